@@ -1,0 +1,172 @@
+"""Ellipse confirmation of reflector blobs (§3.3, Eqs. 21-24).
+
+edge -> arcs -> ellipse: the blob's boundary (OpenCV contour following) is split into
+elliptical arcs at corners (angle condition, AC) and inflections (curvature condition,
+CC); arcs with fewer than Th_nc points are dropped (point condition, PC); each arc is fitted
+with a direct least-squares ellipse (OpenCV ``fitEllipseDirect``, Fitzgibbon 1999 -- we use
+it in place of ElliFit [24]); arcs whose ellipses agree are grouped. A single blob is
+confirmed when one ellipse explains its whole boundary; a component too large for one
+reflector (markers merged with each other or with a glint) is split into the ellipses its
+arcs support (the "supplement" of §3.3).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+Ellipse = tuple[tuple[float, float], tuple[float, float], float]
+
+
+def blob_contour(mask: np.ndarray) -> np.ndarray:
+    """Outer boundary of the largest region of a binary mask, shape (P, 2) as (u, v)."""
+    contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        return np.empty((0, 2), np.float32)
+    c = max(contours, key=len)
+    return c.reshape(-1, 2).astype(np.float32)
+
+
+def fit_ellipse(points: np.ndarray) -> Ellipse | None:
+    """Direct least-squares ellipse ((cx, cy), (axis1, axis2), angle_deg) of (P, 2)."""
+    if len(points) < 5:
+        return None
+    try:
+        e = cv2.fitEllipseDirect(points.astype(np.float32).reshape(-1, 1, 2))
+    except cv2.error:
+        return None
+    (cx, cy), (a1, a2), ang = e
+    if not (np.isfinite([cx, cy, a1, a2]).all() and a1 > 0 and a2 > 0):
+        return None
+    return (float(cx), float(cy)), (float(a1), float(a2)), float(ang)
+
+
+def ellipse_residual_px(ellipse: Ellipse, points: np.ndarray) -> float:
+    """RMS approximate geometric distance of points (P, 2) from an ellipse, pixels.
+
+    Uses the Sampson-like radial measure: |r_point - r_ellipse(theta)| along the ray from
+    the centre, exact for circles and accurate for moderate eccentricity.
+    """
+    (cx, cy), (a1, a2), ang = ellipse
+    t = np.radians(ang)
+    d = points - np.array([cx, cy])
+    x = d[:, 0] * np.cos(t) + d[:, 1] * np.sin(t)
+    y = -d[:, 0] * np.sin(t) + d[:, 1] * np.cos(t)
+    r = np.hypot(x, y)
+    th = np.arctan2(y, x)
+    ra, rb = a1 / 2, a2 / 2
+    r_e = ra * rb / np.sqrt((rb * np.cos(th)) ** 2 + (ra * np.sin(th)) ** 2)
+    return float(np.sqrt(np.mean((r - r_e) ** 2)))
+
+
+def split_arcs(
+    contour: np.ndarray, *, angle_deg: float = 40.0, min_points: int = 6, step: int = 2
+) -> list[np.ndarray]:
+    """Split a closed contour (P, 2) into elliptical arcs (§3.3 AC, CC, PC).
+
+    The contour is sampled every ``step`` points; the turning angle xi between successive
+    chords is computed. The contour is broken where |xi| > ``angle_deg`` (a corner, AC)
+    and where the turning changes sign persistently (an inflection between two convex
+    arcs, CC). Arcs with fewer than ``min_points`` contour points are dropped (PC).
+    """
+    n = len(contour)
+    if n < 2 * min_points:
+        return [contour] if n >= min_points else []
+    idx = np.arange(0, n, step)
+    p = contour[idx].astype(np.float64)
+    v1 = p - np.roll(p, 1, axis=0)
+    v2 = np.roll(p, -1, axis=0) - p
+    cross = v1[:, 0] * v2[:, 1] - v1[:, 1] * v2[:, 0]
+    dot = (v1 * v2).sum(axis=1)
+    xi = np.degrees(np.arctan2(cross, dot))
+    # Smooth the curvature sign over 3 samples so pixel staircases do not break arcs.
+    smooth = np.convolve(np.concatenate((xi[-1:], xi, xi[:1])), np.ones(3) / 3, "valid")
+    dominant = np.sign(np.sum(smooth))
+    breaks = (np.abs(xi) > angle_deg) | (np.sign(smooth) == -dominant) & (np.abs(smooth) > 8)
+    if not np.any(breaks):
+        return [contour]
+    start = int(np.flatnonzero(breaks)[0])
+    order = np.roll(np.arange(len(idx)), -start)
+    arcs, current = [], []
+    for j in order:
+        if breaks[j]:
+            if current:
+                arcs.append(current)
+            current = []
+        else:
+            current.append(j)
+    if current:
+        arcs.append(current)
+    out = []
+    for a in arcs:
+        lo, hi = idx[a[0]], min(idx[a[-1]] + step, n)
+        pts = contour[lo:hi] if lo < hi else np.vstack((contour[lo:], contour[:hi]))
+        if len(pts) >= min_points:
+            out.append(pts)
+    return out
+
+
+def ellipses_from_arcs(
+    arcs: list[np.ndarray], *, d_min_px: float, d_max_px: float, max_residual_px: float
+) -> list[tuple[Ellipse, np.ndarray]]:
+    """Fit each arc, keep ellipses of plausible size, merge arcs with agreeing ellipses.
+
+    Returns a list of (ellipse, supporting points (P, 2)).
+    """
+    fits: list[tuple[Ellipse, np.ndarray]] = []
+    for arc in arcs:
+        e = fit_ellipse(arc)
+        if e is None:
+            continue
+        major, minor = max(e[1]), min(e[1])
+        if not (d_min_px <= minor and major <= d_max_px):
+            continue
+        if ellipse_residual_px(e, arc) > max_residual_px:
+            continue
+        fits.append((e, arc))
+    groups: list[tuple[Ellipse, np.ndarray]] = []
+    for e, pts in sorted(fits, key=lambda f: -len(f[1])):
+        for g_i, (ge, gpts) in enumerate(groups):
+            tol = 0.25 * max(ge[1])
+            if np.hypot(e[0][0] - ge[0][0], e[0][1] - ge[0][1]) < tol:
+                merged = np.vstack((gpts, pts))
+                me = fit_ellipse(merged) or ge
+                groups[g_i] = (me, merged)
+                break
+        else:
+            groups.append((e, pts))
+    return groups
+
+
+def cone_distance_mm(ellipse: Ellipse, K: np.ndarray, radius_mm: float) -> float:
+    """Distance to a circle of known radius from its image ellipse (Eqs. 22-24).
+
+    Back-projects the ellipse to the cone Q_v = K^T C K (normalised coordinates), orders
+    its eigenvalues (lambda1, lambda2 of one sign with |lambda1| >= |lambda2|, lambda3 of
+    the other) and returns the distance to the circle centre along the cone's axis,
+    ``z = R * sqrt(|lambda1| (|lambda2| + |lambda3|) / (|lambda3| (|lambda1| + |lambda3|)))``
+    (Eq. 24 with R the circle radius). Returns NaN for a degenerate conic.
+    """
+    (cx, cy), (a1, a2), ang = ellipse
+    t = np.radians(ang)
+    c, s = np.cos(t), np.sin(t)
+    Rm = np.array([[c, -s], [s, c]])
+    Dm = np.diag([1.0 / (a1 / 2) ** 2, 1.0 / (a2 / 2) ** 2])
+    A2 = Rm @ Dm @ Rm.T
+    centre = np.array([cx, cy])
+    C = np.zeros((3, 3))
+    C[:2, :2] = A2
+    C[:2, 2] = C[2, :2] = -A2 @ centre
+    C[2, 2] = centre @ A2 @ centre - 1.0
+    Q = K.T @ C @ K
+    mu = np.linalg.eigvalsh(Q)
+    pos, neg = mu[mu > 0], mu[mu < 0]
+    if len(pos) == 2 and len(neg) == 1:
+        l12, l3 = pos, neg[0]
+    elif len(neg) == 2 and len(pos) == 1:
+        l12, l3 = neg, pos[0]
+    else:
+        return float("nan")
+    l1, l2 = sorted(np.abs(l12), reverse=True)
+    l3 = abs(l3)
+    return float(radius_mm * np.sqrt(l1 * (l2 + l3) / (l3 * (l1 + l3))))

@@ -1,0 +1,96 @@
+"""Rotations, the Euler convention and rigid transforms (numpy + scipy only).
+
+Conventions (DESIGN.md §3): ``T_a_b`` maps points of frame b into frame a,
+``y = R_a_b @ x + t_a_b``. Euler angles are (pitch, yaw, roll) with
+``R = Rz(roll) @ Ry(yaw) @ Rx(pitch)``, i.e. scipy's extrinsic ``"xyz"`` sequence.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+EULER_SEQUENCE = "xyz"  # extrinsic x (pitch), then y (yaw), then z (roll)
+
+
+def rotation_from_euler_rad(pitch_rad: float, yaw_rad: float, roll_rad: float) -> np.ndarray:
+    """Rotation matrix, shape (3, 3), ``Rz(roll) @ Ry(yaw) @ Rx(pitch)``."""
+    return Rotation.from_euler(EULER_SEQUENCE, [pitch_rad, yaw_rad, roll_rad]).as_matrix()
+
+
+def rotation_from_euler_deg(pitch_deg: float, yaw_deg: float, roll_deg: float) -> np.ndarray:
+    """Rotation matrix, shape (3, 3), from (pitch, yaw, roll) in degrees."""
+    return Rotation.from_euler(
+        EULER_SEQUENCE, [pitch_deg, yaw_deg, roll_deg], degrees=True
+    ).as_matrix()
+
+
+def euler_deg_from_rotation(R: np.ndarray) -> np.ndarray:
+    """(pitch, yaw, roll) in degrees, shape (3,), of a rotation matrix of shape (3, 3)."""
+    return Rotation.from_matrix(R).as_euler(EULER_SEQUENCE, degrees=True)
+
+
+def quaternion_wxyz_from_rotation(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z), shape (4,), with w >= 0."""
+    x, y, z, w = Rotation.from_matrix(R).as_quat()
+    q = np.array([w, x, y, z])
+    return q if w >= 0 else -q
+
+
+def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
+    """Angle in degrees of the relative rotation ``R_a^T R_b`` (geodesic distance)."""
+    cos = (np.trace(R_a.T @ R_b) - 1.0) / 2.0
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrix, shape (3, 3), of a vector of shape (3,)."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+@dataclass(frozen=True)
+class RigidTransform:
+    """A rigid transform ``T_a_b``: ``y = R @ x + t_mm``.
+
+    Attributes
+    ----------
+    R : ndarray of shape (3, 3)
+        Rotation ``R_a_b``.
+    t_mm : ndarray of shape (3,)
+        Origin of frame b expressed in frame a, millimetres.
+    """
+
+    R: np.ndarray
+    t_mm: np.ndarray
+
+    @staticmethod
+    def identity() -> RigidTransform:
+        return RigidTransform(np.eye(3), np.zeros(3))
+
+    @staticmethod
+    def from_euler_deg(
+        pitch_deg: float, yaw_deg: float, roll_deg: float, t_mm=(0.0, 0.0, 0.0)
+    ) -> RigidTransform:
+        return RigidTransform(
+            rotation_from_euler_deg(pitch_deg, yaw_deg, roll_deg), np.asarray(t_mm, float)
+        )
+
+    def apply(self, points_mm: np.ndarray) -> np.ndarray:
+        """Map points of shape (N, 3) (or (3,)) from frame b into frame a."""
+        return np.asarray(points_mm) @ self.R.T + self.t_mm
+
+    def compose(self, other: RigidTransform) -> RigidTransform:
+        """``T_a_b.compose(T_b_c) == T_a_c``."""
+        return RigidTransform(self.R @ other.R, self.R @ other.t_mm + self.t_mm)
+
+    def inverse(self) -> RigidTransform:
+        return RigidTransform(self.R.T, -self.R.T @ self.t_mm)
+
+    def as_matrix(self) -> np.ndarray:
+        """Homogeneous matrix of shape (4, 4)."""
+        T = np.eye(4)
+        T[:3, :3] = self.R
+        T[:3, 3] = self.t_mm
+        return T

@@ -1,0 +1,396 @@
+"""Frame pair -> PoseResult: the full measurement pipeline of the paper (§3-§5).
+
+``PosePipeline(camera, catalog, config).process(gray, distance_mm, time_s)`` runs, per
+frame: levels and active pixel set (§3.1), candidate blobs (§3.2), ellipse confirmation
+and supplement (§3.3), persistence and centroids (§3.4), back-projection (Eqs. 7-9),
+deterministic-annealing matching (§4), weighted SVD (§5.1), perspective-bias correction
+of the centroids, and refinement (§5.2), and returns a ``PoseResult`` with per-stage
+timings. Multi-frame state (persistence history) lives in the pipeline; ``reset()``
+clears it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Literal
+
+import cv2
+import numpy as np
+
+from tofpose.camera import CameraModel
+from tofpose.catalog import Catalog
+from tofpose.ellipse import (
+    blob_contour,
+    ellipse_residual_px,
+    ellipses_from_arcs,
+    fit_ellipse,
+    split_arcs,
+)
+from tofpose.extraction import (
+    Blob,
+    ExtractionConfig,
+    check_frame,
+    disc_image_centre_offset_px,
+    find_candidate_blobs,
+    frame_levels,
+    measure_blobs,
+    predicted_diameter_window_px,
+)
+from tofpose.geometry import euler_deg_from_rotation, quaternion_wxyz_from_rotation
+from tofpose.matching import MatchingConfig, match_reflectors
+from tofpose.persistence import Persistence, PersistenceConfig
+from tofpose.pose import refine_line_of_sight, refine_maximum_likelihood, weighted_svd
+
+Refinement = Literal["ml", "los", "none"]
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """All pipeline parameters.
+
+    refinement : "ml" (ours: Gauss-Newton on bearings and ranges, the default), "los"
+        (the paper's line-of-sight iteration, Eqs. 51-52), or "none" (SVD only).
+    correct_perspective_bias : shift centroids by the predicted offset between the image
+        ellipse's centre and the projected disc centre, then re-solve.
+    ellipse_confirmation : run §3.3 (confirm candidate shapes, split merged components).
+    centroid_sigma_floor_px, range_sigma_floor_mm : floors of the per-reflector
+        measurement sigmas used as weights and in the covariance.
+    """
+
+    extraction: ExtractionConfig = field(default_factory=ExtractionConfig)
+    persistence: PersistenceConfig = field(default_factory=PersistenceConfig)
+    matching: MatchingConfig = field(default_factory=MatchingConfig)
+    refinement: Refinement = "ml"
+    correct_perspective_bias: bool = True
+    ellipse_confirmation: bool = True
+    centroid_sigma_floor_px: float = 0.03
+    range_sigma_floor_mm: float = 1.0
+    los_tolerance: float = 0.002
+
+    @staticmethod
+    def paper() -> PipelineConfig:
+        """The paper's literal settings: fixed thresholds, LOS refinement, no bias fix."""
+        return PipelineConfig(
+            extraction=ExtractionConfig.paper(),
+            refinement="los",
+            correct_perspective_bias=False,
+        )
+
+
+@dataclass
+class MatchedReflector:
+    """A reflector found in the frame and identified in the catalog."""
+
+    catalog_id: int
+    centroid_uv: np.ndarray  # (2,) px, after bias correction
+    point_mm: np.ndarray  # (3,) measured position in the camera frame
+    residual_mm: float  # |measured - predicted| at the final pose
+    distance_mm: float
+    area_px: int
+
+
+@dataclass
+class PoseResult:
+    """Output of one frame.
+
+    ok : bool; reason : why not ok (empty when ok).
+    R : (3, 3) R_camera_target; t_mm : (3,) target origin in the camera frame.
+    euler_deg : (pitch, yaw, roll), R = Rz(roll) Ry(yaw) Rx(pitch).
+    quaternion_wxyz : (4,).
+    matched : list of MatchedReflector; unmatched : list of (u, v, distance_mm) blobs.
+    residual_mm : RMS of matched residuals; iterations : refinement iterations.
+    covariance : (6, 6) over (rotation vector rad, translation mm), or None.
+    timings_ms : per stage; n_candidates; frames_used (persistence); motion detected.
+    """
+
+    ok: bool
+    reason: str = ""
+    time_s: float | None = None
+    R: np.ndarray | None = None
+    t_mm: np.ndarray | None = None
+    euler_deg: np.ndarray | None = None
+    quaternion_wxyz: np.ndarray | None = None
+    matched: list[MatchedReflector] = field(default_factory=list)
+    unmatched: list[tuple[float, float, float]] = field(default_factory=list)
+    residual_mm: float = float("nan")
+    iterations: int = 0
+    covariance: np.ndarray | None = None
+    timings_ms: dict[str, float] = field(default_factory=dict)
+    n_candidates: int = 0
+    frames_used: int = 1
+    motion: bool = False
+
+    @property
+    def n_matched(self) -> int:
+        return len(self.matched)
+
+
+class _Timer:
+    def __init__(self) -> None:
+        self.ms: dict[str, float] = {}
+        self._t = time.perf_counter()
+        self._start = self._t
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.ms[name] = self.ms.get(name, 0.0) + (now - self._t) * 1e3
+        self._t = now
+
+    def total(self) -> dict[str, float]:
+        self.ms["total"] = (time.perf_counter() - self._start) * 1e3
+        return self.ms
+
+
+class PosePipeline:
+    """Stateful per-camera pipeline. Not thread-safe: one instance per stream."""
+
+    def __init__(
+        self, camera: CameraModel, catalog: Catalog, config: PipelineConfig | None = None
+    ) -> None:
+        self.camera = camera
+        self.catalog = catalog
+        self.config = config or PipelineConfig()
+        self._persistence = Persistence(self.config.persistence)
+        self._catalog_xyz = catalog.positions_mm
+        self._catalog_d = catalog.diameters_mm
+        self._catalog_ids = catalog.ids
+        camera.pixel_bearings()  # warm the cache
+
+    def reset(self) -> None:
+        """Forget multi-frame history (call when the stream is discontinuous)."""
+        self._persistence.reset()
+
+    # ------------------------------------------------------------------------------------
+    def process(
+        self, gray: np.ndarray, distance_mm: np.ndarray, time_s: float | None = None
+    ) -> PoseResult:
+        """Estimate the pose from one (gray, distance) frame pair.
+
+        Raises ``FrameError`` (a ValueError) for arrays of the wrong shape or dtype;
+        every other failure is an ``ok = False`` result with a reason.
+        """
+        cfg = self.config
+        timer = _Timer()
+        g, d = check_frame(self.camera, gray, distance_mm)
+        stats = frame_levels(g, cfg.extraction)
+        timer.lap("levels")
+
+        def fail(reason: str, **kw) -> PoseResult:
+            return PoseResult(False, reason, time_s, timings_ms=timer.total(), **kw)
+
+        if stats.saturated_fraction > 0.5:
+            self.reset()
+            return fail(f"frame saturated: {stats.saturated_fraction:.0%} of pixels at full scale")
+        if stats.i_max - stats.background < cfg.extraction.min_contrast_counts:
+            self.reset()
+            return fail(
+                f"no reflector contrast: brightest pixel {stats.i_max:.0f} counts over a "
+                f"background of {stats.background:.0f} (all-dark frame?)"
+            )
+        blobs, oversize, _ = find_candidate_blobs(
+            g, d, self.camera, self._catalog_d, cfg.extraction, stats
+        )
+        timer.lap("blobs")
+        if cfg.ellipse_confirmation:
+            blobs = self._confirm_ellipses(blobs, oversize, g, d, stats)
+        timer.lap("ellipses")
+        measure_blobs(blobs, g, d, self.camera, stats.background)
+        kept, mean_g, med_d, pinfo = self._persistence.apply(blobs, g, d)
+        if pinfo.frames_used > 1:
+            measure_blobs(kept, mean_g, med_d, self.camera, stats.background)
+        timer.lap("centroids")
+        extra = {"frames_used": pinfo.frames_used, "motion": pinfo.motion}
+        ranged = [b for b in kept if np.isfinite(b.distance_mm)]
+        unmatched = [(b.centroid_uv[0], b.centroid_uv[1], b.distance_mm) for b in kept if not np.isfinite(b.distance_mm)]
+        extra["n_candidates"] = len(kept)
+        if len(ranged) < cfg.matching.min_matches:
+            return fail(
+                f"found {len(ranged)} candidate reflector(s) with a valid range "
+                f"(of {len(kept)} blobs), need {cfg.matching.min_matches}",
+                unmatched=unmatched + [(b.centroid_uv[0], b.centroid_uv[1], b.distance_mm) for b in ranged],
+                **extra,
+            )
+
+        uv = np.array([b.centroid_uv for b in ranged])
+        rho = np.array([b.distance_mm for b in ranged])
+        e = self.camera.bearings(uv)
+        y = e * rho[:, None]  # Eq. 8
+        sig_px, sig_rng = self._sigmas(ranged, mean_g, med_d, stats.background)
+        w = 1.0 / (sig_rng**2 + (rho * sig_px / self.camera.fx) ** 2)
+        diam = np.array([self._apparent_diameter_px(b) for b in ranged]) * rho / self.camera.fx
+        timer.lap("backproject")
+        m = match_reflectors(
+            y, self._catalog_xyz, cfg.matching,
+            observed_diameter_mm=diam, catalog_diameter_mm=self._catalog_d, weights=w,
+        )
+        timer.lap("matching")
+        if not m.ok:
+            return fail(
+                f"matching failed: {m.reason}",
+                unmatched=unmatched + [(u[0], u[1], r) for u, r in zip(uv, rho, strict=True)],
+                **extra,
+            )
+        k_idx, i_idx = m.pairs[:, 0], m.pairs[:, 1]
+        x = self._catalog_xyz[i_idx]
+        R, t = weighted_svd(x, y[k_idx], w[k_idx])
+        k_idx, i_idx = self._complete(y, w, k_idx, i_idx, R, t, m.alpha_mm * cfg.matching.residual_factor)
+        x = self._catalog_xyz[i_idx]
+        R, t = weighted_svd(x, y[k_idx], w[k_idx])
+        timer.lap("svd")
+
+        uv_m = uv[k_idx].copy()
+        if cfg.correct_perspective_bias:
+            for n, i in enumerate(i_idx):
+                off = disc_image_centre_offset_px(
+                    self.camera, R @ x[n] + t, R[:, 2], self._catalog_d[i] / 2
+                )
+                uv_m[n] -= off
+        e_m = self.camera.bearings(uv_m)
+        rho_m = rho[k_idx]
+        y_m = e_m * rho_m[:, None]
+        R, t = weighted_svd(x, y_m, w[k_idx])
+        sb = sig_px[k_idx] / self.camera.fx
+        sr = sig_rng[k_idx]
+        iterations = 0
+        if cfg.refinement == "los":
+            ref = refine_line_of_sight(x, e_m, R, t, w[k_idx], tol=cfg.los_tolerance)
+            R, t, iterations = ref.R, ref.t, ref.iterations
+        ml = refine_maximum_likelihood(
+            x, e_m, rho_m, R, t, sr, sb, max_iterations=10 if cfg.refinement == "ml" else 0
+        )
+        if cfg.refinement == "ml":
+            R, t, iterations = ml.R, ml.t, ml.iterations
+        timer.lap("refine")
+
+        pred = x @ R.T + t
+        res = np.linalg.norm(y_m - pred, axis=1)
+        matched = [
+            MatchedReflector(
+                int(self._catalog_ids[i]), uv_m[n], y_m[n], float(res[n]),
+                float(rho_m[n]), ranged[k].area_px,
+            )
+            for n, (k, i) in enumerate(zip(k_idx, i_idx, strict=True))
+        ]
+        used = set(int(k) for k in k_idx)
+        unmatched += [
+            (uv[k, 0], uv[k, 1], rho[k]) for k in range(len(ranged)) if k not in used
+        ]
+        return PoseResult(
+            True, "", time_s, R, t, euler_deg_from_rotation(R), quaternion_wxyz_from_rotation(R),
+            matched, unmatched, float(np.sqrt(np.mean(res**2))), iterations, ml.covariance,
+            timer.total(), **extra,
+        )
+
+    # ------------------------------------------------------------------------------------
+    def _sigmas(self, blobs: list[Blob], gray, dist, background) -> tuple[np.ndarray, np.ndarray]:
+        """Per-blob centroid sigma (px) and range sigma (mm) from the pixel statistics.
+
+        Centroid: shot noise propagated through Eq. 19, sqrt(sum I_p |p - c|^2) / sum I_p,
+        floored. Range: robust spread of the member distances / sqrt(n) (median
+        efficiency 1.25), floored.
+        """
+        w_img = gray.shape[1]
+        cfg = self.config
+        sp, sr = [], []
+        for b in blobs:
+            rows, cols = np.divmod(b.pixels, w_img)
+            i = np.maximum(gray[rows, cols] - background, 1.0)
+            r2 = (cols - b.centroid_uv[0]) ** 2 + (rows - b.centroid_uv[1]) ** 2
+            s_px = np.sqrt((np.maximum(gray[rows, cols], 1.0) * r2).sum()) / i.sum()
+            sp.append(max(float(s_px), cfg.centroid_sigma_floor_px))
+            dv = dist[rows, cols]
+            dv = dv[np.isfinite(dv)]
+            if len(dv) >= 3:
+                mad = 1.4826 * float(np.median(np.abs(dv - np.median(dv))))
+                s_r = 1.2533 * mad / np.sqrt(len(dv))
+            else:
+                s_r = 30.0
+            sr.append(max(s_r, cfg.range_sigma_floor_mm))
+        return np.array(sp), np.array(sr)
+
+    @staticmethod
+    def _apparent_diameter_px(b: Blob) -> float:
+        if b.ellipse is not None:
+            return float(max(b.ellipse[1]))
+        x, y, bw, bh = b.bbox
+        return float(max(bw, bh, 2.0 * np.sqrt(b.area_px / np.pi)))
+
+    def _complete(self, y, w, k_idx, i_idx, R, t, tol_mm):
+        """Add unmatched blobs that sit on a predicted unmatched reflector (ours)."""
+        free_k = [k for k in range(len(y)) if k not in set(k_idx.tolist())]
+        free_i = [i for i in range(len(self._catalog_xyz)) if i not in set(i_idx.tolist())]
+        if not free_k or not free_i:
+            return k_idx, i_idx
+        pred = self._catalog_xyz[free_i] @ R.T + t
+        dist = np.linalg.norm(y[free_k][:, None] - pred[None], axis=-1)
+        ks, is_ = list(k_idx), list(i_idx)
+        while dist.size and dist.min() < tol_mm:
+            a, b = np.unravel_index(np.argmin(dist), dist.shape)
+            ks.append(free_k[a])
+            is_.append(free_i[b])
+            dist[a, :] = np.inf
+            dist[:, b] = np.inf
+        return np.array(ks), np.array(is_)
+
+    def _confirm_ellipses(self, blobs, oversize, gray, dist, stats) -> list[Blob]:
+        """§3.3: confirm candidate shapes; split oversize components into ellipses.
+
+        A candidate of >= 20 px whose boundary is not an ellipse (RMS > limit) is dropped.
+        When there are fewer candidates than catalog reflectors, components rejected as
+        too large are searched for elliptical arcs of the predicted size (supplement).
+        """
+        cfg = self.config.extraction
+        h, w = gray.shape
+        out = []
+        for b in blobs:
+            if b.area_px >= 20:
+                mask, x0, y0 = _blob_mask(b, w)
+                pts = blob_contour(mask)
+                if len(pts) >= cfg.ellipse_min_points:
+                    e = fit_ellipse(pts + [x0, y0])
+                    if e is not None:
+                        b.ellipse = e
+                        b.ellipse_residual_px = ellipse_residual_px(e, pts + [x0, y0])
+                        if b.ellipse_residual_px > cfg.ellipse_max_residual_px:
+                            continue
+            out.append(b)
+        if len(out) >= len(self.catalog) or not oversize:
+            return out
+        for comp in oversize:
+            mask, x0, y0 = _blob_mask(comp, w)
+            pts = blob_contour(mask)
+            d_lo, d_hi = predicted_diameter_window_px(
+                self.camera.fx, comp.distance_mm, self._catalog_d, cfg
+            )
+            arcs = split_arcs(pts, min_points=cfg.ellipse_min_points)
+            for e, _ in ellipses_from_arcs(
+                arcs, d_min_px=d_lo, d_max_px=d_hi, max_residual_px=cfg.ellipse_max_residual_px
+            ):
+                fill = np.zeros_like(mask)
+                (cx, cy), (a1, a2), ang = e
+                cv2.ellipse(fill, ((cx, cy), (a1, a2), ang), 1, -1)
+                inside = (fill > 0) & (mask > 0)
+                rows, cols = np.nonzero(inside)
+                if len(rows) < cfg.min_area_px:
+                    continue
+                nb = Blob(
+                    pixels=(rows + y0) * w + (cols + x0),
+                    area_px=len(rows),
+                    bbox=(int(cols.min() + x0), int(rows.min() + y0), int(np.ptp(cols) + 1), int(np.ptp(rows) + 1)),
+                    peak_counts=float(gray[rows + y0, cols + x0].max()),
+                    ellipse=((cx + x0, cy + y0), (a1, a2), ang),
+                    source="ellipse",
+                )
+                out.append(nb)
+        return out
+
+
+def _blob_mask(b: Blob, width: int) -> tuple[np.ndarray, int, int]:
+    """Binary mask of a blob in its bounding box padded by 1 px, and the box origin."""
+    x, y, bw, bh = b.bbox
+    x0, y0 = x - 1, y - 1
+    m = np.zeros((bh + 2, bw + 2), np.uint8)
+    rows, cols = np.divmod(b.pixels, width)
+    m[rows - y0, cols - x0] = 1
+    return m, x0, y0

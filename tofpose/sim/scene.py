@@ -1,0 +1,177 @@
+"""The simulated scene: a target plate with raised disc retro-reflectors, an optional
+background wall, and clutter (extra bright spurious reflectors), posed in the camera frame.
+
+``TargetScene.in_camera(T_camera_target)`` returns flat surfaces in the camera frame that
+``raycast`` intersects with pixel rays. Surfaces are planes bounded by a rectangle (plate),
+a disc (reflectors, clutter) or unbounded (wall).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tofpose.catalog import Catalog, paper_target
+from tofpose.geometry import RigidTransform
+
+NO_HIT, WALL, PLATE, FIRST_DISC = 0, 1, 2, 3
+
+KIND_LAMBERTIAN, KIND_RETRO = 0, 1
+
+
+@dataclass(frozen=True)
+class Clutter:
+    """A spurious bright reflection: a disc in the target frame, facing ``normal``."""
+
+    position_mm: tuple[float, float, float]
+    diameter_mm: float
+    gain: float = 1.0  # retro gain relative to a catalog reflector
+    normal: tuple[float, float, float] = (0.0, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class TargetScene:
+    """Target geometry and surface properties.
+
+    Attributes
+    ----------
+    catalog : Catalog
+        Reflector discs (target frame, facing +z).
+    plate_reflectance : float
+        Lambertian reflectance of the black plate at 850 nm.
+    reflector_diffuse_reflectance : float
+        Diffuse reflectance of the white reflectors (for ambient light).
+    wall_distance_mm : float or None
+        A Lambertian wall parallel to the plate, this far behind it; None for no wall.
+    wall_reflectance : float
+    clutter : tuple of Clutter
+    """
+
+    catalog: Catalog = field(default_factory=paper_target)
+    plate_reflectance: float = 0.10
+    reflector_diffuse_reflectance: float = 0.8
+    wall_distance_mm: float | None = 2000.0
+    wall_reflectance: float = 0.4
+    clutter: tuple[Clutter, ...] = ()
+
+    def in_camera(self, T_camera_target: RigidTransform) -> SceneInCamera:
+        """Surfaces transformed into the camera frame. Raises ``ValueError`` when the
+        target origin is not in front of the camera."""
+        R, t = T_camera_target.R, np.asarray(T_camera_target.t_mm, float)
+        if t[2] <= 0:
+            raise ValueError(f"target is behind the camera (target origin z = {t[2]:.1f} mm <= 0)")
+        normal = R[:, 2]
+        cat = self.catalog
+        centres = T_camera_target.apply(cat.positions_mm)
+        radii = cat.diameters_mm / 2
+        gains = np.ones(len(cat))
+        normals = np.repeat(normal[None], len(cat), axis=0)
+        if self.clutter:
+            c_pos = np.array([c.position_mm for c in self.clutter], float)
+            c_norm = np.array([c.normal for c in self.clutter], float)
+            c_norm /= np.linalg.norm(c_norm, axis=1, keepdims=True)
+            centres = np.vstack((centres, T_camera_target.apply(c_pos)))
+            radii = np.concatenate((radii, [c.diameter_mm / 2 for c in self.clutter]))
+            gains = np.concatenate((gains, [c.gain for c in self.clutter]))
+            normals = np.vstack((normals, c_norm @ R.T))
+        wall_point = None
+        if self.wall_distance_mm is not None:
+            wall_point = t - normal * self.wall_distance_mm
+        return SceneInCamera(
+            plate_centre=t,
+            plate_axes=R[:, :2].T.copy(),
+            plate_half_size=np.asarray(cat.plate_size_mm, float) / 2,
+            plate_normal=normal,
+            disc_centres=centres,
+            disc_normals=normals,
+            disc_radii=radii,
+            disc_gains=gains,
+            wall_point=wall_point,
+            scene=self,
+        )
+
+
+@dataclass(frozen=True)
+class SceneInCamera:
+    """Scene surfaces in the camera frame (all arrays in mm).
+
+    plate_axes : ndarray of shape (2, 3), the plate's in-plane x and y axes.
+    disc_* : arrays of shape (D, 3) or (D,), catalog reflectors first, then clutter.
+    """
+
+    plate_centre: np.ndarray
+    plate_axes: np.ndarray
+    plate_half_size: np.ndarray
+    plate_normal: np.ndarray
+    disc_centres: np.ndarray
+    disc_normals: np.ndarray
+    disc_radii: np.ndarray
+    disc_gains: np.ndarray
+    wall_point: np.ndarray | None
+    scene: TargetScene
+
+    def raycast(self, bearings: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Nearest intersection of unit rays from the camera centre.
+
+        Parameters
+        ----------
+        bearings : ndarray of shape (M, 3), unit vectors.
+
+        Returns
+        -------
+        distance_mm : ndarray of shape (M,), radial distance to the hit (inf if none).
+        surface_id : ndarray of shape (M,) uint8: NO_HIT, WALL, PLATE or FIRST_DISC + k.
+        cos_incidence : ndarray of shape (M,), cosine between the ray and the normal.
+        """
+        m = len(bearings)
+        best = np.full(m, np.inf)
+        sid = np.zeros(m, np.uint8)
+        cos_inc = np.zeros(m)
+
+        def plane_hits(point, normal):
+            denom = bearings @ normal
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s = (point @ normal) / denom
+            s[~np.isfinite(s) | (s <= 0)] = np.inf
+            return s, np.abs(denom)
+
+        if self.wall_point is not None:
+            s, c = plane_hits(self.wall_point, self.plate_normal)
+            take = s < best
+            best[take], sid[take], cos_inc[take] = s[take], WALL, c[take]
+
+        s, c = plane_hits(self.plate_centre, self.plate_normal)
+        finite = np.isfinite(s)
+        local = np.full((m, 2), np.inf)
+        local[finite] = (bearings[finite] * s[finite, None] - self.plate_centre) @ self.plate_axes.T
+        inside = np.all(np.abs(local) <= self.plate_half_size, axis=1)
+        take = inside & (s < best)
+        best[take], sid[take], cos_inc[take] = s[take], PLATE, c[take]
+
+        # Cull: a ray can only hit disc k within its angular radius around the centre.
+        dist_c = np.linalg.norm(self.disc_centres, axis=1)
+        c_unit = self.disc_centres / dist_c[:, None]
+        sin_half = np.clip(self.disc_radii * 1.001 / dist_c, 0.0, 1.0)
+        cos_half = np.sqrt(1.0 - sin_half**2)
+        candidates = (bearings @ c_unit.T) >= cos_half  # (M, D)
+        for k in range(len(self.disc_radii)):
+            idx = np.flatnonzero(candidates[:, k])
+            if not len(idx):
+                continue
+            centre, normal = self.disc_centres[k], self.disc_normals[k]
+            denom = bearings[idx] @ normal
+            front = denom < 0  # the disc faces the camera
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s = (centre @ normal) / denom
+            ok = front & (s > 0) & (s < best[idx])
+            idx, s, denom = idx[ok], s[ok], denom[ok]
+            p = bearings[idx] * s[:, None] - centre
+            inside = np.einsum("ij,ij->i", p, p) <= self.disc_radii[k] ** 2
+            idx, s, denom = idx[inside], s[inside], denom[inside]
+            best[idx], sid[idx], cos_inc[idx] = s, FIRST_DISC + k, -denom
+        return best, sid, cos_inc
+
+    def surface_kind(self, surface_id: np.ndarray) -> np.ndarray:
+        """KIND_RETRO for discs, KIND_LAMBERTIAN otherwise; shape of ``surface_id``."""
+        return np.where(surface_id >= FIRST_DISC, KIND_RETRO, KIND_LAMBERTIAN)
