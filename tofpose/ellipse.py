@@ -60,50 +60,48 @@ def ellipse_residual_px(ellipse: Ellipse, points: np.ndarray) -> float:
 
 
 def split_arcs(
-    contour: np.ndarray, *, angle_deg: float = 40.0, min_points: int = 6, step: int = 2
+    contour: np.ndarray, *, angle_deg: float = 40.0, min_points: int = 6, smooth_sigma: float = 2.0
 ) -> list[np.ndarray]:
     """Split a closed contour (P, 2) into elliptical arcs (§3.3 AC, CC, PC).
 
-    The contour is sampled every ``step`` points; the turning angle xi between successive
-    chords is computed. The contour is broken where |xi| > ``angle_deg`` (a corner, AC)
-    and where the turning changes sign persistently (an inflection between two convex
-    arcs, CC). Arcs with fewer than ``min_points`` contour points are dropped (PC).
+    The contour is smoothed along its length (Gaussian, ``smooth_sigma`` points, so pixel
+    staircases do not count as curvature); the turning angle xi between successive
+    tangents (lag 2) is computed. The contour is broken where |xi| exceeds ``angle_deg``
+    (a corner, AC) and where it turns against the contour's dominant direction (a concave
+    point between two convex arcs, CC). Arcs with fewer than ``min_points`` contour
+    points are dropped (PC). Returns the arcs as arrays of original contour points.
     """
     n = len(contour)
     if n < 2 * min_points:
         return [contour] if n >= min_points else []
-    idx = np.arange(0, n, step)
-    p = contour[idx].astype(np.float64)
-    v1 = p - np.roll(p, 1, axis=0)
-    v2 = np.roll(p, -1, axis=0) - p
-    cross = v1[:, 0] * v2[:, 1] - v1[:, 1] * v2[:, 0]
-    dot = (v1 * v2).sum(axis=1)
-    xi = np.degrees(np.arctan2(cross, dot))
-    # Smooth the curvature sign over 3 samples so pixel staircases do not break arcs.
-    smooth = np.convolve(np.concatenate((xi[-1:], xi, xi[:1])), np.ones(3) / 3, "valid")
-    dominant = np.sign(np.sum(smooth))
-    breaks = (np.abs(xi) > angle_deg) | (np.sign(smooth) == -dominant) & (np.abs(smooth) > 8)
+    pts = contour.astype(np.float64)
+    r = int(np.ceil(3 * smooth_sigma))
+    k = np.exp(-0.5 * (np.arange(-r, r + 1) / smooth_sigma) ** 2)
+    k /= k.sum()
+    wrap = np.vstack((pts[-r:], pts, pts[:r]))
+    sm = np.column_stack([np.convolve(wrap[:, i], k, "valid") for i in range(2)])
+    lag = 2
+    tangent = np.roll(sm, -lag, axis=0) - sm
+    ang = np.arctan2(tangent[:, 1], tangent[:, 0])
+    xi = np.degrees(np.angle(np.exp(1j * (ang - np.roll(ang, lag)))))
+    dominant = np.sign(np.sum(xi)) or 1.0
+    concave = dominant * xi < -2.0
+    breaks = (np.abs(xi) > angle_deg) | concave
     if not np.any(breaks):
         return [contour]
     start = int(np.flatnonzero(breaks)[0])
-    order = np.roll(np.arange(len(idx)), -start)
-    arcs, current = [], []
-    for j in order:
+    arcs: list[np.ndarray] = []
+    current: list[int] = []
+    for j in np.roll(np.arange(n), -start):
         if breaks[j]:
-            if current:
-                arcs.append(current)
+            if len(current) >= min_points:
+                arcs.append(contour[current])
             current = []
         else:
-            current.append(j)
-    if current:
-        arcs.append(current)
-    out = []
-    for a in arcs:
-        lo, hi = idx[a[0]], min(idx[a[-1]] + step, n)
-        pts = contour[lo:hi] if lo < hi else np.vstack((contour[lo:], contour[:hi]))
-        if len(pts) >= min_points:
-            out.append(pts)
-    return out
+            current.append(int(j))
+    if len(current) >= min_points:
+        arcs.append(contour[current])
+    return arcs
 
 
 def ellipses_from_arcs(

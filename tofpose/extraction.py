@@ -276,6 +276,8 @@ def find_candidate_blobs(
         x, y, bw, bh, area = (int(v) for v in cc_stats[k])
         if area < config.min_area_px:
             continue
+        if x == 0 or y == 0 or x + bw == w or y + bh == h:
+            continue  # cut by the image border: its centroid would be biased
         roi = (slice(y, y + bh), slice(x, x + bw))
         member = labels[roi] == k
         g_roi = gray[roi]

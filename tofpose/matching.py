@@ -49,7 +49,7 @@ class MatchingConfig:
     psi_start: float = 0.02
     psi_end: float = 50.0
     growth: float = 1.25
-    clip_factor: float = 3.0
+    clip_factor: float = 1.0
     size_weight: float = 0.5
     residual_factor: float = 2.5
     min_matches: int = 3

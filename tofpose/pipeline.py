@@ -202,13 +202,18 @@ class PosePipeline:
         timer.lap("centroids")
         extra = {"frames_used": pinfo.frames_used, "motion": pinfo.motion}
         ranged = [b for b in kept if np.isfinite(b.distance_mm)]
-        unmatched = [(b.centroid_uv[0], b.centroid_uv[1], b.distance_mm) for b in kept if not np.isfinite(b.distance_mm)]
+        unmatched = [
+            (b.centroid_uv[0], b.centroid_uv[1], b.distance_mm)
+            for b in kept
+            if not np.isfinite(b.distance_mm)
+        ]
         extra["n_candidates"] = len(kept)
         if len(ranged) < cfg.matching.min_matches:
             return fail(
                 f"found {len(ranged)} candidate reflector(s) with a valid range "
                 f"(of {len(kept)} blobs), need {cfg.matching.min_matches}",
-                unmatched=unmatched + [(b.centroid_uv[0], b.centroid_uv[1], b.distance_mm) for b in ranged],
+                unmatched=unmatched
+                + [(b.centroid_uv[0], b.centroid_uv[1], b.distance_mm) for b in ranged],
                 **extra,
             )
 
@@ -221,8 +226,12 @@ class PosePipeline:
         diam = np.array([self._apparent_diameter_px(b) for b in ranged]) * rho / self.camera.fx
         timer.lap("backproject")
         m = match_reflectors(
-            y, self._catalog_xyz, cfg.matching,
-            observed_diameter_mm=diam, catalog_diameter_mm=self._catalog_d, weights=w,
+            y,
+            self._catalog_xyz,
+            cfg.matching,
+            observed_diameter_mm=diam,
+            catalog_diameter_mm=self._catalog_d,
+            weights=w,
         )
         timer.lap("matching")
         if not m.ok:
@@ -234,7 +243,9 @@ class PosePipeline:
         k_idx, i_idx = m.pairs[:, 0], m.pairs[:, 1]
         x = self._catalog_xyz[i_idx]
         R, t = weighted_svd(x, y[k_idx], w[k_idx])
-        k_idx, i_idx = self._complete(y, w, k_idx, i_idx, R, t, m.alpha_mm * cfg.matching.residual_factor)
+        k_idx, i_idx = self._complete(
+            y, w, k_idx, i_idx, R, t, m.alpha_mm * cfg.matching.residual_factor
+        )
         x = self._catalog_xyz[i_idx]
         R, t = weighted_svd(x, y[k_idx], w[k_idx])
         timer.lap("svd")
@@ -267,19 +278,32 @@ class PosePipeline:
         res = np.linalg.norm(y_m - pred, axis=1)
         matched = [
             MatchedReflector(
-                int(self._catalog_ids[i]), uv_m[n], y_m[n], float(res[n]),
-                float(rho_m[n]), ranged[k].area_px,
+                int(self._catalog_ids[i]),
+                uv_m[n],
+                y_m[n],
+                float(res[n]),
+                float(rho_m[n]),
+                ranged[k].area_px,
             )
             for n, (k, i) in enumerate(zip(k_idx, i_idx, strict=True))
         ]
         used = set(int(k) for k in k_idx)
-        unmatched += [
-            (uv[k, 0], uv[k, 1], rho[k]) for k in range(len(ranged)) if k not in used
-        ]
+        unmatched += [(uv[k, 0], uv[k, 1], rho[k]) for k in range(len(ranged)) if k not in used]
         return PoseResult(
-            True, "", time_s, R, t, euler_deg_from_rotation(R), quaternion_wxyz_from_rotation(R),
-            matched, unmatched, float(np.sqrt(np.mean(res**2))), iterations, ml.covariance,
-            timer.total(), **extra,
+            True,
+            "",
+            time_s,
+            R,
+            t,
+            euler_deg_from_rotation(R),
+            quaternion_wxyz_from_rotation(R),
+            matched,
+            unmatched,
+            float(np.sqrt(np.mean(res**2))),
+            iterations,
+            ml.covariance,
+            timer.total(),
+            **extra,
         )
 
     # ------------------------------------------------------------------------------------
@@ -377,7 +401,12 @@ class PosePipeline:
                 nb = Blob(
                     pixels=(rows + y0) * w + (cols + x0),
                     area_px=len(rows),
-                    bbox=(int(cols.min() + x0), int(rows.min() + y0), int(np.ptp(cols) + 1), int(np.ptp(rows) + 1)),
+                    bbox=(
+                        int(cols.min() + x0),
+                        int(rows.min() + y0),
+                        int(np.ptp(cols) + 1),
+                        int(np.ptp(rows) + 1),
+                    ),
                     peak_counts=float(gray[rows + y0, cols + x0].max()),
                     ellipse=((cx + x0, cy + y0), (a1, a2), ang),
                     source="ellipse",

@@ -1,0 +1,49 @@
+import numpy as np
+import pytest
+
+from tofpose.geometry import (
+    RigidTransform,
+    euler_deg_from_rotation,
+    quaternion_wxyz_from_rotation,
+    rotation_angle_deg,
+    rotation_from_euler_deg,
+)
+
+
+def _rx(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _ry(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def _rz(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def test_euler_convention_is_rz_ry_rx():
+    p, y, r = np.radians([10.0, -20.0, 30.0])
+    R = rotation_from_euler_deg(10, -20, 30)
+    np.testing.assert_allclose(R, _rz(r) @ _ry(y) @ _rx(p), atol=1e-12)
+    np.testing.assert_allclose(euler_deg_from_rotation(R), [10, -20, 30], atol=1e-9)
+
+
+def test_quaternion_has_nonnegative_w_and_matches_angle():
+    R = rotation_from_euler_deg(0, 0, 200)
+    q = quaternion_wxyz_from_rotation(R)
+    assert q[0] >= 0
+    assert 2 * np.degrees(np.arccos(q[0])) == pytest.approx(160.0)
+    assert rotation_angle_deg(np.eye(3), R) == pytest.approx(160.0)
+
+
+def test_transform_compose_inverse():
+    a = RigidTransform.from_euler_deg(5, 10, -30, (1, 2, 3))
+    b = RigidTransform.from_euler_deg(-40, 2, 7, (-5, 0, 9))
+    x = np.array([[1.0, 2.0, 3.0], [-4.0, 0.5, 7.0]])
+    np.testing.assert_allclose(a.compose(b).apply(x), a.apply(b.apply(x)))
+    np.testing.assert_allclose(a.inverse().apply(a.apply(x)), x, atol=1e-12)
+    np.testing.assert_allclose(a.as_matrix()[:3, 3], a.t_mm)

@@ -1,0 +1,86 @@
+import numpy as np
+import pytest
+
+from tofpose.catalog import paper_target
+from tofpose.geometry import rotation_from_euler_deg
+from tofpose.matching import MatchingConfig, match_reflectors, one_to_one, pair_compatibility
+from tofpose.sim.bench import R_FACING
+
+
+def _observe(ids, noise_mm=1.0, seed=0, distance_mm=3000.0):
+    cat = paper_target()
+    R = rotation_from_euler_deg(4, -6, 25) @ R_FACING
+    t = np.array([40.0, -20.0, distance_mm])
+    rng = np.random.default_rng(seed)
+    idx = [int(np.flatnonzero(cat.ids == i)[0]) for i in ids]
+    y = cat.positions_mm[idx] @ R.T + t + rng.normal(0, noise_mm, (len(idx), 3))
+    return cat, y, idx
+
+
+def _pairs_as_ids(cat, res):
+    return {int(k): int(cat.ids[i]) for k, i in res.pairs}
+
+
+@pytest.mark.parametrize("ids", [[1, 2, 3, 4, 5, 6, 7, 8], [3, 4, 5, 6, 7], [5, 6, 7, 8], [2, 4, 6]])
+def test_recovers_correspondence_with_markers_out_of_view(ids):
+    cat, y, idx = _observe(ids)
+    perm = np.random.default_rng(1).permutation(len(ids))
+    res = match_reflectors(y[perm], cat.positions_mm)
+    assert res.ok, res.reason
+    assert _pairs_as_ids(cat, res) == {k: ids[p] for k, p in enumerate(perm)}
+
+
+@pytest.mark.parametrize("n_spurious", [1, 3, 6])
+def test_spurious_blobs_get_the_null_label(n_spurious):
+    ids = [2, 3, 4, 5, 6, 7]
+    cat, y, idx = _observe(ids, seed=n_spurious)
+    rng = np.random.default_rng(10 + n_spurious)
+    # Spurious bright blobs on and around the target plane.
+    fake = y.mean(axis=0) + rng.uniform([-500, -300, -80], [500, 300, 80], (n_spurious, 3))
+    obs = np.vstack((y, fake))
+    res = match_reflectors(obs, cat.positions_mm)
+    assert res.ok, res.reason
+    assert _pairs_as_ids(cat, res) == {k: ids[k] for k in range(len(ids))}
+    assert set(range(len(ids), len(obs))) <= set(res.unmatched)
+
+
+def test_inconsistent_observations_are_refused_not_matched():
+    cat = paper_target()
+    rng = np.random.default_rng(4)
+    junk = rng.uniform([-600, -400, 2800], [600, 400, 3200], (6, 3))
+    res = match_reflectors(junk, cat.positions_mm)
+    assert not res.ok
+    assert "no rigidly consistent match" in res.reason or len(res.pairs) == 0
+
+
+def test_too_few_candidates_reason():
+    cat, y, _ = _observe([5, 6])
+    res = match_reflectors(y, cat.positions_mm)
+    assert not res.ok and "need 3" in res.reason
+
+
+def test_pair_compatibility_is_eq36_potential():
+    cat, y, idx = _observe([1, 2, 3], noise_mm=0.0)
+    P = pair_compatibility(y, cat.positions_mm, alpha_mm=10.0, clip_factor=1e9)
+    # correct pairs (k -> idx[k], l -> idx[l]) have rho = 0: potential -alpha^2
+    assert P[0, idx[0], 1, idx[1]] == pytest.approx(-100.0, abs=1e-6)
+    d_obs = np.linalg.norm(y[0] - y[1])
+    d_cat = np.linalg.norm(cat.positions_mm[idx[0]] - cat.positions_mm[4])
+    assert P[0, idx[0], 1, 4] == pytest.approx((d_obs - d_cat) ** 2 - 100.0)
+    assert P[0, 0, 0, 1] == 0.0  # l == k: no self-support
+
+
+def test_one_to_one_resolves_duplicate_row_maxima():
+    A = np.array([[0.1, 0.8, 0.1], [0.1, 0.7, 0.2]])  # both rows prefer catalog 0
+    pairs, unmatched = one_to_one(A)
+    assert sorted(map(tuple, pairs.tolist())) == [(0, 0), (1, 1)]
+    assert unmatched == []
+
+
+def test_size_term_breaks_distance_ties():
+    cat, y, idx = _observe([5, 6, 7, 8], noise_mm=4.0, seed=2, distance_mm=9000.0)
+    diam = cat.diameters_mm[idx]
+    res = match_reflectors(y, cat.positions_mm, MatchingConfig(),
+                           observed_diameter_mm=diam, catalog_diameter_mm=cat.diameters_mm)
+    assert res.ok
+    assert _pairs_as_ids(cat, res) == {0: 5, 1: 6, 2: 7, 3: 8}

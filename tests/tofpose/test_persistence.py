@@ -1,0 +1,55 @@
+import numpy as np
+
+from tofpose.extraction import Blob
+from tofpose.persistence import Persistence, PersistenceConfig
+
+H, W = 40, 60
+
+
+def _frame(cx, cy, level=1000.0, rng=None, r=4):
+    v, u = np.mgrid[0:H, 0:W]
+    inside = (u - cx) ** 2 + (v - cy) ** 2 <= r * r
+    g = np.where(inside, level, 10.0).astype(np.float32)
+    d = np.where(inside, 2000.0, np.nan).astype(np.float32)
+    if rng is not None:
+        d = d + rng.normal(0, 5, d.shape).astype(np.float32)
+    idx = np.flatnonzero(inside)
+    b = Blob(pixels=idx, area_px=len(idx), bbox=(cx - r, cy - r, 2 * r + 1, 2 * r + 1))
+    b.centroid_uv = np.array([cx, cy], float)
+    return [b], g, d
+
+
+def test_static_scene_uses_k_frames_and_median_distance():
+    p = Persistence(PersistenceConfig(k_frames=5, c_min=2))
+    rng = np.random.default_rng(0)
+    for n in range(1, 8):
+        blobs, g, d = _frame(20, 20, rng=rng)
+        kept, mean_g, med_d, info = p.apply(blobs, g, d)
+        assert info.frames_used == min(n, 5)
+        assert not info.motion
+        assert len(kept) == 1
+    # The temporal median over 5 frames has less noise than one frame.
+    pix = kept[0].pixels
+    assert np.std(med_d.reshape(-1)[pix]) < 0.75 * np.std(d.reshape(-1)[pix])
+
+
+def test_motion_cuts_history_so_nothing_stale_is_averaged():
+    p = Persistence(PersistenceConfig(k_frames=5, c_min=2, motion_tolerance_px=0.35))
+    for _ in range(4):
+        p.apply(*_frame(20, 20))
+    blobs, g, d = _frame(26, 20)  # the scene jumped 6 px
+    kept, mean_g, _, info = p.apply(blobs, g, d)
+    assert info.motion and info.frames_used == 1
+    np.testing.assert_array_equal(mean_g, g)  # only the current frame
+    assert len(kept) == 1  # a fresh scene is measured, not refused
+
+
+def test_transient_blob_is_dropped_by_counter_image():
+    p = Persistence(PersistenceConfig(k_frames=5, c_min=2))
+    for _ in range(3):
+        p.apply(*_frame(20, 20))
+    blobs, g, d = _frame(20, 20)
+    extra, g2, _ = _frame(45, 30, r=3)
+    g = np.maximum(g, g2)
+    kept, _, _, info = p.apply(blobs + extra, g, d)
+    assert len(kept) == 1 and info.dropped_blobs == 1

@@ -1,0 +1,233 @@
+"""The ``tofpose`` command: estimate poses from recordings, simulate, render, demo."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from tofpose.camera import CameraModel
+from tofpose.catalog import Catalog, paper_target
+from tofpose.geometry import euler_deg_from_rotation, rotation_angle_deg
+from tofpose.pipeline import PosePipeline
+from tofpose.recording import RecordingError, RecordingWriter, open_recording
+
+CSV_COLUMNS = (
+    "frame", "time_s", "ok", "n_matched", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz",
+    "pitch_deg", "yaw_deg", "roll_deg", "residual_mm",
+)  # fmt: skip
+
+
+def _read_text(path: str, what: str) -> str:
+    try:
+        return Path(path).read_text()
+    except OSError as exc:
+        raise SystemExit(f"tofpose: cannot read {what} {path}: {exc.strerror}") from exc
+
+
+def estimate(
+    rec_path: str,
+    out_csv: str,
+    catalog_path: str | None,
+    camera_path: str | None,
+    progress: bool = True,
+) -> dict[str, float]:
+    """Run the pipeline over a recording and write the CSV; returns summary numbers."""
+    with open_recording(rec_path) as rec:
+        camera = (
+            CameraModel.from_json(_read_text(camera_path, "camera")) if camera_path else rec.camera
+        )
+        if catalog_path:
+            catalog = Catalog.from_json(_read_text(catalog_path, "catalog"))
+        elif rec.catalog is not None:
+            catalog = rec.catalog
+        else:
+            raise SystemExit(f"tofpose: {rec_path} has no /catalog; pass --catalog CAT.json")
+        if camera.shape != rec.camera.shape:
+            raise SystemExit(
+                f"tofpose: camera {camera.width}x{camera.height} does not match the recording's "
+                f"{rec.camera.width}x{rec.camera.height} frames"
+            )
+        pipe = PosePipeline(camera, catalog)
+        n_ok = 0
+        with open(out_csv, "w", newline="") as fh:
+            wr = csv.writer(fh)
+            wr.writerow(CSV_COLUMNS)
+            for i in tqdm(
+                range(rec.n_frames),
+                desc="estimate",
+                unit="frame",
+                disable=not progress,
+                file=sys.stderr,
+            ):
+                gray, dist, t = rec.frame(i)
+                r = pipe.process(gray, dist, t)
+                row = [i, f"{t:.6f}", int(r.ok), r.n_matched]
+                if r.ok:
+                    n_ok += 1
+                    row += [f"{v:.4f}" for v in r.t_mm]
+                    row += [f"{v:.8f}" for v in r.quaternion_wxyz]
+                    row += [f"{v:.5f}" for v in r.euler_deg]
+                    row += [f"{r.residual_mm:.4f}"]
+                else:
+                    row += [""] * 11
+                wr.writerow(row)
+        return {"frames": rec.n_frames, "ok": n_ok}
+
+
+def simulate(
+    scenario_name: str,
+    n_frames: int,
+    out: str,
+    seed: int,
+    catalog_path: str | None,
+    progress: bool = True,
+) -> None:
+    from tofpose.sim.scenarios import get_scenario, run_scenario
+
+    scenario = get_scenario(scenario_name)
+    catalog = (
+        Catalog.from_json(_read_text(catalog_path, "catalog")) if catalog_path else paper_target()
+    )
+    camera = CameraModel()
+    with RecordingWriter(out, camera, catalog, with_truth=True) as w:
+        for bf in tqdm(
+            run_scenario(scenario, n_frames, seed=seed, catalog=catalog),
+            total=n_frames,
+            desc=f"simulate {scenario_name}",
+            unit="frame",
+            disable=not progress,
+            file=sys.stderr,
+        ):
+            w.append(
+                bf.frame.gray,
+                bf.frame.distance_mm,
+                bf.time_s,
+                bf.T_lab_truth.R,
+                bf.T_lab_truth.t_mm,
+            )
+
+
+def render_pngs(scenario_name: str, prefix: str, seed: int) -> list[str]:
+    """Write PREFIX-gray.png and PREFIX-distance.png of a scenario's first frame."""
+    import cv2
+
+    from tofpose.sim.scenarios import get_scenario, run_scenario
+
+    bf = next(run_scenario(get_scenario(scenario_name), 1, seed=seed))
+    g = bf.frame.gray.astype(np.float64)
+    g8 = np.clip(255 * np.sqrt(g / max(g.max(), 1)), 0, 255).astype(np.uint8)  # gamma 0.5
+    d = bf.frame.distance_mm
+    valid = np.isfinite(d)
+    lo, hi = np.percentile(d[valid], [2, 98]) if valid.any() else (0, 1)
+    d8 = np.zeros(d.shape, np.uint8)
+    d8[valid] = np.clip(255 * (d[valid] - lo) / max(hi - lo, 1e-6), 0, 255).astype(np.uint8)
+    color = cv2.applyColorMap(d8, cv2.COLORMAP_TURBO)
+    color[~valid] = 0
+    scale = 2
+    out = []
+    for name, img in (("gray", g8), ("distance", color)):
+        path = f"{prefix}-{name}.png"
+        big = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
+        cv2.imwrite(path, big)
+        out.append(path)
+    return out
+
+
+def demo(n_frames: int = 48, seed: int = 1) -> int:
+    """Simulate a short attitude-grid recording, estimate it, print estimate vs truth."""
+    with tempfile.TemporaryDirectory() as tmp:
+        rec, out = Path(tmp) / "demo.h5", Path(tmp) / "poses.csv"
+        print(f"simulating {n_frames} frames of the 'attitude-grid' scenario ...", flush=True)
+        simulate("attitude-grid", n_frames, str(rec), seed, None)
+        estimate(str(rec), str(out), None, None)
+        with open_recording(rec) as r, open(out) as fh:
+            rows = list(csv.DictReader(fh))
+            hdr = (
+                f"{'frame':>5} {'ok':>2} {'n':>2} | {'x_mm':>8} {'y_mm':>8} {'z_mm':>9} "
+                f"{'pitch':>8} {'yaw':>7} {'roll':>7} | {'dpos_mm':>7} {'dang_deg':>8}"
+            )
+            print(hdr)
+            print("-" * len(hdr))
+            errs = []
+            for i in range(0, r.n_frames, max(1, r.n_frames // 24)):
+                row = rows[i]
+                R_t, t_t = r.truth_R[i], r.truth_t_mm[i]
+                e_t = euler_deg_from_rotation(R_t)
+                print(
+                    f"{i:>5} {'':>2} {'':>2} | {t_t[0]:8.2f} {t_t[1]:8.2f} {t_t[2]:9.2f} "
+                    f"{e_t[0]:8.3f} {e_t[1]:7.3f} {e_t[2]:7.3f} |   truth"
+                )
+                if row["ok"] == "1":
+                    t_m = np.array([float(row[k]) for k in ("x_mm", "y_mm", "z_mm")])
+                    q = [float(row[k]) for k in ("qw", "qx", "qy", "qz")]
+                    from scipy.spatial.transform import Rotation
+
+                    R_m = Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_matrix()
+                    dp, da = np.linalg.norm(t_m - t_t), rotation_angle_deg(R_m, R_t)
+                    errs.append((dp, da))
+                    print(
+                        f"{'':>5} {1:>2} {row['n_matched']:>2} | {t_m[0]:8.2f} {t_m[1]:8.2f} "
+                        f"{t_m[2]:9.2f} {float(row['pitch_deg']):8.3f} {float(row['yaw_deg']):7.3f} "
+                        f"{float(row['roll_deg']):7.3f} | {dp:7.2f} {da:8.3f}"
+                    )
+                else:
+                    print(f"{'':>5} {0:>2} {row['n_matched']:>2} | (no pose)")
+            n_ok = sum(1 for row in rows if row["ok"] == "1")
+            print(f"\n{n_ok}/{len(rows)} frames with a pose", end="")
+            if errs:
+                e = np.array(errs)
+                print(f"; median error {np.median(e[:, 0]):.2f} mm, {np.median(e[:, 1]):.3f} deg")
+            else:
+                print()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="tofpose", description=__doc__)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    p = sub.add_parser("estimate", help="estimate the pose of every frame of a recording")
+    p.add_argument("recording")
+    p.add_argument("--catalog", help="catalog JSON (default: the recording's)")
+    p.add_argument("--camera", help="camera JSON (default: the recording's)")
+    p.add_argument("--out", required=True, help="output CSV")
+    p = sub.add_parser("simulate", help="write a simulated recording with ground truth")
+    p.add_argument("--scenario", required=True)
+    p.add_argument("--frames", type=int, required=True)
+    p.add_argument("--out", required=True)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--catalog")
+    p = sub.add_parser("render", help="write gray and distance PNGs of a scenario frame")
+    p.add_argument("--scenario", default="stability-697")
+    p.add_argument("--out-prefix", required=True)
+    p.add_argument("--seed", type=int, default=0)
+    p = sub.add_parser("demo", help="simulate, estimate and print estimate vs truth")
+    p.add_argument("--frames", type=int, default=48)
+    args = ap.parse_args(argv)
+    try:
+        if args.cmd == "estimate":
+            s = estimate(args.recording, args.out, args.catalog, args.camera)
+            print(f"{s['ok']}/{s['frames']} frames with a pose -> {args.out}")
+        elif args.cmd == "simulate":
+            if args.frames < 1:
+                raise SystemExit("tofpose: --frames must be >= 1")
+            simulate(args.scenario, args.frames, args.out, args.seed, args.catalog)
+            print(f"wrote {args.frames} frames -> {args.out}")
+        elif args.cmd == "render":
+            for path in render_pngs(args.scenario, args.out_prefix, args.seed):
+                print(path)
+        elif args.cmd == "demo":
+            return demo(args.frames)
+    except (RecordingError, ValueError) as exc:
+        print(f"tofpose: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,241 @@
+"""HDF5 recordings (DESIGN.md §7): one file per recording, frames with optional truth.
+
+::
+
+    /            attrs: format = "tofpose-recording", version = 1
+    /camera      attrs: width, height, fx, fy, cx, cy, dist (5), name
+    /catalog     attrs: json                                              optional
+    /frames/gray          uint16  (N, H, W)
+    /frames/distance_mm   float32 (N, H, W)  radial distance, NaN = invalid
+    /frames/time_s        float64 (N,)
+    /truth/R_camera_target     float64 (N, 3, 3)                          optional
+    /truth/t_camera_target_mm  float64 (N, 3)                             optional
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from tofpose.camera import CameraModel
+from tofpose.catalog import Catalog
+
+FORMAT = "tofpose-recording"
+VERSION = 1
+
+
+class RecordingError(ValueError):
+    """A recording that cannot be read: names the file and what is wrong."""
+
+
+class RecordingWriter:
+    """Append frames to a new recording. Use as a context manager.
+
+    Frames are written in chunks of one frame (resizable datasets), so a recording
+    interrupted part-way still holds every frame written before the interruption.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        camera: CameraModel,
+        catalog: Catalog | None = None,
+        *,
+        with_truth: bool = False,
+        compression: str | None = "gzip",
+    ) -> None:
+        self.path = Path(path)
+        self.camera = camera
+        self._f = h5py.File(self.path, "w")
+        f = self._f
+        f.attrs["format"] = FORMAT
+        f.attrs["version"] = VERSION
+        cam = f.create_group("camera")
+        for k in ("width", "height", "fx", "fy", "cx", "cy"):
+            cam.attrs[k] = getattr(camera, k)
+        cam.attrs["dist"] = np.asarray(camera.dist, float)
+        cam.attrs["name"] = camera.name
+        if catalog is not None:
+            f.create_group("catalog").attrs["json"] = catalog.to_json()
+        h, w = camera.height, camera.width
+        fr = f.create_group("frames")
+        opts = {"compression": compression, "compression_opts": 1} if compression == "gzip" else {}
+        self._gray = fr.create_dataset(
+            "gray", (0, h, w), np.uint16, maxshape=(None, h, w), chunks=(1, h, w), **opts
+        )
+        self._dist = fr.create_dataset(
+            "distance_mm", (0, h, w), np.float32, maxshape=(None, h, w), chunks=(1, h, w), **opts
+        )
+        self._time = fr.create_dataset("time_s", (0,), np.float64, maxshape=(None,), chunks=(1024,))
+        self._truth = with_truth
+        if with_truth:
+            tr = f.create_group("truth")
+            self._R = tr.create_dataset(
+                "R_camera_target", (0, 3, 3), np.float64, maxshape=(None, 3, 3), chunks=(256, 3, 3)
+            )
+            self._t = tr.create_dataset(
+                "t_camera_target_mm", (0, 3), np.float64, maxshape=(None, 3), chunks=(256, 3)
+            )
+        self.n = 0
+
+    def append(
+        self,
+        gray: np.ndarray,
+        distance_mm: np.ndarray,
+        time_s: float,
+        R_camera_target: np.ndarray | None = None,
+        t_camera_target_mm: np.ndarray | None = None,
+    ) -> None:
+        """Add one frame; truth is required iff the writer was opened ``with_truth``."""
+        shape = (self.camera.height, self.camera.width)
+        if gray.shape != shape or distance_mm.shape != shape:
+            raise ValueError(f"frame shapes {gray.shape}, {distance_mm.shape} != camera {shape}")
+        n = self.n
+        for ds in (self._gray, self._dist, self._time):
+            ds.resize(n + 1, axis=0)
+        self._gray[n] = gray.astype(np.uint16)
+        self._dist[n] = distance_mm.astype(np.float32)
+        self._time[n] = time_s
+        if self._truth:
+            if R_camera_target is None or t_camera_target_mm is None:
+                raise ValueError("this recording stores truth: pass R and t for every frame")
+            self._R.resize(n + 1, axis=0)
+            self._t.resize(n + 1, axis=0)
+            self._R[n] = R_camera_target
+            self._t[n] = t_camera_target_mm
+        self.n += 1
+
+    def close(self) -> None:
+        if self._f.id.valid:
+            self._f.close()
+
+    def __enter__(self) -> RecordingWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+@dataclass
+class Recording:
+    """An open recording (read-only). Frames are read lazily; use as a context manager.
+
+    camera : CameraModel; catalog : Catalog or None; n_frames : int;
+    time_s : ndarray (N,); truth_R : ndarray (N, 3, 3) or None; truth_t_mm : (N, 3) or None.
+    """
+
+    path: Path
+    camera: CameraModel
+    catalog: Catalog | None
+    n_frames: int
+    time_s: np.ndarray
+    truth_R: np.ndarray | None
+    truth_t_mm: np.ndarray | None
+    _file: h5py.File
+
+    def frame(self, i: int) -> tuple[np.ndarray, np.ndarray, float]:
+        """(gray (H, W) uint16, distance (H, W) float32, time_s) of frame i."""
+        if not 0 <= i < self.n_frames:
+            raise IndexError(f"frame {i} out of range 0..{self.n_frames - 1}")
+        try:
+            g = self._file["frames/gray"][i]
+            d = self._file["frames/distance_mm"][i]
+        except (OSError, KeyError) as exc:
+            raise RecordingError(f"{self.path}: frame {i} cannot be read ({exc})") from exc
+        return g, d, float(self.time_s[i])
+
+    def frames(self) -> Iterator[tuple[np.ndarray, np.ndarray, float]]:
+        for i in range(self.n_frames):
+            yield self.frame(i)
+
+    def close(self) -> None:
+        if self._file.id.valid:
+            self._file.close()
+
+    def __enter__(self) -> Recording:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def open_recording(path: str | Path) -> Recording:
+    """Open and validate a recording; raises ``RecordingError`` naming the problem."""
+    path = Path(path)
+    if not path.exists():
+        raise RecordingError(f"{path}: no such file")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise RecordingError(f"{path}: not a readable HDF5 file ({exc})") from exc
+    try:
+        if f.attrs.get("format") != FORMAT:
+            raise RecordingError(
+                f"{path}: not a tofpose recording (format attribute is {f.attrs.get('format')!r})"
+            )
+        version = int(f.attrs.get("version", -1))
+        if version != VERSION:
+            raise RecordingError(
+                f"{path}: unsupported recording version {version} (expected {VERSION})"
+            )
+        if "camera" not in f:
+            raise RecordingError(f"{path}: missing the /camera group")
+        cam_attrs = {
+            k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in f["camera"].attrs.items()
+        }
+        if isinstance(cam_attrs.get("name"), bytes):
+            cam_attrs["name"] = cam_attrs["name"].decode()
+        try:
+            camera = CameraModel.from_dict(cam_attrs)
+        except ValueError as exc:
+            raise RecordingError(f"{path}: /camera attributes are invalid ({exc})") from exc
+        catalog = None
+        if "catalog" in f:
+            try:
+                catalog = Catalog.from_json(str(f["catalog"].attrs["json"]))
+            except (KeyError, ValueError) as exc:
+                raise RecordingError(f"{path}: /catalog is invalid ({exc})") from exc
+        for name in ("frames/gray", "frames/distance_mm", "frames/time_s"):
+            if name not in f:
+                raise RecordingError(f"{path}: missing dataset /{name}")
+        g, d, t = f["frames/gray"], f["frames/distance_mm"], f["frames/time_s"]
+        shape = (camera.height, camera.width)
+        for ds in (g, d):
+            if ds.ndim != 3 or ds.shape[1:] != shape:
+                raise RecordingError(
+                    f"{path}: /{ds.name.lstrip('/')} has shape {ds.shape}, "
+                    f"expected (N, {shape[0]}, {shape[1]})"
+                )
+        if g.dtype != np.uint16:
+            raise RecordingError(f"{path}: /frames/gray must be uint16, is {g.dtype}")
+        if d.dtype.kind != "f":
+            raise RecordingError(f"{path}: /frames/distance_mm must be float, is {d.dtype}")
+        n = g.shape[0]
+        if d.shape[0] != n or t.shape != (n,):
+            raise RecordingError(
+                f"{path}: frame counts disagree (gray {n}, distance {d.shape[0]}, "
+                f"time_s {t.shape[0]})"
+            )
+        truth_R = truth_t = None
+        if "truth" in f:
+            if "truth/R_camera_target" not in f or "truth/t_camera_target_mm" not in f:
+                raise RecordingError(
+                    f"{path}: /truth needs both R_camera_target and t_camera_target_mm"
+                )
+            truth_R = f["truth/R_camera_target"][...]
+            truth_t = f["truth/t_camera_target_mm"][...]
+            if truth_R.shape != (n, 3, 3) or truth_t.shape != (n, 3):
+                raise RecordingError(
+                    f"{path}: truth shapes {truth_R.shape}, {truth_t.shape} do not match {n} frames"
+                )
+        return Recording(path, camera, catalog, n, t[...], truth_R, truth_t, f)
+    except RecordingError:
+        f.close()
+        raise
+    except (OSError, KeyError) as exc:
+        f.close()
+        raise RecordingError(f"{path}: corrupt recording ({exc})") from exc

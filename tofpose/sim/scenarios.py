@@ -1,0 +1,162 @@
+"""Named simulation scenarios and the frame generator that writes recordings.
+
+A scenario is a bench (geometry, sensor, scene) and a schedule of set-points; each
+set-point is approached under the turntable's limits, then frames are captured at the
+frame rate while the axes dwell. ``run_scenario`` yields ``BenchFrame``s in simulated time.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from tofpose.catalog import Catalog, paper_target
+from tofpose.geometry import RigidTransform
+from tofpose.sim.bench import BenchFrame, LabGeometry, SimulatedBench
+from tofpose.sim.render import AMBIENT_HIGH_LUX, SensorModel
+from tofpose.sim.scene import Clutter, TargetScene
+from tofpose.sim.turntable import Turntable
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A bench set-up and a schedule.
+
+    setpoints : list of axis dicts (deg / mm); frames are split evenly between them.
+    frame_rate_hz : capture rate while dwelling.
+    """
+
+    name: str
+    description: str
+    geometry: LabGeometry
+    sensor: SensorModel = field(default_factory=SensorModel)
+    clutter: tuple[Clutter, ...] = ()
+    setpoints: tuple[dict[str, float], ...] = ({},)
+    frame_rate_hz: float = 30.0
+
+
+def _paper_mount_error() -> RigidTransform:
+    """A small unknown installation error (§6.4): 0.3 deg and ~2 mm."""
+    return RigidTransform.from_euler_deg(0.2, -0.25, 0.1, (1.5, -1.0, 0.5))
+
+
+def _stability(distance_mm: float) -> Scenario:
+    return Scenario(
+        f"stability-{int(distance_mm)}",
+        f"static target at {distance_mm:.0f} mm, the paper's Tables 1-3 set-up",
+        LabGeometry(
+            target_distance_mm=distance_mm,
+            target_offset_mm=(2.0, -10.0),
+            mount_error=_paper_mount_error(),
+        ),
+    )
+
+
+def _range_sweep() -> Scenario:
+    rails = np.concatenate((np.linspace(0, 13000, 14), [14000, 14300, 14500, 14700]))
+    return Scenario(
+        "range-sweep",
+        "rail moves the camera from 15 m to 0.3 m from the target",
+        LabGeometry(target_distance_mm=15000.0, target_offset_mm=(0.0, -30.0)),
+        setpoints=tuple({"rail": float(r)} for r in rails),
+    )
+
+
+def _attitude_grid() -> Scenario:
+    pts = []
+    for rail in (13000.0, 11000.0, 8000.0):  # 2, 4 and 7 m
+        for pitch, yaw, roll in (
+            (0, 0, 0),
+            (3, 0, 0),
+            (-3, 0, 0),
+            (0, 3, 0),
+            (0, -3, 0),
+            (0, 0, 20),
+            (0, 0, -36),
+            (2, -2, 10),
+        ):
+            pts.append(
+                {"rail": rail, "pitch": float(pitch), "yaw": float(yaw), "roll": float(roll)}
+            )
+    return Scenario(
+        "attitude-grid",
+        "turntable attitude steps at 2, 4 and 7 m",
+        LabGeometry(target_distance_mm=15000.0, target_offset_mm=(0.0, -30.0)),
+        setpoints=tuple(pts),
+    )
+
+
+def _high_ambient() -> Scenario:
+    return Scenario(
+        "high-ambient",
+        "static target at 3 m under 10000 lux (§2.1 high light)",
+        LabGeometry(target_distance_mm=3000.0, target_offset_mm=(0.0, -30.0)),
+        sensor=SensorModel(ambient_lux=AMBIENT_HIGH_LUX),
+    )
+
+
+def _clutter() -> Scenario:
+    clutter = (
+        Clutter((250.0, 180.0, 20.0), 60.0, 1.2),
+        Clutter((-420.0, -230.0, 10.0), 40.0, 0.8),
+        Clutter((0.0, 0.0, 5.0), 50.0, 1.0),
+        Clutter((650.0, 0.0, -100.0), 70.0, 1.5),
+    )
+    return Scenario(
+        "clutter",
+        "target at 2.5 m with four extra bright spurious reflections",
+        LabGeometry(target_distance_mm=2500.0, target_offset_mm=(0.0, -30.0)),
+        clutter=clutter,
+    )
+
+
+SCENARIOS: dict[str, Callable[[], Scenario]] = {
+    "stability-697": lambda: _stability(697.0),
+    "stability-5712": lambda: _stability(5712.0),
+    "range-sweep": _range_sweep,
+    "attitude-grid": _attitude_grid,
+    "high-ambient": _high_ambient,
+    "clutter": _clutter,
+}
+
+
+def get_scenario(name: str) -> Scenario:
+    """A named scenario; ``ValueError`` listing the names for an unknown one."""
+    if name not in SCENARIOS:
+        raise ValueError(f"unknown scenario {name!r}; choose one of {', '.join(SCENARIOS)}")
+    return SCENARIOS[name]()
+
+
+def make_bench(scenario: Scenario, catalog: Catalog | None = None, seed: int = 0) -> SimulatedBench:
+    scene = TargetScene(catalog=catalog or paper_target(), clutter=scenario.clutter)
+    return SimulatedBench(
+        scene=scene,
+        sensor=scenario.sensor,
+        geometry=replace(scenario.geometry),
+        turntable=Turntable(seed=seed + 1),
+        seed=seed,
+    )
+
+
+def run_scenario(
+    scenario: Scenario, n_frames: int, *, seed: int = 0, catalog: Catalog | None = None
+) -> Iterator[BenchFrame]:
+    """Yield ``n_frames`` captures: for each set-point, move, wait until settled, dwell."""
+    if n_frames < 1:
+        raise ValueError("n_frames must be >= 1")
+    bench = make_bench(scenario, catalog, seed)
+    n_sp = len(scenario.setpoints)
+    per = np.diff(np.linspace(0, n_frames, n_sp + 1).round().astype(int))
+    t = 0.0
+    dt = 1.0 / scenario.frame_rate_hz
+    for sp, count in zip(scenario.setpoints, per, strict=True):
+        if count == 0:
+            continue
+        if sp:
+            bench.turntable.move_to(sp, t)
+            t = bench.turntable.settle_time(t)
+        for _ in range(count):
+            yield bench.capture(t)
+            t += dt
