@@ -49,11 +49,11 @@ class ExtractionConfig:
     nlog_sigma_px : paper preset only (fixed numbers, no range adaptivity).
     """
 
-    raw_threshold_rel: float = 0.2
+    raw_threshold_rel: float = 0.15
     noise_floor_sigma: float = 6.0
     min_contrast_counts: float = 25.0
     n_max: int = 120 * 100
-    peak_rel: float = 0.35
+    peak_rel: float = 0.25
     nlog_peak_rel: float = 0.15
     nlog_floor_rel: float = -0.05
     max_tilt_deg: float = 72.0

@@ -38,9 +38,12 @@ class MatchingConfig:
     alpha_mm, alpha_per_m : distance tolerance alpha = alpha_mm + alpha_per_m * range_m.
     psi_start, psi_end : inverse temperature range in units of 1 / alpha^2.
     growth : c of Eq. 35 (psi_{m+1} = c psi_m).
-    clip_factor : rho is clipped at clip_factor * alpha.
+    clip_factor : rho is clipped at clip_factor * alpha; with 1 (default) a pair supports
+        an assignment by up to alpha^2 and an incompatible pair costs nothing, so the
+        null label (energy 0) wins exactly when a blob has no support.
     size_weight : weight (in alpha^2 units) of the apparent-size unary term; 0 disables.
-    residual_factor : rigid residual tolerance = residual_factor * alpha.
+    residual_factor : rigid residual tolerance per pair is clip(4 sigma, alpha,
+        residual_factor * alpha), sigma from the weights when given.
     min_matches : fewest matched reflectors for a pose.
     """
 
@@ -194,8 +197,12 @@ def match_reflectors(
     A, iters = anneal(P, unary, alpha, cfg)
     pairs, unmatched = one_to_one(A)
     w = np.ones(g) if weights is None else np.asarray(weights, float)
+    # Per-pair tolerance: 4 sigma of that measurement (weights are 1 / sigma^2), at
+    # least alpha, at most residual_factor * alpha.
+    sigma = 1.0 / np.sqrt(w) if weights is not None else np.full(g, alpha)
+    tol = np.clip(4.0 * sigma, alpha, cfg.residual_factor * alpha)
     pairs, rejected, reason = rigid_residual_check(
-        observed_mm, catalog_mm, pairs, w, cfg.residual_factor * alpha, cfg.min_matches
+        observed_mm, catalog_mm, pairs, w, tol, cfg.min_matches
     )
     unmatched = sorted(set(unmatched) | set(rejected))
     return MatchResult(pairs, unmatched, A, iters, alpha, reason)
@@ -206,10 +213,12 @@ def rigid_residual_check(
     catalog_mm: np.ndarray,
     pairs: np.ndarray,
     weights: np.ndarray,
-    tol_mm: float,
+    tol_mm: float | np.ndarray,
     min_matches: int,
 ) -> tuple[np.ndarray, list[int], str]:
-    """Drop the worst pair until every rigid-fit residual is within ``tol_mm``.
+    """Drop the worst pair until every rigid-fit residual is within its tolerance.
+
+    ``tol_mm`` is a scalar or one tolerance per observed reflector (gamma,).
 
     Returns (pairs kept (m, 2), observed indices rejected, reason or "").
     """
@@ -220,8 +229,9 @@ def rigid_residual_check(
         x = catalog_mm[pairs[:, 1]]
         R, t = weighted_svd(x, y, weights[pairs[:, 0]])
         res = np.linalg.norm(y - (x @ R.T + t), axis=1)
-        worst = int(np.argmax(res))
-        if res[worst] <= tol_mm:
+        tol = np.broadcast_to(np.asarray(tol_mm, float), (len(observed_mm),))[pairs[:, 0]]
+        worst = int(np.argmax(res / tol))
+        if res[worst] <= tol[worst]:
             return pairs, rejected, ""
         rejected.append(int(pairs[worst, 0]))
         pairs = np.delete(pairs, worst, axis=0)
@@ -229,5 +239,5 @@ def rigid_residual_check(
         np.empty((0, 2), int),
         rejected + [int(k) for k in pairs[:, 0]],
         f"no rigidly consistent match of >= {min_matches} reflectors "
-        f"(residual tolerance {tol_mm:.1f} mm)",
+        f"(residual tolerance up to {np.max(tol_mm):.1f} mm)",
     )

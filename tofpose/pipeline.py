@@ -54,6 +54,9 @@ class PipelineConfig:
     correct_perspective_bias : shift centroids by the predicted offset between the image
         ellipse's centre and the projected disc centre, then re-solve.
     ellipse_confirmation : run §3.3 (confirm candidate shapes, split merged components).
+    verify_pose : refuse a pose that makes the target face away from the camera (beyond
+        ``max_view_angle_deg``) or that predicts a well-resolved reflector where the
+        frame has no bright pixel (catches congruent-triangle mismatches with 3 markers).
     centroid_sigma_floor_px, range_sigma_floor_mm : floors of the per-reflector
         measurement sigmas used as weights and in the covariance.
     """
@@ -64,6 +67,8 @@ class PipelineConfig:
     refinement: Refinement = "ml"
     correct_perspective_bias: bool = True
     ellipse_confirmation: bool = True
+    verify_pose: bool = True
+    max_view_angle_deg: float = 80.0
     centroid_sigma_floor_px: float = 0.03
     range_sigma_floor_mm: float = 1.0
     los_tolerance: float = 0.002
@@ -188,7 +193,7 @@ class PosePipeline:
                 f"no reflector contrast: brightest pixel {stats.i_max:.0f} counts over a "
                 f"background of {stats.background:.0f} (all-dark frame?)"
             )
-        blobs, oversize, _ = find_candidate_blobs(
+        blobs, oversize, active = find_candidate_blobs(
             g, d, self.camera, self._catalog_d, cfg.extraction, stats
         )
         timer.lap("blobs")
@@ -273,6 +278,14 @@ class PosePipeline:
         if cfg.refinement == "ml":
             R, t, iterations = ml.R, ml.t, ml.iterations
         timer.lap("refine")
+        if cfg.verify_pose:
+            problem = self._verify(R, t, active, set(int(i) for i in i_idx))
+            if problem:
+                return fail(
+                    f"pose rejected: {problem}",
+                    unmatched=unmatched + [(u[0], u[1], r) for u, r in zip(uv, rho, strict=True)],
+                    **extra,
+                )
 
         pred = x @ R.T + t
         res = np.linalg.norm(y_m - pred, axis=1)
@@ -339,6 +352,41 @@ class PosePipeline:
             return float(max(b.ellipse[1]))
         x, y, bw, bh = b.bbox
         return float(max(bw, bh, 2.0 * np.sqrt(b.area_px / np.pi)))
+
+    def _verify(self, R, t, active: np.ndarray, matched: set[int]) -> str:
+        """Physical consistency of a pose with the frame; empty string when consistent."""
+        to_camera = -(R @ self._catalog_xyz.mean(axis=0) + t)
+        cos_view = float(R[:, 2] @ to_camera / np.linalg.norm(to_camera))
+        if cos_view < np.cos(np.radians(self.config.max_view_angle_deg)):
+            return (
+                f"the target would face away from the camera (view angle "
+                f"{np.degrees(np.arccos(np.clip(cos_view, -1, 1))):.0f} deg)"
+            )
+        centres = self._catalog_xyz @ R.T + t
+        if np.any(centres[:, 2] <= 0):
+            return "reflectors would be behind the camera"
+        uv = self.camera.project(centres)
+        d_px = self.camera.fx * self._catalog_d / centres[:, 2]
+        h, w = active.shape
+        for i in range(len(centres)):
+            if i in matched or d_px[i] < 2.5:
+                continue
+            u, v = uv[i]
+            m = 0.75 * d_px[i] + 2
+            if not (m <= u < w - m and m <= v < h - m):
+                continue
+            sep = np.linalg.norm(uv - uv[i], axis=1)
+            sep[i] = np.inf
+            if np.min(sep) < 1.5 * d_px[i]:
+                continue  # would merge with a neighbour: no clean prediction
+            r = max(1, int(round(d_px[i] / 3)))
+            iu, iv = int(round(u)), int(round(v))
+            if not active[iv - r : iv + r + 1, iu - r : iu + r + 1].any():
+                return (
+                    f"reflector {int(self._catalog_ids[i])} should be visible at "
+                    f"({u:.0f}, {v:.0f}) px but the frame is dark there"
+                )
+        return ""
 
     def _complete(self, y, w, k_idx, i_idx, R, t, tol_mm):
         """Add unmatched blobs that sit on a predicted unmatched reflector (ours)."""

@@ -1,0 +1,101 @@
+import numpy as np
+import pytest
+
+from tests.conftest import facing_pose, render
+from tofpose.camera import CameraModel
+from tofpose.catalog import paper_target
+from tofpose.geometry import RigidTransform
+from tofpose.sim.render import SPEED_OF_LIGHT_MM_S, SensorModel
+from tofpose.sim.scene import FIRST_DISC, PLATE, TargetScene
+
+
+def test_reflector_centre_and_size_follow_the_pinhole_model():
+    cam, cat = CameraModel(), paper_target()
+    T = facing_pose(2000.0, offset_mm=(10.0, 20.0))
+    f = render(T, noise=False)
+    centres = T.apply(cat.positions_mm)
+    uv = cam.project(centres)
+    for k in range(len(cat)):
+        m = f.surface_id == FIRST_DISC + k
+        if not m.any():
+            continue
+        rows, cols = np.nonzero(m)
+        # pixel-centre sampling quantises the disc: tolerance shrinks with its area
+        tol = max(0.05, 1.5 / np.sqrt(m.sum()))
+        np.testing.assert_allclose([cols.mean(), rows.mean()], uv[k], atol=tol)
+        expected_area = np.pi * (cam.fx * cat.diameters_mm[k] / 2 / centres[k, 2]) ** 2
+        assert m.sum() == pytest.approx(expected_area, rel=0.1)
+
+
+def test_noiseless_distance_is_exact_ray_intersection():
+    cam = CameraModel()
+    T = facing_pose(1800.0, 10, -8, 5)
+    f = render(T, noise=False, sensor=SensorModel(noise=False, supersampling=1))
+    n, p0 = T.R[:, 2], T.t_mm
+    e = cam.pixel_bearings()
+    plate = f.surface_id == PLATE
+    s = (p0 @ n) / (e[plate] @ n)  # exact ray-plane distance
+    np.testing.assert_allclose(f.distance_mm[plate], s, rtol=1e-6)
+    disc = f.surface_id == FIRST_DISC + 5
+    c = T.apply(paper_target().positions_mm[5])
+    np.testing.assert_allclose(f.distance_mm[disc], (c @ n) / (e[disc] @ n), rtol=1e-6)
+
+
+@pytest.mark.parametrize("distance_mm", [1500.0, 6000.0])
+@pytest.mark.parametrize("lux", [1000.0, 10000.0])
+def test_distance_noise_matches_cw_tof_model(distance_mm, lux):
+    sensor = SensorModel(ambient_lux=lux, supersampling=1)
+    T = facing_pose(distance_mm)
+    frames = [render(T, seed=s, sensor=sensor) for s in range(60)]
+    f0 = frames[0]
+    stack = np.stack([f.distance_mm for f in frames])
+    interior = (f0.surface_id >= FIRST_DISC) & np.isfinite(stack).all(axis=0)
+    # interior pixels only: their 3x3 neighbourhood is the same disc
+    import cv2
+
+    same = cv2.erode((f0.surface_id >= FIRST_DISC).astype(np.uint8), np.ones((3, 3))) > 0
+    sel = interior & same
+    assert sel.sum() >= 4
+    emp = stack[:, sel].std(axis=0, ddof=1)
+    model = sensor.distance_sigma_mm(f0.amplitude[sel], f0.background[sel])
+    assert np.median(emp / model) == pytest.approx(1.0, abs=0.1)
+
+
+def test_edge_pixel_reads_between_the_two_surfaces():
+    T = facing_pose(1500.0)
+    f = render(T, noise=False)
+    import cv2
+
+    disc = (f.surface_id == FIRST_DISC + 5).astype(np.uint8)
+    ring = (cv2.dilate(disc, np.ones((3, 3))) > 0) & (disc == 0) & (f.surface_id == PLATE)
+    d_disc = np.nanmedian(f.distance_mm[disc > 0])
+    d_plate = np.nanmedian(f.distance_mm[ring])
+    mixed = [v for v in f.true_distance_mm[ring] if d_disc + 1 < v < d_plate - 1]
+    assert len(mixed) > 0, "no flying pixel between reflector and plate"
+
+
+def test_phase_wraps_at_the_unambiguous_range():
+    sensor = SensorModel(modulation_frequency_hz=20e6, noise=False, supersampling=1)
+    amb = SPEED_OF_LIGHT_MM_S / 2 / 20e6
+    assert sensor.unambiguous_range_mm == pytest.approx(7494.8, abs=0.1)
+    T = facing_pose(amb + 500.0)
+    f = render(T, sensor=sensor, noise=False)
+    plate = f.surface_id == FIRST_DISC + 5
+    true = np.linalg.norm(T.apply(paper_target().positions_mm[5]))
+    np.testing.assert_allclose(np.median(f.distance_mm[plate]), true - amb, atol=1.0)
+
+
+def test_same_seed_same_frames_and_saturation_flags():
+    T = facing_pose(2000.0)
+    a, b = render(T, seed=7), render(T, seed=7)
+    np.testing.assert_array_equal(a.gray, b.gray)
+    np.testing.assert_array_equal(a.distance_mm, b.distance_mm)
+    hot = render(T, sensor=SensorModel(auto_exposure=False, integration_time_us=4000.0), seed=1)
+    sat = hot.gray == 4095
+    assert sat.any() and np.isnan(hot.distance_mm[sat]).all()
+
+
+def test_target_behind_camera_is_an_error():
+    T = RigidTransform(np.eye(3), np.array([0.0, 0.0, -500.0]))
+    with pytest.raises(ValueError, match="behind the camera"):
+        render(T, noise=False, scene=TargetScene())

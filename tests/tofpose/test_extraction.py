@@ -1,0 +1,108 @@
+import numpy as np
+import pytest
+
+from tests.conftest import facing_pose, render
+from tofpose.camera import CameraModel
+from tofpose.catalog import paper_target
+from tofpose.extraction import (
+    ExtractionConfig,
+    FrameError,
+    active_pixel_mask,
+    check_frame,
+    disc_image_centre_offset_px,
+    find_candidate_blobs,
+    frame_levels,
+    measure_blobs,
+    nlog_response,
+)
+
+
+def _blobs(frame, cfg=None, camera=None):
+    camera = camera or CameraModel()
+    cfg = cfg or ExtractionConfig()
+    g, d = check_frame(camera, frame.gray, frame.distance_mm)
+    stats = frame_levels(g, cfg)
+    blobs, _, _ = find_candidate_blobs(g, d, camera, paper_target().diameters_mm, cfg, stats)
+    measure_blobs(blobs, g, d, camera, stats.background)
+    return blobs
+
+
+@pytest.mark.parametrize(
+    ("distance_mm", "angles"),
+    [(1000.0, (0, 0, 0)), (1500.0, (6, -5, 15)), (2000.0, (20, -4, 10)), (3000.0, (-10, 12, -30))],
+)
+def test_centroids_match_projected_centres_on_noiseless_frames(distance_mm, angles):
+    """Sub-0.1 px after removing the perspective (ellipse-centre) bias; ranges to 0.5 %."""
+    cam, cat = CameraModel(), paper_target()
+    T = facing_pose(distance_mm, *angles, offset_mm=(30.0, -40.0))
+    blobs = _blobs(render(T, noise=False))
+    centres = T.apply(cat.positions_mm)
+    uv_true = cam.project(centres)
+    assert len(blobs) >= 5
+    worst_raw, worst = 0.0, 0.0
+    for b in blobs:
+        k = int(np.argmin(np.linalg.norm(uv_true - b.centroid_uv, axis=1)))
+        off = disc_image_centre_offset_px(cam, centres[k], T.R[:, 2], cat.diameters_mm[k] / 2)
+        worst_raw = max(worst_raw, np.linalg.norm(b.centroid_uv - uv_true[k]))
+        worst = max(worst, np.linalg.norm(b.centroid_uv - off - uv_true[k]))
+        assert b.distance_mm == pytest.approx(np.linalg.norm(centres[k]), rel=5e-3, abs=1.0)
+    assert worst < 0.1, f"worst corrected centroid error {worst:.3f} px (raw {worst_raw:.3f})"
+
+
+def test_perspective_offset_vanishes_for_fronto_parallel_disc():
+    cam = CameraModel()
+    off = disc_image_centre_offset_px(cam, np.array([300.0, -200.0, 1500.0]), np.array([0, 0, -1.0]), 40.0)
+    np.testing.assert_allclose(off, 0.0, atol=1e-9)
+    tilted = disc_image_centre_offset_px(cam, np.array([0.0, 0.0, 800.0]), np.array([0, -0.5, -0.866]), 40.0)
+    assert np.linalg.norm(tilted) > 0.05
+
+
+def test_active_set_is_capped_dimmest_first():
+    rng = np.random.default_rng(0)
+    g = rng.uniform(0, 1000, (240, 320)).astype(np.float32)
+    stats = frame_levels(g, ExtractionConfig(raw_threshold_abs=100.0))
+    mask = active_pixel_mask(g, stats, n_max=500)
+    assert stats.n_active == mask.sum() == 500
+    assert g[mask.astype(bool)].min() >= np.sort(g.ravel())[-500]
+
+
+def test_nlog_scale_normalised_disc_response_is_2_over_e():
+    v, u = np.mgrid[0:101, 0:101]
+    r = 12.0
+    img = ((u - 50) ** 2 + (v - 50) ** 2 <= r * r).astype(np.float32) * 100.0
+    j = nlog_response(img, r / np.sqrt(2))
+    assert j[50, 50] == pytest.approx(100 * 2 / np.e, rel=0.06)
+
+
+def test_size_gate_follows_range():
+    """The same physical 80 mm marker is accepted at 1 m and 6 m; a disc twice too big is not."""
+    for z in (1000.0, 6000.0):
+        assert any(b.area_px > 0 for b in _blobs(render(facing_pose(z), noise=False)))
+    from tofpose.catalog import Catalog, Reflector
+    from tofpose.sim.scene import TargetScene
+
+    big = Catalog("big", tuple(Reflector(i, (x, y, 100.0), 200.0) for i, x, y in
+                               ((1, -200, 0), (2, 0, 100), (3, 200, -50))))
+    frame = render(facing_pose(2000.0), noise=False, scene=TargetScene(catalog=big))
+    assert _blobs(frame) == []
+
+
+@pytest.mark.parametrize(
+    ("gray", "dist", "msg"),
+    [
+        (np.zeros((240, 300), np.uint16), np.zeros((240, 320), np.float32), "gray image has shape"),
+        (np.zeros((240, 320), np.uint16), np.zeros((24, 32), np.float32), "distance image has shape"),
+        (np.zeros((240, 320), bool), np.zeros((240, 320), np.float32), "integer counts"),
+        (np.zeros((240, 320), np.uint16), np.zeros((240, 320), np.int32), "float mm"),
+    ],
+)
+def test_check_frame_names_the_problem(gray, dist, msg):
+    with pytest.raises(FrameError, match=msg):
+        check_frame(CameraModel(), gray, dist)
+
+
+def test_check_frame_turns_inf_and_negative_into_nan():
+    d = np.full((240, 320), 1000.0, np.float32)
+    d[0, 0], d[0, 1], d[0, 2] = np.inf, -5.0, np.nan
+    _, out = check_frame(CameraModel(), np.zeros((240, 320), np.uint16), d)
+    assert np.isnan(out[0, :3]).all() and np.isfinite(out[1:]).all()
