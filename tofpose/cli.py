@@ -173,8 +173,9 @@ def demo(n_frames: int = 48, seed: int = 1) -> int:
                     errs.append((dp, da))
                     print(
                         f"{'':>5} {1:>2} {row['n_matched']:>2} | {t_m[0]:8.2f} {t_m[1]:8.2f} "
-                        f"{t_m[2]:9.2f} {float(row['pitch_deg']):8.3f} {float(row['yaw_deg']):7.3f} "
-                        f"{float(row['roll_deg']):7.3f} | {dp:7.2f} {da:8.3f}"
+                        f"{t_m[2]:9.2f} {float(row['pitch_deg']):8.3f} "
+                        f"{float(row['yaw_deg']):7.3f} {float(row['roll_deg']):7.3f} | "
+                        f"{dp:7.2f} {da:8.3f}"
                     )
                 else:
                     print(f"{'':>5} {0:>2} {row['n_matched']:>2} | (no pose)")

@@ -16,7 +16,9 @@ def test_epc660_defaults_match_paper_fov():
 def test_project_back_project_round_trip(dist):
     cam = CameraModel(dist=dist)
     rng = np.random.default_rng(1)
-    p = np.column_stack((rng.uniform(-800, 800, 50), rng.uniform(-600, 600, 50), rng.uniform(1000, 9000, 50)))
+    p = np.column_stack(
+        (rng.uniform(-800, 800, 50), rng.uniform(-600, 600, 50), rng.uniform(1000, 9000, 50))
+    )
     uv = cam.project(p)
     back = cam.back_project(uv, np.linalg.norm(p, axis=1))
     np.testing.assert_allclose(back, p, atol=1e-3)

@@ -51,9 +51,13 @@ def test_centroids_match_projected_centres_on_noiseless_frames(distance_mm, angl
 
 def test_perspective_offset_vanishes_for_fronto_parallel_disc():
     cam = CameraModel()
-    off = disc_image_centre_offset_px(cam, np.array([300.0, -200.0, 1500.0]), np.array([0, 0, -1.0]), 40.0)
+    off = disc_image_centre_offset_px(
+        cam, np.array([300.0, -200.0, 1500.0]), np.array([0, 0, -1.0]), 40.0
+    )
     np.testing.assert_allclose(off, 0.0, atol=1e-9)
-    tilted = disc_image_centre_offset_px(cam, np.array([0.0, 0.0, 800.0]), np.array([0, -0.5, -0.866]), 40.0)
+    tilted = disc_image_centre_offset_px(
+        cam, np.array([0.0, 0.0, 800.0]), np.array([0, -0.5, -0.866]), 40.0
+    )
     assert np.linalg.norm(tilted) > 0.05
 
 
@@ -81,8 +85,13 @@ def test_size_gate_follows_range():
     from tofpose.catalog import Catalog, Reflector
     from tofpose.sim.scene import TargetScene
 
-    big = Catalog("big", tuple(Reflector(i, (x, y, 100.0), 200.0) for i, x, y in
-                               ((1, -200, 0), (2, 0, 100), (3, 200, -50))))
+    big = Catalog(
+        "big",
+        tuple(
+            Reflector(i, (x, y, 100.0), 200.0)
+            for i, x, y in ((1, -200, 0), (2, 0, 100), (3, 200, -50))
+        ),
+    )
     frame = render(facing_pose(2000.0), noise=False, scene=TargetScene(catalog=big))
     assert _blobs(frame) == []
 
@@ -91,7 +100,11 @@ def test_size_gate_follows_range():
     ("gray", "dist", "msg"),
     [
         (np.zeros((240, 300), np.uint16), np.zeros((240, 320), np.float32), "gray image has shape"),
-        (np.zeros((240, 320), np.uint16), np.zeros((24, 32), np.float32), "distance image has shape"),
+        (
+            np.zeros((240, 320), np.uint16),
+            np.zeros((24, 32), np.float32),
+            "distance image has shape",
+        ),
         (np.zeros((240, 320), bool), np.zeros((240, 320), np.float32), "integer counts"),
         (np.zeros((240, 320), np.uint16), np.zeros((240, 320), np.int32), "float mm"),
     ],

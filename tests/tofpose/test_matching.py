@@ -21,7 +21,9 @@ def _pairs_as_ids(cat, res):
     return {int(k): int(cat.ids[i]) for k, i in res.pairs}
 
 
-@pytest.mark.parametrize("ids", [[1, 2, 3, 4, 5, 6, 7, 8], [3, 4, 5, 6, 7], [5, 6, 7, 8], [2, 4, 6]])
+@pytest.mark.parametrize(
+    "ids", [[1, 2, 3, 4, 5, 6, 7, 8], [3, 4, 5, 6, 7], [5, 6, 7, 8], [2, 4, 6]]
+)
 def test_recovers_correspondence_with_markers_out_of_view(ids):
     cat, y, idx = _observe(ids)
     perm = np.random.default_rng(1).permutation(len(ids))
@@ -80,7 +82,12 @@ def test_one_to_one_resolves_duplicate_row_maxima():
 def test_size_term_breaks_distance_ties():
     cat, y, idx = _observe([5, 6, 7, 8], noise_mm=4.0, seed=2, distance_mm=9000.0)
     diam = cat.diameters_mm[idx]
-    res = match_reflectors(y, cat.positions_mm, MatchingConfig(),
-                           observed_diameter_mm=diam, catalog_diameter_mm=cat.diameters_mm)
+    res = match_reflectors(
+        y,
+        cat.positions_mm,
+        MatchingConfig(),
+        observed_diameter_mm=diam,
+        catalog_diameter_mm=cat.diameters_mm,
+    )
     assert res.ok
     assert _pairs_as_ids(cat, res) == {0: 5, 1: 6, 2: 7, 3: 8}

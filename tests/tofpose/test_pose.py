@@ -44,7 +44,9 @@ def test_reflection_fix_returns_a_proper_rotation():
     assert np.linalg.det(R) == pytest.approx(1.0)
 
 
-@pytest.mark.parametrize(("x", "msg"), [(np.zeros((2, 3)), "at least 3"), (np.zeros((4, 2)), "\\(m, 3\\)")])
+@pytest.mark.parametrize(
+    ("x", "msg"), [(np.zeros((2, 3)), "at least 3"), (np.zeros((4, 2)), "\\(m, 3\\)")]
+)
 def test_weighted_svd_errors(x, msg):
     with pytest.raises(ValueError, match=msg):
         weighted_svd(x, x)

@@ -1,0 +1,82 @@
+import csv
+
+import pytest
+
+from tofpose.cli import CSV_COLUMNS, main
+
+
+def test_simulate_then_estimate_writes_the_documented_csv(tmp_path, capsys):
+    rec, out = tmp_path / "r.h5", tmp_path / "poses.csv"
+    assert (
+        main(["simulate", "--scenario", "stability-697", "--frames", "4", "--out", str(rec)]) == 0
+    )
+    assert main(["estimate", str(rec), "--out", str(out)]) == 0
+    rows = list(csv.reader(out.open()))
+    assert tuple(rows[0]) == CSV_COLUMNS
+    assert len(rows) == 5
+    body = [dict(zip(rows[0], r, strict=True)) for r in rows[1:]]
+    assert all(r["ok"] == "1" for r in body)
+    assert all(abs(float(r["z_mm"]) - 697) < 10 for r in body)
+    assert "4/4 frames with a pose" in capsys.readouterr().out
+
+
+def test_failed_frames_have_empty_pose_cells(tmp_path):
+    import numpy as np
+
+    from tofpose.camera import CameraModel
+    from tofpose.catalog import paper_target
+    from tofpose.recording import RecordingWriter
+
+    rec, out = tmp_path / "dark.h5", tmp_path / "p.csv"
+    with RecordingWriter(rec, CameraModel(), paper_target()) as w:
+        w.append(np.zeros((240, 320), np.uint16), np.full((240, 320), np.nan, np.float32), 0.0)
+    assert main(["estimate", str(rec), "--out", str(out)]) == 0
+    row = list(csv.DictReader(out.open()))[0]
+    assert row["ok"] == "0" and row["x_mm"] == "" and row["residual_mm"] == ""
+
+
+def test_bad_inputs_exit_with_a_message(tmp_path, capsys):
+    assert main(["estimate", str(tmp_path / "nope.h5"), "--out", str(tmp_path / "o.csv")]) == 2
+    assert "no such file" in capsys.readouterr().err
+    assert (
+        main(["simulate", "--scenario", "bogus", "--frames", "1", "--out", str(tmp_path / "x.h5")])
+        == 2
+    )
+    assert "unknown scenario" in capsys.readouterr().err
+    bad_cat = tmp_path / "cat.json"
+    bad_cat.write_text(
+        '{"name": "x", "reflectors": [{"id": 1, "position_mm": [0,0,0], "diameter_mm": 5},'
+        '{"id": 1, "position_mm": [9,0,0], "diameter_mm": 5},'
+        '{"id": 2, "position_mm": [0,9,0], "diameter_mm": 5}]}'
+    )
+    with pytest.raises(SystemExit):
+        main(
+            [
+                "simulate",
+                "--scenario",
+                "clutter",
+                "--frames",
+                "1",
+                "--out",
+                str(tmp_path / "y.h5"),
+                "--catalog",
+                str(tmp_path / "missing.json"),
+            ]
+        )
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                "clutter",
+                "--frames",
+                "1",
+                "--out",
+                str(tmp_path / "y.h5"),
+                "--catalog",
+                str(bad_cat),
+            ]
+        )
+        == 2
+    )
+    assert "duplicate reflector ids" in capsys.readouterr().err

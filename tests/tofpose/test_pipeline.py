@@ -1,0 +1,146 @@
+import numpy as np
+import pytest
+
+from tests.conftest import facing_pose, render
+from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
+from tofpose.extraction import FrameError
+from tofpose.geometry import rotation_angle_deg
+from tofpose.sim.scene import Clutter, TargetScene
+
+# (distance mm, (pitch, yaw, roll) deg, offset mm, max position error mm, max angle deg)
+RANGE_CASES = [
+    (500.0, (2, -3, 5), (220.0, -90.0), 2.0, 0.8),  # only markers 1, 2, 4 fit at 0.5 m
+    (700.0, (3, 2, -10), (0.0, 0.0), 1.0, 0.2),
+    (1500.0, (5, -4, 10), (30.0, -40.0), 1.0, 0.2),
+    (3000.0, (-6, 8, 30), (0.0, 0.0), 2.0, 0.3),
+    (5712.0, (4, 1, -2), (5.0, -2.0), 3.0, 0.8),
+    (8000.0, (2, -3, 15), (0.0, 0.0), 8.0, 2.5),
+    (12000.0, (2, 2, -20), (0.0, 0.0), 25.0, 8.0),
+]
+
+
+@pytest.mark.parametrize(("z", "angles", "offset", "pos_tol", "ang_tol"), RANGE_CASES)
+def test_end_to_end_pose_over_the_operating_range(z, angles, offset, pos_tol, ang_tol):
+    cam, cat = CameraModel(), paper_target()
+    T = facing_pose(z, *angles, offset_mm=offset)
+    pipe = PosePipeline(cam, cat)
+    results = [
+        pipe.process(*(lambda f: (f.gray, f.distance_mm))(render(T, seed=s)), s / 30)
+        for s in range(6)
+    ]
+    ok = [r for r in results if r.ok]
+    assert len(ok) >= 5, [r.reason for r in results if not r.ok]
+    for r in ok:
+        assert np.linalg.norm(r.t_mm - T.t_mm) < pos_tol
+        assert rotation_angle_deg(r.R, T.R) < ang_tol
+        assert r.n_matched >= 3 and np.isfinite(r.residual_mm)
+        assert set(r.timings_ms) >= {"levels", "blobs", "centroids", "matching", "refine", "total"}
+        assert r.covariance is not None and np.all(np.linalg.eigvalsh(r.covariance) > 0)
+
+
+def test_matched_ids_are_the_true_reflectors():
+    cam, cat = CameraModel(), paper_target()
+    T = facing_pose(2500.0, 3, -2, 40)
+    r = PosePipeline(cam, cat).process(render(T).gray, render(T).distance_mm)
+    uv_true = dict(zip(cat.ids, cam.project(T.apply(cat.positions_mm)), strict=True))
+    assert r.ok and r.n_matched == 8
+    for m in r.matched:
+        assert np.linalg.norm(m.centroid_uv - uv_true[m.catalog_id]) < 0.3
+
+
+@pytest.mark.parametrize("refinement", ["ml", "los", "none"])
+def test_every_refinement_mode_gives_the_pose(refinement):
+    T = facing_pose(2000.0, 4, 3, -8)
+    f = render(T, seed=3)
+    r = PosePipeline(CameraModel(), paper_target(), PipelineConfig(refinement=refinement)).process(
+        f.gray, f.distance_mm
+    )
+    assert r.ok
+    # SVD alone is dominated by range noise (~0.4 deg at 2 m); refinement removes it.
+    ang_tol = 1.0 if refinement == "none" else 0.3
+    assert np.linalg.norm(r.t_mm - T.t_mm) < 3.0 and rotation_angle_deg(r.R, T.R) < ang_tol
+    if refinement == "los":
+        assert r.iterations >= 1
+
+
+def test_paper_preset_runs_on_the_paper_scene():
+    T = facing_pose(697.0, 0, 0, 0, offset_mm=(2.0, -10.0))
+    pipe = PosePipeline(CameraModel(), paper_target(), PipelineConfig.paper())
+    f = render(T, seed=0)
+    r = pipe.process(f.gray, f.distance_mm)
+    assert r.ok, r.reason
+    assert np.linalg.norm(r.t_mm - T.t_mm) < 5.0
+
+
+def test_spurious_bright_blobs_do_not_change_the_answer():
+    clutter = (
+        Clutter((250.0, 180.0, 20.0), 60.0, 1.2),
+        Clutter((-420.0, -230.0, 10.0), 40.0, 0.8),
+        Clutter((0.0, 0.0, 5.0), 50.0, 1.0),
+    )
+    T = facing_pose(2500.0, 2, -3, 12)
+    scene = TargetScene(clutter=clutter)
+    pipe = PosePipeline(CameraModel(), paper_target())
+    f = render(T, seed=1, scene=scene)
+    r = pipe.process(f.gray, f.distance_mm)
+    assert r.ok and r.n_matched >= 6 and len(r.unmatched) >= 2
+    assert np.linalg.norm(r.t_mm - T.t_mm) < 2.0
+
+
+def test_jumping_scene_is_never_reported_stale():
+    """A recording jumping between poses: each frame right (or refused), never the old pose."""
+    cam, cat = CameraModel(), paper_target()
+    pipe = PosePipeline(cam, cat)
+    poses = [
+        facing_pose(2000.0, 0, 0, 0),
+        facing_pose(2000.0, 0, 0, 25),
+        facing_pose(2600.0, 3, -4, -10),
+    ]
+    seq = [0, 0, 0, 0, 1, 1, 2, 0, 2]
+    for n, k in enumerate(seq):
+        f = render(poses[k], seed=n)
+        r = pipe.process(f.gray, f.distance_mm, n / 30)
+        if r.ok:
+            assert rotation_angle_deg(r.R, poses[k].R) < 0.3, f"frame {n}"
+            assert np.linalg.norm(r.t_mm - poses[k].t_mm) < 3.0, f"frame {n}"
+        else:
+            assert r.reason
+        if n > 0 and seq[n] != seq[n - 1]:
+            assert r.frames_used == 1 and r.motion
+
+
+def test_slewing_roll_axis_tracks_each_frame():
+    """Roll slewing 0.5 deg per frame: persistence must not lag the estimate."""
+    cam, cat = CameraModel(), paper_target()
+    pipe = PosePipeline(cam, cat)
+    for n in range(10):
+        T = facing_pose(1800.0, 0, 0, 0.5 * n)
+        f = render(T, seed=n)
+        r = pipe.process(f.gray, f.distance_mm)
+        assert r.ok
+        assert rotation_angle_deg(r.R, T.R) < 0.15
+
+
+def test_bad_frames_give_errors_or_reasons():
+    pipe = PosePipeline(CameraModel(), paper_target())
+    with pytest.raises(FrameError, match="gray image has shape"):
+        pipe.process(np.zeros((10, 10), np.uint16), np.zeros((240, 320), np.float32))
+    with pytest.raises(FrameError, match="float mm"):
+        pipe.process(np.zeros((240, 320), np.uint16), np.zeros((240, 320), np.uint16))
+    dark = pipe.process(np.full((240, 320), 3, np.uint16), np.full((240, 320), np.nan, np.float32))
+    assert not dark.ok and "all-dark" in dark.reason
+    sat = pipe.process(
+        np.full((240, 320), 4095, np.uint16), np.full((240, 320), np.nan, np.float32)
+    )
+    assert not sat.ok and "saturated" in sat.reason
+    f = render(facing_pose(2000.0), seed=0)
+    d = f.distance_mm.copy()
+    d[:, ::2] = np.inf
+    d[::3] = np.nan
+    r = pipe.process(f.gray, d)
+    assert r.ok or r.reason  # degraded data: a pose or an explanation, never an exception
+    # With history, the temporal median (§3.4) may fill ranges from consistent recent
+    # frames; a fresh pipeline has nothing to fall back on.
+    pipe.reset()
+    nodist = pipe.process(f.gray, np.full((240, 320), np.nan, np.float32))
+    assert not nodist.ok and "valid range" in nodist.reason

@@ -1,0 +1,78 @@
+import h5py
+import numpy as np
+import pytest
+
+from tofpose.camera import CameraModel
+from tofpose.catalog import paper_target
+from tofpose.recording import RecordingError, RecordingWriter, open_recording
+
+
+def _write(path, n=3, truth=True):
+    cam = CameraModel()
+    rng = np.random.default_rng(0)
+    frames = []
+    with RecordingWriter(path, cam, paper_target(), with_truth=truth) as w:
+        for i in range(n):
+            g = rng.integers(0, 4096, (240, 320)).astype(np.uint16)
+            d = rng.uniform(300, 15000, (240, 320)).astype(np.float32)
+            d[0, i] = np.nan
+            frames.append((g, d))
+            if truth:
+                w.append(g, d, i * 0.1, np.eye(3), np.array([0, 0, 1000.0 + i]))
+            else:
+                w.append(g, d, i * 0.1)
+    return frames
+
+
+def test_round_trip(tmp_path):
+    p = tmp_path / "r.h5"
+    frames = _write(p)
+    with open_recording(p) as rec:
+        assert rec.n_frames == 3 and rec.camera == CameraModel() and rec.catalog == paper_target()
+        for i, (g, d, t) in enumerate(rec.frames()):
+            np.testing.assert_array_equal(g, frames[i][0])
+            np.testing.assert_array_equal(d, frames[i][1])  # NaN preserved
+            assert t == pytest.approx(0.1 * i)
+        np.testing.assert_allclose(rec.truth_t_mm[:, 2], [1000, 1001, 1002])
+
+
+def test_missing_dataset_is_named(tmp_path):
+    p = tmp_path / "r.h5"
+    _write(p)
+    with h5py.File(p, "a") as f:
+        del f["frames/time_s"]
+    with pytest.raises(RecordingError, match="missing dataset /frames/time_s"):
+        open_recording(p)
+
+
+def test_disagreeing_lengths(tmp_path):
+    p = tmp_path / "r.h5"
+    _write(p)
+    with h5py.File(p, "a") as f:
+        f["frames/time_s"].resize((2,))
+    with pytest.raises(RecordingError, match="frame counts disagree"):
+        open_recording(p)
+
+
+def test_corrupt_and_foreign_files(tmp_path):
+    bad = tmp_path / "bad.h5"
+    bad.write_bytes(b"\x89HDF\r\n\x1a\n" + b"garbage" * 100)
+    with pytest.raises(RecordingError, match="not a readable HDF5 file"):
+        open_recording(bad)
+    other = tmp_path / "other.h5"
+    with h5py.File(other, "w") as f:
+        f.attrs["format"] = "something-else"
+    with pytest.raises(RecordingError, match="not a tofpose recording"):
+        open_recording(other)
+    with pytest.raises(RecordingError, match="no such file"):
+        open_recording(tmp_path / "missing.h5")
+
+
+def test_truncated_file_is_a_clear_error(tmp_path):
+    p = tmp_path / "r.h5"
+    _write(p, n=4)
+    data = p.read_bytes()
+    p.write_bytes(data[: len(data) // 2])
+    with pytest.raises(RecordingError), open_recording(p) as rec:
+        for _ in rec.frames():
+            pass
