@@ -200,10 +200,13 @@ class PosePipeline:
         if cfg.ellipse_confirmation:
             blobs = self._confirm_ellipses(blobs, oversize, g, d, stats)
         timer.lap("ellipses")
-        measure_blobs(blobs, g, d, self.camera, stats.background)
+        for b in blobs:  # ellipse-supplemented blobs have no moment centroid yet
+            if not np.isfinite(b.centroid_uv).all() and b.ellipse is not None:
+                b.centroid_uv = np.array(b.ellipse[0])
+        # The motion gate compares the cheap moment centroids of find_candidate_blobs;
+        # the precise centroids and ranges are measured once, on the combined frames.
         kept, mean_g, med_d, pinfo = self._persistence.apply(blobs, g, d)
-        if pinfo.frames_used > 1:
-            measure_blobs(kept, mean_g, med_d, self.camera, stats.background)
+        measure_blobs(kept, mean_g, med_d, self.camera, stats.background)
         timer.lap("centroids")
         extra = {"frames_used": pinfo.frames_used, "motion": pinfo.motion}
         ranged = [b for b in kept if np.isfinite(b.distance_mm)]

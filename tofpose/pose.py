@@ -126,9 +126,13 @@ def measurement_jacobian(
     lat_sigma = np.maximum(ranges_mm * sigma_bearing_rad, 1e-6)
     r_lat = np.einsum("mkj,mj->mk", B, pred) / lat_sigma[:, None]
     r_rng = (np.einsum("mj,mj->m", bearings, pred) - ranges_mm) / sigma_range_mm
-    dP = np.concatenate(
-        (-np.stack([skew(v) for v in rx]), np.broadcast_to(np.eye(3), (len(rx), 3, 3))), axis=2
-    )  # (m, 3, 6)
+    m = len(rx)
+    dP = np.zeros((m, 3, 6))
+    # d(R x + t) / d(rotation vector) = -[R x]_x ; / d t = I
+    dP[:, 0, 1], dP[:, 0, 2] = rx[:, 2], -rx[:, 1]
+    dP[:, 1, 0], dP[:, 1, 2] = -rx[:, 2], rx[:, 0]
+    dP[:, 2, 0], dP[:, 2, 1] = rx[:, 1], -rx[:, 0]
+    dP[:, 0, 3] = dP[:, 1, 4] = dP[:, 2, 5] = 1.0  # (m, 3, 6)
     J_lat = np.einsum("mkj,mjp->mkp", B, dP) / lat_sigma[:, None, None]
     J_rng = np.einsum("mj,mjp->mp", bearings, dP) / sigma_range_mm[:, None]
     r = np.concatenate((r_lat, r_rng[:, None]), axis=1).reshape(-1)
@@ -161,7 +165,7 @@ def refine_maximum_likelihood(
     sigma_bearing_rad: np.ndarray,
     *,
     max_iterations: int = 10,
-    tol: float = 1e-8,
+    tol: float = 1e-7,
 ) -> MLResult:
     """Gauss-Newton on bearings and ranges together (ours, beyond §5.2).
 
