@@ -71,7 +71,8 @@ def main() -> None:
             cells.append(f"{m:.2f} / {p:.2f}")
         rows.append(cells)
     print(
-        f"pipeline time per frame, ms (median / p95), one core, {args.frames} frames x {args.repeats}"
+        f"pipeline time per frame, ms (median / p95), one core, "
+        f"{args.frames} frames x {args.repeats}"
     )
     print(table(["range", "ok", *STAGES], rows))
 

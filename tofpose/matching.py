@@ -241,3 +241,61 @@ def rigid_residual_check(
         f"no rigidly consistent match of >= {min_matches} reflectors "
         f"(residual tolerance up to {np.max(tol_mm):.1f} mm)",
     )
+
+
+def match_by_triplets(
+    observed_mm: np.ndarray,
+    catalog_mm: np.ndarray,
+    alpha_mm: float,
+    tol_mm: np.ndarray,
+    accept_pose,
+    *,
+    weights: np.ndarray | None = None,
+    max_observed: int = 7,
+    min_matches: int = 3,
+) -> np.ndarray:
+    """Exhaustive triplet hypotheses (ours): the fallback when annealing's answer fails
+    verification (e.g. a mirror-image assignment of 3-4 markers at long range).
+
+    For every observed triplet (among the first ``max_observed``) and every ordered catalog
+    triplet whose three side lengths agree within ``alpha_mm``, fit the rigid pose, skip it
+    unless ``accept_pose(R, t)`` (e.g. the target faces the camera), and count observed
+    points within their tolerance of a predicted reflector. Returns the pairs (m, 2) of
+    the hypothesis with most inliers (ties: smaller weighted residual), or an empty array.
+    """
+    from itertools import combinations, permutations
+
+    g = min(len(observed_mm), max_observed)
+    e = len(catalog_mm)
+    w = np.ones(len(observed_mm)) if weights is None else np.asarray(weights, float)
+    c_d = np.linalg.norm(catalog_mm[:, None] - catalog_mm[None], axis=-1)
+    best, best_key = np.empty((0, 2), int), (0, np.inf)
+    cat_triplets = list(permutations(range(e), 3))
+    for tri in combinations(range(g), 3):
+        a, b, c = tri
+        o = [
+            np.linalg.norm(observed_mm[a] - observed_mm[b]),
+            np.linalg.norm(observed_mm[b] - observed_mm[c]),
+            np.linalg.norm(observed_mm[a] - observed_mm[c]),
+        ]
+        for i, j, k in cat_triplets:
+            if (
+                abs(o[0] - c_d[i, j]) > alpha_mm
+                or abs(o[1] - c_d[j, k]) > alpha_mm
+                or abs(o[2] - c_d[i, k]) > alpha_mm
+            ):
+                continue
+            R, t = weighted_svd(catalog_mm[[i, j, k]], observed_mm[[a, b, c]], w[[a, b, c]])
+            if not accept_pose(R, t):
+                continue
+            pred = catalog_mm @ R.T + t
+            dist = np.linalg.norm(observed_mm[:, None] - pred[None], axis=-1)
+            rows, cols = linear_sum_assignment(dist)
+            ok = dist[rows, cols] <= tol_mm[rows]
+            n = int(ok.sum())
+            key = (n, float((dist[rows, cols][ok] ** 2 * w[rows[ok]]).sum()))
+            if n >= min_matches and (
+                key[0] > best_key[0] or (key[0] == best_key[0] and key[1] < best_key[1])
+            ):
+                best, best_key = np.column_stack((rows[ok], cols[ok])), key
+    return best

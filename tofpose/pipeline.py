@@ -38,7 +38,7 @@ from tofpose.extraction import (
     predicted_diameter_window_px,
 )
 from tofpose.geometry import euler_deg_from_rotation, quaternion_wxyz_from_rotation
-from tofpose.matching import MatchingConfig, match_reflectors
+from tofpose.matching import MatchingConfig, match_by_triplets, match_reflectors
 from tofpose.persistence import Persistence, PersistenceConfig
 from tofpose.pose import refine_line_of_sight, refine_maximum_likelihood, weighted_svd
 
@@ -248,48 +248,30 @@ class PosePipeline:
                 unmatched=unmatched + [(u[0], u[1], r) for u, r in zip(uv, rho, strict=True)],
                 **extra,
             )
-        k_idx, i_idx = m.pairs[:, 0], m.pairs[:, 1]
-        x = self._catalog_xyz[i_idx]
-        R, t = weighted_svd(x, y[k_idx], w[k_idx])
-        k_idx, i_idx = self._complete(
-            y, w, k_idx, i_idx, R, t, m.alpha_mm * cfg.matching.residual_factor
-        )
-        x = self._catalog_xyz[i_idx]
-        R, t = weighted_svd(x, y[k_idx], w[k_idx])
-        timer.lap("svd")
-
-        uv_m = uv[k_idx].copy()
-        if cfg.correct_perspective_bias:
-            for n, i in enumerate(i_idx):
-                off = disc_image_centre_offset_px(
-                    self.camera, R @ x[n] + t, R[:, 2], self._catalog_d[i] / 2
-                )
-                uv_m[n] -= off
-        e_m = self.camera.bearings(uv_m)
-        rho_m = rho[k_idx]
-        y_m = e_m * rho_m[:, None]
-        R, t = weighted_svd(x, y_m, w[k_idx])
-        sb = sig_px[k_idx] / self.camera.fx
-        sr = sig_rng[k_idx]
-        iterations = 0
-        if cfg.refinement == "los":
-            ref = refine_line_of_sight(x, e_m, R, t, w[k_idx], tol=cfg.los_tolerance)
-            R, t, iterations = ref.R, ref.t, ref.iterations
-        ml = refine_maximum_likelihood(
-            x, e_m, rho_m, R, t, sr, sb, max_iterations=10 if cfg.refinement == "ml" else 0
-        )
-        if cfg.refinement == "ml":
-            R, t, iterations = ml.R, ml.t, ml.iterations
+        solved = self._solve(m.pairs, uv, rho, y, w, sig_px, sig_rng, m.alpha_mm, active)
+        if isinstance(solved, str) and "pose rejected" in solved:
+            # Annealing found a mirror-image or otherwise impossible assignment: try the
+            # exhaustive triplet hypotheses restricted to physically possible poses.
+            tol = np.clip(4.0 / np.sqrt(w), m.alpha_mm, cfg.matching.residual_factor * m.alpha_mm)
+            pairs = match_by_triplets(
+                y,
+                self._catalog_xyz,
+                m.alpha_mm,
+                tol,
+                lambda R_, t_: self._faces_camera(R_, t_),
+                weights=w,
+                min_matches=cfg.matching.min_matches,
+            )
+            if len(pairs):
+                solved = self._solve(pairs, uv, rho, y, w, sig_px, sig_rng, m.alpha_mm, active)
         timer.lap("refine")
-        if cfg.verify_pose:
-            problem = self._verify(R, t, active, set(int(i) for i in i_idx))
-            if problem:
-                return fail(
-                    f"pose rejected: {problem}",
-                    unmatched=unmatched + [(u[0], u[1], r) for u, r in zip(uv, rho, strict=True)],
-                    **extra,
-                )
-
+        if isinstance(solved, str):
+            return fail(
+                solved,
+                unmatched=unmatched + [(u[0], u[1], r) for u, r in zip(uv, rho, strict=True)],
+                **extra,
+            )
+        R, t, x, k_idx, i_idx, uv_m, y_m, rho_m, iterations, ml = solved
         pred = x @ R.T + t
         res = np.linalg.norm(y_m - pred, axis=1)
         matched = [
@@ -321,6 +303,52 @@ class PosePipeline:
             timer.total(),
             **extra,
         )
+
+    def _solve(self, pairs, uv, rho, y, w, sig_px, sig_rng, alpha_mm, active):
+        """Pose from matched pairs (m, 2): SVD, completion, perspective-bias correction,
+        refinement and verification. Returns a tuple, or a reason string on rejection."""
+        cfg = self.config
+        k_idx, i_idx = pairs[:, 0], pairs[:, 1]
+        x = self._catalog_xyz[i_idx]
+        R, t = weighted_svd(x, y[k_idx], w[k_idx])
+        k_idx, i_idx = self._complete(
+            y, w, k_idx, i_idx, R, t, alpha_mm * cfg.matching.residual_factor
+        )
+        x = self._catalog_xyz[i_idx]
+        R, t = weighted_svd(x, y[k_idx], w[k_idx])
+
+        uv_m = uv[k_idx].copy()
+        if cfg.correct_perspective_bias:
+            for n, i in enumerate(i_idx):
+                off = disc_image_centre_offset_px(
+                    self.camera, R @ x[n] + t, R[:, 2], self._catalog_d[i] / 2
+                )
+                uv_m[n] -= off
+        e_m = self.camera.bearings(uv_m)
+        rho_m = rho[k_idx]
+        y_m = e_m * rho_m[:, None]
+        R, t = weighted_svd(x, y_m, w[k_idx])
+        sb = sig_px[k_idx] / self.camera.fx
+        sr = sig_rng[k_idx]
+        iterations = 0
+        if cfg.refinement == "los":
+            ref = refine_line_of_sight(x, e_m, R, t, w[k_idx], tol=cfg.los_tolerance)
+            R, t, iterations = ref.R, ref.t, ref.iterations
+        ml = refine_maximum_likelihood(
+            x, e_m, rho_m, R, t, sr, sb, max_iterations=10 if cfg.refinement == "ml" else 0
+        )
+        if cfg.refinement == "ml":
+            R, t, iterations = ml.R, ml.t, ml.iterations
+        if cfg.verify_pose:
+            problem = self._verify(R, t, active, set(int(i) for i in i_idx))
+            if problem:
+                return f"pose rejected: {problem}"
+        return R, t, x, k_idx, i_idx, uv_m, y_m, rho_m, iterations, ml
+
+    def _faces_camera(self, R, t) -> bool:
+        to_camera = -(R @ self._catalog_xyz.mean(axis=0) + t)
+        cos_view = float(R[:, 2] @ to_camera / np.linalg.norm(to_camera))
+        return cos_view >= np.cos(np.radians(self.config.max_view_angle_deg))
 
     # ------------------------------------------------------------------------------------
     def _sigmas(self, blobs: list[Blob], gray, dist, background) -> tuple[np.ndarray, np.ndarray]:
