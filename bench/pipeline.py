@@ -28,7 +28,6 @@ STAGES = [
     "centroids",
     "backproject",
     "matching",
-    "svd",
     "refine",
     "total",
 ]

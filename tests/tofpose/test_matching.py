@@ -91,3 +91,19 @@ def test_size_term_breaks_distance_ties():
     )
     assert res.ok
     assert _pairs_as_ids(cat, res) == {0: 5, 1: 6, 2: 7, 3: 8}
+
+
+def test_triplet_fallback_respects_the_pose_constraint():
+    """With the facing constraint, the triplet search returns the true (not mirror) pose."""
+    from tofpose.matching import match_by_triplets
+
+    ids = [5, 6, 7]
+    cat, y, idx = _observe(ids, noise_mm=0.5, seed=3, distance_mm=10000.0)
+
+    def faces_camera(R, t):
+        return R[:, 2] @ -(R @ cat.positions_mm.mean(axis=0) + t) > 0
+
+    pairs = match_by_triplets(y, cat.positions_mm, 20.0, np.full(3, 20.0), faces_camera)
+    assert {int(k): int(cat.ids[i]) for k, i in pairs} == {0: 5, 1: 6, 2: 7}
+    none = match_by_triplets(y, cat.positions_mm, 20.0, np.full(3, 20.0), lambda R, t: False)
+    assert len(none) == 0
