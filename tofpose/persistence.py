@@ -10,6 +10,7 @@ combined, and a moving scene degrades gracefully to single-frame measurement.
 
 from __future__ import annotations
 
+import warnings
 from collections import deque
 from dataclasses import dataclass
 
@@ -130,11 +131,8 @@ class Persistence:
                 stack = np.stack(
                     [distance.reshape(-1)[idx]] + [e.distance.reshape(-1)[idx] for e in used]
                 )
-                with np.errstate(all="ignore"):
-                    import warnings
-
-                    with warnings.catch_warnings():
-                        warnings.simplefilter("ignore", RuntimeWarning)
-                        med = np.nanmedian(stack, axis=0)
+                with warnings.catch_warnings():  # all-NaN columns stay NaN, silently
+                    warnings.simplefilter("ignore", RuntimeWarning)
+                    med = np.nanmedian(stack, axis=0)
                 med_dist.reshape(-1)[idx] = med
         return kept, mean_gray, med_dist, PersistenceInfo(n, motion, dropped)

@@ -345,10 +345,13 @@ class PosePipeline:
                 return f"pose rejected: {problem}"
         return R, t, x, k_idx, i_idx, uv_m, y_m, rho_m, iterations, ml
 
-    def _faces_camera(self, R, t) -> bool:
+    def _view_cosine(self, R, t) -> float:
+        """Cosine between the target normal and the direction to the camera."""
         to_camera = -(R @ self._catalog_xyz.mean(axis=0) + t)
-        cos_view = float(R[:, 2] @ to_camera / np.linalg.norm(to_camera))
-        return cos_view >= np.cos(np.radians(self.config.max_view_angle_deg))
+        return float(R[:, 2] @ to_camera / np.linalg.norm(to_camera))
+
+    def _faces_camera(self, R, t) -> bool:
+        return self._view_cosine(R, t) >= np.cos(np.radians(self.config.max_view_angle_deg))
 
     # ------------------------------------------------------------------------------------
     def _sigmas(self, blobs: list[Blob], gray, dist, background) -> tuple[np.ndarray, np.ndarray]:
@@ -386,8 +389,7 @@ class PosePipeline:
 
     def _verify(self, R, t, active: np.ndarray, matched: set[int]) -> str:
         """Physical consistency of a pose with the frame; empty string when consistent."""
-        to_camera = -(R @ self._catalog_xyz.mean(axis=0) + t)
-        cos_view = float(R[:, 2] @ to_camera / np.linalg.norm(to_camera))
+        cos_view = self._view_cosine(R, t)
         if cos_view < np.cos(np.radians(self.config.max_view_angle_deg)):
             return (
                 f"the target would face away from the camera (view angle "
