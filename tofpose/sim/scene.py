@@ -17,8 +17,6 @@ from tofpose.geometry import RigidTransform
 
 NO_HIT, WALL, PLATE, FIRST_DISC = 0, 1, 2, 3
 
-KIND_LAMBERTIAN, KIND_RETRO = 0, 1
-
 
 @dataclass(frozen=True)
 class Clutter:
@@ -171,7 +169,3 @@ class SceneInCamera:
             idx, s, denom = idx[inside], s[inside], denom[inside]
             best[idx], sid[idx], cos_inc[idx] = s, FIRST_DISC + k, -denom
         return best, sid, cos_inc
-
-    def surface_kind(self, surface_id: np.ndarray) -> np.ndarray:
-        """KIND_RETRO for discs, KIND_LAMBERTIAN otherwise; shape of ``surface_id``."""
-        return np.where(surface_id >= FIRST_DISC, KIND_RETRO, KIND_LAMBERTIAN)
