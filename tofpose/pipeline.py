@@ -384,7 +384,7 @@ class PosePipeline:
     def _apparent_diameter_px(b: Blob) -> float:
         if b.ellipse is not None:
             return float(max(b.ellipse[1]))
-        x, y, bw, bh = b.bbox
+        _, _, bw, bh = b.bbox
         return float(max(bw, bh, 2.0 * np.sqrt(b.area_px / np.pi)))
 
     def _verify(self, R, t, active: np.ndarray, matched: set[int]) -> str:
