@@ -12,7 +12,7 @@ $(VENV)/.installed: pyproject.toml
 	touch $@
 
 run: $(VENV)/.installed
-	$(VENV)/bin/tofpose demo
+	$(VENV)/bin/tofpose serve
 
 lint: $(VENV)/.installed
 	$(VENV)/bin/ruff check .

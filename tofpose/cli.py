@@ -209,7 +209,23 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p = sub.add_parser("demo", help="simulate, estimate and print estimate vs truth")
     p.add_argument("--frames", type=int, default=48)
+    p = sub.add_parser(
+        "serve", help="run the server (simulated devices by default); settings also from TOFPOSE_*"
+    )
+    p.add_argument("--host", help="bind address (default 127.0.0.1)")
+    p.add_argument("--port", type=int, help="port (default 8000)")
+    p.add_argument("--db", dest="database_url", help="SQLAlchemy URL (default SQLite in data dir)")
+    p.add_argument("--data-dir", help="data directory (default ./data)")
+    p.add_argument("--camera", help="'sim' or 'replay:REC.h5'")
+    p.add_argument("--motion", help="'sim' or 'none'")
+    p.add_argument("--rate", dest="replay_rate_hz", type=float, help="replay rate, Hz")
     args = ap.parse_args(argv)
+    if args.cmd == "serve":
+        from backend.main import serve  # lazy: the library does not need the server
+
+        opts = vars(args)
+        opts.pop("cmd")
+        return serve(opts)
     try:
         if args.cmd == "estimate":
             s = estimate(args.recording, args.out, args.catalog, args.camera)

@@ -149,8 +149,9 @@ class Turntable:
             st = self._state[name]
             here = self._commanded(name, time_s)
             st.plan = plan_move(here, float(value), time_s, st.spec.max_rate, st.spec.max_accel)
-            st.stopped_at = None
             done = max(done, time_s + st.plan.duration_s)
+        for st in self._state.values():
+            st.stopped_at = None
         return done
 
     def stop(self, time_s: float) -> None:
@@ -189,6 +190,10 @@ class Turntable:
             noisy = p + s.encoder_noise * self._rng.standard_normal()
             out[n] = float(np.round(noisy / s.encoder_resolution) * s.encoder_resolution)
         return out
+
+    def is_stopped(self) -> bool:
+        """True after ``stop`` until the next ``move_to``."""
+        return any(st.stopped_at is not None for st in self._state.values())
 
     def target_position(self) -> dict[str, float]:
         return {n: st.plan.end for n, st in self._state.items()}

@@ -1,0 +1,1 @@
+"""HTTP and WebSocket API: schemas, dependencies, one router per resource."""

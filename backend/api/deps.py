@@ -1,0 +1,69 @@
+"""Dependencies shared by the routers (``Annotated`` aliases, as in the FastAPI template)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Annotated
+
+from fastapi import Depends, HTTPException, Request, status
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from sqlalchemy.orm import Session
+
+from backend.auth import token_matches
+from backend.drivers.base import MotionDriver
+from backend.state import AppState
+
+bearer_scheme = HTTPBearer(
+    auto_error=False,
+    description="API token (TOFPOSE_API_TOKEN, or the one printed at start and stored in "
+    "the data directory)",
+)
+
+
+def get_state(request: Request) -> AppState:
+    return request.app.state.tofpose
+
+
+StateDep = Annotated[AppState, Depends(get_state)]
+CredentialsDep = Annotated[HTTPAuthorizationCredentials | None, Depends(bearer_scheme)]
+
+
+def get_session(state: StateDep) -> Iterator[Session]:
+    with state.sessions() as session:
+        yield session
+
+
+SessionDep = Annotated[Session, Depends(get_session)]
+
+
+def require_token(state: StateDep, creds: CredentialsDep) -> None:
+    """Every request that moves hardware or changes state goes through this."""
+    if creds is None:
+        raise HTTPException(
+            status.HTTP_401_UNAUTHORIZED,
+            "this request changes state: send 'Authorization: Bearer <API token>'",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
+    if not token_matches(state.token, creds.credentials):
+        raise HTTPException(
+            status.HTTP_401_UNAUTHORIZED,
+            "invalid API token",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
+
+
+def require_read(state: StateDep, creds: CredentialsDep) -> None:
+    """Reads are open when the server is bound to loopback (or ``open_reads``)."""
+    if not state.settings.reads_are_open:
+        require_token(state, creds)
+
+
+def require_motion(state: StateDep) -> MotionDriver:
+    if state.devices.motion is None:
+        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, "no motion system configured")
+    return state.devices.motion
+
+
+WriteAuth = Depends(require_token)
+ReadAuth = Depends(require_read)
+MotionDep = Annotated[MotionDriver, Depends(require_motion)]

@@ -1,0 +1,51 @@
+"""GET/PUT /api/camera/settings. Applied on the acquisition thread, persisted, and
+re-applied at the next start."""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import asdict, replace
+
+from fastapi import APIRouter, HTTPException
+
+from backend.api.deps import ReadAuth, StateDep, WriteAuth
+from backend.api.schemas import CameraSettingsPublic, CameraSettingsUpdate
+from backend.drivers.base import CameraSettings
+from backend.services.store import save_device_settings
+from tofpose.sim.render import SPEED_OF_LIGHT_MM_S
+
+router = APIRouter(prefix="/api/camera", tags=["camera"])
+APPLY_TIMEOUT_S = 5.0
+
+
+def settings_public(s: CameraSettings) -> CameraSettingsPublic:
+    return CameraSettingsPublic(
+        **asdict(s),
+        unambiguous_range_mm=SPEED_OF_LIGHT_MM_S / (2.0 * s.modulation_frequency_mhz * 1e6),
+    )
+
+
+@router.get("/settings", dependencies=[ReadAuth])
+def get_settings(state: StateDep) -> CameraSettingsPublic:
+    return settings_public(state.devices.camera.get_settings())
+
+
+@router.put("/settings", dependencies=[WriteAuth])
+async def put_settings(body: CameraSettingsUpdate, state: StateDep) -> CameraSettingsPublic:
+    """Change some or all settings; returns what the camera actually uses (it may clamp)."""
+    cam = state.devices.camera
+    wanted = replace(cam.get_settings(), **body.model_dump(exclude_none=True))
+    fut = state.acquisition.submit(lambda: cam.apply_settings(wanted))
+    try:
+        applied = await asyncio.wait_for(asyncio.wrap_future(fut), APPLY_TIMEOUT_S)
+    except TimeoutError as exc:
+        raise HTTPException(504, "the camera did not apply the settings in time") from exc
+    except Exception as exc:
+        raise HTTPException(503, f"the camera refused the settings: {exc}") from exc
+
+    def persist() -> None:
+        with state.sessions() as session:
+            save_device_settings(session, "camera", asdict(applied))
+
+    await asyncio.to_thread(persist)
+    return settings_public(applied)

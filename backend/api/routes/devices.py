@@ -1,0 +1,31 @@
+"""GET /api/devices: camera and motion state in one call."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from backend.api.deps import ReadAuth, StateDep
+from backend.api.routes.health import camera_state
+from backend.api.routes.motion import motion_public
+from backend.api.schemas import CameraDevicePublic, DevicesPublic
+
+router = APIRouter(prefix="/api", tags=["status"], dependencies=[ReadAuth])
+
+
+@router.get("/devices")
+def devices(state: StateDep) -> DevicesPublic:
+    cam = state.devices.camera
+    m = cam.model
+    camera = CameraDevicePublic(
+        **camera_state(state).model_dump(),
+        width_px=m.width,
+        height_px=m.height,
+        fx_px=m.fx,
+        fy_px=m.fy,
+        cx_px=m.cx,
+        cy_px=m.cy,
+        frames_processed=state.acquisition.frames_processed,
+        frame_rate_hz=state.acquisition.frame_rate_hz,
+        catalog=state.acquisition.catalog_name,
+    )
+    return DevicesPublic(camera=camera, motion=motion_public(state))

@@ -1,0 +1,136 @@
+"""WebSocket /ws/live: every pose result as JSON at the camera rate, to many clients.
+
+Protocol (JSON text messages):
+
+- server -> client on connect: ``{"type": "hello", "camera": {...}, "catalog": name}``
+- server -> client per frame: ``{"type": "pose", "dropped": n, "data": PosePublic}``;
+  ``dropped`` counts frames this client missed because it read too slowly.
+- client -> server, any time: options ``{"images": ["gray", "distance"],
+  "image_every": 5, "image_step": 2, "points": true}``. Then every ``image_every``-th
+  frame also brings ``{"type": "image", "kind", "frame_index", "png_base64"}`` (the image
+  shrunk ``image_step`` times), and every frame ``{"type": "points", "frame_index",
+  "points_mm": [[x, y, z], ...], "catalog_ids": [id or null, ...]}`` (the reflector point
+  cloud in the camera frame). Bad options get ``{"type": "error", "message"}``.
+
+When reads are not open (server bound beyond loopback), pass ``?token=API_TOKEN``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import contextlib
+import json
+from typing import Literal
+
+from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+from pydantic import Field, ValidationError
+
+from backend.api.schemas import PosePublic, StrictBody
+from backend.auth import token_matches
+from backend.services.acquisition import LiveSample, frame_point_cloud_mm
+from backend.services.imaging import downsample_png
+from backend.state import AppState
+
+router = APIRouter(tags=["live"])
+POLICY_VIOLATION = 1008
+
+
+class LiveOptions(StrictBody):
+    images: list[Literal["gray", "distance"]] = Field(default_factory=list, max_length=2)
+    image_every: int = Field(5, ge=1, le=1000)
+    image_step: int = Field(2, ge=1, le=8)
+    points: bool = False
+
+
+def pose_json(sample: LiveSample) -> str:
+    def make() -> str:
+        public = sample.cached("pose_public", lambda: PosePublic.from_sample(sample))
+        return public.model_dump_json()
+
+    return sample.cached("pose_json", make)
+
+
+def image_message(sample: LiveSample, kind: str, step: int) -> str:
+    def make() -> str:
+        png = downsample_png(kind, sample.frame.gray, sample.frame.distance_mm, step)
+        return json.dumps({
+            "type": "image", "kind": kind, "frame_index": sample.frame.index, "step": step,
+            "png_base64": base64.b64encode(png).decode(),
+        })  # fmt: skip
+
+    return sample.cached(f"img:{kind}:{step}", make)
+
+
+def points_message(sample: LiveSample, state: AppState) -> str:
+    def make() -> str:
+        pts = frame_point_cloud_mm(sample, state.devices.camera.model)
+        ids = [m.catalog_id for m in sample.result.matched]
+        ids += [None] * (len(pts) - len(ids))
+        return json.dumps({
+            "type": "points", "frame_index": sample.frame.index,
+            "points_mm": [[round(float(c), 2) for c in p] for p in pts], "catalog_ids": ids,
+        })  # fmt: skip
+
+    return sample.cached("points", make)
+
+
+async def _read_options(ws: WebSocket, opts: dict[str, LiveOptions]) -> None:
+    while True:
+        msg = await ws.receive()
+        if msg["type"] == "websocket.disconnect":
+            raise WebSocketDisconnect(msg.get("code", 1000))
+        text = msg.get("text") or (msg.get("bytes") or b"").decode("utf-8", "replace")
+        try:
+            opts["current"] = LiveOptions.model_validate_json(text)
+        except ValidationError as exc:
+            msg = "; ".join(f"{'.'.join(map(str, e['loc'])) or 'body'}: {e['msg']}"
+                            for e in exc.errors())  # fmt: skip
+            await ws.send_text(json.dumps({"type": "error", "message": f"bad options: {msg}"}))
+
+
+@router.websocket("/ws/live")
+async def live(ws: WebSocket) -> None:
+    state: AppState = ws.app.state.tofpose
+    if not state.settings.reads_are_open and not token_matches(
+        state.token, ws.query_params.get("token")
+    ):
+        await ws.close(code=POLICY_VIOLATION, reason="API token required (?token=...)")
+        return
+    await ws.accept()
+    m = state.devices.camera.model
+    await ws.send_text(json.dumps({
+        "type": "hello", "catalog": state.acquisition.catalog_name,
+        "camera": {"driver": state.devices.camera.name, "width_px": m.width,
+                   "height_px": m.height, "fx_px": m.fx, "fy_px": m.fy, "cx_px": m.cx,
+                   "cy_px": m.cy},
+    }))  # fmt: skip
+    sub = state.hub.subscribe(loop=asyncio.get_running_loop())
+    opts = {"current": LiveOptions()}
+    reader = asyncio.create_task(_read_options(ws, opts))
+    n = 0
+    try:
+        while True:
+            getter = asyncio.ensure_future(sub.get_async())
+            done, _ = await asyncio.wait({getter, reader}, return_when=asyncio.FIRST_COMPLETED)
+            if reader in done:
+                getter.cancel()
+                reader.result()  # re-raises the disconnect
+                return
+            sample: LiveSample = getter.result()
+            head = f'{{"type":"pose","dropped":{sub.dropped},"data":'
+            await ws.send_text(head + pose_json(sample) + "}")
+            o = opts["current"]
+            if o.images and n % o.image_every == 0:
+                for kind in o.images:
+                    await ws.send_text(image_message(sample, kind, o.image_step))
+            if o.points:
+                await ws.send_text(points_message(sample, state))
+            n += 1
+    except (WebSocketDisconnect, RuntimeError):
+        pass
+    finally:
+        state.hub.unsubscribe(sub)
+        reader.cancel()
+        with contextlib.suppress(asyncio.CancelledError, Exception):
+            await reader

@@ -1,0 +1,95 @@
+"""Turntable: GET /api/motion, POST /api/motion/move, POST /api/motion/stop.
+
+Set-points are checked against the driver's soft limits here, before the driver sees
+them. Stop is accepted from any authenticated caller at any time.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+from fastapi import APIRouter, HTTPException, status
+
+from backend.api.deps import MotionDep, ReadAuth, StateDep, WriteAuth
+from backend.api.schemas import AxisPublic, MotionPublic, MoveRequest
+from backend.state import AppState
+
+log = logging.getLogger(__name__)
+router = APIRouter(prefix="/api/motion", tags=["motion"])
+
+
+def _degrade(state: AppState, message: str) -> None:
+    h = state.motion_health
+    h.state, h.last_error, h.last_error_unix_s = "degraded", message, time.time()
+    h.error_count += 1
+
+
+def motion_public(state: AppState) -> MotionPublic:
+    motion = state.devices.motion
+    if motion is None:
+        return MotionPublic(driver="none", state="absent")
+    h = state.motion_health
+    axes = [
+        AxisPublic(name=a.name, unit=a.unit, min_pos=a.min_pos, max_pos=a.max_pos,
+                   max_rate_per_s=a.max_rate)
+        for a in motion.axes.values()
+    ]  # fmt: skip
+    try:
+        st = motion.status()
+    except Exception as exc:
+        _degrade(state, f"motion status failed: {exc}")
+        return MotionPublic(driver=motion.name, state="degraded", last_error=h.last_error,
+                            error_count=h.error_count, axes=axes)  # fmt: skip
+    if h.state != "ok":
+        h.state = "ok"
+    return MotionPublic(
+        driver=motion.name, state="ok", last_error=h.last_error, error_count=h.error_count,
+        axes=axes, positions=st.positions, targets=st.targets, busy=st.busy,
+        settled=st.settled, stopped=st.stopped,
+    )  # fmt: skip
+
+
+@router.get("", dependencies=[ReadAuth])
+def get_motion(state: StateDep) -> MotionPublic:
+    """Axes with soft limits, encoder positions (deg / mm), targets, busy/settled."""
+    return motion_public(state)
+
+
+@router.post("/move", status_code=status.HTTP_202_ACCEPTED, dependencies=[WriteAuth])
+def move(body: MoveRequest, state: StateDep, motion: MotionDep) -> MotionPublic:
+    """Start a move; returns at once (poll GET /api/motion for busy/settled).
+
+    422 names every axis that is unknown to this motion system or outside its soft
+    limits; in that case nothing is sent to the driver.
+    """
+    setpoints = body.setpoints()
+    if not setpoints:
+        raise HTTPException(422, "give at least one of yaw_deg, pitch_deg, roll_deg, rail_mm")
+    problems = []
+    for name, value in setpoints.items():
+        axis = motion.axes.get(name)
+        if axis is None:
+            problems.append(f"this motion system has no {name} axis (axes: {sorted(motion.axes)})")
+        elif (why := axis.check(value)) is not None:
+            problems.append(why)
+    if problems:
+        raise HTTPException(422, problems)
+    try:
+        motion.move_to(setpoints)
+    except Exception as exc:
+        _degrade(state, f"move failed: {exc}")
+        raise HTTPException(503, f"the motion system refused the move: {exc}") from exc
+    return motion_public(state)
+
+
+@router.post("/stop", dependencies=[WriteAuth])
+def stop(state: StateDep, motion: MotionDep) -> MotionPublic:
+    """Emergency stop: every axis stops where it is. Always accepted."""
+    try:
+        motion.stop()
+    except Exception as exc:
+        log.exception("stop failed")
+        _degrade(state, f"stop failed: {exc}")
+        raise HTTPException(503, f"the motion system did not confirm the stop: {exc}") from exc
+    return motion_public(state)

@@ -1,0 +1,31 @@
+"""GET /api/pose/latest and /api/pose/history."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, HTTPException, Query
+
+from backend.api.deps import ReadAuth, StateDep
+from backend.api.schemas import PosePublic
+
+router = APIRouter(prefix="/api/pose", tags=["pose"], dependencies=[ReadAuth])
+
+
+@router.get("/latest", responses={404: {"description": "no frame processed yet"}})
+def latest(state: StateDep) -> PosePublic:
+    """The last result: ok/reason, pose (mm, deg, quaternion), matched reflectors with
+    pixel centroids and 3-D points, residual, stage timings, frame time, truth if known."""
+    sample = state.acquisition.latest
+    if sample is None:
+        raise HTTPException(404, "no frame has been processed yet")
+    return sample.cached("pose_public", lambda: PosePublic.from_sample(sample))
+
+
+@router.get("/history")
+def history(state: StateDep, n: Annotated[int, Query(ge=1, le=100_000)] = 100) -> list[PosePublic]:
+    """The last ``n`` results, oldest first (bounded by the server's history size)."""
+    return [
+        s.cached("pose_public", lambda s=s: PosePublic.from_sample(s))
+        for s in state.acquisition.history(n)
+    ]

@@ -1,0 +1,250 @@
+"""Request and response schemas (pydantic). Units in every field name (DESIGN.md §3)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from backend.services.acquisition import LiveSample
+from tofpose.geometry import RigidTransform, euler_deg_from_rotation, rotation_angle_deg
+
+
+class StrictBody(BaseModel):
+    """Request bodies: unknown fields and NaN/inf are errors, not silently ignored."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+# -- health and devices ------------------------------------------------------------------
+class DeviceStatePublic(BaseModel):
+    driver: str
+    state: Literal["starting", "ok", "degraded", "stopped", "absent"]
+    last_error: str | None = None
+    error_count: int = 0
+
+
+class HealthPublic(BaseModel):
+    status: Literal["ok", "degraded"]
+    version: str
+    uptime_s: float
+    database: Literal["ok", "error"]
+    camera: DeviceStatePublic
+    motion: DeviceStatePublic
+
+
+class CameraDevicePublic(DeviceStatePublic):
+    width_px: int
+    height_px: int
+    fx_px: float
+    fy_px: float
+    cx_px: float
+    cy_px: float
+    frames_processed: int
+    frame_rate_hz: float = Field(description="delivered rate over the last few frames")
+    catalog: str
+
+
+class AxisPublic(BaseModel):
+    name: str
+    unit: str
+    min_pos: float
+    max_pos: float
+    max_rate_per_s: float
+
+
+class MotionPublic(DeviceStatePublic):
+    axes: list[AxisPublic] = []
+    positions: dict[str, float] = Field(default_factory=dict, description="encoders, deg / mm")
+    targets: dict[str, float] = Field(default_factory=dict)
+    busy: bool = False
+    settled: bool = True
+    stopped: bool = False
+
+
+class DevicesPublic(BaseModel):
+    camera: CameraDevicePublic
+    motion: MotionPublic
+
+
+# -- camera settings ---------------------------------------------------------------------
+class CameraSettingsPublic(BaseModel):
+    integration_time_us: float
+    modulation_frequency_mhz: float
+    frame_rate_hz: float
+    auto_exposure: bool
+    unambiguous_range_mm: float
+
+
+class CameraSettingsUpdate(StrictBody):
+    """Fields left out keep their current value."""
+
+    integration_time_us: float | None = Field(None, ge=1.0, le=20000.0)
+    modulation_frequency_mhz: float | None = Field(None, ge=1.0, le=24.0)
+    frame_rate_hz: float | None = Field(None, ge=1.0, le=60.0)
+    auto_exposure: bool | None = None
+
+
+# -- pose --------------------------------------------------------------------------------
+class MatchedPublic(BaseModel):
+    catalog_id: int
+    u_px: float
+    v_px: float
+    point_mm: list[float] = Field(description="measured position in the camera frame")
+    distance_mm: float
+    residual_mm: float
+    area_px: int
+
+
+class BlobPublic(BaseModel):
+    u_px: float
+    v_px: float
+    distance_mm: float
+
+
+class TruthPublic(BaseModel):
+    """The lab's ground truth for this frame (encoders + nominal geometry) and the error
+    of the measurement against it."""
+
+    x_mm: float
+    y_mm: float
+    z_mm: float
+    pitch_deg: float
+    yaw_deg: float
+    roll_deg: float
+    position_error_mm: float | None = None
+    attitude_error_deg: float | None = Field(None, description="geodesic angle")
+
+
+class PosePublic(BaseModel):
+    frame_index: int
+    frame_time_s: float
+    captured_unix_s: float
+    processed_unix_s: float
+    catalog: str
+    ok: bool
+    reason: str
+    x_mm: float | None = None
+    y_mm: float | None = None
+    z_mm: float | None = None
+    pitch_deg: float | None = None
+    yaw_deg: float | None = None
+    roll_deg: float | None = None
+    quaternion_wxyz: list[float] | None = None
+    position_sigma_mm: list[float] | None = Field(None, description="1-sigma, x y z")
+    attitude_sigma_deg: list[float] | None = Field(
+        None, description="1-sigma of the rotation-vector components"
+    )
+    n_candidates: int
+    n_matched: int
+    matched: list[MatchedPublic]
+    unmatched: list[BlobPublic]
+    residual_mm: float | None
+    iterations: int
+    frames_used: int
+    motion: bool
+    timings_ms: dict[str, float]
+    truth: TruthPublic | None = None
+
+    @classmethod
+    def from_sample(cls, s: LiveSample) -> PosePublic:
+        r = s.result
+        pose: dict = {}
+        if r.ok and r.R is not None:
+            x, y, z = (float(v) for v in r.t_mm)
+            p, yw, rl = (float(v) for v in r.euler_deg)
+            pose = dict(x_mm=x, y_mm=y, z_mm=z, pitch_deg=p, yaw_deg=yw, roll_deg=rl)
+            pose["quaternion_wxyz"] = [float(v) for v in r.quaternion_wxyz]
+            if r.covariance is not None:
+                sd = np.sqrt(np.clip(np.diag(r.covariance), 0.0, None))
+                pose["attitude_sigma_deg"] = [float(v) for v in np.degrees(sd[:3])]
+                pose["position_sigma_mm"] = [float(v) for v in sd[3:]]
+        truth = None
+        T = s.frame.T_truth
+        if T is not None:
+            truth = _truth(T, r.R if r.ok else None, r.t_mm if r.ok else None)
+        return cls(
+            frame_index=s.frame.index,
+            frame_time_s=s.frame.time_s,
+            captured_unix_s=s.captured_unix_s,
+            processed_unix_s=s.processed_unix_s,
+            catalog=s.catalog_name,
+            ok=r.ok,
+            reason=r.reason,
+            n_candidates=r.n_candidates,
+            n_matched=r.n_matched,
+            matched=[
+                MatchedPublic(
+                    catalog_id=m.catalog_id,
+                    u_px=float(m.centroid_uv[0]),
+                    v_px=float(m.centroid_uv[1]),
+                    point_mm=[float(v) for v in m.point_mm],
+                    distance_mm=float(m.distance_mm),
+                    residual_mm=float(m.residual_mm),
+                    area_px=int(m.area_px),
+                )
+                for m in r.matched
+            ],
+            unmatched=[
+                BlobPublic(u_px=float(u), v_px=float(v), distance_mm=float(d))
+                for u, v, d in r.unmatched
+            ],
+            residual_mm=float(r.residual_mm) if np.isfinite(r.residual_mm) else None,
+            iterations=r.iterations,
+            frames_used=r.frames_used,
+            motion=r.motion,
+            timings_ms={k: float(v) for k, v in r.timings_ms.items()},
+            truth=truth,
+            **pose,
+        )
+
+
+def _truth(T: RigidTransform, R: np.ndarray | None, t_mm: np.ndarray | None) -> TruthPublic:
+    p, y, r = (float(v) for v in euler_deg_from_rotation(T.R))
+    err_pos = err_ang = None
+    if R is not None and t_mm is not None:
+        err_pos = float(np.linalg.norm(np.asarray(t_mm) - T.t_mm))
+        err_ang = float(rotation_angle_deg(T.R, R))
+    x, yy, z = (float(v) for v in T.t_mm)
+    return TruthPublic(
+        x_mm=x, y_mm=yy, z_mm=z, pitch_deg=p, yaw_deg=y, roll_deg=r,
+        position_error_mm=err_pos, attitude_error_deg=err_ang,
+    )  # fmt: skip
+
+
+# -- motion ------------------------------------------------------------------------------
+class MoveRequest(StrictBody):
+    """Axis set-points; axes left out stay where they are. At least one is required."""
+
+    yaw_deg: float | None = None
+    pitch_deg: float | None = None
+    roll_deg: float | None = None
+    rail_mm: float | None = None
+
+    def setpoints(self) -> dict[str, float]:
+        names = {"yaw_deg": "yaw", "pitch_deg": "pitch", "roll_deg": "roll", "rail_mm": "rail"}
+        return {names[k]: v for k, v in self.model_dump().items() if v is not None}
+
+
+# -- catalogs ----------------------------------------------------------------------------
+class ReflectorModel(StrictBody):
+    id: int = Field(ge=0, le=1_000_000)
+    position_mm: list[float] = Field(min_length=3, max_length=3)
+    diameter_mm: float = Field(gt=0, le=10_000)
+
+
+class CatalogCreate(StrictBody):
+    name: str = Field(min_length=1, max_length=128, pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+    reflectors: list[ReflectorModel] = Field(min_length=3, max_length=256)
+
+
+class CatalogPublic(BaseModel):
+    name: str
+    builtin: bool
+    active: bool
+    reflectors: list[ReflectorModel]
+
+
+class ActiveCatalogPublic(BaseModel):
+    catalog: str

@@ -1,0 +1,117 @@
+"""The app factory. Nothing is built at import time: ``create_app(settings)`` returns an
+app whose lifespan opens the database (migrating it), starts the devices and the
+acquisition loop, and tears them down again."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from dataclasses import fields
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse, RedirectResponse
+
+import backend
+from backend.api.routes import camera, catalogs, frames, health, live, motion, pose
+from backend.api.routes import devices as devices_route
+from backend.auth import load_or_create_token
+from backend.db.engine import make_engine, make_session_factory, upgrade_database
+from backend.drivers.base import CameraSettings
+from backend.drivers.factory import Devices, build_devices
+from backend.limits import BodySizeLimit
+from backend.services.acquisition import AcquisitionService
+from backend.services.hub import LiveHub
+from backend.services.store import find_catalog, load_device_settings
+from backend.settings import Settings
+from backend.state import AppState
+from tofpose.catalog import Catalog
+
+log = logging.getLogger("tofpose.server")
+
+
+def _initial_catalog(state_sessions, settings: Settings, devices: Devices) -> tuple[str, Catalog]:
+    """Stored choice > the replayed recording's own catalog > ``settings.catalog``."""
+    with state_sessions() as session:
+        stored = load_device_settings(session, "pipeline") or {}
+        name = stored.get("catalog")
+        if name and (cat := find_catalog(session, name)) is not None:
+            return name, cat
+        if devices.catalog_hint is not None:
+            return f"recording:{devices.catalog_hint.name}", devices.catalog_hint
+        cat = find_catalog(session, settings.catalog)
+    if cat is None:
+        raise ValueError(f"catalog {settings.catalog!r} is neither built in nor stored")
+    return settings.catalog, cat
+
+
+def _restore_camera_settings(sessions, devices: Devices) -> None:
+    with sessions() as session:
+        stored = load_device_settings(session, "camera")
+    if not stored:
+        return
+    known = {f.name for f in fields(CameraSettings)}
+    try:
+        wanted = CameraSettings(**{k: v for k, v in stored.items() if k in known})
+        devices.camera.apply_settings(wanted)
+    except Exception as exc:  # a stale stored setting must not stop the server
+        log.warning("stored camera settings not applied: %s", exc)
+
+
+def create_app(settings: Settings | None = None, devices: Devices | None = None) -> FastAPI:
+    """Build the app. ``devices`` overrides the drivers named in ``settings`` (tests)."""
+    settings = settings or Settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        settings.data_dir.mkdir(parents=True, exist_ok=True)
+        token, created = load_or_create_token(
+            settings.data_dir,
+            settings.api_token.get_secret_value() if settings.api_token else None,
+        )
+        app.state.token_created = created
+        engine = make_engine(settings.resolved_database_url)
+        upgrade_database(engine)
+        sessions = make_session_factory(engine)
+        devs = devices or build_devices(settings)
+        _restore_camera_settings(sessions, devs)
+        cat_name, cat = _initial_catalog(sessions, settings, devs)
+        hub = LiveHub(settings.subscriber_queue)
+        acq = AcquisitionService(
+            devs.camera, cat, cat_name, hub,
+            history_size=settings.history_size,
+            timeout_s=settings.camera_timeout_s,
+            backoff_s=settings.retry_backoff_s,
+        )  # fmt: skip
+        app.state.tofpose = AppState(settings, token, engine, sessions, devs, hub, acq)
+        acq.start()
+        try:
+            yield
+        finally:
+            acq.stop()
+            devs.close()
+            engine.dispose()
+
+    app = FastAPI(
+        title="tofpose",
+        version=backend.__version__,
+        summary="Pose of a cooperative target from a ToF camera, live, with a turntable.",
+        lifespan=lifespan,
+    )
+    app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation_error(_request: Request, exc: RequestValidationError) -> JSONResponse:
+        # FastAPI's default, minus the echoed input (which can be a huge body).
+        errors = [{k: v for k, v in e.items() if k in ("loc", "msg", "type")} for e in exc.errors()]
+        return JSONResponse({"detail": errors}, status_code=422)
+
+    for module in (health, devices_route, camera, pose, frames, motion, catalogs, live):
+        app.include_router(module.router)
+
+    @app.get("/", include_in_schema=False)
+    def root() -> RedirectResponse:
+        return RedirectResponse("/docs")
+
+    return app

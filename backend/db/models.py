@@ -1,0 +1,140 @@
+"""SQLAlchemy 2 models. Alembic migrations in ``migrations/`` create exactly these
+(tests/backend/db/test_migrations.py compares them).
+
+Units are in the column names (DESIGN.md §3): mm, deg, s.
+"""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Any
+
+from sqlalchemy import (
+    JSON,
+    Boolean,
+    DateTime,
+    Float,
+    ForeignKey,
+    Integer,
+    String,
+    Text,
+    UniqueConstraint,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+
+def utcnow() -> datetime:
+    return datetime.now(UTC)
+
+
+class Base(DeclarativeBase):
+    pass
+
+
+class DeviceSettingsRow(Base):
+    """Last applied settings of a device (``camera``, ``pipeline``), re-applied at start."""
+
+    __tablename__ = "device_settings"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    device: Mapped[str] = mapped_column(String(64), unique=True)
+    settings: Mapped[dict[str, Any]] = mapped_column(JSON)
+    updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class CatalogRow(Base):
+    """A user-supplied target catalog (the built-in ones live in ``tofpose.catalog``)."""
+
+    __tablename__ = "catalogs"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(128), unique=True)
+    catalog_json: Mapped[str] = mapped_column(Text)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class CampaignRow(Base):
+    """A turntable test campaign: a set-point sequence measured N frames per point.
+
+    status : draft, queued, running, paused, done, failed, aborted.
+    """
+
+    __tablename__ = "campaigns"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(200))
+    status: Mapped[str] = mapped_column(String(16), default="draft", index=True)
+    catalog_name: Mapped[str] = mapped_column(String(128))
+    frames_per_point: Mapped[int] = mapped_column(Integer, default=30)
+    dwell_s: Mapped[float] = mapped_column(Float, default=1.0)
+    notes: Mapped[str] = mapped_column(Text, default="")
+    camera_settings: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    started_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+
+    setpoints: Mapped[list[SetPointRow]] = relationship(
+        back_populates="campaign", cascade="all, delete-orphan", order_by="SetPointRow.index"
+    )
+
+
+class SetPointRow(Base):
+    """One set-point of a campaign; None for an axis means "leave it where it is".
+
+    status : pending, running, done, failed.
+    """
+
+    __tablename__ = "setpoints"
+    __table_args__ = (UniqueConstraint("campaign_id", "index", name="uq_setpoint_index"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaigns.id", ondelete="CASCADE"))
+    index: Mapped[int] = mapped_column(Integer)
+    yaw_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    pitch_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    roll_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    rail_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    status: Mapped[str] = mapped_column(String(16), default="pending")
+    completed_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+
+    campaign: Mapped[CampaignRow] = relationship(back_populates="setpoints")
+    measurements: Mapped[list[MeasurementRow]] = relationship(
+        back_populates="setpoint", cascade="all, delete-orphan"
+    )
+
+
+class MeasurementRow(Base):
+    """One frame measured at a set-point: the pose, and the lab's ground truth
+    (encoders + nominal geometry) when known."""
+
+    __tablename__ = "measurements"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    setpoint_id: Mapped[int] = mapped_column(
+        ForeignKey("setpoints.id", ondelete="CASCADE"), index=True
+    )
+    frame_index: Mapped[int] = mapped_column(Integer)
+    frame_time_s: Mapped[float] = mapped_column(Float)
+    ok: Mapped[bool] = mapped_column(Boolean)
+    reason: Mapped[str] = mapped_column(Text, default="")
+    n_matched: Mapped[int] = mapped_column(Integer, default=0)
+    residual_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    x_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    y_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    z_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    pitch_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    yaw_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    roll_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    qw: Mapped[float | None] = mapped_column(Float, nullable=True)
+    qx: Mapped[float | None] = mapped_column(Float, nullable=True)
+    qy: Mapped[float | None] = mapped_column(Float, nullable=True)
+    qz: Mapped[float | None] = mapped_column(Float, nullable=True)
+    truth_x_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    truth_y_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    truth_z_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    truth_pitch_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    truth_yaw_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    truth_roll_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    encoders: Mapped[dict[str, float] | None] = mapped_column(JSON, nullable=True)
+
+    setpoint: Mapped[SetPointRow] = relationship(back_populates="measurements")

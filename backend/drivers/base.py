@@ -1,0 +1,128 @@
+"""The two device interfaces the backend talks to (DESIGN.md §8).
+
+A camera yields (gray, distance, time) frame pairs and accepts settings; a motion system
+moves axes to set-points, reports encoder positions and busy/settled state, and stops at
+once. Simulated, replay and (later) real devices implement these Protocols.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from tofpose.camera import CameraModel
+from tofpose.geometry import RigidTransform
+
+
+class CameraError(RuntimeError):
+    """The camera could not deliver a frame (disconnected, timed out, bad data)."""
+
+
+class MotionError(RuntimeError):
+    """The motion controller refused or failed a command."""
+
+
+@dataclass(frozen=True)
+class CameraSettings:
+    """Acquisition settings common to ToF cameras.
+
+    integration_time_us : exposure; ignored while ``auto_exposure`` is on.
+    modulation_frequency_mhz : CW modulation; unambiguous range is c / (2 f).
+    frame_rate_hz : frames per second delivered by ``read``.
+    """
+
+    integration_time_us: float = 500.0
+    modulation_frequency_mhz: float = 6.0
+    frame_rate_hz: float = 10.0
+    auto_exposure: bool = True
+
+
+@dataclass
+class CameraFrame:
+    """One frame pair.
+
+    gray : (H, W) uint16 counts; distance_mm : (H, W) float32 radial distance, NaN invalid.
+    time_s : the device's capture time (monotonic within a stream).
+    index : running frame number of this driver.
+    T_truth : the lab's ground truth ``T_camera_target`` if the source knows it (simulator
+        from encoders and nominal geometry, recordings with /truth), else None.
+    meta : driver-specific extras (integration time, encoder readings, recording index).
+    """
+
+    gray: np.ndarray
+    distance_mm: np.ndarray
+    time_s: float
+    index: int
+    T_truth: RigidTransform | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+
+@runtime_checkable
+class CameraDriver(Protocol):
+    """A ToF camera. ``read`` blocks for at most ``timeout_s`` and raises ``CameraError``
+    (or ``TimeoutError``) when no frame arrives; it is called from one thread only."""
+
+    name: str
+    model: CameraModel
+
+    def read(self, timeout_s: float) -> CameraFrame: ...
+
+    def get_settings(self) -> CameraSettings: ...
+
+    def apply_settings(self, settings: CameraSettings) -> CameraSettings:
+        """Apply and return what the device actually uses (it may clamp)."""
+        ...
+
+    def close(self) -> None: ...
+
+
+@dataclass(frozen=True)
+class AxisLimits:
+    """Soft limits of one axis; rotary axes in degrees, the rail in mm."""
+
+    name: str
+    unit: str
+    min_pos: float
+    max_pos: float
+    max_rate: float
+
+    def check(self, value: float) -> str | None:
+        """Why ``value`` is not an acceptable set-point, or None."""
+        if not np.isfinite(value):
+            return f"{self.name} set-point must be a finite number"
+        if not self.min_pos <= value <= self.max_pos:
+            return (
+                f"{self.name} set-point {value:g} {self.unit} is outside the soft limits "
+                f"[{self.min_pos:g}, {self.max_pos:g}] {self.unit}"
+            )
+        return None
+
+
+@dataclass(frozen=True)
+class MotionStatus:
+    """Encoder read-back and state; positions keyed by axis name (deg / mm)."""
+
+    positions: dict[str, float]
+    targets: dict[str, float]
+    busy: bool
+    settled: bool
+    stopped: bool = False
+
+
+@runtime_checkable
+class MotionDriver(Protocol):
+    """A turntable (+ rail). Set-points are validated by the caller against ``axes``
+    before ``move_to``; ``stop`` must work at any time."""
+
+    name: str
+    axes: dict[str, AxisLimits]
+
+    def move_to(self, setpoints: dict[str, float]) -> None: ...
+
+    def stop(self) -> None: ...
+
+    def status(self) -> MotionStatus: ...
+
+    def close(self) -> None: ...

@@ -1,0 +1,92 @@
+"""Replay of an HDF5 recording (DESIGN.md §7) as a camera, looping, at the recorded rate
+or a chosen one."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from backend.drivers.base import CameraError, CameraFrame, CameraSettings
+from backend.drivers.pacing import FramePacer
+from tofpose.geometry import RigidTransform
+from tofpose.recording import RecordingError, open_recording
+
+DEFAULT_RATE_HZ = 10.0
+
+
+def recorded_rate_hz(time_s: np.ndarray) -> float:
+    """Median frame rate of a recording's time stamps (``DEFAULT_RATE_HZ`` if unknown)."""
+    dt = np.diff(np.asarray(time_s, float))
+    dt = dt[np.isfinite(dt) & (dt > 0)]
+    return float(1.0 / np.median(dt)) if dt.size else DEFAULT_RATE_HZ
+
+
+class ReplayCamera:
+    """Plays a recording's frames in a loop (implements ``CameraDriver``).
+
+    Frame times are stream times (seconds since the replay started), so they increase
+    across loops; ``meta`` carries the recording index, its own time stamp and the loop
+    count, and ``meta["discontinuity"]`` is True on the first frame of every loop.
+    Raises ``RecordingError`` at construction if the file is not a valid recording.
+    """
+
+    name = "replay"
+
+    def __init__(self, path: str | Path, rate_hz: float | None = None) -> None:
+        self.path = Path(path)
+        self._rec = open_recording(self.path)
+        if self._rec.n_frames == 0:
+            self._rec.close()
+            raise RecordingError(f"{self.path}: the recording holds no frames")
+        self.model = self._rec.camera
+        self.catalog = self._rec.catalog
+        self.recorded_rate_hz = recorded_rate_hz(self._rec.time_s)
+        rate = rate_hz or self.recorded_rate_hz
+        self._settings = CameraSettings(frame_rate_hz=rate, auto_exposure=False)
+        self._pacer = FramePacer(rate)
+        self._count = 0
+        self._t0: float | None = None
+
+    def read(self, timeout_s: float) -> CameraFrame:
+        self._pacer.wait(timeout_s)
+        if self._t0 is None:
+            self._t0 = time.monotonic()
+        n = self._rec.n_frames
+        i = self._count % n
+        try:
+            gray, dist, rec_t = self._rec.frame(i)
+        except RecordingError as exc:
+            raise CameraError(str(exc)) from exc
+        truth = None
+        if self._rec.truth_R is not None and self._rec.truth_t_mm is not None:
+            truth = RigidTransform(self._rec.truth_R[i], self._rec.truth_t_mm[i])
+        self._count += 1
+        return CameraFrame(
+            gray=gray,
+            distance_mm=dist,
+            time_s=time.monotonic() - self._t0,
+            index=self._count,
+            T_truth=truth,
+            meta={
+                "recording_index": i,
+                "recorded_time_s": rec_t,
+                "loop": (self._count - 1) // n,
+                "discontinuity": i == 0,
+            },
+        )
+
+    def get_settings(self) -> CameraSettings:
+        return self._settings
+
+    def apply_settings(self, settings: CameraSettings) -> CameraSettings:
+        """Only the frame rate can change; the rest is fixed by the recording."""
+        self._settings = replace(self._settings, frame_rate_hz=settings.frame_rate_hz)
+        self._pacer.set_rate(settings.frame_rate_hz)
+        return self._settings
+
+    def close(self) -> None:
+        self._pacer.close()
+        self._rec.close()

@@ -1,0 +1,63 @@
+"""``tofpose serve``: build the app from settings + command-line overrides and run it."""
+
+from __future__ import annotations
+
+import sys
+
+from pydantic import SecretStr, ValidationError
+
+from backend.auth import TOKEN_FILE, load_or_create_token
+from backend.settings import Settings
+from tofpose.recording import RecordingError
+
+
+def banner(settings: Settings, token: str, created: bool) -> str:
+    host = settings.host if ":" not in settings.host else f"[{settings.host}]"
+    base = f"http://{host}:{settings.port}"
+    camera = "simulated ToF camera" if settings.camera == "sim" else settings.camera
+    motion = {"sim": "simulated turntable + rail", "none": "no motion system"}[settings.motion]
+    where = "generated now and stored in" if created else "from"
+    source = (
+        "TOFPOSE_API_TOKEN"
+        if settings.api_token and not created
+        else (f"{where} {settings.data_dir / TOKEN_FILE}")
+    )
+    reads = "open (loopback)" if settings.reads_are_open else "token required"
+    return "\n".join([
+        f"tofpose server: {camera}, {motion}",
+        f"  API docs       {base}/docs   (OpenAPI: {base}/openapi.json)",
+        f"  live pose      ws://{host}:{settings.port}/ws/live",
+        f"  health         {base}/api/health",
+        f"  database       {settings.resolved_database_url}",
+        f"  API token      {token}   ({source})",
+        f"  reads          {reads}; moves and changes need 'Authorization: Bearer <token>'",
+    ])  # fmt: skip
+
+
+def serve(overrides: dict) -> int:
+    """Run uvicorn until interrupted; returns a process exit code."""
+    import uvicorn
+
+    from backend.app import create_app
+    from backend.drivers.factory import build_devices
+
+    try:
+        settings = Settings(**{k: v for k, v in overrides.items() if v is not None})
+    except ValidationError as exc:
+        msgs = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
+        print(f"tofpose serve: bad settings: {msgs}", file=sys.stderr)
+        return 2
+    settings.data_dir.mkdir(parents=True, exist_ok=True)
+    configured = settings.api_token.get_secret_value() if settings.api_token else None
+    token, created = load_or_create_token(settings.data_dir, configured)
+    text = banner(settings, token, created)
+    settings = settings.model_copy(update={"api_token": SecretStr(token)})
+    try:
+        devices = build_devices(settings)
+    except RecordingError as exc:
+        print(f"tofpose serve: cannot replay: {exc}", file=sys.stderr)
+        return 2
+    app = create_app(settings, devices)
+    print(text, flush=True)
+    uvicorn.run(app, host=settings.host, port=settings.port, log_level="info")
+    return 0

@@ -1,0 +1,1 @@
+"""Services: the acquisition loop, the live hub, image rendering."""

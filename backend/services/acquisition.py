@@ -1,0 +1,221 @@
+"""The acquisition loop: one thread owns the camera, runs ``PosePipeline`` on every frame
+pair, keeps the latest sample and a bounded history, and publishes to the hub.
+
+A camera error or timeout marks the device degraded and is retried with exponential
+backoff; nothing a driver or a subscriber does can stop the loop. Commands for the camera
+(settings changes) are queued to the loop so that only its thread touches the device.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from concurrent.futures import Future
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from backend.drivers.base import CameraDriver, CameraFrame
+from backend.services.hub import LiveHub
+from tofpose.catalog import Catalog
+from tofpose.extraction import FrameError
+from tofpose.pipeline import PipelineConfig, PosePipeline, PoseResult
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class LiveSample:
+    """One processed frame: the frame pair, its result and when things happened.
+
+    captured_unix_s : wall-clock time the frame arrived from the driver.
+    processed_unix_s : wall-clock time the pipeline finished.
+    cache : serialised forms (JSON, PNG) computed once and shared by all consumers.
+    """
+
+    frame: CameraFrame
+    result: PoseResult
+    catalog_name: str
+    captured_unix_s: float
+    processed_unix_s: float
+    cache: dict[str, Any] = field(default_factory=dict)
+
+    def cached(self, key: str, make: Callable[[], Any]) -> Any:
+        if key not in self.cache:
+            self.cache[key] = make()
+        return self.cache[key]
+
+
+@dataclass
+class DeviceHealth:
+    """State of a device as the server sees it: ``starting``, ``ok``, ``degraded``,
+    ``stopped``."""
+
+    state: str = "starting"
+    last_error: str | None = None
+    last_error_unix_s: float | None = None
+    error_count: int = 0
+    consecutive_failures: int = 0
+
+
+class AcquisitionService:
+    """Runs the live loop in a daemon thread; see the module docstring."""
+
+    def __init__(
+        self,
+        camera: CameraDriver,
+        catalog: Catalog,
+        catalog_name: str,
+        hub: LiveHub,
+        *,
+        history_size: int = 600,
+        timeout_s: float = 2.0,
+        backoff_s: tuple[float, float] = (0.05, 2.0),
+        pipeline_config: PipelineConfig | None = None,
+    ) -> None:
+        self.camera = camera
+        self.hub = hub
+        self.timeout_s = timeout_s
+        self.backoff_s = backoff_s
+        self.health = DeviceHealth()
+        self._config = pipeline_config or PipelineConfig()
+        self._catalog_name = catalog_name
+        self._pipeline = PosePipeline(camera.model, catalog, self._config)
+        self._history: deque[LiveSample] = deque(maxlen=history_size)
+        self._latest: LiveSample | None = None
+        self._commands: queue.Queue[tuple[Callable[[], Any], Future]] = queue.Queue()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._arrivals: deque[float] = deque(maxlen=30)
+        self.frames_processed = 0
+
+    # -- lifecycle ----------------------------------------------------------------------
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name="acquisition", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+        self.health.state = "stopped"
+        while not self._commands.empty():
+            _, fut = self._commands.get_nowait()
+            fut.set_exception(RuntimeError("acquisition stopped"))
+
+    # -- what others read ---------------------------------------------------------------
+    @property
+    def latest(self) -> LiveSample | None:
+        return self._latest
+
+    @property
+    def catalog_name(self) -> str:
+        return self._catalog_name
+
+    @property
+    def catalog(self) -> Catalog:
+        return self._pipeline.catalog
+
+    def history(self, n: int) -> list[LiveSample]:
+        items = list(self._history)
+        return items[-n:] if n > 0 else []
+
+    @property
+    def frame_rate_hz(self) -> float:
+        """Delivered frame rate over the last few frames (0 if unknown)."""
+        t = list(self._arrivals)
+        if len(t) < 2 or t[-1] <= t[0]:
+            return 0.0
+        return (len(t) - 1) / (t[-1] - t[0])
+
+    # -- commands run on the loop's thread ----------------------------------------------
+    def submit(self, fn: Callable[[], Any]) -> Future:
+        """Run ``fn`` on the acquisition thread between frames; returns a Future."""
+        fut: Future = Future()
+        if self._stop.is_set():
+            fut.set_exception(RuntimeError("acquisition stopped"))
+        else:
+            self._commands.put((fn, fut))
+        return fut
+
+    def set_catalog(self, name: str, catalog: Catalog) -> Future:
+        def swap() -> None:
+            self._pipeline = PosePipeline(self.camera.model, catalog, self._config)
+            self._catalog_name = name
+
+        return self.submit(swap)
+
+    def _run_commands(self) -> None:
+        while True:
+            try:
+                fn, fut = self._commands.get_nowait()
+            except queue.Empty:
+                return
+            if fut.set_running_or_notify_cancel():
+                try:
+                    fut.set_result(fn())
+                except Exception as exc:  # handed to the caller
+                    fut.set_exception(exc)
+
+    # -- the loop -----------------------------------------------------------------------
+    def _fail(self, message: str) -> None:
+        h = self.health
+        h.state = "degraded"
+        h.last_error = message
+        h.last_error_unix_s = time.time()
+        h.error_count += 1
+        h.consecutive_failures += 1
+
+    def _run(self) -> None:
+        backoff = self.backoff_s[0]
+        while not self._stop.is_set():
+            self._run_commands()
+            try:
+                frame = self.camera.read(self.timeout_s)
+            except Exception as exc:
+                if self._stop.is_set():
+                    break
+                kind = "timed out" if isinstance(exc, TimeoutError) else "failed"
+                self._fail(f"camera {kind}: {exc}")
+                log.warning("camera %s (%s); retrying in %.2f s", kind, exc, backoff)
+                self._stop.wait(backoff)
+                backoff = min(2.0 * backoff, self.backoff_s[1])
+                continue
+            captured = time.time()
+            self._arrivals.append(time.monotonic())
+            if frame.meta.get("discontinuity"):
+                self._pipeline.reset()
+            try:
+                result = self._pipeline.process(frame.gray, frame.distance_mm, frame.time_s)
+            except FrameError as exc:
+                self._fail(f"malformed frame from the camera: {exc}")
+                continue
+            except Exception as exc:  # a pipeline bug must not stop the live loop
+                log.exception("pipeline failed on frame %d", frame.index)
+                result = PoseResult(False, f"pipeline error: {exc}", frame.time_s)
+            backoff = self.backoff_s[0]
+            self.health.state = "ok"
+            self.health.consecutive_failures = 0
+            sample = LiveSample(frame, result, self._catalog_name, captured, time.time())
+            self._latest = sample
+            self._history.append(sample)
+            self.frames_processed += 1
+            try:
+                self.hub.publish(sample)
+            except Exception:
+                log.exception("publishing frame %d failed", frame.index)
+
+
+def frame_point_cloud_mm(sample: LiveSample, camera_model) -> np.ndarray:
+    """Camera-frame 3-D points (N, 3) of every detected blob: matched then unmatched."""
+    res = sample.result
+    pts = [m.point_mm for m in res.matched]
+    if res.unmatched:
+        uvd = np.asarray(res.unmatched, float)
+        pts.extend(camera_model.back_project(uvd[:, :2], uvd[:, 2]))
+    return np.asarray(pts, float).reshape(-1, 3)

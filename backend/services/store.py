@@ -1,0 +1,44 @@
+"""Small persistence helpers: device settings and user catalogs."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from backend.db.models import CatalogRow, DeviceSettingsRow, utcnow
+from tofpose.catalog import BUILTIN_CATALOGS, Catalog
+
+
+def load_device_settings(session: Session, device: str) -> dict[str, Any] | None:
+    row = session.scalar(select(DeviceSettingsRow).where(DeviceSettingsRow.device == device))
+    return dict(row.settings) if row is not None else None
+
+
+def save_device_settings(session: Session, device: str, settings: dict[str, Any]) -> None:
+    row = session.scalar(select(DeviceSettingsRow).where(DeviceSettingsRow.device == device))
+    if row is None:
+        session.add(DeviceSettingsRow(device=device, settings=settings))
+    else:
+        row.settings = settings
+        row.updated_at = utcnow()
+    session.commit()
+
+
+def stored_catalogs(session: Session) -> list[tuple[str, Catalog]]:
+    rows = session.scalars(select(CatalogRow).order_by(CatalogRow.id)).all()
+    return [(r.name, Catalog.from_json(r.catalog_json)) for r in rows]
+
+
+def find_catalog(session: Session, name: str) -> Catalog | None:
+    """A built-in or stored catalog by name, or None."""
+    if name in BUILTIN_CATALOGS:
+        return BUILTIN_CATALOGS[name]()
+    row = session.scalar(select(CatalogRow).where(CatalogRow.name == name))
+    return Catalog.from_json(row.catalog_json) if row is not None else None
+
+
+def add_catalog(session: Session, name: str, catalog: Catalog) -> None:
+    session.add(CatalogRow(name=name, catalog_json=catalog.to_json()))
+    session.commit()

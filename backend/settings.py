@@ -1,0 +1,79 @@
+"""Server settings, read from ``TOFPOSE_*`` environment variables (pydantic-settings)."""
+
+from __future__ import annotations
+
+import ipaddress
+from pathlib import Path
+
+from pydantic import Field, SecretStr, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+LOOPBACK_NAMES = {"localhost", "localhost.localdomain"}
+
+
+def is_loopback_host(host: str) -> bool:
+    """True for 127.0.0.0/8, ::1 and localhost."""
+    if host in LOOPBACK_NAMES:
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+class Settings(BaseSettings):
+    """Everything the app factory needs; every field maps to ``TOFPOSE_<NAME>``.
+
+    camera : "sim" (simulated camera in the simulated lab) or "replay:PATH.h5".
+    motion : "sim" (simulated turntable + rail) or "none".
+    database_url : any SQLAlchemy URL; default ``sqlite:///<data_dir>/tofpose.db``.
+    api_token : bearer token for state-changing requests; when unset, one is generated on
+        first start and stored in ``<data_dir>/api_token``.
+    open_reads : allow unauthenticated reads; default: only when bound to loopback.
+    """
+
+    model_config = SettingsConfigDict(env_prefix="TOFPOSE_", extra="ignore")
+
+    host: str = "127.0.0.1"
+    port: int = Field(8000, ge=0, le=65535)
+    data_dir: Path = Path("data")
+    database_url: str | None = None
+    api_token: SecretStr | None = None
+    open_reads: bool | None = None
+    camera: str = "sim"
+    motion: str = "sim"
+    replay_rate_hz: float | None = Field(None, gt=0, le=1000)
+    catalog: str = "paper-target"
+    frame_rate_hz: float = Field(10.0, gt=0, le=60)
+    sim_target_distance_mm: float = Field(15000.0, gt=0)
+    sim_start_rail_mm: float = Field(13000.0, ge=0)
+    sim_seed: int = 0
+    history_size: int = Field(600, ge=1, le=100_000)
+    subscriber_queue: int = Field(8, ge=1, le=1000)
+    camera_timeout_s: float = Field(2.0, gt=0)
+    retry_backoff_s: tuple[float, float] = (0.05, 2.0)
+    max_body_bytes: int = Field(1_000_000, ge=1024)
+
+    @field_validator("camera")
+    @classmethod
+    def _camera_spec(cls, v: str) -> str:
+        if v != "sim" and not (v.startswith("replay:") and len(v) > len("replay:")):
+            raise ValueError(f"camera must be 'sim' or 'replay:PATH.h5', got {v!r}")
+        return v
+
+    @field_validator("motion")
+    @classmethod
+    def _motion_spec(cls, v: str) -> str:
+        if v not in ("sim", "none"):
+            raise ValueError(f"motion must be 'sim' or 'none', got {v!r}")
+        return v
+
+    @property
+    def resolved_database_url(self) -> str:
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(self.data_dir / 'tofpose.db').resolve()}"
+
+    @property
+    def reads_are_open(self) -> bool:
+        return self.open_reads if self.open_reads is not None else is_loopback_host(self.host)

@@ -1,0 +1,32 @@
+"""What the running app owns, built by ``create_app``'s lifespan and reached by routes
+through ``request.app.state.tofpose``."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+from sqlalchemy import Engine
+from sqlalchemy.orm import Session, sessionmaker
+
+from backend.drivers.factory import Devices
+from backend.services.acquisition import AcquisitionService, DeviceHealth
+from backend.services.hub import LiveHub
+from backend.settings import Settings
+
+
+@dataclass
+class AppState:
+    settings: Settings
+    token: str
+    engine: Engine
+    sessions: sessionmaker[Session]
+    devices: Devices
+    hub: LiveHub
+    acquisition: AcquisitionService
+    motion_health: DeviceHealth = field(default_factory=lambda: DeviceHealth(state="ok"))
+    started_monotonic: float = field(default_factory=time.monotonic)
+
+    @property
+    def uptime_s(self) -> float:
+        return time.monotonic() - self.started_monotonic
