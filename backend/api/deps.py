@@ -20,6 +20,13 @@ bearer_scheme = HTTPBearer(
 )
 
 
+def unprocessable(loc: list[str | int], messages: list[str]) -> HTTPException:
+    """A 422 shaped like FastAPI's own validation errors (``detail`` = list of
+    ``{loc, msg, type}``), so clients handle every 422 the same way."""
+    detail = [{"loc": loc, "msg": m, "type": "value_error"} for m in messages]
+    return HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, detail)
+
+
 def get_state(request: Request) -> AppState:
     return request.app.state.tofpose
 

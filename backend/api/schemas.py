@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -230,7 +230,9 @@ class MoveRequest(StrictBody):
 # -- catalogs ----------------------------------------------------------------------------
 class ReflectorModel(StrictBody):
     id: int = Field(ge=0, le=1_000_000)
-    position_mm: list[float] = Field(min_length=3, max_length=3)
+    position_mm: list[Annotated[float, Field(ge=-1e6, le=1e6)]] = Field(
+        min_length=3, max_length=3, description="centre in the target frame, mm"
+    )
     diameter_mm: float = Field(gt=0, le=10_000)
 
 

@@ -7,7 +7,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Path, status
 
-from backend.api.deps import ReadAuth, SessionDep, StateDep, WriteAuth
+from backend.api.deps import ReadAuth, SessionDep, StateDep, WriteAuth, unprocessable
 from backend.api.schemas import ActiveCatalogPublic, CatalogCreate, CatalogPublic, ReflectorModel
 from backend.services.store import add_catalog, find_catalog, save_device_settings, stored_catalogs
 from tofpose.catalog import BUILTIN_CATALOGS, Catalog, Reflector
@@ -49,7 +49,7 @@ def create_catalog(body: CatalogCreate, state: StateDep, session: SessionDep) ->
             tuple(Reflector(r.id, tuple(r.position_mm), r.diameter_mm) for r in body.reflectors),
         )
     except ValueError as exc:
-        raise HTTPException(422, f"catalog rejected: {exc}") from exc
+        raise unprocessable(["body", "reflectors"], [f"catalog rejected: {exc}"]) from exc
     add_catalog(session, body.name, cat)
     return _public(body.name, cat, builtin=False, active=state.acquisition.catalog_name)
 

@@ -11,7 +11,7 @@ import time
 
 from fastapi import APIRouter, HTTPException, status
 
-from backend.api.deps import MotionDep, ReadAuth, StateDep, WriteAuth
+from backend.api.deps import MotionDep, ReadAuth, StateDep, WriteAuth, unprocessable
 from backend.api.schemas import AxisPublic, MotionPublic, MoveRequest
 from backend.state import AppState
 
@@ -65,7 +65,9 @@ def move(body: MoveRequest, state: StateDep, motion: MotionDep) -> MotionPublic:
     """
     setpoints = body.setpoints()
     if not setpoints:
-        raise HTTPException(422, "give at least one of yaw_deg, pitch_deg, roll_deg, rail_mm")
+        raise unprocessable(
+            ["body"], ["give at least one of yaw_deg, pitch_deg, roll_deg, rail_mm"]
+        )
     problems = []
     for name, value in setpoints.items():
         axis = motion.axes.get(name)
@@ -74,7 +76,7 @@ def move(body: MoveRequest, state: StateDep, motion: MotionDep) -> MotionPublic:
         elif (why := axis.check(value)) is not None:
             problems.append(why)
     if problems:
-        raise HTTPException(422, problems)
+        raise unprocessable(["body"], problems)
     try:
         motion.move_to(setpoints)
     except Exception as exc:

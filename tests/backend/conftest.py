@@ -1,0 +1,157 @@
+"""Fixtures for backend tests: an app on a temp SQLite file with simulated devices."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+
+from backend.app import create_app
+from backend.drivers.base import CameraFrame, MotionStatus
+from backend.drivers.factory import Devices, build_devices
+from backend.settings import Settings
+
+TOKEN = "test-token-0123456789"
+AUTH = {"Authorization": f"Bearer {TOKEN}"}
+
+
+def make_settings(data_dir: Path, **kw) -> Settings:
+    kw.setdefault("api_token", TOKEN)
+    kw.setdefault("frame_rate_hz", 20.0)
+    kw.setdefault("retry_backoff_s", (0.02, 0.1))
+    return Settings(data_dir=data_dir, **kw)
+
+
+class FlakyCamera:
+    """Wraps a camera; while ``failing`` is set, ``read`` raises like a dropped device."""
+
+    def __init__(self, inner) -> None:
+        self.inner = inner
+        self.name = inner.name
+        self.model = inner.model
+        self.failing = threading.Event()
+        self.reads = 0
+
+    def read(self, timeout_s: float) -> CameraFrame:
+        self.reads += 1
+        if self.failing.is_set():
+            time.sleep(0.01)
+            raise ConnectionError("camera unplugged (test)")
+        return self.inner.read(timeout_s)
+
+    def get_settings(self):
+        return self.inner.get_settings()
+
+    def apply_settings(self, s):
+        return self.inner.apply_settings(s)
+
+    def close(self) -> None:
+        self.inner.close()
+
+
+class SpyMotion:
+    """Wraps a motion driver and records every command that reaches it."""
+
+    def __init__(self, inner) -> None:
+        self.inner = inner
+        self.name = inner.name
+        self.axes = inner.axes
+        self.calls: list[tuple[str, dict]] = []
+
+    def move_to(self, setpoints: dict[str, float]) -> None:
+        self.calls.append(("move_to", dict(setpoints)))
+        self.inner.move_to(setpoints)
+
+    def stop(self) -> None:
+        self.calls.append(("stop", {}))
+        self.inner.stop()
+
+    def status(self) -> MotionStatus:
+        return self.inner.status()
+
+    def close(self) -> None:
+        self.inner.close()
+
+
+@pytest.fixture
+def settings(tmp_path) -> Settings:
+    return make_settings(tmp_path / "data")
+
+
+@contextmanager
+def running_app(settings: Settings, devices: Devices | None = None) -> Iterator[TestClient]:
+    with TestClient(create_app(settings, devices)) as client:
+        yield client
+
+
+@pytest.fixture
+def client(settings) -> Iterator[TestClient]:
+    with running_app(settings) as c:
+        yield c
+
+
+@pytest.fixture
+def spy_devices(settings) -> Devices:
+    devs = build_devices(settings)
+    devs.camera = FlakyCamera(devs.camera)
+    devs.motion = SpyMotion(devs.motion)
+    return devs
+
+
+def wait_for(pred: Callable[[], object], timeout_s: float = 10.0, what: str = "condition"):
+    """Poll ``pred`` until it returns a truthy value; fail the test after the timeout."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        value = pred()
+        if value:
+            return value
+        time.sleep(0.02)
+    pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
+
+
+def latest_pose(client: TestClient, after_index: int = 0, ok: bool = True) -> dict:
+    """Wait for a pose newer than ``after_index`` (and ok, if asked)."""
+
+    def get():
+        r = client.get("/api/pose/latest")
+        if r.status_code != 200:
+            return None
+        p = r.json()
+        return p if p["frame_index"] > after_index and (p["ok"] or not ok) else None
+
+    return wait_for(get, what=f"a pose after frame {after_index}")
+
+
+class LiveServer:
+    """The app served by uvicorn on a free loopback port, in a background thread."""
+
+    def __init__(self, settings: Settings, devices: Devices | None = None) -> None:
+        import uvicorn
+
+        app = create_app(settings, devices)
+        config = uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning")
+        self.server = uvicorn.Server(config)
+        self.thread = threading.Thread(target=self.server.run, daemon=True)
+
+    def __enter__(self) -> LiveServer:
+        self.thread.start()
+        wait_for(lambda: self.server.started, 20.0, "uvicorn to start")
+        port = self.server.servers[0].sockets[0].getsockname()[1]
+        self.base_url = f"http://127.0.0.1:{port}"
+        self.ws_url = f"ws://127.0.0.1:{port}/ws/live"
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.server.should_exit = True
+        self.thread.join(15.0)
+
+
+@pytest.fixture
+def live_server(settings) -> Iterator[LiveServer]:
+    with LiveServer(settings) as server:
+        yield server
