@@ -151,8 +151,8 @@ def test_restart_on_the_same_database_keeps_its_data(tmp_path):
         auth = {"Authorization": f"Bearer {token}"}
         assert c.post("/api/catalogs", json=square, headers=auth).status_code == 201
         assert c.post("/api/catalogs", json=square, headers=auth).status_code == 409
-        r = c.put("/api/camera/settings", json={"frame_rate_hz": 12.5, "modulation_frequency_mhz": 8},
-                  headers=auth)  # fmt: skip
+        new = {"frame_rate_hz": 12.5, "modulation_frequency_mhz": 8}
+        r = c.put("/api/camera/settings", json=new, headers=auth)
         assert r.status_code == 200 and r.json()["unambiguous_range_mm"] == 18737.028625
         assert c.post("/api/catalogs/square-4/activate", headers=auth).json() == {
             "catalog": "square-4"
