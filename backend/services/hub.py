@@ -82,6 +82,11 @@ class LiveHub:
         with self._lock:
             self._subs.discard(sub)
 
+    def subscriptions(self) -> list[Subscription]:
+        """A snapshot of the current subscriptions (for status and tests)."""
+        with self._lock:
+            return list(self._subs)
+
     @property
     def n_subscribers(self) -> int:
         with self._lock:

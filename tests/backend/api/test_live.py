@@ -1,0 +1,134 @@
+"""WebSocket /ws/live: pose stream, options, many clients, slow clients, auth."""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import json
+import time
+
+import cv2
+import numpy as np
+import pytest
+import websockets
+from starlette.websockets import WebSocketDisconnect
+
+from tests.backend.conftest import LiveServer, make_settings, running_app
+
+
+def _poses(ws, n: int) -> list[dict]:
+    out = []
+    while len(out) < n:
+        m = ws.receive_json()
+        if m["type"] == "pose":
+            out.append(m)
+    return out
+
+
+def test_stream_sends_hello_then_every_pose(client):
+    with client.websocket_connect("/ws/live") as ws:
+        hello = ws.receive_json()
+        assert hello["type"] == "hello" and hello["camera"]["width_px"] == 320
+        assert hello["catalog"] == "paper-target"
+        msgs = _poses(ws, 12)
+    idx = [m["data"]["frame_index"] for m in msgs]
+    assert idx == sorted(idx) and len(set(idx)) == 12
+    # A reader that keeps up misses (almost) nothing: consecutive frame numbers.
+    assert idx[-1] - idx[0] <= 12
+    ok = [m["data"] for m in msgs if m["data"]["ok"]]
+    assert len(ok) >= 10
+    assert all(abs(p["z_mm"] - 2000.0) < 30.0 for p in ok)
+
+
+def test_images_and_point_cloud_on_request(client):
+    with client.websocket_connect("/ws/live") as ws:
+        ws.receive_json()
+        ws.send_text(json.dumps({"images": ["gray", "distance"], "image_every": 2,
+                                 "image_step": 2, "points": True}))  # fmt: skip
+        seen: dict[str, list] = {"image": [], "points": [], "pose": []}
+        while len(seen["pose"]) < 8 or not seen["points"] or len(seen["image"]) < 2:
+            m = ws.receive_json()
+            seen[m["type"]].append(m)
+    img = seen["image"][0]
+    png = np.frombuffer(base64.b64decode(img["png_base64"]), np.uint8)
+    decoded = cv2.imdecode(png, cv2.IMREAD_UNCHANGED)
+    assert decoded.shape[:2] == (120, 160)
+    assert {m["kind"] for m in seen["image"]} == {"gray", "distance"}
+    pts = seen["points"][-1]
+    pose = next(p["data"] for p in seen["pose"] if p["data"]["frame_index"] == pts["frame_index"])
+    assert len(pts["points_mm"]) == pose["n_matched"] + len(pose["unmatched"])
+    matched = {m["catalog_id"]: m["point_mm"] for m in pose["matched"]}
+    for cid, p in zip(pts["catalog_ids"], pts["points_mm"], strict=True):
+        if cid is not None:
+            np.testing.assert_allclose(p, matched[cid], atol=0.01)
+    # The reflector cloud sits around the target, ~2 m away.
+    assert np.all(np.abs(np.array(pts["points_mm"])[:, 2] - 1900.0) < 200.0)
+
+
+def test_bad_options_get_an_error_message_and_the_stream_goes_on(client):
+    with client.websocket_connect("/ws/live") as ws:
+        ws.receive_json()
+        ws.send_text('{"images": ["thermal"]}')
+        ws.send_text("not json")
+        errors = []
+        poses = 0
+        while len(errors) < 2 or poses < 2:
+            m = ws.receive_json()
+            if m["type"] == "error":
+                errors.append(m["message"])
+            poses += m["type"] == "pose"
+    assert "images" in errors[0] and "bad options" in errors[1]
+
+
+def test_token_required_when_reads_are_not_open(tmp_path):
+    with running_app(make_settings(tmp_path, host="0.0.0.0")) as c:
+        with pytest.raises(WebSocketDisconnect) as exc, c.websocket_connect("/ws/live") as ws:
+            ws.receive_json()
+        assert exc.value.code == 1008
+        with c.websocket_connect("/ws/live?token=test-token-0123456789") as ws:
+            assert ws.receive_json()["type"] == "hello"
+
+
+async def _client(url: str, seconds: float, read: bool = True, options=None) -> list[dict]:
+    got = []
+    async with websockets.connect(url, max_queue=4, close_timeout=1) as ws:
+        if options:
+            await ws.send(json.dumps(options))
+        t_end = time.monotonic() + seconds
+        while time.monotonic() < t_end:
+            if not read:
+                await asyncio.sleep(0.1)
+                continue
+            try:
+                m = json.loads(await asyncio.wait_for(ws.recv(), t_end - time.monotonic()))
+            except TimeoutError:
+                break
+            if m["type"] == "pose":
+                got.append(m)
+    return got
+
+
+def test_many_clients_and_a_stuck_one_do_not_slow_the_camera(tmp_path):
+    """Eight readers and one client that asks for full-size images and never reads, over
+    real sockets: the stuck client's socket fills and it loses frames, every reader still
+    gets the camera rate, and the acquisition loop keeps its rate."""
+    with LiveServer(make_settings(tmp_path, frame_rate_hz=10.0)) as srv:
+        state = srv.server.config.app.state.tofpose
+        heavy = {"images": ["gray", "distance"], "image_every": 1, "image_step": 1}
+
+        async def main():
+            stuck = asyncio.create_task(_client(srv.ws_url, 6.0, read=False, options=heavy))
+            await asyncio.sleep(2.0)
+            readers = await asyncio.gather(*(_client(srv.ws_url, 3.0) for _ in range(8)))
+            dropped = max(s.dropped for s in state.hub.subscriptions())
+            await stuck
+            return readers, dropped
+
+        readers, stuck_dropped = asyncio.run(main())
+        fps = state.acquisition.frame_rate_hz
+    assert stuck_dropped > 0
+    for got in readers:
+        assert len(got) >= 24, len(got)  # 10 Hz for 3 s, less start-up
+        idx = [m["data"]["frame_index"] for m in got]
+        assert idx[-1] - idx[0] + 1 - len(idx) <= 2  # at most 2 frames lost
+    assert fps > 8.5
