@@ -166,3 +166,20 @@ def test_restart_on_the_same_database_keeps_its_data(tmp_path):
         s = c.get("/api/camera/settings").json()
         assert s["frame_rate_hz"] == 12.5 and s["modulation_frequency_mhz"] == 8.0
         assert c.get("/api/devices").json()["camera"]["catalog"] == "square-4"
+
+
+def test_replay_camera_without_motion(tmp_path):
+    from tofpose.cli import simulate
+
+    rec = tmp_path / "stability.h5"
+    simulate("stability-697", 6, str(rec), seed=2, catalog_path=None, progress=False)
+    settings = make_settings(tmp_path / "data", camera=f"replay:{rec}", motion="none")
+    with running_app(settings) as c:
+        p = latest_pose(c)
+        assert p["catalog"] == "recording:paper-target"
+        assert p["truth"]["position_error_mm"] < 15.0
+        assert abs(p["z_mm"] - 697.0) < 30.0
+        h = c.get("/api/health").json()
+        assert h["motion"]["state"] == "absent" and h["camera"]["driver"] == "replay"
+        r = c.post("/api/motion/move", json={"yaw_deg": 1.0}, headers=AUTH)
+        assert r.status_code == 503 and "no motion system" in r.json()["detail"]

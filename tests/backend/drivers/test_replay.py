@@ -1,0 +1,65 @@
+"""Replay of an HDF5 recording as a camera."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from backend.drivers.base import CameraDriver
+from backend.drivers.replay import ReplayCamera, recorded_rate_hz
+from tofpose.camera import CameraModel
+from tofpose.catalog import paper_target
+from tofpose.recording import RecordingError, RecordingWriter
+
+
+@pytest.fixture
+def recording(tmp_path):
+    path = tmp_path / "rec.h5"
+    cam = CameraModel()
+    with RecordingWriter(path, cam, paper_target(), with_truth=True) as w:
+        for i in range(3):
+            gray = np.full(cam.shape, 100 + i, np.uint16)
+            dist = np.full(cam.shape, 1000.0 + i, np.float32)
+            w.append(gray, dist, 0.04 * i, np.eye(3), np.array([0.0, 0.0, 1000.0 + i]))
+    return path
+
+
+def test_loops_over_the_frames_with_truth_and_stream_time(recording):
+    cam = ReplayCamera(recording, rate_hz=100.0)
+    assert isinstance(cam, CameraDriver)
+    assert cam.recorded_rate_hz == pytest.approx(25.0)
+    assert cam.catalog.name == "paper-target"
+    frames = [cam.read(1.0) for _ in range(7)]
+    assert [int(f.gray[0, 0]) for f in frames] == [100, 101, 102, 100, 101, 102, 100]
+    assert [f.meta["loop"] for f in frames] == [0, 0, 0, 1, 1, 1, 2]
+    assert [f.meta["discontinuity"] for f in frames] == [True, False, False, True, False, False,
+                                                         True]  # fmt: skip
+    assert all(np.diff([f.time_s for f in frames]) > 0)  # stream time keeps increasing
+    assert frames[4].T_truth.t_mm[2] == 1001.0
+    cam.close()
+
+
+def test_plays_at_the_recorded_rate_by_default(recording):
+    cam = ReplayCamera(recording)
+    cam.read(1.0)
+    t0 = time.monotonic()
+    for _ in range(4):
+        cam.read(1.0)
+    assert time.monotonic() - t0 == pytest.approx(4 * 0.04, abs=0.04)
+    cam.close()
+
+
+def test_bad_files_raise_recording_error(tmp_path):
+    with pytest.raises(RecordingError, match="no such file"):
+        ReplayCamera(tmp_path / "missing.h5")
+    junk = tmp_path / "junk.h5"
+    junk.write_bytes(b"not hdf5")
+    with pytest.raises(RecordingError, match="HDF5"):
+        ReplayCamera(junk)
+
+
+def test_recorded_rate_ignores_bad_stamps():
+    assert recorded_rate_hz(np.array([0.0, 0.1, 0.2, 0.2, np.nan, 0.4])) == pytest.approx(10.0)
+    assert recorded_rate_hz(np.array([5.0])) == 10.0

@@ -1,0 +1,92 @@
+"""Simulated camera + turntable share one world: the camera sees what the table does."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from backend.drivers.base import CameraDriver, CameraSettings, MotionDriver
+from backend.drivers.sim import SimCamera, SimMotion, make_sim_world
+from tofpose.geometry import rotation_angle_deg
+
+
+@pytest.fixture
+def world():
+    return make_sim_world(target_distance_mm=15000.0, start_rail_mm=13000.0, seed=3)
+
+
+def test_drivers_implement_the_protocols(world):
+    assert isinstance(SimCamera(world), CameraDriver)
+    assert isinstance(SimMotion(world), MotionDriver)
+
+
+def test_camera_frames_carry_lab_truth_at_the_start_range(world):
+    cam = SimCamera(world, CameraSettings(frame_rate_hz=50.0))
+    f = cam.read(2.0)
+    assert f.gray.shape == (240, 320) and f.gray.dtype == np.uint16
+    assert f.distance_mm.dtype == np.float32
+    np.testing.assert_allclose(f.T_truth.t_mm, [0.0, 0.0, 2000.0], atol=0.1)
+    # Centre pixels see the plate at ~1.85-2 m (radial distance), NaN only where invalid.
+    centre = f.distance_mm[110:130, 150:170]
+    assert np.nanmedian(centre) == pytest.approx(2000.0, abs=160.0)
+
+
+def test_frame_rate_is_paced_and_changes_with_settings(world):
+    cam = SimCamera(world, CameraSettings(frame_rate_hz=20.0))
+    cam.read(1.0)
+    t0 = time.monotonic()
+    times = [cam.read(1.0).time_s for _ in range(6)]
+    assert time.monotonic() - t0 == pytest.approx(6 / 20.0, abs=0.08)
+    assert np.median(np.diff(times)) == pytest.approx(0.05, abs=0.01)
+    applied = cam.apply_settings(CameraSettings(frame_rate_hz=5.0, integration_time_us=1e6))
+    assert applied.integration_time_us == 4000.0  # clamped to the sensor's limit
+    cam.read(1.0)
+    t0 = time.monotonic()
+    cam.read(1.0)
+    assert time.monotonic() - t0 == pytest.approx(0.2, abs=0.05)
+
+
+def test_modulation_frequency_setting_reaches_the_sensor(world):
+    cam = SimCamera(world)
+    cam.apply_settings(CameraSettings(modulation_frequency_mhz=12.0, auto_exposure=False))
+    assert world.bench.sensor.modulation_frequency_hz == 12.0e6
+    assert world.bench.sensor.auto_exposure is False
+
+
+def test_camera_sees_the_turntable_move(world):
+    cam = SimCamera(world, CameraSettings(frame_rate_hz=50.0))
+    motion = SimMotion(world)
+    before = cam.read(1.0).T_truth
+    motion.move_to({"roll": 4.0})
+    assert motion.status().busy
+    deadline = time.monotonic() + 5.0
+    while not motion.status().settled and time.monotonic() < deadline:
+        time.sleep(0.02)
+    st = motion.status()
+    assert st.settled and abs(st.positions["roll"] - 4.0) < 0.01
+    after = cam.read(1.0).T_truth
+    assert rotation_angle_deg(before.R, after.R) == pytest.approx(4.0, abs=0.01)
+
+
+def test_stop_freezes_the_axes_where_they_are(world):
+    motion = SimMotion(world)
+    motion.move_to({"yaw": 100.0})
+    time.sleep(0.3)
+    motion.stop()
+    st = motion.status()
+    assert st.stopped and not st.busy
+    assert 0.5 < st.positions["yaw"] < 10.0
+    time.sleep(0.2)
+    assert motion.status().positions["yaw"] == pytest.approx(st.positions["yaw"], abs=0.01)
+    motion.move_to({"yaw": 0.0})
+    assert not motion.status().stopped
+
+
+def test_closed_camera_read_times_out(world):
+    cam = SimCamera(world, CameraSettings(frame_rate_hz=1.0))
+    cam.read(1.0)
+    cam.close()
+    with pytest.raises(TimeoutError):
+        cam.read(0.5)

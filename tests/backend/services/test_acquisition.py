@@ -1,0 +1,131 @@
+"""The acquisition loop with a scripted camera: results, history, degradation, commands."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from backend.drivers.base import CameraFrame, CameraSettings
+from backend.services.acquisition import AcquisitionService, frame_point_cloud_mm
+from backend.services.hub import LiveHub
+from tests.backend.conftest import wait_for
+from tests.conftest import facing_pose, render
+from tofpose.camera import CameraModel
+from tofpose.catalog import paper_target
+
+
+class ScriptedCamera:
+    """Serves one pre-rendered frame pair at ~200 Hz; can fail, hang or send junk."""
+
+    name = "scripted"
+
+    def __init__(self) -> None:
+        self.model = CameraModel()
+        self.T = facing_pose(1500.0, yaw_deg=5.0)
+        f = render(self.T, seed=1)
+        self.gray, self.dist = f.gray, f.distance_mm
+        self.mode = "ok"
+        self.n = 0
+        self.settings = CameraSettings()
+        self.thread_names: set[str] = set()
+
+    def read(self, timeout_s):
+        self.thread_names.add(threading.current_thread().name)
+        time.sleep(0.005)
+        if self.mode == "raise":
+            raise OSError("link down")
+        if self.mode == "hang":
+            time.sleep(timeout_s)
+            raise TimeoutError(f"no frame within {timeout_s} s")
+        self.n += 1
+        gray = self.gray[:10] if self.mode == "junk" else self.gray
+        return CameraFrame(gray, self.dist, 0.005 * self.n, self.n, self.T)
+
+    def get_settings(self):
+        return self.settings
+
+    def apply_settings(self, s):
+        self.thread_names.add(threading.current_thread().name)
+        self.settings = s
+        return s
+
+    def close(self):
+        pass
+
+
+@pytest.fixture
+def service():
+    cam = ScriptedCamera()
+    hub = LiveHub()
+    svc = AcquisitionService(cam, paper_target(), "paper-target", hub, history_size=20,
+                             timeout_s=0.05, backoff_s=(0.01, 0.04))  # fmt: skip
+    svc.start()
+    yield svc, cam, hub
+    svc.stop()
+
+
+def test_results_history_and_publication(service):
+    svc, cam, hub = service
+    sub = hub.subscribe(maxsize=100)
+    wait_for(lambda: svc.frames_processed >= 25, what="25 frames")
+    s = svc.latest
+    assert s.result.ok and s.result.n_matched == 8
+    np.testing.assert_allclose(s.result.t_mm, cam.T.t_mm, atol=3.0)
+    assert len(svc.history(100)) == 20  # bounded
+    idx = [x.frame.index for x in svc.history(5)]
+    assert idx == sorted(idx) and len(idx) == 5
+    assert sub.get(1.0).frame.index >= 1
+    assert svc.health.state == "ok"
+    pts = frame_point_cloud_mm(s, cam.model)
+    assert pts.shape == (8 + len(s.result.unmatched), 3)
+
+
+@pytest.mark.parametrize(("mode", "needle"), [("raise", "link down"), ("hang", "timed out"),
+                                              ("junk", "malformed frame")])  # fmt: skip
+def test_camera_trouble_degrades_then_recovers(service, mode, needle):
+    svc, cam, _ = service
+    wait_for(lambda: svc.frames_processed > 2, what="first frames")
+    cam.mode = mode
+    wait_for(lambda: svc.health.state == "degraded", what="degraded")
+    assert needle in svc.health.last_error
+    errors = svc.health.error_count
+    wait_for(lambda: svc.health.error_count > errors + 2, what="retries")
+    cam.mode = "ok"
+    n = svc.frames_processed
+    wait_for(lambda: svc.frames_processed > n + 3 and svc.health.state == "ok", what="recovery")
+    assert svc.health.consecutive_failures == 0
+
+
+def test_a_stuck_subscriber_does_not_slow_the_loop(service):
+    svc, _, hub = service
+    hub.subscribe(maxsize=1)  # never read
+    n0 = svc.frames_processed
+    wait_for(lambda: svc.frames_processed > n0 + 40, what="40 frames")
+    assert hub.subscriptions()[0].dropped > 30
+
+
+def test_commands_run_on_the_acquisition_thread(service):
+    svc, cam, _ = service
+    fut = svc.submit(lambda: cam.apply_settings(CameraSettings(frame_rate_hz=7.0)))
+    assert fut.result(2.0).frame_rate_hz == 7.0
+    assert cam.thread_names == {"acquisition"}
+    failing = svc.submit(lambda: 1 / 0)
+    with pytest.raises(ZeroDivisionError):
+        failing.result(2.0)
+    assert svc.health.state == "ok"
+
+
+def test_catalog_swap_takes_effect(service):
+    from tofpose.catalog import Catalog
+
+    svc, _, _ = service
+    sub4 = Catalog("first-four", paper_target().reflectors[:4])
+    svc.set_catalog("first-four", sub4).result(2.0)
+    n = svc.frames_processed
+    wait_for(lambda: svc.frames_processed > n + 2, what="frames with the new catalog")
+    s = svc.latest
+    assert s.catalog_name == "first-four"
+    assert {m.catalog_id for m in s.result.matched} <= {1, 2, 3, 4}
