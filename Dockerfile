@@ -1,0 +1,24 @@
+# The tofpose server with simulated devices. Build: docker build -t tofpose .
+# Run: docker run -p 8000:8000 -v tofpose-data:/data tofpose
+# Bound to 0.0.0.0 inside the container, so reads need the token too (printed at start,
+# stored in /data/api_token).
+FROM python:3.11-slim
+
+ENV PYTHONDONTWRITEBYTECODE=1 \
+    PYTHONUNBUFFERED=1 \
+    PIP_NO_CACHE_DIR=1 \
+    TOFPOSE_DATA_DIR=/data \
+    TOFPOSE_HOST=0.0.0.0 \
+    TOFPOSE_PORT=8000
+
+WORKDIR /app
+COPY pyproject.toml README.md alembic.ini ./
+COPY tofpose ./tofpose
+COPY backend ./backend
+COPY migrations ./migrations
+# Editable install: the server applies the Alembic revisions from /app/migrations.
+RUN pip install -e . && mkdir -p /data
+
+EXPOSE 8000
+VOLUME ["/data"]
+CMD ["tofpose", "serve"]
