@@ -30,6 +30,8 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import contextlib
+
 from bench._common import table  # noqa: E402
 
 
@@ -71,10 +73,8 @@ async def _client(url: str, seconds: float, start: asyncio.Event):
     async with websockets.connect(url, max_queue=64, close_timeout=1) as ws:
         await ws.recv()  # hello
         while not start.is_set():  # keep reading during warm-up so nothing queues up
-            try:
+            with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(ws.recv(), 0.05)
-            except TimeoutError:
-                pass
         t_end = time.monotonic() + seconds
         while (left := t_end - time.monotonic()) > 0:
             try:
