@@ -253,6 +253,8 @@ def match_by_triplets(
     weights: np.ndarray | None = None,
     max_observed: int = 7,
     min_matches: int = 3,
+    observed_triplets=None,
+    deadline_s: float | None = None,
 ) -> np.ndarray:
     """Exhaustive triplet hypotheses (ours): the fallback when annealing's answer fails
     verification (e.g. a mirror-image assignment of 3-4 markers at long range).
@@ -262,7 +264,12 @@ def match_by_triplets(
     unless ``accept_pose(R, t)`` (e.g. the target faces the camera), and count observed
     points within their tolerance of a predicted reflector. Returns the pairs (m, 2) of
     the hypothesis with most inliers (ties: smaller weighted residual), or an empty array.
+
+    observed_triplets : optional iterable of observed index triplets to try instead (e.g.
+        ``random_triplets`` for a RANSAC-style search over all blobs);
+    deadline_s : optional ``time.perf_counter()`` value after which the search stops.
     """
+    import time
     from itertools import combinations, permutations
 
     g = min(len(observed_mm), max_observed)
@@ -271,7 +278,10 @@ def match_by_triplets(
     c_d = np.linalg.norm(catalog_mm[:, None] - catalog_mm[None], axis=-1)
     best, best_key = np.empty((0, 2), int), (0, np.inf)
     cat_triplets = list(permutations(range(e), 3))
-    for tri in combinations(range(g), 3):
+    triplets = combinations(range(g), 3) if observed_triplets is None else observed_triplets
+    for tri in triplets:
+        if deadline_s is not None and time.perf_counter() > deadline_s:
+            break
         a, b, c = tri
         o = [
             np.linalg.norm(observed_mm[a] - observed_mm[b]),
@@ -299,3 +309,13 @@ def match_by_triplets(
             ):
                 best, best_key = np.column_stack((rows[ok], cols[ok])), key
     return best
+
+
+def random_triplets(n_observed: int, rng: np.random.Generator):
+    """Every 3-subset of ``range(n_observed)`` once, in random order (RANSAC sampling
+    without repetition), for ``match_by_triplets(observed_triplets=...)``."""
+    from itertools import combinations
+
+    tris = list(combinations(range(n_observed), 3))
+    for k in rng.permutation(len(tris)):
+        yield tris[k]

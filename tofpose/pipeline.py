@@ -38,7 +38,13 @@ from tofpose.extraction import (
     predicted_diameter_window_px,
 )
 from tofpose.geometry import euler_deg_from_rotation, quaternion_wxyz_from_rotation
-from tofpose.matching import MatchingConfig, match_by_triplets, match_reflectors
+from tofpose.matching import (
+    MatchingConfig,
+    MatchResult,
+    match_by_triplets,
+    match_reflectors,
+    random_triplets,
+)
 from tofpose.persistence import Persistence, PersistenceConfig
 from tofpose.pose import refine_line_of_sight, refine_maximum_likelihood, weighted_svd
 
@@ -69,6 +75,10 @@ class PipelineConfig:
     ellipse_confirmation: bool = True
     verify_pose: bool = True
     max_view_angle_deg: float = 80.0
+    matcher: Literal["annealing", "ransac"] = "annealing"
+    triplet_fallback: bool = True
+    ransac_time_budget_ms: float = 5.0
+    ransac_seed: int = 0
     centroid_sigma_floor_px: float = 0.03
     range_sigma_floor_mm: float = 1.0
     los_tolerance: float = 0.002
@@ -160,6 +170,7 @@ class PosePipeline:
         self._catalog_xyz = catalog.positions_mm
         self._catalog_d = catalog.diameters_mm
         self._catalog_ids = catalog.ids
+        self._rng = np.random.default_rng(self.config.ransac_seed)
         camera.pixel_bearings()  # warm the cache
 
     def reset(self) -> None:
@@ -233,14 +244,17 @@ class PosePipeline:
         w = 1.0 / (sig_rng**2 + (rho * sig_px / self.camera.fx) ** 2)
         diam = np.array([self._apparent_diameter_px(b) for b in ranged]) * rho / self.camera.fx
         timer.lap("backproject")
-        m = match_reflectors(
-            y,
-            self._catalog_xyz,
-            cfg.matching,
-            observed_diameter_mm=diam,
-            catalog_diameter_mm=self._catalog_d,
-            weights=w,
-        )
+        if cfg.matcher == "ransac":
+            m = self._match_ransac(y, w)
+        else:
+            m = match_reflectors(
+                y,
+                self._catalog_xyz,
+                cfg.matching,
+                observed_diameter_mm=diam,
+                catalog_diameter_mm=self._catalog_d,
+                weights=w,
+            )
         timer.lap("matching")
         if not m.ok:
             return fail(
@@ -249,7 +263,12 @@ class PosePipeline:
                 **extra,
             )
         solved = self._solve(m.pairs, uv, rho, y, w, sig_px, sig_rng, m.alpha_mm, active)
-        if isinstance(solved, str) and "pose rejected" in solved:
+        if (
+            isinstance(solved, str)
+            and "pose rejected" in solved
+            and cfg.triplet_fallback
+            and cfg.matcher == "annealing"
+        ):
             # Annealing found a mirror-image or otherwise impossible assignment: try the
             # exhaustive triplet hypotheses restricted to physically possible poses.
             tol = np.clip(4.0 / np.sqrt(w), m.alpha_mm, cfg.matching.residual_factor * m.alpha_mm)
@@ -344,6 +363,28 @@ class PosePipeline:
             if problem:
                 return f"pose rejected: {problem}"
         return R, t, x, k_idx, i_idx, uv_m, y_m, rho_m, iterations, ml
+
+    def _match_ransac(self, y: np.ndarray, w: np.ndarray) -> MatchResult:
+        """Random triplet hypotheses over all blobs, best inlier count within the budget."""
+        cfg = self.config
+        rng_m = float(np.median(np.linalg.norm(y, axis=1))) / 1000.0
+        alpha = cfg.matching.alpha_mm + cfg.matching.alpha_per_m * rng_m
+        tol = np.clip(4.0 / np.sqrt(w), alpha, cfg.matching.residual_factor * alpha)
+        pairs = match_by_triplets(
+            y,
+            self._catalog_xyz,
+            alpha,
+            tol,
+            lambda R_, t_: self._faces_camera(R_, t_),
+            weights=w,
+            min_matches=cfg.matching.min_matches,
+            observed_triplets=random_triplets(len(y), self._rng),
+            deadline_s=time.perf_counter() + cfg.ransac_time_budget_ms / 1000.0,
+        )
+        matched = set(pairs[:, 0].tolist())
+        unmatched = [k for k in range(len(y)) if k not in matched]
+        reason = "" if len(pairs) else "no triplet hypothesis with enough inliers"
+        return MatchResult(pairs, unmatched, np.zeros((len(y), 0)), 0, alpha, reason)
 
     def _view_cosine(self, R, t) -> float:
         """Cosine between the target normal and the direction to the camera."""
