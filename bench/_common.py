@@ -29,3 +29,41 @@ def table(header: list[str], rows: list[list[str]]) -> str:
 def med_p95(values) -> tuple[float, float]:
     v = np.asarray(values, float)
     return float(np.median(v)), float(np.percentile(v, 95))
+
+
+def pose_errors(R_est, t_est, T_true) -> tuple[float, float]:
+    """(position error mm, geodesic attitude error deg) of an estimate against a truth."""
+    from tofpose.geometry import rotation_angle_deg
+
+    return float(np.linalg.norm(np.asarray(t_est) - T_true.t_mm)), rotation_angle_deg(
+        T_true.R, np.asarray(R_est)
+    )
+
+
+def relative_euler_deg(R) -> np.ndarray:
+    """(pitch, yaw, roll) deg of R relative to the facing reference diag(1, -1, -1).
+
+    With DESIGN.md's frames a target facing the camera has R = diag(1, -1, -1), i.e.
+    pitch = +-180 deg; reports use R @ diag(1, -1, -1) so that face-on reads ~0 like the
+    paper's tables.
+    """
+    from tofpose.geometry import euler_deg_from_rotation
+
+    return euler_deg_from_rotation(np.asarray(R) @ np.diag([1.0, -1.0, -1.0]))
+
+
+def stats(values) -> dict[str, float]:
+    """median, RMS and 95th percentile of finite values (NaN when none)."""
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return {"median": np.nan, "rms": np.nan, "p95": np.nan}
+    return {
+        "median": float(np.median(v)),
+        "rms": float(np.sqrt(np.mean(v**2))),
+        "p95": float(np.percentile(v, 95)),
+    }
+
+
+def fmt(x: float, digits: int = 2) -> str:
+    return "-" if not np.isfinite(x) else f"{x:.{digits}f}"
