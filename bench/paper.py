@@ -97,6 +97,18 @@ def _bench(distance_mm: float, aim: tuple[float, float], seed: int) -> Simulated
                           turntable=Turntable(seed=seed + 1), seed=seed)  # fmt: skip
 
 
+def _dwell(bench: SimulatedBench, pipe: PosePipeline, t0: float, n: int):
+    """n frames at 30 Hz from t0: measured and lab-truth relative Euler angles (deg)."""
+    meas, truth = [], []
+    for k in range(n):
+        bf = bench.capture(t0 + k / 30.0)
+        r = pipe.process(bf.frame.gray, bf.frame.distance_mm, bf.time_s)
+        if r.ok:
+            meas.append(relative_euler_deg(r.R))
+            truth.append(relative_euler_deg(bf.T_lab_truth.R))
+    return np.array(meas), np.array(truth)
+
+
 def steps(n: int):
     """For each step: measured change of the target attitude, lab-truth change."""
     out = []
@@ -105,19 +117,9 @@ def steps(n: int):
         pipe = PosePipeline(bench.camera, paper_target())
         t = 0.0
 
-        def dwell(t0: float):
-            meas, truth = [], []
-            for k in range(n):
-                bf = bench.capture(t0 + k / 30.0)
-                r = pipe.process(bf.frame.gray, bf.frame.distance_mm, bf.time_s)
-                if r.ok:
-                    meas.append(relative_euler_deg(r.R))
-                    truth.append(relative_euler_deg(bf.T_lab_truth.R))
-            return np.array(meas), np.array(truth)
-
-        m0, g0 = dwell(t)
+        m0, g0 = _dwell(bench, pipe, t, n)
         t = bench.turntable.settle_time(bench.turntable.move_to({axis: value}, n / 30.0))
-        m1, g1 = dwell(t)
+        m1, g1 = _dwell(bench, pipe, t, n)
         i = AXIS_INDEX[axis]
         d_meas = float(np.mean(m1[:, i]) - np.mean(m0[:, i]))
         d_true = float(np.mean(g1[:, i]) - np.mean(g0[:, i]))
@@ -231,8 +233,9 @@ def markdown(stab, step_data, range_data, imgs, n_stab: int) -> str:
           ""]  # fmt: skip
     rows = []
     for axis, value, d_meas, d_true, spread, paper_diff, _ in step_data:
-        rows.append([axis, f"{value:g}", f"{d_meas:.3f}", f"{d_true:.3f}",
-                     f"{abs(d_meas - d_true):.3f}", f"{spread:.3f}", f"{paper_diff:.3f}"])  # fmt: skip
+        diff = abs(d_meas - d_true)
+        rows.append([axis, f"{value:g}", f"{d_meas:.3f}", f"{d_true:.3f}", f"{diff:.3f}",
+                     f"{spread:.3f}", f"{paper_diff:.3f}"])  # fmt: skip
     L += [table(["axis", "commanded deg", "measured change deg", "true change deg",
                  "abs difference deg", "spread after deg", "paper's difference deg"], rows),
           ""]  # fmt: skip
