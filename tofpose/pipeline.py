@@ -63,6 +63,9 @@ class PipelineConfig:
     verify_pose : refuse a pose that makes the target face away from the camera (beyond
         ``max_view_angle_deg``) or that predicts a well-resolved reflector where the
         frame has no bright pixel (catches congruent-triangle mismatches with 3 markers).
+    dark_check_max_matches : the dark-marker check applies only to poses from at most
+        this many matched reflectors; with more, a rigid fit that passed the residual
+        check is not ambiguous, and a dark predicted marker is an occluded one.
     centroid_sigma_floor_px, range_sigma_floor_mm : floors of the per-reflector
         measurement sigmas used as weights and in the covariance.
     """
@@ -75,6 +78,7 @@ class PipelineConfig:
     ellipse_confirmation: bool = True
     verify_pose: bool = True
     max_view_angle_deg: float = 80.0
+    dark_check_max_matches: int = 4
     matcher: Literal["annealing", "ransac"] = "annealing"
     triplet_fallback: bool = True
     ransac_time_budget_ms: float = 5.0
@@ -439,6 +443,8 @@ class PosePipeline:
         centres = self._catalog_xyz @ R.T + t
         if np.any(centres[:, 2] <= 0):
             return "reflectors would be behind the camera"
+        if len(matched) > self.config.dark_check_max_matches:
+            return ""
         uv = self.camera.project(centres)
         d_px = self.camera.fx * self._catalog_d / centres[:, 2]
         h, w = active.shape

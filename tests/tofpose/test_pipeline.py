@@ -163,3 +163,21 @@ def test_ransac_matcher_recovers_the_pose_with_clutter():
     assert res.ok, res.reason
     assert np.linalg.norm(res.t_mm - bf.T_true.t_mm) < 10.0
     assert len(res.unmatched) >= 1
+
+
+def test_covered_markers_do_not_veto_a_well_determined_pose():
+    """Two markers covered (in view, dark): six matches still give the pose; the dark-marker
+    check only guards poses from few matches."""
+    from tofpose.catalog import Catalog
+
+    cat = paper_target()
+    covered = Catalog(cat.name, tuple(r for r in cat.reflectors if r.id not in (3, 6)))
+    T = facing_pose(3000.0, pitch_deg=2.0, yaw_deg=-3.0)
+    f = render(T, seed=5, scene=TargetScene(covered))
+    res = PosePipeline(CameraModel(), cat).process(f.gray, f.distance_mm)
+    assert res.ok, res.reason
+    assert sorted(m.catalog_id for m in res.matched) == [1, 2, 4, 5, 7, 8]
+    assert np.linalg.norm(res.t_mm - T.t_mm) < 2.0
+    strict = PipelineConfig(dark_check_max_matches=8)
+    refused = PosePipeline(CameraModel(), cat, strict).process(f.gray, f.distance_mm)
+    assert not refused.ok and "dark" in refused.reason
