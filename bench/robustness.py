@@ -87,14 +87,14 @@ def run(n: int = 20):
         da = PosePipeline(cam, cat)
         da_only = PosePipeline(cam, cat, PipelineConfig(triplet_fallback=False))
         results = {METHODS[0]: [], METHODS[1]: []}
-        for T, f in frames:
+        for _, f in frames:
             for name, pipe in ((METHODS[0], da), (METHODS[1], da_only)):
                 pipe.reset()
                 results[name].append(pipe.process(f.gray, f.distance_mm))
         budget = float(np.median([r.timings_ms.get("matching", 0.0)
                                   for r in results[METHODS[1]]]))  # fmt: skip
-        rs = PosePipeline(cam, cat, PipelineConfig(matcher="ransac",
-                                                   ransac_time_budget_ms=max(budget, 0.05)))  # fmt: skip
+        cfg = PipelineConfig(matcher="ransac", ransac_time_budget_ms=max(budget, 0.05))
+        rs = PosePipeline(cam, cat, cfg)
         results[METHODS[2]] = []
         for _, f in frames:
             rs.reset()
