@@ -1,4 +1,4 @@
-# tofpose: `make run` (the demo / server), `make test` (the whole suite), `make bench`.
+# tofpose: `make run` (the server), `make test` (the whole suite), `make bench` (docs/results.md).
 PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
@@ -22,8 +22,7 @@ test: lint
 	$(PY) -m pytest -q
 
 bench: $(VENV)/.installed
-	$(PY) bench/sim.py
-	$(PY) bench/pipeline.py
+	$(PY) bench/report.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache

@@ -1,0 +1,167 @@
+"""``make bench``: regenerate every table and plot of docs/results.md from scratch, with
+fixed seeds, and write the document. The numbers in the file are the ones this run printed.
+
+Run: ``python bench/report.py [--quick]`` (--quick: fewer frames, for trying it out).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench import accuracy, baseline, paper, robustness  # noqa: E402
+
+DOC = ROOT / "docs" / "results.md"
+IMG = ROOT / "docs" / "img" / "results"
+
+
+def _rel(p: Path) -> str:
+    return str(p.relative_to(DOC.parent))
+
+
+def _script(name: str, *args: str) -> str:
+    """Run another benchmark script in its own process; return what it printed."""
+    out = subprocess.run([sys.executable, str(ROOT / "bench" / name), *args], check=True,
+                         capture_output=True, text=True, cwd=ROOT)  # fmt: skip
+    print(out.stdout, flush=True)
+    return out.stdout.strip()
+
+
+def findings(acc_summary, rob, base_rows, stab, step_data) -> list[str]:
+    """Plain statements computed from this run, including where we are worse."""
+    out = []
+    full = acc_summary[("normal (1000 lux)", "full (ML)")]
+    none = acc_summary[("normal (1000 lux)", "no refinement")]
+    oracle = acc_summary[("normal (1000 lux)", "oracle")]
+    ok_ranges = [r for r in accuracy.RANGES_M if full[r][0] >= 0.9]
+    out.append(f"The full pipeline gives a pose in >= 90 % of frames from {min(ok_ranges):g} "
+               f"m to {max(ok_ranges):g} m at 1000 lux; at 0.3 m no three markers fit in the "
+               "view.")  # fmt: skip
+    worse = [r for r in accuracy.RANGES_M
+             if np.isfinite(none[r][1]["median"])
+             and none[r][1]["median"] < full[r][1]["median"]]  # fmt: skip
+    if worse:
+        out.append("**Worse:** without refinement (weighted SVD only) the median position error "
+                   "is lower than with our ML refinement at " + ", ".join(f"{r:g}" for r in worse)
+                   + " m: at long range the centroid sigma model is too optimistic, so the "
+                   "refinement trusts the bearings of 1-3 px blobs too much.")  # fmt: skip
+    gaps = [full[r][1]["median"] / oracle[r][1]["median"] for r in accuracy.RANGES_M
+            if np.isfinite(full[r][1]["median"]) and oracle[r][1]["median"] > 0]  # fmt: skip
+    if gaps:
+        out.append(f"Gap to the oracle (median position error, full / oracle): median "
+                   f"{np.median(gaps):.1f}x, worst {max(gaps):.1f}x over the range.")  # fmt: skip
+    P697, keep697, _ = stab["stability-697"]
+    P5712, keep5712, _ = stab["stability-5712"]
+    f697 = np.ptp(P697[keep697], axis=0)
+    f5712 = np.ptp(P5712[keep5712], axis=0)
+    p697 = np.array(paper.PAPER["697-removed"][3])
+    p5712 = np.array(paper.PAPER["5712"][3])
+    def pairs(ours, theirs) -> str:
+        return ", ".join(f"{a} {x:.3f}/{y:.3f}"
+                         for a, x, y in zip(paper.AXES, ours, theirs, strict=True))  # fmt: skip
+
+    out.append("Stability (fluctuation range, singular points removed), ours/paper: 697 mm "
+               + pairs(f697, p697) + "; 5712 mm " + pairs(f5712, p5712) + ".")  # fmt: skip
+    worse_stab = [a for a, x, y in zip(paper.AXES, f5712, p5712, strict=True) if x > y]
+    if worse_stab:
+        out.append("**Worse:** at 5712 mm our simulated fluctuation exceeds the paper's in "
+                   + ", ".join(worse_stab) + " (over a much shorter run; the simulated sensor "
+                   "noise at 5.7 m may be higher than the real camera's, and the paper's "
+                   "filtering is not described).")  # fmt: skip
+    diffs = [abs(d - t) for _, _, d, t, _, _, _ in step_data]
+    out.append(f"Attitude steps: |measured - true| change {min(diffs):.3f}-{max(diffs):.3f} deg "
+               f"(paper 0.001-0.057 deg; requirement 0.15 deg).")  # fmt: skip
+    ransac10 = rob[("spurious", 10, robustness.METHODS[2])][1]
+    da10 = rob[("spurious", 10, robustness.METHODS[0])][1]
+    out.append(f"With 10 spurious blobs the correct-match rate is {100 * da10:.0f} % for "
+               f"annealing + fallback and {100 * ransac10:.0f} % for RANSAC at equal time. "
+               "With 4 of 8 markers covered every method refuses the pose: with only 4 "
+               "matches the dark-marker check cannot tell an occluded marker from a "
+               "mirror-image match.")  # fmt: skip
+    t_ours = np.median([base_rows[r]["tofpose"][3] for r in baseline.RANGES_M])
+    t_base = np.median([base_rows[r]["solvePnP"][3] for r in baseline.RANGES_M])
+    ratios = [base_rows[r]["solvePnP"][1]["median"] / base_rows[r]["tofpose"][1]["median"]
+              for r in baseline.RANGES_M
+              if np.isfinite(base_rows[r]["solvePnP"][1]["median"])]  # fmt: skip
+    reach = max((r for r in baseline.RANGES_M if base_rows[r]["solvePnP"][0] >= 0.5),
+                default=float("nan"))  # fmt: skip
+    out.append(f"**Worse:** OpenCV SimpleBlobDetector + solvePnP is {t_ours / t_base:.0f}x "
+               f"faster per frame ({t_base:.2f} vs {t_ours:.2f} ms median), even before it "
+               f"solves correspondences; its median position error is {min(ratios):.0f}-"
+               f"{max(ratios):.0f}x ours and it gives a pose in half the frames or more only "
+               f"up to {reach:g} m: it ignores the distance image.")  # fmt: skip
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args()
+    q = args.quick
+    IMG.mkdir(parents=True, exist_ok=True)
+    t0 = time.monotonic()
+
+    stab, step_data, range_data, pimgs = paper.run(IMG, 120 if q else 900, 15 if q else 30)
+    sec_paper = paper.markdown(stab, step_data, range_data, [_rel(p) for p in pimgs],
+                               120 if q else 900)  # fmt: skip
+    print(sec_paper, flush=True)
+
+    n_acc = 4 if q else 20
+    acc_summary = accuracy.summarise(accuracy.run(n_acc))
+    accuracy.plot(acc_summary, IMG / "accuracy-range.png")
+    sec_acc = accuracy.markdown(acc_summary, _rel(IMG / "accuracy-range.png"), n_acc)
+    print(sec_acc, flush=True)
+
+    n_rob = 5 if q else 24
+    rob = robustness.run(n_rob)
+    robustness.plot(rob, IMG / "robustness.png")
+    sec_rob = robustness.markdown(rob, _rel(IMG / "robustness.png"), n_rob)
+    print(sec_rob, flush=True)
+
+    n_base = 4 if q else 16
+    base_rows = baseline.run(n_base)
+    baseline.plot(base_rows, IMG / "baseline.png")
+    sec_base = baseline.markdown(base_rows, _rel(IMG / "baseline.png"), n_base)
+    print(sec_base, flush=True)
+
+    pipe_tab = _script("pipeline.py", "--frames", "20" if q else "60")
+    sim_tab = _script("sim.py", "--frames", "10" if q else "40")
+    live_tab = _script("live.py", "--clients", "1", "10", "50", "--rates", "10", "30",
+                       "--seconds", "2" if q else "4", "--repeats", "1" if q else "2")  # fmt: skip
+
+    minutes = (time.monotonic() - t0) / 60.0
+    head = [
+        "# Results", "",
+        f"Generated by `make bench` (`python bench/report.py`) on "
+        f"{datetime.date.today().isoformat()}, {platform.processor() or platform.machine()}, "
+        f"Python {platform.python_version()}, in {minutes:.1f} min. Every number below is "
+        "what that run printed; seeds are fixed. All frames come from the simulator "
+        "(`tofpose.sim`); there is no real camera data in this document.", "",
+        "## Findings", "",
+        *[f"- {s}" for s in findings(acc_summary, rob, base_rows, stab, step_data)], "",
+    ]  # fmt: skip
+    speed = ["## Speed", "",
+             "Pipeline per stage, ms per frame on one core (`bench/pipeline.py`), median / p95:",
+             "", pipe_tab, "",
+             "The issue-2 goal of 1 ms per frame is **not met**: we are at ~5-6 ms.", "",
+             "Simulator (`bench/sim.py`):", "", sim_tab, "",
+             "Live server end to end (`bench/live.py`): simulated camera in the server "
+             "process, N WebSocket clients in another process on the same 2 cores; latency "
+             "from the frame reaching the server to client receipt:", "", live_tab, ""]  # fmt: skip
+    text = "\n".join(head + [sec_paper, sec_acc, sec_rob, sec_base] + speed)
+    DOC.write_text(text + "\n")
+    print(f"wrote {DOC} in {minutes:.1f} min", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
