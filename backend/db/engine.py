@@ -36,6 +36,11 @@ def make_session_factory(engine: Engine) -> sessionmaker[Session]:
 
 def alembic_config(url: str | None = None) -> Config:
     """Alembic configuration pointing at ``migrations/`` (no alembic.ini needed)."""
+    if not (MIGRATIONS_DIR / "env.py").exists():
+        raise RuntimeError(
+            f"Alembic migrations not found at {MIGRATIONS_DIR}: run the server from a source "
+            "checkout or an editable install (pip install -e .)"
+        )
     cfg = Config()
     cfg.set_main_option("script_location", str(MIGRATIONS_DIR))
     if url:
