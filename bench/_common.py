@@ -67,3 +67,31 @@ def stats(values) -> dict[str, float]:
 
 def fmt(x: float, digits: int = 2) -> str:
     return "-" if not np.isfinite(x) else f"{x:.{digits}f}"
+
+
+def pyplot():
+    """matplotlib.pyplot on the non-interactive Agg backend."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def section_main(doc: str, default_frames: int, run, plot, markdown, image_name: str) -> None:
+    """Command line of a one-plot benchmark section: ``--frames N --out DIR``; runs
+    ``run(frames)``, saves ``plot(data, path)`` and prints ``markdown(data, path, frames)``."""
+    import argparse
+    from pathlib import Path
+
+    ap = argparse.ArgumentParser(description=doc)
+    ap.add_argument("--frames", type=int, default=default_frames)
+    ap.add_argument("--out", default="docs/img/results")
+    args = ap.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    data = run(args.frames)
+    img = out / image_name
+    plot(data, img)
+    print(markdown(data, str(img), args.frames))

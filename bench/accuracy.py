@@ -12,7 +12,6 @@ Run: ``python bench/accuracy.py [--frames N] [--out DIR]``
 
 from __future__ import annotations
 
-import argparse
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -22,7 +21,7 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench._common import fmt, pose_errors, stats, table  # noqa: E402
+from bench._common import fmt, pose_errors, pyplot, section_main, stats, table  # noqa: E402
 from bench.oracle import oracle_pose  # noqa: E402
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
@@ -108,10 +107,7 @@ def summarise(rows) -> dict:
 
 
 def plot(summary, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), sharex=True)
     styles = {"full (ML)": "o-", "paper LOS": "s--", "no refinement": "^:", "oracle": "k-"}
@@ -178,15 +174,7 @@ def markdown(summary, img_rel: str, n_frames: int) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--frames", type=int, default=16)
-    ap.add_argument("--out", default="docs/img/results")
-    args = ap.parse_args()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    s = summarise(run(args.frames))
-    plot(s, out / "accuracy-range.png")
-    print(markdown(s, str(out / "accuracy-range.png"), args.frames))
+    section_main(__doc__, 16, lambda n: summarise(run(n)), plot, markdown, "accuracy-range.png")
 
 
 if __name__ == "__main__":

@@ -12,7 +12,6 @@ Run: ``python bench/baseline.py [--frames N] [--out DIR]``
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -23,7 +22,7 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench._common import fmt, pose_errors, single_core, stats, table  # noqa: E402
+from bench._common import fmt, pose_errors, pyplot, section_main, single_core, stats, table  # noqa: E402
 from bench.accuracy import random_pose  # noqa: E402
 from tofpose import CameraModel, PosePipeline, paper_target  # noqa: E402
 from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
@@ -106,10 +105,7 @@ def run(n: int = 12):
 
 
 def plot(rows, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, axes = plt.subplots(1, 3, figsize=(14, 3.8))
     for k, style in (("tofpose", "o-"), ("solvePnP", "s--"), ("solvePnPRansac", "^:")):
@@ -158,15 +154,7 @@ def markdown(rows, img: str, n: int) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--frames", type=int, default=12)
-    ap.add_argument("--out", default="docs/img/results")
-    args = ap.parse_args()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    rows = run(args.frames)
-    plot(rows, out / "baseline.png")
-    print(markdown(rows, str(out / "baseline.png"), args.frames))
+    section_main(__doc__, 12, run, plot, markdown, "baseline.png")
 
 
 if __name__ == "__main__":

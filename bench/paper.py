@@ -24,10 +24,11 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench._common import fmt, relative_euler_deg, table  # noqa: E402
+from bench._common import fmt, pyplot, relative_euler_deg, table  # noqa: E402
+from bench.accuracy import aim_point_mm  # noqa: E402
 from tofpose import CameraModel, PosePipeline, paper_target  # noqa: E402
 from tofpose.sim.bench import LabGeometry, SimulatedBench  # noqa: E402
-from tofpose.sim.scenarios import _paper_mount_error, get_scenario, run_scenario  # noqa: E402
+from tofpose.sim.scenarios import get_scenario, paper_mount_error, run_scenario  # noqa: E402
 from tofpose.sim.scene import TargetScene  # noqa: E402
 from tofpose.sim.turntable import Turntable  # noqa: E402
 
@@ -92,7 +93,7 @@ def stability(name: str, n: int):
 
 def _bench(distance_mm: float, aim: tuple[float, float], seed: int) -> SimulatedBench:
     geo = LabGeometry(target_distance_mm=distance_mm, target_offset_mm=(-aim[0], aim[1]),
-                      mount_error=_paper_mount_error())  # fmt: skip
+                      mount_error=paper_mount_error())  # fmt: skip
     return SimulatedBench(scene=TargetScene(paper_target()), geometry=geo,
                           turntable=Turntable(seed=seed + 1), seed=seed)  # fmt: skip
 
@@ -134,8 +135,7 @@ FIG14_Z_MM = [474.4, 644.6, 1000.0, 1500.0, 2000.0, 3000.0, 4000.0, 5000.0, 5712
 def ground_truth_over_range(n: int):
     out = []
     for z in tqdm(FIG14_Z_MM, desc="fig14", file=sys.stderr):
-        aim = (-247.0, -110.0) if z < 600 else ((110.0, -55.0) if z < 1200 else (0.0, 0.0))
-        bench = _bench(z, aim, seed=int(z))
+        bench = _bench(z, aim_point_mm(z / 1000.0), seed=int(z))
         pipe = PosePipeline(bench.camera, paper_target())
         err = []
         for k in range(n):
@@ -149,10 +149,7 @@ def ground_truth_over_range(n: int):
 
 
 def plot_stability(data: dict, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, axes = plt.subplots(len(data), 6, figsize=(15, 2.6 * len(data)))
     for row, (name, (P, keep, times)) in enumerate(data.items()):
@@ -169,10 +166,7 @@ def plot_stability(data: dict, path: Path) -> None:
 
 
 def plot_steps_and_range(step_data, range_data, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4))
     for axis, value, d_meas, d_true, _, _, series in step_data:

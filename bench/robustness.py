@@ -14,7 +14,6 @@ Run: ``python bench/robustness.py [--frames N] [--out DIR]``
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -23,7 +22,7 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench._common import pose_errors, table  # noqa: E402
+from bench._common import pose_errors, pyplot, section_main, table  # noqa: E402
 from bench.accuracy import random_pose  # noqa: E402
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
 from tofpose.catalog import Catalog  # noqa: E402
@@ -109,10 +108,7 @@ def run(n: int = 20):
 
 
 def plot(out, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4))
     for ax, kind, levels, xl in ((axes[0], "spurious", SPURIOUS, "spurious bright blobs"),
@@ -159,15 +155,7 @@ def markdown(out, img: str, n: int) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--frames", type=int, default=20)
-    ap.add_argument("--out", default="docs/img/results")
-    args = ap.parse_args()
-    out_dir = Path(args.out)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    res = run(args.frames)
-    plot(res, out_dir / "robustness.png")
-    print(markdown(res, str(out_dir / "robustness.png"), args.frames))
+    section_main(__doc__, 20, run, plot, markdown, "robustness.png")
 
 
 if __name__ == "__main__":

@@ -57,6 +57,19 @@ class MatchingConfig:
     residual_factor: float = 2.5
     min_matches: int = 3
 
+    def alpha_for(self, observed_mm: np.ndarray) -> float:
+        """alpha (mm) at the median range of observed points (gamma, 3)."""
+        rng_m = float(np.median(np.linalg.norm(observed_mm, axis=1))) / 1000 if len(
+            observed_mm
+        ) else 0.0
+        return self.alpha_mm + self.alpha_per_m * rng_m
+
+    def pair_tolerance_mm(self, alpha_mm: float, weights: np.ndarray) -> np.ndarray:
+        """Per-pair rigid residual tolerance clip(4 sigma, alpha, residual_factor alpha),
+        sigma = 1 / sqrt(weight); shape (gamma,)."""
+        sigma = 1.0 / np.sqrt(np.asarray(weights, float))
+        return np.clip(4.0 * sigma, alpha_mm, self.residual_factor * alpha_mm)
+
 
 @dataclass
 class MatchResult:
@@ -178,8 +191,7 @@ def match_reflectors(
     """
     cfg = config or MatchingConfig()
     g, e = len(observed_mm), len(catalog_mm)
-    rng_m = float(np.median(np.linalg.norm(observed_mm, axis=1))) / 1000 if g else 0.0
-    alpha = cfg.alpha_mm + cfg.alpha_per_m * rng_m
+    alpha = cfg.alpha_for(observed_mm)
     empty = np.empty((0, 2), int)
     if g < cfg.min_matches:
         return MatchResult(
@@ -197,10 +209,8 @@ def match_reflectors(
     A, iters = anneal(P, unary, alpha, cfg)
     pairs, unmatched = one_to_one(A)
     w = np.ones(g) if weights is None else np.asarray(weights, float)
-    # Per-pair tolerance: 4 sigma of that measurement (weights are 1 / sigma^2), at
-    # least alpha, at most residual_factor * alpha.
-    sigma = 1.0 / np.sqrt(w) if weights is not None else np.full(g, alpha)
-    tol = np.clip(4.0 * sigma, alpha, cfg.residual_factor * alpha)
+    # Without weights every pair gets sigma = alpha, i.e. the tolerance residual_factor alpha.
+    tol = cfg.pair_tolerance_mm(alpha, w if weights is not None else np.full(g, alpha**-2.0))
     pairs, rejected, reason = rigid_residual_check(
         observed_mm, catalog_mm, pairs, w, tol, cfg.min_matches
     )

@@ -275,7 +275,7 @@ class PosePipeline:
         ):
             # Annealing found a mirror-image or otherwise impossible assignment: try the
             # exhaustive triplet hypotheses restricted to physically possible poses.
-            tol = np.clip(4.0 / np.sqrt(w), m.alpha_mm, cfg.matching.residual_factor * m.alpha_mm)
+            tol = cfg.matching.pair_tolerance_mm(m.alpha_mm, w)
             pairs = match_by_triplets(
                 y,
                 self._catalog_xyz,
@@ -371,9 +371,8 @@ class PosePipeline:
     def _match_ransac(self, y: np.ndarray, w: np.ndarray) -> MatchResult:
         """Random triplet hypotheses over all blobs, best inlier count within the budget."""
         cfg = self.config
-        rng_m = float(np.median(np.linalg.norm(y, axis=1))) / 1000.0
-        alpha = cfg.matching.alpha_mm + cfg.matching.alpha_per_m * rng_m
-        tol = np.clip(4.0 / np.sqrt(w), alpha, cfg.matching.residual_factor * alpha)
+        alpha = cfg.matching.alpha_for(y)
+        tol = cfg.matching.pair_tolerance_mm(alpha, w)
         pairs = match_by_triplets(
             y,
             self._catalog_xyz,

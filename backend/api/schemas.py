@@ -200,6 +200,11 @@ class PosePublic(BaseModel):
         )
 
 
+def pose_public(sample: LiveSample) -> PosePublic:
+    """The sample's ``PosePublic``, built once and shared by REST and WebSocket."""
+    return sample.cached("pose_public", lambda: PosePublic.from_sample(sample))
+
+
 def _truth(T: RigidTransform, R: np.ndarray | None, t_mm: np.ndarray | None) -> TruthPublic:
     p, y, r = (float(v) for v in euler_deg_from_rotation(T.R))
     err_pos = err_ang = None

@@ -17,14 +17,11 @@ import numpy as np
 from backend.drivers.base import AxisLimits, CameraFrame, CameraSettings, MotionStatus
 from backend.drivers.pacing import FramePacer
 from tofpose.catalog import Catalog, paper_target
-from tofpose.geometry import RigidTransform
 from tofpose.sim.bench import LabGeometry, SimulatedBench
 from tofpose.sim.render import render_frame
+from tofpose.sim.scenarios import paper_mount_error
 from tofpose.sim.scene import TargetScene
 from tofpose.sim.turntable import Turntable
-
-# A small unknown installation error (§6.4), as in the paper's bench.
-MOUNT_ERROR = RigidTransform.from_euler_deg(0.2, -0.25, 0.1, (1.5, -1.0, 0.5))
 
 
 class SimWorld:
@@ -40,13 +37,9 @@ class SimWorld:
 
     def capture(self):
         """Render the scene as the turntable stands now; returns (time_s, frame, T_lab, enc)."""
-        with self._lock:
+        with self._lock:  # the turntable state; rendering happens outside the lock
             t = self.now_s()
-            tt = self.bench.turntable
-            true_pos = tt.true_position(t)
-            enc = tt.encoder_position(t)
-            T_true = self.bench.geometry.T_camera_target(true_pos, true=True)
-            T_lab = self.bench.geometry.T_camera_target(enc, true=False)
+            T_true, T_lab, enc = self.bench.poses_at(t)
             sensor = self.bench.sensor
         frame = render_frame(self.bench.camera, self.bench.scene, T_true, sensor, self.bench.rng)
         return t, frame, T_lab, T_true, enc
@@ -90,7 +83,9 @@ def make_sim_world(
     turntable.move_to({"rail": start_rail_mm}, time_s=-1.0e4)
     bench = SimulatedBench(
         scene=TargetScene(catalog or paper_target()),
-        geometry=LabGeometry(target_distance_mm=target_distance_mm, mount_error=MOUNT_ERROR),
+        geometry=LabGeometry(
+            target_distance_mm=target_distance_mm, mount_error=paper_mount_error()
+        ),
         turntable=turntable,
         seed=seed,
     )

@@ -62,6 +62,17 @@ class DeviceHealth:
     error_count: int = 0
     consecutive_failures: int = 0
 
+    def record_failure(self, message: str) -> None:
+        self.state = "degraded"
+        self.last_error = message
+        self.last_error_unix_s = time.time()
+        self.error_count += 1
+        self.consecutive_failures += 1
+
+    def record_ok(self) -> None:
+        self.state = "ok"
+        self.consecutive_failures = 0
+
 
 class AcquisitionService:
     """Runs the live loop in a daemon thread; see the module docstring."""
@@ -163,14 +174,6 @@ class AcquisitionService:
                     fut.set_exception(exc)
 
     # -- the loop -----------------------------------------------------------------------
-    def _fail(self, message: str) -> None:
-        h = self.health
-        h.state = "degraded"
-        h.last_error = message
-        h.last_error_unix_s = time.time()
-        h.error_count += 1
-        h.consecutive_failures += 1
-
     def _run(self) -> None:
         backoff = self.backoff_s[0]
         while not self._stop.is_set():
@@ -181,7 +184,7 @@ class AcquisitionService:
                 if self._stop.is_set():
                     break
                 kind = "timed out" if isinstance(exc, TimeoutError) else "failed"
-                self._fail(f"camera {kind}: {exc}")
+                self.health.record_failure(f"camera {kind}: {exc}")
                 log.warning("camera %s (%s); retrying in %.2f s", kind, exc, backoff)
                 self._stop.wait(backoff)
                 backoff = min(2.0 * backoff, self.backoff_s[1])
@@ -193,14 +196,13 @@ class AcquisitionService:
             try:
                 result = self._pipeline.process(frame.gray, frame.distance_mm, frame.time_s)
             except FrameError as exc:
-                self._fail(f"malformed frame from the camera: {exc}")
+                self.health.record_failure(f"malformed frame from the camera: {exc}")
                 continue
             except Exception as exc:  # a pipeline bug must not stop the live loop
                 log.exception("pipeline failed on frame %d", frame.index)
                 result = PoseResult(False, f"pipeline error: {exc}", frame.time_s)
             backoff = self.backoff_s[0]
-            self.health.state = "ok"
-            self.health.consecutive_failures = 0
+            self.health.record_ok()
             sample = LiveSample(frame, result, self._catalog_name, captured, time.time())
             self._latest = sample
             self._history.append(sample)

@@ -91,10 +91,16 @@ class SimulatedBench:
     def __post_init__(self) -> None:
         self.rng = np.random.default_rng(self.seed)
 
-    def capture(self, time_s: float) -> BenchFrame:
+    def poses_at(
+        self, time_s: float
+    ) -> tuple[RigidTransform, RigidTransform, dict[str, float]]:
+        """(T_true the world renders, T_lab_truth from encoders, encoder readings) at a time."""
         true_pos = self.turntable.true_position(time_s)
         enc = self.turntable.encoder_position(time_s)
         T_true = self.geometry.T_camera_target(true_pos, true=True)
-        T_lab = self.geometry.T_camera_target(enc, true=False)
+        return T_true, self.geometry.T_camera_target(enc, true=False), enc
+
+    def capture(self, time_s: float) -> BenchFrame:
+        T_true, T_lab, enc = self.poses_at(time_s)
         frame = render_frame(self.camera, self.scene, T_true, self.sensor, self.rng)
         return BenchFrame(time_s, frame, T_true, T_lab, enc)

@@ -37,7 +37,7 @@ class Scenario:
     frame_rate_hz: float = 30.0
 
 
-def _paper_mount_error() -> RigidTransform:
+def paper_mount_error() -> RigidTransform:
     """A small unknown installation error (§6.4): 0.3 deg and ~2 mm."""
     return RigidTransform.from_euler_deg(0.2, -0.25, 0.1, (1.5, -1.0, 0.5))
 
@@ -49,7 +49,7 @@ def _stability(distance_mm: float, offset_mm: tuple[float, float]) -> Scenario:
         LabGeometry(
             target_distance_mm=distance_mm,
             target_offset_mm=offset_mm,
-            mount_error=_paper_mount_error(),
+            mount_error=paper_mount_error(),
         ),
     )
 

@@ -26,7 +26,7 @@ from typing import Literal
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from pydantic import Field, ValidationError
 
-from backend.api.schemas import PosePublic, StrictBody
+from backend.api.schemas import StrictBody, pose_public
 from backend.auth import token_matches
 from backend.services.acquisition import LiveSample, frame_point_cloud_mm
 from backend.services.imaging import downsample_png
@@ -44,11 +44,7 @@ class LiveOptions(StrictBody):
 
 
 def pose_json(sample: LiveSample) -> str:
-    def make() -> str:
-        public = sample.cached("pose_public", lambda: PosePublic.from_sample(sample))
-        return public.model_dump_json()
-
-    return sample.cached("pose_json", make)
+    return sample.cached("pose_json", lambda: pose_public(sample).model_dump_json())
 
 
 def image_message(sample: LiveSample, kind: str, step: int) -> str:

@@ -7,11 +7,11 @@ them. Stop is accepted from any authenticated caller at any time.
 from __future__ import annotations
 
 import logging
-import time
 
 from fastapi import APIRouter, HTTPException, status
 
 from backend.api.deps import MotionDep, ReadAuth, StateDep, WriteAuth, unprocessable
+from backend.api.routes.health import motion_state
 from backend.api.schemas import AxisPublic, MotionPublic, MoveRequest
 from backend.state import AppState
 
@@ -19,17 +19,10 @@ log = logging.getLogger(__name__)
 router = APIRouter(prefix="/api/motion", tags=["motion"])
 
 
-def _degrade(state: AppState, message: str) -> None:
-    h = state.motion_health
-    h.state, h.last_error, h.last_error_unix_s = "degraded", message, time.time()
-    h.error_count += 1
-
-
 def motion_public(state: AppState) -> MotionPublic:
     motion = state.devices.motion
     if motion is None:
         return MotionPublic(driver="none", state="absent")
-    h = state.motion_health
     axes = [
         AxisPublic(name=a.name, unit=a.unit, min_pos=a.min_pos, max_pos=a.max_pos,
                    max_rate_per_s=a.max_rate)
@@ -38,15 +31,12 @@ def motion_public(state: AppState) -> MotionPublic:
     try:
         st = motion.status()
     except Exception as exc:
-        _degrade(state, f"motion status failed: {exc}")
-        return MotionPublic(driver=motion.name, state="degraded", last_error=h.last_error,
-                            error_count=h.error_count, axes=axes)  # fmt: skip
-    if h.state != "ok":
-        h.state = "ok"
+        state.motion_health.record_failure(f"motion status failed: {exc}")
+        return MotionPublic(**motion_state(state).model_dump(), axes=axes)
+    state.motion_health.record_ok()
     return MotionPublic(
-        driver=motion.name, state="ok", last_error=h.last_error, error_count=h.error_count,
-        axes=axes, positions=st.positions, targets=st.targets, busy=st.busy,
-        settled=st.settled, stopped=st.stopped,
+        **motion_state(state).model_dump(), axes=axes, positions=st.positions,
+        targets=st.targets, busy=st.busy, settled=st.settled, stopped=st.stopped,
     )  # fmt: skip
 
 
@@ -80,7 +70,7 @@ def move(body: MoveRequest, state: StateDep, motion: MotionDep) -> MotionPublic:
     try:
         motion.move_to(setpoints)
     except Exception as exc:
-        _degrade(state, f"move failed: {exc}")
+        state.motion_health.record_failure(f"move failed: {exc}")
         raise HTTPException(503, f"the motion system refused the move: {exc}") from exc
     return motion_public(state)
 
@@ -92,6 +82,6 @@ def stop(state: StateDep, motion: MotionDep) -> MotionPublic:
         motion.stop()
     except Exception as exc:
         log.exception("stop failed")
-        _degrade(state, f"stop failed: {exc}")
+        state.motion_health.record_failure(f"stop failed: {exc}")
         raise HTTPException(503, f"the motion system did not confirm the stop: {exc}") from exc
     return motion_public(state)

@@ -7,7 +7,7 @@ from typing import Annotated
 from fastapi import APIRouter, HTTPException, Query
 
 from backend.api.deps import ReadAuth, StateDep
-from backend.api.schemas import PosePublic
+from backend.api.schemas import PosePublic, pose_public
 
 router = APIRouter(prefix="/api/pose", tags=["pose"], dependencies=[ReadAuth])
 
@@ -19,13 +19,10 @@ def latest(state: StateDep) -> PosePublic:
     sample = state.acquisition.latest
     if sample is None:
         raise HTTPException(404, "no frame has been processed yet")
-    return sample.cached("pose_public", lambda: PosePublic.from_sample(sample))
+    return pose_public(sample)
 
 
 @router.get("/history")
 def history(state: StateDep, n: Annotated[int, Query(ge=1, le=100_000)] = 100) -> list[PosePublic]:
     """The last ``n`` results, oldest first (bounded by the server's history size)."""
-    return [
-        s.cached("pose_public", lambda s=s: PosePublic.from_sample(s))
-        for s in state.acquisition.history(n)
-    ]
+    return [pose_public(s) for s in state.acquisition.history(n)]
