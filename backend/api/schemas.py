@@ -100,7 +100,9 @@ class MatchedPublic(BaseModel):
 class BlobPublic(BaseModel):
     u_px: float
     v_px: float
-    distance_mm: float
+    distance_mm: float | None = Field(
+        description="null when no pixel of the blob has a valid distance"
+    )
 
 
 class TruthPublic(BaseModel):
@@ -115,6 +117,18 @@ class TruthPublic(BaseModel):
     roll_deg: float
     position_error_mm: float | None = None
     attitude_error_deg: float | None = Field(None, description="geodesic angle")
+
+
+def finite_or_none(value: float) -> float | None:
+    """JSON has no NaN/inf: a value the pipeline could not compute is sent as null."""
+    v = float(value)
+    return v if np.isfinite(v) else None
+
+
+def finite_list_or_none(values) -> list[float] | None:
+    """A vector is sent only when every component is finite, else null."""
+    out = [float(v) for v in values]
+    return out if all(np.isfinite(out)) else None
 
 
 class PosePublic(BaseModel):
@@ -158,8 +172,8 @@ class PosePublic(BaseModel):
             pose["quaternion_wxyz"] = [float(v) for v in r.quaternion_wxyz]
             if r.covariance is not None:
                 sd = np.sqrt(np.clip(np.diag(r.covariance), 0.0, None))
-                pose["attitude_sigma_deg"] = [float(v) for v in np.degrees(sd[:3])]
-                pose["position_sigma_mm"] = [float(v) for v in sd[3:]]
+                pose["attitude_sigma_deg"] = finite_list_or_none(np.degrees(sd[:3]))
+                pose["position_sigma_mm"] = finite_list_or_none(sd[3:])
         truth = None
         T = s.frame.T_truth
         if T is not None:
@@ -187,10 +201,10 @@ class PosePublic(BaseModel):
                 for m in r.matched
             ],
             unmatched=[
-                BlobPublic(u_px=float(u), v_px=float(v), distance_mm=float(d))
+                BlobPublic(u_px=float(u), v_px=float(v), distance_mm=finite_or_none(d))
                 for u, v, d in r.unmatched
             ],
-            residual_mm=float(r.residual_mm) if np.isfinite(r.residual_mm) else None,
+            residual_mm=finite_or_none(r.residual_mm),
             iterations=r.iterations,
             frames_used=r.frames_used,
             motion=r.motion,

@@ -213,11 +213,20 @@ class AcquisitionService:
                 log.exception("publishing frame %d failed", frame.index)
 
 
-def frame_point_cloud_mm(sample: LiveSample, camera_model) -> np.ndarray:
-    """Camera-frame 3-D points (N, 3) of every detected blob: matched then unmatched."""
+def frame_point_cloud_mm(
+    sample: LiveSample, camera_model
+) -> tuple[np.ndarray, list[int | None]]:
+    """Camera-frame 3-D points of every detected blob, matched then unmatched.
+
+    Returns (points_mm (N, 3), catalog_ids (N,)) with ``None`` ids for unmatched blobs.
+    Unmatched blobs without a valid distance (no finite 3-D point) are left out.
+    """
     res = sample.result
-    pts = [m.point_mm for m in res.matched]
+    pts = [np.asarray(m.point_mm, float) for m in res.matched]
+    ids: list[int | None] = [m.catalog_id for m in res.matched]
     if res.unmatched:
         uvd = np.asarray(res.unmatched, float)
+        uvd = uvd[np.isfinite(uvd).all(axis=1)]
         pts.extend(camera_model.back_project(uvd[:, :2], uvd[:, 2]))
-    return np.asarray(pts, float).reshape(-1, 3)
+        ids += [None] * len(uvd)
+    return np.asarray(pts, float).reshape(-1, 3), ids

@@ -60,9 +60,7 @@ def image_message(sample: LiveSample, kind: str, step: int) -> str:
 
 def points_message(sample: LiveSample, state: AppState) -> str:
     def make() -> str:
-        pts = frame_point_cloud_mm(sample, state.devices.camera.model)
-        ids = [m.catalog_id for m in sample.result.matched]
-        ids += [None] * (len(pts) - len(ids))
+        pts, ids = frame_point_cloud_mm(sample, state.devices.camera.model)
         return json.dumps({
             "type": "points", "frame_index": sample.frame.index,
             "points_mm": [[round(float(c), 2) for c in p] for p in pts], "catalog_ids": ids,

@@ -79,8 +79,8 @@ def test_results_history_and_publication(service):
     assert idx == sorted(idx) and len(idx) == 5
     assert sub.get(1.0).frame.index >= 1
     assert svc.health.state == "ok"
-    pts = frame_point_cloud_mm(s, cam.model)
-    assert pts.shape == (8 + len(s.result.unmatched), 3)
+    pts, ids = frame_point_cloud_mm(s, cam.model)
+    assert pts.shape == (8 + len(s.result.unmatched), 3) and len(ids) == len(pts)
 
 
 @pytest.mark.parametrize(("mode", "needle"), [("raise", "link down"), ("hang", "timed out"),

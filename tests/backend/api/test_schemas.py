@@ -1,0 +1,64 @@
+"""Response schemas: what the pipeline could not compute is sent as JSON null, never NaN."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import jsonschema
+import numpy as np
+import pytest
+
+from backend.api.schemas import PosePublic
+from backend.drivers.base import CameraFrame
+from backend.services.acquisition import LiveSample, frame_point_cloud_mm
+from tests.conftest import facing_pose, render
+from tofpose.camera import CameraModel
+from tofpose.catalog import paper_target
+from tofpose.pipeline import PosePipeline
+
+
+def _strict_json(text: str) -> dict:
+    def refuse(token: str):
+        raise ValueError(f"non-JSON constant {token}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+@pytest.fixture
+def sample_with_gaps() -> tuple[LiveSample, CameraModel]:
+    """A real pose result plus one unmatched blob without distance and a singular
+    covariance, as the pipeline produces for blobs whose pixels are all invalid."""
+    cam = CameraModel()
+    T = facing_pose(2000.0)
+    f = render(T, seed=3)
+    res = PosePipeline(cam, paper_target()).process(f.gray, f.distance_mm)
+    assert res.ok and res.covariance is not None
+    cov = res.covariance.copy()
+    cov[0, 0] = np.nan
+    res = dataclasses.replace(
+        res, unmatched=[(10.0, 20.0, float("nan")), (30.0, 40.0, 2500.0)], covariance=cov
+    )
+    frame = CameraFrame(gray=f.gray, distance_mm=f.distance_mm, time_s=1.0, index=7,
+                        T_truth=T)  # fmt: skip
+    return LiveSample(frame, res, "paper-target", 1.0, 1.01), cam
+
+
+def test_blob_without_distance_is_null_not_nan(sample_with_gaps):
+    sample, _ = sample_with_gaps
+    body = _strict_json(PosePublic.from_sample(sample).model_dump_json())
+    jsonschema.validate(body, PosePublic.model_json_schema(mode="serialization"))
+    assert body["unmatched"][0]["distance_mm"] is None
+    assert body["unmatched"][1]["distance_mm"] == 2500.0
+    assert body["attitude_sigma_deg"] is None  # one NaN component: the vector is unknown
+    assert all(np.isfinite(body["position_sigma_mm"]))
+    assert body["n_matched"] == 8 and body["ok"] is True
+
+
+def test_point_cloud_leaves_out_blobs_without_distance(sample_with_gaps):
+    sample, cam = sample_with_gaps
+    pts, ids = frame_point_cloud_mm(sample, cam)
+    assert pts.shape == (9, 3) and len(ids) == 9
+    assert np.isfinite(pts).all()
+    assert ids[:8] == [m.catalog_id for m in sample.result.matched] and ids[8] is None
+    assert np.linalg.norm(pts[8]) == pytest.approx(2500.0)
