@@ -18,6 +18,8 @@ import numpy as np
 from tofpose.camera import CameraModel
 
 SATURATED_COUNTS = 4095
+#: fewest pixels for which a blob's eccentricity means anything (the shape gate and q_shape)
+SHAPE_MIN_PIXELS = 6
 
 
 @dataclass(frozen=True)
@@ -335,7 +337,7 @@ def find_candidate_blobs(
         us, vs = cols + x, rows + y
         wts = np.maximum(g_roi[keep] - stats.background, 1.0).astype(np.float64)
         c, ecc = _moments(us.astype(np.float64), vs.astype(np.float64), wts)
-        if len(us) >= 6 and ecc > ecc_max:
+        if len(us) >= SHAPE_MIN_PIXELS and ecc > ecc_max:
             continue
         blob.pixels = vs * w + us
         blob.area_px = len(us)
@@ -357,7 +359,8 @@ def penalty_score(
 
     Ours: ``q = 1 - (1 - q_size)(1 - q_shape)(1 - q_int)`` where q_size is the log-ratio of
     the blob's equivalent diameter to the nearest predicted catalog diameter (0 at a match,
-    1 at a factor 3), q_shape the eccentricity relative to the accepted maximum (squared),
+    1 at a factor 3), q_shape the eccentricity relative to the accepted maximum (squared;
+    0 below ``SHAPE_MIN_PIXELS``, where two pixels side by side already read as a line),
     and q_int how far the peak falls short of I_peak... above I_t (0 at I_peak and above).
     """
     d_eq = 2.0 * np.sqrt(blob.area_px / np.pi)
@@ -365,7 +368,9 @@ def penalty_score(
     if np.isfinite(blob.distance_mm) and blob.distance_mm > 0 and d_eq >= 3.0:
         pred = fx * diameters_mm / blob.distance_mm
         q_size = float(np.clip(np.min(np.abs(np.log(d_eq / pred))) / np.log(3.0), 0.0, 1.0))
-    q_shape = float(np.clip(blob.eccentricity / max(ecc_max, 1e-6), 0.0, 1.0)) ** 2
+    q_shape = 0.0
+    if blob.area_px >= SHAPE_MIN_PIXELS:  # a 1-5 px blob has no measurable shape
+        q_shape = float(np.clip(blob.eccentricity / max(ecc_max, 1e-6), 0.0, 1.0)) ** 2
     span = max(stats.peak_threshold - stats.raw_threshold, 1e-6)
     q_int = float(np.clip((stats.peak_threshold - blob.peak_counts) / span, 0.0, 1.0))
     return 1.0 - (1.0 - q_size) * (1.0 - q_shape) * (1.0 - q_int)

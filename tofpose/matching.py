@@ -59,9 +59,11 @@ class MatchingConfig:
 
     def alpha_for(self, observed_mm: np.ndarray) -> float:
         """alpha (mm) at the median range of observed points (gamma, 3)."""
-        rng_m = float(np.median(np.linalg.norm(observed_mm, axis=1))) / 1000 if len(
-            observed_mm
-        ) else 0.0
+        rng_m = (
+            float(np.median(np.linalg.norm(observed_mm, axis=1))) / 1000
+            if len(observed_mm)
+            else 0.0
+        )
         return self.alpha_mm + self.alpha_per_m * rng_m
 
     def pair_tolerance_mm(self, alpha_mm: float, weights: np.ndarray) -> np.ndarray:

@@ -47,6 +47,7 @@ from tofpose.matching import (
 )
 from tofpose.persistence import Persistence, PersistenceConfig
 from tofpose.pose import refine_line_of_sight, refine_maximum_likelihood, weighted_svd
+from tofpose.uncertainty import SigmaFloors, measurement_sigmas
 
 Refinement = Literal["ml", "los", "none"]
 
@@ -67,7 +68,8 @@ class PipelineConfig:
         this many matched reflectors; with more, a rigid fit that passed the residual
         check is not ambiguous, and a dark predicted marker is an occluded one.
     centroid_sigma_floor_px, range_sigma_floor_mm : floors of the per-reflector
-        measurement sigmas used as weights and in the covariance.
+        measurement sigmas (``tofpose.uncertainty``) used as weights and in the
+        covariance.
     """
 
     extraction: ExtractionConfig = field(default_factory=ExtractionConfig)
@@ -107,6 +109,8 @@ class MatchedReflector:
     residual_mm: float  # |measured - predicted| at the final pose
     distance_mm: float
     area_px: int
+    centroid_sigma_px: float = float("nan")  # per image axis (tofpose.uncertainty)
+    range_sigma_mm: float = float("nan")
 
 
 @dataclass
@@ -244,7 +248,13 @@ class PosePipeline:
         rho = np.array([b.distance_mm for b in ranged])
         e = self.camera.bearings(uv)
         y = e * rho[:, None]  # Eq. 8
-        sig_px, sig_rng = self._sigmas(ranged, mean_g, med_d, stats.background)
+        sig_px, sig_rng = measurement_sigmas(
+            ranged,
+            mean_g,
+            med_d,
+            stats.background,
+            SigmaFloors(cfg.centroid_sigma_floor_px, cfg.range_sigma_floor_mm),
+        )
         w = 1.0 / (sig_rng**2 + (rho * sig_px / self.camera.fx) ** 2)
         diam = np.array([self._apparent_diameter_px(b) for b in ranged]) * rho / self.camera.fx
         timer.lap("backproject")
@@ -305,6 +315,8 @@ class PosePipeline:
                 float(res[n]),
                 float(rho_m[n]),
                 ranged[k].area_px,
+                float(sig_px[k]),
+                float(sig_rng[k]),
             )
             for n, (k, i) in enumerate(zip(k_idx, i_idx, strict=True))
         ]
@@ -398,32 +410,6 @@ class PosePipeline:
         return self._view_cosine(R, t) >= np.cos(np.radians(self.config.max_view_angle_deg))
 
     # ------------------------------------------------------------------------------------
-    def _sigmas(self, blobs: list[Blob], gray, dist, background) -> tuple[np.ndarray, np.ndarray]:
-        """Per-blob centroid sigma (px) and range sigma (mm) from the pixel statistics.
-
-        Centroid: shot noise propagated through Eq. 19, sqrt(sum I_p |p - c|^2) / sum I_p,
-        floored. Range: robust spread of the member distances / sqrt(n) (median
-        efficiency 1.25), floored.
-        """
-        w_img = gray.shape[1]
-        cfg = self.config
-        sp, sr = [], []
-        for b in blobs:
-            rows, cols = np.divmod(b.pixels, w_img)
-            i = np.maximum(gray[rows, cols] - background, 1.0)
-            r2 = (cols - b.centroid_uv[0]) ** 2 + (rows - b.centroid_uv[1]) ** 2
-            s_px = np.sqrt((np.maximum(gray[rows, cols], 1.0) * r2).sum()) / i.sum()
-            sp.append(max(float(s_px), cfg.centroid_sigma_floor_px))
-            dv = dist[rows, cols]
-            dv = dv[np.isfinite(dv)]
-            if len(dv) >= 3:
-                mad = 1.4826 * float(np.median(np.abs(dv - np.median(dv))))
-                s_r = 1.2533 * mad / np.sqrt(len(dv))
-            else:
-                s_r = 30.0
-            sr.append(max(s_r, cfg.range_sigma_floor_mm))
-        return np.array(sp), np.array(sr)
-
     @staticmethod
     def _apparent_diameter_px(b: Blob) -> float:
         if b.ellipse is not None:

@@ -119,3 +119,21 @@ def test_check_frame_turns_inf_and_negative_into_nan():
     d[0, 0], d[0, 1], d[0, 2] = np.inf, -5.0, np.nan
     _, out = check_frame(CameraModel(), np.zeros((240, 320), np.uint16), d)
     assert np.isnan(out[0, :3]).all() and np.isfinite(out[1:]).all()
+
+
+def test_two_pixel_blob_of_a_distant_small_marker_is_a_candidate():
+    """A 35 mm marker at 10 m covers ~1 px and often lights a 1 x 2 pixel pair. Two pixels
+    side by side have eccentricity 1, which must not count as a bad shape: the blob is too
+    small for its shape to mean anything."""
+    from tofpose.extraction import Blob, FrameStats, penalty_score
+
+    stats = FrameStats(
+        background=50.0, noise_sigma=7.0, i_max=800.0, raw_threshold=150.0,
+        peak_threshold=220.0, n_active=0, saturated_fraction=0.0,
+    )  # fmt: skip
+    pair = Blob(pixels=np.array([0, 1]), area_px=2, bbox=(0, 0, 2, 1), peak_counts=580.0,
+                eccentricity=1.0, distance_mm=10000.0)  # fmt: skip
+    assert penalty_score(pair, stats, 325.0, paper_target().diameters_mm, 0.95) == 0.0
+    line = Blob(pixels=np.arange(8), area_px=8, bbox=(0, 0, 8, 1), peak_counts=580.0,
+                eccentricity=1.0, distance_mm=10000.0)  # fmt: skip
+    assert penalty_score(line, stats, 325.0, paper_target().diameters_mm, 0.95) == 1.0

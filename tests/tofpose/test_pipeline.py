@@ -181,3 +181,22 @@ def test_covered_markers_do_not_veto_a_well_determined_pose():
     strict = PipelineConfig(dark_check_max_matches=8)
     refused = PosePipeline(CameraModel(), cat, strict).process(f.gray, f.distance_mm)
     assert not refused.ok and "dark" in refused.reason
+
+
+def test_ten_metres_gives_a_pose_on_almost_every_frame():
+    """At 10 m the 35 mm markers light 1-2 pixels and markers 7 and 8 merge into one
+    blob; the pose must still come from the small markers (these used to be rejected for
+    the 'eccentricity' of two pixels side by side, failing a third of the frames)."""
+    cam, cat = CameraModel(), paper_target()
+    pipe = PosePipeline(cam, cat)
+    rng = np.random.default_rng(5)
+    n_ok = 0
+    for s in range(12):
+        T = facing_pose(10000.0, *rng.uniform(-5, 5, 3))
+        pipe.reset()
+        r = pipe.process(*(lambda f: (f.gray, f.distance_mm))(render(T, seed=s)))
+        if r.ok:
+            n_ok += 1
+            assert np.linalg.norm(r.t_mm - T.t_mm) < 25.0
+            assert rotation_angle_deg(r.R, T.R) < 6.0
+    assert n_ok >= 11

@@ -91,9 +91,7 @@ class SimulatedBench:
     def __post_init__(self) -> None:
         self.rng = np.random.default_rng(self.seed)
 
-    def poses_at(
-        self, time_s: float
-    ) -> tuple[RigidTransform, RigidTransform, dict[str, float]]:
+    def poses_at(self, time_s: float) -> tuple[RigidTransform, RigidTransform, dict[str, float]]:
         """(T_true the world renders, T_lab_truth from encoders, encoder readings) at a time."""
         true_pos = self.turntable.true_position(time_s)
         enc = self.turntable.encoder_position(time_s)
