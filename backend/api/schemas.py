@@ -95,6 +95,10 @@ class MatchedPublic(BaseModel):
     distance_mm: float
     residual_mm: float
     area_px: int
+    centroid_sigma_px: float | None = Field(
+        None, description="predicted 1-sigma of the centroid per image axis"
+    )
+    range_sigma_mm: float | None = Field(None, description="predicted 1-sigma of the range")
 
 
 class BlobPublic(BaseModel):
@@ -197,6 +201,8 @@ class PosePublic(BaseModel):
                     distance_mm=float(m.distance_mm),
                     residual_mm=float(m.residual_mm),
                     area_px=int(m.area_px),
+                    centroid_sigma_px=finite_or_none(m.centroid_sigma_px),
+                    range_sigma_mm=finite_or_none(m.range_sigma_mm),
                 )
                 for m in r.matched
             ],

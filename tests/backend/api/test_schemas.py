@@ -53,6 +53,9 @@ def test_blob_without_distance_is_null_not_nan(sample_with_gaps):
     assert body["attitude_sigma_deg"] is None  # one NaN component: the vector is unknown
     assert all(np.isfinite(body["position_sigma_mm"]))
     assert body["n_matched"] == 8 and body["ok"] is True
+    for m, reflector in zip(body["matched"], sample.result.matched, strict=True):
+        assert m["centroid_sigma_px"] == reflector.centroid_sigma_px > 0
+        assert m["range_sigma_mm"] == reflector.range_sigma_mm >= 1.0
 
 
 def test_point_cloud_leaves_out_blobs_without_distance(sample_with_gaps):
