@@ -66,6 +66,7 @@ def findings(acc_summary, rob, base_rows, stab, step_data) -> list[str]:
     f5712 = np.ptp(P5712[keep5712], axis=0)
     p697 = np.array(paper.PAPER["697-removed"][3])
     p5712 = np.array(paper.PAPER["5712"][3])
+
     def pairs(ours, theirs) -> str:
         return ", ".join(f"{a} {x:.3f}/{y:.3f}"
                          for a, x, y in zip(paper.AXES, ours, theirs, strict=True))  # fmt: skip

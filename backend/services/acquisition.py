@@ -213,9 +213,7 @@ class AcquisitionService:
                 log.exception("publishing frame %d failed", frame.index)
 
 
-def frame_point_cloud_mm(
-    sample: LiveSample, camera_model
-) -> tuple[np.ndarray, list[int | None]]:
+def frame_point_cloud_mm(sample: LiveSample, camera_model) -> tuple[np.ndarray, list[int | None]]:
     """Camera-frame 3-D points of every detected blob, matched then unmatched.
 
     Returns (points_mm (N, 3), catalog_ids (N,)) with ``None`` ids for unmatched blobs.

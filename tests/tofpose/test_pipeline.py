@@ -158,8 +158,9 @@ def test_ransac_matcher_recovers_the_pose_with_clutter():
     bench = make_bench(sc, seed=4)
     bf = bench.capture(0.0)
     cfg = PipelineConfig(matcher="ransac", ransac_time_budget_ms=200.0)
-    res = PosePipeline(CameraModel(), paper_target(), cfg).process(bf.frame.gray,
-                                                                   bf.frame.distance_mm)
+    res = PosePipeline(CameraModel(), paper_target(), cfg).process(
+        bf.frame.gray, bf.frame.distance_mm
+    )
     assert res.ok, res.reason
     assert np.linalg.norm(res.t_mm - bf.T_true.t_mm) < 10.0
     assert len(res.unmatched) >= 1
