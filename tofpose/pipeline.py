@@ -46,7 +46,12 @@ from tofpose.matching import (
     random_triplets,
 )
 from tofpose.persistence import Persistence, PersistenceConfig
-from tofpose.pose import refine_line_of_sight, refine_maximum_likelihood, weighted_svd
+from tofpose.pose import (
+    refine_line_of_sight,
+    refine_maximum_likelihood,
+    reflector_whitened_norms,
+    weighted_svd,
+)
 from tofpose.uncertainty import SigmaFloors, measurement_sigmas
 
 Refinement = Literal["ml", "los", "none"]
@@ -64,6 +69,11 @@ class PipelineConfig:
     verify_pose : refuse a pose that makes the target face away from the camera (beyond
         ``max_view_angle_deg``) or that predicts a well-resolved reflector where the
         frame has no bright pixel (catches congruent-triangle mismatches with 3 markers).
+    reject_outliers, outlier_sigma : after the fit, drop the matched reflector whose
+        whitened residual (lateral and range, in predicted sigmas) is largest while it
+        exceeds ``outlier_sigma`` and more than ``matching.min_matches`` remain, refitting
+        each time (ours: a spurious blob or a merged pair next to a marker's position
+        passes the matching tolerance but bends the pose by degrees).
     dark_check_max_matches : the dark-marker check applies only to poses from at most
         this many matched reflectors; with more, a rigid fit that passed the residual
         check is not ambiguous, and a dark predicted marker is an occluded one.
@@ -79,6 +89,8 @@ class PipelineConfig:
     correct_perspective_bias: bool = True
     ellipse_confirmation: bool = True
     verify_pose: bool = True
+    reject_outliers: bool = True
+    outlier_sigma: float = 6.0
     max_view_angle_deg: float = 80.0
     dark_check_max_matches: int = 4
     matcher: Literal["annealing", "ransac"] = "annealing"
@@ -96,6 +108,7 @@ class PipelineConfig:
             extraction=ExtractionConfig.paper(),
             refinement="los",
             correct_perspective_bias=False,
+            reject_outliers=False,
         )
 
 
@@ -362,23 +375,40 @@ class PosePipeline:
         e_m = self.camera.bearings(uv_m)
         rho_m = rho[k_idx]
         y_m = e_m * rho_m[:, None]
-        R, t = weighted_svd(x, y_m, w[k_idx])
         sb = sig_px[k_idx] / self.camera.fx
         sr = sig_rng[k_idx]
+        R, t, iterations, ml = self._fit(x, e_m, rho_m, y_m, w[k_idx], sr, sb)
+        if cfg.reject_outliers:
+            while len(k_idx) > cfg.matching.min_matches:
+                z = reflector_whitened_norms(x, e_m, rho_m, R, t, sr, sb)
+                worst = int(np.argmax(z))
+                if z[worst] <= cfg.outlier_sigma:
+                    break
+                keep = np.arange(len(k_idx)) != worst
+                k_idx, i_idx, x, uv_m, e_m = (a[keep] for a in (k_idx, i_idx, x, uv_m, e_m))
+                rho_m, y_m, sb, sr = (a[keep] for a in (rho_m, y_m, sb, sr))
+                R, t, iterations, ml = self._fit(x, e_m, rho_m, y_m, w[k_idx], sr, sb)
+        if cfg.verify_pose:
+            problem = self._verify(R, t, active, set(int(i) for i in i_idx))
+            if problem:
+                return f"pose rejected: {problem}"
+        return R, t, x, k_idx, i_idx, uv_m, y_m, rho_m, iterations, ml
+
+    def _fit(self, x, e_m, rho_m, y_m, w_m, sr, sb):
+        """Weighted SVD (Eqs. 40-50) then the configured refinement; the ML solution is
+        always evaluated at the final pose for its covariance."""
+        cfg = self.config
+        R, t = weighted_svd(x, y_m, w_m)
         iterations = 0
         if cfg.refinement == "los":
-            ref = refine_line_of_sight(x, e_m, R, t, w[k_idx], tol=cfg.los_tolerance)
+            ref = refine_line_of_sight(x, e_m, R, t, w_m, tol=cfg.los_tolerance)
             R, t, iterations = ref.R, ref.t, ref.iterations
         ml = refine_maximum_likelihood(
             x, e_m, rho_m, R, t, sr, sb, max_iterations=10 if cfg.refinement == "ml" else 0
         )
         if cfg.refinement == "ml":
             R, t, iterations = ml.R, ml.t, ml.iterations
-        if cfg.verify_pose:
-            problem = self._verify(R, t, active, set(int(i) for i in i_idx))
-            if problem:
-                return f"pose rejected: {problem}"
-        return R, t, x, k_idx, i_idx, uv_m, y_m, rho_m, iterations, ml
+        return R, t, iterations, ml
 
     def _match_ransac(self, y: np.ndarray, w: np.ndarray) -> MatchResult:
         """Random triplet hypotheses over all blobs, best inlier count within the budget."""

@@ -140,6 +140,21 @@ def measurement_jacobian(
     return r, J
 
 
+def reflector_whitened_norms(
+    x_mm: np.ndarray,
+    bearings: np.ndarray,
+    ranges_mm: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+    sigma_range_mm: np.ndarray,
+    sigma_bearing_rad: np.ndarray,
+) -> np.ndarray:
+    """Per reflector, the norm of its three whitened residuals (two lateral, one range)
+    at the pose (R, t), shape (m,): how many predicted sigmas it sits off the fit."""
+    r, _ = measurement_jacobian(x_mm, bearings, ranges_mm, R, t, sigma_range_mm, sigma_bearing_rad)
+    return np.linalg.norm(r.reshape(-1, 3), axis=1)
+
+
 @dataclass
 class MLResult:
     """Maximum-likelihood pose with covariance.

@@ -201,3 +201,21 @@ def test_ten_metres_gives_a_pose_on_almost_every_frame():
             assert np.linalg.norm(r.t_mm - T.t_mm) < 25.0
             assert rotation_angle_deg(r.R, T.R) < 6.0
     assert n_ok >= 11
+
+
+@pytest.mark.parametrize(("reject", "expect_good"), [(True, True), (False, False)])
+def test_a_reflection_beside_a_marker_is_dropped_not_fitted(reject, expect_good):
+    """An 80 mm bright disc 60 mm in front of marker 6 and 20 mm to its side passes the
+    matching tolerance in its place; fitted, it bends the pose by ~6 deg. The outlier
+    step (residual > 6 predicted sigmas) drops it and keeps the other seven."""
+    T = facing_pose(3000.0, 2, -3, 12)
+    scene = TargetScene(clutter=(Clutter((120.0, 60.0, 210.0), 80.0, 1.0),))
+    f = render(T, seed=1, scene=scene)
+    pipe = PosePipeline(CameraModel(), paper_target(), PipelineConfig(reject_outliers=reject))
+    r = pipe.process(f.gray, f.distance_mm)
+    assert r.ok
+    good = np.linalg.norm(r.t_mm - T.t_mm) < 2.0 and rotation_angle_deg(r.R, T.R) < 0.3
+    assert good == expect_good
+    if reject:
+        assert 6 not in [m.catalog_id for m in r.matched] and r.n_matched == 6
+        assert max(m.residual_mm for m in r.matched) < 3.0

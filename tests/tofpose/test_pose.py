@@ -4,7 +4,12 @@ from scipy.spatial.transform import Rotation
 
 from tofpose.catalog import paper_target
 from tofpose.geometry import rotation_angle_deg
-from tofpose.pose import refine_line_of_sight, refine_maximum_likelihood, weighted_svd
+from tofpose.pose import (
+    refine_line_of_sight,
+    refine_maximum_likelihood,
+    reflector_whitened_norms,
+    weighted_svd,
+)
 
 
 def _truth(seed=0):
@@ -87,3 +92,21 @@ def test_maximum_likelihood_covariance_predicts_the_spread():
     emp = np.std(errs, axis=0)
     pred = np.sqrt(np.diag(cov))
     np.testing.assert_allclose(emp / pred, 1.0, atol=0.2)
+
+
+def test_whitened_norm_counts_sigmas_off_the_fit():
+    """A reflector 5 mm too far along its line of sight (range sigma 1 mm) sits 5 sigmas
+    off; one 3 mm sideways at 3 m with a 1e-3 rad bearing sigma sits 1 sigma off."""
+    x = paper_target().positions_mm
+    R, t = _truth()
+    y = x @ R.T + t
+    rho = np.linalg.norm(y, axis=1)
+    e = y / rho[:, None]
+    rho[0] += 5.0
+    side = np.cross(e[1], [0.0, 0.0, 1.0])
+    y1 = y[1] + 3.0 * side / np.linalg.norm(side)
+    e[1], rho[1] = y1 / np.linalg.norm(y1), np.linalg.norm(y1)
+    z = reflector_whitened_norms(x, e, rho, R, t, np.ones(len(x)), np.full(len(x), 1e-3))
+    assert z[0] == pytest.approx(5.0, rel=1e-6)
+    assert z[1] == pytest.approx(3.0 / rho[1] / 1e-3, rel=1e-3)
+    assert np.all(z[2:] < 1e-6)
