@@ -16,8 +16,9 @@ COPY pyproject.toml README.md alembic.ini ./
 COPY tofpose ./tofpose
 COPY backend ./backend
 COPY migrations ./migrations
-# Editable install: the server applies the Alembic revisions from /app/migrations.
-RUN pip install -e . && mkdir -p /data
+# A regular install: the wheel carries the Alembic revisions as backend/migrations,
+# which the server applies at every start (tests/test_packaging.py checks this).
+RUN pip install . && mkdir -p /data
 
 EXPOSE 8000
 VOLUME ["/data"]

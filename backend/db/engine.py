@@ -9,7 +9,16 @@ from alembic.config import Config
 from sqlalchemy import Engine, create_engine, event
 from sqlalchemy.orm import Session, sessionmaker
 
-MIGRATIONS_DIR = Path(__file__).resolve().parents[2] / "migrations"
+
+def _migrations_dir() -> Path:
+    """``migrations/`` of the source checkout, else ``backend/migrations`` of a wheel."""
+    source = Path(__file__).resolve().parents[2] / "migrations"
+    if (source / "env.py").exists():
+        return source
+    return Path(__file__).resolve().parents[1] / "migrations"
+
+
+MIGRATIONS_DIR = _migrations_dir()
 
 
 def make_engine(url: str) -> Engine:
@@ -38,8 +47,8 @@ def alembic_config(url: str | None = None) -> Config:
     """Alembic configuration pointing at ``migrations/`` (no alembic.ini needed)."""
     if not (MIGRATIONS_DIR / "env.py").exists():
         raise RuntimeError(
-            f"Alembic migrations not found at {MIGRATIONS_DIR}: run the server from a source "
-            "checkout or an editable install (pip install -e .)"
+            f"Alembic migrations not found at {MIGRATIONS_DIR}: the installation is "
+            "incomplete (reinstall tofpose, or run from a source checkout)"
         )
     cfg = Config()
     cfg.set_main_option("script_location", str(MIGRATIONS_DIR))
