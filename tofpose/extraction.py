@@ -439,24 +439,38 @@ def measure_blobs(
         b.distance_mm = float(np.median(along))
 
 
-def disc_image_centre_offset_px(
-    camera: CameraModel, centre_mm: np.ndarray, normal: np.ndarray, radius_mm: float
+def disc_image_centre_offsets_px(
+    camera: CameraModel, centres_mm: np.ndarray, normal: np.ndarray, radii_mm: np.ndarray
 ) -> np.ndarray:
-    """Perspective bias of a projected disc: ellipse centre minus projected disc centre.
+    """Perspective bias of projected discs: ellipse centre minus projected disc centre.
 
     A circle's image is an ellipse whose centre is not the image of the circle's centre
     (§3.3, "projected-circle bias"). With the disc's homography ``H = K [a b c]`` (a, b
     in-plane axes, c its centre), the image conic is ``Q = H^-T diag(1, 1, -r^2) H^-1``
     and the ellipse centre is ``-Q[:2, :2]^-1 Q[:2, 2]``. Distortion is ignored (it is
-    second order here). Returns shape (2,) in pixels.
+    second order here).
+
+    centres_mm : (m, 3) disc centres in the camera frame; normal : (3,) shared normal
+    (the plate's); radii_mm : (m,). Returns (m, 2) pixels.
     """
+    c = np.atleast_2d(np.asarray(centres_mm, float))
     n = normal / np.linalg.norm(normal)
     a = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
     a /= np.linalg.norm(a)
     b = np.cross(n, a)
-    H = camera.K @ np.column_stack((a, b, centre_mm))
-    Hinv = np.linalg.inv(H)
-    Q = Hinv.T @ np.diag([1.0, 1.0, -(radius_mm**2)]) @ Hinv
-    ellipse_centre = -np.linalg.solve(Q[:2, :2], Q[:2, 2])
-    p = camera.K @ centre_mm
-    return ellipse_centre - p[:2] / p[2]
+    cols = np.empty((len(c), 3, 3))
+    cols[:, :, 0], cols[:, :, 1], cols[:, :, 2] = a, b, c
+    Hinv = np.linalg.inv(camera.K @ cols)  # (m, 3, 3)
+    D = np.ones((len(c), 3))
+    D[:, 2] = -(np.asarray(radii_mm, float) ** 2)
+    Q = np.einsum("mji,mj,mjk->mik", Hinv, D, Hinv)
+    ellipse_centre = -np.linalg.solve(Q[:, :2, :2], Q[:, :2, 2:3])[:, :, 0]
+    p = c @ camera.K.T
+    return ellipse_centre - p[:, :2] / p[:, 2:3]
+
+
+def disc_image_centre_offset_px(
+    camera: CameraModel, centre_mm: np.ndarray, normal: np.ndarray, radius_mm: float
+) -> np.ndarray:
+    """One disc of ``disc_image_centre_offsets_px``: centre (3,), returns (2,) px."""
+    return disc_image_centre_offsets_px(camera, centre_mm[None], normal, np.array([radius_mm]))[0]

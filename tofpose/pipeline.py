@@ -31,7 +31,7 @@ from tofpose.extraction import (
     Blob,
     ExtractionConfig,
     check_frame,
-    disc_image_centre_offset_px,
+    disc_image_centre_offsets_px,
     find_candidate_blobs,
     frame_levels,
     measure_blobs,
@@ -367,11 +367,9 @@ class PosePipeline:
 
         uv_m = uv[k_idx].copy()
         if cfg.correct_perspective_bias:
-            for n, i in enumerate(i_idx):
-                off = disc_image_centre_offset_px(
-                    self.camera, R @ x[n] + t, R[:, 2], self._catalog_d[i] / 2
-                )
-                uv_m[n] -= off
+            uv_m -= disc_image_centre_offsets_px(
+                self.camera, x @ R.T + t, R[:, 2], self._catalog_d[i_idx] / 2
+            )
         e_m = self.camera.bearings(uv_m)
         rho_m = rho[k_idx]
         y_m = e_m * rho_m[:, None]
