@@ -75,8 +75,10 @@ class PipelineConfig:
         each time (ours: a spurious blob or a merged pair next to a marker's position
         passes the matching tolerance but bends the pose by degrees).
     dark_check_max_matches : the dark-marker check applies only to poses from at most
-        this many matched reflectors; with more, a rigid fit that passed the residual
-        check is not ambiguous, and a dark predicted marker is an occluded one.
+        this many matched reflectors. Three points always admit a congruent alternative;
+        from four on, a wrong assignment either fails the rigid residual check or (a
+        mirror image of the nearly planar pattern) makes the target face away, so a dark
+        predicted marker is an occluded one.
     centroid_sigma_floor_px, range_sigma_floor_mm : floors of the per-reflector
         measurement sigmas (``tofpose.uncertainty``) used as weights and in the
         covariance.
@@ -92,7 +94,7 @@ class PipelineConfig:
     reject_outliers: bool = True
     outlier_sigma: float = 6.0
     max_view_angle_deg: float = 80.0
-    dark_check_max_matches: int = 4
+    dark_check_max_matches: int = 3
     matcher: Literal["annealing", "ransac"] = "annealing"
     triplet_fallback: bool = True
     ransac_time_budget_ms: float = 5.0
