@@ -74,6 +74,9 @@ class PipelineConfig:
         exceeds ``outlier_sigma`` and more than ``matching.min_matches`` remain, refitting
         each time (ours: a spurious blob or a merged pair next to a marker's position
         passes the matching tolerance but bends the pose by degrees).
+    outlier_chi2_per_dof : above this chi^2 per degree of freedom the fit is inconsistent
+        and each reflector is also tested against a fit without it (leave-one-out), which
+        finds a biased point that a fit of few points has absorbed.
     dark_check_max_matches : the dark-marker check applies only to poses from at most
         this many matched reflectors. Three points always admit a congruent alternative;
         from four on, a wrong assignment either fails the rigid residual check or (a
@@ -93,6 +96,7 @@ class PipelineConfig:
     verify_pose: bool = True
     reject_outliers: bool = True
     outlier_sigma: float = 6.0
+    outlier_chi2_per_dof: float = 4.0
     max_view_angle_deg: float = 80.0
     dark_check_max_matches: int = 3
     matcher: Literal["annealing", "ransac"] = "annealing"
@@ -162,6 +166,17 @@ class PoseResult:
     @property
     def n_matched(self) -> int:
         return len(self.matched)
+
+
+def variance_factor(chi2: float, n_reflectors: int) -> float:
+    """A-posteriori variance factor max(1, chi^2 / dof), dof = 3 n - 6.
+
+    The covariance (J^T J)^-1 assumes the measurement sigmas are right. When the fit is
+    worse than they allow (a biased blob the outlier step could not single out, e.g. one
+    of 4), the reported uncertainty grows with it instead of claiming sub-millimetre.
+    """
+    dof = 3 * n_reflectors - 6
+    return max(1.0, chi2 / dof) if dof > 0 and np.isfinite(chi2) else 1.0
 
 
 class _Timer:
@@ -349,7 +364,7 @@ class PosePipeline:
             unmatched,
             float(np.sqrt(np.mean(res**2))),
             iterations,
-            ml.covariance,
+            ml.covariance * variance_factor(ml.chi2, len(matched)),
             timer.total(),
             **extra,
         )
@@ -380,9 +395,8 @@ class PosePipeline:
         R, t, iterations, ml = self._fit(x, e_m, rho_m, y_m, w[k_idx], sr, sb)
         if cfg.reject_outliers:
             while len(k_idx) > cfg.matching.min_matches:
-                z = reflector_whitened_norms(x, e_m, rho_m, R, t, sr, sb)
-                worst = int(np.argmax(z))
-                if z[worst] <= cfg.outlier_sigma:
+                worst = self._worst_outlier(x, e_m, rho_m, y_m, w[k_idx], sr, sb, R, t)
+                if worst is None:
                     break
                 keep = np.arange(len(k_idx)) != worst
                 k_idx, i_idx, x, uv_m, e_m = (a[keep] for a in (k_idx, i_idx, x, uv_m, e_m))
@@ -393,6 +407,38 @@ class PosePipeline:
             if problem:
                 return f"pose rejected: {problem}"
         return R, t, x, k_idx, i_idx, uv_m, y_m, rho_m, iterations, ml
+
+    def _worst_outlier(self, x, e_m, rho_m, y_m, w_m, sr, sb, R, t) -> int | None:
+        """Index of the reflector to drop, or None when the fit is consistent.
+
+        A reflector more than ``outlier_sigma`` off the fit (whitened norm) is dropped. A
+        biased point can also drag a fit of few points towards itself and hide (its error
+        spread over the others); so when the fit as a whole is inconsistent (chi^2 above
+        ``outlier_chi2_per_dof`` per degree of freedom) each reflector is predicted from
+        a fit without it, and the one predicted worst goes if it is off by more than
+        ``outlier_sigma`` (from 5 reflectors on: a fit of 3 cannot single out the bad one
+        of 4).
+        """
+        cfg = self.config
+        z = reflector_whitened_norms(x, e_m, rho_m, R, t, sr, sb)
+        worst = int(np.argmax(z))
+        if z[worst] > cfg.outlier_sigma:
+            return worst
+        dof = 3 * len(z) - 6
+        if len(z) < 5 or float(z @ z) <= cfg.outlier_chi2_per_dof * dof:
+            return None  # with 4 points a fit of the other 3 cannot single one out
+        predicted = np.empty(len(z))
+        for j in range(len(z)):
+            rest = np.arange(len(z)) != j
+            Rj, tj, _, _ = self._fit(
+                x[rest], e_m[rest], rho_m[rest], y_m[rest], w_m[rest], sr[rest], sb[rest]
+            )
+            predicted[j] = reflector_whitened_norms(
+                x[j : j + 1], e_m[j : j + 1], rho_m[j : j + 1], Rj, tj,
+                sr[j : j + 1], sb[j : j + 1],
+            )[0]  # fmt: skip
+        worst = int(np.argmax(predicted))
+        return worst if predicted[worst] > cfg.outlier_sigma else None
 
     def _fit(self, x, e_m, rho_m, y_m, w_m, sr, sb):
         """Weighted SVD (Eqs. 40-50) then the configured refinement; the ML solution is
