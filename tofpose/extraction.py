@@ -429,12 +429,16 @@ def measure_blobs(
         b.centroid_uv = np.array(
             [(wts * (cc + x0)).sum() / wts.sum(), (wts * (rr + y0)).sum() / wts.sum()]
         )
+    if not blobs:
+        return
+    centre_bearings = camera.bearings(np.array([b.centroid_uv for b in blobs]))
+    for b, e_c in zip(blobs, centre_bearings, strict=True):
+        rows, cols = np.divmod(b.pixels, w)
         d = distance_mm[rows, cols]
         ok = np.isfinite(d)
         if not np.any(ok):
             b.distance_mm = float("nan")
             continue
-        e_c = camera.bearings(b.centroid_uv[None])[0]
         along = d[ok] * (bearings[rows[ok], cols[ok]] @ e_c)
         b.distance_mm = float(np.median(along))
 

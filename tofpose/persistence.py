@@ -131,8 +131,11 @@ class Persistence:
                 stack = np.stack(
                     [distance.reshape(-1)[idx]] + [e.distance.reshape(-1)[idx] for e in used]
                 )
-                with warnings.catch_warnings():  # all-NaN columns stay NaN, silently
-                    warnings.simplefilter("ignore", RuntimeWarning)
-                    med = np.nanmedian(stack, axis=0)
+                if np.isfinite(stack).all():  # the usual case; nanmedian is ~5x slower
+                    med = np.median(stack, axis=0)
+                else:
+                    with warnings.catch_warnings():  # all-NaN columns stay NaN, silently
+                        warnings.simplefilter("ignore", RuntimeWarning)
+                        med = np.nanmedian(stack, axis=0)
                 med_dist.reshape(-1)[idx] = med
         return kept, mean_gray, med_dist, PersistenceInfo(n, motion, dropped)
