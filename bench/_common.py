@@ -79,6 +79,13 @@ def pyplot():
     return plt
 
 
+def save_figure(fig, path, dpi: int = 100) -> None:
+    """Lay out, write to ``path`` (PNG) and close a figure."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    pyplot().close(fig)
+
+
 def section_main(doc: str, default_frames: int, run, plot, markdown, image_name: str) -> None:
     """Command line of a one-plot benchmark section: ``--frames N --out DIR``; runs
     ``run(frames)``, saves ``plot(data, path)`` and prints ``markdown(data, path, frames)``."""

@@ -21,7 +21,15 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench._common import fmt, pose_errors, pyplot, section_main, stats, table  # noqa: E402
+from bench._common import (  # noqa: E402
+    fmt,
+    pose_errors,
+    pyplot,
+    save_figure,
+    section_main,
+    stats,
+    table,
+)
 from bench.oracle import oracle_pose  # noqa: E402
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
@@ -131,9 +139,7 @@ def plot(summary, path: Path) -> None:
     for ax in axes.flat:
         ax.grid(True, which="both", alpha=0.3)
     axes[0, 1].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def markdown(summary, img_rel: str, n_frames: int) -> str:

@@ -22,7 +22,16 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench._common import fmt, pose_errors, pyplot, section_main, single_core, stats, table  # noqa: E402
+from bench._common import (  # noqa: E402
+    fmt,
+    pose_errors,
+    pyplot,
+    save_figure,
+    section_main,
+    single_core,
+    stats,
+    table,
+)
 from bench.accuracy import random_pose  # noqa: E402
 from tofpose import CameraModel, PosePipeline, paper_target  # noqa: E402
 from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
@@ -118,9 +127,7 @@ def plot(rows, path: Path) -> None:
         ax.set_ylabel(yl)
         ax.grid(alpha=0.3, which="both")
     axes[0].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def markdown(rows, img: str, n: int) -> str:

@@ -24,7 +24,7 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench._common import fmt, pyplot, relative_euler_deg, table  # noqa: E402
+from bench._common import fmt, pyplot, relative_euler_deg, save_figure, table  # noqa: E402
 from bench.accuracy import aim_point_mm  # noqa: E402
 from tofpose import CameraModel, PosePipeline, paper_target  # noqa: E402
 from tofpose.sim.bench import LabGeometry, SimulatedBench  # noqa: E402
@@ -160,9 +160,7 @@ def plot_stability(data: dict, path: Path) -> None:
             ax.set_title(f"{name}: {AXES[j]}", fontsize=9)
             ax.tick_params(labelsize=7)
     axes[-1, 0].set_xlabel("time (s)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def plot_steps_and_range(step_data, range_data, path: Path) -> None:
@@ -189,9 +187,7 @@ def plot_steps_and_range(step_data, range_data, path: Path) -> None:
     axes[1].legend(fontsize=7)
     for ax in axes:
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def markdown(stab, step_data, range_data, imgs, n_stab: int) -> str:

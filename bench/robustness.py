@@ -22,7 +22,7 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench._common import pose_errors, pyplot, section_main, table  # noqa: E402
+from bench._common import pose_errors, pyplot, save_figure, section_main, table  # noqa: E402
 from bench.accuracy import random_pose  # noqa: E402
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
 from tofpose.catalog import Catalog  # noqa: E402
@@ -123,9 +123,7 @@ def plot(out, path: Path) -> None:
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7)
     fig.suptitle(f"correspondence robustness at {RANGE_M:g} m")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def markdown(out, img: str, n: int) -> str:

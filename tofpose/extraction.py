@@ -407,11 +407,11 @@ def measure_blobs(
     h, w = gray.shape
     bearings = camera.pixel_bearings()
     kernel = np.ones((3, 3), np.uint8)
-    for b in blobs:
+    members = [np.divmod(b.pixels, w) for b in blobs]  # (rows, cols) of each blob
+    for b, (rows, cols) in zip(blobs, members, strict=True):
         x, y, bw, bh = b.bbox
         y0, y1, x0, x1 = max(y - 2, 0), min(y + bh + 2, h), max(x - 2, 0), min(x + bw + 2, w)
         m = np.zeros((y1 - y0, x1 - x0), np.uint8)
-        rows, cols = np.divmod(b.pixels, w)
         m[rows - y0, cols - x0] = 1
         ring = cv2.dilate(m, kernel).astype(bool)
         patch = np.maximum(gray[y0:y1, x0:x1].astype(np.float32) - background, 0.0)
@@ -432,8 +432,7 @@ def measure_blobs(
     if not blobs:
         return
     centre_bearings = camera.bearings(np.array([b.centroid_uv for b in blobs]))
-    for b, e_c in zip(blobs, centre_bearings, strict=True):
-        rows, cols = np.divmod(b.pixels, w)
+    for b, (rows, cols), e_c in zip(blobs, members, centre_bearings, strict=True):
         d = distance_mm[rows, cols]
         ok = np.isfinite(d)
         if not np.any(ok):

@@ -395,7 +395,7 @@ class PosePipeline:
         R, t, iterations, ml = self._fit(x, e_m, rho_m, y_m, w[k_idx], sr, sb)
         if cfg.reject_outliers:
             while len(k_idx) > cfg.matching.min_matches:
-                worst = self._worst_outlier(x, e_m, rho_m, y_m, w[k_idx], sr, sb, R, t)
+                worst = self._worst_outlier(x, e_m, rho_m, y_m, w[k_idx], sr, sb, ml)
                 if worst is None:
                     break
                 keep = np.arange(len(k_idx)) != worst
@@ -408,7 +408,7 @@ class PosePipeline:
                 return f"pose rejected: {problem}"
         return R, t, x, k_idx, i_idx, uv_m, y_m, rho_m, iterations, ml
 
-    def _worst_outlier(self, x, e_m, rho_m, y_m, w_m, sr, sb, R, t) -> int | None:
+    def _worst_outlier(self, x, e_m, rho_m, y_m, w_m, sr, sb, ml) -> int | None:
         """Index of the reflector to drop, or None when the fit is consistent.
 
         A reflector more than ``outlier_sigma`` off the fit (whitened norm) is dropped. A
@@ -420,7 +420,7 @@ class PosePipeline:
         of 4).
         """
         cfg = self.config
-        z = reflector_whitened_norms(x, e_m, rho_m, R, t, sr, sb)
+        z = ml.reflector_norms  # evaluated at the final pose of every refinement mode
         worst = int(np.argmax(z))
         if z[worst] > cfg.outlier_sigma:
             return worst

@@ -161,6 +161,8 @@ class MLResult:
 
     covariance : (6, 6) over (rotation vector rad, translation mm), left perturbation.
     chi2 : sum of squared whitened residuals; dof = 3 m - 6.
+    reflector_norms : (m,) whitened residual norm of each reflector at the final pose
+        (as ``reflector_whitened_norms``).
     """
 
     R: np.ndarray
@@ -168,6 +170,7 @@ class MLResult:
     covariance: np.ndarray
     chi2: float
     iterations: int
+    reflector_norms: np.ndarray
 
 
 def refine_maximum_likelihood(
@@ -215,4 +218,4 @@ def refine_maximum_likelihood(
         cov = np.linalg.inv(J.T @ J)
     except np.linalg.LinAlgError:
         cov = np.full((6, 6), np.nan)
-    return MLResult(R, t, cov, float(r @ r), iterations)
+    return MLResult(R, t, cov, float(r @ r), iterations, np.linalg.norm(r.reshape(-1, 3), axis=1))

@@ -49,34 +49,13 @@ def test_bad_inputs_exit_with_a_message(tmp_path, capsys):
         '{"id": 1, "position_mm": [9,0,0], "diameter_mm": 5},'
         '{"id": 2, "position_mm": [0,9,0], "diameter_mm": 5}]}'
     )
+
+    def simulate_with(catalog):
+        out = str(tmp_path / "y.h5")
+        argv = ["simulate", "--scenario", "clutter", "--frames", "1", "--out", out]
+        return main([*argv, "--catalog", str(catalog)])
+
     with pytest.raises(SystemExit):
-        main(
-            [
-                "simulate",
-                "--scenario",
-                "clutter",
-                "--frames",
-                "1",
-                "--out",
-                str(tmp_path / "y.h5"),
-                "--catalog",
-                str(tmp_path / "missing.json"),
-            ]
-        )
-    assert (
-        main(
-            [
-                "simulate",
-                "--scenario",
-                "clutter",
-                "--frames",
-                "1",
-                "--out",
-                str(tmp_path / "y.h5"),
-                "--catalog",
-                str(bad_cat),
-            ]
-        )
-        == 2
-    )
+        simulate_with(tmp_path / "missing.json")
+    assert simulate_with(bad_cat) == 2
     assert "duplicate reflector ids" in capsys.readouterr().err
