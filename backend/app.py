@@ -12,6 +12,7 @@ from dataclasses import fields
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, RedirectResponse
+from sqlalchemy.exc import IntegrityError
 
 import backend
 from backend.api.routes import camera, catalogs, frames, health, live, motion, pose
@@ -106,6 +107,17 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         # FastAPI's default, minus the echoed input (which can be a huge body).
         errors = [{k: v for k, v in e.items() if k in ("loc", "msg", "type")} for e in exc.errors()]
         return JSONResponse({"detail": errors}, status_code=422)
+
+    @app.exception_handler(IntegrityError)
+    async def _conflict(_request: Request, exc: IntegrityError) -> JSONResponse:
+        # Safety net for any unique-constraint race a route did not translate itself:
+        # the request conflicts with stored state (409), it is not a server fault (500).
+        log.warning("integrity error answered with 409: %s", exc.orig)
+        return JSONResponse(
+            {"detail": "the request conflicts with stored data (a unique name or key is "
+                       "already taken)"},
+            status_code=409,
+        )  # fmt: skip
 
     for module in (health, devices_route, camera, pose, frames, motion, catalogs, live):
         app.include_router(module.router)

@@ -11,17 +11,22 @@ from backend.settings import Settings
 from tofpose.recording import RecordingError
 
 
+def token_line(settings: Settings, token: str, created: bool) -> str:
+    """How the banner names the API token: in clear only on the start that generated it,
+    so that the token of a long-lived data directory does not land in every log."""
+    path = settings.data_dir / TOKEN_FILE
+    if created:
+        return f"{token}   (generated now and stored in {path}; printed only this once)"
+    if settings.api_token:
+        return "from TOFPOSE_API_TOKEN (not printed)"
+    return f"stored in {path} (not printed: cat it)"
+
+
 def banner(settings: Settings, token: str, created: bool) -> str:
     host = settings.host if ":" not in settings.host else f"[{settings.host}]"
     base = f"http://{host}:{settings.port}"
     camera = "simulated ToF camera" if settings.camera == "sim" else settings.camera
     motion = {"sim": "simulated turntable + rail", "none": "no motion system"}[settings.motion]
-    where = "generated now and stored in" if created else "from"
-    source = (
-        "TOFPOSE_API_TOKEN"
-        if settings.api_token and not created
-        else (f"{where} {settings.data_dir / TOKEN_FILE}")
-    )
     reads = "open (loopback)" if settings.reads_are_open else "token required"
     return "\n".join([
         f"tofpose server: {camera}, {motion}",
@@ -29,7 +34,7 @@ def banner(settings: Settings, token: str, created: bool) -> str:
         f"  live pose      ws://{host}:{settings.port}/ws/live",
         f"  health         {base}/api/health",
         f"  database       {settings.resolved_database_url}",
-        f"  API token      {token}   ({source})",
+        f"  API token      {token_line(settings, token, created)}",
         f"  reads          {reads}; moves and changes need 'Authorization: Bearer <token>'",
     ])  # fmt: skip
 

@@ -16,8 +16,9 @@ from typing import Any
 
 import numpy as np
 
-# Smallest triangle area (mm^2) for which three reflectors count as non-collinear.
-_MIN_TRIANGLE_AREA_MM2 = 1.0
+# Smallest spread off the best-fit line, relative to the spread along it, for which the
+# reflectors count as non-collinear (scale-free: a 1 mm triangle is as good as a 1 m one).
+MIN_OFF_LINE_RATIO = 1e-4
 
 
 @dataclass(frozen=True)
@@ -132,9 +133,14 @@ def validate_reflectors(reflectors: tuple[Reflector, ...]) -> None:
     x = np.array([r.position_mm for r in reflectors], dtype=np.float64)
     centred = x - x.mean(axis=0)
     s = np.linalg.svd(centred, compute_uv=False)
-    # Second singular value ~ spread off the best line; compare with a tiny triangle.
-    if s[1] < np.sqrt(_MIN_TRIANGLE_AREA_MM2):
-        raise ValueError("catalog reflectors are collinear: a pose is not determined")
+    # s[0] ~ extent along the best-fit line, s[1] ~ spread off it.
+    ratio = s[1] / s[0] if s[0] > 0 else 0.0
+    if ratio < MIN_OFF_LINE_RATIO:
+        raise ValueError(
+            "catalog reflectors are collinear (or coincide): their spread off the best-fit "
+            f"line is {ratio:.3g} of their extent along it, below {MIN_OFF_LINE_RATIO:g}; "
+            "a pose is not determined"
+        )
 
 
 PAPER_TARGET_TABLE = (

@@ -12,9 +12,11 @@ from tofpose.geometry import RigidTransform, euler_deg_from_rotation, rotation_a
 
 
 class StrictBody(BaseModel):
-    """Request bodies: unknown fields and NaN/inf are errors, not silently ignored."""
+    """Request bodies: unknown fields, NaN/inf and values of the wrong JSON type are errors,
+    not silently coerced (``true`` is not 1 deg, ``"5"`` is not a number, ``"yes"`` is not
+    a boolean). Integers are accepted where a number is expected."""
 
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
 
 # -- health and devices ------------------------------------------------------------------

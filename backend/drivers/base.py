@@ -94,8 +94,8 @@ class AxisLimits:
             return f"{self.name} set-point must be a finite number"
         if not self.min_pos <= value <= self.max_pos:
             return (
-                f"{self.name} set-point {value:g} {self.unit} is outside the soft limits "
-                f"[{self.min_pos:g}, {self.max_pos:g}] {self.unit}"
+                f"{self.name} set-point {value:.15g} {self.unit} is outside the soft limits "
+                f"[{self.min_pos:.15g}, {self.max_pos:.15g}] {self.unit}"
             )
         return None
 

@@ -34,6 +34,8 @@ def _refl(i, x, y=0.0, d=10.0):
         ((_refl(1, 0), _refl(2, 10, 5), _refl(3, 0, 9, -1)), "diameter_mm must be positive"),
         ((_refl(1, 0), _refl(2, 10)), "at least 3"),
         ((_refl(1, 0), _refl(2, 10), _refl(3, 20)), "collinear"),
+        ((_refl(1, 0), _refl(2, 1000), _refl(3, 2000, 1e-3)), "collinear.*below 0.0001"),
+        ((_refl(1, 5), _refl(2, 5), _refl(3, 5)), "collinear"),
     ],
 )
 def test_validation_errors(reflectors, message):
@@ -48,3 +50,10 @@ def test_malformed_json_names_the_reflector():
         Catalog.from_json(json.dumps(d))
     with pytest.raises(ValueError, match="not valid JSON"):
         Catalog.from_json("[1,")
+
+
+@pytest.mark.parametrize("scale_mm", [1.0, 1e-3, 1e4])
+def test_collinearity_test_is_scale_free(scale_mm):
+    """A right triangle is a usable catalog at any size (1 mm was once rejected)."""
+    cat = Catalog("tri", (_refl(1, 0), _refl(2, scale_mm), _refl(3, 0, scale_mm)))
+    assert len(cat.reflectors) == 3

@@ -9,7 +9,13 @@ from fastapi import APIRouter, HTTPException, Path, status
 
 from backend.api.deps import ReadAuth, SessionDep, StateDep, WriteAuth, unprocessable
 from backend.api.schemas import ActiveCatalogPublic, CatalogCreate, CatalogPublic, ReflectorModel
-from backend.services.store import add_catalog, find_catalog, save_device_settings, stored_catalogs
+from backend.services.store import (
+    NameTaken,
+    add_catalog,
+    find_catalog,
+    save_device_settings,
+    stored_catalogs,
+)
 from tofpose.catalog import BUILTIN_CATALOGS, Catalog, Reflector
 
 router = APIRouter(prefix="/api/catalogs", tags=["catalogs"])
@@ -50,7 +56,10 @@ def create_catalog(body: CatalogCreate, state: StateDep, session: SessionDep) ->
         )
     except ValueError as exc:
         raise unprocessable(["body", "reflectors"], [f"catalog rejected: {exc}"]) from exc
-    add_catalog(session, body.name, cat)
+    try:
+        add_catalog(session, body.name, cat)
+    except NameTaken as exc:  # lost a race with a concurrent request for the same name
+        raise HTTPException(409, str(exc)) from exc
     return _public(body.name, cat, builtin=False, active=state.acquisition.catalog_name)
 
 

@@ -24,7 +24,7 @@ import json
 from typing import Literal
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
-from pydantic import Field, ValidationError
+from pydantic import Field, ValidationError, field_validator
 
 from backend.api.schemas import StrictBody, pose_public
 from backend.auth import token_matches
@@ -41,6 +41,11 @@ class LiveOptions(StrictBody):
     image_every: int = Field(5, ge=1, le=1000)
     image_step: int = Field(2, ge=1, le=8)
     points: bool = False
+
+    @field_validator("images")
+    @classmethod
+    def _each_kind_once(cls, kinds: list[str]) -> list[str]:
+        return list(dict.fromkeys(kinds))  # ["gray", "gray"] sends gray once
 
 
 def pose_json(sample: LiveSample) -> str:

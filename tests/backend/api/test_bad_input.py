@@ -29,6 +29,15 @@ def _detail_text(r) -> str:
         ("/api/camera/settings", "put", b'{"exposure": 3}', "exposure"),
         ("/api/catalogs", "post", b'{"name": "a", "reflectors": [1, 2, 3]}', "reflectors"),
         ("/api/catalogs", "post", b'{"name": "../etc", "reflectors": []}', "name"),
+        # Strict types: no coercion of booleans or strings into numbers and back.
+        ("/api/motion/move", "post", b'{"yaw_deg": true}', "yaw_deg"),
+        ("/api/motion/move", "post", b'{"yaw_deg": "5"}', "yaw_deg"),
+        ("/api/camera/settings", "put", b'{"auto_exposure": "yes"}', "auto_exposure"),
+        ("/api/camera/settings", "put", b'{"auto_exposure": 1}', "auto_exposure"),
+        ("/api/camera/settings", "put", b'{"frame_rate_hz": "10"}', "frame_rate_hz"),
+        ("/api/catalogs", "post",
+         b'{"name": "s", "reflectors": [{"id": "1", "position_mm": [0, 0, 0], '
+         b'"diameter_mm": 1}]}', "id"),
     ],
 )
 def test_malformed_bodies_are_422_with_a_message(client, path, method, raw, needle):
@@ -87,3 +96,16 @@ def test_unknown_resources_and_bad_queries_are_4xx(client):
     assert client.get("/api/frames/latest/gray.png?scale=9").status_code == 422
     assert client.get("/api/pose/history?n=0").status_code == 422
     assert client.get("/api/nothing").status_code == 404
+
+
+def test_integers_are_still_numbers(client):
+    """Strictness does not refuse a JSON integer where a number is expected."""
+    r = client.post("/api/motion/move", json={"yaw_deg": 1}, headers=AUTH)
+    assert r.status_code == 202, r.text
+
+
+def test_soft_limit_errors_print_the_value_with_its_digits(client):
+    r = client.post("/api/motion/move", json={"yaw_deg": -170.0001}, headers=AUTH)
+    assert r.status_code == 422
+    text = _detail_text(r)
+    assert "-170.0001 deg" in text and "[-170, 170]" in text

@@ -80,6 +80,20 @@ def test_bad_options_get_an_error_message_and_the_stream_goes_on(client):
     assert "images" in errors[0] and "bad options" in errors[1]
 
 
+def test_an_image_kind_asked_for_twice_is_sent_once(client):
+    with client.websocket_connect("/ws/live") as ws:
+        ws.receive_json()
+        ws.send_text(json.dumps({"images": ["gray", "gray"], "image_every": 1}))
+        per_frame: dict[int, int] = {}
+        poses = 0
+        while poses < 6:
+            m = ws.receive_json()
+            if m["type"] == "image":
+                per_frame[m["frame_index"]] = per_frame.get(m["frame_index"], 0) + 1
+            poses += m["type"] == "pose"
+    assert per_frame and set(per_frame.values()) == {1}
+
+
 def test_token_required_when_reads_are_not_open(tmp_path):
     with running_app(make_settings(tmp_path, host="0.0.0.0")) as c:
         with pytest.raises(WebSocketDisconnect) as exc, c.websocket_connect("/ws/live") as ws:

@@ -1,0 +1,92 @@
+"""``tofpose serve`` in a real subprocess, for tests that need signals, RSS or restarts."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class ServeProcess:
+    """Start ``python -m tofpose.cli serve`` on a free loopback port with ``data_dir``;
+    ``__enter__`` waits until /api/health reports the camera ok."""
+
+    def __init__(self, data_dir: Path, *args: str, env: dict[str, str] | None = None) -> None:
+        self.port = free_port()
+        self.data_dir = data_dir
+        self.base_url = f"http://127.0.0.1:{self.port}"
+        cmd = [sys.executable, "-m", "tofpose.cli", "serve", "--port", str(self.port),
+               "--data-dir", str(data_dir), *args]  # fmt: skip
+        self.proc = subprocess.Popen(
+            cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+            env={**os.environ, **(env or {})},
+        )  # fmt: skip
+        self.output = ""
+
+    def get_json(self, path: str, timeout_s: float = 5.0):
+        with urllib.request.urlopen(self.base_url + path, timeout=timeout_s) as r:
+            return json.load(r)
+
+    def wait_healthy(self, timeout_s: float = 60.0) -> dict:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise AssertionError(f"server exited early:\n{self.proc.stdout.read()}")
+            try:
+                h = self.get_json("/api/health", 2.0)
+                if h["camera"]["state"] == "ok":
+                    return h
+            except OSError:
+                pass
+            time.sleep(0.2)
+        raise AssertionError("server did not come up")
+
+    @property
+    def token(self) -> str:
+        return (self.data_dir / "api_token").read_text().strip()
+
+    def rss_mb(self) -> float:
+        """Resident set size of the server process (Linux /proc), MiB."""
+        for line in Path(f"/proc/{self.proc.pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+        raise RuntimeError("no VmRSS")
+
+    def stop(self, sig: int = signal.SIGINT, timeout_s: float = 30.0) -> float:
+        """Send ``sig`` and wait for exit; returns the seconds it took. Kills on timeout
+        (and raises ``subprocess.TimeoutExpired``)."""
+        t0 = time.monotonic()
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+        try:
+            out, _ = self.proc.communicate(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.output += self.proc.communicate()[0]
+            raise
+        self.output += out
+        return time.monotonic() - t0
+
+    def __enter__(self) -> ServeProcess:
+        try:
+            self.wait_healthy()
+        except BaseException:
+            self.stop(signal.SIGKILL)
+            raise
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.proc.poll() is None:
+            self.stop()
