@@ -40,19 +40,19 @@ def find_catalog(session: Session, name: str) -> Catalog | None:
     return Catalog.from_json(row.catalog_json) if row is not None else None
 
 
-class NameTaken(ValueError):
+class NameTakenError(ValueError):
     """A row with this unique name already exists (possibly inserted a moment ago by a
     concurrent request: the database's unique constraint is the arbiter, not a prior
     look-up)."""
 
 
 def add_catalog(session: Session, name: str, catalog: Catalog) -> None:
-    """Store a user catalog; raises ``NameTaken`` if the name exists (built-in or stored)."""
+    """Store a user catalog; raises ``NameTakenError`` if the name exists (built-in or stored)."""
     if name in BUILTIN_CATALOGS:
-        raise NameTaken(f"a catalog named {name!r} already exists (built in)")
+        raise NameTakenError(f"a catalog named {name!r} already exists (built in)")
     session.add(CatalogRow(name=name, catalog_json=catalog.to_json()))
     try:
         session.commit()
     except IntegrityError as exc:
         session.rollback()
-        raise NameTaken(f"a catalog named {name!r} already exists") from exc
+        raise NameTakenError(f"a catalog named {name!r} already exists") from exc

@@ -10,7 +10,7 @@ from fastapi import APIRouter, HTTPException, Path, status
 from backend.api.deps import ReadAuth, SessionDep, StateDep, WriteAuth, unprocessable
 from backend.api.schemas import ActiveCatalogPublic, CatalogCreate, CatalogPublic, ReflectorModel
 from backend.services.store import (
-    NameTaken,
+    NameTakenError,
     add_catalog,
     find_catalog,
     save_device_settings,
@@ -58,7 +58,7 @@ def create_catalog(body: CatalogCreate, state: StateDep, session: SessionDep) ->
         raise unprocessable(["body", "reflectors"], [f"catalog rejected: {exc}"]) from exc
     try:
         add_catalog(session, body.name, cat)
-    except NameTaken as exc:  # lost a race with a concurrent request for the same name
+    except NameTakenError as exc:  # lost a race with a concurrent request for the same name
         raise HTTPException(409, str(exc)) from exc
     return _public(body.name, cat, builtin=False, active=state.acquisition.catalog_name)
 

@@ -35,9 +35,13 @@ def _detail_text(r) -> str:
         ("/api/camera/settings", "put", b'{"auto_exposure": "yes"}', "auto_exposure"),
         ("/api/camera/settings", "put", b'{"auto_exposure": 1}', "auto_exposure"),
         ("/api/camera/settings", "put", b'{"frame_rate_hz": "10"}', "frame_rate_hz"),
-        ("/api/catalogs", "post",
-         b'{"name": "s", "reflectors": [{"id": "1", "position_mm": [0, 0, 0], '
-         b'"diameter_mm": 1}]}', "id"),
+        (
+            "/api/catalogs",
+            "post",
+            b'{"name": "s", "reflectors": [{"id": "1", "position_mm": [0, 0, 0], '
+            b'"diameter_mm": 1}]}',
+            "id",
+        ),
     ],
 )
 def test_malformed_bodies_are_422_with_a_message(client, path, method, raw, needle):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from backend.db.engine import make_engine, make_session_factory, upgrade_database
-from backend.services.store import NameTaken, add_catalog, find_catalog, stored_catalogs
+from backend.services.store import NameTakenError, add_catalog, find_catalog, stored_catalogs
 from tofpose.catalog import paper_target
 
 
@@ -21,7 +21,7 @@ def test_a_second_catalog_with_the_same_name_is_name_taken_and_the_first_survive
     cat = paper_target()
     with sessions() as s:
         add_catalog(s, "mine", cat)
-    with sessions() as s, pytest.raises(NameTaken, match="'mine' already exists"):
+    with sessions() as s, pytest.raises(NameTakenError, match="'mine' already exists"):
         add_catalog(s, "mine", cat)  # as if a concurrent request had inserted it just now
     with sessions() as s:
         assert [n for n, _ in stored_catalogs(s)] == ["mine"]
@@ -30,5 +30,5 @@ def test_a_second_catalog_with_the_same_name_is_name_taken_and_the_first_survive
 
 
 def test_a_built_in_name_cannot_be_stored(sessions):
-    with sessions() as s, pytest.raises(NameTaken, match="built in"):
+    with sessions() as s, pytest.raises(NameTakenError, match="built in"):
         add_catalog(s, "paper-target", paper_target())
