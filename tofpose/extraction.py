@@ -139,6 +139,34 @@ class FrameStats:
     saturated_fraction: float
 
 
+@dataclass(frozen=True)
+class WrongSizeBlob:
+    """A bright component (it passed criterion 1) whose size is outside the window the
+    catalog's diameters predict at its range: evidence that the active catalog does not
+    describe the target in view."""
+
+    diameter_px: float
+    expected_min_px: float
+    expected_max_px: float
+    distance_mm: float
+
+
+@dataclass(frozen=True)
+class CandidateBlobs:
+    """What ``find_candidate_blobs`` found.
+
+    accepted : candidate reflector blobs, best (lowest penalty) first.
+    oversize : components too large for one reflector (merged markers), for §3.3.
+    active_mask : (H, W) uint8, the active pixel set A (§3.1.1).
+    wrong_size : bright components rejected by the size window (oversize ones included).
+    """
+
+    accepted: list[Blob]
+    oversize: list[Blob]
+    active_mask: np.ndarray
+    wrong_size: tuple[WrongSizeBlob, ...] = ()
+
+
 class FrameError(ValueError):
     """A frame that cannot be processed (wrong shape or dtype)."""
 
@@ -260,18 +288,19 @@ def find_candidate_blobs(
     diameters_mm: np.ndarray,
     config: ExtractionConfig,
     stats: FrameStats,
-) -> tuple[list[Blob], list[Blob], np.ndarray]:
+) -> CandidateBlobs:
     """Candidate reflector blobs (§3.1.2-§3.2): B1-B4 as reconstruction + gates.
 
-    Returns (accepted, rejected_oversize, active_mask). ``rejected_oversize`` holds
-    components too large for one reflector (merged markers), which the ellipse stage
-    may split (§3.3).
+    ``oversize`` holds components too large for one reflector (merged markers), which the
+    ellipse stage may split (§3.3); ``wrong_size`` every bright component the size window
+    refused, so that a failure can say the catalog does not fit what is in view.
     """
     mask = active_pixel_mask(gray, stats, config.n_max)
     h, w = gray.shape
     n_lab, labels, cc_stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     accepted: list[Blob] = []
     oversize: list[Blob] = []
+    wrong_size: list[WrongSizeBlob] = []
     cos_t = np.cos(np.radians(config.max_tilt_deg))
     ecc_max = np.sqrt(1.0 - cos_t**2)
     for k in range(1, n_lab):
@@ -294,7 +323,9 @@ def find_candidate_blobs(
             lo_a, hi_a = config.h_min_px, config.h_max_px or np.inf
             too_big = area > hi_a
             size_ok = lo_a <= area <= hi_a
-            d_lo, d_hi = 0.0, np.inf
+            # the paper's fixed area window H_min..H_max, as equivalent diameters
+            d_lo, d_hi = 2.0 * np.sqrt(np.array([lo_a, hi_a]) / np.pi)
+            d_eq = 2.0 * np.sqrt(area / np.pi)
         else:
             d_lo, d_hi = predicted_diameter_window_px(camera.fx, rho, diameters_mm, config)
             d_eq = 2.0 * np.sqrt(area / np.pi)
@@ -303,6 +334,8 @@ def find_candidate_blobs(
         blob = Blob(
             pixels=np.empty(0, np.int64), area_px=area, bbox=(x, y, bw, bh), peak_counts=peak
         )
+        if not size_ok:
+            wrong_size.append(WrongSizeBlob(float(d_eq), float(d_lo), float(d_hi), rho))
         if too_big:
             rows, cols = np.nonzero(member)
             blob.pixels = (rows + y) * w + (cols + x)
@@ -349,7 +382,7 @@ def find_candidate_blobs(
             continue
         accepted.append(blob)
     accepted.sort(key=lambda b: (b.penalty, -b.peak_counts))
-    return accepted[: config.max_candidates], oversize, mask
+    return CandidateBlobs(accepted[: config.max_candidates], oversize, mask, tuple(wrong_size))
 
 
 def penalty_score(

@@ -242,9 +242,8 @@ class PosePipeline:
                 f"no reflector contrast: brightest pixel {stats.i_max:.0f} counts over a "
                 f"background of {stats.background:.0f} (all-dark frame?)"
             )
-        blobs, oversize, active = find_candidate_blobs(
-            g, d, self.camera, self._catalog_d, cfg.extraction, stats
-        )
+        found = find_candidate_blobs(g, d, self.camera, self._catalog_d, cfg.extraction, stats)
+        blobs, oversize, active = found.accepted, found.oversize, found.active_mask
         timer.lap("blobs")
         if cfg.ellipse_confirmation:
             blobs = self._confirm_ellipses(blobs, oversize, g, d, stats)
@@ -268,7 +267,8 @@ class PosePipeline:
         if len(ranged) < cfg.matching.min_matches:
             return fail(
                 f"found {len(ranged)} candidate reflector(s) with a valid range "
-                f"(of {len(kept)} blobs), need {cfg.matching.min_matches}",
+                f"(of {len(kept)} blobs), need {cfg.matching.min_matches}"
+                + self._size_hint(found.wrong_size),
                 unmatched=unmatched
                 + [(b.centroid_uv[0], b.centroid_uv[1], b.distance_mm) for b in ranged],
                 **extra,
@@ -367,6 +367,19 @@ class PosePipeline:
             ml.covariance * variance_factor(ml.chi2, len(matched)),
             timer.total(),
             **extra,
+        )
+
+    def _size_hint(self, wrong_size) -> str:
+        """A clause naming bright blobs the catalog's sizes ruled out, or ''."""
+        if not wrong_size:
+            return ""
+        w = max(wrong_size, key=lambda b: b.diameter_px)
+        where = f" at {w.distance_mm / 1000:.1f} m" if np.isfinite(w.distance_mm) else ""
+        return (
+            f"; {len(wrong_size)} bright blob(s) in view do not have a size the catalog "
+            f"{self.catalog.name!r} predicts at their range (e.g. {w.diameter_px:.0f} px "
+            f"across{where}, expected {w.expected_min_px:.1f}-{w.expected_max_px:.1f} px): "
+            "is the right catalog active?"
         )
 
     def _solve(self, pairs, uv, rho, y, w, sig_px, sig_rng, alpha_mm, active):

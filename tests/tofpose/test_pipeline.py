@@ -289,3 +289,22 @@ def test_a_biased_blob_absorbed_by_the_fit_is_found_by_leave_one_out(chi2_per_do
             np.linalg.norm(m.centroid_uv - proj[ids.index(m.catalog_id)]) > 0.5 for m in r.matched
         )
     assert (biased > 0) == expect_biased
+
+
+@pytest.mark.parametrize("diameter_mm", [5.0, 20.0])
+def test_a_catalog_the_camera_cannot_see_says_so(diameter_mm):
+    """Paper target in view, but a catalog of much smaller markers active: the reason
+    names the bright blobs that do not have the catalog's size, not just '0 candidates'."""
+    from tofpose.catalog import Catalog, Reflector
+
+    scene_cat = paper_target()
+    tiny = Catalog(
+        "tiny",
+        tuple(Reflector(r.id, r.position_mm, diameter_mm) for r in scene_cat.reflectors),
+    )
+    frame = render(facing_pose(2000.0, 2, -3, 5))
+    r = PosePipeline(CameraModel(), tiny).process(frame.gray, frame.distance_mm, 0.0)
+    assert not r.ok
+    assert "do not have a size the catalog 'tiny' predicts" in r.reason, r.reason
+    n = int(r.reason.split("; ")[1].split()[0])
+    assert n >= 4  # the 80 mm markers at least; each one is refused for its size
