@@ -1,14 +1,11 @@
-"""Request and response schemas (pydantic). Units in every field name (DESIGN.md §3)."""
+"""Request and response schemas (pydantic): plain data, no behaviour. Units in every field
+name (docs/architecture.md). Building them from services' types is ``presenters``' job."""
 
 from __future__ import annotations
 
 from typing import Annotated, Literal
 
-import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
-
-from backend.services.acquisition import LiveSample
-from tofpose.geometry import RigidTransform, euler_deg_from_rotation, rotation_angle_deg
 
 
 class StrictBody(BaseModel):
@@ -125,18 +122,6 @@ class TruthPublic(BaseModel):
     attitude_error_deg: float | None = Field(None, description="geodesic angle")
 
 
-def finite_or_none(value: float) -> float | None:
-    """JSON has no NaN/inf: a value the pipeline could not compute is sent as null."""
-    v = float(value)
-    return v if np.isfinite(v) else None
-
-
-def finite_list_or_none(values) -> list[float] | None:
-    """A vector is sent only when every component is finite, else null."""
-    out = [float(v) for v in values]
-    return out if all(np.isfinite(out)) else None
-
-
 class PosePublic(BaseModel):
     frame_index: int
     frame_time_s: float
@@ -166,78 +151,6 @@ class PosePublic(BaseModel):
     motion: bool
     timings_ms: dict[str, float]
     truth: TruthPublic | None = None
-
-    @classmethod
-    def from_sample(cls, s: LiveSample) -> PosePublic:
-        r = s.result
-        pose: dict = {}
-        if r.ok and r.R is not None:
-            x, y, z = (float(v) for v in r.t_mm)
-            p, yw, rl = (float(v) for v in r.euler_deg)
-            pose = dict(x_mm=x, y_mm=y, z_mm=z, pitch_deg=p, yaw_deg=yw, roll_deg=rl)
-            pose["quaternion_wxyz"] = [float(v) for v in r.quaternion_wxyz]
-            if r.covariance is not None:
-                sd = np.sqrt(np.clip(np.diag(r.covariance), 0.0, None))
-                pose["attitude_sigma_deg"] = finite_list_or_none(np.degrees(sd[:3]))
-                pose["position_sigma_mm"] = finite_list_or_none(sd[3:])
-        truth = None
-        T = s.frame.T_truth
-        if T is not None:
-            truth = _truth(T, r.R if r.ok else None, r.t_mm if r.ok else None)
-        return cls(
-            frame_index=s.frame.index,
-            frame_time_s=s.frame.time_s,
-            captured_unix_s=s.captured_unix_s,
-            processed_unix_s=s.processed_unix_s,
-            catalog=s.catalog_name,
-            ok=r.ok,
-            reason=r.reason,
-            n_candidates=r.n_candidates,
-            n_matched=r.n_matched,
-            matched=[
-                MatchedPublic(
-                    catalog_id=m.catalog_id,
-                    u_px=float(m.centroid_uv[0]),
-                    v_px=float(m.centroid_uv[1]),
-                    point_mm=[float(v) for v in m.point_mm],
-                    distance_mm=float(m.distance_mm),
-                    residual_mm=float(m.residual_mm),
-                    area_px=int(m.area_px),
-                    centroid_sigma_px=finite_or_none(m.centroid_sigma_px),
-                    range_sigma_mm=finite_or_none(m.range_sigma_mm),
-                )
-                for m in r.matched
-            ],
-            unmatched=[
-                BlobPublic(u_px=float(u), v_px=float(v), distance_mm=finite_or_none(d))
-                for u, v, d in r.unmatched
-            ],
-            residual_mm=finite_or_none(r.residual_mm),
-            iterations=r.iterations,
-            frames_used=r.frames_used,
-            motion=r.motion,
-            timings_ms={k: float(v) for k, v in r.timings_ms.items()},
-            truth=truth,
-            **pose,
-        )
-
-
-def pose_public(sample: LiveSample) -> PosePublic:
-    """The sample's ``PosePublic``, built once and shared by REST and WebSocket."""
-    return sample.cached("pose_public", lambda: PosePublic.from_sample(sample))
-
-
-def _truth(T: RigidTransform, R: np.ndarray | None, t_mm: np.ndarray | None) -> TruthPublic:
-    p, y, r = (float(v) for v in euler_deg_from_rotation(T.R))
-    err_pos = err_ang = None
-    if R is not None and t_mm is not None:
-        err_pos = float(np.linalg.norm(np.asarray(t_mm) - T.t_mm))
-        err_ang = float(rotation_angle_deg(T.R, R))
-    x, yy, z = (float(v) for v in T.t_mm)
-    return TruthPublic(
-        x_mm=x, y_mm=yy, z_mm=z, pitch_deg=p, yaw_deg=y, roll_deg=r,
-        position_error_mm=err_pos, attitude_error_deg=err_ang,
-    )  # fmt: skip
 
 
 # -- motion ------------------------------------------------------------------------------

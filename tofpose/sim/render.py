@@ -30,8 +30,8 @@ import numpy as np
 from tofpose.camera import CameraModel
 from tofpose.geometry import RigidTransform
 from tofpose.sim.scene import FIRST_DISC, NO_HIT, PLATE, WALL, SceneInCamera, TargetScene
+from tofpose.tof import SPEED_OF_LIGHT_MM_S
 
-SPEED_OF_LIGHT_MM_S = 299_792_458_000.0
 FULL_SCALE_COUNTS = 4095
 
 AMBIENT_NORMAL_LUX = 1000.0

@@ -9,25 +9,17 @@ from dataclasses import asdict, replace
 from fastapi import APIRouter, HTTPException
 
 from backend.api.deps import ReadAuth, StateDep, WriteAuth
+from backend.api.presenters import camera_settings_public
 from backend.api.schemas import CameraSettingsPublic, CameraSettingsUpdate
-from backend.drivers.base import CameraSettings
 from backend.services.store import save_device_settings
-from tofpose.sim.render import SPEED_OF_LIGHT_MM_S
 
 router = APIRouter(prefix="/api/camera", tags=["camera"])
 APPLY_TIMEOUT_S = 5.0
 
 
-def settings_public(s: CameraSettings) -> CameraSettingsPublic:
-    return CameraSettingsPublic(
-        **asdict(s),
-        unambiguous_range_mm=SPEED_OF_LIGHT_MM_S / (2.0 * s.modulation_frequency_mhz * 1e6),
-    )
-
-
 @router.get("/settings", dependencies=[ReadAuth])
 def get_settings(state: StateDep) -> CameraSettingsPublic:
-    return settings_public(state.devices.camera.get_settings())
+    return camera_settings_public(state.devices.camera.get_settings())
 
 
 @router.put("/settings", dependencies=[WriteAuth])
@@ -48,4 +40,4 @@ async def put_settings(body: CameraSettingsUpdate, state: StateDep) -> CameraSet
             save_device_settings(session, "camera", asdict(applied))
 
     await asyncio.to_thread(persist)
-    return settings_public(applied)
+    return camera_settings_public(applied)

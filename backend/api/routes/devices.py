@@ -5,8 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from backend.api.deps import ReadAuth, StateDep
-from backend.api.routes.health import camera_state
-from backend.api.routes.motion import motion_public
+from backend.api.presenters import camera_state, motion_public
 from backend.api.schemas import CameraDevicePublic, DevicesPublic
 
 router = APIRouter(prefix="/api", tags=["status"], dependencies=[ReadAuth])

@@ -7,32 +7,10 @@ from sqlalchemy import text
 
 import backend
 from backend.api.deps import StateDep
-from backend.api.schemas import DeviceStatePublic, HealthPublic
-from backend.state import AppState
+from backend.api.presenters import camera_state, motion_state
+from backend.api.schemas import HealthPublic
 
 router = APIRouter(prefix="/api", tags=["status"])
-
-
-def camera_state(state: AppState) -> DeviceStatePublic:
-    h = state.acquisition.health
-    return DeviceStatePublic(
-        driver=state.devices.camera.name,
-        state=h.state,
-        last_error=h.last_error,
-        error_count=h.error_count,
-    )
-
-
-def motion_state(state: AppState) -> DeviceStatePublic:
-    if state.devices.motion is None:
-        return DeviceStatePublic(driver="none", state="absent")
-    h = state.motion_health
-    return DeviceStatePublic(
-        driver=state.devices.motion.name,
-        state=h.state,
-        last_error=h.last_error,
-        error_count=h.error_count,
-    )
 
 
 @router.get("/health")

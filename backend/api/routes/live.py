@@ -26,7 +26,8 @@ from typing import Literal
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from pydantic import Field, ValidationError, field_validator
 
-from backend.api.schemas import StrictBody, pose_public
+from backend.api.presenters import pose_public
+from backend.api.schemas import StrictBody
 from backend.auth import token_matches
 from backend.services.acquisition import LiveSample, frame_point_cloud_mm
 from backend.services.imaging import downsample_png

@@ -11,33 +11,11 @@ import logging
 from fastapi import APIRouter, HTTPException, status
 
 from backend.api.deps import MotionDep, ReadAuth, StateDep, WriteAuth, unprocessable
-from backend.api.routes.health import motion_state
-from backend.api.schemas import AxisPublic, MotionPublic, MoveRequest
-from backend.state import AppState
+from backend.api.presenters import motion_public
+from backend.api.schemas import MotionPublic, MoveRequest
 
 log = logging.getLogger(__name__)
 router = APIRouter(prefix="/api/motion", tags=["motion"])
-
-
-def motion_public(state: AppState) -> MotionPublic:
-    motion = state.devices.motion
-    if motion is None:
-        return MotionPublic(driver="none", state="absent")
-    axes = [
-        AxisPublic(name=a.name, unit=a.unit, min_pos=a.min_pos, max_pos=a.max_pos,
-                   max_rate_per_s=a.max_rate)
-        for a in motion.axes.values()
-    ]  # fmt: skip
-    try:
-        st = motion.status()
-    except Exception as exc:
-        state.motion_health.record_failure(f"motion status failed: {exc}")
-        return MotionPublic(**motion_state(state).model_dump(), axes=axes)
-    state.motion_health.record_ok()
-    return MotionPublic(
-        **motion_state(state).model_dump(), axes=axes, positions=st.positions,
-        targets=st.targets, busy=st.busy, settled=st.settled, stopped=st.stopped,
-    )  # fmt: skip
 
 
 @router.get("", dependencies=[ReadAuth])

@@ -7,7 +7,8 @@ from typing import Annotated
 from fastapi import APIRouter, HTTPException, Query
 
 from backend.api.deps import ReadAuth, StateDep
-from backend.api.schemas import PosePublic, pose_public
+from backend.api.presenters import pose_public
+from backend.api.schemas import PosePublic
 
 router = APIRouter(prefix="/api/pose", tags=["pose"], dependencies=[ReadAuth])
 

@@ -9,6 +9,7 @@ import jsonschema
 import numpy as np
 import pytest
 
+from backend.api.presenters import pose_from_sample
 from backend.api.schemas import PosePublic
 from backend.drivers.base import CameraFrame
 from backend.services.acquisition import LiveSample, frame_point_cloud_mm
@@ -46,7 +47,7 @@ def sample_with_gaps() -> tuple[LiveSample, CameraModel]:
 
 def test_blob_without_distance_is_null_not_nan(sample_with_gaps):
     sample, _ = sample_with_gaps
-    body = _strict_json(PosePublic.from_sample(sample).model_dump_json())
+    body = _strict_json(pose_from_sample(sample).model_dump_json())
     jsonschema.validate(body, PosePublic.model_json_schema(mode="serialization"))
     assert body["unmatched"][0]["distance_mm"] is None
     assert body["unmatched"][1]["distance_mm"] == 2500.0

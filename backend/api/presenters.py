@@ -1,0 +1,163 @@
+"""Presenters: build the public schemas from what the services and drivers hold.
+
+The one place where route modules get their response objects from, so that routes do not
+import each other and schemas stay plain data.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+
+import numpy as np
+
+from backend.api.schemas import (
+    AxisPublic,
+    BlobPublic,
+    CameraSettingsPublic,
+    DeviceStatePublic,
+    MatchedPublic,
+    MotionPublic,
+    PosePublic,
+    TruthPublic,
+)
+from backend.drivers.base import CameraSettings
+from backend.services.acquisition import LiveSample
+from backend.state import AppState
+from tofpose.geometry import RigidTransform, euler_deg_from_rotation, rotation_angle_deg
+from tofpose.tof import unambiguous_range_mm
+
+
+def camera_state(state: AppState) -> DeviceStatePublic:
+    h = state.acquisition.health
+    return DeviceStatePublic(
+        driver=state.devices.camera.name,
+        state=h.state,
+        last_error=h.last_error,
+        error_count=h.error_count,
+    )
+
+
+def motion_state(state: AppState) -> DeviceStatePublic:
+    if state.devices.motion is None:
+        return DeviceStatePublic(driver="none", state="absent")
+    h = state.motion_health
+    return DeviceStatePublic(
+        driver=state.devices.motion.name,
+        state=h.state,
+        last_error=h.last_error,
+        error_count=h.error_count,
+    )
+
+
+def motion_public(state: AppState) -> MotionPublic:
+    """Axes with soft limits and the encoder read-back; a failing status read degrades
+    the motion state instead of failing the request."""
+    motion = state.devices.motion
+    if motion is None:
+        return MotionPublic(driver="none", state="absent")
+    axes = [
+        AxisPublic(name=a.name, unit=a.unit, min_pos=a.min_pos, max_pos=a.max_pos,
+                   max_rate_per_s=a.max_rate)
+        for a in motion.axes.values()
+    ]  # fmt: skip
+    try:
+        st = motion.status()
+    except Exception as exc:
+        state.motion_health.record_failure(f"motion status failed: {exc}")
+        return MotionPublic(**motion_state(state).model_dump(), axes=axes)
+    state.motion_health.record_ok()
+    return MotionPublic(
+        **motion_state(state).model_dump(), axes=axes, positions=st.positions,
+        targets=st.targets, busy=st.busy, settled=st.settled, stopped=st.stopped,
+    )  # fmt: skip
+
+
+def camera_settings_public(s: CameraSettings) -> CameraSettingsPublic:
+    return CameraSettingsPublic(
+        **asdict(s), unambiguous_range_mm=unambiguous_range_mm(s.modulation_frequency_mhz)
+    )
+
+
+def finite_or_none(value: float) -> float | None:
+    """JSON has no NaN/inf: a value the pipeline could not compute is sent as null."""
+    v = float(value)
+    return v if np.isfinite(v) else None
+
+
+def finite_list_or_none(values) -> list[float] | None:
+    """A vector is sent only when every component is finite, else null."""
+    out = [float(v) for v in values]
+    return out if all(np.isfinite(out)) else None
+
+
+def pose_from_sample(s: LiveSample) -> PosePublic:
+    """The public form of one processed frame; values that are not finite become null."""
+    r = s.result
+    pose: dict = {}
+    if r.ok and r.R is not None:
+        x, y, z = (float(v) for v in r.t_mm)
+        p, yw, rl = (float(v) for v in r.euler_deg)
+        pose = dict(x_mm=x, y_mm=y, z_mm=z, pitch_deg=p, yaw_deg=yw, roll_deg=rl)
+        pose["quaternion_wxyz"] = [float(v) for v in r.quaternion_wxyz]
+        if r.covariance is not None:
+            sd = np.sqrt(np.clip(np.diag(r.covariance), 0.0, None))
+            pose["attitude_sigma_deg"] = finite_list_or_none(np.degrees(sd[:3]))
+            pose["position_sigma_mm"] = finite_list_or_none(sd[3:])
+    truth = None
+    T = s.frame.T_truth
+    if T is not None:
+        truth = _truth(T, r.R if r.ok else None, r.t_mm if r.ok else None)
+    return PosePublic(
+        frame_index=s.frame.index,
+        frame_time_s=s.frame.time_s,
+        captured_unix_s=s.captured_unix_s,
+        processed_unix_s=s.processed_unix_s,
+        catalog=s.catalog_name,
+        ok=r.ok,
+        reason=r.reason,
+        n_candidates=r.n_candidates,
+        n_matched=r.n_matched,
+        matched=[
+            MatchedPublic(
+                catalog_id=m.catalog_id,
+                u_px=float(m.centroid_uv[0]),
+                v_px=float(m.centroid_uv[1]),
+                point_mm=[float(v) for v in m.point_mm],
+                distance_mm=float(m.distance_mm),
+                residual_mm=float(m.residual_mm),
+                area_px=int(m.area_px),
+                centroid_sigma_px=finite_or_none(m.centroid_sigma_px),
+                range_sigma_mm=finite_or_none(m.range_sigma_mm),
+            )
+            for m in r.matched
+        ],
+        unmatched=[
+            BlobPublic(u_px=float(u), v_px=float(v), distance_mm=finite_or_none(d))
+            for u, v, d in r.unmatched
+        ],
+        residual_mm=finite_or_none(r.residual_mm),
+        iterations=r.iterations,
+        frames_used=r.frames_used,
+        motion=r.motion,
+        timings_ms={k: float(v) for k, v in r.timings_ms.items()},
+        truth=truth,
+        **pose,
+    )
+
+
+def pose_public(sample: LiveSample) -> PosePublic:
+    """The sample's ``PosePublic``, built once and shared by REST and WebSocket."""
+    return sample.cached("pose_public", lambda: pose_from_sample(sample))
+
+
+def _truth(T: RigidTransform, R: np.ndarray | None, t_mm: np.ndarray | None) -> TruthPublic:
+    p, y, r = (float(v) for v in euler_deg_from_rotation(T.R))
+    err_pos = err_ang = None
+    if R is not None and t_mm is not None:
+        err_pos = float(np.linalg.norm(np.asarray(t_mm) - T.t_mm))
+        err_ang = float(rotation_angle_deg(T.R, R))
+    x, yy, z = (float(v) for v in T.t_mm)
+    return TruthPublic(
+        x_mm=x, y_mm=yy, z_mm=z, pitch_deg=p, yaw_deg=y, roll_deg=r,
+        position_error_mm=err_pos, attitude_error_deg=err_ang,
+    )  # fmt: skip
