@@ -10,6 +10,7 @@ from contextlib import asynccontextmanager
 from dataclasses import fields
 
 from fastapi import FastAPI, Request
+from fastapi_offline import FastAPIOffline
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, RedirectResponse
 from sqlalchemy.exc import IntegrityError
@@ -94,11 +95,14 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             devs.close()
             engine.dispose()
 
-    app = FastAPI(
+    # Swagger UI and ReDoc from files shipped in the fastapi-offline package, not a CDN:
+    # a lab machine without internet still gets its API docs (no page fetches off-host).
+    app = FastAPIOffline(
         title="tofpose",
         version=backend.__version__,
         summary="Pose of a cooperative target from a ToF camera, live, with a turntable.",
         lifespan=lifespan,
+        swagger_ui_parameters={"validatorUrl": None},  # no badge from validator.swagger.io
     )
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
 
