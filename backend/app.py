@@ -10,9 +10,9 @@ from contextlib import asynccontextmanager
 from dataclasses import fields
 
 from fastapi import FastAPI, Request
-from fastapi_offline import FastAPIOffline
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, RedirectResponse
+from fastapi_offline import FastAPIOffline
 from sqlalchemy.exc import IntegrityError
 
 import backend
