@@ -14,6 +14,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, RedirectResponse
 from fastapi_offline import FastAPIOffline
 from sqlalchemy.exc import IntegrityError
+from starlette.middleware.trustedhost import TrustedHostMiddleware
 
 import backend
 from backend.api.routes import camera, catalogs, frames, health, live, motion, pose
@@ -91,6 +92,7 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         try:
             yield
         finally:
+            app.state.tofpose.renderer.close()
             acq.stop()
             devs.close()
             engine.dispose()
@@ -105,6 +107,9 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         swagger_ui_parameters={"validatorUrl": None},  # no badge from validator.swagger.io
     )
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
+    # Outermost: a request naming a host we do not serve (DNS rebinding) gets 400 before
+    # anything else runs. Origin is checked on the WebSocket itself (routes/live.py).
+    app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.trusted_hosts)
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(_request: Request, exc: RequestValidationError) -> JSONResponse:

@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import ipaddress
 from pathlib import Path
+from typing import Annotated
+from urllib.parse import urlsplit
 
 from pydantic import Field, SecretStr, field_validator
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 LOOPBACK_NAMES = {"localhost", "localhost.localdomain"}
+LOOPBACK_HOST_HEADERS = ("localhost", "127.0.0.1", "[::1]")
+WILDCARD_BINDS = {"0.0.0.0", "::", ""}
 
 
 def is_loopback_host(host: str) -> bool:
@@ -30,6 +34,11 @@ class Settings(BaseSettings):
     api_token : bearer token for state-changing requests; when unset, one is generated on
         first start and stored in ``<data_dir>/api_token``.
     open_reads : allow unauthenticated reads; default: only when bound to loopback.
+    allowed_hosts : extra names the server answers to in the ``Host`` header (comma-separated
+        in the environment), beside the bind address and, on loopback, localhost,
+        127.0.0.1 and [::1]. A wildcard bind (0.0.0.0, ::) with none given accepts any.
+    allowed_origins : extra browser origins (``scheme://host:port``) that may open
+        ``/ws/live``, beside the server's own origin.
     """
 
     model_config = SettingsConfigDict(env_prefix="TOFPOSE_", extra="ignore")
@@ -53,6 +62,34 @@ class Settings(BaseSettings):
     camera_timeout_s: float = Field(2.0, gt=0)
     retry_backoff_s: tuple[float, float] = (0.05, 2.0)
     max_body_bytes: int = Field(1_000_000, ge=1024)
+    allowed_hosts: Annotated[list[str], NoDecode] = Field(default_factory=list)
+    allowed_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
+
+    @field_validator("allowed_hosts", "allowed_origins", mode="before")
+    @classmethod
+    def _comma_list(cls, v: object) -> object:
+        if isinstance(v, str):
+            return [item.strip() for item in v.split(",") if item.strip()]
+        return v
+
+    @field_validator("allowed_origins")
+    @classmethod
+    def _origins(cls, v: list[str]) -> list[str]:
+        out = []
+        for origin in v:
+            parts = urlsplit(origin)
+            if (
+                parts.scheme not in ("http", "https")
+                or not parts.netloc
+                or parts.path
+                not in (
+                    "",
+                    "/",
+                )
+            ):
+                raise ValueError(f"allowed origin must look like http://host:port, got {origin!r}")
+            out.append(f"{parts.scheme}://{parts.netloc}".lower())
+        return out
 
     @field_validator("camera")
     @classmethod
@@ -73,6 +110,17 @@ class Settings(BaseSettings):
         if self.database_url:
             return self.database_url
         return f"sqlite:///{(self.data_dir / 'tofpose.db').resolve()}"
+
+    @property
+    def trusted_hosts(self) -> list[str]:
+        """Names accepted in the ``Host`` header (DNS-rebinding defence); ["*"] = any."""
+        if self.host in WILDCARD_BINDS and not self.allowed_hosts:
+            return ["*"]
+        bind = f"[{self.host}]" if ":" in self.host else self.host
+        names = [bind, *self.allowed_hosts]
+        if is_loopback_host(self.host) or self.host in WILDCARD_BINDS:
+            names += LOOPBACK_HOST_HEADERS
+        return list(dict.fromkeys(n.lower() for n in names))
 
     @property
     def reads_are_open(self) -> bool:

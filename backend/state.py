@@ -12,6 +12,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from backend.drivers.factory import Devices
 from backend.services.acquisition import AcquisitionService, DeviceHealth
 from backend.services.hub import LiveHub
+from backend.services.imaging import ImageRenderer
 from backend.settings import Settings
 
 
@@ -24,6 +25,7 @@ class AppState:
     devices: Devices
     hub: LiveHub
     acquisition: AcquisitionService
+    renderer: ImageRenderer = field(default_factory=ImageRenderer)
     motion_health: DeviceHealth = field(default_factory=lambda: DeviceHealth(state="ok"))
     started_monotonic: float = field(default_factory=time.monotonic)
 

@@ -15,7 +15,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -46,9 +46,25 @@ class LiveSample:
     cache: dict[str, Any] = field(default_factory=dict)
 
     def cached(self, key: str, make: Callable[[], Any]) -> Any:
+        """Small serialised forms only (JSON); rendered images live in the bounded
+        ``ImageRenderer`` cache, never here."""
         if key not in self.cache:
             self.cache[key] = make()
         return self.cache[key]
+
+    @property
+    def has_images(self) -> bool:
+        return self.frame.gray.size > 0
+
+    def without_images(self) -> LiveSample:
+        """The same result with the frame's images dropped (shape (0, 0)): what the
+        history keeps, so that its memory is the results', not 450 kB of pixels each."""
+        frame = replace(self.frame, gray=_NO_GRAY, distance_mm=_NO_DISTANCE)
+        return replace(self, frame=frame, cache={})
+
+
+_NO_GRAY = np.zeros((0, 0), np.uint16)
+_NO_DISTANCE = np.zeros((0, 0), np.float32)
 
 
 @dataclass
@@ -133,6 +149,7 @@ class AcquisitionService:
         return self._pipeline.catalog
 
     def history(self, n: int) -> list[LiveSample]:
+        """The last ``n`` results, oldest first, without their images."""
         items = list(self._history)
         return items[-n:] if n > 0 else []
 
@@ -205,7 +222,7 @@ class AcquisitionService:
             self.health.record_ok()
             sample = LiveSample(frame, result, self._catalog_name, captured, time.time())
             self._latest = sample
-            self._history.append(sample)
+            self._history.append(sample.without_images())
             self.frames_processed += 1
             try:
                 self.hub.publish(sample)

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+
 import cv2
 import numpy as np
 
@@ -106,3 +111,83 @@ def downsample_png(kind: str, gray: np.ndarray, distance_mm: np.ndarray, step: i
     if not ok:
         raise RuntimeError("PNG encoding failed")
     return buf.tobytes()
+
+
+class ImageRenderer:
+    """Renders PNGs off the event loop and off the acquisition thread, in bounded memory
+    and bounded work.
+
+    One worker thread renders (OpenCV releases the GIL while it resizes and encodes; one
+    renderer cannot starve the acquisition loop however many clients ask). The cache
+    holds one entry per *variant* (kind and options), not per frame: a request for the
+    latest frame gets that variant's render if it is of the latest frame or still in
+    progress, and starts a new render only when the cached one is done and older; the
+    worker renders at most ``max_duty`` of the time. So at
+    most one render per variant is ever queued (requests faster than the renderer get a
+    frame or two older, named in the result), and memory is at most one PNG per variant:
+    32 variants (16 REST, 16 WebSocket) of at most ~1 MB each.
+    """
+
+    def __init__(self, workers: int = 1, max_duty: float = 0.5) -> None:
+        if not 0.0 < max_duty <= 1.0:
+            raise ValueError(f"max_duty must be in (0, 1], got {max_duty}")
+        self.max_duty = max_duty
+        self._next_start = 0.0  # monotonic time before which the worker rests
+        self._pool = ThreadPoolExecutor(workers, thread_name_prefix="render")
+        self._cache: dict[tuple, tuple[int, Future]] = {}
+        self._lock = threading.Lock()
+        self.renders = 0  # how many PNGs were actually encoded (for tests and status)
+        self.busy_s = 0.0  # time spent rendering
+
+    def _get(self, variant: tuple, frame_index: int, make: Callable[[], bytes]) -> Future:
+        """Future of (frame_index, png) for ``variant``; see the class docstring."""
+        with self._lock:
+            entry = self._cache.get(variant)
+            if entry is not None:
+                cached_index, fut = entry
+                if cached_index >= frame_index or not fut.done():
+                    return fut
+
+            def run() -> tuple[int, bytes]:
+                # Duty cycle: after a render of dt, rest dt (1/duty - 1), so that open
+                # reads can never take more than max_duty of a core from the live loop.
+                time.sleep(max(0.0, self._next_start - time.monotonic()))
+                t0 = time.monotonic()
+                png = make()
+                t1 = time.monotonic()
+                self._next_start = t1 + (t1 - t0) * (1.0 / self.max_duty - 1.0)
+                self.renders += 1
+                self.busy_s += t1 - t0
+                return frame_index, png
+
+            fut = self._pool.submit(run)
+            self._cache[variant] = (frame_index, fut)
+            return fut
+
+    def png(
+        self, frame_index: int, kind: str, gray: np.ndarray, distance_mm: np.ndarray,
+        result: PoseResult | None, *, overlay: bool, scale: int,
+    ) -> Future:  # fmt: skip
+        """Future of (frame_index, PNG bytes) of ``render_png(...)``."""
+        return self._get(
+            ("png", kind, overlay, scale),
+            frame_index,
+            lambda: render_png(kind, gray, distance_mm, result, overlay=overlay, scale=scale),
+        )
+
+    def stream_png(
+        self, frame_index: int, kind: str, gray: np.ndarray, distance_mm: np.ndarray, step: int
+    ) -> Future:
+        """Future of (frame_index, PNG bytes) of ``downsample_png(...)`` (live images)."""
+        return self._get(
+            ("stream", kind, step),
+            frame_index,
+            lambda: downsample_png(kind, gray, distance_mm, step),
+        )
+
+    def cached_entries(self) -> int:
+        with self._lock:
+            return len(self._cache)
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=False, cancel_futures=True)

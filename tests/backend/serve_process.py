@@ -29,11 +29,22 @@ class ServeProcess:
         self.base_url = f"http://127.0.0.1:{self.port}"
         cmd = [sys.executable, "-m", "tofpose.cli", "serve", "--port", str(self.port),
                "--data-dir", str(data_dir), *args]  # fmt: skip
+        # Output to a file, not a pipe: a server logging every request would block on a
+        # full pipe that nobody reads.
+        data_dir.parent.mkdir(parents=True, exist_ok=True)
+        self._log_path = data_dir.parent / f"serve-{self.port}.log"
+        self._log = open(self._log_path, "w")  # noqa: SIM115 (closed in stop)
         self.proc = subprocess.Popen(
-            cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+            cmd, stdout=self._log, stderr=subprocess.STDOUT, text=True,
             env={**os.environ, **(env or {})},
         )  # fmt: skip
-        self.output = ""
+
+    @property
+    def output(self) -> str:
+        """Everything the server printed so far."""
+        if not self._log.closed:
+            self._log.flush()
+        return self._log_path.read_text()
 
     def get_json(self, path: str, timeout_s: float = 5.0):
         with urllib.request.urlopen(self.base_url + path, timeout=timeout_s) as r:
@@ -43,7 +54,7 @@ class ServeProcess:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
-                raise AssertionError(f"server exited early:\n{self.proc.stdout.read()}")
+                raise AssertionError(f"server exited early:\n{self.output}")
             try:
                 h = self.get_json("/api/health", 2.0)
                 if h["camera"]["state"] == "ok":
@@ -71,12 +82,13 @@ class ServeProcess:
         if self.proc.poll() is None:
             self.proc.send_signal(sig)
         try:
-            out, _ = self.proc.communicate(timeout=timeout_s)
+            self.proc.wait(timeout=timeout_s)
         except subprocess.TimeoutExpired:
             self.proc.kill()
-            self.output += self.proc.communicate()[0]
+            self.proc.wait()
             raise
-        self.output += out
+        finally:
+            self._log.close() if self.proc.poll() is not None else None
         return time.monotonic() - t0
 
     def __enter__(self) -> ServeProcess:

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
+import asyncio
 from enum import StrEnum
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Query, Response
 
 from backend.api.deps import ReadAuth, StateDep
-from backend.services.imaging import render_png
 
 router = APIRouter(prefix="/api/frames", tags=["frames"], dependencies=[ReadAuth])
 
@@ -23,7 +23,7 @@ class ImageKind(StrEnum):
     response_class=Response,
     responses={200: {"content": {"image/png": {}}}, 404: {"description": "no frame yet"}},
 )
-def latest_png(
+async def latest_png(
     kind: ImageKind,
     state: StateDep,
     overlay: Annotated[bool, Query(description="draw blobs, centroids and catalog ids")] = False,
@@ -33,13 +33,13 @@ def latest_png(
     if sample is None:
         raise HTTPException(404, "no frame has been captured yet")
     f = sample.frame
-    png = sample.cached(
-        f"png:{kind.value}:{int(overlay)}:{scale}",
-        lambda: render_png(kind.value, f.gray, f.distance_mm, sample.result,
-                           overlay=overlay, scale=scale),
-    )  # fmt: skip
+    # Rendered on the renderer's own thread (not the event loop, not the acquisition
+    # thread), shared with identical requests, kept in a small LRU: see ImageRenderer.
+    fut = state.renderer.png(f.index, kind.value, f.gray, f.distance_mm, sample.result,
+                             overlay=overlay, scale=scale)  # fmt: skip
+    index, png = await asyncio.wrap_future(fut)
     return Response(
         png,
         media_type="image/png",
-        headers={"Cache-Control": "no-store", "X-Frame-Index": str(f.index)},
+        headers={"Cache-Control": "no-store", "X-Frame-Index": str(index)},
     )

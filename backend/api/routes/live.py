@@ -22,6 +22,7 @@ import base64
 import contextlib
 import json
 from typing import Literal
+from urllib.parse import urlsplit
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from pydantic import Field, ValidationError, field_validator
@@ -30,7 +31,6 @@ from backend.api.presenters import pose_public
 from backend.api.schemas import StrictBody
 from backend.auth import token_matches
 from backend.services.acquisition import LiveSample, frame_point_cloud_mm
-from backend.services.imaging import downsample_png
 from backend.state import AppState
 
 router = APIRouter(tags=["live"])
@@ -53,15 +53,14 @@ def pose_json(sample: LiveSample) -> str:
     return sample.cached("pose_json", lambda: pose_public(sample).model_dump_json())
 
 
-def image_message(sample: LiveSample, kind: str, step: int) -> str:
-    def make() -> str:
-        png = downsample_png(kind, sample.frame.gray, sample.frame.distance_mm, step)
-        return json.dumps({
-            "type": "image", "kind": kind, "frame_index": sample.frame.index, "step": step,
-            "png_base64": base64.b64encode(png).decode(),
-        })  # fmt: skip
-
-    return sample.cached(f"img:{kind}:{step}", make)
+async def image_message(sample: LiveSample, state: AppState, kind: str, step: int) -> str:
+    f = sample.frame
+    fut = state.renderer.stream_png(f.index, kind, f.gray, f.distance_mm, step)
+    index, png = await asyncio.wrap_future(fut)
+    return json.dumps({
+        "type": "image", "kind": kind, "frame_index": index, "step": step,
+        "png_base64": base64.b64encode(png).decode(),
+    })  # fmt: skip
 
 
 def points_message(sample: LiveSample, state: AppState) -> str:
@@ -89,9 +88,31 @@ async def _read_options(ws: WebSocket, opts: dict[str, LiveOptions]) -> None:
             await ws.send_text(json.dumps({"type": "error", "message": f"bad options: {msg}"}))
 
 
+def origin_allowed(origin: str | None, host: str | None, allowed: list[str]) -> bool:
+    """A browser's WebSocket is accepted from the server's own origin (the dashboard) or
+    an allow-listed one; clients that send no Origin (scripts, not browsers) pass."""
+    if origin is None:
+        return True
+    parts = urlsplit(origin)
+    if f"{parts.scheme}://{parts.netloc}".lower() in allowed:
+        return True
+    return (
+        parts.scheme in ("http", "https")
+        and host is not None
+        and (parts.netloc.lower() == host.lower())
+    )
+
+
 @router.websocket("/ws/live")
 async def live(ws: WebSocket) -> None:
     state: AppState = ws.app.state.tofpose
+    origin = ws.headers.get("origin")
+    if not origin_allowed(origin, ws.headers.get("host"), state.settings.allowed_origins):
+        await ws.close(
+            code=POLICY_VIOLATION,
+            reason=f"cross-origin WebSocket refused: {origin[:100]} (TOFPOSE_ALLOWED_ORIGINS)",
+        )
+        return
     if not state.settings.reads_are_open and not token_matches(
         state.token, ws.query_params.get("token")
     ):
@@ -123,7 +144,7 @@ async def live(ws: WebSocket) -> None:
             o = opts["current"]
             if o.images and n % o.image_every == 0:
                 for kind in o.images:
-                    await ws.send_text(image_message(sample, kind, o.image_step))
+                    await ws.send_text(await image_message(sample, state, kind, o.image_step))
             if o.points:
                 await ws.send_text(points_message(sample, state))
             n += 1

@@ -79,6 +79,11 @@ def test_results_history_and_publication(service):
     assert idx == sorted(idx) and len(idx) == 5
     assert sub.get(1.0).frame.index >= 1
     assert svc.health.state == "ok"
+    # The history keeps results, not pixels; the latest frame and subscribers keep both.
+    assert s.has_images and sub.get(1.0).has_images
+    past = svc.history(20)
+    assert not any(x.has_images for x in past)
+    assert all(x.result.ok and x.result.n_matched == 8 for x in past)
     pts, ids = frame_point_cloud_mm(s, cam.model)
     assert pts.shape == (8 + len(s.result.unmatched), 3) and len(ids) == len(pts)
 

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import time
+
 import cv2
 import numpy as np
+import pytest
 
 from backend.services.imaging import (
     MATCHED_BGR,
+    ImageRenderer,
     distance_to_bgr,
     downsample_png,
     gray_to_u8,
@@ -60,3 +64,47 @@ def test_downsampled_png_has_the_reduced_size():
     f = render(facing_pose(2000.0), seed=0)
     assert _decode(downsample_png("gray", f.gray, f.distance_mm, 4)).shape[:2] == (60, 80)
     assert _decode(downsample_png("distance", f.gray, f.distance_mm, 1)).shape[:2] == (240, 320)
+
+
+def _renderer_inputs():
+    f = render(facing_pose(2000.0, 2, -3, 5))
+    return f.gray, f.distance_mm
+
+
+def test_renderer_renders_each_variant_once_per_frame_and_shares_it():
+    gray, dist = _renderer_inputs()
+    r = ImageRenderer(max_duty=1.0)
+    try:
+        a = r.png(7, "gray", gray, dist, None, overlay=False, scale=2)
+        b = r.png(7, "gray", gray, dist, None, overlay=False, scale=2)
+        assert a is b and a.result(5)[0] == 7
+        assert _decode(a.result()[1]).shape[:2] == (480, 640)
+        c = r.png(8, "gray", gray, dist, None, overlay=False, scale=2)  # a newer frame
+        assert c is not a and c.result(5)[0] == 8
+        r.png(8, "distance", gray, dist, None, overlay=False, scale=2).result(5)
+        r.stream_png(8, "gray", gray, dist, 2).result(5)
+        assert r.renders == 4
+        assert r.cached_entries() == 3  # one per variant, never one per frame
+    finally:
+        r.close()
+
+
+def test_renderer_rests_between_renders_to_cap_its_cpu_share():
+    gray, dist = _renderer_inputs()
+    r = ImageRenderer(max_duty=0.25)
+    try:
+        t0 = time.monotonic()
+        for i in range(4):
+            r.png(i, "distance", gray, dist, None, overlay=False, scale=4).result(10)
+        elapsed = time.monotonic() - t0
+    finally:
+        r.close()
+    # a rest of 3x the render time after each render: rendering is <= 1/4 of the time
+    # from the first start to the end of the last render (3 rests in 4 renders)
+    assert r.renders == 4
+    assert r.busy_s / elapsed < 0.25 * 4 / 3 * 1.1, (r.busy_s, elapsed)
+
+
+def test_renderer_refuses_a_bad_duty_cycle():
+    with pytest.raises(ValueError, match="max_duty"):
+        ImageRenderer(max_duty=0.0)

@@ -1,0 +1,67 @@
+"""Open reads at full speed cannot grow the server's memory or slow the live loop.
+
+A real ``tofpose serve`` subprocess (so RSS is the server's alone); 12 clients fetch
+every PNG variant of the latest frame as fast as they can for 12 s. docs/server.md
+states the ceiling this checks.
+"""
+
+from __future__ import annotations
+
+import itertools
+import threading
+import time
+
+import httpx
+
+from tests.backend.serve_process import ServeProcess
+
+RSS_CEILING_MB = 350.0  # docs/server.md, "Memory"
+VARIANTS = [
+    f"/api/frames/latest/{kind}.png?overlay={o}&scale={s}"
+    for kind in ("gray", "distance")
+    for o in (0, 1)
+    for s in (1, 2, 3, 4)
+]
+
+
+def _rate_hz(server: ServeProcess, seconds: float) -> float:
+    f0 = server.get_json("/api/devices")["camera"]["frames_processed"]
+    t0 = time.monotonic()
+    time.sleep(seconds)
+    f1 = server.get_json("/api/devices", 10.0)["camera"]["frames_processed"]
+    return (f1 - f0) / (time.monotonic() - t0)
+
+
+def test_png_reads_at_full_speed_keep_memory_bounded_and_the_live_rate(tmp_path):
+    with ServeProcess(tmp_path / "data") as server:
+        idle_rate = _rate_hz(server, 4.0)
+        stop_at = time.monotonic() + 12.0
+        served, errors = [0], []
+
+        def client(offset: int) -> None:
+            with httpx.Client(base_url=server.base_url, timeout=20) as c:
+                for path in itertools.islice(itertools.cycle(VARIANTS), offset, None):
+                    if time.monotonic() > stop_at:
+                        return
+                    r = c.get(path)
+                    if r.status_code != 200 or r.content[:4] != b"\x89PNG":
+                        errors.append(f"{path}: {r.status_code}")
+                        return
+                    served[0] += 1
+
+        threads = [threading.Thread(target=client, args=(i,)) for i in range(12)]
+        for t in threads:
+            t.start()
+        rss = []
+        time.sleep(1.0)
+        loaded_rate = _rate_hz(server, 8.0)
+        while any(t.is_alive() for t in threads):
+            rss.append(server.rss_mb())
+            time.sleep(0.5)
+        for t in threads:
+            t.join()
+        rss.append(server.rss_mb())
+    assert not errors, errors[:3]
+    assert served[0] > 100
+    assert max(rss) < RSS_CEILING_MB, f"RSS peaked at {max(rss):.0f} MB"
+    assert loaded_rate > 0.7 * idle_rate, (idle_rate, loaded_rate)
