@@ -64,5 +64,11 @@ def serve(overrides: dict) -> int:
         return 2
     app = create_app(settings, devices)
     print(text, flush=True)
-    uvicorn.run(app, host=settings.host, port=settings.port, log_level="info")
+    # After SIGTERM/SIGINT, connections get shutdown_timeout_s to close; then their tasks
+    # are cancelled and the app shuts down anyway (a WebSocket client that never reads
+    # cannot keep the server alive: its socket's write buffer never drains).
+    uvicorn.run(
+        app, host=settings.host, port=settings.port, log_level="info",
+        timeout_graceful_shutdown=settings.shutdown_timeout_s,
+    )  # fmt: skip
     return 0

@@ -62,6 +62,7 @@ class Settings(BaseSettings):
     camera_timeout_s: float = Field(2.0, gt=0)
     retry_backoff_s: tuple[float, float] = (0.05, 2.0)
     max_body_bytes: int = Field(1_000_000, ge=1024)
+    shutdown_timeout_s: float = Field(3.0, gt=0, le=60)
     allowed_hosts: Annotated[list[str], NoDecode] = Field(default_factory=list)
     allowed_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
 

@@ -113,3 +113,22 @@ def test_soft_limit_errors_print_the_value_with_its_digits(client):
     assert r.status_code == 422
     text = _detail_text(r)
     assert "-170.0001 deg" in text and "[-170, 170]" in text
+
+
+@pytest.mark.parametrize(
+    ("authorization", "status"),
+    [
+        (None, 401),
+        ("Bearer wrong-token", 401),
+        ("Basic dGVzdDp0ZXN0", 401),
+        ("Bearer", 401),
+        ("bearer test-token-0123456789", 202),  # scheme names are case-insensitive
+        ("Bearer test-token-0123456789", 202),
+    ],
+)
+def test_authorization_header_variants(client, authorization, status):
+    headers = {"Authorization": authorization} if authorization else {}
+    r = client.post("/api/motion/move", json={"yaw_deg": 0.5}, headers=headers)
+    assert r.status_code == status, r.text
+    if status == 401:
+        assert r.headers["www-authenticate"] == "Bearer"
