@@ -43,7 +43,7 @@ def pose_errors(R_est, t_est, T_true) -> tuple[float, float]:
 def relative_euler_deg(R) -> np.ndarray:
     """(pitch, yaw, roll) deg of R relative to the facing reference diag(1, -1, -1).
 
-    With DESIGN.md's frames a target facing the camera has R = diag(1, -1, -1), i.e.
+    With docs/architecture.md's frames a target facing the camera has R = diag(1, -1, -1), i.e.
     pitch = +-180 deg; reports use R @ diag(1, -1, -1) so that face-on reads ~0 like the
     paper's tables.
     """

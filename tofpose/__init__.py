@@ -2,7 +2,7 @@
 
 Implements Zhu et al., "System Design for Pose Determination of Spacecraft Using
 Time-of-Flight Sensors" (Space: Science & Technology, 2022). Lengths are millimetres,
-angles radians inside the maths and degrees at the edges. See ``DESIGN.md``.
+angles radians inside the maths and degrees at the edges. See ``docs/architecture.md``.
 """
 
 from tofpose.camera import CameraModel

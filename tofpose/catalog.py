@@ -1,6 +1,6 @@
 """Target reflector catalogs: the built-in ``paper-target``, validation, JSON I/O.
 
-Catalog JSON (DESIGN.md §7)::
+Catalog JSON (docs/architecture.md §7)::
 
     {"name": str, "reflectors": [{"id": int, "position_mm": [x, y, z], "diameter_mm": d}]}
 
@@ -144,7 +144,7 @@ def validate_reflectors(reflectors: tuple[Reflector, ...]) -> None:
 
 
 PAPER_TARGET_TABLE = (
-    # id, x, y, z, diameter (mm) -- DESIGN.md §4
+    # id, x, y, z, diameter (mm) -- docs/architecture.md §4
     (1, -300.0, -150.0, 100.0, 35.0),
     (2, -300.0, -30.0, 150.0, 35.0),
     (3, -300.0, 120.0, 100.0, 35.0),

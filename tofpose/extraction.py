@@ -1,6 +1,6 @@
 """Reflector extraction (§3): active pixel set, nLoG, blob criteria, centroids, ellipses.
 
-All functions take arrays. Range adaptivity (DESIGN.md §4): instead of the paper's fixed
+All functions take arrays. Range adaptivity (docs/architecture.md §4): instead of the paper's fixed
 pixel-count window (H_min = 95, H_max = 225 px, tuned for one range), each connected
 component's expected size is predicted from its measured distance and the catalog
 diameters, ``d_px = f * D_mm / rho``; intensity thresholds are relative to the frame's

@@ -1,6 +1,6 @@
 """Rotations, the Euler convention and rigid transforms (numpy + scipy only).
 
-Conventions (DESIGN.md §3): ``T_a_b`` maps points of frame b into frame a,
+Conventions (docs/architecture.md §3): ``T_a_b`` maps points of frame b into frame a,
 ``y = R_a_b @ x + t_a_b``. Euler angles are (pitch, yaw, roll) with
 ``R = Rz(roll) @ Ry(yaw) @ Rx(pitch)``, i.e. scipy's extrinsic ``"xyz"`` sequence.
 """

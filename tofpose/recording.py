@@ -1,4 +1,4 @@
-"""HDF5 recordings (DESIGN.md §7): one file per recording, frames with optional truth.
+"""HDF5 recordings (docs/architecture.md §7): one file per recording, frames with optional truth.
 
 ::
 

@@ -1,7 +1,7 @@
 """SQLAlchemy 2 models. Alembic migrations in ``migrations/`` create exactly these
 (tests/backend/db/test_migrations.py compares them).
 
-Units are in the column names (DESIGN.md §3): mm, deg, s.
+Units are in the column names (docs/architecture.md §3): mm, deg, s.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The two device interfaces the backend talks to (DESIGN.md §8).
+"""The two device interfaces the backend talks to (docs/architecture.md §8).
 
 A camera yields (gray, distance, time) frame pairs and accepts settings; a motion system
 moves axes to set-points, reports encoder positions and busy/settled state, and stops at

@@ -1,4 +1,4 @@
-"""Replay of an HDF5 recording (DESIGN.md §7) as a camera, looping, at the recorded rate
+"""Replay of an HDF5 recording (docs/architecture.md §7) as a camera, looping, at the recorded rate
 or a chosen one."""
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Rendering of a ToF frame pair (gray, radial distance) from a posed scene.
 
-Physics (DESIGN.md §6), per pixel:
+Physics (docs/architecture.md §6), per pixel:
 
 1. Ray casting at the pixel centre finds the surface; pixels whose 3 x 3 neighbourhood
    holds more than one surface are supersampled on an S x S grid.

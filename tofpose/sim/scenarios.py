@@ -113,7 +113,7 @@ def _clutter() -> Scenario:
 
 
 SCENARIOS: dict[str, Callable[[], Scenario]] = {
-    # At 697 mm the camera sees ~540 x 400 mm of the marker plane; with the DESIGN.md
+    # At 697 mm the camera sees ~540 x 400 mm of the marker plane; with the docs/architecture.md
     # layout it is aimed at (110, -55) mm on the plate so that reflectors 4-7 are in
     # view (the paper saw 5-6 with its own, unpublished layout).
     "stability-697": lambda: _stability(697.0, (-110.0, -55.0)),
