@@ -1,9 +1,9 @@
 """Simulated camera and turntable sharing one simulated lab (tofpose.sim).
 
 The lab: the target stands ``target_distance_mm`` from the turntable centre; the camera
-rides the turntable on a rail that moves it towards the target (docs/architecture.md §6). Time is the
-wall clock since the world was made, so the turntable moves in real time and the camera
-sees what it does.
+rides the turntable on a rail that moves it towards the target (docs/architecture.md
+§6). Time is the wall clock since the world was made, so the turntable moves in real
+time and the camera sees what it does.
 """
 
 from __future__ import annotations
