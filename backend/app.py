@@ -5,18 +5,22 @@ acquisition loop, and tears them down again."""
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from dataclasses import fields
 
 from fastapi import FastAPI, Request
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse, RedirectResponse
+from fastapi.responses import JSONResponse, RedirectResponse, Response
 from fastapi_offline import FastAPIOffline
 from sqlalchemy.exc import IntegrityError
+from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 
 import backend
+from backend.api.contract import complete_openapi, operation_id
 from backend.api.routes import camera, catalogs, frames, health, live, motion, pose
 from backend.api.routes import devices as devices_route
 from backend.auth import load_or_create_token
@@ -62,6 +66,30 @@ def _restore_camera_settings(sessions, devices: Devices) -> None:
         log.warning("stored camera settings not applied: %s", exc)
 
 
+HTTP_METHODS = {"get", "put", "post", "delete", "patch", "head", "options"}
+AXIS_FIELDS = {"yaw": "yaw_deg", "pitch": "pitch_deg", "roll": "roll_deg", "rail": "rail_mm"}
+
+
+def _soft_limits(app: FastAPI) -> dict[str, tuple[float, float]] | None:
+    """Soft limits by request field once the app runs (None before: nothing known yet)."""
+    state = getattr(app.state, "tofpose", None)
+    if state is None:
+        return None
+    motion = state.devices.motion
+    axes = motion.axes.values() if motion is not None else ()
+    return {AXIS_FIELDS[a.name]: (a.min_pos, a.max_pos) for a in axes if a.name in AXIS_FIELDS}
+
+
+def methods_for_path(app: FastAPI, path: str) -> list[str]:
+    """Every HTTP method the API document lists for this request path (sorted)."""
+    methods: set[str] = set()
+    for template, item in app.openapi().get("paths", {}).items():
+        pattern = re.sub(r"\\\{[^}]+\\\}", "[^/]+", re.escape(template))
+        if re.fullmatch(pattern, path):
+            methods |= {m.upper() for m in item if m in HTTP_METHODS}
+    return sorted(methods)
+
+
 def create_app(settings: Settings | None = None, devices: Devices | None = None) -> FastAPI:
     """Build the app. ``devices`` overrides the drivers named in ``settings`` (tests)."""
     settings = settings or Settings()
@@ -105,7 +133,9 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         summary="Pose of a cooperative target from a ToF camera, live, with a turntable.",
         lifespan=lifespan,
         swagger_ui_parameters={"validatorUrl": None},  # no badge from validator.swagger.io
+        generate_unique_id_function=operation_id,
     )
+    app.openapi = lambda: complete_openapi(app, _soft_limits(app))  # type: ignore[method-assign]
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     # Outermost: a request naming a host we do not serve (DNS rebinding) gets 400 before
     # anything else runs. Origin is checked on the WebSocket itself (routes/live.py).
@@ -116,6 +146,16 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         # FastAPI's default, minus the echoed input (which can be a huge body).
         errors = [{k: v for k, v in e.items() if k in ("loc", "msg", "type")} for e in exc.errors()]
         return JSONResponse({"detail": errors}, status_code=422)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http_error(request: Request, exc: StarletteHTTPException) -> Response:
+        if exc.status_code == 405:
+            # Starlette's Allow lists the methods of the first route that matched the path
+            # only; a path served by several routes (GET + PUT) must list them all.
+            allowed = methods_for_path(app, request.url.path)
+            headers = {**(exc.headers or {}), "Allow": ", ".join(allowed)}
+            return JSONResponse({"detail": exc.detail}, status_code=405, headers=headers)
+        return await http_exception_handler(request, exc)
 
     @app.exception_handler(IntegrityError)
     async def _conflict(_request: Request, exc: IntegrityError) -> JSONResponse:

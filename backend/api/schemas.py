@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic.json_schema import SkipJsonSchema
 
 
 class StrictBody(BaseModel):
@@ -155,12 +156,27 @@ class PosePublic(BaseModel):
 
 # -- motion ------------------------------------------------------------------------------
 class MoveRequest(StrictBody):
-    """Axis set-points; axes left out stay where they are. At least one is required."""
+    """Axis set-points; axes left out stay where they are. At least one is required, and
+    ``null`` is not a set-point (leave the axis out instead)."""
 
-    yaw_deg: float | None = None
-    pitch_deg: float | None = None
-    roll_deg: float | None = None
-    rail_mm: float | None = None
+    model_config = ConfigDict(json_schema_extra={"minProperties": 1})
+
+    yaw_deg: float | SkipJsonSchema[None] = None
+    pitch_deg: float | SkipJsonSchema[None] = None
+    roll_deg: float | SkipJsonSchema[None] = None
+    rail_mm: float | SkipJsonSchema[None] = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_nulls(cls, data: object) -> object:
+        if isinstance(data, dict):
+            nulls = [k for k, v in data.items() if v is None]
+            if nulls:
+                raise ValueError(
+                    f"{', '.join(nulls)}: null is not a set-point; leave the axis out to keep "
+                    "it where it is"
+                )
+        return data
 
     def setpoints(self) -> dict[str, float]:
         names = {"yaw_deg": "yaw", "pitch_deg": "pitch", "roll_deg": "roll", "rail_mm": "rail"}

@@ -8,6 +8,7 @@ from dataclasses import asdict, replace
 
 from fastapi import APIRouter, HTTPException
 
+from backend.api.contract import errors
 from backend.api.deps import ReadAuth, StateDep, WriteAuth
 from backend.api.presenters import camera_settings_public
 from backend.api.schemas import CameraSettingsPublic, CameraSettingsUpdate
@@ -18,12 +19,14 @@ APPLY_TIMEOUT_S = 5.0
 
 
 @router.get("/settings", dependencies=[ReadAuth])
-def get_settings(state: StateDep) -> CameraSettingsPublic:
+def get_camera_settings(state: StateDep) -> CameraSettingsPublic:
     return camera_settings_public(state.devices.camera.get_settings())
 
 
-@router.put("/settings", dependencies=[WriteAuth])
-async def put_settings(body: CameraSettingsUpdate, state: StateDep) -> CameraSettingsPublic:
+@router.put("/settings", dependencies=[WriteAuth], responses=errors(503, 504))
+async def update_camera_settings(
+    body: CameraSettingsUpdate, state: StateDep
+) -> CameraSettingsPublic:
     """Change some or all settings; returns what the camera actually uses (it may clamp)."""
     cam = state.devices.camera
     wanted = replace(cam.get_settings(), **body.model_dump(exclude_none=True))

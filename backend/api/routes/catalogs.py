@@ -7,6 +7,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Path, status
 
+from backend.api.contract import errors
 from backend.api.deps import ReadAuth, SessionDep, StateDep, WriteAuth, unprocessable
 from backend.api.schemas import ActiveCatalogPublic, CatalogCreate, CatalogPublic, ReflectorModel
 from backend.services.store import (
@@ -43,7 +44,9 @@ def list_catalogs(state: StateDep, session: SessionDep) -> list[CatalogPublic]:
     return out
 
 
-@router.post("", status_code=status.HTTP_201_CREATED, dependencies=[WriteAuth])
+@router.post(
+    "", status_code=status.HTTP_201_CREATED, dependencies=[WriteAuth], responses=errors(409)
+)
 def create_catalog(body: CatalogCreate, state: StateDep, session: SessionDep) -> CatalogPublic:
     """Add a catalog (positions in the target frame, mm). 409 if the name exists; 422 if
     the geometry is unusable (duplicate ids, collinear, ...)."""
@@ -63,7 +66,7 @@ def create_catalog(body: CatalogCreate, state: StateDep, session: SessionDep) ->
     return _public(body.name, cat, builtin=False, active=state.acquisition.catalog_name)
 
 
-@router.get("/{name}", dependencies=[ReadAuth])
+@router.get("/{name}", dependencies=[ReadAuth], responses=errors(404))
 def get_catalog(name: NameParam, state: StateDep, session: SessionDep) -> CatalogPublic:
     cat = find_catalog(session, name)
     if cat is None:
@@ -72,8 +75,8 @@ def get_catalog(name: NameParam, state: StateDep, session: SessionDep) -> Catalo
                    active=state.acquisition.catalog_name)  # fmt: skip
 
 
-@router.post("/{name}/activate", dependencies=[WriteAuth])
-async def activate(name: NameParam, state: StateDep) -> ActiveCatalogPublic:
+@router.post("/{name}/activate", dependencies=[WriteAuth], responses=errors(404, 409, 503, 504))
+async def activate_catalog(name: NameParam, state: StateDep) -> ActiveCatalogPublic:
     """Make the live pipeline use this catalog (kept across restarts)."""
 
     def lookup() -> Catalog | None:
@@ -83,7 +86,12 @@ async def activate(name: NameParam, state: StateDep) -> ActiveCatalogPublic:
     cat = await asyncio.to_thread(lookup)
     if cat is None:
         raise HTTPException(404, f"no catalog named {name!r}")
-    await asyncio.wait_for(asyncio.wrap_future(state.acquisition.set_catalog(name, cat)), 10.0)
+    try:
+        await asyncio.wait_for(asyncio.wrap_future(state.acquisition.set_catalog(name, cat)), 10.0)
+    except TimeoutError as exc:
+        raise HTTPException(504, "the acquisition loop did not switch catalogs in time") from exc
+    except RuntimeError as exc:  # acquisition stopped (shutting down)
+        raise HTTPException(503, f"the catalog was not switched: {exc}") from exc
 
     def persist() -> None:
         with state.sessions() as session:

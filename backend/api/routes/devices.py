@@ -12,7 +12,7 @@ router = APIRouter(prefix="/api", tags=["status"], dependencies=[ReadAuth])
 
 
 @router.get("/devices")
-def devices(state: StateDep) -> DevicesPublic:
+def get_devices(state: StateDep) -> DevicesPublic:
     cam = state.devices.camera
     m = cam.model
     camera = CameraDevicePublic(

@@ -8,6 +8,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Query, Response
 
+from backend.api.contract import errors
 from backend.api.deps import ReadAuth, StateDep
 
 router = APIRouter(prefix="/api/frames", tags=["frames"], dependencies=[ReadAuth])
@@ -21,9 +22,9 @@ class ImageKind(StrEnum):
 @router.get(
     "/latest/{kind}.png",
     response_class=Response,
-    responses={200: {"content": {"image/png": {}}}, 404: {"description": "no frame yet"}},
+    responses={200: {"content": {"image/png": {}}}, **errors(404)},
 )
-async def latest_png(
+async def get_latest_frame_png(
     kind: ImageKind,
     state: StateDep,
     overlay: Annotated[bool, Query(description="draw blobs, centroids and catalog ids")] = False,

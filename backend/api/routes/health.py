@@ -14,7 +14,7 @@ router = APIRouter(prefix="/api", tags=["status"])
 
 
 @router.get("/health")
-def health(state: StateDep) -> HealthPublic:
+def get_health(state: StateDep) -> HealthPublic:
     """Always answers (no auth): overall status and the state of each device."""
     try:
         with state.engine.connect() as conn:

@@ -10,6 +10,7 @@ import logging
 
 from fastapi import APIRouter, HTTPException, status
 
+from backend.api.contract import errors
 from backend.api.deps import MotionDep, ReadAuth, StateDep, WriteAuth, unprocessable
 from backend.api.presenters import motion_public
 from backend.api.schemas import MotionPublic, MoveRequest
@@ -24,8 +25,13 @@ def get_motion(state: StateDep) -> MotionPublic:
     return motion_public(state)
 
 
-@router.post("/move", status_code=status.HTTP_202_ACCEPTED, dependencies=[WriteAuth])
-def move(body: MoveRequest, state: StateDep, motion: MotionDep) -> MotionPublic:
+@router.post(
+    "/move",
+    status_code=status.HTTP_202_ACCEPTED,
+    dependencies=[WriteAuth],
+    responses=errors(503),
+)
+def move_axes(body: MoveRequest, state: StateDep, motion: MotionDep) -> MotionPublic:
     """Start a move; returns at once (poll GET /api/motion for busy/settled).
 
     422 names every axis that is unknown to this motion system or outside its soft
@@ -53,8 +59,8 @@ def move(body: MoveRequest, state: StateDep, motion: MotionDep) -> MotionPublic:
     return motion_public(state)
 
 
-@router.post("/stop", dependencies=[WriteAuth])
-def stop(state: StateDep, motion: MotionDep) -> MotionPublic:
+@router.post("/stop", dependencies=[WriteAuth], responses=errors(503))
+def stop_motion(state: StateDep, motion: MotionDep) -> MotionPublic:
     """Emergency stop: every axis stops where it is. Always accepted."""
     try:
         motion.stop()

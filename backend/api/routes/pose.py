@@ -6,6 +6,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Query
 
+from backend.api.contract import errors
 from backend.api.deps import ReadAuth, StateDep
 from backend.api.presenters import pose_public
 from backend.api.schemas import PosePublic
@@ -13,8 +14,8 @@ from backend.api.schemas import PosePublic
 router = APIRouter(prefix="/api/pose", tags=["pose"], dependencies=[ReadAuth])
 
 
-@router.get("/latest", responses={404: {"description": "no frame processed yet"}})
-def latest(state: StateDep) -> PosePublic:
+@router.get("/latest", responses=errors(404))
+def get_latest_pose(state: StateDep) -> PosePublic:
     """The last result: ok/reason, pose (mm, deg, quaternion), matched reflectors with
     pixel centroids and 3-D points, residual, stage timings, frame time, truth if known."""
     sample = state.acquisition.latest
@@ -24,6 +25,8 @@ def latest(state: StateDep) -> PosePublic:
 
 
 @router.get("/history")
-def history(state: StateDep, n: Annotated[int, Query(ge=1, le=100_000)] = 100) -> list[PosePublic]:
+def get_pose_history(
+    state: StateDep, n: Annotated[int, Query(ge=1, le=100_000)] = 100
+) -> list[PosePublic]:
     """The last ``n`` results, oldest first (bounded by the server's history size)."""
     return [pose_public(s) for s in state.acquisition.history(n)]
