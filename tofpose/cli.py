@@ -95,7 +95,7 @@ def simulate(
         Catalog.from_json(_read_text(catalog_path, "catalog")) if catalog_path else paper_target()
     )
     camera = CameraModel()
-    with RecordingWriter(out, camera, catalog, with_truth=True) as w:
+    with RecordingWriter(out, camera, catalog, with_truth=True, with_lab_truth=True) as w:
         for bf in tqdm(
             run_scenario(scenario, n_frames, seed=seed, catalog=catalog),
             total=n_frames,
@@ -108,8 +108,10 @@ def simulate(
                 bf.frame.gray,
                 bf.frame.distance_mm,
                 bf.time_s,
-                bf.T_lab_truth.R,
-                bf.T_lab_truth.t_mm,
+                bf.T_true.R,  # /truth: the pose the simulator rendered
+                bf.T_true.t_mm,
+                lab_R_camera_target=bf.T_lab_truth.R,  # /lab_truth: encoders + nominal
+                lab_t_camera_target_mm=bf.T_lab_truth.t_mm,
             )
 
 

@@ -10,6 +10,12 @@
     /frames/time_s        float64 (N,)
     /truth/R_camera_target     float64 (N, 3, 3)                          optional
     /truth/t_camera_target_mm  float64 (N, 3)                             optional
+    /lab_truth/R_camera_target     float64 (N, 3, 3)                      optional
+    /lab_truth/t_camera_target_mm  float64 (N, 3)                         optional
+
+``/truth`` is the pose that produced each frame (on the simulator: what was rendered);
+``/lab_truth`` is what the lab believed (encoders + nominal mount and placement), the
+only reference a real lab has. A simulated recording carries both.
 """
 
 from __future__ import annotations
@@ -46,6 +52,7 @@ class RecordingWriter:
         catalog: Catalog | None = None,
         *,
         with_truth: bool = False,
+        with_lab_truth: bool = False,
         compression: str | None = "gzip",
     ) -> None:
         self.path = Path(path)
@@ -71,15 +78,8 @@ class RecordingWriter:
             "distance_mm", (0, h, w), np.float32, maxshape=(None, h, w), chunks=(1, h, w), **opts
         )
         self._time = fr.create_dataset("time_s", (0,), np.float64, maxshape=(None,), chunks=(1024,))
-        self._truth = with_truth
-        if with_truth:
-            tr = f.create_group("truth")
-            self._R = tr.create_dataset(
-                "R_camera_target", (0, 3, 3), np.float64, maxshape=(None, 3, 3), chunks=(256, 3, 3)
-            )
-            self._t = tr.create_dataset(
-                "t_camera_target_mm", (0, 3), np.float64, maxshape=(None, 3), chunks=(256, 3)
-            )
+        self._truth = _pose_datasets(f, "truth") if with_truth else None
+        self._lab_truth = _pose_datasets(f, "lab_truth") if with_lab_truth else None
         self.n = 0
 
     def append(
@@ -89,8 +89,12 @@ class RecordingWriter:
         time_s: float,
         R_camera_target: np.ndarray | None = None,
         t_camera_target_mm: np.ndarray | None = None,
+        *,
+        lab_R_camera_target: np.ndarray | None = None,
+        lab_t_camera_target_mm: np.ndarray | None = None,
     ) -> None:
-        """Add one frame; truth is required iff the writer was opened ``with_truth``."""
+        """Add one frame; truth (lab truth) is required iff the writer was opened
+        ``with_truth`` (``with_lab_truth``)."""
         shape = (self.camera.height, self.camera.width)
         if gray.shape != shape or distance_mm.shape != shape:
             raise ValueError(f"frame shapes {gray.shape}, {distance_mm.shape} != camera {shape}")
@@ -100,13 +104,17 @@ class RecordingWriter:
         self._gray[n] = gray.astype(np.uint16)
         self._dist[n] = distance_mm.astype(np.float32)
         self._time[n] = time_s
-        if self._truth:
-            if R_camera_target is None or t_camera_target_mm is None:
-                raise ValueError("this recording stores truth: pass R and t for every frame")
-            self._R.resize(n + 1, axis=0)
-            self._t.resize(n + 1, axis=0)
-            self._R[n] = R_camera_target
-            self._t[n] = t_camera_target_mm
+        for name, datasets, R, t in (
+            ("truth", self._truth, R_camera_target, t_camera_target_mm),
+            ("lab truth", self._lab_truth, lab_R_camera_target, lab_t_camera_target_mm),
+        ):
+            if datasets is None:
+                continue
+            if R is None or t is None:
+                raise ValueError(f"this recording stores {name}: pass R and t for every frame")
+            for ds, value in zip(datasets, (R, t), strict=True):
+                ds.resize(n + 1, axis=0)
+                ds[n] = value
         self.n += 1
 
     def close(self) -> None:
@@ -120,12 +128,40 @@ class RecordingWriter:
         self.close()
 
 
+def _pose_datasets(f: h5py.File, group: str) -> tuple[h5py.Dataset, h5py.Dataset]:
+    """Resizable (N, 3, 3) rotation and (N, 3) translation datasets under ``group``."""
+    g = f.create_group(group)
+    R = g.create_dataset(
+        "R_camera_target", (0, 3, 3), np.float64, maxshape=(None, 3, 3), chunks=(256, 3, 3)
+    )
+    t = g.create_dataset(
+        "t_camera_target_mm", (0, 3), np.float64, maxshape=(None, 3), chunks=(256, 3)
+    )
+    return R, t
+
+
+def _read_poses(f: h5py.File, group: str, n: int, path) -> tuple[np.ndarray, np.ndarray] | None:
+    """(R (N, 3, 3), t (N, 3)) of ``/group``, None if absent; RecordingError if malformed."""
+    if group not in f:
+        return None
+    if f"{group}/R_camera_target" not in f or f"{group}/t_camera_target_mm" not in f:
+        raise RecordingError(f"{path}: /{group} needs both R_camera_target and t_camera_target_mm")
+    R = f[f"{group}/R_camera_target"][...]
+    t = f[f"{group}/t_camera_target_mm"][...]
+    if R.shape != (n, 3, 3) or t.shape != (n, 3):
+        raise RecordingError(
+            f"{path}: /{group} shapes {R.shape}, {t.shape} do not match {n} frames"
+        )
+    return R, t
+
+
 @dataclass
 class Recording:
     """An open recording (read-only). Frames are read lazily; use as a context manager.
 
     camera : CameraModel; catalog : Catalog or None; n_frames : int;
     time_s : ndarray (N,); truth_R : ndarray (N, 3, 3) or None; truth_t_mm : (N, 3) or None.
+    lab_truth_R, lab_truth_t_mm : the lab's reference, same shapes, or None.
     """
 
     path: Path
@@ -136,6 +172,8 @@ class Recording:
     truth_R: np.ndarray | None
     truth_t_mm: np.ndarray | None
     _file: h5py.File
+    lab_truth_R: np.ndarray | None = None
+    lab_truth_t_mm: np.ndarray | None = None
 
     def frame(self, i: int) -> tuple[np.ndarray, np.ndarray, float]:
         """(gray (H, W) uint16, distance (H, W) float32, time_s) of frame i."""
@@ -220,19 +258,11 @@ def open_recording(path: str | Path) -> Recording:
                 f"{path}: frame counts disagree (gray {n}, distance {d.shape[0]}, "
                 f"time_s {t.shape[0]})"
             )
-        truth_R = truth_t = None
-        if "truth" in f:
-            if "truth/R_camera_target" not in f or "truth/t_camera_target_mm" not in f:
-                raise RecordingError(
-                    f"{path}: /truth needs both R_camera_target and t_camera_target_mm"
-                )
-            truth_R = f["truth/R_camera_target"][...]
-            truth_t = f["truth/t_camera_target_mm"][...]
-            if truth_R.shape != (n, 3, 3) or truth_t.shape != (n, 3):
-                raise RecordingError(
-                    f"{path}: truth shapes {truth_R.shape}, {truth_t.shape} do not match {n} frames"
-                )
-        return Recording(path, camera, catalog, n, t[...], truth_R, truth_t, f)
+        truth = _read_poses(f, "truth", n, path)
+        lab = _read_poses(f, "lab_truth", n, path)
+        truth_R, truth_t = truth if truth is not None else (None, None)
+        lab_R, lab_t = lab if lab is not None else (None, None)
+        return Recording(path, camera, catalog, n, t[...], truth_R, truth_t, f, lab_R, lab_t)
     except RecordingError:
         f.close()
         raise

@@ -59,3 +59,32 @@ def test_bad_inputs_exit_with_a_message(tmp_path, capsys):
         simulate_with(tmp_path / "missing.json")
     assert simulate_with(bad_cat) == 2
     assert "duplicate reflector ids" in capsys.readouterr().err
+
+
+def test_simulated_truth_is_what_was_rendered_and_lab_truth_is_apart(tmp_path):
+    """/truth is the rendered pose; /lab_truth (encoders + nominal geometry) differs from
+    it by the simulated mount and placement errors, and the pipeline agrees with /truth."""
+    import numpy as np
+
+    from tofpose.recording import open_recording
+    from tofpose.sim.scenarios import get_scenario, run_scenario
+
+    rec = tmp_path / "r.h5"
+    assert (
+        main(["simulate", "--scenario", "stability-697", "--frames", "3", "--out", str(rec)]) == 0
+    )
+    expected = list(run_scenario(get_scenario("stability-697"), 3, seed=0))
+    with open_recording(rec) as r:
+        for i, bf in enumerate(expected):
+            np.testing.assert_allclose(r.truth_R[i], bf.T_true.R, atol=1e-12)
+            np.testing.assert_allclose(r.truth_t_mm[i], bf.T_true.t_mm, atol=1e-9)
+            np.testing.assert_allclose(r.lab_truth_t_mm[i], bf.T_lab_truth.t_mm, atol=1e-9)
+        lab_off = np.linalg.norm(r.lab_truth_t_mm - r.truth_t_mm, axis=1)
+        assert np.all(lab_off > 0.5)  # the mount error the lab does not know
+    out = tmp_path / "poses.csv"
+    assert main(["estimate", str(rec), "--out", str(out)]) == 0
+    rows = list(csv.DictReader(out.open()))
+    with open_recording(rec) as r:
+        for i, row in enumerate(rows):
+            est = np.array([float(row[k]) for k in ("x_mm", "y_mm", "z_mm")])
+            assert np.linalg.norm(est - r.truth_t_mm[i]) < 2.0 < lab_off[i] + 2.0

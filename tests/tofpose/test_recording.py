@@ -76,3 +76,22 @@ def test_truncated_file_is_a_clear_error(tmp_path):
     with pytest.raises(RecordingError), open_recording(p) as rec:
         for _ in rec.frames():
             pass
+
+
+def test_lab_truth_is_stored_beside_truth_and_checked(tmp_path):
+    p = tmp_path / "r.h5"
+    cam = CameraModel()
+    g = np.zeros((240, 320), np.uint16)
+    d = np.full((240, 320), 1000.0, np.float32)
+    with RecordingWriter(p, cam, with_truth=True, with_lab_truth=True) as w:
+        with pytest.raises(ValueError, match="stores lab truth"):
+            w.append(g, d, 0.0, np.eye(3), np.zeros(3))
+        lab = {"lab_R_camera_target": np.eye(3), "lab_t_camera_target_mm": np.array([2, 0, 1e3])}
+        w.append(g, d, 0.0, np.eye(3), np.array([0, 0, 1000.0]), **lab)
+    with open_recording(p) as rec:
+        np.testing.assert_allclose(rec.truth_t_mm, [[0, 0, 1000]])
+        np.testing.assert_allclose(rec.lab_truth_t_mm, [[2, 0, 1000]])
+    with h5py.File(p, "a") as f:
+        del f["lab_truth/R_camera_target"]
+    with pytest.raises(RecordingError, match="/lab_truth needs both"):
+        open_recording(p)
