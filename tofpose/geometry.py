@@ -32,6 +32,16 @@ def euler_deg_from_rotation(R: np.ndarray) -> np.ndarray:
     return Rotation.from_matrix(R).as_euler(EULER_SEQUENCE, degrees=True)
 
 
+FACING = np.diag([1.0, -1.0, -1.0])  # R_camera_target of a target squarely facing the camera
+
+
+def facing_euler_deg(R_camera_target: np.ndarray) -> np.ndarray:
+    """(pitch, yaw, roll) in degrees, shape (3,), of ``R_camera_target @ diag(1, -1, -1)``:
+    the attitude as people read it (docs/architecture.md §3). A target squarely facing
+    the camera reads (0, 0, 0) instead of (+/-180, 0, 0), so it never flips sign."""
+    return euler_deg_from_rotation(np.asarray(R_camera_target) @ FACING)
+
+
 def quaternion_wxyz_from_rotation(R: np.ndarray) -> np.ndarray:
     """Unit quaternion (w, x, y, z), shape (4,), with w >= 0."""
     x, y, z, w = Rotation.from_matrix(R).as_quat()

@@ -53,23 +53,40 @@ class CatalogRow(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 
+CAMPAIGN_STATES = (
+    "draft", "queued", "running", "paused", "interrupted", "done", "failed", "cancelled",
+)  # fmt: skip
+POSE_FIELDS = ("x_mm", "y_mm", "z_mm", "pitch_deg", "yaw_deg", "roll_deg")
+
+
 class CampaignRow(Base):
     """A turntable test campaign: a set-point sequence measured N frames per point.
 
-    status : draft, queued, running, paused, done, failed, aborted.
+    status : one of ``CAMPAIGN_STATES`` (docs/campaigns.md has the state diagram).
+    settle_s : wait after the turntable reports settled before frames count (device time).
+    requirements : per-axis accuracy requirements, e.g. {"x_mm": 6.0, ..., "roll_deg": 0.15}.
+    generator : the generator request the set-points came from, or None for explicit ones.
+    status_reason : why the campaign is paused / failed / interrupted.
     """
 
     __tablename__ = "campaigns"
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    name: Mapped[str] = mapped_column(String(200))
+    name: Mapped[str] = mapped_column(String(200), unique=True)
     status: Mapped[str] = mapped_column(String(16), default="draft", index=True)
+    status_reason: Mapped[str] = mapped_column(Text, default="")
     catalog_name: Mapped[str] = mapped_column(String(128))
     frames_per_point: Mapped[int] = mapped_column(Integer, default=30)
-    dwell_s: Mapped[float] = mapped_column(Float, default=1.0)
-    notes: Mapped[str] = mapped_column(Text, default="")
+    settle_s: Mapped[float] = mapped_column(Float, default=1.0)
+    lock_timeout_s: Mapped[float] = mapped_column(Float, default=5.0)
+    requirements: Mapped[dict[str, float]] = mapped_column(JSON)
+    generator: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
     camera_settings: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    record_raw: Mapped[bool] = mapped_column(Boolean, default=False)
+    recording_path: Mapped[str | None] = mapped_column(Text, nullable=True)
+    notes: Mapped[str] = mapped_column(Text, default="")
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    scheduled_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
     started_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
     finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
 
@@ -81,7 +98,8 @@ class CampaignRow(Base):
 class SetPointRow(Base):
     """One set-point of a campaign; None for an axis means "leave it where it is".
 
-    status : pending, running, done, failed.
+    status : pending or done. A set-point becomes done in the same transaction that
+    stores its measurements, so a crash never leaves half a set-point counted.
     """
 
     __tablename__ = "setpoints"
@@ -99,15 +117,25 @@ class SetPointRow(Base):
 
     campaign: Mapped[CampaignRow] = relationship(back_populates="setpoints")
     measurements: Mapped[list[MeasurementRow]] = relationship(
-        back_populates="setpoint", cascade="all, delete-orphan"
+        back_populates="setpoint", cascade="all, delete-orphan", order_by="MeasurementRow.id"
     )
 
 
 class MeasurementRow(Base):
-    """One frame measured at a set-point: the pose, and the lab's ground truth
-    (encoders + nominal geometry) when known."""
+    """One frame measured at a set-point.
+
+    Pose: position mm, attitude as people read it (facing Euler, docs/architecture.md §3),
+    raw quaternion of R_camera_target, the pipeline's own 1-sigma. ``truth_*``: the pose
+    that produced the frame when the source knows it (simulator); ``lab_truth_*``: what
+    the lab computes from the encoders and the nominal geometry. ``encoders``: axis
+    read-back at capture (deg / mm). ``recording_index``: frame number in the campaign's
+    raw recording, when one is kept.
+    """
 
     __tablename__ = "measurements"
+    __table_args__ = (
+        UniqueConstraint("setpoint_id", "frame_index", name="uq_measurement_frame"),
+    )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     setpoint_id: Mapped[int] = mapped_column(
@@ -129,12 +157,23 @@ class MeasurementRow(Base):
     qx: Mapped[float | None] = mapped_column(Float, nullable=True)
     qy: Mapped[float | None] = mapped_column(Float, nullable=True)
     qz: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sigma_x_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sigma_y_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sigma_z_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sigma_attitude_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     truth_x_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
     truth_y_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
     truth_z_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
     truth_pitch_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     truth_yaw_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     truth_roll_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    lab_truth_x_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    lab_truth_y_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    lab_truth_z_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    lab_truth_pitch_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    lab_truth_yaw_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    lab_truth_roll_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     encoders: Mapped[dict[str, float] | None] = mapped_column(JSON, nullable=True)
+    recording_index: Mapped[int | None] = mapped_column(Integer, nullable=True)
 
     setpoint: Mapped[SetPointRow] = relationship(back_populates="measurements")

@@ -47,3 +47,12 @@ def test_transform_compose_inverse():
     np.testing.assert_allclose(a.compose(b).apply(x), a.apply(b.apply(x)))
     np.testing.assert_allclose(a.inverse().apply(a.apply(x)), x, atol=1e-12)
     np.testing.assert_allclose(a.as_matrix()[:3, 3], a.t_mm)
+
+
+def test_facing_euler_reads_zero_face_on_and_never_flips():
+    from tofpose.geometry import FACING, facing_euler_deg, rotation_from_euler_deg
+
+    np.testing.assert_allclose(facing_euler_deg(FACING), [0, 0, 0], atol=1e-12)
+    for angles in ([0.01, -0.02, 0.0], [-0.01, 0.02, 0.0], [3.0, -4.0, 10.0]):
+        R = rotation_from_euler_deg(*angles) @ FACING  # tilted from facing
+        np.testing.assert_allclose(facing_euler_deg(R), angles, atol=1e-9)

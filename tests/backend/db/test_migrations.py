@@ -29,7 +29,7 @@ def test_empty_file_becomes_a_current_wal_database(tmp_path):
     upgrade_database(engine)
     with engine.connect() as conn:
         assert conn.execute(text("PRAGMA journal_mode")).scalar() == "wal"
-        assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0002"
+        assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0003"
     assert {"catalogs", "campaigns", "setpoints", "measurements"} <= set(
         inspect(engine).get_table_names()
     )
@@ -66,7 +66,7 @@ def test_campaign_rows_cascade_to_setpoints_and_measurements(tmp_path):
     engine = make_engine(f"sqlite:///{tmp_path / 'c.db'}")
     upgrade_database(engine)
     with Session(engine) as s:
-        camp = CampaignRow(name="yaw sweep", catalog_name="paper-target")
+        camp = CampaignRow(name="yaw sweep", catalog_name="paper-target", requirements={})
         sp = SetPointRow(index=0, yaw_deg=10.0)
         sp.measurements.append(MeasurementRow(frame_index=1, frame_time_s=0.1, ok=True,
                                               x_mm=1.0, truth_x_mm=1.2))  # fmt: skip
