@@ -21,7 +21,7 @@ from starlette.middleware.trustedhost import TrustedHostMiddleware
 
 import backend
 from backend.api.contract import complete_openapi, operation_id
-from backend.api.routes import camera, catalogs, frames, health, live, motion, pose
+from backend.api.routes import camera, campaigns, catalogs, frames, health, live, motion, pose
 from backend.api.routes import devices as devices_route
 from backend.auth import load_or_create_token
 from backend.db.engine import make_engine, make_session_factory, upgrade_database
@@ -29,6 +29,7 @@ from backend.drivers.base import CameraSettings
 from backend.drivers.factory import Devices, build_devices
 from backend.limits import BodySizeLimit
 from backend.services.acquisition import AcquisitionService
+from backend.services.campaigns import CampaignService
 from backend.services.hub import LiveHub
 from backend.services.store import find_catalog, load_device_settings
 from backend.settings import Settings
@@ -115,11 +116,18 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             timeout_s=settings.camera_timeout_s,
             backoff_s=settings.retry_backoff_s,
         )  # fmt: skip
-        app.state.tofpose = AppState(settings, token, engine, sessions, devs, hub, acq)
+        campaigns = CampaignService(sessions, acq, hub, devs.motion)
+        interrupted = campaigns.recover()
+        if interrupted:
+            log.warning("%d campaign(s) were running when the server stopped: interrupted "
+                        "(resume them to continue)", interrupted)  # fmt: skip
+        app.state.tofpose = AppState(settings, token, engine, sessions, devs, hub, acq, campaigns)
         acq.start()
+        campaigns.start()
         try:
             yield
         finally:
+            campaigns.stop()  # a running campaign is left interrupted (resumable)
             app.state.tofpose.renderer.close()
             acq.stop()
             devs.close()
@@ -168,7 +176,7 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             status_code=409,
         )  # fmt: skip
 
-    for module in (health, devices_route, camera, pose, frames, motion, catalogs, live):
+    for module in (health, devices_route, camera, pose, frames, motion, catalogs, campaigns, live):
         app.include_router(module.router)
 
     @app.get("/", include_in_schema=False)

@@ -57,6 +57,7 @@ class Settings(BaseSettings):
     sim_target_distance_mm: float = Field(15000.0, gt=0)
     sim_start_rail_mm: float = Field(13000.0, ge=0)
     sim_seed: int = 0
+    sim_time_scale: float = Field(1.0, ge=0.01, le=1000.0)
     history_size: int = Field(600, ge=1, le=100_000)
     subscriber_queue: int = Field(8, ge=1, le=1000)
     camera_timeout_s: float = Field(2.0, gt=0)

@@ -11,6 +11,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from backend.drivers.factory import Devices
 from backend.services.acquisition import AcquisitionService, DeviceHealth
+from backend.services.campaigns import CampaignService
 from backend.services.hub import LiveHub
 from backend.services.imaging import ImageRenderer
 from backend.settings import Settings
@@ -25,6 +26,7 @@ class AppState:
     devices: Devices
     hub: LiveHub
     acquisition: AcquisitionService
+    campaigns: CampaignService
     renderer: ImageRenderer = field(default_factory=ImageRenderer)
     motion_health: DeviceHealth = field(default_factory=lambda: DeviceHealth(state="ok"))
     started_monotonic: float = field(default_factory=time.monotonic)

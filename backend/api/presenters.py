@@ -14,12 +14,18 @@ from backend.api.schemas import (
     AxisPublic,
     BlobPublic,
     CameraSettingsPublic,
+    CampaignPublic,
     DeviceStatePublic,
     MatchedPublic,
+    MeasurementPublic,
     MotionPublic,
     PosePublic,
+    ProgressPublic,
+    Requirements,
+    SetPointPublic,
     TruthPublic,
 )
+from backend.db.models import POSE_FIELDS, CampaignRow, MeasurementRow
 from backend.drivers.base import CameraSettings
 from backend.services.acquisition import LiveSample
 from backend.state import AppState
@@ -160,4 +166,45 @@ def _truth(T: RigidTransform, R: np.ndarray | None, t_mm: np.ndarray | None) -> 
     return TruthPublic(
         x_mm=x, y_mm=yy, z_mm=z, pitch_deg=p, yaw_deg=y, roll_deg=r,
         position_error_mm=err_pos, attitude_error_deg=err_ang,
+    )  # fmt: skip
+
+
+def campaign_public(
+    row: CampaignRow,
+    progress: dict | None,
+    estimated_duration_s: float,
+    *,
+    with_setpoints: bool = False,
+) -> CampaignPublic:
+    n_done = sum(1 for sp in row.setpoints if sp.status == "done")
+    return CampaignPublic(
+        id=row.id, name=row.name, status=row.status, status_reason=row.status_reason,
+        catalog=row.catalog_name, frames_per_point=row.frames_per_point,
+        settle_s=row.settle_s, lock_timeout_s=row.lock_timeout_s,
+        requirements=Requirements(**row.requirements), generator=row.generator,
+        camera=row.camera_settings, notes=row.notes, created_at=row.created_at,
+        scheduled_at=row.scheduled_at, started_at=row.started_at,
+        finished_at=row.finished_at, n_setpoints=len(row.setpoints), n_done=n_done,
+        estimated_duration_s=estimated_duration_s,
+        progress=ProgressPublic(**progress) if progress else None,
+        setpoints=[
+            SetPointPublic(index=sp.index, yaw_deg=sp.yaw_deg, pitch_deg=sp.pitch_deg,
+                           roll_deg=sp.roll_deg, rail_mm=sp.rail_mm, status=sp.status)
+            for sp in row.setpoints
+        ] if with_setpoints else None,
+    )  # fmt: skip
+
+
+def _pose_dict(m: MeasurementRow, prefix: str) -> dict[str, float] | None:
+    values = {k: getattr(m, prefix + k) for k in POSE_FIELDS}
+    return values if all(v is not None for v in values.values()) else None
+
+
+def measurement_public(m: MeasurementRow, setpoint_index: int) -> MeasurementPublic:
+    return MeasurementPublic(
+        setpoint_index=setpoint_index, frame_index=m.frame_index, time_s=m.frame_time_s,
+        ok=m.ok, reason=m.reason, n_matched=m.n_matched, residual_mm=m.residual_mm,
+        x_mm=m.x_mm, y_mm=m.y_mm, z_mm=m.z_mm, pitch_deg=m.pitch_deg, yaw_deg=m.yaw_deg,
+        roll_deg=m.roll_deg, truth=_pose_dict(m, "truth_"),
+        lab_truth=_pose_dict(m, "lab_truth_"), encoders=m.encoders,
     )  # fmt: skip

@@ -3,9 +3,10 @@ name (docs/architecture.md). Building them from services' types is ``presenters`
 
 from __future__ import annotations
 
+from datetime import datetime
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import AwareDatetime, BaseModel, ConfigDict, Field, model_validator
 from pydantic.json_schema import SkipJsonSchema
 
 
@@ -155,16 +156,11 @@ class PosePublic(BaseModel):
 
 
 # -- motion ------------------------------------------------------------------------------
-class MoveRequest(StrictBody):
-    """Axis set-points; axes left out stay where they are. At least one is required, and
-    ``null`` is not a set-point (leave the axis out instead)."""
+class AxisBody(StrictBody):
+    """Axis set-points (yaw, pitch, roll in deg, rail in mm); an axis left out stays where
+    it is. At least one is required, and ``null`` is not a set-point."""
 
     model_config = ConfigDict(json_schema_extra={"minProperties": 1})
-
-    yaw_deg: float | SkipJsonSchema[None] = None
-    pitch_deg: float | SkipJsonSchema[None] = None
-    roll_deg: float | SkipJsonSchema[None] = None
-    rail_mm: float | SkipJsonSchema[None] = None
 
     @model_validator(mode="before")
     @classmethod
@@ -178,9 +174,21 @@ class MoveRequest(StrictBody):
                 )
         return data
 
+    def axes(self) -> dict[str, float]:
+        """{"yaw": deg, "rail": mm, ...} of the axes given."""
+        return {k.rsplit("_", 1)[0]: v for k, v in self.model_dump().items() if v is not None}
+
+
+class MoveRequest(AxisBody):
+    """A manual move; refused with 409 while a campaign owns the motion system."""
+
+    yaw_deg: float | SkipJsonSchema[None] = None
+    pitch_deg: float | SkipJsonSchema[None] = None
+    roll_deg: float | SkipJsonSchema[None] = None
+    rail_mm: float | SkipJsonSchema[None] = None
+
     def setpoints(self) -> dict[str, float]:
-        names = {"yaw_deg": "yaw", "pitch_deg": "pitch", "roll_deg": "roll", "rail_mm": "rail"}
-        return {names[k]: v for k, v in self.model_dump().items() if v is not None}
+        return self.axes()
 
 
 # -- catalogs ----------------------------------------------------------------------------
@@ -206,3 +214,181 @@ class CatalogPublic(BaseModel):
 
 class ActiveCatalogPublic(BaseModel):
     catalog: str
+
+
+# -- campaigns ---------------------------------------------------------------------------
+MAX_SETPOINTS = 5000
+MAX_FRAMES_PER_POINT = 100_000
+MAX_FRAMES_PER_CAMPAIGN = 1_000_000
+AngleDeg = Annotated[float, Field(ge=-360.0, le=360.0)]
+RailMm = Annotated[float, Field(ge=0.0, le=100_000.0)]
+
+
+class SetPointModel(AxisBody):
+    """Axis set-points of one campaign point; an axis left out stays where it is."""
+
+    yaw_deg: AngleDeg | SkipJsonSchema[None] = None
+    pitch_deg: AngleDeg | SkipJsonSchema[None] = None
+    roll_deg: AngleDeg | SkipJsonSchema[None] = None
+    rail_mm: RailMm | SkipJsonSchema[None] = None
+
+
+class Requirements(StrictBody):
+    """Accuracy requirements per axis (default: the paper's, §6.4): a set-point passes an
+    axis when the largest |error| after singular-point removal is within it."""
+
+    x_mm: float = Field(6.0, gt=0, le=1e5)
+    y_mm: float = Field(6.0, gt=0, le=1e5)
+    z_mm: float = Field(28.3, gt=0, le=1e5)
+    pitch_deg: float = Field(0.15, gt=0, le=180)
+    yaw_deg: float = Field(0.15, gt=0, le=180)
+    roll_deg: float = Field(0.15, gt=0, le=180)
+
+
+AxisValues = Annotated[list[AngleDeg], Field(min_length=1, max_length=200)]
+
+
+class GridGenerator(StrictBody):
+    kind: Literal["grid"]
+    yaw_deg: AxisValues | None = None
+    pitch_deg: AxisValues | None = None
+    roll_deg: AxisValues | None = None
+    rail_mm: Annotated[list[RailMm], Field(min_length=1, max_length=200)] | None = None
+
+
+class RangeSweepGenerator(StrictBody):
+    kind: Literal["range_sweep"]
+    rail_start_mm: RailMm
+    rail_stop_mm: RailMm
+    points: int = Field(ge=2, le=MAX_SETPOINTS)
+    yaw_deg: AngleDeg | None = None
+    pitch_deg: AngleDeg | None = None
+    roll_deg: AngleDeg | None = None
+
+
+class StabilityGenerator(StrictBody):
+    kind: Literal["stability"]
+    yaw_deg: AngleDeg | None = None
+    pitch_deg: AngleDeg | None = None
+    roll_deg: AngleDeg | None = None
+    rail_mm: RailMm | None = None
+
+
+class AttitudeStepsGenerator(StrictBody):
+    kind: Literal["attitude_steps"]
+    axis: Literal["yaw", "pitch", "roll"]
+    steps_deg: Annotated[list[AngleDeg], Field(min_length=1, max_length=MAX_SETPOINTS)]
+    yaw_deg: AngleDeg | None = None
+    pitch_deg: AngleDeg | None = None
+    roll_deg: AngleDeg | None = None
+    rail_mm: RailMm | None = None
+
+
+class CalibrationGenerator(StrictBody):
+    kind: Literal["calibration"]
+    rails_mm: Annotated[list[RailMm], Field(min_length=2, max_length=20)]
+    amplitude_deg: float = Field(8.0, gt=0, le=45)
+
+
+Generator = Annotated[
+    GridGenerator
+    | RangeSweepGenerator
+    | StabilityGenerator
+    | AttitudeStepsGenerator
+    | CalibrationGenerator,
+    Field(discriminator="kind"),
+]
+
+
+class CampaignCreate(StrictBody):
+    """A campaign: explicit ``setpoints`` or a ``generator`` (exactly one of them)."""
+
+    name: str = Field(min_length=1, max_length=200, pattern=r"^[^\x00-\x1f]+$")
+    catalog: str = Field("paper-target", min_length=1, max_length=128)
+    frames_per_point: int = Field(30, ge=1, le=MAX_FRAMES_PER_POINT)
+    settle_s: float = Field(1.0, ge=0.0, le=3600.0)
+    lock_timeout_s: float = Field(5.0, gt=0.0, le=3600.0)
+    setpoints: Annotated[list[SetPointModel], Field(max_length=MAX_SETPOINTS)] | None = None
+    generator: Generator | None = None
+    requirements: Requirements = Field(default_factory=Requirements)
+    camera: CameraSettingsUpdate | None = None
+    notes: str = Field("", max_length=4000)
+
+
+class CampaignStart(StrictBody):
+    """Start now (``at`` left out) or at a given time (ISO 8601 with a time zone)."""
+
+    at: AwareDatetime | None = None
+
+
+class ProgressPublic(BaseModel):
+    campaign_id: int
+    name: str
+    status: str
+    setpoint_index: int = Field(description="0-based index of the set-point in progress")
+    n_setpoints: int
+    n_done: int
+    frames_collected: int = Field(description="frames of the set-point in progress")
+    frames_per_point: int
+    elapsed_s: float
+    eta_s: float | None
+
+
+class SetPointPublic(BaseModel):
+    index: int
+    yaw_deg: float | None
+    pitch_deg: float | None
+    roll_deg: float | None
+    rail_mm: float | None
+    status: Literal["pending", "done"]
+
+
+class CampaignPublic(BaseModel):
+    id: int
+    name: str
+    status: Literal[
+        "draft", "queued", "running", "paused", "interrupted", "done", "failed", "cancelled"
+    ]
+    status_reason: str
+    catalog: str
+    frames_per_point: int
+    settle_s: float
+    lock_timeout_s: float
+    requirements: Requirements
+    generator: dict | None
+    camera: dict | None
+    notes: str
+    created_at: datetime
+    scheduled_at: datetime | None
+    started_at: datetime | None
+    finished_at: datetime | None
+    n_setpoints: int
+    n_done: int
+    estimated_duration_s: float
+    progress: ProgressPublic | None = None
+    setpoints: list[SetPointPublic] | None = None
+
+
+class MeasurementPublic(BaseModel):
+    setpoint_index: int
+    frame_index: int
+    time_s: float
+    ok: bool
+    reason: str
+    n_matched: int
+    residual_mm: float | None
+    x_mm: float | None
+    y_mm: float | None
+    z_mm: float | None
+    pitch_deg: float | None
+    yaw_deg: float | None
+    roll_deg: float | None
+    truth: dict[str, float] | None = Field(description="pose that produced the frame")
+    lab_truth: dict[str, float] | None = Field(description="encoders + nominal geometry")
+    encoders: dict[str, float] | None
+
+
+class MeasurementPage(BaseModel):
+    total: int
+    offset: int
+    items: list[MeasurementPublic]

@@ -125,7 +125,9 @@ class MeasurementRow(Base):
     """One frame measured at a set-point.
 
     Pose: position mm, attitude as people read it (facing Euler, docs/architecture.md §3),
-    raw quaternion of R_camera_target, the pipeline's own 1-sigma. ``truth_*``: the pose
+    raw quaternion of R_camera_target, the pipeline's own 1-sigma (position per axis;
+    attitude as the rotation-vector components about camera x, y, z, which near face-on
+    are the pitch, yaw and roll sigmas). ``truth_*``: the pose
     that produced the frame when the source knows it (simulator); ``lab_truth_*``: what
     the lab computes from the encoders and the nominal geometry. ``encoders``: axis
     read-back at capture (deg / mm). ``recording_index``: frame number in the campaign's
@@ -133,9 +135,7 @@ class MeasurementRow(Base):
     """
 
     __tablename__ = "measurements"
-    __table_args__ = (
-        UniqueConstraint("setpoint_id", "frame_index", name="uq_measurement_frame"),
-    )
+    __table_args__ = (UniqueConstraint("setpoint_id", "frame_index", name="uq_measurement_frame"),)
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     setpoint_id: Mapped[int] = mapped_column(
@@ -160,7 +160,9 @@ class MeasurementRow(Base):
     sigma_x_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
     sigma_y_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
     sigma_z_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
-    sigma_attitude_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sigma_pitch_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sigma_yaw_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sigma_roll_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     truth_x_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
     truth_y_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
     truth_z_mm: Mapped[float | None] = mapped_column(Float, nullable=True)

@@ -100,6 +100,19 @@ class AxisLimits:
         return None
 
 
+def soft_limit_problems(axes: dict[str, AxisLimits], setpoint: dict[str, float]) -> list[str]:
+    """Every reason ``setpoint`` ({axis: value}) cannot be sent to a motion system with
+    ``axes``: unknown axes and values outside the soft limits (empty when acceptable)."""
+    problems = []
+    for name, value in setpoint.items():
+        axis = axes.get(name)
+        if axis is None:
+            problems.append(f"this motion system has no {name} axis (axes: {sorted(axes)})")
+        elif (why := axis.check(value)) is not None:
+            problems.append(why)
+    return problems
+
+
 @dataclass(frozen=True)
 class MotionStatus:
     """Encoder read-back and state; positions keyed by axis name (deg / mm)."""

@@ -38,6 +38,7 @@ def build_devices(settings: Settings, catalog: Catalog | None = None) -> Devices
             start_rail_mm=settings.sim_start_rail_mm,
             catalog=catalog,
             seed=settings.sim_seed,
+            time_scale=settings.sim_time_scale,
         )
     hint = None
     if settings.camera == "sim":

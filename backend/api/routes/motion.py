@@ -14,6 +14,7 @@ from backend.api.contract import errors
 from backend.api.deps import MotionDep, ReadAuth, StateDep, WriteAuth, unprocessable
 from backend.api.presenters import motion_public
 from backend.api.schemas import MotionPublic, MoveRequest
+from backend.drivers.base import soft_limit_problems
 
 log = logging.getLogger(__name__)
 router = APIRouter(prefix="/api/motion", tags=["motion"])
@@ -29,7 +30,7 @@ def get_motion(state: StateDep) -> MotionPublic:
     "/move",
     status_code=status.HTTP_202_ACCEPTED,
     dependencies=[WriteAuth],
-    responses=errors(503),
+    responses=errors(409, 503),
 )
 def move_axes(body: MoveRequest, state: StateDep, motion: MotionDep) -> MotionPublic:
     """Start a move; returns at once (poll GET /api/motion for busy/settled).
@@ -42,15 +43,15 @@ def move_axes(body: MoveRequest, state: StateDep, motion: MotionDep) -> MotionPu
         raise unprocessable(
             ["body"], ["give at least one of yaw_deg, pitch_deg, roll_deg, rail_mm"]
         )
-    problems = []
-    for name, value in setpoints.items():
-        axis = motion.axes.get(name)
-        if axis is None:
-            problems.append(f"this motion system has no {name} axis (axes: {sorted(motion.axes)})")
-        elif (why := axis.check(value)) is not None:
-            problems.append(why)
+    problems = soft_limit_problems(motion.axes, setpoints)
     if problems:
         raise unprocessable(["body"], problems)
+    if (owner := state.campaigns.owner) is not None:
+        raise HTTPException(
+            409,
+            f"campaign {owner[0]} ({owner[1]!r}) owns the motion system while it runs: pause "
+            "or cancel it first (STOP always works)",
+        )
     try:
         motion.move_to(setpoints)
     except Exception as exc:
@@ -61,11 +62,14 @@ def move_axes(body: MoveRequest, state: StateDep, motion: MotionDep) -> MotionPu
 
 @router.post("/stop", dependencies=[WriteAuth], responses=errors(503))
 def stop_motion(state: StateDep, motion: MotionDep) -> MotionPublic:
-    """Emergency stop: every axis stops where it is. Always accepted."""
+    """Emergency stop: every axis stops where it is. Always accepted, also while a campaign
+    runs (the campaign pauses, reason "STOP pressed")."""
     try:
         motion.stop()
     except Exception as exc:
         log.exception("stop failed")
         state.motion_health.record_failure(f"stop failed: {exc}")
         raise HTTPException(503, f"the motion system did not confirm the stop: {exc}") from exc
+    finally:
+        state.campaigns.stop_pressed()
     return motion_public(state)

@@ -1,0 +1,201 @@
+"""Campaigns: create, list, read, start / pause / resume / cancel, measurements, reports.
+
+States and what each command does: docs/campaigns.md.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, HTTPException, Path, Query, status
+from sqlalchemy import func, select
+
+from backend.api.contract import errors
+from backend.api.deps import ReadAuth, SessionDep, StateDep, WriteAuth, unprocessable
+from backend.api.presenters import campaign_public, measurement_public
+from backend.api.schemas import (
+    MAX_FRAMES_PER_CAMPAIGN,
+    MAX_SETPOINTS,
+    CampaignCreate,
+    CampaignPublic,
+    CampaignStart,
+    MeasurementPage,
+)
+from backend.db.models import CampaignRow, MeasurementRow, SetPointRow
+from backend.services import campaign_plan
+from backend.services.campaigns import (
+    CampaignConflictError,
+    CampaignNotFoundError,
+    plan_problems,
+)
+from backend.services.campaigns import create_campaign as store_campaign
+from backend.services.store import NameTakenError, find_catalog
+from backend.state import AppState
+
+router = APIRouter(prefix="/api/campaigns", tags=["campaigns"])
+IdParam = Annotated[int, Path(ge=1, le=2**31 - 1)]
+
+
+def expand(body: CampaignCreate) -> list[dict[str, float]]:
+    """The set-point list of a request: explicit, or from its generator."""
+    if body.generator is None:
+        return [sp.axes() for sp in body.setpoints or []]
+    g = body.generator.model_dump()
+    kind = g.pop("kind")
+    if kind == "grid":
+        return campaign_plan.grid(**g)
+    if kind == "range_sweep":
+        return campaign_plan.range_sweep(**g)
+    if kind == "stability":
+        return campaign_plan.stability(**g)
+    if kind == "attitude_steps":
+        return campaign_plan.attitude_steps(**g)
+    return campaign_plan.calibration(**g)
+
+
+def estimate_s(state: AppState, row: CampaignRow) -> float:
+    motion = state.devices.motion
+    rates = {n: a.max_rate for n, a in motion.axes.items()} if motion else {}
+    try:
+        start = motion.status().positions if motion else {}
+    except Exception:
+        start = {}
+    pending = [
+        {a: v for a, v in (("yaw", sp.yaw_deg), ("pitch", sp.pitch_deg),
+                           ("roll", sp.roll_deg), ("rail", sp.rail_mm)) if v is not None}
+        for sp in row.setpoints if sp.status != "done"
+    ]  # fmt: skip
+    rate_hz = state.devices.camera.get_settings().frame_rate_hz
+    return campaign_plan.estimate_duration_s(
+        pending, start, rates, settle_s=row.settle_s,
+        frames_per_point=row.frames_per_point, frame_rate_hz=rate_hz,
+    )  # fmt: skip
+
+
+def _public(state: AppState, row: CampaignRow, *, with_setpoints: bool = False):
+    return campaign_public(row, state.campaigns.progress(row.id), estimate_s(state, row),
+                           with_setpoints=with_setpoints)  # fmt: skip
+
+
+def _row(session, campaign_id: int) -> CampaignRow:
+    row = session.get(CampaignRow, campaign_id)
+    if row is None:
+        raise HTTPException(404, f"no campaign with id {campaign_id}")
+    return row
+
+
+@router.post(
+    "", status_code=status.HTTP_201_CREATED, dependencies=[WriteAuth], responses=errors(409)
+)
+def create_campaign(body: CampaignCreate, state: StateDep, session: SessionDep) -> CampaignPublic:
+    """Store a draft campaign (start it with ``POST /api/campaigns/{id}/start``).
+
+    422 names every problem: no set-points, both or neither of ``setpoints`` and
+    ``generator``, set-points outside the soft limits, too many set-points or frames, an
+    unknown catalog. 409 if the name is taken. Nothing is stored on an error.
+    """
+    if body.setpoints is not None and body.generator is not None:
+        raise unprocessable(["body"], ["give either 'setpoints' or 'generator', not both"])
+    try:
+        setpoints = expand(body)
+    except ValueError as exc:
+        raise unprocessable(["body", "generator"], [str(exc)]) from exc
+    motion = state.devices.motion
+    problems = plan_problems(
+        setpoints, motion.axes if motion else None, frames_per_point=body.frames_per_point,
+        max_setpoints=MAX_SETPOINTS, max_frames=MAX_FRAMES_PER_CAMPAIGN,
+    )  # fmt: skip
+    if find_catalog(session, body.catalog) is None:
+        problems.append(f"no catalog named {body.catalog!r} (GET /api/catalogs lists them)")
+    if problems:
+        raise unprocessable(["body"], problems)
+    try:
+        row = store_campaign(
+            session, name=body.name, catalog_name=body.catalog, setpoints=setpoints,
+            frames_per_point=body.frames_per_point, settle_s=body.settle_s,
+            lock_timeout_s=body.lock_timeout_s, requirements=body.requirements.model_dump(),
+            generator=body.generator.model_dump() if body.generator else None,
+            camera=body.camera.model_dump(exclude_none=True) if body.camera else None,
+            notes=body.notes,
+        )  # fmt: skip
+    except NameTakenError as exc:
+        raise HTTPException(409, str(exc)) from exc
+    return _public(state, row, with_setpoints=True)
+
+
+@router.get("", dependencies=[ReadAuth])
+def list_campaigns(state: StateDep, session: SessionDep) -> list[CampaignPublic]:
+    """Every campaign, newest first, without its set-point list."""
+    rows = session.scalars(select(CampaignRow).order_by(CampaignRow.id.desc())).all()
+    return [_public(state, r) for r in rows]
+
+
+@router.get("/{campaign_id}", dependencies=[ReadAuth], responses=errors(404))
+def get_campaign(campaign_id: IdParam, state: StateDep, session: SessionDep) -> CampaignPublic:
+    """One campaign with its set-points and, while it runs, its progress."""
+    return _public(state, _row(session, campaign_id), with_setpoints=True)
+
+
+def _command(state: AppState, session, campaign_id: int, fn) -> CampaignPublic:
+    _row(session, campaign_id)
+    try:
+        fn()
+    except CampaignNotFoundError as exc:
+        raise HTTPException(404, str(exc)) from exc
+    except CampaignConflictError as exc:
+        raise HTTPException(409, str(exc)) from exc
+    session.expire_all()
+    return _public(state, _row(session, campaign_id), with_setpoints=True)
+
+
+@router.post("/{campaign_id}/start", dependencies=[WriteAuth], responses=errors(404, 409))
+def start_campaign(
+    campaign_id: IdParam, state: StateDep, session: SessionDep, body: CampaignStart | None = None
+) -> CampaignPublic:
+    """Queue the campaign: it runs as soon as the motion system is free, or at ``at``."""
+    at = body.at if body is not None else None
+    return _command(state, session, campaign_id,
+                    lambda: state.campaigns.start_campaign(campaign_id, at))  # fmt: skip
+
+
+@router.post("/{campaign_id}/pause", dependencies=[WriteAuth], responses=errors(404, 409))
+def pause_campaign(campaign_id: IdParam, state: StateDep, session: SessionDep) -> CampaignPublic:
+    """Pause a running (or queued) campaign; the set-point in progress is measured again
+    on resume."""
+    return _command(state, session, campaign_id, lambda: state.campaigns.pause(campaign_id))
+
+
+@router.post("/{campaign_id}/resume", dependencies=[WriteAuth], responses=errors(404, 409))
+def resume_campaign(campaign_id: IdParam, state: StateDep, session: SessionDep) -> CampaignPublic:
+    """Queue a paused or interrupted campaign again; it continues at its first set-point
+    not done."""
+    return _command(state, session, campaign_id, lambda: state.campaigns.resume(campaign_id))
+
+
+@router.post("/{campaign_id}/cancel", dependencies=[WriteAuth], responses=errors(404, 409))
+def cancel_campaign(campaign_id: IdParam, state: StateDep, session: SessionDep) -> CampaignPublic:
+    """Cancel for good (what was measured stays stored and reportable)."""
+    return _command(state, session, campaign_id, lambda: state.campaigns.cancel(campaign_id))
+
+
+@router.get("/{campaign_id}/measurements", dependencies=[ReadAuth], responses=errors(404))
+def list_measurements(
+    campaign_id: IdParam,
+    session: SessionDep,
+    offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
+    limit: Annotated[int, Query(ge=1, le=10_000)] = 1000,
+) -> MeasurementPage:
+    """Stored frames of the campaign, in set-point then frame order, a page at a time."""
+    _row(session, campaign_id)
+    base = (
+        select(MeasurementRow, SetPointRow.index)
+        .join(SetPointRow, MeasurementRow.setpoint_id == SetPointRow.id)
+        .where(SetPointRow.campaign_id == campaign_id)
+    )
+    total = session.scalar(select(func.count()).select_from(base.subquery()))
+    rows = session.execute(
+        base.order_by(SetPointRow.index, MeasurementRow.id).offset(offset).limit(limit)
+    ).all()
+    return MeasurementPage(
+        total=total, offset=offset, items=[measurement_public(m, i) for m, i in rows]
+    )

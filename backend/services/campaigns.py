@@ -1,0 +1,539 @@
+"""Campaigns: a queue of stored set-point sequences, run one at a time, unattended.
+
+States (docs/campaigns.md): ``draft`` -> start -> ``queued`` -> (the scheduler, when the
+motion system is free and the start time has come) -> ``running`` -> ``done``. A running
+campaign can be paused (by request, by STOP, by a device fault or a lost pose lock:
+``paused`` with the reason), resumed (back to ``queued``), or cancelled. A server that
+stops or dies while a campaign runs leaves it ``interrupted``; resume continues at the
+first set-point not done.
+
+The runner, per set-point: move; wait until the motion system reports settled; then
+count only frames captured after that moment and at least ``settle_s`` of device time
+later, whose encoder read-back (when the driver gives it) is at the set-point; collect
+``frames_per_point`` of them; store them and mark the set-point done in one transaction.
+A set-point that does not complete stores nothing and is measured again on resume.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from datetime import UTC, datetime
+
+import numpy as np
+from sqlalchemy import func, select
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session, sessionmaker
+
+from backend.db.models import CampaignRow, MeasurementRow, SetPointRow, utcnow
+from backend.drivers.base import MotionDriver, soft_limit_problems
+from backend.services.acquisition import AcquisitionService, LiveSample
+from backend.services.hub import LiveHub
+from backend.services.store import NameTakenError
+from tofpose.geometry import facing_euler_deg
+
+log = logging.getLogger(__name__)
+
+AXIS_COLUMNS = {"yaw": "yaw_deg", "pitch": "pitch_deg", "roll": "roll_deg", "rail": "rail_mm"}
+# Encoder read-back farther than this from the set-point means the axis is not there.
+AT_SETPOINT_TOLERANCE = {"yaw": 0.05, "pitch": 0.05, "roll": 0.05, "rail": 1.0}
+ACTIVE = ("running",)
+RESUMABLE = ("paused", "interrupted")
+FINISHED = ("done", "failed", "cancelled")
+
+
+class CampaignNotFoundError(LookupError):
+    """No campaign with this id."""
+
+
+class CampaignConflictError(RuntimeError):
+    """The request conflicts with the campaign's state or with another campaign."""
+
+
+class _Halt(Exception):  # noqa: N818 (control flow, not an error)
+    """Raised inside the runner to leave a set-point: pause, cancel or shutdown."""
+
+    def __init__(self, status: str, reason: str) -> None:
+        super().__init__(reason)
+        self.status = status
+        self.reason = reason
+
+
+@dataclass
+class Progress:
+    campaign_id: int
+    name: str
+    status: str
+    setpoint_index: int
+    n_setpoints: int
+    n_done: int
+    frames_collected: int
+    frames_per_point: int
+    started_monotonic: float
+    done_this_run: int = 0
+
+    def as_dict(self) -> dict:
+        elapsed = time.monotonic() - self.started_monotonic
+        remaining = self.n_setpoints - self.n_done
+        eta = (elapsed / self.done_this_run * remaining) if self.done_this_run else None
+        return {
+            "campaign_id": self.campaign_id, "name": self.name, "status": self.status,
+            "setpoint_index": self.setpoint_index, "n_setpoints": self.n_setpoints,
+            "n_done": self.n_done, "frames_collected": self.frames_collected,
+            "frames_per_point": self.frames_per_point, "elapsed_s": elapsed, "eta_s": eta,
+        }  # fmt: skip
+
+
+def measurement_row(setpoint_id: int, sample: LiveSample) -> MeasurementRow:
+    """One stored frame: pose (facing Euler), sigmas, exact and lab truth, encoders."""
+    r, f = sample.result, sample.frame
+    row = MeasurementRow(
+        setpoint_id=setpoint_id,
+        frame_index=f.index,
+        frame_time_s=float(f.time_s),
+        ok=bool(r.ok),
+        reason=r.reason,
+        n_matched=int(r.n_matched),
+        residual_mm=_finite(r.residual_mm),
+        encoders={k: float(v) for k, v in f.meta.get("encoders", {}).items()} or None,
+    )
+    if r.ok and r.R is not None:
+        row.x_mm, row.y_mm, row.z_mm = (float(v) for v in r.t_mm)
+        row.pitch_deg, row.yaw_deg, row.roll_deg = (float(v) for v in facing_euler_deg(r.R))
+        row.qw, row.qx, row.qy, row.qz = (float(v) for v in r.quaternion_wxyz)
+        if r.covariance is not None:
+            sd = np.sqrt(np.clip(np.diag(r.covariance), 0.0, None))
+            row.sigma_pitch_deg, row.sigma_yaw_deg, row.sigma_roll_deg = (
+                _finite(np.degrees(v)) for v in sd[:3]
+            )
+            row.sigma_x_mm, row.sigma_y_mm, row.sigma_z_mm = (_finite(v) for v in sd[3:])
+    for prefix, T in (("truth_", f.meta.get("T_world")), ("lab_truth_", f.T_truth)):
+        if T is not None:
+            p, y, rl = (float(v) for v in facing_euler_deg(T.R))
+            x, yy, z = (float(v) for v in T.t_mm)
+            for name, v in zip(
+                ("x_mm", "y_mm", "z_mm", "pitch_deg", "yaw_deg", "roll_deg"),
+                (x, yy, z, p, y, rl),
+                strict=True,
+            ):
+                setattr(row, prefix + name, v)
+    return row
+
+
+def _finite(v) -> float | None:
+    v = float(v)
+    return v if np.isfinite(v) else None
+
+
+class CampaignService:
+    """Owns the campaign queue and at most one runner thread. Thread-safe."""
+
+    def __init__(
+        self,
+        sessions: sessionmaker[Session],
+        acquisition: AcquisitionService,
+        hub: LiveHub,
+        motion: MotionDriver | None,
+        *,
+        poll_s: float = 0.05,
+        move_timeout_s: float = 600.0,
+        frame_timeout_s: float = 10.0,
+    ) -> None:
+        self.sessions = sessions
+        self.acquisition = acquisition
+        self.hub = hub
+        self.motion = motion
+        self.poll_s = poll_s
+        self.move_timeout_s = move_timeout_s
+        self.frame_timeout_s = frame_timeout_s
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._shutdown = threading.Event()
+        self._scheduler: threading.Thread | None = None
+        self._runner: threading.Thread | None = None
+        self._running_id: int | None = None
+        self._request: tuple[str, str] | None = None  # ("paused" | "cancelled", reason)
+        self._progress: Progress | None = None
+        self.progress_version = 0
+
+    # -- lifecycle ------------------------------------------------------------------------
+    def recover(self) -> int:
+        """At start: campaigns left ``running`` by a server that died are ``interrupted``."""
+        with self.sessions() as s, s.begin():
+            rows = s.scalars(select(CampaignRow).where(CampaignRow.status.in_(ACTIVE))).all()
+            for row in rows:
+                row.status = "interrupted"
+                row.status_reason = "the server stopped while this campaign was running"
+            return len(rows)
+
+    def start(self) -> None:
+        self._scheduler = threading.Thread(target=self._schedule, name="campaigns", daemon=True)
+        self._scheduler.start()
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Shutdown: a running campaign is left ``interrupted`` (resumable)."""
+        self._shutdown.set()
+        self._wake.set()
+        for t in (self._runner, self._scheduler):
+            if t is not None:
+                t.join(timeout_s)
+
+    # -- what the API reads -------------------------------------------------------------------
+    @property
+    def owner(self) -> tuple[int, str] | None:
+        """(id, name) of the campaign that owns the motion system now, or None."""
+        with self._lock:
+            p = self._progress
+            return (p.campaign_id, p.name) if p is not None and self._running_id else None
+
+    def progress(self, campaign_id: int | None = None) -> dict | None:
+        with self._lock:
+            p = self._progress
+            if p is None or (campaign_id is not None and p.campaign_id != campaign_id):
+                return None
+            return p.as_dict()
+
+    # -- commands -------------------------------------------------------------------------
+    def _get(self, s: Session, campaign_id: int) -> CampaignRow:
+        row = s.get(CampaignRow, campaign_id)
+        if row is None:
+            raise CampaignNotFoundError(f"no campaign with id {campaign_id}")
+        return row
+
+    def start_campaign(self, campaign_id: int, at: datetime | None = None) -> None:
+        with self.sessions() as s, s.begin():
+            row = self._get(s, campaign_id)
+            if row.status not in ("draft", "queued"):
+                raise CampaignConflictError(
+                    f"campaign {campaign_id} is {row.status}: only a draft or queued campaign "
+                    "can be started (resume a paused or interrupted one)"
+                )
+            row.status = "queued"
+            row.status_reason = ""
+            row.scheduled_at = at
+        self._wake.set()
+
+    def resume(self, campaign_id: int) -> None:
+        with self.sessions() as s, s.begin():
+            row = self._get(s, campaign_id)
+            if row.status not in RESUMABLE:
+                raise CampaignConflictError(
+                    f"campaign {campaign_id} is {row.status}: only a paused or interrupted "
+                    "campaign can be resumed" + ("; it has nothing left to do" if
+                                                 row.status == "done" else "")
+                )  # fmt: skip
+            row.status = "queued"
+            row.status_reason = ""
+            row.scheduled_at = None
+        self._wake.set()
+
+    def pause(self, campaign_id: int, reason: str = "paused by request") -> None:
+        with self._lock:
+            if self._running_id == campaign_id:
+                self._request = ("paused", reason)
+                return
+        with self.sessions() as s, s.begin():
+            row = self._get(s, campaign_id)
+            if row.status != "queued":
+                raise CampaignConflictError(
+                    f"campaign {campaign_id} is {row.status}: only a running or queued "
+                    "campaign can be paused"
+                )
+            row.status, row.status_reason = "paused", reason
+
+    def cancel(self, campaign_id: int) -> None:
+        with self._lock:
+            if self._running_id == campaign_id:
+                self._request = ("cancelled", "cancelled by request")
+                return
+        with self.sessions() as s, s.begin():
+            row = self._get(s, campaign_id)
+            if row.status in FINISHED:
+                raise CampaignConflictError(f"campaign {campaign_id} is already {row.status}")
+            row.status, row.status_reason = "cancelled", "cancelled by request"
+            row.finished_at = utcnow()
+
+    def stop_pressed(self) -> None:
+        """STOP: the running campaign (if any) pauses; the turntable is stopped by the
+        caller, whatever the campaign does."""
+        with self._lock:
+            if self._running_id is not None:
+                self._request = ("paused", "STOP pressed")
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        """Wait until no runner is active (tests, shutdown)."""
+        t = self._runner
+        if t is not None:
+            t.join(timeout_s)
+            return not t.is_alive()
+        return True
+
+    # -- scheduler --------------------------------------------------------------------------
+    def _schedule(self) -> None:
+        while not self._shutdown.is_set():
+            self._wake.wait(0.25)
+            self._wake.clear()
+            if self._shutdown.is_set():
+                return
+            if self._runner is not None and self._runner.is_alive():
+                continue
+            try:
+                nxt = self._next_due()
+            except Exception:
+                log.exception("campaign scheduler could not read the queue")
+                continue
+            if nxt is not None:
+                self._runner = threading.Thread(
+                    target=self._run, args=(nxt,), name=f"campaign-{nxt}", daemon=True
+                )
+                self._runner.start()
+
+    def _next_due(self) -> int | None:
+        now = datetime.now(UTC)
+        with self.sessions() as s:
+            rows = s.scalars(
+                select(CampaignRow)
+                .where(CampaignRow.status == "queued")
+                .order_by(
+                    CampaignRow.scheduled_at.is_not(None), CampaignRow.scheduled_at, CampaignRow.id
+                )  # fmt: skip
+            ).all()
+            for row in rows:
+                at = row.scheduled_at
+                if at is not None and at.tzinfo is None:
+                    at = at.replace(tzinfo=UTC)  # SQLite returns naive datetimes
+                if at is None or at <= now:
+                    return row.id
+        return None
+
+    # -- runner ---------------------------------------------------------------------------
+    def _set_status(self, campaign_id: int, status: str, reason: str = "") -> None:
+        with self.sessions() as s, s.begin():
+            row = s.get(CampaignRow, campaign_id)
+            row.status, row.status_reason = status, reason
+            if status == "running" and row.started_at is None:
+                row.started_at = utcnow()
+            if status in FINISHED:
+                row.finished_at = utcnow()
+
+    def _bump(self, **changes) -> None:
+        with self._lock:
+            if self._progress is not None:
+                for k, v in changes.items():
+                    setattr(self._progress, k, v)
+            self.progress_version += 1
+
+    def _run(self, campaign_id: int) -> None:
+        with self.sessions() as s:
+            row = s.get(CampaignRow, campaign_id)
+            pending = [sp for sp in row.setpoints if sp.status != "done"]
+            n_total, n_done = len(row.setpoints), len(row.setpoints) - len(pending)
+            plan = [(sp.id, sp.index, _axes(sp)) for sp in pending]
+            name, frames, settle_s = row.name, row.frames_per_point, row.settle_s
+            lock_timeout_s = row.lock_timeout_s
+        with self._lock:
+            self._running_id = campaign_id
+            self._request = None
+            self._progress = Progress(campaign_id, name, "running", plan[0][1] if plan else 0,
+                                      n_total, n_done, 0, frames, time.monotonic())  # fmt: skip
+        self._set_status(campaign_id, "running")
+        self._bump()
+        sub = self.hub.subscribe(maxsize=256)
+        final, reason = "done", ""
+        try:
+            if self.motion is None and any(axes for _, _, axes in plan):
+                raise _Halt("failed", "no motion system is configured")
+            for sp_id, index, axes in plan:
+                self._bump(setpoint_index=index, frames_collected=0)
+                samples = self._measure(sub, index, axes, frames, settle_s, lock_timeout_s)
+                with self.sessions() as s, s.begin():
+                    s.add_all(measurement_row(sp_id, x) for x in samples)
+                    sp = s.get(SetPointRow, sp_id)
+                    sp.status, sp.completed_at = "done", utcnow()
+                with self._lock:
+                    self._progress.n_done += 1
+                    self._progress.done_this_run += 1
+                self._bump()
+        except _Halt as halt:
+            final, reason = halt.status, halt.reason
+        except Exception as exc:
+            log.exception("campaign %d failed", campaign_id)
+            final, reason = "paused", f"runner error: {exc}"
+        finally:
+            self.hub.unsubscribe(sub)
+            try:
+                self._set_status(campaign_id, final, reason)
+            finally:
+                with self._lock:
+                    self._running_id = None
+                    if self._progress is not None:
+                        self._progress.status = final
+                self._bump()
+                self._wake.set()
+
+    def _check(self, index: int) -> None:
+        if self._shutdown.is_set():
+            raise _Halt("interrupted", f"the server shut down during set-point {index}")
+        with self._lock:
+            req = self._request
+        if req is not None:
+            raise _Halt(req[0], f"{req[1]} (during set-point {index})")
+
+    def _measure(
+        self, sub, index: int, axes: dict[str, float], frames: int, settle_s: float,
+        lock_timeout_s: float,
+    ) -> list[LiveSample]:  # fmt: skip
+        """Move to ``axes`` and collect ``frames`` samples taken at rest (see module)."""
+        self._check(index)
+        if axes:
+            try:
+                self.motion.move_to(axes)
+            except Exception as exc:
+                raise _Halt("paused", f"move to set-point {index} failed: {exc}") from exc
+            deadline = time.monotonic() + self.move_timeout_s
+            while True:
+                self._check(index)
+                try:
+                    st = self.motion.status()
+                except Exception as exc:
+                    msg = f"motion status failed at set-point {index}: {exc}"
+                    raise _Halt("paused", msg) from exc
+                if st.stopped:
+                    raise _Halt("paused", f"the turntable was stopped at set-point {index}")
+                if st.settled and not st.busy:
+                    break
+                if time.monotonic() > deadline:
+                    raise _Halt("paused", f"set-point {index} not settled within "
+                                          f"{self.move_timeout_s:g} s")  # fmt: skip
+                time.sleep(self.poll_s)
+        settled_unix_s = time.time()
+        while sub.get(0.0) is not None:  # frames queued before the settle do not count
+            pass
+        t_ready = None
+        last_ok_s = None
+        out: list[LiveSample] = []
+        waited_since = time.monotonic()
+        while len(out) < frames:
+            self._check(index)
+            sample = sub.get(self.poll_s)
+            if sample is None:
+                if time.monotonic() - waited_since > self.frame_timeout_s:
+                    h = self.acquisition.health
+                    msg = (
+                        f"no frame for {self.frame_timeout_s:g} s at set-point {index} "
+                        f"(camera {h.state}: {h.last_error})"
+                    )
+                    raise _Halt("paused", msg)
+                continue
+            waited_since = time.monotonic()
+            if sample.captured_unix_s < settled_unix_s:
+                continue
+            t = float(sample.frame.time_s)
+            if t_ready is None:
+                t_ready = t + settle_s
+                last_ok_s = t_ready
+            if t < t_ready:
+                continue
+            enc = sample.frame.meta.get("encoders") or {}
+            off = [
+                a
+                for a, v in axes.items()
+                if a in enc and abs(enc[a] - v) > AT_SETPOINT_TOLERANCE.get(a, 0.05)
+            ]
+            if off:
+                raise _Halt("paused", f"the turntable left set-point {index} (axes {off})")
+            if sample.result.ok:
+                last_ok_s = t
+            elif t - last_ok_s > lock_timeout_s:
+                raise _Halt("paused", f"pose lock lost for {t - last_ok_s:.1f} s at set-point "
+                                      f"{index}: {sample.result.reason}")  # fmt: skip
+            out.append(sample)
+            self._bump(frames_collected=len(out))
+        return out
+
+
+def _axes(sp: SetPointRow) -> dict[str, float]:
+    return {
+        a: float(getattr(sp, col))
+        for a, col in AXIS_COLUMNS.items()
+        if getattr(sp, col) is not None
+    }
+
+
+def count_done(s: Session, campaign_id: int) -> int:
+    return s.scalar(
+        select(func.count())
+        .select_from(SetPointRow)
+        .where(SetPointRow.campaign_id == campaign_id, SetPointRow.status == "done")
+    )
+
+
+def plan_problems(
+    setpoints: list[dict[str, float]],
+    axes: dict | None,
+    *,
+    frames_per_point: int,
+    max_setpoints: int,
+    max_frames: int,
+) -> list[str]:
+    """Why a set-point list cannot run on this motion system (empty when it can): empty
+    or too long, too many frames in all, unknown axes or values outside the soft limits
+    (each named with its index)."""
+    if not setpoints:
+        return ["the campaign has no set-points: give a non-empty 'setpoints' or a generator"]
+    problems = []
+    if len(setpoints) > max_setpoints:
+        problems.append(f"{len(setpoints)} set-points is more than the maximum {max_setpoints}")
+    if len(setpoints) * frames_per_point > max_frames:
+        problems.append(
+            f"{len(setpoints)} set-points x {frames_per_point} frames is more than the "
+            f"maximum {max_frames} frames per campaign"
+        )
+    if axes is None:
+        if any(setpoints):
+            problems.append("no motion system is configured: set-points cannot be reached")
+        return problems
+    for i, sp in enumerate(setpoints):
+        problems += [f"set-point {i}: {p}" for p in soft_limit_problems(axes, sp)]
+        if len(problems) > 20:
+            problems.append("... (more)")
+            break
+    return problems
+
+
+def create_campaign(
+    s: Session,
+    *,
+    name: str,
+    catalog_name: str,
+    setpoints: list[dict[str, float]],
+    frames_per_point: int,
+    settle_s: float,
+    lock_timeout_s: float,
+    requirements: dict[str, float],
+    generator: dict | None = None,
+    camera: dict | None = None,
+    notes: str = "",
+) -> CampaignRow:
+    """Store a draft campaign with its set-points; ``NameTakenError`` if the name exists."""
+    row = CampaignRow(
+        name=name, status="draft", status_reason="", catalog_name=catalog_name,
+        frames_per_point=frames_per_point, settle_s=settle_s, lock_timeout_s=lock_timeout_s,
+        requirements=requirements, generator=generator, camera_settings=camera, notes=notes,
+        record_raw=False,
+    )  # fmt: skip
+    for i, sp in enumerate(setpoints):
+        row.setpoints.append(
+            SetPointRow(
+                index=i, status="pending", **{AXIS_COLUMNS[a]: float(v) for a, v in sp.items()}
+            )  # fmt: skip
+        )
+    s.add(row)
+    try:
+        s.commit()
+    except IntegrityError as exc:
+        s.rollback()
+        raise NameTakenError(f"a campaign named {name!r} already exists") from exc
+    return row
