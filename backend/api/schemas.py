@@ -316,9 +316,13 @@ class CampaignCreate(StrictBody):
 
 
 class CampaignStart(StrictBody):
-    """Start now (``at`` left out) or at a given time (ISO 8601 with a time zone)."""
+    """Start now (``at`` left out) or at a given time (ISO 8601 with a time zone).
+
+    While another campaign owns the motion system, starting now is refused (409) unless
+    ``queue`` is true: then this one runs when the other finishes."""
 
     at: AwareDatetime | None = None
+    queue: bool = False
 
 
 class ProgressPublic(BaseModel):

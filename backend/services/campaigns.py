@@ -202,7 +202,15 @@ class CampaignService:
             raise CampaignNotFoundError(f"no campaign with id {campaign_id}")
         return row
 
-    def start_campaign(self, campaign_id: int, at: datetime | None = None) -> None:
+    def start_campaign(
+        self, campaign_id: int, at: datetime | None = None, *, queue: bool = False
+    ) -> None:
+        owner = self.owner
+        if at is None and not queue and owner is not None and owner[0] != campaign_id:
+            raise CampaignConflictError(
+                f"campaign {owner[0]} ({owner[1]!r}) owns the motion system: start this one "
+                'with {"queue": true} to run it next, or at a later time'
+            )
         with self.sessions() as s, s.begin():
             row = self._get(s, campaign_id)
             if row.status not in ("draft", "queued"):

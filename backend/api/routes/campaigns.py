@@ -5,9 +5,10 @@ States and what each command does: docs/campaigns.md.
 
 from __future__ import annotations
 
+from enum import StrEnum
 from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Path, Query, status
+from fastapi import APIRouter, HTTPException, Path, Query, Response, status
 from sqlalchemy import func, select
 
 from backend.api.contract import errors
@@ -29,6 +30,7 @@ from backend.services.campaigns import (
     plan_problems,
 )
 from backend.services.campaigns import create_campaign as store_campaign
+from backend.services.reports import ReportError, build, to_csv, to_html, to_json, to_pdf
 from backend.services.store import NameTakenError, find_catalog
 from backend.state import AppState
 
@@ -153,9 +155,11 @@ def start_campaign(
     campaign_id: IdParam, state: StateDep, session: SessionDep, body: CampaignStart | None = None
 ) -> CampaignPublic:
     """Queue the campaign: it runs as soon as the motion system is free, or at ``at``."""
-    at = body.at if body is not None else None
-    return _command(state, session, campaign_id,
-                    lambda: state.campaigns.start_campaign(campaign_id, at))  # fmt: skip
+    body = body or CampaignStart()
+    return _command(
+        state, session, campaign_id,
+        lambda: state.campaigns.start_campaign(campaign_id, body.at, queue=body.queue),
+    )  # fmt: skip
 
 
 @router.post("/{campaign_id}/pause", dependencies=[WriteAuth], responses=errors(404, 409))
@@ -198,4 +202,64 @@ def list_measurements(
     ).all()
     return MeasurementPage(
         total=total, offset=offset, items=[measurement_public(m, i) for m, i in rows]
+    )
+
+
+class ReportFormat(StrEnum):
+    html = "html"
+    pdf = "pdf"
+    csv = "csv"
+    json = "json"
+
+
+class Reference(StrEnum):
+    lab = "lab"
+    exact = "exact"
+
+
+MEDIA_TYPES = {
+    "html": "text/html; charset=utf-8",
+    "pdf": "application/pdf",
+    "csv": "text/csv; charset=utf-8",
+    "json": "application/json",
+}
+
+
+@router.get(
+    "/{campaign_id}/report.{fmt}",
+    dependencies=[ReadAuth],
+    response_class=Response,
+    responses={
+        200: {"content": {m: {} for m in MEDIA_TYPES.values()}, "description": "the report"},
+        **errors(404),
+    },
+)
+def get_campaign_report(
+    campaign_id: IdParam,
+    fmt: ReportFormat,
+    session: SessionDep,
+    reference: Annotated[
+        Reference, Query(description="lab: encoders + nominal geometry; exact: simulator only")
+    ] = Reference.lab,
+) -> Response:
+    """The accuracy report: HTML (self-contained), PDF, CSV (one row per frame) or JSON
+    (every statistic). Statistics against the lab's reference by default."""
+    row = _row(session, campaign_id)
+    try:
+        report, rows = build(session, campaign_id, reference.value)
+    except ReportError as exc:
+        raise unprocessable(["query", "reference"], [str(exc)]) from exc
+    if fmt is ReportFormat.csv:
+        body: str | bytes = to_csv(rows)
+    elif fmt is ReportFormat.json:
+        body = to_json(report)
+    elif fmt is ReportFormat.html:
+        body = to_html(report, rows)
+    else:
+        body = to_pdf(report, rows)
+    filename = f"campaign-{row.id}-report.{fmt.value}"
+    return Response(
+        body,
+        media_type=MEDIA_TYPES[fmt.value],
+        headers={"Content-Disposition": f'attachment; filename="{filename}"'},
     )

@@ -11,6 +11,9 @@ Protocol (JSON text messages):
   shrunk ``image_step`` times), and every frame ``{"type": "points", "frame_index",
   "points_mm": [[x, y, z], ...], "catalog_ids": [id or null, ...]}`` (the reflector point
   cloud in the camera frame). Bad options get ``{"type": "error", "message"}``.
+- server -> client, whenever a campaign's progress changed (checked once per frame):
+  ``{"type": "campaign", "data": {campaign_id, name, status, setpoint_index, n_setpoints,
+  n_done, frames_collected, frames_per_point, elapsed_s, eta_s}}``.
 
 When reads are not open (server bound beyond loopback), pass ``?token=API_TOKEN``.
 """
@@ -130,6 +133,7 @@ async def live(ws: WebSocket) -> None:
     opts = {"current": LiveOptions()}
     reader = asyncio.create_task(_read_options(ws, opts))
     n = 0
+    campaign_version = -1
     try:
         while True:
             getter = asyncio.ensure_future(sub.get_async())
@@ -141,6 +145,10 @@ async def live(ws: WebSocket) -> None:
             sample: LiveSample = getter.result()
             head = f'{{"type":"pose","dropped":{sub.dropped},"data":'
             await ws.send_text(head + pose_json(sample) + "}")
+            if (v := state.campaigns.progress_version) != campaign_version:
+                campaign_version = v
+                if (progress := state.campaigns.progress()) is not None:
+                    await ws.send_text(json.dumps({"type": "campaign", "data": progress}))
             o = opts["current"]
             if o.images and n % o.image_every == 0:
                 for kind in o.images:

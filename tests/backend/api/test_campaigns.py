@@ -1,0 +1,243 @@
+"""Campaigns through the API on the simulated devices: create, run, control, reports."""
+
+from __future__ import annotations
+
+import csv
+import io
+import subprocess
+from html.parser import HTMLParser
+
+import cv2
+import numpy as np
+import pytest
+
+from tests.backend.conftest import AUTH, make_settings, running_app, wait_for
+
+GRID = {
+    "name": "grid-1", "catalog": "paper-target", "frames_per_point": 10, "settle_s": 0.5,
+    "setpoints": [
+        {"yaw_deg": 0, "pitch_deg": 0, "roll_deg": 0, "rail_mm": 11000},
+        {"yaw_deg": 5, "pitch_deg": 0, "roll_deg": 0, "rail_mm": 11000},
+    ],
+}  # fmt: skip
+
+
+@pytest.fixture
+def fast_client(tmp_path):
+    """The app with the simulated lab running 5x faster than real time."""
+    with running_app(make_settings(tmp_path / "data", sim_time_scale=5.0)) as c:
+        yield c
+
+
+def _run(client, body, timeout_s=60.0) -> dict:
+    r = client.post("/api/campaigns", json=body, headers=AUTH)
+    assert r.status_code == 201, r.text
+    cid = r.json()["id"]
+    assert client.post(f"/api/campaigns/{cid}/start", headers=AUTH).status_code == 200
+    return wait_for(
+        lambda: (c := client.get(f"/api/campaigns/{cid}").json())["status"] in
+        ("done", "paused", "failed") and c,
+        timeout_s, "the campaign to finish",
+    )  # fmt: skip
+
+
+class _Tables(HTMLParser):
+    def __init__(self) -> None:
+        super().__init__()
+        self.tables, self.imgs, self.cells = 0, 0, []
+
+    def handle_starttag(self, tag, attrs):
+        self.tables += tag == "table"
+        self.imgs += tag == "img" and dict(attrs).get("src", "").startswith("data:image/png")
+
+    def handle_data(self, data):
+        self.cells.append(data.strip())
+
+
+def _recompute(rows: list[dict], axis: str, ref: str = "lab_truth_") -> dict:
+    """Independent recomputation of one set-point's statistics from CSV rows."""
+    ok = [r for r in rows if r["ok"] == "1"]
+    e = np.array([float(r[axis]) - float(r[ref + axis]) for r in ok])
+    med = np.median(e)
+    mad = 1.4826 * np.median(np.abs(e - med))
+    k = e if mad == 0 else e[np.abs(e - med) <= 5.0 * mad]
+    return {"n": len(k), "bias": k.mean(), "std": k.std(ddof=1), "max_abs": np.abs(k).max(),
+            "rms": np.sqrt(np.mean(k**2))}  # fmt: skip
+
+
+def test_a_grid_campaign_runs_to_completion_and_every_report_downloads(fast_client, tmp_path):
+    c = fast_client
+    done = _run(c, GRID)
+    assert done["status"] == "done" and done["n_done"] == 2, done
+    page = c.get(f"/api/campaigns/{done['id']}/measurements?limit=5").json()
+    assert page["total"] == 20 and len(page["items"]) == 5
+    # Frames are attributed only at rest: each frame's encoders are at its set-point.
+    allm = c.get(f"/api/campaigns/{done['id']}/measurements?limit=100").json()["items"]
+    for m in allm:
+        sp = GRID["setpoints"][m["setpoint_index"]]
+        assert abs(m["encoders"]["yaw"] - sp["yaw_deg"]) < 0.01
+        assert abs(m["encoders"]["rail"] - sp["rail_mm"]) < 0.5
+        assert m["truth"] is not None and m["lab_truth"] is not None
+    base = f"/api/campaigns/{done['id']}/report"
+
+    r = c.get(base + ".csv")
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/csv")
+    rows = list(csv.DictReader(io.StringIO(r.text)))
+    required = ["setpoint_index", "frame_index", "time_s", "ok", "x_mm", "y_mm", "z_mm",
+                "pitch_deg", "yaw_deg", "roll_deg", "truth_x_mm", "truth_y_mm", "truth_z_mm",
+                "truth_pitch_deg", "truth_yaw_deg", "truth_roll_deg"]  # fmt: skip
+    assert set(required) <= set(rows[0]) and len(rows) == 20
+
+    report = c.get(base + ".json").json()
+    assert report["reference"] == "lab" and report["n_frames"] == 20
+    for sp in report["setpoints"]:
+        sp_rows = [r for r in rows if int(r["setpoint_index"]) == sp["setpoint_index"]]
+        for axis in ("x_mm", "z_mm", "yaw_deg", "roll_deg"):
+            want = _recompute(sp_rows, axis)
+            got = sp["axes"][axis]
+            assert got["n"] == want["n"]
+            for k in ("bias", "std", "max_abs", "rms"):
+                assert got[k] == pytest.approx(want[k], rel=1e-9, abs=1e-12), (axis, k)
+            assert got["passed"] == (got["max_abs"] <= got["requirement"])
+    exact = c.get(base + ".json?reference=exact").json()
+    # Against the pose that was rendered, x/y errors are far smaller than against the
+    # lab's reference, which carries the simulated mount error (~2 mm, 0.3 deg).
+    assert exact["overall"]["axes"]["x_mm"]["rms"] < 2.0 < report["overall"]["axes"]["x_mm"]["rms"]
+
+    r = c.get(base + ".html")
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
+    parsed = _Tables()
+    parsed.feed(r.text)
+    assert parsed.tables >= 1 + 2 * 2 and parsed.imgs == 3
+    assert "x_mm" in parsed.cells and "http" not in r.text.split("<body>")[0]
+
+    r = c.get(base + ".pdf")
+    assert r.status_code == 200 and r.content[:5] == b"%PDF-"
+    pdf = tmp_path / "report.pdf"
+    pdf.write_bytes(r.content)
+    subprocess.run(["pdftoppm", "-r", "40", "-png", "-f", "1", "-l", "1", str(pdf),
+                    str(tmp_path / "page")], check=True)  # fmt: skip
+    page1 = cv2.imread(str(next(tmp_path.glob("page*.png"))), cv2.IMREAD_GRAYSCALE)
+    ink = (page1 < 128).mean()
+    assert 0.005 < ink < 0.5, f"page 1 ink fraction {ink:.4f}: blank or black"
+
+
+def test_generators_make_the_set_points(fast_client):
+    c = fast_client
+    cases = [
+        ({"kind": "grid", "yaw_deg": [-5, 0, 5], "pitch_deg": [0, 3]}, 6),
+        ({"kind": "range_sweep", "rail_start_mm": 9000, "rail_stop_mm": 13000, "points": 5}, 5),
+        ({"kind": "stability", "rail_mm": 14303}, 1),
+        ({"kind": "attitude_steps", "axis": "roll", "steps_deg": [0, 1, 2, 5, 0]}, 5),
+        ({"kind": "calibration", "rails_mm": [10000, 12000]}, 18),
+    ]
+    for i, (gen, n) in enumerate(cases):
+        r = c.post("/api/campaigns", json={"name": f"g{i}", "generator": gen}, headers=AUTH)
+        assert r.status_code == 201, r.text
+        camp = r.json()
+        assert camp["n_setpoints"] == n and len(camp["setpoints"]) == n
+        assert camp["status"] == "draft" and camp["estimated_duration_s"] > 0
+    sweep = c.get("/api/campaigns").json()[-2]  # newest first: g1 is second to last
+    assert [sp["rail_mm"] for sp in c.get(f"/api/campaigns/{sweep['id']}").json()["setpoints"]] == [
+        9000,
+        10000,
+        11000,
+        12000,
+        13000,
+    ]
+
+
+@pytest.mark.parametrize(
+    ("body", "status", "needle"),
+    [
+        ({**GRID, "setpoints": []}, 422, "no set-points"),
+        ({**GRID, "setpoints": [{"yaw_deg": 200}]}, 422, "set-point 0: yaw set-point 200"),
+        ({**GRID, "setpoints": [{"yaw_deg": 0}] * 5001}, 422, "setpoints"),
+        ({**GRID, "frames_per_point": 100_000, "setpoints": [{"yaw_deg": 0}] * 11}, 422,
+         "maximum 1000000 frames"),
+        ({**GRID, "catalog": "nope"}, 422, "no catalog named 'nope'"),
+        ({**GRID, "generator": {"kind": "stability"}}, 422, "not both"),
+        ({"name": "x", "generator": {"kind": "range_sweep", "rail_start_mm": 1,
+                                     "rail_stop_mm": 2, "points": 1}}, 422, "points"),
+        ({**GRID, "setpoints": [{"yaw_deg": None}]}, 422, "null is not a set-point"),
+    ],
+)  # fmt: skip
+def test_bad_campaigns_are_refused_and_nothing_is_stored(client, body, status, needle):
+    r = client.post("/api/campaigns", json=body, headers=AUTH)
+    assert r.status_code == status, r.text
+    detail = r.json()["detail"]
+    text = detail if isinstance(detail, str) else " ".join(f"{e['loc']} {e['msg']}" for e in detail)
+    assert needle in text
+    assert client.get("/api/campaigns").json() == []
+
+
+def test_unknown_ids_names_taken_and_auth(client):
+    assert client.get("/api/campaigns/99").status_code == 404
+    assert client.post("/api/campaigns/99/start", headers=AUTH).status_code == 404
+    assert client.get("/api/campaigns/99/report.csv").status_code == 404
+    assert client.post("/api/campaigns", json=GRID).status_code == 401
+    assert client.post("/api/campaigns", json=GRID, headers=AUTH).status_code == 201
+    r = client.post("/api/campaigns", json=GRID, headers=AUTH)
+    assert r.status_code == 409 and "'grid-1' already exists" in r.json()["detail"]
+    assert len(client.get("/api/campaigns").json()) == 1
+
+
+def test_a_running_campaign_owns_the_turntable_and_stop_pauses_it(fast_client):
+    c = fast_client
+    body = {**GRID, "name": "long", "frames_per_point": 400}
+    cid = c.post("/api/campaigns", json=body, headers=AUTH).json()["id"]
+    other = c.post("/api/campaigns", json={**GRID, "name": "other"}, headers=AUTH).json()["id"]
+    assert c.post(f"/api/campaigns/{cid}/start", headers=AUTH).status_code == 200
+    wait_for(lambda: c.get(f"/api/campaigns/{cid}").json()["status"] == "running")
+    r = c.post("/api/motion/move", json={"yaw_deg": 1}, headers=AUTH)
+    assert r.status_code == 409 and "owns the motion system" in r.json()["detail"]
+    r = c.post(f"/api/campaigns/{other}/start", headers=AUTH)
+    assert r.status_code == 409 and "queue" in r.json()["detail"]
+    assert c.post(f"/api/campaigns/{cid}/resume", headers=AUTH).status_code == 409
+    assert c.post("/api/motion/stop", headers=AUTH).status_code == 200
+    paused = wait_for(lambda: (x := c.get(f"/api/campaigns/{cid}").json())["status"] == "paused"
+                      and x)  # fmt: skip
+    assert "STOP pressed" in paused["status_reason"]
+    assert c.post("/api/motion/move", json={"yaw_deg": 1}, headers=AUTH).status_code == 202
+    assert c.post(f"/api/campaigns/{cid}/cancel", headers=AUTH).status_code == 200
+    assert c.get(f"/api/campaigns/{cid}").json()["status"] == "cancelled"
+    r = c.post(f"/api/campaigns/{cid}/resume", headers=AUTH)
+    assert r.status_code == 409 and "cancelled" in r.json()["detail"]
+
+
+def test_pause_then_resume_measures_every_set_point_once(fast_client):
+    c = fast_client
+    body = {**GRID, "name": "pr", "frames_per_point": 15,
+            "setpoints": [{"yaw_deg": y, "rail_mm": 12000} for y in (0, 2, 4, 6)]}  # fmt: skip
+    cid = c.post("/api/campaigns", json=body, headers=AUTH).json()["id"]
+    c.post(f"/api/campaigns/{cid}/start", headers=AUTH)
+    wait_for(lambda: c.get(f"/api/campaigns/{cid}").json()["n_done"] >= 1, 60)
+    assert c.post(f"/api/campaigns/{cid}/pause", headers=AUTH).status_code == 200
+    wait_for(lambda: c.get(f"/api/campaigns/{cid}").json()["status"] == "paused")
+    done_at_pause = c.get(f"/api/campaigns/{cid}").json()["n_done"]
+    assert c.get(f"/api/campaigns/{cid}/measurements").json()["total"] == 15 * done_at_pause
+    assert c.post(f"/api/campaigns/{cid}/resume", headers=AUTH).status_code == 200
+    final = wait_for(lambda: (x := c.get(f"/api/campaigns/{cid}").json())["status"] == "done"
+                     and x, 60)  # fmt: skip
+    assert final["n_done"] == 4
+    items = c.get(f"/api/campaigns/{cid}/measurements").json()["items"]
+    assert len(items) == 60
+    assert [sum(m["setpoint_index"] == i for m in items) for i in range(4)] == [15] * 4
+    r = c.post(f"/api/campaigns/{cid}/resume", headers=AUTH)
+    assert r.status_code == 409 and "nothing left to do" in r.json()["detail"]
+
+
+def test_progress_reaches_the_websocket(fast_client):
+    c = fast_client
+    body = {**GRID, "name": "ws", "frames_per_point": 5}
+    cid = c.post("/api/campaigns", json=body, headers=AUTH).json()["id"]
+    with c.websocket_connect("/ws/live") as ws:
+        ws.receive_json()
+        c.post(f"/api/campaigns/{cid}/start", headers=AUTH)
+        seen = []
+        while not seen or seen[-1]["status"] != "done":
+            m = ws.receive_json()
+            if m["type"] == "campaign":
+                seen.append(m["data"])
+    assert seen[-1]["n_done"] == 2 and seen[-1]["campaign_id"] == cid
+    assert any(s["status"] == "running" for s in seen)
