@@ -72,3 +72,42 @@ def serve(overrides: dict) -> int:
         timeout_graceful_shutdown=settings.shutdown_timeout_s,
     )  # fmt: skip
     return 0
+
+
+def report(opts: dict) -> int:
+    """``tofpose report``: a campaign's report from a database, without a server."""
+    from sqlalchemy.exc import SQLAlchemyError
+
+    from backend.db.engine import make_engine, make_session_factory
+    from backend.db.models import CampaignRow
+    from backend.services.reports import ReportError, build, to_csv, to_html, to_json, to_pdf
+
+    try:
+        engine = make_engine(opts["db"])
+        with make_session_factory(engine)() as session:
+            if session.get(CampaignRow, opts["campaign_id"]) is None:
+                print(f"tofpose report: no campaign with id {opts['campaign_id']} in "
+                      f"{opts['db']}", file=sys.stderr)  # fmt: skip
+                return 2
+            rep, rows = build(session, opts["campaign_id"], opts["reference"])
+    except ReportError as exc:
+        print(f"tofpose report: {exc}", file=sys.stderr)
+        return 2
+    except SQLAlchemyError as exc:
+        print(f"tofpose report: cannot read {opts['db']}: {exc.__class__.__name__}: "
+              f"{str(exc).splitlines()[0]}", file=sys.stderr)  # fmt: skip
+        return 2
+    fmt = opts["format"]
+    writers = {
+        "csv": lambda: to_csv(rows),
+        "json": lambda: to_json(rep),
+        "html": lambda: to_html(rep, rows),
+        "pdf": lambda: to_pdf(rep, rows),
+    }
+    body = writers[fmt]()
+    mode = "wb" if isinstance(body, bytes) else "w"
+    with open(opts["out"], mode) as fh:
+        fh.write(body)
+    print(f"campaign {opts['campaign_id']}: {rep['n_frames']} frames, reference "
+          f"{opts['reference']} -> {opts['out']}")  # fmt: skip
+    return 0

@@ -221,13 +221,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--camera", help="'sim' or 'replay:REC.h5'")
     p.add_argument("--motion", help="'sim' or 'none'")
     p.add_argument("--rate", dest="replay_rate_hz", type=float, help="replay rate, Hz")
+    p = sub.add_parser("report", help="write a campaign's accuracy report from the database")
+    p.add_argument("campaign_id", type=int)
+    p.add_argument("--db", required=True, help="SQLAlchemy URL, e.g. sqlite:///data/tofpose.db")
+    p.add_argument("--format", choices=("html", "pdf", "csv", "json"), default="html")
+    p.add_argument("--reference", choices=("lab", "exact"), default="lab")
+    p.add_argument("--out", required=True, help="output file")
     args = ap.parse_args(argv)
-    if args.cmd == "serve":
-        from backend.main import serve  # lazy: the library does not need the server
+    if args.cmd in ("serve", "report"):
+        from backend import main as server_main  # lazy: the library does not need the server
 
         opts = vars(args)
-        opts.pop("cmd")
-        return serve(opts)
+        cmd = opts.pop("cmd")
+        return server_main.serve(opts) if cmd == "serve" else server_main.report(opts)
     try:
         if args.cmd == "estimate":
             s = estimate(args.recording, args.out, args.catalog, args.camera)

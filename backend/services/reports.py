@@ -294,21 +294,26 @@ def to_pdf(report: dict, rows: list[dict]) -> bytes:
         for _title, f in figures(report, rows):
             pdf.savefig(f)
             plt.close(f)
-        per_page = 3
-        sps = report["setpoints"]
-        for k in range(0, len(sps), per_page):
+        # Per set-point: one compact table (bias / std per axis and pass), many set-points
+        # a page; the full per-set-point tables are in the HTML and JSON.
+        header = ["set-point", "frames ok"] + [f"{a.rsplit('_', 1)[0]} {q}" for a in POSE
+                                                for q in ("bias", "std")] + ["result"]  # fmt: skip
+        body = [
+            [str(sp["setpoint_index"]), f"{sp['n_ok']}/{sp['n_frames']}"]
+            + [_fmt(sp["axes"][a][q]) for a in POSE for q in ("bias", "std")]
+            + [_fmt(sp["passed"])]
+            for sp in report["setpoints"]
+        ]
+        per_page = 30
+        for k in range(0, len(body), per_page):
             fig = plt.figure(figsize=(11.7, 8.3))
-            for j, sp in enumerate(sps[k : k + per_page]):
-                ax = fig.add_axes((0.03, 0.68 - 0.32 * j, 0.94, 0.27))
-                ax.axis("off")
-                ax.set_title(f"Set-point {sp['setpoint_index']}: {sp['n_ok']}/{sp['n_frames']} "
-                             f"frames with a pose, {_fmt(sp['passed'])}", fontsize=9)  # fmt: skip
-                body = [r + [_fmt(sp["axes"][r[0]][p]) for p in PAPER_COLUMNS]
-                        for r in table_rows(sp["axes"], STAT_COLUMNS)]  # fmt: skip
-                tab = ax.table(cellText=body, colLabels=["axis", *STAT_COLUMNS, *PAPER_COLUMNS],
-                               loc="upper center")  # fmt: skip
-                tab.auto_set_font_size(False)
-                tab.set_fontsize(6.5)
+            ax = fig.add_axes((0.03, 0.03, 0.94, 0.9))
+            ax.axis("off")
+            ax.set_title(f"Per set-point (errors against the {report['reference']} reference;"
+                         " mm and deg)", fontsize=10)  # fmt: skip
+            tab = ax.table(cellText=body[k : k + per_page], colLabels=header, loc="upper center")
+            tab.auto_set_font_size(False)
+            tab.set_fontsize(6.5)
             pdf.savefig(fig)
             plt.close(fig)
     return buf.getvalue()

@@ -241,3 +241,23 @@ def test_progress_reaches_the_websocket(fast_client):
                 seen.append(m["data"])
     assert seen[-1]["n_done"] == 2 and seen[-1]["campaign_id"] == cid
     assert any(s["status"] == "running" for s in seen)
+
+
+def test_the_cli_writes_the_same_report_from_the_database(tmp_path, capsys):
+    from tofpose.cli import main
+
+    data = tmp_path / "data"
+    with running_app(make_settings(data, sim_time_scale=5.0)) as c:
+        done = _run(c, {**GRID, "frames_per_point": 4})
+        api_csv = c.get(f"/api/campaigns/{done['id']}/report.csv").text
+    url = f"sqlite:///{data / 'tofpose.db'}"
+    out = tmp_path / "r.csv"
+    assert main(["report", "--db", url, str(done["id"]), "--format", "csv", "--out",
+                 str(out)]) == 0  # fmt: skip
+    assert out.read_text() == api_csv
+    pdf = tmp_path / "r.pdf"
+    assert main(["report", "--db", url, str(done["id"]), "--format", "pdf", "--out",
+                 str(pdf)]) == 0  # fmt: skip
+    assert pdf.read_bytes()[:5] == b"%PDF-"
+    assert main(["report", "--db", url, "77", "--out", str(out)]) == 2
+    assert "no campaign with id 77" in capsys.readouterr().err
