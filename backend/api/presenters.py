@@ -7,6 +7,7 @@ import each other and schemas stay plain data.
 from __future__ import annotations
 
 from dataclasses import asdict
+from datetime import UTC, datetime
 
 import numpy as np
 
@@ -182,9 +183,9 @@ def campaign_public(
         catalog=row.catalog_name, frames_per_point=row.frames_per_point,
         settle_s=row.settle_s, lock_timeout_s=row.lock_timeout_s,
         requirements=Requirements(**row.requirements), generator=row.generator,
-        camera=row.camera_settings, notes=row.notes, created_at=row.created_at,
-        scheduled_at=row.scheduled_at, started_at=row.started_at,
-        finished_at=row.finished_at, n_setpoints=len(row.setpoints), n_done=n_done,
+        camera=row.camera_settings, notes=row.notes, created_at=_utc(row.created_at),
+        scheduled_at=_utc(row.scheduled_at), started_at=_utc(row.started_at),
+        finished_at=_utc(row.finished_at), n_setpoints=len(row.setpoints), n_done=n_done,
         estimated_duration_s=estimated_duration_s,
         progress=ProgressPublic(**progress) if progress else None,
         setpoints=[
@@ -193,6 +194,11 @@ def campaign_public(
             for sp in row.setpoints
         ] if with_setpoints else None,
     )  # fmt: skip
+
+
+def _utc(dt: datetime | None) -> datetime | None:
+    """Stored times are UTC; SQLite hands them back without a zone."""
+    return dt.replace(tzinfo=UTC) if dt is not None and dt.tzinfo is None else dt
 
 
 def _pose_dict(m: MeasurementRow, prefix: str) -> dict[str, float] | None:

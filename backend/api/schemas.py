@@ -6,7 +6,14 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Literal
 
-from pydantic import AwareDatetime, BaseModel, ConfigDict, Field, model_validator
+from pydantic import (
+    AwareDatetime,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    model_validator,
+)
 from pydantic.json_schema import SkipJsonSchema
 
 
@@ -174,6 +181,12 @@ class AxisBody(StrictBody):
                 )
         return data
 
+    @model_validator(mode="after")
+    def _at_least_one(self):
+        if not self.axes():
+            raise ValueError("give at least one of yaw_deg, pitch_deg, roll_deg, rail_mm")
+        return self
+
     def axes(self) -> dict[str, float]:
         """{"yaw": deg, "rail": mm, ...} of the axes given."""
         return {k.rsplit("_", 1)[0]: v for k, v in self.model_dump().items() if v is not None}
@@ -308,11 +321,20 @@ class CampaignCreate(StrictBody):
     frames_per_point: int = Field(30, ge=1, le=MAX_FRAMES_PER_POINT)
     settle_s: float = Field(1.0, ge=0.0, le=3600.0)
     lock_timeout_s: float = Field(5.0, gt=0.0, le=3600.0)
-    setpoints: Annotated[list[SetPointModel], Field(max_length=MAX_SETPOINTS)] | None = None
+    setpoints: (
+        Annotated[list[SetPointModel], Field(min_length=1, max_length=MAX_SETPOINTS)] | None
+    ) = None
     generator: Generator | None = None
     requirements: Requirements = Field(default_factory=Requirements)
     camera: CameraSettingsUpdate | None = None
     notes: str = Field("", max_length=4000)
+
+
+def _iso_text(v: object) -> object:
+    """A date-time in JSON is ISO 8601 text (not a number of seconds)."""
+    if v is not None and not isinstance(v, str | datetime):
+        raise ValueError("must be an ISO 8601 date-time with a time zone, as text")
+    return v
 
 
 class CampaignStart(StrictBody):
@@ -321,7 +343,7 @@ class CampaignStart(StrictBody):
     While another campaign owns the motion system, starting now is refused (409) unless
     ``queue`` is true: then this one runs when the other finishes."""
 
-    at: AwareDatetime | None = None
+    at: Annotated[AwareDatetime, BeforeValidator(_iso_text)] | None = Field(None, strict=False)
     queue: bool = False
 
 

@@ -150,7 +150,9 @@ def test_generators_make_the_set_points(fast_client):
 @pytest.mark.parametrize(
     ("body", "status", "needle"),
     [
-        ({**GRID, "setpoints": []}, 422, "no set-points"),
+        ({**GRID, "setpoints": []}, 422, "at least 1 item"),
+        ({k: v for k, v in GRID.items() if k != "setpoints"}, 422, "no set-points"),
+        ({**GRID, "setpoints": [{}]}, 422, "at least one of yaw_deg"),
         ({**GRID, "setpoints": [{"yaw_deg": 200}]}, 422, "set-point 0: yaw set-point 200"),
         ({**GRID, "setpoints": [{"yaw_deg": 0}] * 5001}, 422, "setpoints"),
         ({**GRID, "frames_per_point": 100_000, "setpoints": [{"yaw_deg": 0}] * 11}, 422,
