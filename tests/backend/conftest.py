@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import os
 import threading
 import time
+import uuid
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -77,6 +79,33 @@ class SpyMotion:
 
     def close(self) -> None:
         self.inner.close()
+
+
+POSTGRES_ENV = "TOFPOSE_TEST_POSTGRES_URL"
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def database_url(request) -> Iterator[str | None]:
+    """None (the app's default: an SQLite file in the data directory), then a fresh
+    PostgreSQL database on the server named by $TOFPOSE_TEST_POSTGRES_URL (an admin URL,
+    e.g. postgresql+psycopg://tofpose:tofpose@127.0.0.1:5432/postgres; .ci/run starts
+    Debian's PostgreSQL and sets it)."""
+    if request.param == "sqlite":
+        yield None
+        return
+    admin = os.environ.get(POSTGRES_ENV)
+    if not admin:
+        pytest.skip(f"{POSTGRES_ENV} not set: no PostgreSQL server (.ci/run starts one)")
+    from sqlalchemy import create_engine, make_url, text
+
+    name = f"tofpose_test_{uuid.uuid4().hex[:12]}"
+    engine = create_engine(admin, isolation_level="AUTOCOMMIT")
+    with engine.connect() as conn:
+        conn.execute(text(f'CREATE DATABASE "{name}"'))
+    yield make_url(admin).set(database=name).render_as_string(hide_password=False)
+    with engine.connect() as conn:
+        conn.execute(text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
+    engine.dispose()
 
 
 @pytest.fixture

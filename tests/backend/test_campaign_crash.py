@@ -46,11 +46,12 @@ def _check_rows(c: httpx.Client, cid: int) -> int:
     return len(done)
 
 
-def test_sigkill_at_several_moments_loses_and_duplicates_nothing(tmp_path):
+def test_sigkill_at_several_moments_loses_and_duplicates_nothing(tmp_path, database_url):
     data = tmp_path / "data"
+    env = {**ENV, **({"TOFPOSE_DATABASE_URL": database_url} if database_url else {})}
 
     def server() -> ServeProcess:
-        return ServeProcess(data, env=ENV)
+        return ServeProcess(data, env=env)
 
     # 1. killed in the middle of a set-point
     with server() as s:

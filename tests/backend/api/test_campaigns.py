@@ -23,9 +23,11 @@ GRID = {
 
 
 @pytest.fixture
-def fast_client(tmp_path):
-    """The app with the simulated lab running 5x faster than real time."""
-    with running_app(make_settings(tmp_path / "data", sim_time_scale=5.0)) as c:
+def fast_client(tmp_path, database_url):
+    """The app with the simulated lab running 5x faster than real time, on SQLite and
+    (when a server is available) on PostgreSQL."""
+    settings = make_settings(tmp_path / "data", sim_time_scale=5.0, database_url=database_url)
+    with running_app(settings) as c:
         yield c
 
 
@@ -164,7 +166,8 @@ def test_generators_make_the_set_points(fast_client):
         ({**GRID, "setpoints": [{"yaw_deg": None}]}, 422, "null is not a set-point"),
     ],
 )  # fmt: skip
-def test_bad_campaigns_are_refused_and_nothing_is_stored(client, body, status, needle):
+def test_bad_campaigns_are_refused_and_nothing_is_stored(fast_client, body, status, needle):
+    client = fast_client
     r = client.post("/api/campaigns", json=body, headers=AUTH)
     assert r.status_code == status, r.text
     detail = r.json()["detail"]
@@ -173,7 +176,8 @@ def test_bad_campaigns_are_refused_and_nothing_is_stored(client, body, status, n
     assert client.get("/api/campaigns").json() == []
 
 
-def test_unknown_ids_names_taken_and_auth(client):
+def test_unknown_ids_names_taken_and_auth(fast_client):
+    client = fast_client
     assert client.get("/api/campaigns/99").status_code == 404
     assert client.post("/api/campaigns/99/start", headers=AUTH).status_code == 404
     assert client.get("/api/campaigns/99/report.csv").status_code == 404

@@ -13,8 +13,9 @@ from backend.db.models import Base
 from tests.backend.conftest import running_app
 
 
-def test_migrations_match_the_models(tmp_path):
-    engine = make_engine(f"sqlite:///{tmp_path / 'm.db'}")
+def test_migrations_match_the_models(tmp_path, database_url):
+    """On SQLite and on PostgreSQL: upgrading an empty database gives exactly the models."""
+    engine = make_engine(database_url or f"sqlite:///{tmp_path / 'm.db'}")
     upgrade_database(engine)
     with engine.connect() as conn:
         diff = compare_metadata(MigrationContext.configure(conn), Base.metadata)
