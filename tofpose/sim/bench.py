@@ -18,21 +18,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tofpose.camera import CameraModel
-from tofpose.geometry import RigidTransform, rotation_from_euler_deg
+from tofpose.geometry import RigidTransform
+from tofpose.kinematics import axes_transform
 from tofpose.sim.render import RenderedFrame, SensorModel, render_frame
 from tofpose.sim.scene import TargetScene
 from tofpose.sim.turntable import Turntable
 
 # Target facing the camera: target z (out of the plate) points at the camera, target y up.
 R_FACING = np.diag([1.0, -1.0, -1.0])
-
-
-def axes_transform(positions: dict[str, float]) -> RigidTransform:
-    """T_lab_inner for axis positions (deg, rail mm)."""
-    R = rotation_from_euler_deg(0.0, positions.get("yaw", 0.0), 0.0)
-    R = R @ rotation_from_euler_deg(positions.get("pitch", 0.0), 0.0, 0.0)
-    R = R @ rotation_from_euler_deg(0.0, 0.0, positions.get("roll", 0.0))
-    return RigidTransform(R, np.array([0.0, 0.0, positions.get("rail", 0.0)]))
 
 
 @dataclass
