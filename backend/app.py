@@ -21,7 +21,17 @@ from starlette.middleware.trustedhost import TrustedHostMiddleware
 
 import backend
 from backend.api.contract import complete_openapi, operation_id
-from backend.api.routes import camera, campaigns, catalogs, frames, health, live, motion, pose
+from backend.api.routes import (
+    calibrations,
+    camera,
+    campaigns,
+    catalogs,
+    frames,
+    health,
+    live,
+    motion,
+    pose,
+)
 from backend.api.routes import devices as devices_route
 from backend.auth import load_or_create_token
 from backend.db.engine import make_engine, make_session_factory, upgrade_database
@@ -176,7 +186,9 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             status_code=409,
         )  # fmt: skip
 
-    for module in (health, devices_route, camera, pose, frames, motion, catalogs, campaigns, live):
+    routers = (health, devices_route, camera, pose, frames, motion, catalogs, campaigns,
+               calibrations, live)  # fmt: skip
+    for module in routers:
         app.include_router(module.router)
 
     @app.get("/", include_in_schema=False)

@@ -49,6 +49,12 @@ def quaternion_wxyz_from_rotation(R: np.ndarray) -> np.ndarray:
     return q if w >= 0 else -q
 
 
+def rotation_from_quaternion_wxyz(q_wxyz) -> np.ndarray:
+    """Rotation matrix, shape (3, 3), of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = (float(v) for v in q_wxyz)
+    return Rotation.from_quat([x, y, z, w]).as_matrix()
+
+
 def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
     """Angle in degrees of the relative rotation ``R_a^T R_b`` (geodesic distance)."""
     cos = (np.trace(R_a.T @ R_b) - 1.0) / 2.0

@@ -14,6 +14,7 @@ import numpy as np
 from backend.api.schemas import (
     AxisPublic,
     BlobPublic,
+    CalibrationPublic,
     CameraSettingsPublic,
     CampaignPublic,
     DeviceStatePublic,
@@ -24,9 +25,10 @@ from backend.api.schemas import (
     ProgressPublic,
     Requirements,
     SetPointPublic,
+    TransformPublic,
     TruthPublic,
 )
-from backend.db.models import POSE_FIELDS, CampaignRow, MeasurementRow
+from backend.db.models import POSE_FIELDS, CalibrationRow, CampaignRow, MeasurementRow
 from backend.drivers.base import CameraSettings
 from backend.services.acquisition import LiveSample
 from backend.state import AppState
@@ -213,4 +215,26 @@ def measurement_public(m: MeasurementRow, setpoint_index: int) -> MeasurementPub
         x_mm=m.x_mm, y_mm=m.y_mm, z_mm=m.z_mm, pitch_deg=m.pitch_deg, yaw_deg=m.yaw_deg,
         roll_deg=m.roll_deg, truth=_pose_dict(m, "truth_"),
         lab_truth=_pose_dict(m, "lab_truth_"), encoders=m.encoders,
+    )  # fmt: skip
+
+
+def _transform_public(matrix: list[list[float]]) -> TransformPublic:
+    M = np.asarray(matrix, float)
+    return TransformPublic(
+        matrix=M.tolist(),
+        euler_deg=[float(v) for v in euler_deg_from_rotation(M[:3, :3])],
+        translation_mm=[float(v) for v in M[:3, 3]],
+    )
+
+
+def calibration_public(row: CalibrationRow) -> CalibrationPublic:
+    s = row.sigmas
+    return CalibrationPublic(
+        id=row.id, name=row.name, campaign_id=row.campaign_id,
+        created_at=_utc(row.created_at), mount=_transform_public(row.mount),
+        placement=_transform_public(row.placement), mount_sigma_deg=s[0:3],
+        mount_sigma_mm=s[3:6], placement_sigma_deg=s[6:9], placement_sigma_mm=s[9:12],
+        residual_rms_mm=float(np.sqrt(np.mean(np.square(row.residual_mm)))),
+        residual_rms_deg=float(np.sqrt(np.mean(np.square(row.residual_deg)))),
+        chi2_per_dof=row.chi2_per_dof, n_observations=row.n_observations,
     )  # fmt: skip

@@ -179,3 +179,26 @@ class MeasurementRow(Base):
     recording_index: Mapped[int | None] = mapped_column(Integer, nullable=True)
 
     setpoint: Mapped[SetPointRow] = relationship(back_populates="measurements")
+
+
+class CalibrationRow(Base):
+    """A bench calibration estimated from a campaign: the camera's installation on the
+    inner axis (``mount``) and the target's placement in the lab (``placement``), each a
+    4 x 4 homogeneous matrix (mm), with 1-sigma (mount rotation xyz deg, translation xyz
+    mm, placement rotation xyz deg, translation xyz mm) and the fit's residuals."""
+
+    __tablename__ = "calibrations"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(200), unique=True)
+    campaign_id: Mapped[int | None] = mapped_column(
+        ForeignKey("campaigns.id", ondelete="SET NULL"), nullable=True
+    )
+    mount: Mapped[list[list[float]]] = mapped_column(JSON)
+    placement: Mapped[list[list[float]]] = mapped_column(JSON)
+    sigmas: Mapped[list[float]] = mapped_column(JSON)
+    residual_mm: Mapped[list[float]] = mapped_column(JSON)
+    residual_deg: Mapped[list[float]] = mapped_column(JSON)
+    chi2_per_dof: Mapped[float] = mapped_column(Float)
+    n_observations: Mapped[int] = mapped_column(Integer)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)

@@ -30,7 +30,7 @@ RULE = (
     f"singular point: |error - median| > {SINGULAR_K:g} x {MAD_TO_SIGMA} x MAD of its axis "
     "within its set-point; pass: max |error| after removal <= requirement"
 )
-REFERENCE_PREFIX = {"lab": "lab_truth_", "exact": "truth_"}
+REFERENCE_PREFIX = {"lab": "lab_truth_", "exact": "truth_", "calibrated": "calibrated_truth_"}
 
 
 @dataclass

@@ -24,8 +24,14 @@ from matplotlib.backends.backend_pdf import PdfPages  # noqa: E402
 from sqlalchemy import select  # noqa: E402
 from sqlalchemy.orm import Session  # noqa: E402
 
-from backend.db.models import CampaignRow, MeasurementRow, SetPointRow  # noqa: E402
+from backend.db.models import (  # noqa: E402
+    CalibrationRow,
+    CampaignRow,
+    MeasurementRow,
+    SetPointRow,
+)
 from backend.services.analysis import AXES, REFERENCE_PREFIX, analyse, findings  # noqa: E402
+from backend.services.calibrations import calibrated_reference  # noqa: E402
 
 POSE = AXES
 CSV_COLUMNS = (
@@ -37,6 +43,7 @@ CSV_COLUMNS = (
     "sigma_roll_deg",
     "setpoint_yaw_deg", "setpoint_pitch_deg", "setpoint_roll_deg", "setpoint_rail_mm",
     "encoder_yaw_deg", "encoder_pitch_deg", "encoder_roll_deg", "encoder_rail_mm",
+    *(f"calibrated_truth_{a}" for a in POSE),
 )  # fmt: skip
 UNITS = {a: a.rsplit("_", 1)[1] for a in POSE}
 
@@ -45,8 +52,11 @@ class ReportError(ValueError):
     """A report that cannot be made as asked (e.g. no exact truth on real hardware)."""
 
 
-def campaign_rows(session: Session, campaign_id: int) -> list[dict]:
-    """Every stored frame of the campaign as a dict of ``CSV_COLUMNS``."""
+def campaign_rows(
+    session: Session, campaign_id: int, calibration: CalibrationRow | None = None
+) -> list[dict]:
+    """Every stored frame of the campaign as a dict of ``CSV_COLUMNS``; the
+    ``calibrated_truth_*`` columns are filled when a calibration is given."""
     q = (
         select(MeasurementRow, SetPointRow)
         .join(SetPointRow, MeasurementRow.setpoint_id == SetPointRow.id)
@@ -65,9 +75,12 @@ def campaign_rows(session: Session, campaign_id: int) -> list[dict]:
             "encoder_yaw_deg": enc.get("yaw"), "encoder_pitch_deg": enc.get("pitch"),
             "encoder_roll_deg": enc.get("roll"), "encoder_rail_mm": enc.get("rail"),
         }  # fmt: skip
+        if calibration is not None and {"yaw", "pitch", "roll", "rail"} <= set(enc):
+            ref = calibrated_reference(calibration, enc)
+            row.update({f"calibrated_truth_{a}": v for a, v in ref.items()})
         for col in CSV_COLUMNS:
             if col not in row:
-                row[col] = getattr(m, col)
+                row[col] = getattr(m, col, None)
         out.append(row)
     return out
 
@@ -92,10 +105,19 @@ def jsonable(obj):
     return obj
 
 
-def build(session: Session, campaign_id: int, reference: str = "lab") -> tuple[dict, list]:
-    """(report dict, rows) of a campaign; ``ReportError`` when the reference is missing."""
+def build(
+    session: Session,
+    campaign_id: int,
+    reference: str = "lab",
+    calibration: CalibrationRow | None = None,
+) -> tuple[dict, list]:
+    """(report dict, rows) of a campaign; ``ReportError`` when the reference is missing.
+    With a ``calibration`` the reference is ``calibrated``: encoders + the calibrated mount
+    and placement."""
+    if calibration is not None:
+        reference = "calibrated"
     row = session.get(CampaignRow, campaign_id)
-    rows = campaign_rows(session, campaign_id)
+    rows = campaign_rows(session, campaign_id, calibration)
     prefix = REFERENCE_PREFIX[reference]
     if rows and all(r[prefix + "x_mm"] is None for r in rows):
         raise ReportError(
@@ -114,6 +136,9 @@ def build(session: Session, campaign_id: int, reference: str = "lab") -> tuple[d
             "finished_at": row.finished_at.isoformat() if row.finished_at else None,
         },
         "generated_at": datetime.now(UTC).isoformat(),
+        "calibration": (
+            {"id": calibration.id, "name": calibration.name} if calibration is not None else None
+        ),
         **result,
     }  # fmt: skip
     report["findings"] = findings(result)

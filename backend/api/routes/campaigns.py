@@ -22,7 +22,7 @@ from backend.api.schemas import (
     CampaignStart,
     MeasurementPage,
 )
-from backend.db.models import CampaignRow, MeasurementRow, SetPointRow
+from backend.db.models import CalibrationRow, CampaignRow, MeasurementRow, SetPointRow
 from backend.services import campaign_plan
 from backend.services.campaigns import (
     CampaignConflictError,
@@ -241,12 +241,19 @@ def get_campaign_report(
     reference: Annotated[
         Reference, Query(description="lab: encoders + nominal geometry; exact: simulator only")
     ] = Reference.lab,
+    calibration: Annotated[
+        int | None,
+        Query(ge=1, le=2**31 - 1, description="reference = encoders + this calibration"),
+    ] = None,
 ) -> Response:
     """The accuracy report: HTML (self-contained), PDF, CSV (one row per frame) or JSON
     (every statistic). Statistics against the lab's reference by default."""
     row = _row(session, campaign_id)
+    cal = None
+    if calibration is not None and (cal := session.get(CalibrationRow, calibration)) is None:
+        raise HTTPException(404, f"no calibration with id {calibration}")
     try:
-        report, rows = build(session, campaign_id, reference.value)
+        report, rows = build(session, campaign_id, reference.value, cal)
     except ReportError as exc:
         raise unprocessable(["query", "reference"], [str(exc)]) from exc
     if fmt is ReportFormat.csv:

@@ -1,0 +1,54 @@
+"""Bench calibrations: estimate from a campaign, list. Applied to a report with
+``GET /api/campaigns/{id}/report.{fmt}?calibration=ID`` (docs/campaigns.md)."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, HTTPException, status
+from sqlalchemy import select
+
+from backend.api.contract import errors
+from backend.api.deps import ReadAuth, SessionDep, StateDep, WriteAuth, unprocessable
+from backend.api.presenters import calibration_public
+from backend.api.schemas import CalibrationCreate, CalibrationPublic
+from backend.db.models import CalibrationRow, CampaignRow
+from backend.services.calibrations import calibrate_from_campaign
+from backend.services.store import NameTakenError
+
+router = APIRouter(prefix="/api/calibrations", tags=["calibrations"])
+
+
+@router.post(
+    "", status_code=status.HTTP_201_CREATED, dependencies=[WriteAuth],
+    responses=errors(404, 409),
+)  # fmt: skip
+def create_calibration(
+    body: CalibrationCreate, state: StateDep, session: SessionDep
+) -> CalibrationPublic:
+    """Fit the camera mount and the target placement to the campaign's set-points and
+    store the result with its 1-sigma and residuals. 422 when the campaign cannot
+    determine them (fewer than 3 usable set-points, rotations about fewer than 2 axes) or
+    the lab's nominal geometry is unknown; nothing is stored then."""
+    if session.get(CampaignRow, body.campaign_id) is None:
+        raise HTTPException(404, f"no campaign with id {body.campaign_id}")
+    world = state.devices.world
+    if world is None:
+        raise unprocessable(["body"], ["the lab's nominal camera mount and target placement "
+                                       "are unknown for these devices (only the simulated lab "
+                                       "defines them today)"])  # fmt: skip
+    geometry = world.bench.geometry
+    try:
+        row = calibrate_from_campaign(session, body.campaign_id, body.name,
+                                      geometry.T_inner_camera, geometry.T_lab_target)  # fmt: skip
+    except NameTakenError as exc:
+        raise HTTPException(409, str(exc)) from exc
+    except ValueError as exc:
+        raise unprocessable(["body", "campaign_id"],
+                            [f"campaign {body.campaign_id}: {exc}"]) from exc  # fmt: skip
+    return calibration_public(row)
+
+
+@router.get("", dependencies=[ReadAuth])
+def list_calibrations(session: SessionDep) -> list[CalibrationPublic]:
+    """Stored calibrations, newest first."""
+    rows = session.scalars(select(CalibrationRow).order_by(CalibrationRow.id.desc())).all()
+    return [calibration_public(r) for r in rows]
