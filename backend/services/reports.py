@@ -255,8 +255,9 @@ def to_html(report: dict, rows: list[dict]) -> str:
         f"<h1>Campaign {c['id']}: {esc(c['name'])}</h1>",
         f"<p>Status <b>{esc(c['status'])}</b>, catalog {esc(c['catalog'])}, "
         f"{c['n_done']} of {c['n_setpoints']} set-points measured, {c['frames_per_point']} "
-        f"frames per set-point, settle {c['settle_s']:g} s. Reference: <b>{report['reference']}"
-        f"</b>. {report['n_ok']} of {report['n_frames']} frames gave a pose.</p>",
+        f"frames per set-point, settle {c['settle_s']:g} s. Reference: "
+        f"<b>{esc(_reference_label(report))}</b>. {report['n_ok']} of {report['n_frames']} "
+        "frames gave a pose.</p>",
         f"<p><i>{esc(report['rule'])}</i></p>",
         "<h2>Findings</h2><ul>",
         *(f"<li>{esc(f)}</li>" for f in report["findings"]),
@@ -282,6 +283,14 @@ def to_html(report: dict, rows: list[dict]) -> str:
     return "\n".join(parts)
 
 
+def _reference_label(report: dict) -> str:
+    cal = report.get("calibration")
+    if cal:
+        return f"calibrated (encoders + calibration {cal['id']} '{cal['name']}')"
+    labels = {"lab": "lab (encoders + nominal geometry)", "exact": "exact (the rendered pose)"}
+    return labels.get(report["reference"], report["reference"])
+
+
 def _html_table(header: list[str], body: list[list[str]]) -> str:
     def cell(v: str) -> str:
         cls = " class='fail'" if v == "FAIL" else (" class='pass'" if v == "pass" else "")
@@ -302,7 +311,8 @@ def to_pdf(report: dict, rows: list[dict]) -> bytes:
         lines = [
             f"Status {c['status']}, catalog {c['catalog']}, {c['n_done']} of "
             f"{c['n_setpoints']} set-points, {c['frames_per_point']} frames each; reference "
-            f"{report['reference']}; {report['n_ok']} of {report['n_frames']} frames with a pose.",
+            f"{_reference_label(report)}; {report['n_ok']} of {report['n_frames']} frames "
+            "with a pose.",
             report["rule"],
             *("- " + f for f in report["findings"]),
         ]
