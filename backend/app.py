@@ -126,7 +126,9 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             timeout_s=settings.camera_timeout_s,
             backoff_s=settings.retry_backoff_s,
         )  # fmt: skip
-        campaigns = CampaignService(sessions, acq, hub, devs.motion)
+        campaigns = CampaignService(
+            sessions, acq, hub, devs.motion, recordings_dir=settings.data_dir / "campaigns"
+        )
         interrupted = campaigns.recover()
         if interrupted:
             log.warning("%d campaign(s) were running when the server stopped: interrupted "

@@ -117,6 +117,49 @@ class RecordingWriter:
                 ds[n] = value
         self.n += 1
 
+    @classmethod
+    def reopen(cls, path: str | Path) -> RecordingWriter:
+        """Continue an existing recording (append mode); ``RecordingError`` if the file is
+        not one of ours or lacks a dataset the writer needs."""
+        path = Path(path)
+        try:
+            f = h5py.File(path, "a")
+        except OSError as exc:
+            raise RecordingError(f"{path}: cannot open for appending ({exc})") from exc
+        try:
+            if f.attrs.get("format") != FORMAT:
+                raise RecordingError(f"{path}: not a tofpose recording")
+            for ds in ("frames/gray", "frames/distance_mm", "frames/time_s"):
+                if ds not in f:
+                    raise RecordingError(f"{path}: missing dataset /{ds}")
+            self = cls.__new__(cls)
+            self.path, self._f = path, f
+            self.camera = _camera_from_attrs(f["camera"].attrs, path)
+            self._gray, self._dist = f["frames/gray"], f["frames/distance_mm"]
+            self._time = f["frames/time_s"]
+            self._truth = _existing_pose_datasets(f, "truth")
+            self._lab_truth = _existing_pose_datasets(f, "lab_truth")
+            self.n = int(self._time.shape[0])
+            return self
+        except BaseException:
+            f.close()
+            raise
+
+    def truncate(self, n: int) -> None:
+        """Drop every frame from index ``n`` on (e.g. an aborted batch of frames)."""
+        if not 0 <= n <= self.n:
+            raise ValueError(f"cannot truncate a recording of {self.n} frames to {n}")
+        datasets = [self._gray, self._dist, self._time]
+        for group in (self._truth, self._lab_truth):
+            if group is not None:
+                datasets += list(group)
+        for ds in datasets:
+            ds.resize(n, axis=0)
+        self.n = n
+
+    def flush(self) -> None:
+        self._f.flush()
+
     def close(self) -> None:
         if self._f.id.valid:
             self._f.close()
@@ -138,6 +181,23 @@ def _pose_datasets(f: h5py.File, group: str) -> tuple[h5py.Dataset, h5py.Dataset
         "t_camera_target_mm", (0, 3), np.float64, maxshape=(None, 3), chunks=(256, 3)
     )
     return R, t
+
+
+def _camera_from_attrs(attrs, path=None) -> CameraModel:
+    """The CameraModel stored in /camera's attributes; RecordingError if invalid."""
+    cam_attrs = {k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in attrs.items()}
+    if isinstance(cam_attrs.get("name"), bytes):
+        cam_attrs["name"] = cam_attrs["name"].decode()
+    try:
+        return CameraModel.from_dict(cam_attrs)
+    except ValueError as exc:
+        raise RecordingError(f"{path}: /camera attributes are invalid ({exc})") from exc
+
+
+def _existing_pose_datasets(f: h5py.File, group: str):
+    if group not in f:
+        return None
+    return f[f"{group}/R_camera_target"], f[f"{group}/t_camera_target_mm"]
 
 
 def _read_poses(f: h5py.File, group: str, n: int, path) -> tuple[np.ndarray, np.ndarray] | None:
@@ -222,15 +282,7 @@ def open_recording(path: str | Path) -> Recording:
             )
         if "camera" not in f:
             raise RecordingError(f"{path}: missing the /camera group")
-        cam_attrs = {
-            k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in f["camera"].attrs.items()
-        }
-        if isinstance(cam_attrs.get("name"), bytes):
-            cam_attrs["name"] = cam_attrs["name"].decode()
-        try:
-            camera = CameraModel.from_dict(cam_attrs)
-        except ValueError as exc:
-            raise RecordingError(f"{path}: /camera attributes are invalid ({exc})") from exc
+        camera = _camera_from_attrs(f["camera"].attrs, path)
         catalog = None
         if "catalog" in f:
             try:

@@ -327,6 +327,11 @@ class CampaignCreate(StrictBody):
     generator: Generator | None = None
     requirements: Requirements = Field(default_factory=Requirements)
     camera: CameraSettingsUpdate | None = None
+    record_raw: bool = Field(
+        False,
+        description="keep every measured frame pair in an HDF5 recording "
+        "(GET /api/campaigns/{id}/recording.h5), so the campaign can be re-processed",
+    )
     notes: str = Field("", max_length=4000)
 
 
@@ -383,6 +388,7 @@ class CampaignPublic(BaseModel):
     requirements: Requirements
     generator: dict | None
     camera: dict | None
+    record_raw: bool
     notes: str
     created_at: datetime
     scheduled_at: datetime | None

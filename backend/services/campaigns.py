@@ -21,6 +21,7 @@ import threading
 import time
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from pathlib import Path
 
 import numpy as np
 from sqlalchemy import func, select
@@ -33,6 +34,7 @@ from backend.services.acquisition import AcquisitionService, LiveSample
 from backend.services.hub import LiveHub
 from backend.services.store import NameTakenError
 from tofpose.geometry import facing_euler_deg
+from tofpose.recording import RecordingWriter
 
 log = logging.getLogger(__name__)
 
@@ -127,6 +129,58 @@ def _finite(v) -> float | None:
     return v if np.isfinite(v) else None
 
 
+class RawRecorder:
+    """A campaign's raw frames in an HDF5 recording (docs/architecture.md §7), kept equal
+    to what the database holds: frames are appended as they are measured, the file is
+    flushed before the set-point's transaction commits, and frames of a set-point that
+    did not complete (pause, cancel, shutdown; after a crash, at the next run) are cut
+    off again, so ``/frames`` holds exactly the committed measurements, in order."""
+
+    def __init__(self, path: Path, camera, catalog, committed_frames: int) -> None:
+        self.path = path
+        self._camera, self._catalog = camera, catalog
+        self._writer: RecordingWriter | None = None
+        if path.exists():
+            self._writer = RecordingWriter.reopen(path)
+            self._writer.truncate(min(committed_frames, self._writer.n))
+
+    @property
+    def n(self) -> int:
+        return self._writer.n if self._writer is not None else 0
+
+    def append(self, sample: LiveSample) -> int:
+        f = sample.frame
+        exact, lab = f.meta.get("T_world"), f.T_truth
+        if self._writer is None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._writer = RecordingWriter(
+                self.path, self._camera, self._catalog,
+                with_truth=exact is not None, with_lab_truth=lab is not None,
+            )  # fmt: skip
+        w = self._writer
+        index = w.n
+        w.append(
+            f.gray, f.distance_mm, float(f.time_s),
+            exact.R if exact is not None else None, exact.t_mm if exact is not None else None,
+            lab_R_camera_target=lab.R if lab is not None else None,
+            lab_t_camera_target_mm=lab.t_mm if lab is not None else None,
+        )  # fmt: skip
+        return index
+
+    def rollback(self, n: int) -> None:
+        if self._writer is not None:
+            self._writer.truncate(n)
+            self._writer.flush()
+
+    def flush(self) -> None:
+        if self._writer is not None:
+            self._writer.flush()
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+
+
 class CampaignService:
     """Owns the campaign queue and at most one runner thread. Thread-safe."""
 
@@ -140,7 +194,9 @@ class CampaignService:
         poll_s: float = 0.05,
         move_timeout_s: float = 600.0,
         frame_timeout_s: float = 10.0,
+        recordings_dir: Path | None = None,
     ) -> None:
+        self.recordings_dir = recordings_dir
         self.sessions = sessions
         self.acquisition = acquisition
         self.hub = hub
@@ -341,6 +397,13 @@ class CampaignService:
             plan = [(sp.id, sp.index, _axes(sp)) for sp in pending]
             name, frames, settle_s = row.name, row.frames_per_point, row.settle_s
             lock_timeout_s = row.lock_timeout_s
+            record_raw = row.record_raw
+            committed_frames = s.scalar(
+                select(func.count())
+                .select_from(MeasurementRow)
+                .join(SetPointRow, MeasurementRow.setpoint_id == SetPointRow.id)
+                .where(SetPointRow.campaign_id == campaign_id)
+            )
         with self._lock:
             self._running_id = campaign_id
             self._request = None
@@ -350,14 +413,33 @@ class CampaignService:
         self._bump()
         sub = self.hub.subscribe(maxsize=256)
         final, reason = "done", ""
+        recorder: RawRecorder | None = None
         try:
+            if record_raw:
+                recorder = RawRecorder(
+                    self.recording_path(campaign_id), self.acquisition.camera.model,
+                    self.acquisition.catalog, committed_frames,
+                )  # fmt: skip
             if self.motion is None and any(axes for _, _, axes in plan):
                 raise _Halt("failed", "no motion system is configured")
             for sp_id, index, axes in plan:
                 self._bump(setpoint_index=index, frames_collected=0)
-                samples = self._measure(sub, index, axes, frames, settle_s, lock_timeout_s)
+                start_n = recorder.n if recorder is not None else 0
+                try:
+                    samples = self._measure(
+                        sub, index, axes, frames, settle_s, lock_timeout_s, recorder
+                    )
+                    if recorder is not None:
+                        recorder.flush()  # the frames are on disk before the rows commit
+                except BaseException:
+                    if recorder is not None:
+                        recorder.rollback(start_n)
+                    raise
                 with self.sessions() as s, s.begin():
-                    s.add_all(measurement_row(sp_id, x) for x in samples)
+                    for k, x in enumerate(samples):
+                        m = measurement_row(sp_id, x)
+                        m.recording_index = start_n + k if recorder is not None else None
+                        s.add(m)
                     sp = s.get(SetPointRow, sp_id)
                     sp.status, sp.completed_at = "done", utcnow()
                 with self._lock:
@@ -371,6 +453,8 @@ class CampaignService:
             final, reason = "paused", f"runner error: {exc}"
         finally:
             self.hub.unsubscribe(sub)
+            if recorder is not None:
+                recorder.close()
             try:
                 self._set_status(campaign_id, final, reason)
             finally:
@@ -389,9 +473,14 @@ class CampaignService:
         if req is not None:
             raise _Halt(req[0], f"{req[1]} (during set-point {index})")
 
+    def recording_path(self, campaign_id: int) -> Path:
+        if self.recordings_dir is None:
+            raise RuntimeError("no directory for campaign recordings is configured")
+        return self.recordings_dir / f"campaign-{campaign_id}.h5"
+
     def _measure(
         self, sub, index: int, axes: dict[str, float], frames: int, settle_s: float,
-        lock_timeout_s: float,
+        lock_timeout_s: float, recorder: RawRecorder | None = None,
     ) -> list[LiveSample]:  # fmt: skip
         """Move to ``axes`` and collect ``frames`` samples taken at rest (see module)."""
         self._check(index)
@@ -457,6 +546,8 @@ class CampaignService:
             elif t - last_ok_s > lock_timeout_s:
                 raise _Halt("paused", f"pose lock lost for {t - last_ok_s:.1f} s at set-point "
                                       f"{index}: {sample.result.reason}")  # fmt: skip
+            if recorder is not None:
+                recorder.append(sample)
             out.append(sample)
             self._bump(frames_collected=len(out))
         return out
@@ -524,13 +615,14 @@ def create_campaign(
     generator: dict | None = None,
     camera: dict | None = None,
     notes: str = "",
+    record_raw: bool = False,
 ) -> CampaignRow:
     """Store a draft campaign with its set-points; ``NameTakenError`` if the name exists."""
     row = CampaignRow(
         name=name, status="draft", status_reason="", catalog_name=catalog_name,
         frames_per_point=frames_per_point, settle_s=settle_s, lock_timeout_s=lock_timeout_s,
         requirements=requirements, generator=generator, camera_settings=camera, notes=notes,
-        record_raw=False,
+        record_raw=record_raw,
     )  # fmt: skip
     for i, sp in enumerate(setpoints):
         row.setpoints.append(

@@ -95,3 +95,24 @@ def test_lab_truth_is_stored_beside_truth_and_checked(tmp_path):
         del f["lab_truth/R_camera_target"]
     with pytest.raises(RecordingError, match="/lab_truth needs both"):
         open_recording(p)
+
+
+def test_a_recording_can_be_reopened_appended_and_truncated(tmp_path):
+    p = tmp_path / "r.h5"
+    frames = _write(p, n=3)
+    w = RecordingWriter.reopen(p)
+    assert w.n == 3
+    g, d = frames[0]
+    w.append(g, d, 9.0, np.eye(3), np.array([0, 0, 2000.0]))
+    w.append(g, d, 9.1, np.eye(3), np.array([0, 0, 2001.0]))
+    w.truncate(4)  # drop the last one (an aborted batch)
+    with pytest.raises(ValueError, match="cannot truncate"):
+        w.truncate(7)
+    w.close()
+    with open_recording(p) as rec:
+        assert rec.n_frames == 4
+        np.testing.assert_allclose(rec.time_s, [0.0, 0.1, 0.2, 9.0])
+        np.testing.assert_allclose(rec.truth_t_mm[:, 2], [1000, 1001, 1002, 2000])
+    (tmp_path / "x.h5").write_bytes(b"nope")
+    with pytest.raises(RecordingError, match="cannot open for appending"):
+        RecordingWriter.reopen(tmp_path / "x.h5")

@@ -9,6 +9,7 @@ from enum import StrEnum
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Path, Query, Response, status
+from fastapi.responses import FileResponse
 from sqlalchemy import func, select
 
 from backend.api.contract import errors
@@ -118,7 +119,7 @@ def create_campaign(body: CampaignCreate, state: StateDep, session: SessionDep) 
             lock_timeout_s=body.lock_timeout_s, requirements=body.requirements.model_dump(),
             generator=body.generator.model_dump() if body.generator else None,
             camera=body.camera.model_dump(exclude_none=True) if body.camera else None,
-            notes=body.notes,
+            notes=body.notes, record_raw=body.record_raw,
         )  # fmt: skip
     except NameTakenError as exc:
         raise HTTPException(409, str(exc)) from exc
@@ -270,3 +271,25 @@ def get_campaign_report(
         media_type=MEDIA_TYPES[fmt.value],
         headers={"Content-Disposition": f'attachment; filename="{filename}"'},
     )
+
+
+@router.get(
+    "/{campaign_id}/recording.h5",
+    dependencies=[ReadAuth],
+    response_class=FileResponse,
+    responses={200: {"content": {"application/x-hdf5": {}}, "description": "the recording"},
+               **errors(404, 409)},
+)  # fmt: skip
+def get_campaign_recording(campaign_id: IdParam, state: StateDep, session: SessionDep):
+    """The campaign's raw frames (HDF5, docs/architecture.md §7): exactly the stored
+    measurements, in order (``recording_index`` of each). Only with ``record_raw``."""
+    row = _row(session, campaign_id)
+    path = state.campaigns.recording_path(campaign_id)
+    if not row.record_raw or not path.exists():
+        raise HTTPException(404, f"campaign {campaign_id} has no raw recording"
+                            + ("" if row.record_raw else " (record_raw was off)"))  # fmt: skip
+    if row.status == "running":
+        raise HTTPException(409, f"campaign {campaign_id} is running and writing its "
+                                 "recording: pause it or wait until it is done")  # fmt: skip
+    return FileResponse(path, media_type="application/x-hdf5",
+                        filename=f"campaign-{campaign_id}.h5")  # fmt: skip

@@ -267,3 +267,50 @@ def test_the_cli_writes_the_same_report_from_the_database(tmp_path, capsys):
     assert pdf.read_bytes()[:5] == b"%PDF-"
     assert main(["report", "--db", url, "77", "--out", str(out)]) == 2
     assert "no campaign with id 77" in capsys.readouterr().err
+
+
+def test_raw_recording_holds_exactly_the_stored_frames_and_reprocesses(fast_client, tmp_path):
+    """record_raw: after a pause mid-set-point the file holds only committed frames;
+    after resume the downloaded recording re-processed by `tofpose estimate` gives the
+    stored poses."""
+    from tofpose.cli import main
+    from tofpose.recording import open_recording
+
+    c = fast_client
+    body = {**GRID, "name": "raw", "frames_per_point": 12, "record_raw": True,
+            "setpoints": [{"yaw_deg": y, "rail_mm": 12000} for y in (0, 3, 6)]}  # fmt: skip
+    cid = c.post("/api/campaigns", json=body, headers=AUTH).json()["id"]
+    c.post(f"/api/campaigns/{cid}/start", headers=AUTH)
+    wait_for(lambda: (p := c.get(f"/api/campaigns/{cid}").json()["progress"]) and
+             p["n_done"] >= 1 and p["frames_collected"] >= 3, 60)  # fmt: skip
+    assert c.get(f"/api/campaigns/{cid}/recording.h5").status_code == 409  # still writing
+    c.post(f"/api/campaigns/{cid}/pause", headers=AUTH)
+    wait_for(lambda: c.get(f"/api/campaigns/{cid}").json()["status"] == "paused")
+    stored = c.get(f"/api/campaigns/{cid}/measurements").json()["total"]
+    r = c.get(f"/api/campaigns/{cid}/recording.h5")
+    assert r.status_code == 200
+    (tmp_path / "paused.h5").write_bytes(r.content)
+    with open_recording(tmp_path / "paused.h5") as rec:
+        assert rec.n_frames == stored and stored % 12 == 0
+    c.post(f"/api/campaigns/{cid}/resume", headers=AUTH)
+    wait_for(lambda: c.get(f"/api/campaigns/{cid}").json()["status"] == "done", 60)
+    rec_path = tmp_path / "raw.h5"
+    rec_path.write_bytes(c.get(f"/api/campaigns/{cid}/recording.h5").content)
+    items = c.get(f"/api/campaigns/{cid}/measurements").json()["items"]
+    with open_recording(rec_path) as rec:
+        assert rec.n_frames == len(items) == 36
+        assert rec.truth_t_mm is not None and rec.lab_truth_t_mm is not None
+        for k, m in enumerate(items):
+            assert rec.time_s[k] == pytest.approx(m["time_s"])
+            np.testing.assert_allclose(
+                rec.lab_truth_t_mm[k], [m["lab_truth"][a] for a in ("x_mm", "y_mm", "z_mm")]
+            )
+    out = tmp_path / "poses.csv"
+    assert main(["estimate", str(rec_path), "--out", str(out)]) == 0
+    poses = list(csv.DictReader(out.open()))
+    diffs = [abs(float(p["x_mm"]) - m["x_mm"]) for p, m in zip(poses, items, strict=True)
+             if p["ok"] == "1" and m["ok"]]  # fmt: skip
+    assert len(diffs) >= 30 and np.median(diffs) < 0.5
+    other = c.post("/api/campaigns", json={**GRID, "name": "no-raw"}, headers=AUTH).json()
+    r = c.get(f"/api/campaigns/{other['id']}/recording.h5")
+    assert r.status_code == 404 and "record_raw was off" in r.json()["detail"]
