@@ -179,6 +179,18 @@ def figures(report: dict, rows: list[dict]) -> list[tuple[str, plt.Figure]]:
     fig.suptitle(f"Error per frame against the {ref} reference")
     figs.append(("Error per frame (time series)", fig))
 
+    fig, axs = plt.subplots(3, 2, figsize=(10, 7.5), sharex=True, constrained_layout=True)
+    for ax, a in zip(axs.T.ravel(), POSE, strict=True):
+        ax.plot(d["t"], d["ref_" + a], "-", color="0.6", lw=1.0, label="reference")
+        ax.plot(d["t"], d[a], ".", ms=2, label="measured")
+        ax.set_ylabel(f"{a.rsplit('_', 1)[0]} ({UNITS[a]})")
+        ax.grid(alpha=0.3)
+    axs[0, 0].legend(loc="best", fontsize=8)
+    for ax in axs[-1]:
+        ax.set_xlabel("frame time (s)")
+    fig.suptitle("Measured pose and reference over time (steps, holds)")
+    figs.append(("Measured and reference over time", fig))
+
     sps = report["setpoints"]
     fig, axs = plt.subplots(2, 3, figsize=(11, 6.5), constrained_layout=True)
     for ax, a in zip(axs.ravel(), POSE, strict=True):

@@ -110,7 +110,7 @@ def test_a_grid_campaign_runs_to_completion_and_every_report_downloads(fast_clie
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
     parsed = _Tables()
     parsed.feed(r.text)
-    assert parsed.tables >= 1 + 2 * 2 and parsed.imgs == 3
+    assert parsed.tables >= 1 + 2 * 2 and parsed.imgs == 4
     assert "x_mm" in parsed.cells and "http" not in r.text.split("<body>")[0]
 
     r = c.get(base + ".pdf")

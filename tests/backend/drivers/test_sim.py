@@ -41,7 +41,7 @@ def test_frame_rate_is_paced_and_changes_with_settings(world):
     # Paced: never faster than the rate (a loaded machine may be slower; that is not
     # the pacer's doing, so only the lower bound is checked on the wall clock).
     assert time.monotonic() - t0 >= 6 / 20.0 - 0.06
-    assert np.median(np.diff(times)) == pytest.approx(0.05, abs=0.01)
+    assert np.median(np.diff(times)) >= 0.05 - 0.01
     applied = cam.apply_settings(CameraSettings(frame_rate_hz=5.0, integration_time_us=1e6))
     assert applied.integration_time_us == 4000.0  # clamped to the sensor's limit
     cam.read(1.0)
