@@ -19,7 +19,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -398,6 +398,7 @@ class CampaignService:
             name, frames, settle_s = row.name, row.frames_per_point, row.settle_s
             lock_timeout_s = row.lock_timeout_s
             record_raw = row.record_raw
+            camera_settings = dict(row.camera_settings or {})
             committed_frames = s.scalar(
                 select(func.count())
                 .select_from(MeasurementRow)
@@ -415,6 +416,8 @@ class CampaignService:
         final, reason = "done", ""
         recorder: RawRecorder | None = None
         try:
+            if camera_settings:
+                self._apply_camera(camera_settings)
             if record_raw:
                 recorder = RawRecorder(
                     self.recording_path(campaign_id), self.acquisition.camera.model,
@@ -464,6 +467,16 @@ class CampaignService:
                         self._progress.status = final
                 self._bump()
                 self._wake.set()
+
+    def _apply_camera(self, wanted: dict) -> None:
+        """The campaign's camera settings, applied on the acquisition thread before the
+        first set-point (the camera keeps them afterwards, as with PUT /api/camera)."""
+        cam = self.acquisition.camera
+        target = replace(cam.get_settings(), **wanted)
+        try:
+            self.acquisition.submit(lambda: cam.apply_settings(target)).result(10.0)
+        except Exception as exc:
+            raise _Halt("paused", f"the camera refused the campaign's settings: {exc}") from exc
 
     def _check(self, index: int) -> None:
         if self._shutdown.is_set():

@@ -314,3 +314,14 @@ def test_raw_recording_holds_exactly_the_stored_frames_and_reprocesses(fast_clie
     other = c.post("/api/campaigns", json={**GRID, "name": "no-raw"}, headers=AUTH).json()
     r = c.get(f"/api/campaigns/{other['id']}/recording.h5")
     assert r.status_code == 404 and "record_raw was off" in r.json()["detail"]
+
+
+def test_the_campaigns_camera_settings_are_applied_before_it_measures(fast_client):
+    c = fast_client
+    body = {**GRID, "name": "cam", "frames_per_point": 3,
+            "camera": {"modulation_frequency_mhz": 12.0, "frame_rate_hz": 15.0}}  # fmt: skip
+    assert c.get("/api/camera/settings").json()["modulation_frequency_mhz"] == 6.0
+    done = _run(c, body)
+    assert done["status"] == "done" and done["camera"]["modulation_frequency_mhz"] == 12.0
+    s = c.get("/api/camera/settings").json()
+    assert s["modulation_frequency_mhz"] == 12.0 and s["frame_rate_hz"] == 15.0
