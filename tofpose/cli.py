@@ -13,7 +13,7 @@ from tqdm import tqdm
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog, paper_target
-from tofpose.geometry import euler_deg_from_rotation, rotation_angle_deg
+from tofpose.geometry import facing_euler_deg, rotation_angle_deg
 from tofpose.pipeline import PosePipeline
 from tofpose.recording import RecordingError, RecordingWriter, open_recording
 
@@ -160,7 +160,7 @@ def demo(n_frames: int = 48, seed: int = 1) -> int:
             for i in range(0, r.n_frames, max(1, r.n_frames // 24)):
                 row = rows[i]
                 R_t, t_t = r.truth_R[i], r.truth_t_mm[i]
-                e_t = euler_deg_from_rotation(R_t)
+                e_t = facing_euler_deg(R_t)
                 print(
                     f"{i:>5} {'':>2} {'':>2} | {t_t[0]:8.2f} {t_t[1]:8.2f} {t_t[2]:9.2f} "
                     f"{e_t[0]:8.3f} {e_t[1]:7.3f} {e_t[2]:7.3f} |   truth"

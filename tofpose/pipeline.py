@@ -37,7 +37,7 @@ from tofpose.extraction import (
     measure_blobs,
     predicted_diameter_window_px,
 )
-from tofpose.geometry import euler_deg_from_rotation, quaternion_wxyz_from_rotation
+from tofpose.geometry import facing_euler_deg, quaternion_wxyz_from_rotation
 from tofpose.matching import (
     MatchingConfig,
     MatchResult,
@@ -138,7 +138,10 @@ class PoseResult:
 
     ok : bool; reason : why not ok (empty when ok).
     R : (3, 3) R_camera_target; t_mm : (3,) target origin in the camera frame.
-    euler_deg : (pitch, yaw, roll), R = Rz(roll) Ry(yaw) Rx(pitch).
+    euler_deg : (pitch, yaw, roll) in deg of the attitude as people read it: the Euler
+        angles (R = Rz(roll) Ry(yaw) Rx(pitch)) of ``R @ diag(1, -1, -1)``, so that a
+        target facing the camera reads (0, 0, 0) (docs/architecture.md §3). ``R`` and the
+        quaternion stay the raw R_camera_target.
     quaternion_wxyz : (4,).
     matched : list of MatchedReflector; unmatched : list of (u, v, distance_mm) blobs.
     residual_mm : RMS of matched residuals; iterations : refinement iterations.
@@ -358,7 +361,7 @@ class PosePipeline:
             time_s,
             R,
             t,
-            euler_deg_from_rotation(R),
+            facing_euler_deg(R),
             quaternion_wxyz_from_rotation(R),
             matched,
             unmatched,

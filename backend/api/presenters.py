@@ -32,7 +32,12 @@ from backend.db.models import POSE_FIELDS, CalibrationRow, CampaignRow, Measurem
 from backend.drivers.base import CameraSettings
 from backend.services.acquisition import LiveSample
 from backend.state import AppState
-from tofpose.geometry import RigidTransform, euler_deg_from_rotation, rotation_angle_deg
+from tofpose.geometry import (
+    RigidTransform,
+    euler_deg_from_rotation,
+    facing_euler_deg,
+    rotation_angle_deg,
+)
 from tofpose.tof import unambiguous_range_mm
 
 
@@ -160,7 +165,7 @@ def pose_public(sample: LiveSample) -> PosePublic:
 
 
 def _truth(T: RigidTransform, R: np.ndarray | None, t_mm: np.ndarray | None) -> TruthPublic:
-    p, y, r = (float(v) for v in euler_deg_from_rotation(T.R))
+    p, y, r = (float(v) for v in facing_euler_deg(T.R))
     err_pos = err_ang = None
     if R is not None and t_mm is not None:
         err_pos = float(np.linalg.norm(np.asarray(t_mm) - T.t_mm))

@@ -132,6 +132,10 @@ class TruthPublic(BaseModel):
 
 
 class PosePublic(BaseModel):
+    """One processed frame. ``pitch_deg``, ``yaw_deg``, ``roll_deg`` are the attitude as
+    people read it: Euler angles of ``R_camera_target @ diag(1, -1, -1)`` (a target facing
+    the camera reads 0, 0, 0); ``quaternion_wxyz`` is the raw ``R_camera_target``."""
+
     frame_index: int
     frame_time_s: float
     captured_unix_s: float

@@ -36,6 +36,11 @@ def test_live_pose_is_accurate_and_follows_the_turntable(client):
     assert abs(before["z_mm"] - 2000.0) < 30.0
     assert before["n_matched"] == 8
     assert before["truth"]["position_error_mm"] < 25.0  # unknown mount error ~0.3 deg
+    # Attitude as people read it: face-on reads ~(0, 0, 0), never +-180 (the raw
+    # quaternion is that of R_camera_target = diag(1, -1, -1): w ~ 0, x ~ 1).
+    assert max(abs(before[k]) for k in ("pitch_deg", "yaw_deg", "roll_deg")) < 1.5
+    assert max(abs(before["truth"][k]) for k in ("pitch_deg", "yaw_deg", "roll_deg")) < 1.5
+    assert abs(before["quaternion_wxyz"][1]) > 0.99
     r = client.post("/api/motion/move", json={"yaw_deg": 10.0, "roll_deg": -5.0}, headers=AUTH)
     assert r.status_code == 202, r.text
     assert r.json()["targets"]["yaw"] == 10.0

@@ -17,6 +17,8 @@ def test_simulate_then_estimate_writes_the_documented_csv(tmp_path, capsys):
     body = [dict(zip(rows[0], r, strict=True)) for r in rows[1:]]
     assert all(r["ok"] == "1" for r in body)
     assert all(abs(float(r["z_mm"]) - 697) < 10 for r in body)
+    # attitude relative to the facing reference: face-on reads ~0, not +-180
+    assert all(abs(float(r[k])) < 2.0 for r in body for k in ("pitch_deg", "yaw_deg", "roll_deg"))
     assert "4/4 frames with a pose" in capsys.readouterr().out
 
 
