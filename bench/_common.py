@@ -41,15 +41,11 @@ def pose_errors(R_est, t_est, T_true) -> tuple[float, float]:
 
 
 def relative_euler_deg(R) -> np.ndarray:
-    """(pitch, yaw, roll) deg of R relative to the facing reference diag(1, -1, -1).
+    """(pitch, yaw, roll) deg of R relative to the facing reference (face-on reads ~0
+    like the paper's tables): ``tofpose.geometry.facing_euler_deg``."""
+    from tofpose.geometry import facing_euler_deg
 
-    With docs/architecture.md's frames a target facing the camera has R = diag(1, -1, -1), i.e.
-    pitch = +-180 deg; reports use R @ diag(1, -1, -1) so that face-on reads ~0 like the
-    paper's tables.
-    """
-    from tofpose.geometry import euler_deg_from_rotation
-
-    return euler_deg_from_rotation(np.asarray(R) @ np.diag([1.0, -1.0, -1.0]))
+    return facing_euler_deg(np.asarray(R))
 
 
 def stats(values) -> dict[str, float]:
