@@ -2,6 +2,15 @@
 # Run: docker run -p 8000:8000 -v tofpose-data:/data tofpose
 # Bound to 0.0.0.0 inside the container, so reads need the token too (printed at start,
 # stored in /data/api_token).
+# Stage 1: the dashboard (frontend/), built with Node from its lock file.
+FROM node:20-slim AS dashboard
+WORKDIR /frontend
+COPY frontend/package.json frontend/package-lock.json ./
+RUN npm ci --no-audit --no-fund
+COPY frontend/ ./
+RUN npm run build
+
+# Stage 2: the server, serving the built dashboard at /.
 FROM python:3.11-slim
 
 ENV PYTHONDONTWRITEBYTECODE=1 \
@@ -9,7 +18,8 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     PIP_NO_CACHE_DIR=1 \
     TOFPOSE_DATA_DIR=/data \
     TOFPOSE_HOST=0.0.0.0 \
-    TOFPOSE_PORT=8000
+    TOFPOSE_PORT=8000 \
+    TOFPOSE_FRONTEND_DIR=/app/dashboard
 
 WORKDIR /app
 COPY pyproject.toml README.md alembic.ini ./
@@ -19,6 +29,7 @@ COPY migrations ./migrations
 # A regular install: the wheel carries the Alembic revisions as backend/migrations,
 # which the server applies at every start (tests/test_packaging.py checks this).
 RUN pip install . && mkdir -p /data
+COPY --from=dashboard /frontend/dist /app/dashboard
 
 EXPOSE 8000
 VOLUME ["/data"]

@@ -18,6 +18,7 @@ from fastapi_offline import FastAPIOffline
 from sqlalchemy.exc import IntegrityError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.middleware.trustedhost import TrustedHostMiddleware
+from starlette.staticfiles import StaticFiles
 
 import backend
 from backend.api.contract import complete_openapi, operation_id
@@ -193,8 +194,16 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
     for module in routers:
         app.include_router(module.router)
 
-    @app.get("/", include_in_schema=False)
-    def root() -> RedirectResponse:
-        return RedirectResponse("/docs")
+    dist = settings.frontend_dist
+    if (dist / "index.html").exists():
+        # The dashboard (frontend/, built by make run / make test): mounted last, so every
+        # API route, the docs and the WebSocket match first.
+        app.mount("/", StaticFiles(directory=dist, html=True), name="dashboard")
+    else:
+
+        @app.get("/", include_in_schema=False)
+        def root() -> RedirectResponse:
+            log.warning("dashboard not built (%s missing): redirecting / to /docs", dist)
+            return RedirectResponse("/docs")
 
     return app

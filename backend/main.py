@@ -30,6 +30,8 @@ def banner(settings: Settings, token: str, created: bool) -> str:
     reads = "open (loopback)" if settings.reads_are_open else "token required"
     return "\n".join([
         f"tofpose server: {camera}, {motion}",
+        f"  dashboard      {base}/"
+        + ("" if (settings.frontend_dist / "index.html").exists() else "   (not built: make run)"),
         f"  API docs       {base}/docs   (OpenAPI: {base}/openapi.json)",
         f"  live pose      ws://{host}:{settings.port}/ws/live",
         f"  health         {base}/api/health",
@@ -110,4 +112,35 @@ def report(opts: dict) -> int:
         fh.write(body)
     print(f"campaign {opts['campaign_id']}: {rep['n_frames']} frames, reference "
           f"{opts['reference']} -> {opts['out']}")  # fmt: skip
+    return 0
+
+
+def openapi_document() -> dict:
+    """The OpenAPI document of a server on the simulated devices (what the dashboard's
+    TypeScript types are generated from; soft limits are the simulated lab's)."""
+    import asyncio
+    import tempfile
+    from pathlib import Path
+
+    from backend.app import create_app
+
+    async def run() -> dict:
+        with tempfile.TemporaryDirectory() as tmp:
+            settings = Settings(data_dir=Path(tmp), api_token=SecretStr("x" * 32))
+            app = create_app(settings)
+            async with app.router.lifespan_context(app):
+                return app.openapi()
+
+    return asyncio.run(run())
+
+
+def write_openapi(out: str) -> int:
+    """``tofpose openapi --out FILE``."""
+    import json
+
+    doc = openapi_document()
+    with open(out, "w") as fh:
+        json.dump(doc, fh, indent=1, sort_keys=True)
+        fh.write("\n")
+    print(f"{len(doc['paths'])} paths -> {out}")
     return 0

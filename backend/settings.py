@@ -64,6 +64,7 @@ class Settings(BaseSettings):
     retry_backoff_s: tuple[float, float] = (0.05, 2.0)
     max_body_bytes: int = Field(1_000_000, ge=1024)
     shutdown_timeout_s: float = Field(3.0, gt=0, le=60)
+    frontend_dir: Path | None = None
     allowed_hosts: Annotated[list[str], NoDecode] = Field(default_factory=list)
     allowed_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
 
@@ -112,6 +113,13 @@ class Settings(BaseSettings):
         if self.database_url:
             return self.database_url
         return f"sqlite:///{(self.data_dir / 'tofpose.db').resolve()}"
+
+    @property
+    def frontend_dist(self) -> Path:
+        """The built dashboard: ``frontend_dir`` or the checkout's ``frontend/dist``."""
+        if self.frontend_dir is not None:
+            return self.frontend_dir
+        return Path(__file__).resolve().parents[1] / "frontend" / "dist"
 
     @property
     def trusted_hosts(self) -> list[str]:

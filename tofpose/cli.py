@@ -227,7 +227,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--format", choices=("html", "pdf", "csv", "json"), default="html")
     p.add_argument("--reference", choices=("lab", "exact"), default="lab")
     p.add_argument("--out", required=True, help="output file")
+    p = sub.add_parser("openapi", help="write the server's OpenAPI document (JSON)")
+    p.add_argument("--out", required=True)
     args = ap.parse_args(argv)
+    if args.cmd == "openapi":
+        from backend import main as server_main
+
+        return server_main.write_openapi(args.out)
     if args.cmd in ("serve", "report"):
         from backend import main as server_main  # lazy: the library does not need the server
 

@@ -1,0 +1,36 @@
+import type { Pose } from "../api/client";
+
+const fmt = (v: number | null | undefined, d = 2) => (v === null || v === undefined ? "-" : v.toFixed(d));
+
+export function PosePanel({ pose, stale }: { pose: Pose | null; stale: boolean }) {
+  if (!pose) return <section class="card"><h2>Pose</h2><p>no frame yet</p></section>;
+  const ps = pose.position_sigma_mm ?? [];
+  const as = pose.attitude_sigma_deg ?? [];
+  const rows: [string, number | null | undefined, number | undefined, string, number][] = [
+    ["x", pose.x_mm, ps[0], "mm", 2], ["y", pose.y_mm, ps[1], "mm", 2], ["z", pose.z_mm, ps[2], "mm", 2],
+    ["pitch", pose.pitch_deg, as[0], "deg", 3], ["yaw", pose.yaw_deg, as[1], "deg", 3], ["roll", pose.roll_deg, as[2], "deg", 3],
+  ];
+  return (
+    <section class={`card ${stale ? "stale" : ""}`}>
+      <h2>Pose {stale && <span class="badge warn" data-testid="stale">stale: no frame for 2 s</span>}</h2>
+      {pose.ok ? (
+        <table class="pose" data-testid="pose">
+          <tbody>
+            {rows.map(([n, v, s, u, d]) => (
+              <tr key={n}><th>{n}</th><td data-testid={`pose-${n}`}>{fmt(v, d)}</td><td>± {fmt(s, d)}</td><td>{u}</td></tr>
+            ))}
+          </tbody>
+        </table>
+      ) : (
+        <p class="error" data-testid="no-pose">no pose: {pose.reason}</p>
+      )}
+      <p class="small">frame {pose.frame_index}, {pose.n_matched} matched of {pose.n_candidates} candidates,
+        residual {fmt(pose.residual_mm, 3)} mm, {fmt(pose.timings_ms["total"], 1)} ms;
+        attitude relative to the facing reference (face-on reads 0, 0, 0)</p>
+      {pose.truth && (
+        <p class="small">lab reference: x {fmt(pose.truth.x_mm)} y {fmt(pose.truth.y_mm)} z {fmt(pose.truth.z_mm)} mm;
+          error {fmt(pose.truth.position_error_mm)} mm, {fmt(pose.truth.attitude_error_deg, 3)} deg</p>
+      )}
+    </section>
+  );
+}

@@ -1,0 +1,55 @@
+import { render } from "preact";
+import { useEffect, useState } from "preact/hooks";
+import { api, setToken, token } from "./api/client";
+import { Campaigns } from "./components/Campaigns";
+import { LiveView } from "./components/LiveView";
+import { MotionPanel } from "./components/MotionPanel";
+import { PosePanel } from "./components/PosePanel";
+import { TimeSeries } from "./components/TimeSeries";
+import { connectLive, type LiveState } from "./live";
+import "./style.css";
+
+function App() {
+  const [live, setLive] = useState<LiveState>({ connected: false, stale: true, pose: null, images: {}, history: [] });
+  const [error, setError] = useState<string | null>(null);
+  const [hasToken, setHasToken] = useState(!!token());
+  useEffect(() => connectLive(setLive), []);
+
+  const askToken = () => {
+    const t = window.prompt("API token (printed at the server's first start, stored in data/api_token):");
+    setToken(t);
+    setHasToken(!!t);
+  };
+  const stop = async () => {
+    try {
+      await api("POST", "/api/motion/stop");
+      setError(null);
+    } catch (e) {
+      setError((e as Error).message);
+    }
+  };
+  return (
+    <div class="page">
+      <header>
+        <h1>tofpose</h1>
+        <span class={`badge ${live.connected ? "ok" : "warn"}`} data-testid="link">
+          {live.connected ? "live" : "reconnecting…"}
+        </span>
+        <button class="token" onClick={askToken}>{hasToken ? "change token" : "enter API token"}</button>
+        <button class="stop" data-testid="stop" onClick={stop}>STOP</button>
+      </header>
+      {error && <p class="error banner" role="alert" data-testid="error">{error}</p>}
+      <main>
+        <LiveView images={live.images} pose={live.pose} />
+        <div class="side">
+          <PosePanel pose={live.pose} stale={live.stale} />
+          <MotionPanel onError={setError} />
+        </div>
+        <TimeSeries history={live.history} />
+        <Campaigns onError={setError} />
+      </main>
+    </div>
+  );
+}
+
+render(<App />, document.getElementById("app")!);

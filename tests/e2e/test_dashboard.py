@@ -1,0 +1,95 @@
+"""The dashboard in a real browser: live pose that follows the turntable moved through
+the page, overlays toggled in the browser, STOP, a clear message without the token."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.backend.conftest import TOKEN, LiveServer, make_settings
+from tests.e2e.conftest import SHOTS
+
+
+@pytest.fixture
+def server(tmp_path):
+    with LiveServer(make_settings(tmp_path / "data", sim_time_scale=3.0)) as srv:
+        yield srv
+
+
+def _num(page, testid: str) -> float:
+    return float(page.get_by_test_id(testid).inner_text())
+
+
+def test_live_pose_follows_a_move_made_in_the_page(server, page_for):
+    page = page_for(server.base_url, TOKEN)
+    page.goto(server.base_url + "/")
+    page.get_by_test_id("pose-x").wait_for(timeout=20_000)
+    page.wait_for_function("document.querySelectorAll('img').length == 2", timeout=20_000)
+    assert page.get_by_test_id("link").inner_text() == "live"
+    x0 = _num(page, "pose-x")
+    page.get_by_test_id("target-yaw").fill("10")
+    page.get_by_test_id("go-yaw").click()
+    page.wait_for_function(
+        "Math.abs(parseFloat(document.querySelector('[data-testid=pos-yaw]').innerText) - 10)"
+        " < 0.01",
+        timeout=20_000,
+    )
+    page.wait_for_timeout(1500)
+    x1 = _num(page, "pose-x")
+    assert x1 < x0 - 300.0, (x0, x1)  # yawing the camera +10 deg moves the target to -x
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SHOTS / "dashboard-live.png"), full_page=False)
+
+
+def _overlay_pixels(page) -> int:
+    return page.evaluate(
+        """() => { const c = document.querySelector('[data-testid=overlay]');
+                   const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+                   let n = 0;
+                   for (let i = 3; i < d.length; i += 4) if (d[i] > 0) n++;
+                   return n; }"""
+    )
+
+
+def test_overlays_toggle_in_the_browser(server, page_for):
+    page = page_for(server.base_url)
+    page.goto(server.base_url + "/")
+    page.get_by_test_id("pose-x").wait_for(timeout=20_000)
+    page.wait_for_function("document.querySelectorAll('[data-testid=overlay]').length == 2")
+    page.wait_for_timeout(500)
+    on = _overlay_pixels(page)
+    assert on > 200
+    page.get_by_test_id("toggle-matched").click()
+    page.wait_for_timeout(400)
+    matched_off = _overlay_pixels(page)
+    page.get_by_test_id("toggle-unmatched").click()
+    page.wait_for_timeout(400)
+    assert _overlay_pixels(page) == 0 and matched_off < on
+
+
+def test_stop_halts_a_move_and_a_missing_token_shows_the_error(server, page_for):
+    page = page_for(server.base_url)  # no token yet
+    page.goto(server.base_url + "/")
+    page.get_by_test_id("target-roll").wait_for(timeout=20_000)
+    page.get_by_test_id("target-roll").fill("90")
+    page.get_by_test_id("go-roll").click()
+    err = page.get_by_test_id("error")
+    err.wait_for(timeout=5000)
+    assert "401" in err.inner_text() and "API token" in err.inner_text()
+
+    page2 = page_for(server.base_url, TOKEN)
+    page2.goto(server.base_url + "/")
+    page2.get_by_test_id("target-roll").wait_for(timeout=20_000)
+    page2.get_by_test_id("target-roll").fill("170")
+    page2.get_by_test_id("go-roll").click()
+    page2.wait_for_timeout(700)
+    page2.get_by_test_id("stop").click()
+    page2.wait_for_timeout(1500)
+    import httpx
+
+    m = httpx.get(server.base_url + "/api/motion").json()
+    assert m["stopped"] and 1.0 < m["positions"]["roll"] < 100.0, m["positions"]
+    roll = m["positions"]["roll"]
+    page2.wait_for_timeout(500)
+    assert np.isclose(httpx.get(server.base_url + "/api/motion").json()["positions"]["roll"],
+                      roll, atol=0.01)  # fmt: skip
