@@ -13,11 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 from sqlalchemy import select
-from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from backend.db.models import CalibrationRow, MeasurementRow, SetPointRow
-from backend.services.store import NameTakenError
+from backend.services.store import commit_unique
 from tofpose.calibration import BenchObservation, calibrate_bench, mean_pose
 from tofpose.geometry import RigidTransform, facing_euler_deg, rotation_from_quaternion_wxyz
 from tofpose.kinematics import camera_target
@@ -82,11 +81,7 @@ def calibrate_from_campaign(
         chi2_per_dof=float(cal.chi2_per_dof), n_observations=len(obs),
     )  # fmt: skip
     session.add(row)
-    try:
-        session.commit()
-    except IntegrityError as exc:
-        session.rollback()
-        raise NameTakenError(f"a calibration named {name!r} already exists") from exc
+    commit_unique(session, f"a calibration named {name!r}")
     return row
 
 

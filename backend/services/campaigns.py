@@ -25,14 +25,13 @@ from pathlib import Path
 
 import numpy as np
 from sqlalchemy import func, select
-from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from backend.db.models import CampaignRow, MeasurementRow, SetPointRow, utcnow
 from backend.drivers.base import MotionDriver, soft_limit_problems
 from backend.services.acquisition import AcquisitionService, LiveSample
 from backend.services.hub import LiveHub
-from backend.services.store import NameTakenError
+from backend.services.store import commit_unique
 from tofpose.geometry import facing_euler_deg
 from tofpose.recording import RecordingWriter
 
@@ -644,9 +643,5 @@ def create_campaign(
             )  # fmt: skip
         )
     s.add(row)
-    try:
-        s.commit()
-    except IntegrityError as exc:
-        s.rollback()
-        raise NameTakenError(f"a campaign named {name!r} already exists") from exc
+    commit_unique(s, f"a campaign named {name!r}")
     return row

@@ -46,13 +46,19 @@ class NameTakenError(ValueError):
     look-up)."""
 
 
+def commit_unique(session: Session, what: str) -> None:
+    """Commit; a unique-constraint violation (a concurrent request took the name first)
+    rolls back and becomes ``NameTakenError(f"{what} already exists")``."""
+    try:
+        session.commit()
+    except IntegrityError as exc:
+        session.rollback()
+        raise NameTakenError(f"{what} already exists") from exc
+
+
 def add_catalog(session: Session, name: str, catalog: Catalog) -> None:
     """Store a user catalog; raises ``NameTakenError`` if the name exists (built-in or stored)."""
     if name in BUILTIN_CATALOGS:
         raise NameTakenError(f"a catalog named {name!r} already exists (built in)")
     session.add(CatalogRow(name=name, catalog_json=catalog.to_json()))
-    try:
-        session.commit()
-    except IntegrityError as exc:
-        session.rollback()
-        raise NameTakenError(f"a catalog named {name!r} already exists") from exc
+    commit_unique(session, f"a catalog named {name!r}")
