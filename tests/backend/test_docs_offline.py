@@ -18,3 +18,18 @@ def test_docs_pages_load_only_assets_from_this_server(client, page):
         assert url.startswith("/") and not url.startswith("//"), f"{page} loads {url}"
         assert client.get(url).status_code == 200, url
     assert "cdn." not in r.text and "fonts.googleapis" not in r.text
+
+
+def test_root_serves_the_built_dashboard_or_points_to_the_docs(tmp_path):
+    from tests.backend.conftest import make_settings, running_app
+
+    dist = tmp_path / "dist"
+    dist.mkdir()
+    (dist / "index.html").write_text("<!doctype html><title>dash</title>")
+    with running_app(make_settings(tmp_path / "a", frontend_dir=dist)) as c:
+        r = c.get("/")
+        assert r.status_code == 200 and "<title>dash</title>" in r.text
+        assert c.get("/api/health").status_code == 200  # API routes win over the mount
+    with running_app(make_settings(tmp_path / "b", frontend_dir=tmp_path / "none")) as c:
+        r = c.get("/", follow_redirects=False)
+        assert r.status_code in (302, 307) and r.headers["location"] == "/docs"
