@@ -13,7 +13,7 @@ from dataclasses import fields
 from fastapi import FastAPI, Request
 from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse, RedirectResponse, Response
+from fastapi.responses import FileResponse, JSONResponse, RedirectResponse, Response
 from fastapi_offline import FastAPIOffline
 from sqlalchemy.exc import IntegrityError
 from starlette.exceptions import HTTPException as StarletteHTTPException
@@ -196,9 +196,16 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
 
     dist = settings.frontend_dist
     if (dist / "index.html").exists():
-        # The dashboard (frontend/, built by make run / make test): mounted last, so every
-        # API route, the docs and the WebSocket match first.
-        app.mount("/", StaticFiles(directory=dist, html=True), name="dashboard")
+        # The dashboard (frontend/, built by make run / make test): its page at / and its
+        # hashed assets under /assets. Not a catch-all mount at /: that would answer 404
+        # instead of 405 for a wrong method on an API path.
+        app.mount("/assets", StaticFiles(directory=dist / "assets", check_dir=False),
+                  name="dashboard-assets")  # fmt: skip
+
+        @app.get("/", include_in_schema=False)
+        def dashboard() -> FileResponse:
+            return FileResponse(dist / "index.html", headers={"Cache-Control": "no-cache"})
+
     else:
 
         @app.get("/", include_in_schema=False)

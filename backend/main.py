@@ -120,6 +120,7 @@ def openapi_document() -> dict:
     TypeScript types are generated from; soft limits are the simulated lab's)."""
     import asyncio
     import tempfile
+    from concurrent.futures import ThreadPoolExecutor
     from pathlib import Path
 
     from backend.app import create_app
@@ -131,7 +132,10 @@ def openapi_document() -> dict:
             async with app.router.lifespan_context(app):
                 return app.openapi()
 
-    return asyncio.run(run())
+    # In a thread of its own: the caller may already run an event loop (a test session
+    # with a browser open, a notebook), where asyncio.run would refuse.
+    with ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, run()).result()
 
 
 def write_openapi(out: str) -> int:
