@@ -158,13 +158,13 @@ def latest_pose(client: TestClient, after_index: int = 0, ok: bool = True) -> di
 
 
 class LiveServer:
-    """The app served by uvicorn on a free loopback port, in a background thread."""
+    """The app served by uvicorn on a loopback port (free, or ``port``), in a thread."""
 
-    def __init__(self, settings: Settings, devices: Devices | None = None) -> None:
+    def __init__(self, settings: Settings, devices: Devices | None = None, port: int = 0) -> None:
         import uvicorn
 
         app = create_app(settings, devices)
-        config = uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning",
+        config = uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning",
                                 timeout_graceful_shutdown=settings.shutdown_timeout_s)  # fmt: skip
         self.server = uvicorn.Server(config)
         self.thread = threading.Thread(target=self.server.run, daemon=True)

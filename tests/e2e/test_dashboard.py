@@ -93,3 +93,25 @@ def test_stop_halts_a_move_and_a_missing_token_shows_the_error(server, page_for)
     page2.wait_for_timeout(500)
     assert np.isclose(httpx.get(server.base_url + "/api/motion").json()["positions"]["roll"],
                       roll, atol=0.01)  # fmt: skip
+
+
+def test_the_page_reconnects_after_the_server_restarts(tmp_path, page_for):
+    settings = make_settings(tmp_path / "data")
+    with LiveServer(settings) as first:
+        base, port = first.base_url, int(first.base_url.rsplit(":", 1)[1])
+        page = page_for(base)
+        page.goto(base + "/")
+        page.get_by_test_id("pose-x").wait_for(timeout=20_000)
+        assert page.get_by_test_id("link").inner_text() == "live"
+    # The server is gone: the page says so, and shows its data as stale.
+    page.wait_for_function(
+        "document.querySelector('[data-testid=link]').innerText.startsWith('reconnecting')",
+        timeout=10_000,
+    )
+    page.get_by_test_id("stale").wait_for(timeout=10_000)
+    with LiveServer(settings, port=port):
+        page.wait_for_function(
+            "document.querySelector('[data-testid=link]').innerText === 'live'", timeout=20_000
+        )
+        page.get_by_test_id("stale").wait_for(state="detached", timeout=20_000)
+        assert float(page.get_by_test_id("pose-z").inner_text()) > 1000.0
