@@ -5,6 +5,7 @@ import { Campaigns } from "./components/Campaigns";
 import { LiveView } from "./components/LiveView";
 import { MotionPanel } from "./components/MotionPanel";
 import { PosePanel } from "./components/PosePanel";
+import { StatusPanel } from "./components/StatusPanel";
 import { TimeSeries } from "./components/TimeSeries";
 import { connectLive, type LiveState } from "./live";
 import "./style.css";
@@ -44,6 +45,7 @@ function App() {
         <div class="side">
           <PosePanel pose={live.pose} stale={live.stale} />
           <MotionPanel onError={setError} />
+          <StatusPanel pose={live.pose} onError={setError} />
         </div>
         <TimeSeries history={live.history} />
         <Campaigns onError={setError} />

@@ -26,6 +26,12 @@ def test_live_pose_follows_a_move_made_in_the_page(server, page_for):
     page.get_by_test_id("pose-x").wait_for(timeout=20_000)
     page.wait_for_function("document.querySelectorAll('img').length == 2", timeout=20_000)
     assert page.get_by_test_id("link").inner_text() == "live"
+    page.wait_for_function(
+        "parseFloat(document.querySelector('[data-testid=camera-rate]').innerText) > 1",
+        timeout=10_000,
+    )
+    assert page.get_by_test_id("camera-state").inner_text() == "ok"
+    assert "matching" in page.get_by_test_id("timings").inner_text()
     x0 = _num(page, "pose-x")
     page.get_by_test_id("target-yaw").fill("10")
     page.get_by_test_id("go-yaw").click()
