@@ -1,6 +1,7 @@
 import { render } from "preact";
 import { useEffect, useState } from "preact/hooks";
 import { api, setToken, token } from "./api/client";
+import { CameraPanel } from "./components/CameraPanel";
 import { Campaigns } from "./components/Campaigns";
 import { LiveView } from "./components/LiveView";
 import { MotionPanel } from "./components/MotionPanel";
@@ -46,6 +47,7 @@ function App() {
           <PosePanel pose={live.pose} stale={live.stale} />
           <MotionPanel onError={setError} />
           <StatusPanel pose={live.pose} onError={setError} />
+          <CameraPanel onError={setError} />
         </div>
         <TimeSeries history={live.history} />
         <Campaigns onError={setError} />

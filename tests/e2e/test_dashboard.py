@@ -3,6 +3,8 @@ the page, overlays toggled in the browser, STOP, a clear message without the tok
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -121,3 +123,37 @@ def test_the_page_reconnects_after_the_server_restarts(tmp_path, page_for):
         )
         page.get_by_test_id("stale").wait_for(state="detached", timeout=20_000)
         assert float(page.get_by_test_id("pose-z").inner_text()) > 1000.0
+
+
+def test_a_campaign_started_in_the_page_runs_and_its_report_downloads(server, page_for):
+    import httpx
+
+    from tests.backend.conftest import AUTH
+
+    body = {"name": "page-grid", "frames_per_point": 4, "settle_s": 0.2,
+            "generator": {"kind": "grid", "yaw_deg": [0, 3], "rail_mm": [12500]}}  # fmt: skip
+    cid = httpx.post(server.base_url + "/api/campaigns", json=body, headers=AUTH).json()["id"]
+    page = page_for(server.base_url, TOKEN)
+    page.goto(server.base_url + "/")
+    page.get_by_test_id(f"start-{cid}").click()
+    page.wait_for_function(
+        f"document.querySelector('[data-testid=status-{cid}]').innerText === 'done'",
+        timeout=60_000,
+    )
+    with page.expect_download() as dl:
+        page.get_by_test_id(f"report-html-{cid}").click()
+    html = Path(dl.value.path()).read_text()
+    assert "Campaign" in html and "page-grid" in html and "<table>" in html
+
+
+def test_camera_settings_change_through_the_page(server, page_for):
+    import httpx
+
+    page = page_for(server.base_url, TOKEN)
+    page.goto(server.base_url + "/")
+    page.get_by_test_id("cam-modulation_frequency_mhz").fill("12")
+    page.get_by_test_id("cam-apply").click()
+    page.wait_for_timeout(1000)
+    s = httpx.get(server.base_url + "/api/camera/settings").json()
+    assert s["modulation_frequency_mhz"] == 12.0
+    assert "12.49 m" in page.inner_text("body")  # the unambiguous range the server computed
