@@ -5,6 +5,7 @@ import { CameraPanel } from "./components/CameraPanel";
 import { Campaigns } from "./components/Campaigns";
 import { LiveView } from "./components/LiveView";
 import { MotionPanel } from "./components/MotionPanel";
+import { NewCampaign } from "./components/NewCampaign";
 import { PosePanel } from "./components/PosePanel";
 import { StatusPanel } from "./components/StatusPanel";
 import { TimeSeries } from "./components/TimeSeries";
@@ -51,6 +52,7 @@ function App() {
         </div>
         <TimeSeries history={live.history} />
         <Campaigns onError={setError} />
+        <NewCampaign onError={setError} />
       </main>
     </div>
   );

@@ -125,16 +125,23 @@ def test_the_page_reconnects_after_the_server_restarts(tmp_path, page_for):
         assert float(page.get_by_test_id("pose-z").inner_text()) > 1000.0
 
 
-def test_a_campaign_started_in_the_page_runs_and_its_report_downloads(server, page_for):
-    import httpx
-
-    from tests.backend.conftest import AUTH
-
-    body = {"name": "page-grid", "frames_per_point": 4, "settle_s": 0.2,
-            "generator": {"kind": "grid", "yaw_deg": [0, 3], "rail_mm": [12500]}}  # fmt: skip
-    cid = httpx.post(server.base_url + "/api/campaigns", json=body, headers=AUTH).json()["id"]
+def test_a_campaign_created_and_started_in_the_page_runs_and_its_report_downloads(server, page_for):
     page = page_for(server.base_url, TOKEN)
     page.goto(server.base_url + "/")
+    page.get_by_test_id("new-name").fill("page-grid")
+    page.get_by_test_id("new-yaw").fill("0, 200")  # outside the soft limits first
+    page.get_by_test_id("new-rail").fill("12500")
+    page.get_by_test_id("new-frames").fill("4")
+    page.get_by_test_id("new-create").click()
+    err = page.get_by_test_id("error")
+    err.wait_for(timeout=5000)
+    assert "422" in err.inner_text() and "yaw set-point 200" in err.inner_text()
+    page.get_by_test_id("new-yaw").fill("0, 3")
+    page.get_by_test_id("new-create").click()
+    draft = page.get_by_test_id("draft")
+    draft.wait_for(timeout=5000)
+    assert "2 set-points" in draft.inner_text()  # the server's preview of the plan
+    cid = int(draft.inner_text().split("Draft ")[1].split()[0])
     page.get_by_test_id(f"start-{cid}").click()
     page.wait_for_function(
         f"document.querySelector('[data-testid=status-{cid}]').innerText === 'done'",
@@ -144,6 +151,7 @@ def test_a_campaign_started_in_the_page_runs_and_its_report_downloads(server, pa
         page.get_by_test_id(f"report-html-{cid}").click()
     html = Path(dl.value.path()).read_text()
     assert "Campaign" in html and "page-grid" in html and "<table>" in html
+    page.screenshot(path=str(SHOTS / "dashboard-campaigns.png"), full_page=True)
 
 
 def test_camera_settings_change_through_the_page(server, page_for):
