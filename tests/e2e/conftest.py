@@ -18,6 +18,12 @@ ARGS = [
 SHOTS = Path(__file__).resolve().parents[2] / "out" / "screenshots"  # gitignored
 
 
+@pytest.fixture(scope="session", autouse=True)
+def screenshot_dir() -> Path:
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    return SHOTS
+
+
 @pytest.fixture(scope="session")
 def browser():
     from playwright.sync_api import sync_playwright

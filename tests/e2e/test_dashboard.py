@@ -45,7 +45,6 @@ def test_live_pose_follows_a_move_made_in_the_page(server, page_for):
     page.wait_for_timeout(1500)
     x1 = _num(page, "pose-x")
     assert x1 < x0 - 300.0, (x0, x1)  # yawing the camera +10 deg moves the target to -x
-    SHOTS.mkdir(parents=True, exist_ok=True)
     page.screenshot(path=str(SHOTS / "dashboard-live.png"), full_page=False)
 
 
