@@ -41,26 +41,20 @@ from tofpose.geometry import (
 from tofpose.tof import unambiguous_range_mm
 
 
-def camera_state(state: AppState) -> DeviceStatePublic:
-    h = state.acquisition.health
+def _device_state(driver: str, h) -> DeviceStatePublic:
     return DeviceStatePublic(
-        driver=state.devices.camera.name,
-        state=h.state,
-        last_error=h.last_error,
-        error_count=h.error_count,
+        driver=driver, state=h.state, last_error=h.last_error, error_count=h.error_count
     )
+
+
+def camera_state(state: AppState) -> DeviceStatePublic:
+    return _device_state(state.devices.camera.name, state.acquisition.health)
 
 
 def motion_state(state: AppState) -> DeviceStatePublic:
     if state.devices.motion is None:
         return DeviceStatePublic(driver="none", state="absent")
-    h = state.motion_health
-    return DeviceStatePublic(
-        driver=state.devices.motion.name,
-        state=h.state,
-        last_error=h.last_error,
-        error_count=h.error_count,
-    )
+    return _device_state(state.devices.motion.name, state.motion_health)
 
 
 def motion_public(state: AppState) -> MotionPublic:

@@ -204,9 +204,6 @@ class MoveRequest(AxisBody):
     roll_deg: float | SkipJsonSchema[None] = None
     rail_mm: float | SkipJsonSchema[None] = None
 
-    def setpoints(self) -> dict[str, float]:
-        return self.axes()
-
 
 # -- catalogs ----------------------------------------------------------------------------
 class ReflectorModel(StrictBody):

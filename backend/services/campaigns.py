@@ -393,7 +393,7 @@ class CampaignService:
             row = s.get(CampaignRow, campaign_id)
             pending = [sp for sp in row.setpoints if sp.status != "done"]
             n_total, n_done = len(row.setpoints), len(row.setpoints) - len(pending)
-            plan = [(sp.id, sp.index, _axes(sp)) for sp in pending]
+            plan = [(sp.id, sp.index, setpoint_axes(sp)) for sp in pending]
             name, frames, settle_s = row.name, row.frames_per_point, row.settle_s
             lock_timeout_s = row.lock_timeout_s
             record_raw = row.record_raw
@@ -565,20 +565,12 @@ class CampaignService:
         return out
 
 
-def _axes(sp: SetPointRow) -> dict[str, float]:
+def setpoint_axes(sp: SetPointRow) -> dict[str, float]:
     return {
         a: float(getattr(sp, col))
         for a, col in AXIS_COLUMNS.items()
         if getattr(sp, col) is not None
     }
-
-
-def count_done(s: Session, campaign_id: int) -> int:
-    return s.scalar(
-        select(func.count())
-        .select_from(SetPointRow)
-        .where(SetPointRow.campaign_id == campaign_id, SetPointRow.status == "done")
-    )
 
 
 def plan_problems(

@@ -5,6 +5,7 @@ States and what each command does: docs/campaigns.md.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from enum import StrEnum
 from typing import Annotated
 
@@ -29,6 +30,7 @@ from backend.services.campaigns import (
     CampaignConflictError,
     CampaignNotFoundError,
     plan_problems,
+    setpoint_axes,
 )
 from backend.services.campaigns import create_campaign as store_campaign
 from backend.services.reports import ReportError, build, to_csv, to_html, to_json, to_pdf
@@ -56,27 +58,39 @@ def expand(body: CampaignCreate) -> list[dict[str, float]]:
     return campaign_plan.calibration(**g)
 
 
-def estimate_s(state: AppState, row: CampaignRow) -> float:
-    motion = state.devices.motion
-    rates = {n: a.max_rate for n, a in motion.axes.items()} if motion else {}
-    try:
-        start = motion.status().positions if motion else {}
-    except Exception:
-        start = {}
-    pending = [
-        {a: v for a, v in (("yaw", sp.yaw_deg), ("pitch", sp.pitch_deg),
-                           ("roll", sp.roll_deg), ("rail", sp.rail_mm)) if v is not None}
-        for sp in row.setpoints if sp.status != "done"
-    ]  # fmt: skip
-    rate_hz = state.devices.camera.get_settings().frame_rate_hz
-    return campaign_plan.estimate_duration_s(
-        pending, start, rates, settle_s=row.settle_s,
-        frames_per_point=row.frames_per_point, frame_rate_hz=rate_hz,
-    )  # fmt: skip
+@dataclass(frozen=True)
+class Planning:
+    """What a duration estimate needs from the devices, read once per request (a real
+    motion controller answers each status query over the wire)."""
+
+    start: dict[str, float]
+    rates: dict[str, float]
+    frame_rate_hz: float
+
+    @classmethod
+    def read(cls, state: AppState) -> Planning:
+        motion = state.devices.motion
+        rates = {n: a.max_rate for n, a in motion.axes.items()} if motion else {}
+        try:
+            start = motion.status().positions if motion else {}
+        except Exception:
+            start = {}
+        return cls(start, rates, state.devices.camera.get_settings().frame_rate_hz)
+
+    def estimate_s(self, row: CampaignRow) -> float:
+        pending = [setpoint_axes(sp) for sp in row.setpoints if sp.status != "done"]
+        return campaign_plan.estimate_duration_s(
+            pending, self.start, self.rates, settle_s=row.settle_s,
+            frames_per_point=row.frames_per_point, frame_rate_hz=self.frame_rate_hz,
+        )  # fmt: skip
 
 
-def _public(state: AppState, row: CampaignRow, *, with_setpoints: bool = False):
-    return campaign_public(row, state.campaigns.progress(row.id), estimate_s(state, row),
+def _public(
+    state: AppState, row: CampaignRow, planning: Planning | None = None, *,
+    with_setpoints: bool = False,
+) -> CampaignPublic:  # fmt: skip
+    planning = planning or Planning.read(state)
+    return campaign_public(row, state.campaigns.progress(row.id), planning.estimate_s(row),
                            with_setpoints=with_setpoints)  # fmt: skip
 
 
@@ -130,7 +144,8 @@ def create_campaign(body: CampaignCreate, state: StateDep, session: SessionDep) 
 def list_campaigns(state: StateDep, session: SessionDep) -> list[CampaignPublic]:
     """Every campaign, newest first, without its set-point list."""
     rows = session.scalars(select(CampaignRow).order_by(CampaignRow.id.desc())).all()
-    return [_public(state, r) for r in rows]
+    planning = Planning.read(state)
+    return [_public(state, r, planning) for r in rows]
 
 
 @router.get("/{campaign_id}", dependencies=[ReadAuth], responses=errors(404))

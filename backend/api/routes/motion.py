@@ -38,11 +38,7 @@ def move_axes(body: MoveRequest, state: StateDep, motion: MotionDep) -> MotionPu
     422 names every axis that is unknown to this motion system or outside its soft
     limits; in that case nothing is sent to the driver.
     """
-    setpoints = body.setpoints()
-    if not setpoints:
-        raise unprocessable(
-            ["body"], ["give at least one of yaw_deg, pitch_deg, roll_deg, rail_mm"]
-        )
+    setpoints = body.axes()  # at least one axis: the schema's validator
     problems = soft_limit_problems(motion.axes, setpoints)
     if problems:
         raise unprocessable(["body"], problems)
