@@ -32,6 +32,7 @@ from backend.api.routes import (
     live,
     motion,
     pose,
+    scene,
 )
 from backend.api.routes import devices as devices_route
 from backend.auth import load_or_create_token
@@ -76,6 +77,27 @@ def _restore_camera_settings(sessions, devices: Devices) -> None:
         devices.camera.apply_settings(wanted)
     except Exception as exc:  # a stale stored setting must not stop the server
         log.warning("stored camera settings not applied: %s", exc)
+
+
+def _start_scene(state: AppState) -> None:
+    """Start the viser 3-D scene unless the settings refuse it; a scene that cannot start
+    (port trouble) is logged and reported by ``GET /api/scene``, never fatal."""
+    refusal = state.settings.scene_refusal
+    if refusal is not None:
+        state.scene_reason = refusal
+        return
+    from backend.services.scene import LiveScene
+
+    motion = state.devices.motion
+    rail = motion.axes.get("rail") if motion is not None else None
+    try:
+        state.scene = LiveScene(
+            state.hub, state.acquisition, host=state.settings.host,
+            port=state.settings.viser_port, rail_length_mm=rail.max_pos if rail else None,
+        )  # fmt: skip
+    except Exception as exc:  # noqa: BLE001 - any failure leaves the API running
+        log.error("3-D scene not started: %s", exc)
+        state.scene_reason = f"3-D scene failed to start: {exc}"
 
 
 HTTP_METHODS = {"get", "put", "post", "delete", "patch", "head", "options"}
@@ -137,9 +159,12 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         app.state.tofpose = AppState(settings, token, engine, sessions, devs, hub, acq, campaigns)
         acq.start()
         campaigns.start()
+        _start_scene(app.state.tofpose)
         try:
             yield
         finally:
+            if app.state.tofpose.scene is not None:
+                app.state.tofpose.scene.close()
             campaigns.stop()  # a running campaign is left interrupted (resumable)
             app.state.tofpose.renderer.close()
             acq.stop()
@@ -190,7 +215,7 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         )  # fmt: skip
 
     routers = (health, devices_route, camera, pose, frames, motion, catalogs, campaigns,
-               calibrations, live)  # fmt: skip
+               calibrations, scene, live)  # fmt: skip
     for module in routers:
         app.include_router(module.router)
 

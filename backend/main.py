@@ -22,6 +22,15 @@ def token_line(settings: Settings, token: str, created: bool) -> str:
     return f"stored in {path} (not printed: cat it)"
 
 
+def scene_line(settings: Settings, host: str) -> str:
+    if settings.scene_refusal is not None:
+        return settings.scene_refusal
+    if settings.viser_port == 0:
+        return "viser on any free port (GET /api/scene names it)"
+    return (f"http://{host}:{settings.viser_port}/   (viser; if the port is taken, the next "
+            "free one: GET /api/scene)")  # fmt: skip
+
+
 def banner(settings: Settings, token: str, created: bool) -> str:
     host = settings.host if ":" not in settings.host else f"[{settings.host}]"
     base = f"http://{host}:{settings.port}"
@@ -35,6 +44,7 @@ def banner(settings: Settings, token: str, created: bool) -> str:
         f"  API docs       {base}/docs   (OpenAPI: {base}/openapi.json)",
         f"  live pose      ws://{host}:{settings.port}/ws/live",
         f"  health         {base}/api/health",
+        f"  3-D scene      {scene_line(settings, host)}",
         f"  database       {settings.resolved_database_url}",
         f"  API token      {token_line(settings, token, created)}",
         f"  reads          {reads}; moves and changes need 'Authorization: Bearer <token>'",
@@ -127,7 +137,7 @@ def openapi_document() -> dict:
 
     async def run() -> dict:
         with tempfile.TemporaryDirectory() as tmp:
-            settings = Settings(data_dir=Path(tmp), api_token=SecretStr("x" * 32))
+            settings = Settings(data_dir=Path(tmp), api_token=SecretStr("x" * 32), viser=False)
             app = create_app(settings)
             async with app.router.lifespan_context(app):
                 return app.openapi()

@@ -39,6 +39,10 @@ class Settings(BaseSettings):
         127.0.0.1 and [::1]. A wildcard bind (0.0.0.0, ::) with none given accepts any.
     allowed_origins : extra browser origins (``scheme://host:port``) that may open
         ``/ws/live``, beside the server's own origin.
+    viser : run the 3-D scene (a viser server in this process) on ``viser_port``
+        (0 = any free port; a taken port moves to the next free one, see
+        ``GET /api/scene``). It has no token check of its own, so on a bind beyond
+        loopback it runs only when reads are open.
     """
 
     model_config = SettingsConfigDict(env_prefix="TOFPOSE_", extra="ignore")
@@ -65,6 +69,8 @@ class Settings(BaseSettings):
     max_body_bytes: int = Field(1_000_000, ge=1024)
     shutdown_timeout_s: float = Field(3.0, gt=0, le=60)
     frontend_dir: Path | None = None
+    viser: bool = True
+    viser_port: int = Field(8080, ge=0, le=65535)
     allowed_hosts: Annotated[list[str], NoDecode] = Field(default_factory=list)
     allowed_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
 
@@ -131,6 +137,18 @@ class Settings(BaseSettings):
         if is_loopback_host(self.host) or self.host in WILDCARD_BINDS:
             names += LOOPBACK_HOST_HEADERS
         return list(dict.fromkeys(n.lower() for n in names))
+
+    @property
+    def scene_refusal(self) -> str | None:
+        """Why the 3-D scene does not run with these settings, or None when it does."""
+        if not self.viser:
+            return "3-D scene switched off (--no-viser / TOFPOSE_VISER=false)"
+        if not self.reads_are_open:
+            return (
+                "3-D scene off: it has no token check and the server is bound beyond "
+                "loopback with closed reads (set TOFPOSE_OPEN_READS=true to serve it)"
+            )
+        return None
 
     @property
     def reads_are_open(self) -> bool:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
@@ -30,6 +31,8 @@ class AppState:
     renderer: ImageRenderer = field(default_factory=ImageRenderer)
     motion_health: DeviceHealth = field(default_factory=lambda: DeviceHealth(state="ok"))
     started_monotonic: float = field(default_factory=time.monotonic)
+    scene: Any = None  # backend.services.scene.LiveScene when the 3-D scene runs
+    scene_reason: str = ""  # why it does not run
 
     @property
     def uptime_s(self) -> float:

@@ -221,6 +221,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--camera", help="'sim' or 'replay:REC.h5'")
     p.add_argument("--motion", help="'sim' or 'none'")
     p.add_argument("--rate", dest="replay_rate_hz", type=float, help="replay rate, Hz")
+    p.add_argument("--viser-port", type=int, help="port of the 3-D scene (default 8080, 0 = any)")
+    p.add_argument(
+        "--no-viser", dest="viser", action="store_false", default=None,
+        help="do not run the 3-D scene",
+    )  # fmt: skip
     p = sub.add_parser("report", help="write a campaign's accuracy report from the database")
     p.add_argument("campaign_id", type=int)
     p.add_argument("--db", required=True, help="SQLAlchemy URL, e.g. sqlite:///data/tofpose.db")

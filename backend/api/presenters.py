@@ -24,6 +24,7 @@ from backend.api.schemas import (
     PosePublic,
     ProgressPublic,
     Requirements,
+    ScenePublic,
     SetPointPublic,
     TransformPublic,
     TruthPublic,
@@ -237,4 +238,14 @@ def calibration_public(row: CalibrationRow) -> CalibrationPublic:
         residual_rms_mm=float(np.sqrt(np.mean(np.square(row.residual_mm)))),
         residual_rms_deg=float(np.sqrt(np.mean(np.square(row.residual_deg)))),
         chi2_per_dof=row.chi2_per_dof, n_observations=row.n_observations,
+    )  # fmt: skip
+
+
+def scene_public(state: AppState) -> ScenePublic:
+    scene = state.scene
+    if scene is None:
+        return ScenePublic(running=False, reason=state.scene_reason)
+    return ScenePublic(
+        running=True, port=scene.port, paused=scene.paused, updates=scene.updates,
+        last_frame_index=scene.last_frame_index,
     )  # fmt: skip

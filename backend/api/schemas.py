@@ -166,6 +166,22 @@ class PosePublic(BaseModel):
     truth: TruthPublic | None = None
 
 
+# -- 3-D scene ---------------------------------------------------------------------------
+class ScenePublic(BaseModel):
+    """The viser 3-D scene served by this process on a port of its own."""
+
+    running: bool
+    port: int | None = Field(None, description="the scene's port on this server's host")
+    paused: bool = False
+    reason: str = Field("", description="why the scene does not run (empty when it does)")
+    updates: int = Field(0, description="scene updates since start")
+    last_frame_index: int | None = None
+
+
+class SceneUpdate(StrictBody):
+    paused: bool
+
+
 # -- motion ------------------------------------------------------------------------------
 class AxisBody(StrictBody):
     """Axis set-points (yaw, pitch, roll in deg, rail in mm); an axis left out stays where

@@ -7,6 +7,7 @@ import { LiveView } from "./components/LiveView";
 import { MotionPanel } from "./components/MotionPanel";
 import { NewCampaign } from "./components/NewCampaign";
 import { PosePanel } from "./components/PosePanel";
+import { ScenePanel } from "./components/ScenePanel";
 import { StatusPanel } from "./components/StatusPanel";
 import { TimeSeries } from "./components/TimeSeries";
 import { connectLive, type LiveState } from "./live";
@@ -51,6 +52,7 @@ function App() {
           <CameraPanel onError={setError} />
         </div>
         <TimeSeries history={live.history} />
+        <ScenePanel onError={setError} />
         <Campaigns onError={setError} />
         <NewCampaign onError={setError} />
       </main>

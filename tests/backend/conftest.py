@@ -27,6 +27,7 @@ def make_settings(data_dir: Path, **kw) -> Settings:
     kw.setdefault("frame_rate_hz", 20.0)
     kw.setdefault("retry_backoff_s", (0.02, 0.1))
     kw.setdefault("allowed_hosts", ["testserver"])  # the TestClient's Host header
+    kw.setdefault("viser", False)  # the 3-D scene runs where a test asks for it
     return Settings(data_dir=data_dir, **kw)
 
 

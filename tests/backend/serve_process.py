@@ -28,7 +28,7 @@ class ServeProcess:
         self.data_dir = data_dir
         self.base_url = f"http://127.0.0.1:{self.port}"
         cmd = [sys.executable, "-m", "tofpose.cli", "serve", "--port", str(self.port),
-               "--data-dir", str(data_dir), *args]  # fmt: skip
+               "--data-dir", str(data_dir), "--viser-port", "0", *args]  # fmt: skip
         # Output to a file, not a pipe: a server logging every request would block on a
         # full pipe that nobody reads.
         data_dir.parent.mkdir(parents=True, exist_ok=True)

@@ -38,3 +38,18 @@ def test_serve_refuses_bad_options_with_a_message(tmp_path, capsys):
     missing = tmp_path / "missing.h5"
     assert main(["serve", "--camera", f"replay:{missing}", "--data-dir", str(tmp_path)]) == 2
     assert "cannot replay" in capsys.readouterr().err
+
+
+def test_serve_runs_the_3d_scene_on_its_own_port_and_no_viser_switches_it_off(tmp_path):
+    import urllib.request
+
+    with ServeProcess(tmp_path / "a") as server:  # ServeProcess passes --viser-port 0
+        scene = server.get_json("/api/scene")
+        assert scene["running"] and scene["port"] not in (None, 0, server.port)
+        with urllib.request.urlopen(f"http://127.0.0.1:{scene['port']}/", timeout=5) as r:
+            assert r.status == 200 and b"<html" in r.read(2000).lower()
+        assert "viser on any free port (GET /api/scene names it)" in server.output
+    with ServeProcess(tmp_path / "b", "--no-viser") as server:
+        scene = server.get_json("/api/scene")
+        assert not scene["running"] and "--no-viser" in scene["reason"]
+        assert "3-D scene switched off" in server.output

@@ -14,6 +14,8 @@ CHROMIUM = "/usr/bin/chromium"
 ARGS = [
     "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
     "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    # WebGL for the 3-D scene without a GPU: SwiftShader, software rendering
+    "--use-gl=swiftshader", "--enable-unsafe-swiftshader",
 ]  # fmt: skip
 SHOTS = Path(__file__).resolve().parents[2] / "out" / "screenshots"  # gitignored
 
