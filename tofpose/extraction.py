@@ -152,6 +152,32 @@ class WrongSizeBlob:
 
 
 @dataclass(frozen=True)
+class RejectedBlob:
+    """A connected component of the active set that is not a candidate, and why.
+
+    u_px, v_px : centre of its bounding box; diameter_px : equivalent diameter of its area.
+    reason : one of ``REJECT_REASONS`` (the gate that refused it).
+    """
+
+    u_px: float
+    v_px: float
+    diameter_px: float
+    reason: str
+
+
+REJECT_REASONS = {
+    "border": "cut by the image border (its centroid would be biased)",
+    "dim": "no seed above I_peak (criterion 1, Eqs. 15-16)",
+    "size": "size outside the window the catalog predicts at its range",
+    "oversize": "too large for one reflector (merged markers?): left to ellipse confirmation",
+    "nlog": "nLoG response below J_peak or J_t (criterion 2, Eqs. 17-18)",
+    "shape": "too elongated for a disc within the tilt limit",
+    "penalty": "penalty score q above q_max (§3.4)",
+    "rank": "beyond the candidate limit (lower-ranked by penalty)",
+}
+
+
+@dataclass(frozen=True)
 class CandidateBlobs:
     """What ``find_candidate_blobs`` found.
 
@@ -159,12 +185,15 @@ class CandidateBlobs:
     oversize : components too large for one reflector (merged markers), for §3.3.
     active_mask : (H, W) uint8, the active pixel set A (§3.1.1).
     wrong_size : bright components rejected by the size window (oversize ones included).
+    rejected : every component of at least ``min_area_px`` that is not a candidate, with
+        the gate that refused it (for display; ``REJECT_REASONS``).
     """
 
     accepted: list[Blob]
     oversize: list[Blob]
     active_mask: np.ndarray
     wrong_size: tuple[WrongSizeBlob, ...] = ()
+    rejected: tuple[RejectedBlob, ...] = ()
 
 
 class FrameError(ValueError):
@@ -301,20 +330,28 @@ def find_candidate_blobs(
     accepted: list[Blob] = []
     oversize: list[Blob] = []
     wrong_size: list[WrongSizeBlob] = []
+    rejected: list[RejectedBlob] = []
     cos_t = np.cos(np.radians(config.max_tilt_deg))
     ecc_max = np.sqrt(1.0 - cos_t**2)
     for k in range(1, n_lab):
         x, y, bw, bh, area = (int(v) for v in cc_stats[k])
         if area < config.min_area_px:
             continue
+
+        def reject(reason: str, x=x, y=y, bw=bw, bh=bh, area=area) -> None:
+            d_eq = 2.0 * np.sqrt(area / np.pi)
+            rejected.append(RejectedBlob(x + (bw - 1) / 2, y + (bh - 1) / 2, d_eq, reason))
+
         if x == 0 or y == 0 or x + bw == w or y + bh == h:
-            continue  # cut by the image border: its centroid would be biased
+            reject("border")  # its centroid would be biased
+            continue
         roi = (slice(y, y + bh), slice(x, x + bw))
         member = labels[roi] == k
         g_roi = gray[roi]
         peak = float(g_roi[member].max())
         # Criterion 1 (B1 and B2, Eqs. 15-16): a seed brighter than I_peak.
         if peak < stats.peak_threshold:
+            reject("dim")
             continue
         d_vals = distance_mm[roi][member]
         d_vals = d_vals[np.isfinite(d_vals)]
@@ -341,8 +378,10 @@ def find_candidate_blobs(
             blob.pixels = (rows + y) * w + (cols + x)
             blob.distance_mm = rho
             oversize.append(blob)
+            reject("oversize")
             continue
         if not size_ok:
+            reject("size")
             continue
         # Criterion 2 (B3, B4, Eqs. 17-18): nLoG on the active pixels of this component
         # (pixels outside A are zero, §3.1.2), matched to the blob's size.
@@ -362,15 +401,18 @@ def find_candidate_blobs(
         inner = (slice(y - y0, y - y0 + bh), slice(x - x0, x - x0 + bw))
         j_in = j[inner]
         if float(j_in[member].max()) < j_peak:
+            reject("nlog")
             continue
         keep = member & (j_in >= j_t)
         if not np.any(keep):
+            reject("nlog")
             continue
         rows, cols = np.nonzero(keep)
         us, vs = cols + x, rows + y
         wts = np.maximum(g_roi[keep] - stats.background, 1.0).astype(np.float64)
         c, ecc = _moments(us.astype(np.float64), vs.astype(np.float64), wts)
         if len(us) >= SHAPE_MIN_PIXELS and ecc > ecc_max:
+            reject("shape")
             continue
         blob.pixels = vs * w + us
         blob.area_px = len(us)
@@ -379,10 +421,15 @@ def find_candidate_blobs(
         blob.distance_mm = rho
         blob.penalty = penalty_score(blob, stats, camera.fx, diameters_mm, ecc_max)
         if blob.penalty > config.q_max:
+            reject("penalty")
             continue
         accepted.append(blob)
     accepted.sort(key=lambda b: (b.penalty, -b.peak_counts))
-    return CandidateBlobs(accepted[: config.max_candidates], oversize, mask, tuple(wrong_size))
+    for b in accepted[config.max_candidates :]:
+        rejected.append(RejectedBlob(*b.centroid_uv, 2.0 * np.sqrt(b.area_px / np.pi), "rank"))
+    return CandidateBlobs(
+        accepted[: config.max_candidates], oversize, mask, tuple(wrong_size), tuple(rejected)
+    )
 
 
 def penalty_score(

@@ -30,6 +30,7 @@ from tofpose.ellipse import (
 from tofpose.extraction import (
     Blob,
     ExtractionConfig,
+    RejectedBlob,
     check_frame,
     disc_image_centre_offsets_px,
     find_candidate_blobs,
@@ -147,6 +148,10 @@ class PoseResult:
     residual_mm : RMS of matched residuals; iterations : refinement iterations.
     covariance : (6, 6) over (rotation vector rad, translation mm), or None.
     timings_ms : per stage; n_candidates; frames_used (persistence); motion detected.
+    rejected : components of the active set that are not candidates, with the gate that
+        refused each (``tofpose.extraction.REJECT_REASONS``), for display.
+    active_threshold_counts : I_t as applied (after the N_max cap): the active pixel set
+        A (§3.1.1) is exactly ``gray >= active_threshold_counts``.
     """
 
     ok: bool
@@ -165,6 +170,8 @@ class PoseResult:
     n_candidates: int = 0
     frames_used: int = 1
     motion: bool = False
+    rejected: list[RejectedBlob] = field(default_factory=list)
+    active_threshold_counts: float = float("nan")
 
     @property
     def n_matched(self) -> int:
@@ -259,7 +266,12 @@ class PosePipeline:
         kept, mean_g, med_d, pinfo = self._persistence.apply(blobs, g, d)
         measure_blobs(kept, mean_g, med_d, self.camera, stats.background)
         timer.lap("centroids")
-        extra = {"frames_used": pinfo.frames_used, "motion": pinfo.motion}
+        extra = {
+            "frames_used": pinfo.frames_used,
+            "motion": pinfo.motion,
+            "rejected": list(found.rejected),
+            "active_threshold_counts": stats.raw_threshold,
+        }
         ranged = [b for b in kept if np.isfinite(b.distance_mm)]
         unmatched = [
             (b.centroid_uv[0], b.centroid_uv[1], b.distance_mm)

@@ -23,6 +23,7 @@ from backend.api.schemas import (
     MotionPublic,
     PosePublic,
     ProgressPublic,
+    RejectedBlobPublic,
     Requirements,
     ScenePublic,
     SetPointPublic,
@@ -33,6 +34,7 @@ from backend.db.models import POSE_FIELDS, CalibrationRow, CampaignRow, Measurem
 from backend.drivers.base import CameraSettings
 from backend.services.acquisition import LiveSample
 from backend.state import AppState
+from tofpose.extraction import REJECT_REASONS
 from tofpose.geometry import (
     RigidTransform,
     euler_deg_from_rotation,
@@ -99,6 +101,9 @@ def finite_list_or_none(values) -> list[float] | None:
     return out if all(np.isfinite(out)) else None
 
 
+MAX_REJECTED_SHOWN = 50  # a cluttered frame must not make every pose message huge
+
+
 def pose_from_sample(s: LiveSample) -> PosePublic:
     """The public form of one processed frame; values that are not finite become null."""
     r = s.result
@@ -144,6 +149,17 @@ def pose_from_sample(s: LiveSample) -> PosePublic:
             BlobPublic(u_px=float(u), v_px=float(v), distance_mm=finite_or_none(d))
             for u, v, d in r.unmatched
         ],
+        rejected=[
+            RejectedBlobPublic(
+                u_px=float(b.u_px),
+                v_px=float(b.v_px),
+                diameter_px=float(b.diameter_px),
+                reason=b.reason,
+                reason_text=REJECT_REASONS[b.reason],
+            )
+            for b in r.rejected[:MAX_REJECTED_SHOWN]
+        ],  # fmt: skip
+        active_threshold_counts=finite_or_none(r.active_threshold_counts),
         residual_mm=finite_or_none(r.residual_mm),
         iterations=r.iterations,
         frames_used=r.frames_used,

@@ -117,6 +117,16 @@ class BlobPublic(BaseModel):
     )
 
 
+class RejectedBlobPublic(BaseModel):
+    """A bright component of the active pixel set that is not a candidate reflector."""
+
+    u_px: float = Field(description="centre of its bounding box")
+    v_px: float
+    diameter_px: float = Field(description="equivalent diameter of its area")
+    reason: Literal["border", "dim", "size", "oversize", "nlog", "shape", "penalty", "rank"]
+    reason_text: str = Field(description="the gate that refused it, in words")
+
+
 class TruthPublic(BaseModel):
     """The lab's ground truth for this frame (encoders + nominal geometry) and the error
     of the measurement against it."""
@@ -158,6 +168,13 @@ class PosePublic(BaseModel):
     n_matched: int
     matched: list[MatchedPublic]
     unmatched: list[BlobPublic]
+    rejected: list[RejectedBlobPublic] = Field(
+        default_factory=list, description="components refused by a gate (at most 50)"
+    )
+    active_threshold_counts: float | None = Field(
+        None,
+        description="I_t as applied: the active pixel set is the pixels with gray >= this",
+    )
     residual_mm: float | None
     iterations: int
     frames_used: int

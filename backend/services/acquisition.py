@@ -46,8 +46,8 @@ class LiveSample:
     cache: dict[str, Any] = field(default_factory=dict)
 
     def cached(self, key: str, make: Callable[[], Any]) -> Any:
-        """Small serialised forms only (JSON); rendered images live in the bounded
-        ``ImageRenderer`` cache, never here."""
+        """Serialised forms of this sample (JSON, the raw binary frame). PNGs live in the
+        bounded ``ImageRenderer`` cache; the history keeps samples without this cache."""
         if key not in self.cache:
             self.cache[key] = make()
         return self.cache[key]

@@ -40,6 +40,12 @@ class Subscription:
             except RuntimeError:  # the subscriber's loop is closed
                 self.closed = True
 
+    @property
+    def pending(self) -> int:
+        """Items waiting to be read."""
+        with self._cond:
+            return len(self._items)
+
     def _pop(self) -> Any | None:
         with self._cond:
             return self._items.popleft() if self._items else None

@@ -1,46 +1,75 @@
-// One store for everything that arrives on /ws/live: reconnects by itself, and marks
-// the data stale when no frame has come for a while.
+// One store for everything that arrives on /ws/live: reconnects by itself, marks the
+// data stale when no frame has come for a while, and hands raw frames to the page at most
+// once per animation frame (the newest wins; the server waits for our acknowledgement
+// before it sends more than RAW_CREDIT, so nothing queues).
 import type { Pose } from "./api/client";
+import { parseRawFrame, type RawFrame } from "./rawframe";
 
-export type Images = { gray?: string; distance?: string; frameIndex?: number };
+export type Shown = { raw: RawFrame; pose: Pose | null };
 export type LiveState = {
   connected: boolean;
   stale: boolean;
   pose: Pose | null;
-  images: Images;
+  shown: Shown | null; // the newest raw frame and the pose of that same frame
   history: Pose[];
 };
 
 const STALE_AFTER_MS = 2000;
 const HISTORY = 300;
+const RAW_CREDIT = 2;
 
-export function connectLive(onChange: (s: LiveState) => void): () => void {
-  const state: LiveState = { connected: false, stale: true, pose: null, images: {}, history: [] };
+export type LiveHandle = { close: () => void; ack: (frameIndex: number) => void };
+
+export function connectLive(onChange: (s: LiveState) => void): LiveHandle {
+  const state: LiveState = { connected: false, stale: true, pose: null, shown: null, history: [] };
+  const recent = new Map<number, Pose>(); // pose by frame index, to pair with raw frames
   let ws: WebSocket | null = null;
   let lastFrame = 0;
   let closed = false;
   let retry: number | undefined;
-  const emit = () => onChange({ ...state, images: { ...state.images } });
+  let scheduled = false;
+  let pendingRaw: RawFrame | null = null;
+
+  // One render per animation frame however many messages arrived since the last one.
+  const emit = () => {
+    if (scheduled) return;
+    scheduled = true;
+    requestAnimationFrame(() => {
+      scheduled = false;
+      if (pendingRaw) {
+        state.shown = { raw: pendingRaw, pose: recent.get(pendingRaw.frameIndex) ?? null };
+        pendingRaw = null;
+      }
+      onChange({ ...state });
+    });
+  };
 
   const open = () => {
     const proto = location.protocol === "https:" ? "wss" : "ws";
     ws = new WebSocket(`${proto}://${location.host}/ws/live`);
+    ws.binaryType = "arraybuffer";
     ws.onopen = () => {
       state.connected = true;
-      ws?.send(JSON.stringify({ images: ["gray", "distance"], image_every: 1, image_step: 1 }));
+      ws?.send(JSON.stringify({ raw: true, raw_credit: RAW_CREDIT, image_every: 1, image_step: 1 }));
       emit();
     };
     ws.onmessage = (ev) => {
+      if (ev.data instanceof ArrayBuffer) {
+        const raw = parseRawFrame(ev.data);
+        if (pendingRaw) ack(pendingRaw.frameIndex); // superseded before it was drawn
+        pendingRaw = raw;
+        emit();
+        return;
+      }
       const m = JSON.parse(ev.data);
       if (m.type === "pose") {
-        state.pose = m.data as Pose;
-        state.history = [...state.history.slice(-(HISTORY - 1)), m.data];
+        const p = m.data as Pose;
+        state.pose = p;
+        recent.set(p.frame_index, p);
+        if (recent.size > 60) recent.delete(recent.keys().next().value!);
+        state.history = [...state.history.slice(-(HISTORY - 1)), p];
         lastFrame = Date.now();
         state.stale = false;
-        emit();
-      } else if (m.type === "image") {
-        state.images[m.kind as "gray" | "distance"] = `data:image/png;base64,${m.png_base64}`;
-        state.images.frameIndex = m.frame_index;
         emit();
       }
     };
@@ -50,6 +79,9 @@ export function connectLive(onChange: (s: LiveState) => void): () => void {
       if (!closed) retry = window.setTimeout(open, 1000);
     };
   };
+  const ack = (frameIndex: number) => {
+    if (ws?.readyState === WebSocket.OPEN) ws.send(JSON.stringify({ ack: frameIndex }));
+  };
   open();
   const timer = window.setInterval(() => {
     const stale = Date.now() - lastFrame > STALE_AFTER_MS;
@@ -58,10 +90,13 @@ export function connectLive(onChange: (s: LiveState) => void): () => void {
       emit();
     }
   }, 500);
-  return () => {
-    closed = true;
-    window.clearInterval(timer);
-    window.clearTimeout(retry);
-    ws?.close();
+  return {
+    ack,
+    close: () => {
+      closed = true;
+      window.clearInterval(timer);
+      window.clearTimeout(retry);
+      ws?.close();
+    },
   };
 }

@@ -10,14 +10,19 @@ import { PosePanel } from "./components/PosePanel";
 import { ScenePanel } from "./components/ScenePanel";
 import { StatusPanel } from "./components/StatusPanel";
 import { TimeSeries } from "./components/TimeSeries";
-import { connectLive, type LiveState } from "./live";
+import { connectLive, type LiveHandle, type LiveState } from "./live";
 import "./style.css";
 
 function App() {
-  const [live, setLive] = useState<LiveState>({ connected: false, stale: true, pose: null, images: {}, history: [] });
+  const [live, setLive] = useState<LiveState>({ connected: false, stale: true, pose: null, shown: null, history: [] });
+  const [link, setLink] = useState<LiveHandle | null>(null);
   const [error, setError] = useState<string | null>(null);
   const [hasToken, setHasToken] = useState(!!token());
-  useEffect(() => connectLive(setLive), []);
+  useEffect(() => {
+    const handle = connectLive(setLive);
+    setLink(handle);
+    return handle.close;
+  }, []);
 
   const askToken = () => {
     const t = window.prompt("API token (printed at the server's first start, stored in data/api_token):");
@@ -44,7 +49,7 @@ function App() {
       </header>
       {error && <p class="error banner" role="alert" data-testid="error">{error}</p>}
       <main>
-        <LiveView images={live.images} pose={live.pose} />
+        <LiveView shown={live.shown} onDrawn={(i) => link?.ack(i)} />
         <div class="side">
           <PosePanel pose={live.pose} stale={live.stale} />
           <MotionPanel onError={setError} />

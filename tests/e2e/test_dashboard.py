@@ -26,7 +26,7 @@ def test_live_pose_follows_a_move_made_in_the_page(server, page_for):
     page = page_for(server.base_url, TOKEN)
     page.goto(server.base_url + "/")
     page.get_by_test_id("pose-x").wait_for(timeout=20_000)
-    page.wait_for_function("document.querySelectorAll('img').length == 2", timeout=20_000)
+    page.get_by_test_id("frame-index").wait_for(timeout=20_000)  # raw frames are drawn
     assert page.get_by_test_id("link").inner_text() == "live"
     page.wait_for_function(
         "parseFloat(document.querySelector('[data-testid=camera-rate]').innerText) > 1",
@@ -59,19 +59,28 @@ def _overlay_pixels(page) -> int:
 
 
 def test_overlays_toggle_in_the_browser(server, page_for):
+    """Each overlay layer adds its own pixels and goes away when toggled off, without a
+    server round-trip."""
     page = page_for(server.base_url)
     page.goto(server.base_url + "/")
-    page.get_by_test_id("pose-x").wait_for(timeout=20_000)
+    page.get_by_test_id("frame-index").wait_for(timeout=20_000)
     page.wait_for_function("document.querySelectorAll('[data-testid=overlay]').length == 2")
     page.wait_for_timeout(500)
-    on = _overlay_pixels(page)
-    assert on > 200
-    page.get_by_test_id("toggle-matched").click()
-    page.wait_for_timeout(400)
-    matched_off = _overlay_pixels(page)
-    page.get_by_test_id("toggle-unmatched").click()
-    page.wait_for_timeout(400)
-    assert _overlay_pixels(page) == 0 and matched_off < on
+    default = _overlay_pixels(page)  # candidates + matched + rejected
+    assert default > 200
+    page.get_by_test_id("toggle-active").click()
+    page.wait_for_timeout(300)
+    with_active = _overlay_pixels(page)
+    assert with_active > default + 100  # the reflectors' pixels light up
+    counts = {}
+    for layer in ("active", "matched", "candidates", "rejected"):
+        page.get_by_test_id(f"toggle-{layer}").click()
+        page.wait_for_timeout(300)
+        counts[layer] = _overlay_pixels(page)
+    assert counts["active"] < with_active and counts["matched"] < counts["active"], counts
+    assert counts["candidates"] < counts["matched"], counts
+    assert counts["rejected"] == 0, counts  # every layer off: nothing drawn
+    page.screenshot(path=str(SHOTS / "dashboard-overlays.png"))
 
 
 def test_stop_halts_a_move_and_a_missing_token_shows_the_error(server, page_for):

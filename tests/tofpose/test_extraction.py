@@ -137,3 +137,47 @@ def test_two_pixel_blob_of_a_distant_small_marker_is_a_candidate():
     line = Blob(pixels=np.arange(8), area_px=8, bbox=(0, 0, 8, 1), peak_counts=580.0,
                 eccentricity=1.0, distance_mm=10000.0)  # fmt: skip
     assert penalty_score(line, stats, 325.0, paper_target().diameters_mm, 0.95) == 1.0
+
+
+def _found(frame, cfg=None):
+    camera, cfg = CameraModel(), cfg or ExtractionConfig()
+    g, d = check_frame(camera, frame.gray, frame.distance_mm)
+    stats = frame_levels(g, cfg)
+    return find_candidate_blobs(g, d, camera, paper_target().diameters_mm, cfg, stats), g, stats
+
+
+@pytest.mark.parametrize(
+    ("diameter_mm", "distance_mm", "reason"),
+    [(200.0, 2000.0, "oversize"), (10.0, 1000.0, "penalty"), (6.0, 1000.0, "size")],
+)
+def test_blobs_refused_by_a_gate_are_reported_with_that_gate(diameter_mm, distance_mm, reason):
+    """Discs far larger (smaller) than the catalog's are refused by the size window as
+    oversize (too small), at their place in the image."""
+    from tofpose.catalog import Catalog, Reflector
+    from tofpose.sim.scene import TargetScene
+
+    pos = ((1, -200, 0), (2, 0, 100), (3, 200, -50))
+    cat = Catalog("other", tuple(Reflector(i, (x, y, 100.0), diameter_mm) for i, x, y in pos))
+    pose = facing_pose(distance_mm)
+    frame = render(pose, noise=False, scene=TargetScene(catalog=cat))
+    found, _, _ = _found(frame)
+    assert found.accepted == []
+    assert [r.reason for r in found.rejected] == [reason] * 3, found.rejected
+    centres = CameraModel().project(cat.positions_mm @ pose.R.T + pose.t_mm)
+    got = np.array(sorted((r.u_px, r.v_px) for r in found.rejected))
+    np.testing.assert_allclose(got, np.array(sorted(map(tuple, centres))), atol=1.5)
+
+
+def test_a_marker_cut_by_the_border_is_rejected_as_such_and_the_active_set_is_a_threshold():
+    pose = facing_pose(1500.0)
+    # Slide the target right until marker 8 (x = 420 mm) straddles the image's right edge.
+    cam = CameraModel()
+    edge_x_mm = (cam.width - 1 - cam.cx) * (1500.0 - 150.0) / cam.fx
+    pose.t_mm[0] = edge_x_mm - 420.0
+    frame = render(pose, noise=False)
+    found, g, stats = _found(frame)
+    border = [r for r in found.rejected if r.reason == "border"]
+    assert len(border) == 1 and border[0].u_px > cam.width - 20
+    assert len(found.accepted) == 7
+    # The active pixel set is exactly the pixels at or above the applied threshold.
+    assert np.array_equal(found.active_mask.astype(bool), g >= stats.raw_threshold)

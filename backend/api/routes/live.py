@@ -6,9 +6,17 @@ Protocol (JSON text messages):
 - server -> client per frame: ``{"type": "pose", "dropped": n, "data": PosePublic}``;
   ``dropped`` counts frames this client missed because it read too slowly.
 - client -> server, any time: options ``{"images": ["gray", "distance"],
-  "image_every": 5, "image_step": 2, "points": true}``. Then every ``image_every``-th
-  frame also brings ``{"type": "image", "kind", "frame_index", "png_base64"}`` (the image
-  shrunk ``image_step`` times), and every frame ``{"type": "points", "frame_index",
+  "image_every": 5, "image_step": 2, "raw": false, "points": true}``. Then every
+  ``image_every``-th frame also brings ``{"type": "image", "kind", "frame_index",
+  "png_base64"}`` (the image shrunk ``image_step`` times) or, with ``raw``, one binary
+  message holding both images as uint16 (``backend.services.frame_codec``; the browser
+  colour-maps them). Images are skipped, never queued, when a newer frame is already
+  waiting for this client (its pose messages still all go out). Raw frames are also
+  flow-controlled: at most ``raw_credit`` (default 2; 0 = no limit) may be unacknowledged;
+  the client acknowledges each raw frame it has drawn with ``{"ack": frame_index}``, so
+  a slow browser gets fewer, newer frames instead of a queue in the socket buffers.
+  Every frame brings
+  ``{"type": "points", "frame_index",
   "points_mm": [[x, y, z], ...], "catalog_ids": [id or null, ...]}`` (the reflector point
   cloud in the camera frame). Bad options get ``{"type": "error", "message"}``.
 - server -> client, whenever a campaign's progress changed (checked once per frame):
@@ -24,6 +32,7 @@ import asyncio
 import base64
 import contextlib
 import json
+from collections import deque
 from typing import Literal
 from urllib.parse import urlsplit
 
@@ -34,6 +43,7 @@ from backend.api.presenters import pose_public
 from backend.api.schemas import StrictBody
 from backend.auth import token_matches
 from backend.services.acquisition import LiveSample, frame_point_cloud_mm
+from backend.services.frame_codec import encode_raw_frame
 from backend.state import AppState
 
 router = APIRouter(tags=["live"])
@@ -44,6 +54,8 @@ class LiveOptions(StrictBody):
     images: list[Literal["gray", "distance"]] = Field(default_factory=list, max_length=2)
     image_every: int = Field(5, ge=1, le=1000)
     image_step: int = Field(2, ge=1, le=8)
+    raw: bool = False
+    raw_credit: int = Field(2, ge=0, le=100)
     points: bool = False
 
     @field_validator("images")
@@ -66,6 +78,13 @@ async def image_message(sample: LiveSample, state: AppState, kind: str, step: in
     })  # fmt: skip
 
 
+def raw_message(sample: LiveSample, step: int) -> bytes:
+    f = sample.frame
+    return sample.cached(
+        f"raw:{step}", lambda: encode_raw_frame(f.index, f.gray, f.distance_mm, step)
+    )
+
+
 def points_message(sample: LiveSample, state: AppState) -> str:
     def make() -> str:
         pts, ids = frame_point_cloud_mm(sample, state.devices.camera.model)
@@ -77,12 +96,42 @@ def points_message(sample: LiveSample, state: AppState) -> str:
     return sample.cached("points", make)
 
 
-async def _read_options(ws: WebSocket, opts: dict[str, LiveOptions]) -> None:
+class RawFlow:
+    """Raw frames sent and not yet acknowledged by the client."""
+
+    def __init__(self) -> None:
+        self.unacked: deque[int] = deque()
+
+    def ack(self, frame_index: int) -> None:
+        while self.unacked and self.unacked[0] <= frame_index:
+            self.unacked.popleft()
+
+    def may_send(self, credit: int) -> bool:
+        return credit == 0 or len(self.unacked) < credit
+
+
+def _ack_index(text: str) -> int | None:
+    """The frame index of an ``{"ack": n}`` message, else None."""
+    if '"ack"' not in text:
+        return None
+    try:
+        msg = json.loads(text)
+    except ValueError:
+        return None
+    if isinstance(msg, dict) and msg.keys() == {"ack"} and type(msg["ack"]) is int:
+        return msg["ack"]
+    return None
+
+
+async def _read_options(ws: WebSocket, opts: dict[str, LiveOptions], flow: RawFlow) -> None:
     while True:
         msg = await ws.receive()
         if msg["type"] == "websocket.disconnect":
             raise WebSocketDisconnect(msg.get("code", 1000))
         text = msg.get("text") or (msg.get("bytes") or b"").decode("utf-8", "replace")
+        if (acked := _ack_index(text)) is not None:
+            flow.ack(acked)
+            continue
         try:
             opts["current"] = LiveOptions.model_validate_json(text)
         except ValidationError as exc:
@@ -131,7 +180,8 @@ async def live(ws: WebSocket) -> None:
     }))  # fmt: skip
     sub = state.hub.subscribe(loop=asyncio.get_running_loop())
     opts = {"current": LiveOptions()}
-    reader = asyncio.create_task(_read_options(ws, opts))
+    flow = RawFlow()
+    reader = asyncio.create_task(_read_options(ws, opts, flow))
     n = 0
     campaign_version = -1
     try:
@@ -150,8 +200,13 @@ async def live(ws: WebSocket) -> None:
                 if (progress := state.campaigns.progress()) is not None:
                     await ws.send_text(json.dumps({"type": "campaign", "data": progress}))
             o = opts["current"]
-            if o.images and n % o.image_every == 0:
-                for kind in o.images:
+            # Images only for the newest frame: if another is already waiting, this one's
+            # images would only delay it (latest frame wins; poses are never skipped).
+            if n % o.image_every == 0 and not sub.pending and sample.has_images:
+                if o.raw and flow.may_send(o.raw_credit):
+                    flow.unacked.append(sample.frame.index)
+                    await ws.send_bytes(raw_message(sample, o.image_step))
+                for kind in o.images if not o.raw else ():
                     await ws.send_text(await image_message(sample, state, kind, o.image_step))
             if o.points:
                 await ws.send_text(points_message(sample, state))

@@ -1049,6 +1049,11 @@ export interface components {
          */
         PosePublic: {
             /**
+             * Active Threshold Counts
+             * @description I_t as applied: the active pixel set is the pixels with gray >= this
+             */
+            active_threshold_counts?: number | null;
+            /**
              * Attitude Sigma Deg
              * @description 1-sigma of the rotation-vector components
              */
@@ -1088,6 +1093,11 @@ export interface components {
             quaternion_wxyz?: number[] | null;
             /** Reason */
             reason: string;
+            /**
+             * Rejected
+             * @description components refused by a gate (at most 50)
+             */
+            rejected?: components["schemas"]["RejectedBlobPublic"][];
             /** Residual Mm */
             residual_mm: number | null;
             /** Roll Deg */
@@ -1173,6 +1183,34 @@ export interface components {
              * @description centre in the target frame, mm
              */
             position_mm: number[];
+        };
+        /**
+         * RejectedBlobPublic
+         * @description A bright component of the active pixel set that is not a candidate reflector.
+         */
+        RejectedBlobPublic: {
+            /**
+             * Diameter Px
+             * @description equivalent diameter of its area
+             */
+            diameter_px: number;
+            /**
+             * Reason
+             * @enum {string}
+             */
+            reason: "border" | "dim" | "size" | "oversize" | "nlog" | "shape" | "penalty" | "rank";
+            /**
+             * Reason Text
+             * @description the gate that refused it, in words
+             */
+            reason_text: string;
+            /**
+             * U Px
+             * @description centre of its bounding box
+             */
+            u_px: number;
+            /** V Px */
+            v_px: number;
         };
         /**
          * ReportFormat

@@ -1,70 +1,157 @@
-// Gray and distance images side by side; overlays drawn here, toggled without a server
-// round-trip: matched reflectors (circle, centroid, catalog id) and unmatched blobs.
+// Gray and distance images side by side, colour-mapped here from the raw uint16 frames;
+// overlays drawn here and toggled without a server round-trip: the active pixel set,
+// candidate blobs, matched reflectors with catalog ids, and rejected blobs with the gate
+// that refused them. Each drawn frame is acknowledged (flow control, see live.ts).
 import { useEffect, useRef, useState } from "preact/hooks";
 import type { Pose } from "../api/client";
-import type { Images } from "../live";
+import type { Shown } from "../live";
+import { activePixels, distancePixels, grayPixels, turboCss, type RawFrame } from "../rawframe";
 
-const W = 320;
-const H = 240;
-const SCALE = 2;
+const SCALE = 2; // overlay canvas pixels per image pixel
 
-function Overlay({ pose, matched, unmatched }: { pose: Pose | null; matched: boolean; unmatched: boolean }) {
-  const ref = useRef<HTMLCanvasElement>(null);
-  useEffect(() => {
-    const c = ref.current?.getContext("2d");
-    if (!c) return;
-    c.clearRect(0, 0, W * SCALE, H * SCALE);
-    if (!pose) return;
-    const px = (u: number) => (u + 0.5) * SCALE;
-    c.lineWidth = 1.5;
-    if (matched) {
-      c.strokeStyle = "#3ddc6a";
-      c.fillStyle = "#ffffff";
-      c.font = "13px sans-serif";
-      for (const m of pose.matched) {
-        const r = Math.max(Math.sqrt(m.area_px / Math.PI), 1) * SCALE + 3;
-        c.beginPath();
-        c.arc(px(m.u_px), px(m.v_px), r, 0, 2 * Math.PI);
-        c.stroke();
-        c.beginPath();
-        c.moveTo(px(m.u_px) - 4, px(m.v_px));
-        c.lineTo(px(m.u_px) + 4, px(m.v_px));
-        c.moveTo(px(m.u_px), px(m.v_px) - 4);
-        c.lineTo(px(m.u_px), px(m.v_px) + 4);
-        c.stroke();
-        c.fillText(String(m.catalog_id), px(m.u_px) + r + 2, px(m.v_px) - r);
-      }
-    }
-    if (unmatched) {
-      c.strokeStyle = "#ff4d4d";
-      for (const b of pose.unmatched) {
-        c.beginPath();
-        c.arc(px(b.u_px), px(b.v_px), 7, 0, 2 * Math.PI);
-        c.stroke();
-      }
-    }
-  }, [pose, matched, unmatched]);
-  return <canvas ref={ref} class="overlay" width={W * SCALE} height={H * SCALE} data-testid="overlay" />;
+type Layers = { active: boolean; candidates: boolean; matched: boolean; rejected: boolean };
+const LAYER_LABELS: Record<keyof Layers, string> = {
+  active: "active pixels (gray ≥ I_t)",
+  candidates: "candidate blobs",
+  matched: "matched reflectors (catalog id)",
+  rejected: "rejected blobs (reason)",
+};
+
+declare global {
+  interface Window { __tofposeFramesDrawn?: number } // read by bench/live.py
 }
 
-export function LiveView({ images, pose }: { images: Images; pose: Pose | null }) {
-  const [matched, setMatched] = useState(true);
-  const [unmatched, setUnmatched] = useState(true);
+function useImage(draw: (f: RawFrame, img: ImageData) => void, raw: RawFrame | undefined) {
+  const ref = useRef<HTMLCanvasElement>(null);
+  useEffect(() => {
+    const c = ref.current;
+    if (!c || !raw) return;
+    if (c.width !== raw.width || c.height !== raw.height) {
+      c.width = raw.width;
+      c.height = raw.height;
+    }
+    const ctx = c.getContext("2d")!;
+    const img = ctx.createImageData(raw.width, raw.height);
+    draw(raw, img);
+    ctx.putImageData(img, 0, 0);
+  }, [raw]);
+  return ref;
+}
+
+function Overlay({ shown, layers }: { shown: Shown | null; layers: Layers }) {
+  const ref = useRef<HTMLCanvasElement>(null);
+  const mask = useRef<HTMLCanvasElement | null>(null);
+  useEffect(() => {
+    const c = ref.current;
+    if (!c || !shown) return;
+    const { raw, pose } = shown;
+    const W = raw.width * raw.step;
+    const H = raw.height * raw.step;
+    if (c.width !== W * SCALE) {
+      c.width = W * SCALE;
+      c.height = H * SCALE;
+    }
+    const ctx = c.getContext("2d")!;
+    ctx.clearRect(0, 0, c.width, c.height);
+    if (!pose) return;
+    const px = (u: number) => (u + 0.5) * SCALE;
+    if (layers.active && pose.active_threshold_counts != null) {
+      mask.current ??= document.createElement("canvas");
+      const m = mask.current;
+      m.width = raw.width;
+      m.height = raw.height;
+      const mctx = m.getContext("2d")!;
+      const img = mctx.createImageData(raw.width, raw.height);
+      activePixels(raw, pose.active_threshold_counts, img);
+      mctx.putImageData(img, 0, 0);
+      ctx.imageSmoothingEnabled = false;
+      ctx.drawImage(m, 0, 0, c.width, c.height);
+    }
+    ctx.lineWidth = 1.5;
+    ctx.font = "13px sans-serif";
+    if (layers.candidates) {
+      ctx.strokeStyle = "#ffd400";
+      const all = [...pose.matched.map((b) => [b.u_px, b.v_px]), ...pose.unmatched.map((b) => [b.u_px, b.v_px])];
+      for (const [u, v] of all) ctx.strokeRect(px(u) - 9, px(v) - 9, 18, 18);
+    }
+    if (layers.matched) {
+      ctx.strokeStyle = "#3ddc6a";
+      ctx.fillStyle = "#ffffff";
+      for (const m of pose.matched) {
+        const r = Math.max(Math.sqrt(m.area_px / Math.PI), 1) * SCALE + 3;
+        ctx.beginPath();
+        ctx.arc(px(m.u_px), px(m.v_px), r, 0, 2 * Math.PI);
+        ctx.moveTo(px(m.u_px) - 4, px(m.v_px));
+        ctx.lineTo(px(m.u_px) + 4, px(m.v_px));
+        ctx.moveTo(px(m.u_px), px(m.v_px) - 4);
+        ctx.lineTo(px(m.u_px), px(m.v_px) + 4);
+        ctx.stroke();
+        ctx.fillText(String(m.catalog_id), px(m.u_px) + r + 2, px(m.v_px) - r);
+      }
+    }
+    if (layers.rejected) {
+      ctx.strokeStyle = "#ff4dd2";
+      ctx.fillStyle = "#ff9de8";
+      for (const b of pose.rejected ?? []) {
+        const r = Math.max(b.diameter_px / 2, 2) * SCALE + 2;
+        ctx.beginPath();
+        ctx.moveTo(px(b.u_px) - r, px(b.v_px) - r);
+        ctx.lineTo(px(b.u_px) + r, px(b.v_px) + r);
+        ctx.moveTo(px(b.u_px) + r, px(b.v_px) - r);
+        ctx.lineTo(px(b.u_px) - r, px(b.v_px) + r);
+        ctx.stroke();
+        ctx.fillText(b.reason, px(b.u_px) + r + 2, px(b.v_px) + 4);
+      }
+    }
+  }, [shown, layers]);
+  return <canvas ref={ref} class="overlay" data-testid="overlay" />;
+}
+
+function ColourBar({ range }: { range: [number, number] | null }) {
+  if (!range) return null;
+  const stops = Array.from({ length: 11 }, (_, i) => turboCss(i / 10)).join(", ");
+  return (
+    <div class="colourbar" data-testid="colourbar">
+      <span>{(range[0] / 1000).toFixed(2)} m</span>
+      <div class="bar" style={{ background: `linear-gradient(to right, ${stops})` }} />
+      <span>{(range[1] / 1000).toFixed(2)} m</span>
+    </div>
+  );
+}
+
+export function LiveView({ shown, onDrawn }: { shown: Shown | null; onDrawn: (frameIndex: number) => void }) {
+  const [layers, setLayers] = useState<Layers>({ active: false, candidates: true, matched: true, rejected: true });
+  const [range, setRange] = useState<[number, number] | null>(null);
+  const raw = shown?.raw;
+  const grayRef = useImage(grayPixels, raw);
+  const distRef = useImage((f, img) => setRange(distancePixels(f, img)), raw);
+  useEffect(() => {
+    if (!raw) return;
+    window.__tofposeFramesDrawn = (window.__tofposeFramesDrawn ?? 0) + 1;
+    onDrawn(raw.frameIndex);
+  }, [raw]);
   return (
     <section class="card">
-      <h2>Live images</h2>
+      <h2>Live images {raw && <span class="small" data-testid="frame-index">frame {raw.frameIndex}</span>}</h2>
       <div class="toggles">
-        <label><input type="checkbox" checked={matched} onChange={() => setMatched(!matched)} data-testid="toggle-matched" /> matched reflectors</label>
-        <label><input type="checkbox" checked={unmatched} onChange={() => setUnmatched(!unmatched)} data-testid="toggle-unmatched" /> unmatched blobs</label>
+        {(Object.keys(LAYER_LABELS) as (keyof Layers)[]).map((k) => (
+          <label key={k}>
+            <input type="checkbox" checked={layers[k]} data-testid={`toggle-${k}`}
+              onChange={() => setLayers({ ...layers, [k]: !layers[k] })} /> {LAYER_LABELS[k]}
+          </label>
+        ))}
       </div>
       <div class="images">
         {(["gray", "distance"] as const).map((k) => (
           <figure key={k}>
             <div class="frame">
-              {images[k] ? <img src={images[k]} alt={`${k} image`} width={W * SCALE} height={H * SCALE} /> : <div class="placeholder">waiting for images</div>}
-              <Overlay pose={pose} matched={matched} unmatched={unmatched} />
+              <canvas ref={k === "gray" ? grayRef : distRef} class="image" aria-label={`${k} image`} data-testid={`image-${k}`} />
+              {!raw && <div class="placeholder">waiting for images</div>}
+              <Overlay shown={shown} layers={layers} />
             </div>
-            <figcaption>{k === "gray" ? "gray (gamma 0.5)" : "distance (turbo, near = blue, 2nd-98th percentile; black = invalid)"}</figcaption>
+            <figcaption>
+              {k === "gray" ? "gray (counts, gamma 0.5)" : <>distance (turbo, 2nd–98th percentile; black = invalid) <ColourBar range={range} /></>}
+            </figcaption>
           </figure>
         ))}
       </div>
