@@ -6,7 +6,15 @@ messages per second and the latency from the moment the frame reached the server
 (``captured_unix_s``, same machine clock) to its receipt by the client. Each setting is
 repeated; the table gives medians over repeats of the per-run median / p95.
 
-Run: ``python bench/live.py [--clients 1 10 50] [--rates 10 30] [--seconds 5] [--repeats 3]``
+With ``--dashboards 1 5`` it also opens that many dashboards (the real page, in Debian's
+chromium driven by Playwright) and measures the frames per second each page actually
+drew (its ``window.__tofposeFramesDrawn`` counter: raw frames colour-mapped and put on a
+canvas) and the server process's CPU (user + system time from /proc over wall time, in %
+of one core). The 3-D scene is off in those runs unless ``--with-scene``: this machine has
+no GPU, and software WebGL would measure SwiftShader, not the dashboard.
+
+Run: ``python bench/live.py [--clients 1 10 50] [--rates 10 30] [--seconds 5] [--repeats 3]
+[--dashboards 1 5] [--with-scene]``
 """
 
 from __future__ import annotations
@@ -42,13 +50,14 @@ def _free_port() -> int:
 
 
 class Server:
-    def __init__(self, rate_hz: float) -> None:
+    def __init__(self, rate_hz: float, scene: bool = False) -> None:
         self.port = _free_port()
         self.tmp = tempfile.TemporaryDirectory()
         env = {**os.environ, "TOFPOSE_FRAME_RATE_HZ": str(rate_hz),
                "TOFPOSE_DATA_DIR": self.tmp.name}  # fmt: skip
+        scene_args = ["--viser-port", "0"] if scene else ["--no-viser"]
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "tofpose.cli", "serve", "--port", str(self.port)],
+            [sys.executable, "-m", "tofpose.cli", "serve", "--port", str(self.port), *scene_args],
             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
         )  # fmt: skip
         deadline = time.monotonic() + 60
@@ -61,6 +70,11 @@ class Server:
             except OSError:
                 time.sleep(0.2)
         raise RuntimeError("server did not start")
+
+    def cpu_s(self) -> float:
+        """User + system CPU seconds the server process has used so far."""
+        fields = Path(f"/proc/{self.proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
     def stop(self) -> None:
         self.proc.send_signal(signal.SIGINT)
@@ -101,12 +115,81 @@ async def _run(url: str, n_clients: int, seconds: float):
     return await asyncio.gather(*tasks)
 
 
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = [
+    "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--use-gl=swiftshader", "--enable-unsafe-swiftshader",
+    # five dashboards = five visible pages: without these, headless chromium treats all
+    # but one window as occluded and stops their animation frames (as a hidden tab does)
+    "--disable-backgrounding-occluded-windows", "--disable-renderer-backgrounding",
+    "--disable-background-timer-throttling",
+]  # fmt: skip
+DRAWN = "() => window.__tofposeFramesDrawn || 0"
+
+
+def dashboards(rate: float, n_pages: int, seconds: float, scene: bool) -> tuple[list, float]:
+    """(frames/s drawn per page, server CPU % of one core) with ``n_pages`` dashboards."""
+    from playwright.sync_api import sync_playwright
+
+    server = Server(rate, scene=scene)
+    base = f"http://127.0.0.1:{server.port}"
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+            pages = []
+            for _ in range(n_pages):
+                page = browser.new_context(viewport={"width": 1366, "height": 768}).new_page()
+                page.goto(base + "/")
+                pages.append(page)
+            for page in pages:
+                page.wait_for_function(f"({DRAWN})() > 3", timeout=30_000)
+            time.sleep(2.0)  # warm-up
+            drawn0 = [pg.evaluate(DRAWN) for pg in pages]
+            cpu0, t0 = server.cpu_s(), time.monotonic()
+            time.sleep(seconds)
+            drawn1 = [pg.evaluate(DRAWN) for pg in pages]
+            cpu1, t1 = server.cpu_s(), time.monotonic()
+            browser.close()
+    finally:
+        server.stop()
+    fps = [(b - a) / (t1 - t0) for a, b in zip(drawn0, drawn1, strict=True)]
+    return fps, 100.0 * (cpu1 - cpu0) / (t1 - t0)
+
+
+def dashboard_table(rates, counts, seconds, repeats, scene: bool) -> str:
+    rows = []
+    bar = tqdm(total=len(rates) * len(counts) * repeats, desc="dashboards", unit="run",
+               file=sys.stderr)  # fmt: skip
+    for rate in rates:
+        for n in counts:
+            runs = []
+            for _ in range(repeats):
+                fps, cpu = dashboards(rate, n, seconds, scene)
+                runs.append((np.median(fps), np.min(fps), cpu))
+                bar.update()
+            a = np.median(np.array(runs), axis=0)
+            rows.append([f"{rate:g}", str(n), "on" if scene else "off", f"{a[0]:.1f}",
+                         f"{a[1]:.1f}", f"{a[2]:.0f}"])  # fmt: skip
+    bar.close()
+    return table(["camera Hz", "dashboards", "3-D scene", "frames drawn/s per page (median)",
+                  "slowest page", "server CPU % of one core"], rows)  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--clients", type=int, nargs="+", default=[1, 10, 50])
     ap.add_argument("--rates", type=float, nargs="+", default=[10.0, 30.0])
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument(
+        "--dashboards",
+        type=int,
+        nargs="*",
+        default=[],
+        help="also measure this many open dashboards in chromium, e.g. 1 5",
+    )
+    ap.add_argument("--with-scene", action="store_true", help="dashboards with the 3-D scene")
     args = ap.parse_args()
     rows = []
     jobs = [(r, n) for r in args.rates for n in args.clients]
@@ -132,6 +215,10 @@ def main() -> None:
     bar.close()
     print(table(["camera Hz", "clients", "msg/s per client (median)", "slowest client msg/s",
                  "latency median ms", "latency p95 ms"], rows))  # fmt: skip
+    if args.dashboards:
+        print()
+        print(dashboard_table(args.rates, args.dashboards, args.seconds, args.repeats,
+                              args.with_scene))  # fmt: skip
 
 
 if __name__ == "__main__":

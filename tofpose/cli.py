@@ -16,6 +16,7 @@ from tofpose.catalog import Catalog, paper_target
 from tofpose.geometry import facing_euler_deg, rotation_angle_deg
 from tofpose.pipeline import PosePipeline
 from tofpose.recording import RecordingError, RecordingWriter, open_recording
+from tofpose.threads import single_threaded_blas
 
 CSV_COLUMNS = (
     "frame", "time_s", "ok", "n_matched", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz",
@@ -192,6 +193,7 @@ def demo(n_frames: int = 48, seed: int = 1) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    single_threaded_blas()  # tofpose.threads: idle BLAS threads would burn a core
     ap = argparse.ArgumentParser(prog="tofpose", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
     p = sub.add_parser("estimate", help="estimate the pose of every frame of a recording")

@@ -24,6 +24,14 @@ function App() {
     return handle.close;
   }, []);
 
+  // Escape anywhere on the page stops the turntable, like the STOP button.
+  useEffect(() => {
+    const onKey = (e: KeyboardEvent) => {
+      if (e.key === "Escape") stop();
+    };
+    window.addEventListener("keydown", onKey);
+    return () => window.removeEventListener("keydown", onKey);
+  }, []);
   const askToken = () => {
     const t = window.prompt("API token (printed at the server's first start, stored in data/api_token):");
     setToken(t);
@@ -45,7 +53,7 @@ function App() {
           {live.connected ? "live" : "reconnecting…"}
         </span>
         <button class="token" onClick={askToken}>{hasToken ? "change token" : "enter API token"}</button>
-        <button class="stop" data-testid="stop" onClick={stop}>STOP</button>
+        <button class="stop" data-testid="stop" onClick={stop} title="stop every axis (key: Esc)">STOP <span class="key">Esc</span></button>
       </header>
       {error && <p class="error banner" role="alert" data-testid="error">{error}</p>}
       <main>

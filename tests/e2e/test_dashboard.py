@@ -173,3 +173,37 @@ def test_camera_settings_change_through_the_page(server, page_for):
     s = httpx.get(server.base_url + "/api/camera/settings").json()
     assert s["modulation_frequency_mhz"] == 12.0
     assert "12.49 m" in page.inner_text("body")  # the unambiguous range the server computed
+
+
+def _focus_walk(page, n: int) -> list[str]:
+    """Press Tab n times; the data-testid (or tag) of each element that takes focus."""
+    seen = []
+    for _ in range(n):
+        page.keyboard.press("Tab")
+        seen.append(page.evaluate(
+            "() => { const e = document.activeElement;"
+            " return e ? (e.dataset.testid || e.tagName.toLowerCase()) : ''; }"
+        ))  # fmt: skip
+    return seen
+
+
+def test_the_page_is_keyboard_reachable_and_escape_stops_a_move(server, page_for):
+    page = page_for(server.base_url, TOKEN)
+    page.goto(server.base_url + "/")
+    page.get_by_test_id("new-create").wait_for(timeout=20_000)
+    seen = _focus_walk(page, 80)
+    for control in ("stop", "toggle-active", "toggle-rejected", "target-yaw", "go-yaw",
+                    "cam-apply", "new-create"):  # fmt: skip
+        assert control in seen, (control, seen)
+    # Type a go-to with the keyboard alone, start it with Enter, then stop it with Esc.
+    page.get_by_test_id("target-roll").focus()
+    page.keyboard.type("170")
+    page.keyboard.press("Tab")  # to the go button
+    page.keyboard.press("Enter")
+    page.wait_for_timeout(700)
+    page.keyboard.press("Escape")
+    page.wait_for_timeout(1500)
+    import httpx
+
+    m = httpx.get(server.base_url + "/api/motion").json()
+    assert m["stopped"] and 1.0 < m["positions"]["roll"] < 165.0, m["positions"]

@@ -17,10 +17,13 @@ export function ScenePanel({ onError }: { onError: (m: string | null) => void })
   }, []);
   if (!scene) return null;
   const pause = async (paused: boolean) => {
+    const before = scene;
+    setScene({ ...scene, paused }); // the box follows the click; the server confirms
     try {
       setScene(await api<Scene>("PUT", "/api/scene", { paused }));
       onError(null);
     } catch (e) {
+      setScene(before);
       onError((e as Error).message);
     }
   };

@@ -4,11 +4,14 @@ import uPlot from "uplot";
 import "uplot/dist/uPlot.min.css";
 import type { Pose } from "../api/client";
 
+const REDRAW_MS = 250;
+
 type Key = "x_mm" | "y_mm" | "z_mm" | "pitch_deg" | "yaw_deg" | "roll_deg";
 
 function Chart({ history, keys, unit }: { history: Pose[]; keys: Key[]; unit: string }) {
   const el = useRef<HTMLDivElement>(null);
   const plot = useRef<uPlot | null>(null);
+  const drawnAt = useRef(0);
   useEffect(() => {
     if (!el.current) return;
     const colors = ["#1f77b4", "#d62728", "#2ca02c"];
@@ -25,6 +28,11 @@ function Chart({ history, keys, unit }: { history: Pose[]; keys: Key[]; unit: st
     return () => plot.current?.destroy();
   }, []);
   useEffect(() => {
+    // Redrawn at most 4 times a second: plenty for a rolling 30 s plot, and the page
+    // keeps its time for the images at 30 Hz.
+    const now = performance.now();
+    if (now - drawnAt.current < REDRAW_MS) return;
+    drawnAt.current = now;
     const ok = history.filter((p) => p.ok);
     plot.current?.setData([ok.map((p) => p.frame_time_s), ...keys.map((k) => ok.map((p) => p[k] ?? null))] as uPlot.AlignedData);
   }, [history]);
