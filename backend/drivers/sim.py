@@ -46,7 +46,9 @@ class SimWorld:
             t = self.now_s()
             T_true, T_lab, enc = self.bench.poses_at(t)
             sensor = self.bench.sensor
-        frame = render_frame(self.bench.camera, self.bench.scene, T_true, sensor, self.bench.rng)
+        frame = render_frame(
+            self.bench.camera, self.bench.scene, T_true, sensor, self.bench.rng, time_s=t
+        )
         return t, frame, T_lab, T_true, enc
 
     def move_to(self, setpoints: dict[str, float]) -> None:

@@ -93,5 +93,5 @@ class SimulatedBench:
 
     def capture(self, time_s: float) -> BenchFrame:
         T_true, T_lab, enc = self.poses_at(time_s)
-        frame = render_frame(self.camera, self.scene, T_true, self.sensor, self.rng)
+        frame = render_frame(self.camera, self.scene, T_true, self.sensor, self.rng, time_s=time_s)
         return BenchFrame(time_s, frame, T_true, T_lab, enc)

@@ -30,6 +30,7 @@ import numpy as np
 from tofpose.camera import CameraModel
 from tofpose.geometry import RigidTransform
 from tofpose.sim.scene import FIRST_DISC, NO_HIT, PLATE, WALL, SceneInCamera, TargetScene
+from tofpose.sim.systematic import SystematicErrors
 from tofpose.tof import SPEED_OF_LIGHT_MM_S
 
 FULL_SCALE_COUNTS = 4095
@@ -72,6 +73,9 @@ class SensorModel:
         Gaussian PSF sigma in pixels (0 = no blur).
     noise : bool
         False renders the noiseless expectation.
+    systematic : SystematicErrors or None
+        The systematic range errors of a real, uncalibrated camera (None: the ideal
+        sensor; ``tofpose.sim.systematic``).
     """
 
     modulation_frequency_hz: float = 6.0e6
@@ -89,6 +93,7 @@ class SensorModel:
     supersampling: int = 4
     blur_sigma_px: float = 0.0
     noise: bool = True
+    systematic: SystematicErrors | None = None
 
     def __post_init__(self) -> None:
         if self.modulation_frequency_hz <= 0:
@@ -171,6 +176,33 @@ def _sample_returns(
     return a, b, d, sid
 
 
+def _with_systematic_errors(
+    dist: np.ndarray,
+    re: np.ndarray,
+    im: np.ndarray,
+    amp: np.ndarray,
+    sensor: SensorModel,
+    time_s: float,
+) -> np.ndarray:
+    """Distances (H, W) as an uncalibrated camera reads them: lens scatter mixes the
+    phasors, then cyclic, amplitude-related, per-pixel and drift errors add."""
+    e = sensor.systematic
+    if e.scatter_fraction:
+        re_s, im_s = e.scatter(re, im)
+        phase = np.mod(np.arctan2(im_s, re_s), 2 * np.pi) * sensor.mm_per_radian
+        # the scattered phasor's distance, unwrapped next to the true one
+        u = sensor.unambiguous_range_mm
+        dist = dist + (np.mod(phase - dist + u / 2, u) - u / 2)
+    h, w = dist.shape
+    return (
+        dist
+        + e.cyclic_mm(dist, sensor.unambiguous_range_mm)
+        + e.amplitude_mm(amp)
+        + e.pixel_offsets_mm(h, w)
+        + e.drift_mm(time_s)
+    )
+
+
 def _subpixel_bearings(camera: CameraModel, uv: np.ndarray, s: int) -> np.ndarray:
     """Bearings of an S x S grid inside each pixel; uv (P, 2) -> (P * S * S, 3)."""
     offs = (np.arange(s) + 0.5) / s - 0.5
@@ -186,6 +218,7 @@ def render_frame(
     T_camera_target: RigidTransform,
     sensor: SensorModel,
     rng: np.random.Generator | None = None,
+    time_s: float = 0.0,
 ) -> RenderedFrame:
     """Render one (gray, distance) frame pair.
 
@@ -197,6 +230,7 @@ def render_frame(
         True pose of the target in the camera frame (mm).
     sensor : SensorModel
     rng : numpy Generator, required when ``sensor.noise`` is True.
+    time_s : time since the camera was switched on (temperature drift), s.
 
     Returns
     -------
@@ -251,6 +285,9 @@ def render_frame(
     true_distance = np.where(from_mixture, true_d, unwrapped)
 
     dist = true_distance.copy()
+    sys_err = sensor.systematic
+    if sys_err is not None:
+        dist = _with_systematic_errors(dist, re_img, im_img, amp, sensor, time_s)
     gray = amp + sensor.ambient_gray_fraction * b_img
     if sensor.noise:
         sigma = sensor.distance_sigma_mm(amp, b_img)

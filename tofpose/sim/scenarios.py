@@ -17,6 +17,7 @@ from tofpose.geometry import RigidTransform
 from tofpose.sim.bench import BenchFrame, LabGeometry, SimulatedBench
 from tofpose.sim.render import AMBIENT_HIGH_LUX, SensorModel
 from tofpose.sim.scene import Clutter, TargetScene
+from tofpose.sim.systematic import SystematicErrors
 from tofpose.sim.turntable import Turntable
 
 
@@ -61,6 +62,17 @@ def _range_sweep() -> Scenario:
         "rail moves the camera from 15 m to 0.3 m from the target",
         LabGeometry(target_distance_mm=15000.0, target_offset_mm=(0.0, -30.0)),
         setpoints=tuple({"rail": float(r)} for r in rails),
+    )
+
+
+def _realistic() -> Scenario:
+    sweep = _range_sweep()
+    return replace(
+        sweep,
+        name="realistic",
+        description="the range sweep seen by a real, uncalibrated CW-ToF camera: cyclic, "
+        "amplitude-related, per-pixel and drift range errors and lens scatter",
+        sensor=SensorModel(systematic=SystematicErrors()),
     )
 
 
@@ -122,6 +134,7 @@ SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "attitude-grid": _attitude_grid,
     "high-ambient": _high_ambient,
     "clutter": _clutter,
+    "realistic": _realistic,
 }
 
 
