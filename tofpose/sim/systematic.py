@@ -69,7 +69,7 @@ class SystematicErrors:
         ``"amplitude"``, ``"pixel"``, ``"drift"``, ``"scatter"``."""
         off = SystematicErrors.none()
         keep = {
-            "wiggle": ("wiggle_amplitudes_mm",),
+            "wiggle": ("wiggle_amplitudes_mm", "wiggle_phases_rad"),
             "amplitude": ("amplitude_mm_per_decade",),
             "pixel": ("pixel_offset_sigma_mm", "pixel_offset_corner_mm"),
             "drift": ("drift_mm_per_kelvin",),
