@@ -51,8 +51,10 @@ from tofpose.pose import (
     refine_line_of_sight,
     refine_maximum_likelihood,
     reflector_whitened_norms,
+    systematic_range_sigma_mm,
     weighted_svd,
 )
+from tofpose.range_calibration import RangeCorrection
 from tofpose.uncertainty import SigmaFloors, measurement_sigmas
 
 Refinement = Literal["ml", "los", "none"]
@@ -75,6 +77,14 @@ class PipelineConfig:
         exceeds ``outlier_sigma`` and more than ``matching.min_matches`` remain, refitting
         each time (ours: a spurious blob or a merged pair next to a marker's position
         passes the matching tolerance but bends the pose by degrees).
+    adapt_range_sigma : before the outlier test, estimate from the frame's own residuals
+        the range error its noise model lacks (``pose.systematic_range_sigma_mm``: the
+        systematic errors of a real, uncalibrated ToF camera) and add it to every
+        reflector's range sigma, in the fit, the outlier test and the covariance; without
+        it, correctly detected markers are dropped as outliers one by one.
+    max_systematic_range_sigma_mm : cap of that estimate (published uncalibrated ToF
+        range errors are 10-20 mm; a larger spread is not a systematic error but a bad
+        match, and must stay visible to the outlier test).
     outlier_chi2_per_dof : above this chi^2 per degree of freedom the fit is inconsistent
         and each reflector is also tested against a fit without it (leave-one-out), which
         finds a biased point that a fit of few points has absorbed.
@@ -96,6 +106,8 @@ class PipelineConfig:
     ellipse_confirmation: bool = True
     verify_pose: bool = True
     reject_outliers: bool = True
+    adapt_range_sigma: bool = True
+    max_systematic_range_sigma_mm: float = 25.0
     outlier_sigma: float = 6.0
     outlier_chi2_per_dof: float = 4.0
     max_view_angle_deg: float = 80.0
@@ -116,6 +128,7 @@ class PipelineConfig:
             refinement="los",
             correct_perspective_bias=False,
             reject_outliers=False,
+            adapt_range_sigma=False,
         )
 
 
@@ -209,9 +222,17 @@ class PosePipeline:
     """Stateful per-camera pipeline. Not thread-safe: one instance per stream."""
 
     def __init__(
-        self, camera: CameraModel, catalog: Catalog, config: PipelineConfig | None = None
+        self,
+        camera: CameraModel,
+        catalog: Catalog,
+        config: PipelineConfig | None = None,
+        range_correction: RangeCorrection | None = None,
     ) -> None:
+        """``range_correction``: the camera's calibrated range errors
+        (``tofpose.range_calibration``), subtracted from each reflector's range before
+        back-projection; None for a camera without one."""
         self.camera = camera
+        self.range_correction = range_correction
         self.catalog = catalog
         self.config = config or PipelineConfig()
         self._persistence = Persistence(self.config.persistence)
@@ -279,6 +300,8 @@ class PosePipeline:
             if not np.isfinite(b.distance_mm)
         ]
         extra["n_candidates"] = len(kept)
+        if self.range_correction is not None:
+            self._correct_ranges(ranged, mean_g)
         if len(ranged) < cfg.matching.min_matches:
             return fail(
                 f"found {len(ranged)} candidate reflector(s) with a valid range "
@@ -384,6 +407,16 @@ class PosePipeline:
             **extra,
         )
 
+    def _correct_ranges(self, blobs: list[Blob], gray: np.ndarray) -> None:
+        """Subtract the calibrated range error from each blob's range: the model at the
+        blob's range, evaluated per member pixel (its amplitude, its offset), median."""
+        flat = gray.ravel()
+        for b in blobs:
+            amp = flat[b.pixels]  # the gray level, as in the calibration fit
+            err = self.range_correction.error_mm(np.full(len(b.pixels), b.distance_mm), amp,
+                                                 b.pixels)  # fmt: skip
+            b.distance_mm = float(b.distance_mm - np.median(err))
+
     def _size_hint(self, wrong_size) -> str:
         """A clause naming bright blobs the catalog's sizes ruled out, or ''."""
         if not wrong_size:
@@ -419,17 +452,17 @@ class PosePipeline:
         rho_m = rho[k_idx]
         y_m = e_m * rho_m[:, None]
         sb = sig_px[k_idx] / self.camera.fx
-        sr = sig_rng[k_idx]
-        R, t, iterations, ml = self._fit(x, e_m, rho_m, y_m, w[k_idx], sr, sb)
+        sr0 = sig_rng[k_idx]
+        R, t, iterations, ml, sr, w_m = self._fit_adaptive(x, e_m, rho_m, y_m, sr0, sb)
         if cfg.reject_outliers:
             while len(k_idx) > cfg.matching.min_matches:
-                worst = self._worst_outlier(x, e_m, rho_m, y_m, w[k_idx], sr, sb, ml)
+                worst = self._worst_outlier(x, e_m, rho_m, y_m, w_m, sr, sb, ml)
                 if worst is None:
                     break
                 keep = np.arange(len(k_idx)) != worst
                 k_idx, i_idx, x, uv_m, e_m = (a[keep] for a in (k_idx, i_idx, x, uv_m, e_m))
-                rho_m, y_m, sb, sr = (a[keep] for a in (rho_m, y_m, sb, sr))
-                R, t, iterations, ml = self._fit(x, e_m, rho_m, y_m, w[k_idx], sr, sb)
+                rho_m, y_m, sb, sr0 = (a[keep] for a in (rho_m, y_m, sb, sr0))
+                R, t, iterations, ml, sr, w_m = self._fit_adaptive(x, e_m, rho_m, y_m, sr0, sb)
         if cfg.verify_pose:
             problem = self._verify(R, t, active, set(int(i) for i in i_idx))
             if problem:
@@ -467,6 +500,39 @@ class PosePipeline:
             )[0]  # fmt: skip
         worst = int(np.argmax(predicted))
         return worst if predicted[worst] > cfg.outlier_sigma else None
+
+    def _fit_adaptive(self, x, e_m, rho_m, y_m, sr0, sb):
+        """``_fit`` with the noise model's range sigmas ``sr0``, then, with
+        ``adapt_range_sigma``, again with the frame's systematic range sigma added
+        (capped at ``max_systematic_range_sigma_mm``); it is re-estimated after every
+        outlier removal. Returns (R, t, iterations, ml, sr, w)."""
+        cfg = self.config
+        w_m = 1.0 / (sr0**2 + (rho_m * sb) ** 2)
+        R, t, iterations, ml = self._fit(x, e_m, rho_m, y_m, w_m, sr0, sb)
+        if not cfg.adapt_range_sigma or len(x) < 4:
+            return R, t, iterations, ml, sr0, w_m
+        cap = cfg.max_systematic_range_sigma_mm
+        extra = systematic_range_sigma_mm(x, e_m, rho_m, R, t, sr0, sb, max_mm=cap)
+        # A single bad point (a reflection matched in a marker's place) bends the fit so
+        # that every residual looks large; without it the others agree. So the estimate
+        # is the smallest over the fits that leave one reflector out: a systematic error
+        # shows in all of them, one bad point in all but one.
+        for j in range(len(x) if extra > 0 and len(x) >= 5 else 0):
+            rest = np.arange(len(x)) != j
+            Rj, tj, _, _ = self._fit(
+                x[rest], e_m[rest], rho_m[rest], y_m[rest], w_m[rest], sr0[rest], sb[rest]
+            )
+            extra = min(extra, systematic_range_sigma_mm(
+                x[rest], e_m[rest], rho_m[rest], Rj, tj, sr0[rest], sb[rest], max_mm=cap
+            ))  # fmt: skip
+            if extra <= 0:
+                break
+        if extra <= 0:
+            return R, t, iterations, ml, sr0, w_m
+        sr = np.sqrt(sr0**2 + extra**2)
+        w_m = 1.0 / (sr**2 + (rho_m * sb) ** 2)
+        R, t, iterations, ml = self._fit(x, e_m, rho_m, y_m, w_m, sr, sb)
+        return R, t, iterations, ml, sr, w_m
 
     def _fit(self, x, e_m, rho_m, y_m, w_m, sr, sb):
         """Weighted SVD (Eqs. 40-50) then the configured refinement; the ML solution is

@@ -155,6 +155,46 @@ def reflector_whitened_norms(
     return np.linalg.norm(r.reshape(-1, 3), axis=1)
 
 
+MEDIAN_CHI2_3DOF = 2.366  # median of a chi-square with 3 degrees of freedom
+
+
+def systematic_range_sigma_mm(
+    x_mm: np.ndarray,
+    bearings: np.ndarray,
+    ranges_mm: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+    sigma_range_mm: np.ndarray,
+    sigma_bearing_rad: np.ndarray,
+    max_mm: float = 200.0,
+) -> float:
+    """The range error common to this frame's reflectors that their noise model lacks.
+
+    Real ToF ranges carry systematic errors (cyclic, amplitude-related, per pixel) of
+    millimetres to centimetres that differ from reflector to reflector; a noise model
+    fitted to shot noise then calls every reflector an outlier. This returns the smallest
+    sigma_s >= 0 such that, with range sigmas sqrt(sigma_range^2 + sigma_s^2), the median
+    squared whitened residual equals the median of chi^2(3): a variance component
+    estimated from the frame itself, robust to a minority of true outliers (the median).
+    Shapes: x_mm, bearings (m, 3); ranges, sigmas (m,). 0 when the model already fits.
+    """
+
+    def median_z2(extra: float) -> float:
+        sr = np.sqrt(sigma_range_mm**2 + extra**2)
+        z = reflector_whitened_norms(x_mm, bearings, ranges_mm, R, t, sr, sigma_bearing_rad)
+        return float(np.median(z**2))
+
+    if median_z2(0.0) <= MEDIAN_CHI2_3DOF:
+        return 0.0
+    if median_z2(max_mm) > MEDIAN_CHI2_3DOF:
+        return max_mm
+    lo, hi = 0.0, max_mm
+    for _ in range(30):  # bisection to ~0.2 um
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if median_z2(mid) > MEDIAN_CHI2_3DOF else (lo, mid)
+    return hi
+
+
 @dataclass
 class MLResult:
     """Maximum-likelihood pose with covariance.
