@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import sys
 import tempfile
 from pathlib import Path
@@ -13,14 +14,23 @@ from tqdm import tqdm
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog, paper_target
-from tofpose.geometry import facing_euler_deg, rotation_angle_deg
+from tofpose.geometry import RigidTransform, facing_euler_deg, rotation_angle_deg
 from tofpose.pipeline import PosePipeline
+from tofpose.range_calibration import (
+    RangeCorrection,
+    fit_range_correction,
+    true_pixel_distances,
+)
 from tofpose.recording import RecordingError, RecordingWriter, open_recording
 from tofpose.threads import single_threaded_blas
+from tofpose.tof import unambiguous_range_mm
 
 CSV_COLUMNS = (
     "frame", "time_s", "ok", "n_matched", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz",
     "pitch_deg", "yaw_deg", "roll_deg", "residual_mm",
+    # appended later (readers of the columns above keep working): the pose's predicted
+    # 1-sigma, position and rotation-vector components
+    "sigma_x_mm", "sigma_y_mm", "sigma_z_mm", "sigma_rx_deg", "sigma_ry_deg", "sigma_rz_deg",
 )  # fmt: skip
 
 
@@ -29,6 +39,52 @@ def _read_text(path: str, what: str) -> str:
         return Path(path).read_text()
     except OSError as exc:
         raise SystemExit(f"tofpose: cannot read {what} {path}: {exc.strerror}") from exc
+
+
+def load_camera(text: str) -> tuple[CameraModel, RangeCorrection | None]:
+    """A camera JSON, with its ``range_correction`` when it has one
+    (``tofpose calibrate-range`` writes both)."""
+    camera = CameraModel.from_json(text)
+    rc = json.loads(text).get("range_correction")
+    return camera, (RangeCorrection.from_dict(rc) if rc is not None else None)
+
+
+def calibrate_range(
+    rec_path: str, out: str, reference: str, modulation_mhz: float, progress: bool = True
+) -> str:
+    """Fit the range correction from a recording of the known target with a reference
+    pose per frame (``/truth`` or ``/lab_truth``); write the camera JSON with it."""
+    with open_recording(rec_path) as rec:
+        R_all, t_all = (
+            (rec.truth_R, rec.truth_t_mm) if reference == "truth"
+            else (rec.lab_truth_R, rec.lab_truth_t_mm)
+        )  # fmt: skip
+        if R_all is None:
+            raise SystemExit(
+                f"tofpose: {rec_path} has no /{reference}: nothing to calibrate against"
+            )
+        if rec.catalog is None:
+            raise SystemExit(f"tofpose: {rec_path} has no /catalog: the target's shape is unknown")
+
+        def samples():
+            for i in tqdm(range(rec.n_frames), desc="calibrate-range", unit="frame",
+                          disable=not progress, file=sys.stderr):  # fmt: skip
+                gray, dist, _ = rec.frame(i)
+                T = RigidTransform(R_all[i], t_all[i])
+                if T.t_mm[2] <= 0:
+                    continue
+                truth = true_pixel_distances(rec.camera, rec.catalog, T)
+                yield dist.astype(float), gray.astype(float), truth
+
+        fit = fit_range_correction(samples(), unambiguous_range_mm(modulation_mhz))
+        doc = {**rec.camera.to_dict(), "range_correction": fit.correction.to_dict()}
+    Path(out).write_text(json.dumps(doc, indent=1) + "\n")
+    c = fit.correction
+    harm = ", ".join(f"{np.hypot(a, b):.2f}" for a, b in c.harmonics_mm)
+    return (f"{fit.n_frames} frames, {fit.n_samples} pixel samples: constant {c.offset_mm:.2f} mm, "
+            f"cyclic amplitudes {harm} mm, amplitude term {c.amplitude_mm_per_decade:.2f} "
+            f"mm/decade, {fit.pixels_with_offset} per-pixel offsets; residual RMS "
+            f"{fit.rms_before_mm:.2f} -> {fit.rms_after_mm:.2f} mm -> {out}")  # fmt: skip
 
 
 def estimate(
@@ -40,9 +96,9 @@ def estimate(
 ) -> dict[str, float]:
     """Run the pipeline over a recording and write the CSV; returns summary numbers."""
     with open_recording(rec_path) as rec:
-        camera = (
-            CameraModel.from_json(_read_text(camera_path, "camera")) if camera_path else rec.camera
-        )
+        camera, correction = rec.camera, None
+        if camera_path:
+            camera, correction = load_camera(_read_text(camera_path, "camera"))
         if catalog_path:
             catalog = Catalog.from_json(_read_text(catalog_path, "catalog"))
         elif rec.catalog is not None:
@@ -54,7 +110,7 @@ def estimate(
                 f"tofpose: camera {camera.width}x{camera.height} does not match the recording's "
                 f"{rec.camera.width}x{rec.camera.height} frames"
             )
-        pipe = PosePipeline(camera, catalog)
+        pipe = PosePipeline(camera, catalog, range_correction=correction)
         n_ok = 0
         with open(out_csv, "w", newline="") as fh:
             wr = csv.writer(fh)
@@ -75,8 +131,11 @@ def estimate(
                     row += [f"{v:.8f}" for v in r.quaternion_wxyz]
                     row += [f"{v:.5f}" for v in r.euler_deg]
                     row += [f"{r.residual_mm:.4f}"]
+                    sd = np.sqrt(np.clip(np.diag(r.covariance), 0.0, None))
+                    row += [f"{v:.4f}" for v in sd[3:]]
+                    row += [f"{v:.5f}" for v in np.degrees(sd[:3])]
                 else:
-                    row += [""] * 11
+                    row += [""] * 17
                 wr.writerow(row)
         return {"frames": rec.n_frames, "ok": n_ok}
 
@@ -201,6 +260,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--catalog", help="catalog JSON (default: the recording's)")
     p.add_argument("--camera", help="camera JSON (default: the recording's)")
     p.add_argument("--out", required=True, help="output CSV")
+    p = sub.add_parser(
+        "calibrate-range",
+        help="fit the camera's range correction from a recording of the known target",
+    )
+    p.add_argument("recording")
+    p.add_argument("--out", required=True, help="camera JSON with its range_correction")
+    p.add_argument("--reference", choices=("truth", "lab_truth"), default="truth",
+                   help="reference pose per frame (default: /truth)")  # fmt: skip
+    p.add_argument("--modulation-mhz", type=float, default=6.0,
+                   help="the recording's modulation frequency (default 6 MHz)")  # fmt: skip
     p = sub.add_parser("simulate", help="write a simulated recording with ground truth")
     p.add_argument("--scenario", required=True)
     p.add_argument("--frames", type=int, required=True)
@@ -251,6 +320,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.cmd == "estimate":
             s = estimate(args.recording, args.out, args.catalog, args.camera)
             print(f"{s['ok']}/{s['frames']} frames with a pose -> {args.out}")
+        elif args.cmd == "calibrate-range":
+            print(calibrate_range(args.recording, args.out, args.reference, args.modulation_mhz))
         elif args.cmd == "simulate":
             if args.frames < 1:
                 raise SystemExit("tofpose: --frames must be >= 1")

@@ -11,7 +11,10 @@ offsets. The correction model, linear in its parameters:
 the gray level as its proxy, o a zero-mean per-pixel offset map). It is fitted from a
 calibration recording against known geometry: every frame's reference pose (truth) and
 the target's known shape give each pixel's true radial distance by ray casting; pixels on
-a surface edge are left out (their range mixes two surfaces). The pipeline subtracts
+a surface edge are left out (their range mixes two surfaces), and so is the plate (see
+``true_pixel_distances``). Varying the integration time during the calibration run
+spreads the reflectors' amplitudes over a decade at each distance, which is what
+separates the amplitude-related term from the others. The pipeline subtracts
 ``e`` from each reflector's range before back-projection (Eq. 8).
 """
 
@@ -119,11 +122,19 @@ class RangeCalibrationFit:
 
 
 def true_pixel_distances(
-    camera: CameraModel, catalog: Catalog, T_camera_target: RigidTransform
+    camera: CameraModel,
+    catalog: Catalog,
+    T_camera_target: RigidTransform,
+    reflectors_only: bool = True,
 ) -> np.ndarray:
-    """Each pixel's true radial distance to the known target (plate and reflector discs),
-    NaN where the ray misses it or lands within a pixel of a surface edge. (H, W)."""
-    from tofpose.sim.scene import NO_HIT, TargetScene  # the target's shape, ray-cast
+    """Each pixel's true radial distance to the known target, NaN where the ray misses it
+    or lands within a pixel of a surface edge. (H, W).
+
+    ``reflectors_only`` (default) keeps the reflector discs only: they are what the
+    pipeline ranges, and the dim plate beside them is where lens scatter mixes in the
+    reflectors' phase, an error that would otherwise be fitted as an amplitude effect.
+    """
+    from tofpose.sim.scene import FIRST_DISC, NO_HIT, TargetScene  # the target's shape
 
     scene = TargetScene(catalog=catalog, wall_distance_mm=None)
     d, sid, _ = scene.in_camera(T_camera_target).raycast(camera.pixel_bearings().reshape(-1, 3))
@@ -132,6 +143,8 @@ def true_pixel_distances(
     edge = cv2.dilate(sid, np.ones((3, 3), np.uint8)) != cv2.erode(sid, np.ones((3, 3), np.uint8))
     out = d.reshape(h, w).astype(float)
     out[(sid == NO_HIT) | edge] = np.nan
+    if reflectors_only:
+        out[sid < FIRST_DISC] = np.nan
     return out
 
 

@@ -29,7 +29,8 @@ def test_live_pose_follows_a_move_made_in_the_page(server, page_for):
     page.get_by_test_id("frame-index").wait_for(timeout=20_000)  # raw frames are drawn
     assert page.get_by_test_id("link").inner_text() == "live"
     page.wait_for_function(
-        "parseFloat(document.querySelector('[data-testid=camera-rate]').innerText) > 1",
+        "(e => e !== null && parseFloat(e.innerText) > 1)"
+        "(document.querySelector('[data-testid=camera-rate]'))",
         timeout=10_000,
     )
     assert page.get_by_test_id("camera-state").inner_text() == "ok"

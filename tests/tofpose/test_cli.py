@@ -20,6 +20,10 @@ def test_simulate_then_estimate_writes_the_documented_csv(tmp_path, capsys):
     # attitude relative to the facing reference: face-on reads ~0, not +-180
     assert all(abs(float(r[k])) < 2.0 for r in body for k in ("pitch_deg", "yaw_deg", "roll_deg"))
     assert "4/4 frames with a pose" in capsys.readouterr().out
+    # the 1-sigma columns come after the original ones (old readers keep working)
+    assert CSV_COLUMNS[:15][-1] == "residual_mm" and CSV_COLUMNS[15] == "sigma_x_mm"
+    assert all(0 < float(r["sigma_z_mm"]) < 2.0 for r in body)
+    assert all(0 < float(r["sigma_ry_deg"]) < 1.0 for r in body)
 
 
 def test_failed_frames_have_empty_pose_cells(tmp_path):
@@ -35,6 +39,37 @@ def test_failed_frames_have_empty_pose_cells(tmp_path):
     assert main(["estimate", str(rec), "--out", str(out)]) == 0
     row = list(csv.DictReader(out.open()))[0]
     assert row["ok"] == "0" and row["x_mm"] == "" and row["residual_mm"] == ""
+    assert row["sigma_rz_deg"] == ""
+
+
+def test_calibrate_range_writes_a_camera_the_estimate_uses(tmp_path, capsys):
+    """simulate a realistic sweep, fit its range correction, estimate with it: the
+    correction is stored with the camera and applied: errors against /truth shrink at
+    2.5-6.5 m, where the systematic errors dominate and the sweep's reflectors gave the
+    fit its samples (beyond ~6 m they are a pixel or two, all edge, and the model would
+    extrapolate)."""
+    import numpy as np
+
+    from tofpose.cli import load_camera
+    from tofpose.recording import open_recording
+
+    rec, cam, raw_csv, cal_csv = (tmp_path / n for n in ("r.h5", "c.json", "a.csv", "b.csv"))
+    assert main(["simulate", "--scenario", "realistic", "--frames", "72", "--out", str(rec)]) == 0
+    assert main(["calibrate-range", str(rec), "--out", str(cam)]) == 0
+    assert "cyclic amplitudes" in capsys.readouterr().out
+    camera, corr = load_camera(cam.read_text())
+    assert corr is not None and camera.width == 320
+    assert main(["estimate", str(rec), "--out", str(raw_csv)]) == 0
+    assert main(["estimate", str(rec), "--camera", str(cam), "--out", str(cal_csv)]) == 0
+    with open_recording(rec) as r:
+        true_z = r.truth_t_mm[:, 2]
+    errs = {}
+    for name, path in (("raw", raw_csv), ("cal", cal_csv)):
+        rows = list(csv.DictReader(path.open()))
+        far = [abs(float(x["z_mm"]) - true_z[i]) for i, x in enumerate(rows)
+               if x["ok"] == "1" and 2500 < true_z[i] < 6500]  # fmt: skip
+        errs[name] = float(np.median(far))
+    assert errs["cal"] < 0.5 * errs["raw"], errs
 
 
 def test_bad_inputs_exit_with_a_message(tmp_path, capsys):

@@ -87,7 +87,7 @@ def test_a_correction_survives_its_json_form():
 
 def test_true_pixel_distances_match_the_renderers_noiseless_truth():
     T = facing_pose(2000.0, yaw_deg=5.0)
-    truth = true_pixel_distances(CAM, paper_target(), T)
+    truth = true_pixel_distances(CAM, paper_target(), T, reflectors_only=False)
     f = render_frame(CAM, TargetScene(), T, SensorModel(noise=False), None)
     known = np.isfinite(truth)
     assert known.sum() > 10_000
