@@ -9,7 +9,15 @@ success rate, median / p95 position and attitude error against the rendered trut
 median number of matched markers against the number in view, and "wrong" poses: reported
 ``ok`` but outside max(1 deg, 3 reported sigmas) or max(20 mm, 0.5 % of range, 3 sigmas).
 
-Run: ``python bench/realistic.py [--frames N] [--out DIR]``
+A second part looks for confident wrong poses at long range: 3-8 m, random attitudes up
+to 20 deg (random axis) and lateral offsets up to a quarter of the half field of view,
+``--long-frames`` frames per range and sensor. Per range: how many are refused, how many
+reported ``ok`` are wrong (as above), and the consistency of the reported covariance:
+the mean NEES (normalised estimation error squared over the 6 pose components, error
+rotation vector and translation) against its 95 % band for that many frames, and the
+share of frames inside the per-frame 95 % bound chi2_6 = 12.6.
+
+Run: ``python bench/realistic.py [--frames N] [--long-frames N] [--out DIR]``
 """
 
 from __future__ import annotations
@@ -22,9 +30,9 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench._common import fmt, pose_errors, pyplot, save_figure, section_main, stats, table  # noqa: E402,I001
+from bench._common import fmt, pose_errors, pyplot, save_figure, stats, table  # noqa: E402
 from bench.accuracy import random_pose  # noqa: E402
-from tofpose import CameraModel, PosePipeline, paper_target  # noqa: E402
+from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
 from tofpose.range_calibration import fit_range_correction, true_pixel_distances  # noqa: E402
 from tofpose.sim.bench import R_FACING  # noqa: E402
@@ -68,21 +76,30 @@ def _wrong(res, T, range_m: float) -> bool:
     return ae > max(1.0, 3 * s_att) or pe > max(20.0, 0.005 * range_m * 1000.0, 3 * s_pos)
 
 
-def run(n_frames: int = 12, seed: int = 0):
+def _pipeline(cam, cat, corr) -> PosePipeline:
+    """The ideal sensor is known to have no range bias (``"ideal"``); the others get the
+    default prior for an uncalibrated or a calibrated camera."""
+    if isinstance(corr, str):
+        return PosePipeline(cam, cat, PipelineConfig(range_bias_sigma_mm=0.0))
+    return PosePipeline(cam, cat, range_correction=corr)
+
+
+def run(n_frames: int = 12, seed: int = 0, long_frames: int = 90):
     cam, cat = CameraModel(), paper_target()
     errors = SystematicErrors()
     fit = fit_range_correction(calibration_samples(cam, errors), SensorModel().unambiguous_range_mm)
     sensors = {
-        "ideal": (SensorModel(), None),
+        "ideal": (SensorModel(), "ideal"),
         "realistic": (SensorModel(systematic=errors), None),
         "realistic, calibrated": (SensorModel(systematic=errors), fit.correction),
     }
     rows = []  # (sensor, range, ok, pos_err, att_err, n_matched, n_in_view, wrong)
+    long_rows = run_long_range(fit, long_frames)
     for r in tqdm(RANGES_M, desc="realistic sensor", unit="range", file=sys.stderr):
         rng = np.random.default_rng([seed, int(r * 1000)])
         poses = [random_pose(r, rng) for _ in range(n_frames)]
         for name, (sensor, corr) in sensors.items():
-            pipe = PosePipeline(cam, cat, range_correction=corr)
+            pipe = _pipeline(cam, cat, corr)
             frng = np.random.default_rng([seed, int(r * 1000), 7])  # same noise per sensor
             for T in poses:
                 f = render_frame(cam, TargetScene(cat), T, sensor, frng, time_s=WARM_S)
@@ -94,7 +111,82 @@ def run(n_frames: int = 12, seed: int = 0):
                                  _wrong(res, T, r)))  # fmt: skip
                 else:
                     rows.append((name, r, False, np.nan, np.nan, 0, _in_view(f), False))
-    return {"rows": rows, "fit": fit}
+    return {"rows": rows, "fit": fit, "long": long_rows, "long_frames": long_frames}
+
+
+LONG_RANGES_M = [3.0, 4.0, 5.0, 6.0, 7.0, 8.0]
+NEES_95_PER_FRAME = 12.592  # chi2_6, 95 %
+
+
+def long_range_pose(range_m: float, rng: np.random.Generator) -> RigidTransform:
+    """Attitude up to 20 deg about a random axis, lateral offset up to a quarter of the
+    half field of view (module docstring)."""
+    from scipy.spatial.transform import Rotation
+
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    R = Rotation.from_rotvec(axis * np.radians(rng.uniform(0.0, 20.0))).as_matrix() @ R_FACING
+    z = range_m * 1000.0
+    t = np.array([rng.uniform(-1, 1) * 0.25 * 0.49 * z, rng.uniform(-1, 1) * 0.25 * 0.37 * z, z])
+    return RigidTransform(R, t)
+
+
+def nees(res, T) -> float:
+    """e^T Sigma^-1 e over (rotation vector error, translation error), the covariance's
+    own parameterisation (left perturbation)."""
+    from scipy.spatial.transform import Rotation
+
+    e = np.concatenate([Rotation.from_matrix(res.R @ T.R.T).as_rotvec(), res.t_mm - T.t_mm])
+    return float(e @ np.linalg.solve(res.covariance, e))
+
+
+def run_long_range(fit, n_frames: int, seed: int = 1) -> list:
+    cam, cat = CameraModel(), paper_target()
+    errors = SystematicErrors()
+    sensors = {
+        "ideal": (SensorModel(), "ideal"),
+        "realistic": (SensorModel(systematic=errors), None),
+        "realistic, calibrated": (SensorModel(systematic=errors), fit.correction),
+    }
+    rows = []  # (sensor, range, ok, wrong, nees, n_matched)
+    for r in tqdm(LONG_RANGES_M, desc="long range", unit="range", file=sys.stderr):
+        rng = np.random.default_rng([seed, int(r * 1000)])
+        poses = [long_range_pose(r, rng) for _ in range(n_frames)]
+        for name, (sensor, corr) in sensors.items():
+            pipe = _pipeline(cam, cat, corr)
+            frng = np.random.default_rng([seed, int(r * 1000), 7])
+            for T in poses:
+                f = render_frame(cam, TargetScene(cat), T, sensor, frng, time_s=WARM_S)
+                pipe.reset()
+                res = pipe.process(f.gray, f.distance_mm)
+                if res.ok:
+                    rows.append((name, r, True, _wrong(res, T, r), nees(res, T), res.n_matched))
+                else:
+                    rows.append((name, r, False, False, np.nan, 0))
+    return rows
+
+
+def long_range_table(rows) -> str:
+    from scipy.stats import chi2
+
+    out = []
+    for r in LONG_RANGES_M:
+        for name in SENSORS:
+            sel = [x for x in rows if x[0] == name and x[1] == r]
+            ok = [x for x in sel if x[2]]
+            ns = np.array([x[4] for x in ok])
+            k = len(ns)
+            lo, hi = (chi2.ppf([0.025, 0.975], 6 * k) / k) if k else (np.nan, np.nan)
+            mean = float(np.mean(ns)) if k else np.nan
+            verdict = "in band" if lo <= mean <= hi else ("too wide" if mean < lo else "too narrow")
+            out.append([f"{r:g}", name, str(len(sel)), str(len(sel) - k),
+                        str(sum(x[3] for x in ok)),
+                        f"{np.median([x[5] for x in ok]):.0f}" if k else "-",
+                        f"{mean:.1f}", f"{lo:.1f}-{hi:.1f}", verdict,
+                        f"{np.mean(ns <= NEES_95_PER_FRAME):.0%}" if k else "-"])  # fmt: skip
+    return table(["range m", "sensor", "frames", "refused", "wrong ok poses", "matched (median)",
+                  "mean NEES", "95 % band", "covariance", "frames with NEES <= 12.6"],
+                 out)  # fmt: skip
 
 
 def summarise(data) -> dict:
@@ -158,8 +250,30 @@ def markdown(data, img: str, n_frames: int) -> str:
         table(["range m", "sensor", "ok", "pos median mm", "pos p95 mm", "att median deg",
                "att p95 deg", "matched / in view", "wrong ok poses"], rows),
         "", f"![realistic sensor]({img})", "",
+        "### Long range: wrong poses and covariance consistency", "",
+        f"{data['long_frames']} frames per range and sensor, attitudes up to 20 deg, lateral "
+        "offsets (module docstring). A wrong pose is one reported `ok` outside max(1 deg, "
+        "3 reported sigmas) or max(20 mm, 0.5 % of range, 3 sigmas); \"covariance\" says "
+        "whether the mean NEES lies in its 95 % band (too narrow: the reported sigmas "
+        "claim more than the errors show).", "",
+        long_range_table(data["long"]), "",
     ])  # fmt: skip
 
 
+def main() -> None:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--frames", type=int, default=12)
+    ap.add_argument("--long-frames", type=int, default=90)
+    ap.add_argument("--out", default="docs/img/results")
+    args = ap.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    data = run(args.frames, long_frames=args.long_frames)
+    plot(data, out / "realistic.png")
+    print(markdown(data, str(out / "realistic.png"), args.frames))
+
+
 if __name__ == "__main__":
-    section_main(__doc__, 12, run, plot, markdown, "realistic.png")
+    main()

@@ -12,7 +12,7 @@ clears it.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import cv2
@@ -48,6 +48,7 @@ from tofpose.matching import (
 )
 from tofpose.persistence import Persistence, PersistenceConfig
 from tofpose.pose import (
+    common_range_bias_covariance,
     refine_line_of_sight,
     refine_maximum_likelihood,
     reflector_whitened_norms,
@@ -82,6 +83,12 @@ class PipelineConfig:
         systematic errors of a real, uncalibrated ToF camera) and add it to every
         reflector's range sigma, in the fit, the outlier test and the covariance; without
         it, correctly detected markers are dropped as outliers one by one.
+    range_bias_sigma_mm, calibrated_range_bias_sigma_mm : sigma of a range offset common
+        to all reflectors that no frame can reveal (the fit absorbs it into the pose): the
+        constant, amplitude and temperature-drift errors of a ToF camera without range
+        calibration, or what is left of them with one (drift since the calibration). Added
+        to the reported covariance (``pose.common_range_bias_covariance``), so that the
+        1-sigma of an uncalibrated camera does not claim the shot-noise limit.
     max_systematic_range_sigma_mm : cap of that estimate (published uncalibrated ToF
         range errors are 10-20 mm; a larger spread is not a systematic error but a bad
         match, and must stay visible to the outlier test).
@@ -108,6 +115,8 @@ class PipelineConfig:
     reject_outliers: bool = True
     adapt_range_sigma: bool = True
     max_systematic_range_sigma_mm: float = 25.0
+    range_bias_sigma_mm: float = 8.0
+    calibrated_range_bias_sigma_mm: float = 2.0
     outlier_sigma: float = 6.0
     outlier_chi2_per_dof: float = 4.0
     max_view_angle_deg: float = 80.0
@@ -129,6 +138,8 @@ class PipelineConfig:
             correct_perspective_bias=False,
             reject_outliers=False,
             adapt_range_sigma=False,
+            range_bias_sigma_mm=0.0,
+            calibrated_range_bias_sigma_mm=0.0,
         )
 
 
@@ -402,7 +413,8 @@ class PosePipeline:
             unmatched,
             float(np.sqrt(np.mean(res**2))),
             iterations,
-            ml.covariance * variance_factor(ml.chi2, len(matched)),
+            ml.covariance * variance_factor(ml.chi2, len(matched))
+            + (ml.bias_covariance if ml.bias_covariance is not None else 0.0),
             timer.total(),
             **extra,
         )
@@ -467,6 +479,11 @@ class PosePipeline:
             problem = self._verify(R, t, active, set(int(i) for i in i_idx))
             if problem:
                 return f"pose rejected: {problem}"
+        bias = (cfg.range_bias_sigma_mm if self.range_correction is None
+                else cfg.calibrated_range_bias_sigma_mm)  # fmt: skip
+        if bias > 0:
+            extra = common_range_bias_covariance(x, e_m, rho_m, R, t, sr, sb, bias)
+            ml = replace(ml, bias_covariance=extra)
         return R, t, x, k_idx, i_idx, uv_m, y_m, rho_m, iterations, ml
 
     def _worst_outlier(self, x, e_m, rho_m, y_m, w_m, sr, sb, ml) -> int | None:

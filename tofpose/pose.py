@@ -195,6 +195,29 @@ def systematic_range_sigma_mm(
     return hi
 
 
+def common_range_bias_covariance(
+    x_mm: np.ndarray,
+    bearings: np.ndarray,
+    ranges_mm: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+    sigma_range_mm: np.ndarray,
+    sigma_bearing_rad: np.ndarray,
+    bias_sigma_mm: float,
+) -> np.ndarray:
+    """(6, 6) pose covariance caused by a range offset common to every reflector, of
+    sigma ``bias_sigma_mm``, that the frame cannot reveal (the fit absorbs it, mostly into
+    the translation along the line of sight): s s^T sigma_b^2 with s = (J^T J)^-1 J^T g,
+    g the whitened residuals' response to a unit offset (-1 / sigma_range on each range
+    row). An uncalibrated camera's constant and drift errors are such an offset."""
+    _, J = measurement_jacobian(x_mm, bearings, ranges_mm, R, t, sigma_range_mm,
+                                sigma_bearing_rad)  # fmt: skip
+    g = np.zeros(J.shape[0])
+    g[2::3] = -1.0 / np.asarray(sigma_range_mm, float)
+    s = np.linalg.solve(J.T @ J, J.T @ g)
+    return bias_sigma_mm**2 * np.outer(s, s)
+
+
 @dataclass
 class MLResult:
     """Maximum-likelihood pose with covariance.
@@ -203,6 +226,8 @@ class MLResult:
     chi2 : sum of squared whitened residuals; dof = 3 m - 6.
     reflector_norms : (m,) whitened residual norm of each reflector at the final pose
         (as ``reflector_whitened_norms``).
+    bias_covariance : (6, 6) added by a common range offset the data cannot reveal
+        (``common_range_bias_covariance``), or None.
     """
 
     R: np.ndarray
@@ -211,6 +236,7 @@ class MLResult:
     chi2: float
     iterations: int
     reflector_norms: np.ndarray
+    bias_covariance: np.ndarray | None = None
 
 
 def refine_maximum_likelihood(
