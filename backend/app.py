@@ -47,6 +47,7 @@ from backend.services.store import find_catalog, load_device_settings
 from backend.settings import Settings
 from backend.state import AppState
 from tofpose.catalog import Catalog
+from tofpose.pipeline import PipelineConfig
 
 log = logging.getLogger("tofpose.server")
 
@@ -77,6 +78,13 @@ def _restore_camera_settings(sessions, devices: Devices) -> None:
         devices.camera.apply_settings(wanted)
     except Exception as exc:  # a stale stored setting must not stop the server
         log.warning("stored camera settings not applied: %s", exc)
+
+
+def _pipeline_config(devices: Devices) -> PipelineConfig:
+    """The pipeline's defaults, but for a camera that states its common range bias (the
+    ideal simulated sensor has none), whose 1-sigma need not carry the default prior."""
+    bias = getattr(devices.camera, "range_bias_sigma_mm", None)
+    return PipelineConfig() if bias is None else PipelineConfig(range_bias_sigma_mm=bias)
 
 
 def _start_scene(state: AppState) -> None:
@@ -148,6 +156,7 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             history_size=settings.history_size,
             timeout_s=settings.camera_timeout_s,
             backoff_s=settings.retry_backoff_s,
+            pipeline_config=_pipeline_config(devs),
         )  # fmt: skip
         campaigns = CampaignService(
             sessions, acq, hub, devs.motion, recordings_dir=settings.data_dir / "campaigns"

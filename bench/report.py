@@ -19,7 +19,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench import accuracy, baseline, paper, robustness  # noqa: E402
+from bench import accuracy, baseline, paper, realistic, robustness  # noqa: E402
 
 DOC = ROOT / "docs" / "results.md"
 IMG = ROOT / "docs" / "img" / "results"
@@ -167,6 +167,12 @@ def main() -> None:
     sec_rob = robustness.markdown(rob, _rel(IMG / "robustness.png"), n_rob)
     print(sec_rob, flush=True)
 
+    n_real, n_long = (4, 20) if q else (16, 90)
+    real = realistic.run(n_real, long_frames=n_long)
+    realistic.plot(real, IMG / "realistic.png")
+    sec_real = realistic.markdown(real, _rel(IMG / "realistic.png"), n_real)
+    print(sec_real, flush=True)
+
     n_base = 4 if q else 16
     base_rows = baseline.run(n_base)
     baseline.plot(base_rows, IMG / "baseline.png")
@@ -201,7 +207,7 @@ def main() -> None:
              "Debian's chromium (software rendering, no GPU) sharing the same 2 cores with "
              "the server: frames each page actually drew per second, and the server's CPU:",
              "", live_tab, ""]  # fmt: skip
-    text = "\n".join(head + [sec_paper, sec_acc, sec_rob, sec_base] + speed)
+    text = "\n".join(head + [sec_paper, sec_acc, sec_real, sec_rob, sec_base] + speed)
     DOC.write_text(text + "\n")
     print(f"wrote {DOC} in {minutes:.1f} min", file=sys.stderr)
 

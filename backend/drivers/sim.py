@@ -130,6 +130,12 @@ class SimCamera:
             },
         )
 
+    @property
+    def range_bias_sigma_mm(self) -> float | None:
+        """The simulated sensor's ranges carry no common offset unless its systematic
+        errors are switched on (None: the pipeline's default prior)."""
+        return 0.0 if self.world.bench.sensor.systematic is None else None
+
     def get_settings(self) -> CameraSettings:
         return self._settings
 
