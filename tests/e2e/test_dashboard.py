@@ -160,7 +160,23 @@ def test_a_campaign_created_and_started_in_the_page_runs_and_its_report_download
         page.get_by_test_id(f"report-html-{cid}").click()
     html = Path(dl.value.path()).read_text()
     assert "Campaign" in html and "page-grid" in html and "<table>" in html
+    # Its statistics and pass/fail in the page: the same verdicts as the JSON report.
+    import httpx
+
+    report = httpx.get(f"{server.base_url}/api/campaigns/{cid}/report.json").json()
+    page.get_by_test_id(f"results-{cid}").click()
+    page.get_by_test_id(f"result-{cid}").wait_for(timeout=10_000)
+    for axis, st in report["overall"]["axes"].items():
+        shown = page.get_by_test_id(f"pass-{cid}-{axis}").inner_text()
+        assert shown == {True: "pass", False: "FAIL", None: "n/a"}[st["passed"]], (axis, shown)
+    verdict = page.get_by_test_id(f"verdict-{cid}").inner_text()
+    assert verdict == {True: "pass", False: "FAIL", None: "n/a"}[report["overall"]["passed"]]
+    inner = page.frame_locator(f"iframe[title='campaign {cid} report']")
+    inner.locator("img").first.wait_for(timeout=10_000)  # the report's plots
     page.screenshot(path=str(SHOTS / "dashboard-campaigns.png"), full_page=True)
+    report_page = page_for(server.base_url, TOKEN)
+    report_page.goto(f"{server.base_url}/api/campaigns/{cid}/report.html?inline=true")
+    report_page.screenshot(path=str(SHOTS / "campaign-report.png"), full_page=True)
 
 
 def test_camera_settings_change_through_the_page(server, page_for):

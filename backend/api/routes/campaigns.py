@@ -261,6 +261,9 @@ def get_campaign_report(
         int | None,
         Query(ge=1, le=2**31 - 1, description="reference = encoders + this calibration"),
     ] = None,
+    inline: Annotated[
+        bool, Query(description="show in the browser instead of downloading (the dashboard)")
+    ] = False,
 ) -> Response:
     """The accuracy report: HTML (self-contained), PDF, CSV (one row per frame) or JSON
     (every statistic). Statistics against the lab's reference by default."""
@@ -284,7 +287,9 @@ def get_campaign_report(
     return Response(
         body,
         media_type=MEDIA_TYPES[fmt.value],
-        headers={"Content-Disposition": f'attachment; filename="{filename}"'},
+        headers={
+            "Content-Disposition": f'{"inline" if inline else "attachment"}; filename="{filename}"'
+        },
     )
 
 

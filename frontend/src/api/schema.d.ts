@@ -2119,6 +2119,8 @@ export interface operations {
                 reference?: components["schemas"]["Reference"];
                 /** @description reference = encoders + this calibration */
                 calibration?: number | null;
+                /** @description show in the browser instead of downloading (the dashboard) */
+                inline?: boolean;
             };
             header?: never;
             path: {

@@ -1,7 +1,8 @@
-// Campaigns: status and progress, start / pause / resume / cancel, report downloads.
-// (Statistics and pass/fail are computed by the server and shown in its reports.)
+// Campaigns: status and progress, start / pause / resume / cancel, report downloads, and
+// for a finished one its statistics and pass/fail (CampaignResult).
 import { useEffect, useState } from "preact/hooks";
 import { api, type Campaign } from "../api/client";
+import { CampaignResult } from "./CampaignResult";
 
 const ACTIONS: Record<string, string[]> = {
   draft: ["start", "cancel"], queued: ["pause", "cancel"], running: ["pause", "cancel"],
@@ -16,6 +17,7 @@ function fmtDuration(s: number | null | undefined): string {
 
 export function Campaigns({ onError }: { onError: (m: string | null) => void }) {
   const [list, setList] = useState<Campaign[]>([]);
+  const [open, setOpen] = useState<number | null>(null);
   const refresh = () => api<Campaign[]>("GET", "/api/campaigns").then(setList).catch((e) => onError(e.message));
   useEffect(() => {
     refresh();
@@ -53,12 +55,17 @@ export function Campaigns({ onError }: { onError: (m: string | null) => void }) 
                 ))}</td>
                 <td>{(["html", "pdf", "csv", "json"] as const).map((f) => (
                   <a key={f} data-testid={`report-${f}-${c.id}`} href={`/api/campaigns/${c.id}/report.${f}`}>{f} </a>
-                ))}</td>
+                ))}
+                {c.status === "done" && (
+                  <button data-testid={`results-${c.id}`} aria-expanded={open === c.id}
+                    onClick={() => setOpen(open === c.id ? null : c.id)}>results</button>
+                )}</td>
               </tr>
             ))}
           </tbody>
         </table>
       )}
+      {open !== null && <CampaignResult id={open} onError={onError} />}
     </section>
   );
 }

@@ -1,4 +1,5 @@
-// Rolling plots of the six pose components (uPlot).
+// Rolling plots of the six pose components (uPlot), with the lab's reference (dashed)
+// when the source knows it.
 import { useEffect, useRef } from "preact/hooks";
 import uPlot from "uplot";
 import "uplot/dist/uPlot.min.css";
@@ -20,9 +21,13 @@ function Chart({ history, keys, unit }: { history: Pose[]; keys: Key[]; unit: st
         width: 460, height: 170,
         scales: { x: { time: false } },
         axes: [{ label: "frame time (s)" }, { label: unit }],
-        series: [{}, ...keys.map((k, i) => ({ label: k, stroke: colors[i], width: 1.5 }))],
+        series: [
+          {},
+          ...keys.map((k, i) => ({ label: k, stroke: colors[i], width: 1.5 })),
+          ...keys.map((k, i) => ({ label: `reference ${k}`, stroke: colors[i], width: 1, dash: [4, 4] })),
+        ],
       },
-      [[], ...keys.map(() => [])],
+      [[], ...keys.map(() => []), ...keys.map(() => [])],
       el.current,
     );
     return () => plot.current?.destroy();
@@ -34,7 +39,11 @@ function Chart({ history, keys, unit }: { history: Pose[]; keys: Key[]; unit: st
     if (now - drawnAt.current < REDRAW_MS) return;
     drawnAt.current = now;
     const ok = history.filter((p) => p.ok);
-    plot.current?.setData([ok.map((p) => p.frame_time_s), ...keys.map((k) => ok.map((p) => p[k] ?? null))] as uPlot.AlignedData);
+    plot.current?.setData([
+      ok.map((p) => p.frame_time_s),
+      ...keys.map((k) => ok.map((p) => p[k] ?? null)),
+      ...keys.map((k) => ok.map((p) => p.truth?.[k] ?? null)),
+    ] as uPlot.AlignedData);
   }, [history]);
   return <div ref={el} />;
 }
