@@ -8,6 +8,8 @@ three integration times per pose, other seeds; ``tofpose.range_calibration``). P
 success rate, median / p95 position and attitude error against the rendered truth, the
 median number of matched markers against the number in view, and "wrong" poses: reported
 ``ok`` but outside max(1 deg, 3 reported sigmas) or max(20 mm, 0.5 % of range, 3 sigmas).
+Markers: matched by the pipeline / found by a plain detector (OpenCV SimpleBlobDetector,
+a keypoint within 3 px of the marker's true image position) / in view (median).
 
 A second part looks for confident wrong poses at long range: 3-8 m, random attitudes up
 to 20 deg (random axis) and lateral offsets up to a quarter of the half field of view,
@@ -32,6 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench._common import fmt, pose_errors, pyplot, save_figure, stats, table  # noqa: E402
 from bench.accuracy import random_pose  # noqa: E402
+from bench.baseline import blob_detector  # noqa: E402
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
 from tofpose.range_calibration import fit_range_correction, true_pixel_distances  # noqa: E402
@@ -60,6 +63,20 @@ def calibration_samples(cam: CameraModel, errors: SystematicErrors, seed: int = 
                                 integration_time_us=t_auto * frac)  # fmt: skip
                 f = render_frame(cam, TargetScene(cat), T, s, rng, time_s=WARM_S)
                 yield f.distance_mm.astype(float), f.gray.astype(float), truth
+
+
+def _simple_detected(f, T, cam, cat, detector) -> int:
+    """Markers a plain detector finds: OpenCV's SimpleBlobDetector on the gray image
+    (bench/baseline.py) with a keypoint within 3 px of the marker's true image position."""
+    img8 = np.clip(f.gray / 16.0, 0, 255).astype(np.uint8)
+    pts = np.array([k.pt for k in detector.detect(img8)]).reshape(-1, 2)
+    p = cat.positions_mm @ T.R.T + T.t_mm
+    front = p[:, 2] > 0
+    if not len(pts) or not front.any():
+        return 0
+    proj = cam.project(p[front])
+    d = np.linalg.norm(proj[:, None, :] - pts[None, :, :], axis=2)
+    return int(np.count_nonzero(d.min(axis=1) < 3.0))
 
 
 def _in_view(f) -> int:
@@ -93,8 +110,9 @@ def run(n_frames: int = 12, seed: int = 0, long_frames: int = 90):
         "realistic": (SensorModel(systematic=errors), None),
         "realistic, calibrated": (SensorModel(systematic=errors), fit.correction),
     }
-    rows = []  # (sensor, range, ok, pos_err, att_err, n_matched, n_in_view, wrong)
+    rows = []  # (sensor, range, ok, pos_err, att_err, n_matched, n_in_view, wrong, n_simple)
     long_rows = run_long_range(fit, long_frames)
+    detector = blob_detector()
     for r in tqdm(RANGES_M, desc="realistic sensor", unit="range", file=sys.stderr):
         rng = np.random.default_rng([seed, int(r * 1000)])
         poses = [random_pose(r, rng) for _ in range(n_frames)]
@@ -105,12 +123,13 @@ def run(n_frames: int = 12, seed: int = 0, long_frames: int = 90):
                 f = render_frame(cam, TargetScene(cat), T, sensor, frng, time_s=WARM_S)
                 pipe.reset()
                 res = pipe.process(f.gray, f.distance_mm)
+                simple = _simple_detected(f, T, cam, cat, detector)
                 if res.ok:
                     pe, ae = pose_errors(res.R, res.t_mm, T)
                     rows.append((name, r, True, pe, ae, res.n_matched, _in_view(f),
-                                 _wrong(res, T, r)))  # fmt: skip
+                                 _wrong(res, T, r), simple))  # fmt: skip
                 else:
-                    rows.append((name, r, False, np.nan, np.nan, 0, _in_view(f), False))
+                    rows.append((name, r, False, np.nan, np.nan, 0, _in_view(f), False, simple))
     return {"rows": rows, "fit": fit, "long": long_rows, "long_frames": long_frames}
 
 
@@ -200,6 +219,7 @@ def summarise(data) -> dict:
                 "att": stats([x[4] for x in sel]),
                 "matched": float(np.median([x[5] for x in sel])),
                 "in_view": float(np.median([x[6] for x in sel])),
+                "simple": float(np.median([x[8] for x in sel])),
                 "wrong": int(sum(x[7] for x in sel)),
                 "n": len(sel),
             }
@@ -233,7 +253,8 @@ def markdown(data, img: str, n_frames: int) -> str:
             x = s[(name, r)]
             rows.append([f"{r:g}", name, f"{x['ok']:.0%}", fmt(x["pos"]["median"]),
                          fmt(x["pos"]["p95"]), fmt(x["att"]["median"], 3),
-                         fmt(x["att"]["p95"], 3), f"{x['matched']:.0f} / {x['in_view']:.0f}",
+                         fmt(x["att"]["p95"], 3),
+                         f"{x['matched']:.0f} / {x['simple']:.0f} / {x['in_view']:.0f}",
                          f"{x['wrong']} / {x['n']}"])  # fmt: skip
     c = fit.correction
     harm = ", ".join(f"{np.hypot(a, b):.1f}" for a, b in c.harmonics_mm)
@@ -248,7 +269,7 @@ def markdown(data, img: str, n_frames: int) -> str:
         f"an offset; residual RMS {fit.rms_before_mm:.1f} -> {fit.rms_after_mm:.1f} mm "
         "(noise included).", "",
         table(["range m", "sensor", "ok", "pos median mm", "pos p95 mm", "att median deg",
-               "att p95 deg", "matched / in view", "wrong ok poses"], rows),
+               "att p95 deg", "matched / simple detector / in view", "wrong ok poses"], rows),
         "", f"![realistic sensor]({img})", "",
         "### Long range: wrong poses and covariance consistency", "",
         f"{data['long_frames']} frames per range and sensor, attitudes up to 20 deg, lateral "
