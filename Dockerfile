@@ -1,7 +1,9 @@
 # The tofpose server with simulated devices. Build: docker build -t tofpose .
 # Run: docker run -p 8000:8000 -v tofpose-data:/data tofpose
 # Bound to 0.0.0.0 inside the container, so reads need the token too (printed at start,
-# stored in /data/api_token).
+# stored in /data/api_token). The 3-D scene (viser, port 8080) has no token check, so it
+# runs only with open reads: docker run -p 8000:8000 -p 8080:8080
+#   -e TOFPOSE_OPEN_READS=true -v tofpose-data:/data tofpose
 # Stage 1: the dashboard (frontend/), built with Node from its lock file.
 FROM node:20-slim AS dashboard
 WORKDIR /frontend
@@ -31,6 +33,6 @@ COPY migrations ./migrations
 RUN pip install . && mkdir -p /data
 COPY --from=dashboard /frontend/dist /app/dashboard
 
-EXPOSE 8000
+EXPOSE 8000 8080
 VOLUME ["/data"]
 CMD ["tofpose", "serve"]
