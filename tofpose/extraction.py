@@ -366,7 +366,7 @@ def find_candidate_blobs(
         else:
             d_lo, d_hi = predicted_diameter_window_px(camera.fx, rho, diameters_mm, config)
             d_eq = 2.0 * np.sqrt(area / np.pi)
-            too_big = d_eq > d_hi
+            too_big = d_eq > d_hi or max(bw, bh) > d_hi + 1  # long: merged markers (§3.3)
             size_ok = d_lo <= d_eq <= d_hi and max(bw, bh) <= d_hi + 1 and max(bw, bh) >= d_lo
         blob = Blob(
             pixels=np.empty(0, np.int64), area_px=area, bbox=(x, y, bw, bh), peak_counts=peak

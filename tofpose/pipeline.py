@@ -688,9 +688,12 @@ class PosePipeline:
                 self.camera.fx, comp.distance_mm, self._catalog_d, cfg
             )
             arcs = split_arcs(pts, min_points=cfg.ellipse_min_points)
-            for e, _ in ellipses_from_arcs(
+            found = ellipses_from_arcs(
                 arcs, d_min_px=d_lo, d_max_px=d_hi, max_residual_px=cfg.ellipse_max_residual_px
-            ):
+            )
+            if not found:
+                out += _split_by_threshold(comp, gray, stats.raw_threshold, d_hi, cfg.min_area_px)
+            for e, _ in found:
                 fill = np.zeros_like(mask)
                 (cx, cy), (a1, a2), ang = e
                 cv2.ellipse(fill, ((cx, cy), (a1, a2), ang), 1, -1)
@@ -713,6 +716,53 @@ class PosePipeline:
                 )
                 out.append(nb)
         return out
+
+
+SPLIT_LEVELS = 12
+
+
+def _split_by_threshold(
+    comp: Blob, gray: np.ndarray, raw_threshold: float, d_max_px: float, min_area_px: int
+) -> list[Blob]:
+    """Ours (after §3.3): a component too large for one reflector whose outline gives no
+    elliptical arcs (small merged markers, e.g. 7 and 8 beyond ~4 m, a few px each) is
+    thresholded again at rising levels between I_t and its peak; at the first level where
+    it falls apart into two or more parts of at least a tenth of the component each, and
+    each no larger than one reflector, those parts' cores are the candidates (their range
+    and centroid are measured later as for any blob). Returns [] when no level splits it."""
+    h, w = gray.shape
+    mask, x0, y0 = _blob_mask(comp, w)
+    patch = np.zeros(mask.shape, np.float32)
+    rows, cols = np.nonzero(mask)
+    patch[rows, cols] = gray[rows + y0, cols + x0]
+    peak = float(patch.max())
+    for level in np.linspace(raw_threshold, peak, SPLIT_LEVELS + 2)[1:-1]:
+        n, labels, st, _ = cv2.connectedComponentsWithStats(
+            (patch >= level).astype(np.uint8), connectivity=8
+        )
+        # parts that are cores of markers, not noise specks on one big disc: each holds
+        # at least a tenth of the component
+        big = max(min_area_px, 0.1 * comp.area_px)
+        parts = [k for k in range(1, n) if st[k, cv2.CC_STAT_AREA] >= big]
+        if len(parts) < 2:
+            continue
+        sizes = [2.0 * np.sqrt(st[k, cv2.CC_STAT_AREA] / np.pi) for k in parts]
+        if max(sizes) > d_max_px:
+            continue  # still a merged pair in one of the parts: go higher
+        out = []
+        for k in parts:
+            pr, pc = np.nonzero(labels == k)
+            out.append(Blob(
+                pixels=(pr + y0) * w + (pc + x0),
+                area_px=len(pr),
+                bbox=(int(pc.min() + x0), int(pr.min() + y0), int(np.ptp(pc) + 1),
+                      int(np.ptp(pr) + 1)),
+                peak_counts=float(patch[pr, pc].max()),
+                distance_mm=comp.distance_mm,
+                source="split",
+            ))  # fmt: skip
+        return out
+    return []
 
 
 def _blob_mask(b: Blob, width: int) -> tuple[np.ndarray, int, int]:
