@@ -37,8 +37,9 @@ from bench.accuracy import random_pose  # noqa: E402
 from bench.baseline import blob_detector  # noqa: E402
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
-from tofpose.range_calibration import fit_range_correction, true_pixel_distances  # noqa: E402
+from tofpose.range_calibration import fit_range_correction  # noqa: E402
 from tofpose.sim.bench import R_FACING  # noqa: E402
+from tofpose.sim.calibration_run import calibration_frames  # noqa: E402
 from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
 from tofpose.sim.scene import FIRST_DISC, TargetScene  # noqa: E402
 from tofpose.sim.systematic import SystematicErrors  # noqa: E402
@@ -50,19 +51,13 @@ SENSORS = ("ideal", "realistic", "realistic, calibrated")
 
 def calibration_samples(cam: CameraModel, errors: SystematicErrors, seed: int = 99):
     """A calibration run: frames of the known target at known poses (module docstring)."""
-    rng = np.random.default_rng(seed)
-    cat = paper_target()
-    for z in np.linspace(1200.0, 8000.0, 25):
-        for p, y, ox, oy in ((0, 0, 0, 0), (4, -5, 150, -80), (-3, 6, -200, 60)):
-            R = rotation_from_euler_deg(p, y, 0.0) @ R_FACING
-            T = RigidTransform(R, np.array([ox, oy, z]))
-            truth = true_pixel_distances(cam, cat, T)
-            t_auto = SensorModel().exposure_for(z)
-            for frac in (1.0, 1 / 3, 1 / 10):
-                s = SensorModel(systematic=errors, auto_exposure=False,
-                                integration_time_us=t_auto * frac)  # fmt: skip
-                f = render_frame(cam, TargetScene(cat), T, s, rng, time_s=WARM_S)
-                yield f.distance_mm.astype(float), f.gray.astype(float), truth
+    poses = [
+        RigidTransform(rotation_from_euler_deg(p, y, 0.0) @ R_FACING, np.array([ox, oy, z]))
+        for z in np.linspace(1200.0, 8000.0, 25)
+        for p, y, ox, oy in ((0, 0, 0, 0), (4, -5, 150, -80), (-3, 6, -200, 60))
+    ]
+    return calibration_frames(cam, paper_target(), errors, poses, np.random.default_rng(seed),
+                              time_s=WARM_S)  # fmt: skip
 
 
 def _simple_detected(f, T, cam, cat, detector) -> int:

@@ -189,7 +189,7 @@ def systematic_range_sigma_mm(
     if median_z2(max_mm) > MEDIAN_CHI2_3DOF:
         return max_mm
     lo, hi = 0.0, max_mm
-    for _ in range(30):  # bisection to ~0.2 um
+    for _ in range(16):  # bisection to max_mm / 2^16 (3 um at the default cap)
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if median_z2(mid) > MEDIAN_CHI2_3DOF else (lo, mid)
     return hi

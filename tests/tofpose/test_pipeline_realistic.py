@@ -9,7 +9,8 @@ import pytest
 from tests.conftest import facing_pose
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
 from tofpose.geometry import rotation_angle_deg
-from tofpose.range_calibration import fit_range_correction, true_pixel_distances
+from tofpose.range_calibration import fit_range_correction
+from tofpose.sim.calibration_run import calibration_frames
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import FIRST_DISC, TargetScene
 from tofpose.sim.systematic import SystematicErrors
@@ -57,16 +58,9 @@ def test_markers_with_systematic_range_errors_are_kept(z_mm):
 
 
 def _calibration(errors: SystematicErrors):
-    rng = np.random.default_rng(11)
-    for z in np.linspace(1200.0, 8000.0, 14):
-        T = facing_pose(z, 3.0, -4.0, offset_mm=(100.0, -50.0))
-        truth = true_pixel_distances(CAM, CAT, T)
-        t_auto = SensorModel().exposure_for(z)
-        for frac in (1.0, 1 / 3, 1 / 10):
-            s = SensorModel(systematic=errors, auto_exposure=False,
-                            integration_time_us=t_auto * frac)  # fmt: skip
-            f = render_frame(CAM, TargetScene(CAT), T, s, rng, time_s=WARM_S)
-            yield f.distance_mm.astype(float), f.gray.astype(float), truth
+    poses = [facing_pose(z, 3.0, -4.0, offset_mm=(100.0, -50.0))
+             for z in np.linspace(1200.0, 8000.0, 14)]  # fmt: skip
+    return calibration_frames(CAM, CAT, errors, poses, np.random.default_rng(11), time_s=WARM_S)
 
 
 def test_the_range_calibration_restores_long_range_position_accuracy():

@@ -14,6 +14,7 @@ from tofpose.range_calibration import (
     fit_range_correction,
     true_pixel_distances,
 )
+from tofpose.sim.calibration_run import EXPOSURE_FRACTIONS, calibration_frames
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import FIRST_DISC, TargetScene
 from tofpose.sim.systematic import SystematicErrors
@@ -27,20 +28,14 @@ def _calibration_set(errors: SystematicErrors, n_per_pose: int = 3, seed: int = 
     three integration times (1, 1/3, 1/10 of auto exposure): the reflectors' amplitude
     then spans a decade at the same distance, which separates the amplitude-related
     error from the others (the black plate is too dim and noisy to help)."""
-    rng = np.random.default_rng(seed)
     poses = [
         facing_pose(z, pitch_deg=p, yaw_deg=y, offset_mm=(ox, oy))
         for z in np.linspace(1200.0, 8000.0, 25)
         for p, y, ox, oy in ((0, 0, 0, 0), (4, -5, 150, -80), (-3, 6, -200, 60))
     ]
-    for T in poses:
-        truth = true_pixel_distances(CAM, paper_target(), T)
-        t_auto = SensorModel().exposure_for(float(np.linalg.norm(T.t_mm)))
-        for k in range(n_per_pose):
-            t_us = t_auto * (1.0, 1 / 3, 1 / 10)[k % 3]
-            sensor = SensorModel(systematic=errors, auto_exposure=False, integration_time_us=t_us)
-            f = render_frame(CAM, TargetScene(), T, sensor, rng)
-            yield f.distance_mm.astype(float), f.gray.astype(float), truth
+    fractions = tuple(EXPOSURE_FRACTIONS[k % 3] for k in range(n_per_pose))
+    return calibration_frames(CAM, paper_target(), errors, poses, np.random.default_rng(seed),
+                              exposure_fractions=fractions)  # fmt: skip
 
 
 def test_the_fit_recovers_the_cyclic_amplitude_and_pixel_errors():
