@@ -35,7 +35,9 @@ def banner(settings: Settings, token: str, created: bool) -> str:
     host = settings.host if ":" not in settings.host else f"[{settings.host}]"
     base = f"http://{host}:{settings.port}"
     camera = "simulated ToF camera" if settings.camera == "sim" else settings.camera
-    motion = {"sim": "simulated turntable + rail", "none": "no motion system"}[settings.motion]
+    motion = {"sim": "simulated turntable + rail", "none": "no motion system"}.get(
+        settings.motion, settings.motion
+    )
     reads = "open (loopback)" if settings.reads_are_open else "token required"
     return "\n".join([
         f"tofpose server: {camera}, {motion}",
@@ -56,6 +58,7 @@ def serve(overrides: dict) -> int:
     import uvicorn
 
     from backend.app import create_app
+    from backend.drivers.base import CameraError, MotionError
     from backend.drivers.factory import build_devices
 
     try:
@@ -73,6 +76,9 @@ def serve(overrides: dict) -> int:
         devices = build_devices(settings)
     except RecordingError as exc:
         print(f"tofpose serve: cannot replay: {exc}", file=sys.stderr)
+        return 2
+    except (CameraError, MotionError) as exc:
+        print(f"tofpose serve: {exc}", file=sys.stderr)
         return 2
     app = create_app(settings, devices)
     print(text, flush=True)

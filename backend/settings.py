@@ -25,11 +25,25 @@ def is_loopback_host(host: str) -> bool:
         return False
 
 
+def visa_resource(motion: str) -> str | None:
+    """The VISA resource of a ``scpi:...`` motion spec: ``scpi:HOST:PORT`` means
+    ``TCPIP::HOST::PORT::SOCKET``; anything with ``::`` is a VISA resource as given."""
+    rest = motion.removeprefix("scpi:")
+    if "::" in rest:
+        return rest
+    host, _, port = rest.rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        return None
+    return f"TCPIP::{host}::{port}::SOCKET"
+
+
 class Settings(BaseSettings):
     """Everything the app factory needs; every field maps to ``TOFPOSE_<NAME>``.
 
-    camera : "sim" (simulated camera in the simulated lab) or "replay:PATH.h5".
-    motion : "sim" (simulated turntable + rail) or "none".
+    camera : "sim" (simulated camera in the simulated lab), "replay:PATH.h5", or
+        "tofcam660:ADDRESS" (an ESPROS TOFcam-660 or the emulator, docs/devices.md).
+    motion : "sim" (simulated turntable + rail), "none", or "scpi:HOST:PORT" /
+        "scpi:VISA-RESOURCE" (an SCPI rate-table controller or the emulator).
     database_url : any SQLAlchemy URL; default ``sqlite:///<data_dir>/tofpose.db``.
     api_token : bearer token for state-changing requests; when unset, one is generated on
         first start and stored in ``<data_dir>/api_token``.
@@ -103,16 +117,28 @@ class Settings(BaseSettings):
     @field_validator("camera")
     @classmethod
     def _camera_spec(cls, v: str) -> str:
-        if v != "sim" and not (v.startswith("replay:") and len(v) > len("replay:")):
-            raise ValueError(f"camera must be 'sim' or 'replay:PATH.h5', got {v!r}")
+        kind, _, rest = v.partition(":")
+        if v != "sim" and not (kind in ("replay", "tofcam660") and rest):
+            raise ValueError(
+                f"camera must be 'sim', 'replay:PATH.h5' or 'tofcam660:ADDRESS', got {v!r}"
+            )
+        if kind == "tofcam660":
+            try:
+                ipaddress.IPv4Address(rest)
+            except ValueError:
+                raise ValueError(f"tofcam660 camera needs an IPv4 address, got {rest!r}") from None
         return v
 
     @field_validator("motion")
     @classmethod
     def _motion_spec(cls, v: str) -> str:
-        if v not in ("sim", "none"):
-            raise ValueError(f"motion must be 'sim' or 'none', got {v!r}")
-        return v
+        if v in ("sim", "none"):
+            return v
+        if v.startswith("scpi:") and (visa_resource(v) is not None):
+            return v
+        raise ValueError(
+            f"motion must be 'sim', 'none', 'scpi:HOST:PORT' or 'scpi:VISA-RESOURCE', got {v!r}"
+        )
 
     @property
     def resolved_database_url(self) -> str:

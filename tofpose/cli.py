@@ -289,8 +289,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--port", type=int, help="port (default 8000)")
     p.add_argument("--db", dest="database_url", help="SQLAlchemy URL (default SQLite in data dir)")
     p.add_argument("--data-dir", help="data directory (default ./data)")
-    p.add_argument("--camera", help="'sim' or 'replay:REC.h5'")
-    p.add_argument("--motion", help="'sim' or 'none'")
+    p.add_argument("--camera", help="'sim', 'replay:REC.h5' or 'tofcam660:ADDRESS'")
+    p.add_argument("--motion", help="'sim', 'none' or 'scpi:HOST:PORT'")
     p.add_argument("--rate", dest="replay_rate_hz", type=float, help="replay rate, Hz")
     p.add_argument("--viser-port", type=int, help="port of the 3-D scene (default 8080, 0 = any)")
     p.add_argument(
@@ -303,6 +303,26 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--format", choices=("html", "pdf", "csv", "json"), default="html")
     p.add_argument("--reference", choices=("lab", "exact"), default="lab")
     p.add_argument("--out", required=True, help="output file")
+    p = sub.add_parser("emulate", help="run device emulators over a simulated lab")
+    emu = p.add_subparsers(dest="device", required=True)
+    for name, text in (
+        ("camera", "ESPROS TOFcam-660 protocol (TCP 50660, UDP images to port 45454)"),
+        ("table", "SCPI rate-table controller (ACUTROL3000-style)"),
+        ("lab", "both, over one simulated lab (moving the table changes what the camera sees)"),
+    ):
+        q = emu.add_parser(name, help=text)
+        if name == "camera":
+            q.add_argument("--address", default="127.0.0.2", help="loopback address of its own")
+        if name == "lab":
+            q.add_argument("--camera-address", default="127.0.0.2")
+            q.add_argument("--table-port", type=int, default=5025)
+        if name != "camera":
+            q.add_argument("--host", default="127.0.0.1", help="rate-table bind address")
+        if name == "table":
+            q.add_argument("--port", type=int, default=5025)
+        q.add_argument("--target-distance-mm", type=float, default=15000.0)
+        q.add_argument("--start-rail-mm", type=float, default=13000.0)
+        q.add_argument("--seed", type=int, default=0)
     p = sub.add_parser("openapi", help="write the server's OpenAPI document (JSON)")
     p.add_argument("--out", required=True)
     args = ap.parse_args(argv)
@@ -310,6 +330,10 @@ def main(argv: list[str] | None = None) -> int:
         from backend import main as server_main
 
         return server_main.write_openapi(args.out)
+    if args.cmd == "emulate":
+        from backend.emulators import cli as emulators  # lazy, like serve
+
+        return emulators.run(vars(args))
     if args.cmd in ("serve", "report"):
         from backend import main as server_main  # lazy: the library does not need the server
 

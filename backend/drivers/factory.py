@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from backend.drivers.base import CameraDriver, CameraSettings, MotionDriver
+from backend.drivers.base import CameraDriver, CameraSettings, MotionDriver, MotionError
 from backend.drivers.replay import ReplayCamera
 from backend.drivers.sim import SimCamera, SimMotion, SimWorld, make_sim_world
-from backend.settings import Settings
+from backend.settings import Settings, visa_resource
 from tofpose.catalog import Catalog
 
 
@@ -41,11 +41,27 @@ def build_devices(settings: Settings, catalog: Catalog | None = None) -> Devices
             time_scale=settings.sim_time_scale,
         )
     hint = None
+    initial = CameraSettings(frame_rate_hz=settings.frame_rate_hz)
     if settings.camera == "sim":
-        initial = CameraSettings(frame_rate_hz=settings.frame_rate_hz)
         camera: CameraDriver = SimCamera(world, initial)
+    elif settings.camera.startswith("tofcam660:"):
+        from backend.drivers.tofcam660 import TofCam660Driver  # the optional vendor client
+
+        camera = TofCam660Driver(
+            settings.camera.removeprefix("tofcam660:"), settings=initial, connect_now=False
+        )
     else:
         camera = ReplayCamera(settings.camera.removeprefix("replay:"), settings.replay_rate_hz)
         hint = camera.catalog
-    motion = SimMotion(world) if settings.motion == "sim" else None
+    motion: MotionDriver | None = None
+    if settings.motion == "sim":
+        motion = SimMotion(world)
+    elif settings.motion.startswith("scpi:"):
+        from backend.drivers.scpi import ScpiRateTable  # the optional PyVISA
+
+        try:
+            motion = ScpiRateTable(str(visa_resource(settings.motion)))
+        except MotionError:
+            camera.close()
+            raise
     return Devices(camera, motion, world, hint)
