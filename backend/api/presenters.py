@@ -44,20 +44,23 @@ from tofpose.geometry import (
 from tofpose.tof import unambiguous_range_mm
 
 
-def _device_state(driver: str, h) -> DeviceStatePublic:
+def _device_state(device, h) -> DeviceStatePublic:
+    describe = getattr(device, "describe", None)
+    info = describe() if describe is not None else {}
     return DeviceStatePublic(
-        driver=driver, state=h.state, last_error=h.last_error, error_count=h.error_count
-    )
+        driver=device.name, state=h.state, last_error=h.last_error, error_count=h.error_count,
+        **{k: info.get(k) for k in ("model", "firmware", "link", "address")},
+    )  # fmt: skip
 
 
 def camera_state(state: AppState) -> DeviceStatePublic:
-    return _device_state(state.devices.camera.name, state.acquisition.health)
+    return _device_state(state.devices.camera, state.acquisition.health)
 
 
 def motion_state(state: AppState) -> DeviceStatePublic:
     if state.devices.motion is None:
         return DeviceStatePublic(driver="none", state="absent")
-    return _device_state(state.devices.motion.name, state.motion_health)
+    return _device_state(state.devices.motion, state.motion_health)
 
 
 def motion_public(state: AppState) -> MotionPublic:

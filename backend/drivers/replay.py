@@ -81,6 +81,10 @@ class ReplayCamera:
     def get_settings(self) -> CameraSettings:
         return self._settings
 
+    def describe(self) -> dict[str, str]:
+        return {"model": f"replay of {self._rec.camera.name}", "address": str(self.path),
+                "link": "up"}  # fmt: skip
+
     def apply_settings(self, settings: CameraSettings) -> CameraSettings:
         """Only the frame rate can change; the rest is fixed by the recording."""
         self._settings = replace(self._settings, frame_rate_hz=settings.frame_rate_hz)

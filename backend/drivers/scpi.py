@@ -202,6 +202,11 @@ class ScpiRateTable:
             stopped |= bool(b & STATUS_ABORTED)
         return MotionStatus(positions, targets, busy, settled and not busy, stopped)
 
+    def reset_faults(self) -> None:
+        """Clear the controller's axis faults (the operator's acknowledgement after the
+        cause is fixed); interlocks stay open until the next move closes them."""
+        self.command(";".join(f":FAUL:CLE {n}" for n in self.axis_numbers.values()))
+
     def describe(self) -> dict[str, str]:
         """Model, firmware and link state for GET /api/devices."""
         parts = [p.strip() for p in self.identity.split(",")] + ["", "", "", ""]

@@ -16,6 +16,7 @@ import numpy as np
 
 from backend.drivers.base import AxisLimits, CameraFrame, CameraSettings, MotionStatus
 from backend.drivers.pacing import FramePacer
+from tofpose import __version__
 from tofpose.catalog import Catalog, paper_target
 from tofpose.sim.bench import LabGeometry, SimulatedBench
 from tofpose.sim.render import render_frame
@@ -139,6 +140,9 @@ class SimCamera:
     def get_settings(self) -> CameraSettings:
         return self._settings
 
+    def describe(self) -> dict[str, str]:
+        return {"model": "tofpose simulated ToF camera", "firmware": __version__, "link": "up"}
+
     def apply_settings(self, settings: CameraSettings) -> CameraSettings:
         lo, hi = self.world.bench.sensor.integration_limits_us
         applied = replace(
@@ -177,6 +181,10 @@ class SimMotion:
 
     def status(self) -> MotionStatus:
         return self.world.motion_status()
+
+    def describe(self) -> dict[str, str]:
+        return {"model": "tofpose simulated turntable + rail", "firmware": __version__,
+                "link": "up"}  # fmt: skip
 
     def close(self) -> None:
         pass

@@ -49,8 +49,8 @@ SENSOR_SIZE = (320, 240)
 def _vendor() -> Any:
     try:
         from epc.tofCam660 import Command, TOFcam660
-        from epc.tofCam660.tofCam660 import DEFAULT_MAX_AMP
         from epc.tofCam660.parser import DistanceAndAmplitudeParser
+        from epc.tofCam660.tofCam660 import DEFAULT_MAX_AMP
     except ImportError as exc:  # pragma: no cover - the extra is part of dev installs
         raise CameraError(
             "the tofcam660 driver needs ESPROS's client: pip install 'tofpose[espros]'"

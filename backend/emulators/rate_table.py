@@ -247,6 +247,9 @@ class RateTableController:
             return f"{self.world.motion_status().targets[ax.name]:.6f}"
         ax, (value_text,) = self._axis_arg(cmd, 2)
         value = self._number(value_text)
+        if not ax.low <= value <= ax.high:
+            msg = f"Data out of range; {value:g} outside [{ax.low:g}, {ax.high:g}]"
+            raise ScpiError(-222, msg)
         if self.safety_open:
             raise ScpiError(ERR_SAFETY_OPEN, "Safety interlock open")
         if ax.fault is not None:
@@ -255,8 +258,6 @@ class RateTableController:
             raise ScpiError(ERR_INTERLOCK_OPEN, "Axis interlock open; close it first")
         if ax.mode != "POS":
             raise ScpiError(ERR_NOT_POSITION_MODE, "Axis not in position mode")
-        if not ax.low <= value <= ax.high:
-            raise ScpiError(-222, f"Data out of range; {value:g} outside [{ax.low:g}, {ax.high:g}]")
         self.world.move_to({ax.name: value})
         self.aborted = False
         return None
@@ -457,7 +458,10 @@ class RateTableEmulator:
 
     def start(self) -> RateTableEmulator:
         self._thread = threading.Thread(
-            target=self._server.serve_forever, name="rate-table-emulator", daemon=True
+            target=self._server.serve_forever,
+            args=(0.05,),
+            name="rate-table-emulator",
+            daemon=True,
         )
         self._thread.start()
         return self

@@ -402,7 +402,10 @@ class TofCam660Emulator:
 
     def start(self) -> TofCam660Emulator:
         self._thread = threading.Thread(
-            target=self._server.serve_forever, name="tofcam660-emulator", daemon=True
+            target=self._server.serve_forever,
+            args=(0.05,),
+            name="tofcam660-emulator",
+            daemon=True,
         )
         self._thread.start()
         return self
