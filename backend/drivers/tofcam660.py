@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import socket
 import threading
 import time
 from dataclasses import replace
@@ -44,6 +45,7 @@ INTEGRATION_LIMITS_US = (1.0, 4000.0)
 INVALID_CODE_MIN = 64000
 SATURATION_CODES = (64002, 64003)  # ADC overflow, saturation
 SENSOR_SIZE = (320, 240)
+COMMAND_PORT = 50660
 
 
 def _vendor() -> Any:
@@ -157,6 +159,10 @@ class TofCam660Driver:
     def _connect(self) -> None:
         TOFcam660 = self._vendor[0]
         try:
+            # Our own time-out first: the vendor's connect has none (minutes on a network
+            # where the address does not answer), and a failed vendor constructor leaves
+            # a half-built object behind.
+            socket.create_connection((self.address, COMMAND_PORT), self.io_timeout_s).close()
             cam = TOFcam660(self.address)
         except Exception as exc:
             raise CameraError(f"tofcam660 {self.address}: cannot connect: {exc}") from exc
