@@ -29,8 +29,9 @@ COPY tofpose ./tofpose
 COPY backend ./backend
 COPY migrations ./migrations
 # A regular install: the wheel carries the Alembic revisions as backend/migrations,
-# which the server applies at every start (tests/test_packaging.py checks this).
-RUN pip install . && mkdir -p /data
+# which the server applies at every start (tests/test_packaging.py checks this). The
+# extras bring the real-device drivers (ESPROS's client, PyVISA); docs/devices.md.
+RUN pip install '.[espros,scpi]' && mkdir -p /data
 COPY --from=dashboard /frontend/dist /app/dashboard
 
 EXPOSE 8000 8080

@@ -49,6 +49,8 @@ COMMAND_PORT = 50660
 
 
 def _vendor() -> Any:
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
     try:
         from epc.tofCam660 import Command, TOFcam660
         from epc.tofCam660.parser import DistanceAndAmplitudeParser
@@ -57,6 +59,11 @@ def _vendor() -> Any:
         raise CameraError(
             "the tofcam660 driver needs ESPROS's client: pip install 'tofpose[espros]'"
         ) from exc
+    # Importing ``epc`` configures the root logger (a coloured handler at INFO): undo
+    # that, the server configures its own logging; keep the client's chatter to warnings.
+    root.handlers[:] = handlers
+    root.setLevel(level)
+    logging.getLogger("TOFcam660").setLevel(logging.WARNING)
     return TOFcam660, Command, DistanceAndAmplitudeParser, DEFAULT_MAX_AMP
 
 
