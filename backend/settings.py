@@ -51,6 +51,9 @@ class Settings(BaseSettings):
     allowed_hosts : extra names the server answers to in the ``Host`` header (comma-separated
         in the environment), beside the bind address and, on loopback, localhost,
         127.0.0.1 and [::1]. A wildcard bind (0.0.0.0, ::) with none given accepts any.
+    lab_target_distance_mm : with real devices, the target's distance from the turntable
+        centre (rail 0): the lab reference pose is computed from the rate table's encoders
+        and this nominal geometry, as the simulated lab does with ``sim_target_distance_mm``.
     allowed_origins : extra browser origins (``scheme://host:port``) that may open
         ``/ws/live``, beside the server's own origin.
     viser : run the 3-D scene (a viser server in this process) on ``viser_port``
@@ -73,6 +76,7 @@ class Settings(BaseSettings):
     catalog: str = "paper-target"
     frame_rate_hz: float = Field(10.0, gt=0, le=60)
     sim_target_distance_mm: float = Field(15000.0, gt=0)
+    lab_target_distance_mm: float = Field(15000.0, gt=0)
     sim_start_rail_mm: float = Field(13000.0, ge=0)
     sim_seed: int = 0
     sim_time_scale: float = Field(1.0, ge=0.01, le=1000.0)

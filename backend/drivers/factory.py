@@ -5,10 +5,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from backend.drivers.base import CameraDriver, CameraSettings, MotionDriver, MotionError
+from backend.drivers.reference import EncoderReferencedCamera
 from backend.drivers.replay import ReplayCamera
 from backend.drivers.sim import SimCamera, SimMotion, SimWorld, make_sim_world
 from backend.settings import Settings, visa_resource
 from tofpose.catalog import Catalog
+from tofpose.sim.bench import LabGeometry
 
 
 @dataclass
@@ -64,4 +66,8 @@ def build_devices(settings: Settings, catalog: Catalog | None = None) -> Devices
         except MotionError:
             camera.close()
             raise
+    if motion is not None and not isinstance(camera, (SimCamera, ReplayCamera)):
+        # a real camera knows no truth: the lab reference comes from the encoders
+        geometry = LabGeometry(target_distance_mm=settings.lab_target_distance_mm)
+        camera = EncoderReferencedCamera(camera, motion, geometry)
     return Devices(camera, motion, world, hint)
