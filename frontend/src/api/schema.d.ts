@@ -609,6 +609,11 @@ export interface components {
         };
         /** CameraDevicePublic */
         CameraDevicePublic: {
+            /**
+             * Address
+             * @description where the device is reached
+             */
+            address?: string | null;
             /** Catalog */
             catalog: string;
             /** Cx Px */
@@ -622,6 +627,11 @@ export interface components {
              * @default 0
              */
             error_count: number;
+            /**
+             * Firmware
+             * @description firmware or software version
+             */
+            firmware?: string | null;
             /**
              * Frame Rate Hz
              * @description delivered rate over the last few frames
@@ -637,6 +647,16 @@ export interface components {
             height_px: number;
             /** Last Error */
             last_error?: string | null;
+            /**
+             * Link
+             * @description connection to the device (real devices and their emulators)
+             */
+            link?: ("up" | "down") | null;
+            /**
+             * Model
+             * @description device model as the device reports it
+             */
+            model?: string | null;
             /**
              * State
              * @enum {string}
@@ -808,6 +828,11 @@ export interface components {
         };
         /** DeviceStatePublic */
         DeviceStatePublic: {
+            /**
+             * Address
+             * @description where the device is reached
+             */
+            address?: string | null;
             /** Driver */
             driver: string;
             /**
@@ -815,8 +840,23 @@ export interface components {
              * @default 0
              */
             error_count: number;
+            /**
+             * Firmware
+             * @description firmware or software version
+             */
+            firmware?: string | null;
             /** Last Error */
             last_error?: string | null;
+            /**
+             * Link
+             * @description connection to the device (real devices and their emulators)
+             */
+            link?: ("up" | "down") | null;
+            /**
+             * Model
+             * @description device model as the device reports it
+             */
+            model?: string | null;
             /**
              * State
              * @enum {string}
@@ -970,6 +1010,11 @@ export interface components {
         /** MotionPublic */
         MotionPublic: {
             /**
+             * Address
+             * @description where the device is reached
+             */
+            address?: string | null;
+            /**
              * Axes
              * @default []
              */
@@ -986,8 +1031,23 @@ export interface components {
              * @default 0
              */
             error_count: number;
+            /**
+             * Firmware
+             * @description firmware or software version
+             */
+            firmware?: string | null;
             /** Last Error */
             last_error?: string | null;
+            /**
+             * Link
+             * @description connection to the device (real devices and their emulators)
+             */
+            link?: ("up" | "down") | null;
+            /**
+             * Model
+             * @description device model as the device reports it
+             */
+            model?: string | null;
             /**
              * Positions
              * @description encoders, deg / mm

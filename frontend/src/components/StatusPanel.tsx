@@ -1,10 +1,20 @@
-// Device status (state, delivered frame rate, last error) and the pipeline's per-stage
+// Device status (state, model, firmware, address and link, delivered frame rate, last error) and the pipeline's per-stage
 // timings of the latest frame.
 import { useEffect, useState } from "preact/hooks";
 import { api, type Pose } from "../api/client";
 import type { components } from "../api/schema";
 
 type Devices = components["schemas"]["DevicesPublic"];
+type Device = components["schemas"]["DeviceStatePublic"];
+
+// "ESPROS TOFcam-660 3.59 at 127.0.0.2 (link down)": what the driver says of its device.
+function describe(d: Device): string {
+  const parts = [d.model ?? d.driver];
+  if (d.firmware) parts.push(d.firmware);
+  if (d.address) parts.push(`at ${d.address}`);
+  if (d.link === "down") parts.push("(link down)");
+  return parts.join(" ");
+}
 
 export function StatusPanel({ pose, onError }: { pose: Pose | null; onError: (m: string | null) => void }) {
   const [dev, setDev] = useState<Devices | null>(null);
@@ -23,8 +33,9 @@ export function StatusPanel({ pose, onError }: { pose: Pose | null; onError: (m:
           <tbody>
             <tr><th>camera</th><td data-testid="camera-state">{dev.camera.state}</td>
               <td data-testid="camera-rate">{dev.camera.frame_rate_hz.toFixed(1)} frames/s</td>
-              <td>{dev.camera.driver}, catalog {dev.camera.catalog}</td></tr>
-            <tr><th>motion</th><td data-testid="motion-state">{dev.motion.state}</td><td>{dev.motion.driver}</td><td /></tr>
+              <td data-testid="camera-device">{describe(dev.camera)}, catalog {dev.camera.catalog}</td></tr>
+            <tr><th>motion</th><td data-testid="motion-state">{dev.motion.state}</td><td />
+              <td data-testid="motion-device">{describe(dev.motion)}</td></tr>
             {[dev.camera, dev.motion].filter((d) => d.last_error).map((d) => (
               <tr key={d.driver}><td colSpan={4} class="error">{d.driver}: {d.last_error}</td></tr>
             ))}
