@@ -96,7 +96,12 @@ class ScpiRateTable:
     def _connect(self) -> None:
         self._session = self._open()
         self._stop_session = self._open()
-        self.identity = self._query_raw(self._session, "*CLS;*IDN?")
+        try:
+            self.identity = self._query_raw(self._session, "*CLS;*IDN?")
+        except MotionError as exc:
+            raise MotionError(
+                f"cannot reach the rate-table controller at {self.resource}: {exc.__cause__}"
+            ) from exc
 
     def _drop(self) -> None:
         for inst in (self._session, self._stop_session):

@@ -34,7 +34,14 @@ def test_the_token_is_printed_only_when_it_is_generated(tmp_path):
 
 def test_serve_refuses_bad_options_with_a_message(tmp_path, capsys):
     assert main(["serve", "--camera", "usb3", "--data-dir", str(tmp_path)]) == 2
-    assert "camera must be 'sim' or 'replay:PATH.h5'" in capsys.readouterr().err
+    assert "camera must be 'sim', 'replay:PATH.h5' or 'tofcam660:ADDRESS'" in (
+        capsys.readouterr().err
+    )
+    # a rate table that does not answer: its axes and limits come from it, so no start
+    assert main(["serve", "--motion", "scpi:127.0.0.1:9", "--data-dir", str(tmp_path),
+                 "--no-viser"]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert "cannot reach the rate-table controller at TCPIP::127.0.0.1::9::SOCKET" in err
     missing = tmp_path / "missing.h5"
     assert main(["serve", "--camera", f"replay:{missing}", "--data-dir", str(tmp_path)]) == 2
     assert "cannot replay" in capsys.readouterr().err

@@ -9,7 +9,7 @@ import pytest
 from pydantic import ValidationError
 
 from backend.auth import load_or_create_token, token_matches
-from backend.settings import Settings, is_loopback_host
+from backend.settings import Settings, is_loopback_host, visa_resource
 
 
 def test_environment_variables_are_read(monkeypatch, tmp_path):
@@ -39,6 +39,9 @@ def test_loopback_detection(host, loop):
 
 
 @pytest.mark.parametrize("kw", [{"camera": "usb"}, {"camera": "replay:"}, {"motion": "acutrol"},
+                                {"camera": "tofcam660:"}, {"camera": "tofcam660:camera.lab"},
+                                {"motion": "scpi:"}, {"motion": "scpi:host"},
+                                {"motion": "scpi:host:99999"},
                                 {"port": 70000}, {"frame_rate_hz": 0}])  # fmt: skip
 def test_bad_settings_are_named(kw):
     with pytest.raises(ValidationError) as exc:
@@ -54,3 +57,17 @@ def test_token_generated_once_private_and_reused(tmp_path):
     assert load_or_create_token(tmp_path, None) == (t1, False)
     assert load_or_create_token(tmp_path, "configured") == ("configured", False)
     assert token_matches(t1, t1) and not token_matches(t1, t1[:-1]) and not token_matches(t1, None)
+
+
+@pytest.mark.parametrize(
+    ("motion", "resource"),
+    [
+        ("scpi:127.0.0.1:5025", "TCPIP::127.0.0.1::5025::SOCKET"),
+        ("scpi:table.lab:5025", "TCPIP::table.lab::5025::SOCKET"),
+        ("scpi:GPIB0::14::INSTR", "GPIB0::14::INSTR"),
+        ("scpi:ASRL/dev/ttyUSB0::INSTR", "ASRL/dev/ttyUSB0::INSTR"),
+    ],
+)
+def test_scpi_motion_specs_name_a_visa_resource(motion, resource):
+    assert Settings(motion=motion).motion == motion
+    assert visa_resource(motion) == resource
