@@ -167,3 +167,8 @@ def test_absent_camera_is_an_error_naming_it_or_a_degraded_start():
             )  # fmt: skip
     finally:
         drv.close()
+
+
+def test_a_refused_setting_is_reported_naming_the_command(emu):
+    with pytest.raises(CameraError, match=r"setup failed: .*refused command: SetRoi.*Error"):
+        TofCam660Driver(ADDRESS, settings=FIXED, roi=(0, 10, 320, 200))  # rows not symmetric
