@@ -16,6 +16,14 @@ def single_core() -> None:
     cv2.setNumThreads(1)
 
 
+def all_cores() -> None:
+    """Undo an inherited one-core pin (``make bench`` runs this after benches that pin
+    themselves with ``single_core``): the server, its clients and the browsers share the
+    machine's cores, as in use; pinned, a 30 Hz camera fell to 10 Hz."""
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, range(os.cpu_count() or 1))
+
+
 def table(header: list[str], rows: list[list[str]]) -> str:
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
     line = "| " + " | ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)) + " |"

@@ -40,7 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import contextlib
 
-from bench._common import table  # noqa: E402
+from bench._common import all_cores, table  # noqa: E402
 
 
 def _free_port() -> int:
@@ -174,14 +174,6 @@ def dashboard_table(rates, counts, seconds, repeats, scene: bool) -> str:
     bar.close()
     return table(["camera Hz", "dashboards", "3-D scene", "frames drawn/s per page (median)",
                   "slowest page", "server CPU % of one core"], rows)  # fmt: skip
-
-
-def all_cores() -> None:
-    """Undo an inherited one-core pin (``make bench`` runs this after benches that pin
-    themselves with ``single_core``): the server, its clients and the browsers share the
-    machine's cores, as in use; pinned, a 30 Hz camera fell to 10 Hz."""
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, range(os.cpu_count() or 1))
 
 
 def main() -> None:

@@ -209,6 +209,7 @@ def main() -> None:
     live_tab = _script("live.py", "--clients", "1", "10", "50", "--rates", "10", "30",
                        "--seconds", "2" if q else "4", "--repeats", "1" if q else "2",
                        "--dashboards", "1", "5")  # fmt: skip
+    dev_tab = _script("devices.py", "--repeats", "2" if q else "5")
 
     minutes = (time.monotonic() - t0) / 60.0
     head = [
@@ -231,7 +232,12 @@ def main() -> None:
              "from the frame reaching the server to client receipt; then whole dashboards in "
              "Debian's chromium (software rendering, no GPU) sharing the same 2 cores with "
              "the server: frames each page actually drew per second, and the server's CPU:",
-             "", live_tab, ""]  # fmt: skip
+             "", live_tab, "",
+             "## Real-device drivers: link loss and recovery", "",
+             "The server with the `tofcam660` camera and `scpi` rate-table drivers against "
+             "the shipped emulators (`bench/devices.py`, default time-outs and back-offs, "
+             "docs/devices.md): how long until the device shows degraded, and how long "
+             "until it works again (a new pose; motion state ok):", "", dev_tab, ""]  # fmt: skip
     text = "\n".join(head + [sec_paper, sec_acc, sec_real, sec_rob, sec_base] + speed)
     DOC.write_text(text + "\n")
     print(f"wrote {DOC} in {minutes:.1f} min", file=sys.stderr)
