@@ -80,7 +80,7 @@ class MatchResult:
     pairs : ndarray (m, 2) int, rows (observed index k, catalog index i).
     unmatched : list of observed indices assigned to the null label.
     A : ndarray (gamma, eta + 1), the final assignment probabilities.
-    iterations : annealing iterations.
+    iterations : annealing iterations (RANSAC: observed triplets tried).
     alpha_mm : tolerance used.
     reason : empty when ok, else why no consistent match was found.
     """
@@ -267,6 +267,8 @@ def match_by_triplets(
     min_matches: int = 3,
     observed_triplets=None,
     deadline_s: float | None = None,
+    confidence: float | None = None,
+    stats: dict | None = None,
 ) -> np.ndarray:
     """Exhaustive triplet hypotheses (ours): the fallback when annealing's answer fails
     verification (e.g. a mirror-image assignment of 3-4 markers at long range).
@@ -280,6 +282,10 @@ def match_by_triplets(
     observed_triplets : optional iterable of observed index triplets to try instead (e.g.
         ``random_triplets`` for a RANSAC-style search over all blobs);
     deadline_s : optional ``time.perf_counter()`` value after which the search stops.
+    confidence : optional RANSAC stopping rule: stop once the probability that every
+        observed triplet tried so far held an outlier is below ``1 - confidence``, for an
+        inlier fraction estimated from the best hypothesis (``ransac_trials_needed``).
+    stats : optional dict that receives ``triplets`` (observed triplets tried).
     """
     import time
     from itertools import combinations, permutations
@@ -289,24 +295,30 @@ def match_by_triplets(
     w = np.ones(len(observed_mm)) if weights is None else np.asarray(weights, float)
     c_d = np.linalg.norm(catalog_mm[:, None] - catalog_mm[None], axis=-1)
     best, best_key = np.empty((0, 2), int), (0, np.inf)
-    cat_triplets = list(permutations(range(e), 3))
+    cat_triplets = np.array(list(permutations(range(e), 3)), int).reshape(-1, 3)
+    # side lengths (ij, jk, ik) of every ordered catalog triplet, shape (P, 3)
+    cat_sides = np.stack([c_d[cat_triplets[:, 0], cat_triplets[:, 1]],
+                          c_d[cat_triplets[:, 1], cat_triplets[:, 2]],
+                          c_d[cat_triplets[:, 0], cat_triplets[:, 2]]], axis=1)  # fmt: skip
     triplets = combinations(range(g), 3) if observed_triplets is None else observed_triplets
+    n_total = len(observed_mm)
+    tried = 0
     for tri in triplets:
         if deadline_s is not None and time.perf_counter() > deadline_s:
             break
+        if confidence is not None and tried >= ransac_trials_needed(
+            best_key[0], n_total, confidence
+        ):
+            break
+        tried += 1
         a, b, c = tri
-        o = [
+        o = np.array([
             np.linalg.norm(observed_mm[a] - observed_mm[b]),
             np.linalg.norm(observed_mm[b] - observed_mm[c]),
             np.linalg.norm(observed_mm[a] - observed_mm[c]),
-        ]
-        for i, j, k in cat_triplets:
-            if (
-                abs(o[0] - c_d[i, j]) > alpha_mm
-                or abs(o[1] - c_d[j, k]) > alpha_mm
-                or abs(o[2] - c_d[i, k]) > alpha_mm
-            ):
-                continue
+        ])  # fmt: skip
+        compatible = np.all(np.abs(cat_sides - o) <= alpha_mm, axis=1)
+        for i, j, k in cat_triplets[compatible]:
             R, t = weighted_svd(catalog_mm[[i, j, k]], observed_mm[[a, b, c]], w[[a, b, c]])
             if not accept_pose(R, t):
                 continue
@@ -320,7 +332,25 @@ def match_by_triplets(
                 key[0] > best_key[0] or (key[0] == best_key[0] and key[1] < best_key[1])
             ):
                 best, best_key = np.column_stack((rows[ok], cols[ok])), key
+    if stats is not None:
+        stats["triplets"] = tried
     return best
+
+
+def ransac_trials_needed(n_inliers: int, n_observed: int, confidence: float) -> float:
+    """Observed triplets to draw (without repetition) so that, with ``n_inliers`` of
+    ``n_observed`` blobs being markers, at least one all-marker triplet was drawn with
+    probability ``confidence``: ``log(1 - p) / log(1 - C(I, 3) / C(n, 3))`` (the standard
+    RANSAC count, Fischler and Bolles 1981, with the all-inlier probability of a triplet
+    drawn without replacement). Infinite while fewer than 3 inliers are known."""
+    from math import comb, inf, log
+
+    if n_inliers < 3 or n_observed < 3:
+        return inf
+    p_good = comb(n_inliers, 3) / comb(n_observed, 3)
+    if p_good >= 1.0:
+        return 1.0
+    return log(1.0 - confidence) / log(1.0 - p_good)
 
 
 def random_triplets(n_observed: int, rng: np.random.Generator):

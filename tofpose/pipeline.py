@@ -123,7 +123,8 @@ class PipelineConfig:
     dark_check_max_matches: int = 3
     matcher: Literal["annealing", "ransac"] = "annealing"
     triplet_fallback: bool = True
-    ransac_time_budget_ms: float = 5.0
+    ransac_time_budget_ms: float | None = 5.0
+    ransac_confidence: float | None = None
     ransac_seed: int = 0
     centroid_sigma_floor_px: float = 0.03
     range_sigma_floor_mm: float = 1.0
@@ -568,8 +569,12 @@ class PosePipeline:
         return R, t, iterations, ml
 
     def _match_ransac(self, y: np.ndarray, w: np.ndarray) -> MatchResult:
-        """Random triplet hypotheses over all blobs, best inlier count within the budget."""
+        """Random triplet hypotheses over all blobs, best inlier count, until the time
+        budget is spent or (``ransac_confidence``) the standard RANSAC count is reached;
+        ``iterations`` of the result = observed triplets tried."""
         cfg = self.config
+        stats: dict = {}
+        budget = cfg.ransac_time_budget_ms
         alpha = cfg.matching.alpha_for(y)
         tol = cfg.matching.pair_tolerance_mm(alpha, w)
         pairs = match_by_triplets(
@@ -581,12 +586,15 @@ class PosePipeline:
             weights=w,
             min_matches=cfg.matching.min_matches,
             observed_triplets=random_triplets(len(y), self._rng),
-            deadline_s=time.perf_counter() + cfg.ransac_time_budget_ms / 1000.0,
+            deadline_s=None if budget is None else time.perf_counter() + budget / 1000.0,
+            confidence=cfg.ransac_confidence,
+            stats=stats,
         )
         matched = set(pairs[:, 0].tolist())
         unmatched = [k for k in range(len(y)) if k not in matched]
         reason = "" if len(pairs) else "no triplet hypothesis with enough inliers"
-        return MatchResult(pairs, unmatched, np.zeros((len(y), 0)), 0, alpha, reason)
+        tried = stats.get("triplets", 0)
+        return MatchResult(pairs, unmatched, np.zeros((len(y), 0)), tried, alpha, reason)
 
     def _view_cosine(self, R, t) -> float:
         """Cosine between the target normal and the direction to the camera."""

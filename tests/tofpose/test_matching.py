@@ -107,3 +107,40 @@ def test_triplet_fallback_respects_the_pose_constraint():
     assert {int(k): int(cat.ids[i]) for k, i in pairs} == {0: 5, 1: 6, 2: 7}
     none = match_by_triplets(y, cat.positions_mm, 20.0, np.full(3, 20.0), lambda R, t: False)
     assert len(none) == 0
+
+
+def test_ransac_trials_needed_is_the_standard_count():
+    from math import comb, log
+
+    from tofpose.matching import ransac_trials_needed
+
+    assert ransac_trials_needed(2, 10, 0.99) == float("inf")  # no hypothesis yet
+    assert ransac_trials_needed(8, 8, 0.99) == 1.0  # every triplet is all-marker
+    p = comb(8, 3) / comb(18, 3)
+    assert ransac_trials_needed(8, 18, 0.99) == pytest.approx(log(0.01) / log(1 - p))
+
+
+def test_ransac_to_confidence_stops_early_and_finds_the_markers():
+    """With 8 markers among 14 blobs, the confidence rule stops long before all 364
+    triplets and still returns the right correspondence."""
+    from tofpose.catalog import paper_target
+    from tofpose.matching import match_by_triplets, random_triplets
+
+    rng = np.random.default_rng(3)
+    cat = paper_target().positions_mm
+    R = np.eye(3)
+    t = np.array([10.0, -20.0, 3000.0])
+    markers = cat @ R.T + t
+    spurious = t + rng.uniform([-700, -450, -150], [700, 450, 250], size=(6, 3))
+    observed = np.vstack([markers, spurious])
+    order = rng.permutation(len(observed))
+    observed = observed[order]
+    stats: dict = {}
+    pairs = match_by_triplets(
+        observed, cat, 15.0, np.full(len(observed), 15.0), lambda R_, t_: True,
+        max_observed=len(observed), observed_triplets=random_triplets(len(observed), rng),
+        confidence=0.99, stats=stats,
+    )  # fmt: skip
+    assert stats["triplets"] < 60  # log(0.01) / log(1 - 56/364) = 28 once all 8 are found
+    truth = {int(np.flatnonzero(order == i)[0]): i for i in range(len(cat))}
+    assert {int(k): int(i) for k, i in pairs} == truth
