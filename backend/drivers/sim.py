@@ -46,10 +46,12 @@ class SimWorld:
         with self._lock:  # the turntable state; rendering happens outside the lock
             t = self.now_s()
             T_true, T_lab, enc = self.bench.poses_at(t)
+            subframes = self.bench.subframe_poses(t, T_true)
             sensor = self.bench.sensor
         frame = render_frame(
-            self.bench.camera, self.bench.scene, T_true, sensor, self.bench.rng, time_s=t
-        )
+            self.bench.camera, self.bench.scene, T_true, sensor, self.bench.rng, time_s=t,
+            subframe_poses=subframes,
+        )  # fmt: skip
         return t, frame, T_lab, T_true, enc
 
     def move_to(self, setpoints: dict[str, float]) -> None:

@@ -91,7 +91,21 @@ class SimulatedBench:
         T_true = self.geometry.T_camera_target(true_pos, true=True)
         return T_true, self.geometry.T_camera_target(enc, true=False), enc
 
+    def subframe_poses(self, time_s: float, T_true: RigidTransform) -> list | None:
+        """True poses at the four phase sub-frames of a frame starting at ``time_s``, or
+        None when the table does not move over them (or the sensor's motion artefacts are
+        off): a slewing table gives motion artefacts (``render.combine_subframes``)."""
+        if not self.sensor.motion_artefacts:
+            return None
+        period = self.sensor.subframe_period_s(float(np.linalg.norm(T_true.t_mm)))
+        positions = [self.turntable.true_position(time_s + k * period) for k in range(4)]
+        if all(p == positions[0] for p in positions[1:]):
+            return None
+        return [self.geometry.T_camera_target(p, true=True) for p in positions]
+
     def capture(self, time_s: float) -> BenchFrame:
         T_true, T_lab, enc = self.poses_at(time_s)
-        frame = render_frame(self.camera, self.scene, T_true, self.sensor, self.rng, time_s=time_s)
+        subframes = self.subframe_poses(time_s, T_true)
+        frame = render_frame(self.camera, self.scene, T_true, self.sensor, self.rng,
+                             time_s=time_s, subframe_poses=subframes)  # fmt: skip
         return BenchFrame(time_s, frame, T_true, T_lab, enc)

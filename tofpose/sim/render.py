@@ -22,6 +22,7 @@ sensor's background suppression (``ambient_gray_fraction * B``), quantised to 12
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import cv2
@@ -76,6 +77,11 @@ class SensorModel:
     systematic : SystematicErrors or None
         The systematic range errors of a real, uncalibrated camera (None: the ideal
         sensor; ``tofpose.sim.systematic``).
+    motion_artefacts : bool
+        While the scene moves, render each of the four phase sub-frames at its own time
+        (``combine_subframes``; the bench and the live simulator pass the poses).
+    subframe_readout_us : float
+        Readout between sub-frames; the sub-frame period is exposure + readout.
     """
 
     modulation_frequency_hz: float = 6.0e6
@@ -94,6 +100,8 @@ class SensorModel:
     blur_sigma_px: float = 0.0
     noise: bool = True
     systematic: SystematicErrors | None = None
+    motion_artefacts: bool = True
+    subframe_readout_us: float = 1500.0
 
     def __post_init__(self) -> None:
         if self.modulation_frequency_hz <= 0:
@@ -127,6 +135,10 @@ class SensorModel:
         t = self.auto_exposure_fill * FULL_SCALE_COUNTS / peak_per_us
         lo, hi = self.integration_limits_us
         return float(np.clip(t, lo, hi))
+
+    def subframe_period_s(self, distance_mm: float) -> float:
+        """Time from one phase sub-frame to the next: exposure plus readout, s."""
+        return (self.exposure_for(distance_mm) + self.subframe_readout_us) * 1e-6
 
     def with_ambient(self, lux: float) -> SensorModel:
         return replace(self, ambient_lux=lux)
@@ -212,35 +224,17 @@ def _subpixel_bearings(camera: CameraModel, uv: np.ndarray, s: int) -> np.ndarra
     return camera.bearings(pts)
 
 
-def render_frame(
+def _phasor_images(
     camera: CameraModel,
     scene: TargetScene,
     T_camera_target: RigidTransform,
     sensor: SensorModel,
-    rng: np.random.Generator | None = None,
-    time_s: float = 0.0,
-) -> RenderedFrame:
-    """Render one (gray, distance) frame pair.
-
-    Parameters
-    ----------
-    camera : CameraModel
-    scene : TargetScene
-    T_camera_target : RigidTransform
-        True pose of the target in the camera frame (mm).
-    sensor : SensorModel
-    rng : numpy Generator, required when ``sensor.noise`` is True.
-    time_s : time since the camera was switched on (temperature drift), s.
-
-    Returns
-    -------
-    RenderedFrame
-    """
-    if sensor.noise and rng is None:
-        raise ValueError("a seeded numpy Generator is required when sensor.noise is True")
+    t_int: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Noiseless phasor of one pose: (re, im, background, surface id, pixel-centre
+    distance, mixed-surface mask), each (H, W)."""
     sc = scene.in_camera(T_camera_target)
     h, w = camera.height, camera.width
-    t_int = sensor.exposure_for(float(np.linalg.norm(T_camera_target.t_mm)))
 
     bearings = camera.pixel_bearings().reshape(-1, 3)
     a, b, d, sid = _sample_returns(sc, bearings, sensor, t_int)
@@ -270,6 +264,76 @@ def render_frame(
             b[idx] = sbk.reshape(-1, s * s).mean(axis=1)
 
     re_img, im_img, b_img = (x.reshape(h, w) for x in (phasor_re, phasor_im, b))
+    return re_img, im_img, b_img, sid_img, d.reshape(h, w), mixed
+
+
+def combine_subframes(
+    phasors: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
+    background_fraction: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The phasor a 4-phase CW-ToF pixel measures when its four correlation samples
+    (0, 90, 180, 270 deg) see different scenes (motion artefacts).
+
+    phasors : four (re, im, background) image triples, one per sub-frame, shape (H, W).
+    Sample k is ``c_k = B_k + a_k cos(phi_k - k pi / 2)``; the camera forms
+    ``((c0 - c2) + j (c1 - c3)) / 2``, so the real part comes from sub-frames 0 and 2 and
+    the imaginary part from 1 and 3; background differences enter scaled by
+    ``background_fraction`` (the part the sensor's background suppression leaves). Four
+    equal sub-frames give back the static phasor exactly. Returns (re, im, mean
+    background).
+    """
+    if len(phasors) != 4:
+        raise ValueError(f"a 4-phase frame has 4 sub-frames, got {len(phasors)}")
+    (re0, _, b0), (_, im1, b1), (re2, _, b2), (_, im3, b3) = phasors
+    re = 0.5 * (re0 + re2) + 0.5 * background_fraction * (b0 - b2)
+    im = 0.5 * (im1 + im3) + 0.5 * background_fraction * (b1 - b3)
+    return re, im, 0.25 * (b0 + b1 + b2 + b3)
+
+
+def render_frame(
+    camera: CameraModel,
+    scene: TargetScene,
+    T_camera_target: RigidTransform,
+    sensor: SensorModel,
+    rng: np.random.Generator | None = None,
+    time_s: float = 0.0,
+    subframe_poses: Sequence[RigidTransform] | None = None,
+) -> RenderedFrame:
+    """Render one (gray, distance) frame pair.
+
+    Parameters
+    ----------
+    camera : CameraModel
+    scene : TargetScene
+    T_camera_target : RigidTransform
+        True pose of the target in the camera frame (mm).
+    sensor : SensorModel
+    rng : numpy Generator, required when ``sensor.noise`` is True.
+    time_s : time since the camera was switched on (temperature drift), s.
+    subframe_poses : optional four poses of the target at the times of the four phase
+        sub-frames (``combine_subframes``): motion artefacts while the scene moves.
+        ``T_camera_target`` then sets the exposure and the truth's surface map.
+
+    Returns
+    -------
+    RenderedFrame
+    """
+    if sensor.noise and rng is None:
+        raise ValueError("a seeded numpy Generator is required when sensor.noise is True")
+    h, w = camera.height, camera.width
+    t_int = sensor.exposure_for(float(np.linalg.norm(T_camera_target.t_mm)))
+    re_img, im_img, b_img, sid_img, d_img, mixed = _phasor_images(
+        camera, scene, T_camera_target, sensor, t_int
+    )
+    moved = np.zeros_like(mixed)  # pixels whose surface changes between sub-frames
+    if subframe_poses is not None:
+        # the four phase samples see the scene at their own times (a slewing table)
+        subs = [_phasor_images(camera, scene, T, sensor, t_int) for T in subframe_poses]
+        re_img, im_img, b_img = combine_subframes(
+            [x[:3] for x in subs], sensor.ambient_gray_fraction
+        )
+        for x in subs:
+            moved |= x[3] != sid_img
     if sensor.blur_sigma_px > 0:
         ks = 2 * int(np.ceil(3 * sensor.blur_sigma_px)) + 1
         re_img, im_img, b_img = (
@@ -278,10 +342,11 @@ def render_frame(
     amp = np.hypot(re_img, im_img)
     true_d = np.mod(np.arctan2(im_img, re_img), 2 * np.pi) * sensor.mm_per_radian
     # The phasor angle is already wrapped; keep the unwrapped truth for tests where we can.
-    unwrapped = np.where(sid_img != NO_HIT, d.reshape(h, w), np.nan)
+    unwrapped = np.where(sid_img != NO_HIT, d_img, np.nan)
     from_mixture = mixed if sensor.supersampling > 1 else np.zeros_like(mixed)
     if sensor.blur_sigma_px > 0:
         from_mixture = np.ones_like(mixed)
+    from_mixture = from_mixture | moved
     true_distance = np.where(from_mixture, true_d, unwrapped)
 
     dist = true_distance.copy()
