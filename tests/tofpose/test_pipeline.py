@@ -7,22 +7,30 @@ from tofpose.extraction import FrameError
 from tofpose.geometry import rotation_angle_deg
 from tofpose.sim.scene import Clutter, TargetScene
 
-# (distance mm, (pitch, yaw, roll) deg, offset mm, max position error mm, max angle deg)
+# (distance mm, (pitch, yaw, roll) deg, offset mm, median position error mm, median angle
+# deg, per-frame maxima mm / deg). The bounds are about twice what the pipeline measured
+# over these six seeded frames (medians 0.53/0.14/0.10/0.60/0.77/4.4/2.3/6.0 mm and
+# 0.24/0.025/0.037/0.034/0.25/1.0/0.87/2.4 deg from 0.5 to 12 m): a regression that
+# doubles the error fails here.
 RANGE_CASES = [
-    (500.0, (2, -3, 5), (220.0, -90.0), 2.0, 0.8),  # only markers 1, 2, 4 fit at 0.5 m
-    (700.0, (3, 2, -10), (0.0, 0.0), 1.0, 0.2),
-    (1500.0, (5, -4, 10), (30.0, -40.0), 1.0, 0.2),
-    (3000.0, (-6, 8, 30), (0.0, 0.0), 2.0, 0.3),
-    (5712.0, (4, 1, -2), (5.0, -2.0), 3.0, 0.8),
-    (8000.0, (2, -3, 15), (0.0, 0.0), 8.0, 2.5),
+    (500.0, (2, -3, 5), (220.0, -90.0), 1.1, 0.5, 1.5, 0.7),  # markers 1, 2, 4 fit at 0.5 m
+    (700.0, (3, 2, -10), (0.0, 0.0), 0.3, 0.05, 0.4, 0.08),
+    (1500.0, (5, -4, 10), (30.0, -40.0), 0.2, 0.08, 0.25, 0.12),
+    (3000.0, (-6, 8, 30), (0.0, 0.0), 1.2, 0.07, 2.0, 0.14),
+    (5712.0, (4, 1, -2), (5.0, -2.0), 1.6, 0.5, 2.6, 0.9),
+    (8000.0, (2, -3, 15), (0.0, 0.0), 9.0, 2.0, 12.0, 3.1),
     # at 10 m annealing often returns a mirror assignment; the triplet fallback fixes it
-    (10000.0, (2, -3, 10), (0.0, 0.0), 15.0, 5.0),
-    (12000.0, (2, 2, -20), (0.0, 0.0), 25.0, 8.0),
+    (10000.0, (2, -3, 10), (0.0, 0.0), 4.5, 1.8, 7.6, 3.9),
+    (12000.0, (2, 2, -20), (0.0, 0.0), 12.0, 5.0, 18.0, 6.2),
 ]
 
 
-@pytest.mark.parametrize(("z", "angles", "offset", "pos_tol", "ang_tol"), RANGE_CASES)
-def test_end_to_end_pose_over_the_operating_range(z, angles, offset, pos_tol, ang_tol):
+@pytest.mark.parametrize(
+    ("z", "angles", "offset", "pos_med", "ang_med", "pos_max", "ang_max"), RANGE_CASES
+)
+def test_end_to_end_pose_over_the_operating_range(
+    z, angles, offset, pos_med, ang_med, pos_max, ang_max
+):
     cam, cat = CameraModel(), paper_target()
     T = facing_pose(z, *angles, offset_mm=offset)
     pipe = PosePipeline(cam, cat)
@@ -31,10 +39,12 @@ def test_end_to_end_pose_over_the_operating_range(z, angles, offset, pos_tol, an
         for s in range(6)
     ]
     ok = [r for r in results if r.ok]
-    assert len(ok) >= 5, [r.reason for r in results if not r.ok]
+    assert len(ok) == 6, [r.reason for r in results if not r.ok]
+    pos = [np.linalg.norm(r.t_mm - T.t_mm) for r in ok]
+    ang = [rotation_angle_deg(r.R, T.R) for r in ok]
+    assert np.median(pos) < pos_med and np.median(ang) < ang_med, (pos, ang)
+    assert max(pos) < pos_max and max(ang) < ang_max, (pos, ang)
     for r in ok:
-        assert np.linalg.norm(r.t_mm - T.t_mm) < pos_tol
-        assert rotation_angle_deg(r.R, T.R) < ang_tol
         assert r.n_matched >= 3 and np.isfinite(r.residual_mm)
         assert set(r.timings_ms) >= {"levels", "blobs", "centroids", "matching", "refine", "total"}
         assert r.covariance is not None and np.all(np.linalg.eigvalsh(r.covariance) > 0)
@@ -58,11 +68,35 @@ def test_every_refinement_mode_gives_the_pose(refinement):
         f.gray, f.distance_mm
     )
     assert r.ok
-    # SVD alone is dominated by range noise (~0.4 deg at 2 m); refinement removes it.
-    ang_tol = 1.0 if refinement == "none" else 0.3
-    assert np.linalg.norm(r.t_mm - T.t_mm) < 3.0 and rotation_angle_deg(r.R, T.R) < ang_tol
+    assert np.linalg.norm(r.t_mm - T.t_mm) < 2.0 and rotation_angle_deg(r.R, T.R) < 0.7
     if refinement == "los":
         assert r.iterations >= 1
+
+
+def test_refinement_modes_compared_on_the_same_frames():
+    """Ten frames at 2 m: weighted SVD alone is dominated by range noise (measured median
+    0.40 mm / 0.17 deg); both refinements cut its attitude error by more than half and its
+    position error by at least a third (ML 0.16 mm / 0.051 deg, the paper's LOS
+    0.14 mm / 0.041 deg); ML and LOS agree with each other within 0.03 deg."""
+    cam, cat = CameraModel(), paper_target()
+    T = facing_pose(2000.0, 4, 3, -8)
+    frames = [render(T, seed=s) for s in range(10)]
+    err = {}
+    for mode in ("ml", "los", "none"):
+        pipe = PosePipeline(cam, cat, PipelineConfig(refinement=mode))
+        rs = []
+        for f in frames:
+            pipe.reset()
+            rs.append(pipe.process(f.gray, f.distance_mm))
+        assert all(r.ok for r in rs)
+        err[mode] = (np.median([np.linalg.norm(r.t_mm - T.t_mm) for r in rs]),
+                     np.median([rotation_angle_deg(r.R, T.R) for r in rs]),
+                     [r.R for r in rs])  # fmt: skip
+    for mode in ("ml", "los"):
+        assert err[mode][1] < 0.5 * err["none"][1], err
+        assert err[mode][0] < 0.67 * err["none"][0], err
+    gap = [rotation_angle_deg(a, b) for a, b in zip(err["ml"][2], err["los"][2], strict=True)]
+    assert np.median(gap) < 0.03
 
 
 def test_paper_preset_runs_on_the_paper_scene():
