@@ -125,6 +125,7 @@ def plot(out, path: Path) -> None:
             ax.plot(levels, [100 * out[(kind, lv, name)][2] for lv in levels], style,
                     alpha=0.4, label=f"{name}: wrong pose")  # fmt: skip
         ax.set_xlabel(xl)
+        ax.set_xticks(levels)
         ax.set_ylabel("% of frames")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7)
