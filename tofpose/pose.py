@@ -113,16 +113,19 @@ def measurement_jacobian(
     t: np.ndarray,
     sigma_range_mm: np.ndarray,
     sigma_bearing_rad: np.ndarray,
+    tangent_bases: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Whitened residuals r (3m,) and Jacobian J (3m, 6) of the ToF model (Eq. 10).
 
     Per reflector: two lateral residuals (predicted point off the measured line of sight,
     over range * sigma_bearing) and one range residual (e . (R x + t) - rho, over
     sigma_range). Parameters: small rotation (rad, left-multiplied) then translation (mm).
+    tangent_bases : optional ``_tangent_bases(bearings)`` (m, 2, 3), which depends only on
+    the measured bearings: an iteration passes it in instead of recomputing it.
     """
-    pred = x_mm @ R.T + t
     rx = x_mm @ R.T
-    B = _tangent_bases(bearings)  # (m, 2, 3)
+    pred = rx + t
+    B = _tangent_bases(bearings) if tangent_bases is None else tangent_bases  # (m, 2, 3)
     lat_sigma = np.maximum(ranges_mm * sigma_bearing_rad, 1e-6)
     r_lat = np.einsum("mkj,mj->mk", B, pred) / lat_sigma[:, None]
     r_rng = (np.einsum("mj,mj->m", bearings, pred) - ranges_mm) / sigma_range_mm
@@ -179,10 +182,17 @@ def systematic_range_sigma_mm(
     Shapes: x_mm, bearings (m, 3); ranges, sigmas (m,). 0 when the model already fits.
     """
 
+    # At a fixed pose only the range sigma changes with sigma_s: the lateral residuals
+    # and the raw range residuals are computed once.
+    pred = x_mm @ R.T + t
+    B = _tangent_bases(bearings)
+    lat_sigma = np.maximum(ranges_mm * sigma_bearing_rad, 1e-6)
+    lat2 = (np.einsum("mkj,mj->mk", B, pred) ** 2).sum(axis=1) / lat_sigma**2
+    rng2 = (np.einsum("mj,mj->m", bearings, pred) - ranges_mm) ** 2
+    var_range = np.asarray(sigma_range_mm, float) ** 2
+
     def median_z2(extra: float) -> float:
-        sr = np.sqrt(sigma_range_mm**2 + extra**2)
-        z = reflector_whitened_norms(x_mm, bearings, ranges_mm, R, t, sr, sigma_bearing_rad)
-        return float(np.median(z**2))
+        return float(np.median(lat2 + rng2 / (var_range + extra**2)))
 
     if median_z2(0.0) <= MEDIAN_CHI2_3DOF:
         return 0.0
@@ -260,9 +270,10 @@ def refine_maximum_likelihood(
     """
     R, t = R0.copy(), t0.copy()
     iterations = 0
+    B = _tangent_bases(bearings)
     for iterations in range(1, max_iterations + 1):  # noqa: B007
         r, J = measurement_jacobian(
-            x_mm, bearings, ranges_mm, R, t, sigma_range_mm, sigma_bearing_rad
+            x_mm, bearings, ranges_mm, R, t, sigma_range_mm, sigma_bearing_rad, B
         )
         H = J.T @ J
         try:
@@ -279,7 +290,9 @@ def refine_maximum_likelihood(
         t = t + delta[3:]
         if np.linalg.norm(delta) < tol:
             break
-    r, J = measurement_jacobian(x_mm, bearings, ranges_mm, R, t, sigma_range_mm, sigma_bearing_rad)
+    r, J = measurement_jacobian(
+        x_mm, bearings, ranges_mm, R, t, sigma_range_mm, sigma_bearing_rad, B
+    )
     try:
         cov = np.linalg.inv(J.T @ J)
     except np.linalg.LinAlgError:
