@@ -488,12 +488,20 @@ def measure_blobs(
     bearings = camera.pixel_bearings()
     kernel = np.ones((3, 3), np.uint8)
     members = [np.divmod(b.pixels, w) for b in blobs]  # (rows, cols) of each blob
-    for b, (rows, cols) in zip(blobs, members, strict=True):
+    # which blob owns each pixel: the one-pixel ring of a blob must not reach into a
+    # neighbour's pixels (markers 7 and 8 split apart touch each other), or that
+    # neighbour's light pulls the centroid towards it
+    owner = np.full(h * w, -1, np.int32)
+    for j, b in enumerate(blobs):
+        owner[b.pixels] = j
+    owner = owner.reshape(h, w)
+    for j, (b, (rows, cols)) in enumerate(zip(blobs, members, strict=True)):
         x, y, bw, bh = b.bbox
         y0, y1, x0, x1 = max(y - 2, 0), min(y + bh + 2, h), max(x - 2, 0), min(x + bw + 2, w)
         m = np.zeros((y1 - y0, x1 - x0), np.uint8)
         m[rows - y0, cols - x0] = 1
-        ring = cv2.dilate(m, kernel).astype(bool)
+        others = owner[y0:y1, x0:x1]
+        ring = cv2.dilate(m, kernel).astype(bool) & ((others == -1) | (others == j))
         patch = np.maximum(gray[y0:y1, x0:x1].astype(np.float32) - background, 0.0)
         if weighting == "coverage":
             local_max = cv2.dilate(np.where(m > 0, patch, 0).astype(np.float32), kernel)

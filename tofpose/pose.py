@@ -158,6 +158,11 @@ def reflector_whitened_norms(
     return np.linalg.norm(r.reshape(-1, 3), axis=1)
 
 
+#: Gauss-Newton stops once a step moves the pose by less than 1e-4 of its 1-sigma: with
+#: inconsistent data (large residuals) it converges only linearly and would otherwise
+#: spend its whole iteration budget on steps far below any uncertainty
+STEP_SIGMA2 = 1e-8
+
 MEDIAN_CHI2_3DOF = 2.366  # median of a chi-square with 3 degrees of freedom
 
 
@@ -288,7 +293,9 @@ def refine_maximum_likelihood(
             dR = np.eye(3) + np.sin(angle) * Kx + (1 - np.cos(angle)) * Kx @ Kx
             R = dR @ R
         t = t + delta[3:]
-        if np.linalg.norm(delta) < tol:
+        # converged when the step is below tol in mm/rad, or a negligible fraction of the
+        # pose's own uncertainty (delta^T H delta is the step in sigmas, squared)
+        if np.linalg.norm(delta) < tol or float(delta @ H @ delta) < STEP_SIGMA2:
             break
     r, J = measurement_jacobian(
         x_mm, bearings, ranges_mm, R, t, sigma_range_mm, sigma_bearing_rad, B
