@@ -456,6 +456,23 @@ def penalty_score(
     return 1.0 - (1.0 - q_size) * (1.0 - q_shape) * (1.0 - q_int)
 
 
+def _pixel_owner(blobs: list[Blob], h: int, w: int) -> np.ndarray | None:
+    """(H, W) index of the blob owning each pixel (-1: none), or None when no two blobs'
+    boxes come within 2 px of each other (the usual case: nothing to exclude)."""
+    boxes = np.array([b.bbox for b in blobs], float).reshape(-1, 4)
+    x0, y0 = boxes[:, 0] - 2, boxes[:, 1] - 2
+    x1, y1 = boxes[:, 0] + boxes[:, 2] + 2, boxes[:, 1] + boxes[:, 3] + 2
+    near = (x0[:, None] < x1[None]) & (x0[None] < x1[:, None])
+    near &= (y0[:, None] < y1[None]) & (y0[None] < y1[:, None])
+    np.fill_diagonal(near, False)
+    if not near.any():
+        return None
+    owner = np.full(h * w, -1, np.int32)
+    for j, b in enumerate(blobs):
+        owner[b.pixels] = j
+    return owner.reshape(h, w)
+
+
 def measure_blobs(
     blobs: list[Blob],
     gray: np.ndarray,
@@ -491,17 +508,16 @@ def measure_blobs(
     # which blob owns each pixel: the one-pixel ring of a blob must not reach into a
     # neighbour's pixels (markers 7 and 8 split apart touch each other), or that
     # neighbour's light pulls the centroid towards it
-    owner = np.full(h * w, -1, np.int32)
-    for j, b in enumerate(blobs):
-        owner[b.pixels] = j
-    owner = owner.reshape(h, w)
+    owner = _pixel_owner(blobs, h, w)
     for j, (b, (rows, cols)) in enumerate(zip(blobs, members, strict=True)):
         x, y, bw, bh = b.bbox
         y0, y1, x0, x1 = max(y - 2, 0), min(y + bh + 2, h), max(x - 2, 0), min(x + bw + 2, w)
         m = np.zeros((y1 - y0, x1 - x0), np.uint8)
         m[rows - y0, cols - x0] = 1
-        others = owner[y0:y1, x0:x1]
-        ring = cv2.dilate(m, kernel).astype(bool) & ((others == -1) | (others == j))
+        ring = cv2.dilate(m, kernel).astype(bool)
+        if owner is not None:
+            others = owner[y0:y1, x0:x1]
+            ring &= (others == -1) | (others == j)
         patch = np.maximum(gray[y0:y1, x0:x1].astype(np.float32) - background, 0.0)
         if weighting == "coverage":
             local_max = cv2.dilate(np.where(m > 0, patch, 0).astype(np.float32), kernel)

@@ -59,6 +59,22 @@ def _consistent(current: np.ndarray, previous: np.ndarray, tol_px: float) -> boo
     return float(np.median(nn[near])) <= tol_px
 
 
+def _mean_near_blobs(gray: np.ndarray, older: list[np.ndarray], blobs: list[Blob]):
+    """I-bar (§3.4) where it is read: in each blob's box grown by 2 px (its centroid ring
+    and range pixels); elsewhere this frame's gray. (H, W) like ``gray``; inside the boxes
+    the same arithmetic as the full-frame mean, ``(gray + sum(older)) / n``."""
+    n = 1 + len(older)
+    h, w = gray.shape
+    if not blobs:
+        return (gray + sum(older)) / n
+    out = np.array(gray, dtype=np.result_type(gray.dtype, np.float32))
+    for b in blobs:
+        x, y, bw, bh = b.bbox
+        sl = np.s_[max(y - 2, 0) : min(y + bh + 2, h), max(x - 2, 0) : min(x + bw + 2, w)]
+        out[sl] = (gray[sl] + sum(o[sl] for o in older)) / n
+    return out
+
+
 class Persistence:
     """Counter image and temporal combination over the last K consistent frames."""
 
@@ -68,6 +84,15 @@ class Persistence:
 
     def reset(self) -> None:
         self._history.clear()
+
+    def snapshot(self) -> list:
+        """The history as it is (for ``restore``: a pass that is abandoned after ``apply``
+        must not leave its frame in the history twice)."""
+        return list(self._history)
+
+    def restore(self, snapshot: list) -> None:
+        self._history.clear()
+        self._history.extend(snapshot)
 
     def apply(
         self, blobs: list[Blob], gray: np.ndarray, distance: np.ndarray
@@ -115,16 +140,18 @@ class Persistence:
         kept, dropped = blobs, 0
         mean_gray, med_dist = gray, distance
         if n > 1:
-            counter = mask.astype(np.int32) + sum(e.mask.astype(np.int32) for e in used)
             if n >= cfg.c_min:
                 kept = []
                 for b in blobs:
-                    c = counter.reshape(-1)[b.pixels]
+                    # the counter image C, read only where it is used: at the blob
+                    c = mask.reshape(-1)[b.pixels].astype(np.int32) + sum(
+                        e.mask.reshape(-1)[b.pixels].astype(np.int32) for e in used
+                    )
                     if np.median(c) >= cfg.c_min:
                         kept.append(b)
                     else:
                         dropped += 1
-            mean_gray = (gray + sum(e.gray for e in used)) / n
+            mean_gray = _mean_near_blobs(gray, [e.gray for e in used], blobs)
             med_dist = distance.copy()
             if kept:
                 idx = np.concatenate([b.pixels for b in kept])

@@ -56,6 +56,13 @@ from tofpose.pose import (
     weighted_svd,
 )
 from tofpose.range_calibration import RangeCorrection
+from tofpose.tracking import (
+    TrackingConfig,
+    TrackState,
+    find_in_window,
+    predict_windows,
+    share_pixels,
+)
 from tofpose.uncertainty import SigmaFloors, measurement_sigmas
 
 Refinement = Literal["ml", "los", "none"]
@@ -108,6 +115,7 @@ class PipelineConfig:
     extraction: ExtractionConfig = field(default_factory=ExtractionConfig)
     persistence: PersistenceConfig = field(default_factory=PersistenceConfig)
     matching: MatchingConfig = field(default_factory=MatchingConfig)
+    tracking: TrackingConfig = field(default_factory=TrackingConfig)
     refinement: Refinement = "ml"
     correct_perspective_bias: bool = True
     ellipse_confirmation: bool = True
@@ -197,6 +205,7 @@ class PoseResult:
     motion: bool = False
     rejected: list[RejectedBlob] = field(default_factory=list)
     active_threshold_counts: float = float("nan")
+    mode: Literal["acquisition", "tracking"] = "acquisition"
 
     @property
     def n_matched(self) -> int:
@@ -252,11 +261,13 @@ class PosePipeline:
         self._catalog_d = catalog.diameters_mm
         self._catalog_ids = catalog.ids
         self._rng = np.random.default_rng(self.config.ransac_seed)
+        self._track: TrackState | None = None
         camera.pixel_bearings()  # warm the cache
 
     def reset(self) -> None:
         """Forget multi-frame history (call when the stream is discontinuous)."""
         self._persistence.reset()
+        self._track = None
 
     # ------------------------------------------------------------------------------------
     def process(
@@ -270,6 +281,17 @@ class PosePipeline:
         cfg = self.config
         timer = _Timer()
         g, d = check_frame(self.camera, gray, distance_mm)
+        track = self._track
+        self._track = None  # set again below by a confident pose
+        if (
+            cfg.tracking.enabled
+            and track is not None
+            and track.frames_since_acquisition + 1 < cfg.tracking.reacquire_every
+        ):
+            tracked = self._process_tracking(g, d, time_s, track, timer)
+            if tracked is not None:
+                return tracked
+            timer.lap("tracking fallback")
         stats = frame_levels(g, cfg.extraction)
         timer.lap("levels")
 
@@ -384,6 +406,89 @@ class PosePipeline:
                 unmatched=unmatched + [(u[0], u[1], r) for u, r in zip(uv, rho, strict=True)],
                 **extra,
             )
+        result = self._pose_result(solved, ranged, uv, rho, sig_px, sig_rng, unmatched,
+                                   time_s, timer, extra)  # fmt: skip
+        self._track = TrackState(result.R, result.t_mm, stats.raw_threshold, stats.background)
+        return result
+
+    def _process_tracking(self, g, d, time_s, track: TrackState, timer) -> PoseResult | None:
+        """Tracking mode (``tofpose.tracking``): reflectors searched only in windows around
+        their predicted images, correspondences known; None means "fall back to the full
+        acquisition pass", and leaves no trace in the persistence history."""
+        cfg = self.config
+        tc = cfg.tracking
+        windows = predict_windows(
+            self.camera, self._catalog_xyz, self._catalog_d, track.R, track.t_mm,
+            margin_px=tc.margin_px, min_diameter_px=tc.min_diameter_px,
+        )  # fmt: skip
+        if len(windows) < cfg.matching.min_matches:
+            return None
+        blobs = []
+        for wdw in windows:
+            b = find_in_window(g, wdw, track.threshold_counts, track.background_counts)
+            if isinstance(b, str):
+                return None  # a marker lost (or moved too far): acquire
+            blobs.append(b)
+        if share_pixels(blobs):
+            return None
+        timer.lap("windows")
+        before = self._persistence.snapshot()
+
+        def give_up() -> None:
+            self._persistence.restore(before)
+
+        kept, mean_g, med_d, pinfo = self._persistence.apply(blobs, g, d)
+        if len(kept) != len(blobs):
+            give_up()
+            return None
+        measure_blobs(kept, mean_g, med_d, self.camera, track.background_counts)
+        if not all(np.isfinite(b.distance_mm) for b in kept):
+            give_up()
+            return None
+        if self.range_correction is not None:
+            self._correct_ranges(kept, mean_g)
+        timer.lap("centroids")
+        uv = np.array([b.centroid_uv for b in kept])
+        rho = np.array([b.distance_mm for b in kept])
+        y = self.camera.bearings(uv) * rho[:, None]  # Eq. 8
+        sig_px, sig_rng = measurement_sigmas(
+            kept, mean_g, med_d, track.background_counts,
+            SigmaFloors(cfg.centroid_sigma_floor_px, cfg.range_sigma_floor_mm),
+        )  # fmt: skip
+        w = 1.0 / (sig_rng**2 + (rho * sig_px / self.camera.fx) ** 2)
+        pairs = np.column_stack((np.arange(len(kept)), [wd.catalog_index for wd in windows]))
+        timer.lap("backproject")
+        active = g >= track.threshold_counts
+        solved = self._solve(pairs, uv, rho, y, w, sig_px, sig_rng,
+                             cfg.matching.alpha_for(y), active)  # fmt: skip
+        timer.lap("refine")
+        if isinstance(solved, str) or len(solved[3]) < len(pairs):
+            give_up()  # rejected, or a reflector dropped as an outlier: acquire
+            return None
+        ml = solved[9]
+        if ml.chi2 > cfg.outlier_chi2_per_dof * max(3 * len(pairs) - 6, 1):
+            give_up()  # an inconsistent fit: the windows may hold the wrong blobs
+            return None
+        extra = {
+            "frames_used": pinfo.frames_used,
+            "motion": pinfo.motion,
+            "rejected": [],
+            "active_threshold_counts": track.threshold_counts,
+            "n_candidates": len(kept),
+        }
+        result = self._pose_result(solved, kept, uv, rho, sig_px, sig_rng, [], time_s, timer,
+                                   extra, mode="tracking")  # fmt: skip
+        self._track = replace(
+            track,
+            R=result.R,
+            t_mm=result.t_mm,
+            frames_since_acquisition=track.frames_since_acquisition + 1,
+        )
+        return result
+
+    def _pose_result(self, solved, ranged, uv, rho, sig_px, sig_rng, unmatched, time_s, timer,
+                     extra, mode: str = "acquisition") -> PoseResult:  # fmt: skip
+        """The ok result of a solved pose (``_solve``'s tuple)."""
         R, t, x, k_idx, i_idx, uv_m, y_m, rho_m, iterations, ml = solved
         pred = x @ R.T + t
         res = np.linalg.norm(y_m - pred, axis=1)
@@ -418,6 +523,7 @@ class PosePipeline:
             + (ml.bias_covariance if ml.bias_covariance is not None else 0.0),
             timer.total(),
             **extra,
+            mode=mode,
         )
 
     def _correct_ranges(self, blobs: list[Blob], gray: np.ndarray) -> None:

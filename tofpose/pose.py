@@ -99,10 +99,20 @@ def refine_line_of_sight(
 def _tangent_bases(bearings: np.ndarray) -> np.ndarray:
     """Two unit vectors orthogonal to each bearing, shape (m, 2, 3)."""
     ref = np.where(np.abs(bearings[:, [0]]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    a = np.cross(bearings, ref)
+    a = _cross(bearings, ref)
     a /= np.linalg.norm(a, axis=1, keepdims=True)
-    b = np.cross(bearings, a)
+    b = _cross(bearings, a)
     return np.stack((a, b), axis=1)
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (m, 3) arrays: ``np.cross``'s arithmetic without its
+    per-call axis handling (which costs more than the product for a few rows)."""
+    out = np.empty_like(u)
+    out[:, 0] = u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1]
+    out[:, 1] = u[:, 2] * v[:, 0] - u[:, 0] * v[:, 2]
+    out[:, 2] = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+    return out
 
 
 def measurement_jacobian(

@@ -1,0 +1,169 @@
+"""Tracking mode (ours, beyond the paper): once a pose is confident, the next frame is
+searched only in small windows around each reflector's predicted image.
+
+The paper processes every frame from scratch (§3-§5). Between two frames of a live stream
+the target moves little, so the last pose predicts where each catalog reflector appears
+and how large; the frame is thresholded only in a window around each prediction, the
+component nearest the prediction is that reflector (the correspondence is known, no
+annealing), and the pose is solved and verified as in acquisition. Policy, stated in
+docs/algorithm.md ("Tracking mode"): the pipeline falls back to the full acquisition
+pass in the same frame whenever a predicted reflector is not found in its window, a
+component touches its window's edge (the target moved more than the window allows), the
+fit is inconsistent or drops a reflector as an outlier, or the pose fails verification;
+and every ``reacquire_every`` frames in any case, so that a re-appearing marker or a new
+bright reflection elsewhere is seen. Tracking therefore never reports a pose the current
+frame's pixels do not support.
+
+Functions take and return arrays; shapes are given in each docstring.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from tofpose.camera import CameraModel
+from tofpose.extraction import Blob
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    """enabled : use tracking after a confident pose. reacquire_every : a full acquisition
+    pass at least every this many frames. margin_px : search margin around a reflector's
+    predicted disc (inter-frame motion allowed). min_diameter_px : reflectors predicted
+    smaller than this are not tracked (their windows hold too little to verify)."""
+
+    enabled: bool = False
+    reacquire_every: int = 15
+    margin_px: float = 4.0
+    min_diameter_px: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.reacquire_every < 1:
+            raise ValueError(f"reacquire_every must be >= 1, got {self.reacquire_every}")
+        if self.margin_px < 1:
+            raise ValueError(f"margin_px must be >= 1, got {self.margin_px}")
+
+
+@dataclass(frozen=True)
+class TrackState:
+    """What the last confident pose leaves for the next frame."""
+
+    R: np.ndarray
+    t_mm: np.ndarray
+    threshold_counts: float
+    background_counts: float
+    frames_since_acquisition: int = 0
+
+
+@dataclass(frozen=True)
+class Window:
+    """A search window: catalog index, predicted centre (u, v) px, predicted diameter px,
+    and the window's pixel bounds [u0, u1) x [v0, v1)."""
+
+    catalog_index: int
+    centre_uv: np.ndarray
+    diameter_px: float
+    u0: int
+    u1: int
+    v0: int
+    v1: int
+
+
+def predict_windows(
+    camera: CameraModel,
+    catalog_mm: np.ndarray,
+    catalog_diameter_mm: np.ndarray,
+    R: np.ndarray,
+    t_mm: np.ndarray,
+    *,
+    margin_px: float,
+    min_diameter_px: float,
+) -> list[Window]:
+    """Windows around the predicted image of every catalog reflector in view.
+
+    catalog_mm : (N, 3) target frame; catalog_diameter_mm : (N,). Reflectors smaller than
+    ``min_diameter_px``, whose window leaves the image, or whose disc would touch a
+    neighbour's (closer than half their diameters plus 2 px: they merge into one blob,
+    markers 7 and 8 beyond ~4.5 m) are skipped; the others carry the pose. The window is
+    the predicted disc plus ``margin_px`` on every side.
+    """
+    centres = catalog_mm @ R.T + t_mm
+    out: list[Window] = []
+    if np.any(centres[:, 2] <= 0):
+        return out
+    uv = camera.project(centres)
+    d_px = camera.fx * catalog_diameter_mm / centres[:, 2]
+    gap = np.linalg.norm(uv[:, None] - uv[None], axis=-1) - 0.5 * (d_px[:, None] + d_px[None])
+    np.fill_diagonal(gap, np.inf)
+    for i in range(len(centres)):
+        if d_px[i] < min_diameter_px or gap[i].min() < 2.0:
+            continue
+        half = 0.5 * d_px[i] + margin_px
+        u0, u1 = int(np.floor(uv[i, 0] - half)), int(np.ceil(uv[i, 0] + half)) + 1
+        v0, v1 = int(np.floor(uv[i, 1] - half)), int(np.ceil(uv[i, 1] + half)) + 1
+        if u0 < 0 or v0 < 0 or u1 > camera.width or v1 > camera.height:
+            continue
+        out.append(Window(i, uv[i], float(d_px[i]), u0, u1, v0, v1))
+    return out
+
+
+def share_pixels(blobs: list[Blob]) -> bool:
+    """True if two windows found the same component (one blob serving two reflectors)."""
+    seen: set[int] = set()
+    for b in blobs:
+        px = set(b.pixels.tolist())
+        if seen & px:
+            return True
+        seen |= px
+    return False
+
+
+def find_in_window(
+    gray: np.ndarray, window: Window, threshold_counts: float, background_counts: float
+) -> Blob | str:
+    """The reflector's blob in its window, or why it is not there.
+
+    gray : (H, W) frame. The window is thresholded at ``threshold_counts`` (the active
+    pixel set's I_t of the last acquisition); of the 8-connected components, the one
+    nearest the predicted centre is taken when its area is between a quarter and four
+    times the predicted disc's (at least one pixel). A component touching the window's
+    edge means the target moved more than the margin: refused. The blob carries its
+    moment centroid (the persistence motion gate's) and global pixel indices.
+    """
+    w_img = gray.shape[1]
+    patch = gray[window.v0 : window.v1, window.u0 : window.u1]
+    mask = (patch >= threshold_counts).astype(np.uint8)
+    n, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    if n <= 1:
+        return "not found in its window"
+    expected = np.pi * (0.5 * window.diameter_px) ** 2
+    c_local = window.centre_uv - [window.u0, window.v0]
+    best, best_d = 0, np.inf
+    for k in range(1, n):
+        area = stats[k, cv2.CC_STAT_AREA]
+        if not max(1.0, 0.25 * expected) <= area <= max(4.0, 4.0 * expected):
+            continue
+        d = float(np.hypot(*(cents[k] - c_local)))
+        if d < best_d:
+            best, best_d = k, d
+    if best == 0:
+        return "no component of the predicted size in its window"
+    x, y, bw, bh = (int(stats[best, j]) for j in range(4))
+    ph, pw = mask.shape
+    if x == 0 or y == 0 or x + bw >= pw or y + bh >= ph:
+        return "touches its window's edge (moved too far)"
+    rows, cols = np.nonzero(labels == best)
+    vals = patch[rows, cols].astype(np.float64)
+    wts = np.maximum(vals - background_counts, 1e-9)
+    rows_g, cols_g = rows + window.v0, cols + window.u0
+    return Blob(
+        pixels=rows_g * w_img + cols_g,
+        area_px=len(rows),
+        bbox=(x + window.u0, y + window.v0, bw, bh),
+        centroid_uv=np.array([(wts * cols_g).sum() / wts.sum(), (wts * rows_g).sum() / wts.sum()]),
+        peak_counts=float(vals.max()),
+        source="tracking",
+    )
