@@ -8,7 +8,7 @@ import logging
 import re
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
-from dataclasses import fields
+from dataclasses import fields, replace
 
 from fastapi import FastAPI, Request
 from fastapi.exception_handlers import http_exception_handler
@@ -48,6 +48,7 @@ from backend.settings import Settings
 from backend.state import AppState
 from tofpose.catalog import Catalog
 from tofpose.pipeline import PipelineConfig
+from tofpose.tracking import TrackingConfig
 
 log = logging.getLogger("tofpose.server")
 
@@ -80,11 +81,13 @@ def _restore_camera_settings(sessions, devices: Devices) -> None:
         log.warning("stored camera settings not applied: %s", exc)
 
 
-def _pipeline_config(devices: Devices) -> PipelineConfig:
+def _pipeline_config(devices: Devices, settings: Settings) -> PipelineConfig:
     """The pipeline's defaults, but for a camera that states its common range bias (the
-    ideal simulated sensor has none), whose 1-sigma need not carry the default prior."""
+    ideal simulated sensor has none), whose 1-sigma need not carry the default prior, and
+    with tracking mode as the settings say (a live stream: on by default)."""
+    cfg = PipelineConfig(tracking=TrackingConfig(enabled=settings.tracking))
     bias = getattr(devices.camera, "range_bias_sigma_mm", None)
-    return PipelineConfig() if bias is None else PipelineConfig(range_bias_sigma_mm=bias)
+    return cfg if bias is None else replace(cfg, range_bias_sigma_mm=bias)
 
 
 def _start_scene(state: AppState) -> None:
@@ -156,7 +159,7 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             history_size=settings.history_size,
             timeout_s=settings.camera_timeout_s,
             backoff_s=settings.retry_backoff_s,
-            pipeline_config=_pipeline_config(devs),
+            pipeline_config=_pipeline_config(devs, settings),
         )  # fmt: skip
         campaigns = CampaignService(
             sessions, acq, hub, devs.motion, recordings_dir=settings.data_dir / "campaigns"

@@ -51,6 +51,8 @@ class Settings(BaseSettings):
     allowed_hosts : extra names the server answers to in the ``Host`` header (comma-separated
         in the environment), beside the bind address and, on loopback, localhost,
         127.0.0.1 and [::1]. A wildcard bind (0.0.0.0, ::) with none given accepts any.
+    tracking : the live pipeline's tracking mode (windows around the predicted reflectors
+        after a confident pose, full acquisition as fallback; docs/algorithm.md).
     lab_target_distance_mm : with real devices, the target's distance from the turntable
         centre (rail 0): the lab reference pose is computed from the rate table's encoders
         and this nominal geometry, as the simulated lab does with ``sim_target_distance_mm``.
@@ -87,6 +89,7 @@ class Settings(BaseSettings):
     max_body_bytes: int = Field(1_000_000, ge=1024)
     shutdown_timeout_s: float = Field(3.0, gt=0, le=60)
     frontend_dir: Path | None = None
+    tracking: bool = True
     viser: bool = True
     viser_port: int = Field(8080, ge=0, le=65535)
     allowed_hosts: Annotated[list[str], NoDecode] = Field(default_factory=list)

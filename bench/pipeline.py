@@ -1,13 +1,19 @@
-"""Pipeline speed per stage on one core over simulated frames at several ranges.
+"""Pipeline speed on one core over simulated streams at several ranges: acquisition (the
+full pass on every frame) and tracking (``PipelineConfig.tracking``: windows around the
+predicted reflectors, a full pass every 15 frames and whenever tracking fails), Python
+function calls per frame, and OpenCV's SimpleBlobDetector + solvePnP (SQPnP) timed in the
+same run on the same frames, so the ratio is measured side by side. The baseline gets its
+correspondences for free (``bench.baseline.strict_correspondences``, not timed).
 
-Run: ``python bench/pipeline.py [--frames N]``. Prints a Markdown table of median and p95
-milliseconds per stage and in total, per range, with the pose success rate.
+Run: ``python bench/pipeline.py [--frames N] [--repeats R]``. Prints two Markdown tables:
+totals per mode with the ratio to OpenCV, and acquisition per stage (median / p95).
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -15,22 +21,16 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench._common import med_p95, single_core, table  # noqa: E402
-from tofpose import CameraModel, PosePipeline, paper_target  # noqa: E402
+from bench.baseline import baseline_pose, blob_detector  # noqa: E402
+from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
 from tofpose.sim.bench import R_FACING  # noqa: E402
 from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
 from tofpose.sim.scene import TargetScene  # noqa: E402
+from tofpose.tracking import TrackingConfig  # noqa: E402
 
-STAGES = [
-    "levels",
-    "blobs",
-    "ellipses",
-    "centroids",
-    "backproject",
-    "matching",
-    "refine",
-    "total",
-]
+STAGES = ["levels", "blobs", "ellipses", "centroids", "backproject", "matching", "refine",
+          "total"]  # fmt: skip
 CASES = [
     (700.0, (-110.0, -55.0)),
     (1500.0, (0.0, -30.0)),
@@ -38,6 +38,95 @@ CASES = [
     (5712.0, (2.0, -10.0)),
     (10000.0, (0.0, 0.0)),
 ]
+TRACKING = PipelineConfig(tracking=TrackingConfig(enabled=True))
+
+
+def python_calls(pipe: PosePipeline, frames) -> float:
+    """Python-level function calls (and C functions called from Python) per frame."""
+    count = 0
+
+    def prof(frame, event, arg):  # noqa: ARG001 - the profiler's signature
+        nonlocal count
+        if event in ("call", "c_call"):
+            count += 1
+
+    sys.setprofile(prof)
+    try:
+        for f in frames:
+            pipe.process(f.gray, f.distance_mm)
+    finally:
+        sys.setprofile(None)
+    return count / len(frames)
+
+
+def run(n_frames: int, repeats: int):
+    single_core()
+    cam, cat = CameraModel(), paper_target()
+    det = blob_detector()
+    rng = np.random.default_rng(0)
+    rows = []
+    for z, off in CASES:
+        T = RigidTransform(rotation_from_euler_deg(2, -3, 10) @ R_FACING, np.array([*off, z]))
+        frames = [render_frame(cam, TargetScene(), T, SensorModel(), rng)
+                  for _ in range(n_frames)]  # fmt: skip
+        acq_stage: dict[str, list[float]] = {s: [] for s in STAGES}
+        acq_ok, trk_ms, trk_all, cv_ms = [], [], [], []
+        for _ in range(repeats):
+            pipe = PosePipeline(cam, cat)
+            for f in frames:
+                r = pipe.process(f.gray, f.distance_mm)
+                acq_ok.append(r.ok)
+                for s in STAGES:
+                    acq_stage[s].append(r.timings_ms.get(s, 0.0))
+            pipe = PosePipeline(cam, cat, TRACKING)
+            for f in frames:
+                t0 = time.perf_counter()
+                r = pipe.process(f.gray, f.distance_mm)
+                ms = 1e3 * (time.perf_counter() - t0)
+                trk_all.append(ms)
+                if r.mode == "tracking":
+                    trk_ms.append(ms)
+            for f in frames:
+                cv_ms.append(baseline_pose(f.gray, cam, cat, T, det, ransac=False)[2])
+        calls_acq = python_calls(PosePipeline(cam, cat), frames[: min(10, n_frames)])
+        trk = PosePipeline(cam, cat, TRACKING)
+        trk.process(frames[0].gray, frames[0].distance_mm)  # acquire, then count tracking
+        calls_trk = python_calls(trk, frames[1 : min(10, n_frames)])
+        rows.append({
+            "range": z, "ok": float(np.mean(acq_ok)), "stages": acq_stage,
+            "tracking": trk_ms, "tracking_all": trk_all, "tracked": len(trk_ms) / len(trk_all),
+            "opencv": cv_ms, "calls": (calls_acq, calls_trk),
+        })  # fmt: skip
+    return rows
+
+
+def totals_table(rows) -> str:
+    body = []
+    for r in rows:
+        acq = med_p95(r["stages"]["total"])
+        trk = med_p95(r["tracking"]) if r["tracking"] else (np.nan, np.nan)
+        cv = float(np.median(r["opencv"]))
+        body.append([
+            f"{r['range'] / 1000:.1f} m", f"{r['ok']:.0%}",
+            f"{acq[0]:.2f} / {acq[1]:.2f}", f"{trk[0]:.2f} / {trk[1]:.2f}",
+            f"{r['tracked']:.0%}", f"{np.median(r['tracking_all']):.2f}",
+            f"{r['calls'][0]:.0f} / {r['calls'][1]:.0f}", f"{cv:.2f}",
+            f"{acq[0] / cv:.1f}", f"{trk[0] / cv:.1f}",
+        ])  # fmt: skip
+    return table(["range", "ok", "acquisition ms", "tracking ms", "frames tracked",
+                  "stream ms (both)", "Python calls / frame (acq / track)", "OpenCV ms",
+                  "acquisition / OpenCV", "tracking / OpenCV"], body)  # fmt: skip
+
+
+def stages_table(rows) -> str:
+    body = []
+    for r in rows:
+        cells = [f"{r['range'] / 1000:.1f} m", f"{r['ok']:.0%}"]
+        for s in STAGES:
+            m, p = med_p95(r["stages"][s])
+            cells.append(f"{m:.2f} / {p:.2f}")
+        body.append(cells)
+    return table(["range", "ok", *STAGES], body)
 
 
 def main() -> None:
@@ -45,35 +134,15 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=60)
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
-    single_core()
-    cam, cat = CameraModel(), paper_target()
-    rows = []
-    rng = np.random.default_rng(0)
-    for z, off in CASES:
-        R = rotation_from_euler_deg(2, -3, 10) @ R_FACING
-        T = RigidTransform(R, np.array([*off, z]))
-        frames = [
-            render_frame(cam, TargetScene(), T, SensorModel(), rng) for _ in range(args.frames)
-        ]
-        per_stage: dict[str, list[float]] = {s: [] for s in STAGES}
-        n_ok = 0
-        for _ in range(args.repeats):
-            pipe = PosePipeline(cam, cat)
-            for f in frames:
-                r = pipe.process(f.gray, f.distance_mm)
-                n_ok += r.ok
-                for s in STAGES:
-                    per_stage[s].append(r.timings_ms.get(s, 0.0))
-        cells = [f"{z / 1000:.1f} m", f"{n_ok / (args.frames * args.repeats):.0%}"]
-        for s in STAGES:
-            m, p = med_p95(per_stage[s])
-            cells.append(f"{m:.2f} / {p:.2f}")
-        rows.append(cells)
-    print(
-        f"pipeline time per frame, ms (median / p95), one core, "
-        f"{args.frames} frames x {args.repeats}"
-    )
-    print(table(["range", "ok", *STAGES], rows))
+    rows = run(args.frames, args.repeats)
+    print(f"ms per frame (median / p95), one core, {args.frames} frames x {args.repeats} per "
+          "range; tracking: the frames the tracking pipeline measured in tracking mode; "
+          "stream: every frame of the tracking pipeline (acquisitions included); OpenCV: "
+          "SimpleBlobDetector + solvePnP on the same frames, correspondences free")  # fmt: skip
+    print(totals_table(rows))
+    print()
+    print("acquisition per stage, ms (median / p95):")
+    print(stages_table(rows))
 
 
 if __name__ == "__main__":

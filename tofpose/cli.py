@@ -15,7 +15,7 @@ from tqdm import tqdm
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog, paper_target
 from tofpose.geometry import RigidTransform, facing_euler_deg, rotation_angle_deg
-from tofpose.pipeline import PosePipeline
+from tofpose.pipeline import PipelineConfig, PosePipeline
 from tofpose.range_calibration import (
     RangeCorrection,
     fit_range_correction,
@@ -24,6 +24,7 @@ from tofpose.range_calibration import (
 from tofpose.recording import RecordingError, RecordingWriter, open_recording
 from tofpose.threads import single_threaded_blas
 from tofpose.tof import unambiguous_range_mm
+from tofpose.tracking import TrackingConfig
 
 CSV_COLUMNS = (
     "frame", "time_s", "ok", "n_matched", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz",
@@ -93,8 +94,10 @@ def estimate(
     catalog_path: str | None,
     camera_path: str | None,
     progress: bool = True,
+    tracking: bool = False,
 ) -> dict[str, float]:
-    """Run the pipeline over a recording and write the CSV; returns summary numbers."""
+    """Run the pipeline over a recording and write the CSV; returns summary numbers.
+    ``tracking``: the pipeline's tracking mode (faster on a continuous recording)."""
     with open_recording(rec_path) as rec:
         camera, correction = rec.camera, None
         if camera_path:
@@ -110,7 +113,8 @@ def estimate(
                 f"tofpose: camera {camera.width}x{camera.height} does not match the recording's "
                 f"{rec.camera.width}x{rec.camera.height} frames"
             )
-        pipe = PosePipeline(camera, catalog, range_correction=correction)
+        config = PipelineConfig(tracking=TrackingConfig(enabled=tracking))
+        pipe = PosePipeline(camera, catalog, config, range_correction=correction)
         n_ok = 0
         with open(out_csv, "w", newline="") as fh:
             wr = csv.writer(fh)
@@ -260,6 +264,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--catalog", help="catalog JSON (default: the recording's)")
     p.add_argument("--camera", help="camera JSON (default: the recording's)")
     p.add_argument("--out", required=True, help="output CSV")
+    p.add_argument("--tracking", action="store_true",
+                   help="tracking mode: look for reflectors near their last position")  # fmt: skip
     p = sub.add_parser(
         "calibrate-range",
         help="fit the camera's range correction from a recording of the known target",
@@ -342,7 +348,8 @@ def main(argv: list[str] | None = None) -> int:
         return server_main.serve(opts) if cmd == "serve" else server_main.report(opts)
     try:
         if args.cmd == "estimate":
-            s = estimate(args.recording, args.out, args.catalog, args.camera)
+            s = estimate(args.recording, args.out, args.catalog, args.camera,
+                         tracking=args.tracking)  # fmt: skip
             print(f"{s['ok']}/{s['frames']} frames with a pose -> {args.out}")
         elif args.cmd == "calibrate-range":
             print(calibrate_range(args.recording, args.out, args.reference, args.modulation_mhz))

@@ -132,6 +132,7 @@ def pose_from_sample(s: LiveSample) -> PosePublic:
         catalog=s.catalog_name,
         ok=r.ok,
         reason=r.reason,
+        mode=r.mode,
         n_candidates=r.n_candidates,
         n_matched=r.n_matched,
         matched=[

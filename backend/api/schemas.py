@@ -182,6 +182,11 @@ class PosePublic(BaseModel):
         description="I_t as applied: the active pixel set is the pixels with gray >= this",
     )
     residual_mm: float | None
+    mode: Literal["acquisition", "tracking"] = Field(
+        "acquisition",
+        description="acquisition: the full pass; tracking: windows around the reflectors "
+        "predicted from the last pose",
+    )
     iterations: int
     frames_used: int
     motion: bool

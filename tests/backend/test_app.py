@@ -188,3 +188,14 @@ def test_replay_camera_without_motion(tmp_path):
         assert h["motion"]["state"] == "absent" and h["camera"]["driver"] == "replay"
         r = c.post("/api/motion/move", json={"yaw_deg": 1.0}, headers=AUTH)
         assert r.status_code == 503 and "no motion system" in r.json()["detail"]
+
+
+def test_live_pipeline_tracks_after_the_first_pose_unless_switched_off(tmp_path):
+    with running_app(make_settings(tmp_path / "a")) as client:
+        first = latest_pose(client)
+        later = wait_for(lambda: (p := latest_pose(client, first["frame_index"]))["mode"]
+                         == "tracking" and p, 10.0, "a tracked pose")  # fmt: skip
+        assert later["ok"] and later["n_matched"] >= 6
+    with running_app(make_settings(tmp_path / "b", tracking=False)) as client:
+        p = latest_pose(client, latest_pose(client)["frame_index"] + 2)
+        assert p["mode"] == "acquisition"

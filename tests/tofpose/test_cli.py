@@ -20,6 +20,12 @@ def test_simulate_then_estimate_writes_the_documented_csv(tmp_path, capsys):
     # attitude relative to the facing reference: face-on reads ~0, not +-180
     assert all(abs(float(r[k])) < 2.0 for r in body for k in ("pitch_deg", "yaw_deg", "roll_deg"))
     assert "4/4 frames with a pose" in capsys.readouterr().out
+    # tracking mode gives the same poses within their sigma on this static recording
+    tracked = tmp_path / "tracked.csv"
+    assert main(["estimate", str(rec), "--out", str(tracked), "--tracking"]) == 0
+    rows_t = [dict(zip(rows[0], r, strict=True)) for r in list(csv.reader(tracked.open()))[1:]]
+    for a, b in zip(body, rows_t, strict=True):
+        assert abs(float(a["z_mm"]) - float(b["z_mm"])) < float(a["sigma_z_mm"])
     # the 1-sigma columns come after the original ones (old readers keep working)
     assert CSV_COLUMNS[:15][-1] == "residual_mm" and CSV_COLUMNS[15] == "sigma_x_mm"
     assert all(0 < float(r["sigma_z_mm"]) < 2.0 for r in body)

@@ -1132,6 +1132,13 @@ export interface components {
             iterations: number;
             /** Matched */
             matched: components["schemas"]["MatchedPublic"][];
+            /**
+             * Mode
+             * @description acquisition: the full pass; tracking: windows around the reflectors predicted from the last pose
+             * @default acquisition
+             * @enum {string}
+             */
+            mode: "acquisition" | "tracking";
             /** Motion */
             motion: boolean;
             /** N Candidates */

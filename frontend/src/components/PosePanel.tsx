@@ -25,7 +25,8 @@ export function PosePanel({ pose, stale }: { pose: Pose | null; stale: boolean }
         <p class="error" data-testid="no-pose">no pose: {pose.reason}</p>
       )}
       <p class="small">frame {pose.frame_index}, {pose.n_matched} matched of {pose.n_candidates} candidates,
-        residual {fmt(pose.residual_mm, 3)} mm, {fmt(pose.timings_ms["total"], 1)} ms;
+        residual {fmt(pose.residual_mm, 3)} mm, {fmt(pose.timings_ms["total"], 1)} ms
+        (<span data-testid="pose-mode">{pose.mode}</span>);
         attitude relative to the facing reference (face-on reads 0, 0, 0)</p>
       {pose.truth && (
         <p class="small">lab reference: x {fmt(pose.truth.x_mm)} y {fmt(pose.truth.y_mm)} z {fmt(pose.truth.z_mm)} mm;
