@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from tofpose.camera import CameraModel
+from tofpose.robust import median_1d
 
 SATURATED_COUNTS = 4095
 #: fewest pixels for which a blob's eccentricity means anything (the shape gate and q_shape)
@@ -355,7 +356,7 @@ def find_candidate_blobs(
             continue
         d_vals = distance_mm[roi][member]
         d_vals = d_vals[np.isfinite(d_vals)]
-        rho = float(np.median(d_vals)) if len(d_vals) else float("nan")
+        rho = median_1d(d_vals) if len(d_vals) else float("nan")
         if config.h_min_px is not None:
             lo_a, hi_a = config.h_min_px, config.h_max_px or np.inf
             too_big = area > hi_a
@@ -543,7 +544,7 @@ def measure_blobs(
             b.distance_mm = float("nan")
             continue
         along = d[ok] * (bearings[rows[ok], cols[ok]] @ e_c)
-        b.distance_mm = float(np.median(along))
+        b.distance_mm = median_1d(along)
 
 
 def disc_image_centre_offsets_px(

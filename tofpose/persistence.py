@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tofpose.extraction import Blob
+from tofpose.robust import median_1d
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,7 @@ def _consistent(current: np.ndarray, previous: np.ndarray, tol_px: float) -> boo
     near = nn < max(4 * tol_px, 2.0)
     if near.sum() < max(1, int(np.ceil(0.5 * len(current)))):
         return False
-    return float(np.median(nn[near])) <= tol_px
+    return median_1d(nn[near]) <= tol_px
 
 
 def _mean_near_blobs(gray: np.ndarray, older: list[np.ndarray], blobs: list[Blob]):
@@ -147,7 +148,7 @@ class Persistence:
                     c = mask.reshape(-1)[b.pixels].astype(np.int32) + sum(
                         e.mask.reshape(-1)[b.pixels].astype(np.int32) for e in used
                     )
-                    if np.median(c) >= cfg.c_min:
+                    if median_1d(c) >= cfg.c_min:
                         kept.append(b)
                     else:
                         dropped += 1

@@ -56,6 +56,7 @@ from tofpose.pose import (
     weighted_svd,
 )
 from tofpose.range_calibration import RangeCorrection
+from tofpose.robust import median_1d
 from tofpose.tracking import (
     TrackingConfig,
     TrackState,
@@ -534,7 +535,7 @@ class PosePipeline:
             amp = flat[b.pixels]  # the gray level, as in the calibration fit
             err = self.range_correction.error_mm(np.full(len(b.pixels), b.distance_mm), amp,
                                                  b.pixels)  # fmt: skip
-            b.distance_mm = float(b.distance_mm - np.median(err))
+            b.distance_mm = float(b.distance_mm - median_1d(err))
 
     def _size_hint(self, wrong_size) -> str:
         """A clause naming bright blobs the catalog's sizes ruled out, or ''."""

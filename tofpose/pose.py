@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tofpose.geometry import skew
+from tofpose.robust import median_1d
 
 
 def weighted_svd(
@@ -207,7 +208,7 @@ def systematic_range_sigma_mm(
     var_range = np.asarray(sigma_range_mm, float) ** 2
 
     def median_z2(extra: float) -> float:
-        return float(np.median(lat2 + rng2 / (var_range + extra**2)))
+        return median_1d(lat2 + rng2 / (var_range + extra**2))
 
     if median_z2(0.0) <= MEDIAN_CHI2_3DOF:
         return 0.0

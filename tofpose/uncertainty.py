@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tofpose.extraction import Blob
+from tofpose.robust import median_1d
 
 #: centroid sampling error of a single-pixel blob, px (uniform over one pixel)
 SINGLE_PIXEL_SIGMA_PX = 1.0 / np.sqrt(12.0)
@@ -86,12 +87,12 @@ def measurement_sigmas(
             model_unit[j] = float(np.mean(np.sqrt(g[ok]) / amp[ok]))
         if n_valid[j] >= 3:
             d = dv[ok]
-            own_mad_mm[j] = 1.4826 * float(np.median(np.abs(d - np.median(d))))
+            own_mad_mm[j] = 1.4826 * median_1d(np.abs(d - median_1d(d)))
 
     sigma_px = np.sqrt(shot_px**2 + floors.centroid_px**2 + sampling_sigma_px(n_px) ** 2)
 
     pool = (n_valid >= POOL_MIN_PIXELS) & np.isfinite(own_mad_mm) & (model_unit > 0)
-    k = float(np.median(own_mad_mm[pool] / model_unit[pool])) if pool.any() else np.nan
+    k = median_1d(own_mad_mm[pool] / model_unit[pool]) if pool.any() else np.nan
     per_pixel_mm = np.where(np.isfinite(own_mad_mm), own_mad_mm, 0.0)
     if np.isfinite(k):
         per_pixel_mm = np.maximum(per_pixel_mm, k * np.nan_to_num(model_unit))
