@@ -143,11 +143,14 @@ class Persistence:
         if n > 1:
             if n >= cfg.c_min:
                 kept = []
-                for b in blobs:
-                    # the counter image C, read only where it is used: at the blob
-                    c = mask.reshape(-1)[b.pixels].astype(np.int32) + sum(
-                        e.mask.reshape(-1)[b.pixels].astype(np.int32) for e in used
-                    )
+                # the counter image C, read only where it is used: at the blobs' pixels
+                idx = np.concatenate([b.pixels for b in blobs]) if blobs else np.empty(0, int)
+                count = mask.reshape(-1)[idx].astype(np.int32)
+                for e in used:
+                    count += e.mask.reshape(-1)[idx]
+                ends = np.cumsum([len(b.pixels) for b in blobs])
+                for b, end in zip(blobs, ends, strict=True):
+                    c = count[end - len(b.pixels) : end]
                     if median_1d(c) >= cfg.c_min:
                         kept.append(b)
                     else:

@@ -151,7 +151,7 @@ def find_in_window(
             best, best_d = k, d
     if best == 0:
         return "no component of the predicted size in its window"
-    x, y, bw, bh = (int(stats[best, j]) for j in range(4))
+    x, y, bw, bh = stats[best, :4].tolist()
     ph, pw = mask.shape
     if x == 0 or y == 0 or x + bw >= pw or y + bh >= ph:
         return "touches its window's edge (moved too far)"
