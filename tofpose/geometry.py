@@ -28,8 +28,20 @@ def rotation_from_euler_deg(pitch_deg: float, yaw_deg: float, roll_deg: float) -
 
 
 def euler_deg_from_rotation(R: np.ndarray) -> np.ndarray:
-    """(pitch, yaw, roll) in degrees, shape (3,), of a rotation matrix of shape (3, 3)."""
-    return Rotation.from_matrix(R).as_euler(EULER_SEQUENCE, degrees=True)
+    """(pitch, yaw, roll) in degrees, shape (3,), of a rotation matrix of shape (3, 3).
+
+    Closed form of ``R = Rz(roll) Ry(yaw) Rx(pitch)`` (``R[2, 0] = -sin(yaw)``); the same
+    angles as scipy's extrinsic ``"xyz"`` away from yaw = +-90 deg (gimbal lock, where
+    only pitch - roll is defined and roll is set to 0), at a fraction of the cost.
+    """
+    R = np.asarray(R, float)
+    c_yaw = np.hypot(R[0, 0], R[1, 0])
+    yaw = np.arctan2(-R[2, 0], c_yaw)
+    if c_yaw > 1e-9:
+        pitch, roll = np.arctan2(R[2, 1], R[2, 2]), np.arctan2(R[1, 0], R[0, 0])
+    else:  # gimbal lock: fold everything into pitch
+        pitch, roll = np.arctan2(-R[1, 2], R[1, 1]), 0.0
+    return np.degrees(np.array([pitch, yaw, roll]))
 
 
 FACING = np.diag([1.0, -1.0, -1.0])  # R_camera_target of a target squarely facing the camera
@@ -43,10 +55,30 @@ def facing_euler_deg(R_camera_target: np.ndarray) -> np.ndarray:
 
 
 def quaternion_wxyz_from_rotation(R: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z), shape (4,), with w >= 0."""
-    x, y, z, w = Rotation.from_matrix(R).as_quat()
-    q = np.array([w, x, y, z])
-    return q if w >= 0 else -q
+    """Unit quaternion (w, x, y, z), shape (4,), with w >= 0, of a rotation matrix (3, 3).
+
+    Shepperd's method: the largest of the four squared components is taken from the
+    diagonal and the others from the off-diagonal sums, which keeps it accurate for any
+    rotation.
+    """
+    R = np.asarray(R, float)
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    k = int(np.argmax([tr, R[0, 0], R[1, 1], R[2, 2]]))
+    if k == 0:
+        s = 2.0 * np.sqrt(1.0 + tr)
+        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+    elif k == 1:
+        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = [(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
+    elif k == 2:
+        s = 2.0 * np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
+        q = [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s]
+    else:
+        s = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
+        q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0 else -q
 
 
 def rotation_from_quaternion_wxyz(q_wxyz) -> np.ndarray:

@@ -56,3 +56,25 @@ def test_facing_euler_reads_zero_face_on_and_never_flips():
     for angles in ([0.01, -0.02, 0.0], [-0.01, 0.02, 0.0], [3.0, -4.0, 10.0]):
         R = rotation_from_euler_deg(*angles) @ FACING  # tilted from facing
         np.testing.assert_allclose(facing_euler_deg(R), angles, atol=1e-9)
+
+
+def test_closed_form_euler_and_quaternion_agree_with_scipy():
+    """The closed forms (no scipy call per frame) give scipy's answers."""
+    from scipy.spatial.transform import Rotation
+
+    from tofpose.geometry import (
+        euler_deg_from_rotation,
+        quaternion_wxyz_from_rotation,
+        rotation_from_euler_deg,
+    )
+
+    for R in Rotation.random(2000, random_state=3).as_matrix():
+        ref = Rotation.from_matrix(R).as_euler("xyz", degrees=True)
+        np.testing.assert_allclose(euler_deg_from_rotation(R), ref, atol=1e-9)
+        x, y, z, w = Rotation.from_matrix(R).as_quat()
+        q = np.array([w, x, y, z]) * (1 if w >= 0 else -1)
+        np.testing.assert_allclose(quaternion_wxyz_from_rotation(R), q, atol=1e-12)
+    # gimbal lock (yaw 90 deg): the angles still give back the rotation
+    R = rotation_from_euler_deg(20.0, 90.0, 5.0)
+    np.testing.assert_allclose(rotation_from_euler_deg(*euler_deg_from_rotation(R)), R,
+                               atol=1e-9)  # fmt: skip
