@@ -48,6 +48,7 @@ from tofpose.matching import (
 )
 from tofpose.persistence import Persistence, PersistenceConfig
 from tofpose.pose import (
+    MLResult,
     common_range_bias_covariance,
     refine_line_of_sight,
     refine_maximum_likelihood,
@@ -224,6 +225,38 @@ def variance_factor(chi2: float, n_reflectors: int) -> float:
     return max(1.0, chi2 / dof) if dof > 0 and np.isfinite(chi2) else 1.0
 
 
+@dataclass(frozen=True)
+class Solution:
+    """A solved pose (§5) and what it was solved from.
+
+    R, t_mm : the pose; catalog_xyz : (m, 3) matched reflectors in the target frame;
+    k_idx, i_idx : (m,) observed and catalog indices of the matches; uv_px, y_mm,
+    range_mm : (m, 2), (m, 3), (m,) the measurements used (perspective-corrected
+    centroids, back-projected points, ranges); iterations : refinement iterations; ml :
+    the maximum-likelihood evaluation at the pose (covariance, chi^2, norms).
+    """
+
+    R: np.ndarray
+    t_mm: np.ndarray
+    catalog_xyz: np.ndarray
+    k_idx: np.ndarray
+    i_idx: np.ndarray
+    uv_px: np.ndarray
+    y_mm: np.ndarray
+    range_mm: np.ndarray
+    iterations: int
+    ml: MLResult
+
+
+@dataclass(frozen=True)
+class Rejected:
+    """No pose: ``reason`` for the user; ``implausible`` when a pose was found but failed
+    verification (the assignment may be a mirror image: worth the triplet fallback)."""
+
+    reason: str
+    implausible: bool = False
+
+
 class _Timer:
     def __init__(self) -> None:
         self.ms: dict[str, float] = {}
@@ -381,8 +414,8 @@ class PosePipeline:
             )
         solved = self._solve(m.pairs, uv, rho, y, w, sig_px, sig_rng, m.alpha_mm, active)
         if (
-            isinstance(solved, str)
-            and "pose rejected" in solved
+            isinstance(solved, Rejected)
+            and solved.implausible
             and cfg.triplet_fallback
             and cfg.matcher == "annealing"
         ):
@@ -401,9 +434,9 @@ class PosePipeline:
             if len(pairs):
                 solved = self._solve(pairs, uv, rho, y, w, sig_px, sig_rng, m.alpha_mm, active)
         timer.lap("refine")
-        if isinstance(solved, str):
+        if isinstance(solved, Rejected):
             return fail(
-                solved,
+                solved.reason,
                 unmatched=unmatched + [(u[0], u[1], r) for u, r in zip(uv, rho, strict=True)],
                 **extra,
             )
@@ -463,10 +496,10 @@ class PosePipeline:
         solved = self._solve(pairs, uv, rho, y, w, sig_px, sig_rng,
                              cfg.matching.alpha_for(y), active)  # fmt: skip
         timer.lap("refine")
-        if isinstance(solved, str) or len(solved[3]) < len(pairs):
+        if isinstance(solved, Rejected) or len(solved.k_idx) < len(pairs):
             give_up()  # rejected, or a reflector dropped as an outlier: acquire
             return None
-        ml = solved[9]
+        ml = solved.ml
         if ml.chi2 > cfg.outlier_chi2_per_dof * max(3 * len(pairs) - 6, 1):
             give_up()  # an inconsistent fit: the windows may hold the wrong blobs
             return None
@@ -489,8 +522,10 @@ class PosePipeline:
 
     def _pose_result(self, solved, ranged, uv, rho, sig_px, sig_rng, unmatched, time_s, timer,
                      extra, mode: str = "acquisition") -> PoseResult:  # fmt: skip
-        """The ok result of a solved pose (``_solve``'s tuple)."""
-        R, t, x, k_idx, i_idx, uv_m, y_m, rho_m, iterations, ml = solved
+        """The ok result of a ``Solution``."""
+        s = solved
+        R, t, x, k_idx, i_idx = s.R, s.t_mm, s.catalog_xyz, s.k_idx, s.i_idx
+        uv_m, y_m, rho_m, iterations, ml = s.uv_px, s.y_mm, s.range_mm, s.iterations, s.ml
         pred = x @ R.T + t
         res = np.linalg.norm(y_m - pred, axis=1)
         matched = [
@@ -550,9 +585,11 @@ class PosePipeline:
             "is the right catalog active?"
         )
 
-    def _solve(self, pairs, uv, rho, y, w, sig_px, sig_rng, alpha_mm, active):
+    def _solve(
+        self, pairs, uv, rho, y, w, sig_px, sig_rng, alpha_mm, active
+    ) -> Solution | Rejected:
         """Pose from matched pairs (m, 2): SVD, completion, perspective-bias correction,
-        refinement and verification. Returns a tuple, or a reason string on rejection."""
+        refinement and verification. Returns a ``Solution`` or ``Rejected``."""
         cfg = self.config
         k_idx, i_idx = pairs[:, 0], pairs[:, 1]
         x = self._catalog_xyz[i_idx]
@@ -586,13 +623,13 @@ class PosePipeline:
         if cfg.verify_pose:
             problem = self._verify(R, t, active, set(int(i) for i in i_idx))
             if problem:
-                return f"pose rejected: {problem}"
+                return Rejected(f"pose rejected: {problem}", implausible=True)
         bias = (cfg.range_bias_sigma_mm if self.range_correction is None
                 else cfg.calibrated_range_bias_sigma_mm)  # fmt: skip
         if bias > 0:
             extra = common_range_bias_covariance(x, e_m, rho_m, R, t, sr, sb, bias)
             ml = replace(ml, bias_covariance=extra)
-        return R, t, x, k_idx, i_idx, uv_m, y_m, rho_m, iterations, ml
+        return Solution(R, t, x, k_idx, i_idx, uv_m, y_m, rho_m, iterations, ml)
 
     def _worst_outlier(self, x, e_m, rho_m, y_m, w_m, sr, sb, ml) -> int | None:
         """Index of the reflector to drop, or None when the fit is consistent.
