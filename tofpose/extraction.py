@@ -311,6 +311,78 @@ def _moments(us: np.ndarray, vs: np.ndarray, w: np.ndarray) -> tuple[np.ndarray,
     return np.array([cu, cv]), ecc
 
 
+def size_gate(
+    area_px: int,
+    extent_px: int,
+    range_mm: float,
+    fx_px: float,
+    diameters_mm: np.ndarray,
+    config: ExtractionConfig,
+) -> tuple[float, float, float, bool, bool]:
+    """The size window (§3.2, ``H_min..H_max``): (equivalent diameter, window low, window
+    high, inside, too big) in px for a component of ``area_px`` pixels whose bounding box
+    spans ``extent_px`` at most. The paper's fixed area window when ``config.h_min_px``
+    is set; ours otherwise: the catalog's diameters at the component's range
+    (``predicted_diameter_window_px``); a component longer than one reflector is too big
+    (merged markers go to §3.3)."""
+    d_eq = 2.0 * np.sqrt(area_px / np.pi)
+    if config.h_min_px is not None:
+        lo_a, hi_a = config.h_min_px, config.h_max_px or np.inf
+        d_lo, d_hi = 2.0 * np.sqrt(np.array([lo_a, hi_a]) / np.pi)
+        return d_eq, d_lo, d_hi, bool(lo_a <= area_px <= hi_a), bool(area_px > hi_a)
+    d_lo, d_hi = predicted_diameter_window_px(fx_px, range_mm, diameters_mm, config)
+    too_big = d_eq > d_hi or extent_px > d_hi + 1
+    size_ok = d_lo <= d_eq <= d_hi and extent_px <= d_hi + 1 and extent_px >= d_lo
+    return d_eq, d_lo, d_hi, bool(size_ok), bool(too_big)
+
+
+def nlog_gate(
+    gray: np.ndarray,
+    labels: np.ndarray,
+    label: int,
+    bbox: tuple[int, int, int, int],
+    member: np.ndarray,
+    peak: float,
+    stats: FrameStats,
+    config: ExtractionConfig,
+) -> np.ndarray | None:
+    """Criterion 2 (B3, B4, Eqs. 17-18): the nLoG response on the active pixels of one
+    component (pixels outside A are zero, §3.1.2), at a scale matched to its size, must
+    reach ``J_peak`` somewhere (Eq. 17); the pixels at or above ``J_t`` (Eq. 18) are the
+    blob. Returns that mask over the component's box (bh, bw), or None when refused.
+
+    gray, labels : (H, W); member : (bh, bw) bool, the component's pixels in its box.
+    """
+    h, w = gray.shape
+    x, y, bw, bh = bbox
+    pad = 2
+    y0, y1 = max(y - pad, 0), min(y + bh + pad, h)
+    x0, x1 = max(x - pad, 0), min(x + bw + pad, w)
+    patch = np.where(labels[y0:y1, x0:x1] == label, gray[y0:y1, x0:x1], 0.0).astype(np.float32)
+    if config.nlog_sigma_px is not None:
+        j = nlog_response(patch, config.nlog_sigma_px, normalise=False)
+        j_peak, j_t = config.nlog_peak_abs, config.nlog_floor_abs
+    else:
+        area = int(member.sum())
+        sigma = max(0.5, np.sqrt(area / np.pi) / np.sqrt(2.0))
+        j = nlog_response(patch, sigma)
+        contrast = peak - stats.background
+        j_peak = config.nlog_peak_rel * contrast  # Eq. 17
+        j_t = config.nlog_floor_rel * contrast  # Eq. 18
+    j_in = j[y - y0 : y - y0 + bh, x - x0 : x - x0 + bw]
+    if float(j_in[member].max()) < j_peak:
+        return None
+    keep = member & (j_in >= j_t)
+    return keep if np.any(keep) else None
+
+
+def shape_gate(n_pixels: int, eccentricity: float, max_eccentricity: float) -> bool:
+    """The shape criterion: a blob of at least ``SHAPE_MIN_PIXELS`` must be no more
+    eccentric than a disc tilted by the largest accepted angle; smaller blobs have no
+    measurable shape and pass."""
+    return n_pixels < SHAPE_MIN_PIXELS or eccentricity <= max_eccentricity
+
+
 def find_candidate_blobs(
     gray: np.ndarray,
     distance_mm: np.ndarray,
@@ -357,18 +429,9 @@ def find_candidate_blobs(
         d_vals = distance_mm[roi][member]
         d_vals = d_vals[np.isfinite(d_vals)]
         rho = median_1d(d_vals) if len(d_vals) else float("nan")
-        if config.h_min_px is not None:
-            lo_a, hi_a = config.h_min_px, config.h_max_px or np.inf
-            too_big = area > hi_a
-            size_ok = lo_a <= area <= hi_a
-            # the paper's fixed area window H_min..H_max, as equivalent diameters
-            d_lo, d_hi = 2.0 * np.sqrt(np.array([lo_a, hi_a]) / np.pi)
-            d_eq = 2.0 * np.sqrt(area / np.pi)
-        else:
-            d_lo, d_hi = predicted_diameter_window_px(camera.fx, rho, diameters_mm, config)
-            d_eq = 2.0 * np.sqrt(area / np.pi)
-            too_big = d_eq > d_hi or max(bw, bh) > d_hi + 1  # long: merged markers (§3.3)
-            size_ok = d_lo <= d_eq <= d_hi and max(bw, bh) <= d_hi + 1 and max(bw, bh) >= d_lo
+        d_eq, d_lo, d_hi, size_ok, too_big = size_gate(
+            area, max(bw, bh), rho, camera.fx, diameters_mm, config
+        )
         blob = Blob(
             pixels=np.empty(0, np.int64), area_px=area, bbox=(x, y, bw, bh), peak_counts=peak
         )
@@ -384,35 +447,15 @@ def find_candidate_blobs(
         if not size_ok:
             reject("size")
             continue
-        # Criterion 2 (B3, B4, Eqs. 17-18): nLoG on the active pixels of this component
-        # (pixels outside A are zero, §3.1.2), matched to the blob's size.
-        pad = 2
-        y0, y1 = max(y - pad, 0), min(y + bh + pad, h)
-        x0, x1 = max(x - pad, 0), min(x + bw + pad, w)
-        patch = np.where(labels[y0:y1, x0:x1] == k, gray[y0:y1, x0:x1], 0.0).astype(np.float32)
-        if config.nlog_sigma_px is not None:
-            j = nlog_response(patch, config.nlog_sigma_px, normalise=False)
-            j_peak, j_t = config.nlog_peak_abs, config.nlog_floor_abs
-        else:
-            sigma = max(0.5, np.sqrt(area / np.pi) / np.sqrt(2.0))
-            j = nlog_response(patch, sigma)
-            contrast = peak - stats.background
-            j_peak = config.nlog_peak_rel * contrast
-            j_t = config.nlog_floor_rel * contrast
-        inner = (slice(y - y0, y - y0 + bh), slice(x - x0, x - x0 + bw))
-        j_in = j[inner]
-        if float(j_in[member].max()) < j_peak:
-            reject("nlog")
-            continue
-        keep = member & (j_in >= j_t)
-        if not np.any(keep):
+        keep = nlog_gate(gray, labels, k, (x, y, bw, bh), member, peak, stats, config)
+        if keep is None:
             reject("nlog")
             continue
         rows, cols = np.nonzero(keep)
         us, vs = cols + x, rows + y
         wts = np.maximum(g_roi[keep] - stats.background, 1.0).astype(np.float64)
         c, ecc = _moments(us.astype(np.float64), vs.astype(np.float64), wts)
-        if len(us) >= SHAPE_MIN_PIXELS and ecc > ecc_max:
+        if not shape_gate(len(us), ecc, ecc_max):
             reject("shape")
             continue
         blob.pixels = vs * w + us

@@ -181,3 +181,24 @@ def test_a_marker_cut_by_the_border_is_rejected_as_such_and_the_active_set_is_a_
     assert len(found.accepted) == 7
     # The active pixel set is exactly the pixels at or above the applied threshold.
     assert np.array_equal(found.active_mask.astype(bool), g >= stats.raw_threshold)
+
+
+def test_size_gate_window_from_the_catalog_at_the_range():
+    from tofpose.extraction import ExtractionConfig, size_gate
+
+    cfg, diam = ExtractionConfig(), paper_target().diameters_mm
+    # a 100 mm marker at 2 m is ~16 px across (f = 325 px): ~200 px of area
+    d_eq, lo, hi, ok, big = size_gate(200, 16, 2000.0, 325.0, diam, cfg)
+    assert ok and not big and lo < d_eq < hi
+    assert size_gate(2000, 50, 2000.0, 325.0, diam, cfg)[4]  # too big: merged markers
+    assert not size_gate(200, 60, 2000.0, 325.0, diam, cfg)[3]  # long and thin: no disc
+    paper = ExtractionConfig(h_min_px=10, h_max_px=300)
+    assert size_gate(200, 16, float("nan"), 325.0, diam, paper)[3:] == (True, False)
+    assert size_gate(400, 16, float("nan"), 325.0, diam, paper)[3:] == (False, True)
+
+
+@pytest.mark.parametrize(("n", "ecc", "ok"), [(4, 0.99, True), (30, 0.3, True), (30, 0.9, False)])
+def test_shape_gate(n, ecc, ok):
+    from tofpose.extraction import shape_gate
+
+    assert shape_gate(n, ecc, 0.5) is ok
