@@ -29,6 +29,7 @@ from tofpose.ellipse import (
 )
 from tofpose.extraction import (
     Blob,
+    CandidateBlobs,
     ExtractionConfig,
     RejectedBlob,
     check_frame,
@@ -226,6 +227,29 @@ def variance_factor(chi2: float, n_reflectors: int) -> float:
 
 
 @dataclass(frozen=True)
+class Measurements:
+    """Candidate reflectors back-projected (Eqs. 7-8) with their sigmas.
+
+    blobs : the n blobs, in order; uv_px : (n, 2) centroids (Eq. 19); range_mm : (n,)
+    ranges (Eq. 20); y_mm : (n, 3) points in the camera frame (Eq. 8); weights : (n,) the
+    weights of Eq. 21, ``1 / (sigma_range^2 + (range sigma_px / f)^2)``; sigma_px,
+    sigma_range_mm : (n,) per-reflector sigmas (``uncertainty.measurement_sigmas``).
+    """
+
+    blobs: tuple[Blob, ...]
+    uv_px: np.ndarray
+    range_mm: np.ndarray
+    y_mm: np.ndarray
+    weights: np.ndarray
+    sigma_px: np.ndarray
+    sigma_range_mm: np.ndarray
+
+    def as_unmatched(self) -> list[tuple[float, float, float]]:
+        """(u, v, range) of every candidate, for a result without a pose."""
+        return [(u[0], u[1], r) for u, r in zip(self.uv_px, self.range_mm, strict=True)]
+
+
+@dataclass(frozen=True)
 class Solution:
     """A solved pose (§5) and what it was solved from.
 
@@ -341,15 +365,8 @@ class PosePipeline:
                 f"no reflector contrast: brightest pixel {stats.i_max:.0f} counts over a "
                 f"background of {stats.background:.0f} (all-dark frame?)"
             )
-        found = find_candidate_blobs(g, d, self.camera, self._catalog_d, cfg.extraction, stats)
-        blobs, oversize, active = found.accepted, found.oversize, found.active_mask
-        timer.lap("blobs")
-        if cfg.ellipse_confirmation:
-            blobs = self._confirm_ellipses(blobs, oversize, g, d, stats)
-        timer.lap("ellipses")
-        for b in blobs:  # ellipse-supplemented blobs have no moment centroid yet
-            if not np.isfinite(b.centroid_uv).all() and b.ellipse is not None:
-                b.centroid_uv = np.array(b.ellipse[0])
+        found, blobs = self._candidates(g, d, stats, timer)
+        active = found.active_mask
         # The motion gate compares the cheap moment centroids of find_candidate_blobs;
         # the precise centroids and ranges are measured once, on the combined frames.
         kept, mean_g, med_d, pinfo = self._persistence.apply(blobs, g, d)
@@ -380,70 +397,78 @@ class PosePipeline:
                 **extra,
             )
 
-        uv = np.array([b.centroid_uv for b in ranged])
-        rho = np.array([b.distance_mm for b in ranged])
-        e = self.camera.bearings(uv)
-        y = e * rho[:, None]  # Eq. 8
-        sig_px, sig_rng = measurement_sigmas(
-            ranged,
-            mean_g,
-            med_d,
-            stats.background,
-            SigmaFloors(cfg.centroid_sigma_floor_px, cfg.range_sigma_floor_mm),
-        )
-        w = 1.0 / (sig_rng**2 + (rho * sig_px / self.camera.fx) ** 2)
-        diam = np.array([self._apparent_diameter_px(b) for b in ranged]) * rho / self.camera.fx
+        meas = self._back_project(ranged, mean_g, med_d, stats.background)
         timer.lap("backproject")
-        if cfg.matcher == "ransac":
-            m = self._match_ransac(y, w)
-        else:
-            m = match_reflectors(
-                y,
-                self._catalog_xyz,
-                cfg.matching,
-                observed_diameter_mm=diam,
-                catalog_diameter_mm=self._catalog_d,
-                weights=w,
-            )
+        m = self._match(meas)
         timer.lap("matching")
         if not m.ok:
-            return fail(
-                f"matching failed: {m.reason}",
-                unmatched=unmatched + [(u[0], u[1], r) for u, r in zip(uv, rho, strict=True)],
-                **extra,
-            )
-        solved = self._solve(m.pairs, uv, rho, y, w, sig_px, sig_rng, m.alpha_mm, active)
-        if (
-            isinstance(solved, Rejected)
-            and solved.implausible
-            and cfg.triplet_fallback
-            and cfg.matcher == "annealing"
-        ):
-            # Annealing found a mirror-image or otherwise impossible assignment: try the
-            # exhaustive triplet hypotheses restricted to physically possible poses.
-            tol = cfg.matching.pair_tolerance_mm(m.alpha_mm, w)
-            pairs = match_by_triplets(
-                y,
-                self._catalog_xyz,
-                m.alpha_mm,
-                tol,
-                lambda R_, t_: self._faces_camera(R_, t_),
-                weights=w,
-                min_matches=cfg.matching.min_matches,
-            )
-            if len(pairs):
-                solved = self._solve(pairs, uv, rho, y, w, sig_px, sig_rng, m.alpha_mm, active)
+            return fail(f"matching failed: {m.reason}",
+                        unmatched=unmatched + meas.as_unmatched(), **extra)  # fmt: skip
+        solved = self._solve_with_fallback(meas, m, active)
         timer.lap("refine")
         if isinstance(solved, Rejected):
-            return fail(
-                solved.reason,
-                unmatched=unmatched + [(u[0], u[1], r) for u, r in zip(uv, rho, strict=True)],
-                **extra,
-            )
-        result = self._pose_result(solved, ranged, uv, rho, sig_px, sig_rng, unmatched,
-                                   time_s, timer, extra)  # fmt: skip
+            return fail(solved.reason, unmatched=unmatched + meas.as_unmatched(), **extra)
+        result = self._pose_result(solved, meas, unmatched, time_s, timer, extra)
         self._track = TrackState(result.R, result.t_mm, stats.raw_threshold, stats.background)
         return result
+
+    # -- stages ---------------------------------------------------------------------------
+    def _candidates(self, g, d, stats, timer) -> tuple[CandidateBlobs, list[Blob]]:
+        """§3.1-§3.3: candidate blobs through the gates, then ellipse confirmation (which
+        may split merged components); returns the extraction record and the blobs."""
+        cfg = self.config
+        found = find_candidate_blobs(g, d, self.camera, self._catalog_d, cfg.extraction, stats)
+        timer.lap("blobs")
+        blobs = found.accepted
+        if cfg.ellipse_confirmation:
+            blobs = self._confirm_ellipses(blobs, found.oversize, g, d, stats)
+        timer.lap("ellipses")
+        for b in blobs:  # ellipse-supplemented blobs have no moment centroid yet
+            if not np.isfinite(b.centroid_uv).all() and b.ellipse is not None:
+                b.centroid_uv = np.array(b.ellipse[0])
+        return found, blobs
+
+    def _back_project(self, blobs, mean_gray, med_distance, background) -> Measurements:
+        """Eqs. 7-8 and the per-reflector sigmas of measured blobs (finite ranges)."""
+        cfg = self.config
+        uv = np.array([b.centroid_uv for b in blobs])
+        rho = np.array([b.distance_mm for b in blobs])
+        y = self.camera.bearings(uv) * rho[:, None]  # Eq. 8
+        sig_px, sig_rng = measurement_sigmas(
+            blobs, mean_gray, med_distance, background,
+            SigmaFloors(cfg.centroid_sigma_floor_px, cfg.range_sigma_floor_mm),
+        )  # fmt: skip
+        w = 1.0 / (sig_rng**2 + (rho * sig_px / self.camera.fx) ** 2)  # Eq. 21 weights
+        return Measurements(tuple(blobs), uv, rho, y, w, sig_px, sig_rng)
+
+    def _match(self, meas: Measurements) -> MatchResult:
+        """§4: deterministic annealing (with the size term) or, configured, RANSAC."""
+        cfg = self.config
+        if cfg.matcher == "ransac":
+            return self._match_ransac(meas.y_mm, meas.weights)
+        diam = np.array([self._apparent_diameter_px(b) for b in meas.blobs])
+        return match_reflectors(
+            meas.y_mm, self._catalog_xyz, cfg.matching,
+            observed_diameter_mm=diam * meas.range_mm / self.camera.fx,
+            catalog_diameter_mm=self._catalog_d, weights=meas.weights,
+        )  # fmt: skip
+
+    def _solve_with_fallback(self, meas: Measurements, m: MatchResult, active):
+        """§5 on the matched pairs; when annealing's assignment gives an implausible pose
+        (a mirror image), the exhaustive triplet hypotheses restricted to physically
+        possible poses (ours) are solved instead."""
+        cfg = self.config
+        solved = self._solve(m.pairs, meas, m.alpha_mm, active)
+        if not (isinstance(solved, Rejected) and solved.implausible and cfg.triplet_fallback
+                and cfg.matcher == "annealing"):  # fmt: skip
+            return solved
+        tol = cfg.matching.pair_tolerance_mm(m.alpha_mm, meas.weights)
+        pairs = match_by_triplets(
+            meas.y_mm, self._catalog_xyz, m.alpha_mm, tol,
+            lambda R_, t_: self._faces_camera(R_, t_),
+            weights=meas.weights, min_matches=cfg.matching.min_matches,
+        )  # fmt: skip
+        return self._solve(pairs, meas, m.alpha_mm, active) if len(pairs) else solved
 
     def _process_tracking(self, g, d, time_s, track: TrackState, timer) -> PoseResult | None:
         """Tracking mode (``tofpose.tracking``): reflectors searched only in windows around
@@ -482,19 +507,11 @@ class PosePipeline:
         if self.range_correction is not None:
             self._correct_ranges(kept, mean_g)
         timer.lap("centroids")
-        uv = np.array([b.centroid_uv for b in kept])
-        rho = np.array([b.distance_mm for b in kept])
-        y = self.camera.bearings(uv) * rho[:, None]  # Eq. 8
-        sig_px, sig_rng = measurement_sigmas(
-            kept, mean_g, med_d, track.background_counts,
-            SigmaFloors(cfg.centroid_sigma_floor_px, cfg.range_sigma_floor_mm),
-        )  # fmt: skip
-        w = 1.0 / (sig_rng**2 + (rho * sig_px / self.camera.fx) ** 2)
+        meas = self._back_project(kept, mean_g, med_d, track.background_counts)
         pairs = np.column_stack((np.arange(len(kept)), [wd.catalog_index for wd in windows]))
         timer.lap("backproject")
         active = g >= track.threshold_counts
-        solved = self._solve(pairs, uv, rho, y, w, sig_px, sig_rng,
-                             cfg.matching.alpha_for(y), active)  # fmt: skip
+        solved = self._solve(pairs, meas, cfg.matching.alpha_for(meas.y_mm), active)
         timer.lap("refine")
         if isinstance(solved, Rejected) or len(solved.k_idx) < len(pairs):
             give_up()  # rejected, or a reflector dropped as an outlier: acquire
@@ -510,8 +527,7 @@ class PosePipeline:
             "active_threshold_counts": track.threshold_counts,
             "n_candidates": len(kept),
         }
-        result = self._pose_result(solved, kept, uv, rho, sig_px, sig_rng, [], time_s, timer,
-                                   extra, mode="tracking")  # fmt: skip
+        result = self._pose_result(solved, meas, [], time_s, timer, extra, mode="tracking")
         self._track = replace(
             track,
             R=result.R,
@@ -520,12 +536,15 @@ class PosePipeline:
         )
         return result
 
-    def _pose_result(self, solved, ranged, uv, rho, sig_px, sig_rng, unmatched, time_s, timer,
+    def _pose_result(self, solved: Solution, meas: Measurements, unmatched, time_s, timer,
                      extra, mode: str = "acquisition") -> PoseResult:  # fmt: skip
-        """The ok result of a ``Solution``."""
+        """The ok result of a ``Solution`` found from ``meas``; ``unmatched`` lists the
+        blobs without a range, the unmatched candidates are added."""
         s = solved
         R, t, x, k_idx, i_idx = s.R, s.t_mm, s.catalog_xyz, s.k_idx, s.i_idx
         uv_m, y_m, rho_m, iterations, ml = s.uv_px, s.y_mm, s.range_mm, s.iterations, s.ml
+        ranged, uv, rho = meas.blobs, meas.uv_px, meas.range_mm
+        sig_px, sig_rng = meas.sigma_px, meas.sigma_range_mm
         pred = x @ R.T + t
         res = np.linalg.norm(y_m - pred, axis=1)
         matched = [
@@ -586,11 +605,14 @@ class PosePipeline:
         )
 
     def _solve(
-        self, pairs, uv, rho, y, w, sig_px, sig_rng, alpha_mm, active
+        self, pairs: np.ndarray, meas: Measurements, alpha_mm: float, active: np.ndarray
     ) -> Solution | Rejected:
-        """Pose from matched pairs (m, 2): SVD, completion, perspective-bias correction,
-        refinement and verification. Returns a ``Solution`` or ``Rejected``."""
+        """Pose from matched pairs (m, 2) of observed and catalog indices: weighted SVD
+        (Eqs. 40-50), completion, perspective-bias correction, refinement, outlier step
+        and verification (§5). Returns a ``Solution`` or ``Rejected``."""
         cfg = self.config
+        uv, rho, y, w = meas.uv_px, meas.range_mm, meas.y_mm, meas.weights
+        sig_px, sig_rng = meas.sigma_px, meas.sigma_range_mm
         k_idx, i_idx = pairs[:, 0], pairs[:, 1]
         x = self._catalog_xyz[i_idx]
         R, t = weighted_svd(x, y[k_idx], w[k_idx])
