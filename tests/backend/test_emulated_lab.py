@@ -112,3 +112,20 @@ def test_lab_reference_comes_from_the_encoders_through_the_nominal_geometry(lab,
     # mounting error (the simulator knows it), plus a little noise
     mount_error_mm = float(np.linalg.norm(T_true.t_mm - T_lab.t_mm))
     assert truth["position_error_mm"] == pytest.approx(mount_error_mm, abs=3.0)
+
+
+def test_an_injected_fault_is_reset_through_the_api(lab, client):
+    lab.table.controller.inject_fault(2, "amplifier overtemperature")
+    r = client.post("/api/motion/move", json={"pitch_deg": 2.0}, headers=AUTH)
+    assert r.status_code == 503 and "amplifier overtemperature" in r.json()["detail"]
+    assert client.post("/api/motion/reset-faults").status_code == 401  # needs the token
+    r = client.post("/api/motion/reset-faults", headers=AUTH)
+    assert r.status_code == 200, r.text
+    r = client.post("/api/motion/move", json={"pitch_deg": 2.0}, headers=AUTH)
+    assert r.status_code == 202, r.text
+
+
+def test_the_simulator_has_no_faults_to_reset(tmp_path):
+    with running_app(make_settings(tmp_path / "data")) as c:
+        r = c.post("/api/motion/reset-faults", headers=AUTH)
+        assert r.status_code == 409 and "no faults to reset" in r.json()["detail"]

@@ -1,4 +1,5 @@
-"""Turntable: GET /api/motion, POST /api/motion/move, POST /api/motion/stop.
+"""Turntable: GET /api/motion, POST /api/motion/move, POST /api/motion/stop,
+POST /api/motion/reset-faults.
 
 Set-points are checked against the driver's soft limits here, before the driver sees
 them. Stop is accepted from any authenticated caller at any time.
@@ -68,4 +69,20 @@ def stop_motion(state: StateDep, motion: MotionDep) -> MotionPublic:
         raise HTTPException(503, f"the motion system did not confirm the stop: {exc}") from exc
     finally:
         state.campaigns.stop_pressed()
+    return motion_public(state)
+
+
+@router.post("/reset-faults", dependencies=[WriteAuth], responses=errors(409, 503))
+def reset_faults(state: StateDep, motion: MotionDep) -> MotionPublic:
+    """Acknowledge the controller's axis faults once their cause is fixed (real rate
+    tables; docs/devices.md). Interlocks stay open until the next move closes them. 409
+    when this motion system has no faults to acknowledge (the simulator)."""
+    reset = getattr(motion, "reset_faults", None)
+    if reset is None:
+        raise HTTPException(409, f"the {motion.name!r} motion system has no faults to reset")
+    try:
+        reset()
+    except Exception as exc:
+        state.motion_health.record_failure(f"fault reset failed: {exc}")
+        raise HTTPException(503, f"the motion system refused the fault reset: {exc}") from exc
     return motion_public(state)
