@@ -198,13 +198,13 @@ def systematic_range_sigma_mm(
     Shapes: x_mm, bearings (m, 3); ranges, sigmas (m,). 0 when the model already fits.
     """
 
-    # At a fixed pose only the range sigma changes with sigma_s: the lateral residuals
-    # and the raw range residuals are computed once.
-    pred = x_mm @ R.T + t
-    B = _tangent_bases(bearings)
-    lat_sigma = np.maximum(ranges_mm * sigma_bearing_rad, 1e-6)
-    lat2 = (np.einsum("mkj,mj->mk", B, pred) ** 2).sum(axis=1) / lat_sigma**2
-    rng2 = (np.einsum("mj,mj->m", bearings, pred) - ranges_mm) ** 2
+    # At a fixed pose only the range sigma changes with sigma_s: the whitened lateral
+    # residuals and the raw range residuals (unit range sigma) are computed once.
+    r, _ = measurement_jacobian(x_mm, bearings, ranges_mm, R, t, np.ones(len(x_mm)),
+                                sigma_bearing_rad)  # fmt: skip
+    r = r.reshape(-1, 3)
+    lat2 = (r[:, :2] ** 2).sum(axis=1)
+    rng2 = r[:, 2] ** 2
     var_range = np.asarray(sigma_range_mm, float) ** 2
 
     def median_z2(extra: float) -> float:

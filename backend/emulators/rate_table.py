@@ -14,9 +14,7 @@ commands), so that a driver's refusal and recovery paths can be tested.
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import socket
 import socketserver
 import threading
 from collections import deque
@@ -26,6 +24,7 @@ import numpy as np
 
 from backend.drivers.sim import SimWorld
 from backend.emulators.scpi_parse import ParsedCommand, ScpiError, parse_command, split_message
+from backend.emulators.tcp import ServedEmulator, TrackedHandler, TrackedTCPServer
 from tofpose import __version__
 
 log = logging.getLogger(__name__)
@@ -376,18 +375,8 @@ class RateTableController:
 TREE_BY_PATH = {tuple(n.upper() for n in path): name for path, name in TREE.items()}
 
 
-class _Handler(socketserver.StreamRequestHandler):
+class _Handler(TrackedHandler, socketserver.StreamRequestHandler):
     server: _Server
-
-    def setup(self) -> None:
-        super().setup()
-        with self.server.clients_lock:
-            self.server.clients.add(self.request)
-
-    def finish(self) -> None:
-        with self.server.clients_lock:
-            self.server.clients.discard(self.request)
-        super().finish()
 
     def handle(self) -> None:
         session = _Session()
@@ -417,64 +406,24 @@ class _Handler(socketserver.StreamRequestHandler):
                     return
 
 
-class _Server(socketserver.ThreadingTCPServer):
-    allow_reuse_address = True
-    daemon_threads = True
-
+class _Server(TrackedTCPServer):
     def __init__(self, address: tuple[str, int], controller: RateTableController) -> None:
         self.controller = controller
-        self.clients: set = set()
-        self.clients_lock = threading.Lock()
         super().__init__(address, _Handler)
 
-    def drop_clients(self) -> None:
-        """Close every client connection (the client sees the link drop)."""
-        with self.clients_lock:
-            clients = list(self.clients)
-        for sock in clients:
-            with contextlib.suppress(OSError):
-                sock.shutdown(socket.SHUT_RDWR)
 
-
-class RateTableEmulator:
+class RateTableEmulator(ServedEmulator):
     """The controller on a TCP port: ``start()`` serves in a thread, ``close()`` stops and
     drops every client connection (a link drop, as far as clients can tell)."""
+
+    thread_name = "rate-table-emulator"
 
     def __init__(self, world: SimWorld, host: str = "127.0.0.1", port: int = 5025) -> None:
         self.controller = RateTableController(world)
         self._server = _Server((host, port), self.controller)
-        self._thread: threading.Thread | None = None
-
-    @property
-    def address(self) -> tuple[str, int]:
-        host, port = self._server.server_address[:2]
-        return str(host), int(port)
 
     @property
     def resource(self) -> str:
         """The VISA resource name of this emulator."""
         host, port = self.address
         return f"TCPIP::{host}::{port}::SOCKET"
-
-    def start(self) -> RateTableEmulator:
-        self._thread = threading.Thread(
-            target=self._server.serve_forever,
-            args=(0.05,),
-            name="rate-table-emulator",
-            daemon=True,
-        )
-        self._thread.start()
-        return self
-
-    def close(self) -> None:
-        self._server.shutdown()
-        self._server.drop_clients()
-        self._server.server_close()
-        if self._thread is not None:
-            self._thread.join(2.0)
-
-    def __enter__(self) -> RateTableEmulator:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

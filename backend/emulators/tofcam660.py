@@ -28,7 +28,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import socket
-import socketserver
 import struct
 import threading
 import time
@@ -37,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from backend.drivers.sim import SimWorld
+from backend.emulators.tcp import ServedEmulator, TrackedHandler, TrackedTCPServer
 from tofpose.tof import unambiguous_range_mm
 
 log = logging.getLogger(__name__)
@@ -270,17 +270,12 @@ class TofCam660Camera:
         return unambiguous_range_mm(MODULATION_MHZ[self.state.modulation_code])
 
 
-class _Handler(socketserver.BaseRequestHandler):
+class _Handler(TrackedHandler):
     server: _Server
 
     def setup(self) -> None:
-        with self.server.clients_lock:
-            self.server.clients.add(self.request)
+        super().setup()
         self.request.settimeout(None)
-
-    def finish(self) -> None:
-        with self.server.clients_lock:
-            self.server.clients.discard(self.request)
 
     def _recv_exact(self, n: int, first: bool) -> bytes:
         buf = bytearray()
@@ -345,15 +340,10 @@ class _Handler(socketserver.BaseRequestHandler):
         return True
 
 
-class _Server(socketserver.ThreadingTCPServer):
-    allow_reuse_address = True
-    daemon_threads = True
-
+class _Server(TrackedTCPServer):
     def __init__(self, address: tuple[str, int], camera: TofCam660Camera, data_port: int):
         self.camera = camera
         self.data_port = data_port
-        self.clients: set[socket.socket] = set()
-        self.clients_lock = threading.Lock()
         self.udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.udp.bind((address[0], 0))  # images come from the camera's own address
         self.udp.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 1 << 20)
@@ -367,21 +357,16 @@ class _Server(socketserver.ThreadingTCPServer):
                 time.sleep(0.001)
                 self.udp.sendto(packet, (ip, self.data_port))
 
-    def drop_clients(self) -> None:
-        with self.clients_lock:
-            clients = list(self.clients)
-        for sock in clients:
-            with contextlib.suppress(OSError):
-                sock.shutdown(socket.SHUT_RDWR)
-
     def server_close(self) -> None:
         super().server_close()
         self.udp.close()
 
 
-class TofCam660Emulator:
+class TofCam660Emulator(ServedEmulator):
     """The camera on ``address`` (a loopback address of its own, e.g. 127.0.0.2, since the
     ports are fixed): ``start()`` serves in a thread; ``close()`` also drops clients."""
+
+    thread_name = "tofcam660-emulator"
 
     def __init__(
         self,
@@ -393,36 +378,3 @@ class TofCam660Emulator:
     ) -> None:
         self.camera = TofCam660Camera(world)
         self._server = _Server((address, command_port), self.camera, data_port)
-        self._thread: threading.Thread | None = None
-
-    @property
-    def address(self) -> tuple[str, int]:
-        host, port = self._server.server_address[:2]
-        return str(host), int(port)
-
-    def start(self) -> TofCam660Emulator:
-        self._thread = threading.Thread(
-            target=self._server.serve_forever,
-            args=(0.05,),
-            name="tofcam660-emulator",
-            daemon=True,
-        )
-        self._thread.start()
-        return self
-
-    def drop_clients(self) -> None:
-        """Cut every command connection (a link drop as the client sees it)."""
-        self._server.drop_clients()
-
-    def close(self) -> None:
-        self._server.shutdown()
-        self._server.drop_clients()
-        self._server.server_close()
-        if self._thread is not None:
-            self._thread.join(2.0)
-
-    def __enter__(self) -> TofCam660Emulator:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

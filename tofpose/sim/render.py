@@ -267,6 +267,10 @@ def _phasor_images(
     return re_img, im_img, b_img, sid_img, d.reshape(h, w), mixed
 
 
+def _same_pose(a: RigidTransform, b: RigidTransform) -> bool:
+    return np.array_equal(a.R, b.R) and np.array_equal(a.t_mm, b.t_mm)
+
+
 def combine_subframes(
     phasors: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
     background_fraction: float = 1.0,
@@ -322,13 +326,17 @@ def render_frame(
         raise ValueError("a seeded numpy Generator is required when sensor.noise is True")
     h, w = camera.height, camera.width
     t_int = sensor.exposure_for(float(np.linalg.norm(T_camera_target.t_mm)))
-    re_img, im_img, b_img, sid_img, d_img, mixed = _phasor_images(
-        camera, scene, T_camera_target, sensor, t_int
-    )
+    static = _phasor_images(camera, scene, T_camera_target, sensor, t_int)
+    re_img, im_img, b_img, sid_img, d_img, mixed = static
     moved = np.zeros_like(mixed)  # pixels whose surface changes between sub-frames
     if subframe_poses is not None:
-        # the four phase samples see the scene at their own times (a slewing table)
-        subs = [_phasor_images(camera, scene, T, sensor, t_int) for T in subframe_poses]
+        # the four phase samples see the scene at their own times (a slewing table); a
+        # sub-frame at the frame's own pose (the first, usually) is not rendered again
+        subs = [
+            static if _same_pose(T, T_camera_target)
+            else _phasor_images(camera, scene, T, sensor, t_int)
+            for T in subframe_poses
+        ]  # fmt: skip
         re_img, im_img, b_img = combine_subframes(
             [x[:3] for x in subs], sensor.ambient_gray_fraction
         )
