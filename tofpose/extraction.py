@@ -16,6 +16,12 @@ import cv2
 import numpy as np
 
 from tofpose.camera import CameraModel
+from tofpose.kernels.components import (
+    component_median_ranges,
+    component_table,
+    weighted_moments,
+)
+from tofpose.kernels.gates import ACCEPTED, OVERSIZE, gate_components
 from tofpose.robust import median_1d
 
 SATURATED_COUNTS = 4095
@@ -299,16 +305,9 @@ def predicted_diameter_window_px(
 
 
 def _moments(us: np.ndarray, vs: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, float]:
-    """Weighted centroid (2,) and eccentricity of a point set with weights w."""
-    sw = w.sum()
-    cu, cv = (us * w).sum() / sw, (vs * w).sum() / sw
-    du, dv = us - cu, vs - cv
-    cuu, cvv, cuv = (w * du * du).sum() / sw, (w * dv * dv).sum() / sw, (w * du * dv).sum() / sw
-    tr, det = cuu + cvv, cuu * cvv - cuv * cuv
-    disc = np.sqrt(max(tr * tr / 4 - det, 0.0))
-    l1, l2 = tr / 2 + disc, tr / 2 - disc
-    ecc = float(np.sqrt(max(0.0, 1.0 - l2 / l1))) if l1 > 1e-12 else 0.0
-    return np.array([cu, cv]), ecc
+    """Weighted centroid (2,) and eccentricity of a point set with weights w (n,)."""
+    cu, cv, ecc = weighted_moments(us, vs, w)
+    return np.array([cu, cv]), float(ecc)
 
 
 def size_gate(
@@ -399,81 +398,82 @@ def find_candidate_blobs(
     """
     mask = active_pixel_mask(gray, stats, config.n_max)
     h, w = gray.shape
-    n_lab, labels, cc_stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    gray32 = np.asarray(gray, np.float32)
+    n_lab, labels = cv2.connectedComponents(mask, connectivity=8)
+    area_k, bbox_k, peak_k, starts, flat = component_table(labels, n_lab, gray32)
+    # the median range is read only by components that pass the border and dim gates
+    x_k, y_k, w_k, h_k = bbox_k.T
+    inner = (x_k > 0) & (y_k > 0) & (x_k + w_k < w) & (y_k + h_k < h)
+    ranged = np.flatnonzero(
+        inner & (peak_k >= stats.peak_threshold) & (area_k >= config.min_area_px)
+    )
+    rho_k = np.full(n_lab, np.nan)
+    d_flat = np.asarray(distance_mm, np.float32).reshape(-1)
+    rho_k[ranged] = component_median_ranges(flat, starts, d_flat, ranged)
+    cos_t = np.cos(np.radians(config.max_tilt_deg))
+    ecc_max = np.sqrt(1.0 - cos_t**2)
+    listed = np.flatnonzero(area_k >= max(config.min_area_px, 1))
+    testable = inner[listed] & (peak_k[listed] >= stats.peak_threshold)
+    which = listed[testable]
+    status, size, mom, keep_starts, keep_flat = gate_components(
+        gray32, labels, bbox_k, area_k, peak_k, rho_k, which, float(camera.fx),
+        np.asarray(diameters_mm, np.float64), _gate_params(config, stats, cos_t, ecc_max),
+    )  # fmt: skip
     accepted: list[Blob] = []
     oversize: list[Blob] = []
     wrong_size: list[WrongSizeBlob] = []
-    rejected: list[RejectedBlob] = []
-    cos_t = np.cos(np.radians(config.max_tilt_deg))
-    ecc_max = np.sqrt(1.0 - cos_t**2)
-    for k in range(1, n_lab):
-        x, y, bw, bh, area = (int(v) for v in cc_stats[k])
-        if area < config.min_area_px:
-            continue
+    refused: list[tuple[int, RejectedBlob]] = []  # (label, why), listed in label order
 
-        def reject(reason: str, x=x, y=y, bw=bw, bh=bh, area=area) -> None:
-            d_eq = 2.0 * np.sqrt(area / np.pi)
-            rejected.append(RejectedBlob(x + (bw - 1) / 2, y + (bh - 1) / 2, d_eq, reason))
+    def reject(k: int, reason: str) -> None:
+        x, y, bw, bh = bbox_k[k].tolist()
+        d_eq = 2.0 * np.sqrt(area_k[k] / np.pi)
+        refused.append((k, RejectedBlob(x + (bw - 1) / 2, y + (bh - 1) / 2, float(d_eq), reason)))
 
-        if x == 0 or y == 0 or x + bw == w or y + bh == h:
-            reject("border")  # its centroid would be biased
+    for k in listed[~testable].tolist():
+        reject(k, "border" if not inner[k] else "dim")
+    for j, k in enumerate(which.tolist()):
+        code = int(status[j])
+        if size[j, 3] == 0.0:
+            wrong_size.append(WrongSizeBlob(*size[j, :3].tolist(), float(rho_k[k])))
+        bbox = tuple(bbox_k[k].tolist())
+        if code == OVERSIZE:
+            oversize.append(Blob(
+                pixels=flat[starts[k] : starts[k + 1]].copy(), area_px=int(area_k[k]),
+                bbox=bbox, peak_counts=float(peak_k[k]), distance_mm=float(rho_k[k]),
+            ))  # fmt: skip
+        if code != ACCEPTED:
+            reject(k, _GATE_REASONS[code])
             continue
-        roi = (slice(y, y + bh), slice(x, x + bw))
-        member = labels[roi] == k
-        g_roi = gray[roi]
-        peak = float(g_roi[member].max())
-        # Criterion 1 (B1 and B2, Eqs. 15-16): a seed brighter than I_peak.
-        if peak < stats.peak_threshold:
-            reject("dim")
-            continue
-        d_vals = distance_mm[roi][member]
-        d_vals = d_vals[np.isfinite(d_vals)]
-        rho = median_1d(d_vals) if len(d_vals) else float("nan")
-        d_eq, d_lo, d_hi, size_ok, too_big = size_gate(
-            area, max(bw, bh), rho, camera.fx, diameters_mm, config
-        )
-        blob = Blob(
-            pixels=np.empty(0, np.int64), area_px=area, bbox=(x, y, bw, bh), peak_counts=peak
-        )
-        if not size_ok:
-            wrong_size.append(WrongSizeBlob(float(d_eq), float(d_lo), float(d_hi), rho))
-        if too_big:
-            rows, cols = np.nonzero(member)
-            blob.pixels = (rows + y) * w + (cols + x)
-            blob.distance_mm = rho
-            oversize.append(blob)
-            reject("oversize")
-            continue
-        if not size_ok:
-            reject("size")
-            continue
-        keep = nlog_gate(gray, labels, k, (x, y, bw, bh), member, peak, stats, config)
-        if keep is None:
-            reject("nlog")
-            continue
-        rows, cols = np.nonzero(keep)
-        us, vs = cols + x, rows + y
-        wts = np.maximum(g_roi[keep] - stats.background, 1.0).astype(np.float64)
-        c, ecc = _moments(us.astype(np.float64), vs.astype(np.float64), wts)
-        if not shape_gate(len(us), ecc, ecc_max):
-            reject("shape")
-            continue
-        blob.pixels = vs * w + us
-        blob.area_px = len(us)
-        blob.centroid_uv = c
-        blob.eccentricity = ecc
-        blob.distance_mm = rho
-        blob.penalty = penalty_score(blob, stats, camera.fx, diameters_mm, ecc_max)
-        if blob.penalty > config.q_max:
-            reject("penalty")
-            continue
-        accepted.append(blob)
+        pixels = keep_flat[keep_starts[j] : keep_starts[j + 1]]
+        accepted.append(Blob(
+            pixels=pixels, area_px=len(pixels), bbox=bbox, centroid_uv=mom[j, :2].copy(),
+            distance_mm=float(rho_k[k]), peak_counts=float(peak_k[k]),
+            eccentricity=float(mom[j, 2]), penalty=float(mom[j, 3]),
+        ))  # fmt: skip
     accepted.sort(key=lambda b: (b.penalty, -b.peak_counts))
+    rejected = [r for _, r in sorted(refused, key=lambda kr: kr[0])]
     for b in accepted[config.max_candidates :]:
         rejected.append(RejectedBlob(*b.centroid_uv, 2.0 * np.sqrt(b.area_px / np.pi), "rank"))
     return CandidateBlobs(
         accepted[: config.max_candidates], oversize, mask, tuple(wrong_size), tuple(rejected)
     )
+
+
+_GATE_REASONS = {1: "oversize", 2: "size", 3: "nlog", 4: "shape", 5: "penalty"}
+
+
+def _gate_params(config: ExtractionConfig, stats: FrameStats, cos_t: float, ecc_max: float):
+    """The scalar parameters of ``kernels.gates.gate_components``, (13,) float64."""
+    paper = config.nlog_sigma_px is not None
+    return np.array([
+        -1.0 if config.h_min_px is None else config.h_min_px,
+        -1.0 if config.h_max_px is None else config.h_max_px,
+        cos_t, config.size_tolerance, config.size_margin_px,
+        config.nlog_sigma_px if paper else -1.0,
+        config.nlog_peak_abs if paper else config.nlog_peak_rel,
+        config.nlog_floor_abs if paper else config.nlog_floor_rel,
+        stats.background, ecc_max, stats.peak_threshold, stats.raw_threshold, config.q_max,
+    ], np.float64)  # fmt: skip
 
 
 def penalty_score(
