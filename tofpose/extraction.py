@@ -10,19 +10,19 @@ literal numbers as a preset.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
 
 from tofpose.camera import CameraModel
+from tofpose.kernels.centroids import blob_centroids, blob_ranges
 from tofpose.kernels.components import (
     component_median_ranges,
     component_table,
     weighted_moments,
 )
 from tofpose.kernels.gates import ACCEPTED, OVERSIZE, gate_components
-from tofpose.robust import median_1d
 
 SATURATED_COUNTS = 4095
 #: fewest pixels for which a blob's eccentricity means anything (the shape gate and q_shape)
@@ -525,8 +525,9 @@ def measure_blobs(
     background: float,
     *,
     weighting: str = "coverage",
-) -> None:
-    """Centroid (Eq. 19) and radial distance (Eq. 20) of each blob, in place.
+) -> list[Blob]:
+    """Centroid (Eq. 19) and radial distance (Eq. 20) of each blob: new blobs with
+    ``centroid_uv`` and ``distance_mm`` measured (the inputs are not changed).
 
     Centroid over the blob dilated by one pixel (so partially covered edge pixels below
     I_t still pull the centre to sub-pixel accuracy), with weights:
@@ -545,49 +546,30 @@ def measure_blobs(
     is the centre's distance exactly (a plain mean of rho is biased long by
     ~R^2 / 4 rho); the median rejects flying pixels on the rim.
     """
+    if not blobs:
+        return []
     h, w = gray.shape
-    bearings = camera.pixel_bearings()
-    kernel = np.ones((3, 3), np.uint8)
-    members = [np.divmod(b.pixels, w) for b in blobs]  # (rows, cols) of each blob
+    starts = np.zeros(len(blobs) + 1, np.int64)
+    starts[1:] = np.cumsum([len(b.pixels) for b in blobs])
+    flat = np.concatenate([b.pixels for b in blobs]).astype(np.int64, copy=False)
+    bbox = np.array([b.bbox for b in blobs], np.int64)
     # which blob owns each pixel: the one-pixel ring of a blob must not reach into a
     # neighbour's pixels (markers 7 and 8 split apart touch each other), or that
     # neighbour's light pulls the centroid towards it
     owner = _pixel_owner(blobs, h, w)
-    for j, (b, (rows, cols)) in enumerate(zip(blobs, members, strict=True)):
-        x, y, bw, bh = b.bbox
-        y0, y1, x0, x1 = max(y - 2, 0), min(y + bh + 2, h), max(x - 2, 0), min(x + bw + 2, w)
-        m = np.zeros((y1 - y0, x1 - x0), np.uint8)
-        m[rows - y0, cols - x0] = 1
-        ring = cv2.dilate(m, kernel).astype(bool)
-        if owner is not None:
-            others = owner[y0:y1, x0:x1]
-            ring &= (others == -1) | (others == j)
-        patch = np.maximum(gray[y0:y1, x0:x1].astype(np.float32) - background, 0.0)
-        if weighting == "coverage":
-            local_max = cv2.dilate(np.where(m > 0, patch, 0).astype(np.float32), kernel)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                cov = np.clip(patch / local_max, 0.0, 1.0)
-            cov[~np.isfinite(cov)] = 0.0
-            wts = cov[ring].astype(np.float64)
-        else:
-            wts = patch[ring].astype(np.float64)
-        rr, cc = np.nonzero(ring)
-        if wts.sum() <= 0:
-            wts = np.ones(len(rr))
-        b.centroid_uv = np.array(
-            [(wts * (cc + x0)).sum() / wts.sum(), (wts * (rr + y0)).sum() / wts.sum()]
-        )
-    if not blobs:
-        return
-    centre_bearings = camera.bearings(np.array([b.centroid_uv for b in blobs]))
-    for b, (rows, cols), e_c in zip(blobs, members, centre_bearings, strict=True):
-        d = distance_mm[rows, cols]
-        ok = np.isfinite(d)
-        if not np.any(ok):
-            b.distance_mm = float("nan")
-            continue
-        along = d[ok] * (bearings[rows[ok], cols[ok]] @ e_c)
-        b.distance_mm = median_1d(along)
+    uv = blob_centroids(
+        flat, starts, bbox, np.asarray(gray, np.float32), float(background),
+        weighting == "coverage", _NO_OWNER if owner is None else owner, owner is not None,
+    )  # fmt: skip
+    bearings = camera.pixel_bearings().reshape(-1, 3)
+    rho = blob_ranges(
+        flat, starts, np.asarray(distance_mm, np.float32).reshape(-1), bearings,
+        camera.bearings(uv),
+    )  # fmt: skip
+    return [replace(b, centroid_uv=uv[j], distance_mm=float(rho[j])) for j, b in enumerate(blobs)]
+
+
+_NO_OWNER = np.full((1, 1), -1, np.int32)
 
 
 def disc_image_centre_offsets_px(

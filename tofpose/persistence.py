@@ -10,13 +10,13 @@ combined, and a moving scene degrades gracefully to single-frame measurement.
 
 from __future__ import annotations
 
-import warnings
 from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
 from tofpose.extraction import Blob
+from tofpose.kernels.persistence import column_medians
 from tofpose.robust import median_1d
 
 
@@ -162,11 +162,5 @@ class Persistence:
                 stack = np.stack(
                     [distance.reshape(-1)[idx]] + [e.distance.reshape(-1)[idx] for e in used]
                 )
-                if np.isfinite(stack).all():  # the usual case; nanmedian is ~5x slower
-                    med = np.median(stack, axis=0)
-                else:
-                    with warnings.catch_warnings():  # all-NaN columns stay NaN, silently
-                        warnings.simplefilter("ignore", RuntimeWarning)
-                        med = np.nanmedian(stack, axis=0)
-                med_dist.reshape(-1)[idx] = med
+                med_dist.reshape(-1)[idx] = column_medians(stack.astype(np.float32, copy=False))
         return kept, mean_gray, med_dist, PersistenceInfo(n, motion, dropped)

@@ -370,7 +370,7 @@ class PosePipeline:
         # The motion gate compares the cheap moment centroids of find_candidate_blobs;
         # the precise centroids and ranges are measured once, on the combined frames.
         kept, mean_g, med_d, pinfo = self._persistence.apply(blobs, g, d)
-        measure_blobs(kept, mean_g, med_d, self.camera, stats.background)
+        kept = measure_blobs(kept, mean_g, med_d, self.camera, stats.background)
         timer.lap("centroids")
         extra = {
             "frames_used": pinfo.frames_used,
@@ -386,7 +386,7 @@ class PosePipeline:
         ]
         extra["n_candidates"] = len(kept)
         if self.range_correction is not None:
-            self._correct_ranges(ranged, mean_g)
+            ranged = self._correct_ranges(ranged, mean_g)
         if len(ranged) < cfg.matching.min_matches:
             return fail(
                 f"found {len(ranged)} candidate reflector(s) with a valid range "
@@ -500,12 +500,12 @@ class PosePipeline:
         if len(kept) != len(blobs):
             give_up()
             return None
-        measure_blobs(kept, mean_g, med_d, self.camera, track.background_counts)
+        kept = measure_blobs(kept, mean_g, med_d, self.camera, track.background_counts)
         if not all(np.isfinite(b.distance_mm) for b in kept):
             give_up()
             return None
         if self.range_correction is not None:
-            self._correct_ranges(kept, mean_g)
+            kept = self._correct_ranges(kept, mean_g)
         timer.lap("centroids")
         meas = self._back_project(kept, mean_g, med_d, track.background_counts)
         pairs = np.column_stack((np.arange(len(kept)), [wd.catalog_index for wd in windows]))
@@ -581,15 +581,18 @@ class PosePipeline:
             mode=mode,
         )
 
-    def _correct_ranges(self, blobs: list[Blob], gray: np.ndarray) -> None:
-        """Subtract the calibrated range error from each blob's range: the model at the
-        blob's range, evaluated per member pixel (its amplitude, its offset), median."""
+    def _correct_ranges(self, blobs: list[Blob], gray: np.ndarray) -> list[Blob]:
+        """The blobs with the calibrated range error subtracted from their ranges (new
+        blobs): the model at the blob's range, evaluated per member pixel (its amplitude,
+        its offset), median."""
         flat = gray.ravel()
+        out = []
         for b in blobs:
             amp = flat[b.pixels]  # the gray level, as in the calibration fit
             err = self.range_correction.error_mm(np.full(len(b.pixels), b.distance_mm), amp,
                                                  b.pixels)  # fmt: skip
-            b.distance_mm = float(b.distance_mm - median_1d(err))
+            out.append(replace(b, distance_mm=float(b.distance_mm - median_1d(err))))
+        return out
 
     def _size_hint(self, wrong_size) -> str:
         """A clause naming bright blobs the catalog's sizes ruled out, or ''."""

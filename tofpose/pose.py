@@ -9,8 +9,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tofpose.geometry import skew
-from tofpose.robust import median_1d
+from tofpose.kernels.pose import (
+    ml_refine,
+    reflector_norms,
+    residuals_jacobian,
+    svd_pose,
+    systematic_sigma,
+)
+from tofpose.kernels.pose import tangent_bases as bearing_tangent_bases
 
 
 def weighted_svd(
@@ -40,16 +46,7 @@ def weighted_svd(
     w = np.ones(len(x)) if weights is None else np.asarray(weights, float)
     if w.shape != (len(x),) or np.any(w <= 0) or not np.all(np.isfinite(w)):
         raise ValueError("weights must be positive and finite, one per point")
-    ws = w / w.sum()
-    x_bar, y_bar = ws @ x, ws @ y  # Eq. 41
-    xc, yc = x - x_bar, y - y_bar  # Eq. 42
-    S = (xc * w[:, None]).T @ yc  # Eq. 45
-    U, _, Vt = np.linalg.svd(S)
-    V = Vt.T
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(V @ U.T)) or 1.0])
-    R = V @ D @ U.T  # Eq. 49
-    t = y_bar - R @ x_bar  # Eq. 50
-    return R, t
+    return svd_pose(np.ascontiguousarray(x), np.ascontiguousarray(y), np.ascontiguousarray(w))
 
 
 @dataclass
@@ -97,25 +94,6 @@ def refine_line_of_sight(
     return RefinementResult(R, t, residuals, max_iterations)
 
 
-def _tangent_bases(bearings: np.ndarray) -> np.ndarray:
-    """Two unit vectors orthogonal to each bearing, shape (m, 2, 3)."""
-    ref = np.where(np.abs(bearings[:, [0]]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    a = _cross(bearings, ref)
-    a /= np.linalg.norm(a, axis=1, keepdims=True)
-    b = _cross(bearings, a)
-    return np.stack((a, b), axis=1)
-
-
-def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (m, 3) arrays: ``np.cross``'s arithmetic without its
-    per-call axis handling (which costs more than the product for a few rows)."""
-    out = np.empty_like(u)
-    out[:, 0] = u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1]
-    out[:, 1] = u[:, 2] * v[:, 0] - u[:, 0] * v[:, 2]
-    out[:, 2] = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
-    return out
-
-
 def measurement_jacobian(
     x_mm: np.ndarray,
     bearings: np.ndarray,
@@ -131,27 +109,28 @@ def measurement_jacobian(
     Per reflector: two lateral residuals (predicted point off the measured line of sight,
     over range * sigma_bearing) and one range residual (e . (R x + t) - rho, over
     sigma_range). Parameters: small rotation (rad, left-multiplied) then translation (mm).
-    tangent_bases : optional ``_tangent_bases(bearings)`` (m, 2, 3), which depends only on
-    the measured bearings: an iteration passes it in instead of recomputing it.
+    tangent_bases : optional ``kernels.pose.tangent_bases(bearings)`` (m, 2, 3), which
+    depends only on the measured bearings: an iteration passes it in instead of
+    recomputing it.
     """
-    rx = x_mm @ R.T
-    pred = rx + t
-    B = _tangent_bases(bearings) if tangent_bases is None else tangent_bases  # (m, 2, 3)
-    lat_sigma = np.maximum(ranges_mm * sigma_bearing_rad, 1e-6)
-    r_lat = np.einsum("mkj,mj->mk", B, pred) / lat_sigma[:, None]
-    r_rng = (np.einsum("mj,mj->m", bearings, pred) - ranges_mm) / sigma_range_mm
-    m = len(rx)
-    dP = np.zeros((m, 3, 6))
-    # d(R x + t) / d(rotation vector) = -[R x]_x ; / d t = I
-    dP[:, 0, 1], dP[:, 0, 2] = rx[:, 2], -rx[:, 1]
-    dP[:, 1, 0], dP[:, 1, 2] = -rx[:, 2], rx[:, 0]
-    dP[:, 2, 0], dP[:, 2, 1] = rx[:, 1], -rx[:, 0]
-    dP[:, 0, 3] = dP[:, 1, 4] = dP[:, 2, 5] = 1.0  # (m, 3, 6)
-    J_lat = np.einsum("mkj,mjp->mkp", B, dP) / lat_sigma[:, None, None]
-    J_rng = np.einsum("mj,mjp->mp", bearings, dP) / sigma_range_mm[:, None]
-    r = np.concatenate((r_lat, r_rng[:, None]), axis=1).reshape(-1)
-    J = np.concatenate((J_lat, J_rng[:, None, :]), axis=1).reshape(-1, 6)
-    return r, J
+    e, rho, sr, sb = _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
+    B = bearing_tangent_bases(e) if tangent_bases is None else tangent_bases
+    return residuals_jacobian(_f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb, B)
+
+
+def _f64(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad):
+    """The measurement arrays as the kernels take them: bearings (m, 3) and ranges,
+    range sigmas and bearing sigmas (m,), contiguous float64 (sigmas may be scalars)."""
+    e = _f64(bearings)
+    m = len(e)
+    rho = _f64(ranges_mm)
+    sr = _f64(np.broadcast_to(np.asarray(sigma_range_mm, float), (m,)))
+    sb = _f64(np.broadcast_to(np.asarray(sigma_bearing_rad, float), (m,)))
+    return e, rho, sr, sb
 
 
 def reflector_whitened_norms(
@@ -166,7 +145,7 @@ def reflector_whitened_norms(
     """Per reflector, the norm of its three whitened residuals (two lateral, one range)
     at the pose (R, t), shape (m,): how many predicted sigmas it sits off the fit."""
     r, _ = measurement_jacobian(x_mm, bearings, ranges_mm, R, t, sigma_range_mm, sigma_bearing_rad)
-    return np.linalg.norm(r.reshape(-1, 3), axis=1)
+    return reflector_norms(r)
 
 
 #: Gauss-Newton stops once a step moves the pose by less than 1e-4 of its 1-sigma: with
@@ -198,27 +177,9 @@ def systematic_range_sigma_mm(
     Shapes: x_mm, bearings (m, 3); ranges, sigmas (m,). 0 when the model already fits.
     """
 
-    # At a fixed pose only the range sigma changes with sigma_s: the whitened lateral
-    # residuals and the raw range residuals (unit range sigma) are computed once.
-    r, _ = measurement_jacobian(x_mm, bearings, ranges_mm, R, t, np.ones(len(x_mm)),
-                                sigma_bearing_rad)  # fmt: skip
-    r = r.reshape(-1, 3)
-    lat2 = (r[:, :2] ** 2).sum(axis=1)
-    rng2 = r[:, 2] ** 2
-    var_range = np.asarray(sigma_range_mm, float) ** 2
-
-    def median_z2(extra: float) -> float:
-        return median_1d(lat2 + rng2 / (var_range + extra**2))
-
-    if median_z2(0.0) <= MEDIAN_CHI2_3DOF:
-        return 0.0
-    if median_z2(max_mm) > MEDIAN_CHI2_3DOF:
-        return max_mm
-    lo, hi = 0.0, max_mm
-    for _ in range(16):  # bisection to max_mm / 2^16 (3 um at the default cap)
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if median_z2(mid) > MEDIAN_CHI2_3DOF else (lo, mid)
-    return hi
+    e, rho, sr, sb = _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
+    return float(systematic_sigma(_f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb,
+                                  float(max_mm), MEDIAN_CHI2_3DOF))  # fmt: skip
 
 
 def common_range_bias_covariance(
@@ -284,35 +245,9 @@ def refine_maximum_likelihood(
     likelihood pose; unlike the pure line-of-sight iteration it keeps the ToF ranges,
     which dominate depth accuracy at long range. The covariance is (J^T J)^-1.
     """
-    R, t = R0.copy(), t0.copy()
-    iterations = 0
-    B = _tangent_bases(bearings)
-    for iterations in range(1, max_iterations + 1):  # noqa: B007
-        r, J = measurement_jacobian(
-            x_mm, bearings, ranges_mm, R, t, sigma_range_mm, sigma_bearing_rad, B
-        )
-        H = J.T @ J
-        try:
-            delta = -np.linalg.solve(H, J.T @ r)
-        except np.linalg.LinAlgError:
-            break
-        w = delta[:3]
-        angle = np.linalg.norm(w)
-        if angle > 0:
-            k = w / angle
-            Kx = skew(k)
-            dR = np.eye(3) + np.sin(angle) * Kx + (1 - np.cos(angle)) * Kx @ Kx
-            R = dR @ R
-        t = t + delta[3:]
-        # converged when the step is below tol in mm/rad, or a negligible fraction of the
-        # pose's own uncertainty (delta^T H delta is the step in sigmas, squared)
-        if np.linalg.norm(delta) < tol or float(delta @ H @ delta) < STEP_SIGMA2:
-            break
-    r, J = measurement_jacobian(
-        x_mm, bearings, ranges_mm, R, t, sigma_range_mm, sigma_bearing_rad, B
-    )
-    try:
-        cov = np.linalg.inv(J.T @ J)
-    except np.linalg.LinAlgError:
-        cov = np.full((6, 6), np.nan)
-    return MLResult(R, t, cov, float(r @ r), iterations, np.linalg.norm(r.reshape(-1, 3), axis=1))
+    e, rho, sr, sb = _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
+    R, t, cov, chi2, iterations, norms = ml_refine(
+        _f64(x_mm), e, rho, _f64(R0), _f64(t0), sr, sb, int(max_iterations), float(tol),
+        STEP_SIGMA2,
+    )  # fmt: skip
+    return MLResult(R, t, cov, float(chi2), int(iterations), norms)

@@ -23,8 +23,7 @@ def _blobs(frame, cfg=None, camera=None):
     g, d = check_frame(camera, frame.gray, frame.distance_mm)
     stats = frame_levels(g, cfg)
     blobs = find_candidate_blobs(g, d, camera, paper_target().diameters_mm, cfg, stats).accepted
-    measure_blobs(blobs, g, d, camera, stats.background)
-    return blobs
+    return measure_blobs(blobs, g, d, camera, stats.background)
 
 
 @pytest.mark.parametrize(

@@ -1,0 +1,115 @@
+"""Centroids (Eq. 19) and radial distances (Eq. 20) of measured blobs, all blobs in one
+call; the arithmetic of ``tofpose.extraction.measure_blobs``, whose docstring gives the
+method (coverage weights over the blob dilated by one pixel, median of the ranges
+projected on the centroid's line of sight)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tofpose.kernels import jit
+
+
+@jit
+def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, use_owner):
+    """Centroid (u, v) px of each blob.
+
+    flat, starts : blob j's pixels are ``flat[starts[j]:starts[j + 1]]`` (flat indices);
+    bbox : (n, 4) int64 (x, y, w, h); gray : (H, W) float32; coverage : coverage weights
+    (else intensity, Eq. 19 as written); owner : (H, W) int32 index of the blob owning
+    each pixel (-1 none), read when ``use_owner``. Returns (n, 2) float64.
+    """
+    h, w = gray.shape
+    n = bbox.shape[0]
+    out = np.empty((n, 2))
+    bg = np.float32(background)
+    for j in range(n):
+        x, y, bw, bh = bbox[j, 0], bbox[j, 1], bbox[j, 2], bbox[j, 3]
+        y0, y1 = max(y - 2, 0), min(y + bh + 2, h)
+        x0, x1 = max(x - 2, 0), min(x + bw + 2, w)
+        ph, pw = y1 - y0, x1 - x0
+        member = np.zeros((ph, pw), np.bool_)
+        for i in range(starts[j], starts[j + 1]):
+            member[flat[i] // w - y0, flat[i] % w - x0] = True
+        patch = np.empty((ph, pw), np.float32)
+        for r in range(ph):
+            for c in range(pw):
+                patch[r, c] = max(gray[r + y0, c + x0] - bg, np.float32(0.0))
+        sw, su, sv = 0.0, 0.0, 0.0
+        count = 0
+        for r in range(ph):
+            for c in range(pw):
+                # the one-pixel ring (3 x 3 dilation inside the box) and the largest
+                # member value around the pixel (the coverage denominator)
+                ring = False
+                local_max = np.float32(0.0)
+                for dr in range(max(r - 1, 0), min(r + 2, ph)):
+                    for dc in range(max(c - 1, 0), min(c + 2, pw)):
+                        if member[dr, dc]:
+                            ring = True
+                            local_max = max(local_max, patch[dr, dc])
+                if not ring:
+                    continue
+                if use_owner:
+                    o = owner[r + y0, c + x0]
+                    if o != -1 and o != j:
+                        continue
+                if coverage:  # clip(patch / local_max, 0, 1); x / 0 -> 1, 0 / 0 -> 0
+                    if local_max > 0:
+                        v = patch[r, c] / local_max
+                        wt = float(min(max(v, np.float32(0.0)), np.float32(1.0)))
+                    else:
+                        wt = 1.0 if patch[r, c] > 0 else 0.0
+                else:
+                    wt = float(patch[r, c])
+                sw += wt
+                su += wt * (c + x0)
+                sv += wt * (r + y0)
+                count += 1
+        if sw <= 0:  # no weight anywhere: the plain mean of the ring
+            sw, su, sv = 0.0, 0.0, 0.0
+            for r in range(ph):
+                for c in range(pw):
+                    ring = False
+                    for dr in range(max(r - 1, 0), min(r + 2, ph)):
+                        for dc in range(max(c - 1, 0), min(c + 2, pw)):
+                            ring = ring or member[dr, dc]
+                    o = owner[r + y0, c + x0] if use_owner else -1
+                    if ring and (o == -1 or o == j):
+                        sw += 1.0
+                        su += c + x0
+                        sv += r + y0
+        out[j, 0] = su / sw
+        out[j, 1] = sv / sw
+    return out
+
+
+@jit
+def blob_ranges(flat, starts, distance_flat, bearings_flat, centre_bearings):
+    """Radial distance of each blob (Eq. 20 variant): the median over its valid pixels of
+    ``rho_p * (e_p . e_c)``; NaN when no pixel has a range.
+
+    distance_flat : (H * W,) float32 mm; bearings_flat : (H * W, 3) unit bearings of the
+    pixels; centre_bearings : (n, 3) of the centroids. Returns (n,) float64.
+    """
+    n = centre_bearings.shape[0]
+    out = np.empty(n)
+    for j in range(n):
+        a, b = starts[j], starts[j + 1]
+        along = np.empty(b - a)
+        m = 0
+        ex, ey, ez = centre_bearings[j, 0], centre_bearings[j, 1], centre_bearings[j, 2]
+        for i in range(a, b):
+            p = flat[i]
+            d = distance_flat[p]
+            if np.isfinite(d):
+                e = bearings_flat[p]
+                along[m] = d * (e[0] * ex + e[1] * ey + e[2] * ez)
+                m += 1
+        if m == 0:
+            out[j] = np.nan
+            continue
+        k = m >> 1
+        s = np.partition(along[:m], k)
+        out[j] = s[k] if m & 1 else (s[:k].max() + s[k]) / 2.0
+    return out
