@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from tofpose.kernels.annealing import anneal_assignment
 from tofpose.pose import weighted_svd
 
 
@@ -137,23 +138,11 @@ def anneal(
 ) -> tuple[np.ndarray, int]:
     """Run Eqs. 35-39; returns A of shape (gamma, eta + 1) and the iteration count."""
     g, e = P.shape[0], P.shape[1]
-    A = np.full((g, e + 1), 1.0 / (1 + e))  # Eq. 39
-    Pm = P.reshape(g * e, g * e)
-    psi = config.psi_start / alpha_mm**2
-    psi_end = config.psi_end / alpha_mm**2
-    u = None if unary is None else config.size_weight * alpha_mm**2 * unary
-    it = 0
-    while psi <= psi_end:
-        E = (Pm @ A[:, 1:].reshape(-1)).reshape(g, e)
-        if u is not None:
-            E = E + u
-        logits = np.concatenate((np.zeros((g, 1)), -psi * E), axis=1)  # F_k0 = 1
-        logits -= logits.max(axis=1, keepdims=True)
-        F = np.exp(logits)
-        A = F / F.sum(axis=1, keepdims=True)  # Eq. 37
-        psi *= config.growth  # Eq. 35
-        it += 1
-    return A, it
+    u = np.zeros((g, e)) if unary is None else config.size_weight * alpha_mm**2 * unary
+    return anneal_assignment(
+        np.ascontiguousarray(P.reshape(g * e, g * e)), np.ascontiguousarray(u, float),
+        config.psi_start / alpha_mm**2, config.psi_end / alpha_mm**2, config.growth,
+    )  # fmt: skip
 
 
 def one_to_one(A: np.ndarray) -> tuple[np.ndarray, list[int]]:
