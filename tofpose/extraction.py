@@ -23,6 +23,7 @@ from tofpose.kernels.components import (
     weighted_moments,
 )
 from tofpose.kernels.gates import ACCEPTED, OVERSIZE, gate_components
+from tofpose.kernels.levels import clean_distance, frame_level_stats
 
 SATURATED_COUNTS = 4095
 #: fewest pixels for which a blob's eccentricity means anything (the shape gate and q_shape)
@@ -230,11 +231,9 @@ def check_frame(
     if not np.issubdtype(distance_mm.dtype, np.floating):
         raise FrameError(f"distance image must be float mm, got dtype {distance_mm.dtype}")
     g = gray.astype(np.float32)
-    if not np.all(np.isfinite(g)):
+    if np.issubdtype(gray.dtype, np.floating) and not np.all(np.isfinite(g)):
         g = np.nan_to_num(g, nan=0.0, posinf=0.0, neginf=0.0)
-    d = distance_mm.astype(np.float32, copy=True)
-    d[~np.isfinite(d) | (d <= 0)] = np.nan
-    return g, d
+    return g, clean_distance(distance_mm)
 
 
 def frame_levels(gray: np.ndarray, config: ExtractionConfig) -> FrameStats:
@@ -242,18 +241,17 @@ def frame_levels(gray: np.ndarray, config: ExtractionConfig) -> FrameStats:
 
     Background and its noise come from a strided subsample (median and MAD).
     """
-    sub = gray[::3, ::3]
-    bg = float(np.median(sub))
-    mad = float(np.median(np.abs(sub - bg)))
+    bg, mad, i_max, n_sat = frame_level_stats(
+        np.asarray(gray, np.float32), 3, float(SATURATED_COUNTS)
+    )
     sigma = max(1.4826 * mad, np.sqrt(max(bg, 1.0)))
-    i_max = float(gray.max())
     contrast = i_max - bg
     if config.raw_threshold_abs is not None:
         i_t = config.raw_threshold_abs
     else:
         i_t = max(bg + config.raw_threshold_rel * contrast, bg + config.noise_floor_sigma * sigma)
     i_peak = config.peak_abs if config.peak_abs is not None else bg + config.peak_rel * contrast
-    sat = float(np.count_nonzero(gray >= SATURATED_COUNTS)) / gray.size
+    sat = float(n_sat) / gray.size
     return FrameStats(bg, sigma, i_max, i_t, max(i_peak, i_t), 0, sat)
 
 

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tofpose.extraction import Blob
+from tofpose.kernels.sigmas import blob_pixel_stats
 from tofpose.robust import median_1d
 
 #: centroid sampling error of a single-pixel blob, px (uniform over one pixel)
@@ -67,27 +68,14 @@ def measurement_sigmas(
 
     gray, distance_mm : (H, W) frame (or persistence-combined frame) the blobs came from.
     """
-    w_img = gray.shape[1]
-    shot_px = np.empty(len(blobs))
-    n_px = np.empty(len(blobs))
-    own_mad_mm = np.full(len(blobs), np.nan)  # per-pixel spread from the blob itself
-    model_unit = np.full(len(blobs), np.nan)  # sqrt(G) / A, mean over valid pixels
-    n_valid = np.zeros(len(blobs), int)
-    for j, b in enumerate(blobs):
-        rows, cols = np.divmod(b.pixels, w_img)
-        g = np.maximum(gray[rows, cols].astype(np.float64), 1.0)
-        amp = np.maximum(g - background_counts, 1.0)
-        r2 = (cols - b.centroid_uv[0]) ** 2 + (rows - b.centroid_uv[1]) ** 2
-        shot_px[j] = np.sqrt((g * r2).sum()) / amp.sum()
-        n_px[j] = len(rows)
-        dv = distance_mm[rows, cols]
-        ok = np.isfinite(dv)
-        n_valid[j] = int(ok.sum())
-        if n_valid[j]:
-            model_unit[j] = float(np.mean(np.sqrt(g[ok]) / amp[ok]))
-        if n_valid[j] >= 3:
-            d = dv[ok]
-            own_mad_mm[j] = 1.4826 * median_1d(np.abs(d - median_1d(d)))
+    starts = np.zeros(len(blobs) + 1, np.int64)
+    starts[1:] = np.cumsum([len(b.pixels) for b in blobs])
+    flat = np.concatenate([b.pixels for b in blobs]).astype(np.int64, copy=False)
+    centroids = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
+    shot_px, n_px, own_mad_mm, model_unit, n_valid = blob_pixel_stats(
+        flat, starts, centroids, np.asarray(gray, np.float32),
+        np.asarray(distance_mm, np.float32), float(background_counts),
+    )  # fmt: skip
 
     sigma_px = np.sqrt(shot_px**2 + floors.centroid_px**2 + sampling_sigma_px(n_px) ** 2)
 
