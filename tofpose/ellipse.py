@@ -15,6 +15,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from tofpose.kernels.ellipses import ellipse_rms_px
+
 Ellipse = tuple[tuple[float, float], tuple[float, float], float]
 
 
@@ -48,15 +50,8 @@ def ellipse_residual_px(ellipse: Ellipse, points: np.ndarray) -> float:
     the centre, exact for circles and accurate for moderate eccentricity.
     """
     (cx, cy), (a1, a2), ang = ellipse
-    t = np.radians(ang)
-    d = points - np.array([cx, cy])
-    x = d[:, 0] * np.cos(t) + d[:, 1] * np.sin(t)
-    y = -d[:, 0] * np.sin(t) + d[:, 1] * np.cos(t)
-    r = np.hypot(x, y)
-    th = np.arctan2(y, x)
-    ra, rb = a1 / 2, a2 / 2
-    r_e = ra * rb / np.sqrt((rb * np.cos(th)) ** 2 + (ra * np.sin(th)) ** 2)
-    return float(np.sqrt(np.mean((r - r_e) ** 2)))
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+    return float(ellipse_rms_px(float(cx), float(cy), float(a1), float(a2), float(ang), pts))
 
 
 def split_arcs(

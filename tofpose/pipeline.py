@@ -40,6 +40,7 @@ from tofpose.extraction import (
     predicted_diameter_window_px,
 )
 from tofpose.geometry import facing_euler_deg, quaternion_wxyz_from_rotation
+from tofpose.kernels.ellipses import blob_mask
 from tofpose.matching import (
     MatchingConfig,
     MatchResult,
@@ -948,8 +949,4 @@ def _split_by_threshold(
 def _blob_mask(b: Blob, width: int) -> tuple[np.ndarray, int, int]:
     """Binary mask of a blob in its bounding box padded by 1 px, and the box origin."""
     x, y, bw, bh = b.bbox
-    x0, y0 = x - 1, y - 1
-    m = np.zeros((bh + 2, bw + 2), np.uint8)
-    rows, cols = np.divmod(b.pixels, width)
-    m[rows - y0, cols - x0] = 1
-    return m, x0, y0
+    return blob_mask(b.pixels, x, y, bw, bh, width), x - 1, y - 1
