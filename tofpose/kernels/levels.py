@@ -28,6 +28,44 @@ def _median32(v):
     return float(s[k]) if n & 1 else float((s[:k].max() + s[k]) / np.float32(2.0))
 
 
+#: the counting median handles values v with 2 v an integer in [0, this)
+_COUNTING_LIMIT = 1 << 17
+
+
+@jit
+def _kth_counted(counts, k):
+    """Index of the k-th smallest (0-based) value in a histogram of counts."""
+    seen = 0
+    for i in range(counts.shape[0]):
+        seen += counts[i]
+        if seen > k:
+            return i
+    return counts.shape[0] - 1
+
+
+@jit
+def _median_of_levels(v):
+    """``_median32`` of float32 values (n,); by counting when every value is a multiple
+    of 0.5 in [0, 65536) (gray counts, and their deviations from such a median), which
+    is linear in n and not slowed by the many ties of a dark background."""
+    n = v.shape[0]
+    top = 0.0
+    for i in range(n):
+        d = v[i] * 2
+        if not (d >= 0 and d < _COUNTING_LIMIT and d == np.floor(d)):
+            return _median32(v.copy())
+        top = max(top, d)
+    counts = np.zeros(int(top) + 1, np.int64)
+    for i in range(n):
+        counts[int(v[i] * 2)] += 1
+    k = n >> 1
+    hi = np.float32(_kth_counted(counts, k) / 2.0)
+    if n & 1:
+        return float(hi)
+    lo = np.float32(_kth_counted(counts, k - 1) / 2.0)
+    return float((lo + hi) / np.float32(2.0))
+
+
 @jit
 def frame_level_stats(gray, stride, saturated_counts):
     """Background (median of a strided subsample), its median absolute deviation, the
@@ -43,18 +81,18 @@ def frame_level_stats(gray, stride, saturated_counts):
         for c in range(0, w, stride):
             sub[n] = gray[r, c]
             n += 1
-    bg = _median32(sub[:n].copy())
+    bg = _median_of_levels(sub[:n])
     dev = np.empty(n, np.float32)
     bg32 = np.float32(bg)
     for i in range(n):
         dev[i] = abs(sub[i] - bg32)
-    mad = _median32(dev)
-    i_max = -np.inf
+    mad = _median_of_levels(dev)
+    i_max = np.float32(-np.inf)
+    sat = np.float32(saturated_counts)
     n_sat = 0
     for r in range(h):
         for c in range(w):
             v = gray[r, c]
             i_max = max(i_max, v)
-            if v >= saturated_counts:
-                n_sat += 1
+            n_sat += v >= sat
     return bg, mad, float(i_max), n_sat
