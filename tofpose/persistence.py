@@ -16,8 +16,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from tofpose.extraction import Blob
-from tofpose.kernels.persistence import column_medians
-from tofpose.robust import median_1d
+from tofpose.kernels.persistence import (
+    column_medians,
+    consistent,
+    counter_medians,
+    gather_stack,
+    mean_in_boxes,
+)
 
 
 @dataclass(frozen=True)
@@ -36,7 +41,7 @@ class PersistenceConfig:
 @dataclass
 class _Entry:
     centroids: np.ndarray  # (n, 2) single-frame centroids
-    mask: np.ndarray  # (H, W) bool, candidate-blob pixels
+    mask: np.ndarray  # (H * W,) bool, candidate-blob pixels
     gray: np.ndarray  # (H, W) float32
     distance: np.ndarray  # (H, W) float32
 
@@ -46,34 +51,6 @@ class PersistenceInfo:
     frames_used: int
     motion: bool
     dropped_blobs: int
-
-
-def _consistent(current: np.ndarray, previous: np.ndarray, tol_px: float) -> bool:
-    """Do two centroid sets (n, 2), (m, 2) describe the same static scene?"""
-    if len(current) == 0 or len(previous) == 0:
-        return len(current) == len(previous)
-    d = np.linalg.norm(current[:, None, :] - previous[None, :, :], axis=-1)
-    nn = d.min(axis=1)
-    near = nn < max(4 * tol_px, 2.0)
-    if near.sum() < max(1, int(np.ceil(0.5 * len(current)))):
-        return False
-    return median_1d(nn[near]) <= tol_px
-
-
-def _mean_near_blobs(gray: np.ndarray, older: list[np.ndarray], blobs: list[Blob]):
-    """I-bar (§3.4) where it is read: in each blob's box grown by 2 px (its centroid ring
-    and range pixels); elsewhere this frame's gray. (H, W) like ``gray``; inside the boxes
-    the same arithmetic as the full-frame mean, ``(gray + sum(older)) / n``."""
-    n = 1 + len(older)
-    h, w = gray.shape
-    if not blobs:
-        return (gray + sum(older)) / n
-    out = np.array(gray, dtype=np.result_type(gray.dtype, np.float32))
-    for b in blobs:
-        x, y, bw, bh = b.bbox
-        sl = np.s_[max(y - 2, 0) : min(y + bh + 2, h), max(x - 2, 0) : min(x + bw + 2, w)]
-        out[sl] = (gray[sl] + sum(o[sl] for o in older)) / n
-    return out
 
 
 class Persistence:
@@ -116,16 +93,16 @@ class Persistence:
         """
         cfg = self.config
         h, w = gray.shape
-        cur = np.array([b.centroid_uv for b in blobs]).reshape(-1, 2)
+        cur = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
         mask = np.zeros(h * w, bool)
-        for b in blobs:
-            mask[b.pixels] = True
-        mask = mask.reshape(h, w)
+        if blobs:
+            idx = np.concatenate([b.pixels for b in blobs]).astype(np.int64, copy=False)
+            mask[idx] = True
 
         used: list[_Entry] = []
         motion = False
         for entry in reversed(self._history):
-            if _consistent(cur, entry.centroids, cfg.motion_tolerance_px):
+            if consistent(cur, entry.centroids, cfg.motion_tolerance_px):
                 used.append(entry)
             else:
                 motion = True
@@ -140,27 +117,20 @@ class Persistence:
         n = 1 + len(used)
         kept, dropped = blobs, 0
         mean_gray, med_dist = gray, distance
-        if n > 1:
-            if n >= cfg.c_min:
-                kept = []
-                # the counter image C, read only where it is used: at the blobs' pixels
-                idx = np.concatenate([b.pixels for b in blobs]) if blobs else np.empty(0, int)
-                count = mask.reshape(-1)[idx].astype(np.int32)
-                for e in used:
-                    count += e.mask.reshape(-1)[idx]
-                ends = np.cumsum([len(b.pixels) for b in blobs])
-                for b, end in zip(blobs, ends, strict=True):
-                    c = count[end - len(b.pixels) : end]
-                    if median_1d(c) >= cfg.c_min:
-                        kept.append(b)
-                    else:
-                        dropped += 1
-            mean_gray = _mean_near_blobs(gray, [e.gray for e in used], blobs)
-            med_dist = distance.copy()
-            if kept:
-                idx = np.concatenate([b.pixels for b in kept])
-                stack = np.stack(
-                    [distance.reshape(-1)[idx]] + [e.distance.reshape(-1)[idx] for e in used]
-                )
-                med_dist.reshape(-1)[idx] = column_medians(stack.astype(np.float32, copy=False))
+        if n == 1 or not blobs:
+            return kept, mean_gray, med_dist, PersistenceInfo(n, motion, dropped)
+        starts = np.zeros(len(blobs) + 1, np.int64)
+        starts[1:] = np.cumsum([len(b.pixels) for b in blobs])
+        if n >= cfg.c_min:
+            # the counter image C, read only where it is used: at the blobs' pixels
+            c = counter_medians((mask, *(e.mask for e in used)), idx, starts)
+            kept = [b for b, ck in zip(blobs, c, strict=True) if ck >= cfg.c_min]
+            dropped = len(blobs) - len(kept)
+        boxes = np.array([b.bbox for b in blobs], np.int64)
+        mean_gray = mean_in_boxes(gray, tuple(e.gray for e in used), boxes)
+        med_dist = distance.copy()
+        if kept:
+            kidx = np.concatenate([b.pixels for b in kept]).astype(np.int64, copy=False)
+            stack = gather_stack((distance, *(e.distance for e in used)), kidx)
+            med_dist.reshape(-1)[kidx] = column_medians(stack)
         return kept, mean_gray, med_dist, PersistenceInfo(n, motion, dropped)

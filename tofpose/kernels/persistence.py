@@ -37,3 +37,82 @@ def column_medians(stack):
         else:
             out[p] = (buf[(m >> 1) - 1] + buf[m >> 1]) / np.float32(2.0)
     return out
+
+
+@jit
+def consistent(current, previous, tol_px):
+    """Do two centroid sets (n, 2), (m, 2) describe the same static scene? At least half
+    of the current centroids (rounded up, at least one) have a previous one within
+    max(4 tol, 2 px), and the median of those nearest distances is at most tol."""
+    n, m = current.shape[0], previous.shape[0]
+    if n == 0 or m == 0:
+        return n == m
+    near_d = np.empty(n)
+    k = 0
+    for i in range(n):
+        best = np.inf
+        for j in range(m):
+            best = min(best, np.hypot(current[i, 0] - previous[j, 0],
+                                      current[i, 1] - previous[j, 1]))  # fmt: skip
+        if best < max(4 * tol_px, 2.0):
+            near_d[k] = best
+            k += 1
+    if k < max(1, int(np.ceil(0.5 * n))):
+        return False
+    s = np.sort(near_d[:k])
+    med = s[k >> 1] if k & 1 else (s[(k >> 1) - 1] + s[k >> 1]) / 2.0
+    return med <= tol_px
+
+
+@jit
+def mean_in_boxes(gray, older, boxes):
+    """I-bar (§3.4) where it is read: ``(gray + sum(older)) / n`` inside each box grown
+    by 2 px, this frame's gray elsewhere, in float32 as NumPy computes it.
+
+    gray : (H, W) float32; older : tuple of (H, W) float32 frames; boxes : (b, 4) int64
+    (x, y, w, h). Returns (H, W) float32."""
+    h, w = gray.shape
+    out = gray.copy()
+    n = np.float32(1 + len(older))
+    for j in range(boxes.shape[0]):
+        x, y, bw, bh = boxes[j, 0], boxes[j, 1], boxes[j, 2], boxes[j, 3]
+        for r in range(max(y - 2, 0), min(y + bh + 2, h)):
+            for c in range(max(x - 2, 0), min(x + bw + 2, w)):
+                s = np.float32(0.0)
+                for o in older:
+                    s += o[r, c]
+                out[r, c] = (gray[r, c] + s) / n
+    return out
+
+
+@jit
+def counter_medians(masks, flat, starts):
+    """The counter image C of §3.4 read at each blob's pixels: per blob, the median over
+    its pixels (flat indices ``flat[starts[j]:starts[j + 1]]``) of the number of frames,
+    of the (H * W,) bool masks given, in which the pixel belonged to a candidate blob.
+    Returns (n,) float64."""
+    n = starts.shape[0] - 1
+    out = np.empty(n)
+    for j in range(n):
+        a, b = starts[j], starts[j + 1]
+        c = np.empty(b - a)
+        for i in range(a, b):
+            k = 0
+            for m in masks:
+                k += m[flat[i]]
+            c[i - a] = k
+        s = np.sort(c)
+        q = (b - a) >> 1
+        out[j] = s[q] if (b - a) & 1 else (s[q - 1] + s[q]) / 2.0
+    return out
+
+
+@jit
+def gather_stack(frames, flat):
+    """(K, P) float32: each of the K (H, W) frames read at the flat indices (P,)."""
+    out = np.empty((len(frames), flat.shape[0]), np.float32)
+    for f in range(len(frames)):
+        src = frames[f].reshape(-1)
+        for i in range(flat.shape[0]):
+            out[f, i] = src[flat[i]]
+    return out
