@@ -35,19 +35,25 @@ def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, use_ow
         for r in range(ph):
             for c in range(pw):
                 patch[r, c] = max(gray[r + y0, c + x0] - bg, np.float32(0.0))
-        sw, su, sv = 0.0, 0.0, 0.0
-        count = 0
+        # the one-pixel ring (3 x 3 dilation of the blob inside the box) and the largest
+        # member value around each pixel (the coverage denominator), as separable maxima
+        row_max = np.zeros((ph, pw), np.float32)
+        row_any = np.zeros((ph, pw), np.bool_)
         for r in range(ph):
             for c in range(pw):
-                # the one-pixel ring (3 x 3 dilation inside the box) and the largest
-                # member value around the pixel (the coverage denominator)
+                for dc in range(max(c - 1, 0), min(c + 2, pw)):
+                    if member[r, dc]:
+                        row_any[r, c] = True
+                        row_max[r, c] = max(row_max[r, c], patch[r, dc])
+        sw, su, sv = 0.0, 0.0, 0.0
+        for r in range(ph):
+            for c in range(pw):
                 ring = False
                 local_max = np.float32(0.0)
                 for dr in range(max(r - 1, 0), min(r + 2, ph)):
-                    for dc in range(max(c - 1, 0), min(c + 2, pw)):
-                        if member[dr, dc]:
-                            ring = True
-                            local_max = max(local_max, patch[dr, dc])
+                    if row_any[dr, c]:
+                        ring = True
+                        local_max = max(local_max, row_max[dr, c])
                 if not ring:
                     continue
                 if use_owner:
@@ -65,15 +71,13 @@ def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, use_ow
                 sw += wt
                 su += wt * (c + x0)
                 sv += wt * (r + y0)
-                count += 1
         if sw <= 0:  # no weight anywhere: the plain mean of the ring
             sw, su, sv = 0.0, 0.0, 0.0
             for r in range(ph):
                 for c in range(pw):
                     ring = False
                     for dr in range(max(r - 1, 0), min(r + 2, ph)):
-                        for dc in range(max(c - 1, 0), min(c + 2, pw)):
-                            ring = ring or member[dr, dc]
+                        ring = ring or row_any[dr, c]
                     o = owner[r + y0, c + x0] if use_owner else -1
                     if ring and (o == -1 or o == j):
                         sw += 1.0
@@ -103,8 +107,9 @@ def blob_ranges(flat, starts, distance_flat, bearings_flat, centre_bearings):
             p = flat[i]
             d = distance_flat[p]
             if np.isfinite(d):
-                e = bearings_flat[p]
-                along[m] = d * (e[0] * ex + e[1] * ey + e[2] * ez)
+                along[m] = d * (
+                    bearings_flat[p, 0] * ex + bearings_flat[p, 1] * ey + bearings_flat[p, 2] * ez
+                )
                 m += 1
         if m == 0:
             out[j] = np.nan
