@@ -24,6 +24,7 @@ from tofpose.kernels.components import (
 )
 from tofpose.kernels.gates import ACCEPTED, OVERSIZE, gate_components
 from tofpose.kernels.levels import clean_distance, frame_level_stats
+from tofpose.kernels.perspective import disc_centre_offsets
 
 SATURATED_COUNTS = 4095
 #: fewest pixels for which a blob's eccentricity means anything (the shape gate and q_shape)
@@ -584,20 +585,12 @@ def disc_image_centre_offsets_px(
     centres_mm : (m, 3) disc centres in the camera frame; normal : (3,) shared normal
     (the plate's); radii_mm : (m,). Returns (m, 2) pixels.
     """
-    c = np.atleast_2d(np.asarray(centres_mm, float))
-    n = normal / np.linalg.norm(normal)
-    a = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
-    a /= np.linalg.norm(a)
-    b = np.cross(n, a)
-    cols = np.empty((len(c), 3, 3))
-    cols[:, :, 0], cols[:, :, 1], cols[:, :, 2] = a, b, c
-    Hinv = np.linalg.inv(camera.K @ cols)  # (m, 3, 3)
-    D = np.ones((len(c), 3))
-    D[:, 2] = -(np.asarray(radii_mm, float) ** 2)
-    Q = np.einsum("mji,mj,mjk->mik", Hinv, D, Hinv)
-    ellipse_centre = -np.linalg.solve(Q[:, :2, :2], Q[:, :2, 2:3])[:, :, 0]
-    p = c @ camera.K.T
-    return ellipse_centre - p[:, :2] / p[:, 2:3]
+    c = np.ascontiguousarray(np.atleast_2d(np.asarray(centres_mm, float)))
+    return disc_centre_offsets(
+        np.ascontiguousarray(camera.K, dtype=float), c,
+        np.ascontiguousarray(normal, dtype=float),
+        np.ascontiguousarray(np.broadcast_to(np.asarray(radii_mm, float), (len(c),))),
+    )  # fmt: skip
 
 
 def disc_image_centre_offset_px(

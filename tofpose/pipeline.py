@@ -33,7 +33,6 @@ from tofpose.extraction import (
     ExtractionConfig,
     RejectedBlob,
     check_frame,
-    disc_image_centre_offsets_px,
     find_candidate_blobs,
     frame_levels,
     measure_blobs,
@@ -49,17 +48,9 @@ from tofpose.matching import (
     random_triplets,
 )
 from tofpose.persistence import Persistence, PersistenceConfig
-from tofpose.pose import (
-    MLResult,
-    common_range_bias_covariance,
-    refine_line_of_sight,
-    refine_maximum_likelihood,
-    reflector_whitened_norms,
-    systematic_range_sigma_mm,
-    weighted_svd,
-)
 from tofpose.range_calibration import RangeCorrection
 from tofpose.robust import median_1d
+from tofpose.solve import Measurements, PoseSolver, Rejected, Solution
 from tofpose.tracking import (
     TrackingConfig,
     TrackState,
@@ -227,61 +218,6 @@ def variance_factor(chi2: float, n_reflectors: int) -> float:
     return max(1.0, chi2 / dof) if dof > 0 and np.isfinite(chi2) else 1.0
 
 
-@dataclass(frozen=True)
-class Measurements:
-    """Candidate reflectors back-projected (Eqs. 7-8) with their sigmas.
-
-    blobs : the n blobs, in order; uv_px : (n, 2) centroids (Eq. 19); range_mm : (n,)
-    ranges (Eq. 20); y_mm : (n, 3) points in the camera frame (Eq. 8); weights : (n,) the
-    weights of Eq. 21, ``1 / (sigma_range^2 + (range sigma_px / f)^2)``; sigma_px,
-    sigma_range_mm : (n,) per-reflector sigmas (``uncertainty.measurement_sigmas``).
-    """
-
-    blobs: tuple[Blob, ...]
-    uv_px: np.ndarray
-    range_mm: np.ndarray
-    y_mm: np.ndarray
-    weights: np.ndarray
-    sigma_px: np.ndarray
-    sigma_range_mm: np.ndarray
-
-    def as_unmatched(self) -> list[tuple[float, float, float]]:
-        """(u, v, range) of every candidate, for a result without a pose."""
-        return [(u[0], u[1], r) for u, r in zip(self.uv_px, self.range_mm, strict=True)]
-
-
-@dataclass(frozen=True)
-class Solution:
-    """A solved pose (§5) and what it was solved from.
-
-    R, t_mm : the pose; catalog_xyz : (m, 3) matched reflectors in the target frame;
-    k_idx, i_idx : (m,) observed and catalog indices of the matches; uv_px, y_mm,
-    range_mm : (m, 2), (m, 3), (m,) the measurements used (perspective-corrected
-    centroids, back-projected points, ranges); iterations : refinement iterations; ml :
-    the maximum-likelihood evaluation at the pose (covariance, chi^2, norms).
-    """
-
-    R: np.ndarray
-    t_mm: np.ndarray
-    catalog_xyz: np.ndarray
-    k_idx: np.ndarray
-    i_idx: np.ndarray
-    uv_px: np.ndarray
-    y_mm: np.ndarray
-    range_mm: np.ndarray
-    iterations: int
-    ml: MLResult
-
-
-@dataclass(frozen=True)
-class Rejected:
-    """No pose: ``reason`` for the user; ``implausible`` when a pose was found but failed
-    verification (the assignment may be a mirror image: worth the triplet fallback)."""
-
-    reason: str
-    implausible: bool = False
-
-
 class _Timer:
     def __init__(self) -> None:
         self.ms: dict[str, float] = {}
@@ -320,6 +256,7 @@ class PosePipeline:
         self._catalog_d = catalog.diameters_mm
         self._catalog_ids = catalog.ids
         self._rng = np.random.default_rng(self.config.ransac_seed)
+        self._solver = PoseSolver(camera, catalog, self.config, range_correction is not None)
         self._track: TrackState | None = None
         camera.pixel_bearings()  # warm the cache
 
@@ -459,17 +396,17 @@ class PosePipeline:
         (a mirror image), the exhaustive triplet hypotheses restricted to physically
         possible poses (ours) are solved instead."""
         cfg = self.config
-        solved = self._solve(m.pairs, meas, m.alpha_mm, active)
+        solved = self._solver.solve(m.pairs, meas, m.alpha_mm, active)
         if not (isinstance(solved, Rejected) and solved.implausible and cfg.triplet_fallback
                 and cfg.matcher == "annealing"):  # fmt: skip
             return solved
         tol = cfg.matching.pair_tolerance_mm(m.alpha_mm, meas.weights)
         pairs = match_by_triplets(
             meas.y_mm, self._catalog_xyz, m.alpha_mm, tol,
-            lambda R_, t_: self._faces_camera(R_, t_),
+            lambda R_, t_: self._solver.faces_camera(R_, t_),
             weights=meas.weights, min_matches=cfg.matching.min_matches,
         )  # fmt: skip
-        return self._solve(pairs, meas, m.alpha_mm, active) if len(pairs) else solved
+        return self._solver.solve(pairs, meas, m.alpha_mm, active) if len(pairs) else solved
 
     def _process_tracking(self, g, d, time_s, track: TrackState, timer) -> PoseResult | None:
         """Tracking mode (``tofpose.tracking``): reflectors searched only in windows around
@@ -512,9 +449,9 @@ class PosePipeline:
         pairs = np.column_stack((np.arange(len(kept)), [wd.catalog_index for wd in windows]))
         timer.lap("backproject")
         active = g >= track.threshold_counts
-        solved = self._solve(pairs, meas, cfg.matching.alpha_for(meas.y_mm), active)
+        solved = self._solver.solve(pairs, meas, cfg.matching.alpha_for(meas.y_mm), active)
         timer.lap("refine")
-        if isinstance(solved, Rejected) or len(solved.k_idx) < len(pairs):
+        if isinstance(solved, Rejected) or len(solved.observations) < len(pairs):
             give_up()  # rejected, or a reflector dropped as an outlier: acquire
             return None
         ml = solved.ml
@@ -541,9 +478,14 @@ class PosePipeline:
                      extra, mode: str = "acquisition") -> PoseResult:  # fmt: skip
         """The ok result of a ``Solution`` found from ``meas``; ``unmatched`` lists the
         blobs without a range, the unmatched candidates are added."""
-        s = solved
-        R, t, x, k_idx, i_idx = s.R, s.t_mm, s.catalog_xyz, s.k_idx, s.i_idx
-        uv_m, y_m, rho_m, iterations, ml = s.uv_px, s.y_mm, s.range_mm, s.iterations, s.ml
+        obs, T, ml, iterations = (
+            solved.observations,
+            solved.T_camera_target,
+            solved.ml,
+            solved.iterations,
+        )
+        R, t, x, k_idx, i_idx = T.R, T.t_mm, obs.x_mm, obs.k_idx, obs.i_idx
+        uv_m, y_m, rho_m = obs.uv_px, obs.y_mm, obs.range_mm
         ranged, uv, rho = meas.blobs, meas.uv_px, meas.range_mm
         sig_px, sig_rng = meas.sigma_px, meas.sigma_range_mm
         pred = x @ R.T + t
@@ -608,139 +550,6 @@ class PosePipeline:
             "is the right catalog active?"
         )
 
-    def _solve(
-        self, pairs: np.ndarray, meas: Measurements, alpha_mm: float, active: np.ndarray
-    ) -> Solution | Rejected:
-        """Pose from matched pairs (m, 2) of observed and catalog indices: weighted SVD
-        (Eqs. 40-50), completion, perspective-bias correction, refinement, outlier step
-        and verification (§5). Returns a ``Solution`` or ``Rejected``."""
-        cfg = self.config
-        uv, rho, y, w = meas.uv_px, meas.range_mm, meas.y_mm, meas.weights
-        sig_px, sig_rng = meas.sigma_px, meas.sigma_range_mm
-        k_idx, i_idx = pairs[:, 0], pairs[:, 1]
-        x = self._catalog_xyz[i_idx]
-        R, t = weighted_svd(x, y[k_idx], w[k_idx])
-        k_idx, i_idx = self._complete(
-            y, w, k_idx, i_idx, R, t, alpha_mm * cfg.matching.residual_factor
-        )
-        x = self._catalog_xyz[i_idx]
-        R, t = weighted_svd(x, y[k_idx], w[k_idx])
-
-        uv_m = uv[k_idx].copy()
-        if cfg.correct_perspective_bias:
-            uv_m -= disc_image_centre_offsets_px(
-                self.camera, x @ R.T + t, R[:, 2], self._catalog_d[i_idx] / 2
-            )
-        e_m = self.camera.bearings(uv_m)
-        rho_m = rho[k_idx]
-        y_m = e_m * rho_m[:, None]
-        sb = sig_px[k_idx] / self.camera.fx
-        sr0 = sig_rng[k_idx]
-        R, t, iterations, ml, sr, w_m = self._fit_adaptive(x, e_m, rho_m, y_m, sr0, sb)
-        if cfg.reject_outliers:
-            while len(k_idx) > cfg.matching.min_matches:
-                worst = self._worst_outlier(x, e_m, rho_m, y_m, w_m, sr, sb, ml)
-                if worst is None:
-                    break
-                keep = np.arange(len(k_idx)) != worst
-                k_idx, i_idx, x, uv_m, e_m = (a[keep] for a in (k_idx, i_idx, x, uv_m, e_m))
-                rho_m, y_m, sb, sr0 = (a[keep] for a in (rho_m, y_m, sb, sr0))
-                R, t, iterations, ml, sr, w_m = self._fit_adaptive(x, e_m, rho_m, y_m, sr0, sb)
-        if cfg.verify_pose:
-            problem = self._verify(R, t, active, set(int(i) for i in i_idx))
-            if problem:
-                return Rejected(f"pose rejected: {problem}", implausible=True)
-        bias = (cfg.range_bias_sigma_mm if self.range_correction is None
-                else cfg.calibrated_range_bias_sigma_mm)  # fmt: skip
-        if bias > 0:
-            extra = common_range_bias_covariance(x, e_m, rho_m, R, t, sr, sb, bias)
-            ml = replace(ml, bias_covariance=extra)
-        return Solution(R, t, x, k_idx, i_idx, uv_m, y_m, rho_m, iterations, ml)
-
-    def _worst_outlier(self, x, e_m, rho_m, y_m, w_m, sr, sb, ml) -> int | None:
-        """Index of the reflector to drop, or None when the fit is consistent.
-
-        A reflector more than ``outlier_sigma`` off the fit (whitened norm) is dropped. A
-        biased point can also drag a fit of few points towards itself and hide (its error
-        spread over the others); so when the fit as a whole is inconsistent (chi^2 above
-        ``outlier_chi2_per_dof`` per degree of freedom) each reflector is predicted from
-        a fit without it, and the one predicted worst goes if it is off by more than
-        ``outlier_sigma`` (from 5 reflectors on: a fit of 3 cannot single out the bad one
-        of 4).
-        """
-        cfg = self.config
-        z = ml.reflector_norms  # evaluated at the final pose of every refinement mode
-        worst = int(np.argmax(z))
-        if z[worst] > cfg.outlier_sigma:
-            return worst
-        dof = 3 * len(z) - 6
-        if len(z) < 5 or float(z @ z) <= cfg.outlier_chi2_per_dof * dof:
-            return None  # with 4 points a fit of the other 3 cannot single one out
-        predicted = np.empty(len(z))
-        for j in range(len(z)):
-            rest = np.arange(len(z)) != j
-            Rj, tj, _, _ = self._fit(
-                x[rest], e_m[rest], rho_m[rest], y_m[rest], w_m[rest], sr[rest], sb[rest]
-            )
-            predicted[j] = reflector_whitened_norms(
-                x[j : j + 1], e_m[j : j + 1], rho_m[j : j + 1], Rj, tj,
-                sr[j : j + 1], sb[j : j + 1],
-            )[0]  # fmt: skip
-        worst = int(np.argmax(predicted))
-        return worst if predicted[worst] > cfg.outlier_sigma else None
-
-    def _fit_adaptive(self, x, e_m, rho_m, y_m, sr0, sb):
-        """``_fit`` with the noise model's range sigmas ``sr0``, then, with
-        ``adapt_range_sigma``, again with the frame's systematic range sigma added
-        (capped at ``max_systematic_range_sigma_mm``); it is re-estimated after every
-        outlier removal. Returns (R, t, iterations, ml, sr, w)."""
-        cfg = self.config
-        w_m = 1.0 / (sr0**2 + (rho_m * sb) ** 2)
-        R, t, iterations, ml = self._fit(x, e_m, rho_m, y_m, w_m, sr0, sb)
-        if not cfg.adapt_range_sigma or len(x) < 4:
-            return R, t, iterations, ml, sr0, w_m
-        cap = cfg.max_systematic_range_sigma_mm
-        extra = systematic_range_sigma_mm(x, e_m, rho_m, R, t, sr0, sb, max_mm=cap)
-        # A single bad point (a reflection matched in a marker's place) bends the fit so
-        # that every residual looks large; without it the others agree. So the estimate
-        # is the smallest over the fits that leave one reflector out: a systematic error
-        # shows in all of them, one bad point in all but one. The fits leave out the
-        # worst-fitting reflectors first: with one bad point the first fit already gives
-        # 0 and ends the search (same minimum, usually one fit instead of n).
-        order = np.argsort(-ml.reflector_norms, kind="stable")
-        for j in order if extra > 0 and len(x) >= 5 else ():
-            rest = np.arange(len(x)) != j
-            Rj, tj, _, _ = self._fit(
-                x[rest], e_m[rest], rho_m[rest], y_m[rest], w_m[rest], sr0[rest], sb[rest]
-            )
-            extra = min(extra, systematic_range_sigma_mm(
-                x[rest], e_m[rest], rho_m[rest], Rj, tj, sr0[rest], sb[rest], max_mm=cap
-            ))  # fmt: skip
-            if extra <= 0:
-                break
-        if extra <= 0:
-            return R, t, iterations, ml, sr0, w_m
-        sr = np.sqrt(sr0**2 + extra**2)
-        w_m = 1.0 / (sr**2 + (rho_m * sb) ** 2)
-        R, t, iterations, ml = self._fit(x, e_m, rho_m, y_m, w_m, sr, sb)
-        return R, t, iterations, ml, sr, w_m
-
-    def _fit(self, x, e_m, rho_m, y_m, w_m, sr, sb):
-        """Weighted SVD (Eqs. 40-50) then the configured refinement; the ML solution is
-        always evaluated at the final pose for its covariance."""
-        cfg = self.config
-        R, t = weighted_svd(x, y_m, w_m)
-        iterations = 0
-        if cfg.refinement == "los":
-            ref = refine_line_of_sight(x, e_m, R, t, w_m, tol=cfg.los_tolerance)
-            R, t, iterations = ref.R, ref.t, ref.iterations
-        ml = refine_maximum_likelihood(
-            x, e_m, rho_m, R, t, sr, sb, max_iterations=10 if cfg.refinement == "ml" else 0
-        )
-        if cfg.refinement == "ml":
-            R, t, iterations = ml.R, ml.t, ml.iterations
-        return R, t, iterations, ml
-
     def _match_ransac(self, y: np.ndarray, w: np.ndarray) -> MatchResult:
         """Random triplet hypotheses over all blobs, best inlier count, until the time
         budget is spent or (``ransac_confidence``) the standard RANSAC count is reached;
@@ -755,7 +564,7 @@ class PosePipeline:
             self._catalog_xyz,
             alpha,
             tol,
-            lambda R_, t_: self._faces_camera(R_, t_),
+            lambda R_, t_: self._solver.faces_camera(R_, t_),
             weights=w,
             min_matches=cfg.matching.min_matches,
             observed_triplets=random_triplets(len(y), self._rng),
@@ -769,14 +578,6 @@ class PosePipeline:
         tried = stats.get("triplets", 0)
         return MatchResult(pairs, unmatched, np.zeros((len(y), 0)), tried, alpha, reason)
 
-    def _view_cosine(self, R, t) -> float:
-        """Cosine between the target normal and the direction to the camera."""
-        to_camera = -(R @ self._catalog_xyz.mean(axis=0) + t)
-        return float(R[:, 2] @ to_camera / np.linalg.norm(to_camera))
-
-    def _faces_camera(self, R, t) -> bool:
-        return self._view_cosine(R, t) >= np.cos(np.radians(self.config.max_view_angle_deg))
-
     # ------------------------------------------------------------------------------------
     @staticmethod
     def _apparent_diameter_px(b: Blob) -> float:
@@ -784,59 +585,6 @@ class PosePipeline:
             return float(max(b.ellipse[1]))
         _, _, bw, bh = b.bbox
         return float(max(bw, bh, 2.0 * np.sqrt(b.area_px / np.pi)))
-
-    def _verify(self, R, t, active: np.ndarray, matched: set[int]) -> str:
-        """Physical consistency of a pose with the frame; empty string when consistent."""
-        cos_view = self._view_cosine(R, t)
-        if cos_view < np.cos(np.radians(self.config.max_view_angle_deg)):
-            return (
-                f"the target would face away from the camera (view angle "
-                f"{np.degrees(np.arccos(np.clip(cos_view, -1, 1))):.0f} deg)"
-            )
-        centres = self._catalog_xyz @ R.T + t
-        if np.any(centres[:, 2] <= 0):
-            return "reflectors would be behind the camera"
-        if len(matched) > self.config.dark_check_max_matches:
-            return ""
-        uv = self.camera.project(centres)
-        d_px = self.camera.fx * self._catalog_d / centres[:, 2]
-        h, w = active.shape
-        for i in range(len(centres)):
-            if i in matched or d_px[i] < 2.5:
-                continue
-            u, v = uv[i]
-            m = 0.75 * d_px[i] + 2
-            if not (m <= u < w - m and m <= v < h - m):
-                continue
-            sep = np.linalg.norm(uv - uv[i], axis=1)
-            sep[i] = np.inf
-            if np.min(sep) < 1.5 * d_px[i]:
-                continue  # would merge with a neighbour: no clean prediction
-            r = max(1, int(round(d_px[i] / 3)))
-            iu, iv = int(round(u)), int(round(v))
-            if not active[iv - r : iv + r + 1, iu - r : iu + r + 1].any():
-                return (
-                    f"reflector {int(self._catalog_ids[i])} should be visible at "
-                    f"({u:.0f}, {v:.0f}) px but the frame is dark there"
-                )
-        return ""
-
-    def _complete(self, y, w, k_idx, i_idx, R, t, tol_mm):
-        """Add unmatched blobs that sit on a predicted unmatched reflector (ours)."""
-        free_k = [k for k in range(len(y)) if k not in set(k_idx.tolist())]
-        free_i = [i for i in range(len(self._catalog_xyz)) if i not in set(i_idx.tolist())]
-        if not free_k or not free_i:
-            return k_idx, i_idx
-        pred = self._catalog_xyz[free_i] @ R.T + t
-        dist = np.linalg.norm(y[free_k][:, None] - pred[None], axis=-1)
-        ks, is_ = list(k_idx), list(i_idx)
-        while dist.size and dist.min() < tol_mm:
-            a, b = np.unravel_index(np.argmin(dist), dist.shape)
-            ks.append(free_k[a])
-            is_.append(free_i[b])
-            dist[a, :] = np.inf
-            dist[:, b] = np.inf
-        return np.array(ks), np.array(is_)
 
     def _confirm_ellipses(self, blobs, oversize, gray, dist, stats) -> list[Blob]:
         """§3.3: confirm candidate shapes; split oversize components into ellipses.

@@ -1,0 +1,342 @@
+"""Pose from matched reflectors (§5) as the pipeline runs it: weighted SVD (Eqs. 40-50),
+completion with unmatched blobs, perspective-bias correction, refinement (ML or the
+paper's LOS, Eqs. 51-52), the outlier step, and verification against the frame.
+
+``PoseSolver.solve`` takes the matched pairs and the frame's ``Measurements`` and returns
+a ``Solution`` or ``Rejected``. The matched reflectors travel as one frozen
+``MatchedObservations`` record; the outlier step drops one with ``without(i)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from tofpose.camera import CameraModel
+from tofpose.catalog import Catalog
+from tofpose.extraction import Blob, disc_image_centre_offsets_px
+from tofpose.geometry import RigidTransform
+from tofpose.kernels.pose import ml_refine, svd_pose, systematic_sigma
+from tofpose.pose import (
+    MEDIAN_CHI2_3DOF,
+    STEP_SIGMA2,
+    MLResult,
+    common_range_bias_covariance,
+    refine_line_of_sight,
+    reflector_whitened_norms,
+)
+
+if TYPE_CHECKING:  # the pipeline imports this module
+    from tofpose.pipeline import PipelineConfig
+
+
+@dataclass(frozen=True)
+class Measurements:
+    """Candidate reflectors back-projected (Eqs. 7-8) with their sigmas.
+
+    blobs : the n blobs, in order; uv_px : (n, 2) centroids (Eq. 19); range_mm : (n,)
+    ranges (Eq. 20); y_mm : (n, 3) points in the camera frame (Eq. 8); weights : (n,) the
+    weights of Eq. 21, ``1 / (sigma_range^2 + (range sigma_px / f)^2)``; sigma_px,
+    sigma_range_mm : (n,) per-reflector sigmas (``uncertainty.measurement_sigmas``).
+    """
+
+    blobs: tuple[Blob, ...]
+    uv_px: np.ndarray
+    range_mm: np.ndarray
+    y_mm: np.ndarray
+    weights: np.ndarray
+    sigma_px: np.ndarray
+    sigma_range_mm: np.ndarray
+
+    def as_unmatched(self) -> list[tuple[float, float, float]]:
+        """(u, v, range) of every candidate, for a result without a pose."""
+        return [(u[0], u[1], r) for u, r in zip(self.uv_px, self.range_mm, strict=True)]
+
+
+@dataclass(frozen=True)
+class MatchedObservations:
+    """The m matched reflectors as the solver uses them, row i for one reflector.
+
+    k_idx, i_idx : (m,) observed (into ``Measurements``) and catalog indices;
+    x_mm : (m, 3) catalog positions (target frame); uv_px : (m, 2) centroids after the
+    perspective-bias correction; bearings : (m, 3) their unit lines of sight (Eq. 9);
+    range_mm : (m,); y_mm : (m, 3) back-projected points (Eq. 8); sigma_bearing_rad,
+    sigma_range_mm : (m,) the noise model's sigmas (before any systematic term).
+    """
+
+    k_idx: np.ndarray
+    i_idx: np.ndarray
+    x_mm: np.ndarray
+    uv_px: np.ndarray
+    bearings: np.ndarray
+    range_mm: np.ndarray
+    y_mm: np.ndarray
+    sigma_bearing_rad: np.ndarray
+    sigma_range_mm: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.k_idx)
+
+    def without(self, i: int) -> MatchedObservations:
+        """The same observations with row ``i`` dropped (the outlier step)."""
+        keep = np.arange(len(self)) != i
+        return MatchedObservations(**{
+            name: getattr(self, name)[keep] for name in self.__dataclass_fields__
+        })  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Fit:
+    """One fit of ``MatchedObservations``: the pose, the refinement's iterations, the ML
+    evaluation at the pose, and the range sigmas and weights it used (the noise model's,
+    or with the frame's systematic range sigma added), each (m,)."""
+
+    T_camera_target: RigidTransform
+    iterations: int
+    ml: MLResult
+    sigma_range_mm: np.ndarray
+    weights: np.ndarray
+
+
+@dataclass(frozen=True)
+class Solution:
+    """A solved pose (§5): ``T_camera_target`` maps target-frame points into the camera
+    frame; ``observations`` are the reflectors it was solved from (outliers removed);
+    iterations : refinement iterations; ml : the maximum-likelihood evaluation at the
+    pose (covariance, chi^2, norms)."""
+
+    T_camera_target: RigidTransform
+    observations: MatchedObservations
+    iterations: int
+    ml: MLResult
+
+
+@dataclass(frozen=True)
+class Rejected:
+    """No pose: ``reason`` for the user; ``implausible`` when a pose was found but failed
+    verification (the assignment may be a mirror image: worth the triplet fallback)."""
+
+    reason: str
+    implausible: bool = False
+
+
+class PoseSolver:
+    """§5 for one camera and catalog under a ``PipelineConfig``."""
+
+    def __init__(
+        self, camera: CameraModel, catalog: Catalog, config: PipelineConfig, calibrated: bool
+    ) -> None:
+        """``calibrated``: the camera's ranges are corrected (``RangeCorrection``), which
+        selects the smaller common range-bias sigma of the covariance."""
+        self.camera = camera
+        self.config = config
+        self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
+        self._d = catalog.diameters_mm
+        self._ids = catalog.ids
+        self._calibrated = calibrated
+
+    # ------------------------------------------------------------------------------------
+    def solve(
+        self, pairs: np.ndarray, meas: Measurements, alpha_mm: float, active: np.ndarray
+    ) -> Solution | Rejected:
+        """Pose from matched pairs (m, 2) of observed and catalog indices: weighted SVD
+        (Eqs. 40-50), completion, perspective-bias correction, refinement, outlier step
+        and verification (§5). ``active`` : (H, W) the frame's active pixel set."""
+        cfg = self.config
+        y, w = meas.y_mm, meas.weights
+        k_idx, i_idx = pairs[:, 0], pairs[:, 1]
+        R, t = svd_pose(self._xyz[i_idx], y[k_idx], w[k_idx])
+        k_idx, i_idx = self.complete(y, k_idx, i_idx, R, t, alpha_mm * cfg.matching.residual_factor)
+        R, t = svd_pose(self._xyz[i_idx], y[k_idx], w[k_idx])
+        obs = self.observations(meas, k_idx, i_idx, R, t)
+        fit = self.fit_adaptive(obs)
+        if cfg.reject_outliers:
+            while len(obs) > cfg.matching.min_matches:
+                worst = self.worst_outlier(obs, fit)
+                if worst is None:
+                    break
+                obs = obs.without(worst)
+                fit = self.fit_adaptive(obs)
+        T = fit.T_camera_target
+        if cfg.verify_pose:
+            problem = self.verify(T, active, set(obs.i_idx.tolist()))
+            if problem:
+                return Rejected(f"pose rejected: {problem}", implausible=True)
+        ml = fit.ml
+        bias = cfg.calibrated_range_bias_sigma_mm if self._calibrated else cfg.range_bias_sigma_mm
+        if bias > 0:
+            extra = common_range_bias_covariance(
+                obs.x_mm, obs.bearings, obs.range_mm, T.R, T.t_mm, fit.sigma_range_mm,
+                obs.sigma_bearing_rad, bias,
+            )  # fmt: skip
+            ml = replace(ml, bias_covariance=extra)
+        return Solution(T, obs, fit.iterations, ml)
+
+    def observations(self, meas: Measurements, k_idx, i_idx, R, t) -> MatchedObservations:
+        """The matched rows of ``meas``, centroids corrected for the perspective bias of
+        the discs at the pose (R, t) (when configured) and back-projected again."""
+        x = self._xyz[i_idx]
+        uv = meas.uv_px[k_idx].copy()
+        if self.config.correct_perspective_bias:
+            uv -= disc_image_centre_offsets_px(
+                self.camera, x @ R.T + t, R[:, 2], self._d[i_idx] / 2
+            )
+        e = self.camera.bearings(uv)
+        rho = meas.range_mm[k_idx]
+        return MatchedObservations(
+            k_idx=k_idx, i_idx=i_idx, x_mm=x, uv_px=uv, bearings=e, range_mm=rho,
+            y_mm=e * rho[:, None], sigma_bearing_rad=meas.sigma_px[k_idx] / self.camera.fx,
+            sigma_range_mm=meas.sigma_range_mm[k_idx],
+        )  # fmt: skip
+
+    def fit(self, obs: MatchedObservations, sigma_range_mm: np.ndarray) -> Fit:
+        """Weighted SVD (Eqs. 40-50) then the configured refinement; the ML solution is
+        always evaluated at the final pose for its covariance."""
+        cfg = self.config
+        x, e, rho, sb = obs.x_mm, obs.bearings, obs.range_mm, obs.sigma_bearing_rad
+        w = 1.0 / (sigma_range_mm**2 + (rho * sb) ** 2)
+        R, t = svd_pose(x, obs.y_mm, w)
+        iterations = 0
+        if cfg.refinement == "los":
+            ref = refine_line_of_sight(x, e, R, t, w, tol=cfg.los_tolerance)
+            R, t, iterations = ref.R, ref.t, ref.iterations
+        R_ml, t_ml, cov, chi2, its, norms = ml_refine(
+            x, e, rho, R, t, sigma_range_mm, sb, 10 if cfg.refinement == "ml" else 0, 1e-7,
+            STEP_SIGMA2,
+        )  # fmt: skip
+        ml = MLResult(R_ml, t_ml, cov, float(chi2), int(its), norms)
+        if cfg.refinement == "ml":
+            R, t, iterations = R_ml, t_ml, int(its)
+        return Fit(RigidTransform(R, t), iterations, ml, sigma_range_mm, w)
+
+    def _systematic_sigma(self, obs: MatchedObservations, T: RigidTransform) -> float:
+        return systematic_sigma(
+            obs.x_mm, obs.bearings, obs.range_mm, T.R, T.t_mm, obs.sigma_range_mm,
+            obs.sigma_bearing_rad, self.config.max_systematic_range_sigma_mm,
+            MEDIAN_CHI2_3DOF,
+        )  # fmt: skip
+
+    def fit_adaptive(self, obs: MatchedObservations) -> Fit:
+        """``fit`` with the noise model's range sigmas, then, with ``adapt_range_sigma``,
+        again with the frame's systematic range sigma added (capped at
+        ``max_systematic_range_sigma_mm``); it is re-estimated after every outlier
+        removal."""
+        cfg = self.config
+        first = self.fit(obs, obs.sigma_range_mm)
+        if not cfg.adapt_range_sigma or len(obs) < 4:
+            return first
+        extra = self._systematic_sigma(obs, first.T_camera_target)
+        # A single bad point (a reflection matched in a marker's place) bends the fit so
+        # that every residual looks large; without it the others agree. So the estimate
+        # is the smallest over the fits that leave one reflector out: a systematic error
+        # shows in all of them, one bad point in all but one. The fits leave out the
+        # worst-fitting reflectors first: with one bad point the first fit already gives
+        # 0 and ends the search (same minimum, usually one fit instead of n).
+        order = np.argsort(-first.ml.reflector_norms, kind="stable")
+        for j in order.tolist() if extra > 0 and len(obs) >= 5 else ():
+            rest = obs.without(j)
+            extra = min(
+                extra,
+                self._systematic_sigma(rest, self.fit(rest, rest.sigma_range_mm).T_camera_target),
+            )
+            if extra <= 0:
+                break
+        if extra <= 0:
+            return first
+        return self.fit(obs, np.sqrt(obs.sigma_range_mm**2 + extra**2))
+
+    def worst_outlier(self, obs: MatchedObservations, fit: Fit) -> int | None:
+        """Index of the reflector to drop, or None when the fit is consistent.
+
+        A reflector more than ``outlier_sigma`` off the fit (whitened norm) is dropped. A
+        biased point can also drag a fit of few points towards itself and hide (its error
+        spread over the others); so when the fit as a whole is inconsistent (chi^2 above
+        ``outlier_chi2_per_dof`` per degree of freedom) each reflector is predicted from
+        a fit without it, and the one predicted worst goes if it is off by more than
+        ``outlier_sigma`` (from 5 reflectors on: a fit of 3 cannot single out the bad one
+        of 4).
+        """
+        cfg = self.config
+        z = fit.ml.reflector_norms  # evaluated at the final pose of every refinement mode
+        worst = int(np.argmax(z))
+        if z[worst] > cfg.outlier_sigma:
+            return worst
+        dof = 3 * len(z) - 6
+        if len(z) < 5 or float(z @ z) <= cfg.outlier_chi2_per_dof * dof:
+            return None  # with 4 points a fit of the other 3 cannot single one out
+        sr = fit.sigma_range_mm
+        predicted = np.empty(len(z))
+        for j in range(len(z)):
+            keep = np.arange(len(z)) != j
+            Tj = self.fit(obs.without(j), sr[keep]).T_camera_target
+            predicted[j] = reflector_whitened_norms(
+                obs.x_mm[j : j + 1], obs.bearings[j : j + 1], obs.range_mm[j : j + 1],
+                Tj.R, Tj.t_mm, sr[j : j + 1], obs.sigma_bearing_rad[j : j + 1],
+            )[0]  # fmt: skip
+        worst = int(np.argmax(predicted))
+        return worst if predicted[worst] > cfg.outlier_sigma else None
+
+    # ------------------------------------------------------------------------------------
+    def view_cosine(self, R: np.ndarray, t: np.ndarray) -> float:
+        """Cosine between the target normal and the direction to the camera."""
+        to_camera = -(R @ self._xyz.mean(axis=0) + t)
+        return float(R[:, 2] @ to_camera / np.linalg.norm(to_camera))
+
+    def faces_camera(self, R: np.ndarray, t: np.ndarray) -> bool:
+        return self.view_cosine(R, t) >= np.cos(np.radians(self.config.max_view_angle_deg))
+
+    def verify(self, T: RigidTransform, active: np.ndarray, matched: set[int]) -> str:
+        """Physical consistency of a pose with the frame; empty string when consistent."""
+        R, t = T.R, T.t_mm
+        cos_view = self.view_cosine(R, t)
+        if cos_view < np.cos(np.radians(self.config.max_view_angle_deg)):
+            return (
+                f"the target would face away from the camera (view angle "
+                f"{np.degrees(np.arccos(np.clip(cos_view, -1, 1))):.0f} deg)"
+            )
+        centres = self._xyz @ R.T + t
+        if np.any(centres[:, 2] <= 0):
+            return "reflectors would be behind the camera"
+        if len(matched) > self.config.dark_check_max_matches:
+            return ""
+        uv = self.camera.project(centres)
+        d_px = self.camera.fx * self._d / centres[:, 2]
+        h, w = active.shape
+        for i in range(len(centres)):
+            if i in matched or d_px[i] < 2.5:
+                continue
+            u, v = uv[i]
+            m = 0.75 * d_px[i] + 2
+            if not (m <= u < w - m and m <= v < h - m):
+                continue
+            sep = np.linalg.norm(uv - uv[i], axis=1)
+            sep[i] = np.inf
+            if np.min(sep) < 1.5 * d_px[i]:
+                continue  # would merge with a neighbour: no clean prediction
+            r = max(1, int(round(d_px[i] / 3)))
+            iu, iv = int(round(u)), int(round(v))
+            if not active[iv - r : iv + r + 1, iu - r : iu + r + 1].any():
+                return (
+                    f"reflector {int(self._ids[i])} should be visible at "
+                    f"({u:.0f}, {v:.0f}) px but the frame is dark there"
+                )
+        return ""
+
+    def complete(self, y, k_idx, i_idx, R, t, tol_mm):
+        """Add unmatched blobs that sit on a predicted unmatched reflector (ours)."""
+        free_k = [k for k in range(len(y)) if k not in set(k_idx.tolist())]
+        free_i = [i for i in range(len(self._xyz)) if i not in set(i_idx.tolist())]
+        if not free_k or not free_i:
+            return k_idx, i_idx
+        pred = self._xyz[free_i] @ R.T + t
+        dist = np.linalg.norm(y[free_k][:, None] - pred[None], axis=-1)
+        ks, is_ = list(k_idx), list(i_idx)
+        while dist.size and dist.min() < tol_mm:
+            a, b = np.unravel_index(np.argmin(dist), dist.shape)
+            ks.append(free_k[a])
+            is_.append(free_i[b])
+            dist[a, :] = np.inf
+            dist[:, b] = np.inf
+        return np.array(ks), np.array(is_)
