@@ -1,8 +1,9 @@
 """A/B harness for pipeline changes that must not change the answer: the same fixed
 frames (the speed bench's ranges as a stream, plus independent random poses from 0.5 to
-12 m, with and without spurious blobs) through the pipeline; ``--save`` stores every
-frame's ok flag, matched ids, R and t; ``--compare`` reports the largest differences
-against a saved run and fails when any exceeds 1e-6 mm / 1e-6 deg or a flag differs.
+12 m, with and without spurious blobs) through the pipeline, with tracking off and on;
+``--save`` stores every frame's ok flag, matched ids, R, t and mode; ``--compare``
+reports the largest differences against a saved run and fails when any exceeds 1e-6 mm
+/ 1e-6 deg or a flag or mode differs.
 
 Run: ``python bench/ab.py --save before.npz`` (old code), then
 ``python bench/ab.py --compare before.npz`` (new code).
@@ -21,11 +22,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.accuracy import random_pose  # noqa: E402
 from bench.pipeline import CASES  # noqa: E402
-from tofpose import CameraModel, PosePipeline, paper_target  # noqa: E402
+from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
 from tofpose.sim.bench import R_FACING  # noqa: E402
 from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
 from tofpose.sim.scene import Clutter, TargetScene  # noqa: E402
+from tofpose.tracking import TrackingConfig  # noqa: E402
 
 TOL = 1e-6
 
@@ -54,13 +56,13 @@ def frames():
             yield f"single-{r}-{j}", f.gray, f.distance_mm
 
 
-def run() -> dict[str, np.ndarray]:
+def run(config: PipelineConfig | None = None) -> dict[str, np.ndarray]:
     cam, cat = CameraModel(), paper_target()
     pipes: dict[str, PosePipeline] = {}
-    ok, ids, Rs, ts = [], [], [], []
+    ok, ids, Rs, ts, modes = [], [], [], [], []
     for stream, gray, dist in tqdm(list(frames()), desc="A/B frames", file=sys.stderr):
         key = stream if stream.startswith("stream") else "single"
-        pipe = pipes.setdefault(key, PosePipeline(cam, cat))
+        pipe = pipes.setdefault(key, PosePipeline(cam, cat, config))
         if key == "single":
             pipe.reset()
         r = pipe.process(gray, dist)
@@ -68,17 +70,31 @@ def run() -> dict[str, np.ndarray]:
         ids.append(",".join(str(m.catalog_id) for m in r.matched) if r.ok else "")
         Rs.append(r.R if r.ok else np.full((3, 3), np.nan))
         ts.append(r.t_mm if r.ok else np.full(3, np.nan))
-    return {"ok": np.array(ok), "ids": np.array(ids), "R": np.array(Rs), "t": np.array(ts)}
+        modes.append(r.mode)
+    return {"ok": np.array(ok), "ids": np.array(ids), "R": np.array(Rs), "t": np.array(ts),
+            "mode": np.array(modes)}  # fmt: skip
 
 
-def compare(a: dict, b: dict) -> int:
+def run_both() -> dict[str, np.ndarray]:
+    """The frames through the default pipeline and through one with tracking on (its
+    keys prefixed ``tracking_``)."""
+    out = run()
+    tracked = run(PipelineConfig(tracking=TrackingConfig(enabled=True)))
+    out.update({f"tracking_{k}": v for k, v in tracked.items()})
+    return out
+
+
+def compare(a: dict, b: dict, label: str = "acquisition") -> int:
+    if "mode" in a and np.any(a["mode"] != b["mode"]):
+        print(f"{label}: modes differ on {int(np.sum(a['mode'] != b['mode']))} frames")
+        return 1
     flags = np.flatnonzero(a["ok"] != b["ok"])
     idd = np.flatnonzero(a["ids"] != b["ids"])
     both = a["ok"] & b["ok"]
     dt = np.linalg.norm(a["t"][both] - b["t"][both], axis=1)
     # small-angle difference from the Frobenius norm (arccos near 1 loses ~1e-6 deg)
     dR = np.degrees(np.linalg.norm(a["R"][both] - b["R"][both], axis=(1, 2)) / np.sqrt(2.0))
-    print(f"frames {len(a['ok'])}, ok {int(a['ok'].sum())} / {int(b['ok'].sum())}; "
+    print(f"{label}: frames {len(a['ok'])}, ok {int(a['ok'].sum())} / {int(b['ok'].sum())}; "
           f"ok flags differ {len(flags)}, matched ids differ {len(idd)}; "
           f"max |dt| {dt.max(initial=0):.3g} mm, max dR {dR.max(initial=0):.3g} deg")  # fmt: skip
     for i in np.argsort(-dt)[:5] if len(dt) and dt.max() > TOL else []:
@@ -93,13 +109,23 @@ def main() -> None:
     g.add_argument("--save")
     g.add_argument("--compare")
     args = ap.parse_args()
-    result = run()
+    result = run_both()
     if args.save:
         np.savez(args.save, **result)
-        print(f"saved {len(result['ok'])} frames -> {args.save}")
+        print(f"saved {len(result['ok'])} frames x 2 modes -> {args.save}")
         return
-    with np.load(args.compare) as before:
-        sys.exit(compare(dict(before), result))
+    with np.load(args.compare) as saved:
+        before = dict(saved)
+    status = compare(before, result)
+    if "tracking_ok" in before:
+        tracked = {
+            k.removeprefix("tracking_"): v for k, v in result.items() if k.startswith("tracking_")
+        }
+        old = {
+            k.removeprefix("tracking_"): v for k, v in before.items() if k.startswith("tracking_")
+        }
+        status |= compare(old, tracked, "tracking")
+    sys.exit(status)
 
 
 if __name__ == "__main__":

@@ -404,7 +404,7 @@ def find_candidate_blobs(
     x_k, y_k, w_k, h_k = bbox_k.T
     inner = (x_k > 0) & (y_k > 0) & (x_k + w_k < w) & (y_k + h_k < h)
     ranged = np.flatnonzero(
-        inner & (peak_k >= stats.peak_threshold) & (area_k >= config.min_area_px)
+        inner & (peak_k.astype(np.float64) >= stats.peak_threshold) & (area_k >= config.min_area_px)
     )
     rho_k = np.full(n_lab, np.nan)
     d_flat = np.asarray(distance_mm, np.float32).reshape(-1)
@@ -412,7 +412,7 @@ def find_candidate_blobs(
     cos_t = np.cos(np.radians(config.max_tilt_deg))
     ecc_max = np.sqrt(1.0 - cos_t**2)
     listed = np.flatnonzero(area_k >= max(config.min_area_px, 1))
-    testable = inner[listed] & (peak_k[listed] >= stats.peak_threshold)
+    testable = inner[listed] & (peak_k[listed].astype(np.float64) >= stats.peak_threshold)
     which = listed[testable]
     status, size, mom, keep_starts, keep_flat = gate_components(
         gray32, labels, bbox_k, area_k, peak_k, rho_k, which, float(camera.fx),

@@ -54,9 +54,8 @@ from tofpose.solve import Measurements, PoseSolver, Rejected, Solution
 from tofpose.tracking import (
     TrackingConfig,
     TrackState,
-    find_in_window,
+    find_in_windows,
     predict_windows,
-    share_pixels,
 )
 from tofpose.uncertainty import SigmaFloors, measurement_sigmas
 
@@ -420,14 +419,9 @@ class PosePipeline:
         )  # fmt: skip
         if len(windows) < cfg.matching.min_matches:
             return None
-        blobs = []
-        for wdw in windows:
-            b = find_in_window(g, wdw, track.threshold_counts, track.background_counts)
-            if isinstance(b, str):
-                return None  # a marker lost (or moved too far): acquire
-            blobs.append(b)
-        if share_pixels(blobs):
-            return None
+        blobs = find_in_windows(g, windows, track.threshold_counts, track.background_counts)
+        if isinstance(blobs, str):
+            return None  # a marker lost, moved too far, or two merged: acquire
         timer.lap("windows")
         before = self._persistence.snapshot()
 

@@ -21,11 +21,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from tofpose.camera import CameraModel
 from tofpose.extraction import Blob
+from tofpose.kernels.tracking import (
+    AT_EDGE,
+    FOUND,
+    NO_SIZE,
+    NOT_FOUND,
+    any_shared,
+    search_windows,
+)
 
 
 @dataclass(frozen=True)
@@ -110,60 +117,56 @@ def predict_windows(
     return out
 
 
-def share_pixels(blobs: list[Blob]) -> bool:
-    """True if two windows found the same component (one blob serving two reflectors)."""
-    seen: set[int] = set()
-    for b in blobs:
-        px = set(b.pixels.tolist())
-        if seen & px:
-            return True
-        seen |= px
-    return False
+_WHY_NOT = {
+    NOT_FOUND: "not found in its window",
+    NO_SIZE: "no component of the predicted size in its window",
+    AT_EDGE: "touches its window's edge (moved too far)",
+}
+
+
+def find_in_windows(
+    gray: np.ndarray, windows: list[Window], threshold_counts: float, background_counts: float
+) -> list[Blob] | str:
+    """Each window's reflector blob, or why one is not there (the first failing window).
+
+    gray : (H, W) frame. Each window is thresholded at ``threshold_counts`` (the active
+    pixel set's I_t of the last acquisition); of the 8-connected components, the one
+    nearest the predicted centre is taken when its area is between a quarter and four
+    times the predicted disc's (at least one pixel). A component touching the window's
+    edge means the target moved more than the margin: refused. Two windows finding the
+    same component (one blob serving two reflectors) are refused too. The blobs carry
+    their moment centroid (the persistence motion gate's) and global pixel indices.
+    """
+    if not windows:
+        return []
+    bounds = np.array([(w.u0, w.u1, w.v0, w.v1) for w in windows], np.int64)
+    centres = np.array([w.centre_uv for w in windows], np.float64)
+    diameters = np.array([w.diameter_px for w in windows], np.float64)
+    status, bbox, peak, centroid, starts, flat = search_windows(
+        np.asarray(gray, np.float32), bounds, centres, diameters,
+        np.float32(threshold_counts), float(background_counts),
+    )  # fmt: skip
+    for code in status.tolist():
+        if code != FOUND:
+            return _WHY_NOT[code]
+    if any_shared(flat, starts):
+        return "two windows found the same component"
+    return [
+        Blob(
+            pixels=flat[starts[j] : starts[j + 1]],
+            area_px=int(starts[j + 1] - starts[j]),
+            bbox=tuple(bbox[j].tolist()),
+            centroid_uv=centroid[j],
+            peak_counts=float(peak[j]),
+            source="tracking",
+        )  # fmt: skip
+        for j in range(len(windows))
+    ]
 
 
 def find_in_window(
     gray: np.ndarray, window: Window, threshold_counts: float, background_counts: float
 ) -> Blob | str:
-    """The reflector's blob in its window, or why it is not there.
-
-    gray : (H, W) frame. The window is thresholded at ``threshold_counts`` (the active
-    pixel set's I_t of the last acquisition); of the 8-connected components, the one
-    nearest the predicted centre is taken when its area is between a quarter and four
-    times the predicted disc's (at least one pixel). A component touching the window's
-    edge means the target moved more than the margin: refused. The blob carries its
-    moment centroid (the persistence motion gate's) and global pixel indices.
-    """
-    w_img = gray.shape[1]
-    patch = gray[window.v0 : window.v1, window.u0 : window.u1]
-    mask = (patch >= threshold_counts).astype(np.uint8)
-    n, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    if n <= 1:
-        return "not found in its window"
-    expected = np.pi * (0.5 * window.diameter_px) ** 2
-    c_local = window.centre_uv - [window.u0, window.v0]
-    best, best_d = 0, np.inf
-    for k in range(1, n):
-        area = stats[k, cv2.CC_STAT_AREA]
-        if not max(1.0, 0.25 * expected) <= area <= max(4.0, 4.0 * expected):
-            continue
-        d = float(np.hypot(*(cents[k] - c_local)))
-        if d < best_d:
-            best, best_d = k, d
-    if best == 0:
-        return "no component of the predicted size in its window"
-    x, y, bw, bh = stats[best, :4].tolist()
-    ph, pw = mask.shape
-    if x == 0 or y == 0 or x + bw >= pw or y + bh >= ph:
-        return "touches its window's edge (moved too far)"
-    rows, cols = np.nonzero(labels == best)
-    vals = patch[rows, cols].astype(np.float64)
-    wts = np.maximum(vals - background_counts, 1e-9)
-    rows_g, cols_g = rows + window.v0, cols + window.u0
-    return Blob(
-        pixels=rows_g * w_img + cols_g,
-        area_px=len(rows),
-        bbox=(x + window.u0, y + window.v0, bw, bh),
-        centroid_uv=np.array([(wts * cols_g).sum() / wts.sum(), (wts * rows_g).sum() / wts.sum()]),
-        peak_counts=float(vals.max()),
-        source="tracking",
-    )
+    """One window of ``find_in_windows``: the reflector's blob, or why it is not there."""
+    found = find_in_windows(gray, [window], threshold_counts, background_counts)
+    return found if isinstance(found, str) else found[0]

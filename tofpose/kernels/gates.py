@@ -162,6 +162,7 @@ def gate_components(gray, labels, bbox, area, peak, rho, which, fx, diameters_mm
             jr = nlog_patch(patch, sigma, True)
             contrast = peak[k] - background
             j_peak, j_t = j_peak_p * contrast, j_t_p * contrast
+        j_t = np.float32(j_t)  # NumPy compares the float32 response in float32
         j_max = -np.inf
         n_keep = 0
         for yy in range(y, y + bh):
