@@ -4,7 +4,8 @@ paper's LOS, Eqs. 51-52), the outlier step, and verification against the frame.
 
 ``PoseSolver.solve`` takes the matched pairs and the frame's ``Measurements`` and returns
 a ``Solution`` or ``Rejected``. The matched reflectors travel as one frozen
-``MatchedObservations`` record; the outlier step drops one with ``without(i)``.
+``MatchedObservations`` record (``without(i)`` drops one). The fit, the systematic range
+sigma and the outlier loop run as one compiled call (``tofpose.kernels.pose``).
 """
 
 from __future__ import annotations
@@ -18,15 +19,16 @@ from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.extraction import Blob, disc_image_centre_offsets_px
 from tofpose.geometry import RigidTransform
-from tofpose.kernels.pose import ml_refine, svd_pose, systematic_sigma
-from tofpose.pose import (
-    MEDIAN_CHI2_3DOF,
-    STEP_SIGMA2,
-    MLResult,
-    common_range_bias_covariance,
-    refine_line_of_sight,
-    reflector_whitened_norms,
+from tofpose.kernels.pose import (
+    REFINE_LOS,
+    REFINE_ML,
+    REFINE_NONE,
+    fit_with_outliers,
+    svd_pose,
 )
+from tofpose.pose import MEDIAN_CHI2_3DOF, STEP_SIGMA2, MLResult, common_range_bias_covariance
+
+_REFINEMENT = {"none": REFINE_NONE, "ml": REFINE_ML, "los": REFINE_LOS}
 
 if TYPE_CHECKING:  # the pipeline imports this module
     from tofpose.pipeline import PipelineConfig
@@ -81,23 +83,13 @@ class MatchedObservations:
 
     def without(self, i: int) -> MatchedObservations:
         """The same observations with row ``i`` dropped (the outlier step)."""
-        keep = np.arange(len(self)) != i
+        return self.subset(np.arange(len(self)) != i)
+
+    def subset(self, keep: np.ndarray) -> MatchedObservations:
+        """The rows where the (m,) bool mask ``keep`` is true."""
         return MatchedObservations(**{
             name: getattr(self, name)[keep] for name in self.__dataclass_fields__
         })  # fmt: skip
-
-
-@dataclass(frozen=True)
-class Fit:
-    """One fit of ``MatchedObservations``: the pose, the refinement's iterations, the ML
-    evaluation at the pose, and the range sigmas and weights it used (the noise model's,
-    or with the frame's systematic range sigma added), each (m,)."""
-
-    T_camera_target: RigidTransform
-    iterations: int
-    ml: MLResult
-    sigma_range_mm: np.ndarray
-    weights: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -143,7 +135,22 @@ class PoseSolver:
     ) -> Solution | Rejected:
         """Pose from matched pairs (m, 2) of observed and catalog indices: weighted SVD
         (Eqs. 40-50), completion, perspective-bias correction, refinement, outlier step
-        and verification (§5). ``active`` : (H, W) the frame's active pixel set."""
+        and verification (§5). ``active`` : (H, W) the frame's active pixel set.
+
+        The fit (``kernels.pose.fit_with_outliers``) first uses the noise model's range
+        sigmas; with ``adapt_range_sigma`` it adds the frame's systematic range sigma
+        (``pose.systematic_range_sigma_mm``, capped at ``max_systematic_range_sigma_mm``)
+        and fits again. A single bad point (a reflection matched in a marker's place)
+        bends the fit so that every residual looks large while without it the others
+        agree, so that estimate is the smallest over the fits that leave one reflector
+        out (worst-fitting first: with one bad point the first such fit already gives 0).
+        The outlier step then drops a reflector more than ``outlier_sigma`` off the fit
+        (whitened norm), re-estimating after each removal. A biased point can also drag a
+        fit of few points towards itself and hide; so when the fit as a whole is
+        inconsistent (chi^2 above ``outlier_chi2_per_dof`` per degree of freedom) each
+        reflector is predicted from a fit without it, and the one predicted worst goes
+        if it is off by more than ``outlier_sigma`` (from 5 reflectors on: a fit of 3
+        cannot single out the bad one of 4)."""
         cfg = self.config
         y, w = meas.y_mm, meas.weights
         k_idx, i_idx = pairs[:, 0], pairs[:, 1]
@@ -151,28 +158,27 @@ class PoseSolver:
         k_idx, i_idx = self.complete(y, k_idx, i_idx, R, t, alpha_mm * cfg.matching.residual_factor)
         R, t = svd_pose(self._xyz[i_idx], y[k_idx], w[k_idx])
         obs = self.observations(meas, k_idx, i_idx, R, t)
-        fit = self.fit_adaptive(obs)
-        if cfg.reject_outliers:
-            while len(obs) > cfg.matching.min_matches:
-                worst = self.worst_outlier(obs, fit)
-                if worst is None:
-                    break
-                obs = obs.without(worst)
-                fit = self.fit_adaptive(obs)
-        T = fit.T_camera_target
+        kept, R, t, iterations, cov, chi2, norms, sr = fit_with_outliers(
+            obs.x_mm, obs.bearings, obs.range_mm, obs.y_mm, obs.sigma_range_mm,
+            obs.sigma_bearing_rad, _REFINEMENT[cfg.refinement], cfg.los_tolerance,
+            STEP_SIGMA2, cfg.adapt_range_sigma, cfg.max_systematic_range_sigma_mm,
+            MEDIAN_CHI2_3DOF, cfg.reject_outliers, cfg.matching.min_matches,
+            cfg.outlier_sigma, cfg.outlier_chi2_per_dof,
+        )  # fmt: skip
+        obs = obs.subset(kept)
+        T = RigidTransform(R, t)
         if cfg.verify_pose:
             problem = self.verify(T, active, set(obs.i_idx.tolist()))
             if problem:
                 return Rejected(f"pose rejected: {problem}", implausible=True)
-        ml = fit.ml
+        ml = MLResult(R, t, cov, float(chi2), int(iterations), norms)
         bias = cfg.calibrated_range_bias_sigma_mm if self._calibrated else cfg.range_bias_sigma_mm
         if bias > 0:
             extra = common_range_bias_covariance(
-                obs.x_mm, obs.bearings, obs.range_mm, T.R, T.t_mm, fit.sigma_range_mm,
-                obs.sigma_bearing_rad, bias,
-            )  # fmt: skip
+                obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, obs.sigma_bearing_rad, bias
+            )
             ml = replace(ml, bias_covariance=extra)
-        return Solution(T, obs, fit.iterations, ml)
+        return Solution(T, obs, int(iterations), ml)
 
     def observations(self, meas: Measurements, k_idx, i_idx, R, t) -> MatchedObservations:
         """The matched rows of ``meas``, centroids corrected for the perspective bias of
@@ -190,93 +196,6 @@ class PoseSolver:
             y_mm=e * rho[:, None], sigma_bearing_rad=meas.sigma_px[k_idx] / self.camera.fx,
             sigma_range_mm=meas.sigma_range_mm[k_idx],
         )  # fmt: skip
-
-    def fit(self, obs: MatchedObservations, sigma_range_mm: np.ndarray) -> Fit:
-        """Weighted SVD (Eqs. 40-50) then the configured refinement; the ML solution is
-        always evaluated at the final pose for its covariance."""
-        cfg = self.config
-        x, e, rho, sb = obs.x_mm, obs.bearings, obs.range_mm, obs.sigma_bearing_rad
-        w = 1.0 / (sigma_range_mm**2 + (rho * sb) ** 2)
-        R, t = svd_pose(x, obs.y_mm, w)
-        iterations = 0
-        if cfg.refinement == "los":
-            ref = refine_line_of_sight(x, e, R, t, w, tol=cfg.los_tolerance)
-            R, t, iterations = ref.R, ref.t, ref.iterations
-        R_ml, t_ml, cov, chi2, its, norms = ml_refine(
-            x, e, rho, R, t, sigma_range_mm, sb, 10 if cfg.refinement == "ml" else 0, 1e-7,
-            STEP_SIGMA2,
-        )  # fmt: skip
-        ml = MLResult(R_ml, t_ml, cov, float(chi2), int(its), norms)
-        if cfg.refinement == "ml":
-            R, t, iterations = R_ml, t_ml, int(its)
-        return Fit(RigidTransform(R, t), iterations, ml, sigma_range_mm, w)
-
-    def _systematic_sigma(self, obs: MatchedObservations, T: RigidTransform) -> float:
-        return systematic_sigma(
-            obs.x_mm, obs.bearings, obs.range_mm, T.R, T.t_mm, obs.sigma_range_mm,
-            obs.sigma_bearing_rad, self.config.max_systematic_range_sigma_mm,
-            MEDIAN_CHI2_3DOF,
-        )  # fmt: skip
-
-    def fit_adaptive(self, obs: MatchedObservations) -> Fit:
-        """``fit`` with the noise model's range sigmas, then, with ``adapt_range_sigma``,
-        again with the frame's systematic range sigma added (capped at
-        ``max_systematic_range_sigma_mm``); it is re-estimated after every outlier
-        removal."""
-        cfg = self.config
-        first = self.fit(obs, obs.sigma_range_mm)
-        if not cfg.adapt_range_sigma or len(obs) < 4:
-            return first
-        extra = self._systematic_sigma(obs, first.T_camera_target)
-        # A single bad point (a reflection matched in a marker's place) bends the fit so
-        # that every residual looks large; without it the others agree. So the estimate
-        # is the smallest over the fits that leave one reflector out: a systematic error
-        # shows in all of them, one bad point in all but one. The fits leave out the
-        # worst-fitting reflectors first: with one bad point the first fit already gives
-        # 0 and ends the search (same minimum, usually one fit instead of n).
-        order = np.argsort(-first.ml.reflector_norms, kind="stable")
-        for j in order.tolist() if extra > 0 and len(obs) >= 5 else ():
-            rest = obs.without(j)
-            extra = min(
-                extra,
-                self._systematic_sigma(rest, self.fit(rest, rest.sigma_range_mm).T_camera_target),
-            )
-            if extra <= 0:
-                break
-        if extra <= 0:
-            return first
-        return self.fit(obs, np.sqrt(obs.sigma_range_mm**2 + extra**2))
-
-    def worst_outlier(self, obs: MatchedObservations, fit: Fit) -> int | None:
-        """Index of the reflector to drop, or None when the fit is consistent.
-
-        A reflector more than ``outlier_sigma`` off the fit (whitened norm) is dropped. A
-        biased point can also drag a fit of few points towards itself and hide (its error
-        spread over the others); so when the fit as a whole is inconsistent (chi^2 above
-        ``outlier_chi2_per_dof`` per degree of freedom) each reflector is predicted from
-        a fit without it, and the one predicted worst goes if it is off by more than
-        ``outlier_sigma`` (from 5 reflectors on: a fit of 3 cannot single out the bad one
-        of 4).
-        """
-        cfg = self.config
-        z = fit.ml.reflector_norms  # evaluated at the final pose of every refinement mode
-        worst = int(np.argmax(z))
-        if z[worst] > cfg.outlier_sigma:
-            return worst
-        dof = 3 * len(z) - 6
-        if len(z) < 5 or float(z @ z) <= cfg.outlier_chi2_per_dof * dof:
-            return None  # with 4 points a fit of the other 3 cannot single one out
-        sr = fit.sigma_range_mm
-        predicted = np.empty(len(z))
-        for j in range(len(z)):
-            keep = np.arange(len(z)) != j
-            Tj = self.fit(obs.without(j), sr[keep]).T_camera_target
-            predicted[j] = reflector_whitened_norms(
-                obs.x_mm[j : j + 1], obs.bearings[j : j + 1], obs.range_mm[j : j + 1],
-                Tj.R, Tj.t_mm, sr[j : j + 1], obs.sigma_bearing_rad[j : j + 1],
-            )[0]  # fmt: skip
-        worst = int(np.argmax(predicted))
-        return worst if predicted[worst] > cfg.outlier_sigma else None
 
     # ------------------------------------------------------------------------------------
     def view_cosine(self, R: np.ndarray, t: np.ndarray) -> float:

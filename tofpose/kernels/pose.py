@@ -174,3 +174,202 @@ def systematic_sigma(x, e, rho, R, t, sr, sb, max_mm, median_chi2):
         else:
             hi = mid
     return hi
+
+
+#: refinement modes of ``fit_pose`` (PipelineConfig.refinement)
+REFINE_NONE, REFINE_ML, REFINE_LOS = 0, 1, 2
+
+
+@jit
+def line_of_sight(x, e, R, t, w, tol, max_iterations):
+    """The paper's line-of-sight refinement (§5.2, Eqs. 51-52) from (R, t): project the
+    predicted points on the measured lines of sight, re-solve the weighted SVD, stop when
+    the residual sum changes by less than ``tol``. Returns R, t, iterations."""
+    m = x.shape[0]
+    prev = np.nan
+    y = np.empty((m, 3))
+    for it in range(1, max_iterations + 1):
+        for i in range(m):
+            p = R @ x[i] + t
+            s = e[i, 0] * p[0] + e[i, 1] * p[1] + e[i, 2] * p[2]
+            y[i] = s * e[i]  # Eq. 51
+        R, t = svd_pose(x, y, w)
+        eps = 0.0
+        for i in range(m):
+            d = R @ x[i] + t - y[i]
+            eps += np.sqrt((d**2).sum())  # Eq. 52
+        if it > 1 and abs(eps - prev) < tol:
+            return R, t, it
+        prev = eps
+    return R, t, max_iterations
+
+
+@jit
+def fit_pose(x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2):
+    """One fit: weighted SVD (Eqs. 40-50, weights 1 / (sr^2 + (rho sb)^2)), then the
+    refinement; the ML evaluation at the final pose always. Returns R, t, iterations,
+    covariance, chi^2, norms (m,), weights (m,)."""
+    w = 1.0 / (sr**2 + (rho * sb) ** 2)
+    R, t = svd_pose(x, y, w)
+    iterations = 0
+    if refinement == REFINE_LOS:
+        R, t, iterations = line_of_sight(x, e, R, t, w, los_tol, 200)
+    max_it = 10 if refinement == REFINE_ML else 0
+    R_ml, t_ml, cov, chi2, its, norms = ml_refine(
+        x, e, rho, R, t, sr, sb, max_it, 1e-7, step_sigma2
+    )
+    if refinement == REFINE_ML:
+        R, t, iterations = R_ml, t_ml, its
+    return R, t, iterations, cov, chi2, norms, w
+
+
+@jit
+def fit_adaptive(
+    x, e, rho, y, sr0, sb, refinement, los_tol, step_sigma2, adapt, max_sys, median_chi2
+):
+    """``fit_pose`` with the noise model's range sigmas sr0, then (``adapt``, from 4
+    reflectors) again with the frame's systematic range sigma added: the smallest
+    estimate over the full fit and the fits leaving one reflector out, worst-fitting
+    first, stopping at 0 (``tofpose.solve.PoseSolver.fit_adaptive`` documents why).
+    Returns R, t, iterations, covariance, chi^2, norms, the range sigmas used (m,)."""
+    R, t, its, cov, chi2, norms, w = fit_pose(
+        x, e, rho, y, sr0, sb, refinement, los_tol, step_sigma2
+    )
+    m = x.shape[0]
+    if not adapt or m < 4:
+        return R, t, its, cov, chi2, norms, sr0
+    extra = systematic_sigma(x, e, rho, R, t, sr0, sb, max_sys, median_chi2)
+    if extra > 0 and m >= 5:
+        order = np.argsort(-norms, kind="mergesort")
+        for j in order:
+            keep = np.arange(m) != j
+            Rj, tj, _, _, _, _, _ = fit_pose(
+                x[keep],
+                e[keep],
+                rho[keep],
+                y[keep],
+                sr0[keep],
+                sb[keep],
+                refinement,
+                los_tol,
+                step_sigma2,
+            )
+            extra = min(
+                extra,
+                systematic_sigma(
+                    x[keep], e[keep], rho[keep], Rj, tj, sr0[keep], sb[keep], max_sys, median_chi2
+                ),
+            )
+            if extra <= 0:
+                break
+    if extra <= 0:
+        return R, t, its, cov, chi2, norms, sr0
+    sr = np.sqrt(sr0**2 + extra**2)
+    R, t, its, cov, chi2, norms, w = fit_pose(
+        x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2
+    )
+    return R, t, its, cov, chi2, norms, sr
+
+
+@jit
+def worst_outlier(
+    x, e, rho, y, sr, sb, norms, refinement, los_tol, step_sigma2, outlier_sigma, chi2_per_dof
+):
+    """Index of the reflector to drop, -1 when the fit is consistent
+    (``tofpose.solve.PoseSolver.worst_outlier`` documents the rule)."""
+    m = norms.shape[0]
+    worst = int(np.argmax(norms))
+    if norms[worst] > outlier_sigma:
+        return worst
+    dof = 3 * m - 6
+    if m < 5 or (norms**2).sum() <= chi2_per_dof * dof:
+        return -1
+    predicted = np.empty(m)
+    for j in range(m):
+        keep = np.arange(m) != j
+        Rj, tj, _, _, _, _, _ = fit_pose(
+            x[keep],
+            e[keep],
+            rho[keep],
+            y[keep],
+            sr[keep],
+            sb[keep],
+            refinement,
+            los_tol,
+            step_sigma2,
+        )
+        r, _ = residuals_jacobian(
+            x[j : j + 1],
+            e[j : j + 1],
+            rho[j : j + 1],
+            Rj,
+            tj,
+            sr[j : j + 1],
+            sb[j : j + 1],
+            tangent_bases(e[j : j + 1]),
+        )
+        predicted[j] = np.sqrt((r**2).sum())
+    worst = int(np.argmax(predicted))
+    return worst if predicted[worst] > outlier_sigma else -1
+
+
+@jit
+def fit_with_outliers(
+    x,
+    e,
+    rho,
+    y,
+    sr0,
+    sb,
+    refinement,
+    los_tol,
+    step_sigma2,
+    adapt,
+    max_sys,
+    median_chi2,
+    reject,
+    min_matches,
+    outlier_sigma,
+    chi2_per_dof,
+):
+    """``fit_adaptive``, then (``reject``) drop the worst outlier and refit while one is
+    found and more than ``min_matches`` remain. Returns the kept rows (m,) bool and the
+    final fit: R, t, iterations, covariance, chi^2, norms (kept,), range sigmas (kept,)."""
+    m = x.shape[0]
+    kept = np.ones(m, np.bool_)
+    rows = np.arange(m)
+    R, t, its, cov, chi2, norms, sr = fit_adaptive(
+        x, e, rho, y, sr0, sb, refinement, los_tol, step_sigma2, adapt, max_sys, median_chi2
+    )
+    while reject and rows.shape[0] > min_matches:
+        worst = worst_outlier(
+            x,
+            e,
+            rho,
+            y,
+            sr,
+            sb,
+            norms,
+            refinement,
+            los_tol,
+            step_sigma2,
+            outlier_sigma,
+            chi2_per_dof,
+        )
+        if worst < 0:
+            break
+        kept[rows[worst]] = False
+        keep = np.arange(rows.shape[0]) != worst
+        rows, x, e, rho, y, sr0, sb = (
+            rows[keep],
+            x[keep],
+            e[keep],
+            rho[keep],
+            y[keep],
+            sr0[keep],
+            sb[keep],
+        )
+        R, t, its, cov, chi2, norms, sr = fit_adaptive(
+            x, e, rho, y, sr0, sb, refinement, los_tol, step_sigma2, adapt, max_sys, median_chi2
+        )
+    return kept, R, t, its, cov, chi2, norms, sr
