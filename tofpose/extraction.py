@@ -103,7 +103,7 @@ class ExtractionConfig:
         )
 
 
-@dataclass(eq=False)
+@dataclass(frozen=True, eq=False)
 class Blob:
     """One candidate reflector blob in a frame.
 
@@ -135,9 +135,11 @@ class Blob:
     source: str = "morphology"
 
 
-@dataclass
+@dataclass(frozen=True)
 class FrameStats:
-    """Frame-level levels used by the thresholds (counts)."""
+    """Frame-level levels used by the thresholds (counts). ``raw_threshold`` is I_t and
+    ``n_active`` the size of the active pixel set once ``active_pixel_mask`` has applied
+    the N_max cap (``frame_levels`` gives the uncapped I_t and 0)."""
 
     background: float
     noise_sigma: float
@@ -196,6 +198,7 @@ class CandidateBlobs:
     wrong_size : bright components rejected by the size window (oversize ones included).
     rejected : every component of at least ``min_area_px`` that is not a candidate, with
         the gate that refused it (for display; ``REJECT_REASONS``).
+    stats : the frame levels as applied (I_t after the N_max cap).
     """
 
     accepted: list[Blob]
@@ -203,6 +206,7 @@ class CandidateBlobs:
     active_mask: np.ndarray
     wrong_size: tuple[WrongSizeBlob, ...] = ()
     rejected: tuple[RejectedBlob, ...] = ()
+    stats: FrameStats | None = None
 
 
 class FrameError(ValueError):
@@ -256,21 +260,24 @@ def frame_levels(gray: np.ndarray, config: ExtractionConfig) -> FrameStats:
     return FrameStats(bg, sigma, i_max, i_t, max(i_peak, i_t), 0, sat)
 
 
-def active_pixel_mask(gray: np.ndarray, stats: FrameStats, n_max: int) -> np.ndarray:
+def active_pixel_mask(
+    gray: np.ndarray, stats: FrameStats, n_max: int
+) -> tuple[np.ndarray, FrameStats]:
     """Active pixel set A (§3.1.1): pixels >= I_t, at most N_max, dimmest dropped first.
 
-    Returns a uint8 mask of shape (H, W); updates ``stats.raw_threshold``/``n_active``.
+    Returns a uint8 mask of shape (H, W) and the levels as applied (``raw_threshold``
+    raised to the cut when the cap applies, ``n_active`` the mask's size).
     """
     mask = gray >= stats.raw_threshold
     n = int(np.count_nonzero(mask))
+    threshold = stats.raw_threshold
     if n > n_max:
         values = gray[mask]
         cut = np.partition(values, n - n_max)[n - n_max]
-        stats.raw_threshold = float(cut)
+        threshold = float(cut)
         mask = gray >= cut
         n = int(np.count_nonzero(mask))
-    stats.n_active = n
-    return mask.view(np.uint8)
+    return mask.view(np.uint8), replace(stats, raw_threshold=threshold, n_active=n)
 
 
 def nlog_response(image: np.ndarray, sigma_px: float, normalise: bool = True) -> np.ndarray:
@@ -395,7 +402,7 @@ def find_candidate_blobs(
     ellipse stage may split (§3.3); ``wrong_size`` every bright component the size window
     refused, so that a failure can say the catalog does not fit what is in view.
     """
-    mask = active_pixel_mask(gray, stats, config.n_max)
+    mask, stats = active_pixel_mask(gray, stats, config.n_max)
     h, w = gray.shape
     gray32 = np.asarray(gray, np.float32)
     n_lab, labels = cv2.connectedComponents(mask, connectivity=8)
@@ -454,8 +461,9 @@ def find_candidate_blobs(
     for b in accepted[config.max_candidates :]:
         rejected.append(RejectedBlob(*b.centroid_uv, 2.0 * np.sqrt(b.area_px / np.pi), "rank"))
     return CandidateBlobs(
-        accepted[: config.max_candidates], oversize, mask, tuple(wrong_size), tuple(rejected)
-    )
+        accepted[: config.max_candidates], oversize, mask, tuple(wrong_size), tuple(rejected),
+        stats,
+    )  # fmt: skip
 
 
 _GATE_REASONS = {1: "oversize", 2: "size", 3: "nlog", 4: "shape", 5: "penalty"}

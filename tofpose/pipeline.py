@@ -303,6 +303,7 @@ class PosePipeline:
                 f"background of {stats.background:.0f} (all-dark frame?)"
             )
         found, blobs = self._candidates(g, d, stats, timer)
+        stats = found.stats  # I_t as applied (after the N_max cap)
         active = found.active_mask
         # The motion gate compares the cheap moment centroids of find_candidate_blobs;
         # the precise centroids and ranges are measured once, on the combined frames.
@@ -358,11 +359,15 @@ class PosePipeline:
         timer.lap("blobs")
         blobs = found.accepted
         if cfg.ellipse_confirmation:
-            blobs = self._confirm_ellipses(blobs, found.oversize, g, d, stats)
+            blobs = self._confirm_ellipses(blobs, found.oversize, g, d, found.stats)
         timer.lap("ellipses")
-        for b in blobs:  # ellipse-supplemented blobs have no moment centroid yet
-            if not np.isfinite(b.centroid_uv).all() and b.ellipse is not None:
-                b.centroid_uv = np.array(b.ellipse[0])
+        # ellipse-supplemented blobs have no moment centroid yet: the ellipse's centre
+        blobs = [
+            replace(b, centroid_uv=np.array(b.ellipse[0]))
+            if not np.isfinite(b.centroid_uv).all() and b.ellipse is not None
+            else b
+            for b in blobs
+        ]
         return found, blobs
 
     def _back_project(self, blobs, mean_gray, med_distance, background) -> Measurements:
@@ -597,8 +602,9 @@ class PosePipeline:
                 if len(pts) >= cfg.ellipse_min_points:
                     e = fit_ellipse(pts + [x0, y0])
                     if e is not None:
-                        b.ellipse = e
-                        b.ellipse_residual_px = ellipse_residual_px(e, pts + [x0, y0])
+                        b = replace(
+                            b, ellipse=e, ellipse_residual_px=ellipse_residual_px(e, pts + [x0, y0])
+                        )
                         if b.ellipse_residual_px > cfg.ellipse_max_residual_px:
                             continue
             out.append(b)

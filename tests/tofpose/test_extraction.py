@@ -64,8 +64,9 @@ def test_active_set_is_capped_dimmest_first():
     rng = np.random.default_rng(0)
     g = rng.uniform(0, 1000, (240, 320)).astype(np.float32)
     stats = frame_levels(g, ExtractionConfig(raw_threshold_abs=100.0))
-    mask = active_pixel_mask(g, stats, n_max=500)
-    assert stats.n_active == mask.sum() == 500
+    mask, applied = active_pixel_mask(g, stats, n_max=500)
+    assert applied.n_active == mask.sum() == 500 and stats.n_active == 0
+    assert applied.raw_threshold > stats.raw_threshold
     assert g[mask.astype(bool)].min() >= np.sort(g.ravel())[-500]
 
 

@@ -14,8 +14,8 @@ def _frame(cx, cy, level=1000.0, rng=None, r=4):
     if rng is not None:
         d = d + rng.normal(0, 5, d.shape).astype(np.float32)
     idx = np.flatnonzero(inside)
-    b = Blob(pixels=idx, area_px=len(idx), bbox=(cx - r, cy - r, 2 * r + 1, 2 * r + 1))
-    b.centroid_uv = np.array([cx, cy], float)
+    b = Blob(pixels=idx, area_px=len(idx), bbox=(cx - r, cy - r, 2 * r + 1, 2 * r + 1),
+             centroid_uv=np.array([cx, cy], float))  # fmt: skip
     return [b], g, d
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -21,10 +23,9 @@ def test_sampling_sigma_is_one_pixel_uniform_for_one_pixel_and_falls_with_size()
 
 def _square_blob(u0: int, v0: int, side: int, width: int) -> Blob:
     rows, cols = np.mgrid[v0 : v0 + side, u0 : u0 + side]
-    b = Blob(pixels=(rows * width + cols).ravel(), area_px=side * side,
-             bbox=(u0, v0, side, side))  # fmt: skip
-    b.centroid_uv = np.array([u0 + (side - 1) / 2, v0 + (side - 1) / 2])
-    return b
+    return Blob(pixels=(rows * width + cols).ravel(), area_px=side * side,
+                bbox=(u0, v0, side, side),
+                centroid_uv=np.array([u0 + (side - 1) / 2, v0 + (side - 1) / 2]))  # fmt: skip
 
 
 def test_few_pixel_blob_takes_the_range_noise_the_frame_pools_from_larger_blobs():
@@ -35,7 +36,7 @@ def test_few_pixel_blob_takes_the_range_noise_the_frame_pools_from_larger_blobs(
     dist = np.full((60, 80), np.nan)
     big = _square_blob(10, 10, 8, 80)
     small = _square_blob(50, 30, 2, 80)
-    small.pixels, small.area_px = small.pixels[:3], 3
+    small = replace(small, pixels=small.pixels[:3], area_px=3)
     for b in (big, small):
         r, c = np.divmod(b.pixels, 80)
         gray[r, c] = 850.0
