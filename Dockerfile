@@ -31,7 +31,9 @@ COPY migrations ./migrations
 # A regular install: the wheel carries the Alembic revisions as backend/migrations,
 # which the server applies at every start (tests/test_packaging.py checks this). The
 # extras bring the real-device drivers (ESPROS's client, PyVISA); docs/devices.md.
-RUN pip install '.[espros,scpi]' && mkdir -p /data
+# `tofpose warm-up` compiles the pipeline's numba kernels into the image's cache, so
+# that a container starts without the ~1 min first compile.
+RUN pip install '.[espros,scpi]' && tofpose warm-up && mkdir -p /data
 COPY --from=dashboard /frontend/dist /app/dashboard
 
 EXPOSE 8000 8080

@@ -11,6 +11,7 @@ $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[dev]'
+	$(VENV)/bin/tofpose warm-up  # compile the pipeline kernels into numba's cache (~1 min once)
 	touch $@
 
 # The dashboard: npm ci from the lock file, then type-check and build into frontend/dist.

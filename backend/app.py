@@ -4,6 +4,7 @@ acquisition loop, and tears them down again."""
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import re
 from collections.abc import AsyncIterator
@@ -49,6 +50,7 @@ from backend.state import AppState
 from tofpose.catalog import Catalog
 from tofpose.pipeline import PipelineConfig
 from tofpose.tracking import TrackingConfig
+from tofpose.warmup import warm_up
 
 log = logging.getLogger("tofpose.server")
 
@@ -169,6 +171,11 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             log.warning("%d campaign(s) were running when the server stopped: interrupted "
                         "(resume them to continue)", interrupted)  # fmt: skip
         app.state.tofpose = AppState(settings, token, engine, sessions, devs, hub, acq, campaigns)
+        # the pipeline's compiled kernels, before the first live frame (tofpose.warmup)
+        seconds = await asyncio.to_thread(warm_up)
+        if seconds > 5:
+            log.warning("compiling the pipeline kernels took %.0f s (run `tofpose warm-up` "
+                        "after installing to keep it off the server start)", seconds)  # fmt: skip
         acq.start()
         campaigns.start()
         _start_scene(app.state.tofpose)

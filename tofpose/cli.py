@@ -331,7 +331,16 @@ def main(argv: list[str] | None = None) -> int:
         q.add_argument("--seed", type=int, default=0)
     p = sub.add_parser("openapi", help="write the server's OpenAPI document (JSON)")
     p.add_argument("--out", required=True)
+    sub.add_parser(
+        "warm-up",
+        help="compile the pipeline's kernels into numba's cache (once after installing)",
+    )
     args = ap.parse_args(argv)
+    if args.cmd == "warm-up":
+        from tofpose.warmup import warm_up
+
+        print(f"pipeline kernels ready in {warm_up():.1f} s")
+        return 0
     if args.cmd == "openapi":
         from backend import main as server_main
 

@@ -72,6 +72,12 @@ class Persistence:
         self._history.clear()
         self._history.extend(snapshot)
 
+    def _padded(self, current: np.ndarray, older: list[np.ndarray]) -> tuple:
+        """(current, *older) padded with ``current`` to K arrays: the kernels take a tuple
+        of fixed length (one compiled version per K) and a count of the arrays to use."""
+        k = max(self.config.k_frames, 2)
+        return (current, *older, *([current] * (k - 1 - len(older))))
+
     def apply(
         self, blobs: list[Blob], gray: np.ndarray, distance: np.ndarray
     ) -> tuple[list[Blob], np.ndarray, np.ndarray, PersistenceInfo]:
@@ -123,14 +129,15 @@ class Persistence:
         starts[1:] = np.cumsum([len(b.pixels) for b in blobs])
         if n >= cfg.c_min:
             # the counter image C, read only where it is used: at the blobs' pixels
-            c = counter_medians((mask, *(e.mask for e in used)), idx, starts)
+            c = counter_medians(self._padded(mask, [e.mask for e in used]), n, idx, starts)
             kept = [b for b, ck in zip(blobs, c, strict=True) if ck >= cfg.c_min]
             dropped = len(blobs) - len(kept)
         boxes = np.array([b.bbox for b in blobs], np.int64)
-        mean_gray = mean_in_boxes(gray, tuple(e.gray for e in used), boxes)
+        older = self._padded(gray, [e.gray for e in used])[1:]
+        mean_gray = mean_in_boxes(gray, older, n - 1, boxes)
         med_dist = distance.copy()
         if kept:
             kidx = np.concatenate([b.pixels for b in kept]).astype(np.int64, copy=False)
-            stack = gather_stack((distance, *(e.distance for e in used)), kidx)
+            stack = gather_stack(self._padded(distance, [e.distance for e in used]), n, kidx)
             med_dist.reshape(-1)[kidx] = column_medians(stack)
         return kept, mean_gray, med_dist, PersistenceInfo(n, motion, dropped)

@@ -65,32 +65,34 @@ def consistent(current, previous, tol_px):
 
 
 @jit
-def mean_in_boxes(gray, older, boxes):
+def mean_in_boxes(gray, older, n_older, boxes):
     """I-bar (§3.4) where it is read: ``(gray + sum(older)) / n`` inside each box grown
     by 2 px, this frame's gray elsewhere, in float32 as NumPy computes it.
 
-    gray : (H, W) float32; older : tuple of (H, W) float32 frames; boxes : (b, 4) int64
-    (x, y, w, h). Returns (H, W) float32."""
+    gray : (H, W) float32; older : tuple of (H, W) float32 frames, of which the first
+    ``n_older`` are used (the tuple has a fixed length per configuration, so that one
+    compiled version serves every history length); boxes : (b, 4) int64 (x, y, w, h).
+    Returns (H, W) float32."""
     h, w = gray.shape
     out = gray.copy()
-    n = np.float32(1 + len(older))
+    n = np.float32(1 + n_older)
     for j in range(boxes.shape[0]):
         x, y, bw, bh = boxes[j, 0], boxes[j, 1], boxes[j, 2], boxes[j, 3]
         for r in range(max(y - 2, 0), min(y + bh + 2, h)):
             for c in range(max(x - 2, 0), min(x + bw + 2, w)):
                 s = np.float32(0.0)
-                for o in older:
-                    s += o[r, c]
+                for i in range(n_older):
+                    s += older[i][r, c]
                 out[r, c] = (gray[r, c] + s) / n
     return out
 
 
 @jit
-def counter_medians(masks, flat, starts):
+def counter_medians(masks, n_masks, flat, starts):
     """The counter image C of §3.4 read at each blob's pixels: per blob, the median over
     its pixels (flat indices ``flat[starts[j]:starts[j + 1]]``) of the number of frames,
-    of the (H * W,) bool masks given, in which the pixel belonged to a candidate blob.
-    Returns (n,) float64."""
+    of the first ``n_masks`` (H * W,) bool masks given, in which the pixel belonged to a
+    candidate blob. Returns (n,) float64."""
     n = starts.shape[0] - 1
     out = np.empty(n)
     for j in range(n):
@@ -98,8 +100,8 @@ def counter_medians(masks, flat, starts):
         c = np.empty(b - a)
         for i in range(a, b):
             k = 0
-            for m in masks:
-                k += m[flat[i]]
+            for f in range(n_masks):
+                k += masks[f][flat[i]]
             c[i - a] = k
         s = np.sort(c)
         q = (b - a) >> 1
@@ -108,10 +110,11 @@ def counter_medians(masks, flat, starts):
 
 
 @jit
-def gather_stack(frames, flat):
-    """(K, P) float32: each of the K (H, W) frames read at the flat indices (P,)."""
-    out = np.empty((len(frames), flat.shape[0]), np.float32)
-    for f in range(len(frames)):
+def gather_stack(frames, n_frames, flat):
+    """(K, P) float32: each of the first K = ``n_frames`` (H, W) frames read at the flat
+    indices (P,)."""
+    out = np.empty((n_frames, flat.shape[0]), np.float32)
+    for f in range(n_frames):
         src = frames[f].reshape(-1)
         for i in range(flat.shape[0]):
             out[f, i] = src[flat[i]]

@@ -1,0 +1,41 @@
+"""The compiled annealing iteration against Eqs. 35-39 written in NumPy."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tofpose.kernels.annealing import anneal_assignment
+from tofpose.matching import MatchingConfig, pair_compatibility
+
+
+def _reference(P, u, psi, psi_end, growth):
+    g, e = u.shape
+    A = np.full((g, e + 1), 1.0 / (1 + e))  # Eq. 39
+    Pm = P.reshape(g * e, g * e)
+    it = 0
+    while psi <= psi_end:
+        E = (Pm @ A[:, 1:].reshape(-1)).reshape(g, e) + u
+        logits = np.concatenate((np.zeros((g, 1)), -psi * E), axis=1)  # F_k0 = 1 (Eq. 36)
+        logits -= logits.max(axis=1, keepdims=True)
+        F = np.exp(logits)
+        A = F / F.sum(axis=1, keepdims=True)  # Eq. 37
+        psi *= growth  # Eq. 35
+        it += 1
+    return A, it
+
+
+def test_anneal_assignment_equals_the_equations():
+    rng = np.random.default_rng(0)
+    catalog = rng.uniform(-300, 300, (8, 3))
+    observed = np.vstack((catalog[[0, 2, 3, 5, 6]] + rng.normal(0, 2, (5, 3)),
+                          rng.uniform(-300, 300, (2, 3))))  # fmt: skip
+    cfg = MatchingConfig()
+    alpha = 15.0
+    P = pair_compatibility(observed, catalog, alpha, cfg.clip_factor)
+    u = rng.uniform(0, 50, (7, 8))
+    args = (cfg.psi_start / alpha**2, cfg.psi_end / alpha**2, cfg.growth)
+    A, it = anneal_assignment(np.ascontiguousarray(P.reshape(56, 56)), u, *args)
+    A_ref, it_ref = _reference(P, u, *args)
+    assert it == it_ref > 30
+    np.testing.assert_allclose(A, A_ref, atol=1e-12)
+    assert [int(np.argmax(A[k])) for k in range(5)] == [1, 3, 4, 6, 7]  # markers found

@@ -1,0 +1,41 @@
+"""Frame levels and the distance clean-up against NumPy's own arithmetic."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tofpose.kernels.levels import _median_of_levels, clean_distance, frame_level_stats
+
+
+@pytest.mark.parametrize("kind", ["dark counts", "bright counts", "fractional", "odd"])
+def test_counting_median_equals_numpy_median(kind):
+    rng = np.random.default_rng(3)
+    v = {
+        "dark counts": rng.poisson(3.0, 8560),
+        "bright counts": rng.integers(0, 4096, 8560),
+        "fractional": rng.normal(200.0, 30.0, 8560),  # not counts: the partition path
+        "odd": rng.poisson(50.0, 8561),
+    }[kind].astype(np.float32)
+    assert _median_of_levels(v) == float(np.median(v))
+    dev = np.abs(v - np.float32(np.median(v)))  # half-integer deviations for even counts
+    assert _median_of_levels(dev) == float(np.median(dev))
+
+
+def test_frame_level_stats_match_numpy():
+    rng = np.random.default_rng(0)
+    g = rng.poisson(4.0, (240, 320)).astype(np.float32)
+    g[100:110, 50:60] = 4095.0  # a saturated patch
+    bg, mad, i_max, n_sat = frame_level_stats(g, 3, 4095.0)
+    sub = g[::3, ::3]
+    assert bg == float(np.median(sub))
+    assert mad == float(np.median(np.abs(sub - bg)))
+    assert i_max == 4095.0 and n_sat == 100
+
+
+def test_clean_distance_marks_invalid_pixels_nan():
+    d = np.array([[1000.0, -5.0, 0.0], [np.inf, np.nan, 2500.5]])
+    out = clean_distance(d)
+    assert out.dtype == np.float32
+    np.testing.assert_array_equal(np.isnan(out), [[False, True, True], [True, True, False]])
+    assert out[0, 0] == 1000.0 and out[1, 2] == np.float32(2500.5)

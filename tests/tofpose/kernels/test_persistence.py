@@ -1,0 +1,52 @@
+"""The persistence kernels against NumPy."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tofpose.kernels.persistence import (
+    column_medians,
+    consistent,
+    counter_medians,
+    gather_stack,
+    mean_in_boxes,
+)
+
+
+def test_column_medians_equal_nanmedian():
+    rng = np.random.default_rng(0)
+    for k in (1, 2, 3, 4, 5):
+        stack = rng.normal(2000, 5, (k, 300)).astype(np.float32)
+        stack[rng.random((k, 300)) < 0.2] = np.nan
+        want = np.full(300, np.nan, np.float32)
+        some = ~np.all(np.isnan(stack), axis=0)
+        want[some] = np.nanmedian(stack[:, some], axis=0)
+        np.testing.assert_array_equal(column_medians(stack), want)
+
+
+def test_consistency_gate():
+    a = np.array([[10.0, 10.0], [50.0, 40.0], [90.0, 20.0]])
+    assert consistent(a, a + 0.1, 0.35)
+    assert not consistent(a, a + 1.0, 0.35)  # moved a pixel
+    assert consistent(a[:2], a, 0.35)  # a blob more in the older frame
+    assert not consistent(a, np.empty((0, 2)), 0.35)
+
+
+def test_means_counts_and_stacks_use_only_the_counted_frames():
+    rng = np.random.default_rng(1)
+    frames = [rng.uniform(0, 100, (20, 30)).astype(np.float32) for _ in range(4)]
+    boxes = np.array([[5, 5, 4, 3]], np.int64)
+    out = mean_in_boxes(frames[0], (frames[1], frames[2], frames[0]), 2, boxes)
+    sl = np.s_[3:10, 3:11]
+    np.testing.assert_array_equal(out[sl], (frames[0][sl] + (frames[1][sl] + frames[2][sl])) / 3)
+    np.testing.assert_array_equal(out[0, :], frames[0][0, :])  # outside the box: this frame
+    masks = [rng.random(600) < 0.5 for _ in range(3)]
+    flat = np.arange(0, 600, 7, dtype=np.int64)
+    starts = np.array([0, 40, len(flat)], np.int64)
+    got = counter_medians((*masks, masks[0]), 3, flat, starts)
+    count = sum(m[flat].astype(int) for m in masks)
+    np.testing.assert_array_equal(got, [np.median(count[:40]), np.median(count[40:])])
+    stack = gather_stack((frames[3], frames[1], frames[3]), 2, flat[:20])
+    np.testing.assert_array_equal(
+        stack, [frames[3].ravel()[flat[:20]], frames[1].ravel()[flat[:20]]]
+    )

@@ -1,0 +1,78 @@
+"""Ellipse residual, perspective offsets and blob pixel statistics against NumPy."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tofpose.camera import CameraModel
+from tofpose.kernels.ellipses import blob_mask, ellipse_rms_px
+from tofpose.kernels.perspective import disc_centre_offsets
+from tofpose.kernels.sigmas import blob_pixel_stats
+
+
+def test_ellipse_rms_is_zero_on_the_ellipse_and_the_radial_gap_off_it():
+    th = np.linspace(0, 2 * np.pi, 50, endpoint=False)
+    a, b, ang = 20.0, 10.0, np.radians(30)
+    pts = np.column_stack((a / 2 * np.cos(th), b / 2 * np.sin(th)))
+    rot = np.array([[np.cos(ang), -np.sin(ang)], [np.sin(ang), np.cos(ang)]])
+    pts = pts @ rot.T + [5.0, 7.0]
+    assert ellipse_rms_px(5.0, 7.0, a, b, 30.0, pts) < 1e-12
+    circle = np.column_stack((np.cos(th), np.sin(th))) * 6.0
+    assert ellipse_rms_px(0.0, 0.0, 10.0, 10.0, 0.0, circle) == pytest.approx(1.0)
+
+
+def test_blob_mask_places_pixels_in_the_padded_box():
+    m = blob_mask(np.array([2 * 10 + 3, 3 * 10 + 4]), 3, 2, 2, 2, 10)
+    assert m.shape == (4, 4) and m[1, 1] == 1 and m[2, 2] == 1 and m.sum() == 2
+
+
+def _offsets_numpy(K, c, normal, radii):
+    """Ellipse centre of the conic Q = H^-T diag(1, 1, -r^2) H^-1, H = K [a b c], minus
+    the projected centre (the method of ``disc_image_centre_offsets_px``)."""
+    n = normal / np.linalg.norm(normal)
+    a = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(n, a)
+    out = []
+    for ci, r in zip(c, radii, strict=True):
+        Hinv = np.linalg.inv(K @ np.column_stack((a, b, ci)))
+        Q = Hinv.T @ np.diag([1.0, 1.0, -(r**2)]) @ Hinv
+        centre = -np.linalg.solve(Q[:2, :2], Q[:2, 2])
+        p = K @ ci
+        out.append(centre - p[:2] / p[2])
+    return np.array(out)
+
+
+def test_perspective_offsets_vanish_face_on_and_match_the_conic_when_tilted():
+    cam = CameraModel()
+    centres = np.array([[0.0, 0.0, 1000.0], [300.0, -100.0, 1000.0]])
+    radii = np.array([40.0, 17.5])
+    face_on = disc_centre_offsets(cam.K, centres, np.array([0.0, 0.0, -1.0]), radii)
+    assert np.abs(face_on).max() < 1e-9  # a fronto-parallel circle images as a circle
+    tilted = np.array([0.3, -0.2, -1.0])
+    got = disc_centre_offsets(cam.K, centres, tilted, radii)
+    np.testing.assert_allclose(got, _offsets_numpy(cam.K, centres, tilted, radii), atol=1e-12)
+    assert np.abs(got[0]).max() > 0.01
+
+
+def test_blob_pixel_stats_equal_numpy():
+    rng = np.random.default_rng(0)
+    gray = rng.uniform(200, 900, (20, 30)).astype(np.float32)
+    dist = rng.normal(3000, 4, (20, 30)).astype(np.float32)
+    dist[5, 5] = np.nan
+    flat = np.array([5 * 30 + 5, 5 * 30 + 6, 6 * 30 + 5, 6 * 30 + 6, 100], np.int64)
+    starts = np.array([0, 4, 5], np.int64)
+    cen = np.array([[5.5, 5.5], [10.0, 3.0]])
+    shot, n_px, mad, unit, n_valid = blob_pixel_stats(flat, starts, cen, gray, dist, 100.0)
+    rows, cols = np.divmod(flat[:4], 30)
+    g = np.maximum(gray[rows, cols].astype(float), 1.0)
+    amp = np.maximum(g - 100.0, 1.0)
+    r2 = (cols - 5.5) ** 2 + (rows - 5.5) ** 2
+    assert shot[0] == pytest.approx(np.sqrt((g * r2).sum()) / amp.sum(), rel=1e-12)
+    d = dist[rows, cols]
+    ok = np.isfinite(d)
+    assert n_px.tolist() == [4, 1] and n_valid.tolist() == [3, 1]
+    assert unit[0] == pytest.approx(np.mean(np.sqrt(g[ok]) / amp[ok]), rel=1e-12)
+    assert mad[0] == pytest.approx(1.4826 * np.median(np.abs(d[ok] - np.median(d[ok]))))
+    assert np.isnan(mad[1])  # fewer than 3 ranges: no own spread

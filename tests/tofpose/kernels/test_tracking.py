@@ -1,0 +1,49 @@
+"""The compiled window search against OpenCV's labelling on the same windows."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from tofpose.kernels.tracking import AT_EDGE, FOUND, NO_SIZE, NOT_FOUND, search_windows
+
+
+def _opencv(gray, u0, u1, v0, v1, centre, diameter, threshold):
+    patch = gray[v0:v1, u0:u1]
+    n, labels, stats, cents = cv2.connectedComponentsWithStats(
+        (patch >= threshold).astype(np.uint8), connectivity=8
+    )
+    expected = np.pi * (0.5 * diameter) ** 2
+    lo, hi = max(1, expected / 4), max(4, 4 * expected)
+    ok = [k for k in range(1, n) if lo <= stats[k, cv2.CC_STAT_AREA] <= hi]
+    if not ok:
+        return None
+    best = min(ok, key=lambda k: np.hypot(*(cents[k] - (centre - [u0, v0]))))
+    return stats[best, :4] + [u0, v0, 0, 0], np.flatnonzero(
+        np.pad(labels == best, ((v0, gray.shape[0] - v1), (u0, gray.shape[1] - u1))).ravel()
+    )
+
+
+def test_search_windows_takes_the_component_opencv_takes():
+    rng = np.random.default_rng(0)
+    gray = rng.uniform(0, 50, (120, 160)).astype(np.float32)
+    v, u = np.mgrid[0:120, 0:160]
+    for cu, cv, r in ((40, 40, 5.0), (100, 60, 3.0), (52, 43, 1.5)):  # a glint near disc 1
+        gray[(u - cu) ** 2 + (v - cv) ** 2 <= r * r] = 800.0
+    bounds = np.array([[28, 53, 28, 53], [90, 111, 50, 71], [0, 10, 0, 10], [37, 44, 30, 50]])
+    centres = np.array([[40.0, 40.0], [100.0, 60.0], [5.0, 5.0], [40.0, 40.0]])
+    diam = np.array([10.0, 6.0, 4.0, 10.0])
+    status, bbox, peak, cen, starts, flat = search_windows(gray, bounds, centres, diam,
+                                                           np.float32(400.0), 10.0)  # fmt: skip
+    assert status.tolist() == [FOUND, FOUND, NOT_FOUND, AT_EDGE]
+    for j in (0, 1):
+        want_box, want_px = _opencv(gray, *bounds[j], centres[j], diam[j], 400.0)
+        np.testing.assert_array_equal(bbox[j], want_box)
+        np.testing.assert_array_equal(flat[starts[j] : starts[j + 1]], want_px)
+        vals = gray.ravel()[want_px].astype(float) - 10.0
+        want_c = [(vals * (want_px % 160)).sum() / vals.sum(),
+                  (vals * (want_px // 160)).sum() / vals.sum()]  # fmt: skip
+        np.testing.assert_allclose(cen[j], want_c, atol=1e-9)
+        assert peak[j] == 800.0
+    tiny = search_windows(gray, bounds[:1], centres[:1], np.array([40.0]), np.float32(400.0), 10.0)
+    assert tiny[0][0] == NO_SIZE  # a 40 px disc predicted, only a 10 px one there
