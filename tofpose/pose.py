@@ -11,6 +11,7 @@ import numpy as np
 
 from tofpose.kernels.pose import (
     ml_refine,
+    range_bias_covariance,
     reflector_norms,
     residuals_jacobian,
     svd_pose,
@@ -197,12 +198,9 @@ def common_range_bias_covariance(
     the translation along the line of sight): s s^T sigma_b^2 with s = (J^T J)^-1 J^T g,
     g the whitened residuals' response to a unit offset (-1 / sigma_range on each range
     row). An uncalibrated camera's constant and drift errors are such an offset."""
-    _, J = measurement_jacobian(x_mm, bearings, ranges_mm, R, t, sigma_range_mm,
-                                sigma_bearing_rad)  # fmt: skip
-    g = np.zeros(J.shape[0])
-    g[2::3] = -1.0 / np.asarray(sigma_range_mm, float)
-    s = np.linalg.solve(J.T @ J, J.T @ g)
-    return bias_sigma_mm**2 * np.outer(s, s)
+    e, rho, sr, sb = _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
+    return range_bias_covariance(_f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb,
+                                 float(bias_sigma_mm))  # fmt: skip
 
 
 @dataclass

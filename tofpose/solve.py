@@ -24,9 +24,10 @@ from tofpose.kernels.pose import (
     REFINE_ML,
     REFINE_NONE,
     fit_with_outliers,
+    range_bias_covariance,
     svd_pose,
 )
-from tofpose.pose import MEDIAN_CHI2_3DOF, STEP_SIGMA2, MLResult, common_range_bias_covariance
+from tofpose.pose import MEDIAN_CHI2_3DOF, STEP_SIGMA2, MLResult
 
 _REFINEMENT = {"none": REFINE_NONE, "ml": REFINE_ML, "los": REFINE_LOS}
 
@@ -174,7 +175,7 @@ class PoseSolver:
         ml = MLResult(R, t, cov, float(chi2), int(iterations), norms)
         bias = cfg.calibrated_range_bias_sigma_mm if self._calibrated else cfg.range_bias_sigma_mm
         if bias > 0:
-            extra = common_range_bias_covariance(
+            extra = range_bias_covariance(
                 obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, obs.sigma_bearing_rad, bias
             )
             ml = replace(ml, bias_covariance=extra)

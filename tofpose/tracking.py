@@ -98,23 +98,21 @@ def predict_windows(
     the predicted disc plus ``margin_px`` on every side.
     """
     centres = catalog_mm @ R.T + t_mm
-    out: list[Window] = []
     if np.any(centres[:, 2] <= 0):
-        return out
+        return []
     uv = camera.project(centres)
     d_px = camera.fx * catalog_diameter_mm / centres[:, 2]
     gap = np.linalg.norm(uv[:, None] - uv[None], axis=-1) - 0.5 * (d_px[:, None] + d_px[None])
     np.fill_diagonal(gap, np.inf)
-    for i in range(len(centres)):
-        if d_px[i] < min_diameter_px or gap[i].min() < 2.0:
-            continue
-        half = 0.5 * d_px[i] + margin_px
-        u0, u1 = int(np.floor(uv[i, 0] - half)), int(np.ceil(uv[i, 0] + half)) + 1
-        v0, v1 = int(np.floor(uv[i, 1] - half)), int(np.ceil(uv[i, 1] + half)) + 1
-        if u0 < 0 or v0 < 0 or u1 > camera.width or v1 > camera.height:
-            continue
-        out.append(Window(i, uv[i], float(d_px[i]), u0, u1, v0, v1))
-    return out
+    half = 0.5 * d_px + margin_px
+    u0, u1 = np.floor(uv[:, 0] - half).astype(int), np.ceil(uv[:, 0] + half).astype(int) + 1
+    v0, v1 = np.floor(uv[:, 1] - half).astype(int), np.ceil(uv[:, 1] + half).astype(int) + 1
+    use = (d_px >= min_diameter_px) & (gap.min(axis=1) >= 2.0)
+    use &= (u0 >= 0) & (v0 >= 0) & (u1 <= camera.width) & (v1 <= camera.height)
+    return [
+        Window(i, uv[i], float(d_px[i]), int(u0[i]), int(u1[i]), int(v0[i]), int(v1[i]))
+        for i in np.flatnonzero(use).tolist()
+    ]
 
 
 _WHY_NOT = {

@@ -373,3 +373,16 @@ def fit_with_outliers(
             x, e, rho, y, sr0, sb, refinement, los_tol, step_sigma2, adapt, max_sys, median_chi2
         )
     return kept, R, t, its, cov, chi2, norms, sr
+
+
+@jit
+def range_bias_covariance(x, e, rho, R, t, sr, sb, bias_sigma_mm):
+    """(6, 6) pose covariance from a range offset common to every reflector, of sigma
+    ``bias_sigma_mm``: s s^T sigma_b^2 with s = (J^T J)^-1 J^T g, g the whitened
+    residuals' response to a unit offset (-1 / sr on each range row)."""
+    _, J = residuals_jacobian(x, e, rho, R, t, sr, sb, tangent_bases(e))
+    g = np.zeros(J.shape[0])
+    for i in range(x.shape[0]):
+        g[3 * i + 2] = -1.0 / sr[i]
+    s = np.linalg.solve(J.T @ J, J.T @ g)
+    return bias_sigma_mm**2 * np.outer(s, s)
