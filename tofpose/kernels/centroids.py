@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
+from tofpose.kernels.stats import median_inplace
 
 
 @jit
@@ -114,7 +115,5 @@ def blob_ranges(flat, starts, distance_flat, bearings_flat, centre_bearings):
         if m == 0:
             out[j] = np.nan
             continue
-        k = m >> 1
-        s = np.partition(along[:m], k)
-        out[j] = s[k] if m & 1 else (s[:k].max() + s[k]) / 2.0
+        out[j] = median_inplace(along[:m])
     return out

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
+from tofpose.kernels.stats import median_inplace
 
 
 @jit
@@ -74,11 +75,7 @@ def median_of_finite(values):
             n += 1
     if n == 0:
         return np.nan
-    k = n >> 1
-    s = np.partition(buf[:n], k)  # s[k] in place, smaller values before it
-    if n & 1:
-        return float(s[k])
-    return float((s[:k].max() + s[k]) / np.float32(2.0))
+    return median_inplace(buf[:n])
 
 
 @jit

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
+from tofpose.kernels.stats import median_inplace
 
 
 @jit
@@ -18,14 +19,6 @@ def clean_distance(distance_mm):
             v = np.float32(distance_mm[r, c])
             out[r, c] = v if (np.isfinite(v) and v > 0) else np.nan
     return out
-
-
-@jit
-def _median32(v):
-    n = v.shape[0]
-    k = n >> 1
-    s = np.partition(v, k)
-    return float(s[k]) if n & 1 else float((s[:k].max() + s[k]) / np.float32(2.0))
 
 
 #: the counting median handles values v with 2 v an integer in [0, this)
@@ -45,7 +38,7 @@ def _kth_counted(counts, k):
 
 @jit
 def _median_of_levels(v):
-    """``_median32`` of float32 values (n,); by counting when every value is a multiple
+    """``np.median`` of float32 values (n,); by counting when every value is a multiple
     of 0.5 in [0, 65536) (gray counts, and their deviations from such a median), which
     is linear in n and not slowed by the many ties of a dark background."""
     n = v.shape[0]
@@ -53,7 +46,7 @@ def _median_of_levels(v):
     for i in range(n):
         d = v[i] * 2
         if not (d >= 0 and d < _COUNTING_LIMIT and d == np.floor(d)):
-            return _median32(v.copy())
+            return median_inplace(v.copy())
         top = max(top, d)
     counts = np.zeros(int(top) + 1, np.int64)
     for i in range(n):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
+from tofpose.kernels.stats import median_inplace
 
 
 @jit
@@ -137,14 +138,6 @@ def ml_refine(x, e, rho, R0, t0, sr, sb, max_iterations, tol, step_sigma2):
 
 
 @jit
-def _median(v):
-    n = v.shape[0]
-    k = n >> 1
-    s = np.partition(v.copy(), k)
-    return s[k] if n & 1 else (s[:k].max() + s[k]) / 2.0
-
-
-@jit
 def systematic_sigma(x, e, rho, R, t, sr, sb, max_mm, median_chi2):
     """The smallest sigma_s >= 0 (mm) with which the median squared whitened residual
     of the reflectors equals ``median_chi2`` (range sigmas sqrt(sr^2 + sigma_s^2)), by
@@ -160,7 +153,7 @@ def systematic_sigma(x, e, rho, R, t, sr, sb, max_mm, median_chi2):
     var = sr**2
 
     def median_z2(extra):
-        return _median(lat2 + rng2 / (var + extra**2))
+        return median_inplace(lat2 + rng2 / (var + extra**2))
 
     if median_z2(0.0) <= median_chi2:
         return 0.0

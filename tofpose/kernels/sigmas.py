@@ -6,14 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
-
-
-@jit
-def _median32(v):
-    n = v.shape[0]
-    k = n >> 1
-    s = np.partition(v, k)
-    return float(s[k]) if n & 1 else float((s[:k].max() + s[k]) / np.float32(2.0))
+from tofpose.kernels.stats import median_inplace
 
 
 @jit
@@ -63,9 +56,9 @@ def blob_pixel_stats(flat, starts, centroids, gray, distance, background):
         if m:
             model_unit[j] = s_unit / m
         if m >= 3:
-            med = np.float32(_median32(d_ok[:m].copy()))
+            med = np.float32(median_inplace(d_ok[:m].copy()))
             dev = np.empty(m, np.float32)
             for i in range(m):
                 dev[i] = abs(d_ok[i] - med)
-            own_mad[j] = 1.4826 * _median32(dev)
+            own_mad[j] = 1.4826 * median_inplace(dev)
     return shot, n_px, own_mad, model_unit, n_valid
