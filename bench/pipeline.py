@@ -28,6 +28,7 @@ from tofpose.sim.bench import R_FACING  # noqa: E402
 from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
 from tofpose.sim.scene import TargetScene  # noqa: E402
 from tofpose.tracking import TrackingConfig  # noqa: E402
+from tofpose.warmup import warm_up  # noqa: E402
 
 STAGES = ["levels", "blobs", "ellipses", "centroids", "backproject", "matching", "refine",
           "total"]  # fmt: skip
@@ -61,6 +62,7 @@ def python_calls(pipe: PosePipeline, frames) -> float:
 
 def run(n_frames: int, repeats: int):
     single_core()
+    warm_up()  # compiled kernels loaded before timing, as the server does at start
     cam, cat = CameraModel(), paper_target()
     det = blob_detector()
     rng = np.random.default_rng(0)
