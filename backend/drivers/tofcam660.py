@@ -276,12 +276,15 @@ class TofCam660Driver:
 
     # -- frames -------------------------------------------------------------------------
     def read(self, timeout_s: float) -> CameraFrame:
+        """One distance + amplitude image; ``CameraError`` when the command link fails
+        (the link is dropped and re-opened later) or the image does not arrive within
+        ``io_timeout_s`` (a lost UDP image fails only this frame)."""
         self._pacer.wait(timeout_s)
         with self._lock:
             cam = self._ensure()
             _, Command, Parser, _ = self._vendor
             try:
-                cam.rxInterface.clearInputBuffer()  # no stale packets of a lost frame
+                _flush_datagrams(cam.rxInterface.udpSocket)  # no stale packets of a lost frame
                 self._transceive(Command.create("getDistanceAndAmplitude", 0))
             except (OSError, EOFError, ValueError, RuntimeError) as exc:
                 self._drop(str(exc) or type(exc).__name__)
@@ -337,3 +340,20 @@ class TofCam660Driver:
             if self._cam is not None:
                 self._close_cam(self._cam)
                 self._cam = None
+
+
+def _flush_datagrams(sock) -> None:
+    """Discard every datagram waiting on ``sock`` and keep its time-out. (The vendor's
+    ``clearInputBuffer`` restores blocking mode with ``setblocking(True)``, which clears
+    the time-out: a lost image would then block the read, and the server's shutdown,
+    for ever.)"""
+    timeout = sock.gettimeout()
+    sock.setblocking(False)
+    try:
+        while True:
+            try:
+                sock.recvfrom(65536)
+            except (BlockingIOError, InterruptedError):
+                break
+    finally:
+        sock.settimeout(timeout)

@@ -347,9 +347,12 @@ class _Server(TrackedTCPServer):
         self.udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.udp.bind((address[0], 0))  # images come from the camera's own address
         self.udp.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 1 << 20)
+        self.lose_images = False  # fault injection: answer image commands, send no image
         super().__init__(address, _Handler)
 
     def send_frame(self, frame: bytes, ip: str, measurement_id: int) -> None:
+        if self.lose_images:
+            return
         for packet in packetise(frame, measurement_id):
             try:
                 self.udp.sendto(packet, (ip, self.data_port))
@@ -378,3 +381,7 @@ class TofCam660Emulator(ServedEmulator):
     ) -> None:
         self.camera = TofCam660Camera(world)
         self._server = _Server((address, command_port), self.camera, data_port)
+
+    def lose_images(self, lose: bool = True) -> None:
+        """Fault injection: acknowledge image commands but send no image (UDP loss)."""
+        self._server.lose_images = lose

@@ -144,6 +144,24 @@ def test_dropped_link_mid_stream_then_reconnect(emu):
         drv.close()
 
 
+def test_a_lost_image_fails_that_frame_within_the_time_out_and_the_next_one_arrives(emu):
+    """The UDP socket keeps its time-out across reads (the vendor's buffer flush would
+    clear it, and a lost image then blocked the read and the server's shutdown)."""
+    drv = TofCam660Driver(ADDRESS, settings=FIXED, io_timeout_s=0.5)
+    try:
+        first = drv.read(2.0).index
+        emu.lose_images()
+        t0 = time.monotonic()
+        with pytest.raises(CameraError, match="image lost"):
+            drv.read(2.0)
+        assert time.monotonic() - t0 < 2.0
+        assert drv.describe()["link"] == "up"  # the command link answered: still up
+        emu.lose_images(False)
+        assert drv.read(2.0).index > first
+    finally:
+        drv.close()
+
+
 def _try_read(drv):
     try:
         return drv.read(1.0)
