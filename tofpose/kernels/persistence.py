@@ -43,7 +43,14 @@ def column_medians(stack):
 def consistent(current, previous, tol_px):
     """Do two centroid sets (n, 2), (m, 2) describe the same static scene? At least half
     of the current centroids (rounded up, at least one) have a previous one within
-    max(4 tol, 2 px), and the median of those nearest distances is at most tol."""
+    max(4 tol, 2 px), and the median of those nearest distances is at most tol.
+
+    A centroid that is NaN (a part split out of a merged component has no moment
+    centroid before it is measured) has no neighbour and is nobody's neighbour: it
+    counts in n but cannot be near, and a NaN previous centroid is skipped. (The NumPy
+    version this replaced let one NaN previous centroid make every distance NaN, so a
+    frame with a split 7+8 pair was always "moving" and persistence never combined
+    frames at the ranges where the pair merges.)"""
     n, m = current.shape[0], previous.shape[0]
     if n == 0 or m == 0:
         return n == m
@@ -52,8 +59,9 @@ def consistent(current, previous, tol_px):
     for i in range(n):
         best = np.inf
         for j in range(m):
-            best = min(best, np.hypot(current[i, 0] - previous[j, 0],
-                                      current[i, 1] - previous[j, 1]))  # fmt: skip
+            d = np.hypot(current[i, 0] - previous[j, 0], current[i, 1] - previous[j, 1])
+            if d < best:  # False for NaN
+                best = d
         if best < max(4 * tol_px, 2.0):
             near_d[k] = best
             k += 1

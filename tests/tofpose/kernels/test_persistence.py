@@ -30,6 +30,10 @@ def test_consistency_gate():
     assert not consistent(a, a + 1.0, 0.35)  # moved a pixel
     assert consistent(a[:2], a, 0.35)  # a blob more in the older frame
     assert not consistent(a, np.empty((0, 2)), 0.35)
+    # a part split from a merged pair has no centroid yet: it takes no part
+    with_split = np.vstack((a, [[np.nan, np.nan]]))
+    assert consistent(with_split, with_split + 0.1, 0.35)
+    assert not consistent(with_split, with_split + 1.0, 0.35)
 
 
 def test_means_counts_and_stacks_use_only_the_counted_frames():
