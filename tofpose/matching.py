@@ -29,7 +29,8 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from tofpose.kernels.annealing import anneal_assignment
-from tofpose.pose import weighted_svd
+from tofpose.kernels.pose import svd_pose
+from tofpose.robust import median_1d
 
 
 @dataclass(frozen=True)
@@ -60,11 +61,7 @@ class MatchingConfig:
 
     def alpha_for(self, observed_mm: np.ndarray) -> float:
         """alpha (mm) at the median range of observed points (gamma, 3)."""
-        rng_m = (
-            float(np.median(np.linalg.norm(observed_mm, axis=1))) / 1000
-            if len(observed_mm)
-            else 0.0
-        )
+        rng_m = median_1d(np.linalg.norm(observed_mm, axis=1)) / 1000 if len(observed_mm) else 0.0
         return self.alpha_mm + self.alpha_per_m * rng_m
 
     def pair_tolerance_mm(self, alpha_mm: float, weights: np.ndarray) -> np.ndarray:
@@ -225,12 +222,16 @@ def rigid_residual_check(
     """
     rejected: list[int] = []
     pairs = pairs.copy()
+    observed_mm = np.ascontiguousarray(observed_mm, dtype=float)
+    catalog_mm = np.ascontiguousarray(catalog_mm, dtype=float)
+    weights = np.ascontiguousarray(weights, dtype=float)
+    tol_all = np.broadcast_to(np.asarray(tol_mm, float), (len(observed_mm),))
     while len(pairs) >= min_matches:
         y = observed_mm[pairs[:, 0]]
         x = catalog_mm[pairs[:, 1]]
-        R, t = weighted_svd(x, y, weights[pairs[:, 0]])
+        R, t = svd_pose(x, y, weights[pairs[:, 0]])  # Eqs. 40-50
         res = np.linalg.norm(y - (x @ R.T + t), axis=1)
-        tol = np.broadcast_to(np.asarray(tol_mm, float), (len(observed_mm),))[pairs[:, 0]]
+        tol = tol_all[pairs[:, 0]]
         worst = int(np.argmax(res / tol))
         if res[worst] <= tol[worst]:
             return pairs, rejected, ""
@@ -279,6 +280,8 @@ def match_by_triplets(
     import time
     from itertools import combinations, permutations
 
+    observed_mm = np.asarray(observed_mm, dtype=float)
+    catalog_mm = np.asarray(catalog_mm, dtype=float)
     g = min(len(observed_mm), max_observed)
     e = len(catalog_mm)
     w = np.ones(len(observed_mm)) if weights is None else np.asarray(weights, float)
@@ -308,7 +311,7 @@ def match_by_triplets(
         ])  # fmt: skip
         compatible = np.all(np.abs(cat_sides - o) <= alpha_mm, axis=1)
         for i, j, k in cat_triplets[compatible]:
-            R, t = weighted_svd(catalog_mm[[i, j, k]], observed_mm[[a, b, c]], w[[a, b, c]])
+            R, t = svd_pose(catalog_mm[[i, j, k]], observed_mm[[a, b, c]], w[[a, b, c]])
             if not accept_pose(R, t):
                 continue
             pred = catalog_mm @ R.T + t

@@ -17,8 +17,9 @@ import numpy as np
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
-from tofpose.extraction import Blob, disc_image_centre_offsets_px
+from tofpose.extraction import Blob
 from tofpose.geometry import RigidTransform
+from tofpose.kernels.perspective import disc_centre_offsets
 from tofpose.kernels.pose import (
     REFINE_LOS,
     REFINE_ML,
@@ -126,7 +127,8 @@ class PoseSolver:
         self.camera = camera
         self.config = config
         self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
-        self._d = catalog.diameters_mm
+        self._d = np.ascontiguousarray(catalog.diameters_mm, dtype=float)
+        self._K = np.ascontiguousarray(camera.K, dtype=float)
         self._ids = catalog.ids
         self._calibrated = calibrated
 
@@ -187,9 +189,7 @@ class PoseSolver:
         x = self._xyz[i_idx]
         uv = meas.uv_px[k_idx].copy()
         if self.config.correct_perspective_bias:
-            uv -= disc_image_centre_offsets_px(
-                self.camera, x @ R.T + t, R[:, 2], self._d[i_idx] / 2
-            )
+            uv -= disc_centre_offsets(self._K, x @ R.T + t, R[:, 2].copy(), self._d[i_idx] / 2)
         e = self.camera.bearings(uv)
         rho = meas.range_mm[k_idx]
         return MatchedObservations(
