@@ -20,7 +20,6 @@ from tofpose.kernels.centroids import blob_centroids, blob_ranges
 from tofpose.kernels.components import (
     component_median_ranges,
     component_table,
-    weighted_moments,
 )
 from tofpose.kernels.gates import ACCEPTED, OVERSIZE, gate_components
 from tofpose.kernels.levels import clean_distance, frame_level_stats
@@ -308,12 +307,6 @@ def predicted_diameter_window_px(
     d_min = d_face.min() * np.sqrt(cos_t) / config.size_tolerance - config.size_margin_px
     d_max = d_face.max() * config.size_tolerance + config.size_margin_px
     return max(d_min, 1.0), d_max
-
-
-def _moments(us: np.ndarray, vs: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, float]:
-    """Weighted centroid (2,) and eccentricity of a point set with weights w (n,)."""
-    cu, cv, ecc = weighted_moments(us, vs, w)
-    return np.array([cu, cv]), float(ecc)
 
 
 def size_gate(

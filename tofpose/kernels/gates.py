@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
+from tofpose.kernels.components import weighted_moments
 
 #: outcome codes of ``gate_components``
 ACCEPTED, OVERSIZE, SIZE, NLOG, SHAPE, PENALTY = 0, 1, 2, 3, 4, 5
@@ -189,24 +190,8 @@ def gate_components(gray, labels, bbox, area, peak, rho, which, fx, diameters_mm
                     vs[i] = yy
                     wts[i] = max(gray[yy, xx] - np.float32(background), np.float32(1.0))
                     i += 1
-        # moment centroid and shape (components.weighted_moments)
-        sw, su, sv = 0.0, 0.0, 0.0
-        for i in range(n_keep):
-            sw += wts[i]
-            su += us[i] * wts[i]
-            sv += vs[i] * wts[i]
-        cu, cv = su / sw, sv / sw
-        cuu, cvv, cuv = 0.0, 0.0, 0.0
-        for i in range(n_keep):
-            du, dv = us[i] - cu, vs[i] - cv
-            cuu += wts[i] * du * du
-            cvv += wts[i] * dv * dv
-            cuv += wts[i] * du * dv
-        cuu, cvv, cuv = cuu / sw, cvv / sw, cuv / sw
-        tr, det = cuu + cvv, cuu * cvv - cuv * cuv
-        disc = np.sqrt(max(tr * tr / 4 - det, 0.0))
-        l1, l2 = tr / 2 + disc, tr / 2 - disc
-        ecc = np.sqrt(max(0.0, 1.0 - l2 / l1)) if l1 > 1e-12 else 0.0
+        # moment centroid (Eq. 19) and shape
+        cu, cv, ecc = weighted_moments(us, vs, wts)
         moments[j, 0], moments[j, 1], moments[j, 2] = cu, cv, ecc
         pieces.append(kept)
         if not (n_keep < SHAPE_MIN_PIXELS or ecc <= ecc_max):

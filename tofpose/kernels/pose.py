@@ -217,13 +217,25 @@ def fit_pose(x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2):
 
 
 @jit
+def fit_without(j, x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2):
+    """``fit_pose`` of every reflector but row j (the leave-one-out fits): returns the
+    kept rows (m,) bool and the pose R, t."""
+    keep = np.arange(x.shape[0]) != j
+    R, t, _, _, _, _, _ = fit_pose(
+        x[keep], e[keep], rho[keep], y[keep], sr[keep], sb[keep], refinement, los_tol,
+        step_sigma2,
+    )  # fmt: skip
+    return keep, R, t
+
+
+@jit
 def fit_adaptive(
     x, e, rho, y, sr0, sb, refinement, los_tol, step_sigma2, adapt, max_sys, median_chi2
 ):
     """``fit_pose`` with the noise model's range sigmas sr0, then (``adapt``, from 4
     reflectors) again with the frame's systematic range sigma added: the smallest
     estimate over the full fit and the fits leaving one reflector out, worst-fitting
-    first, stopping at 0 (``tofpose.solve.PoseSolver.fit_adaptive`` documents why).
+    first, stopping at 0 (``tofpose.solve.PoseSolver.solve`` documents why).
     Returns R, t, iterations, covariance, chi^2, norms, the range sigmas used (m,)."""
     R, t, its, cov, chi2, norms, w = fit_pose(
         x, e, rho, y, sr0, sb, refinement, los_tol, step_sigma2
@@ -235,18 +247,7 @@ def fit_adaptive(
     if extra > 0 and m >= 5:
         order = np.argsort(-norms, kind="mergesort")
         for j in order:
-            keep = np.arange(m) != j
-            Rj, tj, _, _, _, _, _ = fit_pose(
-                x[keep],
-                e[keep],
-                rho[keep],
-                y[keep],
-                sr0[keep],
-                sb[keep],
-                refinement,
-                los_tol,
-                step_sigma2,
-            )
+            keep, Rj, tj = fit_without(j, x, e, rho, y, sr0, sb, refinement, los_tol, step_sigma2)
             extra = min(
                 extra,
                 systematic_sigma(
@@ -269,7 +270,7 @@ def worst_outlier(
     x, e, rho, y, sr, sb, norms, refinement, los_tol, step_sigma2, outlier_sigma, chi2_per_dof
 ):
     """Index of the reflector to drop, -1 when the fit is consistent
-    (``tofpose.solve.PoseSolver.worst_outlier`` documents the rule)."""
+    (``tofpose.solve.PoseSolver.solve`` documents the rule)."""
     m = norms.shape[0]
     worst = int(np.argmax(norms))
     if norms[worst] > outlier_sigma:
@@ -279,18 +280,7 @@ def worst_outlier(
         return -1
     predicted = np.empty(m)
     for j in range(m):
-        keep = np.arange(m) != j
-        Rj, tj, _, _, _, _, _ = fit_pose(
-            x[keep],
-            e[keep],
-            rho[keep],
-            y[keep],
-            sr[keep],
-            sb[keep],
-            refinement,
-            los_tol,
-            step_sigma2,
-        )
+        _, Rj, tj = fit_without(j, x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2)
         r, _ = residuals_jacobian(
             x[j : j + 1],
             e[j : j + 1],
