@@ -85,7 +85,8 @@ def calibrate_range(
     return (f"{fit.n_frames} frames, {fit.n_samples} pixel samples: constant {c.offset_mm:.2f} mm, "
             f"cyclic amplitudes {harm} mm, amplitude term {c.amplitude_mm_per_decade:.2f} "
             f"mm/decade, {fit.pixels_with_offset} per-pixel offsets; residual RMS "
-            f"{fit.rms_before_mm:.2f} -> {fit.rms_after_mm:.2f} mm -> {out}")  # fmt: skip
+            f"{fit.rms_before_mm:.2f} -> {fit.rms_after_mm:.2f} mm; calibrated span "
+            f"{c.calibrated_span_mm[0]:.0f}-{c.calibrated_span_mm[1]:.0f} mm -> {out}")  # fmt: skip
 
 
 def estimate(

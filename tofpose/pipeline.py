@@ -87,7 +87,9 @@ class PipelineConfig:
     range_bias_sigma_mm, calibrated_range_bias_sigma_mm : sigma of a range offset common
         to all reflectors that no frame can reveal (the fit absorbs it into the pose): the
         constant, amplitude and temperature-drift errors of a ToF camera without range
-        calibration, or what is left of them with one (drift since the calibration). Added
+        calibration, or what is left of them with one (drift since the calibration; the
+        uncalibrated sigma applies where a reflector lies outside the correction's
+        ``calibrated_span_mm``, where the model is extrapolated). Added
         to the reported covariance (``pose.common_range_bias_covariance``), so that the
         1-sigma of an uncalibrated camera does not claim the shot-noise limit.
     max_systematic_range_sigma_mm : cap of that estimate (published uncalibrated ToF
@@ -255,7 +257,7 @@ class PosePipeline:
         self._catalog_d = catalog.diameters_mm
         self._catalog_ids = catalog.ids
         self._rng = np.random.default_rng(self.config.ransac_seed)
-        self._solver = PoseSolver(camera, catalog, self.config, range_correction is not None)
+        self._solver = PoseSolver(camera, catalog, self.config, range_correction)
         self._track: TrackState | None = None
         camera.pixel_bearings()  # warm the cache
 

@@ -41,6 +41,10 @@ class RangeCorrection:
 
     harmonics_mm : ((s_1, c_1), (s_2, c_2), ...) for the 4k-th phase harmonics.
     pixel_offsets_mm : (H, W) zero-mean offsets, or None (not fitted).
+    calibrated_span_mm : (near, far) measured distances of the samples the fit used, or
+        None (a file written before spans were recorded: taken to cover every range).
+        Outside it the model is an extrapolation (the amplitude term above all): the
+        pipeline still applies it but reports the uncalibrated range-bias uncertainty.
     """
 
     unambiguous_range_mm: float
@@ -49,6 +53,14 @@ class RangeCorrection:
     amplitude_mm_per_decade: float = 0.0
     amplitude_reference_counts: float = AMPLITUDE_REFERENCE_COUNTS
     pixel_offsets_mm: np.ndarray | None = field(default=None, compare=False)
+    calibrated_span_mm: tuple[float, float] | None = None
+
+    def covers(self, distance_mm: float) -> bool:
+        """Whether ``distance_mm`` lies in the span the calibration data covered."""
+        if self.calibrated_span_mm is None:
+            return True
+        near, far = self.calibrated_span_mm
+        return bool(near <= distance_mm <= far)
 
     def error_mm(
         self, distance_mm: np.ndarray, amplitude: np.ndarray, pixel_index: np.ndarray | None
@@ -75,6 +87,8 @@ class RangeCorrection:
             "amplitude_mm_per_decade": self.amplitude_mm_per_decade,
             "amplitude_reference_counts": self.amplitude_reference_counts,
         }
+        if self.calibrated_span_mm is not None:
+            d["calibrated_span_mm"] = [float(v) for v in self.calibrated_span_mm]
         if self.pixel_offsets_mm is not None:
             q = np.clip(np.rint(self.pixel_offsets_mm / OFFSET_QUANTUM_MM), -32767, 32767)
             d["pixel_offsets"] = {
@@ -95,6 +109,14 @@ class RangeCorrection:
                 if raw.size != h * w:
                     raise ValueError(f"pixel_offsets hold {raw.size} values for {h} x {w} px")
                 offsets = raw.reshape(h, w).astype(float) * float(p["quantum_mm"])
+            span = d.get("calibrated_span_mm")
+            if span is not None:
+                if not isinstance(span, list | tuple) or len(span) != 2:
+                    raise ValueError(f"calibrated_span_mm must be [near, far] in mm, got {span!r}")
+                near, far = (float(v) for v in span)
+                if not 0 <= near <= far:
+                    raise ValueError(f"calibrated_span_mm must be 0 <= near <= far, got {span}")
+                span = (near, far)
             return RangeCorrection(
                 unambiguous_range_mm=float(d["unambiguous_range_mm"]),
                 offset_mm=float(d["offset_mm"]),
@@ -104,6 +126,7 @@ class RangeCorrection:
                     d.get("amplitude_reference_counts", AMPLITUDE_REFERENCE_COUNTS)
                 ),
                 pixel_offsets_mm=offsets,
+                calibrated_span_mm=span,
             )
         except KeyError as exc:
             raise ValueError(f"range correction lacks {exc.args[0]!r}") from None
@@ -229,6 +252,7 @@ def fit_range_correction(
         harmonics_mm=harm,
         amplitude_mm_per_decade=float(coef[-1]),
         pixel_offsets_mm=offsets.reshape(shape) if per_pixel else None,
+        calibrated_span_mm=(float(d[keep].min()), float(d[keep].max())),
     )
     return RangeCalibrationFit(
         correction=corr,

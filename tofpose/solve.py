@@ -34,6 +34,7 @@ _REFINEMENT = {"none": REFINE_NONE, "ml": REFINE_ML, "los": REFINE_LOS}
 
 if TYPE_CHECKING:  # the pipeline imports this module
     from tofpose.pipeline import PipelineConfig
+    from tofpose.range_calibration import RangeCorrection
 
 
 @dataclass(frozen=True)
@@ -120,17 +121,23 @@ class PoseSolver:
     """§5 for one camera and catalog under a ``PipelineConfig``."""
 
     def __init__(
-        self, camera: CameraModel, catalog: Catalog, config: PipelineConfig, calibrated: bool
+        self,
+        camera: CameraModel,
+        catalog: Catalog,
+        config: PipelineConfig,
+        range_correction: RangeCorrection | None,
     ) -> None:
-        """``calibrated``: the camera's ranges are corrected (``RangeCorrection``), which
-        selects the smaller common range-bias sigma of the covariance."""
+        """``range_correction``: the camera's ranges are corrected with it; where the
+        reflectors lie in its calibrated span the covariance takes the smaller common
+        range-bias sigma (``calibrated_range_bias_sigma_mm``), elsewhere the uncalibrated
+        one (the model is an extrapolation there)."""
         self.camera = camera
         self.config = config
         self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
         self._d = np.ascontiguousarray(catalog.diameters_mm, dtype=float)
         self._K = np.ascontiguousarray(camera.K, dtype=float)
         self._ids = catalog.ids
-        self._calibrated = calibrated
+        self._correction = range_correction
 
     # ------------------------------------------------------------------------------------
     def solve(
@@ -175,13 +182,23 @@ class PoseSolver:
             if problem:
                 return Rejected(f"pose rejected: {problem}", implausible=True)
         ml = MLResult(R, t, cov, float(chi2), int(iterations), norms)
-        bias = cfg.calibrated_range_bias_sigma_mm if self._calibrated else cfg.range_bias_sigma_mm
+        bias = self.range_bias_sigma_mm(obs.range_mm)
         if bias > 0:
             extra = range_bias_covariance(
                 obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, obs.sigma_bearing_rad, bias
             )
             ml = replace(ml, bias_covariance=extra)
         return Solution(T, obs, int(iterations), ml)
+
+    def range_bias_sigma_mm(self, range_mm: np.ndarray) -> float:
+        """Sigma of the common range offset for reflectors at ``range_mm`` (m,): the
+        calibrated one when a range correction is applied and its calibrated span holds
+        every reflector, the uncalibrated one otherwise."""
+        cfg = self.config
+        c = self._correction
+        if c is not None and all(c.covers(float(f(range_mm))) for f in (np.min, np.max)):
+            return cfg.calibrated_range_bias_sigma_mm
+        return cfg.range_bias_sigma_mm
 
     def observations(self, meas: Measurements, k_idx, i_idx, R, t) -> MatchedObservations:
         """The matched rows of ``meas``, centroids corrected for the perspective bias of

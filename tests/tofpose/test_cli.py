@@ -62,9 +62,12 @@ def test_calibrate_range_writes_a_camera_the_estimate_uses(tmp_path, capsys):
     rec, cam, raw_csv, cal_csv = (tmp_path / n for n in ("r.h5", "c.json", "a.csv", "b.csv"))
     assert main(["simulate", "--scenario", "realistic", "--frames", "72", "--out", str(rec)]) == 0
     assert main(["calibrate-range", str(rec), "--out", str(cam)]) == 0
-    assert "cyclic amplitudes" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "cyclic amplitudes" in printed
     camera, corr = load_camera(cam.read_text())
     assert corr is not None and camera.width == 320
+    near, far = corr.calibrated_span_mm  # stored with the camera and printed
+    assert f"calibrated span {near:.0f}-{far:.0f} mm" in printed and near < far
     assert main(["estimate", str(rec), "--out", str(raw_csv)]) == 0
     assert main(["estimate", str(rec), "--camera", str(cam), "--out", str(cal_csv)]) == 0
     with open_recording(rec) as r:

@@ -3,6 +3,8 @@ outliers; the range calibration brings long-range accuracy back near the ideal s
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -96,3 +98,32 @@ def test_an_uncalibrated_camera_reports_an_uncertainty_that_covers_its_range_bia
     honest = [_nees(r, T) for r, T, _ in _run(PosePipeline(CAM, CAT), REALISTIC, poses)]
     assert np.mean(narrow) > 12.6, narrow
     assert np.mean(honest) < 12.6, honest
+
+
+def test_outside_the_calibrated_span_the_covariance_takes_the_uncalibrated_range_bias():
+    """A range correction is a fit over the distances its calibration run covered; a
+    frame outside that span gets the uncalibrated common range-bias sigma in its reported
+    covariance (the correction is an extrapolation there), inside it the calibrated one.
+    The correction here is zero, so the poses are the same and only the covariance moves."""
+    from tofpose.range_calibration import RangeCorrection
+
+    u = SensorModel().unambiguous_range_mm
+    T = facing_pose(5000.0, 2.0, -3.0, 5.0)
+    f = render_frame(CAM, TargetScene(CAT), T, REALISTIC, np.random.default_rng(3), time_s=WARM_S)
+    cfg = PipelineConfig(range_bias_sigma_mm=8.0, calibrated_range_bias_sigma_mm=2.0)
+    out = {}
+    for name, span in (("inside", (1200.0, 8000.0)), ("outside", (1200.0, 3000.0)),
+                       ("no span", None), ("bare", (1200.0, 8000.0))):  # fmt: skip
+        c = RangeCorrection(u, calibrated_span_mm=span)
+        bias = 0.0 if name == "bare" else 1.0
+        pipe = PosePipeline(CAM, CAT, replace(cfg, range_bias_sigma_mm=8.0 * bias,
+                                                   calibrated_range_bias_sigma_mm=2.0 * bias),
+                            range_correction=c)  # fmt: skip
+        out[name] = pipe.process(f.gray, f.distance_mm)
+    assert all(r.ok for r in out.values())
+    np.testing.assert_allclose(out["outside"].t_mm, out["inside"].t_mm, atol=1e-9)
+    extra = {k: out[k].covariance[5, 5] - out["bare"].covariance[5, 5] for k in out}
+    # the common range bias moves the pose along the line of sight (z) by about itself
+    assert extra["inside"] == pytest.approx(2.0**2, rel=0.3), extra
+    assert extra["outside"] == pytest.approx(8.0**2, rel=0.3), extra
+    assert extra["no span"] == pytest.approx(extra["inside"]), extra

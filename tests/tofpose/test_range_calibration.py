@@ -48,6 +48,12 @@ def test_the_fit_recovers_the_cyclic_amplitude_and_pixel_errors():
     phases = [np.arctan2(co, s) for s, co in c.harmonics_mm]
     np.testing.assert_allclose(phases, e.wiggle_phases_rad, atol=0.2)
     assert c.amplitude_mm_per_decade == pytest.approx(e.amplitude_mm_per_decade, rel=0.15)
+    # it records the distances it used: the reflectors' pixels of a run whose target
+    # origin stood at 1.2-8 m (its markers stand in front of the origin, and the dimmest
+    # pixels of the far poses fall below the amplitude cut)
+    near, far = c.calibrated_span_mm
+    assert 900 < near < 1200 and 7000 < far < 8100, c.calibrated_span_mm
+    assert c.covers(3000.0) and not c.covers(700.0) and not c.covers(9000.0)
     # The per-pixel map follows the programmed fixed pattern where the reflectors were
     # seen often and brightly enough to fix it (up to the mean, held by the constant).
     truth = e.pixel_offsets_mm(240, 320)
@@ -71,13 +77,20 @@ def test_the_fit_recovers_the_cyclic_amplitude_and_pixel_errors():
 def test_a_correction_survives_its_json_form():
     c = RangeCorrection(
         24_982.0, 3.5, ((1.0, -2.0), (0.5, 0.25)), -6.0,
-        pixel_offsets_mm=np.arange(12.0).reshape(3, 4) / 7,
+        pixel_offsets_mm=np.arange(12.0).reshape(3, 4) / 7, calibrated_span_mm=(900.0, 6000.0),
     )  # fmt: skip
     back = RangeCorrection.from_dict(c.to_dict())
+    assert back.calibrated_span_mm == (900.0, 6000.0)
     d, a, i = np.array([1000.0, 5000.0]), np.array([50.0, 3000.0]), np.array([0, 11])
     np.testing.assert_allclose(back.error_mm(d, a, i), c.error_mm(d, a, i), atol=0.01)
     with pytest.raises(ValueError, match="lacks 'offset_mm'"):
         RangeCorrection.from_dict({"unambiguous_range_mm": 1.0})
+    for bad in ([5000.0, 900.0], [900.0], "900-6000"):
+        with pytest.raises(ValueError, match="calibrated_span_mm"):
+            RangeCorrection.from_dict({**c.to_dict(), "calibrated_span_mm": bad})
+    # a file written before spans were recorded covers every range
+    legacy = {k: v for k, v in c.to_dict().items() if k != "calibrated_span_mm"}
+    assert RangeCorrection.from_dict(legacy).covers(100_000.0)
 
 
 def test_true_pixel_distances_match_the_renderers_noiseless_truth():
