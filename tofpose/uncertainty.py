@@ -34,8 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tofpose.extraction import Blob
-from tofpose.kernels.sigmas import blob_pixel_stats
-from tofpose.robust import median_1d
+from tofpose.kernels.sigmas import blob_sigmas
 
 #: centroid sampling error of a single-pixel blob, px (uniform over one pixel)
 SINGLE_PIXEL_SIGMA_PX = 1.0 / np.sqrt(12.0)
@@ -81,23 +80,10 @@ def measurement_sigmas(
     starts[1:] = np.cumsum([len(b.pixels) for b in blobs])
     flat = np.concatenate([b.pixels for b in blobs]).astype(np.int64, copy=False)
     centroids = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
-    shot_px, n_px, own_mad_mm, model_unit, n_valid = blob_pixel_stats(
-        flat, starts, centroids, np.asarray(gray, np.float32),
-        np.asarray(distance_mm, np.float32), float(background_counts),
-    )  # fmt: skip
-
     split = np.array([b.source == "split" for b in blobs], bool)
-    neighbour_px = np.where(split, SPLIT_CENTROID_PX / np.sqrt(n_px), 0.0)
-    sigma_px = np.sqrt(
-        shot_px**2 + floors.centroid_px**2 + sampling_sigma_px(n_px) ** 2 + neighbour_px**2
-    )
-
-    pool = (n_valid >= POOL_MIN_PIXELS) & np.isfinite(own_mad_mm) & (model_unit > 0)
-    k = median_1d(own_mad_mm[pool] / model_unit[pool]) if pool.any() else np.nan
-    per_pixel_mm = np.where(np.isfinite(own_mad_mm), own_mad_mm, 0.0)
-    if np.isfinite(k):
-        per_pixel_mm = np.maximum(per_pixel_mm, k * np.nan_to_num(model_unit))
-    sigma_range = MEDIAN_EFFICIENCY * per_pixel_mm / np.sqrt(np.maximum(n_valid, 1))
-    uncalibrated = ~np.isfinite(k) & (n_valid < 3)
-    sigma_range[uncalibrated] = UNCALIBRATED_RANGE_SIGMA_MM
-    return sigma_px, np.maximum(sigma_range, floors.range_mm)
+    return blob_sigmas(
+        flat, starts, centroids, np.asarray(gray, np.float32),
+        np.asarray(distance_mm, np.float32), float(background_counts), split,
+        float(floors.centroid_px), float(floors.range_mm), SINGLE_PIXEL_SIGMA_PX,
+        SPLIT_CENTROID_PX, POOL_MIN_PIXELS, MEDIAN_EFFICIENCY, UNCALIBRATED_RANGE_SIGMA_MM,
+    )  # fmt: skip
