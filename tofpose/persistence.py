@@ -72,6 +72,34 @@ class Persistence:
         self._history.clear()
         self._history.extend(snapshot)
 
+    def history(self, gray: np.ndarray, distance: np.ndarray) -> tuple:
+        """The history newest first for ``kernels.tracking_frame.track_frame``: tuples of
+        gray, distance, mask and centroids, each padded to K - 1 entries (at least one)
+        with this frame's arrays (never read), and the number of real entries."""
+        k = max(self.config.k_frames - 1, 1)
+        entries = list(reversed(self._history))
+        pad = k - len(entries)
+        return (
+            tuple([e.gray for e in entries] + [gray] * pad),
+            tuple([e.distance for e in entries] + [distance] * pad),
+            tuple([e.mask for e in entries] + [np.zeros(gray.size, bool)] * pad),
+            tuple([e.centroids for e in entries] + [np.zeros((0, 2))] * pad),
+            len(entries),
+        )
+
+    def commit(self, centroids: np.ndarray, pixels: np.ndarray, gray: np.ndarray,
+               distance: np.ndarray, n_used: int, motion: bool) -> None:  # fmt: skip
+        """Record a frame combined by ``track_frame`` as ``apply`` would have: with
+        motion, only the ``n_used`` newest entries stay; then this frame is appended.
+        centroids : (n, 2) its blobs' centroids; pixels : their flat pixel indices."""
+        if motion:
+            keep = list(self._history)[len(self._history) - n_used :] if n_used else []
+            self._history.clear()
+            self._history.extend(keep)
+        mask = np.zeros(gray.size, bool)
+        mask[pixels] = True
+        self._history.append(_Entry(centroids, mask, gray, distance))
+
     def _padded(self, current: np.ndarray, older: list[np.ndarray]) -> tuple:
         """(current, *older) padded with ``current`` to K arrays: the kernels take a tuple
         of fixed length (one compiled version per K) and a count of the arrays to use."""

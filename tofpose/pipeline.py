@@ -57,6 +57,7 @@ from tofpose.tracking import (
     find_in_windows,
     predict_windows,
 )
+from tofpose.tracking_frame import CompiledTracker
 from tofpose.uncertainty import SigmaFloors, measurement_sigmas
 
 Refinement = Literal["ml", "los", "none"]
@@ -260,6 +261,11 @@ class PosePipeline:
         self._solver = PoseSolver(camera, catalog, self.config, range_correction)
         self._track: TrackState | None = None
         camera.pixel_bearings()  # warm the cache
+        self._compiled_tracker = (
+            CompiledTracker(camera, catalog, self.config, self._solver, self._persistence)
+            if CompiledTracker.applies(camera, range_correction)
+            else None
+        )
 
     def reset(self) -> None:
         """Forget multi-frame history (call when the stream is discontinuous)."""
@@ -418,6 +424,8 @@ class PosePipeline:
         """Tracking mode (``tofpose.tracking``): reflectors searched only in windows around
         their predicted images, correspondences known; None means "fall back to the full
         acquisition pass", and leaves no trace in the persistence history."""
+        if self._compiled_tracker is not None:
+            return self._track_compiled(g, d, time_s, track, timer)
         cfg = self.config
         tc = cfg.tracking
         windows = predict_windows(
@@ -459,12 +467,26 @@ class PosePipeline:
         if ml.chi2 > cfg.outlier_chi2_per_dof * max(3 * len(pairs) - 6, 1):
             give_up()  # an inconsistent fit: the windows may hold the wrong blobs
             return None
+        return self._tracked_result(solved, meas, pinfo, time_s, timer, track)
+
+    def _track_compiled(self, g, d, time_s, track: TrackState, timer) -> PoseResult | None:
+        """``_process_tracking`` in one compiled call (``tofpose.tracking_frame``)."""
+        tracked = self._compiled_tracker.track(g, d, track)
+        timer.lap("tracking")
+        if tracked is None:
+            return None
+        return self._tracked_result(tracked.solution, tracked.measurements, tracked.persistence,
+                                    time_s, timer, track)  # fmt: skip
+
+    def _tracked_result(self, solved: Solution, meas: Measurements, info, time_s, timer,
+                        track: TrackState) -> PoseResult:  # fmt: skip
+        """The ok result of a tracked frame; the track moves on to its pose."""
         extra = {
-            "frames_used": pinfo.frames_used,
-            "motion": pinfo.motion,
+            "frames_used": info.frames_used,
+            "motion": info.motion,
             "rejected": [],
             "active_threshold_counts": track.threshold_counts,
-            "n_candidates": len(kept),
+            "n_candidates": len(meas.blobs),
         }
         result = self._pose_result(solved, meas, [], time_s, timer, extra, mode="tracking")
         self._track = replace(

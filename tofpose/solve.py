@@ -175,9 +175,17 @@ class PoseSolver:
             MEDIAN_CHI2_3DOF, cfg.reject_outliers, cfg.matching.min_matches,
             cfg.outlier_sigma, cfg.outlier_chi2_per_dof,
         )  # fmt: skip
-        obs = obs.subset(kept)
+        return self.conclude(obs.subset(kept), R, t, iterations, cov, chi2, norms, sr, active)
+
+    def conclude(
+        self, obs: MatchedObservations, R, t, iterations, cov, chi2, norms, sr, active
+    ) -> Solution | Rejected:
+        """The fitted pose of ``obs`` (the reflectors kept): verified against the frame
+        (``active`` : (H, W) its active pixel set; it is only read when few reflectors
+        are matched, ``dark_check_max_matches``), with the covariance of the fit (6, 6)
+        and of the common range bias the data cannot reveal."""
         T = RigidTransform(R, t)
-        if cfg.verify_pose:
+        if self.config.verify_pose:
             problem = self.verify(T, active, set(obs.i_idx.tolist()))
             if problem:
                 return Rejected(f"pose rejected: {problem}", implausible=True)
@@ -224,8 +232,10 @@ class PoseSolver:
     def faces_camera(self, R: np.ndarray, t: np.ndarray) -> bool:
         return self.view_cosine(R, t) >= np.cos(np.radians(self.config.max_view_angle_deg))
 
-    def verify(self, T: RigidTransform, active: np.ndarray, matched: set[int]) -> str:
-        """Physical consistency of a pose with the frame; empty string when consistent."""
+    def verify(self, T: RigidTransform, active: np.ndarray | None, matched: set[int]) -> str:
+        """Physical consistency of a pose with the frame; empty string when consistent.
+        ``active`` (H, W) is read only for the dark check (at most
+        ``dark_check_max_matches`` reflectors matched) and may be None otherwise."""
         R, t = T.R, T.t_mm
         cos_view = self.view_cosine(R, t)
         if cos_view < np.cos(np.radians(self.config.max_view_angle_deg)):

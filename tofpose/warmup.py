@@ -3,15 +3,16 @@
 The pipeline's inner loops are compiled on first use (``tofpose.kernels``): ~45 s on a
 fresh install, ~0.3 s once the cache exists. ``warm_up()`` runs the pipeline over a few
 simulated frames that take every compiled path (acquisition, persistence over the full
-history, tracking, merged markers split by ellipse confirmation, the paper's LOS
-refinement, the RANSAC matcher) so that this happens once, at a moment of the caller's
-choosing: ``tofpose warm-up`` after installing (``make`` and the Dockerfile run it), and
-the server before its acquisition loop starts.
+history, tracking in one call and stage by stage, merged markers split by ellipse
+confirmation, the paper's LOS refinement, the RANSAC matcher) so that this happens once,
+at a moment of the caller's choosing: ``tofpose warm-up`` after installing (``make``
+and the Dockerfile run it), and the server before its acquisition loop starts.
 """
 
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -52,5 +53,9 @@ def warm_up() -> float:
             pipe = PosePipeline(cam, cat, config)
             for f in frames if i == 0 else frames[:2]:
                 pipe.process(f.gray, f.distance_mm)
+        # a camera with lens distortion tracks stage by stage (``tofpose.tracking_frame``)
+        pipe = PosePipeline(replace(cam, dist=(1e-4, 0.0, 0.0, 0.0, 0.0)), cat, configs[0])
+        for f in frames[:3]:
+            pipe.process(f.gray, f.distance_mm)
     _done = True
     return time.perf_counter() - t0

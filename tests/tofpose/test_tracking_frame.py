@@ -1,0 +1,111 @@
+"""The compiled tracking frame (``tofpose.tracking_frame``) against the stage-by-stage
+tracking path it replaces for distortion-free cameras: same windows, same poses, same
+fallbacks, same persistence history."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.conftest import facing_pose, render
+from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
+from tofpose.catalog import Catalog
+from tofpose.kernels.tracking_frame import pinhole_windows
+from tofpose.sim.scene import Clutter, TargetScene
+from tofpose.tracking import TrackingConfig, predict_windows
+
+TRACKING = PipelineConfig(tracking=TrackingConfig(enabled=True, reacquire_every=6))
+
+
+@pytest.mark.parametrize(("z", "offset"), [(700.0, (60.0, -40.0)), (3000.0, (-120.0, 40.0)),
+                                         (8000.0, (-120.0, 40.0))])  # fmt: skip
+def test_pinhole_windows_are_predict_windows(z, offset):
+    cam, cat = CameraModel(), paper_target()
+    T = facing_pose(z, 3, -4, 20, offset_mm=offset)
+    want = predict_windows(cam, cat.positions_mm, cat.diameters_mm, T.R, T.t_mm,
+                           margin_px=4.0, min_diameter_px=1.0)  # fmt: skip
+    idx, bounds, centres, diam = pinhole_windows(
+        cat.positions_mm, cat.diameters_mm, T.R, T.t_mm, cam.fx, cam.fy, cam.cx, cam.cy,
+        4.0, 1.0, cam.width, cam.height,
+    )  # fmt: skip
+    assert idx.tolist() == [w.catalog_index for w in want] and len(want) >= 3
+    assert bounds.tolist() == [[w.u0, w.u1, w.v0, w.v1] for w in want]
+    np.testing.assert_allclose(centres, [w.centre_uv for w in want], atol=1e-9)
+    np.testing.assert_allclose(diam, [w.diameter_px for w in want], rtol=1e-12)
+    behind = facing_pose(-500.0)
+    assert (
+        len(
+            pinhole_windows(
+                cat.positions_mm,
+                cat.diameters_mm,
+                behind.R,
+                behind.t_mm,
+                cam.fx,
+                cam.fy,
+                cam.cx,
+                cam.cy,
+                4.0,
+                1.0,
+                320,
+                240,
+            )[0]
+        )
+        == 0
+    )
+
+
+def _stream():
+    """A static run, a slew, a jump, a covered marker and a reflection in a window: every
+    way tracking continues or falls back."""
+    cat = paper_target()
+    covered = TargetScene(Catalog(cat.name, tuple(r for r in cat.reflectors if r.id != 6)))
+    glint = TargetScene(clutter=(Clutter((120.0, 60.0, 210.0), 80.0, 1.0),))
+    for _ in range(6):
+        yield facing_pose(2500.0, 2, -3, 10), None
+    for n in range(5):
+        yield facing_pose(2500.0, 2, -3, 10 + 0.5 * n), None
+    yield facing_pose(2600.0, 2, 4, 14), None  # a jump
+    for n in range(3):
+        yield facing_pose(2600.0, 2, 4, 14), covered if n else None
+    for n in range(4):
+        yield facing_pose(2600.0, 2, 4, 14), glint if n >= 2 else None
+    for _ in range(6):
+        yield facing_pose(5712.0, 2, -3, 10, offset_mm=(2.0, -10.0)), None
+
+
+def test_the_compiled_frame_gives_the_stage_by_stage_results():
+    cam, cat = CameraModel(), paper_target()
+    compiled = PosePipeline(cam, cat, TRACKING)
+    staged = PosePipeline(cam, cat, TRACKING)
+    assert compiled._compiled_tracker is not None
+    staged._compiled_tracker = None  # the stages one by one
+    modes = []
+    for k, (T, scene) in enumerate(_stream()):
+        f = render(T, seed=k, scene=scene)
+        a, b = (p.process(f.gray, f.distance_mm) for p in (compiled, staged))
+        assert (a.ok, a.mode, a.frames_used, a.motion) == (b.ok, b.mode, b.frames_used, b.motion)
+        assert [m.catalog_id for m in a.matched] == [m.catalog_id for m in b.matched]
+        if a.ok:
+            np.testing.assert_allclose(a.t_mm, b.t_mm, atol=1e-9)
+            np.testing.assert_allclose(a.R, b.R, atol=1e-12)
+            np.testing.assert_allclose(a.covariance, b.covariance, rtol=1e-9, atol=1e-15)
+            for ma, mb in zip(a.matched, b.matched, strict=True):
+                np.testing.assert_allclose(ma.centroid_uv, mb.centroid_uv, atol=1e-9)
+                assert ma.area_px == mb.area_px
+                assert ma.centroid_sigma_px == pytest.approx(mb.centroid_sigma_px, rel=1e-12)
+                assert ma.range_sigma_mm == pytest.approx(mb.range_sigma_mm, rel=1e-12)
+        modes.append(a.mode)
+    # the stream exercised both: tracked frames and fallbacks to acquisition after them
+    assert modes.count("tracking") >= 10
+    pairs = zip(modes[:-1], modes[1:], strict=True)
+    assert any(p == "tracking" and m == "acquisition" for p, m in pairs)
+
+
+def test_a_camera_with_distortion_or_a_range_correction_tracks_stage_by_stage():
+    from tofpose.range_calibration import RangeCorrection
+
+    cat = paper_target()
+    distorted = CameraModel(dist=(0.05, 0.0, 0.0, 0.0, 0.0))
+    assert PosePipeline(distorted, cat, TRACKING)._compiled_tracker is None
+    corrected = PosePipeline(CameraModel(), cat, TRACKING, range_correction=RangeCorrection(2e4))
+    assert corrected._compiled_tracker is None

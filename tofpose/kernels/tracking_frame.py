@@ -1,0 +1,276 @@
+"""A whole tracking-mode frame in one compiled call: window search, persistence,
+measurement, sigmas and the §5 fit, chained from the stage kernels so that the frame
+pays the Python overhead of one call instead of ~25 (``PosePipeline`` uses it for
+cameras without lens distortion and without a range correction; otherwise the stages
+run one by one, with the same arithmetic).
+
+The steps and their order are those of ``PosePipeline._process_tracking`` with
+``Persistence.apply``, ``extraction.measure_blobs``, ``uncertainty.measurement_sigmas``
+and ``PoseSolver.solve`` (whose ``complete`` adds nothing when every blob is matched to
+its window). The persistence history is read, not changed: the caller commits the
+frame to it only when tracking succeeds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tofpose.kernels import jit
+from tofpose.kernels.centroids import blob_centroids, blob_ranges
+from tofpose.kernels.persistence import column_medians, consistent, mean_in_boxes
+from tofpose.kernels.perspective import disc_centre_offsets
+from tofpose.kernels.pose import fit_with_outliers, svd_pose
+from tofpose.kernels.sigmas import blob_sigmas
+from tofpose.kernels.tracking import FOUND, any_shared, search_windows
+
+#: outcome codes of ``track_frame`` (anything but TRACKED: fall back to acquisition)
+TRACKED, LOST, SHARED, NOT_PERSISTENT, NO_RANGE, OUTLIER = 0, 1, 2, 3, 4, 5
+
+
+@jit
+def pinhole_bearings(uv, fx, fy, cx, cy):
+    """Unit lines of sight (n, 3) of pixels (n, 2) of a camera without distortion
+    (``CameraModel.bearings``, Eq. 9)."""
+    n = uv.shape[0]
+    e = np.empty((n, 3))
+    for i in range(n):
+        x = (uv[i, 0] - cx) / fx
+        y = (uv[i, 1] - cy) / fy
+        norm = np.sqrt(x * x + (y * y + 1.0))  # NumPy's order of the 3-term sum
+        e[i, 0], e[i, 1], e[i, 2] = x / norm, y / norm, 1.0 / norm
+    return e
+
+
+@jit
+def pinhole_windows(xyz, diameters_mm, R, t, fx, fy, cx, cy, margin_px, min_diameter_px,
+                    width, height):  # fmt: skip
+    """``tracking.predict_windows`` for a camera without distortion, as arrays: the
+    catalog indices (m,) of the reflectors to track, their window bounds (m, 4) int64
+    (u0, u1, v0, v1), predicted centres (m, 2) px and diameters (m,) px. No windows when
+    a reflector would be behind the camera."""
+    n = xyz.shape[0]
+    centres = xyz @ R.T + t
+    uv = np.empty((n, 2))
+    d_px = np.empty(n)
+    for i in range(n):
+        if centres[i, 2] <= 0:
+            return (np.empty(0, np.int64), np.empty((0, 4), np.int64), np.empty((0, 2)),
+                    np.empty(0))  # fmt: skip
+        uv[i, 0] = fx * centres[i, 0] / centres[i, 2] + cx
+        uv[i, 1] = fy * centres[i, 1] / centres[i, 2] + cy
+        d_px[i] = fx * diameters_mm[i] / centres[i, 2]
+    use = np.zeros(n, np.bool_)
+    bounds = np.empty((n, 4), np.int64)
+    for i in range(n):
+        gap = np.inf
+        for j in range(n):
+            if j != i:
+                du, dv = uv[i, 0] - uv[j, 0], uv[i, 1] - uv[j, 1]
+                gap = min(gap, np.sqrt(du * du + dv * dv) - 0.5 * (d_px[i] + d_px[j]))
+        half = 0.5 * d_px[i] + margin_px
+        u0, u1 = int(np.floor(uv[i, 0] - half)), int(np.ceil(uv[i, 0] + half)) + 1
+        v0, v1 = int(np.floor(uv[i, 1] - half)), int(np.ceil(uv[i, 1] + half)) + 1
+        bounds[i, 0], bounds[i, 1], bounds[i, 2], bounds[i, 3] = u0, u1, v0, v1
+        use[i] = (d_px[i] >= min_diameter_px and gap >= 2.0 and u0 >= 0 and v0 >= 0
+                  and u1 <= width and v1 <= height)  # fmt: skip
+    idx = np.flatnonzero(use)
+    return idx, bounds[idx], uv[idx], d_px[idx]
+
+
+@jit
+def _counter_ok(flat, starts, masks, n_used, c_min):
+    """Every blob's median count of frames (this one and the first ``n_used`` masks)
+    in which its pixels were candidate pixels is at least c_min (§3.4's counter C)."""
+    for j in range(starts.shape[0] - 1):
+        a, b = starts[j], starts[j + 1]
+        c = np.empty(b - a)
+        for i in range(a, b):
+            k = 1  # this frame: the pixel is the blob's
+            for f in range(n_used):
+                k += masks[f][flat[i]]
+            c[i - a] = k
+        s = np.sort(c)
+        q = (b - a) >> 1
+        med = s[q] if (b - a) & 1 else (s[q - 1] + s[q]) / 2.0
+        if med < c_min:
+            return False
+    return True
+
+
+@jit
+def _owner(flat, starts, bbox, h, w):
+    """(H, W) index of the blob owning each pixel and whether it is needed: only when
+    two blobs' boxes come within 2 px (``extraction._pixel_owner``)."""
+    n = bbox.shape[0]
+    near = False
+    for a in range(n):
+        for b in range(n):
+            if a == b:
+                continue
+            if (bbox[a, 0] - 2 < bbox[b, 0] + bbox[b, 2] + 2
+                    and bbox[b, 0] - 2 < bbox[a, 0] + bbox[a, 2] + 2
+                    and bbox[a, 1] - 2 < bbox[b, 1] + bbox[b, 3] + 2
+                    and bbox[b, 1] - 2 < bbox[a, 1] + bbox[a, 3] + 2):  # fmt: skip
+                near = True
+    if not near:
+        return np.full((1, 1), -1, np.int32), False
+    owner = np.full(h * w, -1, np.int32)
+    for j in range(n):
+        for i in range(starts[j], starts[j + 1]):
+            owner[flat[i]] = j
+    return owner.reshape(h, w), True
+
+
+@jit
+def track_frame(
+    gray, distance, bounds, centres, diameters, cat_idx, threshold, background,
+    hist_gray, hist_dist, hist_mask, hist_cent, n_hist, tol_px, c_min,
+    fx, fy, cx, cy, pixel_bearings, xyz, radii, K, correct_perspective,
+    floor_px, floor_mm, single_px, split_px, pool_min, median_eff, uncal_mm,
+    refinement, los_tol, step_sigma2, adapt, max_sys, median_chi2, reject, min_matches,
+    outlier_sigma, chi2_per_dof,
+):  # fmt: skip
+    """One tracking frame (module docstring).
+
+    gray, distance : (H, W) float32 checked frame; bounds (n, 4), centres (n, 2),
+    diameters (n,), cat_idx (n,) : the windows (``tracking.predict_windows``);
+    threshold, background : the last acquisition's I_t and background, counts;
+    hist_* : the persistence history newest first as tuples of equal length (gray,
+    distance (H, W) float32, mask (H * W,) bool, centroids (m, 2)), of which the first
+    ``n_hist`` are real; tol_px, c_min : ``PersistenceConfig``; fx..cy, pixel_bearings
+    (H * W, 3) : the camera; xyz (N, 3), radii (N,) mm : the catalog; K (3, 3);
+    the rest : ``uncertainty`` constants and floors, and the ``fit_with_outliers``
+    settings of ``PoseSolver.solve``.
+
+    Returns (code, n_used, motion, centroids (n, 2) moment centroids, flat, starts,
+    bbox, peak, uv (n, 2) measured centroids, rho (n,), sigma_px (n,), sigma_range (n,),
+    y (n, 3) back-projected points (Eq. 8), weights (n,) (Eq. 21), uv_obs (n, 2)
+    perspective-corrected, e_obs (n, 3), y_obs (n, 3), R, t, iterations, covariance
+    (6, 6), chi2, norms (n,), sr (n,)); the arrays after ``code`` are only meaningful up
+    to the step that set it.
+    """
+    h, w = gray.shape
+    n = bounds.shape[0]
+    status, bbox, peak, cent, starts, flat = search_windows(
+        gray, bounds, centres, diameters, threshold, background
+    )
+    uv = np.full((n, 2), np.nan)
+    rho = np.full(n, np.nan)
+    sp = np.full(n, np.nan)
+    sr = np.full(n, np.nan)
+    y = np.full((n, 3), np.nan)
+    wts = np.full(n, np.nan)
+    uv_obs = np.full((n, 2), np.nan)
+    e_obs = np.full((n, 3), np.nan)
+    y_obs = np.full((n, 3), np.nan)
+    R = np.eye(3)
+    t = np.zeros(3)
+    its = 0
+    cov = np.full((6, 6), np.nan)
+    chi2 = np.inf
+    norms = np.full(n, np.nan)
+    sr_fit = np.full(n, np.nan)
+    n_used, motion = 0, False
+    code = TRACKED
+    for _ in range(1):  # one pass; ``break`` ends the frame with ``code``
+        for j in range(n):
+            if status[j] != FOUND:
+                code = LOST
+        if code == LOST:
+            break
+        if any_shared(flat, starts):
+            code = SHARED
+            break
+
+        # §3.4 persistence: the consistent part of the history (newest first)
+        for f in range(n_hist):
+            if consistent(cent, hist_cent[f], tol_px):
+                n_used += 1
+            else:
+                motion = True
+                break
+        frames = 1 + n_used
+        mean_gray = gray
+        med_dist = distance
+        if frames > 1 and n > 0:
+            if frames >= c_min and not _counter_ok(flat, starts, hist_mask, n_used, c_min):
+                code = NOT_PERSISTENT
+                break
+            mean_gray = mean_in_boxes(gray, hist_gray, n_used, bbox)
+            med_dist = distance.copy()
+            stack = np.empty((frames, flat.shape[0]), np.float32)
+            src = distance.reshape(-1)
+            for i in range(flat.shape[0]):
+                stack[0, i] = src[flat[i]]
+            for f in range(n_used):
+                older = hist_dist[f].reshape(-1)
+                for i in range(flat.shape[0]):
+                    stack[f + 1, i] = older[flat[i]]
+            med = column_medians(stack)
+            out = med_dist.reshape(-1)
+            for i in range(flat.shape[0]):
+                out[flat[i]] = med[i]
+
+        # Eqs. 19-20: centroids on I-bar, ranges on D-bar
+        owner, use_owner = _owner(flat, starts, bbox, h, w)
+        uv = blob_centroids(flat, starts, bbox, mean_gray, background, True, owner, use_owner)
+        rho = blob_ranges(flat, starts, med_dist.reshape(-1), pixel_bearings,
+                          pinhole_bearings(uv, fx, fy, cx, cy))  # fmt: skip
+        if not np.isfinite(rho).all():
+            code = NO_RANGE
+            break
+
+        # Eqs. 7-8 and the per-reflector sigmas; Eq. 21's weights
+        sp, sr = blob_sigmas(flat, starts, uv, mean_gray, med_dist, background,
+                             np.zeros(n, np.bool_), floor_px, floor_mm, single_px, split_px,
+                             pool_min, median_eff, uncal_mm)  # fmt: skip
+        e = pinhole_bearings(uv, fx, fy, cx, cy)
+        for j in range(n):
+            y[j] = e[j] * rho[j]
+            wts[j] = 1.0 / (sr[j] ** 2 + (rho[j] * sp[j] / fx) ** 2)
+
+        # §5: weighted SVD on the known correspondences, perspective-bias correction, fit
+        x = np.empty((n, 3))
+        r_disc = np.empty(n)
+        for j in range(n):
+            x[j] = xyz[cat_idx[j]]
+            r_disc[j] = radii[cat_idx[j]]
+        R, t = svd_pose(x, y, wts)
+        uv_obs = uv.copy()
+        if correct_perspective:
+            uv_obs -= disc_centre_offsets(K, x @ R.T + t, R[:, 2].copy(), r_disc)
+        e_obs = pinhole_bearings(uv_obs, fx, fy, cx, cy)
+        for j in range(n):
+            y_obs[j] = e_obs[j] * rho[j]
+        kept, R, t, its, cov, chi2, norms, sr_fit = fit_with_outliers(
+            x, e_obs, rho, y_obs, sr, sp / fx, refinement, los_tol, step_sigma2, adapt,
+            max_sys, median_chi2, reject, min_matches, outlier_sigma, chi2_per_dof,
+        )  # fmt: skip
+        if not kept.all():
+            code = OUTLIER
+    return (
+        code,
+        n_used,
+        motion,
+        cent,
+        flat,
+        starts,
+        bbox,
+        peak,
+        uv,
+        rho,
+        sp,
+        sr,
+        y,
+        wts,
+        uv_obs,
+        e_obs,
+        y_obs,
+        R,
+        t,
+        its,
+        cov,
+        chi2,
+        norms,
+        sr_fit,
+    )

@@ -1,0 +1,121 @@
+"""Tracking mode in one compiled call per frame (``kernels.tracking_frame.track_frame``).
+
+``PosePipeline`` tracks through ``CompiledTracker`` when the camera has no lens
+distortion and no range correction is applied (the kernel's back-projection is the
+pinhole model and the correction's model lives in Python); otherwise it runs the same
+stages one by one. The two give the same poses (``tests/tofpose/test_tracking_frame.py``
+and the A/B harness ``bench/ab.py``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from tofpose.camera import CameraModel
+from tofpose.catalog import Catalog
+from tofpose.extraction import Blob
+from tofpose.kernels.pose import REFINE_LOS, REFINE_ML, REFINE_NONE
+from tofpose.kernels.tracking_frame import TRACKED, pinhole_windows, track_frame
+from tofpose.persistence import Persistence, PersistenceInfo
+from tofpose.pose import MEDIAN_CHI2_3DOF, STEP_SIGMA2
+from tofpose.solve import MatchedObservations, Measurements, PoseSolver, Solution
+from tofpose.tracking import TrackState
+from tofpose.uncertainty import (
+    MEDIAN_EFFICIENCY,
+    POOL_MIN_PIXELS,
+    SINGLE_PIXEL_SIGMA_PX,
+    SPLIT_CENTROID_PX,
+    UNCALIBRATED_RANGE_SIGMA_MM,
+)
+
+if TYPE_CHECKING:  # the pipeline imports this module
+    from tofpose.pipeline import PipelineConfig
+
+_REFINEMENT = {"none": REFINE_NONE, "ml": REFINE_ML, "los": REFINE_LOS}
+
+
+@dataclass(frozen=True)
+class Tracked:
+    """A tracked frame: the solved pose, the measurements it came from, and what
+    persistence combined."""
+
+    solution: Solution
+    measurements: Measurements
+    persistence: PersistenceInfo
+
+
+class CompiledTracker:
+    """Runs tracking frames through ``track_frame`` for one pipeline's camera, catalog,
+    configuration, solver and persistence history."""
+
+    def __init__(self, camera: CameraModel, catalog: Catalog, config: PipelineConfig,
+                 solver: PoseSolver, persistence: Persistence) -> None:  # fmt: skip
+        self.camera = camera
+        self.config = config
+        self._solver = solver
+        self._persistence = persistence
+        self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
+        self._diameters = np.ascontiguousarray(catalog.diameters_mm, dtype=float)
+        self._radii = self._diameters / 2
+        self._K = np.ascontiguousarray(camera.K, dtype=float)
+        self._bearings = np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3))
+
+    @staticmethod
+    def applies(camera: CameraModel, range_correction: object | None) -> bool:
+        """Whether the compiled path can serve this camera (module docstring)."""
+        return not camera.has_distortion and range_correction is None
+
+    def track(self, g: np.ndarray, d: np.ndarray, track: TrackState) -> Tracked | None:
+        """One frame; None means "fall back to the acquisition pass" (fewer reflectors to
+        track than a pose needs, one lost or not persistent, a range missing, one dropped
+        as an outlier, verification failed or the fit inconsistent), and leaves the
+        persistence history as it was."""
+        cfg, cam = self.config, self.camera
+        pc, tc = cfg.persistence, cfg.tracking
+        cat_idx, bounds, centres, diameters = pinhole_windows(
+            self._xyz, self._diameters, track.R, track.t_mm, cam.fx, cam.fy, cam.cx, cam.cy,
+            float(tc.margin_px), float(tc.min_diameter_px), cam.width, cam.height,
+        )  # fmt: skip
+        if len(cat_idx) < cfg.matching.min_matches:
+            return None
+        hist_g, hist_d, hist_m, hist_c, n_hist = self._persistence.history(g, d)
+        (code, n_used, motion, cent, flat, starts, bbox, peak, uv, rho, sp, sr, y, w, uv_obs,
+         e_obs, y_obs, R, t, its, cov, chi2, norms, sr_fit) = track_frame(
+            g, d, bounds, centres, diameters, cat_idx, np.float32(track.threshold_counts),
+            float(track.background_counts), hist_g, hist_d, hist_m, hist_c, n_hist,
+            float(pc.motion_tolerance_px), int(pc.c_min), cam.fx, cam.fy, cam.cx, cam.cy,
+            self._bearings, self._xyz, self._radii, self._K, cfg.correct_perspective_bias,
+            float(cfg.centroid_sigma_floor_px), float(cfg.range_sigma_floor_mm),
+            SINGLE_PIXEL_SIGMA_PX, SPLIT_CENTROID_PX, POOL_MIN_PIXELS, MEDIAN_EFFICIENCY,
+            UNCALIBRATED_RANGE_SIGMA_MM, _REFINEMENT[cfg.refinement], cfg.los_tolerance,
+            STEP_SIGMA2, cfg.adapt_range_sigma, cfg.max_systematic_range_sigma_mm,
+            MEDIAN_CHI2_3DOF, cfg.reject_outliers, cfg.matching.min_matches,
+            cfg.outlier_sigma, cfg.outlier_chi2_per_dof,
+        )  # fmt: skip
+        if code != TRACKED:
+            return None
+        n = len(cat_idx)
+        k_idx = np.arange(n)
+        obs = MatchedObservations(
+            k_idx=k_idx, i_idx=cat_idx, x_mm=self._xyz[cat_idx], uv_px=uv_obs, bearings=e_obs,
+            range_mm=rho, y_mm=y_obs, sigma_bearing_rad=sp / cam.fx, sigma_range_mm=sr,
+        )  # fmt: skip
+        few = n <= cfg.dark_check_max_matches
+        active = g >= track.threshold_counts if few else None
+        solved = self._solver.conclude(obs, R, t, its, cov, chi2, norms, sr_fit, active)
+        if not isinstance(solved, Solution):
+            return None
+        if solved.ml.chi2 > cfg.outlier_chi2_per_dof * max(3 * n - 6, 1):
+            return None  # an inconsistent fit: the windows may hold the wrong blobs
+        self._persistence.commit(cent, flat, g, d, n_used, motion)
+        blobs = tuple(
+            Blob(pixels=flat[starts[j] : starts[j + 1]], area_px=int(starts[j + 1] - starts[j]),
+                 bbox=tuple(bbox[j].tolist()), centroid_uv=uv[j], distance_mm=float(rho[j]),
+                 peak_counts=float(peak[j]), source="tracking")
+            for j in range(n)
+        )  # fmt: skip
+        meas = Measurements(blobs, uv, rho, y, w, sp, sr)
+        return Tracked(solved, meas, PersistenceInfo(1 + n_used, motion, 0))
