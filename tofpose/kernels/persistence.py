@@ -96,6 +96,22 @@ def mean_in_boxes(gray, older, n_older, boxes):
 
 
 @jit
+def median_of_counts(hist, m):
+    """``np.median`` of m small non-negative integers given as their histogram
+    ``hist[v]`` = how many equal v (a counting median: linear, exact)."""
+    q = m >> 1
+    seen, lo, hi = 0, -1, -1
+    for v in range(hist.shape[0]):
+        seen += hist[v]
+        if lo < 0 and seen > q - 1:
+            lo = v
+        if seen > q:
+            hi = v
+            break
+    return float(hi) if m & 1 else (lo + hi) / 2.0
+
+
+@jit
 def counter_medians(masks, n_masks, flat, starts):
     """The counter image C of §3.4 read at each blob's pixels: per blob, the median over
     its pixels (flat indices ``flat[starts[j]:starts[j + 1]]``) of the number of frames,
@@ -103,17 +119,15 @@ def counter_medians(masks, n_masks, flat, starts):
     candidate blob. Returns (n,) float64."""
     n = starts.shape[0] - 1
     out = np.empty(n)
+    hist = np.empty(n_masks + 1, np.int64)
     for j in range(n):
-        a, b = starts[j], starts[j + 1]
-        c = np.empty(b - a)
-        for i in range(a, b):
+        hist[:] = 0
+        for i in range(starts[j], starts[j + 1]):
             k = 0
             for f in range(n_masks):
                 k += masks[f][flat[i]]
-            c[i - a] = k
-        s = np.sort(c)
-        q = (b - a) >> 1
-        out[j] = s[q] if (b - a) & 1 else (s[q - 1] + s[q]) / 2.0
+            hist[k] += 1
+        out[j] = median_of_counts(hist, starts[j + 1] - starts[j])
     return out
 
 

@@ -17,7 +17,12 @@ import numpy as np
 
 from tofpose.kernels import jit
 from tofpose.kernels.centroids import blob_centroids, blob_ranges
-from tofpose.kernels.persistence import column_medians, consistent, mean_in_boxes
+from tofpose.kernels.persistence import (
+    column_medians,
+    consistent,
+    mean_in_boxes,
+    median_of_counts,
+)
 from tofpose.kernels.perspective import disc_centre_offsets
 from tofpose.kernels.pose import fit_with_outliers, svd_pose
 from tofpose.kernels.sigmas import blob_sigmas
@@ -81,18 +86,15 @@ def pinhole_windows(xyz, diameters_mm, R, t, fx, fy, cx, cy, margin_px, min_diam
 def _counter_ok(flat, starts, masks, n_used, c_min):
     """Every blob's median count of frames (this one and the first ``n_used`` masks)
     in which its pixels were candidate pixels is at least c_min (§3.4's counter C)."""
+    hist = np.empty(n_used + 2, np.int64)
     for j in range(starts.shape[0] - 1):
-        a, b = starts[j], starts[j + 1]
-        c = np.empty(b - a)
-        for i in range(a, b):
+        hist[:] = 0
+        for i in range(starts[j], starts[j + 1]):
             k = 1  # this frame: the pixel is the blob's
             for f in range(n_used):
                 k += masks[f][flat[i]]
-            c[i - a] = k
-        s = np.sort(c)
-        q = (b - a) >> 1
-        med = s[q] if (b - a) & 1 else (s[q - 1] + s[q]) / 2.0
-        if med < c_min:
+            hist[k] += 1
+        if median_of_counts(hist, starts[j + 1] - starts[j]) < c_min:
             return False
     return True
 

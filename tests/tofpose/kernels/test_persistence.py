@@ -54,3 +54,13 @@ def test_means_counts_and_stacks_use_only_the_counted_frames():
     np.testing.assert_array_equal(
         stack, [frames[3].ravel()[flat[:20]], frames[1].ravel()[flat[:20]]]
     )
+
+
+def test_the_counting_median_is_numpys_median():
+    from tofpose.kernels.persistence import median_of_counts
+
+    rng = np.random.default_rng(4)
+    for m in (1, 2, 3, 4, 7, 10, 51):
+        for _ in range(20):
+            v = rng.integers(0, 6, m)
+            assert median_of_counts(np.bincount(v, minlength=6), m) == np.median(v)
