@@ -513,18 +513,13 @@ class PosePipeline:
         sig_px, sig_rng = meas.sigma_px, meas.sigma_range_mm
         pred = x @ R.T + t
         res = np.linalg.norm(y_m - pred, axis=1)
+        per_reflector = zip(
+            self._catalog_ids[i_idx].tolist(), uv_m, y_m, res.tolist(), rho_m.tolist(),
+            k_idx.tolist(), sig_px[k_idx].tolist(), sig_rng[k_idx].tolist(), strict=True,
+        )  # fmt: skip
         matched = [
-            MatchedReflector(
-                int(self._catalog_ids[i]),
-                uv_m[n],
-                y_m[n],
-                float(res[n]),
-                float(rho_m[n]),
-                ranged[k].area_px,
-                float(sig_px[k]),
-                float(sig_rng[k]),
-            )
-            for n, (k, i) in enumerate(zip(k_idx, i_idx, strict=True))
+            MatchedReflector(cid, uv_n, y_n, r_n, rho_n, ranged[k].area_px, sp_n, sr_n)
+            for cid, uv_n, y_n, r_n, rho_n, k, sp_n, sr_n in per_reflector
         ]
         used = set(int(k) for k in k_idx)
         unmatched += [(uv[k, 0], uv[k, 1], rho[k]) for k in range(len(ranged)) if k not in used]

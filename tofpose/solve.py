@@ -10,7 +10,7 @@ sigma and the outlier loop run as one compiled call (``tofpose.kernels.pose``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -134,6 +134,7 @@ class PoseSolver:
         self.camera = camera
         self.config = config
         self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
+        self._xyz_mean = self._xyz.mean(axis=0)
         self._d = np.ascontiguousarray(catalog.diameters_mm, dtype=float)
         self._K = np.ascontiguousarray(camera.K, dtype=float)
         self._ids = catalog.ids
@@ -189,13 +190,15 @@ class PoseSolver:
             problem = self.verify(T, active, set(obs.i_idx.tolist()))
             if problem:
                 return Rejected(f"pose rejected: {problem}", implausible=True)
-        ml = MLResult(R, t, cov, float(chi2), int(iterations), norms)
         bias = self.range_bias_sigma_mm(obs.range_mm)
-        if bias > 0:
-            extra = range_bias_covariance(
+        extra = (
+            range_bias_covariance(
                 obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, obs.sigma_bearing_rad, bias
             )
-            ml = replace(ml, bias_covariance=extra)
+            if bias > 0
+            else None
+        )
+        ml = MLResult(R, t, cov, float(chi2), int(iterations), norms, bias_covariance=extra)
         return Solution(T, obs, int(iterations), ml)
 
     def range_bias_sigma_mm(self, range_mm: np.ndarray) -> float:
@@ -226,7 +229,7 @@ class PoseSolver:
     # ------------------------------------------------------------------------------------
     def view_cosine(self, R: np.ndarray, t: np.ndarray) -> float:
         """Cosine between the target normal and the direction to the camera."""
-        to_camera = -(R @ self._xyz.mean(axis=0) + t)
+        to_camera = -(R @ self._xyz_mean + t)
         return float(R[:, 2] @ to_camera / np.linalg.norm(to_camera))
 
     def faces_camera(self, R: np.ndarray, t: np.ndarray) -> bool:
