@@ -4,6 +4,8 @@ fallbacks, same persistence history."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -11,6 +13,7 @@ from tests.conftest import facing_pose, render
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
 from tofpose.catalog import Catalog
 from tofpose.kernels.tracking_frame import pinhole_windows
+from tofpose.persistence import PersistenceConfig
 from tofpose.sim.scene import Clutter, TargetScene
 from tofpose.tracking import TrackingConfig, predict_windows
 
@@ -73,10 +76,15 @@ def _stream():
         yield facing_pose(5712.0, 2, -3, 10, offset_mm=(2.0, -10.0)), None
 
 
-def test_the_compiled_frame_gives_the_stage_by_stage_results():
+@pytest.mark.parametrize(
+    "persistence",
+    [PersistenceConfig(), PersistenceConfig(k_frames=1, c_min=1), PersistenceConfig(3, 3)],
+)
+def test_the_compiled_frame_gives_the_stage_by_stage_results(persistence):
     cam, cat = CameraModel(), paper_target()
-    compiled = PosePipeline(cam, cat, TRACKING)
-    staged = PosePipeline(cam, cat, TRACKING)
+    cfg = replace(TRACKING, persistence=persistence)
+    compiled = PosePipeline(cam, cat, cfg)
+    staged = PosePipeline(cam, cat, cfg)
     assert compiled._compiled_tracker is not None
     staged._compiled_tracker = None  # the stages one by one
     modes = []
