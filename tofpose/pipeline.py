@@ -263,7 +263,7 @@ class PosePipeline:
         camera.pixel_bearings()  # warm the cache
         self._compiled_tracker = (
             CompiledTracker(camera, catalog, self.config, self._solver, self._persistence)
-            if CompiledTracker.applies(camera, range_correction)
+            if CompiledTracker.applies(range_correction)
             else None
         )
 

@@ -1,9 +1,8 @@
 """Tracking mode in one compiled call per frame (``kernels.tracking_frame.track_frame``).
 
-``PosePipeline`` tracks through ``CompiledTracker`` when the camera has no lens
-distortion and no range correction is applied (the kernel's back-projection is the
-pinhole model and the correction's model lives in Python); otherwise it runs the same
-stages one by one. The two give the same poses (``tests/tofpose/test_tracking_frame.py``
+``PosePipeline`` tracks through ``CompiledTracker`` unless a range correction is applied
+(the correction's model lives in Python); then it runs the same stages one by one. The
+two give the same poses (``tests/tofpose/test_tracking_frame.py``
 and the A/B harness ``bench/ab.py``).
 """
 
@@ -18,7 +17,7 @@ from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.extraction import Blob
 from tofpose.kernels.pose import REFINE_LOS, REFINE_ML, REFINE_NONE
-from tofpose.kernels.tracking_frame import TRACKED, pinhole_windows, track_frame
+from tofpose.kernels.tracking_frame import TRACKED, camera_windows, track_frame
 from tofpose.persistence import Persistence, PersistenceInfo
 from tofpose.pose import MEDIAN_CHI2_3DOF, STEP_SIGMA2
 from tofpose.solve import MatchedObservations, Measurements, PoseSolver, Solution
@@ -62,11 +61,12 @@ class CompiledTracker:
         self._radii = self._diameters / 2
         self._K = np.ascontiguousarray(camera.K, dtype=float)
         self._bearings = np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3))
+        self._dist = np.ascontiguousarray(camera.dist_array)
 
     @staticmethod
-    def applies(camera: CameraModel, range_correction: object | None) -> bool:
-        """Whether the compiled path can serve this camera (module docstring)."""
-        return not camera.has_distortion and range_correction is None
+    def applies(range_correction: object | None) -> bool:
+        """Whether the compiled path can serve a pipeline (module docstring)."""
+        return range_correction is None
 
     def track(self, g: np.ndarray, d: np.ndarray, track: TrackState) -> Tracked | None:
         """One frame; None means "fall back to the acquisition pass" (fewer reflectors to
@@ -75,9 +75,9 @@ class CompiledTracker:
         persistence history as it was."""
         cfg, cam = self.config, self.camera
         pc, tc = cfg.persistence, cfg.tracking
-        cat_idx, bounds, centres, diameters = pinhole_windows(
+        cat_idx, bounds, centres, diameters = camera_windows(
             self._xyz, self._diameters, track.R, track.t_mm, cam.fx, cam.fy, cam.cx, cam.cy,
-            float(tc.margin_px), float(tc.min_diameter_px), cam.width, cam.height,
+            self._dist, float(tc.margin_px), float(tc.min_diameter_px), cam.width, cam.height,
         )  # fmt: skip
         if len(cat_idx) < cfg.matching.min_matches:
             return None
@@ -87,7 +87,8 @@ class CompiledTracker:
             g, d, bounds, centres, diameters, cat_idx, np.float32(track.threshold_counts),
             float(track.background_counts), hist_g, hist_d, hist_m, hist_c, n_hist,
             float(pc.motion_tolerance_px), int(pc.c_min), cam.fx, cam.fy, cam.cx, cam.cy,
-            self._bearings, self._xyz, self._radii, self._K, cfg.correct_perspective_bias,
+            self._dist, self._bearings, self._xyz, self._radii, self._K,
+            cfg.correct_perspective_bias,
             float(cfg.centroid_sigma_floor_px), float(cfg.range_sigma_floor_mm),
             SINGLE_PIXEL_SIGMA_PX, SPLIT_CENTROID_PX, POOL_MIN_PIXELS, MEDIAN_EFFICIENCY,
             UNCALIBRATED_RANGE_SIGMA_MM, _REFINEMENT[cfg.refinement], cfg.los_tolerance,

@@ -12,7 +12,6 @@ and the Dockerfile run it), and the server before its acquisition loop starts.
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 
 import numpy as np
 
@@ -20,6 +19,7 @@ from tofpose.camera import CameraModel
 from tofpose.catalog import paper_target
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg
 from tofpose.pipeline import PipelineConfig, PosePipeline
+from tofpose.range_calibration import RangeCorrection
 from tofpose.sim.bench import R_FACING
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import TargetScene
@@ -53,8 +53,9 @@ def warm_up() -> float:
             pipe = PosePipeline(cam, cat, config)
             for f in frames if i == 0 else frames[:2]:
                 pipe.process(f.gray, f.distance_mm)
-        # a camera with lens distortion tracks stage by stage (``tofpose.tracking_frame``)
-        pipe = PosePipeline(replace(cam, dist=(1e-4, 0.0, 0.0, 0.0, 0.0)), cat, configs[0])
+        # with a range correction tracking runs stage by stage (``tofpose.tracking_frame``)
+        correction = RangeCorrection(SensorModel().unambiguous_range_mm)
+        pipe = PosePipeline(cam, cat, configs[0], range_correction=correction)
         for f in frames[:3]:
             pipe.process(f.gray, f.distance_mm)
     _done = True

@@ -1,6 +1,6 @@
 """The compiled tracking frame (``tofpose.tracking_frame``) against the stage-by-stage
-tracking path it replaces for distortion-free cameras: same windows, same poses, same
-fallbacks, same persistence history."""
+tracking path it replaces when no range correction is applied: same windows, same poses,
+same fallbacks, same persistence history, with and without lens distortion."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import pytest
 from tests.conftest import facing_pose, render
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
 from tofpose.catalog import Catalog
-from tofpose.kernels.tracking_frame import pinhole_windows
+from tofpose.kernels.tracking_frame import camera_windows
 from tofpose.persistence import PersistenceConfig
 from tofpose.sim.scene import Clutter, TargetScene
 from tofpose.tracking import TrackingConfig, predict_windows
@@ -20,41 +20,44 @@ from tofpose.tracking import TrackingConfig, predict_windows
 TRACKING = PipelineConfig(tracking=TrackingConfig(enabled=True, reacquire_every=6))
 
 
+#: a lens with distortion (the simulator renders without; these tests compare two code
+#: paths on the same frames, not poses against the truth)
+LENS = CameraModel(dist=(-0.02, 0.008, 0.0004, -0.0003, 0.0))
+
+
+@pytest.mark.parametrize("cam", [CameraModel(), LENS], ids=["pinhole", "distorted"])
 @pytest.mark.parametrize(("z", "offset"), [(700.0, (60.0, -40.0)), (3000.0, (-120.0, 40.0)),
                                          (8000.0, (-120.0, 40.0))])  # fmt: skip
-def test_pinhole_windows_are_predict_windows(z, offset):
-    cam, cat = CameraModel(), paper_target()
+def test_camera_windows_are_predict_windows(cam, z, offset):
+    cat = paper_target()
     T = facing_pose(z, 3, -4, 20, offset_mm=offset)
     want = predict_windows(cam, cat.positions_mm, cat.diameters_mm, T.R, T.t_mm,
                            margin_px=4.0, min_diameter_px=1.0)  # fmt: skip
-    idx, bounds, centres, diam = pinhole_windows(
+    idx, bounds, centres, diam = camera_windows(
         cat.positions_mm, cat.diameters_mm, T.R, T.t_mm, cam.fx, cam.fy, cam.cx, cam.cy,
-        4.0, 1.0, cam.width, cam.height,
+        cam.dist_array, 4.0, 1.0, cam.width, cam.height,
     )  # fmt: skip
     assert idx.tolist() == [w.catalog_index for w in want] and len(want) >= 3
     assert bounds.tolist() == [[w.u0, w.u1, w.v0, w.v1] for w in want]
     np.testing.assert_allclose(centres, [w.centre_uv for w in want], atol=1e-9)
     np.testing.assert_allclose(diam, [w.diameter_px for w in want], rtol=1e-12)
     behind = facing_pose(-500.0)
-    assert (
-        len(
-            pinhole_windows(
-                cat.positions_mm,
-                cat.diameters_mm,
-                behind.R,
-                behind.t_mm,
-                cam.fx,
-                cam.fy,
-                cam.cx,
-                cam.cy,
-                4.0,
-                1.0,
-                320,
-                240,
-            )[0]
-        )
-        == 0
+    nothing = camera_windows(
+        cat.positions_mm,
+        cat.diameters_mm,
+        behind.R,
+        behind.t_mm,
+        cam.fx,
+        cam.fy,
+        cam.cx,
+        cam.cy,
+        cam.dist_array,
+        4.0,
+        1.0,
+        320,
+        240,
     )
+    assert len(nothing[0]) == 0
 
 
 def _stream():
@@ -77,11 +80,13 @@ def _stream():
 
 
 @pytest.mark.parametrize(
-    "persistence",
-    [PersistenceConfig(), PersistenceConfig(k_frames=1, c_min=1), PersistenceConfig(3, 3)],
-)
-def test_the_compiled_frame_gives_the_stage_by_stage_results(persistence):
-    cam, cat = CameraModel(), paper_target()
+    ("cam", "persistence"),
+    [(CameraModel(), PersistenceConfig()), (CameraModel(), PersistenceConfig(1, 1)),
+     (CameraModel(), PersistenceConfig(3, 3)), (LENS, PersistenceConfig())],
+    ids=["K=5", "K=1", "K=3,C=3", "distorted"],
+)  # fmt: skip
+def test_the_compiled_frame_gives_the_stage_by_stage_results(cam, persistence):
+    cat = paper_target()
     cfg = replace(TRACKING, persistence=persistence)
     compiled = PosePipeline(cam, cat, cfg)
     staged = PosePipeline(cam, cat, cfg)
@@ -109,11 +114,10 @@ def test_the_compiled_frame_gives_the_stage_by_stage_results(persistence):
     assert any(p == "tracking" and m == "acquisition" for p, m in pairs)
 
 
-def test_a_camera_with_distortion_or_a_range_correction_tracks_stage_by_stage():
+def test_a_range_correction_tracks_stage_by_stage():
     from tofpose.range_calibration import RangeCorrection
 
     cat = paper_target()
-    distorted = CameraModel(dist=(0.05, 0.0, 0.0, 0.0, 0.0))
-    assert PosePipeline(distorted, cat, TRACKING)._compiled_tracker is None
+    assert PosePipeline(LENS, cat, TRACKING)._compiled_tracker is not None
     corrected = PosePipeline(CameraModel(), cat, TRACKING, range_correction=RangeCorrection(2e4))
     assert corrected._compiled_tracker is None

@@ -1,8 +1,7 @@
 """A whole tracking-mode frame in one compiled call: window search, persistence,
 measurement, sigmas and the §5 fit, chained from the stage kernels so that the frame
-pays the Python overhead of one call instead of ~25 (``PosePipeline`` uses it for
-cameras without lens distortion and without a range correction; otherwise the stages
-run one by one, with the same arithmetic).
+pays the Python overhead of one call instead of ~25 (``PosePipeline`` uses it unless a
+range correction is applied; then the stages run one by one, with the same arithmetic).
 
 The steps and their order are those of ``PosePipeline._process_tracking`` with
 ``Persistence.apply``, ``extraction.measure_blobs``, ``uncertainty.measurement_sigmas``
@@ -16,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
+from tofpose.kernels.camera import bearings, project
 from tofpose.kernels.centroids import blob_centroids, blob_ranges
 from tofpose.kernels.persistence import (
     column_medians,
@@ -33,37 +33,21 @@ TRACKED, LOST, SHARED, NOT_PERSISTENT, NO_RANGE, OUTLIER = 0, 1, 2, 3, 4, 5
 
 
 @jit
-def pinhole_bearings(uv, fx, fy, cx, cy):
-    """Unit lines of sight (n, 3) of pixels (n, 2) of a camera without distortion
-    (``CameraModel.bearings``, Eq. 9)."""
-    n = uv.shape[0]
-    e = np.empty((n, 3))
-    for i in range(n):
-        x = (uv[i, 0] - cx) / fx
-        y = (uv[i, 1] - cy) / fy
-        norm = np.sqrt(x * x + (y * y + 1.0))  # NumPy's order of the 3-term sum
-        e[i, 0], e[i, 1], e[i, 2] = x / norm, y / norm, 1.0 / norm
-    return e
-
-
-@jit
-def pinhole_windows(xyz, diameters_mm, R, t, fx, fy, cx, cy, margin_px, min_diameter_px,
-                    width, height):  # fmt: skip
-    """``tracking.predict_windows`` for a camera without distortion, as arrays: the
+def camera_windows(xyz, diameters_mm, R, t, fx, fy, cx, cy, dist, margin_px,
+                   min_diameter_px, width, height):  # fmt: skip
+    """``tracking.predict_windows`` as arrays (dist (5,): the lens distortion): the
     catalog indices (m,) of the reflectors to track, their window bounds (m, 4) int64
     (u0, u1, v0, v1), predicted centres (m, 2) px and diameters (m,) px. No windows when
     a reflector would be behind the camera."""
     n = xyz.shape[0]
     centres = xyz @ R.T + t
-    uv = np.empty((n, 2))
     d_px = np.empty(n)
     for i in range(n):
         if centres[i, 2] <= 0:
             return (np.empty(0, np.int64), np.empty((0, 4), np.int64), np.empty((0, 2)),
                     np.empty(0))  # fmt: skip
-        uv[i, 0] = fx * centres[i, 0] / centres[i, 2] + cx
-        uv[i, 1] = fy * centres[i, 1] / centres[i, 2] + cy
         d_px[i] = fx * diameters_mm[i] / centres[i, 2]
+    uv = project(centres, fx, fy, cx, cy, dist)
     use = np.zeros(n, np.bool_)
     bounds = np.empty((n, 4), np.int64)
     for i in range(n):
@@ -127,7 +111,7 @@ def _owner(flat, starts, bbox, h, w):
 def track_frame(
     gray, distance, bounds, centres, diameters, cat_idx, threshold, background,
     hist_gray, hist_dist, hist_mask, hist_cent, n_hist, tol_px, c_min,
-    fx, fy, cx, cy, pixel_bearings, xyz, radii, K, correct_perspective,
+    fx, fy, cx, cy, dist, pixel_bearings, xyz, radii, K, correct_perspective,
     floor_px, floor_mm, single_px, split_px, pool_min, median_eff, uncal_mm,
     refinement, los_tol, step_sigma2, adapt, max_sys, median_chi2, reject, min_matches,
     outlier_sigma, chi2_per_dof,
@@ -139,8 +123,8 @@ def track_frame(
     threshold, background : the last acquisition's I_t and background, counts;
     hist_* : the persistence history newest first as tuples of equal length (gray,
     distance (H, W) float32, mask (H * W,) bool, centroids (m, 2)), of which the first
-    ``n_hist`` are real; tol_px, c_min : ``PersistenceConfig``; fx..cy, pixel_bearings
-    (H * W, 3) : the camera; xyz (N, 3), radii (N,) mm : the catalog; K (3, 3);
+    ``n_hist`` are real; tol_px, c_min : ``PersistenceConfig``; fx..cy, dist (5,),
+    pixel_bearings (H * W, 3) : the camera; xyz (N, 3), radii (N,) mm : the catalog; K (3, 3);
     the rest : ``uncertainty`` constants and floors, and the ``fit_with_outliers``
     settings of ``PoseSolver.solve``.
 
@@ -217,7 +201,7 @@ def track_frame(
         owner, use_owner = _owner(flat, starts, bbox, h, w)
         uv = blob_centroids(flat, starts, bbox, mean_gray, background, True, owner, use_owner)
         rho = blob_ranges(flat, starts, med_dist.reshape(-1), pixel_bearings,
-                          pinhole_bearings(uv, fx, fy, cx, cy))  # fmt: skip
+                          bearings(uv, fx, fy, cx, cy, dist))  # fmt: skip
         if not np.isfinite(rho).all():
             code = NO_RANGE
             break
@@ -226,7 +210,7 @@ def track_frame(
         sp, sr = blob_sigmas(flat, starts, uv, mean_gray, med_dist, background,
                              np.zeros(n, np.bool_), floor_px, floor_mm, single_px, split_px,
                              pool_min, median_eff, uncal_mm)  # fmt: skip
-        e = pinhole_bearings(uv, fx, fy, cx, cy)
+        e = bearings(uv, fx, fy, cx, cy, dist)
         for j in range(n):
             y[j] = e[j] * rho[j]
             wts[j] = 1.0 / (sr[j] ** 2 + (rho[j] * sp[j] / fx) ** 2)
@@ -241,7 +225,7 @@ def track_frame(
         uv_obs = uv.copy()
         if correct_perspective:
             uv_obs -= disc_centre_offsets(K, x @ R.T + t, R[:, 2].copy(), r_disc)
-        e_obs = pinhole_bearings(uv_obs, fx, fy, cx, cy)
+        e_obs = bearings(uv_obs, fx, fy, cx, cy, dist)
         for j in range(n):
             y_obs[j] = e_obs[j] * rho[j]
         kept, R, t, its, cov, chi2, norms, sr_fit = fit_with_outliers(
