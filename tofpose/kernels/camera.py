@@ -20,16 +20,15 @@ def has_distortion(dist):
 @jit
 def project(points, fx, fy, cx, cy, dist):
     """Pixels (n, 2) of camera-frame points (n, 3) in front of the camera."""
-    n = points.shape[0]
-    uv = np.empty((n, 2))
-    distorted = has_distortion(dist)
+    uv = np.empty((points.shape[0], 2))
+    if not has_distortion(dist):
+        for i in range(points.shape[0]):
+            uv[i, 0] = fx * points[i, 0] / points[i, 2] + cx
+            uv[i, 1] = fy * points[i, 1] / points[i, 2] + cy
+        return uv
     k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
-    for i in range(n):
+    for i in range(points.shape[0]):
         X, Y, Z = points[i, 0], points[i, 1], points[i, 2]
-        if not distorted:
-            uv[i, 0] = fx * X / Z + cx
-            uv[i, 1] = fy * Y / Z + cy
-            continue
         z = 1.0 / Z
         x, y = X * z, Y * z
         r2 = x * x + y * y
