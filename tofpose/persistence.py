@@ -11,11 +11,13 @@ combined, and a moving scene degrades gracefully to single-frame measurement.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from tofpose.camera import CameraModel
 from tofpose.extraction import Blob
+from tofpose.kernels.measure import persist_and_measure
 from tofpose.kernels.persistence import (
     column_medians,
     consistent,
@@ -71,6 +73,35 @@ class Persistence:
     def restore(self, snapshot: list) -> None:
         self._history.clear()
         self._history.extend(snapshot)
+
+    def measure(
+        self, blobs: list[Blob], gray: np.ndarray, distance: np.ndarray,
+        camera: CameraModel, background: float,
+    ) -> tuple[list[Blob], np.ndarray, np.ndarray, PersistenceInfo]:  # fmt: skip
+        """``apply`` followed by ``extraction.measure_blobs`` on the kept blobs, in one
+        compiled call (``kernels.measure.persist_and_measure``): the kept blobs with
+        their centroids (Eq. 19) and ranges (Eq. 20) measured on the combined frames,
+        the combined frames (I-bar, D-bar) and what was combined. ``background`` : the
+        frame's background level, counts."""
+        cur = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
+        starts = np.zeros(len(blobs) + 1, np.int64)
+        starts[1:] = np.cumsum([len(b.pixels) for b in blobs])
+        flat = (np.concatenate([b.pixels for b in blobs]).astype(np.int64, copy=False)
+                if blobs else np.zeros(0, np.int64))  # fmt: skip
+        bbox = np.array([b.bbox for b in blobs], np.int64).reshape(-1, 4)
+        hist_g, hist_d, hist_m, hist_c, n_hist = self.history(gray, distance)
+        cfg = self.config
+        n_used, motion, keep, mean_gray, med_dist, uv, rho = persist_and_measure(
+            gray, distance, flat, starts, bbox, cur, hist_g, hist_d, hist_m, hist_c, n_hist,
+            float(cfg.motion_tolerance_px), int(cfg.c_min), float(background), camera.fx,
+            camera.fy, camera.cx, camera.cy, camera.dist_array,
+            np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3)),
+        )  # fmt: skip
+        self.commit(cur, flat, gray, distance, n_used, motion)
+        kept = [replace(b, centroid_uv=uv[j], distance_mm=float(rho[j]))
+                for j, b in enumerate(blobs) if keep[j]]  # fmt: skip
+        return kept, mean_gray, med_dist, PersistenceInfo(1 + n_used, motion,
+                                                          len(blobs) - len(kept))  # fmt: skip
 
     def history(self, gray: np.ndarray, distance: np.ndarray) -> tuple:
         """The history newest first for ``kernels.tracking_frame.track_frame``: tuples of

@@ -35,7 +35,6 @@ from tofpose.extraction import (
     check_frame,
     find_candidate_blobs,
     frame_levels,
-    measure_blobs,
     predicted_diameter_window_px,
 )
 from tofpose.geometry import facing_euler_deg, quaternion_wxyz_from_rotation
@@ -315,8 +314,9 @@ class PosePipeline:
         active = found.active_mask
         # The motion gate compares the cheap moment centroids of find_candidate_blobs;
         # the precise centroids and ranges are measured once, on the combined frames.
-        kept, mean_g, med_d, pinfo = self._persistence.apply(blobs, g, d)
-        kept = measure_blobs(kept, mean_g, med_d, self.camera, stats.background)
+        kept, mean_g, med_d, pinfo = self._persistence.measure(
+            blobs, g, d, self.camera, stats.background
+        )
         timer.lap("centroids")
         extra = {
             "frames_used": pinfo.frames_used,
@@ -443,11 +443,12 @@ class PosePipeline:
         def give_up() -> None:
             self._persistence.restore(before)
 
-        kept, mean_g, med_d, pinfo = self._persistence.apply(blobs, g, d)
+        kept, mean_g, med_d, pinfo = self._persistence.measure(
+            blobs, g, d, self.camera, track.background_counts
+        )
         if len(kept) != len(blobs):
             give_up()
             return None
-        kept = measure_blobs(kept, mean_g, med_d, self.camera, track.background_counts)
         if not all(np.isfinite(b.distance_mm) for b in kept):
             give_up()
             return None

@@ -1,4 +1,7 @@
+from dataclasses import replace
+
 import numpy as np
+import pytest
 
 from tofpose.extraction import Blob
 from tofpose.persistence import Persistence, PersistenceConfig
@@ -53,3 +56,35 @@ def test_transient_blob_is_dropped_by_counter_image():
     g = np.maximum(g, g2)
     kept, _, _, info = p.apply(blobs + extra, g, d)
     assert len(kept) == 1 and info.dropped_blobs == 1
+
+
+def test_the_compiled_measure_is_apply_then_measure_blobs():
+    """``Persistence.measure`` (one compiled call) against ``apply`` followed by
+    ``measure_blobs`` over a stream with a static run, a transient blob the counter drops,
+    a blob without a centroid (as a split part has) and a jump that cuts the history."""
+    from tofpose.camera import CameraModel
+    from tofpose.extraction import measure_blobs
+
+    cam = CameraModel(width=W, height=H, fx=60.0, fy=60.0, cx=29.5, cy=19.5,
+                      dist=(-0.05, 0.01, 0.0, 0.0, 0.0))  # fmt: skip
+    rng = np.random.default_rng(3)
+    stream = [_frame(20, 20, rng=rng) for _ in range(4)]
+    blobs, g, d = _frame(20, 20, rng=rng)
+    extra, g2, d2 = _frame(45, 30, r=3, rng=rng)
+    stream.append((blobs + extra, np.maximum(g, g2), np.fmin(d, d2)))
+    blobs, g, d = _frame(20, 20, rng=rng)
+    stream.append(([replace(blobs[0], centroid_uv=np.full(2, np.nan))], g, d))
+    stream += [_frame(27, 22, rng=rng) for _ in range(3)]
+    compiled, reference = (Persistence(PersistenceConfig(k_frames=4, c_min=2)) for _ in "ab")
+    for blobs, g, d in stream:
+        got, got_g, got_d, got_info = compiled.measure(blobs, g, d, cam, 10.0)
+        kept, mean_g, med_d, info = reference.apply(blobs, g, d)
+        want = measure_blobs(kept, mean_g, med_d, cam, 10.0)
+        assert got_info == info
+        np.testing.assert_array_equal(got_g, mean_g)
+        np.testing.assert_array_equal(got_d, med_d)
+        assert len(got) == len(want)
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_allclose(a.centroid_uv, b.centroid_uv, rtol=0, atol=1e-12)
+            assert a.distance_mm == pytest.approx(b.distance_mm, abs=1e-9)
+    assert compiled.snapshot()[-1].centroids.shape == reference.snapshot()[-1].centroids.shape

@@ -112,18 +112,19 @@ def median_of_counts(hist, m):
 
 
 @jit
-def counter_medians(masks, n_masks, flat, starts):
+def counter_medians(masks, n_masks, flat, starts, base=0):
     """The counter image C of §3.4 read at each blob's pixels: per blob, the median over
     its pixels (flat indices ``flat[starts[j]:starts[j + 1]]``) of the number of frames,
-    of the first ``n_masks`` (H * W,) bool masks given, in which the pixel belonged to a
-    candidate blob. Returns (n,) float64."""
+    of the first ``n_masks`` (H * W,) bool masks given and ``base`` frames known to hold
+    every blob pixel (the current one, when its mask is not among ``masks``), in which
+    the pixel belonged to a candidate blob. Returns (n,) float64."""
     n = starts.shape[0] - 1
     out = np.empty(n)
-    hist = np.empty(n_masks + 1, np.int64)
+    hist = np.empty(base + n_masks + 1, np.int64)
     for j in range(n):
         hist[:] = 0
         for i in range(starts[j], starts[j + 1]):
-            k = 0
+            k = base
             for f in range(n_masks):
                 k += masks[f][flat[i]]
             hist[k] += 1

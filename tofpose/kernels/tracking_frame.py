@@ -16,13 +16,7 @@ import numpy as np
 
 from tofpose.kernels import jit
 from tofpose.kernels.camera import bearings, project
-from tofpose.kernels.centroids import blob_centroids, blob_ranges
-from tofpose.kernels.persistence import (
-    column_medians,
-    consistent,
-    mean_in_boxes,
-    median_of_counts,
-)
+from tofpose.kernels.measure import persist_and_measure
 from tofpose.kernels.perspective import disc_centre_offsets
 from tofpose.kernels.pose import fit_with_outliers, svd_pose
 from tofpose.kernels.sigmas import blob_sigmas
@@ -67,47 +61,6 @@ def camera_windows(xyz, diameters_mm, R, t, fx, fy, cx, cy, dist, margin_px,
 
 
 @jit
-def _counter_ok(flat, starts, masks, n_used, c_min):
-    """Every blob's median count of frames (this one and the first ``n_used`` masks)
-    in which its pixels were candidate pixels is at least c_min (§3.4's counter C)."""
-    hist = np.empty(n_used + 2, np.int64)
-    for j in range(starts.shape[0] - 1):
-        hist[:] = 0
-        for i in range(starts[j], starts[j + 1]):
-            k = 1  # this frame: the pixel is the blob's
-            for f in range(n_used):
-                k += masks[f][flat[i]]
-            hist[k] += 1
-        if median_of_counts(hist, starts[j + 1] - starts[j]) < c_min:
-            return False
-    return True
-
-
-@jit
-def _owner(flat, starts, bbox, h, w):
-    """(H, W) index of the blob owning each pixel and whether it is needed: only when
-    two blobs' boxes come within 2 px (``extraction._pixel_owner``)."""
-    n = bbox.shape[0]
-    near = False
-    for a in range(n):
-        for b in range(n):
-            if a == b:
-                continue
-            if (bbox[a, 0] - 2 < bbox[b, 0] + bbox[b, 2] + 2
-                    and bbox[b, 0] - 2 < bbox[a, 0] + bbox[a, 2] + 2
-                    and bbox[a, 1] - 2 < bbox[b, 1] + bbox[b, 3] + 2
-                    and bbox[b, 1] - 2 < bbox[a, 1] + bbox[a, 3] + 2):  # fmt: skip
-                near = True
-    if not near:
-        return np.full((1, 1), -1, np.int32), False
-    owner = np.full(h * w, -1, np.int32)
-    for j in range(n):
-        for i in range(starts[j], starts[j + 1]):
-            owner[flat[i]] = j
-    return owner.reshape(h, w), True
-
-
-@jit
 def track_frame(
     gray, distance, bounds, centres, diameters, cat_idx, threshold, background,
     hist_gray, hist_dist, hist_mask, hist_cent, n_hist, tol_px, c_min,
@@ -135,7 +88,6 @@ def track_frame(
     (6, 6), chi2, norms (n,), sr (n,)); the arrays after ``code`` are only meaningful up
     to the step that set it.
     """
-    h, w = gray.shape
     n = bounds.shape[0]
     status, bbox, peak, cent, starts, flat = search_windows(
         gray, bounds, centres, diameters, threshold, background
@@ -168,40 +120,15 @@ def track_frame(
             code = SHARED
             break
 
-        # §3.4 persistence: the consistent part of the history (newest first)
-        for f in range(n_hist):
-            if consistent(cent, hist_cent[f], tol_px):
-                n_used += 1
-            else:
-                motion = True
-                break
-        frames = 1 + n_used
-        mean_gray = gray
-        med_dist = distance
-        if frames > 1 and n > 0:
-            if frames >= c_min and not _counter_ok(flat, starts, hist_mask, n_used, c_min):
-                code = NOT_PERSISTENT
-                break
-            mean_gray = mean_in_boxes(gray, hist_gray, n_used, bbox)
-            med_dist = distance.copy()
-            stack = np.empty((frames, flat.shape[0]), np.float32)
-            src = distance.reshape(-1)
-            for i in range(flat.shape[0]):
-                stack[0, i] = src[flat[i]]
-            for f in range(n_used):
-                older = hist_dist[f].reshape(-1)
-                for i in range(flat.shape[0]):
-                    stack[f + 1, i] = older[flat[i]]
-            med = column_medians(stack)
-            out = med_dist.reshape(-1)
-            for i in range(flat.shape[0]):
-                out[flat[i]] = med[i]
-
-        # Eqs. 19-20: centroids on I-bar, ranges on D-bar
-        owner, use_owner = _owner(flat, starts, bbox, h, w)
-        uv = blob_centroids(flat, starts, bbox, mean_gray, background, True, owner, use_owner)
-        rho = blob_ranges(flat, starts, med_dist.reshape(-1), pixel_bearings,
-                          bearings(uv, fx, fy, cx, cy, dist))  # fmt: skip
+        # §3.4: persistence over the consistent history, then Eqs. 19-20
+        n_used, motion, keep, mean_gray, med_dist, uv, rho = persist_and_measure(
+            gray, distance, flat, starts, bbox, cent, hist_gray, hist_dist, hist_mask,
+            hist_cent, n_hist, tol_px, c_min, background, fx, fy, cx, cy, dist,
+            pixel_bearings,
+        )  # fmt: skip
+        if not keep.all():
+            code = NOT_PERSISTENT
+            break
         if not np.isfinite(rho).all():
             code = NO_RANGE
             break
