@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from tofpose.camera import CameraModel
-from tofpose.kernels.centroids import blob_centroids, blob_ranges
+from tofpose.kernels.centroids import blob_centroids, blob_ranges, owner_map
 from tofpose.kernels.components import (
     component_median_ranges,
     component_table,
@@ -500,23 +500,6 @@ def penalty_score(
     return 1.0 - (1.0 - q_size) * (1.0 - q_shape) * (1.0 - q_int)
 
 
-def _pixel_owner(blobs: list[Blob], h: int, w: int) -> np.ndarray | None:
-    """(H, W) index of the blob owning each pixel (-1: none), or None when no two blobs'
-    boxes come within 2 px of each other (the usual case: nothing to exclude)."""
-    boxes = np.array([b.bbox for b in blobs], float).reshape(-1, 4)
-    x0, y0 = boxes[:, 0] - 2, boxes[:, 1] - 2
-    x1, y1 = boxes[:, 0] + boxes[:, 2] + 2, boxes[:, 1] + boxes[:, 3] + 2
-    near = (x0[:, None] < x1[None]) & (x0[None] < x1[:, None])
-    near &= (y0[:, None] < y1[None]) & (y0[None] < y1[:, None])
-    np.fill_diagonal(near, False)
-    if not near.any():
-        return None
-    owner = np.full(h * w, -1, np.int32)
-    for j, b in enumerate(blobs):
-        owner[b.pixels] = j
-    return owner.reshape(h, w)
-
-
 def measure_blobs(
     blobs: list[Blob],
     gray: np.ndarray,
@@ -553,13 +536,10 @@ def measure_blobs(
     starts[1:] = np.cumsum([len(b.pixels) for b in blobs])
     flat = np.concatenate([b.pixels for b in blobs]).astype(np.int64, copy=False)
     bbox = np.array([b.bbox for b in blobs], np.int64)
-    # which blob owns each pixel: the one-pixel ring of a blob must not reach into a
-    # neighbour's pixels (markers 7 and 8 split apart touch each other), or that
-    # neighbour's light pulls the centroid towards it
-    owner = _pixel_owner(blobs, h, w)
+    owner, use_owner = owner_map(flat, starts, bbox, h, w)  # which blob owns each pixel
     uv = blob_centroids(
         flat, starts, bbox, np.asarray(gray, np.float32), float(background),
-        weighting == "coverage", _NO_OWNER if owner is None else owner, owner is not None,
+        weighting == "coverage", owner, use_owner,
     )  # fmt: skip
     bearings = camera.pixel_bearings().reshape(-1, 3)
     rho = blob_ranges(
@@ -567,9 +547,6 @@ def measure_blobs(
         camera.bearings(uv),
     )  # fmt: skip
     return [replace(b, centroid_uv=uv[j], distance_mm=float(rho[j])) for j, b in enumerate(blobs)]
-
-
-_NO_OWNER = np.full((1, 1), -1, np.int32)
 
 
 def disc_image_centre_offsets_px(

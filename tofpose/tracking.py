@@ -31,6 +31,7 @@ from tofpose.kernels.tracking import (
     NO_SIZE,
     NOT_FOUND,
     any_shared,
+    camera_windows,
     search_windows,
 )
 
@@ -97,21 +98,15 @@ def predict_windows(
     markers 7 and 8 beyond ~4.5 m) are skipped; the others carry the pose. The window is
     the predicted disc plus ``margin_px`` on every side.
     """
-    centres = catalog_mm @ R.T + t_mm
-    if np.any(centres[:, 2] <= 0):
-        return []
-    uv = camera.project(centres)
-    d_px = camera.fx * catalog_diameter_mm / centres[:, 2]
-    gap = np.linalg.norm(uv[:, None] - uv[None], axis=-1) - 0.5 * (d_px[:, None] + d_px[None])
-    np.fill_diagonal(gap, np.inf)
-    half = 0.5 * d_px + margin_px
-    u0, u1 = np.floor(uv[:, 0] - half).astype(int), np.ceil(uv[:, 0] + half).astype(int) + 1
-    v0, v1 = np.floor(uv[:, 1] - half).astype(int), np.ceil(uv[:, 1] + half).astype(int) + 1
-    use = (d_px >= min_diameter_px) & (gap.min(axis=1) >= 2.0)
-    use &= (u0 >= 0) & (v0 >= 0) & (u1 <= camera.width) & (v1 <= camera.height)
+    idx, bounds, uv, d_px = camera_windows(
+        np.ascontiguousarray(catalog_mm, dtype=float),
+        np.ascontiguousarray(catalog_diameter_mm, dtype=float), np.asarray(R, float),
+        np.asarray(t_mm, float), camera.fx, camera.fy, camera.cx, camera.cy, camera.dist_array,
+        float(margin_px), float(min_diameter_px), camera.width, camera.height,
+    )  # fmt: skip
     return [
-        Window(i, uv[i], float(d_px[i]), int(u0[i]), int(u1[i]), int(v0[i]), int(v1[i]))
-        for i in np.flatnonzero(use).tolist()
+        Window(int(i), uv[n], float(d_px[n]), *(int(v) for v in bounds[n]))
+        for n, i in enumerate(idx.tolist())
     ]
 
 

@@ -17,7 +17,8 @@ from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.extraction import Blob
 from tofpose.kernels.pose import REFINE_LOS, REFINE_ML, REFINE_NONE
-from tofpose.kernels.tracking_frame import TRACKED, camera_windows, track_frame
+from tofpose.kernels.tracking import camera_windows
+from tofpose.kernels.tracking_frame import TRACKED, track_frame
 from tofpose.persistence import Persistence, PersistenceInfo
 from tofpose.pose import MEDIAN_CHI2_3DOF, STEP_SIGMA2
 from tofpose.solve import MatchedObservations, Measurements, PoseSolver, Solution

@@ -12,10 +12,10 @@ import pytest
 from tests.conftest import facing_pose, render
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
 from tofpose.catalog import Catalog
-from tofpose.kernels.tracking_frame import camera_windows
+from tofpose.kernels.tracking import camera_windows
 from tofpose.persistence import PersistenceConfig
 from tofpose.sim.scene import Clutter, TargetScene
-from tofpose.tracking import TrackingConfig, predict_windows
+from tofpose.tracking import TrackingConfig, Window, predict_windows
 
 TRACKING = PipelineConfig(tracking=TrackingConfig(enabled=True, reacquire_every=6))
 
@@ -25,14 +25,35 @@ TRACKING = PipelineConfig(tracking=TrackingConfig(enabled=True, reacquire_every=
 LENS = CameraModel(dist=(-0.02, 0.008, 0.0004, -0.0003, 0.0))
 
 
+def _windows_numpy(cam, xyz, diameters, T, margin_px, min_diameter_px):
+    """The window rule of ``predict_windows`` stated in NumPy with ``CameraModel.project``
+    (OpenCV's projection under distortion): (catalog index, centre, diameter, u0, u1,
+    v0, v1) of the reflectors in view, large enough and clear of their neighbours."""
+    centres = T.apply(xyz)
+    uv = cam.project(centres)
+    d_px = cam.fx * diameters / centres[:, 2]
+    gap = np.linalg.norm(uv[:, None] - uv[None], axis=-1) - 0.5 * (d_px[:, None] + d_px[None])
+    np.fill_diagonal(gap, np.inf)
+    half = 0.5 * d_px + margin_px
+    u0, u1 = np.floor(uv[:, 0] - half).astype(int), np.ceil(uv[:, 0] + half).astype(int) + 1
+    v0, v1 = np.floor(uv[:, 1] - half).astype(int), np.ceil(uv[:, 1] + half).astype(int) + 1
+    use = (d_px >= min_diameter_px) & (gap.min(axis=1) >= 2.0)
+    use &= (u0 >= 0) & (v0 >= 0) & (u1 <= cam.width) & (v1 <= cam.height)
+    return [Window(i, uv[i], d_px[i], u0[i], u1[i], v0[i], v1[i]) for i in np.flatnonzero(use)]
+
+
 @pytest.mark.parametrize("cam", [CameraModel(), LENS], ids=["pinhole", "distorted"])
 @pytest.mark.parametrize(("z", "offset"), [(700.0, (60.0, -40.0)), (3000.0, (-120.0, 40.0)),
                                          (8000.0, (-120.0, 40.0))])  # fmt: skip
-def test_camera_windows_are_predict_windows(cam, z, offset):
+def test_camera_windows_are_the_window_rule(cam, z, offset):
     cat = paper_target()
     T = facing_pose(z, 3, -4, 20, offset_mm=offset)
-    want = predict_windows(cam, cat.positions_mm, cat.diameters_mm, T.R, T.t_mm,
-                           margin_px=4.0, min_diameter_px=1.0)  # fmt: skip
+    want = _windows_numpy(cam, cat.positions_mm, cat.diameters_mm, T, 4.0, 1.0)
+    got = predict_windows(cam, cat.positions_mm, cat.diameters_mm, T.R, T.t_mm,
+                          margin_px=4.0, min_diameter_px=1.0)  # fmt: skip
+    assert [(w.catalog_index, w.u0, w.u1, w.v0, w.v1) for w in got] == [
+        (w.catalog_index, w.u0, w.u1, w.v0, w.v1) for w in want
+    ]
     idx, bounds, centres, diam = camera_windows(
         cat.positions_mm, cat.diameters_mm, T.R, T.t_mm, cam.fx, cam.fy, cam.cx, cam.cy,
         cam.dist_array, 4.0, 1.0, cam.width, cam.height,

@@ -117,3 +117,28 @@ def blob_ranges(flat, starts, distance_flat, bearings_flat, centre_bearings):
             continue
         out[j] = median_inplace(along[:m])
     return out
+
+
+@jit
+def owner_map(flat, starts, bbox, h, w):
+    """(H, W) int32 index of the blob owning each pixel (-1: none), and whether it is
+    needed: only when two blobs' boxes (n, 4) (x, y, w, h) come within 2 px (the usual
+    case is that they do not, and nothing needs excluding). The ring of a blob must
+    not reach into a neighbour's pixels (markers 7 and 8 split apart touch each
+    other), or that neighbour's light pulls the centroid towards it."""
+    n = bbox.shape[0]
+    near = False
+    for a in range(n):
+        for b in range(n):
+            if a != b and (bbox[a, 0] - 2 < bbox[b, 0] + bbox[b, 2] + 2
+                           and bbox[b, 0] - 2 < bbox[a, 0] + bbox[a, 2] + 2
+                           and bbox[a, 1] - 2 < bbox[b, 1] + bbox[b, 3] + 2
+                           and bbox[b, 1] - 2 < bbox[a, 1] + bbox[a, 3] + 2):  # fmt: skip
+                near = True
+    if not near:
+        return np.full((1, 1), -1, np.int32), False
+    owner = np.full(h * w, -1, np.int32)
+    for j in range(n):
+        for i in range(starts[j], starts[j + 1]):
+            owner[flat[i]] = j
+    return owner.reshape(h, w), True

@@ -8,35 +8,13 @@ import numpy as np
 
 from tofpose.kernels import jit
 from tofpose.kernels.camera import bearings
-from tofpose.kernels.centroids import blob_centroids, blob_ranges
+from tofpose.kernels.centroids import blob_centroids, blob_ranges, owner_map
 from tofpose.kernels.persistence import (
     column_medians,
     consistent,
     counter_medians,
     mean_in_boxes,
 )
-
-
-@jit
-def owner_map(flat, starts, bbox, h, w):
-    """(H, W) index of the blob owning each pixel, and whether it is needed: only when
-    two blobs' boxes come within 2 px (``extraction._pixel_owner``)."""
-    n = bbox.shape[0]
-    near = False
-    for a in range(n):
-        for b in range(n):
-            if a != b and (bbox[a, 0] - 2 < bbox[b, 0] + bbox[b, 2] + 2
-                           and bbox[b, 0] - 2 < bbox[a, 0] + bbox[a, 2] + 2
-                           and bbox[a, 1] - 2 < bbox[b, 1] + bbox[b, 3] + 2
-                           and bbox[b, 1] - 2 < bbox[a, 1] + bbox[a, 3] + 2):  # fmt: skip
-                near = True
-    if not near:
-        return np.full((1, 1), -1, np.int32), False
-    owner = np.full(h * w, -1, np.int32)
-    for j in range(n):
-        for i in range(starts[j], starts[j + 1]):
-            owner[flat[i]] = j
-    return owner.reshape(h, w), True
 
 
 @jit

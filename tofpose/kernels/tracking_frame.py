@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
-from tofpose.kernels.camera import bearings, project
+from tofpose.kernels.camera import bearings
 from tofpose.kernels.measure import persist_and_measure
 from tofpose.kernels.perspective import disc_centre_offsets
 from tofpose.kernels.pose import fit_with_outliers, svd_pose
@@ -24,40 +24,6 @@ from tofpose.kernels.tracking import FOUND, any_shared, search_windows
 
 #: outcome codes of ``track_frame`` (anything but TRACKED: fall back to acquisition)
 TRACKED, LOST, SHARED, NOT_PERSISTENT, NO_RANGE, OUTLIER = 0, 1, 2, 3, 4, 5
-
-
-@jit
-def camera_windows(xyz, diameters_mm, R, t, fx, fy, cx, cy, dist, margin_px,
-                   min_diameter_px, width, height):  # fmt: skip
-    """``tracking.predict_windows`` as arrays (dist (5,): the lens distortion): the
-    catalog indices (m,) of the reflectors to track, their window bounds (m, 4) int64
-    (u0, u1, v0, v1), predicted centres (m, 2) px and diameters (m,) px. No windows when
-    a reflector would be behind the camera."""
-    n = xyz.shape[0]
-    centres = xyz @ R.T + t
-    d_px = np.empty(n)
-    for i in range(n):
-        if centres[i, 2] <= 0:
-            return (np.empty(0, np.int64), np.empty((0, 4), np.int64), np.empty((0, 2)),
-                    np.empty(0))  # fmt: skip
-        d_px[i] = fx * diameters_mm[i] / centres[i, 2]
-    uv = project(centres, fx, fy, cx, cy, dist)
-    use = np.zeros(n, np.bool_)
-    bounds = np.empty((n, 4), np.int64)
-    for i in range(n):
-        gap = np.inf
-        for j in range(n):
-            if j != i:
-                du, dv = uv[i, 0] - uv[j, 0], uv[i, 1] - uv[j, 1]
-                gap = min(gap, np.sqrt(du * du + dv * dv) - 0.5 * (d_px[i] + d_px[j]))
-        half = 0.5 * d_px[i] + margin_px
-        u0, u1 = int(np.floor(uv[i, 0] - half)), int(np.ceil(uv[i, 0] + half)) + 1
-        v0, v1 = int(np.floor(uv[i, 1] - half)), int(np.ceil(uv[i, 1] + half)) + 1
-        bounds[i, 0], bounds[i, 1], bounds[i, 2], bounds[i, 3] = u0, u1, v0, v1
-        use[i] = (d_px[i] >= min_diameter_px and gap >= 2.0 and u0 >= 0 and v0 >= 0
-                  and u1 <= width and v1 <= height)  # fmt: skip
-    idx = np.flatnonzero(use)
-    return idx, bounds[idx], uv[idx], d_px[idx]
 
 
 @jit
