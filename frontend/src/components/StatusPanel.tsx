@@ -42,15 +42,19 @@ export function StatusPanel({ pose, onError }: { pose: Pose | null; onError: (m:
           </tbody>
         </table>
       )}
-      {timings.length > 0 && (
-        <table class="small" data-testid="timings">
-          <tbody>
-            {timings.map(([stage, ms]) => (
-              <tr key={stage}><th>{stage}</th><td>{ms.toFixed(2)} ms</td></tr>
-            ))}
-          </tbody>
-        </table>
-      )}
+      {/* room for the longest list (acquisition's stages), so that a tracked frame's
+          shorter one does not move everything below this panel up and down */}
+      <div class="timings-box">
+        {timings.length > 0 && (
+          <table class="small" data-testid="timings">
+            <tbody>
+              {timings.map(([stage, ms]) => (
+                <tr key={stage}><th>{stage}</th><td>{ms.toFixed(2)} ms</td></tr>
+              ))}
+            </tbody>
+          </table>
+        )}
+      </div>
     </section>
   );
 }
