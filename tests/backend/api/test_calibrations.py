@@ -45,7 +45,14 @@ def test_calibration_recovers_mount_and_placement_and_fixes_the_report(lab):
           f"{place_mm:.3f} mm; residual {cal['residual_rms_mm']:.3f} mm "
           f"{cal['residual_rms_deg']:.4f} deg")  # fmt: skip
     assert mount_deg < 0.02 and place_deg < 0.02
-    assert mount_mm < 0.5 and place_mm < 0.5
+    # Five runs of this campaign gave translation errors of 0.11-0.53 mm against reported
+    # per-axis sigmas of 0.13-0.28 mm (the frames, hence the noise, differ from run to run):
+    # the bound is ~2x the median error, and each axis must lie within 4 of its own sigmas.
+    assert mount_mm < 0.8 and place_mm < 0.8
+    for got, true, sigma in ((M, true_mount, cal["mount_sigma_mm"]),
+                             (P, true_place, cal["placement_sigma_mm"])):  # fmt: skip
+        z = np.abs(got[:3, 3] - true.t_mm) / np.array(sigma)
+        assert np.all(z < 4.0), (z, sigma)
     assert c.get("/api/calibrations").json()[0]["name"] == "bench-1"
 
     grid = _run(c, {"name": "check", "frames_per_point": 10, "settle_s": 0.2,
