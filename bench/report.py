@@ -232,10 +232,14 @@ def _pipeline_verdict(pipe_tab: str) -> str:
         return [float(r[i].split("/")[0]) for r in rows if len(r) == len(header)]
 
     out = []
-    for name, goal in (("acquisition ms", 1.0), ("tracking ms", 0.3)):
+    ranges = [r[0] for r in rows if len(r) == len(header)]
+    for name, goal in (("acquisition ms", 1.0), ("tracking ms", 0.3),
+                       ("tracking ms, range-corrected", 0.3)):  # fmt: skip
         v = col(name)
-        verdict = "met" if max(v) <= goal else "**not met**"
-        out.append(f"The {goal:g} ms goal for {name.split()[0]} is {verdict}: medians "
+        met = [rg for rg, x in zip(ranges, v, strict=True) if x <= goal]
+        verdict = ("met" if len(met) == len(v) else "**not met**" if not met
+                   else f"met at {', '.join(met)} only")  # fmt: skip
+        out.append(f"The {goal:g} ms goal for {name.split(' ms')[0]} is {verdict}: medians "
                    f"{min(v):.2f}-{max(v):.2f} ms.")  # fmt: skip
     ra, rt = col("acquisition / OpenCV"), col("tracking / OpenCV")
     out.append(f"Against OpenCV on the same frames: acquisition {min(ra):.1f}-{max(ra):.1f}x, "

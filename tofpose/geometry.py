@@ -7,6 +7,7 @@ Conventions (docs/architecture.md §3): ``T_a_b`` maps points of frame b into fr
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,14 +35,14 @@ def euler_deg_from_rotation(R: np.ndarray) -> np.ndarray:
     angles as scipy's extrinsic ``"xyz"`` away from yaw = +-90 deg (gimbal lock, where
     only pitch - roll is defined and roll is set to 0), at a fraction of the cost.
     """
-    R = np.asarray(R, float)
-    c_yaw = np.hypot(R[0, 0], R[1, 0])
-    yaw = np.arctan2(-R[2, 0], c_yaw)
+    (r00, _, _), (r10, r11, r12), (r20, r21, r22) = np.asarray(R, float).tolist()
+    c_yaw = math.hypot(r00, r10)
+    yaw = math.atan2(-r20, c_yaw)
     if c_yaw > 1e-9:
-        pitch, roll = np.arctan2(R[2, 1], R[2, 2]), np.arctan2(R[1, 0], R[0, 0])
+        pitch, roll = math.atan2(r21, r22), math.atan2(r10, r00)
     else:  # gimbal lock: fold everything into pitch
-        pitch, roll = np.arctan2(-R[1, 2], R[1, 1]), 0.0
-    return np.degrees(np.array([pitch, yaw, roll]))
+        pitch, roll = math.atan2(-r12, r11), 0.0
+    return np.array([math.degrees(pitch), math.degrees(yaw), math.degrees(roll)])
 
 
 FACING = np.diag([1.0, -1.0, -1.0])  # R_camera_target of a target squarely facing the camera
@@ -61,24 +62,25 @@ def quaternion_wxyz_from_rotation(R: np.ndarray) -> np.ndarray:
     diagonal and the others from the off-diagonal sums, which keeps it accurate for any
     rotation.
     """
-    R = np.asarray(R, float)
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    k = int(np.argmax([tr, R[0, 0], R[1, 1], R[2, 2]]))
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = np.asarray(R, float).tolist()
+    tr = r00 + r11 + r22
+    diag = [tr, r00, r11, r22]
+    k = diag.index(max(diag))
     if k == 0:
-        s = 2.0 * np.sqrt(1.0 + tr)
-        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+        s = 2.0 * math.sqrt(1.0 + tr)
+        q = [0.25 * s, (r21 - r12) / s, (r02 - r20) / s, (r10 - r01) / s]
     elif k == 1:
-        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-        q = [(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
+        s = 2.0 * math.sqrt(1.0 + r00 - r11 - r22)
+        q = [(r21 - r12) / s, 0.25 * s, (r01 + r10) / s, (r02 + r20) / s]
     elif k == 2:
-        s = 2.0 * np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
-        q = [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s]
+        s = 2.0 * math.sqrt(1.0 + r11 - r00 - r22)
+        q = [(r02 - r20) / s, (r01 + r10) / s, 0.25 * s, (r12 + r21) / s]
     else:
-        s = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
-        q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    return q if q[0] >= 0 else -q
+        s = 2.0 * math.sqrt(1.0 + r22 - r00 - r11)
+        q = [(r10 - r01) / s, (r02 + r20) / s, (r12 + r21) / s, 0.25 * s]
+    norm = math.sqrt(sum(v * v for v in q))
+    sign = 1.0 if q[0] >= 0 else -1.0
+    return np.array([sign * v / norm for v in q])
 
 
 def rotation_from_quaternion_wxyz(q_wxyz) -> np.ndarray:

@@ -11,6 +11,7 @@ clears it.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field, replace
 from typing import Literal
@@ -39,6 +40,7 @@ from tofpose.extraction import (
 )
 from tofpose.geometry import facing_euler_deg, quaternion_wxyz_from_rotation
 from tofpose.kernels.ellipses import blob_mask
+from tofpose.kernels.range_correction import corrected_ranges
 from tofpose.matching import (
     MatchingConfig,
     MatchResult,
@@ -48,7 +50,6 @@ from tofpose.matching import (
 )
 from tofpose.persistence import Persistence, PersistenceConfig
 from tofpose.range_calibration import RangeCorrection
-from tofpose.robust import median_1d
 from tofpose.solve import Measurements, PoseSolver, Rejected, Solution
 from tofpose.tracking import (
     TrackingConfig,
@@ -247,9 +248,20 @@ class PosePipeline:
     ) -> None:
         """``range_correction``: the camera's calibrated range errors
         (``tofpose.range_calibration``), subtracted from each reflector's range before
-        back-projection; None for a camera without one."""
+        back-projection; None for a camera without one. ``ValueError`` when its
+        per-pixel offsets are not of the camera's image size."""
+        offsets = None if range_correction is None else range_correction.pixel_offsets_mm
+        if offsets is not None and offsets.shape != camera.shape:
+            raise ValueError(
+                f"the range correction's pixel offsets are {offsets.shape[0]} x "
+                f"{offsets.shape[1]} px (rows x columns), the camera's images "
+                f"{camera.shape[0]} x {camera.shape[1]}"
+            )
         self.camera = camera
         self.range_correction = range_correction
+        self._correction_args = (
+            None if range_correction is None else range_correction.kernel_arguments()
+        )
         self.catalog = catalog
         self.config = config or PipelineConfig()
         self._persistence = Persistence(self.config.persistence)
@@ -260,10 +272,8 @@ class PosePipeline:
         self._solver = PoseSolver(camera, catalog, self.config, range_correction)
         self._track: TrackState | None = None
         camera.pixel_bearings()  # warm the cache
-        self._compiled_tracker = (
-            CompiledTracker(camera, catalog, self.config, self._solver, self._persistence)
-            if CompiledTracker.applies(range_correction)
-            else None
+        self._compiled_tracker = CompiledTracker(
+            camera, catalog, self.config, self._solver, self._persistence, self._correction_args
         )
 
     def reset(self) -> None:
@@ -389,7 +399,8 @@ class PosePipeline:
             SigmaFloors(cfg.centroid_sigma_floor_px, cfg.range_sigma_floor_mm),
         )  # fmt: skip
         w = 1.0 / (sig_rng**2 + (rho * sig_px / self.camera.fx) ** 2)  # Eq. 21 weights
-        return Measurements(tuple(blobs), uv, rho, y, w, sig_px, sig_rng)
+        area = np.array([b.area_px for b in blobs], np.int64)
+        return Measurements(tuple(blobs), area, uv, rho, y, w, sig_px, sig_rng)
 
     def _match(self, meas: Measurements) -> MatchResult:
         """§4: deterministic annealing (with the size term) or, configured, RANSAC."""
@@ -423,7 +434,9 @@ class PosePipeline:
     def _process_tracking(self, g, d, time_s, track: TrackState, timer) -> PoseResult | None:
         """Tracking mode (``tofpose.tracking``): reflectors searched only in windows around
         their predicted images, correspondences known; None means "fall back to the full
-        acquisition pass", and leaves no trace in the persistence history."""
+        acquisition pass", and leaves no trace in the persistence history. The pipeline
+        tracks in one compiled call; the stages below, one by one, are its readable
+        reference (``tofpose.tracking_frame``), run when there is no compiled tracker."""
         if self._compiled_tracker is not None:
             return self._track_compiled(g, d, time_s, track, timer)
         cfg = self.config
@@ -487,7 +500,7 @@ class PosePipeline:
             "motion": info.motion,
             "rejected": [],
             "active_threshold_counts": track.threshold_counts,
-            "n_candidates": len(meas.blobs),
+            "n_candidates": len(meas.range_mm),
         }
         result = self._pose_result(solved, meas, [], time_s, timer, extra, mode="tracking")
         self._track = replace(
@@ -510,20 +523,17 @@ class PosePipeline:
         )
         R, t, x, k_idx, i_idx = T.R, T.t_mm, obs.x_mm, obs.k_idx, obs.i_idx
         uv_m, y_m, rho_m = obs.uv_px, obs.y_mm, obs.range_mm
-        ranged, uv, rho = meas.blobs, meas.uv_px, meas.range_mm
+        area, uv, rho = meas.area_px, meas.uv_px, meas.range_mm
         sig_px, sig_rng = meas.sigma_px, meas.sigma_range_mm
         pred = x @ R.T + t
-        res = np.linalg.norm(y_m - pred, axis=1)
+        res = np.sqrt(((y_m - pred) ** 2).sum(axis=1))
         per_reflector = zip(
             self._catalog_ids[i_idx].tolist(), uv_m, y_m, res.tolist(), rho_m.tolist(),
-            k_idx.tolist(), sig_px[k_idx].tolist(), sig_rng[k_idx].tolist(), strict=True,
+            area[k_idx].tolist(), sig_px[k_idx].tolist(), sig_rng[k_idx].tolist(), strict=True,
         )  # fmt: skip
-        matched = [
-            MatchedReflector(cid, uv_n, y_n, r_n, rho_n, ranged[k].area_px, sp_n, sr_n)
-            for cid, uv_n, y_n, r_n, rho_n, k, sp_n, sr_n in per_reflector
-        ]
-        used = set(int(k) for k in k_idx)
-        unmatched += [(uv[k, 0], uv[k, 1], rho[k]) for k in range(len(ranged)) if k not in used]
+        matched = [MatchedReflector(*row) for row in per_reflector]
+        used = set(k_idx.tolist())
+        unmatched += [(uv[k, 0], uv[k, 1], rho[k]) for k in range(len(rho)) if k not in used]
         return PoseResult(
             True,
             "",
@@ -534,7 +544,7 @@ class PosePipeline:
             quaternion_wxyz_from_rotation(R),
             matched,
             unmatched,
-            float(np.sqrt(np.mean(res**2))),
+            math.sqrt(float(res @ res) / len(res)),
             iterations,
             ml.covariance * variance_factor(ml.chi2, len(matched))
             + (ml.bias_covariance if ml.bias_covariance is not None else 0.0),
@@ -546,15 +556,17 @@ class PosePipeline:
     def _correct_ranges(self, blobs: list[Blob], gray: np.ndarray) -> list[Blob]:
         """The blobs with the calibrated range error subtracted from their ranges (new
         blobs): the model at the blob's range, evaluated per member pixel (its amplitude,
-        its offset), median."""
-        flat = gray.ravel()
-        out = []
-        for b in blobs:
-            amp = flat[b.pixels]  # the gray level, as in the calibration fit
-            err = self.range_correction.error_mm(np.full(len(b.pixels), b.distance_mm), amp,
-                                                 b.pixels)  # fmt: skip
-            out.append(replace(b, distance_mm=float(b.distance_mm - median_1d(err))))
-        return out
+        the gray level as in the calibration fit; its offset), median
+        (``kernels.range_correction.corrected_ranges``)."""
+        if not blobs:
+            return blobs
+        starts = np.zeros(len(blobs) + 1, np.int64)
+        starts[1:] = np.cumsum([len(b.pixels) for b in blobs])
+        flat = np.concatenate([b.pixels for b in blobs]).astype(np.int64, copy=False)
+        rho = np.array([b.distance_mm for b in blobs], float)
+        out = corrected_ranges(rho, flat, starts, np.asarray(gray, np.float32),
+                               *self._correction_args)  # fmt: skip
+        return [replace(b, distance_mm=float(r)) for b, r in zip(blobs, out, strict=True)]
 
     def _size_hint(self, wrong_size) -> str:
         """A clause naming bright blobs the catalog's sizes ruled out, or ''."""

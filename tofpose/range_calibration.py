@@ -78,6 +78,19 @@ class RangeCorrection:
             out += self.pixel_offsets_mm.ravel()[np.asarray(pixel_index, int)]
         return out
 
+    def kernel_arguments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The model as ``kernels.range_correction.corrected_ranges`` takes it: (4,)
+        (unambiguous range, offset, amplitude mm per decade, amplitude reference), (k, 2)
+        harmonics, (H * W,) pixel offsets (empty when not fitted), all float64."""
+        model = np.array([
+            self.unambiguous_range_mm, self.offset_mm, self.amplitude_mm_per_decade,
+            self.amplitude_reference_counts,
+        ])  # fmt: skip
+        harmonics = np.array(self.harmonics_mm, float).reshape(-1, 2)
+        offsets = (np.zeros(0) if self.pixel_offsets_mm is None
+                   else np.ascontiguousarray(self.pixel_offsets_mm, float).ravel())  # fmt: skip
+        return model, harmonics, offsets
+
     def to_dict(self) -> dict:
         d = {
             "model": "cyclic+amplitude+pixel",

@@ -10,6 +10,7 @@ sigma and the outlier loop run as one compiled call (``tofpose.kernels.pose``).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -41,13 +42,17 @@ if TYPE_CHECKING:  # the pipeline imports this module
 class Measurements:
     """Candidate reflectors back-projected (Eqs. 7-8) with their sigmas.
 
-    blobs : the n blobs, in order; uv_px : (n, 2) centroids (Eq. 19); range_mm : (n,)
-    ranges (Eq. 20); y_mm : (n, 3) points in the camera frame (Eq. 8); weights : (n,) the
-    weights of Eq. 21, ``1 / (sigma_range^2 + (range sigma_px / f)^2)``; sigma_px,
-    sigma_range_mm : (n,) per-reflector sigmas (``uncertainty.measurement_sigmas``).
+    blobs : the n blobs, in order, where the stage that measured them built records
+    (acquisition; a tracked frame measures its windows' pixel lists in one compiled call
+    and gives none); area_px : (n,) their pixel counts; uv_px : (n, 2) centroids (Eq. 19);
+    range_mm : (n,) ranges (Eq. 20); y_mm : (n, 3) points in the camera frame (Eq. 8);
+    weights : (n,) the weights of Eq. 21, ``1 / (sigma_range^2 + (range sigma_px / f)^2)``;
+    sigma_px, sigma_range_mm : (n,) per-reflector sigmas
+    (``uncertainty.measurement_sigmas``).
     """
 
     blobs: tuple[Blob, ...]
+    area_px: np.ndarray
     uv_px: np.ndarray
     range_mm: np.ndarray
     y_mm: np.ndarray
@@ -230,7 +235,7 @@ class PoseSolver:
     def view_cosine(self, R: np.ndarray, t: np.ndarray) -> float:
         """Cosine between the target normal and the direction to the camera."""
         to_camera = -(R @ self._xyz_mean + t)
-        return float(R[:, 2] @ to_camera / np.linalg.norm(to_camera))
+        return float(R[:, 2] @ to_camera) / math.sqrt(float(to_camera @ to_camera))
 
     def faces_camera(self, R: np.ndarray, t: np.ndarray) -> bool:
         return self.view_cosine(R, t) >= np.cos(np.radians(self.config.max_view_angle_deg))
@@ -247,7 +252,7 @@ class PoseSolver:
                 f"{np.degrees(np.arccos(np.clip(cos_view, -1, 1))):.0f} deg)"
             )
         centres = self._xyz @ R.T + t
-        if np.any(centres[:, 2] <= 0):
+        if centres[:, 2].min() <= 0:
             return "reflectors would be behind the camera"
         if len(matched) > self.config.dark_check_max_matches:
             return ""

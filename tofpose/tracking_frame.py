@@ -1,9 +1,9 @@
 """Tracking mode in one compiled call per frame (``kernels.tracking_frame.track_frame``).
 
-``PosePipeline`` tracks through ``CompiledTracker`` unless a range correction is applied
-(the correction's model lives in Python); then it runs the same stages one by one. The
-two give the same poses (``tests/tofpose/test_tracking_frame.py``
-and the A/B harness ``bench/ab.py``).
+``PosePipeline`` tracks through ``CompiledTracker``, with or without a calibrated range
+correction. Its stage-by-stage form (``PosePipeline._process_tracking`` when the
+pipeline has no compiled tracker) is the readable reference: the two give the same
+poses (``tests/tofpose/test_tracking_frame.py`` and the A/B harness ``bench/ab.py``).
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ import numpy as np
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
-from tofpose.extraction import Blob
 from tofpose.kernels.pose import REFINE_LOS, REFINE_ML, REFINE_NONE
 from tofpose.kernels.tracking import camera_windows
 from tofpose.kernels.tracking_frame import TRACKED, track_frame
@@ -52,7 +51,9 @@ class CompiledTracker:
     configuration, solver and persistence history."""
 
     def __init__(self, camera: CameraModel, catalog: Catalog, config: PipelineConfig,
-                 solver: PoseSolver, persistence: Persistence) -> None:  # fmt: skip
+                 solver: PoseSolver, persistence: Persistence,
+                 correction: tuple | None = None) -> None:  # fmt: skip
+        """``correction``: ``RangeCorrection.kernel_arguments()``, or None."""
         self.camera = camera
         self.config = config
         self._solver = solver
@@ -63,11 +64,8 @@ class CompiledTracker:
         self._K = np.ascontiguousarray(camera.K, dtype=float)
         self._bearings = np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3))
         self._dist = np.ascontiguousarray(camera.dist_array)
-
-    @staticmethod
-    def applies(range_correction: object | None) -> bool:
-        """Whether the compiled path can serve a pipeline (module docstring)."""
-        return range_correction is None
+        self._correct = correction is not None
+        self._correction = correction or (np.zeros(4), np.zeros((0, 2)), np.zeros(0))
 
     def track(self, g: np.ndarray, d: np.ndarray, track: TrackState) -> Tracked | None:
         """One frame; None means "fall back to the acquisition pass" (fewer reflectors to
@@ -83,7 +81,7 @@ class CompiledTracker:
         if len(cat_idx) < cfg.matching.min_matches:
             return None
         hist_g, hist_d, hist_m, hist_c, n_hist = self._persistence.history(g, d)
-        (code, n_used, motion, cent, flat, starts, bbox, peak, uv, rho, sp, sr, y, w, uv_obs,
+        (code, n_used, motion, cent, flat, starts, uv, rho, sp, sr, y, w, uv_obs,
          e_obs, y_obs, R, t, its, cov, chi2, norms, sr_fit) = track_frame(
             g, d, bounds, centres, diameters, cat_idx, np.float32(track.threshold_counts),
             float(track.background_counts), hist_g, hist_d, hist_m, hist_c, n_hist,
@@ -95,7 +93,7 @@ class CompiledTracker:
             UNCALIBRATED_RANGE_SIGMA_MM, _REFINEMENT[cfg.refinement], cfg.los_tolerance,
             STEP_SIGMA2, cfg.adapt_range_sigma, cfg.max_systematic_range_sigma_mm,
             MEDIAN_CHI2_3DOF, cfg.reject_outliers, cfg.matching.min_matches,
-            cfg.outlier_sigma, cfg.outlier_chi2_per_dof,
+            cfg.outlier_sigma, cfg.outlier_chi2_per_dof, self._correct, *self._correction,
         )  # fmt: skip
         if code != TRACKED:
             return None
@@ -113,11 +111,5 @@ class CompiledTracker:
         if solved.ml.chi2 > cfg.outlier_chi2_per_dof * max(3 * n - 6, 1):
             return None  # an inconsistent fit: the windows may hold the wrong blobs
         self._persistence.commit(cent, flat, g, d, n_used, motion)
-        blobs = tuple(
-            Blob(pixels=flat[starts[j] : starts[j + 1]], area_px=int(starts[j + 1] - starts[j]),
-                 bbox=tuple(bbox[j].tolist()), centroid_uv=uv[j], distance_mm=float(rho[j]),
-                 peak_counts=float(peak[j]), source="tracking")
-            for j in range(n)
-        )  # fmt: skip
-        meas = Measurements(blobs, uv, rho, y, w, sp, sr)
+        meas = Measurements((), np.diff(starts), uv, rho, y, w, sp, sr)
         return Tracked(solved, meas, PersistenceInfo(1 + n_used, motion, 0))

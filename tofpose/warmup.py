@@ -3,7 +3,7 @@
 The pipeline's inner loops are compiled on first use (``tofpose.kernels``): ~45 s on a
 fresh install, ~0.3 s once the cache exists. ``warm_up()`` runs the pipeline over a few
 simulated frames that take every compiled path (acquisition, persistence over the full
-history, tracking in one call and stage by stage, merged markers split by ellipse
+history, tracking in one call with and without a range correction, merged markers split by ellipse
 confirmation, the paper's LOS refinement, the RANSAC matcher) so that this happens once,
 at a moment of the caller's choosing: ``tofpose warm-up`` after installing (``make``
 and the Dockerfile run it), and the server before its acquisition loop starts.
@@ -53,7 +53,7 @@ def warm_up() -> float:
             pipe = PosePipeline(cam, cat, config)
             for f in frames if i == 0 else frames[:2]:
                 pipe.process(f.gray, f.distance_mm)
-        # with a range correction tracking runs stage by stage (``tofpose.tracking_frame``)
+        # a range-corrected camera: the correction kernel in acquisition and tracking
         correction = RangeCorrection(SensorModel().unambiguous_range_mm)
         pipe = PosePipeline(cam, cat, configs[0], range_correction=correction)
         for f in frames[:3]:

@@ -14,6 +14,8 @@ from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
 from tofpose.catalog import Catalog
 from tofpose.kernels.tracking import camera_windows
 from tofpose.persistence import PersistenceConfig
+from tofpose.range_calibration import RangeCorrection
+from tofpose.sim.render import SensorModel
 from tofpose.sim.scene import Clutter, TargetScene
 from tofpose.tracking import TrackingConfig, Window, predict_windows
 
@@ -100,17 +102,27 @@ def _stream():
         yield facing_pose(5712.0, 2, -3, 10, offset_mm=(2.0, -10.0)), None
 
 
-@pytest.mark.parametrize(
-    ("cam", "persistence"),
-    [(CameraModel(), PersistenceConfig()), (CameraModel(), PersistenceConfig(1, 1)),
-     (CameraModel(), PersistenceConfig(3, 3)), (LENS, PersistenceConfig())],
-    ids=["K=5", "K=1", "K=3,C=3", "distorted"],
+#: a calibrated range correction with every term of the model (offsets of a few mm, as
+#: a real camera's calibration gives)
+CORRECTION = RangeCorrection(
+    SensorModel().unambiguous_range_mm, offset_mm=3.0, harmonics_mm=((2.0, -1.5), (0.5, 0.3)),
+    amplitude_mm_per_decade=1.5,
+    pixel_offsets_mm=np.random.default_rng(7).normal(0.0, 2.0, CameraModel().shape),
 )  # fmt: skip
-def test_the_compiled_frame_gives_the_stage_by_stage_results(cam, persistence):
+
+
+@pytest.mark.parametrize(
+    ("cam", "persistence", "correction"),
+    [(CameraModel(), PersistenceConfig(), None), (CameraModel(), PersistenceConfig(1, 1), None),
+     (CameraModel(), PersistenceConfig(3, 3), None), (LENS, PersistenceConfig(), None),
+     (CameraModel(), PersistenceConfig(), CORRECTION)],
+    ids=["K=5", "K=1", "K=3,C=3", "distorted", "range-corrected"],
+)  # fmt: skip
+def test_the_compiled_frame_gives_the_stage_by_stage_results(cam, persistence, correction):
     cat = paper_target()
     cfg = replace(TRACKING, persistence=persistence)
-    compiled = PosePipeline(cam, cat, cfg)
-    staged = PosePipeline(cam, cat, cfg)
+    compiled = PosePipeline(cam, cat, cfg, range_correction=correction)
+    staged = PosePipeline(cam, cat, cfg, range_correction=correction)
     assert compiled._compiled_tracker is not None
     staged._compiled_tracker = None  # the stages one by one
     modes = []
@@ -135,10 +147,7 @@ def test_the_compiled_frame_gives_the_stage_by_stage_results(cam, persistence):
     assert any(p == "tracking" and m == "acquisition" for p, m in pairs)
 
 
-def test_a_range_correction_tracks_stage_by_stage():
-    from tofpose.range_calibration import RangeCorrection
-
-    cat = paper_target()
-    assert PosePipeline(LENS, cat, TRACKING)._compiled_tracker is not None
-    corrected = PosePipeline(CameraModel(), cat, TRACKING, range_correction=RangeCorrection(2e4))
-    assert corrected._compiled_tracker is None
+def test_range_offsets_of_another_image_size_are_refused():
+    small = replace(CORRECTION, pixel_offsets_mm=np.zeros((120, 160)))
+    with pytest.raises(ValueError, match="120 x 160 px .* 240 x 320"):
+        PosePipeline(CameraModel(), paper_target(), TRACKING, range_correction=small)

@@ -1,10 +1,12 @@
 """A whole tracking-mode frame in one compiled call: window search, persistence,
 measurement, sigmas and the §5 fit, chained from the stage kernels so that the frame
-pays the Python overhead of one call instead of ~25 (``PosePipeline`` uses it unless a
-range correction is applied; then the stages run one by one, with the same arithmetic).
+pays the Python overhead of one call instead of ~25 (``PosePipeline`` tracks with it;
+its stage-by-stage form, with the same arithmetic, is the reference the tests hold it
+to).
 
 The steps and their order are those of ``PosePipeline._process_tracking`` with
-``Persistence.apply``, ``extraction.measure_blobs``, ``uncertainty.measurement_sigmas``
+``Persistence.apply``, ``extraction.measure_blobs``, the range correction,
+``uncertainty.measurement_sigmas``
 and ``PoseSolver.solve`` (whose ``complete`` adds nothing when every blob is matched to
 its window). The persistence history is read, not changed: the caller commits the
 frame to it only when tracking succeeds.
@@ -19,6 +21,7 @@ from tofpose.kernels.camera import bearings
 from tofpose.kernels.measure import persist_and_measure
 from tofpose.kernels.perspective import disc_centre_offsets
 from tofpose.kernels.pose import fit_with_outliers, svd_pose
+from tofpose.kernels.range_correction import corrected_ranges
 from tofpose.kernels.sigmas import blob_sigmas
 from tofpose.kernels.tracking import FOUND, any_shared, search_windows
 
@@ -33,7 +36,7 @@ def track_frame(
     fx, fy, cx, cy, dist, pixel_bearings, xyz, radii, K, correct_perspective,
     floor_px, floor_mm, single_px, split_px, pool_min, median_eff, uncal_mm,
     refinement, los_tol, step_sigma2, adapt, max_sys, median_chi2, reject, min_matches,
-    outlier_sigma, chi2_per_dof,
+    outlier_sigma, chi2_per_dof, correct_range, corr_model, corr_harmonics, corr_offsets,
 ):  # fmt: skip
     """One tracking frame (module docstring).
 
@@ -45,10 +48,11 @@ def track_frame(
     ``n_hist`` are real; tol_px, c_min : ``PersistenceConfig``; fx..cy, dist (5,),
     pixel_bearings (H * W, 3) : the camera; xyz (N, 3), radii (N,) mm : the catalog; K (3, 3);
     the rest : ``uncertainty`` constants and floors, and the ``fit_with_outliers``
-    settings of ``PoseSolver.solve``.
+    settings of ``PoseSolver.solve``; correct_range and corr_* : whether to apply the
+    calibrated range correction and its model (``RangeCorrection.kernel_arguments``).
 
     Returns (code, n_used, motion, centroids (n, 2) moment centroids, flat, starts,
-    bbox, peak, uv (n, 2) measured centroids, rho (n,), sigma_px (n,), sigma_range (n,),
+    uv (n, 2) measured centroids, rho (n,), sigma_px (n,), sigma_range (n,),
     y (n, 3) back-projected points (Eq. 8), weights (n,) (Eq. 21), uv_obs (n, 2)
     perspective-corrected, e_obs (n, 3), y_obs (n, 3), R, t, iterations, covariance
     (6, 6), chi2, norms (n,), sr (n,)); the arrays after ``code`` are only meaningful up
@@ -98,6 +102,9 @@ def track_frame(
         if not np.isfinite(rho).all():
             code = NO_RANGE
             break
+        if correct_range:
+            rho = corrected_ranges(rho, flat, starts, mean_gray, corr_model, corr_harmonics,
+                                   corr_offsets)  # fmt: skip
 
         # Eqs. 7-8 and the per-reflector sigmas; Eq. 21's weights
         sp, sr = blob_sigmas(flat, starts, uv, mean_gray, med_dist, background,
@@ -134,8 +141,6 @@ def track_frame(
         cent,
         flat,
         starts,
-        bbox,
-        peak,
         uv,
         rho,
         sp,
