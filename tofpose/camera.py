@@ -15,6 +15,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from tofpose.kernels.camera import bearings as kernel_bearings
+
 
 @dataclass(frozen=True)
 class CameraModel:
@@ -99,10 +101,12 @@ class CameraModel:
         return xy.reshape(-1, 2)
 
     def bearings(self, uv_px: np.ndarray) -> np.ndarray:
-        """Unit line-of-sight vectors e (Eq. 9), shape (N, 3), of pixels (N, 2)."""
-        xy = self.normalized(uv_px)
-        u = np.column_stack((xy, np.ones(len(xy))))  # Eq. 8's u = [tan phi, tan omega, 1]
-        return u / np.linalg.norm(u, axis=1, keepdims=True)
+        """Unit line-of-sight vectors e (Eq. 9), shape (N, 3), of pixels (N, 2): Eq. 8's
+        u = [tan phi, tan omega, 1] of the undistorted point, normalised. Computed by
+        ``kernels.camera.bearings`` (``normalized``'s arithmetic, OpenCV's with lens
+        distortion; one compiled call instead of a chain of small NumPy ones)."""
+        uv = np.ascontiguousarray(np.asarray(uv_px, dtype=np.float64).reshape(-1, 2))
+        return kernel_bearings(uv, self.fx, self.fy, self.cx, self.cy, self.dist_array)
 
     def back_project(self, uv_px: np.ndarray, distance_mm: np.ndarray) -> np.ndarray:
         """3-D points y = rho * e (Eq. 8), shape (N, 3), from pixels (N, 2) and radial

@@ -245,9 +245,9 @@ def frame_levels(gray: np.ndarray, config: ExtractionConfig) -> FrameStats:
 
     Background and its noise come from a strided subsample (median and MAD).
     """
-    bg, mad, i_max, n_sat = frame_level_stats(
-        np.asarray(gray, np.float32), 3, float(SATURATED_COUNTS)
-    )
+    gray32 = np.ascontiguousarray(gray, np.float32)
+    bg, mad, n_sat = frame_level_stats(gray32, 3, float(SATURATED_COUNTS))
+    i_max = float(gray32.max())
     sigma = max(1.4826 * mad, np.sqrt(max(bg, 1.0)))
     contrast = i_max - bg
     if config.raw_threshold_abs is not None:
@@ -398,8 +398,15 @@ def find_candidate_blobs(
     mask, stats = active_pixel_mask(gray, stats, config.n_max)
     h, w = gray.shape
     gray32 = np.asarray(gray, np.float32)
-    n_lab, labels = cv2.connectedComponents(mask, connectivity=8)
-    area_k, bbox_k, peak_k, starts, flat = component_table(labels, n_lab, gray32)
+    # label the active set's bounding box grown by 2 px (what the gates read around a
+    # component's box), not the whole frame; its origin on even coordinates, so that
+    # OpenCV's 2 x 2 block scan sees the pixels in the same blocks and numbers the
+    # components in the same order
+    ax, ay, aw, ah = cv2.boundingRect(mask)
+    ox, oy = max(ax - 2, 0) & ~1, max(ay - 2, 0) & ~1
+    crop = mask[oy : min(ay + ah + 2, h), ox : min(ax + aw + 2, w)]
+    n_lab, labels = cv2.connectedComponents(crop, connectivity=8)
+    area_k, bbox_k, peak_k, starts, flat = component_table(labels, n_lab, gray32, ox, oy)
     # the median range is read only by components that pass the border and dim gates
     x_k, y_k, w_k, h_k = bbox_k.T
     inner = (x_k > 0) & (y_k > 0) & (x_k + w_k < w) & (y_k + h_k < h)
@@ -415,7 +422,7 @@ def find_candidate_blobs(
     testable = inner[listed] & (peak_k[listed].astype(np.float64) >= stats.peak_threshold)
     which = listed[testable]
     status, size, mom, keep_starts, keep_flat = gate_components(
-        gray32, labels, bbox_k, area_k, peak_k, rho_k, which, float(camera.fx),
+        gray32, labels, ox, oy, bbox_k, area_k, peak_k, rho_k, which, float(camera.fx),
         np.asarray(diameters_mm, np.float64), _gate_params(config, stats, cos_t, ecc_max),
     )  # fmt: skip
     accepted: list[Blob] = []

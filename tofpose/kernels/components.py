@@ -1,8 +1,8 @@
 """Connected components of the active pixel set, tabulated in one pass (§3.1.2-§3.2).
 
-OpenCV labels the active set (``cv2.connectedComponents``); its ``...WithStats`` variant
-also tabulates the background and costs ~7x more. These kernels take the labels and give
-what the blob criteria read: each component's area, bounding box, brightest pixel, its
+OpenCV labels the active set (``cv2.connectedComponents``, over the set's bounding box);
+its ``...WithStats`` variant also tabulates the background and costs ~7x more. These
+kernels take the labels and give what the blob criteria read: each component's area, bounding box, brightest pixel, its
 member pixels (flat indices, raster order) and the median of its valid ranges.
 """
 
@@ -15,15 +15,19 @@ from tofpose.kernels.stats import median_inplace
 
 
 @jit
-def component_table(labels, n_labels, gray):
+def component_table(labels, n_labels, gray, x_origin, y_origin):
     """Per component k = 0 .. n_labels - 1 (0, the background, is left empty).
 
-    labels : (H, W) int32 from ``cv2.connectedComponents``; gray : (H, W) float32.
-    Returns area (K,) int64, bbox (K, 4) int64 as (x, y, w, h), peak (K,) float32 counts,
-    starts (K + 1,) int64 and flat (P,) int64: the flat indices (row * W + col) of
-    component k's pixels, in raster order, are ``flat[starts[k]:starts[k + 1]]``.
+    labels : (h, w) int32 from ``cv2.connectedComponents`` over the part of the image
+    whose top-left pixel is (``x_origin``, ``y_origin``) (the active set's bounding box:
+    labelling the whole frame for a few lit pixels cost most of the time); gray :
+    (H, W) float32, the whole frame. Returns, in whole-frame coordinates, area (K,)
+    int64, bbox (K, 4) int64 as (x, y, w, h), peak (K,) float32 counts, starts (K + 1,)
+    int64 and flat (P,) int64: the flat indices (row * W + col) of component k's
+    pixels, in raster order, are ``flat[starts[k]:starts[k + 1]]``.
     """
     h, w = labels.shape
+    w_img = gray.shape[1]
     area = np.zeros(n_labels, np.int64)
     x0 = np.full(n_labels, w, np.int64)
     y0 = np.full(n_labels, h, np.int64)
@@ -40,7 +44,7 @@ def component_table(labels, n_labels, gray):
             x1[k] = max(x1[k], c)
             y0[k] = min(y0[k], r)
             y1[k] = max(y1[k], r)
-            peak[k] = max(peak[k], gray[r, c])
+            peak[k] = max(peak[k], gray[r + y_origin, c + x_origin])
     starts = np.zeros(n_labels + 1, np.int64)
     for k in range(1, n_labels):
         starts[k + 1] = starts[k] + area[k]
@@ -51,12 +55,12 @@ def component_table(labels, n_labels, gray):
             k = labels[r, c]
             if k == 0:
                 continue
-            flat[fill[k]] = r * w + c
+            flat[fill[k]] = (r + y_origin) * w_img + c + x_origin
             fill[k] += 1
     bbox = np.empty((n_labels, 4), np.int64)
     for k in range(n_labels):
-        bbox[k, 0] = x0[k]
-        bbox[k, 1] = y0[k]
+        bbox[k, 0] = x0[k] + x_origin
+        bbox[k, 1] = y0[k] + y_origin
         bbox[k, 2] = x1[k] - x0[k] + 1
         bbox[k, 3] = y1[k] - y0[k] + 1
     return area, bbox, peak, starts, flat

@@ -79,11 +79,14 @@ def nlog_patch(patch, sigma_px, normalise):
 
 
 @jit
-def gate_components(gray, labels, bbox, area, peak, rho, which, fx, diameters_mm, params):
+def gate_components(gray, labels, x_origin, y_origin, bbox, area, peak, rho, which, fx,
+                    diameters_mm, params):  # fmt: skip
     """Run the §3.2 gates on the listed components (already past the border and dim
     gates).
 
-    gray : (H, W) float32; labels : (H, W) int32; bbox (K, 4), area (K,), peak (K,), rho
+    gray : (H, W) float32; labels : (h, w) int32, the labels of the image part whose
+    top-left pixel is (x_origin, y_origin), covering every component's box grown by 2
+    px (within the image); bbox (K, 4), area (K,), peak (K,), rho
     (K,) per label from ``components.component_table`` (rho: median range, mm);
     which : (n,) labels to test; diameters_mm : (N,) catalog diameters; params : (13,)
     float64: h_min_px (<0: range-adaptive window), h_max_px (<0: none), cos(max tilt),
@@ -153,7 +156,7 @@ def gate_components(gray, labels, bbox, area, peak, rho, which, fx, diameters_mm
         patch = np.zeros((y1 - y0, x1 - x0), np.float32)
         for yy in range(y0, y1):
             for xx in range(x0, x1):
-                if labels[yy, xx] == k:
+                if labels[yy - y_origin, xx - x_origin] == k:
                     patch[yy - y0, xx - x0] = gray[yy, xx]
         if sigma_abs > 0:
             jr = nlog_patch(patch, sigma_abs, False)
@@ -168,7 +171,7 @@ def gate_components(gray, labels, bbox, area, peak, rho, which, fx, diameters_mm
         n_keep = 0
         for yy in range(y, y + bh):
             for xx in range(x, x + bw):
-                if labels[yy, xx] == k:
+                if labels[yy - y_origin, xx - x_origin] == k:
                     v = jr[yy - y0, xx - x0]
                     j_max = max(j_max, v)
                     if v >= j_t:
@@ -184,7 +187,7 @@ def gate_components(gray, labels, bbox, area, peak, rho, which, fx, diameters_mm
         i = 0
         for yy in range(y, y + bh):
             for xx in range(x, x + bw):
-                if labels[yy, xx] == k and jr[yy - y0, xx - x0] >= j_t:
+                if labels[yy - y_origin, xx - x_origin] == k and jr[yy - y0, xx - x0] >= j_t:
                     kept[i] = yy * w_img + xx
                     us[i] = xx
                     vs[i] = yy
