@@ -2,8 +2,9 @@
 
 OpenCV labels the active set (``cv2.connectedComponents``, over the set's bounding box);
 its ``...WithStats`` variant also tabulates the background and costs ~7x more. These
-kernels take the labels and give what the blob criteria read: each component's area, bounding box, brightest pixel, its
-member pixels (flat indices, raster order) and the median of its valid ranges.
+kernels take the labels and give what the blob criteria read: each component's area,
+bounding box, brightest pixel, its member pixels (flat indices, raster order) and the
+median of its valid ranges.
 """
 
 from __future__ import annotations

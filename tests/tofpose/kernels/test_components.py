@@ -30,18 +30,25 @@ from tofpose.kernels.components import (
 from tofpose.kernels.gates import nlog_patch
 
 
-def test_component_table_equals_opencv_stats():
-    rng = np.random.default_rng(1)
-    mask = (rng.random((60, 80)) > 0.8).astype(np.uint8)
-    gray = rng.random((60, 80)).astype(np.float32)
+def _assert_is_opencvs(table, mask, gray):
+    """The table holds OpenCV's components of the whole mask, numbered as OpenCV does."""
+    area, bbox, peak, starts, flat = table
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    area, bbox, peak, starts, flat = component_table(labels, n, gray, 0, 0)
+    assert len(area) == n
     np.testing.assert_array_equal(area[1:], stats[1:, cv2.CC_STAT_AREA])
     np.testing.assert_array_equal(bbox[1:], stats[1:, :4])
     for k in range(1, n):
         np.testing.assert_array_equal(flat[starts[k] : starts[k + 1]],
                                       np.flatnonzero(labels.ravel() == k))  # fmt: skip
         assert peak[k] == gray[labels == k].max()
+
+
+def test_component_table_equals_opencv_stats():
+    rng = np.random.default_rng(1)
+    mask = (rng.random((60, 80)) > 0.8).astype(np.uint8)
+    gray = rng.random((60, 80)).astype(np.float32)
+    n, labels = cv2.connectedComponents(mask, connectivity=8)
+    _assert_is_opencvs(component_table(labels, n, gray, 0, 0), mask, gray)
 
 
 @pytest.mark.parametrize("origin", [(16, 10), (0, 0), (2, 8)])
@@ -53,17 +60,10 @@ def test_a_crop_at_even_origin_gives_the_whole_frame_table(origin):
     mask = np.zeros((60, 80), np.uint8)
     mask[11:47, 17:70] = rng.random((36, 53)) > 0.75  # many small components, odd edges
     gray = rng.random((60, 80)).astype(np.float32)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     x0, y0 = origin
     n_crop, crop_labels = cv2.connectedComponents(mask[y0:, x0:], connectivity=8)
-    assert n_crop == n > 20
-    area, bbox, peak, starts, flat = component_table(crop_labels, n_crop, gray, x0, y0)
-    np.testing.assert_array_equal(area[1:], stats[1:, cv2.CC_STAT_AREA])
-    np.testing.assert_array_equal(bbox[1:], stats[1:, :4])
-    for k in range(1, n):
-        np.testing.assert_array_equal(flat[starts[k] : starts[k + 1]],
-                                      np.flatnonzero(labels.ravel() == k))  # fmt: skip
-        assert peak[k] == gray[labels == k].max()
+    assert n_crop > 20
+    _assert_is_opencvs(component_table(crop_labels, n_crop, gray, x0, y0), mask, gray)
 
 
 def test_median_of_finite_is_numpy_median_without_nans():
