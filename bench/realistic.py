@@ -22,12 +22,13 @@ the mean NEES (normalised estimation error squared over the 6 pose components, e
 rotation vector and translation) against its 95 % band for that many frames, and the
 share of frames inside the per-frame 95 % bound chi2_6 = 12.6.
 
-Run: ``python bench/realistic.py [--frames N] [--long-frames N] [--out DIR]``
+Run: ``python bench/realistic.py [--frames N] [--long-frames N] [--cal-frames N] [--out DIR]``
 """
 
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +40,7 @@ from bench._common import fmt, pose_errors, pyplot, save_figure, stats, table  #
 from bench.accuracy import random_pose  # noqa: E402
 from bench.baseline import blob_detector  # noqa: E402
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
+from tofpose.covariance_calibration import fit_covariance_scale, pose_nees  # noqa: E402
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
 from tofpose.range_calibration import fit_range_correction  # noqa: E402
 from tofpose.sim.bench import R_FACING  # noqa: E402
@@ -91,15 +93,16 @@ def _wrong(res, T, range_m: float) -> bool:
     return ae > max(1.0, 3 * s_att) or pe > max(20.0, 0.005 * range_m * 1000.0, 3 * s_pos)
 
 
-def _pipeline(cam, cat, corr) -> PosePipeline:
+def _pipeline(cam, cat, corr, covariance_scale=None) -> PosePipeline:
     """The ideal sensor is known to have no range bias (``"ideal"``); the others get the
     default prior for an uncalibrated or a calibrated camera."""
     if isinstance(corr, str):
-        return PosePipeline(cam, cat, PipelineConfig(range_bias_sigma_mm=0.0))
-    return PosePipeline(cam, cat, range_correction=corr)
+        return PosePipeline(cam, cat, PipelineConfig(range_bias_sigma_mm=0.0),
+                            covariance_scale=covariance_scale)  # fmt: skip
+    return PosePipeline(cam, cat, range_correction=corr, covariance_scale=covariance_scale)
 
 
-def run(n_frames: int = 12, seed: int = 0, long_frames: int = 90):
+def run(n_frames: int = 12, seed: int = 0, long_frames: int = 90, cal_frames: int = 60):
     cam, cat = CameraModel(), paper_target()
     errors = SystematicErrors()
     fit = fit_range_correction(calibration_samples(cam, errors), SensorModel().unambiguous_range_mm)
@@ -109,7 +112,7 @@ def run(n_frames: int = 12, seed: int = 0, long_frames: int = 90):
         "realistic, calibrated": (SensorModel(systematic=errors), fit.correction),
     }
     rows = []  # (sensor, range, ok, pos_err, att_err, n_matched, n_in_view, wrong, n_simple)
-    long_rows = run_long_range(fit, long_frames)
+    long_rows = run_long_range(fit, long_frames, cal_frames=cal_frames)
     detector = blob_detector()
     for r in tqdm(RANGES_M, desc="realistic sensor", unit="range", file=sys.stderr):
         rng = np.random.default_rng([seed, int(r * 1000)])
@@ -128,7 +131,13 @@ def run(n_frames: int = 12, seed: int = 0, long_frames: int = 90):
                                  _wrong(res, T, r), simple))  # fmt: skip
                 else:
                     rows.append((name, r, False, np.nan, np.nan, 0, _in_view(f), False, simple))
-    return {"rows": rows, "fit": fit, "long": long_rows, "long_frames": long_frames}
+    return {
+        "rows": rows,
+        "fit": fit,
+        "long": long_rows,
+        "long_frames": long_frames,
+        "cal_frames": cal_frames,
+    }
 
 
 #: the rule for wrong poses is stated for 3-8 m (4-5 markers at long range); the nearer
@@ -153,13 +162,40 @@ def long_range_pose(range_m: float, rng: np.random.Generator) -> RigidTransform:
 def nees(res, T) -> float:
     """e^T Sigma^-1 e over (rotation vector error, translation error), the covariance's
     own parameterisation (left perturbation)."""
-    from scipy.spatial.transform import Rotation
-
-    e = np.concatenate([Rotation.from_matrix(res.R @ T.R.T).as_rotvec(), res.t_mm - T.t_mm])
-    return float(e @ np.linalg.solve(res.covariance, e))
+    return pose_nees(res.R, res.t_mm, res.covariance, T.R, T.t_mm)
 
 
-def run_long_range(fit, n_frames: int, seed: int = 1) -> list:
+def _consistency_frames(sensor, pipe, r: float, n: int, seed: int):
+    """(truth, result) of ``n`` long-range poses at ``r`` m, each frame on its own."""
+    cam, cat = pipe.camera, pipe.catalog
+    rng = np.random.default_rng([seed, int(r * 1000)])
+    poses = [long_range_pose(r, rng) for _ in range(n)]
+    frng = np.random.default_rng([seed, int(r * 1000), 7])
+    for T in poses:
+        f = render_frame(cam, TargetScene(cat), T, sensor, frng, time_s=WARM_S)
+        pipe.reset()
+        yield T, pipe.process(f.gray, f.distance_mm)
+
+
+def covariance_calibration(sensor, corr, n_frames: int, seed: int = 2):
+    """The sensor's covariance factors, fitted on frames of its own (other poses and
+    noise than the consistency run's), knots at the consistency ranges."""
+    cam, cat = CameraModel(), paper_target()
+    pipe = _pipeline(cam, cat, corr)
+    ranges, values = [], []
+    for r in CONSISTENCY_RANGES_M:
+        for T, res in _consistency_frames(sensor, pipe, r, n_frames, seed):
+            if res.ok:
+                ranges.append(float(np.linalg.norm(T.t_mm)))
+                values.append(nees(res, T))
+    return fit_covariance_scale(ranges, values, [r * 1000.0 for r in CONSISTENCY_RANGES_M])
+
+
+def run_long_range(fit, n_frames: int, seed: int = 1, cal_frames: int = 60) -> list:
+    """Rows (sensor, range, ok, wrong, NEES, matched, NEES calibrated, wrong calibrated):
+    wrong and NEES with the model's covariance, then with the covariance calibrated on
+    ``cal_frames`` other frames per range (``covariance_calibration``); the poses are
+    the same."""
     cam, cat = CameraModel(), paper_target()
     errors = SystematicErrors()
     sensors = {
@@ -167,46 +203,60 @@ def run_long_range(fit, n_frames: int, seed: int = 1) -> list:
         "realistic": (SensorModel(systematic=errors), None),
         "realistic, calibrated": (SensorModel(systematic=errors), fit.correction),
     }
-    rows = []  # (sensor, range, ok, wrong, nees, n_matched)
-    for r in tqdm(CONSISTENCY_RANGES_M, desc="consistency", unit="range", file=sys.stderr):
-        rng = np.random.default_rng([seed, int(r * 1000)])
-        poses = [long_range_pose(r, rng) for _ in range(n_frames)]
-        for name, (sensor, corr) in sensors.items():
-            pipe = _pipeline(cam, cat, corr)
-            frng = np.random.default_rng([seed, int(r * 1000), 7])
-            for T in poses:
-                f = render_frame(cam, TargetScene(cat), T, sensor, frng, time_s=WARM_S)
-                pipe.reset()
-                res = pipe.process(f.gray, f.distance_mm)
-                if res.ok:
-                    rows.append((name, r, True, _wrong(res, T, r), nees(res, T), res.n_matched))
-                else:
-                    rows.append((name, r, False, False, np.nan, 0))
+    rows = []
+    for name, (sensor, corr) in tqdm(sensors.items(), desc="consistency", unit="sensor",
+                                     file=sys.stderr):  # fmt: skip
+        scale = covariance_calibration(sensor, corr, cal_frames).scale
+        pipe = _pipeline(cam, cat, corr, scale)
+        for r in CONSISTENCY_RANGES_M:
+            for T, res in _consistency_frames(sensor, pipe, r, n_frames, seed):
+                if not res.ok:
+                    rows.append((name, r, False, False, np.nan, 0, np.nan, False))
+                    continue
+                factor = scale.factor_at(float(np.linalg.norm(res.t_mm)))
+                model = replace(res, covariance=res.covariance / factor)
+                rows.append((name, r, True, _wrong(model, T, r), nees(model, T),
+                             res.n_matched, nees(res, T), _wrong(res, T, r)))  # fmt: skip
     return rows
 
 
-def long_range_table(rows) -> str:
+def consistency(ns: np.ndarray) -> tuple[float, float, float, str]:
+    """Mean NEES of k frames, its 95 % band (chi2 with 6k dof, / k) and the verdict."""
     from scipy.stats import chi2
 
+    k = len(ns)
+    if not k:
+        return np.nan, np.nan, np.nan, "-"
+    lo, hi = chi2.ppf([0.025, 0.975], 6 * k) / k
+    mean = float(np.mean(ns))
+    return mean, lo, hi, ("in band" if lo <= mean <= hi else
+                          "too wide" if mean < lo else "too narrow")  # fmt: skip
+
+
+def _share(ns: np.ndarray) -> str:
+    """Share of frames inside the per-frame 95 % bound."""
+    return f"{np.mean(ns <= NEES_95_PER_FRAME):.0%}" if len(ns) else "-"
+
+
+def long_range_table(rows) -> str:
     out = []
     for r in CONSISTENCY_RANGES_M:
         for name in SENSORS:
             sel = [x for x in rows if x[0] == name and x[1] == r]
             ok = [x for x in sel if x[2]]
-            ns = np.array([x[4] for x in ok])
-            k = len(ns)
-            lo, hi = (chi2.ppf([0.025, 0.975], 6 * k) / k) if k else (np.nan, np.nan)
-            mean = float(np.mean(ns)) if k else np.nan
-            verdict = "in band" if lo <= mean <= hi else ("too wide" if mean < lo else "too narrow")
-            out.append([f"{r:g}", name, str(len(sel)), str(len(sel) - k),
-                        str(sum(x[3] for x in ok)),
-                        f"{np.median([x[5] for x in ok]):.0f}" if k else "-",
-                        f"{mean:.1f}", f"{lo:.1f}-{hi:.1f}", verdict, f"{np.sqrt(mean / 6):.2f}",
-                        f"{np.mean(ns <= NEES_95_PER_FRAME):.0%}" if k else "-"])  # fmt: skip
-    return table(["range m", "sensor", "frames", "refused", "wrong ok poses", "matched (median)",
-                  "mean NEES", "95 % band", "covariance", "errors / reported sigmas",
-                  "frames with NEES <= 12.6"],
-                 out)  # fmt: skip
+            ns, nc = np.array([x[4] for x in ok]), np.array([x[6] for x in ok])
+            mean, lo, hi, verdict = consistency(ns)
+            mean_c, _, _, verdict_c = consistency(nc)
+            out.append([f"{r:g}", name, str(len(sel)), str(len(sel) - len(ok)),
+                        f"{sum(x[3] for x in ok)} / {sum(x[7] for x in ok)}",
+                        f"{np.median([x[5] for x in ok]):.0f}" if ok else "-",
+                        f"{lo:.1f}-{hi:.1f}", f"{mean:.1f}", verdict, f"{np.sqrt(mean / 6):.2f}",
+                        _share(ns), f"{mean_c:.1f}", verdict_c, _share(nc)])  # fmt: skip
+    return table(["range m", "sensor", "frames", "refused", "wrong ok poses (model / cal.)",
+                  "matched (median)", "95 % band", "mean NEES, model", "model covariance",
+                  "errors / reported sigmas, model", "NEES <= 12.6, model",
+                  "mean NEES, calibrated", "calibrated covariance",
+                  "NEES <= 12.6, calibrated"], out)  # fmt: skip
 
 
 def summarise(data) -> dict:
@@ -276,11 +326,17 @@ def markdown(data, img: str, n_frames: int) -> str:
         "### Wrong poses and covariance consistency, 0.7-8 m", "",
         f"{data['long_frames']} frames per range and sensor, attitudes up to 20 deg, lateral "
         "offsets (module docstring). A wrong pose is one reported `ok` outside max(1 deg, "
-        "3 reported sigmas) or max(20 mm, 0.5 % of range, 3 sigmas); \"covariance\" says "
+        "3 reported sigmas) or max(20 mm, 0.5 % of range, 3 sigmas), counted with the "
+        "model's covariance and with the calibrated one; \"covariance\" says "
         "whether the mean NEES lies in its 95 % band (too narrow: the reported sigmas "
         "claim more than the errors show); \"errors / reported sigmas\" is sqrt(mean NEES "
         "/ 6), the factor by which the errors' spread differs from the reported one (1: "
-        "consistent, below 1: the reported sigmas are wider than the errors).", "",
+        "consistent, below 1: the reported sigmas are wider than the errors). Model: the "
+        "covariance of the measurement model (`tofpose.uncertainty`, floors included). "
+        f"Calibrated: the same poses, the covariance times the sensor's factor per range "
+        f"(`tofpose.covariance_calibration`) fitted on {data['cal_frames']} other frames per "
+        "range of the same sensor (other poses and noise), as `tofpose calibrate-covariance` "
+        "fits it from a recording with a reference pose.", "",
         long_range_table(data["long"]), "",
     ])  # fmt: skip
 
@@ -291,11 +347,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--frames", type=int, default=12)
     ap.add_argument("--long-frames", type=int, default=90)
+    ap.add_argument("--cal-frames", type=int, default=150)
     ap.add_argument("--out", default="docs/img/results")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    data = run(args.frames, long_frames=args.long_frames)
+    data = run(args.frames, long_frames=args.long_frames, cal_frames=args.cal_frames)
     plot(data, out / "realistic.png")
     print(markdown(data, str(out / "realistic.png"), args.frames))
 

@@ -14,6 +14,12 @@ from tqdm import tqdm
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog, paper_target
+from tofpose.covariance_calibration import (
+    CovarianceScale,
+    auto_knots,
+    fit_covariance_scale,
+    pose_nees,
+)
 from tofpose.geometry import RigidTransform, facing_euler_deg, rotation_angle_deg
 from tofpose.pipeline import PipelineConfig, PosePipeline
 from tofpose.range_calibration import (
@@ -42,12 +48,62 @@ def _read_text(path: str, what: str) -> str:
         raise SystemExit(f"tofpose: cannot read {what} {path}: {exc.strerror}") from exc
 
 
-def load_camera(text: str) -> tuple[CameraModel, RangeCorrection | None]:
-    """A camera JSON, with its ``range_correction`` when it has one
-    (``tofpose calibrate-range`` writes both)."""
+def load_camera(text: str) -> tuple[CameraModel, RangeCorrection | None, CovarianceScale | None]:
+    """A camera JSON, with its ``range_correction`` and ``covariance_scale`` when it has
+    them (``tofpose calibrate-range`` and ``calibrate-covariance`` write them)."""
     camera = CameraModel.from_json(text)
-    rc = json.loads(text).get("range_correction")
-    return camera, (RangeCorrection.from_dict(rc) if rc is not None else None)
+    doc = json.loads(text)
+    rc, cs = doc.get("range_correction"), doc.get("covariance_scale")
+    return (camera, RangeCorrection.from_dict(rc) if rc is not None else None,
+            CovarianceScale.from_dict(cs) if cs is not None else None)  # fmt: skip
+
+
+def _reference(rec, reference: str, rec_path: str) -> tuple[np.ndarray, np.ndarray]:
+    """The recording's reference poses (``/truth`` or ``/lab_truth``): R (N, 3, 3), t (N, 3)."""
+    R_all, t_all = (
+        (rec.truth_R, rec.truth_t_mm) if reference == "truth"
+        else (rec.lab_truth_R, rec.lab_truth_t_mm)
+    )  # fmt: skip
+    if R_all is None:
+        raise SystemExit(f"tofpose: {rec_path} has no /{reference}: nothing to calibrate against")
+    return R_all, t_all
+
+
+def calibrate_covariance(
+    rec_path: str, out: str, camera_path: str | None, reference: str,
+    knots_mm: list[float] | None, progress: bool = True,
+) -> str:  # fmt: skip
+    """Run the pipeline over a recording of the known target (with the camera's range
+    correction, if any), compare each pose and its covariance with the reference, fit
+    the covariance's factor per range (``tofpose.covariance_calibration``) and write the
+    camera JSON with it."""
+    with open_recording(rec_path) as rec:
+        R_all, t_all = _reference(rec, reference, rec_path)
+        if rec.catalog is None:
+            raise SystemExit(f"tofpose: {rec_path} has no /catalog: the target is unknown")
+        camera, correction = rec.camera, None
+        if camera_path:
+            camera, correction, _ = load_camera(_read_text(camera_path, "camera"))
+        pipe = PosePipeline(camera, rec.catalog, range_correction=correction)
+        ranges, nees = [], []
+        for i in tqdm(range(rec.n_frames), desc="calibrate-covariance", unit="frame",
+                      disable=not progress, file=sys.stderr):  # fmt: skip
+            gray, dist, t = rec.frame(i)
+            r = pipe.process(gray, dist, t)
+            if r.ok and r.covariance is not None:
+                ranges.append(float(np.linalg.norm(t_all[i])))
+                nees.append(pose_nees(r.R, r.t_mm, r.covariance, R_all[i], t_all[i]))
+    fit = fit_covariance_scale(ranges, nees, knots_mm or auto_knots(ranges))
+    doc = {**camera.to_dict(), "covariance_scale": fit.scale.to_dict()}
+    if correction is not None:
+        doc["range_correction"] = correction.to_dict()
+    Path(out).write_text(json.dumps(doc, indent=1) + "\n")
+    per_knot = "; ".join(
+        f"{k:.0f} mm: {n} frames ({o} failed poses left out), mean NEES {m:.2f} -> x{f:.3g}"
+        for k, n, o, m, f in zip(fit.scale.ranges_mm, fit.frames, fit.outliers, fit.mean_nees,
+                                 fit.scale.factors, strict=True)
+    )  # fmt: skip
+    return f"{len(nees)} of {rec.n_frames} frames with a pose; {per_knot} -> {out}"
 
 
 def calibrate_range(
@@ -56,14 +112,7 @@ def calibrate_range(
     """Fit the range correction from a recording of the known target with a reference
     pose per frame (``/truth`` or ``/lab_truth``); write the camera JSON with it."""
     with open_recording(rec_path) as rec:
-        R_all, t_all = (
-            (rec.truth_R, rec.truth_t_mm) if reference == "truth"
-            else (rec.lab_truth_R, rec.lab_truth_t_mm)
-        )  # fmt: skip
-        if R_all is None:
-            raise SystemExit(
-                f"tofpose: {rec_path} has no /{reference}: nothing to calibrate against"
-            )
+        R_all, t_all = _reference(rec, reference, rec_path)
         if rec.catalog is None:
             raise SystemExit(f"tofpose: {rec_path} has no /catalog: the target's shape is unknown")
 
@@ -100,9 +149,9 @@ def estimate(
     """Run the pipeline over a recording and write the CSV; returns summary numbers.
     ``tracking``: the pipeline's tracking mode (faster on a continuous recording)."""
     with open_recording(rec_path) as rec:
-        camera, correction = rec.camera, None
+        camera, correction, scale = rec.camera, None, None
         if camera_path:
-            camera, correction = load_camera(_read_text(camera_path, "camera"))
+            camera, correction, scale = load_camera(_read_text(camera_path, "camera"))
         if catalog_path:
             catalog = Catalog.from_json(_read_text(catalog_path, "catalog"))
         elif rec.catalog is not None:
@@ -115,7 +164,8 @@ def estimate(
                 f"{rec.camera.width}x{rec.camera.height} frames"
             )
         config = PipelineConfig(tracking=TrackingConfig(enabled=tracking))
-        pipe = PosePipeline(camera, catalog, config, range_correction=correction)
+        pipe = PosePipeline(camera, catalog, config, range_correction=correction,
+                            covariance_scale=scale)  # fmt: skip
         n_ok = 0
         with open(out_csv, "w", newline="") as fh:
             wr = csv.writer(fh)
@@ -277,6 +327,20 @@ def main(argv: list[str] | None = None) -> int:
                    help="reference pose per frame (default: /truth)")  # fmt: skip
     p.add_argument("--modulation-mhz", type=float, default=6.0,
                    help="the recording's modulation frequency (default 6 MHz)")  # fmt: skip
+    p = sub.add_parser(
+        "calibrate-covariance",
+        help="fit the camera's covariance factor per range from a recording of the known target",
+    )
+    p.add_argument("recording")
+    p.add_argument("--out", required=True, help="camera JSON with its covariance_scale")
+    p.add_argument("--camera", help="camera JSON to start from, e.g. with its range correction "
+                                    "(default: the recording's camera)")  # fmt: skip
+    p.add_argument("--reference", choices=("truth", "lab_truth"), default="truth",
+                   help="reference pose per frame (default: /truth); its own error must be "
+                        "well below the pose's")  # fmt: skip
+    p.add_argument("--knots-mm", type=lambda v: [float(x) for x in v.split(",")],
+                   help="target distances of the factors, comma separated (default: every "
+                        "1.5x over the recording's range, each with >= 20 frames)")  # fmt: skip
     p = sub.add_parser("simulate", help="write a simulated recording with ground truth")
     p.add_argument("--scenario", required=True)
     p.add_argument("--frames", type=int, required=True)
@@ -361,6 +425,9 @@ def main(argv: list[str] | None = None) -> int:
             s = estimate(args.recording, args.out, args.catalog, args.camera,
                          tracking=args.tracking)  # fmt: skip
             print(f"{s['ok']}/{s['frames']} frames with a pose -> {args.out}")
+        elif args.cmd == "calibrate-covariance":
+            print(calibrate_covariance(args.recording, args.out, args.camera, args.reference,
+                                       args.knots_mm))  # fmt: skip
         elif args.cmd == "calibrate-range":
             print(calibrate_range(args.recording, args.out, args.reference, args.modulation_mhz))
         elif args.cmd == "simulate":

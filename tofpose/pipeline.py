@@ -21,6 +21,7 @@ import numpy as np
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
+from tofpose.covariance_calibration import CovarianceScale
 from tofpose.ellipse import (
     blob_contour,
     ellipse_residual_px,
@@ -245,11 +246,14 @@ class PosePipeline:
         catalog: Catalog,
         config: PipelineConfig | None = None,
         range_correction: RangeCorrection | None = None,
+        covariance_scale: CovarianceScale | None = None,
     ) -> None:
         """``range_correction``: the camera's calibrated range errors
         (``tofpose.range_calibration``), subtracted from each reflector's range before
         back-projection; None for a camera without one. ``ValueError`` when its
-        per-pixel offsets are not of the camera's image size."""
+        per-pixel offsets are not of the camera's image size. ``covariance_scale``: the
+        camera's covariance calibration (``tofpose.covariance_calibration``), applied to
+        the reported covariance at the target's distance; None reports the model's."""
         offsets = None if range_correction is None else range_correction.pixel_offsets_mm
         if offsets is not None and offsets.shape != camera.shape:
             raise ValueError(
@@ -259,6 +263,7 @@ class PosePipeline:
             )
         self.camera = camera
         self.range_correction = range_correction
+        self.covariance_scale = covariance_scale
         self._correction_args = (
             None if range_correction is None else range_correction.kernel_arguments()
         )
@@ -546,12 +551,21 @@ class PosePipeline:
             unmatched,
             math.sqrt(float(res @ res) / len(res)),
             iterations,
-            ml.covariance * variance_factor(ml.chi2, len(matched))
-            + (ml.bias_covariance if ml.bias_covariance is not None else 0.0),
+            self._reported_covariance(ml, len(matched), t),
             timer.total(),
             **extra,
             mode=mode,
         )
+
+    def _reported_covariance(self, ml, n_matched: int, t_mm: np.ndarray) -> np.ndarray:
+        """(6, 6): the fit's covariance with its a-posteriori variance factor, plus the
+        common range bias's, times the camera's calibrated factor at this distance."""
+        cov = ml.covariance * variance_factor(ml.chi2, n_matched)
+        if ml.bias_covariance is not None:
+            cov = cov + ml.bias_covariance
+        if self.covariance_scale is not None:
+            cov = cov * self.covariance_scale.factor_at(math.sqrt(float(t_mm @ t_mm)))
+        return cov
 
     def _correct_ranges(self, blobs: list[Blob], gray: np.ndarray) -> list[Blob]:
         """The blobs with the calibrated range error subtracted from their ranges (new

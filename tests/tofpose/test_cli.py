@@ -64,7 +64,7 @@ def test_calibrate_range_writes_a_camera_the_estimate_uses(tmp_path, capsys):
     assert main(["calibrate-range", str(rec), "--out", str(cam)]) == 0
     printed = capsys.readouterr().out
     assert "cyclic amplitudes" in printed
-    camera, corr = load_camera(cam.read_text())
+    camera, corr, _ = load_camera(cam.read_text())
     assert corr is not None and camera.width == 320
     near, far = corr.calibrated_span_mm  # stored with the camera and printed
     assert f"calibrated span {near:.0f}-{far:.0f} mm" in printed and near < far
@@ -79,6 +79,45 @@ def test_calibrate_range_writes_a_camera_the_estimate_uses(tmp_path, capsys):
                if x["ok"] == "1" and 2500 < true_z[i] < 6500]  # fmt: skip
         errs[name] = float(np.median(far))
     assert errs["cal"] < 0.5 * errs["raw"], errs
+
+
+def test_calibrate_covariance_writes_a_camera_whose_sigmas_the_estimate_reports(tmp_path, capsys):
+    """calibrate-covariance fits the factor per range against /truth and stores it with
+    the camera; estimate with that camera reports the same poses with the 1-sigma
+    columns scaled by the square root of the factor at each pose's distance."""
+    import json
+
+    import numpy as np
+
+    from tofpose.cli import load_camera
+
+    rec, cam, raw_csv, cal_csv = (tmp_path / n for n in ("r.h5", "c.json", "a.csv", "b.csv"))
+    assert main(["simulate", "--scenario", "range-sweep", "--frames", "54", "--out", str(rec)]) == 0
+    assert main(["calibrate-covariance", str(rec), "--out", str(cam)]) == 0
+    printed = capsys.readouterr().out
+    assert "frames with a pose" in printed and "mean NEES" in printed
+    _, _, scale = load_camera(cam.read_text())
+    assert scale is not None and json.loads(cam.read_text())["covariance_scale"]
+    # the simulator's errors are smaller than the model's floors claim: factors below 1
+    assert all(0.01 < f < 1.0 for f in scale.factors), scale
+    assert main(["estimate", str(rec), "--out", str(raw_csv)]) == 0
+    assert main(["estimate", str(rec), "--camera", str(cam), "--out", str(cal_csv)]) == 0
+    raw, cal = (list(csv.DictReader(p.open())) for p in (raw_csv, cal_csv))
+    n_ok = 0
+    for a, b in zip(raw, cal, strict=True):
+        assert (a["ok"], a["x_mm"], a["z_mm"], a["yaw_deg"]) == (b["ok"], b["x_mm"], b["z_mm"],
+                                                                   b["yaw_deg"])  # fmt: skip
+        if a["ok"] == "1":
+            n_ok += 1
+            t = np.array([float(a[k]) for k in ("x_mm", "y_mm", "z_mm")])
+            root = np.sqrt(scale.factor_at(float(np.linalg.norm(t))))
+            for k in ("sigma_z_mm", "sigma_ry_deg"):
+                assert float(b[k]) == pytest.approx(float(a[k]) * root, rel=2e-3, abs=2e-4)
+    assert n_ok >= 20
+    # a knot the recording has no frames near is refused, by name
+    assert main(["calibrate-covariance", str(rec), "--out", str(cam),
+                 "--knots-mm", "2000,1e9"]) == 2  # fmt: skip
+    assert "too few at 1000000000 mm (0)" in capsys.readouterr().err
 
 
 def test_bad_inputs_exit_with_a_message(tmp_path, capsys):
