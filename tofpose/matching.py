@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from tofpose.kernels.annealing import anneal_assignment
+from tofpose.kernels.annealing import anneal_assignment, pair_potentials
 from tofpose.kernels.pose import svd_pose
 from tofpose.robust import median_1d
 
@@ -100,17 +100,15 @@ def pair_compatibility(
 ) -> np.ndarray:
     """Pair potential rho_kilj^2 - alpha^2 (Eq. 36), shape (gamma, eta, gamma, eta).
 
-    Entries with l == k or j == i are zero (no self-support).
+    rho_kilj = |d_kl - D_ij| compares the distance between observed blobs k and l (Eq. 26)
+    with that between catalog reflectors i and j (Eq. 25); rho^2 is clipped at
+    (clip_factor alpha)^2. Entries with l == k or j == i are zero (no self-support).
+    Computed by ``kernels.annealing.pair_potentials``.
     """
-    o = np.linalg.norm(observed_mm[:, None] - observed_mm[None], axis=-1)  # (g, g) Eq. 26
-    c = np.linalg.norm(catalog_mm[:, None] - catalog_mm[None], axis=-1)  # (e, e) Eq. 25
-    rho = np.abs(o[:, None, :, None] - c[None, :, None, :])  # (k, i, l, j)
-    rho2 = np.minimum(rho**2, (clip_factor * alpha_mm) ** 2)
-    P = rho2 - alpha_mm**2
-    g, e = len(observed_mm), len(catalog_mm)
-    P[np.arange(g), :, np.arange(g), :] = 0.0
-    P[:, np.arange(e), :, np.arange(e)] = 0.0
-    return P
+    return pair_potentials(
+        np.ascontiguousarray(observed_mm, float), np.ascontiguousarray(catalog_mm, float),
+        float(alpha_mm), float(clip_factor),
+    )  # fmt: skip
 
 
 def size_unary(

@@ -1,5 +1,6 @@
-"""The deterministic-annealing iteration of §4 (Eqs. 35-39), compiled; the reference
-and its documentation are ``tofpose.matching.anneal``."""
+"""The deterministic-annealing iteration of §4 (Eqs. 35-39) and its pair potentials
+(Eq. 36), compiled; the reference and its documentation are ``tofpose.matching.anneal``
+and ``tofpose.matching.pair_compatibility``."""
 
 from __future__ import annotations
 
@@ -41,3 +42,42 @@ def anneal_assignment(Pm, unary, psi, psi_end, growth):
         psi *= growth
         it += 1
     return A, it
+
+
+@jit
+def _pairwise_distances(points):
+    """(n, n) Euclidean distances of points (n, 3), summed as NumPy's norm does."""
+    n = points.shape[0]
+    out = np.empty((n, n))
+    for a in range(n):
+        for b in range(n):
+            dx = points[a, 0] - points[b, 0]
+            dy = points[a, 1] - points[b, 1]
+            dz = points[a, 2] - points[b, 2]
+            out[a, b] = np.sqrt(dx * dx + dy * dy + dz * dz)
+    return out
+
+
+@jit
+def pair_potentials(observed, catalog, alpha, clip):
+    """Pair potential min(rho_kilj^2, (clip alpha)^2) - alpha^2 (Eq. 36, rho = |d_kl -
+    D_ij|, Eqs. 25-26), shape (gamma, eta, gamma, eta), 0 where l == k or j == i.
+
+    observed : (gamma, 3) mm, camera frame; catalog : (eta, 3) mm, target frame.
+    """
+    g, e = observed.shape[0], catalog.shape[0]
+    o = _pairwise_distances(observed)
+    c = _pairwise_distances(catalog)
+    cap = (clip * alpha) ** 2
+    a2 = alpha**2
+    P = np.zeros((g, e, g, e))
+    for k in range(g):
+        for i in range(e):
+            for m in range(g):
+                if m == k:
+                    continue
+                for j in range(e):
+                    if j != i:
+                        r = abs(o[k, m] - c[i, j])
+                        P[k, i, m, j] = min(r * r, cap) - a2
+    return P

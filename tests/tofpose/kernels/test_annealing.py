@@ -1,10 +1,11 @@
-"""The compiled annealing iteration against Eqs. 35-39 written in NumPy."""
+"""The compiled annealing iteration and pair potentials against Eqs. 35-39 written in NumPy."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from tofpose.kernels.annealing import anneal_assignment
+from tofpose.kernels.annealing import anneal_assignment, pair_potentials
 from tofpose.matching import MatchingConfig, pair_compatibility
 
 
@@ -39,3 +40,23 @@ def test_anneal_assignment_equals_the_equations():
     assert it == it_ref > 30
     np.testing.assert_allclose(A, A_ref, atol=1e-12)
     assert [int(np.argmax(A[k])) for k in range(5)] == [1, 3, 4, 6, 7]  # markers found
+
+
+def _potentials_numpy(observed, catalog, alpha, clip):
+    """Eq. 36 by broadcasting (the NumPy form the kernel replaced)."""
+    o = np.linalg.norm(observed[:, None] - observed[None], axis=-1)  # Eq. 26
+    c = np.linalg.norm(catalog[:, None] - catalog[None], axis=-1)  # Eq. 25
+    rho = np.abs(o[:, None, :, None] - c[None, :, None, :])  # (k, i, l, j)
+    P = np.minimum(rho**2, (clip * alpha) ** 2) - alpha**2
+    g, e = len(observed), len(catalog)
+    P[np.arange(g), :, np.arange(g), :] = 0.0
+    P[:, np.arange(e), :, np.arange(e)] = 0.0
+    return P
+
+
+@pytest.mark.parametrize("clip", [3.0, 1e9])
+def test_pair_potentials_equal_the_broadcast_equation(clip):
+    rng = np.random.default_rng(3)
+    observed, catalog = rng.uniform(-400, 400, (7, 3)), rng.uniform(-300, 300, (8, 3))
+    got = pair_potentials(observed, catalog, 12.5, clip)
+    np.testing.assert_array_equal(got, _potentials_numpy(observed, catalog, 12.5, clip))
