@@ -134,6 +134,16 @@ class Blob:
     source: str = "morphology"
 
 
+def pixel_lists(blobs: list[Blob]) -> tuple[np.ndarray, np.ndarray]:
+    """The blobs' pixels as the kernels take them: flat (P,) int64 flat indices, blob j's
+    being ``flat[starts[j]:starts[j + 1]]``, and starts (B + 1,) int64."""
+    starts = np.zeros(len(blobs) + 1, np.int64)
+    starts[1:] = np.cumsum([len(b.pixels) for b in blobs])
+    flat = (np.concatenate([b.pixels for b in blobs]).astype(np.int64, copy=False)
+            if blobs else np.zeros(0, np.int64))  # fmt: skip
+    return flat, starts
+
+
 @dataclass(frozen=True)
 class FrameStats:
     """Frame-level levels used by the thresholds (counts). ``raw_threshold`` is I_t and
@@ -539,9 +549,7 @@ def measure_blobs(
     if not blobs:
         return []
     h, w = gray.shape
-    starts = np.zeros(len(blobs) + 1, np.int64)
-    starts[1:] = np.cumsum([len(b.pixels) for b in blobs])
-    flat = np.concatenate([b.pixels for b in blobs]).astype(np.int64, copy=False)
+    flat, starts = pixel_lists(blobs)
     bbox = np.array([b.bbox for b in blobs], np.int64)
     owner, use_owner = owner_map(flat, starts, bbox, h, w)  # which blob owns each pixel
     uv = blob_centroids(

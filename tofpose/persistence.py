@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from tofpose.camera import CameraModel
-from tofpose.extraction import Blob
+from tofpose.extraction import Blob, pixel_lists
 from tofpose.kernels.measure import persist_and_measure
 from tofpose.kernels.persistence import (
     column_medians,
@@ -84,10 +84,7 @@ class Persistence:
         the combined frames (I-bar, D-bar) and what was combined. ``background`` : the
         frame's background level, counts."""
         cur = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
-        starts = np.zeros(len(blobs) + 1, np.int64)
-        starts[1:] = np.cumsum([len(b.pixels) for b in blobs])
-        flat = (np.concatenate([b.pixels for b in blobs]).astype(np.int64, copy=False)
-                if blobs else np.zeros(0, np.int64))  # fmt: skip
+        flat, starts = pixel_lists(blobs)
         bbox = np.array([b.bbox for b in blobs], np.int64).reshape(-1, 4)
         hist_g, hist_d, hist_m, hist_c, n_hist = self.history(gray, distance)
         cfg = self.config
@@ -160,9 +157,8 @@ class Persistence:
         h, w = gray.shape
         cur = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
         mask = np.zeros(h * w, bool)
-        if blobs:
-            idx = np.concatenate([b.pixels for b in blobs]).astype(np.int64, copy=False)
-            mask[idx] = True
+        idx, starts = pixel_lists(blobs)
+        mask[idx] = True
 
         used: list[_Entry] = []
         motion = False
@@ -184,8 +180,6 @@ class Persistence:
         mean_gray, med_dist = gray, distance
         if n == 1 or not blobs:
             return kept, mean_gray, med_dist, PersistenceInfo(n, motion, dropped)
-        starts = np.zeros(len(blobs) + 1, np.int64)
-        starts[1:] = np.cumsum([len(b.pixels) for b in blobs])
         if n >= cfg.c_min:
             # the counter image C, read only where it is used: at the blobs' pixels
             c = counter_medians(self._padded(mask, [e.mask for e in used]), n, idx, starts)
@@ -196,7 +190,7 @@ class Persistence:
         mean_gray = mean_in_boxes(gray, older, n - 1, boxes)
         med_dist = distance.copy()
         if kept:
-            kidx = np.concatenate([b.pixels for b in kept]).astype(np.int64, copy=False)
+            kidx, _ = pixel_lists(kept)
             stack = gather_stack(self._padded(distance, [e.distance for e in used]), n, kidx)
             med_dist.reshape(-1)[kidx] = column_medians(stack)
         return kept, mean_gray, med_dist, PersistenceInfo(n, motion, dropped)

@@ -37,6 +37,7 @@ from tofpose.extraction import (
     check_frame,
     find_candidate_blobs,
     frame_levels,
+    pixel_lists,
     predicted_diameter_window_px,
 )
 from tofpose.geometry import facing_euler_deg, quaternion_wxyz_from_rotation
@@ -574,9 +575,7 @@ class PosePipeline:
         (``kernels.range_correction.corrected_ranges``)."""
         if not blobs:
             return blobs
-        starts = np.zeros(len(blobs) + 1, np.int64)
-        starts[1:] = np.cumsum([len(b.pixels) for b in blobs])
-        flat = np.concatenate([b.pixels for b in blobs]).astype(np.int64, copy=False)
+        flat, starts = pixel_lists(blobs)
         rho = np.array([b.distance_mm for b in blobs], float)
         out = corrected_ranges(rho, flat, starts, np.asarray(gray, np.float32),
                                *self._correction_args)  # fmt: skip

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tofpose.extraction import Blob
+from tofpose.extraction import Blob, pixel_lists
 from tofpose.kernels.sigmas import blob_sigmas
 
 #: centroid sampling error of a single-pixel blob, px (uniform over one pixel)
@@ -76,9 +76,7 @@ def measurement_sigmas(
 
     gray, distance_mm : (H, W) frame (or persistence-combined frame) the blobs came from.
     """
-    starts = np.zeros(len(blobs) + 1, np.int64)
-    starts[1:] = np.cumsum([len(b.pixels) for b in blobs])
-    flat = np.concatenate([b.pixels for b in blobs]).astype(np.int64, copy=False)
+    flat, starts = pixel_lists(blobs)
     centroids = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
     split = np.array([b.source == "split" for b in blobs], bool)
     return blob_sigmas(
