@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
+from tofpose.kernels.indexing import row_col
 from tofpose.kernels.stats import median_inplace
 
 
@@ -24,51 +25,44 @@ def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, use_ow
     n = bbox.shape[0]
     out = np.empty((n, 2))
     bg = np.float32(background)
+    inv_w = 1.0 / w
     for j in range(n):
         x, y, bw, bh = bbox[j, 0], bbox[j, 1], bbox[j, 2], bbox[j, 3]
         y0, y1 = max(y - 2, 0), min(y + bh + 2, h)
         x0, x1 = max(x - 2, 0), min(x + bw + 2, w)
         ph, pw = y1 - y0, x1 - x0
-        member = np.zeros((ph, pw), np.bool_)
+        # the members' background-subtracted values (>= 0), -1 elsewhere and on a border
+        # of one pixel around the box
+        member = np.full((ph + 2, pw + 2), np.float32(-1.0))
         for i in range(starts[j], starts[j + 1]):
-            member[flat[i] // w - y0, flat[i] % w - x0] = True
-        patch = np.empty((ph, pw), np.float32)
-        for r in range(ph):
+            r, c = row_col(flat[i], w, inv_w)
+            member[r - y0 + 1, c - x0 + 1] = max(gray[r, c] - bg, np.float32(0.0))
+        # the largest member value around each pixel (3 x 3, separable: rows, then
+        # columns): >= 0 on the one-pixel ring (the blob dilated by one pixel), where it
+        # is the coverage denominator; -1 elsewhere
+        row_max = np.empty((ph + 2, pw), np.float32)
+        for r in range(ph + 2):
             for c in range(pw):
-                patch[r, c] = max(gray[r + y0, c + x0] - bg, np.float32(0.0))
-        # the one-pixel ring (3 x 3 dilation of the blob inside the box) and the largest
-        # member value around each pixel (the coverage denominator), as separable maxima
-        row_max = np.zeros((ph, pw), np.float32)
-        row_any = np.zeros((ph, pw), np.bool_)
-        for r in range(ph):
-            for c in range(pw):
-                for dc in range(max(c - 1, 0), min(c + 2, pw)):
-                    if member[r, dc]:
-                        row_any[r, c] = True
-                        row_max[r, c] = max(row_max[r, c], patch[r, dc])
+                row_max[r, c] = max(max(member[r, c], member[r, c + 1]), member[r, c + 2])
         sw, su, sv = 0.0, 0.0, 0.0
         for r in range(ph):
             for c in range(pw):
-                ring = False
-                local_max = np.float32(0.0)
-                for dr in range(max(r - 1, 0), min(r + 2, ph)):
-                    if row_any[dr, c]:
-                        ring = True
-                        local_max = max(local_max, row_max[dr, c])
-                if not ring:
+                local_max = max(max(row_max[r, c], row_max[r + 1, c]), row_max[r + 2, c])
+                if local_max < 0:
                     continue
                 if use_owner:
                     o = owner[r + y0, c + x0]
                     if o != -1 and o != j:
                         continue
-                if coverage:  # clip(patch / local_max, 0, 1); x / 0 -> 1, 0 / 0 -> 0
+                value = max(gray[r + y0, c + x0] - bg, np.float32(0.0))
+                if coverage:  # clip(value / local_max, 0, 1); x / 0 -> 1, 0 / 0 -> 0
                     if local_max > 0:
-                        v = patch[r, c] / local_max
-                        wt = float(min(max(v, np.float32(0.0)), np.float32(1.0)))
+                        wt = float(min(max(value / local_max, np.float32(0.0)),
+                                       np.float32(1.0)))  # fmt: skip
                     else:
-                        wt = 1.0 if patch[r, c] > 0 else 0.0
+                        wt = 1.0 if value > 0 else 0.0
                 else:
-                    wt = float(patch[r, c])
+                    wt = float(value)
                 sw += wt
                 su += wt * (c + x0)
                 sv += wt * (r + y0)
@@ -76,11 +70,9 @@ def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, use_ow
             sw, su, sv = 0.0, 0.0, 0.0
             for r in range(ph):
                 for c in range(pw):
-                    ring = False
-                    for dr in range(max(r - 1, 0), min(r + 2, ph)):
-                        ring = ring or row_any[dr, c]
+                    local_max = max(max(row_max[r, c], row_max[r + 1, c]), row_max[r + 2, c])
                     o = owner[r + y0, c + x0] if use_owner else -1
-                    if ring and (o == -1 or o == j):
+                    if local_max >= 0 and (o == -1 or o == j):
                         sw += 1.0
                         su += c + x0
                         sv += r + y0

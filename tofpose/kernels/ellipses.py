@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
+from tofpose.kernels.indexing import row_col
 
 
 @jit
@@ -13,8 +14,10 @@ def blob_mask(pixels, x, y, bw, bh, width):
     """uint8 mask (bh + 2, bw + 2) of a blob's pixels (flat indices) in its box (x, y,
     bw, bh) padded by one pixel; the mask's origin is (x - 1, y - 1)."""
     m = np.zeros((bh + 2, bw + 2), np.uint8)
+    inv_width = 1.0 / width
     for p in pixels:
-        m[p // width - y + 1, p % width - x + 1] = 1
+        r, c = row_col(p, width, inv_width)
+        m[r - y + 1, c - x + 1] = 1
     return m
 
 

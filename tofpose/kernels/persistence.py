@@ -86,12 +86,20 @@ def mean_in_boxes(gray, older, n_older, boxes):
     n = np.float32(1 + n_older)
     for j in range(boxes.shape[0]):
         x, y, bw, bh = boxes[j, 0], boxes[j, 1], boxes[j, 2], boxes[j, 3]
-        for r in range(max(y - 2, 0), min(y + bh + 2, h)):
-            for c in range(max(x - 2, 0), min(x + bw + 2, w)):
-                s = np.float32(0.0)
-                for i in range(n_older):
-                    s += older[i][r, c]
-                out[r, c] = (gray[r, c] + s) / n
+        r0, r1 = max(y - 2, 0), min(y + bh + 2, h)
+        c0, c1 = max(x - 2, 0), min(x + bw + 2, w)
+        # sum the older frames one frame at a time (the same float32 additions in the
+        # same order as a per-pixel loop over the frames, without re-selecting the frame
+        # from the tuple at every pixel)
+        s = np.zeros((r1 - r0, c1 - c0), np.float32)
+        for i in range(n_older):
+            frame = older[i]
+            for r in range(r0, r1):
+                for c in range(c0, c1):
+                    s[r - r0, c - c0] += frame[r, c]
+        for r in range(r0, r1):
+            for c in range(c0, c1):
+                out[r, c] = (gray[r, c] + s[r - r0, c - c0]) / n
     return out
 
 
@@ -121,13 +129,15 @@ def counter_medians(masks, n_masks, flat, starts, base=0):
     n = starts.shape[0] - 1
     out = np.empty(n)
     hist = np.empty(base + n_masks + 1, np.int64)
+    counts = np.full(flat.shape[0], base, np.int64)
+    for f in range(n_masks):  # one frame at a time (no tuple selection per pixel)
+        mask = masks[f]
+        for i in range(flat.shape[0]):
+            counts[i] += mask[flat[i]]
     for j in range(n):
         hist[:] = 0
         for i in range(starts[j], starts[j + 1]):
-            k = base
-            for f in range(n_masks):
-                k += masks[f][flat[i]]
-            hist[k] += 1
+            hist[counts[i]] += 1
         out[j] = median_of_counts(hist, starts[j + 1] - starts[j])
     return out
 

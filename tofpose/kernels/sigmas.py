@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
+from tofpose.kernels.indexing import row_col
 from tofpose.kernels.stats import median_inplace
 
 
@@ -29,6 +30,7 @@ def blob_pixel_stats(flat, starts, centroids, gray, distance, background):
     model_unit = np.full(n, np.nan)
     n_valid = np.zeros(n, np.int64)
     gray_f = gray.reshape(-1)
+    inv_w = 1.0 / w
     dist_f = distance.reshape(-1)
     for j in range(n):
         a, b = starts[j], starts[j + 1]
@@ -40,7 +42,7 @@ def blob_pixel_stats(flat, starts, centroids, gray, distance, background):
         m = 0
         for i in range(a, b):
             p = flat[i]
-            row, col = p // w, p % w
+            row, col = row_col(p, w, inv_w)
             g = max(np.float64(gray_f[p]), 1.0)
             amp = max(g - background, 1.0)
             s_g_r2 += g * ((col - cu) ** 2 + (row - cv) ** 2)

@@ -20,10 +20,15 @@ def _label_window(mask):
     sums (for the unweighted centroid). Returns labels, n, area, sum_u, sum_v."""
     ph, pw = mask.shape
     labels = np.zeros((ph, pw), np.int32)
-    area = np.zeros(ph * pw + 1, np.int64)
-    su = np.zeros(ph * pw + 1)
-    sv = np.zeros(ph * pw + 1)
-    stack = np.empty(ph * pw, np.int64)
+    n_set = 0
+    for r in range(ph):
+        for c in range(pw):
+            n_set += mask[r, c]
+    area = np.zeros(n_set + 1, np.int64)  # at most one component per set pixel
+    su = np.zeros(n_set + 1)
+    sv = np.zeros(n_set + 1)
+    stack_r = np.empty(n_set, np.int64)
+    stack_c = np.empty(n_set, np.int64)
     n = 0
     for r0 in range(ph):
         for c0 in range(pw):
@@ -32,11 +37,11 @@ def _label_window(mask):
             n += 1
             labels[r0, c0] = n
             top = 0
-            stack[top] = r0 * pw + c0
+            stack_r[top], stack_c[top] = r0, c0
             top += 1
             while top:
                 top -= 1
-                r, c = stack[top] // pw, stack[top] % pw
+                r, c = stack_r[top], stack_c[top]
                 area[n] += 1
                 su[n] += c
                 sv[n] += r
@@ -45,7 +50,7 @@ def _label_window(mask):
                         rr, cc = r + dr, c + dc
                         if 0 <= rr < ph and 0 <= cc < pw and mask[rr, cc] and not labels[rr, cc]:
                             labels[rr, cc] = n
-                            stack[top] = rr * pw + cc
+                            stack_r[top], stack_c[top] = rr, cc
                             top += 1
     return labels, n, area, su, sv
 

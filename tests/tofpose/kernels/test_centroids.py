@@ -85,3 +85,27 @@ def test_touching_blobs_do_not_pull_each_other():
         uv, _ = _reference(orig, g, d, cam, 5.0, owner, j)
         np.testing.assert_allclose(m.centroid_uv, uv, atol=1e-9)
     assert ma.centroid_uv[0] == pytest.approx(102.5, abs=0.05)  # not pulled to the right
+
+
+@pytest.mark.parametrize("corner", ["top-left", "bottom-right"])
+def test_blobs_at_the_image_border_and_with_dark_members_equal_the_reference(corner):
+    """Random ragged blobs cut by the image border (their dilated box is clipped), some
+    members below the background (weight 0): the compiled centroid equals the reference."""
+    from tofpose.extraction import Blob
+
+    cam = CameraModel()
+    h, w = cam.shape
+    rng = np.random.default_rng(5)
+    d = np.full(cam.shape, 2500.0, np.float32)
+    for _ in range(20):
+        g = rng.normal(60.0, 40.0, cam.shape).astype(np.float32)
+        member = np.zeros(cam.shape, bool)
+        r0, c0 = (0, 0) if corner == "top-left" else (h - 9, w - 11)
+        member[r0 : r0 + 9, c0 : c0 + 11] = rng.random((9, 11)) < 0.6
+        pixels = np.flatnonzero(member)
+        rows, cols = np.divmod(pixels, w)
+        bbox = (int(cols.min()), int(rows.min()), int(np.ptp(cols)) + 1, int(np.ptp(rows)) + 1)
+        blob = Blob(pixels=pixels, area_px=len(pixels), bbox=bbox)
+        (m,) = measure_blobs([blob], g, d, cam, 50.0)
+        uv, _ = _reference(blob, g, d, cam, 50.0)
+        np.testing.assert_allclose(m.centroid_uv, uv, atol=1e-9)
