@@ -15,7 +15,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from tofpose.kernels.ellipses import ellipse_rms_px
+from tofpose.kernels.ellipses import arc_points, ellipse_rms_px
 
 Ellipse = tuple[tuple[float, float], tuple[float, float], float]
 
@@ -69,34 +69,9 @@ def split_arcs(
     n = len(contour)
     if n < 2 * min_points:
         return [contour] if n >= min_points else []
-    pts = contour.astype(np.float64)
-    r = int(np.ceil(3 * smooth_sigma))
-    k = np.exp(-0.5 * (np.arange(-r, r + 1) / smooth_sigma) ** 2)
-    k /= k.sum()
-    wrap = np.vstack((pts[-r:], pts, pts[:r]))
-    sm = np.column_stack([np.convolve(wrap[:, i], k, "valid") for i in range(2)])
-    lag = 2
-    tangent = np.roll(sm, -lag, axis=0) - sm
-    ang = np.arctan2(tangent[:, 1], tangent[:, 0])
-    xi = np.degrees(np.angle(np.exp(1j * (ang - np.roll(ang, lag)))))
-    dominant = np.sign(np.sum(xi)) or 1.0
-    concave = dominant * xi < -2.0
-    breaks = (np.abs(xi) > angle_deg) | concave
-    if not np.any(breaks):
-        return [contour]
-    start = int(np.flatnonzero(breaks)[0])
-    arcs: list[np.ndarray] = []
-    current: list[int] = []
-    for j in np.roll(np.arange(n), -start):
-        if breaks[j]:
-            if len(current) >= min_points:
-                arcs.append(contour[current])
-            current = []
-        else:
-            current.append(int(j))
-    if len(current) >= min_points:
-        arcs.append(contour[current])
-    return arcs
+    index, starts = arc_points(np.ascontiguousarray(contour, np.float64), float(angle_deg),
+                               int(min_points), float(smooth_sigma))  # fmt: skip
+    return [contour[index[starts[a] : starts[a + 1]]] for a in range(len(starts) - 1)]
 
 
 def ellipses_from_arcs(
