@@ -240,12 +240,12 @@ def check_frame(
         raise FrameError(
             f"distance image has shape {distance_mm.shape}, camera expects {camera.shape}"
         )
-    if not (np.issubdtype(gray.dtype, np.integer) or np.issubdtype(gray.dtype, np.floating)):
+    if gray.dtype.kind not in "iuf":  # signed, unsigned integer or floating
         raise FrameError(f"gray image must be integer counts, got dtype {gray.dtype}")
-    if not np.issubdtype(distance_mm.dtype, np.floating):
+    if distance_mm.dtype.kind != "f":
         raise FrameError(f"distance image must be float mm, got dtype {distance_mm.dtype}")
     g = gray.astype(np.float32)
-    if np.issubdtype(gray.dtype, np.floating) and not np.all(np.isfinite(g)):
+    if gray.dtype.kind == "f" and not np.isfinite(g).all():
         g = np.nan_to_num(g, nan=0.0, posinf=0.0, neginf=0.0)
     return g, clean_distance(distance_mm)
 

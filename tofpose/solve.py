@@ -94,7 +94,9 @@ class MatchedObservations:
         return self.subset(np.arange(len(self)) != i)
 
     def subset(self, keep: np.ndarray) -> MatchedObservations:
-        """The rows where the (m,) bool mask ``keep`` is true."""
+        """The rows where the (m,) bool mask ``keep`` is true (itself when all are)."""
+        if keep.all():
+            return self
         return MatchedObservations(**{
             name: getattr(self, name)[keep] for name in self.__dataclass_fields__
         })  # fmt: skip
@@ -281,8 +283,9 @@ class PoseSolver:
 
     def complete(self, y, k_idx, i_idx, R, t, tol_mm):
         """Add unmatched blobs that sit on a predicted unmatched reflector (ours)."""
-        free_k = [k for k in range(len(y)) if k not in set(k_idx.tolist())]
-        free_i = [i for i in range(len(self._xyz)) if i not in set(i_idx.tolist())]
+        used_k, used_i = set(k_idx.tolist()), set(i_idx.tolist())
+        free_k = [k for k in range(len(y)) if k not in used_k]
+        free_i = [i for i in range(len(self._xyz)) if i not in used_i]
         if not free_k or not free_i:
             return k_idx, i_idx
         pred = self._xyz[free_i] @ R.T + t
