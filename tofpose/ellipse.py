@@ -12,6 +12,8 @@ arcs support (the "supplement" of §3.3).
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 
@@ -22,10 +24,12 @@ Ellipse = tuple[tuple[float, float], tuple[float, float], float]
 
 def blob_contour(mask: np.ndarray) -> np.ndarray:
     """Outer boundary of the largest region of a binary mask, shape (P, 2) as (u, v)."""
-    contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    contours, _ = cv2.findContours(
+        np.asarray(mask, np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE
+    )
     if not contours:
         return np.empty((0, 2), np.float32)
-    c = max(contours, key=len)
+    c = contours[0] if len(contours) == 1 else max(contours, key=len)
     return c.reshape(-1, 2).astype(np.float32)
 
 
@@ -38,7 +42,7 @@ def fit_ellipse(points: np.ndarray) -> Ellipse | None:
     except cv2.error:
         return None
     (cx, cy), (a1, a2), ang = e
-    if not (np.isfinite([cx, cy, a1, a2]).all() and a1 > 0 and a2 > 0):
+    if not (math.isfinite(cx + cy + a1 + a2) and a1 > 0 and a2 > 0):
         return None
     return (float(cx), float(cy)), (float(a1), float(a2)), float(ang)
 

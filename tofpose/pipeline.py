@@ -645,13 +645,13 @@ class PosePipeline:
                 mask, x0, y0 = _blob_mask(b, w)
                 pts = blob_contour(mask)
                 if len(pts) >= cfg.ellipse_min_points:
-                    e = fit_ellipse(pts + [x0, y0])
+                    pts += (x0, y0)  # image coordinates (whole pixels, exact in float32)
+                    e = fit_ellipse(pts)
                     if e is not None:
-                        b = replace(
-                            b, ellipse=e, ellipse_residual_px=ellipse_residual_px(e, pts + [x0, y0])
-                        )
-                        if b.ellipse_residual_px > cfg.ellipse_max_residual_px:
+                        rms_px = ellipse_residual_px(e, pts)
+                        if rms_px > cfg.ellipse_max_residual_px:
                             continue
+                        b = replace(b, ellipse=e, ellipse_residual_px=rms_px)
             out.append(b)
         if len(out) >= len(self.catalog) or not oversize:
             return out
