@@ -133,6 +133,22 @@ class Blob:
     ellipse_residual_px: float = float("nan")
     source: str = "morphology"
 
+    def with_values(self, **changes) -> Blob:
+        """A new blob with the named fields changed: ``dataclasses.replace`` for the
+        per-frame path (a copy of the field values, ~5x cheaper; the class has no
+        ``__post_init__``, so nothing that ``replace`` would run is skipped)."""
+        unknown = changes.keys() - _BLOB_FIELDS
+        if unknown:
+            raise TypeError(f"Blob has no field(s) {sorted(unknown)}")
+        new = object.__new__(Blob)
+        fields_of_new = new.__dict__
+        fields_of_new.update(self.__dict__)
+        fields_of_new.update(changes)
+        return new
+
+
+_BLOB_FIELDS = frozenset(Blob.__dataclass_fields__)
+
 
 def pixel_lists(blobs: list[Blob]) -> tuple[np.ndarray, np.ndarray]:
     """The blobs' pixels as the kernels take them: flat (P,) int64 flat indices, blob j's
@@ -561,7 +577,8 @@ def measure_blobs(
         flat, starts, np.asarray(distance_mm, np.float32).reshape(-1), bearings,
         camera.bearings(uv),
     )  # fmt: skip
-    return [replace(b, centroid_uv=uv[j], distance_mm=float(rho[j])) for j, b in enumerate(blobs)]
+    return [b.with_values(centroid_uv=uv[j], distance_mm=float(rho[j]))
+            for j, b in enumerate(blobs)]  # fmt: skip
 
 
 def disc_image_centre_offsets_px(

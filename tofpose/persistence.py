@@ -11,7 +11,7 @@ combined, and a moving scene degrades gracefully to single-frame measurement.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -95,7 +95,7 @@ class Persistence:
             np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3)),
         )  # fmt: skip
         self.commit(cur, flat, gray, distance, n_used, motion)
-        kept = [replace(b, centroid_uv=uv[j], distance_mm=float(rho[j]))
+        kept = [b.with_values(centroid_uv=uv[j], distance_mm=float(rho[j]))
                 for j, b in enumerate(blobs) if keep[j]]  # fmt: skip
         return kept, mean_gray, med_dist, PersistenceInfo(1 + n_used, motion,
                                                           len(blobs) - len(kept))  # fmt: skip

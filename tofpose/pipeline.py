@@ -387,7 +387,7 @@ class PosePipeline:
         timer.lap("ellipses")
         # ellipse-supplemented blobs have no moment centroid yet: the ellipse's centre
         blobs = [
-            replace(b, centroid_uv=np.array(b.ellipse[0]))
+            b.with_values(centroid_uv=np.array(b.ellipse[0]))
             if not np.isfinite(b.centroid_uv).all() and b.ellipse is not None
             else b
             for b in blobs
@@ -579,7 +579,7 @@ class PosePipeline:
         rho = np.array([b.distance_mm for b in blobs], float)
         out = corrected_ranges(rho, flat, starts, np.asarray(gray, np.float32),
                                *self._correction_args)  # fmt: skip
-        return [replace(b, distance_mm=float(r)) for b, r in zip(blobs, out, strict=True)]
+        return [b.with_values(distance_mm=float(r)) for b, r in zip(blobs, out, strict=True)]
 
     def _size_hint(self, wrong_size) -> str:
         """A clause naming bright blobs the catalog's sizes ruled out, or ''."""
@@ -651,7 +651,7 @@ class PosePipeline:
                         rms_px = ellipse_residual_px(e, pts)
                         if rms_px > cfg.ellipse_max_residual_px:
                             continue
-                        b = replace(b, ellipse=e, ellipse_residual_px=rms_px)
+                        b = b.with_values(ellipse=e, ellipse_residual_px=rms_px)
             out.append(b)
         if len(out) >= len(self.catalog) or not oversize:
             return out

@@ -202,3 +202,26 @@ def test_shape_gate(n, ecc, ok):
     from tofpose.extraction import shape_gate
 
     assert shape_gate(n, ecc, 0.5) is ok
+
+
+def test_blob_with_values_is_dataclasses_replace():
+    """The per-frame copy with changed fields gives what ``dataclasses.replace`` gives,
+    leaves the original as it was, and refuses a field Blob does not have."""
+    from dataclasses import fields, replace
+
+    from tofpose.extraction import Blob
+
+    b = Blob(pixels=np.arange(5), area_px=5, bbox=(1, 2, 3, 4), peak_counts=900.0,
+             ellipse=((1.0, 2.0), (3.0, 2.5), 10.0), source="ellipse")  # fmt: skip
+    changes = {"centroid_uv": np.array([3.5, 4.5]), "distance_mm": 1234.5}
+    got, want = b.with_values(**changes), replace(b, **changes)
+    assert type(got) is Blob and got is not b
+    for f in fields(Blob):
+        a, w = getattr(got, f.name), getattr(want, f.name)
+        same = np.array_equal(a, w, equal_nan=True) if isinstance(w, np.ndarray) else a == w
+        assert same or (a != a and w != w), f.name  # NaN floats are the same NaN
+    assert np.isnan(b.distance_mm) and np.isnan(b.centroid_uv).all()  # unchanged
+    with pytest.raises(TypeError, match="distance"):
+        b.with_values(distance=3.0)
+    with pytest.raises(AttributeError):  # still frozen
+        got.distance_mm = 1.0
