@@ -30,6 +30,7 @@ from scipy.optimize import linear_sum_assignment
 
 from tofpose.kernels.annealing import anneal_assignment, pair_potentials
 from tofpose.kernels.pose import svd_pose
+from tofpose.kernels.residual_check import prune_pairs
 from tofpose.robust import median_1d
 
 
@@ -61,7 +62,8 @@ class MatchingConfig:
 
     def alpha_for(self, observed_mm: np.ndarray) -> float:
         """alpha (mm) at the median range of observed points (gamma, 3)."""
-        rng_m = median_1d(np.linalg.norm(observed_mm, axis=1)) / 1000 if len(observed_mm) else 0.0
+        y = np.asarray(observed_mm, float)
+        rng_m = median_1d(np.sqrt((y * y).sum(axis=1))) / 1000 if len(y) else 0.0
         return self.alpha_mm + self.alpha_per_m * rng_m
 
     def pair_tolerance_mm(self, alpha_mm: float, weights: np.ndarray) -> np.ndarray:
@@ -146,14 +148,15 @@ def one_to_one(A: np.ndarray) -> tuple[np.ndarray, list[int]]:
     e = e1 - 1
     big = 1e6
     cost = np.full((g, e + g), big)
-    with np.errstate(divide="ignore"):
-        logA = -np.log(np.maximum(A, 1e-300))
+    logA = -np.log(np.maximum(A, 1e-300))  # finite: A is clipped away from 0
     cost[:, :e] = logA[:, 1:]
-    cost[np.arange(g), e + np.arange(g)] = logA[:, 0]
+    np.fill_diagonal(cost[:, e:], logA[:, 0])
     rows, cols = linear_sum_assignment(cost)
-    pairs = [(r, c) for r, c in zip(rows, cols, strict=True) if c < e and cost[r, c] < big]
-    unmatched = sorted(set(range(g)) - {p[0] for p in pairs})
-    return np.array(pairs, int).reshape(-1, 2), unmatched
+    real = (cols < e) & (cost[rows, cols] < big)
+    matched = np.zeros(g, bool)
+    matched[rows[real]] = True
+    pairs = np.column_stack((rows[real], cols[real])).astype(int)
+    return pairs.reshape(-1, 2), np.flatnonzero(~matched).tolist()
 
 
 def match_reflectors(
@@ -214,30 +217,26 @@ def rigid_residual_check(
 ) -> tuple[np.ndarray, list[int], str]:
     """Drop the worst pair until every rigid-fit residual is within its tolerance.
 
-    ``tol_mm`` is a scalar or one tolerance per observed reflector (gamma,).
+    ``tol_mm`` is a scalar or one tolerance per observed reflector (gamma,). Each round
+    fits the kept pairs (weighted SVD, Eqs. 40-50) and drops the pair with the largest
+    residual / tolerance (``kernels.residual_check.prune_pairs``).
 
     Returns (pairs kept (m, 2), observed indices rejected, reason or "").
     """
-    rejected: list[int] = []
-    pairs = pairs.copy()
     observed_mm = np.ascontiguousarray(observed_mm, dtype=float)
-    catalog_mm = np.ascontiguousarray(catalog_mm, dtype=float)
-    weights = np.ascontiguousarray(weights, dtype=float)
-    tol_all = np.broadcast_to(np.asarray(tol_mm, float), (len(observed_mm),))
-    while len(pairs) >= min_matches:
-        y = observed_mm[pairs[:, 0]]
-        x = catalog_mm[pairs[:, 1]]
-        R, t = svd_pose(x, y, weights[pairs[:, 0]])  # Eqs. 40-50
-        res = np.linalg.norm(y - (x @ R.T + t), axis=1)
-        tol = tol_all[pairs[:, 0]]
-        worst = int(np.argmax(res / tol))
-        if res[worst] <= tol[worst]:
-            return pairs, rejected, ""
-        rejected.append(int(pairs[worst, 0]))
-        pairs = np.delete(pairs, worst, axis=0)
+    tol_all = np.asarray(tol_mm, float)
+    if tol_all.ndim == 0:
+        tol_all = np.full(len(observed_mm), float(tol_all))
+    kept, rejected, ok = prune_pairs(
+        observed_mm, np.ascontiguousarray(catalog_mm, dtype=float),
+        np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2),
+        np.ascontiguousarray(weights, dtype=float), np.ascontiguousarray(tol_all), min_matches,
+    )  # fmt: skip
+    if ok:
+        return kept, rejected.tolist(), ""
     return (
-        np.empty((0, 2), int),
-        rejected + [int(k) for k in pairs[:, 0]],
+        kept,
+        rejected.tolist(),
         f"no rigidly consistent match of >= {min_matches} reflectors "
         f"(residual tolerance up to {np.max(tol_mm):.1f} mm)",
     )
