@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from tofpose.kernels.annealing import anneal_assignment, pair_potentials
+from tofpose.kernels.annealing import anneal_assignment, pair_potentials, size_mismatch
 from tofpose.kernels.pose import svd_pose
 from tofpose.kernels.residual_check import prune_pairs
 from tofpose.robust import median_1d
@@ -122,12 +122,10 @@ def size_unary(
     """
     if observed_diameter_mm is None:
         return None
-    d = np.asarray(observed_diameter_mm, float)[:, None]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = (np.log(d / catalog_diameter_mm[None]) / np.log(1.6)) ** 2
-    u = np.minimum(u, 4.0)
-    u[~np.isfinite(u)] = 0.0
-    return u
+    return size_mismatch(
+        np.ascontiguousarray(observed_diameter_mm, float).reshape(-1),
+        np.ascontiguousarray(catalog_diameter_mm, float).reshape(-1),
+    )
 
 
 def anneal(

@@ -81,3 +81,21 @@ def pair_potentials(observed, catalog, alpha, clip):
                         r = abs(o[k, m] - c[i, j])
                         P[k, i, m, j] = min(r * r, cap) - a2
     return P
+
+
+@jit
+def size_mismatch(observed_diameter, catalog_diameter):
+    """Unary size term (``matching.size_unary``): (ln(d_obs / D_i) / ln 1.6)^2 capped at
+    4, and 0 where it is undefined (a NaN diameter); (gamma,), (eta,) -> (gamma, eta)."""
+    g, e = observed_diameter.shape[0], catalog_diameter.shape[0]
+    out = np.empty((g, e))
+    ln16 = np.log(1.6)
+    for k in range(g):
+        for i in range(e):
+            v = (np.log(observed_diameter[k] / catalog_diameter[i]) / ln16) ** 2
+            if v != v:  # NaN: unknown
+                v = 0.0
+            elif v > 4.0:  # also +inf, a zero or infinite diameter
+                v = 4.0
+            out[k, i] = v
+    return out

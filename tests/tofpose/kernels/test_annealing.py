@@ -60,3 +60,17 @@ def test_pair_potentials_equal_the_broadcast_equation(clip):
     observed, catalog = rng.uniform(-400, 400, (7, 3)), rng.uniform(-300, 300, (8, 3))
     got = pair_potentials(observed, catalog, 12.5, clip)
     np.testing.assert_array_equal(got, _potentials_numpy(observed, catalog, 12.5, clip))
+
+
+def test_size_term_equals_the_numpy_statement_and_its_special_cases():
+    """``matching.size_unary`` (compiled) against (ln(d / D) / ln 1.6)^2 capped at 4,
+    undefined -> 0; NumPy's vectorised log may differ from libm's by one ulp."""
+    from tofpose.matching import size_unary
+
+    rng = np.random.default_rng(0)
+    catalog = np.array([35.0, 50.0, 80.0, 20.0])
+    observed = rng.uniform(5.0, 150.0, 200)
+    want = np.minimum((np.log(observed[:, None] / catalog[None]) / np.log(1.6)) ** 2, 4.0)
+    np.testing.assert_allclose(size_unary(observed, catalog), want, rtol=1e-14, atol=1e-15)
+    special = size_unary(np.array([np.nan, 0.0, np.inf, 56.0, 35.0 * 1.6**3]), catalog[:1])
+    np.testing.assert_allclose(special[:, 0], [0.0, 4.0, 4.0, 1.0, 4.0], rtol=1e-12)
