@@ -4,8 +4,10 @@ paper's LOS, Eqs. 51-52), the outlier step, and verification against the frame.
 
 ``PoseSolver.solve`` takes the matched pairs and the frame's ``Measurements`` and returns
 a ``Solution`` or ``Rejected``. The matched reflectors travel as one frozen
-``MatchedObservations`` record (``without(i)`` drops one). The fit, the systematic range
-sigma and the outlier loop run as one compiled call (``tofpose.kernels.pose``).
+``MatchedObservations`` record (``without(i)`` drops one). Everything up to the
+verification (SVD, completion, bias correction, the fit, the systematic range sigma and
+the outlier loop) runs as one compiled call (``tofpose.kernels.solve``), the one the
+tracking frame calls too.
 """
 
 from __future__ import annotations
@@ -20,15 +22,13 @@ from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.extraction import Blob
 from tofpose.geometry import RigidTransform
-from tofpose.kernels.perspective import disc_centre_offsets
 from tofpose.kernels.pose import (
     REFINE_LOS,
     REFINE_ML,
     REFINE_NONE,
-    fit_with_outliers,
     range_bias_covariance,
-    svd_pose,
 )
+from tofpose.kernels.solve import solve_pairs
 from tofpose.pose import MEDIAN_CHI2_3DOF, STEP_SIGMA2, MLResult
 
 _REFINEMENT = {"none": REFINE_NONE, "ml": REFINE_ML, "los": REFINE_LOS}
@@ -169,19 +169,22 @@ class PoseSolver:
         reflector is predicted from a fit without it, and the one predicted worst goes
         if it is off by more than ``outlier_sigma`` (from 5 reflectors on: a fit of 3
         cannot single out the bad one of 4)."""
-        cfg = self.config
-        y, w = meas.y_mm, meas.weights
-        k_idx, i_idx = pairs[:, 0], pairs[:, 1]
-        R, t = svd_pose(self._xyz[i_idx], y[k_idx], w[k_idx])
-        k_idx, i_idx = self.complete(y, k_idx, i_idx, R, t, alpha_mm * cfg.matching.residual_factor)
-        R, t = svd_pose(self._xyz[i_idx], y[k_idx], w[k_idx])
-        obs = self.observations(meas, k_idx, i_idx, R, t)
-        kept, R, t, iterations, cov, chi2, norms, sr = fit_with_outliers(
-            obs.x_mm, obs.bearings, obs.range_mm, obs.y_mm, obs.sigma_range_mm,
-            obs.sigma_bearing_rad, _REFINEMENT[cfg.refinement], cfg.los_tolerance,
-            STEP_SIGMA2, cfg.adapt_range_sigma, cfg.max_systematic_range_sigma_mm,
-            MEDIAN_CHI2_3DOF, cfg.reject_outliers, cfg.matching.min_matches,
-            cfg.outlier_sigma, cfg.outlier_chi2_per_dof,
+        cfg, cam = self.config, self.camera
+        (k_idx, i_idx, uv, e, y, kept, R, t, iterations, cov, chi2, norms, sr) = solve_pairs(
+            meas.y_mm, meas.weights, meas.uv_px, meas.range_mm, meas.sigma_px,
+            meas.sigma_range_mm, np.ascontiguousarray(pairs[:, 0]),
+            np.ascontiguousarray(pairs[:, 1]), self._xyz, self._d / 2, self._K, cam.fx, cam.fy,
+            cam.cx, cam.cy, cam.dist_array, cfg.correct_perspective_bias,
+            alpha_mm * cfg.matching.residual_factor, _REFINEMENT[cfg.refinement],
+            cfg.los_tolerance, STEP_SIGMA2, cfg.adapt_range_sigma,
+            cfg.max_systematic_range_sigma_mm, MEDIAN_CHI2_3DOF, cfg.reject_outliers,
+            cfg.matching.min_matches, cfg.outlier_sigma, cfg.outlier_chi2_per_dof,
+        )  # fmt: skip
+        obs = MatchedObservations(
+            k_idx=k_idx, i_idx=i_idx, x_mm=self._xyz[i_idx], uv_px=uv, bearings=e,
+            range_mm=meas.range_mm[k_idx], y_mm=y,
+            sigma_bearing_rad=meas.sigma_px[k_idx] / cam.fx,
+            sigma_range_mm=meas.sigma_range_mm[k_idx],
         )  # fmt: skip
         return self.conclude(obs.subset(kept), R, t, iterations, cov, chi2, norms, sr, active)
 
@@ -217,21 +220,6 @@ class PoseSolver:
         if c is not None and all(c.covers(float(f(range_mm))) for f in (np.min, np.max)):
             return cfg.calibrated_range_bias_sigma_mm
         return cfg.range_bias_sigma_mm
-
-    def observations(self, meas: Measurements, k_idx, i_idx, R, t) -> MatchedObservations:
-        """The matched rows of ``meas``, centroids corrected for the perspective bias of
-        the discs at the pose (R, t) (when configured) and back-projected again."""
-        x = self._xyz[i_idx]
-        uv = meas.uv_px[k_idx].copy()
-        if self.config.correct_perspective_bias:
-            uv -= disc_centre_offsets(self._K, x @ R.T + t, R[:, 2].copy(), self._d[i_idx] / 2)
-        e = self.camera.bearings(uv)
-        rho = meas.range_mm[k_idx]
-        return MatchedObservations(
-            k_idx=k_idx, i_idx=i_idx, x_mm=x, uv_px=uv, bearings=e, range_mm=rho,
-            y_mm=e * rho[:, None], sigma_bearing_rad=meas.sigma_px[k_idx] / self.camera.fx,
-            sigma_range_mm=meas.sigma_range_mm[k_idx],
-        )  # fmt: skip
 
     # ------------------------------------------------------------------------------------
     def view_cosine(self, R: np.ndarray, t: np.ndarray) -> float:
@@ -280,21 +268,3 @@ class PoseSolver:
                     f"({u:.0f}, {v:.0f}) px but the frame is dark there"
                 )
         return ""
-
-    def complete(self, y, k_idx, i_idx, R, t, tol_mm):
-        """Add unmatched blobs that sit on a predicted unmatched reflector (ours)."""
-        used_k, used_i = set(k_idx.tolist()), set(i_idx.tolist())
-        free_k = [k for k in range(len(y)) if k not in used_k]
-        free_i = [i for i in range(len(self._xyz)) if i not in used_i]
-        if not free_k or not free_i:
-            return k_idx, i_idx
-        pred = self._xyz[free_i] @ R.T + t
-        dist = np.linalg.norm(y[free_k][:, None] - pred[None], axis=-1)
-        ks, is_ = list(k_idx), list(i_idx)
-        while dist.size and dist.min() < tol_mm:
-            a, b = np.unravel_index(np.argmin(dist), dist.shape)
-            ks.append(free_k[a])
-            is_.append(free_i[b])
-            dist[a, :] = np.inf
-            dist[:, b] = np.inf
-        return np.array(ks), np.array(is_)

@@ -6,10 +6,10 @@ to).
 
 The steps and their order are those of ``PosePipeline._process_tracking`` with
 ``Persistence.apply``, ``extraction.measure_blobs``, the range correction,
-``uncertainty.measurement_sigmas``
-and ``PoseSolver.solve`` (whose ``complete`` adds nothing when every blob is matched to
-its window). The persistence history is read, not changed: the caller commits the
-frame to it only when tracking succeeds.
+``uncertainty.measurement_sigmas`` and ``PoseSolver.solve``, whose compiled §5
+(``kernels.solve.solve_pairs``) it calls itself (its completion adds nothing when every
+blob is matched to its window). The persistence history is read, not changed: the
+caller commits the frame to it only when tracking succeeds.
 """
 
 from __future__ import annotations
@@ -19,10 +19,9 @@ import numpy as np
 from tofpose.kernels import jit
 from tofpose.kernels.camera import bearings
 from tofpose.kernels.measure import persist_and_measure
-from tofpose.kernels.perspective import disc_centre_offsets
-from tofpose.kernels.pose import fit_with_outliers, svd_pose
 from tofpose.kernels.range_correction import corrected_ranges
 from tofpose.kernels.sigmas import blob_sigmas
+from tofpose.kernels.solve import solve_pairs
 from tofpose.kernels.tracking import FOUND, any_shared, search_windows
 
 #: outcome codes of ``track_frame`` (anything but TRACKED: fall back to acquisition)
@@ -115,22 +114,11 @@ def track_frame(
             y[j] = e[j] * rho[j]
             wts[j] = 1.0 / (sr[j] ** 2 + (rho[j] * sp[j] / fx) ** 2)
 
-        # §5: weighted SVD on the known correspondences, perspective-bias correction, fit
-        x = np.empty((n, 3))
-        r_disc = np.empty(n)
-        for j in range(n):
-            x[j] = xyz[cat_idx[j]]
-            r_disc[j] = radii[cat_idx[j]]
-        R, t = svd_pose(x, y, wts)
-        uv_obs = uv.copy()
-        if correct_perspective:
-            uv_obs -= disc_centre_offsets(K, x @ R.T + t, R[:, 2].copy(), r_disc)
-        e_obs = bearings(uv_obs, fx, fy, cx, cy, dist)
-        for j in range(n):
-            y_obs[j] = e_obs[j] * rho[j]
-        kept, R, t, its, cov, chi2, norms, sr_fit = fit_with_outliers(
-            x, e_obs, rho, y_obs, sr, sp / fx, refinement, los_tol, step_sigma2, adapt,
-            max_sys, median_chi2, reject, min_matches, outlier_sigma, chi2_per_dof,
+        # §5 on the known correspondences (every blob matched: nothing to complete)
+        (_, _, uv_obs, e_obs, y_obs, kept, R, t, its, cov, chi2, norms, sr_fit) = solve_pairs(
+            y, wts, uv, rho, sp, sr, np.arange(n), cat_idx, xyz, radii, K, fx, fy, cx, cy,
+            dist, correct_perspective, 0.0, refinement, los_tol, step_sigma2, adapt, max_sys,
+            median_chi2, reject, min_matches, outlier_sigma, chi2_per_dof,
         )  # fmt: skip
         if not kept.all():
             code = OUTLIER
