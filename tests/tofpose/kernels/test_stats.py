@@ -1,0 +1,39 @@
+"""The kernels' in-place selection and median against NumPy, on the inputs that break
+quickselects: ties, constant, sorted and reversed arrays, both float widths."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tofpose.kernels.stats import median_inplace, select_kth
+
+
+def _arrays(rng, dtype):
+    for n in (1, 2, 3, 4, 5, 17, 256, 1701, 4096):
+        noisy = rng.normal(2000.0, 5.0, n).astype(dtype)
+        yield noisy
+        yield np.round(noisy)  # many ties
+        yield np.full(n, 3.0, dtype)
+        yield np.sort(noisy)
+        yield np.sort(noisy)[::-1].copy()
+        yield np.tile(np.array([1.0, 2.0], dtype), n)[:n]  # two values alternating
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_median_is_numpy_median_exactly(dtype):
+    rng = np.random.default_rng(0)
+    for v in _arrays(rng, dtype):
+        assert median_inplace(v.copy()) == float(np.median(v))  # bit for bit
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_select_kth_partitions_around_the_kth_value(dtype):
+    rng = np.random.default_rng(1)
+    for v in _arrays(rng, dtype):
+        for k in {0, len(v) // 2, len(v) - 1, int(rng.integers(0, len(v)))}:
+            w = v.copy()
+            x = select_kth(w, k)
+            assert x == np.sort(v)[k]
+            assert (w[:k] <= x).all() and (w[k + 1 :] >= x).all()
+            np.testing.assert_array_equal(np.sort(w), np.sort(v))  # a permutation
