@@ -22,10 +22,11 @@ from tofpose.kernels.ellipses import arc_points, ellipse_rms_px
 Ellipse = tuple[tuple[float, float], tuple[float, float], float]
 
 
-def blob_contour(mask: np.ndarray) -> np.ndarray:
-    """Outer boundary of the largest region of a binary mask, shape (P, 2) as (u, v)."""
+def blob_contour(mask: np.ndarray, origin: tuple[int, int] = (0, 0)) -> np.ndarray:
+    """Outer boundary of the largest region of a binary mask, shape (P, 2) float32 as
+    (u, v), shifted by ``origin`` (the mask's top-left pixel in the image)."""
     contours, _ = cv2.findContours(
-        np.asarray(mask, np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE
+        np.asarray(mask, np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE, offset=origin
     )
     if not contours:
         return np.empty((0, 2), np.float32)
@@ -38,7 +39,7 @@ def fit_ellipse(points: np.ndarray) -> Ellipse | None:
     if len(points) < 5:
         return None
     try:
-        e = cv2.fitEllipseDirect(points.astype(np.float32).reshape(-1, 1, 2))
+        e = cv2.fitEllipseDirect(np.asarray(points, np.float32).reshape(-1, 1, 2))
     except cv2.error:
         return None
     (cx, cy), (a1, a2), ang = e
@@ -54,7 +55,8 @@ def ellipse_residual_px(ellipse: Ellipse, points: np.ndarray) -> float:
     the centre, exact for circles and accurate for moderate eccentricity.
     """
     (cx, cy), (a1, a2), ang = ellipse
-    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+    pts = points if points.dtype == np.float32 else np.asarray(points, np.float64)
+    pts = np.ascontiguousarray(pts).reshape(-1, 2)  # float32 exact in the float64 sums
     return float(ellipse_rms_px(float(cx), float(cy), float(a1), float(a2), float(ang), pts))
 
 

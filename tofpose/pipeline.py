@@ -643,9 +643,8 @@ class PosePipeline:
         for b in blobs:
             if b.area_px >= 20:
                 mask, x0, y0 = _blob_mask(b, w)
-                pts = blob_contour(mask)
+                pts = blob_contour(mask, (x0, y0))  # in image coordinates
                 if len(pts) >= cfg.ellipse_min_points:
-                    pts += (x0, y0)  # image coordinates (whole pixels, exact in float32)
                     e = fit_ellipse(pts)
                     if e is not None:
                         rms_px = ellipse_residual_px(e, pts)

@@ -51,3 +51,13 @@ def test_arcs_split_two_merged_discs_into_two_ellipses():
     assert len(centres) == 2
     np.testing.assert_allclose(centres[0], (45, 40), atol=1.0)
     np.testing.assert_allclose(centres[1], (75, 40), atol=1.0)
+
+
+def test_contour_with_an_origin_is_the_contour_shifted():
+    mask = np.zeros((12, 15), np.uint8)
+    mask[3:9, 2:11] = 1
+    mask[5, 12] = 1  # a smaller second region: the larger one is returned
+    plain = blob_contour(mask)
+    shifted = blob_contour(mask, (140, 61))
+    assert shifted.dtype == np.float32 and len(plain) == 2 * (6 + 9) - 4
+    np.testing.assert_array_equal(shifted, plain + [140, 61])
