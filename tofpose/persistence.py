@@ -61,6 +61,15 @@ class Persistence:
     def __init__(self, config: PersistenceConfig | None = None) -> None:
         self.config = config or PersistenceConfig()
         self._history: deque[_Entry] = deque(maxlen=max(self.config.k_frames - 1, 0))
+        self._scratch: tuple[np.ndarray, np.ndarray] | None = None
+
+    def scratch(self, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """The two (H, W) float32 frames the compiled measurement writes I-bar and D-bar
+        into where they are read (``kernels.measure.persist_and_measure``), allocated
+        once per image size and lent to every frame."""
+        if self._scratch is None or self._scratch[0].shape != shape:
+            self._scratch = (np.zeros(shape, np.float32), np.zeros(shape, np.float32))
+        return self._scratch
 
     def reset(self) -> None:
         self._history.clear()
@@ -82,7 +91,9 @@ class Persistence:
         compiled call (``kernels.measure.persist_and_measure``): the kept blobs with
         their centroids (Eq. 19) and ranges (Eq. 20) measured on the combined frames,
         the combined frames (I-bar, D-bar) and what was combined. ``background`` : the
-        frame's background level, counts."""
+        frame's background level, counts. The combined frames are defined where the
+        next steps read them, inside the blobs' boxes grown by 2 px (I-bar) and at the
+        kept blobs' pixels (D-bar), and are reused by the next frame (``scratch``)."""
         cur = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
         flat, starts = pixel_lists(blobs)
         bbox = np.array([b.bbox for b in blobs], np.int64).reshape(-1, 4)
@@ -93,6 +104,7 @@ class Persistence:
             float(cfg.motion_tolerance_px), int(cfg.c_min), float(background), camera.fx,
             camera.fy, camera.cx, camera.cy, camera.dist_array,
             np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3)),
+            *self.scratch(gray.shape),
         )  # fmt: skip
         self.commit(cur, flat, gray, distance, n_used, motion)
         kept = [b.with_values(centroid_uv=uv[j], distance_mm=float(rho[j]))
@@ -187,7 +199,7 @@ class Persistence:
             dropped = len(blobs) - len(kept)
         boxes = np.array([b.bbox for b in blobs], np.int64)
         older = self._padded(gray, [e.gray for e in used])[1:]
-        mean_gray = mean_in_boxes(gray, older, n - 1, boxes)
+        mean_gray = mean_in_boxes(gray, older, n - 1, boxes, gray.copy())
         med_dist = distance.copy()
         if kept:
             kidx, _ = pixel_lists(kept)

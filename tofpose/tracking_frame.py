@@ -94,6 +94,7 @@ class CompiledTracker:
             STEP_SIGMA2, cfg.adapt_range_sigma, cfg.max_systematic_range_sigma_mm,
             MEDIAN_CHI2_3DOF, cfg.reject_outliers, cfg.matching.min_matches,
             cfg.outlier_sigma, cfg.outlier_chi2_per_dof, self._correct, *self._correction,
+            *self._persistence.scratch(g.shape),
         )  # fmt: skip
         if code != TRACKED:
             return None

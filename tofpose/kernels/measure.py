@@ -21,6 +21,7 @@ from tofpose.kernels.persistence import (
 def persist_and_measure(
     gray, distance, flat, starts, bbox, centroids, hist_gray, hist_dist, hist_mask,
     hist_cent, n_hist, tol_px, c_min, background, fx, fy, cx, cy, dist, pixel_bearings,
+    mean_buf, med_buf,
 ):  # fmt: skip
     """The frame's blobs (pixels ``flat[starts[j]:starts[j + 1]]``, boxes (n, 4) (x, y,
     w, h), single-frame centroids (n, 2), NaN allowed) combined with the history (newest
@@ -28,10 +29,16 @@ def persist_and_measure(
 
     Returns n_used (consistent history frames combined), motion (the history was cut),
     keep (n,) bool (counter C >= c_min, or every blob while fewer than c_min frames are
-    combined), mean_gray (H, W) float32 (I-bar inside the boxes grown by 2 px, this frame
-    elsewhere), med_distance (H, W) float32 (D-bar at the kept blobs' pixels), uv (n, 2)
-    and rho (n,) of the kept blobs (NaN for the others): coverage-weighted centroids on
-    I-bar and ranges on D-bar along each centroid's line of sight."""
+    combined), mean_gray (H, W) float32, med_distance (H, W) float32, uv (n, 2) and rho
+    (n,) of the kept blobs (NaN for the others): coverage-weighted centroids on I-bar and
+    ranges on D-bar along each centroid's line of sight.
+
+    With one frame, mean_gray and med_distance are the frame's gray and distance. With
+    more, they are the scratch frames ``mean_buf`` and ``med_buf`` (H, W) float32
+    (``Persistence`` owns them and lends them to every frame: copying two whole frames
+    cost more than the rest of this call at far range), holding I-bar inside the boxes
+    grown by 2 px and D-bar at the kept blobs' pixels, the only places anything reads;
+    elsewhere they hold whatever an earlier frame left there."""
     h, w = gray.shape
     n = starts.shape[0] - 1
     n_used, motion = 0, False
@@ -48,8 +55,8 @@ def persist_and_measure(
     if frames > 1 and n > 0:
         if frames >= c_min:
             keep = counter_medians(hist_mask, n_used, flat, starts, 1) >= c_min
-        mean_gray = mean_in_boxes(gray, hist_gray, n_used, bbox)
-        med_dist = distance.copy()
+        mean_gray = mean_in_boxes(gray, hist_gray, n_used, bbox, mean_buf)
+        med_dist = med_buf
         kidx = np.empty(flat.shape[0], np.int64)
         m = 0
         for j in range(n):

@@ -73,16 +73,16 @@ def consistent(current, previous, tol_px):
 
 
 @jit
-def mean_in_boxes(gray, older, n_older, boxes):
+def mean_in_boxes(gray, older, n_older, boxes, out):
     """I-bar (§3.4) where it is read: ``(gray + sum(older)) / n`` inside each box grown
-    by 2 px, this frame's gray elsewhere, in float32 as NumPy computes it.
+    by 2 px, written into ``out``; the rest of ``out`` is left as it was (pass
+    ``gray.copy()`` for this frame's gray elsewhere), in float32 as NumPy computes it.
 
     gray : (H, W) float32; older : tuple of (H, W) float32 frames, of which the first
     ``n_older`` are used (the tuple has a fixed length per configuration, so that one
-    compiled version serves every history length); boxes : (b, 4) int64 (x, y, w, h).
-    Returns (H, W) float32."""
+    compiled version serves every history length); boxes : (b, 4) int64 (x, y, w, h);
+    out : (H, W) float32. Returns ``out``."""
     h, w = gray.shape
-    out = gray.copy()
     n = np.float32(1 + n_older)
     for j in range(boxes.shape[0]):
         x, y, bw, bh = boxes[j, 0], boxes[j, 1], boxes[j, 2], boxes[j, 3]

@@ -36,6 +36,7 @@ def track_frame(
     floor_px, floor_mm, single_px, split_px, pool_min, median_eff, uncal_mm,
     refinement, los_tol, step_sigma2, adapt, max_sys, median_chi2, reject, min_matches,
     outlier_sigma, chi2_per_dof, correct_range, corr_model, corr_harmonics, corr_offsets,
+    mean_buf, med_buf,
 ):  # fmt: skip
     """One tracking frame (module docstring).
 
@@ -48,7 +49,8 @@ def track_frame(
     pixel_bearings (H * W, 3) : the camera; xyz (N, 3), radii (N,) mm : the catalog; K (3, 3);
     the rest : ``uncertainty`` constants and floors, and the ``fit_with_outliers``
     settings of ``PoseSolver.solve``; correct_range and corr_* : whether to apply the
-    calibrated range correction and its model (``RangeCorrection.kernel_arguments``).
+    calibrated range correction and its model (``RangeCorrection.kernel_arguments``);
+    mean_buf, med_buf : the persistence's scratch frames (``Persistence.scratch``).
 
     Returns (code, n_used, motion, centroids (n, 2) moment centroids, flat, starts,
     uv (n, 2) measured centroids, rho (n,), sigma_px (n,), sigma_range (n,),
@@ -93,7 +95,7 @@ def track_frame(
         n_used, motion, keep, mean_gray, med_dist, uv, rho = persist_and_measure(
             gray, distance, flat, starts, bbox, cent, hist_gray, hist_dist, hist_mask,
             hist_cent, n_hist, tol_px, c_min, background, fx, fy, cx, cy, dist,
-            pixel_bearings,
+            pixel_bearings, mean_buf, med_buf,
         )  # fmt: skip
         if not keep.all():
             code = NOT_PERSISTENT

@@ -40,7 +40,8 @@ def test_means_counts_and_stacks_use_only_the_counted_frames():
     rng = np.random.default_rng(1)
     frames = [rng.uniform(0, 100, (20, 30)).astype(np.float32) for _ in range(4)]
     boxes = np.array([[5, 5, 4, 3]], np.int64)
-    out = mean_in_boxes(frames[0], (frames[1], frames[2], frames[0]), 2, boxes)
+    out = mean_in_boxes(frames[0], (frames[1], frames[2], frames[0]), 2, boxes,
+                        frames[0].copy())  # fmt: skip
     sl = np.s_[3:10, 3:11]
     np.testing.assert_array_equal(out[sl], (frames[0][sl] + (frames[1][sl] + frames[2][sl])) / 3)
     np.testing.assert_array_equal(out[0, :], frames[0][0, :])  # outside the box: this frame
