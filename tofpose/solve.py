@@ -141,7 +141,8 @@ class PoseSolver:
         self.camera = camera
         self.config = config
         self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
-        self._xyz_mean = self._xyz.mean(axis=0)
+        self._xyz_mean_list = self._xyz.mean(axis=0).tolist()
+        self._cos_max_view = math.cos(math.radians(config.max_view_angle_deg))
         self._d = np.ascontiguousarray(catalog.diameters_mm, dtype=float)
         self._K = np.ascontiguousarray(camera.K, dtype=float)
         self._ids = catalog.ids
@@ -223,12 +224,19 @@ class PoseSolver:
 
     # ------------------------------------------------------------------------------------
     def view_cosine(self, R: np.ndarray, t: np.ndarray) -> float:
-        """Cosine between the target normal and the direction to the camera."""
-        to_camera = -(R @ self._xyz_mean + t)
-        return float(R[:, 2] @ to_camera) / math.sqrt(float(to_camera @ to_camera))
+        """Cosine between the target normal and the direction to the camera (scalar
+        arithmetic: this runs on every frame, and NumPy's per-call cost on 3-vectors
+        exceeds the arithmetic)."""
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
+        mx, my, mz = self._xyz_mean_list
+        tx, ty, tz = t.tolist()
+        cx = -(r00 * mx + r01 * my + r02 * mz + tx)  # to the camera, from the target
+        cy = -(r10 * mx + r11 * my + r12 * mz + ty)
+        cz = -(r20 * mx + r21 * my + r22 * mz + tz)
+        return (r02 * cx + r12 * cy + r22 * cz) / math.sqrt(cx * cx + cy * cy + cz * cz)
 
     def faces_camera(self, R: np.ndarray, t: np.ndarray) -> bool:
-        return self.view_cosine(R, t) >= np.cos(np.radians(self.config.max_view_angle_deg))
+        return self.view_cosine(R, t) >= self._cos_max_view
 
     def verify(self, T: RigidTransform, active: np.ndarray | None, matched: set[int]) -> str:
         """Physical consistency of a pose with the frame; empty string when consistent.
@@ -236,16 +244,16 @@ class PoseSolver:
         ``dark_check_max_matches`` reflectors matched) and may be None otherwise."""
         R, t = T.R, T.t_mm
         cos_view = self.view_cosine(R, t)
-        if cos_view < np.cos(np.radians(self.config.max_view_angle_deg)):
+        if cos_view < self._cos_max_view:
             return (
                 f"the target would face away from the camera (view angle "
                 f"{np.degrees(np.arccos(np.clip(cos_view, -1, 1))):.0f} deg)"
             )
-        centres = self._xyz @ R.T + t
-        if centres[:, 2].min() <= 0:
+        if float((self._xyz @ R[2]).min()) + float(t[2]) <= 0:  # the centres' depths
             return "reflectors would be behind the camera"
         if len(matched) > self.config.dark_check_max_matches:
             return ""
+        centres = self._xyz @ R.T + t
         uv = self.camera.project(centres)
         d_px = self.camera.fx * self._d / centres[:, 2]
         h, w = active.shape

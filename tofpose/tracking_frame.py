@@ -64,8 +64,23 @@ class CompiledTracker:
         self._K = np.ascontiguousarray(camera.K, dtype=float)
         self._bearings = np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3))
         self._dist = np.ascontiguousarray(camera.dist_array)
-        self._correct = correction is not None
-        self._correction = correction or (np.zeros(4), np.zeros((0, 2)), np.zeros(0))
+        correct = correction is not None
+        correction = correction or (np.zeros(4), np.zeros((0, 2)), np.zeros(0))
+        pc = config.persistence
+        # the arguments of ``track_frame`` that do not change from frame to frame
+        self._camera_args = (
+            float(pc.motion_tolerance_px), int(pc.c_min), camera.fx, camera.fy, camera.cx,
+            camera.cy, self._dist, self._bearings, self._xyz, self._radii, self._K,
+            config.correct_perspective_bias,
+        )  # fmt: skip
+        self._fit_args = (
+            float(config.centroid_sigma_floor_px), float(config.range_sigma_floor_mm),
+            SINGLE_PIXEL_SIGMA_PX, SPLIT_CENTROID_PX, POOL_MIN_PIXELS, MEDIAN_EFFICIENCY,
+            UNCALIBRATED_RANGE_SIGMA_MM, _REFINEMENT[config.refinement], config.los_tolerance,
+            STEP_SIGMA2, config.adapt_range_sigma, config.max_systematic_range_sigma_mm,
+            MEDIAN_CHI2_3DOF, config.reject_outliers, config.matching.min_matches,
+            config.outlier_sigma, config.outlier_chi2_per_dof, correct, *correction,
+        )  # fmt: skip
 
     def track(self, g: np.ndarray, d: np.ndarray, track: TrackState) -> Tracked | None:
         """One frame; None means "fall back to the acquisition pass" (fewer reflectors to
@@ -73,7 +88,7 @@ class CompiledTracker:
         as an outlier, verification failed or the fit inconsistent), and leaves the
         persistence history as it was."""
         cfg, cam = self.config, self.camera
-        pc, tc = cfg.persistence, cfg.tracking
+        tc = cfg.tracking
         cat_idx, bounds, centres, diameters = camera_windows(
             self._xyz, self._diameters, track.R, track.t_mm, cam.fx, cam.fy, cam.cx, cam.cy,
             self._dist, float(tc.margin_px), float(tc.min_diameter_px), cam.width, cam.height,
@@ -85,16 +100,7 @@ class CompiledTracker:
          e_obs, y_obs, R, t, its, cov, chi2, norms, sr_fit) = track_frame(
             g, d, bounds, centres, diameters, cat_idx, np.float32(track.threshold_counts),
             float(track.background_counts), hist_g, hist_d, hist_m, hist_c, n_hist,
-            float(pc.motion_tolerance_px), int(pc.c_min), cam.fx, cam.fy, cam.cx, cam.cy,
-            self._dist, self._bearings, self._xyz, self._radii, self._K,
-            cfg.correct_perspective_bias,
-            float(cfg.centroid_sigma_floor_px), float(cfg.range_sigma_floor_mm),
-            SINGLE_PIXEL_SIGMA_PX, SPLIT_CENTROID_PX, POOL_MIN_PIXELS, MEDIAN_EFFICIENCY,
-            UNCALIBRATED_RANGE_SIGMA_MM, _REFINEMENT[cfg.refinement], cfg.los_tolerance,
-            STEP_SIGMA2, cfg.adapt_range_sigma, cfg.max_systematic_range_sigma_mm,
-            MEDIAN_CHI2_3DOF, cfg.reject_outliers, cfg.matching.min_matches,
-            cfg.outlier_sigma, cfg.outlier_chi2_per_dof, self._correct, *self._correction,
-            *self._persistence.scratch(g.shape),
+            *self._camera_args, *self._fit_args, *self._persistence.scratch(g.shape),
         )  # fmt: skip
         if code != TRACKED:
             return None
@@ -112,5 +118,5 @@ class CompiledTracker:
         if solved.ml.chi2 > cfg.outlier_chi2_per_dof * max(3 * n - 6, 1):
             return None  # an inconsistent fit: the windows may hold the wrong blobs
         self._persistence.commit(cent, flat, g, d, n_used, motion)
-        meas = Measurements((), np.diff(starts), uv, rho, y, w, sp, sr)
+        meas = Measurements((), starts[1:] - starts[:-1], uv, rho, y, w, sp, sr)
         return Tracked(solved, meas, PersistenceInfo(1 + n_used, motion, 0))
