@@ -567,10 +567,10 @@ def measure_blobs(
     h, w = gray.shape
     flat, starts = pixel_lists(blobs)
     bbox = np.array([b.bbox for b in blobs], np.int64)
-    owner, use_owner = owner_map(flat, starts, bbox, h, w)  # which blob owns each pixel
+    owner, ox, oy, use_owner = owner_map(flat, starts, bbox, h, w)  # whose pixel is it
     uv = blob_centroids(
         flat, starts, bbox, np.asarray(gray, np.float32), float(background),
-        weighting == "coverage", owner, use_owner,
+        weighting == "coverage", owner, ox, oy, use_owner,
     )  # fmt: skip
     bearings = camera.pixel_bearings().reshape(-1, 3)
     rho = blob_ranges(

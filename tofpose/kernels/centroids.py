@@ -13,13 +13,15 @@ from tofpose.kernels.stats import median_inplace
 
 
 @jit
-def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, use_owner):
+def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, owner_x0, owner_y0,
+                   use_owner):  # fmt: skip
     """Centroid (u, v) px of each blob.
 
     flat, starts : blob j's pixels are ``flat[starts[j]:starts[j + 1]]`` (flat indices);
     bbox : (n, 4) int64 (x, y, w, h); gray : (H, W) float32; coverage : coverage weights
-    (else intensity, Eq. 19 as written); owner : (H, W) int32 index of the blob owning
-    each pixel (-1 none), read when ``use_owner``. Returns (n, 2) float64.
+    (else intensity, Eq. 19 as written); owner, owner_x0, owner_y0 : ``owner_map``'s
+    index of the blob owning each pixel (-1 none) and its top-left pixel, read when
+    ``use_owner``. Returns (n, 2) float64.
     """
     h, w = gray.shape
     n = bbox.shape[0]
@@ -51,7 +53,7 @@ def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, use_ow
                 if local_max < 0:
                     continue
                 if use_owner:
-                    o = owner[r + y0, c + x0]
+                    o = owner[r + y0 - owner_y0, c + x0 - owner_x0]
                     if o != -1 and o != j:
                         continue
                 value = max(gray[r + y0, c + x0] - bg, np.float32(0.0))
@@ -71,7 +73,7 @@ def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, use_ow
             for r in range(ph):
                 for c in range(pw):
                     local_max = max(max(row_max[r, c], row_max[r + 1, c]), row_max[r + 2, c])
-                    o = owner[r + y0, c + x0] if use_owner else -1
+                    o = owner[r + y0 - owner_y0, c + x0 - owner_x0] if use_owner else -1
                     if local_max >= 0 and (o == -1 or o == j):
                         sw += 1.0
                         su += c + x0
@@ -113,11 +115,13 @@ def blob_ranges(flat, starts, distance_flat, bearings_flat, centre_bearings):
 
 @jit
 def owner_map(flat, starts, bbox, h, w):
-    """(H, W) int32 index of the blob owning each pixel (-1: none), and whether it is
-    needed: only when two blobs' boxes (n, 4) (x, y, w, h) come within 2 px (the usual
-    case is that they do not, and nothing needs excluding). The ring of a blob must
-    not reach into a neighbour's pixels (markers 7 and 8 split apart touch each
-    other), or that neighbour's light pulls the centroid towards it."""
+    """Index of the blob owning each pixel (-1: none) over the part of the (H, W) image
+    that holds every blob's box grown by 2 px, and whether it is needed: only when two
+    blobs' boxes (n, 4) (x, y, w, h) come within 2 px (the usual case is that they do
+    not, and nothing needs excluding). The ring of a blob must not reach into a
+    neighbour's pixels (markers 7 and 8 split apart touch each other), or that
+    neighbour's light pulls the centroid towards it. Returns owner (h', w') int32, its
+    top-left pixel (x0, y0) in the image, and use_owner."""
     n = bbox.shape[0]
     near = False
     for a in range(n):
@@ -128,9 +132,17 @@ def owner_map(flat, starts, bbox, h, w):
                            and bbox[b, 1] - 2 < bbox[a, 1] + bbox[a, 3] + 2):  # fmt: skip
                 near = True
     if not near:
-        return np.full((1, 1), -1, np.int32), False
-    owner = np.full(h * w, -1, np.int32)
+        return np.full((1, 1), -1, np.int32), 0, 0, False
+    x0, y0, x1, y1 = w, h, 0, 0
+    for j in range(n):
+        x0 = min(x0, max(bbox[j, 0] - 2, 0))
+        y0 = min(y0, max(bbox[j, 1] - 2, 0))
+        x1 = max(x1, min(bbox[j, 0] + bbox[j, 2] + 2, w))
+        y1 = max(y1, min(bbox[j, 1] + bbox[j, 3] + 2, h))
+    owner = np.full((y1 - y0, x1 - x0), -1, np.int32)
+    inv_w = 1.0 / w
     for j in range(n):
         for i in range(starts[j], starts[j + 1]):
-            owner[flat[i]] = j
-    return owner.reshape(h, w), True
+            r, c = row_col(flat[i], w, inv_w)
+            owner[r - y0, c - x0] = j
+    return owner, x0, y0, True

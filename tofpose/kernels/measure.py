@@ -89,9 +89,9 @@ def persist_and_measure(
         j = kept[a]
         k_flat[k_starts[a] : k_starts[a + 1]] = flat[starts[j] : starts[j + 1]]
         k_bbox[a] = bbox[j]
-    owner, use_owner = owner_map(k_flat, k_starts, k_bbox, h, w)
-    k_uv = blob_centroids(k_flat, k_starts, k_bbox, mean_gray, background, True, owner,
-                          use_owner)  # fmt: skip
+    owner, ox, oy, use_owner = owner_map(k_flat, k_starts, k_bbox, h, w)
+    k_uv = blob_centroids(k_flat, k_starts, k_bbox, mean_gray, background, True, owner, ox,
+                          oy, use_owner)  # fmt: skip
     k_rho = blob_ranges(k_flat, k_starts, med_dist.reshape(-1), pixel_bearings,
                         bearings(k_uv, fx, fy, cx, cy, dist))  # fmt: skip
     uv = np.full((n, 2), np.nan)
