@@ -1,6 +1,6 @@
 """Compile (or load from numba's on-disk cache) every pipeline kernel before live frames.
 
-The pipeline's inner loops are compiled on first use (``tofpose.kernels``): ~45 s on a
+The pipeline's inner loops are compiled on first use (``tofpose.kernels``): about a minute on a
 fresh install, ~0.3 s once the cache exists. ``warm_up()`` runs the pipeline over a few
 simulated frames that take every compiled path (acquisition, persistence over the full
 history, tracking in one call with and without a range correction, merged markers split by ellipse

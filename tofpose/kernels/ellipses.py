@@ -24,7 +24,12 @@ def blob_mask(pixels, x, y, bw, bh, width):
 @jit
 def ellipse_rms_px(cx, cy, a1, a2, angle_deg, points):
     """RMS radial distance of points (P, 2) from the ellipse ((cx, cy), (a1, a2), angle):
-    along the ray from the centre, |r_point - r_ellipse(theta)|, exact for circles."""
+    along the ray from the centre, |r_point - r_ellipse(theta)|, exact for circles.
+
+    In the ellipse's axes a point is (x, y) = r (cos theta, sin theta), and the ellipse's
+    radius along that ray is ra rb / sqrt((rb cos theta)^2 + (ra sin theta)^2) =
+    ra rb r / sqrt((rb x)^2 + (ra y)^2): no angle is needed (a point at the centre takes
+    the radius along the first axis, theta = atan2(0, 0) = 0)."""
     t = np.radians(angle_deg)
     ct, st = np.cos(t), np.sin(t)
     ra, rb = a1 / 2, a2 / 2
@@ -34,9 +39,9 @@ def ellipse_rms_px(cx, cy, a1, a2, angle_deg, points):
         du, dv = points[i, 0] - cx, points[i, 1] - cy
         x = du * ct + dv * st
         y = -du * st + dv * ct
-        r = np.hypot(x, y)
-        th = np.arctan2(y, x)
-        r_e = ra * rb / np.sqrt((rb * np.cos(th)) ** 2 + (ra * np.sin(th)) ** 2)
+        r = np.sqrt(x * x + y * y)
+        q = np.sqrt((rb * x) ** 2 + (ra * y) ** 2)
+        r_e = ra * rb * r / q if q > 0 else ra
         s += (r - r_e) ** 2
     return np.sqrt(s / n)
 

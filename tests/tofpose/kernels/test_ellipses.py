@@ -1,11 +1,13 @@
-"""The compiled arc split of §3.3 (``kernels.ellipses.arc_points`` behind
+"""The compiled helpers of §3.3: the arc split (``kernels.ellipses.arc_points`` behind
 ``ellipse.split_arcs``) against the NumPy statement it replaced, on random blob contours:
-one to three overlapping ellipses (merged markers), some with speckle."""
+one to three overlapping ellipses (merged markers), some with speckle; and the RMS
+distance from an ellipse."""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from tofpose.ellipse import blob_contour, split_arcs
 
@@ -61,3 +63,24 @@ def test_arcs_equal_the_numpy_statement_on_random_contours():
                 np.testing.assert_array_equal(a, b)
             n_arcs += len(want)
     assert n_arcs > 1000  # the contours do break into arcs (not one arc each)
+
+
+def test_ellipse_residual_equals_the_angular_statement():
+    """The radius along each point's ray without angles (``ellipse_rms_px``) against
+    r_e(theta) = ra rb / sqrt((rb cos theta)^2 + (ra sin theta)^2), theta = atan2."""
+    from tofpose.kernels.ellipses import ellipse_rms_px
+
+    rng = np.random.default_rng(4)
+    for _ in range(500):
+        cx, cy = rng.uniform(0, 300, 2)
+        a1, a2 = rng.uniform(2, 60, 2)
+        ang = rng.uniform(0, 180)
+        pts = np.column_stack([cx + rng.normal(0, 20, 40), cy + rng.normal(0, 20, 40)])
+        pts[0] = (cx, cy)  # one at the centre: theta = atan2(0, 0) = 0
+        t = np.radians(ang)
+        du, dv = pts[:, 0] - cx, pts[:, 1] - cy
+        x, y = du * np.cos(t) + dv * np.sin(t), -du * np.sin(t) + dv * np.cos(t)
+        theta = np.arctan2(y, x)
+        r_e = (a1 / 2) * (a2 / 2) / np.hypot((a2 / 2) * np.cos(theta), (a1 / 2) * np.sin(theta))
+        want = np.sqrt(np.mean((np.hypot(x, y) - r_e) ** 2))
+        assert ellipse_rms_px(cx, cy, a1, a2, ang, pts) == pytest.approx(want, rel=1e-12)
