@@ -47,3 +47,50 @@ def test_search_windows_takes_the_component_opencv_takes():
         assert peak[j] == 800.0
     tiny = search_windows(gray, bounds[:1], centres[:1], np.array([40.0]), np.float32(400.0), 10.0)
     assert tiny[0][0] == NO_SIZE  # a 40 px disc predicted, only a 10 px one there
+
+
+def test_search_windows_on_random_speckle_and_merging_shapes_equals_opencv():
+    """Components that only join further down (U, comb and diagonal shapes: the run
+    union-find must merge them) among random speckle: the same pick, box and pixels as
+    OpenCV's 8-connected labelling."""
+    rng = np.random.default_rng(7)
+    checked = 0
+    for _ in range(150):
+        gray = rng.uniform(0, 50, (90, 120)).astype(np.float32)
+        gray[rng.random(gray.shape) < 0.08] = 900.0  # speckle
+        v, u = np.mgrid[0:90, 0:120]
+        cu, cv = rng.uniform(30, 90), rng.uniform(25, 65)
+        shape = rng.integers(0, 3)
+        if shape == 0:  # a U: two prongs joined at the bottom
+            gray[int(cv) - 8 : int(cv) + 6, int(cu) - 6 : int(cu) - 3] = 900.0
+            gray[int(cv) - 8 : int(cv) + 6, int(cu) + 3 : int(cu) + 6] = 900.0
+            gray[int(cv) + 6 : int(cv) + 8, int(cu) - 6 : int(cu) + 6] = 900.0
+        elif shape == 1:  # a diagonal staircase (8-connected only)
+            for k in range(-7, 8):
+                gray[int(cv) + k, int(cu) + k] = 900.0
+        else:  # a comb: teeth joined by a bar at the bottom
+            for k in range(-6, 7, 3):
+                gray[int(cv) - 6 : int(cv) + 6, int(cu) + k] = 900.0
+            gray[int(cv) + 6, int(cu) - 6 : int(cu) + 7] = 900.0
+        gray[(u - cu) ** 2 + (v - cv) ** 2 <= 4.0] = 900.0  # a small disc in the middle
+        u0, v0 = int(cu) - 16, int(cv) - 16
+        bounds = np.array([[u0, u0 + 33, v0, v0 + 33]])
+        diam = np.array([rng.uniform(4.0, 14.0)])
+        centre = np.array([[cu + rng.normal(0, 2), cv + rng.normal(0, 2)]])
+        status, bbox, _, _, starts, flat = search_windows(
+            gray, bounds, centre, diam, np.float32(400.0), 10.0
+        )
+        want = _opencv(gray, *bounds[0], centre[0], diam[0], 400.0)
+        if want is None:
+            assert status[0] == NO_SIZE
+            continue
+        want_box, want_px = want
+        x, y, w, h = want_box
+        if x == u0 or y == v0 or x + w >= u0 + 33 or y + h >= v0 + 33:
+            assert status[0] == AT_EDGE
+            continue
+        assert status[0] == FOUND
+        np.testing.assert_array_equal(bbox[0], want_box)
+        np.testing.assert_array_equal(flat[starts[0] : starts[1]], want_px)
+        checked += 1
+    assert checked > 50
