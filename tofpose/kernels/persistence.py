@@ -7,6 +7,31 @@ import numpy as np
 from tofpose.kernels import jit
 
 
+#: a sorting network for five values (nine compare-exchanges; Knuth, TAOCP 5.3.4)
+_NETWORK_5 = ((0, 1), (3, 4), (2, 4), (2, 3), (0, 3), (0, 2), (1, 4), (1, 3), (1, 2))
+
+
+@jit
+def _insertion_median(stack, p, buf):
+    """The median over frames of pixel p of stack (K, P), ignoring NaNs (NaN when none),
+    by insertion sort of the at most K valid values (buf : (K,) scratch)."""
+    m = 0
+    for f in range(stack.shape[0]):
+        v = stack[f, p]
+        if np.isfinite(v):
+            i = m
+            while i > 0 and buf[i - 1] > v:
+                buf[i] = buf[i - 1]
+                i -= 1
+            buf[i] = v
+            m += 1
+    if m == 0:
+        return np.float32(np.nan)
+    if m & 1:
+        return buf[m >> 1]
+    return (buf[(m >> 1) - 1] + buf[m >> 1]) / np.float32(2.0)
+
+
 @jit
 def column_medians(stack):
     """Median over frames of each pixel's distance, ignoring NaNs (NaN when a pixel has
@@ -14,28 +39,30 @@ def column_medians(stack):
     (an even count averages its two middle values in float32).
 
     stack : (K, P) float32, K frames of the same P pixels. Returns (P,) float32.
-    """
+
+    With five frames (a full persistence history) every pixel goes through a sorting
+    network of five, row against row, which the compiler vectorises across pixels; the
+    pixels with a NaN among them are then done one by one."""
     k_frames, n = stack.shape
     out = np.empty(n, np.float32)
     buf = np.empty(k_frames, np.float32)
+    if k_frames != 5:
+        for p in range(n):
+            out[p] = _insertion_median(stack, p, buf)
+        return out
+    rows = stack.copy()
+    for a, b in _NETWORK_5:
+        ra, rb = rows[a], rows[b]
+        for p in range(n):
+            lo, hi = min(ra[p], rb[p]), max(ra[p], rb[p])
+            ra[p], rb[p] = lo, hi
     for p in range(n):
-        m = 0
-        for f in range(k_frames):
-            v = stack[f, p]
-            if np.isfinite(v):
-                # insertion sort of at most K values
-                i = m
-                while i > 0 and buf[i - 1] > v:
-                    buf[i] = buf[i - 1]
-                    i -= 1
-                buf[i] = v
-                m += 1
-        if m == 0:
-            out[p] = np.nan
-        elif m & 1:
-            out[p] = buf[m >> 1]
-        else:
-            out[p] = (buf[(m >> 1) - 1] + buf[m >> 1]) / np.float32(2.0)
+        out[p] = rows[2, p]
+    for p in range(n):
+        if not (np.isfinite(stack[0, p]) and np.isfinite(stack[1, p])
+                and np.isfinite(stack[2, p]) and np.isfinite(stack[3, p])
+                and np.isfinite(stack[4, p])):  # fmt: skip
+            out[p] = _insertion_median(stack, p, buf)
     return out
 
 

@@ -22,6 +22,9 @@ def test_column_medians_equal_nanmedian():
         some = ~np.all(np.isnan(stack), axis=0)
         want[some] = np.nanmedian(stack[:, some], axis=0)
         np.testing.assert_array_equal(column_medians(stack), want)
+    # five frames without NaNs go through the sorting network only; with ties
+    full = np.round(rng.normal(2000, 2, (5, 1000))).astype(np.float32)
+    np.testing.assert_array_equal(column_medians(full), np.median(full, axis=0))
 
 
 def test_consistency_gate():
