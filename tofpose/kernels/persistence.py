@@ -6,7 +6,6 @@ import numpy as np
 
 from tofpose.kernels import jit
 
-
 #: a sorting network for five values (nine compare-exchanges; Knuth, TAOCP 5.3.4)
 _NETWORK_5 = ((0, 1), (3, 4), (2, 4), (2, 3), (0, 3), (0, 2), (1, 4), (1, 3), (1, 2))
 
