@@ -37,6 +37,18 @@ def _kth_counted(counts, k):
 
 
 @jit
+def _median_counted(counts, n):
+    """``np.median`` in float32 of the n values whose doubled values are histogrammed in
+    ``counts`` (``_median_of_levels``' arithmetic)."""
+    k = n >> 1
+    hi = np.float32(_kth_counted(counts, k) / 2.0)
+    if n & 1:
+        return float(hi)
+    lo = np.float32(_kth_counted(counts, k - 1) / 2.0)
+    return float((lo + hi) / np.float32(2.0))
+
+
+@jit
 def _median_of_levels(v):
     """``np.median`` of float32 values (n,); by counting when every value is a multiple
     of 0.5 in [0, 65536) (gray counts, and their deviations from such a median), which
@@ -51,12 +63,43 @@ def _median_of_levels(v):
     counts = np.zeros(int(top) + 1, np.int64)
     for i in range(n):
         counts[int(v[i] * 2)] += 1
-    k = n >> 1
-    hi = np.float32(_kth_counted(counts, k) / 2.0)
-    if n & 1:
-        return float(hi)
-    lo = np.float32(_kth_counted(counts, k - 1) / 2.0)
-    return float((lo + hi) / np.float32(2.0))
+    return _median_counted(counts, n)
+
+
+@jit
+def _level_and_spread(v):
+    """(median, median absolute deviation) of float32 values (n,), both as
+    ``_median_of_levels`` gives them. When every value is a multiple of 0.5 in [0,
+    65536) and the median a multiple of 0.5 too, both come from one histogram: the
+    deviations' histogram is the values' folded at the median, and no second pass over
+    the values is needed."""
+    n = v.shape[0]
+    top = 0.0
+    for i in range(n):
+        d = v[i] * 2
+        if not (d >= 0 and d < _COUNTING_LIMIT and d == np.floor(d)):
+            top = -1.0
+            break
+        top = max(top, d)
+    if top >= 0:
+        counts = np.zeros(int(top) + 1, np.int64)
+        for i in range(n):
+            counts[int(v[i] * 2)] += 1
+        bg = _median_counted(counts, n)
+        twice = np.float32(bg) * 2
+        if twice == np.floor(twice):
+            centre = int(twice)
+            folded = np.zeros(max(centre, counts.shape[0] - 1 - centre) + 1, np.int64)
+            for b in range(counts.shape[0]):
+                folded[abs(b - centre)] += counts[b]
+            return bg, _median_counted(folded, n)
+    else:
+        bg = _median_of_levels(v)
+    dev = np.empty(n, np.float32)
+    bg32 = np.float32(bg)
+    for i in range(n):
+        dev[i] = abs(v[i] - bg32)
+    return bg, _median_of_levels(dev)
 
 
 @jit
@@ -76,12 +119,7 @@ def frame_level_stats(gray, stride, saturated_counts):
         for c in range(0, w, stride):
             sub[n] = gray[r, c]
             n += 1
-    bg = _median_of_levels(sub[:n])
-    dev = np.empty(n, np.float32)
-    bg32 = np.float32(bg)
-    for i in range(n):
-        dev[i] = abs(sub[i] - bg32)
-    mad = _median_of_levels(dev)
+    bg, mad = _level_and_spread(sub[:n])
     sat = np.float32(saturated_counts)
     flat = gray.reshape(-1)
     n_sat = 0

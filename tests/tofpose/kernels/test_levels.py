@@ -22,14 +22,29 @@ def test_counting_median_equals_numpy_median(kind):
     assert _median_of_levels(dev) == float(np.median(dev))
 
 
-def test_frame_level_stats_match_numpy():
+@pytest.mark.parametrize(
+    "kind", ["counts", "half counts", "median between two levels", "fractional"]
+)
+def test_frame_level_stats_match_numpy(kind):
+    """Background and MAD of the strided subsample as NumPy's medians give them, both
+    from one folded histogram (counts, half counts), with the deviations counted
+    separately (a median half-way between two half counts is a quarter count) or both
+    by selection (fractional levels)."""
     rng = np.random.default_rng(0)
     g = rng.poisson(4.0, (240, 320)).astype(np.float32)
+    if kind == "half counts":
+        g += 0.5
+    elif kind == "median between two levels":
+        sub = g[::3, ::3]
+        sub[...] = 4.0
+        sub.flat[sub.size // 2 :] = 3.5  # an even count split between 3.5 and 4: 3.75
+    elif kind == "fractional":
+        g = rng.normal(40.0, 6.0, g.shape).astype(np.float32)
     g[100:110, 50:60] = 4095.0  # a saturated patch
     bg, mad, n_sat = frame_level_stats(g, 3, 4095.0)
     sub = g[::3, ::3]
     assert bg == float(np.median(sub))
-    assert mad == float(np.median(np.abs(sub - bg)))
+    assert mad == float(np.median(np.abs(sub - np.float32(bg))))
     assert n_sat == 100
 
 
