@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 
-.PHONY: run test lint bench clean system-deps frontend
+.PHONY: run test lint bench clean kernels-clean system-deps frontend
 
 FRONTEND_SRC := $(shell find frontend/src -type f 2>/dev/null) frontend/index.html frontend/vite.config.ts frontend/tsconfig.json
 
@@ -43,5 +43,9 @@ test: lint system-deps frontend
 bench: $(VENV)/.installed
 	$(PY) bench/report.py
 
-clean:
+clean: kernels-clean
 	rm -rf $(VENV) .pytest_cache .ruff_cache frontend/node_modules frontend/dist
+
+# numba's on-disk cache of the compiled kernels (stale for callers after a kernel edit)
+kernels-clean:
+	find tofpose -name '*.nbi' -delete -o -name '*.nbc' -delete
