@@ -22,6 +22,7 @@ from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.extraction import Blob
 from tofpose.geometry import RigidTransform
+from tofpose.kernels.camera import project
 from tofpose.kernels.pose import (
     REFINE_LOS,
     REFINE_ML,
@@ -122,6 +123,20 @@ class Rejected:
 
     reason: str
     implausible: bool = False
+
+
+class ThresholdedFrame:
+    """A frame's active pixel set ``gray >= threshold`` computed only where it is read:
+    ``verify``'s dark check reads a few small windows, and comparing the whole frame
+    each tracked frame cost more than the check itself."""
+
+    def __init__(self, gray: np.ndarray, threshold: float) -> None:
+        self._gray = gray
+        self._threshold = threshold
+        self.shape = gray.shape
+
+    def __getitem__(self, index) -> np.ndarray:
+        return self._gray[index] >= self._threshold
 
 
 class PoseSolver:
@@ -241,7 +256,9 @@ class PoseSolver:
     def verify(self, T: RigidTransform, active: np.ndarray | None, matched: set[int]) -> str:
         """Physical consistency of a pose with the frame; empty string when consistent.
         ``active`` (H, W) is read only for the dark check (at most
-        ``dark_check_max_matches`` reflectors matched) and may be None otherwise."""
+        ``dark_check_max_matches`` reflectors matched) and may be None otherwise; any
+        object with a ``shape`` that gives a bool array when sliced will do
+        (``ThresholdedFrame``)."""
         R, t = T.R, T.t_mm
         cos_view = self.view_cosine(R, t)
         if cos_view < self._cos_max_view:
@@ -254,7 +271,8 @@ class PoseSolver:
         if len(matched) > self.config.dark_check_max_matches:
             return ""
         centres = self._xyz @ R.T + t
-        uv = self.camera.project(centres)
+        cam = self.camera
+        uv = project(centres, cam.fx, cam.fy, cam.cx, cam.cy, cam.dist_array)  # all z > 0
         d_px = self.camera.fx * self._d / centres[:, 2]
         h, w = active.shape
         for i in range(len(centres)):

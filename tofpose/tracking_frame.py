@@ -20,7 +20,13 @@ from tofpose.kernels.tracking import camera_windows
 from tofpose.kernels.tracking_frame import TRACKED, track_frame
 from tofpose.persistence import Persistence, PersistenceInfo
 from tofpose.pose import MEDIAN_CHI2_3DOF, STEP_SIGMA2
-from tofpose.solve import MatchedObservations, Measurements, PoseSolver, Solution
+from tofpose.solve import (
+    MatchedObservations,
+    Measurements,
+    PoseSolver,
+    Solution,
+    ThresholdedFrame,
+)
 from tofpose.tracking import TrackState
 from tofpose.uncertainty import (
     MEDIAN_EFFICIENCY,
@@ -111,7 +117,7 @@ class CompiledTracker:
             range_mm=rho, y_mm=y_obs, sigma_bearing_rad=sp / cam.fx, sigma_range_mm=sr,
         )  # fmt: skip
         few = n <= cfg.dark_check_max_matches
-        active = g >= track.threshold_counts if few else None
+        active = ThresholdedFrame(g, track.threshold_counts) if few else None
         solved = self._solver.conclude(obs, R, t, its, cov, chi2, norms, sr_fit, active)
         if not isinstance(solved, Solution):
             return None

@@ -217,8 +217,20 @@ def test_covered_markers_do_not_veto_a_well_determined_pose():
     assert sorted(m.catalog_id for m in res.matched) == [1, 2, 4, 5, 7, 8]
     assert np.linalg.norm(res.t_mm - T.t_mm) < 2.0
     strict = PipelineConfig(dark_check_max_matches=8)
-    refused = PosePipeline(CameraModel(), cat, strict).process(f.gray, f.distance_mm)
+    pipe = PosePipeline(CameraModel(), cat, strict)
+    refused = pipe.process(f.gray, f.distance_mm)
     assert not refused.ok and "dark" in refused.reason
+    # tracking reads the active set only in the dark check's windows (ThresholdedFrame):
+    # the same verdict as the whole thresholded frame
+    from tofpose.geometry import RigidTransform
+    from tofpose.solve import ThresholdedFrame
+
+    g = f.gray.astype(np.float32)
+    matched = {int(np.flatnonzero(cat.ids == i)[0]) for i in (1, 2, 4, 5, 7, 8)}
+    whole = pipe._solver.verify(RigidTransform(res.R, res.t_mm), g >= 400.0, matched)
+    lazy = pipe._solver.verify(RigidTransform(res.R, res.t_mm), ThresholdedFrame(g, 400.0),
+                               matched)  # fmt: skip
+    assert "dark" in whole and lazy == whole
 
 
 def test_ten_metres_gives_a_pose_on_almost_every_frame():
