@@ -22,7 +22,7 @@ from tofpose.kernels.components import (
     component_table,
 )
 from tofpose.kernels.gates import ACCEPTED, OVERSIZE, gate_components
-from tofpose.kernels.levels import clean_distance, frame_level_stats
+from tofpose.kernels.levels import clean_distance, frame_level_stats, threshold_mask
 from tofpose.kernels.perspective import disc_centre_offsets
 
 SATURATED_COUNTS = 4095
@@ -293,16 +293,24 @@ def active_pixel_mask(
     Returns a uint8 mask of shape (H, W) and the levels as applied (``raw_threshold``
     raised to the cut when the cap applies, ``n_active`` the mask's size).
     """
-    mask = gray >= stats.raw_threshold
-    n = int(np.count_nonzero(mask))
+    mask, stats, _ = _active_set(gray, stats, n_max)
+    return mask, stats
+
+
+def _active_set(
+    gray: np.ndarray, stats: FrameStats, n_max: int
+) -> tuple[np.ndarray, FrameStats, tuple[int, int, int, int]]:
+    """``active_pixel_mask`` and the set's bounding box (x, y, w, h), in one pass over the
+    frame (``kernels.levels.threshold_mask``) unless the N_max cap applies."""
+    gray32 = np.ascontiguousarray(gray, np.float32)
     threshold = stats.raw_threshold
+    mask, n, *box = threshold_mask(gray32, float(threshold))
     if n > n_max:
-        values = gray[mask]
+        values = gray32[mask.view(bool)]
         cut = np.partition(values, n - n_max)[n - n_max]
         threshold = float(cut)
-        mask = gray >= cut
-        n = int(np.count_nonzero(mask))
-    return mask.view(np.uint8), replace(stats, raw_threshold=threshold, n_active=n)
+        mask, n, *box = threshold_mask(gray32, threshold)
+    return mask, replace(stats, raw_threshold=threshold, n_active=n), tuple(box)
 
 
 def nlog_response(image: np.ndarray, sigma_px: float, normalise: bool = True) -> np.ndarray:
@@ -421,14 +429,13 @@ def find_candidate_blobs(
     ellipse stage may split (§3.3); ``wrong_size`` every bright component the size window
     refused, so that a failure can say the catalog does not fit what is in view.
     """
-    mask, stats = active_pixel_mask(gray, stats, config.n_max)
+    mask, stats, (ax, ay, aw, ah) = _active_set(gray, stats, config.n_max)
     h, w = gray.shape
     gray32 = np.asarray(gray, np.float32)
     # label the active set's bounding box grown by 2 px (what the gates read around a
     # component's box), not the whole frame; its origin on even coordinates, so that
     # OpenCV's 2 x 2 block scan sees the pixels in the same blocks and numbers the
     # components in the same order
-    ax, ay, aw, ah = cv2.boundingRect(mask)
     ox, oy = max(ax - 2, 0) & ~1, max(ay - 2, 0) & ~1
     crop = mask[oy : min(ay + ah + 2, h), ox : min(ax + aw + 2, w)]
     n_lab, labels = cv2.connectedComponents(crop, connectivity=8)

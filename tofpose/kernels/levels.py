@@ -127,3 +127,36 @@ def frame_level_stats(gray, stride, saturated_counts):
         if flat[i] >= sat:
             n_sat += 1
     return bg, mad, n_sat
+
+
+@jit
+def threshold_mask(gray, threshold):
+    """The active pixel set ``gray >= threshold`` (§3.1.1) in one pass: uint8 mask
+    (H, W), its size, and its bounding box (x, y, w, h) as ``cv2.boundingRect`` gives
+    it ((0, 0, 0, 0) when empty). gray : (H, W) float32."""
+    h, w = gray.shape
+    mask = np.empty((h, w), np.uint8)
+    n = 0
+    x0, y0, x1, y1 = w, h, -1, -1
+    t = np.float32(threshold)
+    for r in range(h):
+        row_n = 0
+        for c in range(w):
+            on = gray[r, c] >= t
+            mask[r, c] = on
+            row_n += on
+        if row_n:
+            n += row_n
+            y0 = min(y0, r)
+            y1 = r
+            for c in range(w):
+                if mask[r, c]:
+                    x0 = min(x0, c)
+                    break
+            for c in range(w - 1, -1, -1):
+                if mask[r, c]:
+                    x1 = max(x1, c)
+                    break
+    if n == 0:
+        return mask, 0, 0, 0, 0, 0
+    return mask, n, x0, y0, x1 - x0 + 1, y1 - y0 + 1

@@ -54,3 +54,19 @@ def test_clean_distance_marks_invalid_pixels_nan():
     assert out.dtype == np.float32
     np.testing.assert_array_equal(np.isnan(out), [[False, True, True], [True, True, False]])
     assert out[0, 0] == 1000.0 and out[1, 2] == np.float32(2500.5)
+
+
+def test_threshold_mask_is_numpy_threshold_with_opencv_bounding_box():
+    import cv2
+
+    from tofpose.kernels.levels import threshold_mask
+
+    rng = np.random.default_rng(2)
+    for trial in range(200):
+        g = rng.gamma(2.0, 30.0, (60, 80)).astype(np.float32)
+        threshold = float(rng.uniform(50.0, 400.0)) if trial % 5 else 1e9  # some empty
+        mask, n, *box = threshold_mask(g, threshold)
+        want = (g >= np.float32(threshold)).view(np.uint8)
+        np.testing.assert_array_equal(mask, want)
+        assert n == int(want.sum())
+        assert tuple(box) == cv2.boundingRect(want)
