@@ -70,7 +70,7 @@ class MatchingConfig:
         """Per-pair rigid residual tolerance clip(4 sigma, alpha, residual_factor alpha),
         sigma = 1 / sqrt(weight); shape (gamma,)."""
         sigma = 1.0 / np.sqrt(np.asarray(weights, float))
-        return np.clip(4.0 * sigma, alpha_mm, self.residual_factor * alpha_mm)
+        return np.minimum(np.maximum(4.0 * sigma, alpha_mm), self.residual_factor * alpha_mm)
 
 
 @dataclass
@@ -153,8 +153,9 @@ def one_to_one(A: np.ndarray) -> tuple[np.ndarray, list[int]]:
     real = (cols < e) & (cost[rows, cols] < big)
     matched = np.zeros(g, bool)
     matched[rows[real]] = True
-    pairs = np.column_stack((rows[real], cols[real])).astype(int)
-    return pairs.reshape(-1, 2), np.flatnonzero(~matched).tolist()
+    pairs = np.empty((int(real.sum()), 2), int)
+    pairs[:, 0], pairs[:, 1] = rows[real], cols[real]
+    return pairs, np.flatnonzero(~matched).tolist()
 
 
 def match_reflectors(

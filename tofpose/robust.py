@@ -13,9 +13,13 @@ import numpy as np
 
 
 def median_1d(values: np.ndarray) -> float:
-    """``float(np.median(values))`` for a non-empty 1-D array without NaNs, shape (n,)."""
+    """``float(np.median(values))`` for a non-empty 1-D array without NaNs, shape (n,).
+    A few float64 values are sorted as a Python list (the same float64 arithmetic)."""
     n = values.shape[0]
     k = n >> 1
+    if n <= 32 and values.dtype == np.float64:
+        s = sorted(values.tolist())
+        return s[k] if n & 1 else (s[k - 1] + s[k]) / 2.0
     if n & 1:
         return float(np.partition(values, k)[k])
     part = np.partition(values, (k - 1, k))
