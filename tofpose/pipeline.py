@@ -340,11 +340,11 @@ class PosePipeline:
             "rejected": list(found.rejected),
             "active_threshold_counts": stats.raw_threshold,
         }
-        ranged = [b for b in kept if np.isfinite(b.distance_mm)]
+        ranged = [b for b in kept if math.isfinite(b.distance_mm)]
         unmatched = [
             (b.centroid_uv[0], b.centroid_uv[1], b.distance_mm)
             for b in kept
-            if not np.isfinite(b.distance_mm)
+            if not math.isfinite(b.distance_mm)
         ]
         extra["n_candidates"] = len(kept)
         if self.range_correction is not None:
@@ -388,7 +388,7 @@ class PosePipeline:
         # ellipse-supplemented blobs have no moment centroid yet: the ellipse's centre
         blobs = [
             b.with_values(centroid_uv=np.array(b.ellipse[0]))
-            if not np.isfinite(b.centroid_uv).all() and b.ellipse is not None
+            if b.ellipse is not None and not math.isfinite(b.centroid_uv[0] + b.centroid_uv[1])
             else b
             for b in blobs
         ]
