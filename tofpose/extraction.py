@@ -17,11 +17,7 @@ import numpy as np
 
 from tofpose.camera import CameraModel
 from tofpose.kernels.centroids import blob_centroids, blob_ranges, owner_map
-from tofpose.kernels.components import (
-    component_median_ranges,
-    component_table,
-)
-from tofpose.kernels.gates import ACCEPTED, OVERSIZE, gate_components
+from tofpose.kernels.gates import ACCEPTED, OVERSIZE, label_table_and_gates
 from tofpose.kernels.levels import clean_distance, frame_level_stats, threshold_mask
 from tofpose.kernels.perspective import disc_centre_offsets
 
@@ -439,24 +435,13 @@ def find_candidate_blobs(
     ox, oy = max(ax - 2, 0) & ~1, max(ay - 2, 0) & ~1
     crop = mask[oy : min(ay + ah + 2, h), ox : min(ax + aw + 2, w)]
     n_lab, labels = cv2.connectedComponents(crop, connectivity=8)
-    area_k, bbox_k, peak_k, starts, flat = component_table(labels, n_lab, gray32, ox, oy)
-    # the median range is read only by components that pass the border and dim gates
-    x_k, y_k, w_k, h_k = bbox_k.T
-    inner = (x_k > 0) & (y_k > 0) & (x_k + w_k < w) & (y_k + h_k < h)
-    ranged = np.flatnonzero(
-        inner & (peak_k.astype(np.float64) >= stats.peak_threshold) & (area_k >= config.min_area_px)
-    )
-    rho_k = np.full(n_lab, np.nan)
-    d_flat = np.asarray(distance_mm, np.float32).reshape(-1)
-    rho_k[ranged] = component_median_ranges(flat, starts, d_flat, ranged)
     cos_t = np.cos(np.radians(config.max_tilt_deg))
     ecc_max = np.sqrt(1.0 - cos_t**2)
-    listed = np.flatnonzero(area_k >= max(config.min_area_px, 1))
-    testable = inner[listed] & (peak_k[listed].astype(np.float64) >= stats.peak_threshold)
-    which = listed[testable]
-    status, size, mom, keep_starts, keep_flat = gate_components(
-        gray32, labels, ox, oy, bbox_k, area_k, peak_k, rho_k, which, float(camera.fx),
-        np.asarray(diameters_mm, np.float64), _gate_params(config, stats, cos_t, ecc_max),
+    (area_k, bbox_k, peak_k, starts, flat, inner, listed, testable, rho_k, which, status,
+     size, mom, keep_starts, keep_flat) = label_table_and_gates(
+        labels, n_lab, gray32, ox, oy, np.asarray(distance_mm, np.float32).reshape(-1),
+        float(camera.fx), np.asarray(diameters_mm, np.float64),
+        _gate_params(config, stats, cos_t, ecc_max), int(config.min_area_px),
     )  # fmt: skip
     accepted: list[Blob] = []
     oversize: list[Blob] = []

@@ -12,7 +12,11 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
-from tofpose.kernels.components import weighted_moments
+from tofpose.kernels.components import (
+    component_median_ranges,
+    component_table,
+    weighted_moments,
+)
 
 #: outcome codes of ``gate_components``
 ACCEPTED, OVERSIZE, SIZE, NLOG, SHAPE, PENALTY = 0, 1, 2, 3, 4, 5
@@ -223,3 +227,65 @@ def gate_components(gray, labels, x_origin, y_origin, bbox, area, peak, rho, whi
     for j in range(n):
         keep_flat[keep_starts[j] : keep_starts[j + 1]] = pieces[j]
     return status, size, moments, keep_starts, keep_flat
+
+
+@jit
+def label_table_and_gates(labels, n_labels, gray, x_origin, y_origin, distance_flat, fx,
+                          diameters_mm, params, min_area_px):  # fmt: skip
+    """``components.component_table`` of the labelled active set, the border and dim
+    gates, the median range of the components that pass them and can be sized
+    (``components.component_median_ranges``), then ``gate_components`` on them: the
+    blob criteria of §3.1.2-§3.2 from OpenCV's labels in one call.
+
+    labels, n_labels, x_origin, y_origin : as ``component_table``; gray (H, W) float32;
+    distance_flat (H * W,) float32 mm; fx, diameters_mm, params : as ``gate_components``
+    (params[10] is I_peak); min_area_px : the smallest component listed.
+
+    Returns the table (area, bbox, peak, starts, flat), inner (K,) bool (clear of the
+    image border),
+    listed (L,) labels of at least ``max(min_area_px, 1)`` pixels, testable (L,) bool
+    (inner and bright enough to test), rho (K,) median ranges (NaN where not read), and
+    ``gate_components``' results for ``listed[testable]``."""
+    h, w = gray.shape
+    area, bbox, peak, starts, flat = component_table(labels, n_labels, gray, x_origin, y_origin)
+    i_peak = params[10]
+    inner = np.empty(n_labels, np.bool_)
+    n_ranged, n_listed = 0, 0
+    for k in range(n_labels):
+        inner[k] = (bbox[k, 0] > 0 and bbox[k, 1] > 0 and bbox[k, 0] + bbox[k, 2] < w
+                    and bbox[k, 1] + bbox[k, 3] < h)  # fmt: skip
+        bright = np.float64(peak[k]) >= i_peak
+        n_ranged += inner[k] and bright and area[k] >= min_area_px
+        n_listed += area[k] >= max(min_area_px, 1)
+    ranged = np.empty(n_ranged, np.int64)
+    listed = np.empty(n_listed, np.int64)
+    a, b = 0, 0
+    for k in range(n_labels):
+        bright = np.float64(peak[k]) >= i_peak
+        if inner[k] and bright and area[k] >= min_area_px:
+            ranged[a] = k
+            a += 1
+        if area[k] >= max(min_area_px, 1):
+            listed[b] = k
+            b += 1
+    rho = np.full(n_labels, np.nan)
+    medians = component_median_ranges(flat, starts, distance_flat, ranged)
+    for a in range(n_ranged):
+        rho[ranged[a]] = medians[a]
+    testable = np.empty(n_listed, np.bool_)
+    n_which = 0
+    for b in range(n_listed):
+        k = listed[b]
+        testable[b] = inner[k] and np.float64(peak[k]) >= i_peak
+        n_which += testable[b]
+    which = np.empty(n_which, np.int64)
+    a = 0
+    for b in range(n_listed):
+        if testable[b]:
+            which[a] = listed[b]
+            a += 1
+    status, size, moments, keep_starts, keep_flat = gate_components(
+        gray, labels, x_origin, y_origin, bbox, area, peak, rho, which, fx, diameters_mm, params
+    )
+    return (area, bbox, peak, starts, flat, inner, listed, testable, rho, which, status, size,
+            moments, keep_starts, keep_flat)  # fmt: skip
