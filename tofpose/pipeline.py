@@ -23,8 +23,8 @@ from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.covariance_calibration import CovarianceScale
 from tofpose.ellipse import (
-    Ellipse,
     blob_contour,
+    ellipse_residual_px,
     ellipses_from_arcs,
     fit_ellipse,
     split_arcs,
@@ -41,7 +41,7 @@ from tofpose.extraction import (
     predicted_diameter_window_px,
 )
 from tofpose.geometry import facing_euler_deg, quaternion_wxyz_from_rotation
-from tofpose.kernels.ellipses import blob_mask, ellipses_rms_px
+from tofpose.kernels.ellipses import blob_mask
 from tofpose.kernels.range_correction import corrected_ranges
 from tofpose.matching import (
     MatchingConfig,
@@ -639,25 +639,18 @@ class PosePipeline:
         """
         cfg = self.config.extraction
         h, w = gray.shape
-        fitted: dict[int, Ellipse] = {}  # blob index -> its boundary's ellipse
-        contours = []
-        for i, b in enumerate(blobs):
+        out = []
+        for b in blobs:
             if b.area_px >= 20:
                 mask, x0, y0 = _blob_mask(b, w)
                 pts = blob_contour(mask, (x0, y0))  # in image coordinates
                 if len(pts) >= cfg.ellipse_min_points:
                     e = fit_ellipse(pts)
                     if e is not None:
-                        fitted[i] = e
-                        contours.append(pts)
-        # the boundaries' RMS distances from their ellipses in one compiled call
-        rms = dict(zip(fitted, _ellipse_residuals(list(fitted.values()), contours), strict=True))
-        out = []
-        for i, b in enumerate(blobs):
-            if i in fitted:
-                if rms[i] > cfg.ellipse_max_residual_px:
-                    continue
-                b = b.with_values(ellipse=fitted[i], ellipse_residual_px=rms[i])
+                        rms_px = ellipse_residual_px(e, pts)
+                        if rms_px > cfg.ellipse_max_residual_px:
+                            continue
+                        b = b.with_values(ellipse=e, ellipse_residual_px=rms_px)
             out.append(b)
         if len(out) >= len(self.catalog) or not oversize:
             return out
@@ -743,16 +736,6 @@ def _split_by_threshold(
             ))  # fmt: skip
         return out
     return []
-
-
-def _ellipse_residuals(ellipses: list[Ellipse], contours: list[np.ndarray]) -> list[float]:
-    """``ellipse_residual_px`` of each ellipse and its contour (P_j, 2) float32, at once."""
-    if not ellipses:
-        return []
-    params = np.array([(cx, cy, a1, a2, ang) for (cx, cy), (a1, a2), ang in ellipses])
-    starts = np.zeros(len(contours) + 1, np.int64)
-    starts[1:] = np.cumsum([len(c) for c in contours])
-    return ellipses_rms_px(params, np.concatenate(contours), starts).tolist()
 
 
 def _blob_mask(b: Blob, width: int) -> tuple[np.ndarray, int, int]:

@@ -116,16 +116,3 @@ def arc_points(contour, angle_deg, min_points, smooth_sigma):
     else:
         m -= run
     return index[:m], starts[: n_arcs + 1]
-
-
-@jit
-def ellipses_rms_px(ellipses, points, starts):
-    """``ellipse_rms_px`` of several ellipses at once: ellipses (n, 5) rows (cx, cy, a1,
-    a2, angle_deg), ellipse j's points ``points[starts[j]:starts[j + 1]]`` (P, 2).
-    Returns (n,)."""
-    n = ellipses.shape[0]
-    out = np.empty(n)
-    for j in range(n):
-        out[j] = ellipse_rms_px(ellipses[j, 0], ellipses[j, 1], ellipses[j, 2], ellipses[j, 3],
-                                ellipses[j, 4], points[starts[j] : starts[j + 1]])  # fmt: skip
-    return out

@@ -84,17 +84,3 @@ def test_ellipse_residual_equals_the_angular_statement():
         r_e = (a1 / 2) * (a2 / 2) / np.hypot((a2 / 2) * np.cos(theta), (a1 / 2) * np.sin(theta))
         want = np.sqrt(np.mean((np.hypot(x, y) - r_e) ** 2))
         assert ellipse_rms_px(cx, cy, a1, a2, ang, pts) == pytest.approx(want, rel=1e-12)
-
-
-def test_residuals_of_several_ellipses_at_once_equal_one_by_one():
-    from tofpose.kernels.ellipses import ellipse_rms_px, ellipses_rms_px
-
-    rng = np.random.default_rng(6)
-    params = np.column_stack([rng.uniform(0, 300, (7, 2)), rng.uniform(3, 40, (7, 2)),
-                              rng.uniform(0, 180, 7)])  # fmt: skip
-    contours = [rng.uniform(0, 300, (int(rng.integers(5, 60)), 2)).astype(np.float32)
-                for _ in range(7)]  # fmt: skip
-    starts = np.concatenate([[0], np.cumsum([len(c) for c in contours])])
-    got = ellipses_rms_px(params, np.concatenate(contours), starts)
-    want = [ellipse_rms_px(*p, c) for p, c in zip(params, contours, strict=True)]
-    np.testing.assert_array_equal(got, want)
