@@ -71,51 +71,56 @@ def python_calls(pipe: PosePipeline, frames) -> float:
 
 
 def run(n_frames: int, repeats: int):
+    """Time every range once per repeat, the ranges inside the repeats: this machine has
+    slow phases of a minute or so, and timing one range after another put a whole
+    phase on one range (its row, not the pipeline, looked slow)."""
     single_core()
     warm_up()  # compiled kernels loaded before timing, as the server does at start
     cam, cat = CameraModel(), paper_target()
     det = blob_detector()
     rng = np.random.default_rng(0)
-    rows = []
+    streams = []
     for z, off in CASES:
         T = RigidTransform(rotation_from_euler_deg(2, -3, 10) @ R_FACING, np.array([*off, z]))
         frames = [render_frame(cam, TargetScene(), T, SensorModel(), rng)
                   for _ in range(n_frames)]  # fmt: skip
-        acq_stage: dict[str, list[float]] = {s: [] for s in STAGES}
-        acq_ok, trk_ms, trk_all, trk_corr, cv_ms = [], [], [], [], []
-        for _ in range(repeats):
+        streams.append((z, T, frames))
+    rows = [{
+        "range": z, "acq_ok": [], "stages": {s: [] for s in STAGES}, "tracking": [],
+        "tracking_corrected": [], "tracking_all": [], "opencv": [],
+    } for z, _, _ in streams]  # fmt: skip
+    for _ in range(repeats):
+        for row, (_, T, frames) in zip(rows, streams, strict=True):
             pipe = PosePipeline(cam, cat)
             for f in frames:
                 r = pipe.process(f.gray, f.distance_mm)
-                acq_ok.append(r.ok)
+                row["acq_ok"].append(r.ok)
                 for s in STAGES:
-                    acq_stage[s].append(r.timings_ms.get(s, 0.0))
+                    row["stages"][s].append(r.timings_ms.get(s, 0.0))
             pipe = PosePipeline(cam, cat, TRACKING)
             for f in frames:
                 t0 = time.perf_counter()
                 r = pipe.process(f.gray, f.distance_mm)
                 ms = 1e3 * (time.perf_counter() - t0)
-                trk_all.append(ms)
+                row["tracking_all"].append(ms)
                 if r.mode == "tracking":
-                    trk_ms.append(ms)
+                    row["tracking"].append(ms)
             pipe = PosePipeline(cam, cat, TRACKING, range_correction=CORRECTION)
             for f in frames:
                 t0 = time.perf_counter()
                 r = pipe.process(f.gray, f.distance_mm)
                 if r.mode == "tracking":
-                    trk_corr.append(1e3 * (time.perf_counter() - t0))
+                    row["tracking_corrected"].append(1e3 * (time.perf_counter() - t0))
             for f in frames:
-                cv_ms.append(baseline_pose(f.gray, cam, cat, T, det, ransac=False)[2])
+                row["opencv"].append(baseline_pose(f.gray, cam, cat, T, det, ransac=False)[2])
+    for row, (_, _, frames) in zip(rows, streams, strict=True):
         calls_acq = python_calls(PosePipeline(cam, cat), frames[: min(10, n_frames)])
         trk = PosePipeline(cam, cat, TRACKING)
         trk.process(frames[0].gray, frames[0].distance_mm)  # acquire, then count tracking
         calls_trk = python_calls(trk, frames[1 : min(10, n_frames)])
-        rows.append({
-            "range": z, "ok": float(np.mean(acq_ok)), "stages": acq_stage,
-            "tracking": trk_ms, "tracking_corrected": trk_corr, "tracking_all": trk_all,
-            "tracked": len(trk_ms) / len(trk_all),
-            "opencv": cv_ms, "calls": (calls_acq, calls_trk),
-        })  # fmt: skip
+        row["ok"] = float(np.mean(row.pop("acq_ok")))
+        row["tracked"] = len(row["tracking"]) / len(row["tracking_all"])
+        row["calls"] = (calls_acq, calls_trk)
     return rows
 
 
@@ -154,11 +159,12 @@ def stages_table(rows) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--frames", type=int, default=60)
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--repeats", type=int, default=6)
     args = ap.parse_args()
     rows = run(args.frames, args.repeats)
     print(f"ms per frame (median / p95), one core, {args.frames} frames x {args.repeats} per "
-          "range; tracking: the frames the tracking pipeline measured in tracking mode; "
+          "range, every range timed once per repeat (a slow spell of the machine is shared "
+          "by all ranges); tracking: the frames the tracking pipeline measured in tracking mode; "
           "range-corrected: the tracking pipeline of a camera with a calibrated range "
           "correction (every term of the model); "
           "stream: every frame of the tracking pipeline (acquisitions included); OpenCV: "
