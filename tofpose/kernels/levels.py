@@ -49,21 +49,31 @@ def _median_counted(counts, n):
 
 
 @jit
-def _median_of_levels(v):
-    """``np.median`` of float32 values (n,); by counting when every value is a multiple
-    of 0.5 in [0, 65536) (gray counts, and their deviations from such a median), which
-    is linear in n and not slowed by the many ties of a dark background."""
-    n = v.shape[0]
+def _half_grid_counts(v):
+    """Histogram of 2 v for float32 values (n,) that are all multiples of 0.5 in [0,
+    65536) (gray counts, and their deviations from such a median), indexed by 2 v; an
+    empty histogram when any value is not."""
     top = 0.0
-    for i in range(n):
+    for i in range(v.shape[0]):
         d = v[i] * 2
         if not (d >= 0 and d < _COUNTING_LIMIT and d == np.floor(d)):
-            return median_inplace(v.copy())
+            return np.zeros(0, np.int64)
         top = max(top, d)
     counts = np.zeros(int(top) + 1, np.int64)
-    for i in range(n):
+    for i in range(v.shape[0]):
         counts[int(v[i] * 2)] += 1
-    return _median_counted(counts, n)
+    return counts
+
+
+@jit
+def _median_of_levels(v):
+    """``np.median`` of float32 values (n,); by counting when every value is a multiple
+    of 0.5 in [0, 65536) (``_half_grid_counts``), which is linear in n and not slowed by
+    the many ties of a dark background."""
+    counts = _half_grid_counts(v)
+    if counts.shape[0] == 0:
+        return median_inplace(v.copy())
+    return _median_counted(counts, v.shape[0])
 
 
 @jit
@@ -74,17 +84,10 @@ def _level_and_spread(v):
     deviations' histogram is the values' folded at the median, and no second pass over
     the values is needed."""
     n = v.shape[0]
-    top = 0.0
-    for i in range(n):
-        d = v[i] * 2
-        if not (d >= 0 and d < _COUNTING_LIMIT and d == np.floor(d)):
-            top = -1.0
-            break
-        top = max(top, d)
-    if top >= 0:
-        counts = np.zeros(int(top) + 1, np.int64)
-        for i in range(n):
-            counts[int(v[i] * 2)] += 1
+    counts = _half_grid_counts(v)
+    if counts.shape[0] == 0:
+        bg = median_inplace(v.copy())
+    else:
         bg = _median_counted(counts, n)
         twice = np.float32(bg) * 2
         if twice == np.floor(twice):
@@ -93,8 +96,6 @@ def _level_and_spread(v):
             for b in range(counts.shape[0]):
                 folded[abs(b - centre)] += counts[b]
             return bg, _median_counted(folded, n)
-    else:
-        bg = _median_of_levels(v)
     dev = np.empty(n, np.float32)
     bg32 = np.float32(bg)
     for i in range(n):
