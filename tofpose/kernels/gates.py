@@ -248,42 +248,18 @@ def label_table_and_gates(labels, n_labels, gray, x_origin, y_origin, distance_f
     ``gate_components``' results for ``listed[testable]``."""
     h, w = gray.shape
     area, bbox, peak, starts, flat = component_table(labels, n_labels, gray, x_origin, y_origin)
-    i_peak = params[10]
     inner = np.empty(n_labels, np.bool_)
-    n_ranged, n_listed = 0, 0
+    bright = np.empty(n_labels, np.bool_)
     for k in range(n_labels):
         inner[k] = (bbox[k, 0] > 0 and bbox[k, 1] > 0 and bbox[k, 0] + bbox[k, 2] < w
                     and bbox[k, 1] + bbox[k, 3] < h)  # fmt: skip
-        bright = np.float64(peak[k]) >= i_peak
-        n_ranged += inner[k] and bright and area[k] >= min_area_px
-        n_listed += area[k] >= max(min_area_px, 1)
-    ranged = np.empty(n_ranged, np.int64)
-    listed = np.empty(n_listed, np.int64)
-    a, b = 0, 0
-    for k in range(n_labels):
-        bright = np.float64(peak[k]) >= i_peak
-        if inner[k] and bright and area[k] >= min_area_px:
-            ranged[a] = k
-            a += 1
-        if area[k] >= max(min_area_px, 1):
-            listed[b] = k
-            b += 1
+        bright[k] = np.float64(peak[k]) >= params[10]  # I_peak
+    ranged = np.flatnonzero(inner & bright & (area >= min_area_px))
     rho = np.full(n_labels, np.nan)
-    medians = component_median_ranges(flat, starts, distance_flat, ranged)
-    for a in range(n_ranged):
-        rho[ranged[a]] = medians[a]
-    testable = np.empty(n_listed, np.bool_)
-    n_which = 0
-    for b in range(n_listed):
-        k = listed[b]
-        testable[b] = inner[k] and np.float64(peak[k]) >= i_peak
-        n_which += testable[b]
-    which = np.empty(n_which, np.int64)
-    a = 0
-    for b in range(n_listed):
-        if testable[b]:
-            which[a] = listed[b]
-            a += 1
+    rho[ranged] = component_median_ranges(flat, starts, distance_flat, ranged)
+    listed = np.flatnonzero(area >= max(min_area_px, 1))
+    testable = inner[listed] & bright[listed]
+    which = listed[testable]
     status, size, moments, keep_starts, keep_flat = gate_components(
         gray, labels, x_origin, y_origin, bbox, area, peak, rho, which, fx, diameters_mm, params
     )
