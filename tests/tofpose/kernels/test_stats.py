@@ -1,4 +1,4 @@
-"""The kernels' in-place selection and median against NumPy, on the inputs that break
+"""The kernels' selection and median against NumPy, on the inputs that break
 quickselects: ties, constant, sorted and reversed arrays, both float widths."""
 
 from __future__ import annotations
@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tofpose.kernels.stats import median_inplace, select_kth
+from tofpose.kernels.stats import median_inplace, select_pair
 
 
 def _arrays(rng, dtype):
-    for n in (1, 2, 3, 4, 5, 17, 256, 1701, 4096):
+    for n in (1, 2, 3, 4, 5, 17, 24, 25, 26, 256, 1701, 4096):
         noisy = rng.normal(2000.0, 5.0, n).astype(dtype)
         yield noisy
         yield np.round(noisy)  # many ties
@@ -28,12 +28,11 @@ def test_median_is_numpy_median_exactly(dtype):
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
-def test_select_kth_partitions_around_the_kth_value(dtype):
+def test_select_pair_gives_the_two_order_statistics(dtype):
     rng = np.random.default_rng(1)
     for v in _arrays(rng, dtype):
-        for k in {0, len(v) // 2, len(v) - 1, int(rng.integers(0, len(v)))}:
-            w = v.copy()
-            x = select_kth(w, k)
-            assert x == np.sort(v)[k]
-            assert (w[:k] <= x).all() and (w[k + 1 :] >= x).all()
-            np.testing.assert_array_equal(np.sort(w), np.sort(v))  # a permutation
+        ranked = np.sort(v)
+        for k in {0, 1, len(v) // 2, len(v) - 1, int(rng.integers(0, len(v)))} - {len(v)}:
+            lower, upper = select_pair(v.copy(), k)
+            assert upper == ranked[k]
+            assert lower == (ranked[k - 1] if k > 0 else -np.inf)
