@@ -70,21 +70,27 @@ def residuals_jacobian(x, e, rho, R, t, sr, sb, B):
         rx2 = R[2, 0] * x[i, 0] + R[2, 1] * x[i, 1] + R[2, 2] * x[i, 2]
         p0, p1, p2 = rx0 + t[0], rx1 + t[1], rx2 + t[2]
         lat = max(rho[i] * sb[i], 1e-6)
-        # rows of d(R x + t) / d(w, t): dP[:, 0:3] = -[R x]_x, dP[:, 3:6] = I
-        dP = np.array([
-            [0.0, rx2, -rx1, 1.0, 0.0, 0.0],
-            [-rx2, 0.0, rx0, 0.0, 1.0, 0.0],
-            [rx1, -rx0, 0.0, 0.0, 0.0, 1.0],
-        ])  # fmt: skip
-        for k in range(2):
-            b0, b1, b2 = B[i, k, 0], B[i, k, 1], B[i, k, 2]
-            r[3 * i + k] = (b0 * p0 + b1 * p1 + b2 * p2) / lat
-            for c in range(6):
-                J[3 * i + k, c] = (b0 * dP[0, c] + b1 * dP[1, c] + b2 * dP[2, c]) / lat
-        e0, e1, e2 = e[i, 0], e[i, 1], e[i, 2]
-        r[3 * i + 2] = ((e0 * p0 + e1 * p1 + e2 * p2) - rho[i]) / sr[i]
-        for c in range(6):
-            J[3 * i + 2, c] = (e0 * dP[0, c] + e1 * dP[1, c] + e2 * dP[2, c]) / sr[i]
+        # d(R x + t) / d(w, t) = [-[R x]_x | I], column by column as scalars (rows
+        # 0, 1, 2 of column c are (u_c, v_c, s_c)): no array allocated per reflector
+        u0, v0, s0 = 0.0, -rx2, rx1
+        u1, v1, s1 = rx2, 0.0, -rx0
+        u2, v2, s2 = -rx1, rx0, 0.0
+        for k in range(3):
+            if k < 2:
+                b0, b1, b2 = B[i, k, 0], B[i, k, 1], B[i, k, 2]
+                r[3 * i + k] = (b0 * p0 + b1 * p1 + b2 * p2) / lat
+                scale = lat
+            else:
+                b0, b1, b2 = e[i, 0], e[i, 1], e[i, 2]
+                r[3 * i + 2] = ((b0 * p0 + b1 * p1 + b2 * p2) - rho[i]) / sr[i]
+                scale = sr[i]
+            row = 3 * i + k
+            J[row, 0] = (b0 * u0 + b1 * v0 + b2 * s0) / scale
+            J[row, 1] = (b0 * u1 + b1 * v1 + b2 * s1) / scale
+            J[row, 2] = (b0 * u2 + b1 * v2 + b2 * s2) / scale
+            J[row, 3] = (b0 * 1.0 + b1 * 0.0 + b2 * 0.0) / scale
+            J[row, 4] = (b0 * 0.0 + b1 * 1.0 + b2 * 0.0) / scale
+            J[row, 5] = (b0 * 0.0 + b1 * 0.0 + b2 * 1.0) / scale
     return r, J
 
 
