@@ -56,6 +56,21 @@ def test_perspective_offsets_vanish_face_on_and_match_the_conic_when_tilted():
     assert np.abs(got[0]).max() > 0.01
 
 
+def test_perspective_offsets_match_the_conic_over_ranges_and_tilts():
+    """The kernel's pole of the line at infinity against the conic's inverse, from 0.4 to
+    12 m and tilts up to ~56 deg (offsets up to a few px)."""
+    cam = CameraModel()
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        z = rng.uniform(400.0, 12000.0)
+        centres = np.column_stack((rng.uniform(-0.4, 0.4, 8) * z, rng.uniform(-0.3, 0.3, 8) * z,
+                                   z + rng.uniform(-200.0, 200.0, 8)))  # fmt: skip
+        normal = np.array([*rng.uniform(-1.5, 1.5, 2), -1.0])
+        radii = rng.uniform(5.0, 40.0, 8)
+        got = disc_centre_offsets(cam.K, centres, normal, radii)
+        np.testing.assert_allclose(got, _offsets_numpy(cam.K, centres, normal, radii), atol=1e-10)
+
+
 def test_blob_pixel_stats_equal_numpy():
     rng = np.random.default_rng(0)
     gray = rng.uniform(200, 900, (20, 30)).astype(np.float32)
