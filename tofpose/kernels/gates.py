@@ -49,8 +49,8 @@ def _band(k, n):
     r = k.shape[0] // 2
     out = np.zeros((n, n), np.float32)
     for i in range(n):
-        for j in range(max(i - r, 0), min(i + r + 1, n)):
-            out[i, j] = k[j - i + r]
+        lo, hi = max(i - r, 0), min(i + r + 1, n)
+        out[i, lo:hi] = k[lo - i + r : hi - i + r]
     return out
 
 
@@ -63,7 +63,10 @@ def nlog_patch(patch, sigma_px, normalise):
     h, w = patch.shape
     # The separable Gaussian with zero borders as two matrix products (BLAS):
     # smooth = G_h @ patch @ G_w^T, G_n the (n, n) band matrix of the kernel's taps.
-    smooth = np.dot(_band(k, h), np.dot(patch, _band(k, w).T))
+    # (a blob's patch is mostly square: then one band serves both sides)
+    band_h = _band(k, h)
+    band_w = band_h if w == h else _band(k, w)
+    smooth = np.dot(band_h, np.dot(patch, band_w.T))
     scale = np.float32(sigma_px * sigma_px) if normalise else np.float32(1.0)
     out = np.empty((h, w), np.float32)
     for y in range(h):
