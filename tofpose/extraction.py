@@ -10,7 +10,8 @@ literal numbers as a preset.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
+from itertools import accumulate
 
 import cv2
 import numpy as np
@@ -149,11 +150,12 @@ _BLOB_FIELDS = frozenset(Blob.__dataclass_fields__)
 def pixel_lists(blobs: list[Blob]) -> tuple[np.ndarray, np.ndarray]:
     """The blobs' pixels as the kernels take them: flat (P,) int64 flat indices, blob j's
     being ``flat[starts[j]:starts[j + 1]]``, and starts (B + 1,) int64."""
-    starts = np.zeros(len(blobs) + 1, np.int64)
-    starts[1:] = np.cumsum([len(b.pixels) for b in blobs])
-    flat = (np.concatenate([b.pixels for b in blobs]).astype(np.int64, copy=False)
-            if blobs else np.zeros(0, np.int64))  # fmt: skip
-    return flat, starts
+    if not blobs:
+        return np.zeros(0, np.int64), np.zeros(1, np.int64)
+    pieces = [b.pixels for b in blobs]
+    starts = np.fromiter(accumulate((p.shape[0] for p in pieces), initial=0), np.int64,
+                         len(pieces) + 1)  # fmt: skip
+    return np.concatenate(pieces).astype(np.int64, copy=False), starts
 
 
 @dataclass(frozen=True)
@@ -306,7 +308,9 @@ def _active_set(
         cut = np.partition(values, n - n_max)[n - n_max]
         threshold = float(cut)
         mask, n, *box = threshold_mask(gray32, threshold)
-    return mask, replace(stats, raw_threshold=threshold, n_active=n), tuple(box)
+    applied = FrameStats(stats.background, stats.noise_sigma, stats.i_max, threshold,
+                         stats.peak_threshold, n, stats.saturated_fraction)  # fmt: skip
+    return mask, applied, tuple(box)
 
 
 def nlog_response(image: np.ndarray, sigma_px: float, normalise: bool = True) -> np.ndarray:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Literal
 
 import cv2
@@ -509,11 +509,12 @@ class PosePipeline:
             "n_candidates": len(meas.range_mm),
         }
         result = self._pose_result(solved, meas, [], time_s, timer, extra, mode="tracking")
-        self._track = replace(
-            track,
-            R=result.R,
-            t_mm=result.t_mm,
-            frames_since_acquisition=track.frames_since_acquisition + 1,
+        self._track = TrackState(
+            result.R,
+            result.t_mm,
+            track.threshold_counts,
+            track.background_counts,
+            track.frames_since_acquisition + 1,
         )
         return result
 
