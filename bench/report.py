@@ -256,6 +256,16 @@ def _pipeline_verdict(pipe_tab: str) -> str:
                    else f"met at {', '.join(met)} only")  # fmt: skip
         out.append(f"The {goal:g} ms goal for {name.replace(' ms', '')} is {verdict}: medians "
                    f"{min(v):.2f}-{max(v):.2f} ms.")  # fmt: skip
+    i_c = header.index("ms in compiled code (acq / track)")
+    compiled = [float(r[i_c].split("/")[0]) for r in rows if len(r) == len(header)]
+    glue = [a - c for a, c in zip(col("acquisition ms"), compiled, strict=True)]
+    share = [c / a for a, c in zip(col("acquisition ms"), compiled, strict=True)]
+    out.append(
+        f"Of an acquisition frame, compiled code (kernels, OpenCV, SciPy) takes "
+        f"{min(compiled):.2f}-{max(compiled):.2f} ms ({min(share):.0%}-"
+        f"{max(share):.0%}); Python and NumPy the remaining {min(glue):.2f}-"
+        f"{max(glue):.2f} ms (the profiled pass and the timed one are separate runs)."
+    )
     ra, rt = col("acquisition / OpenCV"), col("tracking / OpenCV")
     out.append(f"Against OpenCV on the same frames: acquisition {min(ra):.1f}-{max(ra):.1f}x, "
                f"tracking {min(rt):.1f}-{max(rt):.1f}x its time.")  # fmt: skip
