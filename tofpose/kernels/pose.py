@@ -70,11 +70,9 @@ def residuals_jacobian(x, e, rho, R, t, sr, sb, B):
         rx2 = R[2, 0] * x[i, 0] + R[2, 1] * x[i, 1] + R[2, 2] * x[i, 2]
         p0, p1, p2 = rx0 + t[0], rx1 + t[1], rx2 + t[2]
         lat = max(rho[i] * sb[i], 1e-6)
-        # d(R x + t) / d(w, t) = [-[R x]_x | I], column by column as scalars (rows
-        # 0, 1, 2 of column c are (u_c, v_c, s_c)): no array allocated per reflector
-        u0, v0, s0 = 0.0, -rx2, rx1
-        u1, v1, s1 = rx2, 0.0, -rx0
-        u2, v2, s2 = -rx1, rx0, 0.0
+        # d(R x + t) / d(w, t) = [-[R x]_x | I]; each residual's row is its direction b
+        # (a tangent or the bearing) times that, over its sigma: (R x) x b for the
+        # rotation, b for the translation (scalars: no array per reflector)
         for k in range(3):
             if k < 2:
                 b0, b1, b2 = B[i, k, 0], B[i, k, 1], B[i, k, 2]
@@ -85,12 +83,12 @@ def residuals_jacobian(x, e, rho, R, t, sr, sb, B):
                 r[3 * i + 2] = ((b0 * p0 + b1 * p1 + b2 * p2) - rho[i]) / sr[i]
                 scale = sr[i]
             row = 3 * i + k
-            J[row, 0] = (b0 * u0 + b1 * v0 + b2 * s0) / scale
-            J[row, 1] = (b0 * u1 + b1 * v1 + b2 * s1) / scale
-            J[row, 2] = (b0 * u2 + b1 * v2 + b2 * s2) / scale
-            J[row, 3] = (b0 * 1.0 + b1 * 0.0 + b2 * 0.0) / scale
-            J[row, 4] = (b0 * 0.0 + b1 * 1.0 + b2 * 0.0) / scale
-            J[row, 5] = (b0 * 0.0 + b1 * 0.0 + b2 * 1.0) / scale
+            J[row, 0] = (b1 * -rx2 + b2 * rx1) / scale
+            J[row, 1] = (b0 * rx2 + b2 * -rx0) / scale
+            J[row, 2] = (b0 * -rx1 + b1 * rx0) / scale
+            J[row, 3] = b0 / scale
+            J[row, 4] = b1 / scale
+            J[row, 5] = b2 / scale
     return r, J
 
 
