@@ -280,7 +280,10 @@ def frame_levels(gray: np.ndarray, config: ExtractionConfig) -> FrameStats:
         i_t = max(bg + config.raw_threshold_rel * contrast, bg + config.noise_floor_sigma * sigma)
     i_peak = config.peak_abs if config.peak_abs is not None else bg + config.peak_rel * contrast
     sat = float(n_sat) / gray.size
-    return FrameStats(bg, sigma, i_max, i_t, max(i_peak, i_t), 0, sat)
+    return FrameStats(
+        background=bg, noise_sigma=sigma, i_max=i_max, raw_threshold=i_t,
+        peak_threshold=max(i_peak, i_t), n_active=0, saturated_fraction=sat,
+    )  # fmt: skip
 
 
 def active_pixel_mask(
@@ -308,8 +311,11 @@ def _active_set(
         cut = np.partition(values, n - n_max)[n - n_max]
         threshold = float(cut)
         mask, n, *box = threshold_mask(gray32, threshold)
-    applied = FrameStats(stats.background, stats.noise_sigma, stats.i_max, threshold,
-                         stats.peak_threshold, n, stats.saturated_fraction)  # fmt: skip
+    applied = FrameStats(
+        background=stats.background, noise_sigma=stats.noise_sigma, i_max=stats.i_max,
+        raw_threshold=threshold, peak_threshold=stats.peak_threshold, n_active=n,
+        saturated_fraction=stats.saturated_fraction,
+    )  # fmt: skip
     return mask, applied, tuple(box)
 
 

@@ -371,7 +371,9 @@ class PosePipeline:
         if isinstance(solved, Rejected):
             return fail(solved.reason, unmatched=unmatched + meas.as_unmatched(), **extra)
         result = self._pose_result(solved, meas, unmatched, time_s, timer, extra)
-        self._track = TrackState(result.R, result.t_mm, stats.raw_threshold, stats.background)
+        self._track = TrackState(R=result.R, t_mm=result.t_mm,
+                                 threshold_counts=stats.raw_threshold,
+                                 background_counts=stats.background)  # fmt: skip
         return result
 
     # -- stages ---------------------------------------------------------------------------
@@ -510,12 +512,10 @@ class PosePipeline:
         }
         result = self._pose_result(solved, meas, [], time_s, timer, extra, mode="tracking")
         self._track = TrackState(
-            result.R,
-            result.t_mm,
-            track.threshold_counts,
-            track.background_counts,
-            track.frames_since_acquisition + 1,
-        )
+            R=result.R, t_mm=result.t_mm, threshold_counts=track.threshold_counts,
+            background_counts=track.background_counts,
+            frames_since_acquisition=track.frames_since_acquisition + 1,
+        )  # fmt: skip
         return result
 
     def _pose_result(self, solved: Solution, meas: Measurements, unmatched, time_s, timer,
