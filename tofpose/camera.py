@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from tofpose.kernels.camera import bearings as kernel_bearings
+from tofpose.kernels.camera import project as kernel_project
 
 
 @dataclass(frozen=True)
@@ -80,17 +81,14 @@ class CameraModel:
     def project(self, points_mm: np.ndarray) -> np.ndarray:
         """Project camera-frame points of shape (N, 3) to pixels (u, v), shape (N, 2).
 
-        Points must be in front of the camera (z > 0).
+        Points must be in front of the camera (z > 0). Computed by
+        ``kernels.camera.project`` (OpenCV's ``projectPoints`` arithmetic where the lens
+        distorts; one compiled call, cheap enough for the per-frame pose check).
         """
-        p = np.atleast_2d(np.asarray(points_mm, dtype=np.float64))
+        p = np.ascontiguousarray(np.atleast_2d(np.asarray(points_mm, dtype=np.float64)))
         if np.any(p[:, 2] <= 0):
             raise ValueError("cannot project points at or behind the camera (z <= 0)")
-        if not self.has_distortion:
-            return np.column_stack(
-                (self.fx * p[:, 0] / p[:, 2] + self.cx, self.fy * p[:, 1] / p[:, 2] + self.cy)
-            )
-        uv, _ = cv2.projectPoints(p, np.zeros(3), np.zeros(3), self.K, self.dist_array)
-        return uv.reshape(-1, 2)
+        return kernel_project(p, self.fx, self.fy, self.cx, self.cy, self.dist_array)
 
     def normalized(self, uv_px: np.ndarray) -> np.ndarray:
         """Undistorted normalised coordinates (x/z, y/z), shape (N, 2), of pixels (N, 2)."""

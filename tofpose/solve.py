@@ -22,7 +22,6 @@ from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.extraction import Blob
 from tofpose.geometry import RigidTransform
-from tofpose.kernels.camera import project
 from tofpose.kernels.pose import (
     REFINE_LOS,
     REFINE_ML,
@@ -271,8 +270,7 @@ class PoseSolver:
         if len(matched) > self.config.dark_check_max_matches:
             return ""
         centres = self._xyz @ R.T + t
-        cam = self.camera
-        uv = project(centres, cam.fx, cam.fy, cam.cx, cam.cy, cam.dist_array)  # all z > 0
+        uv = self.camera.project(centres)  # all z > 0 (checked above)
         d_px = self.camera.fx * self._d / centres[:, 2]
         h, w = active.shape
         for i in range(len(centres)):
