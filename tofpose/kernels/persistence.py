@@ -114,18 +114,20 @@ def mean_in_boxes(gray, older, n_older, boxes, out):
         x, y, bw, bh = boxes[j, 0], boxes[j, 1], boxes[j, 2], boxes[j, 3]
         r0, r1 = max(y - 2, 0), min(y + bh + 2, h)
         c0, c1 = max(x - 2, 0), min(x + bw + 2, w)
-        # sum the older frames one frame at a time (the same float32 additions in the
-        # same order as a per-pixel loop over the frames, without re-selecting the frame
-        # from the tuple at every pixel)
-        s = np.zeros((r1 - r0, c1 - c0), np.float32)
-        for i in range(n_older):
-            frame = older[i]
-            for r in range(r0, r1):
-                for c in range(c0, c1):
-                    s[r - r0, c - c0] += frame[r, c]
+        # row by row, the older frames summed one frame at a time into a row buffer (the
+        # same float32 additions in the same order as a per-pixel loop over the frames);
+        # 1-D loops over contiguous rows, which the compiler vectorises (the 2-D loop
+        # this replaced was not: 7x slower)
+        s = np.empty(c1 - c0, np.float32)
         for r in range(r0, r1):
-            for c in range(c0, c1):
-                out[r, c] = (gray[r, c] + s[r - r0, c - c0]) / n
+            s[:] = 0
+            for i in range(n_older):
+                row = older[i][r]
+                for c in range(c1 - c0):
+                    s[c] += row[c0 + c]
+            g_row, out_row = gray[r], out[r]
+            for c in range(c1 - c0):
+                out_row[c0 + c] = (g_row[c0 + c] + s[c]) / n
     return out
 
 
