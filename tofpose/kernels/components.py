@@ -16,52 +16,62 @@ from tofpose.kernels.stats import median_inplace
 
 
 @jit
-def component_table(labels, n_labels, gray, x_origin, y_origin):
+def component_table(labels, n_labels, gray, x_origin, y_origin, runs):
     """Per component k = 0 .. n_labels - 1 (0, the background, is left empty).
 
     labels : (h, w) int32 from ``cv2.connectedComponents`` over the part of the image
     whose top-left pixel is (``x_origin``, ``y_origin``) (the active set's bounding box:
     labelling the whole frame for a few lit pixels cost most of the time); gray :
-    (H, W) float32, the whole frame. Returns, in whole-frame coordinates, area (K,)
-    int64, bbox (K, 4) int64 as (x, y, w, h), peak (K,) float32 counts, starts (K + 1,)
-    int64 and flat (P,) int64: the flat indices (row * W + col) of component k's
-    pixels, in raster order, are ``flat[starts[k]:starts[k + 1]]``.
+    (H, W) float32, the whole frame; runs : (R, 3) int64, the labelled set's horizontal
+    runs in raster order (``levels.threshold_mask``), in whole-frame coordinates. A run
+    lies in one component (its pixels are neighbours), so the table is built run by run:
+    at 0.7 m ~200 runs instead of the ~64,000 pixels of the box, twice (9x faster).
+    Returns, in whole-frame coordinates, area (K,) int64, bbox (K, 4) int64 as
+    (x, y, w, h), peak (K,) float32 counts, starts (K + 1,) int64 and flat (P,) int64:
+    the flat indices (row * W + col) of component k's pixels, in raster order, are
+    ``flat[starts[k]:starts[k + 1]]``.
     """
     h, w = labels.shape
     w_img = gray.shape[1]
     area = np.zeros(n_labels, np.int64)
-    x0 = np.full(n_labels, w, np.int64)
-    y0 = np.full(n_labels, h, np.int64)
-    x1 = np.full(n_labels, -1, np.int64)
-    y1 = np.full(n_labels, -1, np.int64)
+    x0 = np.full(n_labels, w + x_origin, np.int64)  # (the background's box: as OpenCV's)
+    y0 = np.full(n_labels, h + y_origin, np.int64)
+    x1 = np.full(n_labels, x_origin - 1, np.int64)
+    y1 = np.full(n_labels, y_origin - 1, np.int64)
     peak = np.full(n_labels, -np.inf, np.float32)
-    for r in range(h):
-        for c in range(w):
-            k = labels[r, c]
-            if k == 0:
-                continue
-            area[k] += 1
-            x0[k] = min(x0[k], c)
-            x1[k] = max(x1[k], c)
-            y0[k] = min(y0[k], r)
-            y1[k] = max(y1[k], r)
-            peak[k] = max(peak[k], gray[r + y_origin, c + x_origin])
+    n_runs = runs.shape[0]
+    run_label = np.empty(n_runs, np.int64)
+    for i in range(n_runs):
+        r, first, end = runs[i, 0], runs[i, 1], runs[i, 2]
+        k = labels[r - y_origin, first - x_origin]
+        run_label[i] = k
+        area[k] += end - first
+        x0[k] = min(x0[k], first)
+        x1[k] = max(x1[k], end - 1)
+        y0[k] = min(y0[k], r)
+        y1[k] = max(y1[k], r)
+        row = gray[r]
+        top = peak[k]
+        for c in range(first, end):
+            top = max(top, row[c])
+        peak[k] = top
     starts = np.zeros(n_labels + 1, np.int64)
     for k in range(1, n_labels):
         starts[k + 1] = starts[k] + area[k]
     fill = starts[:-1].copy()
     flat = np.empty(starts[n_labels], np.int64)
-    for r in range(h):
-        for c in range(w):
-            k = labels[r, c]
-            if k == 0:
-                continue
-            flat[fill[k]] = (r + y_origin) * w_img + c + x_origin
-            fill[k] += 1
+    for i in range(n_runs):
+        k = run_label[i]
+        base = runs[i, 0] * w_img
+        f = fill[k]
+        for c in range(runs[i, 1], runs[i, 2]):
+            flat[f] = base + c
+            f += 1
+        fill[k] = f
     bbox = np.empty((n_labels, 4), np.int64)
     for k in range(n_labels):
-        bbox[k, 0] = x0[k] + x_origin
-        bbox[k, 1] = y0[k] + y_origin
+        bbox[k, 0] = x0[k]
+        bbox[k, 1] = y0[k]
         bbox[k, 2] = x1[k] - x0[k] + 1
         bbox[k, 3] = y1[k] - y0[k] + 1
     return area, bbox, peak, starts, flat

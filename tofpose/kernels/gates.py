@@ -233,14 +233,14 @@ def gate_components(gray, labels, x_origin, y_origin, bbox, area, peak, rho, whi
 
 
 @jit
-def label_table_and_gates(labels, n_labels, gray, x_origin, y_origin, distance_flat, fx,
-                          diameters_mm, params, min_area_px):  # fmt: skip
+def label_table_and_gates(labels, n_labels, gray, x_origin, y_origin, runs, distance_flat,
+                          fx, diameters_mm, params, min_area_px):  # fmt: skip
     """``components.component_table`` of the labelled active set, the border and dim
     gates, the median range of the components that pass them and can be sized
     (``components.component_median_ranges``), then ``gate_components`` on them: the
     blob criteria of §3.1.2-§3.2 from OpenCV's labels in one call.
 
-    labels, n_labels, x_origin, y_origin : as ``component_table``; gray (H, W) float32;
+    labels, n_labels, x_origin, y_origin, runs : as ``component_table``; gray (H, W) float32;
     distance_flat (H * W,) float32 mm; fx, diameters_mm, params : as ``gate_components``
     (params[10] is I_peak); min_area_px : the smallest component listed.
 
@@ -250,7 +250,8 @@ def label_table_and_gates(labels, n_labels, gray, x_origin, y_origin, distance_f
     (inner and bright enough to test), rho (K,) median ranges (NaN where not read), and
     ``gate_components``' results for ``listed[testable]``."""
     h, w = gray.shape
-    area, bbox, peak, starts, flat = component_table(labels, n_labels, gray, x_origin, y_origin)
+    area, bbox, peak, starts, flat = component_table(labels, n_labels, gray, x_origin, y_origin,
+                                                     runs)  # fmt: skip
     inner = np.empty(n_labels, np.bool_)
     bright = np.empty(n_labels, np.bool_)
     for k in range(n_labels):

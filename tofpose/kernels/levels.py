@@ -133,10 +133,16 @@ def frame_level_stats(gray, stride, saturated_counts):
 @jit
 def threshold_mask(gray, threshold):
     """The active pixel set ``gray >= threshold`` (§3.1.1) in one pass: uint8 mask
-    (H, W), its size, and its bounding box (x, y, w, h) as ``cv2.boundingRect`` gives
-    it ((0, 0, 0, 0) when empty). gray : (H, W) float32."""
+    (H, W), its runs, its size, and its bounding box (x, y, w, h) as ``cv2.boundingRect``
+    gives it ((0, 0, 0, 0) when empty). gray : (H, W) float32.
+
+    runs : (R, 3) int64, the set's maximal horizontal runs of pixels in raster order, as
+    (row, first column, last column + 1): the labelled components are read run by run
+    (``components.component_table``) instead of scanning every pixel of their box."""
     h, w = gray.shape
     mask = np.empty((h, w), np.uint8)
+    runs = np.empty((h * ((w + 1) // 2), 3), np.int64)  # at most (w + 1) // 2 a row
+    n_runs = 0
     n = 0
     x0, y0, x1, y1 = w, h, -1, -1
     t = np.float32(threshold)
@@ -150,14 +156,20 @@ def threshold_mask(gray, threshold):
             n += row_n
             y0 = min(y0, r)
             y1 = r
-            for c in range(w):
+            c = 0
+            while c < w:
                 if mask[r, c]:
-                    x0 = min(x0, c)
-                    break
-            for c in range(w - 1, -1, -1):
-                if mask[r, c]:
-                    x1 = max(x1, c)
-                    break
+                    first = c
+                    while c < w and mask[r, c]:
+                        c += 1
+                    runs[n_runs, 0] = r
+                    runs[n_runs, 1] = first
+                    runs[n_runs, 2] = c
+                    n_runs += 1
+                    x0 = min(x0, first)
+                    x1 = max(x1, c - 1)
+                else:
+                    c += 1
     if n == 0:
-        return mask, 0, 0, 0, 0, 0
-    return mask, n, x0, y0, x1 - x0 + 1, y1 - y0 + 1
+        return mask, runs[:0], 0, 0, 0, 0, 0
+    return mask, runs[:n_runs], n, x0, y0, x1 - x0 + 1, y1 - y0 + 1

@@ -28,6 +28,7 @@ from tofpose.kernels.components import (
     median_of_finite,
 )
 from tofpose.kernels.gates import nlog_patch
+from tofpose.kernels.levels import threshold_mask
 
 
 def _assert_is_opencvs(table, mask, gray):
@@ -43,12 +44,17 @@ def _assert_is_opencvs(table, mask, gray):
         assert peak[k] == gray[labels == k].max()
 
 
+def _runs(mask):
+    """The mask's horizontal runs as ``threshold_mask`` gives them."""
+    return threshold_mask(mask.astype(np.float32), 0.5)[1]
+
+
 def test_component_table_equals_opencv_stats():
     rng = np.random.default_rng(1)
     mask = (rng.random((60, 80)) > 0.8).astype(np.uint8)
     gray = rng.random((60, 80)).astype(np.float32)
     n, labels = cv2.connectedComponents(mask, connectivity=8)
-    _assert_is_opencvs(component_table(labels, n, gray, 0, 0), mask, gray)
+    _assert_is_opencvs(component_table(labels, n, gray, 0, 0, _runs(mask)), mask, gray)
 
 
 @pytest.mark.parametrize("origin", [(16, 10), (0, 0), (2, 8)])
@@ -63,7 +69,8 @@ def test_a_crop_at_even_origin_gives_the_whole_frame_table(origin):
     x0, y0 = origin
     n_crop, crop_labels = cv2.connectedComponents(mask[y0:, x0:], connectivity=8)
     assert n_crop > 20
-    _assert_is_opencvs(component_table(crop_labels, n_crop, gray, x0, y0), mask, gray)
+    table = component_table(crop_labels, n_crop, gray, x0, y0, _runs(mask))
+    _assert_is_opencvs(table, mask, gray)
 
 
 def test_median_of_finite_is_numpy_median_without_nans():

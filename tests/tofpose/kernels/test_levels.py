@@ -65,8 +65,16 @@ def test_threshold_mask_is_numpy_threshold_with_opencv_bounding_box():
     for trial in range(200):
         g = rng.gamma(2.0, 30.0, (60, 80)).astype(np.float32)
         threshold = float(rng.uniform(50.0, 400.0)) if trial % 5 else 1e9  # some empty
-        mask, n, *box = threshold_mask(g, threshold)
+        mask, runs, n, *box = threshold_mask(g, threshold)
         want = (g >= np.float32(threshold)).view(np.uint8)
         np.testing.assert_array_equal(mask, want)
         assert n == int(want.sum())
         assert tuple(box) == cv2.boundingRect(want)
+        # the runs are the mask's maximal horizontal runs, in raster order
+        from_runs = np.zeros_like(want)
+        for r, first, end in runs:
+            from_runs[r, first:end] = 1
+            assert first == 0 or not want[r, first - 1]
+            assert end == want.shape[1] or not want[r, end]
+        np.testing.assert_array_equal(from_runs, want)
+        assert np.all(np.diff(runs[:, 0] * 1000 + runs[:, 1]) > 0)
