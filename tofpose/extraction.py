@@ -439,12 +439,11 @@ def find_candidate_blobs(
     mask, stats, runs, (ax, ay, aw, ah) = _active_set(gray, stats, config.n_max)
     h, w = gray.shape
     gray32 = np.asarray(gray, np.float32)
-    # label the active set's bounding box grown by 2 px (what the gates read around a
-    # component's box), not the whole frame; its origin on even coordinates, so that
-    # OpenCV's 2 x 2 block scan sees the pixels in the same blocks and numbers the
-    # components in the same order
-    ox, oy = max(ax - 2, 0) & ~1, max(ay - 2, 0) & ~1
-    crop = mask[oy : min(ay + ah + 2, h), ox : min(ax + aw + 2, w)]
+    # label the active set's bounding box, not the whole frame; its origin on even
+    # coordinates, so that OpenCV's 2 x 2 block scan sees the pixels in the same blocks
+    # and numbers the components in the same order
+    ox, oy = ax & ~1, ay & ~1
+    crop = mask[oy : ay + ah, ox : ax + aw]
     n_lab, labels = cv2.connectedComponents(crop, connectivity=8)
     cos_t = np.cos(np.radians(config.max_tilt_deg))
     ecc_max = np.sqrt(1.0 - cos_t**2)

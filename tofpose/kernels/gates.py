@@ -92,9 +92,9 @@ def gate_components(gray, labels, x_origin, y_origin, bbox, area, peak, rho, whi
     gates).
 
     gray : (H, W) float32; labels : (h, w) int32, the labels of the image part whose
-    top-left pixel is (x_origin, y_origin), covering every component's box grown by 2
-    px (within the image); bbox (K, 4), area (K,), peak (K,), rho
-    (K,) per label from ``components.component_table`` (rho: median range, mm);
+    top-left pixel is (x_origin, y_origin), covering every component's box; bbox
+    (K, 4), area (K,), peak (K,), rho (K,) per label from
+    ``components.component_table`` (rho: median range, mm);
     which : (n,) labels to test; diameters_mm : (N,) catalog diameters; params : (13,)
     float64: h_min_px (<0: range-adaptive window), h_max_px (<0: none), cos(max tilt),
     size_tolerance, size_margin_px, nlog_sigma_px (<=0: matched to each blob's size),
@@ -161,8 +161,8 @@ def gate_components(gray, labels, x_origin, y_origin, bbox, area, peak, rho, whi
         y0, y1 = max(y - 2, 0), min(y + bh + 2, h_img)
         x0, x1 = max(x - 2, 0), min(x + bw + 2, w_img)
         patch = np.zeros((y1 - y0, x1 - x0), np.float32)
-        for yy in range(y0, y1):
-            for xx in range(x0, x1):
+        for yy in range(y, y + bh):  # the members lie in the box
+            for xx in range(x, x + bw):
                 if labels[yy - y_origin, xx - x_origin] == k:
                     patch[yy - y0, xx - x0] = gray[yy, xx]
         if sigma_abs > 0:

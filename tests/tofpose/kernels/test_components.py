@@ -73,6 +73,26 @@ def test_a_crop_at_even_origin_gives_the_whole_frame_table(origin):
     _assert_is_opencvs(table, mask, gray)
 
 
+def test_labelling_the_active_sets_box_from_an_even_origin_gives_the_whole_frame_table():
+    """The crop find_candidate_blobs labels: exactly the set's bounding box, its origin
+    moved to even coordinates; sets of every size and position (odd and even edges)."""
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        mask = np.zeros((60, 80), np.uint8)
+        y, x = rng.integers(0, 25, 2)
+        bh, bw = rng.integers(3, 35, 2)
+        mask[y : y + bh, x : x + bw] = rng.random((bh, bw)) > rng.uniform(0.3, 0.9)
+        gray = rng.random((60, 80)).astype(np.float32)
+        x, y, bw, bh = cv2.boundingRect(mask)
+        if bw == 0:
+            continue
+        x0, y0 = x & ~1, y & ~1
+        n_crop, crop_labels = cv2.connectedComponents(mask[y0 : y + bh, x0 : x + bw],
+                                                      connectivity=8)  # fmt: skip
+        table = component_table(crop_labels, n_crop, gray, x0, y0, _runs(mask))
+        _assert_is_opencvs(table, mask, gray)
+
+
 def test_median_of_finite_is_numpy_median_without_nans():
     rng = np.random.default_rng(2)
     for n in (1, 2, 7, 100):
