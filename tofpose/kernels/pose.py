@@ -11,26 +11,46 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
+from tofpose.kernels.small_matrices import (
+    cholesky,
+    cholesky_inverse,
+    cholesky_solve,
+    gram,
+    matmul3,
+    rotation_from_correlation,
+    transposed_times,
+)
 from tofpose.kernels.stats import median_inplace
 
 
 @jit
 def svd_pose(x, y, w):
     """Weighted absolute orientation: R (3, 3), t (3,) minimising
-    ``sum w_i ||y_i - (R x_i + t)||^2`` (Eqs. 40-50)."""
-    ws = w / w.sum()
-    x_bar = ws @ x  # Eq. 41
-    y_bar = ws @ y
-    xc = x - x_bar  # Eq. 42
-    yc = y - y_bar
-    S = (xc * w.reshape(-1, 1)).T @ yc  # Eq. 45
-    U, _, Vt = np.linalg.svd(S)
-    V = Vt.T
-    d = np.sign(np.linalg.det(V @ U.T))
-    D = np.eye(3)
-    D[2, 2] = d if d != 0 else 1.0
-    R = V @ D @ U.T  # Eq. 49
-    return R, y_bar - R @ x_bar  # Eq. 50
+    ``sum w_i ||y_i - (R x_i + t)||^2`` (Eqs. 40-50). The rotation of Eqs. 45-49 by
+    Horn's closed form (``small_matrices.rotation_from_correlation``: the same R as the
+    SVD's, without LAPACK)."""
+    m = x.shape[0]
+    w_sum = 0.0
+    for i in range(m):
+        w_sum += w[i]
+    x_bar = np.zeros(3)  # Eq. 41
+    y_bar = np.zeros(3)
+    for i in range(m):
+        ws = w[i] / w_sum
+        for a in range(3):
+            x_bar[a] += ws * x[i, a]
+            y_bar[a] += ws * y[i, a]
+    S = np.zeros((3, 3))  # Eq. 45, over the centred points (Eq. 42)
+    for i in range(m):
+        for a in range(3):
+            xa = w[i] * (x[i, a] - x_bar[a])
+            for b in range(3):
+                S[a, b] += xa * (y[i, b] - y_bar[b])
+    R = rotation_from_correlation(S)  # Eqs. 46-49
+    t = np.empty(3)  # Eq. 50
+    for a in range(3):
+        t[a] = y_bar[a] - (R[a, 0] * x_bar[0] + R[a, 1] * x_bar[1] + R[a, 2] * x_bar[2])
+    return R, t
 
 
 @jit
@@ -110,7 +130,7 @@ def rotation_step(w):
         return np.eye(3)
     k0, k1, k2 = w[0] / angle, w[1] / angle, w[2] / angle
     K = np.array([[0.0, -k2, k1], [k2, 0.0, -k0], [-k1, k0, 0.0]])
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * matmul3(K, K)
 
 
 @jit
@@ -127,18 +147,23 @@ def ml_refine(x, e, rho, R0, t0, sr, sb, max_iterations, tol, step_sigma2):
     for it in range(1, max_iterations + 1):
         iterations = it
         r, J = residuals_jacobian(x, e, rho, R, t, sr, sb, B)
-        H = J.T @ J
-        if abs(np.linalg.det(H)) == 0.0:
+        H = gram(J)
+        L, ok = cholesky(H)
+        if not ok:  # singular normal equations
             break
-        delta = -np.linalg.solve(H, J.T @ r)
-        R = rotation_step(delta[:3]) @ R
+        delta = -cholesky_solve(L, transposed_times(J, r))
+        R = matmul3(rotation_step(delta[:3]), R)
         t = t + delta[3:]
-        if np.sqrt((delta**2).sum()) < tol or delta @ H @ delta < step_sigma2:
+        step2 = 0.0  # delta^T H delta
+        for a in range(6):
+            for b in range(6):
+                step2 += delta[a] * H[a, b] * delta[b]
+        if np.sqrt((delta**2).sum()) < tol or step2 < step_sigma2:
             break
     r, J = residuals_jacobian(x, e, rho, R, t, sr, sb, B)
-    H = J.T @ J
-    cov = np.full((6, 6), np.nan) if abs(np.linalg.det(H)) == 0.0 else np.linalg.inv(H)
-    return R, t, cov, r @ r, iterations, reflector_norms(r)
+    L, ok = cholesky(gram(J))
+    cov = cholesky_inverse(L) if ok else np.full((6, 6), np.nan)
+    return R, t, cov, (r**2).sum(), iterations, reflector_norms(r)
 
 
 @jit
@@ -187,14 +212,19 @@ def line_of_sight(x, e, R, t, w, tol, max_iterations):
     y = np.empty((m, 3))
     for it in range(1, max_iterations + 1):
         for i in range(m):
-            p = R @ x[i] + t
-            s = e[i, 0] * p[0] + e[i, 1] * p[1] + e[i, 2] * p[2]
-            y[i] = s * e[i]  # Eq. 51
+            s = 0.0
+            for a in range(3):
+                s += e[i, a] * (R[a, 0] * x[i, 0] + R[a, 1] * x[i, 1] + R[a, 2] * x[i, 2] + t[a])
+            for a in range(3):
+                y[i, a] = s * e[i, a]  # Eq. 51
         R, t = svd_pose(x, y, w)
         eps = 0.0
         for i in range(m):
-            d = R @ x[i] + t - y[i]
-            eps += np.sqrt((d**2).sum())  # Eq. 52
+            d2 = 0.0
+            for a in range(3):
+                d = R[a, 0] * x[i, 0] + R[a, 1] * x[i, 1] + R[a, 2] * x[i, 2] + t[a] - y[i, a]
+                d2 += d * d
+            eps += np.sqrt(d2)  # Eq. 52
         if it > 1 and abs(eps - prev) < tol:
             return R, t, it
         prev = eps
@@ -371,5 +401,8 @@ def range_bias_covariance(x, e, rho, R, t, sr, sb, bias_sigma_mm):
     g = np.zeros(J.shape[0])
     for i in range(x.shape[0]):
         g[3 * i + 2] = -1.0 / sr[i]
-    s = np.linalg.solve(J.T @ J, J.T @ g)
+    L, ok = cholesky(gram(J))
+    if not ok:
+        return np.full((6, 6), np.nan)
+    s = cholesky_solve(L, transposed_times(J, g))
     return bias_sigma_mm**2 * np.outer(s, s)

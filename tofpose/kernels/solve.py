@@ -99,7 +99,11 @@ def solve_pairs(
         r_disc[a] = radii[i_idx[a]]
         rho_m[a] = rho[k_idx[a]]
     if correct_perspective:
-        uv_obs -= disc_centre_offsets(K, x @ R.T + t, R[:, 2].copy(), r_disc)
+        centres = np.empty((m, 3))  # x R^T + t, the discs' centres in the camera frame
+        for a in range(m):
+            for b in range(3):
+                centres[a, b] = R[b, 0] * x[a, 0] + R[b, 1] * x[a, 1] + R[b, 2] * x[a, 2] + t[b]
+        uv_obs -= disc_centre_offsets(K, centres, R[:, 2].copy(), r_disc)
     e_obs = bearings(uv_obs, fx, fy, cx, cy, dist)
     y_obs = np.empty((m, 3))
     sb = np.empty(m)
