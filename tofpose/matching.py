@@ -28,7 +28,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from tofpose.kernels.annealing import anneal_assignment, pair_potentials, size_mismatch
+from tofpose.kernels.annealing import (
+    anneal_assignment,
+    assigned_pairs,
+    assignment_costs,
+    pair_potentials,
+    size_mismatch,
+)
 from tofpose.kernels.pose import svd_pose
 from tofpose.kernels.residual_check import prune_pairs
 from tofpose.robust import median_1d
@@ -141,21 +147,17 @@ def anneal(
 
 
 def one_to_one(A: np.ndarray) -> tuple[np.ndarray, list[int]]:
-    """Hungarian assignment on -log A with a private null column per observed blob."""
-    g, e1 = A.shape
-    e = e1 - 1
-    big = 1e6
-    cost = np.full((g, e + g), big)
-    logA = -np.log(np.maximum(A, 1e-300))  # finite: A is clipped away from 0
-    cost[:, :e] = logA[:, 1:]
-    np.fill_diagonal(cost[:, e:], logA[:, 0])
+    """Hungarian assignment on -log A with a private null column per observed blob.
+
+    A : (g, e + 1) assignment probabilities, column 0 the null label. Returns the pairs
+    (m, 2) (blob k, catalog i) and the unmatched blobs. The cost matrix and the reading
+    of the assignment are compiled (``kernels.annealing.assignment_costs``,
+    ``assigned_pairs``); the assignment is SciPy's."""
+    cost = assignment_costs(-np.log(np.maximum(A, 1e-300)))  # finite: A > 0
     rows, cols = linear_sum_assignment(cost)
-    real = (cols < e) & (cost[rows, cols] < big)
-    matched = np.zeros(g, bool)
-    matched[rows[real]] = True
-    pairs = np.empty((int(real.sum()), 2), int)
-    pairs[:, 0], pairs[:, 1] = rows[real], cols[real]
-    return pairs, np.flatnonzero(~matched).tolist()
+    pairs, unmatched = assigned_pairs(rows.astype(np.int64), cols.astype(np.int64), cost,
+                                      A.shape[1] - 1)  # fmt: skip
+    return pairs, unmatched.tolist()
 
 
 def match_reflectors(

@@ -99,3 +99,39 @@ def size_mismatch(observed_diameter, catalog_diameter):
                 v = 4.0
             out[k, i] = v
     return out
+
+
+#: the cost of a forbidden cell of the one-to-one step (a blob's other blobs' nulls)
+FORBIDDEN = 1e6
+
+
+@jit
+def assignment_costs(neg_log_a):
+    """The cost matrix (g, e + g) of ``matching.one_to_one`` from -log A (g, e + 1):
+    catalog columns first, then one private null column per blob (its own null cost on
+    the diagonal, ``FORBIDDEN`` elsewhere)."""
+    g, e1 = neg_log_a.shape
+    e = e1 - 1
+    cost = np.full((g, e + g), FORBIDDEN)
+    for k in range(g):
+        for i in range(e):
+            cost[k, i] = neg_log_a[k, i + 1]
+        cost[k, e + k] = neg_log_a[k, 0]
+    return cost
+
+
+@jit
+def assigned_pairs(rows, cols, cost, e):
+    """The (k, i) pairs (m, 2) int64 of an assignment (rows, cols) of ``assignment_costs``
+    that are real catalog labels at an allowed cost, and the blobs left unmatched (u,)
+    int64, ascending."""
+    g = cost.shape[0]
+    matched = np.zeros(g, np.bool_)
+    pairs = np.empty((rows.shape[0], 2), np.int64)
+    m = 0
+    for a in range(rows.shape[0]):
+        if cols[a] < e and cost[rows[a], cols[a]] < FORBIDDEN:
+            pairs[m, 0], pairs[m, 1] = rows[a], cols[a]
+            matched[rows[a]] = True
+            m += 1
+    return pairs[:m], np.flatnonzero(~matched)

@@ -74,3 +74,29 @@ def test_size_term_equals_the_numpy_statement_and_its_special_cases():
     np.testing.assert_allclose(size_unary(observed, catalog), want, rtol=1e-14, atol=1e-15)
     special = size_unary(np.array([np.nan, 0.0, np.inf, 56.0, 35.0 * 1.6**3]), catalog[:1])
     np.testing.assert_allclose(special[:, 0], [0.0, 4.0, 4.0, 1.0, 4.0], rtol=1e-12)
+
+
+def test_one_to_one_is_the_hungarian_assignment_with_private_null_columns():
+    """The compiled cost matrix and reading of the assignment against the same step in
+    NumPy (the form they replaced), on random assignment matrices with blobs that prefer
+    the null label and blobs competing for one reflector."""
+    from scipy.optimize import linear_sum_assignment
+
+    from tofpose.matching import one_to_one
+
+    rng = np.random.default_rng(8)
+    for _ in range(300):
+        g, e = int(rng.integers(1, 12)), int(rng.integers(3, 10))
+        A = rng.dirichlet(np.full(e + 1, 0.3), size=g)
+        A[rng.random(g) < 0.2, 0] = 5.0  # some blobs clearly spurious
+        A /= A.sum(axis=1, keepdims=True)
+        cost = np.full((g, e + g), 1e6)
+        log_a = -np.log(np.maximum(A, 1e-300))
+        cost[:, :e] = log_a[:, 1:]
+        np.fill_diagonal(cost[:, e:], log_a[:, 0])
+        rows, cols = linear_sum_assignment(cost)
+        real = (cols < e) & (cost[rows, cols] < 1e6)
+        pairs, unmatched = one_to_one(A)
+        np.testing.assert_array_equal(pairs, np.column_stack((rows[real], cols[real])))
+        assert unmatched == sorted(set(range(g)) - set(rows[real].tolist()))
+        assert len(set(pairs[:, 1].tolist())) == len(pairs)  # one blob per reflector
