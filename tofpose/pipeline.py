@@ -52,7 +52,7 @@ from tofpose.matching import (
 )
 from tofpose.persistence import Persistence, PersistenceConfig
 from tofpose.range_calibration import RangeCorrection
-from tofpose.solve import Measurements, PoseSolver, Rejected, Solution
+from tofpose.solve import Measurements, PoseSolver, Rejected, Solution, ThresholdedFrame
 from tofpose.tracking import (
     TrackingConfig,
     TrackState,
@@ -327,7 +327,7 @@ class PosePipeline:
             )
         found, blobs = self._candidates(g, d, stats, timer)
         stats = found.stats  # I_t as applied (after the N_max cap)
-        active = found.active_mask
+        active = ThresholdedFrame(g, stats.raw_threshold)  # A, for the pose check
         # The motion gate compares the cheap moment centroids of find_candidate_blobs;
         # the precise centroids and ranges are measured once, on the combined frames.
         kept, mean_g, med_d, pinfo = self._persistence.measure(
@@ -479,7 +479,7 @@ class PosePipeline:
         meas = self._back_project(kept, mean_g, med_d, track.background_counts)
         pairs = np.column_stack((np.arange(len(kept)), [wd.catalog_index for wd in windows]))
         timer.lap("backproject")
-        active = g >= track.threshold_counts
+        active = ThresholdedFrame(g, track.threshold_counts)
         solved = self._solver.solve(pairs, meas, cfg.matching.alpha_for(meas.y_mm), active)
         timer.lap("refine")
         if isinstance(solved, Rejected) or len(solved.observations) < len(pairs):

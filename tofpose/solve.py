@@ -29,6 +29,7 @@ from tofpose.kernels.pose import (
     range_bias_covariance,
 )
 from tofpose.kernels.solve import solve_pairs
+from tofpose.kernels.verify import BEHIND_CAMERA, DARK_REFLECTOR, pose_check
 from tofpose.pose import MEDIAN_CHI2_3DOF, STEP_SIGMA2, MLResult
 
 _REFINEMENT = {"none": REFINE_NONE, "ml": REFINE_ML, "los": REFINE_LOS}
@@ -124,18 +125,19 @@ class Rejected:
     implausible: bool = False
 
 
+@dataclass(frozen=True)
 class ThresholdedFrame:
-    """A frame's active pixel set ``gray >= threshold`` computed only where it is read:
-    ``verify``'s dark check reads a few small windows, and comparing the whole frame
-    each tracked frame cost more than the check itself."""
+    """A frame's active pixel set ``gray >= threshold`` (float32 comparison, as
+    ``extraction.active_pixel_mask``), given as the frame and its I_t: ``verify``'s dark
+    check reads a few small windows of it, and thresholding the whole frame each
+    tracked frame cost more than the check itself. gray : (H, W) float32."""
 
-    def __init__(self, gray: np.ndarray, threshold: float) -> None:
-        self._gray = gray
-        self._threshold = threshold
-        self.shape = gray.shape
+    gray: np.ndarray
+    threshold: float
 
-    def __getitem__(self, index) -> np.ndarray:
-        return self._gray[index] >= self._threshold
+
+#: the frame ``verify`` passes when the dark check does not run (never read)
+_NO_FRAME = ThresholdedFrame(np.zeros((1, 1), np.float32), 0.0)
 
 
 class PoseSolver:
@@ -159,16 +161,22 @@ class PoseSolver:
         self._cos_max_view = math.cos(math.radians(config.max_view_angle_deg))
         self._d = np.ascontiguousarray(catalog.diameters_mm, dtype=float)
         self._K = np.ascontiguousarray(camera.K, dtype=float)
+        self._dist = np.ascontiguousarray(camera.dist_array, dtype=float)
         self._ids = catalog.ids
         self._correction = range_correction
 
     # ------------------------------------------------------------------------------------
     def solve(
-        self, pairs: np.ndarray, meas: Measurements, alpha_mm: float, active: np.ndarray
+        self,
+        pairs: np.ndarray,
+        meas: Measurements,
+        alpha_mm: float,
+        active: ThresholdedFrame | None,
     ) -> Solution | Rejected:
         """Pose from matched pairs (m, 2) of observed and catalog indices: weighted SVD
         (Eqs. 40-50), completion, perspective-bias correction, refinement, outlier step
-        and verification (§5). ``active`` : (H, W) the frame's active pixel set.
+        and verification (§5). ``active`` : the frame and its I_t (the active pixel set,
+        read by the dark check), or None when the check cannot run.
 
         The fit (``kernels.pose.fit_with_outliers``) first uses the noise model's range
         sigmas; with ``adapt_range_sigma`` it adds the frame's systematic range sigma
@@ -207,8 +215,8 @@ class PoseSolver:
         self, obs: MatchedObservations, R, t, iterations, cov, chi2, norms, sr, active
     ) -> Solution | Rejected:
         """The fitted pose of ``obs`` (the reflectors kept): verified against the frame
-        (``active`` : (H, W) its active pixel set; it is only read when few reflectors
-        are matched, ``dark_check_max_matches``), with the covariance of the fit (6, 6)
+        (``active`` : the frame and its I_t; it is only read when few reflectors are
+        matched, ``dark_check_max_matches``), with the covariance of the fit (6, 6)
         and of the common range bias the data cannot reveal."""
         T = RigidTransform(R, t)
         if self.config.verify_pose:
@@ -252,12 +260,14 @@ class PoseSolver:
     def faces_camera(self, R: np.ndarray, t: np.ndarray) -> bool:
         return self.view_cosine(R, t) >= self._cos_max_view
 
-    def verify(self, T: RigidTransform, active: np.ndarray | None, matched: set[int]) -> str:
-        """Physical consistency of a pose with the frame; empty string when consistent.
-        ``active`` (H, W) is read only for the dark check (at most
-        ``dark_check_max_matches`` reflectors matched) and may be None otherwise; any
-        object with a ``shape`` that gives a bool array when sliced will do
-        (``ThresholdedFrame``)."""
+    def verify(self, T: RigidTransform, active: ThresholdedFrame | None,
+               matched: set[int]) -> str:  # fmt: skip
+        """Physical consistency of a pose with the frame; empty string when consistent:
+        the target faces the camera within ``max_view_angle_deg``, every reflector is in
+        front of it, and (at most ``dark_check_max_matches`` reflectors matched) no
+        reflector that should be clearly visible falls on a dark part of the frame
+        (``kernels.verify.pose_check`` states the rule). ``active`` : the frame and its
+        I_t; read only for the dark check, and may be None otherwise."""
         R, t = T.R, T.t_mm
         cos_view = self.view_cosine(R, t)
         if cos_view < self._cos_max_view:
@@ -265,30 +275,21 @@ class PoseSolver:
                 f"the target would face away from the camera (view angle "
                 f"{np.degrees(np.arccos(np.clip(cos_view, -1, 1))):.0f} deg)"
             )
-        if float((self._xyz @ R[2]).min()) + float(t[2]) <= 0:  # the centres' depths
+        dark_check = len(matched) <= self.config.dark_check_max_matches
+        is_matched = np.zeros(len(self._xyz), bool)
+        is_matched[list(matched)] = True
+        frame = active if dark_check else _NO_FRAME
+        cam = self.camera
+        outcome, i, u, v = pose_check(
+            self._xyz, self._d, is_matched, np.ascontiguousarray(R, dtype=float),
+            np.ascontiguousarray(t, dtype=float), cam.fx, cam.fy, cam.cx, cam.cy,
+            self._dist, frame.gray, float(frame.threshold), dark_check,
+        )  # fmt: skip
+        if outcome == BEHIND_CAMERA:
             return "reflectors would be behind the camera"
-        if len(matched) > self.config.dark_check_max_matches:
-            return ""
-        centres = self._xyz @ R.T + t
-        uv = self.camera.project(centres)  # all z > 0 (checked above)
-        d_px = self.camera.fx * self._d / centres[:, 2]
-        h, w = active.shape
-        for i in range(len(centres)):
-            if i in matched or d_px[i] < 2.5:
-                continue
-            u, v = uv[i]
-            m = 0.75 * d_px[i] + 2
-            if not (m <= u < w - m and m <= v < h - m):
-                continue
-            sep = np.linalg.norm(uv - uv[i], axis=1)
-            sep[i] = np.inf
-            if np.min(sep) < 1.5 * d_px[i]:
-                continue  # would merge with a neighbour: no clean prediction
-            r = max(1, int(round(d_px[i] / 3)))
-            iu, iv = int(round(u)), int(round(v))
-            if not active[iv - r : iv + r + 1, iu - r : iu + r + 1].any():
-                return (
-                    f"reflector {int(self._ids[i])} should be visible at "
-                    f"({u:.0f}, {v:.0f}) px but the frame is dark there"
-                )
+        if outcome == DARK_REFLECTOR:
+            return (
+                f"reflector {int(self._ids[i])} should be visible at "
+                f"({u:.0f}, {v:.0f}) px but the frame is dark there"
+            )
         return ""

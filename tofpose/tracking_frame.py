@@ -116,8 +116,7 @@ class CompiledTracker:
             k_idx=k_idx, i_idx=cat_idx, x_mm=self._xyz[cat_idx], uv_px=uv_obs, bearings=e_obs,
             range_mm=rho, y_mm=y_obs, sigma_bearing_rad=sp / cam.fx, sigma_range_mm=sr,
         )  # fmt: skip
-        few = n <= cfg.dark_check_max_matches
-        active = ThresholdedFrame(g, track.threshold_counts) if few else None
+        active = ThresholdedFrame(g, track.threshold_counts)
         solved = self._solver.conclude(obs, R, t, its, cov, chi2, norms, sr_fit, active)
         if not isinstance(solved, Solution):
             return None

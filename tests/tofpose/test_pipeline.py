@@ -220,17 +220,43 @@ def test_covered_markers_do_not_veto_a_well_determined_pose():
     pipe = PosePipeline(CameraModel(), cat, strict)
     refused = pipe.process(f.gray, f.distance_mm)
     assert not refused.ok and "dark" in refused.reason
-    # tracking reads the active set only in the dark check's windows (ThresholdedFrame):
-    # the same verdict as the whole thresholded frame
+    # the compiled check (kernels.verify.pose_check) against the rule written out over
+    # the whole thresholded frame
     from tofpose.geometry import RigidTransform
     from tofpose.solve import ThresholdedFrame
 
     g = f.gray.astype(np.float32)
     matched = {int(np.flatnonzero(cat.ids == i)[0]) for i in (1, 2, 4, 5, 7, 8)}
-    whole = pipe._solver.verify(RigidTransform(res.R, res.t_mm), g >= 400.0, matched)
-    lazy = pipe._solver.verify(RigidTransform(res.R, res.t_mm), ThresholdedFrame(g, 400.0),
-                               matched)  # fmt: skip
-    assert "dark" in whole and lazy == whole
+    verdict = pipe._solver.verify(RigidTransform(res.R, res.t_mm), ThresholdedFrame(g, 400.0),
+                                  matched)  # fmt: skip
+    assert verdict == _dark_reflector_reference(res.R, res.t_mm, cat, matched, g >= 400.0)
+    assert "reflector 3 should be visible" in verdict
+
+
+def _dark_reflector_reference(R, t, cat, matched, active):
+    """The dark-marker rule of ``PoseSolver.verify`` in NumPy over a whole active mask."""
+    cam = CameraModel()
+    centres = cat.positions_mm @ R.T + t
+    uv = cam.project(centres)
+    d_px = cam.fx * cat.diameters_mm / centres[:, 2]
+    h, w = active.shape
+    for i in range(len(centres)):
+        if i in matched or d_px[i] < 2.5:
+            continue
+        u, v = uv[i]
+        m = 0.75 * d_px[i] + 2
+        if not (m <= u < w - m and m <= v < h - m):
+            continue
+        sep = np.linalg.norm(uv - uv[i], axis=1)
+        sep[i] = np.inf
+        if np.min(sep) < 1.5 * d_px[i]:
+            continue
+        r = max(1, int(round(d_px[i] / 3)))
+        iu, iv = int(round(u)), int(round(v))
+        if not active[iv - r : iv + r + 1, iu - r : iu + r + 1].any():
+            return (f"reflector {int(cat.ids[i])} should be visible at ({u:.0f}, {v:.0f}) px "
+                    "but the frame is dark there")  # fmt: skip
+    return ""
 
 
 def test_ten_metres_gives_a_pose_on_almost_every_frame():
