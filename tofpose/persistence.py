@@ -55,6 +55,14 @@ class PersistenceInfo:
     dropped_blobs: int
 
 
+def blob_arrays(blobs: list[Blob]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The blobs as the compiled measurement takes them: single-frame centroids (n, 2),
+    flat pixel indices and starts (``pixel_lists``), boxes (n, 4) (x, y, w, h)."""
+    cur = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
+    flat, starts = pixel_lists(blobs)
+    return cur, flat, starts, np.array([b.bbox for b in blobs], np.int64).reshape(-1, 4)
+
+
 class Persistence:
     """Counter image and temporal combination over the last K consistent frames."""
 
@@ -94,13 +102,10 @@ class Persistence:
         frame's background level, counts. The combined frames are defined where the
         next steps read them, inside the blobs' boxes grown by 2 px (I-bar) and at the
         kept blobs' pixels (D-bar), and are reused by the next frame (``scratch``)."""
-        cur = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
-        flat, starts = pixel_lists(blobs)
-        bbox = np.array([b.bbox for b in blobs], np.int64).reshape(-1, 4)
-        hist_g, hist_d, hist_m, hist_c, n_hist = self.history(gray, distance)
+        cur, flat, starts, bbox = blob_arrays(blobs)
         cfg = self.config
         n_used, motion, keep, mean_gray, med_dist, uv, rho = persist_and_measure(
-            gray, distance, flat, starts, bbox, cur, hist_g, hist_d, hist_m, hist_c, n_hist,
+            gray, distance, flat, starts, bbox, cur, *self.history(gray, distance),
             float(cfg.motion_tolerance_px), int(cfg.c_min), float(background), camera.fx,
             camera.fy, camera.cx, camera.cy, camera.dist_array,
             np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3)),

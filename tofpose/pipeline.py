@@ -42,6 +42,7 @@ from tofpose.extraction import (
 )
 from tofpose.geometry import facing_euler_deg, quaternion_wxyz_from_rotation
 from tofpose.kernels.ellipses import blob_mask
+from tofpose.kernels.measure import measure_and_back_project
 from tofpose.kernels.range_correction import corrected_ranges
 from tofpose.matching import (
     MatchingConfig,
@@ -50,8 +51,8 @@ from tofpose.matching import (
     match_reflectors,
     random_triplets,
 )
-from tofpose.persistence import Persistence, PersistenceConfig
-from tofpose.range_calibration import RangeCorrection
+from tofpose.persistence import Persistence, PersistenceConfig, PersistenceInfo, blob_arrays
+from tofpose.range_calibration import RangeCorrection, correction_kernel_arguments
 from tofpose.solve import Measurements, PoseSolver, Rejected, Solution, ThresholdedFrame
 from tofpose.tracking import (
     TrackingConfig,
@@ -60,7 +61,7 @@ from tofpose.tracking import (
     predict_windows,
 )
 from tofpose.tracking_frame import CompiledTracker
-from tofpose.uncertainty import SigmaFloors, measurement_sigmas
+from tofpose.uncertainty import SigmaFloors, kernel_constants, measurement_sigmas
 
 Refinement = Literal["ml", "los", "none"]
 
@@ -268,6 +269,8 @@ class PosePipeline:
         self._correction_args = (
             None if range_correction is None else range_correction.kernel_arguments()
         )
+        self._correction_kernel_args = correction_kernel_arguments(range_correction)
+        self._bearings_flat = np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3))
         self.catalog = catalog
         self.config = config or PipelineConfig()
         self._persistence = Persistence(self.config.persistence)
@@ -277,9 +280,8 @@ class PosePipeline:
         self._rng = np.random.default_rng(self.config.ransac_seed)
         self._solver = PoseSolver(camera, catalog, self.config, range_correction)
         self._track: TrackState | None = None
-        camera.pixel_bearings()  # warm the cache
         self._compiled_tracker = CompiledTracker(
-            camera, catalog, self.config, self._solver, self._persistence, self._correction_args
+            camera, catalog, self.config, self._solver, self._persistence, range_correction
         )
 
     def reset(self) -> None:
@@ -330,36 +332,24 @@ class PosePipeline:
         active = ThresholdedFrame(g, stats.raw_threshold)  # A, for the pose check
         # The motion gate compares the cheap moment centroids of find_candidate_blobs;
         # the precise centroids and ranges are measured once, on the combined frames.
-        kept, mean_g, med_d, pinfo = self._persistence.measure(
-            blobs, g, d, self.camera, stats.background
-        )
+        meas, unranged, n_kept, pinfo = self._measure(blobs, g, d, stats.background)
         timer.lap("centroids")
         extra = {
             "frames_used": pinfo.frames_used,
             "motion": pinfo.motion,
             "rejected": list(found.rejected),
             "active_threshold_counts": stats.raw_threshold,
+            "n_candidates": n_kept,
         }
-        ranged = [b for b in kept if math.isfinite(b.distance_mm)]
-        unmatched = [
-            (b.centroid_uv[0], b.centroid_uv[1], b.distance_mm)
-            for b in kept
-            if not math.isfinite(b.distance_mm)
-        ]
-        extra["n_candidates"] = len(kept)
-        if self.range_correction is not None:
-            ranged = self._correct_ranges(ranged, mean_g)
-        if len(ranged) < cfg.matching.min_matches:
+        if len(meas.range_mm) < cfg.matching.min_matches:
             return fail(
-                f"found {len(ranged)} candidate reflector(s) with a valid range "
-                f"(of {len(kept)} blobs), need {cfg.matching.min_matches}"
+                f"found {len(meas.range_mm)} candidate reflector(s) with a valid range "
+                f"(of {n_kept} blobs), need {cfg.matching.min_matches}"
                 + self._size_hint(found.wrong_size),
-                unmatched=unmatched
-                + [(b.centroid_uv[0], b.centroid_uv[1], b.distance_mm) for b in ranged],
+                unmatched=unranged + meas.as_unmatched(),
                 **extra,
             )
-
-        meas = self._back_project(ranged, mean_g, med_d, stats.background)
+        unmatched = unranged
         timer.lap("backproject")
         m = self._match(meas)
         timer.lap("matching")
@@ -396,8 +386,38 @@ class PosePipeline:
         ]
         return found, blobs
 
+    def _measure(self, blobs: list[Blob], g, d, background: float):
+        """§3.4 and Eqs. 7-8 in one compiled call
+        (``kernels.measure.measure_and_back_project``): the blobs combined with the
+        consistent persistence history (the frame is then committed to it), their
+        centroids (Eq. 19) and ranges (Eq. 20) measured, the calibrated range correction
+        applied, and those with a range back-projected (Eq. 8) with their sigmas and the
+        weights of Eq. 21. Returns the ``Measurements`` of the kept blobs with a range,
+        (u, v, range) of the kept ones without, how many were kept, and what persistence
+        combined."""
+        cfg, cam, persistence = self.config, self.camera, self._persistence
+        cur, flat, starts, bbox = blob_arrays(blobs)
+        split = np.array([b.source == "split" for b in blobs], bool)
+        pc = cfg.persistence
+        n_used, motion, keep, uv, rho, ranged, rho_r, sp, sr, y, w = measure_and_back_project(
+            g, d, flat, starts, bbox, cur, split, *persistence.history(g, d),
+            float(pc.motion_tolerance_px), int(pc.c_min), float(background), cam.fx, cam.fy,
+            cam.cx, cam.cy, cam.dist_array, self._bearings_flat, *persistence.scratch(g.shape),
+            *self._correction_kernel_args, *kernel_constants(
+                SigmaFloors(cfg.centroid_sigma_floor_px, cfg.range_sigma_floor_mm)),
+        )  # fmt: skip
+        persistence.commit(cur, flat, g, d, n_used, motion)
+        unranged = [(uv[j, 0], uv[j, 1], rho[j]) for j in np.flatnonzero(keep & ~np.isfinite(rho))]
+        ranged_blobs = tuple(blobs[j] for j in ranged.tolist())
+        area = np.array([b.area_px for b in ranged_blobs], np.int64)
+        meas = Measurements(ranged_blobs, area, uv[ranged], rho_r, y, w, sp, sr)
+        n_kept = int(keep.sum())
+        return meas, unranged, n_kept, PersistenceInfo(1 + n_used, motion, len(blobs) - n_kept)
+
     def _back_project(self, blobs, mean_gray, med_distance, background) -> Measurements:
-        """Eqs. 7-8 and the per-reflector sigmas of measured blobs (finite ranges)."""
+        """Eqs. 7-8 and the per-reflector sigmas of measured blobs (finite ranges), stage
+        by stage: the reference of ``_measure``'s compiled back-projection, used by the
+        stage-by-stage tracking pass."""
         cfg = self.config
         uv = np.array([b.centroid_uv for b in blobs])
         rho = np.array([b.distance_mm for b in blobs])

@@ -275,3 +275,12 @@ def fit_range_correction(
         rms_after_mm=float(np.sqrt(np.mean(after[keep] ** 2))),
         pixels_with_offset=int(np.count_nonzero(covered)),
     )
+
+
+def correction_kernel_arguments(correction: RangeCorrection | None) -> tuple:
+    """(apply, model, harmonics, offsets): whether a camera's range correction is applied
+    and its model as ``kernels.range_correction.corrected_ranges`` takes it
+    (``RangeCorrection.kernel_arguments``), or False and empty arrays without one."""
+    if correction is None:
+        return False, np.zeros(4), np.zeros((0, 2)), np.zeros(0)
+    return True, *correction.kernel_arguments()

@@ -20,6 +20,7 @@ from tofpose.kernels.tracking import camera_windows
 from tofpose.kernels.tracking_frame import TRACKED, track_frame
 from tofpose.persistence import Persistence, PersistenceInfo
 from tofpose.pose import MEDIAN_CHI2_3DOF, STEP_SIGMA2
+from tofpose.range_calibration import RangeCorrection, correction_kernel_arguments
 from tofpose.solve import (
     MatchedObservations,
     Measurements,
@@ -28,13 +29,7 @@ from tofpose.solve import (
     ThresholdedFrame,
 )
 from tofpose.tracking import TrackState
-from tofpose.uncertainty import (
-    MEDIAN_EFFICIENCY,
-    POOL_MIN_PIXELS,
-    SINGLE_PIXEL_SIGMA_PX,
-    SPLIT_CENTROID_PX,
-    UNCALIBRATED_RANGE_SIGMA_MM,
-)
+from tofpose.uncertainty import SigmaFloors, kernel_constants
 
 if TYPE_CHECKING:  # the pipeline imports this module
     from tofpose.pipeline import PipelineConfig
@@ -58,8 +53,8 @@ class CompiledTracker:
 
     def __init__(self, camera: CameraModel, catalog: Catalog, config: PipelineConfig,
                  solver: PoseSolver, persistence: Persistence,
-                 correction: tuple | None = None) -> None:  # fmt: skip
-        """``correction``: ``RangeCorrection.kernel_arguments()``, or None."""
+                 correction: RangeCorrection | None = None) -> None:  # fmt: skip
+        """``correction``: the camera's calibrated range correction, or None."""
         self.camera = camera
         self.config = config
         self._solver = solver
@@ -70,8 +65,6 @@ class CompiledTracker:
         self._K = np.ascontiguousarray(camera.K, dtype=float)
         self._bearings = np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3))
         self._dist = np.ascontiguousarray(camera.dist_array)
-        correct = correction is not None
-        correction = correction or (np.zeros(4), np.zeros((0, 2)), np.zeros(0))
         pc = config.persistence
         # the arguments of ``track_frame`` that do not change from frame to frame
         self._camera_args = (
@@ -80,12 +73,13 @@ class CompiledTracker:
             config.correct_perspective_bias,
         )  # fmt: skip
         self._fit_args = (
-            float(config.centroid_sigma_floor_px), float(config.range_sigma_floor_mm),
-            SINGLE_PIXEL_SIGMA_PX, SPLIT_CENTROID_PX, POOL_MIN_PIXELS, MEDIAN_EFFICIENCY,
-            UNCALIBRATED_RANGE_SIGMA_MM, _REFINEMENT[config.refinement], config.los_tolerance,
+            *correction_kernel_arguments(correction),
+            *kernel_constants(SigmaFloors(config.centroid_sigma_floor_px,
+                                          config.range_sigma_floor_mm)),
+            _REFINEMENT[config.refinement], config.los_tolerance,
             STEP_SIGMA2, config.adapt_range_sigma, config.max_systematic_range_sigma_mm,
             MEDIAN_CHI2_3DOF, config.reject_outliers, config.matching.min_matches,
-            config.outlier_sigma, config.outlier_chi2_per_dof, correct, *correction,
+            config.outlier_sigma, config.outlier_chi2_per_dof,
         )  # fmt: skip
 
     def track(self, g: np.ndarray, d: np.ndarray, track: TrackState) -> Tracked | None:

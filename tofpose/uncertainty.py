@@ -65,6 +65,15 @@ def sampling_sigma_px(n_pixels: np.ndarray) -> np.ndarray:
     return SINGLE_PIXEL_SIGMA_PX * n**-1.5
 
 
+def kernel_constants(floors: SigmaFloors) -> tuple:
+    """The floors and this module's constants in the order the compiled sigmas take them
+    (``kernels.sigmas.blob_sigmas`` after ``split``)."""
+    return (
+        float(floors.centroid_px), float(floors.range_mm), SINGLE_PIXEL_SIGMA_PX,
+        SPLIT_CENTROID_PX, POOL_MIN_PIXELS, MEDIAN_EFFICIENCY, UNCALIBRATED_RANGE_SIGMA_MM,
+    )  # fmt: skip
+
+
 def measurement_sigmas(
     blobs: Sequence[Blob],
     gray: np.ndarray,
@@ -82,6 +91,5 @@ def measurement_sigmas(
     return blob_sigmas(
         flat, starts, centroids, np.asarray(gray, np.float32),
         np.asarray(distance_mm, np.float32), float(background_counts), split,
-        float(floors.centroid_px), float(floors.range_mm), SINGLE_PIXEL_SIGMA_PX,
-        SPLIT_CENTROID_PX, POOL_MIN_PIXELS, MEDIAN_EFFICIENCY, UNCALIBRATED_RANGE_SIGMA_MM,
+        *kernel_constants(floors),
     )  # fmt: skip

@@ -403,3 +403,50 @@ def test_markers_7_and_8_merged_into_one_blob_are_split_and_both_matched():
             truth = (p7, p8)[m.catalog_id - 7]
             assert np.linalg.norm(m.centroid_uv - truth) < 0.6
     assert np.linalg.norm(r.t_mm - T.t_mm) < 5.0 and rotation_angle_deg(r.R, T.R) < 0.5
+
+
+@pytest.mark.parametrize("corrected", [False, True], ids=["plain", "range-corrected"])
+def test_the_compiled_measurement_gives_the_stage_by_stage_measurements(corrected):
+    """``_measure`` (one compiled call: persistence, centroids, ranges, the range
+    correction, back-projection, sigmas, weights) against the stages one by one
+    (``Persistence.measure``, ``_correct_ranges``, ``_back_project``) on a stream whose
+    history builds up, with the split halves of the merged markers 7 and 8 at 8 m."""
+    from math import isfinite
+
+    from tofpose.extraction import check_frame, frame_levels
+    from tofpose.pipeline import _Timer
+    from tofpose.range_calibration import RangeCorrection
+    from tofpose.sim.render import SensorModel
+
+    cam, cat = CameraModel(), paper_target()
+    correction = RangeCorrection(
+        SensorModel().unambiguous_range_mm, offset_mm=3.0, harmonics_mm=((2.0, -1.5),),
+        amplitude_mm_per_decade=1.5,
+        pixel_offsets_mm=np.random.default_rng(7).normal(0.0, 2.0, cam.shape),
+    ) if corrected else None  # fmt: skip
+    compiled = PosePipeline(cam, cat, range_correction=correction)
+    staged = PosePipeline(cam, cat, range_correction=correction)
+    sources = set()
+    poses = [facing_pose(8000.0, 2, -3, 10)] * 4 + [facing_pose(1500.0, 3, 2, -5)] * 3
+    for k, T in enumerate(poses):
+        f = render(T, seed=k)
+        g, d = check_frame(cam, f.gray, f.distance_mm)
+        found, blobs = compiled._candidates(g, d, frame_levels(g, compiled.config.extraction),
+                                            _Timer())  # fmt: skip
+        sources |= {b.source for b in blobs}
+        bg = found.stats.background
+        meas, unranged, n_kept, info = compiled._measure(blobs, g, d, bg)
+        kept, mean_g, med_d, ref_info = staged._persistence.measure(blobs, g, d, cam, bg)
+        ranged = [b for b in kept if isfinite(b.distance_mm)]
+        if corrected:
+            ranged = staged._correct_ranges(ranged, mean_g)
+        ref = staged._back_project(ranged, mean_g, med_d, bg)
+        assert (n_kept, info) == (len(kept), ref_info)
+        assert unranged == [(b.centroid_uv[0], b.centroid_uv[1], b.distance_mm)
+                            for b in kept if not isfinite(b.distance_mm)]  # fmt: skip
+        # the same blobs, in order (the staged ones are new records of the same pixels)
+        assert all(b.pixels is r.pixels for b, r in zip(meas.blobs, ranged, strict=True))
+        for name in ("area_px", "uv_px", "range_mm", "y_mm", "weights", "sigma_px",
+                     "sigma_range_mm"):  # fmt: skip
+            np.testing.assert_array_equal(getattr(meas, name), getattr(ref, name), err_msg=name)
+    assert "split" in sources

@@ -1,6 +1,8 @@
 """§3.4 in one call: combine the frame with the consistent persistence history and
-measure the kept blobs' centroids (Eq. 19) and ranges (Eq. 20) on the combined frames.
-The arithmetic of ``Persistence.apply`` followed by ``extraction.measure_blobs``."""
+measure the kept blobs' centroids (Eq. 19) and ranges (Eq. 20) on the combined frames
+(the arithmetic of ``Persistence.apply`` followed by ``extraction.measure_blobs``);
+and with the range correction, back-projection (Eqs. 7-8), sigmas and weights (Eq. 21)
+of the measured blobs, the measurement stage that acquisition and tracking share."""
 
 from __future__ import annotations
 
@@ -15,6 +17,8 @@ from tofpose.kernels.persistence import (
     counter_medians,
     mean_in_boxes,
 )
+from tofpose.kernels.range_correction import corrected_ranges
+from tofpose.kernels.sigmas import blob_sigmas
 
 
 @jit
@@ -100,3 +104,68 @@ def persist_and_measure(
         uv[kept[a]] = k_uv[a]
         rho[kept[a]] = k_rho[a]
     return n_used, motion, keep, mean_gray, med_dist, uv, rho
+
+
+@jit
+def measure_and_back_project(
+    gray, distance, flat, starts, bbox, centroids, split, hist_gray, hist_dist, hist_mask,
+    hist_cent, n_hist, tol_px, c_min, background, fx, fy, cx, cy, dist, pixel_bearings,
+    mean_buf, med_buf, correct_range, corr_model, corr_harmonics, corr_offsets, floor_px,
+    floor_mm, single_px, split_px, pool_min, median_eff, uncal_mm,
+):  # fmt: skip
+    """§3.4 and Eqs. 7-8 in one call: ``persist_and_measure``, then of the kept blobs
+    with a range (the "ranged" ones): the calibrated range correction (``correct_range``,
+    ``range_correction.corrected_ranges``), the measurement sigmas
+    (``sigmas.blob_sigmas``), the points y = rho e(uv) (Eq. 8) and the weights of Eq. 21,
+    ``1 / (sigma_range^2 + (rho sigma_px / fx)^2)``. The arithmetic of
+    ``Persistence.measure``, ``PosePipeline._correct_ranges`` and ``_back_project``.
+
+    The arguments are ``persist_and_measure``'s, ``split`` (n,) bool (blobs cut out of a
+    merged component), the correction's model (``RangeCorrection.kernel_arguments``) and
+    the ``uncertainty`` constants and floors.
+
+    Returns n_used, motion, keep (n,), uv (n, 2) and rho (n,) as ``persist_and_measure``
+    gives them (rho uncorrected), ranged (r,) int64 the indices of the ranged blobs, and
+    for those: rho (r,) corrected, sigma_px (r,), sigma_range (r,), y (r, 3), weights (r,).
+    """
+    n_used, motion, keep, mean_gray, med_dist, uv, rho = persist_and_measure(
+        gray, distance, flat, starts, bbox, centroids, hist_gray, hist_dist, hist_mask,
+        hist_cent, n_hist, tol_px, c_min, background, fx, fy, cx, cy, dist, pixel_bearings,
+        mean_buf, med_buf,
+    )  # fmt: skip
+    n = keep.shape[0]
+    ranged = np.empty(n, np.int64)
+    n_ranged = 0
+    for j in range(n):
+        if keep[j] and np.isfinite(rho[j]):
+            ranged[n_ranged] = j
+            n_ranged += 1
+    ranged = ranged[:n_ranged]
+    r_starts = np.zeros(n_ranged + 1, np.int64)
+    for a in range(n_ranged):
+        j = ranged[a]
+        r_starts[a + 1] = r_starts[a] + starts[j + 1] - starts[j]
+    r_flat = np.empty(r_starts[n_ranged], np.int64)
+    r_uv = np.empty((n_ranged, 2))
+    r_rho = np.empty(n_ranged)
+    r_split = np.empty(n_ranged, np.bool_)
+    for a in range(n_ranged):
+        j = ranged[a]
+        r_flat[r_starts[a] : r_starts[a + 1]] = flat[starts[j] : starts[j + 1]]
+        r_uv[a] = uv[j]
+        r_rho[a] = rho[j]
+        r_split[a] = split[j]
+    if correct_range and n_ranged:
+        r_rho = corrected_ranges(r_rho, r_flat, r_starts, mean_gray, corr_model,
+                                 corr_harmonics, corr_offsets)  # fmt: skip
+    sp, sr = blob_sigmas(r_flat, r_starts, r_uv, mean_gray, med_dist, background, r_split,
+                         floor_px, floor_mm, single_px, split_px, pool_min, median_eff,
+                         uncal_mm)  # fmt: skip
+    e = bearings(r_uv, fx, fy, cx, cy, dist)
+    y = np.empty((n_ranged, 3))
+    w = np.empty(n_ranged)
+    for a in range(n_ranged):
+        for b in range(3):
+            y[a, b] = e[a, b] * r_rho[a]  # Eq. 8
+        w[a] = 1.0 / (sr[a] ** 2 + (r_rho[a] * sp[a] / fx) ** 2)  # Eq. 21
+    return n_used, motion, keep, uv, rho, ranged, r_rho, sp, sr, y, w

@@ -17,10 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
-from tofpose.kernels.camera import bearings
-from tofpose.kernels.measure import persist_and_measure
-from tofpose.kernels.range_correction import corrected_ranges
-from tofpose.kernels.sigmas import blob_sigmas
+from tofpose.kernels.measure import measure_and_back_project
 from tofpose.kernels.solve import solve_pairs
 from tofpose.kernels.tracking import FOUND, any_shared, search_windows
 
@@ -33,10 +30,10 @@ def track_frame(
     gray, distance, bounds, centres, diameters, cat_idx, threshold, background,
     hist_gray, hist_dist, hist_mask, hist_cent, n_hist, tol_px, c_min,
     fx, fy, cx, cy, dist, pixel_bearings, xyz, radii, K, correct_perspective,
-    floor_px, floor_mm, single_px, split_px, pool_min, median_eff, uncal_mm,
-    refinement, los_tol, step_sigma2, adapt, max_sys, median_chi2, reject, min_matches,
-    outlier_sigma, chi2_per_dof, correct_range, corr_model, corr_harmonics, corr_offsets,
-    mean_buf, med_buf,
+    correct_range, corr_model, corr_harmonics, corr_offsets, floor_px, floor_mm, single_px,
+    split_px, pool_min, median_eff, uncal_mm, refinement, los_tol, step_sigma2, adapt,
+    max_sys, median_chi2, reject, min_matches, outlier_sigma, chi2_per_dof, mean_buf,
+    med_buf,
 ):  # fmt: skip
     """One tracking frame (module docstring).
 
@@ -47,9 +44,9 @@ def track_frame(
     distance (H, W) float32, mask (H * W,) bool, centroids (m, 2)), of which the first
     ``n_hist`` are real; tol_px, c_min : ``PersistenceConfig``; fx..cy, dist (5,),
     pixel_bearings (H * W, 3) : the camera; xyz (N, 3), radii (N,) mm : the catalog; K (3, 3);
-    the rest : ``uncertainty`` constants and floors, and the ``fit_with_outliers``
-    settings of ``PoseSolver.solve``; correct_range and corr_* : whether to apply the
-    calibrated range correction and its model (``RangeCorrection.kernel_arguments``);
+    correct_range and corr_* : whether to apply the calibrated range correction and its
+    model (``range_calibration.correction_kernel_arguments``); then the ``uncertainty``
+    constants and floors, and the ``fit_with_outliers`` settings of ``PoseSolver.solve``;
     mean_buf, med_buf : the persistence's scratch frames (``Persistence.scratch``).
 
     Returns (code, n_used, motion, centroids (n, 2) moment centroids, flat, starts,
@@ -91,30 +88,23 @@ def track_frame(
             code = SHARED
             break
 
-        # §3.4: persistence over the consistent history, then Eqs. 19-20
-        n_used, motion, keep, mean_gray, med_dist, uv, rho = persist_and_measure(
-            gray, distance, flat, starts, bbox, cent, hist_gray, hist_dist, hist_mask,
-            hist_cent, n_hist, tol_px, c_min, background, fx, fy, cx, cy, dist,
-            pixel_bearings, mean_buf, med_buf,
+        # §3.4 (persistence over the consistent history, then Eqs. 19-20), the range
+        # correction, Eqs. 7-8 with the sigmas and Eq. 21's weights
+        n_used, motion, keep, uv, _, ranged, rho, sp, sr, y, wts = (
+            measure_and_back_project(
+                gray, distance, flat, starts, bbox, cent, np.zeros(n, np.bool_), hist_gray,
+                hist_dist, hist_mask, hist_cent, n_hist, tol_px, c_min, background, fx, fy,
+                cx, cy, dist, pixel_bearings, mean_buf, med_buf, correct_range, corr_model,
+                corr_harmonics, corr_offsets, floor_px, floor_mm, single_px, split_px,
+                pool_min, median_eff, uncal_mm,
+            )
         )  # fmt: skip
         if not keep.all():
             code = NOT_PERSISTENT
             break
-        if not np.isfinite(rho).all():
+        if ranged.shape[0] < n:
             code = NO_RANGE
             break
-        if correct_range:
-            rho = corrected_ranges(rho, flat, starts, mean_gray, corr_model, corr_harmonics,
-                                   corr_offsets)  # fmt: skip
-
-        # Eqs. 7-8 and the per-reflector sigmas; Eq. 21's weights
-        sp, sr = blob_sigmas(flat, starts, uv, mean_gray, med_dist, background,
-                             np.zeros(n, np.bool_), floor_px, floor_mm, single_px, split_px,
-                             pool_min, median_eff, uncal_mm)  # fmt: skip
-        e = bearings(uv, fx, fy, cx, cy, dist)
-        for j in range(n):
-            y[j] = e[j] * rho[j]
-            wts[j] = 1.0 / (sr[j] ** 2 + (rho[j] * sp[j] / fx) ** 2)
 
         # §5 on the known correspondences (every blob matched: nothing to complete)
         (_, _, uv_obs, e_obs, y_obs, kept, R, t, its, cov, chi2, norms, sr_fit) = solve_pairs(
