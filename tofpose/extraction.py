@@ -294,30 +294,30 @@ def active_pixel_mask(
     Returns a uint8 mask of shape (H, W) and the levels as applied (``raw_threshold``
     raised to the cut when the cap applies, ``n_active`` the mask's size).
     """
-    mask, stats, _, _ = _active_set(gray, stats, n_max)
+    mask, stats, _ = _active_set(gray, stats, n_max)
     return mask, stats
 
 
 def _active_set(
     gray: np.ndarray, stats: FrameStats, n_max: int
-) -> tuple[np.ndarray, FrameStats, np.ndarray, tuple[int, int, int, int]]:
-    """``active_pixel_mask``, the set's runs (R, 3) (row, first column, last + 1) and its
-    bounding box (x, y, w, h), in one pass over the frame
-    (``kernels.levels.threshold_mask``) unless the N_max cap applies."""
+) -> tuple[np.ndarray, FrameStats, np.ndarray]:
+    """``active_pixel_mask`` and the set's runs (R, 3) (row, first column, last + 1), in
+    one pass over the frame (``kernels.levels.threshold_mask``) unless the N_max cap
+    applies."""
     gray32 = np.ascontiguousarray(gray, np.float32)
     threshold = stats.raw_threshold
-    mask, runs, n, *box = threshold_mask(gray32, float(threshold))
+    mask, runs, n, *_ = threshold_mask(gray32, float(threshold))
     if n > n_max:
         values = gray32[mask.view(bool)]
         cut = np.partition(values, n - n_max)[n - n_max]
         threshold = float(cut)
-        mask, runs, n, *box = threshold_mask(gray32, threshold)
+        mask, runs, n, *_ = threshold_mask(gray32, threshold)
     applied = FrameStats(
         background=stats.background, noise_sigma=stats.noise_sigma, i_max=stats.i_max,
         raw_threshold=threshold, peak_threshold=stats.peak_threshold, n_active=n,
         saturated_fraction=stats.saturated_fraction,
     )  # fmt: skip
-    return mask, applied, runs, tuple(box)
+    return mask, applied, runs
 
 
 def nlog_response(image: np.ndarray, sigma_px: float, normalise: bool = True) -> np.ndarray:
@@ -436,22 +436,17 @@ def find_candidate_blobs(
     ellipse stage may split (§3.3); ``wrong_size`` every bright component the size window
     refused, so that a failure can say the catalog does not fit what is in view.
     """
-    mask, stats, runs, (ax, ay, aw, ah) = _active_set(gray, stats, config.n_max)
-    h, w = gray.shape
+    mask, stats, runs = _active_set(gray, stats, config.n_max)
     gray32 = np.asarray(gray, np.float32)
-    # label the active set's bounding box, not the whole frame; its origin on even
-    # coordinates, so that OpenCV's 2 x 2 block scan sees the pixels in the same blocks
-    # and numbers the components in the same order
-    ox, oy = ax & ~1, ay & ~1
-    crop = mask[oy : ay + ah, ox : ax + aw]
-    n_lab, labels = cv2.connectedComponents(crop, connectivity=8)
     cos_t = np.cos(np.radians(config.max_tilt_deg))
     ecc_max = np.sqrt(1.0 - cos_t**2)
+    # the components of A from its runs, numbered as cv2.connectedComponents numbers them
+    # (kernels.components.run_labels), and every gate, in one call
     (area_k, bbox_k, peak_k, starts, flat, inner, listed, testable, rho_k, which, status,
      size, mom, keep_starts, keep_flat) = label_table_and_gates(
-        labels, n_lab, gray32, ox, oy, runs, np.asarray(distance_mm, np.float32).reshape(-1),
-        float(camera.fx), np.asarray(diameters_mm, np.float64),
-        _gate_params(config, stats, cos_t, ecc_max), int(config.min_area_px),
+        runs, gray32, np.asarray(distance_mm, np.float32).reshape(-1), float(camera.fx),
+        np.asarray(diameters_mm, np.float64), _gate_params(config, stats, cos_t, ecc_max),
+        int(config.min_area_px),
     )  # fmt: skip
     accepted: list[Blob] = []
     oversize: list[Blob] = []

@@ -1,10 +1,13 @@
-"""Connected components of the active pixel set, tabulated in one pass (§3.1.2-§3.2).
+"""Connected components of the active pixel set (§3.1.2-§3.2), from its runs.
 
-OpenCV labels the active set (``cv2.connectedComponents``, over the set's bounding box);
-its ``...WithStats`` variant also tabulates the background and costs ~7x more. These
-kernels take the labels and give what the blob criteria read: each component's area,
-bounding box, brightest pixel, its member pixels (flat indices, raster order) and the
-median of its valid ranges.
+The threshold pass records the active set's horizontal runs (``levels.threshold_mask``);
+``run_labels`` joins them into 8-connected components numbered exactly as
+``cv2.connectedComponents`` numbers them (tests hold it to OpenCV on random sets and
+frames), at a few operations per run: ~5 us for the ~190 runs of a 0.7 m frame, where
+OpenCV's labelling of the set's bounding box took ~50 us and the table built from its
+label image another ~100 us. ``component_table`` gives what the blob criteria read: each
+component's area, bounding box, brightest pixel, member pixels (flat indices, raster
+order) and runs; ``component_median_ranges`` the median of its valid ranges.
 """
 
 from __future__ import annotations
@@ -16,35 +19,99 @@ from tofpose.kernels.stats import median_inplace
 
 
 @jit
-def component_table(labels, n_labels, gray, x_origin, y_origin, runs):
-    """Per component k = 0 .. n_labels - 1 (0, the background, is left empty).
+def _root(parent, i):
+    """Root of run i in the union-find forest (path halving)."""
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
 
-    labels : (h, w) int32 from ``cv2.connectedComponents`` over the part of the image
-    whose top-left pixel is (``x_origin``, ``y_origin``) (the active set's bounding box:
-    labelling the whole frame for a few lit pixels cost most of the time); gray :
-    (H, W) float32, the whole frame; runs : (R, 3) int64, the labelled set's horizontal
-    runs in raster order (``levels.threshold_mask``), in whole-frame coordinates. A run
-    lies in one component (its pixels are neighbours), so the table is built run by run:
-    at 0.7 m ~200 runs instead of the ~64,000 pixels of the box, twice (9x faster).
-    Returns, in whole-frame coordinates, area (K,) int64, bbox (K, 4) int64 as
-    (x, y, w, h), peak (K,) float32 counts, starts (K + 1,) int64 and flat (P,) int64:
-    the flat indices (row * W + col) of component k's pixels, in raster order, are
-    ``flat[starts[k]:starts[k + 1]]``.
-    """
-    h, w = labels.shape
-    w_img = gray.shape[1]
+
+@jit
+def run_labels(runs):
+    """The 8-connected components of a pixel set given as its horizontal runs (R, 3)
+    (row, first column, last column + 1) in raster order (``levels.threshold_mask``),
+    numbered as ``cv2.connectedComponents`` numbers them: labels (R,) int64, 1..K-1
+    per run, and K (the background counts as label 0).
+
+    Runs in adjacent rows whose columns overlap or touch diagonally are joined
+    (union-find, each root the earliest run): a few operations per run instead of a
+    visit of every pixel of the set's box. OpenCV scans the image in 2 x 2 blocks and
+    numbers a component by its first block in that scan (the four pixels of a block
+    are neighbours, so a block belongs to one component): components are sorted by the
+    block row and then the block column of their first pixel in block order."""
+    n = runs.shape[0]
+    parent = np.arange(n)
+    prev_a, prev_b = 0, 0  # the previous row's runs are [prev_a, prev_b)
+    i = 0
+    while i < n:
+        r = runs[i, 0]
+        j = i
+        while j < n and runs[j, 0] == r:
+            j += 1
+        if prev_b == prev_a or runs[prev_a, 0] != r - 1:
+            prev_a, prev_b = i, i  # no run in the row above
+        first = prev_a
+        for q in range(i, j):
+            for p in range(first, prev_b):
+                if runs[p, 2] < runs[q, 1]:  # p ends left of q's reach: so for later q
+                    first = p + 1
+                    continue
+                if runs[p, 1] > runs[q, 2]:  # p starts right of q's reach
+                    break
+                a, b = _root(parent, p), _root(parent, q)
+                if a < b:
+                    parent[b] = a
+                elif b < a:
+                    parent[a] = b
+        prev_a, prev_b = i, j
+        i = j
+    big = np.iinfo(np.int64).max
+    block_row = np.full(n, big, np.int64)
+    block_col = np.full(n, big, np.int64)
+    root = np.empty(n, np.int64)
+    for q in range(n):
+        rt = _root(parent, q)
+        root[q] = rt
+        br, bc = runs[q, 0] >> 1, runs[q, 1] >> 1
+        if br < block_row[rt] or (br == block_row[rt] and bc < block_col[rt]):
+            block_row[rt], block_col[rt] = br, bc
+    roots = np.flatnonzero(root == np.arange(n))
+    key = np.empty(roots.shape[0], np.int64)
+    for a in range(roots.shape[0]):
+        key[a] = block_row[roots[a]] * (1 << 31) + block_col[roots[a]]
+    order = np.argsort(key)
+    label_of_root = np.zeros(n, np.int64)
+    for a in range(roots.shape[0]):
+        label_of_root[roots[order[a]]] = a + 1
+    labels = np.empty(n, np.int64)
+    for q in range(n):
+        labels[q] = label_of_root[root[q]]
+    return labels, roots.shape[0] + 1
+
+
+@jit
+def component_table(runs, labels, n_labels, gray):
+    """Per component k = 0 .. n_labels - 1 (0, the background, is left empty) of a set
+    given as its runs (R, 3) in raster order and their ``run_labels``; gray : (H, W)
+    float32. Returns area (K,) int64, bbox (K, 4) int64 as (x, y, w, h), peak (K,)
+    float32 counts, starts (K + 1,) int64 and flat (P,) int64: the flat indices
+    (row * W + col) of component k's pixels, in raster order, are
+    ``flat[starts[k]:starts[k + 1]]``; and its runs, in raster order, as
+    ``run_order[run_starts[k]:run_starts[k + 1]]`` (indices into ``runs``)."""
+    h_img, w_img = gray.shape
     area = np.zeros(n_labels, np.int64)
-    x0 = np.full(n_labels, w + x_origin, np.int64)  # (the background's box: as OpenCV's)
-    y0 = np.full(n_labels, h + y_origin, np.int64)
-    x1 = np.full(n_labels, x_origin - 1, np.int64)
-    y1 = np.full(n_labels, y_origin - 1, np.int64)
+    x0 = np.full(n_labels, w_img, np.int64)  # (the background's box: as OpenCV's)
+    y0 = np.full(n_labels, h_img, np.int64)
+    x1 = np.full(n_labels, -1, np.int64)
+    y1 = np.full(n_labels, -1, np.int64)
     peak = np.full(n_labels, -np.inf, np.float32)
     n_runs = runs.shape[0]
-    run_label = np.empty(n_runs, np.int64)
+    run_starts = np.zeros(n_labels + 1, np.int64)
     for i in range(n_runs):
         r, first, end = runs[i, 0], runs[i, 1], runs[i, 2]
-        k = labels[r - y_origin, first - x_origin]
-        run_label[i] = k
+        k = labels[i]
+        run_starts[k + 1] += 1
         area[k] += end - first
         x0[k] = min(x0[k], first)
         x1[k] = max(x1[k], end - 1)
@@ -58,10 +125,15 @@ def component_table(labels, n_labels, gray, x_origin, y_origin, runs):
     starts = np.zeros(n_labels + 1, np.int64)
     for k in range(1, n_labels):
         starts[k + 1] = starts[k] + area[k]
+        run_starts[k + 1] += run_starts[k]
     fill = starts[:-1].copy()
+    run_fill = run_starts[:-1].copy()
     flat = np.empty(starts[n_labels], np.int64)
+    run_order = np.empty(n_runs, np.int64)
     for i in range(n_runs):
-        k = run_label[i]
+        k = labels[i]
+        run_order[run_fill[k]] = i
+        run_fill[k] += 1
         base = runs[i, 0] * w_img
         f = fill[k]
         for c in range(runs[i, 1], runs[i, 2]):
@@ -74,7 +146,7 @@ def component_table(labels, n_labels, gray, x_origin, y_origin, runs):
         bbox[k, 1] = y0[k]
         bbox[k, 2] = x1[k] - x0[k] + 1
         bbox[k, 3] = y1[k] - y0[k] + 1
-    return area, bbox, peak, starts, flat
+    return area, bbox, peak, starts, flat, run_order, run_starts
 
 
 @jit

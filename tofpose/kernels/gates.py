@@ -15,6 +15,7 @@ from tofpose.kernels import jit
 from tofpose.kernels.components import (
     component_median_ranges,
     component_table,
+    run_labels,
     weighted_moments,
 )
 
@@ -86,15 +87,15 @@ def nlog_patch(patch, sigma_px, normalise):
 
 
 @jit
-def gate_components(gray, labels, x_origin, y_origin, bbox, area, peak, rho, which, fx,
+def gate_components(gray, runs, run_order, run_starts, bbox, area, peak, rho, which, fx,
                     diameters_mm, params):  # fmt: skip
     """Run the §3.2 gates on the listed components (already past the border and dim
     gates).
 
-    gray : (H, W) float32; labels : (h, w) int32, the labels of the image part whose
-    top-left pixel is (x_origin, y_origin), covering every component's box; bbox
-    (K, 4), area (K,), peak (K,), rho (K,) per label from
-    ``components.component_table`` (rho: median range, mm);
+    gray : (H, W) float32; runs (R, 3) : the active set's runs; run_order, run_starts,
+    bbox (K, 4), area (K,), peak (K,), rho (K,) per label from
+    ``components.component_table`` (component k's runs, raster order, are
+    ``runs[run_order[run_starts[k]:run_starts[k + 1]]]``; rho: median range, mm);
     which : (n,) labels to test; diameters_mm : (N,) catalog diameters; params : (13,)
     float64: h_min_px (<0: range-adaptive window), h_max_px (<0: none), cos(max tilt),
     size_tolerance, size_margin_px, nlog_sigma_px (<=0: matched to each blob's size),
@@ -160,11 +161,12 @@ def gate_components(gray, labels, x_origin, y_origin, bbox, area, peak, rho, whi
         # criterion 2 (extraction.nlog_gate)
         y0, y1 = max(y - 2, 0), min(y + bh + 2, h_img)
         x0, x1 = max(x - 2, 0), min(x + bw + 2, w_img)
+        # the component's pixels, run by run (raster order)
         patch = np.zeros((y1 - y0, x1 - x0), np.float32)
-        for yy in range(y, y + bh):  # the members lie in the box
-            for xx in range(x, x + bw):
-                if labels[yy - y_origin, xx - x_origin] == k:
-                    patch[yy - y0, xx - x0] = gray[yy, xx]
+        first_run, end_run = run_starts[k], run_starts[k + 1]
+        for q in run_order[first_run:end_run]:
+            yy, c0, c1 = runs[q, 0], runs[q, 1], runs[q, 2]
+            patch[yy - y0, c0 - x0 : c1 - x0] = gray[yy, c0:c1]
         if sigma_abs > 0:
             jr = nlog_patch(patch, sigma_abs, False)
             j_peak, j_t = j_peak_p, j_t_p
@@ -176,13 +178,13 @@ def gate_components(gray, labels, x_origin, y_origin, bbox, area, peak, rho, whi
         j_t = np.float32(j_t)  # NumPy compares the float32 response in float32
         j_max = -np.inf
         n_keep = 0
-        for yy in range(y, y + bh):
-            for xx in range(x, x + bw):
-                if labels[yy - y_origin, xx - x_origin] == k:
-                    v = jr[yy - y0, xx - x0]
-                    j_max = max(j_max, v)
-                    if v >= j_t:
-                        n_keep += 1
+        for q in run_order[first_run:end_run]:
+            j_row = jr[runs[q, 0] - y0]
+            for xx in range(runs[q, 1], runs[q, 2]):
+                v = j_row[xx - x0]
+                j_max = max(j_max, v)
+                if v >= j_t:
+                    n_keep += 1
         if j_max < j_peak or n_keep == 0:
             status[j] = NLOG
             pieces.append(np.empty(0, np.int64))
@@ -192,13 +194,15 @@ def gate_components(gray, labels, x_origin, y_origin, bbox, area, peak, rho, whi
         vs = np.empty(n_keep)
         wts = np.empty(n_keep)
         i = 0
-        for yy in range(y, y + bh):
-            for xx in range(x, x + bw):
-                if labels[yy - y_origin, xx - x_origin] == k and jr[yy - y0, xx - x0] >= j_t:
+        for q in run_order[first_run:end_run]:
+            yy = runs[q, 0]
+            j_row, g_row = jr[yy - y0], gray[yy]
+            for xx in range(runs[q, 1], runs[q, 2]):
+                if j_row[xx - x0] >= j_t:
                     kept[i] = yy * w_img + xx
                     us[i] = xx
                     vs[i] = yy
-                    wts[i] = max(gray[yy, xx] - np.float32(background), np.float32(1.0))
+                    wts[i] = max(g_row[xx] - np.float32(background), np.float32(1.0))
                     i += 1
         # moment centroid (Eq. 19) and shape
         cu, cv, ecc = weighted_moments(us, vs, wts)
@@ -233,25 +237,27 @@ def gate_components(gray, labels, x_origin, y_origin, bbox, area, peak, rho, whi
 
 
 @jit
-def label_table_and_gates(labels, n_labels, gray, x_origin, y_origin, runs, distance_flat,
-                          fx, diameters_mm, params, min_area_px):  # fmt: skip
-    """``components.component_table`` of the labelled active set, the border and dim
-    gates, the median range of the components that pass them and can be sized
+def label_table_and_gates(runs, gray, distance_flat, fx, diameters_mm, params, min_area_px):
+    """The active set's components (``components.run_labels`` of its runs, numbered as
+    OpenCV numbers them) and their table (``components.component_table``), the border
+    and dim gates, the median range of the components that pass them and can be sized
     (``components.component_median_ranges``), then ``gate_components`` on them: the
-    blob criteria of §3.1.2-§3.2 from OpenCV's labels in one call.
+    blob criteria of §3.1.2-§3.2 in one call.
 
-    labels, n_labels, x_origin, y_origin, runs : as ``component_table``; gray (H, W) float32;
-    distance_flat (H * W,) float32 mm; fx, diameters_mm, params : as ``gate_components``
-    (params[10] is I_peak); min_area_px : the smallest component listed.
+    runs (R, 3) : the active set's runs (``levels.threshold_mask``); gray (H, W)
+    float32; distance_flat (H * W,) float32 mm; fx, diameters_mm, params : as
+    ``gate_components`` (params[10] is I_peak); min_area_px : the smallest component
+    listed.
 
     Returns the table (area, bbox, peak, starts, flat), inner (K,) bool (clear of the
-    image border),
-    listed (L,) labels of at least ``max(min_area_px, 1)`` pixels, testable (L,) bool
-    (inner and bright enough to test), rho (K,) median ranges (NaN where not read), and
-    ``gate_components``' results for ``listed[testable]``."""
+    image border), listed (L,) labels of at least ``max(min_area_px, 1)`` pixels,
+    testable (L,) bool (inner and bright enough to test), rho (K,) median ranges (NaN
+    where not read), and ``gate_components``' results for ``listed[testable]``."""
     h, w = gray.shape
-    area, bbox, peak, starts, flat = component_table(labels, n_labels, gray, x_origin, y_origin,
-                                                     runs)  # fmt: skip
+    labels, n_labels = run_labels(runs)
+    area, bbox, peak, starts, flat, run_order, run_starts = component_table(
+        runs, labels, n_labels, gray
+    )
     inner = np.empty(n_labels, np.bool_)
     bright = np.empty(n_labels, np.bool_)
     for k in range(n_labels):
@@ -265,7 +271,8 @@ def label_table_and_gates(labels, n_labels, gray, x_origin, y_origin, runs, dist
     testable = inner[listed] & bright[listed]
     which = listed[testable]
     status, size, moments, keep_starts, keep_flat = gate_components(
-        gray, labels, x_origin, y_origin, bbox, area, peak, rho, which, fx, diameters_mm, params
-    )
+        gray, runs, run_order, run_starts, bbox, area, peak, rho, which, fx, diameters_mm,
+        params,
+    )  # fmt: skip
     return (area, bbox, peak, starts, flat, inner, listed, testable, rho, which, status, size,
             moments, keep_starts, keep_flat)  # fmt: skip

@@ -26,71 +26,71 @@ from tofpose.kernels.components import (
     component_median_ranges,
     component_table,
     median_of_finite,
+    run_labels,
 )
 from tofpose.kernels.gates import nlog_patch
 from tofpose.kernels.levels import threshold_mask
 
 
+def _table(mask, gray):
+    """The component table of a mask as find_candidate_blobs builds it: its runs, their
+    labels, the table."""
+    runs = threshold_mask(mask.astype(np.float32), 0.5)[1]
+    labels, n = run_labels(runs)
+    return component_table(runs, labels, n, gray)
+
+
 def _assert_is_opencvs(table, mask, gray):
     """The table holds OpenCV's components of the whole mask, numbered as OpenCV does."""
-    area, bbox, peak, starts, flat = table
+    area, bbox, peak, starts, flat, run_order, run_starts = table
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     assert len(area) == n
     np.testing.assert_array_equal(area[1:], stats[1:, cv2.CC_STAT_AREA])
     np.testing.assert_array_equal(bbox[1:], stats[1:, :4])
+    runs = threshold_mask(mask.astype(np.float32), 0.5)[1]
     for k in range(1, n):
         np.testing.assert_array_equal(flat[starts[k] : starts[k + 1]],
                                       np.flatnonzero(labels.ravel() == k))  # fmt: skip
         assert peak[k] == gray[labels == k].max()
-
-
-def _runs(mask):
-    """The mask's horizontal runs as ``threshold_mask`` gives them."""
-    return threshold_mask(mask.astype(np.float32), 0.5)[1]
+        own = runs[run_order[run_starts[k] : run_starts[k + 1]]]
+        assert all((labels[r, a:b] == k).all() for r, a, b in own)
+        assert sum(b - a for _, a, b in own) == area[k]
 
 
 def test_component_table_equals_opencv_stats():
     rng = np.random.default_rng(1)
     mask = (rng.random((60, 80)) > 0.8).astype(np.uint8)
     gray = rng.random((60, 80)).astype(np.float32)
-    n, labels = cv2.connectedComponents(mask, connectivity=8)
-    _assert_is_opencvs(component_table(labels, n, gray, 0, 0, _runs(mask)), mask, gray)
+    _assert_is_opencvs(_table(mask, gray), mask, gray)
 
 
-@pytest.mark.parametrize("origin", [(16, 10), (0, 0), (2, 8)])
-def test_a_crop_at_even_origin_gives_the_whole_frame_table(origin):
-    """find_candidate_blobs labels only the active set's box, from an even origin: the
-    components, their numbering and their whole-frame pixels are those of labelling the
-    whole frame."""
+def test_run_labels_number_the_components_as_opencv_does():
+    """Random sets of every density and size, odd and even edges: the same label image
+    as cv2.connectedComponents (8-connectivity), including its numbering."""
     rng = np.random.default_rng(5)
-    mask = np.zeros((60, 80), np.uint8)
-    mask[11:47, 17:70] = rng.random((36, 53)) > 0.75  # many small components, odd edges
-    gray = rng.random((60, 80)).astype(np.float32)
-    x0, y0 = origin
-    n_crop, crop_labels = cv2.connectedComponents(mask[y0:, x0:], connectivity=8)
-    assert n_crop > 20
-    table = component_table(crop_labels, n_crop, gray, x0, y0, _runs(mask))
-    _assert_is_opencvs(table, mask, gray)
+    for trial in range(1500):
+        h, w = (int(v) for v in rng.integers(1, 70, 2))
+        mask = (rng.random((h, w)) > rng.uniform(0.2, 0.95)).astype(np.uint8)
+        if trial % 3 == 0:  # larger blobs with holes and bays
+            mask = cv2.dilate(mask, np.ones((2, 2), np.uint8))
+        runs = threshold_mask(mask.astype(np.float32), 0.5)[1]
+        labels, n = run_labels(runs)
+        n_cv, want = cv2.connectedComponents(mask, connectivity=8)
+        image = np.zeros((h, w), np.int32)
+        for (r, a, b), k in zip(runs, labels, strict=True):
+            image[r, a:b] = k
+        assert n == n_cv
+        np.testing.assert_array_equal(image, want)
 
 
-def test_labelling_the_active_sets_box_from_an_even_origin_gives_the_whole_frame_table():
-    """The crop find_candidate_blobs labels: exactly the set's bounding box, its origin
-    moved to even coordinates; sets of every size and position (odd and even edges)."""
-    rng = np.random.default_rng(7)
-    for _ in range(200):
-        mask = np.zeros((60, 80), np.uint8)
-        y, x = rng.integers(0, 25, 2)
-        bh, bw = rng.integers(3, 35, 2)
-        mask[y : y + bh, x : x + bw] = rng.random((bh, bw)) > rng.uniform(0.3, 0.9)
-        gray = rng.random((60, 80)).astype(np.float32)
-        x, y, bw, bh = cv2.boundingRect(mask)
-        if bw == 0:
-            continue
-        x0, y0 = x & ~1, y & ~1
-        n_crop, crop_labels = cv2.connectedComponents(mask[y0 : y + bh, x0 : x + bw],
-                                                      connectivity=8)  # fmt: skip
-        table = component_table(crop_labels, n_crop, gray, x0, y0, _runs(mask))
-        _assert_is_opencvs(table, mask, gray)
+def test_a_frames_active_set_is_labelled_as_opencv_labels_it():
+    cam, cfg = CameraModel(), ExtractionConfig()
+    for distance_mm in (700.0, 3000.0, 9000.0):
+        frame = render(facing_pose(distance_mm, 3, -4, 12), seed=2)
+        g, d = check_frame(cam, frame.gray, frame.distance_mm)
+        found = find_candidate_blobs(g, d, cam, paper_target().diameters_mm, cfg,
+                                     frame_levels(g, cfg))  # fmt: skip
+        _assert_is_opencvs(_table(found.active_mask, g), found.active_mask, g)
 
 
 def test_median_of_finite_is_numpy_median_without_nans():
