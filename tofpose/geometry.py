@@ -46,13 +46,17 @@ def euler_deg_from_rotation(R: np.ndarray) -> np.ndarray:
 
 
 FACING = np.diag([1.0, -1.0, -1.0])  # R_camera_target of a target squarely facing the camera
+_FACING_SIGNS = np.diag(FACING)
 
 
 def facing_euler_deg(R_camera_target: np.ndarray) -> np.ndarray:
     """(pitch, yaw, roll) in degrees, shape (3,), of ``R_camera_target @ diag(1, -1, -1)``:
     the attitude as people read it (docs/architecture.md §3). A target squarely facing
     the camera reads (0, 0, 0) instead of (+/-180, 0, 0), so it never flips sign."""
-    return euler_deg_from_rotation(np.asarray(R_camera_target) @ FACING)
+    # R @ diag(1, -1, -1) negates columns 1 and 2: elementwise (a 3 x 3 matrix product
+    # goes through BLAS, whose code is cold on every frame); + 0.0 keeps zeros positive,
+    # as the product gives them
+    return euler_deg_from_rotation(np.asarray(R_camera_target) * _FACING_SIGNS + 0.0)
 
 
 def quaternion_wxyz_from_rotation(R: np.ndarray) -> np.ndarray:

@@ -43,6 +43,7 @@ from tofpose.extraction import (
 from tofpose.geometry import facing_euler_deg, quaternion_wxyz_from_rotation
 from tofpose.kernels.ellipses import blob_mask
 from tofpose.kernels.measure import measure_and_back_project
+from tofpose.kernels.pose import point_residuals_mm
 from tofpose.kernels.range_correction import corrected_ranges
 from tofpose.matching import (
     MatchingConfig,
@@ -552,8 +553,7 @@ class PosePipeline:
         uv_m, y_m, rho_m = obs.uv_px, obs.y_mm, obs.range_mm
         area, uv, rho = meas.area_px, meas.uv_px, meas.range_mm
         sig_px, sig_rng = meas.sigma_px, meas.sigma_range_mm
-        pred = x @ R.T + t
-        res = np.sqrt(((y_m - pred) ** 2).sum(axis=1))
+        res, rms = point_residuals_mm(x, y_m, R, t)
         per_reflector = zip(
             self._catalog_ids[i_idx].tolist(), uv_m, y_m, res.tolist(), rho_m.tolist(),
             area[k_idx].tolist(), sig_px[k_idx].tolist(), sig_rng[k_idx].tolist(), strict=True,
@@ -571,7 +571,7 @@ class PosePipeline:
             quaternion_wxyz_from_rotation(R),
             matched,
             unmatched,
-            math.sqrt(float(res @ res) / len(res)),
+            rms,
             iterations,
             self._reported_covariance(ml, len(matched), t),
             timer.total(),

@@ -406,3 +406,20 @@ def range_bias_covariance(x, e, rho, R, t, sr, sb, bias_sigma_mm):
         return np.full((6, 6), np.nan)
     s = cholesky_solve(L, transposed_times(J, g))
     return bias_sigma_mm**2 * np.outer(s, s)
+
+
+@jit
+def point_residuals_mm(x, y, R, t):
+    """|y_i - (R x_i + t)| (m,) mm of matched points x (m, 3) (target frame) and y (m, 3)
+    (camera frame), and their RMS."""
+    m = x.shape[0]
+    out = np.empty(m)
+    s = 0.0
+    for i in range(m):
+        d2 = 0.0
+        for a in range(3):
+            d = y[i, a] - (R[a, 0] * x[i, 0] + R[a, 1] * x[i, 1] + R[a, 2] * x[i, 2] + t[a])
+            d2 += d * d
+        out[i] = np.sqrt(d2)
+        s += d2
+    return out, np.sqrt(s / m)

@@ -137,3 +137,19 @@ def test_blob_sigmas_equal_the_numpy_model(pooled):
     np.testing.assert_array_equal(got[0], want[0])
     np.testing.assert_array_equal(got[1], want[1])
     assert (got[1] == u.UNCALIBRATED_RANGE_SIGMA_MM).any() != pooled
+
+
+def test_point_residuals_are_the_distances_from_the_fitted_points():
+    from scipy.spatial.transform import Rotation
+
+    from tofpose.kernels.pose import point_residuals_mm
+
+    rng = np.random.default_rng(11)
+    x = rng.normal(0.0, 200.0, (7, 3))
+    R = Rotation.random(random_state=3).as_matrix()
+    t = np.array([10.0, -20.0, 3000.0])
+    y = x @ R.T + t + rng.normal(0.0, 2.0, (7, 3))
+    res, rms = point_residuals_mm(x, y, R, t)
+    want = np.linalg.norm(y - (x @ R.T + t), axis=1)
+    np.testing.assert_allclose(res, want, rtol=1e-12)
+    assert rms == pytest.approx(np.sqrt(np.mean(want**2)), rel=1e-12)
