@@ -31,8 +31,7 @@ from tofpose.sim.scene import TargetScene  # noqa: E402
 from tofpose.tracking import TrackingConfig  # noqa: E402
 from tofpose.warmup import warm_up  # noqa: E402
 
-STAGES = ["levels", "blobs", "ellipses", "centroids", "backproject", "matching", "refine",
-          "total"]  # fmt: skip
+STAGES = ["levels", "blobs", "ellipses", "measurement", "matching", "refine", "total"]
 CASES = [
     (700.0, (-110.0, -55.0)),
     (1500.0, (0.0, -30.0)),

@@ -267,9 +267,6 @@ class PosePipeline:
         self.camera = camera
         self.range_correction = range_correction
         self.covariance_scale = covariance_scale
-        self._correction_args = (
-            None if range_correction is None else range_correction.kernel_arguments()
-        )
         self._correction_kernel_args = correction_kernel_arguments(range_correction)
         self._bearings_flat = np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3))
         self.catalog = catalog
@@ -333,8 +330,8 @@ class PosePipeline:
         active = ThresholdedFrame(g, stats.raw_threshold)  # A, for the pose check
         # The motion gate compares the cheap moment centroids of find_candidate_blobs;
         # the precise centroids and ranges are measured once, on the combined frames.
-        meas, unranged, n_kept, pinfo = self._measure(blobs, g, d, stats.background)
-        timer.lap("centroids")
+        meas, unmatched, n_kept, pinfo = self._measure(blobs, g, d, stats.background)
+        timer.lap("measurement")  # §3.4, Eqs. 7-9 and the sigmas
         extra = {
             "frames_used": pinfo.frames_used,
             "motion": pinfo.motion,
@@ -347,11 +344,9 @@ class PosePipeline:
                 f"found {len(meas.range_mm)} candidate reflector(s) with a valid range "
                 f"(of {n_kept} blobs), need {cfg.matching.min_matches}"
                 + self._size_hint(found.wrong_size),
-                unmatched=unranged + meas.as_unmatched(),
+                unmatched=unmatched + meas.as_unmatched(),
                 **extra,
             )
-        unmatched = unranged
-        timer.lap("backproject")
         m = self._match(meas)
         timer.lap("matching")
         if not m.ok:
@@ -599,7 +594,7 @@ class PosePipeline:
         flat, starts = pixel_lists(blobs)
         rho = np.array([b.distance_mm for b in blobs], float)
         out = corrected_ranges(rho, flat, starts, np.asarray(gray, np.float32),
-                               *self._correction_args)  # fmt: skip
+                               *self._correction_kernel_args[1:])  # fmt: skip
         return [b.with_values(distance_mm=float(r)) for b, r in zip(blobs, out, strict=True)]
 
     def _size_hint(self, wrong_size) -> str:
