@@ -3,9 +3,9 @@
 The threshold pass records the active set's horizontal runs (``levels.threshold_mask``);
 ``run_labels`` joins them into 8-connected components numbered exactly as
 ``cv2.connectedComponents`` numbers them (tests hold it to OpenCV on random sets and
-frames), at a few operations per run: ~5 us for the ~190 runs of a 0.7 m frame, where
-OpenCV's labelling of the set's bounding box took ~50 us and the table built from its
-label image another ~100 us. ``component_table`` gives what the blob criteria read: each
+frames), at a few operations per run instead of a visit of every pixel of the set's
+bounding box (OpenCV's labelling) and a second one to read its label image back into a
+table. ``component_table`` gives what the blob criteria read: each
 component's area, bounding box, brightest pixel, member pixels (flat indices, raster
 order) and runs; ``component_median_ranges`` the median of its valid ranges.
 """

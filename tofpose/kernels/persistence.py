@@ -117,7 +117,7 @@ def mean_in_boxes(gray, older, n_older, boxes, out):
         # row by row, the older frames summed one frame at a time into a row buffer (the
         # same float32 additions in the same order as a per-pixel loop over the frames);
         # 1-D loops over contiguous rows, which the compiler vectorises (the 2-D loop
-        # this replaced was not: 7x slower)
+        # this replaced was not)
         s = np.empty(c1 - c0, np.float32)
         for r in range(r0, r1):
             s[:] = 0

@@ -2,13 +2,12 @@
 plain compiled loops.
 
 LAPACK and BLAS do these in microseconds when their code is in the cache, but in the
-pipeline's stream a frame's other work evicts it between calls: a 3 x 3 SVD measured
-5 us in a loop and 19 us in the stream (and 80 us after a few MB of other work), a
-Gauss-Newton fit 25 us against 41 us. These loops are short and stay fast wherever they
-are called from. Arithmetic: Horn's closed form for the rotation (the eigenvector of a
-4 x 4 symmetric matrix, by Jacobi rotations) and Cholesky for the symmetric
-positive-definite normal equations; both agree with the LAPACK versions they replace to
-rounding (tests/tofpose/kernels/test_small_matrices.py).
+pipeline's stream a frame's other work evicts it between calls, and each call then costs
+several times as much (a 3 x 3 SVD, the Gauss-Newton fit). These loops are short and
+stay fast wherever they are called from. Arithmetic: Horn's closed form for the
+rotation (the eigenvector of a 4 x 4 symmetric matrix, by Jacobi rotations) and Cholesky
+for the symmetric positive-definite normal equations; both agree with the LAPACK
+versions they replace to rounding (tests/tofpose/kernels/test_small_matrices.py).
 """
 
 from __future__ import annotations
