@@ -19,7 +19,12 @@ import numpy as np
 from tofpose.camera import CameraModel
 from tofpose.kernels.centroids import blob_centroids, blob_ranges, owner_map
 from tofpose.kernels.gates import ACCEPTED, OVERSIZE, label_table_and_gates
-from tofpose.kernels.levels import clean_distance, frame_level_stats, threshold_mask
+from tofpose.kernels.levels import (
+    checked_frame,
+    clean_distance,
+    frame_level_stats,
+    threshold_mask,
+)
 from tofpose.kernels.perspective import disc_centre_offsets
 
 SATURATED_COUNTS = 4095
@@ -258,10 +263,17 @@ def check_frame(
         raise FrameError(f"gray image must be integer counts, got dtype {gray.dtype}")
     if distance_mm.dtype.kind != "f":
         raise FrameError(f"distance image must be float mm, got dtype {distance_mm.dtype}")
+    if gray.dtype == np.uint16 and distance_mm.dtype in _CHECKED_DISTANCE_DTYPES:
+        return checked_frame(gray, distance_mm)  # a camera's counts: one compiled pass
     g = gray.astype(np.float32)
     if gray.dtype.kind == "f" and not np.isfinite(g).all():
         g = np.nan_to_num(g, nan=0.0, posinf=0.0, neginf=0.0)
     return g, clean_distance(distance_mm)
+
+
+#: distance dtypes whose frames ``check_frame`` converts in one compiled pass with uint16
+#: counts (both compiled by ``warm_up``; others take NumPy's conversion, never a compile)
+_CHECKED_DISTANCE_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
 
 
 def frame_levels(gray: np.ndarray, config: ExtractionConfig) -> FrameStats:

@@ -18,7 +18,7 @@ import numpy as np
 from tofpose.camera import CameraModel
 from tofpose.catalog import paper_target
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg
-from tofpose.kernels.levels import clean_distance
+from tofpose.kernels.levels import checked_frame, clean_distance
 from tofpose.pipeline import PipelineConfig, PosePipeline
 from tofpose.range_calibration import RangeCorrection
 from tofpose.sim.bench import R_FACING
@@ -59,8 +59,10 @@ def warm_up() -> float:
         pipe = PosePipeline(cam, cat, configs[0], range_correction=correction)
         for f in frames[:3]:
             pipe.process(f.gray, f.distance_mm)
-    # distance images arrive as float32 (cameras) or float64 (some recordings): the
-    # frame check compiles once per dtype
-    clean_distance(np.zeros((1, 1), np.float64))
+    # distance images arrive as float32 (cameras) or float64 (some recordings), counts
+    # as uint16 or as floats: the frame check compiles once per dtype
+    for distance_dtype in (np.float32, np.float64):
+        clean_distance(np.zeros((1, 1), distance_dtype))
+        checked_frame(np.zeros((1, 1), np.uint16), np.zeros((1, 1), distance_dtype))
     _done = True
     return time.perf_counter() - t0

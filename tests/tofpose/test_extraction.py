@@ -121,6 +121,30 @@ def test_check_frame_turns_inf_and_negative_into_nan():
     assert np.isnan(out[0, :3]).all() and np.isfinite(out[1:]).all()
 
 
+@pytest.mark.parametrize("gray_dtype", [np.uint16, np.uint8, np.int32, np.float32, np.float64])
+@pytest.mark.parametrize("distance_dtype", [np.float32, np.float64])
+def test_check_frame_converts_every_input_dtype_as_numpy_does(gray_dtype, distance_dtype):
+    """Counts become float32 (non-finite float counts 0), distances float32 with every
+    non-finite or non-positive value NaN, whichever path converts them (uint16 counts
+    with float distances take one compiled pass)."""
+    rng = np.random.default_rng(4)
+    gray = rng.integers(0, 250, (240, 320)).astype(gray_dtype)
+    d = rng.normal(1500.0, 400.0, (240, 320)).astype(distance_dtype)
+    d.flat[:6] = [np.inf, -np.inf, np.nan, 0.0, -3.0, 1e-3]
+    if np.dtype(gray_dtype).kind == "f":
+        gray.flat[:2] = [np.nan, np.inf]
+    g, out = check_frame(CameraModel(), gray, d)
+    want_g = np.nan_to_num(gray.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    want_d = d.astype(np.float32)
+    want_d[~(np.isfinite(want_d) & (want_d > 0))] = np.nan
+    assert g.dtype == out.dtype == np.float32
+    np.testing.assert_array_equal(g, want_g)
+    np.testing.assert_array_equal(out, want_d)
+    before = (g[0, 10], out[0, 10])
+    gray[0, 10], d[0, 10] = 7, -1.0  # copies: the caller's buffers may be reused
+    assert (g[0, 10], out[0, 10]) == before
+
+
 def test_two_pixel_blob_of_a_distant_small_marker_is_a_candidate():
     """A 35 mm marker at 10 m covers ~1 px and often lights a 1 x 2 pixel pair. Two pixels
     side by side have eccentricity 1, which must not count as a bad shape: the blob is too
