@@ -51,13 +51,15 @@ CORRECTION = RangeCorrection(
 )  # fmt: skip
 
 
-def call_profile(pipe: PosePipeline, frames, mode: str) -> tuple[float, float]:
-    """Median over the frames the pipeline measured in ``mode`` of the Python-level
-    function calls (and C functions called from Python) per frame, and of the ms spent
-    inside compiled code: the kernels (``tofpose/kernels``, whose numba dispatchers
-    report their calls to a profiler) and OpenCV's and SciPy's C functions. The rest of
-    a frame's time is Python and NumPy glue. A profiled pass (not the timed one): the
-    profiler slows the Python, not the compiled calls it brackets."""
+def call_profile(pipe: PosePipeline, frames, mode: str) -> tuple[list[int], list[float]]:
+    """For each frame the pipeline measured in ``mode``: the Python-level function calls
+    (and C functions called from Python), and the ms spent inside compiled code: the
+    kernels (``tofpose/kernels``, whose numba dispatchers report their calls to a
+    profiler) and OpenCV's and SciPy's C functions. The rest of a frame's time is Python
+    and NumPy glue. A profiled pass (not the timed one): the profiler slows the Python,
+    and adds about a microsecond to each compiled call it brackets (so the compiled share
+    is an upper bound); ``run`` repeats it with the timed passes, so that a slow spell of
+    the machine does not land on one range's profile."""
     count = 0
     inside = 0.0
     started: list = []  # (frame or C function, start time) of the compiled call running
@@ -90,7 +92,7 @@ def call_profile(pipe: PosePipeline, frames, mode: str) -> tuple[float, float]:
         if r.mode == mode:
             calls.append(count)
             ms.append(1e3 * inside)
-    return float(np.median(calls)), float(np.median(ms))
+    return calls, ms
 
 
 def run(n_frames: int, repeats: int):
@@ -111,6 +113,7 @@ def run(n_frames: int, repeats: int):
     rows = [{
         "range": z, "acq_ok": [], "stages": {s: [] for s in STAGES}, "tracking": [],
         "tracking_corrected": [], "tracking_all": [], "opencv": [],
+        "profile": {"acquisition": ([], []), "tracking": ([], [])},
     } for z, _, _ in streams]  # fmt: skip
     for _ in range(repeats):
         for row, (_, T, frames) in zip(rows, streams, strict=True):
@@ -136,14 +139,17 @@ def run(n_frames: int, repeats: int):
                     row["tracking_corrected"].append(1e3 * (time.perf_counter() - t0))
             for f in frames:
                 row["opencv"].append(baseline_pose(f.gray, cam, cat, T, det, ransac=False)[2])
-    for row, (_, _, frames) in zip(rows, streams, strict=True):
-        calls_acq, compiled_acq = call_profile(PosePipeline(cam, cat), frames, "acquisition")
-        calls_trk, compiled_trk = call_profile(PosePipeline(cam, cat, TRACKING), frames,
-                                               "tracking")  # fmt: skip
+            for mode, config in (("acquisition", PipelineConfig()), ("tracking", TRACKING)):
+                calls, ms = call_profile(PosePipeline(cam, cat, config), frames, mode)
+                row["profile"][mode][0].extend(calls)
+                row["profile"][mode][1].extend(ms)
+    for row in rows:
         row["ok"] = float(np.mean(row.pop("acq_ok")))
         row["tracked"] = len(row["tracking"]) / len(row["tracking_all"])
-        row["calls"] = (calls_acq, calls_trk)
-        row["compiled"] = (compiled_acq, compiled_trk)
+        profile = row.pop("profile")
+        row["calls"] = tuple(float(np.median(profile[m][0])) for m in ("acquisition", "tracking"))
+        row["compiled"] = tuple(float(np.median(profile[m][1]))
+                                for m in ("acquisition", "tracking"))  # fmt: skip
     return rows
 
 
