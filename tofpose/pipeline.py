@@ -271,6 +271,9 @@ class PosePipeline:
         self._bearings_flat = np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3))
         self.catalog = catalog
         self.config = config or PipelineConfig()
+        self._sigma_constants = kernel_constants(
+            SigmaFloors(self.config.centroid_sigma_floor_px, self.config.range_sigma_floor_mm)
+        )
         self._persistence = Persistence(self.config.persistence)
         self._catalog_xyz = catalog.positions_mm
         self._catalog_d = catalog.diameters_mm
@@ -399,8 +402,7 @@ class PosePipeline:
             g, d, flat, starts, bbox, cur, split, *persistence.history(g, d),
             float(pc.motion_tolerance_px), int(pc.c_min), float(background), cam.fx, cam.fy,
             cam.cx, cam.cy, cam.dist_array, self._bearings_flat, *persistence.scratch(g.shape),
-            *self._correction_kernel_args, *kernel_constants(
-                SigmaFloors(cfg.centroid_sigma_floor_px, cfg.range_sigma_floor_mm)),
+            *self._correction_kernel_args, *self._sigma_constants,
         )  # fmt: skip
         persistence.commit(cur, flat, g, d, n_used, motion)
         unranged = [(uv[j, 0], uv[j, 1], rho[j]) for j in np.flatnonzero(keep & ~np.isfinite(rho))]
