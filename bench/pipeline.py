@@ -200,8 +200,8 @@ def main() -> None:
           "correction (every term of the model); "
           "stream: every frame of the tracking pipeline (acquisitions included); OpenCV: "
           "SimpleBlobDetector + solvePnP on the same frames, correspondences free; compiled "
-          "code: time inside the kernels and OpenCV's and SciPy's C functions, median over a "
-          "profiled pass (the rest of a frame is Python and NumPy)")  # fmt: skip
+          "code: time inside the kernels and OpenCV's and SciPy's C functions, median over "
+          "profiled passes, one per repeat (the rest of a frame is Python and NumPy)")  # fmt: skip
     print(totals_table(rows))
     print()
     print("acquisition per stage, ms (median / p95):")

@@ -264,7 +264,7 @@ def _pipeline_verdict(pipe_tab: str) -> str:
         f"Of an acquisition frame, compiled code (kernels, OpenCV, SciPy) takes "
         f"{min(compiled):.2f}-{max(compiled):.2f} ms ({min(share):.0%}-"
         f"{max(share):.0%}); Python and NumPy the remaining {min(glue):.2f}-"
-        f"{max(glue):.2f} ms (the profiled pass and the timed one are separate runs)."
+        f"{max(glue):.2f} ms (the profiled passes and the timed ones are separate runs)."
     )
     ra, rt = col("acquisition / OpenCV"), col("tracking / OpenCV")
     out.append(f"Against OpenCV on the same frames: acquisition {min(ra):.1f}-{max(ra):.1f}x, "
