@@ -22,6 +22,19 @@ from tofpose.kernels.sigmas import blob_sigmas
 
 
 @jit
+def pixel_list_subset(flat, starts, idx):
+    """The pixel lists (``extraction.pixel_lists`` form: flat (P,), starts (n + 1,)) of
+    the blobs ``idx`` (m,), in that order: flat (P',) and starts (m + 1,)."""
+    sub_starts = np.zeros(idx.shape[0] + 1, np.int64)
+    for a in range(idx.shape[0]):
+        sub_starts[a + 1] = sub_starts[a] + starts[idx[a] + 1] - starts[idx[a]]
+    sub_flat = np.empty(sub_starts[-1], np.int64)
+    for a in range(idx.shape[0]):
+        sub_flat[sub_starts[a] : sub_starts[a + 1]] = flat[starts[idx[a]] : starts[idx[a] + 1]]
+    return sub_flat, sub_starts
+
+
+@jit
 def persist_and_measure(
     gray, distance, flat, starts, bbox, centroids, hist_gray, hist_dist, hist_mask,
     hist_cent, n_hist, tol_px, c_min, background, fx, fy, cx, cy, dist, pixel_bearings,
@@ -83,16 +96,8 @@ def persist_and_measure(
 
     # the kept blobs as their own pixel lists, then Eqs. 19-20
     kept = np.flatnonzero(keep)
-    k_starts = np.zeros(kept.shape[0] + 1, np.int64)
-    for a in range(kept.shape[0]):
-        j = kept[a]
-        k_starts[a + 1] = k_starts[a] + starts[j + 1] - starts[j]
-    k_flat = np.empty(k_starts[-1], np.int64)
-    k_bbox = np.empty((kept.shape[0], 4), np.int64)
-    for a in range(kept.shape[0]):
-        j = kept[a]
-        k_flat[k_starts[a] : k_starts[a + 1]] = flat[starts[j] : starts[j + 1]]
-        k_bbox[a] = bbox[j]
+    k_flat, k_starts = pixel_list_subset(flat, starts, kept)
+    k_bbox = bbox[kept]
     owner, ox, oy, use_owner = owner_map(k_flat, k_starts, k_bbox, h, w)
     k_uv = blob_centroids(k_flat, k_starts, k_bbox, mean_gray, background, True, owner, ox,
                           oy, use_owner)  # fmt: skip
@@ -133,28 +138,10 @@ def measure_and_back_project(
         hist_cent, n_hist, tol_px, c_min, background, fx, fy, cx, cy, dist, pixel_bearings,
         mean_buf, med_buf,
     )  # fmt: skip
-    n = keep.shape[0]
-    ranged = np.empty(n, np.int64)
-    n_ranged = 0
-    for j in range(n):
-        if keep[j] and np.isfinite(rho[j]):
-            ranged[n_ranged] = j
-            n_ranged += 1
-    ranged = ranged[:n_ranged]
-    r_starts = np.zeros(n_ranged + 1, np.int64)
-    for a in range(n_ranged):
-        j = ranged[a]
-        r_starts[a + 1] = r_starts[a] + starts[j + 1] - starts[j]
-    r_flat = np.empty(r_starts[n_ranged], np.int64)
-    r_uv = np.empty((n_ranged, 2))
-    r_rho = np.empty(n_ranged)
-    r_split = np.empty(n_ranged, np.bool_)
-    for a in range(n_ranged):
-        j = ranged[a]
-        r_flat[r_starts[a] : r_starts[a + 1]] = flat[starts[j] : starts[j + 1]]
-        r_uv[a] = uv[j]
-        r_rho[a] = rho[j]
-        r_split[a] = split[j]
+    ranged = np.flatnonzero(keep & np.isfinite(rho))
+    n_ranged = ranged.shape[0]
+    r_flat, r_starts = pixel_list_subset(flat, starts, ranged)
+    r_uv, r_rho, r_split = uv[ranged], rho[ranged], split[ranged]
     if correct_range and n_ranged:
         r_rho = corrected_ranges(r_rho, r_flat, r_starts, mean_gray, corr_model,
                                  corr_harmonics, corr_offsets)  # fmt: skip
