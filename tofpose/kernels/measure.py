@@ -12,10 +12,10 @@ from tofpose.kernels import jit
 from tofpose.kernels.camera import bearings
 from tofpose.kernels.centroids import blob_centroids, blob_ranges, owner_map
 from tofpose.kernels.persistence import (
-    column_medians,
     consistent,
     counter_medians,
     mean_in_boxes,
+    medians_at,
 )
 from tofpose.kernels.range_correction import corrected_ranges
 from tofpose.kernels.sigmas import blob_sigmas
@@ -69,34 +69,16 @@ def persist_and_measure(
     keep = np.ones(n, np.bool_)
     mean_gray = gray
     med_dist = distance
-    if frames > 1 and n > 0:
-        if frames >= c_min:
-            keep = counter_medians(hist_mask, n_used, flat, starts, 1) >= c_min
-        mean_gray = mean_in_boxes(gray, hist_gray, n_used, bbox, mean_buf)
-        med_dist = med_buf
-        kidx = np.empty(flat.shape[0], np.int64)
-        m = 0
-        for j in range(n):
-            if keep[j]:
-                for i in range(starts[j], starts[j + 1]):
-                    kidx[m] = flat[i]
-                    m += 1
-        stack = np.empty((frames, m), np.float32)
-        src = distance.reshape(-1)
-        for i in range(m):
-            stack[0, i] = src[kidx[i]]
-        for f in range(n_used):
-            older = hist_dist[f].reshape(-1)
-            for i in range(m):
-                stack[f + 1, i] = older[kidx[i]]
-        med = column_medians(stack)
-        out = med_dist.reshape(-1)
-        for i in range(m):
-            out[kidx[i]] = med[i]
-
-    # the kept blobs as their own pixel lists, then Eqs. 19-20
+    if frames > 1 and n > 0 and frames >= c_min:
+        keep = counter_medians(hist_mask, n_used, flat, starts, 1) >= c_min
+    # the kept blobs as their own pixel lists
     kept = np.flatnonzero(keep)
     k_flat, k_starts = pixel_list_subset(flat, starts, kept)
+    if frames > 1 and n > 0:
+        mean_gray = mean_in_boxes(gray, hist_gray, n_used, bbox, mean_buf)
+        med_dist = medians_at((distance,) + hist_dist, frames, k_flat, med_buf)
+
+    # Eqs. 19-20 on the combined frames
     k_bbox = bbox[kept]
     owner, ox, oy, use_owner = owner_map(k_flat, k_starts, k_bbox, h, w)
     k_uv = blob_centroids(k_flat, k_starts, k_bbox, mean_gray, background, True, owner, ox,

@@ -66,6 +66,56 @@ def column_medians(stack):
 
 
 @jit
+def _median_of_five(v0, v1, v2, v3, v4):
+    """The median of five finite values: ``_NETWORK_5`` on scalars (the compiler drops
+    what the middle output does not depend on)."""
+    v0, v1 = min(v0, v1), max(v0, v1)
+    v3, v4 = min(v3, v4), max(v3, v4)
+    v2, v4 = min(v2, v4), max(v2, v4)
+    v2, v3 = min(v2, v3), max(v2, v3)
+    v0, v3 = min(v0, v3), max(v0, v3)
+    v0, v2 = min(v0, v2), max(v0, v2)
+    v1, v4 = min(v1, v4), max(v1, v4)
+    v1, v3 = min(v1, v3), max(v1, v3)
+    return max(v1, v2)
+
+
+@jit
+def medians_at(frames, n_frames, flat, out):
+    """D-bar (§3.4) where it is read: at each flat index of ``flat`` (P,), the median
+    over the first ``n_frames`` of ``frames`` (a tuple of (H, W) float32, current frame
+    first) ignoring NaNs, written into ``out`` (H, W) float32 at that index; the rest of
+    ``out`` is left as it was. The same values as ``column_medians(gather_stack(frames,
+    n_frames, flat))`` scattered to ``flat``.
+
+    With five frames (a full persistence history) each pixel's five values are read
+    and sorted in registers, pixel by pixel: the five frames are visited together
+    instead of one after another through a (5, P) stack and nine passes over it."""
+    o = out.reshape(-1)
+    if n_frames != 5:
+        med = column_medians(gather_stack(frames, n_frames, flat))
+        for i in range(flat.shape[0]):
+            o[flat[i]] = med[i]
+        return out
+    # a runtime index: a tuple shorter than five (K < 5) must still compile
+    k = n_frames - 5
+    f0, f1 = frames[k].reshape(-1), frames[k + 1].reshape(-1)
+    f2, f3, f4 = frames[k + 2].reshape(-1), frames[k + 3].reshape(-1), frames[k + 4].reshape(-1)
+    buf = np.empty((5, 1), np.float32)
+    scratch = np.empty(5, np.float32)
+    for i in range(flat.shape[0]):
+        p = flat[i]
+        v0, v1, v2, v3, v4 = f0[p], f1[p], f2[p], f3[p], f4[p]
+        if (np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2) and np.isfinite(v3)
+                and np.isfinite(v4)):  # fmt: skip
+            o[p] = _median_of_five(v0, v1, v2, v3, v4)
+        else:
+            buf[0, 0], buf[1, 0], buf[2, 0], buf[3, 0], buf[4, 0] = v0, v1, v2, v3, v4
+            o[p] = _insertion_median(buf, 0, scratch)
+    return out
+
+
+@jit
 def consistent(current, previous, tol_px):
     """Do two centroid sets (n, 2), (m, 2) describe the same static scene? At least half
     of the current centroids (rounded up, at least one) have a previous one within

@@ -10,6 +10,7 @@ from tofpose.kernels.persistence import (
     counter_medians,
     gather_stack,
     mean_in_boxes,
+    medians_at,
 )
 
 
@@ -25,6 +26,25 @@ def test_column_medians_equal_nanmedian():
     # five frames without NaNs go through the sorting network only; with ties
     full = np.round(rng.normal(2000, 2, (5, 1000))).astype(np.float32)
     np.testing.assert_array_equal(column_medians(full), np.median(full, axis=0))
+
+
+def test_medians_at_the_pixels_equal_the_stacked_medians():
+    rng = np.random.default_rng(3)
+    for k_frames in (2, 3, 5, 6):  # tuples shorter than five frames compile too
+        frames = tuple(rng.normal(700, 3, (20, 30)).astype(np.float32) for _ in range(k_frames))
+        for f in frames:
+            f[rng.random(f.shape) < 0.15] = np.nan
+        flat = np.sort(rng.choice(600, 250, replace=False)).astype(np.int64)
+        for n in range(1, k_frames + 1):
+            out = np.full((20, 30), -1.0, np.float32)
+            medians_at(frames, n, flat, out)
+            want = np.full(250, np.nan, np.float32)
+            stack = np.array([f.ravel()[flat] for f in frames[:n]])
+            some = ~np.all(np.isnan(stack), axis=0)
+            want[some] = np.nanmedian(stack[:, some], axis=0)
+            np.testing.assert_array_equal(out.ravel()[flat], want)
+            untouched = np.setdiff1d(np.arange(600), flat)
+            assert (out.ravel()[untouched] == -1).all()
 
 
 def test_consistency_gate():
