@@ -142,7 +142,7 @@ def find_in_windows(
     for code in status.tolist():
         if code != FOUND:
             return _WHY_NOT[code]
-    if any_shared(flat, starts):
+    if any_shared(flat, starts, bbox):
         return "two windows found the same component"
     return [
         Blob(

@@ -84,7 +84,7 @@ def track_frame(
                 code = LOST
         if code == LOST:
             break
-        if any_shared(flat, starts):
+        if any_shared(flat, starts, bbox):
             code = SHARED
             break
 

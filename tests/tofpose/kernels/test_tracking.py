@@ -94,3 +94,31 @@ def test_search_windows_on_random_speckle_and_merging_shapes_equals_opencv():
         np.testing.assert_array_equal(flat[starts[0] : starts[1]], want_px)
         checked += 1
     assert checked > 50
+
+
+def test_windows_share_a_pixel_exactly_when_their_lists_intersect():
+    from tofpose.kernels.tracking import any_shared
+
+    rng = np.random.default_rng(7)
+    w = 40
+    for _ in range(300):
+        lists = []
+        for _ in range(rng.integers(2, 5)):  # random blobs in random boxes, some overlapping
+            x, y = rng.integers(0, 30, 2)
+            bw, bh = rng.integers(1, 10, 2)
+            rows, cols = np.mgrid[y : y + bh, x : x + bw]
+            keep = rng.random(rows.size) < 0.5
+            keep[0] = True
+            lists.append(np.sort((rows.ravel() * w + cols.ravel())[keep]))
+        flat = np.concatenate(lists).astype(np.int64)
+        starts = np.cumsum([0] + [len(v) for v in lists]).astype(np.int64)
+        bbox = np.array(
+            [[(v % w).min(), (v // w).min(), np.ptp(v % w) + 1, np.ptp(v // w) + 1] for v in lists],
+            np.int64,
+        )
+        want = any(
+            np.intersect1d(lists[a], lists[b]).size
+            for a in range(len(lists))
+            for b in range(a + 1, len(lists))
+        )
+        assert any_shared(flat, starts, bbox) == want
