@@ -36,6 +36,11 @@ def euler_deg_from_rotation(R: np.ndarray) -> np.ndarray:
     only pitch - roll is defined and roll is set to 0), at a fraction of the cost.
     """
     (r00, _, _), (r10, r11, r12), (r20, r21, r22) = np.asarray(R, float).tolist()
+    return _euler_deg(r00, r10, r11, r12, r20, r21, r22)
+
+
+def _euler_deg(r00, r10, r11, r12, r20, r21, r22) -> np.ndarray:
+    """``euler_deg_from_rotation`` from the seven elements it reads."""
     c_yaw = math.hypot(r00, r10)
     yaw = math.atan2(-r20, c_yaw)
     if c_yaw > 1e-9:
@@ -46,17 +51,17 @@ def euler_deg_from_rotation(R: np.ndarray) -> np.ndarray:
 
 
 FACING = np.diag([1.0, -1.0, -1.0])  # R_camera_target of a target squarely facing the camera
-_FACING_SIGNS = np.diag(FACING)
 
 
 def facing_euler_deg(R_camera_target: np.ndarray) -> np.ndarray:
     """(pitch, yaw, roll) in degrees, shape (3,), of ``R_camera_target @ diag(1, -1, -1)``:
     the attitude as people read it (docs/architecture.md §3). A target squarely facing
     the camera reads (0, 0, 0) instead of (+/-180, 0, 0), so it never flips sign."""
-    # R @ diag(1, -1, -1) negates columns 1 and 2: elementwise (a 3 x 3 matrix product
-    # goes through BLAS, whose code is cold on every frame); + 0.0 keeps zeros positive,
-    # as the product gives them
-    return euler_deg_from_rotation(np.asarray(R_camera_target) * _FACING_SIGNS + 0.0)
+    # R @ diag(1, -1, -1) negates columns 1 and 2: the elements negated one by one (NumPy
+    # on a 3 x 3 costs more than the arithmetic); + 0.0 keeps zeros positive, as the
+    # product gives them (atan2 tells -0.0 from 0.0)
+    (r00, _, _), (r10, r11, r12), (r20, r21, r22) = np.asarray(R_camera_target, float).tolist()
+    return _euler_deg(r00, r10, -r11 + 0.0, -r12 + 0.0, r20, -r21 + 0.0, -r22 + 0.0)
 
 
 def quaternion_wxyz_from_rotation(R: np.ndarray) -> np.ndarray:

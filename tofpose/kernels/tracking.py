@@ -199,7 +199,10 @@ def camera_windows(xyz, diameters_mm, R, t, fx, fy, cx, cy, dist, margin_px,
     (u0, u1, v0, v1), predicted centres (m, 2) px and diameters (m,) px. No windows when
     a reflector would be behind the camera."""
     n = xyz.shape[0]
-    centres = xyz @ R.T + t
+    centres = np.empty((n, 3))
+    for i in range(n):  # R x + t by loops: BLAS's code is cold on every frame
+        for a in range(3):
+            centres[i, a] = R[a, 0] * xyz[i, 0] + R[a, 1] * xyz[i, 1] + R[a, 2] * xyz[i, 2] + t[a]
     d_px = np.empty(n)
     for i in range(n):
         if centres[i, 2] <= 0:
