@@ -9,13 +9,71 @@ from tofpose.kernels import jit
 
 #: segments of at most this many values are finished by insertion sort
 _SMALL = 24
+#: the bracketing sample's size, and its half-width in sample ranks around k
+_SAMPLE, _GAP = 31, 4
+
+
+@jit
+def _insertion_sort(a):
+    """Sort the 1-D array a in place (a few dozen values)."""
+    for i in range(1, a.shape[0]):
+        x = a[i]
+        j = i
+        while j > 0 and a[j - 1] > x:
+            a[j] = a[j - 1]
+            j -= 1
+        a[j] = x
 
 
 @jit
 def select_pair(v, k):
     """The (k-1)-th and k-th smallest values (0-based; -inf for the first when k = 0) of
-    a 1-D float array without NaNs. ``v`` is used as scratch: its contents afterwards
-    are unspecified.
+    a 1-D float array without NaNs. ``v`` may be used as scratch: its contents
+    afterwards are unspecified.
+
+    Large arrays are first narrowed to a bracket (Floyd and Rivest's idea): the values
+    of a regular sample of 31, sorted, give bounds lo and hi around the k-th value's
+    expected place (+/- 4 sample ranks, about two standard deviations of the rank);
+    one vectorised pass counts the values below lo and inside [lo, hi], and when the
+    k-th and (k-1)-th value are inside, a second pass copies the inside values (about
+    a quarter) and ``quickselect_pair`` finishes on those. When the bracket misses, the
+    whole array goes to ``quickselect_pair``. On 1600 pixel values 5.6 -> 3.3 us; below
+    8 x 31 values the sample does not pay and the quickselect runs directly. The values
+    selected are the same order statistics either way."""
+    n = v.shape[0]
+    if n < 8 * _SAMPLE or k == 0:
+        return quickselect_pair(v, k)
+    sample = np.empty(_SAMPLE, v.dtype)
+    for i in range(_SAMPLE):
+        sample[i] = v[(2 * i + 1) * n // (2 * _SAMPLE)]
+    _insertion_sort(sample)
+    r = (k * _SAMPLE) // n
+    lo, hi = sample[max(r - _GAP, 0)], sample[min(r + _GAP, _SAMPLE - 1)]
+    n_below, n_inside = 0, 0
+    for i in range(n):
+        x = v[i]
+        n_below += x < lo
+        n_inside += (x >= lo) & (x <= hi)
+    if not (n_below <= k - 1 and k < n_below + n_inside):
+        return quickselect_pair(v, k)
+    inside = np.empty(n_inside + 1, v.dtype)  # + 1: the last write of the loop lands anywhere
+    m = 0
+    for i in range(n):  # branch-free compaction
+        x = v[i]
+        inside[m] = x
+        m += (x >= lo) & (x <= hi)
+    lower, upper = quickselect_pair(inside[:n_inside], k - n_below)
+    if k == n_below:  # the (k-1)-th value is the largest below the bracket
+        lower = v.dtype.type(-np.inf)
+        for i in range(n):
+            if v[i] < lo:
+                lower = max(lower, v[i])
+    return lower, upper
+
+
+@jit
+def quickselect_pair(v, k):
+    """``select_pair`` by quickselect alone. ``v`` is used as scratch.
 
     Quickselect with an out-of-place, branch-free partition: every value is written to
     both ends of the other buffer and the ends advance by the comparisons' outcomes, so
@@ -53,13 +111,7 @@ def select_pair(v, k):
             k -= n - n_gt
             src, dst, n = dst[n - n_gt : n], src[:n_gt], n_gt
             below = pivot
-    for i in range(1, n):  # insertion sort of the last few
-        x = src[i]
-        j = i
-        while j > 0 and src[j - 1] > x:
-            src[j] = src[j - 1]
-            j -= 1
-        src[j] = x
+    _insertion_sort(src[:n])  # the last few
     return (src[k - 1] if k > 0 else below), src[k]
 
 

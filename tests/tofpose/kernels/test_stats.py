@@ -18,6 +18,14 @@ def _arrays(rng, dtype):
         yield np.sort(noisy)
         yield np.sort(noisy)[::-1].copy()
         yield np.tile(np.array([1.0, 2.0], dtype), n)[:n]  # two values alternating
+        # large arrays are bracketed from a regular sample first: a sample that sees only
+        # outliers (the bracket misses, the quickselect takes the whole array), heavy
+        # tails and two modes
+        spiked = noisy.copy()
+        spiked[(2 * np.arange(31) + 1) * n // 62] = 1e6
+        yield spiked
+        yield np.abs(rng.standard_cauchy(n)).astype(dtype)
+        yield np.where(rng.random(n) < 0.5, noisy, noisy + 300).astype(dtype)
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
@@ -32,7 +40,8 @@ def test_select_pair_gives_the_two_order_statistics(dtype):
     rng = np.random.default_rng(1)
     for v in _arrays(rng, dtype):
         ranked = np.sort(v)
-        for k in {0, 1, len(v) // 2, len(v) - 1, int(rng.integers(0, len(v)))} - {len(v)}:
+        n = len(v)
+        for k in {0, 1, n // 2, n // 2 + 1, n // 3, n - 1, int(rng.integers(0, n))} - {n}:
             lower, upper = select_pair(v.copy(), k)
             assert upper == ranked[k]
             assert lower == (ranked[k - 1] if k > 0 else -np.inf)
