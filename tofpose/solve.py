@@ -220,7 +220,7 @@ class PoseSolver:
         and of the common range bias the data cannot reveal."""
         T = RigidTransform(R, t)
         if self.config.verify_pose:
-            problem = self.verify(T, active, set(obs.i_idx.tolist()))
+            problem = self.verify(T, active, obs.i_idx)
             if problem:
                 return Rejected(f"pose rejected: {problem}", implausible=True)
         bias = self.range_bias_sigma_mm(obs.range_mm)
@@ -261,13 +261,14 @@ class PoseSolver:
         return self.view_cosine(R, t) >= self._cos_max_view
 
     def verify(self, T: RigidTransform, active: ThresholdedFrame | None,
-               matched: set[int]) -> str:  # fmt: skip
+               matched: np.ndarray) -> str:  # fmt: skip
         """Physical consistency of a pose with the frame; empty string when consistent:
         the target faces the camera within ``max_view_angle_deg``, every reflector is in
         front of it, and (at most ``dark_check_max_matches`` reflectors matched) no
         reflector that should be clearly visible falls on a dark part of the frame
         (``kernels.verify.pose_check`` states the rule). ``active`` : the frame and its
-        I_t; read only for the dark check, and may be None otherwise."""
+        I_t; read only for the dark check, and may be None otherwise. ``matched`` :
+        (m,) int, the catalog indices of the matched reflectors, each once."""
         R, t = T.R, T.t_mm
         cos_view = self.view_cosine(R, t)
         if cos_view < self._cos_max_view:
@@ -277,7 +278,7 @@ class PoseSolver:
             )
         dark_check = len(matched) <= self.config.dark_check_max_matches
         is_matched = np.zeros(len(self._xyz), bool)
-        is_matched[list(matched)] = True
+        is_matched[matched] = True
         frame = active if dark_check else _NO_FRAME
         cam = self.camera
         outcome, i, u, v = pose_check(

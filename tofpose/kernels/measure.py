@@ -12,10 +12,10 @@ from tofpose.kernels import jit
 from tofpose.kernels.camera import bearings
 from tofpose.kernels.centroids import blob_centroids, blob_ranges, owner_map
 from tofpose.kernels.persistence import (
+    blob_count_medians,
     consistent,
-    counter_medians,
     mean_in_boxes,
-    medians_at,
+    medians_and_counts_at,
 )
 from tofpose.kernels.range_correction import corrected_ranges
 from tofpose.kernels.sigmas import blob_sigmas
@@ -54,7 +54,7 @@ def persist_and_measure(
     more, they are the scratch frames ``mean_buf`` and ``med_buf`` (H, W) float32
     (``Persistence`` owns them and lends them to every frame: copying two whole frames
     cost more than the rest of this call at far range), holding I-bar inside the boxes
-    grown by 2 px and D-bar at the kept blobs' pixels, the only places anything reads;
+    grown by 2 px and D-bar at the blobs' pixels, the only places anything reads;
     elsewhere they hold whatever an earlier frame left there."""
     h, w = gray.shape
     n = starts.shape[0] - 1
@@ -69,14 +69,17 @@ def persist_and_measure(
     keep = np.ones(n, np.bool_)
     mean_gray = gray
     med_dist = distance
-    if frames > 1 and n > 0 and frames >= c_min:
-        keep = counter_medians(hist_mask, n_used, flat, starts, 1) >= c_min
+    if frames > 1 and n > 0:
+        # D-bar at every blob's pixels (only the kept ones' are read) and the counter
+        counts = medians_and_counts_at((distance,) + hist_dist, hist_mask, n_used, flat,
+                                       med_buf)  # fmt: skip
+        med_dist = med_buf
+        if frames >= c_min:
+            keep = blob_count_medians(counts, starts, frames + 1) >= c_min
+        mean_gray = mean_in_boxes(gray, hist_gray, n_used, bbox, mean_buf)
     # the kept blobs as their own pixel lists
     kept = np.flatnonzero(keep)
     k_flat, k_starts = pixel_list_subset(flat, starts, kept)
-    if frames > 1 and n > 0:
-        mean_gray = mean_in_boxes(gray, hist_gray, n_used, bbox, mean_buf)
-        med_dist = medians_at((distance,) + hist_dist, frames, k_flat, med_buf)
 
     # Eqs. 19-20 on the combined frames
     k_bbox = bbox[kept]

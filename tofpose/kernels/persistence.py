@@ -81,30 +81,36 @@ def _median_of_five(v0, v1, v2, v3, v4):
 
 
 @jit
-def medians_at(frames, n_frames, flat, out):
-    """D-bar (§3.4) where it is read: at each flat index of ``flat`` (P,), the median
-    over the first ``n_frames`` of ``frames`` (a tuple of (H, W) float32, current frame
-    first) ignoring NaNs, written into ``out`` (H, W) float32 at that index; the rest of
-    ``out`` is left as it was. The same values as ``column_medians(gather_stack(frames,
-    n_frames, flat))`` scattered to ``flat``.
+def medians_and_counts_at(frames, masks, n_older, flat, out):
+    """D-bar and the counter C of §3.4 where they are read, at the blobs' pixels ``flat``
+    (P,) (flat indices): the median over the first ``1 + n_older`` of ``frames`` (a
+    tuple of (H, W) float32, current frame first) ignoring NaNs, written into ``out``
+    (H, W) float32 at each index (the rest of ``out`` is left as it was); and returned,
+    the counts (P,) int64, 1 + the number of the first ``n_older`` ``masks`` (a tuple of
+    (H * W,) bool) holding the pixel. The values of ``column_medians(gather_stack(...))``
+    and ``pixel_counts(masks, n_older, flat, 1)``.
 
-    With five frames (a full persistence history) each pixel's five values are read
-    and sorted in registers, pixel by pixel: the five frames are visited together
-    instead of one after another through a (5, P) stack and nine passes over it."""
+    With a full history of five frames each pixel's five values and four mask bits are
+    read together and the values sorted in registers, pixel by pixel: one pass over the
+    history frames' blob pixels instead of a stack of five rows, nine passes over it,
+    and four more over the masks."""
     o = out.reshape(-1)
-    if n_frames != 5:
-        med = column_medians(gather_stack(frames, n_frames, flat))
+    if n_older != 4:
+        med = column_medians(gather_stack(frames, 1 + n_older, flat))
         for i in range(flat.shape[0]):
             o[flat[i]] = med[i]
-        return out
+        return pixel_counts(masks, n_older, flat, 1)
     # a runtime index: a tuple shorter than five (K < 5) must still compile
-    k = n_frames - 5
+    k = n_older - 4
     f0, f1 = frames[k].reshape(-1), frames[k + 1].reshape(-1)
     f2, f3, f4 = frames[k + 2].reshape(-1), frames[k + 3].reshape(-1), frames[k + 4].reshape(-1)
+    m0, m1, m2, m3 = masks[k], masks[k + 1], masks[k + 2], masks[k + 3]
+    counts = np.empty(flat.shape[0], np.int64)
     buf = np.empty((5, 1), np.float32)
     scratch = np.empty(5, np.float32)
     for i in range(flat.shape[0]):
         p = flat[i]
+        counts[i] = 1 + np.int64(m0[p]) + np.int64(m1[p]) + np.int64(m2[p]) + np.int64(m3[p])
         v0, v1, v2, v3, v4 = f0[p], f1[p], f2[p], f3[p], f4[p]
         if (np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2) and np.isfinite(v3)
                 and np.isfinite(v4)):  # fmt: skip
@@ -112,7 +118,7 @@ def medians_at(frames, n_frames, flat, out):
         else:
             buf[0, 0], buf[1, 0], buf[2, 0], buf[3, 0], buf[4, 0] = v0, v1, v2, v3, v4
             o[p] = _insertion_median(buf, 0, scratch)
-    return out
+    return counts
 
 
 @jit
@@ -198,26 +204,41 @@ def median_of_counts(hist, m):
 
 
 @jit
-def counter_medians(masks, n_masks, flat, starts, base=0):
-    """The counter image C of §3.4 read at each blob's pixels: per blob, the median over
-    its pixels (flat indices ``flat[starts[j]:starts[j + 1]]``) of the number of frames,
-    of the first ``n_masks`` (H * W,) bool masks given and ``base`` frames known to hold
-    every blob pixel (the current one, when its mask is not among ``masks``), in which
-    the pixel belonged to a candidate blob. Returns (n,) float64."""
-    n = starts.shape[0] - 1
-    out = np.empty(n)
-    hist = np.empty(base + n_masks + 1, np.int64)
+def pixel_counts(masks, n_masks, flat, base=0):
+    """(P,) int64: at each flat index of ``flat``, ``base`` + the number of the first
+    ``n_masks`` (H * W,) bool ``masks`` holding it."""
     counts = np.full(flat.shape[0], base, np.int64)
     for f in range(n_masks):  # one frame at a time (no tuple selection per pixel)
         mask = masks[f]
         for i in range(flat.shape[0]):
             counts[i] += mask[flat[i]]
+    return counts
+
+
+@jit
+def blob_count_medians(counts, starts, n_values):
+    """Per blob, the median of its pixels' counts (``counts[starts[j]:starts[j + 1]]``,
+    integers in [0, n_values)). Returns (n,) float64."""
+    n = starts.shape[0] - 1
+    out = np.empty(n)
+    hist = np.empty(n_values, np.int64)
     for j in range(n):
         hist[:] = 0
         for i in range(starts[j], starts[j + 1]):
             hist[counts[i]] += 1
         out[j] = median_of_counts(hist, starts[j + 1] - starts[j])
     return out
+
+
+@jit
+def counter_medians(masks, n_masks, flat, starts, base=0):
+    """The counter image C of §3.4 read at each blob's pixels: per blob, the median over
+    its pixels (flat indices ``flat[starts[j]:starts[j + 1]]``) of the number of frames,
+    of the first ``n_masks`` (H * W,) bool masks given and ``base`` frames known to hold
+    every blob pixel (the current one, when its mask is not among ``masks``), in which
+    the pixel belonged to a candidate blob. Returns (n,) float64."""
+    counts = pixel_counts(masks, n_masks, flat, base)
+    return blob_count_medians(counts, starts, base + n_masks + 1)
 
 
 @jit

@@ -10,7 +10,7 @@ from tofpose.kernels.persistence import (
     counter_medians,
     gather_stack,
     mean_in_boxes,
-    medians_at,
+    medians_and_counts_at,
 )
 
 
@@ -28,23 +28,26 @@ def test_column_medians_equal_nanmedian():
     np.testing.assert_array_equal(column_medians(full), np.median(full, axis=0))
 
 
-def test_medians_at_the_pixels_equal_the_stacked_medians():
+def test_medians_and_counts_at_the_pixels_equal_the_stacked_ones():
     rng = np.random.default_rng(3)
     for k_frames in (2, 3, 5, 6):  # tuples shorter than five frames compile too
         frames = tuple(rng.normal(700, 3, (20, 30)).astype(np.float32) for _ in range(k_frames))
         for f in frames:
             f[rng.random(f.shape) < 0.15] = np.nan
+        masks = tuple(rng.random(600) < 0.6 for _ in range(k_frames - 1))
         flat = np.sort(rng.choice(600, 250, replace=False)).astype(np.int64)
-        for n in range(1, k_frames + 1):
+        for n_older in range(k_frames):
             out = np.full((20, 30), -1.0, np.float32)
-            medians_at(frames, n, flat, out)
+            counts = medians_and_counts_at(frames, masks, n_older, flat, out)
             want = np.full(250, np.nan, np.float32)
-            stack = np.array([f.ravel()[flat] for f in frames[:n]])
+            stack = np.array([f.ravel()[flat] for f in frames[: 1 + n_older]])
             some = ~np.all(np.isnan(stack), axis=0)
             want[some] = np.nanmedian(stack[:, some], axis=0)
             np.testing.assert_array_equal(out.ravel()[flat], want)
             untouched = np.setdiff1d(np.arange(600), flat)
             assert (out.ravel()[untouched] == -1).all()
+            want_counts = 1 + sum(m[flat].astype(int) for m in masks[:n_older])
+            np.testing.assert_array_equal(counts, want_counts)
 
 
 def test_consistency_gate():
