@@ -24,6 +24,7 @@ from tofpose.kernels.persistence import (
     counter_medians,
     gather_stack,
     mean_in_boxes,
+    pixel_mask,
 )
 
 
@@ -141,8 +142,7 @@ class Persistence:
             keep = list(self._history)[len(self._history) - n_used :] if n_used else []
             self._history.clear()
             self._history.extend(keep)
-        mask = np.zeros(gray.size, bool)
-        mask[pixels] = True
+        mask = pixel_mask(pixels, gray.size)
         self._history.append(_Entry(centroids, mask, gray, distance))
 
     def _padded(self, current: np.ndarray, older: list[np.ndarray]) -> tuple:
@@ -173,9 +173,8 @@ class Persistence:
         cfg = self.config
         h, w = gray.shape
         cur = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
-        mask = np.zeros(h * w, bool)
         idx, starts = pixel_lists(blobs)
-        mask[idx] = True
+        mask = pixel_mask(idx, h * w)
 
         used: list[_Entry] = []
         motion = False

@@ -11,6 +11,7 @@ from tofpose.kernels.persistence import (
     gather_stack,
     mean_in_boxes,
     medians_and_counts_at,
+    pixel_mask,
 )
 
 
@@ -91,3 +92,11 @@ def test_the_counting_median_is_numpys_median():
         for _ in range(20):
             v = rng.integers(0, 6, m)
             assert median_of_counts(np.bincount(v, minlength=6), m) == np.median(v)
+
+
+def test_the_pixel_mask_holds_exactly_the_listed_pixels():
+    flat = np.array([0, 5, 6, 7, 599, 5], np.int64)  # a repeat is harmless
+    want = np.zeros(600, bool)
+    want[flat] = True
+    np.testing.assert_array_equal(pixel_mask(flat, 600), want)
+    assert not pixel_mask(np.empty(0, np.int64), 600).any()
