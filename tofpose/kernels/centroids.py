@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
-from tofpose.kernels.indexing import row_col
+from tofpose.kernels.indexing import row_col, run_end
 from tofpose.kernels.stats import median_inplace
 
 
@@ -34,11 +34,16 @@ def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, owner_
         x0, x1 = max(x - 2, 0), min(x + bw + 2, w)
         ph, pw = y1 - y0, x1 - x0
         # the members' background-subtracted values (>= 0), -1 elsewhere and on a border
-        # of one pixel around the box
+        # of one pixel around the box; filled run by run (contiguous in both arrays)
         member = np.full((ph + 2, pw + 2), np.float32(-1.0))
-        for i in range(starts[j], starts[j + 1]):
+        i, end = starts[j], starts[j + 1]
+        while i < end:
             r, c = row_col(flat[i], w, inv_w)
-            member[r - y0 + 1, c - x0 + 1] = max(gray[r, c] - bg, np.float32(0.0))
+            e = run_end(flat, i, end, w - c)
+            m_row, g_row = member[r - y0 + 1], gray[r]
+            for q in range(e - i):
+                m_row[c - x0 + 1 + q] = max(g_row[c + q] - bg, np.float32(0.0))
+            i = e
         # the largest member value around each pixel (3 x 3, separable: rows, then
         # columns): >= 0 on the one-pixel ring (the blob dilated by one pixel), where it
         # is the coverage denominator; -1 elsewhere
@@ -46,28 +51,35 @@ def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, owner_
         for r in range(ph + 2):
             for c in range(pw):
                 row_max[r, c] = max(max(member[r, c], member[r, c + 1]), member[r, c + 2])
+        # row by row: the weights without a branch (the compiler vectorises the loop; 0
+        # off the dilated blob and on a neighbour's pixels), then the sums in pixel order
+        # (adding 0 changes no sum: they are >= 0)
+        wt = np.empty(pw)
         sw, su, sv = 0.0, 0.0, 0.0
         for r in range(ph):
+            g_row = gray[r + y0]
+            a_row, b_row, c_row = row_max[r], row_max[r + 1], row_max[r + 2]
             for c in range(pw):
-                local_max = max(max(row_max[r, c], row_max[r + 1, c]), row_max[r + 2, c])
-                if local_max < 0:
-                    continue
-                if use_owner:
+                local_max = max(max(a_row[c], b_row[c]), c_row[c])
+                value = max(g_row[c + x0] - bg, np.float32(0.0))
+                if coverage:  # clip(value / local_max, 0, 1); x / 0 -> 1, 0 / 0 -> 0
+                    q = value / (local_max if local_max > 0 else np.float32(1.0))
+                    covered = min(max(q, np.float32(0.0)), np.float32(1.0))
+                    lone = np.float32(1.0) if value > 0 else np.float32(0.0)
+                    v = covered if local_max > 0 else lone
+                else:
+                    v = value
+                wt[c] = float(v) if local_max >= 0 else 0.0
+            if use_owner:
+                for c in range(pw):
                     o = owner[r + y0 - owner_y0, c + x0 - owner_x0]
                     if o != -1 and o != j:
-                        continue
-                value = max(gray[r + y0, c + x0] - bg, np.float32(0.0))
-                if coverage:  # clip(value / local_max, 0, 1); x / 0 -> 1, 0 / 0 -> 0
-                    if local_max > 0:
-                        wt = float(min(max(value / local_max, np.float32(0.0)),
-                                       np.float32(1.0)))  # fmt: skip
-                    else:
-                        wt = 1.0 if value > 0 else 0.0
-                else:
-                    wt = float(value)
-                sw += wt
-                su += wt * (c + x0)
-                sv += wt * (r + y0)
+                        wt[c] = 0.0
+            row_v = float(r + y0)
+            for c in range(pw):
+                sw += wt[c]
+                su += wt[c] * (c + x0)
+                sv += wt[c] * row_v
         if sw <= 0:  # no weight anywhere: the plain mean of the ring
             sw, su, sv = 0.0, 0.0, 0.0
             for r in range(ph):

@@ -109,3 +109,22 @@ def test_blobs_at_the_image_border_and_with_dark_members_equal_the_reference(cor
         (m,) = measure_blobs([blob], g, d, cam, 50.0)
         uv, _ = _reference(blob, g, d, cam, 50.0)
         np.testing.assert_allclose(m.centroid_uv, uv, atol=1e-9)
+
+
+def test_a_blob_across_the_whole_image_width_equals_the_reference():
+    """A band of full rows: each row's last pixel and the next row's first are
+    consecutive flat indices, but the member values are filled run by run and a run
+    must end with its row."""
+    from tofpose.extraction import Blob
+
+    cam = CameraModel()
+    h, w = cam.shape
+    rng = np.random.default_rng(6)
+    g = rng.normal(60.0, 40.0, cam.shape).astype(np.float32)
+    g[100:104] += np.linspace(300.0, 900.0, w, dtype=np.float32)  # brighter to the right
+    d = np.full(cam.shape, 2500.0, np.float32)
+    pixels = np.arange(100 * w, 104 * w, dtype=np.int64)
+    blob = Blob(pixels=pixels, area_px=len(pixels), bbox=(0, 100, w, 4))
+    (m,) = measure_blobs([blob], g, d, cam, 50.0)
+    uv, _ = _reference(blob, g, d, cam, 50.0)
+    np.testing.assert_allclose(m.centroid_uv, uv, atol=1e-9)
