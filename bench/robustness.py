@@ -145,8 +145,9 @@ def markdown(out, img: str, n: int) -> str:
          "RANSAC count log(0.01) / log(1 - C(I,3) / C(n,3)) of blob triplets is drawn for "
          "the best hypothesis's I inliers among n blobs (99 % confidence of having drawn "
          "an all-marker triplet; each drawn triplet is tried against every catalog triplet "
-         "with matching side lengths, vectorised). Time = median matching + refinement ms "
-         "per frame.", "",
+         "with matching side lengths). RANSAC's hypothesis loop is compiled, as our triplet "
+         "fallback's is (the same kernel), so that equal time compares methods, not call "
+         "overheads. Time = median matching + refinement ms per frame.", "",
          f"![robustness]({img})", ""]  # fmt: skip
     for kind, levels, lab in (("spurious", SPURIOUS, "spurious blobs"),
                               ("covered", COVERED, "markers covered")):  # fmt: skip

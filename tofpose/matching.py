@@ -35,8 +35,8 @@ from tofpose.kernels.annealing import (
     pair_potentials,
     size_mismatch,
 )
-from tofpose.kernels.pose import svd_pose
 from tofpose.kernels.residual_check import prune_pairs
+from tofpose.kernels.triplets import catalog_triplets, trials_needed, triplet_search
 from tofpose.robust import median_1d
 
 
@@ -248,12 +248,12 @@ def match_by_triplets(
     catalog_mm: np.ndarray,
     alpha_mm: float,
     tol_mm: np.ndarray,
-    accept_pose,
+    facing: tuple[np.ndarray, float] | None = None,
     *,
     weights: np.ndarray | None = None,
     max_observed: int = 7,
     min_matches: int = 3,
-    observed_triplets=None,
+    observed_triplets: np.ndarray | None = None,
     deadline_s: float | None = None,
     confidence: float | None = None,
     stats: dict | None = None,
@@ -263,91 +263,67 @@ def match_by_triplets(
 
     For every observed triplet (among the first ``max_observed``) and every ordered catalog
     triplet whose three side lengths agree within ``alpha_mm``, fit the rigid pose, skip it
-    unless ``accept_pose(R, t)`` (e.g. the target faces the camera), and count observed
-    points within their tolerance of a predicted reflector. Returns the pairs (m, 2) of
-    the hypothesis with most inliers (ties: smaller weighted residual), or an empty array.
+    unless it faces the camera (``facing`` = (the catalog's centroid (3,), the least
+    cosine of the view angle), ``kernels.triplets.facing_cosine``; None: no constraint),
+    and count observed points within their tolerance of a predicted reflector
+    (one-to-one). Returns the pairs (m, 2) of the hypothesis with most inliers (ties:
+    smaller weighted residual), or an empty array. The loop is compiled
+    (``kernels.triplets.triplet_search``).
 
-    observed_triplets : optional iterable of observed index triplets to try instead (e.g.
-        ``random_triplets`` for a RANSAC-style search over all blobs);
-    deadline_s : optional ``time.perf_counter()`` value after which the search stops.
+    observed_triplets : optional (T, 3) observed index triplets to try instead, in order
+        (e.g. ``random_triplets`` for a RANSAC-style search over all blobs);
+    deadline_s : optional ``time.perf_counter()`` value after which the search stops
+        (looked at before every ``DEADLINE_CHUNK`` triplets);
     confidence : optional RANSAC stopping rule: stop once the probability that every
         observed triplet tried so far held an outlier is below ``1 - confidence``, for an
         inlier fraction estimated from the best hypothesis (``ransac_trials_needed``).
     stats : optional dict that receives ``triplets`` (observed triplets tried).
     """
     import time
-    from itertools import combinations, permutations
+    from itertools import combinations
 
-    observed_mm = np.asarray(observed_mm, dtype=float)
-    catalog_mm = np.asarray(catalog_mm, dtype=float)
-    g = min(len(observed_mm), max_observed)
-    e = len(catalog_mm)
-    w = np.ones(len(observed_mm)) if weights is None else np.asarray(weights, float)
-    c_d = np.linalg.norm(catalog_mm[:, None] - catalog_mm[None], axis=-1)
-    best, best_key = np.empty((0, 2), int), (0, np.inf)
-    cat_triplets = np.array(list(permutations(range(e), 3)), int).reshape(-1, 3)
-    # side lengths (ij, jk, ik) of every ordered catalog triplet, shape (P, 3)
-    cat_sides = np.stack([c_d[cat_triplets[:, 0], cat_triplets[:, 1]],
-                          c_d[cat_triplets[:, 1], cat_triplets[:, 2]],
-                          c_d[cat_triplets[:, 0], cat_triplets[:, 2]]], axis=1)  # fmt: skip
-    triplets = combinations(range(g), 3) if observed_triplets is None else observed_triplets
-    n_total = len(observed_mm)
-    tried = 0
-    for tri in triplets:
+    observed = np.ascontiguousarray(observed_mm, dtype=float).reshape(-1, 3)
+    catalog = np.ascontiguousarray(catalog_mm, dtype=float)
+    n = len(observed)
+    w = np.ones(n) if weights is None else np.ascontiguousarray(weights, dtype=float)
+    tol = np.ascontiguousarray(np.broadcast_to(tol_mm, (n,)), dtype=float)
+    if observed_triplets is None:
+        g = min(n, max_observed)
+        observed_triplets = np.array(list(combinations(range(g), 3)), np.int64)
+    triplets = np.ascontiguousarray(observed_triplets, dtype=np.int64).reshape(-1, 3)
+    cat_tri, cat_sides = catalog_triplets(catalog)
+    centroid, cos_min = (np.zeros(3), -np.inf) if facing is None else facing
+    fixed = (observed, catalog, w, tol, float(alpha_mm))
+    rule = (facing is not None, np.ascontiguousarray(centroid, dtype=float), float(cos_min),
+            int(min_matches), confidence is not None,
+            0.0 if confidence is None else float(confidence))  # fmt: skip
+    best, best_n, best_cost, tried = np.empty((0, 2), np.int64), 0, np.inf, 0
+    step = max(len(triplets) if deadline_s is None else DEADLINE_CHUNK, 1)
+    for s in range(0, len(triplets), step):
         if deadline_s is not None and time.perf_counter() > deadline_s:
             break
-        if confidence is not None and tried >= ransac_trials_needed(
-            best_key[0], n_total, confidence
-        ):
+        best, best_n, best_cost, tried, done = triplet_search(
+            *fixed, triplets[s : s + step], cat_tri, cat_sides, *rule, best, best_n,
+            best_cost, tried,
+        )  # fmt: skip
+        if done:
             break
-        tried += 1
-        a, b, c = tri
-        o = np.array([
-            np.linalg.norm(observed_mm[a] - observed_mm[b]),
-            np.linalg.norm(observed_mm[b] - observed_mm[c]),
-            np.linalg.norm(observed_mm[a] - observed_mm[c]),
-        ])  # fmt: skip
-        compatible = np.all(np.abs(cat_sides - o) <= alpha_mm, axis=1)
-        for i, j, k in cat_triplets[compatible]:
-            R, t = svd_pose(catalog_mm[[i, j, k]], observed_mm[[a, b, c]], w[[a, b, c]])
-            if not accept_pose(R, t):
-                continue
-            pred = catalog_mm @ R.T + t
-            dist = np.linalg.norm(observed_mm[:, None] - pred[None], axis=-1)
-            rows, cols = linear_sum_assignment(dist)
-            ok = dist[rows, cols] <= tol_mm[rows]
-            n = int(ok.sum())
-            key = (n, float((dist[rows, cols][ok] ** 2 * w[rows[ok]]).sum()))
-            if n >= min_matches and (
-                key[0] > best_key[0] or (key[0] == best_key[0] and key[1] < best_key[1])
-            ):
-                best, best_key = np.column_stack((rows[ok], cols[ok])), key
     if stats is not None:
         stats["triplets"] = tried
     return best
 
 
-def ransac_trials_needed(n_inliers: int, n_observed: int, confidence: float) -> float:
-    """Observed triplets to draw (without repetition) so that, with ``n_inliers`` of
-    ``n_observed`` blobs being markers, at least one all-marker triplet was drawn with
-    probability ``confidence``: ``log(1 - p) / log(1 - C(I, 3) / C(n, 3))`` (the standard
-    RANSAC count, Fischler and Bolles 1981, with the all-inlier probability of a triplet
-    drawn without replacement). Infinite while fewer than 3 inliers are known."""
-    from math import comb, inf, log
+#: observed triplets tried between two looks at the clock (a few microseconds of work)
+DEADLINE_CHUNK = 4
 
-    if n_inliers < 3 or n_observed < 3:
-        return inf
-    p_good = comb(n_inliers, 3) / comb(n_observed, 3)
-    if p_good >= 1.0:
-        return 1.0
-    return log(1.0 - confidence) / log(1.0 - p_good)
+#: the standard RANSAC count (``kernels.triplets.trials_needed``)
+ransac_trials_needed = trials_needed
 
 
-def random_triplets(n_observed: int, rng: np.random.Generator):
+def random_triplets(n_observed: int, rng: np.random.Generator) -> np.ndarray:
     """Every 3-subset of ``range(n_observed)`` once, in random order (RANSAC sampling
-    without repetition), for ``match_by_triplets(observed_triplets=...)``."""
+    without repetition), (T, 3) int64, for ``match_by_triplets(observed_triplets=...)``."""
     from itertools import combinations
 
-    tris = list(combinations(range(n_observed), 3))
-    for k in rng.permutation(len(tris)):
-        yield tris[k]
+    tris = np.array(list(combinations(range(n_observed), 3)), np.int64).reshape(-1, 3)
+    return tris[rng.permutation(len(tris))]

@@ -452,7 +452,7 @@ class PosePipeline:
         tol = cfg.matching.pair_tolerance_mm(m.alpha_mm, meas.weights)
         pairs = match_by_triplets(
             meas.y_mm, self._catalog_xyz, m.alpha_mm, tol,
-            lambda R_, t_: self._solver.faces_camera(R_, t_),
+            self._solver.facing,
             weights=meas.weights, min_matches=cfg.matching.min_matches,
         )  # fmt: skip
         return self._solver.solve(pairs, meas, m.alpha_mm, active) if len(pairs) else solved
@@ -626,7 +626,7 @@ class PosePipeline:
             self._catalog_xyz,
             alpha,
             tol,
-            lambda R_, t_: self._solver.faces_camera(R_, t_),
+            self._solver.facing,
             weights=w,
             min_matches=cfg.matching.min_matches,
             observed_triplets=random_triplets(len(y), self._rng),

@@ -29,6 +29,7 @@ from tofpose.kernels.pose import (
     range_bias_covariance,
 )
 from tofpose.kernels.solve import solve_pairs
+from tofpose.kernels.triplets import facing_cosine
 from tofpose.kernels.verify import BEHIND_CAMERA, DARK_REFLECTOR, pose_check
 from tofpose.pose import MEDIAN_CHI2_3DOF, STEP_SIGMA2, MLResult
 
@@ -157,7 +158,7 @@ class PoseSolver:
         self.camera = camera
         self.config = config
         self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
-        self._xyz_mean_list = self._xyz.mean(axis=0).tolist()
+        self._xyz_mean = self._xyz.mean(axis=0)
         self._cos_max_view = math.cos(math.radians(config.max_view_angle_deg))
         self._d = np.ascontiguousarray(catalog.diameters_mm, dtype=float)
         self._K = np.ascontiguousarray(camera.K, dtype=float)
@@ -246,19 +247,16 @@ class PoseSolver:
 
     # ------------------------------------------------------------------------------------
     def view_cosine(self, R: np.ndarray, t: np.ndarray) -> float:
-        """Cosine between the target normal and the direction to the camera (scalar
-        arithmetic: this runs on every frame, and NumPy's per-call cost on 3-vectors
-        exceeds the arithmetic)."""
-        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
-        mx, my, mz = self._xyz_mean_list
-        tx, ty, tz = t.tolist()
-        cx = -(r00 * mx + r01 * my + r02 * mz + tx)  # to the camera, from the target
-        cy = -(r10 * mx + r11 * my + r12 * mz + ty)
-        cz = -(r20 * mx + r21 * my + r22 * mz + tz)
-        return (r02 * cx + r12 * cy + r22 * cz) / math.sqrt(cx * cx + cy * cy + cz * cz)
+        """Cosine between the target normal and the direction to the camera
+        (``kernels.triplets.facing_cosine``)."""
+        return facing_cosine(np.ascontiguousarray(R, dtype=float),
+                             np.ascontiguousarray(t, dtype=float), self._xyz_mean)  # fmt: skip
 
-    def faces_camera(self, R: np.ndarray, t: np.ndarray) -> bool:
-        return self.view_cosine(R, t) >= self._cos_max_view
+    @property
+    def facing(self) -> tuple[np.ndarray, float]:
+        """The facing constraint as ``matching.match_by_triplets`` takes it: the catalog's
+        centroid (3,) and the least cosine of the view angle."""
+        return self._xyz_mean, self._cos_max_view
 
     def verify(self, T: RigidTransform, active: ThresholdedFrame | None,
                matched: np.ndarray) -> str:  # fmt: skip

@@ -126,13 +126,13 @@ def test_triplet_fallback_respects_the_pose_constraint():
     ids = [5, 6, 7]
     cat, y, idx = _observe(ids, noise_mm=0.5, seed=3, distance_mm=10000.0)
 
-    def faces_camera(R, t):
-        return R[:, 2] @ -(R @ cat.positions_mm.mean(axis=0) + t) > 0
-
-    pairs = match_by_triplets(y, cat.positions_mm, 20.0, np.full(3, 20.0), faces_camera)
+    facing = (cat.positions_mm.mean(axis=0), 0.0)  # the target's front towards the camera
+    pairs = match_by_triplets(y, cat.positions_mm, 20.0, np.full(3, 20.0), facing)
     assert {int(k): int(cat.ids[i]) for k, i in pairs} == {0: 5, 1: 6, 2: 7}
-    none = match_by_triplets(y, cat.positions_mm, 20.0, np.full(3, 20.0), lambda R, t: False)
-    assert len(none) == 0
+    unconstrained = match_by_triplets(y, cat.positions_mm, 20.0, np.full(3, 20.0))
+    assert len(unconstrained) == 3
+    impossible = (cat.positions_mm.mean(axis=0), 1.5)  # no pose has a cosine above 1
+    assert len(match_by_triplets(y, cat.positions_mm, 20.0, np.full(3, 20.0), impossible)) == 0
 
 
 def test_ransac_trials_needed_is_the_standard_count():
@@ -163,7 +163,7 @@ def test_ransac_to_confidence_stops_early_and_finds_the_markers():
     observed = observed[order]
     stats: dict = {}
     pairs = match_by_triplets(
-        observed, cat, 15.0, np.full(len(observed), 15.0), lambda R_, t_: True,
+        observed, cat, 15.0, np.full(len(observed), 15.0), None,
         max_observed=len(observed), observed_triplets=random_triplets(len(observed), rng),
         confidence=0.99, stats=stats,
     )  # fmt: skip
