@@ -26,10 +26,10 @@ from tofpose.kernels.pose import (
     REFINE_LOS,
     REFINE_ML,
     REFINE_NONE,
+    facing_cosine,
     range_bias_covariance,
 )
 from tofpose.kernels.solve import solve_pairs
-from tofpose.kernels.triplets import facing_cosine
 from tofpose.kernels.verify import BEHIND_CAMERA, DARK_REFLECTOR, pose_check
 from tofpose.pose import MEDIAN_CHI2_3DOF, STEP_SIGMA2, MLResult
 

@@ -54,6 +54,17 @@ def svd_pose(x, y, w):
 
 
 @jit
+def facing_cosine(R, t, centroid):
+    """Cosine between the target normal R e_z and the direction from the target's
+    centroid (3,) (catalog frame) to the camera, for the pose (R (3, 3), t (3,))."""
+    mx, my, mz = centroid[0], centroid[1], centroid[2]
+    cx = -(R[0, 0] * mx + R[0, 1] * my + R[0, 2] * mz + t[0])
+    cy = -(R[1, 0] * mx + R[1, 1] * my + R[1, 2] * mz + t[1])
+    cz = -(R[2, 0] * mx + R[2, 1] * my + R[2, 2] * mz + t[2])
+    return (R[0, 2] * cx + R[1, 2] * cy + R[2, 2] * cz) / np.sqrt(cx * cx + cy * cy + cz * cz)
+
+
+@jit
 def tangent_bases(e):
     """Two unit vectors orthogonal to each bearing, (m, 2, 3)."""
     m = e.shape[0]

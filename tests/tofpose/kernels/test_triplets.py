@@ -11,7 +11,7 @@ from scipy.optimize import linear_sum_assignment
 from tofpose.catalog import paper_target
 from tofpose.geometry import rotation_from_euler_deg
 from tofpose.kernels.pose import svd_pose
-from tofpose.kernels.triplets import catalog_triplets, facing_cosine
+from tofpose.kernels.triplets import catalog_triplets
 from tofpose.matching import match_by_triplets
 
 
@@ -48,17 +48,6 @@ def test_catalog_triplets_in_permutation_order_with_their_sides():
     for (i, j, k), s in zip(tri, sides, strict=True):
         want = [np.linalg.norm(cat[u] - cat[v]) for u, v in ((i, j), (j, k), (i, k))]
         np.testing.assert_allclose(s, want, rtol=1e-15)
-
-
-def test_facing_cosine_is_the_cosine_of_the_view_angle():
-    rng = np.random.default_rng(2)
-    centroid = rng.normal(0, 100, 3)
-    for _ in range(200):
-        R = rotation_from_euler_deg(*rng.uniform(-180, 180, 3))
-        t = rng.normal(0, 500, 3) + [0, 0, 3000]
-        to_camera = -(R @ centroid + t)
-        want = R[:, 2] @ to_camera / np.linalg.norm(to_camera)
-        assert abs(facing_cosine(R, t, centroid) - want) < 1e-14
 
 
 def test_the_search_equals_the_reference_with_spurious_points():
