@@ -68,12 +68,15 @@ class ServeProcess:
     def token(self) -> str:
         return (self.data_dir / "api_token").read_text().strip()
 
-    def rss_mb(self) -> float:
-        """Resident set size of the server process (Linux /proc), MiB."""
+    def private_mb(self) -> float:
+        """The server's own resident memory (Linux /proc ``RssAnon``), MiB: anonymous
+        pages (heap, arrays, compiled kernels), without the resident pages of the shared
+        libraries and files it maps, which depend on the page cache (docs/server.md,
+        "Memory")."""
         for line in Path(f"/proc/{self.proc.pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
+            if line.startswith("RssAnon:"):
                 return int(line.split()[1]) / 1024.0
-        raise RuntimeError("no VmRSS")
+        raise RuntimeError("no RssAnon")
 
     def stop(self, sig: int = signal.SIGINT, timeout_s: float = 30.0) -> float:
         """Send ``sig`` and wait for exit; returns the seconds it took. Kills on timeout

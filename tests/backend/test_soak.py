@@ -1,8 +1,9 @@
 """Open reads at full speed cannot grow the server's memory or slow the live loop.
 
-A real ``tofpose serve`` subprocess (so RSS is the server's alone); 6 clients fetch
-every PNG variant of the latest frame as fast as they can for 12 s. docs/server.md
-states the ceiling this checks.
+A real ``tofpose serve`` subprocess (so the memory is the server's alone); 6 clients
+fetch every PNG variant of the latest frame as fast as they can for 12 s. docs/server.md
+states the ceiling this checks, on the server's private (anonymous) memory: the shared
+libraries' resident pages vary with the page cache by tens of MB from run to run.
 """
 
 from __future__ import annotations
@@ -15,8 +16,8 @@ import httpx
 
 from tests.backend.serve_process import ServeProcess
 
-RSS_CEILING_MB = 550.0  # docs/server.md, "Memory"
-RSS_GROWTH_MB = 60.0  # above the idle server, under the read load
+PRIVATE_CEILING_MB = 380.0  # docs/server.md, "Memory": the server's own (anonymous) pages
+PRIVATE_GROWTH_MB = 60.0  # above the idle server, under the read load
 VARIANTS = [
     f"/api/frames/latest/{kind}.png?overlay={o}&scale={s}"
     for kind in ("gray", "distance")
@@ -36,7 +37,7 @@ def _rate_hz(server: ServeProcess, seconds: float) -> float:
 def test_png_reads_at_full_speed_keep_memory_bounded_and_the_live_rate(tmp_path):
     with ServeProcess(tmp_path / "data") as server:
         idle_rate = _rate_hz(server, 4.0)
-        idle_rss = server.rss_mb()
+        idle_mb = server.private_mb()
         stop_at = time.monotonic() + 12.0
         served, errors = [0], []
 
@@ -54,17 +55,17 @@ def test_png_reads_at_full_speed_keep_memory_bounded_and_the_live_rate(tmp_path)
         threads = [threading.Thread(target=client, args=(i,)) for i in range(6)]
         for t in threads:
             t.start()
-        rss = []
+        private = []
         time.sleep(1.0)
         loaded_rate = _rate_hz(server, 8.0)
         while any(t.is_alive() for t in threads):
-            rss.append(server.rss_mb())
+            private.append(server.private_mb())
             time.sleep(0.5)
         for t in threads:
             t.join()
-        rss.append(server.rss_mb())
+        private.append(server.private_mb())
     assert not errors, errors[:3]
     assert served[0] > 100
-    assert max(rss) < RSS_CEILING_MB, f"RSS peaked at {max(rss):.0f} MB"
-    assert max(rss) - idle_rss < RSS_GROWTH_MB, (idle_rss, max(rss))
+    assert max(private) < PRIVATE_CEILING_MB, f"private memory peaked at {max(private):.0f} MB"
+    assert max(private) - idle_mb < PRIVATE_GROWTH_MB, (idle_mb, max(private))
     assert loaded_rate > 0.6 * idle_rate, (idle_rate, loaded_rate)
