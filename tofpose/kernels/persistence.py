@@ -6,9 +6,6 @@ import numpy as np
 
 from tofpose.kernels import jit
 
-#: a sorting network for five values (nine compare-exchanges; Knuth, TAOCP 5.3.4)
-_NETWORK_5 = ((0, 1), (3, 4), (2, 4), (2, 3), (0, 3), (0, 2), (1, 4), (1, 3), (1, 2))
-
 
 @jit
 def _insertion_median(stack, p, buf):
@@ -39,9 +36,8 @@ def column_medians(stack):
 
     stack : (K, P) float32, K frames of the same P pixels. Returns (P,) float32.
 
-    With five frames (a full persistence history) every pixel goes through a sorting
-    network of five, row against row, which the compiler vectorises across pixels; the
-    pixels with a NaN among them are then done one by one."""
+    With five frames (a full persistence history) each pixel's values go through
+    ``_median_of_five``."""
     k_frames, n = stack.shape
     out = np.empty(n, np.float32)
     buf = np.empty(k_frames, np.float32)
@@ -49,26 +45,20 @@ def column_medians(stack):
         for p in range(n):
             out[p] = _insertion_median(stack, p, buf)
         return out
-    rows = stack.copy()
-    for a, b in _NETWORK_5:
-        ra, rb = rows[a], rows[b]
-        for p in range(n):
-            lo, hi = min(ra[p], rb[p]), max(ra[p], rb[p])
-            ra[p], rb[p] = lo, hi
     for p in range(n):
-        out[p] = rows[2, p]
-    for p in range(n):
-        if not (np.isfinite(stack[0, p]) and np.isfinite(stack[1, p])
-                and np.isfinite(stack[2, p]) and np.isfinite(stack[3, p])
-                and np.isfinite(stack[4, p])):  # fmt: skip
+        v0, v1, v2, v3, v4 = stack[0, p], stack[1, p], stack[2, p], stack[3, p], stack[4, p]
+        if _finite5(v0, v1, v2, v3, v4):
+            out[p] = _median_of_five(v0, v1, v2, v3, v4)
+        else:
             out[p] = _insertion_median(stack, p, buf)
     return out
 
 
 @jit
 def _median_of_five(v0, v1, v2, v3, v4):
-    """The median of five finite values: ``_NETWORK_5`` on scalars (the compiler drops
-    what the middle output does not depend on)."""
+    """The median of five finite values: a sorting network of nine compare-exchanges
+    (Knuth, TAOCP 5.3.4) on scalars, in registers (the compiler drops what the middle
+    output does not depend on)."""
     v0, v1 = min(v0, v1), max(v0, v1)
     v3, v4 = min(v3, v4), max(v3, v4)
     v2, v4 = min(v2, v4), max(v2, v4)
@@ -78,6 +68,21 @@ def _median_of_five(v0, v1, v2, v3, v4):
     v1, v4 = min(v1, v4), max(v1, v4)
     v1, v3 = min(v1, v3), max(v1, v3)
     return max(v1, v2)
+
+
+@jit
+def _finite5(v0, v1, v2, v3, v4):
+    """Are the five values finite?"""
+    return (np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2) and np.isfinite(v3)
+            and np.isfinite(v4))  # fmt: skip
+
+
+@jit
+def _median_with_nans(v0, v1, v2, v3, v4, column, buf):
+    """The median of five float32 values of which some are not finite, ignoring them
+    (NaN when none is): ``_insertion_median`` (column : (5, 1), buf : (5,) scratch)."""
+    column[0, 0], column[1, 0], column[2, 0], column[3, 0], column[4, 0] = v0, v1, v2, v3, v4
+    return _insertion_median(column, 0, buf)
 
 
 @jit
@@ -91,9 +96,9 @@ def medians_and_counts_at(frames, masks, n_older, flat, out):
     and ``pixel_counts(masks, n_older, flat, 1)``.
 
     With a full history of five frames each pixel's five values and four mask bits are
-    read together and the values sorted in registers, pixel by pixel: one pass over the
-    history frames' blob pixels instead of a stack of five rows, nine passes over it,
-    and four more over the masks."""
+    read together and the values sorted in registers (``_median_of_five``), pixel
+    by pixel: one pass over the history frames' blob pixels instead of a stack of five
+    rows and four more passes over the masks."""
     o = out.reshape(-1)
     if n_older != 4:
         med = column_medians(gather_stack(frames, 1 + n_older, flat))
@@ -106,18 +111,16 @@ def medians_and_counts_at(frames, masks, n_older, flat, out):
     f2, f3, f4 = frames[k + 2].reshape(-1), frames[k + 3].reshape(-1), frames[k + 4].reshape(-1)
     m0, m1, m2, m3 = masks[k], masks[k + 1], masks[k + 2], masks[k + 3]
     counts = np.empty(flat.shape[0], np.int64)
-    buf = np.empty((5, 1), np.float32)
-    scratch = np.empty(5, np.float32)
+    column = np.empty((5, 1), np.float32)
+    buf = np.empty(5, np.float32)
     for i in range(flat.shape[0]):
         p = flat[i]
         counts[i] = 1 + np.int64(m0[p]) + np.int64(m1[p]) + np.int64(m2[p]) + np.int64(m3[p])
         v0, v1, v2, v3, v4 = f0[p], f1[p], f2[p], f3[p], f4[p]
-        if (np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2) and np.isfinite(v3)
-                and np.isfinite(v4)):  # fmt: skip
+        if _finite5(v0, v1, v2, v3, v4):
             o[p] = _median_of_five(v0, v1, v2, v3, v4)
         else:
-            buf[0, 0], buf[1, 0], buf[2, 0], buf[3, 0], buf[4, 0] = v0, v1, v2, v3, v4
-            o[p] = _insertion_median(buf, 0, scratch)
+            o[p] = _median_with_nans(v0, v1, v2, v3, v4, column, buf)
     return counts
 
 
