@@ -1,8 +1,10 @@
 """Campaign reports: CSV (one row per frame), JSON (every statistic), HTML (self-contained,
-plots embedded) and PDF (the same tables and plots, matplotlib's PDF backend).
+plots embedded) and PDF (the same sections, matplotlib's PDF backend: ``report_pdf``).
 
 The statistics come from ``analysis.analyse`` on exactly the rows the CSV holds, so a
-reader can recompute every number of the JSON from the CSV.
+reader can recompute every number of the JSON from the CSV. What the HTML and PDF say
+(verdict, findings, tables with human headers) is built once in ``report_content``; the
+plots are in ``report_plots``.
 """
 
 from __future__ import annotations
@@ -19,8 +21,6 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.backends.backend_pdf import PdfPages  # noqa: E402
 from sqlalchemy import select  # noqa: E402
 from sqlalchemy.orm import Session  # noqa: E402
 
@@ -30,8 +30,11 @@ from backend.db.models import (  # noqa: E402
     MeasurementRow,
     SetPointRow,
 )
-from backend.services.analysis import AXES, REFERENCE_PREFIX, analyse, findings  # noqa: E402
+from backend.services import report_content as rc  # noqa: E402
+from backend.services import report_pdf  # noqa: E402
+from backend.services.analysis import AXES, REFERENCE_PREFIX, analyse  # noqa: E402
 from backend.services.calibrations import calibrated_reference  # noqa: E402
+from backend.services.report_plots import NO_PLOTS, evidence_plots, standalone  # noqa: E402
 
 POSE = AXES
 CSV_COLUMNS = (
@@ -45,7 +48,6 @@ CSV_COLUMNS = (
     "encoder_yaw_deg", "encoder_pitch_deg", "encoder_roll_deg", "encoder_rail_mm",
     *(f"calibrated_truth_{a}" for a in POSE),
 )  # fmt: skip
-UNITS = {a: a.rsplit("_", 1)[1] for a in POSE}
 
 
 class ReportError(ValueError):
@@ -86,6 +88,7 @@ def campaign_rows(
 
 
 def to_csv(rows: list[dict]) -> str:
+    """One line per frame, the columns of ``CSV_COLUMNS``."""
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=CSV_COLUMNS, lineterminator="\n")
     w.writeheader()
@@ -141,90 +144,126 @@ def build(
         ),
         **result,
     }  # fmt: skip
-    report["findings"] = findings(result)
+    _add_commanded(report["setpoints"], rows)
+    report["findings"] = rc.findings(report)
     return jsonable(report), rows
 
 
+def _add_commanded(setpoints: list[dict], rows: list[dict]) -> None:
+    """Each set-point's commanded axes (``yaw``, ``pitch``, ``roll`` deg, ``rail`` mm; None
+    for an axis it left alone), from its first frame's row."""
+    first: dict[int, dict] = {}
+    for r in rows:
+        first.setdefault(int(r["setpoint_index"]), r)
+    for sp in setpoints:
+        r = first.get(sp["setpoint_index"], {})
+        sp["commanded"] = {name: r.get(col) for name, col in rc.COMMANDED_AXES}
+
+
 def to_json(report: dict) -> str:
+    """Every statistic of ``build``, NaN as null."""
     return json.dumps(report, indent=1, allow_nan=False)
 
 
-# -- plots ---------------------------------------------------------------------------------
-def _arrays(rows: list[dict], reference: str) -> dict[str, np.ndarray]:
-    prefix = REFERENCE_PREFIX[reference]
-    ok = [r for r in rows if r["ok"]]
-
-    def col(k):
-        return np.array([np.nan if r[k] is None else float(r[k]) for r in ok], float)
-
-    out = {"t": col("time_s"), "sp": col("setpoint_index")}
-    for a in POSE:
-        out[a], out["ref_" + a] = col(a), col(prefix + a)
-    return out
-
-
-def figures(report: dict, rows: list[dict]) -> list[tuple[str, plt.Figure]]:
-    """(title, figure) of the report's plots: error time series (paper Figs. 8-13),
-    measured vs reference per set-point (Fig. 14), error vs range."""
-    ref = report["reference"]
-    d = _arrays(rows, ref)
-    figs = []
-    fig, axs = plt.subplots(3, 2, figsize=(10, 7.5), sharex=True, constrained_layout=True)
-    for ax, a in zip(axs.T.ravel(), POSE, strict=True):
-        ax.plot(d["t"], d[a] - d["ref_" + a], ".", ms=2)
-        ax.set_ylabel(f"{a.rsplit('_', 1)[0]} error ({UNITS[a]})")
-        ax.grid(alpha=0.3)
-    for ax in axs[-1]:
-        ax.set_xlabel("frame time (s)")
-    fig.suptitle(f"Error per frame against the {ref} reference")
-    figs.append(("Error per frame (time series)", fig))
-
-    fig, axs = plt.subplots(3, 2, figsize=(10, 7.5), sharex=True, constrained_layout=True)
-    for ax, a in zip(axs.T.ravel(), POSE, strict=True):
-        ax.plot(d["t"], d["ref_" + a], "-", color="0.6", lw=1.0, label="reference")
-        ax.plot(d["t"], d[a], ".", ms=2, label="measured")
-        ax.set_ylabel(f"{a.rsplit('_', 1)[0]} ({UNITS[a]})")
-        ax.grid(alpha=0.3)
-    axs[0, 0].legend(loc="best", fontsize=8)
-    for ax in axs[-1]:
-        ax.set_xlabel("frame time (s)")
-    fig.suptitle("Measured pose and reference over time (steps, holds)")
-    figs.append(("Measured and reference over time", fig))
-
-    sps = report["setpoints"]
-    fig, axs = plt.subplots(2, 3, figsize=(11, 6.5), constrained_layout=True)
-    for ax, a in zip(axs.ravel(), POSE, strict=True):
-        ref_v = np.array([sp["reference"][a] if sp["reference"][a] is not None else np.nan
-                          for sp in sps], float)  # fmt: skip
-        mean = ref_v + np.array([_num(sp["axes"][a]["bias"]) for sp in sps])
-        ax.plot(ref_v, mean, "o", ms=4)
-        lo, hi = np.nanmin(np.r_[ref_v, mean, 0.0]), np.nanmax(np.r_[ref_v, mean, 0.0])
-        ax.plot([lo, hi], [lo, hi], "k--", lw=0.8)
-        ax.set_xlabel(f"reference {a.rsplit('_', 1)[0]} ({UNITS[a]})")
-        ax.set_ylabel(f"measured ({UNITS[a]})")
-        ax.grid(alpha=0.3)
-    fig.suptitle("Measured (mean per set-point) vs reference")
-    figs.append(("Measured vs reference per set-point", fig))
-
-    rng = np.array([_num(sp["reference"]["z_mm"]) for sp in sps]) / 1000.0
-    fig, axs = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
-    for ax, group, unit in ((axs[0], POSE[:3], "mm"), (axs[1], POSE[3:], "deg")):
-        for a in group:
-            bias = np.array([_num(sp["axes"][a]["bias"]) for sp in sps])
-            std = np.array([_num(sp["axes"][a]["std"]) for sp in sps])
-            ax.errorbar(rng, bias, yerr=np.nan_to_num(std), fmt="o", ms=4, capsize=2,
-                        label=a.rsplit("_", 1)[0])  # fmt: skip
-        ax.set_xlabel("range (reference z, m)")
-        ax.set_ylabel(f"mean error +/- 1 std ({unit})")
-        ax.legend()
-        ax.grid(alpha=0.3)
-    fig.suptitle("Error vs range")
-    figs.append(("Error vs range", fig))
-    return figs
+# -- HTML ------------------------------------------------------------------------------------
+STYLE = (
+    "body{font-family:sans-serif;max-width:1150px;margin:2em auto;color:#222;line-height:1.35}"
+    "table{border-collapse:collapse;margin:0.3em 0 1.2em}td,th{border:1px solid #bbb;"
+    "padding:3px 7px;text-align:right}th{background:#e6e6e6;font-size:0.9em}"
+    "td:first-child{text-align:left}caption{text-align:left;font-weight:bold;padding:2px 0}"
+    ".fail{color:#b00000;font-weight:bold}.pass{color:#2a7d2a}.note{color:#555;"
+    "font-size:0.9em}.verdict{font-size:1.25em;font-weight:bold}.bar{display:inline-block;"
+    "width:120px;height:0.8em;background:#eee;position:relative;vertical-align:middle}"
+    ".bar span{display:block;height:100%}.bar i{position:absolute;top:-2px;bottom:-2px;"
+    "border-left:1px dashed #000}img{max-width:100%}"
+)
 
 
-def _num(v) -> float:
-    return float("nan") if v is None else float(v)
+def _html_table(t: rc.Table, bars: dict[int, float] | None = None) -> str:
+    """A ``<table>``; cells marked in ``t.status`` get the pass / fail class; ``bars``
+    (row -> share of the requirement) draws a bar in the row's fourth cell."""
+    esc = html.escape
+
+    def cell(r: int, c: int, v: str) -> str:
+        state = t.status.get((r, c))
+        cls = {True: " class='pass'", False: " class='fail'"}.get(state, "")
+        body = esc(v)
+        if bars is not None and c == 3 and math.isfinite(bars.get(r, math.nan)):
+            width = min(100.0, bars[r] * 100.0 / 1.5)  # the bar spans 0-150 %
+            colour = "#b00000" if bars[r] > 1.0 else "#2a7d2a"
+            body = (f"<span class='bar'><span style='width:{width:.0f}%;background:{colour}'>"
+                    f"</span><i style='left:{100 / 1.5:.0f}%'></i></span> {body}")  # fmt: skip
+        return f"<td{cls}>{body}</td>"
+
+    cap = f"<caption>{esc(t.caption)}</caption>" if t.caption else ""
+    head = "".join(f"<th>{esc(h)}</th>" for h in t.header)
+    body = "".join(
+        "<tr>" + "".join(cell(r, c, v) for c, v in enumerate(row)) + "</tr>"
+        for r, row in enumerate(t.rows)
+    )
+    return f"<table>{cap}<tr>{head}</tr>{body}</table>"
+
+
+def _html_verdict(report: dict) -> list[str]:
+    esc = html.escape
+    cls = {True: "pass", False: "fail"}.get(report["overall"]["passed"], "")
+    bars = {i: v.share for i, v in enumerate(rc.axis_verdicts(report))}
+    return [
+        "<h2>Verdict</h2>",
+        f"<p class='verdict {cls}'>{esc(rc.verdict_line(report))}</p>",
+        _html_table(rc.verdict_table(report), bars),
+        f"<p class='note'>{esc(rc.requirement_source(report))}</p>",
+    ]
+
+
+def _html_setpoint_details(report: dict) -> list[str]:
+    """The appendix: every statistic and the measured-value table of each set-point."""
+    parts = ["<h2>Appendix: per set-point statistics</h2>"]
+    for sp in report["setpoints"]:
+        commanded = rc.commanded_text(sp.get("commanded") or {})
+        parts.append(
+            f"<h3>Set-point {sp['setpoint_index']} (commanded {html.escape(commanded)}; "
+            f"{sp['n_ok']} of {sp['n_frames']} frames with a pose; {rc.fmt(sp['passed'])})</h3>"
+        )
+        parts += [_html_table(t) for t in rc.statistics_tables(sp["axes"])]
+        for t in rc.measured_tables(sp["axes"]):
+            t.caption = t.caption.replace("(", "measured values (", 1)
+            parts.append(_html_table(t))
+    return parts
+
+
+def to_html(report: dict, rows: list[dict]) -> str:
+    """The report as one self-contained HTML page, in the PDF's order: summary, verdict,
+    findings, statistics, per-set-point table, plots; then every set-point in detail."""
+    esc = html.escape
+    title = rc.title(report)
+    findings = report["findings"] or ["Nothing to add to the verdict."]
+    parts = [
+        "<!DOCTYPE html><html><head><meta charset='utf-8'>",
+        f"<title>{esc(title)}</title><style>{STYLE}</style></head><body>",
+        f"<h1>{esc(title)}</h1>",
+        f"<p>{esc(rc.summary(report))}</p>",
+        *_html_verdict(report),
+        "<h2>Findings</h2><ul>",
+        *(f"<li>{esc(f)}</li>" for f in findings),
+        "</ul>",
+        "<h2>Accuracy over the whole campaign</h2>",
+        *(_html_table(t) for t in rc.statistics_tables(report["overall"]["axes"])),
+        f"<p class='note'>{esc(rc.reading_notes(report))}</p>",
+        "<h2>Per set-point</h2>",
+        _html_table(rc.setpoint_table(report)),
+        "<h2>Plots</h2>",
+    ]
+    plots = evidence_plots(report, rows)
+    if not plots:
+        parts.append(f"<p>{esc(NO_PLOTS)}</p>")
+    for plot in plots:
+        parts.append(f"<p><img alt='{esc(plot.title)}' "
+                     f"src='data:image/png;base64,{_png_b64(standalone(plot))}'></p>")  # fmt: skip
+    parts += _html_setpoint_details(report)
+    parts.append(f"<p class='note'>Generated {esc(report['generated_at'])} by tofpose.</p>"
+                 "</body></html>")  # fmt: skip
+    return "\n".join(parts)
 
 
 def _png_b64(fig: plt.Figure) -> str:
@@ -234,133 +273,6 @@ def _png_b64(fig: plt.Figure) -> str:
     return base64.b64encode(buf.getvalue()).decode()
 
 
-# -- tables ----------------------------------------------------------------------------------
-def _fmt(v, digits: int = 3) -> str:
-    if v is None:
-        return "-"
-    if isinstance(v, bool):
-        return "pass" if v else "FAIL"
-    if isinstance(v, float):
-        return f"{v:.{digits}g}" if math.isfinite(v) else "-"
-    return str(v)
-
-
-STAT_COLUMNS = ("n", "n_removed", "bias", "std", "rms", "max_abs", "three_sigma",
-                "predicted_sigma", "sigma_ratio", "requirement", "passed")  # fmt: skip
-PAPER_COLUMNS = ("average", "maximum", "minimum", "fluctuation")
-
-
-def table_rows(axes: dict[str, dict], columns) -> list[list[str]]:
-    return [[a] + [_fmt(axes[a][c]) for c in columns] for a in POSE]
-
-
-def to_html(report: dict, rows: list[dict]) -> str:
-    c = report["campaign"]
-    esc = html.escape
-    parts = [
-        "<!DOCTYPE html><html><head><meta charset='utf-8'>",
-        f"<title>Campaign {c['id']}: {esc(c['name'])}</title>",
-        "<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}"
-        "table{border-collapse:collapse;margin:0.5em 0 1.5em}td,th{border:1px solid #bbb;"
-        "padding:3px 7px;text-align:right}th{background:#eee}td:first-child{text-align:left}"
-        ".fail{color:#b00;font-weight:bold}.pass{color:#070}</style></head><body>",
-        f"<h1>Campaign {c['id']}: {esc(c['name'])}</h1>",
-        f"<p>Status <b>{esc(c['status'])}</b>, catalog {esc(c['catalog'])}, "
-        f"{c['n_done']} of {c['n_setpoints']} set-points measured, {c['frames_per_point']} "
-        f"frames per set-point, settle {c['settle_s']:g} s. Reference: "
-        f"<b>{esc(_reference_label(report))}</b>. {report['n_ok']} of {report['n_frames']} "
-        "frames gave a pose.</p>",
-        f"<p><i>{esc(report['rule'])}</i></p>",
-        "<h2>Findings</h2><ul>",
-        *(f"<li>{esc(f)}</li>" for f in report["findings"]),
-        "</ul>",
-        "<h2>Whole campaign</h2>",
-        _html_table(
-            ["axis", *STAT_COLUMNS], table_rows(report["overall"]["axes"], STAT_COLUMNS)
-        ),  # fmt: skip
-    ]
-    for title, fig in figures(report, rows):
-        parts.append(f"<h2>{esc(title)}</h2><img alt='{esc(title)}' "
-                     f"src='data:image/png;base64,{_png_b64(fig)}'>")  # fmt: skip
-    parts.append("<h2>Per set-point</h2>")
-    for sp in report["setpoints"]:
-        parts.append(
-            f"<h3>Set-point {sp['setpoint_index']} ({sp['n_ok']}/{sp['n_frames']} frames with "
-            f"a pose; {_fmt(sp['passed'])})</h3>"
-        )
-        parts.append(_html_table(["axis", *STAT_COLUMNS], table_rows(sp["axes"], STAT_COLUMNS)))
-        parts.append(_html_table(["axis (measured)", *PAPER_COLUMNS],
-                                 table_rows(sp["axes"], PAPER_COLUMNS)))  # fmt: skip
-    parts.append(f"<p>Generated {esc(report['generated_at'])} by tofpose.</p></body></html>")
-    return "\n".join(parts)
-
-
-def _reference_label(report: dict) -> str:
-    cal = report.get("calibration")
-    if cal:
-        return f"calibrated (encoders + calibration {cal['id']} '{cal['name']}')"
-    labels = {"lab": "lab (encoders + nominal geometry)", "exact": "exact (the rendered pose)"}
-    return labels.get(report["reference"], report["reference"])
-
-
-def _html_table(header: list[str], body: list[list[str]]) -> str:
-    def cell(v: str) -> str:
-        cls = " class='fail'" if v == "FAIL" else (" class='pass'" if v == "pass" else "")
-        return f"<td{cls}>{html.escape(v)}</td>"
-
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
-    rows = "".join("<tr>" + "".join(cell(v) for v in r) + "</tr>" for r in body)
-    return f"<table><tr>{head}</tr>{rows}</table>"
-
-
 def to_pdf(report: dict, rows: list[dict]) -> bytes:
-    """The summary, the whole-campaign table, the plots and the per-set-point tables."""
-    buf = io.BytesIO()
-    c = report["campaign"]
-    with PdfPages(buf) as pdf:
-        fig = plt.figure(figsize=(11.7, 8.3))
-        fig.text(0.05, 0.94, f"Campaign {c['id']}: {c['name']}", fontsize=18, weight="bold")
-        lines = [
-            f"Status {c['status']}, catalog {c['catalog']}, {c['n_done']} of "
-            f"{c['n_setpoints']} set-points, {c['frames_per_point']} frames each; reference "
-            f"{_reference_label(report)}; {report['n_ok']} of {report['n_frames']} frames "
-            "with a pose.",
-            report["rule"],
-            *("- " + f for f in report["findings"]),
-        ]
-        fig.text(0.05, 0.9, "\n".join(lines), fontsize=8.5, va="top", wrap=True)
-        ax = fig.add_axes((0.05, 0.05, 0.9, 0.45))
-        ax.axis("off")
-        tab = ax.table(cellText=table_rows(report["overall"]["axes"], STAT_COLUMNS),
-                       colLabels=["axis", *STAT_COLUMNS], loc="upper center")  # fmt: skip
-        tab.auto_set_font_size(False)
-        tab.set_fontsize(7.5)
-        tab.scale(1.0, 1.4)
-        pdf.savefig(fig)
-        plt.close(fig)
-        for _title, f in figures(report, rows):
-            pdf.savefig(f)
-            plt.close(f)
-        # Per set-point: one compact table (bias / std per axis and pass), many set-points
-        # a page; the full per-set-point tables are in the HTML and JSON.
-        header = ["set-point", "frames ok"] + [f"{a.rsplit('_', 1)[0]} {q}" for a in POSE
-                                                for q in ("bias", "std")] + ["result"]  # fmt: skip
-        body = [
-            [str(sp["setpoint_index"]), f"{sp['n_ok']}/{sp['n_frames']}"]
-            + [_fmt(sp["axes"][a][q]) for a in POSE for q in ("bias", "std")]
-            + [_fmt(sp["passed"])]
-            for sp in report["setpoints"]
-        ]
-        per_page = 30
-        for k in range(0, len(body), per_page):
-            fig = plt.figure(figsize=(11.7, 8.3))
-            ax = fig.add_axes((0.03, 0.03, 0.94, 0.9))
-            ax.axis("off")
-            ax.set_title(f"Per set-point (errors against the {report['reference']} reference;"
-                         " mm and deg)", fontsize=10)  # fmt: skip
-            tab = ax.table(cellText=body[k : k + per_page], colLabels=header, loc="upper center")
-            tab.auto_set_font_size(False)
-            tab.set_fontsize(6.5)
-            pdf.savefig(fig)
-            plt.close(fig)
-    return buf.getvalue()
+    """The report as PDF (A4 landscape pages, see ``report_pdf``)."""
+    return report_pdf.to_pdf(report, rows)
