@@ -20,21 +20,23 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     PIP_NO_CACHE_DIR=1 \
     TOFPOSE_DATA_DIR=/data \
     TOFPOSE_HOST=0.0.0.0 \
-    TOFPOSE_PORT=8000 \
-    TOFPOSE_FRONTEND_DIR=/app/dashboard
+    TOFPOSE_PORT=8000
 
 WORKDIR /app
-COPY pyproject.toml README.md alembic.ini ./
+COPY pyproject.toml setup.py MANIFEST.in README.md alembic.ini ./
 COPY tofpose ./tofpose
 COPY backend ./backend
 COPY migrations ./migrations
-# A regular install: the wheel carries the Alembic revisions as backend/migrations,
-# which the server applies at every start (tests/test_packaging.py checks this). The
-# extras bring the real-device drivers (ESPROS's client, PyVISA); docs/devices.md.
-# `tofpose warm-up` compiles the pipeline's numba kernels into the image's cache, so
-# that a container starts without the ~1 min first compile.
+# The dashboard built in stage 1, where setup.py's build step takes it from: this image
+# has no Node.js, and the wheel ships the dashboard as backend/dashboard.
+COPY --from=dashboard /frontend/dist ./frontend/dist
+# A regular install, as from a release wheel: it carries the Alembic revisions as
+# backend/migrations, which the server applies at every start, and the dashboard
+# (tests/test_packaging.py checks both). The extras bring the real-device drivers
+# (ESPROS's client, PyVISA); docs/devices.md. `tofpose warm-up` compiles the pipeline's
+# numba kernels into the image's cache, so that a container starts without the ~1 min
+# first compile.
 RUN pip install '.[espros,scpi]' && tofpose warm-up && mkdir -p /data
-COPY --from=dashboard /frontend/dist /app/dashboard
 
 EXPOSE 8000 8080
 VOLUME ["/data"]

@@ -7,23 +7,35 @@ PY     := $(VENV)/bin/python
 
 FRONTEND_SRC := $(shell find frontend/src -type f 2>/dev/null) frontend/index.html frontend/vite.config.ts frontend/tsconfig.json
 
+# The venv: the server compiles the pipeline kernels itself, in the background, on its first
+# start (frames stream meanwhile); `make test` compiles them first (warm-up below).
 $(VENV)/.installed: pyproject.toml
+	@echo "[setup] creating $(VENV) and installing tofpose with its dependencies (pip; ~40 s with a warm package cache)"
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[dev]'
-	$(VENV)/bin/tofpose warm-up  # compile the pipeline kernels into numba's cache (~1 min once)
+	touch $@
+
+# numba's on-disk cache of the pipeline kernels (~1-2 min once, seconds when cached)
+$(VENV)/.kernels: $(VENV)/.installed $(shell find tofpose -name '*.py')
+	@echo "[setup] compiling the pipeline kernels into numba's cache (~1-2 min the first time)"
+	$(VENV)/bin/tofpose warm-up
 	touch $@
 
 # The dashboard: npm ci from the lock file, then type-check and build into frontend/dist.
 frontend/node_modules/.package-lock.json: frontend/package.json frontend/package-lock.json
+	@echo "[setup] installing the dashboard's npm packages (npm ci)"
 	cd frontend && npm ci --no-audit --no-fund --loglevel=error
 
 frontend/dist/index.html: frontend/node_modules/.package-lock.json $(FRONTEND_SRC)
+	@echo "[setup] building the dashboard (tsc + vite)"
 	cd frontend && npm run build --silent
 
 frontend: frontend/dist/index.html
 
-run: $(VENV)/.installed frontend
+# The venv and the dashboard build in parallel (pip and npm each wait on their own I/O).
+run:
+	@$(MAKE) --no-print-directory -j2 $(VENV)/.installed frontend
+	@echo "[run] starting the server (on a first start it compiles the pipeline kernels in the background: frames stream at once, poses follow in ~1-2 min)"
 	$(VENV)/bin/tofpose serve
 
 lint: $(VENV)/.installed
@@ -37,10 +49,10 @@ system-deps:
 	command -v chromium >/dev/null || missing="$$missing chromium"; \
 	if [ -n "$$missing" ]; then apt-get update -qq && apt-get install -y -qq $$missing; fi
 
-test: lint system-deps frontend
+test: lint system-deps frontend $(VENV)/.kernels
 	$(PY) -m pytest -q
 
-bench: $(VENV)/.installed
+bench: $(VENV)/.kernels
 	$(PY) bench/report.py
 
 clean: kernels-clean
@@ -49,3 +61,4 @@ clean: kernels-clean
 # numba's on-disk cache of the compiled kernels (stale for callers after a kernel edit)
 kernels-clean:
 	find tofpose -name '*.nbi' -delete -o -name '*.nbc' -delete
+	rm -f $(VENV)/.kernels

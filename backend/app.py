@@ -14,12 +14,11 @@ from dataclasses import fields, replace
 from fastapi import FastAPI, Request
 from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, JSONResponse, RedirectResponse, Response
+from fastapi.responses import JSONResponse, Response
 from fastapi_offline import FastAPIOffline
 from sqlalchemy.exc import IntegrityError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.middleware.trustedhost import TrustedHostMiddleware
-from starlette.staticfiles import StaticFiles
 
 import backend
 from backend.api.contract import complete_openapi, operation_id
@@ -28,11 +27,13 @@ from backend.api.routes import (
     camera,
     campaigns,
     catalogs,
+    dashboard,
     frames,
     health,
     live,
     motion,
     pose,
+    reference,
     scene,
 )
 from backend.api.routes import devices as devices_route
@@ -44,13 +45,13 @@ from backend.limits import BodySizeLimit
 from backend.services.acquisition import AcquisitionService
 from backend.services.campaigns import CampaignService
 from backend.services.hub import LiveHub
+from backend.services.kernel_warmup import KernelWarmup
 from backend.services.store import find_catalog, load_device_settings
 from backend.settings import Settings
 from backend.state import AppState
 from tofpose.catalog import Catalog
 from tofpose.pipeline import PipelineConfig
 from tofpose.tracking import TrackingConfig
-from tofpose.warmup import warm_up
 
 log = logging.getLogger("tofpose.server")
 
@@ -156,12 +157,14 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         _restore_camera_settings(sessions, devs)
         cat_name, cat = _initial_catalog(sessions, settings, devs)
         hub = LiveHub(settings.subscriber_queue)
+        kernels = KernelWarmup()
         acq = AcquisitionService(
             devs.camera, cat, cat_name, hub,
             history_size=settings.history_size,
             timeout_s=settings.camera_timeout_s,
             backoff_s=settings.retry_backoff_s,
             pipeline_config=_pipeline_config(devs, settings),
+            kernels=kernels,
         )  # fmt: skip
         campaigns = CampaignService(
             sessions, acq, hub, devs.motion, recordings_dir=settings.data_dir / "campaigns"
@@ -171,11 +174,12 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             log.warning("%d campaign(s) were running when the server stopped: interrupted "
                         "(resume them to continue)", interrupted)  # fmt: skip
         app.state.tofpose = AppState(settings, token, engine, sessions, devs, hub, acq, campaigns)
-        # the pipeline's compiled kernels, before the first live frame (tofpose.warmup)
-        seconds = await asyncio.to_thread(warm_up)
-        if seconds > 5:
-            log.warning("compiling the pipeline kernels took %.0f s (run `tofpose warm-up` "
-                        "after installing to keep it off the server start)", seconds)  # fmt: skip
+        # the pipeline's compiled kernels (tofpose.warmup): in the background while frames
+        # already stream (backend/services/kernel_warmup.py), or before the first frame
+        if settings.kernels_in_background:
+            kernels.start()
+        else:
+            await asyncio.to_thread(kernels.run)
         acq.start()
         campaigns.start()
         _start_scene(app.state.tofpose)
@@ -234,27 +238,10 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         )  # fmt: skip
 
     routers = (health, devices_route, camera, pose, frames, motion, catalogs, campaigns,
-               calibrations, scene, live)  # fmt: skip
+               calibrations, reference, scene, live)  # fmt: skip
     for module in routers:
         app.include_router(module.router)
 
-    dist = settings.frontend_dist
-    if (dist / "index.html").exists():
-        # The dashboard (frontend/, built by make run / make test): its page at / and its
-        # hashed assets under /assets. Not a catch-all mount at /: that would answer 404
-        # instead of 405 for a wrong method on an API path.
-        app.mount("/assets", StaticFiles(directory=dist / "assets", check_dir=False),
-                  name="dashboard-assets")  # fmt: skip
-
-        @app.get("/", include_in_schema=False)
-        def dashboard() -> FileResponse:
-            return FileResponse(dist / "index.html", headers={"Cache-Control": "no-cache"})
-
-    else:
-
-        @app.get("/", include_in_schema=False)
-        def root() -> RedirectResponse:
-            log.warning("dashboard not built (%s missing): redirecting / to /docs", dist)
-            return RedirectResponse("/docs")
-
+    # The dashboard at / (its assets under /assets), or a page saying how to build it.
+    dashboard.install(app, settings.frontend_dist)
     return app

@@ -10,6 +10,11 @@ from urllib.parse import urlsplit
 from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
+PACKAGED_DASHBOARD = Path(__file__).resolve().parent / "dashboard"
+"""The built dashboard inside an installed wheel (copied there by setup.py's build step)."""
+CHECKOUT_DASHBOARD = Path(__file__).resolve().parents[1] / "frontend" / "dist"
+"""The built dashboard of a source checkout (``make frontend``; an editable install)."""
+
 LOOPBACK_NAMES = {"localhost", "localhost.localdomain"}
 LOOPBACK_HOST_HEADERS = ("localhost", "127.0.0.1", "[::1]")
 WILDCARD_BINDS = {"0.0.0.0", "::", ""}
@@ -58,6 +63,8 @@ class Settings(BaseSettings):
         and this nominal geometry, as the simulated lab does with ``sim_target_distance_mm``.
     allowed_origins : extra browser origins (``scheme://host:port``) that may open
         ``/ws/live``, beside the server's own origin.
+    frontend_dir : the built dashboard served at ``/``; default: the copy an installed
+        wheel carries, else the checkout's ``frontend/dist`` (``frontend_dist``).
     viser : run the 3-D scene (a viser server in this process) on ``viser_port``
         (0 = any free port; a taken port moves to the next free one, see
         ``GET /api/scene``). It has no token check of its own, so on a bind beyond
@@ -85,6 +92,12 @@ class Settings(BaseSettings):
     history_size: int = Field(600, ge=1, le=100_000)
     subscriber_queue: int = Field(8, ge=1, le=1000)
     camera_timeout_s: float = Field(2.0, gt=0)
+    kernels_in_background: bool = Field(
+        True,
+        description="compile the pipeline's kernels in a background thread while "
+        "frames already stream (poses follow when the compile is done); False waits for "
+        "them before the camera loop starts",
+    )
     retry_backoff_s: tuple[float, float] = (0.05, 2.0)
     max_body_bytes: int = Field(1_000_000, ge=1024)
     shutdown_timeout_s: float = Field(3.0, gt=0, le=60)
@@ -155,10 +168,15 @@ class Settings(BaseSettings):
 
     @property
     def frontend_dist(self) -> Path:
-        """The built dashboard: ``frontend_dir`` or the checkout's ``frontend/dist``."""
+        """The built dashboard's directory (it may be missing: then ``/`` says so):
+        ``frontend_dir`` if set, else the installed wheel's copy, else, in a source
+        checkout without one, the checkout's ``frontend/dist`` (``make frontend``)."""
         if self.frontend_dir is not None:
             return self.frontend_dir
-        return Path(__file__).resolve().parents[1] / "frontend" / "dist"
+        in_checkout = (CHECKOUT_DASHBOARD.parent / "package.json").is_file()
+        if in_checkout and not (PACKAGED_DASHBOARD / "index.html").is_file():
+            return CHECKOUT_DASHBOARD
+        return PACKAGED_DASHBOARD
 
     @property
     def trusted_hosts(self) -> list[str]:

@@ -21,6 +21,7 @@ from backend.api.schemas import (
     MatchedPublic,
     MeasurementPublic,
     MotionPublic,
+    PipelineStatePublic,
     PosePublic,
     ProgressPublic,
     RejectedBlobPublic,
@@ -33,6 +34,7 @@ from backend.api.schemas import (
 from backend.db.models import POSE_FIELDS, CalibrationRow, CampaignRow, MeasurementRow
 from backend.drivers.base import CameraSettings
 from backend.services.acquisition import LiveSample
+from backend.services.kernel_warmup import COMPILING_REASON
 from backend.state import AppState
 from tofpose.extraction import REJECT_REASONS
 from tofpose.geometry import (
@@ -63,6 +65,18 @@ def motion_state(state: AppState) -> DeviceStatePublic:
     return _device_state(state.devices.motion, state.motion_health)
 
 
+def pipeline_state(state: AppState) -> PipelineStatePublic:
+    """Whether the live pipeline's compiled kernels are ready (backend/services/
+    kernel_warmup.py): frames stream while they compile, poses follow."""
+    kernels = state.acquisition.kernels
+    if kernels is None:
+        return PipelineStatePublic(state="ready", seconds=0.0)
+    detail = {"compiling": COMPILING_REASON, "ready": "", "failed": kernels.error}[kernels.state]
+    return PipelineStatePublic(
+        state=kernels.state, seconds=round(kernels.elapsed_s, 1), detail=detail
+    )
+
+
 def motion_public(state: AppState) -> MotionPublic:
     """Axes with soft limits and the encoder read-back; a failing status read degrades
     the motion state instead of failing the request."""
@@ -80,9 +94,12 @@ def motion_public(state: AppState) -> MotionPublic:
         state.motion_health.record_failure(f"motion status failed: {exc}")
         return MotionPublic(**motion_state(state).model_dump(), axes=axes)
     state.motion_health.record_ok()
+    owner = state.campaigns.owner
     return MotionPublic(
         **motion_state(state).model_dump(), axes=axes, positions=st.positions,
         targets=st.targets, busy=st.busy, settled=st.settled, stopped=st.stopped,
+        owner_campaign_id=owner[0] if owner else None,
+        owner_campaign_name=owner[1] if owner else None,
     )  # fmt: skip
 
 
@@ -121,9 +138,9 @@ def pose_from_sample(s: LiveSample) -> PosePublic:
             pose["attitude_sigma_deg"] = finite_list_or_none(np.degrees(sd[:3]))
             pose["position_sigma_mm"] = finite_list_or_none(sd[3:])
     truth = None
-    T = s.frame.T_truth
+    T = s.reference.pose(s.frame)
     if T is not None:
-        truth = _truth(T, r.R if r.ok else None, r.t_mm if r.ok else None)
+        truth = _truth(T, r.R if r.ok else None, r.t_mm if r.ok else None, s.reference.label)
     return PosePublic(
         frame_index=s.frame.index,
         frame_time_s=s.frame.time_s,
@@ -179,7 +196,9 @@ def pose_public(sample: LiveSample) -> PosePublic:
     return sample.cached("pose_public", lambda: pose_from_sample(sample))
 
 
-def _truth(T: RigidTransform, R: np.ndarray | None, t_mm: np.ndarray | None) -> TruthPublic:
+def _truth(
+    T: RigidTransform, R: np.ndarray | None, t_mm: np.ndarray | None, reference: str
+) -> TruthPublic:
     p, y, r = (float(v) for v in facing_euler_deg(T.R))
     err_pos = err_ang = None
     if R is not None and t_mm is not None:
@@ -188,7 +207,7 @@ def _truth(T: RigidTransform, R: np.ndarray | None, t_mm: np.ndarray | None) -> 
     x, yy, z = (float(v) for v in T.t_mm)
     return TruthPublic(
         x_mm=x, y_mm=yy, z_mm=z, pitch_deg=p, yaw_deg=y, roll_deg=r,
-        position_error_mm=err_pos, attitude_error_deg=err_ang,
+        position_error_mm=err_pos, attitude_error_deg=err_ang, reference=reference,
     )  # fmt: skip
 
 

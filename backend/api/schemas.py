@@ -25,6 +25,21 @@ class StrictBody(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
 
+def _integral_float_to_int(value: object) -> object:
+    """JSON Schema's ``integer`` includes ``5.0``: take it as 5 (``5.5``, ``"5"`` and
+    ``true`` stay errors under strict validation)."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value
+
+
+JsonInt = Annotated[int, BeforeValidator(_integral_float_to_int)]
+"""An integer as JSON Schema means it (strict otherwise)."""
+RowId = Annotated[int, Field(ge=1, le=2**31 - 1), BeforeValidator(_integral_float_to_int)]
+"""A stored row's id (constraints before the validator: pydantic writes them into the
+schema as minimum/maximum only in this order)."""
+
+
 # -- health and devices ------------------------------------------------------------------
 class DeviceStatePublic(BaseModel):
     driver: str
@@ -39,6 +54,16 @@ class DeviceStatePublic(BaseModel):
     address: str | None = Field(None, description="where the device is reached")
 
 
+class PipelineStatePublic(BaseModel):
+    """The live pipeline's compiled kernels: compiled in the background at server start
+    (about 1-2 min after an install, seconds from numba's cache); frames stream
+    meanwhile, poses follow when they are ready."""
+
+    state: Literal["compiling", "ready", "failed"]
+    seconds: float = Field(description="since the warm-up started, or how long it took")
+    detail: str = ""
+
+
 class HealthPublic(BaseModel):
     status: Literal["ok", "degraded"]
     version: str
@@ -46,6 +71,7 @@ class HealthPublic(BaseModel):
     database: Literal["ok", "error"]
     camera: DeviceStatePublic
     motion: DeviceStatePublic
+    pipeline: PipelineStatePublic
 
 
 class CameraDevicePublic(DeviceStatePublic):
@@ -75,11 +101,18 @@ class MotionPublic(DeviceStatePublic):
     busy: bool = False
     settled: bool = True
     stopped: bool = False
+    owner_campaign_id: int | None = Field(
+        None,
+        description="the campaign that owns the motion system while it runs (manual "
+        "moves and jogs are refused with 409 then); null when it is free",
+    )
+    owner_campaign_name: str | None = None
 
 
 class DevicesPublic(BaseModel):
     camera: CameraDevicePublic
     motion: MotionPublic
+    pipeline: PipelineStatePublic
 
 
 # -- camera settings ---------------------------------------------------------------------
@@ -134,8 +167,8 @@ class RejectedBlobPublic(BaseModel):
 
 
 class TruthPublic(BaseModel):
-    """The lab's ground truth for this frame (encoders + nominal geometry) and the error
-    of the measurement against it."""
+    """The lab's reference for this frame (encoders + nominal geometry, or + a selected
+    calibration's mount and placement) and the error of the measurement against it."""
 
     x_mm: float
     y_mm: float
@@ -145,6 +178,11 @@ class TruthPublic(BaseModel):
     roll_deg: float
     position_error_mm: float | None = None
     attitude_error_deg: float | None = Field(None, description="geodesic angle")
+    reference: str = Field(
+        "nominal lab geometry (uncalibrated)",
+        description="which reference: the nominal lab geometry, or a calibration "
+        "(PUT /api/reference)",
+    )
 
 
 class PosePublic(BaseModel):
@@ -247,6 +285,55 @@ class MoveRequest(AxisBody):
     pitch_deg: float | SkipJsonSchema[None] = None
     roll_deg: float | SkipJsonSchema[None] = None
     rail_mm: float | SkipJsonSchema[None] = None
+
+
+JOG_MAX_DEG = 10.0
+JOG_MAX_MM = 1000.0
+"""The largest single jog step: a jog is a nudge, a larger move is a go-to."""
+
+
+JogDeg = Annotated[
+    float, Field(ge=-JOG_MAX_DEG, le=JOG_MAX_DEG, description="signed step, deg (not 0)",
+                 json_schema_extra={"not": {"const": 0}})
+]  # fmt: skip
+JogMm = Annotated[
+    float, Field(ge=-JOG_MAX_MM, le=JOG_MAX_MM, description="signed step, mm (not 0)",
+                 json_schema_extra={"not": {"const": 0}})
+]  # fmt: skip
+
+
+class JogRequest(AxisBody):
+    """A relative move of exactly one axis (deg for yaw, pitch, roll; mm for rail),
+    applied by the server to that axis' encoder position when the request arrives (never
+    to a position a client last saw). Refused with 409 while the motion system is moving
+    or a campaign owns it, and with 422 when the step would leave the soft limits from
+    where the axis is now."""
+
+    model_config = ConfigDict(json_schema_extra={"minProperties": 1, "maxProperties": 1})
+    # AxisBody's checks apply: null is not a step, at least one axis is given
+
+    yaw_deg: JogDeg | SkipJsonSchema[None] = None
+    pitch_deg: JogDeg | SkipJsonSchema[None] = None
+    roll_deg: JogDeg | SkipJsonSchema[None] = None
+    rail_mm: JogMm | SkipJsonSchema[None] = None
+
+    @model_validator(mode="after")
+    def _one_real_step(self):
+        steps = {k: v for k, v in self.model_dump().items() if v is not None}
+        if len(steps) != 1:
+            raise ValueError(
+                "give exactly one of yaw_deg, pitch_deg, roll_deg, rail_mm "
+                f"(got {', '.join(steps) or 'none'})"
+            )
+        ((name, step),) = steps.items()
+        if step == 0:
+            raise ValueError(f"{name}: a jog of 0 moves nothing")
+        return self
+
+    def axis_step(self) -> tuple[str, float]:
+        """(axis name, step in its unit) of the one axis given."""
+        ((name, step),) = {k: v for k, v in self.model_dump().items() if v is not None}.items()
+        return name.rsplit("_", 1)[0], step
 
 
 # -- catalogs ----------------------------------------------------------------------------
@@ -361,6 +448,27 @@ Generator = Annotated[
 class CampaignCreate(StrictBody):
     """A campaign: explicit ``setpoints`` or a ``generator`` (exactly one of them)."""
 
+    # "Exactly one of them" in the document too: a oneOf of the two alternatives (one
+    # given, the other absent or null), so that generated clients and schemathesis know
+    # that both, or neither, is invalid. The route still answers either with 422.
+    model_config = ConfigDict(
+        json_schema_extra={
+            "oneOf": [
+                {
+                    "required": ["setpoints"],
+                    "properties": {"setpoints": {"type": "array"}, "generator": {"type": "null"}},
+                },
+                {
+                    "required": ["generator"],
+                    "properties": {
+                        "generator": {"type": "object", "additionalProperties": True},
+                        "setpoints": {"type": "null"},
+                    },
+                },
+            ]
+        }
+    )
+
     name: str = Field(min_length=1, max_length=200, pattern=r"^[^\x00-\x1f]+$")
     catalog: str = Field("paper-target", min_length=1, max_length=128)
     frames_per_point: int = Field(30, ge=1, le=MAX_FRAMES_PER_POINT)
@@ -472,11 +580,30 @@ class MeasurementPage(BaseModel):
 
 
 # -- calibrations ------------------------------------------------------------------------
+class ReferencePublic(BaseModel):
+    """The live reference: nominal lab geometry, or a stored calibration."""
+
+    source: Literal["nominal", "calibration"]
+    label: str
+    calibration_id: int | None = None
+    n_calibrations: int = Field(description="stored calibrations that could be selected")
+    calibrated_available: bool = Field(
+        description="whether this lab can run a calibration campaign (its nominal geometry "
+        "is known: the simulated lab)"
+    )
+
+
+class ReferenceUpdate(StrictBody):
+    calibration_id: RowId | None = Field(
+        description="a stored calibration's id, or null for the nominal lab geometry"
+    )
+
+
 class CalibrationCreate(StrictBody):
     """Estimate the camera mount and target placement from a finished campaign (best one
     made with the ``calibration`` generator)."""
 
-    campaign_id: int = Field(ge=1, le=2**31 - 1)
+    campaign_id: JsonInt = Field(ge=1, le=2**31 - 1)
     name: str = Field(min_length=1, max_length=200, pattern=r"^[^\x00-\x1f]+$")
 
 

@@ -22,6 +22,8 @@ import numpy as np
 
 from backend.drivers.base import CameraDriver, CameraFrame
 from backend.services.hub import LiveHub
+from backend.services.kernel_warmup import COMPILING_REASON, KernelWarmup
+from backend.services.live_reference import LiveReference
 from tofpose.catalog import Catalog
 from tofpose.extraction import FrameError
 from tofpose.pipeline import PipelineConfig, PosePipeline, PoseResult
@@ -35,6 +37,9 @@ class LiveSample:
 
     captured_unix_s : wall-clock time the frame arrived from the driver.
     processed_unix_s : wall-clock time the pipeline finished.
+    measured : False for a frame the pipeline did not see (its kernels were still
+        compiling at server start): shown live, never counted by a campaign.
+    reference : the lab reference the live error of this frame is measured against.
     cache : serialised forms (JSON, PNG) computed once and shared by all consumers.
     """
 
@@ -43,6 +48,8 @@ class LiveSample:
     catalog_name: str
     captured_unix_s: float
     processed_unix_s: float
+    measured: bool = True
+    reference: LiveReference = field(default_factory=LiveReference)
     cache: dict[str, Any] = field(default_factory=dict)
 
     def cached(self, key: str, make: Callable[[], Any]) -> Any:
@@ -104,6 +111,7 @@ class AcquisitionService:
         timeout_s: float = 2.0,
         backoff_s: tuple[float, float] = (0.05, 2.0),
         pipeline_config: PipelineConfig | None = None,
+        kernels: KernelWarmup | None = None,
     ) -> None:
         self.camera = camera
         self.hub = hub
@@ -111,6 +119,8 @@ class AcquisitionService:
         self.backoff_s = backoff_s
         self.health = DeviceHealth()
         self._config = pipeline_config or PipelineConfig()
+        self.kernels = kernels  # None: the kernels are ready (or compile on first use)
+        self.reference = LiveReference()  # nominal until a calibration is selected
         self._catalog_name = catalog_name
         self._pipeline = PosePipeline(camera.model, catalog, self._config)
         self._history: deque[LiveSample] = deque(maxlen=history_size)
@@ -210,8 +220,13 @@ class AcquisitionService:
             self._arrivals.append(time.monotonic())
             if frame.meta.get("discontinuity"):
                 self._pipeline.reset()
+            measured = self.kernels is None or self.kernels.ready.is_set()
             try:
-                result = self._pipeline.process(frame.gray, frame.distance_mm, frame.time_s)
+                if measured:
+                    result = self._pipeline.process(frame.gray, frame.distance_mm, frame.time_s)
+                else:
+                    _check_shapes(frame, self.camera.model.shape)  # no kernel call yet
+                    result = PoseResult(False, COMPILING_REASON, frame.time_s)
             except FrameError as exc:
                 self.health.record_failure(f"malformed frame from the camera: {exc}")
                 continue
@@ -220,7 +235,10 @@ class AcquisitionService:
                 result = PoseResult(False, f"pipeline error: {exc}", frame.time_s)
             backoff = self.backoff_s[0]
             self.health.record_ok()
-            sample = LiveSample(frame, result, self._catalog_name, captured, time.time())
+            sample = LiveSample(
+                frame, result, self._catalog_name, captured, time.time(), measured=measured,
+                reference=self.reference,
+            )  # fmt: skip
             self._latest = sample
             self._history.append(sample.without_images())
             self.frames_processed += 1
@@ -228,6 +246,13 @@ class AcquisitionService:
                 self.hub.publish(sample)
             except Exception:
                 log.exception("publishing frame %d failed", frame.index)
+
+
+def _check_shapes(frame: CameraFrame, shape: tuple[int, int]) -> None:
+    """The part of the pipeline's frame check that needs no compiled kernel."""
+    for name, image in (("gray", frame.gray), ("distance", frame.distance_mm)):
+        if np.shape(image) != shape:
+            raise FrameError(f"{name} image has shape {np.shape(image)}, camera expects {shape}")
 
 
 def frame_point_cloud_mm(sample: LiveSample, camera_model) -> tuple[np.ndarray, list[int | None]]:

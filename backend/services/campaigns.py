@@ -537,8 +537,8 @@ class CampaignService:
                     raise _Halt("paused", msg)
                 continue
             waited_since = time.monotonic()
-            if sample.captured_unix_s < settled_unix_s:
-                continue
+            if sample.captured_unix_s < settled_unix_s or not sample.measured:
+                continue  # before the settle, or while the pipeline's kernels compile
             t = float(sample.frame.time_s)
             if t_ready is None:
                 t_ready = t + settle_s

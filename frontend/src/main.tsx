@@ -7,6 +7,7 @@ import { LiveView } from "./components/LiveView";
 import { MotionPanel } from "./components/MotionPanel";
 import { NewCampaign } from "./components/NewCampaign";
 import { PosePanel } from "./components/PosePanel";
+import { ReferenceBar } from "./components/ReferenceBar";
 import { ScenePanel } from "./components/ScenePanel";
 import { StatusPanel } from "./components/StatusPanel";
 import { TimeSeries } from "./components/TimeSeries";
@@ -18,6 +19,7 @@ function App() {
   const [link, setLink] = useState<LiveHandle | null>(null);
   const [error, setError] = useState<string | null>(null);
   const [hasToken, setHasToken] = useState(!!token());
+  const [preset, setPreset] = useState(0); // bumped: the new-campaign form shows a calibration
   useEffect(() => {
     const handle = connectLive(setLive);
     setLink(handle);
@@ -59,7 +61,9 @@ function App() {
       <main>
         <LiveView shown={live.shown} onDrawn={(i) => link?.ack(i)} />
         <div class="side">
-          <PosePanel pose={live.pose} stale={live.stale} />
+          <PosePanel pose={live.pose} stale={live.stale}>
+            <ReferenceBar onError={setError} onCalibrate={() => setPreset((n) => n + 1)} />
+          </PosePanel>
           <MotionPanel onError={setError} />
           <StatusPanel pose={live.pose} onError={setError} />
           <CameraPanel onError={setError} />
@@ -67,7 +71,7 @@ function App() {
         <TimeSeries history={live.history} />
         <ScenePanel onError={setError} />
         <Campaigns onError={setError} />
-        <NewCampaign onError={setError} />
+        <NewCampaign onError={setError} calibrationRequest={preset} />
       </main>
     </div>
   );

@@ -28,6 +28,8 @@ def make_settings(data_dir: Path, **kw) -> Settings:
     kw.setdefault("retry_backoff_s", (0.02, 0.1))
     kw.setdefault("allowed_hosts", ["testserver"])  # the TestClient's Host header
     kw.setdefault("viser", False)  # the 3-D scene runs where a test asks for it
+    # poses from the first frame on (the background compile has a test of its own)
+    kw.setdefault("kernels_in_background", False)
     return Settings(data_dir=data_dir, **kw)
 
 

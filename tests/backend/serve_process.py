@@ -21,7 +21,8 @@ def free_port() -> int:
 
 class ServeProcess:
     """Start ``python -m tofpose.cli serve`` on a free loopback port with ``data_dir``;
-    ``__enter__`` waits until /api/health reports the camera ok."""
+    ``__enter__`` waits until /api/health reports the camera ok and the pipeline's kernels
+    ready, and the latest pose is ok."""
 
     def __init__(self, data_dir: Path, *args: str, env: dict[str, str] | None = None) -> None:
         self.port = free_port()
@@ -57,7 +58,10 @@ class ServeProcess:
                 raise AssertionError(f"server exited early:\n{self.output}")
             try:
                 h = self.get_json("/api/health", 2.0)
-                if h["camera"]["state"] == "ok":
+                # camera up, the kernels compiled in the background (docs/server.md,
+                # "First start") and a pose measured with them
+                if (h["camera"]["state"] == "ok" and h["pipeline"]["state"] == "ready"
+                        and self.get_json("/api/pose/latest", 2.0)["ok"]):  # fmt: skip
                     return h
             except OSError:
                 pass

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import re
 
 import pytest
@@ -20,7 +21,7 @@ def test_docs_pages_load_only_assets_from_this_server(client, page):
     assert "cdn." not in r.text and "fonts.googleapis" not in r.text
 
 
-def test_root_serves_the_built_dashboard_or_points_to_the_docs(tmp_path):
+def test_root_serves_the_built_dashboard_or_says_how_to_build_it(tmp_path):
     from tests.backend.conftest import make_settings, running_app
 
     dist = tmp_path / "dist"
@@ -32,4 +33,9 @@ def test_root_serves_the_built_dashboard_or_points_to_the_docs(tmp_path):
         assert c.get("/api/health").status_code == 200  # API routes win over the mount
     with running_app(make_settings(tmp_path / "b", frontend_dir=tmp_path / "none")) as c:
         r = c.get("/", follow_redirects=False)
-        assert r.status_code in (302, 307) and r.headers["location"] == "/docs"
+        assert r.status_code == 503 and r.headers["content-type"].startswith("text/html")
+        page = html.unescape(r.text)
+        assert "dashboard is not built" in page and str(tmp_path / "none") in page
+        assert "make frontend" in page and "cd frontend && npm ci && npm run build" in page
+        assert 'href="/docs"' in r.text and r.headers["cache-control"] == "no-store"
+        assert c.get("/docs").status_code == 200 and c.get("/api/health").status_code == 200

@@ -143,14 +143,14 @@ def test_a_campaign_created_and_started_in_the_page_runs_and_its_report_download
     page = page_for(server.base_url, TOKEN)
     page.goto(server.base_url + "/")
     page.get_by_test_id("new-name").fill("page-grid")
-    page.get_by_test_id("new-yaw").fill("0, 200")  # outside the soft limits first
-    page.get_by_test_id("new-rail").fill("12500")
+    page.get_by_test_id("new-yaw_deg").fill("0, 200")  # outside the soft limits first
+    page.get_by_test_id("new-rail_mm").fill("12500")
     page.get_by_test_id("new-frames").fill("4")
     page.get_by_test_id("new-create").click()
     err = page.get_by_test_id("error")
     err.wait_for(timeout=5000)
     assert "422" in err.inner_text() and "yaw set-point 200" in err.inner_text()
-    page.get_by_test_id("new-yaw").fill("0, 3")
+    page.get_by_test_id("new-yaw_deg").fill("0, 3")
     page.get_by_test_id("new-create").click()
     draft = page.get_by_test_id("draft")
     draft.wait_for(timeout=5000)

@@ -1,11 +1,11 @@
-"""GET /api/devices: camera and motion state in one call."""
+"""GET /api/devices: camera, motion and pipeline state in one call."""
 
 from __future__ import annotations
 
 from fastapi import APIRouter
 
 from backend.api.deps import ReadAuth, StateDep
-from backend.api.presenters import camera_state, motion_public
+from backend.api.presenters import camera_state, motion_public, pipeline_state
 from backend.api.schemas import CameraDevicePublic, DevicesPublic
 
 router = APIRouter(prefix="/api", tags=["status"], dependencies=[ReadAuth])
@@ -27,4 +27,4 @@ def get_devices(state: StateDep) -> DevicesPublic:
         frame_rate_hz=state.acquisition.frame_rate_hz,
         catalog=state.acquisition.catalog_name,
     )
-    return DevicesPublic(camera=camera, motion=motion_public(state))
+    return DevicesPublic(camera=camera, motion=motion_public(state), pipeline=pipeline_state(state))

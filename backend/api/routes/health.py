@@ -7,7 +7,7 @@ from sqlalchemy import text
 
 import backend
 from backend.api.deps import StateDep
-from backend.api.presenters import camera_state, motion_state
+from backend.api.presenters import camera_state, motion_state, pipeline_state
 from backend.api.schemas import HealthPublic
 
 router = APIRouter(prefix="/api", tags=["status"])
@@ -15,7 +15,8 @@ router = APIRouter(prefix="/api", tags=["status"])
 
 @router.get("/health")
 def get_health(state: StateDep) -> HealthPublic:
-    """Always answers (no auth): overall status and the state of each device."""
+    """Always answers (no auth): overall status, the state of each device and of the
+    pipeline's compiled kernels."""
     try:
         with state.engine.connect() as conn:
             conn.execute(text("SELECT 1"))
@@ -31,4 +32,5 @@ def get_health(state: StateDep) -> HealthPublic:
         database=db,
         camera=cam,
         motion=mot,
+        pipeline=pipeline_state(state),
     )

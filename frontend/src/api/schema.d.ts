@@ -349,7 +349,8 @@ export interface paths {
         };
         /**
          * Get Health
-         * @description Always answers (no auth): overall status and the state of each device.
+         * @description Always answers (no auth): overall status, the state of each device and of the
+         *     pipeline's compiled kernels.
          */
         get: operations["getHealth"];
         put?: never;
@@ -374,6 +375,30 @@ export interface paths {
         get: operations["getMotion"];
         put?: never;
         post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/motion/jog": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        get?: never;
+        put?: never;
+        /**
+         * Jog Axis
+         * @description Move one axis by the step given (deg / mm) from its encoder position now.
+         *
+         *     409 while that axis is still moving (a second click does not stack on a move in
+         *     progress) or a campaign owns the motion system; 422 when the axis is unknown or the
+         *     target is outside the soft limits; 503 when the position cannot be read.
+         */
+        post: operations["jogAxis"];
         delete?: never;
         options?: never;
         head?: never;
@@ -480,6 +505,31 @@ export interface paths {
          */
         get: operations["getLatestPose"];
         put?: never;
+        post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/reference": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * Get Reference
+         * @description The live reference in use, and how many calibrations could be selected.
+         */
+        get: operations["getReference"];
+        /**
+         * Set Reference
+         * @description Measure the live error against a stored calibration (``calibration_id``) or the
+         *     nominal lab geometry (null). 404 for an unknown calibration (nothing changes).
+         */
+        put: operations["setReference"];
         post?: never;
         delete?: never;
         options?: never;
@@ -758,7 +808,15 @@ export interface components {
              * @default 1
              */
             settle_s: number;
-        };
+        } & ({
+            generator?: null;
+            setpoints: unknown[];
+        } | {
+            generator: {
+                [key: string]: unknown;
+            };
+            setpoints?: null;
+        });
         /** CampaignPublic */
         CampaignPublic: {
             /** Camera */
@@ -889,6 +947,7 @@ export interface components {
         DevicesPublic: {
             camera: components["schemas"]["CameraDevicePublic"];
             motion: components["schemas"]["MotionPublic"];
+            pipeline: components["schemas"]["PipelineStatePublic"];
         };
         /**
          * ErrorPublic
@@ -928,6 +987,7 @@ export interface components {
              */
             database: "ok" | "error";
             motion: components["schemas"]["DeviceStatePublic"];
+            pipeline: components["schemas"]["PipelineStatePublic"];
             /**
              * Status
              * @enum {string}
@@ -943,6 +1003,36 @@ export interface components {
          * @enum {string}
          */
         ImageKind: "gray" | "distance";
+        /**
+         * JogRequest
+         * @description A relative move of exactly one axis (deg for yaw, pitch, roll; mm for rail),
+         *     applied by the server to that axis' encoder position when the request arrives (never
+         *     to a position a client last saw). Refused with 409 while the motion system is moving
+         *     or a campaign owns it, and with 422 when the step would leave the soft limits from
+         *     where the axis is now.
+         */
+        JogRequest: {
+            /**
+             * Pitch Deg
+             * @description signed step, deg (not 0)
+             */
+            pitch_deg?: number;
+            /**
+             * Rail Mm
+             * @description signed step, mm (not 0)
+             */
+            rail_mm?: number;
+            /**
+             * Roll Deg
+             * @description signed step, deg (not 0)
+             */
+            roll_deg?: number;
+            /**
+             * Yaw Deg
+             * @description signed step, deg (not 0)
+             */
+            yaw_deg?: number;
+        };
         /** MatchedPublic */
         MatchedPublic: {
             /** Area Px */
@@ -1071,6 +1161,13 @@ export interface components {
              */
             model?: string | null;
             /**
+             * Owner Campaign Id
+             * @description the campaign that owns the motion system while it runs (manual moves and jogs are refused with 409 then); null when it is free
+             */
+            owner_campaign_id?: number | null;
+            /** Owner Campaign Name */
+            owner_campaign_name?: string | null;
+            /**
              * Positions
              * @description encoders, deg / mm
              */
@@ -1122,6 +1219,29 @@ export interface components {
              * @description soft limits of this server's motion system: [-170, 170]
              */
             yaw_deg?: number;
+        };
+        /**
+         * PipelineStatePublic
+         * @description The live pipeline's compiled kernels: compiled in the background at server start
+         *     (about 1-2 min after an install, seconds from numba's cache); frames stream
+         *     meanwhile, poses follow when they are ready.
+         */
+        PipelineStatePublic: {
+            /**
+             * Detail
+             * @default
+             */
+            detail: string;
+            /**
+             * Seconds
+             * @description since the warm-up started, or how long it took
+             */
+            seconds: number;
+            /**
+             * State
+             * @enum {string}
+             */
+            state: "compiling" | "ready" | "failed";
         };
         /**
          * PosePublic
@@ -1261,6 +1381,39 @@ export interface components {
          * @enum {string}
          */
         Reference: "lab" | "exact";
+        /**
+         * ReferencePublic
+         * @description The live reference: nominal lab geometry, or a stored calibration.
+         */
+        ReferencePublic: {
+            /**
+             * Calibrated Available
+             * @description whether this lab can run a calibration campaign (its nominal geometry is known: the simulated lab)
+             */
+            calibrated_available: boolean;
+            /** Calibration Id */
+            calibration_id?: number | null;
+            /** Label */
+            label: string;
+            /**
+             * N Calibrations
+             * @description stored calibrations that could be selected
+             */
+            n_calibrations: number;
+            /**
+             * Source
+             * @enum {string}
+             */
+            source: "nominal" | "calibration";
+        };
+        /** ReferenceUpdate */
+        ReferenceUpdate: {
+            /**
+             * Calibration Id
+             * @description a stored calibration's id, or null for the nominal lab geometry
+             */
+            calibration_id: number | null;
+        };
         /** ReflectorModel */
         ReflectorModel: {
             /** Diameter Mm */
@@ -1445,8 +1598,8 @@ export interface components {
         };
         /**
          * TruthPublic
-         * @description The lab's ground truth for this frame (encoders + nominal geometry) and the error
-         *     of the measurement against it.
+         * @description The lab's reference for this frame (encoders + nominal geometry, or + a selected
+         *     calibration's mount and placement) and the error of the measurement against it.
          */
         TruthPublic: {
             /**
@@ -1458,6 +1611,12 @@ export interface components {
             pitch_deg: number;
             /** Position Error Mm */
             position_error_mm?: number | null;
+            /**
+             * Reference
+             * @description which reference: the nominal lab geometry, or a calibration (PUT /api/reference)
+             * @default nominal lab geometry (uncalibrated)
+             */
+            reference: string;
             /** Roll Deg */
             roll_deg: number;
             /** X Mm */
@@ -2884,6 +3043,87 @@ export interface operations {
             };
         };
     };
+    jogAxis: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody: {
+            content: {
+                "application/json": components["schemas"]["JogRequest"];
+            };
+        };
+        responses: {
+            /** @description Successful Response */
+            202: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["MotionPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Conflicts with stored state (a name already taken, or the resource is busy) */
+            409: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The request body is larger than the server's limit */
+            413: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+            /** @description The device is absent or refused the command */
+            503: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+        };
+    };
     moveAxes: {
         parameters: {
             query?: never;
@@ -3190,6 +3430,119 @@ export interface operations {
                 };
                 content: {
                     "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+        };
+    };
+    getReference: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ReferencePublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+        };
+    };
+    setReference: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody: {
+            content: {
+                "application/json": components["schemas"]["ReferenceUpdate"];
+            };
+        };
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ReferencePublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description No such resource */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The request body is larger than the server's limit */
+            413: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
                 };
             };
         };

@@ -1,52 +1,111 @@
-// Axis positions, go-to within the soft limits, and an always-visible STOP.
+// Axis positions, go-to within the soft limits, jog, and an always-visible STOP (in the
+// header). Nothing reaches the motion system that the user did not type: a go-to sends
+// only a complete number inside the axis' soft limits (an empty or partial field says
+// what is wrong and sends nothing), a jog is a relative step the server applies to the
+// axis' encoder position when it arrives (POST /api/motion/jog), every control waits for
+// its answer before it can be used again (a double click sends one move), and the
+// controls are locked while the turntable's status is stale or a campaign owns it.
 import { useEffect, useState } from "preact/hooks";
 import { api, type Motion } from "../api/client";
+import { parseSetpoint } from "../setpoint";
 
 const FIELDS: Record<string, string> = { yaw: "yaw_deg", pitch: "pitch_deg", roll: "roll_deg", rail: "rail_mm" };
+const STALE_AFTER_MS = 2000;
+
+/** Why the motion controls are locked, or null when they can be used. */
+function lockReason(motion: Motion, updatedAt: number, now: number): string | null {
+  if (now - updatedAt > STALE_AFTER_MS) return "turntable status is stale (no answer for 2 s): controls locked";
+  if (motion.owner_campaign_id !== null && motion.owner_campaign_id !== undefined)
+    return `campaign ${motion.owner_campaign_id} ("${motion.owner_campaign_name}") owns the turntable: pause or cancel it to move by hand`;
+  if (motion.state === "absent") return "no motion system";
+  return null;
+}
 
 export function MotionPanel({ onError }: { onError: (m: string | null) => void }) {
   const [motion, setMotion] = useState<Motion | null>(null);
+  const [updatedAt, setUpdatedAt] = useState(0);
+  const [now, setNow] = useState(Date.now());
   const [targets, setTargets] = useState<Record<string, string>>({});
+  const [fieldErrors, setFieldErrors] = useState<Record<string, string>>({});
+  const [pending, setPending] = useState<string | null>(null);
+  const took = (m: Motion) => {
+    setMotion(m);
+    setUpdatedAt(Date.now());
+  };
   useEffect(() => {
-    const poll = () => api<Motion>("GET", "/api/motion").then(setMotion).catch((e) => onError(String(e.message)));
+    const poll = () => api<Motion>("GET", "/api/motion").then(took).catch((e) => onError(String(e.message)));
     poll();
-    const t = window.setInterval(poll, 500);
+    const t = window.setInterval(() => {
+      setNow(Date.now());
+      poll();
+    }, 500);
     return () => window.clearInterval(t);
   }, []);
-  const go = async (body: Record<string, number>) => {
+  const send = async (key: string, path: string, body: Record<string, unknown>) => {
+    if (pending !== null) return; // one command at a time: a double click sends one
+    setPending(key);
     try {
-      setMotion(await api<Motion>("POST", "/api/motion/move", body));
+      took(await api<Motion>("POST", path, body));
       onError(null);
     } catch (e) {
       onError((e as Error).message);
+    } finally {
+      setPending(null);
     }
   };
   if (!motion) return <section class="card"><h2>Turntable</h2><p>loading</p></section>;
+  const locked = lockReason(motion, updatedAt, now);
+  const goTo = (axis: Motion["axes"][number]) => {
+    const parsed = parseSetpoint(targets[axis.name] ?? "", axis);
+    if ("error" in parsed) {
+      setFieldErrors({ ...fieldErrors, [axis.name]: parsed.error });
+      return;
+    }
+    setFieldErrors({ ...fieldErrors, [axis.name]: "" });
+    send(`go-${axis.name}`, "/api/motion/move", { [FIELDS[axis.name]]: parsed.value });
+  };
   return (
     <section class="card">
       <h2>Turntable <span class="small">{motion.busy ? "moving" : motion.settled ? "settled" : "settling"}</span></h2>
+      {locked && <p class="small warn" data-testid="motion-locked">{locked}</p>}
       <table class="axes">
         <thead><tr><th>axis</th><th>position</th><th>limits</th><th>go to</th><th>jog</th></tr></thead>
         <tbody>
-          {motion.axes.map((a) => (
-            <tr key={a.name}>
-              <th>{a.name}</th>
-              <td data-testid={`pos-${a.name}`}>{(motion.positions?.[a.name] ?? 0).toFixed(a.unit === "mm" ? 1 : 3)} {a.unit}</td>
-              <td class="small">{a.min_pos} .. {a.max_pos}</td>
-              <td>
-                <input aria-label={`${a.name} target (${a.unit})`} data-testid={`target-${a.name}`} size={7}
-                  value={targets[a.name] ?? ""} onInput={(e) => setTargets({ ...targets, [a.name]: (e.target as HTMLInputElement).value })} />
-                <button data-testid={`go-${a.name}`} onClick={() => go({ [FIELDS[a.name]]: Number(targets[a.name]) })}>go</button>
-              </td>
-              <td>
-                {[-1, 1].map((s) => (
-                  <button key={s} onClick={() => go({ [FIELDS[a.name]]: (motion.positions?.[a.name] ?? 0) + s * (a.unit === "mm" ? 100 : 1) })}>
-                    {s < 0 ? "−" : "+"}{a.unit === "mm" ? "100 mm" : "1°"}
-                  </button>
-                ))}
-              </td>
-            </tr>
-          ))}
+          {motion.axes.map((a) => {
+            const pos = motion.positions?.[a.name];
+            const err = fieldErrors[a.name];
+            const step = a.unit === "mm" ? 100 : 1;
+            return (
+              <tr key={a.name}>
+                <th>{a.name}</th>
+                <td data-testid={`pos-${a.name}`}>{pos === undefined ? "-" : pos.toFixed(a.unit === "mm" ? 1 : 3)} {a.unit}</td>
+                <td class="small">{a.min_pos} .. {a.max_pos}</td>
+                <td>
+                  <form class="goto" onSubmit={(e) => { e.preventDefault(); if (!locked) goTo(a); }}>
+                    <input aria-label={`${a.name} target (${a.unit})`} data-testid={`target-${a.name}`} size={7}
+                      inputMode="decimal" aria-invalid={err ? "true" : undefined}
+                      aria-describedby={err ? `target-error-${a.name}` : undefined}
+                      value={targets[a.name] ?? ""} onInput={(e) => {
+                        setTargets({ ...targets, [a.name]: (e.target as HTMLInputElement).value });
+                        if (err) setFieldErrors({ ...fieldErrors, [a.name]: "" });
+                      }} />
+                    <button type="submit" data-testid={`go-${a.name}`} disabled={!!locked || pending !== null}>go</button>
+                    {err && <span class="field-error" role="alert" id={`target-error-${a.name}`} data-testid={`target-error-${a.name}`}>{err}</span>}
+                  </form>
+                </td>
+                <td>
+                  {[-1, 1].map((s) => (
+                    <button key={s} data-testid={`jog-${a.name}-${s < 0 ? "minus" : "plus"}`}
+                      disabled={!!locked || pending !== null || motion.busy}
+                      title={`move ${a.name} by ${s * step} ${a.unit} from where it is now`}
+                      onClick={() => send(`jog-${a.name}`, "/api/motion/jog", { [FIELDS[a.name]]: s * step })}>
+                      {s < 0 ? "−" : "+"}{a.unit === "mm" ? "100 mm" : "1°"}
+                    </button>
+                  ))}
+                </td>
+              </tr>
+            );
+          })}
         </tbody>
       </table>
     </section>

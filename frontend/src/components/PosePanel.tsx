@@ -1,9 +1,10 @@
+import type { ComponentChildren } from "preact";
 import type { Pose } from "../api/client";
 
 const fmt = (v: number | null | undefined, d = 2) => (v === null || v === undefined ? "-" : v.toFixed(d));
 
-export function PosePanel({ pose, stale }: { pose: Pose | null; stale: boolean }) {
-  if (!pose) return <section class="card"><h2>Pose</h2><p>no frame yet</p></section>;
+export function PosePanel({ pose, stale, children }: { pose: Pose | null; stale: boolean; children?: ComponentChildren }) {
+  if (!pose) return <section class="card"><h2>Pose</h2><p>no frame yet</p>{children}</section>;
   const ps = pose.position_sigma_mm ?? [];
   const as = pose.attitude_sigma_deg ?? [];
   const rows: [string, number | null | undefined, number | undefined, string, number][] = [
@@ -29,9 +30,10 @@ export function PosePanel({ pose, stale }: { pose: Pose | null; stale: boolean }
         (<span data-testid="pose-mode">{pose.mode}</span>);
         attitude relative to the facing reference (face-on reads 0, 0, 0)</p>
       {pose.truth && (
-        <p class="small">lab reference: x {fmt(pose.truth.x_mm)} y {fmt(pose.truth.y_mm)} z {fmt(pose.truth.z_mm)} mm;
-          error {fmt(pose.truth.position_error_mm)} mm, {fmt(pose.truth.attitude_error_deg, 3)} deg</p>
+        <p class="small" data-testid="truth">lab reference ({pose.truth.reference}): x {fmt(pose.truth.x_mm)} y {fmt(pose.truth.y_mm)} z {fmt(pose.truth.z_mm)} mm;
+          error <span data-testid="truth-error-mm">{fmt(pose.truth.position_error_mm)}</span> mm, {fmt(pose.truth.attitude_error_deg, 3)} deg</p>
       )}
+      {children}
     </section>
   );
 }

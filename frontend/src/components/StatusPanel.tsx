@@ -1,5 +1,5 @@
-// Device status (state, model, firmware, address and link, delivered frame rate, last error) and the pipeline's per-stage
-// timings of the latest frame.
+// Device status (state, model, firmware, address and link, delivered frame rate, last error),
+// whether the pipeline's compiled kernels are ready, and its per-stage timings of the latest frame.
 import { useEffect, useState } from "preact/hooks";
 import { api, type Pose } from "../api/client";
 import type { components } from "../api/schema";
@@ -36,6 +36,9 @@ export function StatusPanel({ pose, onError }: { pose: Pose | null; onError: (m:
               <td data-testid="camera-device">{describe(dev.camera)}, catalog {dev.camera.catalog}</td></tr>
             <tr><th>motion</th><td data-testid="motion-state">{dev.motion.state}</td><td />
               <td data-testid="motion-device">{describe(dev.motion)}</td></tr>
+            <tr><th>pipeline</th><td data-testid="pipeline-state">{dev.pipeline.state}</td>
+              <td>{dev.pipeline.state === "compiling" ? `${dev.pipeline.seconds.toFixed(0)} s` : ""}</td>
+              <td class="small" data-testid="pipeline-detail">{dev.pipeline.state === "ready" ? "compiled kernels" : dev.pipeline.detail}</td></tr>
             {[dev.camera, dev.motion].filter((d) => d.last_error).map((d) => (
               <tr key={d.driver}><td colSpan={4} class="error">{d.driver}: {d.last_error}</td></tr>
             ))}

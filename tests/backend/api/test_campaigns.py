@@ -111,7 +111,8 @@ def test_a_grid_campaign_runs_to_completion_and_every_report_downloads(fast_clie
     parsed = _Tables()
     parsed.feed(r.text)
     assert parsed.tables >= 1 + 2 * 2 and parsed.imgs == 4
-    assert "x_mm" in parsed.cells and "http" not in r.text.split("<body>")[0]
+    assert "x" in parsed.cells and "x_mm" not in parsed.cells  # human headers, not identifiers
+    assert "http" not in r.text.split("<body>")[0]
 
     r = c.get(base + ".pdf")
     assert r.status_code == 200 and r.content[:5] == b"%PDF-"
@@ -197,6 +198,10 @@ def test_a_running_campaign_owns_the_turntable_and_stop_pauses_it(fast_client):
     wait_for(lambda: c.get(f"/api/campaigns/{cid}").json()["status"] == "running")
     r = c.post("/api/motion/move", json={"yaw_deg": 1}, headers=AUTH)
     assert r.status_code == 409 and "owns the motion system" in r.json()["detail"]
+    r = c.post("/api/motion/jog", json={"yaw_deg": 1}, headers=AUTH)
+    assert r.status_code == 409 and "owns the motion system" in r.json()["detail"]
+    motion = c.get("/api/motion").json()
+    assert (motion["owner_campaign_id"], motion["owner_campaign_name"]) == (cid, "long")
     r = c.post(f"/api/campaigns/{other}/start", headers=AUTH)
     assert r.status_code == 409 and "queue" in r.json()["detail"]
     assert c.post(f"/api/campaigns/{cid}/resume", headers=AUTH).status_code == 409
@@ -204,6 +209,7 @@ def test_a_running_campaign_owns_the_turntable_and_stop_pauses_it(fast_client):
     paused = wait_for(lambda: (x := c.get(f"/api/campaigns/{cid}").json())["status"] == "paused"
                       and x)  # fmt: skip
     assert "STOP pressed" in paused["status_reason"]
+    assert c.get("/api/motion").json()["owner_campaign_id"] is None
     assert c.post("/api/motion/move", json={"yaw_deg": 1}, headers=AUTH).status_code == 202
     assert c.post(f"/api/campaigns/{cid}/cancel", headers=AUTH).status_code == 200
     assert c.get(f"/api/campaigns/{cid}").json()["status"] == "cancelled"

@@ -5,7 +5,9 @@ invalid one accepted, a wrong ``Allow`` header, an auth requirement the document
 state... fails the run. New operations join automatically.
 
 The command is the one docs/server.md gives; ``schemathesis.toml`` at the repository root
-holds the one documented exception (createCatalog's semantic 422).
+holds the documented exceptions (the semantic 422s of createCatalog, createCampaign and
+createCalibration: what JSON Schema cannot say). That a campaign takes ``setpoints`` or a
+``generator``, not both, it can say: CampaignCreate's ``oneOf``, checked below.
 """
 
 from __future__ import annotations
@@ -14,9 +16,11 @@ import os
 import re
 import subprocess
 import sys
+import uuid
 from pathlib import Path
 
 import httpx
+import jsonschema
 import pytest
 
 from tests.backend.conftest import AUTH, TOKEN, LiveServer, make_settings
@@ -79,6 +83,33 @@ def test_the_document_states_errors_security_and_ids(server):
     move = doc["components"]["schemas"]["MoveRequest"]
     assert move["minProperties"] == 1
     assert move["properties"]["yaw_deg"]["minimum"] == -170.0
+
+
+SETPOINTS = [{"yaw_deg": 0.0}]
+GENERATOR = {"kind": "stability", "rail_mm": 12000.0}
+
+
+@pytest.mark.parametrize(
+    ("fields", "valid"),
+    [
+        ({"setpoints": SETPOINTS}, True),
+        ({"generator": GENERATOR}, True),
+        ({"setpoints": SETPOINTS, "generator": None}, True),
+        ({"setpoints": None, "generator": GENERATOR}, True),
+        ({"setpoints": SETPOINTS, "generator": GENERATOR}, False),
+        ({}, False),
+        ({"setpoints": None, "generator": None}, False),
+    ],
+)
+def test_the_document_says_setpoints_or_generator_and_the_server_agrees(server, fields, valid):
+    """CampaignCreate's oneOf: exactly one of ``setpoints`` and ``generator``, the other
+    absent or null. A body the document calls invalid is the one the server refuses."""
+    doc = httpx.get(f"{server.base_url}/openapi.json").json()
+    schema = {"$ref": "#/components/schemas/CampaignCreate", "components": doc["components"]}
+    body = {"name": f"one-of-{uuid.uuid4().hex[:8]}", **fields}
+    assert jsonschema.Draft202012Validator(schema).is_valid(body) is valid
+    r = httpx.post(f"{server.base_url}/api/campaigns", json=body, headers=AUTH)
+    assert r.status_code == (201 if valid else 422), r.text
 
 
 def test_allow_lists_every_method_of_a_path(server):

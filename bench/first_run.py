@@ -1,0 +1,152 @@
+"""First run: from a fresh clone to a live dashboard with ``make run``, as a new user
+starts the project (package caches warm, nothing else prepared).
+
+Each repeat clones the repository's committed HEAD into a temporary directory (no venv,
+no ``node_modules``, no built dashboard, no numba cache), runs ``make run`` there on free
+ports, and records when, counted from the start of ``make run``:
+
+- each ``[setup]``/``[run]`` step began (the lines the Makefile prints),
+- ``/api/health`` first answered,
+- ``/`` served the dashboard's page (``<div id="app">``),
+- the first live frame arrived (``/api/pose/latest`` answered: frames stream),
+- the pipeline's kernels were ready (``/api/health`` -> ``pipeline.state``),
+- the first ok pose arrived.
+
+"Dashboard live" is the later of the page and the first frame. Medians over repeats.
+
+Run: ``python bench/first_run.py [--repeats 3] [--timeout 400]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import httpx
+import numpy as np
+from tqdm import tqdm
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench._common import all_cores, table  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+MILESTONES = (
+    "health",
+    "dashboard",
+    "first frame",
+    "dashboard live",
+    "kernels ready",
+    "first ok pose",
+)
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _read_output(proc: subprocess.Popen, t0: float, steps: dict[str, float], log: list[str]):
+    """Timestamp each ``[setup] ...`` / ``[run] ...`` line of make's output."""
+    for line in proc.stdout:  # type: ignore[union-attr]
+        log.append(line.rstrip())
+        m = re.match(r"\[(setup|run)\] (.{0,48})", line)
+        if m:
+            steps.setdefault(m.group(2).split("(")[0].strip(), time.monotonic() - t0)
+
+
+def one_run(timeout_s: float) -> tuple[dict[str, float], dict[str, float]]:
+    """(milestone -> s, make step -> s) of one fresh clone's ``make run``."""
+    with tempfile.TemporaryDirectory(prefix="tofpose-first-run-") as tmp:
+        clone = Path(tmp) / "tofpose"
+        subprocess.run(["git", "clone", "--quiet", str(ROOT), str(clone)], check=True)
+        port = free_port()
+        env = {**os.environ, "TOFPOSE_PORT": str(port), "TOFPOSE_VISER_PORT": str(free_port())}
+        env.pop("VIRTUAL_ENV", None)
+        t0 = time.monotonic()
+        proc = subprocess.Popen(
+            ["make", "run"], cwd=clone, env=env, stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT, text=True, start_new_session=True,
+        )  # fmt: skip
+        steps: dict[str, float] = {}
+        log: list[str] = []
+        reader = threading.Thread(target=_read_output, args=(proc, t0, steps, log), daemon=True)
+        reader.start()
+        seen: dict[str, float] = {}
+        base = f"http://127.0.0.1:{port}"
+        try:
+            with httpx.Client(timeout=2.0) as client:
+                while len(seen) < len(MILESTONES) and time.monotonic() - t0 < timeout_s:
+                    if proc.poll() is not None:
+                        raise RuntimeError("make run exited:\n" + "\n".join(log[-30:]))
+                    _poll(client, base, seen, t0)
+                    time.sleep(0.2)
+        finally:
+            os.killpg(proc.pid, signal.SIGINT)
+            try:
+                proc.wait(20)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+        if len(seen) < len(MILESTONES):
+            missing = [m for m in MILESTONES if m not in seen]
+            raise RuntimeError(f"not reached within {timeout_s:g} s: {missing}")
+        return seen, steps
+
+
+def _poll(client: httpx.Client, base: str, seen: dict[str, float], t0: float) -> None:
+    now = time.monotonic() - t0
+    try:
+        h = client.get(base + "/api/health").json()
+    except (httpx.HTTPError, ValueError):
+        return
+    seen.setdefault("health", now)
+    if h.get("pipeline", {}).get("state") == "ready":
+        seen.setdefault("kernels ready", now)
+    if "dashboard" not in seen and '<div id="app">' in client.get(base + "/").text:
+        seen["dashboard"] = now
+    r = client.get(base + "/api/pose/latest")
+    if r.status_code == 200:
+        seen.setdefault("first frame", now)
+        if r.json().get("ok"):
+            seen.setdefault("first ok pose", now)
+    if "dashboard" in seen and "first frame" in seen:
+        seen.setdefault("dashboard live", max(seen["dashboard"], seen["first frame"]))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--timeout", type=float, default=400.0, help="s per run")
+    args = ap.parse_args()
+    all_cores()
+    runs = []
+    for _ in tqdm(range(args.repeats), desc="fresh clones", unit="run"):
+        runs.append(one_run(args.timeout))
+    rows = [[m, f"{np.median([r[0][m] for r in runs]):.1f}",
+             f"{max(r[0][m] for r in runs):.1f}"] for m in MILESTONES]  # fmt: skip
+    print(f"\nFresh clone -> `make run` (s from its start; {args.repeats} runs, median and max)\n")
+    print(table(["milestone", "median s", "max s"], rows))
+    names = sorted(
+        {k for r in runs for k in r[1]}, key=lambda k: np.median([r[1].get(k, 0) for r in runs])
+    )
+    rows = [[n, f"{np.median([r[1][n] for r in runs if n in r[1]]):.1f}"] for n in names]
+    print("\nwhen each step of `make run` began (median s)\n")
+    print(table(["step", "began at s"], rows))
+    live = np.median([r[0]["dashboard live"] for r in runs])
+    print(
+        f"\ndashboard live after {live:.1f} s (goal <= 60 s): {'met' if live <= 60 else 'MISSED'}"
+    )
+
+
+if __name__ == "__main__":
+    main()
