@@ -85,10 +85,12 @@ class PipelineConfig:
         each time (ours: a spurious blob or a merged pair next to a marker's position
         passes the matching tolerance but bends the pose by degrees).
     adapt_range_sigma : before the outlier test, estimate from the frame's own residuals
-        the range error its noise model lacks (``pose.systematic_range_sigma_mm``: the
-        systematic errors of a real, uncalibrated ToF camera) and add it to every
-        reflector's range sigma, in the fit, the outlier test and the covariance; without
-        it, correctly detected markers are dropped as outliers one by one.
+        the range and centroid errors its noise model lacks (``pose.systematic_sigmas``:
+        the systematic errors of a real, uncalibrated ToF camera; the centroid errors of
+        small markers on a plate that is not black) and add them to every reflector's
+        sigmas, in the fit, the outlier test and the covariance; without it, correctly
+        detected markers are dropped as outliers one by one, or a biased bearing is
+        trusted.
     range_bias_sigma_mm, calibrated_range_bias_sigma_mm : sigma of a range offset common
         to all reflectors that no frame can reveal (the fit absorbs it into the pose): the
         constant, amplitude and temperature-drift errors of a ToF camera without range
@@ -100,6 +102,18 @@ class PipelineConfig:
     max_systematic_range_sigma_mm : cap of that estimate (published uncalibrated ToF
         range errors are 10-20 mm; a larger spread is not a systematic error but a bad
         match, and must stay visible to the outlier test).
+    max_systematic_centroid_sigma_px : cap of the frame's excess centroid sigma, estimated
+        beside the range one from the lateral residuals alone (``pose.systematic_sigmas``:
+        small or blurred markers against a plate that is not black have centroids off by
+        tenths of a pixel that no pixel statistic sees). A matched marker's centroid off
+        by more than half a pixel is a blend or a wrong blob, not noise.
+    consistency_p : refuse a pose whose chi^2 (with the sigmas the fit used, the excess
+        components included) exceeds this quantile of chi^2(3m - 6): a misfit that no
+        noise can produce (a one-in-a-million tail), left when a component reached its
+        cap or from the minimum number of markers, where no outlier can be singled out
+        and no component is estimated. None: no test. Below the limit, a chi^2 per
+        degree of freedom above 1 scales the reported covariance up by it
+        (``variance_factor``).
     outlier_chi2_per_dof : above this chi^2 per degree of freedom the fit is inconsistent
         and each reflector is also tested against a fit without it (leave-one-out), which
         finds a biased point that a fit of few points has absorbed.
@@ -124,6 +138,8 @@ class PipelineConfig:
     reject_outliers: bool = True
     adapt_range_sigma: bool = True
     max_systematic_range_sigma_mm: float = 25.0
+    max_systematic_centroid_sigma_px: float = 0.5
+    consistency_p: float | None = 0.999999
     range_bias_sigma_mm: float = 8.0
     calibrated_range_bias_sigma_mm: float = 2.0
     outlier_sigma: float = 6.0

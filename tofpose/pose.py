@@ -15,7 +15,9 @@ from tofpose.kernels.pose import (
     reflector_norms,
     residuals_jacobian,
     svd_pose,
-    systematic_sigma,
+)
+from tofpose.kernels.pose import (
+    systematic_sigmas as kernel_systematic_sigmas,
 )
 from tofpose.kernels.pose import tangent_bases as bearing_tangent_bases
 
@@ -154,10 +156,8 @@ def reflector_whitened_norms(
 #: spend its whole iteration budget on steps far below any uncertainty
 STEP_SIGMA2 = 1e-8
 
-MEDIAN_CHI2_3DOF = 2.366  # median of a chi-square with 3 degrees of freedom
 
-
-def systematic_range_sigma_mm(
+def systematic_sigmas(
     x_mm: np.ndarray,
     bearings: np.ndarray,
     ranges_mm: np.ndarray,
@@ -165,22 +165,29 @@ def systematic_range_sigma_mm(
     t: np.ndarray,
     sigma_range_mm: np.ndarray,
     sigma_bearing_rad: np.ndarray,
-    max_mm: float = 200.0,
-) -> float:
-    """The range error common to this frame's reflectors that their noise model lacks.
+    max_range_mm: float = 200.0,
+    max_bearing_rad: float = 1.0,
+) -> tuple[float, float]:
+    """The range (mm) and bearing (rad) errors this frame's reflectors show beyond their
+    noise model, as two variance components.
 
     Real ToF ranges carry systematic errors (cyclic, amplitude-related, per pixel) of
-    millimetres to centimetres that differ from reflector to reflector; a noise model
-    fitted to shot noise then calls every reflector an outlier. This returns the smallest
-    sigma_s >= 0 such that, with range sigmas sqrt(sigma_range^2 + sigma_s^2), the median
-    squared whitened residual equals the median of chi^2(3): a variance component
-    estimated from the frame itself, robust to a minority of true outliers (the median).
-    Shapes: x_mm, bearings (m, 3); ranges, sigmas (m,). 0 when the model already fits.
+    millimetres to centimetres that differ from reflector to reflector; small or blurred
+    markers seen against a plate that is not black have centroids off by tenths of a
+    pixel. A noise model fitted to shot noise then calls every reflector an outlier (or,
+    worse, trusts a biased bearing). Each component is the smallest sigma_s >= 0 such that,
+    with sigmas sqrt(sigma^2 + sigma_s^2), the median squared whitened residual of that
+    kind (range: 1 degree of freedom per reflector; lateral: 2) equals the median of its
+    chi^2: estimated from the frame itself, robust to a minority of true outliers (the
+    median), capped at ``max_range_mm`` / ``max_bearing_rad``. Estimated apart, a range
+    sigma does not grow to absorb bearing errors. Shapes: x_mm, bearings (m, 3);
+    ranges, sigmas (m,). (0, 0) when the model already fits.
     """
 
     e, rho, sr, sb = _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
-    return float(systematic_sigma(_f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb,
-                                  float(max_mm), MEDIAN_CHI2_3DOF))  # fmt: skip
+    er, eb = kernel_systematic_sigmas(_f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb,
+                                      float(max_range_mm), float(max_bearing_rad))  # fmt: skip
+    return float(er), float(eb)
 
 
 def common_range_bias_covariance(

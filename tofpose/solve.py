@@ -12,11 +12,13 @@ tracking frame calls too.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+import scipy.stats
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
@@ -31,13 +33,19 @@ from tofpose.kernels.pose import (
 )
 from tofpose.kernels.solve import solve_pairs
 from tofpose.kernels.verify import BEHIND_CAMERA, DARK_REFLECTOR, pose_check
-from tofpose.pose import MEDIAN_CHI2_3DOF, STEP_SIGMA2, MLResult
+from tofpose.pose import STEP_SIGMA2, MLResult
 
 _REFINEMENT = {"none": REFINE_NONE, "ml": REFINE_ML, "los": REFINE_LOS}
 
 if TYPE_CHECKING:  # the pipeline imports this module
     from tofpose.pipeline import PipelineConfig
     from tofpose.range_calibration import RangeCorrection
+
+
+@functools.cache
+def chi2_limit(dof: int, p: float) -> float:
+    """The p-quantile of chi^2 with ``dof`` degrees of freedom (SciPy)."""
+    return float(scipy.stats.chi2.ppf(p, dof))
 
 
 @dataclass(frozen=True)
@@ -194,14 +202,16 @@ class PoseSolver:
         if it is off by more than ``outlier_sigma`` (from 5 reflectors on: a fit of 3
         cannot single out the bad one of 4)."""
         cfg, cam = self.config, self.camera
-        (k_idx, i_idx, uv, e, y, kept, R, t, iterations, cov, chi2, norms, sr) = solve_pairs(
+        (k_idx, i_idx, uv, e, y, kept, R, t, iterations, cov, chi2, norms, sr,
+         sb) = solve_pairs(
             meas.y_mm, meas.weights, meas.uv_px, meas.range_mm, meas.sigma_px,
             meas.sigma_range_mm, np.ascontiguousarray(pairs[:, 0]),
             np.ascontiguousarray(pairs[:, 1]), self._xyz, self._d / 2, self._K, cam.fx, cam.fy,
             cam.cx, cam.cy, cam.dist_array, cfg.correct_perspective_bias,
             alpha_mm * cfg.matching.residual_factor, _REFINEMENT[cfg.refinement],
             cfg.los_tolerance, STEP_SIGMA2, cfg.adapt_range_sigma,
-            cfg.max_systematic_range_sigma_mm, MEDIAN_CHI2_3DOF, cfg.reject_outliers,
+            cfg.max_systematic_range_sigma_mm, cfg.max_systematic_centroid_sigma_px,
+            cfg.reject_outliers,
             cfg.matching.min_matches, cfg.outlier_sigma, cfg.outlier_chi2_per_dof,
         )  # fmt: skip
         obs = MatchedObservations(
@@ -210,30 +220,48 @@ class PoseSolver:
             sigma_bearing_rad=meas.sigma_px[k_idx] / cam.fx,
             sigma_range_mm=meas.sigma_range_mm[k_idx],
         )  # fmt: skip
-        return self.conclude(obs.subset(kept), R, t, iterations, cov, chi2, norms, sr, active)
+        return self.conclude(obs.subset(kept), R, t, iterations, cov, chi2, norms, sr, sb, active)
 
     def conclude(
-        self, obs: MatchedObservations, R, t, iterations, cov, chi2, norms, sr, active
+        self, obs: MatchedObservations, R, t, iterations, cov, chi2, norms, sr, sb, active
     ) -> Solution | Rejected:
-        """The fitted pose of ``obs`` (the reflectors kept): verified against the frame
-        (``active`` : the frame and its I_t; it is only read when few reflectors are
-        matched, ``dark_check_max_matches``), with the covariance of the fit (6, 6)
-        and of the common range bias the data cannot reveal."""
+        """The fitted pose of ``obs`` (the reflectors kept; ``sr`` mm, ``sb`` rad (m,):
+        the sigmas the fit used, the frame's excess components included): verified
+        against the frame (``active`` : the frame and its I_t; it is only read when few
+        reflectors are matched, ``dark_check_max_matches``), refused when its residuals
+        stay inconsistent with those sigmas (chi^2 beyond ``consistency_p``), with the
+        covariance of the fit (6, 6; the pipeline scales it by the a-posteriori variance
+        factor) and of the common range bias the data cannot reveal."""
         T = RigidTransform(R, t)
         if self.config.verify_pose:
             problem = self.verify(T, active, obs.i_idx)
             if problem:
                 return Rejected(f"pose rejected: {problem}", implausible=True)
+        dof = 3 * len(obs.i_idx) - 6
+        if self.config.consistency_p is not None and dof > 0:
+            limit = chi2_limit(dof, self.config.consistency_p)
+            if not chi2 <= limit:
+                return Rejected(self._inconsistent(obs, norms, float(chi2), dof, limit),
+                                implausible=True)  # fmt: skip
         bias = self.range_bias_sigma_mm(obs.range_mm)
         extra = (
-            range_bias_covariance(
-                obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, obs.sigma_bearing_rad, bias
-            )
+            range_bias_covariance(obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, sb, bias)
             if bias > 0
             else None
         )
         ml = MLResult(R, t, cov, float(chi2), int(iterations), norms, bias_covariance=extra)
         return Solution(T, obs, int(iterations), ml)
+
+    def _inconsistent(self, obs, norms, chi2: float, dof: int, limit: float) -> str:
+        """The reason for a pose whose residuals the measurement model cannot explain,
+        naming the reflectors that fit worst (whitened residual norms)."""
+        worst = np.argsort(-np.asarray(norms))[:3]
+        named = ", ".join(f"{int(self._ids[obs.i_idx[j]])}: {norms[j]:.1f}" for j in worst)
+        return (
+            f"pose rejected: residuals inconsistent with the measurement model (chi^2 "
+            f"{chi2:.1f} for {dof} degrees of freedom, limit {limit:.1f}; worst reflectors, "
+            f"whitened residual: {named})"
+        )
 
     def range_bias_sigma_mm(self, range_mm: np.ndarray) -> float:
         """Sigma of the common range offset for reflectors at ``range_mm`` (m,): the

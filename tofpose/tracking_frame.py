@@ -19,7 +19,7 @@ from tofpose.kernels.pose import REFINE_LOS, REFINE_ML, REFINE_NONE
 from tofpose.kernels.tracking import camera_windows
 from tofpose.kernels.tracking_frame import TRACKED, track_frame
 from tofpose.persistence import Persistence, PersistenceInfo
-from tofpose.pose import MEDIAN_CHI2_3DOF, STEP_SIGMA2
+from tofpose.pose import STEP_SIGMA2
 from tofpose.range_calibration import RangeCorrection, correction_kernel_arguments
 from tofpose.solve import (
     MatchedObservations,
@@ -78,7 +78,8 @@ class CompiledTracker:
                                           config.range_sigma_floor_mm)),
             _REFINEMENT[config.refinement], config.los_tolerance,
             STEP_SIGMA2, config.adapt_range_sigma, config.max_systematic_range_sigma_mm,
-            MEDIAN_CHI2_3DOF, config.reject_outliers, config.matching.min_matches,
+            config.max_systematic_centroid_sigma_px, config.reject_outliers,
+            config.matching.min_matches,
             config.outlier_sigma, config.outlier_chi2_per_dof,
         )  # fmt: skip
 
@@ -97,7 +98,7 @@ class CompiledTracker:
             return None
         hist_g, hist_d, hist_m, hist_c, n_hist = self._persistence.history(g, d)
         (code, n_used, motion, cent, flat, starts, uv, rho, sp, sr, y, w, uv_obs,
-         e_obs, y_obs, R, t, its, cov, chi2, norms, sr_fit) = track_frame(
+         e_obs, y_obs, R, t, its, cov, chi2, norms, sr_fit, sb_fit) = track_frame(
             g, d, bounds, centres, diameters, cat_idx, np.float32(track.threshold_counts),
             float(track.background_counts), hist_g, hist_d, hist_m, hist_c, n_hist,
             *self._camera_args, *self._fit_args, *self._persistence.scratch(g.shape),
@@ -111,7 +112,8 @@ class CompiledTracker:
             range_mm=rho, y_mm=y_obs, sigma_bearing_rad=sp / cam.fx, sigma_range_mm=sr,
         )  # fmt: skip
         active = ThresholdedFrame(g, track.threshold_counts)
-        solved = self._solver.conclude(obs, R, t, its, cov, chi2, norms, sr_fit, active)
+        solved = self._solver.conclude(obs, R, t, its, cov, chi2, norms, sr_fit, sb_fit,
+                                       active)  # fmt: skip
         if not isinstance(solved, Solution):
             return None
         if solved.ml.chi2 > cfg.outlier_chi2_per_dof * max(3 * n - 6, 1):

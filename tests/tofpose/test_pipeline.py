@@ -289,21 +289,26 @@ def test_ten_metres_gives_a_pose_on_almost_every_frame():
     assert n_ok >= 11
 
 
-@pytest.mark.parametrize(("reject", "expect_good"), [(True, True), (False, False)])
-def test_a_reflection_beside_a_marker_is_dropped_not_fitted(reject, expect_good):
+@pytest.mark.parametrize(
+    ("reject", "consistency_p", "expect_good"),
+    [(True, 1 - 1e-6, True), (False, 1 - 1e-6, True), (False, None, False)],
+)
+def test_a_reflection_beside_a_marker_is_dropped_not_fitted(reject, consistency_p, expect_good):
     """An 80 mm bright disc 60 mm in front of marker 6 and 20 mm to its side passes the
-    matching tolerance in its place; fitted, it bends the pose by ~6 deg. The outlier
-    step (residual > 6 predicted sigmas) drops it and keeps the other seven."""
+    matching tolerance in its place; fitted, it bends the pose. The outlier step
+    (residual > 6 predicted sigmas) drops it and keeps the others. Without that step the
+    fit with it is refused by the acceptance test (a misfit no noise can produce) and the
+    triplet fallback finds the consistent match without it; with neither, the bent pose
+    is reported."""
     T = facing_pose(3000.0, 2, -3, 12)
     scene = TargetScene(clutter=(Clutter((120.0, 60.0, 210.0), 80.0, 1.0),))
     f = render(T, seed=1, scene=scene)
-    pipe = PosePipeline(CameraModel(), paper_target(), PipelineConfig(reject_outliers=reject))
-    r = pipe.process(f.gray, f.distance_mm)
+    config = PipelineConfig(reject_outliers=reject, consistency_p=consistency_p)
+    r = PosePipeline(CameraModel(), paper_target(), config).process(f.gray, f.distance_mm)
     assert r.ok
     good = np.linalg.norm(r.t_mm - T.t_mm) < 2.0 and rotation_angle_deg(r.R, T.R) < 0.3
-    assert good == expect_good
-    if reject:
-        assert 6 not in [m.catalog_id for m in r.matched] and r.n_matched == 6
+    assert good == expect_good, (np.linalg.norm(r.t_mm - T.t_mm), rotation_angle_deg(r.R, T.R))
+    if expect_good:
         assert max(m.residual_mm for m in r.matched) < 3.0
 
 
@@ -337,9 +342,9 @@ def test_an_inconsistent_fit_reports_an_uncertainty_that_covers_its_error():
     T = facing_pose(3000.0, 2, -3, 12)
     scene = TargetScene(clutter=(Clutter((120.0, 60.0, 210.0), 80.0, 1.0),))
     f = render(T, seed=1, scene=scene)
-    r = PosePipeline(CameraModel(), paper_target(), PipelineConfig(reject_outliers=False)).process(
-        f.gray, f.distance_mm
-    )
+    # the acceptance test off too: it refuses this fit (tested above)
+    config = PipelineConfig(reject_outliers=False, consistency_p=None)
+    r = PosePipeline(CameraModel(), paper_target(), config).process(f.gray, f.distance_mm)
     err_mm = np.linalg.norm(r.t_mm - T.t_mm)
     sigma_mm = np.sqrt(np.trace(r.covariance[3:, 3:]))
     assert err_mm > 10.0 and err_mm / sigma_mm < 5.0
@@ -358,7 +363,9 @@ def test_a_biased_blob_absorbed_by_the_fit_is_found_by_leave_one_out(chi2_per_do
     from tofpose.sim.render import SensorModel, render_frame
 
     cam, cat = CameraModel(), paper_target()
-    pipe = PosePipeline(cam, cat, PipelineConfig(outlier_chi2_per_dof=chi2_per_dof))
+    # the acceptance test off: it would refuse some of these fits itself
+    config = PipelineConfig(outlier_chi2_per_dof=chi2_per_dof, consistency_p=None)
+    pipe = PosePipeline(cam, cat, config)
     ids, scene = list(cat.ids), TargetScene(cat)
     sensor = replace(SensorModel(), ambient_lux=10000.0)
     rng = np.random.default_rng([5, 10000])

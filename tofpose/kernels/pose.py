@@ -1,6 +1,7 @@
 """Pose from matched reflectors (§5), compiled: weighted SVD (Eqs. 40-50), the whitened
 residuals and Jacobian of the ToF measurement model (Eq. 10), Gauss-Newton maximum-
-likelihood refinement with its covariance, and the frame's systematic range sigma.
+likelihood refinement with its covariance, and the frame's excess range and bearing
+sigmas (variance components).
 
 The readable specification, input checks and docstrings are in ``tofpose.pose``, whose
 functions call these; shapes: x, e (m, 3); rho, sigmas (m,); R (3, 3); t (3,).
@@ -177,36 +178,59 @@ def ml_refine(x, e, rho, R0, t0, sr, sb, max_iterations, tol, step_sigma2):
     return R, t, cov, (r**2).sum(), iterations, reflector_norms(r)
 
 
+#: medians of chi-square with 1 (a range residual) and 2 (a lateral pair) degrees of freedom
+MEDIAN_CHI2_1DOF = 0.45494
+MEDIAN_CHI2_2DOF = 1.38629
+
+
 @jit
-def systematic_sigma(x, e, rho, R, t, sr, sb, max_mm, median_chi2):
-    """The smallest sigma_s >= 0 (mm) with which the median squared whitened residual
-    of the reflectors equals ``median_chi2`` (range sigmas sqrt(sr^2 + sigma_s^2)), by
-    bisection to max_mm / 2^16; 0 when the model already fits, max_mm when even that
-    does not."""
-    m = x.shape[0]
-    r, _ = residuals_jacobian(x, e, rho, R, t, np.ones(m), sb, tangent_bases(e))
-    lat2 = np.empty(m)
-    rng2 = np.empty(m)
-    for i in range(m):
-        lat2[i] = r[3 * i] ** 2 + r[3 * i + 1] ** 2
-        rng2[i] = r[3 * i + 2] ** 2
-    var = sr**2
+def _excess_sigma(z2, var, median_target, max_extra):
+    """The smallest extra >= 0 with median(z2 * var / (var + extra^2)) <= median_target,
+    by bisection to max_extra / 2^16; max_extra when even that does not reach it.
+    z2 (m,) : squared residuals whitened by sqrt(var) (m,)."""
+    scaled = np.empty(z2.shape[0])
 
-    def median_z2(extra):
-        return median_inplace(lat2 + rng2 / (var + extra**2))
+    def median_scaled(extra):
+        for i in range(z2.shape[0]):
+            scaled[i] = z2[i] * var[i] / (var[i] + extra * extra)
+        return median_inplace(scaled)
 
-    if median_z2(0.0) <= median_chi2:
+    if median_scaled(0.0) <= median_target:
         return 0.0
-    if median_z2(max_mm) > median_chi2:
-        return max_mm
-    lo, hi = 0.0, max_mm
+    if median_scaled(max_extra) > median_target:
+        return max_extra
+    lo, hi = 0.0, max_extra
     for _ in range(16):
         mid = 0.5 * (lo + hi)
-        if median_z2(mid) > median_chi2:
+        if median_scaled(mid) > median_target:
             lo = mid
         else:
             hi = mid
     return hi
+
+
+@jit
+def systematic_sigmas(x, e, rho, R, t, sr, sb, max_range_mm, max_bearing_rad):
+    """The frame's excess range sigma (mm) and excess bearing sigma (rad) that its noise
+    model lacks, estimated separately from the range and the lateral residuals (variance
+    components): the smallest values with which the median squared whitened range
+    residual equals the median of chi^2(1) and the median squared lateral pair that of
+    chi^2(2), each capped by what the sensor can do (``max_range_mm``: uncalibrated ToF
+    range errors; ``max_bearing_rad``: a matched centroid off by more than about half a
+    pixel is a blend or a wrong blob, not noise). Separate components keep a range sigma
+    from growing to absorb bearing errors (and the reverse)."""
+    m = x.shape[0]
+    r, _ = residuals_jacobian(x, e, rho, R, t, sr, sb, tangent_bases(e))
+    lat2 = np.empty(m)
+    rng2 = np.empty(m)
+    var_b = np.empty(m)
+    for i in range(m):
+        lat2[i] = r[3 * i] ** 2 + r[3 * i + 1] ** 2
+        rng2[i] = r[3 * i + 2] ** 2
+        var_b[i] = sb[i] ** 2
+    extra_range = _excess_sigma(rng2, sr**2, MEDIAN_CHI2_1DOF, max_range_mm)
+    extra_bearing = _excess_sigma(lat2, var_b, MEDIAN_CHI2_2DOF, max_bearing_rad)
+    return extra_range, extra_bearing
 
 
 #: refinement modes of ``fit_pose`` (PipelineConfig.refinement)
@@ -275,39 +299,41 @@ def fit_without(j, x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2):
 
 @jit
 def fit_adaptive(
-    x, e, rho, y, sr0, sb, refinement, los_tol, step_sigma2, adapt, max_sys, median_chi2
+    x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2, adapt, max_sys, max_sys_bearing
 ):
-    """``fit_pose`` with the noise model's range sigmas sr0, then (``adapt``, from 4
-    reflectors) again with the frame's systematic range sigma added: the smallest
-    estimate over the full fit and the fits leaving one reflector out, worst-fitting
-    first, stopping at 0 (``tofpose.solve.PoseSolver.solve`` documents why).
-    Returns R, t, iterations, covariance, chi^2, norms, the range sigmas used (m,)."""
+    """``fit_pose`` with the noise model's sigmas sr0 (mm), sb0 (rad), then (``adapt``,
+    from 4 reflectors) again with the frame's excess range and bearing sigmas added
+    (``systematic_sigmas``): for each, the smallest estimate over the full fit and the
+    fits leaving one reflector out, worst-fitting first, stopping at 0
+    (``tofpose.solve.PoseSolver.solve`` documents why).
+    Returns R, t, iterations, covariance, chi^2, norms, and the range sigmas (m,) and
+    bearing sigmas (m,) used."""
     R, t, its, cov, chi2, norms, w = fit_pose(
-        x, e, rho, y, sr0, sb, refinement, los_tol, step_sigma2
+        x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2
     )
     m = x.shape[0]
     if not adapt or m < 4:
-        return R, t, its, cov, chi2, norms, sr0
-    extra = systematic_sigma(x, e, rho, R, t, sr0, sb, max_sys, median_chi2)
-    if extra > 0 and m >= 5:
+        return R, t, its, cov, chi2, norms, sr0, sb0
+    er, eb = systematic_sigmas(x, e, rho, R, t, sr0, sb0, max_sys, max_sys_bearing)
+    if (er > 0 or eb > 0) and m >= 5:
         order = np.argsort(-norms, kind="mergesort")
         for j in order:
-            keep, Rj, tj = fit_without(j, x, e, rho, y, sr0, sb, refinement, los_tol, step_sigma2)
-            extra = min(
-                extra,
-                systematic_sigma(
-                    x[keep], e[keep], rho[keep], Rj, tj, sr0[keep], sb[keep], max_sys, median_chi2
-                ),
-            )
-            if extra <= 0:
+            keep, Rj, tj = fit_without(j, x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2)
+            er_j, eb_j = systematic_sigmas(
+                x[keep], e[keep], rho[keep], Rj, tj, sr0[keep], sb0[keep], max_sys,
+                max_sys_bearing,
+            )  # fmt: skip
+            er, eb = min(er, er_j), min(eb, eb_j)
+            if er <= 0 and eb <= 0:
                 break
-    if extra <= 0:
-        return R, t, its, cov, chi2, norms, sr0
-    sr = np.sqrt(sr0**2 + extra**2)
+    if er <= 0 and eb <= 0:
+        return R, t, its, cov, chi2, norms, sr0, sb0
+    sr = np.sqrt(sr0**2 + er**2)
+    sb = np.sqrt(sb0**2 + eb**2)
     R, t, its, cov, chi2, norms, w = fit_pose(
         x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2
     )
-    return R, t, its, cov, chi2, norms, sr
+    return R, t, its, cov, chi2, norms, sr, sb
 
 
 @jit
@@ -348,13 +374,13 @@ def fit_with_outliers(
     rho,
     y,
     sr0,
-    sb,
+    sb0,
     refinement,
     los_tol,
     step_sigma2,
     adapt,
     max_sys,
-    median_chi2,
+    max_sys_bearing,
     reject,
     min_matches,
     outlier_sigma,
@@ -362,12 +388,13 @@ def fit_with_outliers(
 ):
     """``fit_adaptive``, then (``reject``) drop the worst outlier and refit while one is
     found and more than ``min_matches`` remain. Returns the kept rows (m,) bool and the
-    final fit: R, t, iterations, covariance, chi^2, norms (kept,), range sigmas (kept,)."""
+    final fit: R, t, iterations, covariance, chi^2, norms (kept,), range sigmas (kept,),
+    bearing sigmas (kept,)."""
     m = x.shape[0]
     kept = np.ones(m, np.bool_)
     rows = np.arange(m)
-    R, t, its, cov, chi2, norms, sr = fit_adaptive(
-        x, e, rho, y, sr0, sb, refinement, los_tol, step_sigma2, adapt, max_sys, median_chi2
+    R, t, its, cov, chi2, norms, sr, sb = fit_adaptive(
+        x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2, adapt, max_sys, max_sys_bearing
     )
     while reject and rows.shape[0] > min_matches:
         worst = worst_outlier(
@@ -388,19 +415,20 @@ def fit_with_outliers(
             break
         kept[rows[worst]] = False
         keep = np.arange(rows.shape[0]) != worst
-        rows, x, e, rho, y, sr0, sb = (
+        rows, x, e, rho, y, sr0, sb0 = (
             rows[keep],
             x[keep],
             e[keep],
             rho[keep],
             y[keep],
             sr0[keep],
-            sb[keep],
+            sb0[keep],
         )
-        R, t, its, cov, chi2, norms, sr = fit_adaptive(
-            x, e, rho, y, sr0, sb, refinement, los_tol, step_sigma2, adapt, max_sys, median_chi2
-        )
-    return kept, R, t, its, cov, chi2, norms, sr
+        R, t, its, cov, chi2, norms, sr, sb = fit_adaptive(
+            x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2, adapt, max_sys,
+            max_sys_bearing,
+        )  # fmt: skip
+    return kept, R, t, its, cov, chi2, norms, sr, sb
 
 
 @jit

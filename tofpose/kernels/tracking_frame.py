@@ -32,7 +32,7 @@ def track_frame(
     fx, fy, cx, cy, dist, pixel_bearings, xyz, radii, K, correct_perspective,
     correct_range, corr_model, corr_harmonics, corr_offsets, floor_px, floor_mm, single_px,
     split_px, pool_min, median_eff, uncal_mm, refinement, los_tol, step_sigma2, adapt,
-    max_sys, median_chi2, reject, min_matches, outlier_sigma, chi2_per_dof, mean_buf,
+    max_sys, max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof, mean_buf,
     med_buf,
 ):  # fmt: skip
     """One tracking frame (module docstring).
@@ -53,7 +53,8 @@ def track_frame(
     uv (n, 2) measured centroids, rho (n,), sigma_px (n,), sigma_range (n,),
     y (n, 3) back-projected points (Eq. 8), weights (n,) (Eq. 21), uv_obs (n, 2)
     perspective-corrected, e_obs (n, 3), y_obs (n, 3), R, t, iterations, covariance
-    (6, 6), chi2, norms (n,), sr (n,)); the arrays after ``code`` are only meaningful up
+    (6, 6), chi2, norms (n,), sr (n,), sb (n,) the range and bearing sigmas of the fit);
+    the arrays after ``code`` are only meaningful up
     to the step that set it.
     """
     n = bounds.shape[0]
@@ -76,6 +77,7 @@ def track_frame(
     chi2 = np.inf
     norms = np.full(n, np.nan)
     sr_fit = np.full(n, np.nan)
+    sb_fit = np.full(n, np.nan)
     n_used, motion = 0, False
     code = TRACKED
     for _ in range(1):  # one pass; ``break`` ends the frame with ``code``
@@ -107,10 +109,11 @@ def track_frame(
             break
 
         # §5 on the known correspondences (every blob matched: nothing to complete)
-        (_, _, uv_obs, e_obs, y_obs, kept, R, t, its, cov, chi2, norms, sr_fit) = solve_pairs(
+        (_, _, uv_obs, e_obs, y_obs, kept, R, t, its, cov, chi2, norms, sr_fit,
+         sb_fit) = solve_pairs(
             y, wts, uv, rho, sp, sr, np.arange(n), cat_idx, xyz, radii, K, fx, fy, cx, cy,
             dist, correct_perspective, 0.0, refinement, los_tol, step_sigma2, adapt, max_sys,
-            median_chi2, reject, min_matches, outlier_sigma, chi2_per_dof,
+            max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof,
         )  # fmt: skip
         if not kept.all():
             code = OUTLIER
@@ -137,4 +140,5 @@ def track_frame(
         chi2,
         norms,
         sr_fit,
+        sb_fit,
     )

@@ -71,7 +71,12 @@ class SensorModel:
     supersampling : int
         S: edge pixels are sampled on an S x S grid (1 = pixel centres only).
     blur_sigma_px : float
-        Gaussian PSF sigma in pixels (0 = no blur).
+        PSF core sigma in pixels (0 = no blur). Real ToF lenses blur by 0.3-1.5 px
+        (defocus over the working range, a wide aperture for the weak return).
+    psf_halo_fraction, psf_halo_scale : a measured lens's PSF is not one Gaussian: a
+        core of sigma ``blur_sigma_px`` and a halo (scattered light in the glass and on
+        the sensor) carrying ``psf_halo_fraction`` of the energy with ``psf_halo_scale``
+        times the core's sigma (0: a Gaussian PSF).
     noise : bool
         False renders the noiseless expectation.
     systematic : SystematicErrors or None
@@ -98,6 +103,8 @@ class SensorModel:
     min_amplitude_counts: float = 4.0
     supersampling: int = 4
     blur_sigma_px: float = 0.0
+    psf_halo_fraction: float = 0.0
+    psf_halo_scale: float = 4.0
     noise: bool = True
     systematic: SystematicErrors | None = None
     motion_artefacts: bool = True
@@ -179,7 +186,9 @@ def _sample_returns(
     disc = sid >= FIRST_DISC
     if np.any(disc):
         k = sid[disc].astype(int) - FIRST_DISC
-        refl[disc] = sensor.retro_gain * sc.disc_gains[k] * cos_inc[disc] ** 3
+        refl[disc] = (
+            sensor.retro_gain * sc.disc_gains[k] * cos_inc[disc] ** scene.retro_falloff_exponent
+        )
         diffuse[disc] = scene.reflector_diffuse_reflectance
     hit = sid != NO_HIT
     a = np.zeros(len(d))
@@ -249,6 +258,7 @@ def _phasor_images(
 
     kernel = np.ones((3, 3), np.uint8)
     mixed = cv2.dilate(sid_img, kernel) != cv2.erode(sid_img, kernel)
+    mixed |= _disc_rims(camera, sc)
     if sensor.supersampling > 1:
         idx = np.flatnonzero(mixed)
         if len(idx):
@@ -265,6 +275,50 @@ def _phasor_images(
 
     re_img, im_img, b_img = (x.reshape(h, w) for x in (phasor_re, phasor_im, b))
     return re_img, im_img, b_img, sid_img, d.reshape(h, w), mixed
+
+
+def _disc_rims(camera: CameraModel, sc: SceneInCamera) -> np.ndarray:
+    """(H, W) bool: the pixels a disc can cover in part, found from its geometry (the
+    annulus between the projected disc's minor and major radius, 1.5 px each way).
+    Surface changes between pixel centres miss a disc of 1-2 px that covers no centre or
+    one: without these pixels such a marker would be rendered by its centre samples
+    alone, or not at all, instead of by the area it covers."""
+    h, w = camera.height, camera.width
+    rims = np.zeros((h, w), bool)
+    front = sc.disc_centres[:, 2] > 0
+    if not front.any():
+        return rims
+    centres = sc.disc_centres[front]
+    uv = camera.project(centres)
+    dist = np.linalg.norm(centres, axis=1)
+    cos_view = np.abs(np.einsum("ij,ij->i", sc.disc_normals[front], centres)) / dist
+    r_major = sc.disc_radii[front] * camera.fx / centres[:, 2]
+    r_minor = r_major * cos_view
+    vv, uu = np.mgrid[0:h, 0:w]
+    for (u, v), lo, hi in zip(uv, r_minor - 1.5, r_major + 1.5, strict=True):
+        u0, u1 = int(max(np.floor(u - hi), 0)), int(min(np.ceil(u + hi) + 1, w))
+        v0, v1 = int(max(np.floor(v - hi), 0)), int(min(np.ceil(v + hi) + 1, h))
+        if u0 >= u1 or v0 >= v1:
+            continue
+        d = np.hypot(uu[v0:v1, u0:u1] - u, vv[v0:v1, u0:u1] - v)
+        rims[v0:v1, u0:u1] |= (d >= lo) & (d <= hi)
+    return rims
+
+
+def _psf(image: np.ndarray, sensor: SensorModel) -> np.ndarray:
+    """The image (H, W) through the lens's PSF: a Gaussian core of ``blur_sigma_px`` plus
+    a halo of ``psf_halo_fraction`` of the energy, ``psf_halo_scale`` times as wide
+    (applied to the phasor's parts: blur mixes returns as a real lens does)."""
+
+    def gaussian(x, sigma):
+        ks = 2 * int(np.ceil(3 * sigma)) + 1
+        return cv2.GaussianBlur(x, (ks, ks), sigma)
+
+    core = gaussian(image, sensor.blur_sigma_px)
+    if sensor.psf_halo_fraction <= 0:
+        return core
+    halo = gaussian(image, sensor.blur_sigma_px * sensor.psf_halo_scale)
+    return (1.0 - sensor.psf_halo_fraction) * core + sensor.psf_halo_fraction * halo
 
 
 def _same_pose(a: RigidTransform, b: RigidTransform) -> bool:
@@ -343,10 +397,7 @@ def render_frame(
         for x in subs:
             moved |= x[3] != sid_img
     if sensor.blur_sigma_px > 0:
-        ks = 2 * int(np.ceil(3 * sensor.blur_sigma_px)) + 1
-        re_img, im_img, b_img = (
-            cv2.GaussianBlur(x, (ks, ks), sensor.blur_sigma_px) for x in (re_img, im_img, b_img)
-        )
+        re_img, im_img, b_img = (_psf(x, sensor) for x in (re_img, im_img, b_img))
     amp = np.hypot(re_img, im_img)
     true_d = np.mod(np.arctan2(im_img, re_img), 2 * np.pi) * sensor.mm_per_radian
     # The phasor angle is already wrapped; keep the unwrapped truth for tests where we can.

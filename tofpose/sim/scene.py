@@ -44,6 +44,16 @@ class TargetScene:
         A Lambertian wall parallel to the plate, this far behind it; None for no wall.
     wall_reflectance : float
     clutter : tuple of Clutter
+    reflector_gains : per catalog reflector, its retro-reflective return relative to a
+        new one (ageing, dirt, a batch of different film: real targets spread by 10-30 %);
+        None: all 1.
+    retro_falloff_exponent : the retro-reflectors' return falls off as cos^n of the
+        incidence angle (n = 3 here, times the cos of the projected area: cos^4 in all
+        for n = 3; cube-corner sheeting falls off faster, glass beads slower).
+
+    Plate brightness: ``plate_reflectance`` 0.10 is black anodised aluminium; a
+    mock-up covered in multi-layer insulation (MLI) returns 0.3-0.6 of a white diffuser at
+    850 nm in the directions a camera beside its illuminator sees.
     """
 
     catalog: Catalog = field(default_factory=paper_target)
@@ -52,6 +62,15 @@ class TargetScene:
     wall_distance_mm: float | None = 2000.0
     wall_reflectance: float = 0.4
     clutter: tuple[Clutter, ...] = ()
+    reflector_gains: tuple[float, ...] | None = None
+    retro_falloff_exponent: float = 3.0
+
+    def __post_init__(self) -> None:
+        if self.reflector_gains is not None and len(self.reflector_gains) != len(self.catalog):
+            raise ValueError(
+                f"reflector_gains has {len(self.reflector_gains)} values, the catalog "
+                f"{len(self.catalog)} reflectors"
+            )
 
     def in_camera(self, T_camera_target: RigidTransform) -> SceneInCamera:
         """Surfaces transformed into the camera frame. Raises ``ValueError`` when the
@@ -63,7 +82,10 @@ class TargetScene:
         cat = self.catalog
         centres = T_camera_target.apply(cat.positions_mm)
         radii = cat.diameters_mm / 2
-        gains = np.ones(len(cat))
+        gains = (
+            np.ones(len(cat)) if self.reflector_gains is None
+            else np.asarray(self.reflector_gains, float)
+        )  # fmt: skip
         normals = np.repeat(normal[None], len(cat), axis=0)
         if self.clutter:
             c_pos = np.array([c.position_mm for c in self.clutter], float)
