@@ -111,7 +111,8 @@ class PipelineConfig:
         components included) exceeds this quantile of chi^2(3m - 6): a misfit that no
         noise can produce (a one-in-a-million tail), left when a component reached its
         cap or from the minimum number of markers, where no outlier can be singled out
-        and no component is estimated. None: no test. Below the limit, a chi^2 per
+        and no component is estimated. Only with ``refinement="ml"`` (the chi^2 of an
+        SVD or LOS pose is not minimised). None: no test. Below the limit, a chi^2 per
         degree of freedom above 1 scales the reported covariance up by it
         (``variance_factor``).
     outlier_chi2_per_dof : above this chi^2 per degree of freedom the fit is inconsistent
@@ -166,6 +167,7 @@ class PipelineConfig:
             adapt_range_sigma=False,
             range_bias_sigma_mm=0.0,
             calibrated_range_bias_sigma_mm=0.0,
+            consistency_p=None,
         )
 
 

@@ -238,7 +238,8 @@ class PoseSolver:
             if problem:
                 return Rejected(f"pose rejected: {problem}", implausible=True)
         dof = 3 * len(obs.i_idx) - 6
-        if self.config.consistency_p is not None and dof > 0:
+        # chi^2 at the ML optimum only: an SVD or LOS pose's chi^2 is not minimised
+        if self.config.consistency_p is not None and dof > 0 and self.config.refinement == "ml":
             limit = chi2_limit(dof, self.config.consistency_p)
             if not chi2 <= limit:
                 return Rejected(self._inconsistent(obs, norms, float(chi2), dof, limit),
