@@ -7,16 +7,23 @@ PY     := $(VENV)/bin/python
 
 FRONTEND_SRC := $(shell find frontend/src -type f 2>/dev/null) frontend/index.html frontend/vite.config.ts frontend/tsconfig.json
 
-# The venv: the server compiles the pipeline kernels itself, in the background, on its first
-# start (frames stream meanwhile); `make test` compiles them first (warm-up below).
+# The venv with what the server needs: the server compiles the pipeline kernels itself, in
+# the background, on its first start (frames stream meanwhile).
 $(VENV)/.installed: pyproject.toml
-	@echo "[setup] creating $(VENV) and installing tofpose with its dependencies (pip; ~40 s with a warm package cache)"
+	@echo "[setup] creating $(VENV) and installing tofpose with its dependencies (pip)"
 	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet -e .
+	touch $@
+
+# The test, lint and device tools on top (pytest, playwright, schemathesis, the real
+# devices' client libraries): `make test`, `make lint`, `make bench`.
+$(VENV)/.dev: $(VENV)/.installed
+	@echo "[setup] installing the test tools (pip, the dev extra)"
 	$(PY) -m pip install --quiet -e '.[dev]'
 	touch $@
 
 # numba's on-disk cache of the pipeline kernels (~1-2 min once, seconds when cached)
-$(VENV)/.kernels: $(VENV)/.installed $(shell find tofpose -name '*.py')
+$(VENV)/.kernels: $(VENV)/.dev $(shell find tofpose -name '*.py')
 	@echo "[setup] compiling the pipeline kernels into numba's cache (~1-2 min the first time)"
 	$(VENV)/bin/tofpose warm-up
 	touch $@
@@ -38,7 +45,7 @@ run:
 	@echo "[run] starting the server (on a first start it compiles the pipeline kernels in the background: frames stream at once, poses follow in ~1-2 min)"
 	$(VENV)/bin/tofpose serve
 
-lint: $(VENV)/.installed
+lint: $(VENV)/.dev
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/lint-imports
 

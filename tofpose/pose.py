@@ -220,6 +220,8 @@ class MLResult:
         (as ``reflector_whitened_norms``).
     bias_covariance : (6, 6) added by a common range offset the data cannot reveal
         (``common_range_bias_covariance``), or None.
+    range_offset_mm : the range offset common to the reflectors that the fit estimated
+        and took out of their ranges (``kernels.pose.common_range_offset``; 0: none).
     """
 
     R: np.ndarray
@@ -229,6 +231,7 @@ class MLResult:
     iterations: int
     reflector_norms: np.ndarray
     bias_covariance: np.ndarray | None = None
+    range_offset_mm: float = 0.0
 
 
 def refine_maximum_likelihood(

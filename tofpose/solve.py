@@ -202,8 +202,9 @@ class PoseSolver:
         if it is off by more than ``outlier_sigma`` (from 5 reflectors on: a fit of 3
         cannot single out the bad one of 4)."""
         cfg, cam = self.config, self.camera
-        (k_idx, i_idx, uv, e, y, kept, R, t, iterations, cov, chi2, norms, sr,
-         sb) = solve_pairs(
+        prior_mm = self.offset_prior_mm(meas.range_mm[pairs[:, 0]])
+        (k_idx, i_idx, uv, e, y, kept, R, t, iterations, cov, chi2, norms, sr, sb, offset,
+         offset_sigma) = solve_pairs(
             meas.y_mm, meas.weights, meas.uv_px, meas.range_mm, meas.sigma_px,
             meas.sigma_range_mm, np.ascontiguousarray(pairs[:, 0]),
             np.ascontiguousarray(pairs[:, 1]), self._xyz, self._d / 2, self._K, cam.fx, cam.fy,
@@ -212,19 +213,28 @@ class PoseSolver:
             cfg.los_tolerance, STEP_SIGMA2, cfg.adapt_range_sigma,
             cfg.max_systematic_range_sigma_mm, cfg.max_systematic_centroid_sigma_px,
             cfg.reject_outliers,
-            cfg.matching.min_matches, cfg.outlier_sigma, cfg.outlier_chi2_per_dof,
+            cfg.matching.min_matches, cfg.outlier_sigma, cfg.outlier_chi2_per_dof, prior_mm,
         )  # fmt: skip
         obs = MatchedObservations(
             k_idx=k_idx, i_idx=i_idx, x_mm=self._xyz[i_idx], uv_px=uv, bearings=e,
-            range_mm=meas.range_mm[k_idx], y_mm=y,
+            range_mm=meas.range_mm[k_idx] - offset, y_mm=y - e * offset,
             sigma_bearing_rad=meas.sigma_px[k_idx] / cam.fx,
             sigma_range_mm=meas.sigma_range_mm[k_idx],
         )  # fmt: skip
-        return self.conclude(obs.subset(kept), R, t, iterations, cov, chi2, norms, sr, sb, active)
+        return self.conclude(obs.subset(kept), R, t, iterations, cov, chi2, norms, sr, sb,
+                             active, offset, offset_sigma)  # fmt: skip
+
+    def offset_prior_mm(self, range_mm: np.ndarray) -> float:
+        """Prior sigma of the common range offset the fit estimates (mm; 0: none):
+        ``range_bias_sigma_mm`` for these ranges, when ``estimate_range_offset``."""
+        if not self.config.estimate_range_offset:
+            return 0.0
+        return self.range_bias_sigma_mm(range_mm)
 
     def conclude(
-        self, obs: MatchedObservations, R, t, iterations, cov, chi2, norms, sr, sb, active
-    ) -> Solution | Rejected:
+        self, obs: MatchedObservations, R, t, iterations, cov, chi2, norms, sr, sb, active,
+        offset_mm: float = 0.0, offset_sigma_mm: float | None = None,
+    ) -> Solution | Rejected:  # fmt: skip
         """The fitted pose of ``obs`` (the reflectors kept; ``sr`` mm, ``sb`` rad (m,):
         the sigmas the fit used, the frame's excess components included): verified
         against the frame (``active`` : the frame and its I_t; it is only read when few
@@ -244,13 +254,18 @@ class PoseSolver:
             if not chi2 <= limit:
                 return Rejected(self._inconsistent(obs, norms, float(chi2), dof, limit),
                                 implausible=True)  # fmt: skip
-        bias = self.range_bias_sigma_mm(obs.range_mm)
+        # the common offset's uncertainty: its posterior sigma when the fit estimated it
+        # (``obs`` then holds the ranges with the offset taken out), else the prior's
+        bias = offset_sigma_mm if offset_sigma_mm is not None and offset_mm != 0 else (
+            self.range_bias_sigma_mm(obs.range_mm)
+        )  # fmt: skip
         extra = (
             range_bias_covariance(obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, sb, bias)
             if bias > 0
             else None
         )
-        ml = MLResult(R, t, cov, float(chi2), int(iterations), norms, bias_covariance=extra)
+        ml = MLResult(R, t, cov, float(chi2), int(iterations), norms, bias_covariance=extra,
+                      range_offset_mm=float(offset_mm))  # fmt: skip
         return Solution(T, obs, int(iterations), ml)
 
     def _inconsistent(self, obs, norms, chi2: float, dof: int, limit: float) -> str:

@@ -81,6 +81,10 @@ class CompiledTracker:
             config.max_systematic_centroid_sigma_px, config.reject_outliers,
             config.matching.min_matches,
             config.outlier_sigma, config.outlier_chi2_per_dof,
+            # the offset's prior: the tracker has no ranges yet; a corrected camera's
+            # calibrated sigma (its span is checked again when the pose is concluded)
+            (0.0 if not config.estimate_range_offset else config.range_bias_sigma_mm
+             if correction is None else config.calibrated_range_bias_sigma_mm),
         )  # fmt: skip
 
     def track(self, g: np.ndarray, d: np.ndarray, track: TrackState) -> Tracked | None:
@@ -98,7 +102,8 @@ class CompiledTracker:
             return None
         hist_g, hist_d, hist_m, hist_c, n_hist = self._persistence.history(g, d)
         (code, n_used, motion, cent, flat, starts, uv, rho, sp, sr, y, w, uv_obs,
-         e_obs, y_obs, R, t, its, cov, chi2, norms, sr_fit, sb_fit) = track_frame(
+         e_obs, y_obs, R, t, its, cov, chi2, norms, sr_fit, sb_fit, offset,
+         offset_sigma) = track_frame(
             g, d, bounds, centres, diameters, cat_idx, np.float32(track.threshold_counts),
             float(track.background_counts), hist_g, hist_d, hist_m, hist_c, n_hist,
             *self._camera_args, *self._fit_args, *self._persistence.scratch(g.shape),
@@ -109,11 +114,12 @@ class CompiledTracker:
         k_idx = np.arange(n)
         obs = MatchedObservations(
             k_idx=k_idx, i_idx=cat_idx, x_mm=self._xyz[cat_idx], uv_px=uv_obs, bearings=e_obs,
-            range_mm=rho, y_mm=y_obs, sigma_bearing_rad=sp / cam.fx, sigma_range_mm=sr,
+            range_mm=rho - offset, y_mm=y_obs - e_obs * offset, sigma_bearing_rad=sp / cam.fx,
+            sigma_range_mm=sr,
         )  # fmt: skip
         active = ThresholdedFrame(g, track.threshold_counts)
         solved = self._solver.conclude(obs, R, t, its, cov, chi2, norms, sr_fit, sb_fit,
-                                       active)  # fmt: skip
+                                       active, offset, offset_sigma)  # fmt: skip
         if not isinstance(solved, Solution):
             return None
         if solved.ml.chi2 > cfg.outlier_chi2_per_dof * max(3 * n - 6, 1):

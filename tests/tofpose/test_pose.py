@@ -161,3 +161,33 @@ def test_excess_sigmas_stop_at_what_the_sensor_can_do():
                                max_bearing_rad=5e-4)  # fmt: skip
     assert (er, eb) == (25.0, 5e-4)
     assert systematic_sigmas(x, e, rho, R, t, sr, sb, 25.0, 5e-4) == (er, eb)
+
+
+@pytest.mark.parametrize(("bearing_sigma_rad", "expect_found"), [(2e-5, True), (2e-3, False)])
+def test_a_common_range_offset_is_found_when_the_image_scale_fixes_the_distance(
+    bearing_sigma_rad, expect_found
+):
+    """Ranges all read 20 mm long (an uncalibrated camera's offset). With sharp bearings
+    the target's image scale fixes its distance and the offset is estimated (posterior
+    sigma well below the 8 mm prior); with blurred ones the data hardly know it: it is
+    shrunk towards the prior's 0, with most of the prior's sigma."""
+    from tofpose.kernels.pose import common_range_offset
+
+    x = paper_target().positions_mm
+    R, t = _truth(5)
+    y = x @ R.T + t
+    rho = np.linalg.norm(y, axis=1)
+    e = y / rho[:, None]
+    rng = np.random.default_rng(2)
+    e = e + rng.normal(0, bearing_sigma_rad, e.shape)
+    e /= np.linalg.norm(e, axis=1, keepdims=True)
+    rho_measured = rho + 20.0 + rng.normal(0, 1.0, len(x))
+    sr, sb = np.full(len(x), 1.0), np.full(len(x), bearing_sigma_rad)
+    R0, t0 = weighted_svd(x, e * rho_measured[:, None])
+    ml = refine_maximum_likelihood(x, e, rho_measured, R0, t0, sr, sb)
+    offset, sigma = common_range_offset(x, e, rho_measured, ml.R, ml.t, sr, sb, 8.0)
+    if expect_found:
+        assert offset == pytest.approx(20.0, abs=3 * sigma) and sigma < 2.0
+    else:
+        assert sigma > 5.0  # most of the 8 mm prior: the data hardly know it
+        assert abs(offset) < 20.0 - sigma  # shrunk towards the prior's 0

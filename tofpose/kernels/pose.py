@@ -367,6 +367,49 @@ def worst_outlier(
     return worst if predicted[worst] > outlier_sigma else -1
 
 
+#: Gauss-Newton steps of the common range offset's estimate (from a converged 6-parameter fit)
+OFFSET_ITERATIONS = 3
+#: the offset is taken out of the ranges only when it differs from 0 at 99 % confidence
+#: ((b / sigma_b)^2 above the 0.99 quantile of chi^2(1)); otherwise the prior stands
+OFFSET_SIGNIFICANCE = 6.635
+
+
+@jit
+def common_range_offset(x, e, rho, R0, t0, sr, sb, prior_sigma_mm):
+    """The range offset b (mm) common to every reflector (ranges read ``|p| + b``), with
+    the pose, by Gauss-Newton on (rotation, translation, b) from (R0, t0), with the prior
+    b ~ N(0, prior_sigma_mm^2) as one more residual. The image scale (the bearings)
+    determines b when the target is large enough in the image; otherwise the prior
+    keeps it near 0. Returns b, its posterior sigma (mm)."""
+    m = x.shape[0]
+    if prior_sigma_mm <= 0:
+        return 0.0, 0.0
+    R, t, b = R0.copy(), t0.copy(), 0.0
+    B = tangent_bases(e)
+    J7 = np.zeros((3 * m + 1, 7))
+    r7 = np.zeros(3 * m + 1)
+    sigma_b = prior_sigma_mm
+    for _ in range(OFFSET_ITERATIONS):
+        r, J = residuals_jacobian(x, e, rho - b, R, t, sr, sb, B)
+        for i in range(3 * m):
+            r7[i] = r[i]
+            for k in range(6):
+                J7[i, k] = J[i, k]
+        for i in range(m):
+            J7[3 * i + 2, 6] = 1.0 / sr[i]
+        r7[3 * m] = b / prior_sigma_mm
+        J7[3 * m, 6] = 1.0 / prior_sigma_mm
+        L, ok = cholesky(gram(J7))
+        if not ok:
+            return 0.0, prior_sigma_mm
+        delta = -cholesky_solve(L, transposed_times(J7, r7))
+        R = matmul3(rotation_step(delta[:3]), R)
+        t = t + delta[3:6]
+        b = b + delta[6]
+        sigma_b = np.sqrt(cholesky_inverse(L)[6, 6])
+    return b, sigma_b
+
+
 @jit
 def fit_with_outliers(
     x,
@@ -385,17 +428,37 @@ def fit_with_outliers(
     min_matches,
     outlier_sigma,
     chi2_per_dof,
+    offset_prior_mm,
 ):
-    """``fit_adaptive``, then (``reject``) drop the worst outlier and refit while one is
-    found and more than ``min_matches`` remain. Returns the kept rows (m,) bool and the
-    final fit: R, t, iterations, covariance, chi^2, norms (kept,), range sigmas (kept,),
-    bearing sigmas (kept,)."""
+    """``fit_adaptive``; then (``offset_prior_mm`` > 0, ML refinement, 4 reflectors or
+    more) the range offset common to all reflectors (``common_range_offset``) taken out
+    of the ranges and the fit repeated when it differs from 0 at 99 % confidence
+    (``OFFSET_SIGNIFICANCE``); then (``reject``) drop the worst outlier and
+    refit while one is found and more than ``min_matches`` remain. Returns the kept rows
+    (m,) bool and the final fit: R, t, iterations, covariance, chi^2, norms (kept,),
+    range sigmas (kept,), bearing sigmas (kept,), the common offset b (mm, 0 when not
+    estimated) and its posterior sigma (mm; the prior's when not estimated)."""
     m = x.shape[0]
     kept = np.ones(m, np.bool_)
     rows = np.arange(m)
     R, t, its, cov, chi2, norms, sr, sb = fit_adaptive(
         x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2, adapt, max_sys, max_sys_bearing
     )
+    offset, offset_sigma = 0.0, offset_prior_mm
+    if offset_prior_mm > 0 and refinement == REFINE_ML and m >= 4:
+        offset, offset_sigma = common_range_offset(x, e, rho, R, t, sr, sb, offset_prior_mm)
+    if offset * offset > OFFSET_SIGNIFICANCE * offset_sigma * offset_sigma:
+        rho = rho - offset
+        y = np.empty_like(y)
+        for i in range(m):
+            for k in range(3):
+                y[i, k] = e[i, k] * rho[i]
+        R, t, its, cov, chi2, norms, sr, sb = fit_adaptive(
+            x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2, adapt, max_sys,
+            max_sys_bearing,
+        )  # fmt: skip
+    else:  # not distinguishable from 0: the prior stands
+        offset, offset_sigma = 0.0, offset_prior_mm
     while reject and rows.shape[0] > min_matches:
         worst = worst_outlier(
             x,
@@ -428,7 +491,7 @@ def fit_with_outliers(
             x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2, adapt, max_sys,
             max_sys_bearing,
         )  # fmt: skip
-    return kept, R, t, its, cov, chi2, norms, sr, sb
+    return kept, R, t, its, cov, chi2, norms, sr, sb, offset, offset_sigma
 
 
 @jit

@@ -65,7 +65,7 @@ def complete_pairs(y, k_idx, i_idx, xyz, R, t, tol_mm):
 def solve_pairs(
     y, w, uv, rho, sigma_px, sigma_range, k_idx, i_idx, xyz, radii, K, fx, fy, cx, cy,
     dist, correct_perspective, complete_tol_mm, refinement, los_tol, step_sigma2, adapt,
-    max_sys, max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof,
+    max_sys, max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior_mm,
 ):  # fmt: skip
     """The pose of matched pairs (module docstring).
 
@@ -79,7 +79,8 @@ def solve_pairs(
     Returns k_idx, i_idx (m',) after completion, uv_obs (m', 2) corrected centroids,
     e_obs (m', 3) their bearings, y_obs (m', 3) points, then what ``fit_with_outliers``
     returns (kept (m',) bool, R, t, iterations, covariance, chi^2, norms, range sigmas,
-    bearing sigmas).
+    bearing sigmas, common range offset mm and its sigma). ``y_obs`` and the ranges are
+    as measured: the offset is not taken out of them here.
     """
     x = np.empty((k_idx.shape[0], 3))
     for a in range(k_idx.shape[0]):
@@ -114,9 +115,9 @@ def solve_pairs(
         y_obs[a] = e_obs[a] * rho_m[a]
         sb[a] = sigma_px[k_idx[a]] / fx
         sr[a] = sigma_range[k_idx[a]]
-    kept, R, t, its, cov, chi2, norms, sr_fit, sb_fit = fit_with_outliers(
+    kept, R, t, its, cov, chi2, norms, sr_fit, sb_fit, offset, offset_sigma = fit_with_outliers(
         x, e_obs, rho_m, y_obs, sr, sb, refinement, los_tol, step_sigma2, adapt, max_sys,
-        max_sys_px / fx, reject, min_matches, outlier_sigma, chi2_per_dof,
+        max_sys_px / fx, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior_mm,
     )  # fmt: skip
     return (k_idx, i_idx, uv_obs, e_obs, y_obs, kept, R, t, its, cov, chi2, norms, sr_fit,
-            sb_fit)  # fmt: skip
+            sb_fit, offset, offset_sigma)  # fmt: skip

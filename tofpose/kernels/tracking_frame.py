@@ -32,8 +32,8 @@ def track_frame(
     fx, fy, cx, cy, dist, pixel_bearings, xyz, radii, K, correct_perspective,
     correct_range, corr_model, corr_harmonics, corr_offsets, floor_px, floor_mm, single_px,
     split_px, pool_min, median_eff, uncal_mm, refinement, los_tol, step_sigma2, adapt,
-    max_sys, max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof, mean_buf,
-    med_buf,
+    max_sys, max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior_mm,
+    mean_buf, med_buf,
 ):  # fmt: skip
     """One tracking frame (module docstring).
 
@@ -53,7 +53,8 @@ def track_frame(
     uv (n, 2) measured centroids, rho (n,), sigma_px (n,), sigma_range (n,),
     y (n, 3) back-projected points (Eq. 8), weights (n,) (Eq. 21), uv_obs (n, 2)
     perspective-corrected, e_obs (n, 3), y_obs (n, 3), R, t, iterations, covariance
-    (6, 6), chi2, norms (n,), sr (n,), sb (n,) the range and bearing sigmas of the fit);
+    (6, 6), chi2, norms (n,), sr (n,), sb (n,) the range and bearing sigmas of the fit,
+    the common range offset mm and its sigma);
     the arrays after ``code`` are only meaningful up
     to the step that set it.
     """
@@ -78,6 +79,7 @@ def track_frame(
     norms = np.full(n, np.nan)
     sr_fit = np.full(n, np.nan)
     sb_fit = np.full(n, np.nan)
+    offset, offset_sigma = 0.0, offset_prior_mm
     n_used, motion = 0, False
     code = TRACKED
     for _ in range(1):  # one pass; ``break`` ends the frame with ``code``
@@ -109,11 +111,11 @@ def track_frame(
             break
 
         # §5 on the known correspondences (every blob matched: nothing to complete)
-        (_, _, uv_obs, e_obs, y_obs, kept, R, t, its, cov, chi2, norms, sr_fit,
-         sb_fit) = solve_pairs(
+        (_, _, uv_obs, e_obs, y_obs, kept, R, t, its, cov, chi2, norms, sr_fit, sb_fit,
+         offset, offset_sigma) = solve_pairs(
             y, wts, uv, rho, sp, sr, np.arange(n), cat_idx, xyz, radii, K, fx, fy, cx, cy,
             dist, correct_perspective, 0.0, refinement, los_tol, step_sigma2, adapt, max_sys,
-            max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof,
+            max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior_mm,
         )  # fmt: skip
         if not kept.all():
             code = OUTLIER
@@ -141,4 +143,6 @@ def track_frame(
         norms,
         sr_fit,
         sb_fit,
+        offset,
+        offset_sigma,
     )
