@@ -12,7 +12,7 @@ FRONTEND_SRC := $(shell find frontend/src -type f 2>/dev/null) frontend/index.ht
 $(VENV)/.installed: pyproject.toml
 	@echo "[setup] creating $(VENV) and installing tofpose with its dependencies (pip)"
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet -e .
+	$(PY) -m pip install --quiet --no-compile --disable-pip-version-check -e .
 	touch $@
 
 # The test, lint and device tools on top (pytest, playwright, schemathesis, the real
@@ -24,7 +24,9 @@ $(VENV)/.dev: $(VENV)/.installed
 
 # numba's on-disk cache of the pipeline kernels (~1-2 min once, seconds when cached)
 $(VENV)/.kernels: $(VENV)/.dev $(shell find tofpose -name '*.py')
-	@echo "[setup] compiling the pipeline kernels into numba's cache (~1-2 min the first time)"
+	@echo "[setup] compiling the pipeline kernels into numba's cache (~1-2 min)"
+	@# numba does not recompile a cached kernel when one it calls, in another file, changed
+	find tofpose -name '*.nbi' -delete -o -name '*.nbc' -delete
 	$(VENV)/bin/tofpose warm-up
 	touch $@
 

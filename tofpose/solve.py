@@ -188,19 +188,19 @@ class PoseSolver:
         read by the dark check), or None when the check cannot run.
 
         The fit (``kernels.pose.fit_with_outliers``) first uses the noise model's range
-        sigmas; with ``adapt_range_sigma`` it adds the frame's systematic range sigma
-        (``pose.systematic_range_sigma_mm``, capped at ``max_systematic_range_sigma_mm``)
-        and fits again. A single bad point (a reflection matched in a marker's place)
-        bends the fit so that every residual looks large while without it the others
-        agree, so that estimate is the smallest over the fits that leave one reflector
-        out (worst-fitting first: with one bad point the first such fit already gives 0).
-        The outlier step then drops a reflector more than ``outlier_sigma`` off the fit
-        (whitened norm), re-estimating after each removal. A biased point can also drag a
-        fit of few points towards itself and hide; so when the fit as a whole is
-        inconsistent (chi^2 above ``outlier_chi2_per_dof`` per degree of freedom) each
-        reflector is predicted from a fit without it, and the one predicted worst goes
-        if it is off by more than ``outlier_sigma`` (from 5 reflectors on: a fit of 3
-        cannot single out the bad one of 4)."""
+        sigmas; with ``adapt_range_sigma`` it adds the frame's excess range and bearing
+        sigmas (``pose.systematic_sigmas``, capped at ``max_systematic_range_sigma_mm`` and
+        ``max_systematic_centroid_sigma_px``) and fits again. A single bad point (a
+        reflection matched in a marker's place) bends the fit so that every residual looks
+        large while without it the others agree, so that estimate is the smallest over the
+        fits that leave one reflector out (worst-fitting first: with one bad point the first
+        such fit already gives 0). The outlier step then drops a reflector more than
+        ``outlier_sigma`` off the fit (whitened norm), re-estimating after each removal. A
+        biased point can also drag a fit of few points towards itself and hide; so when the
+        fit as a whole is inconsistent (chi^2 above ``outlier_chi2_per_dof`` per degree of
+        freedom) each reflector is predicted from a fit without it, and the one predicted
+        worst goes if it is off by more than ``outlier_sigma`` (from 5 reflectors on: a fit
+        of 3 cannot single out the bad one of 4)."""
         cfg, cam = self.config, self.camera
         prior_mm = self.offset_prior_mm(meas.range_mm[pairs[:, 0]])
         (k_idx, i_idx, uv, e, y, kept, R, t, iterations, cov, chi2, norms, sr, sb, offset,

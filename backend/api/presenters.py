@@ -92,7 +92,12 @@ def motion_public(state: AppState) -> MotionPublic:
         st = motion.status()
     except Exception as exc:
         state.motion_health.record_failure(f"motion status failed: {exc}")
-        return MotionPublic(**motion_state(state).model_dump(), axes=axes)
+        owner = state.campaigns.owner
+        return MotionPublic(
+            **motion_state(state).model_dump(), axes=axes,
+            owner_campaign_id=owner[0] if owner else None,
+            owner_campaign_name=owner[1] if owner else None,
+        )  # fmt: skip
     state.motion_health.record_ok()
     owner = state.campaigns.owner
     return MotionPublic(

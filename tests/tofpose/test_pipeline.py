@@ -310,6 +310,8 @@ def test_a_reflection_beside_a_marker_is_dropped_not_fitted(reject, consistency_
     assert good == expect_good, (np.linalg.norm(r.t_mm - T.t_mm), rotation_angle_deg(r.R, T.R))
     if expect_good:
         assert max(m.residual_mm for m in r.matched) < 3.0
+    if reject:  # the outlier step dropped the reflection matched as marker 6
+        assert 6 not in [m.catalog_id for m in r.matched]
 
 
 @pytest.mark.parametrize("visible", [(1, 2, 3, 4), (1, 4, 6, 8), (2, 5, 6, 7)])

@@ -61,7 +61,8 @@ def _serve_built(app: FastAPI, dist: Path) -> None:
 
 
 def _serve_not_built(app: FastAPI, dist: Path) -> None:
-    """``/`` -> the not-built page, 503, not cached (it goes once the build is there)."""
+    """``/`` -> the not-built page, 503, not cached (build the dashboard, then restart
+    the server)."""
     log.warning("dashboard not built (no index.html in %s): / says how to build it "
                 "(%s)", dist, BUILD_COMMANDS[0])  # fmt: skip
     page = not_built_page(dist)

@@ -18,6 +18,8 @@ function lockReason(motion: Motion, updatedAt: number, now: number): string | nu
   if (motion.owner_campaign_id !== null && motion.owner_campaign_id !== undefined)
     return `campaign ${motion.owner_campaign_id} ("${motion.owner_campaign_name}") owns the turntable: pause or cancel it to move by hand`;
   if (motion.state === "absent") return "no motion system";
+  if (motion.state !== "ok" || Object.keys(motion.positions ?? {}).length === 0)
+    return `turntable status unknown (${motion.state}${motion.last_error ? `: ${motion.last_error}` : ""}): controls locked`;
   return null;
 }
 

@@ -31,6 +31,24 @@ def test_a_jog_moves_from_the_encoder_position_not_from_a_stale_view(settings, s
         assert abs(_settled(c)["positions"]["yaw"] - 3.0) < 0.01
 
 
+def test_after_a_stop_a_jog_starts_where_the_axis_stopped_not_at_its_target(settings, spy_devices):
+    """STOP mid-move leaves the target (170 deg) far from the encoder: the jog's step is
+    added to the encoder reading."""
+    with running_app(settings, spy_devices) as c:
+        assert c.post("/api/motion/move", json={"roll_deg": 170.0}, headers=AUTH).status_code == 202
+        wait_for(lambda: c.get("/api/motion").json()["positions"]["roll"] > 5.0, 10.0,
+                 "the roll axis to move")  # fmt: skip
+        assert c.post("/api/motion/stop", headers=AUTH).status_code == 200
+        wait_for(lambda: not c.get("/api/motion").json()["busy"], 5.0, "the stop")
+        stopped_at = c.get("/api/motion").json()["positions"]["roll"]
+        assert stopped_at < 100.0
+        spy_devices.motion.calls.clear()
+        r = c.post("/api/motion/jog", json={"roll_deg": 1.0}, headers=AUTH)
+        assert r.status_code == 202, r.text
+        ((name, setpoint),) = spy_devices.motion.calls
+        assert name == "move_to" and setpoint["roll"] == pytest.approx(stopped_at + 1.0, abs=0.05)
+
+
 def test_a_second_jog_while_moving_is_refused(settings, spy_devices):
     with running_app(settings, spy_devices) as c:
         _settled(c)
