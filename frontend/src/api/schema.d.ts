@@ -394,8 +394,8 @@ export interface paths {
          * Jog Axis
          * @description Move one axis by the step given (deg / mm) from its encoder position now.
          *
-         *     409 while that axis is still moving (a second click does not stack on a move in
-         *     progress) or a campaign owns the motion system; 422 when the axis is unknown or the
+         *     409 while the motion system is still moving (any axis: a second click does not
+         *     stack on a move in progress) or a campaign owns it; 422 when the axis is unknown or the
          *     target is outside the soft limits; 503 when the position cannot be read.
          */
         post: operations["jogAxis"];
