@@ -88,23 +88,18 @@ def motion_public(state: AppState) -> MotionPublic:
                    max_rate_per_s=a.max_rate)
         for a in motion.axes.values()
     ]  # fmt: skip
+    owner = state.campaigns.owner
+    owned = {"owner_campaign_id": owner[0] if owner else None,
+             "owner_campaign_name": owner[1] if owner else None}  # fmt: skip
     try:
         st = motion.status()
     except Exception as exc:
         state.motion_health.record_failure(f"motion status failed: {exc}")
-        owner = state.campaigns.owner
-        return MotionPublic(
-            **motion_state(state).model_dump(), axes=axes,
-            owner_campaign_id=owner[0] if owner else None,
-            owner_campaign_name=owner[1] if owner else None,
-        )  # fmt: skip
+        return MotionPublic(**motion_state(state).model_dump(), axes=axes, **owned)
     state.motion_health.record_ok()
-    owner = state.campaigns.owner
     return MotionPublic(
         **motion_state(state).model_dump(), axes=axes, positions=st.positions,
-        targets=st.targets, busy=st.busy, settled=st.settled, stopped=st.stopped,
-        owner_campaign_id=owner[0] if owner else None,
-        owner_campaign_name=owner[1] if owner else None,
+        targets=st.targets, busy=st.busy, settled=st.settled, stopped=st.stopped, **owned,
     )  # fmt: skip
 
 
