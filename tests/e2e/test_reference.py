@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import httpx
 import pytest
+from playwright.sync_api import expect
 
 from backend.db.models import CalibrationRow
 from backend.services.live_reference import NOMINAL_LABEL
@@ -31,8 +32,9 @@ def test_the_reference_is_named_and_a_calibration_can_be_set_up_or_selected(serv
     page.screenshot(path=str(SHOTS / "dashboard-reference.png"), full_page=False)
     # one click fills the new-campaign form with the calibration generator
     page.get_by_test_id("reference-calibrate").click()
-    assert page.get_by_test_id("new-kind").input_value() == "calibration"
-    assert page.get_by_test_id("new-name").input_value() == "bench-calibration"
+    # the form fills in an effect after the click's render: wait for it, as a person would
+    expect(page.get_by_test_id("new-kind")).to_have_value("calibration", timeout=10_000)
+    expect(page.get_by_test_id("new-name")).to_have_value("bench-calibration", timeout=10_000)
     assert page.get_by_test_id("new-rails_mm").get_attribute("placeholder") == "11000, 12500"
     # a stored calibration appears in the selector; selecting it switches the reference
     state = server.server.config.app.state.tofpose
