@@ -25,6 +25,7 @@ from tofpose.kernels.levels import (
     frame_level_stats,
     threshold_mask,
 )
+from tofpose.kernels.mixed_pixels import blob_mixing, blob_surrounds
 from tofpose.kernels.perspective import disc_centre_offsets
 
 SATURATED_COUNTS = 4095
@@ -121,6 +122,8 @@ class Blob:
     ellipse : ((cx, cy), (major, minor), angle_deg) from the edge fit, or None.
     ellipse_residual_px : RMS edge-to-ellipse distance, or NaN.
     source : "morphology" or "ellipse" (supplemented by §3.3).
+    mixing : ndarray (``kernels.mixed_pixels.MIX_FIELDS``,), the mixing sums of its
+        support against its surround (measured with the centroid), or None.
     """
 
     pixels: np.ndarray
@@ -134,6 +137,7 @@ class Blob:
     ellipse: tuple | None = None
     ellipse_residual_px: float = float("nan")
     source: str = "morphology"
+    mixing: np.ndarray | None = None
 
     def with_values(self, **changes) -> Blob:
         """A new blob with the named fields changed: ``dataclasses.replace`` for the
@@ -176,6 +180,8 @@ class FrameStats:
     peak_threshold: float
     n_active: int
     saturated_fraction: float
+    #: the gray of pixels without a return (``kernels.levels.frame_level_stats``)
+    dark_level: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -282,7 +288,7 @@ def frame_levels(gray: np.ndarray, config: ExtractionConfig) -> FrameStats:
     Background and its noise come from a strided subsample (median and MAD).
     """
     gray32 = np.ascontiguousarray(gray, np.float32)
-    bg, mad, n_sat = frame_level_stats(gray32, 3, float(SATURATED_COUNTS))
+    bg, mad, n_sat, dark = frame_level_stats(gray32, 3, float(SATURATED_COUNTS))
     i_max = float(gray32.max())
     sigma = max(1.4826 * mad, np.sqrt(max(bg, 1.0)))
     contrast = i_max - bg
@@ -295,6 +301,7 @@ def frame_levels(gray: np.ndarray, config: ExtractionConfig) -> FrameStats:
     return FrameStats(
         background=bg, noise_sigma=sigma, i_max=i_max, raw_threshold=i_t,
         peak_threshold=max(i_peak, i_t), n_active=0, saturated_fraction=sat,
+        dark_level=min(float(dark), bg),
     )  # fmt: skip
 
 
@@ -327,7 +334,7 @@ def _active_set(
     applied = FrameStats(
         background=stats.background, noise_sigma=stats.noise_sigma, i_max=stats.i_max,
         raw_threshold=threshold, peak_threshold=stats.peak_threshold, n_active=n,
-        saturated_fraction=stats.saturated_fraction,
+        saturated_fraction=stats.saturated_fraction, dark_level=stats.dark_level,
     )  # fmt: skip
     return mask, applied, runs
 
@@ -550,14 +557,20 @@ def measure_blobs(
     background: float,
     *,
     weighting: str = "coverage",
+    dark: float = float("nan"),
+    surround: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> list[Blob]:
     """Centroid (Eq. 19) and radial distance (Eq. 20) of each blob: new blobs with
     ``centroid_uv`` and ``distance_mm`` measured (the inputs are not changed).
 
     Centroid over the blob dilated by one pixel (so partially covered edge pixels below
-    I_t still pull the centre to sub-pixel accuracy), with weights:
+    I_t still pull the centre to sub-pixel accuracy), above the blob's own surround
+    level (``kernels.mixed_pixels.blob_surrounds``: the median of a ring 2-3 px outside
+    its box; ``background``, the frame's level, where there is no ring): a plate that is
+    not black around a small marker would otherwise give the dilated ring's pixels a
+    weight, which the ring's shape turns into a bias. Weights:
 
-    * ``"intensity"``: the paper's Eq. 19, ``I - background``. A retro-reflector's
+    * ``"intensity"``: the paper's Eq. 19, ``I - level``. A retro-reflector's
       brightness changes across its face (entrance-angle fall-off, 1/d^2), which pulls
       this centroid towards the bright side: ~0.8 px on a 48 px disc seen 7 deg
       off-normal.
@@ -569,7 +582,13 @@ def measure_blobs(
     Distance: the median over member pixels of ``rho_p * (e_p . e_c)``, each pixel's
     point projected on the centroid's line of sight. For a disc facing the camera this
     is the centre's distance exactly (a plain mean of rho is biased long by
-    ~R^2 / 4 rho); the median rejects flying pixels on the rim.
+    ~R^2 / 4 rho); the median rejects flying pixels on the rim. With it, each blob's
+    mixing sums (``kernels.mixed_pixels.blob_mixing``, with ``dark`` the frame's
+    no-return level; NaN without one), from which the solver takes a small marker's
+    range once it knows the marker's size. ``surround`` : the (gray, distance) frame
+    the surround and the mixing sums are read on when ``gray`` and ``distance_mm`` are
+    combined frames (persistence's I-bar and D-bar hold values only inside the boxes
+    and at the blobs' pixels); by default the frames given.
     """
     if not blobs:
         return []
@@ -577,16 +596,26 @@ def measure_blobs(
     flat, starts = pixel_lists(blobs)
     bbox = np.array([b.bbox for b in blobs], np.int64)
     owner, ox, oy, use_owner = owner_map(flat, starts, bbox, h, w)  # whose pixel is it
+    g32 = np.asarray(gray, np.float32)
+    d32 = np.asarray(distance_mm, np.float32)
+    sg, sd = (
+        (g32, d32)
+        if surround is None
+        else (np.asarray(surround[0], np.float32), np.asarray(surround[1], np.float32))
+    )
+    s_gray, s_mm = blob_surrounds(bbox, sg, sd, owner, ox, oy, use_owner)
+    level = np.where(np.isfinite(s_gray), s_gray, float(background))
     uv = blob_centroids(
-        flat, starts, bbox, np.asarray(gray, np.float32), float(background),
-        weighting == "coverage", owner, ox, oy, use_owner,
+        flat, starts, bbox, g32, level, weighting == "coverage", owner, ox, oy, use_owner,
     )  # fmt: skip
+    mix = blob_mixing(flat, starts, bbox, sg, sd, s_gray, s_mm, float(dark), owner, ox, oy,
+                      use_owner)  # fmt: skip
     bearings = camera.pixel_bearings().reshape(-1, 3)
     rho = blob_ranges(
         flat, starts, np.asarray(distance_mm, np.float32).reshape(-1), bearings,
         camera.bearings(uv),
     )  # fmt: skip
-    return [b.with_values(centroid_uv=uv[j], distance_mm=float(rho[j]))
+    return [b.with_values(centroid_uv=uv[j], distance_mm=float(rho[j]), mixing=mix[j])
             for j, b in enumerate(blobs)]  # fmt: skip
 
 

@@ -94,26 +94,28 @@ class Persistence:
 
     def measure(
         self, blobs: list[Blob], gray: np.ndarray, distance: np.ndarray,
-        camera: CameraModel, background: float,
+        camera: CameraModel, background: float, dark: float = float("nan"),
     ) -> tuple[list[Blob], np.ndarray, np.ndarray, PersistenceInfo]:  # fmt: skip
         """``apply`` followed by ``extraction.measure_blobs`` on the kept blobs, in one
         compiled call (``kernels.measure.persist_and_measure``): the kept blobs with
         their centroids (Eq. 19) and ranges (Eq. 20) measured on the combined frames,
-        the combined frames (I-bar, D-bar) and what was combined. ``background`` : the
-        frame's background level, counts. The combined frames are defined where the
-        next steps read them, inside the blobs' boxes grown by 2 px (I-bar) and at the
-        kept blobs' pixels (D-bar), and are reused by the next frame (``scratch``)."""
+        the combined frames (I-bar, D-bar) and what was combined. ``background``,
+        ``dark`` : the frame's background and no-return levels, counts. The combined
+        frames are defined where the next steps read them, inside the blobs' boxes grown
+        by 2 px (I-bar) and at the kept blobs' pixels (D-bar), and are reused by the next
+        frame (``scratch``)."""
         cur, flat, starts, bbox = blob_arrays(blobs)
         cfg = self.config
-        n_used, motion, keep, mean_gray, med_dist, uv, rho = persist_and_measure(
+        n_used, motion, keep, mean_gray, med_dist, uv, rho, mix = persist_and_measure(
             gray, distance, flat, starts, bbox, cur, *self.history(gray, distance),
-            float(cfg.motion_tolerance_px), int(cfg.c_min), float(background), camera.fx,
+            float(cfg.motion_tolerance_px), int(cfg.c_min), float(background), float(dark),
+            camera.fx,
             camera.fy, camera.cx, camera.cy, camera.dist_array,
             np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3)),
             *self.scratch(gray.shape),
         )  # fmt: skip
         self.commit(cur, flat, gray, distance, n_used, motion)
-        kept = [b.with_values(centroid_uv=uv[j], distance_mm=float(rho[j]))
+        kept = [b.with_values(centroid_uv=uv[j], distance_mm=float(rho[j]), mixing=mix[j])
                 for j, b in enumerate(blobs) if keep[j]]  # fmt: skip
         return kept, mean_gray, med_dist, PersistenceInfo(1 + n_used, motion,
                                                           len(blobs) - len(kept))  # fmt: skip

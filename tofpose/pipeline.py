@@ -52,6 +52,7 @@ from tofpose.matching import (
     match_reflectors,
     random_triplets,
 )
+from tofpose.mixing import mixing_rows, shifted_mixing
 from tofpose.persistence import Persistence, PersistenceConfig, PersistenceInfo, blob_arrays
 from tofpose.range_calibration import RangeCorrection, correction_kernel_arguments
 from tofpose.solve import Measurements, PoseSolver, Rejected, Solution, ThresholdedFrame
@@ -75,6 +76,11 @@ class PipelineConfig:
         (the paper's line-of-sight iteration, Eqs. 51-52), or "none" (SVD only).
     correct_perspective_bias : shift centroids by the predicted offset between the image
         ellipse's centre and the projected disc centre, then re-solve.
+    mixed_pixel_radius_px : a matched marker whose disc appears smaller than this
+        radius takes its range from the mixing model of its pixels and its surround
+        (``kernels.mixed_pixels``) instead of its pixels' median, which the surround
+        pulls towards itself when few pixels are covered whole; 0: never (the paper's
+        preset). 4 px: from there on most of a disc's pixels are covered whole.
     ellipse_confirmation : run §3.3 (confirm candidate shapes, split merged components).
     verify_pose : refuse a pose that makes the target face away from the camera (beyond
         ``max_view_angle_deg``) or that predicts a well-resolved reflector where the
@@ -146,6 +152,7 @@ class PipelineConfig:
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     refinement: Refinement = "ml"
     correct_perspective_bias: bool = True
+    mixed_pixel_radius_px: float = 4.0
     ellipse_confirmation: bool = True
     verify_pose: bool = True
     reject_outliers: bool = True
@@ -176,6 +183,7 @@ class PipelineConfig:
             extraction=ExtractionConfig.paper(),
             refinement="los",
             correct_perspective_bias=False,
+            mixed_pixel_radius_px=0.0,
             reject_outliers=False,
             adapt_range_sigma=False,
             range_bias_sigma_mm=0.0,
@@ -365,7 +373,8 @@ class PosePipeline:
         active = ThresholdedFrame(g, stats.raw_threshold)  # A, for the pose check
         # The motion gate compares the cheap moment centroids of find_candidate_blobs;
         # the precise centroids and ranges are measured once, on the combined frames.
-        meas, unmatched, n_kept, pinfo = self._measure(blobs, g, d, stats.background)
+        meas, unmatched, n_kept, pinfo = self._measure(blobs, g, d, stats.background,
+                                                       stats.dark_level)  # fmt: skip
         timer.lap("measurement")  # §3.4, Eqs. 7-9 and the sigmas
         extra = {
             "frames_used": pinfo.frames_used,
@@ -394,7 +403,8 @@ class PosePipeline:
         result = self._pose_result(solved, meas, unmatched, time_s, timer, extra)
         self._track = TrackState(R=result.R, t_mm=result.t_mm,
                                  threshold_counts=stats.raw_threshold,
-                                 background_counts=stats.background)  # fmt: skip
+                                 background_counts=stats.background,
+                                 dark_counts=stats.dark_level)  # fmt: skip
         return result
 
     # -- stages ---------------------------------------------------------------------------
@@ -417,7 +427,7 @@ class PosePipeline:
         ]
         return found, blobs
 
-    def _measure(self, blobs: list[Blob], g, d, background: float):
+    def _measure(self, blobs: list[Blob], g, d, background: float, dark: float):
         """§3.4 and Eqs. 7-8 in one compiled call
         (``kernels.measure.measure_and_back_project``): the blobs combined with the
         consistent persistence history (the frame is then committed to it), their
@@ -430,9 +440,11 @@ class PosePipeline:
         cur, flat, starts, bbox = blob_arrays(blobs)
         split = np.array([b.source == "split" for b in blobs], bool)
         pc = cfg.persistence
-        n_used, motion, keep, uv, rho, ranged, rho_r, sp, sr, y, w = measure_and_back_project(
+        (n_used, motion, keep, uv, rho, ranged, rho_r, sp, sr, y, w,
+         mix) = measure_and_back_project(
             g, d, flat, starts, bbox, cur, split, *persistence.history(g, d),
-            float(pc.motion_tolerance_px), int(pc.c_min), float(background), cam.fx, cam.fy,
+            float(pc.motion_tolerance_px), int(pc.c_min), float(background), float(dark),
+            cam.fx, cam.fy,
             cam.cx, cam.cy, cam.dist_array, self._bearings_flat, *persistence.scratch(g.shape),
             *self._correction_kernel_args, *self._sigma_constants,
         )  # fmt: skip
@@ -440,7 +452,7 @@ class PosePipeline:
         unranged = [(uv[j, 0], uv[j, 1], rho[j]) for j in np.flatnonzero(keep & ~np.isfinite(rho))]
         ranged_blobs = tuple(blobs[j] for j in ranged.tolist())
         area = np.array([b.area_px for b in ranged_blobs], np.int64)
-        meas = Measurements(ranged_blobs, area, uv[ranged], rho_r, y, w, sp, sr)
+        meas = Measurements(ranged_blobs, area, uv[ranged], rho_r, y, w, sp, sr, mix)
         n_kept = int(keep.sum())
         return meas, unranged, n_kept, PersistenceInfo(1 + n_used, motion, len(blobs) - n_kept)
 
@@ -458,7 +470,8 @@ class PosePipeline:
         )  # fmt: skip
         w = 1.0 / (sig_rng**2 + (rho * sig_px / self.camera.fx) ** 2)  # Eq. 21 weights
         area = np.array([b.area_px for b in blobs], np.int64)
-        return Measurements(tuple(blobs), area, uv, rho, y, w, sig_px, sig_rng)
+        return Measurements(tuple(blobs), area, uv, rho, y, w, sig_px, sig_rng,
+                            mixing_rows(blobs))  # fmt: skip
 
     def _match(self, meas: Measurements) -> MatchResult:
         """§4: deterministic annealing (with the size term) or, configured, RANSAC."""
@@ -515,7 +528,7 @@ class PosePipeline:
             self._persistence.restore(before)
 
         kept, mean_g, med_d, pinfo = self._persistence.measure(
-            blobs, g, d, self.camera, track.background_counts
+            blobs, g, d, self.camera, track.background_counts, track.dark_counts
         )
         if len(kept) != len(blobs):
             give_up()
@@ -563,7 +576,7 @@ class PosePipeline:
         result = self._pose_result(solved, meas, [], time_s, timer, extra, mode="tracking")
         self._track = TrackState(
             R=result.R, t_mm=result.t_mm, threshold_counts=track.threshold_counts,
-            background_counts=track.background_counts,
+            background_counts=track.background_counts, dark_counts=track.dark_counts,
             frames_since_acquisition=track.frames_since_acquisition + 1,
         )  # fmt: skip
         return result
@@ -629,7 +642,8 @@ class PosePipeline:
         rho = np.array([b.distance_mm for b in blobs], float)
         out = corrected_ranges(rho, flat, starts, np.asarray(gray, np.float32),
                                *self._correction_kernel_args[1:])  # fmt: skip
-        return [b.with_values(distance_mm=float(r)) for b, r in zip(blobs, out, strict=True)]
+        return [b.with_values(distance_mm=float(r), mixing=shifted_mixing(b.mixing, r - r0))
+                for b, r, r0 in zip(blobs, out, rho, strict=True)]  # fmt: skip
 
     def _size_hint(self, wrong_size) -> str:
         """A clause naming bright blobs the catalog's sizes ruled out, or ''."""

@@ -24,6 +24,7 @@ from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.extraction import Blob
 from tofpose.geometry import RigidTransform
+from tofpose.kernels.mixed_pixels import MIX_FIELDS
 from tofpose.kernels.pose import (
     REFINE_LOS,
     REFINE_ML,
@@ -58,7 +59,8 @@ class Measurements:
     range_mm : (n,) ranges (Eq. 20); y_mm : (n, 3) points in the camera frame (Eq. 8);
     weights : (n,) the weights of Eq. 21, ``1 / (sigma_range^2 + (range sigma_px / f)^2)``;
     sigma_px, sigma_range_mm : (n,) per-reflector sigmas
-    (``uncertainty.measurement_sigmas``).
+    (``uncertainty.measurement_sigmas``); mixing : (n, ``kernels.mixed_pixels.MIX_FIELDS``)
+    their mixing sums (NaN rows, or None: none).
     """
 
     blobs: tuple[Blob, ...]
@@ -69,6 +71,7 @@ class Measurements:
     weights: np.ndarray
     sigma_px: np.ndarray
     sigma_range_mm: np.ndarray
+    mixing: np.ndarray | None = None
 
     def as_unmatched(self) -> list[tuple[float, float, float]]:
         """(u, v, range) of every candidate, for a result without a pose."""
@@ -203,13 +206,19 @@ class PoseSolver:
         of 3 cannot single out the bad one of 4)."""
         cfg, cam = self.config, self.camera
         prior_mm = self.offset_prior_mm(meas.range_mm[pairs[:, 0]])
-        (k_idx, i_idx, uv, e, y, kept, R, t, iterations, cov, chi2, norms, sr, sb, offset,
-         offset_sigma) = solve_pairs(
+        mixing = (
+            meas.mixing
+            if meas.mixing is not None
+            else np.full((len(meas.range_mm), MIX_FIELDS), np.nan)
+        )
+        (k_idx, i_idx, uv, e, y, rho, sigma_range, kept, R, t, iterations, cov, chi2, norms,
+         sr, sb, offset, offset_sigma) = solve_pairs(
             meas.y_mm, meas.weights, meas.uv_px, meas.range_mm, meas.sigma_px,
-            meas.sigma_range_mm, np.ascontiguousarray(pairs[:, 0]),
+            meas.sigma_range_mm, mixing, np.ascontiguousarray(pairs[:, 0]),
             np.ascontiguousarray(pairs[:, 1]), self._xyz, self._d / 2, self._K, cam.fx, cam.fy,
             cam.cx, cam.cy, cam.dist_array, cfg.correct_perspective_bias,
-            alpha_mm * cfg.matching.residual_factor, _REFINEMENT[cfg.refinement],
+            float(cfg.mixed_pixel_radius_px), alpha_mm * cfg.matching.residual_factor,
+            _REFINEMENT[cfg.refinement],
             cfg.los_tolerance, STEP_SIGMA2, cfg.adapt_range_sigma,
             cfg.max_systematic_range_sigma_mm, cfg.max_systematic_centroid_sigma_px,
             cfg.reject_outliers,
@@ -217,9 +226,8 @@ class PoseSolver:
         )  # fmt: skip
         obs = MatchedObservations(
             k_idx=k_idx, i_idx=i_idx, x_mm=self._xyz[i_idx], uv_px=uv, bearings=e,
-            range_mm=meas.range_mm[k_idx] - offset, y_mm=y - e * offset,
-            sigma_bearing_rad=meas.sigma_px[k_idx] / cam.fx,
-            sigma_range_mm=meas.sigma_range_mm[k_idx],
+            range_mm=rho - offset, y_mm=y - e * offset,
+            sigma_bearing_rad=meas.sigma_px[k_idx] / cam.fx, sigma_range_mm=sigma_range,
         )  # fmt: skip
         return self.conclude(obs.subset(kept), R, t, iterations, cov, chi2, norms, sr, sb,
                              active, offset, offset_sigma)  # fmt: skip

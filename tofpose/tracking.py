@@ -64,6 +64,7 @@ class TrackState:
     threshold_counts: float
     background_counts: float
     frames_since_acquisition: int = 0
+    dark_counts: float = float("nan")  # the no-return level (``FrameStats.dark_level``)
 
 
 @dataclass(frozen=True)

@@ -70,7 +70,7 @@ class CompiledTracker:
         self._camera_args = (
             float(pc.motion_tolerance_px), int(pc.c_min), camera.fx, camera.fy, camera.cx,
             camera.cy, self._dist, self._bearings, self._xyz, self._radii, self._K,
-            config.correct_perspective_bias,
+            config.correct_perspective_bias, float(config.mixed_pixel_radius_px),
         )  # fmt: skip
         self._fit_args = (
             *correction_kernel_arguments(correction),
@@ -105,7 +105,8 @@ class CompiledTracker:
          e_obs, y_obs, R, t, its, cov, chi2, norms, sr_fit, sb_fit, offset,
          offset_sigma) = track_frame(
             g, d, bounds, centres, diameters, cat_idx, np.float32(track.threshold_counts),
-            float(track.background_counts), hist_g, hist_d, hist_m, hist_c, n_hist,
+            float(track.background_counts), float(track.dark_counts), hist_g, hist_d, hist_m,
+            hist_c, n_hist,
             *self._camera_args, *self._fit_args, *self._persistence.scratch(g.shape),
         )  # fmt: skip
         if code != TRACKED:

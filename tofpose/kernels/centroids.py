@@ -18,7 +18,8 @@ def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, owner_
     """Centroid (u, v) px of each blob.
 
     flat, starts : blob j's pixels are ``flat[starts[j]:starts[j + 1]]`` (flat indices);
-    bbox : (n, 4) int64 (x, y, w, h); gray : (H, W) float32; coverage : coverage weights
+    bbox : (n, 4) int64 (x, y, w, h); gray : (H, W) float32; background : (n,) each
+    blob's surround level (``mixed_pixels.blob_surrounds``), counts; coverage : coverage weights
     (else intensity, Eq. 19 as written); owner, owner_x0, owner_y0 : ``owner_map``'s
     index of the blob owning each pixel (-1 none) and its top-left pixel, read when
     ``use_owner``. Returns (n, 2) float64.
@@ -26,9 +27,9 @@ def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, owner_
     h, w = gray.shape
     n = bbox.shape[0]
     out = np.empty((n, 2))
-    bg = np.float32(background)
     inv_w = 1.0 / w
     for j in range(n):
+        bg = np.float32(background[j])
         x, y, bw, bh = bbox[j, 0], bbox[j, 1], bbox[j, 2], bbox[j, 3]
         y0, y1 = max(y - 2, 0), min(y + bh + 2, h)
         x0, x1 = max(x - 2, 0), min(x + bw + 2, w)

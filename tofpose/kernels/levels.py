@@ -40,6 +40,10 @@ def checked_frame(gray, distance_mm):
     return g, d
 
 
+#: the no-return level is this percentile of the frame's gray: on a target seen against
+#: a hall or space most pixels see nothing; with a wall behind it, the darkest 2 %
+DARK_PERCENTILE = 2.0
+
 #: the counting median handles values v with 2 v an integer in [0, this)
 _COUNTING_LIMIT = 1 << 17
 
@@ -124,13 +128,16 @@ def _level_and_spread(v):
 
 @jit
 def frame_level_stats(gray, stride, saturated_counts):
-    """Background (median of a strided subsample), its median absolute deviation and the
-    number of pixels at or above ``saturated_counts``. (The brightest pixel is NumPy's
+    """Background (median of a strided subsample), its median absolute deviation, the
+    number of pixels at or above ``saturated_counts`` and the no-return level (the
+    ``DARK_PERCENTILE``-th percentile of the subsample, nearest rank: the gray of pixels
+    that see nothing within range, the zero of the amplitudes that
+    ``mixed_pixels`` mixes). (The brightest pixel is NumPy's
     ``gray.max()``, several times faster than a compiled loop: numba does not vectorise a
     max reduction.)
 
-    gray : (H, W) float32. Returns (background, mad, n_saturated); background and mad
-    with NumPy's float32 median arithmetic.
+    gray : (H, W) float32. Returns (background, mad, n_saturated, dark); background and
+    mad with NumPy's float32 median arithmetic.
     """
     h, w = gray.shape
     sub = np.empty(((h + stride - 1) // stride) * ((w + stride - 1) // stride), np.float32)
@@ -140,13 +147,16 @@ def frame_level_stats(gray, stride, saturated_counts):
             sub[n] = gray[r, c]
             n += 1
     bg, mad = _level_and_spread(sub[:n])
+    k = int(n * DARK_PERCENTILE / 100.0)
+    counts = _half_grid_counts(sub[:n])
+    dark = _kth_counted(counts, k) / 2.0 if counts.shape[0] else float(np.sort(sub[:n])[k])
     sat = np.float32(saturated_counts)
     flat = gray.reshape(-1)
     n_sat = 0
     for i in range(flat.shape[0]):
         if flat[i] >= sat:
             n_sat += 1
-    return bg, mad, n_sat
+    return bg, mad, n_sat, dark
 
 
 @jit

@@ -11,6 +11,7 @@ import numpy as np
 from tofpose.kernels import jit
 from tofpose.kernels.camera import bearings
 from tofpose.kernels.centroids import blob_centroids, blob_ranges, owner_map
+from tofpose.kernels.mixed_pixels import MIX_FIELDS, blob_mixing, blob_surrounds
 from tofpose.kernels.persistence import (
     blob_count_medians,
     consistent,
@@ -37,18 +38,24 @@ def pixel_list_subset(flat, starts, idx):
 @jit
 def persist_and_measure(
     gray, distance, flat, starts, bbox, centroids, hist_gray, hist_dist, hist_mask,
-    hist_cent, n_hist, tol_px, c_min, background, fx, fy, cx, cy, dist, pixel_bearings,
+    hist_cent, n_hist, tol_px, c_min, background, dark, fx, fy, cx, cy, dist, pixel_bearings,
     mean_buf, med_buf,
 ):  # fmt: skip
     """The frame's blobs (pixels ``flat[starts[j]:starts[j + 1]]``, boxes (n, 4) (x, y,
     w, h), single-frame centroids (n, 2), NaN allowed) combined with the history (newest
     first as tuples, the first ``n_hist`` real: ``Persistence.history``) and measured.
 
+    background : the frame's level, counts (the centroids' level where a blob's own
+    surround cannot be read); dark : its no-return level (``mixed_pixels``).
+
     Returns n_used (consistent history frames combined), motion (the history was cut),
     keep (n,) bool (counter C >= c_min, or every blob while fewer than c_min frames are
     combined), mean_gray (H, W) float32, med_distance (H, W) float32, uv (n, 2) and rho
-    (n,) of the kept blobs (NaN for the others): coverage-weighted centroids on I-bar and
-    ranges on D-bar along each centroid's line of sight.
+    (n,) of the kept blobs (NaN for the others): coverage-weighted centroids on I-bar
+    above each blob's surround level and ranges on D-bar along each centroid's line of
+    sight; and mix (n, ``MIX_FIELDS``) the mixing sums of the kept blobs
+    (``mixed_pixels.blob_mixing`` on this frame: the combined frames hold I-bar and
+    D-bar only inside the boxes and at the blobs' pixels, not on their surround).
 
     With one frame, mean_gray and med_distance are the frame's gray and distance. With
     more, they are the scratch frames ``mean_buf`` and ``med_buf`` (H, W) float32
@@ -84,22 +91,30 @@ def persist_and_measure(
     # Eqs. 19-20 on the combined frames
     k_bbox = bbox[kept]
     owner, ox, oy, use_owner = owner_map(k_flat, k_starts, k_bbox, h, w)
-    k_uv = blob_centroids(k_flat, k_starts, k_bbox, mean_gray, background, True, owner, ox,
+    s_gray, s_mm = blob_surrounds(k_bbox, gray, distance, owner, ox, oy, use_owner)
+    level = np.empty(kept.shape[0])
+    for a in range(kept.shape[0]):
+        level[a] = s_gray[a] if np.isfinite(s_gray[a]) else background
+    k_uv = blob_centroids(k_flat, k_starts, k_bbox, mean_gray, level, True, owner, ox,
                           oy, use_owner)  # fmt: skip
+    k_mix = blob_mixing(k_flat, k_starts, k_bbox, gray, distance, s_gray, s_mm, dark, owner,
+                        ox, oy, use_owner)  # fmt: skip
     k_rho = blob_ranges(k_flat, k_starts, med_dist.reshape(-1), pixel_bearings,
                         bearings(k_uv, fx, fy, cx, cy, dist))  # fmt: skip
     uv = np.full((n, 2), np.nan)
     rho = np.full(n, np.nan)
+    mix = np.full((n, MIX_FIELDS), np.nan)
     for a in range(kept.shape[0]):
         uv[kept[a]] = k_uv[a]
         rho[kept[a]] = k_rho[a]
-    return n_used, motion, keep, mean_gray, med_dist, uv, rho
+        mix[kept[a]] = k_mix[a]
+    return n_used, motion, keep, mean_gray, med_dist, uv, rho, mix
 
 
 @jit
 def measure_and_back_project(
     gray, distance, flat, starts, bbox, centroids, split, hist_gray, hist_dist, hist_mask,
-    hist_cent, n_hist, tol_px, c_min, background, fx, fy, cx, cy, dist, pixel_bearings,
+    hist_cent, n_hist, tol_px, c_min, background, dark, fx, fy, cx, cy, dist, pixel_bearings,
     mean_buf, med_buf, correct_range, corr_model, corr_harmonics, corr_offsets, floor_px,
     floor_mm, single_px, split_px, pool_min, median_eff, uncal_mm,
 ):  # fmt: skip
@@ -116,20 +131,29 @@ def measure_and_back_project(
 
     Returns n_used, motion, keep (n,), uv (n, 2) and rho (n,) as ``persist_and_measure``
     gives them (rho uncorrected), ranged (r,) int64 the indices of the ranged blobs, and
-    for those: rho (r,) corrected, sigma_px (r,), sigma_range (r,), y (r, 3), weights (r,).
+    for those: rho (r,) corrected, sigma_px (r,), sigma_range (r,), y (r, 3), weights (r,),
+    mix (r, ``MIX_FIELDS``) their mixing sums, with the calibrated correction's shift of
+    each blob's range applied to every distance in them (``solve.solve_pairs`` turns
+    them into ranges once the blobs are matched).
     """
-    n_used, motion, keep, mean_gray, med_dist, uv, rho = persist_and_measure(
+    n_used, motion, keep, mean_gray, med_dist, uv, rho, mix = persist_and_measure(
         gray, distance, flat, starts, bbox, centroids, hist_gray, hist_dist, hist_mask,
-        hist_cent, n_hist, tol_px, c_min, background, fx, fy, cx, cy, dist, pixel_bearings,
-        mean_buf, med_buf,
+        hist_cent, n_hist, tol_px, c_min, background, dark, fx, fy, cx, cy, dist,
+        pixel_bearings, mean_buf, med_buf,
     )  # fmt: skip
     ranged = np.flatnonzero(keep & np.isfinite(rho))
     n_ranged = ranged.shape[0]
     r_flat, r_starts = pixel_list_subset(flat, starts, ranged)
     r_uv, r_rho, r_split = uv[ranged], rho[ranged], split[ranged]
+    r_mix = mix[ranged]
     if correct_range and n_ranged:
+        raw = r_rho
         r_rho = corrected_ranges(r_rho, r_flat, r_starts, mean_gray, corr_model,
                                  corr_harmonics, corr_offsets)  # fmt: skip
+        for a in range(n_ranged):  # the same shift of every distance in the mixing sums
+            shift = r_rho[a] - raw[a]
+            r_mix[a, 1] += shift
+            r_mix[a, 3] += shift * r_mix[a, 2]
     sp, sr = blob_sigmas(r_flat, r_starts, r_uv, mean_gray, med_dist, background, r_split,
                          floor_px, floor_mm, single_px, split_px, pool_min, median_eff,
                          uncal_mm)  # fmt: skip
@@ -140,4 +164,4 @@ def measure_and_back_project(
         for b in range(3):
             y[a, b] = e[a, b] * r_rho[a]  # Eq. 8
         w[a] = 1.0 / (sr[a] ** 2 + (r_rho[a] * sp[a] / fx) ** 2)  # Eq. 21
-    return n_used, motion, keep, uv, rho, ranged, r_rho, sp, sr, y, w
+    return n_used, motion, keep, uv, rho, ranged, r_rho, sp, sr, y, w, r_mix

@@ -11,6 +11,7 @@ import numpy as np
 
 from tofpose.kernels import jit
 from tofpose.kernels.camera import bearings
+from tofpose.kernels.mixed_pixels import unmixed_range
 from tofpose.kernels.perspective import disc_centre_offsets
 from tofpose.kernels.pose import fit_with_outliers, svd_pose
 
@@ -63,24 +64,31 @@ def complete_pairs(y, k_idx, i_idx, xyz, R, t, tol_mm):
 
 @jit
 def solve_pairs(
-    y, w, uv, rho, sigma_px, sigma_range, k_idx, i_idx, xyz, radii, K, fx, fy, cx, cy,
-    dist, correct_perspective, complete_tol_mm, refinement, los_tol, step_sigma2, adapt,
+    y, w, uv, rho, sigma_px, sigma_range, mix, k_idx, i_idx, xyz, radii, K, fx, fy, cx, cy,
+    dist, correct_perspective, mixing_radius_px, complete_tol_mm, refinement, los_tol,
+    step_sigma2, adapt,
     max_sys, max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior_mm,
 ):  # fmt: skip
     """The pose of matched pairs (module docstring).
 
     y (g, 3), w (g,), uv (g, 2), rho (g,), sigma_px (g,), sigma_range (g,) : the
-    candidates' points (Eq. 8), weights (Eq. 21), centroids, ranges and sigmas; k_idx,
+    candidates' points (Eq. 8), weights (Eq. 21), centroids, ranges and sigmas; mix
+    (g, ``mixed_pixels.MIX_FIELDS``) : their mixing sums (NaN rows: none); k_idx,
     i_idx (m,) : matched (candidate, catalog) pairs; xyz (e, 3), radii (e,) : the
-    catalog; K (3, 3) and fx..dist : the camera; complete_tol_mm : completion's
-    tolerance (<= 0: none); the rest : ``fit_with_outliers``'s settings (the bearing
-    cap given in px, ``max_sys_px``, taken to rad with fx).
+    catalog; K (3, 3) and fx..dist : the camera; mixing_radius_px : matched discs whose
+    apparent radius is below it take the mixing model's range instead of the median
+    (``mixed_pixels.unmixed_range``, with the disc's area and incidence from the SVD
+    pose; <= 0: never); complete_tol_mm : completion's tolerance (<= 0: none); the
+    rest : ``fit_with_outliers``'s settings (the bearing cap given in px, ``max_sys_px``,
+    taken to rad with fx).
 
     Returns k_idx, i_idx (m',) after completion, uv_obs (m', 2) corrected centroids,
-    e_obs (m', 3) their bearings, y_obs (m', 3) points, then what ``fit_with_outliers``
-    returns (kept (m',) bool, R, t, iterations, covariance, chi^2, norms, range sigmas,
-    bearing sigmas, common range offset mm and its sigma). ``y_obs`` and the ranges are
-    as measured: the offset is not taken out of them here.
+    e_obs (m', 3) their bearings, y_obs (m', 3) points, rho_obs (m',) their ranges and
+    sr_obs (m',) range sigmas (the model's own uncertainty added where it replaced the
+    median), then what ``fit_with_outliers`` returns (kept (m',) bool, R, t,
+    iterations, covariance, chi^2, norms, range sigmas, bearing sigmas, common range
+    offset mm and its sigma). ``y_obs`` and the ranges are as measured: the offset is
+    not taken out of them here.
     """
     x = np.empty((k_idx.shape[0], 3))
     for a in range(k_idx.shape[0]):
@@ -97,27 +105,35 @@ def solve_pairs(
     uv_obs = np.empty((m, 2))
     r_disc = np.empty(m)
     rho_m = np.empty(m)
+    sr = np.empty(m)
+    centres = np.empty((m, 3))  # x R^T + t, the discs' centres in the camera frame
     for a in range(m):
         uv_obs[a] = uv[k_idx[a]]
         r_disc[a] = radii[i_idx[a]]
         rho_m[a] = rho[k_idx[a]]
-    if correct_perspective:
-        centres = np.empty((m, 3))  # x R^T + t, the discs' centres in the camera frame
+        sr[a] = sigma_range[k_idx[a]]
+        for b in range(3):
+            centres[a, b] = R[b, 0] * x[a, 0] + R[b, 1] * x[a, 1] + R[b, 2] * x[a, 2] + t[b]
+    if mixing_radius_px > 0:
         for a in range(m):
-            for b in range(3):
-                centres[a, b] = R[b, 0] * x[a, 0] + R[b, 1] * x[a, 1] + R[b, 2] * x[a, 2] + t[b]
+            c = centres[a]
+            norm_c = np.sqrt(c[0] ** 2 + c[1] ** 2 + c[2] ** 2)
+            cos_inc = abs(R[0, 2] * c[0] + R[1, 2] * c[1] + R[2, 2] * c[2]) / norm_c
+            d, sens = unmixed_range(rho_m[a], mix[k_idx[a]], r_disc[a] * fx / rho_m[a],
+                                    cos_inc, mixing_radius_px)  # fmt: skip
+            rho_m[a] = d
+            sr[a] = np.sqrt(sr[a] ** 2 + sens**2)
+    if correct_perspective:
         uv_obs -= disc_centre_offsets(K, centres, R[:, 2].copy(), r_disc)
     e_obs = bearings(uv_obs, fx, fy, cx, cy, dist)
     y_obs = np.empty((m, 3))
     sb = np.empty(m)
-    sr = np.empty(m)
     for a in range(m):
         y_obs[a] = e_obs[a] * rho_m[a]
         sb[a] = sigma_px[k_idx[a]] / fx
-        sr[a] = sigma_range[k_idx[a]]
     kept, R, t, its, cov, chi2, norms, sr_fit, sb_fit, offset, offset_sigma = fit_with_outliers(
         x, e_obs, rho_m, y_obs, sr, sb, refinement, los_tol, step_sigma2, adapt, max_sys,
         max_sys_px / fx, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior_mm,
     )  # fmt: skip
-    return (k_idx, i_idx, uv_obs, e_obs, y_obs, kept, R, t, its, cov, chi2, norms, sr_fit,
-            sb_fit, offset, offset_sigma)  # fmt: skip
+    return (k_idx, i_idx, uv_obs, e_obs, y_obs, rho_m, sr, kept, R, t, its, cov, chi2, norms,
+            sr_fit, sb_fit, offset, offset_sigma)  # fmt: skip

@@ -27,10 +27,11 @@ TRACKED, LOST, SHARED, NOT_PERSISTENT, NO_RANGE, OUTLIER = 0, 1, 2, 3, 4, 5
 
 @jit
 def track_frame(
-    gray, distance, bounds, centres, diameters, cat_idx, threshold, background,
+    gray, distance, bounds, centres, diameters, cat_idx, threshold, background, dark,
     hist_gray, hist_dist, hist_mask, hist_cent, n_hist, tol_px, c_min,
     fx, fy, cx, cy, dist, pixel_bearings, xyz, radii, K, correct_perspective,
-    correct_range, corr_model, corr_harmonics, corr_offsets, floor_px, floor_mm, single_px,
+    mixing_radius_px, correct_range, corr_model, corr_harmonics, corr_offsets, floor_px,
+    floor_mm, single_px,
     split_px, pool_min, median_eff, uncal_mm, refinement, los_tol, step_sigma2, adapt,
     max_sys, max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior_mm,
     mean_buf, med_buf,
@@ -39,11 +40,13 @@ def track_frame(
 
     gray, distance : (H, W) float32 checked frame; bounds (n, 4), centres (n, 2),
     diameters (n,), cat_idx (n,) : the windows (``tracking.predict_windows``);
-    threshold, background : the last acquisition's I_t and background, counts;
+    threshold, background, dark : the last acquisition's I_t, background and no-return
+    level, counts;
     hist_* : the persistence history newest first as tuples of equal length (gray,
     distance (H, W) float32, mask (H * W,) bool, centroids (m, 2)), of which the first
     ``n_hist`` are real; tol_px, c_min : ``PersistenceConfig``; fx..cy, dist (5,),
     pixel_bearings (H * W, 3) : the camera; xyz (N, 3), radii (N,) mm : the catalog; K (3, 3);
+    correct_perspective, mixing_radius_px : ``solve.solve_pairs``'s;
     correct_range and corr_* : whether to apply the calibrated range correction and its
     model (``range_calibration.correction_kernel_arguments``); then the ``uncertainty``
     constants and floors, and the ``fit_with_outliers`` settings of ``PoseSolver.solve``;
@@ -94,10 +97,10 @@ def track_frame(
 
         # §3.4 (persistence over the consistent history, then Eqs. 19-20), the range
         # correction, Eqs. 7-8 with the sigmas and Eq. 21's weights
-        n_used, motion, keep, uv, _, ranged, rho, sp, sr, y, wts = (
+        n_used, motion, keep, uv, _, ranged, rho, sp, sr, y, wts, mix = (
             measure_and_back_project(
                 gray, distance, flat, starts, bbox, cent, np.zeros(n, np.bool_), hist_gray,
-                hist_dist, hist_mask, hist_cent, n_hist, tol_px, c_min, background, fx, fy,
+                hist_dist, hist_mask, hist_cent, n_hist, tol_px, c_min, background, dark, fx, fy,
                 cx, cy, dist, pixel_bearings, mean_buf, med_buf, correct_range, corr_model,
                 corr_harmonics, corr_offsets, floor_px, floor_mm, single_px, split_px,
                 pool_min, median_eff, uncal_mm,
@@ -111,12 +114,14 @@ def track_frame(
             break
 
         # §5 on the known correspondences (every blob matched: nothing to complete)
-        (_, _, uv_obs, e_obs, y_obs, kept, R, t, its, cov, chi2, norms, sr_fit, sb_fit,
-         offset, offset_sigma) = solve_pairs(
-            y, wts, uv, rho, sp, sr, np.arange(n), cat_idx, xyz, radii, K, fx, fy, cx, cy,
-            dist, correct_perspective, 0.0, refinement, los_tol, step_sigma2, adapt, max_sys,
-            max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior_mm,
+        (_, _, uv_obs, e_obs, y_obs, rho_obs, sr_obs, kept, R, t, its, cov, chi2, norms,
+         sr_fit, sb_fit, offset, offset_sigma) = solve_pairs(
+            y, wts, uv, rho, sp, sr, mix, np.arange(n), cat_idx, xyz, radii, K, fx, fy, cx,
+            cy, dist, correct_perspective, mixing_radius_px, 0.0, refinement, los_tol,
+            step_sigma2, adapt, max_sys, max_sys_px, reject, min_matches, outlier_sigma,
+            chi2_per_dof, offset_prior_mm,
         )  # fmt: skip
+        rho, sr = rho_obs, sr_obs  # every blob is matched, in order
         if not kept.all():
             code = OUTLIER
     return (

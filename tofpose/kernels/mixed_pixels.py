@@ -1,0 +1,184 @@
+"""A small marker's pixels mix its return with the surface around it; these kernels
+measure the surround of each blob and remove it from the blob's range (ours, beyond the
+paper's Eq. 20; docs/algorithm.md, "Small markers: local surround and mixed pixels").
+
+A pixel p that a reflector covers by the fraction c_p (its area, after the lens) returns
+the phasor ``c_p P_r + (1 - c_p) P_b``: the reflector's ``P_r`` and the surround's
+``P_b`` (a raised marker's plate, 100-150 mm behind it on the paper's target). The phase
+spread between the two (~0.04 rad at 6 MHz) is small, so amplitude and amplitude x
+distance mix linearly: with a_p the pixel's amplitude (gray above the frame's no-return
+level) and d_p its distance, summed over the blob's support (its pixels dilated by one),
+
+    S_a  = sum (a_p - a_b)            = C (A_r - a_b)
+    S_ad = sum (a_p d_p - a_b d_b)    = C (A_r d_r - a_b d_b)
+
+where C = sum c_p is the reflector's image area in px^2. C cannot be told from A_r
+by the pixels alone (a dimmer, larger disc gives the same image), but the catalog gives
+it once the blob is matched: ``pi r_px^2 cos(incidence)``. Then
+
+    A_r = a_b + S_a / C,   d_r = (a_b d_b + S_ad / C) / A_r
+
+is the reflector's own distance. The median over the blob's pixels (Eq. 20 as we
+measure it) is pulled towards the surround by the mixed pixels: on foreign-renderer
+frames 35 mm markers at 8 m read +6 mm long (p90 13 mm) with it, -2 mm (p90 6 mm) with
+this model.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tofpose.kernels import jit
+from tofpose.kernels.indexing import row_col
+from tofpose.kernels.stats import median_inplace
+
+#: the surround is read in the box of the blob grown by this many pixels ...
+SURROUND_OUTER_PX = 3
+#: ... outside the box grown by this many (the support reaches 1 px beyond the blob)
+SURROUND_INNER_PX = 1
+#: (n, MIX_FIELDS) per blob: a_b, d_b, S_a, S_ad, covered area of the support pixels
+#: without a range (px^2, their gray's coverage estimate), n_support
+MIX_FIELDS = 6
+
+
+@jit
+def _owned_by_other(owner, ox, oy, use_owner, r, c, j):
+    """Whether pixel (r, c) belongs to a blob other than j (``centroids.owner_map``)."""
+    if not use_owner:
+        return False
+    rr, cc = r - oy, c - ox
+    if rr < 0 or cc < 0 or rr >= owner.shape[0] or cc >= owner.shape[1]:
+        return False
+    o = owner[rr, cc]
+    return o != -1 and o != j
+
+
+@jit
+def blob_surrounds(bbox, gray, distance, owner, ox, oy, use_owner):
+    """The gray level (counts) and distance (mm) of the surface around each blob: the
+    medians over the ring between its box grown by ``SURROUND_INNER_PX`` and by
+    ``SURROUND_OUTER_PX`` (clipped to the image; other blobs' pixels left out). A tilted
+    plate's gradient cancels in the median of a ring centred on the blob.
+
+    bbox : (n, 4) int64 (x, y, w, h); gray : (H, W) float32; distance : (H, W) float32
+    (NaN invalid); owner, ox, oy, use_owner : ``centroids.owner_map``. Returns
+    surround_gray (n,) (NaN with no ring pixel) and surround_mm (n,) (NaN with fewer
+    than 3 ranged ring pixels)."""
+    h, w = gray.shape
+    n = bbox.shape[0]
+    level = np.full(n, np.nan)
+    depth = np.full(n, np.nan)
+    so, si = SURROUND_OUTER_PX, SURROUND_INNER_PX
+    for j in range(n):
+        x, y, bw, bh = bbox[j, 0], bbox[j, 1], bbox[j, 2], bbox[j, 3]
+        y0, y1 = max(y - so, 0), min(y + bh + so, h)
+        x0, x1 = max(x - so, 0), min(x + bw + so, w)
+        g_ring = np.empty((y1 - y0) * (x1 - x0), np.float32)
+        d_ring = np.empty((y1 - y0) * (x1 - x0), np.float32)
+        ng, nd = 0, 0
+        for r in range(y0, y1):
+            inner_row = y - si <= r < y + bh + si
+            for c in range(x0, x1):
+                if inner_row and x - si <= c < x + bw + si:
+                    continue
+                if _owned_by_other(owner, ox, oy, use_owner, r, c, j):
+                    continue
+                g_ring[ng] = gray[r, c]
+                ng += 1
+                d = distance[r, c]
+                if np.isfinite(d):
+                    d_ring[nd] = d
+                    nd += 1
+        if ng:
+            level[j] = median_inplace(g_ring[:ng])
+        if nd >= 3:
+            depth[j] = median_inplace(d_ring[:nd])
+    return level, depth
+
+
+@jit
+def blob_mixing(flat, starts, bbox, gray, distance, surround_gray, surround_mm, dark,
+                owner, ox, oy, use_owner):  # fmt: skip
+    """The sums of the mixing model (module docstring) of each blob over its support
+    (its pixels dilated by one, other blobs' pixels left out): (n, ``MIX_FIELDS``) rows
+    (a_b, d_b, S_a, S_ad, C_unranged, n_support), NaN rows where the surround is unknown.
+
+    flat, starts : the pixel lists; bbox (n, 4); gray, distance (H, W) float32 (the
+    frame the surround was read on); surround_gray, surround_mm (n,) :
+    ``blob_surrounds``; dark : the frame's no-return gray level (counts). Support pixels
+    without a range (saturated, or too dark) are left out of the sums; their covered
+    area, estimated from their gray as ``(g - g_b) / (g_max - g_b)`` clipped to [0, 1]
+    (1 for a saturated centre), is returned so that the caller takes it off C."""
+    h, w = gray.shape
+    n = bbox.shape[0]
+    out = np.full((n, MIX_FIELDS), np.nan)
+    inv_w = 1.0 / w
+    for j in range(n):
+        gb, db = surround_gray[j], surround_mm[j]
+        if not (np.isfinite(gb) and np.isfinite(db)):
+            continue
+        x, y, bw, bh = bbox[j, 0], bbox[j, 1], bbox[j, 2], bbox[j, 3]
+        y0, y1 = max(y - 1, 0), min(y + bh + 1, h)
+        x0, x1 = max(x - 1, 0), min(x + bw + 1, w)
+        ph, pw = y1 - y0, x1 - x0
+        member = np.zeros((ph, pw), np.bool_)
+        g_max = gb
+        for i in range(starts[j], starts[j + 1]):
+            r, c = row_col(flat[i], w, inv_w)
+            member[r - y0, c - x0] = True
+            g_max = max(g_max, float(gray[r, c]))
+        a_b = gb - dark
+        s_a, s_ad, c_unranged, n_sup = 0.0, 0.0, 0.0, 0
+        for r in range(ph):
+            for c in range(pw):
+                near = False
+                for dr in range(-1, 2):
+                    for dc in range(-1, 2):
+                        rr, cc = r + dr, c + dc
+                        if 0 <= rr < ph and 0 <= cc < pw and member[rr, cc]:
+                            near = True
+                if not near or _owned_by_other(owner, ox, oy, use_owner, r + y0, c + x0, j):
+                    continue
+                n_sup += 1
+                g = float(gray[r + y0, c + x0])
+                d = distance[r + y0, c + x0]
+                if np.isfinite(d):
+                    a = g - dark
+                    s_a += a - a_b
+                    s_ad += a * d - a_b * db
+                elif g_max > gb:
+                    c_unranged += min(max((g - gb) / (g_max - gb), 0.0), 1.0)
+        out[j, 0], out[j, 1], out[j, 2], out[j, 3] = a_b, db, s_a, s_ad
+        out[j, 4], out[j, 5] = c_unranged, n_sup
+    return out
+
+
+@jit
+def unmixed_range(rho, mix, radius_px, cos_incidence, median_radius_px):
+    """The reflector's own distance (mm) from its mixing sums (module docstring), or
+    ``rho`` (the blob's median range) when the model does not apply: a disc of at least
+    ``median_radius_px`` (most of its pixels are covered whole and the median is
+    unbiased), no surround, a surround as bright as the reflector, or too little of the
+    disc ranged.
+
+    rho : mm; mix : (``MIX_FIELDS``,) ``blob_mixing`` row; radius_px : the catalog disc's
+    apparent radius at rho; cos_incidence : of the disc's normal to the line of sight.
+    Returns (range mm, C-sensitivity mm): the change of the range when C is 15 %
+    larger, the model's own uncertainty (edges, the lens's spill beyond the support)."""
+    if not radius_px < median_radius_px or not np.isfinite(mix[0]):
+        return rho, 0.0
+    area = np.pi * radius_px * radius_px * max(cos_incidence, 0.1)
+    c = area - mix[4]
+    if not c > 0.25 * area:
+        return rho, 0.0
+    a_b, d_b, s_a, s_ad = mix[0], mix[1], mix[2], mix[3]
+    a_r = a_b + s_a / c
+    if not a_r > 2.0 * max(a_b, 0.0) or not a_r > 0:
+        return rho, 0.0
+    d_r = (a_b * d_b + s_ad / c) / a_r
+    c2 = 1.15 * c
+    a_r2 = a_b + s_a / c2
+    d_r2 = (a_b * d_b + s_ad / c2) / a_r2
+    if not np.isfinite(d_r):
+        return rho, 0.0
+    return d_r, abs(d_r2 - d_r)
