@@ -586,9 +586,10 @@ def measure_blobs(
     mixing sums (``kernels.mixed_pixels.blob_mixing``, with ``dark`` the frame's
     no-return level; NaN without one), from which the solver takes a small marker's
     range once it knows the marker's size. ``surround`` : the (gray, distance) frame
-    the surround and the mixing sums are read on when ``gray`` and ``distance_mm`` are
-    combined frames (persistence's I-bar and D-bar hold values only inside the boxes
-    and at the blobs' pixels); by default the frames given.
+    the surround (and the support's distances outside the blob) are read on when
+    ``gray`` and ``distance_mm`` are combined frames (persistence's I-bar and D-bar
+    hold values only inside the boxes and at the blobs' pixels); by default the frames
+    given.
     """
     if not blobs:
         return []
@@ -603,13 +604,13 @@ def measure_blobs(
         if surround is None
         else (np.asarray(surround[0], np.float32), np.asarray(surround[1], np.float32))
     )
-    s_gray, s_mm = blob_surrounds(bbox, sg, sd, owner, ox, oy, use_owner)
+    s_gray, s_mm, crowded = blob_surrounds(bbox, sg, sd, owner, ox, oy, use_owner)
     level = np.where(np.isfinite(s_gray), s_gray, float(background))
     uv = blob_centroids(
         flat, starts, bbox, g32, level, weighting == "coverage", owner, ox, oy, use_owner,
     )  # fmt: skip
-    mix = blob_mixing(flat, starts, bbox, sg, sd, s_gray, s_mm, float(dark), owner, ox, oy,
-                      use_owner)  # fmt: skip
+    mix = blob_mixing(flat, starts, bbox, g32, d32, sd, s_gray, s_mm, crowded, float(dark),
+                      owner, ox, oy, use_owner)  # fmt: skip
     bearings = camera.pixel_bearings().reshape(-1, 3)
     rho = blob_ranges(
         flat, starts, np.asarray(distance_mm, np.float32).reshape(-1), bearings,

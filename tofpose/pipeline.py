@@ -594,11 +594,12 @@ class PosePipeline:
         R, t, x, k_idx, i_idx = T.R, T.t_mm, obs.x_mm, obs.k_idx, obs.i_idx
         uv_m, y_m, rho_m = obs.uv_px, obs.y_mm, obs.range_mm
         area, uv, rho = meas.area_px, meas.uv_px, meas.range_mm
-        sig_px, sig_rng = meas.sigma_px, meas.sigma_range_mm
+        sig_px = meas.sigma_px
         res, rms = point_residuals_mm(x, y_m, R, t)
         per_reflector = zip(
             self._catalog_ids[i_idx].tolist(), uv_m, y_m, res.tolist(), rho_m.tolist(),
-            area[k_idx].tolist(), sig_px[k_idx].tolist(), sig_rng[k_idx].tolist(), strict=True,
+            area[k_idx].tolist(), sig_px[k_idx].tolist(), obs.sigma_range_mm.tolist(),
+            strict=True,
         )  # fmt: skip
         matched = [MatchedReflector(*row) for row in per_reflector]
         used = set(k_idx.tolist())

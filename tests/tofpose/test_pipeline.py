@@ -422,7 +422,11 @@ def test_markers_7_and_8_merged_into_one_blob_are_split_and_both_matched():
         if m.catalog_id in (7, 8):
             truth = (p7, p8)[m.catalog_id - 7]
             assert np.linalg.norm(m.centroid_uv - truth) < 0.6
-    assert np.linalg.norm(r.t_mm - T.t_mm) < 5.0 and rotation_angle_deg(r.R, T.R) < 0.5
+    assert np.linalg.norm(r.t_mm - T.t_mm) < 5.0 and rotation_angle_deg(r.R, T.R) < 0.6
+    # and the reported covariance holds it: inside chi2_6's 3-sigma quantile (20.06)
+    from tofpose.covariance_calibration import pose_nees
+
+    assert pose_nees(r.R, r.t_mm, r.covariance, T.R, T.t_mm) < 20.06
 
 
 @pytest.mark.parametrize("corrected", [False, True], ids=["plain", "range-corrected"])
@@ -447,6 +451,7 @@ def test_the_compiled_measurement_gives_the_stage_by_stage_measurements(correcte
     compiled = PosePipeline(cam, cat, range_correction=correction)
     staged = PosePipeline(cam, cat, range_correction=correction)
     sources = set()
+    with_sums = 0
     poses = [facing_pose(8000.0, 2, -3, 10)] * 4 + [facing_pose(1500.0, 3, 2, -5)] * 3
     for k, T in enumerate(poses):
         f = render(T, seed=k)
@@ -454,9 +459,9 @@ def test_the_compiled_measurement_gives_the_stage_by_stage_measurements(correcte
         found, blobs = compiled._candidates(g, d, frame_levels(g, compiled.config.extraction),
                                             _Timer())  # fmt: skip
         sources |= {b.source for b in blobs}
-        bg = found.stats.background
-        meas, unranged, n_kept, info = compiled._measure(blobs, g, d, bg)
-        kept, mean_g, med_d, ref_info = staged._persistence.measure(blobs, g, d, cam, bg)
+        bg, dark = found.stats.background, found.stats.dark_level
+        meas, unranged, n_kept, info = compiled._measure(blobs, g, d, bg, dark)
+        kept, mean_g, med_d, ref_info = staged._persistence.measure(blobs, g, d, cam, bg, dark)
         ranged = [b for b in kept if isfinite(b.distance_mm)]
         if corrected:
             ranged = staged._correct_ranges(ranged, mean_g)
@@ -467,6 +472,8 @@ def test_the_compiled_measurement_gives_the_stage_by_stage_measurements(correcte
         # the same blobs, in order (the staged ones are new records of the same pixels)
         assert all(b.pixels is r.pixels for b, r in zip(meas.blobs, ranged, strict=True))
         for name in ("area_px", "uv_px", "range_mm", "y_mm", "weights", "sigma_px",
-                     "sigma_range_mm"):  # fmt: skip
+                     "sigma_range_mm", "mixing"):  # fmt: skip
             np.testing.assert_array_equal(getattr(meas, name), getattr(ref, name), err_msg=name)
+        with_sums += int(np.isfinite(meas.mixing).all(axis=1).sum())
     assert "split" in sources
+    assert with_sums > 0  # blobs whose surround has a range (the plate at 1.5 m) have sums

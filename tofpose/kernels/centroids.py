@@ -129,9 +129,10 @@ def blob_ranges(flat, starts, distance_flat, bearings_flat, centre_bearings):
 @jit
 def owner_map(flat, starts, bbox, h, w):
     """Index of the blob owning each pixel (-1: none) over the part of the (H, W) image
-    that holds every blob's box grown by 2 px, and whether it is needed: only when two
-    blobs' boxes (n, 4) (x, y, w, h) come within 2 px (the usual case is that they do
-    not, and nothing needs excluding). The ring of a blob must not reach into a
+    that holds every blob's box grown by 2 px, and whether it is needed: only when a
+    blob's box (n, 4) (x, y, w, h) grown by 3 px (the reach of its surround ring,
+    ``mixed_pixels.SURROUND_OUTER_PX``) meets another's box (the usual case is that none
+    does, and nothing needs excluding). The ring of a blob must not reach into a
     neighbour's pixels (markers 7 and 8 split apart touch each other), or that
     neighbour's light pulls the centroid towards it. Returns owner (h', w') int32, its
     top-left pixel (x0, y0) in the image, and use_owner."""
@@ -139,10 +140,10 @@ def owner_map(flat, starts, bbox, h, w):
     near = False
     for a in range(n):
         for b in range(n):
-            if a != b and (bbox[a, 0] - 2 < bbox[b, 0] + bbox[b, 2] + 2
-                           and bbox[b, 0] - 2 < bbox[a, 0] + bbox[a, 2] + 2
-                           and bbox[a, 1] - 2 < bbox[b, 1] + bbox[b, 3] + 2
-                           and bbox[b, 1] - 2 < bbox[a, 1] + bbox[a, 3] + 2):  # fmt: skip
+            if a != b and (bbox[a, 0] - 3 < bbox[b, 0] + bbox[b, 2]
+                           and bbox[b, 0] - 3 < bbox[a, 0] + bbox[a, 2]
+                           and bbox[a, 1] - 3 < bbox[b, 1] + bbox[b, 3]
+                           and bbox[b, 1] - 3 < bbox[a, 1] + bbox[a, 3]):  # fmt: skip
                 near = True
     if not near:
         return np.full((1, 1), -1, np.int32), 0, 0, False

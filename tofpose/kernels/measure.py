@@ -54,8 +54,9 @@ def persist_and_measure(
     (n,) of the kept blobs (NaN for the others): coverage-weighted centroids on I-bar
     above each blob's surround level and ranges on D-bar along each centroid's line of
     sight; and mix (n, ``MIX_FIELDS``) the mixing sums of the kept blobs
-    (``mixed_pixels.blob_mixing`` on this frame: the combined frames hold I-bar and
-    D-bar only inside the boxes and at the blobs' pixels, not on their surround).
+    (``mixed_pixels.blob_mixing`` on I-bar, D-bar at the blobs' pixels, and this frame's
+    distance elsewhere; the surround from this frame: the combined frames hold I-bar
+    and D-bar only inside the boxes and at the blobs' pixels).
 
     With one frame, mean_gray and med_distance are the frame's gray and distance. With
     more, they are the scratch frames ``mean_buf`` and ``med_buf`` (H, W) float32
@@ -91,14 +92,14 @@ def persist_and_measure(
     # Eqs. 19-20 on the combined frames
     k_bbox = bbox[kept]
     owner, ox, oy, use_owner = owner_map(k_flat, k_starts, k_bbox, h, w)
-    s_gray, s_mm = blob_surrounds(k_bbox, gray, distance, owner, ox, oy, use_owner)
+    s_gray, s_mm, crowded = blob_surrounds(k_bbox, gray, distance, owner, ox, oy, use_owner)
     level = np.empty(kept.shape[0])
     for a in range(kept.shape[0]):
         level[a] = s_gray[a] if np.isfinite(s_gray[a]) else background
     k_uv = blob_centroids(k_flat, k_starts, k_bbox, mean_gray, level, True, owner, ox,
                           oy, use_owner)  # fmt: skip
-    k_mix = blob_mixing(k_flat, k_starts, k_bbox, gray, distance, s_gray, s_mm, dark, owner,
-                        ox, oy, use_owner)  # fmt: skip
+    k_mix = blob_mixing(k_flat, k_starts, k_bbox, mean_gray, med_dist, distance, s_gray, s_mm,
+                        crowded, dark, owner, ox, oy, use_owner)  # fmt: skip
     k_rho = blob_ranges(k_flat, k_starts, med_dist.reshape(-1), pixel_bearings,
                         bearings(k_uv, fx, fy, cx, cy, dist))  # fmt: skip
     uv = np.full((n, 2), np.nan)

@@ -62,12 +62,14 @@ def blob_surrounds(bbox, gray, distance, owner, ox, oy, use_owner):
 
     bbox : (n, 4) int64 (x, y, w, h); gray : (H, W) float32; distance : (H, W) float32
     (NaN invalid); owner, ox, oy, use_owner : ``centroids.owner_map``. Returns
-    surround_gray (n,) (NaN with no ring pixel) and surround_mm (n,) (NaN with fewer
-    than 3 ranged ring pixels)."""
+    surround_gray (n,) (NaN with no ring pixel), surround_mm (n,) (NaN with fewer than 3
+    ranged ring pixels) and crowded (n,) bool: another blob's pixels lie in the ring (its
+    light then spills into this blob's support, and the mixing sums are not used)."""
     h, w = gray.shape
     n = bbox.shape[0]
     level = np.full(n, np.nan)
     depth = np.full(n, np.nan)
+    crowded = np.zeros(n, np.bool_)
     so, si = SURROUND_OUTER_PX, SURROUND_INNER_PX
     for j in range(n):
         x, y, bw, bh = bbox[j, 0], bbox[j, 1], bbox[j, 2], bbox[j, 3]
@@ -82,6 +84,7 @@ def blob_surrounds(bbox, gray, distance, owner, ox, oy, use_owner):
                 if inner_row and x - si <= c < x + bw + si:
                     continue
                 if _owned_by_other(owner, ox, oy, use_owner, r, c, j):
+                    crowded[j] = True
                     continue
                 g_ring[ng] = gray[r, c]
                 ng += 1
@@ -93,18 +96,22 @@ def blob_surrounds(bbox, gray, distance, owner, ox, oy, use_owner):
             level[j] = median_inplace(g_ring[:ng])
         if nd >= 3:
             depth[j] = median_inplace(d_ring[:nd])
-    return level, depth
+    return level, depth, crowded
 
 
 @jit
-def blob_mixing(flat, starts, bbox, gray, distance, surround_gray, surround_mm, dark,
-                owner, ox, oy, use_owner):  # fmt: skip
+def blob_mixing(flat, starts, bbox, gray, member_distance, distance, surround_gray,
+                surround_mm, crowded, dark, owner, ox, oy, use_owner):  # fmt: skip
     """The sums of the mixing model (module docstring) of each blob over its support
     (its pixels dilated by one, other blobs' pixels left out): (n, ``MIX_FIELDS``) rows
-    (a_b, d_b, S_a, S_ad, C_unranged, n_support), NaN rows where the surround is unknown.
+    (a_b, d_b, S_a, S_ad, C_unranged, n_support), NaN rows where the surround is unknown
+    or crowded.
 
-    flat, starts : the pixel lists; bbox (n, 4); gray, distance (H, W) float32 (the
-    frame the surround was read on); surround_gray, surround_mm (n,) :
+    flat, starts : the pixel lists; bbox (n, 4); gray (H, W) float32 (I-bar where
+    persistence combined frames: it holds them inside the boxes grown by 2 px);
+    member_distance (H, W) float32, read at the blobs' own pixels (D-bar, the
+    combination's median, as the blob's median range reads it), and distance, the
+    frame's own, read at the support's other pixels; surround_gray, surround_mm, crowded (n,) :
     ``blob_surrounds``; dark : the frame's no-return gray level (counts). Support pixels
     without a range (saturated, or too dark) are left out of the sums; their covered
     area, estimated from their gray as ``(g - g_b) / (g_max - g_b)`` clipped to [0, 1]
@@ -115,7 +122,7 @@ def blob_mixing(flat, starts, bbox, gray, distance, surround_gray, surround_mm, 
     inv_w = 1.0 / w
     for j in range(n):
         gb, db = surround_gray[j], surround_mm[j]
-        if not (np.isfinite(gb) and np.isfinite(db)):
+        if crowded[j] or not (np.isfinite(gb) and np.isfinite(db)):
             continue
         x, y, bw, bh = bbox[j, 0], bbox[j, 1], bbox[j, 2], bbox[j, 3]
         y0, y1 = max(y - 1, 0), min(y + bh + 1, h)
@@ -141,7 +148,8 @@ def blob_mixing(flat, starts, bbox, gray, distance, surround_gray, surround_mm, 
                     continue
                 n_sup += 1
                 g = float(gray[r + y0, c + x0])
-                d = distance[r + y0, c + x0]
+                src = member_distance if member[r, c] else distance
+                d = src[r + y0, c + x0]
                 if np.isfinite(d):
                     a = g - dark
                     s_a += a - a_b

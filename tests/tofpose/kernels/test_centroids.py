@@ -19,9 +19,24 @@ from tofpose.extraction import (
 )
 
 
-def _reference(blob, gray, dist, cam, bg, owner=None, j=0):
-    """Coverage-weighted centroid over the blob dilated by one pixel, then the median of
-    the member ranges projected on the centroid's line of sight."""
+def _surround_level(blob, gray, owner, j, frame_bg):
+    """The median gray of the ring between the blob's box grown by 1 and by 3 px (other
+    blobs' pixels left out), or the frame's level without one."""
+    h, w = gray.shape
+    x, y, bw, bh = blob.bbox
+    ring = np.zeros((h, w), bool)
+    ring[max(y - 3, 0) : y + bh + 3, max(x - 3, 0) : x + bw + 3] = True
+    ring[max(y - 1, 0) : y + bh + 1, max(x - 1, 0) : x + bw + 1] = False
+    if owner is not None:
+        ring &= (owner == -1) | (owner == j)
+    return float(np.median(gray[ring])) if ring.any() else frame_bg
+
+
+def _reference(blob, gray, dist, cam, frame_bg, owner=None, j=0):
+    """Coverage-weighted centroid over the blob dilated by one pixel, above the blob's
+    surround level, then the median of the member ranges projected on the centroid's
+    line of sight."""
+    bg = _surround_level(blob, gray, owner, j, frame_bg)
     h, w = gray.shape
     x, y, bw, bh = blob.bbox
     y0, y1, x0, x1 = max(y - 2, 0), min(y + bh + 2, h), max(x - 2, 0), min(x + bw + 2, w)
@@ -56,8 +71,11 @@ def test_measured_blobs_equal_the_reference(distance_mm):
     bg = found.stats.background
     measured = measure_blobs(found.accepted, g, d, cam, bg)
     assert len(measured) == len(found.accepted) >= 3
-    for b, m in zip(found.accepted, measured, strict=True):
-        uv, rho = _reference(b, g, d, cam, bg)
+    owner = np.full(cam.shape, -1, np.int32)
+    for j, b in enumerate(found.accepted):
+        owner.ravel()[b.pixels] = j
+    for j, (b, m) in enumerate(zip(found.accepted, measured, strict=True)):
+        uv, rho = _reference(b, g, d, cam, bg, owner, j)
         np.testing.assert_allclose(m.centroid_uv, uv, atol=1e-9)
         assert m.distance_mm == pytest.approx(rho, abs=1e-6)
         assert b.distance_mm != m.distance_mm or b.centroid_uv is not m.centroid_uv  # new
