@@ -1,0 +1,78 @@
+"""The mixing model of small markers (``tofpose.kernels.mixed_pixels``) against frames
+built from the model's own physics with a known truth: a disc of known size and range,
+area-integrated over the pixels, in front of a plate that is not black."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tofpose.camera import CameraModel
+from tofpose.extraction import Blob, measure_blobs
+from tofpose.kernels.mixed_pixels import unmixed_range
+
+DARK = 90.0  # counts with no return
+PLATE_AMP, PLATE_MM = 120.0, 5120.0
+MARKER_AMP, MARKER_MM = 1600.0, 5000.0
+
+
+def _frame(centre_uv, radius_px, seed=0, noise=0.0):
+    """(gray, distance, blob) of a disc over a plate: each pixel's coverage c from 16 x 16
+    samples, amplitude and amplitude x distance mixed linearly (the phasor sum for a
+    phase spread of 0.03 rad), gray = amplitude + DARK."""
+    cam = CameraModel()
+    h, w = cam.shape
+    rng = np.random.default_rng(seed)
+    cov = np.zeros((h, w))
+    u0, v0 = centre_uv
+    s = (np.arange(16) + 0.5) / 16 - 0.5
+    for r in range(int(v0) - 4, int(v0) + 5):
+        for c in range(int(u0) - 4, int(u0) + 5):
+            uu, vv = np.meshgrid(c + s, r + s)
+            cov[r, c] = np.mean((uu - u0) ** 2 + (vv - v0) ** 2 <= radius_px**2)
+    amp = cov * MARKER_AMP + (1 - cov) * PLATE_AMP
+    dist = (cov * MARKER_AMP * MARKER_MM + (1 - cov) * PLATE_AMP * PLATE_MM) / amp
+    gray = (amp + DARK + noise * rng.standard_normal((h, w))).astype(np.float32)
+    dist = (dist + noise * 0.05 * rng.standard_normal((h, w))).astype(np.float32)
+    member = gray > DARK + PLATE_AMP + 0.15 * (MARKER_AMP - PLATE_AMP) * cov.max()
+    pixels = np.flatnonzero(member)
+    rows, cols = np.divmod(pixels, w)
+    bbox = (int(cols.min()), int(rows.min()), int(np.ptp(cols)) + 1, int(np.ptp(rows)) + 1)
+    return cam, gray, dist, Blob(pixels=pixels, area_px=len(pixels), bbox=bbox)
+
+
+@pytest.mark.parametrize("centre", [(150.3, 120.6), (151.0, 119.5), (149.72, 121.18)])
+@pytest.mark.parametrize("radius_px", [0.7, 1.2, 2.0])
+def test_a_small_marker_over_a_grey_plate_has_its_own_range_and_centre(centre, radius_px):
+    cam, gray, dist, blob = _frame(centre, radius_px)
+    (m,) = measure_blobs([blob], gray, dist, cam, float(np.median(gray)), dark=DARK)
+    # the median of its pixels is pulled towards the plate behind it ...
+    assert m.distance_mm - MARKER_MM > 0.5
+    # ... the model, given the disc's area, is not
+    rho, sens = unmixed_range(m.distance_mm, m.mixing, radius_px, 1.0, 4.0)
+    assert rho == pytest.approx(MARKER_MM, abs=0.2)  # 16 x 16 samples vs pi r^2
+    assert sens > 0  # and it says how much a wrong area would move it
+    # the centroid above the blob's own surround level is the disc's centre
+    np.testing.assert_allclose(m.centroid_uv, centre, atol=0.05)  # 0.04 px at r = 0.7 px
+
+
+def test_the_model_does_not_apply_where_it_cannot():
+    cam, gray, dist, blob = _frame((150.3, 120.6), 1.0)
+    (m,) = measure_blobs([blob], gray, dist, cam, float(np.median(gray)), dark=DARK)
+    assert unmixed_range(m.distance_mm, m.mixing, 5.0, 1.0, 4.0) == (m.distance_mm, 0.0)
+    nan_row = np.full_like(m.mixing, np.nan)
+    assert unmixed_range(m.distance_mm, nan_row, 1.0, 1.0, 4.0) == (m.distance_mm, 0.0)
+    (no_dark,) = measure_blobs([blob], gray, dist, cam, float(np.median(gray)))
+    assert unmixed_range(no_dark.distance_mm, no_dark.mixing, 1.0, 1.0, 4.0)[0] == (
+        no_dark.distance_mm
+    )  # without the frame's no-return level the amplitudes are unknown
+
+
+def test_with_noise_the_model_stays_closer_than_the_median():
+    errs_model, errs_median = [], []
+    for seed in range(20):
+        cam, gray, dist, blob = _frame((150.3 + 0.05 * seed, 120.6), 0.8, seed, noise=10.0)
+        (m,) = measure_blobs([blob], gray, dist, cam, float(np.median(gray)), dark=DARK)
+        errs_model.append(unmixed_range(m.distance_mm, m.mixing, 0.8, 1.0, 4.0)[0] - MARKER_MM)
+        errs_median.append(m.distance_mm - MARKER_MM)
+    assert abs(np.median(errs_model)) < 0.5 * abs(np.median(errs_median))
