@@ -62,7 +62,7 @@ test: lint system-deps frontend $(VENV)/.kernels
 	$(PY) -m pytest -q
 
 bench: $(VENV)/.kernels
-	$(PY) bench/report.py
+	$(PY) bench/report.py $(BENCH_ARGS)
 
 clean: kernels-clean
 	rm -rf $(VENV) .pytest_cache .ruff_cache frontend/node_modules frontend/dist

@@ -19,9 +19,8 @@ it once the blob is matched: ``pi r_px^2 cos(incidence)``. Then
     A_r = a_b + S_a / C,   d_r = (a_b d_b + S_ad / C) / A_r
 
 is the reflector's own distance. The median over the blob's pixels (Eq. 20 as we
-measure it) is pulled towards the surround by the mixed pixels: on foreign-renderer
-frames 35 mm markers at 8 m read +6 mm long (p90 13 mm) with it, -2 mm (p90 6 mm) with
-this model.
+measure it) is pulled towards the surround by the mixed pixels; ``bench/foreign.py``
+and ``bench/physics.py`` measure both against truth by marker size (docs/results.md).
 """
 
 from __future__ import annotations
