@@ -197,13 +197,44 @@ class PoseSolver:
         reflection matched in a marker's place) bends the fit so that every residual looks
         large while without it the others agree, so that estimate is the smallest over the
         fits that leave one reflector out (worst-fitting first: with one bad point the first
-        such fit already gives 0). The outlier step then drops a reflector more than
-        ``outlier_sigma`` off the fit (whitened norm), re-estimating after each removal. A
-        biased point can also drag a fit of few points towards itself and hide; so when the
-        fit as a whole is inconsistent (chi^2 above ``outlier_chi2_per_dof`` per degree of
-        freedom) each reflector is predicted from a fit without it, and the one predicted
-        worst goes if it is off by more than ``outlier_sigma`` (from 5 reflectors on: a fit
-        of 3 cannot single out the bad one of 4)."""
+        such fit already gives 0). The outlier step then looks for a reflector to drop,
+        re-estimating after each removal, when one is more than ``outlier_sigma`` off the
+        fit (whitened norm) or the fit as a whole is inconsistent (chi^2 above
+        ``outlier_chi2_per_dof`` per degree of freedom). A biased point with a small sigma
+        drags the fit towards itself and hides, leaving good points with the large
+        residuals (two markers imaged as one blob did so at 8 m, and the good ones were
+        dropped); so from 5 reflectors on, each is predicted from a fit without it and the
+        one predicted worst goes if it is off by more than ``outlier_sigma``; with 4 (a
+        fit of 3 cannot single out the bad one of 4) the largest whitened residual goes.
+        When completion added a blob and the outlier step then dropped matched ones, the
+        fit without completion is taken if it keeps more reflectors."""
+        cfg = self.config
+        complete_mm = alpha_mm * cfg.matching.residual_factor
+        fit = self._fit_pairs(pairs, meas, complete_mm)
+        kept = fit[7]
+        n = len(pairs)
+        if len(kept) > n and kept[n:].any() and not kept[:n].all():
+            # completion added a blob and the outlier step then dropped matched ones: the
+            # added blob may be what bent the fit (two markers imaged as one blob sits
+            # near a predicted reflector); the fit without completion is taken when it
+            # keeps more reflectors
+            alone = self._fit_pairs(pairs, meas, 0.0)
+            if alone[7].sum() > kept.sum():
+                fit = alone
+        (k_idx, i_idx, uv, e, y, rho, sigma_range, kept, R, t, iterations, cov, chi2, norms,
+         sr, sb, offset, offset_sigma) = fit  # fmt: skip
+        obs = MatchedObservations(
+            k_idx=k_idx, i_idx=i_idx, x_mm=self._xyz[i_idx], uv_px=uv, bearings=e,
+            range_mm=rho - offset, y_mm=y - e * offset,
+            sigma_bearing_rad=meas.sigma_px[k_idx] / self.camera.fx,
+            sigma_range_mm=sigma_range,
+        )  # fmt: skip
+        return self.conclude(obs.subset(kept), R, t, iterations, cov, chi2, norms, sr, sb,
+                             active, offset, offset_sigma)  # fmt: skip
+
+    def _fit_pairs(self, pairs: np.ndarray, meas: Measurements, complete_mm: float) -> tuple:
+        """``kernels.solve.solve_pairs`` on matched pairs (m, 2) with completion within
+        ``complete_mm`` (0: none): its return tuple."""
         cfg, cam = self.config, self.camera
         prior_mm = self.offset_prior_mm(meas.range_mm[pairs[:, 0]])
         mixing = (
@@ -211,26 +242,17 @@ class PoseSolver:
             if meas.mixing is not None
             else np.full((len(meas.range_mm), MIX_FIELDS), np.nan)
         )
-        (k_idx, i_idx, uv, e, y, rho, sigma_range, kept, R, t, iterations, cov, chi2, norms,
-         sr, sb, offset, offset_sigma) = solve_pairs(
+        return solve_pairs(
             meas.y_mm, meas.weights, meas.uv_px, meas.range_mm, meas.sigma_px,
             meas.sigma_range_mm, mixing, np.ascontiguousarray(pairs[:, 0]),
             np.ascontiguousarray(pairs[:, 1]), self._xyz, self._d / 2, self._K, cam.fx, cam.fy,
             cam.cx, cam.cy, cam.dist_array, cfg.correct_perspective_bias,
-            float(cfg.mixed_pixel_radius_px), alpha_mm * cfg.matching.residual_factor,
-            _REFINEMENT[cfg.refinement],
+            float(cfg.mixed_pixel_radius_px), float(complete_mm), _REFINEMENT[cfg.refinement],
             cfg.los_tolerance, STEP_SIGMA2, cfg.adapt_range_sigma,
             cfg.max_systematic_range_sigma_mm, cfg.max_systematic_centroid_sigma_px,
             cfg.reject_outliers,
             cfg.matching.min_matches, cfg.outlier_sigma, cfg.outlier_chi2_per_dof, prior_mm,
         )  # fmt: skip
-        obs = MatchedObservations(
-            k_idx=k_idx, i_idx=i_idx, x_mm=self._xyz[i_idx], uv_px=uv, bearings=e,
-            range_mm=rho - offset, y_mm=y - e * offset,
-            sigma_bearing_rad=meas.sigma_px[k_idx] / cam.fx, sigma_range_mm=sigma_range,
-        )  # fmt: skip
-        return self.conclude(obs.subset(kept), R, t, iterations, cov, chi2, norms, sr, sb,
-                             active, offset, offset_sigma)  # fmt: skip
 
     def offset_prior_mm(self, range_mm: np.ndarray) -> float:
         """Prior sigma of the common range offset the fit estimates (mm; 0: none):

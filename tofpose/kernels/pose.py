@@ -344,11 +344,15 @@ def worst_outlier(
     (``tofpose.solve.PoseSolver.solve`` documents the rule)."""
     m = norms.shape[0]
     worst = int(np.argmax(norms))
-    if norms[worst] > outlier_sigma:
-        return worst
     dof = 3 * m - 6
-    if m < 5 or (norms**2).sum() <= chi2_per_dof * dof:
+    inconsistent = (norms**2).sum() > chi2_per_dof * dof
+    if m < 5:
+        return worst if norms[worst] > outlier_sigma else -1
+    if norms[worst] <= outlier_sigma and not inconsistent:
         return -1
+    # the one to drop is the one the others predict worst: a biased point with a small
+    # sigma drags the fit towards itself, so that its own residual is small and good
+    # points' residuals are large (masking); a fit without it shows it
     predicted = np.empty(m)
     for j in range(m):
         _, Rj, tj = fit_without(j, x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2)
