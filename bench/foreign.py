@@ -242,7 +242,8 @@ def _int(x: int) -> str:
 def report(ev: dict) -> str:
     """The tables of one evaluated recording (``evaluate``)."""
     mode = "tracking" if ev["tracking"] else "acquisition"
-    head = f"## {ev['path']}: {ev['frames']} frames, {mode} mode, catalog {ev['catalog']!r}"
+    name = Path(ev["path"]).name
+    head = f"### {name}: {ev['frames']} frames, {mode} mode, catalog {ev['catalog']!r}"
     n_truth = ev["oracle_frames_matched"]
     if n_truth is not None:
         head += f"; the oracle matched {n_truth} frames by truth"
