@@ -174,9 +174,11 @@ def markdown(summary, img_rel: str, n_frames: int) -> str:
         "so that at least three markers are in view (below 0.6 m the 35 mm group, below "
         "1.2 m the 80 mm group). The pipeline's 1-sigma is its own prediction (the "
         "median over frames of its reported covariance); the Cramer-Rao bound is the "
-        "limit from the measurement model at the true pose: the sensor's shot noise and "
-        "pixel sampling (bench/crlb.py; position and attitude as the root of the trace of "
-        "each block, like the 1-sigma).",
+        "limit from the physics alone at the true pose: the sensor's shot noise on the "
+        "pixel-integrated image of each disc, its rim's information for the bearing and "
+        "its pixels' for the range, no estimator's terms (bench/crlb.py; position and "
+        "attitude as the root of the trace of each block, like the 1-sigma). It is what "
+        "a fit of the whole image model would reach; centroids do not.",
         "",
         f"![accuracy over range]({img_rel})",
         "",
