@@ -16,6 +16,8 @@ none) and the surround's share of mixed pixels.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from tofpose.camera import CameraModel
@@ -41,8 +43,11 @@ def pose_crlb(
         if not m.any():
             continue
         a, b = f.amplitude[m], f.background[m]
+        var_px2 = bearing_variance_px2(f, cam, T, pos, radii_mm[k], m)
+        if not math.isfinite(var_px2):
+            continue
         s_r.append(1.0 / np.sqrt(np.sum(1.0 / sensor.distance_sigma_mm(a, b) ** 2)))
-        s_b.append(np.sqrt(bearing_variance_px2(f, cam, T, pos, radii_mm[k], m)) / cam.fx)
+        s_b.append(np.sqrt(var_px2) / cam.fx)
         p = T.R @ pos + T.t_mm
         x.append(pos)
         rho.append(np.linalg.norm(p))
@@ -71,8 +76,10 @@ def bearing_variance_px2(f: RenderedFrame, cam: CameraModel, T: RigidTransform, 
     centre = rim.mean(axis=0)
     if np.sum(normal * (rim - centre)) < 0:
         normal = -normal
-    col = np.clip(np.rint(rim[:, 0]).astype(int), 0, cam.width - 1)
-    row = np.clip(np.rint(rim[:, 1]).astype(int), 0, cam.height - 1)
+    col = np.rint(rim[:, 0]).astype(int)
+    row = np.rint(rim[:, 1]).astype(int)
+    inside = (col >= 0) & (col < cam.width) & (row >= 0) & (row < cam.height)
+    col, row, normal = col[inside], row[inside], normal[inside]  # the image's part of it
     grad = np.zeros((cam.height, cam.width, 2))
     np.add.at(grad, (row, col), normal)  # d coverage / d (u, v) of each pixel
     touched = covered.copy()
@@ -84,4 +91,6 @@ def bearing_variance_px2(f: RenderedFrame, cam: CameraModel, T: RigidTransform, 
     a_disc = float(f.amplitude[touched].sum()) / max(area_px, 1e-9)
     var_pixel = np.maximum(f.amplitude + f.background, 1.0)
     info = np.einsum("hwi,hwj->ij", grad, grad / var_pixel[..., None]) * a_disc**2
+    if not np.all(np.isfinite(info)) or np.linalg.det(info) <= 1e-12 * np.trace(info) ** 2:
+        return math.inf  # no bearing information (the disc edge-on, or out of the image)
     return float(np.max(np.diag(np.linalg.inv(info))))
