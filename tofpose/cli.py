@@ -28,6 +28,7 @@ from tofpose.range_calibration import (
     true_pixel_distances,
 )
 from tofpose.recording import RecordingError, RecordingWriter, open_recording
+from tofpose.relative_state import RelativeStateFilter
 from tofpose.threads import single_threaded_blas
 from tofpose.tof import unambiguous_range_mm
 from tofpose.tracking import TrackingConfig
@@ -38,6 +39,15 @@ CSV_COLUMNS = (
     # appended later (readers of the columns above keep working): the pose's predicted
     # 1-sigma, position and rotation-vector components
     "sigma_x_mm", "sigma_y_mm", "sigma_z_mm", "sigma_rx_deg", "sigma_ry_deg", "sigma_rz_deg",
+)  # fmt: skip
+
+#: with ``estimate --filter``: the relative-state filter's state at each frame
+#: (``tofpose.relative_state``): angular rate in the camera frame, velocity, their 1-sigma,
+#: and what the filter did with the frame's pose
+FILTER_COLUMNS = (
+    "rate_x_deg_s", "rate_y_deg_s", "rate_z_deg_s", "vel_x_mm_s", "vel_y_mm_s", "vel_z_mm_s",
+    "sigma_rate_x_deg_s", "sigma_rate_y_deg_s", "sigma_rate_z_deg_s",
+    "sigma_vel_x_mm_s", "sigma_vel_y_mm_s", "sigma_vel_z_mm_s", "filter_status",
 )  # fmt: skip
 
 
@@ -145,9 +155,12 @@ def estimate(
     camera_path: str | None,
     progress: bool = True,
     tracking: bool = False,
+    filter_state: bool = False,
 ) -> dict[str, float]:
     """Run the pipeline over a recording and write the CSV; returns summary numbers.
-    ``tracking``: the pipeline's tracking mode (faster on a continuous recording)."""
+    ``tracking``: the pipeline's tracking mode (faster on a continuous recording);
+    ``filter_state``: run the relative-state filter over the poses and add
+    ``FILTER_COLUMNS`` (empty until its first pose)."""
     with open_recording(rec_path) as rec:
         camera, correction, scale = rec.camera, None, None
         if camera_path:
@@ -167,9 +180,10 @@ def estimate(
         pipe = PosePipeline(camera, catalog, config, range_correction=correction,
                             covariance_scale=scale)  # fmt: skip
         n_ok = 0
+        rel = RelativeStateFilter() if filter_state else None
         with open(out_csv, "w", newline="") as fh:
             wr = csv.writer(fh)
-            wr.writerow(CSV_COLUMNS)
+            wr.writerow(CSV_COLUMNS + (FILTER_COLUMNS if rel else ()))
             for i in tqdm(
                 range(rec.n_frames),
                 desc="estimate",
@@ -191,8 +205,24 @@ def estimate(
                     row += [f"{v:.5f}" for v in np.degrees(sd[:3])]
                 else:
                     row += [""] * 17
+                if rel is not None:
+                    row += _filter_columns(rel, r, t)
                 wr.writerow(row)
         return {"frames": rec.n_frames, "ok": n_ok}
+
+
+def _filter_columns(rel: RelativeStateFilter, r, time_s: float) -> list[str]:
+    """``FILTER_COLUMNS`` of one frame: the pose fused (or rejected), or the state
+    predicted to the frame's time without one."""
+    if r.ok:
+        s = rel.update(time_s, r.R, r.t_mm, r.covariance)
+    elif rel.initialised:
+        s = rel.predict(time_s)
+    else:
+        return [""] * len(FILTER_COLUMNS)
+    return ([f"{v:.4f}" for v in s.angular_rate_deg_s] + [f"{v:.3f}" for v in s.velocity_mm_s]
+            + [f"{v:.4f}" for v in s.angular_rate_sigma_deg_s]
+            + [f"{v:.3f}" for v in s.velocity_sigma_mm_s] + [s.status])  # fmt: skip
 
 
 def simulate(
@@ -317,6 +347,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", required=True, help="output CSV")
     p.add_argument("--tracking", action="store_true",
                    help="tracking mode: look for reflectors near their last position")  # fmt: skip
+    p.add_argument("--filter", action="store_true",
+                   help="add the relative-state filter's angular rate and velocity with "
+                        "their 1-sigma (rate_*, vel_*, sigma_rate_*, sigma_vel_*)")  # fmt: skip
     p = sub.add_parser(
         "calibrate-range",
         help="fit the camera's range correction from a recording of the known target",
@@ -423,7 +456,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.cmd == "estimate":
             s = estimate(args.recording, args.out, args.catalog, args.camera,
-                         tracking=args.tracking)  # fmt: skip
+                         tracking=args.tracking, filter_state=args.filter)  # fmt: skip
             print(f"{s['ok']}/{s['frames']} frames with a pose -> {args.out}")
         elif args.cmd == "calibrate-covariance":
             print(calibrate_covariance(args.recording, args.out, args.camera, args.reference,

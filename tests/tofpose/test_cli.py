@@ -48,6 +48,29 @@ def test_failed_frames_have_empty_pose_cells(tmp_path):
     assert row["sigma_rz_deg"] == ""
 
 
+def test_estimate_with_the_filter_adds_rate_and_velocity_of_a_static_target(tmp_path):
+    """``estimate --filter``: the relative-state filter's columns after the pose's; the
+    stability recording's target does not move, so the rates and velocities it reports
+    are zero within their own 3 sigma once it has seen a few frames."""
+    from tofpose.cli import FILTER_COLUMNS
+
+    rec, out = tmp_path / "r.h5", tmp_path / "poses.csv"
+    assert main(["simulate", "--scenario", "stability-697", "--frames", "12", "--out",
+                 str(rec)]) == 0  # fmt: skip
+    assert main(["estimate", str(rec), "--out", str(out), "--filter"]) == 0
+    rows = list(csv.reader(out.open()))
+    assert tuple(rows[0]) == CSV_COLUMNS + FILTER_COLUMNS
+    body = [dict(zip(rows[0], r, strict=True)) for r in rows[1:]]
+    assert body[0]["filter_status"] == "initialised"
+    assert {r["filter_status"] for r in body[1:]} == {"updated"}
+    for r in body[4:]:
+        for axis in "xyz":
+            assert abs(float(r[f"rate_{axis}_deg_s"])) < 3 * float(r[f"sigma_rate_{axis}_deg_s"])
+            assert abs(float(r[f"vel_{axis}_mm_s"])) < 3 * float(r[f"sigma_vel_{axis}_mm_s"])
+    # well below the 30 deg/s it starts from: the poses told it the rate
+    assert float(body[-1]["sigma_rate_y_deg_s"]) < 3.0
+
+
 def test_calibrate_range_writes_a_camera_the_estimate_uses(tmp_path, capsys):
     """simulate a realistic sweep, fit its range correction, estimate with it: the
     correction is stored with the camera and applied: errors against /truth shrink at

@@ -1,0 +1,172 @@
+"""The relative-state filter (``tofpose.relative_state``) against known truth: its own
+process model simulated exactly (the covariance must hold: NEES), and poses the pipeline
+measures on frames ``tofpose.sim`` renders of a tumbling and a slewing target."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from tests.conftest import facing_pose, render
+from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
+from tofpose.geometry import RigidTransform
+from tofpose.persistence import PersistenceConfig
+from tofpose.relative_state import RelativeStateConfig, RelativeStateFilter, state_error
+
+SIGMA_RAD, SIGMA_MM = math.radians(0.1), 1.0
+POSE_COV = np.diag([SIGMA_RAD**2] * 3 + [SIGMA_MM**2] * 3)
+
+
+def _process(cfg, n, dt, rng, w0=(2.0, -5.0, 3.0), v0=(10.0, -5.0, 20.0)):
+    """Truth drawn from the filter's own model (white accelerations of the configured
+    densities, discretised exactly) and noisy poses of it: yields (time, R, t, w, v,
+    measured R, measured t)."""
+    R, t = np.eye(3), np.array([0.0, 0.0, 3000.0])
+    w, v = np.radians(w0), np.array(v0, float)
+    block = np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
+    for k in range(n):
+        if k:
+            da = rng.multivariate_normal([0, 0], cfg.angular_accel_psd * block, 3)
+            dl = rng.multivariate_normal([0, 0], cfg.linear_accel_psd * block, 3)
+            R = Rotation.from_rotvec(w * dt + da[:, 0]).as_matrix() @ R
+            w = w + da[:, 1]
+            t = t + v * dt + dl[:, 0]
+            v = v + dl[:, 1]
+        Rm = Rotation.from_rotvec(rng.normal(0, SIGMA_RAD, 3)).as_matrix() @ R
+        yield k * dt, R, t, w, v, Rm, t + rng.normal(0, SIGMA_MM, 3)
+
+
+def test_the_covariance_holds_on_the_filters_own_process():
+    cfg = RelativeStateConfig(angular_accel_psd=math.radians(5) ** 2, linear_accel_psd=50.0**2)
+    f, nees = RelativeStateFilter(cfg), []
+    frames = _process(cfg, 400, 0.1, np.random.default_rng(0))
+    for k, (tt, R, t, w, v, Rm, tm) in enumerate(frames):
+        s = f.update(tt, Rm, tm, POSE_COV)
+        assert s.status == ("initialised" if k == 0 else "updated")
+        if k > 50:  # converged from its start at rest
+            e = state_error(s, R, t, w, v)
+            nees.append(e @ np.linalg.solve(s.covariance, e))
+    assert 9.0 < np.mean(nees) < 16.0  # 12 for a consistent 12-state covariance
+
+
+def test_a_wrong_pose_is_rejected_and_does_not_drag_the_state():
+    cfg = RelativeStateConfig(angular_accel_psd=math.radians(1) ** 2, linear_accel_psd=10.0**2)
+    f = RelativeStateFilter(cfg)
+    frames = list(_process(cfg, 60, 0.1, np.random.default_rng(1), (0, 3, 0), (0, 0, 0)))
+    for tt, *_, Rm, tm in frames[:40]:
+        f.update(tt, Rm, tm, POSE_COV)
+    tt, R, t, w, v, Rm, tm = frames[40]
+    bad = Rotation.from_rotvec(np.radians([0, 5.0, 0])).as_matrix() @ Rm  # 5 deg off
+    s = f.update(tt, bad, tm, POSE_COV)
+    assert s.status == "rejected" and s.n_rejected == 1 and s.innovation_d2 > cfg.gate_chi2
+    assert np.degrees(np.linalg.norm(state_error(s, R, t, w, v)[:3])) < 0.3
+    s = f.update(frames[41][0], *frames[41][5:], POSE_COV)
+    assert s.status == "updated" and s.n_rejected == 0
+
+
+def test_a_target_that_jumped_is_reacquired_after_consistent_rejections():
+    cfg = RelativeStateConfig(angular_accel_psd=math.radians(1) ** 2, linear_accel_psd=10.0**2)
+    f = RelativeStateFilter(cfg)
+    jump = Rotation.from_rotvec(np.radians([0, 20.0, 0])).as_matrix()
+    statuses = []
+    s = None
+    for k, (tt, R, t, _w, _v, Rm, tm) in enumerate(
+        _process(cfg, 60, 0.1, np.random.default_rng(2), (0, 2, 0), (0, 0, 0))
+    ):
+        if k >= 30:  # re-placed: every pose from here on is 20 deg and 300 mm away
+            Rm, tm, R, t = jump @ Rm, tm + 300.0, jump @ R, t + 300.0
+        s = f.update(tt, Rm, tm, POSE_COV)
+        statuses.append(s.status)
+    assert statuses[30:33] == ["rejected", "rejected", "reset"]
+    assert set(statuses[34:]) == {"updated"}
+    assert np.degrees(np.linalg.norm(state_error(s, R, t, _w, _v)[:3])) < 0.3
+
+
+def test_a_two_second_dropout_is_bridged_and_the_state_can_be_asked_ahead():
+    cfg = RelativeStateConfig(angular_accel_psd=math.radians(2) ** 2, linear_accel_psd=20.0**2)
+    f = RelativeStateFilter(cfg)
+    frames = list(_process(cfg, 100, 0.1, np.random.default_rng(3), (0, 6, 0), (5, 0, 0)))
+    for tt, *_, Rm, tm in frames[:50]:
+        f.update(tt, Rm, tm, POSE_COV)
+    ahead = f.state_at(frames[55][0])  # the controller's time, 0.5 s later
+    for tt, *_ in frames[50:70]:  # 2 s without a pose
+        s = f.predict(tt)
+        assert s.status == "predicted"
+    assert f.state_at(frames[69][0]).time_s == pytest.approx(frames[69][0])
+    tt, R, t, w, v, Rm, tm = frames[69]
+    e = state_error(s, R, t, w, v)
+    assert e @ np.linalg.solve(s.covariance, e) < 32.9  # chi2_12 at 0.999
+    s = f.update(frames[70][0], *frames[70][5:], POSE_COV)
+    assert s.status == "updated"  # reacquired without a reset
+    # asking ahead is prediction: it matches truth at that time within its covariance
+    _, R55, t55, w55, v55, *_ = frames[55]
+    e = state_error(ahead, R55, t55, w55, v55)
+    assert e @ np.linalg.solve(ahead.covariance, e) < 32.9
+
+
+def test_bad_input_is_refused_with_a_reason():
+    f = RelativeStateFilter()
+    with pytest.raises(RuntimeError, match="starts with a pose"):
+        f.state()
+    f.update(1.0, np.eye(3), np.zeros(3), POSE_COV)
+    with pytest.raises(ValueError, match="time order"):
+        f.update(0.5, np.eye(3), np.zeros(3), POSE_COV)
+    with pytest.raises(ValueError, match="6 x 6"):
+        f.update(2.0, np.eye(3), np.zeros(3), np.eye(3))
+
+
+def _rendered(truth, n, cfg):
+    """Poses the pipeline measures (single-frame persistence: combining frames while
+    the target moves lags the pose) on frames rendered at 10 Hz; the filter's rate error
+    (deg/s) and NEES after 4 s, and the peak true rate (deg/s)."""
+    cam, cat = CameraModel(), paper_target()
+    pipe = PosePipeline(cam, cat, PipelineConfig(persistence=PersistenceConfig(1, 1)))
+    f, errors, nees, peak, missed = RelativeStateFilter(cfg), [], [], 0.0, 0
+    t0 = facing_pose(3000.0, 2, -3, 5)
+    for k in range(n):
+        tt = 0.1 * k
+        R, w = truth(tt, t0.R)
+        frame = render(RigidTransform(R, t0.t_mm), seed=k)
+        r = pipe.process(frame.gray, frame.distance_mm, tt)
+        if not r.ok:  # a frame without a pose (the fit refused it): the filter predicts
+            missed += 1
+            s = f.predict(tt)
+            continue
+        s = f.update(tt, r.R, r.t_mm, r.covariance)
+        peak = max(peak, math.degrees(np.linalg.norm(w)))
+        if tt > 4.0:
+            e = state_error(s, R, t0.t_mm, w, np.zeros(3))
+            errors.append(np.linalg.norm(np.degrees(e[6:9])))
+            nees.append(e @ np.linalg.solve(s.covariance, e))
+    assert missed <= 0.1 * n
+    return np.sqrt(np.mean(np.square(errors))), np.mean(nees), peak
+
+
+def test_a_tumbling_target_rendered_by_the_simulator_gives_its_rate():
+    w = np.radians([0.0, 8.0, 3.0])  # 8.5 deg/s about a fixed axis in the camera frame
+    cfg = RelativeStateConfig(angular_accel_psd=math.radians(1.0) ** 2, linear_accel_psd=100.0)
+    rms, nees, peak = _rendered(lambda tt, R0: (Rotation.from_rotvec(w * tt).as_matrix() @ R0,
+                                                w), 80, cfg)  # fmt: skip
+    assert rms < 0.05 * peak  # 0.3 deg/s
+    # the pipeline's covariance at 3 m is wider than its errors (docs/results.md), so the
+    # filter's is too; it must not claim less than it knows
+    assert 1.0 < nees < 18.0
+
+
+def test_a_sine_slew_rendered_by_the_simulator_gives_its_rate():
+    amp, period = math.radians(5.0), 4.0  # the turntable's sine of the done-when
+    alpha = amp * (2 * math.pi / period) ** 2
+    cfg = RelativeStateConfig(angular_accel_psd=alpha**2 * period / 10, linear_accel_psd=100.0)
+    axis = np.array([0.0, 1.0, 0.0])
+
+    def truth(tt, R0):
+        angle = amp * math.sin(2 * math.pi * tt / period)
+        rate = amp * 2 * math.pi / period * math.cos(2 * math.pi * tt / period)
+        return Rotation.from_rotvec(axis * angle).as_matrix() @ R0, axis * rate
+
+    rms, nees, peak = _rendered(truth, 120, cfg)
+    assert rms < 0.15 * peak  # 0.8 deg/s of 7.9 measured
+    assert 1.0 < nees < 18.0

@@ -1,0 +1,275 @@
+"""Relative state for GNC: pose, angular rate and velocity with their covariance, from
+the pipeline's poses (ours; the paper measures static poses only).
+
+An error-state Kalman filter on SE(3) x R^6. Nominal state: the attitude R
+(``R_camera_target``), the position t (mm, camera frame), the angular rate w (rad/s,
+camera frame: ``dR/dt = [w]x R``) and the velocity v (mm/s, camera frame). Error state
+(12,): ``(dtheta, dt, dw, dv)`` with the attitude error a left perturbation in the
+camera frame, ``R = exp([dtheta]x) R_hat``: the convention of the pipeline's reported
+covariance (rotation vector rad, translation mm), so a pose and its covariance are the
+measurement as they come.
+
+Motion model: constant angular rate and constant velocity between frames, driven by
+white angular and linear acceleration of spectral densities ``angular_accel_psd``
+(rad^2 / s^3) and ``linear_accel_psd`` (mm^2 / s^3); over a step dt each axis's (angle,
+rate) block of Q is ``q [[dt^3 / 3, dt^2 / 2], [dt^2 / 2, dt]]``. Irregular steps and
+missed frames are steps of their own length. A measurement whose squared Mahalanobis
+distance of the innovation exceeds ``gate_chi2`` (chi^2 with 6 degrees of freedom) is
+rejected and reported as such, not fused; after ``reset_after`` rejections in a row whose
+poses agree with each other (the target moved while the filter was blind, or the filter
+was wrong) the filter restarts from the newest one. Why not filterpy: its Kalman filters
+assume a vector state that adds, and the attitude does not; the linear algebra here is a
+few lines of NumPy, the SE(3) parts would have to be ours either way.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
+
+#: chi^2(6) quantile beyond which a pose is rejected: 1 in 10^4 of consistent poses
+DEFAULT_GATE_CHI2 = float(chi2.ppf(1.0 - 1e-4, 6))
+
+Status = Literal["initialised", "updated", "rejected", "reset", "predicted"]
+
+
+@dataclass(frozen=True)
+class RelativeStateConfig:
+    """Settings of ``RelativeStateFilter``.
+
+    angular_accel_psd : rad^2 / s^3, white angular acceleration (a sine slew of amplitude
+        A and period T has peak acceleration A (2 pi / T)^2; q ~ alpha_peak^2 * T / 10
+        follows it); linear_accel_psd : mm^2 / s^3;
+    initial_rate_sigma_deg_s, initial_velocity_sigma_mm_s : the rate and velocity sigmas
+        when the filter starts from a single pose;
+    gate_chi2 : innovation gate (module docstring); reset_after : rejections in a row
+        after which the filter restarts; max_gap_s : a longer gap without a measurement
+        restarts the filter at the next one (the prediction is no longer worth keeping).
+    """
+
+    angular_accel_psd: float = math.radians(10.0) ** 2
+    linear_accel_psd: float = 100.0**2
+    initial_rate_sigma_deg_s: float = 30.0
+    initial_velocity_sigma_mm_s: float = 500.0
+    gate_chi2: float = DEFAULT_GATE_CHI2
+    reset_after: int = 3
+    max_gap_s: float = 10.0
+
+
+@dataclass(frozen=True)
+class RelativeState:
+    """The filter's state at ``time_s``.
+
+    R : (3, 3) R_camera_target; t_mm : (3,); angular_rate_deg_s : (3,) in the camera
+    frame; angular_rate_target_deg_s : (3,) the same rate in the target frame;
+    velocity_mm_s : (3,) camera frame; covariance : (12, 12) of (dtheta rad, dt mm,
+    dw rad/s, dv mm/s) (module docstring); status : what the last step did; innovation_d2
+    : squared Mahalanobis distance of the last measurement's innovation (NaN when none);
+    n_rejected : rejections in a row.
+    """
+
+    time_s: float
+    R: np.ndarray
+    t_mm: np.ndarray
+    angular_rate_deg_s: np.ndarray
+    angular_rate_target_deg_s: np.ndarray
+    velocity_mm_s: np.ndarray
+    covariance: np.ndarray
+    status: Status
+    innovation_d2: float = float("nan")
+    n_rejected: int = 0
+
+    @property
+    def angular_rate_sigma_deg_s(self) -> np.ndarray:
+        """(3,) 1-sigma of the camera-frame rate."""
+        return np.degrees(np.sqrt(np.diag(self.covariance)[6:9]))
+
+    @property
+    def velocity_sigma_mm_s(self) -> np.ndarray:
+        """(3,) 1-sigma of the velocity."""
+        return np.sqrt(np.diag(self.covariance)[9:12])
+
+
+def _exp(w: np.ndarray) -> np.ndarray:
+    return Rotation.from_rotvec(w).as_matrix()
+
+
+def _log(R: np.ndarray) -> np.ndarray:
+    return Rotation.from_matrix(R).as_rotvec()
+
+
+@dataclass
+class RelativeStateFilter:
+    """The filter (module docstring). ``update(time_s, R, t_mm, covariance)`` per pose,
+    ``predict(time_s)`` for a frame without one, ``state_at(time_s)`` for the state at
+    any later time without changing the filter (latency compensation)."""
+
+    config: RelativeStateConfig = field(default_factory=RelativeStateConfig)
+    _time_s: float | None = None
+    _R: np.ndarray = field(default_factory=lambda: np.eye(3))
+    _t: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    _w: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    _v: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    _P: np.ndarray = field(default_factory=lambda: np.eye(12))
+    _status: Status = "initialised"
+    _d2: float = float("nan")
+    _rejected: list = field(default_factory=list)
+
+    @property
+    def initialised(self) -> bool:
+        return self._time_s is not None
+
+    def reset(self) -> None:
+        """Forget everything: the next pose starts the filter again."""
+        self._time_s = None
+        self._rejected = []
+
+    # -- the model ------------------------------------------------------------------------
+    def _propagated(self, dt: float):
+        """(R, t, w, v, P) propagated by dt >= 0 s (module docstring)."""
+        cfg = self.config
+        R = _exp(self._w * dt) @ self._R
+        t = self._t + self._v * dt
+        F = np.eye(12)
+        F[0:3, 0:3] = _exp(self._w * dt)
+        F[0:3, 6:9] = dt * np.eye(3)
+        F[3:6, 9:12] = dt * np.eye(3)
+        Q = np.zeros((12, 12))
+        for pos, rate, q in ((0, 6, cfg.angular_accel_psd), (3, 9, cfg.linear_accel_psd)):
+            Q[pos : pos + 3, pos : pos + 3] = q * dt**3 / 3 * np.eye(3)
+            Q[pos : pos + 3, rate : rate + 3] = q * dt**2 / 2 * np.eye(3)
+            Q[rate : rate + 3, pos : pos + 3] = q * dt**2 / 2 * np.eye(3)
+            Q[rate : rate + 3, rate : rate + 3] = q * dt * np.eye(3)
+        P = F @ self._P @ F.T + Q
+        return R, t, self._w.copy(), self._v.copy(), 0.5 * (P + P.T)
+
+    def _start(self, time_s: float, R: np.ndarray, t_mm: np.ndarray, cov: np.ndarray) -> None:
+        cfg = self.config
+        self._time_s = float(time_s)
+        self._R, self._t = np.array(R, float), np.array(t_mm, float)
+        self._w, self._v = np.zeros(3), np.zeros(3)
+        self._P = np.zeros((12, 12))
+        self._P[:6, :6] = cov
+        self._P[6:9, 6:9] = math.radians(cfg.initial_rate_sigma_deg_s) ** 2 * np.eye(3)
+        self._P[9:12, 9:12] = cfg.initial_velocity_sigma_mm_s**2 * np.eye(3)
+        self._rejected = []
+
+    def _advance(self, time_s: float) -> None:
+        dt = float(time_s) - self._time_s
+        if dt < 0:
+            raise ValueError(
+                f"time {time_s:.6f} s is before the filter's {self._time_s:.6f} s: "
+                "poses must come in time order"
+            )
+        self._R, self._t, self._w, self._v, self._P = self._propagated(dt)
+        self._time_s = float(time_s)
+
+    # -- the interface ---------------------------------------------------------------------
+    def update(self, time_s: float, R: np.ndarray, t_mm: np.ndarray,
+               covariance: np.ndarray) -> RelativeState:  # fmt: skip
+        """Fuse a pose (R (3, 3) R_camera_target, t_mm (3,), covariance (6, 6) rotation
+        vector rad then mm, the pipeline's) taken at ``time_s``."""
+        cov = np.asarray(covariance, float)
+        if cov.shape != (6, 6) or not np.all(np.isfinite(cov)):
+            raise ValueError("a pose's covariance must be a finite 6 x 6 matrix")
+        if not self.initialised or time_s - self._time_s > self.config.max_gap_s:
+            self._start(time_s, R, t_mm, cov)
+            self._status, self._d2 = "initialised", float("nan")
+            return self.state()
+        self._advance(time_s)
+        y = np.concatenate([_log(np.asarray(R, float) @ self._R.T),
+                            np.asarray(t_mm, float) - self._t])  # fmt: skip
+        S = self._P[:6, :6] + cov
+        d2 = float(y @ np.linalg.solve(S, y))
+        self._d2 = d2
+        if d2 > self.config.gate_chi2:
+            self._rejected.append((float(time_s), np.array(R, float), np.array(t_mm, float), cov))
+            if len(self._rejected) >= self.config.reset_after and self._rejected_agree():
+                _, R0, t0, c0 = self._rejected[-1]
+                self._start(time_s, R0, t0, c0)
+                self._status = "reset"
+                return self.state()
+            self._status = "rejected"
+            return self.state()
+        self._rejected = []
+        K = np.linalg.solve(S, self._P[:6, :]).T  # (12, 6) = P H^T S^-1 (S symmetric)
+        dx = K @ y
+        self._R = _exp(dx[0:3]) @ self._R
+        self._t = self._t + dx[3:6]
+        self._w = self._w + dx[6:9]
+        self._v = self._v + dx[9:12]
+        IKH = np.eye(12)
+        IKH[:, :6] -= K
+        P = IKH @ self._P @ IKH.T + K @ cov @ K.T  # Joseph form
+        self._P = 0.5 * (P + P.T)
+        self._status = "updated"
+        return self.state()
+
+    def _rejected_agree(self) -> bool:
+        """Whether the rejected poses in a row describe one motion: each one within the
+        gate of the one before it, with the rate and velocity they imply."""
+        poses = self._rejected[-self.config.reset_after :]
+        for (t0, R0, p0, c0), (t1, R1, p1, c1) in zip(poses, poses[1:], strict=False):
+            cfg, dt = self.config, max(t1 - t0, 1e-3)
+            y = np.concatenate([_log(R1 @ R0.T), p1 - p0])
+            # the rate and velocity are unknown: the initial sigmas' motion over the
+            # interval, and the accelerations', on top of the two poses' own covariances
+            turn = (
+                cfg.angular_accel_psd * dt**3 / 3
+                + (math.radians(cfg.initial_rate_sigma_deg_s) * dt) ** 2
+            )
+            move = cfg.linear_accel_psd * dt**3 / 3 + (cfg.initial_velocity_sigma_mm_s * dt) ** 2
+            S = c0 + c1 + np.diag([turn] * 3 + [move] * 3)
+            if float(y @ np.linalg.solve(S, y)) > self.config.gate_chi2:
+                return False
+        return True
+
+    def predict(self, time_s: float) -> RelativeState:
+        """Advance to ``time_s`` without a measurement (a frame without a pose)."""
+        if not self.initialised:
+            raise RuntimeError("the filter has no state yet: it starts with a pose")
+        self._advance(time_s)
+        self._status = "predicted"
+        return self.state()
+
+    def state_at(self, time_s: float) -> RelativeState:
+        """The state predicted to ``time_s`` (>= the last step's time), the filter left as
+        it is: the controller's time, ahead of the frame's by the latency."""
+        if not self.initialised:
+            raise RuntimeError("the filter has no state yet: it starts with a pose")
+        dt = float(time_s) - self._time_s
+        if dt < 0:
+            raise ValueError(f"time {time_s:.6f} s is before the filter's {self._time_s:.6f} s")
+        R, t, w, v, P = self._propagated(dt)
+        return self._state(float(time_s), R, t, w, v, P, "predicted")
+
+    def state(self) -> RelativeState:
+        """The state at the last step's time."""
+        if not self.initialised:
+            raise RuntimeError("the filter has no state yet: it starts with a pose")
+        return self._state(self._time_s, self._R, self._t, self._w, self._v, self._P,
+                           self._status)  # fmt: skip
+
+    def _state(self, time_s, R, t, w, v, P, status) -> RelativeState:
+        return RelativeState(
+            time_s=time_s, R=R.copy(), t_mm=t.copy(), angular_rate_deg_s=np.degrees(w),
+            angular_rate_target_deg_s=np.degrees(R.T @ w), velocity_mm_s=v.copy(),
+            covariance=P.copy(), status=status, innovation_d2=self._d2,
+            n_rejected=len(self._rejected),
+        )  # fmt: skip
+
+
+def state_error(state: RelativeState, R_true: np.ndarray, t_true_mm: np.ndarray,
+                w_true_rad_s: np.ndarray, v_true_mm_s: np.ndarray) -> np.ndarray:  # fmt: skip
+    """(12,) error of a state against truth in the filter's error-state convention
+    (rotation vector of ``R R_true^T`` rad, mm, rad/s, mm/s); ``e @ inv(P) @ e`` is its
+    NEES."""
+    return np.concatenate([
+        _log(state.R @ np.asarray(R_true).T), state.t_mm - t_true_mm,
+        np.radians(state.angular_rate_deg_s) - w_true_rad_s, state.velocity_mm_s - v_true_mm_s,
+    ])  # fmt: skip
