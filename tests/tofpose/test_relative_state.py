@@ -39,6 +39,15 @@ def _process(cfg, n, dt, rng, w0=(2.0, -5.0, 3.0), v0=(10.0, -5.0, 20.0)):
         yield k * dt, R, t, w, v, Rm, t + rng.normal(0, SIGMA_MM, 3)
 
 
+def _fed(cfg, n, n_fed, seed, w0, v0):
+    """A filter given the first ``n_fed`` of ``n`` poses of ``_process``, and all n."""
+    f = RelativeStateFilter(cfg)
+    frames = list(_process(cfg, n, 0.1, np.random.default_rng(seed), w0, v0))
+    for tt, *_, Rm, tm in frames[:n_fed]:
+        f.update(tt, Rm, tm, POSE_COV)
+    return f, frames
+
+
 def test_the_covariance_holds_on_the_filters_own_process():
     cfg = RelativeStateConfig(angular_accel_psd=math.radians(5) ** 2, linear_accel_psd=50.0**2)
     f, nees = RelativeStateFilter(cfg), []
@@ -54,10 +63,7 @@ def test_the_covariance_holds_on_the_filters_own_process():
 
 def test_a_wrong_pose_is_rejected_and_does_not_drag_the_state():
     cfg = RelativeStateConfig(angular_accel_psd=math.radians(1) ** 2, linear_accel_psd=10.0**2)
-    f = RelativeStateFilter(cfg)
-    frames = list(_process(cfg, 60, 0.1, np.random.default_rng(1), (0, 3, 0), (0, 0, 0)))
-    for tt, *_, Rm, tm in frames[:40]:
-        f.update(tt, Rm, tm, POSE_COV)
+    f, frames = _fed(cfg, 60, 40, seed=1, w0=(0, 3, 0), v0=(0, 0, 0))
     tt, R, t, w, v, Rm, tm = frames[40]
     bad = Rotation.from_rotvec(np.radians([0, 5.0, 0])).as_matrix() @ Rm  # 5 deg off
     s = f.update(tt, bad, tm, POSE_COV)
@@ -87,10 +93,7 @@ def test_a_target_that_jumped_is_reacquired_after_consistent_rejections():
 
 def test_a_two_second_dropout_is_bridged_and_the_state_can_be_asked_ahead():
     cfg = RelativeStateConfig(angular_accel_psd=math.radians(2) ** 2, linear_accel_psd=20.0**2)
-    f = RelativeStateFilter(cfg)
-    frames = list(_process(cfg, 100, 0.1, np.random.default_rng(3), (0, 6, 0), (5, 0, 0)))
-    for tt, *_, Rm, tm in frames[:50]:
-        f.update(tt, Rm, tm, POSE_COV)
+    f, frames = _fed(cfg, 100, 50, seed=3, w0=(0, 6, 0), v0=(5, 0, 0))
     ahead = f.state_at(frames[55][0])  # the controller's time, 0.5 s later
     for tt, *_ in frames[50:70]:  # 2 s without a pose
         s = f.predict(tt)
