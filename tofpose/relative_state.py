@@ -111,6 +111,7 @@ class RelativeStateFilter:
 
     config: RelativeStateConfig = field(default_factory=RelativeStateConfig)
     _time_s: float | None = None
+    _fused_s: float = 0.0  # time of the last pose fused (or started from)
     _R: np.ndarray = field(default_factory=lambda: np.eye(3))
     _t: np.ndarray = field(default_factory=lambda: np.zeros(3))
     _w: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -150,7 +151,7 @@ class RelativeStateFilter:
 
     def _start(self, time_s: float, R: np.ndarray, t_mm: np.ndarray, cov: np.ndarray) -> None:
         cfg = self.config
-        self._time_s = float(time_s)
+        self._time_s = self._fused_s = float(time_s)
         self._R, self._t = np.array(R, float), np.array(t_mm, float)
         self._w, self._v = np.zeros(3), np.zeros(3)
         self._P = np.zeros((12, 12))
@@ -177,7 +178,9 @@ class RelativeStateFilter:
         cov = np.asarray(covariance, float)
         if cov.shape != (6, 6) or not np.all(np.isfinite(cov)):
             raise ValueError("a pose's covariance must be a finite 6 x 6 matrix")
-        if not self.initialised or time_s - self._time_s > self.config.max_gap_s:
+        # the gap counts from the last pose fused, not from the last prediction: a
+        # dropout bridged by predict() on every frame still restarts the filter
+        if not self.initialised or time_s - self._fused_s > self.config.max_gap_s:
             self._start(time_s, R, t_mm, cov)
             self._status, self._d2 = "initialised", float("nan")
             return self.state()
@@ -207,6 +210,7 @@ class RelativeStateFilter:
         IKH[:, :6] -= K
         P = IKH @ self._P @ IKH.T + K @ cov @ K.T  # Joseph form
         self._P = 0.5 * (P + P.T)
+        self._fused_s = float(time_s)
         self._status = "updated"
         return self.state()
 

@@ -110,6 +110,22 @@ def test_a_two_second_dropout_is_bridged_and_the_state_can_be_asked_ahead():
     assert e @ np.linalg.solve(ahead.covariance, e) < 32.9
 
 
+def test_a_dropout_longer_than_the_gap_limit_restarts_the_filter_at_the_next_pose():
+    """Frames without a pose are predicted one by one (as ``estimate --filter`` does);
+    the gap still counts from the last pose fused."""
+    cfg = RelativeStateConfig(max_gap_s=10.0)
+    f, frames = _fed(cfg, 10, 10, seed=4, w0=(0, 3, 0), v0=(0, 0, 0))
+    for k in range(1, 121):  # 12 s of frames without a pose
+        f.predict(0.9 + 0.1 * k)
+    s = f.update(13.0, *frames[-1][5:], POSE_COV)
+    assert s.status == "initialised"
+    assert np.all(s.angular_rate_deg_s == 0.0)  # started again from the pose alone
+    f2, _ = _fed(cfg, 10, 10, seed=4, w0=(0, 3, 0), v0=(0, 0, 0))
+    for k in range(1, 51):  # 5 s: within the limit, the prediction is kept
+        f2.predict(0.9 + 0.1 * k)
+    assert f2.update(5.95, *frames[-1][5:], POSE_COV).status in ("updated", "rejected")
+
+
 def test_bad_input_is_refused_with_a_reason():
     f = RelativeStateFilter()
     with pytest.raises(RuntimeError, match="starts with a pose"):
