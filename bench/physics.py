@@ -31,13 +31,8 @@ from tqdm import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench._common import pyplot, save_figure, section_main, table  # noqa: E402
-from bench._foreign_metrics import (  # noqa: E402
-    FrameOutcome,
-    marker_errors,
-    pose_error,
-    summarise,
-    true_images,
-)
+from bench._foreign_metrics import marker_errors, summarise, true_images  # noqa: E402
+from bench.foreign import frame_outcome  # noqa: E402
 from tofpose import CameraModel, PosePipeline, paper_target  # noqa: E402
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
 from tofpose.sim.bench import R_FACING  # noqa: E402
@@ -98,18 +93,11 @@ def run(n: int = 12, seed: int = 0):
             f = render_frame(cam, scene, T, sensor, rng)
             pipe.reset()
             r = pipe.process(f.gray, f.distance_mm)
-            if not r.ok:
-                outcomes.append(FrameOutcome(i, float(np.linalg.norm(T.t_mm)), False, r.reason,
-                                             n_matched=r.n_matched))  # fmt: skip
-                continue
-            markers = marker_errors(r, true_images(cam, cat, T), cat, 0)
+            markers = marker_errors(r, true_images(cam, cat, T), cat, 0)  # [] without a pose
             for m in markers:
                 if m.correct:
                     ranges.setdefault(int(m.diameter_mm), []).append(m.range_error_mm)
-            outcomes.append(FrameOutcome(
-                i, float(np.linalg.norm(T.t_mm)), True, "", pose_error(r.R, r.t_mm, T.R, T.t_mm),
-                r.covariance, r.n_matched, sum(not m.correct for m in markers),
-            ))  # fmt: skip
+            outcomes.append(frame_outcome(i, r, T, markers))
         out[(family, range_m)] = (summarise(outcomes), ranges)
     return out
 

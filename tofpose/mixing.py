@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tofpose.kernels.mixed_pixels import MIX_FIELDS
+from tofpose.kernels.mixed_pixels import MIX_FIELDS, shift_mixing
 
 
 def mixing_rows(blobs) -> np.ndarray:
@@ -18,12 +18,10 @@ def mixing_rows(blobs) -> np.ndarray:
 
 
 def shifted_mixing(mixing: np.ndarray | None, shift_mm: float) -> np.ndarray | None:
-    """The sums with every distance in them shifted by ``shift_mm`` (a range correction
-    applied to the blob): d_b + shift, S_ad + shift S_a (the model's range moves by the
-    same shift). (MIX_FIELDS,) or None."""
+    """A copy of the sums with every distance in them shifted by ``shift_mm``
+    (``kernels.mixed_pixels.shift_mixing``). (MIX_FIELDS,) or None."""
     if mixing is None:
         return None
     out = np.array(mixing, float)
-    out[1] += shift_mm
-    out[3] += shift_mm * out[2]
+    shift_mixing(out, float(shift_mm))
     return out

@@ -100,14 +100,13 @@ def _median_of_levels(v):
 
 
 @jit
-def _level_and_spread(v):
+def _level_and_spread(v, counts):
     """(median, median absolute deviation) of float32 values (n,), both as
-    ``_median_of_levels`` gives them. When every value is a multiple of 0.5 in [0,
-    65536) and the median a multiple of 0.5 too, both come from one histogram: the
-    deviations' histogram is the values' folded at the median, and no second pass over
-    the values is needed."""
+    ``_median_of_levels`` gives them; counts : their ``_half_grid_counts``. When every
+    value is a multiple of 0.5 in [0, 65536) and the median a multiple of 0.5 too, both
+    come from that one histogram: the deviations' histogram is the values' folded at the
+    median, and no second pass over the values is needed."""
     n = v.shape[0]
-    counts = _half_grid_counts(v)
     if counts.shape[0] == 0:
         bg = median_inplace(v.copy())
     else:
@@ -146,9 +145,9 @@ def frame_level_stats(gray, stride, saturated_counts):
         for c in range(0, w, stride):
             sub[n] = gray[r, c]
             n += 1
-    bg, mad = _level_and_spread(sub[:n])
+    counts = _half_grid_counts(sub[:n])  # one histogram for all three levels
+    bg, mad = _level_and_spread(sub[:n], counts)
     k = int(n * DARK_PERCENTILE / 100.0)
-    counts = _half_grid_counts(sub[:n])
     dark = _kth_counted(counts, k) / 2.0 if counts.shape[0] else float(np.sort(sub[:n])[k])
     sat = np.float32(saturated_counts)
     flat = gray.reshape(-1)

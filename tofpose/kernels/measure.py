@@ -11,7 +11,7 @@ import numpy as np
 from tofpose.kernels import jit
 from tofpose.kernels.camera import bearings
 from tofpose.kernels.centroids import blob_centroids, blob_ranges, owner_map
-from tofpose.kernels.mixed_pixels import MIX_FIELDS, blob_mixing, blob_surrounds
+from tofpose.kernels.mixed_pixels import MIX_FIELDS, blob_mixing, blob_surrounds, shift_mixing
 from tofpose.kernels.persistence import (
     blob_count_medians,
     consistent,
@@ -152,9 +152,7 @@ def measure_and_back_project(
         r_rho = corrected_ranges(r_rho, r_flat, r_starts, mean_gray, corr_model,
                                  corr_harmonics, corr_offsets)  # fmt: skip
         for a in range(n_ranged):  # the same shift of every distance in the mixing sums
-            shift = r_rho[a] - raw[a]
-            r_mix[a, 1] += shift
-            r_mix[a, 3] += shift * r_mix[a, 2]
+            shift_mixing(r_mix[a], r_rho[a] - raw[a])
     sp, sr = blob_sigmas(r_flat, r_starts, r_uv, mean_gray, med_dist, background, r_split,
                          floor_px, floor_mm, single_px, split_px, pool_min, median_eff,
                          uncal_mm)  # fmt: skip

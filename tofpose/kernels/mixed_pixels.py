@@ -161,6 +161,15 @@ def blob_mixing(flat, starts, bbox, gray, member_distance, distance, surround_gr
 
 
 @jit
+def shift_mixing(row, shift_mm):
+    """Shift every distance in a ``blob_mixing`` row (``MIX_FIELDS``,) by ``shift_mm`` in
+    place (a range correction applied to the blob): d_b + shift, S_ad + shift S_a, so
+    that the model's range moves by the same shift."""
+    row[1] += shift_mm
+    row[3] += shift_mm * row[2]
+
+
+@jit
 def unmixed_range(rho, mix, radius_px, cos_incidence, median_radius_px):
     """The reflector's own distance (mm) from its mixing sums (module docstring), or
     ``rho`` (the blob's median range) when the model does not apply: a disc of at least
