@@ -10,7 +10,7 @@ literal numbers as a preset.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from itertools import accumulate
 
 import cv2
@@ -182,6 +182,9 @@ class FrameStats:
     saturated_fraction: float
     #: the gray of pixels without a return (``kernels.levels.frame_level_stats``)
     dark_level: float = float("nan")
+    #: the lens blur the frame's candidates show, px (1-sigma of a Gaussian PSF per
+    #: axis; ``kernels.gates.psf_variance_px2``); 0 until the gates have run
+    psf_sigma_px: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -462,7 +465,7 @@ def find_candidate_blobs(
     # the components of A from its runs, numbered as cv2.connectedComponents numbers them
     # (kernels.components.run_labels), and every gate, in one call
     (area_k, bbox_k, peak_k, starts, flat, inner, listed, testable, rho_k, which, status,
-     size, mom, keep_starts, keep_flat) = label_table_and_gates(
+     size, mom, keep_starts, keep_flat, blur_var_px2) = label_table_and_gates(
         runs, gray32, np.asarray(distance_mm, np.float32).reshape(-1), float(camera.fx),
         np.asarray(diameters_mm, np.float64), _gate_params(config, stats, cos_t, ecc_max),
         int(config.min_area_px),
@@ -502,6 +505,7 @@ def find_candidate_blobs(
     rejected = [r for _, r in sorted(refused, key=lambda kr: kr[0])]
     for b in accepted[config.max_candidates :]:
         rejected.append(RejectedBlob(*b.centroid_uv, 2.0 * np.sqrt(b.area_px / np.pi), "rank"))
+    stats = replace(stats, psf_sigma_px=float(np.sqrt(blur_var_px2)))
     return CandidateBlobs(
         accepted[: config.max_candidates], oversize, mask, tuple(wrong_size), tuple(rejected),
         stats,

@@ -23,6 +23,14 @@ from tofpose.kernels.components import (
 ACCEPTED, OVERSIZE, SIZE, NLOG, SHAPE, PENALTY = 0, 1, 2, 3, 4, 5
 #: fewest pixels for which a blob's eccentricity means anything (extraction.SHAPE_MIN_PIXELS)
 SHAPE_MIN_PIXELS = 6
+#: how far (px) the window of ``window_moments`` reaches beyond a component's box: the
+#: active set cuts a blurred blob at ~1-2 PSF sigmas, and 3 px more hold the tails of a
+#: PSF of up to ~1.5 px (2 px read a 1.4 px PSF as ~1.1)
+WINDOW_PAD_PX = 3
+#: the widest lens PSF (1-sigma, px) the gates adapt to: a lens this far out of focus
+#: smears a 35 mm marker at 3 m over ~5 px; a component that reads wider is taken for
+#: a disc larger than the catalog's smallest, not for blur
+MAX_PSF_SIGMA_PX = 2.0
 
 
 @jit
@@ -87,8 +95,115 @@ def nlog_patch(patch, sigma_px, normalise):
 
 
 @jit
+def blur_widening_px(d_sharp_px, blur_var_px2, peak_contrast, threshold_contrast):
+    """How much wider (px) a disc of ``d_sharp_px`` reads in the active set when seen
+    through a Gaussian PSF of variance ``blur_var_px2`` (px^2) than without it. The
+    blurred disc is taken as a Gaussian of variance sigma^2 + d^2 / 16 + 1/12 (the PSF's,
+    the disc's and the pixel's second moments per axis) with peak ``peak_contrast`` over
+    the background, cut at ``threshold_contrast``: its diameter there is
+    ``2 sqrt(2 v ln(peak / threshold))``, and the widening is that diameter with the PSF
+    minus the same without it (0 without blur or when the peak is not above the
+    threshold)."""
+    if blur_var_px2 <= 0.0 or peak_contrast <= threshold_contrast or threshold_contrast <= 0:
+        return 0.0
+    sharp = 0.0625 * d_sharp_px * d_sharp_px + 1.0 / 12.0
+    cut = 2.0 * np.log(peak_contrast / threshold_contrast)
+    return 2.0 * (np.sqrt(cut * (sharp + blur_var_px2)) - np.sqrt(cut * sharp))
+
+
+@jit
+def window_moments(gray, bbox, which):
+    """Flux and second moment of each listed component over its box grown by ``WINDOW_PAD_PX``,
+    above the median of that window's border, without a threshold (a threshold cuts a
+    blurred blob's tails and hides the blur).
+
+    gray (H, W) float32; bbox (K, 4) (x, y, w, h); which (n,) labels. Returns flux (n,)
+    counts (the sum of the positive excess) and m2 (n,) px^2 (the mean of the two axes'
+    variances of that excess; NaN without one)."""
+    h_img, w_img = gray.shape
+    n = which.shape[0]
+    flux = np.zeros(n)
+    m2 = np.full(n, np.nan)
+    for j in range(n):
+        k = which[j]
+        pad = WINDOW_PAD_PX
+        x0, y0 = max(bbox[k, 0] - pad, 0), max(bbox[k, 1] - pad, 0)
+        x1 = min(bbox[k, 0] + bbox[k, 2] + pad, w_img)
+        y1 = min(bbox[k, 1] + bbox[k, 3] + pad, h_img)
+        nb = 2 * (x1 - x0) + 2 * max(y1 - y0 - 2, 0)
+        border = np.empty(nb, np.float32)
+        i = 0
+        for x in range(x0, x1):
+            border[i] = gray[y0, x]
+            border[i + 1] = gray[y1 - 1, x]
+            i += 2
+        for y in range(y0 + 1, y1 - 1):
+            border[i] = gray[y, x0]
+            border[i + 1] = gray[y, x1 - 1]
+            i += 2
+        level = np.float64(np.median(border))
+        sw, su, sv, suu, svv = 0.0, 0.0, 0.0, 0.0, 0.0
+        for y in range(y0, y1):
+            row = gray[y]
+            for x in range(x0, x1):
+                wt = np.float64(row[x]) - level
+                if wt > 0:
+                    sw += wt
+                    su += wt * x
+                    sv += wt * y
+                    suu += wt * x * x
+                    svv += wt * y * y
+        flux[j] = sw
+        if sw > 0:
+            cu, cv = su / sw, sv / sw
+            m2[j] = 0.5 * ((suu / sw - cu * cu) + (svv / sw - cv * cv))
+    return flux, m2
+
+
+@jit
+def psf_variance_px2(m2, rho, use, fx, d_min_mm):
+    """The frame's PSF variance (px^2 per axis) from its candidates' window moments:
+    the smallest over the used components of m2 - r^2 / 4 - 1/12, r the catalog's
+    smallest disc's image radius at the component's range (a disc of radius r has
+    r^2 / 4 per axis, a pixel 1/12). The smallest reflectors are the least resolved and
+    read it best; a larger disc or two merged ones only read larger, so the smallest
+    value is the estimate. 0 when none is used or the moments say less than a sharp
+    disc, or when every component reads more than ``MAX_PSF_SIGMA_PX`` (discs larger
+    than the catalog's: what they show is their size, not the lens). m2, rho, use (n,)."""
+    best = np.inf
+    for j in range(m2.shape[0]):
+        r = rho[j]
+        if use[j] and np.isfinite(m2[j]) and np.isfinite(r) and r > 0:
+            r_px = 0.5 * fx * d_min_mm / r
+            var = m2[j] - 0.25 * r_px * r_px - 1.0 / 12.0
+            if var <= MAX_PSF_SIGMA_PX * MAX_PSF_SIGMA_PX:  # else no reflector of ours
+                best = min(best, var)
+    return max(best, 0.0) if np.isfinite(best) else 0.0
+
+
+@jit
+def blob_brightness(peak, flux, m2, rho, blur_var_px2, fx, d_min_mm, background):
+    """The level criterion 1 (Eq. 16) credits each component with, (n,) counts: the
+    larger of its peak and ``background`` + its surface brightness, flux / A, with A
+    the image area of the disc that its window moments leave once the PSF is taken
+    out (pi r^2, r^2 = 4 (m2 - sigma^2 - 1/12)), and at least the catalog's smallest
+    disc face-on at its range. A reflector the lens does not resolve spreads its light:
+    its peak falls with the PSF, its surface brightness does not; a dim extended
+    patch's surface brightness is its own level. peak, flux, m2, rho (n,)."""
+    out = np.empty(peak.shape[0])
+    for j in range(peak.shape[0]):
+        out[j] = peak[j]
+        r = rho[j]
+        if np.isfinite(r) and r > 0 and np.isfinite(m2[j]):
+            a_min = 0.25 * np.pi * (fx * d_min_mm / r) ** 2
+            a_disc = max(a_min, 4.0 * np.pi * (m2[j] - blur_var_px2 - 1.0 / 12.0))
+            out[j] = max(out[j], background + flux[j] / a_disc)
+    return out
+
+
+@jit
 def gate_components(gray, runs, run_order, run_starts, bbox, area, peak, rho, which, fx,
-                    diameters_mm, params):  # fmt: skip
+                    diameters_mm, params, brightness, blur_var_px2):  # fmt: skip
     """Run the §3.2 gates on the listed components (already past the border and dim
     gates).
 
@@ -100,7 +215,11 @@ def gate_components(gray, runs, run_order, run_starts, bbox, area, peak, rho, wh
     float64: h_min_px (<0: range-adaptive window), h_max_px (<0: none), cos(max tilt),
     size_tolerance, size_margin_px, nlog_sigma_px (<=0: matched to each blob's size),
     J_peak and J_t (fractions of the blob's contrast, or absolute with a fixed sigma),
-    background, eccentricity limit, I_peak, I_t, q_max.
+    background, eccentricity limit, I_peak, I_t, q_max; brightness (K,) the level
+    criterion 1 credits each component with (``blob_brightness``: its peak, or what its
+    flux is worth for an unresolved reflector); blur_var_px2 : the frame's PSF variance
+    (``psf_variance_px2``; 0 for none), which widens the window's upper end
+    (``blur_widening_px``).
 
     Returns status (n,) int64 (``ACCEPTED`` ... ``PENALTY``), size (n, 4) float64 as
     (equivalent diameter, window low, window high, inside the window), moments (n, 4)
@@ -144,7 +263,10 @@ def gate_components(gray, runs, run_order, run_starts, bbox, area, peak, rho, wh
                 d_lo, d_hi = 0.0, np.inf
             else:
                 d_lo = (fx * d_min_cat / r) * np.sqrt(cos_t) / size_tol - size_margin
-                d_hi = (fx * d_max_cat / r) * size_tol + size_margin
+                # the margin covers blur up to its size; a wider PSF widens the window
+                d_hi = (fx * d_max_cat / r) * size_tol + max(size_margin, blur_widening_px(
+                    fx * d_max_cat / r * size_tol, blur_var_px2, peak[k] - background,
+                    i_t - background))  # fmt: skip
                 d_lo = max(d_lo, 1.0)
             too_big = d_eq > d_hi or extent > d_hi + 1
             size_ok = d_lo <= d_eq <= d_hi and extent <= d_hi + 1 and extent >= d_lo
@@ -224,7 +346,7 @@ def gate_components(gray, runs, run_order, run_starts, bbox, area, peak, rho, wh
         if n_keep >= SHAPE_MIN_PIXELS:
             q_shape = min(max(ecc / max(ecc_max, 1e-6), 0.0), 1.0) ** 2
         span = max(i_peak - i_t, 1e-6)
-        q_int = min(max((i_peak - peak[k]) / span, 0.0), 1.0)
+        q_int = min(max((i_peak - brightness[k]) / span, 0.0), 1.0)
         q = 1.0 - (1.0 - q_size) * (1.0 - q_shape) * (1.0 - q_int)
         moments[j, 3] = q
         status[j] = PENALTY if q > q_max else ACCEPTED
@@ -259,20 +381,35 @@ def label_table_and_gates(runs, gray, distance_flat, fx, diameters_mm, params, m
         runs, labels, n_labels, gray
     )
     inner = np.empty(n_labels, np.bool_)
-    bright = np.empty(n_labels, np.bool_)
     for k in range(n_labels):
         inner[k] = (bbox[k, 0] > 0 and bbox[k, 1] > 0 and bbox[k, 0] + bbox[k, 2] < w
                     and bbox[k, 1] + bbox[k, 3] < h)  # fmt: skip
-        bright[k] = np.float64(peak[k]) >= params[10]  # I_peak
-    ranged = np.flatnonzero(inner & bright & (area >= min_area_px))
+    brightness = peak.astype(np.float64)
     rho = np.full(n_labels, np.nan)
-    rho[ranged] = component_median_ranges(flat, starts, distance_flat, ranged)
+    blur_var = 0.0
+    d_min = diameters_mm.min()
+    if params[0] < 0:  # range-adaptive window: criterion 1 also on surface brightness
+        ranged = np.flatnonzero(inner & (area >= max(min_area_px, 1)))
+        rho[ranged] = component_median_ranges(flat, starts, distance_flat, ranged)
+        flux, m2 = window_moments(gray, bbox, ranged)
+        # the PSF from the components bright by their peak, then every component's
+        # surface brightness with it, then the PSF again with all that are bright
+        blur_var = psf_variance_px2(m2, rho[ranged], brightness[ranged] >= params[10], fx,
+                                    d_min)  # fmt: skip
+        brightness[ranged] = blob_brightness(brightness[ranged], flux, m2, rho[ranged],
+                                             blur_var, fx, d_min, params[8])  # fmt: skip
+        blur_var = psf_variance_px2(m2, rho[ranged], brightness[ranged] >= params[10], fx,
+                                    d_min)  # fmt: skip
+    bright = brightness >= params[10]  # I_peak
+    if params[0] >= 0:  # the paper's fixed window: its peak criterion as written
+        ranged = np.flatnonzero(inner & bright & (area >= min_area_px))
+        rho[ranged] = component_median_ranges(flat, starts, distance_flat, ranged)
     listed = np.flatnonzero(area >= max(min_area_px, 1))
     testable = inner[listed] & bright[listed]
     which = listed[testable]
     status, size, moments, keep_starts, keep_flat = gate_components(
         gray, runs, run_order, run_starts, bbox, area, peak, rho, which, fx, diameters_mm,
-        params,
+        params, brightness, blur_var,
     )  # fmt: skip
     return (area, bbox, peak, starts, flat, inner, listed, testable, rho, which, status, size,
-            moments, keep_starts, keep_flat)  # fmt: skip
+            moments, keep_starts, keep_flat, blur_var)  # fmt: skip
