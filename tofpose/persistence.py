@@ -19,12 +19,14 @@ from tofpose.camera import CameraModel
 from tofpose.extraction import Blob, pixel_lists
 from tofpose.kernels.measure import persist_and_measure
 from tofpose.kernels.persistence import (
+    RANGE_TEST_Z,
     column_medians,
     consistent,
     counter_medians,
     gather_stack,
     mean_in_boxes,
     pixel_mask,
+    ranges_consistent,
 )
 
 
@@ -181,7 +183,9 @@ class Persistence:
         used: list[_Entry] = []
         motion = False
         for entry in reversed(self._history):
-            if consistent(cur, entry.centroids, cfg.motion_tolerance_px):
+            if consistent(cur, entry.centroids, cfg.motion_tolerance_px) and ranges_consistent(
+                distance, entry.distance, idx, starts, RANGE_TEST_Z
+            ):  # fmt: skip
                 used.append(entry)
             else:
                 motion = True

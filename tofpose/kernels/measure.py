@@ -13,10 +13,12 @@ from tofpose.kernels.camera import bearings
 from tofpose.kernels.centroids import blob_centroids, blob_ranges, owner_map
 from tofpose.kernels.mixed_pixels import MIX_FIELDS, blob_mixing, blob_surrounds, shift_mixing
 from tofpose.kernels.persistence import (
+    RANGE_TEST_Z,
     blob_count_medians,
     consistent,
     mean_in_boxes,
     medians_and_counts_at,
+    ranges_consistent,
 )
 from tofpose.kernels.range_correction import corrected_ranges
 from tofpose.kernels.sigmas import blob_sigmas
@@ -68,7 +70,9 @@ def persist_and_measure(
     n = starts.shape[0] - 1
     n_used, motion = 0, False
     for f in range(n_hist):
-        if consistent(centroids, hist_cent[f], tol_px):
+        if consistent(centroids, hist_cent[f], tol_px) and ranges_consistent(
+            distance, hist_dist[f], flat, starts, RANGE_TEST_Z
+        ):  # fmt: skip
             n_used += 1
         else:
             motion = True

@@ -265,3 +265,62 @@ def gather_stack(frames, n_frames, flat):
         for i in range(flat.shape[0]):
             out[f, i] = src[flat[i]]
     return out
+
+
+#: the standard normal quantile of ``ranges_consistent``'s test (0.999: a static scene
+#: is cut one frame pair in a thousand)
+RANGE_TEST_Z = 3.09
+#: the most one blob adds to ``ranges_consistent``'s statistic (3 sigma squared)
+RANGE_TEST_CLIP = 9.0
+#: fewest pixels with a range in both frames for a blob to take part in
+#: ``ranges_consistent`` (a median and a MAD of fewer say little about the noise)
+RANGE_TEST_MIN_PIXELS = 5
+
+
+@jit
+def ranges_consistent(current, previous, flat, starts, z):
+    """Do two distance frames show the blobs at the same ranges, within their noise?
+    The test the centroids' ``consistent`` cannot make: a target turning about an axis
+    through itself changes its markers' ranges by millimetres a frame while their
+    images hardly move, and combining such frames lags the ranges (D-bar).
+
+    Per blob (pixels ``flat[starts[j]:starts[j + 1]]``) with at least
+    ``RANGE_TEST_MIN_PIXELS`` pixels valid in both frames: the pixel differences
+    delta = current - previous, their median m and its standard error from their MAD
+    (1.4826 MAD sqrt(pi / 2) / sqrt(n): the median of n Gaussian values); t = m / that.
+    Consistent when the sum of t^2, each clipped at ``RANGE_TEST_CLIP``, is within
+    chi^2 of the number of blobs tested at the standard normal quantile ``z``
+    (Wilson-Hilferty), or when no blob can be tested. The clip is for the tails: a
+    blob of 5-20 pixels with mixed pixels on its rim reads t^2 ~ 20 now and then on a
+    static scene (a MAD of few values), so one blob alone never cuts the history;
+    moving markers cut it together.
+
+    current, previous : (H * W,) or (H, W) float32 mm, NaN where invalid."""
+    cur = current.reshape(-1)
+    prev = previous.reshape(-1)
+    n_blobs = starts.shape[0] - 1
+    stat, tested = 0.0, 0
+    for j in range(n_blobs):
+        lo, hi = starts[j], starts[j + 1]
+        d = np.empty(hi - lo)
+        m = 0
+        for i in range(lo, hi):
+            a, b = cur[flat[i]], prev[flat[i]]
+            if np.isfinite(a) and np.isfinite(b):
+                d[m] = np.float64(a) - np.float64(b)
+                m += 1
+        if m < RANGE_TEST_MIN_PIXELS:
+            continue
+        med = np.median(d[:m])
+        mad = np.median(np.abs(d[:m] - med))
+        se = 1.4826 * mad * np.sqrt(0.5 * np.pi / m)
+        if se <= 0.0:
+            continue
+        stat += min((med / se) ** 2, RANGE_TEST_CLIP)
+        tested += 1
+    if tested == 0:
+        return True
+    k = np.float64(tested)
+    c = 2.0 / (9.0 * k)
+    limit = k * (1.0 - c + z * np.sqrt(c)) ** 3
+    return stat <= limit

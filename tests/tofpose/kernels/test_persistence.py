@@ -12,6 +12,7 @@ from tofpose.kernels.persistence import (
     mean_in_boxes,
     medians_and_counts_at,
     pixel_mask,
+    ranges_consistent,
 )
 
 
@@ -100,3 +101,36 @@ def test_the_pixel_mask_holds_exactly_the_listed_pixels():
     want[flat] = True
     np.testing.assert_array_equal(pixel_mask(flat, 600), want)
     assert not pixel_mask(np.empty(0, np.int64), 600).any()
+
+
+def _blob_ranges(rng, n_blobs, n_pix, shift_mm, sigma_mm=4.0, base_mm=3000.0):
+    """Two distance frames (flat, float32) of ``n_blobs`` blobs of ``n_pix`` pixels with
+    Gaussian noise; the second frame's blob j is ``shift_mm[j]`` nearer."""
+    size = n_blobs * n_pix
+    a = (base_mm + rng.normal(0, sigma_mm, size)).astype(np.float32)
+    b = (base_mm + rng.normal(0, sigma_mm, size)).astype(np.float32)
+    b -= np.repeat(np.asarray(shift_mm, np.float32), n_pix)
+    return a, b, np.arange(size, dtype=np.int64), np.arange(0, size + 1, n_pix, dtype=np.int64)
+
+
+def test_ranges_consistent_keeps_static_frames_and_cuts_moving_markers():
+    """Static: consistent in nearly every pair (the test is at 0.999); the markers
+    moving by 4 standard errors of their median difference (a target turning a
+    fraction of a degree a frame at 3 m): cut; one blob alone far off (a blob's heavy
+    tail): not cut; too few pixels or none valid: nothing to test, consistent."""
+    rng = np.random.default_rng(4)
+    z = 3.09
+    static = [ranges_consistent(*_blob_ranges(rng, 8, 40, np.zeros(8)), z) for _ in range(500)]
+    assert np.mean(static) >= 0.99
+    se = 1.2533 * 4.0 * np.sqrt(2.0) / np.sqrt(40)  # the median difference's standard error
+    moving = [ranges_consistent(*_blob_ranges(rng, 8, 40, 4 * se * np.linspace(-1, 1, 8)), z)
+              for _ in range(200)]  # fmt: skip
+    assert np.mean(moving) <= 0.05
+    one_off = np.zeros(8)
+    one_off[3] = 30 * se
+    assert np.mean([ranges_consistent(*_blob_ranges(rng, 8, 40, one_off), z)
+                    for _ in range(200)]) >= 0.95  # fmt: skip
+    a, b, flat, starts = _blob_ranges(rng, 8, 4, np.full(8, 50.0))  # 4 pixels a blob
+    assert ranges_consistent(a, b, flat, starts, z)
+    b[:] = np.nan
+    assert ranges_consistent(a, b, flat, starts, z)
