@@ -51,7 +51,7 @@ lint: $(VENV)/.dev
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/lint-imports
 
-# System tools the tests use: pdftoppm (poppler-utils) renders report PDFs to PNG;
+# System tools the tests and the bench use: pdftoppm (poppler-utils) renders report PDFs to PNG;
 # Debian's chromium runs the dashboard's browser tests.
 system-deps:
 	@missing=""; command -v pdftoppm >/dev/null || missing="$$missing poppler-utils"; \
@@ -61,7 +61,7 @@ system-deps:
 test: lint system-deps frontend $(VENV)/.kernels
 	$(PY) -m pytest -q
 
-bench: $(VENV)/.kernels
+bench: system-deps frontend $(VENV)/.kernels
 	$(PY) bench/report.py $(BENCH_ARGS)
 
 clean: kernels-clean

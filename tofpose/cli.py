@@ -28,7 +28,7 @@ from tofpose.range_calibration import (
     true_pixel_distances,
 )
 from tofpose.recording import RecordingError, RecordingWriter, open_recording
-from tofpose.relative_state import RelativeStateFilter
+from tofpose.relative_state import STATE_COLUMNS, RelativeStateFilter
 from tofpose.threads import single_threaded_blas
 from tofpose.tof import unambiguous_range_mm
 from tofpose.tracking import TrackingConfig
@@ -44,11 +44,7 @@ CSV_COLUMNS = (
 #: with ``estimate --filter``: the relative-state filter's state at each frame
 #: (``tofpose.relative_state``): angular rate in the camera frame, velocity, their 1-sigma,
 #: and what the filter did with the frame's pose
-FILTER_COLUMNS = (
-    "rate_x_deg_s", "rate_y_deg_s", "rate_z_deg_s", "vel_x_mm_s", "vel_y_mm_s", "vel_z_mm_s",
-    "sigma_rate_x_deg_s", "sigma_rate_y_deg_s", "sigma_rate_z_deg_s",
-    "sigma_vel_x_mm_s", "sigma_vel_y_mm_s", "sigma_vel_z_mm_s", "filter_status",
-)  # fmt: skip
+FILTER_COLUMNS = STATE_COLUMNS
 
 
 def _read_text(path: str, what: str) -> str:
@@ -214,11 +210,8 @@ def estimate(
 def _filter_columns(rel: RelativeStateFilter, r, time_s: float) -> list[str]:
     """``FILTER_COLUMNS`` of one frame: the pose fused (or rejected), or the state
     predicted to the frame's time without one."""
-    if r.ok:
-        s = rel.update(time_s, r.R, r.t_mm, r.covariance)
-    elif rel.initialised:
-        s = rel.predict(time_s)
-    else:
+    s = rel.step(time_s, *((r.R, r.t_mm, r.covariance) if r.ok else (None, None, None)))
+    if s is None:
         return [""] * len(FILTER_COLUMNS)
     return ([f"{v:.4f}" for v in s.angular_rate_deg_s] + [f"{v:.3f}" for v in s.velocity_mm_s]
             + [f"{v:.4f}" for v in s.angular_rate_sigma_deg_s]

@@ -37,6 +37,14 @@ DEFAULT_GATE_CHI2 = float(chi2.ppf(1.0 - 1e-4, 6))
 
 Status = Literal["initialised", "updated", "rejected", "reset", "predicted"]
 
+#: a state as table columns (the CSV of ``tofpose estimate --filter``, campaign rows and
+#: reports): camera-frame angular rate deg/s and velocity mm/s, their 1-sigma, status
+STATE_COLUMNS = (
+    "rate_x_deg_s", "rate_y_deg_s", "rate_z_deg_s", "vel_x_mm_s", "vel_y_mm_s", "vel_z_mm_s",
+    "sigma_rate_x_deg_s", "sigma_rate_y_deg_s", "sigma_rate_z_deg_s",
+    "sigma_vel_x_mm_s", "sigma_vel_y_mm_s", "sigma_vel_z_mm_s", "filter_status",
+)  # fmt: skip
+
 
 @dataclass(frozen=True)
 class RelativeStateConfig:
@@ -232,6 +240,18 @@ class RelativeStateFilter:
             if float(y @ np.linalg.solve(S, y)) > self.config.gate_chi2:
                 return False
         return True
+
+    def step(self, time_s: float, R: np.ndarray | None, t_mm: np.ndarray | None,
+             covariance: np.ndarray | None) -> RelativeState | None:  # fmt: skip
+        """One frame as it comes from the pipeline: its pose fused (``update``) when it
+        has one, else the state predicted to its time (``predict``); None before the
+        first pose. A frame older than the filter's state (a replayed recording that
+        started over, a clock reset) restarts it from that frame's pose."""
+        if self.initialised and time_s < self._time_s:
+            self.reset()
+        if R is not None and t_mm is not None and covariance is not None:
+            return self.update(time_s, R, t_mm, covariance)
+        return self.predict(time_s) if self.initialised else None
 
     def predict(self, time_s: float) -> RelativeState:
         """Advance to ``time_s`` without a measurement (a frame without a pose)."""

@@ -137,6 +137,14 @@ def pose_from_sample(s: LiveSample) -> PosePublic:
             sd = np.sqrt(np.clip(np.diag(r.covariance), 0.0, None))
             pose["attitude_sigma_deg"] = finite_list_or_none(np.degrees(sd[:3]))
             pose["position_sigma_mm"] = finite_list_or_none(sd[3:])
+    if s.state is not None:
+        st = s.state
+        pose["filter_status"] = st.status
+        pose["angular_rate_deg_s"] = finite_list_or_none(st.angular_rate_deg_s)
+        pose["angular_rate_target_deg_s"] = finite_list_or_none(st.angular_rate_target_deg_s)
+        pose["angular_rate_sigma_deg_s"] = finite_list_or_none(st.angular_rate_sigma_deg_s)
+        pose["velocity_mm_s"] = finite_list_or_none(st.velocity_mm_s)
+        pose["velocity_sigma_mm_s"] = finite_list_or_none(st.velocity_sigma_mm_s)
     truth = None
     T = s.reference.pose(s.frame)
     if T is not None:

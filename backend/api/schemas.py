@@ -230,6 +230,28 @@ class PosePublic(BaseModel):
     motion: bool
     timings_ms: dict[str, float]
     truth: TruthPublic | None = None
+    filter_status: Literal["initialised", "updated", "rejected", "reset", "predicted"] | None = (
+        Field(
+            None,
+            description="what the relative-state filter did with this frame: started from "
+            "its pose (initialised), fused it (updated), refused it as inconsistent with the "
+            "motion so far (rejected), restarted after rejections that agree (reset), or "
+            "predicted without a pose (predicted); null before its first pose",
+        )
+    )
+    angular_rate_deg_s: list[float] | None = Field(
+        None, description="the target's angular rate, camera frame (x y z), deg/s"
+    )
+    angular_rate_target_deg_s: list[float] | None = Field(
+        None, description="the same rate in the target frame (x y z), deg/s"
+    )
+    angular_rate_sigma_deg_s: list[float] | None = Field(
+        None, description="1-sigma of angular_rate_deg_s"
+    )
+    velocity_mm_s: list[float] | None = Field(
+        None, description="the target origin's velocity, camera frame (x y z), mm/s"
+    )
+    velocity_sigma_mm_s: list[float] | None = Field(None, description="1-sigma of velocity_mm_s")
 
 
 # -- 3-D scene ---------------------------------------------------------------------------

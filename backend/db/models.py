@@ -131,7 +131,9 @@ class MeasurementRow(Base):
     that produced the frame when the source knows it (simulator); ``lab_truth_*``: what
     the lab computes from the encoders and the nominal geometry. ``encoders``: axis
     read-back at capture (deg / mm). ``recording_index``: frame number in the campaign's
-    raw recording, when one is kept.
+    raw recording, when one is kept. ``rate_*``, ``vel_*``, ``sigma_rate_*``,
+    ``sigma_vel_*``, ``filter_status``: the relative-state filter's state at the frame
+    (null before its first pose).
     """
 
     __tablename__ = "measurements"
@@ -177,6 +179,21 @@ class MeasurementRow(Base):
     lab_truth_roll_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     encoders: Mapped[dict[str, float] | None] = mapped_column(JSON, nullable=True)
     recording_index: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    # the relative-state filter at the frame (tofpose.relative_state): angular rate deg/s
+    # and velocity mm/s in the camera frame, their 1-sigma, and what it did with the pose
+    rate_x_deg_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    rate_y_deg_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    rate_z_deg_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    vel_x_mm_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    vel_y_mm_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    vel_z_mm_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sigma_rate_x_deg_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sigma_rate_y_deg_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sigma_rate_z_deg_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sigma_vel_x_mm_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sigma_vel_y_mm_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sigma_vel_z_mm_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    filter_status: Mapped[str | None] = mapped_column(String(16), nullable=True)
 
     setpoint: Mapped[SetPointRow] = relationship(back_populates="measurements")
 

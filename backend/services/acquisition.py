@@ -27,6 +27,7 @@ from backend.services.live_reference import LiveReference
 from tofpose.catalog import Catalog
 from tofpose.extraction import FrameError
 from tofpose.pipeline import PipelineConfig, PosePipeline, PoseResult
+from tofpose.relative_state import RelativeState, RelativeStateConfig, RelativeStateFilter
 
 log = logging.getLogger(__name__)
 
@@ -40,6 +41,9 @@ class LiveSample:
     measured : False for a frame the pipeline did not see (its kernels were still
         compiling at server start): shown live, never counted by a campaign.
     reference : the lab reference the live error of this frame is measured against.
+    state : the relative-state filter's state at the frame's time (pose, rates,
+        velocity and their covariance; ``tofpose.relative_state``), None before its
+        first pose.
     cache : serialised forms (JSON, PNG) computed once and shared by all consumers.
     """
 
@@ -50,6 +54,7 @@ class LiveSample:
     processed_unix_s: float
     measured: bool = True
     reference: LiveReference = field(default_factory=LiveReference)
+    state: RelativeState | None = None
     cache: dict[str, Any] = field(default_factory=dict)
 
     def cached(self, key: str, make: Callable[[], Any]) -> Any:
@@ -112,6 +117,7 @@ class AcquisitionService:
         backoff_s: tuple[float, float] = (0.05, 2.0),
         pipeline_config: PipelineConfig | None = None,
         kernels: KernelWarmup | None = None,
+        state_config: RelativeStateConfig | None = None,
     ) -> None:
         self.camera = camera
         self.hub = hub
@@ -123,6 +129,8 @@ class AcquisitionService:
         self.reference = LiveReference()  # nominal until a calibration is selected
         self._catalog_name = catalog_name
         self._pipeline = PosePipeline(camera.model, catalog, self._config)
+        #: the relative state (rates, velocity) from the poses, on the loop's thread
+        self._filter = RelativeStateFilter(state_config or RelativeStateConfig())
         self._history: deque[LiveSample] = deque(maxlen=history_size)
         self._latest: LiveSample | None = None
         self._commands: queue.Queue[tuple[Callable[[], Any], Future]] = queue.Queue()
@@ -184,6 +192,7 @@ class AcquisitionService:
     def set_catalog(self, name: str, catalog: Catalog) -> Future:
         def swap() -> None:
             self._pipeline = PosePipeline(self.camera.model, catalog, self._config)
+            self._filter.reset()  # another target: its motion starts again
             self._catalog_name = name
 
         return self.submit(swap)
@@ -220,6 +229,7 @@ class AcquisitionService:
             self._arrivals.append(time.monotonic())
             if frame.meta.get("discontinuity"):
                 self._pipeline.reset()
+                self._filter.reset()
             measured = self.kernels is None or self.kernels.ready.is_set()
             try:
                 if measured:
@@ -235,9 +245,10 @@ class AcquisitionService:
                 result = PoseResult(False, f"pipeline error: {exc}", frame.time_s)
             backoff = self.backoff_s[0]
             self.health.record_ok()
+            state = self._relative_state(result, frame.time_s) if measured else None
             sample = LiveSample(
                 frame, result, self._catalog_name, captured, time.time(), measured=measured,
-                reference=self.reference,
+                reference=self.reference, state=state,
             )  # fmt: skip
             self._latest = sample
             self._history.append(sample.without_images())
@@ -246,6 +257,17 @@ class AcquisitionService:
                 self.hub.publish(sample)
             except Exception:
                 log.exception("publishing frame %d failed", frame.index)
+
+    def _relative_state(self, result: PoseResult, time_s: float) -> RelativeState | None:
+        """The filter stepped with this frame (``RelativeStateFilter.step``); a filter
+        failure (a pose it cannot take) restarts it and never stops the loop."""
+        pose = (result.R, result.t_mm, result.covariance) if result.ok else (None,) * 3
+        try:
+            return self._filter.step(time_s, *pose)
+        except Exception:
+            log.exception("relative-state filter failed at t = %.3f s; restarting it", time_s)
+            self._filter.reset()
+            return None
 
 
 def _check_shapes(frame: CameraFrame, shape: tuple[int, int]) -> None:

@@ -88,7 +88,8 @@ class Progress:
 
 
 def measurement_row(setpoint_id: int, sample: LiveSample) -> MeasurementRow:
-    """One stored frame: pose (facing Euler), sigmas, exact and lab truth, encoders."""
+    """One stored frame: pose (facing Euler), sigmas, exact and lab truth, encoders, and
+    the relative-state filter's rates and velocity with their sigmas."""
     r, f = sample.result, sample.frame
     row = MeasurementRow(
         setpoint_id=setpoint_id,
@@ -110,6 +111,16 @@ def measurement_row(setpoint_id: int, sample: LiveSample) -> MeasurementRow:
                 _finite(np.degrees(v)) for v in sd[:3]
             )
             row.sigma_x_mm, row.sigma_y_mm, row.sigma_z_mm = (_finite(v) for v in sd[3:])
+    st = sample.state
+    if st is not None:
+        row.filter_status = st.status
+        for name, values in (
+            ("rate_{}_deg_s", st.angular_rate_deg_s), ("vel_{}_mm_s", st.velocity_mm_s),
+            ("sigma_rate_{}_deg_s", st.angular_rate_sigma_deg_s),
+            ("sigma_vel_{}_mm_s", st.velocity_sigma_mm_s),
+        ):  # fmt: skip
+            for axis, v in zip("xyz", values, strict=True):
+                setattr(row, name.format(axis), _finite(v))
     for prefix, T in (("truth_", f.meta.get("T_world")), ("lab_truth_", f.T_truth)):
         if T is not None:
             p, y, rl = (float(v) for v in facing_euler_deg(T.R))

@@ -35,6 +35,7 @@ from backend.services import report_pdf  # noqa: E402
 from backend.services.analysis import AXES, REFERENCE_PREFIX, analyse  # noqa: E402
 from backend.services.calibrations import calibrated_reference  # noqa: E402
 from backend.services.report_plots import NO_PLOTS, evidence_plots, standalone  # noqa: E402
+from tofpose.relative_state import STATE_COLUMNS  # noqa: E402
 
 POSE = AXES
 CSV_COLUMNS = (
@@ -47,6 +48,7 @@ CSV_COLUMNS = (
     "setpoint_yaw_deg", "setpoint_pitch_deg", "setpoint_roll_deg", "setpoint_rail_mm",
     "encoder_yaw_deg", "encoder_pitch_deg", "encoder_roll_deg", "encoder_rail_mm",
     *(f"calibrated_truth_{a}" for a in POSE),
+    *STATE_COLUMNS,
 )  # fmt: skip
 
 

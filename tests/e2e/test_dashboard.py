@@ -1,5 +1,6 @@
-"""The dashboard in a real browser: live pose that follows the turntable moved through
-the page, overlays toggled in the browser, STOP, a clear message without the token."""
+"""The dashboard in a real browser: live pose and angular rate that follow the turntable
+moved through the page, overlays toggled in the browser, STOP, a clear message without
+the token."""
 
 from __future__ import annotations
 
@@ -41,8 +42,17 @@ def test_live_pose_follows_a_move_made_in_the_page(server, page_for):
     stages = page.get_by_test_id("timings").inner_text()
     assert "total" in stages and ("refine" in stages or "tracking" in stages), stages
     x0 = _num(page, "pose-x")
+    assert page.get_by_test_id("filter-status").inner_text() in ("updated", "initialised")
+    page.get_by_test_id("rate-chart").wait_for()
     page.get_by_test_id("target-yaw").fill("10")
     page.get_by_test_id("go-yaw").click()
+    # while the table turns, the relative state shows the target turning about the
+    # camera's vertical axis (the table's yaw seen from the camera it carries)
+    rates = []
+    for _ in range(15):
+        page.wait_for_timeout(100)
+        rates.append(abs(_num(page, "rate-y")))
+    assert max(rates) > 2.0, rates
     page.wait_for_function(
         "Math.abs(parseFloat(document.querySelector('[data-testid=pos-yaw]').innerText) - 10)"
         " < 0.01",

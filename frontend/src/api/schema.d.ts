@@ -1256,6 +1256,21 @@ export interface components {
              */
             active_threshold_counts?: number | null;
             /**
+             * Angular Rate Deg S
+             * @description the target's angular rate, camera frame (x y z), deg/s
+             */
+            angular_rate_deg_s?: number[] | null;
+            /**
+             * Angular Rate Sigma Deg S
+             * @description 1-sigma of angular_rate_deg_s
+             */
+            angular_rate_sigma_deg_s?: number[] | null;
+            /**
+             * Angular Rate Target Deg S
+             * @description the same rate in the target frame (x y z), deg/s
+             */
+            angular_rate_target_deg_s?: number[] | null;
+            /**
              * Attitude Sigma Deg
              * @description 1-sigma of the rotation-vector components
              */
@@ -1264,6 +1279,11 @@ export interface components {
             captured_unix_s: number;
             /** Catalog */
             catalog: string;
+            /**
+             * Filter Status
+             * @description what the relative-state filter did with this frame: started from its pose (initialised), fused it (updated), refused it as inconsistent with the motion so far (rejected), restarted after rejections that agree (reset), or predicted without a pose (predicted); null before its first pose
+             */
+            filter_status?: ("initialised" | "updated" | "rejected" | "reset" | "predicted") | null;
             /** Frame Index */
             frame_index: number;
             /** Frame Time S */
@@ -1318,6 +1338,16 @@ export interface components {
             truth?: components["schemas"]["TruthPublic"] | null;
             /** Unmatched */
             unmatched: components["schemas"]["BlobPublic"][];
+            /**
+             * Velocity Mm S
+             * @description the target origin's velocity, camera frame (x y z), mm/s
+             */
+            velocity_mm_s?: number[] | null;
+            /**
+             * Velocity Sigma Mm S
+             * @description 1-sigma of velocity_mm_s
+             */
+            velocity_sigma_mm_s?: number[] | null;
             /** X Mm */
             x_mm?: number | null;
             /** Y Mm */

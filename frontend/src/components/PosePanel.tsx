@@ -29,6 +29,24 @@ export function PosePanel({ pose, stale, children }: { pose: Pose | null; stale:
         residual {fmt(pose.residual_mm, 3)} mm, {fmt(pose.timings_ms["total"], 1)} ms
         (<span data-testid="pose-mode">{pose.mode}</span>);
         attitude relative to the facing reference (face-on reads 0, 0, 0)</p>
+      {pose.angular_rate_deg_s && (
+        <table class="pose" data-testid="rates">
+          <thead><tr><th></th><th>rate (deg/s)</th><th>velocity (mm/s)</th></tr></thead>
+          <tbody>
+            {["x", "y", "z"].map((n, i) => (
+              <tr key={n}>
+                <th>{n}</th>
+                <td><span data-testid={`rate-${n}`}>{fmt(pose.angular_rate_deg_s?.[i], 2)}</span> ± {fmt(pose.angular_rate_sigma_deg_s?.[i], 2)}</td>
+                <td>{fmt(pose.velocity_mm_s?.[i], 1)} ± {fmt(pose.velocity_sigma_mm_s?.[i], 1)}</td>
+              </tr>
+            ))}
+          </tbody>
+        </table>
+      )}
+      {pose.filter_status && (
+        <p class="small">relative state (camera frame): <span data-testid="filter-status">{pose.filter_status}</span>
+          {pose.filter_status === "rejected" && " (this pose disagrees with the motion so far and was not fused)"}</p>
+      )}
       {pose.truth && (
         <p class="small" data-testid="truth">lab reference ({pose.truth.reference}): x {fmt(pose.truth.x_mm)} y {fmt(pose.truth.y_mm)} z {fmt(pose.truth.z_mm)} mm;
           error <span data-testid="truth-error-mm">{fmt(pose.truth.position_error_mm)}</span> mm, {fmt(pose.truth.attitude_error_deg, 3)} deg</p>

@@ -1,5 +1,5 @@
-// Rolling plots of the six pose components (uPlot), with the lab's reference (dashed)
-// when the source knows it.
+// Rolling plots of the six pose components and of the target's angular rate (uPlot),
+// with the lab's reference (dashed) when the source knows it.
 import { useEffect, useRef } from "preact/hooks";
 import uPlot from "uplot";
 import "uplot/dist/uPlot.min.css";
@@ -9,10 +9,27 @@ const REDRAW_MS = 250;
 
 type Key = "x_mm" | "y_mm" | "z_mm" | "pitch_deg" | "yaw_deg" | "roll_deg";
 
-function Chart({ history, keys, unit }: { history: Pose[]; keys: Key[]; unit: string }) {
+/** One plotted line: its label, its value in a frame, and the lab reference's, if any. */
+interface Line {
+  label: string;
+  value: (p: Pose) => number | null | undefined;
+  reference?: (p: Pose) => number | null | undefined;
+}
+
+const poseLine = (k: Key): Line => ({ label: k, value: (p) => p[k], reference: (p) => p.truth?.[k] });
+
+const rateLine = (axis: number, name: string): Line => ({
+  label: `rate ${name} (camera)`,
+  value: (p) => p.angular_rate_deg_s?.[axis],
+});
+
+function Chart({ history, lines, unit, shown, testid }: {
+  history: Pose[]; lines: Line[]; unit: string; shown: (p: Pose) => boolean; testid?: string;
+}) {
   const el = useRef<HTMLDivElement>(null);
   const plot = useRef<uPlot | null>(null);
   const drawnAt = useRef(0);
+  const withRef = lines.filter((l) => l.reference);
   useEffect(() => {
     if (!el.current) return;
     const colors = ["#1f77b4", "#d62728", "#2ca02c"];
@@ -23,11 +40,11 @@ function Chart({ history, keys, unit }: { history: Pose[]; keys: Key[]; unit: st
         axes: [{ label: "frame time (s)" }, { label: unit }],
         series: [
           {},
-          ...keys.map((k, i) => ({ label: k, stroke: colors[i], width: 1.5 })),
-          ...keys.map((k, i) => ({ label: `reference ${k}`, stroke: colors[i], width: 1, dash: [4, 4] })),
+          ...lines.map((l, i) => ({ label: l.label, stroke: colors[i], width: 1.5 })),
+          ...withRef.map((l, i) => ({ label: `reference ${l.label}`, stroke: colors[i], width: 1, dash: [4, 4] })),
         ],
       },
-      [[], ...keys.map(() => []), ...keys.map(() => [])],
+      [[], ...lines.map(() => []), ...withRef.map(() => [])],
       el.current,
     );
     return () => plot.current?.destroy();
@@ -38,23 +55,28 @@ function Chart({ history, keys, unit }: { history: Pose[]; keys: Key[]; unit: st
     const now = performance.now();
     if (now - drawnAt.current < REDRAW_MS) return;
     drawnAt.current = now;
-    const ok = history.filter((p) => p.ok);
+    const rows = history.filter(shown);
     plot.current?.setData([
-      ok.map((p) => p.frame_time_s),
-      ...keys.map((k) => ok.map((p) => p[k] ?? null)),
-      ...keys.map((k) => ok.map((p) => p.truth?.[k] ?? null)),
+      rows.map((p) => p.frame_time_s),
+      ...lines.map((l) => rows.map((p) => l.value(p) ?? null)),
+      ...withRef.map((l) => rows.map((p) => l.reference?.(p) ?? null)),
     ] as uPlot.AlignedData);
   }, [history]);
-  return <div ref={el} />;
+  return <div ref={el} data-testid={testid} />;
 }
+
+const hasPose = (p: Pose) => p.ok;
+const hasState = (p: Pose) => p.angular_rate_deg_s != null;
 
 export function TimeSeries({ history }: { history: Pose[] }) {
   return (
     <section class="card">
       <h2>Pose over time</h2>
-      <Chart history={history} keys={["x_mm", "y_mm"]} unit="mm" />
-      <Chart history={history} keys={["z_mm"]} unit="mm" />
-      <Chart history={history} keys={["pitch_deg", "yaw_deg", "roll_deg"]} unit="deg" />
+      <Chart history={history} lines={["x_mm", "y_mm"].map((k) => poseLine(k as Key))} unit="mm" shown={hasPose} />
+      <Chart history={history} lines={[poseLine("z_mm")]} unit="mm" shown={hasPose} />
+      <Chart history={history} lines={["pitch_deg", "yaw_deg", "roll_deg"].map((k) => poseLine(k as Key))} unit="deg" shown={hasPose} />
+      <Chart history={history} lines={[rateLine(0, "x"), rateLine(1, "y"), rateLine(2, "z")]}
+        unit="deg/s" shown={hasState} testid="rate-chart" />
     </section>
   );
 }

@@ -39,6 +39,12 @@ def test_stream_sends_hello_then_every_pose(client):
     ok = [m["data"] for m in msgs if m["data"]["ok"]]
     assert len(ok) >= 10
     assert all(abs(p["z_mm"] - 2000.0) < 30.0 for p in ok)
+    # the relative state rides along: a static simulated bench turns at no rate
+    last = ok[-1]
+    assert last["filter_status"] in ("updated", "initialised")
+    for w, s in zip(last["angular_rate_deg_s"], last["angular_rate_sigma_deg_s"], strict=True):
+        assert abs(w) < 3 * s + 0.05
+    assert len(last["velocity_mm_s"]) == len(last["velocity_sigma_mm_s"]) == 3
 
 
 def test_images_and_point_cloud_on_request(client):
