@@ -288,9 +288,9 @@ def ranges_consistent(current, previous, flat, starts, z):
     through itself changes its markers' ranges by millimetres a frame while their
     images hardly move, and combining such frames lags the ranges (D-bar).
 
-    Per blob (pixels ``flat[starts[j]:starts[j + 1]]``, every k-th of them, k = P // ``RANGE_TEST_MAX_PIXELS``,
-    so that fewer than twice that are read) with at least ``RANGE_TEST_MIN_PIXELS``
-    pixels valid in both frames: the pixel differences
+    Per blob (pixels ``flat[starts[j]:starts[j + 1]]``, every k-th of them,
+    k = P // ``RANGE_TEST_MAX_PIXELS``, so that fewer than twice that are read) with at
+    least ``RANGE_TEST_MIN_PIXELS`` pixels valid in both frames: the pixel differences
     delta = current - previous, their median m and its standard error from their MAD
     (1.4826 MAD sqrt(pi / 2) / sqrt(n): the median of n Gaussian values); t = m / that.
     Consistent when the sum of t^2, each clipped at ``RANGE_TEST_CLIP``, is within
