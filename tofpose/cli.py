@@ -21,6 +21,8 @@ from tofpose.covariance_calibration import (
     pose_nees,
 )
 from tofpose.geometry import RigidTransform, facing_euler_deg, rotation_angle_deg
+from tofpose.interop.topics import DISTANCE as DISTANCE_TOPIC
+from tofpose.interop.topics import GRAY as GRAY_TOPIC
 from tofpose.pipeline import PipelineConfig, PosePipeline
 from tofpose.range_calibration import (
     RangeCorrection,
@@ -144,6 +146,30 @@ def calibrate_range(
             f"{c.calibrated_span_mm[0]:.0f}-{c.calibrated_span_mm[1]:.0f} mm -> {out}")  # fmt: skip
 
 
+def pipeline_for(
+    rec, rec_path: str, catalog_path: str | None, camera_path: str | None, tracking: bool
+) -> PosePipeline:
+    """The pipeline ``estimate`` runs over an open recording: its camera and catalog, or
+    the ones given (a camera JSON with its range correction and covariance scale)."""
+    camera, correction, scale = rec.camera, None, None
+    if camera_path:
+        camera, correction, scale = load_camera(_read_text(camera_path, "camera"))
+    if catalog_path:
+        catalog = Catalog.from_json(_read_text(catalog_path, "catalog"))
+    elif rec.catalog is not None:
+        catalog = rec.catalog
+    else:
+        raise SystemExit(f"tofpose: {rec_path} has no /catalog; pass --catalog CAT.json")
+    if camera.shape != rec.camera.shape:
+        raise SystemExit(
+            f"tofpose: camera {camera.width}x{camera.height} does not match the recording's "
+            f"{rec.camera.width}x{rec.camera.height} frames"
+        )
+    config = PipelineConfig(tracking=TrackingConfig(enabled=tracking))
+    return PosePipeline(camera, catalog, config, range_correction=correction,
+                        covariance_scale=scale)  # fmt: skip
+
+
 def estimate(
     rec_path: str,
     out_csv: str,
@@ -158,23 +184,7 @@ def estimate(
     ``filter_state``: run the relative-state filter over the poses and add
     ``FILTER_COLUMNS`` (empty until its first pose)."""
     with open_recording(rec_path) as rec:
-        camera, correction, scale = rec.camera, None, None
-        if camera_path:
-            camera, correction, scale = load_camera(_read_text(camera_path, "camera"))
-        if catalog_path:
-            catalog = Catalog.from_json(_read_text(catalog_path, "catalog"))
-        elif rec.catalog is not None:
-            catalog = rec.catalog
-        else:
-            raise SystemExit(f"tofpose: {rec_path} has no /catalog; pass --catalog CAT.json")
-        if camera.shape != rec.camera.shape:
-            raise SystemExit(
-                f"tofpose: camera {camera.width}x{camera.height} does not match the recording's "
-                f"{rec.camera.width}x{rec.camera.height} frames"
-            )
-        config = PipelineConfig(tracking=TrackingConfig(enabled=tracking))
-        pipe = PosePipeline(camera, catalog, config, range_correction=correction,
-                            covariance_scale=scale)  # fmt: skip
+        pipe = pipeline_for(rec, rec_path, catalog_path, camera_path, tracking)
         n_ok = 0
         rel = RelativeStateFilter() if filter_state else None
         with open(out_csv, "w", newline="") as fh:
@@ -329,6 +339,27 @@ def demo(n_frames: int = 48, seed: int = 1) -> int:
     return 0
 
 
+def export_file(args: argparse.Namespace) -> str:
+    """``tofpose export mcap``: the recording, and with ``--estimate`` each frame's pose."""
+    from tofpose.interop.mcap_export import export_mcap  # lazy: foxglove-sdk loads a runtime
+
+    with open_recording(args.recording) as rec:
+        pipe = (pipeline_for(rec, args.recording, args.catalog, args.camera, args.tracking)
+                if args.estimate else None)  # fmt: skip
+        s = export_mcap(rec, args.out, pipe, overwrite=args.force)
+    poses = f", {s['ok']} with a pose" if args.estimate else ""
+    return f"{s['frames']} frames{poses} -> {args.out}"
+
+
+def import_file(args: argparse.Namespace) -> str:
+    """``tofpose import mcap``."""
+    from tofpose.interop.mcap_import import import_mcap
+
+    s = import_mcap(args.file, args.out, gray_topic=args.gray_topic,
+                    distance_topic=args.distance_topic, overwrite=args.force)  # fmt: skip
+    return f"{s['frames']} frames -> {args.out}"
+
+
 def main(argv: list[str] | None = None) -> int:
     single_threaded_blas()  # tofpose.threads: idle BLAS threads would burn a core
     ap = argparse.ArgumentParser(prog="tofpose", description=__doc__)
@@ -420,6 +451,23 @@ def main(argv: list[str] | None = None) -> int:
         q.add_argument("--target-distance-mm", type=float, default=15000.0)
         q.add_argument("--start-rail-mm", type=float, default=13000.0)
         q.add_argument("--seed", type=int, default=0)
+    p = sub.add_parser("export", help="write a recording in another format (docs/interop.md)")
+    p.add_argument("format", choices=("mcap",), help="mcap: Foxglove / ROS 2 / Rerun")
+    p.add_argument("recording")
+    p.add_argument("--out", required=True, help="output file (REC.mcap)")
+    p.add_argument("--catalog", help="catalog JSON (default: the recording's)")
+    p.add_argument("--camera", help="camera JSON (default: the recording's)")
+    p.add_argument("--tracking", action="store_true", help="estimate in tracking mode")
+    p.add_argument("--no-estimate", dest="estimate", action="store_false",
+                   help="frames and reference poses only, no pipeline run")  # fmt: skip
+    p.add_argument("--force", action="store_true", help="overwrite --out")
+    p = sub.add_parser("import", help="make a recording from another format (docs/interop.md)")
+    p.add_argument("format", choices=("mcap",))
+    p.add_argument("file", help="input file (REC.mcap)")
+    p.add_argument("--out", required=True, help="output recording (REC.h5)")
+    p.add_argument("--gray-topic", help=f"gray image topic (default {GRAY_TOPIC})")
+    p.add_argument("--distance-topic", help=f"distance image topic (default {DISTANCE_TOPIC})")
+    p.add_argument("--force", action="store_true", help="overwrite --out")
     p = sub.add_parser("openapi", help="write the server's OpenAPI document (JSON)")
     p.add_argument("--out", required=True)
     sub.add_parser(
@@ -451,6 +499,10 @@ def main(argv: list[str] | None = None) -> int:
             s = estimate(args.recording, args.out, args.catalog, args.camera,
                          tracking=args.tracking, filter_state=args.filter)  # fmt: skip
             print(f"{s['ok']}/{s['frames']} frames with a pose -> {args.out}")
+        elif args.cmd == "export":
+            print(export_file(args))
+        elif args.cmd == "import":
+            print(import_file(args))
         elif args.cmd == "calibrate-covariance":
             print(calibrate_covariance(args.recording, args.out, args.camera, args.reference,
                                        args.knots_mm))  # fmt: skip

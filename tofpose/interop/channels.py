@@ -1,0 +1,128 @@
+"""One set of Foxglove channels (``topics``) on a ``foxglove.Context``, logged per frame.
+
+The MCAP export opens an MCAP writer on the context, the live server a Foxglove
+WebSocket server; both log through ``ToFChannels.log_frame``. Channels of the truth and
+lab-truth poses are created on first use, so a stream without them advertises none.
+"""
+
+from __future__ import annotations
+
+import json
+
+import foxglove
+import numpy as np
+from foxglove.channels import (
+    CameraCalibrationChannel,
+    FrameTransformChannel,
+    ImageAnnotationsChannel,
+    PointCloudChannel,
+    PoseInFrameChannel,
+    RawImageChannel,
+)
+
+from tofpose.camera import CameraModel
+from tofpose.interop import foxglove_messages as msg
+from tofpose.interop import topics
+from tofpose.pipeline import PoseResult
+
+
+def json_channel(topic: str, schema: dict, context: foxglove.Context) -> foxglove.Channel:
+    """A JSON channel whose schema (``jsonschema`` encoding) is named by its ``title``."""
+    return foxglove.Channel(
+        topic,
+        schema=foxglove.Schema(
+            name=schema["title"], encoding="jsonschema", data=json.dumps(schema).encode()
+        ),
+        message_encoding="json",
+        context=context,
+    )
+
+
+class ToFChannels:
+    """The channels of one camera stream on ``context``.
+
+    camera : the model logged as ``CameraCalibration`` with every frame (so a client that
+    joins late, or a player that seeks, has it at once).
+    """
+
+    def __init__(self, context: foxglove.Context, camera: CameraModel) -> None:
+        self.context = context
+        self.camera = camera
+        self.gray = RawImageChannel(topics.GRAY, context=context)
+        self.distance = RawImageChannel(
+            topics.DISTANCE, context=context, metadata=topics.DISTANCE_CHANNEL_METADATA
+        )
+        self.calibration = CameraCalibrationChannel(topics.CALIBRATION, context=context)
+        self.frame = json_channel(topics.FRAME, topics.FRAME_SCHEMA, context)
+        self._lazy: dict[str, object] = {}
+
+    def _get(self, topic: str, make):
+        ch = self._lazy.get(topic)
+        if ch is None:
+            ch = self._lazy[topic] = make()
+        return ch
+
+    def _json(self, topic: str, schema: dict) -> foxglove.Channel:
+        return self._get(topic, lambda: json_channel(topic, schema, self.context))
+
+    def _log_pose(
+        self, topic: str, transform_topic: str, child: str, index: int,
+        pose: tuple[np.ndarray, np.ndarray], ts, log_time_ns: int,
+    ) -> None:  # fmt: skip
+        R, t_mm = pose
+        self._json(topic, topics.POSE_SCHEMA).log(
+            msg.pose_payload(index, R, t_mm), log_time=log_time_ns
+        )
+        ch = self._get(transform_topic, lambda: FrameTransformChannel(
+            transform_topic, context=self.context))  # fmt: skip
+        ch.log(msg.frame_transform(R, t_mm, child, ts), log_time=log_time_ns)
+
+    def log_frame(
+        self,
+        index: int,
+        gray: np.ndarray,
+        distance_mm: np.ndarray,
+        time_s: float,
+        log_time_ns: int,
+        result: PoseResult | None = None,
+        truth: tuple[np.ndarray, np.ndarray] | None = None,
+        lab_truth: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> None:
+        """Log one frame (gray (H, W) uint16, distance (H, W) float32 mm) at
+        ``log_time_ns``; with the pipeline's ``result`` its estimate, pose, reflectors
+        and overlay; with ``truth`` / ``lab_truth`` = (R (3, 3), t (3,) mm) those poses."""
+        ts = msg.timestamp(log_time_ns)
+        self.frame.log(msg.frame_payload(index, time_s), log_time=log_time_ns)
+        self.gray.log(msg.gray_image(gray, ts), log_time=log_time_ns)
+        self.distance.log(msg.distance_image(distance_mm, ts), log_time=log_time_ns)
+        self.calibration.log(msg.camera_calibration(self.camera, ts), log_time=log_time_ns)
+        if result is not None:
+            self._json(topics.ESTIMATE, topics.ESTIMATE_SCHEMA).log(
+                json.dumps(msg.estimate_payload(index, time_s, result), allow_nan=False),
+                log_time=log_time_ns,
+            )
+            self._get(topics.ANNOTATIONS, lambda: ImageAnnotationsChannel(
+                topics.ANNOTATIONS, context=self.context)).log(
+                msg.image_annotations(result, ts), log_time=log_time_ns)  # fmt: skip
+            if result.ok:
+                self._get(topics.POSE_TRANSFORM, lambda: FrameTransformChannel(
+                    topics.POSE_TRANSFORM, context=self.context)).log(
+                    msg.frame_transform(result.R, result.t_mm, topics.TARGET_FRAME_ID, ts),
+                    log_time=log_time_ns)  # fmt: skip
+                self._get(topics.POSE, lambda: PoseInFrameChannel(
+                    topics.POSE, context=self.context)).log(
+                    msg.pose_in_frame(result.R, result.t_mm, ts), log_time=log_time_ns)  # fmt: skip
+            self._get(topics.REFLECTORS, lambda: PointCloudChannel(
+                topics.REFLECTORS, context=self.context)).log(
+                msg.reflector_cloud(result, ts), log_time=log_time_ns)  # fmt: skip
+        if truth is not None:
+            self._log_pose(topics.TRUTH, topics.TRUTH_TRANSFORM, topics.TRUTH_FRAME_ID,
+                           index, truth, ts, log_time_ns)  # fmt: skip
+        if lab_truth is not None:
+            self._log_pose(topics.LAB_TRUTH, topics.LAB_TRUTH_TRANSFORM, topics.LAB_FRAME_ID,
+                           index, lab_truth, ts, log_time_ns)  # fmt: skip
+
+    def close(self) -> None:
+        for ch in (self.gray, self.distance, self.calibration, self.frame,
+                   *self._lazy.values()):  # fmt: skip
+            ch.close()

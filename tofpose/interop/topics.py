@@ -1,0 +1,124 @@
+"""Channel names, frame ids and the JSON schemas of our own channels (docs/interop.md).
+
+Units follow Foxglove's 3-D conventions where a well-known schema is used (metres,
+quaternions x, y, z, w) and ours (millimetres, R_camera_target row-major) in the JSON
+channels, which keep every value exact (Python's float repr round-trips float64).
+"""
+
+from __future__ import annotations
+
+GRAY = "/tof/gray"  # foxglove.RawImage mono16: the amplitude image in counts
+DISTANCE = "/tof/distance"  # foxglove.RawImage 32FC1: radial distance in MILLIMETRES, NaN invalid
+CALIBRATION = "/tof/calibration"  # foxglove.CameraCalibration (OpenCV K, plumb_bob D)
+ANNOTATIONS = "/tof/annotations"  # foxglove.ImageAnnotations on the gray image
+FRAME = "/tofpose/frame"  # JSON: index and exact capture time of each frame
+POSE_TRANSFORM = "/tofpose/pose_transform"  # foxglove.FrameTransform camera -> target
+POSE = "/tofpose/pose"  # foxglove.PoseInFrame: the estimate in the camera frame
+REFLECTORS = "/tofpose/reflectors"  # foxglove.PointCloud: matched reflector points
+ESTIMATE = "/tofpose/estimate"  # JSON: ok/reason, covariance, sigmas, timings, matches
+TRUTH = "/tofpose/truth"  # JSON: the recording's /truth pose, exact
+TRUTH_TRANSFORM = "/tofpose/truth_transform"  # foxglove.FrameTransform camera -> target_truth
+LAB_TRUTH = "/tofpose/lab_truth"  # JSON: the lab's reference (/lab_truth), exact
+LAB_TRUTH_TRANSFORM = "/tofpose/lab_truth_transform"  # camera -> target_lab
+
+CAMERA_FRAME_ID = "camera"
+TARGET_FRAME_ID = "target"
+TRUTH_FRAME_ID = "target_truth"
+LAB_FRAME_ID = "target_lab"
+
+#: the MCAP metadata record with what no channel carries
+METADATA_NAME = "tofpose"
+
+#: MCAP channel metadata of the distance channel: what its float32 values are
+DISTANCE_CHANNEL_METADATA = {"unit": "mm", "quantity": "radial distance", "invalid": "NaN"}
+
+_VEC = {"type": "array", "items": {"type": "number"}}
+
+
+def _vec(n: int, description: str) -> dict:
+    return {**_VEC, "minItems": n, "maxItems": n, "description": description}
+
+
+FRAME_SCHEMA = {
+    "title": "tofpose.Frame",
+    "type": "object",
+    "properties": {
+        "index": {"type": "integer", "description": "frame number in the recording"},
+        "time_s": {"type": "number", "description": "capture time, s (exact float64)"},
+    },
+    "required": ["index", "time_s"],
+}
+
+POSE_SCHEMA = {
+    "title": "tofpose.Pose",
+    "type": "object",
+    "properties": {
+        "index": {"type": "integer"},
+        "R_camera_target": _vec(9, "rotation target -> camera, row-major"),
+        "t_camera_target_mm": _vec(3, "target origin in the camera frame, mm"),
+    },
+    "required": ["index", "R_camera_target", "t_camera_target_mm"],
+}
+
+_NULLABLE_VEC = {"anyOf": [_VEC, {"type": "null"}]}
+
+ESTIMATE_SCHEMA = {
+    "title": "tofpose.Estimate",
+    "type": "object",
+    "properties": {
+        "index": {"type": "integer"},
+        "time_s": {"type": "number"},
+        "ok": {"type": "boolean"},
+        "reason": {"type": "string", "description": "why there is no pose (empty when ok)"},
+        "mode": {"type": "string", "enum": ["acquisition", "tracking"]},
+        "n_matched": {"type": "integer"},
+        "n_candidates": {"type": "integer"},
+        "frames_used": {"type": "integer", "description": "frames persistence combined"},
+        "R_camera_target": {**_NULLABLE_VEC, "description": "row-major 3x3, or null"},
+        "t_camera_target_mm": _NULLABLE_VEC,
+        "quaternion_wxyz": _NULLABLE_VEC,
+        "euler_deg": {**_NULLABLE_VEC, "description": "pitch, yaw, roll (docs/architecture.md)"},
+        "covariance": {
+            **_NULLABLE_VEC,
+            "description": "6x6 row-major over (rotation vector rad, translation mm)",
+        },
+        "sigma_mm": {**_NULLABLE_VEC, "description": "1-sigma of x, y, z"},
+        "sigma_rotvec_deg": {**_NULLABLE_VEC, "description": "1-sigma of the rotation vector"},
+        "residual_mm": {"type": ["number", "null"]},
+        "timings_ms": {"type": "object", "additionalProperties": {"type": "number"}},
+        "matched": {
+            "type": "array",
+            "items": {
+                "type": "object",
+                "properties": {
+                    "id": {"type": "integer"},
+                    "u_px": {"type": "number"},
+                    "v_px": {"type": "number"},
+                    "distance_mm": {"type": "number"},
+                    "residual_mm": {"type": ["number", "null"]},
+                    "point_mm": _vec(3, "measured point in the camera frame, mm"),
+                },
+            },
+        },
+        "unmatched": {
+            "type": "array",
+            "items": {
+                "type": "array", "items": {"type": ["number", "null"]},
+                "minItems": 3, "maxItems": 3, "description": "u_px, v_px, distance_mm",
+            },
+        },
+        "rejected": {
+            "type": "array",
+            "items": {
+                "type": "object",
+                "properties": {
+                    "u_px": {"type": "number"},
+                    "v_px": {"type": "number"},
+                    "diameter_px": {"type": "number"},
+                    "reason": {"type": "string"},
+                },
+            },
+        },
+    },
+    "required": ["index", "time_s", "ok", "reason", "n_matched"],
+}
