@@ -156,6 +156,7 @@ def test_a_campaign_created_and_started_in_the_page_runs_and_its_report_download
     page.get_by_test_id("new-yaw_deg").fill("0, 200")  # outside the soft limits first
     page.get_by_test_id("new-rail_mm").fill("12500")
     page.get_by_test_id("new-frames").fill("4")
+    page.get_by_test_id("new-record-raw").check()
     page.get_by_test_id("new-create").click()
     err = page.get_by_test_id("error")
     err.wait_for(timeout=5000)
@@ -175,6 +176,11 @@ def test_a_campaign_created_and_started_in_the_page_runs_and_its_report_download
         page.get_by_test_id(f"report-html-{cid}").click()
     html = Path(dl.value.path()).read_text()
     assert "Campaign" in html and "page-grid" in html and "<table>" in html
+    with page.expect_download() as dl:  # its raw frames, for Foxglove / Rerun
+        page.get_by_test_id(f"recording-mcap-{cid}").click()
+    assert dl.value.suggested_filename == f"campaign-{cid}.mcap"
+    with open(dl.value.path(), "rb") as fh:
+        assert fh.read(8) == b"\x89MCAP0\r\n"  # the MCAP magic
     # Its statistics and pass/fail in the page: the same verdicts as the JSON report.
     import httpx
 

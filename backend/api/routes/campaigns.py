@@ -33,6 +33,7 @@ from backend.services.campaigns import (
     setpoint_axes,
 )
 from backend.services.campaigns import create_campaign as store_campaign
+from backend.services.mcap_files import recording_mcap
 from backend.services.reports import ReportError, build, to_csv, to_html, to_json, to_pdf
 from backend.services.store import NameTakenError, find_catalog
 from backend.state import AppState
@@ -303,6 +304,30 @@ def get_campaign_report(
 def get_campaign_recording(campaign_id: IdParam, state: StateDep, session: SessionDep):
     """The campaign's raw frames (HDF5, docs/architecture.md §7): exactly the stored
     measurements, in order (``recording_index`` of each). Only with ``record_raw``."""
+    path = _finished_recording(session, state, campaign_id)
+    return FileResponse(path, media_type="application/x-hdf5",
+                        filename=f"campaign-{campaign_id}.h5")  # fmt: skip
+
+
+@router.get(
+    "/{campaign_id}/recording.mcap",
+    dependencies=[ReadAuth],
+    response_class=FileResponse,
+    responses={200: {"content": {"application/x-mcap": {}}, "description": "the recording"},
+               **errors(404, 409)},
+)  # fmt: skip
+def get_campaign_recording_mcap(campaign_id: IdParam, state: StateDep, session: SessionDep):
+    """The campaign's raw recording as MCAP for Foxglove, ROS 2 and Rerun (docs/interop.md):
+    the frames, the references and the pipeline's estimate of each frame, re-run over the
+    recording with its camera and catalog. Made on the first request (a long recording
+    takes a while) and kept. Only with ``record_raw``."""
+    path = _finished_recording(session, state, campaign_id)
+    return FileResponse(recording_mcap(path), media_type="application/x-mcap",
+                        filename=f"campaign-{campaign_id}.mcap")  # fmt: skip
+
+
+def _finished_recording(session, state: AppState, campaign_id: int):
+    """The campaign's HDF5 recording; 404 without one, 409 while it is being written."""
     row = _row(session, campaign_id)
     path = state.campaigns.recording_path(campaign_id)
     if not row.record_raw or not path.exists():
@@ -311,5 +336,4 @@ def get_campaign_recording(campaign_id: IdParam, state: StateDep, session: Sessi
     if row.status == "running":
         raise HTTPException(409, f"campaign {campaign_id} is running and writing its "
                                  "recording: pause it or wait until it is done")  # fmt: skip
-    return FileResponse(path, media_type="application/x-hdf5",
-                        filename=f"campaign-{campaign_id}.h5")  # fmt: skip
+    return path

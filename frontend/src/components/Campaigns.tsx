@@ -56,6 +56,10 @@ export function Campaigns({ onError }: { onError: (m: string | null) => void }) 
                 <td>{(["html", "pdf", "csv", "json"] as const).map((f) => (
                   <a key={f} data-testid={`report-${f}-${c.id}`} href={`/api/campaigns/${c.id}/report.${f}`}>{f} </a>
                 ))}
+                {c.record_raw && c.status !== "running" && c.status !== "draft" && (["h5", "mcap"] as const).map((f) => (
+                  <a key={f} data-testid={`recording-${f}-${c.id}`} title={`raw frames (${f === "h5" ? "HDF5" : "MCAP: Foxglove, Rerun"})`}
+                    href={`/api/campaigns/${c.id}/recording.${f}`}>frames.{f} </a>
+                ))}
                 {c.status === "done" && (
                   <button data-testid={`results-${c.id}`} aria-expanded={open === c.id}
                     onClick={() => setOpen(open === c.id ? null : c.id)}>results</button>

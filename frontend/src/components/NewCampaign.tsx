@@ -52,6 +52,7 @@ export function NewCampaign({ onError, calibrationRequest = 0 }: { onError: (m: 
   const [kind, setKind] = useState<Kind>("grid");
   const [p, setP] = useState<Record<string, string>>({});
   const [frames, setFrames] = useState("20");
+  const [recordRaw, setRecordRaw] = useState(false);
   const [draft, setDraft] = useState<Campaign | null>(null);
   const [formError, setFormError] = useState<string | null>(null);
   const form = useRef<HTMLElement>(null);
@@ -71,7 +72,7 @@ export function NewCampaign({ onError, calibrationRequest = 0 }: { onError: (m: 
     if (problem !== null || "error" in gen || "error" in nFrames || busy) return;
     setBusy(true);
     try {
-      const body = { name, frames_per_point: nFrames.value, generator: gen.body };
+      const body = { name, frames_per_point: nFrames.value, generator: gen.body, record_raw: recordRaw };
       setDraft(await api<Campaign>("POST", "/api/campaigns", body));
       onError(null);
     } catch (e) {
@@ -94,6 +95,9 @@ export function NewCampaign({ onError, calibrationRequest = 0 }: { onError: (m: 
             onInput={(e) => setP({ ...p, [key]: (e.target as HTMLInputElement).value })} /></label>
         ))}
         <label>frames per set-point <input data-testid="new-frames" size={5} value={frames} onInput={(e) => setFrames((e.target as HTMLInputElement).value)} /></label>
+        <label title="every measured frame pair in a recording (HDF5, also downloadable as MCAP for Foxglove / Rerun)">
+          <input type="checkbox" data-testid="new-record-raw" checked={recordRaw}
+            onChange={(e) => setRecordRaw((e.target as HTMLInputElement).checked)} /> keep raw frames</label>
         <button data-testid="new-create" onClick={create} disabled={busy}>create draft</button>
       </div>
       {formError && <p class="field-error" role="alert" data-testid="new-error">{formError}</p>}

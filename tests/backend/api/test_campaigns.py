@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from tests.backend.conftest import AUTH, make_settings, running_app, wait_for
+from tests.tofpose.interop.test_mcap_export import read_back
 
 GRID = {
     "name": "grid-1", "catalog": "paper-target", "frames_per_point": 10, "settle_s": 0.5,
@@ -295,6 +296,7 @@ def test_raw_recording_holds_exactly_the_stored_frames_and_reprocesses(fast_clie
     after resume the downloaded recording re-processed by `tofpose estimate` gives the
     stored poses."""
     from tofpose.cli import main
+    from tofpose.interop import topics
     from tofpose.recording import open_recording
 
     c = fast_client
@@ -332,9 +334,25 @@ def test_raw_recording_holds_exactly_the_stored_frames_and_reprocesses(fast_clie
     diffs = [abs(float(p["x_mm"]) - m["x_mm"]) for p, m in zip(poses, items, strict=True)
              if p["ok"] == "1" and m["ok"]]  # fmt: skip
     assert len(diffs) >= 30 and np.median(diffs) < 0.5
+    # the same recording as MCAP: its frames, the references and a pose per frame
+    r = c.get(f"/api/campaigns/{cid}/recording.mcap")
+    assert r.status_code == 200 and r.headers["content-type"] == "application/x-mcap"
+    (tmp_path / "raw.mcap").write_bytes(r.content)
+    messages, _, _ = read_back(tmp_path / "raw.mcap")
+    with open_recording(rec_path) as rec:
+        assert len(messages[topics.GRAY]) == rec.n_frames
+        for k in (0, rec.n_frames - 1):
+            g = messages[topics.GRAY][k][1]
+            np.testing.assert_array_equal(np.frombuffer(g.data, "<u2").reshape(240, 320),
+                                          rec.frame(k)[0])  # fmt: skip
+            lab = messages[topics.LAB_TRUTH][k][1]
+            assert lab["t_camera_target_mm"] == rec.lab_truth_t_mm[k].tolist()
+    est = [p for _, p in messages[topics.ESTIMATE]]
+    assert sum(e["ok"] for e in est) >= 30
     other = c.post("/api/campaigns", json={**GRID, "name": "no-raw"}, headers=AUTH).json()
-    r = c.get(f"/api/campaigns/{other['id']}/recording.h5")
-    assert r.status_code == 404 and "record_raw was off" in r.json()["detail"]
+    for suffix in ("h5", "mcap"):
+        r = c.get(f"/api/campaigns/{other['id']}/recording.{suffix}")
+        assert r.status_code == 404 and "record_raw was off" in r.json()["detail"]
 
 
 def test_the_campaigns_camera_settings_are_applied_before_it_measures(fast_client):
