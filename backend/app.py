@@ -28,6 +28,7 @@ from backend.api.routes import (
     campaigns,
     catalogs,
     dashboard,
+    foxglove,
     frames,
     health,
     live,
@@ -114,6 +115,23 @@ def _start_scene(state: AppState) -> None:
         state.scene_reason = f"3-D scene failed to start: {exc}"
 
 
+def _start_foxglove(state: AppState) -> None:
+    """Start the live Foxglove server when the settings ask for it; one that cannot start
+    (a taken port) is logged and reported by ``GET /api/foxglove``, never fatal."""
+    refusal = state.settings.foxglove_refusal
+    if refusal is not None:
+        state.foxglove_reason = refusal
+        return
+    from backend.services.foxglove_live import LiveFoxglove
+
+    try:
+        state.foxglove = LiveFoxglove(state.hub, state.acquisition, host=state.settings.host,
+                                      port=state.settings.foxglove_port)  # fmt: skip
+    except Exception as exc:  # noqa: BLE001 - any failure leaves the API running
+        log.error("Foxglove server not started: %s", exc)
+        state.foxglove_reason = f"Foxglove server failed to start: {exc}"
+
+
 HTTP_METHODS = {"get", "put", "post", "delete", "patch", "head", "options"}
 AXIS_FIELDS = {"yaw": "yaw_deg", "pitch": "pitch_deg", "roll": "roll_deg", "rail": "rail_mm"}
 
@@ -183,11 +201,14 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         acq.start()
         campaigns.start()
         _start_scene(app.state.tofpose)
+        _start_foxglove(app.state.tofpose)
         try:
             yield
         finally:
             if app.state.tofpose.scene is not None:
                 app.state.tofpose.scene.close()
+            if app.state.tofpose.foxglove is not None:
+                app.state.tofpose.foxglove.close()
             campaigns.stop()  # a running campaign is left interrupted (resumable)
             app.state.tofpose.renderer.close()
             acq.stop()
@@ -238,7 +259,7 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         )  # fmt: skip
 
     routers = (health, devices_route, camera, pose, frames, motion, catalogs, campaigns,
-               calibrations, reference, scene, live)  # fmt: skip
+               calibrations, reference, scene, foxglove, live)  # fmt: skip
     for module in routers:
         app.include_router(module.router)
 

@@ -31,6 +31,14 @@ def scene_line(settings: Settings, host: str) -> str:
             "free one: GET /api/scene)")  # fmt: skip
 
 
+def foxglove_line(settings: Settings, host: str) -> str:
+    if settings.foxglove_refusal is not None:
+        return settings.foxglove_refusal
+    if settings.foxglove_port == 0:
+        return "Foxglove WebSocket on any free port (GET /api/foxglove names it)"
+    return f"ws://{host}:{settings.foxglove_port}   (Foxglove app: Open connection)"
+
+
 def banner(settings: Settings, token: str, created: bool) -> str:
     host = settings.host if ":" not in settings.host else f"[{settings.host}]"
     base = f"http://{host}:{settings.port}"
@@ -47,6 +55,7 @@ def banner(settings: Settings, token: str, created: bool) -> str:
         f"  live pose      ws://{host}:{settings.port}/ws/live",
         f"  health         {base}/api/health",
         f"  3-D scene      {scene_line(settings, host)}",
+        f"  Foxglove       {foxglove_line(settings, host)}",
         f"  database       {settings.resolved_database_url}",
         f"  API token      {token_line(settings, token, created)}",
         f"  reads          {reads}; moves and changes need 'Authorization: Bearer <token>'",

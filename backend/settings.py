@@ -69,6 +69,9 @@ class Settings(BaseSettings):
         (0 = any free port; a taken port moves to the next free one, see
         ``GET /api/scene``). It has no token check of its own, so on a bind beyond
         loopback it runs only when reads are open.
+    foxglove_port : publish the live stream to Foxglove (a ``foxglove-sdk`` WebSocket
+        server on this host, docs/interop.md); None (the default) = off, 0 = any free
+        port. Like the 3-D scene it has no token check: beyond loopback only with open reads.
     """
 
     model_config = SettingsConfigDict(env_prefix="TOFPOSE_", extra="ignore")
@@ -105,6 +108,7 @@ class Settings(BaseSettings):
     tracking: bool = True
     viser: bool = True
     viser_port: int = Field(8080, ge=0, le=65535)
+    foxglove_port: int | None = Field(None, ge=0, le=65535)
     allowed_hosts: Annotated[list[str], NoDecode] = Field(default_factory=list)
     allowed_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
 
@@ -197,6 +201,18 @@ class Settings(BaseSettings):
         if not self.reads_are_open:
             return (
                 "3-D scene off: it has no token check and the server is bound beyond "
+                "loopback with closed reads (set TOFPOSE_OPEN_READS=true to serve it)"
+            )
+        return None
+
+    @property
+    def foxglove_refusal(self) -> str | None:
+        """Why the live Foxglove server does not run with these settings, or None."""
+        if self.foxglove_port is None:
+            return "Foxglove server off (--foxglove-port / TOFPOSE_FOXGLOVE_PORT to start it)"
+        if not self.reads_are_open:
+            return (
+                "Foxglove server off: it has no token check and the server is bound beyond "
                 "loopback with closed reads (set TOFPOSE_OPEN_READS=true to serve it)"
             )
         return None

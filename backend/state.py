@@ -33,6 +33,8 @@ class AppState:
     started_monotonic: float = field(default_factory=time.monotonic)
     scene: Any = None  # backend.services.scene.LiveScene when the 3-D scene runs
     scene_reason: str = ""  # why it does not run
+    foxglove: Any = None  # backend.services.foxglove_live.LiveFoxglove when it runs
+    foxglove_reason: str = ""  # why it does not run
 
     @property
     def uptime_s(self) -> float:

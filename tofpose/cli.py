@@ -425,6 +425,9 @@ def main(argv: list[str] | None = None) -> int:
         "--no-viser", dest="viser", action="store_false", default=None,
         help="do not run the 3-D scene",
     )  # fmt: skip
+    p.add_argument("--foxglove-port", type=int,
+                   help="publish the live stream to Foxglove on this port (default off; "
+                        "0 = any free port; docs/interop.md)")  # fmt: skip
     p = sub.add_parser("report", help="write a campaign's accuracy report from the database")
     p.add_argument("campaign_id", type=int)
     p.add_argument("--db", required=True, help="SQLAlchemy URL, e.g. sqlite:///data/tofpose.db")

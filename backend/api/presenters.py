@@ -18,6 +18,7 @@ from backend.api.schemas import (
     CameraSettingsPublic,
     CampaignPublic,
     DeviceStatePublic,
+    FoxglovePublic,
     MatchedPublic,
     MeasurementPublic,
     MotionPublic,
@@ -286,6 +287,14 @@ def calibration_public(row: CalibrationRow) -> CalibrationPublic:
         residual_rms_deg=float(np.sqrt(np.mean(np.square(row.residual_deg)))),
         chi2_per_dof=row.chi2_per_dof, n_observations=row.n_observations,
     )  # fmt: skip
+
+
+def foxglove_public(state: AppState) -> FoxglovePublic:
+    fox = state.foxglove
+    if fox is None:
+        return FoxglovePublic(running=False, reason=state.foxglove_reason)
+    return FoxglovePublic(running=True, url=fox.url, port=fox.port, published=fox.published,
+                          dropped=fox.dropped)  # fmt: skip
 
 
 def scene_public(state: AppState) -> ScenePublic:

@@ -270,6 +270,20 @@ class SceneUpdate(StrictBody):
     paused: bool
 
 
+class FoxglovePublic(BaseModel):
+    """The live Foxglove WebSocket server (``foxglove-sdk``) run by this process."""
+
+    running: bool
+    url: str | None = Field(None, description="ws:// address for the Foxglove app")
+    port: int | None = None
+    reason: str = Field("", description="why it does not run (empty when it does)")
+    published: int = Field(0, description="frames published to subscribed clients")
+    dropped: int = Field(
+        0, description="frames skipped because the publisher was still busy with one "
+        "(the camera loop never waits for it)",
+    )
+
+
 # -- motion ------------------------------------------------------------------------------
 class AxisBody(StrictBody):
     """Axis set-points (yaw, pitch, roll in deg, rail in mm); an axis left out stays where

@@ -1,8 +1,7 @@
 """One set of Foxglove channels (``topics``) on a ``foxglove.Context``, logged per frame.
 
 The MCAP export opens an MCAP writer on the context, the live server a Foxglove
-WebSocket server; both log through ``ToFChannels.log_frame``. Channels of the truth and
-lab-truth poses are created on first use, so a stream without them advertises none.
+WebSocket server; both log through ``ToFChannels.log_frame``.
 """
 
 from __future__ import annotations
@@ -39,14 +38,19 @@ def json_channel(topic: str, schema: dict, context: foxglove.Context) -> foxglov
 
 
 class ToFChannels:
-    """The channels of one camera stream on ``context``.
+    """The channels of one camera stream on ``context``, all advertised at construction
+    (a live client can subscribe before the first frame).
 
     camera : the model logged as ``CameraCalibration`` with every frame (so a client that
     joins late, or a player that seeks, has it at once).
+    estimate / truth / lab_truth : create the channels of the pipeline's results and of
+    the two reference poses; ``log_frame`` refuses what has no channel.
     """
 
-    def __init__(self, context: foxglove.Context, camera: CameraModel) -> None:
-        self.context = context
+    def __init__(
+        self, context: foxglove.Context, camera: CameraModel, *, estimate: bool = True,
+        truth: bool = False, lab_truth: bool = False,
+    ) -> None:  # fmt: skip
         self.camera = camera
         self.gray = RawImageChannel(topics.GRAY, context=context)
         self.distance = RawImageChannel(
@@ -54,28 +58,39 @@ class ToFChannels:
         )
         self.calibration = CameraCalibrationChannel(topics.CALIBRATION, context=context)
         self.frame = json_channel(topics.FRAME, topics.FRAME_SCHEMA, context)
-        self._lazy: dict[str, object] = {}
+        self.optional: dict[str, object] = {}
+        if estimate:
+            self.optional.update({
+                topics.ESTIMATE: json_channel(topics.ESTIMATE, topics.ESTIMATE_SCHEMA, context),
+                topics.ANNOTATIONS: ImageAnnotationsChannel(topics.ANNOTATIONS, context=context),
+                topics.POSE_TRANSFORM: FrameTransformChannel(topics.POSE_TRANSFORM,
+                                                             context=context),
+                topics.POSE: PoseInFrameChannel(topics.POSE, context=context),
+                topics.REFLECTORS: PointCloudChannel(topics.REFLECTORS, context=context),
+            })  # fmt: skip
+        for wanted, topic, transform in (
+            (truth, topics.TRUTH, topics.TRUTH_TRANSFORM),
+            (lab_truth, topics.LAB_TRUTH, topics.LAB_TRUTH_TRANSFORM),
+        ):
+            if wanted:
+                self.optional[topic] = json_channel(topic, topics.POSE_SCHEMA, context)
+                self.optional[transform] = FrameTransformChannel(transform, context=context)
 
-    def _get(self, topic: str, make):
-        ch = self._lazy.get(topic)
+    def _channel(self, topic: str):
+        ch = self.optional.get(topic)
         if ch is None:
-            ch = self._lazy[topic] = make()
+            raise ValueError(f"no {topic} channel: this stream was opened without it")
         return ch
-
-    def _json(self, topic: str, schema: dict) -> foxglove.Channel:
-        return self._get(topic, lambda: json_channel(topic, schema, self.context))
 
     def _log_pose(
         self, topic: str, transform_topic: str, child: str, index: int,
         pose: tuple[np.ndarray, np.ndarray], ts, log_time_ns: int,
     ) -> None:  # fmt: skip
         R, t_mm = pose
-        self._json(topic, topics.POSE_SCHEMA).log(
-            msg.pose_payload(index, R, t_mm), log_time=log_time_ns
+        self._channel(topic).log(msg.pose_payload(index, R, t_mm), log_time=log_time_ns)
+        self._channel(transform_topic).log(
+            msg.frame_transform(R, t_mm, child, ts), log_time=log_time_ns
         )
-        ch = self._get(transform_topic, lambda: FrameTransformChannel(
-            transform_topic, context=self.context))  # fmt: skip
-        ch.log(msg.frame_transform(R, t_mm, child, ts), log_time=log_time_ns)
 
     def log_frame(
         self,
@@ -97,24 +112,24 @@ class ToFChannels:
         self.distance.log(msg.distance_image(distance_mm, ts), log_time=log_time_ns)
         self.calibration.log(msg.camera_calibration(self.camera, ts), log_time=log_time_ns)
         if result is not None:
-            self._json(topics.ESTIMATE, topics.ESTIMATE_SCHEMA).log(
+            self._channel(topics.ESTIMATE).log(
                 json.dumps(msg.estimate_payload(index, time_s, result), allow_nan=False),
                 log_time=log_time_ns,
             )
-            self._get(topics.ANNOTATIONS, lambda: ImageAnnotationsChannel(
-                topics.ANNOTATIONS, context=self.context)).log(
-                msg.image_annotations(result, ts), log_time=log_time_ns)  # fmt: skip
+            self._channel(topics.ANNOTATIONS).log(
+                msg.image_annotations(result, ts), log_time=log_time_ns
+            )
             if result.ok:
-                self._get(topics.POSE_TRANSFORM, lambda: FrameTransformChannel(
-                    topics.POSE_TRANSFORM, context=self.context)).log(
+                self._channel(topics.POSE_TRANSFORM).log(
                     msg.frame_transform(result.R, result.t_mm, topics.TARGET_FRAME_ID, ts),
-                    log_time=log_time_ns)  # fmt: skip
-                self._get(topics.POSE, lambda: PoseInFrameChannel(
-                    topics.POSE, context=self.context)).log(
-                    msg.pose_in_frame(result.R, result.t_mm, ts), log_time=log_time_ns)  # fmt: skip
-            self._get(topics.REFLECTORS, lambda: PointCloudChannel(
-                topics.REFLECTORS, context=self.context)).log(
-                msg.reflector_cloud(result, ts), log_time=log_time_ns)  # fmt: skip
+                    log_time=log_time_ns,
+                )
+                self._channel(topics.POSE).log(
+                    msg.pose_in_frame(result.R, result.t_mm, ts), log_time=log_time_ns
+                )
+            self._channel(topics.REFLECTORS).log(
+                msg.reflector_cloud(result, ts), log_time=log_time_ns
+            )
         if truth is not None:
             self._log_pose(topics.TRUTH, topics.TRUTH_TRANSFORM, topics.TRUTH_FRAME_ID,
                            index, truth, ts, log_time_ns)  # fmt: skip
@@ -124,5 +139,5 @@ class ToFChannels:
 
     def close(self) -> None:
         for ch in (self.gray, self.distance, self.calibration, self.frame,
-                   *self._lazy.values()):  # fmt: skip
+                   *self.optional.values()):  # fmt: skip
             ch.close()

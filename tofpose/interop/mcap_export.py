@@ -68,7 +68,9 @@ def export_mcap(
         raise ValueError(f"{out} exists (pass --force to overwrite it)")
     times_ns = [time_ns_from_seconds(float(t)) for t in rec.time_s]
     context = foxglove.Context()
-    channels = ToFChannels(context, rec.camera)
+    channels = ToFChannels(context, rec.camera, estimate=pipeline is not None,
+                           truth=rec.truth_R is not None,
+                           lab_truth=rec.lab_truth_R is not None)  # fmt: skip
     n_ok = 0
     partial = out.with_name(out.name + ".partial")  # renamed when complete
     writer = foxglove.open_mcap(partial, allow_overwrite=True, context=context)

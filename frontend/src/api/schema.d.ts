@@ -346,6 +346,28 @@ export interface paths {
         patch?: never;
         trace?: never;
     };
+    "/api/foxglove": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * Get Foxglove
+         * @description The live Foxglove server's URL (open it in the Foxglove app: "Open connection",
+         *     Foxglove WebSocket) and what it has published; ``running`` is false with a
+         *     ``reason`` when it is off (``--foxglove-port``) or could not start.
+         */
+        get: operations["getFoxglove"];
+        put?: never;
+        post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
     "/api/frames/latest/{kind}.png": {
         parameters: {
             query?: never;
@@ -979,6 +1001,39 @@ export interface components {
         ErrorPublic: {
             /** Detail */
             detail: string;
+        };
+        /**
+         * FoxglovePublic
+         * @description The live Foxglove WebSocket server (``foxglove-sdk``) run by this process.
+         */
+        FoxglovePublic: {
+            /**
+             * Dropped
+             * @description frames skipped because the publisher was still busy with one (the camera loop never waits for it)
+             * @default 0
+             */
+            dropped: number;
+            /** Port */
+            port?: number | null;
+            /**
+             * Published
+             * @description frames published to subscribed clients
+             * @default 0
+             */
+            published: number;
+            /**
+             * Reason
+             * @description why it does not run (empty when it does)
+             * @default
+             */
+            reason: string;
+            /** Running */
+            running: boolean;
+            /**
+             * Url
+             * @description ws:// address for the Foxglove app
+             */
+            url?: string | null;
         };
         /** GridGenerator */
         GridGenerator: {
@@ -3004,6 +3059,47 @@ export interface operations {
                 };
                 content: {
                     "application/json": components["schemas"]["DevicesPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+        };
+    };
+    getFoxglove: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["FoxglovePublic"];
                 };
             };
             /** @description The body could not be parsed, or the Host header names a host this server does not serve */
