@@ -50,11 +50,11 @@ def _free_port() -> int:
 
 
 class Server:
-    def __init__(self, rate_hz: float, scene: bool = False) -> None:
+    def __init__(self, rate_hz: float, scene: bool = False, env: dict | None = None) -> None:
         self.port = _free_port()
         self.tmp = tempfile.TemporaryDirectory()
         env = {**os.environ, "TOFPOSE_FRAME_RATE_HZ": str(rate_hz),
-               "TOFPOSE_DATA_DIR": self.tmp.name}  # fmt: skip
+               "TOFPOSE_DATA_DIR": self.tmp.name, **(env or {})}  # fmt: skip
         scene_args = ["--viser-port", "0"] if scene else ["--no-viser"]
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "tofpose.cli", "serve", "--port", str(self.port), *scene_args],

@@ -346,7 +346,7 @@ def export_file(args: argparse.Namespace) -> str:
     with open_recording(args.recording) as rec:
         pipe = (pipeline_for(rec, args.recording, args.catalog, args.camera, args.tracking)
                 if args.estimate else None)  # fmt: skip
-        s = export_mcap(rec, args.out, pipe, overwrite=args.force)
+        s = export_mcap(rec, args.out, pipe, overwrite=args.force, previews=args.previews)
     poses = f", {s['ok']} with a pose" if args.estimate else ""
     return f"{s['frames']} frames{poses} -> {args.out}"
 
@@ -463,6 +463,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--tracking", action="store_true", help="estimate in tracking mode")
     p.add_argument("--no-estimate", dest="estimate", action="store_false",
                    help="frames and reference poses only, no pipeline run")  # fmt: skip
+    p.add_argument("--no-previews", dest="previews", action="store_false",
+                   help="leave out the viewer images (/tof/gray_preview, /tof/distance_preview): "
+                        "a smaller file")  # fmt: skip
     p.add_argument("--force", action="store_true", help="overwrite --out")
     p = sub.add_parser("import", help="make a recording from another format (docs/interop.md)")
     p.add_argument("format", choices=("mcap",))

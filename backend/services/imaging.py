@@ -10,43 +10,12 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import cv2
 import numpy as np
 
+from tofpose.interop.previews import distance_to_bgr, gray_to_u8
 from tofpose.pipeline import PoseResult
 
-FULL_SCALE_COUNTS = 4095
 MATCHED_BGR = (80, 220, 80)
 UNMATCHED_BGR = (60, 60, 255)
 LABEL_BGR = (255, 255, 255)
-
-
-def gray_to_u8(gray: np.ndarray) -> np.ndarray:
-    """(H, W) uint16 counts -> (H, W) uint8, gamma 0.5 so that the dark plate stays
-    visible beside bright reflectors; full scale maps to 255."""
-    g = np.clip(gray.astype(np.float32) / FULL_SCALE_COUNTS, 0.0, 1.0)
-    return np.round(255.0 * np.sqrt(g)).astype(np.uint8)
-
-
-def distance_to_bgr(
-    distance_mm: np.ndarray, range_mm: tuple[float, float] | None = None
-) -> np.ndarray:
-    """(H, W) float mm -> (H, W, 3) uint8 turbo colour map; invalid (NaN) pixels black.
-
-    range_mm : colour scale limits; default the 2nd-98th percentile of valid pixels.
-    """
-    d = np.asarray(distance_mm, np.float32)
-    valid = np.isfinite(d)
-    if range_mm is None:
-        if valid.any():
-            lo, hi = np.percentile(d[valid], [2.0, 98.0])
-        else:
-            lo, hi = 0.0, 1.0
-    else:
-        lo, hi = range_mm
-    hi = max(hi, lo + 1.0)
-    x = np.zeros(d.shape, np.uint8)
-    x[valid] = np.round(255.0 * np.clip((d[valid] - lo) / (hi - lo), 0.0, 1.0)).astype(np.uint8)
-    bgr = cv2.applyColorMap(x, cv2.COLORMAP_TURBO)
-    bgr[~valid] = 0
-    return bgr
 
 
 def draw_overlay(bgr: np.ndarray, result: PoseResult, scale: int) -> np.ndarray:

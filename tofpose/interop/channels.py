@@ -45,13 +45,20 @@ class ToFChannels:
     joins late, or a player that seeks, has it at once).
     estimate / truth / lab_truth : create the channels of the pipeline's results and of
     the two reference poses; ``log_frame`` refuses what has no channel.
+    previews : also the images viewers display as they are (``previews``): the gray
+    image in 8 bits and the distance colour-mapped.
     """
 
     def __init__(
         self, context: foxglove.Context, camera: CameraModel, *, estimate: bool = True,
-        truth: bool = False, lab_truth: bool = False,
+        truth: bool = False, lab_truth: bool = False, previews: bool = True,
     ) -> None:  # fmt: skip
         self.camera = camera
+        self.previews = (
+            (RawImageChannel(topics.GRAY_PREVIEW, context=context),
+             RawImageChannel(topics.DISTANCE_PREVIEW, context=context))
+            if previews else ()
+        )  # fmt: skip
         self.gray = RawImageChannel(topics.GRAY, context=context)
         self.distance = RawImageChannel(
             topics.DISTANCE, context=context, metadata=topics.DISTANCE_CHANNEL_METADATA
@@ -111,6 +118,11 @@ class ToFChannels:
         self.gray.log(msg.gray_image(gray, ts), log_time=log_time_ns)
         self.distance.log(msg.distance_image(distance_mm, ts), log_time=log_time_ns)
         self.calibration.log(msg.camera_calibration(self.camera, ts), log_time=log_time_ns)
+        if self.previews:
+            gray_preview, distance_preview = self.previews
+            gray_preview.log(msg.gray_preview_image(gray, ts), log_time=log_time_ns)
+            distance_preview.log(msg.distance_preview_image(distance_mm, ts),
+                                 log_time=log_time_ns)  # fmt: skip
         if result is not None:
             self._channel(topics.ESTIMATE).log(
                 json.dumps(msg.estimate_payload(index, time_s, result), allow_nan=False),
@@ -138,6 +150,6 @@ class ToFChannels:
                            index, lab_truth, ts, log_time_ns)  # fmt: skip
 
     def close(self) -> None:
-        for ch in (self.gray, self.distance, self.calibration, self.frame,
+        for ch in (self.gray, self.distance, self.calibration, self.frame, *self.previews,
                    *self.optional.values()):  # fmt: skip
             ch.close()

@@ -16,6 +16,7 @@ from foxglove import messages as fm
 from tofpose.camera import CameraModel
 from tofpose.geometry import quaternion_wxyz_from_rotation
 from tofpose.interop import topics
+from tofpose.interop.previews import distance_to_rgb, gray_to_u8
 from tofpose.pipeline import PoseResult
 
 MATCHED_RGBA = (0.31, 0.86, 0.31, 1.0)
@@ -58,6 +59,23 @@ def distance_image(distance_mm: np.ndarray, ts: fm.Timestamp) -> fm.RawImage:
     values unchanged (mm, not Foxglove's usual metres: a conversion to metres in float32
     would not round-trip bit-exactly; the channel's metadata says ``unit: mm``)."""
     return _raw_image(distance_mm, "<f4", "32FC1", ts)
+
+
+def gray_preview_image(gray: np.ndarray, ts: fm.Timestamp) -> fm.RawImage:
+    """(H, W) uint16 counts -> RawImage ``mono8`` as the dashboard shows it
+    (``previews.gray_to_u8``): a 12-bit image in ``mono16`` looks black in a viewer."""
+    return _raw_image(gray_to_u8(gray), "u1", "mono8", ts)
+
+
+def distance_preview_image(distance_mm: np.ndarray, ts: fm.Timestamp) -> fm.RawImage:
+    """(H, W) distance, mm -> RawImage ``rgb8``, turbo over the 2nd-98th percentile,
+    invalid black (``previews.distance_to_rgb``, the dashboard's view)."""
+    rgb = distance_to_rgb(distance_mm)
+    h, w, _ = rgb.shape
+    return fm.RawImage(
+        timestamp=ts, frame_id=topics.CAMERA_FRAME_ID, width=w, height=h,
+        encoding="rgb8", step=3 * w, data=rgb.tobytes(),
+    )  # fmt: skip
 
 
 def camera_calibration(camera: CameraModel, ts: fm.Timestamp) -> fm.CameraCalibration:

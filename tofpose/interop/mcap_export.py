@@ -58,8 +58,10 @@ def export_mcap(
     *,
     progress: bool = True,
     overwrite: bool = False,
+    previews: bool = True,
 ) -> dict[str, int]:
-    """Write ``rec`` to ``out``; with a ``pipeline``, each frame's estimate too.
+    """Write ``rec`` to ``out``; with a ``pipeline``, each frame's estimate too; with
+    ``previews``, the images viewers display as they are (8-bit gray, coloured distance).
 
     Returns {"frames": N, "ok": frames with a pose}. ValueError (naming the frame) for a
     capture time MCAP cannot hold (negative)."""
@@ -70,7 +72,8 @@ def export_mcap(
     context = foxglove.Context()
     channels = ToFChannels(context, rec.camera, estimate=pipeline is not None,
                            truth=rec.truth_R is not None,
-                           lab_truth=rec.lab_truth_R is not None)  # fmt: skip
+                           lab_truth=rec.lab_truth_R is not None,
+                           previews=previews)  # fmt: skip
     n_ok = 0
     partial = out.with_name(out.name + ".partial")  # renamed when complete
     writer = foxglove.open_mcap(partial, allow_overwrite=True, context=context)

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 GRAY = "/tof/gray"  # foxglove.RawImage mono16: the amplitude image in counts
 DISTANCE = "/tof/distance"  # foxglove.RawImage 32FC1: radial distance in MILLIMETRES, NaN invalid
+GRAY_PREVIEW = "/tof/gray_preview"  # foxglove.RawImage mono8: gamma 0.5 of the 12-bit counts
+DISTANCE_PREVIEW = "/tof/distance_preview"  # foxglove.RawImage rgb8: turbo-coloured distance
 CALIBRATION = "/tof/calibration"  # foxglove.CameraCalibration (OpenCV K, plumb_bob D)
 ANNOTATIONS = "/tof/annotations"  # foxglove.ImageAnnotations on the gray image
 FRAME = "/tofpose/frame"  # JSON: index and exact capture time of each frame

@@ -19,12 +19,15 @@ from tofpose.cli import main
 from tofpose.geometry import rotation_from_quaternion_wxyz
 from tofpose.interop import topics
 from tofpose.interop.mcap_export import export_mcap
+from tofpose.interop.previews import distance_to_bgr, gray_to_u8
 from tofpose.pipeline import PosePipeline
 from tofpose.recording import RecordingWriter, open_recording
 
 PER_FRAME = {
     topics.GRAY: "foxglove.RawImage",
     topics.DISTANCE: "foxglove.RawImage",
+    topics.GRAY_PREVIEW: "foxglove.RawImage",
+    topics.DISTANCE_PREVIEW: "foxglove.RawImage",
     topics.CALIBRATION: "foxglove.CameraCalibration",
     topics.ANNOTATIONS: "foxglove.ImageAnnotations",
     topics.FRAME: "tofpose.Frame",
@@ -103,6 +106,23 @@ def test_images_are_the_recordings_frames_at_their_capture_times(recording, cont
             )
             frame = messages[topics.FRAME][i][1]
             assert frame == {"index": i, "time_s": time_s}
+
+
+def test_previews_are_what_a_viewer_should_show(recording, contents):
+    messages, _, _ = contents
+    with open_recording(recording) as rec:
+        gray, dist, _ = rec.frame(2)
+    g = messages[topics.GRAY_PREVIEW][2][1]
+    assert (g.encoding, g.step) == ("mono8", 320)
+    shown = np.frombuffer(g.data, np.uint8).reshape(240, 320)
+    np.testing.assert_array_equal(shown, gray_to_u8(gray))
+    assert shown.max() > 4 * (gray.max() // 256)  # 12-bit counts are visible in 8 bits
+    d = messages[topics.DISTANCE_PREVIEW][2][1]
+    assert (d.encoding, d.step) == ("rgb8", 960)
+    rgb = np.frombuffer(d.data, np.uint8).reshape(240, 320, 3)
+    np.testing.assert_array_equal(rgb, distance_to_bgr(dist)[..., ::-1])
+    valid = np.isfinite(dist)
+    assert np.all(rgb[~valid] == 0) and len(np.unique(rgb[valid].reshape(-1, 3), axis=0)) > 50
 
 
 def test_estimates_are_the_pipelines_and_the_transforms_agree(contents, results):

@@ -1,0 +1,240 @@
+"""Interop (docs/interop.md): MCAP export / import speed and memory, the live Foxglove
+server's cost to the camera loop, and a screenshot of Rerun's viewer on an export.
+
+1. Files: a simulated recording (the realistic scene) cycled to N frames; ``tofpose
+   export mcap`` with and without the pipeline's estimates and ``tofpose import mcap``,
+   frames per second (median over repeats), and the export's peak memory (a fresh
+   process's max RSS) for two lengths: streaming means it does not grow with N.
+2. Live: ``tofpose serve`` at 30 Hz; the rate /ws/live delivers poses (the camera loop)
+   with the Foxglove server off, on without a client, on with a client reading every
+   channel, and on with a client that subscribes to every channel and never reads (its
+   messages are dropped by the SDK); what the Foxglove server published and dropped.
+3. ``--screenshot PNG``: Rerun's web viewer (``rerun --serve-web REC.mcap``) in Debian's
+   chromium with software WebGL.
+
+Run: ``python bench/interop.py [--frames 1000 10000] [--repeats 3] [--seconds 5]
+[--screenshot docs/img/interop/rerun.png]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+from tqdm import tqdm
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench._common import all_cores, table  # noqa: E402
+from bench.live import CHROMIUM, CHROMIUM_ARGS, Server, _free_port, _run  # noqa: E402
+from tofpose.cli import main as tofpose  # noqa: E402
+from tofpose.recording import RecordingWriter, open_recording  # noqa: E402
+
+PEAK_RSS = """
+import resource, sys, time
+from tofpose.interop.mcap_export import export_mcap
+from tofpose.recording import open_recording
+with open_recording(sys.argv[1]) as rec:
+    t0 = time.perf_counter()
+    export_mcap(rec, sys.argv[2], None, progress=False, overwrite=True)
+    dt = time.perf_counter() - t0
+print(dt, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+"""
+
+
+def cycled(base: Path, out: Path, n: int) -> Path:
+    """A recording of ``n`` frames cycling those of ``base`` (times 1/30 s apart)."""
+    with open_recording(base) as rec:
+        frames = [rec.frame(i)[:2] for i in range(rec.n_frames)]
+        with RecordingWriter(out, rec.camera, rec.catalog) as w:
+            for i in tqdm(range(n), desc=f"recording of {n} frames", unit="frame",
+                          file=sys.stderr, leave=False):  # fmt: skip
+                gray, dist = frames[i % len(frames)]
+                w.append(gray, dist, i / 30.0)
+    return out
+
+
+def _rate(args: list[str], n: int, repeats: int) -> float:
+    """Median frames/s of ``tofpose ARGS`` over ``repeats`` runs of ``n`` frames."""
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        assert tofpose(args) == 0
+        times.append(time.perf_counter() - t0)
+    return n / statistics.median(times)
+
+
+def file_table(lengths: list[int], repeats: int, tmp: Path) -> str:
+    base = tmp / "base.h5"
+    assert tofpose(["simulate", "--scenario", "realistic", "--frames", "24",
+                    "--out", str(base), "--seed", "0"]) == 0  # fmt: skip
+    short = cycled(base, tmp / "short.h5", 120)
+    mcap, back = tmp / "short.mcap", tmp / "back.h5"
+    rows = []
+    for label, extra in (("export, frames only", ["--no-estimate"]),
+                         ("export with the estimates", [])):  # fmt: skip
+        fps = _rate(["export", "mcap", str(short), "--out", str(mcap), "--force", *extra],
+                    120, repeats)  # fmt: skip
+        rows.append([label, "120", f"{fps:.0f}", f"{mcap.stat().st_size / 120 / 1024:.0f}", ""])
+    fps = _rate(["import", "mcap", str(mcap), "--out", str(back), "--force"], 120, repeats)
+    rows.append(["import", "120", f"{fps:.0f}", "", ""])
+    for n in lengths:
+        src = cycled(base, tmp / f"long{n}.h5", n)
+        out = tmp / f"long{n}.mcap"
+        res = subprocess.run([sys.executable, "-c", PEAK_RSS, str(src), str(out)], check=True,
+                             capture_output=True, text=True, cwd=ROOT)  # fmt: skip
+        dt_s, rss_kib = res.stdout.split()[-2:]
+        dt, rss_mib = float(dt_s), int(rss_kib) / 1024
+        rows.append(["export, frames only (fresh process)", str(n), f"{n / dt:.0f}",
+                     f"{out.stat().st_size / n / 1024:.0f}", f"{rss_mib:.0f}"])  # fmt: skip
+        src.unlink()
+        out.unlink()
+    return table(["run", "frames", "frames/s", "MCAP KiB/frame", "peak RSS MiB"], rows)
+
+
+class FoxgloveClient(threading.Thread):
+    """A Foxglove WebSocket client subscribed to every channel; ``stall``: never reads
+    after subscribing (the server's backlog for it fills and drops)."""
+
+    def __init__(self, url: str, stall: bool) -> None:
+        super().__init__(daemon=True)
+        self.url, self.stall = url, stall
+        self.gray_messages = 0
+        self.ready = threading.Event()
+        self.stop = threading.Event()
+
+    def run(self) -> None:
+        from websockets.sync.client import connect
+
+        with connect(self.url, subprotocols=["foxglove.sdk.v1"], max_size=None) as ws:
+            channels = {}
+            while len(channels) < 13:
+                msg = ws.recv(timeout=10)
+                if isinstance(msg, str) and json.loads(msg)["op"] == "advertise":
+                    channels.update({c["id"]: c["topic"] for c in json.loads(msg)["channels"]})
+            ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+                {"id": cid, "channelId": cid} for cid in channels]}))  # fmt: skip
+            gray = next(c for c, t in channels.items() if t == "/tof/gray")
+            self.ready.set()
+            while not self.stop.is_set():
+                if self.stall:
+                    time.sleep(0.05)
+                    continue
+                try:
+                    msg = ws.recv(timeout=0.5)
+                except TimeoutError:
+                    continue
+                if isinstance(msg, bytes) and int.from_bytes(msg[1:5], "little") == gray:
+                    self.gray_messages += 1
+
+
+def _foxglove_status(port: int) -> dict:
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/foxglove", timeout=2) as r:
+        return json.load(r)
+
+
+def live_table(rate_hz: float, seconds: float, repeats: int) -> str:
+    rows = []
+    cases = (("off", None), ("on, no client", "none"), ("on, a client reading", "read"),
+             ("on, a client that never reads", "stall"))  # fmt: skip
+    bar = tqdm(total=len(cases) * repeats, desc="live foxglove", unit="run", file=sys.stderr)
+    for label, client in cases:
+        runs = []
+        for _ in range(repeats):
+            fox_port = _free_port()
+            env = {"TOFPOSE_FOXGLOVE_PORT": str(fox_port)} if client is not None else {}
+            server = Server(rate_hz, env=env)
+            fc = None
+            try:
+                if client in ("read", "stall"):
+                    fc = FoxgloveClient(f"ws://127.0.0.1:{fox_port}", stall=client == "stall")
+                    fc.start()
+                    fc.ready.wait(20)
+                time.sleep(1.0)
+                before = _foxglove_status(server.port) if client is not None else None
+                res = asyncio.run(_run(f"ws://127.0.0.1:{server.port}/ws/live", 1, seconds))
+                after = _foxglove_status(server.port) if client is not None else None
+                pub = drop = got = float("nan")
+                if before is not None:
+                    span = seconds + 1.0  # the WebSocket client's connect second included
+                    pub = (after["published"] - before["published"]) / span
+                    drop = (after["dropped"] - before["dropped"]) / span
+                if fc is not None and not fc.stall:
+                    got = fc.gray_messages
+                runs.append((res[0][0], pub, drop, got))
+            finally:
+                if fc is not None:
+                    fc.stop.set()
+                server.stop()
+            bar.update()
+        med = [statistics.median(r[i] for r in runs) for i in range(4)]
+        fmt = [f"{v:.1f}" if v == v else "-" for v in med[:3]]  # NaN -> "-"
+        rows.append([label, f"{rate_hz:g}", *fmt,
+                     str(int(med[3])) if med[3] == med[3] else "-"])  # fmt: skip
+    bar.close()
+    return table(["Foxglove server", "camera Hz", "poses/s on /ws/live",
+                  "frames published/s", "hub drops/s", "gray messages read"], rows)  # fmt: skip
+
+
+def rerun_screenshot(out_png: Path, tmp: Path) -> None:
+    """Rerun's web viewer on an export of the cluttered scene, in headless chromium."""
+    from playwright.sync_api import sync_playwright
+
+    rec, mcap = tmp / "shot.h5", tmp / "shot.mcap"
+    assert tofpose(["simulate", "--scenario", "clutter", "--frames", "12", "--out",
+                    str(rec), "--seed", "1"]) == 0  # fmt: skip
+    assert tofpose(["export", "mcap", str(rec), "--out", str(mcap), "--force"]) == 0
+    web, grpc = _free_port(), _free_port()
+    rerun = Path(sys.executable).parent / "rerun"
+    proc = subprocess.Popen([str(rerun), "--serve-web", str(mcap), "--web-viewer-port",
+                             str(web), "--port", str(grpc)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)  # fmt: skip
+    try:
+        time.sleep(5.0)
+        args = [a for a in CHROMIUM_ARGS if a != "--disable-gpu"] + ["--ignore-gpu-blocklist"]
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=args)
+            page = browser.new_page(viewport={"width": 1400, "height": 900})
+            page.goto(f"http://127.0.0.1:{web}/?url=rerun%2Bhttp://127.0.0.1:{grpc}/proxy")
+            time.sleep(25.0)  # the wasm viewer loads, then streams the recording
+            out_png.parent.mkdir(parents=True, exist_ok=True)
+            page.screenshot(path=str(out_png))
+            browser.close()
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    shown = out_png.relative_to(ROOT) if out_png.is_relative_to(ROOT) else out_png
+    print(f"Rerun's web viewer on an exported recording: {shown}")
+
+
+def main() -> None:
+    all_cores()
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--frames", type=int, nargs="+", default=[1000, 10000])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--seconds", type=float, default=5.0)
+    ap.add_argument("--rate", type=float, default=30.0)
+    ap.add_argument("--screenshot", type=Path)
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        print(file_table(args.frames, args.repeats, tmp))
+        print()
+        print(live_table(args.rate, args.seconds, args.repeats))
+        if args.screenshot is not None:
+            print()
+            rerun_screenshot(args.screenshot.resolve(), tmp)
+
+
+if __name__ == "__main__":
+    main()
