@@ -213,8 +213,9 @@ def rerun_screenshot(out_png: Path, tmp: Path) -> None:
     finally:
         proc.terminate()
         proc.wait(10)
-    shown = out_png.relative_to(ROOT) if out_png.is_relative_to(ROOT) else out_png
-    print(f"Rerun's web viewer on an exported recording: {shown}")
+    docs = ROOT / "docs"
+    shown = out_png.relative_to(docs) if out_png.is_relative_to(docs) else out_png
+    print(f"![Rerun's web viewer on an exported recording (`rerun REC.mcap`)]({shown})")
 
 
 def main() -> None:

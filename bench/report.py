@@ -336,6 +336,9 @@ def main() -> None:
                        "--seconds", "2" if q else "4", "--repeats", "1" if q else "2",
                        "--dashboards", "1", "5")  # fmt: skip
     dev_tab = _script("devices.py", "--repeats", "2" if q else "5")
+    interop_tab = _script("interop.py", "--frames", *(("200", "400") if q else ("1000", "10000")),
+                          "--repeats", "1" if q else "3", "--seconds", "2" if q else "5",
+                          "--screenshot", str(ROOT / "docs" / "img" / "interop" / "rerun.png"))
 
     minutes = (time.monotonic() - t0) / 60.0
     head = [
@@ -367,7 +370,14 @@ def main() -> None:
              "The server with the `tofcam660` camera and `scpi` rate-table drivers against "
              "the shipped emulators (`bench/devices.py`, default time-outs and back-offs, "
              "docs/devices.md): how long until the device shows degraded, and how long "
-             "until it works again (a new pose; motion state ok):", "", dev_tab, ""]  # fmt: skip
+             "until it works again (a new pose; motion state ok):", "", dev_tab, "",
+             "## Interop: MCAP files and the live Foxglove server", "",
+             "`bench/interop.py` (docs/interop.md): `tofpose export mcap` / `import mcap` "
+             "speed and file size on a simulated recording, the export's peak memory in a "
+             "fresh process for two recording lengths, then the live server at 30 Hz: the "
+             "pose rate its own WebSocket delivers with the Foxglove server off, idle, "
+             "serving a client that reads every channel, and serving one that subscribes "
+             "to every channel and never reads:", "", interop_tab, ""]  # fmt: skip
     text = "\n".join(head + [sec_paper, sec_acc, sec_real, sec_phys, sec_foreign, sec_rob,
                              sec_base] + speed)  # fmt: skip
     DOC.write_text(text + "\n")
