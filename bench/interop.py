@@ -7,8 +7,9 @@ server's cost to the camera loop, and a screenshot of Rerun's viewer on an expor
    process's max RSS) for two lengths: streaming means it does not grow with N.
 2. Live: ``tofpose serve`` at 30 Hz; the rate /ws/live delivers poses (the camera loop)
    with the Foxglove server off, on without a client, on with a client reading every
-   channel, and on with a client that subscribes to every channel and never reads (its
-   messages are dropped by the SDK); what the Foxglove server published and dropped.
+   channel, one reading far fewer messages than are published (the SDK drops the oldest
+   of its backlog: it reads few images, and recent ones), and one that subscribes to
+   every channel and never reads; what the Foxglove server published.
 3. ``--screenshot PNG``: Rerun's web viewer (``rerun --serve-web REC.mcap``) in Debian's
    chromium with software WebGL.
 
@@ -21,6 +22,8 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import os
+import signal
 import statistics
 import subprocess
 import sys
@@ -103,13 +106,15 @@ def file_table(lengths: list[int], repeats: int, tmp: Path) -> str:
 
 
 class FoxgloveClient(threading.Thread):
-    """A Foxglove WebSocket client subscribed to every channel; ``stall``: never reads
-    after subscribing (the server's backlog for it fills and drops)."""
+    """A Foxglove WebSocket client subscribed to every channel. ``slow``: it reads one
+    message every 0.25 s (far below what is published), so the server's backlog for it
+    fills and the SDK drops the oldest; ``stall``: it never reads after subscribing.
+    Counts the gray images it reads and their age (arrival here - log time)."""
 
-    def __init__(self, url: str, stall: bool) -> None:
+    def __init__(self, url: str, mode: str) -> None:
         super().__init__(daemon=True)
-        self.url, self.stall = url, stall
-        self.gray_messages = 0
+        self.url, self.mode = url, mode
+        self.gray_ages_s: list[float] = []
         self.ready = threading.Event()
         self.stop = threading.Event()
 
@@ -127,15 +132,18 @@ class FoxgloveClient(threading.Thread):
             gray = next(c for c, t in channels.items() if t == "/tof/gray")
             self.ready.set()
             while not self.stop.is_set():
-                if self.stall:
+                if self.mode == "stall":
                     time.sleep(0.05)
                     continue
+                if self.mode == "slow":
+                    time.sleep(0.25)
                 try:
                     msg = ws.recv(timeout=0.5)
                 except TimeoutError:
                     continue
                 if isinstance(msg, bytes) and int.from_bytes(msg[1:5], "little") == gray:
-                    self.gray_messages += 1
+                    log_ns = int.from_bytes(msg[5:13], "little")
+                    self.gray_ages_s.append(time.time() - log_ns * 1e-9)
 
 
 def _foxglove_status(port: int) -> dict:
@@ -146,6 +154,7 @@ def _foxglove_status(port: int) -> dict:
 def live_table(rate_hz: float, seconds: float, repeats: int) -> str:
     rows = []
     cases = (("off", None), ("on, no client", "none"), ("on, a client reading", "read"),
+             ("on, a client reading 4 messages/s", "slow"),
              ("on, a client that never reads", "stall"))  # fmt: skip
     bar = tqdm(total=len(cases) * repeats, desc="live foxglove", unit="run", file=sys.stderr)
     for label, client in cases:
@@ -156,34 +165,38 @@ def live_table(rate_hz: float, seconds: float, repeats: int) -> str:
             server = Server(rate_hz, env=env)
             fc = None
             try:
-                if client in ("read", "stall"):
-                    fc = FoxgloveClient(f"ws://127.0.0.1:{fox_port}", stall=client == "stall")
+                if client in ("read", "slow", "stall"):
+                    fc = FoxgloveClient(f"ws://127.0.0.1:{fox_port}", client)
                     fc.start()
                     fc.ready.wait(20)
                 time.sleep(1.0)
                 before = _foxglove_status(server.port) if client is not None else None
+                n_before = len(fc.gray_ages_s) if fc is not None else 0
+                t0 = time.monotonic()
                 res = asyncio.run(_run(f"ws://127.0.0.1:{server.port}/ws/live", 1, seconds))
+                span = time.monotonic() - t0
                 after = _foxglove_status(server.port) if client is not None else None
-                pub = drop = got = float("nan")
-                if before is not None:
-                    span = seconds + 1.0  # the WebSocket client's connect second included
-                    pub = (after["published"] - before["published"]) / span
-                    drop = (after["dropped"] - before["dropped"]) / span
-                if fc is not None and not fc.stall:
-                    got = fc.gray_messages
-                runs.append((res[0][0], pub, drop, got))
+                nan = float("nan")
+                pub = nan if before is None else (after["published"] - before["published"]) / span
+                got = age = nan
+                if fc is not None and fc.mode != "stall":
+                    ages = fc.gray_ages_s[n_before:]
+                    got = len(ages) / span
+                    age = statistics.median(ages) if ages else nan
+                runs.append((res[0][0], pub, got, age))
             finally:
                 if fc is not None:
                     fc.stop.set()
                 server.stop()
             bar.update()
         med = [statistics.median(r[i] for r in runs) for i in range(4)]
-        fmt = [f"{v:.1f}" if v == v else "-" for v in med[:3]]  # NaN -> "-"
-        rows.append([label, f"{rate_hz:g}", *fmt,
-                     str(int(med[3])) if med[3] == med[3] else "-"])  # fmt: skip
+        rows.append([label, f"{rate_hz:g}",
+                     *(f"{v:.1f}" if v == v else "-" for v in med[:3]),  # NaN -> "-"
+                     f"{med[3]:.2f}" if med[3] == med[3] else "-"])  # fmt: skip
     bar.close()
     return table(["Foxglove server", "camera Hz", "poses/s on /ws/live",
-                  "frames published/s", "hub drops/s", "gray messages read"], rows)  # fmt: skip
+                  "frames published/s", "gray images read/s", "their age s (median)"],
+                 rows)  # fmt: skip
 
 
 def rerun_screenshot(out_png: Path, tmp: Path) -> None:
@@ -196,9 +209,11 @@ def rerun_screenshot(out_png: Path, tmp: Path) -> None:
     assert tofpose(["export", "mcap", str(rec), "--out", str(mcap), "--force"]) == 0
     web, grpc = _free_port(), _free_port()
     rerun = Path(sys.executable).parent / "rerun"
+    # its own session: ``rerun`` is a wrapper that starts the viewer binary as a child,
+    # and both must go when we are done
     proc = subprocess.Popen([str(rerun), "--serve-web", str(mcap), "--web-viewer-port",
                              str(web), "--port", str(grpc)], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)  # fmt: skip
+                            stderr=subprocess.DEVNULL, start_new_session=True)  # fmt: skip
     try:
         time.sleep(5.0)
         args = [a for a in CHROMIUM_ARGS if a != "--disable-gpu"] + ["--ignore-gpu-blocklist"]
@@ -211,7 +226,7 @@ def rerun_screenshot(out_png: Path, tmp: Path) -> None:
             page.screenshot(path=str(out_png))
             browser.close()
     finally:
-        proc.terminate()
+        os.killpg(proc.pid, signal.SIGTERM)
         proc.wait(10)
     docs = ROOT / "docs"
     shown = out_png.relative_to(docs) if out_png.is_relative_to(docs) else out_png
