@@ -4,6 +4,8 @@
 # stored in /data/api_token). The 3-D scene (viser, port 8080) has no token check, so it
 # runs only with open reads: docker run -p 8000:8000 -p 8080:8080
 #   -e TOFPOSE_OPEN_READS=true -v tofpose-data:/data tofpose
+# The live Foxglove stream (docs/interop.md) likewise, on a port of its choosing:
+#   ... -p 8765:8765 -e TOFPOSE_FOXGLOVE_PORT=8765 -e TOFPOSE_OPEN_READS=true ...
 # Stage 1: the dashboard (frontend/), built with Node from its lock file.
 FROM node:20-slim AS dashboard
 WORKDIR /frontend

@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
+import io
 import json
 import os
 import signal
@@ -40,7 +42,7 @@ sys.path.insert(0, str(ROOT))
 
 from bench._common import all_cores, table  # noqa: E402
 from bench.live import CHROMIUM, CHROMIUM_ARGS, Server, _free_port, _run  # noqa: E402
-from tofpose.cli import main as tofpose  # noqa: E402
+from tofpose.cli import main as tofpose_cli  # noqa: E402
 from tofpose.recording import RecordingWriter, open_recording  # noqa: E402
 
 PEAK_RSS = """
@@ -53,6 +55,12 @@ with open_recording(sys.argv[1]) as rec:
     dt = time.perf_counter() - t0
 print(dt, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
 """
+
+
+def tofpose(args: list[str]) -> int:
+    """``tofpose ARGS`` in this process, its summary line kept out of our tables."""
+    with contextlib.redirect_stdout(io.StringIO()):
+        return tofpose_cli(args)
 
 
 def cycled(base: Path, out: Path, n: int) -> Path:

@@ -376,8 +376,9 @@ def main() -> None:
              "speed and file size on a simulated recording, the export's peak memory in a "
              "fresh process for two recording lengths, then the live server at 30 Hz: the "
              "pose rate its own WebSocket delivers with the Foxglove server off, idle, "
-             "serving a client that reads every channel, and serving one that subscribes "
-             "to every channel and never reads:", "", interop_tab, ""]  # fmt: skip
+             "serving a client that reads every channel, one that reads 4 messages a second "
+             "(its backlog drops the oldest: the age of what it reads), and one that "
+             "subscribes to every channel and never reads:", "", interop_tab, ""]  # fmt: skip
     text = "\n".join(head + [sec_paper, sec_acc, sec_real, sec_phys, sec_foreign, sec_rob,
                              sec_base] + speed)  # fmt: skip
     DOC.write_text(text + "\n")

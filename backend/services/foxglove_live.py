@@ -7,9 +7,10 @@ lab reference (``/tofpose/lab_truth``: the reference the live error is measured 
 and, on the simulator, the exact truth. Log times are the frames' arrival times (unix ns).
 
 The camera loop never waits for it: one thread takes the newest sample from a one-deep
-hub subscription (older ones are dropped and counted, never queued), converts it only
-when a client is subscribed, and hands it to the SDK, which keeps at most
-``backlog_messages`` per client and drops the oldest for a client that reads too slowly.
+hub subscription (older ones are dropped and counted, never queued), converts each
+channel's message only when a client subscribes to that channel, and hands it to the
+SDK, which keeps at most ``backlog_messages`` per client and drops the oldest for a
+client that reads too slowly.
 """
 
 from __future__ import annotations
@@ -75,7 +76,7 @@ class LiveFoxglove:
     def _run(self) -> None:
         while not self._stop.is_set():
             sample = self._sub.get(timeout_s=0.5)
-            if sample is None or not self.channels.gray.has_sinks():
+            if sample is None or not self.channels.has_sinks():
                 continue
             try:
                 self.publish(sample)

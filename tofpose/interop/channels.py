@@ -89,15 +89,30 @@ class ToFChannels:
             raise ValueError(f"no {topic} channel: this stream was opened without it")
         return ch
 
+    @property
+    def channels(self) -> list:
+        return [self.gray, self.distance, self.calibration, self.frame, *self.previews,
+                *self.optional.values()]  # fmt: skip
+
+    def has_sinks(self) -> bool:
+        """Whether anything (an MCAP writer, a subscribed client) takes any channel."""
+        return any(ch.has_sinks() for ch in self.channels)
+
+    @staticmethod
+    def _emit(ch, make, log_time_ns: int) -> None:
+        """Log ``make()`` on ``ch`` when something takes it (a live client subscribes per
+        channel: an unsubscribed channel costs no conversion)."""
+        if ch.has_sinks():
+            ch.log(make(), log_time=log_time_ns)
+
     def _log_pose(
         self, topic: str, transform_topic: str, child: str, index: int,
         pose: tuple[np.ndarray, np.ndarray], ts, log_time_ns: int,
     ) -> None:  # fmt: skip
         R, t_mm = pose
-        self._channel(topic).log(msg.pose_payload(index, R, t_mm), log_time=log_time_ns)
-        self._channel(transform_topic).log(
-            msg.frame_transform(R, t_mm, child, ts), log_time=log_time_ns
-        )
+        self._emit(self._channel(topic), lambda: msg.pose_payload(index, R, t_mm), log_time_ns)
+        self._emit(self._channel(transform_topic),
+                   lambda: msg.frame_transform(R, t_mm, child, ts), log_time_ns)  # fmt: skip
 
     def log_frame(
         self,
@@ -114,34 +129,28 @@ class ToFChannels:
         ``log_time_ns``; with the pipeline's ``result`` its estimate, pose, reflectors
         and overlay; with ``truth`` / ``lab_truth`` = (R (3, 3), t (3,) mm) those poses."""
         ts = msg.timestamp(log_time_ns)
-        self.frame.log(msg.frame_payload(index, time_s), log_time=log_time_ns)
-        self.gray.log(msg.gray_image(gray, ts), log_time=log_time_ns)
-        self.distance.log(msg.distance_image(distance_mm, ts), log_time=log_time_ns)
-        self.calibration.log(msg.camera_calibration(self.camera, ts), log_time=log_time_ns)
+        emit = self._emit
+        emit(self.frame, lambda: msg.frame_payload(index, time_s), log_time_ns)
+        emit(self.gray, lambda: msg.gray_image(gray, ts), log_time_ns)
+        emit(self.distance, lambda: msg.distance_image(distance_mm, ts), log_time_ns)
+        emit(self.calibration, lambda: msg.camera_calibration(self.camera, ts), log_time_ns)
         if self.previews:
             gray_preview, distance_preview = self.previews
-            gray_preview.log(msg.gray_preview_image(gray, ts), log_time=log_time_ns)
-            distance_preview.log(msg.distance_preview_image(distance_mm, ts),
-                                 log_time=log_time_ns)  # fmt: skip
+            emit(gray_preview, lambda: msg.gray_preview_image(gray, ts), log_time_ns)
+            emit(distance_preview, lambda: msg.distance_preview_image(distance_mm, ts),
+                 log_time_ns)  # fmt: skip
         if result is not None:
-            self._channel(topics.ESTIMATE).log(
-                json.dumps(msg.estimate_payload(index, time_s, result), allow_nan=False),
-                log_time=log_time_ns,
-            )
-            self._channel(topics.ANNOTATIONS).log(
-                msg.image_annotations(result, ts), log_time=log_time_ns
-            )
+            emit(self._channel(topics.ESTIMATE), lambda: json.dumps(
+                msg.estimate_payload(index, time_s, result), allow_nan=False), log_time_ns)
+            emit(self._channel(topics.ANNOTATIONS),
+                 lambda: msg.image_annotations(result, ts), log_time_ns)  # fmt: skip
             if result.ok:
-                self._channel(topics.POSE_TRANSFORM).log(
-                    msg.frame_transform(result.R, result.t_mm, topics.TARGET_FRAME_ID, ts),
-                    log_time=log_time_ns,
-                )
-                self._channel(topics.POSE).log(
-                    msg.pose_in_frame(result.R, result.t_mm, ts), log_time=log_time_ns
-                )
-            self._channel(topics.REFLECTORS).log(
-                msg.reflector_cloud(result, ts), log_time=log_time_ns
-            )
+                emit(self._channel(topics.POSE_TRANSFORM), lambda: msg.frame_transform(
+                    result.R, result.t_mm, topics.TARGET_FRAME_ID, ts), log_time_ns)
+                emit(self._channel(topics.POSE),
+                     lambda: msg.pose_in_frame(result.R, result.t_mm, ts), log_time_ns)
+            emit(self._channel(topics.REFLECTORS),
+                 lambda: msg.reflector_cloud(result, ts), log_time_ns)  # fmt: skip
         if truth is not None:
             self._log_pose(topics.TRUTH, topics.TRUTH_TRANSFORM, topics.TRUTH_FRAME_ID,
                            index, truth, ts, log_time_ns)  # fmt: skip
@@ -150,6 +159,5 @@ class ToFChannels:
                            index, lab_truth, ts, log_time_ns)  # fmt: skip
 
     def close(self) -> None:
-        for ch in (self.gray, self.distance, self.calibration, self.frame, *self.previews,
-                   *self.optional.values()):  # fmt: skip
+        for ch in self.channels:
             ch.close()

@@ -41,6 +41,7 @@ def export_metadata(rec: Recording, pipeline: PosePipeline | None) -> dict[str, 
         "camera": camera.to_json(),
         "recording_camera": rec.camera.to_json(),
         "catalog": catalog.to_json() if catalog is not None else "",
+        "recording_catalog": rec.catalog.to_json() if rec.catalog is not None else "",
         "pipeline_config": (
             json.dumps(dataclasses.asdict(pipeline.config), default=str)
             if pipeline is not None else ""

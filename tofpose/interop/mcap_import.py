@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 from mcap.exceptions import McapError
-from mcap.reader import make_reader
+from mcap.reader import NonSeekingReader, make_reader
 from mcap_protobuf.decoder import DecoderFactory
 from tqdm import tqdm
 
@@ -128,7 +128,9 @@ class _Source:
         order."""
         decoders = {}
         with open(self.path, "rb") as fh:
-            reader = make_reader(fh)
+            # file order through the non-seeking reader, which streams chunk by chunk (the
+            # seeking one queues every chunk before the first message in file order)
+            reader = NonSeekingReader(fh) if self.ours else make_reader(fh)
             for schema, channel, message in reader.iter_messages(
                 topics=wanted, log_time_order=not self.ours
             ):
@@ -167,7 +169,9 @@ def _pick_topic(src: _Source, requested: str | None, default: str, what: str) ->
 
 def _camera_and_catalog(src: _Source) -> tuple[CameraModel, Catalog | None]:
     meta = src.metadata.get(topics.METADATA_NAME, {})
-    catalog = Catalog.from_json(meta["catalog"]) if meta.get("catalog") else None
+    # the recording's own catalog (an export with --catalog estimated with another one)
+    text = meta.get("recording_catalog", meta.get("catalog"))
+    catalog = Catalog.from_json(text) if text else None
     if meta.get("recording_camera"):
         return CameraModel.from_json(meta["recording_camera"]), catalog
     calib = src.topics_with_schema(CALIBRATION)

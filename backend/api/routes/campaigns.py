@@ -317,9 +317,10 @@ def get_campaign_recording(campaign_id: IdParam, state: StateDep, session: Sessi
                **errors(404, 409)},
 )  # fmt: skip
 def get_campaign_recording_mcap(campaign_id: IdParam, state: StateDep, session: SessionDep):
-    """The campaign's raw recording as MCAP for Foxglove, ROS 2 and Rerun (docs/interop.md):
-    the frames, the references and the pipeline's estimate of each frame, re-run over the
-    recording with its camera and catalog. Made on the first request (a long recording
+    """The campaign's raw recording as MCAP for Foxglove and Rerun (docs/interop.md): the
+    frames, the references and an estimate of each frame by the pipeline re-run over the
+    recording (its camera and catalog, default settings, tracking off; not the stored
+    measurement rows). Made on the first request (a long recording
     takes a while) and kept. Only with ``record_raw``."""
     path = _finished_recording(session, state, campaign_id)
     return FileResponse(recording_mcap(path), media_type="application/x-mcap",

@@ -191,9 +191,10 @@ export interface paths {
         };
         /**
          * Get Campaign Recording Mcap
-         * @description The campaign's raw recording as MCAP for Foxglove, ROS 2 and Rerun (docs/interop.md):
-         *     the frames, the references and the pipeline's estimate of each frame, re-run over the
-         *     recording with its camera and catalog. Made on the first request (a long recording
+         * @description The campaign's raw recording as MCAP for Foxglove and Rerun (docs/interop.md): the
+         *     frames, the references and an estimate of each frame by the pipeline re-run over the
+         *     recording (its camera and catalog, default settings, tracking off; not the stored
+         *     measurement rows). Made on the first request (a long recording
          *     takes a while) and kept. Only with ``record_raw``.
          */
         get: operations["getCampaignRecordingMcap"];

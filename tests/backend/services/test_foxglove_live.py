@@ -73,11 +73,20 @@ def test_a_foxglove_client_gets_the_frames_the_server_measured(tmp_path):
                 payload = msg[struct.calcsize("<BIQ"):]
                 (images if sid == 1 else transforms)[log_ns] = (
                     RawImage if sid == 1 else Transform).FromString(payload)
+        # a client that shows only the 3-D pose (no image panel) gets it too: channels
+        # are converted for whoever subscribes to them
+        with connect(info["url"], subprotocols=SUBPROTOCOLS, open_timeout=10) as ws:
+            subscribe(ws, {topics.POSE_TRANSFORM: 7})
+            while isinstance(msg := ws.recv(timeout=10), str):
+                pass
+            assert struct.unpack_from("<BI", msg) == (MESSAGE_DATA, 7)
+            tf = Transform.FromString(msg[struct.calcsize("<BIQ"):])
+            assert (tf.parent_frame_id, tf.child_frame_id) == ("camera", "target")
         measured = {}
         while (s := sub.get(timeout_s=0.1)) is not None:
             measured[int(round(s.captured_unix_s * 1e9))] = s
         state.hub.unsubscribe(sub)
-        matched = 0
+        matched = compared = 0
         for log_ns, img in images.items():
             if log_ns not in measured:
                 continue  # published before the test's own subscription began
@@ -89,8 +98,9 @@ def test_a_foxglove_client_gets_the_frames_the_server_measured(tmp_path):
                 t = transforms[log_ns].translation
                 np.testing.assert_allclose([t.x, t.y, t.z], sample.result.t_mm / 1000.0,
                                            atol=1e-12)  # fmt: skip
+                compared += 1
             matched += 1
-        assert matched >= 2
+        assert matched >= 2 and compared >= 1
         status = c.get("/api/foxglove").json()
         assert status["published"] >= 3
 

@@ -50,7 +50,7 @@ def test_round_trip_is_exact_and_gives_the_same_poses(recording, exported, tmp_p
     assert csv_a.read_text().count("\n") == 9
 
 
-def _foreign_mcap(path, n=3, unit_metres=True):
+def _foreign_mcap(path, n=3, bad_frame=None):
     """An MCAP written by another tool: its own topics, distance in metres (Foxglove's
     32FC1 convention), a CameraCalibration, no tofpose metadata."""
     camera = CameraModel(width=8, height=6, fx=10.0, fy=11.0, cx=3.5, cy=2.5,
@@ -66,12 +66,15 @@ def _foreign_mcap(path, n=3, unit_metres=True):
             ns = 1_700_000_000_000_000_000 + i * 50_000_000
             ts = timestamp(ns)
             gray = rng.integers(0, 4096, (6, 8)).astype("<u2")
+            if i == bad_frame:  # a frame of another size, part-way through the file
+                gray = gray[:, :6].copy()
             depth_m = rng.uniform(0.5, 3.0, (6, 8)).astype("<f4")
             depth_m[0, 0] = np.nan
             truth.append((gray, depth_m, ns))
             calib_ch.log(camera_calibration(camera, ts), log_time=ns)
-            gray_ch.log(fm.RawImage(timestamp=ts, frame_id="cam", width=8, height=6,
-                                    encoding="16UC1", step=16, data=gray.tobytes()),
+            gray_ch.log(fm.RawImage(timestamp=ts, frame_id="cam", width=gray.shape[1],
+                                    height=6, encoding="16UC1", step=2 * gray.shape[1],
+                                    data=gray.tobytes()),
                         log_time=ns)  # fmt: skip
             depth_ch.log(fm.RawImage(timestamp=ts, frame_id="cam", width=8, height=6,
                                      encoding="32FC1", step=32, data=depth_m.tobytes()),
@@ -115,4 +118,16 @@ def test_bad_input_is_named_and_an_existing_output_survives(exported, tmp_path, 
     truncated.write_bytes(exported.read_bytes()[: exported.stat().st_size // 2])
     with pytest.raises(McapImportError, match=str(truncated.name)):
         import_mcap(truncated, tmp_path / "z.h5", progress=False)
+    assert not list(tmp_path.glob("*.partial"))
+
+
+def test_a_bad_frame_part_way_leaves_the_existing_output_alone(tmp_path):
+    src = tmp_path / "bad.mcap"
+    _foreign_mcap(src, n=4, bad_frame=2)
+    keep = tmp_path / "keep.h5"
+    keep.write_bytes(b"precious")
+    with pytest.raises(McapImportError, match=r"at log time \d+ ns: images \(6, 6\)"):
+        import_mcap(src, keep, gray_topic="/cam/amplitude", distance_topic="/cam/depth",
+                    progress=False, overwrite=True)  # fmt: skip
+    assert keep.read_bytes() == b"precious"
     assert not list(tmp_path.glob("*.partial"))
