@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -46,8 +48,17 @@ def test_live_pose_is_accurate_and_follows_the_turntable(client):
     assert r.json()["targets"]["yaw"] == 10.0
     wait_for(lambda: client.get("/api/motion").json()["busy"], 2.0, "the move to start")
     wait_for(lambda: client.get("/api/motion").json()["settled"], 10.0, "the move to settle")
-    settled_index = client.get("/api/pose/latest").json()["frame_index"]
-    after = latest_pose(client, settled_index)
+    # A frame rendered from the turntable's state before the settle can arrive after it
+    # (captured_unix_s is its arrival): the frame after the first one to arrive after the
+    # settle was rendered from the state at rest.
+    settled_unix_s = time.time()
+
+    def arrived_after_settle():
+        p = latest_pose(client)
+        return p if p["captured_unix_s"] > settled_unix_s else None
+
+    first = wait_for(arrived_after_settle, what="a pose that arrived after the settle")
+    after = latest_pose(client, first["frame_index"])
     motion = client.get("/api/motion").json()
     assert abs(motion["positions"]["yaw"] - 10.0) < 0.01
     # The measured relative rotation is the commanded one (11.2 deg geodesic), to 0.2 deg.
