@@ -110,16 +110,20 @@ class PipelineConfig:
         match, and must stay visible to the outlier test).
     estimate_range_offset : estimate the range offset common to every reflector as a
         seventh parameter of the ML fit, with the prior N(0, range_bias_sigma^2) (the
-        calibrated sigma where a range correction covers the ranges), and take it out of
-        the ranges before the final fit; its posterior sigma replaces the prior's in the
-        covariance. The image scale (the bearings) determines it when the target is large
-        enough in the image; otherwise the prior keeps it near 0. From 4 reflectors, and
-        only when it differs from 0 at 99 % confidence. Off by default: on frames from
-        another renderer it raised success with uncalibrated ranges (58 -> 69 % at
-        1-6 m) but lowered it with calibrated ones (79 -> 74 % at 3-8 m, where the
-        small markers' mixed-pixel range bias is not common to all) and the covariance
-        held less well there (beyond 3 sigma 10 -> 13 %); an uncalibrated camera used
-        at mid range should turn it on (or be range-calibrated).
+        calibrated sigma where a range correction covers the ranges), and take its
+        posterior mean out of the ranges before the final fit; its posterior sigma
+        replaces the prior's in the covariance. The image scale (the bearings) determines
+        it when the target is large enough in the image; otherwise the prior keeps it
+        near 0. The scale itself is an eighth parameter with its own prior
+        (``focal_length_sigma_rel``, ``common_centroid_bias_px``), so an image-scale
+        error is not read as a range offset. From 4 reflectors. On by default; a camera
+        whose driver states a range-bias sigma of 0 turns it off.
+    focal_length_sigma_rel : relative sigma of the focal length's calibration (0.2 %: a
+        checkerboard calibration's typical focal-length uncertainty).
+    common_centroid_bias_px : sigma of a centroid error common to a frame's markers
+        (0.1 px: the systematic sub-pixel error of small blob centroids, the
+        star-tracker literature's S-curve size); over the pattern's rms radius in the
+        image it is a scale error.
     max_systematic_centroid_sigma_px : cap of the frame's excess centroid sigma, estimated
         beside the range one from the lateral residuals alone (``pose.systematic_sigmas``:
         small or blurred markers against a plate that is not black have centroids off by
@@ -160,9 +164,11 @@ class PipelineConfig:
     max_systematic_range_sigma_mm: float = 25.0
     max_systematic_centroid_sigma_px: float = 0.5
     consistency_p: float | None = 0.999999
-    estimate_range_offset: bool = False
+    estimate_range_offset: bool = True
     range_bias_sigma_mm: float = 8.0
     calibrated_range_bias_sigma_mm: float = 2.0
+    focal_length_sigma_rel: float = 0.002
+    common_centroid_bias_px: float = 0.1
     outlier_sigma: float = 6.0
     outlier_chi2_per_dof: float = 4.0
     max_view_angle_deg: float = 80.0

@@ -26,9 +26,11 @@ from tofpose.extraction import Blob
 from tofpose.geometry import RigidTransform
 from tofpose.kernels.mixed_pixels import MIX_FIELDS
 from tofpose.kernels.pose import (
+    NO_OFFSET,
     REFINE_LOS,
     REFINE_ML,
     REFINE_NONE,
+    RangeOffsetPrior,
     facing_cosine,
     range_bias_covariance,
 )
@@ -47,6 +49,15 @@ if TYPE_CHECKING:  # the pipeline imports this module
 def chi2_limit(dof: int, p: float) -> float:
     """The p-quantile of chi^2 with ``dof`` degrees of freedom (SciPy)."""
     return float(scipy.stats.chi2.ppf(p, dof))
+
+
+def offset_prior(config: PipelineConfig, sigma_mm: float, fx_px: float) -> RangeOffsetPrior:
+    """The common range offset's prior for ``kernels.pose.common_range_offset``: sigma
+    ``sigma_mm`` (the uncalibrated or calibrated range-bias sigma), and the image scale's
+    uncertainty from ``focal_length_sigma_rel`` and ``common_centroid_bias_px`` (over the
+    focal length ``fx_px``)."""
+    return RangeOffsetPrior(float(sigma_mm), float(config.focal_length_sigma_rel),
+                            float(config.common_centroid_bias_px) / fx_px)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -236,7 +247,7 @@ class PoseSolver:
         """``kernels.solve.solve_pairs`` on matched pairs (m, 2) with completion within
         ``complete_mm`` (0: none): its return tuple."""
         cfg, cam = self.config, self.camera
-        prior_mm = self.offset_prior_mm(meas.range_mm[pairs[:, 0]])
+        prior = self.offset_prior(meas.range_mm[pairs[:, 0]])
         mixing = (
             meas.mixing
             if meas.mixing is not None
@@ -251,15 +262,16 @@ class PoseSolver:
             cfg.los_tolerance, STEP_SIGMA2, cfg.adapt_range_sigma,
             cfg.max_systematic_range_sigma_mm, cfg.max_systematic_centroid_sigma_px,
             cfg.reject_outliers,
-            cfg.matching.min_matches, cfg.outlier_sigma, cfg.outlier_chi2_per_dof, prior_mm,
+            cfg.matching.min_matches, cfg.outlier_sigma, cfg.outlier_chi2_per_dof, prior,
         )  # fmt: skip
 
-    def offset_prior_mm(self, range_mm: np.ndarray) -> float:
-        """Prior sigma of the common range offset the fit estimates (mm; 0: none):
-        ``range_bias_sigma_mm`` for these ranges, when ``estimate_range_offset``."""
+    def offset_prior(self, range_mm: np.ndarray) -> RangeOffsetPrior:
+        """What the fit knows of the common range offset before the frame (the module's
+        ``offset_prior``; ``NO_OFFSET`` unless ``estimate_range_offset``), for
+        reflectors at ``range_mm`` (m,)."""
         if not self.config.estimate_range_offset:
-            return 0.0
-        return self.range_bias_sigma_mm(range_mm)
+            return NO_OFFSET
+        return offset_prior(self.config, self.range_bias_sigma_mm(range_mm), self.camera.fx)
 
     def conclude(
         self, obs: MatchedObservations, R, t, iterations, cov, chi2, norms, sr, sb, active,

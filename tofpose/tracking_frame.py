@@ -15,7 +15,7 @@ import numpy as np
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
-from tofpose.kernels.pose import REFINE_LOS, REFINE_ML, REFINE_NONE
+from tofpose.kernels.pose import NO_OFFSET, REFINE_LOS, REFINE_ML, REFINE_NONE
 from tofpose.kernels.tracking import camera_windows
 from tofpose.kernels.tracking_frame import TRACKED, track_frame
 from tofpose.persistence import Persistence, PersistenceInfo
@@ -27,6 +27,7 @@ from tofpose.solve import (
     PoseSolver,
     Solution,
     ThresholdedFrame,
+    offset_prior,
 )
 from tofpose.tracking import TrackState
 from tofpose.uncertainty import SigmaFloors, kernel_constants
@@ -83,8 +84,9 @@ class CompiledTracker:
             config.outlier_sigma, config.outlier_chi2_per_dof,
             # the offset's prior: the tracker has no ranges yet; a corrected camera's
             # calibrated sigma (its span is checked again when the pose is concluded)
-            (0.0 if not config.estimate_range_offset else config.range_bias_sigma_mm
-             if correction is None else config.calibrated_range_bias_sigma_mm),
+            NO_OFFSET if not config.estimate_range_offset else offset_prior(
+                config, config.range_bias_sigma_mm if correction is None
+                else config.calibrated_range_bias_sigma_mm, camera.fx),
         )  # fmt: skip
 
     def track(self, g: np.ndarray, d: np.ndarray, track: TrackState) -> Tracked | None:

@@ -9,13 +9,14 @@ from tofpose.sim.scene import Clutter, TargetScene
 
 # (distance mm, (pitch, yaw, roll) deg, offset mm, median position error mm, median angle
 # deg, per-frame maxima mm / deg). The bounds are about twice what the pipeline measured
-# over these six seeded frames (medians 0.53/0.14/0.10/0.60/0.77/4.4/2.3/6.0 mm and
-# 0.24/0.025/0.037/0.034/0.25/1.0/0.87/2.4 deg from 0.5 to 12 m): a regression that
-# doubles the error fails here.
+# over these six seeded frames (medians 0.53/0.19/0.22/0.31/0.58/1.1/4.0/6.9 mm and
+# 0.24/0.038/0.036/0.067/0.14/0.47/1.5/2.9 deg from 0.5 to 12 m, with the common range
+# offset estimated: on this simulator, which has none, that costs ~0.1 mm at 0.7-1.5 m,
+# 0.14/0.09 mm without it): a regression that doubles the error fails here.
 RANGE_CASES = [
     (500.0, (2, -3, 5), (220.0, -90.0), 1.1, 0.5, 1.5, 0.7),  # markers 1, 2, 4 fit at 0.5 m
     (700.0, (3, 2, -10), (0.0, 0.0), 0.3, 0.05, 0.4, 0.08),
-    (1500.0, (5, -4, 10), (30.0, -40.0), 0.2, 0.08, 0.25, 0.12),
+    (1500.0, (5, -4, 10), (30.0, -40.0), 0.45, 0.08, 0.55, 0.12),
     (3000.0, (-6, 8, 30), (0.0, 0.0), 1.2, 0.07, 2.0, 0.14),
     (5712.0, (4, 1, -2), (5.0, -2.0), 1.6, 0.5, 2.6, 0.9),
     (8000.0, (2, -3, 15), (0.0, 0.0), 9.0, 2.0, 12.0, 3.1),

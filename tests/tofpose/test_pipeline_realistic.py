@@ -104,13 +104,17 @@ def test_outside_the_calibrated_span_the_covariance_takes_the_uncalibrated_range
     """A range correction is a fit over the distances its calibration run covered; a
     frame outside that span gets the uncalibrated common range-bias sigma in its reported
     covariance (the correction is an extrapolation there), inside it the calibrated one.
-    The correction here is zero, so the poses are the same and only the covariance moves."""
+    The correction here is zero, so the poses are the same and only the covariance moves
+    (the offset not estimated: its prior alone enters the covariance; estimated, the
+    posterior sigma is at most the prior's)."""
     from tofpose.range_calibration import RangeCorrection
 
     u = SensorModel().unambiguous_range_mm
     T = facing_pose(5000.0, 2.0, -3.0, 5.0)
     f = render_frame(CAM, TargetScene(CAT), T, REALISTIC, np.random.default_rng(3), time_s=WARM_S)
-    cfg = PipelineConfig(range_bias_sigma_mm=8.0, calibrated_range_bias_sigma_mm=2.0)
+    cfg = PipelineConfig(
+        range_bias_sigma_mm=8.0, calibrated_range_bias_sigma_mm=2.0, estimate_range_offset=False
+    )
     out = {}
     for name, span in (("inside", (1200.0, 8000.0)), ("outside", (1200.0, 3000.0)),
                        ("no span", None), ("bare", (1200.0, 8000.0))):  # fmt: skip
@@ -127,3 +131,11 @@ def test_outside_the_calibrated_span_the_covariance_takes_the_uncalibrated_range
     assert extra["inside"] == pytest.approx(2.0**2, rel=0.3), extra
     assert extra["outside"] == pytest.approx(8.0**2, rel=0.3), extra
     assert extra["no span"] == pytest.approx(extra["inside"]), extra
+    estimated = PosePipeline(
+        CAM,
+        CAT,
+        replace(cfg, estimate_range_offset=True),
+        range_correction=RangeCorrection(u, calibrated_span_mm=(1200.0, 3000.0)),
+    )
+    r = estimated.process(f.gray, f.distance_mm)
+    assert r.ok and r.covariance[5, 5] - out["bare"].covariance[5, 5] <= 8.0**2

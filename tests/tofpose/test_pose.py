@@ -171,7 +171,7 @@ def test_a_common_range_offset_is_found_when_the_image_scale_fixes_the_distance(
     the target's image scale fixes its distance and the offset is estimated (posterior
     sigma well below the 8 mm prior); with blurred ones the data hardly know it: it is
     shrunk towards the prior's 0, with most of the prior's sigma."""
-    from tofpose.kernels.pose import common_range_offset
+    from tofpose.kernels.pose import RangeOffsetPrior, common_range_offset
 
     x = paper_target().positions_mm
     R, t = _truth(5)
@@ -185,9 +185,62 @@ def test_a_common_range_offset_is_found_when_the_image_scale_fixes_the_distance(
     sr, sb = np.full(len(x), 1.0), np.full(len(x), bearing_sigma_rad)
     R0, t0 = weighted_svd(x, e * rho_measured[:, None])
     ml = refine_maximum_likelihood(x, e, rho_measured, R0, t0, sr, sb)
-    offset, sigma = common_range_offset(x, e, rho_measured, ml.R, ml.t, sr, sb, 8.0)
+    exact_scale = RangeOffsetPrior(8.0, 0.0, 0.0)
+    offset, sigma = common_range_offset(x, e, rho_measured, ml.R, ml.t, sr, sb, exact_scale)
     if expect_found:
         assert offset == pytest.approx(20.0, abs=3 * sigma) and sigma < 2.0
     else:
         assert sigma > 5.0  # most of the 8 mm prior: the data hardly know it
         assert abs(offset) < 20.0 - sigma  # shrunk towards the prior's 0
+
+
+def _scaled_about_mean(e, scale):
+    """Bearings e (m, 3) whose offsets from their mean bearing are ``scale`` times
+    larger (a focal-length error), unit length."""
+    mean = e.mean(axis=0)
+    mean /= np.linalg.norm(mean)
+    along = e @ mean
+    out = mean[None, :] * along[:, None] + scale * (e - mean[None, :] * along[:, None])
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def test_an_image_scale_error_is_not_read_as_a_range_offset():
+    """Exact ranges, sharp bearings whose image is 0.5 % too large (a focal length 0.5 %
+    off, or a centroid error common to small markers). Assuming the scale exact, the fit
+    reads the scale error as a range offset of ~0.5 % of the range, tens of its own
+    sigmas (the confidently wrong pose it would feed); with the scale's uncertainty as a
+    parameter (``pattern_scale_sigma``) the offset stays within 3 of its sigmas of the
+    true 0, and the sigma says the image cannot fix it to better than ~the scale's."""
+    from tofpose.kernels.pose import RangeOffsetPrior, common_range_offset
+
+    x = paper_target().positions_mm
+    R, t = _truth(5)
+    y = x @ R.T + t
+    rho = np.linalg.norm(y, axis=1)
+    rng = np.random.default_rng(3)
+    e = _scaled_about_mean(y / rho[:, None], 1.005) + rng.normal(0, 2e-5, y.shape)
+    e /= np.linalg.norm(e, axis=1, keepdims=True)
+    rho_measured = rho + rng.normal(0, 1.0, len(x))
+    sr, sb = np.full(len(x), 1.0), np.full(len(x), 2e-5)
+    R0, t0 = weighted_svd(x, e * rho_measured[:, None])
+    ml = refine_maximum_likelihood(x, e, rho_measured, R0, t0, sr, sb)
+    naive, naive_sigma = common_range_offset(x, e, rho_measured, ml.R, ml.t, sr, sb,
+                                             RangeOffsetPrior(8.0, 0.0, 0.0))  # fmt: skip
+    assert abs(naive) > 10 * naive_sigma and abs(naive) > 5.0
+    offset, sigma = common_range_offset(x, e, rho_measured, ml.R, ml.t, sr, sb,
+                                        RangeOffsetPrior(8.0, 0.005, 0.0))  # fmt: skip
+    assert abs(offset) < 3 * sigma
+    assert sigma > 0.3 * 0.005 * np.linalg.norm(t)
+
+
+def test_the_image_scale_prior_adds_the_centroid_bias_over_the_pattern_radius():
+    """sigma_kappa^2 = sigma_f^2 + (c / r_rms)^2, r_rms the rms angle of the bearings
+    from their mean (here four bearings 0.01 rad off axis: r_rms = 0.01)."""
+    from tofpose.kernels.pose import RangeOffsetPrior, pattern_scale_sigma
+
+    a = 0.01
+    e = np.array([[np.sin(a), 0, np.cos(a)], [-np.sin(a), 0, np.cos(a)],
+                  [0, np.sin(a), np.cos(a)], [0, -np.sin(a), np.cos(a)]])  # fmt: skip
+    sigma, mean = pattern_scale_sigma(e, RangeOffsetPrior(8.0, 0.002, 1e-4))
+    assert mean == pytest.approx([0, 0, 1])
+    assert sigma == pytest.approx(np.hypot(0.002, 1e-4 / np.sin(a)), rel=1e-9)

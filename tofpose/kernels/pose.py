@@ -9,6 +9,8 @@ functions call these; shapes: x, e (m, 3); rho, sigmas (m,); R (3, 3); t (3,).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from tofpose.kernels import jit
@@ -373,43 +375,105 @@ def worst_outlier(
 
 #: Gauss-Newton steps of the common range offset's estimate (from a converged 6-parameter fit)
 OFFSET_ITERATIONS = 3
-#: the offset is taken out of the ranges only when it differs from 0 at 99 % confidence
-#: ((b / sigma_b)^2 above the 0.99 quantile of chi^2(1)); otherwise the prior stands
-OFFSET_SIGNIFICANCE = 6.635
+
+
+class RangeOffsetPrior(NamedTuple):
+    """What is known of the common range offset before a frame (``common_range_offset``).
+
+    sigma_mm : prior sigma of the offset (0: not estimated); scale_sigma_rel : relative
+    sigma of the focal length's calibration (the image scale); centroid_bias_rad : a
+    systematic centroid error common to the frame's markers (rad: px over fx), which
+    scales the pattern by ``centroid_bias_rad / r_rms`` (r_rms its rms angular radius)."""
+
+    sigma_mm: float
+    scale_sigma_rel: float
+    centroid_bias_rad: float
+
+
+#: no offset estimated
+NO_OFFSET = RangeOffsetPrior(0.0, 0.0, 0.0)
 
 
 @jit
-def common_range_offset(x, e, rho, R0, t0, sr, sb, prior_sigma_mm):
+def pattern_scale_sigma(e, prior):
+    """Prior sigma (relative) of the image scale for bearings e (m, 3): focal-length
+    calibration and common-mode centroid error over the pattern's rms angular radius,
+    in quadrature; also returns the unit mean bearing (3,)."""
+    m = e.shape[0]
+    mean = np.zeros(3)
+    for i in range(m):
+        mean += e[i]
+    mean /= np.sqrt((mean**2).sum())
+    r2 = 0.0
+    for i in range(m):
+        c = e[i, 0] * mean[0] + e[i, 1] * mean[1] + e[i, 2] * mean[2]
+        r2 += 1.0 - c * c
+    r_rms = np.sqrt(max(r2 / m, 1e-12))
+    bias = prior.centroid_bias_rad / r_rms
+    return np.sqrt(prior.scale_sigma_rel**2 + bias * bias), mean
+
+
+@jit
+def common_range_offset(x, e, rho, R0, t0, sr, sb, prior):
     """The range offset b (mm) common to every reflector (ranges read ``|p| + b``), with
-    the pose, by Gauss-Newton on (rotation, translation, b) from (R0, t0), with the prior
-    b ~ N(0, prior_sigma_mm^2) as one more residual. The image scale (the bearings)
-    determines b when the target is large enough in the image; otherwise the prior
-    keeps it near 0. Returns b, its posterior sigma (mm)."""
+    the pose and the image scale, by Gauss-Newton on (rotation, translation, b, kappa)
+    from (R0, t0). kappa: the measured bearings' offsets from the pattern's mean bearing
+    are (1 + kappa) times the true ones (a focal-length error, or a centroid error common
+    to the frame's small markers); it is what lets the image scale fix the distance, so
+    it is estimated with its prior (``pattern_scale_sigma``) rather than assumed exact: a
+    scale error of 1 % at 6 m is 60 mm of range. Priors b ~ N(0, prior.sigma_mm^2) and
+    kappa ~ N(0, sigma_kappa^2) enter as two more residuals. The image scale determines
+    b when the target is large enough in the image and the scale is known well enough;
+    otherwise the priors keep it near 0. Returns b, its posterior sigma (mm, kappa
+    marginalised)."""
     m = x.shape[0]
+    prior_sigma_mm = prior.sigma_mm
     if prior_sigma_mm <= 0:
         return 0.0, 0.0
+    sigma_kappa, mean = pattern_scale_sigma(e, prior)
     R, t, b = R0.copy(), t0.copy(), 0.0
     B = tangent_bases(e)
-    J7 = np.zeros((3 * m + 1, 7))
-    r7 = np.zeros(3 * m + 1)
+    # d(lateral residual)/d(kappa): the true bearing is e_i - kappa (e_i - mean (e_i.mean))
+    # to first order, whose tangent components are -kappa (e_i.mean) (B_ik.mean)
+    scale_column = np.empty((m, 2))
+    for i in range(m):
+        c = e[i, 0] * mean[0] + e[i, 1] * mean[1] + e[i, 2] * mean[2]
+        for k in range(2):
+            bm = B[i, k, 0] * mean[0] + B[i, k, 1] * mean[1] + B[i, k, 2] * mean[2]
+            scale_column[i, k] = -c * bm
+    fit_scale = sigma_kappa > 0  # else the scale is taken as exact: kappa stays 0
+    inv_sigma_kappa = 1.0 / sigma_kappa if fit_scale else 1.0
+    if not fit_scale:
+        scale_column[:] = 0.0
+    J8 = np.zeros((3 * m + 2, 8))
+    r8 = np.zeros(3 * m + 2)
+    kappa = 0.0
     sigma_b = prior_sigma_mm
     for _ in range(OFFSET_ITERATIONS):
         r, J = residuals_jacobian(x, e, rho - b, R, t, sr, sb, B)
         for i in range(3 * m):
-            r7[i] = r[i]
+            r8[i] = r[i]
             for k in range(6):
-                J7[i, k] = J[i, k]
+                J8[i, k] = J[i, k]
         for i in range(m):
-            J7[3 * i + 2, 6] = 1.0 / sr[i]
-        r7[3 * m] = b / prior_sigma_mm
-        J7[3 * m, 6] = 1.0 / prior_sigma_mm
-        L, ok = cholesky(gram(J7))
+            lat = max((rho[i] - b) * sb[i], 1e-6)
+            for k in range(2):
+                col = (rho[i] - b) * scale_column[i, k] / lat
+                J8[3 * i + k, 7] = col
+                r8[3 * i + k] += kappa * col
+            J8[3 * i + 2, 6] = 1.0 / sr[i]
+        r8[3 * m] = b / prior_sigma_mm
+        J8[3 * m, 6] = 1.0 / prior_sigma_mm
+        r8[3 * m + 1] = kappa * inv_sigma_kappa
+        J8[3 * m + 1, 7] = inv_sigma_kappa
+        L, ok = cholesky(gram(J8))
         if not ok:
             return 0.0, prior_sigma_mm
-        delta = -cholesky_solve(L, transposed_times(J7, r7))
+        delta = -cholesky_solve(L, transposed_times(J8, r8))
         R = matmul3(rotation_step(delta[:3]), R)
         t = t + delta[3:6]
         b = b + delta[6]
+        kappa = kappa + delta[7]
         sigma_b = np.sqrt(cholesky_inverse(L)[6, 6])
     return b, sigma_b
 
@@ -432,13 +496,14 @@ def fit_with_outliers(
     min_matches,
     outlier_sigma,
     chi2_per_dof,
-    offset_prior_mm,
+    offset_prior,
 ):
-    """``fit_adaptive``; then (``offset_prior_mm`` > 0, ML refinement, 4 reflectors or
-    more) the range offset common to all reflectors (``common_range_offset``) taken out
-    of the ranges and the fit repeated when it differs from 0 at 99 % confidence
-    (``OFFSET_SIGNIFICANCE``); then (``reject``) drop the worst outlier and
-    refit while one is found and more than ``min_matches`` remain. Returns the kept rows
+    """``fit_adaptive``; then (``reject``) drop the worst outlier and refit while one is
+    found and more than ``min_matches`` remain; then (``offset_prior.sigma_mm`` > 0, a
+    ``RangeOffsetPrior``; ML refinement, 4 reflectors kept or more) the range offset
+    common to the kept reflectors (``common_range_offset``: its posterior mean, which
+    the priors shrink towards 0 when the frame cannot tell it) taken out of their ranges
+    and the fit repeated. Returns the kept rows
     (m,) bool and the final fit: R, t, iterations, covariance, chi^2, norms (kept,),
     range sigmas (kept,), bearing sigmas (kept,), the common offset b (mm, 0 when not
     estimated) and its posterior sigma (mm; the prior's when not estimated)."""
@@ -448,21 +513,6 @@ def fit_with_outliers(
     R, t, its, cov, chi2, norms, sr, sb = fit_adaptive(
         x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2, adapt, max_sys, max_sys_bearing
     )
-    offset, offset_sigma = 0.0, offset_prior_mm
-    if offset_prior_mm > 0 and refinement == REFINE_ML and m >= 4:
-        offset, offset_sigma = common_range_offset(x, e, rho, R, t, sr, sb, offset_prior_mm)
-    if offset * offset > OFFSET_SIGNIFICANCE * offset_sigma * offset_sigma:
-        rho = rho - offset
-        y = np.empty_like(y)
-        for i in range(m):
-            for k in range(3):
-                y[i, k] = e[i, k] * rho[i]
-        R, t, its, cov, chi2, norms, sr, sb = fit_adaptive(
-            x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2, adapt, max_sys,
-            max_sys_bearing,
-        )  # fmt: skip
-    else:  # not distinguishable from 0: the prior stands
-        offset, offset_sigma = 0.0, offset_prior_mm
     while reject and rows.shape[0] > min_matches:
         worst = worst_outlier(
             x,
@@ -491,6 +541,22 @@ def fit_with_outliers(
             sr0[keep],
             sb0[keep],
         )
+        R, t, its, cov, chi2, norms, sr, sb = fit_adaptive(
+            x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2, adapt, max_sys,
+            max_sys_bearing,
+        )  # fmt: skip
+    # the common offset from the reflectors kept: a reflection left in would bend the
+    # fit the offset is estimated from
+    offset, offset_sigma = 0.0, offset_prior.sigma_mm
+    n_kept = rows.shape[0]
+    if offset_prior.sigma_mm > 0 and refinement == REFINE_ML and n_kept >= 4:
+        offset, offset_sigma = common_range_offset(x, e, rho, R, t, sr, sb, offset_prior)
+    if offset != 0.0:
+        rho = rho - offset
+        y = np.empty_like(y)
+        for i in range(n_kept):
+            for k in range(3):
+                y[i, k] = e[i, k] * rho[i]
         R, t, its, cov, chi2, norms, sr, sb = fit_adaptive(
             x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2, adapt, max_sys,
             max_sys_bearing,

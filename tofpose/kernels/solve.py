@@ -67,7 +67,7 @@ def solve_pairs(
     y, w, uv, rho, sigma_px, sigma_range, mix, k_idx, i_idx, xyz, radii, K, fx, fy, cx, cy,
     dist, correct_perspective, mixing_radius_px, complete_tol_mm, refinement, los_tol,
     step_sigma2, adapt,
-    max_sys, max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior_mm,
+    max_sys, max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior,
 ):  # fmt: skip
     """The pose of matched pairs (module docstring).
 
@@ -133,7 +133,7 @@ def solve_pairs(
         sb[a] = sigma_px[k_idx[a]] / fx
     kept, R, t, its, cov, chi2, norms, sr_fit, sb_fit, offset, offset_sigma = fit_with_outliers(
         x, e_obs, rho_m, y_obs, sr, sb, refinement, los_tol, step_sigma2, adapt, max_sys,
-        max_sys_px / fx, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior_mm,
+        max_sys_px / fx, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior,
     )  # fmt: skip
     return (k_idx, i_idx, uv_obs, e_obs, y_obs, rho_m, sr, kept, R, t, its, cov, chi2, norms,
             sr_fit, sb_fit, offset, offset_sigma)  # fmt: skip

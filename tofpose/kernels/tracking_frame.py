@@ -33,7 +33,7 @@ def track_frame(
     mixing_radius_px, correct_range, corr_model, corr_harmonics, corr_offsets, floor_px,
     floor_mm, single_px,
     split_px, pool_min, median_eff, uncal_mm, refinement, los_tol, step_sigma2, adapt,
-    max_sys, max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior_mm,
+    max_sys, max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior,
     mean_buf, med_buf,
 ):  # fmt: skip
     """One tracking frame (module docstring).
@@ -82,7 +82,7 @@ def track_frame(
     norms = np.full(n, np.nan)
     sr_fit = np.full(n, np.nan)
     sb_fit = np.full(n, np.nan)
-    offset, offset_sigma = 0.0, offset_prior_mm
+    offset, offset_sigma = 0.0, offset_prior.sigma_mm
     n_used, motion = 0, False
     code = TRACKED
     for _ in range(1):  # one pass; ``break`` ends the frame with ``code``
@@ -119,7 +119,7 @@ def track_frame(
             y, wts, uv, rho, sp, sr, mix, np.arange(n), cat_idx, xyz, radii, K, fx, fy, cx,
             cy, dist, correct_perspective, mixing_radius_px, 0.0, refinement, los_tol,
             step_sigma2, adapt, max_sys, max_sys_px, reject, min_matches, outlier_sigma,
-            chi2_per_dof, offset_prior_mm,
+            chi2_per_dof, offset_prior,
         )  # fmt: skip
         rho, sr = rho_obs, sr_obs  # every blob is matched, in order
         if not kept.all():
