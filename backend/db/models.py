@@ -128,8 +128,10 @@ class MeasurementRow(Base):
     raw quaternion of R_camera_target, the pipeline's own 1-sigma (position per axis;
     attitude as the rotation-vector components about camera x, y, z, which near face-on
     are the pitch, yaw and roll sigmas). ``truth_*``: the pose
-    that produced the frame when the source knows it (simulator); ``lab_truth_*``: what
-    the lab computes from the encoders and the nominal geometry. ``encoders``: axis
+    that produced the frame when the source knows it (simulator, a replayed recording's
+    ``/truth``: ``CameraFrame.T_camera_target_exact``); ``lab_truth_*``: what the lab
+    computes from the encoders and the nominal geometry (or a replayed recording's
+    ``/lab_truth``: ``CameraFrame.T_camera_target_lab``). ``encoders``: axis
     read-back at capture (deg / mm). ``recording_index``: frame number in the campaign's
     raw recording, when one is kept. ``rate_*``, ``vel_*``, ``sigma_rate_*``,
     ``sigma_vel_*``, ``filter_status``: the relative-state filter's state at the frame

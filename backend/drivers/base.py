@@ -46,8 +46,13 @@ class CameraFrame:
     gray : (H, W) uint16 counts; distance_mm : (H, W) float32 radial distance, NaN invalid.
     time_s : the device's capture time (monotonic within a stream).
     index : running frame number of this driver.
-    T_truth : the lab's ground truth ``T_camera_target`` if the source knows it (simulator
-        from encoders and nominal geometry, recordings with /truth), else None.
+    T_camera_target_exact : the pose that produced the frame (docs/architecture.md §3,
+        "Truth"), known only to a simulator (what it rendered) or a recording's ``/truth``;
+        else None. Reports call it the ``exact`` reference.
+    T_camera_target_lab : the lab's reference for the frame: the encoders through the
+        nominal camera mount and target placement (the simulator, or a real bench through
+        ``EncoderReferencedCamera``), or a recording's ``/lab_truth``; else None. It
+        differs from the exact pose by the bench's own mount and placement errors.
     meta : driver-specific extras (integration time, encoder readings, recording index).
     """
 
@@ -55,7 +60,8 @@ class CameraFrame:
     distance_mm: np.ndarray
     time_s: float
     index: int
-    T_truth: RigidTransform | None = None
+    T_camera_target_exact: RigidTransform | None = None
+    T_camera_target_lab: RigidTransform | None = None
     meta: dict[str, Any] = field(default_factory=dict)
 
 

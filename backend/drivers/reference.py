@@ -15,10 +15,12 @@ log = logging.getLogger(__name__)
 
 
 class EncoderReferencedCamera:
-    """Wraps a camera (implements ``CameraDriver``): each frame without ``T_truth`` gets
-    ``T_truth = geometry.T_camera_target(encoders, nominal)`` and the encoder readings in
-    ``meta["encoders"]``. A failing encoder read leaves the frame without a reference (the
-    frame itself is still good); everything else is the wrapped camera's."""
+    """Wraps a camera (implements ``CameraDriver``): each frame without a lab reference gets
+    ``T_camera_target_lab = geometry.T_camera_target(encoders, nominal)`` and the encoder
+    readings in ``meta["encoders"]``; its exact pose (``T_camera_target_exact``, unknown
+    to a real camera) is left as the camera gave it. A failing encoder read leaves the
+    frame without a reference (the frame itself is still good); everything else is the
+    wrapped camera's."""
 
     def __init__(self, camera: CameraDriver, motion: MotionDriver, geometry: LabGeometry):
         self.camera = camera
@@ -29,7 +31,7 @@ class EncoderReferencedCamera:
 
     def read(self, timeout_s: float) -> CameraFrame:
         frame = self.camera.read(timeout_s)
-        if frame.T_truth is not None:
+        if frame.T_camera_target_lab is not None:
             return frame
         try:
             positions = self.motion.status().positions
@@ -37,7 +39,7 @@ class EncoderReferencedCamera:
             log.debug("no encoder reference for frame %d: %s", frame.index, exc)
             return frame
         T_lab = self.geometry.T_camera_target(positions, true=False)
-        return replace(frame, T_truth=T_lab, meta={**frame.meta, "encoders": positions})
+        return replace(frame, T_camera_target_lab=T_lab, meta={**frame.meta, "encoders": positions})
 
     def get_settings(self):
         return self.camera.get_settings()

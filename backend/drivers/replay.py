@@ -24,12 +24,24 @@ def recorded_rate_hz(time_s: np.ndarray) -> float:
     return float(1.0 / np.median(dt)) if dt.size else DEFAULT_RATE_HZ
 
 
+def _pose_at(
+    R_all: np.ndarray | None, t_all_mm: np.ndarray | None, i: int
+) -> RigidTransform | None:
+    """Frame ``i`` of a recording's pose datasets (R (N, 3, 3), t (N, 3) mm), or None when
+    the recording has none."""
+    if R_all is None or t_all_mm is None:
+        return None
+    return RigidTransform(R_all[i], t_all_mm[i])
+
+
 class ReplayCamera:
     """Plays a recording's frames in a loop (implements ``CameraDriver``).
 
     Frame times are stream times (seconds since the replay started), so they increase
     across loops; ``meta`` carries the recording index, its own time stamp and the loop
-    count, and ``meta["discontinuity"]`` is True on the first frame of every loop.
+    count, and ``meta["discontinuity"]`` is True on the first frame of every loop. The
+    recording's ``/truth`` is each frame's exact pose and its ``/lab_truth`` the lab's
+    reference (``T_camera_target_exact`` / ``T_camera_target_lab``, None when absent).
     Raises ``RecordingError`` at construction if the file is not a valid recording.
     """
 
@@ -60,16 +72,14 @@ class ReplayCamera:
             gray, dist, rec_t = self._rec.frame(i)
         except RecordingError as exc:
             raise CameraError(str(exc)) from exc
-        truth = None
-        if self._rec.truth_R is not None and self._rec.truth_t_mm is not None:
-            truth = RigidTransform(self._rec.truth_R[i], self._rec.truth_t_mm[i])
         self._count += 1
         return CameraFrame(
             gray=gray,
             distance_mm=dist,
             time_s=time.monotonic() - self._t0,
             index=self._count,
-            T_truth=truth,
+            T_camera_target_exact=_pose_at(self._rec.truth_R, self._rec.truth_t_mm, i),
+            T_camera_target_lab=_pose_at(self._rec.lab_truth_R, self._rec.lab_truth_t_mm, i),
             meta={
                 "recording_index": i,
                 "recorded_time_s": rec_t,

@@ -42,7 +42,9 @@ class SimWorld:
         return (time.monotonic() - self._t0) * self.time_scale
 
     def capture(self):
-        """Render the scene as the turntable stands now; returns (time_s, frame, T_lab, enc)."""
+        """Render the scene as the turntable stands now; returns (time_s, frame, T_lab,
+        T_true, encoders): the lab's reference (encoders + nominal geometry) and the exact
+        pose rendered, both ``T_camera_target``."""
         with self._lock:  # the turntable state; rendering happens outside the lock
             t = self.now_s()
             T_true, T_lab, enc = self.bench.poses_at(t)
@@ -125,12 +127,9 @@ class SimCamera:
             distance_mm=frame.distance_mm,
             time_s=t,
             index=self._index,
-            T_truth=T_lab,
-            meta={
-                "integration_time_us": frame.integration_time_us,
-                "encoders": enc,
-                "T_world": T_true,
-            },
+            T_camera_target_exact=T_true,
+            T_camera_target_lab=T_lab,
+            meta={"integration_time_us": frame.integration_time_us, "encoders": enc},
         )
 
     @property

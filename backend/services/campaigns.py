@@ -32,7 +32,7 @@ from backend.drivers.base import MotionDriver, soft_limit_problems
 from backend.services.acquisition import AcquisitionService, LiveSample
 from backend.services.hub import LiveHub
 from backend.services.store import commit_unique
-from tofpose.geometry import facing_euler_deg
+from tofpose.geometry import RigidTransform, facing_euler_deg
 from tofpose.recording import RecordingWriter
 
 log = logging.getLogger(__name__)
@@ -88,8 +88,10 @@ class Progress:
 
 
 def measurement_row(setpoint_id: int, sample: LiveSample) -> MeasurementRow:
-    """One stored frame: pose (facing Euler), sigmas, exact and lab truth, encoders, and
-    the relative-state filter's rates and velocity with their sigmas."""
+    """One stored frame: pose (facing Euler), sigmas, exact truth (``truth_*``, from the
+    frame's ``T_camera_target_exact``) and the lab's reference (``lab_truth_*``, from
+    ``T_camera_target_lab``), encoders, and the relative-state filter's rates and
+    velocity with their sigmas."""
     r, f = sample.result, sample.frame
     row = MeasurementRow(
         setpoint_id=setpoint_id,
@@ -121,17 +123,24 @@ def measurement_row(setpoint_id: int, sample: LiveSample) -> MeasurementRow:
         ):  # fmt: skip
             for axis, v in zip("xyz", values, strict=True):
                 setattr(row, name.format(axis), _finite(v))
-    for prefix, T in (("truth_", f.meta.get("T_world")), ("lab_truth_", f.T_truth)):
-        if T is not None:
-            p, y, rl = (float(v) for v in facing_euler_deg(T.R))
-            x, yy, z = (float(v) for v in T.t_mm)
-            for name, v in zip(
-                ("x_mm", "y_mm", "z_mm", "pitch_deg", "yaw_deg", "roll_deg"),
-                (x, yy, z, p, y, rl),
-                strict=True,
-            ):
-                setattr(row, prefix + name, v)
+    _set_reference(row, "truth_", f.T_camera_target_exact)
+    _set_reference(row, "lab_truth_", f.T_camera_target_lab)
     return row
+
+
+def _set_reference(row: MeasurementRow, prefix: str, T: RigidTransform | None) -> None:
+    """Fill ``row``'s ``prefix``-named pose columns (mm; facing Euler, deg) from ``T``
+    (``T_camera_target``); leave them null when ``T`` is None."""
+    if T is None:
+        return
+    p, y, rl = (float(v) for v in facing_euler_deg(T.R))
+    x, yy, z = (float(v) for v in T.t_mm)
+    for name, v in zip(
+        ("x_mm", "y_mm", "z_mm", "pitch_deg", "yaw_deg", "roll_deg"),
+        (x, yy, z, p, y, rl),
+        strict=True,
+    ):
+        setattr(row, prefix + name, v)
 
 
 def _finite(v) -> float | None:
@@ -159,8 +168,10 @@ class RawRecorder:
         return self._writer.n if self._writer is not None else 0
 
     def append(self, sample: LiveSample) -> int:
+        """Write the sample's frame (``/truth`` from its exact pose, ``/lab_truth`` from
+        its lab reference, each when the first frame has it); returns its index."""
         f = sample.frame
-        exact, lab = f.meta.get("T_world"), f.T_truth
+        exact, lab = f.T_camera_target_exact, f.T_camera_target_lab
         if self._writer is None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._writer = RecordingWriter(

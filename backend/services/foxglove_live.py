@@ -4,7 +4,9 @@ It publishes the channels of an exported MCAP file (``tofpose.interop.topics``, 
 docs/interop.md) for every live frame: the gray and distance images, the camera model,
 the overlay, the estimate (transform, pose, reflectors, JSON with its covariance), the
 lab reference (``/tofpose/lab_truth``: the reference the live error is measured against)
-and, on the simulator, the exact truth. Log times are the frames' arrival times (unix ns).
+and, where the source knows it (the simulator, a replayed recording's ``/truth``), the
+exact truth (``CameraFrame.T_camera_target_exact``). Log times are the frames' arrival
+times (unix ns).
 
 The camera loop never waits for it: one thread takes the newest sample from a one-deep
 hub subscription (older ones are dropped and counted, never queued), converts each
@@ -86,7 +88,7 @@ class LiveFoxglove:
     def publish(self, sample: LiveSample) -> None:
         """Log one live sample on every channel."""
         f = sample.frame
-        exact = f.meta.get("T_world")
+        exact = f.T_camera_target_exact
         lab = sample.reference.pose(f)
         self.channels.log_frame(
             f.index, f.gray, f.distance_mm, float(f.time_s),

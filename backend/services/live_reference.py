@@ -46,9 +46,10 @@ class LiveReference:
 
     def pose(self, frame: CameraFrame) -> RigidTransform | None:
         """``T_camera_target`` of the reference for this frame, or None when the frame has
-        none (no nominal truth; for a calibration, no encoder reading of every axis)."""
+        none (nominal: the frame's ``T_camera_target_lab``, never its exact pose; for a
+        calibration, None without an encoder reading of every axis)."""
         if self.calibration_id is None:
-            return frame.T_truth
+            return frame.T_camera_target_lab
         encoders = frame.meta.get("encoders") or {}
         if not set(AXES) <= set(encoders):
             return None

@@ -127,7 +127,11 @@ def build(
     if rows and all(r[prefix + "x_mm"] is None for r in rows):
         raise ReportError(
             f"no {reference} reference in this campaign's frames"
-            + (" (exact truth exists only on the simulator)" if reference == "exact" else "")
+            + (
+                " (exact truth exists only on the simulator or in a replayed recording's /truth)"
+                if reference == "exact"
+                else ""
+            )
         )
     result = analyse(rows, row.requirements, reference)
     report = {

@@ -10,7 +10,8 @@ metres (``scene_model``):
   ``max_cloud_points``) and ``/camera/reflectors`` (the measured reflector points,
   coloured matched / unmatched).
 - ``/estimate`` and ``/truth``: the target model at the estimated pose and at the lab's
-  reference (when the source knows it): ``.../plate`` and ``.../reflector_<id>``, each
+  reference (when the source knows it; else at the exact pose, when that is known:
+  ``_shown_truth``): ``.../plate`` and ``.../reflector_<id>``, each
   reflector coloured matched / unmatched / out of view (``scene_model.STATE_COLOURS``).
 - GUI: a "Pause scene" checkbox (freezes the scene; the pipeline keeps running) and a
   status line.
@@ -27,6 +28,7 @@ import time
 
 import numpy as np
 
+from backend.drivers.base import CameraFrame
 from backend.services.acquisition import AcquisitionService, LiveSample
 from backend.services.hub import LiveHub
 from backend.services.scene_model import (
@@ -43,6 +45,16 @@ from tofpose.geometry import RigidTransform, quaternion_wxyz_from_rotation
 log = logging.getLogger("tofpose.scene")
 TRUTH_COLOUR = (70, 120, 230)
 PLATE_COLOUR = (200, 200, 205)
+
+
+def _shown_truth(frame: CameraFrame) -> RigidTransform | None:
+    """The pose ``/truth`` shows (``T_camera_target``): the lab's reference (encoders +
+    nominal geometry, or a recording's ``/lab_truth``), as it always has on the
+    simulator; the exact pose only when the frame has no lab reference (a replayed
+    recording with ``/truth`` alone); None when it has neither."""
+    if frame.T_camera_target_lab is not None:
+        return frame.T_camera_target_lab
+    return frame.T_camera_target_exact
 
 
 def _place(handle, T: RigidTransform) -> None:
@@ -186,22 +198,22 @@ class LiveScene:
             self._catalog_name = catalog.name
         res, frame = sample.result, sample.frame
         T_lab_cam = lab_camera_pose(frame.meta.get("encoders"))
+        T_shown = _shown_truth(frame)  # the lab reference; the exact pose only without one
         if not self._aimed:
-            self._aim_view(T_lab_cam, res, frame.T_truth)
+            self._aim_view(T_lab_cam, res, T_shown)
         with self.server.atomic():
             _place(self.turntable, T_lab_cam)
             _place(self.camera_node, T_lab_cam)
             T_est = RigidTransform(res.R, res.t_mm) if res.ok else None
-            T_truth = frame.T_truth
-            states = reflector_states(catalog, res, self._camera, T_est or T_truth)
+            states = reflector_states(catalog, res, self._camera, T_est or T_shown)
             for r, state in zip(catalog.reflectors, states, strict=True):
                 self.estimate_reflectors[r.id].color = STATE_COLOURS[state]
             self.estimate.visible = T_est is not None
             if T_est is not None:
                 _place(self.estimate, T_lab_cam.compose(T_est))
-            self.truth.visible = T_truth is not None
-            if T_truth is not None:
-                _place(self.truth, T_lab_cam.compose(T_truth))
+            self.truth.visible = T_shown is not None
+            if T_shown is not None:
+                _place(self.truth, T_lab_cam.compose(T_shown))
             if sample.has_images:
                 cloud = distance_cloud(
                     self._camera, frame.gray, frame.distance_mm, self._max_cloud_points
@@ -214,13 +226,13 @@ class LiveScene:
         self.updates += 1
         self.last_frame_index = frame.index
 
-    def _aim_view(self, T_lab_cam: RigidTransform, res, T_truth) -> None:
+    def _aim_view(self, T_lab_cam: RigidTransform, res, T_shown) -> None:
         """Point the initial view (new browser tabs) at the camera and the target: from
         above and to the side of the camera, at the middle of the line of sight."""
         if res.ok:
             range_m = float(np.linalg.norm(res.t_mm)) / 1000.0
-        elif T_truth is not None:
-            range_m = float(np.linalg.norm(T_truth.t_mm)) / 1000.0
+        elif T_shown is not None:
+            range_m = float(np.linalg.norm(T_shown.t_mm)) / 1000.0
         else:
             return  # wait for a frame that says where the target is
         cam = T_lab_cam.t_mm / 1000.0

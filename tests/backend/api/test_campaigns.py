@@ -364,3 +364,76 @@ def test_the_campaigns_camera_settings_are_applied_before_it_measures(fast_clien
     assert done["status"] == "done" and done["camera"]["modulation_frequency_mhz"] == 12.0
     s = c.get("/api/camera/settings").json()
     assert s["modulation_frequency_mhz"] == 12.0 and s["frame_rate_hz"] == 15.0
+
+
+def _write_recording_with_both_truths(path, n_frames: int) -> None:
+    """A small simulated recording whose /lab_truth is its /truth off by a known error
+    (0.5, -0.4, 0.3 deg and (4, -3, 6) mm, as a mis-mounted bench would be): frame i
+    shows the target at 2 m, turned by i deg of yaw, 20 frames/s."""
+    from tests.conftest import facing_pose, render
+    from tofpose.camera import CameraModel
+    from tofpose.catalog import paper_target
+    from tofpose.geometry import RigidTransform
+    from tofpose.recording import RecordingWriter
+
+    T_lab_exact = RigidTransform.from_euler_deg(0.5, -0.4, 0.3, (4.0, -3.0, 6.0))
+    with RecordingWriter(path, CameraModel(), paper_target(), with_truth=True,
+                         with_lab_truth=True) as w:  # fmt: skip
+        for i in range(n_frames):
+            T_exact = facing_pose(2000.0, yaw_deg=float(i), offset_mm=(30.0, -20.0))
+            T_lab = T_lab_exact.compose(T_exact)
+            f = render(T_exact, seed=100 + i)
+            w.append(f.gray, f.distance_mm, 0.05 * i, T_exact.R, T_exact.t_mm,
+                     lab_R_camera_target=T_lab.R, lab_t_camera_target_mm=T_lab.t_mm)  # fmt: skip
+
+
+def _facing_pose_columns(R, t_mm) -> dict[str, float]:
+    """A ``T_camera_target`` as a measurement's pose columns (mm, facing Euler deg)."""
+    from tofpose.geometry import facing_euler_deg
+
+    p, y, r = (float(v) for v in facing_euler_deg(R))
+    x, yy, z = (float(v) for v in t_mm)
+    return {"x_mm": x, "y_mm": yy, "z_mm": z, "pitch_deg": p, "yaw_deg": y, "roll_deg": r}
+
+
+def test_a_replayed_recordings_truth_and_lab_truth_are_stored_where_they_belong(tmp_path):
+    """A campaign on a replayed simulated recording with both references: each row's
+    ``truth_*`` is the input's /truth and its ``lab_truth_*`` the input's /lab_truth (not
+    /truth as lab truth), and the campaign's raw recording keeps both as they came in."""
+    from tofpose.recording import open_recording
+
+    n_in = 5
+    source = tmp_path / "both.h5"
+    _write_recording_with_both_truths(source, n_in)
+    # the simulated turntable only gives the campaign something to move: a replay's
+    # frames carry no encoder reading, so nothing of the table reaches the rows
+    settings = make_settings(tmp_path / "data", camera=f"replay:{source}", motion="sim",
+                             sim_time_scale=5.0)  # fmt: skip
+    body = {"name": "replayed", "frames_per_point": 8, "settle_s": 0.1, "record_raw": True,
+            "setpoints": [{"yaw_deg": 0.0}]}  # fmt: skip
+    with running_app(settings) as c:
+        done = _run(c, body)
+        assert done["status"] == "done", done
+        items = c.get(f"/api/campaigns/{done['id']}/measurements?limit=100").json()["items"]
+        raw = tmp_path / "raw.h5"
+        raw.write_bytes(c.get(f"/api/campaigns/{done['id']}/recording.h5").content)
+        exact_report = c.get(f"/api/campaigns/{done['id']}/report.json?reference=exact")
+    assert len(items) == 8
+    with open_recording(source) as src, open_recording(raw) as out:
+        assert out.n_frames == len(items)
+        assert out.truth_R is not None and out.lab_truth_R is not None
+        for k, m in enumerate(items):
+            i = (m["frame_index"] - 1) % n_in  # the replay's frame numbers start at 1
+            assert m["encoders"] is None
+            for got, R, t in (
+                (m["truth"], src.truth_R[i], src.truth_t_mm[i]),
+                (m["lab_truth"], src.lab_truth_R[i], src.lab_truth_t_mm[i]),
+            ):
+                assert got == pytest.approx(_facing_pose_columns(R, t), abs=1e-9), (k, i)
+            np.testing.assert_array_equal(out.truth_R[k], src.truth_R[i])
+            np.testing.assert_array_equal(out.truth_t_mm[k], src.truth_t_mm[i])
+            np.testing.assert_array_equal(out.lab_truth_R[k], src.lab_truth_R[i])
+            np.testing.assert_array_equal(out.lab_truth_t_mm[k], src.lab_truth_t_mm[i])
+        # the two references really differ, so a swap or a copy could not pass
+        assert abs(items[0]["truth"]["x_mm"] - items[0]["lab_truth"]["x_mm"]) > 1.0
+    assert exact_report.status_code == 200, exact_report.text  # the rows have an exact truth

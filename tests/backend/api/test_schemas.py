@@ -41,7 +41,7 @@ def sample_with_gaps() -> tuple[LiveSample, CameraModel]:
         res, unmatched=[(10.0, 20.0, float("nan")), (30.0, 40.0, 2500.0)], covariance=cov
     )
     frame = CameraFrame(gray=f.gray, distance_mm=f.distance_mm, time_s=1.0, index=7,
-                        T_truth=T)  # fmt: skip
+                        T_camera_target_lab=T)  # fmt: skip
     return LiveSample(frame, res, "paper-target", 1.0, 1.01), cam
 
 

@@ -42,7 +42,7 @@ class ScriptedCamera:
             raise TimeoutError(f"no frame within {timeout_s} s")
         self.n += 1
         gray = self.gray[:10] if self.mode == "junk" else self.gray
-        return CameraFrame(gray, self.dist, 0.005 * self.n, self.n, self.T)
+        return CameraFrame(gray, self.dist, 0.005 * self.n, self.n, T_camera_target_exact=self.T)
 
     def get_settings(self):
         return self.settings
@@ -163,7 +163,9 @@ class TurningCamera(ScriptedCamera):
         time.sleep(0.005)
         gray, dist = self.frames[self.n]
         self.n += 1
-        return CameraFrame(gray, dist, 0.1 * (self.n - 1), self.n, self.poses[self.n - 1])
+        return CameraFrame(
+            gray, dist, 0.1 * (self.n - 1), self.n, T_camera_target_exact=self.poses[self.n - 1]
+        )
 
 
 @pytest.mark.parametrize("rate_deg_s", [0.0, 6.0])

@@ -102,3 +102,23 @@ def test_a_scene_on_a_wide_bind_with_closed_reads_is_refused_with_a_reason(tmp_p
     assert "no token check" in s.scene_refusal
     opened = make_settings(tmp_path, viser=True, host="0.0.0.0", open_reads=True)
     assert opened.scene_refusal is None
+
+
+def test_the_truth_node_shows_the_lab_reference_else_the_exact_pose():
+    """``/truth`` keeps showing the lab's reference (as on the simulator); a frame with
+    the exact pose alone (a replayed recording with /truth only) shows that."""
+    from backend.drivers.base import CameraFrame
+    from backend.services.scene import _shown_truth
+    from tofpose.geometry import RigidTransform
+
+    exact = RigidTransform(np.eye(3), np.array([0.0, 0.0, 2000.0]))
+    lab = RigidTransform(np.eye(3), np.array([5.0, 0.0, 2000.0]))
+    image = np.zeros((2, 2), np.uint16)
+
+    def frame(**poses):
+        return CameraFrame(image, image.astype(np.float32), 0.0, 1, **poses)
+
+    assert _shown_truth(frame(T_camera_target_exact=exact, T_camera_target_lab=lab)) is lab
+    assert _shown_truth(frame(T_camera_target_exact=exact)) is exact
+    assert _shown_truth(frame(T_camera_target_lab=lab)) is lab
+    assert _shown_truth(frame()) is None
