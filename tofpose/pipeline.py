@@ -123,7 +123,11 @@ class PipelineConfig:
     common_centroid_bias_px : sigma of a centroid error common to a frame's markers
         (0.1 px: the systematic sub-pixel error of small blob centroids, the
         star-tracker literature's S-curve size); over the pattern's rms radius in the
-        image it is a scale error.
+        image it is a scale error, estimated with the range offset. Markers of one size
+        share it apart from the others (their blobs mix with the surround, the PSF and the
+        fall-off alike), so each size's own scale error also enters the reported
+        covariance (``solve.PoseSolver.size_scale_covariance``): where the sizes sit on
+        different sides of the pattern, the fit reads it as a tilt.
     max_systematic_centroid_sigma_px : cap of the frame's excess centroid sigma, estimated
         beside the range one from the lateral residuals alone (``pose.systematic_sigmas``:
         small or blurred markers against a plate that is not black have centroids off by

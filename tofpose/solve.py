@@ -31,6 +31,7 @@ from tofpose.kernels.pose import (
     REFINE_ML,
     REFINE_NONE,
     RangeOffsetPrior,
+    class_scale_covariance,
     facing_cosine,
     range_bias_covariance,
 )
@@ -187,6 +188,9 @@ class PoseSolver:
         self._dist = np.ascontiguousarray(camera.dist_array, dtype=float)
         self._ids = catalog.ids
         self._correction = range_correction
+        # each reflector's diameter class (index among the catalog's distinct diameters)
+        sizes, self._size_class = np.unique(self._d, return_inverse=True)
+        self._n_sizes = len(sizes)
 
     # ------------------------------------------------------------------------------------
     def solve(
@@ -306,9 +310,27 @@ class PoseSolver:
             if bias > 0
             else None
         )
+        by_size = self.size_scale_covariance(obs, R, t, sr, sb)
+        if by_size is not None:
+            extra = by_size if extra is None else extra + by_size
         ml = MLResult(R, t, cov, float(chi2), int(iterations), norms, bias_covariance=extra,
                       range_offset_mm=float(offset_mm))  # fmt: skip
         return Solution(T, obs, int(iterations), ml)
+
+    def size_scale_covariance(self, obs: MatchedObservations, R, t, sr, sb) -> np.ndarray | None:
+        """(6, 6) covariance of image-scale errors common to the kept reflectors of one
+        diameter (``kernels.pose.class_scale_covariance`` with ``common_centroid_bias_px``),
+        or None when they are all of one size (the common scale error is then the one
+        ``common_range_offset`` estimates) or the bias is 0."""
+        bias_px = self.config.common_centroid_bias_px
+        cls = self._size_class[obs.i_idx]
+        if bias_px <= 0 or len(np.unique(cls)) < 2:
+            return None
+        return class_scale_covariance(
+            obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, sb,
+            np.ascontiguousarray(cls, dtype=np.int64), self._n_sizes,
+            float(bias_px) / self.camera.fx,
+        )  # fmt: skip
 
     def _inconsistent(self, obs, norms, chi2: float, dof: int, limit: float) -> str:
         """The reason for a pose whose residuals the measurement model cannot explain,

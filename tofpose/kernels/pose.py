@@ -581,6 +581,47 @@ def range_bias_covariance(x, e, rho, R, t, sr, sb, bias_sigma_mm):
 
 
 @jit
+def class_scale_covariance(x, e, rho, R, t, sr, sb, group, n_groups, bias_rad):
+    """(6, 6) pose covariance from image-scale errors, each common to one group of
+    reflectors (``group`` (m,) int in [0, n_groups): the markers of one diameter) and
+    independent between groups: a centroid error ``bias_rad`` common to a group's markers
+    scales their bearings about the pattern's mean bearing by kappa_g, sigma
+    ``bias_rad / r_g`` (r_g the group's rms angle from the mean bearing). Sum over groups
+    of s_g s_g^T sigma_g^2, s_g = (J^T J)^-1 J^T g_g, g_g the whitened residuals'
+    response to a unit kappa_g (as in ``common_range_offset``)."""
+    m = x.shape[0]
+    B = tangent_bases(e)
+    _, J = residuals_jacobian(x, e, rho, R, t, sr, sb, B)
+    L, ok = cholesky(gram(J))
+    if not ok:
+        return np.full((6, 6), np.nan)
+    mean = np.zeros(3)
+    for i in range(m):
+        mean += e[i]
+    mean /= np.sqrt((mean**2).sum())
+    out = np.zeros((6, 6))
+    for k in range(n_groups):
+        g = np.zeros(J.shape[0])
+        r2, n = 0.0, 0
+        for i in range(m):
+            if group[i] != k:
+                continue
+            c = e[i, 0] * mean[0] + e[i, 1] * mean[1] + e[i, 2] * mean[2]
+            r2 += 1.0 - c * c
+            n += 1
+            lat = max(rho[i] * sb[i], 1e-6)
+            for q in range(2):
+                bm = B[i, q, 0] * mean[0] + B[i, q, 1] * mean[1] + B[i, q, 2] * mean[2]
+                g[3 * i + q] = -rho[i] * c * bm / lat
+        if n == 0:
+            continue
+        sigma = bias_rad / np.sqrt(max(r2 / n, 1e-12))
+        s = cholesky_solve(L, transposed_times(J, g))
+        out += sigma**2 * np.outer(s, s)
+    return out
+
+
+@jit
 def point_residuals_mm(x, y, R, t):
     """|y_i - (R x_i + t)| (m,) mm of matched points x (m, 3) (target frame) and y (m, 3)
     (camera frame), and their RMS."""
