@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from backend.settings import Settings
@@ -32,6 +33,8 @@ def test_health_reports_devices_and_database(client):
     assert h["status"] == "ok" and h["camera"]["state"] == "ok"
 
 
+# Load: the pipeline lags the camera; the waits for the move and a post-settle pose can time out.
+@pytest.mark.load_sensitive
 def test_live_pose_is_accurate_and_follows_the_turntable(client):
     before = latest_pose(client)
     # The simulated lab starts with the camera 2 m from the target (rail 13 m of 15 m).

@@ -23,6 +23,8 @@ def _num(page, testid: str) -> float:
     return float(page.get_by_test_id(testid).inner_text())
 
 
+# Load: the page, filter and pipeline lag; the turn's rate and position can show after the waits.
+@pytest.mark.load_sensitive
 def test_live_pose_follows_a_move_made_in_the_page(server, page_for):
     page = page_for(server.base_url, TOKEN)
     page.goto(server.base_url + "/")
