@@ -121,7 +121,11 @@ class Blob:
     penalty : q in [0, 1] (§3.4).
     ellipse : ((cx, cy), (major, minor), angle_deg) from the edge fit, or None.
     ellipse_residual_px : RMS edge-to-ellipse distance, or NaN.
-    source : "morphology" or "ellipse" (supplemented by §3.3).
+    source : "morphology" or "ellipse" (supplemented by §3.3), "split" (cut out of a
+        merged component).
+    fitted_uv : ndarray (2,), the centre from a model fit of the pixels
+        (``pair_fit.fit_pair``: one of two markers imaged as one blob), which replaces
+        the moment centroid in the measurement; None for the others.
     mixing : ndarray (``kernels.mixed_pixels.MIX_FIELDS``,), the mixing sums of its
         support against its surround (measured with the centroid), or None.
     """
@@ -138,6 +142,7 @@ class Blob:
     ellipse_residual_px: float = float("nan")
     source: str = "morphology"
     mixing: np.ndarray | None = None
+    fitted_uv: np.ndarray | None = None
 
     def with_values(self, **changes) -> Blob:
         """A new blob with the named fields changed: ``dataclasses.replace`` for the

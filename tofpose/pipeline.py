@@ -53,6 +53,7 @@ from tofpose.matching import (
     random_triplets,
 )
 from tofpose.mixing import mixing_rows, shifted_mixing
+from tofpose.pair_fit import fit_pair
 from tofpose.persistence import Persistence, PersistenceConfig, PersistenceInfo, blob_arrays
 from tofpose.range_calibration import RangeCorrection, correction_kernel_arguments
 from tofpose.solve import Measurements, PoseSolver, Rejected, Solution, ThresholdedFrame
@@ -63,7 +64,12 @@ from tofpose.tracking import (
     predict_windows,
 )
 from tofpose.tracking_frame import CompiledTracker
-from tofpose.uncertainty import SigmaFloors, kernel_constants, measurement_sigmas
+from tofpose.uncertainty import (
+    UNCALIBRATED_RANGE_SIGMA_MM,
+    SigmaFloors,
+    kernel_constants,
+    measurement_sigmas,
+)
 
 Refinement = Literal["ml", "los", "none"]
 
@@ -461,8 +467,18 @@ class PosePipeline:
         persistence.commit(cur, flat, g, d, n_used, motion)
         unranged = [(uv[j, 0], uv[j, 1], rho[j]) for j in np.flatnonzero(keep & ~np.isfinite(rho))]
         ranged_blobs = tuple(blobs[j] for j in ranged.tolist())
+        uv = uv[ranged]
+        fitted = [a for a, b in enumerate(ranged_blobs) if b.fitted_uv is not None]
+        if fitted:  # centres from the pair fit replace the halves' moment centroids
+            uv, y, w, sr = uv.copy(), y.copy(), w.copy(), sr.copy()
+            uv[fitted] = [ranged_blobs[a].fitted_uv for a in fitted]
+            # a half's range mixes the neighbour's and the surround's light at the cut:
+            # its bearing is used, its range only as a weak constraint
+            sr[fitted] = np.maximum(sr[fitted], UNCALIBRATED_RANGE_SIGMA_MM)
+            y[fitted] = cam.bearings(uv[fitted]) * rho_r[fitted, None]  # Eq. 8
+            w[fitted] = 1.0 / (sr[fitted] ** 2 + (rho_r[fitted] * sp[fitted] / cam.fx) ** 2)
         area = np.array([b.area_px for b in ranged_blobs], np.int64)
-        meas = Measurements(ranged_blobs, area, uv[ranged], rho_r, y, w, sp, sr, mix)
+        meas = Measurements(ranged_blobs, area, uv, rho_r, y, w, sp, sr, mix)
         n_kept = int(keep.sum())
         return meas, unranged, n_kept, PersistenceInfo(1 + n_used, motion, len(blobs) - n_kept)
 
@@ -740,7 +756,19 @@ class PosePipeline:
                 arcs, d_min_px=d_lo, d_max_px=d_hi, max_residual_px=cfg.ellipse_max_residual_px
             )
             if not found:
-                out += _split_by_threshold(comp, gray, stats.raw_threshold, d_hi, cfg.min_area_px)
+                found_parts = _split_by_threshold(comp, gray, stats.raw_threshold, d_hi,
+                                                  cfg.min_area_px)  # fmt: skip
+                out += found_parts or _split_in_two(comp, gray, stats.background, d_lo,
+                                                    d_hi, cfg.min_area_px)  # fmt: skip
+            elif len(found) == 1:
+                # one ellipse for a component too large for one reflector: at a few px
+                # the outline of a merged pair fits one ellipse of a reflector's size
+                # over part of it; a pair's two centres explain all of it
+                pair = _split_in_two(comp, gray, stats.background, d_lo, d_hi,
+                                     cfg.min_area_px)  # fmt: skip
+                if pair:
+                    out += pair
+                    continue
             for e, _ in found:
                 fill = np.zeros_like(mask)
                 (cx, cy), (a1, a2), ang = e
@@ -811,6 +839,83 @@ def _split_by_threshold(
             ))  # fmt: skip
         return out
     return []
+
+
+#: Lloyd iterations of the two-centre split (they converge in 2-4 on a merged pair)
+TWO_CENTRE_ITERATIONS = 8
+#: the halves of a merged pair of like reflectors carry light within this ratio (gains
+#: of aged or dirty reflectors differ by up to ~30 %, so a pair by up to ~2x)
+PAIR_LIGHT_RATIO = 3.0
+
+
+def _split_in_two(
+    comp: Blob, gray: np.ndarray, background: float, d_lo_px: float, d_hi_px: float,
+    min_area_px: int,
+) -> list[Blob]:  # fmt: skip
+    """Ours (after ``_split_by_threshold``): a component the size of two reflectors whose
+    light shows no dip between them (two discs a fraction of a pixel apart, integrated
+    over the pixel area and blurred by the lens: markers 7 and 8 beyond ~6 m) is cut in
+    two by intensity-weighted 2-means (Lloyd's iteration from the ends of its major
+    axis), each half's pixels those nearer its centre. Taken only when the component is
+    elongated as a pair is (major axis over minor >= 1.5), each half's equivalent
+    diameter lies in the window of one reflector (``d_lo_px``..``d_hi_px``) and their
+    light is within ``PAIR_LIGHT_RATIO``; returns [] otherwise. Each half's moment
+    centroid leans towards the other (it keeps the neighbour's light at the cut), so the
+    centres come from a model fit of the pair's pixels (``pair_fit.fit_pair``; no split
+    when it fails) and replace the halves' centroids in the measurement
+    (``Blob.fitted_uv``); ranges are measured on the halves as any blob's, and the
+    centroid sigma keeps the split's term (``uncertainty.SPLIT_CENTROID_PX``)."""
+    w = gray.shape[1]
+    rows, cols = np.divmod(np.asarray(comp.pixels), w)
+    weight = np.maximum(gray[rows, cols].astype(float) - background, 0.0)
+    if len(rows) < 2 * min_area_px or weight.sum() <= 0:
+        return []
+    pts = np.column_stack((cols, rows)).astype(float)
+    mean = (weight[:, None] * pts).sum(axis=0) / weight.sum()
+    centred = pts - mean
+    cov = (weight[:, None, None] * centred[:, :, None] * centred[:, None, :]).sum(axis=0)
+    evals, evecs = np.linalg.eigh(cov / weight.sum())
+    if evals[0] <= 0 or evals[1] < 1.5**2 * evals[0]:
+        return []  # not elongated as two discs side by side are
+    axis = evecs[:, 1]
+    along = centred @ axis
+    centres = mean + np.array([along.min(), along.max()])[:, None] * axis[None, :] / 2
+    for _ in range(TWO_CENTRE_ITERATIONS):
+        near = np.argmin(((pts[:, None, :] - centres[None, :, :]) ** 2).sum(axis=2), axis=1)
+        if (near == 0).all() or (near == 1).all():
+            return []
+        centres = np.array([
+            (weight[near == k, None] * pts[near == k]).sum(axis=0)
+            / max(weight[near == k].sum(), 1e-12)
+            for k in range(2)
+        ])  # fmt: skip
+    light = np.array([weight[near == k].sum() for k in range(2)])
+    if light.max() > PAIR_LIGHT_RATIO * light.min():
+        return []  # not two like reflectors (a marker and a glint, or a speck)
+    fit = fit_pair(gray, comp.pixels, centres, background)
+    if fit is None:
+        return []  # the halves' moment centroids lean towards each other: not used
+    # the fitted disc nearest each half's centroid is that half's centre
+    order = np.argmin(((centres[:, None, :] - fit.centres_px[None, :, :]) ** 2).sum(axis=2),
+                      axis=1)  # fmt: skip
+    if order[0] == order[1]:
+        return []
+    out = []
+    for k in range(2):
+        pr, pc = rows[near == k], cols[near == k]
+        d_eq = 2.0 * np.sqrt(len(pr) / np.pi)
+        if len(pr) < min_area_px or not d_lo_px <= d_eq <= d_hi_px:
+            return []
+        out.append(Blob(
+            pixels=pr * w + pc,
+            area_px=len(pr),
+            bbox=(int(pc.min()), int(pr.min()), int(np.ptp(pc) + 1), int(np.ptp(pr) + 1)),
+            peak_counts=float(gray[pr, pc].max()),
+            distance_mm=comp.distance_mm,
+            source="split",
+            fitted_uv=fit.centres_px[order[k]],
+        ))  # fmt: skip
+    return out
 
 
 def _blob_mask(b: Blob, width: int) -> tuple[np.ndarray, int, int]:
