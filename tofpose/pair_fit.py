@@ -16,8 +16,10 @@ blurred by a Gaussian of sigma s (the lens PSF; the erfc edge is the blurred dis
 r >> s, close enough at r ~ 2 px), amplitudes a_k (reflector gains differ), a local
 level bg (a plate that is not black), integrated over each pixel by 3 x 3 sub-samples.
 SciPy's ``least_squares`` fits the 9 parameters on the pixels of the pair's box grown by
-``MARGIN_PX`` (the surround fixes bg and the edge). The centres' sigmas come from the
-fit's covariance, scaled by its residual variance.
+``MARGIN_PX`` (the surround fixes bg and the edge). The centres' sigmas from the fit's
+covariance (scaled by its residual variance) are diagnostic: they hold the pixel noise
+only, not the model's error (the PSF's real shape, the surround's mixing), so the
+measurement keeps the split's own centroid sigma (``uncertainty.SPLIT_CENTROID_PX``).
 """
 
 from __future__ import annotations
@@ -45,7 +47,8 @@ _OFFSETS = (np.arange(SUBSAMPLES) + 0.5) / SUBSAMPLES - 0.5
 @dataclass(frozen=True)
 class PairFit:
     """centres_px (2, 2) (u, v) of the two discs; sigma_px (2,) their centroid sigma per
-    image axis; radius_px and blur_px the fitted disc radius and edge sigma."""
+    image axis from the pixel noise (diagnostic); radius_px and blur_px the fitted disc
+    radius and edge sigma."""
 
     centres_px: np.ndarray
     sigma_px: np.ndarray

@@ -206,6 +206,8 @@ class PipelineConfig:
             calibrated_range_bias_sigma_mm=0.0,
             consistency_p=None,
             estimate_range_offset=False,
+            focal_length_sigma_rel=0.0,
+            common_centroid_bias_px=0.0,
         )
 
 
@@ -650,7 +652,8 @@ class PosePipeline:
 
     def _reported_covariance(self, ml, n_matched: int, t_mm: np.ndarray) -> np.ndarray:
         """(6, 6): the fit's covariance with its a-posteriori variance factor, plus the
-        common range bias's, times the camera's calibrated factor at this distance."""
+        common range bias's and the image scale's (``MLResult.bias_covariance``), times
+        the camera's calibrated factor at this distance."""
         cov = ml.covariance * variance_factor(ml.chi2, n_matched)
         if ml.bias_covariance is not None:
             cov = cov + ml.bias_covariance
@@ -892,6 +895,10 @@ def _split_in_two(
     light = np.array([weight[near == k].sum() for k in range(2)])
     if light.max() > PAIR_LIGHT_RATIO * light.min():
         return []  # not two like reflectors (a marker and a glint, or a speck)
+    for k in range(2):  # each half one reflector's size (before the costly fit)
+        n_k = int((near == k).sum())
+        if n_k < min_area_px or not d_lo_px <= 2.0 * np.sqrt(n_k / np.pi) <= d_hi_px:
+            return []
     fit = fit_pair(gray, comp.pixels, centres, background)
     if fit is None:
         return []  # the halves' moment centroids lean towards each other: not used
@@ -903,9 +910,6 @@ def _split_in_two(
     out = []
     for k in range(2):
         pr, pc = rows[near == k], cols[near == k]
-        d_eq = 2.0 * np.sqrt(len(pr) / np.pi)
-        if len(pr) < min_area_px or not d_lo_px <= d_eq <= d_hi_px:
-            return []
         out.append(Blob(
             pixels=pr * w + pc,
             area_px=len(pr),

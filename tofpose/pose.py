@@ -218,8 +218,9 @@ class MLResult:
     chi2 : sum of squared whitened residuals; dof = 3 m - 6.
     reflector_norms : (m,) whitened residual norm of each reflector at the final pose
         (as ``reflector_whitened_norms``).
-    bias_covariance : (6, 6) added by a common range offset the data cannot reveal
-        (``common_range_bias_covariance``), or None.
+    bias_covariance : (6, 6) added by errors the data cannot reveal: a common range
+        offset (``common_range_bias_covariance``) and the image scale's errors
+        (``kernels.pose.class_scale_covariance``), or None.
     range_offset_mm : the range offset common to the reflectors that the fit estimated
         and took out of their ranges (``kernels.pose.common_range_offset``; 0: none).
     """

@@ -189,7 +189,7 @@ class PoseSolver:
         self._ids = catalog.ids
         self._correction = range_correction
         # each reflector's diameter class (index among the catalog's distinct diameters)
-        sizes, self._size_class = np.unique(self._d, return_inverse=True)
+        sizes, self._size_class = np.unique(np.round(self._d, 3), return_inverse=True)
         self._n_sizes = len(sizes)
 
     # ------------------------------------------------------------------------------------
@@ -318,18 +318,20 @@ class PoseSolver:
         return Solution(T, obs, int(iterations), ml)
 
     def size_scale_covariance(self, obs: MatchedObservations, R, t, sr, sb) -> np.ndarray | None:
-        """(6, 6) covariance of image-scale errors common to the kept reflectors of one
-        diameter (``kernels.pose.class_scale_covariance`` with ``common_centroid_bias_px``),
-        or None when they are all of one size (the common scale error is then the one
-        ``common_range_offset`` estimates) or the bias is 0."""
-        bias_px = self.config.common_centroid_bias_px
-        cls = self._size_class[obs.i_idx]
-        if bias_px <= 0 or len(np.unique(cls)) < 2:
+        """(6, 6) covariance of image-scale errors (``kernels.pose.class_scale_covariance``):
+        the focal length's (``focal_length_sigma_rel``), common to the kept reflectors,
+        and one per diameter from ``common_centroid_bias_px``; None when both are 0. The
+        fit estimates the scale error only to read the range offset, and the pose is
+        refitted without it, so its uncertainty enters here."""
+        cfg = self.config
+        if cfg.common_centroid_bias_px <= 0 and cfg.focal_length_sigma_rel <= 0:
             return None
+        cls = self._size_class[obs.i_idx]
         return class_scale_covariance(
             obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, sb,
             np.ascontiguousarray(cls, dtype=np.int64), self._n_sizes,
-            float(bias_px) / self.camera.fx,
+            float(cfg.common_centroid_bias_px) / self.camera.fx,
+            float(cfg.focal_length_sigma_rel),
         )  # fmt: skip
 
     def _inconsistent(self, obs, norms, chi2: float, dof: int, limit: float) -> str:

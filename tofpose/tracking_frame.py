@@ -15,7 +15,13 @@ import numpy as np
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
-from tofpose.kernels.pose import NO_OFFSET, REFINE_LOS, REFINE_ML, REFINE_NONE
+from tofpose.kernels.pose import (
+    NO_OFFSET,
+    REFINE_LOS,
+    REFINE_ML,
+    REFINE_NONE,
+    RangeOffsetPrior,
+)
 from tofpose.kernels.tracking import camera_windows
 from tofpose.kernels.tracking_frame import TRACKED, track_frame
 from tofpose.persistence import Persistence, PersistenceInfo
@@ -27,7 +33,6 @@ from tofpose.solve import (
     PoseSolver,
     Solution,
     ThresholdedFrame,
-    offset_prior,
 )
 from tofpose.tracking import TrackState
 from tofpose.uncertainty import SigmaFloors, kernel_constants
@@ -82,12 +87,16 @@ class CompiledTracker:
             config.max_systematic_centroid_sigma_px, config.reject_outliers,
             config.matching.min_matches,
             config.outlier_sigma, config.outlier_chi2_per_dof,
-            # the offset's prior: the tracker has no ranges yet; a corrected camera's
-            # calibrated sigma (its span is checked again when the pose is concluded)
-            NO_OFFSET if not config.estimate_range_offset else offset_prior(
-                config, config.range_bias_sigma_mm if correction is None
-                else config.calibrated_range_bias_sigma_mm, camera.fx),
         )  # fmt: skip
+
+    def _offset_prior(self, track: TrackState, cat_idx: np.ndarray) -> RangeOffsetPrior:
+        """The common range offset's prior for this frame: the solver's, for the ranges of
+        the windowed reflectors at the predicted pose (the calibrated sigma only where the
+        range correction's span holds them all)."""
+        if not self.config.estimate_range_offset:
+            return NO_OFFSET
+        p = self._xyz[cat_idx] @ np.asarray(track.R).T + np.asarray(track.t_mm)
+        return self._solver.offset_prior(np.linalg.norm(p, axis=1))
 
     def track(self, g: np.ndarray, d: np.ndarray, track: TrackState) -> Tracked | None:
         """One frame; None means "fall back to the acquisition pass" (fewer reflectors to
@@ -109,7 +118,8 @@ class CompiledTracker:
             g, d, bounds, centres, diameters, cat_idx, np.float32(track.threshold_counts),
             float(track.background_counts), float(track.dark_counts), hist_g, hist_d, hist_m,
             hist_c, n_hist,
-            *self._camera_args, *self._fit_args, *self._persistence.scratch(g.shape),
+            *self._camera_args, *self._fit_args, self._offset_prior(track, cat_idx),
+            *self._persistence.scratch(g.shape),
         )  # fmt: skip
         if code != TRACKED:
             return None

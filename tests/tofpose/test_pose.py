@@ -249,7 +249,8 @@ def test_the_image_scale_prior_adds_the_centroid_bias_over_the_pattern_radius():
 def test_per_size_scale_errors_give_the_covariance_the_pose_errors_have():
     """Monte Carlo: the bearings of each marker size scaled about the pattern's mean
     bearing by its own kappa ~ N(0, (c / r_size)^2) (a centroid error common to the
-    markers of one size), fitted by ML; the pose errors' mean NEES against the fit's
+    markers of one size) plus one common to all ~ N(0, 0.2 %^2) (the focal length),
+    fitted by ML; the pose errors' mean NEES against the fit's
     covariance plus ``class_scale_covariance`` is 6 (within its Monte-Carlo spread),
     and without that term it is several times too large: the fit alone does not know."""
     from tofpose.kernels.pose import class_scale_covariance
@@ -266,19 +267,20 @@ def test_per_size_scale_errors_give_the_covariance_the_pose_errors_have():
     along = e0 @ mean
     radial = e0 - mean * along[:, None]
     r_size = [np.sqrt(np.mean(1 - along[size == k] ** 2)) for k in range(2)]
-    bias_rad, sb_rad, sr_mm = 3e-4, 2e-5, 1.0
+    bias_rad, focal_rel, sb_rad, sr_mm = 3e-4, 2e-3, 2e-5, 1.0
     sr, sb = np.full(len(x), sr_mm), np.full(len(x), sb_rad)
     rng = np.random.default_rng(7)
     d2 = {"with": [], "without": []}
     for _ in range(300):
-        kappa = rng.normal(0, bias_rad / np.array(r_size))[size]
+        kappa = rng.normal(0, bias_rad / np.array(r_size))[size] + rng.normal(0, focal_rel)
         e = mean * along[:, None] + (1 + kappa[:, None]) * radial
         e = e + rng.normal(0, sb_rad, e.shape)
         e /= np.linalg.norm(e, axis=1, keepdims=True)
         rho_m = rho + rng.normal(0, sr_mm, len(x))
         ml = refine_maximum_likelihood(x, e, rho_m, R, t, sr, sb)
         err = np.concatenate([Rotation.from_matrix(ml.R @ R.T).as_rotvec(), ml.t - t])
-        extra = class_scale_covariance(x, e, rho_m, ml.R, ml.t, sr, sb, size, 2, bias_rad)
+        extra = class_scale_covariance(x, e, rho_m, ml.R, ml.t, sr, sb, size, 2, bias_rad,
+                                       focal_rel)  # fmt: skip
         d2["with"].append(err @ np.linalg.solve(ml.covariance + extra, err))
         d2["without"].append(err @ np.linalg.solve(ml.covariance, err))
     assert np.mean(d2["with"]) == pytest.approx(6.0, rel=0.2)

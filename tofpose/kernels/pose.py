@@ -395,15 +395,21 @@ NO_OFFSET = RangeOffsetPrior(0.0, 0.0, 0.0)
 
 
 @jit
+def mean_bearing(e):
+    """The unit mean (3,) of bearings e (m, 3)."""
+    mean = np.zeros(3)
+    for i in range(e.shape[0]):
+        mean += e[i]
+    return mean / np.sqrt((mean**2).sum())
+
+
+@jit
 def pattern_scale_sigma(e, prior):
     """Prior sigma (relative) of the image scale for bearings e (m, 3): focal-length
     calibration and common-mode centroid error over the pattern's rms angular radius,
     in quadrature; also returns the unit mean bearing (3,)."""
     m = e.shape[0]
-    mean = np.zeros(3)
-    for i in range(m):
-        mean += e[i]
-    mean /= np.sqrt((mean**2).sum())
+    mean = mean_bearing(e)
     r2 = 0.0
     for i in range(m):
         c = e[i, 0] * mean[0] + e[i, 1] * mean[1] + e[i, 2] * mean[2]
@@ -581,41 +587,48 @@ def range_bias_covariance(x, e, rho, R, t, sr, sb, bias_sigma_mm):
 
 
 @jit
-def class_scale_covariance(x, e, rho, R, t, sr, sb, group, n_groups, bias_rad):
-    """(6, 6) pose covariance from image-scale errors, each common to one group of
-    reflectors (``group`` (m,) int in [0, n_groups): the markers of one diameter) and
-    independent between groups: a centroid error ``bias_rad`` common to a group's markers
-    scales their bearings about the pattern's mean bearing by kappa_g, sigma
-    ``bias_rad / r_g`` (r_g the group's rms angle from the mean bearing). Sum over groups
-    of s_g s_g^T sigma_g^2, s_g = (J^T J)^-1 J^T g_g, g_g the whitened residuals'
-    response to a unit kappa_g (as in ``common_range_offset``)."""
+def class_scale_covariance(x, e, rho, R, t, sr, sb, group, n_groups, bias_rad,
+                           common_scale_sigma):  # fmt: skip
+    """(6, 6) pose covariance from image-scale errors (bearings scaled about the
+    pattern's mean bearing by 1 + kappa, as in ``common_range_offset``): one common to
+    every reflector, of relative sigma ``common_scale_sigma`` (the focal length's
+    calibration), and one per group of reflectors (``group`` (m,) int in [0, n_groups):
+    the markers of one diameter), independent between groups, from a centroid error
+    ``bias_rad`` common to a group's markers: sigma ``bias_rad / r_g`` (r_g the group's
+    rms angle from the mean bearing). Sum of s s^T sigma^2, s = (J^T J)^-1 J^T g, g the
+    whitened residuals' response to a unit kappa."""
     m = x.shape[0]
     B = tangent_bases(e)
     _, J = residuals_jacobian(x, e, rho, R, t, sr, sb, B)
     L, ok = cholesky(gram(J))
     if not ok:
         return np.full((6, 6), np.nan)
-    mean = np.zeros(3)
+    mean = mean_bearing(e)
+    response = np.zeros((m, 2))  # d(lateral residual k of reflector i) / d(kappa)
+    r2 = np.zeros(m)
     for i in range(m):
-        mean += e[i]
-    mean /= np.sqrt((mean**2).sum())
+        c = e[i, 0] * mean[0] + e[i, 1] * mean[1] + e[i, 2] * mean[2]
+        r2[i] = 1.0 - c * c
+        lat = max(rho[i] * sb[i], 1e-6)
+        for q in range(2):
+            bm = B[i, q, 0] * mean[0] + B[i, q, 1] * mean[1] + B[i, q, 2] * mean[2]
+            response[i, q] = -rho[i] * c * bm / lat
     out = np.zeros((6, 6))
-    for k in range(n_groups):
+    for k in range(-1, n_groups):  # -1: the common scale
         g = np.zeros(J.shape[0])
-        r2, n = 0.0, 0
+        r2_sum, n = 0.0, 0
         for i in range(m):
-            if group[i] != k:
+            if k >= 0 and group[i] != k:
                 continue
-            c = e[i, 0] * mean[0] + e[i, 1] * mean[1] + e[i, 2] * mean[2]
-            r2 += 1.0 - c * c
+            r2_sum += r2[i]
             n += 1
-            lat = max(rho[i] * sb[i], 1e-6)
-            for q in range(2):
-                bm = B[i, q, 0] * mean[0] + B[i, q, 1] * mean[1] + B[i, q, 2] * mean[2]
-                g[3 * i + q] = -rho[i] * c * bm / lat
+            g[3 * i] = response[i, 0]
+            g[3 * i + 1] = response[i, 1]
         if n == 0:
             continue
-        sigma = bias_rad / np.sqrt(max(r2 / n, 1e-12))
+        sigma = common_scale_sigma if k < 0 else bias_rad / np.sqrt(max(r2_sum / n, 1e-12))
+        if sigma <= 0:
+            continue
         s = cholesky_solve(L, transposed_times(J, g))
         out += sigma**2 * np.outer(s, s)
     return out
