@@ -420,6 +420,21 @@ def pattern_scale_sigma(e, prior):
 
 
 @jit
+def scale_directions(e, B, mean):
+    """(m, 2): the tangent components of a unit image-scale error about the unit mean
+    bearing ``mean`` (3,), for bearings e (m, 3) with tangent bases B (m, 2, 3): the
+    true bearing is e_i - kappa (e_i - mean (e_i.mean)) to first order, whose tangent
+    components are -kappa (e_i.mean) (B_ik.mean)."""
+    out = np.empty((e.shape[0], 2))
+    for i in range(e.shape[0]):
+        c = e[i, 0] * mean[0] + e[i, 1] * mean[1] + e[i, 2] * mean[2]
+        for k in range(2):
+            bm = B[i, k, 0] * mean[0] + B[i, k, 1] * mean[1] + B[i, k, 2] * mean[2]
+            out[i, k] = -c * bm
+    return out
+
+
+@jit
 def common_range_offset(x, e, rho, R0, t0, sr, sb, prior):
     """The range offset b (mm) common to every reflector (ranges read ``|p| + b``), with
     the pose and the image scale, by Gauss-Newton on (rotation, translation, b, kappa)
@@ -439,14 +454,7 @@ def common_range_offset(x, e, rho, R0, t0, sr, sb, prior):
     sigma_kappa, mean = pattern_scale_sigma(e, prior)
     R, t, b = R0.copy(), t0.copy(), 0.0
     B = tangent_bases(e)
-    # d(lateral residual)/d(kappa): the true bearing is e_i - kappa (e_i - mean (e_i.mean))
-    # to first order, whose tangent components are -kappa (e_i.mean) (B_ik.mean)
-    scale_column = np.empty((m, 2))
-    for i in range(m):
-        c = e[i, 0] * mean[0] + e[i, 1] * mean[1] + e[i, 2] * mean[2]
-        for k in range(2):
-            bm = B[i, k, 0] * mean[0] + B[i, k, 1] * mean[1] + B[i, k, 2] * mean[2]
-            scale_column[i, k] = -c * bm
+    scale_column = scale_directions(e, B, mean)
     fit_scale = sigma_kappa > 0  # else the scale is taken as exact: kappa stays 0
     inv_sigma_kappa = 1.0 / sigma_kappa if fit_scale else 1.0
     if not fit_scale:
@@ -604,15 +612,12 @@ def class_scale_covariance(x, e, rho, R, t, sr, sb, group, n_groups, bias_rad,
     if not ok:
         return np.full((6, 6), np.nan)
     mean = mean_bearing(e)
-    response = np.zeros((m, 2))  # d(lateral residual k of reflector i) / d(kappa)
+    response = scale_directions(e, B, mean)  # d(lateral residual) / d(kappa), whitened
     r2 = np.zeros(m)
     for i in range(m):
         c = e[i, 0] * mean[0] + e[i, 1] * mean[1] + e[i, 2] * mean[2]
         r2[i] = 1.0 - c * c
-        lat = max(rho[i] * sb[i], 1e-6)
-        for q in range(2):
-            bm = B[i, q, 0] * mean[0] + B[i, q, 1] * mean[1] + B[i, q, 2] * mean[2]
-            response[i, q] = -rho[i] * c * bm / lat
+        response[i] *= rho[i] / max(rho[i] * sb[i], 1e-6)
     out = np.zeros((6, 6))
     for k in range(-1, n_groups):  # -1: the common scale
         g = np.zeros(J.shape[0])
