@@ -15,8 +15,9 @@ two discs of a common radius r (the pair's markers have one diameter) with an ed
 blurred by a Gaussian of sigma s (the lens PSF; the erfc edge is the blurred disc for
 r >> s, close enough at r ~ 2 px), amplitudes a_k (reflector gains differ), a local
 level bg (a plate that is not black), integrated over each pixel by 3 x 3 sub-samples.
-SciPy's ``least_squares`` fits the 9 parameters on the pixels of the pair's box grown by
-``MARGIN_PX`` (the surround fixes bg and the edge). The centres' sigmas from the fit's
+A compiled Levenberg-Marquardt loop (``kernels.pair_fit``; SciPy's ``least_squares`` in
+``fit_pair_reference`` is its oracle) fits the 9 parameters on the pixels of the pair's
+box grown by ``MARGIN_PX`` (the surround fixes bg and the edge). The centres' sigmas from the fit's
 covariance (scaled by its residual variance) are diagnostic: they hold the pixel noise
 only, not the model's error (the PSF's real shape, the surround's mixing), so the
 measurement keeps the split's own centroid sigma (``uncertainty.SPLIT_CENTROID_PX``).
@@ -30,6 +31,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.special import erfc
 
+from tofpose.kernels.pair_fit import fit_pair_lm
+
 #: pixels around the pair's box included in the fit (the surround: level and edges)
 MARGIN_PX = 2
 #: sub-samples per pixel side for the pixel-area integration
@@ -40,6 +43,11 @@ BLUR_BOUNDS_PX = (0.05, 2.0)
 RADIUS_FACTOR = 1.6
 #: function evaluations of the fit (it converges in ~5-15 from the 2-means centres)
 MAX_EVALUATIONS = 200
+#: a step moving no centre by more than this has converged (the centres' noise is
+#: ~0.02-0.05 px), px
+CENTRE_TOLERANCE_PX = 1e-4
+#: an accepted step lowering the cost by less than this fraction has converged
+COST_TOLERANCE = 1e-9
 
 _OFFSETS = (np.arange(SUBSAMPLES) + 0.5) / SUBSAMPLES - 0.5
 
@@ -106,13 +114,10 @@ class _PairModel:
         return jac
 
 
-def fit_pair(
-    gray: np.ndarray, pixels: np.ndarray, centres0_px: np.ndarray, background: float
-) -> PairFit | None:
-    """Fit two blurred discs to the blob of flat ``pixels`` (P,) in ``gray`` (H, W),
-    starting from ``centres0_px`` (2, 2) (u, v; e.g. the 2-means halves' centroids) over
-    the frame's ``background`` level. None when the fit fails or ends at a bound of the
-    radius (not two discs of one size)."""
+def _problem(gray: np.ndarray, pixels: np.ndarray, centres0_px: np.ndarray,
+             background: float):
+    """The fit's sub-samples su, sv (n, S), pixel values (n,), start (9,) and box
+    lower, upper (9,) for the blob of flat ``pixels`` in ``gray``."""
     h, w = gray.shape
     rows, cols = np.divmod(np.asarray(pixels), w)
     r0, r1 = max(rows.min() - MARGIN_PX, 0), min(rows.max() + MARGIN_PX, h - 1)
@@ -127,24 +132,24 @@ def fit_pair(
     peak = float(values.max() - background)
     start = np.array([*centres0_px[0], *centres0_px[1], peak, peak, radius0, 0.5,
                       background])  # fmt: skip
-    lower = [c0, r0, c0, r0, 0.0, 0.0, radius0 / RADIUS_FACTOR, BLUR_BOUNDS_PX[0], -np.inf]
-    upper = [c1, r1, c1, r1, np.inf, np.inf, radius0 * RADIUS_FACTOR, BLUR_BOUNDS_PX[1],
-             np.inf]  # fmt: skip
-    start = np.clip(start, np.array(lower) + 1e-9, np.array(upper) - 1e-9)
-    try:
-        model = _PairModel(su, sv, values)
-        fit = least_squares(model.residuals, start, jac=model.jacobian,
-                            bounds=(lower, upper), x_scale="jac",
-                            max_nfev=MAX_EVALUATIONS)  # fmt: skip
-    except (ValueError, np.linalg.LinAlgError):
+    lower = np.array([c0, r0, c0, r0, 0.0, 0.0, radius0 / RADIUS_FACTOR,
+                      BLUR_BOUNDS_PX[0], -np.inf])  # fmt: skip
+    upper = np.array([c1, r1, c1, r1, np.inf, np.inf, radius0 * RADIUS_FACTOR,
+                      BLUR_BOUNDS_PX[1], np.inf])  # fmt: skip
+    start = np.clip(start, lower + 1e-9, upper - 1e-9)
+    return su, sv, values, start, lower, upper
+
+
+def _result(p: np.ndarray, normal: np.ndarray, cost: float, n_values: int,
+            lower: np.ndarray, upper: np.ndarray) -> PairFit | None:
+    """PairFit of the parameters p (9,) with J^T J ``normal`` (9, 9) and residual sum
+    of squares ``cost`` over ``n_values`` pixels; None at a bound of the radius (not two
+    discs of one size) or with a singular covariance."""
+    if np.isclose(p[6], lower[6]) or np.isclose(p[6], upper[6]):
         return None
-    p = fit.x
-    if not fit.success or np.isclose(p[6], lower[6]) or np.isclose(p[6], upper[6]):
-        return None
-    dof = max(len(values) - len(p), 1)
-    var = float(fit.fun @ fit.fun) / dof
+    var = cost / max(n_values - len(p), 1)
     try:
-        cov = np.linalg.inv(fit.jac.T @ fit.jac) * var
+        cov = np.linalg.inv(normal) * var
     except np.linalg.LinAlgError:
         return None
     centres = np.array([[p[0], p[1]], [p[2], p[3]]])
@@ -152,3 +157,40 @@ def fit_pair(
     if not np.all(np.isfinite(sigma)):
         return None
     return PairFit(centres, sigma, float(p[6]), float(p[7]))
+
+
+def fit_pair(
+    gray: np.ndarray, pixels: np.ndarray, centres0_px: np.ndarray, background: float
+) -> PairFit | None:
+    """Fit two blurred discs to the blob of flat ``pixels`` (P,) in ``gray`` (H, W),
+    starting from ``centres0_px`` (2, 2) (u, v; e.g. the 2-means halves' centroids) over
+    the frame's ``background`` level, by the compiled Levenberg-Marquardt loop
+    (``kernels.pair_fit.fit_pair_lm``). None when the fit does not converge or ends at a
+    bound of the radius (not two discs of one size)."""
+    su, sv, values, start, lower, upper = _problem(gray, pixels, centres0_px, background)
+    p, normal, cost, converged = fit_pair_lm(
+        su, sv, values, start, lower, upper, MAX_EVALUATIONS, CENTRE_TOLERANCE_PX,
+        COST_TOLERANCE,
+    )  # fmt: skip
+    if not converged:
+        return None
+    return _result(p, normal, cost, len(values), lower, upper)
+
+
+def fit_pair_reference(
+    gray: np.ndarray, pixels: np.ndarray, centres0_px: np.ndarray, background: float
+) -> PairFit | None:
+    """``fit_pair`` by SciPy's bounded trust-region ``least_squares`` on the NumPy model
+    (``_PairModel``): the test oracle of the compiled loop (~10x slower)."""
+    su, sv, values, start, lower, upper = _problem(gray, pixels, centres0_px, background)
+    try:
+        model = _PairModel(su, sv, values)
+        fit = least_squares(model.residuals, start, jac=model.jacobian,
+                            bounds=(lower, upper), x_scale="jac",
+                            max_nfev=MAX_EVALUATIONS)  # fmt: skip
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    if not fit.success:
+        return None
+    return _result(fit.x, fit.jac.T @ fit.jac, float(fit.fun @ fit.fun), len(values),
+                   lower, upper)  # fmt: skip

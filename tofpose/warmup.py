@@ -19,6 +19,7 @@ from tofpose.camera import CameraModel
 from tofpose.catalog import paper_target
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg
 from tofpose.kernels.levels import checked_frame, clean_distance
+from tofpose.kernels.pair_fit import fit_pair_lm
 from tofpose.pipeline import PipelineConfig, PosePipeline
 from tofpose.range_calibration import RangeCorrection
 from tofpose.sim.bench import R_FACING
@@ -59,6 +60,11 @@ def warm_up() -> float:
         pipe = PosePipeline(cam, cat, configs[0], range_correction=correction)
         for f in frames[:3]:
             pipe.process(f.gray, f.distance_mm)
+    # the merged-pair fit runs only where two reflectors merge (and a frame at 6 m need
+    # not have them merged): compiled here on a one-pixel problem
+    p0 = np.array([0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 1.0, 0.5, 0.0])
+    fit_pair_lm(np.zeros((1, 9)), np.zeros((1, 9)), np.ones(1), p0, p0 - 1.0, p0 + 1.0, 1,
+                1e-4, 1e-9)  # fmt: skip
     # distance images arrive as float32 (cameras) or float64 (some recordings), counts
     # as uint16 or as floats: the frame check compiles once per dtype
     for distance_dtype in (np.float32, np.float64):
