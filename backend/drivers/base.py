@@ -2,7 +2,8 @@
 
 A camera yields (gray, distance, time) frame pairs and accepts settings; a motion system
 moves axes to set-points, reports encoder positions and busy/settled state, and stops at
-once. Simulated, replay and (later) real devices implement these Protocols.
+once. Simulated, replay and (later) real devices implement these Protocols. A motion
+system may also run motion profiles (``run_profile``, tofpose.motion_profile).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 
 from tofpose.camera import CameraModel
 from tofpose.geometry import RigidTransform
+from tofpose.motion_profile import LimitProblem, MotionProfile
 
 
 class CameraError(RuntimeError):
@@ -86,13 +88,16 @@ class CameraDriver(Protocol):
 
 @dataclass(frozen=True)
 class AxisLimits:
-    """Soft limits of one axis; rotary axes in degrees, the rail in mm."""
+    """Soft limits of one axis; rotary axes in degrees, the rail in mm. ``max_rate`` per
+    second, ``max_accel`` per second^2 (None: the motion system does not say, and runs no
+    profiles on that axis)."""
 
     name: str
     unit: str
     min_pos: float
     max_pos: float
     max_rate: float
+    max_accel: float | None = None
 
     def check(self, value: float) -> str | None:
         """Why ``value`` is not an acceptable set-point, or None."""
@@ -119,21 +124,75 @@ def soft_limit_problems(axes: dict[str, AxisLimits], setpoint: dict[str, float])
     return problems
 
 
+def profile_axis_problem(axes: dict[str, AxisLimits], axis: str) -> LimitProblem | None:
+    """Why no profile can run on ``axis`` of a motion system with ``axes`` (unknown,
+    linear, or without an acceleration limit to check against), or None."""
+    limits = axes.get(axis)
+    if limits is None:
+        why = f"this motion system has no {axis} axis (axes: {sorted(axes)})"
+    elif limits.unit != "deg":
+        why = f"profiles run on rotary axes; {axis} is in {limits.unit}"
+    elif limits.max_accel is None:
+        why = f"the motion system reports no acceleration limit for {axis} to check against"
+    else:
+        return None
+    return LimitProblem("axis", why)
+
+
+def profile_problems(
+    axes: dict[str, AxisLimits], axis: str, profile: MotionProfile
+) -> list[LimitProblem]:
+    """Every reason ``profile`` (run from its ``start_deg``) cannot run on ``axis`` of a
+    motion system with ``axes``: the axis itself (``profile_axis_problem``), its soft
+    limits, its rate and acceleration limits (empty when it can run)."""
+    if (problem := profile_axis_problem(axes, axis)) is not None:
+        return [problem]
+    lim = axes[axis]
+    return profile.limit_problems(axis, lim.min_pos, lim.max_pos, lim.max_rate, lim.max_accel)
+
+
+@dataclass(frozen=True)
+class ProfileStatus:
+    """A motion profile running on one axis: what it is, and how far it has come (s)."""
+
+    axis: str
+    kind: str
+    elapsed_s: float
+    duration_s: float
+
+    @property
+    def remaining_s(self) -> float:
+        return max(self.duration_s - self.elapsed_s, 0.0)
+
+
 @dataclass(frozen=True)
 class MotionStatus:
-    """Encoder read-back and state; positions keyed by axis name (deg / mm)."""
+    """Encoder read-back and state; positions keyed by axis name (deg / mm).
+
+    time_s : when the encoders were read, on the clock of the cameras' ``time_s`` where
+        the driver knows one (the simulated lab's clock; else the host's monotonic
+        clock), None if the driver cannot say.
+    profile : the motion profile running now, else None.
+    """
 
     positions: dict[str, float]
     targets: dict[str, float]
     busy: bool
     settled: bool
     stopped: bool = False
+    time_s: float | None = None
+    profile: ProfileStatus | None = None
 
 
 @runtime_checkable
 class MotionDriver(Protocol):
     """A turntable (+ rail). Set-points are validated by the caller against ``axes``
-    before ``move_to``; ``stop`` must work at any time."""
+    before ``move_to``; ``stop`` must work at any time.
+
+    Optional: ``run_profile(axis, profile)`` starts a motion profile from the axis'
+    position now (checked by the caller with ``profile_problems``; ends on its own or at
+    ``stop``), and ``profile_unavailable`` (None, or why this system cannot run one).
+    """
 
     name: str
     axes: dict[str, AxisLimits]

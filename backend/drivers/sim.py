@@ -14,10 +14,17 @@ from dataclasses import replace
 
 import numpy as np
 
-from backend.drivers.base import AxisLimits, CameraFrame, CameraSettings, MotionStatus
+from backend.drivers.base import (
+    AxisLimits,
+    CameraFrame,
+    CameraSettings,
+    MotionStatus,
+    ProfileStatus,
+)
 from backend.drivers.pacing import FramePacer
 from tofpose import __version__
 from tofpose.catalog import Catalog, paper_target
+from tofpose.motion_profile import MotionProfile
 from tofpose.sim.bench import LabGeometry, SimulatedBench
 from tofpose.sim.render import render_frame
 from tofpose.sim.scenarios import paper_mount_error
@@ -60,20 +67,35 @@ class SimWorld:
         with self._lock:
             self.bench.turntable.move_to(setpoints, self.now_s())
 
+    def run_profile(self, axis: str, profile: MotionProfile) -> MotionProfile:
+        """Start ``profile`` on ``axis`` now, from where it stands (Turntable.run_profile);
+        returns it as started."""
+        with self._lock:
+            return self.bench.turntable.run_profile(axis, profile, self.now_s())
+
     def stop(self) -> None:
         with self._lock:
             self.bench.turntable.stop(self.now_s())
 
     def motion_status(self) -> MotionStatus:
+        """Encoders read now, stamped with the lab time of the reading (the clock of the
+        camera's frames), and the profile running, if any."""
         with self._lock:
             t = self.now_s()
             tt = self.bench.turntable
+            running = tt.running_profile(t)
+            profile = None
+            if running is not None:
+                axis, plan = running
+                profile = ProfileStatus(axis, plan.profile.kind, t - plan.t0_s, plan.duration_s)
             return MotionStatus(
                 positions=tt.encoder_position(t),
                 targets=tt.target_position(),
                 busy=tt.is_busy(t),
                 settled=tt.is_settled(t),
                 stopped=tt.is_stopped(),
+                time_s=t,
+                profile=profile,
             )
 
     def set_sensor(self, **changes) -> None:
@@ -166,16 +188,20 @@ class SimMotion:
     """The simulated turntable + rail of a ``SimWorld`` (implements ``MotionDriver``)."""
 
     name = "sim"
+    profile_unavailable = None  # runs motion profiles on its rotary axes
 
     def __init__(self, world: SimWorld) -> None:
         self.world = world
         self.axes = {
-            n: AxisLimits(n, s.unit, s.min_pos, s.max_pos, s.max_rate)
+            n: AxisLimits(n, s.unit, s.min_pos, s.max_pos, s.max_rate, s.max_accel)
             for n, s in world.bench.turntable.axes.items()
         }
 
     def move_to(self, setpoints: dict[str, float]) -> None:
         self.world.move_to(setpoints)
+
+    def run_profile(self, axis: str, profile: MotionProfile) -> None:
+        self.world.run_profile(axis, profile)
 
     def stop(self) -> None:
         self.world.stop()

@@ -6,6 +6,11 @@ decaying oscillation models settling. ``Turntable`` holds one plan per axis, che
 limits before accepting a set-point, and reports encoder readings quantised to the
 encoder resolution with seeded noise. Time is explicit (``time_s`` arguments), so the
 simulation can run faster than real time or in step with a clock.
+
+An axis can also run a motion profile (tofpose.motion_profile: a sine slew or a ramp),
+accepted only when its peaks lie within the axis' soft, rate and acceleration limits; the
+axis then follows it exactly (servo lag is not modelled, nor settling after it: a profile
+ends at rest with a continuous rate), until it ends or ``stop``.
 """
 
 from __future__ import annotations
@@ -13,6 +18,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from tofpose.motion_profile import MotionProfile
 
 ROTARY_AXES = ("yaw", "pitch", "roll")  # outer, middle, inner
 RAIL_AXIS = "rail"
@@ -96,15 +103,47 @@ def plan_move(start: float, end: float, t0_s: float, max_rate: float, max_accel:
     return MovePlan(start, end, t0_s, max_rate, max_accel, t_acc, t_flat)
 
 
+@dataclass(frozen=True)
+class ProfilePlan:
+    """A motion profile run from ``t0_s``; reads like a ``MovePlan`` (start, end,
+    duration, position at a time)."""
+
+    profile: MotionProfile
+    t0_s: float
+
+    @property
+    def start(self) -> float:
+        return self.profile.start_deg
+
+    @property
+    def end(self) -> float:
+        return self.profile.end_deg
+
+    @property
+    def duration_s(self) -> float:
+        return self.profile.duration_s
+
+    def position(self, time_s: float) -> float:
+        return float(self.profile.angle_deg_at(time_s - self.t0_s))
+
+
 class SoftLimitError(ValueError):
-    """A set-point outside an axis' soft limits."""
+    """A set-point outside an axis' soft limits (or a profile beyond any axis limit)."""
+
+
+class AxisBusyError(ValueError):
+    """A command that needs the axis at rest, or not running a profile."""
 
 
 @dataclass
 class _AxisState:
     spec: AxisSpec
-    plan: MovePlan
+    plan: MovePlan | ProfilePlan
     stopped_at: float | None = None
+
+    def running_profile(self, time_s: float) -> ProfilePlan | None:
+        p = self.plan
+        return p if isinstance(p, ProfilePlan) and time_s < p.t0_s + p.duration_s else None
 
 
 @dataclass
@@ -141,9 +180,13 @@ class Turntable:
     def move_to(self, setpoints: dict[str, float], time_s: float) -> float:
         """Start moving the named axes; returns the time all of them finish the profile.
 
-        All set-points are checked before any axis moves.
+        All set-points are checked before any axis moves; an axis running a profile
+        takes no set-point (``AxisBusyError``: stop it first).
         """
         self.check_setpoints(setpoints)
+        for name in setpoints:
+            if self._state[name].running_profile(time_s) is not None:
+                raise AxisBusyError(f"{name} is running a motion profile: stop it first")
         done = time_s
         for name, value in setpoints.items():
             st = self._state[name]
@@ -153,6 +196,34 @@ class Turntable:
         for st in self._state.values():
             st.stopped_at = None
         return done
+
+    def run_profile(self, name: str, profile: MotionProfile, time_s: float) -> MotionProfile:
+        """Start ``profile`` on rotary axis ``name`` from where it stands; returns the
+        profile as started (its ``start_deg`` set). The axis must be at rest (its move
+        finished), and the profile within its soft, rate and acceleration limits
+        (``SoftLimitError`` naming each one broken); nothing moves otherwise."""
+        if name not in ROTARY_AXES or name not in self.axes:
+            rotary = [a for a in ROTARY_AXES if a in self.axes]
+            raise ValueError(f"profiles run on the rotary axes {rotary}, not {name!r}")
+        st = self._state[name]
+        if time_s < st.plan.t0_s + st.plan.duration_s:
+            raise AxisBusyError(f"{name} is still moving: start the profile once it is at rest")
+        started = profile.started_at(self._commanded(name, time_s))
+        s = st.spec
+        problems = started.limit_problems(name, s.min_pos, s.max_pos, s.max_rate, s.max_accel)
+        if problems:
+            raise SoftLimitError("; ".join(p.message for p in problems))
+        st.plan = ProfilePlan(started, time_s)
+        for other in self._state.values():
+            other.stopped_at = None
+        return started
+
+    def running_profile(self, time_s: float) -> tuple[str, ProfilePlan] | None:
+        """(axis, plan) of the profile running at ``time_s``, else None."""
+        for name, st in self._state.items():
+            if (plan := st.running_profile(time_s)) is not None:
+                return name, plan
+        return None
 
     def stop(self, time_s: float) -> None:
         """Stop every axis at once where it is (emergency stop)."""
@@ -168,7 +239,8 @@ class Turntable:
         st = self._state[name]
         t_end = st.plan.t0_s + st.plan.duration_s
         dt = time_s - t_end
-        if dt < 0 or st.plan.end == st.plan.start:
+        # a profile ends with rate and acceleration continuous: followed exactly, no ring
+        if dt < 0 or st.plan.end == st.plan.start or isinstance(st.plan, ProfilePlan):
             return 0.0
         s = st.spec
         amp = s.settle_amplitude * (st.plan.end - st.plan.start)

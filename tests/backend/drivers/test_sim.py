@@ -10,6 +10,7 @@ import pytest
 from backend.drivers.base import CameraDriver, CameraSettings, MotionDriver
 from backend.drivers.sim import SimCamera, SimMotion, make_sim_world
 from tofpose.geometry import rotation_angle_deg
+from tofpose.motion_profile import SineProfile
 
 
 @pytest.fixture
@@ -101,3 +102,32 @@ def test_closed_camera_read_times_out(world):
     cam.close()
     with pytest.raises(TimeoutError):
         cam.read(0.5)
+
+
+def test_the_table_follows_a_sine_profile_and_stamps_its_encoders():
+    """Status reads during a sine slew: each encoder reading matches the profile at the
+    reading's own time stamp, and the rate from consecutive stamped readings matches
+    the profile's rate; the status names the profile while it runs."""
+    world = make_sim_world(seed=5, time_scale=4.0)
+    motion = SimMotion(world)
+    assert motion.axes["yaw"].max_accel == 40.0 and motion.profile_unavailable is None
+    start = motion.status().positions["yaw"]
+    profile = SineProfile(5.0, 4.0, 1)
+    motion.run_profile("yaw", profile)
+    reads = []
+    while (st := motion.status()).profile is not None:
+        assert st.busy and st.profile.axis == "yaw" and st.profile.kind == "sine"
+        reads.append((st.time_s, st.positions["yaw"], st.profile.elapsed_s))
+        time.sleep(0.02)
+    t_s, yaw, elapsed = (np.array(c) for c in zip(*reads, strict=True))
+    assert len(reads) > 50 and elapsed.max() > 11.0  # 12 s of lab time, seen to the end
+    t0 = t_s[0] - elapsed[0]
+    assert np.allclose(t_s - elapsed, t0)  # elapsed counts on the encoders' clock
+    expected = profile.started_at(start).angle_deg_at(t_s - t0)
+    assert np.abs(yaw - expected).max() < 2e-3
+    rate = np.diff(yaw) / np.diff(t_s)
+    mid = 0.5 * (t_s[1:] + t_s[:-1]) - t0
+    assert np.abs(rate - profile.rate_deg_s_at(mid)).max() < 0.1  # noise / ~0.08 s, curvature
+    assert np.abs(rate).max() == pytest.approx(profile.peak_rate_deg_s, rel=0.05)
+    done = motion.status()
+    assert not done.busy and done.positions["yaw"] == pytest.approx(start, abs=2e-3)
