@@ -5,8 +5,10 @@ The resource is any VISA resource name; for a controller on the network that is
 ``TCPIP::host::port::SOCKET``, and GPIB or serial controllers work the same way. The
 command set (docs/devices.md, "Rate-table protocol"): ``:MODE n,POS``,
 ``:INTerlock:CLOSe n``, ``:DEMand:POSition n,deg``, ``:READ:POSition? n``, ``:STATus? n``,
-``:ABORt``, limits with ``:LIMit:POSition:LOW? n`` / ``HIGH?`` / ``:LIMit:VELocity? n``,
-errors from ``:SYSTem:ERRor?``.
+``:ABORt``, limits with ``:LIMit:POSition:LOW? n`` / ``HIGH?`` / ``:LIMit:VELocity? n`` /
+``:LIMit:ACCeleration? n``, errors from ``:SYSTem:ERRor?``; motion profiles through
+synthesis mode: ``:MODE n,SYNT``, ``:SYNThesis:SINE`` / ``:SYNThesis:RAMP``,
+``:SYNThesis:STARt n``, ``:SYNThesis:STATus? n``.
 
 Policy:
 
@@ -14,7 +16,10 @@ Policy:
   raises ``MotionError`` naming the command and the controller's message.
 - Before a move, the driver puts each axis it moves in position mode and closes its
   interlock (as an operator's software does); a fault or an open safety interlock is
-  reported, never overridden.
+  reported, never overridden. A profile does the same with synthesis mode.
+- A controller without synthesis mode (its ``:SYNThesis:STATus?`` query is an undefined
+  header at connect time) runs no profiles: ``profile_unavailable`` says so, and
+  ``run_profile`` raises ``MotionError`` with that sentence.
 - ``stop`` goes out on a session of its own, opened at connect time, so it never waits
   behind a query in flight on the command session.
 - Any I/O error or time-out closes the session; the next call reconnects (the server
@@ -26,9 +31,11 @@ from __future__ import annotations
 import contextlib
 import re
 import threading
+import time
 from typing import Any
 
-from backend.drivers.base import AxisLimits, MotionError, MotionStatus
+from backend.drivers.base import AxisLimits, MotionError, MotionStatus, ProfileStatus
+from tofpose.motion_profile import MotionProfile, SineProfile
 
 DEFAULT_AXIS_NUMBERS = {"yaw": 1, "pitch": 2, "roll": 3, "rail": 4}
 STATUS_IN_MOTION = 2
@@ -78,6 +85,7 @@ class ScpiRateTable:
         self.axis_numbers, self.axes = self._read_axes(axis_numbers or DEFAULT_AXIS_NUMBERS)
         if not self.axes:
             raise MotionError(f"{resource}: the controller reports none of the axes asked for")
+        self.profile_unavailable = self._probe_synthesis()
 
     # -- link ---------------------------------------------------------------------------
     def _open(self) -> Any:
@@ -161,23 +169,68 @@ class ScpiRateTable:
                     raise
                 continue
             numbers[name] = n
+            accel = self._optional_number(f":LIM:ACC? {n}")
             axes[name] = AxisLimits(name, unit.strip().lower(), float(low), float(high),
-                                    float(vel))  # fmt: skip
+                                    float(vel), accel)  # fmt: skip
         return numbers, axes
+
+    def _optional_number(self, query: str) -> float | None:
+        """The answer to a query some controllers lack, or None when this one does."""
+        try:
+            (answer,) = self.query(query)
+        except MotionError:
+            if self._session is None:  # the link, not the command: report it
+                raise
+            return None
+        return float(answer)
+
+    def _probe_synthesis(self) -> str | None:
+        """None if the controller has synthesis mode, else why profiles cannot run."""
+        n = next(iter(self.axis_numbers.values()))
+        try:
+            self.query(f":SYNT:STAT? {n}")
+        except MotionError as exc:
+            if self._session is None:
+                raise
+            return (f"the controller at {self.resource} has no synthesis mode ({exc}), so it "
+                    "cannot run motion profiles")  # fmt: skip
+        return None
+
+    def _prepare(self, inst: Any, n: int, mode: str) -> None:
+        """Close axis ``n``'s interlock and select ``mode`` (``POS``, ``SYNT``) if needed."""
+        current, closed = self._exchange(inst, f":MODE? {n};:INT? {n}")
+        if closed.strip() != "1":
+            self._exchange(inst, f":INT:CLOS {n}")
+        if current.strip().upper() != mode:
+            self._exchange(inst, f":MODE {n},{mode}")
 
     # -- MotionDriver -------------------------------------------------------------------
     def move_to(self, setpoints: dict[str, float]) -> None:
         with self._lock:
             inst = self._ensure()
             for name in setpoints:
-                n = self.axis_numbers[name]
-                mode, closed = self._exchange(inst, f":MODE? {n};:INT? {n}")
-                if closed.strip() != "1":
-                    self._exchange(inst, f":INT:CLOS {n}")
-                if mode.strip().upper() != "POS":
-                    self._exchange(inst, f":MODE {n},POS")
+                self._prepare(inst, self.axis_numbers[name], "POS")
             for name, value in setpoints.items():
                 self._exchange(inst, f":DEM:POS {self.axis_numbers[name]},{value:.6f}")
+
+    def run_profile(self, axis: str, profile: MotionProfile) -> None:
+        """Load ``profile`` into the controller's synthesis generator for ``axis`` and
+        start it there (the controller times it and checks it against its own limits);
+        ``MotionError`` when the controller has no synthesis mode or refuses."""
+        if self.profile_unavailable is not None:
+            raise MotionError(self.profile_unavailable)
+        n = self.axis_numbers[axis]
+        if isinstance(profile, SineProfile):
+            load = (f":SYNT:SINE {n},{profile.amplitude_deg:.6f},{1.0 / profile.period_s:.12g},"
+                    f"{profile.cycles}")  # fmt: skip
+        else:
+            load = (f":SYNT:RAMP {n},{profile.rate_deg_s:.6f},{profile.accel_deg_s2:.6f},"
+                    f"{profile.hold_s:.6f}")  # fmt: skip
+        with self._lock:
+            inst = self._ensure()
+            self._prepare(inst, n, "SYNT")
+            self._exchange(inst, load)
+            self._exchange(inst, f":SYNT:STAR {n}")
 
     def stop(self) -> None:
         """Abort every axis, on the stop session (never queued behind another command)."""
@@ -191,21 +244,34 @@ class ScpiRateTable:
             self._exchange(inst, ":ABOR")
 
     def status(self) -> MotionStatus:
-        query = ";".join(
-            f":READ:POS? {n};:DEM:POS? {n};:STAT? {n}" for n in self.axis_numbers.values()
-        )
+        """Encoders, demands and state bits of every axis in one round trip (plus each
+        rotary axis' synthesis state when the controller has one), stamped with the
+        host's monotonic clock halfway through it."""
+        per_axis = ":READ:POS? {n};:DEM:POS? {n};:STAT? {n}"
+        if self.profile_unavailable is None:
+            per_axis += ";:SYNT:STAT? {n}"
+        k = per_axis.count(";") + 1
+        query = ";".join(per_axis.format(n=n) for n in self.axis_numbers.values())
+        sent_s = time.monotonic()
         parts = self.query(query)
-        if len(parts) != 3 * len(self.axis_numbers):
+        time_s = 0.5 * (sent_s + time.monotonic())
+        if len(parts) != k * len(self.axis_numbers):
             raise MotionError(f"{self.resource}: status reply has {len(parts)} fields")
         positions, targets, busy, settled, stopped = {}, {}, False, True, False
+        profile = None
         for i, name in enumerate(self.axis_numbers):
-            pos, target, bits = parts[3 * i : 3 * i + 3]
+            pos, target, bits, *synthesis = parts[k * i : k * i + k]
             positions[name], targets[name] = float(pos), float(target)
             b = int(bits)
             busy |= bool(b & STATUS_IN_MOTION)
             settled &= bool(b & STATUS_IN_POSITION)
             stopped |= bool(b & STATUS_ABORTED)
-        return MotionStatus(positions, targets, busy, settled and not busy, stopped)
+            if synthesis and synthesis[0].strip().upper() != "IDLE":
+                kind, elapsed, remaining = synthesis[0].split(",")
+                profile = ProfileStatus(name, kind.strip().lower(), float(elapsed),
+                                        float(elapsed) + float(remaining))  # fmt: skip
+        return MotionStatus(positions, targets, busy, settled and not busy, stopped, time_s,
+                            profile)  # fmt: skip
 
     def reset_faults(self) -> None:
         """Clear the controller's axis faults (the operator's acknowledgement after the

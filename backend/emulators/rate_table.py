@@ -10,6 +10,14 @@ closed; ``:ABORt`` stops every axis at once. Errors go to the session's SCPI err
 (``:SYSTem:ERRor?``), as SCPI instruments do. Faults and the safety interlock can be
 injected (``inject_fault``, ``set_safety_open`` or the emulator-only ``:SIMulate:...``
 commands), so that a driver's refusal and recovery paths can be tested.
+
+Synthesis mode (``:MODE n,SYNThesis``), as rate-table controllers offer it beside position
+and rate modes: the controller generates the axis' demand from a loaded function, a sine
+(``:SYNThesis:SINE n,amplitude,frequency,cycles``) or a constant-rate ramp
+(``:SYNThesis:RAMP n,rate,acceleration,hold``), started about the axis' position by
+``:SYNThesis:STARt n`` (tofpose.motion_profile gives both shapes). A controller made with
+``synthesis=False`` has none of it (an older command set), so a driver's refusal can be
+tested.
 """
 
 from __future__ import annotations
@@ -26,6 +34,8 @@ from backend.drivers.sim import SimWorld
 from backend.emulators.scpi_parse import ParsedCommand, ScpiError, parse_command, split_message
 from backend.emulators.tcp import ServedEmulator, TrackedHandler, TrackedTCPServer
 from tofpose import __version__
+from tofpose.motion_profile import MotionProfile, RampProfile, SineProfile
+from tofpose.sim.turntable import AxisBusyError, SoftLimitError
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +57,9 @@ ERR_INTERLOCK_OPEN = 201
 ERR_SAFETY_OPEN = 202
 ERR_AXIS_FAULT = 203
 ERR_NOT_POSITION_MODE = 204
+ERR_NOT_SYNTHESIS_MODE = 205
+ERR_NO_FUNCTION = 206
+ERR_FUNCTION_RUNNING = 207
 
 TREE: dict[tuple[str, ...], str] = {
     ("SYSTem", "ERRor"): "system_error",
@@ -63,20 +76,28 @@ TREE: dict[tuple[str, ...], str] = {
     ("LIMit", "POSition", "LOW"): "limit_low",
     ("LIMit", "POSition", "HIGH"): "limit_high",
     ("LIMit", "VELocity"): "limit_velocity",
+    ("LIMit", "ACCeleration"): "limit_acceleration",
     ("UNIT",): "unit",
     ("SIMulate", "SAFEty"): "simulate_safety",
     ("SIMulate", "FAULt"): "simulate_fault",
+    ("SYNThesis",): "synthesis",
+    ("SYNThesis", "SINE"): "synthesis_sine",
+    ("SYNThesis", "RAMP"): "synthesis_ramp",
+    ("SYNThesis", "STARt"): "synthesis_start",
+    ("SYNThesis", "STATus"): "synthesis_status",
 }
+SYNTHESIS_NODE = "SYNThesis"
 
 
 @dataclass
 class _Axis:
     name: str
-    mode: str = "OFF"  # OFF | POS
+    mode: str = "OFF"  # OFF | POS | SYNT
     interlock_closed: bool = False
     fault: str | None = None
     low: float = 0.0
     high: float = 0.0
+    function: MotionProfile | None = None  # loaded for synthesis mode
 
 
 class _Session:
@@ -94,10 +115,14 @@ class _Session:
 
 class RateTableController:
     """The controller's logic (no sockets): ``execute(session, line)`` returns the reply
-    line or None. Thread-safe: sessions run in their own threads."""
+    line or None. Thread-safe: sessions run in their own threads. ``synthesis=False``
+    models a controller without synthesis mode (its ``:SYNThesis`` commands are undefined
+    headers)."""
 
-    def __init__(self, world: SimWorld) -> None:
+    def __init__(self, world: SimWorld, *, synthesis: bool = True) -> None:
         self.world = world
+        self.synthesis = synthesis
+        self.tree = {p: h for p, h in TREE.items() if synthesis or p[0] != SYNTHESIS_NODE}
         tt_axes = world.bench.turntable.axes
         self.axes = {
             n: _Axis(name, low=tt_axes[name].min_pos, high=tt_axes[name].max_pos)
@@ -136,7 +161,7 @@ class RateTableController:
         replies = []
         for text in split_message(line):
             try:
-                cmd = parse_command(text, TREE)
+                cmd = parse_command(text, self.tree)
                 with self._lock:
                     reply = self._dispatch(session, cmd)
             except ScpiError as err:
@@ -168,7 +193,7 @@ class RateTableController:
         if name == "*RST" and not cmd.query:
             self._abort_all()
             for ax in self.axes.values():
-                ax.mode, ax.interlock_closed = "OFF", False
+                ax.mode, ax.interlock_closed, ax.function = "OFF", False, None
             return None
         raise ScpiError(-113, f"Undefined header; {name}{'?' if cmd.query else ''}")
 
@@ -231,14 +256,35 @@ class RateTableController:
         ax, (mode,) = self._axis_arg(cmd, 2)
         mode = mode.upper()
         if mode in ("POS", "POSITION"):
-            ax.mode = "POS"
+            new = "POS"
         elif mode == "OFF":
-            ax.mode = "OFF"
-        elif mode in ("RATE", "SYNT", "SYNTHESIS"):
+            new = "OFF"
+        elif mode in ("SYNT", "SYNTHESIS"):
+            if not self.synthesis:
+                raise ScpiError(-221, "Settings conflict; this controller has no synthesis mode")
+            new = "SYNT"
+        elif mode == "RATE":
             raise ScpiError(-221, f"Settings conflict; {mode} mode is not modelled")
         else:
             raise ScpiError(-224, f"Illegal parameter value; mode {mode!r}")
+        if new != ax.mode:
+            self._no_function_running(ax)
+        ax.mode = new
         return None
+
+    def _no_function_running(self, ax: _Axis) -> None:
+        running = self.world.motion_status().profile
+        if running is not None and running.axis == ax.name:
+            raise ScpiError(ERR_FUNCTION_RUNNING, "Synthesis function running; ABORt it first")
+
+    def _drive_enabled(self, ax: _Axis) -> None:
+        """The checks every motion command makes, in this order."""
+        if self.safety_open:
+            raise ScpiError(ERR_SAFETY_OPEN, "Safety interlock open")
+        if ax.fault is not None:
+            raise ScpiError(ERR_AXIS_FAULT, f"Axis fault; {ax.fault}")
+        if not ax.interlock_closed:
+            raise ScpiError(ERR_INTERLOCK_OPEN, "Axis interlock open; close it first")
 
     def _demand_position(self, session: _Session, cmd: ParsedCommand) -> str | None:
         if cmd.query:
@@ -249,12 +295,7 @@ class RateTableController:
         if not ax.low <= value <= ax.high:
             msg = f"Data out of range; {value:g} outside [{ax.low:g}, {ax.high:g}]"
             raise ScpiError(-222, msg)
-        if self.safety_open:
-            raise ScpiError(ERR_SAFETY_OPEN, "Safety interlock open")
-        if ax.fault is not None:
-            raise ScpiError(ERR_AXIS_FAULT, f"Axis fault; {ax.fault}")
-        if not ax.interlock_closed:
-            raise ScpiError(ERR_INTERLOCK_OPEN, "Axis interlock open; close it first")
+        self._drive_enabled(ax)
         if ax.mode != "POS":
             raise ScpiError(ERR_NOT_POSITION_MODE, "Axis not in position mode")
         self.world.move_to({ax.name: value})
@@ -350,6 +391,11 @@ class RateTableController:
         ax, _ = self._axis_arg(cmd)
         return f"{self.world.bench.turntable.axes[ax.name].max_rate:.6f}"
 
+    def _limit_acceleration(self, session: _Session, cmd: ParsedCommand) -> str:
+        self._query_only(cmd)
+        ax, _ = self._axis_arg(cmd)
+        return f"{self.world.bench.turntable.axes[ax.name].max_accel:.6f}"
+
     def _unit(self, session: _Session, cmd: ParsedCommand) -> str:
         self._query_only(cmd)
         ax, _ = self._axis_arg(cmd)
@@ -370,6 +416,82 @@ class RateTableController:
         ax_text, text = self._want_args(cmd, 2)
         self._axis_of(ax_text)  # names a bad axis before anything changes
         self.inject_fault(int(ax_text), text.strip('"') or "injected fault")
+
+    # -- synthesis mode -----------------------------------------------------------------
+    def _rotary_axis_arg(self, cmd: ParsedCommand, n_args: int) -> tuple[_Axis, tuple[str, ...]]:
+        ax, rest = self._axis_arg(cmd, n_args)
+        if ax.name == "rail":
+            raise ScpiError(-221, "Settings conflict; synthesis runs on the rotary axes 1-3")
+        return ax, rest
+
+    def _synthesis(self, session: _Session, cmd: ParsedCommand) -> str:
+        """The loaded function: ``NONE``, ``SINE,amplitude,frequency,cycles`` or
+        ``RAMP,rate,acceleration,hold``."""
+        self._query_only(cmd)
+        ax, _ = self._axis_arg(cmd)
+        f = ax.function
+        if isinstance(f, SineProfile):
+            return f"SINE,{f.amplitude_deg:.6f},{1.0 / f.period_s:.12g},{f.cycles}"
+        if isinstance(f, RampProfile):
+            return f"RAMP,{f.rate_deg_s:.6f},{f.accel_deg_s2:.6f},{f.hold_s:.6f}"
+        return "NONE"
+
+    def _load(self, ax: _Axis, make) -> None:
+        self._no_function_running(ax)
+        try:
+            ax.function = make()
+        except ValueError as exc:
+            raise ScpiError(-222, f"Data out of range; {exc}") from None
+
+    def _synthesis_sine(self, session: _Session, cmd: ParsedCommand) -> None:
+        self._no_query(cmd)
+        ax, (amp, freq, cycles) = self._rotary_axis_arg(cmd, 4)
+        amplitude, frequency, n = self._number(amp), self._number(freq), self._number(cycles)
+        if not n.is_integer():
+            raise ScpiError(-104, f"Data type error; cycles must be a whole number, got {cycles!r}")
+        if frequency <= 0:
+            raise ScpiError(-222, f"Data out of range; frequency {frequency:g} Hz must be > 0")
+        self._load(ax, lambda: SineProfile(amplitude, 1.0 / frequency, int(n)))
+
+    def _synthesis_ramp(self, session: _Session, cmd: ParsedCommand) -> None:
+        self._no_query(cmd)
+        ax, args = self._rotary_axis_arg(cmd, 4)
+        rate, accel, hold = (self._number(a) for a in args)
+        self._load(ax, lambda: RampProfile(rate, hold, accel))
+
+    def _synthesis_start(self, session: _Session, cmd: ParsedCommand) -> None:
+        """Run the loaded function about the axis' position now, if it keeps within the
+        soft limits and the axis' rate and acceleration limits (-222 naming each)."""
+        self._no_query(cmd)
+        ax, _ = self._rotary_axis_arg(cmd, 1)
+        self._drive_enabled(ax)
+        if ax.mode != "SYNT":
+            raise ScpiError(ERR_NOT_SYNTHESIS_MODE, "Axis not in synthesis mode")
+        if ax.function is None:
+            raise ScpiError(ERR_NO_FUNCTION, "No synthesis function loaded")
+        spec = self.world.bench.turntable.axes[ax.name]
+        here = self.world.motion_status().positions[ax.name]
+        problems = ax.function.started_at(here).limit_problems(
+            ax.name, ax.low, ax.high, spec.max_rate, spec.max_accel
+        )
+        if problems:
+            raise ScpiError(-222, "Data out of range; " + "; ".join(p.message for p in problems))
+        try:
+            self.world.run_profile(ax.name, ax.function)
+        except AxisBusyError as exc:
+            raise ScpiError(-221, f"Settings conflict; {exc}") from None
+        except SoftLimitError as exc:
+            raise ScpiError(-222, f"Data out of range; {exc}") from None
+        self.aborted = False
+
+    def _synthesis_status(self, session: _Session, cmd: ParsedCommand) -> str:
+        """``IDLE``, or the running function's kind, elapsed and remaining seconds."""
+        self._query_only(cmd)
+        ax, _ = self._axis_arg(cmd)
+        running = self.world.motion_status().profile
+        if running is None or running.axis != ax.name:
+            return "IDLE"
+        return f"{running.kind.upper()},{running.elapsed_s:.6f},{running.remaining_s:.6f}"
 
 
 TREE_BY_PATH = {tuple(n.upper() for n in path): name for path, name in TREE.items()}
@@ -418,8 +540,11 @@ class RateTableEmulator(ServedEmulator):
 
     thread_name = "rate-table-emulator"
 
-    def __init__(self, world: SimWorld, host: str = "127.0.0.1", port: int = 5025) -> None:
-        self.controller = RateTableController(world)
+    def __init__(
+        self, world: SimWorld, host: str = "127.0.0.1", port: int = 5025, *,
+        synthesis: bool = True,
+    ) -> None:  # fmt: skip
+        self.controller = RateTableController(world, synthesis=synthesis)
         self._server = _Server((host, port), self.controller)
 
     @property

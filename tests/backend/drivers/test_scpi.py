@@ -6,6 +6,7 @@ from __future__ import annotations
 import threading
 import time
 
+import numpy as np
 import pytest
 
 from backend.drivers.base import MotionError
@@ -13,6 +14,7 @@ from backend.drivers.scpi import ScpiRateTable
 from backend.drivers.sim import make_sim_world
 from backend.emulators.rate_table import RateTableEmulator
 from tests.backend.conftest import wait_for
+from tofpose.motion_profile import RampProfile, SineProfile
 
 
 @pytest.fixture
@@ -120,3 +122,66 @@ def test_concurrent_status_and_moves_do_not_interleave_replies(table):
     for t in threads:
         t.join()
     assert errors == []
+
+
+def test_runs_a_sine_profile_through_synthesis_mode(emu, table):
+    """The controller times the profile: the encoders read back through the driver follow
+    the sine about the start, the status names it while it runs, and a move afterwards
+    puts the axis back in position mode."""
+    assert table.profile_unavailable is None and table.axes["yaw"].max_accel == 40.0
+    table.move_to({"yaw": 20.0})
+    wait_for(lambda: (s := table.status()).settled and s, 10.0, "the move to settle")
+    profile = SineProfile(5.0, 4.0, 2)  # 16 lab-s, 0.8 s here
+    table.run_profile("yaw", profile)
+    started = profile.started_at(20.0)
+    seen = []
+    while (st := table.status()).profile is not None:
+        assert st.profile.axis == "yaw" and st.profile.kind == "sine" and st.busy
+        assert st.profile.duration_s == pytest.approx(16.0)
+        seen.append((st.profile.elapsed_s, st.positions["yaw"]))
+        time.sleep(0.01)
+    assert len(seen) > 10 and max(y for _, y in seen) > 23.0  # swung out, not just sat
+    for elapsed, yaw in seen:
+        # the encoder and the elapsed time are answered a moment apart in one round trip
+        # (20x lab time): the reading lies on the profile within 0.3 lab-s of it
+        near = started.angle_deg_at(elapsed + np.linspace(-0.3, 0.3, 6001))
+        assert np.abs(near - yaw).min() < 2e-3, (elapsed, yaw)
+    assert emu.controller.axes[1].mode == "SYNT"
+    assert table.status().positions["yaw"] == pytest.approx(20.0, abs=1e-3)
+    table.move_to({"yaw": 0.0})
+    wait_for(lambda: abs(table.status().positions["yaw"]) < 1e-3, 10.0, "the move back")
+    assert emu.controller.axes[1].mode == "POS"
+
+
+def test_stop_ends_a_profile_on_the_controller(emu, table):
+    table.run_profile("roll", RampProfile(10.0, 10.0, 30.0))  # 103 deg in 10.7 lab-s
+    time.sleep(0.1)
+    table.stop()
+    st = table.status()
+    assert st.stopped and st.profile is None and not st.busy
+    time.sleep(0.1)
+    assert table.status().positions["roll"] == pytest.approx(st.positions["roll"], abs=1e-3)
+    assert 1.0 < st.positions["roll"] < 100.0
+
+
+def test_the_controllers_own_limit_check_is_reported(emu, table):
+    emu.controller.axes[2].high = 3.0  # narrowed on the controller after the driver read it
+    with pytest.raises(MotionError, match=r"-222 Data out of range; pitch would sweep"):
+        table.run_profile("pitch", SineProfile(5.0, 4.0, 1))
+    assert table.status().profile is None
+
+
+def test_a_controller_without_synthesis_mode_refuses_profiles_clearly():
+    with RateTableEmulator(make_sim_world(time_scale=20.0), port=0, synthesis=False) as emu:
+        drv = ScpiRateTable(emu.resource, timeout_s=1.0)
+        try:
+            assert "has no synthesis mode" in drv.profile_unavailable
+            with pytest.raises(MotionError, match="cannot run motion profiles"):
+                drv.run_profile("yaw", SineProfile(5.0, 4.0, 1))
+            st = drv.status()  # status still works, without the synthesis queries
+            assert st.profile is None and not st.busy
+            assert emu.controller.world.bench.turntable.running_profile(1e9) is None
+            drv.move_to({"yaw": 1.0})  # and so do moves
+            wait_for(lambda: drv.status().positions["yaw"] > 0.99, 10.0, "the move")
+        finally:
+            drv.close()

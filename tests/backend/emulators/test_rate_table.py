@@ -121,6 +121,13 @@ def test_fault_blocks_its_axis_until_cleared(c):
         (":read:pos 1", -113, "query only"),
         (":lim:pos:low 1,-500", -222, "beyond the hardware range"),
         (":lim:pos:low 1,171", -222, "beyond the hardware range"),
+        (":synt:sine 4,5,0.25,1", -221, "rotary axes"),
+        (":synt:sine 1,5,0.25,1.5", -104, "whole number"),
+        (":synt:sine 1,5,0,1", -222, "frequency 0 Hz"),
+        (":synt:sine 1,-5,0.25,1", -222, "amplitude_deg must be > 0"),
+        (":synt:ramp 1,0,40,1", -222, "rate_deg_s must be finite and not 0"),
+        (":synt:ramp 1,5,40", -109, "Missing parameter"),
+        (":synt:stat 1", -113, "query only"),
     ],
 )
 def test_bad_commands_are_queued_errors_naming_the_problem(c, line, code, names):
@@ -153,3 +160,58 @@ def test_close_drops_connected_clients(emu, c):
     c.sock.settimeout(2)
     with contextlib.suppress(ConnectionResetError):  # a reset: gone as well
         assert c.sock.recv(10) == b""  # EOF: the link is gone
+
+
+def test_synthesis_runs_a_loaded_sine_about_the_axis_position(emu, c):
+    assert c.ask(":lim:acc? 1;:lim:vel? 1") == "40.000000;20.000000"
+    assert c.ask(":synt? 1") == "NONE"
+    c.send(":int:clos 1;:mode 1,pos;:dem:pos 1,10")
+    time.sleep(0.2)
+    c.send(":synt:sine 1,5,0.25,2")  # 5 deg, 0.25 Hz (4 s), 2 full cycles: 16 lab-s
+    assert c.ask(":synt? 1") == "SINE,5.000000,0.25,2"
+    c.send(":synt:star 1")
+    assert c.ask(":syst:err?").startswith("205,")  # not in synthesis mode
+    c.send(":mode 1,synt;:synt:star 1")
+    assert c.ask(":syst:err?") == '0,"No error"'
+    time.sleep(0.1)
+    kind, elapsed, remaining = c.ask(":synt:stat? 1").split(",")
+    assert kind == "SINE" and float(elapsed) + float(remaining) == pytest.approx(16.0)
+    assert int(c.ask(":stat? 1")) & 2  # in motion
+    running = emu.controller.world.bench.turntable.running_profile(emu.controller.world.now_s())
+    assert running[0] == "yaw" and running[1].profile.start_deg == pytest.approx(10.0, abs=1e-3)
+    c.send(":mode 1,pos")  # a running function is only ended by ABORt (or its end)
+    assert c.ask(":syst:err?") == '207,"Synthesis function running; ABORt it first"'
+    c.send(":synt:ramp 1,5,40,1")
+    assert c.ask(":syst:err?").startswith("207,")
+    assert c.ask(":synt:stat? 2") == "IDLE"
+    c.send(":abor")
+    assert c.ask(":synt:stat? 1") == "IDLE" and int(c.ask(":stat? 1")) & STATUS_ABORTED
+
+
+def test_synthesis_refuses_what_the_table_cannot_follow(c):
+    c.send(":synt:star 1")
+    assert c.ask(":syst:err?").startswith("201,")  # interlock open, checked first
+    c.send(":int:clos 1;:mode 1,synt;:synt:star 1")
+    assert c.ask(":syst:err?") == '206,"No synthesis function loaded"'
+    c.send(":synt:sine 1,10,0.5,1;:synt:star 1")  # 31 deg/s, 99 deg/s^2
+    reply = c.ask(":syst:err?")
+    assert reply.startswith("-222,") and "rate limit of 20" in reply, reply
+    assert "acceleration limit of 40" in reply
+    c.send(":lim:pos:high 1,3;:synt:ramp 1,5,40,1;:synt:star 1")  # 5.6 deg of travel
+    reply = c.ask(":syst:err?")
+    assert reply.startswith("-222,") and "soft limits [-170, 3]" in reply, reply
+    assert c.ask(":synt:stat? 1") == "IDLE" and abs(float(c.ask(":read:pos? 1"))) < 0.01
+
+
+def test_a_controller_without_synthesis_has_none_of_its_commands():
+    with RateTableEmulator(make_sim_world(), port=0, synthesis=False) as emu:
+        c = Client(emu.address)
+        try:
+            c.send(":synt:stat? 1")
+            assert c.ask(":syst:err?").startswith("-113,")
+            c.send(":mode 1,synt")
+            reply = c.ask(":syst:err?")
+            assert reply == '-221,"Settings conflict; this controller has no synthesis mode"'
+            assert c.ask(":mode? 1") == "OFF"
+        finally:
+            c.close()
