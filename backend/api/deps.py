@@ -23,7 +23,12 @@ bearer_scheme = HTTPBearer(
 def unprocessable(loc: list[str | int], messages: list[str]) -> HTTPException:
     """A 422 shaped like FastAPI's own validation errors (``detail`` = list of
     ``{loc, msg, type}``), so clients handle every 422 the same way."""
-    detail = [{"loc": loc, "msg": m, "type": "value_error"} for m in messages]
+    return unprocessable_at([(loc, m) for m in messages])
+
+
+def unprocessable_at(problems: list[tuple[list[str | int], str]]) -> HTTPException:
+    """As ``unprocessable``, with a location of its own for each message."""
+    detail = [{"loc": loc, "msg": m, "type": "value_error"} for loc, m in problems]
     return HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, detail)
 
 

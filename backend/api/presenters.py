@@ -24,6 +24,7 @@ from backend.api.schemas import (
     MotionPublic,
     PipelineStatePublic,
     PosePublic,
+    ProfilePublic,
     ProgressPublic,
     RejectedBlobPublic,
     Requirements,
@@ -86,7 +87,7 @@ def motion_public(state: AppState) -> MotionPublic:
         return MotionPublic(driver="none", state="absent")
     axes = [
         AxisPublic(name=a.name, unit=a.unit, min_pos=a.min_pos, max_pos=a.max_pos,
-                   max_rate_per_s=a.max_rate)
+                   max_rate_per_s=a.max_rate, max_accel_per_s2=a.max_accel)
         for a in motion.axes.values()
     ]  # fmt: skip
     owner = state.campaigns.owner
@@ -98,9 +99,15 @@ def motion_public(state: AppState) -> MotionPublic:
         state.motion_health.record_failure(f"motion status failed: {exc}")
         return MotionPublic(**motion_state(state).model_dump(), axes=axes, **owned)
     state.motion_health.record_ok()
+    p = st.profile
+    profile = None if p is None else ProfilePublic(
+        axis=p.axis, kind=p.kind, elapsed_s=p.elapsed_s, remaining_s=p.remaining_s,
+        duration_s=p.duration_s,
+    )  # fmt: skip
     return MotionPublic(
         **motion_state(state).model_dump(), axes=axes, positions=st.positions,
-        targets=st.targets, busy=st.busy, settled=st.settled, stopped=st.stopped, **owned,
+        time_s=st.time_s, targets=st.targets, busy=st.busy, settled=st.settled,
+        stopped=st.stopped, profile=profile, **owned,
     )  # fmt: skip
 
 

@@ -92,15 +92,35 @@ class AxisPublic(BaseModel):
     min_pos: float
     max_pos: float
     max_rate_per_s: float
+    max_accel_per_s2: float | None = Field(
+        None, description="acceleration limit; null when the motion system does not report "
+        "one (then it runs no profiles on that axis)",
+    )  # fmt: skip
+
+
+class ProfilePublic(BaseModel):
+    """The motion profile running now (POST /api/motion/profile)."""
+
+    axis: str
+    kind: Literal["sine", "ramp"]
+    elapsed_s: float
+    remaining_s: float
+    duration_s: float = Field(description="the whole profile, fades and ramps included")
 
 
 class MotionPublic(DeviceStatePublic):
     axes: list[AxisPublic] = []
     positions: dict[str, float] = Field(default_factory=dict, description="encoders, deg / mm")
+    time_s: float | None = Field(
+        None, description="when the encoders were read, s, on the clock of the camera's "
+        "frames where the motion system shares it (the simulated lab), else the server's "
+        "monotonic clock",
+    )  # fmt: skip
     targets: dict[str, float] = Field(default_factory=dict)
     busy: bool = False
     settled: bool = True
     stopped: bool = False
+    profile: ProfilePublic | None = Field(None, description="the profile running, if any")
     owner_campaign_id: int | None = Field(
         None,
         description="the campaign that owns the motion system while it runs (manual "
@@ -370,6 +390,62 @@ class JogRequest(AxisBody):
         """(axis name, step in its unit) of the one axis given."""
         ((name, step),) = {k: v for k, v in self.model_dump().items() if v is not None}.items()
         return name.rsplit("_", 1)[0], step
+
+
+PROFILE_MAX_S = 3600.0
+"""The longest profile phase taken (a sine's period, a ramp's hold)."""
+ProfileAxis = Literal["yaw", "pitch", "roll"]
+
+
+class SineProfileRequest(StrictBody):
+    """A sine slew about the axis' position when the request arrives: angle = start +
+    amplitude_deg * e(t) * sin(2 pi t / period_s), the envelope e fading in over the first
+    period and out over the last (raised cosine), full amplitude for ``cycles`` periods
+    between, so the whole profile lasts (cycles + 2) * period_s and starts and ends at
+    rest. Peak rate amplitude_deg * 2 pi / period_s; peak acceleration about 5 % above
+    amplitude_deg * (2 pi / period_s)^2."""
+
+    axis: ProfileAxis
+    kind: Literal["sine"]
+    amplitude_deg: float = Field(gt=0, le=180.0, description="either side of the start, deg")
+    period_s: float = Field(ge=0.1, le=PROFILE_MAX_S)
+    cycles: JsonInt = Field(1, ge=1, le=1000, description="periods at full amplitude")
+
+
+class RampProfileRequest(StrictBody):
+    """A constant-rate slew from the axis' position when the request arrives: the rate
+    rises to rate_deg_s at accel_deg_s2, holds for hold_s and falls back to rest at
+    accel_deg_s2 (travel rate_deg_s * (hold_s + |rate_deg_s| / accel_deg_s2))."""
+
+    axis: ProfileAxis
+    kind: Literal["ramp"]
+    rate_deg_s: float = Field(
+        ge=-1000.0, le=1000.0, description="signed rate, deg/s (not 0)",
+        json_schema_extra={"not": {"const": 0}},
+    )  # fmt: skip
+    hold_s: float = Field(ge=0.0, le=PROFILE_MAX_S, description="time at the constant rate")
+    accel_deg_s2: Annotated[float, Field(gt=0, le=10_000.0)] | SkipJsonSchema[None] = Field(
+        None, description="default: the axis' acceleration limit (leave it out; null is not "
+        "an acceleration)",
+    )  # fmt: skip
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_null(cls, data: object) -> object:
+        if isinstance(data, dict) and "accel_deg_s2" in data and data["accel_deg_s2"] is None:
+            raise ValueError("accel_deg_s2: null is not an acceleration; leave it out for the "
+                             "axis' limit")  # fmt: skip
+        return data
+
+    @model_validator(mode="after")
+    def _moves(self):
+        if self.rate_deg_s == 0:
+            raise ValueError("rate_deg_s: a ramp at 0 deg/s moves nothing")
+        return self
+
+
+ProfileRequest = Annotated[SineProfileRequest | RampProfileRequest, Field(discriminator="kind")]
+"""POST /api/motion/profile: a sine or a ramp, told apart by ``kind``."""
 
 
 # -- catalogs ----------------------------------------------------------------------------

@@ -77,6 +77,14 @@ class SpyMotion:
         self.calls.append(("stop", {}))
         self.inner.stop()
 
+    def run_profile(self, axis: str, profile) -> None:
+        self.calls.append(("run_profile", {"axis": axis, "profile": profile}))
+        self.inner.run_profile(axis, profile)
+
+    @property
+    def profile_unavailable(self) -> str | None:
+        return self.inner.profile_unavailable
+
     def status(self) -> MotionStatus:
         return self.inner.status()
 

@@ -465,9 +465,39 @@ export interface paths {
          * @description Start a move; returns at once (poll GET /api/motion for busy/settled).
          *
          *     422 names every axis that is unknown to this motion system or outside its soft
-         *     limits; in that case nothing is sent to the driver.
+         *     limits; in that case nothing is sent to the driver. 409 while a campaign owns the
+         *     motion system or a profile runs on one of the axes (STOP ends it).
          */
         post: operations["moveAxes"];
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/motion/profile": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        get?: never;
+        put?: never;
+        /**
+         * Run Profile
+         * @description Run a motion profile (a sine slew or a constant-rate ramp) on one rotary axis from
+         *     its encoder position when the request arrives; returns at once, and GET /api/motion
+         *     shows the profile (kind, axis, elapsed and remaining seconds) while it runs. STOP
+         *     ends it. Semantics of both kinds: docs/server.md, "Motion profiles".
+         *
+         *     409 when this motion system cannot run profiles (a controller without synthesis
+         *     mode), a campaign owns it, or it is moving; 422 naming each limit the profile would
+         *     break from where the axis is (soft limits, rate limit, acceleration limit, by the
+         *     request field that sets it), in which case nothing moves; 503 when the position
+         *     cannot be read or the controller refuses.
+         */
+        post: operations["runProfile"];
         delete?: never;
         options?: never;
         head?: never;
@@ -642,6 +672,11 @@ export interface components {
         };
         /** AxisPublic */
         AxisPublic: {
+            /**
+             * Max Accel Per S2
+             * @description acceleration limit; null when the motion system does not report one (then it runs no profiles on that axis)
+             */
+            max_accel_per_s2?: number | null;
             /** Max Pos */
             max_pos: number;
             /** Max Rate Per S */
@@ -1253,6 +1288,8 @@ export interface components {
             positions?: {
                 [key: string]: number;
             };
+            /** @description the profile running, if any */
+            profile?: components["schemas"]["ProfilePublic"] | null;
             /**
              * Settled
              * @default true
@@ -1272,6 +1309,11 @@ export interface components {
             targets?: {
                 [key: string]: number;
             };
+            /**
+             * Time S
+             * @description when the encoders were read, s, on the clock of the camera's frames where the motion system shares it (the simulated lab), else the server's monotonic clock
+             */
+            time_s?: number | null;
         };
         /**
          * MoveRequest
@@ -1436,6 +1478,28 @@ export interface components {
             /** Z Mm */
             z_mm?: number | null;
         };
+        /**
+         * ProfilePublic
+         * @description The motion profile running now (POST /api/motion/profile).
+         */
+        ProfilePublic: {
+            /** Axis */
+            axis: string;
+            /**
+             * Duration S
+             * @description the whole profile, fades and ramps included
+             */
+            duration_s: number;
+            /** Elapsed S */
+            elapsed_s: number;
+            /**
+             * Kind
+             * @enum {string}
+             */
+            kind: "sine" | "ramp";
+            /** Remaining S */
+            remaining_s: number;
+        };
         /** ProgressPublic */
         ProgressPublic: {
             /** Campaign Id */
@@ -1464,6 +1528,39 @@ export interface components {
             setpoint_index: number;
             /** Status */
             status: string;
+        };
+        /**
+         * RampProfileRequest
+         * @description A constant-rate slew from the axis' position when the request arrives: the rate
+         *     rises to rate_deg_s at accel_deg_s2, holds for hold_s and falls back to rest at
+         *     accel_deg_s2 (travel rate_deg_s * (hold_s + |rate_deg_s| / accel_deg_s2)).
+         */
+        RampProfileRequest: {
+            /**
+             * Accel Deg S2
+             * @description default: the axis' acceleration limit (leave it out; null is not an acceleration)
+             */
+            accel_deg_s2?: number;
+            /**
+             * Axis
+             * @enum {string}
+             */
+            axis: "yaw" | "pitch" | "roll";
+            /**
+             * Hold S
+             * @description time at the constant rate
+             */
+            hold_s: number;
+            /**
+             * @description discriminator enum property added by openapi-typescript
+             * @enum {string}
+             */
+            kind: "ramp";
+            /**
+             * Rate Deg S
+             * @description signed rate, deg/s (not 0)
+             */
+            rate_deg_s: number;
         };
         /** RangeSweepGenerator */
         RangeSweepGenerator: {
@@ -1673,6 +1770,40 @@ export interface components {
             status: "pending" | "done";
             /** Yaw Deg */
             yaw_deg: number | null;
+        };
+        /**
+         * SineProfileRequest
+         * @description A sine slew about the axis' position when the request arrives: angle = start +
+         *     amplitude_deg * e(t) * sin(2 pi t / period_s), the envelope e fading in over the first
+         *     period and out over the last (raised cosine), full amplitude for ``cycles`` periods
+         *     between, so the whole profile lasts (cycles + 2) * period_s and starts and ends at
+         *     rest. Peak rate amplitude_deg * 2 pi / period_s; peak acceleration about 5 % above
+         *     amplitude_deg * (2 pi / period_s)^2.
+         */
+        SineProfileRequest: {
+            /**
+             * Amplitude Deg
+             * @description either side of the start, deg
+             */
+            amplitude_deg: number;
+            /**
+             * Axis
+             * @enum {string}
+             */
+            axis: "yaw" | "pitch" | "roll";
+            /**
+             * Cycles
+             * @description periods at full amplitude
+             * @default 1
+             */
+            cycles: number;
+            /**
+             * @description discriminator enum property added by openapi-typescript
+             * @enum {string}
+             */
+            kind: "sine";
+            /** Period S */
+            period_s: number;
         };
         /** StabilityGenerator */
         StabilityGenerator: {
@@ -3354,6 +3485,87 @@ export interface operations {
         requestBody: {
             content: {
                 "application/json": components["schemas"]["MoveRequest"];
+            };
+        };
+        responses: {
+            /** @description Successful Response */
+            202: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["MotionPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Conflicts with stored state (a name already taken, or the resource is busy) */
+            409: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The request body is larger than the server's limit */
+            413: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+            /** @description The device is absent or refused the command */
+            503: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+        };
+    };
+    runProfile: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody: {
+            content: {
+                "application/json": components["schemas"]["SineProfileRequest"] | components["schemas"]["RampProfileRequest"];
             };
         };
         responses: {

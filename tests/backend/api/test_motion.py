@@ -1,6 +1,7 @@
 """POST /api/motion/jog: a relative move the server applies to the axis' encoder
 position when the request arrives, refused while the axis moves or when it would leave
-the soft limits; nothing refused reaches the driver."""
+the soft limits; nothing refused reaches the driver (nor does a malformed profile:
+tests/backend/api/test_motion_profile.py has the rest of those)."""
 
 from __future__ import annotations
 
@@ -60,23 +61,36 @@ def test_a_second_jog_while_moving_is_refused(settings, spy_devices):
         assert [name for name, _ in spy_devices.motion.calls] == ["move_to"]
 
 
+SINE = {"axis": "yaw", "kind": "sine", "amplitude_deg": 5.0, "period_s": 4.0, "cycles": 1}
+RAMP = {"axis": "yaw", "kind": "ramp", "rate_deg_s": 3.0, "hold_s": 1.0}
+
+
 @pytest.mark.parametrize(
-    ("body", "needle"),
+    ("path", "body", "needle"),
     [
-        ({"yaw_deg": 0}, "moves nothing"),
-        ({"yaw_deg": 11}, "less than or equal to 10"),
-        ({"rail_mm": -1001}, "greater than or equal to -1000"),
-        ({"tilt_deg": 1}, "extra"),
-        ({}, "at least one"),
-        ({"yaw_deg": 1, "rail_mm": 10}, "exactly one"),
-        ({"yaw_deg": "1"}, "yaw_deg"),
-        ({"yaw_deg": None}, "null is not a set-point"),
-        ({"pitch_deg": -1, "rail_mm": None}, "null is not a set-point"),
+        ("jog", {"yaw_deg": 0}, "moves nothing"),
+        ("jog", {"yaw_deg": 11}, "less than or equal to 10"),
+        ("jog", {"rail_mm": -1001}, "greater than or equal to -1000"),
+        ("jog", {"tilt_deg": 1}, "extra"),
+        ("jog", {}, "at least one"),
+        ("jog", {"yaw_deg": 1, "rail_mm": 10}, "exactly one"),
+        ("jog", {"yaw_deg": "1"}, "yaw_deg"),
+        ("jog", {"yaw_deg": None}, "null is not a set-point"),
+        ("jog", {"pitch_deg": -1, "rail_mm": None}, "null is not a set-point"),
+        ("profile", {**SINE, "rate_deg_s": 3.0}, "Extra inputs"),
+        ("profile", {**RAMP, "cycles": 2}, "Extra inputs"),
+        ("profile", {**RAMP, "rate_deg_s": 0}, "moves nothing"),
+        ("profile", {**RAMP, "accel_deg_s2": None}, "null is not an acceleration"),
+        ("profile", {**SINE, "axis": "rail"}, "'yaw', 'pitch' or 'roll'"),
+        ("profile", {**SINE, "kind": "square"}, "'sine', 'ramp'"),
+        ("profile", {**SINE, "cycles": 0}, "greater than or equal to 1"),
+        ("profile", {**SINE, "period_s": "4"}, "period_s"),
     ],
 )
-def test_bad_jogs_are_refused_with_a_reason(settings, spy_devices, body, needle):
+def test_bad_jogs_and_profiles_are_refused_with_a_reason(settings, spy_devices, path, body,
+                                                         needle):  # fmt: skip
     with running_app(settings, spy_devices) as c:
-        r = c.post("/api/motion/jog", json=body, headers=AUTH)
+        r = c.post(f"/api/motion/{path}", json=body, headers=AUTH)
         assert r.status_code == 422, r.text
         assert needle in str(r.json()["detail"]), r.text
         assert spy_devices.motion.calls == []
