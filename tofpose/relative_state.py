@@ -9,17 +9,32 @@ camera frame, ``R = exp([dtheta]x) R_hat``: the convention of the pipeline's rep
 covariance (rotation vector rad, translation mm), so a pose and its covariance are the
 measurement as they come.
 
-Motion model: constant angular rate and constant velocity between frames, driven by
-white angular and linear acceleration of spectral densities ``angular_accel_psd``
-(rad^2 / s^3) and ``linear_accel_psd`` (mm^2 / s^3); over a step dt each axis's (angle,
-rate) block of Q is ``q [[dt^3 / 3, dt^2 / 2], [dt^2 / 2, dt]]``. Irregular steps and
-missed frames are steps of their own length. A measurement whose squared Mahalanobis
+Motion model: a constant twist (constant angular rate and constant velocity on SE(3)):
+``dR/dt = [w]x R``, ``dt/dt = v``, ``dw/dt = 0``, ``dv/dt = w x v``. Between frames the
+target moves as ``T <- Exp(xi dt) T`` with the camera-frame twist ``xi = (w, v - w x t)``,
+so a constant-rate rotation about *any* fixed point (the camera turned by a turntable,
+the target tumbling about its centre, or a point between) is a constant state; a model
+with a constant ``v`` would see the target's origin accelerate (centripetally) whenever
+the camera turns, by ``|w|^2 |t|`` (~250 mm/s^2 at 20 deg/s and 2 m), and gate the turn.
+The twist is driven by white angular and linear acceleration of spectral densities
+``angular_accel_psd`` (rad^2 / s^3) and ``linear_accel_psd`` (mm^2 / s^3). An angular
+acceleration about a point other than the target's origin also accelerates the origin,
+by ``alpha x (t - c)`` for a centre c: the centre is not known (the camera for a
+turntable or a chaser's attitude manoeuvre, the target for a tumble), so the origin's
+linear acceleration density gets the lever-arm term of the farthest plausible centre,
+the camera: ``angular_accel_psd (|t|^2 I - t t^T)`` (the cross-correlation, which
+depends on the centre, is left out). The error-state transition and the discrete
+process noise over a step dt come from the linearised model's matrix exponential (Van
+Loan's method); irregular steps and missed frames are steps of their own length.
+A measurement whose squared Mahalanobis
 distance of the innovation exceeds ``gate_chi2`` (chi^2 with 6 degrees of freedom) is
 rejected and reported as such, not fused; after ``reset_after`` rejections in a row whose
 poses agree with each other (the target moved while the filter was blind, or the filter
-was wrong) the filter restarts from the newest one. Why not filterpy: its Kalman filters
-assume a vector state that adds, and the attitude does not; the linear algebra here is a
-few lines of NumPy, the SE(3) parts would have to be ours either way.
+was wrong) the filter restarts from the newest one, with the rate and velocity of the
+last two (their difference over their interval) and the covariance that implies. Why not
+filterpy: its Kalman filters assume a vector state that adds, and the attitude does not;
+the linear algebra here is a few lines of NumPy (and SciPy's expm), the SE(3) parts would
+have to be ours either way.
 """
 
 from __future__ import annotations
@@ -29,6 +44,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
+from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
@@ -111,6 +127,31 @@ def _log(R: np.ndarray) -> np.ndarray:
     return Rotation.from_matrix(R).as_rotvec()
 
 
+def _skew(a: np.ndarray) -> np.ndarray:
+    """(3, 3) cross-product matrix: ``_skew(a) @ b == cross(a, b)``."""
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def _left_jacobian(phi: np.ndarray) -> np.ndarray:
+    """(3, 3) left Jacobian of SO(3) at the rotation vector ``phi`` (3,): the translation
+    of ``Exp((w, rho) dt)`` is ``J(w dt) rho dt``."""
+    angle = float(np.linalg.norm(phi))
+    K = _skew(phi)
+    if angle < 1e-6:
+        return np.eye(3) + 0.5 * K + K @ K / 6.0
+    return (np.eye(3) + (1.0 - math.cos(angle)) / angle**2 * K
+            + (angle - math.sin(angle)) / angle**3 * K @ K)  # fmt: skip
+
+
+def _linear_density(cfg: RelativeStateConfig, t_mm: np.ndarray) -> np.ndarray:
+    """(3, 3) spectral density of the target origin's linear acceleration, mm^2 / s^3:
+    the linear white acceleration plus the lever-arm term of an angular acceleration
+    about the camera, ``q_a (|t|^2 I - t t^T)`` (module docstring)."""
+    return cfg.linear_accel_psd * np.eye(3) + cfg.angular_accel_psd * (
+        t_mm @ t_mm * np.eye(3) - np.outer(t_mm, t_mm)
+    )
+
+
 @dataclass
 class RelativeStateFilter:
     """The filter (module docstring). ``update(time_s, R, t_mm, covariance)`` per pose,
@@ -140,24 +181,39 @@ class RelativeStateFilter:
 
     # -- the model ------------------------------------------------------------------------
     def _propagated(self, dt: float):
-        """(R, t, w, v, P) propagated by dt >= 0 s (module docstring)."""
+        """(R, t, w, v, P) propagated by dt >= 0 s along the constant twist (module
+        docstring): the nominal state in closed form, P through the linearised model."""
         cfg = self.config
-        R = _exp(self._w * dt) @ self._R
-        t = self._t + self._v * dt
-        F = np.eye(12)
-        F[0:3, 0:3] = _exp(self._w * dt)
-        F[0:3, 6:9] = dt * np.eye(3)
-        F[3:6, 9:12] = dt * np.eye(3)
-        Q = np.zeros((12, 12))
-        for pos, rate, q in ((0, 6, cfg.angular_accel_psd), (3, 9, cfg.linear_accel_psd)):
-            Q[pos : pos + 3, pos : pos + 3] = q * dt**3 / 3 * np.eye(3)
-            Q[pos : pos + 3, rate : rate + 3] = q * dt**2 / 2 * np.eye(3)
-            Q[rate : rate + 3, pos : pos + 3] = q * dt**2 / 2 * np.eye(3)
-            Q[rate : rate + 3, rate : rate + 3] = q * dt * np.eye(3)
+        w, v, t = self._w, self._v, self._t
+        turn = _exp(w * dt)
+        R = turn @ self._R
+        t_new = turn @ t + _left_jacobian(w * dt) @ (v - np.cross(w, t)) * dt
+        v_new = turn @ v
+        # linearised error dynamics d(dx)/dt = A dx + noise of density Qc (12, 12)
+        A = np.zeros((12, 12))
+        A[0:3, 0:3] = _skew(w)
+        A[0:3, 6:9] = np.eye(3)
+        A[3:6, 9:12] = np.eye(3)
+        A[9:12, 6:9] = -_skew(v)
+        A[9:12, 9:12] = _skew(w)
+        Qc = np.zeros((12, 12))
+        Qc[6:9, 6:9] = cfg.angular_accel_psd * np.eye(3)
+        Qc[9:12, 9:12] = _linear_density(cfg, t)
+        # Van Loan: expm([[-A, Qc], [0, A^T]] dt) = [[., F^-1 Q], [0, F^T]]
+        M = np.zeros((24, 24))
+        M[:12, :12], M[:12, 12:], M[12:, 12:] = -A * dt, Qc * dt, A.T * dt
+        E = expm(M)
+        F = E[12:, 12:].T
+        Q = F @ E[:12, 12:]
         P = F @ self._P @ F.T + Q
-        return R, t, self._w.copy(), self._v.copy(), 0.5 * (P + P.T)
+        return R, t_new, w.copy(), v_new, 0.5 * (P + P.T)
 
-    def _start(self, time_s: float, R: np.ndarray, t_mm: np.ndarray, cov: np.ndarray) -> None:
+    def _start(self, time_s: float, R: np.ndarray, t_mm: np.ndarray, cov: np.ndarray,
+               before: tuple | None = None) -> None:  # fmt: skip
+        """Start from a pose (rate and velocity unknown: the initial sigmas), or, with
+        ``before`` = (time_s, R, t_mm, cov) of an earlier pose of the same motion, with the
+        rate and velocity of the two and their covariance (the difference of two poses
+        over their interval, plus the acceleration's spread over it)."""
         cfg = self.config
         self._time_s = self._fused_s = float(time_s)
         self._R, self._t = np.array(R, float), np.array(t_mm, float)
@@ -166,6 +222,15 @@ class RelativeStateFilter:
         self._P[:6, :6] = cov
         self._P[6:9, 6:9] = math.radians(cfg.initial_rate_sigma_deg_s) ** 2 * np.eye(3)
         self._P[9:12, 9:12] = cfg.initial_velocity_sigma_mm_s**2 * np.eye(3)
+        if before is not None and time_s - before[0] > 1e-6:
+            dt = float(time_s - before[0])
+            x = np.concatenate([_log(self._R @ np.asarray(before[1]).T),
+                                self._t - np.asarray(before[2], float)])  # fmt: skip
+            self._w, self._v = x[:3] / dt, x[3:] / dt
+            self._P[6:, 6:] = (cov + before[3]) / dt**2  # of (x1 - x0) / dt
+            self._P[:6, 6:] = self._P[6:, :6] = cov / dt  # cov(x1, (x1 - x0) / dt)
+            self._P[6:9, 6:9] += cfg.angular_accel_psd * dt / 3 * np.eye(3)
+            self._P[9:12, 9:12] += dt / 3 * _linear_density(cfg, self._t)
         self._rejected = []
 
     def _advance(self, time_s: float) -> None:
@@ -202,7 +267,8 @@ class RelativeStateFilter:
             self._rejected.append((float(time_s), np.array(R, float), np.array(t_mm, float), cov))
             if len(self._rejected) >= self.config.reset_after and self._rejected_agree():
                 _, R0, t0, c0 = self._rejected[-1]
-                self._start(time_s, R0, t0, c0)
+                before = self._rejected[-2] if len(self._rejected) > 1 else None
+                self._start(time_s, R0, t0, c0, before=before)
                 self._status = "reset"
                 return self.state()
             self._status = "rejected"
