@@ -185,8 +185,9 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             kernels=kernels,
         )  # fmt: skip
         campaigns = CampaignService(
-            sessions, acq, hub, devs.motion, recordings_dir=settings.data_dir / "campaigns"
-        )
+            sessions, acq, hub, devs.motion, recordings_dir=settings.data_dir / "campaigns",
+            lab_geometry=devs.lab_geometry,
+        )  # fmt: skip
         interrupted = campaigns.recover()
         if interrupted:
             log.warning("%d campaign(s) were running when the server stopped: interrupted "

@@ -274,3 +274,22 @@ class RampProfile(_Profile):
 
 MotionProfile = SineProfile | RampProfile
 """Either kind; ``kind`` says which."""
+
+
+def profile_from_spec(spec: dict, default_accel_deg_s2: float | None = None) -> MotionProfile:
+    """The profile a request or a stored campaign set-point describes: ``spec`` holds
+    ``kind`` ("sine": ``amplitude_deg``, ``period_s``, ``cycles``; "ramp": ``rate_deg_s``,
+    ``hold_s``, ``accel_deg_s2`` or None for ``default_accel_deg_s2``, the axis' limit);
+    other keys (``axis``) are ignored. Starts at 0 deg (``started_at`` moves it)."""
+    kind = spec.get("kind")
+    if kind == "sine":
+        return SineProfile(
+            float(spec["amplitude_deg"]), float(spec["period_s"]), int(spec.get("cycles", 1))
+        )
+    if kind == "ramp":
+        accel = spec.get("accel_deg_s2")
+        accel = default_accel_deg_s2 if accel is None else accel
+        if accel is None:
+            raise ValueError("a ramp needs accel_deg_s2 (the axis reports no acceleration limit)")
+        return RampProfile(float(spec["rate_deg_s"]), float(spec["hold_s"]), float(accel))
+    raise ValueError(f"unknown profile kind {kind!r} (sine or ramp)")

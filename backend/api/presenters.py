@@ -248,7 +248,8 @@ def campaign_public(
         progress=ProgressPublic(**progress) if progress else None,
         setpoints=[
             SetPointPublic(index=sp.index, yaw_deg=sp.yaw_deg, pitch_deg=sp.pitch_deg,
-                           roll_deg=sp.roll_deg, rail_mm=sp.rail_mm, status=sp.status)
+                           roll_deg=sp.roll_deg, rail_mm=sp.rail_mm, profile=sp.profile,
+                           status=sp.status)
             for sp in row.setpoints
         ] if with_setpoints else None,
     )  # fmt: skip
@@ -270,7 +271,7 @@ def measurement_public(m: MeasurementRow, setpoint_index: int) -> MeasurementPub
         ok=m.ok, reason=m.reason, n_matched=m.n_matched, residual_mm=m.residual_mm,
         x_mm=m.x_mm, y_mm=m.y_mm, z_mm=m.z_mm, pitch_deg=m.pitch_deg, yaw_deg=m.yaw_deg,
         roll_deg=m.roll_deg, truth=_pose_dict(m, "truth_"),
-        lab_truth=_pose_dict(m, "lab_truth_"), encoders=m.encoders,
+        lab_truth=_pose_dict(m, "lab_truth_"), encoders=m.encoders, in_motion=m.in_motion,
     )  # fmt: skip
 
 

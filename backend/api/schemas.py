@@ -299,7 +299,8 @@ class FoxglovePublic(BaseModel):
     reason: str = Field("", description="why it does not run (empty when it does)")
     published: int = Field(0, description="frames published to subscribed clients")
     dropped: int = Field(
-        0, description="frames skipped because the publisher was still busy with one "
+        0,
+        description="frames skipped because the publisher was still busy with one "
         "(the camera loop never waits for it)",
     )
 
@@ -547,12 +548,31 @@ class CalibrationGenerator(StrictBody):
     amplitude_deg: float = Field(8.0, gt=0, le=45)
 
 
+class ProfileGenerator(StrictBody):
+    """A dynamic campaign (docs/campaigns.md, "Dynamic campaigns"): at each start point
+    (every combination of the axis values given, yaw outermost; the profile's own axis
+    at 0 deg unless given), the table settles, rests ``rest_s``, runs ``profile`` from
+    there and rests ``rest_s`` again. Every frame of the three phases is stored, flagged
+    in_motion while the profile ran, with the encoders interpolated to its capture time;
+    ``frames_per_point`` does not apply. Each profile is checked against the soft, rate
+    and acceleration limits from its start point before anything is stored."""
+
+    kind: Literal["profile"]
+    profile: ProfileRequest
+    rest_s: float = Field(2.0, ge=0.5, le=600.0, description="rest before and after, s")
+    yaw_deg: AxisValues | None = None
+    pitch_deg: AxisValues | None = None
+    roll_deg: AxisValues | None = None
+    rail_mm: Annotated[list[RailMm], Field(min_length=1, max_length=200)] | None = None
+
+
 Generator = Annotated[
     GridGenerator
     | RangeSweepGenerator
     | StabilityGenerator
     | AttitudeStepsGenerator
-    | CalibrationGenerator,
+    | CalibrationGenerator
+    | ProfileGenerator,
     Field(discriminator="kind"),
 ]
 
@@ -636,6 +656,10 @@ class SetPointPublic(BaseModel):
     pitch_deg: float | None
     roll_deg: float | None
     rail_mm: float | None
+    profile: dict | None = Field(
+        None, description="a dynamic set-point's motion profile (axis, kind, its fields, "
+        "rest_s), null at a static one",
+    )  # fmt: skip
     status: Literal["pending", "done"]
 
 
@@ -683,6 +707,10 @@ class MeasurementPublic(BaseModel):
     truth: dict[str, float] | None = Field(description="pose that produced the frame")
     lab_truth: dict[str, float] | None = Field(description="encoders + nominal geometry")
     encoders: dict[str, float] | None
+    in_motion: bool | None = Field(
+        None, description="taken while the set-point's motion profile ran (null at a "
+        "static set-point)",
+    )  # fmt: skip
 
 
 class MeasurementPage(BaseModel):

@@ -100,6 +100,9 @@ class SetPointRow(Base):
 
     status : pending or done. A set-point becomes done in the same transaction that
     stores its measurements, so a crash never leaves half a set-point counted.
+    profile : a dynamic set-point's motion profile (``axis``, ``kind`` and its fields, as
+    POST /api/motion/profile takes them), run from the set-point after a rest; None at a
+    static one.
     """
 
     __tablename__ = "setpoints"
@@ -112,6 +115,7 @@ class SetPointRow(Base):
     pitch_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     roll_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     rail_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    profile: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
     status: Mapped[str] = mapped_column(String(16), default="pending")
     completed_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
 
@@ -135,7 +139,9 @@ class MeasurementRow(Base):
     read-back at capture (deg / mm). ``recording_index``: frame number in the campaign's
     raw recording, when one is kept. ``rate_*``, ``vel_*``, ``sigma_rate_*``,
     ``sigma_vel_*``, ``filter_status``: the relative-state filter's state at the frame
-    (null before its first pose).
+    (null before its first pose). ``in_motion``: taken while the set-point's motion
+    profile ran (null at a set-point without one; ``encoders`` and ``lab_truth_*`` of a
+    profile set-point are interpolated to the frame's capture time).
     """
 
     __tablename__ = "measurements"
@@ -196,6 +202,7 @@ class MeasurementRow(Base):
     sigma_vel_y_mm_s: Mapped[float | None] = mapped_column(Float, nullable=True)
     sigma_vel_z_mm_s: Mapped[float | None] = mapped_column(Float, nullable=True)
     filter_status: Mapped[str | None] = mapped_column(String(16), nullable=True)
+    in_motion: Mapped[bool | None] = mapped_column(Boolean, nullable=True)
 
     setpoint: Mapped[SetPointRow] = relationship(back_populates="measurements")
 

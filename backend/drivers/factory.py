@@ -22,6 +22,17 @@ class Devices:
     world: SimWorld | None = None
     catalog_hint: Catalog | None = None  # a replayed recording's own catalog
 
+    @property
+    def lab_geometry(self) -> LabGeometry | None:
+        """The lab's nominal geometry that turns encoder readings into a reference pose:
+        the simulated lab's, or the one an encoder-referenced real camera uses; None
+        without a motion system."""
+        if self.motion is None:
+            return None
+        if self.world is not None:
+            return self.world.bench.geometry
+        return getattr(self.camera, "geometry", None)
+
     def close(self) -> None:
         self.camera.close()
         if self.motion is not None:

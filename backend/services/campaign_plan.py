@@ -9,7 +9,10 @@ an axis that is absent stays where it is. The generators mirror the paper's test
 - ``stability``: one hold, measured for many frames (§6.3, Tables 1-3, Figs. 8-10);
 - ``attitude_steps``: one axis stepped through a list of angles (Figs. 11-13);
 - ``calibration``: rotations about all three axes at two or more ranges, so that the
-  camera mount and target placement are observable (hand-eye / robot-world problem).
+  camera mount and target placement are observable (hand-eye / robot-world problem);
+- ``profile``: a dynamic campaign: at each start point (a grid, as ``grid``), a motion
+  profile on one rotary axis between two rests (``profile_starts``; the runner measures
+  every frame, docs/campaigns.md "Dynamic campaigns").
 """
 
 from __future__ import annotations
@@ -98,6 +101,23 @@ def calibration(*, rails_mm: Sequence[float], amplitude_deg: float = 8.0) -> lis
     ]
 
 
+def profile_starts(
+    *,
+    axis: str,
+    yaw_deg: float | Sequence[float] | None = None,
+    pitch_deg: float | Sequence[float] | None = None,
+    roll_deg: float | Sequence[float] | None = None,
+    rail_mm: float | Sequence[float] | None = None,
+) -> list[SetPoint]:
+    """Start points of a dynamic campaign: the grid of the axis values given, the
+    profile's own ``axis`` at 0 deg where no value is given for it (so that every
+    profile starts where its soft-limit check assumed)."""
+    if axis not in ("yaw", "pitch", "roll"):
+        raise ValueError(f"a profile runs on a rotary axis (yaw, pitch, roll), got {axis!r}")
+    points = grid(yaw_deg=yaw_deg, pitch_deg=pitch_deg, roll_deg=roll_deg, rail_mm=rail_mm)
+    return [{**sp, axis: sp.get(axis, 0.0)} for sp in points]
+
+
 def _fixed(axes: dict[str, float | None]) -> SetPoint:
     """{"yaw_deg": 1, "rail_mm": None} -> {"yaw": 1.0}."""
     out = {}
@@ -119,17 +139,20 @@ def estimate_duration_s(
     frames_per_point: int,
     frame_rate_hz: float,
     settle_overhead_s: float = 0.5,
+    dynamic_s: Sequence[float | None] | None = None,
 ) -> float:
     """Rough wall time of a campaign: per set-point, the slowest axis's move at its peak
-    rate plus a settling overhead, the settle wait, and the frames at the camera rate."""
+    rate plus a settling overhead, the settle wait, and the frames at the camera rate
+    (or, at a dynamic set-point, ``dynamic_s``: its profile and the rests around it)."""
     here = dict(start)
     total = 0.0
-    for sp in setpoints:
+    for k, sp in enumerate(setpoints):
         move = max(
             (abs(v - here.get(a, v)) / max_rate[a] for a, v in sp.items() if a in max_rate),
             default=0.0,
         )
         total += move + (settle_overhead_s if move > 0 else 0.0) + settle_s
-        total += frames_per_point / frame_rate_hz
+        dynamic = dynamic_s[k] if dynamic_s is not None else None
+        total += dynamic if dynamic is not None else frames_per_point / frame_rate_hz
         here.update(sp)
     return total

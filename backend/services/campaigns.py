@@ -28,12 +28,15 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from backend.db.models import CampaignRow, MeasurementRow, SetPointRow, utcnow
-from backend.drivers.base import MotionDriver, soft_limit_problems
+from backend.drivers.base import MotionDriver, profile_problems, soft_limit_problems
 from backend.services.acquisition import AcquisitionService, LiveSample
+from backend.services.encoder_trace import EncoderTrace, EncoderTraceError
 from backend.services.hub import LiveHub
 from backend.services.store import commit_unique
 from tofpose.geometry import RigidTransform, facing_euler_deg
+from tofpose.motion_profile import profile_from_spec
 from tofpose.recording import RecordingWriter
+from tofpose.sim.bench import LabGeometry
 
 log = logging.getLogger(__name__)
 
@@ -216,8 +219,10 @@ class CampaignService:
         move_timeout_s: float = 600.0,
         frame_timeout_s: float = 10.0,
         recordings_dir: Path | None = None,
+        lab_geometry: LabGeometry | None = None,
     ) -> None:
         self.recordings_dir = recordings_dir
+        self.lab_geometry = lab_geometry  # nominal: a dynamic set-point's lab reference
         self.sessions = sessions
         self.acquisition = acquisition
         self.hub = hub
@@ -415,7 +420,7 @@ class CampaignService:
             row = s.get(CampaignRow, campaign_id)
             pending = [sp for sp in row.setpoints if sp.status != "done"]
             n_total, n_done = len(row.setpoints), len(row.setpoints) - len(pending)
-            plan = [(sp.id, sp.index, setpoint_axes(sp)) for sp in pending]
+            plan = [(sp.id, sp.index, setpoint_axes(sp), sp.profile) for sp in pending]
             name, frames, settle_s = row.name, row.frames_per_point, row.settle_s
             lock_timeout_s = row.lock_timeout_s
             record_raw = row.record_raw
@@ -444,15 +449,22 @@ class CampaignService:
                     self.recording_path(campaign_id), self.acquisition.camera.model,
                     self.acquisition.catalog, committed_frames,
                 )  # fmt: skip
-            if self.motion is None and any(axes for _, _, axes in plan):
+            if self.motion is None and any(axes or prof for _, _, axes, prof in plan):
                 raise _Halt("failed", "no motion system is configured")
-            for sp_id, index, axes in plan:
+            for sp_id, index, axes, profile in plan:
                 self._bump(setpoint_index=index, frames_collected=0)
                 start_n = recorder.n if recorder is not None else 0
                 try:
-                    samples = self._measure(
-                        sub, index, axes, frames, settle_s, lock_timeout_s, recorder
-                    )
+                    if profile:
+                        samples = self._measure_profile(
+                            sub, index, axes, profile, settle_s, recorder
+                        )
+                    else:
+                        samples = [
+                            (x, None) for x in self._measure(
+                                sub, index, axes, frames, settle_s, lock_timeout_s, recorder
+                            )
+                        ]  # fmt: skip
                     if recorder is not None:
                         recorder.flush()  # the frames are on disk before the rows commit
                 except BaseException:
@@ -460,8 +472,9 @@ class CampaignService:
                         recorder.rollback(start_n)
                     raise
                 with self.sessions() as s, s.begin():
-                    for k, x in enumerate(samples):
+                    for k, (x, in_motion) in enumerate(samples):
                         m = measurement_row(sp_id, x)
+                        m.in_motion = in_motion
                         m.recording_index = start_n + k if recorder is not None else None
                         s.add(m)
                     sp = s.get(SetPointRow, sp_id)
@@ -512,11 +525,8 @@ class CampaignService:
             raise RuntimeError("no directory for campaign recordings is configured")
         return self.recordings_dir / f"campaign-{campaign_id}.h5"
 
-    def _measure(
-        self, sub, index: int, axes: dict[str, float], frames: int, settle_s: float,
-        lock_timeout_s: float, recorder: RawRecorder | None = None,
-    ) -> list[LiveSample]:  # fmt: skip
-        """Move to ``axes`` and collect ``frames`` samples taken at rest (see module)."""
+    def _move_and_settle(self, index: int, axes: dict[str, float]) -> None:
+        """Move to ``axes`` (if any) and wait until the motion system reports settled."""
         self._check(index)
         if axes:
             try:
@@ -539,26 +549,37 @@ class CampaignService:
                     raise _Halt("paused", f"set-point {index} not settled within "
                                           f"{self.move_timeout_s:g} s")  # fmt: skip
                 time.sleep(self.poll_s)
+
+    def _next_sample(self, sub, index: int) -> LiveSample:
+        """The next live sample; pauses the campaign after ``frame_timeout_s`` without one."""
+        waited_since = time.monotonic()
+        while True:
+            self._check(index)
+            sample = sub.get(self.poll_s)
+            if sample is not None:
+                return sample
+            if time.monotonic() - waited_since > self.frame_timeout_s:
+                h = self.acquisition.health
+                msg = (
+                    f"no frame for {self.frame_timeout_s:g} s at set-point {index} "
+                    f"(camera {h.state}: {h.last_error})"
+                )
+                raise _Halt("paused", msg)
+
+    def _measure(
+        self, sub, index: int, axes: dict[str, float], frames: int, settle_s: float,
+        lock_timeout_s: float, recorder: RawRecorder | None = None,
+    ) -> list[LiveSample]:  # fmt: skip
+        """Move to ``axes`` and collect ``frames`` samples taken at rest (see module)."""
+        self._move_and_settle(index, axes)
         settled_unix_s = time.time()
         while sub.get(0.0) is not None:  # frames queued before the settle do not count
             pass
         t_ready = None
         last_ok_s = None
         out: list[LiveSample] = []
-        waited_since = time.monotonic()
         while len(out) < frames:
-            self._check(index)
-            sample = sub.get(self.poll_s)
-            if sample is None:
-                if time.monotonic() - waited_since > self.frame_timeout_s:
-                    h = self.acquisition.health
-                    msg = (
-                        f"no frame for {self.frame_timeout_s:g} s at set-point {index} "
-                        f"(camera {h.state}: {h.last_error})"
-                    )
-                    raise _Halt("paused", msg)
-                continue
-            waited_since = time.monotonic()
+            sample = self._next_sample(sub, index)
             if sample.captured_unix_s < settled_unix_s or not sample.measured:
                 continue  # before the settle, or while the pipeline's kernels compile
             t = float(sample.frame.time_s)
@@ -585,6 +606,109 @@ class CampaignService:
             out.append(sample)
             self._bump(frames_collected=len(out))
         return out
+
+    def _measure_profile(
+        self, sub, index: int, axes: dict[str, float], spec: dict, settle_s: float,
+        recorder: RawRecorder | None = None,
+    ) -> list[tuple[LiveSample, bool]]:  # fmt: skip
+        """A dynamic set-point (docs/campaigns.md, "Dynamic campaigns"): move and settle;
+        rest ``rest_s``; run the profile from the axis' encoder position; rest ``rest_s``
+        after it has ended. Every measured frame of the three phases is kept, its encoders
+        and lab reference interpolated to its capture time (``EncoderTrace``), with
+        whether the profile ran at that time. A lost pose does not pause it: frames lost
+        in motion are what the report counts."""
+        axis, rest_s = spec["axis"], float(spec.get("rest_s", 2.0))
+        self._move_and_settle(index, axes)
+        trace = EncoderTrace(self.motion)
+        try:
+            trace.start()
+        except EncoderTraceError as exc:
+            raise _Halt("failed", str(exc)) from exc
+        except Exception as exc:
+            raise _Halt("paused", f"motion status failed at set-point {index}: {exc}") from exc
+        running = False
+        try:
+            settled_unix_s = time.time()
+            while sub.get(0.0) is not None:  # frames queued before the settle do not count
+                pass
+            out: list[tuple[LiveSample, bool]] = []
+            t_ready = t0 = t_end = deadline = None
+            while True:
+                sample = self._next_sample(sub, index)
+                if sample.captured_unix_s < settled_unix_s or not sample.measured:
+                    continue
+                t = float(sample.frame.time_s)
+                t_ready = t + settle_s if t_ready is None else t_ready
+                if t < t_ready:
+                    continue
+                if t0 is None and t >= t_ready + rest_s:
+                    t0, t_end = self._start_profile(index, axis, spec)
+                    running = True
+                    deadline = time.monotonic() + (t_end - t0) + self.move_timeout_s
+                out.append((self._referenced(sample, trace), t0 is not None and t0 <= t <= t_end))
+                if recorder is not None:
+                    recorder.append(out[-1][0])
+                self._bump(frames_collected=len(out))
+                if t0 is None:
+                    continue
+                st = trace.latest
+                if st.stopped:
+                    raise _Halt("paused", f"the turntable was stopped at set-point {index}")
+                if t >= t_end + rest_s:
+                    if st.profile is None and st.settled and not st.busy:
+                        running = False
+                        return out
+                    if time.monotonic() > deadline:
+                        raise _Halt("paused", f"the {axis} profile of set-point {index} did not "
+                                              f"end within {self.move_timeout_s:g} s of its "
+                                              "duration")  # fmt: skip
+        except _Halt:
+            if running:  # a pause, cancel or shutdown stops the slew it interrupts
+                try:
+                    self.motion.stop()
+                except Exception:
+                    log.exception("stopping the profile of set-point %d failed", index)
+            raise
+        finally:
+            trace.stop()
+
+    def _start_profile(self, index: int, axis: str, spec: dict) -> tuple[float, float]:
+        """Start the set-point's profile from the axis' encoder position now; returns
+        (start, end) on the encoders' clock."""
+        motion = self.motion
+        why = getattr(motion, "profile_unavailable", "it has no profile mode")
+        if not callable(getattr(motion, "run_profile", None)) or why is not None:
+            raise _Halt("failed", f"set-point {index}: the {motion.name!r} motion system cannot "
+                                  f"run motion profiles ({why})")  # fmt: skip
+        try:
+            start_deg = motion.status().positions[axis]
+            profile = profile_from_spec(spec, motion.axes[axis].max_accel).started_at(start_deg)
+        except Exception as exc:
+            raise _Halt("paused", f"set-point {index}: cannot prepare the profile: {exc}") from exc
+        problems = profile_problems(motion.axes, axis, profile)
+        if problems:
+            raise _Halt("failed", f"set-point {index}: " + "; ".join(p.message for p in problems))
+        try:
+            motion.run_profile(axis, profile)
+            st = motion.status()
+        except Exception as exc:
+            raise _Halt("paused", f"set-point {index}: the profile failed: {exc}") from exc
+        elapsed = st.profile.elapsed_s if st.profile is not None else 0.0
+        t0 = float(st.time_s) - elapsed
+        return t0, t0 + profile.duration_s
+
+    def _referenced(self, sample: LiveSample, trace: EncoderTrace) -> LiveSample:
+        """The sample with the encoders interpolated to its capture time and the lab
+        reference from them (the nominal geometry), when the trace covers that time."""
+        enc = trace.at(float(sample.frame.time_s))
+        if enc is None:
+            return sample
+        f = sample.frame
+        T_lab = f.T_camera_target_lab
+        if self.lab_geometry is not None:
+            T_lab = self.lab_geometry.T_camera_target(enc, true=False)
+        frame = replace(f, T_camera_target_lab=T_lab, meta={**f.meta, "encoders": enc})
+        return replace(sample, frame=frame, cache={})
 
 
 def setpoint_axes(sp: SetPointRow) -> dict[str, float]:
@@ -642,8 +766,10 @@ def create_campaign(
     camera: dict | None = None,
     notes: str = "",
     record_raw: bool = False,
+    profiles: list[dict | None] | None = None,
 ) -> CampaignRow:
-    """Store a draft campaign with its set-points; ``NameTakenError`` if the name exists."""
+    """Store a draft campaign with its set-points (and, for a dynamic one, the motion
+    profile of each); ``NameTakenError`` if the name exists."""
     row = CampaignRow(
         name=name, status="draft", status_reason="", catalog_name=catalog_name,
         frames_per_point=frames_per_point, settle_s=settle_s, lock_timeout_s=lock_timeout_s,
@@ -653,7 +779,10 @@ def create_campaign(
     for i, sp in enumerate(setpoints):
         row.setpoints.append(
             SetPointRow(
-                index=i, status="pending", **{AXIS_COLUMNS[a]: float(v) for a, v in sp.items()}
+                index=i,
+                status="pending",
+                profile=profiles[i] if profiles else None,
+                **{AXIS_COLUMNS[a]: float(v) for a, v in sp.items()},
             )  # fmt: skip
         )
     s.add(row)

@@ -20,7 +20,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.backends.backend_pdf import PdfPages  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
-from backend.services import report_content as rc  # noqa: E402
+from backend.services import report_content as rc
+from backend.services.report_dynamic import dynamic_plots, dynamic_tables  # noqa: E402
 from backend.services.report_plots import (  # noqa: E402
     FAIL_COLOUR,
     NO_PLOTS,
@@ -362,6 +363,10 @@ def blocks(report: dict, rows: list[dict]) -> list:
         TableBlock(rc.setpoint_table(report), 7.0),
         Text([note], 8.0, colour=NOTE_COLOUR),
     ]
+    if report.get("dynamic"):
+        out += [heading("Dynamic accuracy (motion profiles)"),
+                *(TableBlock(t, 7.0) for t in dynamic_tables(report)),
+                *(PlotBlock(p) for p in dynamic_plots(report))]  # fmt: skip
     plots = [PlotBlock(p) for p in evidence_plots(report, rows)]
     return out + (plots or [Text([NO_PLOTS])])
 

@@ -34,6 +34,12 @@ from backend.services import report_content as rc  # noqa: E402
 from backend.services import report_pdf  # noqa: E402
 from backend.services.analysis import AXES, REFERENCE_PREFIX, analyse  # noqa: E402
 from backend.services.calibrations import calibrated_reference  # noqa: E402
+from backend.services.dynamic_analysis import analyse_dynamic, is_static  # noqa: E402
+from backend.services.report_dynamic import (  # noqa: E402
+    dynamic_findings,
+    dynamic_plots,
+    dynamic_tables,
+)
 from backend.services.report_plots import NO_PLOTS, evidence_plots, standalone  # noqa: E402
 from tofpose.relative_state import STATE_COLUMNS  # noqa: E402
 
@@ -49,6 +55,7 @@ CSV_COLUMNS = (
     "encoder_yaw_deg", "encoder_pitch_deg", "encoder_roll_deg", "encoder_rail_mm",
     *(f"calibrated_truth_{a}" for a in POSE),
     *STATE_COLUMNS,
+    "in_motion",
 )  # fmt: skip
 
 
@@ -78,6 +85,7 @@ def campaign_rows(
             "setpoint_roll_deg": sp.roll_deg, "setpoint_rail_mm": sp.rail_mm,
             "encoder_yaw_deg": enc.get("yaw"), "encoder_pitch_deg": enc.get("pitch"),
             "encoder_roll_deg": enc.get("roll"), "encoder_rail_mm": enc.get("rail"),
+            "in_motion": None if m.in_motion is None else int(m.in_motion),
         }  # fmt: skip
         if calibration is not None and {"yaw", "pitch", "roll", "rail"} <= set(enc):
             ref = calibrated_reference(calibration, enc)
@@ -133,7 +141,7 @@ def build(
                 else ""
             )
         )
-    result = analyse(rows, row.requirements, reference)
+    result = analyse([r for r in rows if is_static(r)], row.requirements, reference)
     report = {
         "campaign": {
             "id": row.id, "name": row.name, "status": row.status, "catalog": row.catalog_name,
@@ -151,7 +159,8 @@ def build(
         **result,
     }  # fmt: skip
     _add_commanded(report["setpoints"], rows)
-    report["findings"] = rc.findings(report)
+    report["dynamic"] = analyse_dynamic(rows, reference)
+    report["findings"] = rc.findings(report) + dynamic_findings(report)
     return jsonable(report), rows
 
 
@@ -263,6 +272,10 @@ def to_html(report: dict, rows: list[dict]) -> str:
     plots = evidence_plots(report, rows)
     if not plots:
         parts.append(f"<p>{esc(NO_PLOTS)}</p>")
+    if report.get("dynamic"):
+        parts.append("<h2>Dynamic accuracy (motion profiles)</h2>")
+        parts += [_html_table(t) for t in dynamic_tables(report)]
+        plots = dynamic_plots(report) + plots
     for plot in plots:
         parts.append(f"<p><img alt='{esc(plot.title)}' "
                      f"src='data:image/png;base64,{_png_b64(standalone(plot))}'></p>")  # fmt: skip

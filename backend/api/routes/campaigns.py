@@ -14,7 +14,14 @@ from fastapi.responses import FileResponse
 from sqlalchemy import func, select
 
 from backend.api.contract import errors
-from backend.api.deps import ReadAuth, SessionDep, StateDep, WriteAuth, unprocessable
+from backend.api.deps import (
+    ReadAuth,
+    SessionDep,
+    StateDep,
+    WriteAuth,
+    unprocessable,
+    unprocessable_at,
+)
 from backend.api.presenters import campaign_public, measurement_public
 from backend.api.schemas import (
     MAX_FRAMES_PER_CAMPAIGN,
@@ -25,6 +32,7 @@ from backend.api.schemas import (
     MeasurementPage,
 )
 from backend.db.models import CalibrationRow, CampaignRow, MeasurementRow, SetPointRow
+from backend.drivers.base import profile_axis_problem, profile_problems
 from backend.services import campaign_plan
 from backend.services.campaigns import (
     CampaignConflictError,
@@ -37,6 +45,7 @@ from backend.services.mcap_files import recording_mcap
 from backend.services.reports import ReportError, build, to_csv, to_html, to_json, to_pdf
 from backend.services.store import NameTakenError, find_catalog
 from backend.state import AppState
+from tofpose.motion_profile import profile_from_spec
 
 router = APIRouter(prefix="/api/campaigns", tags=["campaigns"])
 IdParam = Annotated[int, Path(ge=1, le=2**31 - 1)]
@@ -56,7 +65,48 @@ def expand(body: CampaignCreate) -> list[dict[str, float]]:
         return campaign_plan.stability(**g)
     if kind == "attitude_steps":
         return campaign_plan.attitude_steps(**g)
+    if kind == "profile":
+        return campaign_plan.profile_starts(
+            axis=g["profile"]["axis"], **{a: g[a] for a in AXIS_FIELDS}
+        )
     return campaign_plan.calibration(**g)
+
+
+AXIS_FIELDS = ("yaw_deg", "pitch_deg", "roll_deg", "rail_mm")
+
+
+def dynamic_spec(body: CampaignCreate) -> dict | None:
+    """The motion profile (with ``rest_s``) every set-point of a dynamic campaign runs,
+    as stored on its set-points; None for a static campaign."""
+    g = body.generator
+    if g is None or g.kind != "profile":
+        return None
+    return {**g.profile.model_dump(exclude_none=True), "rest_s": g.rest_s}
+
+
+def profile_plan_problems(
+    setpoints: list[dict[str, float]], spec: dict, motion
+) -> list[tuple[list, str]]:
+    """(loc, message) for every reason the profile cannot run from a start point: no
+    profile mode, the axis, its soft/rate/acceleration limits (by the request field)."""
+    if motion is None:
+        return []  # plan_problems names the missing motion system
+    if not callable(getattr(motion, "run_profile", None)):
+        return [(["body", "generator", "profile"],
+                 f"the {motion.name!r} motion system cannot run motion profiles")]  # fmt: skip
+    if (why := getattr(motion, "profile_unavailable", None)) is not None:
+        return [(["body", "generator", "profile"], why)]
+    axis = spec["axis"]
+    if (problem := profile_axis_problem(motion.axes, axis)) is not None:
+        return [(["body", "generator", "profile", problem.field], problem.message)]
+    profile = profile_from_spec(spec, motion.axes[axis].max_accel)
+    out = []
+    for i, sp in enumerate(setpoints):
+        for p in profile_problems(motion.axes, axis, profile.started_at(sp[axis])):
+            out.append((["body", "generator", "profile", p.field], f"start point {i}: {p.message}"))
+        if len(out) > 20:
+            break
+    return out
 
 
 @dataclass(frozen=True)
@@ -79,11 +129,21 @@ class Planning:
         return cls(start, rates, state.devices.camera.get_settings().frame_rate_hz)
 
     def estimate_s(self, row: CampaignRow) -> float:
-        pending = [setpoint_axes(sp) for sp in row.setpoints if sp.status != "done"]
+        pending = [sp for sp in row.setpoints if sp.status != "done"]
         return campaign_plan.estimate_duration_s(
-            pending, self.start, self.rates, settle_s=row.settle_s,
-            frames_per_point=row.frames_per_point, frame_rate_hz=self.frame_rate_hz,
+            [setpoint_axes(sp) for sp in pending], self.start, self.rates,
+            settle_s=row.settle_s, frames_per_point=row.frames_per_point,
+            frame_rate_hz=self.frame_rate_hz,
+            dynamic_s=[_dynamic_s(sp.profile) for sp in pending],
         )  # fmt: skip
+
+
+def _dynamic_s(spec: dict | None) -> float | None:
+    """A dynamic set-point's profile and rests (s), None at a static one."""
+    if not spec:
+        return None
+    accel = spec.get("accel_deg_s2") or 1.0e9  # a ramp at the axis' limit: ramps ignored
+    return profile_from_spec(spec, accel).duration_s + 2 * float(spec.get("rest_s", 2.0))
 
 
 def _public(
@@ -125,8 +185,14 @@ def create_campaign(body: CampaignCreate, state: StateDep, session: SessionDep) 
     )  # fmt: skip
     if find_catalog(session, body.catalog) is None:
         problems.append(f"no catalog named {body.catalog!r} (GET /api/catalogs lists them)")
-    if problems:
-        raise unprocessable(["body"], problems)
+    spec = dynamic_spec(body)
+    if spec is not None and motion is not None and "accel_deg_s2" not in spec:
+        limits = motion.axes.get(spec["axis"])  # a ramp at the axis' limit, stored as such
+        if spec["kind"] == "ramp" and limits is not None and limits.max_accel is not None:
+            spec["accel_deg_s2"] = float(limits.max_accel)
+    located = profile_plan_problems(setpoints, spec, motion) if spec is not None else []
+    if problems or located:
+        raise unprocessable_at([(["body"], p) for p in problems] + located)
     try:
         row = store_campaign(
             session, name=body.name, catalog_name=body.catalog, setpoints=setpoints,
@@ -135,6 +201,7 @@ def create_campaign(body: CampaignCreate, state: StateDep, session: SessionDep) 
             generator=body.generator.model_dump() if body.generator else None,
             camera=body.camera.model_dump(exclude_none=True) if body.camera else None,
             notes=body.notes, record_raw=body.record_raw,
+            profiles=[spec] * len(setpoints) if spec is not None else None,
         )  # fmt: skip
     except NameTakenError as exc:
         raise HTTPException(409, str(exc)) from exc

@@ -30,7 +30,6 @@ from backend.api.schemas import (
     MotionPublic,
     MoveRequest,
     ProfileRequest,
-    SineProfileRequest,
 )
 from backend.drivers.base import (
     AxisLimits,
@@ -41,7 +40,7 @@ from backend.drivers.base import (
     soft_limit_problems,
 )
 from backend.state import AppState
-from tofpose.motion_profile import MotionProfile, RampProfile, SineProfile
+from tofpose.motion_profile import MotionProfile, profile_from_spec
 
 log = logging.getLogger(__name__)
 router = APIRouter(prefix="/api/motion", tags=["motion"])
@@ -134,10 +133,7 @@ def run_profile(body: ProfileRequest, state: StateDep, motion: MotionDep) -> Mot
 def _profile_of(body: ProfileRequest, limits: AxisLimits) -> MotionProfile:
     """The profile a request asks for (a ramp's acceleration defaults to the axis'
     limit, which ``profile_axis_problem`` has made sure is known)."""
-    if isinstance(body, SineProfileRequest):
-        return SineProfile(body.amplitude_deg, body.period_s, body.cycles)
-    accel = body.accel_deg_s2 if body.accel_deg_s2 is not None else limits.max_accel
-    return RampProfile(body.rate_deg_s, body.hold_s, float(accel))
+    return profile_from_spec(body.model_dump(), limits.max_accel)
 
 
 def _status_at_rest(state: AppState, motion: MotionDriver, what: str, verb: str) -> MotionStatus:

@@ -862,7 +862,7 @@ export interface components {
              */
             frames_per_point: number;
             /** Generator */
-            generator?: (components["schemas"]["GridGenerator"] | components["schemas"]["RangeSweepGenerator"] | components["schemas"]["StabilityGenerator"] | components["schemas"]["AttitudeStepsGenerator"] | components["schemas"]["CalibrationGenerator"]) | null;
+            generator?: (components["schemas"]["GridGenerator"] | components["schemas"]["RangeSweepGenerator"] | components["schemas"]["StabilityGenerator"] | components["schemas"]["AttitudeStepsGenerator"] | components["schemas"]["CalibrationGenerator"] | components["schemas"]["ProfileGenerator"]) | null;
             /**
              * Lock Timeout S
              * @default 5
@@ -1195,6 +1195,11 @@ export interface components {
             /** Frame Index */
             frame_index: number;
             /**
+             * In Motion
+             * @description taken while the set-point's motion profile ran (null at a static set-point)
+             */
+            in_motion?: boolean | null;
+            /**
              * Lab Truth
              * @description encoders + nominal geometry
              */
@@ -1479,6 +1484,39 @@ export interface components {
             z_mm?: number | null;
         };
         /**
+         * ProfileGenerator
+         * @description A dynamic campaign (docs/campaigns.md, "Dynamic campaigns"): at each start point
+         *     (every combination of the axis values given, yaw outermost; the profile's own axis
+         *     at 0 deg unless given), the table settles, rests ``rest_s``, runs ``profile`` from
+         *     there and rests ``rest_s`` again. Every frame of the three phases is stored, flagged
+         *     in_motion while the profile ran, with the encoders interpolated to its capture time;
+         *     ``frames_per_point`` does not apply. Each profile is checked against the soft, rate
+         *     and acceleration limits from its start point before anything is stored.
+         */
+        ProfileGenerator: {
+            /**
+             * @description discriminator enum property added by openapi-typescript
+             * @enum {string}
+             */
+            kind: "profile";
+            /** Pitch Deg */
+            pitch_deg?: number[] | null;
+            /** Profile */
+            profile: components["schemas"]["SineProfileRequest"] | components["schemas"]["RampProfileRequest"];
+            /** Rail Mm */
+            rail_mm?: number[] | null;
+            /**
+             * Rest S
+             * @description rest before and after, s
+             * @default 2
+             */
+            rest_s: number;
+            /** Roll Deg */
+            roll_deg?: number[] | null;
+            /** Yaw Deg */
+            yaw_deg?: number[] | null;
+        };
+        /**
          * ProfilePublic
          * @description The motion profile running now (POST /api/motion/profile).
          */
@@ -1759,6 +1797,13 @@ export interface components {
             index: number;
             /** Pitch Deg */
             pitch_deg: number | null;
+            /**
+             * Profile
+             * @description a dynamic set-point's motion profile (axis, kind, its fields, rest_s), null at a static one
+             */
+            profile?: {
+                [key: string]: unknown;
+            } | null;
             /** Rail Mm */
             rail_mm: number | null;
             /** Roll Deg */
