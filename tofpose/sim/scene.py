@@ -14,8 +14,7 @@ import numpy as np
 
 from tofpose.catalog import Catalog, paper_target
 from tofpose.geometry import RigidTransform
-
-NO_HIT, WALL, PLATE, FIRST_DISC = 0, 1, 2, 3
+from tofpose.sim.raycast import FIRST_DISC, NO_HIT, PLATE, WALL, cast_rays  # noqa: F401
 
 
 @dataclass(frozen=True)
@@ -132,7 +131,8 @@ class SceneInCamera:
     scene: TargetScene
 
     def raycast(self, bearings: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Nearest intersection of unit rays from the camera centre.
+        """Nearest intersection of unit rays from the camera centre (the compiled
+        ``tofpose.sim.raycast.cast_rays``).
 
         Parameters
         ----------
@@ -144,50 +144,14 @@ class SceneInCamera:
         surface_id : ndarray of shape (M,) uint8: NO_HIT, WALL, PLATE or FIRST_DISC + k.
         cos_incidence : ndarray of shape (M,), cosine between the ray and the normal.
         """
-        m = len(bearings)
-        best = np.full(m, np.inf)
-        sid = np.zeros(m, np.uint8)
-        cos_inc = np.zeros(m)
-
-        def plane_hits(point, normal):
-            denom = bearings @ normal
-            with np.errstate(divide="ignore", invalid="ignore"):
-                s = (point @ normal) / denom
-            s[~np.isfinite(s) | (s <= 0)] = np.inf
-            return s, np.abs(denom)
-
-        if self.wall_point is not None:
-            s, c = plane_hits(self.wall_point, self.plate_normal)
-            take = s < best
-            best[take], sid[take], cos_inc[take] = s[take], WALL, c[take]
-
-        s, c = plane_hits(self.plate_centre, self.plate_normal)
-        finite = np.isfinite(s)
-        local = np.full((m, 2), np.inf)
-        local[finite] = (bearings[finite] * s[finite, None] - self.plate_centre) @ self.plate_axes.T
-        inside = np.all(np.abs(local) <= self.plate_half_size, axis=1)
-        take = inside & (s < best)
-        best[take], sid[take], cos_inc[take] = s[take], PLATE, c[take]
-
-        # Cull: a ray can only hit disc k within its angular radius around the centre.
-        dist_c = np.linalg.norm(self.disc_centres, axis=1)
-        c_unit = self.disc_centres / dist_c[:, None]
-        sin_half = np.clip(self.disc_radii * 1.001 / dist_c, 0.0, 1.0)
-        cos_half = np.sqrt(1.0 - sin_half**2)
-        candidates = (bearings @ c_unit.T) >= cos_half  # (M, D)
-        for k in range(len(self.disc_radii)):
-            idx = np.flatnonzero(candidates[:, k])
-            if not len(idx):
-                continue
-            centre, normal = self.disc_centres[k], self.disc_normals[k]
-            denom = bearings[idx] @ normal
-            front = denom < 0  # the disc faces the camera
-            with np.errstate(divide="ignore", invalid="ignore"):
-                s = (centre @ normal) / denom
-            ok = front & (s > 0) & (s < best[idx])
-            idx, s, denom = idx[ok], s[ok], denom[ok]
-            p = bearings[idx] * s[:, None] - centre
-            inside = np.einsum("ij,ij->i", p, p) <= self.disc_radii[k] ** 2
-            idx, s, denom = idx[inside], s[inside], denom[inside]
-            best[idx], sid[idx], cos_inc[idx] = s, FIRST_DISC + k, -denom
-        return best, sid, cos_inc
+        has_wall = self.wall_point is not None
+        return cast_rays(
+            np.ascontiguousarray(bearings, dtype=np.float64),
+            np.asarray(self.wall_point if has_wall else np.zeros(3), np.float64), has_wall,
+            np.asarray(self.plate_centre, np.float64), np.asarray(self.plate_normal, np.float64),
+            np.ascontiguousarray(self.plate_axes, dtype=np.float64),
+            np.asarray(self.plate_half_size, np.float64),
+            np.ascontiguousarray(self.disc_centres, dtype=np.float64).reshape(-1, 3),
+            np.ascontiguousarray(self.disc_normals, dtype=np.float64).reshape(-1, 3),
+            np.ascontiguousarray(self.disc_radii, dtype=np.float64).reshape(-1),
+        )  # fmt: skip
