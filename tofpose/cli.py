@@ -30,7 +30,7 @@ from tofpose.range_calibration import (
     true_pixel_distances,
 )
 from tofpose.recording import RecordingError, RecordingWriter, open_recording
-from tofpose.relative_state import STATE_COLUMNS, RelativeStateFilter
+from tofpose.relative_state import STATE_COLUMNS, RelativeStateConfig, RelativeStateFilter
 from tofpose.threads import single_threaded_blas
 from tofpose.tof import unambiguous_range_mm
 from tofpose.tracking import TrackingConfig
@@ -186,7 +186,8 @@ def estimate(
     with open_recording(rec_path) as rec:
         pipe = pipeline_for(rec, rec_path, catalog_path, camera_path, tracking)
         n_ok = 0
-        rel = RelativeStateFilter() if filter_state else None
+        model = RelativeStateConfig.constant_acceleration()
+        rel = RelativeStateFilter(model) if filter_state else None
         with open(out_csv, "w", newline="") as fh:
             wr = csv.writer(fh)
             wr.writerow(CSV_COLUMNS + (FILTER_COLUMNS if rel else ()))

@@ -35,6 +35,19 @@ last two (their difference over their interval) and the covariance that implies.
 filterpy: its Kalman filters assume a vector state that adds, and the attitude does not;
 the linear algebra here is a few lines of NumPy (and SciPy's expm), the SE(3) parts would
 have to be ours either way.
+
+Constant angular acceleration (``RelativeStateConfig.constant_acceleration()``, the
+server's and ``tofpose estimate --filter``'s model): a rate that changes all the time (a
+turntable's sine, a nutating tumble) makes a constant-rate model lag; the state then also
+holds the twist's acceleration, the angular ``a`` (rad/s^2, ``dw/dt = a``) and the linear
+``b`` (mm/s^2, the rate of change of the twist's linear part ``u = v - w x t``), both
+random walks: ``da/dt`` white of density ``angular_jerk_psd``, ``db/dt`` white of density
+``angular_jerk_psd (f |t|)^2``-shaped (``_lever_arm``), as ``b = -a x c`` for a rotation
+about a centre c, taken up to ``f = centre_fraction`` of the range from the camera. So
+``dv/dt = w x v + a x t + b`` (18 states; the reported covariance stays the 12 x 12 of pose,
+rate and velocity). The fraction trades the two ends: a turntable turns the camera about
+an axis next to it (c ~ 0, b ~ 0) and a tumbling target turns about its own centre (c ~ t,
+b ~ -a x t); f = 0.55 follows both (docs/relative_state.md gives the measured rate errors).
 """
 
 from __future__ import annotations
@@ -74,6 +87,14 @@ class RelativeStateConfig:
     gate_chi2 : innovation gate (module docstring); reset_after : rejections in a row
         after which the filter restarts; max_gap_s : a longer gap without a measurement
         restarts the filter at the next one (the prediction is no longer worth keeping).
+    angular_jerk_psd : None for the constant twist (12 states); a value (rad^2 / s^5)
+        adds the angular acceleration to the state, driven by white angular jerk of this
+        density (15 states, module docstring: "Constant angular acceleration"); then
+        ``angular_accel_psd`` is white acceleration on top of it (may be small),
+        ``initial_accel_sigma_deg_s2`` the acceleration's sigma at a start and
+        ``centre_fraction`` how far from the camera the centre of the changing rotation
+        is taken to be, as a fraction of the range (it sets the density of the twist's
+        linear acceleration b; module docstring).
     """
 
     angular_accel_psd: float = math.radians(10.0) ** 2
@@ -83,6 +104,24 @@ class RelativeStateConfig:
     gate_chi2: float = DEFAULT_GATE_CHI2
     reset_after: int = 3
     max_gap_s: float = 10.0
+    angular_jerk_psd: float | None = None
+    initial_accel_sigma_deg_s2: float = 30.0
+    centre_fraction: float = 0.55
+
+    @classmethod
+    def constant_acceleration(cls, **changes) -> RelativeStateConfig:
+        """The constant-angular-acceleration model tuned for slews and tumbles whose rate
+        changes over seconds (a turntable's sine of a few deg and seconds, a nutating
+        tumble): white angular jerk of density (30 deg)^2 / s^5, and white angular
+        acceleration of (1 deg)^2 / s^3 beside it."""
+        base = {"angular_accel_psd": math.radians(1.0) ** 2,
+                "angular_jerk_psd": math.radians(30.0) ** 2}  # fmt: skip
+        return cls(**{**base, **changes})
+
+    @property
+    def n_states(self) -> int:
+        """12 (constant twist) or 18 (with the twist's acceleration)."""
+        return 12 if self.angular_jerk_psd is None else 18
 
 
 @dataclass(frozen=True)
@@ -143,13 +182,17 @@ def _left_jacobian(phi: np.ndarray) -> np.ndarray:
             + (angle - math.sin(angle)) / angle**3 * K @ K)  # fmt: skip
 
 
+def _lever_arm(q: float, t_mm: np.ndarray) -> np.ndarray:
+    """(3, 3) ``q (|t|^2 I - t t^T)``: the density of ``x x t`` for ``x`` white of density
+    ``q I`` (a rotation's acceleration about a centre as far as the target's origin)."""
+    return q * (t_mm @ t_mm * np.eye(3) - np.outer(t_mm, t_mm))
+
+
 def _linear_density(cfg: RelativeStateConfig, t_mm: np.ndarray) -> np.ndarray:
     """(3, 3) spectral density of the target origin's linear acceleration, mm^2 / s^3:
     the linear white acceleration plus the lever-arm term of an angular acceleration
     about the camera, ``q_a (|t|^2 I - t t^T)`` (module docstring)."""
-    return cfg.linear_accel_psd * np.eye(3) + cfg.angular_accel_psd * (
-        t_mm @ t_mm * np.eye(3) - np.outer(t_mm, t_mm)
-    )
+    return cfg.linear_accel_psd * np.eye(3) + _lever_arm(cfg.angular_accel_psd, t_mm)
 
 
 @dataclass
@@ -165,6 +208,8 @@ class RelativeStateFilter:
     _t: np.ndarray = field(default_factory=lambda: np.zeros(3))
     _w: np.ndarray = field(default_factory=lambda: np.zeros(3))
     _v: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    _a: np.ndarray = field(default_factory=lambda: np.zeros(3))  # rad/s^2 (18 states)
+    _b: np.ndarray = field(default_factory=lambda: np.zeros(3))  # mm/s^2 (18 states)
     _P: np.ndarray = field(default_factory=lambda: np.eye(12))
     _status: Status = "initialised"
     _d2: float = float("nan")
@@ -181,32 +226,44 @@ class RelativeStateFilter:
 
     # -- the model ------------------------------------------------------------------------
     def _propagated(self, dt: float):
-        """(R, t, w, v, P) propagated by dt >= 0 s along the constant twist (module
-        docstring): the nominal state in closed form, P through the linearised model."""
+        """(R, t, w, v, a, b, P) propagated by dt >= 0 s (module docstring): the nominal
+        state in closed form (constant twist) or along the mid-step twist (with the twist's
+        acceleration a, b), P through the linearised model."""
         cfg = self.config
-        w, v, t = self._w, self._v, self._t
-        turn = _exp(w * dt)
+        n = cfg.n_states
+        w, v, t, a, b = self._w, self._v, self._t, self._a, self._b
+        u = v - np.cross(w, t)  # the twist's linear part
+        w_mid, u_mid = w + 0.5 * a * dt, u + 0.5 * b * dt
+        turn = _exp(w_mid * dt)
         R = turn @ self._R
-        t_new = turn @ t + _left_jacobian(w * dt) @ (v - np.cross(w, t)) * dt
-        v_new = turn @ v
-        # linearised error dynamics d(dx)/dt = A dx + noise of density Qc (12, 12)
-        A = np.zeros((12, 12))
+        t_new = turn @ t + _left_jacobian(w_mid * dt) @ u_mid * dt
+        w_new = w + a * dt
+        v_new = u + b * dt + np.cross(w_new, t_new)
+        # linearised error dynamics d(dx)/dt = A dx + noise of density Qc (n, n)
+        A = np.zeros((n, n))
         A[0:3, 0:3] = _skew(w)
         A[0:3, 6:9] = np.eye(3)
         A[3:6, 9:12] = np.eye(3)
         A[9:12, 6:9] = -_skew(v)
         A[9:12, 9:12] = _skew(w)
-        Qc = np.zeros((12, 12))
+        Qc = np.zeros((n, n))
         Qc[6:9, 6:9] = cfg.angular_accel_psd * np.eye(3)
         Qc[9:12, 9:12] = _linear_density(cfg, t)
+        if n == 18:  # dw/dt = a, dv/dt = w x v + a x t + b, da/dt, db/dt white
+            A[6:9, 12:15] = np.eye(3)
+            A[9:12, 12:15] = -_skew(t)
+            A[9:12, 3:6] = _skew(a)
+            A[9:12, 15:18] = np.eye(3)
+            Qc[12:15, 12:15] = cfg.angular_jerk_psd * np.eye(3)
+            Qc[15:18, 15:18] = _lever_arm(cfg.angular_jerk_psd * cfg.centre_fraction**2, t)
         # Van Loan: expm([[-A, Qc], [0, A^T]] dt) = [[., F^-1 Q], [0, F^T]]
-        M = np.zeros((24, 24))
-        M[:12, :12], M[:12, 12:], M[12:, 12:] = -A * dt, Qc * dt, A.T * dt
+        M = np.zeros((2 * n, 2 * n))
+        M[:n, :n], M[:n, n:], M[n:, n:] = -A * dt, Qc * dt, A.T * dt
         E = expm(M)
-        F = E[12:, 12:].T
-        Q = F @ E[:12, 12:]
+        F = E[n:, n:].T
+        Q = F @ E[:n, n:]
         P = F @ self._P @ F.T + Q
-        return R, t_new, w.copy(), v_new, 0.5 * (P + P.T)
+        return R, t_new, w_new, v_new, a.copy(), b.copy(), 0.5 * (P + P.T)
 
     def _start(self, time_s: float, R: np.ndarray, t_mm: np.ndarray, cov: np.ndarray,
                before: tuple | None = None) -> None:  # fmt: skip
@@ -218,17 +275,22 @@ class RelativeStateFilter:
         self._time_s = self._fused_s = float(time_s)
         self._R, self._t = np.array(R, float), np.array(t_mm, float)
         self._w, self._v = np.zeros(3), np.zeros(3)
-        self._P = np.zeros((12, 12))
+        self._a, self._b = np.zeros(3), np.zeros(3)
+        self._P = np.zeros((cfg.n_states, cfg.n_states))
         self._P[:6, :6] = cov
         self._P[6:9, 6:9] = math.radians(cfg.initial_rate_sigma_deg_s) ** 2 * np.eye(3)
         self._P[9:12, 9:12] = cfg.initial_velocity_sigma_mm_s**2 * np.eye(3)
+        if cfg.n_states == 18:
+            var_a = math.radians(cfg.initial_accel_sigma_deg_s2) ** 2
+            self._P[12:15, 12:15] = var_a * np.eye(3)
+            self._P[15:18, 15:18] = _lever_arm(var_a * cfg.centre_fraction**2, self._t)
         if before is not None and time_s - before[0] > 1e-6:
             dt = float(time_s - before[0])
             x = np.concatenate([_log(self._R @ np.asarray(before[1]).T),
                                 self._t - np.asarray(before[2], float)])  # fmt: skip
             self._w, self._v = x[:3] / dt, x[3:] / dt
-            self._P[6:, 6:] = (cov + before[3]) / dt**2  # of (x1 - x0) / dt
-            self._P[:6, 6:] = self._P[6:, :6] = cov / dt  # cov(x1, (x1 - x0) / dt)
+            self._P[6:12, 6:12] = (cov + before[3]) / dt**2  # of (x1 - x0) / dt
+            self._P[:6, 6:12] = self._P[6:12, :6] = cov / dt  # cov(x1, (x1 - x0) / dt)
             self._P[6:9, 6:9] += cfg.angular_accel_psd * dt / 3 * np.eye(3)
             self._P[9:12, 9:12] += dt / 3 * _linear_density(cfg, self._t)
         self._rejected = []
@@ -240,7 +302,7 @@ class RelativeStateFilter:
                 f"time {time_s:.6f} s is before the filter's {self._time_s:.6f} s: "
                 "poses must come in time order"
             )
-        self._R, self._t, self._w, self._v, self._P = self._propagated(dt)
+        self._R, self._t, self._w, self._v, self._a, self._b, self._P = self._propagated(dt)
         self._time_s = float(time_s)
 
     # -- the interface ---------------------------------------------------------------------
@@ -274,13 +336,16 @@ class RelativeStateFilter:
             self._status = "rejected"
             return self.state()
         self._rejected = []
-        K = np.linalg.solve(S, self._P[:6, :]).T  # (12, 6) = P H^T S^-1 (S symmetric)
+        K = np.linalg.solve(S, self._P[:6, :]).T  # (n, 6) = P H^T S^-1 (S symmetric)
         dx = K @ y
         self._R = _exp(dx[0:3]) @ self._R
         self._t = self._t + dx[3:6]
         self._w = self._w + dx[6:9]
         self._v = self._v + dx[9:12]
-        IKH = np.eye(12)
+        if len(dx) == 18:
+            self._a = self._a + dx[12:15]
+            self._b = self._b + dx[15:18]
+        IKH = np.eye(len(dx))
         IKH[:, :6] -= K
         P = IKH @ self._P @ IKH.T + K @ cov @ K.T  # Joseph form
         self._P = 0.5 * (P + P.T)
@@ -335,7 +400,7 @@ class RelativeStateFilter:
         dt = float(time_s) - self._time_s
         if dt < 0:
             raise ValueError(f"time {time_s:.6f} s is before the filter's {self._time_s:.6f} s")
-        R, t, w, v, P = self._propagated(dt)
+        R, t, w, v, _, _, P = self._propagated(dt)
         return self._state(float(time_s), R, t, w, v, P, "predicted")
 
     def state(self) -> RelativeState:
@@ -349,7 +414,7 @@ class RelativeStateFilter:
         return RelativeState(
             time_s=time_s, R=R.copy(), t_mm=t.copy(), angular_rate_deg_s=np.degrees(w),
             angular_rate_target_deg_s=np.degrees(R.T @ w), velocity_mm_s=v.copy(),
-            covariance=P.copy(), status=status, innovation_d2=self._d2,
+            covariance=P[:12, :12].copy(), status=status, innovation_d2=self._d2,
             n_rejected=len(self._rejected),
         )  # fmt: skip
 

@@ -130,7 +130,8 @@ class AcquisitionService:
         self._catalog_name = catalog_name
         self._pipeline = PosePipeline(camera.model, catalog, self._config)
         #: the relative state (rates, velocity) from the poses, on the loop's thread
-        self._filter = RelativeStateFilter(state_config or RelativeStateConfig())
+        state_config = state_config or RelativeStateConfig.constant_acceleration()
+        self._filter = RelativeStateFilter(state_config)
         self._history: deque[LiveSample] = deque(maxlen=history_size)
         self._latest: LiveSample | None = None
         self._commands: queue.Queue[tuple[Callable[[], Any], Future]] = queue.Queue()

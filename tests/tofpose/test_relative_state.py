@@ -23,10 +23,12 @@ POSE_COV = np.diag([SIGMA_RAD**2] * 3 + [SIGMA_MM**2] * 3)
 def _process(cfg, n, dt, rng, w0=(2.0, -5.0, 3.0), v0=(10.0, -5.0, 20.0), substeps=20):
     """Truth drawn from the filter's model, integrated on its own (Euler-Maruyama on
     ``substeps`` per frame interval: ``dR/dt = [w]x R``, ``dt/dt = v``, ``dw/dt`` white of
-    density q_a, ``dv/dt = w x v`` plus white of density ``q_l I + q_a (|t|^2 I - t t^T)``)
-    and noisy poses of it: yields (time, R, t, w, v, measured R, measured t)."""
+    density q_a, ``dv/dt = w x v`` plus white of density ``q_l I + q_a (|t|^2 I - t t^T)``;
+    with ``angular_jerk_psd`` also ``dw/dt = a + white``, ``da/dt`` white of density q_j
+    and ``dv/dt`` gains ``a x t``) and noisy poses of it: yields (time, R, t, w, v,
+    measured R, measured t)."""
     R, t = np.eye(3), np.array([0.0, 0.0, 3000.0])
-    w, v = np.radians(w0), np.array(v0, float)
+    w, v, a = np.radians(w0), np.array(v0, float), np.zeros(3)
     h = dt / substeps
     for k in range(n):
         for _ in range(substeps if k else 0):
@@ -35,8 +37,11 @@ def _process(cfg, n, dt, rng, w0=(2.0, -5.0, 3.0), v0=(10.0, -5.0, 20.0), subste
             )
             R = Rotation.from_rotvec(w * h).as_matrix() @ R
             t = t + v * h
-            v = v + np.cross(w, v) * h + rng.multivariate_normal(np.zeros(3), lin * h)
-            w = w + rng.normal(0.0, math.sqrt(cfg.angular_accel_psd * h), 3)
+            v = v + (np.cross(w, v) + np.cross(a, t)) * h
+            v = v + rng.multivariate_normal(np.zeros(3), lin * h)
+            w = w + a * h + rng.normal(0.0, math.sqrt(cfg.angular_accel_psd * h), 3)
+            if cfg.angular_jerk_psd is not None:
+                a = a + rng.normal(0.0, math.sqrt(cfg.angular_jerk_psd * h), 3)
         Rm = Rotation.from_rotvec(rng.normal(0, SIGMA_RAD, 3)).as_matrix() @ R
         yield k * dt, R, t, w, v, Rm, t + rng.normal(0, SIGMA_MM, 3)
 
@@ -50,8 +55,15 @@ def _fed(cfg, n, n_fed, seed, w0, v0):
     return f, frames
 
 
-def test_the_covariance_holds_on_the_filters_own_process():
-    cfg = RelativeStateConfig(angular_accel_psd=math.radians(5) ** 2, linear_accel_psd=50.0**2)
+CONSTANT_TWIST = RelativeStateConfig(angular_accel_psd=math.radians(5) ** 2,
+                                     linear_accel_psd=50.0**2)  # fmt: skip
+CONSTANT_ACCELERATION = RelativeStateConfig.constant_acceleration(
+    angular_jerk_psd=math.radians(1) ** 2, linear_accel_psd=50.0**2
+)
+
+
+@pytest.mark.parametrize("cfg", [CONSTANT_TWIST, CONSTANT_ACCELERATION], ids=["twist", "accel"])
+def test_the_covariance_holds_on_the_filters_own_process(cfg):
     f, nees = RelativeStateFilter(cfg), []
     frames = _process(cfg, 400, 0.1, np.random.default_rng(0))
     for k, (tt, R, t, w, v, Rm, tm) in enumerate(frames):
@@ -60,7 +72,7 @@ def test_the_covariance_holds_on_the_filters_own_process():
         if k > 50:  # converged from its start at rest
             e = state_error(s, R, t, w, v)
             nees.append(e @ np.linalg.solve(s.covariance, e))
-    assert 9.0 < np.mean(nees) < 16.0  # 12 for a consistent 12-state covariance
+    assert 9.0 < np.mean(nees) < 16.0  # 12 for a consistent covariance of the 12 reported
 
 
 def test_a_wrong_pose_is_rejected_and_does_not_drag_the_state():
@@ -177,10 +189,8 @@ def test_a_tumbling_target_rendered_by_the_simulator_gives_its_rate():
     assert 1.0 < nees < 18.0
 
 
-def test_a_sine_slew_rendered_by_the_simulator_gives_its_rate():
+def _sine_slew(cfg):
     amp, period = math.radians(5.0), 4.0  # the turntable's sine of the done-when
-    alpha = amp * (2 * math.pi / period) ** 2
-    cfg = RelativeStateConfig(angular_accel_psd=alpha**2 * period / 10, linear_accel_psd=100.0)
     axis = np.array([0.0, 1.0, 0.0])
 
     def truth(tt, R0):
@@ -188,12 +198,64 @@ def test_a_sine_slew_rendered_by_the_simulator_gives_its_rate():
         rate = amp * 2 * math.pi / period * math.cos(2 * math.pi * tt / period)
         return Rotation.from_rotvec(axis * angle).as_matrix() @ R0, axis * rate
 
-    rms, nees, peak = _rendered(truth, 120, cfg)
+    return _rendered(truth, 120, cfg)
+
+
+def test_a_sine_slew_rendered_by_the_simulator_gives_its_rate():
+    amp, period = math.radians(5.0), 4.0
+    alpha = amp * (2 * math.pi / period) ** 2
+    cfg = RelativeStateConfig(angular_accel_psd=alpha**2 * period / 10, linear_accel_psd=100.0)
+    rms, nees, peak = _sine_slew(cfg)
     assert rms < 0.15 * peak  # 0.8 deg/s of 7.9 measured
     assert 1.0 < nees < 18.0
 
 
-def _turn(dt_s: float):
+def test_the_constant_acceleration_model_follows_a_target_turning_about_itself():
+    """The sine above about the target's own origin (a tumble's case: the twist's linear
+    acceleration b = -a x t is at the far end of what the model assumes): as close as
+    the constant-twist model's best tuning for this very motion (0.77 vs 0.8 deg/s)."""
+    rms, nees, peak = _sine_slew(RelativeStateConfig.constant_acceleration(linear_accel_psd=100.0))
+    assert rms < 0.12 * peak, (rms, peak)
+    assert 1.0 < nees < 18.0
+
+
+def _table_sine(cfg: RelativeStateConfig, seconds: float = 18.0):
+    """The done-when's slew on the simulated lab: the turntable's yaw runs a sine of 5 deg
+    and 4 s (fades of one period each side) with the camera on it; frames at 10 Hz
+    rendered with the sensor's motion artefacts, each measured by a pipeline as the server
+    runs it. Returns the camera-y rate error RMS (deg/s) after 5 s, and the peak rate."""
+    from backend.drivers.sim import make_sim_world
+    from tofpose.motion_profile import SineProfile
+    from tofpose.sim.render import render_frame
+
+    bench = make_sim_world().bench
+    pipe = PosePipeline(bench.camera, bench.scene.catalog)
+    f, errors = RelativeStateFilter(cfg), []
+    profile = SineProfile(5.0, 4.0, 2)
+    bench.turntable.run_profile("yaw", profile, 1.0)
+    for k in range(int(seconds / 0.1)):
+        tt = 0.1 * k
+        T, _, _ = bench.poses_at(tt)
+        frame = render_frame(bench.camera, bench.scene, T, bench.sensor, bench.rng, time_s=tt,
+                             subframe_poses=bench.subframe_poses(tt, T))  # fmt: skip
+        r = pipe.process(frame.gray, frame.distance_mm, tt)
+        s = f.step(tt, *((r.R, r.t_mm, r.covariance) if r.ok else (None,) * 3))
+        ahead, _, _ = bench.poses_at(tt + 1e-3)
+        w_true = Rotation.from_matrix(ahead.R @ T.R.T).as_rotvec() / 1e-3
+        if tt > 5.0:
+            errors.append(s.angular_rate_deg_s[1] - math.degrees(w_true[1]))
+    return float(np.sqrt(np.mean(np.square(errors)))), profile.peak_rate_deg_s
+
+
+def test_a_turntable_sine_gives_its_rate_within_a_tenth_of_its_peak():
+    """The issue's done-when on the simulated lab: the yaw rate's RMS error once
+    converged within 10 % of the peak rate (7.85 deg/s) with the server's model; the
+    constant-twist model lags this slew by more (measured ~1.2 deg/s, 15 %)."""
+    rms, peak = _table_sine(RelativeStateConfig.constant_acceleration())
+    assert rms < 0.10 * peak, (rms, peak)
+
+
+def _turn(dt_s: float, cfg: RelativeStateConfig | None = None):
     """The turntable's yaw turned 20 deg at its full rate (20 deg/s) and acceleration (40
     deg/s^2) with the camera on it, frames every ``dt_s`` rendered by ``tofpose.sim``:
     the filter's statuses and (filter, true) yaw rates at each frame."""
@@ -202,7 +264,7 @@ def _turn(dt_s: float):
 
     bench = make_sim_world().bench
     pipe = PosePipeline(bench.camera, bench.scene.catalog)
-    f, out = RelativeStateFilter(), []
+    f, out = RelativeStateFilter(cfg or RelativeStateConfig()), []
     bench.turntable.move_to({"yaw": 20.0}, 1.0)
     for k in range(int(4.0 / dt_s)):
         tt = k * dt_s
@@ -218,14 +280,19 @@ def _turn(dt_s: float):
     return out
 
 
+@pytest.mark.parametrize("model", ["twist", "accel"])
 @pytest.mark.parametrize("dt_s", [0.1, 0.3])
-def test_a_fast_turn_of_the_camera_is_followed_not_gated(dt_s):
+def test_a_fast_turn_of_the_camera_is_followed_not_gated(dt_s, model):
     """The camera turns about the table's axis, so the target's origin swings round it
     (~700 mm/s at 2 m): a constant-velocity model gated every pose of the turn (the e2e
     defect); the constant twist follows it. At 0.3 s between frames (a loaded server) the
     turn's start and end are steps of 12 deg/s in one interval: the rate has caught up
     by the second frame at full rate."""
-    out = _turn(dt_s)
+    cfg = RelativeStateConfig.constant_acceleration() if model == "accel" else None
+    # the acceleration state carries the 40 deg/s^2 ramp past its end for a while: at
+    # 0.3 s between frames it overshoots by ~2.3 deg/s at the second frame at full rate
+    tolerance = 2.0 if model == "twist" else 2.5
+    out = _turn(dt_s, cfg)
     assert all(st in ("initialised", "updated") for _, st, _, _ in out), out
     cruise = [abs(w - w_true) for _, _, w, w_true in out if abs(w_true) > 19.9]
-    assert len(cruise) >= 2 and max(cruise[1:]) < 2.0, out  # of 20 deg/s, after a frame
+    assert len(cruise) >= 2 and max(cruise[1:]) < tolerance, out  # of 20 deg/s, after a frame
