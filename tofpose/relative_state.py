@@ -159,11 +159,25 @@ class RelativeState:
 
 
 def _exp(w: np.ndarray) -> np.ndarray:
-    return Rotation.from_rotvec(w).as_matrix()
+    """(3, 3) rotation of the rotation vector ``w`` (3,) (Rodrigues; scipy's Rotation
+    costs ~30 us a call, and the filter makes several per frame)."""
+    angle = math.sqrt(float(w @ w))
+    K = _skew(w)
+    if angle < 1e-8:
+        return np.eye(3) + K + 0.5 * K @ K
+    return np.eye(3) + math.sin(angle) / angle * K + (1.0 - math.cos(angle)) / angle**2 * K @ K
 
 
 def _log(R: np.ndarray) -> np.ndarray:
-    return Rotation.from_matrix(R).as_rotvec()
+    """(3,) rotation vector of the rotation ``R`` (3, 3); scipy's near a half turn."""
+    c = max(-1.0, min(1.0, (float(np.trace(R)) - 1.0) / 2.0))
+    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    angle = math.acos(c)
+    if angle < 1e-6:
+        return 0.5 * v
+    if angle > math.pi - 1e-3:
+        return Rotation.from_matrix(R).as_rotvec()
+    return angle / (2.0 * math.sin(angle)) * v
 
 
 def _skew(a: np.ndarray) -> np.ndarray:

@@ -287,3 +287,16 @@ def test_a_fast_turn_of_the_camera_is_followed_not_gated(dt_s, model):
     assert all(st in ("initialised", "updated") for _, st, _, _ in out), out
     cruise = [abs(w - w_true) for _, _, w, w_true in out if abs(w_true) > 19.9]
     assert len(cruise) >= 2 and max(cruise[1:]) < tolerance, out  # of 20 deg/s, after a frame
+
+
+@pytest.mark.parametrize("angle_rad", [1e-9, 1e-5, 0.1, 1.0, 3.0, math.pi - 1e-4])
+def test_the_filters_rotation_maps_agree_with_scipy(angle_rad):
+    from tofpose.relative_state import _exp, _log
+
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        w = rng.normal(size=3)
+        w *= angle_rad / np.linalg.norm(w)
+        R = Rotation.from_rotvec(w).as_matrix()
+        np.testing.assert_allclose(_exp(w), R, atol=1e-12)
+        np.testing.assert_allclose(_log(R), w, atol=1e-9)
