@@ -139,11 +139,20 @@ def summary(report: dict) -> str:
     if c.get("started_at"):
         when = f" Run from {_minute(c['started_at'])}"
         when += f" to {_minute(c['finished_at'])} UTC." if c.get("finished_at") else " UTC."
+    dyn = report.get("dynamic")
+    if dyn:  # a dynamic campaign: every frame of its rests and profiles, not a count
+        moving = sum(s["n_in_motion"] for s in dyn["setpoints"].values())
+        how = (f"each a motion profile between two rests, after a settling time of "
+               f"{c['settle_s']:g} s; every frame kept, {moving} during the profiles; of "
+               f"the {report['n_frames']} at rest {report['n_ok']} gave a pose "
+               f"({_percent(rate)}), and the statistics below are theirs")  # fmt: skip
+    else:
+        how = (f"{c['frames_per_point']} frames each after a settling time of "
+               f"{c['settle_s']:g} s; {report['n_ok']} of {report['n_frames']} frames gave a "
+               f"pose ({_percent(rate)})")  # fmt: skip
     return (
         f"Status {c['status']}; target catalog {c['catalog']}; {c['n_done']} of "
-        f"{c['n_setpoints']} set-points measured, {c['frames_per_point']} frames each after "
-        f"a settling time of {c['settle_s']:g} s; {report['n_ok']} of {report['n_frames']} "
-        f"frames gave a pose ({_percent(rate)}). Errors are measured minus the "
+        f"{c['n_setpoints']} set-points measured, {how}. Errors are measured minus the "
         f"{reference_label(report)}.{when}"
     )
 

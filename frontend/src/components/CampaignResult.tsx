@@ -1,14 +1,25 @@
 // A finished campaign's key statistics and pass/fail per requirement (from its JSON
-// report), with the report's plots (its HTML page) below.
+// report), a dynamic campaign's latency and rate errors, with the report's plots (its
+// HTML page) below.
 import { useEffect, useState } from "preact/hooks";
 import { api } from "../api/client";
 
 type AxisStats = { n: number; bias: number; std: number; rms: number; max_abs: number;
   predicted_sigma: number; requirement: number; passed: boolean | null };
+// The dynamic section (null for a static campaign): the latency pooled over the set-points
+// and, per dynamic set-point (by index), frames in motion and the rate's error.
+type Latency = { delay_s: number; sigma_s: number; n_setpoints: number };
+type DynamicSetpoint = { n_in_motion: number; lost_in_motion_share?: number | null;
+  rate?: { peak_reference_deg_s: number | null; rms_error_in_motion_deg_s: number | null;
+    rms_error_share_of_peak: number | null };
+  latency?: { delay_s?: number; sigma_s?: number; why_none?: string } };
+type Dynamic = { latency: Latency | null; setpoints: Record<string, DynamicSetpoint> };
 type Report = { n_frames: number; n_ok: number; success_rate: number; reference: string;
-  overall: { passed: boolean | null; axes: Record<string, AxisStats> }; findings: string[] };
+  overall: { passed: boolean | null; axes: Record<string, AxisStats> }; findings: string[];
+  dynamic?: Dynamic | null };
 
 const fmt = (v: number | null | undefined, d = 3) => (v === null || v === undefined || Number.isNaN(v) ? "-" : v.toFixed(d));
+const pct = (v: number | null | undefined) => (v === null || v === undefined ? "-" : `${(100 * v).toFixed(1)} %`);
 const verdict = (p: boolean | null) => (p === null ? "n/a" : p ? "pass" : "FAIL");
 
 export function CampaignResult({ id, onError }: { id: number; onError: (m: string | null) => void }) {
@@ -43,8 +54,37 @@ export function CampaignResult({ id, onError }: { id: number; onError: (m: strin
           })}
         </tbody>
       </table>
+      {rep.dynamic && <DynamicSummary id={id} dyn={rep.dynamic} />}
       {rep.findings.length > 0 && <ul class="small">{rep.findings.map((f) => <li key={f}>{f}</li>)}</ul>}
       <iframe title={`campaign ${id} report`} class="report" src={`/api/campaigns/${id}/report.html?inline=true`} />
+    </div>
+  );
+}
+
+function DynamicSummary({ id, dyn }: { id: number; dyn: Dynamic }) {
+  const lat = dyn.latency;
+  const why = Object.values(dyn.setpoints).find((sp) => sp.latency?.why_none)?.latency?.why_none;
+  return (
+    <div data-testid={`dynamic-${id}`}>
+      <p class="small" title="a frame's pose is the attitude the reference had that long before its time stamp">
+        <strong>Dynamic</strong>: latency <strong data-testid={`latency-${id}`}>
+          {lat ? `${fmt(1000 * lat.delay_s, 1)} ± ${fmt(1000 * lat.sigma_s, 1)} ms` : "-"}
+        </strong>
+        {lat ? ` (pooled over ${lat.n_setpoints} set-point${lat.n_setpoints === 1 ? "" : "s"})` : why ? ` (no fit: ${why})` : " (no fit)"}
+      </p>
+      <table class="small">
+        <thead><tr><th>set-point</th><th>frames in motion</th><th>lost in motion</th><th>peak rate (deg/s)</th>
+          <th>rate RMS error (deg/s)</th><th>of peak</th></tr></thead>
+        <tbody>
+          {Object.entries(dyn.setpoints).map(([index, sp]) => (
+            <tr key={index} data-testid={`dynamic-${id}-${index}`}>
+              <th>{index}</th><td>{sp.n_in_motion}</td><td>{pct(sp.lost_in_motion_share)}</td>
+              <td>{fmt(sp.rate?.peak_reference_deg_s, 2)}</td><td>{fmt(sp.rate?.rms_error_in_motion_deg_s)}</td>
+              <td>{pct(sp.rate?.rms_error_share_of_peak)}</td>
+            </tr>
+          ))}
+        </tbody>
+      </table>
     </div>
   );
 }

@@ -138,3 +138,5 @@ def test_the_report_gives_latency_dynamic_errors_and_frame_loss(late_lab):
     assert "Dynamic accuracy" in html and "Measurement latency" in html
     pdf = late_lab.get(f"/api/campaigns/{c['id']}/report.pdf")
     assert pdf.status_code == 200 and pdf.content.startswith(b"%PDF")
+    # the summary says what a dynamic campaign measured, not a frame count per point
+    assert "each a motion profile between two rests" in html and "frames each" not in html
