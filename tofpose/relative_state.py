@@ -47,7 +47,8 @@ about a centre c, taken up to ``f = centre_fraction`` of the range from the came
 ``dv/dt = w x v + a x t + b`` (18 states; the reported covariance stays the 12 x 12 of pose,
 rate and velocity). The fraction trades the two ends: a turntable turns the camera about
 an axis next to it (c ~ 0, b ~ 0) and a tumbling target turns about its own centre (c ~ t,
-b ~ -a x t); f = 0.55 follows both (docs/relative_state.md gives the measured rate errors).
+b ~ -a x t); f = 0.55 follows both (docs/algorithm.md, "Relative state"; docs/results.md gives
+the measured rate errors).
 """
 
 from __future__ import annotations
