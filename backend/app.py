@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import re
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -52,6 +53,7 @@ from backend.settings import Settings
 from backend.state import AppState
 from tofpose.catalog import Catalog
 from tofpose.pipeline import PipelineConfig
+from tofpose.relative_state import RelativeStateConfig
 from tofpose.tracking import TrackingConfig
 
 log = logging.getLogger("tofpose.server")
@@ -92,6 +94,16 @@ def _pipeline_config(devices: Devices, settings: Settings) -> PipelineConfig:
     cfg = PipelineConfig(tracking=TrackingConfig(enabled=settings.tracking))
     bias = getattr(devices.camera, "range_bias_sigma_mm", None)
     return cfg if bias is None else replace(cfg, range_bias_sigma_mm=bias)
+
+
+def _filter_config(settings: Settings) -> RelativeStateConfig:
+    """The relative-state filter the settings ask for (docs/algorithm.md, "Relative
+    state"): constant angular acceleration with their jerk density, or constant twist."""
+    if settings.filter_model == "twist":
+        return RelativeStateConfig()
+    return RelativeStateConfig.constant_acceleration(
+        angular_jerk_psd=math.radians(settings.filter_jerk_deg) ** 2
+    )
 
 
 def _start_scene(state: AppState) -> None:
@@ -183,6 +195,7 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             backoff_s=settings.retry_backoff_s,
             pipeline_config=_pipeline_config(devs, settings),
             kernels=kernels,
+            state_config=_filter_config(settings),
         )  # fmt: skip
         campaigns = CampaignService(
             sessions, acq, hub, devs.motion, recordings_dir=settings.data_dir / "campaigns",

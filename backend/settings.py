@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import ipaddress
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 from urllib.parse import urlsplit
 
 from pydantic import Field, SecretStr, field_validator
@@ -58,6 +58,10 @@ class Settings(BaseSettings):
         127.0.0.1 and [::1]. A wildcard bind (0.0.0.0, ::) with none given accepts any.
     tracking : the live pipeline's tracking mode (windows around the predicted reflectors
         after a confident pose, full acquisition as fallback; docs/algorithm.md).
+    filter_model : the relative-state filter's motion model, ``acceleration`` (constant
+        angular acceleration) or ``twist`` (constant twist); filter_jerk_deg : the
+        acceleration model's white angular jerk, its density's square root in deg
+        (density (filter_jerk_deg deg)^2 / s^5; docs/algorithm.md, "Relative state").
     lab_target_distance_mm : with real devices, the target's distance from the turntable
         centre (rail 0): the lab reference pose is computed from the rate table's encoders
         and this nominal geometry, as the simulated lab does with ``sim_target_distance_mm``.
@@ -106,6 +110,8 @@ class Settings(BaseSettings):
     shutdown_timeout_s: float = Field(3.0, gt=0, le=60)
     frontend_dir: Path | None = None
     tracking: bool = True
+    filter_model: Literal["acceleration", "twist"] = "acceleration"
+    filter_jerk_deg: float = Field(30.0, gt=0, le=10_000)
     viser: bool = True
     viser_port: int = Field(8080, ge=0, le=65535)
     foxglove_port: int | None = Field(None, ge=0, le=65535)

@@ -71,3 +71,20 @@ def test_token_generated_once_private_and_reused(tmp_path):
 def test_scpi_motion_specs_name_a_visa_resource(motion, resource):
     assert Settings(motion=motion).motion == motion
     assert visa_resource(motion) == resource
+
+
+def test_the_filter_model_and_its_jerk_come_from_the_environment(monkeypatch):
+    import math
+
+    from backend.app import _filter_config
+
+    s = Settings()
+    cfg = _filter_config(s)  # the default: constant angular acceleration, (30 deg)^2/s^5
+    assert cfg.n_states == 18 and cfg.angular_jerk_psd == pytest.approx(math.radians(30) ** 2)
+    monkeypatch.setenv("TOFPOSE_FILTER_JERK_DEG", "60")
+    assert _filter_config(Settings()).angular_jerk_psd == pytest.approx(math.radians(60) ** 2)
+    monkeypatch.setenv("TOFPOSE_FILTER_MODEL", "twist")
+    assert _filter_config(Settings()).n_states == 12
+    monkeypatch.setenv("TOFPOSE_FILTER_MODEL", "kalman")
+    with pytest.raises(ValidationError, match="filter_model"):
+        Settings()
