@@ -89,8 +89,8 @@ class RelativeStateConfig:
         after which the filter restarts; max_gap_s : a longer gap without a measurement
         restarts the filter at the next one (the prediction is no longer worth keeping).
     angular_jerk_psd : None for the constant twist (12 states); a value (rad^2 / s^5)
-        adds the angular acceleration to the state, driven by white angular jerk of this
-        density (15 states, module docstring: "Constant angular acceleration"); then
+        adds the twist's acceleration to the state, driven by white angular jerk of this
+        density (18 states, module docstring: "Constant angular acceleration"); then
         ``angular_accel_psd`` is white acceleration on top of it (may be small),
         ``initial_accel_sigma_deg_s2`` the acceleration's sigma at a start and
         ``centre_fraction`` how far from the camera the centre of the changing rotation
@@ -254,23 +254,27 @@ class RelativeStateFilter:
         t_new = turn @ t + _left_jacobian(w_mid * dt) @ u_mid * dt
         w_new = w + a * dt
         v_new = u + b * dt + np.cross(w_new, t_new)
-        # linearised error dynamics d(dx)/dt = A dx + noise of density Qc (n, n)
+        # linearised error dynamics d(dx)/dt = A dx + noise of density Qc (n, n), taken at
+        # the mid-step state (with the acceleration, v changes by (a x t + b) dt within a
+        # step: at the start's state the transition would miss it)
+        t_c = 0.5 * (t + t_new)
+        v_c = u_mid + np.cross(w_mid, t_c)
         A = np.zeros((n, n))
-        A[0:3, 0:3] = _skew(w)
+        A[0:3, 0:3] = _skew(w_mid)
         A[0:3, 6:9] = np.eye(3)
         A[3:6, 9:12] = np.eye(3)
-        A[9:12, 6:9] = -_skew(v)
-        A[9:12, 9:12] = _skew(w)
+        A[9:12, 6:9] = -_skew(v_c)
+        A[9:12, 9:12] = _skew(w_mid)
         Qc = np.zeros((n, n))
         Qc[6:9, 6:9] = cfg.angular_accel_psd * np.eye(3)
-        Qc[9:12, 9:12] = _linear_density(cfg, t)
+        Qc[9:12, 9:12] = _linear_density(cfg, t_c)
         if n == 18:  # dw/dt = a, dv/dt = w x v + a x t + b, da/dt, db/dt white
             A[6:9, 12:15] = np.eye(3)
-            A[9:12, 12:15] = -_skew(t)
+            A[9:12, 12:15] = -_skew(t_c)
             A[9:12, 3:6] = _skew(a)
             A[9:12, 15:18] = np.eye(3)
             Qc[12:15, 12:15] = cfg.angular_jerk_psd * np.eye(3)
-            Qc[15:18, 15:18] = _lever_arm(cfg.angular_jerk_psd * cfg.centre_fraction**2, t)
+            Qc[15:18, 15:18] = _lever_arm(cfg.angular_jerk_psd * cfg.centre_fraction**2, t_c)
         # Van Loan: expm([[-A, Qc], [0, A^T]] dt) = [[., F^-1 Q], [0, F^T]]
         M = np.zeros((2 * n, 2 * n))
         M[:n, :n], M[:n, n:], M[n:, n:] = -A * dt, Qc * dt, A.T * dt
@@ -308,6 +312,14 @@ class RelativeStateFilter:
             self._P[:6, 6:12] = self._P[6:12, :6] = cov / dt  # cov(x1, (x1 - x0) / dt)
             self._P[6:9, 6:9] += cfg.angular_accel_psd * dt / 3 * np.eye(3)
             self._P[9:12, 9:12] += dt / 3 * _linear_density(cfg, self._t)
+            if cfg.n_states == 18:  # the two poses give the mean rate over the interval:
+                # the rate now differs by a dt / 2, the velocity by (a x t + b) dt / 2
+                var_a = math.radians(cfg.initial_accel_sigma_deg_s2) ** 2
+                h2 = (dt / 2) ** 2
+                self._P[6:9, 6:9] += h2 * var_a * np.eye(3)
+                self._P[9:12, 9:12] += h2 * _lever_arm(var_a * (1 + cfg.centre_fraction**2),
+                                                       self._t)  # fmt: skip
+                self._P[6:9, 12:15] = self._P[12:15, 6:9] = dt / 2 * var_a * np.eye(3)
         self._rejected = []
 
     def _advance(self, time_s: float) -> None:

@@ -43,6 +43,8 @@ log = logging.getLogger(__name__)
 AXIS_COLUMNS = {"yaw": "yaw_deg", "pitch": "pitch_deg", "roll": "roll_deg", "rail": "rail_mm"}
 # Encoder read-back farther than this from the set-point means the axis is not there.
 AT_SETPOINT_TOLERANCE = {"yaw": 0.05, "pitch": 0.05, "roll": 0.05, "rail": 1.0}
+# A profile pauses when the motion status has not been read for this long (s, wall time).
+STALE_TRACE_S = 1.0
 ACTIVE = ("running",)
 RESUMABLE = ("paused", "interrupted")
 FINISHED = ("done", "failed", "cancelled")
@@ -642,8 +644,8 @@ class CampaignService:
                 if t < t_ready:
                     continue
                 if t0 is None and t >= t_ready + rest_s:
+                    running = True  # from here on, any way out stops the table first
                     t0, t_end = self._start_profile(index, axis, spec)
-                    running = True
                     deadline = time.monotonic() + (t_end - t0) + self.move_timeout_s
                 out.append((self._referenced(sample, trace), t0 is not None and t0 <= t <= t_end))
                 if recorder is not None:
@@ -651,6 +653,11 @@ class CampaignService:
                 self._bump(frames_collected=len(out))
                 if t0 is None:
                     continue
+                if trace.stale_s() > STALE_TRACE_S:
+                    why = trace.error or "no answer"
+                    raise _Halt("paused", f"the motion status was not read for "
+                                          f"{trace.stale_s():.1f} s during the profile of "
+                                          f"set-point {index}: {why}")  # fmt: skip
                 st = trace.latest
                 if st.stopped:
                     raise _Halt("paused", f"the turntable was stopped at set-point {index}")
@@ -662,8 +669,8 @@ class CampaignService:
                         raise _Halt("paused", f"the {axis} profile of set-point {index} did not "
                                               f"end within {self.move_timeout_s:g} s of its "
                                               "duration")  # fmt: skip
-        except _Halt:
-            if running:  # a pause, cancel or shutdown stops the slew it interrupts
+        except BaseException:
+            if running:  # a pause, cancel, shutdown or failure stops the slew it interrupts
                 try:
                     self.motion.stop()
                 except Exception:
@@ -701,9 +708,10 @@ class CampaignService:
         """The sample with the encoders interpolated to its capture time and the lab
         reference from them (the nominal geometry), when the trace covers that time."""
         enc = trace.at(float(sample.frame.time_s))
-        if enc is None:
-            return sample
         f = sample.frame
+        if enc is None:  # no reading around its capture: no reference rather than a late one
+            meta = {k: v for k, v in f.meta.items() if k != "encoders"}
+            return replace(sample, frame=replace(f, T_camera_target_lab=None, meta=meta), cache={})
         T_lab = f.T_camera_target_lab
         if self.lab_geometry is not None:
             T_lab = self.lab_geometry.T_camera_target(enc, true=False)

@@ -14,8 +14,8 @@ Per dynamic set-point (rows with ``in_motion`` 0 or 1):
   the RMS as a share of the reference's peak rate;
 - frames lost in motion: frames the camera numbered between the first and the last in
   motion that gave no good pose (not delivered, or no pose), as a share of them;
-- latency: ``tofpose.dynamics.fit_latency`` over the good frames of the set-point, and
-  an inverse-variance mean over the set-points with a chi-square of their agreement.
+- latency: ``tofpose.dynamics.fit_latency`` over the good frames in motion, and an
+  inverse-variance mean over the set-points with a chi-square of their agreement.
 """
 
 from __future__ import annotations
@@ -58,6 +58,9 @@ def setpoint_dynamics(rows: list[dict], reference: str) -> dict:
     """The dynamic statistics of one set-point's rows (module docstring)."""
     prefix = REFERENCE_PREFIX[reference]
     rows = sorted(rows, key=lambda r: _num(r["time_s"]))
+    # one row per stamp (a spline needs increasing times; a repeated stamp is a duplicate)
+    t_all = [_num(r["time_s"]) for r in rows]
+    rows = [r for k, r in enumerate(rows) if k == 0 or t_all[k] > t_all[k - 1]]
     t = np.array([_num(r["time_s"]) for r in rows])
     moving = np.array([_num(r["in_motion"]) == 1 for r in rows])
     ok = np.array([str(r["ok"]) in ("1", "True") for r in rows])
@@ -101,7 +104,7 @@ def setpoint_dynamics(rows: list[dict], reference: str) -> dict:
         }  # fmt: skip
         series["rate_reference"] = w_ref[:, axis].tolist()
         series["rate_measured"] = w_meas[:, axis].tolist()
-        good = ok & inside
+        good = ok & inside & moving  # at rest a frame shows no delay, only noise
         try:
             fit = fit_latency(t[good], _rotations([r for r, g in zip(rows, good, strict=True)
                                                    if g], ""),

@@ -35,6 +35,7 @@ class EncoderTrace:
         self._times: list[float] = []
         self._positions: list[dict[str, float]] = []
         self._latest: MotionStatus | None = None
+        self._read_monotonic = time.monotonic()
         self._error: str = ""
         self._cond = threading.Condition()
         self._stop = threading.Event()
@@ -68,6 +69,8 @@ class EncoderTrace:
     def _add(self, st: MotionStatus) -> None:
         with self._cond:
             self._latest = st
+            self._read_monotonic = time.monotonic()
+            self._error = ""
             if st.time_s is not None and (not self._times or st.time_s > self._times[-1]):
                 self._times.append(float(st.time_s))
                 self._positions.append(dict(st.positions))
@@ -88,6 +91,17 @@ class EncoderTrace:
         with self._cond:
             assert self._latest is not None
             return self._latest
+
+    def stale_s(self) -> float:
+        """Wall seconds since the last successful reading."""
+        with self._cond:
+            return time.monotonic() - self._read_monotonic
+
+    @property
+    def error(self) -> str:
+        """The last failed reading's error since the last good one ("" when none)."""
+        with self._cond:
+            return self._error
 
     @property
     def n(self) -> int:

@@ -15,7 +15,14 @@ import pytest
 from backend.drivers.factory import build_devices
 from backend.drivers.reference import EncoderReferencedCamera
 from tests.backend.api.test_campaigns import _run
-from tests.backend.conftest import AUTH, FlakyCamera, make_settings, running_app
+from tests.backend.conftest import (
+    AUTH,
+    FlakyCamera,
+    SpyMotion,
+    make_settings,
+    running_app,
+    wait_for,
+)
 
 SINE = {"axis": "yaw", "kind": "sine", "amplitude_deg": 3.0, "period_s": 2.0, "cycles": 1}
 RAIL_MM = 11000.0
@@ -151,3 +158,59 @@ def test_the_report_gives_latency_dynamic_errors_and_frame_loss(stamped_late_lab
     assert pdf.status_code == 200 and pdf.content.startswith(b"%PDF")
     # the summary says what a dynamic campaign measured, not a frame count per point
     assert "each a motion profile between two rests" in html and "frames each" not in html
+
+
+class DyingMotion(SpyMotion):
+    """The simulated table, whose status stops answering once ``dead`` is set (a motion
+    link that drops during a profile)."""
+
+    dead = False
+
+    def status(self):
+        if self.dead:
+            raise ConnectionError("rate table link lost (test)")
+        return self.inner.status()
+
+
+@pytest.fixture
+def spied_lab(tmp_path):
+    settings = make_settings(tmp_path / "data", frame_rate_hz=20.0)
+    devs = build_devices(settings)
+    devs.motion = DyingMotion(devs.motion)
+    with running_app(settings, devs) as c:
+        yield c, devs.motion
+
+
+def _start_and_wait_for_the_profile(client, motion, name):
+    r = client.post("/api/campaigns", json=_body(name), headers=AUTH)
+    assert r.status_code == 201, r.text
+    cid = r.json()["id"]
+    assert client.post(f"/api/campaigns/{cid}/start", headers=AUTH).status_code == 200
+    wait_for(lambda: any(c == "run_profile" for c, _ in motion.calls), 30.0, "the profile")
+    return cid
+
+
+def test_a_pause_during_the_profile_stops_the_slew(spied_lab):
+    client, motion = spied_lab
+    cid = _start_and_wait_for_the_profile(client, motion, "dyn-pause")
+    assert client.post(f"/api/campaigns/{cid}/pause", headers=AUTH).status_code == 200
+    c = wait_for(lambda: (x := client.get(f"/api/campaigns/{cid}").json())["status"] == "paused"
+                 and x, 20.0, "the pause")  # fmt: skip
+    assert "paused by request" in c["status_reason"]
+    assert [name for name, _ in motion.calls][-1] == "stop"
+    m = client.get("/api/motion").json()
+    assert m["profile"] is None and not m["busy"], m
+    assert c["setpoints"][0]["status"] == "pending"  # measured again on resume
+
+
+def test_a_motion_link_lost_during_the_profile_pauses_and_stops(spied_lab):
+    client, motion = spied_lab
+    cid = _start_and_wait_for_the_profile(client, motion, "dyn-link")
+    motion.dead = True
+    c = wait_for(lambda: (x := client.get(f"/api/campaigns/{cid}").json())["status"] == "paused"
+                 and x, 20.0, "the pause")  # fmt: skip
+    assert "motion status was not read" in c["status_reason"], c["status_reason"]
+    assert "rate table link lost" in c["status_reason"]
+    assert [name for name, _ in motion.calls][-1] == "stop"
+    motion.dead = False
+    assert client.get("/api/motion").json()["profile"] is None
