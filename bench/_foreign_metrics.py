@@ -1,28 +1,7 @@
-"""Metrics of ``bench/foreign.py``: pose errors against truth, their Mahalanobis distance
-against the reported covariance, the success / wrong / confidently-wrong rules, range
-bins, the true correspondences of measured blobs, and the per-marker measurement errors.
-
-Conventions (those of ``tofpose.covariance_calibration.pose_nees`` and ``PoseResult``):
-
-* pose error ``e`` (6,) = (rotation vector of ``R_est R_true^T`` in rad, ``t_est -
-  t_true`` in mm): the pipeline's left perturbation, in the camera frame, in the order of
-  the reported covariance (rotation vector rad, then translation mm);
-* attitude error (deg) = the geodesic angle |e[:3]|; position error (mm) = |e[3:]|;
-* squared Mahalanobis distance ``d2 = e^T Sigma^-1 e`` (the project's per-frame NEES,
-  mean 6 for a consistent covariance); "NEES/6" below is its mean over frames divided by
-  6, so 1 means consistent and 4 means the errors are twice the reported sigmas;
-* a pose is "beyond 3 sigma" when ``d2`` exceeds the chi-square(6) quantile at the
-  probability of a two-sided 3-sigma interval of one normal variable,
-  p = erf(3 / sqrt 2) = 0.9973: ``CHI2_6_3SIGMA`` = 20.06. A consistent covariance puts
-  0.27 % of poses beyond it.
-
-Acceptance rules (position tolerance ``tol = max(20 mm, 0.5 % of the true range)``):
-
-* success: a pose (ok) with attitude error <= 1 deg and position error <= tol;
-* wrong: ok and (attitude error > 2 deg or position error > 2.5 tol);
-* confidently wrong: wrong and beyond 3 sigma.
-
-A frame without a pose counts in the frames and against success, never as wrong.
+"""Metrics of ``bench/foreign.py``: per-frame outcomes against truth judged by the
+project's rules (``tofpose.pose_judgement``: pose error, Mahalanobis distance, success /
+wrong / confidently wrong, beyond 3 sigma), range bins, the true correspondences of
+measured blobs, and the per-marker measurement errors.
 """
 
 from __future__ import annotations
@@ -32,23 +11,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.spatial.transform import Rotation
-from scipy.stats import chi2
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.geometry import RigidTransform
-
-#: probability of a two-sided 3-sigma interval of one normal variable, erf(3 / sqrt 2)
-P_3SIGMA = math.erf(3.0 / math.sqrt(2.0))
-#: chi-square(6) quantile at P_3SIGMA (20.06): a pose's d2 beyond it is "beyond 3 sigma"
-CHI2_6_3SIGMA = float(chi2.ppf(P_3SIGMA, 6))
-
-SUCCESS_ATTITUDE_DEG = 1.0
-POSITION_TOLERANCE_FLOOR_MM = 20.0
-POSITION_TOLERANCE_FRACTION = 0.005  # of the true range
-WRONG_ATTITUDE_DEG = 2.0
-WRONG_POSITION_FACTOR = 2.5  # times the position tolerance
+from tofpose.pose_judgement import (  # noqa: F401  (re-exported: bench/foreign.py's names)
+    AXES,
+    CHI2_6_3SIGMA,
+    P_3SIGMA,
+    SUCCESS_ATTITUDE_DEG,
+    WRONG_ATTITUDE_DEG,
+    WRONG_POSITION_FACTOR,
+    mahalanobis2,
+    pose_error,
+    position_tolerance_mm,
+)
 
 #: a measured blob is the image of a reflector when its centroid lies within the
 #: reflector's true apparent radius plus this many pixels of its true projection ...
@@ -56,30 +33,6 @@ ASSOCIATION_GATE_PX = 1.5
 #: ... and its range within this of the true range to the reflector's centre (wide: a
 #: blob that mixes the reflector with the plate behind it is still that reflector's)
 ASSOCIATION_RANGE_GATE_MM = 300.0
-
-AXES = ("rx", "ry", "rz", "x", "y", "z")
-
-
-def position_tolerance_mm(range_mm):
-    """max(20 mm, 0.5 % of the true range), elementwise; same shape as ``range_mm``."""
-    r = np.asarray(range_mm, float)
-    return np.maximum(POSITION_TOLERANCE_FLOOR_MM, POSITION_TOLERANCE_FRACTION * r)
-
-
-def pose_error(R_est, t_est_mm, R_true, t_true_mm) -> np.ndarray:
-    """(6,): rotation vector of ``R_est R_true^T`` (rad), then ``t_est - t_true`` (mm).
-    R_* (3, 3) R_camera_target, t_* (3,) mm."""
-    rot = Rotation.from_matrix(np.asarray(R_est) @ np.asarray(R_true).T).as_rotvec()
-    return np.concatenate([rot, np.asarray(t_est_mm, float) - np.asarray(t_true_mm, float)])
-
-
-def mahalanobis2(error: np.ndarray, covariance: np.ndarray) -> float:
-    """Squared Mahalanobis distance e^T Sigma^-1 e of a pose error (6,) against its
-    covariance (6, 6) (module docstring); inf when the covariance is singular."""
-    try:
-        return float(error @ np.linalg.solve(covariance, error))
-    except np.linalg.LinAlgError:
-        return math.inf
 
 
 @dataclass

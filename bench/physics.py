@@ -4,13 +4,7 @@ random per frame from what real targets, lenses and sensors do (domain randomisa
 renderer (``bench/_foreign_metrics.py``: success, wrong, confidently wrong, share beyond
 3 reported sigmas, NEES).
 
-Families (each frame draws its own values):
-
-* ``ideal``: the simulator's defaults (black anodised plate, wall 2 m behind);
-* ``grey plate``: plate reflectance 0.25-0.6 (MLI-covered mock-ups), no wall;
-* ``lens blur``: PSF core sigma 0.3-1.5 px, halo 0-10 % of the energy at 4x;
-* ``gains``: each reflector's return 0.7-1.3 of a new one's, fall-off exponent 2-6;
-* ``all``: every knob above drawn at once, ambient 1-10 klx, wall or none.
+Families: ``tofpose.sim.randomise.FAMILIES`` (each frame draws its own values).
 
 Poses: ranges 3, 4.5, 6 and 8 m, attitude up to 20 deg per axis from facing, the target
 centre up to half the half field of view off the optical axis. Each frame is a fresh
@@ -34,48 +28,12 @@ from bench._common import pyplot, save_figure, section_main, table  # noqa: E402
 from bench._foreign_metrics import marker_errors, summarise, true_images  # noqa: E402
 from bench.foreign import frame_outcome  # noqa: E402
 from tofpose import CameraModel, PosePipeline, paper_target  # noqa: E402
-from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
-from tofpose.sim.bench import R_FACING  # noqa: E402
-from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
-from tofpose.sim.scene import TargetScene  # noqa: E402
+from tofpose.sim.randomise import FAMILIES, draw_physics, draw_pose  # noqa: E402
+from tofpose.sim.render import render_frame  # noqa: E402
 
 RANGES_M = (3.0, 4.5, 6.0, 8.0)
-FAMILIES = ("ideal", "grey plate", "lens blur", "gains", "all")
 MAX_ATTITUDE_DEG = 20.0
 OFFSET_FRACTION = 0.5  # of the half field of view
-
-
-def draw_physics(family: str, rng: np.random.Generator, n_reflectors: int):
-    """(TargetScene, SensorModel) of one frame of ``family`` (module docstring)."""
-    cat = paper_target()
-    scene: dict = {"catalog": cat}
-    sensor: dict = {}
-    if family in ("grey plate", "all"):
-        scene["plate_reflectance"] = float(rng.uniform(0.25, 0.6))
-        scene["wall_distance_mm"] = None
-    if family in ("lens blur", "all"):
-        sensor["blur_sigma_px"] = float(rng.uniform(0.3, 1.5))
-        sensor["psf_halo_fraction"] = float(rng.uniform(0.0, 0.1))
-    if family in ("gains", "all"):
-        scene["reflector_gains"] = tuple(rng.uniform(0.7, 1.3, n_reflectors).tolist())
-        scene["retro_falloff_exponent"] = float(rng.uniform(2.0, 6.0))
-    if family == "all":
-        sensor["ambient_lux"] = float(rng.uniform(1000.0, 10000.0))
-        if rng.random() < 0.5:
-            scene["wall_distance_mm"] = 2000.0
-    return TargetScene(**scene), SensorModel(**sensor)
-
-
-def draw_pose(range_m: float, rng: np.random.Generator, cam: CameraModel) -> RigidTransform:
-    """The target centre at ``range_m``, up to ``OFFSET_FRACTION`` of the half field of
-    view off axis, attitude up to ``MAX_ATTITUDE_DEG`` per axis from facing."""
-    p, y, r = rng.uniform(-MAX_ATTITUDE_DEG, MAX_ATTITUDE_DEG, 3)
-    R = rotation_from_euler_deg(p, y, r) @ R_FACING
-    half_u = OFFSET_FRACTION * (cam.width / 2) / cam.fx
-    half_v = OFFSET_FRACTION * (cam.height / 2) / cam.fy
-    direction = np.array([rng.uniform(-half_u, half_u), rng.uniform(-half_v, half_v), 1.0])
-    t = range_m * 1000.0 * direction / np.linalg.norm(direction)
-    return RigidTransform(R, t)
 
 
 def run(n: int = 12, seed: int = 0):
@@ -88,8 +46,8 @@ def run(n: int = 12, seed: int = 0):
         rng = np.random.default_rng([seed, FAMILIES.index(family), int(range_m * 10)])
         outcomes, ranges = [], {}
         for i in range(n):
-            scene, sensor = draw_physics(family, rng, len(cat))
-            T = draw_pose(range_m, rng, cam)
+            scene, sensor = draw_physics(family, rng, cat)
+            T = draw_pose(range_m, rng, cam, MAX_ATTITUDE_DEG, OFFSET_FRACTION)
             f = render_frame(cam, scene, T, sensor, rng)
             pipe.reset()
             r = pipe.process(f.gray, f.distance_mm)

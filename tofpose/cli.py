@@ -361,6 +361,43 @@ def import_file(args: argparse.Namespace) -> str:
     return f"{s['frames']} frames -> {args.out}"
 
 
+def _cluster_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=int,
+                   help="worker processes of a LocalCluster on this machine (default: its cores)")
+    g.add_argument("--scheduler", help="address of a running Dask scheduler, tcp://host:8786")
+
+
+def study(args) -> int:
+    """``tofpose study``: print the example spec, or run a spec into --out."""
+    from tofpose.batch.cluster import ClusterError
+    from tofpose.study.run import StudyCancelledError, run_study
+    from tofpose.study.spec import EXAMPLE, StudySpec, StudySpecError
+    from tofpose.study.store import StudyStoreError
+
+    if args.example:
+        print(json.dumps(EXAMPLE, indent=2))
+        return 0
+    if not args.spec or not args.out:
+        print("tofpose study: give a SPEC and --out DIR (or --example)", file=sys.stderr)
+        return 2
+    try:
+        spec = StudySpec.from_json(_read_text(args.spec, "study spec"), args.spec)
+        summary = run_study(spec, args.out, workers=args.workers, scheduler=args.scheduler)
+    except (StudySpecError, StudyStoreError, ClusterError) as exc:
+        print(f"tofpose study: {exc}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, StudyCancelledError):
+        print(f"tofpose study: interrupted; {args.out} holds the chunks that finished "
+              "(study.json: incomplete); run the same command again to resume", file=sys.stderr)
+        return 130
+    a = summary["all"]
+    print(f"{summary['frames_stored']} frames in {len(spec.cells)} cells: success "
+          f"{a['success_pct']:.1f} %, {a['wrong']} wrong, {a['confidently_wrong']} confidently "
+          f"wrong -> {Path(args.out) / 'report.html'}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     single_threaded_blas()  # tofpose.threads: idle BLAS threads would burn a core
     ap = argparse.ArgumentParser(prog="tofpose", description=__doc__)
@@ -477,11 +514,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--force", action="store_true", help="overwrite --out")
     p = sub.add_parser("openapi", help="write the server's OpenAPI document (JSON)")
     p.add_argument("--out", required=True)
+    p = sub.add_parser(
+        "study",
+        help="Monte-Carlo accuracy study over a grid of cells, on Dask (docs/scaleout.md)",
+    )
+    p.add_argument("spec", nargs="?", help="study spec JSON (tofpose study --example prints one)")
+    p.add_argument("--out", help="study directory (created; a run of the same spec resumes)")
+    p.add_argument("--example", action="store_true", help="print a small example spec and exit")
+    _cluster_arguments(p)
     sub.add_parser(
         "warm-up",
         help="compile the pipeline's kernels into numba's cache (once after installing)",
     )
     args = ap.parse_args(argv)
+    if args.cmd == "study":
+        return study(args)
     if args.cmd == "warm-up":
         from tofpose.warmup import warm_up
 

@@ -1,0 +1,55 @@
+"""Domain randomisation: each family draws its own knobs within the ranges its docstring
+gives, poses are at the range, in view and within the attitude spread, and a caller's
+ambient light is kept."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tofpose import CameraModel, paper_target
+from tofpose.geometry import rotation_angle_deg
+from tofpose.sim.bench import R_FACING
+from tofpose.sim.randomise import draw_physics, draw_pose
+
+CAT = paper_target()
+
+
+def test_poses_are_at_the_range_in_view_and_within_the_attitude_spread():
+    cam, rng = CameraModel(), np.random.default_rng(0)
+    for range_m in (3.0, 4.5, 6.0, 8.0):
+        for _ in range(50):
+            T = draw_pose(range_m, rng, cam)
+            assert abs(np.linalg.norm(T.t_mm) - range_m * 1000.0) < 1e-6
+            u, v = cam.project(T.t_mm[None])[0]
+            assert abs(u - cam.cx) <= 0.5 * cam.width / 2 + 1e-6
+            assert abs(v - cam.cy) <= 0.5 * cam.height / 2 + 1e-6
+            # three Euler angles of at most 20 deg: at most 20 sqrt(3) deg from facing
+            assert rotation_angle_deg(T.R, R_FACING) <= 20.0 * 3**0.5
+
+
+def test_each_family_draws_its_own_knobs_in_their_ranges():
+    rng = np.random.default_rng(1)
+    for _ in range(30):
+        scene, sensor = draw_physics("ideal", rng, CAT)
+        assert (scene.plate_reflectance, sensor.blur_sigma_px, scene.reflector_gains) == (
+            0.10, 0.0, None)  # fmt: skip
+        scene, _ = draw_physics("grey plate", rng, CAT)
+        assert 0.25 <= scene.plate_reflectance <= 0.6 and scene.wall_distance_mm is None
+        _, sensor = draw_physics("lens blur", rng, CAT)
+        assert 0.3 <= sensor.blur_sigma_px <= 1.5 and 0 <= sensor.psf_halo_fraction <= 0.1
+        scene, _ = draw_physics("gains", rng, CAT)
+        assert len(scene.reflector_gains) == 8
+        assert all(0.7 <= g <= 1.3 for g in scene.reflector_gains)
+        assert 2.0 <= scene.retro_falloff_exponent <= 6.0
+        scene, sensor = draw_physics("all", rng, CAT)
+        assert 1000.0 <= sensor.ambient_lux <= 10000.0 and sensor.blur_sigma_px >= 0.3
+
+
+def test_a_callers_ambient_is_kept_and_an_unknown_family_is_named():
+    rng = np.random.default_rng(2)
+    for family in ("ideal", "all"):
+        _, sensor = draw_physics(family, rng, CAT, ambient_lux=25000.0)
+        assert sensor.ambient_lux == 25000.0
+    with pytest.raises(ValueError, match="'fog'"):
+        draw_physics("fog", rng, CAT)

@@ -1,0 +1,74 @@
+"""Domain randomisation: the physics and the pose of one simulated frame, drawn at random
+from what real targets, lenses and sensors do (``docs/simulator.md``'s knobs).
+
+Physics families (each frame draws its own values):
+
+* ``ideal``: the simulator's defaults (black anodised plate, wall 2 m behind);
+* ``grey plate``: plate reflectance 0.25-0.6 (MLI-covered mock-ups), no wall;
+* ``lens blur``: PSF core sigma 0.3-1.5 px, halo 0-10 % of the energy at 4x;
+* ``gains``: each reflector's return 0.7-1.3 of a new one's, fall-off exponent 2-6;
+* ``all``: every knob above drawn at once, ambient 1-10 klx, wall or none.
+
+Used by the physics robustness study (``bench/physics.py``) and by Monte-Carlo accuracy
+studies (``tofpose.study``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tofpose.camera import CameraModel
+from tofpose.catalog import Catalog
+from tofpose.geometry import RigidTransform, rotation_from_euler_deg
+from tofpose.sim.bench import R_FACING
+from tofpose.sim.render import SensorModel
+from tofpose.sim.scene import TargetScene
+
+FAMILIES = ("ideal", "grey plate", "lens blur", "gains", "all")
+
+
+def draw_physics(
+    family: str, rng: np.random.Generator, catalog: Catalog, ambient_lux: float | None = None
+) -> tuple[TargetScene, SensorModel]:
+    """(TargetScene, SensorModel) of one frame of ``family`` (module docstring).
+    ``ambient_lux``: the ambient light, when the caller sets it (a study's grid axis);
+    None keeps the sensor's default, except for ``all``, which draws 1-10 klx.
+    ``ValueError`` naming the family when it is not one of ``FAMILIES``."""
+    if family not in FAMILIES:
+        raise ValueError(f"unknown physics family {family!r} (one of {', '.join(FAMILIES)})")
+    scene: dict = {"catalog": catalog}
+    sensor: dict = {}
+    if family in ("grey plate", "all"):
+        scene["plate_reflectance"] = float(rng.uniform(0.25, 0.6))
+        scene["wall_distance_mm"] = None
+    if family in ("lens blur", "all"):
+        sensor["blur_sigma_px"] = float(rng.uniform(0.3, 1.5))
+        sensor["psf_halo_fraction"] = float(rng.uniform(0.0, 0.1))
+    if family in ("gains", "all"):
+        scene["reflector_gains"] = tuple(rng.uniform(0.7, 1.3, len(catalog)).tolist())
+        scene["retro_falloff_exponent"] = float(rng.uniform(2.0, 6.0))
+    if ambient_lux is not None:
+        sensor["ambient_lux"] = float(ambient_lux)
+    if family == "all":
+        if ambient_lux is None:
+            sensor["ambient_lux"] = float(rng.uniform(1000.0, 10000.0))
+        if rng.random() < 0.5:
+            scene["wall_distance_mm"] = 2000.0
+    return TargetScene(**scene), SensorModel(**sensor)
+
+
+def draw_pose(
+    range_m: float, rng: np.random.Generator, camera: CameraModel,
+    max_attitude_deg: float = 20.0, offset_fraction: float = 0.5,
+) -> RigidTransform:  # fmt: skip
+    """T_camera_target of one frame: the target centre at ``range_m``, up to
+    ``offset_fraction`` of the half field of view off the optical axis (uniform in the
+    image plane), attitude uniform within +-``max_attitude_deg`` per axis (pitch, yaw,
+    roll) from facing the camera."""
+    p, y, r = rng.uniform(-max_attitude_deg, max_attitude_deg, 3)
+    R = rotation_from_euler_deg(p, y, r) @ R_FACING
+    half_u = offset_fraction * (camera.width / 2) / camera.fx
+    half_v = offset_fraction * (camera.height / 2) / camera.fy
+    direction = np.array([rng.uniform(-half_u, half_u), rng.uniform(-half_v, half_v), 1.0])
+    t = range_m * 1000.0 * direction / np.linalg.norm(direction)
+    return RigidTransform(R, t)

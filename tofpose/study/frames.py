@@ -1,0 +1,162 @@
+"""One chunk of a study: simulate its frames, measure them, judge them against truth,
+write them to the store. This is the task a Dask worker runs (``run_chunk``).
+
+Frame ``i`` of cell ``c`` draws its physics, pose and sensor noise from
+``SeedSequence(seed, spawn_key=(c, i))`` (what ``SeedSequence(seed).spawn`` hands its
+children), and the pipeline forgets every frame before it (a fresh acquisition), so the
+rows depend on the spec alone. Per-frame columns: ``COLUMNS``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+
+import numpy as np
+import pyarrow as pa
+
+from tofpose.camera import CameraModel
+from tofpose.catalog import BUILTIN_CATALOGS
+from tofpose.geometry import quaternion_wxyz_from_rotation
+from tofpose.pipeline import PosePipeline
+from tofpose.pose_judgement import AXES, judge, mahalanobis2, pose_error
+from tofpose.sim.randomise import draw_physics, draw_pose
+from tofpose.sim.render import render_frame
+from tofpose.study.spec import PRESETS, Cell, StudySpec
+from tofpose.study.store import write_chunk
+from tofpose.threads import single_threaded_blas
+
+_F, _I, _B, _S = pa.float64(), pa.int32(), pa.bool_(), pa.string()
+#: the store's per-frame columns. Cell axes; the physics the frame drew; truth
+#: (T_camera_target, mm and quaternion w, x, y, z); the result (ok, reason, matched
+#: reflectors, estimate); its error (rotation vector in deg and position in mm, the
+#: pipeline's left perturbation in the camera frame, ``tofpose.pose_judgement``) and
+#: the reported 1-sigma of the same components; d2 (squared Mahalanobis distance of the
+#: error against the reported covariance); the rules' verdicts
+COLUMNS = pa.schema(
+    [("cell", _I), ("frame", _I), ("range_m", _F), ("attitude_deg", _F),
+     ("offset_fraction", _F), ("ambient_lux", _F), ("physics", _S), ("catalog", _S),
+     ("preset", _S),
+     ("plate_reflectance", _F), ("wall_distance_mm", _F), ("blur_sigma_px", _F),
+     ("psf_halo_fraction", _F), ("gain_min", _F), ("gain_max", _F),
+     ("retro_falloff_exponent", _F),
+     ("true_range_mm", _F), ("true_x_mm", _F), ("true_y_mm", _F), ("true_z_mm", _F),
+     ("true_qw", _F), ("true_qx", _F), ("true_qy", _F), ("true_qz", _F),
+     ("ok", _B), ("reason", _S), ("n_matched", _I),
+     ("est_x_mm", _F), ("est_y_mm", _F), ("est_z_mm", _F),
+     ("est_qw", _F), ("est_qx", _F), ("est_qy", _F), ("est_qz", _F)]
+    + [(f"err_{a}_{'deg' if a[0] == 'r' else 'mm'}", _F) for a in AXES]
+    + [(f"sigma_{a}_{'deg' if a[0] == 'r' else 'mm'}", _F) for a in AXES]
+    + [("d2", _F), ("attitude_error_deg", _F), ("position_error_mm", _F),
+       ("success", _B), ("wrong", _B), ("beyond_3sigma", _B), ("confidently_wrong", _B)]
+)  # fmt: skip
+ERROR_COLUMNS = [f"err_{a}_{'deg' if a[0] == 'r' else 'mm'}" for a in AXES]
+SIGMA_COLUMNS = [f"sigma_{a}_{'deg' if a[0] == 'r' else 'mm'}" for a in AXES]
+
+#: this process's pipelines, by (catalog, preset), and what loading its kernels cost
+_pipelines: dict[tuple[str, str], PosePipeline] = {}
+_kernel_load: dict | None = None
+
+
+def frame_rng(seed: int, cell: int, frame: int) -> np.random.Generator:
+    """The generator of frame ``frame`` of cell ``cell``: SeedSequence(seed).spawn's
+    child (cell, frame), independent of every other frame's."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(cell, frame)))
+
+
+def kernel_load() -> dict:
+    """Once per process: warm the pipeline's kernels up and say whether numba loaded
+    them from its on-disk cache: {"seconds", "cache_hits", "cache_misses"} (misses are
+    kernels this process compiled)."""
+    global _kernel_load
+    if _kernel_load is None:
+        from numba.core.registry import CPUDispatcher
+
+        from tofpose.warmup import warm_up
+
+        seconds = warm_up()
+        hits = misses = 0
+        for name, module in list(sys.modules.items()):
+            if name.startswith("tofpose"):
+                for obj in vars(module).values():
+                    if isinstance(obj, CPUDispatcher):
+                        hits += sum(obj.stats.cache_hits.values())
+                        misses += sum(obj.stats.cache_misses.values())
+        _kernel_load = {"pid": os.getpid(), "seconds": seconds, "cache_hits": hits,
+                        "cache_misses": misses}  # fmt: skip
+    return _kernel_load
+
+
+def _pipeline(camera: CameraModel, cell: Cell) -> PosePipeline:
+    key = (cell.catalog, cell.preset)
+    if key not in _pipelines:
+        _pipelines[key] = PosePipeline(camera, BUILTIN_CATALOGS[cell.catalog](),
+                                       PRESETS[cell.preset]())  # fmt: skip
+    return _pipelines[key]
+
+
+def measure_frame(spec: StudySpec, cell: Cell, frame: int, camera: CameraModel) -> dict:
+    """One frame's row (``COLUMNS``)."""
+    pipe = _pipeline(camera, cell)
+    rng = frame_rng(spec.seed, cell.index, frame)
+    scene, sensor = draw_physics(cell.physics, rng, pipe.catalog, cell.ambient_lux)
+    T = draw_pose(cell.range_m, rng, camera, cell.attitude_deg, cell.offset_fraction)
+    f = render_frame(camera, scene, T, sensor, rng)
+    pipe.reset()
+    r = pipe.process(f.gray, f.distance_mm)
+    gains = scene.reflector_gains or (1.0,)
+    nan = math.nan
+    row = {
+        "cell": cell.index, "frame": frame, "range_m": cell.range_m,
+        "attitude_deg": cell.attitude_deg, "offset_fraction": cell.offset_fraction,
+        "ambient_lux": cell.ambient_lux, "physics": cell.physics, "catalog": cell.catalog,
+        "preset": cell.preset, "plate_reflectance": scene.plate_reflectance,
+        "wall_distance_mm": nan if scene.wall_distance_mm is None else scene.wall_distance_mm,
+        "blur_sigma_px": sensor.blur_sigma_px, "psf_halo_fraction": sensor.psf_halo_fraction,
+        "gain_min": min(gains), "gain_max": max(gains),
+        "retro_falloff_exponent": scene.retro_falloff_exponent,
+        "true_range_mm": float(np.linalg.norm(T.t_mm)),
+        **dict(zip(("true_x_mm", "true_y_mm", "true_z_mm"), T.t_mm.tolist(), strict=True)),
+        **dict(zip(("true_qw", "true_qx", "true_qy", "true_qz"),
+                   quaternion_wxyz_from_rotation(T.R).tolist(), strict=True)),
+        "ok": bool(r.ok), "reason": r.reason, "n_matched": r.n_matched,
+    }  # fmt: skip
+    est = ("est_x_mm", "est_y_mm", "est_z_mm", "est_qw", "est_qx", "est_qy", "est_qz")
+    if r.ok:
+        e = pose_error(r.R, r.t_mm, T.R, T.t_mm)
+        sd = np.sqrt(np.clip(np.diag(r.covariance), 0.0, None))
+        scale = np.array([180.0 / math.pi] * 3 + [1.0] * 3)
+        row.update(zip(est, [*r.t_mm.tolist(), *r.quaternion_wxyz.tolist()], strict=True))
+        row.update(zip(ERROR_COLUMNS, (e * scale).tolist(), strict=True))
+        row.update(zip(SIGMA_COLUMNS, (sd * scale).tolist(), strict=True))
+        row["d2"] = mahalanobis2(e, r.covariance)
+        row["attitude_error_deg"] = math.degrees(float(np.linalg.norm(e[:3])))
+        row["position_error_mm"] = float(np.linalg.norm(e[3:]))
+    else:
+        row.update(dict.fromkeys((*est, *ERROR_COLUMNS, *SIGMA_COLUMNS, "d2",
+                                  "attitude_error_deg", "position_error_mm"), nan))  # fmt: skip
+    verdict = judge([row["ok"]], [row["attitude_error_deg"]], [row["position_error_mm"]],
+                    [row["d2"]], [row["true_range_mm"]])  # fmt: skip
+    row.update({k: bool(v[0]) for k, v in verdict.items()})
+    return row
+
+
+def run_chunk(spec_doc: dict, cell_index: int, start: int, stop: int, store_dir: str) -> dict:
+    """The task: frames [start, stop) of cell ``cell_index``, written to the store as one
+    Parquet file (``store.write_chunk``: atomic, named by the chunk, so a rescheduled
+    task overwrites the same file with the same rows). Returns {"cell", "start",
+    "stop", "frames", "seconds" (measuring), "kernel_load" (``kernel_load``)}."""
+    single_threaded_blas()
+    spec = StudySpec.from_dict(spec_doc)
+    load = kernel_load()
+    cell = spec.cells[cell_index]
+    camera = CameraModel()
+    t0 = time.perf_counter()
+    rows = [measure_frame(spec, cell, i, camera) for i in range(start, stop)]
+    seconds = time.perf_counter() - t0
+    table = pa.Table.from_pylist(rows, schema=COLUMNS)
+    write_chunk(store_dir, cell_index, start, stop, table)
+    return {"cell": cell_index, "start": start, "stop": stop, "frames": stop - start,
+            "seconds": seconds, "kernel_load": load}  # fmt: skip

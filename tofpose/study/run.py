@@ -1,0 +1,128 @@
+"""Run a study on a Dask cluster: submit its chunks, follow them, summarise, report.
+
+Chunks already in the store (a run of the same spec that was interrupted) are not run
+again. Progress goes to ``study.json`` after every chunk (``chunks_done``,
+``frames_done``, ``eta_s``), which is what the server's ``GET /api/studies/{id}``
+reads, and to a progress bar. Ctrl-C (or ``should_stop`` returning True) cancels the
+outstanding tasks and leaves the store marked ``incomplete`` with the chunks that were
+finished; a task that raises marks it ``failed`` with the error.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import sys
+import time
+from collections.abc import Callable
+from datetime import UTC, datetime
+from pathlib import Path
+
+from tqdm import tqdm
+
+from tofpose.batch.cluster import dask_client
+from tofpose.study.frames import run_chunk
+from tofpose.study.spec import StudySpec
+from tofpose.study.store import (
+    open_store,
+    present_chunks,
+    read_frames,
+    remove_temporary,
+    write_manifest,
+)
+from tofpose.study.summary import summarise
+
+POLL_S = 0.5
+
+
+class StudyCancelledError(RuntimeError):
+    """The study was stopped before every chunk ran; the store says ``incomplete``."""
+
+
+def _now() -> str:
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+def run_study(
+    spec: StudySpec, out_dir: str | Path, *, workers: int | None = None,
+    scheduler: str | None = None, progress: bool = True,
+    should_stop: Callable[[], bool] | None = None, report: bool = True,
+) -> dict:  # fmt: skip
+    """Run ``spec`` into ``out_dir`` (``tofpose.study.store``); returns the summary
+    (``summary.json``). ``workers`` / ``scheduler``: ``batch.cluster.dask_client``.
+    ``report``: also write report.html and report.pdf (``tofpose.study.report``)."""
+    from dask.distributed import TimeoutError as DaskTimeout
+    from dask.distributed import wait
+
+    root = Path(out_dir).resolve()
+    manifest = open_store(root, spec)
+    remove_temporary(root)
+    done = present_chunks(root)
+    todo = [c for c in spec.chunks() if c not in done]
+    frames_done = sum(b - a for _, a, b in done & set(spec.chunks()))
+    token = hashlib.sha1(spec.to_json().encode()).hexdigest()[:12]
+    manifest.update(status="running", started=_now(), error=None,
+                    cluster=scheduler or f"LocalCluster({workers or 'auto'})",
+                    chunks_done=len(spec.chunks()) - len(todo), frames_done=frames_done,
+                    eta_s=None)  # fmt: skip
+    write_manifest(root, manifest)
+    results: list[dict] = []
+    t0 = time.perf_counter()
+    bar = tqdm(total=spec.n_frames, initial=frames_done, unit="frame", desc=f"study {spec.name}",
+               disable=not progress, file=sys.stderr)  # fmt: skip
+    try:
+        with dask_client(workers, scheduler) as client:
+            manifest["workers"] = len(client.scheduler_info()["workers"])
+            doc = spec.to_dict()
+            pending = {
+                client.submit(run_chunk, doc, c, a, b, str(root), pure=False,
+                              key=f"tofpose-study-{token}-{c}-{a}")
+                for c, a, b in todo
+            }  # fmt: skip
+            while pending:
+                try:
+                    finished, pending = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED")
+                except DaskTimeout:
+                    finished = set()
+                for fut in finished:
+                    res = fut.result()  # a task's exception surfaces here
+                    results.append(res)
+                    bar.update(res["frames"])
+                    manifest["chunks_done"] += 1
+                    manifest["frames_done"] += res["frames"]
+                    rate = sum(r["frames"] for r in results) / (time.perf_counter() - t0)
+                    manifest["eta_s"] = (spec.n_frames - manifest["frames_done"]) / rate
+                    write_manifest(root, manifest)
+                if should_stop is not None and should_stop():
+                    client.cancel(list(pending))
+                    raise StudyCancelledError(f"study {spec.name!r} stopped")
+    except (KeyboardInterrupt, StudyCancelledError):
+        manifest.update(status="incomplete", finished=_now(), eta_s=None)
+        write_manifest(root, manifest)
+        raise
+    except Exception as exc:
+        manifest.update(status="failed", finished=_now(), error=f"{type(exc).__name__}: {exc}")
+        write_manifest(root, manifest)
+        raise
+    finally:
+        bar.close()
+    wall_s = time.perf_counter() - t0
+    summary = summarise(spec, read_frames(root, spec))
+    loads = {r["kernel_load"]["pid"]: r["kernel_load"] for r in results}
+    # how this run went (study.json; summary.json holds only what the frames say, so
+    # that the same spec gives the same file on any cluster)
+    manifest["run"] = {
+        "workers": manifest.get("workers"), "cluster": manifest["cluster"],
+        "frames_run": sum(r["frames"] for r in results), "wall_s": wall_s,
+        "frames_per_s": sum(r["frames"] for r in results) / wall_s if results else None,
+        "worker_kernel_load": sorted(loads.values(), key=lambda d: d["pid"]),
+    }  # fmt: skip
+    from tofpose.study.report import write_summary
+
+    write_summary(root, summary)
+    if report:
+        from tofpose.study.report import write_report
+
+        write_report(root, spec, summary, manifest["run"])
+    manifest.update(status="complete", finished=_now(), eta_s=0.0)
+    write_manifest(root, manifest)
+    return summary
