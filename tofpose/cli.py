@@ -24,29 +24,17 @@ from tofpose.geometry import RigidTransform, facing_euler_deg, rotation_angle_de
 from tofpose.interop.topics import DISTANCE as DISTANCE_TOPIC
 from tofpose.interop.topics import GRAY as GRAY_TOPIC
 from tofpose.pipeline import PipelineConfig, PosePipeline
+from tofpose.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
 from tofpose.range_calibration import (
     RangeCorrection,
     fit_range_correction,
     true_pixel_distances,
 )
 from tofpose.recording import RecordingError, RecordingWriter, open_recording
-from tofpose.relative_state import STATE_COLUMNS, RelativeStateConfig, RelativeStateFilter
+from tofpose.relative_state import RelativeStateConfig, RelativeStateFilter
 from tofpose.threads import single_threaded_blas
 from tofpose.tof import unambiguous_range_mm
 from tofpose.tracking import TrackingConfig
-
-CSV_COLUMNS = (
-    "frame", "time_s", "ok", "n_matched", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz",
-    "pitch_deg", "yaw_deg", "roll_deg", "residual_mm",
-    # appended later (readers of the columns above keep working): the pose's predicted
-    # 1-sigma, position and rotation-vector components
-    "sigma_x_mm", "sigma_y_mm", "sigma_z_mm", "sigma_rx_deg", "sigma_ry_deg", "sigma_rz_deg",
-)  # fmt: skip
-
-#: with ``estimate --filter``: the relative-state filter's state at each frame
-#: (``tofpose.relative_state``): angular rate in the camera frame, velocity, their 1-sigma,
-#: and what the filter did with the frame's pose
-FILTER_COLUMNS = STATE_COLUMNS
 
 
 def _read_text(path: str, what: str) -> str:
@@ -191,42 +179,19 @@ def estimate(
         with open(out_csv, "w", newline="") as fh:
             wr = csv.writer(fh)
             wr.writerow(CSV_COLUMNS + (FILTER_COLUMNS if rel else ()))
-            for i in tqdm(
-                range(rec.n_frames),
-                desc="estimate",
-                unit="frame",
-                disable=not progress,
-                file=sys.stderr,
-            ):
-                gray, dist, t = rec.frame(i)
-                r = pipe.process(gray, dist, t)
-                row = [i, f"{t:.6f}", int(r.ok), r.n_matched]
-                if r.ok:
-                    n_ok += 1
-                    row += [f"{v:.4f}" for v in r.t_mm]
-                    row += [f"{v:.8f}" for v in r.quaternion_wxyz]
-                    row += [f"{v:.5f}" for v in r.euler_deg]
-                    row += [f"{r.residual_mm:.4f}"]
-                    sd = np.sqrt(np.clip(np.diag(r.covariance), 0.0, None))
-                    row += [f"{v:.4f}" for v in sd[3:]]
-                    row += [f"{v:.5f}" for v in np.degrees(sd[:3])]
-                else:
-                    row += [""] * 17
-                if rel is not None:
-                    row += _filter_columns(rel, r, t)
-                wr.writerow(row)
+            bar = tqdm(total=rec.n_frames, desc="estimate", unit="frame", disable=not progress,
+                       file=sys.stderr)  # fmt: skip
+            for first, (grays, dists, times) in rec.blocks():  # reads aligned to the chunks
+                for k, t in enumerate(times.tolist()):
+                    r = pipe.process(grays[k], dists[k], t)
+                    n_ok += int(r.ok)
+                    row = pose_row(first + k, t, r)
+                    if rel is not None:
+                        row += filter_row(rel, t, *((r.R, r.t_mm, r.covariance) if r.ok else ()))
+                    wr.writerow(row)
+                bar.update(len(times))
+            bar.close()
         return {"frames": rec.n_frames, "ok": n_ok}
-
-
-def _filter_columns(rel: RelativeStateFilter, r, time_s: float) -> list[str]:
-    """``FILTER_COLUMNS`` of one frame: the pose fused (or rejected), or the state
-    predicted to the frame's time without one."""
-    s = rel.step(time_s, *((r.R, r.t_mm, r.covariance) if r.ok else (None, None, None)))
-    if s is None:
-        return [""] * len(FILTER_COLUMNS)
-    return ([f"{v:.4f}" for v in s.angular_rate_deg_s] + [f"{v:.3f}" for v in s.velocity_mm_s]
-            + [f"{v:.4f}" for v in s.angular_rate_sigma_deg_s]
-            + [f"{v:.3f}" for v in s.velocity_sigma_mm_s] + [s.status])  # fmt: skip
 
 
 def simulate(
@@ -398,6 +363,46 @@ def study(args) -> int:
     return 0
 
 
+def reprocess(args) -> int:
+    """``tofpose reprocess``: recordings in chunks on Dask, one CSV each."""
+    from tofpose.batch.cluster import ClusterError
+    from tofpose.batch.reprocess import ReprocessError, Settings
+    from tofpose.batch.reprocess import reprocess as run
+
+    settings = Settings(args.camera, args.catalog, args.tracking)
+    try:
+        s = run(args.recordings, args.out, settings=settings, workers=args.workers,
+                scheduler=args.scheduler, filter_state=args.filter,
+                chunk_frames=args.chunk_frames)  # fmt: skip
+    except (RecordingError, ReprocessError, ClusterError) as exc:
+        print(f"tofpose reprocess: {exc}", file=sys.stderr)
+        return 2
+    for r in s["recordings"]:
+        print(f"{r['ok']}/{r['frames']} frames with a pose -> {Path(args.out) / r['csv']}")
+    fps = s["run"]["frames_per_s"]
+    print(f"{s['run']['frames']} frames on {s['run']['workers']} workers, {fps:.1f} frames/s")
+    return 0
+
+
+def compare(args) -> int:
+    """``tofpose compare``: two runs' poses frame by frame."""
+    from tofpose.batch.compare import CompareError, compare_runs
+
+    try:
+        s = compare_runs(args.run_a, args.run_b, args.out)
+    except CompareError as exc:
+        print(f"tofpose compare: {exc}", file=sys.stderr)
+        return 2
+    for name, r in s["recordings"].items():
+        att, pos = r["attitude_diff_deg"], r["position_diff_mm"]
+        print(f"{name}: {r['frames']} frames, poses {r['ok_a']} -> {r['ok_b']} "
+              f"(gained {r['gained']}, lost {r['lost']}); attitude difference p50 "
+              f"{att['p50']} / max {att['max']} deg, position p50 {pos['p50']} / max "
+              f"{pos['max']} mm")  # fmt: skip
+    print(f"-> {Path(args.out) / 'compare.json'}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     single_threaded_blas()  # tofpose.threads: idle BLAS threads would burn a core
     ap = argparse.ArgumentParser(prog="tofpose", description=__doc__)
@@ -522,6 +527,25 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", help="study directory (created; a run of the same spec resumes)")
     p.add_argument("--example", action="store_true", help="print a small example spec and exit")
     _cluster_arguments(p)
+    p = sub.add_parser(
+        "reprocess",
+        help="re-run the pipeline over recordings in chunks on Dask; CSVs as estimate's",
+    )
+    p.add_argument("recordings", nargs="+", metavar="REC.h5")
+    p.add_argument("--out", required=True, help="output directory: <recording>.csv each")
+    p.add_argument("--camera", help="camera JSON (default: each recording's)")
+    p.add_argument("--catalog", help="catalog JSON (default: each recording's)")
+    p.add_argument("--tracking", action="store_true", help="the pipeline's tracking mode")
+    p.add_argument("--filter", action="store_true", help="add the relative-state filter's columns")
+    p.add_argument("--chunk-frames", type=int, default=512,
+                   help="frames per task (default 512)")  # fmt: skip
+    _cluster_arguments(p)
+    p = sub.add_parser(
+        "compare", help="compare two runs of estimate/reprocess: per-frame pose differences"
+    )
+    p.add_argument("run_a", help="a CSV, or a reprocess directory")
+    p.add_argument("run_b", help="a CSV, or a reprocess directory")
+    p.add_argument("--out", required=True, help="output directory (compare.csv/json/png)")
     sub.add_parser(
         "warm-up",
         help="compile the pipeline's kernels into numba's cache (once after installing)",
@@ -529,6 +553,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.cmd == "study":
         return study(args)
+    if args.cmd == "reprocess":
+        return reprocess(args)
+    if args.cmd == "compare":
+        return compare(args)
     if args.cmd == "warm-up":
         from tofpose.warmup import warm_up
 

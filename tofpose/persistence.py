@@ -85,6 +85,15 @@ class Persistence:
     def reset(self) -> None:
         self._history.clear()
 
+    def update_digest(self, h) -> None:
+        """Feed the history (every entry's arrays, oldest first) into the hashlib object
+        ``h`` (``PosePipeline.state_digest``)."""
+        h.update(len(self._history).to_bytes(2, "little"))
+        for e in self._history:
+            for a in (e.centroids, e.mask, e.gray, e.distance):
+                h.update(str(a.shape).encode())
+                h.update(np.ascontiguousarray(a).tobytes())
+
     def snapshot(self) -> list:
         """The history as it is (for ``restore``: a pass that is abandoned after ``apply``
         must not leave its frame in the history twice)."""

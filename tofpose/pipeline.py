@@ -11,6 +11,7 @@ clears it.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import time
 from dataclasses import dataclass, field
@@ -347,6 +348,25 @@ class PosePipeline:
         """Forget multi-frame history (call when the stream is discontinuous)."""
         self._persistence.reset()
         self._track = None
+
+    def state_digest(self) -> bytes:
+        """A digest (16 bytes) of everything a frame leaves for the next ones: the
+        persistence history, the tracking state and the RANSAC generator. Two pipelines
+        of one configuration whose digests are equal give identical results on the same
+        following frames (``tofpose.batch.reprocess`` finds where a chunk started
+        mid-recording has caught up with the serial run this way)."""
+        h = hashlib.blake2b(digest_size=16)
+        self._persistence.update_digest(h)
+        tr = self._track
+        if tr is None:
+            h.update(b"no track")
+        else:
+            h.update(np.ascontiguousarray(tr.R, float).tobytes())
+            h.update(np.ascontiguousarray(tr.t_mm, float).tobytes())
+            h.update(np.array([tr.threshold_counts, tr.background_counts, tr.dark_counts,
+                               tr.frames_since_acquisition], float).tobytes())  # fmt: skip
+        h.update(repr(self._rng.bit_generator.state).encode())
+        return h.digest()
 
     # ------------------------------------------------------------------------------------
     def process(

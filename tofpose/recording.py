@@ -250,6 +250,38 @@ class Recording:
         for i in range(self.n_frames):
             yield self.frame(i)
 
+    @property
+    def frames_per_chunk(self) -> int:
+        """Frames in one HDF5 chunk of /frames/gray (1 for a contiguous dataset): read
+        blocks aligned to it and each chunk is decompressed once."""
+        chunks = self._file["frames/gray"].chunks
+        return int(chunks[0]) if chunks else 1
+
+    def block(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Frames [start, stop) in one read: gray (n, H, W) uint16, distance (n, H, W)
+        float32, time_s (n,)."""
+        if not 0 <= start <= stop <= self.n_frames:
+            raise IndexError(f"frames {start}..{stop} out of range 0..{self.n_frames}")
+        try:
+            g = self._file["frames/gray"][start:stop]
+            d = self._file["frames/distance_mm"][start:stop]
+        except (OSError, KeyError) as exc:
+            raise RecordingError(
+                f"{self.path}: frames {start}..{stop - 1} cannot be read ({exc})"
+            ) from exc
+        return g, d, np.asarray(self.time_s[start:stop], float)
+
+    def blocks(self, start: int = 0, stop: int | None = None) -> Iterator[tuple[int, tuple]]:
+        """(first frame, ``block``) over [start, stop) in reads aligned to the file's
+        chunks (``frames_per_chunk``, at least 32 frames a read)."""
+        stop = self.n_frames if stop is None else stop
+        step = self.frames_per_chunk * max(1, -(-32 // self.frames_per_chunk))
+        a = start
+        while a < stop:
+            b = min(stop, (a // step + 1) * step)
+            yield a, self.block(a, b)
+            a = b
+
     def close(self) -> None:
         if self._file.id.valid:
             self._file.close()

@@ -139,3 +139,23 @@ def test_a_target_turning_in_place_is_not_averaged_into_a_stale_pose():
 def _rendered(render, T, seed):
     frame = render(T, seed=seed)
     return frame.gray, frame.distance_mm
+
+
+def test_the_state_digest_says_when_two_pipelines_will_agree(camera, catalog):
+    from tests.conftest import facing_pose, render
+    from tofpose.pipeline import PosePipeline
+
+    frames = [render(facing_pose(2500.0, yaw_deg=3.0), seed=s) for s in range(6)]
+    a, b = PosePipeline(camera, catalog), PosePipeline(camera, catalog)
+    assert a.state_digest() == b.state_digest()
+    for f in frames[:4]:
+        a.process(f.gray, f.distance_mm)
+    for f in frames[2:4]:  # b sees only the last two: its history is shorter
+        b.process(f.gray, f.distance_mm)
+    assert a.state_digest() != b.state_digest()
+    b.reset()  # the same four frames from a reset: the same state ...
+    for f in frames[:4]:
+        b.process(f.gray, f.distance_mm)
+    assert a.state_digest() == b.state_digest()
+    ra, rb = (p.process(frames[4].gray, frames[4].distance_mm) for p in (a, b))
+    np.testing.assert_array_equal(ra.t_mm, rb.t_mm)  # ... and the same next result

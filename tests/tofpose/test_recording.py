@@ -116,3 +116,20 @@ def test_a_recording_can_be_reopened_appended_and_truncated(tmp_path):
     (tmp_path / "x.h5").write_bytes(b"nope")
     with pytest.raises(RecordingError, match="cannot open for appending"):
         RecordingWriter.reopen(tmp_path / "x.h5")
+
+
+def test_blocks_read_what_frames_read_in_aligned_reads(tmp_path):
+    p = tmp_path / "r.h5"
+    frames = _write(p, n=40)
+    with open_recording(p) as rec:
+        assert rec.frames_per_chunk == 1
+        spans = []
+        for first, (g, d, t) in rec.blocks(5, 40):
+            spans.append((first, first + len(t)))
+            for k in range(len(t)):
+                np.testing.assert_array_equal(g[k], frames[first + k][0])
+                np.testing.assert_array_equal(d[k], frames[first + k][1])
+                assert t[k] == rec.time_s[first + k]
+        assert spans == [(5, 32), (32, 40)]  # reads end on multiples of 32 frames
+        with pytest.raises(IndexError, match="frames 30..41"):
+            rec.block(30, 41)

@@ -1,0 +1,273 @@
+"""Re-process recordings on Dask in chunks of frames, to the same CSV ``tofpose
+estimate`` writes, byte for byte (``tofpose reprocess``).
+
+The pipeline carries state from frame to frame (the persistence history of the last K
+frames, the tracker's last pose and its re-acquisition count), so a chunk cannot simply
+start at its first frame. Each chunk starts earlier, at its *origin*, and runs a warm-up
+over frames the previous chunk outputs. It is exact once its state has caught up with
+the serial run's, and that is checked, not assumed: both the chunk (over its warm-up)
+and the previous chunk (over the same frames, at its end) record
+``PosePipeline.state_digest()`` after each frame. Equal digests at some warm-up frame
+mean equal state there, hence equal results from there on (the pipeline is
+deterministic). A chunk whose digests never meet the previous one's (e.g. a tracker
+that never lost its target, its re-acquisition count out of phase) is run again from
+the previous chunk's own origin, which reproduces that chunk's verified run and carries
+on through this one. The manifest (``reprocess.json``) says, per chunk boundary, which
+of the two happened.
+
+Warm-up: 2 (K - 1) frames in acquisition mode; in tracking mode the origin is a
+multiple of the re-acquisition period N at least K - 1 + N frames back (the serial
+run re-acquires at multiples of N while it keeps its target).
+
+The relative-state filter (``--filter``) remembers every frame, so it is not chunked:
+the workers store each frame's raw pose (``chunks/*.npz``) and the filter runs once
+over them in order, on the client (about 1 ms a frame).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import sys
+import time
+import uuid
+from dataclasses import asdict, dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from tofpose.batch.cluster import dask_client
+from tofpose.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
+from tofpose.recording import open_recording
+
+DEFAULT_CHUNK_FRAMES = 512
+
+
+class ReprocessError(ValueError):
+    """Recordings or settings that cannot be re-processed; the message says which."""
+
+
+@dataclass(frozen=True)
+class Settings:
+    """What every chunk's pipeline is built from (``tofpose.cli.pipeline_for``)."""
+
+    camera_path: str | None = None
+    catalog_path: str | None = None
+    tracking: bool = False
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """Frames [start, stop) of recording ``path`` output, after a warm-up from ``origin``;
+    digests are recorded for the warm-up and for the last ``tail`` frames (the next
+    chunk's warm-up)."""
+
+    path: str
+    index: int
+    origin: int
+    start: int
+    stop: int
+    tail: int
+
+    @property
+    def name(self) -> str:
+        return f"{Path(self.path).stem}-{self.start:08d}"
+
+
+def warmup_origin(start: int, k_frames: int, tracking: bool, reacquire_every: int) -> int:
+    """The origin of a chunk that outputs from ``start`` (module docstring)."""
+    if start == 0:
+        return 0
+    if not tracking:
+        return max(0, start - 2 * (k_frames - 1))
+    n = reacquire_every
+    return max(0, (start - (k_frames - 1) - n) // n * n)
+
+
+def plan(path: str, n_frames: int, chunk_frames: int, k_frames: int, tracking: bool,
+         reacquire_every: int) -> list[Chunk]:  # fmt: skip
+    """The chunks of one recording of ``n_frames``."""
+    starts = list(range(0, n_frames, chunk_frames))
+    origins = [warmup_origin(s, k_frames, tracking, reacquire_every) for s in starts]
+    out = []
+    for j, s in enumerate(starts):
+        stop = min(s + chunk_frames, n_frames)
+        tail = starts[j + 1] - origins[j + 1] if j + 1 < len(starts) else 0
+        out.append(Chunk(path, j, origins[j], s, stop, tail))
+    return out
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
+def run_chunk(chunk: Chunk, settings: Settings, out_dir: str) -> dict:
+    """The task: run frames [origin, stop), write the rows of [start, stop) as
+    ``chunks/<name>.csv`` (no header) and their raw poses as ``chunks/<name>.npz``
+    (atomically); returns {"name", "warm": digests of frames [origin, start), "tail":
+    digests of the last ``tail`` frames, "ok", "seconds"} (digests as hex strings)."""
+    from tofpose.cli import pipeline_for
+    from tofpose.threads import single_threaded_blas
+
+    single_threaded_blas()
+    t0 = time.perf_counter()
+    rows = io.StringIO()
+    wr = csv.writer(rows)
+    n = chunk.stop - chunk.start
+    ok = np.zeros(n, bool)
+    R = np.full((n, 3, 3), np.nan)
+    t_mm = np.full((n, 3), np.nan)
+    cov = np.full((n, 6, 6), np.nan)
+    times = np.zeros(n)
+    warm, tail = [], []
+    with open_recording(chunk.path) as rec:
+        pipe = pipeline_for(rec, chunk.path, settings.catalog_path, settings.camera_path,
+                            settings.tracking)  # fmt: skip
+        for first, (grays, dists, ts) in rec.blocks(chunk.origin, chunk.stop):
+            for k, tk in enumerate(ts.tolist()):
+                i = first + k
+                r = pipe.process(grays[k], dists[k], tk)
+                if i < chunk.start:
+                    warm.append(pipe.state_digest().hex())
+                    continue
+                j = i - chunk.start
+                wr.writerow(pose_row(i, tk, r))
+                times[j] = tk
+                if r.ok:
+                    ok[j], R[j], t_mm[j], cov[j] = True, r.R, r.t_mm, r.covariance
+                if i >= chunk.stop - chunk.tail:
+                    tail.append(pipe.state_digest().hex())
+    chunks = Path(out_dir) / "chunks"
+    chunks.mkdir(parents=True, exist_ok=True)
+    _write_atomic(chunks / f"{chunk.name}.csv", rows.getvalue().encode())
+    buf = io.BytesIO()
+    np.savez(buf, ok=ok, R=R, t_mm=t_mm, covariance=cov, time_s=times)
+    _write_atomic(chunks / f"{chunk.name}.npz", buf.getvalue())
+    return {"name": chunk.name, "warm": warm, "tail": tail, "ok": int(ok.sum()),
+            "seconds": time.perf_counter() - t0}  # fmt: skip
+
+
+def synced_frame(previous: Chunk, prev_result: dict, chunk: Chunk, result: dict) -> int | None:
+    """The first warm-up frame of ``chunk`` at which its state equals the previous
+    chunk's (equal digests), or None."""
+    first_tail = previous.stop - previous.tail
+    for k, digest in enumerate(result["warm"]):
+        frame = chunk.origin + k
+        m = frame - first_tail
+        if 0 <= m < len(prev_result["tail"]) and prev_result["tail"][m] == digest:
+            return frame
+    return None
+
+
+def _now() -> str:
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+def reprocess(
+    recordings: list[str], out_dir: str | Path, *, settings: Settings | None = None,
+    workers: int | None = None, scheduler: str | None = None, filter_state: bool = False,
+    chunk_frames: int = DEFAULT_CHUNK_FRAMES, progress: bool = True,
+) -> dict:  # fmt: skip
+    """Re-process ``recordings`` into ``out_dir``: ``<stem>.csv`` per recording (what
+    ``tofpose estimate`` writes for it), ``chunks/``, and ``reprocess.json`` (returned):
+    settings, per recording its frames, poses and chunk boundaries, and the run's
+    throughput. ``ReprocessError`` for recordings that cannot be read or named apart."""
+    from dask.distributed import as_completed
+
+    from tofpose.cli import pipeline_for
+
+    settings = settings or Settings()
+    if chunk_frames < 1:
+        raise ReprocessError(f"--chunk-frames must be >= 1 (got {chunk_frames})")
+    stems = [Path(p).stem for p in recordings]
+    dup = sorted({s for s in stems if stems.count(s) > 1})
+    if dup:
+        raise ReprocessError(f"two recordings are named {dup[0]!r}: their CSVs would collide")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    chunks: dict[str, list[Chunk]] = {}
+    for path in recordings:
+        with open_recording(path) as rec:  # RecordingError names what is wrong
+            pipe = pipeline_for(rec, path, settings.catalog_path, settings.camera_path,
+                                settings.tracking)  # fmt: skip
+            cfg = pipe.config
+            chunks[path] = plan(str(path), rec.n_frames, chunk_frames, cfg.persistence.k_frames,
+                                settings.tracking, cfg.tracking.reacquire_every)  # fmt: skip
+    total = sum(c.stop - c.start for cs in chunks.values() for c in cs)
+    t0 = time.perf_counter()
+    results: dict[Chunk, dict] = {}
+    boundaries: dict[str, list[dict]] = {p: [] for p in recordings}
+    bar = tqdm(total=total, unit="frame", desc="reprocess", disable=not progress,
+               file=sys.stderr)  # fmt: skip
+    with dask_client(workers, scheduler) as client:
+        n_workers = len(client.scheduler_info()["workers"])
+        futures = {client.submit(run_chunk, c, settings, str(out), pure=False): c
+                   for cs in chunks.values() for c in cs}  # fmt: skip
+        for fut in as_completed(list(futures)):
+            results[futures[fut]] = fut.result()
+            bar.update(futures[fut].stop - futures[fut].start)
+        reruns = 0
+        for path, cs in chunks.items():
+            for j in range(1, len(cs)):
+                prev, cur = cs[j - 1], cs[j]
+                k = synced_frame(prev, results[prev], cur, results[cur])
+                if k is not None:
+                    boundaries[path].append({"chunk": j, "start": cur.start, "synced_at_frame": k})
+                    continue
+                # run again from the previous chunk's origin: its verified run, carried on
+                again = Chunk(path, j, prev.origin, cur.start, cur.stop, cur.tail)
+                results[cur] = client.submit(run_chunk, again, settings, str(out),
+                                             pure=False).result()  # fmt: skip
+                cs[j] = again
+                results[again] = results[cur]
+                reruns += 1
+                boundaries[path].append({"chunk": j, "start": cur.start,
+                                         "continued_from_frame": prev.origin})  # fmt: skip
+    bar.close()
+    wall_s = time.perf_counter() - t0
+    summary = {"format": "tofpose-reprocess", "finished": _now(), "settings": asdict(settings),
+               "filter": filter_state, "chunk_frames": chunk_frames, "recordings": []}  # fmt: skip
+    for path, cs in chunks.items():
+        csv_path = out / f"{Path(path).stem}.csv"
+        n_ok = _concatenate(cs, out, csv_path, filter_state)
+        summary["recordings"].append({
+            "path": str(path), "csv": csv_path.name, "frames": cs[-1].stop if cs else 0,
+            "ok": n_ok, "chunks": len(cs), "boundaries": boundaries[path]})  # fmt: skip
+    summary["run"] = {"workers": n_workers, "cluster": scheduler or f"LocalCluster({n_workers})",
+                      "frames": total, "wall_s": wall_s,
+                      "frames_per_s": total / wall_s if wall_s > 0 else None,
+                      "chunks_run_again": reruns}  # fmt: skip
+    import json
+
+    (out / "reprocess.json").write_text(json.dumps(summary, indent=2))
+    return summary
+
+
+def _concatenate(cs: list[Chunk], out: Path, csv_path: Path, filter_state: bool) -> int:
+    """Write one recording's CSV from its chunks, in order; returns its poses."""
+    from tofpose.relative_state import RelativeStateConfig, RelativeStateFilter
+
+    rel = RelativeStateFilter(RelativeStateConfig.constant_acceleration()) if filter_state else None
+    n_ok = 0
+    tmp = csv_path.with_name(f".{csv_path.name}.tmp")
+    with open(tmp, "w", newline="") as fh:
+        wr = csv.writer(fh)
+        wr.writerow(CSV_COLUMNS + (FILTER_COLUMNS if rel else ()))
+        for c in cs:
+            text = (out / "chunks" / f"{c.name}.csv").read_bytes().decode()  # keeps \r\n
+            raw = np.load(out / "chunks" / f"{c.name}.npz")
+            n_ok += int(raw["ok"].sum())
+            if rel is None:
+                fh.write(text)
+                continue
+            for k, row in enumerate(csv.reader(io.StringIO(text))):
+                pose = ((raw["R"][k], raw["t_mm"][k], raw["covariance"][k])
+                        if raw["ok"][k] else ())  # fmt: skip
+                wr.writerow(row + filter_row(rel, float(raw["time_s"][k]), *pose))
+    os.replace(tmp, csv_path)
+    return n_ok
