@@ -39,6 +39,7 @@ from backend.api.routes import (
     scene,
 )
 from backend.api.routes import devices as devices_route
+from backend.api.routes import studies as studies_route
 from backend.auth import load_or_create_token
 from backend.db.engine import make_engine, make_session_factory, upgrade_database
 from backend.drivers.base import CameraSettings
@@ -49,6 +50,7 @@ from backend.services.campaigns import CampaignService
 from backend.services.hub import LiveHub
 from backend.services.kernel_warmup import KernelWarmup
 from backend.services.store import find_catalog, load_device_settings
+from backend.services.studies import StudyService
 from backend.settings import Settings
 from backend.state import AppState
 from tofpose.catalog import Catalog
@@ -205,7 +207,10 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         if interrupted:
             log.warning("%d campaign(s) were running when the server stopped: interrupted "
                         "(resume them to continue)", interrupted)  # fmt: skip
-        app.state.tofpose = AppState(settings, token, engine, sessions, devs, hub, acq, campaigns)
+        studies = StudyService(settings.data_dir / "studies", settings.dask_scheduler or None,
+                               settings.study_workers)  # fmt: skip
+        app.state.tofpose = AppState(settings, token, engine, sessions, devs, hub, acq, campaigns,
+                                     studies)  # fmt: skip
         # the pipeline's compiled kernels (tofpose.warmup): in the background while frames
         # already stream (backend/services/kernel_warmup.py), or before the first frame
         if settings.kernels_in_background:
@@ -214,6 +219,8 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             await asyncio.to_thread(kernels.run)
         acq.start()
         campaigns.start()
+        if studies.start():
+            log.warning("studies queued or running when the server stopped: queued again")
         _start_scene(app.state.tofpose)
         _start_foxglove(app.state.tofpose)
         try:
@@ -224,6 +231,7 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             if app.state.tofpose.foxglove is not None:
                 app.state.tofpose.foxglove.close()
             campaigns.stop()  # a running campaign is left interrupted (resumable)
+            studies.stop()  # a running study is queued again at the next start
             app.state.tofpose.renderer.close()
             acq.stop()
             devs.close()
@@ -273,7 +281,7 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         )  # fmt: skip
 
     routers = (health, devices_route, camera, pose, frames, motion, catalogs, campaigns,
-               calibrations, reference, scene, foxglove, live)  # fmt: skip
+               calibrations, reference, scene, foxglove, live, studies_route)  # fmt: skip
     for module in routers:
         app.include_router(module.router)
 

@@ -76,6 +76,10 @@ class Settings(BaseSettings):
     foxglove_port : publish the live stream to Foxglove (a ``foxglove-sdk`` WebSocket
         server on this host, docs/interop.md); None (the default) = off, 0 = any free
         port. Like the 3-D scene it has no token check: beyond loopback only with open reads.
+    dask_scheduler : where accuracy studies (``POST /api/studies``) run: the address of a
+        Dask scheduler (``tcp://host:8786``); empty = a LocalCluster on this machine of
+        its cores less one (``study_workers`` to override), workers at a lower priority
+        so that the live camera loop keeps its frame rate (docs/scaleout.md).
     """
 
     model_config = SettingsConfigDict(env_prefix="TOFPOSE_", extra="ignore")
@@ -112,6 +116,8 @@ class Settings(BaseSettings):
     tracking: bool = True
     filter_model: Literal["acceleration", "twist"] = "acceleration"
     filter_jerk_deg: float = Field(30.0, gt=0, le=10_000)
+    dask_scheduler: str = ""
+    study_workers: int | None = Field(None, ge=1, le=1024)
     viser: bool = True
     viser_port: int = Field(8080, ge=0, le=65535)
     foxglove_port: int | None = Field(None, ge=0, le=65535)

@@ -15,6 +15,7 @@ from backend.services.acquisition import AcquisitionService, DeviceHealth
 from backend.services.campaigns import CampaignService
 from backend.services.hub import LiveHub
 from backend.services.imaging import ImageRenderer
+from backend.services.studies import StudyService
 from backend.settings import Settings
 
 
@@ -28,6 +29,7 @@ class AppState:
     hub: LiveHub
     acquisition: AcquisitionService
     campaigns: CampaignService
+    studies: StudyService
     renderer: ImageRenderer = field(default_factory=ImageRenderer)
     motion_health: DeviceHealth = field(default_factory=lambda: DeviceHealth(state="ok"))
     started_monotonic: float = field(default_factory=time.monotonic)

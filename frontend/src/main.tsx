@@ -10,6 +10,7 @@ import { PosePanel } from "./components/PosePanel";
 import { ReferenceBar } from "./components/ReferenceBar";
 import { ScenePanel } from "./components/ScenePanel";
 import { StatusPanel } from "./components/StatusPanel";
+import { Studies } from "./components/Studies";
 import { TimeSeries } from "./components/TimeSeries";
 import { connectLive, type LiveHandle, type LiveState } from "./live";
 import "./style.css";
@@ -72,6 +73,7 @@ function App() {
         <ScenePanel onError={setError} />
         <Campaigns onError={setError} />
         <NewCampaign onError={setError} calibrationRequest={preset} />
+        <Studies onError={setError} />
       </main>
     </div>
   );

@@ -30,6 +30,9 @@ def make_settings(data_dir: Path, **kw) -> Settings:
     kw.setdefault("viser", False)  # the 3-D scene runs where a test asks for it
     # poses from the first frame on (the background compile has a test of its own)
     kw.setdefault("kernels_in_background", False)
+    # studies go to a scheduler that is not there (they fail at once, naming it), so that
+    # a fuzzer's studies do not load the machine; tests of studies set their own
+    kw.setdefault("dask_scheduler", "tcp://127.0.0.1:9")
     return Settings(data_dir=data_dir, **kw)
 
 

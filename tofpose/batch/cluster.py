@@ -12,7 +12,8 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
+from pathlib import Path
 
 CONNECT_TIMEOUT_S = 10.0
 
@@ -31,6 +32,19 @@ def default_workers(reserve: int = 0) -> int:
     return max(1, cores - reserve)
 
 
+def _lower_priority(niceness: int) -> int:
+    """In a worker: raise every thread's nice value by ``niceness`` (on Linux a nice
+    value is per thread; threads started later inherit their creator's). Returns the
+    threads changed."""
+    tasks = Path("/proc/self/task")
+    tids = [int(t.name) for t in tasks.iterdir()] if tasks.is_dir() else [0]
+    for tid in tids:
+        # a thread that ended meanwhile, or not a POSIX system
+        with suppress(OSError, AttributeError):
+            os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + niceness)
+    return len(tids)
+
+
 def _worker_info() -> dict:
     import tofpose
 
@@ -38,9 +52,13 @@ def _worker_info() -> dict:
 
 
 @contextmanager
-def dask_client(workers: int | None = None, scheduler: str | None = None) -> Iterator:
+def dask_client(
+    workers: int | None = None, scheduler: str | None = None, niceness: int = 0
+) -> Iterator:
     """A ``distributed.Client``: on ``scheduler`` when given, else on a LocalCluster of
-    ``workers`` processes (``default_workers()`` when None). ``ClusterError`` naming the
+    ``workers`` processes (``default_workers()`` when None) whose scheduling priority is
+    lowered by ``niceness`` (``os.nice``: a server's live loop keeps its core when a
+    study competes for it). ``ClusterError`` naming the
     address when the scheduler cannot be reached, naming the worker when one runs
     another tofpose version. Closes what it started."""
     from dask.distributed import Client, LocalCluster
@@ -61,6 +79,8 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
             host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR,
         )  # fmt: skip
         client = Client(cluster)
+        if niceness:
+            client.run(_lower_priority, niceness)
     try:
         if scheduler:
             client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)

@@ -171,9 +171,11 @@ def write_report(root: str | Path, spec: StudySpec, summary: dict, run: dict | N
     run_text = ""
     if run:
         fps = run.get("frames_per_s")
+        n = run["workers"]
         run_text = (f"<p>Run: {run['frames_run']} frames on {esc(str(run['cluster']))} "
-                    f"({run['workers']} workers) in {run['wall_s']:.1f} s"
-                    + (f", {fps:.1f} frames/s" if fps else "") + ".</p>")  # fmt: skip
+                    f"({n} worker{'s' if n != 1 else ''}) in {run['wall_s']:.1f} s, of which "
+                    f"{run.get('cluster_start_s', 0.0):.1f} s starting the cluster"
+                    + (f"; {fps:.1f} frames/s after that" if fps else "") + ".</p>")  # fmt: skip
     total = summary["all"] or {}
     body = "\n".join(
         "<tr>" + "".join(f"<td>{esc(x)}</td>" for x in r) + "</tr>" for r in rows
@@ -185,8 +187,8 @@ table{{border-collapse:collapse;font-size:13px}}td,th{{border:1px solid #ccc;pad
 th{{background:#eee}}img{{max-width:100%;margin:1em 0}}</style></head><body>
 <h1>Accuracy study {esc(spec.name)}</h1>
 <p>{len(spec.cells)} cells x {spec.frames_per_cell} frames (seed {spec.seed});
-{summary['frames_stored']} of {summary['frames_planned']} frames stored
-{'' if summary['complete'] else '<strong>(incomplete)</strong>'}.
+{summary['frames_stored']} of {summary['frames_planned']} frames
+stored{'' if summary['complete'] else ' <strong>(incomplete)</strong>'}.
 All frames: success {total.get('success_pct') or 0:.1f} %, {total.get('wrong', 0)} wrong,
 {total.get('confidently_wrong', 0)} confidently wrong.</p>
 {run_text}

@@ -45,11 +45,12 @@ def _now() -> str:
 def run_study(
     spec: StudySpec, out_dir: str | Path, *, workers: int | None = None,
     scheduler: str | None = None, progress: bool = True,
-    should_stop: Callable[[], bool] | None = None, report: bool = True,
+    should_stop: Callable[[], bool] | None = None, report: bool = True, niceness: int = 0,
 ) -> dict:  # fmt: skip
     """Run ``spec`` into ``out_dir`` (``tofpose.study.store``); returns the summary
     (``summary.json``). ``workers`` / ``scheduler``: ``batch.cluster.dask_client``.
-    ``report``: also write report.html and report.pdf (``tofpose.study.report``)."""
+    ``report``: also write report.html and report.pdf (``tofpose.study.report``);
+    ``niceness``: lower a LocalCluster's workers' priority (``dask_client``)."""
     from dask.distributed import TimeoutError as DaskTimeout
     from dask.distributed import wait
 
@@ -70,8 +71,9 @@ def run_study(
     bar = tqdm(total=spec.n_frames, initial=frames_done, unit="frame", desc=f"study {spec.name}",
                disable=not progress, file=sys.stderr)  # fmt: skip
     try:
-        with dask_client(workers, scheduler) as client:
+        with dask_client(workers, scheduler, niceness) as client:
             manifest["workers"] = len(client.scheduler_info()["workers"])
+            t_connected = time.perf_counter()
             doc = spec.to_dict()
             pending = {
                 client.submit(run_chunk, doc, c, a, b, str(root), pure=False,
@@ -106,6 +108,7 @@ def run_study(
     finally:
         bar.close()
     wall_s = time.perf_counter() - t0
+    measure_s = time.perf_counter() - t_connected
     summary = summarise(spec, read_frames(root, spec))
     loads = {r["kernel_load"]["pid"]: r["kernel_load"] for r in results}
     # how this run went (study.json; summary.json holds only what the frames say, so
@@ -113,7 +116,9 @@ def run_study(
     manifest["run"] = {
         "workers": manifest.get("workers"), "cluster": manifest["cluster"],
         "frames_run": sum(r["frames"] for r in results), "wall_s": wall_s,
-        "frames_per_s": sum(r["frames"] for r in results) / wall_s if results else None,
+        "cluster_start_s": wall_s - measure_s,
+        # from the cluster's start to the last chunk (the workers' kernel loads included)
+        "frames_per_s": sum(r["frames"] for r in results) / measure_s if results else None,
         "worker_kernel_load": sorted(loads.values(), key=lambda d: d["pid"]),
     }  # fmt: skip
     from tofpose.study.report import write_summary

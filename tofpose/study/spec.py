@@ -37,6 +37,9 @@ from tofpose.sim.randomise import FAMILIES
 #: the pipeline settings a cell may name
 PRESETS = {"default": PipelineConfig, "paper": PipelineConfig.paper}
 
+#: the most frames one study may ask for (10^8: ~500 core-hours)
+MAX_FRAMES = 100_000_000
+
 GRID_AXES = ("range_m", "attitude_deg", "offset_fraction", "ambient_lux", "physics",
              "catalog", "preset")  # fmt: skip
 _DEFAULT_GRID = {"range_m": [3.0], "attitude_deg": [20.0], "offset_fraction": [0.5],
@@ -134,7 +137,11 @@ class StudySpec:
         if unknown:
             raise StudySpecError(f"grid.{unknown[0]}: unknown axis (known: {', '.join(GRID_AXES)})")
         grid = {a: tuple(_axis(a, grid_doc.get(a, _DEFAULT_GRID[a]))) for a in GRID_AXES}
-        return cls(grid=grid, name=name, seed=seed, frames_per_cell=frames, chunk_frames=chunk)
+        spec = cls(grid=grid, name=name, seed=seed, frames_per_cell=frames, chunk_frames=chunk)
+        if spec.n_frames > MAX_FRAMES:
+            raise StudySpecError(f"frames_per_cell: {len(spec.cells)} cells x {frames} frames "
+                                 f"is more than {MAX_FRAMES:.0e} frames")  # fmt: skip
+        return spec
 
 
 def _integer(doc: dict, key: str, default: int, minimum: int) -> int:

@@ -4,6 +4,8 @@ import type { components } from "./schema";
 export type Pose = components["schemas"]["PosePublic"];
 export type Motion = components["schemas"]["MotionPublic"];
 export type Campaign = components["schemas"]["CampaignPublic"];
+export type Study = components["schemas"]["StudyPublic"];
+export type StudyCreate = components["schemas"]["StudyCreate"];
 export type ApiError = components["schemas"]["ErrorPublic"];
 
 const TOKEN_KEY = "tofpose-token";

@@ -638,6 +638,113 @@ export interface paths {
         patch?: never;
         trace?: never;
     };
+    "/api/studies": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * List Studies
+         * @description Every study, newest first, with its progress.
+         */
+        get: operations["listStudies"];
+        put?: never;
+        /**
+         * Create Study
+         * @description Queue a study. 422 names the field when the spec cannot run (a range outside
+         *     0.3-20 m, an unknown catalog, a value listed twice); nothing is stored then.
+         */
+        post: operations["createStudy"];
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/studies/{study_id}": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * Get Study
+         * @description A study's status, progress (frames and chunks done) and ETA.
+         */
+        get: operations["getStudy"];
+        put?: never;
+        post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/studies/{study_id}/cancel": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        get?: never;
+        put?: never;
+        /**
+         * Cancel Study
+         * @description Stop a queued or running study; the chunks it finished stay (status
+         *     ``incomplete``). A finished study is returned as it is.
+         */
+        post: operations["cancelStudy"];
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/studies/{study_id}/plots/{name}": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * Study Plot
+         * @description A plot of the report (report.html links them relative to itself).
+         */
+        get: operations["studyPlot"];
+        put?: never;
+        post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/studies/{study_id}/report.{fmt}": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * Study Report
+         * @description The study's report: ``html`` (plots inline from ``plots/``), ``pdf``, or ``json``
+         *     (summary.json, the per-cell statistics). 409 until the study is complete.
+         */
+        get: operations["studyReport"];
+        put?: never;
+        post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
 }
 export type webhooks = Record<string, never>;
 export interface components {
@@ -1865,6 +1972,107 @@ export interface components {
             roll_deg?: number | null;
             /** Yaw Deg */
             yaw_deg?: number | null;
+        };
+        /**
+         * StudyCreate
+         * @description A study spec (``tofpose study --example`` prints one).
+         */
+        StudyCreate: {
+            /** Chunk Frames */
+            chunk_frames?: number | null;
+            /**
+             * Frames Per Cell
+             * @default 100
+             */
+            frames_per_cell: number;
+            grid: components["schemas"]["StudyGrid"];
+            /**
+             * Name
+             * @default study
+             */
+            name: string;
+            /**
+             * Seed
+             * @default 0
+             */
+            seed: number;
+        };
+        /**
+         * StudyGrid
+         * @description The study's axes (each a list; every combination is a cell). Omitted axes take
+         *     one value: 3 m, +-20 deg, 0.5 of the half field of view, 1000 lx, ideal,
+         *     paper-target, default.
+         */
+        StudyGrid: {
+            /** Ambient Lux */
+            ambient_lux?: number[] | null;
+            /**
+             * Attitude Deg
+             * @description attitude spread: pitch, yaw, roll each within +- this (deg)
+             */
+            attitude_deg?: number[] | null;
+            /** Catalog */
+            catalog?: string[] | null;
+            /**
+             * Offset Fraction
+             * @description target centre up to this fraction of the half field of view off axis
+             */
+            offset_fraction?: number[] | null;
+            /**
+             * Physics
+             * @description domain-randomisation families (docs/simulator.md)
+             */
+            physics?: ("ideal" | "grey plate" | "lens blur" | "gains" | "all")[] | null;
+            /** Preset */
+            preset?: ("default" | "paper")[] | null;
+            /**
+             * Range M
+             * @description target distance (m)
+             */
+            range_m?: number[] | null;
+        };
+        /** StudyPublic */
+        StudyPublic: {
+            /** Cells */
+            cells: number;
+            /** Chunks */
+            chunks: number;
+            /** Chunks Done */
+            chunks_done: number;
+            /**
+             * Cluster
+             * @description the Dask cluster it ran on
+             */
+            cluster?: string | null;
+            /** Error */
+            error?: string | null;
+            /**
+             * Eta S
+             * @description seconds to go at the rate so far
+             */
+            eta_s?: number | null;
+            /** Finished */
+            finished?: string | null;
+            /** Frames Done */
+            frames_done: number;
+            /** Frames Planned */
+            frames_planned: number;
+            /** Id */
+            id: number;
+            /** Name */
+            name: string;
+            /**
+             * Reports
+             * @description report files available at /api/studies/{id}/report.{html,pdf,json}
+             */
+            reports: ("html" | "pdf" | "json")[];
+            /** Started */
+            started?: string | null;
+            /**
+             * Status
+             * @enum {string}
+             */
+            status: "created" | "queued" | "running" | "complete" | "incomplete" | "failed";
         };
         /** TransformPublic */
         TransformPublic: {
@@ -4119,6 +4327,376 @@ export interface operations {
             };
             /** @description The request body is larger than the server's limit */
             413: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    listStudies: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["StudyPublic"][];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+        };
+    };
+    createStudy: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody: {
+            content: {
+                "application/json": components["schemas"]["StudyCreate"];
+            };
+        };
+        responses: {
+            /** @description Successful Response */
+            201: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["StudyPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The request body is larger than the server's limit */
+            413: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    getStudy: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                study_id: number;
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["StudyPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description No such resource */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    cancelStudy: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                study_id: number;
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["StudyPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description No such resource */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The request body is larger than the server's limit */
+            413: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    studyPlot: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                study_id: number;
+                name: "attitude_vs_range.png" | "success_map.png" | "consistency_vs_range.png";
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "image/png": unknown;
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description No such resource */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    studyReport: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                study_id: number;
+                fmt: "html" | "pdf" | "json";
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": unknown;
+                    "application/pdf": unknown;
+                    "text/html": unknown;
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description No such resource */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Conflicts with stored state (a name already taken, or the resource is busy) */
+            409: {
                 headers: {
                     [name: string]: unknown;
                 };

@@ -1,0 +1,188 @@
+"""Accuracy studies run by the server (``tofpose.study``), one at a time, on Dask.
+
+Each study lives in ``<data_dir>/studies/<id>/`` (the study store: ``study.json`` is the
+source of truth for its status and progress, so a restarted server finds them again).
+Studies queue in submission order and run in a background thread; a study that was
+queued or running when the server stopped is queued again at start and resumes from the
+chunks it had finished. The cluster: ``TOFPOSE_DASK_SCHEDULER`` when set, else a
+LocalCluster of the cores less one (the live camera loop keeps its core) whose workers
+run at a lower priority (nice +10), so a study takes what the live loop leaves.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+from tofpose.batch.cluster import default_workers
+from tofpose.study.run import StudyCancelledError, run_study
+from tofpose.study.spec import StudySpec
+from tofpose.study.store import StudyStoreError, open_store, read_manifest, write_manifest
+
+log = logging.getLogger(__name__)
+
+WORKER_NICENESS = 10
+REPORT_FILES = {"html": "report.html", "pdf": "report.pdf", "json": "summary.json"}
+
+
+class UnknownStudyError(KeyError):
+    """No study with that id."""
+
+
+@dataclass(frozen=True)
+class StudyStatus:
+    """What ``GET /api/studies/{id}`` shows: the manifest's status and progress."""
+
+    id: int
+    name: str
+    status: str
+    cells: int
+    frames_planned: int
+    frames_done: int
+    chunks: int
+    chunks_done: int
+    eta_s: float | None
+    error: str | None
+    started: str | None
+    finished: str | None
+    cluster: str | None
+    reports: tuple[str, ...]
+
+
+class StudyService:
+    """Submit, list, follow and cancel studies (module docstring)."""
+
+    def __init__(self, root: Path, scheduler: str | None = None, workers: int | None = None):
+        self.root = Path(root)
+        self.scheduler = scheduler or None
+        self.workers = workers if workers is not None else default_workers(reserve=1)
+        self._queue: queue.Queue[int | None] = queue.Queue()
+        self._cancel: set[int] = set()
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        self._stopping = threading.Event()
+        self._running: int | None = None
+
+    # -- lifecycle --------------------------------------------------------------------
+    def start(self) -> int:
+        """Start the runner; queue the studies a stopped server left queued or running.
+        Returns how many were queued again."""
+        self.root.mkdir(parents=True, exist_ok=True)
+        again = 0
+        for sid in self._ids():
+            try:
+                status = read_manifest(self._dir(sid))["status"]
+            except StudyStoreError:
+                continue
+            if status in ("created", "queued", "running"):
+                self._queue.put(sid)
+                again += 1
+        self._thread = threading.Thread(target=self._run, name="studies", daemon=True)
+        self._thread.start()
+        return again
+
+    def stop(self) -> None:
+        """Cancel the running study (it stays resumable) and end the runner."""
+        self._stopping.set()
+        self._queue.put(None)
+        if self._thread is not None:
+            self._thread.join(timeout=60)
+
+    # -- commands ---------------------------------------------------------------------
+    def submit(self, spec: StudySpec) -> int:
+        """Store ``spec`` as a new study and queue it; returns its id."""
+        with self._lock:
+            sid = max(self._ids(), default=0) + 1
+            manifest = open_store(self._dir(sid), spec)
+            manifest["status"] = "queued"
+            write_manifest(self._dir(sid), manifest)
+        self._queue.put(sid)
+        return sid
+
+    def cancel(self, sid: int) -> StudyStatus:
+        """Stop a queued or running study; its finished chunks stay (``incomplete``)."""
+        status = self.status(sid)
+        if status.status in ("queued", "created", "running"):
+            with self._lock:
+                self._cancel.add(sid)
+                if self._running != sid:
+                    m = read_manifest(self._dir(sid))
+                    m["status"] = "incomplete"
+                    write_manifest(self._dir(sid), m)
+        return self.status(sid)
+
+    # -- queries ----------------------------------------------------------------------
+    def list(self) -> list[StudyStatus]:
+        """Every study, newest first (unreadable directories left out)."""
+        out = []
+        for sid in sorted(self._ids(), reverse=True):
+            try:
+                out.append(self.status(sid))
+            except (UnknownStudyError, StudyStoreError):
+                continue
+        return out
+
+    def status(self, sid: int) -> StudyStatus:
+        d = self._dir(sid)
+        if not (d / "study.json").exists():
+            raise UnknownStudyError(sid)
+        m = read_manifest(d)
+        spec = StudySpec.from_dict(m["spec"])
+        reports = tuple(k for k, name in REPORT_FILES.items() if (d / name).exists())
+        return StudyStatus(
+            id=sid, name=spec.name, status=m["status"], cells=len(spec.cells),
+            frames_planned=spec.n_frames, frames_done=m.get("frames_done", 0),
+            chunks=m["chunks"], chunks_done=m.get("chunks_done", 0), eta_s=m.get("eta_s"),
+            error=m.get("error"), started=m.get("started"), finished=m.get("finished"),
+            cluster=m.get("cluster"), reports=reports,
+        )  # fmt: skip
+
+    def report_path(self, sid: int, kind: str) -> Path | None:
+        """The study's report file of ``kind`` (``REPORT_FILES``), None before it exists."""
+        self.status(sid)
+        p = self._dir(sid) / REPORT_FILES[kind]
+        return p if p.exists() else None
+
+    # -- the runner -------------------------------------------------------------------
+    def _run(self) -> None:
+        while not self._stopping.is_set():
+            sid = self._queue.get()
+            if sid is None:
+                return
+            with self._lock:
+                if sid in self._cancel:
+                    self._cancel.discard(sid)
+                    continue
+                self._running = sid
+
+            def should_stop(sid: int = sid) -> bool:
+                return self._stopping.is_set() or sid in self._cancel
+
+            try:
+                spec = StudySpec.from_dict(read_manifest(self._dir(sid))["spec"])
+                run_study(spec, self._dir(sid), workers=None if self.scheduler else self.workers,
+                          scheduler=self.scheduler, progress=False, should_stop=should_stop,
+                          niceness=0 if self.scheduler else WORKER_NICENESS)  # fmt: skip
+            except StudyCancelledError:
+                log.info("study %d stopped (its finished chunks are kept)", sid)
+                if sid not in self._cancel:  # the server stops: resume at its next start
+                    m = read_manifest(self._dir(sid))
+                    m["status"] = "queued"
+                    write_manifest(self._dir(sid), m)
+            except Exception:  # noqa: BLE001 (the store says failed, with the error)
+                log.exception("study %d failed", sid)
+            finally:
+                with self._lock:
+                    self._running = None
+                    self._cancel.discard(sid)
+
+    def _dir(self, sid: int) -> Path:
+        return self.root / str(sid)
+
+    def _ids(self) -> list[int]:
+        if not self.root.is_dir():
+            return []
+        return [int(p.name) for p in self.root.iterdir() if p.name.isdigit()]
