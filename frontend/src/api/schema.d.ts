@@ -733,7 +733,8 @@ export interface paths {
         };
         /**
          * Study Report
-         * @description The study's report: ``html`` (plots inline from ``plots/``), ``pdf``, or ``json``
+         * @description The study's report: ``html`` (shown in the browser, its plots from ``plots/``),
+         *     ``pdf``, or ``json``
          *     (summary.json, the per-cell statistics). 409 until the study is complete.
          */
         get: operations["studyReport"];
