@@ -206,6 +206,7 @@ def reprocess(
                file=sys.stderr)  # fmt: skip
     with dask_client(workers, scheduler) as client:
         n_workers = len(client.scheduler_info()["workers"])
+        t_connected = time.perf_counter()
         futures = {client.submit(run_chunk, c, settings, str(out), pure=False): c
                    for cs in chunks.values() for c in cs}  # fmt: skip
         for fut in as_completed(list(futures)):
@@ -230,6 +231,7 @@ def reprocess(
                                          "continued_from_frame": prev.origin})  # fmt: skip
     bar.close()
     wall_s = time.perf_counter() - t0
+    work_s = time.perf_counter() - t_connected
     summary = {"format": "tofpose-reprocess", "finished": _now(), "settings": asdict(settings),
                "filter": filter_state, "chunk_frames": chunk_frames, "recordings": []}  # fmt: skip
     for path, cs in chunks.items():
@@ -239,8 +241,12 @@ def reprocess(
             "path": str(path), "csv": csv_path.name, "frames": cs[-1].stop if cs else 0,
             "ok": n_ok, "chunks": len(cs), "boundaries": boundaries[path]})  # fmt: skip
     summary["run"] = {"workers": n_workers, "cluster": scheduler or f"LocalCluster({n_workers})",
-                      "frames": total, "wall_s": wall_s,
-                      "frames_per_s": total / wall_s if wall_s > 0 else None,
+                      "frames": total, "wall_s": wall_s, "cluster_start_s": wall_s - work_s,
+                      # from the cluster's start to the last chunk's CSV
+                      "frames_per_s": total / work_s if work_s > 0 else None,
+                      # once warm: frames output over the chunks' own time, times the workers
+                      "frames_per_s_warm": total * n_workers
+                      / sum(r["seconds"] for r in results.values()),
                       "chunks_run_again": reruns}  # fmt: skip
     import json
 

@@ -119,6 +119,10 @@ def run_study(
         "cluster_start_s": wall_s - measure_s,
         # from the cluster's start to the last chunk (the workers' kernel loads included)
         "frames_per_s": sum(r["frames"] for r in results) / measure_s if results else None,
+        # the workers' rate once warm: frames over the chunks' own measuring time, times
+        # the workers
+        "frames_per_s_warm": (sum(r["frames"] for r in results) * manifest["workers"]
+                              / sum(r["seconds"] for r in results)) if results else None,
         "worker_kernel_load": sorted(loads.values(), key=lambda d: d["pid"]),
     }  # fmt: skip
     from tofpose.study.report import write_summary
