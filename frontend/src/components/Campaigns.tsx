@@ -2,18 +2,13 @@
 // for a finished one its statistics and pass/fail (CampaignResult).
 import { useEffect, useState } from "preact/hooks";
 import { api, type Campaign } from "../api/client";
+import { fmtDuration } from "../format";
 import { CampaignResult } from "./CampaignResult";
 
 const ACTIONS: Record<string, string[]> = {
   draft: ["start", "cancel"], queued: ["pause", "cancel"], running: ["pause", "cancel"],
   paused: ["resume", "cancel"], interrupted: ["resume", "cancel"],
 };
-
-function fmtDuration(s: number | null | undefined): string {
-  if (s === null || s === undefined) return "-";
-  const m = Math.floor(s / 60);
-  return m > 0 ? `${m} min ${Math.round(s % 60)} s` : `${s.toFixed(0)} s`;
-}
 
 export function Campaigns({ onError }: { onError: (m: string | null) => void }) {
   const [list, setList] = useState<Campaign[]>([]);

@@ -2,17 +2,12 @@
 // spec, follow progress and ETA, cancel, open the report.
 import { useEffect, useState } from "preact/hooks";
 import { api, type Study, type StudyCreate } from "../api/client";
+import { fmtDuration } from "../format";
 
 const EXAMPLE: StudyCreate = {
   name: "envelope", seed: 1, frames_per_cell: 8, chunk_frames: 4,
   grid: { range_m: [3, 6], attitude_deg: [20], physics: ["ideal", "lens blur"] },
 };
-
-function fmtEta(s: number | null | undefined): string {
-  if (s === null || s === undefined) return "-";
-  const m = Math.floor(s / 60);
-  return m > 0 ? `${m} min ${Math.round(s % 60)} s` : `${s.toFixed(0)} s`;
-}
 
 export function Studies({ onError }: { onError: (m: string | null) => void }) {
   const [list, setList] = useState<Study[]>([]);
@@ -60,7 +55,7 @@ export function Studies({ onError }: { onError: (m: string | null) => void }) {
                 <td>{s.id}</td><td>{s.name}</td>
                 <td data-testid={`study-status-${s.id}`}>{s.status}{s.error ? `: ${s.error}` : ""}</td>
                 <td><progress max={s.frames_planned} value={s.frames_done} /> {s.frames_done} / {s.frames_planned} ({s.cells} cells)</td>
-                <td>{s.status === "running" ? fmtEta(s.eta_s) : "-"}</td>
+                <td>{s.status === "running" ? fmtDuration(s.eta_s) : "-"}</td>
                 <td class="small">{s.cluster ?? "-"}</td>
                 <td>{["queued", "running", "created"].includes(s.status) && (
                   <button data-testid={`study-cancel-${s.id}`} onClick={() => cancel(s)}>cancel</button>
