@@ -39,6 +39,7 @@ from backend.api.routes import (
     scene,
 )
 from backend.api.routes import devices as devices_route
+from backend.api.routes import reprocessings as reprocessings_route
 from backend.api.routes import studies as studies_route
 from backend.auth import load_or_create_token
 from backend.db.engine import make_engine, make_session_factory, upgrade_database
@@ -46,9 +47,11 @@ from backend.drivers.base import CameraSettings
 from backend.drivers.factory import Devices, build_devices
 from backend.limits import BodySizeLimit
 from backend.services.acquisition import AcquisitionService
+from backend.services.batch_queue import BatchQueue
 from backend.services.campaigns import CampaignService
 from backend.services.hub import LiveHub
 from backend.services.kernel_warmup import KernelWarmup
+from backend.services.reprocessing import ReprocessService
 from backend.services.store import find_catalog, load_device_settings
 from backend.services.studies import StudyService
 from backend.settings import Settings
@@ -207,10 +210,15 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         if interrupted:
             log.warning("%d campaign(s) were running when the server stopped: interrupted "
                         "(resume them to continue)", interrupted)  # fmt: skip
+        # studies and re-processing share one queue: one batch job at a time on the cluster
+        batch_jobs = BatchQueue()
         studies = StudyService(settings.data_dir / "studies", settings.dask_scheduler or None,
-                               settings.study_workers)  # fmt: skip
+                               settings.study_workers, jobs=batch_jobs)  # fmt: skip
+        reprocessings = ReprocessService(settings.data_dir / "reprocessings",
+                                         settings.dask_scheduler or None, settings.study_workers,
+                                         jobs=batch_jobs)  # fmt: skip
         app.state.tofpose = AppState(settings, token, engine, sessions, devs, hub, acq, campaigns,
-                                     studies)  # fmt: skip
+                                     studies, reprocessings)  # fmt: skip
         # the pipeline's compiled kernels (tofpose.warmup): in the background while frames
         # already stream (backend/services/kernel_warmup.py), or before the first frame
         if settings.kernels_in_background:
@@ -221,6 +229,9 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         campaigns.start()
         if studies.start():
             log.warning("studies queued or running when the server stopped: queued again")
+        if reprocessings.start():
+            log.warning("re-processings queued or running when the server stopped: queued again")
+        batch_jobs.start()
         _start_scene(app.state.tofpose)
         _start_foxglove(app.state.tofpose)
         try:
@@ -231,7 +242,7 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             if app.state.tofpose.foxglove is not None:
                 app.state.tofpose.foxglove.close()
             campaigns.stop()  # a running campaign is left interrupted (resumable)
-            studies.stop()  # a running study is queued again at the next start
+            batch_jobs.stop()  # a running study or re-processing is queued again at the next start
             app.state.tofpose.renderer.close()
             acq.stop()
             devs.close()
@@ -281,7 +292,8 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
         )  # fmt: skip
 
     routers = (health, devices_route, camera, pose, frames, motion, catalogs, campaigns,
-               calibrations, reference, scene, foxglove, live, studies_route)  # fmt: skip
+               calibrations, reference, scene, foxglove, live, studies_route,
+               reprocessings_route)  # fmt: skip
     for module in routers:
         app.include_router(module.router)
 

@@ -15,6 +15,7 @@ from backend.services.acquisition import AcquisitionService, DeviceHealth
 from backend.services.campaigns import CampaignService
 from backend.services.hub import LiveHub
 from backend.services.imaging import ImageRenderer
+from backend.services.reprocessing import ReprocessService
 from backend.services.studies import StudyService
 from backend.settings import Settings
 
@@ -30,6 +31,7 @@ class AppState:
     acquisition: AcquisitionService
     campaigns: CampaignService
     studies: StudyService
+    reprocessings: ReprocessService
     renderer: ImageRenderer = field(default_factory=ImageRenderer)
     motion_health: DeviceHealth = field(default_factory=lambda: DeviceHealth(state="ok"))
     started_monotonic: float = field(default_factory=time.monotonic)

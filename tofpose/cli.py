@@ -13,9 +13,9 @@ import numpy as np
 from tqdm import tqdm
 
 from tofpose.camera import CameraModel
+from tofpose.camera_file import load_camera, pipeline_for, read_text_file
 from tofpose.catalog import Catalog, paper_target
 from tofpose.covariance_calibration import (
-    CovarianceScale,
     auto_knots,
     fit_covariance_scale,
     pose_nees,
@@ -23,10 +23,9 @@ from tofpose.covariance_calibration import (
 from tofpose.geometry import RigidTransform, facing_euler_deg, rotation_angle_deg
 from tofpose.interop.topics import DISTANCE as DISTANCE_TOPIC
 from tofpose.interop.topics import GRAY as GRAY_TOPIC
-from tofpose.pipeline import PipelineConfig, PosePipeline
+from tofpose.pipeline import PosePipeline
 from tofpose.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
 from tofpose.range_calibration import (
-    RangeCorrection,
     fit_range_correction,
     true_pixel_distances,
 )
@@ -34,24 +33,6 @@ from tofpose.recording import RecordingError, RecordingWriter, open_recording
 from tofpose.relative_state import RelativeStateConfig, RelativeStateFilter
 from tofpose.threads import single_threaded_blas
 from tofpose.tof import unambiguous_range_mm
-from tofpose.tracking import TrackingConfig
-
-
-def _read_text(path: str, what: str) -> str:
-    try:
-        return Path(path).read_text()
-    except OSError as exc:
-        raise SystemExit(f"tofpose: cannot read {what} {path}: {exc.strerror}") from exc
-
-
-def load_camera(text: str) -> tuple[CameraModel, RangeCorrection | None, CovarianceScale | None]:
-    """A camera JSON, with its ``range_correction`` and ``covariance_scale`` when it has
-    them (``tofpose calibrate-range`` and ``calibrate-covariance`` write them)."""
-    camera = CameraModel.from_json(text)
-    doc = json.loads(text)
-    rc, cs = doc.get("range_correction"), doc.get("covariance_scale")
-    return (camera, RangeCorrection.from_dict(rc) if rc is not None else None,
-            CovarianceScale.from_dict(cs) if cs is not None else None)  # fmt: skip
 
 
 def _reference(rec, reference: str, rec_path: str) -> tuple[np.ndarray, np.ndarray]:
@@ -79,7 +60,7 @@ def calibrate_covariance(
             raise SystemExit(f"tofpose: {rec_path} has no /catalog: the target is unknown")
         camera, correction = rec.camera, None
         if camera_path:
-            camera, correction, _ = load_camera(_read_text(camera_path, "camera"))
+            camera, correction, _ = load_camera(read_text_file(camera_path, "camera"))
         pipe = PosePipeline(camera, rec.catalog, range_correction=correction)
         ranges, nees = [], []
         for i in tqdm(range(rec.n_frames), desc="calibrate-covariance", unit="frame",
@@ -134,30 +115,6 @@ def calibrate_range(
             f"{c.calibrated_span_mm[0]:.0f}-{c.calibrated_span_mm[1]:.0f} mm -> {out}")  # fmt: skip
 
 
-def pipeline_for(
-    rec, rec_path: str, catalog_path: str | None, camera_path: str | None, tracking: bool
-) -> PosePipeline:
-    """The pipeline ``estimate`` runs over an open recording: its camera and catalog, or
-    the ones given (a camera JSON with its range correction and covariance scale)."""
-    camera, correction, scale = rec.camera, None, None
-    if camera_path:
-        camera, correction, scale = load_camera(_read_text(camera_path, "camera"))
-    if catalog_path:
-        catalog = Catalog.from_json(_read_text(catalog_path, "catalog"))
-    elif rec.catalog is not None:
-        catalog = rec.catalog
-    else:
-        raise SystemExit(f"tofpose: {rec_path} has no /catalog; pass --catalog CAT.json")
-    if camera.shape != rec.camera.shape:
-        raise SystemExit(
-            f"tofpose: camera {camera.width}x{camera.height} does not match the recording's "
-            f"{rec.camera.width}x{rec.camera.height} frames"
-        )
-    config = PipelineConfig(tracking=TrackingConfig(enabled=tracking))
-    return PosePipeline(camera, catalog, config, range_correction=correction,
-                        covariance_scale=scale)  # fmt: skip
-
-
 def estimate(
     rec_path: str,
     out_csv: str,
@@ -206,7 +163,8 @@ def simulate(
 
     scenario = get_scenario(scenario_name)
     catalog = (
-        Catalog.from_json(_read_text(catalog_path, "catalog")) if catalog_path else paper_target()
+        Catalog.from_json(read_text_file(catalog_path, "catalog")) if catalog_path
+        else paper_target()
     )
     camera = CameraModel()
     with RecordingWriter(out, camera, catalog, with_truth=True, with_lab_truth=True) as w:
@@ -347,7 +305,7 @@ def study(args) -> int:
         print("tofpose study: give a SPEC and --out DIR (or --example)", file=sys.stderr)
         return 2
     try:
-        spec = StudySpec.from_json(_read_text(args.spec, "study spec"), args.spec)
+        spec = StudySpec.from_json(read_text_file(args.spec, "study spec"), args.spec)
         summary = run_study(spec, args.out, workers=args.workers, scheduler=args.scheduler)
     except (StudySpecError, StudyStoreError, ClusterError) as exc:
         print(f"tofpose study: {exc}", file=sys.stderr)

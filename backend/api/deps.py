@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request, status
@@ -10,6 +11,7 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
 
 from backend.auth import token_matches
+from backend.db.models import CampaignRow
 from backend.drivers.base import MotionDriver
 from backend.state import AppState
 
@@ -79,3 +81,19 @@ def require_motion(state: StateDep) -> MotionDriver:
 WriteAuth = Depends(require_token)
 ReadAuth = Depends(require_read)
 MotionDep = Annotated[MotionDriver, Depends(require_motion)]
+
+
+def finished_recording(session: Session, state: AppState, campaign_id: int) -> Path:
+    """Campaign ``campaign_id``'s HDF5 recording: 404 for no such campaign or one without
+    a recording, 409 while it is being written."""
+    row = session.get(CampaignRow, campaign_id)
+    if row is None:
+        raise HTTPException(404, f"no campaign with id {campaign_id}")
+    path = state.campaigns.recording_path(campaign_id)
+    if not row.record_raw or not path.exists():
+        raise HTTPException(404, f"campaign {campaign_id} has no raw recording"
+                            + ("" if row.record_raw else " (record_raw was off)"))  # fmt: skip
+    if row.status == "running":
+        raise HTTPException(409, f"campaign {campaign_id} is running and writing its "
+                                 "recording: pause it or wait until it is done")  # fmt: skip
+    return path

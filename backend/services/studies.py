@@ -12,11 +12,12 @@ run at a lower priority (nice +10), so a study takes what the live loop leaves.
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
+from backend.services.batch_queue import BatchQueue
 from tofpose.batch.cluster import default_workers
 from tofpose.study.run import StudyCancelledError, run_study
 from tofpose.study.spec import StudySpec
@@ -53,43 +54,42 @@ class StudyStatus:
 
 
 class StudyService:
-    """Submit, list, follow and cancel studies (module docstring)."""
+    """Submit, list, follow and cancel studies (module docstring). ``jobs``: the queue
+    they run on, shared with re-processing (``backend.services.batch_queue``); without
+    one the service makes and owns its own."""
 
-    def __init__(self, root: Path, scheduler: str | None = None, workers: int | None = None):
+    def __init__(self, root: Path, scheduler: str | None = None, workers: int | None = None,
+                 jobs: BatchQueue | None = None):  # fmt: skip
         self.root = Path(root)
         self.scheduler = scheduler or None
         self.workers = workers if workers is not None else default_workers(reserve=1)
-        self._queue: queue.Queue[int | None] = queue.Queue()
-        self._cancel: set[int] = set()
+        self._own_jobs = jobs is None
+        self.jobs = jobs if jobs is not None else BatchQueue()
         self._lock = threading.Lock()
-        self._thread: threading.Thread | None = None
-        self._stopping = threading.Event()
-        self._running: int | None = None
 
     # -- lifecycle --------------------------------------------------------------------
     def start(self) -> int:
-        """Start the runner; queue the studies a stopped server left queued or running.
-        Returns how many were queued again."""
+        """Queue the studies a stopped server left queued or running (and start the
+        queue when the service owns it). Returns how many were queued again."""
         self.root.mkdir(parents=True, exist_ok=True)
         again = 0
-        for sid in self._ids():
+        for sid in sorted(self._ids()):
             try:
                 status = read_manifest(self._dir(sid))["status"]
             except StudyStoreError:
                 continue
             if status in ("created", "queued", "running"):
-                self._queue.put(sid)
+                self.jobs.put(("study", sid), partial(self._run_one, sid))
                 again += 1
-        self._thread = threading.Thread(target=self._run, name="studies", daemon=True)
-        self._thread.start()
+        if self._own_jobs:
+            self.jobs.start()
         return again
 
     def stop(self) -> None:
-        """Cancel the running study (it stays resumable) and end the runner."""
-        self._stopping.set()
-        self._queue.put(None)
-        if self._thread is not None:
-            self._thread.join(timeout=60)
+        """Cancel the running study (it stays resumable) and end the queue when the
+        service owns it."""
+        if self._own_jobs:
+            self.jobs.stop()
 
     # -- commands ---------------------------------------------------------------------
     def submit(self, spec: StudySpec) -> int:
@@ -99,7 +99,7 @@ class StudyService:
             manifest = open_store(self._dir(sid), spec)
             manifest["status"] = "queued"
             write_manifest(self._dir(sid), manifest)
-        self._queue.put(sid)
+        self.jobs.put(("study", sid), partial(self._run_one, sid))
         return sid
 
     def cancel(self, sid: int) -> StudyStatus:
@@ -107,8 +107,7 @@ class StudyService:
         status = self.status(sid)
         if status.status in ("queued", "created", "running"):
             with self._lock:
-                self._cancel.add(sid)
-                if self._running != sid:
+                if not self.jobs.cancel(("study", sid)):  # queued: it will never run
                     m = read_manifest(self._dir(sid))
                     m["status"] = "incomplete"
                     write_manifest(self._dir(sid), m)
@@ -147,37 +146,21 @@ class StudyService:
         return p if p.exists() else None
 
     # -- the runner -------------------------------------------------------------------
-    def _run(self) -> None:
-        while not self._stopping.is_set():
-            sid = self._queue.get()
-            if sid is None:
-                return
-            with self._lock:
-                if sid in self._cancel:
-                    self._cancel.discard(sid)
-                    continue
-                self._running = sid
-
-            def should_stop(sid: int = sid) -> bool:
-                return self._stopping.is_set() or sid in self._cancel
-
-            try:
-                spec = StudySpec.from_dict(read_manifest(self._dir(sid))["spec"])
-                run_study(spec, self._dir(sid), workers=None if self.scheduler else self.workers,
-                          scheduler=self.scheduler, progress=False, should_stop=should_stop,
-                          niceness=0 if self.scheduler else WORKER_NICENESS)  # fmt: skip
-            except StudyCancelledError:
-                log.info("study %d stopped (its finished chunks are kept)", sid)
-                if sid not in self._cancel:  # the server stops: resume at its next start
-                    m = read_manifest(self._dir(sid))
-                    m["status"] = "queued"
-                    write_manifest(self._dir(sid), m)
-            except Exception:  # noqa: BLE001 (the store says failed, with the error)
-                log.exception("study %d failed", sid)
-            finally:
-                with self._lock:
-                    self._running = None
-                    self._cancel.discard(sid)
+    def _run_one(self, sid: int, should_stop) -> None:
+        """The job: run study ``sid`` to its end, or until ``should_stop``."""
+        try:
+            spec = StudySpec.from_dict(read_manifest(self._dir(sid))["spec"])
+            run_study(spec, self._dir(sid), workers=None if self.scheduler else self.workers,
+                      scheduler=self.scheduler, progress=False, should_stop=should_stop,
+                      niceness=0 if self.scheduler else WORKER_NICENESS)  # fmt: skip
+        except StudyCancelledError:
+            log.info("study %d stopped (its finished chunks are kept)", sid)
+            if not self.jobs.is_cancelled(("study", sid)):  # the server stops: resume later
+                m = read_manifest(self._dir(sid))
+                m["status"] = "queued"
+                write_manifest(self._dir(sid), m)
+        except Exception:  # noqa: BLE001 (the store says failed, with the error)
+            log.exception("study %d failed", sid)
 
     def _dir(self, sid: int) -> Path:
         return self.root / str(sid)

@@ -50,9 +50,13 @@ class ReprocessError(ValueError):
     """Recordings or settings that cannot be re-processed; the message says which."""
 
 
+class ReprocessCancelledError(RuntimeError):
+    """``should_stop`` turned true: the run was cancelled before its CSVs were written."""
+
+
 @dataclass(frozen=True)
 class Settings:
-    """What every chunk's pipeline is built from (``tofpose.cli.pipeline_for``)."""
+    """What every chunk's pipeline is built from (``tofpose.camera_file.pipeline_for``)."""
 
     camera_path: str | None = None
     catalog_path: str | None = None
@@ -111,7 +115,7 @@ def run_chunk(chunk: Chunk, settings: Settings, out_dir: str) -> dict:
     ``chunks/<name>.csv`` (no header) and their raw poses as ``chunks/<name>.npz``
     (atomically); returns {"name", "warm": digests of frames [origin, start), "tail":
     digests of the last ``tail`` frames, "ok", "seconds"} (digests as hex strings)."""
-    from tofpose.cli import pipeline_for
+    from tofpose.camera_file import pipeline_for
     from tofpose.threads import single_threaded_blas
 
     single_threaded_blas()
@@ -172,14 +176,19 @@ def reprocess(
     recordings: list[str], out_dir: str | Path, *, settings: Settings | None = None,
     workers: int | None = None, scheduler: str | None = None, filter_state: bool = False,
     chunk_frames: int = DEFAULT_CHUNK_FRAMES, progress: bool = True,
+    should_stop=None, niceness: int = 0,
 ) -> dict:  # fmt: skip
     """Re-process ``recordings`` into ``out_dir``: ``<stem>.csv`` per recording (what
     ``tofpose estimate`` writes for it), ``chunks/``, and ``reprocess.json`` (returned):
     settings, per recording its frames, poses and chunk boundaries, and the run's
-    throughput. ``ReprocessError`` for recordings that cannot be read or named apart."""
+    throughput. ``ReprocessError`` for recordings that cannot be read or named apart.
+    ``should_stop() -> bool``, polled between chunks: when it turns true the chunks still
+    queued are cancelled and ``ReprocessCancelledError`` raised (no CSV is written).
+    ``niceness``: the LocalCluster workers' priority is lowered by it (a server's live
+    loop keeps its core)."""
     from dask.distributed import as_completed
 
-    from tofpose.cli import pipeline_for
+    from tofpose.camera_file import pipeline_for
 
     settings = settings or Settings()
     if chunk_frames < 1:
@@ -204,12 +213,16 @@ def reprocess(
     boundaries: dict[str, list[dict]] = {p: [] for p in recordings}
     bar = tqdm(total=total, unit="frame", desc="reprocess", disable=not progress,
                file=sys.stderr)  # fmt: skip
-    with dask_client(workers, scheduler) as client:
+    with dask_client(workers, scheduler, niceness=niceness) as client:
         n_workers = len(client.scheduler_info()["workers"])
         t_connected = time.perf_counter()
         futures = {client.submit(run_chunk, c, settings, str(out), pure=False): c
                    for cs in chunks.values() for c in cs}  # fmt: skip
         for fut in as_completed(list(futures)):
+            if should_stop is not None and should_stop():
+                client.cancel(list(futures))
+                bar.close()
+                raise ReprocessCancelledError("re-processing cancelled")
             results[futures[fut]] = fut.result()
             bar.update(futures[fut].stop - futures[fut].start)
         reruns = 0

@@ -19,6 +19,7 @@ from backend.api.deps import (
     SessionDep,
     StateDep,
     WriteAuth,
+    finished_recording,
     unprocessable,
     unprocessable_at,
 )
@@ -371,7 +372,7 @@ def get_campaign_report(
 def get_campaign_recording(campaign_id: IdParam, state: StateDep, session: SessionDep):
     """The campaign's raw frames (HDF5, docs/architecture.md §7): exactly the stored
     measurements, in order (``recording_index`` of each). Only with ``record_raw``."""
-    path = _finished_recording(session, state, campaign_id)
+    path = finished_recording(session, state, campaign_id)
     return FileResponse(path, media_type="application/x-hdf5",
                         filename=f"campaign-{campaign_id}.h5")  # fmt: skip
 
@@ -389,19 +390,6 @@ def get_campaign_recording_mcap(campaign_id: IdParam, state: StateDep, session: 
     recording (its camera and catalog, default settings, tracking off; not the stored
     measurement rows). Made on the first request (a long recording
     takes a while) and kept. Only with ``record_raw``."""
-    path = _finished_recording(session, state, campaign_id)
+    path = finished_recording(session, state, campaign_id)
     return FileResponse(recording_mcap(path), media_type="application/x-mcap",
                         filename=f"campaign-{campaign_id}.mcap")  # fmt: skip
-
-
-def _finished_recording(session, state: AppState, campaign_id: int):
-    """The campaign's HDF5 recording; 404 without one, 409 while it is being written."""
-    row = _row(session, campaign_id)
-    path = state.campaigns.recording_path(campaign_id)
-    if not row.record_raw or not path.exists():
-        raise HTTPException(404, f"campaign {campaign_id} has no raw recording"
-                            + ("" if row.record_raw else " (record_raw was off)"))  # fmt: skip
-    if row.status == "running":
-        raise HTTPException(409, f"campaign {campaign_id} is running and writing its "
-                                 "recording: pause it or wait until it is done")  # fmt: skip
-    return path

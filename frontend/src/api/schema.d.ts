@@ -227,6 +227,29 @@ export interface paths {
         patch?: never;
         trace?: never;
     };
+    "/api/campaigns/{campaign_id}/reprocess": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        get?: never;
+        put?: never;
+        /**
+         * Create Reprocessing
+         * @description Queue a re-processing of the campaign's recording with ``camera`` (and, as the
+         *     baseline, with the camera it was recorded with). 404 without a recording, 409 while
+         *     the campaign writes it, 422 naming ``camera`` when it is not a camera JSON or does not
+         *     fit the recording's frames; nothing is stored then.
+         */
+        post: operations["createReprocessing"];
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
     "/api/campaigns/{campaign_id}/resume": {
         parameters: {
             query?: never;
@@ -606,6 +629,88 @@ export interface paths {
          *     nominal lab geometry (null). 404 for an unknown calibration (nothing changes).
          */
         put: operations["setReference"];
+        post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/reprocessings": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * List Reprocessings
+         * @description Every re-processing (of ``campaign_id`` when given), newest first.
+         */
+        get: operations["listReprocessings"];
+        put?: never;
+        post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/reprocessings/{job_id}": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * Get Reprocessing
+         * @description A re-processing's status and, once complete, its comparison.
+         */
+        get: operations["getReprocessing"];
+        put?: never;
+        post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/reprocessings/{job_id}/cancel": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        get?: never;
+        put?: never;
+        /**
+         * Cancel Reprocessing
+         * @description Cancel a queued or running re-processing; a finished one is returned as it is.
+         */
+        post: operations["cancelReprocessing"];
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/reprocessings/{job_id}/files/{name}": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * Reprocessing File
+         * @description A result file: ``poses.csv`` (the new calibration's, as ``tofpose estimate`` writes
+         *     it), ``baseline.csv`` (the recording's own camera), ``compare.csv|json|png``. 409 until
+         *     the re-processing is complete.
+         */
+        get: operations["reprocessingFile"];
+        put?: never;
         post?: never;
         delete?: never;
         options?: never;
@@ -1812,6 +1917,98 @@ export interface components {
          */
         ReportFormat: "html" | "pdf" | "csv" | "json";
         /**
+         * ReprocessComparison
+         * @description The new calibration (B) against the recording's own camera (A), over the frames
+         *     where both gave a pose (tofpose.batch.compare).
+         */
+        ReprocessComparison: {
+            /** Attitude Diff Deg */
+            attitude_diff_deg: {
+                [key: string]: number | null;
+            };
+            /** Frames */
+            frames: number;
+            /** Gained */
+            gained: number;
+            /** Lost */
+            lost: number;
+            /** Mean Shift */
+            mean_shift: {
+                [key: string]: number | null;
+            };
+            /** Ok A */
+            ok_a: number;
+            /** Ok B */
+            ok_b: number;
+            /** Position Diff Mm */
+            position_diff_mm: {
+                [key: string]: number | null;
+            };
+        };
+        /**
+         * ReprocessCreate
+         * @description Re-process a campaign's recording with another camera calibration.
+         */
+        ReprocessCreate: {
+            /**
+             * Camera
+             * @description a camera JSON (tofpose.camera.CameraModel, with the range_correction and covariance_scale tofpose calibrate-range / calibrate-covariance add); omitted: the recording's own camera
+             */
+            camera?: {
+                [key: string]: unknown;
+            } | null;
+            /**
+             * Filter
+             * @description add the relative-state filter's columns
+             * @default false
+             */
+            filter: boolean;
+            /**
+             * Tracking
+             * @description the pipeline's tracking mode
+             * @default false
+             */
+            tracking: boolean;
+        };
+        /** ReprocessPublic */
+        ReprocessPublic: {
+            /**
+             * Camera
+             * @description the camera the run used: the request's or the recording's own
+             * @enum {string}
+             */
+            camera: "given" | "recording";
+            /** Campaign Id */
+            campaign_id: number;
+            /** Created */
+            created: string;
+            /** Error */
+            error?: string | null;
+            /**
+             * Files
+             * @description downloadable at /api/reprocessings/{id}/files/{name}
+             */
+            files: ("poses.csv" | "baseline.csv" | "compare.csv" | "compare.json" | "compare.png")[];
+            /** Filter */
+            filter: boolean;
+            /** Finished */
+            finished?: string | null;
+            /** Frames */
+            frames?: number | null;
+            /** Id */
+            id: number;
+            /** Started */
+            started?: string | null;
+            /**
+             * Status
+             * @enum {string}
+             */
+            status: "queued" | "running" | "complete" | "failed" | "cancelled";
+            summary?: components["schemas"]["ReprocessComparison"] | null;
+            /** Tracking */
+            tracking: boolean;
+        };
+        /**
          * Requirements
          * @description Accuracy requirements per axis (default: the paper's, §6.4): a set-point passes an
          *     axis when the largest |error| after singular-point removal is within it.
@@ -2978,6 +3175,89 @@ export interface operations {
             };
             /** @description No such resource */
             404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    createReprocessing: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                campaign_id: number;
+            };
+            cookie?: never;
+        };
+        requestBody: {
+            content: {
+                "application/json": components["schemas"]["ReprocessCreate"];
+            };
+        };
+        responses: {
+            /** @description Successful Response */
+            201: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ReprocessPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description No such resource */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Conflicts with stored state (a name already taken, or the resource is busy) */
+            409: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The request body is larger than the server's limit */
+            413: {
                 headers: {
                     [name: string]: unknown;
                 };
@@ -4215,6 +4495,262 @@ export interface operations {
             };
             /** @description The request body is larger than the server's limit */
             413: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    listReprocessings: {
+        parameters: {
+            query?: {
+                campaign_id?: number | null;
+            };
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ReprocessPublic"][];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    getReprocessing: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                job_id: number;
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ReprocessPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description No such resource */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    cancelReprocessing: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                job_id: number;
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ReprocessPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description No such resource */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The request body is larger than the server's limit */
+            413: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    reprocessingFile: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                job_id: number;
+                name: "poses.csv" | "baseline.csv" | "compare.csv" | "compare.json" | "compare.png";
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": unknown;
+                    "image/png": unknown;
+                    "text/csv": unknown;
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description No such resource */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Conflicts with stored state (a name already taken, or the resource is busy) */
+            409: {
                 headers: {
                     [name: string]: unknown;
                 };
