@@ -67,7 +67,7 @@ from bench._foreign_metrics import (  # noqa: E402
     true_correspondences,
     true_images,
 )
-from tofpose import cli  # noqa: E402
+from tofpose import camera_file, cli  # noqa: E402
 from tofpose.geometry import RigidTransform  # noqa: E402
 from tofpose.matching import MatchResult  # noqa: E402
 from tofpose.pipeline import PosePipeline, PoseResult  # noqa: E402
@@ -114,7 +114,8 @@ def run_estimate(
             results.append(r)
             return r
 
-    patched = mock.patch.object(cli, "PosePipeline", RecordingPipeline)
+    # the pipeline estimate runs is built by tofpose.camera_file.pipeline_for
+    patched = mock.patch.object(camera_file, "PosePipeline", RecordingPipeline)
     with tempfile.TemporaryDirectory() as tmp, patched:
         summary = cli.estimate(str(rec_path), str(Path(tmp) / "poses.csv"), catalog_path,
                                camera_path, progress=progress, tracking=tracking)  # fmt: skip

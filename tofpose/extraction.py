@@ -27,6 +27,7 @@ from tofpose.kernels.levels import (
 )
 from tofpose.kernels.mixed_pixels import blob_mixing, blob_surrounds
 from tofpose.kernels.perspective import disc_centre_offsets
+from tofpose.kernels.records import GateSettings
 
 SATURATED_COUNTS = 4095
 #: fewest pixels for which a blob's eccentricity means anything (the shape gate and q_shape)
@@ -520,18 +521,24 @@ def find_candidate_blobs(
 _GATE_REASONS = {1: "oversize", 2: "size", 3: "nlog", 4: "shape", 5: "penalty"}
 
 
-def _gate_params(config: ExtractionConfig, stats: FrameStats, cos_t: float, ecc_max: float):
-    """The scalar parameters of ``kernels.gates.gate_components``, (13,) float64."""
+def _gate_params(
+    config: ExtractionConfig, stats: FrameStats, cos_t: float, ecc_max: float
+) -> GateSettings:
+    """The scalar settings of ``kernels.gates.gate_components`` (a
+    ``kernels.records.GateSettings``) for this frame."""
     paper = config.nlog_sigma_px is not None
-    return np.array([
-        -1.0 if config.h_min_px is None else config.h_min_px,
-        -1.0 if config.h_max_px is None else config.h_max_px,
-        cos_t, config.size_tolerance, config.size_margin_px,
-        config.nlog_sigma_px if paper else -1.0,
-        config.nlog_peak_abs if paper else config.nlog_peak_rel,
-        config.nlog_floor_abs if paper else config.nlog_floor_rel,
-        stats.background, ecc_max, stats.peak_threshold, stats.raw_threshold, config.q_max,
-    ], np.float64)  # fmt: skip
+    return GateSettings(
+        h_min_px=-1.0 if config.h_min_px is None else float(config.h_min_px),
+        h_max_px=-1.0 if config.h_max_px is None else float(config.h_max_px),
+        cos_max_tilt=float(cos_t), size_tolerance=float(config.size_tolerance),
+        size_margin_px=float(config.size_margin_px),
+        nlog_sigma_px=float(config.nlog_sigma_px) if paper else -1.0,
+        j_peak=float(config.nlog_peak_abs if paper else config.nlog_peak_rel),
+        j_t=float(config.nlog_floor_abs if paper else config.nlog_floor_rel),
+        background=float(stats.background), eccentricity_max=float(ecc_max),
+        i_peak=float(stats.peak_threshold), i_t=float(stats.raw_threshold),
+        q_max=float(config.q_max),
+    )  # fmt: skip
 
 
 def penalty_score(

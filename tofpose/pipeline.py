@@ -46,6 +46,7 @@ from tofpose.kernels.ellipses import blob_mask
 from tofpose.kernels.measure import measure_and_back_project
 from tofpose.kernels.pose import point_residuals_mm
 from tofpose.kernels.range_correction import corrected_ranges
+from tofpose.kernels.records import camera_record
 from tofpose.matching import (
     MatchingConfig,
     MatchResult,
@@ -327,7 +328,7 @@ class PosePipeline:
         self.range_correction = range_correction
         self.covariance_scale = covariance_scale
         self._correction_kernel_args = correction_kernel_arguments(range_correction)
-        self._bearings_flat = np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3))
+        self._camera_record = camera_record(camera)
         self.catalog = catalog
         self.config = config or PipelineConfig()
         self._sigma_constants = kernel_constants(
@@ -482,9 +483,8 @@ class PosePipeline:
          mix) = measure_and_back_project(
             g, d, flat, starts, bbox, cur, split, *persistence.history(g, d),
             float(pc.motion_tolerance_px), int(pc.c_min), float(background), float(dark),
-            cam.fx, cam.fy,
-            cam.cx, cam.cy, cam.dist_array, self._bearings_flat, *persistence.scratch(g.shape),
-            *self._correction_kernel_args, *self._sigma_constants,
+            self._camera_record, *persistence.scratch(g.shape), self._correction_kernel_args,
+            self._sigma_constants,
         )  # fmt: skip
         persistence.commit(cur, flat, g, d, n_used, motion)
         unranged = [(uv[j, 0], uv[j, 1], rho[j]) for j in np.flatnonzero(keep & ~np.isfinite(rho))]

@@ -30,6 +30,7 @@ import numpy as np
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.geometry import RigidTransform
+from tofpose.kernels.records import RangeCorrectionRecord
 
 AMPLITUDE_REFERENCE_COUNTS = 100.0
 OFFSET_QUANTUM_MM = 0.01  # per-pixel offsets are stored as int16 multiples of this
@@ -277,10 +278,12 @@ def fit_range_correction(
     )
 
 
-def correction_kernel_arguments(correction: RangeCorrection | None) -> tuple:
-    """(apply, model, harmonics, offsets): whether a camera's range correction is applied
-    and its model as ``kernels.range_correction.corrected_ranges`` takes it
-    (``RangeCorrection.kernel_arguments``), or False and empty arrays without one."""
+def correction_kernel_arguments(correction: RangeCorrection | None) -> RangeCorrectionRecord:
+    """Whether a camera's range correction is applied and its model as
+    ``kernels.range_correction.corrected_ranges`` takes it
+    (``RangeCorrection.kernel_arguments``), or False and empty arrays without one: a
+    ``kernels.records.RangeCorrectionRecord``."""
     if correction is None:
-        return False, np.zeros(4), np.zeros((0, 2)), np.zeros(0)
-    return True, *correction.kernel_arguments()
+        return RangeCorrectionRecord(False, np.zeros(4), np.zeros((0, 2)), np.zeros(0))
+    model, harmonics, offsets = correction.kernel_arguments()
+    return RangeCorrectionRecord(apply=True, model=model, harmonics=harmonics, offsets=offsets)

@@ -35,6 +35,7 @@ from tofpose.kernels.pose import (
     facing_cosine,
     range_bias_covariance,
 )
+from tofpose.kernels.records import FitSettings, camera_record, catalog_record
 from tofpose.kernels.solve import solve_pairs
 from tofpose.kernels.verify import BEHIND_CAMERA, DARK_REFLECTOR, pose_check
 from tofpose.pose import STEP_SIGMA2, MLResult
@@ -164,6 +165,20 @@ class ThresholdedFrame:
 _NO_FRAME = ThresholdedFrame(np.zeros((1, 1), np.float32), 0.0)
 
 
+def fit_settings(config: PipelineConfig) -> FitSettings:
+    """The §5 fit's settings (``kernels.pose.fit_with_outliers``) from the pipeline's
+    configuration: the one place they are built, for the acquisition and the tracking
+    paths alike."""
+    return FitSettings(
+        refinement=_REFINEMENT[config.refinement], los_tolerance=config.los_tolerance,
+        step_sigma2=STEP_SIGMA2, adapt=config.adapt_range_sigma,
+        max_systematic_range_mm=config.max_systematic_range_sigma_mm,
+        max_systematic_centroid_px=config.max_systematic_centroid_sigma_px,
+        reject=config.reject_outliers, min_matches=config.matching.min_matches,
+        outlier_sigma=config.outlier_sigma, chi2_per_dof=config.outlier_chi2_per_dof,
+    )  # fmt: skip
+
+
 class PoseSolver:
     """§5 for one camera and catalog under a ``PipelineConfig``."""
 
@@ -188,6 +203,9 @@ class PoseSolver:
         self._dist = np.ascontiguousarray(camera.dist_array, dtype=float)
         self._ids = catalog.ids
         self._correction = range_correction
+        self._camera_record = camera_record(camera)
+        self._catalog_record = catalog_record(catalog)
+        self._fit_settings = fit_settings(config)
         # each reflector's diameter class (index among the catalog's distinct diameters)
         sizes, self._size_class = np.unique(np.round(self._d, 3), return_inverse=True)
         self._n_sizes = len(sizes)
@@ -250,7 +268,7 @@ class PoseSolver:
     def _fit_pairs(self, pairs: np.ndarray, meas: Measurements, complete_mm: float) -> tuple:
         """``kernels.solve.solve_pairs`` on matched pairs (m, 2) with completion within
         ``complete_mm`` (0: none): its return tuple."""
-        cfg, cam = self.config, self.camera
+        cfg = self.config
         prior = self.offset_prior(meas.range_mm[pairs[:, 0]])
         mixing = (
             meas.mixing
@@ -260,13 +278,9 @@ class PoseSolver:
         return solve_pairs(
             meas.y_mm, meas.weights, meas.uv_px, meas.range_mm, meas.sigma_px,
             meas.sigma_range_mm, mixing, np.ascontiguousarray(pairs[:, 0]),
-            np.ascontiguousarray(pairs[:, 1]), self._xyz, self._d / 2, self._K, cam.fx, cam.fy,
-            cam.cx, cam.cy, cam.dist_array, cfg.correct_perspective_bias,
-            float(cfg.mixed_pixel_radius_px), float(complete_mm), _REFINEMENT[cfg.refinement],
-            cfg.los_tolerance, STEP_SIGMA2, cfg.adapt_range_sigma,
-            cfg.max_systematic_range_sigma_mm, cfg.max_systematic_centroid_sigma_px,
-            cfg.reject_outliers,
-            cfg.matching.min_matches, cfg.outlier_sigma, cfg.outlier_chi2_per_dof, prior,
+            np.ascontiguousarray(pairs[:, 1]), self._catalog_record, self._camera_record,
+            cfg.correct_perspective_bias, float(cfg.mixed_pixel_radius_px), float(complete_mm),
+            self._fit_settings, prior,
         )  # fmt: skip
 
     def offset_prior(self, range_mm: np.ndarray) -> RangeOffsetPrior:

@@ -15,17 +15,11 @@ import numpy as np
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
-from tofpose.kernels.pose import (
-    NO_OFFSET,
-    REFINE_LOS,
-    REFINE_ML,
-    REFINE_NONE,
-    RangeOffsetPrior,
-)
+from tofpose.kernels.pose import NO_OFFSET, RangeOffsetPrior
+from tofpose.kernels.records import camera_record, catalog_record
 from tofpose.kernels.tracking import camera_windows
 from tofpose.kernels.tracking_frame import TRACKED, track_frame
 from tofpose.persistence import Persistence, PersistenceInfo
-from tofpose.pose import STEP_SIGMA2
 from tofpose.range_calibration import RangeCorrection, correction_kernel_arguments
 from tofpose.solve import (
     MatchedObservations,
@@ -33,15 +27,13 @@ from tofpose.solve import (
     PoseSolver,
     Solution,
     ThresholdedFrame,
+    fit_settings,
 )
 from tofpose.tracking import TrackState
 from tofpose.uncertainty import SigmaFloors, kernel_constants
 
 if TYPE_CHECKING:  # the pipeline imports this module
     from tofpose.pipeline import PipelineConfig
-
-_REFINEMENT = {"none": REFINE_NONE, "ml": REFINE_ML, "los": REFINE_LOS}
-
 
 @dataclass(frozen=True)
 class Tracked:
@@ -67,26 +59,18 @@ class CompiledTracker:
         self._persistence = persistence
         self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
         self._diameters = np.ascontiguousarray(catalog.diameters_mm, dtype=float)
-        self._radii = self._diameters / 2
-        self._K = np.ascontiguousarray(camera.K, dtype=float)
-        self._bearings = np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3))
         self._dist = np.ascontiguousarray(camera.dist_array)
         pc = config.persistence
-        # the arguments of ``track_frame`` that do not change from frame to frame
-        self._camera_args = (
-            float(pc.motion_tolerance_px), int(pc.c_min), camera.fx, camera.fy, camera.cx,
-            camera.cy, self._dist, self._bearings, self._xyz, self._radii, self._K,
-            config.correct_perspective_bias, float(config.mixed_pixel_radius_px),
-        )  # fmt: skip
+        # the arguments of ``track_frame`` that do not change from frame to frame, as the
+        # kernels' records (``kernels.records``), built where the acquisition path builds them
+        self._camera_args = (float(pc.motion_tolerance_px), int(pc.c_min), camera_record(camera),
+                             catalog_record(catalog))  # fmt: skip
         self._fit_args = (
-            *correction_kernel_arguments(correction),
-            *kernel_constants(SigmaFloors(config.centroid_sigma_floor_px,
-                                          config.range_sigma_floor_mm)),
-            _REFINEMENT[config.refinement], config.los_tolerance,
-            STEP_SIGMA2, config.adapt_range_sigma, config.max_systematic_range_sigma_mm,
-            config.max_systematic_centroid_sigma_px, config.reject_outliers,
-            config.matching.min_matches,
-            config.outlier_sigma, config.outlier_chi2_per_dof,
+            config.correct_perspective_bias, float(config.mixed_pixel_radius_px),
+            correction_kernel_arguments(correction),
+            kernel_constants(SigmaFloors(config.centroid_sigma_floor_px,
+                                         config.range_sigma_floor_mm)),
+            fit_settings(config),
         )  # fmt: skip
 
     def _offset_prior(self, track: TrackState, cat_idx: np.ndarray) -> RangeOffsetPrior:

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tofpose.extraction import Blob, pixel_lists
+from tofpose.kernels.records import SigmaConstants
 from tofpose.kernels.sigmas import blob_sigmas
 
 #: centroid sampling error of a single-pixel blob, px (uniform over one pixel)
@@ -65,12 +66,14 @@ def sampling_sigma_px(n_pixels: np.ndarray) -> np.ndarray:
     return SINGLE_PIXEL_SIGMA_PX * n**-1.5
 
 
-def kernel_constants(floors: SigmaFloors) -> tuple:
-    """The floors and this module's constants in the order the compiled sigmas take them
-    (``kernels.sigmas.blob_sigmas`` after ``split``)."""
-    return (
-        float(floors.centroid_px), float(floors.range_mm), SINGLE_PIXEL_SIGMA_PX,
-        SPLIT_CENTROID_PX, POOL_MIN_PIXELS, MEDIAN_EFFICIENCY, UNCALIBRATED_RANGE_SIGMA_MM,
+def kernel_constants(floors: SigmaFloors) -> SigmaConstants:
+    """The floors and this module's constants as the compiled sigmas take them (a
+    ``kernels.records.SigmaConstants``; its fields are ``kernels.sigmas.blob_sigmas``'
+    arguments after ``split``, in order)."""
+    return SigmaConstants(
+        floor_px=float(floors.centroid_px), floor_mm=float(floors.range_mm),
+        single_px=SINGLE_PIXEL_SIGMA_PX, split_px=SPLIT_CENTROID_PX, pool_min=POOL_MIN_PIXELS,
+        median_eff=MEDIAN_EFFICIENCY, uncal_mm=UNCALIBRATED_RANGE_SIGMA_MM,
     )  # fmt: skip
 
 

@@ -211,11 +211,9 @@ def gate_components(gray, runs, run_order, run_starts, bbox, area, peak, rho, wh
     bbox (K, 4), area (K,), peak (K,), rho (K,) per label from
     ``components.component_table`` (component k's runs, raster order, are
     ``runs[run_order[run_starts[k]:run_starts[k + 1]]]``; rho: median range, mm);
-    which : (n,) labels to test; diameters_mm : (N,) catalog diameters; params : (13,)
-    float64: h_min_px (<0: range-adaptive window), h_max_px (<0: none), cos(max tilt),
-    size_tolerance, size_margin_px, nlog_sigma_px (<=0: matched to each blob's size),
-    J_peak and J_t (fractions of the blob's contrast, or absolute with a fixed sigma),
-    background, eccentricity limit, I_peak, I_t, q_max; brightness (K,) the level
+    which : (n,) labels to test; diameters_mm : (N,) catalog diameters; params : a
+    ``records.GateSettings`` (the size window, tilt, nLoG, shape, intensity and
+    penalty settings, by name); brightness (K,) the level
     criterion 1 credits each component with (``blob_brightness``: its peak, or what its
     flux is worth for an unresolved reflector); blur_var_px2 : the frame's PSF variance
     (``psf_variance_px2``; 0 for none), which widens the window's upper end
@@ -227,15 +225,11 @@ def gate_components(gray, runs, run_order, run_starts, bbox, area, peak, rho, wh
     flat indices of the pixels the nLoG keeps (Eq. 18), raster order.
     """
     h_img, w_img = gray.shape
-    h_min, h_max, cos_t, size_tol, size_margin = (
-        params[0],
-        params[1],
-        params[2],
-        params[3],
-        params[4],
-    )
-    sigma_abs, j_peak_p, j_t_p, background = params[5], params[6], params[7], params[8]
-    ecc_max, i_peak, i_t, q_max = params[9], params[10], params[11], params[12]
+    h_min, h_max, cos_t = params.h_min_px, params.h_max_px, params.cos_max_tilt
+    size_tol, size_margin = params.size_tolerance, params.size_margin_px
+    sigma_abs, j_peak_p, j_t_p = params.nlog_sigma_px, params.j_peak, params.j_t
+    background, ecc_max = params.background, params.eccentricity_max
+    i_peak, i_t, q_max = params.i_peak, params.i_t, params.q_max
     n = which.shape[0]
     status = np.empty(n, np.int64)
     size = np.zeros((n, 4))
@@ -368,7 +362,7 @@ def label_table_and_gates(runs, gray, distance_flat, fx, diameters_mm, params, m
 
     runs (R, 3) : the active set's runs (``levels.threshold_mask``); gray (H, W)
     float32; distance_flat (H * W,) float32 mm; fx, diameters_mm, params : as
-    ``gate_components`` (params[10] is I_peak); min_area_px : the smallest component
+    ``gate_components`` (``params.i_peak`` is I_peak); min_area_px : the smallest component
     listed.
 
     Returns the table (area, bbox, peak, starts, flat), inner (K,) bool (clear of the
@@ -388,20 +382,20 @@ def label_table_and_gates(runs, gray, distance_flat, fx, diameters_mm, params, m
     rho = np.full(n_labels, np.nan)
     blur_var = 0.0
     d_min = diameters_mm.min()
-    if params[0] < 0:  # range-adaptive window: criterion 1 also on surface brightness
+    if params.h_min_px < 0:  # range-adaptive window: criterion 1 also on surface brightness
         ranged = np.flatnonzero(inner & (area >= max(min_area_px, 1)))
         rho[ranged] = component_median_ranges(flat, starts, distance_flat, ranged)
         flux, m2 = window_moments(gray, bbox, ranged)
         # the PSF from the components bright by their peak, then every component's
         # surface brightness with it, then the PSF again with all that are bright
-        blur_var = psf_variance_px2(m2, rho[ranged], brightness[ranged] >= params[10], fx,
+        blur_var = psf_variance_px2(m2, rho[ranged], brightness[ranged] >= params.i_peak, fx,
                                     d_min)  # fmt: skip
         brightness[ranged] = blob_brightness(brightness[ranged], flux, m2, rho[ranged],
-                                             blur_var, fx, d_min, params[8])  # fmt: skip
-        blur_var = psf_variance_px2(m2, rho[ranged], brightness[ranged] >= params[10], fx,
+                                             blur_var, fx, d_min, params.background)  # fmt: skip
+        blur_var = psf_variance_px2(m2, rho[ranged], brightness[ranged] >= params.i_peak, fx,
                                     d_min)  # fmt: skip
-    bright = brightness >= params[10]  # I_peak
-    if params[0] >= 0:  # the paper's fixed window: its peak criterion as written
+    bright = brightness >= params.i_peak
+    if params.h_min_px >= 0:  # the paper's fixed window: its peak criterion as written
         ranged = np.flatnonzero(inner & bright & (area >= min_area_px))
         rho[ranged] = component_median_ranges(flat, starts, distance_flat, ranged)
     listed = np.flatnonzero(area >= max(min_area_px, 1))

@@ -119,9 +119,8 @@ def persist_and_measure(
 @jit
 def measure_and_back_project(
     gray, distance, flat, starts, bbox, centroids, split, hist_gray, hist_dist, hist_mask,
-    hist_cent, n_hist, tol_px, c_min, background, dark, fx, fy, cx, cy, dist, pixel_bearings,
-    mean_buf, med_buf, correct_range, corr_model, corr_harmonics, corr_offsets, floor_px,
-    floor_mm, single_px, split_px, pool_min, median_eff, uncal_mm,
+    hist_cent, n_hist, tol_px, c_min, background, dark, camera, mean_buf, med_buf,
+    correction, sigmas,
 ):  # fmt: skip
     """§3.4 and Eqs. 7-8 in one call: ``persist_and_measure``, then of the kept blobs
     with a range (the "ranged" ones): the calibrated range correction (``correct_range``,
@@ -130,9 +129,10 @@ def measure_and_back_project(
     ``1 / (sigma_range^2 + (rho sigma_px / fx)^2)``. The arithmetic of
     ``Persistence.measure``, ``PosePipeline._correct_ranges`` and ``_back_project``.
 
-    The arguments are ``persist_and_measure``'s, ``split`` (n,) bool (blobs cut out of a
-    merged component), the correction's model (``RangeCorrection.kernel_arguments``) and
-    the ``uncertainty`` constants and floors.
+    The arguments are ``persist_and_measure``'s (the camera as a
+    ``records.CameraRecord``), ``split`` (n,) bool (blobs cut out of a merged
+    component), the range correction (``records.RangeCorrectionRecord``) and the
+    ``uncertainty`` constants and floors (``records.SigmaConstants``).
 
     Returns n_used, motion, keep (n,), uv (n, 2) and rho (n,) as ``persist_and_measure``
     gives them (rho uncorrected), ranged (r,) int64 the indices of the ranged blobs, and
@@ -141,25 +141,26 @@ def measure_and_back_project(
     each blob's range applied to every distance in them (``solve.solve_pairs`` turns
     them into ranges once the blobs are matched).
     """
+    fx, fy, cx, cy, dist = camera.fx, camera.fy, camera.cx, camera.cy, camera.dist
     n_used, motion, keep, mean_gray, med_dist, uv, rho, mix = persist_and_measure(
         gray, distance, flat, starts, bbox, centroids, hist_gray, hist_dist, hist_mask,
         hist_cent, n_hist, tol_px, c_min, background, dark, fx, fy, cx, cy, dist,
-        pixel_bearings, mean_buf, med_buf,
+        camera.pixel_bearings, mean_buf, med_buf,
     )  # fmt: skip
     ranged = np.flatnonzero(keep & np.isfinite(rho))
     n_ranged = ranged.shape[0]
     r_flat, r_starts = pixel_list_subset(flat, starts, ranged)
     r_uv, r_rho, r_split = uv[ranged], rho[ranged], split[ranged]
     r_mix = mix[ranged]
-    if correct_range and n_ranged:
+    if correction.apply and n_ranged:
         raw = r_rho
-        r_rho = corrected_ranges(r_rho, r_flat, r_starts, mean_gray, corr_model,
-                                 corr_harmonics, corr_offsets)  # fmt: skip
+        r_rho = corrected_ranges(r_rho, r_flat, r_starts, mean_gray, correction.model,
+                                 correction.harmonics, correction.offsets)  # fmt: skip
         for a in range(n_ranged):  # the same shift of every distance in the mixing sums
             shift_mixing(r_mix[a], r_rho[a] - raw[a])
     sp, sr = blob_sigmas(r_flat, r_starts, r_uv, mean_gray, med_dist, background, r_split,
-                         floor_px, floor_mm, single_px, split_px, pool_min, median_eff,
-                         uncal_mm)  # fmt: skip
+                         sigmas.floor_px, sigmas.floor_mm, sigmas.single_px, sigmas.split_px,
+                         sigmas.pool_min, sigmas.median_eff, sigmas.uncal_mm)  # fmt: skip
     e = bearings(r_uv, fx, fy, cx, cy, dist)
     y = np.empty((n_ranged, 3))
     w = np.empty(n_ranged)

@@ -493,25 +493,7 @@ def common_range_offset(x, e, rho, R0, t0, sr, sb, prior):
 
 
 @jit
-def fit_with_outliers(
-    x,
-    e,
-    rho,
-    y,
-    sr0,
-    sb0,
-    refinement,
-    los_tol,
-    step_sigma2,
-    adapt,
-    max_sys,
-    max_sys_bearing,
-    reject,
-    min_matches,
-    outlier_sigma,
-    chi2_per_dof,
-    offset_prior,
-):
+def fit_with_outliers(x, e, rho, y, sr0, sb0, fit, max_sys_bearing, offset_prior):
     """``fit_adaptive``; then (``reject``) drop the worst outlier and refit while one is
     found and more than ``min_matches`` remain; then (``offset_prior.sigma_mm`` > 0, a
     ``RangeOffsetPrior``; ML refinement, 4 reflectors kept or more) the range offset
@@ -520,7 +502,16 @@ def fit_with_outliers(
     and the fit repeated. Returns the kept rows
     (m,) bool and the final fit: R, t, iterations, covariance, chi^2, norms (kept,),
     range sigmas (kept,), bearing sigmas (kept,), the common offset b (mm, 0 when not
-    estimated) and its posterior sigma (mm; the prior's when not estimated)."""
+    estimated) and its posterior sigma (mm; the prior's when not estimated).
+
+    x (m, 3), e (m, 3), rho (m,), y (m, 3), sr0 (m,), sb0 (m,) : the matched reflectors'
+    catalog points, bearings, ranges, points and sigmas (mm, rad); fit : the
+    ``records.FitSettings``; max_sys_bearing : its centroid cap in rad (px over fx);
+    offset_prior : a ``RangeOffsetPrior``."""
+    refinement, los_tol, step_sigma2, adapt = (fit.refinement, fit.los_tolerance,
+                                               fit.step_sigma2, fit.adapt)  # fmt: skip
+    max_sys, reject, min_matches = fit.max_systematic_range_mm, fit.reject, fit.min_matches
+    outlier_sigma, chi2_per_dof = fit.outlier_sigma, fit.chi2_per_dof
     m = x.shape[0]
     kept = np.ones(m, np.bool_)
     rows = np.arange(m)

@@ -64,23 +64,21 @@ def complete_pairs(y, k_idx, i_idx, xyz, R, t, tol_mm):
 
 @jit
 def solve_pairs(
-    y, w, uv, rho, sigma_px, sigma_range, mix, k_idx, i_idx, xyz, radii, K, fx, fy, cx, cy,
-    dist, correct_perspective, mixing_radius_px, complete_tol_mm, refinement, los_tol,
-    step_sigma2, adapt,
-    max_sys, max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior,
+    y, w, uv, rho, sigma_px, sigma_range, mix, k_idx, i_idx, catalog, camera,
+    correct_perspective, mixing_radius_px, complete_tol_mm, fit, offset_prior,
 ):  # fmt: skip
     """The pose of matched pairs (module docstring).
 
     y (g, 3), w (g,), uv (g, 2), rho (g,), sigma_px (g,), sigma_range (g,) : the
     candidates' points (Eq. 8), weights (Eq. 21), centroids, ranges and sigmas; mix
     (g, ``mixed_pixels.MIX_FIELDS``) : their mixing sums (NaN rows: none); k_idx,
-    i_idx (m,) : matched (candidate, catalog) pairs; xyz (e, 3), radii (e,) : the
-    catalog; K (3, 3) and fx..dist : the camera; mixing_radius_px : matched discs whose
+    i_idx (m,) : matched (candidate, catalog) pairs; catalog : ``records.CatalogRecord``;
+    camera : ``records.CameraRecord``; mixing_radius_px : matched discs whose
     apparent radius is below it take the mixing model's range instead of the median
     (``mixed_pixels.unmixed_range``, with the disc's area and incidence from the SVD
-    pose; <= 0: never); complete_tol_mm : completion's tolerance (<= 0: none); the
-    rest : ``fit_with_outliers``'s settings (the bearing cap given in px, ``max_sys_px``,
-    taken to rad with fx).
+    pose; <= 0: never); complete_tol_mm : completion's tolerance (<= 0: none); fit :
+    ``fit_with_outliers``'s ``records.FitSettings`` (the bearing cap given in px, taken
+    to rad with fx); offset_prior : a ``pose.RangeOffsetPrior``.
 
     Returns k_idx, i_idx (m',) after completion, uv_obs (m', 2) corrected centroids,
     e_obs (m', 3) their bearings, y_obs (m', 3) points, rho_obs (m',) their ranges and
@@ -90,6 +88,8 @@ def solve_pairs(
     offset mm and its sigma). ``y_obs`` and the ranges are as measured: the offset is
     not taken out of them here.
     """
+    xyz, radii = catalog.xyz, catalog.radii_mm
+    K, fx, fy, cx, cy, dist = camera.K, camera.fx, camera.fy, camera.cx, camera.cy, camera.dist
     x = np.empty((k_idx.shape[0], 3))
     for a in range(k_idx.shape[0]):
         x[a] = xyz[i_idx[a]]
@@ -132,8 +132,7 @@ def solve_pairs(
         y_obs[a] = e_obs[a] * rho_m[a]
         sb[a] = sigma_px[k_idx[a]] / fx
     kept, R, t, its, cov, chi2, norms, sr_fit, sb_fit, offset, offset_sigma = fit_with_outliers(
-        x, e_obs, rho_m, y_obs, sr, sb, refinement, los_tol, step_sigma2, adapt, max_sys,
-        max_sys_px / fx, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior,
-    )  # fmt: skip
+        x, e_obs, rho_m, y_obs, sr, sb, fit, fit.max_systematic_centroid_px / fx, offset_prior
+    )
     return (k_idx, i_idx, uv_obs, e_obs, y_obs, rho_m, sr, kept, R, t, its, cov, chi2, norms,
             sr_fit, sb_fit, offset, offset_sigma)  # fmt: skip

@@ -28,13 +28,9 @@ TRACKED, LOST, SHARED, NOT_PERSISTENT, NO_RANGE, OUTLIER = 0, 1, 2, 3, 4, 5
 @jit
 def track_frame(
     gray, distance, bounds, centres, diameters, cat_idx, threshold, background, dark,
-    hist_gray, hist_dist, hist_mask, hist_cent, n_hist, tol_px, c_min,
-    fx, fy, cx, cy, dist, pixel_bearings, xyz, radii, K, correct_perspective,
-    mixing_radius_px, correct_range, corr_model, corr_harmonics, corr_offsets, floor_px,
-    floor_mm, single_px,
-    split_px, pool_min, median_eff, uncal_mm, refinement, los_tol, step_sigma2, adapt,
-    max_sys, max_sys_px, reject, min_matches, outlier_sigma, chi2_per_dof, offset_prior,
-    mean_buf, med_buf,
+    hist_gray, hist_dist, hist_mask, hist_cent, n_hist, tol_px, c_min, camera, catalog,
+    correct_perspective, mixing_radius_px, correction, sigmas, fit, offset_prior, mean_buf,
+    med_buf,
 ):  # fmt: skip
     """One tracking frame (module docstring).
 
@@ -44,13 +40,13 @@ def track_frame(
     level, counts;
     hist_* : the persistence history newest first as tuples of equal length (gray,
     distance (H, W) float32, mask (H * W,) bool, centroids (m, 2)), of which the first
-    ``n_hist`` are real; tol_px, c_min : ``PersistenceConfig``; fx..cy, dist (5,),
-    pixel_bearings (H * W, 3) : the camera; xyz (N, 3), radii (N,) mm : the catalog; K (3, 3);
-    correct_perspective, mixing_radius_px : ``solve.solve_pairs``'s;
-    correct_range and corr_* : whether to apply the calibrated range correction and its
-    model (``range_calibration.correction_kernel_arguments``); then the ``uncertainty``
-    constants and floors, and the ``fit_with_outliers`` settings of ``PoseSolver.solve``;
-    mean_buf, med_buf : the persistence's scratch frames (``Persistence.scratch``).
+    ``n_hist`` are real; tol_px, c_min : ``PersistenceConfig``; camera, catalog : a
+    ``records.CameraRecord`` and ``records.CatalogRecord``; correct_perspective,
+    mixing_radius_px : ``solve.solve_pairs``'s; correction : the calibrated range
+    correction (``records.RangeCorrectionRecord``); sigmas : the ``uncertainty``
+    constants and floors (``records.SigmaConstants``); fit : ``PoseSolver``'s
+    ``records.FitSettings``; offset_prior : a ``pose.RangeOffsetPrior``; mean_buf,
+    med_buf : the persistence's scratch frames (``Persistence.scratch``).
 
     Returns (code, n_used, motion, centroids (n, 2) moment centroids, flat, starts,
     uv (n, 2) measured centroids, rho (n,), sigma_px (n,), sigma_range (n,),
@@ -100,10 +96,8 @@ def track_frame(
         n_used, motion, keep, uv, _, ranged, rho, sp, sr, y, wts, mix = (
             measure_and_back_project(
                 gray, distance, flat, starts, bbox, cent, np.zeros(n, np.bool_), hist_gray,
-                hist_dist, hist_mask, hist_cent, n_hist, tol_px, c_min, background, dark, fx, fy,
-                cx, cy, dist, pixel_bearings, mean_buf, med_buf, correct_range, corr_model,
-                corr_harmonics, corr_offsets, floor_px, floor_mm, single_px, split_px,
-                pool_min, median_eff, uncal_mm,
+                hist_dist, hist_mask, hist_cent, n_hist, tol_px, c_min, background, dark,
+                camera, mean_buf, med_buf, correction, sigmas,
             )
         )  # fmt: skip
         if not keep.all():
@@ -116,10 +110,8 @@ def track_frame(
         # §5 on the known correspondences (every blob matched: nothing to complete)
         (_, _, uv_obs, e_obs, y_obs, rho_obs, sr_obs, kept, R, t, its, cov, chi2, norms,
          sr_fit, sb_fit, offset, offset_sigma) = solve_pairs(
-            y, wts, uv, rho, sp, sr, mix, np.arange(n), cat_idx, xyz, radii, K, fx, fy, cx,
-            cy, dist, correct_perspective, mixing_radius_px, 0.0, refinement, los_tol,
-            step_sigma2, adapt, max_sys, max_sys_px, reject, min_matches, outlier_sigma,
-            chi2_per_dof, offset_prior,
+            y, wts, uv, rho, sp, sr, mix, np.arange(n), cat_idx, catalog, camera,
+            correct_perspective, mixing_radius_px, 0.0, fit, offset_prior,
         )  # fmt: skip
         rho, sr = rho_obs, sr_obs  # every blob is matched, in order
         if not kept.all():
