@@ -310,3 +310,39 @@ def marker_summary(errors: list[MarkerError], in_view: int) -> dict:
         "centroid_z_rms": float(np.sqrt(np.mean(cn**2 / (2.0 * sp**2)))),
         "range_z_rms": float(np.sqrt(np.mean((r / sr) ** 2))),
     }
+
+
+def common_scale_error_px(
+    result, truth: TrueImages, catalog: Catalog
+) -> tuple[float, float] | None:
+    """The common-mode (image-scale) error of an ok pose's correctly matched centroids:
+    (c_px, random_px). c_px: kappa times the pattern's rms radius in the image (px), kappa
+    the least-squares scale of the measured centroids' offsets from their mean against the
+    true ones' (``pipeline.PipelineConfig.common_centroid_bias_px`` is its prior sigma);
+    random_px: what the pipeline's own per-marker centroid sigmas alone would give it
+    (rms sigma / sqrt(n)). None without a pose or with fewer than 4 correct matches."""
+    if not result.ok or not result.matched:
+        return None
+    index_of = {int(i): k for k, i in enumerate(catalog.ids)}
+    uv = np.array([m.centroid_uv for m in result.matched], float)
+    rho = np.array([m.distance_mm for m in result.matched], float)
+    claimed = np.array([index_of[int(m.catalog_id)] for m in result.matched])
+    good = true_correspondences(uv, rho, truth) == claimed
+    if good.sum() < 4:
+        return None
+    d_meas = uv[good] - uv[good].mean(axis=0)
+    true_uv = truth.uv_px[claimed[good]]
+    d_true = true_uv - true_uv.mean(axis=0)
+    kappa = float((d_meas * d_true).sum() / (d_true * d_true).sum()) - 1.0
+    r_rms = float(np.sqrt((d_true * d_true).sum(axis=1).mean()))
+    sigma = np.array([m.centroid_sigma_px for m in result.matched], float)[good]
+    return kappa * r_rms, float(np.sqrt(np.mean(sigma**2) / good.sum()))
+
+
+def common_scale_excess_px(errors: list[tuple[float, float]]) -> float:
+    """The common-mode centroid error beyond the random part, over frames: sqrt(max(0,
+    mean c^2 - mean random^2)) (px); NaN without frames."""
+    if not errors:
+        return math.nan
+    e = np.array(errors, float)
+    return float(np.sqrt(max(0.0, np.mean(e[:, 0] ** 2) - np.mean(e[:, 1] ** 2))))

@@ -110,7 +110,10 @@ class PipelineConfig:
         constant, amplitude and temperature-drift errors of a ToF camera without range
         calibration, or what is left of them with one (drift since the calibration; the
         uncalibrated sigma applies where a reflector lies outside the correction's
-        ``calibrated_span_mm``, where the model is extrapolated). Added
+        ``calibrated_span_mm``, where the model is extrapolated). 15 mm: the middle of
+        the 10-20 mm that published uncalibrated CW-ToF cameras err by (zero offset,
+        cyclic and amplitude errors; ``docs/simulator.md``), which the robustness
+        study's ``systematic`` family draws. Added
         to the reported covariance (``pose.common_range_bias_covariance``), so that the
         1-sigma of an uncalibrated camera does not claim the shot-noise limit.
     max_systematic_range_sigma_mm : cap of that estimate (published uncalibrated ToF
@@ -129,8 +132,10 @@ class PipelineConfig:
     focal_length_sigma_rel : relative sigma of the focal length's calibration (0.2 %: a
         checkerboard calibration's typical focal-length uncertainty).
     common_centroid_bias_px : sigma of a centroid error common to a frame's markers
-        (0.1 px: the systematic sub-pixel error of small blob centroids, the
-        star-tracker literature's S-curve size); over the pattern's rms radius in the
+        (0.05 px: the largest common-mode error of the matched centroids measured over
+        the physics robustness study's families, 0.046 px rms beyond their random
+        noise at 8 m with every knob drawn; ``bench/physics.py``'s scale column); over
+        the pattern's rms radius in the
         image it is a scale error, estimated with the range offset. Markers of one size
         share it apart from the others (their blobs mix with the surround, the PSF and the
         fall-off alike), so each size's own scale error also enters the reported
@@ -177,10 +182,10 @@ class PipelineConfig:
     max_systematic_centroid_sigma_px: float = 0.5
     consistency_p: float | None = 0.999999
     estimate_range_offset: bool = True
-    range_bias_sigma_mm: float = 8.0
+    range_bias_sigma_mm: float = 15.0
     calibrated_range_bias_sigma_mm: float = 2.0
     focal_length_sigma_rel: float = 0.002
-    common_centroid_bias_px: float = 0.1
+    common_centroid_bias_px: float = 0.05
     outlier_sigma: float = 6.0
     outlier_chi2_per_dof: float = 4.0
     max_view_angle_deg: float = 80.0

@@ -18,6 +18,8 @@ from bench._foreign_metrics import (
     CHI2_6_3SIGMA,
     FrameOutcome,
     TrueImages,
+    common_scale_error_px,
+    common_scale_excess_px,
     mahalanobis2,
     pose_error,
     position_tolerance_mm,
@@ -174,6 +176,41 @@ def recordings(tmp_path_factory):
                     R = _rot("y", TURN_DEG) @ R
                 w.append(f.gray, f.distance_mm, 0.05 * i, R, T.t_mm)
     return paths
+
+
+def test_common_scale_error_is_the_centroids_scale_about_their_mean_times_the_rms_radius():
+    """Centroids at 1.002 x their true offsets from the pattern's centre, plus a shift
+    common to all (no scale): c = 0.002 x the rms radius; a wrongly matched blob is left
+    out; fewer than 4 correct matches give None. The excess subtracts the random part."""
+    from types import SimpleNamespace
+
+    cat = paper_target()
+    true_uv = np.array([[100.0, 80.0], [140.0, 82.0], [120.0, 130.0], [90.0, 120.0],
+                        [150.0, 125.0]])  # fmt: skip
+    truth = TrueImages(np.zeros((5, 3)), true_uv, np.full(5, 4000.0), np.full(5, 2.0),
+                       np.ones(5, bool))  # fmt: skip
+    centre = true_uv.mean(axis=0)
+    measured = centre + 1.002 * (true_uv - centre) + [0.3, -0.2]
+
+    def result(uv, ids):
+        return SimpleNamespace(ok=True, matched=[
+            SimpleNamespace(centroid_uv=p, distance_mm=4000.0, catalog_id=i,
+                            centroid_sigma_px=0.05)
+            for p, i in zip(uv, ids, strict=True)])  # fmt: skip
+
+    c, random_px = common_scale_error_px(result(measured, cat.ids[:5]), truth, cat)
+    r_rms = np.sqrt(((true_uv - centre) ** 2).sum(axis=1).mean())
+    assert c == pytest.approx(0.002 * r_rms, rel=1e-9)
+    assert random_px == pytest.approx(0.05 / np.sqrt(5))
+    # the fifth blob claimed as another reflector: left out, four remain (their own fit)
+    ids = list(cat.ids[:4]) + [cat.ids[6]]
+    c4, _ = common_scale_error_px(result(measured, ids), truth, cat)
+    t4 = true_uv[:4] - true_uv[:4].mean(axis=0)
+    assert c4 == pytest.approx(0.002 * np.sqrt((t4**2).sum(axis=1).mean()), rel=1e-9)
+    assert common_scale_error_px(result(measured[:3], cat.ids[:3]), truth, cat) is None
+    assert common_scale_excess_px([(0.05, 0.03), (-0.05, 0.03)]) == pytest.approx(0.04)
+    assert common_scale_excess_px([(0.01, 0.03)]) == 0.0
+    assert math.isnan(common_scale_excess_px([]))
 
 
 def test_harness_on_simulated_frames(recordings, tmp_path, capsys):

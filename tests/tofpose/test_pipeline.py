@@ -9,18 +9,22 @@ from tofpose.sim.scene import Clutter, TargetScene
 
 # (distance mm, (pitch, yaw, roll) deg, offset mm, median position error mm, median angle
 # deg, per-frame maxima mm / deg). The bounds are about twice what the pipeline measured
-# over these six seeded frames (medians 0.53/0.19/0.22/0.31/0.58/1.1/4.0/6.9 mm and
-# 0.24/0.038/0.036/0.067/0.14/0.47/1.5/2.9 deg from 0.5 to 12 m): a regression that
+# over these six seeded frames (medians 0.53/0.19/0.21/0.31/0.58/2.6/3.9/7.3 mm and
+# 0.24/0.038/0.036/0.055/0.14/0.46/1.5/2.9 deg from 0.5 to 12 m): a regression that
 # doubles the error fails here. The common range offset is estimated (the default); on
 # this simulator, which has none, that costs 0.05-0.13 mm at 0.7-3 m (0.14/0.09/0.21 mm
-# without it at 0.7/1.5/3 m) and 0.007-0.013 deg, and nothing beyond.
+# without it at 0.7/1.5/3 m) and 0.007-0.013 deg. At 8 m, where the image scale hardly
+# fixes the distance, the offset's 15 mm prior (round 5; 8 mm before) lets its estimate
+# carry the scale's noise into the range: 2.6 mm median (max 4.5) against 1.1 (2.3),
+# inside the 40 mm a pose there may be off, for the 10-25 mm of a real camera's offset
+# it takes out at 2-5 m.
 RANGE_CASES = [
     (500.0, (2, -3, 5), (220.0, -90.0), 1.1, 0.5, 1.5, 0.7),  # markers 1, 2, 4 fit at 0.5 m
     (700.0, (3, 2, -10), (0.0, 0.0), 0.4, 0.08, 0.5, 0.11),
     (1500.0, (5, -4, 10), (30.0, -40.0), 0.45, 0.08, 0.55, 0.1),
     (3000.0, (-6, 8, 30), (0.0, 0.0), 0.65, 0.14, 0.7, 0.2),
     (5712.0, (4, 1, -2), (5.0, -2.0), 1.2, 0.3, 1.5, 0.45),
-    (8000.0, (2, -3, 15), (0.0, 0.0), 2.2, 0.95, 4.5, 1.75),
+    (8000.0, (2, -3, 15), (0.0, 0.0), 5.0, 0.95, 9.0, 1.75),
     # at 10 m annealing often returns a mirror assignment; the triplet fallback fixes it
     (10000.0, (2, -3, 10), (0.0, 0.0), 8.0, 3.0, 11.0, 4.9),
     (12000.0, (2, 2, -20), (0.0, 0.0), 14.0, 5.8, 17.0, 7.0),

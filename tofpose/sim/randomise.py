@@ -7,6 +7,10 @@ Physics families (each frame draws its own values):
 * ``grey plate``: plate reflectance 0.25-0.6 (MLI-covered mock-ups), no wall;
 * ``lens blur``: PSF core sigma 0.3-1.5 px, halo 0-10 % of the energy at 4x;
 * ``gains``: each reflector's return 0.7-1.3 of a new one's, fall-off exponent 2-6;
+* ``systematic``: an uncalibrated camera (``draw_systematic_errors``): cyclic error of
+  0-15 mm (4th harmonic) and 0-5 mm (8th), random phases; amplitude-related error of
+  -10 to +2 mm per decade; per-pixel offsets of 0-10 mm at the corners and 0-4 mm per
+  pixel, a fresh pattern; a zero offset of -15 to +15 mm; lens scatter 0-0.8 %;
 * ``all``: every knob above drawn at once, ambient 1-10 klx, wall or none.
 
 Used by the physics robustness study (``bench/physics.py``) and by Monte-Carlo accuracy
@@ -23,8 +27,9 @@ from tofpose.geometry import RigidTransform, rotation_from_euler_deg
 from tofpose.sim.bench import R_FACING
 from tofpose.sim.render import SensorModel
 from tofpose.sim.scene import TargetScene
+from tofpose.sim.systematic import SystematicErrors
 
-FAMILIES = ("ideal", "grey plate", "lens blur", "gains", "all")
+FAMILIES = ("ideal", "grey plate", "lens blur", "gains", "systematic", "all")
 
 
 def draw_physics(
@@ -47,6 +52,8 @@ def draw_physics(
     if family in ("gains", "all"):
         scene["reflector_gains"] = tuple(rng.uniform(0.7, 1.3, len(catalog)).tolist())
         scene["retro_falloff_exponent"] = float(rng.uniform(2.0, 6.0))
+    if family in ("systematic", "all"):
+        sensor["systematic"] = draw_systematic_errors(rng)
     if ambient_lux is not None:
         sensor["ambient_lux"] = float(ambient_lux)
     if family == "all":
@@ -55,6 +62,27 @@ def draw_physics(
         if rng.random() < 0.5:
             scene["wall_distance_mm"] = 2000.0
     return TargetScene(**scene), SensorModel(**sensor)
+
+
+def draw_systematic_errors(rng: np.random.Generator) -> SystematicErrors:
+    """The range errors of one uncalibrated camera, each term within the span published
+    ToF calibration studies report (``docs/simulator.md``): the cyclic error's 4th
+    harmonic 0-15 mm and 8th 0-5 mm at random phases, -10 to +2 mm per decade of
+    amplitude, per-pixel offsets of 0-10 mm at the corners plus 0-4 mm per pixel (a fresh
+    pattern per camera), a zero offset of -15 to +15 mm (no drift over time: the frame is
+    taken warm), lens scatter of 0-0.8 % of the light. The frame's range error common to
+    a target's reflectors is then up to ~40 mm, a few to 20 mm typically."""
+    return SystematicErrors(
+        wiggle_amplitudes_mm=(float(rng.uniform(0.0, 15.0)), float(rng.uniform(0.0, 5.0))),
+        wiggle_phases_rad=tuple(rng.uniform(0.0, 2.0 * np.pi, 2).tolist()),
+        amplitude_mm_per_decade=float(rng.uniform(-10.0, 2.0)),
+        pixel_offset_sigma_mm=float(rng.uniform(0.0, 4.0)),
+        pixel_offset_corner_mm=float(rng.uniform(0.0, 10.0)),
+        pixel_offset_seed=int(rng.integers(0, 2**31 - 1)),
+        drift_mm_per_kelvin=0.0,
+        scatter_fraction=float(rng.uniform(0.0, 0.008)),
+        offset_mm=float(rng.uniform(-15.0, 15.0)),
+    )
 
 
 def draw_pose(

@@ -206,7 +206,7 @@ def _with_systematic_errors(
     time_s: float,
 ) -> np.ndarray:
     """Distances (H, W) as an uncalibrated camera reads them: lens scatter mixes the
-    phasors, then cyclic, amplitude-related, per-pixel and drift errors add."""
+    phasors, then cyclic, amplitude-related, per-pixel, drift and zero-offset errors add."""
     e = sensor.systematic
     if e.scatter_fraction:
         re_s, im_s = e.scatter(re, im)
@@ -221,6 +221,7 @@ def _with_systematic_errors(
         + e.amplitude_mm(amp)
         + e.pixel_offsets_mm(h, w)
         + e.drift_mm(time_s)
+        + e.offset_mm
     )
 
 

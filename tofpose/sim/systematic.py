@@ -14,6 +14,9 @@ ToF calibration studies (references in docs/simulator.md):
 - per-pixel fixed-pattern offsets (DRNU): a smooth radial term plus a per-pixel random
   offset, fixed for a camera (seeded);
 - temperature drift: the camera warms after power-on, ``k_T dT (1 - exp(-t / tau))``;
+- zero offset: a distance offset common to every pixel, the illumination driver's and
+  the pixel's delays that no user calibration removed (a factory offset, its change with
+  another LED board or cable, the drift of a camera already warm);
 - lens scatter: a small fraction of each pixel's light spreads as a wide halo, so a bright
   reflector mixes its phase into its neighbours (added to the phasor, before the
   distance is taken).
@@ -43,6 +46,7 @@ class SystematicErrors:
     drift_mm_per_kelvin, warmup_kelvin, warmup_tau_s : k_T, dT, tau.
     scatter_fraction, scatter_sigma_px : share of light spread into a Gaussian halo of
         that width.
+    offset_mm : the zero offset, common to every pixel.
     """
 
     wiggle_amplitudes_mm: tuple[float, ...] = (7.0, 2.5)
@@ -57,16 +61,26 @@ class SystematicErrors:
     warmup_tau_s: float = 900.0
     scatter_fraction: float = 0.004
     scatter_sigma_px: float = 12.0
+    offset_mm: float = 0.0
 
     @staticmethod
     def none() -> SystematicErrors:
         """Every term off (the ideal sensor)."""
-        return SystematicErrors((0.0, 0.0), (0.0, 0.0), 0.0, 100.0, 0.0, 0.0, 660, 0.0, 0.0,
-                                900.0, 0.0, 12.0)  # fmt: skip
+        return SystematicErrors(
+            wiggle_amplitudes_mm=(0.0, 0.0),
+            wiggle_phases_rad=(0.0, 0.0),
+            amplitude_mm_per_decade=0.0,
+            pixel_offset_sigma_mm=0.0,
+            pixel_offset_corner_mm=0.0,
+            drift_mm_per_kelvin=0.0,
+            warmup_kelvin=0.0,
+            scatter_fraction=0.0,
+            offset_mm=0.0,
+        )
 
     def only(self, *terms: str) -> SystematicErrors:
         """These defaults with every term but ``terms`` switched off: ``"wiggle"``,
-        ``"amplitude"``, ``"pixel"``, ``"drift"``, ``"scatter"``."""
+        ``"amplitude"``, ``"pixel"``, ``"drift"``, ``"scatter"``, ``"offset"``."""
         off = SystematicErrors.none()
         keep = {
             "wiggle": ("wiggle_amplitudes_mm", "wiggle_phases_rad"),
@@ -74,6 +88,7 @@ class SystematicErrors:
             "pixel": ("pixel_offset_sigma_mm", "pixel_offset_corner_mm"),
             "drift": ("drift_mm_per_kelvin",),
             "scatter": ("scatter_fraction",),
+            "offset": ("offset_mm",),
         }
         unknown = set(terms) - keep.keys()
         if unknown:

@@ -32,8 +32,8 @@ def test_each_family_draws_its_own_knobs_in_their_ranges():
     rng = np.random.default_rng(1)
     for _ in range(30):
         scene, sensor = draw_physics("ideal", rng, CAT)
-        assert (scene.plate_reflectance, sensor.blur_sigma_px, scene.reflector_gains) == (
-            0.10, 0.0, None)  # fmt: skip
+        assert (scene.plate_reflectance, sensor.blur_sigma_px, scene.reflector_gains,
+                sensor.systematic) == (0.10, 0.0, None, None)  # fmt: skip
         scene, _ = draw_physics("grey plate", rng, CAT)
         assert 0.25 <= scene.plate_reflectance <= 0.6 and scene.wall_distance_mm is None
         _, sensor = draw_physics("lens blur", rng, CAT)
@@ -42,8 +42,15 @@ def test_each_family_draws_its_own_knobs_in_their_ranges():
         assert len(scene.reflector_gains) == 8
         assert all(0.7 <= g <= 1.3 for g in scene.reflector_gains)
         assert 2.0 <= scene.retro_falloff_exponent <= 6.0
+        _, sensor = draw_physics("systematic", rng, CAT)
+        e = sensor.systematic
+        assert 0 <= e.wiggle_amplitudes_mm[0] <= 15 and 0 <= e.wiggle_amplitudes_mm[1] <= 5
+        assert -10 <= e.amplitude_mm_per_decade <= 2 and -15 <= e.offset_mm <= 15
+        assert 0 <= e.pixel_offset_corner_mm <= 10 and 0 <= e.pixel_offset_sigma_mm <= 4
+        assert 0 <= e.scatter_fraction <= 0.008 and e.drift_mm_per_kelvin == 0
         scene, sensor = draw_physics("all", rng, CAT)
         assert 1000.0 <= sensor.ambient_lux <= 10000.0 and sensor.blur_sigma_px >= 0.3
+        assert sensor.systematic is not None
 
 
 def test_a_callers_ambient_is_kept_and_an_unknown_family_is_named():

@@ -3,6 +3,8 @@ frames: the difference between what the camera reads and the true phasor distanc
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -101,6 +103,14 @@ def test_lens_scatter_pulls_the_plate_next_to_a_reflector_towards_its_range():
     # nearby read short, by millimetres; far from them it hardly matters
     assert np.median(err[near]) < -2.0
     assert abs(np.median(err[far])) < 0.5 * abs(np.median(err[near]))
+
+
+def test_the_zero_offset_adds_the_same_distance_to_every_pixel():
+    e = replace(SystematicErrors.none(), offset_mm=-17.5)
+    err = _error(_frame(e))
+    assert np.isfinite(err).sum() > 1000
+    assert np.nanmax(np.abs(err + 17.5)) < 1e-3
+    assert DEFAULTS.only("offset") == SystematicErrors.none()  # off by default
 
 
 def test_only_names_the_terms_it_knows():
