@@ -777,6 +777,12 @@ OffsetFraction = Annotated[float, Field(ge=0.0, le=0.9)]
 AmbientLux = Annotated[float, Field(ge=0.0, le=150_000.0)]
 
 
+# tofpose.sim.randomise.FAMILIES (tests/backend/api/test_schemas.py keeps them equal)
+PhysicsFamily = Literal[
+    "ideal", "grey plate", "lens blur", "gains", "systematic", "background", "all"
+]
+
+
 class StudyGrid(StrictBody):
     """The study's axes (each a list; every combination is a cell). Omitted axes take
     one value: 3 m, +-20 deg, 0.5 of the half field of view, 1000 lx, ideal,
@@ -791,7 +797,7 @@ class StudyGrid(StrictBody):
         None, min_length=1, max_length=64,
         description="target centre up to this fraction of the half field of view off axis")
     ambient_lux: list[AmbientLux] | None = Field(None, min_length=1, max_length=64)
-    physics: list[Literal["ideal", "grey plate", "lens blur", "gains", "all"]] | None = Field(
+    physics: list[PhysicsFamily] | None = Field(
         None, min_length=1, description="domain-randomisation families (docs/simulator.md)")
     catalog: list[str] | None = Field(None, min_length=1, max_length=16)
     preset: list[Literal["default", "paper"]] | None = Field(None, min_length=1)

@@ -11,7 +11,12 @@ Physics families (each frame draws its own values):
   0-15 mm (4th harmonic) and 0-5 mm (8th), random phases; amplitude-related error of
   -10 to +2 mm per decade; per-pixel offsets of 0-10 mm at the corners and 0-4 mm per
   pixel, a fresh pattern; a zero offset of -15 to +15 mm; lens scatter 0-0.8 %;
-* ``all``: every knob above drawn at once, ambient 1-10 klx, wall or none.
+* ``background``: a real scene around the target (``tofpose.sim.background.
+  synthetic_room``: walls, floor, furniture, a person, shiny fittings, and in 30 % of
+  frames an arm in front of the target covering part of it), 1-10 klx ambient; drawn by
+  ``draw_background`` once the pose is known;
+* ``all``: every knob above but the background drawn at once, ambient 1-10 klx, wall or
+  none.
 
 Used by the physics robustness study (``bench/physics.py``) and by Monte-Carlo accuracy
 studies (``tofpose.study``).
@@ -19,17 +24,21 @@ studies (``tofpose.study``).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg
+from tofpose.sim.background import synthetic_room
 from tofpose.sim.bench import R_FACING
 from tofpose.sim.render import SensorModel
 from tofpose.sim.scene import TargetScene
 from tofpose.sim.systematic import SystematicErrors
 
-FAMILIES = ("ideal", "grey plate", "lens blur", "gains", "systematic", "all")
+FAMILIES = ("ideal", "grey plate", "lens blur", "gains", "systematic", "background", "all")
+ARM_PROBABILITY = 0.3  # share of background frames with an arm in front of the target
 
 
 def draw_physics(
@@ -52,6 +61,10 @@ def draw_physics(
     if family in ("gains", "all"):
         scene["reflector_gains"] = tuple(rng.uniform(0.7, 1.3, len(catalog)).tolist())
         scene["retro_falloff_exponent"] = float(rng.uniform(2.0, 6.0))
+    if family == "background":
+        scene["wall_distance_mm"] = None  # the room has its own
+        if ambient_lux is None:
+            sensor["ambient_lux"] = float(rng.uniform(1000.0, 10000.0))
     if family in ("systematic", "all"):
         sensor["systematic"] = draw_systematic_errors(rng)
     if ambient_lux is not None:
@@ -62,6 +75,22 @@ def draw_physics(
         if rng.random() < 0.5:
             scene["wall_distance_mm"] = 2000.0
     return TargetScene(**scene), SensorModel(**sensor)
+
+
+def draw_background(
+    family: str, scene: TargetScene, rng: np.random.Generator, camera: CameraModel,
+    T_camera_target: RigidTransform,
+) -> TargetScene:  # fmt: skip
+    """``scene`` with the real scene of family ``background`` around the target at
+    ``T_camera_target`` (``synthetic_room``; the arm reaches across the target's line of
+    sight); other families' scenes are returned as they are, and draw nothing from
+    ``rng``."""
+    if family != "background":
+        return scene
+    t = np.asarray(T_camera_target.t_mm, float)
+    room = synthetic_room(camera, rng, float(np.linalg.norm(t)), t,
+                          arm_probability=ARM_PROBABILITY)  # fmt: skip
+    return replace(scene, background=room)
 
 
 def draw_systematic_errors(rng: np.random.Generator) -> SystematicErrors:

@@ -177,12 +177,22 @@ def _sample_returns(
     """Per-ray amplitude A, ambient B (counts), distance (mm) and surface id, shape (M,)."""
     d, sid, cos_inc = sc.raycast(bearings)
     scene = sc.scene
+    behind = None
+    if scene.background is not None:
+        # the real scene where it is nearer than the target or the ray misses it
+        bd, b_rho = scene.background.along(bearings)
+        behind = bd < np.where(np.isfinite(d) & (sid != NO_HIT), d, np.inf)
+        d, sid, cos_inc = d.copy(), sid.copy(), cos_inc.copy()
+        d[behind], sid[behind], cos_inc[behind] = bd[behind], WALL, 1.0
     refl = np.zeros(len(d))
     diffuse = np.zeros(len(d))
     refl[sid == PLATE] = scene.plate_reflectance
     diffuse[sid == PLATE] = scene.plate_reflectance
     refl[sid == WALL] = scene.wall_reflectance
     diffuse[sid == WALL] = scene.wall_reflectance
+    if behind is not None:
+        refl[behind] = b_rho[behind]
+        diffuse[behind] = np.minimum(b_rho[behind], 1.0)
     disc = sid >= FIRST_DISC
     if np.any(disc):
         k = sid[disc].astype(int) - FIRST_DISC

@@ -14,6 +14,7 @@ import numpy as np
 
 from tofpose.catalog import Catalog, paper_target
 from tofpose.geometry import RigidTransform
+from tofpose.sim.background import SceneBackground
 from tofpose.sim.raycast import FIRST_DISC, NO_HIT, PLATE, WALL, cast_rays  # noqa: F401
 
 
@@ -46,6 +47,9 @@ class TargetScene:
     reflector_gains : per catalog reflector, its retro-reflective return relative to a
         new one (ageing, dirt, a batch of different film: real targets spread by 10-30 %);
         None: all 1.
+    background : a real scene around the target (``tofpose.sim.background``: people,
+        furniture, an arm in front of the markers), composited by depth; None: only the
+        wall, if any.
     retro_falloff_exponent : the retro-reflectors' return falls off as cos^n of the
         incidence angle (n = 3 here, times the cos of the projected area: cos^4 in all
         for n = 3; cube-corner sheeting falls off faster, glass beads slower).
@@ -63,6 +67,7 @@ class TargetScene:
     clutter: tuple[Clutter, ...] = ()
     reflector_gains: tuple[float, ...] | None = None
     retro_falloff_exponent: float = 3.0
+    background: SceneBackground | None = None
 
     def __post_init__(self) -> None:
         if self.reflector_gains is not None and len(self.reflector_gains) != len(self.catalog):

@@ -22,7 +22,7 @@ from tofpose.catalog import BUILTIN_CATALOGS
 from tofpose.geometry import quaternion_wxyz_from_rotation
 from tofpose.pipeline import PosePipeline
 from tofpose.pose_judgement import AXES, judge, mahalanobis2, pose_error
-from tofpose.sim.randomise import draw_physics, draw_pose
+from tofpose.sim.randomise import draw_background, draw_physics, draw_pose
 from tofpose.sim.render import render_frame
 from tofpose.study.spec import PRESETS, Cell, StudySpec
 from tofpose.study.store import write_chunk
@@ -103,6 +103,7 @@ def measure_frame(spec: StudySpec, cell: Cell, frame: int, camera: CameraModel) 
     rng = frame_rng(spec.seed, cell.index, frame)
     scene, sensor = draw_physics(cell.physics, rng, pipe.catalog, cell.ambient_lux)
     T = draw_pose(cell.range_m, rng, camera, cell.attitude_deg, cell.offset_fraction)
+    scene = draw_background(cell.physics, scene, rng, camera, T)
     f = render_frame(camera, scene, T, sensor, rng)
     pipe.reset()
     r = pipe.process(f.gray, f.distance_mm)

@@ -2220,7 +2220,7 @@ export interface components {
              * Physics
              * @description domain-randomisation families (docs/simulator.md)
              */
-            physics?: ("ideal" | "grey plate" | "lens blur" | "gains" | "all")[] | null;
+            physics?: ("ideal" | "grey plate" | "lens blur" | "gains" | "systematic" | "background" | "all")[] | null;
             /** Preset */
             preset?: ("default" | "paper")[] | null;
             /**

@@ -66,3 +66,14 @@ def test_point_cloud_leaves_out_blobs_without_distance(sample_with_gaps):
     assert np.isfinite(pts).all()
     assert ids[:8] == [m.catalog_id for m in sample.result.matched] and ids[8] is None
     assert np.linalg.norm(pts[8]) == pytest.approx(2500.0)
+
+
+def test_the_study_specs_physics_families_are_the_simulators():
+    """The API's study spec offers exactly the domain-randomisation families the
+    simulator draws (a family added to one and not the other is a 422 or a crash)."""
+    from typing import get_args
+
+    from backend.api.schemas import PhysicsFamily
+    from tofpose.sim.randomise import FAMILIES
+
+    assert get_args(PhysicsFamily) == FAMILIES

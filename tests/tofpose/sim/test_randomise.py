@@ -60,3 +60,21 @@ def test_a_callers_ambient_is_kept_and_an_unknown_family_is_named():
         assert sensor.ambient_lux == 25000.0
     with pytest.raises(ValueError, match="'fog'"):
         draw_physics("fog", rng, CAT)
+
+
+def test_the_background_family_puts_a_room_around_the_target_others_draw_nothing():
+    from tofpose.sim.randomise import draw_background
+
+    cam = CameraModel()
+    rng = np.random.default_rng(3)
+    scene, sensor = draw_physics("background", rng, CAT)
+    assert scene.wall_distance_mm is None and 1000.0 <= sensor.ambient_lux <= 10000.0
+    T = draw_pose(4.5, rng, cam)
+    with_room = draw_background("background", scene, rng, cam, T)
+    room = with_room.background
+    assert room is not None and room.distance_mm.shape == (cam.height, cam.width)
+    # the room lies behind the target, except an arm: its far wall is beyond it
+    assert np.nanmax(room.distance_mm[np.isfinite(room.distance_mm)]) > 4500.0
+    state = rng.bit_generator.state
+    assert draw_background("ideal", scene, rng, cam, T) is scene
+    assert rng.bit_generator.state == state  # other families' streams are unchanged
