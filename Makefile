@@ -25,8 +25,7 @@ $(VENV)/.dev: $(VENV)/.installed
 # numba's on-disk cache of the pipeline kernels (~1-2 min once, seconds when cached)
 $(VENV)/.kernels: $(VENV)/.dev $(shell find tofpose -name '*.py')
 	@echo "[setup] compiling the pipeline kernels into numba's cache (~1-2 min)"
-	@# numba does not recompile a cached kernel when one it calls, in another file, changed
-	find tofpose -name '*.nbi' -delete -o -name '*.nbc' -delete
+	@# the cache directory is named after a digest of the kernel sources (tofpose/kernels)
 	$(VENV)/bin/tofpose warm-up
 	touch $@
 
@@ -71,7 +70,8 @@ bench: system-deps frontend $(VENV)/.kernels
 clean: kernels-clean
 	rm -rf $(VENV) .pytest_cache .ruff_cache frontend/node_modules frontend/dist
 
-# numba's on-disk cache of the compiled kernels (stale for callers after a kernel edit)
+# numba's on-disk cache of the compiled kernels (one directory per state of their sources)
 kernels-clean:
 	find tofpose -name '*.nbi' -delete -o -name '*.nbc' -delete
+	find tofpose -type d -name 'tofpose-kernels-*' -prune -exec rm -rf {} +
 	rm -f $(VENV)/.kernels

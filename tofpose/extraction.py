@@ -25,7 +25,7 @@ from tofpose.kernels.levels import (
     frame_level_stats,
     threshold_mask,
 )
-from tofpose.kernels.mixed_pixels import blob_mixing, blob_surrounds
+from tofpose.kernels.mixed_pixels import blob_mixing, blob_surrounds, occluded_blobs
 from tofpose.kernels.perspective import disc_centre_offsets
 from tofpose.kernels.records import GateSettings
 
@@ -601,7 +601,9 @@ def measure_blobs(
     ~R^2 / 4 rho); the median rejects flying pixels on the rim. With it, each blob's
     mixing sums (``kernels.mixed_pixels.blob_mixing``, with ``dark`` the frame's
     no-return level; NaN without one), from which the solver takes a small marker's
-    range once it knows the marker's size. ``surround`` : the (gray, distance) frame
+    range once it knows the marker's size. A blob partly hidden by something nearer
+    than it (``kernels.mixed_pixels.occluded_blobs``) gets a NaN distance: its centroid
+    and range are of the part left visible. ``surround`` : the (gray, distance) frame
     the surround (and the support's distances outside the blob) are read on when
     ``gray`` and ``distance_mm`` are combined frames (persistence's I-bar and D-bar
     hold values only inside the boxes and at the blobs' pixels); by default the frames
@@ -632,6 +634,9 @@ def measure_blobs(
         flat, starts, np.asarray(distance_mm, np.float32).reshape(-1), bearings,
         camera.bearings(uv),
     )  # fmt: skip
+    # partly hidden by something nearer (read on the surround frame): no range
+    hidden = occluded_blobs(flat, starts, bbox, sd, rho, owner, ox, oy, use_owner)
+    rho = np.where(hidden, np.nan, rho)
     return [b.with_values(centroid_uv=uv[j], distance_mm=float(rho[j]), mixing=mix[j])
             for j, b in enumerate(blobs)]  # fmt: skip
 

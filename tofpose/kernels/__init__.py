@@ -10,11 +10,62 @@ Every kernel is compiled on first use and cached on disk (``cache=True``); ``war
 compiles them all on a tiny synthetic frame, so that a server or a long CLI run pays the
 compile time once at start and never on a live frame (``tofpose warm-up`` does it after a
 fresh install).
+
+The cache lives in a directory named after a digest of every kernel source
+(``kernel_cache_dir``): numba keys a cached kernel on its own file only, so after an
+edit the kernels of other files that call the edited one would otherwise keep their old
+compiled code. With the digest in the path, an edit of any kernel file is a new, empty
+cache, and a kernel can never run against another state of the sources.
 """
 
 from __future__ import annotations
 
+import hashlib
+import os
+import shutil
+from pathlib import Path
+
 import numba
+
+_HERE = Path(__file__).resolve().parent
+#: every file with compiled code: the kernels and the simulator's ray caster
+KERNEL_SOURCES = (*sorted(_HERE.glob("*.py")), _HERE.parent / "sim" / "raycast.py")
+_PREFIX = "tofpose-kernels-"
+
+
+def kernel_sources_digest() -> str:
+    """16 hex digits of SHA-256 over the kernel sources' names and bytes and numba's
+    version."""
+    h = hashlib.sha256(numba.__version__.encode())
+    for path in KERNEL_SOURCES:
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def kernel_cache_dir() -> Path:
+    """The numba cache directory of this state of the kernel sources:
+    ``<base>/tofpose-kernels-<digest>``, base ``NUMBA_CACHE_DIR`` when set, else this
+    package's ``__pycache__`` (where numba would put it)."""
+    base = Path(os.environ.get("NUMBA_CACHE_DIR") or _HERE / "__pycache__")
+    return base / f"{_PREFIX}{kernel_sources_digest()}"
+
+
+def _use_kernel_cache_dir() -> None:
+    """Point numba's cache at ``kernel_cache_dir`` (read when each kernel is decorated,
+    i.e. when its module is imported, after this one) and remove the caches of other
+    states of the sources in the same base (best effort: they can only be stale)."""
+    path = kernel_cache_dir()
+    numba.config.CACHE_DIR = str(path)
+    try:
+        for old in path.parent.glob(f"{_PREFIX}*"):
+            if old != path and old.is_dir():
+                shutil.rmtree(old, ignore_errors=True)
+    except OSError:
+        pass
+
+
+_use_kernel_cache_dir()
 
 #: the decorator of every kernel: compiled once, cached on disk, releases the GIL (the
 #: server's acquisition thread and its HTTP threads then do not wait on each other)

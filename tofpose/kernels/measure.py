@@ -11,7 +11,13 @@ import numpy as np
 from tofpose.kernels import jit
 from tofpose.kernels.camera import bearings
 from tofpose.kernels.centroids import blob_centroids, blob_ranges, owner_map
-from tofpose.kernels.mixed_pixels import MIX_FIELDS, blob_mixing, blob_surrounds, shift_mixing
+from tofpose.kernels.mixed_pixels import (
+    MIX_FIELDS,
+    blob_mixing,
+    blob_surrounds,
+    occluded_blobs,
+    shift_mixing,
+)
 from tofpose.kernels.persistence import (
     RANGE_TEST_Z,
     blob_count_medians,
@@ -58,7 +64,8 @@ def persist_and_measure(
     sight; and mix (n, ``MIX_FIELDS``) the mixing sums of the kept blobs
     (``mixed_pixels.blob_mixing`` on I-bar, D-bar at the blobs' pixels, and this frame's
     distance elsewhere; the surround from this frame: the combined frames hold I-bar
-    and D-bar only inside the boxes and at the blobs' pixels).
+    and D-bar only inside the boxes and at the blobs' pixels). A blob partly hidden by
+    something nearer (``mixed_pixels.occluded_blobs``) gets a NaN range.
 
     With one frame, mean_gray and med_distance are the frame's gray and distance. With
     more, they are the scratch frames ``mean_buf`` and ``med_buf`` (H, W) float32
@@ -106,6 +113,11 @@ def persist_and_measure(
                         crowded, dark, owner, ox, oy, use_owner)  # fmt: skip
     k_rho = blob_ranges(k_flat, k_starts, med_dist.reshape(-1), pixel_bearings,
                         bearings(k_uv, fx, fy, cx, cy, dist))  # fmt: skip
+    hidden = occluded_blobs(k_flat, k_starts, k_bbox, distance, k_rho, owner, ox, oy,
+                            use_owner)  # fmt: skip
+    for a in range(kept.shape[0]):
+        if hidden[a]:  # partly hidden: no range, so no measurement
+            k_rho[a] = np.nan
     uv = np.full((n, 2), np.nan)
     rho = np.full(n, np.nan)
     mix = np.full((n, MIX_FIELDS), np.nan)

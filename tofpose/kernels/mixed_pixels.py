@@ -98,6 +98,128 @@ def blob_surrounds(bbox, gray, distance, owner, ox, oy, use_owner):
     return level, depth, crowded
 
 
+#: a pixel near a blob is something in front of it (an arm, a cable, the target's own
+#: structure) when it reads nearer than the blob's range by more than this (a raised
+#: marker's plate lies 100-150 mm behind it) ...
+OCCLUSION_MARGIN_MM = 250.0
+#: ... and by more than this many robust sigmas of the range scatter of the rest of the
+#: blob's surround (a dark plate under strong ambient light scatters by 100s of mm) ...
+OCCLUSION_NOISE_SIGMAS = 4.0
+#: ... and such pixels touch the blob and make a connected patch of at least this many
+#: pixels within its surround (isolated pixels that read near by chance do not chain up)
+OCCLUSION_MIN_PATCH_PX = 4
+#: ... reaching at least this many pixels of the surround's outermost ring (an occluder
+#: is larger than the blob's rim; the rim's pixels alone read wrong while the target
+#: moves, when the four phase sub-frames see the marker's edge at different places)
+OCCLUSION_MIN_OUTER_PX = 2
+
+
+@jit
+def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
+    """(n,) bool: blobs partly hidden by something in front of them. Within the blob's
+    box grown by ``SURROUND_OUTER_PX`` (other blobs' pixels left out), the pixels that
+    read nearer than its range ``rho`` (n,) by more than ``OCCLUSION_MARGIN_MM`` and
+    touch the blob, with the near pixels connected to them, make a patch of at least
+    ``OCCLUSION_MIN_PATCH_PX`` that reaches ``OCCLUSION_MIN_OUTER_PX`` pixels of the
+    window's outermost ring and whose median lies nearer than ``rho`` by more than
+    ``OCCLUSION_NOISE_SIGMAS`` robust sigmas (1.4826 MAD) of the other ranged pixels
+    there (the plate around a marker; none ranged: no scatter). Such a blob is the image
+    of the part of a marker left visible: its centroid lies off the marker's centre by
+    up to its radius and its range mixes in the occluder's, so it carries no
+    measurement (ours, not the paper's). flat, starts : the pixel lists; bbox (n, 4);
+    distance (H, W) float32 (NaN invalid); owner, ox, oy, use_owner:
+    ``centroids.owner_map``. NaN ranges are never occluded."""
+    h, w = distance.shape
+    n = bbox.shape[0]
+    out = np.zeros(n, np.bool_)
+    inv_w = 1.0 / w
+    so = SURROUND_OUTER_PX
+    for j in range(n):
+        if not np.isfinite(rho[j]):
+            continue
+        x, y, bw, bh = bbox[j, 0], bbox[j, 1], bbox[j, 2], bbox[j, 3]
+        y0, y1 = max(y - so, 0), min(y + bh + so, h)
+        x0, x1 = max(x - so, 0), min(x + bw + so, w)
+        ph, pw = y1 - y0, x1 - x0
+        member = np.zeros((ph, pw), np.bool_)
+        for i in range(starts[j], starts[j + 1]):
+            r, c = row_col(flat[i], w, inv_w)
+            member[r - y0, c - x0] = True
+        limit = rho[j] - OCCLUSION_MARGIN_MM
+        ranged = np.zeros((ph, pw), np.bool_)
+        near = np.zeros((ph, pw), np.bool_)
+        for r in range(ph):
+            for c in range(pw):
+                d = distance[r + y0, c + x0]
+                ranged[r, c] = (not member[r, c] and np.isfinite(d)
+                                and not _owned_by_other(owner, ox, oy, use_owner, r + y0,
+                                                        c + x0, j))  # fmt: skip
+                near[r, c] = ranged[r, c] and d < limit
+        # flood the near patches from the near pixels that touch the blob
+        patch = np.zeros((ph, pw), np.bool_)
+        stack = np.empty(ph * pw, np.int64)
+        size = 0
+        for r in range(ph):
+            for c in range(pw):
+                if not near[r, c] or patch[r, c]:
+                    continue
+                touches = False
+                for dr in range(-1, 2):
+                    for dc in range(-1, 2):
+                        rr, cc = r + dr, c + dc
+                        if 0 <= rr < ph and 0 <= cc < pw and member[rr, cc]:
+                            touches = True
+                if not touches:
+                    continue
+                patch[r, c] = True
+                stack[0] = r * pw + c
+                top = 1
+                while top:
+                    top -= 1
+                    k = stack[top]
+                    size += 1
+                    kr, kc = k // pw, k % pw
+                    for dr in range(-1, 2):
+                        for dc in range(-1, 2):
+                            rr, cc = kr + dr, kc + dc
+                            if (0 <= rr < ph and 0 <= cc < pw and near[rr, cc]
+                                    and not patch[rr, cc]):  # fmt: skip
+                                patch[rr, cc] = True
+                                stack[top] = rr * pw + cc
+                                top += 1
+        if size < OCCLUSION_MIN_PATCH_PX:
+            continue
+        outer = 0
+        for r in range(ph):
+            row_out = r + y0 < y - so + 1 or r + y0 >= y + bh + so - 1
+            for c in range(pw):
+                if patch[r, c] and (row_out or c + x0 < x - so + 1
+                                    or c + x0 >= x + bw + so - 1):  # fmt: skip
+                    outer += 1
+        if outer < OCCLUSION_MIN_OUTER_PX:
+            continue
+        inside = np.empty(size, np.float32)
+        rest = np.empty(ph * pw, np.float32)
+        n_in, n_rest = 0, 0
+        for r in range(ph):
+            for c in range(pw):
+                if patch[r, c]:
+                    inside[n_in] = distance[r + y0, c + x0]
+                    n_in += 1
+                elif ranged[r, c]:
+                    rest[n_rest] = distance[r + y0, c + x0]
+                    n_rest += 1
+        scatter = 0.0
+        if n_rest >= 3:
+            med = median_inplace(rest[:n_rest])
+            for i in range(n_rest):
+                rest[i] = abs(rest[i] - med)
+            scatter = 1.4826 * median_inplace(rest[:n_rest])
+        margin = max(OCCLUSION_MARGIN_MM, OCCLUSION_NOISE_SIGMAS * scatter)
+        out[j] = median_inplace(inside[:n_in]) < rho[j] - margin
+    return out
+
+
 @jit
 def blob_mixing(flat, starts, bbox, gray, member_distance, distance, surround_gray,
                 surround_mm, crowded, dark, owner, ox, oy, use_owner):  # fmt: skip

@@ -4,6 +4,7 @@ area-integrated over the pixels, in front of a plate that is not black."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -76,3 +77,56 @@ def test_with_noise_the_model_stays_closer_than_the_median():
         errs_model.append(unmixed_range(m.distance_mm, m.mixing, 0.8, 1.0, 4.0)[0] - MARKER_MM)
         errs_median.append(m.distance_mm - MARKER_MM)
     assert abs(np.median(errs_model)) < 0.5 * abs(np.median(errs_median))
+
+
+# -- a marker partly hidden by something in front of it ----------------------------------
+def _occluded(blob, dist):
+    from tofpose.kernels.centroids import owner_map
+    from tofpose.kernels.mixed_pixels import occluded_blobs
+
+    flat = np.asarray(blob.pixels, np.int64)
+    starts = np.array([0, len(flat)], np.int64)
+    bbox = np.array([blob.bbox], np.int64)
+    owner, ox, oy, use = owner_map(flat, starts, bbox, *dist.shape)
+    rho = np.array([float(np.median(dist.reshape(-1)[flat]))])
+    return bool(occluded_blobs(flat, starts, bbox, dist.astype(np.float32), rho, owner, ox,
+                               oy, use)[0])  # fmt: skip
+
+
+def test_a_marker_with_an_arm_across_its_edge_is_occluded_and_noise_is_not():
+    """An arm 500 mm in front of a 3 px marker, covering the rows above it (the plate
+    around: ranged, or too dark to range): occluded. The same marker on a plate whose
+    ranges scatter by 400 mm (dark, strong ambient: many pixels read 250 mm near by
+    chance, some of them touching), with one near pixel, or with its whole rim reading
+    near (a marker moving during the exposure): not."""
+    cam, gray, dist, blob = _frame((150.3, 120.6), 1.5)
+    assert not _occluded(blob, dist)
+    top = blob.bbox[1]
+    arm = dist.copy()
+    arm[top - 3 : top, 140:161] = MARKER_MM - 500.0
+    assert _occluded(blob, arm)
+    dark_plate = arm.copy()
+    ring = np.zeros_like(dist, bool)
+    ring[top - 3 : top + blob.bbox[3] + 3, 140:161] = True
+    member = np.zeros(dist.size, bool)
+    member[blob.pixels] = True
+    member = member.reshape(dist.shape)
+    dark_plate[ring & ~member & (np.abs(arm - PLATE_MM) < 1.0)] = np.nan
+    assert _occluded(blob, dark_plate)  # the arm alone is ranged around it
+    rng = np.random.default_rng(4)
+    hits = 0
+    for _ in range(50):
+        noisy = dist.copy()
+        plate = ring & ~member & (np.abs(dist - PLATE_MM) < 1.0)
+        noisy[plate] += rng.normal(0.0, 400.0, plate.sum())
+        hits += _occluded(blob, noisy)
+    assert hits == 0
+    one = dist.copy()
+    one[top - 1, int(150.3)] = MARKER_MM - 800.0
+    assert not _occluded(blob, one)
+    # a moving marker: its whole rim reads wrong (sub-frames see the edge at different
+    # places), nothing beyond it does
+    rim = cv2.dilate(member.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    smeared = dist.copy()
+    smeared[rim & ~member] = MARKER_MM - 900.0
+    assert not _occluded(blob, smeared)
