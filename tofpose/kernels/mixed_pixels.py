@@ -53,6 +53,17 @@ def _owned_by_other(owner, ox, oy, use_owner, r, c, j):
 
 
 @jit
+def _next_to(mask, r, c):
+    """Whether (r, c) or one of its 8 neighbours is set in the (h, w) bool ``mask``."""
+    for dr in range(-1, 2):
+        for dc in range(-1, 2):
+            rr, cc = r + dr, c + dc
+            if 0 <= rr < mask.shape[0] and 0 <= cc < mask.shape[1] and mask[rr, cc]:
+                return True
+    return False
+
+
+@jit
 def blob_surrounds(bbox, gray, distance, owner, ox, oy, use_owner):
     """The gray level (counts) and distance (mm) of the surface around each blob: the
     medians over the ring between its box grown by ``SURROUND_INNER_PX`` and by
@@ -163,13 +174,7 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
             for c in range(pw):
                 if not near[r, c] or patch[r, c]:
                     continue
-                touches = False
-                for dr in range(-1, 2):
-                    for dc in range(-1, 2):
-                        rr, cc = r + dr, c + dc
-                        if 0 <= rr < ph and 0 <= cc < pw and member[rr, cc]:
-                            touches = True
-                if not touches:
+                if not _next_to(member, r, c):
                     continue
                 patch[r, c] = True
                 stack[0] = r * pw + c
@@ -259,13 +264,8 @@ def blob_mixing(flat, starts, bbox, gray, member_distance, distance, surround_gr
         s_a, s_ad, c_unranged, n_sup = 0.0, 0.0, 0.0, 0
         for r in range(ph):
             for c in range(pw):
-                near = False
-                for dr in range(-1, 2):
-                    for dc in range(-1, 2):
-                        rr, cc = r + dr, c + dc
-                        if 0 <= rr < ph and 0 <= cc < pw and member[rr, cc]:
-                            near = True
-                if not near or _owned_by_other(owner, ox, oy, use_owner, r + y0, c + x0, j):
+                if not _next_to(member, r, c) or _owned_by_other(owner, ox, oy, use_owner,
+                                                                 r + y0, c + x0, j):  # fmt: skip
                     continue
                 n_sup += 1
                 g = float(gray[r + y0, c + x0])
