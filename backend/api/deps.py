@@ -83,15 +83,19 @@ ReadAuth = Depends(require_read)
 MotionDep = Annotated[MotionDriver, Depends(require_motion)]
 
 
-def finished_recording(session: Session, state: AppState, campaign_id: int) -> Path:
-    """Campaign ``campaign_id``'s HDF5 recording: 404 for no such campaign or one without
-    a recording, 409 while it is being written."""
+def finished_recording(
+    session: Session, state: AppState, campaign_id: int, missing_status: int = 404
+) -> Path:
+    """Campaign ``campaign_id``'s HDF5 recording: 404 for no such campaign,
+    ``missing_status`` for one without a recording (404 where the recording is the
+    resource asked for, a download; 409 where the campaign is, and its state does not
+    allow the request), 409 while it is being written."""
     row = session.get(CampaignRow, campaign_id)
     if row is None:
         raise HTTPException(404, f"no campaign with id {campaign_id}")
     path = state.campaigns.recording_path(campaign_id)
     if not row.record_raw or not path.exists():
-        raise HTTPException(404, f"campaign {campaign_id} has no raw recording"
+        raise HTTPException(missing_status, f"campaign {campaign_id} has no raw recording"
                             + ("" if row.record_raw else " (record_raw was off)"))  # fmt: skip
     if row.status == "running":
         raise HTTPException(409, f"campaign {campaign_id} is running and writing its "

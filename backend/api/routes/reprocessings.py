@@ -37,10 +37,11 @@ def create_reprocessing(
     campaign_id: IdParam, body: ReprocessCreate, state: StateDep, session: SessionDep
 ) -> ReprocessPublic:
     """Queue a re-processing of the campaign's recording with ``camera`` (and, as the
-    baseline, with the camera it was recorded with). 404 without a recording, 409 while
-    the campaign writes it, 422 naming ``camera`` when it is not a camera JSON or does not
-    fit the recording's frames; nothing is stored then."""
-    path = finished_recording(session, state, campaign_id)
+    baseline, with the camera it was recorded with). 404 without the campaign, 409 when it
+    has no recording (it ran with ``record_raw`` off) or is writing it, 422 naming
+    ``camera`` when it is not a camera JSON or does not fit the recording's frames;
+    nothing is stored then."""
+    path = finished_recording(session, state, campaign_id, missing_status=409)
     try:
         job = state.reprocessings.submit(campaign_id, path, body.camera,
                                          tracking=body.tracking, filter_state=body.filter)

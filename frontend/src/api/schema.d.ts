@@ -239,9 +239,10 @@ export interface paths {
         /**
          * Create Reprocessing
          * @description Queue a re-processing of the campaign's recording with ``camera`` (and, as the
-         *     baseline, with the camera it was recorded with). 404 without a recording, 409 while
-         *     the campaign writes it, 422 naming ``camera`` when it is not a camera JSON or does not
-         *     fit the recording's frames; nothing is stored then.
+         *     baseline, with the camera it was recorded with). 404 without the campaign, 409 when it
+         *     has no recording (it ran with ``record_raw`` off) or is writing it, 422 naming
+         *     ``camera`` when it is not a camera JSON or does not fit the recording's frames;
+         *     nothing is stored then.
          */
         post: operations["createReprocessing"];
         delete?: never;

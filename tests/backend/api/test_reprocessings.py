@@ -102,7 +102,8 @@ def test_bad_requests_are_named_and_nothing_is_stored(tmp_path):
         r = c.post(f"/api/campaigns/{cid}/reprocess", json={"tracking": "yes"}, headers=AUTH)
         assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "tracking"]
         r = c.post(f"/api/campaigns/{no_raw}/reprocess", json={}, headers=AUTH)
-        assert r.status_code == 404 and "record_raw was off" in r.json()["detail"]
+        # the campaign exists; its state (no recording) forbids this: a conflict
+        assert r.status_code == 409 and "record_raw was off" in r.json()["detail"]
         assert c.post("/api/campaigns/99/reprocess", json={}, headers=AUTH).status_code == 404
         assert c.get("/api/reprocessings").json() == []
         assert not (settings.data_dir / "reprocessings").exists() or \
