@@ -113,8 +113,8 @@ def markdown(out, img: str, n: int) -> str:
     worst = max(out.values(), key=lambda v: v[0]["confident_wrong"])[0]["confident_wrong"]
     beyond = max(v[0]["beyond_3sigma_pct"] for v in out.values()
                  if math.isfinite(v[0]["beyond_3sigma_pct"]))  # fmt: skip
-    scale = max(v[0]["scale_excess_px"] for v in out.values()
-                if math.isfinite(v[0]["scale_excess_px"]))  # fmt: skip
+    scale = max((v[0]["scale_excess_px"] for v in out.values()
+                 if math.isfinite(v[0]["scale_excess_px"])), default=math.nan)  # fmt: skip
     lines = [
         "## Physics robustness study", "",
         f"`bench/physics.py`: {n} frames per family and range, each with its own draw of the "

@@ -516,9 +516,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.cmd == "compare":
         return compare(args)
     if args.cmd == "warm-up":
+        from tofpose.kernels import kernel_cache_dir, prune_stale_kernel_caches
         from tofpose.warmup import warm_up
 
-        print(f"pipeline kernels ready in {warm_up():.1f} s")
+        print(f"pipeline kernels ready in {warm_up():.1f} s ({kernel_cache_dir()})")
+        for old in prune_stale_kernel_caches():
+            print(f"removed the stale kernel cache {old}")
         return 0
     if args.cmd == "openapi":
         from backend import main as server_main

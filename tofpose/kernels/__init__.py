@@ -15,7 +15,9 @@ The cache lives in a directory named after a digest of every kernel source
 (``kernel_cache_dir``): numba keys a cached kernel on its own file only, so after an
 edit the kernels of other files that call the edited one would otherwise keep their old
 compiled code. With the digest in the path, an edit of any kernel file is a new, empty
-cache, and a kernel can never run against another state of the sources.
+cache, and a kernel can never run against another state of the sources. Old states'
+directories are removed by ``tofpose warm-up`` (``prune_stale_kernel_caches``), not at
+import: another checkout or version may be running from the same base.
 """
 
 from __future__ import annotations
@@ -46,26 +48,49 @@ def kernel_sources_digest() -> str:
 def kernel_cache_dir() -> Path:
     """The numba cache directory of this state of the kernel sources:
     ``<base>/tofpose-kernels-<digest>``, base ``NUMBA_CACHE_DIR`` when set, else this
-    package's ``__pycache__`` (where numba would put it)."""
-    base = Path(os.environ.get("NUMBA_CACHE_DIR") or _HERE / "__pycache__")
-    return base / f"{_PREFIX}{kernel_sources_digest()}"
+    package's ``__pycache__`` (where numba would put it), else, when that cannot be
+    written (a read-only install, a container run as another user), the user's cache
+    (``$XDG_CACHE_HOME`` or ``~/.cache``, ``/tofpose``)."""
+    name = f"{_PREFIX}{kernel_sources_digest()}"
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return Path(os.environ["NUMBA_CACHE_DIR"]) / name
+    for base in (_HERE / "__pycache__",
+                 Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "tofpose"):
+        if _writable(base / name):
+            return base / name
+    return _HERE / "__pycache__" / name  # numba then compiles in memory, each process
 
 
-def _use_kernel_cache_dir() -> None:
-    """Point numba's cache at ``kernel_cache_dir`` (read when each kernel is decorated,
-    i.e. when its module is imported, after this one) and remove the caches of other
-    states of the sources in the same base (best effort: they can only be stale)."""
-    path = kernel_cache_dir()
-    numba.config.CACHE_DIR = str(path)
+def _writable(path: Path) -> bool:
     try:
-        for old in path.parent.glob(f"{_PREFIX}*"):
-            if old != path and old.is_dir():
-                shutil.rmtree(old, ignore_errors=True)
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".probe-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+        return True
     except OSError:
-        pass
+        return False
 
 
-_use_kernel_cache_dir()
+def prune_stale_kernel_caches(min_age_s: float = 86400.0) -> list[Path]:
+    """Remove the cache directories of other states of the kernel sources beside this
+    one that nothing wrote to for ``min_age_s`` (another checkout or version still
+    running keeps its own); returns what was removed. ``tofpose warm-up`` calls it."""
+    import time
+
+    current = kernel_cache_dir()
+    removed = []
+    for old in current.parent.glob(f"{_PREFIX}*"):
+        try:
+            if old != current and old.is_dir() and time.time() - old.stat().st_mtime > min_age_s:
+                shutil.rmtree(old, ignore_errors=True)
+                removed.append(old)
+        except OSError:
+            continue
+    return removed
+
+
+numba.config.CACHE_DIR = str(kernel_cache_dir())
 
 #: the decorator of every kernel: compiled once, cached on disk, releases the GIL (the
 #: server's acquisition thread and its HTTP threads then do not wait on each other)

@@ -54,14 +54,17 @@ class SceneBackground:
     @classmethod
     def from_frame(
         cls, gray: np.ndarray, distance_mm: np.ndarray, camera: CameraModel,
-        illumination_gain: float, integration_time_us: float,
+        illumination_gain: float, integration_time_us: float, dark_counts: float = 0.0,
     ) -> SceneBackground:  # fmt: skip
         """From a recorded (gray, distance) pair of a scene without the target: the
-        reflectance each pixel's amplitude implies at its distance, ``gray * d^2 / (K *
-        T)`` (``K`` = ``illumination_gain``, ``T`` = ``integration_time_us`` of the
-        recording; surfaces taken as facing the camera). Pixels without a valid distance
-        return nothing."""
-        g = np.asarray(gray, float)
+        reflectance each pixel's amplitude implies at its distance, ``(gray - dark) *
+        d^2 / (K * T)`` (``K`` = ``illumination_gain``, ``T`` = ``integration_time_us``
+        of the recording; surfaces taken as facing the camera). ``dark_counts``: the
+        gray level of pixels with no return (the ambient light and offset left in the
+        gray image; the frame's 2nd percentile is a good estimate), taken off so that
+        the re-rendered frame does not count the recording's ambient light twice.
+        Pixels without a valid distance return nothing."""
+        g = np.asarray(gray, float) - float(dark_counts)
         d = np.asarray(distance_mm, float)
         if g.shape != d.shape:
             raise ValueError(f"gray {g.shape} and distance {d.shape} differ in shape")
@@ -75,7 +78,7 @@ class SceneBackground:
     @classmethod
     def from_recording(
         cls, path: str | Path, index: int, illumination_gain: float,
-        integration_time_us: float,
+        integration_time_us: float, dark_counts: float = 0.0,
     ) -> SceneBackground:  # fmt: skip
         """Frame ``index`` of a recording (``tofpose.recording``) as a background, through
         the recording's camera (``from_frame``)."""
@@ -85,12 +88,15 @@ class SceneBackground:
             if not 0 <= index < rec.n_frames:
                 raise IndexError(f"{path} has {rec.n_frames} frames, no frame {index}")
             gray, dist, _ = rec.frame(index)
-            return cls.from_frame(gray, dist, rec.camera, illumination_gain, integration_time_us)
+            return cls.from_frame(gray, dist, rec.camera, illumination_gain,
+                                  integration_time_us, dark_counts)  # fmt: skip
 
     def along(self, bearings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(distance_mm, reflectance), each (M,), for unit rays (M, 3) from the camera
-        centre: the maps at the pixel each ray passes through (nearest pixel); inf and 0
-        for rays outside the image or behind the camera."""
+        centre: the maps at the pixel each ray passes through (nearest pixel: the
+        background is constant over a pixel, so its own edges fall on pixel borders and
+        mix only with the target, not with each other); inf and 0 for rays outside the
+        image or behind the camera."""
         b = np.asarray(bearings, float).reshape(-1, 3)
         d = np.full(len(b), np.inf)
         rho = np.zeros(len(b))
@@ -158,13 +164,14 @@ def synthetic_room(
     """A random indoor lab scene around a target at ``target_range_mm`` (its centre at
     ``target_centre_mm`` in the camera frame, default on the optical axis): a back wall
     1-4 m behind the target (reflectance 0.2-0.8), a floor 0.8-1.5 m below the camera
-    (0.1-0.5), 1-3 pieces of furniture (boxes, 0.05-0.9) between 0.3 m behind the target
-    and the wall, a standing person (a cylinder of 0.2 m radius, 0.2-0.7) 0.3-2 m behind
-    the target (the scene is behind the target; what reaches in front of it is the
-    arm), 0-4 shiny
-    fittings (discs of 10-40 mm with a reflectance of 2-20: metal, glossy paint, a
-    safety vest's stripe), and, with ``arm_probability``, an arm (a cylinder of 40-60 mm
-    radius, 0.3-0.6) 0.3-1 m in front of the target reaching across part of it."""
+    and at least 0.6 m below the target's centre (0.1-0.5), 1-3 pieces of furniture
+    (boxes, 0.05-0.9) between 0.3 m behind the target and the wall, a standing person
+    (a cylinder of 0.2 m radius, 0.2-0.7) 0.3-2 m behind the target (the scene is
+    behind the target; what reaches in front of it is the arm), 0-4 shiny fittings
+    (discs of 10-40 mm with a reflectance of 2-20: metal, glossy paint, a safety vest's
+    stripe), and, with ``arm_probability``, an arm (a cylinder of 40-60 mm
+    radius, 0.3-0.6) 0.3-1 m in front of the target (at least half its range from the
+    camera) reaching across part of it."""
     h, w = camera.height, camera.width
     rays = camera.pixel_bearings().reshape(-1, 3)
     d = np.full(len(rays), np.inf)
@@ -175,8 +182,9 @@ def synthetic_room(
     z_t = float(centre[2])
     wall_z = z_t + rng.uniform(1000.0, 4000.0)
     _planes(rays, hits, np.array([0.0, 0.0, 1.0]), wall_z, rng.uniform(0.2, 0.8))
-    _planes(rays, hits, np.array([0.0, 1.0, 0.0]), rng.uniform(800.0, 1500.0),
-            rng.uniform(0.1, 0.5))  # floor (image y points down)  # fmt: skip
+    # the floor (image y points down) 0.8-1.5 m below the camera and below the target
+    floor_mm = max(rng.uniform(800.0, 1500.0), float(centre[1]) + 600.0)
+    _planes(rays, hits, np.array([0.0, 1.0, 0.0]), floor_mm, rng.uniform(0.1, 0.5))
     half_fov = np.array([w / (2 * camera.fx), h / (2 * camera.fy)])
     for _ in range(rng.integers(1, 4)):
         z0 = rng.uniform(z_t + 300.0, wall_z - 300.0)
@@ -204,7 +212,9 @@ def synthetic_room(
         on = np.linalg.norm(rays * s[:, None] - p[None], axis=1) <= radius
         _keep(hits, np.where(on & (s > 0), s - 1.0, np.inf), rng.uniform(2.0, 20.0))
     if rng.random() < arm_probability:
-        za = z_t - rng.uniform(300.0, 1000.0)
+        # 0.3-1 m in front of the target, and never nearer than half its range (a
+        # target at 1 m gets its arm 0.5-0.7 m from the camera, not behind it)
+        za = max(z_t - rng.uniform(300.0, 1000.0), z_t * rng.uniform(0.5, 0.7))
         reach = centre * za / z_t  # the target's line of sight at the arm's depth
         angle = rng.uniform(-0.6, 0.6)  # from horizontal, rad
         axis = np.array([np.cos(angle), np.sin(angle), 0.0])

@@ -4,8 +4,11 @@ so a caller's cached kernel can never run with another file's old code inlined."
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
+import time
+from pathlib import Path
 
 import numba
 
@@ -36,15 +39,9 @@ def test_an_edit_of_any_kernel_source_is_another_cache(tmp_path, monkeypatch):
     assert kernels.kernel_sources_digest() == before  # the state, not the file's time
 
 
-def test_a_user_cache_base_is_kept_and_stale_states_beside_it_removed(tmp_path):
-    """In a fresh process with ``NUMBA_CACHE_DIR`` set: the kernels' directory is inside
-    it, a compiled kernel's cache files land there, and a directory of another state of
-    the sources is removed."""
-    stale = tmp_path / "tofpose-kernels-0123456789abcdef"
-    stale.mkdir()
-    (stale / "old.nbi").write_bytes(b"x")
-    other = tmp_path / "someone-else"
-    other.mkdir()
+def test_a_user_cache_base_is_kept_and_a_compiled_kernel_lands_there(tmp_path):
+    """In a fresh process with ``NUMBA_CACHE_DIR`` set, the kernels' directory is inside
+    it and a compiled kernel's cache files land there."""
     code = (
         "import numpy as np\n"
         "from tofpose import kernels\n"
@@ -55,6 +52,34 @@ def test_a_user_cache_base_is_kept_and_stale_states_beside_it_removed(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          env={"NUMBA_CACHE_DIR": str(tmp_path), "PATH": "/usr/bin:/bin"},
                          check=True, timeout=600).stdout.strip().splitlines()[-1]  # fmt: skip
-    assert out.startswith(str(tmp_path / "tofpose-kernels-"))
-    assert not stale.exists() and other.exists()
-    assert any(p.suffix == ".nbi" for p in (tmp_path / out.split("/")[-1]).rglob("*"))
+    assert out == str(tmp_path / f"tofpose-kernels-{kernels.kernel_sources_digest()}")
+    assert any(p.suffix == ".nbi" for p in Path(out).rglob("*"))
+
+
+def test_only_old_caches_of_other_states_are_pruned(tmp_path, monkeypatch):
+    """``prune_stale_kernel_caches`` (run by ``tofpose warm-up``) removes the directories
+    of other source states idle for a day; a recent one (another checkout running now),
+    the current one and anything not a kernel cache stay."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    current = kernels.kernel_cache_dir()
+    current.mkdir()
+    old = tmp_path / "tofpose-kernels-0123456789abcdef"
+    recent = tmp_path / "tofpose-kernels-fedcba9876543210"
+    other = tmp_path / "someone-else"
+    for d in (old, recent, other):
+        d.mkdir()
+    two_days_ago = time.time() - 2 * 86400
+    os.utime(old, (two_days_ago, two_days_ago))
+    os.utime(other, (two_days_ago, two_days_ago))
+    assert kernels.prune_stale_kernel_caches() == [old]
+    assert not old.exists() and recent.exists() and current.exists() and other.exists()
+
+
+def test_an_unwritable_package_directory_falls_back_to_the_users_cache(tmp_path, monkeypatch):
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    real = kernels._writable
+    monkeypatch.setattr(kernels, "_writable",
+                        lambda p: False if kernels._HERE in p.parents else real(p))  # fmt: skip
+    path = kernels.kernel_cache_dir()
+    assert path == tmp_path / "tofpose" / f"tofpose-kernels-{kernels.kernel_sources_digest()}"

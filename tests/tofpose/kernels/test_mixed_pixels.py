@@ -124,6 +124,19 @@ def test_a_marker_with_an_arm_across_its_edge_is_occluded_and_noise_is_not():
     one = dist.copy()
     one[top - 1, int(150.3)] = MARKER_MM - 800.0
     assert not _occluded(blob, one)
+    # nothing ranged around the marker but the arm (the noise estimate has no pixels)
+    only_arm = arm.copy()
+    only_arm[ring & ~member & (np.abs(arm - (MARKER_MM - 500.0)) > 1.0)] = np.nan
+    assert _occluded(blob, only_arm)
+    # isolated near pixels on a quiet plate (30 mm scatter: the noise rule alone would
+    # let them through): no connected patch, not occluded
+    speckle = dist.copy()
+    quiet = ring & ~member & (np.abs(dist - PLATE_MM) < 1.0)
+    speckle[quiet] += rng.normal(0.0, 30.0, quiet.sum())
+    rows, cols = np.nonzero(quiet)
+    lone = (rows % 2 == 0) & (cols % 2 == 0)  # every other pixel: none 8-connected
+    speckle[rows[lone], cols[lone]] = MARKER_MM - 800.0
+    assert not _occluded(blob, speckle)
     # a moving marker: its whole rim reads wrong (sub-frames see the edge at different
     # places), nothing beyond it does
     rim = cv2.dilate(member.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)

@@ -73,8 +73,19 @@ def test_the_background_family_puts_a_room_around_the_target_others_draw_nothing
     with_room = draw_background("background", scene, rng, cam, T)
     room = with_room.background
     assert room is not None and room.distance_mm.shape == (cam.height, cam.width)
-    # the room lies behind the target, except an arm: its far wall is beyond it
-    assert np.nanmax(room.distance_mm[np.isfinite(room.distance_mm)]) > 4500.0
+    # the room lies behind the target, except an arm: without one, nothing along the
+    # rays through the target's plate is nearer than the target
+    from tofpose.sim.background import synthetic_room
+
+    plate = CAT.plate_size_mm
+    corners = np.array([[sx * plate[0] / 2, sy * plate[1] / 2, 0.0]
+                        for sx in (-1, 1) for sy in (-1, 1)])  # fmt: skip
+    uv = cam.project(T.apply(corners))
+    u0, v0 = np.floor(uv.min(axis=0)).astype(int)
+    u1, v1 = np.ceil(uv.max(axis=0)).astype(int)
+    for _ in range(20):
+        bare = synthetic_room(cam, rng, 4500.0, T.t_mm, arm_probability=0.0)
+        assert np.min(bare.distance_mm[v0:v1, u0:u1]) > np.linalg.norm(T.t_mm) + 100.0
     state = rng.bit_generator.state
     assert draw_background("ideal", scene, rng, cam, T) is scene
     assert rng.bit_generator.state == state  # other families' streams are unchanged
