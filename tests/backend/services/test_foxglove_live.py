@@ -82,10 +82,12 @@ def test_a_foxglove_client_gets_the_frames_the_server_measured(tmp_path):
             assert struct.unpack_from("<BI", msg) == (MESSAGE_DATA, 7)
             tf = Transform.FromString(msg[struct.calcsize("<BIQ"):])
             assert (tf.parent_frame_id, tf.child_frame_id) == ("camera", "target")
-        measured = {}
-        while (s := sub.get(timeout_s=0.1)) is not None:
-            measured[int(round(s.captured_unix_s * 1e9))] = s
+        # stop the subscription first, then drain what it holds: draining a live one
+        # with a 0.1 s wait never ends while the camera delivers a frame every 0.1 s
         state.hub.unsubscribe(sub)
+        measured = {}
+        while (s := sub.get(timeout_s=0.0)) is not None:
+            measured[int(round(s.captured_unix_s * 1e9))] = s
         matched = compared = 0
         for log_ns, img in images.items():
             if log_ns not in measured:
