@@ -166,6 +166,8 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
                                 and not _owned_by_other(owner, ox, oy, use_owner, r + y0,
                                                         c + x0, j))  # fmt: skip
                 near[r, c] = ranged[r, c] and d < limit
+        if not near.any():  # the usual case: nothing in front, no flood to run
+            continue
         # flood the near patches from the near pixels that touch the blob
         patch = np.zeros((ph, pw), np.bool_)
         stack = np.empty(ph * pw, np.int64)
