@@ -57,6 +57,7 @@ from tofpose.matching import (
 from tofpose.mixing import mixing_rows, shifted_mixing
 from tofpose.pair_fit import fit_pair
 from tofpose.persistence import Persistence, PersistenceConfig, PersistenceInfo, blob_arrays
+from tofpose.pose import covariance_envelope
 from tofpose.range_calibration import RangeCorrection, correction_kernel_arguments
 from tofpose.solve import Measurements, PoseSolver, Rejected, Solution, ThresholdedFrame
 from tofpose.tracking import (
@@ -154,6 +155,13 @@ class PipelineConfig:
         SVD or LOS pose is not minimised). None: no test. Below the limit, a chi^2 per
         degree of freedom above 1 scales the reported covariance up by it
         (``variance_factor``).
+    leave_one_out_covariance : report a covariance no narrower than the spread of the
+        poses fitted without one reflector each (from 4 reflectors; ``pose.
+        leave_one_out_covariance``): a reflector biased beyond its sigma that alone fixes
+        some direction of the pose leaves no residual for chi^2 to see, but moves the
+        pose when left out (at 8 m, a marker partly hidden by an arm in front of it, or
+        pulled by a blurred neighbour's halo, was 3-6 deg off with 4-5 markers and
+        claimed 0.3-1 deg).
     outlier_chi2_per_dof : above this chi^2 per degree of freedom the fit is inconsistent
         and each reflector is also tested against a fit without it (leave-one-out), which
         finds a biased point that a fit of few points has absorbed.
@@ -181,6 +189,7 @@ class PipelineConfig:
     max_systematic_range_sigma_mm: float = 25.0
     max_systematic_centroid_sigma_px: float = 0.5
     consistency_p: float | None = 0.999999
+    leave_one_out_covariance: bool = True
     estimate_range_offset: bool = True
     range_bias_sigma_mm: float = 15.0
     calibrated_range_bias_sigma_mm: float = 2.0
@@ -212,6 +221,7 @@ class PipelineConfig:
             range_bias_sigma_mm=0.0,
             calibrated_range_bias_sigma_mm=0.0,
             consistency_p=None,
+            leave_one_out_covariance=False,
             estimate_range_offset=False,
             focal_length_sigma_rel=0.0,
             common_centroid_bias_px=0.0,
@@ -678,13 +688,14 @@ class PosePipeline:
     def _reported_covariance(self, ml, n_matched: int, t_mm: np.ndarray) -> np.ndarray:
         """(6, 6): the fit's covariance with its a-posteriori variance factor, plus the
         common range bias's and the image scale's (``MLResult.bias_covariance``), times
-        the camera's calibrated factor at this distance."""
+        the camera's calibrated factor at this distance, widened where the leave-one-out
+        poses spread wider (``pose.covariance_envelope``)."""
         cov = ml.covariance * variance_factor(ml.chi2, n_matched)
         if ml.bias_covariance is not None:
             cov = cov + ml.bias_covariance
         if self.covariance_scale is not None:
             cov = cov * self.covariance_scale.factor_at(math.sqrt(float(t_mm @ t_mm)))
-        return cov
+        return covariance_envelope(cov, ml.leave_one_out_covariance)
 
     def _correct_ranges(self, blobs: list[Blob], gray: np.ndarray) -> list[Blob]:
         """The blobs with the calibrated range error subtracted from their ranges (new

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from tofpose.kernels.pose import (
+    MIN_LEAVE_ONE_OUT,
+    leave_one_out_spread,
     ml_refine,
     range_bias_covariance,
     reflector_norms,
@@ -223,6 +225,9 @@ class MLResult:
         (``kernels.pose.class_scale_covariance``), or None.
     range_offset_mm : the range offset common to the reflectors that the fit estimated
         and took out of their ranges (``kernels.pose.common_range_offset``; 0: none).
+    leave_one_out_covariance : (6, 6) spread of the poses fitted without one reflector
+        each about this pose (``leave_one_out_covariance``), or None; the reported
+        covariance is never narrower (``covariance_envelope``).
     """
 
     R: np.ndarray
@@ -233,6 +238,7 @@ class MLResult:
     reflector_norms: np.ndarray
     bias_covariance: np.ndarray | None = None
     range_offset_mm: float = 0.0
+    leave_one_out_covariance: np.ndarray | None = None
 
 
 def refine_maximum_likelihood(
@@ -260,3 +266,47 @@ def refine_maximum_likelihood(
         STEP_SIGMA2,
     )  # fmt: skip
     return MLResult(R, t, cov, float(chi2), int(iterations), norms)
+
+
+def leave_one_out_covariance(
+    x_mm: np.ndarray, bearings: np.ndarray, ranges_mm: np.ndarray, R: np.ndarray,
+    t: np.ndarray, sigma_range_mm: np.ndarray, sigma_bearing_rad: np.ndarray,
+    *, max_iterations: int = 10,
+) -> np.ndarray | None:  # fmt: skip
+    """(6, 6) jackknife covariance of the ML pose (R, t) of m reflectors (ours): the
+    spread ``(m - 1) / m sum_j d_j d_j^T`` of the poses fitted without reflector j
+    about (R, t) (``kernels.pose.leave_one_out_spread``), over (rotation vector rad,
+    translation mm); None below ``MIN_LEAVE_ONE_OUT`` reflectors.
+
+    Why: the model's covariance (J^T J)^-1 trusts every sigma. A reflector whose
+    measurement is biased beyond its sigma (a marker partly hidden by something in
+    front of it, a blurred blob pulled by its neighbour's halo) and that alone fixes
+    some direction of the pose (the only large marker left, the far end of a lever)
+    leaves no residual, so no chi^2 test sees it; the pose then errs by several of
+    its sigmas. Leaving that reflector out moves the pose by about its error, and the
+    spread says so. For consistent measurements it estimates the model's covariance.
+    x_mm, bearings (m, 3); ranges_mm, sigma_range_mm, sigma_bearing_rad (m,)."""
+    if len(x_mm) < MIN_LEAVE_ONE_OUT:
+        return None
+    e, rho, sr, sb = _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
+    return leave_one_out_spread(_f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb,
+                                int(max_iterations), STEP_SIGMA2)  # fmt: skip
+
+
+def covariance_envelope(model: np.ndarray, other: np.ndarray | None) -> np.ndarray:
+    """(6, 6): ``model`` widened to ``other`` in every direction where ``other`` is
+    wider: in the basis where ``model`` is the identity, the eigenvalues of ``other``
+    below 1 are raised to 1 (the smallest such covariance with both ellipsoids' axes;
+    the maximum of the two along each of those axes). ``model`` itself when ``other``
+    is None or either is not finite, or ``model`` is not positive definite."""
+    if other is None or not (np.all(np.isfinite(model)) and np.all(np.isfinite(other))):
+        return model
+    try:
+        L = np.linalg.cholesky(model)
+    except np.linalg.LinAlgError:
+        return model
+    Li = np.linalg.inv(L)
+    M = Li @ other @ Li.T
+    w, V = np.linalg.eigh(0.5 * (M + M.T))
+    out = L @ (V * np.maximum(w, 1.0)) @ V.T @ L.T
+    return 0.5 * (out + out.T)

@@ -38,7 +38,7 @@ from tofpose.kernels.pose import (
 from tofpose.kernels.records import FitSettings, camera_record, catalog_record
 from tofpose.kernels.solve import solve_pairs
 from tofpose.kernels.verify import BEHIND_CAMERA, DARK_REFLECTOR, pose_check
-from tofpose.pose import STEP_SIGMA2, MLResult
+from tofpose.pose import STEP_SIGMA2, MLResult, leave_one_out_covariance
 
 _REFINEMENT = {"none": REFINE_NONE, "ml": REFINE_ML, "los": REFINE_LOS}
 
@@ -327,8 +327,14 @@ class PoseSolver:
         by_size = self.size_scale_covariance(obs, R, t, sr, sb)
         if by_size is not None:
             extra = by_size if extra is None else extra + by_size
+        spread = (
+            leave_one_out_covariance(obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, sb)
+            if self.config.leave_one_out_covariance
+            else None
+        )
         ml = MLResult(R, t, cov, float(chi2), int(iterations), norms, bias_covariance=extra,
-                      range_offset_mm=float(offset_mm))  # fmt: skip
+                      range_offset_mm=float(offset_mm),
+                      leave_one_out_covariance=spread)  # fmt: skip
         return Solution(T, obs, int(iterations), ml)
 
     def size_scale_covariance(self, obs: MatchedObservations, R, t, sr, sb) -> np.ndarray | None:

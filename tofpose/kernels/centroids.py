@@ -11,6 +11,13 @@ from tofpose.kernels import jit
 from tofpose.kernels.indexing import row_col, run_end
 from tofpose.kernels.stats import median_inplace
 
+#: a member pixel at or above this fraction of the largest member value of its 3 x 3
+#: neighbourhood is covered whole (the shot noise of a bright marker's pixel is ~3 %)
+PLATEAU_RATIO = 0.9
+#: coverage weights from this many whole-covered pixels (a 3 x 3 interior) on; below,
+#: intensity weights
+PLATEAU_MIN_PX = 9
+
 
 @jit
 def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, owner_x0, owner_y0,
@@ -19,8 +26,10 @@ def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, owner_
 
     flat, starts : blob j's pixels are ``flat[starts[j]:starts[j + 1]]`` (flat indices);
     bbox : (n, 4) int64 (x, y, w, h); gray : (H, W) float32; background : (n,) each
-    blob's surround level (``mixed_pixels.blob_surrounds``), counts; coverage : coverage weights
-    (else intensity, Eq. 19 as written); owner, owner_x0, owner_y0 : ``owner_map``'s
+    blob's surround level (``mixed_pixels.blob_surrounds``), counts; coverage : coverage
+    weights for a blob with a plateau of whole-covered pixels (``PLATEAU_MIN_PX`` at
+    ``PLATEAU_RATIO``) and intensity weights for the others (else intensity for all, Eq.
+    19 as written); owner, owner_x0, owner_y0 : ``owner_map``'s
     index of the blob owning each pixel (-1 none) and its top-left pixel, read when
     ``use_owner``. Returns (n, 2) float64.
     """
@@ -52,6 +61,23 @@ def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, owner_
         for r in range(ph + 2):
             for c in range(pw):
                 row_max[r, c] = max(max(member[r, c], member[r, c + 1]), member[r, c + 2])
+        # a plateau of whole-covered pixels (members at >= PLATEAU_RATIO of their 3 x 3
+        # neighbourhood's largest member value) is what coverage weights measure; a spot
+        # without one (a small disc, or a blurred one) is all edge, where coverage is the
+        # support's outline and intensity weights (Eq. 19) are the unbiased centre
+        use_coverage = False
+        if coverage:
+            n_full = 0
+            for r in range(ph):
+                a_row, b_row, c_row = row_max[r], row_max[r + 1], row_max[r + 2]
+                m_row = member[r + 1]
+                for c in range(pw):
+                    mv = m_row[c + 1]
+                    if mv > 0:
+                        local_max = max(max(a_row[c], b_row[c]), c_row[c])
+                        if mv >= np.float32(PLATEAU_RATIO) * local_max:
+                            n_full += 1
+            use_coverage = n_full >= PLATEAU_MIN_PX
         # row by row: the weights without a branch (the compiler vectorises the loop; 0
         # off the dilated blob and on a neighbour's pixels), then the sums in pixel order
         # (adding 0 changes no sum: they are >= 0)
@@ -63,7 +89,7 @@ def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, owner_
             for c in range(pw):
                 local_max = max(max(a_row[c], b_row[c]), c_row[c])
                 value = max(g_row[c + x0] - bg, np.float32(0.0))
-                if coverage:  # clip(value / local_max, 0, 1); x / 0 -> 1, 0 / 0 -> 0
+                if use_coverage:  # clip(value / local_max, 0, 1); x / 0 -> 1, 0 / 0 -> 0
                     q = value / (local_max if local_max > 0 else np.float32(1.0))
                     covered = min(max(q, np.float32(0.0)), np.float32(1.0))
                     lone = np.float32(1.0) if value > 0 else np.float32(0.0)

@@ -180,6 +180,63 @@ def ml_refine(x, e, rho, R0, t0, sr, sb, max_iterations, tol, step_sigma2):
     return R, t, cov, (r**2).sum(), iterations, reflector_norms(r)
 
 
+@jit
+def rotation_vector(R):
+    """log(R): the rotation vector (3,) rad of a rotation R (3, 3) (angle below pi)."""
+    c = min(max(0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0), -1.0), 1.0)
+    angle = np.arccos(c)
+    s = np.sin(angle)
+    k = 0.5 if s < 1e-12 else 0.5 * angle / s  # angle / (2 sin angle); 1/2 near 0
+    return np.array([(R[2, 1] - R[1, 2]) * k, (R[0, 2] - R[2, 0]) * k,
+                     (R[1, 0] - R[0, 1]) * k])  # fmt: skip
+
+
+#: fewest reflectors whose leave-one-out fits are determined (each keeps 3 x 3
+#: measurements for the 6 pose parameters)
+MIN_LEAVE_ONE_OUT = 4
+
+
+@jit
+def leave_one_out_spread(x, e, rho, R, t, sr, sb, max_iterations, step_sigma2):
+    """(6, 6) spread of the leave-one-out poses about the pose (R, t) of all m
+    reflectors: ``(m - 1) / m sum_j d_j d_j^T`` with d_j the pose fitted without
+    reflector j (``ml_refine`` from (R, t)) minus (R, t), as (rotation vector rad,
+    translation mm) with the covariance's left perturbation (ours: the jackknife
+    estimate of the pose's error covariance, beside the model's (J^T J)^-1). A biased
+    reflector that the fit cannot single out (it alone fixes some direction of the pose)
+    moves the pose when it is left out; the model's covariance does not see it. Zeros
+    below ``MIN_LEAVE_ONE_OUT`` reflectors; a fit that fails (singular) counts as no
+    move."""
+    m = x.shape[0]
+    out = np.zeros((6, 6))
+    if m < MIN_LEAVE_ONE_OUT:
+        return out
+    keep = np.empty(m - 1, np.int64)
+    d = np.empty(6)
+    for j in range(m):
+        n = 0
+        for i in range(m):
+            if i != j:
+                keep[n] = i
+                n += 1
+        Rj, tj, cov, _, _, _ = ml_refine(x[keep], e[keep], rho[keep], R, t, sr[keep],
+                                         sb[keep], max_iterations, 1e-7, step_sigma2)  # fmt: skip
+        if not np.isfinite(cov[0, 0]):
+            continue
+        w = rotation_vector(matmul3(Rj, R.T))
+        for a in range(3):
+            d[a] = w[a]
+            d[3 + a] = tj[a] - t[a]
+        for a in range(6):
+            for b in range(6):
+                out[a, b] += d[a] * d[b]
+    f = (m - 1.0) / m
+    for a in range(6):
+        for b in range(6):
+            out[a, b] *= f
+    return out
+
+
 #: medians of chi-square with 1 (a range residual) and 2 (a lateral pair) degrees of freedom
 MEDIAN_CHI2_1DOF = 0.45494
 MEDIAN_CHI2_2DOF = 1.38629
