@@ -687,15 +687,17 @@ class PosePipeline:
 
     def _reported_covariance(self, ml, n_matched: int, t_mm: np.ndarray) -> np.ndarray:
         """(6, 6): the fit's covariance with its a-posteriori variance factor, plus the
-        common range bias's and the image scale's (``MLResult.bias_covariance``), times
-        the camera's calibrated factor at this distance, widened where the leave-one-out
-        poses spread wider (``pose.covariance_envelope``)."""
+        common range bias's and the image scale's (``MLResult.bias_covariance``), widened
+        where the leave-one-out poses spread wider (``pose.covariance_envelope``), times
+        the camera's calibrated factor at this distance (fitted on what this reports
+        without it)."""
         cov = ml.covariance * variance_factor(ml.chi2, n_matched)
         if ml.bias_covariance is not None:
             cov = cov + ml.bias_covariance
+        cov = covariance_envelope(cov, ml.leave_one_out_covariance)
         if self.covariance_scale is not None:
             cov = cov * self.covariance_scale.factor_at(math.sqrt(float(t_mm @ t_mm)))
-        return covariance_envelope(cov, ml.leave_one_out_covariance)
+        return cov
 
     def _correct_ranges(self, blobs: list[Blob], gray: np.ndarray) -> list[Blob]:
         """The blobs with the calibrated range error subtracted from their ranges (new

@@ -285,3 +285,109 @@ def test_per_size_scale_errors_give_the_covariance_the_pose_errors_have():
         d2["without"].append(err @ np.linalg.solve(ml.covariance, err))
     assert np.mean(d2["with"]) == pytest.approx(6.0, rel=0.2)
     assert np.mean(d2["without"]) > 3 * 6.0
+
+
+def _far_observations(rng, ids, R, t, sb_rad, sr_mm):
+    """The paper target's reflectors ``ids`` (0-based) seen at (R, t) with Gaussian
+    bearing and range errors of the given sigmas: x, e, rho."""
+    x = paper_target().positions_mm[ids]
+    y = x @ R.T + t
+    rho_true = np.linalg.norm(y, axis=1)
+    e = y / rho_true[:, None] + rng.normal(0, sb_rad, y.shape)
+    e /= np.linalg.norm(e, axis=1, keepdims=True)
+    return x, e, rho_true + rng.normal(0, sr_mm, len(ids))
+
+
+def _error(R, t, R_true, t_true):
+    return np.concatenate([Rotation.from_matrix(R @ R_true.T).as_rotvec(), t - t_true])
+
+
+def test_leave_one_out_covariance_is_the_spread_of_the_refits_about_the_pose():
+    """Against its statement: each reflector left out in turn, the others refitted by ML
+    from the pose, the rotation difference as scipy's rotation vector."""
+    from tofpose.pose import leave_one_out_covariance
+
+    rng = np.random.default_rng(3)
+    R = Rotation.from_euler("xyz", [12, -7, 30], degrees=True).as_matrix()
+    t = np.array([300.0, -200.0, 6000.0])
+    ids = np.arange(8)
+    sr, sb = np.full(8, 8.0), np.full(8, 2e-4)
+    x, e, rho = _far_observations(rng, ids, R, t, 2e-4, 8.0)
+    ml = refine_maximum_likelihood(x, e, rho, R, t, sr, sb)
+    got = leave_one_out_covariance(x, e, rho, ml.R, ml.t, sr, sb)
+    want = np.zeros((6, 6))
+    for j in range(8):
+        k = ids != j
+        f = refine_maximum_likelihood(x[k], e[k], rho[k], ml.R, ml.t, sr[k], sb[k])
+        d = _error(f.R, f.t, ml.R, ml.t)
+        want += np.outer(d, d)
+    want *= 7 / 8
+    np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-14)
+    assert np.any(want != 0)
+    assert leave_one_out_covariance(x[:3], e[:3], rho[:3], ml.R, ml.t, sr[:3], sb[:3]) is None
+
+
+def test_covariance_envelope_contains_both_and_is_the_model_when_it_is_wider():
+    from tofpose.pose import covariance_envelope
+
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        A0, B0 = rng.normal(size=(6, 6)), rng.normal(size=(6, 6))
+        A, B = A0 @ A0.T + 0.1 * np.eye(6), B0 @ B0.T
+        env = covariance_envelope(A, B)
+        np.testing.assert_allclose(env, env.T)
+        assert np.linalg.eigvalsh(env - A).min() > -1e-9 * np.abs(env).max()
+        assert np.linalg.eigvalsh(env - B).min() > -1e-9 * np.abs(env).max()
+        np.testing.assert_allclose(covariance_envelope(A, 0.5 * A), A, rtol=1e-9)
+        np.testing.assert_allclose(covariance_envelope(A, 2.0 * A), 2.0 * A, rtol=1e-9)
+    assert covariance_envelope(A, None) is A
+    assert covariance_envelope(A, np.full((6, 6), np.nan)) is A
+
+
+def test_a_biased_marker_that_alone_fixes_the_tilt_is_caught_by_the_leave_one_out_spread():
+    """Known truth at 8 m with five of the paper target's reflectors: the four small ones
+    (close together in the image) and one large one, whose bearing alone sets the lever
+    the attitude hangs on. Its bearing is off by 6 of its sigmas (a marker partly hidden
+    by something in front of it): the ML fit goes through it (no residual reveals it)
+    and the model's covariance calls the pose beyond 3 sigmas (chi^2_6 0.9973 = 20.06);
+    the envelope with the leave-one-out spread mostly does not (five points are few: a
+    jackknife of five is itself uncertain). With every marker unbiased, the envelope's
+    mean NEES stays within a factor 0.6 of the model's."""
+    from tofpose.pose import covariance_envelope, leave_one_out_covariance
+
+    R = Rotation.from_euler("xyz", [15, -10, 20], degrees=True).as_matrix()
+    t = np.array([400.0, -300.0, 8000.0])
+    ids = np.array([0, 1, 2, 3, 4])
+    sb_rad, sr_mm = 0.035 / 325.0, 15.0  # 0.035 px at fx 325; a small marker's range
+    sr, sb = np.full(5, sr_mm), np.full(5, sb_rad)
+    rng = np.random.default_rng(4)
+    d2 = {"model": [], "envelope": []}
+    clean = {"model": [], "envelope": []}
+    for _ in range(200):
+        x, e, rho = _far_observations(rng, ids, R, t, sb_rad, sr_mm)
+        fits = {}
+        for biased in (True, False):
+            e_b = e.copy()
+            if biased:
+                side = np.cross(e_b[4], [0.0, 0.0, 1.0])
+                e_b[4] += 6 * sb_rad * side / np.linalg.norm(side)
+                e_b[4] /= np.linalg.norm(e_b[4])
+            ml = refine_maximum_likelihood(x, e_b, rho, R, t, sr, sb)
+            err = _error(ml.R, ml.t, R, t)
+            env = covariance_envelope(
+                ml.covariance, leave_one_out_covariance(x, e_b, rho, ml.R, ml.t, sr, sb)
+            )
+            fits[biased] = (err @ np.linalg.solve(ml.covariance, err),
+                            err @ np.linalg.solve(env, err))  # fmt: skip
+        d2["model"].append(fits[True][0])
+        d2["envelope"].append(fits[True][1])
+        clean["model"].append(fits[False][0])
+        clean["envelope"].append(fits[False][1])
+    beyond_model = np.mean(np.array(d2["model"]) > 20.06)
+    beyond_envelope = np.mean(np.array(d2["envelope"]) > 20.06)
+    assert beyond_model > 0.9  # the model is fooled nearly always (0.96 in this run)
+    assert beyond_envelope < 0.2  # the envelope mostly not (0.125: five points are few)
+    assert np.median(d2["envelope"]) < 0.25 * np.median(d2["model"])
+    assert np.mean(clean["model"]) == pytest.approx(6.0, rel=0.25)
+    # unbiased: the envelope widens the model's ellipsoid a little, not several-fold
+    assert np.mean(clean["envelope"]) > 0.6 * np.mean(clean["model"])
