@@ -19,6 +19,9 @@ from tofpose.kernels.pose import (
     svd_pose,
 )
 from tofpose.kernels.pose import (
+    covariance_envelope as kernel_covariance_envelope,
+)
+from tofpose.kernels.pose import (
     systematic_sigmas as kernel_systematic_sigmas,
 )
 from tofpose.kernels.pose import tangent_bases as bearing_tangent_bases
@@ -271,12 +274,12 @@ def refine_maximum_likelihood(
 def leave_one_out_covariance(
     x_mm: np.ndarray, bearings: np.ndarray, ranges_mm: np.ndarray, R: np.ndarray,
     t: np.ndarray, sigma_range_mm: np.ndarray, sigma_bearing_rad: np.ndarray,
-    *, max_iterations: int = 10,
 ) -> np.ndarray | None:  # fmt: skip
     """(6, 6) jackknife covariance of the ML pose (R, t) of m reflectors (ours): the
     spread ``(m - 1) / m sum_j d_j d_j^T`` of the poses fitted without reflector j
-    about (R, t) (``kernels.pose.leave_one_out_spread``), over (rotation vector rad,
-    translation mm); None below ``MIN_LEAVE_ONE_OUT`` reflectors.
+    about (R, t), each one Gauss-Newton step from (R, t)
+    (``kernels.pose.leave_one_out_spread``), over (rotation vector rad, translation
+    mm); None below ``MIN_LEAVE_ONE_OUT`` reflectors.
 
     Why: the model's covariance (J^T J)^-1 trusts every sigma. A reflector whose
     measurement is biased beyond its sigma (a marker partly hidden by something in
@@ -289,24 +292,15 @@ def leave_one_out_covariance(
     if len(x_mm) < MIN_LEAVE_ONE_OUT:
         return None
     e, rho, sr, sb = _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
-    return leave_one_out_spread(_f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb,
-                                int(max_iterations), STEP_SIGMA2)  # fmt: skip
+    return leave_one_out_spread(_f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb)
 
 
 def covariance_envelope(model: np.ndarray, other: np.ndarray | None) -> np.ndarray:
     """(6, 6): ``model`` widened to ``other`` in every direction where ``other`` is
-    wider: in the basis where ``model`` is the identity, the eigenvalues of ``other``
-    below 1 are raised to 1 (the smallest such covariance with both ellipsoids' axes;
-    the maximum of the two along each of those axes). ``model`` itself when ``other``
-    is None or either is not finite, or ``model`` is not positive definite."""
-    if other is None or not (np.all(np.isfinite(model)) and np.all(np.isfinite(other))):
+    wider (``kernels.pose.covariance_envelope``: in the basis where ``model`` is the
+    identity, the eigenvalues of ``other`` below 1 are raised to 1; the result contains
+    both ellipsoids). ``model`` itself when ``other`` is None, and a copy of it when
+    either is not finite or ``model`` is not positive definite."""
+    if other is None:
         return model
-    try:
-        L = np.linalg.cholesky(model)
-    except np.linalg.LinAlgError:
-        return model
-    Li = np.linalg.inv(L)
-    M = Li @ other @ Li.T
-    w, V = np.linalg.eigh(0.5 * (M + M.T))
-    out = L @ (V * np.maximum(w, 1.0)) @ V.T @ L.T
-    return 0.5 * (out + out.T)
+    return kernel_covariance_envelope(_f64(model), _f64(other))

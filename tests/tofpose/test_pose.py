@@ -303,8 +303,11 @@ def _error(R, t, R_true, t_true):
 
 
 def test_leave_one_out_covariance_is_the_spread_of_the_refits_about_the_pose():
-    """Against its statement: each reflector left out in turn, the others refitted by ML
-    from the pose, the rotation difference as scipy's rotation vector."""
+    """Against the exact jackknife: each reflector left out in turn, the others refitted
+    by ML to convergence from the pose, the rotation difference as scipy's rotation
+    vector. The one Gauss-Newton step per reflector (exact to second order) gives each
+    variance within 20 % of the converged refits' (6-13 % larger in this draw at 6 m:
+    the step overshoots slightly, on the safe side)."""
     from tofpose.pose import leave_one_out_covariance
 
     rng = np.random.default_rng(3)
@@ -322,9 +325,19 @@ def test_leave_one_out_covariance_is_the_spread_of_the_refits_about_the_pose():
         d = _error(f.R, f.t, ml.R, ml.t)
         want += np.outer(d, d)
     want *= 7 / 8
-    np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-14)
+    ratio = np.diag(got) / np.diag(want)
+    assert np.all((ratio > 0.9) & (ratio < 1.2)), ratio
+    np.testing.assert_allclose(got, want, rtol=0.4, atol=0.05 * np.abs(want).max())
     assert np.any(want != 0)
     assert leave_one_out_covariance(x[:3], e[:3], rho[:3], ml.R, ml.t, sr[:3], sb[:3]) is None
+
+
+def _envelope_reference(A, B):
+    """The envelope by LAPACK: A = L L^T, eigenvalues of L^-1 B L^-T raised to 1."""
+    L = np.linalg.cholesky(A)
+    Li = np.linalg.inv(L)
+    w, V = np.linalg.eigh(Li @ B @ Li.T)
+    return L @ (V * np.maximum(w, 1.0)) @ V.T @ L.T
 
 
 def test_covariance_envelope_contains_both_and_is_the_model_when_it_is_wider():
@@ -335,13 +348,15 @@ def test_covariance_envelope_contains_both_and_is_the_model_when_it_is_wider():
         A0, B0 = rng.normal(size=(6, 6)), rng.normal(size=(6, 6))
         A, B = A0 @ A0.T + 0.1 * np.eye(6), B0 @ B0.T
         env = covariance_envelope(A, B)
+        np.testing.assert_allclose(env, _envelope_reference(A, B), rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(env, env.T)
         assert np.linalg.eigvalsh(env - A).min() > -1e-9 * np.abs(env).max()
         assert np.linalg.eigvalsh(env - B).min() > -1e-9 * np.abs(env).max()
         np.testing.assert_allclose(covariance_envelope(A, 0.5 * A), A, rtol=1e-9)
         np.testing.assert_allclose(covariance_envelope(A, 2.0 * A), 2.0 * A, rtol=1e-9)
     assert covariance_envelope(A, None) is A
-    assert covariance_envelope(A, np.full((6, 6), np.nan)) is A
+    np.testing.assert_array_equal(covariance_envelope(A, np.full((6, 6), np.nan)), A)
+    np.testing.assert_array_equal(covariance_envelope(-A, B), -A)  # not positive definite
 
 
 def test_a_biased_marker_that_alone_fixes_the_tilt_is_caught_by_the_leave_one_out_spread():

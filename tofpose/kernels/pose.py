@@ -19,8 +19,10 @@ from tofpose.kernels.small_matrices import (
     cholesky_inverse,
     cholesky_solve,
     gram,
+    lower_solve,
     matmul3,
     rotation_from_correlation,
+    symmetric_eigen,
     transposed_times,
 )
 from tofpose.kernels.stats import median_inplace
@@ -180,53 +182,47 @@ def ml_refine(x, e, rho, R0, t0, sr, sb, max_iterations, tol, step_sigma2):
     return R, t, cov, (r**2).sum(), iterations, reflector_norms(r)
 
 
-@jit
-def rotation_vector(R):
-    """log(R): the rotation vector (3,) rad of a rotation R (3, 3) (angle below pi)."""
-    c = min(max(0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0), -1.0), 1.0)
-    angle = np.arccos(c)
-    s = np.sin(angle)
-    k = 0.5 if s < 1e-12 else 0.5 * angle / s  # angle / (2 sin angle); 1/2 near 0
-    return np.array([(R[2, 1] - R[1, 2]) * k, (R[0, 2] - R[2, 0]) * k,
-                     (R[1, 0] - R[0, 1]) * k])  # fmt: skip
-
-
 #: fewest reflectors whose leave-one-out fits are determined (each keeps 3 x 3
 #: measurements for the 6 pose parameters)
 MIN_LEAVE_ONE_OUT = 4
 
 
 @jit
-def leave_one_out_spread(x, e, rho, R, t, sr, sb, max_iterations, step_sigma2):
+def leave_one_out_spread(x, e, rho, R, t, sr, sb):
     """(6, 6) spread of the leave-one-out poses about the pose (R, t) of all m
-    reflectors: ``(m - 1) / m sum_j d_j d_j^T`` with d_j the pose fitted without
-    reflector j (``ml_refine`` from (R, t)) minus (R, t), as (rotation vector rad,
-    translation mm) with the covariance's left perturbation (ours: the jackknife
-    estimate of the pose's error covariance, beside the model's (J^T J)^-1). A biased
-    reflector that the fit cannot single out (it alone fixes some direction of the pose)
-    moves the pose when it is left out; the model's covariance does not see it. Zeros
-    below ``MIN_LEAVE_ONE_OUT`` reflectors; a fit that fails (singular) counts as no
-    move."""
+    reflectors: ``(m - 1) / m sum_j d_j d_j^T`` (ours: the jackknife estimate of the
+    pose's error covariance, beside the model's (J^T J)^-1), with d_j the Gauss-Newton
+    step from (R, t) of the fit without reflector j, ``-(H - H_j)^-1 (J^T r - J_j^T
+    r_j)`` (H = J^T J; J_j, r_j reflector j's three rows), over (rotation vector rad,
+    translation mm) with the covariance's left perturbation. One step from the full
+    optimum is the refit to second order in the step. A biased reflector that the fit
+    cannot single out (it alone fixes some direction of the pose) moves the pose when
+    it is left out; the model's covariance does not see it. Zeros below
+    ``MIN_LEAVE_ONE_OUT`` reflectors; a j without which the normal equations are
+    singular counts as no move."""
     m = x.shape[0]
     out = np.zeros((6, 6))
     if m < MIN_LEAVE_ONE_OUT:
         return out
-    keep = np.empty(m - 1, np.int64)
-    d = np.empty(6)
+    r, J = residuals_jacobian(x, e, rho, R, t, sr, sb, tangent_bases(e))
+    H = gram(J)
+    g = transposed_times(J, r)
+    Hj = np.empty((6, 6))
+    gj = np.empty(6)
     for j in range(m):
-        n = 0
-        for i in range(m):
-            if i != j:
-                keep[n] = i
-                n += 1
-        Rj, tj, cov, _, _, _ = ml_refine(x[keep], e[keep], rho[keep], R, t, sr[keep],
-                                         sb[keep], max_iterations, 1e-7, step_sigma2)  # fmt: skip
-        if not np.isfinite(cov[0, 0]):
+        for a in range(6):
+            gj[a] = g[a]
+            for b in range(6):
+                Hj[a, b] = H[a, b]
+        for k in range(3 * j, 3 * j + 3):
+            for a in range(6):
+                gj[a] -= J[k, a] * r[k]
+                for b in range(6):
+                    Hj[a, b] -= J[k, a] * J[k, b]
+        L, ok = cholesky(Hj)
+        if not ok:
             continue
-        w = rotation_vector(matmul3(Rj, R.T))
-        for a in range(3):
-            d[a] = w[a]
-            d[3 + a] = tj[a] - t[a]
+        d = cholesky_solve(L, gj)  # -d_j; the sign drops out of d d^T
         for a in range(6):
             for b in range(6):
                 out[a, b] += d[a] * d[b]
@@ -234,6 +230,46 @@ def leave_one_out_spread(x, e, rho, R, t, sr, sb, max_iterations, step_sigma2):
     for a in range(6):
         for b in range(6):
             out[a, b] *= f
+    return out
+
+
+@jit
+def covariance_envelope(A, B):
+    """(n, n): ``A`` widened to ``B`` in every direction where ``B`` is wider: with
+    A = L L^T, the eigenvalues of L^-1 B L^-T below 1 are raised to 1 (the maximum of
+    the two along the axes of that basis; the result contains both ellipsoids). ``A``
+    (a copy) when it is not positive definite or anything is not finite."""
+    n = A.shape[0]
+    for a in range(n):
+        for b in range(n):
+            if not (np.isfinite(A[a, b]) and np.isfinite(B[a, b])):
+                return A.copy()
+    L, ok = cholesky(A)
+    if not ok:
+        return A.copy()
+    X = lower_solve(L, B)  # L^-1 B
+    M = lower_solve(L, X.T.copy())  # L^-1 B^T L^-T = L^-1 B L^-T (B symmetric)
+    for a in range(n):  # exactly symmetric
+        for b in range(a + 1, n):
+            v = 0.5 * (M[a, b] + M[b, a])
+            M[a, b] = v
+            M[b, a] = v
+    w, V = symmetric_eigen(M)
+    LV = np.zeros((n, n))
+    for a in range(n):
+        for b in range(n):
+            s = 0.0
+            for k in range(a + 1):
+                s += L[a, k] * V[k, b]
+            LV[a, b] = s
+    out = np.empty((n, n))
+    for a in range(n):
+        for b in range(a, n):
+            s = 0.0
+            for k in range(n):
+                s += LV[a, k] * max(w[k], 1.0) * LV[b, k]
+            out[a, b] = s
+            out[b, a] = s
     return out
 
 

@@ -18,22 +18,23 @@ from tofpose.kernels import jit
 
 
 @jit
-def _symmetric_eigen_4(N):
-    """Eigenvalues (4,) and eigenvectors (4, 4) as columns of a symmetric N (4, 4), by
+def symmetric_eigen(N):
+    """Eigenvalues (n,) and eigenvectors (n, n) as columns of a symmetric N (n, n), by
     cyclic Jacobi rotations until the off-diagonal part is negligible."""
+    n = N.shape[0]
     a = N.copy()
-    v = np.eye(4)
+    v = np.eye(n)
     for _sweep in range(50):
         off = 0.0
         scale = 0.0
-        for p in range(4):
+        for p in range(n):
             scale += a[p, p] * a[p, p]
-            for q in range(p + 1, 4):
+            for q in range(p + 1, n):
                 off += a[p, q] * a[p, q]
         if off <= 1e-32 * scale or off == 0.0:
             break
-        for p in range(3):
-            for q in range(p + 1, 4):
+        for p in range(n - 1):
+            for q in range(p + 1, n):
                 apq = a[p, q]
                 if apq == 0.0:
                     continue
@@ -43,22 +44,43 @@ def _symmetric_eigen_4(N):
                     tan = 1.0
                 c = 1.0 / np.sqrt(tan * tan + 1.0)
                 s = tan * c
-                for k in range(4):  # columns p, q of a
+                for k in range(n):  # columns p, q of a
                     akp, akq = a[k, p], a[k, q]
                     a[k, p] = c * akp - s * akq
                     a[k, q] = s * akp + c * akq
-                for k in range(4):  # rows p, q of a
+                for k in range(n):  # rows p, q of a
                     apk, aqk = a[p, k], a[q, k]
                     a[p, k] = c * apk - s * aqk
                     a[q, k] = s * apk + c * aqk
-                for k in range(4):
+                for k in range(n):
                     vkp, vkq = v[k, p], v[k, q]
                     v[k, p] = c * vkp - s * vkq
                     v[k, q] = s * vkp + c * vkq
-    values = np.empty(4)
-    for p in range(4):
+    values = np.empty(n)
+    for p in range(n):
         values[p] = a[p, p]
     return values, v
+
+
+@jit
+def _symmetric_eigen_4(N):
+    """``symmetric_eigen`` of a 4 x 4 N (Horn's quaternion matrix)."""
+    return symmetric_eigen(N)
+
+
+@jit
+def lower_solve(L, B):
+    """L^-1 B (n, k) for a lower-triangular L (n, n) and B (n, k), by forward
+    substitution column by column."""
+    n, k = B.shape
+    out = np.empty((n, k))
+    for c in range(k):
+        for i in range(n):
+            s = B[i, c]
+            for j in range(i):
+                s -= L[i, j] * out[j, c]
+            out[i, c] = s / L[i, i]
+    return out
 
 
 @jit
