@@ -44,7 +44,7 @@ from tofpose.extraction import (
 from tofpose.geometry import facing_euler_deg, quaternion_wxyz_from_rotation
 from tofpose.kernels.ellipses import blob_mask
 from tofpose.kernels.measure import measure_and_back_project
-from tofpose.kernels.pose import point_residuals_mm
+from tofpose.kernels.pose import covariance_envelope, point_residuals_mm
 from tofpose.kernels.range_correction import corrected_ranges
 from tofpose.kernels.records import camera_record
 from tofpose.matching import (
@@ -57,7 +57,6 @@ from tofpose.matching import (
 from tofpose.mixing import mixing_rows, shifted_mixing
 from tofpose.pair_fit import fit_pair
 from tofpose.persistence import Persistence, PersistenceConfig, PersistenceInfo, blob_arrays
-from tofpose.pose import covariance_envelope
 from tofpose.range_calibration import RangeCorrection, correction_kernel_arguments
 from tofpose.solve import Measurements, PoseSolver, Rejected, Solution, ThresholdedFrame
 from tofpose.tracking import (
@@ -694,7 +693,8 @@ class PosePipeline:
         cov = ml.covariance * variance_factor(ml.chi2, n_matched)
         if ml.bias_covariance is not None:
             cov = cov + ml.bias_covariance
-        cov = covariance_envelope(cov, ml.leave_one_out_covariance)
+        if ml.leave_one_out_covariance is not None:  # pose.covariance_envelope
+            cov = covariance_envelope(cov, ml.leave_one_out_covariance)
         if self.covariance_scale is not None:
             cov = cov * self.covariance_scale.factor_at(math.sqrt(float(t_mm @ t_mm)))
         return cov

@@ -26,6 +26,7 @@ from tofpose.extraction import Blob
 from tofpose.geometry import RigidTransform
 from tofpose.kernels.mixed_pixels import MIX_FIELDS
 from tofpose.kernels.pose import (
+    MIN_LEAVE_ONE_OUT,
     NO_OFFSET,
     REFINE_LOS,
     REFINE_ML,
@@ -33,12 +34,13 @@ from tofpose.kernels.pose import (
     RangeOffsetPrior,
     class_scale_covariance,
     facing_cosine,
+    leave_one_out_spread,
     range_bias_covariance,
 )
 from tofpose.kernels.records import FitSettings, camera_record, catalog_record
 from tofpose.kernels.solve import solve_pairs
 from tofpose.kernels.verify import BEHIND_CAMERA, DARK_REFLECTOR, pose_check
-from tofpose.pose import STEP_SIGMA2, MLResult, leave_one_out_covariance
+from tofpose.pose import STEP_SIGMA2, MLResult
 
 _REFINEMENT = {"none": REFINE_NONE, "ml": REFINE_ML, "los": REFINE_LOS}
 
@@ -327,11 +329,11 @@ class PoseSolver:
         by_size = self.size_scale_covariance(obs, R, t, sr, sb)
         if by_size is not None:
             extra = by_size if extra is None else extra + by_size
-        spread = (
-            leave_one_out_covariance(obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, sb)
-            if self.config.leave_one_out_covariance
-            else None
-        )
+        spread = None  # pose.leave_one_out_covariance, without its input conversions
+        if self.config.leave_one_out_covariance and len(obs.i_idx) >= MIN_LEAVE_ONE_OUT:
+            c = np.ascontiguousarray
+            spread = leave_one_out_spread(c(obs.x_mm), c(obs.bearings), c(obs.range_mm), R, t,
+                                          c(sr), c(sb))  # fmt: skip
         ml = MLResult(R, t, cov, float(chi2), int(iterations), norms, bias_covariance=extra,
                       range_offset_mm=float(offset_mm),
                       leave_one_out_covariance=spread)  # fmt: skip
