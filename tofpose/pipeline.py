@@ -47,6 +47,7 @@ from tofpose.kernels.measure import measure_and_back_project
 from tofpose.kernels.pose import covariance_envelope, point_residuals_mm
 from tofpose.kernels.range_correction import corrected_ranges
 from tofpose.kernels.records import camera_record
+from tofpose.kernels.two_centres import SPLIT_OK, two_centre_split
 from tofpose.matching import (
     MatchingConfig,
     MatchResult,
@@ -905,36 +906,21 @@ def _split_in_two(
     centres come from a model fit of the pair's pixels (``pair_fit.fit_pair``; no split
     when it fails) and replace the halves' centroids in the measurement
     (``Blob.fitted_uv``); ranges are measured on the halves as any blob's, and the
-    centroid sigma keeps the split's term (``uncertainty.SPLIT_CENTROID_PX``)."""
+    centroid sigma keeps the split's term (``uncertainty.SPLIT_CENTROID_PX``). The 2-means
+    is compiled (``kernels.two_centres.two_centre_split``)."""
     w = gray.shape[1]
     rows, cols = np.divmod(np.asarray(comp.pixels), w)
     weight = np.maximum(gray[rows, cols].astype(float) - background, 0.0)
     if len(rows) < 2 * min_area_px or weight.sum() <= 0:
         return []
-    pts = np.column_stack((cols, rows)).astype(float)
-    mean = (weight[:, None] * pts).sum(axis=0) / weight.sum()
-    centred = pts - mean
-    cov = (weight[:, None, None] * centred[:, :, None] * centred[:, None, :]).sum(axis=0)
-    evals, evecs = np.linalg.eigh(cov / weight.sum())
-    if evals[0] <= 0 or evals[1] < 1.5**2 * evals[0]:
-        return []  # not elongated as two discs side by side are
-    axis = evecs[:, 1]
-    along = centred @ axis
-    centres = mean + np.array([along.min(), along.max()])[:, None] * axis[None, :] / 2
-    for _ in range(TWO_CENTRE_ITERATIONS):
-        near = np.argmin(((pts[:, None, :] - centres[None, :, :]) ** 2).sum(axis=2), axis=1)
-        if (near == 0).all() or (near == 1).all():
-            return []
-        centres = np.array([
-            (weight[near == k, None] * pts[near == k]).sum(axis=0)
-            / max(weight[near == k].sum(), 1e-12)
-            for k in range(2)
-        ])  # fmt: skip
-    light = np.array([weight[near == k].sum() for k in range(2)])
+    near, centres, status = two_centre_split(cols.astype(float), rows.astype(float), weight,
+                                             TWO_CENTRE_ITERATIONS)  # fmt: skip
+    if status != SPLIT_OK:
+        return []  # not elongated as two discs side by side are, or one-sided
+    light = np.bincount(near, weights=weight, minlength=2)
     if light.max() > PAIR_LIGHT_RATIO * light.min():
         return []  # not two like reflectors (a marker and a glint, or a speck)
-    for k in range(2):  # each half one reflector's size (before the costly fit)
-        n_k = int((near == k).sum())
+    for n_k in np.bincount(near, minlength=2).tolist():  # each half one reflector's size
         if n_k < min_area_px or not d_lo_px <= 2.0 * np.sqrt(n_k / np.pi) <= d_hi_px:
             return []
     fit = fit_pair(gray, comp.pixels, centres, background)

@@ -20,6 +20,7 @@ from tofpose.catalog import paper_target
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg
 from tofpose.kernels.levels import checked_frame, clean_distance
 from tofpose.kernels.pair_fit import fit_pair_lm
+from tofpose.kernels.two_centres import two_centre_split
 from tofpose.pipeline import PipelineConfig, PosePipeline
 from tofpose.range_calibration import RangeCorrection
 from tofpose.sim.bench import R_FACING
@@ -65,6 +66,7 @@ def warm_up() -> float:
     p0 = np.array([0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 1.0, 0.5, 0.0])
     fit_pair_lm(np.zeros((1, 9)), np.zeros((1, 9)), np.ones(1), p0, p0 - 1.0, p0 + 1.0, 1,
                 1e-4, 1e-9)  # fmt: skip
+    two_centre_split(np.array([0.0, 1.0, 2.0]), np.zeros(3), np.ones(3), 1)
     # distance images arrive as float32 (cameras) or float64 (some recordings), counts
     # as uint16 or as floats: the frame check compiles once per dtype
     for distance_dtype in (np.float32, np.float64):
