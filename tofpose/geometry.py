@@ -64,6 +64,34 @@ def facing_euler_deg(R_camera_target: np.ndarray) -> np.ndarray:
     return _euler_deg(r00, r10, -r11 + 0.0, -r12 + 0.0, r20, -r21 + 0.0, -r22 + 0.0)
 
 
+#: step of the numerical derivative of the Euler angles by the rotation vector, rad
+_EULER_STEP_RAD = 1e-6
+
+
+def facing_euler_sigma_deg(R_camera_target: np.ndarray, covariance: np.ndarray) -> np.ndarray:
+    """1-sigma (3,) in deg of (pitch, yaw, roll) as ``facing_euler_deg`` reads them, from
+    a pose covariance (6, 6) or (3, 3) whose first three rows are the rotation vector
+    (rad, left perturbation ``R <- exp([w]x) R``, as ``PoseResult.covariance``):
+    ``sqrt(diag(J C J^T))`` with J (3, 3) the angles' derivative by w (central
+    differences, differences wrapped to +/-180 deg). The rotation vector's own sigmas are
+    about the camera's axes, not the Euler angles', and differ from these by the
+    attitude (up to the yaw's 1/cos(pitch) near gimbal lock, where these grow without
+    bound as they should). NaN where the covariance is not finite."""
+    C = np.asarray(covariance, float)[:3, :3]
+    if not np.all(np.isfinite(C)):
+        return np.full(3, np.nan)
+    R = np.asarray(R_camera_target, float)
+    J = np.empty((3, 3))
+    for k in range(3):
+        w = np.zeros(3)
+        w[k] = _EULER_STEP_RAD
+        d = facing_euler_deg(Rotation.from_rotvec(w).as_matrix() @ R) - facing_euler_deg(
+            Rotation.from_rotvec(-w).as_matrix() @ R
+        )
+        J[:, k] = ((d + 180.0) % 360.0 - 180.0) / (2.0 * _EULER_STEP_RAD)
+    return np.sqrt(np.clip(np.diag(J @ C @ J.T), 0.0, None))
+
+
 def quaternion_wxyz_from_rotation(R: np.ndarray) -> np.ndarray:
     """Unit quaternion (w, x, y, z), shape (4,), with w >= 0, of a rotation matrix (3, 3).
 

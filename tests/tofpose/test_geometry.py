@@ -78,3 +78,28 @@ def test_closed_form_euler_and_quaternion_agree_with_scipy():
     R = rotation_from_euler_deg(20.0, 90.0, 5.0)
     np.testing.assert_allclose(rotation_from_euler_deg(*euler_deg_from_rotation(R)), R,
                                atol=1e-9)  # fmt: skip
+
+
+@pytest.mark.parametrize("euler", [(10.0, 20.0, 5.0), (-30.0, 60.0, 170.0), (0.0, 0.0, 0.0)])
+def test_facing_euler_sigmas_are_the_spread_of_the_angles_under_the_covariance(euler):
+    """Monte Carlo: rotation vectors drawn from a covariance (left perturbation) move the
+    facing Euler angles by the spread the function gives, to 3 %; the rotation vector's
+    own sigmas are not that spread (yaw near 60 deg mixes the axes)."""
+    from scipy.spatial.transform import Rotation
+
+    from tofpose.geometry import facing_euler_deg, facing_euler_sigma_deg
+
+    R = rotation_from_euler_deg(*euler) @ np.diag([1.0, -1.0, -1.0])
+    np.testing.assert_allclose(facing_euler_deg(R), euler, atol=1e-9)
+    A = np.array([[1.0, 0.3, 0.0], [0.3, 2.0, 0.1], [0.0, 0.1, 0.5]]) * 1e-4
+    cov = np.zeros((6, 6))
+    cov[:3, :3] = A
+    got = facing_euler_sigma_deg(R, cov)
+    rng = np.random.default_rng(0)
+    w = rng.multivariate_normal(np.zeros(3), A, 20000)
+    angles = np.array([facing_euler_deg(Rotation.from_rotvec(v).as_matrix() @ R) for v in w])
+    spread = np.std((angles - euler + 180.0) % 360.0 - 180.0, axis=0)
+    np.testing.assert_allclose(got, spread, rtol=0.03)
+    if euler[1] == 60.0:
+        assert np.abs(got - np.degrees(np.sqrt(np.diag(A)))).max() > 0.1
+    assert np.all(np.isnan(facing_euler_sigma_deg(R, np.full((6, 6), np.nan))))

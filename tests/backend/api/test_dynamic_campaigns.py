@@ -165,10 +165,13 @@ class DyingMotion(SpyMotion):
     link that drops during a profile)."""
 
     dead = False
+    status_reads_in_profile = 0
 
     def status(self):
         if self.dead:
             raise ConnectionError("rate table link lost (test)")
+        if any(c == "run_profile" for c, _ in self.calls):
+            self.status_reads_in_profile += 1
         return self.inner.status()
 
 
@@ -206,6 +209,10 @@ def test_a_pause_during_the_profile_stops_the_slew(spied_lab):
 def test_a_motion_link_lost_during_the_profile_pauses_and_stops(spied_lab):
     client, motion = spied_lab
     cid = _start_and_wait_for_the_profile(client, motion, "dyn-link")
+    # the runner reads the status once right after starting the profile (a link lost
+    # there fails the start, "the profile failed"); this test is about a link lost while
+    # the profile runs and the status is polled
+    wait_for(lambda: motion.status_reads_in_profile >= 3, 20.0, "the profile's status polls")
     motion.dead = True
     c = wait_for(lambda: (x := client.get(f"/api/campaigns/{cid}").json())["status"] == "paused"
                  and x, 20.0, "the pause")  # fmt: skip
