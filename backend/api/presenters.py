@@ -43,6 +43,7 @@ from tofpose.geometry import (
     RigidTransform,
     euler_deg_from_rotation,
     facing_euler_deg,
+    facing_euler_sigma_deg,
     rotation_angle_deg,
 )
 from tofpose.tof import unambiguous_range_mm
@@ -143,7 +144,9 @@ def pose_from_sample(s: LiveSample) -> PosePublic:
         pose["quaternion_wxyz"] = [float(v) for v in r.quaternion_wxyz]
         if r.covariance is not None:
             sd = np.sqrt(np.clip(np.diag(r.covariance), 0.0, None))
-            pose["attitude_sigma_deg"] = finite_list_or_none(np.degrees(sd[:3]))
+            pose["attitude_sigma_deg"] = finite_list_or_none(
+                facing_euler_sigma_deg(r.R, r.covariance)
+            )
             pose["position_sigma_mm"] = finite_list_or_none(sd[3:])
     if s.state is not None:
         st = s.state

@@ -226,7 +226,9 @@ class PosePublic(BaseModel):
     quaternion_wxyz: list[float] | None = None
     position_sigma_mm: list[float] | None = Field(None, description="1-sigma, x y z")
     attitude_sigma_deg: list[float] | None = Field(
-        None, description="1-sigma of the rotation-vector components"
+        None,
+        description="1-sigma of pitch, yaw and roll (deg), propagated from the rotation-"
+        "vector covariance through the Euler angles' derivative (large near gimbal lock)",
     )
     n_candidates: int
     n_matched: int

@@ -33,7 +33,7 @@ from backend.services.acquisition import AcquisitionService, LiveSample
 from backend.services.encoder_trace import EncoderTrace, EncoderTraceError
 from backend.services.hub import LiveHub
 from backend.services.store import commit_unique
-from tofpose.geometry import RigidTransform, facing_euler_deg
+from tofpose.geometry import RigidTransform, facing_euler_deg, facing_euler_sigma_deg
 from tofpose.motion_profile import profile_from_spec
 from tofpose.recording import RecordingWriter
 from tofpose.sim.bench import LabGeometry
@@ -115,7 +115,7 @@ def measurement_row(setpoint_id: int, sample: LiveSample) -> MeasurementRow:
         if r.covariance is not None:
             sd = np.sqrt(np.clip(np.diag(r.covariance), 0.0, None))
             row.sigma_pitch_deg, row.sigma_yaw_deg, row.sigma_roll_deg = (
-                _finite(np.degrees(v)) for v in sd[:3]
+                _finite(v) for v in facing_euler_sigma_deg(r.R, r.covariance)
             )
             row.sigma_x_mm, row.sigma_y_mm, row.sigma_z_mm = (_finite(v) for v in sd[3:])
     st = sample.state

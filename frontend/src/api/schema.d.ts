@@ -1612,7 +1612,7 @@ export interface components {
             angular_rate_target_deg_s?: number[] | null;
             /**
              * Attitude Sigma Deg
-             * @description 1-sigma of the rotation-vector components
+             * @description 1-sigma of pitch, yaw and roll (deg), propagated from the rotation-vector covariance through the Euler angles' derivative (large near gimbal lock)
              */
             attitude_sigma_deg?: number[] | null;
             /** Captured Unix S */

@@ -77,3 +77,23 @@ def test_the_study_specs_physics_families_are_the_simulators():
     from tofpose.sim.randomise import FAMILIES
 
     assert get_args(PhysicsFamily) == FAMILIES
+
+
+def test_attitude_sigmas_are_those_of_pitch_yaw_and_roll():
+    """The pose message's attitude 1-sigma is the Euler angles' (the covariance of the
+    rotation vector propagated through them), not the rotation vector's: at a yaw of
+    40 deg the two differ, and the message's match ``facing_euler_sigma_deg``."""
+    from tofpose.geometry import facing_euler_sigma_deg
+
+    cam = CameraModel()
+    T = facing_pose(2500.0, 0.0, 40.0, 10.0)
+    f = render(T, seed=4)
+    res = PosePipeline(cam, paper_target()).process(f.gray, f.distance_mm)
+    assert res.ok
+    frame = CameraFrame(gray=f.gray, distance_mm=f.distance_mm, time_s=1.0, index=1,
+                        T_camera_target_lab=T)  # fmt: skip
+    body = pose_from_sample(LiveSample(frame, res, "paper-target", 1.0, 1.01)).model_dump()
+    want = facing_euler_sigma_deg(res.R, res.covariance)
+    np.testing.assert_allclose(body["attitude_sigma_deg"], want, rtol=1e-12)
+    rotvec = np.degrees(np.sqrt(np.diag(res.covariance)[:3]))
+    assert np.abs(want - rotvec).max() > 0.05 * rotvec.max()
