@@ -8,7 +8,7 @@ import numpy as np
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.geometry import RigidTransform
-from tofpose.pose import refine_maximum_likelihood, weighted_svd
+from tofpose.pose import refine_maximum_likelihood, weighted_absolute_orientation
 from tofpose.sim.render import RenderedFrame
 from tofpose.sim.scene import FIRST_DISC
 
@@ -48,6 +48,6 @@ def oracle_pose(
     sig_rng = np.array(sig)
     sig_b = np.full(len(keep), BEARING_SIGMA_PX / camera.fx)
     w = 1.0 / (sig_rng**2 + (rho * sig_b) ** 2)
-    R0, t0 = weighted_svd(X[keep], e * rho[:, None], w)
+    R0, t0 = weighted_absolute_orientation(X[keep], e * rho[:, None], w)
     ml = refine_maximum_likelihood(X[keep], e, rho, R0, t0, sig_rng, sig_b)
     return ml.R, ml.t, ml.covariance

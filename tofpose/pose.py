@@ -11,12 +11,12 @@ import numpy as np
 
 from tofpose.kernels.pose import (
     MIN_LEAVE_ONE_OUT,
+    absolute_orientation,
     leave_one_out_spread,
     ml_refine,
     range_bias_covariance,
     reflector_norms,
     residuals_jacobian,
-    svd_pose,
 )
 from tofpose.kernels.pose import (
     covariance_envelope as kernel_covariance_envelope,
@@ -27,10 +27,12 @@ from tofpose.kernels.pose import (
 from tofpose.kernels.pose import tangent_bases as bearing_tangent_bases
 
 
-def weighted_svd(
+def weighted_absolute_orientation(
     x_mm: np.ndarray, y_mm: np.ndarray, weights: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted absolute orientation (Eqs. 40-50).
+    """Weighted absolute orientation (Eqs. 40-50): the paper's weighted SVD solution,
+    computed by Horn's closed form (the unit quaternion that is the top eigenvector of a
+    4 x 4 matrix built from Eq. 45's S; the same R to rounding, no LAPACK call).
 
     Minimises ``1/2 sum w_i ||y_i - (R x_i + t)||^2`` (Eq. 40): centroids (Eq. 41),
     S = sum w_i x~_i y~_i^T (Eq. 45), R = V diag(1, 1, det(V U^T)) U^T (Eq. 49, the
@@ -54,7 +56,8 @@ def weighted_svd(
     w = np.ones(len(x)) if weights is None else np.asarray(weights, float)
     if w.shape != (len(x),) or np.any(w <= 0) or not np.all(np.isfinite(w)):
         raise ValueError("weights must be positive and finite, one per point")
-    return svd_pose(np.ascontiguousarray(x), np.ascontiguousarray(y), np.ascontiguousarray(w))
+    c = np.ascontiguousarray
+    return absolute_orientation(c(x), c(y), c(w))
 
 
 @dataclass
@@ -94,7 +97,7 @@ def refine_line_of_sight(
     for it in range(1, max_iterations + 1):
         pred = x_mm @ R.T + t
         y = np.einsum("ij,ij->i", bearings, pred)[:, None] * bearings  # Eq. 51
-        R, t = weighted_svd(x_mm, y, weights)
+        R, t = weighted_absolute_orientation(x_mm, y, weights)
         eps = float(np.linalg.norm(x_mm @ R.T + t - y, axis=1).sum())  # Eq. 52
         residuals.append(eps)
         if len(residuals) > 1 and abs(residuals[-1] - residuals[-2]) < tol:

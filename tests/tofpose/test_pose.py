@@ -9,7 +9,7 @@ from tofpose.pose import (
     refine_maximum_likelihood,
     reflector_whitened_norms,
     systematic_sigmas,
-    weighted_svd,
+    weighted_absolute_orientation,
 )
 
 
@@ -24,7 +24,7 @@ def test_weighted_svd_exact_on_noiseless_data():
     x = paper_target().positions_mm
     R, t = _truth()
     y = x @ R.T + t
-    R_est, t_est = weighted_svd(x, y, np.linspace(1, 3, len(x)))
+    R_est, t_est = weighted_absolute_orientation(x, y, np.linspace(1, 3, len(x)))
     np.testing.assert_allclose(R_est, R, atol=1e-10)
     np.testing.assert_allclose(t_est, t, atol=1e-7)
 
@@ -35,7 +35,7 @@ def test_weighted_svd_agrees_with_scipy_align_vectors():
     R, t = _truth(3)
     y = x @ R.T + t + rng.normal(0, 2.0, x.shape)
     w = rng.uniform(0.5, 2.0, len(x))
-    R_est, t_est = weighted_svd(x, y, w)
+    R_est, t_est = weighted_absolute_orientation(x, y, w)
     xc = x - (w @ x) / w.sum()
     yc = y - (w @ y) / w.sum()
     rot, _ = Rotation.align_vectors(yc, xc, weights=w)
@@ -46,7 +46,7 @@ def test_weighted_svd_agrees_with_scipy_align_vectors():
 def test_reflection_fix_returns_a_proper_rotation():
     x = paper_target().positions_mm
     y = x * np.array([-1.0, 1.0, 1.0])  # a mirror image: best orthogonal fit is a reflection
-    R, _ = weighted_svd(x, y)
+    R, _ = weighted_absolute_orientation(x, y)
     assert np.linalg.det(R) == pytest.approx(1.0)
 
 
@@ -55,7 +55,7 @@ def test_reflection_fix_returns_a_proper_rotation():
 )
 def test_weighted_svd_errors(x, msg):
     with pytest.raises(ValueError, match=msg):
-        weighted_svd(x, x)
+        weighted_absolute_orientation(x, x)
 
 
 def test_line_of_sight_refinement_recovers_truth_from_bad_ranges():
@@ -65,7 +65,7 @@ def test_line_of_sight_refinement_recovers_truth_from_bad_ranges():
     e = y / np.linalg.norm(y, axis=1, keepdims=True)
     rng = np.random.default_rng(5)
     y_meas = e * (np.linalg.norm(y, axis=1) + rng.normal(0, 30, len(y)))[:, None]
-    R0, t0 = weighted_svd(x, y_meas)
+    R0, t0 = weighted_absolute_orientation(x, y_meas)
     out = refine_line_of_sight(x, e, R0, t0, tol=1e-9, max_iterations=5000)
     assert rotation_angle_deg(out.R, R) < 1e-3
     np.testing.assert_allclose(out.t, t, atol=0.05)
@@ -86,7 +86,7 @@ def test_maximum_likelihood_covariance_predicts_the_spread():
         e = e_true + rng.normal(0, 3e-4, e_true.shape)
         e /= np.linalg.norm(e, axis=1, keepdims=True)
         rho = rho_true + rng.normal(0, 5.0, 8)
-        R0, t0 = weighted_svd(x, e * rho[:, None])
+        R0, t0 = weighted_absolute_orientation(x, e * rho[:, None])
         ml = refine_maximum_likelihood(x, e, rho, R0, t0, sig_r, sig_b)
         errs.append(np.concatenate((Rotation.from_matrix(ml.R @ R.T).as_rotvec(), ml.t - t)))
         cov = ml.covariance
@@ -126,7 +126,7 @@ def _noisy_observations(seed: int, bearing_sigma_rad: float, range_sigma_mm: flo
     e /= np.linalg.norm(e, axis=1, keepdims=True)
     rho = rho_true + rng.normal(0, range_sigma_mm, len(x))
     sr, sb = np.full(len(x), 0.5), np.full(len(x), 1e-5)
-    R0, t0 = weighted_svd(x, e * rho[:, None])
+    R0, t0 = weighted_absolute_orientation(x, e * rho[:, None])
     ml = refine_maximum_likelihood(x, e, rho, R0, t0, sr, sb)
     return x, e, rho, ml.R, ml.t, sr, sb
 
@@ -183,7 +183,7 @@ def test_a_common_range_offset_is_found_when_the_image_scale_fixes_the_distance(
     e /= np.linalg.norm(e, axis=1, keepdims=True)
     rho_measured = rho + 20.0 + rng.normal(0, 1.0, len(x))
     sr, sb = np.full(len(x), 1.0), np.full(len(x), bearing_sigma_rad)
-    R0, t0 = weighted_svd(x, e * rho_measured[:, None])
+    R0, t0 = weighted_absolute_orientation(x, e * rho_measured[:, None])
     ml = refine_maximum_likelihood(x, e, rho_measured, R0, t0, sr, sb)
     exact_scale = RangeOffsetPrior(8.0, 0.0, 0.0)
     offset, sigma = common_range_offset(x, e, rho_measured, ml.R, ml.t, sr, sb, exact_scale)
@@ -222,7 +222,7 @@ def test_an_image_scale_error_is_not_read_as_a_range_offset():
     e /= np.linalg.norm(e, axis=1, keepdims=True)
     rho_measured = rho + rng.normal(0, 1.0, len(x))
     sr, sb = np.full(len(x), 1.0), np.full(len(x), 2e-5)
-    R0, t0 = weighted_svd(x, e * rho_measured[:, None])
+    R0, t0 = weighted_absolute_orientation(x, e * rho_measured[:, None])
     ml = refine_maximum_likelihood(x, e, rho_measured, R0, t0, sr, sb)
     naive, naive_sigma = common_range_offset(x, e, rho_measured, ml.R, ml.t, sr, sb,
                                              RangeOffsetPrior(8.0, 0.0, 0.0))  # fmt: skip

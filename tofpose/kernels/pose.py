@@ -29,7 +29,7 @@ from tofpose.kernels.stats import median_inplace
 
 
 @jit
-def svd_pose(x, y, w):
+def absolute_orientation(x, y, w):
     """Weighted absolute orientation: R (3, 3), t (3,) minimising
     ``sum w_i ||y_i - (R x_i + t)||^2`` (Eqs. 40-50). The rotation of Eqs. 45-49 by
     Horn's closed form (``small_matrices.rotation_from_correlation``: the same R as the
@@ -347,7 +347,7 @@ def line_of_sight(x, e, R, t, w, tol, max_iterations):
                 s += e[i, a] * (R[a, 0] * x[i, 0] + R[a, 1] * x[i, 1] + R[a, 2] * x[i, 2] + t[a])
             for a in range(3):
                 y[i, a] = s * e[i, a]  # Eq. 51
-        R, t = svd_pose(x, y, w)
+        R, t = absolute_orientation(x, y, w)
         eps = 0.0
         for i in range(m):
             d2 = 0.0
@@ -367,7 +367,7 @@ def fit_pose(x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2):
     refinement; the ML evaluation at the final pose always. Returns R, t, iterations,
     covariance, chi^2, norms (m,), weights (m,)."""
     w = 1.0 / (sr**2 + (rho * sb) ** 2)
-    R, t = svd_pose(x, y, w)
+    R, t = absolute_orientation(x, y, w)
     iterations = 0
     if refinement == REFINE_LOS:
         R, t, iterations = line_of_sight(x, e, R, t, w, los_tol, 200)

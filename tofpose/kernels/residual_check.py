@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.kernels import jit
-from tofpose.kernels.pose import svd_pose
+from tofpose.kernels.pose import absolute_orientation
 
 
 @jit
@@ -32,7 +32,7 @@ def prune_pairs(observed, catalog, pairs, weights, tol, min_matches):
             y[a] = observed[pairs[idx[a], 0]]
             x[a] = catalog[pairs[idx[a], 1]]
             w[a] = weights[pairs[idx[a], 0]]
-        R, t = svd_pose(x, y, w)
+        R, t = absolute_orientation(x, y, w)
         worst, worst_ratio, worst_res = 0, -np.inf, 0.0
         for a in range(n):
             s = 0.0

@@ -13,7 +13,7 @@ from tofpose.kernels import jit
 from tofpose.kernels.camera import bearings
 from tofpose.kernels.mixed_pixels import unmixed_range
 from tofpose.kernels.perspective import disc_centre_offsets
-from tofpose.kernels.pose import fit_with_outliers, svd_pose
+from tofpose.kernels.pose import absolute_orientation, fit_with_outliers
 
 
 @jit
@@ -93,14 +93,14 @@ def solve_pairs(
     x = np.empty((k_idx.shape[0], 3))
     for a in range(k_idx.shape[0]):
         x[a] = xyz[i_idx[a]]
-    R, t = svd_pose(x, y[k_idx], w[k_idx])
+    R, t = absolute_orientation(x, y[k_idx], w[k_idx])
     if complete_tol_mm > 0:
         k_idx, i_idx = complete_pairs(y, k_idx, i_idx, xyz, R, t, complete_tol_mm)
         if k_idx.shape[0] > x.shape[0]:  # pairs added: fit them all
             x = np.empty((k_idx.shape[0], 3))
             for a in range(k_idx.shape[0]):
                 x[a] = xyz[i_idx[a]]
-            R, t = svd_pose(x, y[k_idx], w[k_idx])
+            R, t = absolute_orientation(x, y[k_idx], w[k_idx])
     m = k_idx.shape[0]
     uv_obs = np.empty((m, 2))
     r_disc = np.empty(m)

@@ -12,7 +12,7 @@ import numpy as np
 
 from tofpose.kernels import jit
 from tofpose.kernels.assignment import linear_sum_assignment
-from tofpose.kernels.pose import facing_cosine, svd_pose
+from tofpose.kernels.pose import absolute_orientation, facing_cosine
 
 
 @jit
@@ -100,7 +100,7 @@ def triplet_search(
     use_confidence : stop once ``tried`` reaches ``trials_needed`` for the best inlier
     count (``confidence``).
 
-    A hypothesis: the rigid pose of the triplet's three pairs (``svd_pose``); each
+    A hypothesis: the rigid pose of the triplet's three pairs (``absolute_orientation``); each
     observed point is assigned one-to-one to the predicted reflectors (least total
     distance), and the pairs within their tolerance are its inliers. The best has the
     most inliers (at least ``min_matches``), then the smallest sum of w d^2. Returns
@@ -128,7 +128,7 @@ def triplet_search(
                 x3[r] = catalog[cat_tri[p, r]]
                 y3[r] = observed[obs_triplets[q, r]]
                 w3[r] = w[obs_triplets[q, r]]
-            R, t = svd_pose(x3, y3, w3)
+            R, t = absolute_orientation(x3, y3, w3)
             if constrain and not facing_cosine(R, t, centroid) >= cos_min:
                 continue
             for i in range(e):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tofpose.geometry import rotation_from_euler_deg
-from tofpose.kernels.pose import svd_pose
+from tofpose.kernels.pose import absolute_orientation
 from tofpose.matching import rigid_residual_check
 
 
@@ -16,7 +16,7 @@ def _reference(observed, catalog, pairs, weights, tol, min_matches):
     rejected = []
     while len(pairs) >= min_matches:
         y, x = observed[pairs[:, 0]], catalog[pairs[:, 1]]
-        R, t = svd_pose(x, y, weights[pairs[:, 0]])
+        R, t = absolute_orientation(x, y, weights[pairs[:, 0]])
         res = np.linalg.norm(y - (x @ R.T + t), axis=1)
         tol_p = tol[pairs[:, 0]]
         worst = int(np.argmax(res / tol_p))

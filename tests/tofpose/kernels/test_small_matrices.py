@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from tofpose.kernels import small_matrices as sm
-from tofpose.kernels.pose import svd_pose
+from tofpose.kernels.pose import absolute_orientation
 
 
 def _kabsch(x, y, w):
@@ -34,7 +34,7 @@ def test_svd_pose_is_the_svds_absolute_orientation(shape):
         R_true = Rotation.random(random_state=trial).as_matrix()
         y = x @ R_true.T + rng.normal(0.0, 1000.0, 3) + rng.normal(0.0, 0.5, (m, 3))
         w = rng.uniform(0.1, 2.0, m)
-        R, t = svd_pose(x, y, w)
+        R, t = absolute_orientation(x, y, w)
         R_ref, t_ref = _kabsch(x, y, w)
         np.testing.assert_allclose(R, R_ref, atol=1e-11)
         np.testing.assert_allclose(t, t_ref, atol=1e-8)

@@ -10,7 +10,7 @@ from scipy.optimize import linear_sum_assignment
 
 from tofpose.catalog import paper_target
 from tofpose.geometry import rotation_from_euler_deg
-from tofpose.kernels.pose import svd_pose
+from tofpose.kernels.pose import absolute_orientation
 from tofpose.kernels.triplets import catalog_triplets
 from tofpose.matching import match_by_triplets
 
@@ -27,7 +27,7 @@ def _reference(observed, catalog, alpha, tol, centroid, cos_min, w, max_observed
             s = [np.linalg.norm(catalog[u] - catalog[v]) for u, v in ((i, j), (j, k), (i, k))]
             if not np.all(np.abs(np.subtract(s, o)) <= alpha):
                 continue
-            R, t = svd_pose(catalog[[i, j, k]], observed[[a, b, c]], w[[a, b, c]])
+            R, t = absolute_orientation(catalog[[i, j, k]], observed[[a, b, c]], w[[a, b, c]])
             to_camera = -(R @ centroid + t)
             if R[:, 2] @ to_camera / np.linalg.norm(to_camera) < cos_min:
                 continue
