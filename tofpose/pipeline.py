@@ -411,7 +411,8 @@ class PosePipeline:
         timer.lap("levels")
 
         def fail(reason: str, **kw) -> PoseResult:
-            return PoseResult(False, reason, time_s, timings_ms=timer.total(), **kw)
+            return PoseResult(ok=False, reason=reason, time_s=time_s, timings_ms=timer.total(),
+                              **kw)  # fmt: skip
 
         if stats.saturated_fraction > 0.5:
             self.reset()
@@ -668,19 +669,19 @@ class PosePipeline:
         used = set(k_idx.tolist())
         unmatched += [(uv[k, 0], uv[k, 1], rho[k]) for k in range(len(rho)) if k not in used]
         return PoseResult(
-            True,
-            "",
-            time_s,
-            R,
-            t,
-            facing_euler_deg(R),
-            quaternion_wxyz_from_rotation(R),
-            matched,
-            unmatched,
-            rms,
-            iterations,
-            self._reported_covariance(ml, len(matched), t),
-            timer.total(),
+            ok=True,
+            reason="",
+            time_s=time_s,
+            R=R,
+            t_mm=t,
+            euler_deg=facing_euler_deg(R),
+            quaternion_wxyz=quaternion_wxyz_from_rotation(R),
+            matched=matched,
+            unmatched=unmatched,
+            residual_mm=rms,
+            iterations=iterations,
+            covariance=self._reported_covariance(ml, len(matched), t),
+            timings_ms=timer.total(),
             **extra,
             mode=mode,
         )
