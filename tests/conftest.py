@@ -1,6 +1,9 @@
-"""Shared fixtures: the paper camera and target, and simulated frames with known truth."""
+"""Shared fixtures: the paper camera and target, and simulated frames with known truth;
+and the test tiers (``pytest -m unit`` for the fast loop while developing)."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -34,3 +37,38 @@ def camera():
 @pytest.fixture
 def catalog():
     return paper_target()
+
+
+# -- test tiers --------------------------------------------------------------------------
+#: tests that drive a browser (Debian's chromium through Playwright)
+_BROWSER = ("tests/e2e/",)
+#: tests that run the server, devices, subprocesses, clusters or whole benchmarks
+_INTEGRATION = (
+    "tests/backend/", "tests/bench/", "tests/frontend/", "tests/tofpose/batch/",
+    "tests/tofpose/study/", "tests/tofpose/interop/", "tests/tofpose/test_cli.py",
+    "tests/tofpose/test_threads.py", "tests/test_packaging.py",
+)  # fmt: skip
+#: long runs under load (memory and rate over seconds of traffic)
+_SOAK = ("tests/backend/test_soak.py",)
+_ROOT = Path(__file__).resolve().parents[1]
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """Every test gets exactly one tier marker from where it lives: ``browser``,
+    ``soak``, ``integration`` or ``unit`` (the rest: the pipeline, the simulator and the
+    kernels against their oracles), and ``postgres`` besides when it runs against the
+    PostgreSQL server (the ``database_url`` fixture's second parameter). ``make test``
+    runs them all; ``pytest -m unit`` is the developer's loop."""
+    for item in items:
+        path = Path(str(item.fspath)).resolve().relative_to(_ROOT).as_posix()
+        if path.startswith(_BROWSER):
+            item.add_marker(pytest.mark.browser)
+        elif path.startswith(_SOAK):
+            item.add_marker(pytest.mark.soak)
+        elif path.startswith(_INTEGRATION):
+            item.add_marker(pytest.mark.integration)
+        else:
+            item.add_marker(pytest.mark.unit)
+        callspec = getattr(item, "callspec", None)
+        if callspec is not None and callspec.params.get("database_url") == "postgresql":
+            item.add_marker(pytest.mark.postgres)
