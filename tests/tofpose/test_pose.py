@@ -11,6 +11,7 @@ from tofpose.pose import (
     systematic_sigmas,
     weighted_absolute_orientation,
 )
+from tofpose.reference import pose as reference
 
 
 def _truth(seed=0):
@@ -325,19 +326,14 @@ def test_leave_one_out_covariance_is_the_spread_of_the_refits_about_the_pose():
         d = _error(f.R, f.t, ml.R, ml.t)
         want += np.outer(d, d)
     want *= 7 / 8
+    # the statement (one step each, by tofpose.reference) to rounding
+    stated = reference.leave_one_out_spread(x, e, rho, ml.R, ml.t, sr, sb)
+    np.testing.assert_allclose(got, stated, rtol=1e-5, atol=1e-6 * np.abs(stated).max())
     ratio = np.diag(got) / np.diag(want)
     assert np.all((ratio > 0.9) & (ratio < 1.2)), ratio
     np.testing.assert_allclose(got, want, rtol=0.4, atol=0.05 * np.abs(want).max())
     assert np.any(want != 0)
     assert leave_one_out_covariance(x[:3], e[:3], rho[:3], ml.R, ml.t, sr[:3], sb[:3]) is None
-
-
-def _envelope_reference(A, B):
-    """The envelope by LAPACK: A = L L^T, eigenvalues of L^-1 B L^-T raised to 1."""
-    L = np.linalg.cholesky(A)
-    Li = np.linalg.inv(L)
-    w, V = np.linalg.eigh(Li @ B @ Li.T)
-    return L @ (V * np.maximum(w, 1.0)) @ V.T @ L.T
 
 
 def test_covariance_envelope_contains_both_and_is_the_model_when_it_is_wider():
@@ -348,7 +344,7 @@ def test_covariance_envelope_contains_both_and_is_the_model_when_it_is_wider():
         A0, B0 = rng.normal(size=(6, 6)), rng.normal(size=(6, 6))
         A, B = A0 @ A0.T + 0.1 * np.eye(6), B0 @ B0.T
         env = covariance_envelope(A, B)
-        np.testing.assert_allclose(env, _envelope_reference(A, B), rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(env, reference.covariance_envelope(A, B), rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(env, env.T)
         assert np.linalg.eigvalsh(env - A).min() > -1e-9 * np.abs(env).max()
         assert np.linalg.eigvalsh(env - B).min() > -1e-9 * np.abs(env).max()

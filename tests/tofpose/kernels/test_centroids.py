@@ -17,55 +17,17 @@ from tofpose.extraction import (
     frame_levels,
     measure_blobs,
 )
-
-
-def _surround_level(blob, gray, owner, j, frame_bg):
-    """The median gray of the ring between the blob's box grown by 1 and by 3 px (other
-    blobs' pixels left out), or the frame's level without one."""
-    h, w = gray.shape
-    x, y, bw, bh = blob.bbox
-    ring = np.zeros((h, w), bool)
-    ring[max(y - 3, 0) : y + bh + 3, max(x - 3, 0) : x + bw + 3] = True
-    ring[max(y - 1, 0) : y + bh + 1, max(x - 1, 0) : x + bw + 1] = False
-    if owner is not None:
-        ring &= (owner == -1) | (owner == j)
-    return float(np.median(gray[ring])) if ring.any() else frame_bg
+from tofpose.reference.centroids import blob_centroid, blob_range, surround_level
 
 
 def _reference(blob, gray, dist, cam, frame_bg, owner=None, j=0):
-    """Centroid over the blob dilated by one pixel, above the blob's surround level:
-    coverage weights when the blob has a plateau of whole-covered pixels, else
-    intensity weights; then the median of the member ranges projected on the centroid's
-    line of sight."""
-    bg = _surround_level(blob, gray, owner, j, frame_bg)
-    h, w = gray.shape
-    x, y, bw, bh = blob.bbox
-    y0, y1, x0, x1 = max(y - 2, 0), min(y + bh + 2, h), max(x - 2, 0), min(x + bw + 2, w)
-    rows, cols = np.divmod(blob.pixels, w)
-    m = np.zeros((y1 - y0, x1 - x0), np.uint8)
-    m[rows - y0, cols - x0] = 1
-    ring = cv2.dilate(m, np.ones((3, 3), np.uint8)).astype(bool)
-    if owner is not None:
-        o = owner[y0:y1, x0:x1]
-        ring &= (o == -1) | (o == j)
-    patch = np.maximum(gray[y0:y1, x0:x1] - bg, 0.0).astype(np.float32)
-    local = cv2.dilate(np.where(m > 0, patch, 0).astype(np.float32), np.ones((3, 3), np.uint8))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cov = np.clip(patch / local, 0, 1)
-    cov[~np.isfinite(cov)] = 0
-    # coverage only with a plateau: >= 9 members at >= 0.9 of their neighbourhood's max
-    member_values = np.where(m > 0, patch, 0)
-    plateau = (m > 0) & (member_values > 0) & (member_values >= np.float32(0.9) * local)
-    if plateau.sum() < 9:
-        cov = patch  # intensity weights (Eq. 19)
-    rr, cc = np.nonzero(ring)
-    wts = cov[ring].astype(float)
-    uv = np.array([(wts * (cc + x0)).sum() / wts.sum(), (wts * (rr + y0)).sum() / wts.sum()])
-    e_c = cam.bearings(uv[None])[0]
-    d = dist[rows, cols]
-    ok = np.isfinite(d)
-    along = d[ok] * (cam.pixel_bearings()[rows[ok], cols[ok]] @ e_c)
-    return uv, float(np.median(along))
+    """``tofpose.reference.centroids``: the centroid over the blob dilated by one pixel
+    above its surround level (coverage weights with a plateau, else intensity), then the
+    median of the member ranges projected on the centroid's line of sight."""
+    bg = surround_level(gray, blob.bbox, owner, j, frame_bg)
+    uv = blob_centroid(gray, blob.pixels, blob.bbox, bg, owner, j)
+    rho = blob_range(dist, blob.pixels, cam.pixel_bearings(), cam.bearings(uv[None])[0])
+    return uv, rho
 
 
 @pytest.mark.parametrize("distance_mm", [700.0, 2000.0, 6000.0])
@@ -201,7 +163,7 @@ def test_a_blurred_small_disc_is_centred_to_a_few_hundredths_at_any_sub_pixel_po
         np.testing.assert_allclose(m.centroid_uv, uv, atol=1e-9)
         errs.append(np.hypot(*(m.centroid_uv - c)))
         # the same blob with coverage weights forced (the method before the plateau rule)
-        bg = _surround_level(blob, g, None, 0, 40.0)
+        bg = surround_level(g, blob.bbox, None, 0, 40.0)
         patch = np.maximum(g[60:101, 80:121] - bg, 0.0)
         mm = member[60:101, 80:121].astype(np.uint8)
         local = cv2.dilate(np.where(mm > 0, patch, 0).astype(np.float32), np.ones((3, 3)))

@@ -1,4 +1,4 @@
-"""The compiled two-centre split against a NumPy statement of the same 2-means."""
+"""The compiled two-centre split against ``tofpose.reference.two_centres``."""
 
 from __future__ import annotations
 
@@ -10,25 +10,7 @@ from tofpose.kernels.two_centres import (
     SPLIT_ROUND,
     two_centre_split,
 )
-
-
-def _reference(cols, rows, weight, iterations):
-    """Weighted mean and covariance, the major axis by LAPACK, centres from half the
-    extreme projections, Lloyd's iteration (argmin: ties to the first centre)."""
-    pts = np.column_stack((cols, rows))
-    mean = (weight[:, None] * pts).sum(axis=0) / weight.sum()
-    centred = pts - mean
-    cov = (weight[:, None, None] * centred[:, :, None] * centred[:, None, :]).sum(axis=0)
-    evals, evecs = np.linalg.eigh(cov / weight.sum())
-    if evals[0] <= 0 or evals[1] < 1.5**2 * evals[0]:
-        return None
-    along = centred @ evecs[:, 1]
-    centres = mean + np.array([along.min(), along.max()])[:, None] * evecs[:, 1][None] / 2
-    for _ in range(iterations):
-        near = np.argmin(((pts[:, None, :] - centres[None]) ** 2).sum(axis=2), axis=1)
-        centres = np.array([(weight[near == k, None] * pts[near == k]).sum(axis=0)
-                            / weight[near == k].sum() for k in range(2)])  # fmt: skip
-    return near, centres
+from tofpose.reference.two_centres import two_centre_split as reference_split
 
 
 @pytest.mark.parametrize("seed", range(12))
@@ -46,7 +28,7 @@ def test_two_centre_split_equals_the_reference_on_random_pairs(seed):
     rows, cols = np.nonzero(keep)
     weight = img[keep] - 20.0
     near, centres, status = two_centre_split(cols.astype(float), rows.astype(float), weight, 8)
-    ref = _reference(cols.astype(float), rows.astype(float), weight, 8)
+    ref = reference_split(cols.astype(float), rows.astype(float), weight, 8)
     assert status == SPLIT_OK and ref is not None
     ref_near, ref_centres = ref
     if np.abs(centres[0] - ref_centres[0]).max() > 1e-6:  # the halves in the other order
@@ -64,3 +46,4 @@ def test_a_round_spot_is_not_split():
     rows, cols = np.nonzero(img > 50)
     w = img[img > 50]
     assert two_centre_split(cols.astype(float), rows.astype(float), w, 8)[2] == SPLIT_ROUND
+    assert reference_split(cols.astype(float), rows.astype(float), w, 8) is None
