@@ -51,11 +51,18 @@ def test_few_pixel_blob_takes_the_range_noise_the_frame_pools_from_larger_blobs(
     assert sp[1] > sp[0]  # 3 pixels locate a centre worse than 64
 
 
-@pytest.mark.parametrize("range_m", [5.7, 12.0])
-def test_predicted_sigmas_match_the_actual_errors(range_m):
-    """Normalised errors (actual / predicted) of matched reflectors have an RMS near 1.
-    The old model (centroid sigma floored at 0.03 px, no sampling term) gave 2.0 for the
-    centroids at 12 m on these frames (now 0.5)."""
+@pytest.mark.parametrize(
+    ("range_m", "centroid_rms", "range_rms"),
+    [(5.7, (0.55, 1.1), (0.8, 1.3)), (12.0, (0.4, 1.1), (0.8, 1.6))],
+)
+def test_predicted_sigmas_match_the_actual_errors(range_m, centroid_rms, range_rms):
+    """Normalised errors (actual / predicted) of matched reflectors, RMS over ~100 of
+    them (its own Monte-Carlo spread ~7 %). Centroid sigmas cover the errors and are
+    wider than the simulator's (0.71 at 5.7 m, 0.50 at 12 m in this run: the 0.03 px
+    floor stands for what the simulator lacks, docs/algorithm.md); the old model
+    (floor only, no sampling term) gave 2.0 at 12 m. Range sigmas are right at 5.7 m
+    (1.11) and ~45 % narrow at 12 m (1.45), beyond the paper target's 8 m design range:
+    a known limit the bounds record, not a margin."""
     cam, cat = CameraModel(), paper_target()
     scene, pipe = TargetScene(cat), PosePipeline(cam, cat)
     xyz = dict(zip(cat.ids.tolist(), cat.positions_mm, strict=True))
@@ -73,15 +80,16 @@ def test_predicted_sigmas_match_the_actual_errors(range_m):
             z_px.extend((m.centroid_uv - cam.project(true[None])[0]) / m.centroid_sigma_px)
             z_rng.append((m.distance_mm - np.linalg.norm(true)) / m.range_sigma_mm)
     assert len(z_rng) >= 40
-    assert 0.35 < np.sqrt(np.mean(np.square(z_px))) < 1.5
-    assert 0.35 < np.sqrt(np.mean(np.square(z_rng))) < 1.5
+    assert centroid_rms[0] < np.sqrt(np.mean(np.square(z_px))) < centroid_rms[1]
+    assert range_rms[0] < np.sqrt(np.mean(np.square(z_rng))) < range_rms[1]
 
 
 def test_split_halves_of_merged_markers_get_sigmas_that_cover_their_errors():
     """At 8 m markers 7 and 8 image as one component, split into two halves (§3.3, ours)
     whose centroids keep some of the neighbour's light. Their normalised centroid errors
-    must have an RMS near 1: with shot noise, floor and sampling only it was ~3 on these
-    frames, and the fit leaned on two biased bearings."""
+    must have an RMS near 1 (the spread of an RMS of 64 values is ~9 %): with shot noise,
+    floor and sampling only it was ~3 on these frames, and the fit leaned on two biased
+    bearings."""
     from bench.realistic import long_range_pose
 
     cam, cat = CameraModel(), paper_target()
@@ -101,4 +109,4 @@ def test_split_halves_of_merged_markers_get_sigmas_that_cover_their_errors():
                 true = T.apply(xyz[m.catalog_id][None])[0]
                 z_px.extend((m.centroid_uv - cam.project(true[None])[0]) / m.centroid_sigma_px)
     assert len(z_px) >= 20
-    assert 0.3 < np.sqrt(np.mean(np.square(z_px))) < 1.5
+    assert 0.8 < np.sqrt(np.mean(np.square(z_px))) < 1.4  # 1.13 in this run, 64 values
