@@ -95,6 +95,38 @@ def plot(out, path: Path) -> None:
     axes[0].legend(fontsize=8)
     fig.suptitle("physics robustness study (domain randomisation per frame)")
     save_figure(fig, path)
+    plot_examples(examples_path(path))
+
+
+def examples_path(path) -> Path:
+    """Where ``plot`` puts the example frames beside the study's plot."""
+    return Path(path).with_name(Path(path).stem + "-examples.png")
+
+
+def plot_examples(path: Path, range_m: float = 6.0, seed: int = 0) -> None:
+    """One frame per family at ``range_m`` (the first draw of a stream seeded like the
+    study's, so the picture shows what the table measures), the gray image around the
+    target, each panel scaled to its own 1st-99.9th percentile."""
+    plt = pyplot()
+    cam, cat = CameraModel(), paper_target()
+    fig, axes = plt.subplots(1, len(FAMILIES), figsize=(2.3 * len(FAMILIES), 2.8))
+    for ax, family in zip(axes, FAMILIES, strict=True):
+        rng = np.random.default_rng([seed, FAMILIES.index(family), int(range_m * 10)])
+        scene, sensor = draw_physics(family, rng, cat)
+        T = draw_pose(range_m, rng, cam, MAX_ATTITUDE_DEG, OFFSET_FRACTION)
+        scene = draw_background(family, scene, rng, cam, T)
+        f = render_frame(cam, scene, T, sensor, rng)
+        u, v = cam.project(T.apply(cat.positions_mm.mean(axis=0)[None]))[0]
+        half = 28
+        v0, u0 = max(int(v) - half, 0), max(int(u) - half, 0)
+        crop = np.asarray(f.gray, float)[v0 : v0 + 2 * half, u0 : u0 + 2 * half]
+        lo, hi = np.percentile(crop, [1, 99.9])
+        ax.imshow(crop, cmap="gray", vmin=lo, vmax=max(hi, lo + 1))
+        ax.set_title(family, fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.suptitle(f"one frame of each family at {range_m:g} m (gray image around the target)")
+    save_figure(fig, path)
 
 
 def markdown(out, img: str, n: int) -> str:
@@ -143,6 +175,7 @@ def markdown(out, img: str, n: int) -> str:
         f"poses beyond 3 sigma: {beyond:.0f} %; largest common-mode centroid error: "
         f"{scale:.3f} px.", "",
         f"![physics robustness]({img})", "",
+        f"![one frame per family]({examples_path(img).as_posix()})", "",
     ]  # fmt: skip
     return "\n".join(lines)
 

@@ -16,5 +16,7 @@ def test_a_short_run_judges_every_cell_and_reports_it(tmp_path):
     assert out[("ideal", 3.0)][0]["success_pct"] == 100.0
     text = physics.markdown(out, "physics.png", 1)
     assert text.count("\n|") == 2 + len(out)  # header, rule and one row per cell
+    assert "physics-examples.png" in text  # the picture of each family's frames
     physics.plot(out, tmp_path / "physics.png")
     assert (tmp_path / "physics.png").stat().st_size > 10_000
+    assert (tmp_path / "physics-examples.png").stat().st_size > 10_000
