@@ -56,8 +56,16 @@ def test_the_simulated_table_follows_a_sine_slew(fast_devices):
     t0 = t_s[0] - elapsed[0]
     profile = SineProfile(5.0, 4.0, 1, start_deg=start)
     assert np.abs(yaw - profile.angle_deg_at(t_s - t0)).max() < 2e-3
-    rate = np.diff(yaw) / np.diff(t_s)
-    mid = 0.5 * (t_s[1:] + t_s[:-1]) - t0
+    # rates over reads >= 0.1 s apart: two reads a few ms apart (a loaded machine) turn
+    # the angles' 2e-3 deg agreement into a rate error of whole deg/s
+    keep = [0]
+    for i in range(1, len(t_s)):
+        if t_s[i] - t_s[keep[-1]] >= 0.1:
+            keep.append(i)
+    ts, ys = t_s[keep], yaw[keep]
+    assert len(keep) > 60
+    rate = np.diff(ys) / np.diff(ts)
+    mid = 0.5 * (ts[1:] + ts[:-1]) - t0
     assert np.abs(rate - profile.rate_deg_s_at(mid)).max() < 0.15
     assert np.abs(rate).max() == pytest.approx(5.0 * 2 * np.pi / 4.0, rel=0.05)
     (call,) = _profile_calls(devs.motion)
