@@ -30,6 +30,16 @@ def _reference(blob, gray, dist, cam, frame_bg, owner=None, j=0):
     return uv, rho
 
 
+def _blob_from_mask(member):
+    """The Blob of the set pixels of a (H, W) bool mask: flat indices and their box."""
+    from tofpose.extraction import Blob
+
+    pixels = np.flatnonzero(member)
+    rows, cols = np.divmod(pixels, member.shape[1])
+    bbox = (int(cols.min()), int(rows.min()), int(np.ptp(cols)) + 1, int(np.ptp(rows)) + 1)
+    return Blob(pixels=pixels, area_px=len(pixels), bbox=bbox)
+
+
 @pytest.mark.parametrize("distance_mm", [700.0, 2000.0, 6000.0])
 def test_measured_blobs_equal_the_reference(distance_mm):
     cam, cat, cfg = CameraModel(), paper_target(), ExtractionConfig()
@@ -77,7 +87,6 @@ def test_touching_blobs_do_not_pull_each_other():
 def test_blobs_at_the_image_border_and_with_dark_members_equal_the_reference(corner):
     """Random ragged blobs cut by the image border (their dilated box is clipped), some
     members below the background (weight 0): the compiled centroid equals the reference."""
-    from tofpose.extraction import Blob
 
     cam = CameraModel()
     h, w = cam.shape
@@ -88,10 +97,7 @@ def test_blobs_at_the_image_border_and_with_dark_members_equal_the_reference(cor
         member = np.zeros(cam.shape, bool)
         r0, c0 = (0, 0) if corner == "top-left" else (h - 9, w - 11)
         member[r0 : r0 + 9, c0 : c0 + 11] = rng.random((9, 11)) < 0.6
-        pixels = np.flatnonzero(member)
-        rows, cols = np.divmod(pixels, w)
-        bbox = (int(cols.min()), int(rows.min()), int(np.ptp(cols)) + 1, int(np.ptp(rows)) + 1)
-        blob = Blob(pixels=pixels, area_px=len(pixels), bbox=bbox)
+        blob = _blob_from_mask(member)
         (m,) = measure_blobs([blob], g, d, cam, 50.0)
         uv, _ = _reference(blob, g, d, cam, 50.0)
         np.testing.assert_allclose(m.centroid_uv, uv, atol=1e-9)
@@ -141,7 +147,6 @@ def test_a_blurred_small_disc_is_centred_to_a_few_hundredths_at_any_sub_pixel_po
     by several hundredths of a pixel; the measured centroid (intensity weights, as the
     spot has no plateau) is within 0.035 px everywhere and less than 0.6 times as far
     off on average."""
-    from tofpose.extraction import Blob
 
     cam = CameraModel()
     h, w = cam.shape
@@ -154,10 +159,7 @@ def test_a_blurred_small_disc_is_centred_to_a_few_hundredths_at_any_sub_pixel_po
         thr = 40.0 + 0.2 * 600.0
         member = np.zeros(cam.shape, bool)
         member[70:91, 90:111] = g[70:91, 90:111] >= thr
-        pixels = np.flatnonzero(member)
-        rows, cols = np.divmod(pixels, w)
-        bbox = (int(cols.min()), int(rows.min()), int(np.ptp(cols)) + 1, int(np.ptp(rows)) + 1)
-        blob = Blob(pixels=pixels, area_px=len(pixels), bbox=bbox)
+        blob = _blob_from_mask(member)
         (m,) = measure_blobs([blob], g, d, cam, 40.0)
         uv, _ = _reference(blob, g, d, cam, 40.0)
         np.testing.assert_allclose(m.centroid_uv, uv, atol=1e-9)
@@ -184,7 +186,6 @@ def test_a_sharp_large_disc_with_a_brightness_gradient_keeps_coverage_weights():
     """Known truth: an 80 mm marker at 2 m (radius 6.5 px), sharp, 40 % brighter on one
     side (entrance-angle fall-off): it has a plateau, so coverage weights centre it
     within 0.02 px, where intensity weights would be pulled towards the bright side."""
-    from tofpose.extraction import Blob
 
     cam = CameraModel()
     h, w = cam.shape
@@ -194,11 +195,7 @@ def test_a_sharp_large_disc_with_a_brightness_gradient_keeps_coverage_weights():
     ramp = 1.0 + 0.4 * (np.arange(w)[None, :] - (c[0] - 6.5)) / 13.0
     g = (30.0 + 800.0 * disc * ramp).astype(np.float32)
     member = disc > 0.25
-    pixels = np.flatnonzero(member)
-    rows, cols = np.divmod(pixels, w)
-    bbox = (int(cols.min()), int(rows.min()), int(np.ptp(cols)) + 1, int(np.ptp(rows)) + 1)
-    (m,) = measure_blobs([Blob(pixels=pixels, area_px=len(pixels), bbox=bbox)], g, d, cam,
-                         30.0)  # fmt: skip
+    (m,) = measure_blobs([_blob_from_mask(member)], g, d, cam, 30.0)
     assert np.hypot(*(m.centroid_uv - c)) < 0.02
     ring = cv2.dilate(member.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     wt = np.where(ring, np.maximum(g - 30.0, 0), 0)
