@@ -57,9 +57,9 @@ from backend.services.studies import StudyService
 from backend.settings import Settings
 from backend.state import AppState
 from tofpose.catalog import Catalog
+from tofpose.config import TrackingConfig
 from tofpose.pipeline import PipelineConfig
 from tofpose.relative_state import RelativeStateConfig
-from tofpose.tracking import TrackingConfig
 
 log = logging.getLogger("tofpose.server")
 

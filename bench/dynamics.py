@@ -37,6 +37,7 @@ from tqdm import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench._common import med_p95, single_core, table  # noqa: E402
+from tofpose.config import TrackingConfig  # noqa: E402
 from tofpose.dynamics import fit_latency  # noqa: E402
 from tofpose.motion_profile import SineProfile  # noqa: E402
 from tofpose.pipeline import PipelineConfig, PosePipeline  # noqa: E402
@@ -46,7 +47,6 @@ from tofpose.relative_state import (  # noqa: E402
     state_error,
 )
 from tofpose.sim.render import render_frame  # noqa: E402
-from tofpose.tracking import TrackingConfig  # noqa: E402
 
 DELAYS_S = (0.0, 0.040, 0.100)
 #: backend.app._pipeline_config for the simulated camera (TOFPOSE_TRACKING on by default)

@@ -23,12 +23,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._common import med_p95, single_core, table  # noqa: E402
 from bench.baseline import baseline_pose, blob_detector  # noqa: E402
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
+from tofpose.config import TrackingConfig  # noqa: E402
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
 from tofpose.range_calibration import RangeCorrection  # noqa: E402
 from tofpose.sim.bench import R_FACING  # noqa: E402
 from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
 from tofpose.sim.scene import TargetScene  # noqa: E402
-from tofpose.tracking import TrackingConfig  # noqa: E402
 from tofpose.warmup import warm_up  # noqa: E402
 
 STAGES = ["levels", "blobs", "ellipses", "measurement", "matching", "refine", "total"]

@@ -119,7 +119,7 @@ def store_chunk_ms(rows: int = 25, n: int = 40) -> tuple[float, float]:
     """(ms to write one chunk of ``rows`` frames, its size in kB)."""
     import pyarrow as pa
 
-    from tofpose.study.frames import COLUMNS
+    from tofpose.study.columns import COLUMNS
     from tofpose.study.store import write_chunk
 
     spec = study_spec(rows)

@@ -11,10 +11,10 @@ from pathlib import Path
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
+from tofpose.config import TrackingConfig
 from tofpose.covariance_calibration import CovarianceScale
 from tofpose.pipeline import PipelineConfig, PosePipeline
 from tofpose.range_calibration import RangeCorrection
-from tofpose.tracking import TrackingConfig
 
 
 def load_camera(text: str) -> tuple[CameraModel, RangeCorrection | None, CovarianceScale | None]:

@@ -25,12 +25,10 @@ from tofpose.interop.topics import DISTANCE as DISTANCE_TOPIC
 from tofpose.interop.topics import GRAY as GRAY_TOPIC
 from tofpose.pipeline import PosePipeline
 from tofpose.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
-from tofpose.range_calibration import (
-    fit_range_correction,
-    true_pixel_distances,
-)
+from tofpose.range_calibration import fit_range_correction
 from tofpose.recording import RecordingError, RecordingWriter, open_recording
 from tofpose.relative_state import RelativeStateConfig, RelativeStateFilter
+from tofpose.sim.pixel_truth import true_pixel_distances
 from tofpose.threads import single_threaded_blas
 from tofpose.tof import unambiguous_range_mm
 

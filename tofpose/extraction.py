@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from tofpose.camera import CameraModel
+from tofpose.config import ExtractionConfig
 from tofpose.kernels.centroids import blob_centroids, blob_ranges, owner_map
 from tofpose.kernels.gates import ACCEPTED, OVERSIZE, label_table_and_gates
 from tofpose.kernels.levels import (
@@ -32,78 +33,6 @@ from tofpose.kernels.records import GateSettings
 SATURATED_COUNTS = 4095
 #: fewest pixels for which a blob's eccentricity means anything (the shape gate and q_shape)
 SHAPE_MIN_PIXELS = 6
-
-
-@dataclass(frozen=True)
-class ExtractionConfig:
-    """Parameters of §3. Relative thresholds are fractions of the frame's contrast
-    ``I_max - background``; ``*_abs`` values, when set, replace them (paper preset).
-
-    Attributes
-    ----------
-    raw_threshold_rel : I_t = bg + rel * (I_max - bg) (§3.1.1; paper 0.38 * I_max).
-    noise_floor_sigma : I_t is at least bg + this many background noise sigmas.
-    min_contrast_counts : frames whose I_max - bg is below this are "all dark".
-    n_max : N_max, cap on the active pixel set, dimmest discarded first (§3.1.1).
-    peak_rel : I_peak = bg + peak_rel * (I_max - bg) (criterion 1, Eq. 16).
-    nlog_peak_rel : J_peak as a fraction of the blob's own peak contrast; the nLoG is
-        scale-normalised (sigma^2 * -LoG), so a matched disc reaches 2/e ~ 0.74 (Eq. 18).
-    nlog_floor_rel : J_t as a fraction of the blob's peak contrast (Eq. 17).
-    max_tilt_deg : largest reflector tilt to accept; sets the eccentricity gate
-        (e <= sin(tilt)) and the smallest accepted size (cos(tilt) shrink).
-    size_tolerance : multiplicative slack on the predicted diameter window.
-    size_margin_px : additive slack in pixels (blur, thresholding, quantisation).
-    min_area_px : smallest blob in pixels.
-    q_max : maximum penalty score (§3.4, paper 0.9).
-    max_candidates : L, keep the L best candidates.
-    ellipse_min_points : PC, fewest edge points for an ellipse fit (§3.3).
-    ellipse_max_residual_px : RMS distance of edge points from the fitted ellipse above
-        which a blob is not confirmed as a projected disc.
-    h_min_px, h_max_px, raw_threshold_abs, peak_abs, nlog_peak_abs, nlog_floor_abs,
-    nlog_sigma_px : paper preset only (fixed numbers, no range adaptivity).
-    """
-
-    raw_threshold_rel: float = 0.15
-    noise_floor_sigma: float = 6.0
-    min_contrast_counts: float = 25.0
-    n_max: int = 120 * 100
-    peak_rel: float = 0.25
-    nlog_peak_rel: float = 0.15
-    nlog_floor_rel: float = -0.05
-    max_tilt_deg: float = 72.0
-    size_tolerance: float = 1.35
-    size_margin_px: float = 1.5
-    min_area_px: int = 1
-    q_max: float = 0.9
-    max_candidates: int = 32
-    ellipse_min_points: int = 6
-    ellipse_max_residual_px: float = 0.8
-    h_min_px: int | None = None
-    h_max_px: int | None = None
-    raw_threshold_abs: float | None = None
-    peak_abs: float | None = None
-    nlog_peak_abs: float | None = None
-    nlog_floor_abs: float | None = None
-    nlog_sigma_px: float | None = None
-
-    @staticmethod
-    def paper() -> ExtractionConfig:
-        """The paper's literal parameters (§3.1-3.4), tuned for its 697 mm scene.
-
-        The paper's J thresholds are negative (J_t = -185.58, J_peak = -125); with our
-        sign convention (-LoG is positive on bright blobs) they accept almost every pixel.
-        """
-        return ExtractionConfig(
-            raw_threshold_abs=114.66,
-            peak_abs=155.0,
-            nlog_peak_abs=-125.0,
-            nlog_floor_abs=-185.58,
-            nlog_sigma_px=2.0,
-            h_min_px=95,
-            h_max_px=225,
-            n_max=120 * 100,
-            q_max=0.9,
-        )
 
 
 @dataclass(frozen=True, eq=False)

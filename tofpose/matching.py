@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from tofpose.config import MatchingConfig
 from tofpose.kernels.annealing import (
     anneal_assignment,
     assigned_pairs,
@@ -37,46 +38,6 @@ from tofpose.kernels.annealing import (
 )
 from tofpose.kernels.residual_check import prune_pairs
 from tofpose.kernels.triplets import catalog_triplets, trials_needed, triplet_search
-from tofpose.robust import median_1d
-
-
-@dataclass(frozen=True)
-class MatchingConfig:
-    """Deterministic annealing parameters.
-
-    alpha_mm, alpha_per_m : distance tolerance alpha = alpha_mm + alpha_per_m * range_m.
-    psi_start, psi_end : inverse temperature range in units of 1 / alpha^2.
-    growth : c of Eq. 35 (psi_{m+1} = c psi_m).
-    clip_factor : rho is clipped at clip_factor * alpha; with 1 (default) a pair supports
-        an assignment by up to alpha^2 and an incompatible pair costs nothing, so the
-        null label (energy 0) wins exactly when a blob has no support.
-    size_weight : weight (in alpha^2 units) of the apparent-size unary term; 0 disables.
-    residual_factor : rigid residual tolerance per pair is clip(4 sigma, alpha,
-        residual_factor * alpha), sigma from the weights when given.
-    min_matches : fewest matched reflectors for a pose.
-    """
-
-    alpha_mm: float = 12.0
-    alpha_per_m: float = 3.0
-    psi_start: float = 0.02
-    psi_end: float = 50.0
-    growth: float = 1.25
-    clip_factor: float = 1.0
-    size_weight: float = 0.5
-    residual_factor: float = 2.5
-    min_matches: int = 3
-
-    def alpha_for(self, observed_mm: np.ndarray) -> float:
-        """alpha (mm) at the median range of observed points (gamma, 3)."""
-        y = np.asarray(observed_mm, float)
-        rng_m = median_1d(np.sqrt((y * y).sum(axis=1))) / 1000 if len(y) else 0.0
-        return self.alpha_mm + self.alpha_per_m * rng_m
-
-    def pair_tolerance_mm(self, alpha_mm: float, weights: np.ndarray) -> np.ndarray:
-        """Per-pair rigid residual tolerance clip(4 sigma, alpha, residual_factor alpha),
-        sigma = 1 / sqrt(weight); shape (gamma,)."""
-        sigma = 1.0 / np.sqrt(np.asarray(weights, float))
-        return np.minimum(np.maximum(4.0 * sigma, alpha_mm), self.residual_factor * alpha_mm)
 
 
 @dataclass

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tofpose.camera import CameraModel
+from tofpose.config import PersistenceConfig
 from tofpose.extraction import Blob, pixel_lists
 from tofpose.kernels.measure import persist_and_measure
 from tofpose.kernels.persistence import (
@@ -28,19 +29,6 @@ from tofpose.kernels.persistence import (
     pixel_mask,
     ranges_consistent,
 )
-
-
-@dataclass(frozen=True)
-class PersistenceConfig:
-    """K frames of history, C_min frames of presence, and the motion gate (pixels)."""
-
-    k_frames: int = 5
-    c_min: int = 2
-    motion_tolerance_px: float = 0.35
-
-    def __post_init__(self) -> None:
-        if self.k_frames < 1 or self.c_min < 1:
-            raise ValueError("k_frames and c_min must be >= 1")
 
 
 @dataclass

@@ -22,6 +22,7 @@ import numpy as np
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
+from tofpose.config import PipelineConfig
 from tofpose.covariance_calibration import CovarianceScale
 from tofpose.ellipse import (
     blob_contour,
@@ -33,7 +34,6 @@ from tofpose.ellipse import (
 from tofpose.extraction import (
     Blob,
     CandidateBlobs,
-    ExtractionConfig,
     RejectedBlob,
     check_frame,
     find_candidate_blobs,
@@ -49,7 +49,6 @@ from tofpose.kernels.range_correction import corrected_ranges
 from tofpose.kernels.records import camera_record
 from tofpose.kernels.two_centres import SPLIT_OK, two_centre_split
 from tofpose.matching import (
-    MatchingConfig,
     MatchResult,
     match_by_triplets,
     match_reflectors,
@@ -57,11 +56,10 @@ from tofpose.matching import (
 )
 from tofpose.mixing import mixing_rows, shifted_mixing
 from tofpose.pair_fit import fit_pair
-from tofpose.persistence import Persistence, PersistenceConfig, PersistenceInfo, blob_arrays
+from tofpose.persistence import Persistence, PersistenceInfo, blob_arrays
 from tofpose.range_calibration import RangeCorrection, correction_kernel_arguments
 from tofpose.solve import Measurements, PoseSolver, Rejected, Solution, ThresholdedFrame
 from tofpose.tracking import (
-    TrackingConfig,
     TrackState,
     find_in_windows,
     predict_windows,
@@ -73,159 +71,6 @@ from tofpose.uncertainty import (
     kernel_constants,
     measurement_sigmas,
 )
-
-Refinement = Literal["ml", "los", "none"]
-
-
-@dataclass(frozen=True)
-class PipelineConfig:
-    """All pipeline parameters.
-
-    refinement : "ml" (ours: Gauss-Newton on bearings and ranges, the default), "los"
-        (the paper's line-of-sight iteration, Eqs. 51-52), or "none" (SVD only).
-    correct_perspective_bias : shift centroids by the predicted offset between the image
-        ellipse's centre and the projected disc centre, then re-solve.
-    mixed_pixel_radius_px : a matched marker whose disc appears smaller than this
-        radius takes its range from the mixing model of its pixels and its surround
-        (``kernels.mixed_pixels``) instead of its pixels' median, which the surround
-        pulls towards itself when few pixels are covered whole; 0: never (the paper's
-        preset). 4 px: from there on most of a disc's pixels are covered whole.
-    ellipse_confirmation : run §3.3 (confirm candidate shapes, split merged components).
-    verify_pose : refuse a pose that makes the target face away from the camera (beyond
-        ``max_view_angle_deg``) or that predicts a well-resolved reflector where the
-        frame has no bright pixel (catches congruent-triangle mismatches with 3 markers).
-    reject_outliers, outlier_sigma : after the fit, drop the matched reflector whose
-        whitened residual (lateral and range, in predicted sigmas) is largest while it
-        exceeds ``outlier_sigma`` and more than ``matching.min_matches`` remain, refitting
-        each time (ours: a spurious blob or a merged pair next to a marker's position
-        passes the matching tolerance but bends the pose by degrees).
-    adapt_range_sigma : before the outlier test, estimate from the frame's own residuals
-        the range and centroid errors its noise model lacks (``pose.systematic_sigmas``:
-        the systematic errors of a real, uncalibrated ToF camera; the centroid errors of
-        small markers on a plate that is not black) and add them to every reflector's
-        sigmas, in the fit, the outlier test and the covariance; without it, correctly
-        detected markers are dropped as outliers one by one, or a biased bearing is
-        trusted.
-    range_bias_sigma_mm, calibrated_range_bias_sigma_mm : sigma of a range offset common
-        to all reflectors that no frame can reveal (the fit absorbs it into the pose): the
-        constant, amplitude and temperature-drift errors of a ToF camera without range
-        calibration, or what is left of them with one (drift since the calibration; the
-        uncalibrated sigma applies where a reflector lies outside the correction's
-        ``calibrated_span_mm``, where the model is extrapolated). 15 mm: the middle of
-        the 10-20 mm that published uncalibrated CW-ToF cameras err by (zero offset,
-        cyclic and amplitude errors; ``docs/simulator.md``), which the robustness
-        study's ``systematic`` family draws. Added
-        to the reported covariance (``pose.common_range_bias_covariance``), so that the
-        1-sigma of an uncalibrated camera does not claim the shot-noise limit.
-    max_systematic_range_sigma_mm : cap of that estimate (published uncalibrated ToF
-        range errors are 10-20 mm; a larger spread is not a systematic error but a bad
-        match, and must stay visible to the outlier test).
-    estimate_range_offset : estimate the range offset common to every reflector as a
-        seventh parameter of the ML fit, with the prior N(0, range_bias_sigma^2) (the
-        calibrated sigma where a range correction covers the ranges), and take its
-        posterior mean out of the ranges before the final fit; its posterior sigma
-        replaces the prior's in the covariance. The image scale (the bearings) determines
-        it when the target is large enough in the image; otherwise the prior keeps it
-        near 0. The scale itself is an eighth parameter with its own prior
-        (``focal_length_sigma_rel``, ``common_centroid_bias_px``), so an image-scale
-        error is not read as a range offset. From 4 reflectors. On by default; a camera
-        whose driver states a range-bias sigma of 0 turns it off.
-    focal_length_sigma_rel : relative sigma of the focal length's calibration (0.2 %: a
-        checkerboard calibration's typical focal-length uncertainty).
-    common_centroid_bias_px : sigma of a centroid error common to a frame's markers
-        (0.05 px: the largest common-mode error of the matched centroids measured over
-        the physics robustness study's families, 0.046 px rms beyond their random
-        noise at 8 m with every knob drawn; ``bench/physics.py``'s scale column); over
-        the pattern's rms radius in the
-        image it is a scale error, estimated with the range offset. Markers of one size
-        share it apart from the others (their blobs mix with the surround, the PSF and the
-        fall-off alike), so each size's own scale error also enters the reported
-        covariance (``solve.PoseSolver.size_scale_covariance``): where the sizes sit on
-        different sides of the pattern, the fit reads it as a tilt.
-    max_systematic_centroid_sigma_px : cap of the frame's excess centroid sigma, estimated
-        beside the range one from the lateral residuals alone (``pose.systematic_sigmas``:
-        small or blurred markers against a plate that is not black have centroids off by
-        tenths of a pixel that no pixel statistic sees). A matched marker's centroid off
-        by more than half a pixel is a blend or a wrong blob, not noise.
-    consistency_p : refuse a pose whose chi^2 (with the sigmas the fit used, the excess
-        components included) exceeds this quantile of chi^2(3m - 6): a misfit that no
-        noise can produce (a one-in-a-million tail), left when a component reached its
-        cap or from the minimum number of markers, where no outlier can be singled out
-        and no component is estimated. Only with ``refinement="ml"`` (the chi^2 of an
-        SVD or LOS pose is not minimised). None: no test. Below the limit, a chi^2 per
-        degree of freedom above 1 scales the reported covariance up by it
-        (``variance_factor``).
-    leave_one_out_covariance : report a covariance no narrower than the spread of the
-        poses fitted without one reflector each (from 4 reflectors; ``pose.
-        leave_one_out_covariance``): a reflector biased beyond its sigma that alone fixes
-        some direction of the pose leaves no residual for chi^2 to see, but moves the
-        pose when left out (at 8 m, a marker partly hidden by an arm in front of it, or
-        pulled by a blurred neighbour's halo, was 3-6 deg off with 4-5 markers and
-        claimed 0.3-1 deg).
-    outlier_chi2_per_dof : above this chi^2 per degree of freedom the fit is inconsistent
-        and each reflector is also tested against a fit without it (leave-one-out), which
-        finds a biased point that a fit of few points has absorbed.
-    dark_check_max_matches : the dark-marker check applies only to poses from at most
-        this many matched reflectors. Three points always admit a congruent alternative;
-        from four on, a wrong assignment either fails the rigid residual check or (a
-        mirror image of the nearly planar pattern) makes the target face away, so a dark
-        predicted marker is an occluded one.
-    centroid_sigma_floor_px, range_sigma_floor_mm : floors of the per-reflector
-        measurement sigmas (``tofpose.uncertainty``) used as weights and in the
-        covariance.
-    """
-
-    extraction: ExtractionConfig = field(default_factory=ExtractionConfig)
-    persistence: PersistenceConfig = field(default_factory=PersistenceConfig)
-    matching: MatchingConfig = field(default_factory=MatchingConfig)
-    tracking: TrackingConfig = field(default_factory=TrackingConfig)
-    refinement: Refinement = "ml"
-    correct_perspective_bias: bool = True
-    mixed_pixel_radius_px: float = 4.0
-    ellipse_confirmation: bool = True
-    verify_pose: bool = True
-    reject_outliers: bool = True
-    adapt_range_sigma: bool = True
-    max_systematic_range_sigma_mm: float = 25.0
-    max_systematic_centroid_sigma_px: float = 0.5
-    consistency_p: float | None = 0.999999
-    leave_one_out_covariance: bool = True
-    estimate_range_offset: bool = True
-    range_bias_sigma_mm: float = 15.0
-    calibrated_range_bias_sigma_mm: float = 2.0
-    focal_length_sigma_rel: float = 0.002
-    common_centroid_bias_px: float = 0.05
-    outlier_sigma: float = 6.0
-    outlier_chi2_per_dof: float = 4.0
-    max_view_angle_deg: float = 80.0
-    dark_check_max_matches: int = 3
-    matcher: Literal["annealing", "ransac"] = "annealing"
-    triplet_fallback: bool = True
-    ransac_time_budget_ms: float | None = 5.0
-    ransac_confidence: float | None = None
-    ransac_seed: int = 0
-    centroid_sigma_floor_px: float = 0.03
-    range_sigma_floor_mm: float = 1.0
-    los_tolerance: float = 0.002
-
-    @staticmethod
-    def paper() -> PipelineConfig:
-        """The paper's literal settings: fixed thresholds, LOS refinement, no bias fix."""
-        return PipelineConfig(
-            extraction=ExtractionConfig.paper(),
-            refinement="los",
-            correct_perspective_bias=False,
-            mixed_pixel_radius_px=0.0,
-            reject_outliers=False,
-            adapt_range_sigma=False,
-            range_bias_sigma_mm=0.0,
-            calibrated_range_bias_sigma_mm=0.0,
-            consistency_p=None,
-            leave_one_out_covariance=False,
-            estimate_range_offset=False,
-            focal_length_sigma_rel=0.0,
-            common_centroid_bias_px=0.0,
-        )
 
 
 @dataclass
@@ -261,6 +106,9 @@ class PoseResult:
         refused each (``tofpose.extraction.REJECT_REASONS``), for display.
     active_threshold_counts : I_t as applied (after the N_max cap): the active pixel set
         A (§3.1.1) is exactly ``gray >= active_threshold_counts``.
+    R_svd, t_svd_mm : (3, 3), (3,) the weighted SVD pose (Eqs. 40-50) of the matched
+        reflectors with the fit's weights, before refinement (``solve.Solution.T_svd``):
+        the paper's §5.1 answer on the same measurements, to see what refinement did.
     """
 
     ok: bool
@@ -282,6 +130,8 @@ class PoseResult:
     rejected: list[RejectedBlob] = field(default_factory=list)
     active_threshold_counts: float = float("nan")
     mode: Literal["acquisition", "tracking"] = "acquisition"
+    R_svd: np.ndarray | None = None
+    t_svd_mm: np.ndarray | None = None
 
     @property
     def n_matched(self) -> int:
@@ -354,11 +204,12 @@ class PosePipeline:
         self._catalog_d = catalog.diameters_mm
         self._catalog_ids = catalog.ids
         self._rng = np.random.default_rng(self.config.ransac_seed)
-        self._solver = PoseSolver(camera, catalog, self.config, range_correction)
+        self._solver = PoseSolver(camera, catalog, self.config.solve, range_correction)
         self._track: TrackState | None = None
         self._compiled_tracker = CompiledTracker(
-            camera, catalog, self.config, self._solver, self._persistence, range_correction
-        )
+            camera, catalog, self.config.solve, self.config.tracking, self._solver,
+            self._persistence, range_correction,
+        )  # fmt: skip
 
     def reset(self) -> None:
         """Forget multi-frame history (call when the stream is discontinuous)."""
@@ -684,6 +535,8 @@ class PosePipeline:
             timings_ms=timer.total(),
             **extra,
             mode=mode,
+            R_svd=None if solved.T_svd is None else solved.T_svd.R,
+            t_svd_mm=None if solved.T_svd is None else solved.T_svd.t_mm,
         )
 
     def _reported_covariance(self, ml, n_matched: int, t_mm: np.ndarray) -> np.ndarray:

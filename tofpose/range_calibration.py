@@ -12,8 +12,8 @@ the gray level as its proxy, o a zero-mean per-pixel offset map). It is fitted f
 calibration recording against known geometry: every frame's reference pose (truth) and
 the target's known shape give each pixel's true radial distance by ray casting; pixels on
 a surface edge are left out (their range mixes two surfaces), and so is the plate (see
-``true_pixel_distances``). Varying the integration time during the calibration run
-spreads the reflectors' amplitudes over a decade at each distance, which is what
+``tofpose.sim.pixel_truth.true_pixel_distances``). Varying the integration time during
+the calibration run spreads the reflectors' amplitudes over a decade at each distance, which is what
 separates the amplitude-related term from the others. The pipeline subtracts
 ``e`` from each reflector's range before back-projection (Eq. 8).
 """
@@ -24,12 +24,8 @@ import base64
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
-from tofpose.camera import CameraModel
-from tofpose.catalog import Catalog
-from tofpose.geometry import RigidTransform
 from tofpose.kernels.records import RangeCorrectionRecord
 
 AMPLITUDE_REFERENCE_COUNTS = 100.0
@@ -156,33 +152,6 @@ class RangeCalibrationFit:
     rms_before_mm: float
     rms_after_mm: float
     pixels_with_offset: int
-
-
-def true_pixel_distances(
-    camera: CameraModel,
-    catalog: Catalog,
-    T_camera_target: RigidTransform,
-    reflectors_only: bool = True,
-) -> np.ndarray:
-    """Each pixel's true radial distance to the known target, NaN where the ray misses it
-    or lands within a pixel of a surface edge. (H, W).
-
-    ``reflectors_only`` (default) keeps the reflector discs only: they are what the
-    pipeline ranges, and the dim plate beside them is where lens scatter mixes in the
-    reflectors' phase, an error that would otherwise be fitted as an amplitude effect.
-    """
-    from tofpose.sim.scene import FIRST_DISC, NO_HIT, TargetScene  # the target's shape
-
-    scene = TargetScene(catalog=catalog, wall_distance_mm=None)
-    d, sid, _ = scene.in_camera(T_camera_target).raycast(camera.pixel_bearings().reshape(-1, 3))
-    h, w = camera.height, camera.width
-    sid = sid.reshape(h, w)
-    edge = cv2.dilate(sid, np.ones((3, 3), np.uint8)) != cv2.erode(sid, np.ones((3, 3), np.uint8))
-    out = d.reshape(h, w).astype(float)
-    out[(sid == NO_HIT) | edge] = np.nan
-    if reflectors_only:
-        out[sid < FIRST_DISC] = np.nan
-    return out
 
 
 def _design(d: np.ndarray, amp: np.ndarray, u: float, n_harm: int, a_ref: float) -> np.ndarray:

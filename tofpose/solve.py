@@ -22,6 +22,7 @@ import scipy.stats
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
+from tofpose.config import SolveConfig
 from tofpose.extraction import Blob
 from tofpose.geometry import RigidTransform
 from tofpose.kernels.mixed_pixels import MIX_FIELDS
@@ -32,6 +33,7 @@ from tofpose.kernels.pose import (
     REFINE_ML,
     REFINE_NONE,
     RangeOffsetPrior,
+    absolute_orientation,
     class_scale_covariance,
     facing_cosine,
     leave_one_out_spread,
@@ -44,8 +46,7 @@ from tofpose.pose import STEP_SIGMA2, MLResult
 
 _REFINEMENT = {"none": REFINE_NONE, "ml": REFINE_ML, "los": REFINE_LOS}
 
-if TYPE_CHECKING:  # the pipeline imports this module
-    from tofpose.pipeline import PipelineConfig
+if TYPE_CHECKING:
     from tofpose.range_calibration import RangeCorrection
 
 
@@ -55,7 +56,7 @@ def chi2_limit(dof: int, p: float) -> float:
     return float(scipy.stats.chi2.ppf(p, dof))
 
 
-def offset_prior(config: PipelineConfig, sigma_mm: float, fx_px: float) -> RangeOffsetPrior:
+def offset_prior(config: SolveConfig, sigma_mm: float, fx_px: float) -> RangeOffsetPrior:
     """The common range offset's prior for ``kernels.pose.common_range_offset``: sigma
     ``sigma_mm`` (the uncalibrated or calibrated range-bias sigma), and the image scale's
     uncertainty from ``focal_length_sigma_rel`` and ``common_centroid_bias_px`` (over the
@@ -135,12 +136,16 @@ class Solution:
     """A solved pose (§5): ``T_camera_target`` maps target-frame points into the camera
     frame; ``observations`` are the reflectors it was solved from (outliers removed);
     iterations : refinement iterations; ml : the maximum-likelihood evaluation at the
-    pose (covariance, chi^2, norms)."""
+    pose (covariance, chi^2, norms). ``T_svd`` : the weighted absolute orientation
+    (Eqs. 40-50) of the same observations with the fit's weights, before any refinement:
+    what §5.1 alone gives on them (``T_camera_target`` minus it is what refinement
+    changed)."""
 
     T_camera_target: RigidTransform
     observations: MatchedObservations
     iterations: int
     ml: MLResult
+    T_svd: RigidTransform | None = None
 
 
 @dataclass(frozen=True)
@@ -167,8 +172,8 @@ class ThresholdedFrame:
 _NO_FRAME = ThresholdedFrame(np.zeros((1, 1), np.float32), 0.0)
 
 
-def fit_settings(config: PipelineConfig) -> FitSettings:
-    """The §5 fit's settings (``kernels.pose.fit_with_outliers``) from the pipeline's
+def fit_settings(config: SolveConfig) -> FitSettings:
+    """The §5 fit's settings (``kernels.pose.fit_with_outliers``) from the stage's
     configuration: the one place they are built, for the acquisition and the tracking
     paths alike."""
     return FitSettings(
@@ -176,19 +181,19 @@ def fit_settings(config: PipelineConfig) -> FitSettings:
         step_sigma2=STEP_SIGMA2, adapt=config.adapt_range_sigma,
         max_systematic_range_mm=config.max_systematic_range_sigma_mm,
         max_systematic_centroid_px=config.max_systematic_centroid_sigma_px,
-        reject=config.reject_outliers, min_matches=config.matching.min_matches,
+        reject=config.reject_outliers, min_matches=config.min_matches,
         outlier_sigma=config.outlier_sigma, chi2_per_dof=config.outlier_chi2_per_dof,
     )  # fmt: skip
 
 
 class PoseSolver:
-    """§5 for one camera and catalog under a ``PipelineConfig``."""
+    """§5 for one camera and catalog under the stage's ``SolveConfig``."""
 
     def __init__(
         self,
         camera: CameraModel,
         catalog: Catalog,
-        config: PipelineConfig,
+        config: SolveConfig,
         range_correction: RangeCorrection | None,
     ) -> None:
         """``range_correction``: the camera's ranges are corrected with it; where the
@@ -244,7 +249,7 @@ class PoseSolver:
         When completion added a blob and the outlier step then dropped matched ones, the
         fit without completion is taken if it keeps more reflectors."""
         cfg = self.config
-        complete_mm = alpha_mm * cfg.matching.residual_factor
+        complete_mm = alpha_mm * cfg.residual_factor
         fit = self._fit_pairs(pairs, meas, complete_mm)
         kept = fit[7]
         n = len(pairs)
@@ -337,7 +342,10 @@ class PoseSolver:
         ml = MLResult(R, t, cov, float(chi2), int(iterations), norms, bias_covariance=extra,
                       range_offset_mm=float(offset_mm),
                       leave_one_out_covariance=spread)  # fmt: skip
-        return Solution(T, obs, int(iterations), ml)
+        c = np.ascontiguousarray
+        weights = 1.0 / (sr**2 + (obs.range_mm * sb) ** 2)  # as kernels.pose.fit_pose's
+        T_svd = RigidTransform(*absolute_orientation(c(obs.x_mm), c(obs.y_mm), c(weights)))
+        return Solution(T, obs, int(iterations), ml, T_svd=T_svd)
 
     def size_scale_covariance(self, obs: MatchedObservations, R, t, sr, sb) -> np.ndarray | None:
         """(6, 6) covariance of image-scale errors (``kernels.pose.class_scale_covariance``):

@@ -37,25 +37,6 @@ from tofpose.kernels.tracking import (
 
 
 @dataclass(frozen=True)
-class TrackingConfig:
-    """enabled : use tracking after a confident pose. reacquire_every : a full acquisition
-    pass at least every this many frames. margin_px : search margin around a reflector's
-    predicted disc (inter-frame motion allowed). min_diameter_px : reflectors predicted
-    smaller than this are not tracked (their windows hold too little to verify)."""
-
-    enabled: bool = False
-    reacquire_every: int = 15
-    margin_px: float = 4.0
-    min_diameter_px: float = 1.0
-
-    def __post_init__(self) -> None:
-        if self.reacquire_every < 1:
-            raise ValueError(f"reacquire_every must be >= 1, got {self.reacquire_every}")
-        if self.margin_px < 1:
-            raise ValueError(f"margin_px must be >= 1, got {self.margin_px}")
-
-
-@dataclass(frozen=True)
 class TrackState:
     """What the last confident pose leaves for the next frame."""
 

@@ -9,12 +9,12 @@ poses (``tests/tofpose/test_tracking_frame.py`` and the A/B harness ``bench/ab.p
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
+from tofpose.config import SolveConfig, TrackingConfig
 from tofpose.kernels.pose import NO_OFFSET, RangeOffsetPrior
 from tofpose.kernels.records import camera_record, catalog_record
 from tofpose.kernels.tracking import camera_windows
@@ -32,8 +32,6 @@ from tofpose.solve import (
 from tofpose.tracking import TrackState
 from tofpose.uncertainty import SigmaFloors, kernel_constants
 
-if TYPE_CHECKING:  # the pipeline imports this module
-    from tofpose.pipeline import PipelineConfig
 
 @dataclass(frozen=True)
 class Tracked:
@@ -47,20 +45,21 @@ class Tracked:
 
 class CompiledTracker:
     """Runs tracking frames through ``track_frame`` for one pipeline's camera, catalog,
-    configuration, solver and persistence history."""
+    §5 and tracking settings, solver and persistence history."""
 
-    def __init__(self, camera: CameraModel, catalog: Catalog, config: PipelineConfig,
-                 solver: PoseSolver, persistence: Persistence,
+    def __init__(self, camera: CameraModel, catalog: Catalog, config: SolveConfig,
+                 tracking: TrackingConfig, solver: PoseSolver, persistence: Persistence,
                  correction: RangeCorrection | None = None) -> None:  # fmt: skip
         """``correction``: the camera's calibrated range correction, or None."""
         self.camera = camera
         self.config = config
+        self.tracking = tracking
         self._solver = solver
         self._persistence = persistence
         self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
         self._diameters = np.ascontiguousarray(catalog.diameters_mm, dtype=float)
         self._dist = np.ascontiguousarray(camera.dist_array)
-        pc = config.persistence
+        pc = persistence.config
         # the arguments of ``track_frame`` that do not change from frame to frame, as the
         # kernels' records (``kernels.records``), built where the acquisition path builds them
         self._camera_args = (float(pc.motion_tolerance_px), int(pc.c_min), camera_record(camera),
@@ -88,12 +87,12 @@ class CompiledTracker:
         as an outlier, verification failed or the fit inconsistent), and leaves the
         persistence history as it was."""
         cfg, cam = self.config, self.camera
-        tc = cfg.tracking
+        tc = self.tracking
         cat_idx, bounds, centres, diameters = camera_windows(
             self._xyz, self._diameters, track.R, track.t_mm, cam.fx, cam.fy, cam.cx, cam.cy,
             self._dist, float(tc.margin_px), float(tc.min_diameter_px), cam.width, cam.height,
         )  # fmt: skip
-        if len(cat_idx) < cfg.matching.min_matches:
+        if len(cat_idx) < cfg.min_matches:
             return None
         hist_g, hist_d, hist_m, hist_c, n_hist = self._persistence.history(g, d)
         (code, n_used, motion, cent, flat, starts, uv, rho, sp, sr, y, w, uv_obs,

@@ -17,6 +17,7 @@ import numpy as np
 
 from tofpose.camera import CameraModel
 from tofpose.catalog import paper_target
+from tofpose.config import TrackingConfig
 from tofpose.geometry import RigidTransform, rotation_from_euler_deg
 from tofpose.kernels.levels import checked_frame, clean_distance
 from tofpose.kernels.pair_fit import fit_pair_lm
@@ -26,7 +27,6 @@ from tofpose.range_calibration import RangeCorrection
 from tofpose.sim.bench import R_FACING
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import TargetScene
-from tofpose.tracking import TrackingConfig
 
 _done = False
 

@@ -4,8 +4,8 @@ import pytest
 from tests.conftest import facing_pose, render
 from tofpose.camera import CameraModel
 from tofpose.catalog import paper_target
+from tofpose.config import ExtractionConfig
 from tofpose.extraction import (
-    ExtractionConfig,
     FrameError,
     active_pixel_mask,
     check_frame,
@@ -208,7 +208,8 @@ def test_a_marker_cut_by_the_border_is_rejected_as_such_and_the_active_set_is_a_
 
 
 def test_size_gate_window_from_the_catalog_at_the_range():
-    from tofpose.extraction import ExtractionConfig, size_gate
+    from tofpose.config import ExtractionConfig
+    from tofpose.extraction import size_gate
 
     cfg, diam = ExtractionConfig(), paper_target().diameters_mm
     # a 100 mm marker at 2 m is ~16 px across (f = 325 px): ~200 px of area

@@ -2,8 +2,9 @@ import numpy as np
 import pytest
 
 from tofpose.catalog import paper_target
+from tofpose.config import MatchingConfig
 from tofpose.geometry import rotation_from_euler_deg
-from tofpose.matching import MatchingConfig, match_reflectors, one_to_one, pair_compatibility
+from tofpose.matching import match_reflectors, one_to_one, pair_compatibility
 from tofpose.sim.bench import R_FACING
 
 

@@ -3,8 +3,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from tofpose.config import PersistenceConfig
 from tofpose.extraction import Blob
-from tofpose.persistence import Persistence, PersistenceConfig
+from tofpose.persistence import Persistence
 
 H, W = 40, 60
 

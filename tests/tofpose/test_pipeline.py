@@ -80,6 +80,32 @@ def test_every_refinement_mode_gives_the_pose(refinement):
         assert r.iterations >= 1
 
 
+def test_the_svd_pose_before_refinement_is_reported_beside_the_refined_one():
+    """``R_svd``/``t_svd_mm`` are Eqs. 40-50 on the matched reflectors: with no
+    refinement (and no range offset estimated, which would move the ranges) they are the
+    reported pose itself; with the ML refinement a different, nearby pose, in acquisition
+    and tracking alike."""
+    T = facing_pose(3000.0, 4, -3, 12)
+    cam, cat = CameraModel(), paper_target()
+    plain = PipelineConfig(refinement="none", estimate_range_offset=False)
+    f = render(T, seed=5)
+    r = PosePipeline(cam, cat, plain).process(f.gray, f.distance_mm)
+    assert r.ok
+    np.testing.assert_allclose(r.R_svd, r.R, atol=1e-12)
+    np.testing.assert_allclose(r.t_svd_mm, r.t_mm, atol=1e-9)
+    from tofpose.config import TrackingConfig
+
+    pipe = PosePipeline(cam, cat, PipelineConfig(tracking=TrackingConfig(enabled=True)))
+    for seed, mode in ((5, "acquisition"), (6, "tracking")):
+        f = render(T, seed=seed)
+        r = pipe.process(f.gray, f.distance_mm)
+        assert r.ok and r.mode == mode
+        moved_deg = rotation_angle_deg(r.R_svd, r.R)
+        assert 1e-6 < moved_deg < 0.5, moved_deg
+        assert rotation_angle_deg(r.R_svd, T.R) < 0.7
+        assert 1e-6 < np.linalg.norm(r.t_svd_mm - r.t_mm) < 5.0
+
+
 def test_refinement_modes_compared_on_the_same_frames():
     """Ten frames at 2 m: weighted SVD alone is dominated by range noise (measured median
     0.40 mm / 0.17 deg); both refinements cut its attitude error by more than half and its

@@ -12,7 +12,6 @@ from tofpose.catalog import paper_target
 from tofpose.range_calibration import (
     RangeCorrection,
     fit_range_correction,
-    true_pixel_distances,
 )
 from tofpose.sim.calibration_run import EXPOSURE_FRACTIONS, calibration_frames
 from tofpose.sim.render import SensorModel, render_frame
@@ -91,15 +90,6 @@ def test_a_correction_survives_its_json_form():
     # a file written before spans were recorded covers every range
     legacy = {k: v for k, v in c.to_dict().items() if k != "calibrated_span_mm"}
     assert RangeCorrection.from_dict(legacy).covers(100_000.0)
-
-
-def test_true_pixel_distances_match_the_renderers_noiseless_truth():
-    T = facing_pose(2000.0, yaw_deg=5.0)
-    truth = true_pixel_distances(CAM, paper_target(), T, reflectors_only=False)
-    f = render_frame(CAM, TargetScene(), T, SensorModel(noise=False), None)
-    known = np.isfinite(truth)
-    assert known.sum() > 10_000
-    np.testing.assert_allclose(truth[known], f.true_distance_mm[known], atol=0.01)
 
 
 def test_fitting_nothing_is_refused_with_a_reason():

@@ -12,8 +12,8 @@ from scipy.spatial.transform import Rotation
 
 from tests.conftest import facing_pose, render
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
+from tofpose.config import PersistenceConfig
 from tofpose.geometry import RigidTransform
-from tofpose.persistence import PersistenceConfig
 from tofpose.relative_state import RelativeStateConfig, RelativeStateFilter, state_error
 
 SIGMA_RAD, SIGMA_MM = math.radians(0.1), 1.0

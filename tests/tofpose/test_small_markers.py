@@ -12,7 +12,8 @@ import pytest
 from bench._foreign_metrics import marker_errors, true_images
 from bench.physics import draw_pose
 from tofpose import CameraModel, PosePipeline, paper_target
-from tofpose.extraction import ExtractionConfig, check_frame, find_candidate_blobs, frame_levels
+from tofpose.config import ExtractionConfig
+from tofpose.extraction import check_frame, find_candidate_blobs, frame_levels
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import TargetScene
 

@@ -9,9 +9,10 @@ import pytest
 from tests.conftest import facing_pose, render
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
 from tofpose.catalog import Catalog
+from tofpose.config import TrackingConfig
 from tofpose.geometry import rotation_angle_deg
 from tofpose.sim.scene import Clutter, TargetScene
-from tofpose.tracking import TrackingConfig, Window, find_in_window, predict_windows
+from tofpose.tracking import Window, find_in_window, predict_windows
 
 TRACKING = PipelineConfig(tracking=TrackingConfig(enabled=True))
 

@@ -12,12 +12,12 @@ import pytest
 from tests.conftest import facing_pose, render
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
 from tofpose.catalog import Catalog
+from tofpose.config import PersistenceConfig, TrackingConfig
 from tofpose.kernels.tracking import camera_windows
-from tofpose.persistence import PersistenceConfig
 from tofpose.range_calibration import RangeCorrection
 from tofpose.sim.render import SensorModel
 from tofpose.sim.scene import Clutter, TargetScene
-from tofpose.tracking import TrackingConfig, Window, predict_windows
+from tofpose.tracking import Window, predict_windows
 
 TRACKING = PipelineConfig(tracking=TrackingConfig(enabled=True, reacquire_every=6))
 

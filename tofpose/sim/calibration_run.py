@@ -11,7 +11,7 @@ import numpy as np
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.geometry import RigidTransform
-from tofpose.range_calibration import true_pixel_distances
+from tofpose.sim.pixel_truth import true_pixel_distances
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import TargetScene
 from tofpose.sim.systematic import SystematicErrors

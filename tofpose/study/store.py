@@ -24,6 +24,7 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from tofpose.study.columns import COLUMNS
 from tofpose.study.spec import StudySpec
 
 MANIFEST = "study.json"
@@ -85,8 +86,6 @@ def read_frames(store_dir: str | Path, spec: StudySpec) -> pa.Table:
         except (OSError, pa.ArrowInvalid) as exc:
             raise StudyStoreError(f"{p}: unreadable chunk ({exc})") from exc
     if not tables:
-        from tofpose.study.frames import COLUMNS
-
         return COLUMNS.empty_table()
     table = pa.concat_tables(tables)
     return table.sort_by([("cell", "ascending"), ("frame", "ascending")])

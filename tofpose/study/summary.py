@@ -19,7 +19,7 @@ import numpy as np
 import pyarrow as pa
 
 from tofpose.pose_judgement import AXES
-from tofpose.study.frames import ERROR_COLUMNS, SIGMA_COLUMNS
+from tofpose.study.columns import ERROR_COLUMNS, SIGMA_COLUMNS
 from tofpose.study.spec import StudySpec
 
 PERCENTILES = (50, 95, 99)

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tofpose.config import MatchingConfig
 from tofpose.kernels.annealing import anneal_assignment, pair_potentials
-from tofpose.matching import MatchingConfig, pair_compatibility
+from tofpose.matching import pair_compatibility
 
 
 def _reference(P, u, psi, psi_end, growth):

@@ -10,13 +10,8 @@ import pytest
 from tests.conftest import facing_pose, render
 from tofpose.camera import CameraModel
 from tofpose.catalog import paper_target
-from tofpose.extraction import (
-    ExtractionConfig,
-    check_frame,
-    find_candidate_blobs,
-    frame_levels,
-    measure_blobs,
-)
+from tofpose.config import ExtractionConfig
+from tofpose.extraction import check_frame, find_candidate_blobs, frame_levels, measure_blobs
 from tofpose.reference.centroids import blob_centroid, blob_range, surround_level
 
 

@@ -10,9 +10,9 @@ import pytest
 from tests.conftest import facing_pose, render
 from tofpose.camera import CameraModel
 from tofpose.catalog import paper_target
+from tofpose.config import ExtractionConfig
 from tofpose.extraction import (
     Blob,
-    ExtractionConfig,
     check_frame,
     find_candidate_blobs,
     frame_levels,

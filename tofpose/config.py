@@ -1,0 +1,366 @@
+"""The pipeline's configuration: one frozen record per stage, composed by
+``PipelineConfig``.
+
+``ExtractionConfig`` (§3.1-§3.3), ``PersistenceConfig`` (§3.4), ``MatchingConfig`` (§4),
+``SolveConfig`` (§5) and ``TrackingConfig`` (tracking mode) are what each stage receives;
+``PipelineConfig`` holds the first four stages' records and the §5 settings as its own
+fields (the names users set: ``PipelineConfig(refinement="los")``), and hands each stage
+its record (``PipelineConfig.solve``). This module imports no stage, so every stage can
+import its own record without an import circle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Literal
+
+import numpy as np
+
+from tofpose.robust import median_1d
+
+
+@dataclass(frozen=True)
+class ExtractionConfig:
+    """Parameters of §3. Relative thresholds are fractions of the frame's contrast
+    ``I_max - background``; ``*_abs`` values, when set, replace them (paper preset).
+
+    Attributes
+    ----------
+    raw_threshold_rel : I_t = bg + rel * (I_max - bg) (§3.1.1; paper 0.38 * I_max).
+    noise_floor_sigma : I_t is at least bg + this many background noise sigmas.
+    min_contrast_counts : frames whose I_max - bg is below this are "all dark".
+    n_max : N_max, cap on the active pixel set, dimmest discarded first (§3.1.1).
+    peak_rel : I_peak = bg + peak_rel * (I_max - bg) (criterion 1, Eq. 16).
+    nlog_peak_rel : J_peak as a fraction of the blob's own peak contrast; the nLoG is
+        scale-normalised (sigma^2 * -LoG), so a matched disc reaches 2/e ~ 0.74 (Eq. 18).
+    nlog_floor_rel : J_t as a fraction of the blob's peak contrast (Eq. 17).
+    max_tilt_deg : largest reflector tilt to accept; sets the eccentricity gate
+        (e <= sin(tilt)) and the smallest accepted size (cos(tilt) shrink).
+    size_tolerance : multiplicative slack on the predicted diameter window.
+    size_margin_px : additive slack in pixels (blur, thresholding, quantisation).
+    min_area_px : smallest blob in pixels.
+    q_max : maximum penalty score (§3.4, paper 0.9).
+    max_candidates : L, keep the L best candidates.
+    ellipse_min_points : PC, fewest edge points for an ellipse fit (§3.3).
+    ellipse_max_residual_px : RMS distance of edge points from the fitted ellipse above
+        which a blob is not confirmed as a projected disc.
+    h_min_px, h_max_px, raw_threshold_abs, peak_abs, nlog_peak_abs, nlog_floor_abs,
+    nlog_sigma_px : paper preset only (fixed numbers, no range adaptivity).
+    """
+
+    raw_threshold_rel: float = 0.15
+    noise_floor_sigma: float = 6.0
+    min_contrast_counts: float = 25.0
+    n_max: int = 120 * 100
+    peak_rel: float = 0.25
+    nlog_peak_rel: float = 0.15
+    nlog_floor_rel: float = -0.05
+    max_tilt_deg: float = 72.0
+    size_tolerance: float = 1.35
+    size_margin_px: float = 1.5
+    min_area_px: int = 1
+    q_max: float = 0.9
+    max_candidates: int = 32
+    ellipse_min_points: int = 6
+    ellipse_max_residual_px: float = 0.8
+    h_min_px: int | None = None
+    h_max_px: int | None = None
+    raw_threshold_abs: float | None = None
+    peak_abs: float | None = None
+    nlog_peak_abs: float | None = None
+    nlog_floor_abs: float | None = None
+    nlog_sigma_px: float | None = None
+
+    @staticmethod
+    def paper() -> ExtractionConfig:
+        """The paper's literal parameters (§3.1-3.4), tuned for its 697 mm scene.
+
+        The paper's J thresholds are negative (J_t = -185.58, J_peak = -125); with our
+        sign convention (-LoG is positive on bright blobs) they accept almost every pixel.
+        """
+        return ExtractionConfig(
+            raw_threshold_abs=114.66,
+            peak_abs=155.0,
+            nlog_peak_abs=-125.0,
+            nlog_floor_abs=-185.58,
+            nlog_sigma_px=2.0,
+            h_min_px=95,
+            h_max_px=225,
+            n_max=120 * 100,
+            q_max=0.9,
+        )
+
+
+@dataclass(frozen=True)
+class PersistenceConfig:
+    """K frames of history, C_min frames of presence, and the motion gate (pixels)."""
+
+    k_frames: int = 5
+    c_min: int = 2
+    motion_tolerance_px: float = 0.35
+
+    def __post_init__(self) -> None:
+        if self.k_frames < 1 or self.c_min < 1:
+            raise ValueError("k_frames and c_min must be >= 1")
+
+
+@dataclass(frozen=True)
+class MatchingConfig:
+    """Deterministic annealing parameters.
+
+    alpha_mm, alpha_per_m : distance tolerance alpha = alpha_mm + alpha_per_m * range_m.
+    psi_start, psi_end : inverse temperature range in units of 1 / alpha^2.
+    growth : c of Eq. 35 (psi_{m+1} = c psi_m).
+    clip_factor : rho is clipped at clip_factor * alpha; with 1 (default) a pair supports
+        an assignment by up to alpha^2 and an incompatible pair costs nothing, so the
+        null label (energy 0) wins exactly when a blob has no support.
+    size_weight : weight (in alpha^2 units) of the apparent-size unary term; 0 disables.
+    residual_factor : rigid residual tolerance per pair is clip(4 sigma, alpha,
+        residual_factor * alpha), sigma from the weights when given.
+    min_matches : fewest matched reflectors for a pose.
+    """
+
+    alpha_mm: float = 12.0
+    alpha_per_m: float = 3.0
+    psi_start: float = 0.02
+    psi_end: float = 50.0
+    growth: float = 1.25
+    clip_factor: float = 1.0
+    size_weight: float = 0.5
+    residual_factor: float = 2.5
+    min_matches: int = 3
+
+    def alpha_for(self, observed_mm: np.ndarray) -> float:
+        """alpha (mm) at the median range of observed points (gamma, 3)."""
+        y = np.asarray(observed_mm, float)
+        rng_m = median_1d(np.sqrt((y * y).sum(axis=1))) / 1000 if len(y) else 0.0
+        return self.alpha_mm + self.alpha_per_m * rng_m
+
+    def pair_tolerance_mm(self, alpha_mm: float, weights: np.ndarray) -> np.ndarray:
+        """Per-pair rigid residual tolerance clip(4 sigma, alpha, residual_factor alpha),
+        sigma = 1 / sqrt(weight); shape (gamma,)."""
+        sigma = 1.0 / np.sqrt(np.asarray(weights, float))
+        return np.minimum(np.maximum(4.0 * sigma, alpha_mm), self.residual_factor * alpha_mm)
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    """enabled : use tracking after a confident pose. reacquire_every : a full acquisition
+    pass at least every this many frames. margin_px : search margin around a reflector's
+    predicted disc (inter-frame motion allowed). min_diameter_px : reflectors predicted
+    smaller than this are not tracked (their windows hold too little to verify)."""
+
+    enabled: bool = False
+    reacquire_every: int = 15
+    margin_px: float = 4.0
+    min_diameter_px: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.reacquire_every < 1:
+            raise ValueError(f"reacquire_every must be >= 1, got {self.reacquire_every}")
+        if self.margin_px < 1:
+            raise ValueError(f"margin_px must be >= 1, got {self.margin_px}")
+
+
+Refinement = Literal["ml", "los", "none"]
+
+
+@dataclass(frozen=True)
+class SolveConfig:
+    """The §5 stage's settings (``solve.PoseSolver``, ``tracking_frame.CompiledTracker``):
+    the pose fit, its refinement, outlier step, verification and reported covariance.
+    Each field is ``PipelineConfig``'s field of the same name, documented there; the
+    pipeline composes it (``PipelineConfig.solve``), and ``min_matches`` and
+    ``residual_factor`` are the matching stage's (``MatchingConfig``).
+    """
+
+    refinement: Refinement = "ml"
+    correct_perspective_bias: bool = True
+    mixed_pixel_radius_px: float = 4.0
+    verify_pose: bool = True
+    reject_outliers: bool = True
+    adapt_range_sigma: bool = True
+    max_systematic_range_sigma_mm: float = 25.0
+    max_systematic_centroid_sigma_px: float = 0.5
+    consistency_p: float | None = 0.999999
+    leave_one_out_covariance: bool = True
+    estimate_range_offset: bool = True
+    range_bias_sigma_mm: float = 15.0
+    calibrated_range_bias_sigma_mm: float = 2.0
+    focal_length_sigma_rel: float = 0.002
+    common_centroid_bias_px: float = 0.05
+    outlier_sigma: float = 6.0
+    outlier_chi2_per_dof: float = 4.0
+    max_view_angle_deg: float = 80.0
+    dark_check_max_matches: int = 3
+    centroid_sigma_floor_px: float = 0.03
+    range_sigma_floor_mm: float = 1.0
+    los_tolerance: float = 0.002
+    min_matches: int = 3
+    residual_factor: float = 2.5
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """All pipeline parameters.
+
+    refinement : "ml" (ours: Gauss-Newton on bearings and ranges, the default), "los"
+        (the paper's line-of-sight iteration, Eqs. 51-52), or "none" (SVD only).
+    correct_perspective_bias : shift centroids by the predicted offset between the image
+        ellipse's centre and the projected disc centre, then re-solve.
+    mixed_pixel_radius_px : a matched marker whose disc appears smaller than this
+        radius takes its range from the mixing model of its pixels and its surround
+        (``kernels.mixed_pixels``) instead of its pixels' median, which the surround
+        pulls towards itself when few pixels are covered whole; 0: never (the paper's
+        preset). 4 px: from there on most of a disc's pixels are covered whole.
+    ellipse_confirmation : run §3.3 (confirm candidate shapes, split merged components).
+    verify_pose : refuse a pose that makes the target face away from the camera (beyond
+        ``max_view_angle_deg``) or that predicts a well-resolved reflector where the
+        frame has no bright pixel (catches congruent-triangle mismatches with 3 markers).
+    reject_outliers, outlier_sigma : after the fit, drop the matched reflector whose
+        whitened residual (lateral and range, in predicted sigmas) is largest while it
+        exceeds ``outlier_sigma`` and more than ``matching.min_matches`` remain, refitting
+        each time (ours: a spurious blob or a merged pair next to a marker's position
+        passes the matching tolerance but bends the pose by degrees).
+    adapt_range_sigma : before the outlier test, estimate from the frame's own residuals
+        the range and centroid errors its noise model lacks (``pose.systematic_sigmas``:
+        the systematic errors of a real, uncalibrated ToF camera; the centroid errors of
+        small markers on a plate that is not black) and add them to every reflector's
+        sigmas, in the fit, the outlier test and the covariance; without it, correctly
+        detected markers are dropped as outliers one by one, or a biased bearing is
+        trusted.
+    range_bias_sigma_mm, calibrated_range_bias_sigma_mm : sigma of a range offset common
+        to all reflectors that no frame can reveal (the fit absorbs it into the pose): the
+        constant, amplitude and temperature-drift errors of a ToF camera without range
+        calibration, or what is left of them with one (drift since the calibration; the
+        uncalibrated sigma applies where a reflector lies outside the correction's
+        ``calibrated_span_mm``, where the model is extrapolated). 15 mm: the middle of
+        the 10-20 mm that published uncalibrated CW-ToF cameras err by (zero offset,
+        cyclic and amplitude errors; ``docs/simulator.md``), which the robustness
+        study's ``systematic`` family draws. Added
+        to the reported covariance (``pose.common_range_bias_covariance``), so that the
+        1-sigma of an uncalibrated camera does not claim the shot-noise limit.
+    max_systematic_range_sigma_mm : cap of that estimate (published uncalibrated ToF
+        range errors are 10-20 mm; a larger spread is not a systematic error but a bad
+        match, and must stay visible to the outlier test).
+    estimate_range_offset : estimate the range offset common to every reflector as a
+        seventh parameter of the ML fit, with the prior N(0, range_bias_sigma^2) (the
+        calibrated sigma where a range correction covers the ranges), and take its
+        posterior mean out of the ranges before the final fit; its posterior sigma
+        replaces the prior's in the covariance. The image scale (the bearings) determines
+        it when the target is large enough in the image; otherwise the prior keeps it
+        near 0. The scale itself is an eighth parameter with its own prior
+        (``focal_length_sigma_rel``, ``common_centroid_bias_px``), so an image-scale
+        error is not read as a range offset. From 4 reflectors. On by default; a camera
+        whose driver states a range-bias sigma of 0 turns it off.
+    focal_length_sigma_rel : relative sigma of the focal length's calibration (0.2 %: a
+        checkerboard calibration's typical focal-length uncertainty).
+    common_centroid_bias_px : sigma of a centroid error common to a frame's markers
+        (0.05 px: the largest common-mode error of the matched centroids measured over
+        the physics robustness study's families, 0.046 px rms beyond their random
+        noise at 8 m with every knob drawn; ``bench/physics.py``'s scale column); over
+        the pattern's rms radius in the
+        image it is a scale error, estimated with the range offset. Markers of one size
+        share it apart from the others (their blobs mix with the surround, the PSF and the
+        fall-off alike), so each size's own scale error also enters the reported
+        covariance (``solve.PoseSolver.size_scale_covariance``): where the sizes sit on
+        different sides of the pattern, the fit reads it as a tilt.
+    max_systematic_centroid_sigma_px : cap of the frame's excess centroid sigma, estimated
+        beside the range one from the lateral residuals alone (``pose.systematic_sigmas``:
+        small or blurred markers against a plate that is not black have centroids off by
+        tenths of a pixel that no pixel statistic sees). A matched marker's centroid off
+        by more than half a pixel is a blend or a wrong blob, not noise.
+    consistency_p : refuse a pose whose chi^2 (with the sigmas the fit used, the excess
+        components included) exceeds this quantile of chi^2(3m - 6): a misfit that no
+        noise can produce (a one-in-a-million tail), left when a component reached its
+        cap or from the minimum number of markers, where no outlier can be singled out
+        and no component is estimated. Only with ``refinement="ml"`` (the chi^2 of an
+        SVD or LOS pose is not minimised). None: no test. Below the limit, a chi^2 per
+        degree of freedom above 1 scales the reported covariance up by it
+        (``variance_factor``).
+    leave_one_out_covariance : report a covariance no narrower than the spread of the
+        poses fitted without one reflector each (from 4 reflectors; ``pose.
+        leave_one_out_covariance``): a reflector biased beyond its sigma that alone fixes
+        some direction of the pose leaves no residual for chi^2 to see, but moves the
+        pose when left out (at 8 m, a marker partly hidden by an arm in front of it, or
+        pulled by a blurred neighbour's halo, was 3-6 deg off with 4-5 markers and
+        claimed 0.3-1 deg).
+    outlier_chi2_per_dof : above this chi^2 per degree of freedom the fit is inconsistent
+        and each reflector is also tested against a fit without it (leave-one-out), which
+        finds a biased point that a fit of few points has absorbed.
+    dark_check_max_matches : the dark-marker check applies only to poses from at most
+        this many matched reflectors. Three points always admit a congruent alternative;
+        from four on, a wrong assignment either fails the rigid residual check or (a
+        mirror image of the nearly planar pattern) makes the target face away, so a dark
+        predicted marker is an occluded one.
+    centroid_sigma_floor_px, range_sigma_floor_mm : floors of the per-reflector
+        measurement sigmas (``tofpose.uncertainty``) used as weights and in the
+        covariance.
+    """
+
+    extraction: ExtractionConfig = field(default_factory=ExtractionConfig)
+    persistence: PersistenceConfig = field(default_factory=PersistenceConfig)
+    matching: MatchingConfig = field(default_factory=MatchingConfig)
+    tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    refinement: Refinement = "ml"
+    correct_perspective_bias: bool = True
+    mixed_pixel_radius_px: float = 4.0
+    ellipse_confirmation: bool = True
+    verify_pose: bool = True
+    reject_outliers: bool = True
+    adapt_range_sigma: bool = True
+    max_systematic_range_sigma_mm: float = 25.0
+    max_systematic_centroid_sigma_px: float = 0.5
+    consistency_p: float | None = 0.999999
+    leave_one_out_covariance: bool = True
+    estimate_range_offset: bool = True
+    range_bias_sigma_mm: float = 15.0
+    calibrated_range_bias_sigma_mm: float = 2.0
+    focal_length_sigma_rel: float = 0.002
+    common_centroid_bias_px: float = 0.05
+    outlier_sigma: float = 6.0
+    outlier_chi2_per_dof: float = 4.0
+    max_view_angle_deg: float = 80.0
+    dark_check_max_matches: int = 3
+    matcher: Literal["annealing", "ransac"] = "annealing"
+    triplet_fallback: bool = True
+    ransac_time_budget_ms: float | None = 5.0
+    ransac_confidence: float | None = None
+    ransac_seed: int = 0
+    centroid_sigma_floor_px: float = 0.03
+    range_sigma_floor_mm: float = 1.0
+    los_tolerance: float = 0.002
+
+    @property
+    def solve(self) -> SolveConfig:
+        """The §5 stage's own settings, composed from this configuration."""
+        return SolveConfig(
+            **{name: getattr(self, name) for name in _SOLVE_FIELDS},
+            min_matches=self.matching.min_matches,
+            residual_factor=self.matching.residual_factor,
+        )
+
+    @staticmethod
+    def paper() -> PipelineConfig:
+        """The paper's literal settings: fixed thresholds, LOS refinement, no bias fix."""
+        return PipelineConfig(
+            extraction=ExtractionConfig.paper(),
+            refinement="los",
+            correct_perspective_bias=False,
+            mixed_pixel_radius_px=0.0,
+            reject_outliers=False,
+            adapt_range_sigma=False,
+            range_bias_sigma_mm=0.0,
+            calibrated_range_bias_sigma_mm=0.0,
+            consistency_p=None,
+            leave_one_out_covariance=False,
+            estimate_range_offset=False,
+            focal_length_sigma_rel=0.0,
+            common_centroid_bias_px=0.0,
+        )
+
+
+#: the §5 fields of ``PipelineConfig`` that make up its ``SolveConfig``
+_SOLVE_FIELDS = tuple(
+    f.name for f in fields(SolveConfig) if f.name not in ("min_matches", "residual_factor")
+)
