@@ -1,5 +1,5 @@
 """The compiled rigid residual check of §4 (``kernels.residual_check.prune_pairs``,
-behind ``matching.rigid_residual_check``) against the NumPy loop it replaced, on random
+behind ``matching.rigid_residual_check``) against ``tofpose.reference.matching``'s, on random
 rigid scenes with planted wrong pairs; and the wrong pairs are the ones dropped."""
 
 from __future__ import annotations
@@ -8,27 +8,12 @@ import numpy as np
 import pytest
 
 from tofpose.geometry import rotation_from_euler_deg
-from tofpose.kernels.pose import absolute_orientation
 from tofpose.matching import rigid_residual_check
-
-
-def _reference(observed, catalog, pairs, weights, tol, min_matches):
-    rejected = []
-    while len(pairs) >= min_matches:
-        y, x = observed[pairs[:, 0]], catalog[pairs[:, 1]]
-        R, t = absolute_orientation(x, y, weights[pairs[:, 0]])
-        res = np.linalg.norm(y - (x @ R.T + t), axis=1)
-        tol_p = tol[pairs[:, 0]]
-        worst = int(np.argmax(res / tol_p))
-        if res[worst] <= tol_p[worst]:
-            return pairs, rejected, True
-        rejected.append(int(pairs[worst, 0]))
-        pairs = np.delete(pairs, worst, axis=0)
-    return np.empty((0, 2), int), rejected + [int(k) for k in pairs[:, 0]], False
+from tofpose.reference.matching import rigid_residual_check as reference_check
 
 
 @pytest.mark.parametrize("n_wrong", [0, 1, 2, 4])
-def test_pruned_pairs_equal_the_numpy_loop_and_drop_the_planted_wrong_pairs(n_wrong):
+def test_pruned_pairs_equal_the_reference_and_drop_the_planted_wrong_pairs(n_wrong):
     rng = np.random.default_rng(n_wrong)
     found_planted = scenes = 0
     for _ in range(200):
@@ -42,7 +27,7 @@ def test_pruned_pairs_equal_the_numpy_loop_and_drop_the_planted_wrong_pairs(n_wr
         weights = rng.uniform(0.5, 2.0, e)
         tol = np.full(e, 4.0)
         kept, rejected, reason = rigid_residual_check(observed, catalog, pairs, weights, tol, 3)
-        want_kept, want_rej, ok = _reference(observed, catalog, pairs, weights, tol, 3)
+        want_kept, want_rej, ok = reference_check(observed, catalog, pairs, weights, tol, 3)
         np.testing.assert_array_equal(kept, want_kept)
         assert rejected == want_rej and (reason == "") == ok
         if e - n_wrong >= 5:
