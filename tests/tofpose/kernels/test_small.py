@@ -93,30 +93,15 @@ def test_blob_pixel_stats_equal_numpy():
     assert np.isnan(mad[1])  # fewer than 3 ranges: no own spread
 
 
-def _sigmas_numpy(flat, starts, cen, gray, dist, bg, split, floor_px, floor_mm):
-    """The measurement-sigma model of ``uncertainty.measurement_sigmas`` in NumPy on the
-    pixel statistics (the statement the compiled ``blob_sigmas`` replaced)."""
-    from tofpose import uncertainty as u
-
-    shot, n_px, mad, unit, n_valid = blob_pixel_stats(flat, starts, cen, gray, dist, bg)
-    neighbour = np.where(split, u.SPLIT_CENTROID_PX / np.sqrt(n_px), 0.0)
-    sigma_px = np.sqrt(shot**2 + floor_px**2 + u.sampling_sigma_px(n_px) ** 2 + neighbour**2)
-    pool = (n_valid >= u.POOL_MIN_PIXELS) & np.isfinite(mad) & (unit > 0)
-    k = float(np.median(mad[pool] / unit[pool])) if pool.any() else np.nan
-    per_pixel = np.where(np.isfinite(mad), mad, 0.0)
-    if np.isfinite(k):
-        per_pixel = np.maximum(per_pixel, k * np.nan_to_num(unit))
-    sigma_range = u.MEDIAN_EFFICIENCY * per_pixel / np.sqrt(np.maximum(n_valid, 1))
-    sigma_range[~np.isfinite(k) & (n_valid < 3)] = u.UNCALIBRATED_RANGE_SIGMA_MM
-    return sigma_px, np.maximum(sigma_range, floor_mm)
-
-
 @pytest.mark.parametrize("pooled", [True, False])
 def test_blob_sigmas_equal_the_numpy_model(pooled):
-    """Blobs of 1-40 pixels, some split, some without ranges; with blobs large enough to
-    pool the range model, and without (the uncalibrated sigma)."""
+    """The compiled sigmas against ``tofpose.reference.sigmas``, on blobs of 1-40 pixels,
+    some split, some without ranges; with blobs large enough to pool the range model, and
+    without (the uncalibrated sigma). The kernel's medians of float32 ranges are float32,
+    the reference's float64: equal to 1e-6."""
     from tofpose import uncertainty as u
     from tofpose.kernels.sigmas import blob_sigmas
+    from tofpose.reference import sigmas as reference
 
     rng = np.random.default_rng(1)
     h, w = 60, 80
@@ -133,9 +118,13 @@ def test_blob_sigmas_equal_the_numpy_model(pooled):
     got = blob_sigmas(flat, starts, cen, gray, dist, 50.0, split, 0.03, 1.0,
                       u.SINGLE_PIXEL_SIGMA_PX, u.SPLIT_CENTROID_PX, u.POOL_MIN_PIXELS,
                       u.MEDIAN_EFFICIENCY, u.UNCALIBRATED_RANGE_SIGMA_MM)  # fmt: skip
-    want = _sigmas_numpy(flat, starts, cen, gray, dist, 50.0, split, 0.03, 1.0)
-    np.testing.assert_array_equal(got[0], want[0])
-    np.testing.assert_array_equal(got[1], want[1])
+    constants = u.kernel_constants(u.SigmaFloors(0.03, 1.0))
+    blobs = [flat[starts[j] : starts[j + 1]] for j in range(len(sizes))]
+    want_px = [reference.centroid_sigma_px(gray, b, c, 50.0, bool(sp), constants)
+               for b, c, sp in zip(blobs, cen, split, strict=True)]  # fmt: skip
+    np.testing.assert_allclose(got[0], want_px, rtol=1e-12)
+    want_mm = reference.range_sigmas_mm(gray, dist, blobs, 50.0, constants)
+    np.testing.assert_allclose(got[1], want_mm, rtol=1e-6)
     assert (got[1] == u.UNCALIBRATED_RANGE_SIGMA_MM).any() != pooled
 
 
