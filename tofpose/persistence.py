@@ -19,16 +19,7 @@ from tofpose.camera import CameraModel
 from tofpose.config import PersistenceConfig
 from tofpose.extraction import Blob, pixel_lists
 from tofpose.kernels.measure import persist_and_measure
-from tofpose.kernels.persistence import (
-    RANGE_TEST_Z,
-    column_medians,
-    consistent,
-    counter_medians,
-    gather_stack,
-    mean_in_boxes,
-    pixel_mask,
-    ranges_consistent,
-)
+from tofpose.kernels.persistence import pixel_mask
 
 
 @dataclass
@@ -145,71 +136,3 @@ class Persistence:
             self._history.extend(keep)
         mask = pixel_mask(pixels, gray.size)
         self._history.append(_Entry(centroids, mask, gray, distance))
-
-    def _padded(self, current: np.ndarray, older: list[np.ndarray]) -> tuple:
-        """(current, *older) padded with ``current`` to K arrays: the kernels take a tuple
-        of fixed length (one compiled version per K) and a count of the arrays to use."""
-        k = max(self.config.k_frames, 2)
-        return (current, *older, *([current] * (k - 1 - len(older))))
-
-    def apply(
-        self, blobs: list[Blob], gray: np.ndarray, distance: np.ndarray
-    ) -> tuple[list[Blob], np.ndarray, np.ndarray, PersistenceInfo]:
-        """Combine the current frame with consistent history.
-
-        Parameters
-        ----------
-        blobs : candidate blobs of this frame, with single-frame centroids.
-        gray, distance : ndarray of shape (H, W), this frame.
-
-        Returns
-        -------
-        kept : blobs passing the counter check C >= C_min (all blobs while fewer than
-            C_min consistent frames exist, so a fresh or moving scene is still measured).
-        mean_gray : (H, W) float32, mean intensity over the consistent frames (I-bar).
-        median_distance : (H, W) float32, temporal median of distance (D-bar), computed
-            at blob pixels; elsewhere this frame's distance.
-        info : PersistenceInfo.
-        """
-        cfg = self.config
-        h, w = gray.shape
-        cur = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
-        idx, starts = pixel_lists(blobs)
-        mask = pixel_mask(idx, h * w)
-
-        used: list[_Entry] = []
-        motion = False
-        for entry in reversed(self._history):
-            if consistent(cur, entry.centroids, cfg.motion_tolerance_px) and ranges_consistent(
-                distance, entry.distance, idx, starts, RANGE_TEST_Z
-            ):  # fmt: skip
-                used.append(entry)
-            else:
-                motion = True
-                break
-        if motion:
-            # Older frames show the scene elsewhere: forget them for good.
-            keep = list(reversed(used))
-            self._history.clear()
-            self._history.extend(keep)
-        self._history.append(_Entry(cur, mask, gray, distance))
-
-        n = 1 + len(used)
-        kept, dropped = blobs, 0
-        mean_gray, med_dist = gray, distance
-        if n == 1 or not blobs:
-            return kept, mean_gray, med_dist, PersistenceInfo(n, motion, dropped)
-        if n >= cfg.c_min:
-            # the counter image C, read only where it is used: at the blobs' pixels
-            c = counter_medians(self._padded(mask, [e.mask for e in used]), n, idx, starts)
-            kept = [b for b, ck in zip(blobs, c, strict=True) if ck >= cfg.c_min]
-            dropped = len(blobs) - len(kept)
-        boxes = np.array([b.bbox for b in blobs], np.int64)
-        older = self._padded(gray, [e.gray for e in used])[1:]
-        mean_gray = mean_in_boxes(gray, older, n - 1, boxes, gray.copy())
-        med_dist = distance.copy()
-        if kept:
-            kidx, _ = pixel_lists(kept)
-            stack = gather_stack(self._padded(distance, [e.distance for e in used]), n, kidx)
-            med_dist.reshape(-1)[kidx] = column_medians(stack)
-        return kept, mean_gray, med_dist, PersistenceInfo(n, motion, dropped)

@@ -1,13 +1,16 @@
 from dataclasses import replace
 
 import numpy as np
-import pytest
 
+from tofpose.camera import CameraModel
 from tofpose.config import PersistenceConfig
 from tofpose.extraction import Blob
 from tofpose.persistence import Persistence
+from tofpose.reference.persistence import History
 
 H, W = 40, 60
+CAM = CameraModel(width=W, height=H, fx=60.0, fy=60.0, cx=29.5, cy=19.5,
+                  dist=(-0.05, 0.01, 0.0, 0.0, 0.0))  # fmt: skip
 
 
 def _frame(cx, cy, level=1000.0, rng=None, r=4):
@@ -28,7 +31,7 @@ def test_static_scene_uses_k_frames_and_median_distance():
     rng = np.random.default_rng(0)
     for n in range(1, 8):
         blobs, g, d = _frame(20, 20, rng=rng)
-        kept, mean_g, med_d, info = p.apply(blobs, g, d)
+        kept, mean_g, med_d, info = p.measure(blobs, g, d, CAM, 10.0)
         assert info.frames_used == min(n, 5)
         assert not info.motion
         assert len(kept) == 1
@@ -40,34 +43,32 @@ def test_static_scene_uses_k_frames_and_median_distance():
 def test_motion_cuts_history_so_nothing_stale_is_averaged():
     p = Persistence(PersistenceConfig(k_frames=5, c_min=2, motion_tolerance_px=0.35))
     for _ in range(4):
-        p.apply(*_frame(20, 20))
+        p.measure(*_frame(20, 20), CAM, 10.0)
     blobs, g, d = _frame(26, 20)  # the scene jumped 6 px
-    kept, mean_g, _, info = p.apply(blobs, g, d)
+    kept, mean_g, _, info = p.measure(blobs, g, d, CAM, 10.0)
     assert info.motion and info.frames_used == 1
-    np.testing.assert_array_equal(mean_g, g)  # only the current frame
+    assert mean_g is g  # only the current frame
     assert len(kept) == 1  # a fresh scene is measured, not refused
 
 
 def test_transient_blob_is_dropped_by_counter_image():
     p = Persistence(PersistenceConfig(k_frames=5, c_min=2))
     for _ in range(3):
-        p.apply(*_frame(20, 20))
+        p.measure(*_frame(20, 20), CAM, 10.0)
     blobs, g, d = _frame(20, 20)
     extra, g2, _ = _frame(45, 30, r=3)
     g = np.maximum(g, g2)
-    kept, _, _, info = p.apply(blobs + extra, g, d)
+    kept, _, _, info = p.measure(blobs + extra, g, d, CAM, 10.0)
     assert len(kept) == 1 and info.dropped_blobs == 1
 
 
-def test_the_compiled_measure_is_apply_then_measure_blobs():
-    """``Persistence.measure`` (one compiled call) against ``apply`` followed by
-    ``measure_blobs`` over a stream with a static run, a transient blob the counter drops,
-    a blob without a centroid (as a split part has) and a jump that cuts the history."""
-    from tofpose.camera import CameraModel
-    from tofpose.extraction import measure_blobs
-
-    cam = CameraModel(width=W, height=H, fx=60.0, fy=60.0, cx=29.5, cy=19.5,
-                      dist=(-0.05, 0.01, 0.0, 0.0, 0.0))  # fmt: skip
+def test_the_compiled_combination_is_the_reference_statement():
+    """``Persistence.measure`` (one compiled call) against ``tofpose.reference.
+    persistence.History`` over a stream with a static run, a transient blob the counter
+    drops, a blob without a centroid (as a split part has) and a jump that cuts the
+    history: the same frames combined, the same blobs kept, and I-bar and D-bar equal
+    where the compiled call defines them (inside the boxes grown by 2 px, at the kept
+    blobs' pixels; elsewhere its scratch frames hold what earlier frames left)."""
     rng = np.random.default_rng(3)
     stream = [_frame(20, 20, rng=rng) for _ in range(4)]
     blobs, g, d = _frame(20, 20, rng=rng)
@@ -76,27 +77,28 @@ def test_the_compiled_measure_is_apply_then_measure_blobs():
     blobs, g, d = _frame(20, 20, rng=rng)
     stream.append(([replace(blobs[0], centroid_uv=np.full(2, np.nan))], g, d))
     stream += [_frame(27, 22, rng=rng) for _ in range(3)]
-    compiled, reference = (Persistence(PersistenceConfig(k_frames=4, c_min=2)) for _ in "ab")
+    cfg = PersistenceConfig(k_frames=4, c_min=2)
+    compiled, reference = Persistence(cfg), History(cfg.k_frames, cfg.c_min,
+                                                    cfg.motion_tolerance_px)  # fmt: skip
+    seen_drop = seen_motion = seen_combined = False
     for blobs, g, d in stream:
-        got, got_g, got_d, got_info = compiled.measure(blobs, g, d, cam, 10.0)
-        kept, mean_g, med_d, info = reference.apply(blobs, g, d)
-        want = measure_blobs(kept, mean_g, med_d, cam, 10.0)
-        assert got_info == info
-        # the combined frames agree where they are defined: I-bar inside the boxes grown
-        # by 2 px, D-bar at the kept blobs' pixels (elsewhere the scratch frames hold
-        # what earlier frames left)
+        got, got_g, got_d, info = compiled.measure(blobs, g, d, CAM, 10.0)
+        want = reference.combine([b.pixels for b in blobs],
+                                 np.array([b.centroid_uv for b in blobs]), g, d)  # fmt: skip
+        assert (info.frames_used, info.motion) == (want.frames_used, want.motion)
+        assert [b.pixels.tolist() for b in got] == [
+            b.pixels.tolist() for b, k in zip(blobs, want.keep, strict=True) if k
+        ]
         for x, y, bw, bh in (b.bbox for b in blobs):
             box = np.s_[max(y - 2, 0) : y + bh + 2, max(x - 2, 0) : x + bw + 2]
-            np.testing.assert_array_equal(got_g[box], mean_g[box])
-        for b in kept:
-            np.testing.assert_array_equal(got_d.ravel()[b.pixels], med_d.ravel()[b.pixels])
-        if info.frames_used == 1:
-            assert got_g is g and got_d is d
-        assert len(got) == len(want)
-        for a, b in zip(got, want, strict=True):
-            np.testing.assert_allclose(a.centroid_uv, b.centroid_uv, rtol=0, atol=1e-12)
-            assert a.distance_mm == pytest.approx(b.distance_mm, abs=1e-9)
-    assert compiled.snapshot()[-1].centroids.shape == reference.snapshot()[-1].centroids.shape
+            np.testing.assert_array_equal(got_g[box], want.mean_gray[box])
+        for b in got:
+            np.testing.assert_array_equal(got_d.ravel()[b.pixels],
+                                          want.median_distance.ravel()[b.pixels])  # fmt: skip
+        seen_drop |= info.dropped_blobs > 0
+        seen_motion |= info.motion
+        seen_combined |= info.frames_used == cfg.k_frames
+    assert seen_drop and seen_motion and seen_combined
 
 
 def test_a_target_turning_in_place_is_not_averaged_into_a_stale_pose():
