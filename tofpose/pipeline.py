@@ -38,14 +38,12 @@ from tofpose.extraction import (
     check_frame,
     find_candidate_blobs,
     frame_levels,
-    pixel_lists,
     predicted_diameter_window_px,
 )
 from tofpose.geometry import facing_euler_deg, quaternion_wxyz_from_rotation
 from tofpose.kernels.ellipses import blob_mask
 from tofpose.kernels.measure import measure_and_back_project
 from tofpose.kernels.pose import covariance_envelope, point_residuals_mm
-from tofpose.kernels.range_correction import corrected_ranges
 from tofpose.kernels.records import camera_record
 from tofpose.kernels.two_centres import SPLIT_OK, two_centre_split
 from tofpose.matching import (
@@ -54,22 +52,18 @@ from tofpose.matching import (
     match_reflectors,
     random_triplets,
 )
-from tofpose.mixing import mixing_rows, shifted_mixing
 from tofpose.pair_fit import fit_pair
 from tofpose.persistence import Persistence, PersistenceInfo, blob_arrays
 from tofpose.range_calibration import RangeCorrection, correction_kernel_arguments
 from tofpose.solve import Measurements, PoseSolver, Rejected, Solution, ThresholdedFrame
 from tofpose.tracking import (
     TrackState,
-    find_in_windows,
-    predict_windows,
 )
 from tofpose.tracking_frame import CompiledTracker
 from tofpose.uncertainty import (
     UNCALIBRATED_RANGE_SIGMA_MM,
     SigmaFloors,
     kernel_constants,
-    measurement_sigmas,
 )
 
 
@@ -371,23 +365,6 @@ class PosePipeline:
         n_kept = int(keep.sum())
         return meas, unranged, n_kept, PersistenceInfo(1 + n_used, motion, len(blobs) - n_kept)
 
-    def _back_project(self, blobs, mean_gray, med_distance, background) -> Measurements:
-        """Eqs. 7-8 and the per-reflector sigmas of measured blobs (finite ranges), stage
-        by stage: the reference of ``_measure``'s compiled back-projection, used by the
-        stage-by-stage tracking pass."""
-        cfg = self.config
-        uv = np.array([b.centroid_uv for b in blobs])
-        rho = np.array([b.distance_mm for b in blobs])
-        y = self.camera.bearings(uv) * rho[:, None]  # Eq. 8
-        sig_px, sig_rng = measurement_sigmas(
-            blobs, mean_gray, med_distance, background,
-            SigmaFloors(cfg.centroid_sigma_floor_px, cfg.range_sigma_floor_mm),
-        )  # fmt: skip
-        w = 1.0 / (sig_rng**2 + (rho * sig_px / self.camera.fx) ** 2)  # Eq. 21 weights
-        area = np.array([b.area_px for b in blobs], np.int64)
-        return Measurements(tuple(blobs), area, uv, rho, y, w, sig_px, sig_rng,
-                            mixing_rows(blobs))  # fmt: skip
-
     def _match(self, meas: Measurements) -> MatchResult:
         """§4: deterministic annealing (with the size term) or, configured, RANSAC."""
         cfg = self.config
@@ -418,59 +395,10 @@ class PosePipeline:
         return self._solver.solve(pairs, meas, m.alpha_mm, active) if len(pairs) else solved
 
     def _process_tracking(self, g, d, time_s, track: TrackState, timer) -> PoseResult | None:
-        """Tracking mode (``tofpose.tracking``): reflectors searched only in windows around
-        their predicted images, correspondences known; None means "fall back to the full
-        acquisition pass", and leaves no trace in the persistence history. The pipeline
-        tracks in one compiled call; the stages below, one by one, are its readable
-        reference (``tofpose.tracking_frame``), run when there is no compiled tracker."""
-        if self._compiled_tracker is not None:
-            return self._track_compiled(g, d, time_s, track, timer)
-        cfg = self.config
-        tc = cfg.tracking
-        windows = predict_windows(
-            self.camera, self._catalog_xyz, self._catalog_d, track.R, track.t_mm,
-            margin_px=tc.margin_px, min_diameter_px=tc.min_diameter_px,
-        )  # fmt: skip
-        if len(windows) < cfg.matching.min_matches:
-            return None
-        blobs = find_in_windows(g, windows, track.threshold_counts, track.background_counts)
-        if isinstance(blobs, str):
-            return None  # a marker lost, moved too far, or two merged: acquire
-        timer.lap("windows")
-        before = self._persistence.snapshot()
-
-        def give_up() -> None:
-            self._persistence.restore(before)
-
-        kept, mean_g, med_d, pinfo = self._persistence.measure(
-            blobs, g, d, self.camera, track.background_counts, track.dark_counts
-        )
-        if len(kept) != len(blobs):
-            give_up()
-            return None
-        if not all(np.isfinite(b.distance_mm) for b in kept):
-            give_up()
-            return None
-        if self.range_correction is not None:
-            kept = self._correct_ranges(kept, mean_g)
-        timer.lap("centroids")
-        meas = self._back_project(kept, mean_g, med_d, track.background_counts)
-        pairs = np.column_stack((np.arange(len(kept)), [wd.catalog_index for wd in windows]))
-        timer.lap("backproject")
-        active = ThresholdedFrame(g, track.threshold_counts)
-        solved = self._solver.solve(pairs, meas, cfg.matching.alpha_for(meas.y_mm), active)
-        timer.lap("refine")
-        if isinstance(solved, Rejected) or len(solved.observations) < len(pairs):
-            give_up()  # rejected, or a reflector dropped as an outlier: acquire
-            return None
-        ml = solved.ml
-        if ml.chi2 > cfg.outlier_chi2_per_dof * max(3 * len(pairs) - 6, 1):
-            give_up()  # an inconsistent fit: the windows may hold the wrong blobs
-            return None
-        return self._tracked_result(solved, meas, pinfo, time_s, timer, track)
-
-    def _track_compiled(self, g, d, time_s, track: TrackState, timer) -> PoseResult | None:
-        """``_process_tracking`` in one compiled call (``tofpose.tracking_frame``)."""
+        """Tracking mode (``tofpose.tracking``, ``tofpose.tracking_frame``): reflectors
+        searched only in windows around their predicted images, correspondences known,
+        in one compiled call; None means "fall back to the full acquisition pass", and
+        leaves no trace in the persistence history."""
         tracked = self._compiled_tracker.track(g, d, track)
         timer.lap("tracking")
         if tracked is None:
@@ -553,20 +481,6 @@ class PosePipeline:
         if self.covariance_scale is not None:
             cov = cov * self.covariance_scale.factor_at(math.sqrt(float(t_mm @ t_mm)))
         return cov
-
-    def _correct_ranges(self, blobs: list[Blob], gray: np.ndarray) -> list[Blob]:
-        """The blobs with the calibrated range error subtracted from their ranges (new
-        blobs): the model at the blob's range, evaluated per member pixel (its amplitude,
-        the gray level as in the calibration fit; its offset), median
-        (``kernels.range_correction.corrected_ranges``)."""
-        if not blobs:
-            return blobs
-        flat, starts = pixel_lists(blobs)
-        rho = np.array([b.distance_mm for b in blobs], float)
-        out = corrected_ranges(rho, flat, starts, np.asarray(gray, np.float32),
-                               *self._correction_kernel_args[1:])  # fmt: skip
-        return [b.with_values(distance_mm=float(r), mixing=shifted_mixing(b.mixing, r - r0))
-                for b, r, r0 in zip(blobs, out, rho, strict=True)]  # fmt: skip
 
     def _size_hint(self, wrong_size) -> str:
         """A clause naming bright blobs the catalog's sizes ruled out, or ''."""

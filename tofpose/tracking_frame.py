@@ -1,9 +1,10 @@
 """Tracking mode in one compiled call per frame (``kernels.tracking_frame.track_frame``).
 
 ``PosePipeline`` tracks through ``CompiledTracker``, with or without a calibrated range
-correction. Its stage-by-stage form (``PosePipeline._process_tracking`` when the
-pipeline has no compiled tracker) is the readable reference: the two give the same
-poses (``tests/tofpose/test_tracking_frame.py`` and the A/B harness ``bench/ab.py``).
+correction; this is the one implementation of tracking. Its stages are tested against
+``tofpose.reference`` (each kernel's test, and every tracked pose against the reference
+ML fit of its own measurements in ``tests/tofpose/test_tracking_frame.py``); the A/B
+harness ``bench/ab.py`` holds its answers fixed across changes.
 """
 
 from __future__ import annotations

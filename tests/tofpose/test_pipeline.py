@@ -462,17 +462,23 @@ def test_markers_7_and_8_merged_into_one_blob_are_split_and_both_matched():
 
 
 @pytest.mark.parametrize("corrected", [False, True], ids=["plain", "range-corrected"])
-def test_the_compiled_measurement_gives_the_stage_by_stage_measurements(corrected):
+def test_the_compiled_measurement_is_persistence_then_the_reference_equations(corrected):
     """``_measure`` (one compiled call: persistence, centroids, ranges, the range
-    correction, back-projection, sigmas, weights) against the stages one by one
-    (``Persistence.measure``, ``_correct_ranges``, ``_back_project``) on a stream whose
-    history builds up, with the split halves of the merged markers 7 and 8 at 8 m."""
+    correction, back-projection, sigmas, weights) against ``Persistence.measure`` (the
+    combination and Eqs. 19-20, tested against the reference on their own) followed by
+    the calibrated correction as ``RangeCorrection.error_mm`` defines it (the median over
+    the blob's pixels of the model on I-bar), the reference sigmas, Eq. 8 by the
+    reference camera and Eq. 21's weights, on a stream whose history builds up, with the
+    split halves of the merged markers 7 and 8 at 8 m."""
     from math import isfinite
 
     from tofpose.extraction import check_frame, frame_levels
     from tofpose.pipeline import _Timer
     from tofpose.range_calibration import RangeCorrection
+    from tofpose.reference import camera as ref_camera
+    from tofpose.reference import sigmas as ref_sigmas
     from tofpose.sim.render import SensorModel
+    from tofpose.uncertainty import SigmaFloors, kernel_constants
 
     cam, cat = CameraModel(), paper_target()
     correction = RangeCorrection(
@@ -482,6 +488,8 @@ def test_the_compiled_measurement_gives_the_stage_by_stage_measurements(correcte
     ) if corrected else None  # fmt: skip
     compiled = PosePipeline(cam, cat, range_correction=correction)
     staged = PosePipeline(cam, cat, range_correction=correction)
+    cfg = compiled.config
+    constants = kernel_constants(SigmaFloors(cfg.centroid_sigma_floor_px, cfg.range_sigma_floor_mm))
     sources = set()
     with_sums = 0
     poses = [facing_pose(8000.0, 2, -3, 10)] * 4 + [facing_pose(1500.0, 3, 2, -5)] * 3
@@ -495,17 +503,31 @@ def test_the_compiled_measurement_gives_the_stage_by_stage_measurements(correcte
         meas, unranged, n_kept, info = compiled._measure(blobs, g, d, bg, dark)
         kept, mean_g, med_d, ref_info = staged._persistence.measure(blobs, g, d, cam, bg, dark)
         ranged = [b for b in kept if isfinite(b.distance_mm)]
-        if corrected:
-            ranged = staged._correct_ranges(ranged, mean_g)
-        ref = staged._back_project(ranged, mean_g, med_d, bg)
         assert (n_kept, info) == (len(kept), ref_info)
         assert unranged == [(b.centroid_uv[0], b.centroid_uv[1], b.distance_mm)
                             for b in kept if not isfinite(b.distance_mm)]  # fmt: skip
-        # the same blobs, in order (the staged ones are new records of the same pixels)
+        # the same blobs, in order
         assert all(b.pixels is r.pixels for b, r in zip(meas.blobs, ranged, strict=True))
-        for name in ("area_px", "uv_px", "range_mm", "y_mm", "weights", "sigma_px",
-                     "sigma_range_mm", "mixing"):  # fmt: skip
-            np.testing.assert_array_equal(getattr(meas, name), getattr(ref, name), err_msg=name)
+        uv = np.array([b.centroid_uv for b in ranged]).reshape(-1, 2)
+        rho = np.array([b.distance_mm for b in ranged])
+        if corrected:
+            rho = np.array([r - np.median(correction.error_mm(
+                np.full(len(b.pixels), r), mean_g.ravel()[b.pixels], b.pixels))
+                for b, r in zip(ranged, rho, strict=True)])  # fmt: skip
+        pixels = [b.pixels for b in ranged]
+        sp = np.array([ref_sigmas.centroid_sigma_px(mean_g, b.pixels, b.centroid_uv, bg,
+                                                    b.source == "split", constants)
+                       for b in ranged])  # fmt: skip
+        sr = ref_sigmas.range_sigmas_mm(mean_g, med_d, pixels, bg, constants)
+        np.testing.assert_array_equal(meas.uv_px, uv)
+        np.testing.assert_allclose(meas.range_mm, rho, rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(meas.area_px, [b.area_px for b in ranged])
+        np.testing.assert_allclose(meas.sigma_px, sp, rtol=1e-12)
+        np.testing.assert_allclose(meas.sigma_range_mm, sr, rtol=1e-6)
+        np.testing.assert_allclose(meas.y_mm, ref_camera.back_project(uv, rho, cam.K,
+                                   cam.dist_array), rtol=0, atol=1e-8)  # fmt: skip
+        np.testing.assert_allclose(meas.weights, ref_sigmas.weights(rho, sr, sp, cam.fx),
+                                   rtol=1e-5)  # fmt: skip
         with_sums += int(np.isfinite(meas.mixing).all(axis=1).sum())
     assert "split" in sources
     assert with_sums > 0  # blobs whose surround has a range (the plate at 1.5 m) have sums
