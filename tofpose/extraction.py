@@ -13,7 +13,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from itertools import accumulate
 
-import cv2
 import numpy as np
 
 from tofpose.camera import CameraModel
@@ -31,8 +30,6 @@ from tofpose.kernels.perspective import disc_centre_offsets
 from tofpose.kernels.records import GateSettings
 
 SATURATED_COUNTS = 4095
-#: fewest pixels for which a blob's eccentricity means anything (the shape gate and q_shape)
-SHAPE_MIN_PIXELS = 6
 
 
 @dataclass(frozen=True, eq=False)
@@ -277,19 +274,6 @@ def _active_set(
     return mask, applied, runs
 
 
-def nlog_response(image: np.ndarray, sigma_px: float, normalise: bool = True) -> np.ndarray:
-    """Negative Laplacian of Gaussian g = (-nabla^2 G) * f (Eqs. 11-14), same shape.
-
-    With ``normalise`` the response is scale-normalised (times sigma^2), so a bright disc
-    of contrast C at the matched scale sigma = r / sqrt(2) gives about 0.74 C at its
-    centre, independent of its size.
-    """
-    ksize = 2 * int(np.ceil(3.0 * sigma_px)) + 1
-    smooth = cv2.GaussianBlur(image, (ksize, ksize), sigma_px, borderType=cv2.BORDER_CONSTANT)
-    lap = cv2.Laplacian(smooth, cv2.CV_32F, ksize=1, borderType=cv2.BORDER_CONSTANT)
-    return -lap * (sigma_px**2 if normalise else 1.0)
-
-
 def predicted_diameter_window_px(
     fx: float, distance_mm: float, diameters_mm: np.ndarray, config: ExtractionConfig
 ) -> tuple[float, float]:
@@ -305,78 +289,6 @@ def predicted_diameter_window_px(
     d_min = d_face.min() * np.sqrt(cos_t) / config.size_tolerance - config.size_margin_px
     d_max = d_face.max() * config.size_tolerance + config.size_margin_px
     return max(d_min, 1.0), d_max
-
-
-def size_gate(
-    area_px: int,
-    extent_px: int,
-    range_mm: float,
-    fx_px: float,
-    diameters_mm: np.ndarray,
-    config: ExtractionConfig,
-) -> tuple[float, float, float, bool, bool]:
-    """The size window (§3.2, ``H_min..H_max``): (equivalent diameter, window low, window
-    high, inside, too big) in px for a component of ``area_px`` pixels whose bounding box
-    spans ``extent_px`` at most. The paper's fixed area window when ``config.h_min_px``
-    is set; ours otherwise: the catalog's diameters at the component's range
-    (``predicted_diameter_window_px``); a component longer than one reflector is too big
-    (merged markers go to §3.3)."""
-    d_eq = 2.0 * np.sqrt(area_px / np.pi)
-    if config.h_min_px is not None:
-        lo_a, hi_a = config.h_min_px, config.h_max_px or np.inf
-        d_lo, d_hi = 2.0 * np.sqrt(np.array([lo_a, hi_a]) / np.pi)
-        return d_eq, d_lo, d_hi, bool(lo_a <= area_px <= hi_a), bool(area_px > hi_a)
-    d_lo, d_hi = predicted_diameter_window_px(fx_px, range_mm, diameters_mm, config)
-    too_big = d_eq > d_hi or extent_px > d_hi + 1
-    size_ok = d_lo <= d_eq <= d_hi and extent_px <= d_hi + 1 and extent_px >= d_lo
-    return d_eq, d_lo, d_hi, bool(size_ok), bool(too_big)
-
-
-def nlog_gate(
-    gray: np.ndarray,
-    labels: np.ndarray,
-    label: int,
-    bbox: tuple[int, int, int, int],
-    member: np.ndarray,
-    peak: float,
-    stats: FrameStats,
-    config: ExtractionConfig,
-) -> np.ndarray | None:
-    """Criterion 2 (B3, B4, Eqs. 17-18): the nLoG response on the active pixels of one
-    component (pixels outside A are zero, §3.1.2), at a scale matched to its size, must
-    reach ``J_peak`` somewhere (Eq. 17); the pixels at or above ``J_t`` (Eq. 18) are the
-    blob. Returns that mask over the component's box (bh, bw), or None when refused.
-
-    gray, labels : (H, W); member : (bh, bw) bool, the component's pixels in its box.
-    """
-    h, w = gray.shape
-    x, y, bw, bh = bbox
-    pad = 2
-    y0, y1 = max(y - pad, 0), min(y + bh + pad, h)
-    x0, x1 = max(x - pad, 0), min(x + bw + pad, w)
-    patch = np.where(labels[y0:y1, x0:x1] == label, gray[y0:y1, x0:x1], 0.0).astype(np.float32)
-    if config.nlog_sigma_px is not None:
-        j = nlog_response(patch, config.nlog_sigma_px, normalise=False)
-        j_peak, j_t = config.nlog_peak_abs, config.nlog_floor_abs
-    else:
-        area = int(member.sum())
-        sigma = max(0.5, np.sqrt(area / np.pi) / np.sqrt(2.0))
-        j = nlog_response(patch, sigma)
-        contrast = peak - stats.background
-        j_peak = config.nlog_peak_rel * contrast  # Eq. 17
-        j_t = config.nlog_floor_rel * contrast  # Eq. 18
-    j_in = j[y - y0 : y - y0 + bh, x - x0 : x - x0 + bw]
-    if float(j_in[member].max()) < j_peak:
-        return None
-    keep = member & (j_in >= j_t)
-    return keep if np.any(keep) else None
-
-
-def shape_gate(n_pixels: int, eccentricity: float, max_eccentricity: float) -> bool:
-    """The shape criterion: a blob of at least ``SHAPE_MIN_PIXELS`` must be no more
-    eccentric than a disc tilted by the largest accepted angle; smaller blobs have no
-    measurable shape and pass."""
-    return n_pixels < SHAPE_MIN_PIXELS or eccentricity <= max_eccentricity
 
 
 def find_candidate_blobs(
@@ -468,30 +380,6 @@ def _gate_params(
         i_peak=float(stats.peak_threshold), i_t=float(stats.raw_threshold),
         q_max=float(config.q_max),
     )  # fmt: skip
-
-
-def penalty_score(
-    blob: Blob, stats: FrameStats, fx: float, diameters_mm: np.ndarray, ecc_max: float
-) -> float:
-    """Penalty score q in [0, 1] (§3.4; the paper does not define it).
-
-    Ours: ``q = 1 - (1 - q_size)(1 - q_shape)(1 - q_int)`` where q_size is the log-ratio of
-    the blob's equivalent diameter to the nearest predicted catalog diameter (0 at a match,
-    1 at a factor 3), q_shape the eccentricity relative to the accepted maximum (squared;
-    0 below ``SHAPE_MIN_PIXELS``, where two pixels side by side already read as a line),
-    and q_int how far the peak falls short of I_peak... above I_t (0 at I_peak and above).
-    """
-    d_eq = 2.0 * np.sqrt(blob.area_px / np.pi)
-    q_size = 0.0
-    if np.isfinite(blob.distance_mm) and blob.distance_mm > 0 and d_eq >= 3.0:
-        pred = fx * diameters_mm / blob.distance_mm
-        q_size = float(np.clip(np.min(np.abs(np.log(d_eq / pred))) / np.log(3.0), 0.0, 1.0))
-    q_shape = 0.0
-    if blob.area_px >= SHAPE_MIN_PIXELS:  # a 1-5 px blob has no measurable shape
-        q_shape = float(np.clip(blob.eccentricity / max(ecc_max, 1e-6), 0.0, 1.0)) ** 2
-    span = max(stats.peak_threshold - stats.raw_threshold, 1e-6)
-    q_int = float(np.clip((stats.peak_threshold - blob.peak_counts) / span, 0.0, 1.0))
-    return 1.0 - (1.0 - q_size) * (1.0 - q_shape) * (1.0 - q_int)
 
 
 def measure_blobs(

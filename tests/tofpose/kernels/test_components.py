@@ -1,5 +1,5 @@
-"""Component table, medians and gates against OpenCV's statistics and the reference gate
-functions of ``tofpose.extraction``."""
+"""Component table, medians and the nLoG against OpenCV (the gates as a whole against
+``tofpose.reference.extraction``: tests/tofpose/reference/test_extraction.py)."""
 
 from __future__ import annotations
 
@@ -11,17 +11,7 @@ from tests.conftest import facing_pose, render
 from tofpose.camera import CameraModel
 from tofpose.catalog import paper_target
 from tofpose.config import ExtractionConfig
-from tofpose.extraction import (
-    Blob,
-    check_frame,
-    find_candidate_blobs,
-    frame_levels,
-    nlog_gate,
-    nlog_response,
-    penalty_score,
-    shape_gate,
-    size_gate,
-)
+from tofpose.extraction import check_frame, find_candidate_blobs, frame_levels
 from tofpose.kernels.components import (
     component_median_ranges,
     component_table,
@@ -30,6 +20,7 @@ from tofpose.kernels.components import (
 )
 from tofpose.kernels.gates import nlog_patch
 from tofpose.kernels.levels import threshold_mask
+from tofpose.reference.extraction import nlog_response
 
 
 def _table(mask, gray):
@@ -117,68 +108,3 @@ def test_nlog_patch_matches_opencv(sigma):
     # Laplacian's differences and the sigma^2 normalisation: compare at 1e-5 of the peak
     np.testing.assert_allclose(nlog_patch(patch, sigma, True), want, rtol=0,
                                atol=1e-5 * np.abs(want).max())  # fmt: skip
-
-
-def _moments(us, vs, w):
-    """Weighted centroid (Eq. 19) and eccentricity in plain NumPy (the reference)."""
-    sw = w.sum()
-    cu, cv = (us * w).sum() / sw, (vs * w).sum() / sw
-    du, dv = us - cu, vs - cv
-    cuu, cvv, cuv = (w * du * du).sum() / sw, (w * dv * dv).sum() / sw, (w * du * dv).sum() / sw
-    l1, l2 = np.linalg.eigvalsh([[cuu, cuv], [cuv, cvv]])[::-1]
-    return np.array([cu, cv]), float(np.sqrt(max(0.0, 1.0 - l2 / l1))) if l1 > 1e-12 else 0.0
-
-
-@pytest.mark.parametrize("distance_mm", [700.0, 1500.0, 3000.0, 8000.0])
-def test_gates_agree_with_the_reference_gate_functions(distance_mm):
-    """Every component gets the verdict, pixels, centroid, eccentricity and penalty that
-    the readable gate functions give (the moments are the paper's Eq. 19 centroid)."""
-    cam, cat, cfg = CameraModel(), paper_target(), ExtractionConfig()
-    frame = render(facing_pose(distance_mm, 4, -6, 12, offset_mm=(40.0, -25.0)), seed=5)
-    g, d = check_frame(cam, frame.gray, frame.distance_mm)
-    stats0 = frame_levels(g, cfg)
-    found = find_candidate_blobs(g, d, cam, cat.diameters_mm, cfg, stats0)
-    stats = found.stats
-    n, labels = cv2.connectedComponents(found.active_mask, connectivity=8)
-    cos_t = np.cos(np.radians(cfg.max_tilt_deg))
-    ecc_max = np.sqrt(1 - cos_t**2)
-    accepted = {b.bbox: b for b in found.accepted}
-    checked = 0
-    for k in range(1, n):
-        rows, cols = np.nonzero(labels == k)
-        x, y = cols.min(), rows.min()
-        bw, bh = cols.max() - x + 1, rows.max() - y + 1
-        if x == 0 or y == 0 or x + bw == g.shape[1] or y + bh == g.shape[0]:
-            continue
-        peak = float(g[rows, cols].max())
-        if peak < stats.peak_threshold:
-            continue
-        rv = d[rows, cols]
-        rho = float(np.median(rv[np.isfinite(rv)]))
-        _, _, _, ok, big = size_gate(len(rows), max(bw, bh), rho, cam.fx, cat.diameters_mm, cfg)
-        bbox = (int(x), int(y), int(bw), int(bh))
-        if big or not ok:
-            assert bbox not in accepted
-            continue
-        member = labels[y : y + bh, x : x + bw] == k
-        keep = nlog_gate(g, labels, k, bbox, member, peak, stats, cfg)
-        if keep is None:
-            assert bbox not in accepted
-            continue
-        kr, kc = np.nonzero(keep)
-        wts = np.maximum(g[y : y + bh, x : x + bw][keep] - stats.background, 1.0).astype(float)
-        c, ecc = _moments((kc + x).astype(float), (kr + y).astype(float), wts)
-        ref = Blob(pixels=(kr + y) * g.shape[1] + kc + x, area_px=len(kr), bbox=bbox,
-                   centroid_uv=c, distance_mm=rho, peak_counts=peak, eccentricity=ecc)  # fmt: skip
-        q = penalty_score(ref, stats, cam.fx, cat.diameters_mm, ecc_max)
-        passes = shape_gate(len(kr), ecc, ecc_max) and q <= cfg.q_max
-        b = accepted.get(bbox)
-        assert (b is not None) == passes
-        if b is None:
-            continue
-        checked += 1
-        np.testing.assert_allclose(b.centroid_uv, c, atol=1e-9)
-        np.testing.assert_array_equal(b.pixels, ref.pixels)
-        assert b.distance_mm == rho and b.eccentricity == pytest.approx(ecc, abs=1e-9)
-        assert b.penalty == pytest.approx(q, abs=1e-9)
-    assert checked == len(found.accepted) >= 2
