@@ -1,6 +1,5 @@
-// Raw frames from /ws/live (binary messages, backend/services/frame_codec.py): parsing,
-// and colour-mapping into RGBA pixels in the browser.
-import { interpolateTurbo } from "d3-scale-chromatic";
+// Raw frames from /ws/live (binary messages, backend/services/frame_codec.py): parsing.
+// Their colour maps are in colormap.ts.
 
 export type RawFrame = {
   frameIndex: number;
@@ -11,9 +10,10 @@ export type RawFrame = {
   distance: Uint16Array; // mm, 0 = invalid
 };
 
-const HEADER_BYTES = 24;
+export const HEADER_BYTES = 24;
 
 export function parseRawFrame(buf: ArrayBuffer): RawFrame {
+  if (buf.byteLength < HEADER_BYTES) throw new Error(`raw frame of ${buf.byteLength} bytes is shorter than its header`);
   const v = new DataView(buf);
   const magic = String.fromCharCode(v.getUint8(0), v.getUint8(1), v.getUint8(2), v.getUint8(3));
   if (magic !== "TOFR" || v.getUint16(4, true) !== 1) throw new Error(`not a raw frame (${magic})`);
@@ -29,75 +29,4 @@ export function parseRawFrame(buf: ArrayBuffer): RawFrame {
     gray: new Uint16Array(buf, HEADER_BYTES, n),
     distance: new Uint16Array(buf, HEADER_BYTES + 2 * n, n),
   };
-}
-
-/** The q-quantile of the values selected by keep, from a subsample (cheap, per frame). */
-function quantile(values: Uint16Array, q: number, keep: (x: number) => boolean): number {
-  const sample: number[] = [];
-  const stride = Math.max(1, Math.floor(values.length / 4000));
-  for (let i = 0; i < values.length; i += stride) if (keep(values[i])) sample.push(values[i]);
-  if (!sample.length) return 0;
-  sample.sort((a, b) => a - b);
-  return sample[Math.min(sample.length - 1, Math.floor(q * sample.length))];
-}
-
-const TURBO: Uint8ClampedArray = (() => {
-  const lut = new Uint8ClampedArray(256 * 3);
-  for (let i = 0; i < 256; i++) {
-    const m = interpolateTurbo(i / 255).match(/\d+/g)!;
-    lut.set([+m[0], +m[1], +m[2]], 3 * i);
-  }
-  return lut;
-})();
-
-export function turboCss(t: number): string {
-  return interpolateTurbo(t);
-}
-
-/** Gray image, gamma 0.5 up to the 99.5th percentile. */
-export function grayPixels(f: RawFrame, out: ImageData): void {
-  const top = Math.max(quantile(f.gray, 0.995, () => true), 1);
-  const d = out.data;
-  for (let i = 0; i < f.gray.length; i++) {
-    const g = Math.min(255, Math.sqrt(f.gray[i] / top) * 255);
-    d[4 * i] = d[4 * i + 1] = d[4 * i + 2] = g;
-    d[4 * i + 3] = 255;
-  }
-}
-
-/** Distance image, turbo between the 2nd and 98th percentile of valid pixels (near =
- * blue), black where invalid; returns the range mapped, in mm. */
-export function distancePixels(f: RawFrame, out: ImageData): [number, number] {
-  const valid = (x: number) => x > 0;
-  const lo = quantile(f.distance, 0.02, valid);
-  const hi = Math.max(quantile(f.distance, 0.98, valid), lo + 1);
-  const d = out.data;
-  for (let i = 0; i < f.distance.length; i++) {
-    const x = f.distance[i];
-    if (x === 0) {
-      d[4 * i] = d[4 * i + 1] = d[4 * i + 2] = 0;
-    } else {
-      const k = 3 * Math.round(255 * Math.min(1, Math.max(0, (x - lo) / (hi - lo))));
-      d[4 * i] = TURBO[k];
-      d[4 * i + 1] = TURBO[k + 1];
-      d[4 * i + 2] = TURBO[k + 2];
-    }
-    d[4 * i + 3] = 255;
-  }
-  return [lo, hi];
-}
-
-/** The active pixel set A (gray >= I_t) as a translucent cyan mask. */
-export function activePixels(f: RawFrame, thresholdCounts: number, out: ImageData): number {
-  const d = out.data;
-  let n = 0;
-  for (let i = 0; i < f.gray.length; i++) {
-    const on = f.gray[i] >= thresholdCounts;
-    if (on) n++;
-    d[4 * i] = 0;
-    d[4 * i + 1] = 230;
-    d[4 * i + 2] = 255;
-    d[4 * i + 3] = on ? 150 : 0;
-  }
-  return n;
 }

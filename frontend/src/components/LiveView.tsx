@@ -5,7 +5,8 @@
 import { useEffect, useRef, useState } from "preact/hooks";
 import type { Pose } from "../api/client";
 import type { Shown } from "../live";
-import { activePixels, distancePixels, grayPixels, turboCss, type RawFrame } from "../rawframe";
+import { activePixels, distancePixels, grayPixels, turboCss } from "../colormap";
+import type { RawFrame } from "../rawframe";
 
 const SCALE = 2; // overlay canvas pixels per image pixel
 
