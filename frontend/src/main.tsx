@@ -1,6 +1,6 @@
 import { render } from "preact";
 import { useEffect, useState } from "preact/hooks";
-import { api, setToken, token } from "./api/client";
+import { api, setToken, token, unwrap } from "./api/client";
 import { CameraPanel } from "./components/CameraPanel";
 import { Campaigns } from "./components/Campaigns";
 import { LiveView } from "./components/LiveView";
@@ -12,6 +12,7 @@ import { ScenePanel } from "./components/ScenePanel";
 import { StatusPanel } from "./components/StatusPanel";
 import { Studies } from "./components/Studies";
 import { TimeSeries } from "./components/TimeSeries";
+import { ErrorContext, errorText } from "./errors";
 import { connectLive, type LiveHandle, type LiveState } from "./live";
 import "./style.css";
 
@@ -42,40 +43,42 @@ function App() {
   };
   const stop = async () => {
     try {
-      await api("POST", "/api/motion/stop");
+      await unwrap(api.POST("/api/motion/stop"));
       setError(null);
     } catch (e) {
-      setError((e as Error).message);
+      setError(errorText(e));
     }
   };
   return (
-    <div class="page">
-      <header>
-        <h1>tofpose</h1>
-        <span class={`badge ${live.connected ? "ok" : "warn"}`} data-testid="link">
-          {live.connected ? "live" : "reconnecting…"}
-        </span>
-        <button class="token" onClick={askToken}>{hasToken ? "change token" : "enter API token"}</button>
-        <button class="stop" data-testid="stop" onClick={stop} title="stop every axis (key: Esc)">STOP <span class="key">Esc</span></button>
-      </header>
-      {error && <p class="error banner" role="alert" data-testid="error">{error}</p>}
-      <main>
-        <LiveView shown={live.shown} onDrawn={(i) => link?.ack(i)} />
-        <div class="side">
-          <PosePanel pose={live.pose} stale={live.stale}>
-            <ReferenceBar onError={setError} onCalibrate={() => setPreset((n) => n + 1)} />
-          </PosePanel>
-          <MotionPanel onError={setError} />
-          <StatusPanel pose={live.pose} onError={setError} />
-          <CameraPanel onError={setError} />
-        </div>
-        <TimeSeries history={live.history} />
-        <ScenePanel onError={setError} />
-        <Campaigns onError={setError} />
-        <NewCampaign onError={setError} calibrationRequest={preset} />
-        <Studies onError={setError} />
-      </main>
-    </div>
+    <ErrorContext.Provider value={setError}>
+      <div class="page">
+        <header>
+          <h1>tofpose</h1>
+          <span class={`badge ${live.connected ? "ok" : "warn"}`} data-testid="link">
+            {live.connected ? "live" : "reconnecting…"}
+          </span>
+          <button class="token" onClick={askToken}>{hasToken ? "change token" : "enter API token"}</button>
+          <button class="stop" data-testid="stop" onClick={stop} title="stop every axis (key: Esc)">STOP <span class="key">Esc</span></button>
+        </header>
+        {error && <p class="error banner" role="alert" data-testid="error">{error}</p>}
+        <main>
+          <LiveView shown={live.shown} onDrawn={(i) => link?.ack(i)} />
+          <div class="side">
+            <PosePanel pose={live.pose} stale={live.stale}>
+              <ReferenceBar onCalibrate={() => setPreset((n) => n + 1)} />
+            </PosePanel>
+            <MotionPanel />
+            <StatusPanel pose={live.pose} />
+            <CameraPanel />
+          </div>
+          <TimeSeries history={live.history} />
+          <ScenePanel />
+          <Campaigns />
+          <NewCampaign calibrationRequest={preset} />
+          <Studies />
+        </main>
+      </div>
+    </ErrorContext.Provider>
   );
 }
 

@@ -1,29 +1,33 @@
 // Camera settings: read, change (token), show what the camera actually applied.
-import { useEffect, useState } from "preact/hooks";
-import { api } from "../api/client";
-import type { components } from "../api/schema";
+import { useState } from "preact/hooks";
+import { api, unwrap, type Schemas } from "../api/client";
+import { reported, useReportError } from "../errors";
+import { usePolling } from "../polling";
 
-type Settings = components["schemas"]["CameraSettingsPublic"];
+type Settings = Schemas["CameraSettingsPublic"];
+type Update = Schemas["CameraSettingsUpdate"];
+type NumberKey = Exclude<keyof Update, "auto_exposure">;
 
-export function CameraPanel({ onError }: { onError: (m: string | null) => void }) {
-  const [s, setS] = useState<Settings | null>(null);
-  const [edit, setEdit] = useState<Record<string, string>>({});
-  useEffect(() => {
-    api<Settings>("GET", "/api/camera/settings").then(setS).catch((e) => onError(e.message));
-  }, []);
+export function CameraPanel() {
+  const report = useReportError();
+  const settings = usePolling(() => unwrap(api.GET("/api/camera/settings")), null);
+  const [edit, setEdit] = useState<Partial<Record<keyof Update, string>>>({});
+  const s = settings.data;
   if (!s) return null;
   const apply = async () => {
-    const body: Record<string, number | boolean> = {};
-    for (const [k, v] of Object.entries(edit)) if (v !== "") body[k] = k === "auto_exposure" ? v === "true" : Number(v);
-    try {
-      setS(await api<Settings>("PUT", "/api/camera/settings", body));
+    const body: Update = {};
+    for (const [k, v] of Object.entries(edit) as [keyof Update, string][]) {
+      if (v === "") continue;
+      if (k === "auto_exposure") body.auto_exposure = v === "true";
+      else body[k as NumberKey] = Number(v);
+    }
+    const applied = await reported(report, () => unwrap(api.PUT("/api/camera/settings", { body })));
+    if (applied) {
+      settings.set(applied);
       setEdit({});
-      onError(null);
-    } catch (e) {
-      onError((e as Error).message);
     }
   };
-  const field = (key: keyof Settings, label: string, unit: string) => (
+  const field = (key: NumberKey, label: string, unit: string) => (
     <tr>
       <th>{label}</th><td>{String(s[key])} {unit}</td>
       <td><input size={7} aria-label={`${label} (${unit})`} data-testid={`cam-${key}`} value={edit[key] ?? ""}

@@ -1,11 +1,13 @@
 // A finished campaign's key statistics and pass/fail per requirement (from its JSON
 // report), a dynamic campaign's latency and rate errors, with the report's plots (its
 // HTML page) below.
-import { useEffect, useState } from "preact/hooks";
-import { api } from "../api/client";
+import { api, unwrap } from "../api/client";
+import { usePolling } from "../polling";
 
 type AxisStats = { n: number; bias: number; std: number; rms: number; max_abs: number;
   predicted_sigma: number; requirement: number; passed: boolean | null };
+// The report's JSON is not described by the OpenAPI schema (its answer is `unknown`):
+// these types are what the server writes (backend/services/reports.py), checked for shape by isReport.
 // The dynamic section (null for a static campaign): the latency pooled over the set-points
 // and, per dynamic set-point (by index), frames in motion and the rate's error.
 type Latency = { delay_s: number; sigma_s: number; n_setpoints: number };
@@ -18,15 +20,25 @@ type Report = { n_frames: number; n_ok: number; success_rate: number; reference:
   overall: { passed: boolean | null; axes: Record<string, AxisStats> }; findings: string[];
   dynamic?: Dynamic | null };
 
+/** Whether an answer has the report's top-level shape (else the page says it is not one). */
+export function isReport(x: unknown): x is Report {
+  const r = x as Partial<Report> | null;
+  return typeof r === "object" && r !== null && typeof r.n_frames === "number" && typeof r.overall?.axes === "object"
+    && Array.isArray(r.findings);
+}
+
+async function loadReport(id: number): Promise<Report> {
+  const data = await unwrap(api.GET("/api/campaigns/{campaign_id}/report.{fmt}", { params: { path: { campaign_id: id, fmt: "json" } } }));
+  if (!isReport(data)) throw new Error(`campaign ${id}: the report is not the JSON report this page reads`);
+  return data;
+}
+
 const fmt = (v: number | null | undefined, d = 3) => (v === null || v === undefined || Number.isNaN(v) ? "-" : v.toFixed(d));
 const pct = (v: number | null | undefined) => (v === null || v === undefined ? "-" : `${(100 * v).toFixed(1)} %`);
 const verdict = (p: boolean | null) => (p === null ? "n/a" : p ? "pass" : "FAIL");
 
-export function CampaignResult({ id, onError }: { id: number; onError: (m: string | null) => void }) {
-  const [rep, setRep] = useState<Report | null>(null);
-  useEffect(() => {
-    api<Report>("GET", `/api/campaigns/${id}/report.json`).then(setRep).catch((e) => onError(e.message));
-  }, [id]);
+export function CampaignResult({ id }: { id: number }) {
+  const rep = usePolling(() => loadReport(id), null, { deps: [id] }).data;
   if (!rep) return <p class="small">loading the report…</p>;
   return (
     <div class="result" data-testid={`result-${id}`}>

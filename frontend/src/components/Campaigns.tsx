@@ -1,33 +1,36 @@
 // Campaigns: status and progress, start / pause / resume / cancel, report downloads, and
 // for a finished one its statistics and pass/fail (CampaignResult).
-import { useEffect, useState } from "preact/hooks";
-import { api, type Campaign } from "../api/client";
+import { useState } from "preact/hooks";
+import { api, unwrap, type Campaign } from "../api/client";
+import { reported, useReportError } from "../errors";
 import { fmtDuration } from "../format";
+import { usePolling } from "../polling";
 import { CampaignResult } from "./CampaignResult";
 
-const ACTIONS: Record<string, string[]> = {
+type Action = "start" | "pause" | "resume" | "cancel";
+const ACTIONS: Partial<Record<Campaign["status"], Action[]>> = {
   draft: ["start", "cancel"], queued: ["pause", "cancel"], running: ["pause", "cancel"],
   paused: ["resume", "cancel"], interrupted: ["resume", "cancel"],
 };
 
-export function Campaigns({ onError }: { onError: (m: string | null) => void }) {
-  const [list, setList] = useState<Campaign[]>([]);
+/** One action's request (each its own path in the schema). */
+function request(action: Action, id: number) {
+  const path = { params: { path: { campaign_id: id } } };
+  switch (action) {
+    case "start": return api.POST("/api/campaigns/{campaign_id}/start", { ...path, body: { queue: true } });
+    case "pause": return api.POST("/api/campaigns/{campaign_id}/pause", path);
+    case "resume": return api.POST("/api/campaigns/{campaign_id}/resume", path);
+    case "cancel": return api.POST("/api/campaigns/{campaign_id}/cancel", path);
+  }
+}
+
+export function Campaigns() {
+  const report = useReportError();
+  const campaigns = usePolling(() => unwrap(api.GET("/api/campaigns")), 1000);
+  const list = campaigns.data ?? [];
   const [open, setOpen] = useState<number | null>(null);
-  const refresh = () => api<Campaign[]>("GET", "/api/campaigns").then(setList).catch((e) => onError(e.message));
-  useEffect(() => {
-    refresh();
-    const t = window.setInterval(refresh, 1000);
-    return () => window.clearInterval(t);
-  }, []);
-  const act = async (c: Campaign, action: string) => {
-    try {
-      const body = action === "start" ? { queue: true } : undefined;
-      await api("POST", `/api/campaigns/${c.id}/${action}`, body);
-      onError(null);
-      refresh();
-    } catch (e) {
-      onError((e as Error).message);
-    }
+  const act = async (c: Campaign, action: Action) => {
+    if ((await reported(report, () => unwrap(request(action, c.id)))) !== undefined) campaigns.refresh();
   };
   return (
     <section class="card">
@@ -64,7 +67,7 @@ export function Campaigns({ onError }: { onError: (m: string | null) => void }) 
           </tbody>
         </table>
       )}
-      {open !== null && <CampaignResult id={open} onError={onError} />}
+      {open !== null && <CampaignResult id={open} />}
     </section>
   );
 }

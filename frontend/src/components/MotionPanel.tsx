@@ -5,11 +5,16 @@
 // axis' encoder position when it arrives (POST /api/motion/jog), every control waits for
 // its answer before it can be used again (a double click sends one move), and the
 // controls are locked while the turntable's status is stale or a campaign owns it.
-import { useEffect, useState } from "preact/hooks";
-import { api, type Motion } from "../api/client";
+import { useState } from "preact/hooks";
+import { api, unwrap, type Motion, type Schemas } from "../api/client";
+import { reported, useReportError } from "../errors";
+import { usePolling } from "../polling";
 import { parseSetpoint } from "../setpoint";
 
-const FIELDS: Record<string, string> = { yaw: "yaw_deg", pitch: "pitch_deg", roll: "roll_deg", rail: "rail_mm" };
+type Move = Schemas["MoveRequest"];
+type Jog = Schemas["JogRequest"];
+// The request field of each axis (the same in a move and a jog).
+const FIELDS: Record<string, keyof Move & keyof Jog> = { yaw: "yaw_deg", pitch: "pitch_deg", roll: "roll_deg", rail: "rail_mm" };
 const STALE_AFTER_MS = 2000;
 
 /** Why the motion controls are locked, or null when they can be used. */
@@ -23,40 +28,27 @@ function lockReason(motion: Motion, updatedAt: number, now: number): string | nu
   return null;
 }
 
-export function MotionPanel({ onError }: { onError: (m: string | null) => void }) {
-  const [motion, setMotion] = useState<Motion | null>(null);
-  const [updatedAt, setUpdatedAt] = useState(0);
-  const [now, setNow] = useState(Date.now());
+export function MotionPanel() {
+  const report = useReportError();
+  // `clock`: the panel re-renders every 500 ms even when no answer comes (a dropped link
+  // locks the controls after 2 s)
+  const polled = usePolling(() => unwrap(api.GET("/api/motion")), 500, { clock: true });
   const [targets, setTargets] = useState<Record<string, string>>({});
   const [fieldErrors, setFieldErrors] = useState<Record<string, string>>({});
   const [pending, setPending] = useState<string | null>(null);
-  const took = (m: Motion) => {
-    setMotion(m);
-    setUpdatedAt(Date.now());
-  };
-  useEffect(() => {
-    const poll = () => api<Motion>("GET", "/api/motion").then(took).catch((e) => onError(String(e.message)));
-    poll();
-    const t = window.setInterval(() => {
-      setNow(Date.now());
-      poll();
-    }, 500);
-    return () => window.clearInterval(t);
-  }, []);
-  const send = async (key: string, path: string, body: Record<string, unknown>) => {
+  const send = async (key: string, command: () => Promise<Motion>) => {
     if (pending !== null) return; // one command at a time: a double click sends one
     setPending(key);
     try {
-      took(await api<Motion>("POST", path, body));
-      onError(null);
-    } catch (e) {
-      onError((e as Error).message);
+      const m = await reported(report, command);
+      if (m) polled.set(m);
     } finally {
       setPending(null);
     }
   };
+  const motion = polled.data;
   if (!motion) return <section class="card"><h2>Turntable</h2><p>loading</p></section>;
-  const locked = lockReason(motion, updatedAt, now);
+  const locked = lockReason(motion, polled.updatedAt, polled.now);
   const goTo = (axis: Motion["axes"][number]) => {
     const parsed = parseSetpoint(targets[axis.name] ?? "", axis);
     if ("error" in parsed) {
@@ -64,7 +56,9 @@ export function MotionPanel({ onError }: { onError: (m: string | null) => void }
       return;
     }
     setFieldErrors({ ...fieldErrors, [axis.name]: "" });
-    send(`go-${axis.name}`, "/api/motion/move", { [FIELDS[axis.name]]: parsed.value });
+    const body: Move = {};
+    body[FIELDS[axis.name]] = parsed.value;
+    send(`go-${axis.name}`, () => unwrap(api.POST("/api/motion/move", { body })));
   };
   return (
     <section class="card">
@@ -100,7 +94,11 @@ export function MotionPanel({ onError }: { onError: (m: string | null) => void }
                     <button key={s} data-testid={`jog-${a.name}-${s < 0 ? "minus" : "plus"}`}
                       disabled={!!locked || pending !== null || motion.busy}
                       title={`move ${a.name} by ${s * step} ${a.unit} from where it is now`}
-                      onClick={() => send(`jog-${a.name}`, "/api/motion/jog", { [FIELDS[a.name]]: s * step })}>
+                      onClick={() => {
+                        const body: Jog = {};
+                        body[FIELDS[a.name]] = s * step;
+                        send(`jog-${a.name}`, () => unwrap(api.POST("/api/motion/jog", { body })));
+                      }}>
                       {s < 0 ? "−" : "+"}{a.unit === "mm" ? "100 mm" : "1°"}
                     </button>
                   ))}

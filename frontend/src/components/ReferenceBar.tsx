@@ -2,40 +2,32 @@
 // (uncalibrated: the bench's own mount and placement errors are part of the error shown)
 // or a stored calibration, selectable here; from the nominal one, a calibration campaign
 // is one click away (it fills the new-campaign form).
-import { useEffect, useRef, useState } from "preact/hooks";
-import { api } from "../api/client";
-import type { components } from "../api/schema";
+import { useEffect, useState } from "preact/hooks";
+import { api, unwrap, type Schemas } from "../api/client";
+import { reported, useReportError } from "../errors";
+import { usePolling } from "../polling";
 
-type Reference = components["schemas"]["ReferencePublic"];
-type Calibration = components["schemas"]["CalibrationPublic"];
+type Calibration = Schemas["CalibrationPublic"];
 
-export function ReferenceBar({ onCalibrate, onError }: { onCalibrate: () => void; onError: (m: string | null) => void }) {
-  const [ref, setRef] = useState<Reference | null>(null);
+export function ReferenceBar({ onCalibrate }: { onCalibrate: () => void }) {
+  const report = useReportError();
+  const reference = usePolling(() => unwrap(api.GET("/api/reference")), 3000);
   const [cals, setCals] = useState<Calibration[]>([]);
   const [busy, setBusy] = useState(false);
-  const changes = useRef(0); // a poll that started before the last change is out of date
-  const poll = () => {
-    const asked = changes.current;
-    api<Reference>("GET", "/api/reference").then((r) => {
-      if (asked !== changes.current) return;
-      setRef(r);
-      if (r.n_calibrations !== cals.length) api<Calibration[]>("GET", "/api/calibrations").then(setCals).catch(() => {});
-    }).catch((e) => onError(String(e.message)));
-  };
+  const ref = reference.data;
+  // the list of calibrations, fetched again whenever the reference counts another number
   useEffect(() => {
-    poll();
-    const t = window.setInterval(poll, 3000);
-    return () => window.clearInterval(t);
-  }, [cals.length]);
+    if (ref && ref.n_calibrations !== cals.length)
+      unwrap(api.GET("/api/calibrations")).then(setCals).catch(() => {});
+  }, [ref]);
   if (!ref) return null;
   const select = async (value: string) => {
     setBusy(true);
-    changes.current += 1;
+    reference.invalidate(); // a poll sent before this change would show the old reference
     try {
-      setRef(await api<Reference>("PUT", "/api/reference", { calibration_id: value === "" ? null : Number(value) }));
-      onError(null);
-    } catch (e) {
-      onError((e as Error).message);
+      const changed = await reported(report, () =>
+        unwrap(api.PUT("/api/reference", { body: { calibration_id: value === "" ? null : Number(value) } })));
+      if (changed) reference.set(changed);
     } finally {
       setBusy(false);
     }

@@ -1,30 +1,27 @@
 // The viser 3-D scene (served by the backend on a port of its own), embedded; pausing it
 // goes through the API so that the scene's own checkbox and this one agree.
-import { useEffect, useState } from "preact/hooks";
-import { api } from "../api/client";
-import type { components } from "../api/schema";
-
-type Scene = components["schemas"]["ScenePublic"];
+import { api, unwrap } from "../api/client";
+import { errorText, useReportError } from "../errors";
+import { usePolling } from "../polling";
 
 export function sceneUrl(port: number): string {
   return `${location.protocol}//${location.hostname}:${port}/`;
 }
 
-export function ScenePanel({ onError }: { onError: (m: string | null) => void }) {
-  const [scene, setScene] = useState<Scene | null>(null);
-  useEffect(() => {
-    api<Scene>("GET", "/api/scene").then(setScene).catch((e) => onError(e.message));
-  }, []);
+export function ScenePanel() {
+  const report = useReportError();
+  const polled = usePolling(() => unwrap(api.GET("/api/scene")), null);
+  const scene = polled.data;
   if (!scene) return null;
   const pause = async (paused: boolean) => {
     const before = scene;
-    setScene({ ...scene, paused }); // the box follows the click; the server confirms
+    polled.set({ ...scene, paused }); // the box follows the click; the server confirms
     try {
-      setScene(await api<Scene>("PUT", "/api/scene", { paused }));
-      onError(null);
+      polled.set(await unwrap(api.PUT("/api/scene", { body: { paused } })));
+      report(null);
     } catch (e) {
-      setScene(before);
-      onError((e as Error).message);
+      polled.set(before);
+      report(errorText(e));
     }
   };
   return (

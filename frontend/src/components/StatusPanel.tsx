@@ -1,11 +1,9 @@
 // Device status (state, model, firmware, address and link, delivered frame rate, last error),
 // whether the pipeline's compiled kernels are ready, and its per-stage timings of the latest frame.
-import { useEffect, useState } from "preact/hooks";
-import { api, type Pose } from "../api/client";
-import type { components } from "../api/schema";
+import { api, unwrap, type Pose, type Schemas } from "../api/client";
+import { usePolling } from "../polling";
 
-type Devices = components["schemas"]["DevicesPublic"];
-type Device = components["schemas"]["DeviceStatePublic"];
+type Device = Schemas["DeviceStatePublic"];
 
 // "ESPROS TOFcam-660 3.59 at 127.0.0.2 (link down)": what the driver says of its device.
 function describe(d: Device): string {
@@ -16,14 +14,8 @@ function describe(d: Device): string {
   return parts.join(" ");
 }
 
-export function StatusPanel({ pose, onError }: { pose: Pose | null; onError: (m: string | null) => void }) {
-  const [dev, setDev] = useState<Devices | null>(null);
-  useEffect(() => {
-    const poll = () => api<Devices>("GET", "/api/devices").then(setDev).catch((e) => onError(e.message));
-    poll();
-    const t = window.setInterval(poll, 1000);
-    return () => window.clearInterval(t);
-  }, []);
+export function StatusPanel({ pose }: { pose: Pose | null }) {
+  const dev = usePolling(() => unwrap(api.GET("/api/devices")), 1000).data;
   const timings = Object.entries(pose?.timings_ms ?? {});
   return (
     <section class="card">

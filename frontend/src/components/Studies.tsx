@@ -1,47 +1,35 @@
 // Accuracy studies (Monte-Carlo over the envelope, on Dask; docs/scaleout.md): submit a
 // spec, follow progress and ETA, cancel, open the report.
-import { useEffect, useState } from "preact/hooks";
-import { api, type Study, type StudyCreate } from "../api/client";
+import { useState } from "preact/hooks";
+import { api, unwrap, type Study, type StudyCreate } from "../api/client";
+import { reported, useReportError } from "../errors";
 import { fmtDuration } from "../format";
+import { usePolling } from "../polling";
 
 const EXAMPLE: StudyCreate = {
   name: "envelope", seed: 1, frames_per_cell: 8, chunk_frames: 4,
   grid: { range_m: [3, 6], attitude_deg: [20], physics: ["ideal", "lens blur"] },
 };
 
-export function Studies({ onError }: { onError: (m: string | null) => void }) {
-  const [list, setList] = useState<Study[]>([]);
+export function Studies() {
+  const report = useReportError();
+  const studies = usePolling(() => unwrap(api.GET("/api/studies")), 1000);
+  const list = studies.data ?? [];
   const [text, setText] = useState(JSON.stringify(EXAMPLE, null, 2));
-  const refresh = () => api<Study[]>("GET", "/api/studies").then(setList).catch((e) => onError(e.message));
-  useEffect(() => {
-    refresh();
-    const t = window.setInterval(refresh, 1000);
-    return () => window.clearInterval(t);
-  }, []);
   const submit = async () => {
     let body: StudyCreate;
     try {
+      // what a person typed: the server validates it (a 422 names the field)
       body = JSON.parse(text) as StudyCreate;
     } catch (e) {
-      onError(`study spec: not JSON (${(e as Error).message})`);
+      report(`study spec: not JSON (${(e as Error).message})`);
       return;
     }
-    try {
-      await api<Study>("POST", "/api/studies", body);
-      onError(null);
-      refresh();
-    } catch (e) {
-      onError((e as Error).message);
-    }
+    if (await reported(report, () => unwrap(api.POST("/api/studies", { body })))) studies.refresh();
   };
   const cancel = async (s: Study) => {
-    try {
-      await api<Study>("POST", `/api/studies/${s.id}/cancel`);
-      onError(null);
-      refresh();
-    } catch (e) {
-      onError((e as Error).message);
-    }
+    const path = { study_id: s.id };
+    if (await reported(report, () => unwrap(api.POST("/api/studies/{study_id}/cancel", { params: { path } })))) studies.refresh();
   };
   return (
     <section class="card">
