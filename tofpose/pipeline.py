@@ -81,6 +81,30 @@ class MatchedReflector:
     range_sigma_mm: float = float("nan")
 
 
+@dataclass(frozen=True)
+class FrameDiagnostics:
+    """What extraction and persistence made of a frame (``PoseResult``'s properties of
+    the same names read it).
+
+    n_candidates : blobs persistence kept; frames_used : frames it combined (1: this
+    one alone); motion : it cut its history; rejected : components of the active set
+    that are not candidates, with the gate that refused each
+    (``tofpose.extraction.REJECT_REASONS``); active_threshold_counts : I_t as applied
+    (after the N_max cap): the active pixel set A (§3.1.1) is exactly ``gray >=
+    active_threshold_counts``.
+    """
+
+    n_candidates: int = 0
+    frames_used: int = 1
+    motion: bool = False
+    rejected: tuple[RejectedBlob, ...] = ()
+    active_threshold_counts: float = float("nan")
+
+
+#: the diagnostics of a frame refused before extraction
+NO_DIAGNOSTICS = FrameDiagnostics()
+
+
 @dataclass
 class PoseResult:
     """Output of one frame.
@@ -95,11 +119,9 @@ class PoseResult:
     matched : list of MatchedReflector; unmatched : list of (u, v, distance_mm) blobs.
     residual_mm : RMS of matched residuals; iterations : refinement iterations.
     covariance : (6, 6) over (rotation vector rad, translation mm), or None.
-    timings_ms : per stage; n_candidates; frames_used (persistence); motion detected.
-    rejected : components of the active set that are not candidates, with the gate that
-        refused each (``tofpose.extraction.REJECT_REASONS``), for display.
-    active_threshold_counts : I_t as applied (after the N_max cap): the active pixel set
-        A (§3.1.1) is exactly ``gray >= active_threshold_counts``.
+    timings_ms : per stage; diagnostics : what extraction and persistence did
+        (``FrameDiagnostics``; its fields read as properties: n_candidates, frames_used,
+        motion, rejected, active_threshold_counts).
     R_svd, t_svd_mm : (3, 3), (3,) the weighted SVD pose (Eqs. 40-50) of the matched
         reflectors with the fit's weights, before refinement (``solve.Solution.T_svd``):
         the paper's §5.1 answer on the same measurements, to see what refinement did.
@@ -118,11 +140,7 @@ class PoseResult:
     iterations: int = 0
     covariance: np.ndarray | None = None
     timings_ms: dict[str, float] = field(default_factory=dict)
-    n_candidates: int = 0
-    frames_used: int = 1
-    motion: bool = False
-    rejected: list[RejectedBlob] = field(default_factory=list)
-    active_threshold_counts: float = float("nan")
+    diagnostics: FrameDiagnostics = field(default_factory=lambda: NO_DIAGNOSTICS)
     mode: Literal["acquisition", "tracking"] = "acquisition"
     R_svd: np.ndarray | None = None
     t_svd_mm: np.ndarray | None = None
@@ -130,6 +148,26 @@ class PoseResult:
     @property
     def n_matched(self) -> int:
         return len(self.matched)
+
+    @property
+    def n_candidates(self) -> int:
+        return self.diagnostics.n_candidates
+
+    @property
+    def frames_used(self) -> int:
+        return self.diagnostics.frames_used
+
+    @property
+    def motion(self) -> bool:
+        return self.diagnostics.motion
+
+    @property
+    def rejected(self) -> tuple[RejectedBlob, ...]:
+        return self.diagnostics.rejected
+
+    @property
+    def active_threshold_counts(self) -> float:
+        return self.diagnostics.active_threshold_counts
 
 
 def variance_factor(chi2: float, n_reflectors: int) -> float:
@@ -255,9 +293,9 @@ class PosePipeline:
         stats = frame_levels(g, cfg.extraction)
         timer.lap("levels")
 
-        def fail(reason: str, **kw) -> PoseResult:
+        def fail(reason: str, unmatched=(), diagnostics=NO_DIAGNOSTICS) -> PoseResult:
             return PoseResult(ok=False, reason=reason, time_s=time_s, timings_ms=timer.total(),
-                              **kw)  # fmt: skip
+                              unmatched=list(unmatched), diagnostics=diagnostics)  # fmt: skip
 
         if stats.saturated_fraction > 0.5:
             self.reset()
@@ -276,31 +314,29 @@ class PosePipeline:
         meas, unmatched, n_kept, pinfo = self._measure(blobs, g, d, stats.background,
                                                        stats.dark_level)  # fmt: skip
         timer.lap("measurement")  # §3.4, Eqs. 7-9 and the sigmas
-        extra = {
-            "frames_used": pinfo.frames_used,
-            "motion": pinfo.motion,
-            "rejected": list(found.rejected),
-            "active_threshold_counts": stats.raw_threshold,
-            "n_candidates": n_kept,
-        }
+        diag = FrameDiagnostics(
+            n_candidates=n_kept, frames_used=pinfo.frames_used, motion=pinfo.motion,
+            rejected=tuple(found.rejected), active_threshold_counts=stats.raw_threshold,
+        )  # fmt: skip
         if len(meas.range_mm) < cfg.matching.min_matches:
             return fail(
                 f"found {len(meas.range_mm)} candidate reflector(s) with a valid range "
                 f"(of {n_kept} blobs), need {cfg.matching.min_matches}"
                 + self._size_hint(found.wrong_size),
                 unmatched=unmatched + meas.as_unmatched(),
-                **extra,
+                diagnostics=diag,
             )
         m = self._match(meas)
         timer.lap("matching")
         if not m.ok:
             return fail(f"matching failed: {m.reason}",
-                        unmatched=unmatched + meas.as_unmatched(), **extra)  # fmt: skip
+                        unmatched=unmatched + meas.as_unmatched(), diagnostics=diag)  # fmt: skip
         solved = self._solve_with_fallback(meas, m, active)
         timer.lap("refine")
         if isinstance(solved, Rejected):
-            return fail(solved.reason, unmatched=unmatched + meas.as_unmatched(), **extra)
-        result = self._pose_result(solved, meas, unmatched, time_s, timer, extra)
+            return fail(solved.reason, unmatched=unmatched + meas.as_unmatched(),
+                        diagnostics=diag)  # fmt: skip
+        result = self._pose_result(solved, meas, unmatched, time_s, timer, diag)
         self._track = TrackState(R=result.R, t_mm=result.t_mm,
                                  threshold_counts=stats.raw_threshold,
                                  background_counts=stats.background,
@@ -409,14 +445,11 @@ class PosePipeline:
     def _tracked_result(self, solved: Solution, meas: Measurements, info, time_s, timer,
                         track: TrackState) -> PoseResult:  # fmt: skip
         """The ok result of a tracked frame; the track moves on to its pose."""
-        extra = {
-            "frames_used": info.frames_used,
-            "motion": info.motion,
-            "rejected": [],
-            "active_threshold_counts": track.threshold_counts,
-            "n_candidates": len(meas.range_mm),
-        }
-        result = self._pose_result(solved, meas, [], time_s, timer, extra, mode="tracking")
+        diag = FrameDiagnostics(
+            n_candidates=len(meas.range_mm), frames_used=info.frames_used, motion=info.motion,
+            active_threshold_counts=track.threshold_counts,
+        )  # fmt: skip
+        result = self._pose_result(solved, meas, [], time_s, timer, diag, mode="tracking")
         self._track = TrackState(
             R=result.R, t_mm=result.t_mm, threshold_counts=track.threshold_counts,
             background_counts=track.background_counts, dark_counts=track.dark_counts,
@@ -425,7 +458,8 @@ class PosePipeline:
         return result
 
     def _pose_result(self, solved: Solution, meas: Measurements, unmatched, time_s, timer,
-                     extra, mode: str = "acquisition") -> PoseResult:  # fmt: skip
+                     diagnostics: FrameDiagnostics,
+                     mode: str = "acquisition") -> PoseResult:  # fmt: skip
         """The ok result of a ``Solution`` found from ``meas``; ``unmatched`` lists the
         blobs without a range, the unmatched candidates are added."""
         obs, T, ml, iterations = (
@@ -444,7 +478,12 @@ class PosePipeline:
             area[k_idx].tolist(), sig_px[k_idx].tolist(), obs.sigma_range_mm.tolist(),
             strict=True,
         )  # fmt: skip
-        matched = [MatchedReflector(*row) for row in per_reflector]
+        matched = [
+            MatchedReflector(catalog_id=i, centroid_uv=c, point_mm=y, residual_mm=r,
+                             distance_mm=d, area_px=a, centroid_sigma_px=sp,
+                             range_sigma_mm=sr)  # fmt: skip
+            for i, c, y, r, d, a, sp, sr in per_reflector
+        ]
         used = set(k_idx.tolist())
         unmatched += [(uv[k, 0], uv[k, 1], rho[k]) for k in range(len(rho)) if k not in used]
         return PoseResult(
@@ -461,7 +500,7 @@ class PosePipeline:
             iterations=iterations,
             covariance=self._reported_covariance(ml, len(matched), t),
             timings_ms=timer.total(),
-            **extra,
+            diagnostics=diagnostics,
             mode=mode,
             R_svd=None if solved.T_svd is None else solved.T_svd.R,
             t_svd_mm=None if solved.T_svd is None else solved.T_svd.t_mm,
