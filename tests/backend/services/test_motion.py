@@ -1,0 +1,208 @@
+"""The motion service in front of the simulated turntable: soft limits before the driver,
+who holds the table (a campaign or a person), and the device's health."""
+
+from __future__ import annotations
+
+import re
+import time
+
+import pytest
+
+from backend.drivers.sim import SimMotion, make_sim_world
+from backend.services.motion import (
+    MotionAbsentError,
+    MotionConflictError,
+    MotionDeviceError,
+    MotionLimitError,
+    MotionService,
+)
+from tests.backend.conftest import SpyMotion, wait_for
+
+SINE = {"axis": "yaw", "kind": "sine", "amplitude_deg": 2.0, "period_s": 2.0, "cycles": 1}
+
+
+@pytest.fixture
+def spy() -> SpyMotion:
+    return SpyMotion(SimMotion(make_sim_world(time_scale=20.0)))
+
+
+@pytest.fixture
+def motion(spy) -> MotionService:
+    return MotionService(spy)
+
+
+def _settled(motion: MotionService) -> None:
+    wait_for(lambda: (st := motion.status()).settled and not st.busy, 10.0, "the table to settle")
+
+
+def test_a_setpoint_outside_the_soft_limits_names_the_axis_and_the_limit(motion, spy):
+    yaw = motion.axes["yaw"]
+    with pytest.raises(MotionLimitError) as info:
+        motion.move({"yaw": yaw.max_pos + 1.0, "rail": 11000.0})
+    (problem,) = info.value.problems
+    assert problem.field == ""  # the set-point as a whole, not one request field
+    assert problem.message == (f"yaw set-point {yaw.max_pos + 1.0:.15g} deg is outside the soft "
+                               f"limits [{yaw.min_pos:.15g}, {yaw.max_pos:.15g}] deg")  # fmt: skip
+    with pytest.raises(MotionLimitError, match="this motion system has no tilt axis"):
+        motion.move({"tilt": 1.0})
+    with pytest.raises(MotionLimitError, match="pitch set-point must be a finite number"):
+        motion.move({"pitch": float("nan")})
+    assert spy.calls == []  # nothing reached the driver
+
+
+def test_a_jog_past_the_soft_limit_is_refused_from_where_the_axis_is(motion, spy):
+    motion.move({"yaw": motion.axes["yaw"].max_pos - 0.5})
+    _settled(motion)
+    spy.calls.clear()
+    with pytest.raises(MotionLimitError, match="yaw set-point .* is outside the soft limits"):
+        motion.jog("yaw", 1.0)
+    motion.jog("yaw", -1.0)
+    ((name, target),) = spy.calls
+    assert name == "move_to" and target["yaw"] == pytest.approx(motion.axes["yaw"].max_pos - 1.5,
+                                                                abs=1e-3)  # fmt: skip
+
+
+def test_a_campaign_that_owns_the_table_keeps_everyone_else_off(motion, spy):
+    motion.claim(7, "grid-1")
+    assert motion.owner == (7, "grid-1")
+    refused = re.escape(
+        "campaign 7 ('grid-1') owns the motion system while it runs: pause or "
+        "cancel it first (STOP always works)"
+    )
+    for attempt in (lambda: motion.move({"yaw": 1.0}), lambda: motion.jog("yaw", 1.0),
+                    lambda: motion.start_profile("yaw", SINE)):  # fmt: skip
+        with pytest.raises(MotionConflictError, match=refused):
+            attempt()
+    with pytest.raises(MotionConflictError, match="campaign 8 does not own the motion system"):
+        motion.move({"yaw": 1.0}, by=8)
+    with pytest.raises(MotionConflictError, match="campaign 7 .* owns the motion system"):
+        motion.claim(8, "other")
+    assert spy.calls == []
+    motion.move({"yaw": 1.0}, by=7)  # the owner moves
+    assert spy.calls == [("move_to", {"yaw": 1.0})]
+    motion.release(8)  # not the owner: nothing changes
+    assert motion.owner == (7, "grid-1")
+    motion.release(7)
+    assert motion.owner is None
+    _settled(motion)
+    motion.move({"yaw": 2.0})  # free again
+
+
+def test_stop_is_always_accepted_and_only_a_persons_stop_is_told(motion, spy):
+    pressed = []
+    motion.on_stop(lambda: pressed.append(motion.owner))
+    motion.claim(3, "long")
+    motion.stop(by=3)  # the campaign stops its own profile: not STOP pressed
+    assert pressed == []
+    motion.stop()  # STOP while a campaign owns the table
+    assert pressed == [(3, "long")]
+    assert [name for name, _ in spy.calls] == ["stop", "stop"]
+
+
+def test_a_stop_the_driver_does_not_confirm_still_pauses_and_degrades(motion, spy):
+    pressed = []
+    motion.on_stop(lambda: pressed.append(True))
+
+    def broken() -> None:
+        raise ConnectionError("controller unplugged")
+
+    spy.stop = broken
+    with pytest.raises(MotionDeviceError) as info:
+        motion.stop()
+    assert str(info.value) == "controller unplugged"
+    assert info.value.detail == "the motion system did not confirm the stop: controller unplugged"
+    assert pressed == [True]
+    assert motion.health.state == "degraded"
+    assert motion.health.last_error == "stop failed: controller unplugged"
+
+
+def test_health_follows_what_the_driver_answers(motion, spy):
+    inner = spy.status
+
+    def dead():
+        raise TimeoutError("no answer from the controller")
+
+    spy.status = dead
+    with pytest.raises(MotionDeviceError, match="^no answer from the controller$"):
+        motion.status()
+    assert (motion.health.state, motion.health.last_error) == (
+        "degraded",
+        "motion status failed: no answer from the controller",
+    )
+    with pytest.raises(MotionDeviceError) as info:
+        motion.jog("yaw", 1.0)
+    assert info.value.detail == ("cannot read the yaw position to jog from: no answer from the "
+                                 "controller")  # fmt: skip
+    assert motion.health.error_count == 2
+    spy.status = inner
+    motion.status()
+    assert motion.health.state == "ok" and motion.health.error_count == 2
+
+    def refuse(setpoints):
+        raise RuntimeError("interlock open")
+
+    spy.move_to = refuse
+    with pytest.raises(MotionDeviceError) as info:
+        motion.move({"yaw": 1.0})
+    assert info.value.detail == "the motion system refused the move: interlock open"
+    assert motion.health.last_error == "move failed: interlock open"
+
+
+def test_a_jog_while_the_table_moves_is_refused(motion):
+    motion.move({"yaw": 20.0})
+    with pytest.raises(MotionConflictError, match="still moving: jog again once it has stopped"):
+        motion.jog("yaw", 1.0)
+
+
+def test_profiles_are_checked_against_the_axis_and_its_limits(motion, spy):
+    with pytest.raises(MotionLimitError) as info:
+        motion.start_profile("rail", {**SINE, "axis": "rail"})
+    assert [(p.field, p.message) for p in info.value.problems] == [
+        ("axis", "profiles run on rotary axes; rail is in mm")
+    ]
+    with pytest.raises(MotionLimitError) as info:
+        motion.start_profile("yaw", {**SINE, "amplitude_deg": 500.0})
+    assert {p.field for p in info.value.problems} >= {"amplitude_deg"}
+    assert spy.calls == []
+    profile = motion.start_profile("yaw", SINE)
+    assert [name for name, _ in spy.calls] == ["run_profile"]
+    assert profile.start_deg == pytest.approx(0.0, abs=1e-2)
+    with pytest.raises(MotionConflictError, match="a sine profile is running on yaw"):
+        motion.move({"yaw": 1.0})  # a person's move waits for STOP or the end
+    motion.move({"pitch": 1.0})  # another axis moves
+
+
+def test_a_controller_without_profile_mode_is_a_conflict_naming_it(spy):
+    class NoProfiles:
+        name, axes = "plain", spy.axes
+
+        def status(self):
+            return spy.status()
+
+    motion = MotionService(NoProfiles())
+    assert motion.profile_unavailable == "it has no profile mode"
+    with pytest.raises(MotionConflictError, match="^the 'plain' motion system cannot run motion "
+                                                  "profiles$"):  # fmt: skip
+        motion.start_profile("yaw", SINE)
+
+
+def test_without_a_motion_system_every_command_says_so():
+    motion = MotionService(None)
+    assert not motion.present and motion.axes == {} and motion.owner is None
+    for attempt in (lambda: motion.move({"yaw": 1.0}), motion.stop, motion.status,
+                    lambda: motion.jog("yaw", 1.0)):  # fmt: skip
+        with pytest.raises(MotionAbsentError, match="no motion system configured"):
+            attempt()
+    motion.claim(1, "static")  # a campaign without set-points still owns the queue's slot
+    assert motion.owner == (1, "static")
+
+
+def test_the_owner_is_read_consistently_while_campaigns_come_and_go(motion):
+    seen = set()
+    deadline = time.monotonic() + 0.2
+    while time.monotonic() < deadline:
+        motion.claim(1, "a")
+        seen.add(motion.owner)
+        motion.release(1)
+        seen.add(motion.owner)
+    assert seen == {(1, "a"), None}
