@@ -86,7 +86,8 @@ class Persistence:
         self, blobs: list[Blob], gray: np.ndarray, distance: np.ndarray,
         camera: CameraModel, background: float, dark: float = float("nan"),
     ) -> tuple[list[Blob], np.ndarray, np.ndarray, PersistenceInfo]:  # fmt: skip
-        """``apply`` followed by ``extraction.measure_blobs`` on the kept blobs, in one
+        """The §3.4 combination (``tofpose.reference.persistence.History``) followed by
+        ``extraction.measure_blobs`` on the kept blobs, in one
         compiled call (``kernels.measure.persist_and_measure``): the kept blobs with
         their centroids (Eq. 19) and ranges (Eq. 20) measured on the combined frames,
         the combined frames (I-bar, D-bar) and what was combined. ``background``,

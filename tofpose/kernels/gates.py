@@ -3,8 +3,9 @@
 Per component (in the order given): the size window, criterion 2 (nLoG, Eqs. 11-14,
 17-18) on its active pixels, the moment centroid (Eq. 19) and shape of what the nLoG
 keeps, and the penalty score q (§3.4). The arithmetic is that of the reference
-functions in ``tofpose.extraction`` (``size_gate``, ``nlog_gate``, ``shape_gate``,
-``penalty_score``), which stay the readable specification and are tested against this.
+functions in ``tofpose.reference.extraction`` (``size_gate``, ``nlog_gate``,
+``shape_gate``, ``penalty_score``, the chain in ``find_candidates``), the readable
+specification this is tested against (``tests/tofpose/reference/test_extraction.py``).
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ from tofpose.kernels.components import (
 
 #: outcome codes of ``gate_components``
 ACCEPTED, OVERSIZE, SIZE, NLOG, SHAPE, PENALTY = 0, 1, 2, 3, 4, 5
-#: fewest pixels for which a blob's eccentricity means anything (extraction.SHAPE_MIN_PIXELS)
+#: fewest pixels for which a blob's eccentricity means anything
+#: (``reference.extraction.SHAPE_MIN_PIXELS``)
 SHAPE_MIN_PIXELS = 6
 #: how far (px) the window of ``window_moments`` reaches beyond a component's box: the
 #: active set cuts a blurred blob at ~1-2 PSF sigmas, and 3 px more hold the tails of a
@@ -66,7 +68,7 @@ def _band(k, n):
 @jit
 def nlog_patch(patch, sigma_px, normalise):
     """-(Laplacian of the Gaussian-smoothed patch), zero outside it (Eqs. 11-14): the
-    separable Gaussian then the 4-neighbour Laplacian, as ``extraction.nlog_response``
+    separable Gaussian then the 4-neighbour Laplacian, as ``reference.extraction.nlog_response``
     does with OpenCV. patch (h, w) float32; returns (h, w) float32."""
     k = gaussian_kernel_1d(sigma_px)
     h, w = patch.shape
@@ -244,7 +246,7 @@ def gate_components(gray, runs, run_order, run_starts, bbox, area, peak, rho, wh
         a = area[k]
         extent = max(bw, bh)
         d_eq = 2.0 * np.sqrt(a / np.pi)
-        # size window (extraction.size_gate)
+        # size window (reference.extraction.size_gate)
         if h_min >= 0:
             hi_a = h_max if h_max >= 0 else np.inf
             d_lo = 2.0 * np.sqrt(h_min / np.pi)
@@ -274,7 +276,7 @@ def gate_components(gray, runs, run_order, run_starts, bbox, area, peak, rho, wh
             status[j] = SIZE
             pieces.append(np.empty(0, np.int64))
             continue
-        # criterion 2 (extraction.nlog_gate)
+        # criterion 2 (reference.extraction.nlog_gate)
         y0, y1 = max(y - 2, 0), min(y + bh + 2, h_img)
         x0, x1 = max(x - 2, 0), min(x + bw + 2, w_img)
         # the component's pixels, run by run (raster order)
@@ -327,7 +329,7 @@ def gate_components(gray, runs, run_order, run_starts, bbox, area, peak, rho, wh
         if not (n_keep < SHAPE_MIN_PIXELS or ecc <= ecc_max):
             status[j] = SHAPE
             continue
-        # penalty score (extraction.penalty_score)
+        # penalty score (reference.extraction.penalty_score)
         d_k = 2.0 * np.sqrt(n_keep / np.pi)
         q_size = 0.0
         r = rho[k]

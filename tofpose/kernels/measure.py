@@ -1,6 +1,6 @@
 """§3.4 in one call: combine the frame with the consistent persistence history and
 measure the kept blobs' centroids (Eq. 19) and ranges (Eq. 20) on the combined frames
-(the arithmetic of ``Persistence.apply`` followed by ``extraction.measure_blobs``);
+(``Persistence.measure``'s arithmetic);
 and with the range correction, back-projection (Eqs. 7-8), sigmas and weights (Eq. 21)
 of the measured blobs, the measurement stage that acquisition and tracking share."""
 
@@ -138,8 +138,9 @@ def measure_and_back_project(
     with a range (the "ranged" ones): the calibrated range correction (``correct_range``,
     ``range_correction.corrected_ranges``), the measurement sigmas
     (``sigmas.blob_sigmas``), the points y = rho e(uv) (Eq. 8) and the weights of Eq. 21,
-    ``1 / (sigma_range^2 + (rho sigma_px / fx)^2)``. The arithmetic of
-    ``Persistence.measure``, ``PosePipeline._correct_ranges`` and ``_back_project``.
+    ``1 / (sigma_range^2 + (rho sigma_px / fx)^2)``: ``Persistence.measure``, then
+    ``RangeCorrection.error_mm``'s median over the blob, ``reference.sigmas``, Eq. 8 and
+    Eq. 21 (as ``tests/tofpose/test_pipeline.py`` checks).
 
     The arguments are ``persist_and_measure``'s (the camera as a
     ``records.CameraRecord``), ``split`` (n,) bool (blobs cut out of a merged

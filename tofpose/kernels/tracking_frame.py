@@ -1,14 +1,14 @@
 """A whole tracking-mode frame in one compiled call: window search, persistence,
 measurement, sigmas and the §5 fit, chained from the stage kernels so that the frame
 pays the Python overhead of one call instead of ~25 (``PosePipeline`` tracks with it;
-its stage-by-stage form, with the same arithmetic, is the reference the tests hold it
-to).
+each stage kernel it chains is tested against ``tofpose.reference``, and its poses
+against the reference fit of their own measurements).
 
-The steps and their order are those of ``PosePipeline._process_tracking`` with
-``Persistence.apply``, ``extraction.measure_blobs``, the range correction,
-``uncertainty.measurement_sigmas`` and ``PoseSolver.solve``, whose compiled §5
-(``kernels.solve.solve_pairs``) it calls itself (its completion adds nothing when every
-blob is matched to its window). The persistence history is read, not changed: the
+The steps and their order: the windows' search, the measurement of acquisition
+(``kernels.measure.measure_and_back_project``: persistence, centroids, ranges, the
+range correction, sigmas, Eq. 8) and the compiled §5 of ``PoseSolver.solve``
+(``kernels.solve.solve_pairs``; its completion adds nothing when every blob is matched
+to its window). The persistence history is read, not changed: the
 caller commits the frame to it only when tracking succeeds.
 """
 
