@@ -20,6 +20,7 @@ from tofpose.config import PersistenceConfig
 from tofpose.extraction import Blob, pixel_lists
 from tofpose.kernels.measure import persist_and_measure
 from tofpose.kernels.persistence import pixel_mask
+from tofpose.kernels.records import PersistenceHistory
 
 
 @dataclass
@@ -96,12 +97,10 @@ class Persistence:
         by 2 px (I-bar) and at the kept blobs' pixels (D-bar), and are reused by the next
         frame (``scratch``)."""
         cur, flat, starts, bbox = blob_arrays(blobs)
-        cfg = self.config
         n_used, motion, keep, mean_gray, med_dist, uv, rho, mix = persist_and_measure(
-            gray, distance, flat, starts, bbox, cur, *self.history(gray, distance),
-            float(cfg.motion_tolerance_px), int(cfg.c_min), float(background), float(dark),
-            camera.fx,
-            camera.fy, camera.cx, camera.cy, camera.dist_array,
+            gray, distance, flat, starts, bbox, cur, self.history(gray, distance),
+            float(background), float(dark), camera.fx, camera.fy, camera.cx, camera.cy,
+            camera.dist_array,
             np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3)),
             *self.scratch(gray.shape),
         )  # fmt: skip
@@ -111,20 +110,22 @@ class Persistence:
         return kept, mean_gray, med_dist, PersistenceInfo(1 + n_used, motion,
                                                           len(blobs) - len(kept))  # fmt: skip
 
-    def history(self, gray: np.ndarray, distance: np.ndarray) -> tuple:
-        """The history newest first for ``kernels.tracking_frame.track_frame``: tuples of
-        gray, distance, mask and centroids, each padded to K - 1 entries (at least one)
-        with this frame's arrays (never read), and the number of real entries."""
+    def history(self, gray: np.ndarray, distance: np.ndarray) -> PersistenceHistory:
+        """The history newest first with the settings, as the kernels take it (a
+        ``kernels.records.PersistenceHistory``): tuples of gray, distance, mask and
+        centroids, each padded to K - 1 entries (at least one) with this frame's arrays
+        (never read), and the number of real entries."""
         k = max(self.config.k_frames - 1, 1)
         entries = list(reversed(self._history))
         pad = k - len(entries)
-        return (
-            tuple([e.gray for e in entries] + [gray] * pad),
-            tuple([e.distance for e in entries] + [distance] * pad),
-            tuple([e.mask for e in entries] + [np.zeros(gray.size, bool)] * pad),
-            tuple([e.centroids for e in entries] + [np.zeros((0, 2))] * pad),
-            len(entries),
-        )
+        return PersistenceHistory(
+            gray=tuple([e.gray for e in entries] + [gray] * pad),
+            distance=tuple([e.distance for e in entries] + [distance] * pad),
+            mask=tuple([e.mask for e in entries] + [np.zeros(gray.size, bool)] * pad),
+            centroids=tuple([e.centroids for e in entries] + [np.zeros((0, 2))] * pad),
+            count=len(entries), tol_px=float(self.config.motion_tolerance_px),
+            c_min=int(self.config.c_min),
+        )  # fmt: skip
 
     def commit(self, centroids: np.ndarray, pixels: np.ndarray, gray: np.ndarray,
                distance: np.ndarray, n_used: int, motion: bool) -> None:  # fmt: skip

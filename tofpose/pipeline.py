@@ -372,14 +372,13 @@ class PosePipeline:
         weights of Eq. 21. Returns the ``Measurements`` of the kept blobs with a range,
         (u, v, range) of the kept ones without, how many were kept, and what persistence
         combined."""
-        cfg, cam, persistence = self.config, self.camera, self._persistence
+        cam, persistence = self.camera, self._persistence
         cur, flat, starts, bbox = blob_arrays(blobs)
         split = np.array([b.source == "split" for b in blobs], bool)
-        pc = cfg.persistence
         (n_used, motion, keep, uv, rho, ranged, rho_r, sp, sr, y, w,
          mix) = measure_and_back_project(
-            g, d, flat, starts, bbox, cur, split, *persistence.history(g, d),
-            float(pc.motion_tolerance_px), int(pc.c_min), float(background), float(dark),
+            g, d, flat, starts, bbox, cur, split, persistence.history(g, d),
+            float(background), float(dark),
             self._camera_record, *persistence.scratch(g.shape), self._correction_kernel_args,
             self._sigma_constants,
         )  # fmt: skip

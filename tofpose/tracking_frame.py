@@ -60,11 +60,9 @@ class CompiledTracker:
         self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
         self._diameters = np.ascontiguousarray(catalog.diameters_mm, dtype=float)
         self._dist = np.ascontiguousarray(camera.dist_array)
-        pc = persistence.config
         # the arguments of ``track_frame`` that do not change from frame to frame, as the
         # kernels' records (``kernels.records``), built where the acquisition path builds them
-        self._camera_args = (float(pc.motion_tolerance_px), int(pc.c_min), camera_record(camera),
-                             catalog_record(catalog))  # fmt: skip
+        self._camera_args = (camera_record(camera), catalog_record(catalog))
         self._fit_args = (
             config.correct_perspective_bias, float(config.mixed_pixel_radius_px),
             correction_kernel_arguments(correction),
@@ -95,15 +93,13 @@ class CompiledTracker:
         )  # fmt: skip
         if len(cat_idx) < cfg.min_matches:
             return None
-        hist_g, hist_d, hist_m, hist_c, n_hist = self._persistence.history(g, d)
         (code, n_used, motion, cent, flat, starts, uv, rho, sp, sr, y, w, uv_obs,
          e_obs, y_obs, R, t, its, cov, chi2, norms, sr_fit, sb_fit, offset,
          offset_sigma) = track_frame(
             g, d, bounds, centres, diameters, cat_idx, np.float32(track.threshold_counts),
-            float(track.background_counts), float(track.dark_counts), hist_g, hist_d, hist_m,
-            hist_c, n_hist,
-            *self._camera_args, *self._fit_args, self._offset_prior(track, cat_idx),
-            *self._persistence.scratch(g.shape),
+            float(track.background_counts), float(track.dark_counts),
+            self._persistence.history(g, d), *self._camera_args, *self._fit_args,
+            self._offset_prior(track, cat_idx), *self._persistence.scratch(g.shape),
         )  # fmt: skip
         if code != TRACKED:
             return None

@@ -45,13 +45,12 @@ def pixel_list_subset(flat, starts, idx):
 
 @jit
 def persist_and_measure(
-    gray, distance, flat, starts, bbox, centroids, hist_gray, hist_dist, hist_mask,
-    hist_cent, n_hist, tol_px, c_min, background, dark, fx, fy, cx, cy, dist, pixel_bearings,
-    mean_buf, med_buf,
+    gray, distance, flat, starts, bbox, centroids, history, background, dark, fx, fy, cx,
+    cy, dist, pixel_bearings, mean_buf, med_buf,
 ):  # fmt: skip
     """The frame's blobs (pixels ``flat[starts[j]:starts[j + 1]]``, boxes (n, 4) (x, y,
-    w, h), single-frame centroids (n, 2), NaN allowed) combined with the history (newest
-    first as tuples, the first ``n_hist`` real: ``Persistence.history``) and measured.
+    w, h), single-frame centroids (n, 2), NaN allowed) combined with the history (a
+    ``records.PersistenceHistory``: ``Persistence.history``) and measured.
 
     background : the frame's level, counts (the centroids' level where a blob's own
     surround cannot be read); dark : its no-return level (``mixed_pixels``).
@@ -76,9 +75,9 @@ def persist_and_measure(
     h, w = gray.shape
     n = starts.shape[0] - 1
     n_used, motion = 0, False
-    for f in range(n_hist):
-        if consistent(centroids, hist_cent[f], tol_px) and ranges_consistent(
-            distance, hist_dist[f], flat, starts, RANGE_TEST_Z
+    for f in range(history.count):
+        if consistent(centroids, history.centroids[f], history.tol_px) and ranges_consistent(
+            distance, history.distance[f], flat, starts, RANGE_TEST_Z
         ):  # fmt: skip
             n_used += 1
         else:
@@ -90,12 +89,12 @@ def persist_and_measure(
     med_dist = distance
     if frames > 1 and n > 0:
         # D-bar at every blob's pixels (only the kept ones' are read) and the counter
-        counts = medians_and_counts_at((distance,) + hist_dist, hist_mask, n_used, flat,
-                                       med_buf)  # fmt: skip
+        counts = medians_and_counts_at((distance,) + history.distance, history.mask, n_used,
+                                       flat, med_buf)  # fmt: skip
         med_dist = med_buf
-        if frames >= c_min:
-            keep = blob_count_medians(counts, starts, frames + 1) >= c_min
-        mean_gray = mean_in_boxes(gray, hist_gray, n_used, bbox, mean_buf)
+        if frames >= history.c_min:
+            keep = blob_count_medians(counts, starts, frames + 1) >= history.c_min
+        mean_gray = mean_in_boxes(gray, history.gray, n_used, bbox, mean_buf)
     # the kept blobs as their own pixel lists
     kept = np.flatnonzero(keep)
     k_flat, k_starts = pixel_list_subset(flat, starts, kept)
@@ -130,9 +129,8 @@ def persist_and_measure(
 
 @jit
 def measure_and_back_project(
-    gray, distance, flat, starts, bbox, centroids, split, hist_gray, hist_dist, hist_mask,
-    hist_cent, n_hist, tol_px, c_min, background, dark, camera, mean_buf, med_buf,
-    correction, sigmas,
+    gray, distance, flat, starts, bbox, centroids, split, history, background, dark, camera,
+    mean_buf, med_buf, correction, sigmas,
 ):  # fmt: skip
     """§3.4 and Eqs. 7-8 in one call: ``persist_and_measure``, then of the kept blobs
     with a range (the "ranged" ones): the calibrated range correction (``correct_range``,
@@ -156,9 +154,8 @@ def measure_and_back_project(
     """
     fx, fy, cx, cy, dist = camera.fx, camera.fy, camera.cx, camera.cy, camera.dist
     n_used, motion, keep, mean_gray, med_dist, uv, rho, mix = persist_and_measure(
-        gray, distance, flat, starts, bbox, centroids, hist_gray, hist_dist, hist_mask,
-        hist_cent, n_hist, tol_px, c_min, background, dark, fx, fy, cx, cy, dist,
-        camera.pixel_bearings, mean_buf, med_buf,
+        gray, distance, flat, starts, bbox, centroids, history, background, dark, fx, fy,
+        cx, cy, dist, camera.pixel_bearings, mean_buf, med_buf,
     )  # fmt: skip
     ranged = np.flatnonzero(keep & np.isfinite(rho))
     n_ranged = ranged.shape[0]

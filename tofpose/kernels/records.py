@@ -54,6 +54,23 @@ class SigmaConstants(NamedTuple):
     uncal_mm: float
 
 
+class PersistenceHistory(NamedTuple):
+    """The persistence history and its settings as the kernels read them
+    (``Persistence.history``): ``gray``, ``distance`` ((H, W) float32 each), ``mask``
+    ((H * W,) bool each) and ``centroids`` ((m, 2) float64 each) are tuples of one length
+    (K - 1, at least 1), newest first, of which the first ``count`` are real frames (the
+    rest pad with the current frame's arrays and are never read); ``tol_px`` and
+    ``c_min`` are ``PersistenceConfig``'s motion tolerance and C_min."""
+
+    gray: tuple
+    distance: tuple
+    mask: tuple
+    centroids: tuple
+    count: int
+    tol_px: float
+    c_min: int
+
+
 class RangeCorrectionRecord(NamedTuple):
     """A camera's calibrated range correction as ``kernels.range_correction
     .corrected_ranges`` takes it: ``apply`` (False: none), its ``model`` (4,),

@@ -28,9 +28,8 @@ TRACKED, LOST, SHARED, NOT_PERSISTENT, NO_RANGE, OUTLIER = 0, 1, 2, 3, 4, 5
 @jit
 def track_frame(
     gray, distance, bounds, centres, diameters, cat_idx, threshold, background, dark,
-    hist_gray, hist_dist, hist_mask, hist_cent, n_hist, tol_px, c_min, camera, catalog,
-    correct_perspective, mixing_radius_px, correction, sigmas, fit, offset_prior, mean_buf,
-    med_buf,
+    history, camera, catalog, correct_perspective, mixing_radius_px, correction, sigmas, fit,
+    offset_prior, mean_buf, med_buf,
 ):  # fmt: skip
     """One tracking frame (module docstring).
 
@@ -38,9 +37,8 @@ def track_frame(
     diameters (n,), cat_idx (n,) : the windows (``tracking.predict_windows``);
     threshold, background, dark : the last acquisition's I_t, background and no-return
     level, counts;
-    hist_* : the persistence history newest first as tuples of equal length (gray,
-    distance (H, W) float32, mask (H * W,) bool, centroids (m, 2)), of which the first
-    ``n_hist`` are real; tol_px, c_min : ``PersistenceConfig``; camera, catalog : a
+    history : the persistence history and its settings (``records.PersistenceHistory``,
+    ``Persistence.history``); camera, catalog : a
     ``records.CameraRecord`` and ``records.CatalogRecord``; correct_perspective,
     mixing_radius_px : ``solve.solve_pairs``'s; correction : the calibrated range
     correction (``records.RangeCorrectionRecord``); sigmas : the ``uncertainty``
@@ -95,9 +93,8 @@ def track_frame(
         # correction, Eqs. 7-8 with the sigmas and Eq. 21's weights
         n_used, motion, keep, uv, _, ranged, rho, sp, sr, y, wts, mix = (
             measure_and_back_project(
-                gray, distance, flat, starts, bbox, cent, np.zeros(n, np.bool_), hist_gray,
-                hist_dist, hist_mask, hist_cent, n_hist, tol_px, c_min, background, dark,
-                camera, mean_buf, med_buf, correction, sigmas,
+                gray, distance, flat, starts, bbox, cent, np.zeros(n, np.bool_), history,
+                background, dark, camera, mean_buf, med_buf, correction, sigmas,
             )
         )  # fmt: skip
         if not keep.all():
