@@ -51,6 +51,7 @@ from backend.services.batch_queue import BatchQueue
 from backend.services.campaigns import CampaignService
 from backend.services.hub import LiveHub
 from backend.services.kernel_warmup import KernelWarmup
+from backend.services.motion import MotionService
 from backend.services.reprocessing import ReprocessService
 from backend.services.store import find_catalog, load_device_settings
 from backend.services.studies import StudyService
@@ -120,8 +121,7 @@ def _start_scene(state: AppState) -> None:
         return
     from backend.services.scene import LiveScene
 
-    motion = state.devices.motion
-    rail = motion.axes.get("rail") if motion is not None else None
+    rail = state.motion.axes.get("rail")
     try:
         state.scene = LiveScene(
             state.hub, state.acquisition, host=state.settings.host,
@@ -158,8 +158,7 @@ def _soft_limits(app: FastAPI) -> dict[str, tuple[float, float]] | None:
     state = getattr(app.state, "tofpose", None)
     if state is None:
         return None
-    motion = state.devices.motion
-    axes = motion.axes.values() if motion is not None else ()
+    axes = state.motion.axes.values()
     return {AXIS_FIELDS[a.name]: (a.min_pos, a.max_pos) for a in axes if a.name in AXIS_FIELDS}
 
 
@@ -202,8 +201,9 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             kernels=kernels,
             state_config=_filter_config(settings),
         )  # fmt: skip
+        motion_service = MotionService(devs.motion)
         campaigns = CampaignService(
-            sessions, acq, hub, devs.motion, recordings_dir=settings.data_dir / "campaigns",
+            sessions, acq, hub, motion_service, recordings_dir=settings.data_dir / "campaigns",
             lab_geometry=devs.lab_geometry,
         )  # fmt: skip
         interrupted = campaigns.recover()
@@ -218,7 +218,7 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
                                          settings.dask_scheduler or None, settings.study_workers,
                                          jobs=batch_jobs)  # fmt: skip
         app.state.tofpose = AppState(settings, token, engine, sessions, devs, hub, acq, campaigns,
-                                     studies, reprocessings)  # fmt: skip
+                                     studies, reprocessings, motion_service)  # fmt: skip
         # the pipeline's compiled kernels (tofpose.warmup): in the background while frames
         # already stream (backend/services/kernel_warmup.py), or before the first frame
         if settings.kernels_in_background:

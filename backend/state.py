@@ -11,10 +11,11 @@ from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
 from backend.drivers.factory import Devices
-from backend.services.acquisition import AcquisitionService, DeviceHealth
+from backend.services.acquisition import AcquisitionService
 from backend.services.campaigns import CampaignService
 from backend.services.hub import LiveHub
 from backend.services.imaging import ImageRenderer
+from backend.services.motion import MotionService
 from backend.services.reprocessing import ReprocessService
 from backend.services.studies import StudyService
 from backend.settings import Settings
@@ -32,8 +33,8 @@ class AppState:
     campaigns: CampaignService
     studies: StudyService
     reprocessings: ReprocessService
+    motion: MotionService  # soft limits, ownership and health in front of devices.motion
     renderer: ImageRenderer = field(default_factory=ImageRenderer)
-    motion_health: DeviceHealth = field(default_factory=lambda: DeviceHealth(state="ok"))
     started_monotonic: float = field(default_factory=time.monotonic)
     scene: Any = None  # backend.services.scene.LiveScene when the 3-D scene runs
     scene_reason: str = ""  # why it does not run

@@ -11,8 +11,9 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
 
 from backend.auth import token_matches
-from backend.db.models import CampaignRow
-from backend.drivers.base import MotionDriver
+from backend.services.campaign_repository import CampaignNotFoundError
+from backend.services.campaign_states import CampaignState
+from backend.services.motion import MotionService
 from backend.state import AppState
 
 bearer_scheme = HTTPBearer(
@@ -72,32 +73,32 @@ def require_read(state: StateDep, creds: CredentialsDep) -> None:
         require_token(state, creds)
 
 
-def require_motion(state: StateDep) -> MotionDriver:
-    if state.devices.motion is None:
+def require_motion(state: StateDep) -> MotionService:
+    """The motion service, when a motion system is configured (else 503)."""
+    if not state.motion.present:
         raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, "no motion system configured")
-    return state.devices.motion
+    return state.motion
 
 
 WriteAuth = Depends(require_token)
 ReadAuth = Depends(require_read)
-MotionDep = Annotated[MotionDriver, Depends(require_motion)]
+MotionDep = Annotated[MotionService, Depends(require_motion)]
 
 
-def finished_recording(
-    session: Session, state: AppState, campaign_id: int, missing_status: int = 404
-) -> Path:
+def finished_recording(state: AppState, campaign_id: int, missing_status: int = 404) -> Path:
     """Campaign ``campaign_id``'s HDF5 recording: 404 for no such campaign,
     ``missing_status`` for one without a recording (404 where the recording is the
     resource asked for, a download; 409 where the campaign is, and its state does not
     allow the request), 409 while it is being written."""
-    row = session.get(CampaignRow, campaign_id)
-    if row is None:
-        raise HTTPException(404, f"no campaign with id {campaign_id}")
+    try:
+        campaign = state.campaigns.repository.get(campaign_id)
+    except CampaignNotFoundError as exc:
+        raise HTTPException(404, str(exc)) from exc
     path = state.campaigns.recording_path(campaign_id)
-    if not row.record_raw or not path.exists():
+    if not campaign.record_raw or not path.exists():
         raise HTTPException(missing_status, f"campaign {campaign_id} has no raw recording"
-                            + ("" if row.record_raw else " (record_raw was off)"))  # fmt: skip
-    if row.status == "running":
+                            + ("" if campaign.record_raw else " (record_raw was off)"))  # fmt: skip
+    if campaign.status is CampaignState.RUNNING:
         raise HTTPException(409, f"campaign {campaign_id} is running and writing its "
                                  "recording: pause it or wait until it is done")  # fmt: skip
     return path

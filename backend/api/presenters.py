@@ -17,6 +17,8 @@ from backend.api.schemas import (
     CalibrationPublic,
     CameraSettingsPublic,
     CampaignPublic,
+    CampaignStatesPublic,
+    CampaignTransitionPublic,
     DeviceStatePublic,
     FoxglovePublic,
     MatchedPublic,
@@ -33,10 +35,13 @@ from backend.api.schemas import (
     TransformPublic,
     TruthPublic,
 )
-from backend.db.models import POSE_FIELDS, CalibrationRow, CampaignRow, MeasurementRow
+from backend.db.models import POSE_FIELDS, CalibrationRow, MeasurementRow
 from backend.drivers.base import CameraSettings
 from backend.services.acquisition import LiveSample
+from backend.services.campaign_repository import CampaignView
+from backend.services.campaign_states import FINISHED, CampaignState, transition_table
 from backend.services.kernel_warmup import COMPILING_REASON
+from backend.services.motion import MotionDeviceError
 from backend.state import AppState
 from tofpose.extraction import REJECT_REASONS
 from tofpose.geometry import (
@@ -63,9 +68,9 @@ def camera_state(state: AppState) -> DeviceStatePublic:
 
 
 def motion_state(state: AppState) -> DeviceStatePublic:
-    if state.devices.motion is None:
+    if not state.motion.present:
         return DeviceStatePublic(driver="none", state="absent")
-    return _device_state(state.devices.motion, state.motion_health)
+    return _device_state(state.motion.driver, state.motion.health)
 
 
 def pipeline_state(state: AppState) -> PipelineStatePublic:
@@ -83,23 +88,21 @@ def pipeline_state(state: AppState) -> PipelineStatePublic:
 def motion_public(state: AppState) -> MotionPublic:
     """Axes with soft limits and the encoder read-back; a failing status read degrades
     the motion state instead of failing the request."""
-    motion = state.devices.motion
-    if motion is None:
+    motion = state.motion
+    if not motion.present:
         return MotionPublic(driver="none", state="absent")
     axes = [
         AxisPublic(name=a.name, unit=a.unit, min_pos=a.min_pos, max_pos=a.max_pos,
                    max_rate_per_s=a.max_rate, max_accel_per_s2=a.max_accel)
         for a in motion.axes.values()
     ]  # fmt: skip
-    owner = state.campaigns.owner
-    owned = {"owner_campaign_id": owner[0] if owner else None,
-             "owner_campaign_name": owner[1] if owner else None}  # fmt: skip
+    owner = motion.owner
+    owned = {"owner_campaign_id": owner.campaign_id if owner else None,
+             "owner_campaign_name": owner.name if owner else None}  # fmt: skip
     try:
         st = motion.status()
-    except Exception as exc:
-        state.motion_health.record_failure(f"motion status failed: {exc}")
+    except MotionDeviceError:
         return MotionPublic(**motion_state(state).model_dump(), axes=axes, **owned)
-    state.motion_health.record_ok()
     p = st.profile
     profile = None if p is None else ProfilePublic(
         axis=p.axis, kind=p.kind, elapsed_s=p.elapsed_s, remaining_s=p.remaining_s,
@@ -231,30 +234,39 @@ def _truth(
 
 
 def campaign_public(
-    row: CampaignRow,
+    c: CampaignView,
     progress: dict | None,
     estimated_duration_s: float,
     *,
     with_setpoints: bool = False,
 ) -> CampaignPublic:
-    n_done = sum(1 for sp in row.setpoints if sp.status == "done")
     return CampaignPublic(
-        id=row.id, name=row.name, status=row.status, status_reason=row.status_reason,
-        catalog=row.catalog_name, frames_per_point=row.frames_per_point,
-        settle_s=row.settle_s, lock_timeout_s=row.lock_timeout_s,
-        requirements=Requirements(**row.requirements), generator=row.generator,
-        camera=row.camera_settings, record_raw=row.record_raw, notes=row.notes,
-        created_at=_utc(row.created_at),
-        scheduled_at=_utc(row.scheduled_at), started_at=_utc(row.started_at),
-        finished_at=_utc(row.finished_at), n_setpoints=len(row.setpoints), n_done=n_done,
+        id=c.id, name=c.name, status=c.status, status_reason=c.status_reason,
+        catalog=c.catalog_name, frames_per_point=c.frames_per_point,
+        settle_s=c.settle_s, lock_timeout_s=c.lock_timeout_s,
+        requirements=Requirements(**c.requirements), generator=c.generator,
+        camera=c.camera_settings, record_raw=c.record_raw, notes=c.notes,
+        created_at=_utc(c.created_at),
+        scheduled_at=_utc(c.scheduled_at), started_at=_utc(c.started_at),
+        finished_at=_utc(c.finished_at), n_setpoints=len(c.setpoints), n_done=c.n_done,
         estimated_duration_s=estimated_duration_s,
         progress=ProgressPublic(**progress) if progress else None,
         setpoints=[
             SetPointPublic(index=sp.index, yaw_deg=sp.yaw_deg, pitch_deg=sp.pitch_deg,
                            roll_deg=sp.roll_deg, rail_mm=sp.rail_mm, profile=sp.profile,
                            status=sp.status)
-            for sp in row.setpoints
+            for sp in c.setpoints
         ] if with_setpoints else None,
+    )  # fmt: skip
+
+
+def campaign_states_public() -> CampaignStatesPublic:
+    """The campaign state machine (``backend.services.campaign_states``)."""
+    return CampaignStatesPublic(
+        states=list(CampaignState),
+        finished=[s for s in CampaignState if s in FINISHED],
+        transitions=[CampaignTransitionPublic(from_state=a, command=c, to_state=b)
+                     for a, c, b in transition_table()],
     )  # fmt: skip
 
 

@@ -16,6 +16,8 @@ from pydantic import (
 )
 from pydantic.json_schema import SkipJsonSchema
 
+from backend.services.campaign_states import CampaignCommand, CampaignState
+
 
 class StrictBody(BaseModel):
     """Request bodies: unknown fields, NaN/inf and values of the wrong JSON type are errors,
@@ -642,7 +644,7 @@ class CampaignStart(StrictBody):
 class ProgressPublic(BaseModel):
     campaign_id: int
     name: str
-    status: str
+    status: CampaignState
     setpoint_index: int = Field(description="0-based index of the set-point in progress")
     n_setpoints: int
     n_done: int
@@ -668,9 +670,7 @@ class SetPointPublic(BaseModel):
 class CampaignPublic(BaseModel):
     id: int
     name: str
-    status: Literal[
-        "draft", "queued", "running", "paused", "interrupted", "done", "failed", "cancelled"
-    ]
+    status: CampaignState
     status_reason: str
     catalog: str
     frames_per_point: int
@@ -690,6 +690,25 @@ class CampaignPublic(BaseModel):
     estimated_duration_s: float
     progress: ProgressPublic | None = None
     setpoints: list[SetPointPublic] | None = None
+
+
+class CampaignTransitionPublic(BaseModel):
+    """``command`` is accepted in ``from_state`` and leads to ``to_state``."""
+
+    from_state: CampaignState
+    command: CampaignCommand
+    to_state: CampaignState
+
+
+class CampaignStatesPublic(BaseModel):
+    """The campaign state machine (docs/campaigns.md, "States"): what a person's commands
+    do in each state. A command not listed for a state answers 409. The scheduler and
+    the runner move a campaign on their own: queued -> running -> done, failed, paused,
+    cancelled or interrupted."""
+
+    states: list[CampaignState]
+    finished: list[CampaignState] = Field(description="states nothing leads out of")
+    transitions: list[CampaignTransitionPublic]
 
 
 class MeasurementPublic(BaseModel):

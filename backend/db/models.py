@@ -53,16 +53,14 @@ class CatalogRow(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 
-CAMPAIGN_STATES = (
-    "draft", "queued", "running", "paused", "interrupted", "done", "failed", "cancelled",
-)  # fmt: skip
 POSE_FIELDS = ("x_mm", "y_mm", "z_mm", "pitch_deg", "yaw_deg", "roll_deg")
 
 
 class CampaignRow(Base):
     """A turntable test campaign: a set-point sequence measured N frames per point.
 
-    status : one of ``CAMPAIGN_STATES`` (docs/campaigns.md has the state diagram).
+    status : a ``backend.services.campaign_states.CampaignState`` (docs/campaigns.md has
+        the state diagram; that module has the transition table).
     settle_s : wait after the turntable reports settled before frames count (device time).
     requirements : per-axis accuracy requirements, e.g. {"x_mm": 6.0, ..., "roll_deg": 0.15}.
     generator : the generator request the set-points came from, or None for explicit ones.

@@ -12,7 +12,7 @@ reference ("calibrated").
 from __future__ import annotations
 
 import numpy as np
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from backend.db.models import CalibrationRow, MeasurementRow, SetPointRow
@@ -83,6 +83,19 @@ def calibrate_from_campaign(
     session.add(row)
     commit_unique(session, f"a calibration named {name!r}")
     return row
+
+
+def get_calibration(session: Session, calibration_id: int) -> CalibrationRow | None:
+    return session.get(CalibrationRow, calibration_id)
+
+
+def stored_calibrations(session: Session) -> list[CalibrationRow]:
+    """Stored calibrations, newest first."""
+    return list(session.scalars(select(CalibrationRow).order_by(CalibrationRow.id.desc())))
+
+
+def count_calibrations(session: Session) -> int:
+    return session.scalar(select(func.count()).select_from(CalibrationRow))
 
 
 def transform(matrix: list[list[float]]) -> RigidTransform:

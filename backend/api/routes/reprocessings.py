@@ -12,7 +12,6 @@ from fastapi.responses import FileResponse
 from backend.api.contract import errors
 from backend.api.deps import (
     ReadAuth,
-    SessionDep,
     StateDep,
     WriteAuth,
     finished_recording,
@@ -34,14 +33,14 @@ FileName = Literal["poses.csv", "baseline.csv", "compare.csv", "compare.json", "
 @router.post("/campaigns/{campaign_id}/reprocess", status_code=status.HTTP_201_CREATED,
              dependencies=[WriteAuth], responses=errors(404, 409))  # fmt: skip
 def create_reprocessing(
-    campaign_id: IdParam, body: ReprocessCreate, state: StateDep, session: SessionDep
+    campaign_id: IdParam, body: ReprocessCreate, state: StateDep
 ) -> ReprocessPublic:
     """Queue a re-processing of the campaign's recording with ``camera`` (and, as the
     baseline, with the camera it was recorded with). 404 without the campaign, 409 when it
     has no recording (it ran with ``record_raw`` off) or is writing it, 422 naming
     ``camera`` when it is not a camera JSON or does not fit the recording's frames;
     nothing is stored then."""
-    path = finished_recording(session, state, campaign_id, missing_status=409)
+    path = finished_recording(state, campaign_id, missing_status=409)
     try:
         job = state.reprocessings.submit(campaign_id, path, body.camera,
                                          tracking=body.tracking, filter_state=body.filter)

@@ -80,6 +80,28 @@ export interface paths {
         patch?: never;
         trace?: never;
     };
+    "/api/campaigns/states": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * Get Campaign States
+         * @description The campaign state machine: every state, the finished ones, and each command
+         *     (``POST /api/campaigns/{id}/{command}``) with the states it is accepted in and the
+         *     state it leads to; any other command answers 409 (docs/campaigns.md, "States").
+         */
+        get: operations["getCampaignStates"];
+        put?: never;
+        post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
     "/api/campaigns/{campaign_id}": {
         parameters: {
             query?: never;
@@ -1060,6 +1082,12 @@ export interface components {
             modulation_frequency_mhz?: number | null;
         };
         /**
+         * CampaignCommand
+         * @description What a person asks of a campaign (``POST /api/campaigns/{id}/{command}``).
+         * @enum {string}
+         */
+        CampaignCommand: "start" | "pause" | "resume" | "cancel";
+        /**
          * CampaignCreate
          * @description A campaign: explicit ``setpoints`` or a ``generator`` (exactly one of them).
          */
@@ -1159,11 +1187,7 @@ export interface components {
             settle_s: number;
             /** Started At */
             started_at: string | null;
-            /**
-             * Status
-             * @enum {string}
-             */
-            status: "draft" | "queued" | "running" | "paused" | "interrupted" | "done" | "failed" | "cancelled";
+            status: components["schemas"]["CampaignState"];
             /** Status Reason */
             status_reason: string;
         };
@@ -1182,6 +1206,39 @@ export interface components {
              * @default false
              */
             queue: boolean;
+        };
+        /**
+         * CampaignState
+         * @description Where a campaign is in its life (stored as this text in ``campaigns.status``).
+         * @enum {string}
+         */
+        CampaignState: "draft" | "queued" | "running" | "paused" | "interrupted" | "done" | "failed" | "cancelled";
+        /**
+         * CampaignStatesPublic
+         * @description The campaign state machine (docs/campaigns.md, "States"): what a person's commands
+         *     do in each state. A command not listed for a state answers 409. The scheduler and
+         *     the runner move a campaign on their own: queued -> running -> done, failed, paused,
+         *     cancelled or interrupted.
+         */
+        CampaignStatesPublic: {
+            /**
+             * Finished
+             * @description states nothing leads out of
+             */
+            finished: components["schemas"]["CampaignState"][];
+            /** States */
+            states: components["schemas"]["CampaignState"][];
+            /** Transitions */
+            transitions: components["schemas"]["CampaignTransitionPublic"][];
+        };
+        /**
+         * CampaignTransitionPublic
+         * @description ``command`` is accepted in ``from_state`` and leads to ``to_state``.
+         */
+        CampaignTransitionPublic: {
+            command: components["schemas"]["CampaignCommand"];
+            from_state: components["schemas"]["CampaignState"];
+            to_state: components["schemas"]["CampaignState"];
         };
         /** CatalogCreate */
         CatalogCreate: {
@@ -1778,8 +1835,7 @@ export interface components {
              * @description 0-based index of the set-point in progress
              */
             setpoint_index: number;
-            /** Status */
-            status: string;
+            status: components["schemas"]["CampaignState"];
         };
         /**
          * RampProfileRequest
@@ -2695,6 +2751,47 @@ export interface operations {
                 };
                 content: {
                     "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    getCampaignStates: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["CampaignStatesPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
                 };
             };
         };

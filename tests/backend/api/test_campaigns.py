@@ -205,6 +205,29 @@ def test_unknown_ids_names_taken_and_auth(fast_client):
     assert len(client.get("/api/campaigns").json()) == 1
 
 
+def test_the_state_machine_is_served_and_is_what_the_commands_obey(client):
+    """``GET /api/campaigns/states`` (what the dashboard offers per state) and the 409s
+    of the commands come from one table; the API document names the states' enum."""
+    table = client.get("/api/campaigns/states").json()
+    assert table["states"] == ["draft", "queued", "running", "paused", "interrupted", "done",
+                               "failed", "cancelled"]  # fmt: skip
+    assert table["finished"] == ["done", "failed", "cancelled"]
+    moves = {(t["from_state"], t["command"]): t["to_state"] for t in table["transitions"]}
+    assert moves[("draft", "start")] == "queued" and ("draft", "pause") not in moves
+    schemas = client.get("/openapi.json").json()["components"]["schemas"]
+    assert schemas["CampaignState"]["enum"] == table["states"]
+    enum = {"$ref": "#/components/schemas/CampaignState"}
+    for name in ("CampaignPublic", "ProgressPublic"):
+        assert schemas[name]["properties"]["status"] == enum
+    cid = client.post("/api/campaigns", json={**GRID, "name": "sm"}, headers=AUTH).json()["id"]
+    for command in ("pause", "resume"):  # not allowed from draft
+        assert ("draft", command) not in moves
+        r = client.post(f"/api/campaigns/{cid}/{command}", headers=AUTH)
+        assert r.status_code == 409 and r.json()["detail"].startswith(f"campaign {cid} is draft:")
+    assert client.post(f"/api/campaigns/{cid}/cancel", headers=AUTH).json()["status"] == (
+        moves[("draft", "cancel")])
+
+
 def test_a_running_campaign_owns_the_turntable_and_stop_pauses_it(fast_client):
     c = fast_client
     body = {**GRID, "name": "long", "frames_per_point": 400}
