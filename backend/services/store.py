@@ -1,15 +1,25 @@
-"""Small persistence helpers: device settings and user catalogs."""
+"""Small persistence helpers: the database's health, device settings and user catalogs."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import Engine, select, text
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from backend.db.models import CatalogRow, DeviceSettingsRow, utcnow
 from tofpose.catalog import BUILTIN_CATALOGS, Catalog
+
+
+def database_answers(engine: Engine) -> bool:
+    """Whether the database answers a trivial query now."""
+    try:
+        with engine.connect() as conn:
+            conn.execute(text("SELECT 1"))
+    except Exception:
+        return False
+    return True
 
 
 def load_device_settings(session: Session, device: str) -> dict[str, Any] | None:

@@ -4,14 +4,12 @@
 from __future__ import annotations
 
 from fastapi import APIRouter, HTTPException, status
-from sqlalchemy import select
 
 from backend.api.contract import errors
 from backend.api.deps import ReadAuth, SessionDep, StateDep, WriteAuth, unprocessable
 from backend.api.presenters import calibration_public
 from backend.api.schemas import CalibrationCreate, CalibrationPublic
-from backend.db.models import CalibrationRow, CampaignRow
-from backend.services.calibrations import calibrate_from_campaign
+from backend.services.calibrations import calibrate_from_campaign, stored_calibrations
 from backend.services.store import NameTakenError
 
 router = APIRouter(prefix="/api/calibrations", tags=["calibrations"])
@@ -28,7 +26,7 @@ def create_calibration(
     store the result with its 1-sigma and residuals. 422 when the campaign cannot
     determine them (fewer than 3 usable set-points, rotations about fewer than 2 axes) or
     the lab's nominal geometry is unknown; nothing is stored then."""
-    if session.get(CampaignRow, body.campaign_id) is None:
+    if not state.campaigns.repository.exists(body.campaign_id):
         raise HTTPException(404, f"no campaign with id {body.campaign_id}")
     world = state.devices.world
     if world is None:
@@ -50,5 +48,4 @@ def create_calibration(
 @router.get("", dependencies=[ReadAuth])
 def list_calibrations(session: SessionDep) -> list[CalibrationPublic]:
     """Stored calibrations, newest first."""
-    rows = session.scalars(select(CalibrationRow).order_by(CalibrationRow.id.desc())).all()
-    return [calibration_public(r) for r in rows]
+    return [calibration_public(r) for r in stored_calibrations(session)]

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 from fastapi import APIRouter
-from sqlalchemy import text
 
 import backend
 from backend.api.deps import StateDep
 from backend.api.presenters import camera_state, motion_state, pipeline_state
 from backend.api.schemas import HealthPublic
+from backend.services.store import database_answers
 
 router = APIRouter(prefix="/api", tags=["status"])
 
@@ -17,12 +17,7 @@ router = APIRouter(prefix="/api", tags=["status"])
 def get_health(state: StateDep) -> HealthPublic:
     """Always answers (no auth): overall status, the state of each device and of the
     pipeline's compiled kernels."""
-    try:
-        with state.engine.connect() as conn:
-            conn.execute(text("SELECT 1"))
-        db = "ok"
-    except Exception:
-        db = "error"
+    db = "ok" if database_answers(state.engine) else "error"
     cam, mot = camera_state(state), motion_state(state)
     healthy = db == "ok" and cam.state in ("ok", "starting") and mot.state in ("ok", "absent")
     return HealthPublic(

@@ -6,12 +6,11 @@ Campaign rows keep the nominal reference; reports apply a calibration with
 from __future__ import annotations
 
 from fastapi import APIRouter, HTTPException
-from sqlalchemy import func, select
 
 from backend.api.contract import errors
 from backend.api.deps import ReadAuth, SessionDep, StateDep, WriteAuth
 from backend.api.schemas import ReferencePublic, ReferenceUpdate
-from backend.db.models import CalibrationRow
+from backend.services.calibrations import count_calibrations, get_calibration
 from backend.services.live_reference import LiveReference
 from backend.state import AppState
 
@@ -24,7 +23,7 @@ def _public(state: AppState, session) -> ReferencePublic:
         source="nominal" if ref.calibration_id is None else "calibration",
         label=ref.label,
         calibration_id=ref.calibration_id,
-        n_calibrations=session.scalar(select(func.count()).select_from(CalibrationRow)),
+        n_calibrations=count_calibrations(session),
         calibrated_available=state.devices.world is not None,
     )
 
@@ -42,7 +41,7 @@ def set_reference(body: ReferenceUpdate, state: StateDep, session: SessionDep) -
     if body.calibration_id is None:
         state.acquisition.reference = LiveReference()
     else:
-        row = session.get(CalibrationRow, body.calibration_id)
+        row = get_calibration(session, body.calibration_id)
         if row is None:
             raise HTTPException(404, f"no calibration with id {body.calibration_id}")
         state.acquisition.reference = LiveReference.from_calibration(row)
