@@ -359,10 +359,8 @@ def compare(args) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    single_threaded_blas()  # tofpose.threads: idle BLAS threads would burn a core
-    ap = argparse.ArgumentParser(prog="tofpose", description=__doc__)
-    sub = ap.add_subparsers(dest="cmd", required=True)
+def _add_measurement_commands(sub) -> None:
+    """The subcommands estimate, calibrate-range and calibrate-covariance, on ``sub``."""
     p = sub.add_parser("estimate", help="estimate the pose of every frame of a recording")
     p.add_argument("recording")
     p.add_argument("--catalog", help="catalog JSON (default: the recording's)")
@@ -397,6 +395,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--knots-mm", type=lambda v: [float(x) for x in v.split(",")],
                    help="target distances of the factors, comma separated (default: every "
                         "1.5x over the recording's range, each with >= 20 frames)")  # fmt: skip
+
+
+def _add_simulation_commands(sub) -> None:
+    """The subcommands simulate, render, demo, on the subparsers ``sub``."""
     p = sub.add_parser("simulate", help="write a simulated recording with ground truth")
     p.add_argument("--scenario", required=True)
     p.add_argument("--frames", type=int, required=True)
@@ -409,6 +411,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p = sub.add_parser("demo", help="simulate, estimate and print estimate vs truth")
     p.add_argument("--frames", type=int, default=48)
+
+
+def _add_server_commands(sub) -> None:
+    """The subcommands serve, report, emulate, on the subparsers ``sub``."""
     p = sub.add_parser(
         "serve", help="run the server (simulated devices by default); settings also from TOFPOSE_*"
     )
@@ -453,6 +459,10 @@ def main(argv: list[str] | None = None) -> int:
         q.add_argument("--target-distance-mm", type=float, default=15000.0)
         q.add_argument("--start-rail-mm", type=float, default=13000.0)
         q.add_argument("--seed", type=int, default=0)
+
+
+def _add_interop_commands(sub) -> None:
+    """The subcommands export, import, openapi, on the subparsers ``sub``."""
     p = sub.add_parser("export", help="write a recording in another format (docs/interop.md)")
     p.add_argument("format", choices=("mcap",), help="mcap: Foxglove / ROS 2 / Rerun")
     p.add_argument("recording")
@@ -475,6 +485,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--force", action="store_true", help="overwrite --out")
     p = sub.add_parser("openapi", help="write the server's OpenAPI document (JSON)")
     p.add_argument("--out", required=True)
+
+
+def _add_batch_commands(sub) -> None:
+    """The subcommands study, reprocess, compare, warm-up, on the subparsers ``sub``."""
     p = sub.add_parser(
         "study",
         help="Monte-Carlo accuracy study over a grid of cells, on Dask (docs/scaleout.md)",
@@ -506,7 +520,21 @@ def main(argv: list[str] | None = None) -> int:
         "warm-up",
         help="compile the pipeline's kernels into numba's cache (once after installing)",
     )
-    args = ap.parse_args(argv)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``tofpose`` command line: every subcommand and its options."""
+    ap = argparse.ArgumentParser(prog="tofpose", description=__doc__)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    for add in (_add_measurement_commands, _add_simulation_commands, _add_server_commands,
+                _add_interop_commands, _add_batch_commands):  # fmt: skip
+        add(sub)
+    return ap
+
+
+def _run_outside_the_library(args) -> int | None:
+    """The subcommands that run outside the library's error handling (the Dask ones,
+    the kernel warm-up, the server's and the emulators'); None for the others."""
     if args.cmd == "study":
         return study(args)
     if args.cmd == "reprocess":
@@ -535,6 +563,15 @@ def main(argv: list[str] | None = None) -> int:
         opts = vars(args)
         cmd = opts.pop("cmd")
         return server_main.serve(opts) if cmd == "serve" else server_main.report(opts)
+    return None
+
+
+def main(argv: list[str] | None = None) -> int:
+    single_threaded_blas()  # tofpose.threads: idle BLAS threads would burn a core
+    args = build_parser().parse_args(argv)
+    code = _run_outside_the_library(args)
+    if code is not None:
+        return code
     try:
         if args.cmd == "estimate":
             s = estimate(args.recording, args.out, args.catalog, args.camera,
