@@ -1,43 +1,31 @@
 """The triplet-hypothesis kernel against a plain NumPy/SciPy statement of the search
-(``matching.match_by_triplets``' docstring), on scenes with spurious points."""
+(``matching.match_by_triplets``' docstring, ``tofpose.reference.triplets``), on scenes
+with spurious points."""
 
 from __future__ import annotations
 
 from itertools import combinations, permutations
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from tofpose.catalog import paper_target
 from tofpose.geometry import rotation_from_euler_deg
-from tofpose.kernels.pose import absolute_orientation
 from tofpose.kernels.triplets import catalog_triplets
 from tofpose.matching import match_by_triplets
+from tofpose.reference import triplets as reference
 
 
 def _reference(observed, catalog, alpha, tol, centroid, cos_min, w, max_observed=7):
-    """Every observed triplet x every ordered catalog triplet of equal sides: pose,
-    facing constraint, one-to-one assignment of all points, inliers within tol; the
-    most inliers win, then the least sum of w d^2."""
-    best, best_key = np.empty((0, 2), int), (0, np.inf)
-    g = min(len(observed), max_observed)
-    for a, b, c in combinations(range(g), 3):
-        o = [np.linalg.norm(observed[u] - observed[v]) for u, v in ((a, b), (b, c), (a, c))]
-        for i, j, k in permutations(range(len(catalog)), 3):
-            s = [np.linalg.norm(catalog[u] - catalog[v]) for u, v in ((i, j), (j, k), (i, k))]
-            if not np.all(np.abs(np.subtract(s, o)) <= alpha):
-                continue
-            R, t = absolute_orientation(catalog[[i, j, k]], observed[[a, b, c]], w[[a, b, c]])
-            to_camera = -(R @ centroid + t)
-            if R[:, 2] @ to_camera / np.linalg.norm(to_camera) < cos_min:
-                continue
-            dist = np.linalg.norm(observed[:, None] - (catalog @ R.T + t)[None], axis=-1)
-            rows, cols = linear_sum_assignment(dist)
-            ok = dist[rows, cols] <= tol[rows]
-            key = (int(ok.sum()), float((dist[rows, cols][ok] ** 2 * w[rows[ok]]).sum()))
-            if key[0] >= 3 and (key[0] > best_key[0]
-                                or (key[0] == best_key[0] and key[1] < best_key[1])):  # fmt: skip
-                best, best_key = np.column_stack((rows[ok], cols[ok])), key
+    """Every observed triplet (of the first ``max_observed``) x every ordered catalog
+    triplet of equal sides: pose, facing constraint, one-to-one assignment of all points,
+    inliers within tol; the most inliers win, then the least sum of w d^2
+    (``reference.triplets.triplet_search``)."""
+    triplets = np.array(list(combinations(range(min(len(observed), max_observed)), 3)),
+                        np.int64).reshape(-1, 3)  # fmt: skip
+    cat_tri, cat_sides = reference.catalog_triplets(catalog)
+    best, *_ = reference.triplet_search(observed, catalog, w, tol, alpha, triplets, cat_tri,
+                                        cat_sides, True, centroid, cos_min, 3, False, 0.0,
+                                        np.empty((0, 2), np.int64), 0, np.inf, 0)  # fmt: skip
     return best
 
 
