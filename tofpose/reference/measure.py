@@ -50,8 +50,8 @@ def consistent_history(centroids_uv, distance, blobs, history) -> tuple[int, boo
     (``centroids_consistent`` at tol_px and ``ranges_consistent`` at ``RANGE_TEST_Z``)
     before the first that is not, and whether one is not (motion)."""
     for f in range(history.count):
-        if not (centroids_consistent(centroids_uv, history.centroids[f], history.tol_px)
-                and ranges_consistent(distance, history.distance[f], blobs, RANGE_TEST_Z)):  # fmt: skip
+        still = centroids_consistent(centroids_uv, history.centroids[f], history.tol_px)
+        if not (still and ranges_consistent(distance, history.distance[f], blobs, RANGE_TEST_Z)):
             return f, True
     return history.count, False
 
@@ -118,8 +118,8 @@ def persist_and_measure(
     k_rho = np.empty(len(kept))
     for a, j in enumerate(kept):
         level = s_gray[a] if np.isfinite(s_gray[a]) else background
-        k_uv[a] = blob_centroid(mean_gray, blobs[j], tuple(k_bbox[a]),
-                                          np.float32(level), owner_full, a, coverage=True)  # fmt: skip
+        k_uv[a] = blob_centroid(mean_gray, blobs[j], tuple(k_bbox[a]), np.float32(level),
+                                owner_full, a, coverage=True)  # fmt: skip
         e_c = bearings(k_uv[a][None], K, dist)[0]
         k_rho[a] = blob_range(med_dist, blobs[j], bearing_image, e_c)
     hidden = mixed_pixels.occluded_blobs(k_flat, k_starts, k_bbox, distance, k_rho, owner,
@@ -156,8 +156,9 @@ def corrected_range(rho, pixels, gray, correction) -> float:
     """A blob's range less the median of ``range_error_mm`` over its pixels, with gray
     (I-bar) as the amplitude."""
     amplitude = np.asarray(gray).reshape(-1)[pixels]
-    return rho - float(np.median(range_error_mm(rho, amplitude, pixels, correction.model,
-                                                correction.harmonics, correction.offsets)))  # fmt: skip
+    err = range_error_mm(rho, amplitude, pixels, correction.model, correction.harmonics,
+                         correction.offsets)  # fmt: skip
+    return rho - float(np.median(err))
 
 
 def measure_and_back_project(
@@ -189,7 +190,9 @@ def measure_and_back_project(
     sp = np.array([centroid_sigma_px(mean_gray, p, r_uv[a], background, bool(split[j]), sigmas)
                    for a, (j, p) in enumerate(zip(ranged, r_blobs, strict=True))])  # fmt: skip
     sr = range_sigmas_mm(mean_gray, med_dist, r_blobs, background, sigmas)
-    y = back_project(r_uv, r_rho, np.asarray(camera.K, float), camera.dist)  # Eq. 8
+    y = np.zeros((0, 3))
+    if len(ranged):
+        y = back_project(r_uv, r_rho, np.asarray(camera.K, float), camera.dist)  # Eq. 8
     wt = weights(r_rho, sr, sp, camera.fx)  # Eq. 21
     return (n_used, motion, keep, uv, rho, ranged.astype(np.int64), r_rho, sp.reshape(-1),
             np.asarray(sr, float).reshape(-1), y.reshape(-1, 3), wt, r_mix)  # fmt: skip

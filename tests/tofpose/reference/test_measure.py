@@ -75,8 +75,8 @@ def captured_stream(distance_mm, seed, corrected, moving=False):
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(pipeline_module, "measure_and_back_project", spy)
         for f in range(FRAMES):
-            pose = facing_pose(distance_mm, 4, -6, 12,
-                               offset_mm=(-70.0 if moving and f >= 3 else -110.0, -55.0))  # fmt: skip
+            x_mm = -70.0 if moving and f >= 3 else -110.0
+            pose = facing_pose(distance_mm, 4, -6, 12, offset_mm=(x_mm, -55.0))
             frame_scene = replace(scene, clutter=(TRANSIENT,)) if f == FRAMES - 1 else scene
             frame = render(pose, seed=100 * seed + f, scene=frame_scene)
             pipe.process(frame.gray, frame.distance_mm, 0.1 * f)
