@@ -240,20 +240,18 @@ def unmixed_range(rho, mix, radius_px, cos_incidence, median_radius_px):
     apply: radius_px not below ``median_radius_px``, no sums, C at most a quarter of the
     disc's area, A_r = a_b + S_a / C not above 2 max(a_b, 0) or not positive, or a
     d_r that is not finite."""
-
-    def model(c):
-        return (mix[0] * mix[1] + mix[3] / c) / (mix[0] + mix[2] / c)
-
-    if not radius_px < median_radius_px or not np.isfinite(mix[0]):
+    a_b, d_b, s_a, s_ad, c_unranged = (float(v) for v in mix[:5])
+    disc_area = np.pi * radius_px**2 * max(cos_incidence, 0.1)
+    c = disc_area - c_unranged
+    small = radius_px < median_radius_px and np.isfinite(a_b)
+    if not (small and c > 0.25 * disc_area):
         return rho, 0.0
-    area = np.pi * radius_px * radius_px * max(cos_incidence, 0.1)
-    c = area - mix[4]
-    if not c > 0.25 * area:
+    a_r = a_b + s_a / c  # the reflector's amplitude
+    if not (a_r > 2.0 * max(a_b, 0.0) and a_r > 0):
         return rho, 0.0
-    a_r = mix[0] + mix[2] / c
-    if not a_r > 2.0 * max(mix[0], 0.0) or not a_r > 0:
-        return rho, 0.0
-    d_r = model(c)
+    d_r = (a_b * d_b + s_ad / c) / a_r
     if not np.isfinite(d_r):
         return rho, 0.0
-    return d_r, abs(model(1.15 * c) - d_r)
+    # the range with a 15 % larger image area
+    d_r_wider = (a_b * d_b + s_ad / (1.15 * c)) / (a_b + s_a / (1.15 * c))
+    return d_r, abs(d_r_wider - d_r)
