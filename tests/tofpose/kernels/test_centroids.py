@@ -13,6 +13,7 @@ from tofpose.catalog import paper_target
 from tofpose.config import ExtractionConfig
 from tofpose.extraction import check_frame, find_candidate_blobs, frame_levels, measure_blobs
 from tofpose.reference.centroids import blob_centroid, blob_range, surround_level
+from tofpose.reference.mixed_pixels import owner_map
 
 
 def _reference(blob, gray, dist, cam, frame_bg, owner=None, j=0):
@@ -23,6 +24,20 @@ def _reference(blob, gray, dist, cam, frame_bg, owner=None, j=0):
     uv = blob_centroid(gray, blob.pixels, blob.bbox, bg, owner, j)
     rho = blob_range(dist, blob.pixels, cam.pixel_bearings(), cam.bearings(uv[None])[0])
     return uv, rho
+
+
+def _owner(blobs, shape):
+    """``reference.mixed_pixels.owner_map`` of the blobs as a (H, W) image (-1: no blob),
+    or None where no blob's surround reaches another's box (nothing to leave out)."""
+    flat = np.concatenate([b.pixels for b in blobs]).astype(np.int64)
+    starts = np.cumsum([0] + [len(b.pixels) for b in blobs]).astype(np.int64)
+    bbox = np.array([b.bbox for b in blobs], np.int64)
+    owner, x0, y0, use_owner = owner_map(flat, starts, bbox, *shape)
+    if not use_owner:
+        return None
+    full = np.full(shape, -1, np.int32)
+    full[y0 : y0 + owner.shape[0], x0 : x0 + owner.shape[1]] = owner
+    return full
 
 
 def _blob_from_mask(member):
@@ -44,9 +59,7 @@ def test_measured_blobs_equal_the_reference(distance_mm):
     bg = found.stats.background
     measured = measure_blobs(found.accepted, g, d, cam, bg)
     assert len(measured) == len(found.accepted) >= 3
-    owner = np.full(cam.shape, -1, np.int32)
-    for j, b in enumerate(found.accepted):
-        owner.ravel()[b.pixels] = j
+    owner = _owner(found.accepted, cam.shape)
     for j, (b, m) in enumerate(zip(found.accepted, measured, strict=True)):
         uv, rho = _reference(b, g, d, cam, bg, owner, j)
         np.testing.assert_allclose(m.centroid_uv, uv, atol=1e-9)
@@ -69,8 +82,8 @@ def test_touching_blobs_do_not_pull_each_other():
         return Blob(pixels=(r * w + c).ravel(), area_px=36, bbox=(c0, 100, 6, 6))
 
     a, b = blob(100), blob(106)
-    owner = np.full(cam.shape, -1, np.int32)
-    owner.ravel()[a.pixels], owner.ravel()[b.pixels] = 0, 1
+    owner = _owner([a, b], cam.shape)
+    assert owner is not None and owner.ravel()[b.pixels].tolist() == [1] * 36
     ma, mb = measure_blobs([a, b], g, d, cam, 5.0)
     for j, (orig, m) in enumerate(((a, ma), (b, mb))):
         uv, _ = _reference(orig, g, d, cam, 5.0, owner, j)
