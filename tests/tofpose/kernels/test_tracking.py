@@ -1,27 +1,18 @@
-"""The compiled window search against OpenCV's labelling on the same windows."""
+"""The compiled window search against OpenCV's labelling on the same windows (the
+reference, ``tofpose.reference.tracking``)."""
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from tofpose.kernels.tracking import AT_EDGE, FOUND, NO_SIZE, NOT_FOUND, search_windows
+from tofpose.reference import tracking as reference
 
 
-def _opencv(gray, u0, u1, v0, v1, centre, diameter, threshold):
-    patch = gray[v0:v1, u0:u1]
-    n, labels, stats, cents = cv2.connectedComponentsWithStats(
-        (patch >= threshold).astype(np.uint8), connectivity=8
-    )
-    expected = np.pi * (0.5 * diameter) ** 2
-    lo, hi = max(1, expected / 4), max(4, 4 * expected)
-    ok = [k for k in range(1, n) if lo <= stats[k, cv2.CC_STAT_AREA] <= hi]
-    if not ok:
-        return None
-    best = min(ok, key=lambda k: np.hypot(*(cents[k] - (centre - [u0, v0]))))
-    return stats[best, :4] + [u0, v0, 0, 0], np.flatnonzero(
-        np.pad(labels == best, ((v0, gray.shape[0] - v1), (u0, gray.shape[1] - u1))).ravel()
-    )
+def _reference(gray, bounds, centres, diameters, threshold):
+    """The reference's window search (``reference.tracking.search_windows``: OpenCV's
+    8-connected labelling) on the same windows, background 10 counts."""
+    return reference.search_windows(gray, bounds, centres, diameters, threshold, 10.0)
 
 
 def test_search_windows_takes_the_component_opencv_takes():
@@ -36,15 +27,15 @@ def test_search_windows_takes_the_component_opencv_takes():
     status, bbox, peak, cen, starts, flat = search_windows(gray, bounds, centres, diam,
                                                            np.float32(400.0), 10.0)  # fmt: skip
     assert status.tolist() == [FOUND, FOUND, NOT_FOUND, AT_EDGE]
+    want = _reference(gray, bounds, centres, diam, np.float32(400.0))
+    np.testing.assert_array_equal(status, want[0])
+    np.testing.assert_array_equal(starts, want[4])
     for j in (0, 1):
-        want_box, want_px = _opencv(gray, *bounds[j], centres[j], diam[j], 400.0)
-        np.testing.assert_array_equal(bbox[j], want_box)
+        want_px = want[5][want[4][j] : want[4][j + 1]]
+        np.testing.assert_array_equal(bbox[j], want[1][j])
         np.testing.assert_array_equal(flat[starts[j] : starts[j + 1]], want_px)
-        vals = gray.ravel()[want_px].astype(float) - 10.0
-        want_c = [(vals * (want_px % 160)).sum() / vals.sum(),
-                  (vals * (want_px // 160)).sum() / vals.sum()]  # fmt: skip
-        np.testing.assert_allclose(cen[j], want_c, atol=1e-9)
-        assert peak[j] == 800.0
+        np.testing.assert_allclose(cen[j], want[3][j], atol=1e-9)
+        assert peak[j] == want[2][j] == 800.0
     tiny = search_windows(gray, bounds[:1], centres[:1], np.array([40.0]), np.float32(400.0), 10.0)
     assert tiny[0][0] == NO_SIZE  # a 40 px disc predicted, only a 10 px one there
 
@@ -80,18 +71,13 @@ def test_search_windows_on_random_speckle_and_merging_shapes_equals_opencv():
         status, bbox, _, _, starts, flat = search_windows(
             gray, bounds, centre, diam, np.float32(400.0), 10.0
         )
-        want = _opencv(gray, *bounds[0], centre[0], diam[0], 400.0)
-        if want is None:
-            assert status[0] == NO_SIZE
+        want = _reference(gray, bounds, centre, diam, np.float32(400.0))
+        assert status[0] == want[0][0]
+        if status[0] != FOUND:
+            assert status[0] in (NO_SIZE, AT_EDGE)
             continue
-        want_box, want_px = want
-        x, y, w, h = want_box
-        if x == u0 or y == v0 or x + w >= u0 + 33 or y + h >= v0 + 33:
-            assert status[0] == AT_EDGE
-            continue
-        assert status[0] == FOUND
-        np.testing.assert_array_equal(bbox[0], want_box)
-        np.testing.assert_array_equal(flat[starts[0] : starts[1]], want_px)
+        np.testing.assert_array_equal(bbox[0], want[1][0])
+        np.testing.assert_array_equal(flat[starts[0] : starts[1]], want[5])
         checked += 1
     assert checked > 50
 
@@ -116,9 +102,5 @@ def test_windows_share_a_pixel_exactly_when_their_lists_intersect():
             [[(v % w).min(), (v // w).min(), np.ptp(v % w) + 1, np.ptp(v // w) + 1] for v in lists],
             np.int64,
         )
-        want = any(
-            np.intersect1d(lists[a], lists[b]).size
-            for a in range(len(lists))
-            for b in range(a + 1, len(lists))
-        )
+        want = reference.any_shared(flat, starts, bbox)
         assert any_shared(flat, starts, bbox) == want
