@@ -218,7 +218,7 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
                     n_rest += 1
         scatter = 0.0
         if n_rest >= 3:
-            med = median_inplace(rest[:n_rest])
+            med = median_inplace(rest[:n_rest].copy())  # it scrambles its input
             for i in range(n_rest):
                 rest[i] = abs(rest[i] - med)
             scatter = 1.4826 * median_inplace(rest[:n_rest])
