@@ -18,7 +18,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial.distance import cdist
 
-from tofpose.reference.pose import absolute_orientation
+from tofpose.reference.pose import absolute_orientation, facing_cosine
 
 
 def trials_needed(n_inliers, n_observed, confidence) -> float:
@@ -49,13 +49,6 @@ def catalog_triplets(catalog):
     return tri, sides
 
 
-def facing_cosine(R, t, centroid) -> float:
-    """The cosine between the target's normal R e_z and the direction from its centroid
-    (3,) (catalog frame) to the camera, -(R c + t), under the pose (R, t)."""
-    to_camera = -(R @ np.asarray(centroid, float) + t)
-    return float(R[:, 2] @ to_camera / np.linalg.norm(to_camera))
-
-
 def hypothesis_inliers(observed, catalog, R, t, w, tol):
     """One hypothesis (R, t): each observed point assigned one-to-one to a predicted
     reflector R x_i + t (SciPy's assignment, least total distance); the pairs within
@@ -83,8 +76,9 @@ def triplet_search(
     ``trials_needed(best_n, n, confidence)``. For each ordered catalog triplet whose three
     sides are each within ``alpha`` of the observed triplet's: the pose of its three
     pairs (``absolute_orientation``, weights w), dropped with ``constrain`` unless
-    ``facing_cosine >= cos_min``; its ``hypothesis_inliers``. The best hypothesis has the
-    most inliers (at least ``min_matches``), then the smallest cost. Returns best,
+    ``reference.pose.facing_cosine`` (the target's normal against the direction to the
+    camera) is at least ``cos_min``; its ``hypothesis_inliers``. The best hypothesis has
+    the most inliers (at least ``min_matches``), then the smallest cost. Returns best,
     best_n, best_cost, tried and whether the confidence rule ended the search."""
     observed, catalog = np.asarray(observed, float), np.asarray(catalog, float)
     w, tol = np.asarray(w, float), np.asarray(tol, float)
