@@ -1,4 +1,5 @@
-"""Ellipse residual, perspective offsets and blob pixel statistics against NumPy."""
+"""Ellipse residual, perspective offsets and blob pixel statistics against NumPy and
+``tofpose.reference``."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from tofpose.camera import CameraModel
 from tofpose.kernels.ellipses import blob_mask, ellipse_rms_px
 from tofpose.kernels.perspective import disc_centre_offsets
 from tofpose.kernels.sigmas import blob_pixel_stats
+from tofpose.reference.solve import disc_centre_offsets as ref_offsets
 
 
 def test_ellipse_rms_is_zero_on_the_ellipse_and_the_radial_gap_off_it():
@@ -27,23 +29,6 @@ def test_blob_mask_places_pixels_in_the_padded_box():
     assert m.shape == (4, 4) and m[1, 1] == 1 and m[2, 2] == 1 and m.sum() == 2
 
 
-def _offsets_numpy(K, c, normal, radii):
-    """Ellipse centre of the conic Q = H^-T diag(1, 1, -r^2) H^-1, H = K [a b c], minus
-    the projected centre (the method of ``disc_image_centre_offsets_px``)."""
-    n = normal / np.linalg.norm(normal)
-    a = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
-    a /= np.linalg.norm(a)
-    b = np.cross(n, a)
-    out = []
-    for ci, r in zip(c, radii, strict=True):
-        Hinv = np.linalg.inv(K @ np.column_stack((a, b, ci)))
-        Q = Hinv.T @ np.diag([1.0, 1.0, -(r**2)]) @ Hinv
-        centre = -np.linalg.solve(Q[:2, :2], Q[:2, 2])
-        p = K @ ci
-        out.append(centre - p[:2] / p[2])
-    return np.array(out)
-
-
 def test_perspective_offsets_vanish_face_on_and_match_the_conic_when_tilted():
     cam = CameraModel()
     centres = np.array([[0.0, 0.0, 1000.0], [300.0, -100.0, 1000.0]])
@@ -52,7 +37,7 @@ def test_perspective_offsets_vanish_face_on_and_match_the_conic_when_tilted():
     assert np.abs(face_on).max() < 1e-9  # a fronto-parallel circle images as a circle
     tilted = np.array([0.3, -0.2, -1.0])
     got = disc_centre_offsets(cam.K, centres, tilted, radii)
-    np.testing.assert_allclose(got, _offsets_numpy(cam.K, centres, tilted, radii), atol=1e-12)
+    np.testing.assert_allclose(got, ref_offsets(cam.K, centres, tilted, radii), atol=1e-12)
     assert np.abs(got[0]).max() > 0.01
 
 
@@ -68,7 +53,7 @@ def test_perspective_offsets_match_the_conic_over_ranges_and_tilts():
         normal = np.array([*rng.uniform(-1.5, 1.5, 2), -1.0])
         radii = rng.uniform(5.0, 40.0, 8)
         got = disc_centre_offsets(cam.K, centres, normal, radii)
-        np.testing.assert_allclose(got, _offsets_numpy(cam.K, centres, normal, radii), atol=1e-10)
+        np.testing.assert_allclose(got, ref_offsets(cam.K, centres, normal, radii), atol=1e-10)
 
 
 def test_blob_pixel_stats_equal_numpy():
@@ -132,6 +117,7 @@ def test_point_residuals_are_the_distances_from_the_fitted_points():
     from scipy.spatial.transform import Rotation
 
     from tofpose.kernels.pose import point_residuals_mm
+    from tofpose.reference.pose import point_residuals_mm as reference_point_residuals_mm
 
     rng = np.random.default_rng(11)
     x = rng.normal(0.0, 200.0, (7, 3))
@@ -139,6 +125,6 @@ def test_point_residuals_are_the_distances_from_the_fitted_points():
     t = np.array([10.0, -20.0, 3000.0])
     y = x @ R.T + t + rng.normal(0.0, 2.0, (7, 3))
     res, rms = point_residuals_mm(x, y, R, t)
-    want = np.linalg.norm(y - (x @ R.T + t), axis=1)
+    want, want_rms = reference_point_residuals_mm(x, y, R, t)
     np.testing.assert_allclose(res, want, rtol=1e-12)
-    assert rms == pytest.approx(np.sqrt(np.mean(want**2)), rel=1e-12)
+    assert rms == pytest.approx(want_rms, rel=1e-12)

@@ -1,6 +1,6 @@
-"""§5's completion step (``kernels.solve.complete_pairs``) against the NumPy statement
-it replaced, and the shared solve finding a pose whose completion recovered the
-reflectors annealing left out."""
+"""§5's completion step (``kernels.solve.complete_pairs``) against its NumPy statement
+(``tofpose.reference.solve.complete_pairs``), and the shared solve finding a pose whose
+completion recovered the reflectors annealing left out."""
 
 from __future__ import annotations
 
@@ -8,23 +8,7 @@ import numpy as np
 
 from tofpose.geometry import rotation_from_euler_deg
 from tofpose.kernels.solve import complete_pairs
-
-
-def _reference(y, k_idx, i_idx, xyz, R, t, tol_mm):
-    free_k = [k for k in range(len(y)) if k not in set(k_idx.tolist())]
-    free_i = [i for i in range(len(xyz)) if i not in set(i_idx.tolist())]
-    if not free_k or not free_i:
-        return k_idx, i_idx
-    pred = xyz[free_i] @ R.T + t
-    dist = np.linalg.norm(y[free_k][:, None] - pred[None], axis=-1)
-    ks, is_ = list(k_idx), list(i_idx)
-    while dist.size and dist.min() < tol_mm:
-        a, b = np.unravel_index(np.argmin(dist), dist.shape)
-        ks.append(free_k[a])
-        is_.append(free_i[b])
-        dist[a, :] = np.inf
-        dist[:, b] = np.inf
-    return np.array(ks), np.array(is_)
+from tofpose.reference.solve import complete_pairs as reference_complete_pairs
 
 
 def test_completion_equals_the_numpy_statement_and_restores_dropped_pairs():
@@ -43,7 +27,7 @@ def test_completion_equals_the_numpy_statement_and_restores_dropped_pairs():
         k_idx = np.arange(n_matched)
         i_idx = order[:n_matched].copy()
         got = complete_pairs(y, k_idx, i_idx, xyz, R, t, 8.0)
-        want = _reference(y, k_idx, i_idx, xyz, R, t, 8.0)
+        want = reference_complete_pairs(y, k_idx, i_idx, xyz, R, t, 8.0)
         np.testing.assert_array_equal(got[0], want[0])
         np.testing.assert_array_equal(got[1], want[1])
         # every blob of a reflector is back with its own reflector
