@@ -28,8 +28,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.special import erfc
 
 from tofpose.kernels.pair_fit import fit_pair_lm
 
@@ -62,56 +60,6 @@ class PairFit:
     sigma_px: np.ndarray
     radius_px: float
     blur_px: float
-
-
-def _terms(params: np.ndarray, su: np.ndarray, sv: np.ndarray):
-    """Per disc k: (coverage (n,), the sub-sample arrays of exp(-z^2), z, and the unit
-    offsets (su - cu) / dist, (sv - cv) / dist (n, S)) for params (9,)."""
-    u1, v1, u2, v2, _, _, r, s, _ = params
-    out = []
-    for cu, cv in ((u1, v1), (u2, v2)):
-        du, dv = su - cu, sv - cv
-        dist = np.maximum(np.hypot(du, dv), 1e-9)
-        z = (dist - r) / (np.sqrt(2.0) * s)
-        out.append(((0.5 * erfc(z)).mean(axis=1), np.exp(-z * z), z, du / dist, dv / dist))
-    return out
-
-
-class _PairModel:
-    """Residuals and analytic Jacobian of the model at sub-samples su, sv (n, S) against
-    pixel ``values`` (n,); the per-disc terms are computed once per parameter vector
-    (``least_squares`` asks for the residuals and the Jacobian at the same point)."""
-
-    def __init__(self, su: np.ndarray, sv: np.ndarray, values: np.ndarray) -> None:
-        self.su, self.sv, self.values = su, sv, values
-        self._key: bytes | None = None
-        self._terms: list | None = None
-
-    def terms(self, params: np.ndarray) -> list:
-        key = params.tobytes()
-        if key != self._key:
-            self._key, self._terms = key, _terms(params, self.su, self.sv)
-        return self._terms
-
-    def residuals(self, params: np.ndarray) -> np.ndarray:
-        """Model minus pixel values (n,)."""
-        (c1, *_), (c2, *_) = self.terms(params)
-        return params[8] + params[4] * c1 + params[5] * c2 - self.values
-
-    def jacobian(self, params: np.ndarray) -> np.ndarray:
-        """d residuals / d params (n, 9) (d/dz erfc(z)/2 = -exp(-z^2)/sqrt(pi))."""
-        s = params[7]
-        jac = np.zeros((self.su.shape[0], 9))
-        k_c = 1.0 / (np.sqrt(np.pi) * np.sqrt(2.0) * s)
-        for k, (cover, g, z, ux, uy) in enumerate(self.terms(params)):
-            a = params[4 + k]
-            jac[:, 2 * k] = a * k_c * (g * ux).mean(axis=1)
-            jac[:, 2 * k + 1] = a * k_c * (g * uy).mean(axis=1)
-            jac[:, 4 + k] = cover
-            jac[:, 6] += a * k_c * g.mean(axis=1)
-            jac[:, 7] += a * (g * z).mean(axis=1) / (np.sqrt(np.pi) * s)
-        jac[:, 8] = 1.0
-        return jac
 
 
 def _problem(gray: np.ndarray, pixels: np.ndarray, centres0_px: np.ndarray,
@@ -175,22 +123,3 @@ def fit_pair(
     if not converged:
         return None
     return _result(p, normal, cost, len(values), lower, upper)
-
-
-def fit_pair_reference(
-    gray: np.ndarray, pixels: np.ndarray, centres0_px: np.ndarray, background: float
-) -> PairFit | None:
-    """``fit_pair`` by SciPy's bounded trust-region ``least_squares`` on the NumPy model
-    (``_PairModel``): the test oracle of the compiled loop (~10x slower)."""
-    su, sv, values, start, lower, upper = _problem(gray, pixels, centres0_px, background)
-    try:
-        model = _PairModel(su, sv, values)
-        fit = least_squares(model.residuals, start, jac=model.jacobian,
-                            bounds=(lower, upper), x_scale="jac",
-                            max_nfev=MAX_EVALUATIONS)  # fmt: skip
-    except (ValueError, np.linalg.LinAlgError):
-        return None
-    if not fit.success:
-        return None
-    return _result(fit.x, fit.jac.T @ fit.jac, float(fit.fun @ fit.fun), len(values),
-                   lower, upper)  # fmt: skip
