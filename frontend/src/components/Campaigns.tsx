@@ -2,16 +2,13 @@
 // for a finished one its statistics and pass/fail (CampaignResult).
 import { useState } from "preact/hooks";
 import { api, unwrap, type Campaign } from "../api/client";
+import { commandsIn, type CampaignCommand } from "../campaignStates";
 import { reported, useReportError } from "../errors";
 import { fmtDuration } from "../format";
 import { usePolling } from "../polling";
 import { CampaignResult } from "./CampaignResult";
 
-type Action = "start" | "pause" | "resume" | "cancel";
-const ACTIONS: Partial<Record<Campaign["status"], Action[]>> = {
-  draft: ["start", "cancel"], queued: ["pause", "cancel"], running: ["pause", "cancel"],
-  paused: ["resume", "cancel"], interrupted: ["resume", "cancel"],
-};
+type Action = CampaignCommand;
 
 /** One action's request (each its own path in the schema). */
 function request(action: Action, id: number) {
@@ -27,6 +24,8 @@ function request(action: Action, id: number) {
 export function Campaigns() {
   const report = useReportError();
   const campaigns = usePolling(() => unwrap(api.GET("/api/campaigns")), 1000);
+  // the commands each state allows: the server's table, loaded once
+  const states = usePolling(() => unwrap(api.GET("/api/campaigns/states")), null);
   const list = campaigns.data ?? [];
   const [open, setOpen] = useState<number | null>(null);
   const act = async (c: Campaign, action: Action) => {
@@ -48,7 +47,7 @@ export function Campaigns() {
                   {c.progress && c.status === "running" ? ` (set-point ${c.progress.setpoint_index}: ${c.progress.frames_collected}/${c.progress.frames_per_point} frames)` : ""}
                 </td>
                 <td>{fmtDuration(c.status === "running" ? c.progress?.eta_s : c.estimated_duration_s)}</td>
-                <td>{(ACTIONS[c.status] ?? []).map((a) => (
+                <td>{commandsIn(states.data, c.status).map((a) => (
                   <button key={a} data-testid={`${a}-${c.id}`} onClick={() => act(c, a)}>{a}</button>
                 ))}</td>
                 <td>{(["html", "pdf", "csv", "json"] as const).map((f) => (

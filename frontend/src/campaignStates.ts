@@ -1,0 +1,23 @@
+// The campaign state machine as the server serves it (GET /api/campaigns/states): which
+// commands a person may give a campaign in each state. The dashboard reads the table
+// instead of keeping its own copy of the states.
+import type { components } from "./api/schema";
+
+export type CampaignState = components["schemas"]["CampaignState"];
+export type CampaignCommand = components["schemas"]["CampaignCommand"];
+export type CampaignStates = components["schemas"]["CampaignStatesPublic"];
+
+/** The commands allowed in ``state``, in the table's order, without repeats. */
+export function commandsIn(table: CampaignStates | null | undefined, state: CampaignState): CampaignCommand[] {
+  if (!table) return [];
+  const out: CampaignCommand[] = [];
+  for (const t of table.transitions) {
+    if (t.from_state === state && !out.includes(t.command)) out.push(t.command);
+  }
+  return out;
+}
+
+/** Whether nothing leads out of ``state`` (done, failed, cancelled). */
+export function isFinished(table: CampaignStates | null | undefined, state: CampaignState): boolean {
+  return table?.finished.includes(state) ?? false;
+}
