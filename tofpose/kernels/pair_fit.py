@@ -2,7 +2,7 @@
 ``tofpose.pair_fit`` (its docstring has the equations) and a box-constrained Levenberg-
 Marquardt loop on its 9 parameters.
 
-SciPy's ``least_squares`` (the reference, ``pair_fit.fit_pair_reference``) spends ~10 ms
+SciPy's ``least_squares`` (the reference, ``reference.pair_fit.fit_pair_lm``) spends ~10 ms
 on one pair, most of it in per-iteration Python and LAPACK overhead on a 9-parameter
 problem; this loop does the same fit in one compiled call. Parameters p (9,):
 u1, v1, u2, v2 (px), a1, a2 (counts), r (px), s (px), bg (counts); sub-samples su, sv
