@@ -7,6 +7,8 @@ const TABLE: CampaignStates = {
   transitions: [
     { command: "start", from_state: "draft", to_state: "queued" },
     { command: "cancel", from_state: "draft", to_state: "cancelled" },
+    { command: "start", from_state: "queued", to_state: "queued" },
+    { command: "cancel", from_state: "queued", to_state: "cancelled" },
     { command: "pause", from_state: "running", to_state: "paused" },
     { command: "cancel", from_state: "running", to_state: "cancelled" },
     { command: "resume", from_state: "paused", to_state: "queued" },
@@ -19,6 +21,10 @@ describe("commandsIn", () => {
     expect(commandsIn(TABLE, "draft")).toEqual(["start", "cancel"]);
     expect(commandsIn(TABLE, "running")).toEqual(["pause", "cancel"]);
     expect(commandsIn(TABLE, "paused")).toEqual(["resume"]);
+  });
+
+  it("does not offer a command that leaves the state as it is", () => {
+    expect(commandsIn(TABLE, "queued")).toEqual(["cancel"]);
   });
 
   it("offers nothing in a finished state, or before the table has loaded", () => {
