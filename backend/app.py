@@ -172,9 +172,10 @@ def methods_for_path(app: FastAPI, path: str) -> list[str]:
     return sorted(methods)
 
 
-def create_app(settings: Settings | None = None, devices: Devices | None = None) -> FastAPI:
-    """Build the app. ``devices`` overrides the drivers named in ``settings`` (tests)."""
-    settings = settings or Settings()
+def _lifespan(settings: Settings, devices: Devices | None):
+    """The app's lifespan: open the database (upgraded), the devices and every service,
+    start them, and on shutdown stop them in order (a running campaign is left
+    interrupted, a running batch job queued again)."""
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -248,21 +249,12 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             devs.close()
             engine.dispose()
 
-    # Swagger UI and ReDoc from files shipped in the fastapi-offline package, not a CDN:
-    # a lab machine without internet still gets its API docs (no page fetches off-host).
-    app = FastAPIOffline(
-        title="tofpose",
-        version=backend.__version__,
-        summary="Pose of a cooperative target from a ToF camera, live, with a turntable.",
-        lifespan=lifespan,
-        swagger_ui_parameters={"validatorUrl": None},  # no badge from validator.swagger.io
-        generate_unique_id_function=operation_id,
-    )
-    app.openapi = lambda: complete_openapi(app, _soft_limits(app))  # type: ignore[method-assign]
-    app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
-    # Outermost: a request naming a host we do not serve (DNS rebinding) gets 400 before
-    # anything else runs. Origin is checked on the WebSocket itself (routes/live.py).
-    app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.trusted_hosts)
+    return lifespan
+
+
+def _install_error_answers(app: FastAPI) -> None:
+    """The answers to a bad body (422 without the echoed input), a method not allowed
+    (405 listing every method of the path) and a conflict with stored data (409)."""
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(_request: Request, exc: RequestValidationError) -> JSONResponse:
@@ -291,11 +283,39 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
             status_code=409,
         )  # fmt: skip
 
+
+def _include_routes(app: FastAPI) -> None:
+    """Every resource's router."""
     routers = (health, devices_route, camera, pose, frames, motion, catalogs, campaigns,
                calibrations, reference, scene, foxglove, live, studies_route,
                reprocessings_route)  # fmt: skip
     for module in routers:
         app.include_router(module.router)
+
+
+def create_app(settings: Settings | None = None, devices: Devices | None = None) -> FastAPI:
+    """Build the app. ``devices`` overrides the drivers named in ``settings`` (tests)."""
+    settings = settings or Settings()
+    lifespan = _lifespan(settings, devices)
+
+    # Swagger UI and ReDoc from files shipped in the fastapi-offline package, not a CDN:
+    # a lab machine without internet still gets its API docs (no page fetches off-host).
+    app = FastAPIOffline(
+        title="tofpose",
+        version=backend.__version__,
+        summary="Pose of a cooperative target from a ToF camera, live, with a turntable.",
+        lifespan=lifespan,
+        swagger_ui_parameters={"validatorUrl": None},  # no badge from validator.swagger.io
+        generate_unique_id_function=operation_id,
+    )
+    app.openapi = lambda: complete_openapi(app, _soft_limits(app))  # type: ignore[method-assign]
+    app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
+    # Outermost: a request naming a host we do not serve (DNS rebinding) gets 400 before
+    # anything else runs. Origin is checked on the WebSocket itself (routes/live.py).
+    app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.trusted_hosts)
+
+    _install_error_answers(app)
+    _include_routes(app)
 
     # The dashboard at / (its assets under /assets), or a page saying how to build it.
     dashboard.install(app, settings.frontend_dist)
