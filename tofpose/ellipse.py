@@ -17,7 +17,7 @@ import math
 import cv2
 import numpy as np
 
-from tofpose.kernels.ellipses import arc_points, ellipse_rms_px
+from tofpose.arithmetic import COMPILED, Arithmetic
 
 Ellipse = tuple[tuple[float, float], tuple[float, float], float]
 
@@ -48,21 +48,26 @@ def fit_ellipse(points: np.ndarray) -> Ellipse | None:
     return (float(cx), float(cy)), (float(a1), float(a2)), float(ang)
 
 
-def ellipse_residual_px(ellipse: Ellipse, points: np.ndarray) -> float:
+def ellipse_residual_px(
+    ellipse: Ellipse, points: np.ndarray, *, arithmetic: Arithmetic = COMPILED
+) -> float:
     """RMS approximate geometric distance of points (P, 2) from an ellipse, pixels.
 
     Uses the Sampson-like radial measure: |r_point - r_ellipse(theta)| along the ray from
-    the centre, exact for circles and accurate for moderate eccentricity.
+    the centre, exact for circles and accurate for moderate eccentricity
+    (``ellipse_rms_px`` of ``arithmetic``).
     """
     (cx, cy), (a1, a2), ang = ellipse
     pts = points if points.dtype == np.float32 else np.asarray(points, np.float64)
     pts = np.ascontiguousarray(pts).reshape(-1, 2)  # float32 exact in the float64 sums
-    return float(ellipse_rms_px(float(cx), float(cy), float(a1), float(a2), float(ang), pts))
+    return float(arithmetic.ellipse_rms_px(float(cx), float(cy), float(a1), float(a2),
+                                           float(ang), pts))  # fmt: skip
 
 
 def split_arcs(
-    contour: np.ndarray, *, angle_deg: float = 40.0, min_points: int = 6, smooth_sigma: float = 2.0
-) -> list[np.ndarray]:
+    contour: np.ndarray, *, angle_deg: float = 40.0, min_points: int = 6,
+    smooth_sigma: float = 2.0, arithmetic: Arithmetic = COMPILED,
+) -> list[np.ndarray]:  # fmt: skip
     """Split a closed contour (P, 2) into elliptical arcs (§3.3 AC, CC, PC).
 
     The contour is smoothed along its length (Gaussian, ``smooth_sigma`` points, so pixel
@@ -75,14 +80,16 @@ def split_arcs(
     n = len(contour)
     if n < 2 * min_points:
         return [contour] if n >= min_points else []
-    index, starts = arc_points(np.ascontiguousarray(contour, np.float64), float(angle_deg),
-                               int(min_points), float(smooth_sigma))  # fmt: skip
+    index, starts = arithmetic.arc_points(np.ascontiguousarray(contour, np.float64),
+                                          float(angle_deg), int(min_points),
+                                          float(smooth_sigma))  # fmt: skip
     return [contour[index[starts[a] : starts[a + 1]]] for a in range(len(starts) - 1)]
 
 
 def ellipses_from_arcs(
-    arcs: list[np.ndarray], *, d_min_px: float, d_max_px: float, max_residual_px: float
-) -> list[tuple[Ellipse, np.ndarray]]:
+    arcs: list[np.ndarray], *, d_min_px: float, d_max_px: float, max_residual_px: float,
+    arithmetic: Arithmetic = COMPILED,
+) -> list[tuple[Ellipse, np.ndarray]]:  # fmt: skip
     """Fit each arc, keep ellipses of plausible size, merge arcs with agreeing ellipses.
 
     Returns a list of (ellipse, supporting points (P, 2)).
@@ -95,7 +102,7 @@ def ellipses_from_arcs(
         major, minor = max(e[1]), min(e[1])
         if not (d_min_px <= minor and major <= d_max_px):
             continue
-        if ellipse_residual_px(e, arc) > max_residual_px:
+        if ellipse_residual_px(e, arc, arithmetic=arithmetic) > max_residual_px:
             continue
         fits.append((e, arc))
     groups: list[tuple[Ellipse, np.ndarray]] = []

@@ -26,18 +26,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
+from tofpose.arithmetic import COMPILED, Arithmetic
 from tofpose.config import MatchingConfig
-from tofpose.kernels.annealing import (
-    anneal_assignment,
-    assigned_pairs,
-    assignment_costs,
-    pair_potentials,
-    size_mismatch,
-)
-from tofpose.kernels.residual_check import prune_pairs
-from tofpose.kernels.triplets import catalog_triplets, trials_needed, triplet_search
 
 
 @dataclass
@@ -65,60 +56,61 @@ class MatchResult:
 
 
 def pair_compatibility(
-    observed_mm: np.ndarray, catalog_mm: np.ndarray, alpha_mm: float, clip_factor: float
-) -> np.ndarray:
+    observed_mm: np.ndarray, catalog_mm: np.ndarray, alpha_mm: float, clip_factor: float, *,
+    arithmetic: Arithmetic = COMPILED,
+) -> np.ndarray:  # fmt: skip
     """Pair potential rho_kilj^2 - alpha^2 (Eq. 36), shape (gamma, eta, gamma, eta).
 
     rho_kilj = |d_kl - D_ij| compares the distance between observed blobs k and l (Eq. 26)
     with that between catalog reflectors i and j (Eq. 25); rho^2 is clipped at
     (clip_factor alpha)^2. Entries with l == k or j == i are zero (no self-support).
-    Computed by ``kernels.annealing.pair_potentials``.
+    Computed by ``kernels.annealing.pair_potentials`` (``arithmetic``'s).
     """
-    return pair_potentials(
+    return arithmetic.pair_potentials(
         np.ascontiguousarray(observed_mm, float), np.ascontiguousarray(catalog_mm, float),
         float(alpha_mm), float(clip_factor),
     )  # fmt: skip
 
 
 def size_unary(
-    observed_diameter_mm: np.ndarray | None, catalog_diameter_mm: np.ndarray
-) -> np.ndarray | None:
+    observed_diameter_mm: np.ndarray | None, catalog_diameter_mm: np.ndarray, *,
+    arithmetic: Arithmetic = COMPILED,
+) -> np.ndarray | None:  # fmt: skip
     """Unary mismatch (gamma, eta) of apparent vs catalog diameter, 0 where unknown.
 
     ``(ln(d_obs / D_i) / ln 1.6)^2`` capped at 4: a 35 mm blob seen as 80 mm costs ~3.
     """
     if observed_diameter_mm is None:
         return None
-    return size_mismatch(
+    return arithmetic.size_mismatch(
         np.ascontiguousarray(observed_diameter_mm, float).reshape(-1),
         np.ascontiguousarray(catalog_diameter_mm, float).reshape(-1),
     )
 
 
 def anneal(
-    P: np.ndarray, unary: np.ndarray | None, alpha_mm: float, config: MatchingConfig
-) -> tuple[np.ndarray, int]:
+    P: np.ndarray, unary: np.ndarray | None, alpha_mm: float, config: MatchingConfig, *,
+    arithmetic: Arithmetic = COMPILED,
+) -> tuple[np.ndarray, int]:  # fmt: skip
     """Run Eqs. 35-39; returns A of shape (gamma, eta + 1) and the iteration count."""
     g, e = P.shape[0], P.shape[1]
     u = np.zeros((g, e)) if unary is None else config.size_weight * alpha_mm**2 * unary
-    return anneal_assignment(
+    return arithmetic.anneal_assignment(
         np.ascontiguousarray(P.reshape(g * e, g * e)), np.ascontiguousarray(u, float),
         config.psi_start / alpha_mm**2, config.psi_end / alpha_mm**2, config.growth,
     )  # fmt: skip
 
 
-def one_to_one(A: np.ndarray) -> tuple[np.ndarray, list[int]]:
+def one_to_one(
+    A: np.ndarray, *, arithmetic: Arithmetic = COMPILED
+) -> tuple[np.ndarray, list[int]]:
     """Hungarian assignment on -log A with a private null column per observed blob.
 
     A : (g, e + 1) assignment probabilities, column 0 the null label. Returns the pairs
-    (m, 2) (blob k, catalog i) and the unmatched blobs. The cost matrix and the reading
-    of the assignment are compiled (``kernels.annealing.assignment_costs``,
-    ``assigned_pairs``); the assignment is SciPy's."""
-    cost = assignment_costs(-np.log(np.maximum(A, 1e-300)))  # finite: A > 0
-    rows, cols = linear_sum_assignment(cost)
-    pairs, unmatched = assigned_pairs(rows.astype(np.int64), cols.astype(np.int64), cost,
-                                      A.shape[1] - 1)  # fmt: skip
-    return pairs, unmatched.tolist()
+    (m, 2) (blob k, catalog i) and the unmatched blobs. Compiled: the cost matrix and the
+    reading of the assignment are kernels (``kernels.annealing.assignment_costs``,
+    ``assigned_pairs``), the assignment is SciPy's (``arithmetic.COMPILED.one_to_one``)."""
+    return arithmetic.one_to_one(A)
 
 
 def match_reflectors(
@@ -129,6 +121,7 @@ def match_reflectors(
     observed_diameter_mm: np.ndarray | None = None,
     catalog_diameter_mm: np.ndarray | None = None,
     weights: np.ndarray | None = None,
+    arithmetic: Arithmetic = COMPILED,
 ) -> MatchResult:
     """Match observed 3-D reflector positions (gamma, 3) to a catalog (eta, 3).
 
@@ -139,6 +132,7 @@ def match_reflectors(
     observed_diameter_mm : optional (gamma,), apparent diameters for the size term.
     catalog_diameter_mm : optional (eta,).
     weights : optional (gamma,), used by the rigid residual check's SVD.
+    arithmetic : the implementation of the arithmetic (``tofpose.arithmetic``).
     """
     cfg = config or MatchingConfig()
     g, e = len(observed_mm), len(catalog_mm)
@@ -153,17 +147,18 @@ def match_reflectors(
             alpha,
             f"only {g} candidate reflector(s), need {cfg.min_matches}",
         )
-    P = pair_compatibility(observed_mm, catalog_mm, alpha, cfg.clip_factor)
+    P = pair_compatibility(observed_mm, catalog_mm, alpha, cfg.clip_factor,
+                           arithmetic=arithmetic)  # fmt: skip
     unary = None
     if cfg.size_weight > 0 and catalog_diameter_mm is not None:
-        unary = size_unary(observed_diameter_mm, catalog_diameter_mm)
-    A, iters = anneal(P, unary, alpha, cfg)
-    pairs, unmatched = one_to_one(A)
+        unary = size_unary(observed_diameter_mm, catalog_diameter_mm, arithmetic=arithmetic)
+    A, iters = anneal(P, unary, alpha, cfg, arithmetic=arithmetic)
+    pairs, unmatched = one_to_one(A, arithmetic=arithmetic)
     w = np.ones(g) if weights is None else np.asarray(weights, float)
     # Without weights every pair gets sigma = alpha, i.e. the tolerance residual_factor alpha.
     tol = cfg.pair_tolerance_mm(alpha, w if weights is not None else np.full(g, alpha**-2.0))
     pairs, rejected, reason = rigid_residual_check(
-        observed_mm, catalog_mm, pairs, w, tol, cfg.min_matches
+        observed_mm, catalog_mm, pairs, w, tol, cfg.min_matches, arithmetic=arithmetic
     )
     unmatched = sorted(set(unmatched) | set(rejected))
     return MatchResult(pairs, unmatched, A, iters, alpha, reason)
@@ -176,6 +171,8 @@ def rigid_residual_check(
     weights: np.ndarray,
     tol_mm: float | np.ndarray,
     min_matches: int,
+    *,
+    arithmetic: Arithmetic = COMPILED,
 ) -> tuple[np.ndarray, list[int], str]:
     """Drop the worst pair until every rigid-fit residual is within its tolerance.
 
@@ -189,7 +186,7 @@ def rigid_residual_check(
     tol_all = np.asarray(tol_mm, float)
     if tol_all.ndim == 0:
         tol_all = np.full(len(observed_mm), float(tol_all))
-    kept, rejected, ok = prune_pairs(
+    kept, rejected, ok = arithmetic.prune_pairs(
         observed_mm, np.ascontiguousarray(catalog_mm, dtype=float),
         np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2),
         np.ascontiguousarray(weights, dtype=float), np.ascontiguousarray(tol_all), min_matches,
@@ -218,6 +215,7 @@ def match_by_triplets(
     deadline_s: float | None = None,
     confidence: float | None = None,
     stats: dict | None = None,
+    arithmetic: Arithmetic = COMPILED,
 ) -> np.ndarray:
     """Exhaustive triplet hypotheses (ours): the fallback when annealing's answer fails
     verification (e.g. a mirror-image assignment of 3-4 markers at long range).
@@ -239,6 +237,7 @@ def match_by_triplets(
         observed triplet tried so far held an outlier is below ``1 - confidence``, for an
         inlier fraction estimated from the best hypothesis (``ransac_trials_needed``).
     stats : optional dict that receives ``triplets`` (observed triplets tried).
+    arithmetic : the implementation of the arithmetic (``tofpose.arithmetic``).
     """
     import time
     from itertools import combinations
@@ -252,7 +251,7 @@ def match_by_triplets(
         g = min(n, max_observed)
         observed_triplets = np.array(list(combinations(range(g), 3)), np.int64)
     triplets = np.ascontiguousarray(observed_triplets, dtype=np.int64).reshape(-1, 3)
-    cat_tri, cat_sides = catalog_triplets(catalog)
+    cat_tri, cat_sides = arithmetic.catalog_triplets(catalog)
     centroid, cos_min = (np.zeros(3), -np.inf) if facing is None else facing
     fixed = (observed, catalog, w, tol, float(alpha_mm))
     rule = (facing is not None, np.ascontiguousarray(centroid, dtype=float), float(cos_min),
@@ -263,7 +262,7 @@ def match_by_triplets(
     for s in range(0, len(triplets), step):
         if deadline_s is not None and time.perf_counter() > deadline_s:
             break
-        best, best_n, best_cost, tried, done = triplet_search(
+        best, best_n, best_cost, tried, done = arithmetic.triplet_search(
             *fixed, triplets[s : s + step], cat_tri, cat_sides, *rule, best, best_n,
             best_cost, tried,
         )  # fmt: skip
@@ -278,7 +277,7 @@ def match_by_triplets(
 DEADLINE_CHUNK = 4
 
 #: the standard RANSAC count (``kernels.triplets.trials_needed``)
-ransac_trials_needed = trials_needed
+ransac_trials_needed = COMPILED.trials_needed
 
 
 def random_triplets(n_observed: int, rng: np.random.Generator) -> np.ndarray:

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tofpose.kernels.pair_fit import fit_pair_lm
+from tofpose.arithmetic import COMPILED, Arithmetic
 
 #: pixels around the pair's box included in the fit (the surround: level and edges)
 MARGIN_PX = 2
@@ -108,15 +108,17 @@ def _result(p: np.ndarray, normal: np.ndarray, cost: float, n_values: int,
 
 
 def fit_pair(
-    gray: np.ndarray, pixels: np.ndarray, centres0_px: np.ndarray, background: float
-) -> PairFit | None:
+    gray: np.ndarray, pixels: np.ndarray, centres0_px: np.ndarray, background: float, *,
+    arithmetic: Arithmetic = COMPILED,
+) -> PairFit | None:  # fmt: skip
     """Fit two blurred discs to the blob of flat ``pixels`` (P,) in ``gray`` (H, W),
     starting from ``centres0_px`` (2, 2) (u, v; e.g. the 2-means halves' centroids) over
     the frame's ``background`` level, by the compiled Levenberg-Marquardt loop
-    (``kernels.pair_fit.fit_pair_lm``). None when the fit does not converge or ends at a
+    (``kernels.pair_fit.fit_pair_lm``; ``arithmetic``'s: the reference fits by SciPy's
+    ``least_squares``). None when the fit does not converge or ends at a
     bound of the radius (not two discs of one size)."""
     su, sv, values, start, lower, upper = _problem(gray, pixels, centres0_px, background)
-    p, normal, cost, converged = fit_pair_lm(
+    p, normal, cost, converged = arithmetic.fit_pair_lm(
         su, sv, values, start, lower, upper, MAX_EVALUATIONS, CENTRE_TOLERANCE_PX,
         COST_TOLERANCE,
     )  # fmt: skip

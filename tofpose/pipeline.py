@@ -20,6 +20,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
+from tofpose.arithmetic import COMPILED, Arithmetic, arithmetic_for
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.config import PipelineConfig
@@ -36,16 +37,12 @@ from tofpose.extraction import (
     CandidateBlobs,
     RejectedBlob,
     check_frame,
-    find_candidate_blobs,
-    frame_levels,
     predicted_diameter_window_px,
 )
 from tofpose.geometry import facing_euler_deg, quaternion_wxyz_from_rotation
-from tofpose.kernels.ellipses import blob_mask
 from tofpose.kernels.measure import measure_and_back_project
-from tofpose.kernels.pose import covariance_envelope, point_residuals_mm
 from tofpose.kernels.records import camera_record
-from tofpose.kernels.two_centres import SPLIT_OK, two_centre_split
+from tofpose.kernels.two_centres import SPLIT_OK
 from tofpose.matching import (
     MatchResult,
     match_by_triplets,
@@ -207,13 +204,19 @@ class PosePipeline:
         config: PipelineConfig | None = None,
         range_correction: RangeCorrection | None = None,
         covariance_scale: CovarianceScale | None = None,
+        implementation: str = "compiled",
     ) -> None:
         """``range_correction``: the camera's calibrated range errors
         (``tofpose.range_calibration``), subtracted from each reflector's range before
         back-projection; None for a camera without one. ``ValueError`` when its
         per-pixel offsets are not of the camera's image size. ``covariance_scale``: the
         camera's covariance calibration (``tofpose.covariance_calibration``), applied to
-        the reported covariance at the target's distance; None reports the model's."""
+        the reported covariance at the target's distance; None reports the model's.
+        ``implementation``: "compiled" (the kernels, ``tofpose.kernels``) or "reference"
+        (every stage's arithmetic by its plain NumPy/SciPy statement,
+        ``tofpose.reference``: the A/B baseline of the whole chain, much slower; see
+        ``tofpose.arithmetic`` for what it does not cover); ``ValueError`` for others."""
+        arithmetic = arithmetic_for(implementation)  # ValueError naming the accepted ones
         offsets = None if range_correction is None else range_correction.pixel_offsets_mm
         if offsets is not None and offsets.shape != camera.shape:
             raise ValueError(
@@ -222,6 +225,8 @@ class PosePipeline:
                 f"{camera.shape[0]} x {camera.shape[1]}"
             )
         self.camera = camera
+        self.implementation = implementation
+        self.arithmetic: Arithmetic = arithmetic
         self.range_correction = range_correction
         self.covariance_scale = covariance_scale
         self._correction_kernel_args = correction_kernel_arguments(range_correction)
@@ -236,11 +241,12 @@ class PosePipeline:
         self._catalog_d = catalog.diameters_mm
         self._catalog_ids = catalog.ids
         self._rng = np.random.default_rng(self.config.ransac_seed)
-        self._solver = PoseSolver(camera, catalog, self.config.solve, range_correction)
+        self._solver = PoseSolver(camera, catalog, self.config.solve, range_correction,
+                                  arithmetic=arithmetic)  # fmt: skip
         self._track: TrackState | None = None
         self._compiled_tracker = CompiledTracker(
             camera, catalog, self.config.solve, self.config.tracking, self._solver,
-            self._persistence, range_correction,
+            self._persistence, range_correction, arithmetic=arithmetic,
         )  # fmt: skip
 
     def reset(self) -> None:
@@ -290,7 +296,7 @@ class PosePipeline:
             if tracked is not None:
                 return tracked
             timer.lap("tracking fallback")
-        stats = frame_levels(g, cfg.extraction)
+        stats = self.arithmetic.frame_levels(g, cfg.extraction)
         timer.lap("levels")
 
         def fail(reason: str, unmatched=(), diagnostics=NO_DIAGNOSTICS) -> PoseResult:
@@ -348,7 +354,8 @@ class PosePipeline:
         """§3.1-§3.3: candidate blobs through the gates, then ellipse confirmation (which
         may split merged components); returns the extraction record and the blobs."""
         cfg = self.config
-        found = find_candidate_blobs(g, d, self.camera, self._catalog_d, cfg.extraction, stats)
+        found = self.arithmetic.find_candidate_blobs(g, d, self.camera, self._catalog_d,
+                                                     cfg.extraction, stats)  # fmt: skip
         timer.lap("blobs")
         blobs = found.accepted
         if cfg.ellipse_confirmation:
@@ -372,11 +379,13 @@ class PosePipeline:
         weights of Eq. 21. Returns the ``Measurements`` of the kept blobs with a range,
         (u, v, range) of the kept ones without, how many were kept, and what persistence
         combined."""
-        cam, persistence = self.camera, self._persistence
+        cam, persistence, ar = self.camera, self._persistence, self.arithmetic
         cur, flat, starts, bbox = blob_arrays(blobs)
         split = np.array([b.source == "split" for b in blobs], bool)
+        # compiled: the module's ``measure_and_back_project`` (tests spy on it there)
+        measure = measure_and_back_project if ar is COMPILED else ar.measure_and_back_project
         (n_used, motion, keep, uv, rho, ranged, rho_r, sp, sr, y, w,
-         mix) = measure_and_back_project(
+         mix) = measure(
             g, d, flat, starts, bbox, cur, split, persistence.history(g, d),
             float(background), float(dark),
             self._camera_record, *persistence.scratch(g.shape), self._correction_kernel_args,
@@ -393,7 +402,7 @@ class PosePipeline:
             # a half's range mixes the neighbour's and the surround's light at the cut:
             # its bearing is used, its range only as a weak constraint
             sr[fitted] = np.maximum(sr[fitted], UNCALIBRATED_RANGE_SIGMA_MM)
-            y[fitted] = cam.bearings(uv[fitted]) * rho_r[fitted, None]  # Eq. 8
+            y[fitted] = ar.bearings(cam, uv[fitted]) * rho_r[fitted, None]  # Eq. 8
             w[fitted] = 1.0 / (sr[fitted] ** 2 + (rho_r[fitted] * sp[fitted] / cam.fx) ** 2)
         area = np.array([b.area_px for b in ranged_blobs], np.int64)
         meas = Measurements(ranged_blobs, area, uv, rho_r, y, w, sp, sr, mix)
@@ -410,6 +419,7 @@ class PosePipeline:
             meas.y_mm, self._catalog_xyz, cfg.matching,
             observed_diameter_mm=diam * meas.range_mm / self.camera.fx,
             catalog_diameter_mm=self._catalog_d, weights=meas.weights,
+            arithmetic=self.arithmetic,
         )  # fmt: skip
 
     def _solve_with_fallback(self, meas: Measurements, m: MatchResult, active):
@@ -426,6 +436,7 @@ class PosePipeline:
             meas.y_mm, self._catalog_xyz, m.alpha_mm, tol,
             self._solver.facing,
             weights=meas.weights, min_matches=cfg.matching.min_matches,
+            arithmetic=self.arithmetic,
         )  # fmt: skip
         return self._solver.solve(pairs, meas, m.alpha_mm, active) if len(pairs) else solved
 
@@ -471,7 +482,7 @@ class PosePipeline:
         uv_m, y_m, rho_m = obs.uv_px, obs.y_mm, obs.range_mm
         area, uv, rho = meas.area_px, meas.uv_px, meas.range_mm
         sig_px = meas.sigma_px
-        res, rms = point_residuals_mm(x, y_m, R, t)
+        res, rms = self.arithmetic.point_residuals_mm(x, y_m, R, t)
         per_reflector = zip(
             self._catalog_ids[i_idx].tolist(), uv_m, y_m, res.tolist(), rho_m.tolist(),
             area[k_idx].tolist(), sig_px[k_idx].tolist(), obs.sigma_range_mm.tolist(),
@@ -515,7 +526,7 @@ class PosePipeline:
         if ml.bias_covariance is not None:
             cov = cov + ml.bias_covariance
         if ml.leave_one_out_covariance is not None:  # pose.covariance_envelope
-            cov = covariance_envelope(cov, ml.leave_one_out_covariance)
+            cov = self.arithmetic.covariance_envelope(cov, ml.leave_one_out_covariance)
         if self.covariance_scale is not None:
             cov = cov * self.covariance_scale.factor_at(math.sqrt(float(t_mm @ t_mm)))
         return cov
@@ -554,6 +565,7 @@ class PosePipeline:
             deadline_s=None if budget is None else time.perf_counter() + budget / 1000.0,
             confidence=cfg.ransac_confidence,
             stats=stats,
+            arithmetic=self.arithmetic,
         )
         matched = set(pairs[:, 0].tolist())
         unmatched = [k for k in range(len(y)) if k not in matched]
@@ -577,16 +589,17 @@ class PosePipeline:
         too large are searched for elliptical arcs of the predicted size (supplement).
         """
         cfg = self.config.extraction
+        ar = self.arithmetic
         h, w = gray.shape
         out = []
         for b in blobs:
             if b.area_px >= 20:
-                mask, x0, y0 = _blob_mask(b, w)
+                mask, x0, y0 = _blob_mask(b, w, ar)
                 pts = blob_contour(mask, (x0, y0))  # in image coordinates
                 if len(pts) >= cfg.ellipse_min_points:
                     e = fit_ellipse(pts)
                     if e is not None:
-                        rms_px = ellipse_residual_px(e, pts)
+                        rms_px = ellipse_residual_px(e, pts, arithmetic=ar)
                         if rms_px > cfg.ellipse_max_residual_px:
                             continue
                         b = b.with_values(ellipse=e, ellipse_residual_px=rms_px)
@@ -594,26 +607,27 @@ class PosePipeline:
         if len(out) >= len(self.catalog) or not oversize:
             return out
         for comp in oversize:
-            mask, x0, y0 = _blob_mask(comp, w)
+            mask, x0, y0 = _blob_mask(comp, w, ar)
             pts = blob_contour(mask)
             d_lo, d_hi = predicted_diameter_window_px(
                 self.camera.fx, comp.distance_mm, self._catalog_d, cfg
             )
-            arcs = split_arcs(pts, min_points=cfg.ellipse_min_points)
+            arcs = split_arcs(pts, min_points=cfg.ellipse_min_points, arithmetic=ar)
             found = ellipses_from_arcs(
-                arcs, d_min_px=d_lo, d_max_px=d_hi, max_residual_px=cfg.ellipse_max_residual_px
-            )
+                arcs, d_min_px=d_lo, d_max_px=d_hi, max_residual_px=cfg.ellipse_max_residual_px,
+                arithmetic=ar,
+            )  # fmt: skip
             if not found:
                 found_parts = _split_by_threshold(comp, gray, stats.raw_threshold, d_hi,
-                                                  cfg.min_area_px)  # fmt: skip
+                                                  cfg.min_area_px, ar)  # fmt: skip
                 out += found_parts or _split_in_two(comp, gray, stats.background, d_lo,
-                                                    d_hi, cfg.min_area_px)  # fmt: skip
+                                                    d_hi, cfg.min_area_px, ar)  # fmt: skip
             elif len(found) == 1:
                 # one ellipse for a component too large for one reflector: at a few px
                 # the outline of a merged pair fits one ellipse of a reflector's size
                 # over part of it; a pair's two centres explain all of it
                 pair = _split_in_two(comp, gray, stats.background, d_lo, d_hi,
-                                     cfg.min_area_px)  # fmt: skip
+                                     cfg.min_area_px, ar)  # fmt: skip
                 if pair:
                     out += pair
                     continue
@@ -646,8 +660,9 @@ SPLIT_LEVELS = 12
 
 
 def _split_by_threshold(
-    comp: Blob, gray: np.ndarray, raw_threshold: float, d_max_px: float, min_area_px: int
-) -> list[Blob]:
+    comp: Blob, gray: np.ndarray, raw_threshold: float, d_max_px: float, min_area_px: int,
+    arithmetic: Arithmetic = COMPILED,
+) -> list[Blob]:  # fmt: skip
     """Ours (after §3.3): a component too large for one reflector whose outline gives no
     elliptical arcs (small merged markers, e.g. 7 and 8 beyond ~4 m, a few px each) is
     thresholded again at rising levels between I_t and its peak; at the first level where
@@ -655,7 +670,7 @@ def _split_by_threshold(
     each no larger than one reflector, those parts' cores are the candidates (their range
     and centroid are measured later as for any blob). Returns [] when no level splits it."""
     h, w = gray.shape
-    mask, x0, y0 = _blob_mask(comp, w)
+    mask, x0, y0 = _blob_mask(comp, w, arithmetic)
     patch = np.zeros(mask.shape, np.float32)
     rows, cols = np.nonzero(mask)
     patch[rows, cols] = gray[rows + y0, cols + x0]
@@ -698,7 +713,7 @@ PAIR_LIGHT_RATIO = 3.0
 
 def _split_in_two(
     comp: Blob, gray: np.ndarray, background: float, d_lo_px: float, d_hi_px: float,
-    min_area_px: int,
+    min_area_px: int, arithmetic: Arithmetic = COMPILED,
 ) -> list[Blob]:  # fmt: skip
     """Ours (after ``_split_by_threshold``): a component the size of two reflectors whose
     light shows no dip between them (two discs a fraction of a pixel apart, integrated
@@ -713,14 +728,14 @@ def _split_in_two(
     when it fails) and replace the halves' centroids in the measurement
     (``Blob.fitted_uv``); ranges are measured on the halves as any blob's, and the
     centroid sigma keeps the split's term (``uncertainty.SPLIT_CENTROID_PX``). The 2-means
-    is compiled (``kernels.two_centres.two_centre_split``)."""
+    is compiled (``kernels.two_centres.two_centre_split``; ``arithmetic``'s)."""
     w = gray.shape[1]
     rows, cols = np.divmod(np.asarray(comp.pixels), w)
     weight = np.maximum(gray[rows, cols].astype(float) - background, 0.0)
     if len(rows) < 2 * min_area_px or weight.sum() <= 0:
         return []
-    near, centres, status = two_centre_split(cols.astype(float), rows.astype(float), weight,
-                                             TWO_CENTRE_ITERATIONS)  # fmt: skip
+    near, centres, status = arithmetic.two_centre_split(cols.astype(float), rows.astype(float),
+                                                        weight, TWO_CENTRE_ITERATIONS)  # fmt: skip
     if status != SPLIT_OK:
         return []  # not elongated as two discs side by side are, or one-sided
     light = np.bincount(near, weights=weight, minlength=2)
@@ -729,7 +744,7 @@ def _split_in_two(
     for n_k in np.bincount(near, minlength=2).tolist():  # each half one reflector's size
         if n_k < min_area_px or not d_lo_px <= 2.0 * np.sqrt(n_k / np.pi) <= d_hi_px:
             return []
-    fit = fit_pair(gray, comp.pixels, centres, background)
+    fit = fit_pair(gray, comp.pixels, centres, background, arithmetic=arithmetic)
     if fit is None:
         return []  # the halves' moment centroids lean towards each other: not used
     # the fitted disc nearest each half's centroid is that half's centre
@@ -752,7 +767,9 @@ def _split_in_two(
     return out
 
 
-def _blob_mask(b: Blob, width: int) -> tuple[np.ndarray, int, int]:
+def _blob_mask(
+    b: Blob, width: int, arithmetic: Arithmetic = COMPILED
+) -> tuple[np.ndarray, int, int]:
     """Binary mask of a blob in its bounding box padded by 1 px, and the box origin."""
     x, y, bw, bh = b.bbox
-    return blob_mask(b.pixels, x, y, bw, bh, width), x - 1, y - 1
+    return arithmetic.blob_mask(b.pixels, x, y, bw, bh, width), x - 1, y - 1

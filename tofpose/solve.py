@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.stats
 
+from tofpose.arithmetic import COMPILED, Arithmetic
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.config import SolveConfig
@@ -33,15 +34,10 @@ from tofpose.kernels.pose import (
     REFINE_ML,
     REFINE_NONE,
     RangeOffsetPrior,
-    absolute_orientation,
-    class_scale_covariance,
-    facing_cosine,
-    leave_one_out_spread,
-    range_bias_covariance,
 )
 from tofpose.kernels.records import FitSettings, camera_record, catalog_record
 from tofpose.kernels.solve import solve_pairs
-from tofpose.kernels.verify import BEHIND_CAMERA, DARK_REFLECTOR, pose_check
+from tofpose.kernels.verify import BEHIND_CAMERA, DARK_REFLECTOR
 from tofpose.pose import STEP_SIGMA2, MLResult
 
 _REFINEMENT = {"none": REFINE_NONE, "ml": REFINE_ML, "los": REFINE_LOS}
@@ -195,12 +191,16 @@ class PoseSolver:
         catalog: Catalog,
         config: SolveConfig,
         range_correction: RangeCorrection | None,
+        *,
+        arithmetic: Arithmetic = COMPILED,
     ) -> None:
         """``range_correction``: the camera's ranges are corrected with it; where the
         reflectors lie in its calibrated span the covariance takes the smaller common
         range-bias sigma (``calibrated_range_bias_sigma_mm``), elsewhere the uncalibrated
-        one (the model is an extrapolation there)."""
+        one (the model is an extrapolation there). ``arithmetic``: the implementation of
+        the fit, the covariances and the checks (``tofpose.arithmetic``)."""
         self.camera = camera
+        self.arithmetic = arithmetic
         self.config = config
         self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
         self._xyz_mean = self._xyz.mean(axis=0)
@@ -282,7 +282,9 @@ class PoseSolver:
             if meas.mixing is not None
             else np.full((len(meas.range_mm), MIX_FIELDS), np.nan)
         )
-        return solve_pairs(
+        # compiled: the module's ``solve_pairs`` (tests spy on it there)
+        fit = solve_pairs if self.arithmetic is COMPILED else self.arithmetic.solve_pairs
+        return fit(
             meas.y_mm, meas.weights, meas.uv_px, meas.range_mm, meas.sigma_px,
             meas.sigma_range_mm, mixing, np.ascontiguousarray(pairs[:, 0]),
             np.ascontiguousarray(pairs[:, 1]), self._catalog_record, self._camera_record,
@@ -310,6 +312,7 @@ class PoseSolver:
         covariance of the fit (6, 6; the pipeline scales it by the a-posteriori variance
         factor) and of the common range bias the data cannot reveal."""
         T = RigidTransform(R, t)
+        ar = self.arithmetic
         if self.config.verify_pose:
             problem = self.verify(T, active, obs.i_idx)
             if problem:
@@ -327,7 +330,7 @@ class PoseSolver:
             self.range_bias_sigma_mm(obs.range_mm)
         )  # fmt: skip
         extra = (
-            range_bias_covariance(obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, sb, bias)
+            ar.range_bias_covariance(obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, sb, bias)
             if bias > 0
             else None
         )
@@ -337,14 +340,14 @@ class PoseSolver:
         spread = None  # pose.leave_one_out_covariance, without its input conversions
         if self.config.leave_one_out_covariance and len(obs.i_idx) >= MIN_LEAVE_ONE_OUT:
             c = np.ascontiguousarray
-            spread = leave_one_out_spread(c(obs.x_mm), c(obs.bearings), c(obs.range_mm), R, t,
-                                          c(sr), c(sb))  # fmt: skip
+            spread = ar.leave_one_out_spread(c(obs.x_mm), c(obs.bearings), c(obs.range_mm), R,
+                                             t, c(sr), c(sb))  # fmt: skip
         ml = MLResult(R, t, cov, float(chi2), int(iterations), norms, bias_covariance=extra,
                       range_offset_mm=float(offset_mm),
                       leave_one_out_covariance=spread)  # fmt: skip
         c = np.ascontiguousarray
         weights = 1.0 / (sr**2 + (obs.range_mm * sb) ** 2)  # as kernels.pose.fit_pose's
-        T_svd = RigidTransform(*absolute_orientation(c(obs.x_mm), c(obs.y_mm), c(weights)))
+        T_svd = RigidTransform(*ar.absolute_orientation(c(obs.x_mm), c(obs.y_mm), c(weights)))
         return Solution(T, obs, int(iterations), ml, T_svd=T_svd)
 
     def size_scale_covariance(self, obs: MatchedObservations, R, t, sr, sb) -> np.ndarray | None:
@@ -357,7 +360,7 @@ class PoseSolver:
         if cfg.common_centroid_bias_px <= 0 and cfg.focal_length_sigma_rel <= 0:
             return None
         cls = self._size_class[obs.i_idx]
-        return class_scale_covariance(
+        return self.arithmetic.class_scale_covariance(
             obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, sb,
             np.ascontiguousarray(cls, dtype=np.int64), self._n_sizes,
             float(cfg.common_centroid_bias_px) / self.camera.fx,
@@ -389,8 +392,9 @@ class PoseSolver:
     def view_cosine(self, R: np.ndarray, t: np.ndarray) -> float:
         """Cosine between the target normal and the direction to the camera
         (``kernels.triplets.facing_cosine``)."""
-        return facing_cosine(np.ascontiguousarray(R, dtype=float),
-                             np.ascontiguousarray(t, dtype=float), self._xyz_mean)  # fmt: skip
+        return self.arithmetic.facing_cosine(np.ascontiguousarray(R, dtype=float),
+                                             np.ascontiguousarray(t, dtype=float),
+                                             self._xyz_mean)  # fmt: skip
 
     @property
     def facing(self) -> tuple[np.ndarray, float]:
@@ -419,7 +423,7 @@ class PoseSolver:
         is_matched[matched] = True
         frame = active if dark_check else _NO_FRAME
         cam = self.camera
-        outcome, i, u, v = pose_check(
+        outcome, i, u, v = self.arithmetic.pose_check(
             self._xyz, self._d, is_matched, np.ascontiguousarray(R, dtype=float),
             np.ascontiguousarray(t, dtype=float), cam.fx, cam.fy, cam.cx, cam.cy,
             self._dist, frame.gray, float(frame.threshold), dark_check,

@@ -23,17 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tofpose.arithmetic import COMPILED, Arithmetic
 from tofpose.camera import CameraModel
 from tofpose.extraction import Blob
-from tofpose.kernels.tracking import (
-    AT_EDGE,
-    FOUND,
-    NO_SIZE,
-    NOT_FOUND,
-    any_shared,
-    camera_windows,
-    search_windows,
-)
+from tofpose.kernels.tracking import AT_EDGE, FOUND, NO_SIZE, NOT_FOUND
 
 
 @dataclass(frozen=True)
@@ -71,6 +64,7 @@ def predict_windows(
     *,
     margin_px: float,
     min_diameter_px: float,
+    arithmetic: Arithmetic = COMPILED,
 ) -> list[Window]:
     """Windows around the predicted image of every catalog reflector in view.
 
@@ -80,7 +74,7 @@ def predict_windows(
     markers 7 and 8 beyond ~4.5 m) are skipped; the others carry the pose. The window is
     the predicted disc plus ``margin_px`` on every side.
     """
-    idx, bounds, uv, d_px = camera_windows(
+    idx, bounds, uv, d_px = arithmetic.camera_windows(
         np.ascontiguousarray(catalog_mm, dtype=float),
         np.ascontiguousarray(catalog_diameter_mm, dtype=float), np.asarray(R, float),
         np.asarray(t_mm, float), camera.fx, camera.fy, camera.cx, camera.cy, camera.dist_array,
@@ -100,8 +94,9 @@ _WHY_NOT = {
 
 
 def find_in_windows(
-    gray: np.ndarray, windows: list[Window], threshold_counts: float, background_counts: float
-) -> list[Blob] | str:
+    gray: np.ndarray, windows: list[Window], threshold_counts: float, background_counts: float,
+    *, arithmetic: Arithmetic = COMPILED,
+) -> list[Blob] | str:  # fmt: skip
     """Each window's reflector blob, or why one is not there (the first failing window).
 
     gray : (H, W) frame. Each window is thresholded at ``threshold_counts`` (the active
@@ -117,14 +112,14 @@ def find_in_windows(
     bounds = np.array([(w.u0, w.u1, w.v0, w.v1) for w in windows], np.int64)
     centres = np.array([w.centre_uv for w in windows], np.float64)
     diameters = np.array([w.diameter_px for w in windows], np.float64)
-    status, bbox, peak, centroid, starts, flat = search_windows(
+    status, bbox, peak, centroid, starts, flat = arithmetic.search_windows(
         np.asarray(gray, np.float32), bounds, centres, diameters,
         np.float32(threshold_counts), float(background_counts),
     )  # fmt: skip
     for code in status.tolist():
         if code != FOUND:
             return _WHY_NOT[code]
-    if any_shared(flat, starts, bbox):
+    if arithmetic.any_shared(flat, starts, bbox):
         return "two windows found the same component"
     return [
         Blob(
@@ -140,8 +135,10 @@ def find_in_windows(
 
 
 def find_in_window(
-    gray: np.ndarray, window: Window, threshold_counts: float, background_counts: float
-) -> Blob | str:
+    gray: np.ndarray, window: Window, threshold_counts: float, background_counts: float, *,
+    arithmetic: Arithmetic = COMPILED,
+) -> Blob | str:  # fmt: skip
     """One window of ``find_in_windows``: the reflector's blob, or why it is not there."""
-    found = find_in_windows(gray, [window], threshold_counts, background_counts)
+    found = find_in_windows(gray, [window], threshold_counts, background_counts,
+                            arithmetic=arithmetic)  # fmt: skip
     return found if isinstance(found, str) else found[0]

@@ -1,4 +1,5 @@
-"""Tracking mode in one compiled call per frame (``kernels.tracking_frame.track_frame``).
+"""Tracking mode in one compiled call per frame (``kernels.tracking_frame.track_frame``;
+with ``implementation="reference"``, its statement ``reference.tracking_frame``).
 
 ``PosePipeline`` tracks through ``CompiledTracker``, with or without a calibrated range
 correction; this is the one implementation of tracking. Its stages are tested against
@@ -13,13 +14,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tofpose.arithmetic import COMPILED, Arithmetic
 from tofpose.camera import CameraModel
 from tofpose.catalog import Catalog
 from tofpose.config import SolveConfig, TrackingConfig
 from tofpose.kernels.pose import NO_OFFSET, RangeOffsetPrior
 from tofpose.kernels.records import camera_record, catalog_record
-from tofpose.kernels.tracking import camera_windows
-from tofpose.kernels.tracking_frame import TRACKED, track_frame
+from tofpose.kernels.tracking_frame import TRACKED
 from tofpose.persistence import Persistence, PersistenceInfo
 from tofpose.range_calibration import RangeCorrection, correction_kernel_arguments
 from tofpose.solve import (
@@ -50,9 +51,13 @@ class CompiledTracker:
 
     def __init__(self, camera: CameraModel, catalog: Catalog, config: SolveConfig,
                  tracking: TrackingConfig, solver: PoseSolver, persistence: Persistence,
-                 correction: RangeCorrection | None = None) -> None:  # fmt: skip
-        """``correction``: the camera's calibrated range correction, or None."""
+                 correction: RangeCorrection | None = None, *,
+                 arithmetic: Arithmetic = COMPILED) -> None:  # fmt: skip
+        """``correction``: the camera's calibrated range correction, or None;
+        ``arithmetic``: whose ``track_frame`` and ``camera_windows`` run the frames
+        (``tofpose.arithmetic``)."""
         self.camera = camera
+        self._arithmetic = arithmetic
         self.config = config
         self.tracking = tracking
         self._solver = solver
@@ -87,7 +92,8 @@ class CompiledTracker:
         persistence history as it was."""
         cfg, cam = self.config, self.camera
         tc = self.tracking
-        cat_idx, bounds, centres, diameters = camera_windows(
+        arith = self._arithmetic
+        cat_idx, bounds, centres, diameters = arith.camera_windows(
             self._xyz, self._diameters, track.R, track.t_mm, cam.fx, cam.fy, cam.cx, cam.cy,
             self._dist, float(tc.margin_px), float(tc.min_diameter_px), cam.width, cam.height,
         )  # fmt: skip
@@ -95,7 +101,7 @@ class CompiledTracker:
             return None
         (code, n_used, motion, cent, flat, starts, uv, rho, sp, sr, y, w, uv_obs,
          e_obs, y_obs, R, t, its, cov, chi2, norms, sr_fit, sb_fit, offset,
-         offset_sigma) = track_frame(
+         offset_sigma) = arith.track_frame(
             g, d, bounds, centres, diameters, cat_idx, np.float32(track.threshold_counts),
             float(track.background_counts), float(track.dark_counts),
             self._persistence.history(g, d), *self._camera_args, *self._fit_args,
