@@ -7,6 +7,12 @@ reports the largest differences against a saved run and fails when any exceeds 1
 
 Run: ``python bench/ab.py --save before.npz`` (old code), then
 ``python bench/ab.py --compare before.npz`` (new code).
+
+``--implementation reference`` runs the frames through ``PosePipeline(...,
+implementation="reference")`` (every stage's arithmetic by ``tofpose.reference``; slow)
+instead of the kernels; compared against a saved compiled run it needs stated
+tolerances, ``--tolerance-mm`` and ``--tolerance-deg`` (the reference's ML fit is SciPy's
+``least_squares``, equal to the kernels' only to its tolerance).
 """
 
 from __future__ import annotations
@@ -56,13 +62,16 @@ def frames():
             yield f"single-{r}-{j}", f.gray, f.distance_mm
 
 
-def run(config: PipelineConfig | None = None) -> dict[str, np.ndarray]:
+def run(config: PipelineConfig | None = None,
+        implementation: str = "compiled") -> dict[str, np.ndarray]:  # fmt: skip
     cam, cat = CameraModel(), paper_target()
     pipes: dict[str, PosePipeline] = {}
     ok, ids, Rs, ts, modes = [], [], [], [], []
     for stream, gray, dist in tqdm(list(frames()), desc="A/B frames", file=sys.stderr):
         key = stream if stream.startswith("stream") else "single"
-        pipe = pipes.setdefault(key, PosePipeline(cam, cat, config))
+        if key not in pipes:
+            pipes[key] = PosePipeline(cam, cat, config, implementation=implementation)
+        pipe = pipes[key]
         if key == "single":
             pipe.reset()
         r = pipe.process(gray, dist)
@@ -75,21 +84,29 @@ def run(config: PipelineConfig | None = None) -> dict[str, np.ndarray]:
             "mode": np.array(modes)}  # fmt: skip
 
 
-def run_both() -> dict[str, np.ndarray]:
+def run_both(implementation: str = "compiled") -> dict[str, np.ndarray]:
     """The frames through the default pipeline and through one with tracking on (its
     keys prefixed ``tracking_``)."""
-    out = run()
-    tracked = run(PipelineConfig(tracking=TrackingConfig(enabled=True)))
+    out = run(implementation=implementation)
+    tracked = run(PipelineConfig(tracking=TrackingConfig(enabled=True)), implementation)
     out.update({f"tracking_{k}": v for k, v in tracked.items()})
     return out
 
 
-def compare(a: dict, b: dict, label: str = "acquisition") -> int:
+def compare(a: dict, b: dict, label: str = "acquisition", tol_mm: float = TOL,
+            tol_deg: float = TOL, ids_as_sets: bool = False) -> int:  # fmt: skip
+    """Print and return (1: beyond the tolerances) the differences of run ``b`` from
+    ``a``; ``ids_as_sets``: matched ids compared regardless of order (the reference's
+    split of a merged pair may list its halves the other way round)."""
     if "mode" in a and np.any(a["mode"] != b["mode"]):
         print(f"{label}: modes differ on {int(np.sum(a['mode'] != b['mode']))} frames")
         return 1
     flags = np.flatnonzero(a["ok"] != b["ok"])
-    idd = np.flatnonzero(a["ids"] != b["ids"])
+    if ids_as_sets:
+        idd = np.flatnonzero([sorted(x.split(",")) != sorted(y.split(","))
+                              for x, y in zip(a["ids"], b["ids"], strict=True)])  # fmt: skip
+    else:
+        idd = np.flatnonzero(a["ids"] != b["ids"])
     both = a["ok"] & b["ok"]
     dt = np.linalg.norm(a["t"][both] - b["t"][both], axis=1)
     # small-angle difference from the Frobenius norm (arccos near 1 loses ~1e-6 deg)
@@ -97,10 +114,10 @@ def compare(a: dict, b: dict, label: str = "acquisition") -> int:
     print(f"{label}: frames {len(a['ok'])}, ok {int(a['ok'].sum())} / {int(b['ok'].sum())}; "
           f"ok flags differ {len(flags)}, matched ids differ {len(idd)}; "
           f"max |dt| {dt.max(initial=0):.3g} mm, max dR {dR.max(initial=0):.3g} deg")  # fmt: skip
-    for i in np.argsort(-dt)[:5] if len(dt) and dt.max() > TOL else []:
+    for i in np.argsort(-dt)[:5] if len(dt) and dt.max() > tol_mm else []:
         print(f"  frame {np.flatnonzero(both)[i]}: |dt| {dt[i]:.3g} mm, dR {dR[i]:.3g} deg")
-    return int(len(flags) > 0 or len(idd) > 0 or dt.max(initial=0) > TOL
-               or dR.max(initial=0) > TOL)  # fmt: skip
+    return int(len(flags) > 0 or len(idd) > 0 or dt.max(initial=0) > tol_mm
+               or dR.max(initial=0) > tol_deg)  # fmt: skip
 
 
 def main() -> None:
@@ -108,15 +125,23 @@ def main() -> None:
     g = ap.add_mutually_exclusive_group(required=True)
     g.add_argument("--save")
     g.add_argument("--compare")
+    ap.add_argument("--implementation", choices=("compiled", "reference"), default="compiled",
+                    help="the pipeline's arithmetic (PosePipeline's implementation)")
+    ap.add_argument("--tolerance-mm", type=float, default=TOL,
+                    help=f"largest accepted |dt| in --compare, mm (default {TOL:g})")
+    ap.add_argument("--tolerance-deg", type=float, default=TOL,
+                    help=f"largest accepted rotation difference in --compare, deg "
+                         f"(default {TOL:g})")  # fmt: skip
     args = ap.parse_args()
-    result = run_both()
+    tols = (args.tolerance_mm, args.tolerance_deg, args.implementation == "reference")
+    result = run_both(args.implementation)
     if args.save:
         np.savez(args.save, **result)
         print(f"saved {len(result['ok'])} frames x 2 modes -> {args.save}")
         return
     with np.load(args.compare) as saved:
         before = dict(saved)
-    status = compare(before, result)
+    status = compare(before, result, "acquisition", *tols)
     if "tracking_ok" in before:
         tracked = {
             k.removeprefix("tracking_"): v for k, v in result.items() if k.startswith("tracking_")
@@ -124,7 +149,7 @@ def main() -> None:
         old = {
             k.removeprefix("tracking_"): v for k, v in before.items() if k.startswith("tracking_")
         }
-        status |= compare(old, tracked, "tracking")
+        status |= compare(old, tracked, "tracking", *tols)
     sys.exit(status)
 
 
