@@ -26,6 +26,7 @@ from backend.db.models import CampaignRow, MeasurementRow, SetPointRow, utcnow
 from backend.services.acquisition import LiveSample
 from backend.services.campaign_states import (
     FINISHED,
+    RUNNER_TRANSITIONS,
     CampaignCommand,
     CampaignState,
     check_transition,
@@ -251,15 +252,21 @@ class CampaignRepository:
                 row.finished_at = utcnow()
             return to
 
-    def set_status(self, campaign_id: int, status: CampaignState, reason: str = "") -> None:
-        """The runner's state changes (``RUNNER_TRANSITIONS``), with the times they mark."""
+    def set_status(self, campaign_id: int, status: CampaignState, reason: str = "") -> bool:
+        """The runner's state changes, with the times they mark: only those
+        ``RUNNER_TRANSITIONS`` allows from the stored state (the row is locked while it is
+        read and written), so a campaign a person paused or cancelled after the scheduler
+        picked it is never taken back to running. Returns whether the state changed."""
         with self.sessions() as s, s.begin():
-            row = s.get(CampaignRow, campaign_id)
+            row = s.get(CampaignRow, campaign_id, with_for_update=True)
+            if status not in RUNNER_TRANSITIONS.get(CampaignState(row.status), frozenset()):
+                return False
             row.status, row.status_reason = status.value, reason
             if status is CampaignState.RUNNING and row.started_at is None:
                 row.started_at = utcnow()
             if status in FINISHED:
                 row.finished_at = utcnow()
+            return True
 
     def recover(self) -> int:
         """At start: campaigns left running by a server that died are interrupted."""

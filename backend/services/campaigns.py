@@ -174,22 +174,23 @@ class CampaignService:
         self._wake.set()
 
     def pause(self, campaign_id: int, reason: str = "paused by request") -> None:
-        if not self._request_halt(campaign_id, CampaignState.PAUSED, reason):
-            self.repository.apply(campaign_id, CampaignCommand.PAUSE, reason=reason)
+        self._halt(campaign_id, CampaignCommand.PAUSE, CampaignState.PAUSED, reason)
 
     def cancel(self, campaign_id: int) -> None:
-        reason = "cancelled by request"
-        if not self._request_halt(campaign_id, CampaignState.CANCELLED, reason):
-            self.repository.apply(campaign_id, CampaignCommand.CANCEL, reason=reason)
+        self._halt(campaign_id, CampaignCommand.CANCEL, CampaignState.CANCELLED,
+                   "cancelled by request")  # fmt: skip
 
-    def _request_halt(self, campaign_id: int, status: CampaignState, reason: str) -> bool:
-        """Ask the runner to leave campaign ``campaign_id`` as ``status``; False when the
-        runner does not run it (the stored state changes instead)."""
+    def _halt(self, campaign_id: int, command: CampaignCommand, status: CampaignState,
+              reason: str) -> None:  # fmt: skip
+        """Ask the runner to leave campaign ``campaign_id`` as ``status``, or, when the
+        runner does not hold it, change the stored state. Under the lock the runner takes
+        a campaign with (``_begin``), so a command cannot fall between the scheduler's
+        pick and the runner's claim and be lost."""
         with self._lock:
-            if self._running_id != campaign_id:
-                return False
-            self._request = (status, reason)
-            return True
+            if self._running_id == campaign_id:
+                self._request = (status, reason)
+                return
+            self.repository.apply(campaign_id, command, reason=reason)
 
     def stop_pressed(self) -> None:
         """STOP: the running campaign (if any) pauses; the turntable is stopped by the
@@ -244,10 +245,16 @@ class CampaignService:
         if req is not None:
             raise SetPointHalt(req[0], f"{req[1]} (during set-point {index})")
 
-    def _begin(self, campaign: CampaignView) -> None:
-        """The runner holds ``campaign`` and the motion system from now on."""
+    def _begin(self, campaign: CampaignView) -> bool:
+        """The runner holds ``campaign`` and the motion system from now on; False (and
+        nothing held) when the campaign is no longer queued: a person paused or cancelled
+        it after the scheduler picked it."""
         pending = campaign.pending
         with self._lock:
+            if not self.repository.set_status(campaign.id, CampaignState.RUNNING):
+                log.info("campaign %d was not run: %s since the scheduler picked it",
+                         campaign.id, self.repository.get(campaign.id).status)  # fmt: skip
+                return False
             self._running_id = campaign.id
             self._request = None
             self._progress = Progress(
@@ -256,12 +263,14 @@ class CampaignService:
                 0, campaign.frames_per_point, time.monotonic(),
             )  # fmt: skip
             self.motion.claim(campaign.id, campaign.name)
-        self.repository.set_status(campaign.id, CampaignState.RUNNING)
         self._bump()
+        return True
 
     def _end(self, campaign_id: int, final: CampaignState, reason: str) -> None:
         try:
-            self.repository.set_status(campaign_id, final, reason)
+            if not self.repository.set_status(campaign_id, final, reason):
+                log.warning("campaign %d: the runner's %s was not stored (the stored state "
+                            "had changed)", campaign_id, final)  # fmt: skip
         finally:
             with self._lock:
                 self._running_id = None
@@ -274,7 +283,9 @@ class CampaignService:
     def _run(self, campaign_id: int) -> None:
         campaign = self.repository.get(campaign_id)
         committed_frames = self.repository.committed_frames(campaign_id)
-        self._begin(campaign)
+        if not self._begin(campaign):
+            self._wake.set()  # the scheduler looks for the next one
+            return
         sub = self.hub.subscribe(maxsize=256)
         final, reason = CampaignState.DONE, ""
         recorder: RawRecorder | None = None

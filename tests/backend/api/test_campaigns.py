@@ -256,6 +256,27 @@ def test_a_running_campaign_owns_the_turntable_and_stop_pauses_it(fast_client):
     assert r.status_code == 409 and "cancelled" in r.json()["detail"]
 
 
+def test_a_campaign_paused_or_cancelled_after_the_scheduler_picked_it_never_runs(client):
+    """The runner claims a campaign only if it is still queued, under the lock the
+    commands take: a pause or cancel that lands between the scheduler's pick and the
+    runner's claim is kept, and the turntable is never claimed (before, the runner
+    overwrote it with ``running`` and moved the table). The runner is called here as the
+    scheduler would, for a campaign paused (or cancelled) just after being picked."""
+    svc = client.app.state.tofpose.campaigns
+    far = "2099-01-01T00:00:00+00:00"  # queued, but never due: the scheduler leaves it
+    for command, state in (("pause", "paused"), ("cancel", "cancelled")):
+        cid = client.post("/api/campaigns", json={**GRID, "name": command},
+                          headers=AUTH).json()["id"]  # fmt: skip
+        assert client.post(f"/api/campaigns/{cid}/start", json={"at": far},
+                           headers=AUTH).json()["status"] == "queued"  # fmt: skip
+        assert client.post(f"/api/campaigns/{cid}/{command}", headers=AUTH).status_code == 200
+        svc._run(cid)  # the runner, as if the scheduler had picked it a moment before
+        c = client.get(f"/api/campaigns/{cid}").json()
+        assert (c["status"], c["n_done"]) == (state, 0)
+        assert client.get(f"/api/campaigns/{cid}/measurements").json()["total"] == 0
+        assert client.get("/api/motion").json()["owner_campaign_id"] is None
+
+
 def test_pause_then_resume_measures_every_set_point_once(fast_client):
     c = fast_client
     body = {**GRID, "name": "pr", "frames_per_point": 15,

@@ -94,8 +94,10 @@ def test_the_queue_runs_unscheduled_campaigns_first_then_those_due(repo):
 
 def test_recover_interrupts_what_a_dead_server_left_running(repo):
     running, done = _create(repo, "r").id, _create(repo, "d").id
-    repo.set_status(running, CampaignState.RUNNING)
-    repo.set_status(done, CampaignState.DONE)
+    for cid in (running, done):
+        repo.apply(cid, C.START)
+        assert repo.set_status(cid, CampaignState.RUNNING)
+    assert repo.set_status(done, CampaignState.DONE)
     started = repo.get(running).started_at
     assert repo.recover() == 1
     c = repo.get(running)
@@ -127,3 +129,24 @@ def test_a_setpoint_that_fails_to_store_stores_nothing(repo):
     with pytest.raises(Exception, match="UNIQUE"):
         repo.store_setpoint(sp.id, twice)
     assert repo.committed_frames(c.id) == 0 and repo.get(c.id).setpoints[0].status == "pending"
+
+
+def test_the_runner_never_takes_a_paused_or_cancelled_campaign_back_to_running(repo):
+    """``set_status`` makes only the runner's transitions from the stored state: a
+    campaign a person paused or cancelled after the scheduler picked it stays so (the
+    pick-then-claim race that let a cancelled campaign move the table)."""
+    paused, cancelled, queued = (_create(repo, n).id for n in ("p", "c", "q"))
+    for cid in (paused, cancelled, queued):
+        repo.apply(cid, C.START)
+    repo.apply(paused, C.PAUSE, reason="paused by request")
+    repo.apply(cancelled, C.CANCEL)
+    assert not repo.set_status(paused, CampaignState.RUNNING)
+    assert not repo.set_status(cancelled, CampaignState.RUNNING)
+    assert repo.get(paused).status is CampaignState.PAUSED
+    assert repo.get(paused).status_reason == "paused by request"
+    assert repo.get(cancelled).status is CampaignState.CANCELLED
+    assert repo.get(paused).started_at is None
+    assert repo.set_status(queued, CampaignState.RUNNING)  # the one still queued is taken
+    assert not repo.set_status(queued, CampaignState.QUEUED)  # not a runner's transition
+    assert repo.get(queued).status is CampaignState.RUNNING
+
