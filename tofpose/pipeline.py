@@ -40,7 +40,6 @@ from tofpose.extraction import (
     predicted_diameter_window_px,
 )
 from tofpose.geometry import facing_euler_deg, quaternion_wxyz_from_rotation
-from tofpose.kernels.measure import measure_and_back_project
 from tofpose.kernels.records import camera_record
 from tofpose.kernels.two_centres import SPLIT_OK
 from tofpose.matching import (
@@ -382,10 +381,8 @@ class PosePipeline:
         cam, persistence, ar = self.camera, self._persistence, self.arithmetic
         cur, flat, starts, bbox = blob_arrays(blobs)
         split = np.array([b.source == "split" for b in blobs], bool)
-        # compiled: the module's ``measure_and_back_project`` (tests spy on it there)
-        measure = measure_and_back_project if ar is COMPILED else ar.measure_and_back_project
         (n_used, motion, keep, uv, rho, ranged, rho_r, sp, sr, y, w,
-         mix) = measure(
+         mix) = ar.measure_and_back_project(
             g, d, flat, starts, bbox, cur, split, persistence.history(g, d),
             float(background), float(dark),
             self._camera_record, *persistence.scratch(g.shape), self._correction_kernel_args,

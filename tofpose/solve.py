@@ -36,7 +36,6 @@ from tofpose.kernels.pose import (
     RangeOffsetPrior,
 )
 from tofpose.kernels.records import FitSettings, camera_record, catalog_record
-from tofpose.kernels.solve import solve_pairs
 from tofpose.kernels.verify import BEHIND_CAMERA, DARK_REFLECTOR
 from tofpose.pose import STEP_SIGMA2, MLResult
 
@@ -282,9 +281,7 @@ class PoseSolver:
             if meas.mixing is not None
             else np.full((len(meas.range_mm), MIX_FIELDS), np.nan)
         )
-        # compiled: the module's ``solve_pairs`` (tests spy on it there)
-        fit = solve_pairs if self.arithmetic is COMPILED else self.arithmetic.solve_pairs
-        return fit(
+        return self.arithmetic.solve_pairs(
             meas.y_mm, meas.weights, meas.uv_px, meas.range_mm, meas.sigma_px,
             meas.sigma_range_mm, mixing, np.ascontiguousarray(pairs[:, 0]),
             np.ascontiguousarray(pairs[:, 1]), self._catalog_record, self._camera_record,

@@ -12,8 +12,8 @@ from functools import cache
 import numpy as np
 import pytest
 
-import tofpose.pipeline as pipeline_module
 from tests.conftest import facing_pose, render
+from tofpose.arithmetic import COMPILED
 from tofpose.camera import CameraModel
 from tofpose.catalog import paper_target
 from tofpose.pipeline import PosePipeline
@@ -53,10 +53,9 @@ def captured_stream(distance_mm, seed, corrected, moving=False):
     also shows ``TRANSIENT``; with ``moving``, the target moves 40 mm sideways after the
     third frame (the history is cut)."""
     calls = []
-    compiled = pipeline_module.measure_and_back_project
 
     def spy(*args):
-        out = compiled(*args)
+        out = COMPILED.measure_and_back_project(*args)
         calls.append((args, out))
         return out
 
@@ -65,14 +64,14 @@ def captured_stream(distance_mm, seed, corrected, moving=False):
     scene = TargetScene(background=synthetic_room(CAM, rng, distance_mm, T.t_mm,
                                                   arm_probability=1.0))  # fmt: skip
     pipe = PosePipeline(CAM, paper_target(), range_correction=correction() if corrected else None)
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(pipeline_module, "measure_and_back_project", spy)
-        for f in range(FRAMES):
-            x_mm = -70.0 if moving and f >= 3 else -110.0
-            pose = facing_pose(distance_mm, 4, -6, 12, offset_mm=(x_mm, -55.0))
-            frame_scene = replace(scene, clutter=(TRANSIENT,)) if f == FRAMES - 1 else scene
-            frame = render(pose, seed=100 * seed + f, scene=frame_scene)
-            pipe.process(frame.gray, frame.distance_mm, 0.1 * f)
+    # the pipeline's measurement calls go through its Arithmetic record: spy there
+    pipe.arithmetic = replace(pipe.arithmetic, measure_and_back_project=spy)
+    for f in range(FRAMES):
+        x_mm = -70.0 if moving and f >= 3 else -110.0
+        pose = facing_pose(distance_mm, 4, -6, 12, offset_mm=(x_mm, -55.0))
+        frame_scene = replace(scene, clutter=(TRANSIENT,)) if f == FRAMES - 1 else scene
+        frame = render(pose, seed=100 * seed + f, scene=frame_scene)
+        pipe.process(frame.gray, frame.distance_mm, 0.1 * f)
     assert len(calls) == FRAMES
     return calls
 
