@@ -567,6 +567,9 @@ def common_range_offset(x, e, rho, R0, t0, sr, sb, prior):
             for k in range(2):
                 col = (rho[i] - b) * scale_column[i, k] / lat
                 J8[3 * i + k, 7] = col
+                # the lateral sigma (rho - b) sigma_b moves with b: a lateral residual
+                # d / ((rho - b) sb) grows as d / (rho - b)^2 sb per mm of b
+                J8[3 * i + k, 6] = r[3 * i + k] / max(rho[i] - b, 1e-6)
                 r8[3 * i + k] += kappa * col
             J8[3 * i + 2, 6] = 1.0 / sr[i]
         r8[3 * m] = b / prior_sigma_mm
