@@ -222,9 +222,12 @@ class CampaignService:
                 log.exception("campaign scheduler could not read the queue")
                 continue
             if nxt is not None:
+                # the STOP count at the pick: a STOP before the runner claims the motion
+                # system keeps the campaign from starting (``_begin``)
                 self._runner = threading.Thread(
-                    target=self._run, args=(nxt,), name=f"campaign-{nxt}", daemon=True
-                )
+                    target=self._run, args=(nxt, self.motion.stops), name=f"campaign-{nxt}",
+                    daemon=True,
+                )  # fmt: skip
                 self._runner.start()
 
     # -- runner ---------------------------------------------------------------------------
@@ -245,12 +248,17 @@ class CampaignService:
         if req is not None:
             raise SetPointHalt(req[0], f"{req[1]} (during set-point {index})")
 
-    def _begin(self, campaign: CampaignView) -> bool:
+    def _begin(self, campaign: CampaignView, stops_at_pick: int | None = None) -> bool:
         """The runner holds ``campaign`` and the motion system from now on; False (and
-        nothing held) when the campaign is no longer queued: a person paused or cancelled
-        it after the scheduler picked it."""
+        nothing held) when the campaign is no longer queued (a person paused or cancelled
+        it after the scheduler picked it), or when STOP was pressed since the pick
+        (``stops_at_pick``: ``MotionService.stops`` then; the campaign is paused)."""
         pending = campaign.pending
         with self._lock:
+            if stops_at_pick is not None and self.motion.stops != stops_at_pick:
+                self.repository.apply(campaign.id, CampaignCommand.PAUSE,
+                                      reason="STOP pressed before it started")  # fmt: skip
+                return False
             if not self.repository.set_status(campaign.id, CampaignState.RUNNING):
                 log.info("campaign %d was not run: %s since the scheduler picked it",
                          campaign.id, self.repository.get(campaign.id).status)  # fmt: skip
@@ -280,16 +288,17 @@ class CampaignService:
             self._bump()
             self._wake.set()
 
-    def _run(self, campaign_id: int) -> None:
+    def _run(self, campaign_id: int, stops_at_pick: int | None = None) -> None:
         campaign = self.repository.get(campaign_id)
         committed_frames = self.repository.committed_frames(campaign_id)
-        if not self._begin(campaign):
+        if not self._begin(campaign, stops_at_pick):
             self._wake.set()  # the scheduler looks for the next one
             return
-        sub = self.hub.subscribe(maxsize=256)
+        sub = None
         final, reason = CampaignState.DONE, ""
         recorder: RawRecorder | None = None
         try:
+            sub = self.hub.subscribe(maxsize=256)
             if campaign.camera_settings:
                 self._apply_camera(dict(campaign.camera_settings))
             if campaign.record_raw:
@@ -304,7 +313,8 @@ class CampaignService:
             log.exception("campaign %d failed", campaign_id)
             final, reason = CampaignState.PAUSED, f"runner error: {exc}"
         finally:
-            self.hub.unsubscribe(sub)
+            if sub is not None:
+                self.hub.unsubscribe(sub)
             if recorder is not None:
                 recorder.close()
             self._end(campaign_id, final, reason)
@@ -339,11 +349,11 @@ class CampaignService:
                     record = collector.collect(sp.index, sp.axes, policy)
                 if recorder is not None:
                     recorder.flush()  # the frames are on disk before the rows commit
+                self._store(sp.id, record, start_n if recorder is not None else None)
             except BaseException:
-                if recorder is not None:
+                if recorder is not None:  # frames on disk only with their rows committed
                     recorder.rollback(start_n)
                 raise
-            self._store(sp.id, record, start_n if recorder is not None else None)
 
     def _store(self, setpoint_id: int, record: SetPointRecord, first_index: int | None) -> None:
         self.repository.store_setpoint(setpoint_id, record.frames, first_index)

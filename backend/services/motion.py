@@ -83,6 +83,8 @@ class MotionService:
         self.health = health or DeviceHealth(state="ok")
         self._lock = threading.Lock()
         self._owner: MotionOwner | None = None
+        self._halted: int | None = None  # the owner a person's STOP stopped
+        self.stops = 0  # how many times a person pressed STOP (campaigns.CampaignService)
         self._stop_listeners: list[Callable[[], None]] = []
 
     # -- what it is -------------------------------------------------------------------------
@@ -113,11 +115,19 @@ class MotionService:
                 raise MotionConflictError(f"campaign {held.campaign_id} ({held.name!r}) owns "
                                           "the motion system")  # fmt: skip
             self._owner = MotionOwner(campaign_id, name)
+            self._halted = None
 
     def release(self, campaign_id: int) -> None:
         with self._lock:
             if self._owner is not None and self._owner.campaign_id == campaign_id:
                 self._owner = None
+                self._halted = None
+
+    def halted(self, campaign_id: int) -> bool:
+        """Whether a person's STOP stopped campaign ``campaign_id`` while it owned the
+        motion system: it may not move the table again until it is released."""
+        with self._lock:
+            return self._halted == campaign_id
 
     def check_free(self) -> None:
         """``MotionConflictError`` while a campaign owns the motion system."""
@@ -128,11 +138,21 @@ class MotionService:
             )
 
     def _check_caller(self, by: int | None) -> None:
-        """A person (``by`` None) needs the motion system free; campaign ``by`` must own it."""
+        """A person (``by`` None) needs the motion system free; campaign ``by`` must own it
+        and not have been stopped by STOP."""
         if by is None:
             self.check_free()
         elif (owner := self.owner) is None or owner.campaign_id != by:
             raise MotionConflictError(f"campaign {by} does not own the motion system")
+        elif self.halted(by):
+            raise MotionConflictError(f"STOP was pressed: campaign {by} may not move the "
+                                      "motion system until it is resumed")  # fmt: skip
+
+    def _stop_if_halted(self, by: int | None, driver: MotionDriver) -> None:
+        """A STOP pressed between a campaign's check and its command (which the driver
+        then received after the stop): stop again."""
+        if by is not None and self.halted(by):
+            self._send("stop", "the motion system did not confirm the stop", driver.stop)
 
     def on_stop(self, listener: Callable[[], None]) -> None:
         """Call ``listener`` whenever STOP is pressed (whether or not the driver confirms)."""
@@ -215,6 +235,7 @@ class MotionService:
         if by is None:
             self._refuse_during_a_profile(driver, setpoints)
         self._send("move", "the motion system refused the move", lambda: driver.move_to(setpoints))
+        self._stop_if_halted(by, driver)
 
     def _refuse_during_a_profile(self, driver: MotionDriver, setpoints: dict[str, float]) -> None:
         """A profile running on one of the axes to move. A status that cannot be read does
@@ -269,12 +290,18 @@ class MotionService:
         self._check_caller(by)
         self._send("profile", "the motion system refused the profile",
                    lambda: driver.run_profile(axis, profile))  # fmt: skip
+        self._stop_if_halted(by, driver)
 
     def stop(self, *, by: int | None = None) -> None:
         """Every axis stops where it is. Always accepted. STOP pressed by a person (``by``
         None) is told to the listeners, also when the driver does not confirm it; a
         campaign stopping its own profile (``by``) is not."""
         driver = self.require()
+        if by is None:  # before the command: a campaign's next move is refused from now on
+            with self._lock:
+                self.stops += 1
+                if self._owner is not None:
+                    self._halted = self._owner.campaign_id
         try:
             self._send("stop", "the motion system did not confirm the stop", driver.stop)
         except MotionDeviceError:

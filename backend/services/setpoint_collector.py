@@ -187,6 +187,17 @@ class SetPointCollector:
             self.motion.move(axes, by=self.owner)
         except Exception as exc:
             raise _paused(f"move to set-point {index} failed: {exc}") from exc
+        try:
+            self._settle(index)
+        except BaseException:
+            # a pause, cancel, shutdown or failure while the table travels stops it: the
+            # campaign gives the motion system back, and nobody else may move a table
+            # that is still on its way (a profile's slew is stopped the same way)
+            self._stop_table(index)
+            raise
+
+    def _settle(self, index: int) -> None:
+        """Wait until the motion system reports settled after a move."""
         deadline = time.monotonic() + self.timing.move_timeout_s
         while True:
             self.check(index)
@@ -264,7 +275,7 @@ class SetPointCollector:
             raise _paused(f"the frames ended at set-point {index}")  # an endless source
         except BaseException:
             if running:  # a pause, cancel, shutdown or failure stops the slew it interrupts
-                self._stop_profile(index)
+                self._stop_table(index)
             raise
         finally:
             trace.stop()
@@ -328,11 +339,13 @@ class SetPointCollector:
         t0 = float(st.time_s) - elapsed
         return t0, t0 + profile.duration_s
 
-    def _stop_profile(self, index: int) -> None:
+    def _stop_table(self, index: int) -> None:
+        """Stop the table after a move or a profile was interrupted; a stop that fails is
+        logged (the campaign is leaving anyway, and its reason says why)."""
         try:
             self.motion.stop(by=self.owner)
         except Exception:
-            log.exception("stopping the profile of set-point %d failed", index)
+            log.exception("stopping the table at set-point %d failed", index)
 
     def _referenced(self, sample: LiveSample, trace: EncoderTrace) -> LiveSample:
         """The sample with the encoders interpolated to its capture time and the lab

@@ -277,6 +277,26 @@ def test_a_campaign_paused_or_cancelled_after_the_scheduler_picked_it_never_runs
         assert client.get("/api/motion").json()["owner_campaign_id"] is None
 
 
+def test_a_stop_pressed_between_the_pick_and_the_claim_keeps_the_campaign_from_starting(
+    client,
+):
+    """STOP before the runner claims the motion system (the scheduler picked the campaign
+    with the STOP count of that moment): the campaign is paused, never run, and the
+    table is not claimed."""
+    svc = client.app.state.tofpose.campaigns
+    cid = client.post("/api/campaigns", json={**GRID, "name": "stopped"},
+                      headers=AUTH).json()["id"]  # fmt: skip
+    assert client.post(f"/api/campaigns/{cid}/start", json={"at": "2099-01-01T00:00:00+00:00"},
+                       headers=AUTH).json()["status"] == "queued"  # fmt: skip
+    stops_at_pick = svc.motion.stops
+    assert client.post("/api/motion/stop", headers=AUTH).status_code == 200
+    svc._run(cid, stops_at_pick)  # the runner the scheduler started before the STOP
+    c = client.get(f"/api/campaigns/{cid}").json()
+    assert (c["status"], c["status_reason"], c["n_done"]) == (
+        "paused", "STOP pressed before it started", 0)  # fmt: skip
+    assert client.get("/api/motion").json()["owner_campaign_id"] is None
+
+
 def test_pause_then_resume_measures_every_set_point_once(fast_client):
     c = fast_client
     body = {**GRID, "name": "pr", "frames_per_point": 15,

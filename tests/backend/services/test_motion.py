@@ -206,3 +206,27 @@ def test_the_owner_is_read_consistently_while_campaigns_come_and_go(motion):
         motion.release(1)
         seen.add(motion.owner)
     assert seen == {(1, "a"), None}
+
+
+def test_after_a_persons_stop_the_owning_campaign_may_not_move_until_released(motion, spy):
+    """STOP takes the table from the campaign that owns it: its next move (and profile)
+    is refused, so a runner between its check and its command cannot start the table
+    again after STOP returned; a new claim (the campaign resumed) may move again, and a
+    campaign stopping its own motion does not halt itself."""
+    motion.claim(7, "grid")
+    motion.stop(by=7)  # the campaign stopping its own slew
+    motion.move({"yaw": 1.0}, by=7)
+    stops = motion.stops
+    motion.stop()  # a person's STOP
+    assert motion.stops == stops + 1 and motion.halted(7)
+    with pytest.raises(MotionConflictError, match="STOP was pressed: campaign 7 may not move"):
+        motion.move({"yaw": 2.0}, by=7)
+    profile = motion.profile_of("yaw", SINE).started_at(0.0)
+    with pytest.raises(MotionConflictError, match="STOP was pressed"):
+        motion.run_profile("yaw", profile, by=7)
+    assert [c for c, _ in spy.calls].count("move_to") == 1  # only the move before STOP
+    motion.release(7)
+    motion.claim(7, "grid")  # resumed
+    assert not motion.halted(7)
+    motion.move({"yaw": 2.0}, by=7)
+    assert spy.calls[-1] == ("move_to", {"yaw": 2.0})

@@ -230,3 +230,26 @@ def test_a_dynamic_setpoint_keeps_every_frame_and_marks_those_in_motion(lab):
     yaw = [f.sample.frame.meta["encoders"]["yaw"] for f in record.frames if f.in_motion]
     assert max(np.abs(yaw)) > 1.0  # the frames in motion saw the slew (amplitude 2 deg)
     assert not driver.inner.status().busy
+
+
+def test_a_pause_while_the_table_travels_stops_it(lab):
+    """A pause (or cancel, or shutdown) that comes while the table is on its way to the
+    set-point stops the table before the campaign gives the motion system back: nobody
+    may move a table that is still travelling, and a paused campaign's move does not go
+    on (a profile's slew was already stopped the same way)."""
+    _, _, driver = lab
+    collector = _collector(lab)
+    checks = []
+
+    def check(index):
+        checks.append(index)
+        if len(checks) >= 3:  # the move has started; the table is travelling
+            raise SetPointHalt(CampaignState.PAUSED, f"paused (during set-point {index})")
+
+    collector.check = check
+    halt = _halt(lambda: collector.collect(8, {"yaw": 40.0}, POLICY))
+    assert halt.reason == "paused (during set-point 8)"
+    names = [c for c, _ in driver.calls]
+    assert names.index("move_to") < names.index("stop")  # the stop after the move it ends
+    assert not driver.inner.status().busy  # nothing travels once the campaign lets go
+
