@@ -166,13 +166,9 @@ Refinement = Literal["ml", "los", "none"]
 
 
 @dataclass(frozen=True)
-class SolveConfig:
-    """The §5 stage's settings (``solve.PoseSolver``, ``tracking_frame.CompiledTracker``):
-    the pose fit, its refinement, outlier step, verification and reported covariance.
-    Each field is ``PipelineConfig``'s field of the same name, documented there; the
-    pipeline composes it (``PipelineConfig.solve``), and ``min_matches`` and
-    ``residual_factor`` are the matching stage's (``MatchingConfig``).
-    """
+class FitSettingsFields:
+    """The §5 fields ``SolveConfig`` and ``PipelineConfig`` share (declared once; their
+    meaning is documented on ``PipelineConfig``)."""
 
     refinement: Refinement = "ml"
     correct_perspective_bias: bool = True
@@ -196,13 +192,25 @@ class SolveConfig:
     centroid_sigma_floor_px: float = 0.03
     range_sigma_floor_mm: float = 1.0
     los_tolerance: float = 0.002
+
+
+@dataclass(frozen=True)
+class SolveConfig(FitSettingsFields):
+    """The §5 stage's settings (``solve.PoseSolver``, ``tracking_frame.CompiledTracker``):
+    the pose fit, its refinement, outlier step, verification and reported covariance.
+    The ``FitSettingsFields`` are ``PipelineConfig``'s fields of the same names,
+    documented there; the pipeline composes it (``PipelineConfig.solve``), and
+    ``min_matches`` and ``residual_factor`` are the matching stage's (``MatchingConfig``).
+    """
+
     min_matches: int = 3
     residual_factor: float = 2.5
 
 
 @dataclass(frozen=True)
-class PipelineConfig:
-    """All pipeline parameters.
+class PipelineConfig(FitSettingsFields):
+    """All pipeline parameters: the stages' records, and the §5 settings (declared in
+    ``FitSettingsFields``, shared with ``SolveConfig``) as fields of its own.
 
     refinement : "ml" (ours: Gauss-Newton on bearings and ranges, the default), "los"
         (the paper's line-of-sight iteration, Eqs. 51-52), or "none" (SVD only).
@@ -302,34 +310,12 @@ class PipelineConfig:
     persistence: PersistenceConfig = field(default_factory=PersistenceConfig)
     matching: MatchingConfig = field(default_factory=MatchingConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
-    refinement: Refinement = "ml"
-    correct_perspective_bias: bool = True
-    mixed_pixel_radius_px: float = 4.0
     ellipse_confirmation: bool = True
-    verify_pose: bool = True
-    reject_outliers: bool = True
-    adapt_range_sigma: bool = True
-    max_systematic_range_sigma_mm: float = 25.0
-    max_systematic_centroid_sigma_px: float = 0.5
-    consistency_p: float | None = 0.999999
-    leave_one_out_covariance: bool = True
-    estimate_range_offset: bool = True
-    range_bias_sigma_mm: float = 15.0
-    calibrated_range_bias_sigma_mm: float = 2.0
-    focal_length_sigma_rel: float = 0.002
-    common_centroid_bias_px: float = 0.05
-    outlier_sigma: float = 6.0
-    outlier_chi2_per_dof: float = 4.0
-    max_view_angle_deg: float = 80.0
-    dark_check_max_matches: int = 3
     matcher: Literal["annealing", "ransac"] = "annealing"
     triplet_fallback: bool = True
     ransac_time_budget_ms: float | None = 5.0
     ransac_confidence: float | None = None
     ransac_seed: int = 0
-    centroid_sigma_floor_px: float = 0.03
-    range_sigma_floor_mm: float = 1.0
-    los_tolerance: float = 0.002
 
     @property
     def solve(self) -> SolveConfig:
@@ -361,6 +347,4 @@ class PipelineConfig:
 
 
 #: the §5 fields of ``PipelineConfig`` that make up its ``SolveConfig``
-_SOLVE_FIELDS = tuple(
-    f.name for f in fields(SolveConfig) if f.name not in ("min_matches", "residual_factor")
-)
+_SOLVE_FIELDS = tuple(f.name for f in fields(FitSettingsFields))
