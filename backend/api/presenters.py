@@ -97,8 +97,11 @@ def motion_public(state: AppState) -> MotionPublic:
         for a in motion.axes.values()
     ]  # fmt: skip
     owner = motion.owner
+    latched_at = motion.stop_latched_at
     owned = {"owner_campaign_id": owner.campaign_id if owner else None,
-             "owner_campaign_name": owner.name if owner else None}  # fmt: skip
+             "owner_campaign_name": owner.name if owner else None,
+             "stop_latched": latched_at is not None,
+             "stop_latched_at": latched_at.isoformat() if latched_at else None}  # fmt: skip
     try:
         st = motion.status()
     except MotionDeviceError:

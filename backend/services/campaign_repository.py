@@ -268,16 +268,27 @@ class CampaignRepository:
                 row.finished_at = utcnow()
             return True
 
-    def recover(self) -> int:
-        """At start: campaigns left running by a server that died are interrupted."""
+    def recover(self, now: datetime | None = None) -> tuple[int, int]:
+        """At start: campaigns left running by a server that died are interrupted, and
+        queued ones (scheduled or not) are paused, so that nothing moves the table until
+        a person resumes them. Returns (interrupted, held)."""
+        when = f"{(now or datetime.now(UTC)):%Y-%m-%d %H:%M:%S} UTC"
         with self.sessions() as s, s.begin():
-            rows = s.scalars(
+            running = s.scalars(
                 select(CampaignRow).where(CampaignRow.status == CampaignState.RUNNING.value)
             ).all()
-            for row in rows:
+            for row in running:
                 row.status = CampaignState.INTERRUPTED.value
-                row.status_reason = "the server stopped while this campaign was running"
-            return len(rows)
+                row.status_reason = (f"the server stopped while this campaign was running "
+                                     f"(restarted {when}): resume it to continue")  # fmt: skip
+            queued = s.scalars(
+                select(CampaignRow).where(CampaignRow.status == CampaignState.QUEUED.value)
+            ).all()
+            for row in queued:
+                row.status = CampaignState.PAUSED.value
+                row.status_reason = (f"held at server start ({when}): nothing moves after a "
+                                     "restart until a person resumes it")  # fmt: skip
+            return len(running), len(queued)
 
     def store_setpoint(
         self, setpoint_id: int, frames: Iterable[tuple[LiveSample, bool | None]],

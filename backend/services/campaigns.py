@@ -5,7 +5,9 @@ scheduler, when the motion system is free and the start time has come) -> ``runn
 ``done``. A running campaign can be paused (by request, by STOP, by a device fault or a
 lost pose lock: ``paused`` with the reason), resumed (back to ``queued``), or cancelled.
 A server that stops or dies while a campaign runs leaves it ``interrupted``; resume
-continues at the first set-point not done.
+continues at the first set-point not done. Nothing moves after a restart without a
+person: at start every campaign still ``queued`` is paused ("held at server start"),
+and the interrupted ones wait too, until someone resumes them.
 
 ``CampaignService`` holds the commands, the scheduler thread and the runner; it composes
 the repository (``campaign_repository``: the database and the raw recording), the
@@ -122,8 +124,10 @@ class CampaignService:
         motion.on_stop(self.stop_pressed)
 
     # -- lifecycle ------------------------------------------------------------------------
-    def recover(self) -> int:
-        """At start: campaigns left ``running`` by a server that died are ``interrupted``."""
+    def recover(self) -> tuple[int, int]:
+        """At start: campaigns left ``running`` by a server that died are ``interrupted``,
+        and queued ones are paused (nothing moves until a person resumes them). Returns
+        (interrupted, held)."""
         return self.repository.recover()
 
     def start(self) -> None:
@@ -170,7 +174,11 @@ class CampaignService:
         self._wake.set()
 
     def resume(self, campaign_id: int) -> None:
+        """A person resumes the campaign: it is queued again, and a latched STOP is
+        released (the person has decided the table may move)."""
         self.repository.apply(campaign_id, CampaignCommand.RESUME)
+        if self.motion.present:
+            self.motion.release_stop()
         self._wake.set()
 
     def pause(self, campaign_id: int, reason: str = "paused by request") -> None:
@@ -252,12 +260,15 @@ class CampaignService:
         """The runner holds ``campaign`` and the motion system from now on; False (and
         nothing held) when the campaign is no longer queued (a person paused or cancelled
         it after the scheduler picked it), or when STOP was pressed since the pick
-        (``stops_at_pick``: ``MotionService.stops`` then; the campaign is paused)."""
+        (``stops_at_pick``: ``MotionService.stops`` then) or still holds the motion system
+        (latched): the campaign is paused then."""
         pending = campaign.pending
         with self._lock:
-            if stops_at_pick is not None and self.motion.stops != stops_at_pick:
+            stopped = stops_at_pick is not None and self.motion.stops != stops_at_pick
+            if stopped or (self.motion.present and self.motion.stop_latched):
                 self.repository.apply(campaign.id, CampaignCommand.PAUSE,
-                                      reason="STOP pressed before it started")  # fmt: skip
+                                      reason="STOP pressed before it started (resume it to "
+                                             "release STOP and run it)")  # fmt: skip
                 return False
             if not self.repository.set_status(campaign.id, CampaignState.RUNNING):
                 log.info("campaign %d was not run: %s since the scheduler picked it",

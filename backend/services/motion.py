@@ -4,10 +4,20 @@ the driver, for the motion routes and the campaign runner alike.
 - **Soft limits**: a set-point, a jog's target or a profile is checked against the
   driver's axes before the driver sees it (``MotionLimitError`` names the axis and the
   limit; nothing moves then).
-- **Ownership**: a running campaign claims the motion system; while it holds it, moves,
-  jogs and profiles of anyone else are refused (``MotionConflictError`` naming the
-  campaign). STOP is always accepted, and tells the listeners (the campaign service
-  pauses its campaign).
+- **One command path**: every command (a person's move, jog or profile, a campaign's
+  move or profile) runs its checks, its status read and its send under one command
+  lock, and ``claim`` takes the same lock: a claim waits for a command already past its
+  checks, and after the claim nothing but the owner can send. A person's command while
+  a campaign owns the table is refused (``MotionConflictError`` naming the campaign).
+- **STOP first, and latched**: STOP never takes the command lock. It latches at once
+  (``stop_latched``), then stops the driver and tells the listeners (the campaign
+  service pauses its campaign). While latched, every motion command is refused, the
+  owning campaign's too, until a person releases it (``release_stop``: ``POST
+  /api/motion/release`` or a campaign's resume). A command that was already past its
+  checks when STOP came (its send reaches the driver after the stop) is stopped again
+  at once, so nothing a concurrent client sent outlives a STOP. ``stop_in_lane`` runs
+  the driver's stop on a thread pool of its own (``STOP_LANE``), never queued behind
+  the web server's worker threads.
 - **Health**: every failing command or status read marks the device degraded with the
   reason (``health``, shown by ``GET /api/health`` and ``GET /api/motion``); a status
   read that works marks it ok again.
@@ -18,10 +28,13 @@ sentence the API answers with.
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import threading
 from collections.abc import Callable
-from typing import NamedTuple
+from concurrent.futures import ThreadPoolExecutor
+from datetime import UTC, datetime
+from typing import NamedTuple, TypeVar
 
 from backend.drivers.base import (
     AxisLimits,
@@ -35,6 +48,13 @@ from backend.services.acquisition import DeviceHealth
 from tofpose.motion_profile import LimitProblem, MotionProfile, profile_from_spec
 
 log = logging.getLogger(__name__)
+
+T = TypeVar("T")
+
+STOP_LANE = ThreadPoolExecutor(max_workers=2, thread_name_prefix="motion-stop")
+"""The threads STOP runs on (its driver command, its listeners and its answer's status
+read): nothing else is queued here, so exports, reports and readers that fill the web
+server's worker threads cannot delay a STOP."""
 
 
 class MotionAbsentError(RuntimeError):
@@ -81,9 +101,10 @@ class MotionService:
     def __init__(self, driver: MotionDriver | None, health: DeviceHealth | None = None) -> None:
         self.driver = driver
         self.health = health or DeviceHealth(state="ok")
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()  # the fields below: held for no I/O
+        self._commands = threading.RLock()  # one command at a time: check, read, send; claim
         self._owner: MotionOwner | None = None
-        self._halted: int | None = None  # the owner a person's STOP stopped
+        self._latched_at: datetime | None = None  # when a person's STOP latched, until released
         self.stops = 0  # how many times a person pressed STOP (campaigns.CampaignService)
         self._stop_listeners: list[Callable[[], None]] = []
 
@@ -108,26 +129,49 @@ class MotionService:
             return self._owner
 
     def claim(self, campaign_id: int, name: str) -> None:
-        """Campaign ``campaign_id`` holds the motion system until ``release``."""
-        with self._lock:
+        """Campaign ``campaign_id`` holds the motion system until ``release``. Waits for a
+        command already past its checks (the command lock), so that from the return on no
+        one else's command reaches the driver."""
+        with self._commands, self._lock:
             held = self._owner
             if held is not None and held.campaign_id != campaign_id:
                 raise MotionConflictError(f"campaign {held.campaign_id} ({held.name!r}) owns "
                                           "the motion system")  # fmt: skip
             self._owner = MotionOwner(campaign_id, name)
-            self._halted = None
 
     def release(self, campaign_id: int) -> None:
         with self._lock:
             if self._owner is not None and self._owner.campaign_id == campaign_id:
                 self._owner = None
-                self._halted = None
+
+    # -- the STOP latch ------------------------------------------------------------------
+    @property
+    def stop_latched(self) -> bool:
+        """Whether a person's STOP holds every motion command off (until ``release_stop``)."""
+        with self._lock:
+            return self._latched_at is not None
+
+    @property
+    def stop_latched_at(self) -> datetime | None:
+        """When the STOP that holds the motion system was pressed (UTC), or None."""
+        with self._lock:
+            return self._latched_at
+
+    def release_stop(self) -> bool:
+        """A person lets motion commands through again; returns whether STOP was latched."""
+        with self._lock:
+            was = self._latched_at is not None
+            self._latched_at = None
+        if was:
+            log.info("STOP released")
+        return was
 
     def halted(self, campaign_id: int) -> bool:
-        """Whether a person's STOP stopped campaign ``campaign_id`` while it owned the
-        motion system: it may not move the table again until it is released."""
+        """Whether campaign ``campaign_id`` owns the motion system and STOP holds it."""
         with self._lock:
-            return self._halted == campaign_id
+            owner = self._owner
+            return (self._latched_at is not None and owner is not None
+                    and owner.campaign_id == campaign_id)  # fmt: skip
 
     def check_free(self) -> None:
         """``MotionConflictError`` while a campaign owns the motion system."""
@@ -137,22 +181,32 @@ class MotionService:
                 "it runs: pause or cancel it first (STOP always works)"
             )
 
+    def _check_latch(self) -> None:
+        if (at := self.stop_latched_at) is not None:
+            raise MotionConflictError(
+                f"STOP was pressed at {at:%H:%M:%S} UTC and holds the motion system: release "
+                "it first (POST /api/motion/release, or resume the campaign it paused)"
+            )
+
     def _check_caller(self, by: int | None) -> None:
-        """A person (``by`` None) needs the motion system free; campaign ``by`` must own it
-        and not have been stopped by STOP."""
+        """Under the command lock: STOP not latched; a person (``by`` None) needs the
+        motion system free, campaign ``by`` must own it."""
+        self._check_latch()
         if by is None:
             self.check_free()
         elif (owner := self.owner) is None or owner.campaign_id != by:
             raise MotionConflictError(f"campaign {by} does not own the motion system")
-        elif self.halted(by):
-            raise MotionConflictError(f"STOP was pressed: campaign {by} may not move the "
-                                      "motion system until it is resumed")  # fmt: skip
 
-    def _stop_if_halted(self, by: int | None, driver: MotionDriver) -> None:
-        """A STOP pressed between a campaign's check and its command (which the driver
-        then received after the stop): stop again."""
-        if by is not None and self.halted(by):
+    def _send_unless_stopped(self, what: str, refused: str, command: Callable[[], object],
+                             driver: MotionDriver, stops_at_check: int) -> None:  # fmt: skip
+        """Send ``command``; a STOP pressed since the checks (``stops_at_check``), whose
+        stop the driver may have received before this command, is sent again after it."""
+        self._send(what, refused, command)
+        if self.stops != stops_at_check:
+            log.warning("STOP came while a %s was on its way: stopping again", what)
             self._send("stop", "the motion system did not confirm the stop", driver.stop)
+            raise MotionConflictError(f"STOP was pressed while the {what} was sent: the "
+                                      "motion system was stopped again")  # fmt: skip
 
     def on_stop(self, listener: Callable[[], None]) -> None:
         """Call ``listener`` whenever STOP is pressed (whether or not the driver confirms)."""
@@ -231,11 +285,13 @@ class MotionService:
         problems = self.limit_problems(setpoints)
         if problems:
             raise MotionLimitError(_body_problems(problems))
-        self._check_caller(by)
-        if by is None:
-            self._refuse_during_a_profile(driver, setpoints)
-        self._send("move", "the motion system refused the move", lambda: driver.move_to(setpoints))
-        self._stop_if_halted(by, driver)
+        with self._commands:
+            stops = self.stops
+            self._check_caller(by)
+            if by is None:
+                self._refuse_during_a_profile(driver, setpoints)
+            self._send_unless_stopped("move", "the motion system refused the move",
+                                      lambda: driver.move_to(setpoints), driver, stops)  # fmt: skip
 
     def _refuse_during_a_profile(self, driver: MotionDriver, setpoints: dict[str, float]) -> None:
         """A profile running on one of the axes to move. A status that cannot be read does
@@ -258,13 +314,16 @@ class MotionService:
             raise MotionLimitError(_body_problems(
                 [f"this motion system has no {axis} axis (axes: {sorted(driver.axes)})"]
             ))  # fmt: skip
-        self.check_free()
-        st = self.status_at_rest(f"the {axis} position to jog from", "jog again")
-        setpoint = {axis: st.positions[axis] + step}
-        problems = self.limit_problems(setpoint)
-        if problems:
-            raise MotionLimitError(_body_problems(problems))
-        self._send("move", "the motion system refused the move", lambda: driver.move_to(setpoint))
+        with self._commands:
+            stops = self.stops
+            self._check_caller(None)
+            st = self.status_at_rest(f"the {axis} position to jog from", "jog again")
+            setpoint = {axis: st.positions[axis] + step}
+            problems = self.limit_problems(setpoint)
+            if problems:
+                raise MotionLimitError(_body_problems(problems))
+            self._send_unless_stopped("move", "the motion system refused the move",
+                                      lambda: driver.move_to(setpoint), driver, stops)  # fmt: skip
 
     def start_profile(self, axis: str, spec: dict) -> MotionProfile:
         """A person's motion profile on ``axis`` from its encoder position read now
@@ -274,10 +333,11 @@ class MotionService:
             raise MotionLimitError([problem])
         if (why := self.profile_refusal()) is not None:
             raise MotionConflictError(why)
-        self.check_free()
-        st = self.status_at_rest(f"the {axis} position to start from", "start the profile")
-        profile = self.profile_of(axis, spec).started_at(st.positions[axis])
-        self.run_profile(axis, profile)
+        with self._commands:
+            self._check_caller(None)
+            st = self.status_at_rest(f"the {axis} position to start from", "start the profile")
+            profile = self.profile_of(axis, spec).started_at(st.positions[axis])
+            self.run_profile(axis, profile)
         return profile
 
     def run_profile(self, axis: str, profile: MotionProfile, *, by: int | None = None) -> None:
@@ -287,21 +347,30 @@ class MotionService:
         problems = self.profile_problems(axis, profile)
         if problems:
             raise MotionLimitError(problems)
-        self._check_caller(by)
-        self._send("profile", "the motion system refused the profile",
-                   lambda: driver.run_profile(axis, profile))  # fmt: skip
-        self._stop_if_halted(by, driver)
+        with self._commands:
+            stops = self.stops
+            self._check_caller(by)
+            self._send_unless_stopped("profile", "the motion system refused the profile",
+                                      lambda: driver.run_profile(axis, profile), driver,
+                                      stops)  # fmt: skip
+
+    def latch_stop(self) -> None:
+        """The first half of a person's STOP, with no I/O: from now on every motion command
+        is refused, and one already past its checks is stopped again after its send."""
+        self.require()
+        with self._lock:
+            self.stops += 1
+            if self._latched_at is None:
+                self._latched_at = datetime.now(UTC)
 
     def stop(self, *, by: int | None = None) -> None:
-        """Every axis stops where it is. Always accepted. STOP pressed by a person (``by``
-        None) is told to the listeners, also when the driver does not confirm it; a
-        campaign stopping its own profile (``by``) is not."""
+        """Every axis stops where it is. Always accepted, never waits for another
+        command. STOP pressed by a person (``by`` None) latches (``latch_stop``) and is
+        told to the listeners, also when the driver does not confirm it; a campaign
+        stopping its own motion (``by``) does neither."""
         driver = self.require()
-        if by is None:  # before the command: a campaign's next move is refused from now on
-            with self._lock:
-                self.stops += 1
-                if self._owner is not None:
-                    self._halted = self._owner.campaign_id
+        if by is None:  # before the command: nothing may move from now on
+            self.latch_stop()
         try:
             self._send("stop", "the motion system did not confirm the stop", driver.stop)
         except MotionDeviceError:
@@ -311,6 +380,29 @@ class MotionService:
             if by is None:
                 for listener in self._stop_listeners:
                     listener()
+
+    async def stop_in_lane(self) -> None:
+        """A person's STOP from the event loop: latched at once, then the driver's stop
+        and the listeners on ``STOP_LANE`` (never behind the web server's threads)."""
+        self.latch_stop()
+        await self.in_stop_lane(self._stop_latched_driver)
+
+    def _stop_latched_driver(self) -> None:
+        driver = self.require()
+        try:
+            self._send("stop", "the motion system did not confirm the stop", driver.stop)
+        except MotionDeviceError:
+            log.exception("stop failed")
+            raise
+        finally:
+            for listener in self._stop_listeners:
+                listener()
+
+    @staticmethod
+    async def in_stop_lane(work: Callable[[], T]) -> T:
+        """Run ``work`` on ``STOP_LANE`` and wait for it (STOP's answer reads the status
+        there too)."""
+        return await asyncio.get_running_loop().run_in_executor(STOP_LANE, work)
 
     def reset_faults(self) -> None:
         """Acknowledge the controller's axis faults (real rate tables; docs/devices.md)."""

@@ -1,5 +1,6 @@
 """Turntable: GET /api/motion, POST /api/motion/move, POST /api/motion/jog,
-POST /api/motion/profile, POST /api/motion/stop, POST /api/motion/reset-faults.
+POST /api/motion/profile, POST /api/motion/stop, POST /api/motion/release,
+POST /api/motion/reset-faults.
 
 The motion service (backend/services/motion.py) checks set-points against the driver's
 soft limits before the driver sees them, and refuses a person's commands while a
@@ -7,7 +8,10 @@ campaign owns the motion system. A jog is relative to the axis' encoder position
 when the request arrives, so a client whose view is stale cannot jog from an old
 position. A profile (tofpose.motion_profile) is checked the same way, from the axis'
 encoder position, against the soft, rate and acceleration limits. Stop is accepted from
-any authenticated caller at any time, and ends a running profile.
+any authenticated caller at any time, ends a running profile and latches: every motion
+command is refused (409) until a person releases it. STOP is an async route whose
+driver command runs on a thread pool of its own (``motion.STOP_LANE``): exports,
+reports and readers that fill the web server's worker threads cannot delay it.
 """
 
 from __future__ import annotations
@@ -100,11 +104,21 @@ def run_profile(body: ProfileRequest, state: StateDep, motion: MotionDep) -> Mot
 
 
 @router.post("/stop", dependencies=[WriteAuth], responses=errors(503))
-def stop_motion(state: StateDep, motion: MotionDep) -> MotionPublic:
+async def stop_motion(state: StateDep, motion: MotionDep) -> MotionPublic:
     """Emergency stop: every axis stops where it is. Always accepted, also while a campaign
-    runs (the campaign pauses, reason "STOP pressed")."""
+    runs (the campaign pauses, reason "STOP pressed"), and never queued behind other
+    requests. STOP latches: every move, jog, profile and campaign start is refused (409)
+    until a person releases it (POST /api/motion/release, or resuming the campaign)."""
     with _answers():
-        motion.stop()
+        await motion.stop_in_lane()
+    return await motion.in_stop_lane(lambda: motion_public(state))
+
+
+@router.post("/release", dependencies=[WriteAuth])
+def release_stop(state: StateDep, motion: MotionDep) -> MotionPublic:
+    """Release a latched STOP: motion commands are accepted again (a campaign that STOP
+    paused stays paused until resumed). Accepted when nothing is latched too (no change)."""
+    motion.release_stop()
     return motion_public(state)
 
 

@@ -248,7 +248,11 @@ def test_a_running_campaign_owns_the_turntable_and_stop_pauses_it(fast_client):
     paused = wait_for(lambda: (x := c.get(f"/api/campaigns/{cid}").json())["status"] == "paused"
                       and x)  # fmt: skip
     assert "STOP pressed" in paused["status_reason"]
-    assert c.get("/api/motion").json()["owner_campaign_id"] is None
+    motion = c.get("/api/motion").json()
+    assert motion["owner_campaign_id"] is None and motion["stop_latched"] is True
+    r = c.post("/api/motion/move", json={"yaw_deg": 1}, headers=AUTH)
+    assert r.status_code == 409 and "release it first" in r.json()["detail"]  # STOP latched
+    assert c.post("/api/motion/release", headers=AUTH).status_code == 200
     assert c.post("/api/motion/move", json={"yaw_deg": 1}, headers=AUTH).status_code == 202
     assert c.post(f"/api/campaigns/{cid}/cancel", headers=AUTH).status_code == 200
     assert c.get(f"/api/campaigns/{cid}").json()["status"] == "cancelled"
@@ -292,8 +296,17 @@ def test_a_stop_pressed_between_the_pick_and_the_claim_keeps_the_campaign_from_s
     assert client.post("/api/motion/stop", headers=AUTH).status_code == 200
     svc._run(cid, stops_at_pick)  # the runner the scheduler started before the STOP
     c = client.get(f"/api/campaigns/{cid}").json()
-    assert (c["status"], c["status_reason"], c["n_done"]) == (
-        "paused", "STOP pressed before it started", 0)  # fmt: skip
+    assert (c["status"], c["n_done"]) == ("paused", 0)
+    assert c["status_reason"].startswith("STOP pressed before it started")
+    assert client.get("/api/motion").json()["owner_campaign_id"] is None
+    # the latch alone (no STOP since the pick) keeps a campaign from starting too
+    assert client.get("/api/motion").json()["stop_latched"] is True
+    cid = client.post("/api/campaigns", json={**GRID, "name": "latched"},
+                      headers=AUTH).json()["id"]  # fmt: skip
+    assert client.post(f"/api/campaigns/{cid}/start", json={"at": "2099-01-01T00:00:00+00:00"},
+                       headers=AUTH).json()["status"] == "queued"  # fmt: skip
+    svc._run(cid)
+    assert client.get(f"/api/campaigns/{cid}").json()["status"] == "paused"
     assert client.get("/api/motion").json()["owner_campaign_id"] is None
 
 

@@ -45,6 +45,10 @@ def test_after_a_stop_a_jog_starts_where_the_axis_stopped_not_at_its_target(sett
         assert stopped_at < 100.0
         spy_devices.motion.calls.clear()
         r = c.post("/api/motion/jog", json={"roll_deg": 1.0}, headers=AUTH)
+        assert r.status_code == 409 and "release it first" in r.json()["detail"]  # latched
+        released = c.post("/api/motion/release", headers=AUTH)
+        assert released.status_code == 200 and released.json()["stop_latched"] is False
+        r = c.post("/api/motion/jog", json={"roll_deg": 1.0}, headers=AUTH)
         assert r.status_code == 202, r.text
         ((name, setpoint),) = spy_devices.motion.calls
         assert name == "move_to" and setpoint["roll"] == pytest.approx(stopped_at + 1.0, abs=0.05)

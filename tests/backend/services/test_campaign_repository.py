@@ -99,11 +99,29 @@ def test_recover_interrupts_what_a_dead_server_left_running(repo):
         assert repo.set_status(cid, CampaignState.RUNNING)
     assert repo.set_status(done, CampaignState.DONE)
     started = repo.get(running).started_at
-    assert repo.recover() == 1
+    assert repo.recover() == (1, 0)
     c = repo.get(running)
     assert c.status is CampaignState.INTERRUPTED and "server stopped" in c.status_reason
     assert c.started_at == started and repo.get(done).status is CampaignState.DONE
     assert repo.get(done).finished_at is not None
+
+
+def test_recover_holds_every_queued_campaign_until_a_person_resumes_it(repo):
+    """No motion after a restart without a person: queued campaigns (due now or
+    scheduled) are paused with a reason that says why; drafts and finished ones stay."""
+    now = datetime(2026, 12, 6, 7, 0, tzinfo=UTC)
+    queued, scheduled, draft = (_create(repo, n).id for n in ("q", "s", "d"))
+    repo.apply(queued, C.START)
+    repo.apply(scheduled, C.START, scheduled_at=now + timedelta(hours=3))
+    assert repo.recover(now) == (0, 2)
+    for cid in (queued, scheduled):
+        c = repo.get(cid)
+        assert c.status is CampaignState.PAUSED
+        assert c.status_reason.startswith("held at server start (2026-12-06 07:00:00 UTC)")
+    assert repo.get(draft).status is CampaignState.DRAFT
+    assert repo.next_due(now + timedelta(days=1)) is None  # the scheduler finds nothing
+    repo.apply(queued, C.RESUME)
+    assert repo.next_due(now) == queued
 
 
 def test_a_setpoint_is_stored_whole_with_its_recording_indices(repo):

@@ -4,6 +4,7 @@ who holds the table (a campaign or a person), and the device's health."""
 from __future__ import annotations
 
 import re
+import threading
 import time
 
 import pytest
@@ -211,22 +212,147 @@ def test_the_owner_is_read_consistently_while_campaigns_come_and_go(motion):
 def test_after_a_persons_stop_the_owning_campaign_may_not_move_until_released(motion, spy):
     """STOP takes the table from the campaign that owns it: its next move (and profile)
     is refused, so a runner between its check and its command cannot start the table
-    again after STOP returned; a new claim (the campaign resumed) may move again, and a
+    again after STOP returned; once released the campaign may move again, and a
     campaign stopping its own motion does not halt itself."""
     motion.claim(7, "grid")
     motion.stop(by=7)  # the campaign stopping its own slew
+    assert not motion.stop_latched
     motion.move({"yaw": 1.0}, by=7)
     stops = motion.stops
     motion.stop()  # a person's STOP
-    assert motion.stops == stops + 1 and motion.halted(7)
-    with pytest.raises(MotionConflictError, match="STOP was pressed: campaign 7 may not move"):
+    assert motion.stops == stops + 1 and motion.halted(7) and motion.stop_latched
+    with pytest.raises(MotionConflictError, match="STOP was pressed at .* holds the motion system"):
         motion.move({"yaw": 2.0}, by=7)
     profile = motion.profile_of("yaw", SINE).started_at(0.0)
     with pytest.raises(MotionConflictError, match="STOP was pressed"):
         motion.run_profile("yaw", profile, by=7)
     assert [c for c, _ in spy.calls].count("move_to") == 1  # only the move before STOP
-    motion.release(7)
-    motion.claim(7, "grid")  # resumed
-    assert not motion.halted(7)
+    assert motion.release_stop() is True
+    assert not motion.halted(7) and not motion.stop_latched
     motion.move({"yaw": 2.0}, by=7)
     assert spy.calls[-1] == ("move_to", {"yaw": 2.0})
+
+
+def test_stop_latches_for_everyone_until_a_person_releases_it(motion, spy):
+    """STOP is an emergency stop, not a pause: a person's move, jog and profile after it
+    are refused until ``release_stop``; releasing twice is harmless."""
+    motion.stop()
+    spy.calls.clear()
+    for attempt in (lambda: motion.move({"yaw": 1.0}), lambda: motion.jog("yaw", 1.0),
+                    lambda: motion.start_profile("yaw", SINE)):  # fmt: skip
+        with pytest.raises(MotionConflictError, match="release it first"):
+            attempt()
+    assert spy.calls == []
+    assert motion.stop_latched_at is not None
+    assert motion.release_stop() is True and motion.release_stop() is False
+    motion.move({"yaw": 1.0})
+    assert spy.calls == [("move_to", {"yaw": 1.0})]
+
+
+class _SlowSend(SpyMotion):
+    """A driver whose move takes ``delay_s`` to be sent (an SCPI round trip)."""
+
+    def __init__(self, inner, delay_s: float) -> None:
+        super().__init__(inner)
+        self.delay_s = delay_s
+        self.sending = threading.Event()
+
+    def move_to(self, setpoints):
+        self.sending.set()  # past every check, on its way to the controller
+        time.sleep(self.delay_s)
+        super().move_to(setpoints)
+
+
+def test_a_move_in_flight_when_stop_is_pressed_is_stopped_again():
+    """The move passed its checks before STOP and reaches the driver after the stop: the
+    service stops the table again at once and tells the sender, so STOP has the last word."""
+    spy = _SlowSend(SimMotion(make_sim_world(time_scale=20.0)), delay_s=0.1)
+    motion = MotionService(spy)
+    errors: list[Exception] = []
+
+    def person() -> None:
+        try:
+            motion.move({"yaw": 30.0})
+        except MotionConflictError as exc:
+            errors.append(exc)
+
+    t = threading.Thread(target=person)
+    t.start()
+    assert spy.sending.wait(2.0)
+    motion.stop()
+    t.join(5.0)
+    names = [c for c, _ in spy.calls]
+    assert names == ["stop", "move_to", "stop"]  # the move came after the stop: stopped again
+    assert len(errors) == 1 and "STOP was pressed while the move was sent" in str(errors[0])
+    assert motion.stop_latched
+
+
+class _SlowStatus(SpyMotion):
+    """A driver whose status read takes ``delay_s`` (an SCPI round trip) and that records,
+    with each command, which thread sent it and who owned the table when it arrived."""
+
+    def __init__(self, inner, motion_ref: list, delay_s: float) -> None:
+        super().__init__(inner)
+        self.delay_s = delay_s
+        self.motion_ref = motion_ref
+        self.arrivals: list[tuple[str, str, object]] = []
+
+    def status(self):
+        time.sleep(self.delay_s)
+        return super().status()
+
+    def move_to(self, setpoints):
+        owner = self.motion_ref[0]._owner  # noqa: SLF001 - the truth at arrival, unlocked
+        self.arrivals.append(("move_to", threading.current_thread().name, owner))
+        super().move_to(setpoints)
+
+
+def _race_round(motion: MotionService, round_: int) -> list[str]:
+    """Two people (a jog and a move, three tries each) against a campaign that claims the
+    table and moves; returns the people's outcomes ("sent" / "refused")."""
+    barrier = threading.Barrier(3)
+    outcome: list[str] = []
+
+    def person(kind: str) -> None:
+        barrier.wait()
+        for _ in range(3):
+            try:
+                if kind == "jog":
+                    motion.jog("yaw", 0.05)
+                else:
+                    motion.move({"yaw": 0.35 + 0.01 * round_, "pitch": 0.2})
+                outcome.append("sent")
+            except MotionConflictError:
+                outcome.append("refused")
+
+    def campaign() -> None:
+        barrier.wait()
+        time.sleep(0.005 * (round_ % 5))
+        motion.claim(100 + round_, "race")
+        motion.move({"yaw": 5.0}, by=100 + round_)
+
+    threads = [threading.Thread(target=person, args=("jog",), name=f"person-jog-{round_}"),
+               threading.Thread(target=person, args=("move",), name=f"person-move-{round_}"),
+               threading.Thread(target=campaign, name=f"campaign-{round_}")]  # fmt: skip
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(10.0)
+    motion.release(100 + round_)
+    return outcome
+
+
+def test_no_command_from_a_non_owner_reaches_the_driver_while_a_campaign_claims_it():
+    """The race of the security review: two people jog and move while a campaign claims
+    the table, with a 20 ms status read. Every command that reaches the driver while a
+    campaign owns it comes from the campaign's own thread (25 rounds)."""
+    ref: list = []
+    spy = _SlowStatus(SimMotion(make_sim_world(time_scale=50.0)), ref, delay_s=0.02)
+    motion = MotionService(spy)
+    ref.append(motion)
+    outcomes = [o for round_ in range(25) for o in _race_round(motion, round_)]
+    by_non_owner = [(name, owner) for _, name, owner in spy.arrivals
+                    if owner is not None and not name.startswith("campaign-")]  # fmt: skip
+    assert by_non_owner == []
+    assert "refused" in outcomes  # the race was real: people were refused while campaigns held it
+    assert any(name.startswith("campaign-") for _, name, _ in spy.arrivals)
