@@ -98,3 +98,38 @@ def test_sigkill_at_several_moments_loses_and_duplicates_nothing(tmp_path, datab
         assert final["n_done"] == N_POINTS
         r = c.get(f"/api/campaigns/{cid}/report.json")
         assert r.status_code == 200 and r.json()["n_frames"] == N_POINTS * FRAMES
+
+
+def test_after_a_sigkill_nothing_moves_until_a_person_resumes(tmp_path):
+    """Campaign A runs with B queued behind it; SIGKILL. On restart A is interrupted and
+    B held (paused, "held at server start"): for 3 s the table does not move and no
+    campaign owns it. Resuming B is what runs it (the review's B drove yaw to -30 deg
+    within 2.5 s of the restart, no one present)."""
+    data = tmp_path / "data"
+    b_body = {**BODY, "name": "queued-b", "setpoints": [{"yaw_deg": -30.0, "rail_mm": 12000}]}
+    with ServeProcess(data, env=ENV) as s:
+        c = httpx.Client(base_url=s.base_url, headers={"Authorization": f"Bearer {s.token}"})
+        a = c.post("/api/campaigns", json=BODY).json()["id"]
+        b = c.post("/api/campaigns", json=b_body).json()["id"]
+        c.post(f"/api/campaigns/{a}/start")
+        _wait(lambda: _campaign(c, a)["status"] == "running", what="A running")
+        assert c.post(f"/api/campaigns/{b}/start", json={"queue": True}).status_code == 200
+        assert _campaign(c, b)["status"] == "queued"
+        s.stop(signal.SIGKILL)
+    with ServeProcess(data, env=ENV) as s:
+        c = httpx.Client(base_url=s.base_url, headers={"Authorization": f"Bearer {s.token}"})
+        assert _campaign(c, a)["status"] == "interrupted"
+        held = _campaign(c, b)
+        assert held["status"] == "paused"
+        assert held["status_reason"].startswith("held at server start")
+        start = c.get("/api/motion").json()["positions"]
+        deadline = time.monotonic() + 3.0
+        while time.monotonic() < deadline:
+            m = c.get("/api/motion").json()
+            assert m["owner_campaign_id"] is None and not m["busy"], m
+            assert all(abs(m["positions"][k] - v) < 0.05 for k, v in start.items()), m
+            time.sleep(0.2)
+        assert (_campaign(c, a)["status"], _campaign(c, b)["status"]) == ("interrupted", "paused")
+        assert c.post(f"/api/campaigns/{b}/resume").status_code == 200  # a person decides
+        _wait(lambda: _campaign(c, b)["status"] == "done", 90, "B done after its resume")
+        assert abs(c.get("/api/motion").json()["positions"]["yaw"] + 30.0) < 0.1
