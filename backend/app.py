@@ -122,10 +122,14 @@ def _start_scene(state: AppState) -> None:
     from backend.services.scene import LiveScene
 
     rail = state.motion.axes.get("rail")
+    s = state.settings
     try:
+        # The scene's port answers the main port's names and origins only (its Host and
+        # Origin check, backend/services/scene.py); the dashboard, on s.port, frames it.
         state.scene = LiveScene(
-            state.hub, state.acquisition, host=state.settings.host,
-            port=state.settings.viser_port, rail_length_mm=rail.max_pos if rail else None,
+            state.hub, state.acquisition, host=s.host, port=s.viser_port,
+            rail_length_mm=rail.max_pos if rail else None, trusted_hosts=s.trusted_hosts,
+            allowed_origins=s.allowed_origins, dashboard_port=s.port or None,
         )  # fmt: skip
     except Exception as exc:  # noqa: BLE001 - any failure leaves the API running
         log.error("3-D scene not started: %s", exc)

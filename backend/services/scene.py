@@ -18,17 +18,63 @@ metres (``scene_model``):
 
 One thread takes the newest sample from a one-deep hub subscription (older ones are
 dropped, never queued) and updates the nodes at most ``max_rate_hz`` times a second.
+
+Who may use the scene's port (``SceneAccess``): the same Host and Origin rules as the
+main server. Viser serves its page and its WebSocket on one port without looking at
+either header, so any web page the lab user visits could open ``ws://127.0.0.1:8080``
+and read the live pose, around the Origin check of ``/ws/live``; and a hostile domain
+re-resolved to 127.0.0.1 (DNS rebinding) could read it as its own origin. Here, every
+request to the port, HTTP or WebSocket, is checked before viser sees it:
+
+- its ``Host`` must name a trusted host (``Settings.trusted_hosts``: the bind address,
+  the loopback names on loopback, ``TOFPOSE_ALLOWED_HOSTS``; ``*`` = any, ``*.lab`` = a
+  domain), else 400;
+- its ``Origin``, when it sends one (browsers do, on every WebSocket), must be the
+  scene's own origin (the page viser serves, in the dashboard's frame or a tab of its
+  own), the dashboard's (the same host name at the main server's port,
+  ``dashboard_port``) or one of ``TOFPOSE_ALLOWED_ORIGINS``, else 403. Clients without an
+  Origin (scripts, not browsers) pass, as on ``/ws/live``.
+
+A refused WebSocket gets its HTTP answer instead of the 101: it is never opened, so no
+scene message is ever sent on it. Every HTTP answer of the port carries
+``frame-ancestors`` naming the dashboard's origins (only the dashboard may show the
+scene in a frame), ``nosniff`` and ``no-referrer`` (``backend.security_headers``).
+
+How it hooks into viser (1.1 here): ``ViserServer`` starts a thread that listens with
+``websockets.asyncio.server.serve(handler, ..., process_request=<its HTTP file server>)``
+and does not keep the server object nor take hooks of its own. The ``websockets``
+library calls ``process_request`` for every connection before the handshake (the
+documented place to refuse one: return a response instead of None) and
+``process_response`` for every answer. So, for as long as ``ViserServer.__init__`` runs
+(it returns once the port listens), ``_guarded_serve`` puts a wrapper in the place of
+``websockets.asyncio.server.serve`` that hands viser's call our ``process_request``
+(check, then viser's own) and ``process_response`` (the headers); the original is back
+before the constructor returns. The listening socket never exists without the check
+(wrapping the server object after the start would leave a moment with none). The
+replacement is process-wide while it lasts, so it runs under a lock and only while a
+scene starts; nothing else in the server calls ``serve`` (uvicorn drives its WebSockets
+through the protocol classes). Should a later viser start its server some other way,
+the wrapper is never called and ``LiveScene`` stops the server and raises rather than
+run the scene unchecked (``_start_scene`` then reports the scene as not running).
 """
 
 from __future__ import annotations
 
+import contextlib
+import inspect
 import logging
+import re
 import threading
 import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+from urllib.parse import urlsplit
 
 import numpy as np
 
 from backend.drivers.base import CameraFrame
+from backend.security_headers import SCENE_HEADERS
 from backend.services.acquisition import AcquisitionService, LiveSample
 from backend.services.hub import LiveHub
 from backend.services.scene_model import (
@@ -39,6 +85,7 @@ from backend.services.scene_model import (
     lab_camera_pose,
     reflector_states,
 )
+from backend.settings import LOOPBACK_HOST_HEADERS
 from tofpose.catalog import Catalog
 from tofpose.geometry import RigidTransform, quaternion_wxyz_from_rotation
 
@@ -63,8 +110,177 @@ def _place(handle, T: RigidTransform) -> None:
     handle.position = np.asarray(T.t_mm, float) / 1000.0
 
 
+# -- who may use the scene's port ---------------------------------------------------------
+_HOST_HEADER = re.compile(r"(?P<name>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+)(?::(?P<port>\d{1,5}))?")
+DEFAULT_PORTS = {"http": 80, "https": 443}
+
+
+def split_host(value: str) -> tuple[str, int | None] | None:
+    """``Host`` header (or an origin's ``host[:port]``) -> (lower-case name, port), the
+    brackets of an IPv6 literal kept (``[::1]``, as in ``Settings.trusted_hosts``);
+    None when it is not a host name."""
+    m = _HOST_HEADER.fullmatch(value.strip())
+    if m is None:
+        return None
+    return m["name"].lower(), int(m["port"]) if m["port"] else None
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """Why a request to the scene's port is refused, and with which HTTP status."""
+
+    status: int
+    reason: str
+
+
+@dataclass(frozen=True)
+class SceneAccess:
+    """The Host and Origin rules of the scene's port (see the module docstring).
+
+    trusted_hosts : names accepted in ``Host`` (no port), lower case; ``"*"`` = any,
+        ``"*.domain"`` = the domain's names (Starlette's ``TrustedHostMiddleware`` rules,
+        which the main server applies to the same list).
+    allowed_origins : further browser origins (``scheme://host:port``) beside the scene's
+        own and the dashboard's.
+    dashboard_port : the main server's port: ``http(s)://<the Host's name>:<port>`` is
+        the dashboard's origin. None when it is not known (then only the scene's own
+        origin and ``allowed_origins`` pass).
+    """
+
+    trusted_hosts: tuple[str, ...] = LOOPBACK_HOST_HEADERS
+    allowed_origins: tuple[str, ...] = ()
+    dashboard_port: int | None = None
+
+    def host_name(self, hosts: Sequence[str]) -> str | None:
+        """The trusted name the request's ``Host`` headers (all of them) give, else None."""
+        if len(hosts) != 1 or (parsed := split_host(hosts[0])) is None:
+            return None
+        name = parsed[0]
+        for pattern in self.trusted_hosts:
+            if pattern == "*" or name == pattern:
+                return name
+            if pattern.startswith("*.") and name.endswith(pattern[1:]):
+                return name
+        return None
+
+    def origin_allowed(self, origin: str, host_header: str, host_name: str) -> bool:
+        """Whether a browser page of ``origin`` may use the port reached as ``host_header``
+        (whose trusted name is ``host_name``)."""
+        try:
+            parts = urlsplit(origin)
+        except ValueError:  # an unbalanced IPv6 bracket
+            return False
+        if parts.scheme not in DEFAULT_PORTS or not parts.netloc:
+            return False
+        netloc = parts.netloc.lower()
+        if f"{parts.scheme}://{netloc}" in self.allowed_origins:
+            return True
+        if host_header and netloc == host_header.strip().lower():
+            return True  # the scene's own page
+        parsed = split_host(netloc)
+        if parsed is None or self.dashboard_port is None:
+            return False
+        name, port = parsed
+        return name == host_name and (port or DEFAULT_PORTS[parts.scheme]) == self.dashboard_port
+
+    def refusal(self, hosts: Sequence[str], origins: Sequence[str]) -> Refusal | None:
+        """None when a request with these ``Host`` and ``Origin`` headers (every value of
+        each: a repeated header is refused) may be served, else why not."""
+        name = self.host_name(hosts)
+        if name is None and "*" not in self.trusted_hosts:
+            return Refusal(400, "Invalid host header")
+        if not origins:
+            return None
+        host_header = hosts[0] if len(hosts) == 1 else ""
+        if len(origins) > 1 or not self.origin_allowed(origins[0], host_header, name or ""):
+            return Refusal(403, "cross-origin request to the 3-D scene refused "
+                                "(TOFPOSE_ALLOWED_ORIGINS)")  # fmt: skip
+        return None
+
+    def frame_ancestors(self, hosts: Sequence[str]) -> str:
+        """The CSP directive for an answer to a request with these ``Host`` headers: the
+        dashboard's origins on that host name, and ``allowed_origins``."""
+        name = self.host_name(hosts)
+        sources = [f"{scheme}://{name}:{self.dashboard_port}" for scheme in DEFAULT_PORTS
+                   if name is not None and self.dashboard_port]  # fmt: skip
+        sources += self.allowed_origins
+        return "frame-ancestors " + (" ".join(sources) or "'none'")
+
+    def response_headers(self, hosts: Sequence[str]) -> dict[str, str]:
+        """What every HTTP answer of the scene's port carries."""
+        return {"Content-Security-Policy": self.frame_ancestors(hosts), **SCENE_HEADERS}
+
+
+Hook = Callable[..., Any]
+_SERVE_LOCK = threading.Lock()
+
+
+def _checked_request(access: SceneAccess, viser_hook: Hook | None) -> Hook:
+    """A ``process_request`` that refuses what ``access`` refuses, then asks viser's."""
+
+    async def process_request(connection, request):
+        refused = access.refusal(request.headers.get_all("Host"),
+                                 request.headers.get_all("Origin"))  # fmt: skip
+        if refused is not None:
+            hosts, origins = request.headers.get_all("Host"), request.headers.get_all("Origin")
+            log.info("3-D scene: %s (Host %.100r, Origin %.100r)", refused.reason, hosts,
+                     origins)  # fmt: skip
+            return connection.respond(refused.status, refused.reason + "\n")
+        answer = viser_hook(connection, request) if viser_hook is not None else None
+        return await answer if inspect.isawaitable(answer) else answer
+
+    return process_request
+
+
+def _hardened_response(access: SceneAccess, viser_hook: Hook | None) -> Hook:
+    """A ``process_response`` that adds ``access.response_headers`` to every HTTP answer
+    (not to a WebSocket's 101), after viser's own hook if it has one."""
+
+    async def process_response(connection, request, response):
+        if viser_hook is not None:
+            replaced = viser_hook(connection, request, response)
+            replaced = await replaced if inspect.isawaitable(replaced) else replaced
+            response = replaced or response
+        if response.status_code != 101:
+            for name, value in access.response_headers(request.headers.get_all("Host")).items():
+                # a header viser set is kept; a policy is added beside its own (both apply)
+                if name == "Content-Security-Policy" or name not in response.headers:
+                    response.headers[name] = value
+        return response
+
+    return process_response
+
+
+@contextlib.contextmanager
+def _guarded_serve(access: SceneAccess) -> Iterator[list[Hook]]:
+    """While open, ``websockets.asyncio.server.serve`` gives every server it starts the
+    hooks of ``access`` (around the hooks the caller passes). Yields the list of the
+    handlers it started servers for: empty afterwards = the check was never installed."""
+    import websockets.asyncio.server as ws_server
+
+    original = ws_server.serve
+    guarded: list[Hook] = []
+
+    def serve(handler, *args, process_request=None, process_response=None, **kwargs):
+        guarded.append(handler)
+        return original(handler, *args,
+                        process_request=_checked_request(access, process_request),
+                        process_response=_hardened_response(access, process_response),
+                        **kwargs)  # fmt: skip
+
+    with _SERVE_LOCK:
+        ws_server.serve = serve
+        try:
+            yield guarded
+        finally:
+            ws_server.serve = original
+
+
 class LiveScene:
-    """Owns a ``viser.ViserServer`` and keeps its scene in step with the live results."""
+    """Owns a ``viser.ViserServer`` and keeps its scene in step with the live results.
+
+    ``trusted_hosts``, ``allowed_origins`` and ``dashboard_port`` say who may use its
+    port (``SceneAccess``; by default the loopback names and the scene's own origin)."""
 
     def __init__(
         self,
@@ -76,6 +292,9 @@ class LiveScene:
         max_rate_hz: float = 10.0,
         max_cloud_points: int = 12_000,
         rail_length_mm: float | None = None,
+        trusted_hosts: Sequence[str] = LOOPBACK_HOST_HEADERS,
+        allowed_origins: Sequence[str] = (),
+        dashboard_port: int | None = None,
     ) -> None:
         import viser  # imported here: the pipeline and the CLI do not need it
 
@@ -84,7 +303,20 @@ class LiveScene:
         self._camera = acquisition.camera.model
         self._min_period_s = 1.0 / max_rate_hz
         self._max_cloud_points = max_cloud_points
-        self.server = viser.ViserServer(host=host, port=port, label="tofpose", verbose=False)
+        self.access = SceneAccess(
+            trusted_hosts=tuple(h.lower() for h in trusted_hosts),
+            allowed_origins=tuple(o.lower().rstrip("/") for o in allowed_origins),
+            dashboard_port=dashboard_port or None,
+        )
+        with _guarded_serve(self.access) as guarded:
+            self.server = viser.ViserServer(host=host, port=port, label="tofpose", verbose=False)
+        if not guarded:
+            self.server.stop()
+            raise RuntimeError(
+                f"viser {viser.__version__} did not start its server through "
+                "websockets.asyncio.server.serve: the 3-D scene would have no Host/Origin "
+                "check, so it is not served"
+            )
         self.updates = 0
         self.last_frame_index: int | None = None
         self._catalog_name: str | None = None

@@ -8,6 +8,10 @@ answers a small page saying so, how to build it, and where the API docs are, wit
 the server runs, but a part of it that a browser, a smoke test (``curl -f``) or a health
 check asks for at ``/`` is not available, and a success status would hide a broken
 install. Neither route is in the API document.
+
+``install`` also adds the hardening headers (``backend.security_headers``: no framing,
+``nosniff``, no referrer) to every answer of the server, the API's included: the
+dashboard is the page a hostile site would frame, and its API is what that page calls.
 """
 
 from __future__ import annotations
@@ -19,6 +23,8 @@ from pathlib import Path
 from fastapi import FastAPI
 from fastapi.responses import FileResponse, HTMLResponse
 from starlette.staticfiles import StaticFiles
+
+from backend.security_headers import SecurityHeaders
 
 log = logging.getLogger("tofpose.server")
 
@@ -73,7 +79,11 @@ def _serve_not_built(app: FastAPI, dist: Path) -> None:
 
 
 def install(app: FastAPI, dist: Path) -> None:
-    """Serve the dashboard built in ``dist`` at ``/``, or the page saying it is not."""
+    """Serve the dashboard built in ``dist`` at ``/``, or the page saying it is not, and
+    add the hardening headers to every answer of ``app`` (installed outermost when
+    called after the app's other middleware, as ``create_app`` does: the Host check's
+    400 and the body limit's 413 carry them too)."""
+    app.add_middleware(SecurityHeaders)
     if is_built(dist):
         _serve_built(app, dist)
     else:
