@@ -41,6 +41,7 @@ from backend.services.campaign_requests import (
     profile_plan_problems,
 )
 from backend.services.campaign_states import CampaignConflictError
+from backend.services.heavy_work import HeavyWorkBusyError
 from backend.services.mcap_files import recording_mcap
 from backend.services.reports import ReportError, build, to_csv, to_html, to_json, to_pdf
 from backend.services.store import NameTakenError, find_catalog
@@ -48,6 +49,17 @@ from backend.state import AppState
 
 router = APIRouter(prefix="/api/campaigns", tags=["campaigns"])
 IdParam = Annotated[int, Path(ge=1, le=2**31 - 1)]
+BUSY = {503: {"description": "busy with other reports and exports: try again (Retry-After)"}}
+
+
+async def _heavy(state: AppState, work, what: str):
+    """``work`` on the app's report/export workers (backend/services/heavy_work.py): 503
+    with Retry-After when they and their wait queue are full."""
+    try:
+        return await state.heavy_work.run(work, what)
+    except HeavyWorkBusyError as exc:
+        raise HTTPException(503, str(exc),
+                            headers={"Retry-After": str(exc.retry_after_s)}) from exc  # fmt: skip
 
 
 def _planning(state: AppState) -> Planning:
@@ -229,13 +241,13 @@ MEDIA_TYPES = {
     responses={
         200: {"content": {m: {} for m in MEDIA_TYPES.values()}, "description": "the report"},
         **errors(404),
+        **BUSY,
     },
 )
-def get_campaign_report(
+async def get_campaign_report(
     campaign_id: IdParam,
     fmt: ReportFormat,
     state: StateDep,
-    session: SessionDep,
     reference: Annotated[
         Reference, Query(description="lab: encoders + nominal geometry; exact: simulator only")
     ] = Reference.lab,
@@ -248,23 +260,28 @@ def get_campaign_report(
     ] = False,
 ) -> Response:
     """The accuracy report: HTML (self-contained), PDF, CSV (one row per frame) or JSON
-    (every statistic). Statistics against the lab's reference by default."""
-    _campaign(state, campaign_id)
-    cal = None
-    if calibration is not None and (cal := get_calibration(session, calibration)) is None:
-        raise HTTPException(404, f"no calibration with id {calibration}")
-    try:
-        report, rows = build(session, campaign_id, reference.value, cal)
-    except ReportError as exc:
-        raise unprocessable(["query", "reference"], [str(exc)]) from exc
-    if fmt is ReportFormat.csv:
-        body: str | bytes = to_csv(rows)
-    elif fmt is ReportFormat.json:
-        body = to_json(report)
-    elif fmt is ReportFormat.html:
-        body = to_html(report, rows)
-    else:
-        body = to_pdf(report, rows)
+    (every statistic). Statistics against the lab's reference by default. Rendered on the
+    server's report workers: 503 with Retry-After while they and their queue are full."""
+
+    def render() -> str | bytes:
+        _campaign(state, campaign_id)
+        with state.sessions() as session:
+            cal = None
+            if calibration is not None and (cal := get_calibration(session, calibration)) is None:
+                raise HTTPException(404, f"no calibration with id {calibration}")
+            try:
+                report, rows = build(session, campaign_id, reference.value, cal)
+            except ReportError as exc:
+                raise unprocessable(["query", "reference"], [str(exc)]) from exc
+        if fmt is ReportFormat.csv:
+            return to_csv(rows)
+        if fmt is ReportFormat.json:
+            return to_json(report)
+        if fmt is ReportFormat.html:
+            return to_html(report, rows)
+        return to_pdf(report, rows)
+
+    body = await _heavy(state, render, f"the {fmt.value} report of campaign {campaign_id}")
     filename = f"campaign-{campaign_id}-report.{fmt.value}"
     return Response(
         body,
@@ -295,14 +312,16 @@ def get_campaign_recording(campaign_id: IdParam, state: StateDep):
     dependencies=[ReadAuth],
     response_class=FileResponse,
     responses={200: {"content": {"application/x-mcap": {}}, "description": "the recording"},
-               **errors(404, 409)},
+               **errors(404, 409), **BUSY},
 )  # fmt: skip
-def get_campaign_recording_mcap(campaign_id: IdParam, state: StateDep):
+async def get_campaign_recording_mcap(campaign_id: IdParam, state: StateDep):
     """The campaign's raw recording as MCAP for Foxglove and Rerun (docs/interop.md): the
     frames, the references and an estimate of each frame by the pipeline re-run over the
     recording (its camera and catalog, default settings, tracking off; not the stored
     measurement rows). Made on the first request (a long recording
-    takes a while) and kept. Only with ``record_raw``."""
+    takes a while) and kept, on the server's export workers (503 with Retry-After while
+    they and their queue are full). Only with ``record_raw``."""
     path = finished_recording(state, campaign_id)
-    return FileResponse(recording_mcap(path), media_type="application/x-mcap",
+    out = await _heavy(state, lambda: recording_mcap(path), f"the MCAP of campaign {campaign_id}")
+    return FileResponse(out, media_type="application/x-mcap",
                         filename=f"campaign-{campaign_id}.mcap")  # fmt: skip
