@@ -177,6 +177,11 @@ class LiveServer:
     def __init__(self, settings: Settings, devices: Devices | None = None, port: int = 0) -> None:
         import uvicorn
 
+        from tests.backend.serve_process import free_port
+
+        # the app knows its own port (the 3-D scene names the dashboard's origin by it)
+        port = port or free_port()
+        settings = settings.model_copy(update={"port": port})
         app = create_app(settings, devices)
         config = uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning",
                                 timeout_graceful_shutdown=settings.shutdown_timeout_s)  # fmt: skip
