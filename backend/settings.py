@@ -118,6 +118,14 @@ class Settings(BaseSettings):
     filter_jerk_deg: float = Field(30.0, gt=0, le=10_000)
     dask_scheduler: str = ""
     study_workers: int | None = Field(None, ge=1, le=1024)
+    # How large an accepted study may be, and how many may wait (docs/scaleout.md). The
+    # defaults suit a 2-core lab PC, whose LocalCluster is 1 worker at ~28 frames/s: 10^6
+    # frames is ~10 h (a night), 10^4 cells keeps summary.json to ~20 MB (1.7 kB a cell),
+    # and 4 studies queued or running is up to ~2 days of that worker's time. Raise them
+    # for a cluster (TOFPOSE_DASK_SCHEDULER).
+    study_max_cells: int = Field(10_000, ge=1)
+    study_max_frames: int = Field(1_000_000, ge=1)
+    studies_max_active: int = Field(4, ge=1, le=10_000)
     viser: bool = True
     viser_port: int = Field(8080, ge=0, le=65535)
     foxglove_port: int | None = Field(None, ge=0, le=65535)

@@ -186,7 +186,7 @@ def write_report(root: str | Path, spec: StudySpec, summary: dict, run: dict | N
 table{{border-collapse:collapse;font-size:13px}}td,th{{border:1px solid #ccc;padding:3px 6px}}
 th{{background:#eee}}img{{max-width:100%;margin:1em 0}}</style></head><body>
 <h1>Accuracy study {esc(spec.name)}</h1>
-<p>{len(spec.cells)} cells x {spec.frames_per_cell} frames (seed {spec.seed});
+<p>{spec.n_cells} cells x {spec.frames_per_cell} frames (seed {spec.seed});
 {summary['frames_stored']} of {summary['frames_planned']} frames
 stored{'' if summary['complete'] else ' <strong>(incomplete)</strong>'}.
 All frames: success {total.get('success_pct') or 0:.1f} %, {total.get('wrong', 0)} wrong,

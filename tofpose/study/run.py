@@ -58,12 +58,13 @@ def run_study(
     manifest = open_store(root, spec)
     remove_temporary(root)
     done = present_chunks(root)
-    todo = [c for c in spec.chunks() if c not in done]
-    frames_done = sum(b - a for _, a, b in done & set(spec.chunks()))
+    chunks = spec.chunks()
+    todo = [c for c in chunks if c not in done]
+    frames_done = sum(b - a for _, a, b in done & set(chunks))
     token = hashlib.sha1(spec.to_json().encode()).hexdigest()[:12]
     manifest.update(status="running", started=_now(), error=None,
                     cluster=scheduler or f"LocalCluster({workers or 'auto'})",
-                    chunks_done=len(spec.chunks()) - len(todo), frames_done=frames_done,
+                    chunks_done=len(chunks) - len(todo), frames_done=frames_done,
                     eta_s=None)  # fmt: skip
     write_manifest(root, manifest)
     results: list[dict] = []

@@ -21,6 +21,12 @@ every combination)::
 Every frame is a fresh acquisition. Frame ``i`` of cell ``c`` draws everything from
 ``numpy.random.SeedSequence(seed).spawn``'s child ``(c, i)``, so a frame's result
 depends on the spec alone: not on the chunking, the number of workers or their order.
+
+A study's size is known from its axes alone: cells = the product of the axis lengths,
+frames = cells x ``frames_per_cell``. ``from_dict`` checks both against ``StudyLimits``
+before anything else is made, and ``StudySpec.cells`` makes each ``Cell`` only when it
+is asked for (``CellGrid``), so neither a refusal nor a question about a study's size
+costs memory in proportion to its grid.
 """
 
 from __future__ import annotations
@@ -28,7 +34,9 @@ from __future__ import annotations
 import itertools
 import json
 import math
-from dataclasses import asdict, dataclass, field
+import operator
+from collections.abc import Iterator, Sequence
+from dataclasses import asdict, dataclass
 
 from tofpose.catalog import BUILTIN_CATALOGS
 from tofpose.pipeline import PipelineConfig
@@ -37,7 +45,11 @@ from tofpose.sim.randomise import FAMILIES
 #: the pipeline settings a cell may name
 PRESETS = {"default": PipelineConfig, "paper": PipelineConfig.paper}
 
-#: the most frames one study may ask for (10^8: ~500 core-hours)
+#: ``tofpose study``'s limits (``StudyLimits``' defaults): at most 10^5 cells (the
+#: summary and the report hold a row per cell) and 10^8 frames (~900 core-hours at
+#: ~30 ms a frame); the server sets its own (``TOFPOSE_STUDY_MAX_CELLS``,
+#: ``TOFPOSE_STUDY_MAX_FRAMES``, docs/scaleout.md)
+MAX_CELLS = 100_000
 MAX_FRAMES = 100_000_000
 
 GRID_AXES = ("range_m", "attitude_deg", "offset_fraction", "ambient_lux", "physics",
@@ -48,7 +60,57 @@ _DEFAULT_GRID = {"range_m": [3.0], "attitude_deg": [20.0], "offset_fraction": [0
 
 
 class StudySpecError(ValueError):
-    """A study specification that cannot run; the message names the field."""
+    """A study specification that cannot run. ``field``: where, as a path into the
+    spec's JSON (``grid.range_m[1]``; empty for the spec as a whole); ``problem``: what.
+    The message is ``"<field>: <problem>"``."""
+
+    def __init__(self, field: str, problem: str):
+        super().__init__(f"{field}: {problem}" if field else problem)
+        self.field = field
+        self.problem = problem
+
+    @property
+    def loc(self) -> list[str | int]:
+        """``field`` as a list of keys and indices: ``grid.range_m[1]`` -> ``["grid",
+        "range_m", 1]`` (empty for the spec as a whole)."""
+        parts = self.field.replace("[", ".").replace("]", "").split(".")
+        return [int(p) if p.isdigit() else p for p in parts if p]
+
+
+@dataclass(frozen=True)
+class StudyLimits:
+    """How large a study may be: at most ``max_cells`` cells (the product of the grid's
+    axis lengths) and ``max_frames`` frames (cells x ``frames_per_cell``). ``source``:
+    where the limits are set, named in a refusal (``{what}`` is ``CELLS`` or
+    ``FRAMES``)."""
+
+    max_cells: int = MAX_CELLS
+    max_frames: int = MAX_FRAMES
+    source: str = "tofpose.study.spec.MAX_{what}"
+
+    def check(self, axis_lengths: Sequence[int], frames_per_cell: int) -> None:
+        """``StudySpecError`` naming ``grid`` (too many cells) or ``frames_per_cell``
+        (too many frames), the numbers and the limit; O(number of axes), nothing made.
+        ``axis_lengths``: the number of values on each axis (``GRID_AXES`` order)."""
+        n_cells = math.prod(axis_lengths)
+        if n_cells > self.max_cells:
+            shape = " x ".join(f"{n} {a}" for a, n in zip(GRID_AXES, axis_lengths, strict=True)
+                               if n > 1)  # fmt: skip
+            where = self.source.format(what="CELLS")
+            raise StudySpecError("grid", f"{n_cells:,} cells ({shape}) is more than the limit "
+                                         f"of {self.max_cells:,} ({where})")  # fmt: skip
+        n_frames = n_cells * frames_per_cell
+        if n_frames > self.max_frames:
+            where = self.source.format(what="FRAMES")
+            raise StudySpecError(
+                "frames_per_cell",
+                f"{n_cells:,} cells x {frames_per_cell:,} frames = {n_frames:,} frames is more "
+                f"than the limit of {self.max_frames:,} ({where})",
+            )
+
+
+#: ``tofpose study``'s limits
+CLI_LIMITS = StudyLimits()
 
 
 @dataclass(frozen=True)
@@ -71,6 +133,37 @@ class Cell:
                 f"{self.catalog}, {self.preset}")  # fmt: skip
 
 
+class CellGrid(Sequence[Cell]):
+    """The cells of a grid, every combination of its axes' values in
+    ``itertools.product`` order (the last axis, ``preset``, varies fastest), each
+    ``Cell`` made when it is asked for: ``len`` and indexing cost O(number of axes),
+    iterating O(1) per cell, and nothing is kept. ``grid``: axis -> tuple of values."""
+
+    def __init__(self, grid: dict):
+        self._axes = tuple(tuple(grid[a]) for a in GRID_AXES)
+        self._n = math.prod(len(v) for v in self._axes)
+
+    def __len__(self) -> int:
+        return self._n
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(self._n))]
+        index = operator.index(index)
+        if not -self._n <= index < self._n:
+            raise IndexError(f"cell {index} out of range 0..{self._n - 1}")
+        index %= self._n
+        values, rest = [], index
+        for axis in reversed(self._axes):  # mixed radix, the last axis the lowest digit
+            rest, k = divmod(rest, len(axis))
+            values.append(axis[k])
+        return Cell(index, *reversed(values))
+
+    def __iter__(self) -> Iterator[Cell]:
+        for i, values in enumerate(itertools.product(*self._axes)):
+            yield Cell(i, *values)
+
+
 @dataclass(frozen=True)
 class StudySpec:
     """A validated study (module docstring). ``grid``: axis -> tuple of values."""
@@ -80,27 +173,42 @@ class StudySpec:
     seed: int = 0
     frames_per_cell: int = 100
     chunk_frames: int = 25
-    cells: tuple[Cell, ...] = field(init=False, repr=False, compare=False)
 
-    def __post_init__(self) -> None:
-        axes = [self.grid[a] for a in GRID_AXES]
-        cells = tuple(Cell(i, *values) for i, values in enumerate(itertools.product(*axes)))
-        object.__setattr__(self, "cells", cells)
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """The number of values on each axis, in ``GRID_AXES`` order."""
+        return tuple(len(self.grid[a]) for a in GRID_AXES)
+
+    @property
+    def n_cells(self) -> int:
+        """The number of cells: the product of the axis lengths (no cell is made)."""
+        return math.prod(self.shape)
+
+    @property
+    def cells(self) -> CellGrid:
+        """Every cell, made on demand (``CellGrid``)."""
+        return CellGrid(self.grid)
 
     @property
     def n_frames(self) -> int:
-        return len(self.cells) * self.frames_per_cell
+        """Frames in all: cells x ``frames_per_cell``."""
+        return self.n_cells * self.frames_per_cell
+
+    @property
+    def n_chunks(self) -> int:
+        """The number of tasks, ``len(chunks())``, from the sizes alone."""
+        return self.n_cells * -(-self.frames_per_cell // self.chunk_frames)
 
     def chunks(self) -> list[tuple[int, int, int]]:
         """The study's tasks: (cell index, first frame, end frame) of at most
         ``chunk_frames`` frames each, cell by cell."""
         step = self.chunk_frames
-        return [(c.index, a, min(a + step, self.frames_per_cell))
-                for c in self.cells for a in range(0, self.frames_per_cell, step)]  # fmt: skip
+        frames = self.frames_per_cell
+        return [(c, a, min(a + step, frames))
+                for c in range(self.n_cells) for a in range(0, frames, step)]  # fmt: skip
 
     def to_dict(self) -> dict:
         d = asdict(self)
-        d.pop("cells")
         d["grid"] = {a: list(self.grid[a]) for a in GRID_AXES}
         return d
 
@@ -108,52 +216,55 @@ class StudySpec:
         return json.dumps(self.to_dict(), indent=2)
 
     @classmethod
-    def from_json(cls, text: str, source: str = "study spec") -> StudySpec:
+    def from_json(cls, text: str, source: str = "study spec",
+                  limits: StudyLimits | None = CLI_LIMITS) -> StudySpec:  # fmt: skip
+        """``from_dict`` of the JSON ``text``; ``source`` names it when it is not JSON."""
         try:
             doc = json.loads(text)
         except json.JSONDecodeError as exc:
-            raise StudySpecError(f"{source}: not JSON ({exc})") from exc
-        return cls.from_dict(doc)
+            raise StudySpecError(source, f"not JSON ({exc})") from exc
+        return cls.from_dict(doc, limits)
 
     @classmethod
-    def from_dict(cls, doc) -> StudySpec:
-        """Validate ``doc``; ``StudySpecError`` naming the first bad field."""
+    def from_dict(cls, doc, limits: StudyLimits | None = CLI_LIMITS) -> StudySpec:
+        """Validate ``doc``; ``StudySpecError`` naming the first bad field. The study's
+        size (``limits``; None: no limit, for a spec already accepted) is checked from
+        the axis lengths before the spec is made."""
         if not isinstance(doc, dict):
-            raise StudySpecError("the study spec must be a JSON object")
+            raise StudySpecError("", "the study spec must be a JSON object")
         known = {"name", "seed", "frames_per_cell", "chunk_frames", "grid"}
         unknown = sorted(set(doc) - known)
         if unknown:
-            raise StudySpecError(f"{unknown[0]}: unknown field (known: {', '.join(sorted(known))})")
+            raise StudySpecError(unknown[0], f"unknown field (known: {', '.join(sorted(known))})")
         name = doc.get("name", "study")
         if not isinstance(name, str) or not name:
-            raise StudySpecError("name: must be a non-empty string")
+            raise StudySpecError("name", "must be a non-empty string")
         seed = _integer(doc, "seed", 0, 0)
         frames = _integer(doc, "frames_per_cell", 100, 1)
         chunk = _integer(doc, "chunk_frames", min(25, frames), 1)
         grid_doc = doc.get("grid")
         if not isinstance(grid_doc, dict):
-            raise StudySpecError("grid: must be an object of axes (" + ", ".join(GRID_AXES) + ")")
+            raise StudySpecError("grid", "must be an object of axes (" + ", ".join(GRID_AXES) + ")")
         unknown = sorted(set(grid_doc) - set(GRID_AXES))
         if unknown:
-            raise StudySpecError(f"grid.{unknown[0]}: unknown axis (known: {', '.join(GRID_AXES)})")
+            known = ", ".join(GRID_AXES)
+            raise StudySpecError(f"grid.{unknown[0]}", f"unknown axis (known: {known})")
         grid = {a: tuple(_axis(a, grid_doc.get(a, _DEFAULT_GRID[a]))) for a in GRID_AXES}
-        spec = cls(grid=grid, name=name, seed=seed, frames_per_cell=frames, chunk_frames=chunk)
-        if spec.n_frames > MAX_FRAMES:
-            raise StudySpecError(f"frames_per_cell: {len(spec.cells)} cells x {frames} frames "
-                                 f"is more than {MAX_FRAMES:.0e} frames")  # fmt: skip
-        return spec
+        if limits is not None:
+            limits.check([len(grid[a]) for a in GRID_AXES], frames)
+        return cls(grid=grid, name=name, seed=seed, frames_per_cell=frames, chunk_frames=chunk)
 
 
 def _integer(doc: dict, key: str, default: int, minimum: int) -> int:
     v = doc.get(key, default)
     if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
-        raise StudySpecError(f"{key}: must be an integer >= {minimum} (got {v!r})")
+        raise StudySpecError(key, f"must be an integer >= {minimum} (got {v!r})")
     return v
 
 
 def _axis(name: str, values) -> list:
     if not isinstance(values, list) or not values:
-        raise StudySpecError(f"grid.{name}: must be a non-empty list")
+        raise StudySpecError(f"grid.{name}", "must be a non-empty list")
     out = []
     for k, v in enumerate(values):
         where = f"grid.{name}[{k}]"
@@ -161,19 +272,19 @@ def _axis(name: str, values) -> list:
             allowed = {"physics": FAMILIES, "catalog": tuple(BUILTIN_CATALOGS),
                        "preset": tuple(PRESETS)}[name]  # fmt: skip
             if v not in allowed:
-                raise StudySpecError(f"{where}: {v!r} is not one of {', '.join(allowed)}")
+                raise StudySpecError(where, f"{v!r} is not one of {', '.join(allowed)}")
             out.append(v)
             continue
         if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise StudySpecError(f"{where}: must be a number (got {v!r})")
+            raise StudySpecError(where, f"must be a number (got {v!r})")
         v = float(v)
         lo, hi = {"range_m": (0.3, 20.0), "attitude_deg": (0.0, 60.0),
                   "offset_fraction": (0.0, 0.9), "ambient_lux": (0.0, 150000.0)}[name]  # fmt: skip
         if not lo <= v <= hi:
-            raise StudySpecError(f"{where}: {v:g} is outside [{lo:g}, {hi:g}]")
+            raise StudySpecError(where, f"{v:g} is outside [{lo:g}, {hi:g}]")
         out.append(v)
     if len(set(out)) != len(out):
-        raise StudySpecError(f"grid.{name}: a value is listed twice")
+        raise StudySpecError(f"grid.{name}", "a value is listed twice")
     return out
 
 

@@ -28,7 +28,8 @@ from tofpose.study.columns import COLUMNS
 from tofpose.study.spec import StudySpec
 
 MANIFEST = "study.json"
-_CHUNK = re.compile(r"^cell-(\d{5})_frames-(\d{7})-(\d{7})\.parquet$")
+# at least 5 and 7 digits: a larger number takes more (``chunk_name``)
+_CHUNK = re.compile(r"^cell-(\d{5,})_frames-(\d{7,})-(\d{7,})\.parquet$")
 
 
 class StudyStoreError(ValueError):
@@ -99,7 +100,7 @@ def open_store(store_dir: str | Path, spec: StudySpec) -> dict:
     path = root / MANIFEST
     if path.exists():
         manifest = read_manifest(root)
-        if StudySpec.from_dict(manifest["spec"]) != spec:
+        if StudySpec.from_dict(manifest["spec"], limits=None) != spec:
             raise StudyStoreError(
                 f"{root} holds the results of another study spec "
                 f"({manifest['spec'].get('name')!r}); choose another --out or delete it"
@@ -109,7 +110,7 @@ def open_store(store_dir: str | Path, spec: StudySpec) -> dict:
         raise StudyStoreError(f"{root} is not empty and holds no study; choose another --out")
     root.mkdir(parents=True, exist_ok=True)
     manifest = {"format": "tofpose-study", "version": 1, "spec": spec.to_dict(),
-                "status": "created", "chunks": len(spec.chunks()), "chunks_done": 0}  # fmt: skip
+                "status": "created", "chunks": spec.n_chunks, "chunks_done": 0}  # fmt: skip
     write_manifest(root, manifest)
     return manifest
 

@@ -12,7 +12,7 @@ from fastapi.responses import FileResponse
 from backend.api.contract import errors
 from backend.api.deps import ReadAuth, StateDep, WriteAuth, unprocessable
 from backend.api.schemas import StudyCreate, StudyPublic
-from backend.services.studies import UnknownStudyError
+from backend.services.studies import TooManyStudiesError, UnknownStudyError, study_limits
 from tofpose.study.spec import StudySpec, StudySpecError
 
 router = APIRouter(prefix="/api/studies", tags=["studies"])
@@ -25,20 +25,23 @@ def _public(s) -> StudyPublic:
     return StudyPublic(**{**asdict(s), "reports": list(s.reports)})
 
 
-@router.post("", status_code=status.HTTP_201_CREATED, dependencies=[WriteAuth])
+@router.post("", status_code=status.HTTP_201_CREATED, dependencies=[WriteAuth],
+             responses=errors(409))  # fmt: skip
 def create_study(body: StudyCreate, state: StateDep) -> StudyPublic:
     """Queue a study. 422 names the field when the spec cannot run (a range outside
-    0.3-20 m, an unknown catalog, a value listed twice); nothing is stored then."""
+    0.3-20 m, an unknown catalog, a value listed twice, more cells or frames than the
+    server takes: TOFPOSE_STUDY_MAX_CELLS, TOFPOSE_STUDY_MAX_FRAMES); 409 while
+    TOFPOSE_STUDIES_MAX_ACTIVE studies are queued or running. Nothing is stored then."""
     doc = body.model_dump(exclude_none=True)
     doc["grid"] = body.grid.model_dump(exclude_none=True)
-    try:
-        spec = StudySpec.from_dict(doc)
+    try:  # the size is checked from the axis lengths before anything is made
+        spec = StudySpec.from_dict(doc, limits=study_limits(state.settings))
     except StudySpecError as exc:
-        field, _, msg = str(exc).partition(": ")  # "grid.range_m[1]: ..." -> its loc
-        loc = [int(p) if p.isdigit() else p
-               for p in field.replace("[", ".").replace("]", "").split(".")]  # fmt: skip
-        raise unprocessable(["body", *loc], [msg or str(exc)]) from exc
-    sid = state.studies.submit(spec)
+        raise unprocessable(["body", *exc.loc], [exc.problem]) from exc
+    try:
+        sid = state.studies.submit(spec, max_active=state.settings.studies_max_active)
+    except TooManyStudiesError as exc:
+        raise HTTPException(status.HTTP_409_CONFLICT, str(exc)) from exc
     return _public(state.studies.status(sid))
 
 
