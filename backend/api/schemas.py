@@ -129,6 +129,12 @@ class MotionPublic(DeviceStatePublic):
         "moves and jogs are refused with 409 then); null when it is free",
     )
     owner_campaign_name: str | None = None
+    stop_latched: bool = Field(
+        False,
+        description="a person's STOP holds the motion system: every move, jog, profile and "
+        "campaign is refused until POST /api/motion/release (or a campaign's resume)",
+    )  # fmt: skip
+    stop_latched_at: str | None = Field(None, description="when that STOP was pressed (UTC)")
 
 
 class DevicesPublic(BaseModel):
