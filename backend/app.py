@@ -23,6 +23,7 @@ from starlette.middleware.trustedhost import TrustedHostMiddleware
 
 import backend
 from backend.api.contract import complete_openapi, operation_id
+from backend.api.routes import audit as audit_route
 from backend.api.routes import (
     calibrations,
     camera,
@@ -41,16 +42,19 @@ from backend.api.routes import (
 from backend.api.routes import devices as devices_route
 from backend.api.routes import reprocessings as reprocessings_route
 from backend.api.routes import studies as studies_route
-from backend.auth import load_or_create_token
+from backend.audit_middleware import AuditMiddleware
 from backend.db.engine import make_engine, make_session_factory, upgrade_database
 from backend.drivers.base import CameraSettings
 from backend.drivers.factory import Devices, build_devices
+from backend.file_modes import restrict_data_dir
 from backend.limits import BodySizeLimit
 from backend.services.acquisition import AcquisitionService
+from backend.services.audit import AuditService
 from backend.services.batch_queue import BatchQueue
 from backend.services.campaigns import CampaignService
 from backend.services.hub import LiveHub
 from backend.services.kernel_warmup import KernelWarmup
+from backend.services.keys import KeyService
 from backend.services.motion import MotionService
 from backend.services.reprocessing import ReprocessService
 from backend.services.store import find_catalog, load_device_settings
@@ -184,14 +188,20 @@ def _lifespan(settings: Settings, devices: Devices | None):
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         settings.data_dir.mkdir(parents=True, exist_ok=True)
-        token, created = load_or_create_token(
-            settings.data_dir,
-            settings.api_token.get_secret_value() if settings.api_token else None,
-        )
-        app.state.token_created = created
+        restrict_data_dir(settings.data_dir)
         engine = make_engine(settings.resolved_database_url)
         upgrade_database(engine)
         sessions = make_session_factory(engine)
+        # the API keys: the first start stores the configured token, or data/api_token's,
+        # as the admin key (backend/services/keys.py)
+        keys = KeyService(sessions)
+        app.state.key_bootstrap = await asyncio.to_thread(
+            keys.bootstrap, settings.data_dir,
+            settings.api_token.get_secret_value() if settings.api_token else None,
+        )  # fmt: skip
+        keys.start()
+        audit = AuditService(sessions)
+        audit.start()
         devs = devices or build_devices(settings)
         _restore_camera_settings(sessions, devs)
         cat_name, cat = _initial_catalog(sessions, settings, devs)
@@ -222,8 +232,8 @@ def _lifespan(settings: Settings, devices: Devices | None):
         reprocessings = ReprocessService(settings.data_dir / "reprocessings",
                                          settings.dask_scheduler or None, settings.study_workers,
                                          jobs=batch_jobs)  # fmt: skip
-        app.state.tofpose = AppState(settings, token, engine, sessions, devs, hub, acq, campaigns,
-                                     studies, reprocessings, motion_service)  # fmt: skip
+        app.state.tofpose = AppState(settings, keys, audit, engine, sessions, devs, hub, acq,
+                                     campaigns, studies, reprocessings, motion_service)  # fmt: skip
         # the pipeline's compiled kernels (tofpose.warmup): in the background while frames
         # already stream (backend/services/kernel_warmup.py), or before the first frame
         if settings.kernels_in_background:
@@ -251,6 +261,8 @@ def _lifespan(settings: Settings, devices: Devices | None):
             app.state.tofpose.renderer.close()
             acq.stop()
             devs.close()
+            audit.stop()  # what is queued is written first
+            keys.stop()
             engine.dispose()
 
     return lifespan
@@ -288,11 +300,17 @@ def _install_error_answers(app: FastAPI) -> None:
         )  # fmt: skip
 
 
+def _audit_service(app: FastAPI) -> AuditService | None:
+    """The running app's audit writer (None before the lifespan built it)."""
+    state = getattr(app.state, "tofpose", None)
+    return state.audit if state is not None else None
+
+
 def _include_routes(app: FastAPI) -> None:
     """Every resource's router."""
     routers = (health, devices_route, camera, pose, frames, motion, catalogs, campaigns,
                calibrations, reference, scene, foxglove, live, studies_route,
-               reprocessings_route)  # fmt: skip
+               reprocessings_route, audit_route)  # fmt: skip
     for module in routers:
         app.include_router(module.router)
 
@@ -317,6 +335,9 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
     # Outermost: a request naming a host we do not serve (DNS rebinding) gets 400 before
     # anything else runs. Origin is checked on the WebSocket itself (routes/live.py).
     app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.trusted_hosts)
+    # Outside even that: every POST/PUT/PATCH/DELETE is recorded, the refused ones too
+    # (backend/audit_middleware.py; the writer runs on a thread of its own).
+    app.add_middleware(AuditMiddleware, audit=lambda: _audit_service(app))
 
     _install_error_answers(app)
     _include_routes(app)

@@ -1,25 +1,61 @@
-"""``tofpose serve``: build the app from settings + command-line overrides and run it."""
+"""``tofpose serve``: build the app from settings + command-line overrides and run it;
+``tofpose report`` and ``tofpose keys`` (backend/keys_cli.py) on the same settings."""
 
 from __future__ import annotations
 
+import logging
+import re
 import sys
 
 from pydantic import SecretStr, ValidationError
 
-from backend.auth import TOKEN_FILE, load_or_create_token
+from backend.auth import TOKEN_FILE
+from backend.services.keys import Bootstrap
 from backend.settings import Settings
 from tofpose.recording import RecordingError
 
+SECRET_QUERY = re.compile(r"([?&][^=&\s]*(?:token|key|ticket)[^=&\s]*=)[^&\s\"']*",
+                          re.IGNORECASE)  # fmt: skip
+REDACTED = "***"
 
-def token_line(settings: Settings, token: str, created: bool) -> str:
-    """How the banner names the API token: in clear only on the start that generated it,
-    so that the token of a long-lived data directory does not land in every log."""
+
+class RedactSecretQuery(logging.Filter):
+    """Redact the value of every query parameter whose name contains token, key or ticket
+    (``token``, ``api_key``, ...) in a log record (uvicorn's access log and its WebSocket
+    lines print the path with its query string). Defence in depth: the server takes no
+    key in a URL, but a client may still send one."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if isinstance(record.msg, str):
+            record.msg = SECRET_QUERY.sub(rf"\g<1>{REDACTED}", record.msg)
+        if isinstance(record.args, tuple):
+            record.args = tuple(
+                SECRET_QUERY.sub(rf"\g<1>{REDACTED}", a) if isinstance(a, str) else a
+                for a in record.args
+            )
+        return True
+
+
+def install_log_redaction() -> None:
+    """The filter on uvicorn's loggers: ``uvicorn.access`` (HTTP requests) and
+    ``uvicorn.error`` (which logs each WebSocket handshake with its URL)."""
+    for name in ("uvicorn.access", "uvicorn.error"):
+        logger = logging.getLogger(name)
+        if not any(isinstance(f, RedactSecretQuery) for f in logger.filters):
+            logger.addFilter(RedactSecretQuery())
+
+
+def token_line(settings: Settings, boot: Bootstrap) -> str:
+    """How the banner names the admin key: in clear only on the start that generated it,
+    so that the key of a long-lived data directory does not land in every log."""
     path = settings.data_dir / TOKEN_FILE
-    if created:
-        return f"{token}   (generated now and stored in {path}; printed only this once)"
-    if settings.api_token:
-        return "from TOFPOSE_API_TOKEN (not printed)"
-    return f"stored in {path} (not printed: cat it)"
+    if boot.source == "generated":
+        return f"{boot.shown}   (admin; generated now and stored in {path}; printed only this once)"
+    if boot.source == "configured" or (boot.source == "database" and settings.api_token):
+        return "admin key from TOFPOSE_API_TOKEN (not printed)"
+    if boot.source == "file" or path.exists():
+        return f"admin key of the first start in {path} (not printed: cat it); tofpose keys list"
+    return "in the database (not printed): tofpose keys list / tofpose keys create"
 
 
 def scene_line(settings: Settings, host: str) -> str:
@@ -39,14 +75,14 @@ def foxglove_line(settings: Settings, host: str) -> str:
     return f"ws://{host}:{settings.foxglove_port}   (Foxglove app: Open connection)"
 
 
-def banner(settings: Settings, token: str, created: bool) -> str:
+def banner(settings: Settings, boot: Bootstrap) -> str:
     host = settings.host if ":" not in settings.host else f"[{settings.host}]"
     base = f"http://{host}:{settings.port}"
     camera = "simulated ToF camera" if settings.camera == "sim" else settings.camera
     motion = {"sim": "simulated turntable + rail", "none": "no motion system"}.get(
         settings.motion, settings.motion
     )
-    reads = "open (loopback)" if settings.reads_are_open else "token required"
+    reads = "open (loopback)" if settings.reads_are_open else "API key (any scope) required"
     return "\n".join([
         f"tofpose server: {camera}, {motion}",
         f"  dashboard      {base}/"
@@ -57,14 +93,16 @@ def banner(settings: Settings, token: str, created: bool) -> str:
         f"  3-D scene      {scene_line(settings, host)}",
         f"  Foxglove       {foxglove_line(settings, host)}",
         f"  database       {settings.resolved_database_url}",
-        f"  API token      {token_line(settings, token, created)}",
-        f"  reads          {reads}; moves and changes need 'Authorization: Bearer <token>'",
+        f"  API key        {token_line(settings, boot)}",
+        f"  reads          {reads}; moves and changes need 'Authorization: Bearer <key>' "
+        "(scope operate or admin)",
     ])  # fmt: skip
 
 
 def serve(overrides: dict) -> int:
     """Run uvicorn until interrupted; returns a process exit code."""
     import uvicorn
+    from sqlalchemy.exc import SQLAlchemyError
 
     from backend.app import create_app
     from backend.drivers.base import CameraError, MotionError
@@ -76,11 +114,13 @@ def serve(overrides: dict) -> int:
         msgs = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
         print(f"tofpose serve: bad settings: {msgs}", file=sys.stderr)
         return 2
-    settings.data_dir.mkdir(parents=True, exist_ok=True)
-    configured = settings.api_token.get_secret_value() if settings.api_token else None
-    token, created = load_or_create_token(settings.data_dir, configured)
-    text = banner(settings, token, created)
-    settings = settings.model_copy(update={"api_token": SecretStr(token)})
+    try:
+        boot = bootstrap_keys(settings)
+    except SQLAlchemyError as exc:
+        print(f"tofpose serve: cannot open the database {settings.resolved_database_url}: "
+              f"{exc.__class__.__name__}: {str(exc).splitlines()[0]}", file=sys.stderr)  # fmt: skip
+        return 2
+    text = banner(settings, boot)
     try:
         devices = build_devices(settings)
     except RecordingError as exc:
@@ -94,11 +134,42 @@ def serve(overrides: dict) -> int:
     # After SIGTERM/SIGINT, connections get shutdown_timeout_s to close; then their tasks
     # are cancelled and the app shuts down anyway (a WebSocket client that never reads
     # cannot keep the server alive: its socket's write buffer never drains).
+    # No permessage-deflate on WebSockets: it compresses every message once per client,
+    # on the event loop (15 ms for a full-size raw frame, 40 us for a pose), so that a
+    # few dashboards would delay STOP; uncompressed, a frame's bytes are built once for
+    # all clients (LiveSample.cached) and each send is a copy into the socket.
+    install_log_redaction()  # uvicorn's logging set-up keeps a logger's filters
     uvicorn.run(
         app, host=settings.host, port=settings.port, log_level="info",
-        timeout_graceful_shutdown=settings.shutdown_timeout_s,
+        timeout_graceful_shutdown=settings.shutdown_timeout_s, ws_per_message_deflate=False,
     )  # fmt: skip
     return 0
+
+
+def bootstrap_keys(settings: Settings) -> Bootstrap:
+    """Before the server starts: the database migrated and, on its first start, the
+    admin key stored (backend/services/keys.py), so that the banner can say where the key
+    is. The app's lifespan runs the same bootstrap again (then a no-op)."""
+    from backend.db.engine import make_engine, make_session_factory, upgrade_database
+    from backend.file_modes import restrict_data_dir
+    from backend.services.keys import KeyService
+
+    settings.data_dir.mkdir(parents=True, exist_ok=True)
+    restrict_data_dir(settings.data_dir)
+    engine = make_engine(settings.resolved_database_url)
+    try:
+        upgrade_database(engine)
+        configured = settings.api_token.get_secret_value() if settings.api_token else None
+        return KeyService(make_session_factory(engine)).bootstrap(settings.data_dir, configured)
+    finally:
+        engine.dispose()
+
+
+def keys(opts: dict) -> int:
+    """``tofpose keys create|list|revoke`` (backend/keys_cli.py)."""
+    from backend import keys_cli
+
+    return keys_cli.run(opts)
 
 
 def report(opts: dict) -> int:

@@ -102,6 +102,12 @@ class Settings(BaseSettings):
     sim_time_scale: float = Field(1.0, ge=0.01, le=1000.0)
     history_size: int = Field(600, ge=1, le=100_000)
     subscriber_queue: int = Field(8, ge=1, le=1000)
+    # /ws/live connections: at most this many from one client address and in all (more
+    # are refused with close code 1013, "try again later"); a client whose socket has not
+    # taken a message within live_send_timeout_s is let go (its slot freed).
+    live_max_clients_per_address: int = Field(16, ge=1, le=10_000)
+    live_max_clients: int = Field(64, ge=1, le=10_000)
+    live_send_timeout_s: float = Field(5.0, gt=0, le=600)
     camera_timeout_s: float = Field(2.0, gt=0)
     kernels_in_background: bool = Field(
         True,

@@ -12,9 +12,11 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from backend.drivers.factory import Devices
 from backend.services.acquisition import AcquisitionService
+from backend.services.audit import AuditService
 from backend.services.campaigns import CampaignService
 from backend.services.hub import LiveHub
 from backend.services.imaging import ImageRenderer
+from backend.services.keys import KeyService
 from backend.services.motion import MotionService
 from backend.services.reprocessing import ReprocessService
 from backend.services.studies import StudyService
@@ -24,7 +26,8 @@ from backend.settings import Settings
 @dataclass
 class AppState:
     settings: Settings
-    token: str
+    keys: KeyService  # API keys, verified in memory
+    audit: AuditService  # the audit trail's writer thread and reads
     engine: Engine
     sessions: sessionmaker[Session]
     devices: Devices
@@ -40,6 +43,7 @@ class AppState:
     scene_reason: str = ""  # why it does not run
     foxglove: Any = None  # backend.services.foxglove_live.LiveFoxglove when it runs
     foxglove_reason: str = ""  # why it does not run
+    live_clients: dict[str, int] = field(default_factory=dict)  # /ws/live connections by address
 
     @property
     def uptime_s(self) -> float:

@@ -414,7 +414,7 @@ def _add_simulation_commands(sub) -> None:
 
 
 def _add_server_commands(sub) -> None:
-    """The subcommands serve, report, emulate, on the subparsers ``sub``."""
+    """The subcommands serve, report, keys, emulate, on the subparsers ``sub``."""
     p = sub.add_parser(
         "serve", help="run the server (simulated devices by default); settings also from TOFPOSE_*"
     )
@@ -439,6 +439,18 @@ def _add_server_commands(sub) -> None:
     p.add_argument("--format", choices=("html", "pdf", "csv", "json"), default="html")
     p.add_argument("--reference", choices=("lab", "exact"), default="lab")
     p.add_argument("--out", required=True, help="output file")
+    p = sub.add_parser("keys", help="API keys of the server's database: create, list, revoke")
+    p.add_argument("--data-dir", help="data directory (default ./data)")
+    p.add_argument("--db", dest="database_url", help="SQLAlchemy URL (default SQLite in data dir)")
+    keys = p.add_subparsers(dest="action", required=True)
+    q = keys.add_parser("create", help="make a key and print it (once: only its hash is kept)")
+    q.add_argument("name")
+    q.add_argument("--scope", required=True, choices=("read", "operate", "admin"),
+                   help="read: live data and reports; operate: also every state change; "
+                        "admin: also keys, the audit trail and deletions")  # fmt: skip
+    keys.add_parser("list", help="every key: name, scope, created, revoked")
+    q = keys.add_parser("revoke", help="revoke a key (a running server follows within 5 s)")
+    q.add_argument("name")
     p = sub.add_parser("emulate", help="run device emulators over a simulated lab")
     emu = p.add_subparsers(dest="device", required=True)
     for name, text in (
@@ -557,11 +569,13 @@ def _run_outside_the_library(args) -> int | None:
         from backend.emulators import cli as emulators  # lazy, like serve
 
         return emulators.run(vars(args))
-    if args.cmd in ("serve", "report"):
+    if args.cmd in ("serve", "report", "keys"):
         from backend import main as server_main  # lazy: the library does not need the server
 
         opts = vars(args)
         cmd = opts.pop("cmd")
+        if cmd == "keys":
+            return server_main.keys(opts)  # backend/keys_cli.py
         return server_main.serve(opts) if cmd == "serve" else server_main.report(opts)
     return None
 

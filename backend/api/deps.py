@@ -10,16 +10,18 @@ from fastapi import Depends, HTTPException, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
 
-from backend.auth import token_matches
+from backend.services.audit import KEY_NAME_STATE
 from backend.services.campaign_repository import CampaignNotFoundError
 from backend.services.campaign_states import CampaignState
+from backend.services.keys import ApiKey, Scope
 from backend.services.motion import MotionService
 from backend.state import AppState
 
 bearer_scheme = HTTPBearer(
     auto_error=False,
-    description="API token (TOFPOSE_API_TOKEN, or the one printed at start and stored in "
-    "the data directory)",
+    description="API key: the admin key printed at the first start (stored in "
+    "data/api_token, or TOFPOSE_API_TOKEN), or one made with `tofpose keys create` / "
+    "POST /api/keys, of scope read, operate or admin",
 )
 
 
@@ -35,7 +37,7 @@ def unprocessable_at(problems: list[tuple[list[str | int], str]]) -> HTTPExcepti
     return HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, detail)
 
 
-def get_state(request: Request) -> AppState:
+async def get_state(request: Request) -> AppState:
     return request.app.state.tofpose
 
 
@@ -50,38 +52,67 @@ def get_session(state: StateDep) -> Iterator[Session]:
 
 SessionDep = Annotated[Session, Depends(get_session)]
 
+# Every auth dependency is ``async`` and does no I/O (keys are checked against the key
+# service's copy in memory): FastAPI runs sync dependencies on AnyIO's worker threads,
+# which exports and reports can fill, and STOP must never wait for one.
 
-def require_token(state: StateDep, creds: CredentialsDep) -> None:
-    """Every request that moves hardware or changes state goes through this."""
+
+def _authorize(request: Request, state: AppState, creds: HTTPAuthorizationCredentials | None,
+               needed: Scope) -> ApiKey:  # fmt: skip
+    """The key of this request if it has at least ``needed``: 401 without a valid key,
+    403 (naming the scope needed) for a valid key of a lower scope. The key's name goes
+    to the audit trail (``KEY_NAME_STATE``)."""
     if creds is None:
         raise HTTPException(
             status.HTTP_401_UNAUTHORIZED,
-            "this request changes state: send 'Authorization: Bearer <API token>'",
+            f"this request needs an API key (token) of scope {needed.label!r} or above: "
+            "send 'Authorization: Bearer <key>'",
             headers={"WWW-Authenticate": "Bearer"},
         )
-    if not token_matches(state.token, creds.credentials):
+    key = state.keys.verify(creds.credentials)
+    if key is None:
         raise HTTPException(
             status.HTTP_401_UNAUTHORIZED,
-            "invalid API token",
+            "invalid API key (or API token): unknown or revoked",
             headers={"WWW-Authenticate": "Bearer"},
         )
+    setattr(request.state, KEY_NAME_STATE, key.name)
+    if not key.allows(needed):
+        raise HTTPException(
+            status.HTTP_403_FORBIDDEN,
+            f"this request needs the {needed.label!r} scope; key {key.name!r} has "
+            f"{key.scope.label!r}",
+        )
+    return key
 
 
-def require_read(state: StateDep, creds: CredentialsDep) -> None:
-    """Reads are open when the server is bound to loopback (or ``open_reads``)."""
+async def require_operate(request: Request, state: StateDep, creds: CredentialsDep) -> None:
+    """Every request that moves hardware or changes state goes through this."""
+    _authorize(request, state, creds, Scope.OPERATE)
+
+
+async def require_admin(request: Request, state: StateDep, creds: CredentialsDep) -> None:
+    """Keys, the audit trail and deletions."""
+    _authorize(request, state, creds, Scope.ADMIN)
+
+
+async def require_read(request: Request, state: StateDep, creds: CredentialsDep) -> None:
+    """Reads are open when the server is bound to loopback (or ``open_reads``); else they
+    need a key of any scope."""
     if not state.settings.reads_are_open:
-        require_token(state, creds)
+        _authorize(request, state, creds, Scope.READ)
 
 
-def require_motion(state: StateDep) -> MotionService:
+async def require_motion(state: StateDep) -> MotionService:
     """The motion service, when a motion system is configured (else 503)."""
     if not state.motion.present:
         raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, "no motion system configured")
     return state.motion
 
 
-WriteAuth = Depends(require_token)
 ReadAuth = Depends(require_read)
+WriteAuth = Depends(require_operate)  # the "operate" scope
+AdminAuth = Depends(require_admin)
 MotionDep = Annotated[MotionService, Depends(require_motion)]
 
 

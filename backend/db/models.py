@@ -226,3 +226,36 @@ class CalibrationRow(Base):
     chi2_per_dof: Mapped[float] = mapped_column(Float)
     n_observations: Mapped[int] = mapped_column(Integer)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class ApiKeyRow(Base):
+    """An API key (backend/services/keys.py): its name, scope (read, operate or admin)
+    and the SHA-256 of the key (hex). The key itself is never stored. A revoked key keeps
+    its row (``revoked_at`` set) and its name, so that the audit trail's key names keep
+    naming one key."""
+
+    __tablename__ = "api_keys"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(64), unique=True)
+    scope: Mapped[str] = mapped_column(String(16))
+    key_sha256: Mapped[str] = mapped_column(String(64), unique=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    revoked_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+
+
+class AuditRow(Base):
+    """One state-changing request (POST, PUT, PATCH, DELETE), answered or refused: when
+    (UTC), by which key (None: no valid key), from which client address, what (method,
+    path, a redacted summary of the JSON body) and the HTTP status answered."""
+
+    __tablename__ = "audit_log"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    key_name: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    client: Mapped[str] = mapped_column(String(64), default="")
+    method: Mapped[str] = mapped_column(String(8))
+    path: Mapped[str] = mapped_column(Text)
+    body: Mapped[str] = mapped_column(Text, default="")
+    status: Mapped[int] = mapped_column(Integer)

@@ -23,7 +23,23 @@ Protocol (JSON text messages):
   ``{"type": "campaign", "data": {campaign_id, name, status, setpoint_index, n_setpoints,
   n_done, frames_collected, frames_per_point, elapsed_s, eta_s}}``.
 
-When reads are not open (server bound beyond loopback), pass ``?token=API_TOKEN``.
+Authentication: when reads are not open (server bound beyond loopback), a key of any
+scope is needed. It travels in the handshake as a subprotocol, never in the URL (which
+access logs and proxies record): offer the two subprotocols ``tofpose.bearer`` and
+``tofpose.bearer.<key>`` (a browser: ``new WebSocket(url, ["tofpose.bearer",
+"tofpose.bearer." + key])``); the server accepts with ``tofpose.bearer``, never echoing
+the key. A key that is offered is checked also when reads are open. A URL with
+``?token=`` (or ``?key=``) is refused (close code 1008) with a reason saying so.
+
+Caps: at most ``live_max_clients_per_address`` connections from one client address and
+``live_max_clients`` in all; one more is accepted and closed at once with code 1013
+("try again later") and a reason naming the cap.
+
+Clients that do not read: every message goes out through one ``send`` with a timeout
+(``live_send_timeout_s``); a client whose socket has not taken a message by then is let
+go (its connection slot freed; the server writes nothing more to it). Until then the
+frames it cannot take are dropped from its bounded mailbox (``dropped``), and the JSON
+of each frame is built once for all clients (``LiveSample.cached``).
 """
 
 from __future__ import annotations
@@ -32,6 +48,7 @@ import asyncio
 import base64
 import contextlib
 import json
+import logging
 from collections import deque
 from typing import Literal
 from urllib.parse import urlsplit
@@ -41,13 +58,17 @@ from pydantic import Field, ValidationError, field_validator
 
 from backend.api.presenters import pose_public
 from backend.api.schemas import StrictBody
-from backend.auth import token_matches
 from backend.services.acquisition import LiveSample, frame_point_cloud_mm
 from backend.services.frame_codec import encode_raw_frame
 from backend.state import AppState
 
+log = logging.getLogger("tofpose.server")
 router = APIRouter(tags=["live"])
 POLICY_VIOLATION = 1008
+TRY_AGAIN_LATER = 1013
+SUBPROTOCOL = "tofpose.bearer"
+KEY_PREFIX = SUBPROTOCOL + "."
+URL_SECRETS = ("token", "key")
 
 
 class LiveOptions(StrictBody):
@@ -155,6 +176,56 @@ def origin_allowed(origin: str | None, host: str | None, allowed: list[str]) -> 
     )
 
 
+def offered_key(subprotocols: list[str]) -> str | None:
+    """The key a client offers as the subprotocol ``tofpose.bearer.<key>``, or None."""
+    for p in subprotocols:
+        if p.startswith(KEY_PREFIX):
+            return p[len(KEY_PREFIX):]
+    return None
+
+
+def auth_refusal(ws: WebSocket, state: AppState) -> str | None:
+    """Why this handshake is refused (close code 1008), or None to go on."""
+    if any(name in ws.query_params for name in URL_SECRETS):
+        return ("API key in the URL refused (URLs land in access logs): offer the "
+                "subprotocols 'tofpose.bearer' and 'tofpose.bearer.<key>' instead")  # fmt: skip
+    key_text = offered_key(ws.scope.get("subprotocols", []))
+    if key_text is not None and state.keys.verify(key_text) is None:
+        return "invalid API key (unknown or revoked)"
+    if key_text is None and not state.settings.reads_are_open:
+        return ("API key required: offer the subprotocols 'tofpose.bearer' and "
+                "'tofpose.bearer.<key>'")  # fmt: skip
+    return None
+
+
+def cap_refusal(state: AppState, address: str) -> str | None:
+    """Why one more /ws/live client from ``address`` is refused (close code 1013)."""
+    s = state.settings
+    if sum(state.live_clients.values()) >= s.live_max_clients:
+        return f"too many live clients ({s.live_max_clients}, TOFPOSE_LIVE_MAX_CLIENTS)"
+    if state.live_clients.get(address, 0) >= s.live_max_clients_per_address:
+        return (f"too many live clients from {address[:64]} ({s.live_max_clients_per_address}, "
+                "TOFPOSE_LIVE_MAX_CLIENTS_PER_ADDRESS)")  # fmt: skip
+    return None
+
+
+class SendTimeoutError(Exception):
+    """The client did not take a message within ``live_send_timeout_s``."""
+
+
+async def send(ws: WebSocket, message: str | bytes, timeout_s: float) -> None:
+    """Send one message, giving up after ``timeout_s`` (SendTimeoutError): a client whose
+    socket is full would otherwise hold its task (and connection slot) forever."""
+    try:
+        async with asyncio.timeout(timeout_s):
+            if isinstance(message, bytes):
+                await ws.send_bytes(message)
+            else:
+                await ws.send_text(message)
+    except TimeoutError:
+        raise SendTimeoutError from None
+
+
 @router.websocket("/ws/live")
 async def live(ws: WebSocket) -> None:
     state: AppState = ws.app.state.tofpose
@@ -165,19 +236,40 @@ async def live(ws: WebSocket) -> None:
             reason=f"cross-origin WebSocket refused: {origin[:100]} (TOFPOSE_ALLOWED_ORIGINS)",
         )
         return
-    if not state.settings.reads_are_open and not token_matches(
-        state.token, ws.query_params.get("token")
-    ):
-        await ws.close(code=POLICY_VIOLATION, reason="API token required (?token=...)")
+    if (refusal := auth_refusal(ws, state)) is not None:
+        await ws.close(code=POLICY_VIOLATION, reason=refusal)
         return
-    await ws.accept()
+    subprotocol = SUBPROTOCOL if SUBPROTOCOL in ws.scope.get("subprotocols", []) else None
+    address = ws.client.host if ws.client else ""
+    if (refusal := cap_refusal(state, address)) is not None:
+        # accepted first, so that the client gets the close code and its reason (a close
+        # before the handshake reaches a browser as a bare failed handshake)
+        await ws.accept(subprotocol=subprotocol)
+        await ws.close(code=TRY_AGAIN_LATER, reason=refusal)
+        return
+    state.live_clients[address] = state.live_clients.get(address, 0) + 1
+    try:
+        await ws.accept(subprotocol=subprotocol)
+        await _stream(ws, state)
+    except SendTimeoutError:
+        log.info("live client %s let go: it took no message for %.1f s", address,
+                 state.settings.live_send_timeout_s)  # fmt: skip
+    finally:
+        state.live_clients[address] -= 1
+        if not state.live_clients[address]:
+            del state.live_clients[address]
+
+
+async def _stream(ws: WebSocket, state: AppState) -> None:
+    """The hello, then every frame's messages until the client goes or stops reading."""
+    timeout_s = state.settings.live_send_timeout_s
     m = state.devices.camera.model
-    await ws.send_text(json.dumps({
+    await send(ws, json.dumps({
         "type": "hello", "catalog": state.acquisition.catalog_name,
         "camera": {"driver": state.devices.camera.name, "width_px": m.width,
                    "height_px": m.height, "fx_px": m.fx, "fy_px": m.fy, "cx_px": m.cx,
                    "cy_px": m.cy},
-    }))  # fmt: skip
+    }), timeout_s)  # fmt: skip
     sub = state.hub.subscribe(loop=asyncio.get_running_loop())
     opts = {"current": LiveOptions()}
     flow = RawFlow()
@@ -194,22 +286,23 @@ async def live(ws: WebSocket) -> None:
                 return
             sample: LiveSample = getter.result()
             head = f'{{"type":"pose","dropped":{sub.dropped},"data":'
-            await ws.send_text(head + pose_json(sample) + "}")
+            await send(ws, head + pose_json(sample) + "}", timeout_s)
             if (v := state.campaigns.progress_version) != campaign_version:
                 campaign_version = v
                 if (progress := state.campaigns.progress()) is not None:
-                    await ws.send_text(json.dumps({"type": "campaign", "data": progress}))
+                    await send(ws, json.dumps({"type": "campaign", "data": progress}), timeout_s)
             o = opts["current"]
             # Images only for the newest frame: if another is already waiting, this one's
             # images would only delay it (latest frame wins; poses are never skipped).
             if n % o.image_every == 0 and not sub.pending and sample.has_images:
                 if o.raw and flow.may_send(o.raw_credit):
                     flow.unacked.append(sample.frame.index)
-                    await ws.send_bytes(raw_message(sample, o.image_step))
+                    await send(ws, raw_message(sample, o.image_step), timeout_s)
                 for kind in o.images if not o.raw else ():
-                    await ws.send_text(await image_message(sample, state, kind, o.image_step))
+                    text = await image_message(sample, state, kind, o.image_step)
+                    await send(ws, text, timeout_s)
             if o.points:
-                await ws.send_text(points_message(sample, state))
+                await send(ws, points_message(sample, state), timeout_s)
             n += 1
     except (WebSocketDisconnect, RuntimeError):
         pass

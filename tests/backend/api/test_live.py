@@ -14,7 +14,7 @@ import pytest
 import websockets
 from starlette.websockets import WebSocketDisconnect
 
-from tests.backend.conftest import LiveServer, make_settings, running_app
+from tests.backend.conftest import TOKEN, LiveServer, make_settings, running_app, wait_for
 
 
 def _poses(ws, n: int) -> list[dict]:
@@ -101,13 +101,145 @@ def test_an_image_kind_asked_for_twice_is_sent_once(client):
     assert per_frame and set(per_frame.values()) == {1}
 
 
-def test_token_required_when_reads_are_not_open(tmp_path):
+BEARER = ["tofpose.bearer", f"tofpose.bearer.{TOKEN}"]
+
+
+def _refusal(c, url: str, subprotocols: list[str] | None = None) -> tuple[int, str]:
+    """The close code and reason of a handshake the server refuses."""
+    with pytest.raises(WebSocketDisconnect) as exc, c.websocket_connect(
+        url, subprotocols=subprotocols
+    ) as ws:
+        ws.receive_json()
+    return exc.value.code, exc.value.reason
+
+
+def test_a_key_travels_as_a_subprotocol_and_never_in_the_url(tmp_path):
+    """Reads closed (bound beyond loopback): no key, a key in the URL, a wrong or revoked
+    key are refused (1008) with a reason; the key offered as the subprotocol
+    ``tofpose.bearer.<key>`` is taken, and the server accepts ``tofpose.bearer`` (the
+    key is not echoed). A read-scope key is enough to watch."""
     with running_app(make_settings(tmp_path, host="0.0.0.0")) as c:
-        with pytest.raises(WebSocketDisconnect) as exc, c.websocket_connect("/ws/live") as ws:
-            ws.receive_json()
-        assert exc.value.code == 1008
-        with c.websocket_connect("/ws/live?token=test-token-0123456789") as ws:
+        code, reason = _refusal(c, "/ws/live")
+        assert code == 1008 and "API key required" in reason and "tofpose.bearer" in reason
+        for url in (f"/ws/live?token={TOKEN}", f"/ws/live?key={TOKEN}"):
+            code, reason = _refusal(c, url, BEARER)
+            assert code == 1008 and "in the URL refused" in reason
+        code, reason = _refusal(c, "/ws/live", ["tofpose.bearer", "tofpose.bearer.wrong"])
+        assert code == 1008 and "invalid API key" in reason
+        with c.websocket_connect("/ws/live", subprotocols=BEARER) as ws:
+            assert ws.accepted_subprotocol == "tofpose.bearer"
             assert ws.receive_json()["type"] == "hello"
+        keys = c.app.state.tofpose.keys
+        watcher = keys.create("watcher", "read")
+        with c.websocket_connect(
+            "/ws/live", subprotocols=["tofpose.bearer", f"tofpose.bearer.{watcher}"]
+        ) as ws:
+            assert ws.receive_json()["type"] == "hello"
+        keys.revoke("watcher")
+        code, reason = _refusal(c, "/ws/live", ["tofpose.bearer", f"tofpose.bearer.{watcher}"])
+        assert code == 1008 and "invalid API key" in reason
+
+
+def test_open_reads_need_no_key_but_a_wrong_one_is_refused(client):
+    with client.websocket_connect("/ws/live") as ws:
+        assert ws.accepted_subprotocol is None
+        assert ws.receive_json()["type"] == "hello"
+    code, reason = _refusal(client, "/ws/live", ["tofpose.bearer", "tofpose.bearer.nope"])
+    assert code == 1008 and "invalid API key" in reason
+    code, reason = _refusal(client, f"/ws/live?token={TOKEN}")
+    assert code == 1008 and "in the URL refused" in reason
+
+
+def test_the_subprotocol_handshake_over_a_real_socket(tmp_path):
+    """With the websockets client (what a browser does): the server picks
+    ``tofpose.bearer`` among the offered subprotocols and its answer carries no key."""
+    with LiveServer(make_settings(tmp_path, host="127.0.0.1", open_reads=False)) as srv:
+
+        async def main():
+            async with websockets.connect(srv.ws_url, subprotocols=BEARER) as ws:
+                hello = json.loads(await ws.recv())
+                return ws.subprotocol, dict(ws.response.headers), hello
+
+        with ThreadPoolExecutor(1) as pool:
+            chosen, headers, hello = pool.submit(asyncio.run, main()).result()
+    assert chosen == "tofpose.bearer" and hello["type"] == "hello"
+    assert TOKEN not in json.dumps(headers)
+
+
+@pytest.mark.parametrize(
+    ("per_address", "total", "reason"),
+    [(2, 10, "too many live clients from testclient (2, TOFPOSE_LIVE_MAX_CLIENTS_PER_ADDRESS)"),
+     (10, 2, "too many live clients (2, TOFPOSE_LIVE_MAX_CLIENTS)")],
+)  # fmt: skip
+def test_live_clients_are_capped_per_address_and_in_all(tmp_path, per_address, total, reason):
+    """The client over the cap is accepted and closed at once with 1013 (try again
+    later) and a reason naming the cap; a slot frees when a client leaves."""
+    s = make_settings(tmp_path, live_max_clients_per_address=per_address,
+                      live_max_clients=total)  # fmt: skip
+    with running_app(s) as c:
+        state = c.app.state.tofpose
+        first = c.websocket_connect("/ws/live").__enter__()
+        second = c.websocket_connect("/ws/live").__enter__()
+        for ws in (first, second):
+            assert ws.receive_json()["type"] == "hello"
+        assert state.live_clients == {"testclient": 2}
+        with c.websocket_connect("/ws/live") as third, pytest.raises(WebSocketDisconnect) as exc:
+            third.receive_json()
+        assert (exc.value.code, exc.value.reason) == (1013, reason)
+        first.__exit__(None, None, None)
+        wait_for(lambda: state.live_clients == {"testclient": 1}, what="the slot to free")
+        with c.websocket_connect("/ws/live") as again:
+            assert again.receive_json()["type"] == "hello"
+        second.__exit__(None, None, None)
+        wait_for(lambda: state.live_clients == {}, what="every slot to free")
+
+
+def _masked_text_frame(text: str) -> bytes:
+    """A client-to-server WebSocket text frame (clients must mask)."""
+    payload = text.encode()
+    mask = b"\x01\x02\x03\x04"
+    assert len(payload) < 126
+    masked = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+    return bytes([0x81, 0x80 | len(payload)]) + mask + masked
+
+
+def test_a_client_that_never_reads_is_let_go_after_the_send_timeout(tmp_path):
+    """A client that asks for full-size raw frames and never reads: once its socket
+    buffers are full a send waits, and after live_send_timeout_s the server gives the
+    client up (its task ends, its subscription and its connection slot are freed) while
+    a reader beside it keeps getting poses."""
+    import socket
+
+    s = make_settings(tmp_path, live_send_timeout_s=0.5, frame_rate_hz=20.0)
+    with LiveServer(s) as srv:
+        state = srv.server.config.app.state.tofpose
+        port = int(srv.base_url.rsplit(":", 1)[1])
+        mute = socket.socket()
+        mute.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # fills sooner
+        mute.connect(("127.0.0.1", port))
+        mute.sendall(
+            f"GET /ws/live HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+            "Connection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+            "Sec-WebSocket-Version: 13\r\n\r\n".encode()
+        )  # fmt: skip
+        head = b""
+        while b"\r\n\r\n" not in head:  # the 101, then the options
+            head += mute.recv(1)
+        assert head.startswith(b"HTTP/1.1 101")
+        mute.sendall(_masked_text_frame('{"raw":true,"raw_credit":0,"image_every":1,'
+                                        '"image_step":1}'))  # fmt: skip
+        wait_for(lambda: state.live_clients.get("127.0.0.1") == 1, what="the mute client")
+        # never read from `mute` again: the server lets it go on its own
+        wait_for(lambda: not state.live_clients, 30.0, "the server to let the mute client go")
+        assert state.hub.n_subscribers == 0
+
+        async def reader():
+            async with websockets.connect(srv.ws_url) as ws:
+                return [json.loads(await ws.recv())["type"] for _ in range(4)]
+
+        with ThreadPoolExecutor(1) as pool:
+            assert pool.submit(asyncio.run, reader()).result()[1:] == ["pose"] * 3
+        mute.close()
 
 
 async def _client(url: str, seconds: float, read: bool = True, options=None) -> list[dict]:

@@ -1,0 +1,112 @@
+"""Administration (the ``admin`` scope): the audit trail (GET /api/audit) and the API keys
+(GET, POST /api/keys, DELETE /api/keys/{name}). A key is shown once, in the answer that
+creates it; the server keeps its SHA-256 only (backend/services/keys.py)."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, HTTPException, Path, Query, status
+from pydantic import BaseModel, Field
+
+from backend.api.contract import ErrorPublic, errors
+from backend.api.deps import AdminAuth, StateDep
+from backend.api.schemas import StrictBody
+from backend.services.audit import MAX_LIMIT, AuditRecord
+from backend.services.keys import ApiKey, KeyNameTakenError, KeyNotFoundError
+
+router = APIRouter(prefix="/api", tags=["admin"], dependencies=[AdminAuth])
+ADMIN_ONLY: dict[int | str, dict[str, Any]] = {
+    403: {"model": ErrorPublic, "description": "The API key's scope is below 'admin'"}
+}
+KeyNameParam = Annotated[str, Path(min_length=1, max_length=64)]
+ScopeName = Literal["read", "operate", "admin"]
+
+
+class AuditEntryPublic(BaseModel):
+    """One state-changing request: when (UTC), by which key (null: none valid), from
+    where, what, and the HTTP status answered."""
+
+    id: int
+    at: datetime
+    key_name: str | None
+    client: str = Field(description="the client's address")
+    method: str
+    path: str
+    body: str = Field(description="the JSON body, at most ~300 characters, with every field "
+                      "whose name contains token, key, secret or password redacted")  # fmt: skip
+    status: int
+
+
+class KeyPublic(BaseModel):
+    """An API key as the server knows it (never the key itself)."""
+
+    name: str
+    scope: ScopeName
+    created_at: datetime | None
+    revoked_at: datetime | None
+
+
+class KeyCreate(StrictBody):
+    name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9][A-Za-z0-9._@-]*$")
+    scope: ScopeName
+
+
+class KeyCreated(KeyPublic):
+    key: str = Field(description="the key: shown this once, only its hash is stored")
+
+
+def _utc(t: datetime | None) -> datetime | None:
+    """SQLite gives back naive datetimes: they were stored in UTC."""
+    return t.replace(tzinfo=UTC) if t is not None and t.tzinfo is None else t
+
+
+def _audit_public(r: AuditRecord) -> AuditEntryPublic:
+    return AuditEntryPublic(id=r.id, at=_utc(r.at), key_name=r.key_name, client=r.client,
+                            method=r.method, path=r.path, body=r.body, status=r.status)  # fmt: skip
+
+
+def _key_public(k: ApiKey) -> dict[str, Any]:
+    return {"name": k.name, "scope": k.scope.label, "created_at": _utc(k.created_at),
+            "revoked_at": _utc(k.revoked_at)}  # fmt: skip
+
+
+@router.get("/audit", responses=ADMIN_ONLY)
+def list_audit(
+    state: StateDep,
+    limit: Annotated[int, Query(ge=1, le=MAX_LIMIT)] = 100,
+    before_id: Annotated[int | None, Query(ge=1, le=2**63 - 1)] = None,
+) -> list[AuditEntryPublic]:
+    """The audit trail, newest first: every POST, PUT, PATCH and DELETE, answered or
+    refused. Page back with ``before_id`` = the last id of the page before."""
+    return [_audit_public(r) for r in state.audit.entries(limit, before_id)]
+
+
+@router.get("/keys", responses=ADMIN_ONLY)
+def list_keys(state: StateDep) -> list[KeyPublic]:
+    """Every API key, active and revoked (revoked keys keep their names), oldest first."""
+    return [KeyPublic(**_key_public(k)) for k in state.keys.list()]
+
+
+@router.post("/keys", status_code=status.HTTP_201_CREATED,
+             responses={**ADMIN_ONLY, **errors(409)})  # fmt: skip
+def create_key(body: KeyCreate, state: StateDep) -> KeyCreated:
+    """Make a key of this scope; the answer holds the key, which is not shown again.
+    409 when the name is taken (also by a revoked key)."""
+    try:
+        key = state.keys.create(body.name, body.scope)
+    except KeyNameTakenError as exc:
+        raise HTTPException(409, str(exc)) from exc
+    record = next(k for k in state.keys.list() if k.name == body.name)
+    return KeyCreated(**_key_public(record), key=key)
+
+
+@router.delete("/keys/{name}", responses={**ADMIN_ONLY, **errors(404)})
+def revoke_key(name: KeyNameParam, state: StateDep) -> KeyPublic:
+    """Revoke a key: it stops working at once (its row and name stay, for the audit
+    trail). 404 when no active key has this name."""
+    try:
+        return KeyPublic(**_key_public(state.keys.revoke(name)))
+    except KeyNotFoundError as exc:
+        raise HTTPException(404, str(exc)) from exc

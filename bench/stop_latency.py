@@ -1,0 +1,232 @@
+"""STOP latency with mute /ws/live clients (issue 45, item 2), and with dashboards.
+
+Starts ``tofpose serve`` (simulated devices, no 3-D scene) in a subprocess, opens N
+WebSocket clients on /ws/live that complete the handshake (offering permessage-deflate,
+as browsers do) and then never read a byte, and ``--readers`` clients that ask for
+full-size raw frames at every frame, as the dashboard does, and read everything (in
+threads of this process; "readers MB/s" is what they got in all, 307 kB a frame);
+waits ``--settle`` seconds, and times
+``POST /api/motion/stop`` with the admin key ``--stops`` times, a new connection each
+time (as a dashboard's first click after idling). Each client count runs on a fresh
+server. Prints the median, 95th percentile and maximum STOP time per client count, how
+many clients the server accepted (the rest were refused by the per-address / total caps,
+close code 1013) and the server's CPU while the mute clients were connected.
+
+The caps are raised for the run (``--caps N``) so that every client is served: the
+point is what mute clients cost the event loop, not the caps. ``--caps 0`` keeps the
+defaults (16 per address), which is what a lab server runs with.
+
+Run: ``python bench/stop_latency.py [--clients 0 100] [--readers 0] [--rate 20] [--stops 40]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench._common import all_cores, table  # noqa: E402
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Server:
+    """``tofpose serve`` on a free port with a fresh data directory."""
+
+    def __init__(self, rate_hz: float, caps: int) -> None:
+        self.port = _free_port()
+        self.tmp = tempfile.TemporaryDirectory()
+        env = {**os.environ, "TOFPOSE_FRAME_RATE_HZ": str(rate_hz),
+               "TOFPOSE_DATA_DIR": self.tmp.name}  # fmt: skip
+        if caps:
+            env |= {"TOFPOSE_LIVE_MAX_CLIENTS_PER_ADDRESS": str(caps),
+                    "TOFPOSE_LIVE_MAX_CLIENTS": str(caps)}  # fmt: skip
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "tofpose.cli", "serve", "--port", str(self.port), "--no-viser"],
+            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        )  # fmt: skip
+        deadline = time.monotonic() + 900  # a first start compiles the kernels
+        while time.monotonic() < deadline:
+            try:
+                with urllib.request.urlopen(self.url("/api/health"), timeout=1) as r:
+                    h = json.load(r)
+                if h["camera"]["state"] == "ok" and h["pipeline"]["state"] == "ready":
+                    break
+            except OSError:
+                pass
+            time.sleep(0.2)
+        else:
+            self.proc.kill()
+            raise RuntimeError("server did not start")
+        self.key = (Path(self.tmp.name) / "api_token").read_text().strip()
+
+    def url(self, path: str) -> str:
+        return f"http://127.0.0.1:{self.port}{path}"
+
+    def cpu_s(self) -> float:
+        fields = Path(f"/proc/{self.proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+    def stop(self) -> None:
+        self.proc.send_signal(signal.SIGINT)
+        try:
+            self.proc.wait(30)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self.tmp.cleanup()
+
+
+RAW_OPTIONS = b'{"raw":true,"raw_credit":0,"image_every":1,"image_step":1}'
+
+
+def masked_text_frame(payload: bytes) -> bytes:
+    """A client-to-server WebSocket text frame (short payload, masked as clients must)."""
+    mask = os.urandom(4)
+    return bytes([0x81, 0x80 | len(payload)]) + mask + bytes(
+        b ^ mask[i % 4] for i, b in enumerate(payload)
+    )
+
+
+def reader(port: int, stop: threading.Event, measuring: threading.Event,
+           got: list[int]) -> None:  # fmt: skip
+    """A dashboard-like client: raw frames at every frame, everything read (and dropped);
+    appends the bytes it read while ``measuring`` was set to ``got``."""
+    s = handshake(port)
+    if s is None:
+        return
+    s.sendall(masked_text_frame(RAW_OPTIONS))
+    s.settimeout(0.5)
+    n = 0
+    while not stop.is_set():
+        try:
+            chunk = s.recv(1 << 20)
+        except TimeoutError:
+            continue
+        if not chunk:
+            break
+        n += len(chunk) if measuring.is_set() else 0
+    got.append(n)
+    s.close()
+
+
+def mute_client(port: int) -> socket.socket | None:
+    """A WebSocket handshake on /ws/live, then nothing read: the socket, or None when the
+    server refused it (a cap: it accepts, then closes with 1013)."""
+    return handshake(port)
+
+
+def handshake(port: int) -> socket.socket | None:
+    """A WebSocket handshake on /ws/live (offering permessage-deflate): the socket, or
+    None when the server refused it."""
+    s = socket.create_connection(("127.0.0.1", port))
+    nonce = base64.b64encode(os.urandom(16)).decode()
+    s.sendall((
+        "GET /ws/live HTTP/1.1\r\n"
+        f"Host: 127.0.0.1:{port}\r\n"
+        "Upgrade: websocket\r\nConnection: Upgrade\r\n"
+        f"Sec-WebSocket-Key: {nonce}\r\nSec-WebSocket-Version: 13\r\n"
+        "Sec-WebSocket-Extensions: permessage-deflate; client_max_window_bits\r\n\r\n"
+    ).encode())  # fmt: skip
+    head = b""
+    while b"\r\n\r\n" not in head:
+        chunk = s.recv(1)
+        if not chunk:
+            return None
+        head += chunk
+    if b" 101 " not in head.split(b"\r\n", 1)[0]:
+        s.close()
+        return None
+    # the first frame tells a served client (hello) from a refused one (close, 1013)
+    s.settimeout(5.0)
+    first = s.recv(2)
+    s.settimeout(None)
+    if first[:1] in (b"\x88",):  # FIN + close opcode
+        s.close()
+        return None
+    return s
+
+
+def time_stops(server: Server, n: int, gap_s: float) -> list[float]:
+    out = []
+    for _ in range(n):
+        req = urllib.request.Request(server.url("/api/motion/stop"), method="POST",
+                                     headers={"Authorization": f"Bearer {server.key}"})  # fmt: skip
+        t0 = time.perf_counter()
+        with urllib.request.urlopen(req, timeout=30) as r:
+            r.read()
+        out.append(time.perf_counter() - t0)
+        time.sleep(gap_s)
+    return out
+
+
+def run(n_clients: int, n_readers: int, rate: float, stops: int, settle_s: float,
+        caps: int) -> list[str]:  # fmt: skip
+    server = Server(rate, caps)
+    stop, measuring, got = threading.Event(), threading.Event(), []
+    readers = [threading.Thread(target=reader, args=(server.port, stop, measuring, got),
+                                daemon=True) for _ in range(n_readers)]  # fmt: skip
+    try:
+        for t in readers:
+            t.start()
+        socks = [s for _ in range(n_clients) if (s := mute_client(server.port)) is not None]
+        time.sleep(settle_s)
+        cpu0, t0 = server.cpu_s(), time.monotonic()
+        measuring.set()
+        ms = 1e3 * np.array(time_stops(server, stops, 0.2))
+        measuring.clear()
+        elapsed = time.monotonic() - t0
+        cpu = 100 * (server.cpu_s() - cpu0) / elapsed
+        for s in socks:
+            s.close()
+    finally:
+        stop.set()
+        for t in readers:
+            t.join(5.0)
+        server.stop()
+    mb_s = sum(got) / elapsed / 1e6
+    return [str(n_clients), str(len(socks)), str(n_readers), f"{mb_s:.1f}",
+            f"{np.median(ms):.1f}", f"{np.percentile(ms, 95):.1f}", f"{ms.max():.1f}",
+            f"{cpu:.0f}"]  # fmt: skip
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--clients", type=int, nargs="+", default=[0, 100])
+    ap.add_argument("--readers", type=int, default=0,
+                    help="dashboard-like clients reading full-size raw frames")  # fmt: skip
+    ap.add_argument("--rate", type=float, default=20.0, help="camera frame rate, Hz")
+    ap.add_argument("--stops", type=int, default=40)
+    ap.add_argument("--settle", type=float, default=5.0,
+                    help="seconds between the last client and the first STOP")  # fmt: skip
+    ap.add_argument("--caps", type=int, default=1000,
+                    help="per-address and total /ws/live caps for the run (0: the defaults)")
+    args = ap.parse_args()
+    all_cores()
+    rows = [run(n, args.readers, args.rate, args.stops, args.settle, args.caps)
+            for n in args.clients]  # fmt: skip
+    print(f"camera {args.rate:g} Hz, {args.stops} STOPs 0.2 s apart, {os.cpu_count()} cores")
+    print(table(["mute clients", "served", "raw readers", "readers MB/s", "STOP median ms",
+                 "p95 ms", "max ms", "server CPU %"], rows))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
