@@ -45,7 +45,7 @@ def _command(service: KeyService, opts: dict) -> int:
         print(key)
     elif action == "list":
         keys = service.list()
-        print(key_table(keys) if keys else "no keys yet (the server's first start makes the admin key)")
+        print(key_table(keys) if keys else "no keys yet (the server's first start makes one)")
     else:
         service.revoke(opts["name"])
         print(f"key {opts['name']!r} revoked (a running server stops taking it within "

@@ -129,9 +129,9 @@ class KeyService:
         start, or the first since keys came in), store the configured token, or else the
         one in ``data_dir/api_token`` (generated there if missing), as the admin key named
         ``admin``. A revoked admin key counts: revoking every admin key and restarting
-        does not bring the old token back. A configured token also stays an admin key while it is configured,
-        even if the stored one was revoked (the operator who sets the environment has the
-        machine anyway); to retire it, unset TOFPOSE_API_TOKEN."""
+        does not bring the old token back. A configured token also stays an admin key
+        while it is configured, even if the stored one was revoked (the operator who sets
+        the environment has the machine anyway); to retire it, unset TOFPOSE_API_TOKEN."""
         source = "database"
         shown = None
         with self._sessions() as session:
