@@ -1,8 +1,10 @@
 // One store for everything that arrives on /ws/live: reconnects by itself, marks the
 // data stale when no frame has come for a while, and hands raw frames to the page at most
 // once per animation frame (the newest wins; the server waits for our acknowledgement
-// before it sends more than RAW_CREDIT, so nothing queues).
-import type { Pose } from "./api/client";
+// before it sends more than RAW_CREDIT, so nothing queues). The API key the page keeps
+// (sessionStorage, api/client.ts) goes in the handshake as the subprotocol
+// "tofpose.bearer.<key>", never in the URL (docs/server.md, Security).
+import { token, type Pose } from "./api/client";
 import { parseRawFrame, type RawFrame } from "./rawframe";
 
 export type Shown = { raw: RawFrame; pose: Pose | null };
@@ -17,6 +19,14 @@ export type LiveState = {
 const STALE_AFTER_MS = 2000;
 const HISTORY = 300;
 const RAW_CREDIT = 2;
+const BEARER = "tofpose.bearer";
+
+/** The subprotocols that carry the key: the server accepts "tofpose.bearer" (a browser
+ * fails a handshake whose chosen subprotocol it did not offer) and reads the key from
+ * the other; none without a key (reads are open on loopback). */
+export function liveProtocols(key: string | null): string[] {
+  return key ? [BEARER, `${BEARER}.${key}`] : [];
+}
 
 export type LiveHandle = { close: () => void; ack: (frameIndex: number) => void };
 
@@ -46,7 +56,7 @@ export function connectLive(onChange: (s: LiveState) => void): LiveHandle {
 
   const open = () => {
     const proto = location.protocol === "https:" ? "wss" : "ws";
-    ws = new WebSocket(`${proto}://${location.host}/ws/live`);
+    ws = new WebSocket(`${proto}://${location.host}/ws/live`, liveProtocols(token()));
     ws.binaryType = "arraybuffer";
     ws.onopen = () => {
       state.connected = true;
