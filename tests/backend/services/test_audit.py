@@ -106,3 +106,29 @@ def test_a_database_that_fails_loses_those_entries_not_the_writer(sessions, tmp_
     audit.record(_entry(2))
     audit.stop()
     assert [e.path for e in audit.entries()] == ["/api/things/2"]
+
+
+def test_keys_and_audit_entries_round_trip_on_every_database(tmp_path, database_url):
+    """On SQLite and on PostgreSQL (the migration's tables, timezone-aware times)."""
+    from backend.services.keys import KeyService, Scope
+
+    engine = make_engine(database_url or f"sqlite:///{tmp_path / 'rt.db'}")
+    upgrade_database(engine)
+    sessions = make_session_factory(engine)
+    keys = KeyService(sessions)
+    assert keys.bootstrap(tmp_path, "configured-0123456789").source == "configured"
+    key = keys.create("ops", "operate")
+    assert KeyService(sessions).bootstrap(tmp_path, None).source == "database"
+    fresh = KeyService(sessions)
+    fresh.reload()
+    assert fresh.verify(key).scope is Scope.OPERATE
+    assert fresh.verify("configured-0123456789").name == "admin"
+    audit = AuditService(sessions)
+    audit.start()
+    audit.record(_entry(5, b'{"password": "x"}', status=403))
+    audit.stop()
+    (got,) = audit.entries()
+    assert (got.key_name, got.status, got.body) == ("k5", 403, f'{{"password":"{REDACTED}"}}')
+    at = got.at if got.at.tzinfo else got.at.replace(tzinfo=UTC)  # SQLite: naive, in UTC
+    assert at == datetime(2026, 12, 1, 12, 0, 5, tzinfo=UTC)
+    engine.dispose()
