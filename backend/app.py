@@ -221,10 +221,11 @@ def _lifespan(settings: Settings, devices: Devices | None):
             sessions, acq, hub, motion_service, recordings_dir=settings.data_dir / "campaigns",
             lab_geometry=devs.lab_geometry,
         )  # fmt: skip
-        interrupted = campaigns.recover()
-        if interrupted:
-            log.warning("%d campaign(s) were running when the server stopped: interrupted "
-                        "(resume them to continue)", interrupted)  # fmt: skip
+        interrupted, held = campaigns.recover()
+        if interrupted or held:
+            log.warning("%d campaign(s) were running when the server stopped (interrupted) "
+                        "and %d were queued (paused): nothing moves until a person resumes "
+                        "them", interrupted, held)  # fmt: skip
         # studies and re-processing share one queue: one batch job at a time on the cluster
         batch_jobs = BatchQueue()
         studies = StudyService(settings.data_dir / "studies", settings.dask_scheduler or None,

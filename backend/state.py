@@ -14,6 +14,7 @@ from backend.drivers.factory import Devices
 from backend.services.acquisition import AcquisitionService
 from backend.services.audit import AuditService
 from backend.services.campaigns import CampaignService
+from backend.services.heavy_work import HeavyWork
 from backend.services.hub import LiveHub
 from backend.services.imaging import ImageRenderer
 from backend.services.keys import KeyService
@@ -38,6 +39,7 @@ class AppState:
     reprocessings: ReprocessService
     motion: MotionService  # soft limits, ownership and health in front of devices.motion
     renderer: ImageRenderer = field(default_factory=ImageRenderer)
+    heavy_work: HeavyWork = field(default_factory=HeavyWork)  # reports and exports, bounded
     started_monotonic: float = field(default_factory=time.monotonic)
     scene: Any = None  # backend.services.scene.LiveScene when the 3-D scene runs
     scene_reason: str = ""  # why it does not run

@@ -1,6 +1,7 @@
 import { render } from "preact";
 import { useEffect, useState } from "preact/hooks";
 import { api, setToken, token, unwrap } from "./api/client";
+import { AuditLog } from "./components/AuditLog";
 import { CameraPanel } from "./components/CameraPanel";
 import { Campaigns } from "./components/Campaigns";
 import { LiveView } from "./components/LiveView";
@@ -76,6 +77,7 @@ function App() {
           <Campaigns />
           <NewCampaign calibrationRequest={preset} />
           <Studies />
+          <AuditLog />
         </main>
       </div>
     </ErrorContext.Provider>

@@ -143,3 +143,35 @@ def test_controls_lock_while_a_campaign_owns_the_turntable(server, page_for):
     assert sent == []
     httpx.post(f"{server.base_url}/api/campaigns/{cid}/cancel", headers=AUTH)
     wait_for(lambda: locked.count() == 0, 6.0, "the lock to lift after the cancel")
+
+
+def test_stop_latches_in_the_page_until_a_person_releases_it(server, page_for):
+    """STOP (here: Esc) latches on the server: the panel says so, go-to and jog are locked
+    and send nothing, "release STOP" lets moves through again; the audit trail (admin
+    key) lists the STOP and the release under the key's name."""
+    page, sent = _open(server, page_for)
+    page.keyboard.press("Escape")
+    banner = page.get_by_test_id("stop-latched")
+    banner.wait_for(timeout=6000)
+    assert "STOP latched" in banner.inner_text()
+    assert "holds the turntable" in page.get_by_test_id("motion-locked").inner_text()
+    assert _motion(server)["stop_latched"] is True
+    page.get_by_test_id("target-yaw").fill("5")
+    assert page.get_by_test_id("go-yaw").is_disabled()
+    page.get_by_test_id("target-yaw").press("Enter")
+    page.get_by_test_id("jog-yaw-plus").click(force=True)
+    page.wait_for_timeout(800)
+    assert sent == []
+    page.screenshot(path=str(SHOTS / "motion-stop-latched.png"), full_page=False)
+    page.get_by_test_id("release-stop").click()
+    wait_for(lambda: page.get_by_test_id("stop-latched").count() == 0, 6.0, "the latch to go")
+    assert _motion(server)["stop_latched"] is False
+    page.get_by_test_id("go-yaw").click()
+    wait_for(lambda: sent == [("/api/motion/move", {"yaw_deg": 5.0})], 5.0, "the move")
+    page.get_by_test_id("audit-toggle").click()
+    audit = page.get_by_test_id("audit")
+    audit.wait_for(timeout=6000)
+    text = audit.inner_text()
+    for path in ("/api/motion/stop", "/api/motion/release", "/api/motion/move"):
+        assert path in text, text
+    assert "admin" in text  # the bootstrap key's name

@@ -4,6 +4,27 @@
  */
 
 export interface paths {
+    "/api/audit": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * List Audit
+         * @description The audit trail, newest first: every POST, PUT, PATCH and DELETE, answered or
+         *     refused. Page back with ``before_id`` = the last id of the page before.
+         */
+        get: operations["listAudit"];
+        put?: never;
+        post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
     "/api/calibrations": {
         parameters: {
             query?: never;
@@ -217,7 +238,8 @@ export interface paths {
          *     frames, the references and an estimate of each frame by the pipeline re-run over the
          *     recording (its camera and catalog, default settings, tracking off; not the stored
          *     measurement rows). Made on the first request (a long recording
-         *     takes a while) and kept. Only with ``record_raw``.
+         *     takes a while) and kept, on the server's export workers (503 with Retry-After while
+         *     they and their queue are full). Only with ``record_raw``.
          */
         get: operations["getCampaignRecordingMcap"];
         put?: never;
@@ -238,7 +260,8 @@ export interface paths {
         /**
          * Get Campaign Report
          * @description The accuracy report: HTML (self-contained), PDF, CSV (one row per frame) or JSON
-         *     (every statistic). Statistics against the lab's reference by default.
+         *     (every statistic). Statistics against the lab's reference by default. Rendered on the
+         *     server's report workers: 503 with Retry-After while they and their queue are full.
          */
         get: operations["getCampaignReport"];
         put?: never;
@@ -453,6 +476,52 @@ export interface paths {
         patch?: never;
         trace?: never;
     };
+    "/api/keys": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * List Keys
+         * @description Every API key, active and revoked (revoked keys keep their names), oldest first.
+         */
+        get: operations["listKeys"];
+        put?: never;
+        /**
+         * Create Key
+         * @description Make a key of this scope; the answer holds the key, which is not shown again.
+         *     409 when the name is taken (also by a revoked key).
+         */
+        post: operations["createKey"];
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/keys/{name}": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        get?: never;
+        put?: never;
+        post?: never;
+        /**
+         * Revoke Key
+         * @description Revoke a key: it stops working at once (its row and name stay, for the audit
+         *     trail). 404 when no active key has this name.
+         */
+        delete: operations["revokeKey"];
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
     "/api/motion": {
         parameters: {
             query?: never;
@@ -550,6 +619,27 @@ export interface paths {
         patch?: never;
         trace?: never;
     };
+    "/api/motion/release": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        get?: never;
+        put?: never;
+        /**
+         * Release Stop
+         * @description Release a latched STOP: motion commands are accepted again (a campaign that STOP
+         *     paused stays paused until resumed). Accepted when nothing is latched too (no change).
+         */
+        post: operations["releaseStop"];
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
     "/api/motion/reset-faults": {
         parameters: {
             query?: never;
@@ -584,7 +674,9 @@ export interface paths {
         /**
          * Stop Motion
          * @description Emergency stop: every axis stops where it is. Always accepted, also while a campaign
-         *     runs (the campaign pauses, reason "STOP pressed").
+         *     runs (the campaign pauses, reason "STOP pressed"), and never queued behind other
+         *     requests. STOP latches: every move, jog, profile and campaign start is refused (409)
+         *     until a person releases it (POST /api/motion/release, or resuming the campaign).
          */
         post: operations["stopMotion"];
         delete?: never;
@@ -782,7 +874,9 @@ export interface paths {
         /**
          * Create Study
          * @description Queue a study. 422 names the field when the spec cannot run (a range outside
-         *     0.3-20 m, an unknown catalog, a value listed twice); nothing is stored then.
+         *     0.3-20 m, an unknown catalog, a value listed twice, more cells or frames than the
+         *     server takes: TOFPOSE_STUDY_MAX_CELLS, TOFPOSE_STUDY_MAX_FRAMES); 409 while
+         *     TOFPOSE_STUDIES_MAX_ACTIVE studies are queued or running. Nothing is stored then.
          */
         post: operations["createStudy"];
         delete?: never;
@@ -905,6 +999,38 @@ export interface components {
             steps_deg: number[];
             /** Yaw Deg */
             yaw_deg?: number | null;
+        };
+        /**
+         * AuditEntryPublic
+         * @description One state-changing request: when (UTC), by which key (null: none valid), from
+         *     where, what, and the HTTP status answered.
+         */
+        AuditEntryPublic: {
+            /**
+             * At
+             * Format: date-time
+             */
+            at: string;
+            /**
+             * Body
+             * @description the JSON body, at most ~300 characters, with every field whose name contains token, key, secret or password redacted
+             */
+            body: string;
+            /**
+             * Client
+             * @description the client's address
+             */
+            client: string;
+            /** Id */
+            id: number;
+            /** Key Name */
+            key_name: string | null;
+            /** Method */
+            method: string;
+            /** Path */
+            path: string;
+            /** Status */
+            status: number;
         };
         /** AxisPublic */
         AxisPublic: {
@@ -1418,6 +1544,52 @@ export interface components {
              */
             yaw_deg?: number;
         };
+        /** KeyCreate */
+        KeyCreate: {
+            /** Name */
+            name: string;
+            /**
+             * Scope
+             * @enum {string}
+             */
+            scope: "read" | "operate" | "admin";
+        };
+        /** KeyCreated */
+        KeyCreated: {
+            /** Created At */
+            created_at: string | null;
+            /**
+             * Key
+             * @description the key: shown this once, only its hash is stored
+             */
+            key: string;
+            /** Name */
+            name: string;
+            /** Revoked At */
+            revoked_at: string | null;
+            /**
+             * Scope
+             * @enum {string}
+             */
+            scope: "read" | "operate" | "admin";
+        };
+        /**
+         * KeyPublic
+         * @description An API key as the server knows it (never the key itself).
+         */
+        KeyPublic: {
+            /** Created At */
+            created_at: string | null;
+            /** Name */
+            name: string;
+            /** Revoked At */
+            revoked_at: string | null;
+            /**
+             * Scope
+             * @enum {string}
+             */
+            scope: "read" | "operate" | "admin";
+        };
         /** MatchedPublic */
         MatchedPublic: {
             /** Area Px */
@@ -1576,6 +1748,17 @@ export interface components {
              * @enum {string}
              */
             state: "starting" | "ok" | "degraded" | "stopped" | "absent";
+            /**
+             * Stop Latched
+             * @description a person's STOP holds the motion system: every move, jog, profile and campaign is refused until POST /api/motion/release (or a campaign's resume)
+             * @default false
+             */
+            stop_latched: boolean;
+            /**
+             * Stop Latched At
+             * @description when that STOP was pressed (UTC)
+             */
+            stop_latched_at?: string | null;
             /**
              * Stopped
              * @default false
@@ -2398,6 +2581,68 @@ export interface components {
 }
 export type $defs = Record<string, never>;
 export interface operations {
+    listAudit: {
+        parameters: {
+            query?: {
+                limit?: number;
+                before_id?: number | null;
+            };
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["AuditEntryPublic"][];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below 'admin' */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
     listCalibrations: {
         parameters: {
             query?: never;
@@ -3217,6 +3462,13 @@ export interface operations {
                     "application/json": components["schemas"]["HTTPValidationError"];
                 };
             };
+            /** @description busy with other reports and exports: try again (Retry-After) */
+            503: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content?: never;
+            };
         };
     };
     getCampaignReport: {
@@ -3288,6 +3540,13 @@ export interface operations {
                 content: {
                     "application/json": components["schemas"]["HTTPValidationError"];
                 };
+            };
+            /** @description busy with other reports and exports: try again (Retry-After) */
+            503: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content?: never;
             };
         };
     };
@@ -3985,6 +4244,207 @@ export interface operations {
             };
         };
     };
+    listKeys: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["KeyPublic"][];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below 'admin' */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+        };
+    };
+    createKey: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody: {
+            content: {
+                "application/json": components["schemas"]["KeyCreate"];
+            };
+        };
+        responses: {
+            /** @description Successful Response */
+            201: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["KeyCreated"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below 'admin' */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Conflicts with stored state (a name already taken, or the resource is busy) */
+            409: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The request body is larger than the server's limit */
+            413: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    revokeKey: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                name: string;
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["KeyPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below 'admin' */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description No such resource */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
     getMotion: {
         parameters: {
             query?: never;
@@ -4260,6 +4720,56 @@ export interface operations {
             };
             /** @description The device is absent or refused the command */
             503: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+        };
+    };
+    releaseStop: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["MotionPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The request body is larger than the server's limit */
+            413: {
                 headers: {
                     [name: string]: unknown;
                 };
@@ -5058,6 +5568,15 @@ export interface operations {
                 headers: {
                     /** @description Bearer */
                     "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Conflicts with stored state (a name already taken, or the resource is busy) */
+            409: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {

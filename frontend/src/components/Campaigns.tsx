@@ -28,12 +28,21 @@ export function Campaigns() {
   const states = usePolling(() => unwrap(api.GET("/api/campaigns/states")), null);
   const list = campaigns.data ?? [];
   const [open, setOpen] = useState<number | null>(null);
+  // campaigns that wait for a person since the server (re)started: nothing runs them alone
+  const waiting = list.filter((c) => c.status === "interrupted"
+    || (c.status === "paused" && (c.status_reason ?? "").startsWith("held at server start")));
   const act = async (c: Campaign, action: Action) => {
     if ((await reported(report, () => unwrap(request(action, c.id)))) !== undefined) campaigns.refresh();
   };
   return (
     <section class="card">
       <h2>Campaigns</h2>
+      {waiting.length > 0 && (
+        <p class="small warn" data-testid="campaigns-held">
+          {waiting.length} campaign{waiting.length > 1 ? "s" : ""} ({waiting.map((c) => c.id).join(", ")}) wait
+          since the server stopped: nothing moves the turntable after a restart until a person resumes them.
+        </p>
+      )}
       {list.length === 0 ? <p class="small">none yet (POST /api/campaigns; see docs/campaigns.md)</p> : (
         <table data-testid="campaigns">
           <thead><tr><th>id</th><th>name</th><th>status</th><th>progress</th><th>ETA</th><th /><th>report</th></tr></thead>

@@ -4,7 +4,9 @@
 // what is wrong and sends nothing), a jog is a relative step the server applies to the
 // axis' encoder position when it arrives (POST /api/motion/jog), every control waits for
 // its answer before it can be used again (a double click sends one move), and the
-// controls are locked while the turntable's status is stale or a campaign owns it.
+// controls are locked while the turntable's status is stale or a campaign owns it. STOP
+// latches on the server: the panel says so and offers the release (POST
+// /api/motion/release), which is the only way back to moving by hand.
 import { useState } from "preact/hooks";
 import { api, unwrap, type Motion, type Schemas } from "../api/client";
 import { reported, useReportError } from "../errors";
@@ -20,12 +22,19 @@ const STALE_AFTER_MS = 2000;
 /** Why the motion controls are locked, or null when they can be used. */
 function lockReason(motion: Motion, updatedAt: number, now: number): string | null {
   if (now - updatedAt > STALE_AFTER_MS) return "turntable status is stale (no answer for 2 s): controls locked";
+  if (motion.stop_latched)
+    return `STOP pressed${latchedAt(motion)} holds the turntable: nothing moves until it is released`;
   if (motion.owner_campaign_id !== null && motion.owner_campaign_id !== undefined)
     return `campaign ${motion.owner_campaign_id} ("${motion.owner_campaign_name}") owns the turntable: pause or cancel it to move by hand`;
   if (motion.state === "absent") return "no motion system";
   if (motion.state !== "ok" || Object.keys(motion.positions ?? {}).length === 0)
     return `turntable status unknown (${motion.state}${motion.last_error ? `: ${motion.last_error}` : ""}): controls locked`;
   return null;
+}
+
+/** " at HH:MM:SS" (local time) of the latched STOP, or "". */
+function latchedAt(motion: Motion): string {
+  return motion.stop_latched_at ? ` at ${new Date(motion.stop_latched_at).toLocaleTimeString()}` : "";
 }
 
 export function MotionPanel() {
@@ -64,6 +73,14 @@ export function MotionPanel() {
     <section class="card">
       <h2>Turntable <span class="small">{motion.busy ? "moving" : motion.settled ? "settled" : "settling"}</span></h2>
       {locked && <p class="small warn" data-testid="motion-locked">{locked}</p>}
+      {motion.stop_latched && (
+        <p class="latched" data-testid="stop-latched">
+          <strong>STOP latched</strong>
+          <button data-testid="release-stop" disabled={pending !== null}
+            title="let motion commands through again (a campaign STOP paused stays paused until resumed)"
+            onClick={() => send("release", () => unwrap(api.POST("/api/motion/release")))}>release STOP</button>
+        </p>
+      )}
       <table class="axes">
         <thead><tr><th>axis</th><th>position</th><th>limits</th><th>go to</th><th>jog</th></tr></thead>
         <tbody>
