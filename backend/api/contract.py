@@ -5,6 +5,9 @@ Routes declare only what is specific to them (``responses=errors(404, 409)``); w
 follows from the server's own machinery is added to every operation here:
 
 - 401 (with ``WWW-Authenticate: Bearer``) on every operation that takes the token;
+- 403 on every operation that needs more than the ``read`` scope: every state change
+  (``operate``) and every operation of the ``admin`` tag (``admin``: keys and the audit
+  trail, whose reads need the key even on loopback);
 - 400 and 413 on every operation with a request body (body not parsable, body over
   ``TOFPOSE_MAX_BODY_BYTES``), 413 on every POST/PUT (the limit reads any body);
 - 400 on every operation for a ``Host`` header the server does not serve (plain text:
@@ -25,6 +28,7 @@ from pydantic import BaseModel
 
 BEARER = "HTTPBearer"
 OPEN_OPERATIONS = {"getHealth"}
+ADMIN_TAG = "admin"  # backend/api/routes/audit.py: every operation needs the admin scope
 
 
 class ErrorPublic(BaseModel):
@@ -36,6 +40,8 @@ class ErrorPublic(BaseModel):
 ERROR_DESCRIPTIONS = {
     400: "The body could not be parsed, or the Host header names a host this server does not serve",
     401: "No API token, or a wrong one (send 'Authorization: Bearer <token>')",
+    403: "The API key's scope is below what the operation needs (operate: state changes; "
+    "admin: keys, the audit trail)",
     404: "No such resource",
     409: "Conflicts with stored state (a name already taken, or the resource is busy)",
     413: "The request body is larger than the server's limit",
@@ -65,11 +71,14 @@ def _error_ref(code: int) -> dict[str, Any]:
 def _complete_operation(method: str, op: dict[str, Any]) -> None:
     responses = op.setdefault("responses", {})
     takes_token = any(BEARER in req for req in op.get("security", []))
-    is_read = method == "get"
+    admin = ADMIN_TAG in op.get("tags", [])
+    is_read = method == "get" and not admin  # admin reads need the key, even on loopback
     if op.get("operationId") in OPEN_OPERATIONS:
         op["security"] = [{}]
     elif takes_token:
         op["security"] = [{}, {BEARER: []}] if is_read else [{BEARER: []}]
+        if not is_read:
+            responses.setdefault("403", _error_ref(403))
         r401 = _error_ref(401)
         if is_read:
             r401["description"] += " (only when the server is not bound to loopback)"

@@ -49,7 +49,8 @@ from backend.state import AppState
 
 router = APIRouter(prefix="/api/campaigns", tags=["campaigns"])
 IdParam = Annotated[int, Path(ge=1, le=2**31 - 1)]
-BUSY = {503: {"description": "busy with other reports and exports: try again (Retry-After)"}}
+BUSY = {503: {**errors(503)[503],
+              "description": "busy with other reports and exports: try again (Retry-After)"}}
 
 
 async def _heavy(state: AppState, work, what: str):

@@ -2612,7 +2612,7 @@ export interface operations {
                     "text/plain": string;
                 };
             };
-            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') */
             401: {
                 headers: {
                     /** @description Bearer */
@@ -2721,6 +2721,15 @@ export interface operations {
                 headers: {
                     /** @description Bearer */
                     "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {
@@ -2849,6 +2858,15 @@ export interface operations {
                     "application/json": components["schemas"]["ErrorPublic"];
                 };
             };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
             /** @description The request body is larger than the server's limit */
             413: {
                 headers: {
@@ -2965,6 +2983,15 @@ export interface operations {
                 headers: {
                     /** @description Bearer */
                     "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {
@@ -3143,6 +3170,15 @@ export interface operations {
                     "application/json": components["schemas"]["ErrorPublic"];
                 };
             };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
             /** @description No such resource */
             404: {
                 headers: {
@@ -3280,6 +3316,15 @@ export interface operations {
                 headers: {
                     /** @description Bearer */
                     "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {
@@ -3467,7 +3512,9 @@ export interface operations {
                 headers: {
                     [name: string]: unknown;
                 };
-                content?: never;
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
             };
         };
     };
@@ -3546,7 +3593,9 @@ export interface operations {
                 headers: {
                     [name: string]: unknown;
                 };
-                content?: never;
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
             };
         };
     };
@@ -3589,6 +3638,15 @@ export interface operations {
                 headers: {
                     /** @description Bearer */
                     "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {
@@ -3674,6 +3732,15 @@ export interface operations {
                     "application/json": components["schemas"]["ErrorPublic"];
                 };
             };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
             /** @description No such resource */
             404: {
                 headers: {
@@ -3751,6 +3818,15 @@ export interface operations {
                 headers: {
                     /** @description Bearer */
                     "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {
@@ -3873,6 +3949,15 @@ export interface operations {
                 headers: {
                     /** @description Bearer */
                     "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {
@@ -4004,6 +4089,15 @@ export interface operations {
                 headers: {
                     /** @description Bearer */
                     "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {
@@ -4272,7 +4366,7 @@ export interface operations {
                     "text/plain": string;
                 };
             };
-            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') */
             401: {
                 headers: {
                     /** @description Bearer */
@@ -4529,6 +4623,15 @@ export interface operations {
                     "application/json": components["schemas"]["ErrorPublic"];
                 };
             };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
             /** @description Conflicts with stored state (a name already taken, or the resource is busy) */
             409: {
                 headers: {
@@ -4604,6 +4707,15 @@ export interface operations {
                 headers: {
                     /** @description Bearer */
                     "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {
@@ -4691,6 +4803,15 @@ export interface operations {
                     "application/json": components["schemas"]["ErrorPublic"];
                 };
             };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
             /** @description Conflicts with stored state (a name already taken, or the resource is busy) */
             409: {
                 headers: {
@@ -4768,6 +4889,15 @@ export interface operations {
                     "application/json": components["schemas"]["ErrorPublic"];
                 };
             };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
             /** @description The request body is larger than the server's limit */
             413: {
                 headers: {
@@ -4812,6 +4942,15 @@ export interface operations {
                 headers: {
                     /** @description Bearer */
                     "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {
@@ -4880,6 +5019,15 @@ export interface operations {
                 headers: {
                     /** @description Bearer */
                     "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {
@@ -5092,6 +5240,15 @@ export interface operations {
                     "application/json": components["schemas"]["ErrorPublic"];
                 };
             };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
             /** @description No such resource */
             404: {
                 headers: {
@@ -5269,6 +5426,15 @@ export interface operations {
                 headers: {
                     /** @description Bearer */
                     "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {
@@ -5461,6 +5627,15 @@ export interface operations {
                     "application/json": components["schemas"]["ErrorPublic"];
                 };
             };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
             /** @description Conflicts with stored state (a name already taken, or the resource is busy) */
             409: {
                 headers: {
@@ -5568,6 +5743,15 @@ export interface operations {
                 headers: {
                     /** @description Bearer */
                     "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {
@@ -5699,6 +5883,15 @@ export interface operations {
                 headers: {
                     /** @description Bearer */
                     "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {
