@@ -32,6 +32,7 @@ import sys
 import tempfile
 import threading
 import time
+import urllib.error
 import urllib.request
 from pathlib import Path
 
@@ -80,6 +81,24 @@ class Server:
 
     def url(self, path: str) -> str:
         return f"http://127.0.0.1:{self.port}{path}"
+
+    def rss_mb(self) -> float:
+        for line in Path(f"/proc/{self.proc.pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+        return float("nan")
+
+    def request(self, method: str, path: str, body: dict | None = None,
+                timeout_s: float = 120.0) -> tuple[int, bytes]:  # fmt: skip
+        """(status, body) of one request with the admin key."""
+        data = None if body is None else json.dumps(body).encode()
+        req = urllib.request.Request(self.url(path), method=method, data=data, headers={
+            "Authorization": f"Bearer {self.key}", "Content-Type": "application/json"})
+        try:
+            with urllib.request.urlopen(req, timeout=timeout_s) as r:
+                return r.status, r.read()
+        except urllib.error.HTTPError as exc:
+            return exc.code, exc.read()
 
     def cpu_s(self) -> float:
         fields = Path(f"/proc/{self.proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
@@ -208,6 +227,75 @@ def run(n_clients: int, n_readers: int, rate: float, stops: int, settle_s: float
             f"{cpu:.0f}"]  # fmt: skip
 
 
+CAMPAIGN = {"name": "export-load", "frames_per_point": 30, "settle_s": 0.2, "record_raw": True,
+            "setpoints": [{"yaw_deg": 2.0 * i, "rail_mm": 12000} for i in range(4)]}  # fmt: skip
+HUGE_STUDY = {"name": "huge", "frames_per_cell": 1, "grid": {
+    "range_m": [1.0 + 0.25 * i for i in range(64)],
+    "attitude_deg": [0.5 * i for i in range(64)],
+    "offset_fraction": [0.01 * i for i in range(64)],
+    "physics": ["ideal", "grey plate", "lens blur", "gains", "systematic", "background", "all"],
+}}  # fmt: skip
+"""64 x 64 x 64 x 7 = 1,835,008 cells: far beyond TOFPOSE_STUDY_MAX_CELLS."""
+
+
+def _finished_campaign(server: Server) -> int:
+    status, body = server.request("POST", "/api/campaigns", CAMPAIGN)
+    cid = json.loads(body)["id"]
+    server.request("POST", f"/api/campaigns/{cid}/start")
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:
+        if json.loads(server.request("GET", f"/api/campaigns/{cid}")[1])["status"] == "done":
+            return cid
+        time.sleep(0.5)
+    raise RuntimeError("the export campaign did not finish")
+
+
+def run_exports(n: int, rate: float, stops: int) -> list[str]:
+    """STOP timed while ``n`` clients download a report or the MCAP of one campaign."""
+    server = Server(rate, 0)
+    try:
+        cid = _finished_campaign(server)
+        codes: list[int] = []
+        paths = [f"/api/campaigns/{cid}/report.pdf", f"/api/campaigns/{cid}/recording.mcap"]
+
+        def download(k: int) -> None:
+            codes.append(server.request("GET", paths[k % 2], timeout_s=600)[0])
+
+        threads = [threading.Thread(target=download, args=(k,)) for k in range(n)]
+        for t in threads:
+            t.start()
+        time.sleep(0.3)  # the downloads are in the server before the first STOP
+        ms = 1e3 * np.array(time_stops(server, stops, 0.1))
+        busy_during = sum(t.is_alive() for t in threads)
+        for t in threads:
+            t.join()
+    finally:
+        server.stop()
+    return [str(n), str(codes.count(200)), str(codes.count(503)), str(busy_during),
+            f"{np.median(ms):.1f}", f"{np.percentile(ms, 95):.1f}", f"{ms.max():.1f}"]  # fmt: skip
+
+
+def run_study_refusals(repeats: int = 20) -> list[str]:
+    """Median and max ms of refusing ``HUGE_STUDY``, and the server's RSS around it."""
+    server = Server(10.0, 0)
+    try:
+        server.request("GET", "/api/studies")  # warm
+        rss0 = server.rss_mb()
+        ms = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            status, body = server.request("POST", "/api/studies", HUGE_STUDY)
+            ms.append(1e3 * (time.perf_counter() - t0))
+            if status != 422:
+                raise RuntimeError(f"the huge study was not refused: {status} {body[:200]!r}")
+        rss1 = server.rss_mb()
+        detail = json.loads(body)["detail"][0]["msg"]
+    finally:
+        server.stop()
+    return [f"{len(ms)}", f"{np.median(ms):.1f}", f"{max(ms):.1f}", f"{rss0:.0f}",
+            f"{rss1:.0f}", detail[:90]]  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--clients", type=int, nargs="+", default=[0, 100])
@@ -217,6 +305,8 @@ def main() -> None:
     ap.add_argument("--stops", type=int, default=40)
     ap.add_argument("--settle", type=float, default=5.0,
                     help="seconds between the last client and the first STOP")  # fmt: skip
+    ap.add_argument("--exports", type=int, default=60,
+                    help="concurrent report/MCAP downloads while STOP is timed (0: skip)")
     ap.add_argument("--caps", type=int, default=1000,
                     help="per-address and total /ws/live caps for the run (0: the defaults)")
     args = ap.parse_args()
@@ -226,6 +316,18 @@ def main() -> None:
     print(f"camera {args.rate:g} Hz, {args.stops} STOPs 0.2 s apart, {os.cpu_count()} cores")
     print(table(["mute clients", "served", "raw readers", "readers MB/s", "STOP median ms",
                  "p95 ms", "max ms", "server CPU %"], rows))  # fmt: skip
+    if args.exports:
+        exp = run_exports(args.exports, args.rate, args.stops)
+        print()
+        print(f"STOP during {args.exports} concurrent downloads (PDF report and MCAP, half each) "
+              "of one campaign (4 set-points x 30 frames, raw recording)")
+        print(table(["downloads", "served (200)", "refused (503)", "still running at last STOP",
+                     "STOP median ms", "p95 ms", "max ms"], [exp]))  # fmt: skip
+    ref = run_study_refusals()
+    print()
+    print("POST /api/studies with a 1,835,008-cell spec (refused, 422)")
+    print(table(["requests", "median ms", "max ms", "server RSS before MB", "after MB",
+                 "the refusal"], [ref]))  # fmt: skip
 
 
 if __name__ == "__main__":
