@@ -40,6 +40,7 @@ from backend.api.routes import (
     scene,
 )
 from backend.api.routes import devices as devices_route
+from backend.api.routes import recordings as recordings_route
 from backend.api.routes import reprocessings as reprocessings_route
 from backend.api.routes import studies as studies_route
 from backend.audit_middleware import AuditMiddleware
@@ -56,6 +57,7 @@ from backend.services.hub import LiveHub
 from backend.services.kernel_warmup import KernelWarmup
 from backend.services.keys import KeyService
 from backend.services.motion import MotionService
+from backend.services.recordings import RecordingService
 from backend.services.reprocessing import ReprocessService
 from backend.services.store import find_catalog, load_device_settings
 from backend.services.studies import StudyService
@@ -233,8 +235,14 @@ def _lifespan(settings: Settings, devices: Devices | None):
         reprocessings = ReprocessService(settings.data_dir / "reprocessings",
                                          settings.dask_scheduler or None, settings.study_workers,
                                          jobs=batch_jobs)  # fmt: skip
+        # recordings on demand: the live stream to HDF5 files, while a person wants it
+        recordings = RecordingService(
+            settings.data_dir / "recordings", hub, devs.camera.model, lambda: acq.catalog,
+            motion_service, min_free_mb=settings.recording_min_free_mb,
+        )  # fmt: skip
         app.state.tofpose = AppState(settings, keys, audit, engine, sessions, devs, hub, acq,
-                                     campaigns, studies, reprocessings, motion_service)  # fmt: skip
+                                     campaigns, studies, reprocessings, motion_service,
+                                     recordings=recordings)  # fmt: skip
         # the pipeline's compiled kernels (tofpose.warmup): in the background while frames
         # already stream (backend/services/kernel_warmup.py), or before the first frame
         if settings.kernels_in_background:
@@ -258,6 +266,7 @@ def _lifespan(settings: Settings, devices: Devices | None):
             if app.state.tofpose.foxglove is not None:
                 app.state.tofpose.foxglove.close()
             campaigns.stop()  # a running campaign is left interrupted (resumable)
+            recordings.stop_all()  # every recording's file closed, its entry saying why
             batch_jobs.stop()  # a running study or re-processing is queued again at the next start
             app.state.tofpose.renderer.close()
             acq.stop()
@@ -311,7 +320,7 @@ def _include_routes(app: FastAPI) -> None:
     """Every resource's router."""
     routers = (health, devices_route, camera, pose, frames, motion, catalogs, campaigns,
                calibrations, reference, scene, foxglove, live, studies_route,
-               reprocessings_route, audit_route)  # fmt: skip
+               reprocessings_route, recordings_route, audit_route)  # fmt: skip
     for module in routers:
         app.include_router(module.router)
 

@@ -132,6 +132,9 @@ class Settings(BaseSettings):
     study_max_cells: int = Field(10_000, ge=1)
     study_max_frames: int = Field(1_000_000, ge=1)
     studies_max_active: int = Field(4, ge=1, le=10_000)
+    # Recordings on demand (docs/server.md): refused to start below this much free space
+    # (MB) on the data directory's disk; a running one stops, file closed, when it falls below.
+    recording_min_free_mb: float = Field(1000.0, ge=0)
     viser: bool = True
     viser_port: int = Field(8080, ge=0, le=65535)
     foxglove_port: int | None = Field(None, ge=0, le=65535)

@@ -19,6 +19,7 @@ from backend.services.hub import LiveHub
 from backend.services.imaging import ImageRenderer
 from backend.services.keys import KeyService
 from backend.services.motion import MotionService
+from backend.services.recordings import RecordingService
 from backend.services.reprocessing import ReprocessService
 from backend.services.studies import StudyService
 from backend.settings import Settings
@@ -40,6 +41,7 @@ class AppState:
     motion: MotionService  # soft limits, ownership and health in front of devices.motion
     renderer: ImageRenderer = field(default_factory=ImageRenderer)
     heavy_work: HeavyWork = field(default_factory=HeavyWork)  # reports and exports, bounded
+    recordings: RecordingService | None = None  # recordings on demand (the lifespan makes it)
     started_monotonic: float = field(default_factory=time.monotonic)
     scene: Any = None  # backend.services.scene.LiveScene when the 3-D scene runs
     scene_reason: str = ""  # why it does not run

@@ -40,7 +40,7 @@ frame; a recording is refused from the start below it), on a write error, or whe
 server shuts down: the file is then closed and re-opened to count its frames, and the
 recording's entry says why it stopped. At most ``MAX_ACTIVE`` record at once.
 
-The metadata (id, name, UTC start and stop, frames, bytes, state, why it stopped) lives
+The metadata (id, name, UTC start and stop, frames, size, state, why it stopped) lives
 in ``<directory>/index.json``, beside the files, rewritten atomically at every start,
 stop and deletion: the recordings are files, so their list is one too (it moves and is
 backed up with them, needs no migration, and the recording thread touches no database).
@@ -127,7 +127,7 @@ class RecordingInfo:
     """A recording's metadata (one entry of the index).
 
     started_utc, stopped_utc : UTC; duration_s : the duration asked for (None: until
-    stopped); frames : written so far; bytes : the file's size; dropped_frames : frames
+    stopped); frames : written so far; size_bytes : the file's size; dropped_frames : frames
     the hub dropped because the disk could not keep up (not in the file); stop_detail :
     a sentence saying why it stopped ("" while it records); file : the HDF5 file's name
     in the recordings directory.
@@ -141,7 +141,7 @@ class RecordingInfo:
     duration_s: float | None = None
     stopped_utc: datetime | None = None
     frames: int = 0
-    bytes: int = 0
+    size_bytes: int = 0
     dropped_frames: int = 0
     stop_reason: StopReason | None = None
     stop_detail: str = ""
@@ -317,7 +317,7 @@ class _Recorder:
         self.path = service.directory / info.file
         self.sub = sub
         self.frames = 0
-        self.bytes = 0
+        self.size_bytes = 0
         self._stop = threading.Event()
         self._stop_reason = StopReason.REQUESTED
         self._writer: LiveRecordingWriter | None = None
@@ -392,7 +392,7 @@ class _Recorder:
         if now - self._flushed_at >= FLUSH_S:
             self._writer.flush()
             self._flushed_at = now
-            self.bytes = _size(self.path)
+            self.size_bytes = _size(self.path)
         return None
 
     def _motion_now(self) -> MotionReading | None:
@@ -428,7 +428,7 @@ class _Recorder:
                 self.frames = rec.n_frames
         except RecordingError as exc:
             detail = f"{detail}; the file cannot be read ({exc})"
-        self.bytes = _size(self.path)
+        self.size_bytes = _size(self.path)
         return detail
 
 
@@ -510,8 +510,8 @@ class RecordingService:
         log.warning("recording %d (%s) was interrupted by a server stop: %d frames kept",
                     info.id, info.name, frames)  # fmt: skip
         return replace(info, state=RecordingState.STOPPED, stopped_utc=stopped or info.started_utc,
-                       frames=frames, bytes=_size(file), stop_reason=StopReason.INTERRUPTED,
-                       stop_detail=detail)  # fmt: skip
+                       frames=frames, size_bytes=_size(file),
+                       stop_reason=StopReason.INTERRUPTED, stop_detail=detail)  # fmt: skip
 
     def _save(self) -> None:
         """Rewrite the index atomically (callers hold the lock, or own the service)."""
@@ -607,7 +607,7 @@ class RecordingService:
             raise RecordingNotFoundError(f"no recording with id {recording_id}")
         recorder = self._active.get(recording_id)
         if recorder is not None:  # the live counts
-            return replace(info, frames=recorder.frames, bytes=recorder.bytes,
+            return replace(info, frames=recorder.frames, size_bytes=recorder.size_bytes,
                            dropped_frames=recorder.sub.dropped)  # fmt: skip
         return info
 
@@ -665,12 +665,12 @@ class RecordingService:
                 return
             self._infos[rid] = replace(
                 recorder.info, state=RecordingState.STOPPED, stopped_utc=datetime.now(UTC),
-                frames=recorder.frames, bytes=recorder.bytes, dropped_frames=recorder.sub.dropped,
-                stop_reason=reason, stop_detail=detail,
+                frames=recorder.frames, size_bytes=recorder.size_bytes,
+                dropped_frames=recorder.sub.dropped, stop_reason=reason, stop_detail=detail,
             )  # fmt: skip
             self._save()
         log.info("recording %d stopped (%s): %d frames, %.1f MB", rid, reason.value,
-                 recorder.frames, recorder.bytes / MB)  # fmt: skip
+                 recorder.frames, recorder.size_bytes / MB)  # fmt: skip
 
 
 __all__ = [

@@ -118,7 +118,7 @@ def test_every_frame_the_hub_delivers_is_written_with_pose_state_motion_and_stam
                                                             StopReason.REQUESTED, 30)  # fmt: skip
     assert hub.n_subscribers == 0 and done.dropped_frames == 0
     path = service.directory / done.file
-    assert done.bytes == path.stat().st_size > 0
+    assert done.size_bytes == path.stat().st_size > 0
     with open_recording(path) as rec:
         assert rec.n_frames == 30 and rec.camera == CAMERA and rec.catalog == paper_target()
         np.testing.assert_array_equal(rec.time_s, [s.frame.time_s for s in sent])
