@@ -1,5 +1,6 @@
 """``tofpose serve``: build the app from settings + command-line overrides and run it;
-``tofpose report`` and ``tofpose keys`` (backend/keys_cli.py) on the same settings."""
+``tofpose report`` and ``tofpose keys`` (backend/keys_cli.py) on the same settings;
+``tofpose record`` (backend/record_cli.py) against a running server."""
 
 from __future__ import annotations
 
@@ -170,6 +171,13 @@ def keys(opts: dict) -> int:
     from backend import keys_cli
 
     return keys_cli.run(opts)
+
+
+def record(opts: dict) -> int:
+    """``tofpose record`` against a running server (backend/record_cli.py)."""
+    from backend import record_cli
+
+    return record_cli.run(opts)
 
 
 def report(opts: dict) -> int:

@@ -414,7 +414,7 @@ def _add_simulation_commands(sub) -> None:
 
 
 def _add_server_commands(sub) -> None:
-    """The subcommands serve, report, keys, emulate, on the subparsers ``sub``."""
+    """The subcommands serve, report, keys, record, emulate, on the subparsers ``sub``."""
     p = sub.add_parser(
         "serve", help="run the server (simulated devices by default); settings also from TOFPOSE_*"
     )
@@ -451,6 +451,17 @@ def _add_server_commands(sub) -> None:
     keys.add_parser("list", help="every key: name, scope, created, revoked")
     q = keys.add_parser("revoke", help="revoke a key (a running server follows within 5 s)")
     q.add_argument("name")
+    p = sub.add_parser("record", help="record a running server's live stream to HDF5 "
+                       "(POST /api/recordings; docs/server.md)")  # fmt: skip
+    p.add_argument("--duration", type=float, required=True, help="seconds to record")
+    p.add_argument("--name", help="what it is for (default: 'tofpose record' and the UTC time)")
+    p.add_argument("--url", default="http://127.0.0.1:8000", help="the server")
+    p.add_argument("--key", help="API key of scope operate or admin (default: $TOFPOSE_API_KEY, "
+                   "else the key file)")  # fmt: skip
+    p.add_argument("--key-file", default="data/api_token", help="default data/api_token")
+    p.add_argument("--out", help="the HDF5 file to write (default: NAME-ID.h5 here)")
+    p.add_argument("--no-download", dest="download", action="store_false",
+                   help="leave the recording on the server and print its URL")  # fmt: skip
     p = sub.add_parser("emulate", help="run device emulators over a simulated lab")
     emu = p.add_subparsers(dest="device", required=True)
     for name, text in (
@@ -569,13 +580,15 @@ def _run_outside_the_library(args) -> int | None:
         from backend.emulators import cli as emulators  # lazy, like serve
 
         return emulators.run(vars(args))
-    if args.cmd in ("serve", "report", "keys"):
+    if args.cmd in ("serve", "report", "keys", "record"):
         from backend import main as server_main  # lazy: the library does not need the server
 
         opts = vars(args)
         cmd = opts.pop("cmd")
         if cmd == "keys":
             return server_main.keys(opts)  # backend/keys_cli.py
+        if cmd == "record":
+            return server_main.record(opts)  # backend/record_cli.py
         return server_main.serve(opts) if cmd == "serve" else server_main.report(opts)
     return None
 
