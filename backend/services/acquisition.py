@@ -4,6 +4,25 @@ pair, keeps the latest sample and a bounded history, and publishes to the hub.
 A camera error or timeout marks the device degraded and is retried with exponential
 backoff; nothing a driver or a subscriber does can stop the loop. Commands for the camera
 (settings changes) are queued to the loop so that only its thread touches the device.
+
+While the pipeline's kernels compile at server start (``KernelWarmup``), the loop measures
+with the reference implementation (``PosePipeline(..., implementation="reference")``:
+every stage in NumPy/SciPy, the compiled poses to ~0.01 mm and ~0.0002 deg), from the
+moment the warm-up's first stage has compiled the few kernels it still calls (about 1 s;
+before that a frame streams without a pose). When the kernels are ready the next frame
+goes through a compiled pipeline (``_pipeline_for_frame``); no frame goes without a pose
+for it. The new pipeline starts without multi-frame history, as after a discontinuity
+(its first frame is an acquisition, a full search: one frame of persistence and tracking
+state is all that is lost, and the two implementations' histories are not mixed); the
+relative-state filter goes on across the switch (the two implementations' poses differ
+far less than their noise, so its rates and velocity need no restart).
+
+A frame is read only when the loop is free: drivers pace their frames without a backlog
+(``backend.drivers.pacing.FramePacer``; a real camera is asked for each image), so a
+pipeline slower than the camera measures the newest frame each time and lowers the
+delivered frame rate while it is slower; nothing queues. The reference pipeline takes
+~60 ms a frame on this project's 2-core machine, ~130 ms (median) while the other core
+compiles: about 7 frames/s instead of 10 during the compile.
 """
 
 from __future__ import annotations
@@ -16,7 +35,7 @@ from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -38,8 +57,10 @@ class LiveSample:
 
     captured_unix_s : wall-clock time the frame arrived from the driver.
     processed_unix_s : wall-clock time the pipeline finished.
-    measured : False for a frame the pipeline did not see (its kernels were still
-        compiling at server start): shown live, never counted by a campaign.
+    measured : False for a frame no pipeline saw (the first second of a first start,
+        before the warm-up's first stage): shown live, never counted by a campaign.
+    implementation : the pipeline implementation that measured it: "reference" while
+        the kernels compile at server start, "compiled" after; None when not measured.
     reference : the lab reference the live error of this frame is measured against.
     state : the relative-state filter's state at the frame's time (pose, rates,
         velocity and their covariance; ``tofpose.relative_state``), None before its
@@ -53,6 +74,7 @@ class LiveSample:
     captured_unix_s: float
     processed_unix_s: float
     measured: bool = True
+    implementation: Literal["reference", "compiled"] | None = "compiled"
     reference: LiveReference = field(default_factory=LiveReference)
     state: RelativeState | None = None
     cache: dict[str, Any] = field(default_factory=dict)
@@ -128,7 +150,8 @@ class AcquisitionService:
         self.kernels = kernels  # None: the kernels are ready (or compile on first use)
         self.reference = LiveReference()  # nominal until a calibration is selected
         self._catalog_name = catalog_name
-        self._pipeline = PosePipeline(camera.model, catalog, self._config)
+        first = self._live_implementation() or "reference"  # (None: reference soon)
+        self._pipeline = PosePipeline(camera.model, catalog, self._config, implementation=first)
         #: the relative state (rates, velocity) from the poses, on the loop's thread
         state_config = state_config or RelativeStateConfig.constant_acceleration()
         self._filter = RelativeStateFilter(state_config)
@@ -167,6 +190,35 @@ class AcquisitionService:
     def catalog(self) -> Catalog:
         return self._pipeline.catalog
 
+    @property
+    def implementation(self) -> Literal["reference", "compiled"] | None:
+        """The pipeline implementation that measured the latest frame; before a frame
+        was measured, the one that will measure the next (None: none can yet)."""
+        latest = self._latest
+        if latest is not None and latest.measured:
+            return latest.implementation
+        return self._live_implementation()
+
+    def _live_implementation(self) -> Literal["reference", "compiled"] | None:
+        """The implementation for the next frame: "compiled" once the kernels are ready
+        (or when nothing warms them up: ``kernels`` None), "reference" while they compile
+        and after a failed warm-up (rather than compile them in the loop's thread, which
+        would stop it for a minute), None during the warm-up's first stage."""
+        k = self.kernels
+        if k is None or k.state == "ready":
+            return "compiled"
+        return "reference" if k.reference_ready.is_set() else None
+
+    def _pipeline_for_frame(self) -> PosePipeline | None:
+        """The pipeline for the next frame (module docstring), switched to the compiled
+        implementation when the kernels have become ready; None: no pipeline yet."""
+        wanted = self._live_implementation()
+        if wanted is not None and wanted != self._pipeline.implementation:
+            self._pipeline = PosePipeline(self.camera.model, self._pipeline.catalog,
+                                          self._config, implementation=wanted)  # fmt: skip
+            log.info("live poses now from the %s pipeline", wanted)
+        return None if wanted is None else self._pipeline
+
     def history(self, n: int) -> list[LiveSample]:
         """The last ``n`` results, oldest first, without their images."""
         items = list(self._history)
@@ -192,7 +244,8 @@ class AcquisitionService:
 
     def set_catalog(self, name: str, catalog: Catalog) -> Future:
         def swap() -> None:
-            self._pipeline = PosePipeline(self.camera.model, catalog, self._config)
+            self._pipeline = PosePipeline(self.camera.model, catalog, self._config,
+                                          implementation=self._pipeline.implementation)  # fmt: skip
             self._filter.reset()  # another target: its motion starts again
             self._catalog_name = name
 
@@ -231,10 +284,11 @@ class AcquisitionService:
             if frame.meta.get("discontinuity"):
                 self._pipeline.reset()
                 self._filter.reset()
-            measured = self.kernels is None or self.kernels.ready.is_set()
+            pipeline = self._pipeline_for_frame()
+            measured = pipeline is not None
             try:
-                if measured:
-                    result = self._pipeline.process(frame.gray, frame.distance_mm, frame.time_s)
+                if pipeline is not None:
+                    result = pipeline.process(frame.gray, frame.distance_mm, frame.time_s)
                 else:
                     _check_shapes(frame, self.camera.model.shape)  # no kernel call yet
                     result = PoseResult(False, COMPILING_REASON, frame.time_s)
@@ -249,6 +303,7 @@ class AcquisitionService:
             state = self._relative_state(result, frame.time_s) if measured else None
             sample = LiveSample(
                 frame, result, self._catalog_name, captured, time.time(), measured=measured,
+                implementation=pipeline.implementation if pipeline is not None else None,
                 reference=self.reference, state=state,
             )  # fmt: skip
             self._latest = sample

@@ -16,7 +16,8 @@ router = APIRouter(prefix="/api", tags=["status"])
 @router.get("/health")
 def get_health(state: StateDep) -> HealthPublic:
     """Always answers (no auth): overall status, the state of each device and of the
-    pipeline's compiled kernels."""
+    pipeline (its compiled kernels, and which implementation gives the live poses:
+    the reference one while the kernels compile)."""
     db = "ok" if database_answers(state.engine) else "error"
     cam, mot = camera_state(state), motion_state(state)
     healthy = db == "ok" and cam.state in ("ok", "starting") and mot.state in ("ok", "absent")

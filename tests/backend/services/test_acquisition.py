@@ -1,20 +1,28 @@
-"""The acquisition loop with a scripted camera: results, history, degradation, commands."""
+"""The acquisition loop with a scripted camera: results, history, degradation, commands,
+and the reference implementation's poses while the kernels compile."""
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
+from collections import Counter
 
 import numpy as np
 import pytest
 
 from backend.drivers.base import CameraFrame, CameraSettings
+from backend.services import kernel_warmup
 from backend.services.acquisition import AcquisitionService, frame_point_cloud_mm
 from backend.services.hub import LiveHub
+from backend.services.kernel_warmup import COMPILING_REASON, KernelWarmup
 from tests.backend.conftest import wait_for
 from tests.conftest import facing_pose, render
+from tofpose.arithmetic import COMPILED
 from tofpose.camera import CameraModel
 from tofpose.catalog import paper_target
+from tofpose.config import PipelineConfig, TrackingConfig
+from tofpose.geometry import rotation_angle_deg
 
 
 class ScriptedCamera:
@@ -195,3 +203,130 @@ def test_the_live_loop_gives_the_targets_angular_rate(rate_deg_s):
         assert np.all(sigma < 4.0)
     mean = np.mean([st.angular_rate_deg_s for st in late], axis=0)
     assert np.all(np.abs(mean - truth) < 0.15 * rate_deg_s + 0.5), mean
+
+
+@pytest.fixture
+def compiled_calls():
+    """Counts the calls of every function of the compiled arithmetic
+    (``tofpose.arithmetic.COMPILED``: what a compiled pipeline runs, each kernel), by
+    field; restored afterwards."""
+    calls: Counter[str] = Counter()
+    saved = dataclasses.asdict(COMPILED)
+
+    def counted(name, fn):
+        def call(*args, **kwargs):
+            calls[name] += 1
+            return fn(*args, **kwargs)
+
+        return call
+
+    for name, fn in saved.items():
+        if name != "name":
+            object.__setattr__(COMPILED, name, counted(name, fn))
+    try:
+        yield calls
+    finally:
+        for name, fn in saved.items():
+            object.__setattr__(COMPILED, name, fn)
+
+
+def gated_warm_up(monkeypatch) -> tuple[KernelWarmup, threading.Event, threading.Event]:
+    """A ``KernelWarmup`` whose two stages (the reference pipeline's kernels, then all)
+    each wait for a gate the test opens (numba's cache is warm in the suite)."""
+    gates = threading.Event(), threading.Event()
+    for name, gate in zip(("warm_up_reference", "warm_up"), gates, strict=True):
+        monkeypatch.setattr(kernel_warmup, name, lambda gate=gate: float(gate.wait(30.0)))
+    kernels = KernelWarmup()
+    kernels.start()
+    return kernels, *gates
+
+
+def assert_pose_near_truth(sample, T) -> None:
+    """The sample's pose is that of the rendered frame (1.5 m, 8 reflectors)."""
+    r = sample.result
+    assert r.ok and r.n_matched == 8, r.reason
+    np.testing.assert_allclose(r.t_mm, T.t_mm, atol=3.0)
+    assert rotation_angle_deg(r.R, T.R) < 0.2
+
+
+def test_the_reference_pipeline_measures_while_the_kernels_compile(monkeypatch, compiled_calls):
+    """Before the warm-up's first stage, frames stream without a pose; then the reference
+    implementation gives them (no compiled function called) until the kernels are ready;
+    then the compiled one, from the very next frame: every measured frame has a pose,
+    the first compiled one a full acquisition, and the relative-state filter goes on."""
+    kernels, reference_gate, compiled_gate = gated_warm_up(monkeypatch)
+    cam = ScriptedCamera()
+    hub = LiveHub()
+    sub = hub.subscribe(maxsize=10_000)  # every frame, in order
+    config = PipelineConfig(tracking=TrackingConfig(enabled=True))  # as the server's
+    svc = AcquisitionService(cam, paper_target(), "paper-target", hub, timeout_s=0.05,
+                             backoff_s=(0.01, 0.04), pipeline_config=config,
+                             kernels=kernels)  # fmt: skip
+    assert svc.implementation is None
+    svc.start()
+    try:
+        wait_for(lambda: svc.frames_processed >= 3, what="frames before the first stage")
+        s = svc.latest
+        assert not s.measured and s.implementation is None
+        assert not s.result.ok and s.result.reason == COMPILING_REASON
+        reference_gate.set()
+        wait_for(lambda: svc.implementation == "reference", what="a reference pose")
+        n = svc.frames_processed
+        wait_for(lambda: svc.frames_processed >= n + 5, what="5 reference poses")
+        assert kernels.state == "compiling"
+        s = svc.latest
+        assert s.measured and s.implementation == "reference"
+        assert_pose_near_truth(s, cam.T)
+        assert sum(compiled_calls.values()) == 0, compiled_calls
+        compiled_gate.set()
+        wait_for(lambda: svc.implementation == "compiled", what="a compiled pose")
+        n = svc.frames_processed
+        wait_for(lambda: svc.frames_processed >= n + 3, what="3 compiled poses")
+    finally:
+        svc.stop()
+    samples = []
+    while (s := sub.get(0.0)) is not None:
+        samples.append(s)
+    kinds = [s.implementation for s in samples]
+    first_ref, first_compiled = kinds.index("reference"), kinds.index("compiled")
+    assert set(kinds[:first_ref]) == {None}
+    assert set(kinds[first_ref:first_compiled]) == {"reference"}
+    assert set(kinds[first_compiled:]) == {"compiled"}
+    assert sum(compiled_calls.values()) > 0 and compiled_calls["frame_levels"] > 0
+    measured = samples[first_ref:]
+    assert all(s.measured and s.result.ok for s in measured)  # no frame without a pose
+    assert_pose_near_truth(samples[first_compiled - 1], cam.T)
+    assert_pose_near_truth(samples[first_compiled], cam.T)
+    # the reference pipeline tracked; the compiled one starts with a fresh history: a
+    # full acquisition, then tracking from its pose
+    assert [s.result.mode for s in samples[first_compiled : first_compiled + 2]] == [
+        "acquisition", "tracking",
+    ]  # fmt: skip
+    assert "tracking" in {s.result.mode for s in samples[first_ref:first_compiled]}
+    # the filter went on across the switch: initialised once, at the first reference pose
+    statuses = [s.state.status for s in measured]
+    assert statuses[0] == "initialised" and "initialised" not in statuses[1:]
+
+
+def test_a_failed_warm_up_keeps_the_reference_pipeline(monkeypatch, compiled_calls):
+    """A warm-up that fails after its first stage leaves the loop on the reference
+    implementation (compiling in the loop's thread would stop it for a minute)."""
+
+    def failing() -> float:
+        raise RuntimeError("no LLVM today")
+
+    monkeypatch.setattr(kernel_warmup, "warm_up", failing)
+    kernels = KernelWarmup()
+    kernels.run()
+    assert kernels.state == "failed" and "no LLVM today" in kernels.error
+    cam = ScriptedCamera()
+    svc = AcquisitionService(cam, paper_target(), "paper-target", LiveHub(), timeout_s=0.05,
+                             backoff_s=(0.01, 0.04), kernels=kernels)  # fmt: skip
+    svc.start()
+    try:
+        wait_for(lambda: svc.frames_processed >= 3, what="3 poses")
+    finally:
+        svc.stop()
+    assert svc.implementation == "reference"
+    assert_pose_near_truth(svc.latest, cam.T)
+    assert sum(compiled_calls.values()) == 0
