@@ -40,7 +40,7 @@ from backend.drivers.base import CameraSettings
 from backend.services.acquisition import LiveSample
 from backend.services.campaign_repository import CampaignView
 from backend.services.campaign_states import FINISHED, CampaignState, transition_table
-from backend.services.kernel_warmup import COMPILING_REASON
+from backend.services.kernel_warmup import COMPILING_REASON, REFERENCE_DETAIL
 from backend.services.motion import MotionDeviceError
 from backend.state import AppState
 from tofpose.extraction import REJECT_REASONS
@@ -75,14 +75,20 @@ def motion_state(state: AppState) -> DeviceStatePublic:
 
 def pipeline_state(state: AppState) -> PipelineStatePublic:
     """Whether the live pipeline's compiled kernels are ready (backend/services/
-    kernel_warmup.py): frames stream while they compile, poses follow."""
-    kernels = state.acquisition.kernels
+    kernel_warmup.py) and which implementation measures the live frames: the reference
+    one while they compile, the compiled one after (backend/services/acquisition.py)."""
+    acq = state.acquisition
+    kernels, implementation = acq.kernels, acq.implementation
     if kernels is None:
-        return PipelineStatePublic(state="ready", seconds=0.0)
-    detail = {"compiling": COMPILING_REASON, "ready": "", "failed": kernels.error}[kernels.state]
-    return PipelineStatePublic(
-        state=kernels.state, seconds=round(kernels.elapsed_s, 1), detail=detail
-    )
+        return PipelineStatePublic(state="ready", implementation=implementation, seconds=0.0)
+    if kernels.state == "compiling":
+        detail = COMPILING_REASON if implementation is None else REFERENCE_DETAIL
+    elif kernels.state == "failed":
+        detail = f"{kernels.error}; poses from the reference implementation (NumPy/SciPy)"
+    else:
+        detail = ""
+    return PipelineStatePublic(state=kernels.state, implementation=implementation,
+                               seconds=round(kernels.elapsed_s, 1), detail=detail)  # fmt: skip
 
 
 def motion_public(state: AppState) -> MotionPublic:

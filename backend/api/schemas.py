@@ -58,10 +58,19 @@ class DeviceStatePublic(BaseModel):
 
 class PipelineStatePublic(BaseModel):
     """The live pipeline's compiled kernels: compiled in the background at server start
-    (about 1-2 min after an install, seconds from numba's cache); frames stream
-    meanwhile, poses follow when they are ready."""
+    (about 1-2 min after an install, seconds from numba's cache); meanwhile the poses come
+    from the pipeline's reference implementation (NumPy/SciPy, the same poses to ~0.01
+    mm), then from the compiled one."""
 
-    state: Literal["compiling", "ready", "failed"]
+    state: Literal["compiling", "ready", "failed"] = Field(
+        description="the kernels' warm-up: compiling, ready, or failed (the poses then "
+        "stay with the reference implementation)"
+    )
+    implementation: Literal["reference", "compiled"] | None = Field(
+        description="which implementation of the pipeline measures the live frames: "
+        "'reference' while the kernels compile, 'compiled' once they are ready; null in "
+        "the warm-up's first second, when frames stream without a pose"
+    )
     seconds: float = Field(description="since the warm-up started, or how long it took")
     detail: str = ""
 
