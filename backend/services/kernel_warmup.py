@@ -27,8 +27,8 @@ COMPILING_REASON = (
 )
 #: what ``pipeline.detail`` says while the reference implementation gives the poses
 REFERENCE_DETAIL = (
-    "pipeline kernels compiling (first start after an install): poses from the reference "
-    "implementation (NumPy/SciPy) meanwhile"
+    "poses from the reference implementation (NumPy/SciPy) while the kernels compile "
+    "(first start after an install: about 2 min)"
 )
 
 

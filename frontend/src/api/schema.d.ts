@@ -465,7 +465,8 @@ export interface paths {
         /**
          * Get Health
          * @description Always answers (no auth): overall status, the state of each device and of the
-         *     pipeline's compiled kernels.
+         *     pipeline (its compiled kernels, and which implementation gives the live poses:
+         *     the reference one while the kernels compile).
          */
         get: operations["getHealth"];
         put?: never;
@@ -720,6 +721,126 @@ export interface paths {
         get: operations["getLatestPose"];
         put?: never;
         post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/recordings": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * List Recordings
+         * @description Every recording, newest first, with the free space left on the disk they go to.
+         */
+        get: operations["listRecordings"];
+        put?: never;
+        /**
+         * Start Recording
+         * @description Start recording the live stream now: every frame with its pose and covariance, the
+         *     relative state, the references, the turntable's encoders and targets and a UTC
+         *     stamp, into one HDF5 recording (docs/architecture.md §7 plus the groups listed in
+         *     docs/server.md). 507 below the free-space floor; 409 while the most recordings that
+         *     may run at once (``max_active`` of the list) already run.
+         */
+        post: operations["startRecording"];
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/recordings/{recording_id}": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * Get Recording
+         * @description One recording: while it records, its frames, size and time so far.
+         */
+        get: operations["getRecording"];
+        put?: never;
+        post?: never;
+        /**
+         * Delete Recording
+         * @description Delete a recording's files (HDF5 and its MCAP) and entry; admin scope. 409 while it
+         *     records (stop it first).
+         */
+        delete: operations["deleteRecording"];
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/recordings/{recording_id}/recording.h5": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * Get Recording H5
+         * @description The recording (HDF5): readable with ``tofpose.recording.open_recording`` and every
+         *     ``tofpose`` command that takes a recording. 409 while it records.
+         */
+        get: operations["getRecordingH5"];
+        put?: never;
+        post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/recordings/{recording_id}/recording.mcap": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * Get Recording Mcap
+         * @description The recording as MCAP for Foxglove and Rerun (docs/interop.md), made as a
+         *     campaign's is: frames, references and an estimate of each frame by the pipeline
+         *     re-run over the recording. Made on the first request and kept, on the server's
+         *     export workers (503 with Retry-After while they and their queue are full). 409 while
+         *     it records.
+         */
+        get: operations["getRecordingMcap"];
+        put?: never;
+        post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/recordings/{recording_id}/stop": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        get?: never;
+        put?: never;
+        /**
+         * Stop Recording
+         * @description Stop a recording: the frames the live stream delivered until now are written, the
+         *     file is closed, and the answer is its final entry. A stopped recording is answered as
+         *     it is (stopping twice changes nothing).
+         */
+        post: operations["stopRecording"];
         delete?: never;
         options?: never;
         head?: never;
@@ -1803,8 +1924,9 @@ export interface components {
         /**
          * PipelineStatePublic
          * @description The live pipeline's compiled kernels: compiled in the background at server start
-         *     (about 1-2 min after an install, seconds from numba's cache); frames stream
-         *     meanwhile, poses follow when they are ready.
+         *     (about 1-2 min after an install, seconds from numba's cache); meanwhile the poses come
+         *     from the pipeline's reference implementation (NumPy/SciPy, the same poses to ~0.01
+         *     mm), then from the compiled one.
          */
         PipelineStatePublic: {
             /**
@@ -1813,12 +1935,18 @@ export interface components {
              */
             detail: string;
             /**
+             * Implementation
+             * @description which implementation of the pipeline measures the live frames: 'reference' while the kernels compile, 'compiled' once they are ready; null in the warm-up's first second, when frames stream without a pose
+             */
+            implementation: ("reference" | "compiled") | null;
+            /**
              * Seconds
              * @description since the warm-up started, or how long it took
              */
             seconds: number;
             /**
              * State
+             * @description the kernels' warm-up: compiling, ready, or failed (the poses then stay with the reference implementation)
              * @enum {string}
              */
             state: "compiling" | "ready" | "failed";
@@ -2072,6 +2200,96 @@ export interface components {
             roll_deg?: number | null;
             /** Yaw Deg */
             yaw_deg?: number | null;
+        };
+        /**
+         * RecordingCreate
+         * @description A recording to start now.
+         */
+        RecordingCreate: {
+            /**
+             * Duration S
+             * @description stop after this many seconds; null (the default): until stopped, or until the disk's free space falls below the floor
+             */
+            duration_s?: number | null;
+            /**
+             * Name
+             * @description what it is for (need not be unique)
+             */
+            name: string;
+        };
+        /**
+         * RecordingPublic
+         * @description A recording: while it records, ``frames`` and ``size_bytes`` grow (the size is
+         *     read about once a second); once stopped, ``stop_reason`` and ``stop_detail`` say why.
+         */
+        RecordingPublic: {
+            /**
+             * Dropped Frames
+             * @description frames the live stream delivered faster than the disk took them: not in the file
+             */
+            dropped_frames: number;
+            /**
+             * Duration S
+             * @description the duration asked for; null: until stopped
+             */
+            duration_s: number | null;
+            /**
+             * Elapsed S
+             * @description from start to stop (or to now, while it records)
+             */
+            elapsed_s: number;
+            /** Frames */
+            frames: number;
+            /** Id */
+            id: number;
+            /** Name */
+            name: string;
+            /** Size Bytes */
+            size_bytes: number;
+            /**
+             * Started Utc
+             * Format: date-time
+             */
+            started_utc: string;
+            state: components["schemas"]["RecordingState"];
+            /** Stop Detail */
+            stop_detail: string;
+            stop_reason: components["schemas"]["StopReason"] | null;
+            /** Stopped Utc */
+            stopped_utc: string | null;
+        };
+        /**
+         * RecordingState
+         * @enum {string}
+         */
+        RecordingState: "recording" | "stopped";
+        /**
+         * RecordingsPublic
+         * @description Every recording (newest first) and the disk they are written to.
+         */
+        RecordingsPublic: {
+            /**
+             * Free Mb
+             * @description free space on the data directory's disk, MB (10^6 B)
+             */
+            free_mb: number;
+            /**
+             * Max Active
+             * @description recordings that may run at once
+             */
+            max_active: number;
+            /**
+             * Min Free Mb
+             * @description below this a recording is refused or stops (TOFPOSE_RECORDING_MIN_FREE_MB)
+             */
+            min_free_mb: number;
+            /** Recordings */
+            recordings: components["schemas"]["RecordingPublic"][];
+            /**
+             * Used Mb
+             * @description what the recordings (HDF5 and MCAP files) take
+             */
+            used_mb: number;
         };
         /**
          * Reference
@@ -2411,6 +2629,12 @@ export interface components {
             /** Yaw Deg */
             yaw_deg?: number | null;
         };
+        /**
+         * StopReason
+         * @description Why a recording stopped.
+         * @enum {string}
+         */
+        StopReason: "requested" | "duration" | "disk_full" | "error" | "shutdown" | "interrupted";
         /**
          * StudyCreate
          * @description A study spec (``tofpose study --example`` prints one).
@@ -5152,6 +5376,503 @@ export interface operations {
                 };
                 content: {
                     "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+        };
+    };
+    listRecordings: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["RecordingsPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+        };
+    };
+    startRecording: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody: {
+            content: {
+                "application/json": components["schemas"]["RecordingCreate"];
+            };
+        };
+        responses: {
+            /** @description Successful Response */
+            201: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["RecordingPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Conflicts with stored state (a name already taken, or the resource is busy) */
+            409: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The request body is larger than the server's limit */
+            413: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+            /** @description Less free space on the data directory's disk than TOFPOSE_RECORDING_MIN_FREE_MB: nothing was started */
+            507: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+        };
+    };
+    getRecording: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                recording_id: number;
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["RecordingPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description No such resource */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    deleteRecording: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                recording_id: number;
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            204: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content?: never;
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description No such resource */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Conflicts with stored state (a name already taken, or the resource is busy) */
+            409: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    getRecordingH5: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                recording_id: number;
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description the recording */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/x-hdf5": unknown;
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description No such resource */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Conflicts with stored state (a name already taken, or the resource is busy) */
+            409: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    getRecordingMcap: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                recording_id: number;
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description the recording */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/x-mcap": unknown;
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description No such resource */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Conflicts with stored state (a name already taken, or the resource is busy) */
+            409: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+            /** @description busy with other reports and exports: try again (Retry-After) */
+            503: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+        };
+    };
+    stopRecording: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                recording_id: number;
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["RecordingPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
+            403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description No such resource */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description The request body is larger than the server's limit */
+            413: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Validation Error */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HTTPValidationError"];
                 };
             };
         };

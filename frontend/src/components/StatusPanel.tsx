@@ -1,5 +1,6 @@
 // Device status (state, model, firmware, address and link, delivered frame rate, last error),
-// whether the pipeline's compiled kernels are ready, and its per-stage timings of the latest frame.
+// whether the pipeline's compiled kernels are ready and which implementation gives the poses
+// meanwhile, and its per-stage timings of the latest frame.
 import { api, unwrap, type Pose, type Schemas } from "../api/client";
 import { usePolling } from "../polling";
 
@@ -12,6 +13,12 @@ function describe(d: Device): string {
   if (d.address) parts.push(`at ${d.address}`);
   if (d.link === "down") parts.push("(link down)");
   return parts.join(" ");
+}
+
+// Which implementation of the pipeline gives the live poses: the reference one (NumPy/SciPy)
+// while the compiled kernels compile on a first start, then the compiled one.
+function implementation(p: Schemas["PipelineStatePublic"]): string {
+  return p.implementation === null ? "no poses yet" : `${p.implementation} implementation`;
 }
 
 export function StatusPanel({ pose }: { pose: Pose | null }) {
@@ -28,9 +35,10 @@ export function StatusPanel({ pose }: { pose: Pose | null }) {
               <td data-testid="camera-device">{describe(dev.camera)}, catalog {dev.camera.catalog}</td></tr>
             <tr><th>motion</th><td data-testid="motion-state">{dev.motion.state}</td><td />
               <td data-testid="motion-device">{describe(dev.motion)}</td></tr>
-            <tr><th>pipeline</th><td data-testid="pipeline-state">{dev.pipeline.state}</td>
-              <td>{dev.pipeline.state === "compiling" ? `${dev.pipeline.seconds.toFixed(0)} s` : ""}</td>
-              <td class="small" data-testid="pipeline-detail">{dev.pipeline.state === "ready" ? "compiled kernels" : dev.pipeline.detail}</td></tr>
+            <tr><th>pipeline</th><td data-testid="pipeline-state">{dev.pipeline.state}
+                {dev.pipeline.state === "compiling" ? ` ${dev.pipeline.seconds.toFixed(0)} s` : ""}</td>
+              <td data-testid="pipeline-implementation">{implementation(dev.pipeline)}</td>
+              <td class="small" data-testid="pipeline-detail">{dev.pipeline.detail}</td></tr>
             {[dev.camera, dev.motion].filter((d) => d.last_error).map((d) => (
               <tr key={d.driver}><td colSpan={4} class="error">{d.driver}: {d.last_error}</td></tr>
             ))}
