@@ -8,6 +8,7 @@ import { LiveView } from "./components/LiveView";
 import { MotionPanel } from "./components/MotionPanel";
 import { NewCampaign } from "./components/NewCampaign";
 import { PosePanel } from "./components/PosePanel";
+import { Recorder } from "./components/Recorder";
 import { ReferenceBar } from "./components/ReferenceBar";
 import { ScenePanel } from "./components/ScenePanel";
 import { StatusPanel } from "./components/StatusPanel";
@@ -71,6 +72,7 @@ function App() {
             <MotionPanel />
             <StatusPanel pose={live.pose} />
             <CameraPanel />
+            <Recorder />
           </div>
           <TimeSeries history={live.history} />
           <ScenePanel />
