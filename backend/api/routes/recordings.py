@@ -7,6 +7,7 @@ backend/services/recordings.py.
 
 from __future__ import annotations
 
+import pathlib
 import re
 from datetime import datetime
 from typing import Annotated, Any
@@ -108,7 +109,7 @@ def _download_name(info: RecordingInfo, suffix: str) -> str:
     return f"{slug}-{info.id}.{suffix}"
 
 
-def _file(service: RecordingService, recording_id: int) -> tuple[RecordingInfo, Any]:
+def _file(service: RecordingService, recording_id: int) -> tuple[RecordingInfo, pathlib.Path]:
     """(entry, HDF5 path) of a stopped recording: 404 unknown, 409 while it records."""
     try:
         return service.get(recording_id), service.file(recording_id)
