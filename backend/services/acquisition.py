@@ -21,8 +21,8 @@ A frame is read only when the loop is free: drivers pace their frames without a 
 (``backend.drivers.pacing.FramePacer``; a real camera is asked for each image), so a
 pipeline slower than the camera measures the newest frame each time and lowers the
 delivered frame rate while it is slower; nothing queues. The reference pipeline takes
-~60 ms a frame on this project's 2-core machine, ~130 ms (median) while the other core
-compiles: about 7 frames/s instead of 10 during the compile.
+~60 ms a frame on 2 cores, ~85 ms (median; 95th percentile ~190 ms) while the other core
+compiles (``bench/first_run.py``): the camera delivers ~7.6 of its 10 frames/s meanwhile.
 """
 
 from __future__ import annotations
