@@ -186,6 +186,7 @@ def report(opts: dict) -> int:
 
     from backend.db.engine import make_engine, make_session_factory
     from backend.db.models import CampaignRow
+    from backend.services.calibrations import get_calibration
     from backend.services.reports import ReportError, build, to_csv, to_html, to_json, to_pdf
 
     try:
@@ -195,7 +196,14 @@ def report(opts: dict) -> int:
                 print(f"tofpose report: no campaign with id {opts['campaign_id']} in "
                       f"{opts['db']}", file=sys.stderr)  # fmt: skip
                 return 2
-            rep, rows = build(session, opts["campaign_id"], opts["reference"])
+            cal = None
+            if (cal_id := opts.get("calibration")) is not None:
+                cal = get_calibration(session, cal_id)
+                if cal is None:
+                    print(f"tofpose report: no calibration with id {cal_id} in {opts['db']} "
+                          "(GET /api/calibrations lists them)", file=sys.stderr)  # fmt: skip
+                    return 2
+            rep, rows = build(session, opts["campaign_id"], opts["reference"], cal)
     except ReportError as exc:
         print(f"tofpose report: {exc}", file=sys.stderr)
         return 2
@@ -214,8 +222,10 @@ def report(opts: dict) -> int:
     mode = "wb" if isinstance(body, bytes) else "w"
     with open(opts["out"], mode) as fh:
         fh.write(body)
-    print(f"campaign {opts['campaign_id']}: {rep['n_frames']} frames, reference "
-          f"{opts['reference']} -> {opts['out']}")  # fmt: skip
+    ref = (f"calibration {opts['calibration']}" if opts.get("calibration") is not None
+           else opts["reference"])  # fmt: skip
+    print(f"campaign {opts['campaign_id']}: {rep['n_frames']} frames, reference {ref} -> "
+          f"{opts['out']}")  # fmt: skip
     return 0
 
 

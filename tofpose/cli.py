@@ -438,6 +438,9 @@ def _add_server_commands(sub) -> None:
     p.add_argument("--db", required=True, help="SQLAlchemy URL, e.g. sqlite:///data/tofpose.db")
     p.add_argument("--format", choices=("html", "pdf", "csv", "json"), default="html")
     p.add_argument("--reference", choices=("lab", "exact"), default="lab")
+    p.add_argument("--calibration", type=int, metavar="ID",
+                   help="reference = encoders + this stored bench calibration (as the API's "
+                        "?calibration=ID)")  # fmt: skip
     p.add_argument("--out", required=True, help="output file")
     p = sub.add_parser("keys", help="API keys of the server's database: create, list, revoke")
     p.add_argument("--data-dir", help="data directory (default ./data)")

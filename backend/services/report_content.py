@@ -125,9 +125,19 @@ def reference_label(report: dict) -> str:
     """The reference the errors are taken against, in words."""
     cal = report.get("calibration")
     if cal:
-        return f"calibrated reference (encoders + calibration {cal['id']} '{cal['name']}')"
-    labels = {"lab": "lab reference (encoders + nominal geometry)",
-              "exact": "exact reference (the rendered pose, simulator only)"}  # fmt: skip
+        own = ""
+        if "mount_sigma_deg" in cal:  # reports made before the sigmas were carried lack them
+            own = (f"; the reference's own 1-sigma: camera mount {cal['mount_sigma_deg']:.3f} "
+                   f"deg / {cal['mount_sigma_mm']:.2f} mm, target placement "
+                   f"{cal['placement_sigma_deg']:.3f} deg / {cal['placement_sigma_mm']:.2f} mm, "
+                   "part of every error below")  # fmt: skip
+        return f"calibrated reference (encoders + calibration {cal['id']} '{cal['name']}'{own})"
+    labels = {
+        "lab": "lab reference (encoders + nominal geometry; uncalibrated: the errors include "
+        "the bench's own camera-mount and target-placement errors, which a calibration "
+        "campaign measures and ?calibration=ID / --calibration ID removes)",
+        "exact": "exact reference (the rendered pose, simulator only)",
+    }
     return labels.get(report["reference"], f"{report['reference']} reference")
 
 

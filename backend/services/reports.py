@@ -153,15 +153,23 @@ def build(
             "finished_at": row.finished_at.isoformat() if row.finished_at else None,
         },
         "generated_at": datetime.now(UTC).isoformat(),
-        "calibration": (
-            {"id": calibration.id, "name": calibration.name} if calibration is not None else None
-        ),
+        "calibration": calibration_summary(calibration) if calibration is not None else None,
         **result,
     }  # fmt: skip
     _add_commanded(report["setpoints"], rows)
     report["dynamic"] = analyse_dynamic(rows, reference)
     report["findings"] = rc.findings(report) + dynamic_findings(report)
     return jsonable(report), rows
+
+
+def calibration_summary(calibration: CalibrationRow) -> dict:
+    """The calibration a report's reference uses, with its own 1-sigma: the largest
+    per-axis sigma of the camera mount and of the target placement (deg, mm), the
+    reference's uncertainty that the errors of the report include."""
+    s = [float(v) for v in calibration.sigmas]
+    return {"id": calibration.id, "name": calibration.name,
+            "mount_sigma_deg": max(s[0:3]), "mount_sigma_mm": max(s[3:6]),
+            "placement_sigma_deg": max(s[6:9]), "placement_sigma_mm": max(s[9:12])}  # fmt: skip
 
 
 def _add_commanded(setpoints: list[dict], rows: list[dict]) -> None:
