@@ -90,16 +90,24 @@ def body_summary(body: bytes, size: int | None = None) -> str:
         return f"<{size} bytes, not shown>"
     try:
         doc = json.loads(body)
-    except ValueError:
+        text = json.dumps(_redacted(doc), separators=(",", ":"), ensure_ascii=False)
+    except (ValueError, RecursionError):  # not JSON, or nested deeper than Python recurses
         return f"<{size} bytes, not JSON>"
-    text = json.dumps(_redacted(doc), separators=(",", ":"), ensure_ascii=False)
+    text = _text_safe(text)
     return text if len(text) <= SUMMARY_CHARS else text[: SUMMARY_CHARS - 3] + "..."
+
+
+def _text_safe(text: str) -> str:
+    """Without NUL characters, which PostgreSQL's text type refuses (one such request
+    would otherwise fail its whole batch)."""
+    return text.replace("\x00", "\\u0000")
 
 
 def _row(entry: AuditEntry) -> AuditRow:
     return AuditRow(
-        at=entry.at, key_name=entry.key_name, client=entry.client[:64], method=entry.method[:8],
-        path=entry.path, body=body_summary(entry.body, entry.body_size), status=entry.status,
+        at=entry.at, key_name=entry.key_name, client=_text_safe(entry.client[:64]),
+        method=_text_safe(entry.method[:8]), path=_text_safe(entry.path),
+        body=body_summary(entry.body, entry.body_size), status=entry.status,
     )  # fmt: skip
 
 
@@ -174,14 +182,24 @@ class AuditService:
                 return
 
     def _write(self, entries: list[AuditEntry]) -> None:
+        """Store a batch; when the batch fails, each entry alone, so that one entry the
+        database refuses costs only itself."""
         try:
-            with self._sessions() as session:
-                session.add_all([_row(e) for e in entries])
-                session.commit()
-            self.written += len(entries)
-        except Exception as exc:  # noqa: BLE001 - the audit must not take the server down
-            self.dropped += len(entries)
-            log.error("%d audit entries not stored: %s", len(entries), exc)
+            self._store(entries)
+        except Exception:  # noqa: BLE001 - the audit must not take the server down
+            for entry in entries:
+                try:
+                    self._store([entry])
+                except Exception as exc:  # noqa: BLE001
+                    self.dropped += 1
+                    log.error("an audit entry (%s %s) was not stored: %s", entry.method,
+                              entry.path[:100], exc)  # fmt: skip
+
+    def _store(self, entries: list[AuditEntry]) -> None:
+        with self._sessions() as session:
+            session.add_all([_row(e) for e in entries])
+            session.commit()
+        self.written += len(entries)
 
     def entries(self, limit: int = 100, before_id: int | None = None) -> list[AuditRecord]:
         """Stored entries, newest first: at most ``limit``, with ids below ``before_id``

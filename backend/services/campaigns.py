@@ -149,11 +149,13 @@ class CampaignService:
         return self.motion.owner
 
     def progress(self, campaign_id: int | None = None) -> dict | None:
-        with self._lock:
-            p = self._progress
-            if p is None or (campaign_id is not None and p.campaign_id != campaign_id):
-                return None
-            return p.as_dict()
+        """The running (or last) campaign's progress. Takes no lock: the live WebSocket
+        reads it on the event loop, and the runner holds ``_lock`` across database writes
+        and the motion claim; a field read mid-update is at most one frame stale."""
+        p = self._progress
+        if p is None or (campaign_id is not None and p.campaign_id != campaign_id):
+            return None
+        return p.as_dict()
 
     def recording_path(self, campaign_id: int) -> Path:
         if self.recordings_dir is None:
@@ -164,6 +166,13 @@ class CampaignService:
     def start_campaign(
         self, campaign_id: int, at: datetime | None = None, *, queue: bool = False
     ) -> None:
+        """Queue campaign ``campaign_id`` (now, at ``at``, or behind the running one with
+        ``queue``); refused while a STOP is latched (release it first)."""
+        if self.motion.present and (latched := self.motion.stop_latched_at) is not None:
+            raise CampaignConflictError(
+                f"STOP was pressed at {latched:%H:%M:%S} UTC and holds the motion system: "
+                "release it (POST /api/motion/release) before starting a campaign"
+            )
         owner = self.owner
         if at is None and not queue and owner is not None and owner[0] != campaign_id:
             raise CampaignConflictError(
@@ -176,9 +185,10 @@ class CampaignService:
     def resume(self, campaign_id: int) -> None:
         """A person resumes the campaign: it is queued again, and a latched STOP is
         released (the person has decided the table may move)."""
-        self.repository.apply(campaign_id, CampaignCommand.RESUME)
-        if self.motion.present:
-            self.motion.release_stop()
+        with self._lock:  # the scheduler's start (``_begin``) sees both or neither
+            self.repository.apply(campaign_id, CampaignCommand.RESUME)
+            if self.motion.present:
+                self.motion.release_stop()
         self._wake.set()
 
     def pause(self, campaign_id: int, reason: str = "paused by request") -> None:

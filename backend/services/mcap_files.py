@@ -29,9 +29,28 @@ def _stamp(path: Path) -> dict[str, int]:
     return {"size": st.st_size, "mtime_ns": st.st_mtime_ns}
 
 
-def recording_mcap(recording_path: Path) -> Path:
+class ExportSpaceError(OSError):
+    """Too little free disk space to export: the sentence says how much is needed."""
+
+
+def _check_space(recording_path: Path, min_free_mb: float) -> None:
+    """The export copies the recording and writes an MCAP of about its size: refuse
+    (``ExportSpaceError``) unless twice its size plus ``min_free_mb`` are free, so that an
+    export never fills the disk the database and recordings share."""
+    need_mb = 2 * recording_path.stat().st_size / 2**20 + min_free_mb
+    free_mb = shutil.disk_usage(recording_path.parent).free / 2**20
+    if free_mb < need_mb:
+        raise ExportSpaceError(
+            f"not enough free disk space to export {recording_path.name} to MCAP: "
+            f"{free_mb:.0f} MB free, {need_mb:.0f} MB needed (twice the recording, plus "
+            f"TOFPOSE_RECORDING_MIN_FREE_MB = {min_free_mb:g})"
+        )
+
+
+def recording_mcap(recording_path: Path, min_free_mb: float = 0.0) -> Path:
     """The MCAP of ``recording_path`` (``.../campaign-N.h5`` -> ``.../campaign-N.mcap``),
-    exported now unless one made from the recording as it is now exists."""
+    exported now unless one made from the recording as it is now exists; a new export
+    needs twice the recording's size plus ``min_free_mb`` free (``ExportSpaceError``)."""
     from tofpose.interop.mcap_export import export_mcap  # lazy: loads foxglove-sdk
     from tofpose.pipeline import PosePipeline
     from tofpose.recording import open_recording
@@ -42,6 +61,7 @@ def recording_mcap(recording_path: Path) -> Path:
         stamp = _stamp(recording_path)
         if out.exists() and note.exists() and json.loads(note.read_text()) == stamp:
             return out
+        _check_space(recording_path, min_free_mb)
         copy = recording_path.with_suffix(".export.h5")
         try:
             shutil.copyfile(recording_path, copy)

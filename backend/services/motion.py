@@ -52,9 +52,14 @@ log = logging.getLogger(__name__)
 T = TypeVar("T")
 
 STOP_LANE = ThreadPoolExecutor(max_workers=2, thread_name_prefix="motion-stop")
-"""The threads STOP runs on (its driver command, its listeners and its answer's status
-read): nothing else is queued here, so exports, reports and readers that fill the web
-server's worker threads cannot delay a STOP."""
+"""The threads STOP's driver command runs on, and nothing else: exports, reports,
+readers, the listeners and status reads cannot delay a STOP."""
+
+STOP_AFTERMATH = ThreadPoolExecutor(max_workers=2, thread_name_prefix="motion-stop-after")
+"""What follows a STOP: telling the listeners (the campaign service pauses its campaign)
+and the status read STOP answers with; apart from ``STOP_LANE`` so that a listener
+waiting on a lock or a controller that no longer answers its status never holds a
+later STOP's driver command back."""
 
 
 class MotionAbsentError(RuntimeError):
@@ -382,10 +387,16 @@ class MotionService:
                     listener()
 
     async def stop_in_lane(self) -> None:
-        """A person's STOP from the event loop: latched at once, then the driver's stop
-        and the listeners on ``STOP_LANE`` (never behind the web server's threads)."""
+        """A person's STOP from the event loop: latched at once, then the driver's stop on
+        ``STOP_LANE`` (never behind the web server's threads), then the listeners on
+        ``STOP_AFTERMATH`` (not waited for: a listener that waits on a lock does not hold
+        the answer or a later STOP back)."""
         self.latch_stop()
-        await self.in_stop_lane(self._stop_latched_driver)
+        loop = asyncio.get_running_loop()
+        try:
+            await loop.run_in_executor(STOP_LANE, self._stop_latched_driver)
+        finally:
+            STOP_AFTERMATH.submit(self._tell_listeners)
 
     def _stop_latched_driver(self) -> None:
         driver = self.require()
@@ -394,20 +405,28 @@ class MotionService:
         except MotionDeviceError:
             log.exception("stop failed")
             raise
-        finally:
-            for listener in self._stop_listeners:
+
+    def _tell_listeners(self) -> None:
+        for listener in self._stop_listeners:
+            try:
                 listener()
+            except Exception:
+                log.exception("a STOP listener failed")
 
     @staticmethod
-    async def in_stop_lane(work: Callable[[], T]) -> T:
-        """Run ``work`` on ``STOP_LANE`` and wait for it (STOP's answer reads the status
-        there too)."""
-        return await asyncio.get_running_loop().run_in_executor(STOP_LANE, work)
+    async def after_stop(work: Callable[[], T]) -> T:
+        """Run ``work`` on ``STOP_AFTERMATH`` and wait for it (STOP's answer reads the
+        status there)."""
+        return await asyncio.get_running_loop().run_in_executor(STOP_AFTERMATH, work)
 
     def reset_faults(self) -> None:
-        """Acknowledge the controller's axis faults (real rate tables; docs/devices.md)."""
+        """Acknowledge the controller's axis faults (real rate tables; docs/devices.md): a
+        person's command like a move, through the command path (refused while a campaign
+        owns the table or a STOP is latched: clearing faults re-arms a halted table)."""
         driver = self.require()
         reset = getattr(driver, "reset_faults", None)
         if reset is None:
             raise MotionConflictError(f"the {driver.name!r} motion system has no faults to reset")
-        self._send("fault reset", "the motion system refused the fault reset", reset)
+        with self._commands:
+            self._check_caller(None)
+            self._send("fault reset", "the motion system refused the fault reset", reset)

@@ -27,7 +27,7 @@ from backend.services.acquisition import DeviceHealth, LiveSample
 from backend.services.campaign_states import CampaignState
 from backend.services.encoder_trace import EncoderTrace, EncoderTraceError
 from backend.services.hub import Subscription
-from backend.services.motion import MotionService
+from backend.services.motion import MotionDeviceError, MotionService
 from tofpose.sim.bench import LabGeometry
 
 log = logging.getLogger(__name__)
@@ -186,6 +186,10 @@ class SetPointCollector:
         try:
             self.motion.move(axes, by=self.owner)
         except Exception as exc:
+            if isinstance(exc, MotionDeviceError):
+                # a controller that takes a set-point axis by axis may have started some
+                # axes before it failed on another: stop the table before letting it go
+                self._stop_table(index)
             raise _paused(f"move to set-point {index} failed: {exc}") from exc
         try:
             self._settle(index)

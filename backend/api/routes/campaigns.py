@@ -42,13 +42,15 @@ from backend.services.campaign_requests import (
 )
 from backend.services.campaign_states import CampaignConflictError
 from backend.services.heavy_work import HeavyWorkBusyError
-from backend.services.mcap_files import recording_mcap
+from backend.services.mcap_files import ExportSpaceError, recording_mcap
 from backend.services.reports import ReportError, build, to_csv, to_html, to_json, to_pdf
 from backend.services.store import NameTakenError, find_catalog
 from backend.state import AppState
 
 router = APIRouter(prefix="/api/campaigns", tags=["campaigns"])
 IdParam = Annotated[int, Path(ge=1, le=2**31 - 1)]
+EXPORT_SPACE = {507: {**errors(503)[503], "description": "too little free disk space to export: "
+                     "twice the recording plus TOFPOSE_RECORDING_MIN_FREE_MB are needed"}}
 BUSY = {503: {**errors(503)[503],
               "description": "busy with other reports and exports: try again (Retry-After)"}}
 
@@ -170,7 +172,8 @@ def _command(state: AppState, campaign_id: int, fn) -> CampaignPublic:
 def start_campaign(
     campaign_id: IdParam, state: StateDep, body: CampaignStart | None = None
 ) -> CampaignPublic:
-    """Queue the campaign: it runs as soon as the motion system is free, or at ``at``."""
+    """Queue the campaign: it runs as soon as the motion system is free, or at ``at``.
+    409 while a STOP is latched (POST /api/motion/release first)."""
     body = body or CampaignStart()
     return _command(
         state, campaign_id,
@@ -188,7 +191,8 @@ def pause_campaign(campaign_id: IdParam, state: StateDep) -> CampaignPublic:
 @router.post("/{campaign_id}/resume", dependencies=[WriteAuth], responses=errors(404, 409))
 def resume_campaign(campaign_id: IdParam, state: StateDep) -> CampaignPublic:
     """Queue a paused or interrupted campaign again; it continues at its first set-point
-    not done."""
+    not done. A resume is a person deciding that the table may move: it releases a
+    latched STOP too."""
     return _command(state, campaign_id, lambda: state.campaigns.resume(campaign_id))
 
 
@@ -313,7 +317,7 @@ def get_campaign_recording(campaign_id: IdParam, state: StateDep):
     dependencies=[ReadAuth],
     response_class=FileResponse,
     responses={200: {"content": {"application/x-mcap": {}}, "description": "the recording"},
-               **errors(404, 409), **BUSY},
+               **errors(404, 409), **BUSY, **EXPORT_SPACE},
 )  # fmt: skip
 async def get_campaign_recording_mcap(campaign_id: IdParam, state: StateDep):
     """The campaign's raw recording as MCAP for Foxglove and Rerun (docs/interop.md): the
@@ -322,7 +326,13 @@ async def get_campaign_recording_mcap(campaign_id: IdParam, state: StateDep):
     measurement rows). Made on the first request (a long recording
     takes a while) and kept, on the server's export workers (503 with Retry-After while
     they and their queue are full). Only with ``record_raw``."""
-    path = finished_recording(state, campaign_id)
-    out = await _heavy(state, lambda: recording_mcap(path), f"the MCAP of campaign {campaign_id}")
+    def export():  # the recording's lookup reads the database: off the event loop too
+        return recording_mcap(finished_recording(state, campaign_id),
+                              state.settings.recording_min_free_mb)
+
+    try:
+        out = await _heavy(state, export, f"the MCAP of campaign {campaign_id}")
+    except ExportSpaceError as exc:
+        raise HTTPException(507, str(exc)) from exc
     return FileResponse(out, media_type="application/x-mcap",
                         filename=f"campaign-{campaign_id}.mcap")  # fmt: skip

@@ -111,7 +111,7 @@ async def stop_motion(state: StateDep, motion: MotionDep) -> MotionPublic:
     until a person releases it (POST /api/motion/release, or resuming the campaign)."""
     with _answers():
         await motion.stop_in_lane()
-    return await motion.in_stop_lane(lambda: motion_public(state))
+    return await motion.after_stop(lambda: motion_public(state))
 
 
 @router.post("/release", dependencies=[WriteAuth])

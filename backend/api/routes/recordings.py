@@ -20,7 +20,7 @@ from backend.api.contract import ErrorPublic, errors
 from backend.api.deps import AdminAuth, ReadAuth, StateDep, WriteAuth
 from backend.api.schemas import StrictBody
 from backend.services.heavy_work import HeavyWorkBusyError
-from backend.services.mcap_files import recording_mcap
+from backend.services.mcap_files import ExportSpaceError, recording_mcap
 from backend.services.recordings import (
     MAX_DURATION_S,
     MB,
@@ -40,6 +40,10 @@ NO_SPACE_TEXT = ("Less free space on the data directory's disk than "
                  "TOFPOSE_RECORDING_MIN_FREE_MB: nothing was started")  # fmt: skip
 NO_SPACE: dict[int | str, dict[str, Any]] = {
     507: {"model": ErrorPublic, "description": NO_SPACE_TEXT}
+}
+EXPORT_SPACE: dict[int | str, dict[str, Any]] = {
+    507: {"model": ErrorPublic, "description": "too little free disk space to export: twice "
+          "the recording plus TOFPOSE_RECORDING_MIN_FREE_MB are needed"}
 }
 BUSY: dict[int | str, dict[str, Any]] = {
     503: {"model": ErrorPublic,
@@ -187,7 +191,7 @@ def get_recording_h5(recording_id: RecordingIdParam, state: StateDep):
     dependencies=[ReadAuth],
     response_class=FileResponse,
     responses={200: {"content": {"application/x-mcap": {}}, "description": "the recording"},
-               **errors(404, 409), **BUSY},
+               **errors(404, 409), **BUSY, **EXPORT_SPACE},
 )  # fmt: skip
 async def get_recording_mcap(recording_id: RecordingIdParam, state: StateDep):
     """The recording as MCAP for Foxglove and Rerun (docs/interop.md), made as a
@@ -197,8 +201,11 @@ async def get_recording_mcap(recording_id: RecordingIdParam, state: StateDep):
     it records."""
     info, path = _file(_service(state), recording_id)
     try:
-        out = await state.heavy_work.run(lambda: recording_mcap(path),
-                                         f"the MCAP of recording {recording_id}")  # fmt: skip
+        out = await state.heavy_work.run(
+            lambda: recording_mcap(path, state.settings.recording_min_free_mb),
+            f"the MCAP of recording {recording_id}")  # fmt: skip
+    except ExportSpaceError as exc:
+        raise HTTPException(507, str(exc)) from exc
     except HeavyWorkBusyError as exc:
         raise HTTPException(503, str(exc),
                             headers={"Retry-After": str(exc.retry_after_s)}) from exc  # fmt: skip

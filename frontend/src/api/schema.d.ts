@@ -308,7 +308,8 @@ export interface paths {
         /**
          * Resume Campaign
          * @description Queue a paused or interrupted campaign again; it continues at its first set-point
-         *     not done.
+         *     not done. A resume is a person deciding that the table may move: it releases a
+         *     latched STOP too.
          */
         post: operations["resumeCampaign"];
         delete?: never;
@@ -329,6 +330,7 @@ export interface paths {
         /**
          * Start Campaign
          * @description Queue the campaign: it runs as soon as the motion system is free, or at ``at``.
+         *     409 while a STOP is latched (POST /api/motion/release first).
          */
         post: operations["startCampaign"];
         delete?: never;
@@ -3740,6 +3742,15 @@ export interface operations {
                     "application/json": components["schemas"]["ErrorPublic"];
                 };
             };
+            /** @description too little free disk space to export: twice the recording plus TOFPOSE_RECORDING_MIN_FREE_MB are needed */
+            507: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
         };
     };
     getCampaignReport: {
@@ -5789,6 +5800,15 @@ export interface operations {
             };
             /** @description busy with other reports and exports: try again (Retry-After) */
             503: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description too little free disk space to export: twice the recording plus TOFPOSE_RECORDING_MIN_FREE_MB are needed */
+            507: {
                 headers: {
                     [name: string]: unknown;
                 };

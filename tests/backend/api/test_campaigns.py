@@ -299,12 +299,18 @@ def test_a_stop_pressed_between_the_pick_and_the_claim_keeps_the_campaign_from_s
     assert (c["status"], c["n_done"]) == ("paused", 0)
     assert c["status_reason"].startswith("STOP pressed before it started")
     assert client.get("/api/motion").json()["owner_campaign_id"] is None
-    # the latch alone (no STOP since the pick) keeps a campaign from starting too
+    # the latch alone (no STOP since the pick) keeps a queued campaign from starting, and
+    # a campaign cannot be started while it holds
     assert client.get("/api/motion").json()["stop_latched"] is True
     cid = client.post("/api/campaigns", json={**GRID, "name": "latched"},
                       headers=AUTH).json()["id"]  # fmt: skip
+    r = client.post(f"/api/campaigns/{cid}/start", json={"at": "2099-01-01T00:00:00+00:00"},
+                    headers=AUTH)  # fmt: skip
+    assert r.status_code == 409 and "release it" in r.json()["detail"]
+    assert client.post("/api/motion/release", headers=AUTH).status_code == 200
     assert client.post(f"/api/campaigns/{cid}/start", json={"at": "2099-01-01T00:00:00+00:00"},
                        headers=AUTH).json()["status"] == "queued"  # fmt: skip
+    assert client.post("/api/motion/stop", headers=AUTH).json()["stop_latched"] is True
     svc._run(cid)
     assert client.get(f"/api/campaigns/{cid}").json()["status"] == "paused"
     assert client.get("/api/motion").json()["owner_campaign_id"] is None

@@ -132,3 +132,14 @@ def test_keys_and_audit_entries_round_trip_on_every_database(tmp_path, database_
     at = got.at if got.at.tzinfo else got.at.replace(tzinfo=UTC)  # SQLite: naive, in UTC
     assert at == datetime(2026, 12, 1, 12, 0, 5, tzinfo=UTC)
     engine.dispose()
+
+
+def test_a_body_nested_too_deep_or_with_nul_is_summarised_not_fatal():
+    """A keyless client's hostile bodies: JSON nested deeper than Python recurses, and NUL
+    characters (PostgreSQL's text refuses them), are summarised without raising."""
+    from backend.services.audit import body_summary
+
+    deep = b"[" * 3000 + b"]" * 3000
+    assert body_summary(deep) == f"<{len(deep)} bytes, not JSON>"
+    assert "\x00" not in body_summary(b'{"name": "a\\u0000b"}')
+    assert body_summary(b'{"name": "a\\u0000b"}') == '{"name":"a\\u0000b"}'

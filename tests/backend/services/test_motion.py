@@ -356,3 +356,21 @@ def test_no_command_from_a_non_owner_reaches_the_driver_while_a_campaign_claims_
     assert by_non_owner == []
     assert "refused" in outcomes  # the race was real: people were refused while campaigns held it
     assert any(name.startswith("campaign-") for _, name, _ in spy.arrivals)
+
+
+def test_a_fault_reset_goes_through_the_command_path(motion, spy):
+    """Clearing the controller's faults re-arms a halted table: refused while a campaign
+    owns it or a STOP is latched, like a move; accepted once released."""
+    resets: list[str] = []
+    spy.reset_faults = lambda: resets.append("reset")
+    motion.claim(7, "grid")
+    with pytest.raises(MotionConflictError, match="campaign 7 .* owns the motion system"):
+        motion.reset_faults()
+    motion.release(7)
+    motion.stop()
+    with pytest.raises(MotionConflictError, match="release it first"):
+        motion.reset_faults()
+    assert resets == []
+    motion.release_stop()
+    motion.reset_faults()
+    assert resets == ["reset"]
