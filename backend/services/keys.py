@@ -214,6 +214,9 @@ class KeyService:
                 f"key name must be 1-64 letters, digits, '.', '_', '@' or '-' (starting with "
                 f"a letter or digit), got {name!r}"
             )
+        if name == CONFIGURED_NAME:  # the audit trail's name for the configured token
+            raise KeyNameTakenError(f"the key name {name!r} is reserved for the token set in "
+                                    "the server's environment")  # fmt: skip
         key = secrets.token_urlsafe(32)
         with self._sessions() as session:
             if session.scalar(select(ApiKeyRow.id).where(ApiKeyRow.name == name)) is not None:

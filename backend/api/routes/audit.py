@@ -7,7 +7,7 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, HTTPException, Path, Query, status
+from fastapi import APIRouter, HTTPException, Path, Query, Response, status
 from pydantic import BaseModel, Field
 
 from backend.api.contract import ErrorPublic, errors
@@ -91,7 +91,7 @@ def list_keys(state: StateDep) -> list[KeyPublic]:
 
 @router.post("/keys", status_code=status.HTTP_201_CREATED,
              responses={**ADMIN_ONLY, **errors(409)})  # fmt: skip
-def create_key(body: KeyCreate, state: StateDep) -> KeyCreated:
+def create_key(body: KeyCreate, state: StateDep, response: Response) -> KeyCreated:
     """Make a key of this scope; the answer holds the key, which is not shown again.
     409 when the name is taken (also by a revoked key)."""
     try:
@@ -99,6 +99,7 @@ def create_key(body: KeyCreate, state: StateDep) -> KeyCreated:
     except KeyNameTakenError as exc:
         raise HTTPException(409, str(exc)) from exc
     record = next(k for k in state.keys.list() if k.name == body.name)
+    response.headers["Cache-Control"] = "no-store"  # the key itself: kept by no cache
     return KeyCreated(**_key_public(record), key=key)
 
 

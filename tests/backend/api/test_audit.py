@@ -26,6 +26,7 @@ def _bearer(key: str) -> dict[str, str]:
 def _make_key(client, name: str, scope: str) -> str:
     r = client.post("/api/keys", json={"name": name, "scope": scope}, headers=AUTH)
     assert r.status_code == 201, r.text
+    assert r.headers["cache-control"] == "no-store"  # the key itself: no cache keeps it
     body = r.json()
     assert (body["name"], body["scope"], body["revoked_at"]) == (name, scope, None)
     return body["key"]
@@ -81,6 +82,9 @@ def test_keys_are_listed_without_the_key_and_revoked_over_http(client):
     assert r.status_code == 404 and r.json()["detail"] == "no active key named 'temp'"
     r = client.post("/api/keys", json={"name": "temp", "scope": "read"}, headers=AUTH)
     assert r.status_code == 409 and "exists already" in r.json()["detail"]
+    r = client.post("/api/keys", json={"name": "TOFPOSE_API_TOKEN", "scope": "read"},
+                    headers=AUTH)  # fmt: skip
+    assert r.status_code == 409 and "reserved" in r.json()["detail"]
     for bad in ({"name": "has space", "scope": "read"}, {"name": "ok", "scope": "root"},
                 {"name": "ok"}, {"name": "ok", "scope": "read", "key": "mine"}):  # fmt: skip
         assert client.post("/api/keys", json=bad, headers=AUTH).status_code == 422, bad
