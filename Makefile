@@ -43,7 +43,7 @@ frontend: frontend/dist/index.html
 # The venv and the dashboard build in parallel (pip and npm each wait on their own I/O).
 run:
 	@$(MAKE) --no-print-directory -j2 $(VENV)/.installed frontend
-	@echo "[run] starting the server (on a first start it compiles the pipeline kernels in the background: frames stream at once, poses follow in ~1-2 min)"
+	@echo "[run] starting the server (on a first start it compiles the pipeline kernels in the background: poses come from the NumPy reference implementation meanwhile, the compiled kernels take over after ~2-3 min)"
 	$(VENV)/bin/tofpose serve
 
 lint: $(VENV)/.dev
