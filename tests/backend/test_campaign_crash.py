@@ -122,12 +122,17 @@ def test_after_a_sigkill_nothing_moves_until_a_person_resumes(tmp_path):
         held = _campaign(c, b)
         assert held["status"] == "paused"
         assert held["status_reason"].startswith("held at server start")
-        start = c.get("/api/motion").json()["positions"]
+        # the simulated table settles after the start; then nothing may command it: no
+        # owner, no new target, and the encoders stay where they are (within their noise)
+        first = _wait(lambda: (m := c.get("/api/motion").json())["settled"] and m, 30, "settled")
         deadline = time.monotonic() + 3.0
         while time.monotonic() < deadline:
             m = c.get("/api/motion").json()
             assert m["owner_campaign_id"] is None and not m["busy"], m
-            assert all(abs(m["positions"][k] - v) < 0.05 for k, v in start.items()), m
+            assert m["targets"] == first["targets"], (m["targets"], first["targets"])
+            moved = {k: m["positions"][k] - v for k, v in first["positions"].items()}
+            # encoder noise: hundredths of a degree, a tenth of a millimetre on the rail
+            assert all(abs(d) < (0.5 if k == "rail" else 0.05) for k, d in moved.items()), moved
             time.sleep(0.2)
         assert (_campaign(c, a)["status"], _campaign(c, b)["status"]) == ("interrupted", "paused")
         assert c.post(f"/api/campaigns/{b}/resume").status_code == 200  # a person decides
