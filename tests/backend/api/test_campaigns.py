@@ -248,8 +248,10 @@ def test_a_running_campaign_owns_the_turntable_and_stop_pauses_it(fast_client):
     paused = wait_for(lambda: (x := c.get(f"/api/campaigns/{cid}").json())["status"] == "paused"
                       and x)  # fmt: skip
     assert "STOP pressed" in paused["status_reason"]
-    motion = c.get("/api/motion").json()
-    assert motion["owner_campaign_id"] is None and motion["stop_latched"] is True
+    # the runner stores "paused", then gives the motion system back
+    motion = wait_for(lambda: (m := c.get("/api/motion").json())["owner_campaign_id"] is None
+                      and m, 5.0, "the campaign to let go of the motion system")  # fmt: skip
+    assert motion["stop_latched"] is True
     r = c.post("/api/motion/move", json={"yaw_deg": 1}, headers=AUTH)
     assert r.status_code == 409 and "release it first" in r.json()["detail"]  # STOP latched
     assert c.post("/api/motion/release", headers=AUTH).status_code == 200
