@@ -236,10 +236,13 @@ async def live(ws: WebSocket) -> None:
             reason=f"cross-origin WebSocket refused: {origin[:100]} (TOFPOSE_ALLOWED_ORIGINS)",
         )
         return
+    subprotocol = SUBPROTOCOL if SUBPROTOCOL in ws.scope.get("subprotocols", []) else None
     if (refusal := auth_refusal(ws, state)) is not None:
+        # accepted first (nothing is sent but the close), so that a browser gets the close
+        # code and the reason instead of a bare failed handshake
+        await ws.accept(subprotocol=subprotocol)
         await ws.close(code=POLICY_VIOLATION, reason=refusal)
         return
-    subprotocol = SUBPROTOCOL if SUBPROTOCOL in ws.scope.get("subprotocols", []) else None
     address = ws.client.host if ws.client else ""
     if (refusal := cap_refusal(state, address)) is not None:
         # accepted first, so that the client gets the close code and its reason (a close
