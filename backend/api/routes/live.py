@@ -226,6 +226,14 @@ async def send(ws: WebSocket, message: str | bytes, timeout_s: float) -> None:
         raise SendTimeoutError from None
 
 
+def close_reason(text: str) -> str:
+    """``text`` cut to what a WebSocket close frame carries (RFC 6455 5.5: a control
+    frame's payload is at most 125 bytes, 2 of them the code): at most 123 UTF-8 bytes;
+    a longer reason makes the client fail the connection without reading the code."""
+    raw = text.encode()
+    return text if len(raw) <= 123 else raw[:120].decode(errors="ignore") + "..."
+
+
 @router.websocket("/ws/live")
 async def live(ws: WebSocket) -> None:
     state: AppState = ws.app.state.tofpose
@@ -241,14 +249,14 @@ async def live(ws: WebSocket) -> None:
         # accepted first (nothing is sent but the close), so that a browser gets the close
         # code and the reason instead of a bare failed handshake
         await ws.accept(subprotocol=subprotocol)
-        await ws.close(code=POLICY_VIOLATION, reason=refusal)
+        await ws.close(code=POLICY_VIOLATION, reason=close_reason(refusal))
         return
     address = ws.client.host if ws.client else ""
     if (refusal := cap_refusal(state, address)) is not None:
         # accepted first, so that the client gets the close code and its reason (a close
         # before the handshake reaches a browser as a bare failed handshake)
         await ws.accept(subprotocol=subprotocol)
-        await ws.close(code=TRY_AGAIN_LATER, reason=refusal)
+        await ws.close(code=TRY_AGAIN_LATER, reason=close_reason(refusal))
         return
     state.live_clients[address] = state.live_clients.get(address, 0) + 1
     try:

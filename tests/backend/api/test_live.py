@@ -375,3 +375,14 @@ def test_raw_frame_decoding_names_what_is_wrong():
         decode_raw_frame(good[:-2])
     with pytest.raises(ValueError, match="not a raw frame"):
         decode_raw_frame(b"PNG!" + good[4:])
+
+
+def test_a_close_reason_fits_a_close_frame():
+    """RFC 6455: a close frame carries at most 123 bytes of reason; a longer one makes the
+    client fail the connection without reading the code (a browser then learns nothing)."""
+    from backend.api.routes.live import close_reason
+
+    assert close_reason("short") == "short"
+    long = "API key required: " + "é" * 100
+    cut = close_reason(long)
+    assert len(cut.encode()) <= 123 and cut.endswith("...") and cut.startswith("API key required")
