@@ -108,6 +108,9 @@ def run_study(
         raise
     finally:
         bar.close()
+    # every chunk is written: what is left half-written is a killed worker's (its task ran
+    # again elsewhere under another temporary name)
+    remove_temporary(root)
     wall_s = time.perf_counter() - t0
     measure_s = time.perf_counter() - t_connected
     summary = summarise(spec, read_frames(root, spec))

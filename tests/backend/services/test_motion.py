@@ -308,14 +308,17 @@ class _SlowStatus(SpyMotion):
 
 
 def _race_round(motion: MotionService, round_: int) -> list[str]:
-    """Two people (a jog and a move, three tries each) against a campaign that claims the
-    table and moves; returns the people's outcomes ("sent" / "refused")."""
+    """Two people (a jog and a move, again and again) against a campaign that claims the
+    table, moves and holds it for 60 ms; returns the people's outcomes ("sent" /
+    "refused"). The people pause 5 ms between tries so that the claim, which waits for
+    a command in flight, is not starved by their stream."""
     barrier = threading.Barrier(3)
+    done = threading.Event()
     outcome: list[str] = []
 
     def person(kind: str) -> None:
         barrier.wait()
-        for _ in range(3):
+        while not done.is_set():
             try:
                 if kind == "jog":
                     motion.jog("yaw", 0.05)
@@ -324,12 +327,17 @@ def _race_round(motion: MotionService, round_: int) -> list[str]:
                 outcome.append("sent")
             except MotionConflictError:
                 outcome.append("refused")
+            time.sleep(0.005)
 
     def campaign() -> None:
         barrier.wait()
-        time.sleep(0.005 * (round_ % 5))
-        motion.claim(100 + round_, "race")
-        motion.move({"yaw": 5.0}, by=100 + round_)
+        try:
+            time.sleep(0.005 * (round_ % 5))
+            motion.claim(100 + round_, "race")
+            motion.move({"yaw": 5.0}, by=100 + round_)
+            time.sleep(0.06)
+        finally:
+            done.set()
 
     threads = [threading.Thread(target=person, args=("jog",), name=f"person-jog-{round_}"),
                threading.Thread(target=person, args=("move",), name=f"person-move-{round_}"),
