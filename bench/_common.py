@@ -106,3 +106,12 @@ def section_main(doc: str, default_frames: int, run, plot, markdown, image_name:
     img = out / image_name
     plot(data, img)
     print(markdown(data, str(img), args.frames))
+
+
+def free_port() -> int:
+    """A free TCP port on loopback (for a server the bench starts)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]

@@ -24,7 +24,6 @@ import asyncio
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -40,18 +39,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import contextlib
 
-from bench._common import all_cores, table  # noqa: E402
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from bench._common import all_cores, free_port, table  # noqa: E402
 
 
 class Server:
     def __init__(self, rate_hz: float, scene: bool = False, env: dict | None = None) -> None:
-        self.port = _free_port()
+        self.port = free_port()
         self.tmp = tempfile.TemporaryDirectory()
         env = {**os.environ, "TOFPOSE_FRAME_RATE_HZ": str(rate_hz),
                "TOFPOSE_DATA_DIR": self.tmp.name, **(env or {})}  # fmt: skip

@@ -40,20 +40,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench._common import all_cores, table  # noqa: E402
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from bench._common import all_cores, free_port, table  # noqa: E402
 
 
 class Server:
     """``tofpose serve`` on a free port with a fresh data directory."""
 
     def __init__(self, rate_hz: float, caps: int) -> None:
-        self.port = _free_port()
+        self.port = free_port()
         self.tmp = tempfile.TemporaryDirectory()
         env = {**os.environ, "TOFPOSE_FRAME_RATE_HZ": str(rate_hz),
                "TOFPOSE_DATA_DIR": self.tmp.name}  # fmt: skip
