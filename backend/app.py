@@ -63,10 +63,10 @@ from backend.services.store import find_catalog, load_device_settings
 from backend.services.studies import StudyService
 from backend.settings import Settings
 from backend.state import AppState
-from tofpose.catalog import Catalog
 from tofpose.config import TrackingConfig
+from tofpose.core.catalog import Catalog
+from tofpose.lab.relative_state import RelativeStateConfig
 from tofpose.pipeline import PipelineConfig
-from tofpose.relative_state import RelativeStateConfig
 
 log = logging.getLogger("tofpose.server")
 

@@ -13,7 +13,7 @@ from pydantic import SecretStr, ValidationError
 from backend.auth import TOKEN_FILE
 from backend.services.keys import Bootstrap
 from backend.settings import Settings
-from tofpose.recording import RecordingError
+from tofpose.io.recording import RecordingError
 
 SECRET_QUERY = re.compile(r"([?&][^=&\s]*(?:token|key|ticket)[^=&\s]*=)[^&\s\"']*",
                           re.IGNORECASE)  # fmt: skip

@@ -41,7 +41,7 @@ def med_p95(values) -> tuple[float, float]:
 
 def pose_errors(R_est, t_est, T_true) -> tuple[float, float]:
     """(position error mm, geodesic attitude error deg) of an estimate against a truth."""
-    from tofpose.geometry import rotation_angle_deg
+    from tofpose.core.geometry import rotation_angle_deg
 
     return float(np.linalg.norm(np.asarray(t_est) - T_true.t_mm)), rotation_angle_deg(
         T_true.R, np.asarray(R_est)
@@ -50,8 +50,8 @@ def pose_errors(R_est, t_est, T_true) -> tuple[float, float]:
 
 def relative_euler_deg(R) -> np.ndarray:
     """(pitch, yaw, roll) deg of R relative to the facing reference (face-on reads ~0
-    like the paper's tables): ``tofpose.geometry.facing_euler_deg``."""
-    from tofpose.geometry import facing_euler_deg
+    like the paper's tables): ``tofpose.core.geometry.facing_euler_deg``."""
+    from tofpose.core.geometry import facing_euler_deg
 
     return facing_euler_deg(np.asarray(R))
 

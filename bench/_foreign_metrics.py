@@ -1,5 +1,5 @@
 """Metrics of ``bench/foreign.py``: per-frame outcomes against truth judged by the
-project's rules (``tofpose.pose_judgement``: pose error, Mahalanobis distance, success /
+project's rules (``tofpose.lab.pose_judgement``: pose error, Mahalanobis distance, success /
 wrong / confidently wrong, beyond 3 sigma), range bins, the true correspondences of
 measured blobs, and the per-marker measurement errors.
 """
@@ -12,10 +12,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from tofpose.camera import CameraModel
-from tofpose.catalog import Catalog
-from tofpose.geometry import RigidTransform
-from tofpose.pose_judgement import (  # noqa: F401  (re-exported: bench/foreign.py's names)
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog
+from tofpose.core.geometry import RigidTransform
+from tofpose.lab.pose_judgement import (  # noqa: F401  (re-exported: bench/foreign.py's names)
     AXES,
     CHI2_6_3SIGMA,
     P_3SIGMA,
@@ -185,7 +185,7 @@ class TrueImages:
     point_mm : (eta, 3) centres in the camera frame; uv_px : (eta, 2) their projections
     (NaN behind the camera); range_mm : (eta,) true radial distance to the centre (the
     disc's front face: catalog points are the discs' centres, and the pipeline ranges the
-    disc along the centroid's line of sight, ``kernels.centroids.blob_ranges``);
+    disc along the centroid's line of sight, ``stages.extraction.kernels.centroids.blob_ranges``);
     radius_px : (eta,) apparent radius; in_view : (eta,) bool, in front, facing the
     camera and projected inside the image.
     """

@@ -30,7 +30,7 @@ from bench.accuracy import random_pose  # noqa: E402
 from bench.pipeline import CASES  # noqa: E402
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
 from tofpose.config import TrackingConfig  # noqa: E402
-from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
+from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
 from tofpose.sim.bench import R_FACING  # noqa: E402
 from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
 from tofpose.sim.scene import Clutter, TargetScene  # noqa: E402

@@ -34,7 +34,7 @@ from bench._common import (  # noqa: E402
 from bench.crlb import pose_crlb  # noqa: E402
 from bench.oracle import oracle_pose  # noqa: E402
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
-from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
+from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
 from tofpose.sim.bench import R_FACING  # noqa: E402
 from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
 from tofpose.sim.scene import TargetScene  # noqa: E402

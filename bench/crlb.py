@@ -20,12 +20,12 @@ import math
 
 import numpy as np
 
-from tofpose.camera import CameraModel
-from tofpose.catalog import Catalog
-from tofpose.geometry import RigidTransform
-from tofpose.pose import measurement_jacobian
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog
+from tofpose.core.geometry import RigidTransform
 from tofpose.sim.render import RenderedFrame, SensorModel
 from tofpose.sim.scene import FIRST_DISC
+from tofpose.stages.pose.pose import measurement_jacobian
 
 #: rim samples per disc for the coverage gradient
 RIM_SAMPLES = 2048

@@ -13,7 +13,7 @@ range-bias prior for a sensor without systematic errors). Per seed and frame rat
   NEES of the 12 reported states against the truth;
 - latency: the poses stamped ``d`` late (a driver that stamps on arrival after a transfer
   and processing delay d), the reference the lab's (encoders and nominal geometry) at the
-  stamps, as a dynamic campaign stores it; ``tofpose.dynamics.fit_latency`` should find
+  stamps, as a dynamic campaign stores it; ``tofpose.lab.dynamics.fit_latency`` should find
   ``d`` minus the exposure timing (the pose is the attitude at the middle of the four
   phase sub-frames: 1.5 sub-frame periods and half an exposure after the frame's start);
 - cost: the filter's update, median and p95 over every frame, beside the pipeline's time
@@ -38,14 +38,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench._common import med_p95, single_core, table  # noqa: E402
 from tofpose.config import TrackingConfig  # noqa: E402
-from tofpose.dynamics import fit_latency  # noqa: E402
-from tofpose.motion_profile import SineProfile  # noqa: E402
-from tofpose.pipeline import PipelineConfig, PosePipeline  # noqa: E402
-from tofpose.relative_state import (  # noqa: E402
+from tofpose.lab.dynamics import fit_latency  # noqa: E402
+from tofpose.lab.motion_profile import SineProfile  # noqa: E402
+from tofpose.lab.relative_state import (  # noqa: E402
     RelativeStateConfig,
     RelativeStateFilter,
     state_error,
 )
+from tofpose.pipeline import PipelineConfig, PosePipeline  # noqa: E402
 from tofpose.sim.render import render_frame  # noqa: E402
 
 DELAYS_S = (0.0, 0.040, 0.100)

@@ -67,12 +67,13 @@ from bench._foreign_metrics import (  # noqa: E402
     true_correspondences,
     true_images,
 )
-from tofpose import camera_file, cli  # noqa: E402
-from tofpose.geometry import RigidTransform  # noqa: E402
-from tofpose.matching import MatchResult  # noqa: E402
+from tofpose import cli  # noqa: E402
+from tofpose.core.geometry import RigidTransform  # noqa: E402
+from tofpose.core.threads import single_threaded_blas  # noqa: E402
+from tofpose.io import camera_file  # noqa: E402
+from tofpose.io.recording import RecordingError, open_recording  # noqa: E402
 from tofpose.pipeline import PosePipeline, PoseResult  # noqa: E402
-from tofpose.recording import RecordingError, open_recording  # noqa: E402
-from tofpose.threads import single_threaded_blas  # noqa: E402
+from tofpose.stages.matching.matching import MatchResult  # noqa: E402
 
 RUNS = ("pipeline", "oracle")
 
@@ -114,7 +115,7 @@ def run_estimate(
             results.append(r)
             return r
 
-    # the pipeline estimate runs is built by tofpose.camera_file.pipeline_for
+    # the pipeline estimate runs is built by tofpose.io.camera_file.pipeline_for
     patched = mock.patch.object(camera_file, "PosePipeline", RecordingPipeline)
     with tempfile.TemporaryDirectory() as tmp, patched:
         summary = cli.estimate(str(rec_path), str(Path(tmp) / "poses.csv"), catalog_path,

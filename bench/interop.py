@@ -43,12 +43,12 @@ sys.path.insert(0, str(ROOT))
 from bench._common import all_cores, table  # noqa: E402
 from bench.live import CHROMIUM, CHROMIUM_ARGS, Server, _free_port, _run  # noqa: E402
 from tofpose.cli import main as tofpose_cli  # noqa: E402
-from tofpose.recording import RecordingWriter, open_recording  # noqa: E402
+from tofpose.io.recording import RecordingWriter, open_recording  # noqa: E402
 
 PEAK_RSS = """
 import resource, sys, time
-from tofpose.interop.mcap_export import export_mcap
-from tofpose.recording import open_recording
+from tofpose.io.interop.mcap_export import export_mcap
+from tofpose.io.recording import open_recording
 with open_recording(sys.argv[1]) as rec:
     t0 = time.perf_counter()
     export_mcap(rec, sys.argv[2], None, progress=False, overwrite=True)

@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from tofpose.camera import CameraModel
-from tofpose.catalog import Catalog
-from tofpose.geometry import RigidTransform
-from tofpose.pose import refine_maximum_likelihood, weighted_absolute_orientation
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog
+from tofpose.core.geometry import RigidTransform
 from tofpose.sim.render import RenderedFrame
 from tofpose.sim.scene import FIRST_DISC
+from tofpose.stages.pose.pose import refine_maximum_likelihood, weighted_absolute_orientation
 
 BEARING_SIGMA_PX = 0.03  # the pipeline's centroid sigma floor
 RANGE_SIGMA_FLOOR_MM = 1.0

@@ -23,9 +23,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._common import med_p95, single_core, table  # noqa: E402
 from bench.baseline import baseline_pose, blob_detector  # noqa: E402
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
+from tofpose.calibration.range import RangeCorrection  # noqa: E402
 from tofpose.config import TrackingConfig  # noqa: E402
-from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
-from tofpose.range_calibration import RangeCorrection  # noqa: E402
+from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
 from tofpose.sim.bench import R_FACING  # noqa: E402
 from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
 from tofpose.sim.scene import TargetScene  # noqa: E402
@@ -76,7 +76,7 @@ def call_profile(pipe: PosePipeline, frames, mode: str) -> tuple[list[int], list
                 inside += time.perf_counter() - t0
                 started.pop()
             return
-        if event == "call" and "/tofpose/kernels/" in frame.f_code.co_filename:
+        if event == "call" and "/kernels/" in frame.f_code.co_filename:
             started.append((frame, time.perf_counter()))
         elif event == "c_call" and str(getattr(arg, "__module__", "")).startswith(("cv2", "scipy")):
             started.append((arg, time.perf_counter()))

@@ -5,7 +5,7 @@ realistic one (``SystematicErrors()``: cyclic, amplitude-related, per-pixel, dri
 lens scatter; frames taken one hour after power-on), and the realistic one with the
 range correction fitted from a separate calibration run (rail 0.7-8 m, the distances the
 bench measures at; three attitudes, three integration times per pose, other seeds;
-``tofpose.range_calibration``). Per range:
+``tofpose.calibration.range``). Per range:
 success rate, median / p95 position and attitude error against the rendered truth, the
 median number of matched markers against the number in view, and "wrong" poses: reported
 ``ok`` but outside max(1 deg, 3 reported sigmas) or max(20 mm, 0.5 % of range, 3 sigmas).
@@ -40,9 +40,9 @@ from bench._common import fmt, pose_errors, pyplot, save_figure, stats, table  #
 from bench.accuracy import random_pose  # noqa: E402
 from bench.baseline import blob_detector  # noqa: E402
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
-from tofpose.covariance_calibration import fit_covariance_scale, pose_nees  # noqa: E402
-from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
-from tofpose.range_calibration import fit_range_correction  # noqa: E402
+from tofpose.calibration.covariance import fit_covariance_scale, pose_nees  # noqa: E402
+from tofpose.calibration.range import fit_range_correction  # noqa: E402
+from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
 from tofpose.sim.bench import R_FACING  # noqa: E402
 from tofpose.sim.calibration_run import calibration_frames  # noqa: E402
 from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
@@ -332,9 +332,10 @@ def markdown(data, img: str, n_frames: int) -> str:
         "claim more than the errors show); \"errors / reported sigmas\" is sqrt(mean NEES "
         "/ 6), the factor by which the errors' spread differs from the reported one (1: "
         "consistent, below 1: the reported sigmas are wider than the errors). Model: the "
-        "covariance of the measurement model (`tofpose.uncertainty`, floors included). "
+        "covariance of the measurement model (`tofpose.stages.extraction.uncertainty`, "
+        "floors included). "
         f"Calibrated: the same poses, the covariance times the sensor's factor per range "
-        f"(`tofpose.covariance_calibration`) fitted on {data['cal_frames']} other frames per "
+        f"(`tofpose.calibration.covariance`) fitted on {data['cal_frames']} other frames per "
         "range of the same sensor (other poses and noise), as `tofpose calibrate-covariance` "
         "fits it from a recording with a reference pose.", "",
         long_range_table(data["long"]), "",

@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._common import pose_errors, pyplot, save_figure, section_main, table  # noqa: E402
 from bench.accuracy import random_pose  # noqa: E402
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
-from tofpose.catalog import Catalog  # noqa: E402
+from tofpose.core.catalog import Catalog  # noqa: E402
 from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
 from tofpose.sim.scene import Clutter, TargetScene  # noqa: E402
 

@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench._common import all_cores, table  # noqa: E402
-from tofpose.camera import CameraModel  # noqa: E402
+from tofpose.core.camera import CameraModel  # noqa: E402
 from tofpose.study.frames import kernel_load, measure_frame  # noqa: E402
 from tofpose.study.spec import StudySpec  # noqa: E402
 

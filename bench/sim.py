@@ -16,7 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench._common import med_p95, single_core, table  # noqa: E402
 from tofpose import CameraModel  # noqa: E402
-from tofpose.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
+from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
 from tofpose.sim.bench import R_FACING  # noqa: E402
 from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
 from tofpose.sim.scene import TargetScene  # noqa: E402

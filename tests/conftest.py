@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tofpose.camera import CameraModel
-from tofpose.catalog import paper_target
-from tofpose.geometry import RigidTransform, rotation_from_euler_deg
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import paper_target
+from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg
 from tofpose.sim.bench import R_FACING
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import TargetScene
@@ -45,8 +45,8 @@ _BROWSER = ("tests/e2e/",)
 #: tests that run the server, devices, subprocesses, clusters or whole benchmarks
 _INTEGRATION = (
     "tests/backend/", "tests/bench/", "tests/frontend/", "tests/tofpose/batch/",
-    "tests/tofpose/study/", "tests/tofpose/interop/", "tests/tofpose/test_cli.py",
-    "tests/tofpose/test_threads.py", "tests/test_packaging.py",
+    "tests/tofpose/study/", "tests/tofpose/io/interop/", "tests/tofpose/test_cli.py",
+    "tests/tofpose/core/test_threads.py", "tests/test_packaging.py",
 )  # fmt: skip
 #: long runs under load (memory and rate over seconds of traffic)
 _SOAK = ("tests/backend/test_soak.py",)

@@ -5,8 +5,8 @@ Time-of-Flight Sensors" (Space: Science & Technology, 2022). Lengths are millime
 angles radians inside the maths and degrees at the edges. See ``docs/architecture.md``.
 """
 
-from tofpose.camera import CameraModel
-from tofpose.catalog import Catalog, Reflector, paper_target
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog, Reflector, paper_target
 from tofpose.pipeline import PipelineConfig, PosePipeline, PoseResult
 
 __all__ = [

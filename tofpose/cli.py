@@ -12,25 +12,25 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from tofpose.camera import CameraModel
-from tofpose.camera_file import load_camera, pipeline_for, read_text_file
-from tofpose.catalog import Catalog, paper_target
-from tofpose.covariance_calibration import (
+from tofpose.calibration.covariance import (
     auto_knots,
     fit_covariance_scale,
     pose_nees,
 )
-from tofpose.geometry import RigidTransform, facing_euler_deg, rotation_angle_deg
-from tofpose.interop.topics import DISTANCE as DISTANCE_TOPIC
-from tofpose.interop.topics import GRAY as GRAY_TOPIC
+from tofpose.calibration.range import fit_range_correction
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog, paper_target
+from tofpose.core.geometry import RigidTransform, facing_euler_deg, rotation_angle_deg
+from tofpose.core.threads import single_threaded_blas
+from tofpose.core.tof import unambiguous_range_mm
+from tofpose.io.camera_file import load_camera, pipeline_for, read_text_file
+from tofpose.io.interop.topics import DISTANCE as DISTANCE_TOPIC
+from tofpose.io.interop.topics import GRAY as GRAY_TOPIC
+from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
+from tofpose.io.recording import RecordingError, RecordingWriter, open_recording
+from tofpose.lab.relative_state import RelativeStateConfig, RelativeStateFilter
 from tofpose.pipeline import PosePipeline
-from tofpose.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
-from tofpose.range_calibration import fit_range_correction
-from tofpose.recording import RecordingError, RecordingWriter, open_recording
-from tofpose.relative_state import RelativeStateConfig, RelativeStateFilter
 from tofpose.sim.pixel_truth import true_pixel_distances
-from tofpose.threads import single_threaded_blas
-from tofpose.tof import unambiguous_range_mm
 
 
 def _reference(rec, reference: str, rec_path: str) -> tuple[np.ndarray, np.ndarray]:
@@ -50,7 +50,7 @@ def calibrate_covariance(
 ) -> str:  # fmt: skip
     """Run the pipeline over a recording of the known target (with the camera's range
     correction, if any), compare each pose and its covariance with the reference, fit
-    the covariance's factor per range (``tofpose.covariance_calibration``) and write the
+    the covariance's factor per range (``tofpose.calibration.covariance``) and write the
     camera JSON with it."""
     with open_recording(rec_path) as rec:
         R_all, t_all = _reference(rec, reference, rec_path)
@@ -263,7 +263,7 @@ def demo(n_frames: int = 48, seed: int = 1) -> int:
 
 def export_file(args: argparse.Namespace) -> str:
     """``tofpose export mcap``: the recording, and with ``--estimate`` each frame's pose."""
-    from tofpose.interop.mcap_export import export_mcap  # lazy: foxglove-sdk loads a runtime
+    from tofpose.io.interop.mcap_export import export_mcap  # lazy: foxglove-sdk loads a runtime
 
     with open_recording(args.recording) as rec:
         pipe = (pipeline_for(rec, args.recording, args.catalog, args.camera, args.tracking)
@@ -275,7 +275,7 @@ def export_file(args: argparse.Namespace) -> str:
 
 def import_file(args: argparse.Namespace) -> str:
     """``tofpose import mcap``."""
-    from tofpose.interop.mcap_import import import_mcap
+    from tofpose.io.interop.mcap_import import import_mcap
 
     s = import_mcap(args.file, args.out, gray_topic=args.gray_topic,
                     distance_topic=args.distance_topic, overwrite=args.force)  # fmt: skip
@@ -568,7 +568,7 @@ def _run_outside_the_library(args) -> int | None:
     if args.cmd == "compare":
         return compare(args)
     if args.cmd == "warm-up":
-        from tofpose.kernels import kernel_cache_dir, prune_stale_kernel_caches
+        from tofpose.core.compiled import kernel_cache_dir, prune_stale_kernel_caches
         from tofpose.warmup import warm_up
 
         print(f"pipeline kernels ready in {warm_up():.1f} s ({kernel_cache_dir()})")
@@ -597,7 +597,7 @@ def _run_outside_the_library(args) -> int | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    single_threaded_blas()  # tofpose.threads: idle BLAS threads would burn a core
+    single_threaded_blas()  # tofpose.core.threads: idle BLAS threads would burn a core
     args = build_parser().parse_args(argv)
     code = _run_outside_the_library(args)
     if code is not None:

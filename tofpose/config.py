@@ -16,7 +16,7 @@ from typing import Literal
 
 import numpy as np
 
-from tofpose.robust import median_1d
+from tofpose.core.robust import median_1d
 
 
 @dataclass(frozen=True)
@@ -218,7 +218,8 @@ class PipelineConfig(FitSettingsFields):
         ellipse's centre and the projected disc centre, then re-solve.
     mixed_pixel_radius_px : a matched marker whose disc appears smaller than this
         radius takes its range from the mixing model of its pixels and its surround
-        (``kernels.mixed_pixels``) instead of its pixels' median, which the surround
+        (``stages.extraction.kernels.mixed_pixels``) instead of its pixels' median, which the
+        surround
         pulls towards itself when few pixels are covered whole; 0: never (the paper's
         preset). 4 px: from there on most of a disc's pixels are covered whole.
     ellipse_confirmation : run §3.3 (confirm candidate shapes, split merged components).
@@ -302,7 +303,7 @@ class PipelineConfig(FitSettingsFields):
         mirror image of the nearly planar pattern) makes the target face away, so a dark
         predicted marker is an occluded one.
     centroid_sigma_floor_px, range_sigma_floor_mm : floors of the per-reflector
-        measurement sigmas (``tofpose.uncertainty``) used as weights and in the
+        measurement sigmas (``tofpose.stages.extraction.uncertainty``) used as weights and in the
         covariance.
     """
 

@@ -17,50 +17,40 @@ import time
 from dataclasses import dataclass, field
 from typing import Literal
 
-import cv2
 import numpy as np
 
-from tofpose.arithmetic import COMPILED, Arithmetic, arithmetic_for
-from tofpose.camera import CameraModel
-from tofpose.catalog import Catalog
+from tofpose.arithmetic import Arithmetic, arithmetic_for
+from tofpose.calibration.covariance import CovarianceScale
+from tofpose.calibration.range import RangeCorrection, correction_kernel_arguments
 from tofpose.config import PipelineConfig
-from tofpose.covariance_calibration import CovarianceScale
-from tofpose.ellipse import (
-    blob_contour,
-    ellipse_residual_px,
-    ellipses_from_arcs,
-    fit_ellipse,
-    split_arcs,
-)
-from tofpose.extraction import (
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog
+from tofpose.core.geometry import facing_euler_deg, quaternion_wxyz_from_rotation
+from tofpose.core.records import camera_record
+from tofpose.stages.ellipses.confirmation import confirm_ellipses
+from tofpose.stages.extraction.extraction import (
     Blob,
     CandidateBlobs,
     RejectedBlob,
     check_frame,
-    predicted_diameter_window_px,
 )
-from tofpose.geometry import facing_euler_deg, quaternion_wxyz_from_rotation
-from tofpose.kernels.records import camera_record
-from tofpose.kernels.two_centres import SPLIT_OK
-from tofpose.matching import (
+from tofpose.stages.extraction.uncertainty import (
+    UNCALIBRATED_RANGE_SIGMA_MM,
+    SigmaFloors,
+    kernel_constants,
+)
+from tofpose.stages.matching.matching import (
     MatchResult,
     match_by_triplets,
     match_reflectors,
     random_triplets,
 )
-from tofpose.pair_fit import fit_pair
-from tofpose.persistence import Persistence, PersistenceInfo, blob_arrays
-from tofpose.range_calibration import RangeCorrection, correction_kernel_arguments
-from tofpose.solve import Measurements, PoseSolver, Rejected, Solution, ThresholdedFrame
-from tofpose.tracking import (
+from tofpose.stages.persistence.persistence import Persistence, PersistenceInfo, blob_arrays
+from tofpose.stages.pose.solve import Measurements, PoseSolver, Rejected, Solution, ThresholdedFrame
+from tofpose.stages.tracking.tracking import (
     TrackState,
 )
-from tofpose.tracking_frame import CompiledTracker
-from tofpose.uncertainty import (
-    UNCALIBRATED_RANGE_SIGMA_MM,
-    SigmaFloors,
-    kernel_constants,
-)
+from tofpose.stages.tracking.tracking_frame import CompiledTracker
 
 
 @dataclass
@@ -73,7 +63,7 @@ class MatchedReflector:
     residual_mm: float  # |measured - predicted| at the final pose
     distance_mm: float
     area_px: int
-    centroid_sigma_px: float = float("nan")  # per image axis (tofpose.uncertainty)
+    centroid_sigma_px: float = float("nan")  # per image axis (extraction.uncertainty)
     range_sigma_mm: float = float("nan")
 
 
@@ -85,7 +75,8 @@ class FrameDiagnostics:
     n_candidates : blobs persistence kept; frames_used : frames it combined (1: this
     one alone); motion : it cut its history; rejected : components of the active set
     that are not candidates, with the gate that refused each
-    (``tofpose.extraction.REJECT_REASONS``); active_threshold_counts : I_t as applied
+    (``tofpose.stages.extraction.extraction.REJECT_REASONS``); active_threshold_counts : I_t as
+    applied
     (after the N_max cap): the active pixel set A (§3.1.1) is exactly ``gray >=
     active_threshold_counts``.
     """
@@ -206,12 +197,12 @@ class PosePipeline:
         implementation: str = "compiled",
     ) -> None:
         """``range_correction``: the camera's calibrated range errors
-        (``tofpose.range_calibration``), subtracted from each reflector's range before
+        (``tofpose.calibration.range``), subtracted from each reflector's range before
         back-projection; None for a camera without one. ``ValueError`` when its
         per-pixel offsets are not of the camera's image size. ``covariance_scale``: the
-        camera's covariance calibration (``tofpose.covariance_calibration``), applied to
+        camera's covariance calibration (``tofpose.calibration.covariance``), applied to
         the reported covariance at the target's distance; None reports the model's.
-        ``implementation``: "compiled" (the kernels, ``tofpose.kernels``) or "reference"
+        ``implementation``: "compiled" (the kernels, ``tofpose.core.compiled``) or "reference"
         (every stage's arithmetic by its plain NumPy/SciPy statement,
         ``tofpose.reference``: the A/B baseline of the whole chain, much slower; see
         ``tofpose.arithmetic`` for what it does not cover); ``ValueError`` for others."""
@@ -241,11 +232,11 @@ class PosePipeline:
         self._catalog_ids = catalog.ids
         self._rng = np.random.default_rng(self.config.ransac_seed)
         self._solver = PoseSolver(camera, catalog, self.config.solve, range_correction,
-                                  arithmetic=arithmetic)  # fmt: skip
+                                  arithmetic=arithmetic.pose)  # fmt: skip
         self._track: TrackState | None = None
         self._compiled_tracker = CompiledTracker(
             camera, catalog, self.config.solve, self.config.tracking, self._solver,
-            self._persistence, range_correction, arithmetic=arithmetic,
+            self._persistence, range_correction, arithmetic=arithmetic.tracking,
         )  # fmt: skip
 
     def reset(self) -> None:
@@ -295,7 +286,7 @@ class PosePipeline:
             if tracked is not None:
                 return tracked
             timer.lap("tracking fallback")
-        stats = self.arithmetic.frame_levels(g, cfg.extraction)
+        stats = self.arithmetic.extraction.frame_levels(g, cfg.extraction)
         timer.lap("levels")
 
         def fail(reason: str, unmatched=(), diagnostics=NO_DIAGNOSTICS) -> PoseResult:
@@ -353,12 +344,14 @@ class PosePipeline:
         """§3.1-§3.3: candidate blobs through the gates, then ellipse confirmation (which
         may split merged components); returns the extraction record and the blobs."""
         cfg = self.config
-        found = self.arithmetic.find_candidate_blobs(g, d, self.camera, self._catalog_d,
+        found = self.arithmetic.extraction.find_candidate_blobs(g, d, self.camera, self._catalog_d,
                                                      cfg.extraction, stats)  # fmt: skip
         timer.lap("blobs")
         blobs = found.accepted
         if cfg.ellipse_confirmation:
-            blobs = self._confirm_ellipses(blobs, found.oversize, g, d, found.stats)
+            blobs = confirm_ellipses(blobs, found.oversize, g, found.stats, fx_px=self.camera.fx,
+                                     catalog_diameters_mm=self._catalog_d,
+                                     config=cfg.extraction, arithmetic=self.arithmetic.ellipses)
         timer.lap("ellipses")
         # ellipse-supplemented blobs have no moment centroid yet: the ellipse's centre
         blobs = [
@@ -371,7 +364,8 @@ class PosePipeline:
 
     def _measure(self, blobs: list[Blob], g, d, background: float, dark: float):
         """§3.4 and Eqs. 7-8 in one compiled call
-        (``kernels.measure.measure_and_back_project``): the blobs combined with the
+        (``stages.persistence.kernels.measure.measure_and_back_project``): the blobs combined with
+        the
         consistent persistence history (the frame is then committed to it), their
         centroids (Eq. 19) and ranges (Eq. 20) measured, the calibrated range correction
         applied, and those with a range back-projected (Eq. 8) with their sigmas and the
@@ -382,7 +376,7 @@ class PosePipeline:
         cur, flat, starts, bbox = blob_arrays(blobs)
         split = np.array([b.source == "split" for b in blobs], bool)
         (n_used, motion, keep, uv, rho, ranged, rho_r, sp, sr, y, w,
-         mix) = ar.measure_and_back_project(
+         mix) = ar.persistence.measure_and_back_project(
             g, d, flat, starts, bbox, cur, split, persistence.history(g, d),
             float(background), float(dark),
             self._camera_record, *persistence.scratch(g.shape), self._correction_kernel_args,
@@ -399,7 +393,7 @@ class PosePipeline:
             # a half's range mixes the neighbour's and the surround's light at the cut:
             # its bearing is used, its range only as a weak constraint
             sr[fitted] = np.maximum(sr[fitted], UNCALIBRATED_RANGE_SIGMA_MM)
-            y[fitted] = ar.bearings(cam, uv[fitted]) * rho_r[fitted, None]  # Eq. 8
+            y[fitted] = ar.persistence.bearings(cam, uv[fitted]) * rho_r[fitted, None]  # Eq. 8
             w[fitted] = 1.0 / (sr[fitted] ** 2 + (rho_r[fitted] * sp[fitted] / cam.fx) ** 2)
         area = np.array([b.area_px for b in ranged_blobs], np.int64)
         meas = Measurements(ranged_blobs, area, uv, rho_r, y, w, sp, sr, mix)
@@ -416,7 +410,7 @@ class PosePipeline:
             meas.y_mm, self._catalog_xyz, cfg.matching,
             observed_diameter_mm=diam * meas.range_mm / self.camera.fx,
             catalog_diameter_mm=self._catalog_d, weights=meas.weights,
-            arithmetic=self.arithmetic,
+            arithmetic=self.arithmetic.matching,
         )  # fmt: skip
 
     def _solve_with_fallback(self, meas: Measurements, m: MatchResult, active):
@@ -433,12 +427,13 @@ class PosePipeline:
             meas.y_mm, self._catalog_xyz, m.alpha_mm, tol,
             self._solver.facing,
             weights=meas.weights, min_matches=cfg.matching.min_matches,
-            arithmetic=self.arithmetic,
+            arithmetic=self.arithmetic.matching,
         )  # fmt: skip
         return self._solver.solve(pairs, meas, m.alpha_mm, active) if len(pairs) else solved
 
     def _process_tracking(self, g, d, time_s, track: TrackState, timer) -> PoseResult | None:
-        """Tracking mode (``tofpose.tracking``, ``tofpose.tracking_frame``): reflectors
+        """Tracking mode (``tofpose.stages.tracking.tracking``,
+        ``tofpose.stages.tracking.tracking_frame``): reflectors
         searched only in windows around their predicted images, correspondences known,
         in one compiled call; None means "fall back to the full acquisition pass", and
         leaves no trace in the persistence history."""
@@ -479,7 +474,7 @@ class PosePipeline:
         uv_m, y_m, rho_m = obs.uv_px, obs.y_mm, obs.range_mm
         area, uv, rho = meas.area_px, meas.uv_px, meas.range_mm
         sig_px = meas.sigma_px
-        res, rms = self.arithmetic.point_residuals_mm(x, y_m, R, t)
+        res, rms = self.arithmetic.pose.point_residuals_mm(x, y_m, R, t)
         per_reflector = zip(
             self._catalog_ids[i_idx].tolist(), uv_m, y_m, res.tolist(), rho_m.tolist(),
             area[k_idx].tolist(), sig_px[k_idx].tolist(), obs.sigma_range_mm.tolist(),
@@ -523,7 +518,7 @@ class PosePipeline:
         if ml.bias_covariance is not None:
             cov = cov + ml.bias_covariance
         if ml.leave_one_out_covariance is not None:  # pose.covariance_envelope
-            cov = self.arithmetic.covariance_envelope(cov, ml.leave_one_out_covariance)
+            cov = self.arithmetic.pose.covariance_envelope(cov, ml.leave_one_out_covariance)
         if self.covariance_scale is not None:
             cov = cov * self.covariance_scale.factor_at(math.sqrt(float(t_mm @ t_mm)))
         return cov
@@ -562,7 +557,7 @@ class PosePipeline:
             deadline_s=None if budget is None else time.perf_counter() + budget / 1000.0,
             confidence=cfg.ransac_confidence,
             stats=stats,
-            arithmetic=self.arithmetic,
+            arithmetic=self.arithmetic.matching,
         )
         matched = set(pairs[:, 0].tolist())
         unmatched = [k for k in range(len(y)) if k not in matched]
@@ -577,196 +572,3 @@ class PosePipeline:
             return float(max(b.ellipse[1]))
         _, _, bw, bh = b.bbox
         return float(max(bw, bh, 2.0 * np.sqrt(b.area_px / np.pi)))
-
-    def _confirm_ellipses(self, blobs, oversize, gray, dist, stats) -> list[Blob]:
-        """§3.3: confirm candidate shapes; split oversize components into ellipses.
-
-        A candidate of >= 20 px whose boundary is not an ellipse (RMS > limit) is dropped.
-        When there are fewer candidates than catalog reflectors, components rejected as
-        too large are searched for elliptical arcs of the predicted size (supplement).
-        """
-        cfg = self.config.extraction
-        ar = self.arithmetic
-        h, w = gray.shape
-        out = []
-        for b in blobs:
-            if b.area_px >= 20:
-                mask, x0, y0 = _blob_mask(b, w, ar)
-                pts = blob_contour(mask, (x0, y0))  # in image coordinates
-                if len(pts) >= cfg.ellipse_min_points:
-                    e = fit_ellipse(pts)
-                    if e is not None:
-                        rms_px = ellipse_residual_px(e, pts, arithmetic=ar)
-                        if rms_px > cfg.ellipse_max_residual_px:
-                            continue
-                        b = b.with_values(ellipse=e, ellipse_residual_px=rms_px)
-            out.append(b)
-        if len(out) >= len(self.catalog) or not oversize:
-            return out
-        for comp in oversize:
-            mask, x0, y0 = _blob_mask(comp, w, ar)
-            pts = blob_contour(mask)
-            d_lo, d_hi = predicted_diameter_window_px(
-                self.camera.fx, comp.distance_mm, self._catalog_d, cfg
-            )
-            arcs = split_arcs(pts, min_points=cfg.ellipse_min_points, arithmetic=ar)
-            found = ellipses_from_arcs(
-                arcs, d_min_px=d_lo, d_max_px=d_hi, max_residual_px=cfg.ellipse_max_residual_px,
-                arithmetic=ar,
-            )  # fmt: skip
-            if not found:
-                found_parts = _split_by_threshold(comp, gray, stats.raw_threshold, d_hi,
-                                                  cfg.min_area_px, ar)  # fmt: skip
-                out += found_parts or _split_in_two(comp, gray, stats.background, d_lo,
-                                                    d_hi, cfg.min_area_px, ar)  # fmt: skip
-            elif len(found) == 1:
-                # one ellipse for a component too large for one reflector: at a few px
-                # the outline of a merged pair fits one ellipse of a reflector's size
-                # over part of it; a pair's two centres explain all of it
-                pair = _split_in_two(comp, gray, stats.background, d_lo, d_hi,
-                                     cfg.min_area_px, ar)  # fmt: skip
-                if pair:
-                    out += pair
-                    continue
-            for e, _ in found:
-                fill = np.zeros_like(mask)
-                (cx, cy), (a1, a2), ang = e
-                cv2.ellipse(fill, ((cx, cy), (a1, a2), ang), 1, -1)
-                inside = (fill > 0) & (mask > 0)
-                rows, cols = np.nonzero(inside)
-                if len(rows) < cfg.min_area_px:
-                    continue
-                nb = Blob(
-                    pixels=(rows + y0) * w + (cols + x0),
-                    area_px=len(rows),
-                    bbox=(
-                        int(cols.min() + x0),
-                        int(rows.min() + y0),
-                        int(np.ptp(cols) + 1),
-                        int(np.ptp(rows) + 1),
-                    ),
-                    peak_counts=float(gray[rows + y0, cols + x0].max()),
-                    ellipse=((cx + x0, cy + y0), (a1, a2), ang),
-                    source="ellipse",
-                )
-                out.append(nb)
-        return out
-
-
-SPLIT_LEVELS = 12
-
-
-def _split_by_threshold(
-    comp: Blob, gray: np.ndarray, raw_threshold: float, d_max_px: float, min_area_px: int,
-    arithmetic: Arithmetic = COMPILED,
-) -> list[Blob]:  # fmt: skip
-    """Ours (after §3.3): a component too large for one reflector whose outline gives no
-    elliptical arcs (small merged markers, e.g. 7 and 8 beyond ~4 m, a few px each) is
-    thresholded again at rising levels between I_t and its peak; at the first level where
-    it falls apart into two or more parts of at least a tenth of the component each, and
-    each no larger than one reflector, those parts' cores are the candidates (their range
-    and centroid are measured later as for any blob). Returns [] when no level splits it."""
-    h, w = gray.shape
-    mask, x0, y0 = _blob_mask(comp, w, arithmetic)
-    patch = np.zeros(mask.shape, np.float32)
-    rows, cols = np.nonzero(mask)
-    patch[rows, cols] = gray[rows + y0, cols + x0]
-    peak = float(patch.max())
-    for level in np.linspace(raw_threshold, peak, SPLIT_LEVELS + 2)[1:-1]:
-        n, labels, st, _ = cv2.connectedComponentsWithStats(
-            (patch >= level).astype(np.uint8), connectivity=8
-        )
-        # parts that are cores of markers, not noise specks on one big disc: each holds
-        # at least a tenth of the component
-        big = max(min_area_px, 0.1 * comp.area_px)
-        parts = [k for k in range(1, n) if st[k, cv2.CC_STAT_AREA] >= big]
-        if len(parts) < 2:
-            continue
-        sizes = [2.0 * np.sqrt(st[k, cv2.CC_STAT_AREA] / np.pi) for k in parts]
-        if max(sizes) > d_max_px:
-            continue  # still a merged pair in one of the parts: go higher
-        out = []
-        for k in parts:
-            pr, pc = np.nonzero(labels == k)
-            out.append(Blob(
-                pixels=(pr + y0) * w + (pc + x0),
-                area_px=len(pr),
-                bbox=(int(pc.min() + x0), int(pr.min() + y0), int(np.ptp(pc) + 1),
-                      int(np.ptp(pr) + 1)),
-                peak_counts=float(patch[pr, pc].max()),
-                distance_mm=comp.distance_mm,
-                source="split",
-            ))  # fmt: skip
-        return out
-    return []
-
-
-#: Lloyd iterations of the two-centre split (they converge in 2-4 on a merged pair)
-TWO_CENTRE_ITERATIONS = 8
-#: the halves of a merged pair of like reflectors carry light within this ratio (gains
-#: of aged or dirty reflectors differ by up to ~30 %, so a pair by up to ~2x)
-PAIR_LIGHT_RATIO = 3.0
-
-
-def _split_in_two(
-    comp: Blob, gray: np.ndarray, background: float, d_lo_px: float, d_hi_px: float,
-    min_area_px: int, arithmetic: Arithmetic = COMPILED,
-) -> list[Blob]:  # fmt: skip
-    """Ours (after ``_split_by_threshold``): a component the size of two reflectors whose
-    light shows no dip between them (two discs a fraction of a pixel apart, integrated
-    over the pixel area and blurred by the lens: markers 7 and 8 beyond ~6 m) is cut in
-    two by intensity-weighted 2-means (Lloyd's iteration from the ends of its major
-    axis), each half's pixels those nearer its centre. Taken only when the component is
-    elongated as a pair is (major axis over minor >= 1.5), each half's equivalent
-    diameter lies in the window of one reflector (``d_lo_px``..``d_hi_px``) and their
-    light is within ``PAIR_LIGHT_RATIO``; returns [] otherwise. Each half's moment
-    centroid leans towards the other (it keeps the neighbour's light at the cut), so the
-    centres come from a model fit of the pair's pixels (``pair_fit.fit_pair``; no split
-    when it fails) and replace the halves' centroids in the measurement
-    (``Blob.fitted_uv``); ranges are measured on the halves as any blob's, and the
-    centroid sigma keeps the split's term (``uncertainty.SPLIT_CENTROID_PX``). The 2-means
-    is compiled (``kernels.two_centres.two_centre_split``; ``arithmetic``'s)."""
-    w = gray.shape[1]
-    rows, cols = np.divmod(np.asarray(comp.pixels), w)
-    weight = np.maximum(gray[rows, cols].astype(float) - background, 0.0)
-    if len(rows) < 2 * min_area_px or weight.sum() <= 0:
-        return []
-    near, centres, status = arithmetic.two_centre_split(cols.astype(float), rows.astype(float),
-                                                        weight, TWO_CENTRE_ITERATIONS)  # fmt: skip
-    if status != SPLIT_OK:
-        return []  # not elongated as two discs side by side are, or one-sided
-    light = np.bincount(near, weights=weight, minlength=2)
-    if light.max() > PAIR_LIGHT_RATIO * light.min():
-        return []  # not two like reflectors (a marker and a glint, or a speck)
-    for n_k in np.bincount(near, minlength=2).tolist():  # each half one reflector's size
-        if n_k < min_area_px or not d_lo_px <= 2.0 * np.sqrt(n_k / np.pi) <= d_hi_px:
-            return []
-    fit = fit_pair(gray, comp.pixels, centres, background, arithmetic=arithmetic)
-    if fit is None:
-        return []  # the halves' moment centroids lean towards each other: not used
-    # the fitted disc nearest each half's centroid is that half's centre
-    order = np.argmin(((centres[:, None, :] - fit.centres_px[None, :, :]) ** 2).sum(axis=2),
-                      axis=1)  # fmt: skip
-    if order[0] == order[1]:
-        return []
-    out = []
-    for k in range(2):
-        pr, pc = rows[near == k], cols[near == k]
-        out.append(Blob(
-            pixels=pr * w + pc,
-            area_px=len(pr),
-            bbox=(int(pc.min()), int(pr.min()), int(np.ptp(pc) + 1), int(np.ptp(pr) + 1)),
-            peak_counts=float(gray[pr, pc].max()),
-            distance_mm=comp.distance_mm,
-            source="split",
-            fitted_uv=fit.centres_px[order[k]],
-        ))  # fmt: skip
-    return out
-
-
-def _blob_mask(
-    b: Blob, width: int, arithmetic: Arithmetic = COMPILED
-) -> tuple[np.ndarray, int, int]:
-    """Binary mask of a blob in its bounding box padded by 1 px, and the box origin."""
-    x, y, bw, bh = b.bbox
-    return arithmetic.blob_mask(b.pixels, x, y, bw, bh, width), x - 1, y - 1

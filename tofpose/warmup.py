@@ -1,6 +1,7 @@
 """Compile (or load from numba's on-disk cache) every pipeline kernel before live frames.
 
-The pipeline's inner loops are compiled on first use (``tofpose.kernels``): about a minute on a
+The pipeline's inner loops are compiled on first use (``tofpose.core.compiled``): about a minute on
+a
 fresh install, ~0.3 s once the cache exists. The warm-up does it once, at a moment of the
 caller's choosing: ``tofpose warm-up`` after installing (``make test`` and the Dockerfile
 run it), and the server in a background thread while its acquisition loop already runs
@@ -9,9 +10,11 @@ run it), and the server in a background thread while its acquisition loop alread
 1. ``warm_up_reference()``: the few kernels that the reference implementation
    (``PosePipeline(..., implementation="reference")``, every stage in NumPy/SciPy) still
    calls, the ones ``tofpose.arithmetic`` names as not covered: the frame check's float32
-   conversion (``kernels.levels.checked_frame``, ``clean_distance``, once per distance
-   dtype), the persistence history's pixel masks (``kernels.persistence.pixel_mask``)
-   and the camera's bearings and projection (``kernels.camera``, built into the
+   conversion (``stages.extraction.kernels.levels.checked_frame``, ``clean_distance``, once per
+   distance
+   dtype), the persistence history's pixel masks
+   (``stages.persistence.kernels.persistence.pixel_mask``)
+   and the camera's bearings and projection (``core.kernels.camera``, built into the
    pipeline's camera record; the 3-D scene projects with them). About 1 s from an empty
    cache. After it a reference pipeline compiles nothing, so a server can measure with
    it while the second stage compiles in another thread: a kernel first called from the
@@ -30,19 +33,19 @@ import time
 
 import numpy as np
 
-from tofpose.camera import CameraModel
-from tofpose.catalog import paper_target
+from tofpose.calibration.range import RangeCorrection
 from tofpose.config import TrackingConfig
-from tofpose.geometry import RigidTransform, rotation_from_euler_deg
-from tofpose.kernels.levels import checked_frame, clean_distance
-from tofpose.kernels.pair_fit import fit_pair_lm
-from tofpose.kernels.persistence import pixel_mask
-from tofpose.kernels.two_centres import two_centre_split
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import paper_target
+from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg
 from tofpose.pipeline import PipelineConfig, PosePipeline
-from tofpose.range_calibration import RangeCorrection
 from tofpose.sim.bench import R_FACING
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import TargetScene
+from tofpose.stages.ellipses.kernels.pair_fit import fit_pair_lm
+from tofpose.stages.ellipses.kernels.two_centres import two_centre_split
+from tofpose.stages.extraction.kernels.levels import checked_frame, clean_distance
+from tofpose.stages.persistence.kernels.persistence import pixel_mask
 
 _done = False
 _reference_done = False

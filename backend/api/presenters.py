@@ -43,15 +43,15 @@ from backend.services.campaign_states import FINISHED, CampaignState, transition
 from backend.services.kernel_warmup import COMPILING_REASON, REFERENCE_DETAIL
 from backend.services.motion import MotionDeviceError
 from backend.state import AppState
-from tofpose.extraction import REJECT_REASONS
-from tofpose.geometry import (
+from tofpose.core.geometry import (
     RigidTransform,
     euler_deg_from_rotation,
     facing_euler_deg,
     facing_euler_sigma_deg,
     rotation_angle_deg,
 )
-from tofpose.tof import unambiguous_range_mm
+from tofpose.core.tof import unambiguous_range_mm
+from tofpose.stages.extraction.extraction import REJECT_REASONS
 
 
 def _device_state(device, h) -> DeviceStatePublic:

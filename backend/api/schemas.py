@@ -871,7 +871,8 @@ class ReprocessCreate(StrictBody):
     """Re-process a campaign's recording with another camera calibration."""
 
     camera: dict[str, Any] | None = Field(
-        None, description="a camera JSON (tofpose.camera.CameraModel, with the range_correction "
+        None, description="a camera JSON (tofpose.core.camera.CameraModel, with the "
+        "range_correction "
         "and covariance_scale tofpose calibrate-range / calibrate-covariance add); omitted: "
         "the recording's own camera")  # fmt: skip
     tracking: bool = Field(False, description="the pipeline's tracking mode")

@@ -43,7 +43,7 @@ class DeviceSettingsRow(Base):
 
 
 class CatalogRow(Base):
-    """A user-supplied target catalog (the built-in ones live in ``tofpose.catalog``)."""
+    """A user-supplied target catalog (the built-in ones live in ``tofpose.core.catalog``)."""
 
     __tablename__ = "catalogs"
 
@@ -185,7 +185,7 @@ class MeasurementRow(Base):
     lab_truth_roll_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     encoders: Mapped[dict[str, float] | None] = mapped_column(JSON, nullable=True)
     recording_index: Mapped[int | None] = mapped_column(Integer, nullable=True)
-    # the relative-state filter at the frame (tofpose.relative_state): angular rate deg/s
+    # the relative-state filter at the frame (tofpose.lab.relative_state): angular rate deg/s
     # and velocity mm/s in the camera frame, their 1-sigma, and what it did with the pose
     rate_x_deg_s: Mapped[float | None] = mapped_column(Float, nullable=True)
     rate_y_deg_s: Mapped[float | None] = mapped_column(Float, nullable=True)

@@ -3,7 +3,7 @@
 A camera yields (gray, distance, time) frame pairs and accepts settings; a motion system
 moves axes to set-points, reports encoder positions and busy/settled state, and stops at
 once. Simulated, replay and (later) real devices implement these Protocols. A motion
-system may also run motion profiles (``run_profile``, tofpose.motion_profile).
+system may also run motion profiles (``run_profile``, tofpose.lab.motion_profile).
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from tofpose.camera import CameraModel
-from tofpose.geometry import RigidTransform
-from tofpose.motion_profile import LimitProblem, MotionProfile
+from tofpose.core.camera import CameraModel
+from tofpose.core.geometry import RigidTransform
+from tofpose.lab.motion_profile import LimitProblem, MotionProfile
 
 
 class CameraError(RuntimeError):

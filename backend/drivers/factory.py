@@ -9,7 +9,7 @@ from backend.drivers.reference import EncoderReferencedCamera
 from backend.drivers.replay import ReplayCamera
 from backend.drivers.sim import SimCamera, SimMotion, SimWorld, make_sim_world
 from backend.settings import Settings, visa_resource
-from tofpose.catalog import Catalog
+from tofpose.core.catalog import Catalog
 from tofpose.sim.bench import LabGeometry
 
 

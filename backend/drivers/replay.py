@@ -11,8 +11,8 @@ import numpy as np
 
 from backend.drivers.base import CameraError, CameraFrame, CameraSettings
 from backend.drivers.pacing import FramePacer
-from tofpose.geometry import RigidTransform
-from tofpose.recording import RecordingError, open_recording
+from tofpose.core.geometry import RigidTransform
+from tofpose.io.recording import RecordingError, open_recording
 
 DEFAULT_RATE_HZ = 10.0
 

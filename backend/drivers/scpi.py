@@ -35,7 +35,7 @@ import time
 from typing import Any
 
 from backend.drivers.base import AxisLimits, MotionError, MotionStatus, ProfileStatus
-from tofpose.motion_profile import MotionProfile, SineProfile
+from tofpose.lab.motion_profile import MotionProfile, SineProfile
 
 DEFAULT_AXIS_NUMBERS = {"yaw": 1, "pitch": 2, "roll": 3, "rail": 4}
 STATUS_IN_MOTION = 2

@@ -23,8 +23,8 @@ from backend.drivers.base import (
 )
 from backend.drivers.pacing import FramePacer
 from tofpose import __version__
-from tofpose.catalog import Catalog, paper_target
-from tofpose.motion_profile import MotionProfile
+from tofpose.core.catalog import Catalog, paper_target
+from tofpose.lab.motion_profile import MotionProfile
 from tofpose.sim.bench import LabGeometry, SimulatedBench
 from tofpose.sim.render import render_frame
 from tofpose.sim.scenarios import paper_mount_error

@@ -36,7 +36,7 @@ import numpy as np
 
 from backend.drivers.base import CameraError, CameraFrame, CameraSettings
 from backend.drivers.pacing import FramePacer
-from tofpose.camera import CameraModel
+from tofpose.core.camera import CameraModel
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ Synthesis mode (``:MODE n,SYNThesis``), as rate-table controllers offer it besid
 and rate modes: the controller generates the axis' demand from a loaded function, a sine
 (``:SYNThesis:SINE n,amplitude,frequency,cycles``) or a constant-rate ramp
 (``:SYNThesis:RAMP n,rate,acceleration,hold``), started about the axis' position by
-``:SYNThesis:STARt n`` (tofpose.motion_profile gives both shapes). A controller made with
+``:SYNThesis:STARt n`` (tofpose.lab.motion_profile gives both shapes). A controller made with
 ``synthesis=False`` has none of it (an older command set), so a driver's refusal can be
 tested.
 """
@@ -34,7 +34,7 @@ from backend.drivers.sim import SimWorld
 from backend.emulators.scpi_parse import ParsedCommand, ScpiError, parse_command, split_message
 from backend.emulators.tcp import ServedEmulator, TrackedHandler, TrackedTCPServer
 from tofpose import __version__
-from tofpose.motion_profile import MotionProfile, RampProfile, SineProfile
+from tofpose.lab.motion_profile import MotionProfile, RampProfile, SineProfile
 from tofpose.sim.turntable import AxisBusyError, SoftLimitError
 
 log = logging.getLogger(__name__)

@@ -37,7 +37,7 @@ import numpy as np
 
 from backend.drivers.sim import SimWorld
 from backend.emulators.tcp import ServedEmulator, TrackedHandler, TrackedTCPServer
-from tofpose.tof import unambiguous_range_mm
+from tofpose.core.tof import unambiguous_range_mm
 
 log = logging.getLogger(__name__)
 

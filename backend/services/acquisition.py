@@ -43,10 +43,10 @@ from backend.drivers.base import CameraDriver, CameraFrame
 from backend.services.hub import LiveHub
 from backend.services.kernel_warmup import COMPILING_REASON, KernelWarmup
 from backend.services.live_reference import LiveReference
-from tofpose.catalog import Catalog
-from tofpose.extraction import FrameError
+from tofpose.core.catalog import Catalog
+from tofpose.lab.relative_state import RelativeState, RelativeStateConfig, RelativeStateFilter
 from tofpose.pipeline import PipelineConfig, PosePipeline, PoseResult
-from tofpose.relative_state import RelativeState, RelativeStateConfig, RelativeStateFilter
+from tofpose.stages.extraction.extraction import FrameError
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +63,7 @@ class LiveSample:
         the kernels compile at server start, "compiled" after; None when not measured.
     reference : the lab reference the live error of this frame is measured against.
     state : the relative-state filter's state at the frame's time (pose, rates,
-        velocity and their covariance; ``tofpose.relative_state``), None before its
+        velocity and their covariance; ``tofpose.lab.relative_state``), None before its
         first pose.
     cache : serialised forms (JSON, PNG) computed once and shared by all consumers.
     """

@@ -3,7 +3,7 @@
 From a campaign's measurements: per set-point, the mean encoder read-back and the mean
 measured pose (rotation from the stored raw quaternions) form one observation, with the
 standard error of the mean as its 1-sigma (floored, so that a perfectly repeatable
-set-point does not dominate). ``tofpose.calibration.calibrate_bench`` fits the mount and
+set-point does not dominate). ``tofpose.calibration.bench.calibrate_bench`` fits the mount and
 placement; the result is stored with its uncertainty and residuals. A report given a
 calibration uses ``camera_target(encoders, mount, placement)`` per frame as its
 reference ("calibrated").
@@ -17,9 +17,9 @@ from sqlalchemy.orm import Session
 
 from backend.db.models import CalibrationRow, MeasurementRow, SetPointRow
 from backend.services.store import commit_unique
-from tofpose.calibration import BenchObservation, calibrate_bench, mean_pose
-from tofpose.geometry import RigidTransform, facing_euler_deg, rotation_from_quaternion_wxyz
-from tofpose.kinematics import camera_target
+from tofpose.calibration.bench import BenchObservation, calibrate_bench, mean_pose
+from tofpose.core.geometry import RigidTransform, facing_euler_deg, rotation_from_quaternion_wxyz
+from tofpose.lab.kinematics import camera_target
 
 SIGMA_FLOOR_MM = 0.02
 SIGMA_FLOOR_DEG = 0.002

@@ -32,8 +32,8 @@ from backend.services.campaign_states import (
     check_transition,
 )
 from backend.services.store import commit_unique
-from tofpose.geometry import RigidTransform, facing_euler_deg, facing_euler_sigma_deg
-from tofpose.recording import RecordingWriter
+from tofpose.core.geometry import RigidTransform, facing_euler_deg, facing_euler_sigma_deg
+from tofpose.io.recording import RecordingWriter
 
 AXIS_COLUMNS = {"yaw": "yaw_deg", "pitch": "pitch_deg", "roll": "roll_deg", "rail": "rail_mm"}
 

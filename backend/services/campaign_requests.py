@@ -12,7 +12,7 @@ from backend.drivers.base import soft_limit_problems
 from backend.services import campaign_plan
 from backend.services.campaign_repository import CampaignView
 from backend.services.motion import MotionDeviceError, MotionService
-from tofpose.motion_profile import profile_from_spec
+from tofpose.lab.motion_profile import profile_from_spec
 
 AXIS_FIELDS = ("yaw_deg", "pitch_deg", "roll_deg", "rail_mm")
 MAX_LISTED = 20

@@ -9,12 +9,12 @@ Per dynamic set-point (rows with ``in_motion`` 0 or 1):
   (the rests before and after the profile): RMS and max |error|, no singular-point
   removal (a dynamic error is not an outlier);
 - angular rate: the reference's, camera frame, from a rotation spline through the
-  reference attitudes of every frame (``tofpose.dynamics``), against the filter's
+  reference attitudes of every frame (``tofpose.lab.dynamics``), against the filter's
   ``rate_*`` columns at the same stamps; RMS and max of the error norm in motion, and
   the RMS as a share of the reference's peak rate;
 - frames lost in motion: frames the camera numbered between the first and the last in
   motion that gave no good pose (not delivered, or no pose), as a share of them;
-- latency: ``tofpose.dynamics.fit_latency`` over the good frames in motion, and an
+- latency: ``tofpose.lab.dynamics.fit_latency`` over the good frames in motion, and an
   inverse-variance mean over the set-points with a chi-square of their agreement.
 """
 
@@ -23,8 +23,8 @@ from __future__ import annotations
 import numpy as np
 
 from backend.services.analysis import REFERENCE_PREFIX
-from tofpose.dynamics import angular_rate_deg_s, fit_latency, reference_spline
-from tofpose.geometry import FACING, rotation_from_euler_deg
+from tofpose.core.geometry import FACING, rotation_from_euler_deg
+from tofpose.lab.dynamics import angular_rate_deg_s, fit_latency, reference_spline
 
 ANGLES = ("pitch_deg", "yaw_deg", "roll_deg")
 RATES = tuple(f"rate_{a}_deg_s" for a in "xyz")

@@ -1,6 +1,6 @@
 """The live stream for Foxglove: a ``foxglove-sdk`` WebSocket server in this process.
 
-It publishes the channels of an exported MCAP file (``tofpose.interop.topics``, see
+It publishes the channels of an exported MCAP file (``tofpose.io.interop.topics``, see
 docs/interop.md) for every live frame: the gray and distance images, the camera model,
 the overlay, the estimate (transform, pose, reflectors, JSON with its covariance), the
 lab reference (``/tofpose/lab_truth``: the reference the live error is measured against)
@@ -35,7 +35,7 @@ class LiveFoxglove:
     ) -> None:  # fmt: skip
         import foxglove  # imported here: the server runs without it when it is off
 
-        from tofpose.interop.channels import ToFChannels
+        from tofpose.io.interop.channels import ToFChannels
 
         self._hub = hub
         self.context = foxglove.Context()

@@ -10,7 +10,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import cv2
 import numpy as np
 
-from tofpose.interop.previews import distance_to_bgr, gray_to_u8
+from tofpose.io.interop.previews import distance_to_bgr, gray_to_u8
 from tofpose.pipeline import PoseResult
 
 MATCHED_BGR = (80, 220, 80)

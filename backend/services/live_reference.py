@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 from backend.drivers.base import CameraFrame
 from backend.services.calibrations import transform
-from tofpose.geometry import RigidTransform
-from tofpose.kinematics import camera_target
+from tofpose.core.geometry import RigidTransform
+from tofpose.lab.kinematics import camera_target
 
 NOMINAL_LABEL = "nominal lab geometry (uncalibrated)"
 AXES = ("yaw", "pitch", "roll", "rail")

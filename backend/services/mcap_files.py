@@ -1,7 +1,7 @@
 """A campaign's raw recording as MCAP (``GET /api/campaigns/{id}/recording.mcap``).
 
 The MCAP is made from a copy of the campaign's HDF5 recording (so a campaign resumed
-meanwhile can append to the original) by ``tofpose.interop``'s export: frames,
+meanwhile can append to the original) by ``tofpose.io.interop``'s export: frames,
 references, and the pipeline's estimate of each frame with the recording's camera and
 catalog and default settings (tracking off). It is kept beside the recording with a note
 of the recording's size and modification time, and made again when they change. One
@@ -51,9 +51,9 @@ def recording_mcap(recording_path: Path, min_free_mb: float = 0.0) -> Path:
     """The MCAP of ``recording_path`` (``.../campaign-N.h5`` -> ``.../campaign-N.mcap``),
     exported now unless one made from the recording as it is now exists; a new export
     needs twice the recording's size plus ``min_free_mb`` free (``ExportSpaceError``)."""
-    from tofpose.interop.mcap_export import export_mcap  # lazy: loads foxglove-sdk
+    from tofpose.io.interop.mcap_export import export_mcap  # lazy: loads foxglove-sdk
+    from tofpose.io.recording import open_recording
     from tofpose.pipeline import PosePipeline
-    from tofpose.recording import open_recording
 
     out = recording_path.with_suffix(".mcap")
     note = recording_path.with_suffix(".mcap.json")

@@ -45,7 +45,7 @@ from backend.drivers.base import (
     soft_limit_problems,
 )
 from backend.services.acquisition import DeviceHealth
-from tofpose.motion_profile import LimitProblem, MotionProfile, profile_from_spec
+from tofpose.lab.motion_profile import LimitProblem, MotionProfile, profile_from_spec
 
 log = logging.getLogger(__name__)
 
@@ -332,7 +332,7 @@ class MotionService:
 
     def start_profile(self, axis: str, spec: dict) -> MotionProfile:
         """A person's motion profile on ``axis`` from its encoder position read now
-        (``spec`` as ``tofpose.motion_profile.profile_from_spec`` takes it); returns it as
+        (``spec`` as ``tofpose.lab.motion_profile.profile_from_spec`` takes it); returns it as
         started. Checks, in order: the axis, profile mode, ownership, at rest, limits."""
         if (problem := self.profile_axis_problem(axis)) is not None:
             raise MotionLimitError([problem])

@@ -3,7 +3,7 @@ wants it (``POST /api/recordings``, ``tofpose record``, the dashboard's Record p
 
 Each recording subscribes to the live hub, as a campaign's runner does, and writes every
 frame the hub delivers to one file in the project's recording format (docs/architecture.md
-§7, ``tofpose.recording.RecordingWriter``: ``/frames``, ``/truth`` and ``/lab_truth`` when
+§7, ``tofpose.io.recording.RecordingWriter``: ``/frames``, ``/truth`` and ``/lab_truth`` when
 the source knows them, so ``open_recording``, ``tofpose estimate`` and the MCAP export
 read it as they read any recording). Besides those, each frame gets what the live sample
 carries, in optional groups that other readers skip:
@@ -70,9 +70,9 @@ import numpy as np
 from backend.services.acquisition import LiveSample
 from backend.services.hub import LiveHub, Subscription
 from backend.services.motion import MotionService
-from tofpose.camera import CameraModel
-from tofpose.catalog import Catalog
-from tofpose.recording import RecordingError, RecordingWriter, open_recording
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog
+from tofpose.io.recording import RecordingError, RecordingWriter, open_recording
 
 log = logging.getLogger(__name__)
 

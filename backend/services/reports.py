@@ -41,7 +41,7 @@ from backend.services.report_dynamic import (  # noqa: E402
     dynamic_tables,
 )
 from backend.services.report_plots import NO_PLOTS, evidence_plots, standalone  # noqa: E402
-from tofpose.relative_state import STATE_COLUMNS  # noqa: E402
+from tofpose.lab.relative_state import STATE_COLUMNS  # noqa: E402
 
 POSE = AXES
 CSV_COLUMNS = (

@@ -29,8 +29,8 @@ from backend.services.batch_queue import BatchQueue
 from tofpose.batch.cluster import default_workers
 from tofpose.batch.compare import compare_runs
 from tofpose.batch.reprocess import ReprocessCancelledError, Settings, reprocess
-from tofpose.camera_file import load_camera
-from tofpose.recording import RecordingError, open_recording
+from tofpose.io.camera_file import load_camera
+from tofpose.io.recording import RecordingError, open_recording
 
 log = logging.getLogger(__name__)
 
@@ -70,7 +70,7 @@ def _write_json(path: Path, doc: dict) -> None:
 
 def check_camera(camera: dict, recording: Path) -> str:
     """The camera JSON text for ``recording``'s frames; ``ReprocessRequestError`` naming
-    the field when it is not a camera (``tofpose.camera.CameraModel``) or its image size
+    the field when it is not a camera (``tofpose.core.camera.CameraModel``) or its image size
     differs from the recording's."""
     text = json.dumps(camera)
     try:
@@ -212,7 +212,7 @@ class ReprocessService:
                 job.update(status="queued", started=None)
                 _write_json(d / "job.json", job)
             return
-        except SystemExit as exc:  # tofpose.camera_file.pipeline_for's message for the user
+        except SystemExit as exc:  # tofpose.io.camera_file.pipeline_for's message for the user
             self._finish(jid, "failed", str(exc.code).removeprefix("tofpose: "))
             return
         except Exception as exc:  # noqa: BLE001 (the job says failed, with the error)

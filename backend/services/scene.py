@@ -86,8 +86,8 @@ from backend.services.scene_model import (
     reflector_states,
 )
 from backend.settings import LOOPBACK_HOST_HEADERS
-from tofpose.catalog import Catalog
-from tofpose.geometry import RigidTransform, quaternion_wxyz_from_rotation
+from tofpose.core.catalog import Catalog
+from tofpose.core.geometry import RigidTransform, quaternion_wxyz_from_rotation
 
 log = logging.getLogger("tofpose.scene")
 TRUTH_COLOUR = (70, 120, 230)

@@ -11,10 +11,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tofpose.camera import CameraModel
-from tofpose.catalog import Catalog
-from tofpose.geometry import RigidTransform
-from tofpose.kinematics import axes_transform
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog
+from tofpose.core.geometry import RigidTransform
+from tofpose.lab.kinematics import axes_transform
 from tofpose.pipeline import PoseResult
 
 MATCHED, UNMATCHED, OUT_OF_VIEW = "matched", "unmatched", "out_of_view"

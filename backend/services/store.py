@@ -9,7 +9,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from backend.db.models import CatalogRow, DeviceSettingsRow, utcnow
-from tofpose.catalog import BUILTIN_CATALOGS, Catalog
+from tofpose.core.catalog import BUILTIN_CATALOGS, Catalog
 
 
 def database_answers(engine: Engine) -> bool:

@@ -1,5 +1,5 @@
 """``tofpose record`` against a live server (uvicorn on loopback): it starts a recording,
-shows its progress, stops it and downloads an HDF5 recording that ``tofpose.recording``
+shows its progress, stops it and downloads an HDF5 recording that ``tofpose.io.recording``
 reads; the key comes from --key, $TOFPOSE_API_KEY or the key file, in that order; a read
 key, an unreachable server and a missing key each end with one line saying so."""
 
@@ -15,7 +15,7 @@ from backend.record_cli import RecordError, resolve_key
 from tests.backend.conftest import AUTH, TOKEN, LiveServer, make_settings
 from tests.backend.serve_process import free_port
 from tofpose.cli import main as tofpose_main
-from tofpose.recording import open_recording
+from tofpose.io.recording import open_recording
 
 
 @pytest.fixture(scope="module")

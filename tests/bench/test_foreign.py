@@ -28,11 +28,11 @@ from bench._foreign_metrics import (
     true_correspondences,
 )
 from tests.conftest import facing_pose, render
-from tofpose.camera import CameraModel
-from tofpose.catalog import paper_target
+from tofpose.calibration.covariance import pose_nees
 from tofpose.cli import main as tofpose_main
-from tofpose.covariance_calibration import pose_nees
-from tofpose.recording import RecordingWriter
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import paper_target
+from tofpose.io.recording import RecordingWriter
 
 
 def _rot(axis: str, deg: float) -> np.ndarray:

@@ -1,6 +1,6 @@
 """The dashboard's Record panel: name a recording, record the live stream for ~2 s, watch
 its frames and size grow, stop it, download the HDF5 from the list and read it with
-``tofpose.recording``: the frames the server counted, stamped with the wall clock of now."""
+``tofpose.io.recording``: the frames the server counted, stamped with the wall clock of now."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import pytest
 
 from tests.backend.conftest import TOKEN, LiveServer, make_settings, wait_for
 from tests.e2e.conftest import SHOTS
-from tofpose.recording import open_recording
+from tofpose.io.recording import open_recording
 
 
 @pytest.fixture

@@ -28,9 +28,9 @@ from scipy.spatial.transform import Rotation
 from tests.conftest import facing_pose, render
 from tofpose import arithmetic
 from tofpose.arithmetic import COMPILED, REFERENCE
-from tofpose.camera import CameraModel
-from tofpose.catalog import paper_target
 from tofpose.config import PipelineConfig, TrackingConfig
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import paper_target
 from tofpose.pipeline import PosePipeline
 from tofpose.sim.scene import Clutter, TargetScene
 
@@ -98,7 +98,7 @@ def test_they_agree_on_a_frame_with_clutter():
 
 def test_they_agree_on_a_tracked_stream():
     """A stream moving 4 mm per frame: acquisition, then tracking frames (the reference's
-    ``reference.tracking_frame.track_frame``) with persistence building up."""
+    ``stages.tracking.reference.tracking_frame.track_frame``) with persistence building up."""
     a_pipe, b_pipe = both(PipelineConfig(tracking=TrackingConfig(enabled=True)))
     modes = []
     for f in range(6):
@@ -141,21 +141,24 @@ def test_the_reference_pipeline_calls_no_kernel(monkeypatch):
         return call
 
     for mod_name, mod in list(sys.modules.items()):
-        if not mod_name.startswith("tofpose.") or mod_name.startswith("tofpose.kernels"):
+        if not mod_name.startswith("tofpose.") or ".kernels." in mod_name:
             continue
         for name, value in list(vars(mod).items()):
             if isinstance(value, numba.core.registry.CPUDispatcher) and name not in NOT_COVERED:
                 monkeypatch.setattr(mod, name, raiser(f"{mod_name}.{name}"))
-    saved = dataclasses.asdict(COMPILED)  # the compiled path's functions, restored below
+    # every stage's compiled functions, restored below
+    stages = [getattr(COMPILED, f.name) for f in dataclasses.fields(COMPILED) if f.name != "name"]
+    saved = [(stage, f.name, getattr(stage, f.name)) for stage in stages
+             for f in dataclasses.fields(stage) if f.name != "name"]  # fmt: skip
+    assert len(saved) >= 30
     try:
-        for field in saved:
-            if field != "name":
-                object.__setattr__(COMPILED, field, raiser(f"COMPILED.{field}"))
+        for stage, field, _ in saved:
+            object.__setattr__(stage, field, raiser(f"COMPILED.{field}"))
         for frame in frames:
             r = pipe.process(frame.gray, frame.distance_mm)
             assert r.ok, r.reason
         assert r.mode == "tracking"
     finally:
-        for field, value in saved.items():
-            object.__setattr__(COMPILED, field, value)
-    assert arithmetic.COMPILED.solve_pairs is not None
+        for stage, field, value in saved:
+            object.__setattr__(stage, field, value)
+    assert arithmetic.COMPILED.pose.solve_pairs is not None

@@ -35,9 +35,9 @@ def test_simulate_then_estimate_writes_the_documented_csv(tmp_path, capsys):
 def test_failed_frames_have_empty_pose_cells(tmp_path):
     import numpy as np
 
-    from tofpose.camera import CameraModel
-    from tofpose.catalog import paper_target
-    from tofpose.recording import RecordingWriter
+    from tofpose.core.camera import CameraModel
+    from tofpose.core.catalog import paper_target
+    from tofpose.io.recording import RecordingWriter
 
     rec, out = tmp_path / "dark.h5", tmp_path / "p.csv"
     with RecordingWriter(rec, CameraModel(), paper_target()) as w:
@@ -80,7 +80,7 @@ def test_calibrate_range_writes_a_camera_the_estimate_uses(tmp_path, capsys):
     import numpy as np
 
     from tofpose.cli import load_camera
-    from tofpose.recording import open_recording
+    from tofpose.io.recording import open_recording
 
     rec, cam, raw_csv, cal_csv = (tmp_path / n for n in ("r.h5", "c.json", "a.csv", "b.csv"))
     assert main(["simulate", "--scenario", "realistic", "--frames", "72", "--out", str(rec)]) == 0
@@ -174,7 +174,7 @@ def test_simulated_truth_is_what_was_rendered_and_lab_truth_is_apart(tmp_path):
     it by the simulated mount and placement errors, and the pipeline agrees with /truth."""
     import numpy as np
 
-    from tofpose.recording import open_recording
+    from tofpose.io.recording import open_recording
     from tofpose.sim.scenarios import get_scenario, run_scenario
 
     rec = tmp_path / "r.h5"

@@ -3,9 +3,9 @@ import pytest
 
 from tests.conftest import facing_pose, render
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
-from tofpose.extraction import FrameError
-from tofpose.geometry import RigidTransform, rotation_angle_deg
+from tofpose.core.geometry import RigidTransform, rotation_angle_deg
 from tofpose.sim.scene import Clutter, TargetScene
+from tofpose.stages.extraction.extraction import FrameError
 
 # (distance mm, (pitch, yaw, roll) deg, offset mm, median position error mm, median angle
 # deg, per-frame maxima mm / deg). The bounds are about twice what the pipeline measured
@@ -249,7 +249,7 @@ def test_ransac_matcher_recovers_the_pose_with_clutter():
 def test_covered_markers_do_not_veto_a_well_determined_pose():
     """Two markers covered (in view, dark): six matches still give the pose; the dark-marker
     check only guards poses from few matches."""
-    from tofpose.catalog import Catalog
+    from tofpose.core.catalog import Catalog
 
     cat = paper_target()
     covered = Catalog(cat.name, tuple(r for r in cat.reflectors if r.id not in (3, 6)))
@@ -263,10 +263,10 @@ def test_covered_markers_do_not_veto_a_well_determined_pose():
     pipe = PosePipeline(CameraModel(), cat, strict)
     refused = pipe.process(f.gray, f.distance_mm)
     assert not refused.ok and "dark" in refused.reason
-    # the compiled check (kernels.verify.pose_check) against the rule written out over
+    # the compiled check (stages.pose.kernels.verify.pose_check) against the rule written out over
     # the whole thresholded frame
-    from tofpose.geometry import RigidTransform
-    from tofpose.solve import ThresholdedFrame
+    from tofpose.core.geometry import RigidTransform
+    from tofpose.stages.pose.solve import ThresholdedFrame
 
     g = f.gray.astype(np.float32)
     matched = {int(np.flatnonzero(cat.ids == i)[0]) for i in (1, 2, 4, 5, 7, 8)}
@@ -351,7 +351,7 @@ def test_half_the_target_covered_still_gives_the_right_pose(visible):
     """Four of eight markers covered: four matches are not ambiguous (a mirror assignment
     of a nearly planar pattern needs the target to face away, which verification
     refuses), so the dark predicted markers are taken as occluded."""
-    from tofpose.catalog import Catalog
+    from tofpose.core.catalog import Catalog
 
     cat = paper_target()
     scene = TargetScene(Catalog(cat.name, tuple(r for r in cat.reflectors if r.id in visible)))
@@ -422,7 +422,7 @@ def test_a_biased_blob_absorbed_by_the_fit_is_found_by_leave_one_out(chi2_per_do
 def test_a_catalog_the_camera_cannot_see_says_so(diameter_mm):
     """Paper target in view, but a catalog of much smaller markers active: the reason
     names the bright blobs that do not have the catalog's size, not just '0 candidates'."""
-    from tofpose.catalog import Catalog, Reflector
+    from tofpose.core.catalog import Catalog, Reflector
 
     scene_cat = paper_target()
     tiny = Catalog(
@@ -456,7 +456,7 @@ def test_markers_7_and_8_merged_into_one_blob_are_split_and_both_matched():
             assert np.linalg.norm(m.centroid_uv - truth) < 0.6
     assert np.linalg.norm(r.t_mm - T.t_mm) < 5.0 and rotation_angle_deg(r.R, T.R) < 0.6
     # and the reported covariance holds it: inside chi2_6's 3-sigma quantile (20.06)
-    from tofpose.covariance_calibration import pose_nees
+    from tofpose.calibration.covariance import pose_nees
 
     assert pose_nees(r.R, r.t_mm, r.covariance, T.R, T.t_mm) < 20.06
 
@@ -472,13 +472,13 @@ def test_the_compiled_measurement_is_persistence_then_the_reference_equations(co
     split halves of the merged markers 7 and 8 at 8 m."""
     from math import isfinite
 
-    from tofpose.extraction import check_frame, frame_levels
+    from tofpose.calibration.range import RangeCorrection
+    from tofpose.core.reference import camera as ref_camera
     from tofpose.pipeline import _Timer
-    from tofpose.range_calibration import RangeCorrection
-    from tofpose.reference import camera as ref_camera
-    from tofpose.reference import sigmas as ref_sigmas
     from tofpose.sim.render import SensorModel
-    from tofpose.uncertainty import SigmaFloors, kernel_constants
+    from tofpose.stages.extraction.extraction import check_frame, frame_levels
+    from tofpose.stages.extraction.reference import sigmas as ref_sigmas
+    from tofpose.stages.extraction.uncertainty import SigmaFloors, kernel_constants
 
     cam, cat = CameraModel(), paper_target()
     correction = RangeCorrection(

@@ -10,8 +10,8 @@ import pytest
 
 from tests.conftest import facing_pose
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
-from tofpose.geometry import rotation_angle_deg
-from tofpose.range_calibration import fit_range_correction
+from tofpose.calibration.range import fit_range_correction
+from tofpose.core.geometry import rotation_angle_deg
 from tofpose.sim.calibration_run import calibration_frames
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import FIRST_DISC, TargetScene
@@ -106,7 +106,7 @@ def test_outside_the_calibrated_span_the_covariance_takes_the_uncalibrated_range
     covariance (the correction is an extrapolation there), inside it the calibrated one.
     The correction here is zero, so the poses are the same and only the covariance moves
     (the offset not estimated: its prior alone enters the covariance)."""
-    from tofpose.range_calibration import RangeCorrection
+    from tofpose.calibration.range import RangeCorrection
 
     u = SensorModel().unambiguous_range_mm
     T = facing_pose(5000.0, 2.0, -3.0, 5.0)

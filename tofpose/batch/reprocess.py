@@ -40,8 +40,8 @@ import numpy as np
 from tqdm import tqdm
 
 from tofpose.batch.cluster import dask_client
-from tofpose.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
-from tofpose.recording import open_recording
+from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
+from tofpose.io.recording import open_recording
 
 DEFAULT_CHUNK_FRAMES = 512
 
@@ -56,7 +56,7 @@ class ReprocessCancelledError(RuntimeError):
 
 @dataclass(frozen=True)
 class Settings:
-    """What every chunk's pipeline is built from (``tofpose.camera_file.pipeline_for``)."""
+    """What every chunk's pipeline is built from (``tofpose.io.camera_file.pipeline_for``)."""
 
     camera_path: str | None = None
     catalog_path: str | None = None
@@ -115,8 +115,8 @@ def run_chunk(chunk: Chunk, settings: Settings, out_dir: str) -> dict:
     ``chunks/<name>.csv`` (no header) and their raw poses as ``chunks/<name>.npz``
     (atomically); returns {"name", "warm": digests of frames [origin, start), "tail":
     digests of the last ``tail`` frames, "ok", "seconds"} (digests as hex strings)."""
-    from tofpose.camera_file import pipeline_for
-    from tofpose.threads import single_threaded_blas
+    from tofpose.core.threads import single_threaded_blas
+    from tofpose.io.camera_file import pipeline_for
 
     single_threaded_blas()
     t0 = time.perf_counter()
@@ -188,7 +188,7 @@ def reprocess(
     loop keeps its core)."""
     from dask.distributed import as_completed
 
-    from tofpose.camera_file import pipeline_for
+    from tofpose.io.camera_file import pipeline_for
 
     settings = settings or Settings()
     if chunk_frames < 1:
@@ -269,7 +269,7 @@ def reprocess(
 
 def _concatenate(cs: list[Chunk], out: Path, csv_path: Path, filter_state: bool) -> int:
     """Write one recording's CSV from its chunks, in order; returns its poses."""
-    from tofpose.relative_state import RelativeStateConfig, RelativeStateFilter
+    from tofpose.lab.relative_state import RelativeStateConfig, RelativeStateFilter
 
     rel = RelativeStateFilter(RelativeStateConfig.constant_acceleration()) if filter_state else None
     n_ok = 0

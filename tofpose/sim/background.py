@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tofpose.camera import CameraModel
+from tofpose.core.camera import CameraModel
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,9 +80,9 @@ class SceneBackground:
         cls, path: str | Path, index: int, illumination_gain: float,
         integration_time_us: float, dark_counts: float = 0.0,
     ) -> SceneBackground:  # fmt: skip
-        """Frame ``index`` of a recording (``tofpose.recording``) as a background, through
+        """Frame ``index`` of a recording (``tofpose.io.recording``) as a background, through
         the recording's camera (``from_frame``)."""
-        from tofpose.recording import open_recording
+        from tofpose.io.recording import open_recording
 
         with open_recording(path) as rec:
             if not 0 <= index < rec.n_frames:

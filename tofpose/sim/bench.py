@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tofpose.camera import CameraModel
-from tofpose.geometry import RigidTransform
-from tofpose.kinematics import axes_transform
+from tofpose.core.camera import CameraModel
+from tofpose.core.geometry import RigidTransform
+from tofpose.lab.kinematics import axes_transform
 from tofpose.sim.render import RenderedFrame, SensorModel, render_frame
 from tofpose.sim.scene import TargetScene
 from tofpose.sim.turntable import Turntable

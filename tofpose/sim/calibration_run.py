@@ -8,9 +8,9 @@ from collections.abc import Iterable, Iterator
 
 import numpy as np
 
-from tofpose.camera import CameraModel
-from tofpose.catalog import Catalog
-from tofpose.geometry import RigidTransform
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog
+from tofpose.core.geometry import RigidTransform
 from tofpose.sim.pixel_truth import true_pixel_distances
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import TargetScene

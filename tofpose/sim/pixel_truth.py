@@ -1,6 +1,6 @@
 """Each pixel's true radial distance to the known target at a known pose, by ray casting
 the simulator's target shape: the truth a range calibration is fitted against
-(``tofpose.range_calibration``), for a simulated run and for a recording with reference
+(``tofpose.calibration.range``), for a simulated run and for a recording with reference
 poses alike."""
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from tofpose.camera import CameraModel
-from tofpose.catalog import Catalog
-from tofpose.geometry import RigidTransform
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog
+from tofpose.core.geometry import RigidTransform
 from tofpose.sim.scene import FIRST_DISC, NO_HIT, TargetScene
 
 

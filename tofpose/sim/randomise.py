@@ -28,9 +28,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from tofpose.camera import CameraModel
-from tofpose.catalog import Catalog
-from tofpose.geometry import RigidTransform, rotation_from_euler_deg
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog
+from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg
 from tofpose.sim.background import synthetic_room
 from tofpose.sim.bench import R_FACING
 from tofpose.sim.render import SensorModel

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tofpose.kernels import jit
+from tofpose.core.compiled import jit
 
 NO_HIT, WALL, PLATE, FIRST_DISC = 0, 1, 2, 3
 

@@ -28,11 +28,11 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from tofpose.camera import CameraModel
-from tofpose.geometry import RigidTransform
+from tofpose.core.camera import CameraModel
+from tofpose.core.geometry import RigidTransform
+from tofpose.core.tof import SPEED_OF_LIGHT_MM_S
 from tofpose.sim.scene import FIRST_DISC, NO_HIT, PLATE, WALL, SceneInCamera, TargetScene
 from tofpose.sim.systematic import SystematicErrors
-from tofpose.tof import SPEED_OF_LIGHT_MM_S
 
 FULL_SCALE_COUNTS = 4095
 

@@ -12,8 +12,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from tofpose.catalog import Catalog, paper_target
-from tofpose.geometry import RigidTransform
+from tofpose.core.catalog import Catalog, paper_target
+from tofpose.core.geometry import RigidTransform
 from tofpose.sim.bench import BenchFrame, LabGeometry, SimulatedBench
 from tofpose.sim.render import AMBIENT_HIGH_LUX, SensorModel
 from tofpose.sim.scene import Clutter, TargetScene

@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tofpose.catalog import Catalog, paper_target
-from tofpose.geometry import RigidTransform
+from tofpose.core.catalog import Catalog, paper_target
+from tofpose.core.geometry import RigidTransform
 from tofpose.sim.background import SceneBackground
 from tofpose.sim.raycast import FIRST_DISC, NO_HIT, PLATE, WALL, cast_rays  # noqa: F401
 

@@ -7,7 +7,7 @@ limits before accepting a set-point, and reports encoder readings quantised to t
 encoder resolution with seeded noise. Time is explicit (``time_s`` arguments), so the
 simulation can run faster than real time or in step with a clock.
 
-An axis can also run a motion profile (tofpose.motion_profile: a sine slew or a ramp),
+An axis can also run a motion profile (tofpose.lab.motion_profile: a sine slew or a ramp),
 accepted only when its peaks lie within the axis' soft, rate and acceleration limits; the
 axis then follows it exactly (servo lag is not modelled, nor settling after it: a profile
 ends at rest with a continuous rate), until it ends or ``stop``.
@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tofpose.motion_profile import MotionProfile
+from tofpose.lab.motion_profile import MotionProfile
 
 ROTARY_AXES = ("yaw", "pitch", "roll")  # outer, middle, inner
 RAIL_AXIS = "rail"

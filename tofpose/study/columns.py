@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import pyarrow as pa
 
-from tofpose.pose_judgement import AXES
+from tofpose.lab.pose_judgement import AXES
 
 _F, _I, _B, _S = pa.float64(), pa.int32(), pa.bool_(), pa.string()
 #: the store's per-frame columns. Cell axes; the physics the frame drew; truth
 #: (T_camera_target, mm and quaternion w, x, y, z); the result (ok, reason, matched
 #: reflectors, estimate); its error (rotation vector in deg and position in mm, the
-#: pipeline's left perturbation in the camera frame, ``tofpose.pose_judgement``) and
+#: pipeline's left perturbation in the camera frame, ``tofpose.lab.pose_judgement``) and
 #: the reported 1-sigma of the same components; d2 (squared Mahalanobis distance of the
 #: error against the reported covariance); the rules' verdicts
 COLUMNS = pa.schema(

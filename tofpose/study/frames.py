@@ -17,17 +17,17 @@ import time
 import numpy as np
 import pyarrow as pa
 
-from tofpose.camera import CameraModel
-from tofpose.catalog import BUILTIN_CATALOGS
-from tofpose.geometry import quaternion_wxyz_from_rotation
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import BUILTIN_CATALOGS
+from tofpose.core.geometry import quaternion_wxyz_from_rotation
+from tofpose.core.threads import single_threaded_blas
+from tofpose.lab.pose_judgement import judge, mahalanobis2, pose_error
 from tofpose.pipeline import PosePipeline
-from tofpose.pose_judgement import judge, mahalanobis2, pose_error
 from tofpose.sim.randomise import draw_background, draw_physics, draw_pose
 from tofpose.sim.render import render_frame
 from tofpose.study.columns import COLUMNS, ERROR_COLUMNS, SIGMA_COLUMNS
 from tofpose.study.spec import PRESETS, Cell, StudySpec
 from tofpose.study.store import write_chunk
-from tofpose.threads import single_threaded_blas
 
 #: this process's pipelines, by (catalog, preset), and what loading its kernels cost
 _pipelines: dict[tuple[str, str], PosePipeline] = {}

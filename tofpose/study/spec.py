@@ -15,7 +15,7 @@ every combination)::
   off the optical axis (uniform in the image plane);
 * ``ambient_lux``: ambient light on the target (lx; 1000 normal, 10000 high, §2.1);
 * ``physics``: a domain-randomisation family of ``tofpose.sim.randomise.FAMILIES``;
-* ``catalog``: a built-in catalog's name (``tofpose.catalog.BUILTIN_CATALOGS``);
+* ``catalog``: a built-in catalog's name (``tofpose.core.catalog.BUILTIN_CATALOGS``);
 * ``preset``: the pipeline's settings, ``PRESETS``.
 
 Every frame is a fresh acquisition. Frame ``i`` of cell ``c`` draws everything from
@@ -38,7 +38,7 @@ import operator
 from collections.abc import Iterator, Sequence
 from dataclasses import asdict, dataclass
 
-from tofpose.catalog import BUILTIN_CATALOGS
+from tofpose.core.catalog import BUILTIN_CATALOGS
 from tofpose.pipeline import PipelineConfig
 from tofpose.sim.randomise import FAMILIES
 

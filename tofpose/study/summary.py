@@ -2,7 +2,7 @@
 
 Per cell: frames, poses (ok), no pose, success %, wrong and confidently wrong poses,
 share of poses beyond 3 reported sigmas, mean NEES / 6 (the rules of
-``tofpose.pose_judgement``); per error component (``AXES``: rotation vector deg, position
+``tofpose.lab.pose_judgement``); per error component (``AXES``: rotation vector deg, position
 mm) over the poses: bias (mean), std, RMS and the RMS of error over reported sigma
 (1 = a right covariance); attitude and position error p50 / p95 / p99 over the poses
 (every pose, not only the successes: a 99th percentile of an envelope has to see the
@@ -18,7 +18,7 @@ from collections import Counter
 import numpy as np
 import pyarrow as pa
 
-from tofpose.pose_judgement import AXES
+from tofpose.lab.pose_judgement import AXES
 from tofpose.study.columns import ERROR_COLUMNS, SIGMA_COLUMNS
 from tofpose.study.spec import StudySpec
 

@@ -17,7 +17,7 @@ from backend.services.store import (
     save_device_settings,
     stored_catalogs,
 )
-from tofpose.catalog import BUILTIN_CATALOGS, Catalog, Reflector
+from tofpose.core.catalog import BUILTIN_CATALOGS, Catalog, Reflector
 
 router = APIRouter(prefix="/api/catalogs", tags=["catalogs"])
 NameParam = Annotated[str, Path(min_length=1, max_length=128)]

@@ -6,7 +6,7 @@ The motion service (backend/services/motion.py) checks set-points against the dr
 soft limits before the driver sees them, and refuses a person's commands while a
 campaign owns the motion system. A jog is relative to the axis' encoder position read
 when the request arrives, so a client whose view is stale cannot jog from an old
-position. A profile (tofpose.motion_profile) is checked the same way, from the axis'
+position. A profile (tofpose.lab.motion_profile) is checked the same way, from the axis'
 encoder position, against the soft, rate and acceleration limits. Stop is accepted from
 any authenticated caller at any time, ends a running profile and latches: every motion
 command is refused (409) until a person releases it. STOP is an async route whose

@@ -179,7 +179,7 @@ def stop_recording(recording_id: RecordingIdParam, state: StateDep) -> Recording
                **errors(404, 409)},
 )  # fmt: skip
 def get_recording_h5(recording_id: RecordingIdParam, state: StateDep):
-    """The recording (HDF5): readable with ``tofpose.recording.open_recording`` and every
+    """The recording (HDF5): readable with ``tofpose.io.recording.open_recording`` and every
     ``tofpose`` command that takes a recording. 409 while it records."""
     info, path = _file(_service(state), recording_id)
     return FileResponse(path, media_type="application/x-hdf5",

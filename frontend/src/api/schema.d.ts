@@ -791,7 +791,7 @@ export interface paths {
         };
         /**
          * Get Recording H5
-         * @description The recording (HDF5): readable with ``tofpose.recording.open_recording`` and every
+         * @description The recording (HDF5): readable with ``tofpose.io.recording.open_recording`` and every
          *     ``tofpose`` command that takes a recording. 409 while it records.
          */
         get: operations["getRecordingH5"];
@@ -2412,7 +2412,7 @@ export interface components {
         ReprocessCreate: {
             /**
              * Camera
-             * @description a camera JSON (tofpose.camera.CameraModel, with the range_correction and covariance_scale tofpose calibrate-range / calibrate-covariance add); omitted: the recording's own camera
+             * @description a camera JSON (tofpose.core.camera.CameraModel, with the range_correction and covariance_scale tofpose calibrate-range / calibrate-covariance add); omitted: the recording's own camera
              */
             camera?: {
                 [key: string]: unknown;

@@ -10,7 +10,7 @@ import pytest
 from backend.drivers.factory import build_devices
 from tests.backend.api.test_campaigns import _run
 from tests.backend.conftest import AUTH, make_settings, running_app
-from tofpose.geometry import RigidTransform, rotation_angle_deg
+from tofpose.core.geometry import RigidTransform, rotation_angle_deg
 
 PLACEMENT_ERROR = RigidTransform.from_euler_deg(-0.15, 0.1, 0.3, (3.0, -2.0, 4.0))
 

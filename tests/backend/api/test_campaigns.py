@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from tests.backend.conftest import AUTH, make_settings, running_app, wait_for
-from tests.tofpose.interop.test_mcap_export import read_back
+from tests.tofpose.io.interop.test_mcap_export import read_back
 
 GRID = {
     "name": "grid-1", "catalog": "paper-target", "frames_per_point": 10, "settle_s": 0.5,
@@ -381,8 +381,8 @@ def test_raw_recording_holds_exactly_the_stored_frames_and_reprocesses(fast_clie
     after resume the downloaded recording re-processed by `tofpose estimate` gives the
     stored poses."""
     from tofpose.cli import main
-    from tofpose.interop import topics
-    from tofpose.recording import open_recording
+    from tofpose.io.interop import topics
+    from tofpose.io.recording import open_recording
 
     c = fast_client
     body = {**GRID, "name": "raw", "frames_per_point": 12, "record_raw": True,
@@ -456,10 +456,10 @@ def _write_recording_with_both_truths(path, n_frames: int) -> None:
     (0.5, -0.4, 0.3 deg and (4, -3, 6) mm, as a mis-mounted bench would be): frame i
     shows the target at 2 m, turned by i deg of yaw, 20 frames/s."""
     from tests.conftest import facing_pose, render
-    from tofpose.camera import CameraModel
-    from tofpose.catalog import paper_target
-    from tofpose.geometry import RigidTransform
-    from tofpose.recording import RecordingWriter
+    from tofpose.core.camera import CameraModel
+    from tofpose.core.catalog import paper_target
+    from tofpose.core.geometry import RigidTransform
+    from tofpose.io.recording import RecordingWriter
 
     T_lab_exact = RigidTransform.from_euler_deg(0.5, -0.4, 0.3, (4.0, -3.0, 6.0))
     with RecordingWriter(path, CameraModel(), paper_target(), with_truth=True,
@@ -474,7 +474,7 @@ def _write_recording_with_both_truths(path, n_frames: int) -> None:
 
 def _facing_pose_columns(R, t_mm) -> dict[str, float]:
     """A ``T_camera_target`` as a measurement's pose columns (mm, facing Euler deg)."""
-    from tofpose.geometry import facing_euler_deg
+    from tofpose.core.geometry import facing_euler_deg
 
     p, y, r = (float(v) for v in facing_euler_deg(R))
     x, yy, z = (float(v) for v in t_mm)
@@ -485,7 +485,7 @@ def test_a_replayed_recordings_truth_and_lab_truth_are_stored_where_they_belong(
     """A campaign on a replayed simulated recording with both references: each row's
     ``truth_*`` is the input's /truth and its ``lab_truth_*`` the input's /lab_truth (not
     /truth as lab truth), and the campaign's raw recording keeps both as they came in."""
-    from tofpose.recording import open_recording
+    from tofpose.io.recording import open_recording
 
     n_in = 5
     source = tmp_path / "both.h5"

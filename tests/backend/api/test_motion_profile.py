@@ -14,7 +14,7 @@ from backend.drivers.factory import build_devices
 from backend.drivers.scpi import ScpiRateTable
 from backend.emulators.rate_table import RateTableEmulator
 from tests.backend.conftest import AUTH, SpyMotion, make_settings, running_app, wait_for
-from tofpose.motion_profile import SineProfile
+from tofpose.lab.motion_profile import SineProfile
 
 SINE = {"axis": "yaw", "kind": "sine", "amplitude_deg": 5.0, "period_s": 4.0, "cycles": 1}
 

@@ -1,7 +1,7 @@
 """Recordings on demand over HTTP, on the simulated lab: a recording holds exactly the
 frames the live hub delivered (count, frame numbers, device times) with the live poses,
 covariances and relative states, wall-clock stamps and encoders; it downloads as HDF5
-(``tofpose.recording``) and as MCAP (``mcap``'s reader); start is refused without free
+(``tofpose.io.recording``) and as MCAP (``mcap``'s reader); start is refused without free
 space (507), while too many run (409), with a bad body (422 naming the field) and for a
 read key (403); downloads and deletion wait for the stop (409); a server that stops
 closes its recordings."""
@@ -19,9 +19,9 @@ import pytest
 
 from backend.services.recordings import StopReason
 from tests.backend.conftest import AUTH, make_settings, running_app, wait_for
-from tests.tofpose.interop.test_mcap_export import read_back
-from tofpose.interop import topics
-from tofpose.recording import open_recording
+from tests.tofpose.io.interop.test_mcap_export import read_back
+from tofpose.io.interop import topics
+from tofpose.io.recording import open_recording
 
 Usage = namedtuple("Usage", "total used free")
 

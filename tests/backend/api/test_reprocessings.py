@@ -33,7 +33,7 @@ def _finished(c, jid: int) -> dict:
 
 def test_a_recording_is_reprocessed_as_the_cli_would_with_each_camera(tmp_path):
     from tofpose.cli import main
-    from tofpose.recording import open_recording
+    from tofpose.io.recording import open_recording
 
     settings = make_settings(tmp_path / "data", sim_time_scale=5.0, dask_scheduler="",
                              study_workers=1)  # fmt: skip

@@ -14,8 +14,8 @@ from backend.api.schemas import PosePublic
 from backend.drivers.base import CameraFrame
 from backend.services.acquisition import LiveSample, frame_point_cloud_mm
 from tests.conftest import facing_pose, render
-from tofpose.camera import CameraModel
-from tofpose.catalog import paper_target
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import paper_target
 from tofpose.pipeline import PosePipeline
 
 
@@ -83,7 +83,7 @@ def test_attitude_sigmas_are_those_of_pitch_yaw_and_roll():
     """The pose message's attitude 1-sigma is the Euler angles' (the covariance of the
     rotation vector propagated through them), not the rotation vector's: at a yaw of
     40 deg the two differ, and the message's match ``facing_euler_sigma_deg``."""
-    from tofpose.geometry import facing_euler_sigma_deg
+    from tofpose.core.geometry import facing_euler_sigma_deg
 
     cam = CameraModel()
     T = facing_pose(2500.0, 0.0, 40.0, 10.0)

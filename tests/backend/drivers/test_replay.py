@@ -10,9 +10,9 @@ from scipy.spatial.transform import Rotation
 
 from backend.drivers.base import CameraDriver
 from backend.drivers.replay import ReplayCamera, recorded_rate_hz
-from tofpose.camera import CameraModel
-from tofpose.catalog import paper_target
-from tofpose.recording import RecordingError, RecordingWriter
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import paper_target
+from tofpose.io.recording import RecordingError, RecordingWriter
 
 
 @pytest.fixture

@@ -14,7 +14,7 @@ from backend.drivers.scpi import ScpiRateTable
 from backend.drivers.sim import make_sim_world
 from backend.emulators.rate_table import RateTableEmulator
 from tests.backend.conftest import wait_for
-from tofpose.motion_profile import RampProfile, SineProfile
+from tofpose.lab.motion_profile import RampProfile, SineProfile
 
 
 @pytest.fixture

@@ -9,8 +9,8 @@ import pytest
 
 from backend.drivers.base import CameraDriver, CameraSettings, MotionDriver
 from backend.drivers.sim import SimCamera, SimMotion, make_sim_world
-from tofpose.geometry import rotation_angle_deg
-from tofpose.motion_profile import SineProfile
+from tofpose.core.geometry import rotation_angle_deg
+from tofpose.lab.motion_profile import SineProfile
 
 
 @pytest.fixture

@@ -17,8 +17,8 @@ from backend.drivers.tofcam660 import (
 )
 from backend.emulators.tofcam660 import TofCam660Emulator
 from tests.backend.conftest import wait_for
-from tofpose.catalog import paper_target
-from tofpose.geometry import rotation_angle_deg
+from tofpose.core.catalog import paper_target
+from tofpose.core.geometry import rotation_angle_deg
 from tofpose.pipeline import PosePipeline
 
 ADDRESS = "127.0.0.3"

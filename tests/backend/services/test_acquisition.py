@@ -19,10 +19,10 @@ from backend.services.kernel_warmup import COMPILING_REASON, KernelWarmup
 from tests.backend.conftest import wait_for
 from tests.conftest import facing_pose, render
 from tofpose.arithmetic import COMPILED
-from tofpose.camera import CameraModel
-from tofpose.catalog import paper_target
 from tofpose.config import PipelineConfig, TrackingConfig
-from tofpose.geometry import rotation_angle_deg
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import paper_target
+from tofpose.core.geometry import rotation_angle_deg
 
 
 class ScriptedCamera:
@@ -132,7 +132,7 @@ def test_commands_run_on_the_acquisition_thread(service):
 
 
 def test_catalog_swap_takes_effect(service):
-    from tofpose.catalog import Catalog
+    from tofpose.core.catalog import Catalog
 
     svc, _, _ = service
     sub4 = Catalog("first-four", paper_target().reflectors[:4])
@@ -153,7 +153,7 @@ class TurningCamera(ScriptedCamera):
         super().__init__()
         from scipy.spatial.transform import Rotation
 
-        from tofpose.geometry import RigidTransform
+        from tofpose.core.geometry import RigidTransform
 
         T0 = facing_pose(3000.0, 2.0, -3.0, 5.0)
         self.poses, self.frames = [], []

@@ -16,7 +16,7 @@ from websockets.sync.client import connect
 
 from backend.settings import Settings
 from tests.backend.conftest import make_settings, running_app, wait_for
-from tofpose.interop import topics
+from tofpose.io.interop import topics
 
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 MESSAGE_DATA = 0x01  # binary opcode of a message on a subscribed channel

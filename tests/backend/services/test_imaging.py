@@ -17,8 +17,8 @@ from backend.services.imaging import (
     render_png,
 )
 from tests.conftest import facing_pose, render
-from tofpose.camera import CameraModel
-from tofpose.catalog import paper_target
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import paper_target
 from tofpose.pipeline import PosePipeline
 
 

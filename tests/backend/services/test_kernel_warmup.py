@@ -16,7 +16,7 @@ import numpy as np
 
 from backend.services import kernel_warmup
 from tests.backend.conftest import AUTH, latest_pose, make_settings, running_app, wait_for
-from tofpose.geometry import rotation_angle_deg
+from tofpose.core.geometry import rotation_angle_deg
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -91,8 +91,8 @@ FRESH_PROCESS = """
 import numpy as np
 from numba.core import dispatcher
 from tests.conftest import facing_pose, render
-from tofpose.camera import CameraModel
-from tofpose.catalog import paper_target
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import paper_target
 from tofpose.config import PipelineConfig, TrackingConfig
 from tofpose.pipeline import PosePipeline
 from tofpose.warmup import warm_up_reference

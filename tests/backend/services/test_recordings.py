@@ -1,7 +1,7 @@
 """Recordings on demand (backend/services/recordings.py), fed by a hub the test publishes
 to: the file holds exactly the frames the hub delivered, with their poses, covariances,
 relative states, references, encoder readings and wall-clock stamps; it opens with
-``tofpose.recording`` and exports to an MCAP that ``mcap``'s reader reads; the recording
+``tofpose.io.recording`` and exports to an MCAP that ``mcap``'s reader reads; the recording
 stops on request, after its duration, when the disk fills (file closed and readable) and
 is refused from the start without enough free space."""
 
@@ -31,14 +31,14 @@ from backend.services.recordings import (
     StopReason,
 )
 from tests.backend.conftest import wait_for
-from tests.tofpose.interop.test_mcap_export import read_back
-from tofpose.camera import CameraModel
-from tofpose.catalog import paper_target
-from tofpose.geometry import RigidTransform
-from tofpose.interop import topics
+from tests.tofpose.io.interop.test_mcap_export import read_back
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import paper_target
+from tofpose.core.geometry import RigidTransform
+from tofpose.io.interop import topics
+from tofpose.io.recording import open_recording
+from tofpose.lab.relative_state import RelativeState
 from tofpose.pipeline import PoseResult
-from tofpose.recording import open_recording
-from tofpose.relative_state import RelativeState
 
 CAMERA = CameraModel(width=40, height=30, fx=40.0, fy=40.0, cx=19.5, cy=14.5, name="small")
 AXES = {"yaw": AxisLimits("yaw", "deg", -170, 170, 20),

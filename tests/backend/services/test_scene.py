@@ -9,7 +9,7 @@ import pytest
 
 from backend.services.scene_model import STATE_COLOURS
 from tests.backend.conftest import AUTH, make_settings, running_app, wait_for
-from tofpose.geometry import rotation_from_quaternion_wxyz
+from tofpose.core.geometry import rotation_from_quaternion_wxyz
 
 NODES = (
     "/camera", "/camera/frustum", "/camera/cloud", "/camera/reflectors", "/turntable",
@@ -109,7 +109,7 @@ def test_the_truth_node_shows_the_lab_reference_else_the_exact_pose():
     the exact pose alone (a replayed recording with /truth only) shows that."""
     from backend.drivers.base import CameraFrame
     from backend.services.scene import _shown_truth
-    from tofpose.geometry import RigidTransform
+    from tofpose.core.geometry import RigidTransform
 
     exact = RigidTransform(np.eye(3), np.array([0.0, 0.0, 2000.0]))
     lab = RigidTransform(np.eye(3), np.array([5.0, 0.0, 2000.0]))

@@ -12,9 +12,9 @@ from backend.services.scene_model import (
     lab_camera_pose,
     reflector_states,
 )
-from tofpose.camera import CameraModel
-from tofpose.catalog import paper_target
-from tofpose.geometry import RigidTransform, rotation_from_euler_deg
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import paper_target
+from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg
 from tofpose.pipeline import MatchedReflector, PoseResult
 
 FACING = np.diag([1.0, -1.0, -1.0])  # target z towards the camera

@@ -24,7 +24,7 @@ from backend.services.setpoint_collector import (
     SetPointHalt,
 )
 from tests.backend.conftest import FlakyCamera, SpyMotion
-from tofpose.catalog import paper_target
+from tofpose.core.catalog import paper_target
 from tofpose.pipeline import PosePipeline
 
 SETPOINT = {"yaw": 4.0, "pitch": -3.0, "roll": 2.0, "rail": 12000.0}

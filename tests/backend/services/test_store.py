@@ -6,7 +6,7 @@ import pytest
 
 from backend.db.engine import make_engine, make_session_factory, upgrade_database
 from backend.services.store import NameTakenError, add_catalog, find_catalog, stored_catalogs
-from tofpose.catalog import paper_target
+from tofpose.core.catalog import paper_target
 
 
 @pytest.fixture

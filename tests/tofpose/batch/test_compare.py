@@ -9,8 +9,8 @@ import json
 import pytest
 
 from tofpose.batch.compare import CompareError, compare_runs
-from tofpose.camera import CameraModel
 from tofpose.cli import main
+from tofpose.core.camera import CameraModel
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ import pytest
 
 from tofpose.batch.reprocess import ReprocessError, Settings, plan, reprocess, synced_frame
 from tofpose.cli import main
-from tofpose.recording import RecordingError
+from tofpose.io.recording import RecordingError
 
 
 @pytest.fixture(scope="module")

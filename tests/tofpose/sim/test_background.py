@@ -14,7 +14,7 @@ import pytest
 
 from tests.conftest import facing_pose
 from tofpose import CameraModel, PosePipeline, paper_target
-from tofpose.recording import RecordingWriter
+from tofpose.io.recording import RecordingWriter
 from tofpose.sim.background import SceneBackground, synthetic_room
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import FIRST_DISC, WALL, TargetScene
@@ -108,14 +108,14 @@ def test_a_marker_half_hidden_by_an_arm_is_not_measured():
     range mixes in the arm's. Its blob gets no range (``occluded_blobs``), every other
     blob keeps its own; the pipeline leaves the marker out and the pose holds."""
     from bench._foreign_metrics import true_images
-    from tofpose.extraction import (
+    from tofpose.core.geometry import rotation_angle_deg
+    from tofpose.stages.extraction.extraction import (
         ExtractionConfig,
         check_frame,
         find_candidate_blobs,
         frame_levels,
         measure_blobs,
     )
-    from tofpose.geometry import rotation_angle_deg
 
     cat = paper_target()
     T = facing_pose(3000.0, 3.0, -2.0, 4.0)

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from tofpose.catalog import paper_target
+from tofpose.core.catalog import paper_target
 from tofpose.sim.bench import LabGeometry, SimulatedBench
 from tofpose.sim.render import SensorModel
 from tofpose.sim.scene import TargetScene

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from tests.conftest import facing_pose
-from tofpose.camera import CameraModel
-from tofpose.catalog import paper_target
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import paper_target
 from tofpose.sim.pixel_truth import true_pixel_distances
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import TargetScene

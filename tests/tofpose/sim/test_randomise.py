@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tofpose import CameraModel, paper_target
-from tofpose.geometry import rotation_angle_deg
+from tofpose.core.geometry import rotation_angle_deg
 from tofpose.sim.bench import R_FACING
 from tofpose.sim.randomise import draw_physics, draw_pose
 

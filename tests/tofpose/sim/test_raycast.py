@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tofpose.geometry import RigidTransform, rotation_from_euler_deg
+from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg
 from tofpose.sim.bench import R_FACING
 from tofpose.sim.raycast import FIRST_DISC, NO_HIT, PLATE, WALL
 from tofpose.sim.scene import TargetScene

@@ -2,9 +2,9 @@ import numpy as np
 import pytest
 
 from tests.conftest import facing_pose, render
-from tofpose.camera import CameraModel
-from tofpose.catalog import paper_target
-from tofpose.geometry import RigidTransform
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import paper_target
+from tofpose.core.geometry import RigidTransform
 from tofpose.sim.render import SPEED_OF_LIGHT_MM_S, SensorModel, combine_subframes, render_frame
 from tofpose.sim.scene import FIRST_DISC, PLATE, TargetScene
 

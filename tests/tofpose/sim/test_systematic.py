@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import facing_pose
-from tofpose.camera import CameraModel
+from tofpose.core.camera import CameraModel
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import FIRST_DISC, PLATE, TargetScene
 from tofpose.sim.systematic import SystematicErrors

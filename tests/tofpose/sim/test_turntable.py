@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from tofpose import CameraModel, PosePipeline, paper_target
-from tofpose.geometry import euler_deg_from_rotation
-from tofpose.motion_profile import RampProfile, SineProfile
+from tofpose.core.geometry import euler_deg_from_rotation
+from tofpose.lab.motion_profile import RampProfile, SineProfile
 from tofpose.sim.bench import LabGeometry, SimulatedBench
 from tofpose.sim.turntable import AxisBusyError, SoftLimitError, Turntable, plan_move
 
@@ -69,7 +69,7 @@ def test_inner_axis_roll_rolls_the_measured_target(theta_deg):
 
 
 def test_mount_error_separates_world_from_lab_truth():
-    from tofpose.geometry import RigidTransform, rotation_angle_deg
+    from tofpose.core.geometry import RigidTransform, rotation_angle_deg
 
     geom = LabGeometry(mount_error=RigidTransform.from_euler_deg(0.3, 0, 0, (2, 0, 0)))
     pos = {"yaw": 0.0, "pitch": 0.0, "roll": 0.0, "rail": 0.0}

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from tofpose.camera import CameraModel
+from tofpose.core.camera import CameraModel
 from tofpose.study.frames import frame_rng, measure_frame
 from tofpose.study.spec import StudySpec
 

@@ -1,0 +1,135 @@
+import h5py
+import numpy as np
+import pytest
+
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import paper_target
+from tofpose.io.recording import RecordingError, RecordingWriter, open_recording
+
+
+def _write(path, n=3, truth=True):
+    cam = CameraModel()
+    rng = np.random.default_rng(0)
+    frames = []
+    with RecordingWriter(path, cam, paper_target(), with_truth=truth) as w:
+        for i in range(n):
+            g = rng.integers(0, 4096, (240, 320)).astype(np.uint16)
+            d = rng.uniform(300, 15000, (240, 320)).astype(np.float32)
+            d[0, i] = np.nan
+            frames.append((g, d))
+            if truth:
+                w.append(g, d, i * 0.1, np.eye(3), np.array([0, 0, 1000.0 + i]))
+            else:
+                w.append(g, d, i * 0.1)
+    return frames
+
+
+def test_round_trip(tmp_path):
+    p = tmp_path / "r.h5"
+    frames = _write(p)
+    with open_recording(p) as rec:
+        assert rec.n_frames == 3 and rec.camera == CameraModel() and rec.catalog == paper_target()
+        for i, (g, d, t) in enumerate(rec.frames()):
+            np.testing.assert_array_equal(g, frames[i][0])
+            np.testing.assert_array_equal(d, frames[i][1])  # NaN preserved
+            assert t == pytest.approx(0.1 * i)
+        np.testing.assert_allclose(rec.truth_t_mm[:, 2], [1000, 1001, 1002])
+
+
+def test_missing_dataset_is_named(tmp_path):
+    p = tmp_path / "r.h5"
+    _write(p)
+    with h5py.File(p, "a") as f:
+        del f["frames/time_s"]
+    with pytest.raises(RecordingError, match="missing dataset /frames/time_s"):
+        open_recording(p)
+
+
+def test_disagreeing_lengths(tmp_path):
+    p = tmp_path / "r.h5"
+    _write(p)
+    with h5py.File(p, "a") as f:
+        f["frames/time_s"].resize((2,))
+    with pytest.raises(RecordingError, match="frame counts disagree"):
+        open_recording(p)
+
+
+def test_corrupt_and_foreign_files(tmp_path):
+    bad = tmp_path / "bad.h5"
+    bad.write_bytes(b"\x89HDF\r\n\x1a\n" + b"garbage" * 100)
+    with pytest.raises(RecordingError, match="not a readable HDF5 file"):
+        open_recording(bad)
+    other = tmp_path / "other.h5"
+    with h5py.File(other, "w") as f:
+        f.attrs["format"] = "something-else"
+    with pytest.raises(RecordingError, match="not a tofpose recording"):
+        open_recording(other)
+    with pytest.raises(RecordingError, match="no such file"):
+        open_recording(tmp_path / "missing.h5")
+
+
+def test_truncated_file_is_a_clear_error(tmp_path):
+    p = tmp_path / "r.h5"
+    _write(p, n=4)
+    data = p.read_bytes()
+    p.write_bytes(data[: len(data) // 2])
+    with pytest.raises(RecordingError), open_recording(p) as rec:
+        for _ in rec.frames():
+            pass
+
+
+def test_lab_truth_is_stored_beside_truth_and_checked(tmp_path):
+    p = tmp_path / "r.h5"
+    cam = CameraModel()
+    g = np.zeros((240, 320), np.uint16)
+    d = np.full((240, 320), 1000.0, np.float32)
+    with RecordingWriter(p, cam, with_truth=True, with_lab_truth=True) as w:
+        with pytest.raises(ValueError, match="stores lab truth"):
+            w.append(g, d, 0.0, np.eye(3), np.zeros(3))
+        lab = {"lab_R_camera_target": np.eye(3), "lab_t_camera_target_mm": np.array([2, 0, 1e3])}
+        w.append(g, d, 0.0, np.eye(3), np.array([0, 0, 1000.0]), **lab)
+    with open_recording(p) as rec:
+        np.testing.assert_allclose(rec.truth_t_mm, [[0, 0, 1000]])
+        np.testing.assert_allclose(rec.lab_truth_t_mm, [[2, 0, 1000]])
+    with h5py.File(p, "a") as f:
+        del f["lab_truth/R_camera_target"]
+    with pytest.raises(RecordingError, match="/lab_truth needs both"):
+        open_recording(p)
+
+
+def test_a_recording_can_be_reopened_appended_and_truncated(tmp_path):
+    p = tmp_path / "r.h5"
+    frames = _write(p, n=3)
+    w = RecordingWriter.reopen(p)
+    assert w.n == 3
+    g, d = frames[0]
+    w.append(g, d, 9.0, np.eye(3), np.array([0, 0, 2000.0]))
+    w.append(g, d, 9.1, np.eye(3), np.array([0, 0, 2001.0]))
+    w.truncate(4)  # drop the last one (an aborted batch)
+    with pytest.raises(ValueError, match="cannot truncate"):
+        w.truncate(7)
+    w.close()
+    with open_recording(p) as rec:
+        assert rec.n_frames == 4
+        np.testing.assert_allclose(rec.time_s, [0.0, 0.1, 0.2, 9.0])
+        np.testing.assert_allclose(rec.truth_t_mm[:, 2], [1000, 1001, 1002, 2000])
+    (tmp_path / "x.h5").write_bytes(b"nope")
+    with pytest.raises(RecordingError, match="cannot open for appending"):
+        RecordingWriter.reopen(tmp_path / "x.h5")
+
+
+def test_blocks_read_what_frames_read_in_aligned_reads(tmp_path):
+    p = tmp_path / "r.h5"
+    frames = _write(p, n=40)
+    with open_recording(p) as rec:
+        assert rec.frames_per_chunk == 1
+        spans = []
+        for first, (g, d, t) in rec.blocks(5, 40):
+            spans.append((first, first + len(t)))
+            for k in range(len(t)):
+                np.testing.assert_array_equal(g[k], frames[first + k][0])
+                np.testing.assert_array_equal(d[k], frames[first + k][1])
+                assert t[k] == rec.time_s[first + k]
+        assert spans == [(5, 32), (32, 40)]  # reads end on multiples of 32 frames
+        with pytest.raises(IndexError, match="frames 30..41"):
+            rec.block(30, 41)

@@ -1,0 +1,226 @@
+"""The reference statement of the mixed-pixel rules
+(``tofpose.stages.extraction.reference.mixed_pixels``):
+each function against its compiled counterpart (``kernels.mixed_pixels``,
+``kernels.centroids.owner_map``) on the blobs of rendered frames (a room with an arm in
+front of the target, merged and split markers 7 and 8 at 5 and 8 m), and against known
+truth on drawn frames."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.tofpose.stages.persistence.reference.test_measure import captured_stream
+from tofpose.stages.extraction.kernels import centroids as compiled_centroids
+from tofpose.stages.extraction.kernels import mixed_pixels as compiled
+from tofpose.stages.extraction.reference import mixed_pixels as reference
+
+#: (range mm, room seed, frame): frames of ``test_measure``'s streams
+FRAMES = [(1500.0, 0, 0), (3000.0, 0, 2), (3000.0, 0, 5), (8000.0, 3, 1), (8000.0, 5, 4),
+          (5000.0, 7, 3)]  # fmt: skip
+
+
+def _arrays(flat, starts, bbox):
+    return (np.asarray(flat, np.int64), np.asarray(starts, np.int64),
+            np.asarray(bbox, np.int64).reshape(-1, 4))  # fmt: skip
+
+
+def _blob_ranges(flat, starts, distance):
+    """Each blob's median range (NaN with none), the range occlusion is tested against."""
+    d = distance.reshape(-1)
+    return np.array([np.nanmedian(d[flat[a:b]]) if np.isfinite(d[flat[a:b]]).any() else np.nan
+                     for a, b in zip(starts[:-1], starts[1:], strict=True)])  # fmt: skip
+
+
+def _both(flat, starts, bbox, gray, distance, dark):
+    """Every function's result, compiled and reference, on one frame's blobs: a dict of
+    name -> (compiled, reference)."""
+    h, w = gray.shape
+    out = {}
+    own_c = compiled_centroids.owner_map(flat, starts, bbox, h, w)
+    own_r = reference.owner_map(flat, starts, bbox, h, w)
+    out["owner_map"] = own_c, own_r
+    sur_c = compiled.blob_surrounds(bbox, gray, distance, *own_c)
+    sur_r = reference.blob_surrounds(bbox, gray, distance, *own_r)
+    out["blob_surrounds"] = sur_c, sur_r
+    rho = _blob_ranges(flat, starts, distance)
+    pairs = ((compiled, own_c), (reference, own_r))
+    out["occluded_blobs"] = tuple(m.occluded_blobs(flat, starts, bbox, distance, rho, *own)
+                                  for m, own in pairs)  # fmt: skip
+    mix = [m.blob_mixing(flat, starts, bbox, gray, distance, distance, *sur_c, dark, *own)
+           for m, own in pairs]  # fmt: skip
+    out["blob_mixing"] = tuple(mix)
+    return out
+
+
+def _assert_equal(name, got_compiled, got_reference):
+    """Exactly for the owner map, surrounds (float32 medians) and flags; the mixing sums
+    to 1e-12 relative or 1e-6 (float64 sums of products of ~1e3 counts and ~1e4 mm in
+    another order)."""
+    if name == "blob_mixing":
+        np.testing.assert_allclose(got_reference, got_compiled, rtol=1e-12, atol=1e-6)
+        return
+    for a, b in (
+        zip(got_compiled, got_reference, strict=True)
+        if isinstance(got_compiled, tuple)
+        else ((got_compiled, got_reference),)
+    ):
+        np.testing.assert_array_equal(np.asarray(b), np.asarray(a), err_msg=name)
+
+
+@pytest.mark.parametrize(("distance_mm", "seed", "frame"), FRAMES)
+def test_each_rule_equals_the_kernel_on_rendered_frames(distance_mm, seed, frame):
+    args, _ = captured_stream(distance_mm, seed, False)[frame]
+    gray, distance = args[0], args[1]
+    flat, starts, bbox = _arrays(*args[2:5])
+    results = _both(flat, starts, bbox, gray, distance, float(args[9]))
+    for name, (got_c, got_r) in results.items():
+        _assert_equal(name, got_c, got_r)
+    mix = results["blob_mixing"][1]
+    rho = _blob_ranges(flat, starts, distance)
+    for j in range(len(bbox)):
+        row_c, row_r = mix[j].copy(), mix[j].copy()
+        compiled.shift_mixing(row_c, -17.25)
+        reference.shift_mixing(row_r, -17.25)
+        np.testing.assert_array_equal(row_r, row_c)
+        for radius_px in (0.6, 1.3, 2.5, 5.0):
+            want = compiled.unmixed_range(rho[j], mix[j], radius_px, 0.8, 4.0)
+            got = reference.unmixed_range(rho[j], mix[j], radius_px, 0.8, 4.0)
+            np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-12)
+
+
+def test_the_rendered_frames_reach_every_branch():
+    """The frames above hold crowded blobs (touching halves), occluded ones (the arm),
+    blobs with mixing sums and without, and unmixed ranges that differ from the median."""
+    seen = {"use_owner": 0, "crowded": 0, "occluded": 0, "mixed": 0, "unmixed": 0}
+    for distance_mm, seed, frame in [f for f in FRAMES if not hasattr(f, "marks")]:
+        args, _ = captured_stream(distance_mm, seed, False)[frame]
+        flat, starts, bbox = _arrays(*args[2:5])
+        r = _both(flat, starts, bbox, args[0], args[1], float(args[9]))
+        seen["use_owner"] += r["owner_map"][1][3]
+        seen["crowded"] += r["blob_surrounds"][1][2].sum()
+        seen["occluded"] += r["occluded_blobs"][1].sum()
+        mix = r["blob_mixing"][1]
+        seen["mixed"] += np.isfinite(mix[:, 0]).sum()
+        rho = _blob_ranges(flat, starts, args[1])
+        seen["unmixed"] += sum(reference.unmixed_range(rho[j], mix[j], 1.0, 1.0, 4.0)[1] > 0
+                               for j in range(len(rho)))  # fmt: skip
+    assert all(v > 0 for v in seen.values()), seen
+
+
+# -- known truth --------------------------------------------------------------------------
+H, W = 60, 80
+
+
+def _square(x, y, size):
+    """Flat pixels and box of a size x size square at column x, row y."""
+    r, c = np.mgrid[y : y + size, x : x + size]
+    return (r * W + c).ravel(), (x, y, size, size)
+
+
+def _lists(*blobs):
+    flat = np.concatenate([b[0] for b in blobs]).astype(np.int64)
+    starts = np.cumsum([0] + [len(b[0]) for b in blobs]).astype(np.int64)
+    return flat, starts, np.array([b[1] for b in blobs], np.int64)
+
+
+def test_a_tilted_plate_around_a_blob_has_the_level_at_its_centre():
+    """A plate whose gray rises 3 counts a column and whose range rises 2 mm a row: the
+    ring's medians are the plate's values at the blob's centre (the ring is symmetric);
+    a neighbour in the ring crowds the blob and its pixels are left out."""
+    cols, rows = np.meshgrid(np.arange(W), np.arange(H))
+    gray = (100.0 + 3.0 * (cols - 21)).astype(np.float32)
+    distance = (4000.0 + 2.0 * (rows - 21)).astype(np.float32)
+    blob = _square(20, 20, 3)  # centre (21, 21)
+    gray[20:23, 20:23] = 900.0
+    flat, starts, bbox = _lists(blob)
+    owner = reference.owner_map(flat, starts, bbox, H, W)
+    level, depth, crowded = reference.blob_surrounds(bbox, gray, distance, *owner)
+    assert (level[0], depth[0], crowded[0]) == (100.0, 4000.0, False)
+    distance[17, 17:26] = np.nan  # the top row of the ring without a range: median shifts
+    assert reference.blob_surrounds(bbox, gray, distance, np.full((1, 1), -1), 0, 0,
+                                     False)[1][0] == 4002.0  # fmt: skip
+    # a bright neighbour two columns to the right: its pixels reach the ring
+    neighbour = _square(25, 20, 3)
+    gray[20:23, 25:28] = 3000.0
+    flat, starts, bbox = _lists(blob, neighbour)
+    owner = reference.owner_map(flat, starts, bbox, H, W)
+    assert owner[3] and owner[0][20 - owner[2], 25 - owner[1]] == 1
+    level, _, crowded = reference.blob_surrounds(bbox, gray, distance, *owner)
+    assert crowded.tolist() == [True, True] and level[0] < 900.0
+
+
+def _occlusion_frame():
+    """A 4 x 4 marker at 5000 mm on a plate at 5120 mm: (distance, flat, starts, bbox)."""
+    distance = np.full((H, W), 5120.0, np.float32)
+    distance[30:34, 40:44] = 5000.0
+    return (distance, *_lists(_square(40, 30, 4)))
+
+
+def _occluded(distance, flat, starts, bbox):
+    rho = np.array([5000.0])
+    args = (flat, starts, bbox, distance, rho, *reference.owner_map(flat, starts, bbox, H, W))
+    got = bool(reference.occluded_blobs(*args)[0])
+    assert got == bool(compiled.occluded_blobs(*args)[0])
+    return got
+
+
+def test_an_arm_touching_a_marker_hides_it_and_a_lone_near_pixel_does_not():
+    distance, flat, starts, bbox = _occlusion_frame()
+    assert not _occluded(distance, flat, starts, bbox)
+    arm = distance.copy()
+    arm[27:30, 36:48] = 4400.0  # three rows across the window's top, touching the marker
+    assert _occluded(arm, flat, starts, bbox)
+    lone = distance.copy()
+    lone[29, 41] = 4200.0  # one near pixel touching the marker
+    assert not _occluded(lone, flat, starts, bbox)
+    rim = distance.copy()
+    rim[29, 39:45] = 4200.0  # the rim alone, not reaching the window's outer ring
+    assert not _occluded(rim, flat, starts, bbox)
+    apart = distance.copy()
+    apart[27:29, 36:39] = 4400.0  # a near patch in the window's corner, not touching
+    assert not _occluded(apart, flat, starts, bbox)
+    shallow = distance.copy()
+    shallow[27:30, 36:48] = 4800.0  # only 200 mm in front: within the margin
+    assert not _occluded(shallow, flat, starts, bbox)
+
+
+def test_the_mixing_sums_of_a_partly_covering_disc_give_its_coverage_and_range():
+    """A reflector covering the pixels of a 3 x 3 patch by known fractions (C = 3.8),
+    amplitude and amplitude x distance mixed linearly over a plate: S_a = C (A_r - a_b),
+    S_ad = C (A_r d_r - a_b d_b), and the model given C returns d_r. One support pixel
+    without a range: its coverage is estimated from its gray and taken off C."""
+    cover = np.array([[0.1, 0.5, 0.2], [0.6, 1.0, 0.7], [0.1, 0.4, 0.2]])
+    dark, a_b, d_b, a_r, d_r = 90.0, 120.0, 5120.0, 1600.0, 5000.0
+    c = np.zeros((H, W))
+    c[30:33, 40:43] = cover
+    amp = c * a_r + (1 - c) * a_b
+    gray = (amp + dark).astype(np.float32)
+    distance = ((c * a_r * d_r + (1 - c) * a_b * d_b) / amp).astype(np.float64)
+    member = np.flatnonzero(c > 0.3)
+    rows, cols = np.divmod(member, W)
+    bbox = np.array([[cols.min(), rows.min(), np.ptp(cols) + 1, np.ptp(rows) + 1]], np.int64)
+    flat, starts = member.astype(np.int64), np.array([0, len(member)], np.int64)
+    owner = reference.owner_map(flat, starts, bbox, H, W)
+    mix = reference.blob_mixing(flat, starts, bbox, gray, distance, distance,
+                                np.array([a_b + dark]), np.array([d_b]), np.array([False]),
+                                dark, *owner)[0]  # fmt: skip
+    # the float32 gray holds the amplitudes to ~3e-5 counts
+    area = cover.sum()
+    assert mix[4] == 0.0 and mix[5] == 21  # the plus of members dilated: 5 x 5 less corners
+    assert mix[2] == pytest.approx(area * (a_r - a_b), abs=1e-3)
+    assert mix[3] == pytest.approx(area * (a_r * d_r - a_b * d_b), rel=1e-6)
+    radius = np.sqrt(area / np.pi)
+    assert reference.unmixed_range(5100.0, mix, radius, 1.0, 4.0)[0] == pytest.approx(d_r, abs=0.01)
+    # the corner pixel (coverage 0.2) has no range: C_unranged is its gray's estimate
+    distance[32, 42] = np.nan
+    mix = reference.blob_mixing(flat, starts, bbox, gray, distance, distance,
+                                np.array([a_b + dark]), np.array([d_b]), np.array([False]),
+                                dark, *owner)[0]  # fmt: skip
+    assert mix[4] == pytest.approx(0.2, abs=1e-6)
+    assert reference.unmixed_range(5100.0, mix, radius, 1.0, 4.0)[0] == pytest.approx(d_r, abs=0.01)
+    shifted = mix.copy()
+    reference.shift_mixing(shifted, 30.0)
+    assert reference.unmixed_range(5100.0, shifted, radius, 1.0, 4.0)[0] == pytest.approx(
+        d_r + 30.0, abs=0.01
+    )

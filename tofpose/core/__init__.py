@@ -1,0 +1,1 @@
+"""Camera, catalog, geometry and ToF physics: what every stage stands on."""

@@ -1,0 +1,166 @@
+"""Pinhole camera with OpenCV distortion: projection and back-projection (Eqs. 7-9).
+
+Camera frame S follows OpenCV: x right, y down, z along the boresight. Pixel (u, v) is
+(column, row) with the origin at the centre of the top-left pixel. The paper's Eq. 7 uses
+x left / y up (``tan phi = (u_p - u) / (f s_x)``); we keep OpenCV signs throughout, which
+only flips the sign of the two bearing components.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+
+from tofpose.core.kernels.camera import bearings as kernel_bearings
+from tofpose.core.kernels.camera import project as kernel_project
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """Intrinsics of a ToF camera.
+
+    Attributes
+    ----------
+    width, height : int
+        Image size in pixels.
+    fx, fy, cx, cy : float
+        Focal lengths and principal point in pixels.
+    dist : tuple of 5 floats
+        OpenCV distortion coefficients (k1, k2, p1, p2, k3).
+    name : str
+        Free text, e.g. the device model.
+    """
+
+    width: int = 320
+    height: int = 240
+    fx: float = 325.0
+    fy: float = 325.0
+    cx: float = 159.5
+    cy: float = 119.5
+    dist: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    name: str = "EPC660 f=6.5mm"
+    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.width <= 0 or self.height <= 0:
+            raise ValueError(f"camera size must be positive, got {self.width} x {self.height}")
+        if self.fx <= 0 or self.fy <= 0:
+            raise ValueError(f"focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
+        if len(self.dist) != 5:
+            raise ValueError(f"dist must have 5 coefficients (k1,k2,p1,p2,k3), got {self.dist}")
+        object.__setattr__(self, "dist", tuple(float(d) for d in self.dist))
+
+    @staticmethod
+    def epc660() -> CameraModel:
+        """The paper's camera (§2.1): 320 x 240, 20 um pixels, f = 6.5 mm -> 325 px."""
+        return CameraModel()
+
+    @property
+    def K(self) -> np.ndarray:
+        """Intrinsic matrix, shape (3, 3)."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def dist_array(self) -> np.ndarray:
+        return np.asarray(self.dist, dtype=np.float64)
+
+    @property
+    def has_distortion(self) -> bool:
+        return any(d != 0.0 for d in self.dist)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Image array shape (rows, columns)."""
+        return (self.height, self.width)
+
+    # --- projection -------------------------------------------------------------------
+    def project(self, points_mm: np.ndarray) -> np.ndarray:
+        """Project camera-frame points of shape (N, 3) to pixels (u, v), shape (N, 2).
+
+        Points must be in front of the camera (z > 0). Computed by
+        ``core.kernels.camera.project`` (OpenCV's ``projectPoints`` arithmetic where the lens
+        distorts; one compiled call, cheap enough for the per-frame pose check).
+        """
+        p = np.ascontiguousarray(np.atleast_2d(np.asarray(points_mm, dtype=np.float64)))
+        if np.any(p[:, 2] <= 0):
+            raise ValueError("cannot project points at or behind the camera (z <= 0)")
+        return kernel_project(p, self.fx, self.fy, self.cx, self.cy, self.dist_array)
+
+    def normalized(self, uv_px: np.ndarray) -> np.ndarray:
+        """Undistorted normalised coordinates (x/z, y/z), shape (N, 2), of pixels (N, 2)."""
+        uv = np.atleast_2d(np.asarray(uv_px, dtype=np.float64))
+        if not self.has_distortion:
+            return np.column_stack(((uv[:, 0] - self.cx) / self.fx, (uv[:, 1] - self.cy) / self.fy))
+        xy = cv2.undistortPoints(uv.reshape(-1, 1, 2), self.K, self.dist_array)
+        return xy.reshape(-1, 2)
+
+    def bearings(self, uv_px: np.ndarray) -> np.ndarray:
+        """Unit line-of-sight vectors e (Eq. 9), shape (N, 3), of pixels (N, 2): Eq. 8's
+        u = [tan phi, tan omega, 1] of the undistorted point, normalised. Computed by
+        ``core.kernels.camera.bearings`` (``normalized``'s arithmetic, OpenCV's with lens
+        distortion; one compiled call instead of a chain of small NumPy ones)."""
+        uv = np.ascontiguousarray(np.asarray(uv_px, dtype=np.float64).reshape(-1, 2))
+        return kernel_bearings(uv, self.fx, self.fy, self.cx, self.cy, self.dist_array)
+
+    def back_project(self, uv_px: np.ndarray, distance_mm: np.ndarray) -> np.ndarray:
+        """3-D points y = rho * e (Eq. 8), shape (N, 3), from pixels (N, 2) and radial
+        distances rho of shape (N,)."""
+        return self.bearings(uv_px) * np.asarray(distance_mm, dtype=np.float64)[:, None]
+
+    def pixel_bearings(self) -> np.ndarray:
+        """Unit bearing of every pixel centre, shape (H, W, 3), cached."""
+        cached = self._cache.get("pixel_bearings")
+        if cached is None:
+            v, u = np.mgrid[0 : self.height, 0 : self.width].astype(np.float64)
+            e = self.bearings(np.column_stack((u.ravel(), v.ravel())))
+            cached = e.reshape(self.height, self.width, 3)
+            cached.flags.writeable = False
+            self._cache["pixel_bearings"] = cached
+        return cached
+
+    # --- serialisation ----------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "width": self.width,
+            "height": self.height,
+            "fx": self.fx,
+            "fy": self.fy,
+            "cx": self.cx,
+            "cy": self.cy,
+            "dist": list(self.dist),
+        }
+
+    @staticmethod
+    def from_dict(d: dict[str, Any]) -> CameraModel:
+        required = ("width", "height", "fx", "fy", "cx", "cy")
+        missing = [k for k in required if k not in d]
+        if missing:
+            raise ValueError(f"camera description is missing {', '.join(missing)}")
+        return CameraModel(
+            width=int(d["width"]),
+            height=int(d["height"]),
+            fx=float(d["fx"]),
+            fy=float(d["fy"]),
+            cx=float(d["cx"]),
+            cy=float(d["cy"]),
+            dist=tuple(float(x) for x in d.get("dist", (0, 0, 0, 0, 0))),
+            name=str(d.get("name", "")),
+        )
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=2)
+
+    @staticmethod
+    def from_json(text: str) -> CameraModel:
+        try:
+            d = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"camera JSON is not valid JSON: {exc}") from exc
+        if not isinstance(d, dict):
+            raise ValueError("camera JSON must be an object")
+        return CameraModel.from_dict(d)

@@ -1,0 +1,2 @@
+"""Compiled arithmetic shared by the stages (camera model, small matrices,
+statistics, pixel indexing)."""

@@ -1,0 +1,151 @@
+"""The typed records the compiled kernels take instead of long positional argument lists.
+
+Each is a ``typing.NamedTuple`` (numba compiles them as tuples with named fields, so a
+kernel reads ``camera.fx`` rather than argument 17), built in one place from the
+configuration (``camera_record``, ``catalog_record``, ``fit_settings`` here; the sigma
+constants in ``tofpose.stages.extraction.uncertainty.kernel_constants``, the range correction in
+``tofpose.calibration.range.correction_kernel_arguments``, the gate settings in
+``tofpose.stages.extraction.extraction``) and passed whole. Two settings swapped by position cannot
+be
+written: a record is built by keyword.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+class CameraRecord(NamedTuple):
+    """The camera as kernels read it: pinhole intrinsics fx, fy, cx, cy (px), the
+    distortion ``dist`` (5,) (k1, k2, p1, p2, k3), ``K`` (3, 3) and the unit bearing of
+    every pixel ``pixel_bearings`` (H * W, 3), row-major."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    dist: np.ndarray
+    K: np.ndarray
+    pixel_bearings: np.ndarray
+
+
+class CatalogRecord(NamedTuple):
+    """The catalog as kernels read it: reflector centres ``xyz`` (N, 3) mm in the target
+    frame and their radii ``radii_mm`` (N,)."""
+
+    xyz: np.ndarray
+    radii_mm: np.ndarray
+
+
+class SigmaConstants(NamedTuple):
+    """The measurement sigmas' floors and constants (``tofpose.stages.extraction.uncertainty``):
+    floor_px / floor_mm the centroid and range floors, single_px a one-pixel blob's
+    centroid sigma, split_px a split blob's, pool_min the pixels below which a blob's
+    noise is pooled, median_eff the median's efficiency, uncal_mm the uncalibrated range
+    sigma."""
+
+    floor_px: float
+    floor_mm: float
+    single_px: float
+    split_px: float
+    pool_min: int
+    median_eff: float
+    uncal_mm: float
+
+
+class PersistenceHistory(NamedTuple):
+    """The persistence history and its settings as the kernels read them
+    (``Persistence.history``): ``gray``, ``distance`` ((H, W) float32 each), ``mask``
+    ((H * W,) bool each) and ``centroids`` ((m, 2) float64 each) are tuples of one length
+    (K - 1, at least 1), newest first, of which the first ``count`` are real frames (the
+    rest pad with the current frame's arrays and are never read); ``tol_px`` and
+    ``c_min`` are ``PersistenceConfig``'s motion tolerance and C_min."""
+
+    gray: tuple
+    distance: tuple
+    mask: tuple
+    centroids: tuple
+    count: int
+    tol_px: float
+    c_min: int
+
+
+class RangeCorrectionRecord(NamedTuple):
+    """A camera's calibrated range correction as ``stages.persistence.kernels.range_correction
+    .corrected_ranges`` takes it: ``apply`` (False: none), its ``model`` (4,),
+    ``harmonics`` (H, 2) and per-pixel ``offsets`` (H * W,) or (0,)."""
+
+    apply: bool
+    model: np.ndarray
+    harmonics: np.ndarray
+    offsets: np.ndarray
+
+
+class FitSettings(NamedTuple):
+    """The settings of the §5 fit (``stages.pose.kernels.pose.fit_with_outliers``):
+
+    refinement : 0 none, 1 maximum likelihood, 2 the paper's line of sight
+    (``pose.REFINE_NONE``, ``REFINE_ML``, ``REFINE_LOS``; ``solve._REFINEMENT``);
+    los_tolerance : the LOS iteration's tolerance;
+    step_sigma2 : the ML iteration's convergence threshold (squared step in sigmas);
+    adapt : add the frame's excess range and bearing sigmas and fit again;
+    max_systematic_range_mm / max_systematic_centroid_px : their caps; reject : drop
+    outliers; min_matches : never below this many reflectors; outlier_sigma,
+    chi2_per_dof : the outlier step's thresholds."""
+
+    refinement: int
+    los_tolerance: float
+    step_sigma2: float
+    adapt: bool
+    max_systematic_range_mm: float
+    max_systematic_centroid_px: float
+    reject: bool
+    min_matches: int
+    outlier_sigma: float
+    chi2_per_dof: float
+
+
+class GateSettings(NamedTuple):
+    """The scalar settings of the blob criteria
+    (``stages.extraction.kernels.gates.gate_components``):
+
+    h_min_px (< 0: the range-adaptive window), h_max_px (< 0: none) the paper's size
+    window; cos_max_tilt; size_tolerance and size_margin_px of the adaptive window;
+    nlog_sigma_px (<= 0: matched to each blob's size); j_peak and j_t, the nLoG
+    criteria (fractions of the blob's contrast, or absolute with a fixed sigma);
+    background counts; eccentricity_max; i_peak and i_t, the intensity levels; q_max
+    the penalty limit."""
+
+    h_min_px: float
+    h_max_px: float
+    cos_max_tilt: float
+    size_tolerance: float
+    size_margin_px: float
+    nlog_sigma_px: float
+    j_peak: float
+    j_t: float
+    background: float
+    eccentricity_max: float
+    i_peak: float
+    i_t: float
+    q_max: float
+
+
+def camera_record(camera) -> CameraRecord:
+    """A ``tofpose.core.camera.CameraModel`` as kernels read it (contiguous float64 arrays)."""
+    return CameraRecord(
+        fx=float(camera.fx), fy=float(camera.fy), cx=float(camera.cx), cy=float(camera.cy),
+        dist=np.ascontiguousarray(camera.dist_array, dtype=np.float64),
+        K=np.ascontiguousarray(camera.K, dtype=np.float64),
+        pixel_bearings=np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3)),
+    )  # fmt: skip
+
+
+def catalog_record(catalog) -> CatalogRecord:
+    """A ``tofpose.core.catalog.Catalog`` as kernels read it."""
+    return CatalogRecord(
+        xyz=np.ascontiguousarray(catalog.positions_mm, dtype=np.float64),
+        radii_mm=np.ascontiguousarray(catalog.diameters_mm, dtype=np.float64) / 2,
+    )

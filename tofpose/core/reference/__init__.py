@@ -1,0 +1,1 @@
+"""Plain NumPy/OpenCV statements of ``tofpose.core.kernels``."""

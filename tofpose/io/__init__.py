@@ -1,0 +1,1 @@
+"""Files in and out: recordings, pose CSV, camera files, MCAP and Foxglove."""

@@ -1,0 +1,60 @@
+"""The files a pipeline over a recording is built from, as ``tofpose`` commands read
+them: a camera JSON (the camera model, ``tofpose.core.camera.CameraModel``, with, when
+present, the ``range_correction`` that ``tofpose calibrate-range`` adds and the
+``covariance_scale`` that ``tofpose calibrate-covariance`` adds) and a catalog JSON.
+Errors are ``SystemExit`` with a message for the user, as the commands print them."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from tofpose.calibration.covariance import CovarianceScale
+from tofpose.calibration.range import RangeCorrection
+from tofpose.config import TrackingConfig
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog
+from tofpose.pipeline import PipelineConfig, PosePipeline
+
+
+def load_camera(text: str) -> tuple[CameraModel, RangeCorrection | None, CovarianceScale | None]:
+    """The camera, its range correction and its covariance scale (None where absent)
+    from a camera JSON text; ``ValueError`` (or ``KeyError``/``TypeError``) naming what
+    is wrong when it is not one."""
+    camera = CameraModel.from_json(text)
+    doc = json.loads(text)
+    rc, cs = doc.get("range_correction"), doc.get("covariance_scale")
+    return (camera, RangeCorrection.from_dict(rc) if rc is not None else None,
+            CovarianceScale.from_dict(cs) if cs is not None else None)  # fmt: skip
+
+
+def read_text_file(path: str, what: str) -> str:
+    """The text of file ``path``; ``SystemExit`` naming ``what`` and why it cannot be read."""
+    try:
+        return Path(path).read_text()
+    except OSError as exc:
+        raise SystemExit(f"tofpose: cannot read {what} {path}: {exc.strerror}") from exc
+
+
+def pipeline_for(
+    rec, rec_path: str, catalog_path: str | None, camera_path: str | None, tracking: bool
+) -> PosePipeline:
+    """The pipeline ``estimate`` runs over an open recording: its camera and catalog, or
+    the ones given (a camera JSON with its range correction and covariance scale)."""
+    camera, correction, scale = rec.camera, None, None
+    if camera_path:
+        camera, correction, scale = load_camera(read_text_file(camera_path, "camera"))
+    if catalog_path:
+        catalog = Catalog.from_json(read_text_file(catalog_path, "catalog"))
+    elif rec.catalog is not None:
+        catalog = rec.catalog
+    else:
+        raise SystemExit(f"tofpose: {rec_path} has no /catalog; pass --catalog CAT.json")
+    if camera.shape != rec.camera.shape:
+        raise SystemExit(
+            f"tofpose: camera {camera.width}x{camera.height} does not match the recording's "
+            f"{rec.camera.width}x{rec.camera.height} frames"
+        )
+    config = PipelineConfig(tracking=TrackingConfig(enabled=tracking))
+    return PosePipeline(camera, catalog, config, range_correction=correction,
+                        covariance_scale=scale)  # fmt: skip

@@ -1,0 +1,163 @@
+"""One set of Foxglove channels (``topics``) on a ``foxglove.Context``, logged per frame.
+
+The MCAP export opens an MCAP writer on the context, the live server a Foxglove
+WebSocket server; both log through ``ToFChannels.log_frame``.
+"""
+
+from __future__ import annotations
+
+import json
+
+import foxglove
+import numpy as np
+from foxglove.channels import (
+    CameraCalibrationChannel,
+    FrameTransformChannel,
+    ImageAnnotationsChannel,
+    PointCloudChannel,
+    PoseInFrameChannel,
+    RawImageChannel,
+)
+
+from tofpose.core.camera import CameraModel
+from tofpose.io.interop import foxglove_messages as msg
+from tofpose.io.interop import topics
+from tofpose.pipeline import PoseResult
+
+
+def json_channel(topic: str, schema: dict, context: foxglove.Context) -> foxglove.Channel:
+    """A JSON channel whose schema (``jsonschema`` encoding) is named by its ``title``."""
+    return foxglove.Channel(
+        topic,
+        schema=foxglove.Schema(
+            name=schema["title"], encoding="jsonschema", data=json.dumps(schema).encode()
+        ),
+        message_encoding="json",
+        context=context,
+    )
+
+
+class ToFChannels:
+    """The channels of one camera stream on ``context``, all advertised at construction
+    (a live client can subscribe before the first frame).
+
+    camera : the model logged as ``CameraCalibration`` with every frame (so a client that
+    joins late, or a player that seeks, has it at once).
+    estimate / truth / lab_truth : create the channels of the pipeline's results and of
+    the two reference poses; ``log_frame`` refuses what has no channel.
+    previews : also the images viewers display as they are (``previews``): the gray
+    image in 8 bits and the distance colour-mapped.
+    """
+
+    def __init__(
+        self, context: foxglove.Context, camera: CameraModel, *, estimate: bool = True,
+        truth: bool = False, lab_truth: bool = False, previews: bool = True,
+    ) -> None:  # fmt: skip
+        self.camera = camera
+        self.previews = (
+            (RawImageChannel(topics.GRAY_PREVIEW, context=context),
+             RawImageChannel(topics.DISTANCE_PREVIEW, context=context))
+            if previews else ()
+        )  # fmt: skip
+        self.gray = RawImageChannel(topics.GRAY, context=context)
+        self.distance = RawImageChannel(
+            topics.DISTANCE, context=context, metadata=topics.DISTANCE_CHANNEL_METADATA
+        )
+        self.calibration = CameraCalibrationChannel(topics.CALIBRATION, context=context)
+        self.frame = json_channel(topics.FRAME, topics.FRAME_SCHEMA, context)
+        self.optional: dict[str, object] = {}
+        if estimate:
+            self.optional.update({
+                topics.ESTIMATE: json_channel(topics.ESTIMATE, topics.ESTIMATE_SCHEMA, context),
+                topics.ANNOTATIONS: ImageAnnotationsChannel(topics.ANNOTATIONS, context=context),
+                topics.POSE_TRANSFORM: FrameTransformChannel(topics.POSE_TRANSFORM,
+                                                             context=context),
+                topics.POSE: PoseInFrameChannel(topics.POSE, context=context),
+                topics.REFLECTORS: PointCloudChannel(topics.REFLECTORS, context=context),
+            })  # fmt: skip
+        for wanted, topic, transform in (
+            (truth, topics.TRUTH, topics.TRUTH_TRANSFORM),
+            (lab_truth, topics.LAB_TRUTH, topics.LAB_TRUTH_TRANSFORM),
+        ):
+            if wanted:
+                self.optional[topic] = json_channel(topic, topics.POSE_SCHEMA, context)
+                self.optional[transform] = FrameTransformChannel(transform, context=context)
+
+    def _channel(self, topic: str):
+        ch = self.optional.get(topic)
+        if ch is None:
+            raise ValueError(f"no {topic} channel: this stream was opened without it")
+        return ch
+
+    @property
+    def channels(self) -> list:
+        return [self.gray, self.distance, self.calibration, self.frame, *self.previews,
+                *self.optional.values()]  # fmt: skip
+
+    def has_sinks(self) -> bool:
+        """Whether anything (an MCAP writer, a subscribed client) takes any channel."""
+        return any(ch.has_sinks() for ch in self.channels)
+
+    @staticmethod
+    def _emit(ch, make, log_time_ns: int) -> None:
+        """Log ``make()`` on ``ch`` when something takes it (a live client subscribes per
+        channel: an unsubscribed channel costs no conversion)."""
+        if ch.has_sinks():
+            ch.log(make(), log_time=log_time_ns)
+
+    def _log_pose(
+        self, topic: str, transform_topic: str, child: str, index: int,
+        pose: tuple[np.ndarray, np.ndarray], ts, log_time_ns: int,
+    ) -> None:  # fmt: skip
+        R, t_mm = pose
+        self._emit(self._channel(topic), lambda: msg.pose_payload(index, R, t_mm), log_time_ns)
+        self._emit(self._channel(transform_topic),
+                   lambda: msg.frame_transform(R, t_mm, child, ts), log_time_ns)  # fmt: skip
+
+    def log_frame(
+        self,
+        index: int,
+        gray: np.ndarray,
+        distance_mm: np.ndarray,
+        time_s: float,
+        log_time_ns: int,
+        result: PoseResult | None = None,
+        truth: tuple[np.ndarray, np.ndarray] | None = None,
+        lab_truth: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> None:
+        """Log one frame (gray (H, W) uint16, distance (H, W) float32 mm) at
+        ``log_time_ns``; with the pipeline's ``result`` its estimate, pose, reflectors
+        and overlay; with ``truth`` / ``lab_truth`` = (R (3, 3), t (3,) mm) those poses."""
+        ts = msg.timestamp(log_time_ns)
+        emit = self._emit
+        emit(self.frame, lambda: msg.frame_payload(index, time_s), log_time_ns)
+        emit(self.gray, lambda: msg.gray_image(gray, ts), log_time_ns)
+        emit(self.distance, lambda: msg.distance_image(distance_mm, ts), log_time_ns)
+        emit(self.calibration, lambda: msg.camera_calibration(self.camera, ts), log_time_ns)
+        if self.previews:
+            gray_preview, distance_preview = self.previews
+            emit(gray_preview, lambda: msg.gray_preview_image(gray, ts), log_time_ns)
+            emit(distance_preview, lambda: msg.distance_preview_image(distance_mm, ts),
+                 log_time_ns)  # fmt: skip
+        if result is not None:
+            emit(self._channel(topics.ESTIMATE), lambda: json.dumps(
+                msg.estimate_payload(index, time_s, result), allow_nan=False), log_time_ns)
+            emit(self._channel(topics.ANNOTATIONS),
+                 lambda: msg.image_annotations(result, ts), log_time_ns)  # fmt: skip
+            if result.ok:
+                emit(self._channel(topics.POSE_TRANSFORM), lambda: msg.frame_transform(
+                    result.R, result.t_mm, topics.TARGET_FRAME_ID, ts), log_time_ns)
+                emit(self._channel(topics.POSE),
+                     lambda: msg.pose_in_frame(result.R, result.t_mm, ts), log_time_ns)
+            emit(self._channel(topics.REFLECTORS),
+                 lambda: msg.reflector_cloud(result, ts), log_time_ns)  # fmt: skip
+        if truth is not None:
+            self._log_pose(topics.TRUTH, topics.TRUTH_TRANSFORM, topics.TRUTH_FRAME_ID,
+                           index, truth, ts, log_time_ns)  # fmt: skip
+        if lab_truth is not None:
+            self._log_pose(topics.LAB_TRUTH, topics.LAB_TRUTH_TRANSFORM, topics.LAB_FRAME_ID,
+                           index, lab_truth, ts, log_time_ns)  # fmt: skip
+
+    def close(self) -> None:
+        for ch in self.channels:
+            ch.close()

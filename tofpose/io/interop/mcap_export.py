@@ -1,0 +1,103 @@
+"""HDF5 recording -> MCAP file (``tofpose export mcap``; docs/interop.md).
+
+The file is written by ``foxglove-sdk``'s MCAP writer through ``ToFChannels``: one frame
+at a time (memory stays bounded by the writer's chunk, ~1 MiB, whatever the length of
+the recording), log times = the frames' capture times. What no channel carries (the
+camera and catalog JSON, the pipeline's settings and version) is the MCAP metadata
+record ``tofpose``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+from pathlib import Path
+
+import foxglove
+from tqdm import tqdm
+
+import tofpose
+from tofpose.io.interop import topics
+from tofpose.io.interop.channels import ToFChannels
+from tofpose.io.interop.foxglove_messages import time_ns_from_seconds
+from tofpose.io.recording import Recording
+from tofpose.pipeline import PosePipeline
+
+MCAP_FORMAT = "tofpose-mcap"
+MCAP_VERSION = 1
+
+
+def export_metadata(rec: Recording, pipeline: PosePipeline | None) -> dict[str, str]:
+    """The ``tofpose`` metadata record (MCAP metadata values are strings)."""
+    catalog = pipeline.catalog if pipeline is not None else rec.catalog
+    camera = pipeline.camera if pipeline is not None else rec.camera
+    return {
+        "format": MCAP_FORMAT,
+        "version": str(MCAP_VERSION),
+        "tofpose_version": tofpose.__version__,
+        "source": rec.path.name,
+        "n_frames": str(rec.n_frames),
+        "camera": camera.to_json(),
+        "recording_camera": rec.camera.to_json(),
+        "catalog": catalog.to_json() if catalog is not None else "",
+        "recording_catalog": rec.catalog.to_json() if rec.catalog is not None else "",
+        "pipeline_config": (
+            json.dumps(dataclasses.asdict(pipeline.config), default=str)
+            if pipeline is not None else ""
+        ),  # fmt: skip
+        "distance_unit": topics.DISTANCE_CHANNEL_METADATA["unit"],
+        "has_truth": str(rec.truth_R is not None).lower(),
+        "has_lab_truth": str(rec.lab_truth_R is not None).lower(),
+    }
+
+
+def export_mcap(
+    rec: Recording,
+    out: str | Path,
+    pipeline: PosePipeline | None = None,
+    *,
+    progress: bool = True,
+    overwrite: bool = False,
+    previews: bool = True,
+) -> dict[str, int]:
+    """Write ``rec`` to ``out``; with a ``pipeline``, each frame's estimate too; with
+    ``previews``, the images viewers display as they are (8-bit gray, coloured distance).
+
+    Returns {"frames": N, "ok": frames with a pose}. ValueError (naming the frame) for a
+    capture time MCAP cannot hold (negative)."""
+    out = Path(out)
+    if out.exists() and not overwrite:
+        raise ValueError(f"{out} exists (pass --force to overwrite it)")
+    times_ns = [time_ns_from_seconds(float(t)) for t in rec.time_s]
+    context = foxglove.Context()
+    channels = ToFChannels(context, rec.camera, estimate=pipeline is not None,
+                           truth=rec.truth_R is not None,
+                           lab_truth=rec.lab_truth_R is not None,
+                           previews=previews)  # fmt: skip
+    n_ok = 0
+    partial = out.with_name(out.name + ".partial")  # renamed when complete
+    writer = foxglove.open_mcap(partial, allow_overwrite=True, context=context)
+    done = False
+    try:
+        writer.write_metadata(topics.METADATA_NAME, export_metadata(rec, pipeline))
+        for i in tqdm(range(rec.n_frames), desc="export mcap", unit="frame",
+                      disable=not progress, file=sys.stderr):  # fmt: skip
+            gray, dist, t = rec.frame(i)
+            result = pipeline.process(gray, dist, t) if pipeline is not None else None
+            n_ok += int(result is not None and result.ok)
+            truth = (rec.truth_R[i], rec.truth_t_mm[i]) if rec.truth_R is not None else None
+            lab = (
+                (rec.lab_truth_R[i], rec.lab_truth_t_mm[i])
+                if rec.lab_truth_R is not None else None
+            )  # fmt: skip
+            channels.log_frame(i, gray, dist, t, times_ns[i], result, truth, lab)
+        done = True
+    finally:
+        writer.close()
+        channels.close()
+        if done:
+            partial.replace(out)
+        else:
+            partial.unlink(missing_ok=True)
+    return {"frames": rec.n_frames, "ok": n_ok}

@@ -1,0 +1,50 @@
+"""The rows of the CSV that ``tofpose estimate`` (and ``tofpose reprocess``) writes: one
+per frame, the pose with its 1-sigma, and with ``--filter`` the relative-state filter's
+rate and velocity. Formatting lives here once, so that a re-processed chunk's rows are
+the serial command's byte for byte."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tofpose.lab.relative_state import STATE_COLUMNS, RelativeStateFilter
+
+CSV_COLUMNS = (
+    "frame", "time_s", "ok", "n_matched", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz",
+    "pitch_deg", "yaw_deg", "roll_deg", "residual_mm",
+    # appended later (readers of the columns above keep working): the pose's predicted
+    # 1-sigma, position and rotation-vector components
+    "sigma_x_mm", "sigma_y_mm", "sigma_z_mm", "sigma_rx_deg", "sigma_ry_deg", "sigma_rz_deg",
+)  # fmt: skip
+
+#: with ``estimate --filter``: the relative-state filter's state at each frame
+#: (``tofpose.lab.relative_state``): angular rate in the camera frame, velocity, their 1-sigma,
+#: and what the filter did with the frame's pose
+FILTER_COLUMNS = STATE_COLUMNS
+
+
+def pose_row(frame: int, time_s: float, r) -> list:
+    """``CSV_COLUMNS`` of one frame's ``PoseResult`` (empty pose fields without a pose)."""
+    row = [frame, f"{time_s:.6f}", int(r.ok), r.n_matched]
+    if not r.ok:
+        return row + [""] * 17
+    row += [f"{v:.4f}" for v in r.t_mm]
+    row += [f"{v:.8f}" for v in r.quaternion_wxyz]
+    row += [f"{v:.5f}" for v in r.euler_deg]
+    row += [f"{r.residual_mm:.4f}"]
+    sd = np.sqrt(np.clip(np.diag(r.covariance), 0.0, None))
+    row += [f"{v:.4f}" for v in sd[3:]]
+    row += [f"{v:.5f}" for v in np.degrees(sd[:3])]
+    return row
+
+
+def filter_row(rel: RelativeStateFilter, time_s: float, R=None, t_mm=None, covariance=None) -> list:
+    """``FILTER_COLUMNS`` of one frame: its pose (R (3, 3), t (3,) mm, covariance (6, 6))
+    fused (or rejected), or without one (None) the state predicted to the frame's time;
+    empty before the filter's first pose."""
+    s = rel.step(time_s, R, t_mm, covariance)
+    if s is None:
+        return [""] * len(FILTER_COLUMNS)
+    return ([f"{v:.4f}" for v in s.angular_rate_deg_s] + [f"{v:.3f}" for v in s.velocity_mm_s]
+            + [f"{v:.4f}" for v in s.angular_rate_sigma_deg_s]
+            + [f"{v:.3f}" for v in s.velocity_sigma_mm_s] + [s.status])  # fmt: skip

@@ -1,0 +1,355 @@
+"""HDF5 recordings (docs/architecture.md §7): one file per recording, frames with optional truth.
+
+::
+
+    /            attrs: format = "tofpose-recording", version = 1
+    /camera      attrs: width, height, fx, fy, cx, cy, dist (5), name
+    /catalog     attrs: json                                              optional
+    /frames/gray          uint16  (N, H, W)
+    /frames/distance_mm   float32 (N, H, W)  radial distance, NaN = invalid
+    /frames/time_s        float64 (N,)
+    /truth/R_camera_target     float64 (N, 3, 3)                          optional
+    /truth/t_camera_target_mm  float64 (N, 3)                             optional
+    /lab_truth/R_camera_target     float64 (N, 3, 3)                      optional
+    /lab_truth/t_camera_target_mm  float64 (N, 3)                         optional
+
+``/truth`` is the pose that produced each frame (on the simulator: what was rendered);
+``/lab_truth`` is what the lab believed (encoders + nominal mount and placement), the
+only reference a real lab has. A simulated recording carries both.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog
+
+FORMAT = "tofpose-recording"
+VERSION = 1
+
+
+class RecordingError(ValueError):
+    """A recording that cannot be read: names the file and what is wrong."""
+
+
+class RecordingWriter:
+    """Append frames to a new recording. Use as a context manager.
+
+    Frames are written in chunks of one frame (resizable datasets), so a recording
+    interrupted part-way still holds every frame written before the interruption.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        camera: CameraModel,
+        catalog: Catalog | None = None,
+        *,
+        with_truth: bool = False,
+        with_lab_truth: bool = False,
+        compression: str | None = "gzip",
+    ) -> None:
+        self.path = Path(path)
+        self.camera = camera
+        self._f = h5py.File(self.path, "w")
+        f = self._f
+        f.attrs["format"] = FORMAT
+        f.attrs["version"] = VERSION
+        cam = f.create_group("camera")
+        for k in ("width", "height", "fx", "fy", "cx", "cy"):
+            cam.attrs[k] = getattr(camera, k)
+        cam.attrs["dist"] = np.asarray(camera.dist, float)
+        cam.attrs["name"] = camera.name
+        if catalog is not None:
+            f.create_group("catalog").attrs["json"] = catalog.to_json()
+        h, w = camera.height, camera.width
+        fr = f.create_group("frames")
+        opts = {"compression": compression, "compression_opts": 1} if compression == "gzip" else {}
+        self._gray = fr.create_dataset(
+            "gray", (0, h, w), np.uint16, maxshape=(None, h, w), chunks=(1, h, w), **opts
+        )
+        self._dist = fr.create_dataset(
+            "distance_mm", (0, h, w), np.float32, maxshape=(None, h, w), chunks=(1, h, w), **opts
+        )
+        self._time = fr.create_dataset("time_s", (0,), np.float64, maxshape=(None,), chunks=(1024,))
+        self._truth = _pose_datasets(f, "truth") if with_truth else None
+        self._lab_truth = _pose_datasets(f, "lab_truth") if with_lab_truth else None
+        self.n = 0
+
+    def append(
+        self,
+        gray: np.ndarray,
+        distance_mm: np.ndarray,
+        time_s: float,
+        R_camera_target: np.ndarray | None = None,
+        t_camera_target_mm: np.ndarray | None = None,
+        *,
+        lab_R_camera_target: np.ndarray | None = None,
+        lab_t_camera_target_mm: np.ndarray | None = None,
+    ) -> None:
+        """Add one frame; truth (lab truth) is required iff the writer was opened
+        ``with_truth`` (``with_lab_truth``)."""
+        shape = (self.camera.height, self.camera.width)
+        if gray.shape != shape or distance_mm.shape != shape:
+            raise ValueError(f"frame shapes {gray.shape}, {distance_mm.shape} != camera {shape}")
+        n = self.n
+        for ds in (self._gray, self._dist, self._time):
+            ds.resize(n + 1, axis=0)
+        self._gray[n] = gray.astype(np.uint16)
+        self._dist[n] = distance_mm.astype(np.float32)
+        self._time[n] = time_s
+        for name, datasets, R, t in (
+            ("truth", self._truth, R_camera_target, t_camera_target_mm),
+            ("lab truth", self._lab_truth, lab_R_camera_target, lab_t_camera_target_mm),
+        ):
+            if datasets is None:
+                continue
+            if R is None or t is None:
+                raise ValueError(f"this recording stores {name}: pass R and t for every frame")
+            for ds, value in zip(datasets, (R, t), strict=True):
+                ds.resize(n + 1, axis=0)
+                ds[n] = value
+        self.n += 1
+
+    @classmethod
+    def reopen(cls, path: str | Path) -> RecordingWriter:
+        """Continue an existing recording (append mode); ``RecordingError`` if the file is
+        not one of ours or lacks a dataset the writer needs."""
+        path = Path(path)
+        try:
+            f = h5py.File(path, "a")
+        except OSError as exc:
+            raise RecordingError(f"{path}: cannot open for appending ({exc})") from exc
+        try:
+            if f.attrs.get("format") != FORMAT:
+                raise RecordingError(f"{path}: not a tofpose recording")
+            for ds in ("frames/gray", "frames/distance_mm", "frames/time_s"):
+                if ds not in f:
+                    raise RecordingError(f"{path}: missing dataset /{ds}")
+            self = cls.__new__(cls)
+            self.path, self._f = path, f
+            self.camera = _camera_from_attrs(f["camera"].attrs, path)
+            self._gray, self._dist = f["frames/gray"], f["frames/distance_mm"]
+            self._time = f["frames/time_s"]
+            self._truth = _existing_pose_datasets(f, "truth")
+            self._lab_truth = _existing_pose_datasets(f, "lab_truth")
+            self.n = int(self._time.shape[0])
+            return self
+        except BaseException:
+            f.close()
+            raise
+
+    def truncate(self, n: int) -> None:
+        """Drop every frame from index ``n`` on (e.g. an aborted batch of frames)."""
+        if not 0 <= n <= self.n:
+            raise ValueError(f"cannot truncate a recording of {self.n} frames to {n}")
+        datasets = [self._gray, self._dist, self._time]
+        for group in (self._truth, self._lab_truth):
+            if group is not None:
+                datasets += list(group)
+        for ds in datasets:
+            ds.resize(n, axis=0)
+        self.n = n
+
+    def flush(self) -> None:
+        self._f.flush()
+
+    def close(self) -> None:
+        if self._f.id.valid:
+            self._f.close()
+
+    def __enter__(self) -> RecordingWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _pose_datasets(f: h5py.File, group: str) -> tuple[h5py.Dataset, h5py.Dataset]:
+    """Resizable (N, 3, 3) rotation and (N, 3) translation datasets under ``group``."""
+    g = f.create_group(group)
+    R = g.create_dataset(
+        "R_camera_target", (0, 3, 3), np.float64, maxshape=(None, 3, 3), chunks=(256, 3, 3)
+    )
+    t = g.create_dataset(
+        "t_camera_target_mm", (0, 3), np.float64, maxshape=(None, 3), chunks=(256, 3)
+    )
+    return R, t
+
+
+def _camera_from_attrs(attrs, path=None) -> CameraModel:
+    """The CameraModel stored in /camera's attributes; RecordingError if invalid."""
+    cam_attrs = {k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in attrs.items()}
+    if isinstance(cam_attrs.get("name"), bytes):
+        cam_attrs["name"] = cam_attrs["name"].decode()
+    try:
+        return CameraModel.from_dict(cam_attrs)
+    except ValueError as exc:
+        raise RecordingError(f"{path}: /camera attributes are invalid ({exc})") from exc
+
+
+def _existing_pose_datasets(f: h5py.File, group: str):
+    if group not in f:
+        return None
+    return f[f"{group}/R_camera_target"], f[f"{group}/t_camera_target_mm"]
+
+
+def _read_poses(f: h5py.File, group: str, n: int, path) -> tuple[np.ndarray, np.ndarray] | None:
+    """(R (N, 3, 3), t (N, 3)) of ``/group``, None if absent; RecordingError if malformed."""
+    if group not in f:
+        return None
+    if f"{group}/R_camera_target" not in f or f"{group}/t_camera_target_mm" not in f:
+        raise RecordingError(f"{path}: /{group} needs both R_camera_target and t_camera_target_mm")
+    R = f[f"{group}/R_camera_target"][...]
+    t = f[f"{group}/t_camera_target_mm"][...]
+    if R.shape != (n, 3, 3) or t.shape != (n, 3):
+        raise RecordingError(
+            f"{path}: /{group} shapes {R.shape}, {t.shape} do not match {n} frames"
+        )
+    return R, t
+
+
+@dataclass
+class Recording:
+    """An open recording (read-only). Frames are read lazily; use as a context manager.
+
+    camera : CameraModel; catalog : Catalog or None; n_frames : int;
+    time_s : ndarray (N,); truth_R : ndarray (N, 3, 3) or None; truth_t_mm : (N, 3) or None.
+    lab_truth_R, lab_truth_t_mm : the lab's reference, same shapes, or None.
+    """
+
+    path: Path
+    camera: CameraModel
+    catalog: Catalog | None
+    n_frames: int
+    time_s: np.ndarray
+    truth_R: np.ndarray | None
+    truth_t_mm: np.ndarray | None
+    _file: h5py.File
+    lab_truth_R: np.ndarray | None = None
+    lab_truth_t_mm: np.ndarray | None = None
+
+    def frame(self, i: int) -> tuple[np.ndarray, np.ndarray, float]:
+        """(gray (H, W) uint16, distance (H, W) float32, time_s) of frame i."""
+        if not 0 <= i < self.n_frames:
+            raise IndexError(f"frame {i} out of range 0..{self.n_frames - 1}")
+        try:
+            g = self._file["frames/gray"][i]
+            d = self._file["frames/distance_mm"][i]
+        except (OSError, KeyError) as exc:
+            raise RecordingError(f"{self.path}: frame {i} cannot be read ({exc})") from exc
+        return g, d, float(self.time_s[i])
+
+    def frames(self) -> Iterator[tuple[np.ndarray, np.ndarray, float]]:
+        for i in range(self.n_frames):
+            yield self.frame(i)
+
+    @property
+    def frames_per_chunk(self) -> int:
+        """Frames in one HDF5 chunk of /frames/gray (1 for a contiguous dataset): read
+        blocks aligned to it and each chunk is decompressed once."""
+        chunks = self._file["frames/gray"].chunks
+        return int(chunks[0]) if chunks else 1
+
+    def block(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Frames [start, stop) in one read: gray (n, H, W) uint16, distance (n, H, W)
+        float32, time_s (n,)."""
+        if not 0 <= start <= stop <= self.n_frames:
+            raise IndexError(f"frames {start}..{stop} out of range 0..{self.n_frames}")
+        try:
+            g = self._file["frames/gray"][start:stop]
+            d = self._file["frames/distance_mm"][start:stop]
+        except (OSError, KeyError) as exc:
+            raise RecordingError(
+                f"{self.path}: frames {start}..{stop - 1} cannot be read ({exc})"
+            ) from exc
+        return g, d, np.asarray(self.time_s[start:stop], float)
+
+    def blocks(self, start: int = 0, stop: int | None = None) -> Iterator[tuple[int, tuple]]:
+        """(first frame, ``block``) over [start, stop) in reads aligned to the file's
+        chunks (``frames_per_chunk``, at least 32 frames a read)."""
+        stop = self.n_frames if stop is None else stop
+        step = self.frames_per_chunk * max(1, -(-32 // self.frames_per_chunk))
+        a = start
+        while a < stop:
+            b = min(stop, (a // step + 1) * step)
+            yield a, self.block(a, b)
+            a = b
+
+    def close(self) -> None:
+        if self._file.id.valid:
+            self._file.close()
+
+    def __enter__(self) -> Recording:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def open_recording(path: str | Path) -> Recording:
+    """Open and validate a recording; raises ``RecordingError`` naming the problem."""
+    path = Path(path)
+    if not path.exists():
+        raise RecordingError(f"{path}: no such file")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise RecordingError(f"{path}: not a readable HDF5 file ({exc})") from exc
+    try:
+        if f.attrs.get("format") != FORMAT:
+            raise RecordingError(
+                f"{path}: not a tofpose recording (format attribute is {f.attrs.get('format')!r})"
+            )
+        version = int(f.attrs.get("version", -1))
+        if version != VERSION:
+            raise RecordingError(
+                f"{path}: unsupported recording version {version} (expected {VERSION})"
+            )
+        if "camera" not in f:
+            raise RecordingError(f"{path}: missing the /camera group")
+        camera = _camera_from_attrs(f["camera"].attrs, path)
+        catalog = None
+        if "catalog" in f:
+            try:
+                catalog = Catalog.from_json(str(f["catalog"].attrs["json"]))
+            except (KeyError, ValueError) as exc:
+                raise RecordingError(f"{path}: /catalog is invalid ({exc})") from exc
+        for name in ("frames/gray", "frames/distance_mm", "frames/time_s"):
+            if name not in f:
+                raise RecordingError(f"{path}: missing dataset /{name}")
+        g, d, t = f["frames/gray"], f["frames/distance_mm"], f["frames/time_s"]
+        shape = (camera.height, camera.width)
+        for ds in (g, d):
+            if ds.ndim != 3 or ds.shape[1:] != shape:
+                raise RecordingError(
+                    f"{path}: /{ds.name.lstrip('/')} has shape {ds.shape}, "
+                    f"expected (N, {shape[0]}, {shape[1]})"
+                )
+        if g.dtype != np.uint16:
+            raise RecordingError(f"{path}: /frames/gray must be uint16, is {g.dtype}")
+        if d.dtype.kind != "f":
+            raise RecordingError(f"{path}: /frames/distance_mm must be float, is {d.dtype}")
+        n = g.shape[0]
+        if d.shape[0] != n or t.shape != (n,):
+            raise RecordingError(
+                f"{path}: frame counts disagree (gray {n}, distance {d.shape[0]}, "
+                f"time_s {t.shape[0]})"
+            )
+        truth = _read_poses(f, "truth", n, path)
+        lab = _read_poses(f, "lab_truth", n, path)
+        truth_R, truth_t = truth if truth is not None else (None, None)
+        lab_R, lab_t = lab if lab is not None else (None, None)
+        return Recording(path, camera, catalog, n, t[...], truth_R, truth_t, f, lab_R, lab_t)
+    except RecordingError:
+        f.close()
+        raise
+    except (OSError, KeyError) as exc:
+        f.close()
+        raise RecordingError(f"{path}: corrupt recording ({exc})") from exc

@@ -1,0 +1,1 @@
+"""Compiled kernels of the ellipses stage (numba, ``tofpose.core.compiled.jit``)."""

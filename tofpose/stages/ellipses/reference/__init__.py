@@ -1,0 +1,3 @@
+"""Plain NumPy/SciPy/OpenCV statement of the ellipses stage's kernels: their oracle
+in tests and ``PosePipeline(implementation="reference")``'s arithmetic. Imports no
+kernel and no numba."""

@@ -1,0 +1,1 @@
+"""Compiled kernels of the extraction stage (numba, ``tofpose.core.compiled.jit``)."""

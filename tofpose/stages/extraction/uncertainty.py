@@ -1,0 +1,98 @@
+"""Per-reflector measurement sigmas: the weights of Eq. 21 and the ML refinement.
+
+The paper weights each reflector by its measurement quality but gives no noise model.
+Ours has two parts, each checked against the simulator's truth over 0.7-15 m (see
+docs/algorithm.md, "Measurement sigmas"):
+
+Centroid (px, per image axis), independent terms in quadrature:
+
+* shot noise propagated through Eq. 19, ``sqrt(sum G_p |p - c|^2) / sum (G_p - bg)``;
+* a floor for what no pixel statistic sees (PSF, residual perspective bias);
+* sampling: a blob of ``n`` pixels cannot locate its centre better than the pixel grid
+  allows. One pixel leaves the centre uniform over the pixel (``1/sqrt(12)`` px); the
+  error falls quickly as edge pixels are added, as ``n**-1.5`` over the simulated range.
+  Without this term a 1-3 px blob at 10-15 m claims 0.03 px and the refinement
+  over-trusts its bearing;
+* for a blob cut out of a merged component (``source == "split"``: markers 7 and 8
+  beyond ~4.5 m), the neighbour's light it keeps at the cut, ``SPLIT_CENTROID_PX /
+  sqrt(n)``. Without it the halves claimed 0.037 px at 8 m and were off by 0.085 px
+  along the pair (normalised error 3.2), and the fit leaned on them.
+
+Range (mm): the CW-ToF noise model ``sigma_pix = k sqrt(G) / A`` (Lange 2000; G the
+pixel's gray level, A its amplitude above background) with ``k`` pooled over every blob
+of the frame that has enough pixels to measure its own spread (robust MAD). A blob's
+sigma is the larger of its own MAD and the pooled model, times the median's efficiency
+(1.2533) over ``sqrt(n)``. Few-pixel blobs therefore no longer get the (low-biased) MAD of
+3-5 samples, and 1-2 pixel blobs get a model value instead of a fixed guess.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from tofpose.core.records import SigmaConstants
+from tofpose.stages.extraction.extraction import Blob, pixel_lists
+from tofpose.stages.extraction.kernels.sigmas import blob_sigmas
+
+#: centroid sampling error of a single-pixel blob, px (uniform over one pixel)
+SINGLE_PIXEL_SIGMA_PX = 1.0 / np.sqrt(12.0)
+#: blobs with at least this many valid ranges measure their own spread for the pool
+POOL_MIN_PIXELS = 8
+#: sigma of a blob's range when no blob of the frame can calibrate the model, mm
+UNCALIBRATED_RANGE_SIGMA_MM = 30.0
+#: a blob cut out of a merged component (markers 7 and 8 beyond ~4.5 m) keeps part of
+#: its neighbour's light at the cut: its centroid sigma gets this over sqrt(pixels) in
+#: quadrature, px (0.085 px measured for the 8-px halves at 8 m; the accuracy gain of
+#: not over-trusting them is flat between 0.12 and 1.0)
+SPLIT_CENTROID_PX = 0.25
+#: efficiency factor of the median of normal samples
+MEDIAN_EFFICIENCY = 1.2533
+
+
+@dataclass(frozen=True)
+class SigmaFloors:
+    """Lower bounds of the sigmas (what the pixel statistics cannot see)."""
+
+    centroid_px: float = 0.03
+    range_mm: float = 1.0
+
+
+def sampling_sigma_px(n_pixels: np.ndarray) -> np.ndarray:
+    """Centroid error from the pixel grid for blobs of ``n_pixels`` (B,), px, (B,)."""
+    n = np.maximum(np.asarray(n_pixels, float), 1.0)
+    return SINGLE_PIXEL_SIGMA_PX * n**-1.5
+
+
+def kernel_constants(floors: SigmaFloors) -> SigmaConstants:
+    """The floors and this module's constants as the compiled sigmas take them (a
+    ``core.records.SigmaConstants``; its fields are ``kernels.sigmas.blob_sigmas``'
+    arguments after ``split``, in order)."""
+    return SigmaConstants(
+        floor_px=float(floors.centroid_px), floor_mm=float(floors.range_mm),
+        single_px=SINGLE_PIXEL_SIGMA_PX, split_px=SPLIT_CENTROID_PX, pool_min=POOL_MIN_PIXELS,
+        median_eff=MEDIAN_EFFICIENCY, uncal_mm=UNCALIBRATED_RANGE_SIGMA_MM,
+    )  # fmt: skip
+
+
+def measurement_sigmas(
+    blobs: Sequence[Blob],
+    gray: np.ndarray,
+    distance_mm: np.ndarray,
+    background_counts: float,
+    floors: SigmaFloors = SigmaFloors(),
+) -> tuple[np.ndarray, np.ndarray]:
+    """Centroid sigma (B,) px and range sigma (B,) mm of each blob.
+
+    gray, distance_mm : (H, W) frame (or persistence-combined frame) the blobs came from.
+    """
+    flat, starts = pixel_lists(blobs)
+    centroids = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
+    split = np.array([b.source == "split" for b in blobs], bool)
+    return blob_sigmas(
+        flat, starts, centroids, np.asarray(gray, np.float32),
+        np.asarray(distance_mm, np.float32), float(background_counts), split,
+        *kernel_constants(floors),
+    )  # fmt: skip

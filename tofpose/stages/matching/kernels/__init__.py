@@ -1,0 +1,1 @@
+"""Compiled kernels of the matching stage (numba, ``tofpose.core.compiled.jit``)."""

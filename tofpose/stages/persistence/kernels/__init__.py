@@ -1,0 +1,1 @@
+"""Compiled kernels of the persistence stage (numba, ``tofpose.core.compiled.jit``)."""

@@ -1,0 +1,141 @@
+"""Multi-frame persistence (§3.4) that never smears a moving scene.
+
+The paper keeps a counter image C (frames in which each pixel belonged to a candidate
+blob), drops pixels with C < C_min, and averages intensity and takes the temporal median
+of distance over the last K frames. Averaging frames of a moving target would report a
+stale, smeared pose, so (ours) the history is cut at the first frame whose blobs do not
+line up with the current ones within ``motion_tolerance_px``; only consistent frames are
+combined, and a moving scene degrades gracefully to single-frame measurement.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from tofpose.config import PersistenceConfig
+from tofpose.core.camera import CameraModel
+from tofpose.core.records import PersistenceHistory
+from tofpose.stages.extraction.extraction import Blob, pixel_lists
+from tofpose.stages.persistence.kernels.measure import persist_and_measure
+from tofpose.stages.persistence.kernels.persistence import pixel_mask
+
+
+@dataclass
+class _Entry:
+    centroids: np.ndarray  # (n, 2) single-frame centroids
+    mask: np.ndarray  # (H * W,) bool, candidate-blob pixels
+    gray: np.ndarray  # (H, W) float32
+    distance: np.ndarray  # (H, W) float32
+
+
+@dataclass
+class PersistenceInfo:
+    frames_used: int
+    motion: bool
+    dropped_blobs: int
+
+
+def blob_arrays(blobs: list[Blob]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The blobs as the compiled measurement takes them: single-frame centroids (n, 2),
+    flat pixel indices and starts (``pixel_lists``), boxes (n, 4) (x, y, w, h)."""
+    cur = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
+    flat, starts = pixel_lists(blobs)
+    return cur, flat, starts, np.array([b.bbox for b in blobs], np.int64).reshape(-1, 4)
+
+
+class Persistence:
+    """Counter image and temporal combination over the last K consistent frames."""
+
+    def __init__(self, config: PersistenceConfig | None = None) -> None:
+        self.config = config or PersistenceConfig()
+        self._history: deque[_Entry] = deque(maxlen=max(self.config.k_frames - 1, 0))
+        self._scratch: tuple[np.ndarray, np.ndarray] | None = None
+
+    def scratch(self, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """The two (H, W) float32 frames the compiled measurement writes I-bar and D-bar
+        into where they are read (``kernels.measure.persist_and_measure``), allocated
+        once per image size and lent to every frame."""
+        if self._scratch is None or self._scratch[0].shape != shape:
+            self._scratch = (np.zeros(shape, np.float32), np.zeros(shape, np.float32))
+        return self._scratch
+
+    def reset(self) -> None:
+        self._history.clear()
+
+    def update_digest(self, h) -> None:
+        """Feed the history (every entry's arrays, oldest first) into the hashlib object
+        ``h`` (``PosePipeline.state_digest``)."""
+        h.update(len(self._history).to_bytes(2, "little"))
+        for e in self._history:
+            for a in (e.centroids, e.mask, e.gray, e.distance):
+                h.update(str(a.shape).encode())
+                h.update(np.ascontiguousarray(a).tobytes())
+
+    def snapshot(self) -> list:
+        """The history as it is (for ``restore``: a pass that is abandoned after ``apply``
+        must not leave its frame in the history twice)."""
+        return list(self._history)
+
+    def restore(self, snapshot: list) -> None:
+        self._history.clear()
+        self._history.extend(snapshot)
+
+    def measure(
+        self, blobs: list[Blob], gray: np.ndarray, distance: np.ndarray,
+        camera: CameraModel, background: float, dark: float = float("nan"),
+    ) -> tuple[list[Blob], np.ndarray, np.ndarray, PersistenceInfo]:  # fmt: skip
+        """The §3.4 combination (``tofpose.stages.persistence.reference.persistence.History``)
+        followed by
+        ``extraction.measure_blobs`` on the kept blobs, in one
+        compiled call (``kernels.measure.persist_and_measure``): the kept blobs with
+        their centroids (Eq. 19) and ranges (Eq. 20) measured on the combined frames,
+        the combined frames (I-bar, D-bar) and what was combined. ``background``,
+        ``dark`` : the frame's background and no-return levels, counts. The combined
+        frames are defined where the next steps read them, inside the blobs' boxes grown
+        by 2 px (I-bar) and at the kept blobs' pixels (D-bar), and are reused by the next
+        frame (``scratch``)."""
+        cur, flat, starts, bbox = blob_arrays(blobs)
+        n_used, motion, keep, mean_gray, med_dist, uv, rho, mix = persist_and_measure(
+            gray, distance, flat, starts, bbox, cur, self.history(gray, distance),
+            float(background), float(dark), camera.fx, camera.fy, camera.cx, camera.cy,
+            camera.dist_array,
+            np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3)),
+            *self.scratch(gray.shape),
+        )  # fmt: skip
+        self.commit(cur, flat, gray, distance, n_used, motion)
+        kept = [b.with_values(centroid_uv=uv[j], distance_mm=float(rho[j]), mixing=mix[j])
+                for j, b in enumerate(blobs) if keep[j]]  # fmt: skip
+        return kept, mean_gray, med_dist, PersistenceInfo(1 + n_used, motion,
+                                                          len(blobs) - len(kept))  # fmt: skip
+
+    def history(self, gray: np.ndarray, distance: np.ndarray) -> PersistenceHistory:
+        """The history newest first with the settings, as the kernels take it (a
+        ``core.records.PersistenceHistory``): tuples of gray, distance, mask and
+        centroids, each padded to K - 1 entries (at least one) with this frame's arrays
+        (never read), and the number of real entries."""
+        k = max(self.config.k_frames - 1, 1)
+        entries = list(reversed(self._history))
+        pad = k - len(entries)
+        return PersistenceHistory(
+            gray=tuple([e.gray for e in entries] + [gray] * pad),
+            distance=tuple([e.distance for e in entries] + [distance] * pad),
+            mask=tuple([e.mask for e in entries] + [np.zeros(gray.size, bool)] * pad),
+            centroids=tuple([e.centroids for e in entries] + [np.zeros((0, 2))] * pad),
+            count=len(entries), tol_px=float(self.config.motion_tolerance_px),
+            c_min=int(self.config.c_min),
+        )  # fmt: skip
+
+    def commit(self, centroids: np.ndarray, pixels: np.ndarray, gray: np.ndarray,
+               distance: np.ndarray, n_used: int, motion: bool) -> None:  # fmt: skip
+        """Record a frame combined by ``track_frame`` as ``apply`` would have: with
+        motion, only the ``n_used`` newest entries stay; then this frame is appended.
+        centroids : (n, 2) its blobs' centroids; pixels : their flat pixel indices."""
+        if motion:
+            keep = list(self._history)[len(self._history) - n_used :] if n_used else []
+            self._history.clear()
+            self._history.extend(keep)
+        mask = pixel_mask(pixels, gray.size)
+        self._history.append(_Entry(centroids, mask, gray, distance))

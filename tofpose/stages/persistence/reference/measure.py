@@ -1,0 +1,204 @@
+"""§3.4 and Eqs. 7-8, 19-21 composed from the reference statements: a frame's blobs
+combined with the consistent persistence history and measured (centroids, ranges, the
+mixing sums, occlusion), then range-corrected, back-projected and weighted; the
+measurement stage that acquisition and tracking share.
+
+Same names, arguments and returns as ``tofpose.stages.persistence.kernels.measure``, so that one
+can stand
+in for the other. The records are read by field name: ``history`` (gray, distance, mask,
+centroids: tuples newest first of which the first ``count`` are real frames; tol_px,
+c_min), ``camera`` (fx, fy, cx, cy, dist, K, pixel_bearings), ``correction`` (apply,
+model, harmonics, offsets) and ``sigmas`` (``stages.extraction.reference.sigmas``'s constants).
+Blobs are
+pixel lists ``flat`` (P,) with blob j's at ``flat[starts[j]:starts[j + 1]]``, boxes
+``bbox`` (n, 4) (x, y, w, h).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from tofpose.core.reference.camera import back_project, bearings
+from tofpose.stages.extraction.reference import mixed_pixels
+from tofpose.stages.extraction.reference.centroids import blob_centroid, blob_range
+from tofpose.stages.extraction.reference.sigmas import centroid_sigma_px, range_sigmas_mm, weights
+from tofpose.stages.persistence.reference.persistence import (
+    RANGE_TEST_Z,
+    centroids_consistent,
+    ranges_consistent,
+)
+
+
+def _blobs(flat, starts) -> list[np.ndarray]:
+    return [np.asarray(flat[starts[j] : starts[j + 1]], np.int64) for j in range(len(starts) - 1)]
+
+
+def _pixel_lists(blobs) -> tuple[np.ndarray, np.ndarray]:
+    """``flat``, ``starts`` of a list of pixel arrays."""
+    starts = np.concatenate(([0], np.cumsum([len(b) for b in blobs], dtype=np.int64)))
+    flat = np.concatenate(blobs).astype(np.int64) if blobs else np.zeros(0, np.int64)
+    return flat, starts
+
+
+def _owner_image(owner, ox, oy, use_owner, shape):
+    """``owner_map``'s map pasted into a (H, W) image of -1, or None when not used."""
+    if not use_owner:
+        return None
+    full = np.full(shape, -1, np.int32)
+    full[oy : oy + owner.shape[0], ox : ox + owner.shape[1]] = owner
+    return full
+
+
+def consistent_history(centroids_uv, distance, blobs, history) -> tuple[int, bool]:
+    """How many of the history's frames, newest first, are consistent with this frame
+    (``centroids_consistent`` at tol_px and ``ranges_consistent`` at ``RANGE_TEST_Z``)
+    before the first that is not, and whether one is not (motion)."""
+    for f in range(history.count):
+        still = centroids_consistent(centroids_uv, history.centroids[f], history.tol_px)
+        if not (still and ranges_consistent(distance, history.distance[f], blobs, RANGE_TEST_Z)):
+            return f, True
+    return history.count, False
+
+
+def combined_frames(gray, distance, blobs, history, n_used):
+    """§3.4's combination of the frame with the ``n_used`` newest history frames: keep
+    (n,) (the median over a blob's pixels of the counter C, 1 + the history masks
+    holding the pixel, at least c_min; every blob while fewer than c_min frames are
+    combined), I-bar (the mean gray, summed newest first in float32) and D-bar (the
+    median distance ignoring NaNs, float32), both (H, W) over the whole frame."""
+    frames = 1 + n_used
+    keep = np.ones(len(blobs), bool)
+    if frames == 1 or not blobs:
+        return keep, gray, distance
+    if frames >= history.c_min:
+        counter = 1 + sum(history.mask[f].astype(int) for f in range(n_used))
+        keep = np.array([np.median(counter[p]) >= history.c_min for p in blobs])
+    older = np.zeros_like(gray, np.float32)
+    for f in range(n_used):
+        older += history.gray[f]
+    mean_gray = (gray + older) / np.float32(frames)
+    stack = np.stack([distance] + [history.distance[f] for f in range(n_used)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # pixels NaN in every frame
+        median_distance = np.nanmedian(stack, axis=0).astype(np.float32)
+    return keep, mean_gray, median_distance
+
+
+def persist_and_measure(
+    gray, distance, flat, starts, bbox, centroids, history, background, dark, fx, fy, cx,
+    cy, dist, pixel_bearings, mean_buf, med_buf,
+):  # fmt: skip
+    """The frame's blobs combined with the history and measured: ``consistent_history``
+    and ``combined_frames``; then of the kept blobs, on I-bar and D-bar: the surround
+    (``mixed_pixels.blob_surrounds`` on this frame, neighbours left out by
+    ``mixed_pixels.owner_map``), the coverage-weighted centroid above the surround's level
+    (``background`` where the ring is empty; Eq. 19, ``centroids.blob_centroid``), the
+    range along its line of sight (Eq. 20, ``centroids.blob_range``), NaN when
+    ``mixed_pixels.occluded_blobs`` (on this frame's distance) finds it partly hidden,
+    and the mixing sums (``mixed_pixels.blob_mixing``: I-bar, D-bar at the blob's pixels,
+    this frame's distance elsewhere). centroids (n, 2) : the single-frame centroids
+    the history is tested with; dark : the no-return level; fx, fy, cx, cy, dist : the
+    camera; pixel_bearings (H * W, 3). ``mean_buf`` and ``med_buf`` are not used (the
+    combined frames are computed whole).
+
+    Returns n_used, motion, keep (n,), mean_gray and med_distance (H, W) float32, uv
+    (n, 2) and rho (n,) (NaN for blobs not kept), mix (n, ``MIX_FIELDS``)."""
+    h, w = gray.shape
+    blobs = _blobs(flat, starts)
+    n = len(blobs)
+    n_used, motion = consistent_history(centroids, distance, blobs, history)
+    keep, mean_gray, med_dist = combined_frames(gray, distance, blobs, history, n_used)
+
+    kept = np.flatnonzero(keep)
+    k_flat, k_starts = _pixel_lists([blobs[j] for j in kept])
+    k_bbox = np.asarray(bbox, np.int64).reshape(-1, 4)[kept]
+    owner, ox, oy, use_owner = mixed_pixels.owner_map(k_flat, k_starts, k_bbox, h, w)
+    s_gray, s_mm, crowded = mixed_pixels.blob_surrounds(k_bbox, gray, distance, owner, ox,
+                                                        oy, use_owner)  # fmt: skip
+    owner_full = _owner_image(owner, ox, oy, use_owner, (h, w))
+    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    bearing_image = np.asarray(pixel_bearings).reshape(h, w, 3)
+    k_uv = np.empty((len(kept), 2))
+    k_rho = np.empty(len(kept))
+    for a, j in enumerate(kept):
+        level = s_gray[a] if np.isfinite(s_gray[a]) else background
+        k_uv[a] = blob_centroid(mean_gray, blobs[j], tuple(k_bbox[a]), np.float32(level),
+                                owner_full, a, coverage=True)  # fmt: skip
+        e_c = bearings(k_uv[a][None], K, dist)[0]
+        k_rho[a] = blob_range(med_dist, blobs[j], bearing_image, e_c)
+    hidden = mixed_pixels.occluded_blobs(k_flat, k_starts, k_bbox, distance, k_rho, owner,
+                                         ox, oy, use_owner)  # fmt: skip
+    k_rho[hidden] = np.nan
+    k_mix = mixed_pixels.blob_mixing(k_flat, k_starts, k_bbox, mean_gray, med_dist,
+                                     distance, s_gray, s_mm, crowded, dark, owner, ox, oy,
+                                     use_owner)  # fmt: skip
+    uv = np.full((n, 2), np.nan)
+    rho = np.full(n, np.nan)
+    mix = np.full((n, mixed_pixels.MIX_FIELDS), np.nan)
+    uv[kept], rho[kept], mix[kept] = k_uv, k_rho, k_mix
+    return n_used, motion, keep, mean_gray, med_dist, uv, rho, mix
+
+
+def range_error_mm(distance_mm, amplitude, pixel_index, model, harmonics, offsets):
+    """The calibrated range-error model (``RangeCorrection.error_mm``) at pixels (N,) of
+    a blob measured at ``distance_mm``: offset + sum_k (s_k sin 4k phi + c_k cos 4k phi),
+    phi = 2 pi d / U, + k_amp log10(max(amplitude, 1e-3) / a_ref) + the pixel's offset.
+    model (4,) : (U mm, offset mm, k_amp mm per decade, a_ref counts); harmonics (k, 2);
+    offsets (H * W,) mm, or (0,) for none."""
+    u, offset, k_amp, a_ref = model
+    phi = 2.0 * np.pi * distance_mm / u
+    err = np.full(len(pixel_index), float(offset))
+    for k, (s, c) in enumerate(np.asarray(harmonics).reshape(-1, 2), start=1):
+        err += s * np.sin(4 * k * phi) + c * np.cos(4 * k * phi)
+    err += k_amp * np.log10(np.maximum(np.asarray(amplitude, float), 1e-3) / a_ref)
+    if len(offsets):
+        err += np.asarray(offsets)[pixel_index]
+    return err
+
+
+def corrected_range(rho, pixels, gray, correction) -> float:
+    """A blob's range less the median of ``range_error_mm`` over its pixels, with gray
+    (I-bar) as the amplitude."""
+    amplitude = np.asarray(gray).reshape(-1)[pixels]
+    err = range_error_mm(rho, amplitude, pixels, correction.model, correction.harmonics,
+                         correction.offsets)  # fmt: skip
+    return rho - float(np.median(err))
+
+
+def measure_and_back_project(
+    gray, distance, flat, starts, bbox, centroids, split, history, background, dark, camera,
+    mean_buf, med_buf, correction, sigmas,
+):  # fmt: skip
+    """``persist_and_measure``, then of the kept blobs with a range ("ranged"): the range
+    correction when ``correction.apply`` (``corrected_range``; its shift applied to the
+    mixing sums by ``mixed_pixels.shift_mixing``), the sigmas on I-bar and D-bar
+    (``stages.extraction.reference.sigmas``), the points y = rho e(uv) (Eq. 8) and Eq. 21's weights.
+    split (n,) bool : blobs cut out of a merged component.
+
+    Returns n_used, motion, keep (n,), uv (n, 2), rho (n,) uncorrected, ranged (r,)
+    int64, and of the ranged blobs: rho (r,) corrected, sigma_px (r,), sigma_range
+    (r,), y (r, 3), weights (r,), mix (r, ``MIX_FIELDS``)."""
+    n_used, motion, keep, mean_gray, med_dist, uv, rho, mix = persist_and_measure(
+        gray, distance, flat, starts, bbox, centroids, history, background, dark, camera.fx,
+        camera.fy, camera.cx, camera.cy, camera.dist, camera.pixel_bearings, mean_buf, med_buf,
+    )  # fmt: skip
+    blobs = _blobs(flat, starts)
+    ranged = np.flatnonzero(keep & np.isfinite(rho))
+    r_blobs = [blobs[j] for j in ranged]
+    r_uv, r_rho, r_mix = uv[ranged], rho[ranged].copy(), mix[ranged].copy()
+    if correction.apply:
+        for a, p in enumerate(r_blobs):
+            raw = r_rho[a]
+            r_rho[a] = corrected_range(raw, p, mean_gray, correction)
+            mixed_pixels.shift_mixing(r_mix[a], r_rho[a] - raw)
+    sp = np.array([centroid_sigma_px(mean_gray, p, r_uv[a], background, bool(split[j]), sigmas)
+                   for a, (j, p) in enumerate(zip(ranged, r_blobs, strict=True))])  # fmt: skip
+    sr = range_sigmas_mm(mean_gray, med_dist, r_blobs, background, sigmas)
+    y = np.zeros((0, 3))
+    if len(ranged):
+        y = back_project(r_uv, r_rho, np.asarray(camera.K, float), camera.dist)  # Eq. 8
+    wt = weights(r_rho, sr, sp, camera.fx)  # Eq. 21
+    return (n_used, motion, keep, uv, rho, ranged.astype(np.int64), r_rho, sp.reshape(-1),
+            np.asarray(sr, float).reshape(-1), y.reshape(-1, 3), wt, r_mix)  # fmt: skip

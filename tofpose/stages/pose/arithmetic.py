@@ -1,0 +1,41 @@
+"""The pose stage's arithmetic (§5) per implementation: ``COMPILED`` (its kernels) and
+``REFERENCE`` (``reference``), each field with the kernel's calling convention."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from tofpose.stages.pose.kernels import pose, solve, verify
+from tofpose.stages.pose.reference import pose as ref_pose
+from tofpose.stages.pose.reference import solve as ref_solve
+from tofpose.stages.pose.reference import verify as ref_verify
+
+
+@dataclass(frozen=True)
+class PoseArithmetic:
+    """§5 and what the pipeline reports of it: the fit, its checks, its covariances."""
+
+    name: str
+    solve_pairs: Callable
+    pose_check: Callable
+    facing_cosine: Callable
+    absolute_orientation: Callable
+    range_bias_covariance: Callable
+    class_scale_covariance: Callable
+    leave_one_out_spread: Callable
+    covariance_envelope: Callable
+    point_residuals_mm: Callable
+
+
+_FIELDS = ("facing_cosine", "absolute_orientation", "range_bias_covariance",
+           "class_scale_covariance", "leave_one_out_spread", "covariance_envelope",
+           "point_residuals_mm")  # fmt: skip
+
+COMPILED = PoseArithmetic(
+    "compiled", solve.solve_pairs, verify.pose_check, **{f: getattr(pose, f) for f in _FIELDS}
+)
+REFERENCE = PoseArithmetic(
+    "reference", ref_solve.solve_pairs, ref_verify.pose_check,
+    **{f: getattr(ref_pose, f) for f in _FIELDS},
+)  # fmt: skip

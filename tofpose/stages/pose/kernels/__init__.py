@@ -1,0 +1,1 @@
+"""Compiled kernels of the pose stage (numba, ``tofpose.core.compiled.jit``)."""

@@ -1,0 +1,138 @@
+"""§5 from matched pairs in one compiled call, for both modes: weighted SVD (Eqs.
+40-50), completion with unmatched blobs, SVD again, the perspective-bias correction of
+the centroids, back-projection (Eq. 8) and the fit with its outlier step
+(``pose.fit_with_outliers``). ``solve.PoseSolver.solve`` (acquisition) and
+``tracking_frame.track_frame`` (tracking, where every blob is matched and completion
+adds nothing) call it; the verification against the frame stays in ``PoseSolver``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tofpose.core.compiled import jit
+from tofpose.core.kernels.camera import bearings
+from tofpose.stages.extraction.kernels.mixed_pixels import unmixed_range
+from tofpose.stages.extraction.kernels.perspective import disc_centre_offsets
+from tofpose.stages.pose.kernels.pose import absolute_orientation, fit_with_outliers
+
+
+@jit
+def complete_pairs(y, k_idx, i_idx, xyz, R, t, tol_mm):
+    """Add unmatched blobs that sit on a predicted unmatched reflector: repeatedly the
+    closest (blob, reflector) pair under ``tol_mm`` (the first in row-major order among
+    equals), each blob and reflector used once. y (g, 3) observed, xyz (e, 3) catalog;
+    k_idx, i_idx (m,) the matched pairs. Returns the extended k_idx, i_idx."""
+    g, e = y.shape[0], xyz.shape[0]
+    used_k = np.zeros(g, np.bool_)
+    used_i = np.zeros(e, np.bool_)
+    for a in range(k_idx.shape[0]):
+        used_k[k_idx[a]] = True
+        used_i[i_idx[a]] = True
+    free_k = np.flatnonzero(~used_k)
+    free_i = np.flatnonzero(~used_i)
+    nk, ni = free_k.shape[0], free_i.shape[0]
+    out_k = np.empty(k_idx.shape[0] + min(nk, ni), np.int64)
+    out_i = np.empty(out_k.shape[0], np.int64)
+    out_k[: k_idx.shape[0]] = k_idx
+    out_i[: i_idx.shape[0]] = i_idx
+    n = k_idx.shape[0]
+    if nk == 0 or ni == 0:
+        return out_k[:n], out_i[:n]
+    dist = np.empty((nk, ni))
+    for b in range(ni):
+        p = xyz[free_i[b]]
+        px = R[0, 0] * p[0] + R[0, 1] * p[1] + R[0, 2] * p[2] + t[0]
+        py = R[1, 0] * p[0] + R[1, 1] * p[1] + R[1, 2] * p[2] + t[1]
+        pz = R[2, 0] * p[0] + R[2, 1] * p[1] + R[2, 2] * p[2] + t[2]
+        for a in range(nk):
+            q = y[free_k[a]]
+            dist[a, b] = np.sqrt((q[0] - px) ** 2 + (q[1] - py) ** 2 + (q[2] - pz) ** 2)
+    while True:
+        best, ba, bb = np.inf, -1, -1
+        for a in range(nk):
+            for b in range(ni):
+                if dist[a, b] < best:
+                    best, ba, bb = dist[a, b], a, b
+        if not best < tol_mm:
+            break
+        out_k[n], out_i[n] = free_k[ba], free_i[bb]
+        n += 1
+        dist[ba, :] = np.inf
+        dist[:, bb] = np.inf
+    return out_k[:n], out_i[:n]
+
+
+@jit
+def solve_pairs(
+    y, w, uv, rho, sigma_px, sigma_range, mix, k_idx, i_idx, catalog, camera,
+    correct_perspective, mixing_radius_px, complete_tol_mm, fit, offset_prior,
+):  # fmt: skip
+    """The pose of matched pairs (module docstring).
+
+    y (g, 3), w (g,), uv (g, 2), rho (g,), sigma_px (g,), sigma_range (g,) : the
+    candidates' points (Eq. 8), weights (Eq. 21), centroids, ranges and sigmas; mix
+    (g, ``mixed_pixels.MIX_FIELDS``) : their mixing sums (NaN rows: none); k_idx,
+    i_idx (m,) : matched (candidate, catalog) pairs; catalog : ``records.CatalogRecord``;
+    camera : ``records.CameraRecord``; mixing_radius_px : matched discs whose
+    apparent radius is below it take the mixing model's range instead of the median
+    (``mixed_pixels.unmixed_range``, with the disc's area and incidence from the SVD
+    pose; <= 0: never); complete_tol_mm : completion's tolerance (<= 0: none); fit :
+    ``fit_with_outliers``'s ``records.FitSettings`` (the bearing cap given in px, taken
+    to rad with fx); offset_prior : a ``pose.RangeOffsetPrior``.
+
+    Returns k_idx, i_idx (m',) after completion, uv_obs (m', 2) corrected centroids,
+    e_obs (m', 3) their bearings, y_obs (m', 3) points, rho_obs (m',) their ranges and
+    sr_obs (m',) range sigmas (the model's own uncertainty added where it replaced the
+    median), then what ``fit_with_outliers`` returns (kept (m',) bool, R, t,
+    iterations, covariance, chi^2, norms, range sigmas, bearing sigmas, common range
+    offset mm and its sigma). ``y_obs`` and the ranges are as measured: the offset is
+    not taken out of them here.
+    """
+    xyz, radii = catalog.xyz, catalog.radii_mm
+    K, fx, fy, cx, cy, dist = camera.K, camera.fx, camera.fy, camera.cx, camera.cy, camera.dist
+    x = np.empty((k_idx.shape[0], 3))
+    for a in range(k_idx.shape[0]):
+        x[a] = xyz[i_idx[a]]
+    R, t = absolute_orientation(x, y[k_idx], w[k_idx])
+    if complete_tol_mm > 0:
+        k_idx, i_idx = complete_pairs(y, k_idx, i_idx, xyz, R, t, complete_tol_mm)
+        if k_idx.shape[0] > x.shape[0]:  # pairs added: fit them all
+            x = np.empty((k_idx.shape[0], 3))
+            for a in range(k_idx.shape[0]):
+                x[a] = xyz[i_idx[a]]
+            R, t = absolute_orientation(x, y[k_idx], w[k_idx])
+    m = k_idx.shape[0]
+    uv_obs = np.empty((m, 2))
+    r_disc = np.empty(m)
+    rho_m = np.empty(m)
+    sr = np.empty(m)
+    centres = np.empty((m, 3))  # x R^T + t, the discs' centres in the camera frame
+    for a in range(m):
+        uv_obs[a] = uv[k_idx[a]]
+        r_disc[a] = radii[i_idx[a]]
+        rho_m[a] = rho[k_idx[a]]
+        sr[a] = sigma_range[k_idx[a]]
+        for b in range(3):
+            centres[a, b] = R[b, 0] * x[a, 0] + R[b, 1] * x[a, 1] + R[b, 2] * x[a, 2] + t[b]
+    if mixing_radius_px > 0:
+        for a in range(m):
+            c = centres[a]
+            norm_c = np.sqrt(c[0] ** 2 + c[1] ** 2 + c[2] ** 2)
+            cos_inc = abs(R[0, 2] * c[0] + R[1, 2] * c[1] + R[2, 2] * c[2]) / norm_c
+            d, sens = unmixed_range(rho_m[a], mix[k_idx[a]], r_disc[a] * fx / rho_m[a],
+                                    cos_inc, mixing_radius_px)  # fmt: skip
+            rho_m[a] = d
+            sr[a] = np.sqrt(sr[a] ** 2 + sens**2)
+    if correct_perspective:
+        uv_obs -= disc_centre_offsets(K, centres, R[:, 2].copy(), r_disc)
+    e_obs = bearings(uv_obs, fx, fy, cx, cy, dist)
+    y_obs = np.empty((m, 3))
+    sb = np.empty(m)
+    for a in range(m):
+        y_obs[a] = e_obs[a] * rho_m[a]
+        sb[a] = sigma_px[k_idx[a]] / fx
+    kept, R, t, its, cov, chi2, norms, sr_fit, sb_fit, offset, offset_sigma = fit_with_outliers(
+        x, e_obs, rho_m, y_obs, sr, sb, fit, fit.max_systematic_centroid_px / fx, offset_prior
+    )
+    return (k_idx, i_idx, uv_obs, e_obs, y_obs, rho_m, sr, kept, R, t, its, cov, chi2, norms,
+            sr_fit, sb_fit, offset, offset_sigma)  # fmt: skip

@@ -1,0 +1,64 @@
+"""The physical checks of a fitted pose against its frame (ours; ``kernels.verify``,
+``solve.PoseSolver.verify``) stated in NumPy: every reflector in front of the camera,
+and no clearly visible unmatched reflector where the frame is dark."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tofpose.core.reference.camera import project
+
+#: outcomes of ``pose_check`` (the kernel's codes)
+CONSISTENT, BEHIND_CAMERA, DARK_REFLECTOR = 0, 1, 2
+#: a reflector is tested when its image is at least this many px across ...
+MIN_TESTED_PX = 2.5
+#: ... its disc lies this many diameters (+ ``EDGE_MARGIN_PX``) inside the image ...
+EDGE_MARGIN_DIAMETERS = 0.75
+EDGE_MARGIN_PX = 2.0
+#: ... and no other reflector's image centre lies within this many of its diameters
+CLEAR_DIAMETERS = 1.5
+#: it is dark when no active pixel lies within d / 3 px (at least 1) of its centre
+SEARCH_DIVISOR = 3.0
+
+
+def pose_check(xyz, diameters, matched, R, t, fx, fy, cx, cy, dist, gray, threshold,
+               dark_check):  # fmt: skip
+    """The pose (R (3, 3), t (3,)) against the frame. ``BEHIND_CAMERA`` when any
+    reflector's centre R x + t has z <= 0; else (with ``dark_check``) ``DARK_REFLECTOR``
+    for the first reflector in catalog order that is unmatched, imaged d_px = fx d / z
+    >= ``MIN_TESTED_PX`` across at (u, v) = its projected centre (Eq. 7 with the lens),
+    inside the image by 0.75 d_px + 2 px (``m <= u < W - m``, the same for v), with no
+    other reflector's image within 1.5 d_px, and with no active pixel (``gray >=
+    threshold`` in float32) in the square of half-width r = max(1, round(d_px / 3))
+    (half to even) about (round(u), round(v)), clipped to the image; else
+    ``CONSISTENT``.
+
+    xyz (N, 3), diameters (N,) mm : the catalog; matched (N,) bool; gray (H, W) float32.
+    Returns (outcome, reflector index, u, v): the dark reflector's, -1 and NaN
+    otherwise."""
+    centres = np.asarray(xyz, float) @ R.T + t
+    if (centres[:, 2] <= 0).any():
+        return BEHIND_CAMERA, -1, np.nan, np.nan
+    if not dark_check:
+        return CONSISTENT, -1, np.nan, np.nan
+    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    uv = project(centres, K, dist)
+    active = gray >= np.float32(threshold)
+    h, w = gray.shape
+    d_px = fx * np.asarray(diameters, float) / centres[:, 2]
+    gaps = np.linalg.norm(uv[:, None, :] - uv[None, :, :], axis=-1)
+    np.fill_diagonal(gaps, np.inf)
+    for i in range(len(centres)):
+        u, v = uv[i]
+        margin = EDGE_MARGIN_DIAMETERS * d_px[i] + EDGE_MARGIN_PX
+        tested = (not matched[i] and d_px[i] >= MIN_TESTED_PX
+                  and margin <= u < w - margin and margin <= v < h - margin
+                  and gaps[i].min() >= CLEAR_DIAMETERS * d_px[i])  # fmt: skip
+        if not tested:
+            continue
+        r = max(1, round(d_px[i] / SEARCH_DIVISOR))
+        iu, iv = round(u), round(v)
+        window = active[max(iv - r, 0) : iv + r + 1, max(iu - r, 0) : iu + r + 1]
+        if not window.any():
+            return DARK_REFLECTOR, i, float(u), float(v)
+    return CONSISTENT, -1, np.nan, np.nan

@@ -1,0 +1,436 @@
+"""Pose from matched reflectors (§5) as the pipeline runs it: weighted SVD (Eqs. 40-50),
+completion with unmatched blobs, perspective-bias correction, refinement (ML or the
+paper's LOS, Eqs. 51-52), the outlier step, and verification against the frame.
+
+``PoseSolver.solve`` takes the matched pairs and the frame's ``Measurements`` and returns
+a ``Solution`` or ``Rejected``. The matched reflectors travel as one frozen
+``MatchedObservations`` record (``without(i)`` drops one). Everything up to the
+verification (SVD, completion, bias correction, the fit, the systematic range sigma and
+the outlier loop) runs as one compiled call (``tofpose.stages.pose.kernels.solve``), the one the
+tracking frame calls too.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import scipy.stats
+
+from tofpose.config import SolveConfig
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog
+from tofpose.core.geometry import RigidTransform
+from tofpose.core.records import FitSettings, camera_record, catalog_record
+from tofpose.stages.extraction.extraction import Blob
+from tofpose.stages.extraction.kernels.mixed_pixels import MIX_FIELDS
+from tofpose.stages.pose.arithmetic import COMPILED, PoseArithmetic
+from tofpose.stages.pose.kernels.pose import (
+    MIN_LEAVE_ONE_OUT,
+    NO_OFFSET,
+    REFINE_LOS,
+    REFINE_ML,
+    REFINE_NONE,
+    RangeOffsetPrior,
+)
+from tofpose.stages.pose.kernels.verify import BEHIND_CAMERA, DARK_REFLECTOR
+from tofpose.stages.pose.pose import STEP_SIGMA2, MLResult
+
+_REFINEMENT = {"none": REFINE_NONE, "ml": REFINE_ML, "los": REFINE_LOS}
+
+if TYPE_CHECKING:
+    from tofpose.calibration.range import RangeCorrection
+
+
+@functools.cache
+def chi2_limit(dof: int, p: float) -> float:
+    """The p-quantile of chi^2 with ``dof`` degrees of freedom (SciPy)."""
+    return float(scipy.stats.chi2.ppf(p, dof))
+
+
+def offset_prior(config: SolveConfig, sigma_mm: float, fx_px: float) -> RangeOffsetPrior:
+    """The common range offset's prior for ``kernels.pose.common_range_offset``: sigma
+    ``sigma_mm`` (the uncalibrated or calibrated range-bias sigma), and the image scale's
+    uncertainty from ``focal_length_sigma_rel`` and ``common_centroid_bias_px`` (over the
+    focal length ``fx_px``)."""
+    return RangeOffsetPrior(float(sigma_mm), float(config.focal_length_sigma_rel),
+                            float(config.common_centroid_bias_px) / fx_px)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Measurements:
+    """Candidate reflectors back-projected (Eqs. 7-8) with their sigmas.
+
+    blobs : the n blobs, in order, where the stage that measured them built records
+    (acquisition; a tracked frame measures its windows' pixel lists in one compiled call
+    and gives none); area_px : (n,) their pixel counts; uv_px : (n, 2) centroids (Eq. 19);
+    range_mm : (n,) ranges (Eq. 20); y_mm : (n, 3) points in the camera frame (Eq. 8);
+    weights : (n,) the weights of Eq. 21, ``1 / (sigma_range^2 + (range sigma_px / f)^2)``;
+    sigma_px, sigma_range_mm : (n,) per-reflector sigmas
+    (``uncertainty.measurement_sigmas``); mixing : (n,
+    ``stages.extraction.kernels.mixed_pixels.MIX_FIELDS``)
+    their mixing sums (NaN rows, or None: none).
+    """
+
+    blobs: tuple[Blob, ...]
+    area_px: np.ndarray
+    uv_px: np.ndarray
+    range_mm: np.ndarray
+    y_mm: np.ndarray
+    weights: np.ndarray
+    sigma_px: np.ndarray
+    sigma_range_mm: np.ndarray
+    mixing: np.ndarray | None = None
+
+    def as_unmatched(self) -> list[tuple[float, float, float]]:
+        """(u, v, range) of every candidate, for a result without a pose."""
+        return [(u[0], u[1], r) for u, r in zip(self.uv_px, self.range_mm, strict=True)]
+
+
+@dataclass(frozen=True)
+class MatchedObservations:
+    """The m matched reflectors as the solver uses them, row i for one reflector.
+
+    k_idx, i_idx : (m,) observed (into ``Measurements``) and catalog indices;
+    x_mm : (m, 3) catalog positions (target frame); uv_px : (m, 2) centroids after the
+    perspective-bias correction; bearings : (m, 3) their unit lines of sight (Eq. 9);
+    range_mm : (m,); y_mm : (m, 3) back-projected points (Eq. 8); sigma_bearing_rad,
+    sigma_range_mm : (m,) the noise model's sigmas (before any systematic term).
+    """
+
+    k_idx: np.ndarray
+    i_idx: np.ndarray
+    x_mm: np.ndarray
+    uv_px: np.ndarray
+    bearings: np.ndarray
+    range_mm: np.ndarray
+    y_mm: np.ndarray
+    sigma_bearing_rad: np.ndarray
+    sigma_range_mm: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.k_idx)
+
+    def without(self, i: int) -> MatchedObservations:
+        """The same observations with row ``i`` dropped (the outlier step)."""
+        return self.subset(np.arange(len(self)) != i)
+
+    def subset(self, keep: np.ndarray) -> MatchedObservations:
+        """The rows where the (m,) bool mask ``keep`` is true (itself when all are)."""
+        if keep.all():
+            return self
+        return MatchedObservations(**{
+            name: getattr(self, name)[keep] for name in self.__dataclass_fields__
+        })  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Solution:
+    """A solved pose (§5): ``T_camera_target`` maps target-frame points into the camera
+    frame; ``observations`` are the reflectors it was solved from (outliers removed);
+    iterations : refinement iterations; ml : the maximum-likelihood evaluation at the
+    pose (covariance, chi^2, norms). ``T_svd`` : the weighted absolute orientation
+    (Eqs. 40-50) of the same observations with the fit's weights, before any refinement:
+    what §5.1 alone gives on them (``T_camera_target`` minus it is what refinement
+    changed)."""
+
+    T_camera_target: RigidTransform
+    observations: MatchedObservations
+    iterations: int
+    ml: MLResult
+    T_svd: RigidTransform | None = None
+
+
+@dataclass(frozen=True)
+class Rejected:
+    """No pose: ``reason`` for the user; ``implausible`` when a pose was found but failed
+    verification (the assignment may be a mirror image: worth the triplet fallback)."""
+
+    reason: str
+    implausible: bool = False
+
+
+@dataclass(frozen=True)
+class ThresholdedFrame:
+    """A frame's active pixel set ``gray >= threshold`` (float32 comparison, as
+    ``extraction.active_pixel_mask``), given as the frame and its I_t: ``verify``'s dark
+    check reads a few small windows of it, and thresholding the whole frame each
+    tracked frame cost more than the check itself. gray : (H, W) float32."""
+
+    gray: np.ndarray
+    threshold: float
+
+
+#: the frame ``verify`` passes when the dark check does not run (never read)
+_NO_FRAME = ThresholdedFrame(np.zeros((1, 1), np.float32), 0.0)
+
+
+def fit_settings(config: SolveConfig) -> FitSettings:
+    """The §5 fit's settings (``kernels.pose.fit_with_outliers``) from the stage's
+    configuration: the one place they are built, for the acquisition and the tracking
+    paths alike."""
+    return FitSettings(
+        refinement=_REFINEMENT[config.refinement], los_tolerance=config.los_tolerance,
+        step_sigma2=STEP_SIGMA2, adapt=config.adapt_range_sigma,
+        max_systematic_range_mm=config.max_systematic_range_sigma_mm,
+        max_systematic_centroid_px=config.max_systematic_centroid_sigma_px,
+        reject=config.reject_outliers, min_matches=config.min_matches,
+        outlier_sigma=config.outlier_sigma, chi2_per_dof=config.outlier_chi2_per_dof,
+    )  # fmt: skip
+
+
+class PoseSolver:
+    """§5 for one camera and catalog under the stage's ``SolveConfig``."""
+
+    def __init__(
+        self,
+        camera: CameraModel,
+        catalog: Catalog,
+        config: SolveConfig,
+        range_correction: RangeCorrection | None,
+        *,
+        arithmetic: PoseArithmetic = COMPILED,
+    ) -> None:
+        """``range_correction``: the camera's ranges are corrected with it; where the
+        reflectors lie in its calibrated span the covariance takes the smaller common
+        range-bias sigma (``calibrated_range_bias_sigma_mm``), elsewhere the uncalibrated
+        one (the model is an extrapolation there). ``arithmetic``: the implementation of
+        the fit, the covariances and the checks (``tofpose.arithmetic``)."""
+        self.camera = camera
+        self.arithmetic = arithmetic
+        self.config = config
+        self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
+        self._xyz_mean = self._xyz.mean(axis=0)
+        self._cos_max_view = math.cos(math.radians(config.max_view_angle_deg))
+        self._d = np.ascontiguousarray(catalog.diameters_mm, dtype=float)
+        self._K = np.ascontiguousarray(camera.K, dtype=float)
+        self._dist = np.ascontiguousarray(camera.dist_array, dtype=float)
+        self._ids = catalog.ids
+        self._correction = range_correction
+        self._camera_record = camera_record(camera)
+        self._catalog_record = catalog_record(catalog)
+        self._fit_settings = fit_settings(config)
+        # each reflector's diameter class (index among the catalog's distinct diameters)
+        sizes, self._size_class = np.unique(np.round(self._d, 3), return_inverse=True)
+        self._n_sizes = len(sizes)
+
+    # ------------------------------------------------------------------------------------
+    def solve(
+        self,
+        pairs: np.ndarray,
+        meas: Measurements,
+        alpha_mm: float,
+        active: ThresholdedFrame | None,
+    ) -> Solution | Rejected:
+        """Pose from matched pairs (m, 2) of observed and catalog indices: weighted SVD
+        (Eqs. 40-50), completion, perspective-bias correction, refinement, outlier step
+        and verification (§5). ``active`` : the frame and its I_t (the active pixel set,
+        read by the dark check), or None when the check cannot run.
+
+        The fit (``kernels.pose.fit_with_outliers``) first uses the noise model's range
+        sigmas; with ``adapt_range_sigma`` it adds the frame's excess range and bearing
+        sigmas (``pose.systematic_sigmas``, capped at ``max_systematic_range_sigma_mm`` and
+        ``max_systematic_centroid_sigma_px``) and fits again. A single bad point (a
+        reflection matched in a marker's place) bends the fit so that every residual looks
+        large while without it the others agree, so that estimate is the smallest over the
+        fits that leave one reflector out (worst-fitting first: with one bad point the first
+        such fit already gives 0). The outlier step then looks for a reflector to drop,
+        re-estimating after each removal, when one is more than ``outlier_sigma`` off the
+        fit (whitened norm) or the fit as a whole is inconsistent (chi^2 above
+        ``outlier_chi2_per_dof`` per degree of freedom). A biased point with a small sigma
+        drags the fit towards itself and hides, leaving good points with the large
+        residuals (two markers imaged as one blob did so at 8 m, and the good ones were
+        dropped); so from 5 reflectors on, each is predicted from a fit without it and the
+        one predicted worst goes if it is off by more than ``outlier_sigma``; with 4 (a
+        fit of 3 cannot single out the bad one of 4) the largest whitened residual goes.
+        When completion added a blob and the outlier step then dropped matched ones, the
+        fit without completion is taken if it keeps more reflectors."""
+        cfg = self.config
+        complete_mm = alpha_mm * cfg.residual_factor
+        fit = self._fit_pairs(pairs, meas, complete_mm)
+        kept = fit[7]
+        n = len(pairs)
+        if len(kept) > n and kept[n:].any() and not kept[:n].all():
+            # completion added a blob and the outlier step then dropped matched ones: the
+            # added blob may be what bent the fit (two markers imaged as one blob sits
+            # near a predicted reflector); the fit without completion is taken when it
+            # keeps more reflectors
+            alone = self._fit_pairs(pairs, meas, 0.0)
+            if alone[7].sum() > kept.sum():
+                fit = alone
+        (k_idx, i_idx, uv, e, y, rho, sigma_range, kept, R, t, iterations, cov, chi2, norms,
+         sr, sb, offset, offset_sigma) = fit  # fmt: skip
+        obs = MatchedObservations(
+            k_idx=k_idx, i_idx=i_idx, x_mm=self._xyz[i_idx], uv_px=uv, bearings=e,
+            range_mm=rho - offset, y_mm=y - e * offset,
+            sigma_bearing_rad=meas.sigma_px[k_idx] / self.camera.fx,
+            sigma_range_mm=sigma_range,
+        )  # fmt: skip
+        return self.conclude(obs.subset(kept), R, t, iterations, cov, chi2, norms, sr, sb,
+                             active, offset, offset_sigma)  # fmt: skip
+
+    def _fit_pairs(self, pairs: np.ndarray, meas: Measurements, complete_mm: float) -> tuple:
+        """``kernels.solve.solve_pairs`` on matched pairs (m, 2) with completion within
+        ``complete_mm`` (0: none): its return tuple."""
+        cfg = self.config
+        prior = self.offset_prior(meas.range_mm[pairs[:, 0]])
+        mixing = (
+            meas.mixing
+            if meas.mixing is not None
+            else np.full((len(meas.range_mm), MIX_FIELDS), np.nan)
+        )
+        return self.arithmetic.solve_pairs(
+            meas.y_mm, meas.weights, meas.uv_px, meas.range_mm, meas.sigma_px,
+            meas.sigma_range_mm, mixing, np.ascontiguousarray(pairs[:, 0]),
+            np.ascontiguousarray(pairs[:, 1]), self._catalog_record, self._camera_record,
+            cfg.correct_perspective_bias, float(cfg.mixed_pixel_radius_px), float(complete_mm),
+            self._fit_settings, prior,
+        )  # fmt: skip
+
+    def offset_prior(self, range_mm: np.ndarray) -> RangeOffsetPrior:
+        """What the fit knows of the common range offset before the frame (the module's
+        ``offset_prior``; ``NO_OFFSET`` unless ``estimate_range_offset``), for
+        reflectors at ``range_mm`` (m,)."""
+        if not self.config.estimate_range_offset:
+            return NO_OFFSET
+        return offset_prior(self.config, self.range_bias_sigma_mm(range_mm), self.camera.fx)
+
+    def conclude(
+        self, obs: MatchedObservations, R, t, iterations, cov, chi2, norms, sr, sb, active,
+        offset_mm: float = 0.0, offset_sigma_mm: float | None = None,
+    ) -> Solution | Rejected:  # fmt: skip
+        """The fitted pose of ``obs`` (the reflectors kept; ``sr`` mm, ``sb`` rad (m,):
+        the sigmas the fit used, the frame's excess components included): verified
+        against the frame (``active`` : the frame and its I_t; it is only read when few
+        reflectors are matched, ``dark_check_max_matches``), refused when its residuals
+        stay inconsistent with those sigmas (chi^2 beyond ``consistency_p``), with the
+        covariance of the fit (6, 6; the pipeline scales it by the a-posteriori variance
+        factor) and of the common range bias the data cannot reveal."""
+        T = RigidTransform(R, t)
+        ar = self.arithmetic
+        if self.config.verify_pose:
+            problem = self.verify(T, active, obs.i_idx)
+            if problem:
+                return Rejected(f"pose rejected: {problem}", implausible=True)
+        dof = 3 * len(obs.i_idx) - 6
+        # chi^2 at the ML optimum only: an SVD or LOS pose's chi^2 is not minimised
+        if self.config.consistency_p is not None and dof > 0 and self.config.refinement == "ml":
+            limit = chi2_limit(dof, self.config.consistency_p)
+            if not chi2 <= limit:
+                return Rejected(self._inconsistent(obs, norms, float(chi2), dof, limit),
+                                implausible=True)  # fmt: skip
+        # the common offset's uncertainty: its posterior sigma when the fit estimated it
+        # (``obs`` then holds the ranges with the offset taken out), else the prior's
+        bias = offset_sigma_mm if offset_sigma_mm is not None and offset_mm != 0 else (
+            self.range_bias_sigma_mm(obs.range_mm)
+        )  # fmt: skip
+        extra = (
+            ar.range_bias_covariance(obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, sb, bias)
+            if bias > 0
+            else None
+        )
+        by_size = self.size_scale_covariance(obs, R, t, sr, sb)
+        if by_size is not None:
+            extra = by_size if extra is None else extra + by_size
+        spread = None  # pose.leave_one_out_covariance, without its input conversions
+        if self.config.leave_one_out_covariance and len(obs.i_idx) >= MIN_LEAVE_ONE_OUT:
+            c = np.ascontiguousarray
+            spread = ar.leave_one_out_spread(c(obs.x_mm), c(obs.bearings), c(obs.range_mm), R,
+                                             t, c(sr), c(sb))  # fmt: skip
+        ml = MLResult(R, t, cov, float(chi2), int(iterations), norms, bias_covariance=extra,
+                      range_offset_mm=float(offset_mm),
+                      leave_one_out_covariance=spread)  # fmt: skip
+        c = np.ascontiguousarray
+        weights = 1.0 / (sr**2 + (obs.range_mm * sb) ** 2)  # as kernels.pose.fit_pose's
+        T_svd = RigidTransform(*ar.absolute_orientation(c(obs.x_mm), c(obs.y_mm), c(weights)))
+        return Solution(T, obs, int(iterations), ml, T_svd=T_svd)
+
+    def size_scale_covariance(self, obs: MatchedObservations, R, t, sr, sb) -> np.ndarray | None:
+        """(6, 6) covariance of image-scale errors (``kernels.pose.class_scale_covariance``):
+        the focal length's (``focal_length_sigma_rel``), common to the kept reflectors,
+        and one per diameter from ``common_centroid_bias_px``; None when both are 0. The
+        fit estimates the scale error only to read the range offset, and the pose is
+        refitted without it, so its uncertainty enters here."""
+        cfg = self.config
+        if cfg.common_centroid_bias_px <= 0 and cfg.focal_length_sigma_rel <= 0:
+            return None
+        cls = self._size_class[obs.i_idx]
+        return self.arithmetic.class_scale_covariance(
+            obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, sb,
+            np.ascontiguousarray(cls, dtype=np.int64), self._n_sizes,
+            float(cfg.common_centroid_bias_px) / self.camera.fx,
+            float(cfg.focal_length_sigma_rel),
+        )  # fmt: skip
+
+    def _inconsistent(self, obs, norms, chi2: float, dof: int, limit: float) -> str:
+        """The reason for a pose whose residuals the measurement model cannot explain,
+        naming the reflectors that fit worst (whitened residual norms)."""
+        worst = np.argsort(-np.asarray(norms))[:3]
+        named = ", ".join(f"{int(self._ids[obs.i_idx[j]])}: {norms[j]:.1f}" for j in worst)
+        return (
+            f"pose rejected: residuals inconsistent with the measurement model (chi^2 "
+            f"{chi2:.1f} for {dof} degrees of freedom, limit {limit:.1f}; worst reflectors, "
+            f"whitened residual: {named})"
+        )
+
+    def range_bias_sigma_mm(self, range_mm: np.ndarray) -> float:
+        """Sigma of the common range offset for reflectors at ``range_mm`` (m,): the
+        calibrated one when a range correction is applied and its calibrated span holds
+        every reflector, the uncalibrated one otherwise."""
+        cfg = self.config
+        c = self._correction
+        if c is not None and all(c.covers(float(f(range_mm))) for f in (np.min, np.max)):
+            return cfg.calibrated_range_bias_sigma_mm
+        return cfg.range_bias_sigma_mm
+
+    # ------------------------------------------------------------------------------------
+    def view_cosine(self, R: np.ndarray, t: np.ndarray) -> float:
+        """Cosine between the target normal and the direction to the camera
+        (``stages.matching.kernels.triplets.facing_cosine``)."""
+        return self.arithmetic.facing_cosine(np.ascontiguousarray(R, dtype=float),
+                                             np.ascontiguousarray(t, dtype=float),
+                                             self._xyz_mean)  # fmt: skip
+
+    @property
+    def facing(self) -> tuple[np.ndarray, float]:
+        """The facing constraint as ``matching.match_by_triplets`` takes it: the catalog's
+        centroid (3,) and the least cosine of the view angle."""
+        return self._xyz_mean, self._cos_max_view
+
+    def verify(self, T: RigidTransform, active: ThresholdedFrame | None,
+               matched: np.ndarray) -> str:  # fmt: skip
+        """Physical consistency of a pose with the frame; empty string when consistent:
+        the target faces the camera within ``max_view_angle_deg``, every reflector is in
+        front of it, and (at most ``dark_check_max_matches`` reflectors matched) no
+        reflector that should be clearly visible falls on a dark part of the frame
+        (``kernels.verify.pose_check`` states the rule). ``active`` : the frame and its
+        I_t; read only for the dark check, and may be None otherwise. ``matched`` :
+        (m,) int, the catalog indices of the matched reflectors, each once."""
+        R, t = T.R, T.t_mm
+        cos_view = self.view_cosine(R, t)
+        if cos_view < self._cos_max_view:
+            return (
+                f"the target would face away from the camera (view angle "
+                f"{np.degrees(np.arccos(np.clip(cos_view, -1, 1))):.0f} deg)"
+            )
+        dark_check = len(matched) <= self.config.dark_check_max_matches
+        is_matched = np.zeros(len(self._xyz), bool)
+        is_matched[matched] = True
+        frame = active if dark_check else _NO_FRAME
+        cam = self.camera
+        outcome, i, u, v = self.arithmetic.pose_check(
+            self._xyz, self._d, is_matched, np.ascontiguousarray(R, dtype=float),
+            np.ascontiguousarray(t, dtype=float), cam.fx, cam.fy, cam.cx, cam.cy,
+            self._dist, frame.gray, float(frame.threshold), dark_check,
+        )  # fmt: skip
+        if outcome == BEHIND_CAMERA:
+            return "reflectors would be behind the camera"
+        if outcome == DARK_REFLECTOR:
+            return (
+                f"reflector {int(self._ids[i])} should be visible at "
+                f"({u:.0f}, {v:.0f}) px but the frame is dark there"
+            )
+        return ""

@@ -1,0 +1,2 @@
+"""Tracking mode: search windows around the predicted reflectors and the one-call
+tracked frame."""

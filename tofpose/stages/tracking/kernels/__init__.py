@@ -1,0 +1,1 @@
+"""Compiled kernels of the tracking stage (numba, ``tofpose.core.compiled.jit``)."""

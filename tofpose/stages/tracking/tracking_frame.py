@@ -1,0 +1,128 @@
+"""Tracking mode in one compiled call per frame (``kernels.tracking_frame.track_frame``;
+with ``implementation="reference"``, its statement ``reference.tracking_frame``).
+
+``PosePipeline`` tracks through ``CompiledTracker``, with or without a calibrated range
+correction; this is the one implementation of tracking. Its stages are tested against
+``tofpose.reference`` (each kernel's test, and every tracked pose against the reference
+ML fit of its own measurements in ``tests/tofpose/stages/tracking/test_tracking_frame.py``); the A/B
+harness ``bench/ab.py`` holds its answers fixed across changes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tofpose.calibration.range import RangeCorrection, correction_kernel_arguments
+from tofpose.config import SolveConfig, TrackingConfig
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog
+from tofpose.core.records import camera_record, catalog_record
+from tofpose.stages.extraction.uncertainty import SigmaFloors, kernel_constants
+from tofpose.stages.persistence.persistence import Persistence, PersistenceInfo
+from tofpose.stages.pose.kernels.pose import NO_OFFSET, RangeOffsetPrior
+from tofpose.stages.pose.solve import (
+    MatchedObservations,
+    Measurements,
+    PoseSolver,
+    Solution,
+    ThresholdedFrame,
+    fit_settings,
+)
+from tofpose.stages.tracking.arithmetic import COMPILED, TrackingArithmetic
+from tofpose.stages.tracking.kernels.tracking_frame import TRACKED
+from tofpose.stages.tracking.tracking import TrackState
+
+
+@dataclass(frozen=True)
+class Tracked:
+    """A tracked frame: the solved pose, the measurements it came from, and what
+    persistence combined."""
+
+    solution: Solution
+    measurements: Measurements
+    persistence: PersistenceInfo
+
+
+class CompiledTracker:
+    """Runs tracking frames through ``track_frame`` for one pipeline's camera, catalog,
+    §5 and tracking settings, solver and persistence history."""
+
+    def __init__(self, camera: CameraModel, catalog: Catalog, config: SolveConfig,
+                 tracking: TrackingConfig, solver: PoseSolver, persistence: Persistence,
+                 correction: RangeCorrection | None = None, *,
+                 arithmetic: TrackingArithmetic = COMPILED) -> None:  # fmt: skip
+        """``correction``: the camera's calibrated range correction, or None;
+        ``arithmetic``: whose ``track_frame`` and ``camera_windows`` run the frames
+        (``tofpose.arithmetic``)."""
+        self.camera = camera
+        self._arithmetic = arithmetic
+        self.config = config
+        self.tracking = tracking
+        self._solver = solver
+        self._persistence = persistence
+        self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
+        self._diameters = np.ascontiguousarray(catalog.diameters_mm, dtype=float)
+        self._dist = np.ascontiguousarray(camera.dist_array)
+        # the arguments of ``track_frame`` that do not change from frame to frame, as the
+        # kernels' records (``core.records``), built where the acquisition path builds them
+        self._camera_args = (camera_record(camera), catalog_record(catalog))
+        self._fit_args = (
+            config.correct_perspective_bias, float(config.mixed_pixel_radius_px),
+            correction_kernel_arguments(correction),
+            kernel_constants(SigmaFloors(config.centroid_sigma_floor_px,
+                                         config.range_sigma_floor_mm)),
+            fit_settings(config),
+        )  # fmt: skip
+
+    def _offset_prior(self, track: TrackState, cat_idx: np.ndarray) -> RangeOffsetPrior:
+        """The common range offset's prior for this frame: the solver's, for the ranges of
+        the windowed reflectors at the predicted pose (the calibrated sigma only where the
+        range correction's span holds them all)."""
+        if not self.config.estimate_range_offset:
+            return NO_OFFSET
+        p = self._xyz[cat_idx] @ np.asarray(track.R).T + np.asarray(track.t_mm)
+        return self._solver.offset_prior(np.linalg.norm(p, axis=1))
+
+    def track(self, g: np.ndarray, d: np.ndarray, track: TrackState) -> Tracked | None:
+        """One frame; None means "fall back to the acquisition pass" (fewer reflectors to
+        track than a pose needs, one lost or not persistent, a range missing, one dropped
+        as an outlier, verification failed or the fit inconsistent), and leaves the
+        persistence history as it was."""
+        cfg, cam = self.config, self.camera
+        tc = self.tracking
+        arith = self._arithmetic
+        cat_idx, bounds, centres, diameters = arith.camera_windows(
+            self._xyz, self._diameters, track.R, track.t_mm, cam.fx, cam.fy, cam.cx, cam.cy,
+            self._dist, float(tc.margin_px), float(tc.min_diameter_px), cam.width, cam.height,
+        )  # fmt: skip
+        if len(cat_idx) < cfg.min_matches:
+            return None
+        (code, n_used, motion, cent, flat, starts, uv, rho, sp, sr, y, w, uv_obs,
+         e_obs, y_obs, R, t, its, cov, chi2, norms, sr_fit, sb_fit, offset,
+         offset_sigma) = arith.track_frame(
+            g, d, bounds, centres, diameters, cat_idx, np.float32(track.threshold_counts),
+            float(track.background_counts), float(track.dark_counts),
+            self._persistence.history(g, d), *self._camera_args, *self._fit_args,
+            self._offset_prior(track, cat_idx), *self._persistence.scratch(g.shape),
+        )  # fmt: skip
+        if code != TRACKED:
+            return None
+        n = len(cat_idx)
+        k_idx = np.arange(n)
+        obs = MatchedObservations(
+            k_idx=k_idx, i_idx=cat_idx, x_mm=self._xyz[cat_idx], uv_px=uv_obs, bearings=e_obs,
+            range_mm=rho - offset, y_mm=y_obs - e_obs * offset, sigma_bearing_rad=sp / cam.fx,
+            sigma_range_mm=sr,
+        )  # fmt: skip
+        active = ThresholdedFrame(g, track.threshold_counts)
+        solved = self._solver.conclude(obs, R, t, its, cov, chi2, norms, sr_fit, sb_fit,
+                                       active, offset, offset_sigma)  # fmt: skip
+        if not isinstance(solved, Solution):
+            return None
+        if solved.ml.chi2 > cfg.outlier_chi2_per_dof * max(3 * n - 6, 1):
+            return None  # an inconsistent fit: the windows may hold the wrong blobs
+        self._persistence.commit(cent, flat, g, d, n_used, motion)
+        meas = Measurements((), starts[1:] - starts[:-1], uv, rho, y, w, sp, sr)
+        return Tracked(solved, meas, PersistenceInfo(1 + n_used, motion, 0))
