@@ -48,6 +48,7 @@ run:
 
 lint: $(VENV)/.dev
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/lint-imports
 
 # System tools the tests and the bench use: pdftoppm (poppler-utils) renders report PDFs to PNG;

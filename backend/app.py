@@ -133,10 +133,15 @@ def _start_scene(state: AppState) -> None:
         # The scene's port answers the main port's names and origins only (its Host and
         # Origin check, backend/services/scene.py); the dashboard, on s.port, frames it.
         state.scene = LiveScene(
-            state.hub, state.acquisition, host=s.host, port=s.viser_port,
-            rail_length_mm=rail.max_pos if rail else None, trusted_hosts=s.trusted_hosts,
-            allowed_origins=s.allowed_origins, dashboard_port=s.port or None,
-        )  # fmt: skip
+            state.hub,
+            state.acquisition,
+            host=s.host,
+            port=s.viser_port,
+            rail_length_mm=rail.max_pos if rail else None,
+            trusted_hosts=s.trusted_hosts,
+            allowed_origins=s.allowed_origins,
+            dashboard_port=s.port or None,
+        )
     except Exception as exc:  # noqa: BLE001 - any failure leaves the API running
         log.error("3-D scene not started: %s", exc)
         state.scene_reason = f"3-D scene failed to start: {exc}"
@@ -152,8 +157,12 @@ def _start_foxglove(state: AppState) -> None:
     from backend.services.foxglove_live import LiveFoxglove
 
     try:
-        state.foxglove = LiveFoxglove(state.hub, state.acquisition, host=state.settings.host,
-                                      port=state.settings.foxglove_port)  # fmt: skip
+        state.foxglove = LiveFoxglove(
+            state.hub,
+            state.acquisition,
+            host=state.settings.host,
+            port=state.settings.foxglove_port,
+        )
     except Exception as exc:  # noqa: BLE001 - any failure leaves the API running
         log.error("Foxglove server not started: %s", exc)
         state.foxglove_reason = f"Foxglove server failed to start: {exc}"
@@ -198,9 +207,10 @@ def _lifespan(settings: Settings, devices: Devices | None):
         # as the admin key (backend/services/keys.py)
         keys = KeyService(sessions)
         app.state.key_bootstrap = await asyncio.to_thread(
-            keys.bootstrap, settings.data_dir,
+            keys.bootstrap,
+            settings.data_dir,
             settings.api_token.get_secret_value() if settings.api_token else None,
-        )  # fmt: skip
+        )
         keys.start()
         audit = AuditService(sessions)
         audit.start()
@@ -210,39 +220,73 @@ def _lifespan(settings: Settings, devices: Devices | None):
         hub = LiveHub(settings.subscriber_queue)
         kernels = KernelWarmup()
         acq = AcquisitionService(
-            devs.camera, cat, cat_name, hub,
+            devs.camera,
+            cat,
+            cat_name,
+            hub,
             history_size=settings.history_size,
             timeout_s=settings.camera_timeout_s,
             backoff_s=settings.retry_backoff_s,
             pipeline_config=_pipeline_config(devs, settings),
             kernels=kernels,
             state_config=_filter_config(settings),
-        )  # fmt: skip
+        )
         motion_service = MotionService(devs.motion)
         campaigns = CampaignService(
-            sessions, acq, hub, motion_service, recordings_dir=settings.data_dir / "campaigns",
+            sessions,
+            acq,
+            hub,
+            motion_service,
+            recordings_dir=settings.data_dir / "campaigns",
             lab_geometry=devs.lab_geometry,
-        )  # fmt: skip
+        )
         interrupted, held = campaigns.recover()
         if interrupted or held:
-            log.warning("%d campaign(s) were running when the server stopped (interrupted) "
-                        "and %d were queued (paused): nothing moves until a person resumes "
-                        "them", interrupted, held)  # fmt: skip
+            log.warning(
+                "%d campaign(s) were running when the server stopped (interrupted) "
+                "and %d were queued (paused): nothing moves until a person resumes "
+                "them",
+                interrupted,
+                held,
+            )
         # studies and re-processing share one queue: one batch job at a time on the cluster
         batch_jobs = BatchQueue()
-        studies = StudyService(settings.data_dir / "studies", settings.dask_scheduler or None,
-                               settings.study_workers, jobs=batch_jobs)  # fmt: skip
-        reprocessings = ReprocessService(settings.data_dir / "reprocessings",
-                                         settings.dask_scheduler or None, settings.study_workers,
-                                         jobs=batch_jobs)  # fmt: skip
+        studies = StudyService(
+            settings.data_dir / "studies",
+            settings.dask_scheduler or None,
+            settings.study_workers,
+            jobs=batch_jobs,
+        )
+        reprocessings = ReprocessService(
+            settings.data_dir / "reprocessings",
+            settings.dask_scheduler or None,
+            settings.study_workers,
+            jobs=batch_jobs,
+        )
         # recordings on demand: the live stream to HDF5 files, while a person wants it
         recordings = RecordingService(
-            settings.data_dir / "recordings", hub, devs.camera.model, lambda: acq.catalog,
-            motion_service, min_free_mb=settings.recording_min_free_mb,
-        )  # fmt: skip
-        app.state.tofpose = AppState(settings, keys, audit, engine, sessions, devs, hub, acq,
-                                     campaigns, studies, reprocessings, motion_service,
-                                     recordings=recordings)  # fmt: skip
+            settings.data_dir / "recordings",
+            hub,
+            devs.camera.model,
+            lambda: acq.catalog,
+            motion_service,
+            min_free_mb=settings.recording_min_free_mb,
+        )
+        app.state.tofpose = AppState(
+            settings,
+            keys,
+            audit,
+            engine,
+            sessions,
+            devs,
+            hub,
+            acq,
+            campaigns,
+            studies,
+            reprocessings,
+            motion_service,
+            recordings=recordings,
+        )
         # the pipeline's compiled kernels (tofpose.warmup): in the background while frames
         # already stream (backend/services/kernel_warmup.py), or before the first frame
         if settings.kernels_in_background:
@@ -304,10 +348,12 @@ def _install_error_answers(app: FastAPI) -> None:
         # the request conflicts with stored state (409), it is not a server fault (500).
         log.warning("integrity error answered with 409: %s", exc.orig)
         return JSONResponse(
-            {"detail": "the request conflicts with stored data (a unique name or key is "
-                       "already taken)"},
+            {
+                "detail": "the request conflicts with stored data (a unique name or key is "
+                "already taken)"
+            },
             status_code=409,
-        )  # fmt: skip
+        )
 
 
 def _audit_service(app: FastAPI) -> AuditService | None:
@@ -318,9 +364,25 @@ def _audit_service(app: FastAPI) -> AuditService | None:
 
 def _include_routes(app: FastAPI) -> None:
     """Every resource's router."""
-    routers = (health, devices_route, camera, pose, frames, motion, catalogs, campaigns,
-               calibrations, reference, scene, foxglove, live, studies_route,
-               reprocessings_route, recordings_route, audit_route)  # fmt: skip
+    routers = (
+        health,
+        devices_route,
+        camera,
+        pose,
+        frames,
+        motion,
+        catalogs,
+        campaigns,
+        calibrations,
+        reference,
+        scene,
+        foxglove,
+        live,
+        studies_route,
+        reprocessings_route,
+        recordings_route,
+        audit_route,
+    )
     for module in routers:
         app.include_router(module.router)
 

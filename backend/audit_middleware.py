@@ -63,9 +63,15 @@ class AuditMiddleware:
             service: AuditService | None = self.audit()
             if service is not None:
                 client = scope.get("client")
-                service.record(AuditEntry(
-                    at=at, key_name=state.get(KEY_NAME_STATE),
-                    client=client[0] if client else "", method=scope["method"],
-                    path=scope["path"], status=seen[1],
-                    body=b"".join(chunks), body_size=seen[0],
-                ))  # fmt: skip
+                service.record(
+                    AuditEntry(
+                        at=at,
+                        key_name=state.get(KEY_NAME_STATE),
+                        client=client[0] if client else "",
+                        method=scope["method"],
+                        path=scope["path"],
+                        status=seen[1],
+                        body=b"".join(chunks),
+                        body_size=seen[0],
+                    )
+                )

@@ -32,24 +32,29 @@ def key_table(keys: list[ApiKey]) -> str:
     rows = [("NAME", "SCOPE", "CREATED (UTC)", "REVOKED (UTC)")]
     rows += [(k.name, k.scope.label, _when(k.created_at), _when(k.revoked_at)) for k in keys]
     widths = [max(len(r[i]) for r in rows) for i in range(4)]
-    return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
-                     for r in rows)  # fmt: skip
+    return "\n".join(
+        "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows
+    )
 
 
 def _command(service: KeyService, opts: dict) -> int:
     action = opts["action"]
     if action == "create":
         key = service.create(opts["name"], opts["scope"])
-        print(f"key {opts['name']!r} created, scope {opts['scope']}. The key, shown this once "
-              "(only its hash is stored):")  # fmt: skip
+        print(
+            f"key {opts['name']!r} created, scope {opts['scope']}. The key, shown this once "
+            "(only its hash is stored):"
+        )
         print(key)
     elif action == "list":
         keys = service.list()
         print(key_table(keys) if keys else "no keys yet (the server's first start makes one)")
     else:
         service.revoke(opts["name"])
-        print(f"key {opts['name']!r} revoked (a running server stops taking it within "
-              f"{service.refresh_s:g} s)")  # fmt: skip
+        print(
+            f"key {opts['name']!r} revoked (a running server stops taking it within "
+            f"{service.refresh_s:g} s)"
+        )
     return 0
 
 
@@ -76,6 +81,9 @@ def run(opts: dict) -> int:
         print(f"tofpose keys: {exc}", file=sys.stderr)
         return 2
     except (SQLAlchemyError, OSError) as exc:
-        print(f"tofpose keys: cannot use the database {url}: {exc.__class__.__name__}: "
-              f"{str(exc).splitlines()[0]}", file=sys.stderr)  # fmt: skip
+        print(
+            f"tofpose keys: cannot use the database {url}: {exc.__class__.__name__}: "
+            f"{str(exc).splitlines()[0]}",
+            file=sys.stderr,
+        )
         return 2

@@ -15,8 +15,7 @@ from backend.services.keys import Bootstrap
 from backend.settings import Settings
 from tofpose.io.recording import RecordingError
 
-SECRET_QUERY = re.compile(r"([?&][^=&\s]*(?:token|key|ticket)[^=&\s]*=)[^&\s\"']*",
-                          re.IGNORECASE)  # fmt: skip
+SECRET_QUERY = re.compile(r"([?&][^=&\s]*(?:token|key|ticket)[^=&\s]*=)[^&\s\"']*", re.IGNORECASE)
 REDACTED = "***"
 
 
@@ -64,8 +63,10 @@ def scene_line(settings: Settings, host: str) -> str:
         return settings.scene_refusal
     if settings.viser_port == 0:
         return "viser on any free port (GET /api/scene names it)"
-    return (f"http://{host}:{settings.viser_port}/   (viser; if the port is taken, the next "
-            "free one: GET /api/scene)")  # fmt: skip
+    return (
+        f"http://{host}:{settings.viser_port}/   (viser; if the port is taken, the next "
+        "free one: GET /api/scene)"
+    )
 
 
 def foxglove_line(settings: Settings, host: str) -> str:
@@ -84,20 +85,26 @@ def banner(settings: Settings, boot: Bootstrap) -> str:
         settings.motion, settings.motion
     )
     reads = "open (loopback)" if settings.reads_are_open else "API key (any scope) required"
-    return "\n".join([
-        f"tofpose server: {camera}, {motion}",
-        f"  dashboard      {base}/"
-        + ("" if (settings.frontend_dist / "index.html").exists() else "   (not built: make run)"),
-        f"  API docs       {base}/docs   (OpenAPI: {base}/openapi.json)",
-        f"  live pose      ws://{host}:{settings.port}/ws/live",
-        f"  health         {base}/api/health",
-        f"  3-D scene      {scene_line(settings, host)}",
-        f"  Foxglove       {foxglove_line(settings, host)}",
-        f"  database       {settings.resolved_database_url}",
-        f"  API key        {token_line(settings, boot)}",
-        f"  reads          {reads}; moves and changes need 'Authorization: Bearer <key>' "
-        "(scope operate or admin)",
-    ])  # fmt: skip
+    return "\n".join(
+        [
+            f"tofpose server: {camera}, {motion}",
+            f"  dashboard      {base}/"
+            + (
+                ""
+                if (settings.frontend_dist / "index.html").exists()
+                else "   (not built: make run)"
+            ),
+            f"  API docs       {base}/docs   (OpenAPI: {base}/openapi.json)",
+            f"  live pose      ws://{host}:{settings.port}/ws/live",
+            f"  health         {base}/api/health",
+            f"  3-D scene      {scene_line(settings, host)}",
+            f"  Foxglove       {foxglove_line(settings, host)}",
+            f"  database       {settings.resolved_database_url}",
+            f"  API key        {token_line(settings, boot)}",
+            f"  reads          {reads}; moves and changes need 'Authorization: Bearer <key>' "
+            "(scope operate or admin)",
+        ]
+    )
 
 
 def serve(overrides: dict) -> int:
@@ -118,8 +125,11 @@ def serve(overrides: dict) -> int:
     try:
         boot = bootstrap_keys(settings)
     except SQLAlchemyError as exc:
-        print(f"tofpose serve: cannot open the database {settings.resolved_database_url}: "
-              f"{exc.__class__.__name__}: {str(exc).splitlines()[0]}", file=sys.stderr)  # fmt: skip
+        print(
+            f"tofpose serve: cannot open the database {settings.resolved_database_url}: "
+            f"{exc.__class__.__name__}: {str(exc).splitlines()[0]}",
+            file=sys.stderr,
+        )
         return 2
     text = banner(settings, boot)
     try:
@@ -141,9 +151,13 @@ def serve(overrides: dict) -> int:
     # all clients (LiveSample.cached) and each send is a copy into the socket.
     install_log_redaction()  # uvicorn's logging set-up keeps a logger's filters
     uvicorn.run(
-        app, host=settings.host, port=settings.port, log_level="info",
-        timeout_graceful_shutdown=settings.shutdown_timeout_s, ws_per_message_deflate=False,
-    )  # fmt: skip
+        app,
+        host=settings.host,
+        port=settings.port,
+        log_level="info",
+        timeout_graceful_shutdown=settings.shutdown_timeout_s,
+        ws_per_message_deflate=False,
+    )
     return 0
 
 
@@ -193,23 +207,31 @@ def report(opts: dict) -> int:
         engine = make_engine(opts["db"])
         with make_session_factory(engine)() as session:
             if session.get(CampaignRow, opts["campaign_id"]) is None:
-                print(f"tofpose report: no campaign with id {opts['campaign_id']} in "
-                      f"{opts['db']}", file=sys.stderr)  # fmt: skip
+                print(
+                    f"tofpose report: no campaign with id {opts['campaign_id']} in {opts['db']}",
+                    file=sys.stderr,
+                )
                 return 2
             cal = None
             if (cal_id := opts.get("calibration")) is not None:
                 cal = get_calibration(session, cal_id)
                 if cal is None:
-                    print(f"tofpose report: no calibration with id {cal_id} in {opts['db']} "
-                          "(GET /api/calibrations lists them)", file=sys.stderr)  # fmt: skip
+                    print(
+                        f"tofpose report: no calibration with id {cal_id} in {opts['db']} "
+                        "(GET /api/calibrations lists them)",
+                        file=sys.stderr,
+                    )
                     return 2
             rep, rows = build(session, opts["campaign_id"], opts["reference"], cal)
     except ReportError as exc:
         print(f"tofpose report: {exc}", file=sys.stderr)
         return 2
     except SQLAlchemyError as exc:
-        print(f"tofpose report: cannot read {opts['db']}: {exc.__class__.__name__}: "
-              f"{str(exc).splitlines()[0]}", file=sys.stderr)  # fmt: skip
+        print(
+            f"tofpose report: cannot read {opts['db']}: {exc.__class__.__name__}: "
+            f"{str(exc).splitlines()[0]}",
+            file=sys.stderr,
+        )
         return 2
     fmt = opts["format"]
     writers = {
@@ -222,10 +244,15 @@ def report(opts: dict) -> int:
     mode = "wb" if isinstance(body, bytes) else "w"
     with open(opts["out"], mode) as fh:
         fh.write(body)
-    ref = (f"calibration {opts['calibration']}" if opts.get("calibration") is not None
-           else opts["reference"])  # fmt: skip
-    print(f"campaign {opts['campaign_id']}: {rep['n_frames']} frames, reference {ref} -> "
-          f"{opts['out']}")  # fmt: skip
+    ref = (
+        f"calibration {opts['calibration']}"
+        if opts.get("calibration") is not None
+        else opts["reference"]
+    )
+    print(
+        f"campaign {opts['campaign_id']}: {rep['n_frames']} frames, reference {ref} -> "
+        f"{opts['out']}"
+    )
     return 0
 
 

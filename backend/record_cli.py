@@ -31,8 +31,9 @@ class RecordError(RuntimeError):
     """What went wrong, as the one line the command prints."""
 
 
-def resolve_key(key: str | None, key_file: str | Path | None,
-                environ: dict[str, str] | None = None) -> str:  # fmt: skip
+def resolve_key(
+    key: str | None, key_file: str | Path | None, environ: dict[str, str] | None = None
+) -> str:
     """The API key: ``key`` if given, else ``$TOFPOSE_API_KEY``, else the first line of
     ``key_file``; ``RecordError`` naming the three places when none has one."""
     environ = os.environ if environ is None else environ
@@ -58,8 +59,9 @@ def _detail(r: httpx.Response) -> str:
     except ValueError:
         return r.text.strip()[:300] or r.reason_phrase
     if isinstance(detail, list):
-        return "; ".join(f"{'.'.join(map(str, e.get('loc', [])[1:]))}: {e.get('msg')}"
-                         for e in detail)  # fmt: skip
+        return "; ".join(
+            f"{'.'.join(map(str, e.get('loc', [])[1:]))}: {e.get('msg')}" for e in detail
+        )
     return str(detail)
 
 
@@ -71,8 +73,10 @@ def _check(r: httpx.Response, what: str) -> dict:
 
 def progress_line(rec: dict, duration_s: float) -> str:
     """``recording 3 'name': 12.0 / 30 s, 240 frames, 48.2 MB``."""
-    return (f"recording {rec['id']} {rec['name']!r}: {rec['elapsed_s']:.1f} / {duration_s:g} s, "
-            f"{rec['frames']} frames, {rec['size_bytes'] / MB:.1f} MB")  # fmt: skip
+    return (
+        f"recording {rec['id']} {rec['name']!r}: {rec['elapsed_s']:.1f} / {duration_s:g} s, "
+        f"{rec['frames']} frames, {rec['size_bytes'] / MB:.1f} MB"
+    )
 
 
 def _filename(r: httpx.Response, rid: int) -> str:
@@ -81,12 +85,21 @@ def _filename(r: httpx.Response, rid: int) -> str:
     return name or f"recording-{rid}.h5"
 
 
-def record(client: httpx.Client, name: str, duration_s: float, *, out: str | None,
-           download: bool, err: TextIO) -> tuple[dict, Path | str]:  # fmt: skip
+def record(
+    client: httpx.Client,
+    name: str,
+    duration_s: float,
+    *,
+    out: str | None,
+    download: bool,
+    err: TextIO,
+) -> tuple[dict, Path | str]:
     """Start, follow, stop, download. Returns the final entry and the file written (or
     the download URL when ``download`` is False)."""
-    rec = _check(client.post("/api/recordings", json={"name": name, "duration_s": duration_s}),
-                 "the server refused to start the recording")  # fmt: skip
+    rec = _check(
+        client.post("/api/recordings", json={"name": name, "duration_s": duration_s}),
+        "the server refused to start the recording",
+    )
     rid = rec["id"]
     end = time.monotonic() + duration_s
     interactive = err.isatty()
@@ -97,8 +110,12 @@ def record(client: httpx.Client, name: str, duration_s: float, *, out: str | Non
                 break
             time.sleep(min(POLL_S, max(0.0, end - time.monotonic())))
             rec = _check(client.get(f"/api/recordings/{rid}"), "reading its progress failed")
-            print(("\r" if interactive else "") + progress_line(rec, duration_s),
-                  end="" if interactive else "\n", file=err, flush=True)  # fmt: skip
+            print(
+                ("\r" if interactive else "") + progress_line(rec, duration_s),
+                end="" if interactive else "\n",
+                file=err,
+                flush=True,
+            )
     except KeyboardInterrupt:
         print("\ninterrupted: stopping the recording", file=err)
         rec = _check(client.post(f"/api/recordings/{rid}/stop"), "stopping it failed")
@@ -134,8 +151,14 @@ def run(opts: dict, out: TextIO | None = None, err: TextIO | None = None) -> int
         key = resolve_key(opts.get("key"), opts.get("key_file"))
         headers = {"Authorization": f"Bearer {key}"}
         with httpx.Client(base_url=url.rstrip("/"), headers=headers, timeout=60.0) as client:
-            rec, where = record(client, name, duration, out=opts.get("out"),
-                                download=opts.get("download", True), err=err)  # fmt: skip
+            rec, where = record(
+                client,
+                name,
+                duration,
+                out=opts.get("out"),
+                download=opts.get("download", True),
+                err=err,
+            )
     except RecordError as exc:
         print(f"tofpose record: {exc}", file=err)
         return 2
@@ -147,7 +170,10 @@ def run(opts: dict, out: TextIO | None = None, err: TextIO | None = None) -> int
         return 2
     why = f"{rec['stop_reason']}: {rec['stop_detail']}" if rec.get("stop_reason") else ""
     size_mb = rec["size_bytes"] / MB
-    print(f"recording {rec['id']} {rec['name']!r}: {rec['frames']} frames, {size_mb:.1f} MB, "
-          f"{rec['elapsed_s']:.1f} s ({why})", file=out)  # fmt: skip
+    print(
+        f"recording {rec['id']} {rec['name']!r}: {rec['frames']} frames, {size_mb:.1f} MB, "
+        f"{rec['elapsed_s']:.1f} s ({why})",
+        file=out,
+    )
     print(f"wrote {where}" if isinstance(where, Path) else where, file=out)
     return 0

@@ -78,8 +78,11 @@ class SecurityHeaders:
             if message["type"] == "http.response.start":
                 headers = list(message.get("headers", ()))
                 present = {name.lower() for name, _ in headers}
-                headers += [(name, value) for name, value in ours
-                            if name in _RAW_ALWAYS or name not in present]  # fmt: skip
+                headers += [
+                    (name, value)
+                    for name, value in ours
+                    if name in _RAW_ALWAYS or name not in present
+                ]
                 message = {**message, "headers": headers}
             await send(message)
 

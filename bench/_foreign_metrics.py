@@ -103,16 +103,23 @@ class FrameOutcome:
             return float(x) if math.isfinite(x) else None
 
         return {
-            "frame": self.frame, "range_mm": self.range_mm, "ok": self.ok,
-            "reason": self.reason, "n_matched": self.n_matched, "mismatched": self.mismatched,
+            "frame": self.frame,
+            "range_mm": self.range_mm,
+            "ok": self.ok,
+            "reason": self.reason,
+            "n_matched": self.n_matched,
+            "mismatched": self.mismatched,
             "attitude_error_deg": num(self.attitude_error_deg),
-            "position_error_mm": num(self.position_error_mm), "d2": num(self.d2),
-            "success": self.success, "wrong": self.wrong,
+            "position_error_mm": num(self.position_error_mm),
+            "d2": num(self.d2),
+            "success": self.success,
+            "wrong": self.wrong,
             "confidently_wrong": self.confidently_wrong,
             "error": [num(x) for x in self.error],
-            "sigma": None if self.covariance is None
+            "sigma": None
+            if self.covariance is None
             else [num(x) for x in np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))],
-        }  # fmt: skip
+        }
 
 
 def summarise(outcomes: list[FrameOutcome]) -> dict:
@@ -151,8 +158,9 @@ def summarise(outcomes: list[FrameOutcome]) -> dict:
 
 
 # -- range bins ------------------------------------------------------------------------
-def range_bins(range_mm: np.ndarray, width_m: float | None = None,
-               gap_fraction: float = 0.1) -> tuple[np.ndarray, list[str]]:  # fmt: skip
+def range_bins(
+    range_mm: np.ndarray, width_m: float | None = None, gap_fraction: float = 0.1
+) -> tuple[np.ndarray, list[str]]:
     """Bin frames by true range (N,) mm: (bin index per frame (N,) int, label per bin).
 
     ``width_m`` None: the distinct ranges present, clusters of sorted ranges split where
@@ -208,9 +216,11 @@ def true_images(camera: CameraModel, catalog: Catalog, T_true: RigidTransform) -
     facing = (-Y @ T_true.R[:, 2]) > 0  # disc normal (target +z) towards the camera
     inside = (
         front
-        & (uv[:, 0] >= -0.5) & (uv[:, 0] <= camera.width - 0.5)
-        & (uv[:, 1] >= -0.5) & (uv[:, 1] <= camera.height - 0.5)
-    )  # fmt: skip
+        & (uv[:, 0] >= -0.5)
+        & (uv[:, 0] <= camera.width - 0.5)
+        & (uv[:, 1] >= -0.5)
+        & (uv[:, 1] <= camera.height - 0.5)
+    )
     radius = 0.5 * camera.fx * catalog.diameters_mm / rng
     return TrueImages(Y, uv, rng, radius, inside & facing)
 
@@ -273,11 +283,17 @@ def marker_errors(result, truth: TrueImages, catalog: Catalog, bin_index: int) -
     true_k = true_correspondences(uv, rho, truth)
     d = catalog.diameters_mm
     return [
-        MarkerError(bin_index, float(d[c]), bool(t == c), uv[j] - truth.uv_px[c],
-                    float(rho[j] - truth.range_mm[c]), float(m.centroid_sigma_px),
-                    float(m.range_sigma_mm))
+        MarkerError(
+            bin_index,
+            float(d[c]),
+            bool(t == c),
+            uv[j] - truth.uv_px[c],
+            float(rho[j] - truth.range_mm[c]),
+            float(m.centroid_sigma_px),
+            float(m.range_sigma_mm),
+        )
         for j, (m, c, t) in enumerate(zip(result.matched, claimed, true_k, strict=True))
-    ]  # fmt: skip
+    ]
 
 
 def marker_summary(errors: list[MarkerError], in_view: int) -> dict:
@@ -289,10 +305,23 @@ def marker_summary(errors: list[MarkerError], in_view: int) -> dict:
     good = [e for e in errors if e.correct]
     out = {"in_view": in_view, "matched": len(errors), "mismatched": len(errors) - len(good)}
     if not good:
-        return {**out, **dict.fromkeys(
-            ("centroid_p50_px", "centroid_p90_px", "du_median_px", "dv_median_px",
-             "range_p50_mm", "range_p90_mm", "range_median_mm", "centroid_z_rms",
-             "range_z_rms"), math.nan)}  # fmt: skip
+        return {
+            **out,
+            **dict.fromkeys(
+                (
+                    "centroid_p50_px",
+                    "centroid_p90_px",
+                    "du_median_px",
+                    "dv_median_px",
+                    "range_p50_mm",
+                    "range_p90_mm",
+                    "range_median_mm",
+                    "centroid_z_rms",
+                    "range_z_rms",
+                ),
+                math.nan,
+            ),
+        }
     c = np.array([e.centroid_error_px for e in good])
     cn = np.linalg.norm(c, axis=1)
     r = np.array([e.range_error_mm for e in good])

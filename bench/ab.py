@@ -53,17 +53,22 @@ def frames():
         for j in range(8):
             T = random_pose(r, rng)
             clutter = tuple(
-                Clutter((rng.uniform(-600, 600), rng.uniform(-400, 400), rng.uniform(0, 200)),
-                        float(rng.uniform(30, 90)), 1.0)
+                Clutter(
+                    (rng.uniform(-600, 600), rng.uniform(-400, 400), rng.uniform(0, 200)),
+                    float(rng.uniform(30, 90)),
+                    1.0,
+                )
                 for _ in range(j % 4)
-            )  # fmt: skip
-            f = render_frame(cam, TargetScene(paper_target(), clutter=clutter), T,
-                             SensorModel(), rng)  # fmt: skip
+            )
+            f = render_frame(
+                cam, TargetScene(paper_target(), clutter=clutter), T, SensorModel(), rng
+            )
             yield f"single-{r}-{j}", f.gray, f.distance_mm
 
 
-def run(config: PipelineConfig | None = None,
-        implementation: str = "compiled") -> dict[str, np.ndarray]:  # fmt: skip
+def run(
+    config: PipelineConfig | None = None, implementation: str = "compiled"
+) -> dict[str, np.ndarray]:
     cam, cat = CameraModel(), paper_target()
     pipes: dict[str, PosePipeline] = {}
     ok, ids, Rs, ts, modes = [], [], [], [], []
@@ -80,8 +85,13 @@ def run(config: PipelineConfig | None = None,
         Rs.append(r.R if r.ok else np.full((3, 3), np.nan))
         ts.append(r.t_mm if r.ok else np.full(3, np.nan))
         modes.append(r.mode)
-    return {"ok": np.array(ok), "ids": np.array(ids), "R": np.array(Rs), "t": np.array(ts),
-            "mode": np.array(modes)}  # fmt: skip
+    return {
+        "ok": np.array(ok),
+        "ids": np.array(ids),
+        "R": np.array(Rs),
+        "t": np.array(ts),
+        "mode": np.array(modes),
+    }
 
 
 def run_both(implementation: str = "compiled") -> dict[str, np.ndarray]:
@@ -93,8 +103,14 @@ def run_both(implementation: str = "compiled") -> dict[str, np.ndarray]:
     return out
 
 
-def compare(a: dict, b: dict, label: str = "acquisition", tol_mm: float = TOL,
-            tol_deg: float = TOL, ids_as_sets: bool = False) -> int:  # fmt: skip
+def compare(
+    a: dict,
+    b: dict,
+    label: str = "acquisition",
+    tol_mm: float = TOL,
+    tol_deg: float = TOL,
+    ids_as_sets: bool = False,
+) -> int:
     """Print and return (1: beyond the tolerances) the differences of run ``b`` from
     ``a``; ``ids_as_sets``: matched ids compared regardless of order (the reference's
     split of a merged pair may list its halves the other way round)."""
@@ -103,21 +119,28 @@ def compare(a: dict, b: dict, label: str = "acquisition", tol_mm: float = TOL,
         return 1
     flags = np.flatnonzero(a["ok"] != b["ok"])
     if ids_as_sets:
-        idd = np.flatnonzero([sorted(x.split(",")) != sorted(y.split(","))
-                              for x, y in zip(a["ids"], b["ids"], strict=True)])  # fmt: skip
+        idd = np.flatnonzero(
+            [
+                sorted(x.split(",")) != sorted(y.split(","))
+                for x, y in zip(a["ids"], b["ids"], strict=True)
+            ]
+        )
     else:
         idd = np.flatnonzero(a["ids"] != b["ids"])
     both = a["ok"] & b["ok"]
     dt = np.linalg.norm(a["t"][both] - b["t"][both], axis=1)
     # small-angle difference from the Frobenius norm (arccos near 1 loses ~1e-6 deg)
     dR = np.degrees(np.linalg.norm(a["R"][both] - b["R"][both], axis=(1, 2)) / np.sqrt(2.0))
-    print(f"{label}: frames {len(a['ok'])}, ok {int(a['ok'].sum())} / {int(b['ok'].sum())}; "
-          f"ok flags differ {len(flags)}, matched ids differ {len(idd)}; "
-          f"max |dt| {dt.max(initial=0):.3g} mm, max dR {dR.max(initial=0):.3g} deg")  # fmt: skip
+    print(
+        f"{label}: frames {len(a['ok'])}, ok {int(a['ok'].sum())} / {int(b['ok'].sum())}; "
+        f"ok flags differ {len(flags)}, matched ids differ {len(idd)}; "
+        f"max |dt| {dt.max(initial=0):.3g} mm, max dR {dR.max(initial=0):.3g} deg"
+    )
     for i in np.argsort(-dt)[:5] if len(dt) and dt.max() > tol_mm else []:
         print(f"  frame {np.flatnonzero(both)[i]}: |dt| {dt[i]:.3g} mm, dR {dR[i]:.3g} deg")
-    return int(len(flags) > 0 or len(idd) > 0 or dt.max(initial=0) > tol_mm
-               or dR.max(initial=0) > tol_deg)  # fmt: skip
+    return int(
+        len(flags) > 0 or len(idd) > 0 or dt.max(initial=0) > tol_mm or dR.max(initial=0) > tol_deg
+    )
 
 
 def main() -> None:
@@ -125,13 +148,24 @@ def main() -> None:
     g = ap.add_mutually_exclusive_group(required=True)
     g.add_argument("--save")
     g.add_argument("--compare")
-    ap.add_argument("--implementation", choices=("compiled", "reference"), default="compiled",
-                    help="the pipeline's arithmetic (PosePipeline's implementation)")
-    ap.add_argument("--tolerance-mm", type=float, default=TOL,
-                    help=f"largest accepted |dt| in --compare, mm (default {TOL:g})")
-    ap.add_argument("--tolerance-deg", type=float, default=TOL,
-                    help=f"largest accepted rotation difference in --compare, deg "
-                         f"(default {TOL:g})")  # fmt: skip
+    ap.add_argument(
+        "--implementation",
+        choices=("compiled", "reference"),
+        default="compiled",
+        help="the pipeline's arithmetic (PosePipeline's implementation)",
+    )
+    ap.add_argument(
+        "--tolerance-mm",
+        type=float,
+        default=TOL,
+        help=f"largest accepted |dt| in --compare, mm (default {TOL:g})",
+    )
+    ap.add_argument(
+        "--tolerance-deg",
+        type=float,
+        default=TOL,
+        help=f"largest accepted rotation difference in --compare, deg (default {TOL:g})",
+    )
     args = ap.parse_args()
     tols = (args.tolerance_mm, args.tolerance_deg, args.implementation == "reference")
     result = run_both(args.implementation)

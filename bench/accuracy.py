@@ -41,8 +41,12 @@ from tofpose.sim.scene import TargetScene  # noqa: E402
 
 RANGES_M = [0.3, 0.5, 0.7, 1.0, 1.5, 2.0, 3.0, 4.0, 5.7, 7.0, 8.5, 10.0, 12.0, 15.0]
 LUX = {"normal (1000 lux)": 1000.0, "high (10000 lux)": 10000.0}
-METHODS = {"full (ML)": "ml", "paper LOS": "los", "no refinement": "none",
-           "paper as written": "paper"}  # fmt: skip
+METHODS = {
+    "full (ML)": "ml",
+    "paper LOS": "los",
+    "no refinement": "none",
+    "paper as written": "paper",
+}
 
 
 def method_config(ref: str) -> PipelineConfig:
@@ -94,8 +98,11 @@ def run(n_frames: int = 16, seed: int = 0):
                     pe, ae = pose_errors(res.R, res.t_mm, T)
                     cov = res.covariance
                     crb_p = float(np.sqrt(np.trace(cov[3:, 3:]))) if cov is not None else np.nan
-                    crb_a = (float(np.degrees(np.sqrt(np.trace(cov[:3, :3]))))
-                             if cov is not None else np.nan)  # fmt: skip
+                    crb_a = (
+                        float(np.degrees(np.sqrt(np.trace(cov[:3, :3]))))
+                        if cov is not None
+                        else np.nan
+                    )
                     rows.append((lname, r, name, pe, ae, True, crb_p, crb_a))
                 else:
                     rows.append((lname, r, name, np.nan, np.nan, False, np.nan, np.nan))
@@ -119,11 +126,17 @@ def summarise(rows) -> dict:
             for r in RANGES_M:
                 sel = [x for x in rows if x[0] == lname and x[2] == method and x[1] == r]
                 ok = np.mean([x[5] for x in sel])
-                per[r] = (ok, stats([x[3] for x in sel]), stats([x[4] for x in sel]),
-                          float(np.nanmedian([x[6] for x in sel] or [np.nan])) if any(
-                              np.isfinite(x[6]) for x in sel) else np.nan,
-                          float(np.nanmedian([x[7] for x in sel])) if any(
-                              np.isfinite(x[7]) for x in sel) else np.nan)  # fmt: skip
+                per[r] = (
+                    ok,
+                    stats([x[3] for x in sel]),
+                    stats([x[4] for x in sel]),
+                    float(np.nanmedian([x[6] for x in sel] or [np.nan]))
+                    if any(np.isfinite(x[6]) for x in sel)
+                    else np.nan,
+                    float(np.nanmedian([x[7] for x in sel]))
+                    if any(np.isfinite(x[7]) for x in sel)
+                    else np.nan,
+                )
             out[(lname, method)] = per
     return out
 
@@ -132,26 +145,57 @@ def plot(summary, path: Path) -> None:
     plt = pyplot()
 
     fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), sharex=True)
-    styles = {"full (ML)": "o-", "paper LOS": "s--", "no refinement": "^:",
-              "paper as written": "d-.", "oracle": "k-"}  # fmt: skip
+    styles = {
+        "full (ML)": "o-",
+        "paper LOS": "s--",
+        "no refinement": "^:",
+        "paper as written": "d-.",
+        "oracle": "k-",
+    }
     for col, lname in enumerate(LUX):
         for method, style in styles.items():
             per = summary[(lname, method)]
             rs = np.array(RANGES_M)
-            axes[0, col].semilogy(rs, [per[r][1]["median"] for r in RANGES_M], style,
-                                  label=method, ms=4)  # fmt: skip
-            axes[1, col].semilogy(rs, [per[r][2]["median"] for r in RANGES_M], style,
-                                  label=method, ms=4)  # fmt: skip
+            axes[0, col].semilogy(
+                rs, [per[r][1]["median"] for r in RANGES_M], style, label=method, ms=4
+            )
+            axes[1, col].semilogy(
+                rs, [per[r][2]["median"] for r in RANGES_M], style, label=method, ms=4
+            )
         crb = summary[(lname, "full (ML)")]
-        axes[0, col].semilogy(RANGES_M, [crb[r][3] for r in RANGES_M], color="0.6", lw=3,
-                              alpha=0.5, label="predicted 1-sigma (full)")  # fmt: skip
-        axes[1, col].semilogy(RANGES_M, [crb[r][4] for r in RANGES_M], color="0.6", lw=3,
-                              alpha=0.5, label="predicted 1-sigma (full)")  # fmt: skip
+        axes[0, col].semilogy(
+            RANGES_M,
+            [crb[r][3] for r in RANGES_M],
+            color="0.6",
+            lw=3,
+            alpha=0.5,
+            label="predicted 1-sigma (full)",
+        )
+        axes[1, col].semilogy(
+            RANGES_M,
+            [crb[r][4] for r in RANGES_M],
+            color="0.6",
+            lw=3,
+            alpha=0.5,
+            label="predicted 1-sigma (full)",
+        )
         bound = summary[(lname, "oracle")]
-        axes[0, col].semilogy(RANGES_M, [bound[r][3] for r in RANGES_M], color="tab:purple",
-                              lw=1, ls=":", label="Cramer-Rao bound")  # fmt: skip
-        axes[1, col].semilogy(RANGES_M, [bound[r][4] for r in RANGES_M], color="tab:purple",
-                              lw=1, ls=":", label="Cramer-Rao bound")  # fmt: skip
+        axes[0, col].semilogy(
+            RANGES_M,
+            [bound[r][3] for r in RANGES_M],
+            color="tab:purple",
+            lw=1,
+            ls=":",
+            label="Cramer-Rao bound",
+        )
+        axes[1, col].semilogy(
+            RANGES_M,
+            [bound[r][4] for r in RANGES_M],
+            color="tab:purple",
+            lw=1,
+            ls=":",
+            label="Cramer-Rao bound",
+        )
         axes[0, col].set_title(f"ambient {lname}")
         axes[1, col].set_xlabel("range (m)")
     axes[0, 0].set_ylabel("median position error (mm)")
@@ -194,10 +238,11 @@ def markdown(summary, img_rel: str, n_frames: int) -> str:
             row = [f"{r:g}"]
             for m in [*METHODS, "oracle"]:
                 ok, ps, as_, _, _ = summary[(lname, m)][r]
-                row += [f"{100 * ok:.0f}%",
-                        f"{fmt(ps['median'])} / {fmt(ps['rms'])} / {fmt(ps['p95'])}",
-                        f"{fmt(as_['median'], 3)} / {fmt(as_['rms'], 3)} / "
-                        f"{fmt(as_['p95'], 3)}"]  # fmt: skip
+                row += [
+                    f"{100 * ok:.0f}%",
+                    f"{fmt(ps['median'])} / {fmt(ps['rms'])} / {fmt(ps['p95'])}",
+                    f"{fmt(as_['median'], 3)} / {fmt(as_['rms'], 3)} / {fmt(as_['p95'], 3)}",
+                ]
             _, _, _, cp, ca = summary[(lname, "full (ML)")][r]
             _, _, _, bp, ba = summary[(lname, "oracle")][r]
             row += [f"{fmt(cp)} / {fmt(ca, 3)}", f"{fmt(bp, 3)} / {fmt(ba, 4)}"]

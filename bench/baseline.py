@@ -98,8 +98,9 @@ def baseline_pose(gray, cam: CameraModel, cat, T_true, detector, ransac: bool):
     obj, img = np.array(obj, float), np.array(img, float)
     t1 = time.perf_counter()
     if ransac:
-        ok, rvec, tvec, _ = cv2.solvePnPRansac(obj, img, K, None, flags=cv2.SOLVEPNP_SQPNP,
-                                               reprojectionError=2.0)  # fmt: skip
+        ok, rvec, tvec, _ = cv2.solvePnPRansac(
+            obj, img, K, None, flags=cv2.SOLVEPNP_SQPNP, reprojectionError=2.0
+        )
     else:
         ok, rvec, tvec = cv2.solvePnP(obj, img, K, None, flags=cv2.SOLVEPNP_SQPNP)
     ms = 1e3 * (t_detect + time.perf_counter() - t1)
@@ -134,8 +135,10 @@ def run(n: int = 12):
                 acc[k][1].append(pe)
                 acc[k][2].append(ae)
                 acc[k][3].append(ms)
-        rows[r] = {k: (np.mean(v[0]), stats(v[1]), stats(v[2]), float(np.median(v[3])))
-                   for k, v in acc.items()}  # fmt: skip
+        rows[r] = {
+            k: (np.mean(v[0]), stats(v[1]), stats(v[2]), float(np.median(v[3])))
+            for k, v in acc.items()
+        }
     return rows
 
 
@@ -147,8 +150,15 @@ def plot(rows, path: Path) -> None:
         axes[0].semilogy(RANGES_M, [rows[r][k][1]["median"] for r in RANGES_M], style, label=k)
         axes[1].semilogy(RANGES_M, [rows[r][k][2]["median"] for r in RANGES_M], style, label=k)
         axes[2].plot(RANGES_M, [rows[r][k][3] for r in RANGES_M], style, label=k)
-    for ax, yl in zip(axes, ("median position error (mm)", "median attitude error (deg)",
-                             "median ms per frame (one core)"), strict=True):  # fmt: skip
+    for ax, yl in zip(
+        axes,
+        (
+            "median position error (mm)",
+            "median attitude error (deg)",
+            "median ms per frame (one core)",
+        ),
+        strict=True,
+    ):
         ax.set_xlabel("range (m)")
         ax.set_ylabel(yl)
         ax.grid(alpha=0.3, which="both")
@@ -157,33 +167,43 @@ def plot(rows, path: Path) -> None:
 
 
 def markdown(rows, img: str, n: int) -> str:
-    L = ["## Against the obvious alternative: SimpleBlobDetector + solvePnP", "",
-         f"{n} frames per range, 1000 lux, random attitude within +-5 deg, same frames for "
-         "all three. The baseline detects blobs on the gray image with OpenCV's "
-         "`SimpleBlobDetector` and solves with `solvePnP` / `solvePnPRansac` (SQPnP) from "
-         "the catalog (SQPnP from 3 correspondences; the RANSAC variant from 4); its "
-         "correspondences are **given** through a strict gate (a keypoint within 3 px, or "
-         "half the distance to the nearest other projection, of exactly one true "
-         "projection, and alone there; a keypoint of two merged markers is none), which a "
-         "user would otherwise have to solve; that step is free: its time is not counted. "
-         "tofpose's time is the whole pipeline (extraction, matching, "
-         "refinement). Ratios are baseline / tofpose (above 1: tofpose is better / "
-         "faster).", "", f"![baseline]({img})", ""]  # fmt: skip
+    L = [
+        "## Against the obvious alternative: SimpleBlobDetector + solvePnP",
+        "",
+        f"{n} frames per range, 1000 lux, random attitude within +-5 deg, same frames for "
+        "all three. The baseline detects blobs on the gray image with OpenCV's "
+        "`SimpleBlobDetector` and solves with `solvePnP` / `solvePnPRansac` (SQPnP) from "
+        "the catalog (SQPnP from 3 correspondences; the RANSAC variant from 4); its "
+        "correspondences are **given** through a strict gate (a keypoint within 3 px, or "
+        "half the distance to the nearest other projection, of exactly one true "
+        "projection, and alone there; a keypoint of two merged markers is none), which a "
+        "user would otherwise have to solve; that step is free: its time is not counted. "
+        "tofpose's time is the whole pipeline (extraction, matching, "
+        "refinement). Ratios are baseline / tofpose (above 1: tofpose is better / "
+        "faster).",
+        "",
+        f"![baseline]({img})",
+        "",
+    ]
     header = ["range m", "tofpose ok", "tofpose mm / deg / ms"]
     for k in ("solvePnP", "solvePnPRansac"):
         header += [f"{k} ok", f"{k} mm / deg / ms", f"{k} ratio mm / deg / time"]
     body = []
     for r in RANGES_M:
         t = rows[r]["tofpose"]
-        row = [f"{r:g}", f"{100 * t[0]:.0f}%",
-               f"{fmt(t[1]['median'])} / {fmt(t[2]['median'], 3)} / {t[3]:.2f}"]  # fmt: skip
+        row = [
+            f"{r:g}",
+            f"{100 * t[0]:.0f}%",
+            f"{fmt(t[1]['median'])} / {fmt(t[2]['median'], 3)} / {t[3]:.2f}",
+        ]
         for k in ("solvePnP", "solvePnPRansac"):
             b = rows[r][k]
-            ratios = (b[1]["median"] / t[1]["median"], b[2]["median"] / t[2]["median"],
-                      b[3] / t[3])  # fmt: skip
-            row += [f"{100 * b[0]:.0f}%",
-                    f"{fmt(b[1]['median'])} / {fmt(b[2]['median'], 3)} / {b[3]:.2f}",
-                    " / ".join(fmt(x, 2) for x in ratios)]  # fmt: skip
+            ratios = (b[1]["median"] / t[1]["median"], b[2]["median"] / t[2]["median"], b[3] / t[3])
+            row += [
+                f"{100 * b[0]:.0f}%",
+                f"{fmt(b[1]['median'])} / {fmt(b[2]['median'], 3)} / {b[3]:.2f}",
+                " / ".join(fmt(x, 2) for x in ratios),
+            ]
         body.append(row)
     L += [table(header, body), ""]
     return "\n".join(L)

@@ -54,22 +54,30 @@ def pose_crlb(
         e.append(p / np.linalg.norm(p))
     if len(x) < 3:
         return float("nan"), float("nan")
-    _, J = measurement_jacobian(np.array(x), np.array(e), np.array(rho), T.R, T.t_mm,
-                                np.array(s_r), np.array(s_b))  # fmt: skip
+    _, J = measurement_jacobian(
+        np.array(x), np.array(e), np.array(rho), T.R, T.t_mm, np.array(s_r), np.array(s_b)
+    )
     cov = np.linalg.inv(J.T @ J)
     return float(np.sqrt(np.trace(cov[3:, 3:]))), float(np.degrees(np.sqrt(np.trace(cov[:3, :3]))))
 
 
-def bearing_variance_px2(f: RenderedFrame, cam: CameraModel, T: RigidTransform, pos_mm,
-                         radius_mm: float, covered: np.ndarray) -> float:  # fmt: skip
+def bearing_variance_px2(
+    f: RenderedFrame,
+    cam: CameraModel,
+    T: RigidTransform,
+    pos_mm,
+    radius_mm: float,
+    covered: np.ndarray,
+) -> float:
     """Lower bound (px^2, per image axis, the larger of the two) of the variance of the
     disc's image centre (module docstring). The rim is the projected circle of the disc
     (centre ``pos_mm`` in the target frame, normal the target's z axis); ``covered`` (H,
     W) marks the pixels the disc covers at their centre; with the pixels its rim crosses,
     their summed amplitude over the disc's image area is its amplitude per px^2."""
     theta = np.linspace(0.0, 2 * np.pi, RIM_SAMPLES, endpoint=False)
-    rim_target = pos_mm + radius_mm * np.column_stack([np.cos(theta), np.sin(theta),
-                                                       np.zeros_like(theta)])  # fmt: skip
+    rim_target = pos_mm + radius_mm * np.column_stack(
+        [np.cos(theta), np.sin(theta), np.zeros_like(theta)]
+    )
     rim = cam.project(rim_target @ T.R.T + T.t_mm)  # (N, 2) px
     seg = np.roll(rim, -1, axis=0) - rim  # rim element vectors
     normal = np.column_stack([seg[:, 1], -seg[:, 0]])  # outward for a counter-clockwise rim
@@ -84,8 +92,9 @@ def bearing_variance_px2(f: RenderedFrame, cam: CameraModel, T: RigidTransform, 
     np.add.at(grad, (row, col), normal)  # d coverage / d (u, v) of each pixel
     touched = covered.copy()
     touched[row, col] = True
-    area_px = 0.5 * abs(np.sum(rim[:, 0] * np.roll(rim[:, 1], -1)
-                               - np.roll(rim[:, 0], -1) * rim[:, 1]))  # fmt: skip
+    area_px = 0.5 * abs(
+        np.sum(rim[:, 0] * np.roll(rim[:, 1], -1) - np.roll(rim[:, 0], -1) * rim[:, 1])
+    )
     # the disc's amplitude per unit of covered area: its pixels' sum over its area (the
     # plate's share counted as the disc's, which can only lower the bound)
     a_disc = float(f.amplitude[touched].sum()) / max(area_px, 1e-9)

@@ -56,10 +56,13 @@ def run(repeats: int) -> dict[str, list[tuple[float, float]]]:
     ):
         host, port = lab.table.address
         settings = Settings(
-            data_dir=Path(tmp), api_token="bench-token-0123456789", viser=False,
-            camera=f"tofcam660:{CAMERA_ADDRESS}", motion=f"scpi:{host}:{port}",
+            data_dir=Path(tmp),
+            api_token="bench-token-0123456789",
+            viser=False,
+            camera=f"tofcam660:{CAMERA_ADDRESS}",
+            motion=f"scpi:{host}:{port}",
             allowed_hosts=["testserver"],
-        )  # fmt: skip
+        )
         with TestClient(create_app(settings, build_devices(settings))) as client:
 
             def cam_state() -> str:
@@ -117,14 +120,25 @@ def markdown(data: dict[str, list[tuple[float, float]]]) -> str:
     for key, pairs in data.items():
         a = np.array(pairs)
         what, since = LABELS[key]
-        rows.append([
-            what, f"{np.median(a[:, 0]) * 1000:.0f} / {a[:, 0].max() * 1000:.0f}",
-            f"{np.median(a[:, 1]) * 1000:.0f} / {a[:, 1].max() * 1000:.0f}", since, str(len(a)),
-        ])  # fmt: skip
+        rows.append(
+            [
+                what,
+                f"{np.median(a[:, 0]) * 1000:.0f} / {a[:, 0].max() * 1000:.0f}",
+                f"{np.median(a[:, 1]) * 1000:.0f} / {a[:, 1].max() * 1000:.0f}",
+                since,
+                str(len(a)),
+            ]
+        )
     return table(
-        ["fault", "degraded after, ms (median / max)", "working again, ms (median / max)",
-         "working again counted", "repeats"], rows,
-    )  # fmt: skip
+        [
+            "fault",
+            "degraded after, ms (median / max)",
+            "working again, ms (median / max)",
+            "working again counted",
+            "repeats",
+        ],
+        rows,
+    )
 
 
 def main() -> None:

@@ -67,12 +67,23 @@ def measure(seed: int, rate_hz: float, seconds: float):
     profile = SineProfile(5.0, 4.0, 2)
     bench.turntable.run_profile("yaw", profile, 1.0)
     rows = []
-    for k in tqdm(range(int(seconds * rate_hz)), desc=f"seed {seed}, {rate_hz:g} Hz",
-                  leave=False, file=sys.stderr):  # fmt: skip
+    for k in tqdm(
+        range(int(seconds * rate_hz)),
+        desc=f"seed {seed}, {rate_hz:g} Hz",
+        leave=False,
+        file=sys.stderr,
+    ):
         tt = k / rate_hz
         T, _, _ = bench.poses_at(tt)
-        frame = render_frame(bench.camera, bench.scene, T, bench.sensor, bench.rng, time_s=tt,
-                             subframe_poses=bench.subframe_poses(tt, T))  # fmt: skip
+        frame = render_frame(
+            bench.camera,
+            bench.scene,
+            T,
+            bench.sensor,
+            bench.rng,
+            time_s=tt,
+            subframe_poses=bench.subframe_poses(tt, T),
+        )
         t0 = time.perf_counter()
         r = pipe.process(frame.gray, frame.distance_mm, tt)
         ms = (time.perf_counter() - t0) * 1e3
@@ -81,8 +92,20 @@ def measure(seed: int, rate_hz: float, seconds: float):
         behind, _, _ = bench.poses_at(tt - h)
         w = Rotation.from_matrix(ahead.R @ behind.R.T).as_rotvec() / (2 * h)
         v = (ahead.t_mm - behind.t_mm) / (2 * h)
-        rows.append((tt, r.ok, r.R if r.ok else np.eye(3), r.t_mm if r.ok else np.zeros(3),
-                     r.covariance if r.ok else np.eye(6), T.R, T.t_mm, w, v, ms))  # fmt: skip
+        rows.append(
+            (
+                tt,
+                r.ok,
+                r.R if r.ok else np.eye(3),
+                r.t_mm if r.ok else np.zeros(3),
+                r.covariance if r.ok else np.eye(6),
+                T.R,
+                T.t_mm,
+                w,
+                v,
+                ms,
+            )
+        )
     names = ("t", "ok", "R", "tm", "cov", "Rt", "tt", "w", "v", "ms")
     data = {n: np.array([row[i] for row in rows]) for i, n in enumerate(names)}
     return data, profile.peak_rate_deg_s
@@ -118,8 +141,15 @@ def latency(seed: int, artefacts: bool, delays_s, seconds: float = 12.0):
     for k in range(int(seconds * 10)):
         tt = 0.1 * k
         T, _, _ = bench.poses_at(tt)
-        frame = render_frame(bench.camera, bench.scene, T, bench.sensor, bench.rng, time_s=tt,
-                             subframe_poses=bench.subframe_poses(tt, T))  # fmt: skip
+        frame = render_frame(
+            bench.camera,
+            bench.scene,
+            T,
+            bench.sensor,
+            bench.rng,
+            time_s=tt,
+            subframe_poses=bench.subframe_poses(tt, T),
+        )
         r = pipe.process(frame.gray, frame.distance_mm, tt)
         if r.ok:
             ts.append(tt)
@@ -157,14 +187,22 @@ def main() -> None:
                 for delay, fit, art in zip(DELAYS_S, clean, real, strict=True):
                     z = (fit.delay_s - delay) / fit.sigma_s
                     seen = f"{1e3 * art.delay_s:.1f} +/- {1e3 * art.sigma_s:.1f}"
-                    lat_rows.append([str(seed), f"{1e3 * delay:.0f}", f"{1e3 * fit.delay_s:.1f}",
-                                     f"{1e3 * fit.sigma_s:.1f}", f"{z:+.2f}",
-                                     "yes" if abs(z) <= 3 else "NO",
-                                     seen])  # fmt: skip
+                    lat_rows.append(
+                        [
+                            str(seed),
+                            f"{1e3 * delay:.0f}",
+                            f"{1e3 * fit.delay_s:.1f}",
+                            f"{1e3 * fit.sigma_s:.1f}",
+                            f"{z:+.2f}",
+                            "yes" if abs(z) <= 3 else "NO",
+                            seen,
+                        ]
+                    )
         for m in MODELS:
             rms, nees = np.median(per_model[m][0]), np.median(per_model[m][1])
-            rate_rows.append([f"{rate_hz:g} Hz", m, f"{rms:.2f}", f"{100 * rms / peak:.1f} %",
-                              f"{nees:.1f}"])  # fmt: skip
+            rate_rows.append(
+                [f"{rate_hz:g} Hz", m, f"{rms:.2f}", f"{100 * rms / peak:.1f} %", f"{nees:.1f}"]
+            )
     print(
         f"yaw rate on the turntable's sine (5 deg, 4 s; peak {peak:.2f} deg/s), after "
         f"5 s; medians over {args.seeds} seeds (NEES: 12 for a consistent covariance)"
@@ -176,9 +214,20 @@ def main() -> None:
         "motion artefacts (the fit must find the delay), and with them (the sensor as "
         "simulated: their attitude bias grows with the rate and reads as latency)"
     )
-    print(table(["seed", "programmed delay (ms)", "fitted (ms)", "1-sigma (ms)",
-                 "error / sigma", "within 3 sigma", "with motion artefacts (ms)"],
-                lat_rows))  # fmt: skip
+    print(
+        table(
+            [
+                "seed",
+                "programmed delay (ms)",
+                "fitted (ms)",
+                "1-sigma (ms)",
+                "error / sigma",
+                "within 3 sigma",
+                "with motion artefacts (ms)",
+            ],
+            lat_rows,
+        )
+    )
     print()
     pm, pp = med_p95(pipe_ms)
     cost_rows = [[m, *(f"{x:.0f}" for x in med_p95(us))] for m, us in cost.items()]

@@ -102,13 +102,17 @@ def one_run(timeout_s: float) -> Run:
         env.pop("VIRTUAL_ENV", None)
         t0 = time.monotonic()
         proc = subprocess.Popen(
-            ["make", "run"], cwd=clone, env=env, stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT, text=True, start_new_session=True,
-        )  # fmt: skip
+            ["make", "run"],
+            cwd=clone,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            start_new_session=True,
+        )
         run = Run()
         log: list[str] = []
-        reader = threading.Thread(target=_read_output, args=(proc, t0, run.steps, log),
-                                  daemon=True)  # fmt: skip
+        reader = threading.Thread(target=_read_output, args=(proc, t0, run.steps, log), daemon=True)
         reader.start()
         seen = run.seen
         base = f"http://127.0.0.1:{port}"
@@ -158,8 +162,11 @@ def _poll(client: httpx.Client, base: str, run: Run, t0: float) -> None:
         if pose.get("ok") and "first ok pose" not in seen:
             seen["first ok pose"] = now
             after = _implementation(client, base)  # reference -> compiled, never back
-            run.first_pose_by = (after if after == "reference" or before == after
-                                 else "reference or compiled (switched meanwhile)")  # fmt: skip
+            run.first_pose_by = (
+                after
+                if after == "reference" or before == after
+                else "reference or compiled (switched meanwhile)"
+            )
         if pose.get("ok") and before == "reference":
             run.reference_ms.append(pose["timings_ms"]["total"])
             rate = client.get(base + "/api/devices").json()["camera"]["frame_rate_hz"]
@@ -187,8 +194,10 @@ def main() -> None:
 def summary(runs: list[Run]) -> str:
     """The milestone and step tables, the reference pipeline's pace and the verdicts,
     as Markdown."""
-    rows = [[m, f"{np.median([r.seen[m] for r in runs]):.1f}",
-             f"{max(r.seen[m] for r in runs):.1f}"] for m in MILESTONES]  # fmt: skip
+    rows = [
+        [m, f"{np.median([r.seen[m] for r in runs]):.1f}", f"{max(r.seen[m] for r in runs):.1f}"]
+        for m in MILESTONES
+    ]
     names = sorted(
         {k for r in runs for k in r.steps},
         key=lambda k: np.median([r.steps.get(k, 0) for r in runs]),
@@ -208,20 +217,27 @@ def summary(runs: list[Run]) -> str:
         if ms
         else "No reference pose was seen while the kernels compiled."
     )
-    return "\n".join([
-        f"Fresh clone -> `make run`, seconds from its start, {len(runs)} runs (median and "
-        "max), package caches warm:", "",
-        table(["milestone", "median s", "max s"], rows), "",
-        "when each step of `make run` began (median s):", "",
-        table(["step", "began at s"], steps), "",
-        f"Dashboard live (the later of `/` serving the page and the first live frame) after "
-        f"{live:.1f} s: the <= 60 s goal is {'met' if live <= 60 else 'MISSED'}.",
-        f"First ok pose after {pose:.1f} s, {after_start:.1f} s after the server started "
-        f"(max {after_start_max:.1f} s), from the {by} implementation: the <= "
-        f"{FIRST_POSE_GOAL_S:.0f} s goal (from the server's start) is "
-        f"{'met' if after_start_max <= FIRST_POSE_GOAL_S else 'MISSED'}.", "",
-        pace,
-    ])  # fmt: skip
+    return "\n".join(
+        [
+            f"Fresh clone -> `make run`, seconds from its start, {len(runs)} runs (median and "
+            "max), package caches warm:",
+            "",
+            table(["milestone", "median s", "max s"], rows),
+            "",
+            "when each step of `make run` began (median s):",
+            "",
+            table(["step", "began at s"], steps),
+            "",
+            f"Dashboard live (the later of `/` serving the page and the first live frame) after "
+            f"{live:.1f} s: the <= 60 s goal is {'met' if live <= 60 else 'MISSED'}.",
+            f"First ok pose after {pose:.1f} s, {after_start:.1f} s after the server started "
+            f"(max {after_start_max:.1f} s), from the {by} implementation: the <= "
+            f"{FIRST_POSE_GOAL_S:.0f} s goal (from the server's start) is "
+            f"{'met' if after_start_max <= FIRST_POSE_GOAL_S else 'MISSED'}.",
+            "",
+            pace,
+        ]
+    )
 
 
 README = ROOT / "README.md"

@@ -96,9 +96,13 @@ DEFINITIONS = {
 
 # -- the two runs ----------------------------------------------------------------------
 def run_estimate(
-    rec_path: str | Path, *, tracking: bool = False, camera_path: str | None = None,
-    catalog_path: str | None = None, progress: bool = True,
-) -> tuple[list[PoseResult], PosePipeline]:  # fmt: skip
+    rec_path: str | Path,
+    *,
+    tracking: bool = False,
+    camera_path: str | None = None,
+    catalog_path: str | None = None,
+    progress: bool = True,
+) -> tuple[list[PoseResult], PosePipeline]:
     """``tofpose.cli.estimate`` over a recording (its CSV to a temporary file), with the
     pipeline it builds made to keep each frame's ``PoseResult``: (results, one per frame
     in order; the pipeline, for its camera, catalog, config and calibrations)."""
@@ -118,8 +122,14 @@ def run_estimate(
     # the pipeline estimate runs is built by tofpose.io.camera_file.pipeline_for
     patched = mock.patch.object(camera_file, "PosePipeline", RecordingPipeline)
     with tempfile.TemporaryDirectory() as tmp, patched:
-        summary = cli.estimate(str(rec_path), str(Path(tmp) / "poses.csv"), catalog_path,
-                               camera_path, progress=progress, tracking=tracking)  # fmt: skip
+        summary = cli.estimate(
+            str(rec_path),
+            str(Path(tmp) / "poses.csv"),
+            catalog_path,
+            camera_path,
+            progress=progress,
+            tracking=tracking,
+        )
     if len(built) != 1 or len(results) != summary["frames"]:
         raise RuntimeError(
             f"tofpose.cli.estimate built {len(built)} pipeline(s) and processed "
@@ -150,11 +160,19 @@ class OraclePipeline(PosePipeline):
         k = np.flatnonzero(true_k >= 0)
         pairs = np.column_stack((k, true_k[k])).astype(np.int64).reshape(-1, 2)
         need = self.config.matching.min_matches
-        reason = "" if len(k) >= need else (
-            f"oracle: {len(k)} blob(s) on a reflector's true image, need {need}")  # fmt: skip
-        return MatchResult(pairs, np.flatnonzero(true_k < 0).tolist(),
-                           np.zeros((len(true_k), 0)), 0,
-                           self.config.matching.alpha_for(meas.y_mm), reason)  # fmt: skip
+        reason = (
+            ""
+            if len(k) >= need
+            else (f"oracle: {len(k)} blob(s) on a reflector's true image, need {need}")
+        )
+        return MatchResult(
+            pairs,
+            np.flatnonzero(true_k < 0).tolist(),
+            np.zeros((len(true_k), 0)),
+            0,
+            self.config.matching.alpha_for(meas.y_mm),
+            reason,
+        )
 
     def _solve_with_fallback(self, meas, m: MatchResult, active):
         return self._solver.solve(m.pairs, meas, m.alpha_mm, active)
@@ -164,12 +182,17 @@ def run_oracle(rec, pipe: PosePipeline, truth: list[TrueImages], progress: bool 
     """The oracle's ``PoseResult`` per frame of an open recording, with the camera,
     catalog, config (tracking off) and calibrations of the estimate's pipeline."""
     config = replace(pipe.config, tracking=replace(pipe.config.tracking, enabled=False))
-    oracle = OraclePipeline(pipe.camera, pipe.catalog, config,
-                            range_correction=pipe.range_correction,
-                            covariance_scale=pipe.covariance_scale)  # fmt: skip
+    oracle = OraclePipeline(
+        pipe.camera,
+        pipe.catalog,
+        config,
+        range_correction=pipe.range_correction,
+        covariance_scale=pipe.covariance_scale,
+    )
     out = []
-    for i in tqdm(range(rec.n_frames), desc="oracle", unit="frame", disable=not progress,
-                  file=sys.stderr):  # fmt: skip
+    for i in tqdm(
+        range(rec.n_frames), desc="oracle", unit="frame", disable=not progress, file=sys.stderr
+    ):
         gray, dist, t = rec.frame(i)
         oracle.truth = truth[i]
         out.append(oracle.process(gray, dist, t))
@@ -182,20 +205,38 @@ def frame_outcome(i: int, r: PoseResult, T: RigidTransform, markers) -> FrameOut
     rng = float(np.linalg.norm(T.t_mm))
     if not r.ok:
         return FrameOutcome(i, rng, False, r.reason, n_matched=r.n_matched)
-    return FrameOutcome(i, rng, True, "", pose_error(r.R, r.t_mm, T.R, T.t_mm), r.covariance,
-                        r.n_matched, sum(not m.correct for m in markers))  # fmt: skip
+    return FrameOutcome(
+        i,
+        rng,
+        True,
+        "",
+        pose_error(r.R, r.t_mm, T.R, T.t_mm),
+        r.covariance,
+        r.n_matched,
+        sum(not m.correct for m in markers),
+    )
 
 
 def evaluate(
-    rec_path: str | Path, *, tracking: bool = False, camera_path: str | None = None,
-    catalog_path: str | None = None, bin_width_m: float | None = None, oracle: bool = True,
+    rec_path: str | Path,
+    *,
+    tracking: bool = False,
+    camera_path: str | None = None,
+    catalog_path: str | None = None,
+    bin_width_m: float | None = None,
+    oracle: bool = True,
     progress: bool = True,
-) -> dict:  # fmt: skip
+) -> dict:
     """One recording: the pose, spread and per-marker numbers per range bin and run, and
     the per-frame outcomes (``FrameOutcome``), as a dict (``report`` prints it; JSON-ready
     after ``to_json``)."""
-    results, pipe = run_estimate(rec_path, tracking=tracking, camera_path=camera_path,
-                                 catalog_path=catalog_path, progress=progress)  # fmt: skip
+    results, pipe = run_estimate(
+        rec_path,
+        tracking=tracking,
+        camera_path=camera_path,
+        catalog_path=catalog_path,
+        progress=progress,
+    )
     with open_recording(rec_path) as rec:
         if rec.truth_R is None:
             raise SystemExit(f"bench/foreign.py: {rec_path} has no /truth")
@@ -207,13 +248,23 @@ def evaluate(
         if oracle:
             runs["oracle"], matched_by_truth = run_oracle(rec, pipe, truth, progress)
     bins, labels = range_bins(np.linalg.norm(rec.truth_t_mm, axis=1), bin_width_m)
-    out = {"path": str(rec_path), "frames": len(results), "tracking": tracking,
-           "catalog": pipe.catalog.name, "bins": labels, "oracle_frames_matched": matched_by_truth,
-           "pose": [], "markers": [], "outcomes": {}, "reasons": {}}  # fmt: skip
+    out = {
+        "path": str(rec_path),
+        "frames": len(results),
+        "tracking": tracking,
+        "catalog": pipe.catalog.name,
+        "bins": labels,
+        "oracle_frames_matched": matched_by_truth,
+        "pose": [],
+        "markers": [],
+        "outcomes": {},
+        "reasons": {},
+    }
     diam = pipe.catalog.diameters_mm
     for run, res in runs.items():
-        markers = [marker_errors(r, truth[i], pipe.catalog, int(bins[i]))
-                   for i, r in enumerate(res)]  # fmt: skip
+        markers = [
+            marker_errors(r, truth[i], pipe.catalog, int(bins[i])) for i, r in enumerate(res)
+        ]
         outcomes = [frame_outcome(i, r, poses[i], markers[i]) for i, r in enumerate(res)]
         out["outcomes"][run] = outcomes
         out["reasons"][run] = Counter(_reason_kind(o.reason) for o in outcomes if not o.ok)
@@ -223,10 +274,14 @@ def evaluate(
         for b, label in enumerate(labels):
             for d in sorted(set(diam.tolist())):
                 errs = [e for m in markers for e in m if e.bin == b and e.diameter_mm == d]
-                seen = sum(int(np.sum(truth[i].in_view & (diam == d)))
-                           for i, r in enumerate(res) if r.ok and bins[i] == b)  # fmt: skip
-                out["markers"].append({"bin": label, "run": run, "diameter_mm": d,
-                                       **marker_summary(errs, seen)})  # fmt: skip
+                seen = sum(
+                    int(np.sum(truth[i].in_view & (diam == d)))
+                    for i, r in enumerate(res)
+                    if r.ok and bins[i] == b
+                )
+                out["markers"].append(
+                    {"bin": label, "run": run, "diameter_mm": d, **marker_summary(errs, seen)}
+                )
     return out
 
 
@@ -251,41 +306,118 @@ def report(ev: dict) -> str:
         head += f"; the oracle matched {n_truth} frames by truth"
         if n_truth < ev["frames"]:
             head += " (the others had too few candidate blobs)"
-    lines = [head, "", "Poses (success: <= 1 deg and <= max(20 mm, 0.5 % range); wrong: ok and "
-             "> 2 deg or > 2.5x that; conf. wrong: wrong and d2 > "
-             f"chi2_6({P_3SIGMA:.4f}) = {CHI2_6_3SIGMA:.2f}; NEES/6: mean d2 / 6, 1 = "
-             "consistent; medians over successful poses; mismatch: ok poses with a "
-             "reflector matched to the wrong catalog entry)", ""]  # fmt: skip
-    rows = [[p["bin"], p["run"], str(p["frames"]), fmt(p["success_pct"], 0),
-             str(p["wrong"]), str(p["confident_wrong"]), str(p["no_pose"]),
-             fmt(p["beyond_3sigma_pct"], 0), fmt(p["nees_over_6"], 2),
-             fmt(p["median_attitude_deg"], 3), fmt(p["median_position_mm"], 1),
-             _int(p["mismatch_frames"])] for p in ev["pose"]]  # fmt: skip
-    lines.append(table(["range", "run", "frames", "success %", "wrong ok", "conf. wrong",
-                        "no pose", "ok > 3 sigma %", "NEES/6", "med att deg", "med pos mm",
-                        "mismatch"], rows))  # fmt: skip
+    lines = [
+        head,
+        "",
+        "Poses (success: <= 1 deg and <= max(20 mm, 0.5 % range); wrong: ok and "
+        "> 2 deg or > 2.5x that; conf. wrong: wrong and d2 > "
+        f"chi2_6({P_3SIGMA:.4f}) = {CHI2_6_3SIGMA:.2f}; NEES/6: mean d2 / 6, 1 = "
+        "consistent; medians over successful poses; mismatch: ok poses with a "
+        "reflector matched to the wrong catalog entry)",
+        "",
+    ]
+    rows = [
+        [
+            p["bin"],
+            p["run"],
+            str(p["frames"]),
+            fmt(p["success_pct"], 0),
+            str(p["wrong"]),
+            str(p["confident_wrong"]),
+            str(p["no_pose"]),
+            fmt(p["beyond_3sigma_pct"], 0),
+            fmt(p["nees_over_6"], 2),
+            fmt(p["median_attitude_deg"], 3),
+            fmt(p["median_position_mm"], 1),
+            _int(p["mismatch_frames"]),
+        ]
+        for p in ev["pose"]
+    ]
+    lines.append(
+        table(
+            [
+                "range",
+                "run",
+                "frames",
+                "success %",
+                "wrong ok",
+                "conf. wrong",
+                "no pose",
+                "ok > 3 sigma %",
+                "NEES/6",
+                "med att deg",
+                "med pos mm",
+                "mismatch",
+            ],
+            rows,
+        )
+    )
     lines += [
         "",
         "Error spread / reported sigma per axis (RMS over ok poses of e_k / "
         "sigma_k; rotation vector in the camera frame, translation mm; 1 = right)",
         "",
     ]
-    rows = [[p["bin"], p["run"], str(p["frames"] - p["no_pose"]),
-             *(fmt(v, 2) for v in p["spread_over_sigma"])] for p in ev["pose"]]  # fmt: skip
+    rows = [
+        [
+            p["bin"],
+            p["run"],
+            str(p["frames"] - p["no_pose"]),
+            *(fmt(v, 2) for v in p["spread_over_sigma"]),
+        ]
+        for p in ev["pose"]
+    ]
     lines.append(table(["range", "run", "ok", *AXES], rows))
-    lines += ["", "Per-marker errors of correctly matched reflectors in ok poses (centroid: "
-              "bias-corrected, against the true projection of the disc centre; range: "
-              "against the true range to the centre; du, dv, range bias: signed medians; "
-              "e/sigma: RMS of error over the pipeline's sigma)", ""]  # fmt: skip
-    rows = [[m["bin"], m["run"], f"{m['diameter_mm']:g}", str(m["in_view"]), str(m["matched"]),
-             str(m["mismatched"]), fmt(m["centroid_p50_px"], 3), fmt(m["centroid_p90_px"], 3),
-             fmt(m["du_median_px"], 3), fmt(m["dv_median_px"], 3), fmt(m["centroid_z_rms"], 1),
-             fmt(m["range_p50_mm"], 1), fmt(m["range_p90_mm"], 1),
-             fmt(m["range_median_mm"], 1), fmt(m["range_z_rms"], 1)]
-            for m in ev["markers"]]  # fmt: skip
-    lines.append(table(["range", "run", "diam mm", "in view", "matched", "mismatch",
-                        "c p50 px", "c p90 px", "du px", "dv px", "c e/sigma", "r p50 mm",
-                        "r p90 mm", "r bias mm", "r e/sigma"], rows))  # fmt: skip
+    lines += [
+        "",
+        "Per-marker errors of correctly matched reflectors in ok poses (centroid: "
+        "bias-corrected, against the true projection of the disc centre; range: "
+        "against the true range to the centre; du, dv, range bias: signed medians; "
+        "e/sigma: RMS of error over the pipeline's sigma)",
+        "",
+    ]
+    rows = [
+        [
+            m["bin"],
+            m["run"],
+            f"{m['diameter_mm']:g}",
+            str(m["in_view"]),
+            str(m["matched"]),
+            str(m["mismatched"]),
+            fmt(m["centroid_p50_px"], 3),
+            fmt(m["centroid_p90_px"], 3),
+            fmt(m["du_median_px"], 3),
+            fmt(m["dv_median_px"], 3),
+            fmt(m["centroid_z_rms"], 1),
+            fmt(m["range_p50_mm"], 1),
+            fmt(m["range_p90_mm"], 1),
+            fmt(m["range_median_mm"], 1),
+            fmt(m["range_z_rms"], 1),
+        ]
+        for m in ev["markers"]
+    ]
+    lines.append(
+        table(
+            [
+                "range",
+                "run",
+                "diam mm",
+                "in view",
+                "matched",
+                "mismatch",
+                "c p50 px",
+                "c p90 px",
+                "du px",
+                "dv px",
+                "c e/sigma",
+                "r p50 mm",
+                "r p90 mm",
+                "r bias mm",
+                "r e/sigma",
+            ],
+            rows,
+        )
+    )
     for run, reasons in ev["reasons"].items():
         if reasons:
             lines += ["", f"No pose ({run}):"]
@@ -309,8 +441,9 @@ def to_json(ev: dict) -> dict:
 
     doc = {k: v for k, v in ev.items() if k not in ("outcomes", "reasons")}
     doc["reasons"] = {run: dict(c) for run, c in ev["reasons"].items()}
-    doc["frames_detail"] = {run: [o.to_dict() for o in outs]
-                            for run, outs in ev["outcomes"].items()}  # fmt: skip
+    doc["frames_detail"] = {
+        run: [o.to_dict() for o in outs] for run, outs in ev["outcomes"].items()
+    }
     return clean(doc)
 
 
@@ -334,9 +467,15 @@ def main(argv: list[str] | None = None) -> int:
     docs = []
     for path in args.recordings:
         try:
-            ev = evaluate(path, tracking=args.tracking, camera_path=args.camera,
-                          catalog_path=args.catalog, bin_width_m=args.bin_m,
-                          oracle=not args.no_oracle, progress=not args.quiet)  # fmt: skip
+            ev = evaluate(
+                path,
+                tracking=args.tracking,
+                camera_path=args.camera,
+                catalog_path=args.catalog,
+                bin_width_m=args.bin_m,
+                oracle=not args.no_oracle,
+                progress=not args.quiet,
+            )
         except RecordingError as exc:
             print(f"bench/foreign.py: {exc}", file=sys.stderr)
             return 2

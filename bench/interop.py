@@ -68,8 +68,13 @@ def cycled(base: Path, out: Path, n: int) -> Path:
     with open_recording(base) as rec:
         frames = [rec.frame(i)[:2] for i in range(rec.n_frames)]
         with RecordingWriter(out, rec.camera, rec.catalog) as w:
-            for i in tqdm(range(n), desc=f"recording of {n} frames", unit="frame",
-                          file=sys.stderr, leave=False):  # fmt: skip
+            for i in tqdm(
+                range(n),
+                desc=f"recording of {n} frames",
+                unit="frame",
+                file=sys.stderr,
+                leave=False,
+            ):
                 gray, dist = frames[i % len(frames)]
                 w.append(gray, dist, i / 30.0)
     return out
@@ -87,27 +92,56 @@ def _rate(args: list[str], n: int, repeats: int) -> float:
 
 def file_table(lengths: list[int], repeats: int, tmp: Path) -> str:
     base = tmp / "base.h5"
-    assert tofpose(["simulate", "--scenario", "realistic", "--frames", "24",
-                    "--out", str(base), "--seed", "0"]) == 0  # fmt: skip
+    assert (
+        tofpose(
+            [
+                "simulate",
+                "--scenario",
+                "realistic",
+                "--frames",
+                "24",
+                "--out",
+                str(base),
+                "--seed",
+                "0",
+            ]
+        )
+        == 0
+    )
     short = cycled(base, tmp / "short.h5", 120)
     mcap, back = tmp / "short.mcap", tmp / "back.h5"
     rows = []
-    for label, extra in (("export, frames only", ["--no-estimate"]),
-                         ("export with the estimates", [])):  # fmt: skip
-        fps = _rate(["export", "mcap", str(short), "--out", str(mcap), "--force", *extra],
-                    120, repeats)  # fmt: skip
+    for label, extra in (
+        ("export, frames only", ["--no-estimate"]),
+        ("export with the estimates", []),
+    ):
+        fps = _rate(
+            ["export", "mcap", str(short), "--out", str(mcap), "--force", *extra], 120, repeats
+        )
         rows.append([label, "120", f"{fps:.0f}", f"{mcap.stat().st_size / 120 / 1024:.0f}", ""])
     fps = _rate(["import", "mcap", str(mcap), "--out", str(back), "--force"], 120, repeats)
     rows.append(["import", "120", f"{fps:.0f}", "", ""])
     for n in lengths:
         src = cycled(base, tmp / f"long{n}.h5", n)
         out = tmp / f"long{n}.mcap"
-        res = subprocess.run([sys.executable, "-c", PEAK_RSS, str(src), str(out)], check=True,
-                             capture_output=True, text=True, cwd=ROOT)  # fmt: skip
+        res = subprocess.run(
+            [sys.executable, "-c", PEAK_RSS, str(src), str(out)],
+            check=True,
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+        )
         dt_s, rss_kib = res.stdout.split()[-2:]
         dt, rss_mib = float(dt_s), int(rss_kib) / 1024
-        rows.append(["export, frames only (fresh process)", str(n), f"{n / dt:.0f}",
-                     f"{out.stat().st_size / n / 1024:.0f}", f"{rss_mib:.0f}"])  # fmt: skip
+        rows.append(
+            [
+                "export, frames only (fresh process)",
+                str(n),
+                f"{n / dt:.0f}",
+                f"{out.stat().st_size / n / 1024:.0f}",
+                f"{rss_mib:.0f}",
+            ]
+        )
         src.unlink()
         out.unlink()
     return table(["run", "frames", "frames/s", "MCAP KiB/frame", "peak RSS MiB"], rows)
@@ -135,8 +169,14 @@ class FoxgloveClient(threading.Thread):
                 msg = ws.recv(timeout=10)
                 if isinstance(msg, str) and json.loads(msg)["op"] == "advertise":
                     channels.update({c["id"]: c["topic"] for c in json.loads(msg)["channels"]})
-            ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-                {"id": cid, "channelId": cid} for cid in channels]}))  # fmt: skip
+            ws.send(
+                json.dumps(
+                    {
+                        "op": "subscribe",
+                        "subscriptions": [{"id": cid, "channelId": cid} for cid in channels],
+                    }
+                )
+            )
             gray = next(c for c, t in channels.items() if t == "/tof/gray")
             self.ready.set()
             while not self.stop.is_set():
@@ -161,9 +201,13 @@ def _foxglove_status(port: int) -> dict:
 
 def live_table(rate_hz: float, seconds: float, repeats: int) -> str:
     rows = []
-    cases = (("off", None), ("on, no client", "none"), ("on, a client reading", "read"),
-             ("on, a client reading 4 messages/s", "slow"),
-             ("on, a client that never reads", "stall"))  # fmt: skip
+    cases = (
+        ("off", None),
+        ("on, no client", "none"),
+        ("on, a client reading", "read"),
+        ("on, a client reading 4 messages/s", "slow"),
+        ("on, a client that never reads", "stall"),
+    )
     bar = tqdm(total=len(cases) * repeats, desc="live foxglove", unit="run", file=sys.stderr)
     for label, client in cases:
         runs = []
@@ -198,13 +242,26 @@ def live_table(rate_hz: float, seconds: float, repeats: int) -> str:
                 server.stop()
             bar.update()
         med = [statistics.median(r[i] for r in runs) for i in range(4)]
-        rows.append([label, f"{rate_hz:g}",
-                     *(f"{v:.1f}" if v == v else "-" for v in med[:3]),  # NaN -> "-"
-                     f"{med[3]:.2f}" if med[3] == med[3] else "-"])  # fmt: skip
+        rows.append(
+            [
+                label,
+                f"{rate_hz:g}",
+                *(f"{v:.1f}" if v == v else "-" for v in med[:3]),  # NaN -> "-"
+                f"{med[3]:.2f}" if med[3] == med[3] else "-",
+            ]
+        )
     bar.close()
-    return table(["Foxglove server", "camera Hz", "poses/s on /ws/live",
-                  "frames published/s", "gray images read/s", "their age s (median)"],
-                 rows)  # fmt: skip
+    return table(
+        [
+            "Foxglove server",
+            "camera Hz",
+            "poses/s on /ws/live",
+            "frames published/s",
+            "gray images read/s",
+            "their age s (median)",
+        ],
+        rows,
+    )
 
 
 def rerun_screenshot(out_png: Path, tmp: Path) -> None:
@@ -212,16 +269,33 @@ def rerun_screenshot(out_png: Path, tmp: Path) -> None:
     from playwright.sync_api import sync_playwright
 
     rec, mcap = tmp / "shot.h5", tmp / "shot.mcap"
-    assert tofpose(["simulate", "--scenario", "clutter", "--frames", "12", "--out",
-                    str(rec), "--seed", "1"]) == 0  # fmt: skip
+    assert (
+        tofpose(
+            [
+                "simulate",
+                "--scenario",
+                "clutter",
+                "--frames",
+                "12",
+                "--out",
+                str(rec),
+                "--seed",
+                "1",
+            ]
+        )
+        == 0
+    )
     assert tofpose(["export", "mcap", str(rec), "--out", str(mcap), "--force"]) == 0
     web, grpc = _free_port(), _free_port()
     rerun = Path(sys.executable).parent / "rerun"
     # its own session: ``rerun`` is a wrapper that starts the viewer binary as a child,
     # and both must go when we are done
-    proc = subprocess.Popen([str(rerun), "--serve-web", str(mcap), "--web-viewer-port",
-                             str(web), "--port", str(grpc)], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, start_new_session=True)  # fmt: skip
+    proc = subprocess.Popen(
+        [str(rerun), "--serve-web", str(mcap), "--web-viewer-port", str(web), "--port", str(grpc)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     try:
         time.sleep(5.0)
         args = [a for a in CHROMIUM_ARGS if a != "--disable-gpu"] + ["--ignore-gpu-blocklist"]

@@ -46,13 +46,19 @@ class Server:
     def __init__(self, rate_hz: float, scene: bool = False, env: dict | None = None) -> None:
         self.port = free_port()
         self.tmp = tempfile.TemporaryDirectory()
-        env = {**os.environ, "TOFPOSE_FRAME_RATE_HZ": str(rate_hz),
-               "TOFPOSE_DATA_DIR": self.tmp.name, **(env or {})}  # fmt: skip
+        env = {
+            **os.environ,
+            "TOFPOSE_FRAME_RATE_HZ": str(rate_hz),
+            "TOFPOSE_DATA_DIR": self.tmp.name,
+            **(env or {}),
+        }
         scene_args = ["--viser-port", "0"] if scene else ["--no-viser"]
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "tofpose.cli", "serve", "--port", str(self.port), *scene_args],
-            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-        )  # fmt: skip
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
             try:
@@ -110,14 +116,21 @@ async def _run(url: str, n_clients: int, seconds: float):
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = [
-    "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
-    "--use-gl=swiftshader", "--enable-unsafe-swiftshader",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--use-gl=swiftshader",
+    "--enable-unsafe-swiftshader",
     # five dashboards = five visible pages: without these, headless chromium treats all
     # but one window as occluded and stops their animation frames (as a hidden tab does)
-    "--disable-backgrounding-occluded-windows", "--disable-renderer-backgrounding",
+    "--disable-backgrounding-occluded-windows",
+    "--disable-renderer-backgrounding",
     "--disable-background-timer-throttling",
-]  # fmt: skip
+]
 DRAWN = "() => window.__tofposeFramesDrawn || 0"
 
 
@@ -152,8 +165,9 @@ def dashboards(rate: float, n_pages: int, seconds: float, scene: bool) -> tuple[
 
 def dashboard_table(rates, counts, seconds, repeats, scene: bool) -> str:
     rows = []
-    bar = tqdm(total=len(rates) * len(counts) * repeats, desc="dashboards", unit="run",
-               file=sys.stderr)  # fmt: skip
+    bar = tqdm(
+        total=len(rates) * len(counts) * repeats, desc="dashboards", unit="run", file=sys.stderr
+    )
     for rate in rates:
         for n in counts:
             runs = []
@@ -162,11 +176,28 @@ def dashboard_table(rates, counts, seconds, repeats, scene: bool) -> str:
                 runs.append((np.median(fps), np.min(fps), cpu))
                 bar.update()
             a = np.median(np.array(runs), axis=0)
-            rows.append([f"{rate:g}", str(n), "on" if scene else "off", f"{a[0]:.1f}",
-                         f"{a[1]:.1f}", f"{a[2]:.0f}"])  # fmt: skip
+            rows.append(
+                [
+                    f"{rate:g}",
+                    str(n),
+                    "on" if scene else "off",
+                    f"{a[0]:.1f}",
+                    f"{a[1]:.1f}",
+                    f"{a[2]:.0f}",
+                ]
+            )
     bar.close()
-    return table(["camera Hz", "dashboards", "3-D scene", "frames drawn/s per page (median)",
-                  "slowest page", "server CPU % of one core"], rows)  # fmt: skip
+    return table(
+        [
+            "camera Hz",
+            "dashboards",
+            "3-D scene",
+            "frames drawn/s per page (median)",
+            "slowest page",
+            "server CPU % of one core",
+        ],
+        rows,
+    )
 
 
 def main() -> None:
@@ -198,21 +229,44 @@ def main() -> None:
                     res = asyncio.run(_run(url, n, args.seconds))
                     rates = [r for r, _ in res]
                     lat = np.concatenate([np.asarray(lt) for _, lt in res])
-                    per_run.append((np.median(rates), np.min(rates), np.median(lat),
-                                    np.percentile(lat, 95)))  # fmt: skip
+                    per_run.append(
+                        (np.median(rates), np.min(rates), np.median(lat), np.percentile(lat, 95))
+                    )
                     bar.update()
                 a = np.median(np.array(per_run), axis=0)
-                rows.append([f"{rate:g}", str(n), f"{a[0]:.1f}", f"{a[1]:.1f}",
-                             f"{a[2]:.1f}", f"{a[3]:.1f}"])  # fmt: skip
+                rows.append(
+                    [
+                        f"{rate:g}",
+                        str(n),
+                        f"{a[0]:.1f}",
+                        f"{a[1]:.1f}",
+                        f"{a[2]:.1f}",
+                        f"{a[3]:.1f}",
+                    ]
+                )
         finally:
             server.stop()
     bar.close()
-    print(table(["camera Hz", "clients", "msg/s per client (median)", "slowest client msg/s",
-                 "latency median ms", "latency p95 ms"], rows))  # fmt: skip
+    print(
+        table(
+            [
+                "camera Hz",
+                "clients",
+                "msg/s per client (median)",
+                "slowest client msg/s",
+                "latency median ms",
+                "latency p95 ms",
+            ],
+            rows,
+        )
+    )
     if args.dashboards:
         print()
-        print(dashboard_table(args.rates, args.dashboards, args.seconds, args.repeats,
-                              args.with_scene))  # fmt: skip
+        print(
+            dashboard_table(
+                args.rates, args.dashboards, args.seconds, args.repeats, args.with_scene
+            )
+        )
 
 
 if __name__ == "__main__":

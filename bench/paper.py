@@ -35,22 +35,34 @@ from tofpose.sim.turntable import Turntable  # noqa: E402
 AXES = ["X (mm)", "Y (mm)", "Z (mm)", "pitch (deg)", "yaw (deg)", "roll (deg)"]
 # The paper's tables: rows average, maximum, minimum, fluctuation range.
 PAPER = {
-    "697": [[2.193, -10.457, 697.604, -0.382, -2.653, -2.528],
-            [2.399, -10.315, 699.269, -0.056, -1.406, -2.087],
-            [1.515, -11.323, 693.924, -1.143, -2.851, -2.613],
-            [0.884, 1.008, 5.345, 1.087, 1.455, 0.526]],
-    "697-removed": [[2.193, -10.457, 697.606, -0.383, -2.654, -2.528],
-                    [2.399, -10.315, 699.269, -0.056, -2.456, -2.454],
-                    [2.021, -10.638, 695.158, -0.646, -2.851, -2.613],
-                    [0.378, 0.323, 4.111, 0.590, 0.395, 0.159]],
-    "5712": [[5.097, -2.381, 5712.362, 3.823, 1.324, -2.053],
-             [5.192, -2.231, 5713.362, 4.101, 1.473, -1.998],
-             [5.007, -2.552, 5711.246, 3.583, 1.179, -2.114],
-             [0.185, 0.321, 2.116, 0.518, 0.294, 0.116]],
-}  # fmt: skip
+    "697": [
+        [2.193, -10.457, 697.604, -0.382, -2.653, -2.528],
+        [2.399, -10.315, 699.269, -0.056, -1.406, -2.087],
+        [1.515, -11.323, 693.924, -1.143, -2.851, -2.613],
+        [0.884, 1.008, 5.345, 1.087, 1.455, 0.526],
+    ],
+    "697-removed": [
+        [2.193, -10.457, 697.606, -0.383, -2.654, -2.528],
+        [2.399, -10.315, 699.269, -0.056, -2.456, -2.454],
+        [2.021, -10.638, 695.158, -0.646, -2.851, -2.613],
+        [0.378, 0.323, 4.111, 0.590, 0.395, 0.159],
+    ],
+    "5712": [
+        [5.097, -2.381, 5712.362, 3.823, 1.324, -2.053],
+        [5.192, -2.231, 5713.362, 4.101, 1.473, -1.998],
+        [5.007, -2.552, 5711.246, 3.583, 1.179, -2.114],
+        [0.185, 0.321, 2.116, 0.518, 0.294, 0.116],
+    ],
+}
 # Figs. 11-13: (axis, commanded deg, paper's |measured - true| deg)
-STEPS = [("roll", 20.3, 0.05), ("roll", 36.0, 0.014), ("pitch", 3.9, 0.057),
-         ("pitch", 3.0, 0.001), ("yaw", 2.67, 0.02), ("yaw", -0.954, 0.027)]  # fmt: skip
+STEPS = [
+    ("roll", 20.3, 0.05),
+    ("roll", 36.0, 0.014),
+    ("pitch", 3.9, 0.057),
+    ("pitch", 3.0, 0.001),
+    ("yaw", 2.67, 0.02),
+    ("yaw", -0.954, 0.027),
+]
 AXIS_INDEX = {"pitch": 0, "yaw": 1, "roll": 2}
 ROBUST_Z = 5.0
 
@@ -75,8 +87,7 @@ def singular_mask(P: np.ndarray) -> np.ndarray:
 
 
 def four_rows(P: np.ndarray) -> list[list[float]]:
-    return [np.nanmean(P, 0), np.nanmax(P, 0), np.nanmin(P, 0),
-            np.nanmax(P, 0) - np.nanmin(P, 0)]  # fmt: skip
+    return [np.nanmean(P, 0), np.nanmax(P, 0), np.nanmin(P, 0), np.nanmax(P, 0) - np.nanmin(P, 0)]
 
 
 def stability(name: str, n: int):
@@ -92,10 +103,17 @@ def stability(name: str, n: int):
 
 
 def _bench(distance_mm: float, aim: tuple[float, float], seed: int) -> SimulatedBench:
-    geo = LabGeometry(target_distance_mm=distance_mm, target_offset_mm=(-aim[0], aim[1]),
-                      mount_error=paper_mount_error())  # fmt: skip
-    return SimulatedBench(scene=TargetScene(paper_target()), geometry=geo,
-                          turntable=Turntable(seed=seed + 1), seed=seed)  # fmt: skip
+    geo = LabGeometry(
+        target_distance_mm=distance_mm,
+        target_offset_mm=(-aim[0], aim[1]),
+        mount_error=paper_mount_error(),
+    )
+    return SimulatedBench(
+        scene=TargetScene(paper_target()),
+        geometry=geo,
+        turntable=Turntable(seed=seed + 1),
+        seed=seed,
+    )
 
 
 def _dwell(bench: SimulatedBench, pipe: PosePipeline, t0: float, n: int):
@@ -124,8 +142,7 @@ def steps(n: int):
         i = AXIS_INDEX[axis]
         d_meas = float(np.mean(m1[:, i]) - np.mean(m0[:, i]))
         d_true = float(np.mean(g1[:, i]) - np.mean(g0[:, i]))
-        out.append((axis, value, d_meas, d_true, float(np.ptp(m1[:, i])), paper_diff,
-                    m1[:, i]))  # fmt: skip
+        out.append((axis, value, d_meas, d_true, float(np.ptp(m1[:, i])), paper_diff, m1[:, i]))
     return out
 
 
@@ -168,8 +185,13 @@ def plot_steps_and_range(step_data, range_data, path: Path) -> None:
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4))
     for axis, value, d_meas, d_true, _, _, series in step_data:
-        axes[0].plot(series - (series.mean() - d_meas) - d_true, ".-", ms=3, lw=0.6,
-                     label=f"{axis} {value:g} deg")  # fmt: skip
+        axes[0].plot(
+            series - (series.mean() - d_meas) - d_true,
+            ".-",
+            ms=3,
+            lw=0.6,
+            label=f"{axis} {value:g} deg",
+        )
     axes[0].axhline(0.15, color="r", lw=0.8, ls="--")
     axes[0].axhline(-0.15, color="r", lw=0.8, ls="--", label="+-0.15 deg requirement")
     axes[0].set_title("attitude steps: measured change - true change, per frame")
@@ -191,20 +213,24 @@ def plot_steps_and_range(step_data, range_data, path: Path) -> None:
 
 
 def markdown(stab, step_data, range_data, imgs, n_stab: int) -> str:
-    L = ["## Reproducing the paper", "",
-         f"Simulated conditions: EPC660-like camera (320 x 240, f = 325 px), 6 MHz modulation, "
-         f"auto exposure, 1000 lux ambient, a 0.3 deg / ~2 mm unknown camera-mount error; "
-         f"{n_stab} frames per stability run at 30 Hz ({n_stab / 30:.0f} s; the paper "
-         "recorded ~6000 s). Singular points: frames with any axis more than "
-         f"{ROBUST_Z:g} robust sigmas (1.4826 MAD) from the median (the paper does not state "
-         "its rule). Attitudes relative to the facing reference. The paper's absolute values "
-         "(averages) depend on its own target placement, so compare the fluctuation ranges.",
-         ""]  # fmt: skip
+    L = [
+        "## Reproducing the paper",
+        "",
+        f"Simulated conditions: EPC660-like camera (320 x 240, f = 325 px), 6 MHz modulation, "
+        f"auto exposure, 1000 lux ambient, a 0.3 deg / ~2 mm unknown camera-mount error; "
+        f"{n_stab} frames per stability run at 30 Hz ({n_stab / 30:.0f} s; the paper "
+        "recorded ~6000 s). Singular points: frames with any axis more than "
+        f"{ROBUST_Z:g} robust sigmas (1.4826 MAD) from the median (the paper does not state "
+        "its rule). Attitudes relative to the facing reference. The paper's absolute values "
+        "(averages) depend on its own target placement, so compare the fluctuation ranges.",
+        "",
+    ]
     for name, key, pkey in (("stability-697", "697", "697"), ("stability-5712", "5712", "5712")):
         P, keep, _ = stab[name]
-        for label, mask, pk in (("all frames", np.isfinite(P).all(1), pkey),
-                                ("singular points removed", keep,
-                                 "697-removed" if key == "697" else None)):  # fmt: skip
+        for label, mask, pk in (
+            ("all frames", np.isfinite(P).all(1), pkey),
+            ("singular points removed", keep, "697-removed" if key == "697" else None),
+        ):
             ours = four_rows(P[mask])
             rows = []
             names = ["average", "maximum", "minimum", "fluctuation range"]
@@ -214,30 +240,70 @@ def markdown(stab, step_data, range_data, imgs, n_stab: int) -> str:
                 if pk is not None:
                     rows.append([f"{rn} (paper)"] + [fmt(v, 3) for v in PAPER[pk][i]])
             n_ok = int(mask.sum())
-            L += [f"### Pose at {key} mm, {label} ({n_ok} of {len(P)} frames)", "",
-                  table(["", *AXES], rows), ""]  # fmt: skip
-    L += [f"![stability time series]({imgs[0]})", "", "### Attitude steps (Figs. 11-13)", "",
-          "Turntable step at 2 m; change of the measured target attitude (mean of 30 frames "
-          "after settling minus before) against the lab's truth (encoders + nominal mount). "
-          "A camera rotation by +theta turns the target by about -theta in the camera frame.",
-          ""]  # fmt: skip
+            L += [
+                f"### Pose at {key} mm, {label} ({n_ok} of {len(P)} frames)",
+                "",
+                table(["", *AXES], rows),
+                "",
+            ]
+    L += [
+        f"![stability time series]({imgs[0]})",
+        "",
+        "### Attitude steps (Figs. 11-13)",
+        "",
+        "Turntable step at 2 m; change of the measured target attitude (mean of 30 frames "
+        "after settling minus before) against the lab's truth (encoders + nominal mount). "
+        "A camera rotation by +theta turns the target by about -theta in the camera frame.",
+        "",
+    ]
     rows = []
     for axis, value, d_meas, d_true, spread, paper_diff, _ in step_data:
         diff = abs(d_meas - d_true)
-        rows.append([axis, f"{value:g}", f"{d_meas:.3f}", f"{d_true:.3f}", f"{diff:.3f}",
-                     f"{spread:.3f}", f"{paper_diff:.3f}"])  # fmt: skip
-    L += [table(["axis", "commanded deg", "measured change deg", "true change deg",
-                 "abs difference deg", "spread after deg", "paper's difference deg"], rows),
-          ""]  # fmt: skip
-    L += ["### Ground truth over range (Fig. 14)", "",
-          "Camera moved on the rail; mean and std over 30 frames of measured - lab truth. "
-          "Requirements (paper): 6 mm in x/y, 28.3 mm in z.", ""]  # fmt: skip
+        rows.append(
+            [
+                axis,
+                f"{value:g}",
+                f"{d_meas:.3f}",
+                f"{d_true:.3f}",
+                f"{diff:.3f}",
+                f"{spread:.3f}",
+                f"{paper_diff:.3f}",
+            ]
+        )
+    L += [
+        table(
+            [
+                "axis",
+                "commanded deg",
+                "measured change deg",
+                "true change deg",
+                "abs difference deg",
+                "spread after deg",
+                "paper's difference deg",
+            ],
+            rows,
+        ),
+        "",
+    ]
+    L += [
+        "### Ground truth over range (Fig. 14)",
+        "",
+        "Camera moved on the rail; mean and std over 30 frames of measured - lab truth. "
+        "Requirements (paper): 6 mm in x/y, 28.3 mm in z.",
+        "",
+    ]
     rows = []
     for z, okr, mean, sd in range_data:
-        rows.append([f"{z:g}", f"{100 * okr:.0f}%"]
-                    + [f"{fmt(m)} +- {fmt(s)}" for m, s in zip(mean, sd, strict=True)])  # fmt: skip
-    L += [table(["Z mm", "ok", "x error mm", "y error mm", "z error mm"], rows), "",
-          f"![steps and range]({imgs[1]})", ""]  # fmt: skip
+        rows.append(
+            [f"{z:g}", f"{100 * okr:.0f}%"]
+            + [f"{fmt(m)} +- {fmt(s)}" for m, s in zip(mean, sd, strict=True)]
+        )
+    L += [
+        table(["Z mm", "ok", "x error mm", "y error mm", "z error mm"], rows),
+        "",
+        f"![steps and range]({imgs[1]})",
+        "",
+    ]
     return "\n".join(L)
 
 

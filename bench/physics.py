@@ -86,8 +86,11 @@ def plot(out, path: Path) -> None:
         axes[0].plot(RANGES_M, [x["success_pct"] for x in s], "o-", label=family)
         axes[1].plot(RANGES_M, [x["beyond_3sigma_pct"] for x in s], "o-", label=family)
         axes[2].plot(RANGES_M, [x["median_attitude_deg"] for x in s], "o-", label=family)
-    for ax, yl in zip(axes, ("success %", "ok poses beyond 3 sigma %",
-                             "median attitude error of successes (deg)"), strict=True):  # fmt: skip
+    for ax, yl in zip(
+        axes,
+        ("success %", "ok poses beyond 3 sigma %", "median attitude error of successes (deg)"),
+        strict=True,
+    ):
         ax.set_xlabel("range (m)")
         ax.set_ylabel(yl)
         ax.grid(alpha=0.3)
@@ -135,20 +138,35 @@ def markdown(out, img: str, n: int) -> str:
         for r in RANGES_M:
             s, ranges = out[(family, r)]
             bias = {d: float(np.median(v)) if v else math.nan for d, v in ranges.items()}
-            rows.append([
-                family, f"{r:g} m", str(s["frames"]), _num(s["success_pct"], 0), str(s["wrong"]),
-                str(s["confident_wrong"]), str(s["no_pose"]), _num(s["beyond_3sigma_pct"], 0),
-                _num(s["nees_over_6"]), _num(s["median_attitude_deg"], 3),
-                _num(s["median_position_mm"], 1), _num(bias.get(35, math.nan), 1),
-                _num(bias.get(80, math.nan), 1), _num(s["scale_excess_px"], 3),
-            ])  # fmt: skip
+            rows.append(
+                [
+                    family,
+                    f"{r:g} m",
+                    str(s["frames"]),
+                    _num(s["success_pct"], 0),
+                    str(s["wrong"]),
+                    str(s["confident_wrong"]),
+                    str(s["no_pose"]),
+                    _num(s["beyond_3sigma_pct"], 0),
+                    _num(s["nees_over_6"]),
+                    _num(s["median_attitude_deg"], 3),
+                    _num(s["median_position_mm"], 1),
+                    _num(bias.get(35, math.nan), 1),
+                    _num(bias.get(80, math.nan), 1),
+                    _num(s["scale_excess_px"], 3),
+                ]
+            )
     worst = max(out.values(), key=lambda v: v[0]["confident_wrong"])[0]["confident_wrong"]
-    beyond = max(v[0]["beyond_3sigma_pct"] for v in out.values()
-                 if math.isfinite(v[0]["beyond_3sigma_pct"]))  # fmt: skip
-    scale = max((v[0]["scale_excess_px"] for v in out.values()
-                 if math.isfinite(v[0]["scale_excess_px"])), default=math.nan)  # fmt: skip
+    beyond = max(
+        v[0]["beyond_3sigma_pct"] for v in out.values() if math.isfinite(v[0]["beyond_3sigma_pct"])
+    )
+    scale = max(
+        (v[0]["scale_excess_px"] for v in out.values() if math.isfinite(v[0]["scale_excess_px"])),
+        default=math.nan,
+    )
     lines = [
-        "## Physics robustness study", "",
+        "## Physics robustness study",
+        "",
         f"`bench/physics.py`: {n} frames per family and range, each with its own draw of the "
         "physics (domain randomisation) and a random pose (attitude up to 20 deg per axis, up "
         "to half the half field of view off axis), fresh acquisition; judged as "
@@ -166,17 +184,37 @@ def markdown(out, img: str, n: int) -> str:
         "reflectors' range error, by diameter. Scale error: the matched centroids' "
         "common-mode (image-scale) error in px of the pattern's rms radius, beyond what "
         "their own sigmas give (`common_scale_excess_px`; the prior "
-        "`common_centroid_bias_px` must cover it).", "",
-        table(["family", "range", "frames", "success %", "wrong ok", "conf. wrong",
-               "no pose", "ok > 3 sigma %", "NEES/6", "med att deg", "med pos mm",
-               "35 mm range bias", "80 mm range bias", "scale error px"], rows),  # fmt: skip
+        "`common_centroid_bias_px` must cover it).",
+        "",
+        table(
+            [
+                "family",
+                "range",
+                "frames",
+                "success %",
+                "wrong ok",
+                "conf. wrong",
+                "no pose",
+                "ok > 3 sigma %",
+                "NEES/6",
+                "med att deg",
+                "med pos mm",
+                "35 mm range bias",
+                "80 mm range bias",
+                "scale error px",
+            ],
+            rows,
+        ),
         "",
         f"Largest count of confidently wrong poses in a cell: {worst}; largest share of ok "
         f"poses beyond 3 sigma: {beyond:.0f} %; largest common-mode centroid error: "
-        f"{scale:.3f} px.", "",
-        f"![physics robustness]({img})", "",
-        f"![one frame per family]({examples_path(img).as_posix()})", "",
-    ]  # fmt: skip
+        f"{scale:.3f} px.",
+        "",
+        f"![physics robustness]({img})",
+        "",
+        f"![one frame per family]({examples_path(img).as_posix()})",
+        "",
+    ]
     return "\n".join(lines)
 
 

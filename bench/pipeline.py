@@ -45,10 +45,12 @@ TRACKING = PipelineConfig(tracking=TrackingConfig(enabled=True))
 #: errors they remove fail tracking's consistency check at 0.7 m); a correction's values
 #: do not change the work per frame, and a fitted one is in ``bench/realistic.py``
 CORRECTION = RangeCorrection(
-    SensorModel().unambiguous_range_mm, offset_mm=0.3, harmonics_mm=((0.2, -0.15), (0.05, 0.03)),
+    SensorModel().unambiguous_range_mm,
+    offset_mm=0.3,
+    harmonics_mm=((0.2, -0.15), (0.05, 0.03)),
     amplitude_mm_per_decade=0.1,
     pixel_offsets_mm=np.random.default_rng(7).normal(0.0, 0.2, CameraModel().shape),
-)  # fmt: skip
+)
 
 
 def call_profile(pipe: PosePipeline, frames, mode: str) -> tuple[list[int], list[float]]:
@@ -107,14 +109,21 @@ def run(n_frames: int, repeats: int):
     streams = []
     for z, off in CASES:
         T = RigidTransform(rotation_from_euler_deg(2, -3, 10) @ R_FACING, np.array([*off, z]))
-        frames = [render_frame(cam, TargetScene(), T, SensorModel(), rng)
-                  for _ in range(n_frames)]  # fmt: skip
+        frames = [render_frame(cam, TargetScene(), T, SensorModel(), rng) for _ in range(n_frames)]
         streams.append((z, T, frames))
-    rows = [{
-        "range": z, "acq_ok": [], "stages": {s: [] for s in STAGES}, "tracking": [],
-        "tracking_corrected": [], "tracking_all": [], "opencv": [],
-        "profile": {"acquisition": ([], []), "tracking": ([], [])},
-    } for z, _, _ in streams]  # fmt: skip
+    rows = [
+        {
+            "range": z,
+            "acq_ok": [],
+            "stages": {s: [] for s in STAGES},
+            "tracking": [],
+            "tracking_corrected": [],
+            "tracking_all": [],
+            "opencv": [],
+            "profile": {"acquisition": ([], []), "tracking": ([], [])},
+        }
+        for z, _, _ in streams
+    ]
     for _ in range(repeats):
         for row, (_, T, frames) in zip(rows, streams, strict=True):
             pipe = PosePipeline(cam, cat)
@@ -148,8 +157,9 @@ def run(n_frames: int, repeats: int):
         row["tracked"] = len(row["tracking"]) / len(row["tracking_all"])
         profile = row.pop("profile")
         row["calls"] = tuple(float(np.median(profile[m][0])) for m in ("acquisition", "tracking"))
-        row["compiled"] = tuple(float(np.median(profile[m][1]))
-                                for m in ("acquisition", "tracking"))  # fmt: skip
+        row["compiled"] = tuple(
+            float(np.median(profile[m][1])) for m in ("acquisition", "tracking")
+        )
     return rows
 
 
@@ -160,20 +170,39 @@ def totals_table(rows) -> str:
         trk = med_p95(r["tracking"]) if r["tracking"] else (np.nan, np.nan)
         corr = med_p95(r["tracking_corrected"]) if r["tracking_corrected"] else (np.nan, np.nan)
         cv = float(np.median(r["opencv"]))
-        body.append([
-            f"{r['range'] / 1000:.1f} m", f"{r['ok']:.0%}",
-            f"{acq[0]:.2f} / {acq[1]:.2f}", f"{trk[0]:.2f} / {trk[1]:.2f}",
-            f"{corr[0]:.2f} / {corr[1]:.2f}",
-            f"{r['tracked']:.0%}", f"{np.median(r['tracking_all']):.2f}",
-            f"{r['calls'][0]:.0f} / {r['calls'][1]:.0f}",
-            f"{r['compiled'][0]:.2f} / {r['compiled'][1]:.2f}", f"{cv:.2f}",
-            f"{acq[0] / cv:.1f}", f"{trk[0] / cv:.1f}",
-        ])  # fmt: skip
-    return table(["range", "ok", "acquisition ms", "tracking ms",
-                  "tracking ms, range-corrected", "frames tracked",
-                  "stream ms (both)", "Python calls / frame (acq / track)",
-                  "ms in compiled code (acq / track)", "OpenCV ms",
-                  "acquisition / OpenCV", "tracking / OpenCV"], body)  # fmt: skip
+        body.append(
+            [
+                f"{r['range'] / 1000:.1f} m",
+                f"{r['ok']:.0%}",
+                f"{acq[0]:.2f} / {acq[1]:.2f}",
+                f"{trk[0]:.2f} / {trk[1]:.2f}",
+                f"{corr[0]:.2f} / {corr[1]:.2f}",
+                f"{r['tracked']:.0%}",
+                f"{np.median(r['tracking_all']):.2f}",
+                f"{r['calls'][0]:.0f} / {r['calls'][1]:.0f}",
+                f"{r['compiled'][0]:.2f} / {r['compiled'][1]:.2f}",
+                f"{cv:.2f}",
+                f"{acq[0] / cv:.1f}",
+                f"{trk[0] / cv:.1f}",
+            ]
+        )
+    return table(
+        [
+            "range",
+            "ok",
+            "acquisition ms",
+            "tracking ms",
+            "tracking ms, range-corrected",
+            "frames tracked",
+            "stream ms (both)",
+            "Python calls / frame (acq / track)",
+            "ms in compiled code (acq / track)",
+            "OpenCV ms",
+            "acquisition / OpenCV",
+            "tracking / OpenCV",
+        ],
+        body,
+    )
 
 
 def stages_table(rows) -> str:
@@ -193,15 +222,17 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=6)
     args = ap.parse_args()
     rows = run(args.frames, args.repeats)
-    print(f"ms per frame (median / p95), one core, {args.frames} frames x {args.repeats} per "
-          "range, every range timed once per repeat (a slow spell of the machine is shared "
-          "by all ranges); tracking: the frames the tracking pipeline measured in tracking mode; "
-          "range-corrected: the tracking pipeline of a camera with a calibrated range "
-          "correction (every term of the model); "
-          "stream: every frame of the tracking pipeline (acquisitions included); OpenCV: "
-          "SimpleBlobDetector + solvePnP on the same frames, correspondences free; compiled "
-          "code: time inside the kernels and OpenCV's and SciPy's C functions, median over "
-          "profiled passes, one per repeat (the rest of a frame is Python and NumPy)")  # fmt: skip
+    print(
+        f"ms per frame (median / p95), one core, {args.frames} frames x {args.repeats} per "
+        "range, every range timed once per repeat (a slow spell of the machine is shared "
+        "by all ranges); tracking: the frames the tracking pipeline measured in tracking mode; "
+        "range-corrected: the tracking pipeline of a camera with a calibrated range "
+        "correction (every term of the model); "
+        "stream: every frame of the tracking pipeline (acquisitions included); OpenCV: "
+        "SimpleBlobDetector + solvePnP on the same frames, correspondences free; compiled "
+        "code: time inside the kernels and OpenCV's and SciPy's C functions, median over "
+        "profiled passes, one per repeat (the rest of a frame is Python and NumPy)"
+    )
     print(totals_table(rows))
     print()
     print("acquisition per stage, ms (median / p95):")

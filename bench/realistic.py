@@ -61,8 +61,9 @@ def calibration_samples(cam: CameraModel, errors: SystematicErrors, seed: int = 
         for z in np.linspace(700.0, 8000.0, 25)
         for p, y, ox, oy in ((0, 0, 0, 0), (4, -5, 150, -80), (-3, 6, -200, 60))
     ]
-    return calibration_frames(cam, paper_target(), errors, poses, np.random.default_rng(seed),
-                              time_s=WARM_S)  # fmt: skip
+    return calibration_frames(
+        cam, paper_target(), errors, poses, np.random.default_rng(seed), time_s=WARM_S
+    )
 
 
 def _simple_detected(f, T, cam, cat, detector) -> int:
@@ -97,8 +98,9 @@ def _pipeline(cam, cat, corr, covariance_scale=None) -> PosePipeline:
     """The ideal sensor is known to have no range bias (``"ideal"``); the others get the
     default prior for an uncalibrated or a calibrated camera."""
     if isinstance(corr, str):
-        return PosePipeline(cam, cat, PipelineConfig(range_bias_sigma_mm=0.0),
-                            covariance_scale=covariance_scale)  # fmt: skip
+        return PosePipeline(
+            cam, cat, PipelineConfig(range_bias_sigma_mm=0.0), covariance_scale=covariance_scale
+        )
     return PosePipeline(cam, cat, range_correction=corr, covariance_scale=covariance_scale)
 
 
@@ -127,8 +129,19 @@ def run(n_frames: int = 12, seed: int = 0, long_frames: int = 90, cal_frames: in
                 simple = _simple_detected(f, T, cam, cat, detector)
                 if res.ok:
                     pe, ae = pose_errors(res.R, res.t_mm, T)
-                    rows.append((name, r, True, pe, ae, res.n_matched, _in_view(f),
-                                 _wrong(res, T, r), simple))  # fmt: skip
+                    rows.append(
+                        (
+                            name,
+                            r,
+                            True,
+                            pe,
+                            ae,
+                            res.n_matched,
+                            _in_view(f),
+                            _wrong(res, T, r),
+                            simple,
+                        )
+                    )
                 else:
                     rows.append((name, r, False, np.nan, np.nan, 0, _in_view(f), False, simple))
     return {
@@ -204,8 +217,9 @@ def run_long_range(fit, n_frames: int, seed: int = 1, cal_frames: int = 60) -> l
         "realistic, calibrated": (SensorModel(systematic=errors), fit.correction),
     }
     rows = []
-    for name, (sensor, corr) in tqdm(sensors.items(), desc="consistency", unit="sensor",
-                                     file=sys.stderr):  # fmt: skip
+    for name, (sensor, corr) in tqdm(
+        sensors.items(), desc="consistency", unit="sensor", file=sys.stderr
+    ):
         scale = covariance_calibration(sensor, corr, cal_frames).scale
         pipe = _pipeline(cam, cat, corr, scale)
         for r in CONSISTENCY_RANGES_M:
@@ -215,8 +229,18 @@ def run_long_range(fit, n_frames: int, seed: int = 1, cal_frames: int = 60) -> l
                     continue
                 factor = scale.factor_at(float(np.linalg.norm(res.t_mm)))
                 model = replace(res, covariance=res.covariance / factor)
-                rows.append((name, r, True, _wrong(model, T, r), nees(model, T),
-                             res.n_matched, nees(res, T), _wrong(res, T, r)))  # fmt: skip
+                rows.append(
+                    (
+                        name,
+                        r,
+                        True,
+                        _wrong(model, T, r),
+                        nees(model, T),
+                        res.n_matched,
+                        nees(res, T),
+                        _wrong(res, T, r),
+                    )
+                )
     return rows
 
 
@@ -229,8 +253,12 @@ def consistency(ns: np.ndarray) -> tuple[float, float, float, str]:
         return np.nan, np.nan, np.nan, "-"
     lo, hi = chi2.ppf([0.025, 0.975], 6 * k) / k
     mean = float(np.mean(ns))
-    return mean, lo, hi, ("in band" if lo <= mean <= hi else
-                          "too wide" if mean < lo else "too narrow")  # fmt: skip
+    return (
+        mean,
+        lo,
+        hi,
+        ("in band" if lo <= mean <= hi else "too wide" if mean < lo else "too narrow"),
+    )
 
 
 def _share(ns: np.ndarray) -> str:
@@ -247,16 +275,43 @@ def long_range_table(rows) -> str:
             ns, nc = np.array([x[4] for x in ok]), np.array([x[6] for x in ok])
             mean, lo, hi, verdict = consistency(ns)
             mean_c, _, _, verdict_c = consistency(nc)
-            out.append([f"{r:g}", name, str(len(sel)), str(len(sel) - len(ok)),
-                        f"{sum(x[3] for x in ok)} / {sum(x[7] for x in ok)}",
-                        f"{np.median([x[5] for x in ok]):.0f}" if ok else "-",
-                        f"{lo:.1f}-{hi:.1f}", f"{mean:.1f}", verdict, f"{np.sqrt(mean / 6):.2f}",
-                        _share(ns), f"{mean_c:.1f}", verdict_c, _share(nc)])  # fmt: skip
-    return table(["range m", "sensor", "frames", "refused", "wrong ok poses (model / cal.)",
-                  "matched (median)", "95 % band", "mean NEES, model", "model covariance",
-                  "errors / reported sigmas, model", "NEES <= 12.6, model",
-                  "mean NEES, calibrated", "calibrated covariance",
-                  "NEES <= 12.6, calibrated"], out)  # fmt: skip
+            out.append(
+                [
+                    f"{r:g}",
+                    name,
+                    str(len(sel)),
+                    str(len(sel) - len(ok)),
+                    f"{sum(x[3] for x in ok)} / {sum(x[7] for x in ok)}",
+                    f"{np.median([x[5] for x in ok]):.0f}" if ok else "-",
+                    f"{lo:.1f}-{hi:.1f}",
+                    f"{mean:.1f}",
+                    verdict,
+                    f"{np.sqrt(mean / 6):.2f}",
+                    _share(ns),
+                    f"{mean_c:.1f}",
+                    verdict_c,
+                    _share(nc),
+                ]
+            )
+    return table(
+        [
+            "range m",
+            "sensor",
+            "frames",
+            "refused",
+            "wrong ok poses (model / cal.)",
+            "matched (median)",
+            "95 % band",
+            "mean NEES, model",
+            "model covariance",
+            "errors / reported sigmas, model",
+            "NEES <= 12.6, model",
+            "mean NEES, calibrated",
+            "calibrated covariance",
+            "NEES <= 12.6, calibrated",
+        ],
+        out,
+    )
 
 
 def summarise(data) -> dict:
@@ -282,10 +337,12 @@ def plot(data, path: Path) -> None:
     s = summarise(data)
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for name, style in zip(SENSORS, ("k-", "o--", "s-"), strict=True):
-        axes[0].semilogy(RANGES_M, [s[(name, r)]["pos"]["median"] for r in RANGES_M], style,
-                         label=name, ms=4)  # fmt: skip
-        axes[1].semilogy(RANGES_M, [s[(name, r)]["att"]["median"] for r in RANGES_M], style,
-                         label=name, ms=4)  # fmt: skip
+        axes[0].semilogy(
+            RANGES_M, [s[(name, r)]["pos"]["median"] for r in RANGES_M], style, label=name, ms=4
+        )
+        axes[1].semilogy(
+            RANGES_M, [s[(name, r)]["att"]["median"] for r in RANGES_M], style, label=name, ms=4
+        )
     axes[0].set_ylabel("median position error (mm)")
     axes[1].set_ylabel("median attitude error (deg)")
     for ax in axes:
@@ -302,44 +359,74 @@ def markdown(data, img: str, n_frames: int) -> str:
     for r in RANGES_M:
         for name in SENSORS:
             x = s[(name, r)]
-            rows.append([f"{r:g}", name, f"{x['ok']:.0%}", fmt(x["pos"]["median"]),
-                         fmt(x["pos"]["p95"]), fmt(x["att"]["median"], 3),
-                         fmt(x["att"]["p95"], 3),
-                         f"{x['matched']:.0f} / {x['simple']:.0f} / {x['in_view']:.0f}",
-                         f"{x['wrong']} / {x['n']}"])  # fmt: skip
+            rows.append(
+                [
+                    f"{r:g}",
+                    name,
+                    f"{x['ok']:.0%}",
+                    fmt(x["pos"]["median"]),
+                    fmt(x["pos"]["p95"]),
+                    fmt(x["att"]["median"], 3),
+                    fmt(x["att"]["p95"], 3),
+                    f"{x['matched']:.0f} / {x['simple']:.0f} / {x['in_view']:.0f}",
+                    f"{x['wrong']} / {x['n']}",
+                ]
+            )
     c = fit.correction
     harm = ", ".join(f"{np.hypot(a, b):.1f}" for a, b in c.harmonics_mm)
-    return "\n".join([
-        "## Realistic sensor and range calibration", "",
-        f"`bench/realistic.py`, {n_frames} random poses (+-5 deg) per range, the same poses "
-        "for the three sensors. Calibration run: "
-        f"{fit.n_frames} frames, {fit.n_samples} pixel samples; fitted cyclic amplitudes "
-        f"{harm} mm (programmed {', '.join(f'{a:g}' for a in SystematicErrors().wiggle_amplitudes_mm)}), "  # noqa: E501
-        f"amplitude term {c.amplitude_mm_per_decade:.1f} mm/decade (programmed "
-        f"{SystematicErrors().amplitude_mm_per_decade:g}), {fit.pixels_with_offset} pixels with "
-        f"an offset; residual RMS {fit.rms_before_mm:.1f} -> {fit.rms_after_mm:.1f} mm "
-        f"(noise included); calibrated span {c.calibrated_span_mm[0]:.0f}-"
-        f"{c.calibrated_span_mm[1]:.0f} mm (measured distances of the samples used).", "",
-        table(["range m", "sensor", "ok", "pos median mm", "pos p95 mm", "att median deg",
-               "att p95 deg", "matched / simple detector / in view", "wrong ok poses"], rows),
-        "", f"![realistic sensor]({img})", "",
-        "### Wrong poses and covariance consistency, 0.7-8 m", "",
-        f"{data['long_frames']} frames per range and sensor, attitudes up to 20 deg, lateral "
-        "offsets (module docstring). A wrong pose is one reported `ok` outside max(1 deg, "
-        "3 reported sigmas) or max(20 mm, 0.5 % of range, 3 sigmas), counted with the "
-        "model's covariance and with the calibrated one; \"covariance\" says "
-        "whether the mean NEES lies in its 95 % band (too narrow: the reported sigmas "
-        "claim more than the errors show); \"errors / reported sigmas\" is sqrt(mean NEES "
-        "/ 6), the factor by which the errors' spread differs from the reported one (1: "
-        "consistent, below 1: the reported sigmas are wider than the errors). Model: the "
-        "covariance of the measurement model (`tofpose.stages.extraction.uncertainty`, "
-        "floors included). "
-        f"Calibrated: the same poses, the covariance times the sensor's factor per range "
-        f"(`tofpose.calibration.covariance`) fitted on {data['cal_frames']} other frames per "
-        "range of the same sensor (other poses and noise), as `tofpose calibrate-covariance` "
-        "fits it from a recording with a reference pose.", "",
-        long_range_table(data["long"]), "",
-    ])  # fmt: skip
+    return "\n".join(
+        [
+            "## Realistic sensor and range calibration",
+            "",
+            f"`bench/realistic.py`, {n_frames} random poses (+-5 deg) per range, the same poses "
+            "for the three sensors. Calibration run: "
+            f"{fit.n_frames} frames, {fit.n_samples} pixel samples; fitted cyclic amplitudes "
+            f"{harm} mm (programmed {', '.join(f'{a:g}' for a in SystematicErrors().wiggle_amplitudes_mm)}), "  # noqa: E501
+            f"amplitude term {c.amplitude_mm_per_decade:.1f} mm/decade (programmed "
+            f"{SystematicErrors().amplitude_mm_per_decade:g}), "
+            f"{fit.pixels_with_offset} pixels with "
+            f"an offset; residual RMS {fit.rms_before_mm:.1f} -> {fit.rms_after_mm:.1f} mm "
+            f"(noise included); calibrated span {c.calibrated_span_mm[0]:.0f}-"
+            f"{c.calibrated_span_mm[1]:.0f} mm (measured distances of the samples used).",
+            "",
+            table(
+                [
+                    "range m",
+                    "sensor",
+                    "ok",
+                    "pos median mm",
+                    "pos p95 mm",
+                    "att median deg",
+                    "att p95 deg",
+                    "matched / simple detector / in view",
+                    "wrong ok poses",
+                ],
+                rows,
+            ),
+            "",
+            f"![realistic sensor]({img})",
+            "",
+            "### Wrong poses and covariance consistency, 0.7-8 m",
+            "",
+            f"{data['long_frames']} frames per range and sensor, attitudes up to 20 deg, lateral "
+            "offsets (module docstring). A wrong pose is one reported `ok` outside max(1 deg, "
+            "3 reported sigmas) or max(20 mm, 0.5 % of range, 3 sigmas), counted with the "
+            'model\'s covariance and with the calibrated one; "covariance" says '
+            "whether the mean NEES lies in its 95 % band (too narrow: the reported sigmas "
+            'claim more than the errors show); "errors / reported sigmas" is sqrt(mean NEES '
+            "/ 6), the factor by which the errors' spread differs from the reported one (1: "
+            "consistent, below 1: the reported sigmas are wider than the errors). Model: the "
+            "covariance of the measurement model (`tofpose.stages.extraction.uncertainty`, "
+            "floors included). "
+            f"Calibrated: the same poses, the covariance times the sensor's factor per range "
+            f"(`tofpose.calibration.covariance`) fitted on {data['cal_frames']} other frames per "
+            "range of the same sensor (other poses and noise), as `tofpose calibrate-covariance` "
+            "fits it from a recording with a reference pose.",
+            "",
+            long_range_table(data["long"]),
+            "",
+        ]
+    )
 
 
 def main() -> None:

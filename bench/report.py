@@ -45,8 +45,13 @@ def update_readme(lines: list[str]) -> None:
 
 def _script(name: str, *args: str) -> str:
     """Run another benchmark script in its own process; return what it printed."""
-    out = subprocess.run([sys.executable, str(ROOT / "bench" / name), *args], check=True,
-                         capture_output=True, text=True, cwd=ROOT)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "bench" / name), *args],
+        check=True,
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     print(out.stdout, flush=True)
     return out.stdout.strip()
 
@@ -78,8 +83,10 @@ def los_vs_ml(acc_summary) -> list[str]:
             )
             s += f", ML at {', '.join(loses)} m" if loses else ", ML at none"
             parts.append(s)
-        out.append(f"The paper's LOS refinement vs our ML refinement ({light}, median errors, "
-                   "5 % margin, else level): " + "; ".join(parts) + ".")  # fmt: skip
+        out.append(
+            f"The paper's LOS refinement vs our ML refinement ({light}, median errors, "
+            "5 % margin, else level): " + "; ".join(parts) + "."
+        )
     return out
 
 
@@ -89,35 +96,50 @@ def findings(acc_summary, rob, base_rows, stab, step_data, real=None) -> list[st
     full = acc_summary[("normal (1000 lux)", "full (ML)")]
     oracle = acc_summary[("normal (1000 lux)", "oracle")]
     ok_ranges = [r for r in accuracy.RANGES_M if full[r][0] >= 0.9]
-    short = [f"{r:g} m ({100 * full[r][0]:.0f} %)" for r in accuracy.RANGES_M
-             if full[r][0] < 0.9]  # fmt: skip
-    out.append(f"The full pipeline gives a pose in >= 90 % of frames from {min(ok_ranges):g} "
-               f"m to {max(ok_ranges):g} m at 1000 lux"
-               + (f"; less at {', '.join(short)}." if short else "."))  # fmt: skip
+    short = [f"{r:g} m ({100 * full[r][0]:.0f} %)" for r in accuracy.RANGES_M if full[r][0] < 0.9]
+    out.append(
+        f"The full pipeline gives a pose in >= 90 % of frames from {min(ok_ranges):g} "
+        f"m to {max(ok_ranges):g} m at 1000 lux"
+        + (f"; less at {', '.join(short)}." if short else ".")
+    )
     paper_rows = acc_summary[("normal (1000 lux)", "paper as written")]
     works = [r for r in accuracy.RANGES_M if paper_rows[r][0] >= 0.9]
     fails = [r for r in accuracy.RANGES_M if paper_rows[r][0] == 0.0]
     if works:
-        out.append(f"The paper's algorithm as written (`PipelineConfig.paper()`) gives a pose "
-                   f"in >= 90 % of frames from {min(works):g} to {max(works):g} m at 1000 lux"
-                   + (f" and in none at {', '.join(f'{r:g}' for r in fails)} m" if fails
-                      else "") + ".")  # fmt: skip
+        out.append(
+            f"The paper's algorithm as written (`PipelineConfig.paper()`) gives a pose "
+            f"in >= 90 % of frames from {min(works):g} to {max(works):g} m at 1000 lux"
+            + (f" and in none at {', '.join(f'{r:g}' for r in fails)} m" if fails else "")
+            + "."
+        )
     if real is not None:
         s = realistic.summarise(real)
-        gains = [(r, s[("realistic", r)]["pos"]["median"],
-                  s[("realistic, calibrated", r)]["pos"]["median"],
-                  s[("ideal", r)]["pos"]["median"]) for r in realistic.RANGES_M]  # fmt: skip
+        gains = [
+            (
+                r,
+                s[("realistic", r)]["pos"]["median"],
+                s[("realistic, calibrated", r)]["pos"]["median"],
+                s[("ideal", r)]["pos"]["median"],
+            )
+            for r in realistic.RANGES_M
+        ]
         helped = [g for g in gains if g[2] < 0.5 * g[1]]
         if helped:
-            out.append("Range calibration halves the realistic sensor's median position error "
-                       "or better at " + ", ".join(f"{r:g} m ({a:.2f} -> {b:.2f} mm; ideal "
-                                                    f"{c:.2f})" for r, a, b, c in helped)
-                       + ".")  # fmt: skip
+            out.append(
+                "Range calibration halves the realistic sensor's median position error "
+                "or better at "
+                + ", ".join(
+                    f"{r:g} m ({a:.2f} -> {b:.2f} mm; ideal {c:.2f})" for r, a, b, c in helped
+                )
+                + "."
+            )
         far = [x for x in real["long"] if x[1] >= 3.0 and x[2]]  # the rule's 3-8 m
-        out.append(f"Long range (3-8 m, attitudes up to 20 deg): {sum(x[3] for x in far)} "
-                   f"wrong `ok` poses of {len(far)} over the three sensors with the model's "
-                   f"covariance, {sum(x[7] for x in far)} with the calibrated one (3 of its "
-                   "sigmas are a narrower bound).")  # fmt: skip
+        out.append(
+            f"Long range (3-8 m, attitudes up to 20 deg): {sum(x[3] for x in far)} "
+            f"wrong `ok` poses of {len(far)} over the three sensors with the model's "
+            f"covariance, {sum(x[7] for x in far)} with the calibrated one (3 of its "
+            "sigmas are a narrower bound)."
+        )
         nees: dict[tuple, list[float]] = {}
         nees_cal: dict[tuple, list[float]] = {}
         for x in real["long"]:
@@ -127,29 +149,43 @@ def findings(acc_summary, rob, base_rows, stab, step_data, real=None) -> list[st
         spread = [float(np.sqrt(np.mean(v) / 6.0)) for v in nees.values()]
         if spread:
             lo, hi = min(spread), max(spread)
-            verdict = ("the reported sigmas are wider than the errors at every range and sensor"
-                       if hi < 0.9 else "**worse:** the reported sigmas are narrower than the "
-                       "errors at every range and sensor" if lo > 1.1 else
-                       "the reported sigmas are wider than the errors in some cases, narrower "
-                       "or level in others")  # fmt: skip
-            out.append(f"Pose covariance, 0.7-8 m, three sensors: the errors' spread is "
-                       f"{lo:.2f}-{hi:.2f} x the reported one (sqrt of mean NEES / 6); "
-                       f"{verdict}.")  # fmt: skip
+            verdict = (
+                "the reported sigmas are wider than the errors at every range and sensor"
+                if hi < 0.9
+                else "**worse:** the reported sigmas are narrower than the "
+                "errors at every range and sensor"
+                if lo > 1.1
+                else "the reported sigmas are wider than the errors in some cases, narrower "
+                "or level in others"
+            )
+            out.append(
+                f"Pose covariance, 0.7-8 m, three sensors: the errors' spread is "
+                f"{lo:.2f}-{hi:.2f} x the reported one (sqrt of mean NEES / 6); "
+                f"{verdict}."
+            )
             cells = [realistic.consistency(np.array(v)) for v in nees_cal.values()]
             inside = sum(c[3] == "in band" for c in cells)
             sc = [float(np.sqrt(c[0] / 6.0)) for c in cells]
-            narrow = [f"{k[1]:g} m ({k[0]})" for k, c in zip(nees_cal, cells, strict=True)
-                      if c[3] == "too narrow"]  # fmt: skip
-            out.append(f"With the covariance calibrated per sensor on other frames "
-                       f"(`tofpose calibrate-covariance`): mean NEES inside its 95 % band in "
-                       f"{inside} of {len(cells)} range-sensor cells, errors / reported sigmas "
-                       f"{min(sc):.2f}-{max(sc):.2f}"
-                       + (f"; too narrow at {', '.join(narrow)}" if narrow else "")
-                       + ".")  # fmt: skip
+            narrow = [
+                f"{k[1]:g} m ({k[0]})"
+                for k, c in zip(nees_cal, cells, strict=True)
+                if c[3] == "too narrow"
+            ]
+            out.append(
+                f"With the covariance calibrated per sensor on other frames "
+                f"(`tofpose calibrate-covariance`): mean NEES inside its 95 % band in "
+                f"{inside} of {len(cells)} range-sensor cells, errors / reported sigmas "
+                f"{min(sc):.2f}-{max(sc):.2f}"
+                + (f"; too narrow at {', '.join(narrow)}" if narrow else "")
+                + "."
+            )
     for light in accuracy.LUX:
         ml, svd = acc_summary[(light, "full (ML)")], acc_summary[(light, "no refinement")]
-        ranges = [r for r in accuracy.RANGES_M if np.isfinite(svd[r][1]["median"])
-                  and np.isfinite(ml[r][1]["median"])]  # fmt: skip
+        ranges = [
+            r
+            for r in accuracy.RANGES_M
+            if np.isfinite(svd[r][1]["median"]) and np.isfinite(ml[r][1]["median"])
+        ]
         # "worse" needs a margin: 5 % of a median over 20 frames is within its noise
         worse = [r for r in ranges if svd[r][1]["median"] < 0.95 * ml[r][1]["median"]]
         level = [
@@ -157,29 +193,40 @@ def findings(acc_summary, rob, base_rows, stab, step_data, real=None) -> list[st
             for r in ranges
             if 0.95 * ml[r][1]["median"] <= svd[r][1]["median"] < ml[r][1]["median"]
         ]
-        tail = [r for r in ranges if svd[r][1]["p95"] < 0.95 * ml[r][1]["p95"]
-                and r not in worse]  # fmt: skip
+        tail = [r for r in ranges if svd[r][1]["p95"] < 0.95 * ml[r][1]["p95"] and r not in worse]
         if worse:
-            out.append(f"**Worse ({light}):** the median position error without refinement "
-                       "(weighted SVD only) is lower than with our ML refinement at "
-                       + ", ".join(f"{r:g}" for r in worse) + " m.")  # fmt: skip
+            out.append(
+                f"**Worse ({light}):** the median position error without refinement "
+                "(weighted SVD only) is lower than with our ML refinement at "
+                + ", ".join(f"{r:g}" for r in worse)
+                + " m."
+            )
         better = [r for r in ranges if ml[r][1]["median"] < svd[r][1]["median"]]
         parts = []
         if level:
-            parts.append("ML refinement and weighted SVD alone are level (medians within 5 %) "
-                         "at " + ", ".join(f"{r:g}" for r in level) + " m")  # fmt: skip
+            parts.append(
+                "ML refinement and weighted SVD alone are level (medians within 5 %) "
+                "at " + ", ".join(f"{r:g}" for r in level) + " m"
+            )
         if tail:
-            parts.append("**worse:** ML's 95th percentile position error is larger than weighted "
-                         "SVD's at " + ", ".join(f"{r:g}" for r in tail) + " m")  # fmt: skip
+            parts.append(
+                "**worse:** ML's 95th percentile position error is larger than weighted "
+                "SVD's at " + ", ".join(f"{r:g}" for r in tail) + " m"
+            )
         if len(better) == len(ranges) - len(level) - len(worse):
             parts.append("ML's median error is lower at every other range")
         out.append(f"{light}: " + "; ".join(parts) + ".")
     out += los_vs_ml(acc_summary)
-    gaps = [full[r][1]["median"] / oracle[r][1]["median"] for r in accuracy.RANGES_M
-            if np.isfinite(full[r][1]["median"]) and oracle[r][1]["median"] > 0]  # fmt: skip
+    gaps = [
+        full[r][1]["median"] / oracle[r][1]["median"]
+        for r in accuracy.RANGES_M
+        if np.isfinite(full[r][1]["median"]) and oracle[r][1]["median"] > 0
+    ]
     if gaps:
-        out.append(f"Gap to the oracle (median position error, full / oracle): median "
-                   f"{np.median(gaps):.1f}x, worst {max(gaps):.1f}x over the range.")  # fmt: skip
+        out.append(
+            f"Gap to the oracle (median position error, full / oracle): median "
+            f"{np.median(gaps):.1f}x, worst {max(gaps):.1f}x over the range."
+        )
     P697, keep697, _ = stab["stability-697"]
     P5712, keep5712, _ = stab["stability-5712"]
     f697 = np.ptp(P697[keep697], axis=0)
@@ -188,49 +235,73 @@ def findings(acc_summary, rob, base_rows, stab, step_data, real=None) -> list[st
     p5712 = np.array(paper.PAPER["5712"][3])
 
     def pairs(ours, theirs) -> str:
-        return ", ".join(f"{a} {x:.3f}/{y:.3f}"
-                         for a, x, y in zip(paper.AXES, ours, theirs, strict=True))  # fmt: skip
+        return ", ".join(
+            f"{a} {x:.3f}/{y:.3f}" for a, x, y in zip(paper.AXES, ours, theirs, strict=True)
+        )
 
-    out.append("Stability (fluctuation range, singular points removed), ours/paper: 697 mm "
-               + pairs(f697, p697) + "; 5712 mm " + pairs(f5712, p5712) + ".")  # fmt: skip
+    out.append(
+        "Stability (fluctuation range, singular points removed), ours/paper: 697 mm "
+        + pairs(f697, p697)
+        + "; 5712 mm "
+        + pairs(f5712, p5712)
+        + "."
+    )
     worse_stab = [a for a, x, y in zip(paper.AXES, f5712, p5712, strict=True) if x > y]
     if worse_stab:
-        out.append("**Worse:** at 5712 mm our simulated fluctuation exceeds the paper's in "
-                   + ", ".join(worse_stab) + f" (our run: {len(P5712)} frames; the paper "
-                   "recorded ~6000 s).")  # fmt: skip
+        out.append(
+            "**Worse:** at 5712 mm our simulated fluctuation exceeds the paper's in "
+            + ", ".join(worse_stab)
+            + f" (our run: {len(P5712)} frames; the paper "
+            "recorded ~6000 s)."
+        )
     diffs = [abs(d - t) for _, _, d, t, _, _, _ in step_data]
-    out.append(f"Attitude steps: |measured - true| change {min(diffs):.3f}-{max(diffs):.3f} deg "
-               f"(paper 0.001-0.057 deg; requirement 0.15 deg).")  # fmt: skip
+    out.append(
+        f"Attitude steps: |measured - true| change {min(diffs):.3f}-{max(diffs):.3f} deg "
+        f"(paper 0.001-0.057 deg; requirement 0.15 deg)."
+    )
     ransac10 = rob[("spurious", 10, robustness.METHODS[2])][1]
     conv10 = rob[("spurious", 10, robustness.METHODS[3])]
     da10 = rob[("spurious", 10, robustness.METHODS[0])][1]
     cov4 = {m: rob[("covered", max(robustness.COVERED), m)] for m in robustness.METHODS}
     covered_sentence = (
         f"With {max(robustness.COVERED)} of 8 markers covered: "
-        + ", ".join(f"{m} {100 * v[0]:.0f} % ok / {100 * v[2]:.0f} % wrong"
-                    for m, v in cov4.items()) + ".")  # fmt: skip
+        + ", ".join(
+            f"{m} {100 * v[0]:.0f} % ok / {100 * v[2]:.0f} % wrong" for m, v in cov4.items()
+        )
+        + "."
+    )
     worst_wrong = max(rob[("spurious", n, robustness.METHODS[0])][2] for n in robustness.SPURIOUS)
-    out.append(f"With 10 spurious blobs the correct-match rate is {100 * da10:.0f} % for "
-               f"annealing + fallback and {100 * ransac10:.0f} % for RANSAC at equal time "
-               f"({100 * conv10[1]:.0f} % for RANSAC run to 99 % confidence, which takes "
-               f"{conv10[3]:.1f} ms a frame there); "
-               + ("annealing + fallback never reports a wrong pose (> 1 deg or 20 mm off) "
-                  "at any number of spurious blobs. " if worst_wrong == 0 else
-                  f"annealing + fallback reports a wrong pose (> 1 deg or 20 mm off) in up "
-                  f"to {100 * worst_wrong:.0f} % of frames. ")
-               + covered_sentence)  # fmt: skip
+    out.append(
+        f"With 10 spurious blobs the correct-match rate is {100 * da10:.0f} % for "
+        f"annealing + fallback and {100 * ransac10:.0f} % for RANSAC at equal time "
+        f"({100 * conv10[1]:.0f} % for RANSAC run to 99 % confidence, which takes "
+        f"{conv10[3]:.1f} ms a frame there); "
+        + (
+            "annealing + fallback never reports a wrong pose (> 1 deg or 20 mm off) "
+            "at any number of spurious blobs. "
+            if worst_wrong == 0
+            else f"annealing + fallback reports a wrong pose (> 1 deg or 20 mm off) in up "
+            f"to {100 * worst_wrong:.0f} % of frames. "
+        )
+        + covered_sentence
+    )
     t_ours = np.median([base_rows[r]["tofpose"][3] for r in baseline.RANGES_M])
     t_base = np.median([base_rows[r]["solvePnP"][3] for r in baseline.RANGES_M])
-    ratios = [base_rows[r]["solvePnP"][1]["median"] / base_rows[r]["tofpose"][1]["median"]
-              for r in baseline.RANGES_M
-              if np.isfinite(base_rows[r]["solvePnP"][1]["median"])]  # fmt: skip
-    reach = max((r for r in baseline.RANGES_M if base_rows[r]["solvePnP"][0] >= 0.5),
-                default=float("nan"))  # fmt: skip
-    out.append(f"**Worse:** OpenCV SimpleBlobDetector + solvePnP is {t_ours / t_base:.0f}x "
-               f"faster per frame ({t_base:.2f} vs {t_ours:.2f} ms median), even before it "
-               f"solves correspondences; its median position error is {min(ratios):.0f}-"
-               f"{max(ratios):.0f}x ours and it gives a pose in half the frames or more only "
-               f"up to {reach:g} m: it ignores the distance image.")  # fmt: skip
+    ratios = [
+        base_rows[r]["solvePnP"][1]["median"] / base_rows[r]["tofpose"][1]["median"]
+        for r in baseline.RANGES_M
+        if np.isfinite(base_rows[r]["solvePnP"][1]["median"])
+    ]
+    reach = max(
+        (r for r in baseline.RANGES_M if base_rows[r]["solvePnP"][0] >= 0.5), default=float("nan")
+    )
+    out.append(
+        f"**Worse:** OpenCV SimpleBlobDetector + solvePnP is {t_ours / t_base:.0f}x "
+        f"faster per frame ({t_base:.2f} vs {t_ours:.2f} ms median), even before it "
+        f"solves correspondences; its median position error is {min(ratios):.0f}-"
+        f"{max(ratios):.0f}x ours and it gives a pose in half the frames or more only "
+        f"up to {reach:g} m: it ignores the distance image."
+    )
     return out
 
 
@@ -248,14 +319,24 @@ def _pipeline_verdict(pipe_tab: str) -> str:
 
     out = []
     ranges = [r[0] for r in rows if len(r) == len(header)]
-    for name, goal in (("acquisition ms", 1.0), ("tracking ms", 0.3),
-                       ("tracking ms, range-corrected", 0.3)):  # fmt: skip
+    for name, goal in (
+        ("acquisition ms", 1.0),
+        ("tracking ms", 0.3),
+        ("tracking ms, range-corrected", 0.3),
+    ):
         v = col(name)
         met = [rg for rg, x in zip(ranges, v, strict=True) if x <= goal]
-        verdict = ("met" if len(met) == len(v) else "**not met**" if not met
-                   else f"met at {', '.join(met)} only")  # fmt: skip
-        out.append(f"The {goal:g} ms goal for {name.replace(' ms', '')} is {verdict}: medians "
-                   f"{min(v):.2f}-{max(v):.2f} ms.")  # fmt: skip
+        verdict = (
+            "met"
+            if len(met) == len(v)
+            else "**not met**"
+            if not met
+            else f"met at {', '.join(met)} only"
+        )
+        out.append(
+            f"The {goal:g} ms goal for {name.replace(' ms', '')} is {verdict}: medians "
+            f"{min(v):.2f}-{max(v):.2f} ms."
+        )
     i_c = header.index("ms in compiled code (acq / track)")
     compiled = [float(r[i_c].split("/")[0]) for r in rows if len(r) == len(header)]
     glue = [a - c for a, c in zip(col("acquisition ms"), compiled, strict=True)]
@@ -267,8 +348,10 @@ def _pipeline_verdict(pipe_tab: str) -> str:
         f"{max(glue):.2f} ms (the profiled passes and the timed ones are separate runs)."
     )
     ra, rt = col("acquisition / OpenCV"), col("tracking / OpenCV")
-    out.append(f"Against OpenCV on the same frames: acquisition {min(ra):.1f}-{max(ra):.1f}x, "
-               f"tracking {min(rt):.1f}-{max(rt):.1f}x its time.")  # fmt: skip
+    out.append(
+        f"Against OpenCV on the same frames: acquisition {min(ra):.1f}-{max(ra):.1f}x, "
+        f"tracking {min(rt):.1f}-{max(rt):.1f}x its time."
+    )
     return " ".join(out)
 
 
@@ -279,17 +362,25 @@ def dynamics_section(quick: bool) -> str:
     """The "Relative state and latency" section from ``bench/dynamics.py``, between its
     markers (``--only dynamics`` regenerates just this block of docs/results.md)."""
     tab = _script("dynamics.py", "--seeds", "1" if quick else "3")
-    return "\n".join([
-        DYN_BEGIN, "## Relative state and latency", "",
-        "`bench/dynamics.py` (docs/algorithm.md, \"Relative state\"): the turntable's yaw "
-        "runs the sine of issue 29's done-when (5 deg, 4 s) with the camera on it, frames "
-        "rendered with the sensor's motion artefacts and measured by the server's pipeline; "
-        "the filter's rate "
-        "error for both motion models; the latency fit (`tofpose.lab.dynamics`) on poses stamped "
-        "late by a programmed delay; the filter's cost per frame. This section was "
-        f"regenerated on {datetime.date.today().isoformat()}.", "",
-        tab, "", DYN_END,
-    ])  # fmt: skip
+    return "\n".join(
+        [
+            DYN_BEGIN,
+            "## Relative state and latency",
+            "",
+            '`bench/dynamics.py` (docs/algorithm.md, "Relative state"): the turntable\'s yaw '
+            "runs the sine of issue 29's done-when (5 deg, 4 s) with the camera on it, frames "
+            "rendered with the sensor's motion artefacts and measured by the server's pipeline; "
+            "the filter's rate "
+            "error for both motion models; the latency fit (`tofpose.lab.dynamics`) on poses "
+            "stamped "
+            "late by a programmed delay; the filter's cost per frame. This section was "
+            f"regenerated on {datetime.date.today().isoformat()}.",
+            "",
+            tab,
+            "",
+            DYN_END,
+        ]
+    )
 
 
 SCALE_BEGIN, SCALE_END = "<!-- scaleout:begin -->", "<!-- scaleout:end -->"
@@ -299,15 +390,22 @@ def scaleout_section(quick: bool) -> str:
     """The "Scale-out on Dask" section from ``bench/scaleout.py``, between its markers
     (``--only scaleout`` regenerates just this block)."""
     out = _script("scaleout.py", *(["--quick"] if quick else []))
-    return "\n".join([
-        SCALE_BEGIN, "## Scale-out on Dask", "",
-        "`bench/scaleout.py` (docs/scaleout.md): `tofpose study` and `tofpose reprocess` on "
-        "a LocalCluster of 1 and 2 worker processes of this 2-core machine, against the "
-        "same work in one process; numba's cache on the workers; the scheduler's and the "
-        "store's cost per task; the server's live loop while a study runs. This section "
-        f"was regenerated on {datetime.date.today().isoformat()}.", "",
-        out, "", SCALE_END,
-    ])  # fmt: skip
+    return "\n".join(
+        [
+            SCALE_BEGIN,
+            "## Scale-out on Dask",
+            "",
+            "`bench/scaleout.py` (docs/scaleout.md): `tofpose study` and `tofpose reprocess` on "
+            "a LocalCluster of 1 and 2 worker processes of this 2-core machine, against the "
+            "same work in one process; numba's cache on the workers; the scheduler's and the "
+            "store's cost per task; the server's live loop while a study runs. This section "
+            f"was regenerated on {datetime.date.today().isoformat()}.",
+            "",
+            out,
+            "",
+            SCALE_END,
+        ]
+    )
 
 
 SAFETY_BEGIN, SAFETY_END = "<!-- safety:begin -->", "<!-- safety:end -->"
@@ -316,19 +414,36 @@ SAFETY_BEGIN, SAFETY_END = "<!-- safety:begin -->", "<!-- safety:end -->"
 def safety_section(quick: bool) -> str:
     """The "STOP under load" section from ``bench/stop_latency.py``, between its markers
     (``--only safety`` regenerates just this block)."""
-    out = _script("stop_latency.py", "--clients", "0", "100", "--readers", "0",
-                  "--stops", "20" if quick else "40", "--exports", "60")  # fmt: skip
-    return "\n".join([
-        SAFETY_BEGIN, "## STOP under load, refused studies", "",
-        "`bench/stop_latency.py` (docs/server.md, \"Threat model\"): `POST /api/motion/stop` "
-        "timed on a fresh `tofpose serve` with 0 and 100 `/ws/live` clients that never read "
-        "(the caps raised so that all are served), then while 60 clients download a "
-        "campaign's PDF report and MCAP at once (the server's report workers serve 2 at a "
-        "time and queue 8; the rest are refused with 503 at once), then the cost of "
-        "refusing a 1.8 M-cell study spec. The goal: STOP's median under 50 ms in every "
-        f"row. This section was regenerated on {datetime.date.today().isoformat()}.", "",
-        out, "", SAFETY_END,
-    ])  # fmt: skip
+    out = _script(
+        "stop_latency.py",
+        "--clients",
+        "0",
+        "100",
+        "--readers",
+        "0",
+        "--stops",
+        "20" if quick else "40",
+        "--exports",
+        "60",
+    )
+    return "\n".join(
+        [
+            SAFETY_BEGIN,
+            "## STOP under load, refused studies",
+            "",
+            '`bench/stop_latency.py` (docs/server.md, "Threat model"): `POST /api/motion/stop` '
+            "timed on a fresh `tofpose serve` with 0 and 100 `/ws/live` clients that never read "
+            "(the caps raised so that all are served), then while 60 clients download a "
+            "campaign's PDF report and MCAP at once (the server's report workers serve 2 at a "
+            "time and queue 8; the rest are refused with 503 at once), then the cost of "
+            "refusing a 1.8 M-cell study spec. The goal: STOP's median under 50 ms in every "
+            f"row. This section was regenerated on {datetime.date.today().isoformat()}.",
+            "",
+            out,
+            "",
+            SAFETY_END,
+        ]
+    )
 
 
 def replace_section(begin: str, end: str, section: str) -> None:
@@ -337,7 +452,7 @@ def replace_section(begin: str, end: str, section: str) -> None:
     text = DOC.read_text()
     i, j = text.find(begin), text.find(end)
     if i >= 0 and j > i:
-        text = text[:i] + section + text[j + len(end):]
+        text = text[:i] + section + text[j + len(end) :]
     else:
         k = text.index("## Speed")
         text = text[:k] + section + "\n\n" + text[k:]
@@ -351,11 +466,19 @@ def replace_dynamics(section: str) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--only", choices=["dynamics", "scaleout", "safety"],
-                    help="regenerate one section of docs/results.md in place")  # fmt: skip
-    ap.add_argument("--foreign", nargs="*", default=[], metavar="REC.h5",
-                    help="recordings from a renderer other than tofpose.sim (with truth) to "
-                         "judge the pipeline on (bench/foreign.py); none are shipped")  # fmt: skip
+    ap.add_argument(
+        "--only",
+        choices=["dynamics", "scaleout", "safety"],
+        help="regenerate one section of docs/results.md in place",
+    )
+    ap.add_argument(
+        "--foreign",
+        nargs="*",
+        default=[],
+        metavar="REC.h5",
+        help="recordings from a renderer other than tofpose.sim (with truth) to "
+        "judge the pipeline on (bench/foreign.py); none are shipped",
+    )
     args = ap.parse_args()
     q = args.quick
     if args.only == "dynamics":
@@ -374,8 +497,9 @@ def main() -> None:
     t0 = time.monotonic()
 
     stab, step_data, range_data, pimgs = paper.run(IMG, 120 if q else 900, 15 if q else 30)
-    sec_paper = paper.markdown(stab, step_data, range_data, [_rel(p) for p in pimgs],
-                               120 if q else 900)  # fmt: skip
+    sec_paper = paper.markdown(
+        stab, step_data, range_data, [_rel(p) for p in pimgs], 120 if q else 900
+    )
     print(sec_paper, flush=True)
 
     n_acc = 4 if q else 20
@@ -398,15 +522,20 @@ def main() -> None:
 
     sec_foreign = ""
     if args.foreign:
-        sec_foreign = "\n".join([
-            "## Frames from another renderer", "",
-            "`bench/foreign.py` on recordings made by a ToF renderer that shares no code "
-            "with `tofpose.sim` (area-integrated pixels, cos^4 fall-off, a dark but not black "
-            "plate mixing into partly covered pixels, no wall; one set with uncalibrated "
-            "systematic range errors). They are not shipped with the project; the oracle "
-            "rows give the pipeline the true correspondences.", "",
-            _script("foreign.py", *args.foreign, "--quiet"), "",
-        ])  # fmt: skip
+        sec_foreign = "\n".join(
+            [
+                "## Frames from another renderer",
+                "",
+                "`bench/foreign.py` on recordings made by a ToF renderer that shares no code "
+                "with `tofpose.sim` (area-integrated pixels, cos^4 fall-off, a dark but not black "
+                "plate mixing into partly covered pixels, no wall; one set with uncalibrated "
+                "systematic range errors). They are not shipped with the project; the oracle "
+                "rows give the pipeline the true correspondences.",
+                "",
+                _script("foreign.py", *args.foreign, "--quiet"),
+                "",
+            ]
+        )
 
     n_real, n_long, n_cal = (4, 20, 30) if q else (16, 90, 150)
     real = realistic.run(n_real, long_frames=n_long, cal_frames=n_cal)
@@ -422,73 +551,147 @@ def main() -> None:
 
     pipe_tab = _script("pipeline.py", "--frames", "20" if q else "60")
     sim_tab = _script("sim.py", "--frames", "10" if q else "40")
-    live_tab = _script("live.py", "--clients", "1", "10", "50", "--rates", "10", "30",
-                       "--seconds", "2" if q else "4", "--repeats", "1" if q else "2",
-                       "--dashboards", "1", "5")  # fmt: skip
+    live_tab = _script(
+        "live.py",
+        "--clients",
+        "1",
+        "10",
+        "50",
+        "--rates",
+        "10",
+        "30",
+        "--seconds",
+        "2" if q else "4",
+        "--repeats",
+        "1" if q else "2",
+        "--dashboards",
+        "1",
+        "5",
+    )
     dev_tab = _script("devices.py", "--repeats", "2" if q else "5")
-    interop_tab = _script("interop.py", "--frames", *(("200", "400") if q else ("1000", "10000")),
-                          "--repeats", "1" if q else "3", "--seconds", "2" if q else "5",
-                          "--screenshot", str(ROOT / "docs" / "img" / "interop" / "rerun.png"))
+    interop_tab = _script(
+        "interop.py",
+        "--frames",
+        *(("200", "400") if q else ("1000", "10000")),
+        "--repeats",
+        "1" if q else "3",
+        "--seconds",
+        "2" if q else "5",
+        "--screenshot",
+        str(ROOT / "docs" / "img" / "interop" / "rerun.png"),
+    )
 
     minutes = (time.monotonic() - t0) / 60.0
     head = [
-        "# Results", "",
+        "# Results",
+        "",
         f"Generated by `make bench` (`python bench/report.py`) on "
         f"{datetime.date.today().isoformat()}, {platform.processor() or platform.machine()}, "
         f"Python {platform.python_version()}, in {minutes:.1f} min. Every number below is "
         "what that run printed; seeds are fixed. All frames come from the simulator "
-        "(`tofpose.sim`)" + (", except those of \"Frames from another renderer\""
-                             if args.foreign else "")
-        + "; there is no real camera data in this document.", "",
-        "## Findings", "",
-        *[f"- {s}" for s in findings(acc_summary, rob, base_rows, stab, step_data, real)], "",
-    ]  # fmt: skip
-    speed = ["## Speed", "",
-             "Pipeline, ms per frame on one core (`bench/pipeline.py`): acquisition and "
-             "tracking, with OpenCV timed on the same frames in the same run; then "
-             "acquisition per stage:",
-             "", pipe_tab, "",
-             _pipeline_verdict(pipe_tab), "",
-             "Simulator (`bench/sim.py`):", "", sim_tab, "",
-             "Live server end to end (`bench/live.py`): simulated camera in the server "
-             "process, N WebSocket clients in another process on the same 2 cores; latency "
-             "from the frame reaching the server to client receipt; then whole dashboards in "
-             "Debian's chromium (software rendering, no GPU) sharing the same 2 cores with "
-             "the server: frames each page actually drew per second, and the server's CPU:",
-             "", live_tab, "",
-             "## Real-device drivers: link loss and recovery", "",
-             "The server with the `tofcam660` camera and `scpi` rate-table drivers against "
-             "the shipped emulators (`bench/devices.py`, default time-outs and back-offs, "
-             "docs/devices.md): how long until the device shows degraded, and how long "
-             "until it works again (a new pose; motion state ok):", "", dev_tab, "",
-             "## Interop: MCAP files and the live Foxglove server", "",
-             "`bench/interop.py` (docs/interop.md): `tofpose export mcap` / `import mcap` "
-             "speed and file size on a simulated recording, the export's peak memory in a "
-             "fresh process for two recording lengths, then the live server at 30 Hz: the "
-             "pose rate its own WebSocket delivers with the Foxglove server off, idle, "
-             "serving a client that reads every channel, one that reads 4 messages a second "
-             "(its backlog drops the oldest: the age of what it reads), and one that "
-             "subscribes to every channel and never reads:", "", interop_tab, ""]  # fmt: skip
+        "(`tofpose.sim`)"
+        + (', except those of "Frames from another renderer"' if args.foreign else "")
+        + "; there is no real camera data in this document.",
+        "",
+        "## Findings",
+        "",
+        *[f"- {s}" for s in findings(acc_summary, rob, base_rows, stab, step_data, real)],
+        "",
+    ]
+    speed = [
+        "## Speed",
+        "",
+        "Pipeline, ms per frame on one core (`bench/pipeline.py`): acquisition and "
+        "tracking, with OpenCV timed on the same frames in the same run; then "
+        "acquisition per stage:",
+        "",
+        pipe_tab,
+        "",
+        _pipeline_verdict(pipe_tab),
+        "",
+        "Simulator (`bench/sim.py`):",
+        "",
+        sim_tab,
+        "",
+        "Live server end to end (`bench/live.py`): simulated camera in the server "
+        "process, N WebSocket clients in another process on the same 2 cores; latency "
+        "from the frame reaching the server to client receipt; then whole dashboards in "
+        "Debian's chromium (software rendering, no GPU) sharing the same 2 cores with "
+        "the server: frames each page actually drew per second, and the server's CPU:",
+        "",
+        live_tab,
+        "",
+        "## Real-device drivers: link loss and recovery",
+        "",
+        "The server with the `tofcam660` camera and `scpi` rate-table drivers against "
+        "the shipped emulators (`bench/devices.py`, default time-outs and back-offs, "
+        "docs/devices.md): how long until the device shows degraded, and how long "
+        "until it works again (a new pose; motion state ok):",
+        "",
+        dev_tab,
+        "",
+        "## Interop: MCAP files and the live Foxglove server",
+        "",
+        "`bench/interop.py` (docs/interop.md): `tofpose export mcap` / `import mcap` "
+        "speed and file size on a simulated recording, the export's peak memory in a "
+        "fresh process for two recording lengths, then the live server at 30 Hz: the "
+        "pose rate its own WebSocket delivers with the Foxglove server off, idle, "
+        "serving a client that reads every channel, one that reads 4 messages a second "
+        "(its backlog drops the oldest: the age of what it reads), and one that "
+        "subscribes to every channel and never reads:",
+        "",
+        interop_tab,
+        "",
+    ]
     sec_dyn = dynamics_section(q)
     sec_scale = scaleout_section(q)
     sec_safety = safety_section(q)
-    text = "\n".join(head + [sec_paper, sec_acc, sec_real, sec_phys, sec_foreign, sec_rob,
-                             sec_base, sec_dyn, sec_scale, sec_safety] + speed)  # fmt: skip
+    text = "\n".join(
+        head
+        + [
+            sec_paper,
+            sec_acc,
+            sec_real,
+            sec_phys,
+            sec_foreign,
+            sec_rob,
+            sec_base,
+            sec_dyn,
+            sec_scale,
+            sec_safety,
+        ]
+        + speed
+    )
     DOC.write_text(text + "\n")
-    update_readme([
-        f"Generated by `make bench` on {datetime.date.today().isoformat()} "
-        f"({platform.processor() or platform.machine()}, Python {platform.python_version()}); "
-        "the accuracy, robustness and baseline evidence is in "
-        "[docs/results.md](docs/results.md).", "",
-        "`python bench/pipeline.py`: pipeline time, ms per frame on one core, median / p95, "
-        "acquisition and tracking beside OpenCV on the same frames, then per stage:", "",
-        pipe_tab, "", _pipeline_verdict(pipe_tab), "",
-        "`python bench/sim.py`: rendering one simulated frame pair:", "", sim_tab, "",
-        "`python bench/live.py`: the live server with N WebSocket clients, then whole "
-        "dashboards in chromium, on the same 2 cores:", "", live_tab, "",
-        "`python bench/devices.py`: the real-device drivers against the emulators, link "
-        "loss and recovery:", "", dev_tab,
-    ])  # fmt: skip
+    update_readme(
+        [
+            f"Generated by `make bench` on {datetime.date.today().isoformat()} "
+            f"({platform.processor() or platform.machine()}, Python {platform.python_version()}); "
+            "the accuracy, robustness and baseline evidence is in "
+            "[docs/results.md](docs/results.md).",
+            "",
+            "`python bench/pipeline.py`: pipeline time, ms per frame on one core, median / p95, "
+            "acquisition and tracking beside OpenCV on the same frames, then per stage:",
+            "",
+            pipe_tab,
+            "",
+            _pipeline_verdict(pipe_tab),
+            "",
+            "`python bench/sim.py`: rendering one simulated frame pair:",
+            "",
+            sim_tab,
+            "",
+            "`python bench/live.py`: the live server with N WebSocket clients, then whole "
+            "dashboards in chromium, on the same 2 cores:",
+            "",
+            live_tab,
+            "",
+            "`python bench/devices.py`: the real-device drivers against the emulators, link "
+            "loss and recovery:",
+            "",
+            dev_tab,
+        ]
+    )
     print(f"wrote {DOC} in {minutes:.1f} min", file=sys.stderr)
 
 

@@ -33,8 +33,12 @@ from tofpose.sim.scene import Clutter, TargetScene  # noqa: E402
 RANGE_M = 3.0
 SPURIOUS = list(range(0, 11))
 COVERED = [0, 1, 2, 3, 4]
-METHODS = ["annealing + fallback", "annealing only", "RANSAC (equal time)",
-           "RANSAC (99 % confidence)"]  # fmt: skip
+METHODS = [
+    "annealing + fallback",
+    "annealing only",
+    "RANSAC (equal time)",
+    "RANSAC (99 % confidence)",
+]
 RANSAC_CONFIDENCE = 0.99
 
 
@@ -44,8 +48,7 @@ def clutter(n: int, rng: np.random.Generator) -> tuple[Clutter, ...]:
     for _ in range(n):
         x, y = rng.uniform(-700.0, 700.0), rng.uniform(-450.0, 450.0)
         z = rng.uniform(-150.0, 250.0)
-        out.append(Clutter((x, y, z), float(rng.uniform(30.0, 90.0)),
-                           float(rng.uniform(0.5, 1.5))))  # fmt: skip
+        out.append(Clutter((x, y, z), float(rng.uniform(30.0, 90.0)), float(rng.uniform(0.5, 1.5))))
     return tuple(out)
 
 
@@ -62,8 +65,9 @@ def judge(res, T, cam, cat) -> tuple[bool, bool]:
         return False, False
     proj = cam.project(cat.positions_mm @ T.R.T + T.t_mm)
     ids = list(cat.ids)
-    correct = all(np.linalg.norm(m.centroid_uv - proj[ids.index(m.catalog_id)]) < 3.0
-                  for m in res.matched)  # fmt: skip
+    correct = all(
+        np.linalg.norm(m.centroid_uv - proj[ids.index(m.catalog_id)]) < 3.0 for m in res.matched
+    )
     pe, ae = pose_errors(res.R, res.t_mm, T)
     return correct, (pe > 20.0 or ae > 1.0)
 
@@ -93,11 +97,11 @@ def run(n: int = 20):
             for name, pipe in ((METHODS[0], da), (METHODS[1], da_only)):
                 pipe.reset()
                 results[name].append(pipe.process(f.gray, f.distance_mm))
-        budget = float(np.median([r.timings_ms.get("matching", 0.0)
-                                  for r in results[METHODS[1]]]))  # fmt: skip
+        budget = float(np.median([r.timings_ms.get("matching", 0.0) for r in results[METHODS[1]]]))
         equal_time = PipelineConfig(matcher="ransac", ransac_time_budget_ms=max(budget, 0.05))
-        converged = PipelineConfig(matcher="ransac", ransac_time_budget_ms=None,
-                                   ransac_confidence=RANSAC_CONFIDENCE)  # fmt: skip
+        converged = PipelineConfig(
+            matcher="ransac", ransac_time_budget_ms=None, ransac_confidence=RANSAC_CONFIDENCE
+        )
         for name, cfg in ((METHODS[2], equal_time), (METHODS[3], converged)):
             rs = PosePipeline(cam, cat, cfg)
             results[name] = []
@@ -106,10 +110,15 @@ def run(n: int = 20):
                 results[name].append(rs.process(f.gray, f.distance_mm))
         for name, rr in results.items():
             j = [judge(r, T, cam, cat) for r, (T, _) in zip(rr, frames, strict=True)]
-            ms = np.median([r.timings_ms.get("matching", np.nan) + r.timings_ms.get("refine", 0.0)
-                            for r in rr])  # fmt: skip
-            out[(kind, level, name)] = (np.mean([r.ok for r in rr]), np.mean([c for c, _ in j]),
-                                        np.mean([w for _, w in j]), ms)  # fmt: skip
+            ms = np.median(
+                [r.timings_ms.get("matching", np.nan) + r.timings_ms.get("refine", 0.0) for r in rr]
+            )
+            out[(kind, level, name)] = (
+                np.mean([r.ok for r in rr]),
+                np.mean([c for c, _ in j]),
+                np.mean([w for _, w in j]),
+                ms,
+            )
     return out
 
 
@@ -117,13 +126,24 @@ def plot(out, path: Path) -> None:
     plt = pyplot()
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4))
-    for ax, kind, levels, xl in ((axes[0], "spurious", SPURIOUS, "spurious bright blobs"),
-                                 (axes[1], "covered", COVERED, "markers out of view")):  # fmt: skip
+    for ax, kind, levels, xl in (
+        (axes[0], "spurious", SPURIOUS, "spurious bright blobs"),
+        (axes[1], "covered", COVERED, "markers out of view"),
+    ):
         for name, style in zip(METHODS, ("o-", "s--", "^:", "d-."), strict=True):
-            ax.plot(levels, [100 * out[(kind, lv, name)][1] for lv in levels], style,
-                    label=f"{name}: correct match")  # fmt: skip
-            ax.plot(levels, [100 * out[(kind, lv, name)][2] for lv in levels], style,
-                    alpha=0.4, label=f"{name}: wrong pose")  # fmt: skip
+            ax.plot(
+                levels,
+                [100 * out[(kind, lv, name)][1] for lv in levels],
+                style,
+                label=f"{name}: correct match",
+            )
+            ax.plot(
+                levels,
+                [100 * out[(kind, lv, name)][2] for lv in levels],
+                style,
+                alpha=0.4,
+                label=f"{name}: wrong pose",
+            )
         ax.set_xlabel(xl)
         ax.set_xticks(levels)
         ax.set_ylabel("% of frames")
@@ -134,23 +154,30 @@ def plot(out, path: Path) -> None:
 
 
 def markdown(out, img: str, n: int) -> str:
-    L = ["## Robustness: spurious blobs and missing markers", "",
-         f"{n} frames per setting at {RANGE_M:g} m, random attitude within +-5 deg. Spurious "
-         "blobs: retro-reflective discs of 30-90 mm with 0.5-1.5x a marker's gain, scattered "
-         "+-700 x +-450 mm around the plate centre and -150..+250 mm off the plate. Covered: "
-         "k random markers removed from the scene (the catalog still has 8). RANSAC draws "
-         "random blob triplets, aligns them to every compatible catalog triplet, keeps the "
-         "hypothesis with most inliers, and stops either at the median annealing matching "
-         "time of that setting (equal time) or, with no time limit, once the standard "
-         "RANSAC count log(0.01) / log(1 - C(I,3) / C(n,3)) of blob triplets is drawn for "
-         "the best hypothesis's I inliers among n blobs (99 % confidence of having drawn "
-         "an all-marker triplet; each drawn triplet is tried against every catalog triplet "
-         "with matching side lengths). RANSAC's hypothesis loop is compiled, as our triplet "
-         "fallback's is (the same kernel), so that equal time compares methods, not call "
-         "overheads. Time = median matching + refinement ms per frame.", "",
-         f"![robustness]({img})", ""]  # fmt: skip
-    for kind, levels, lab in (("spurious", SPURIOUS, "spurious blobs"),
-                              ("covered", COVERED, "markers covered")):  # fmt: skip
+    L = [
+        "## Robustness: spurious blobs and missing markers",
+        "",
+        f"{n} frames per setting at {RANGE_M:g} m, random attitude within +-5 deg. Spurious "
+        "blobs: retro-reflective discs of 30-90 mm with 0.5-1.5x a marker's gain, scattered "
+        "+-700 x +-450 mm around the plate centre and -150..+250 mm off the plate. Covered: "
+        "k random markers removed from the scene (the catalog still has 8). RANSAC draws "
+        "random blob triplets, aligns them to every compatible catalog triplet, keeps the "
+        "hypothesis with most inliers, and stops either at the median annealing matching "
+        "time of that setting (equal time) or, with no time limit, once the standard "
+        "RANSAC count log(0.01) / log(1 - C(I,3) / C(n,3)) of blob triplets is drawn for "
+        "the best hypothesis's I inliers among n blobs (99 % confidence of having drawn "
+        "an all-marker triplet; each drawn triplet is tried against every catalog triplet "
+        "with matching side lengths). RANSAC's hypothesis loop is compiled, as our triplet "
+        "fallback's is (the same kernel), so that equal time compares methods, not call "
+        "overheads. Time = median matching + refinement ms per frame.",
+        "",
+        f"![robustness]({img})",
+        "",
+    ]
+    for kind, levels, lab in (
+        ("spurious", SPURIOUS, "spurious blobs"),
+        ("covered", COVERED, "markers covered"),
+    ):
         header = [lab]
         for m in METHODS:
             header += [f"{m}: ok / correct / wrong pose", f"{m}: ms"]

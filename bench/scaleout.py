@@ -38,9 +38,15 @@ TOKEN = "bench-token-0123456789"
 
 
 def study_spec(frames_per_cell: int) -> StudySpec:
-    return StudySpec.from_dict({
-        "name": "bench", "seed": 11, "frames_per_cell": frames_per_cell, "chunk_frames": 8,
-        "grid": {"range_m": [3.0, 6.0], "physics": ["ideal", "lens blur"]}})  # fmt: skip
+    return StudySpec.from_dict(
+        {
+            "name": "bench",
+            "seed": 11,
+            "frames_per_cell": frames_per_cell,
+            "chunk_frames": 8,
+            "grid": {"range_m": [3.0, 6.0], "physics": ["ideal", "lens blur"]},
+        }
+    )
 
 
 def serial_study_fps(spec: StudySpec) -> float:
@@ -67,8 +73,12 @@ def study_runs(spec: StudySpec, workers: int, repeats: int) -> dict:
             warm.append(run["frames_per_s_warm"])
             start.append(run["cluster_start_s"])
             loads += run["worker_kernel_load"]
-    return {"fps": float(np.median(fps)), "warm": float(np.median(warm)),
-            "start_s": float(np.median(start)), "loads": loads}
+    return {
+        "fps": float(np.median(fps)),
+        "warm": float(np.median(warm)),
+        "start_s": float(np.median(start)),
+        "loads": loads,
+    }
 
 
 def make_recording(path: Path, n: int) -> None:
@@ -82,8 +92,9 @@ def serial_estimate_fps(rec: Path, tracking: bool) -> float:
 
     with tempfile.TemporaryDirectory() as d:
         t0 = time.perf_counter()
-        s = estimate(str(rec), str(Path(d) / "e.csv"), None, None, progress=False,
-                     tracking=tracking)  # fmt: skip
+        s = estimate(
+            str(rec), str(Path(d) / "e.csv"), None, None, progress=False, tracking=tracking
+        )
         return s["frames"] / (time.perf_counter() - t0)
 
 
@@ -95,8 +106,14 @@ def reprocess_fps(rec: Path, workers: int, tracking: bool, repeats: int) -> tupl
     fps, warm, extra = [], [], []
     for _ in range(repeats):
         with tempfile.TemporaryDirectory() as d:
-            s = reprocess([str(rec)], d, settings=Settings(tracking=tracking), workers=workers,
-                          chunk_frames=100, progress=False)  # fmt: skip
+            s = reprocess(
+                [str(rec)],
+                d,
+                settings=Settings(tracking=tracking),
+                workers=workers,
+                chunk_frames=100,
+                progress=False,
+            )
             fps.append(s["run"]["frames_per_s"])
             warm.append(s["run"]["frames_per_s_warm"])
             chunks = max(1, s["recordings"][0]["chunks"])
@@ -148,12 +165,16 @@ def live_rates(seconds: float) -> dict:
 
     port = _free_port()
     with tempfile.TemporaryDirectory() as d:
-        env = {**os.environ, "TOFPOSE_DATA_DIR": d, "TOFPOSE_PORT": str(port),
-               "TOFPOSE_API_TOKEN": TOKEN, "TOFPOSE_VISER": "false",
-               "TOFPOSE_KERNELS_IN_BACKGROUND": "false"}  # fmt: skip
+        env = {
+            **os.environ,
+            "TOFPOSE_DATA_DIR": d,
+            "TOFPOSE_PORT": str(port),
+            "TOFPOSE_API_TOKEN": TOKEN,
+            "TOFPOSE_VISER": "false",
+            "TOFPOSE_KERNELS_IN_BACKGROUND": "false",
+        }
         cmd = [str(Path(sys.executable).with_name("tofpose")), "serve"]
-        proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL)  # fmt: skip
+        proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         base = f"http://127.0.0.1:{port}"
         auth = {"Authorization": f"Bearer {TOKEN}"}
         try:
@@ -175,8 +196,13 @@ def live_rates(seconds: float) -> dict:
 
             time.sleep(3.0)
             idle, _ = rate(seconds)
-            spec = {"name": "load", "seed": 1, "frames_per_cell": 2000, "chunk_frames": 8,
-                    "grid": {"range_m": [3.0, 6.0]}}  # fmt: skip
+            spec = {
+                "name": "load",
+                "seed": 1,
+                "frames_per_cell": 2000,
+                "chunk_frames": 8,
+                "grid": {"range_m": [3.0, 6.0]},
+            }
             sid = httpx.post(f"{base}/api/studies", json=spec, headers=auth).json()["id"]
             while httpx.get(f"{base}/api/studies/{sid}").json()["frames_done"] < 16:
                 time.sleep(0.5)  # the workers are up and measuring
@@ -185,8 +211,12 @@ def live_rates(seconds: float) -> dict:
             f1 = httpx.get(f"{base}/api/studies/{sid}").json()["frames_done"]
             study = httpx.get(f"{base}/api/studies/{sid}").json()
             httpx.post(f"{base}/api/studies/{sid}/cancel", headers=auth)
-            return {"idle_hz": idle, "busy_hz": busy, "study_fps": (f1 - f0) / span,
-                    "cluster": study["cluster"]}  # fmt: skip
+            return {
+                "idle_hz": idle,
+                "busy_hz": busy,
+                "study_fps": (f1 - f0) / span,
+                "cluster": study["cluster"],
+            }
         finally:
             proc.terminate()
             proc.wait(timeout=60)
@@ -205,20 +235,42 @@ def main() -> None:
     rows = [["serial (one process, no Dask)", "-", f"{serial:.1f}", "-", f"{serial:.1f}", "-"]]
     for w, r in runs.items():
         eff = r["fps"] / (w * runs[1]["fps"])
-        rows.append([f"LocalCluster, {w} worker{'s' if w > 1 else ''}", f"{r['start_s']:.1f}",
-                     f"{r['fps']:.1f}", f"{eff:.2f}", f"{r['warm']:.1f}",
-                     f"{r['warm'] / (w * runs[1]['warm']):.2f}"])  # fmt: skip
-    print(f"study: {spec.n_frames} frames ({len(spec.cells)} cells at 3 and 6 m, ideal and "
-          f"lens blur; chunks of {spec.chunk_frames}); medians of {reps} runs")
-    print(table(["run", "cluster start (s)", "frames/s after start", "scaling efficiency",
-                 "frames/s once warm", "scaling efficiency (warm)"], rows))  # fmt: skip
+        rows.append(
+            [
+                f"LocalCluster, {w} worker{'s' if w > 1 else ''}",
+                f"{r['start_s']:.1f}",
+                f"{r['fps']:.1f}",
+                f"{eff:.2f}",
+                f"{r['warm']:.1f}",
+                f"{r['warm'] / (w * runs[1]['warm']):.2f}",
+            ]
+        )
+    print(
+        f"study: {spec.n_frames} frames ({len(spec.cells)} cells at 3 and 6 m, ideal and "
+        f"lens blur; chunks of {spec.chunk_frames}); medians of {reps} runs"
+    )
+    print(
+        table(
+            [
+                "run",
+                "cluster start (s)",
+                "frames/s after start",
+                "scaling efficiency",
+                "frames/s once warm",
+                "scaling efficiency (warm)",
+            ],
+            rows,
+        )
+    )
     loads = [x for r in runs.values() for x in r["loads"]]
     misses = sum(x["cache_misses"] for x in loads)
     secs = [x["seconds"] for x in loads]
     print()
-    print(f"numba kernels on the workers: {len(loads)} worker starts, cache misses {misses} "
-          f"(0 = every kernel loaded from the cache, none compiled), warm-up "
-          f"{min(secs):.1f}-{max(secs):.1f} s per worker")
+    print(
+        f"numba kernels on the workers: {len(loads)} worker starts, cache misses {misses} "
+        f"(0 = every kernel loaded from the cache, none compiled), warm-up "
+        f"{min(secs):.1f}-{max(secs):.1f} s per worker"
+    )
     print()
     n_rec = 240 if args.quick else 3000
     with tempfile.TemporaryDirectory() as d:
@@ -231,38 +283,65 @@ def main() -> None:
             r2, w2, again = reprocess_fps(rec, 2, tracking, reps)
             mode = "tracking" if tracking else "acquisition"
             eff = f"{r2 / (2 * r1):.2f} ({w2 / (2 * w1):.2f})"
-            rrows.append([mode, f"{s:.1f}", f"{r1:.1f} ({w1:.1f})", f"{r2:.1f} ({w2:.1f})",
-                          eff, f"{again:.0f} %"])  # fmt: skip
-    print(f"re-processing a {n_rec}-frame recording (range sweep) in chunks of 100, "
-          f"medians of {reps} runs (the CSV is estimate's byte for byte); frames/s after "
-          "the cluster's start (in brackets: once warm, over the chunks' own time)")
-    print(table(["mode", "tofpose estimate (frames/s)", "1 worker", "2 workers",
-                 "scaling efficiency", "chunks run again"], rrows))  # fmt: skip
+            rrows.append(
+                [
+                    mode,
+                    f"{s:.1f}",
+                    f"{r1:.1f} ({w1:.1f})",
+                    f"{r2:.1f} ({w2:.1f})",
+                    eff,
+                    f"{again:.0f} %",
+                ]
+            )
+    print(
+        f"re-processing a {n_rec}-frame recording (range sweep) in chunks of 100, "
+        f"medians of {reps} runs (the CSV is estimate's byte for byte); frames/s after "
+        "the cluster's start (in brackets: once warm, over the chunks' own time)"
+    )
+    print(
+        table(
+            [
+                "mode",
+                "tofpose estimate (frames/s)",
+                "1 worker",
+                "2 workers",
+                "scaling efficiency",
+                "chunks run again",
+            ],
+            rrows,
+        )
+    )
     print()
     task_ms = scheduler_overhead_ms(500 if args.quick else 2000)
     chunk_ms, chunk_kb = store_chunk_ms()
     per_frame_s = 1.0 / serial
-    print(f"scheduler: {task_ms:.2f} ms per no-op task (round trip, 2 local workers); "
-          f"store: {chunk_ms:.1f} ms and {chunk_kb:.0f} kB per chunk of 25 frames")
+    print(
+        f"scheduler: {task_ms:.2f} ms per no-op task (round trip, 2 local workers); "
+        f"store: {chunk_ms:.1f} ms and {chunk_kb:.0f} kB per chunk of 25 frames"
+    )
     frames = 1e7
     core_h = frames * per_frame_s / 3600
     chunk = 100
     task_s = chunk * per_frame_s
     max_workers = task_s / (task_ms / 1e3)
     print()
-    print(f"On paper, from these numbers: 10^7 frames are {core_h:.0f} core-hours "
-          f"({per_frame_s * 1e3:.0f} ms a frame); on 10 nodes of 16 cores about "
-          f"{core_h / 160:.1f} h. In chunks of {chunk} frames a task runs {task_s:.0f} s, "
-          f"so the scheduler ({task_ms:.2f} ms a task here; Dask documents ~1 ms) saturates "
-          f"near {max_workers:.0f} workers; the store takes {chunk_kb * chunk / 25:.0f} kB "
-          f"a task, {chunk_kb * chunk / 25 * max_workers / task_s / 1e3:.0f} MB/s at that "
-          "scale. Larger chunks move the limit out.")
+    print(
+        f"On paper, from these numbers: 10^7 frames are {core_h:.0f} core-hours "
+        f"({per_frame_s * 1e3:.0f} ms a frame); on 10 nodes of 16 cores about "
+        f"{core_h / 160:.1f} h. In chunks of {chunk} frames a task runs {task_s:.0f} s, "
+        f"so the scheduler ({task_ms:.2f} ms a task here; Dask documents ~1 ms) saturates "
+        f"near {max_workers:.0f} workers; the store takes {chunk_kb * chunk / 25:.0f} kB "
+        f"a task, {chunk_kb * chunk / 25 * max_workers / task_s / 1e3:.0f} MB/s at that "
+        "scale. Larger chunks move the limit out."
+    )
     print()
     live = live_rates(10.0 if args.quick else 20.0)
     print(json.dumps(live), file=sys.stderr)
-    print(f"the live loop (server, simulated camera at 10 Hz) from outside: "
-          f"{live['idle_hz']:.2f} frames/s idle, {live['busy_hz']:.2f} frames/s while a study "
-          f"ran on {live['cluster']} at nice +10 ({live['study_fps']:.1f} study frames/s)")
+    print(
+        f"the live loop (server, simulated camera at 10 Hz) from outside: "
+        f"{live['idle_hz']:.2f} frames/s idle, {live['busy_hz']:.2f} frames/s while a study "
+        f"ran on {live['cluster']} at nice +10 ({live['study_fps']:.1f} study frames/s)"
+    )
 
 
 if __name__ == "__main__":

@@ -48,9 +48,13 @@ def main() -> None:
     # a slew: four phase sub-frames at their own poses (8 deg/s about the camera's y axis,
     # 2 ms apart), each a full ray cast
     T = RigidTransform(rotation_from_euler_deg(2, -3, 10) @ R_FACING, np.array([0, -30, 3000.0]))
-    subs = [RigidTransform(rotation_from_euler_deg(0, 8.0 * 0.002 * k, 0) @ T.R,
-                           rotation_from_euler_deg(0, 8.0 * 0.002 * k, 0) @ T.t_mm)
-            for k in range(4)]  # fmt: skip
+    subs = [
+        RigidTransform(
+            rotation_from_euler_deg(0, 8.0 * 0.002 * k, 0) @ T.R,
+            rotation_from_euler_deg(0, 8.0 * 0.002 * k, 0) @ T.t_mm,
+        )
+        for k in range(4)
+    ]
     render_frame(cam, TargetScene(), T, SensorModel(), rng, subframe_poses=subs)
     times = []
     for _ in range(args.frames):
@@ -58,8 +62,15 @@ def main() -> None:
         render_frame(cam, TargetScene(), T, SensorModel(), rng, subframe_poses=subs)
         times.append((time.perf_counter() - t0) * 1e3)
     m, p = med_p95(times)
-    rows.append(["default, slewing 8 deg/s (4 sub-frames)", "3.0 m", f"{m:.1f}", f"{p:.1f}",
-                 f"{1000 / m:.0f}"])  # fmt: skip
+    rows.append(
+        [
+            "default, slewing 8 deg/s (4 sub-frames)",
+            "3.0 m",
+            f"{m:.1f}",
+            f"{p:.1f}",
+            f"{1000 / m:.0f}",
+        ]
+    )
     print(f"render one 320x240 frame pair, one core, {args.frames} frames")
     print(table(["sensor", "range", "median ms", "p95 ms", "frames/s"], rows))
 

@@ -49,15 +49,22 @@ class Server:
     def __init__(self, rate_hz: float, caps: int) -> None:
         self.port = free_port()
         self.tmp = tempfile.TemporaryDirectory()
-        env = {**os.environ, "TOFPOSE_FRAME_RATE_HZ": str(rate_hz),
-               "TOFPOSE_DATA_DIR": self.tmp.name}  # fmt: skip
+        env = {
+            **os.environ,
+            "TOFPOSE_FRAME_RATE_HZ": str(rate_hz),
+            "TOFPOSE_DATA_DIR": self.tmp.name,
+        }
         if caps:
-            env |= {"TOFPOSE_LIVE_MAX_CLIENTS_PER_ADDRESS": str(caps),
-                    "TOFPOSE_LIVE_MAX_CLIENTS": str(caps)}  # fmt: skip
+            env |= {
+                "TOFPOSE_LIVE_MAX_CLIENTS_PER_ADDRESS": str(caps),
+                "TOFPOSE_LIVE_MAX_CLIENTS": str(caps),
+            }
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "tofpose.cli", "serve", "--port", str(self.port), "--no-viser"],
-            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-        )  # fmt: skip
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         deadline = time.monotonic() + 900  # a first start compiles the kernels
         while time.monotonic() < deadline:
             try:
@@ -82,12 +89,17 @@ class Server:
                 return int(line.split()[1]) / 1024
         return float("nan")
 
-    def request(self, method: str, path: str, body: dict | None = None,
-                timeout_s: float = 120.0) -> tuple[int, bytes]:  # fmt: skip
+    def request(
+        self, method: str, path: str, body: dict | None = None, timeout_s: float = 120.0
+    ) -> tuple[int, bytes]:
         """(status, body) of one request with the admin key."""
         data = None if body is None else json.dumps(body).encode()
-        req = urllib.request.Request(self.url(path), method=method, data=data, headers={
-            "Authorization": f"Bearer {self.key}", "Content-Type": "application/json"})
+        req = urllib.request.Request(
+            self.url(path),
+            method=method,
+            data=data,
+            headers={"Authorization": f"Bearer {self.key}", "Content-Type": "application/json"},
+        )
         try:
             with urllib.request.urlopen(req, timeout=timeout_s) as r:
                 return r.status, r.read()
@@ -114,13 +126,14 @@ RAW_OPTIONS = b'{"raw":true,"raw_credit":0,"image_every":1,"image_step":1}'
 def masked_text_frame(payload: bytes) -> bytes:
     """A client-to-server WebSocket text frame (short payload, masked as clients must)."""
     mask = os.urandom(4)
-    return bytes([0x81, 0x80 | len(payload)]) + mask + bytes(
-        b ^ mask[i % 4] for i, b in enumerate(payload)
+    return (
+        bytes([0x81, 0x80 | len(payload)])
+        + mask
+        + bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
     )
 
 
-def reader(port: int, stop: threading.Event, measuring: threading.Event,
-           got: list[int]) -> None:  # fmt: skip
+def reader(port: int, stop: threading.Event, measuring: threading.Event, got: list[int]) -> None:
     """A dashboard-like client: raw frames at every frame, everything read (and dropped);
     appends the bytes it read while ``measuring`` was set to ``got``."""
     s = handshake(port)
@@ -152,13 +165,15 @@ def handshake(port: int) -> socket.socket | None:
     None when the server refused it."""
     s = socket.create_connection(("127.0.0.1", port))
     nonce = base64.b64encode(os.urandom(16)).decode()
-    s.sendall((
-        "GET /ws/live HTTP/1.1\r\n"
-        f"Host: 127.0.0.1:{port}\r\n"
-        "Upgrade: websocket\r\nConnection: Upgrade\r\n"
-        f"Sec-WebSocket-Key: {nonce}\r\nSec-WebSocket-Version: 13\r\n"
-        "Sec-WebSocket-Extensions: permessage-deflate; client_max_window_bits\r\n\r\n"
-    ).encode())  # fmt: skip
+    s.sendall(
+        (
+            "GET /ws/live HTTP/1.1\r\n"
+            f"Host: 127.0.0.1:{port}\r\n"
+            "Upgrade: websocket\r\nConnection: Upgrade\r\n"
+            f"Sec-WebSocket-Key: {nonce}\r\nSec-WebSocket-Version: 13\r\n"
+            "Sec-WebSocket-Extensions: permessage-deflate; client_max_window_bits\r\n\r\n"
+        ).encode()
+    )
     head = b""
     while b"\r\n\r\n" not in head:
         chunk = s.recv(1)
@@ -181,8 +196,11 @@ def handshake(port: int) -> socket.socket | None:
 def time_stops(server: Server, n: int, gap_s: float) -> list[float]:
     out = []
     for _ in range(n):
-        req = urllib.request.Request(server.url("/api/motion/stop"), method="POST",
-                                     headers={"Authorization": f"Bearer {server.key}"})  # fmt: skip
+        req = urllib.request.Request(
+            server.url("/api/motion/stop"),
+            method="POST",
+            headers={"Authorization": f"Bearer {server.key}"},
+        )
         t0 = time.perf_counter()
         with urllib.request.urlopen(req, timeout=30) as r:
             r.read()
@@ -191,12 +209,15 @@ def time_stops(server: Server, n: int, gap_s: float) -> list[float]:
     return out
 
 
-def run(n_clients: int, n_readers: int, rate: float, stops: int, settle_s: float,
-        caps: int) -> list[str]:  # fmt: skip
+def run(
+    n_clients: int, n_readers: int, rate: float, stops: int, settle_s: float, caps: int
+) -> list[str]:
     server = Server(rate, caps)
     stop, measuring, got = threading.Event(), threading.Event(), []
-    readers = [threading.Thread(target=reader, args=(server.port, stop, measuring, got),
-                                daemon=True) for _ in range(n_readers)]  # fmt: skip
+    readers = [
+        threading.Thread(target=reader, args=(server.port, stop, measuring, got), daemon=True)
+        for _ in range(n_readers)
+    ]
     try:
         for t in readers:
             t.start()
@@ -216,19 +237,35 @@ def run(n_clients: int, n_readers: int, rate: float, stops: int, settle_s: float
             t.join(5.0)
         server.stop()
     mb_s = sum(got) / elapsed / 1e6
-    return [str(n_clients), str(len(socks)), str(n_readers), f"{mb_s:.1f}",
-            f"{np.median(ms):.1f}", f"{np.percentile(ms, 95):.1f}", f"{ms.max():.1f}",
-            f"{cpu:.0f}"]  # fmt: skip
+    return [
+        str(n_clients),
+        str(len(socks)),
+        str(n_readers),
+        f"{mb_s:.1f}",
+        f"{np.median(ms):.1f}",
+        f"{np.percentile(ms, 95):.1f}",
+        f"{ms.max():.1f}",
+        f"{cpu:.0f}",
+    ]
 
 
-CAMPAIGN = {"name": "export-load", "frames_per_point": 30, "settle_s": 0.2, "record_raw": True,
-            "setpoints": [{"yaw_deg": 2.0 * i, "rail_mm": 12000} for i in range(4)]}  # fmt: skip
-HUGE_STUDY = {"name": "huge", "frames_per_cell": 1, "grid": {
-    "range_m": [1.0 + 0.25 * i for i in range(64)],
-    "attitude_deg": [0.5 * i for i in range(64)],
-    "offset_fraction": [0.01 * i for i in range(64)],
-    "physics": ["ideal", "grey plate", "lens blur", "gains", "systematic", "background", "all"],
-}}  # fmt: skip
+CAMPAIGN = {
+    "name": "export-load",
+    "frames_per_point": 30,
+    "settle_s": 0.2,
+    "record_raw": True,
+    "setpoints": [{"yaw_deg": 2.0 * i, "rail_mm": 12000} for i in range(4)],
+}
+HUGE_STUDY = {
+    "name": "huge",
+    "frames_per_cell": 1,
+    "grid": {
+        "range_m": [1.0 + 0.25 * i for i in range(64)],
+        "attitude_deg": [0.5 * i for i in range(64)],
+        "offset_fraction": [0.01 * i for i in range(64)],
+        "physics": ["ideal", "grey plate", "lens blur", "gains", "systematic", "background", "all"],
+    },
+}
 """64 x 64 x 64 x 7 = 1,835,008 cells: far beyond TOFPOSE_STUDY_MAX_CELLS."""
 
 
@@ -265,8 +302,15 @@ def run_exports(n: int, rate: float, stops: int) -> list[str]:
             t.join()
     finally:
         server.stop()
-    return [str(n), str(codes.count(200)), str(codes.count(503)), str(busy_during),
-            f"{np.median(ms):.1f}", f"{np.percentile(ms, 95):.1f}", f"{ms.max():.1f}"]  # fmt: skip
+    return [
+        str(n),
+        str(codes.count(200)),
+        str(codes.count(503)),
+        str(busy_during),
+        f"{np.median(ms):.1f}",
+        f"{np.percentile(ms, 95):.1f}",
+        f"{ms.max():.1f}",
+    ]
 
 
 def run_study_refusals(repeats: int = 20) -> list[str]:
@@ -286,42 +330,93 @@ def run_study_refusals(repeats: int = 20) -> list[str]:
         detail = json.loads(body)["detail"][0]["msg"]
     finally:
         server.stop()
-    return [f"{len(ms)}", f"{np.median(ms):.1f}", f"{max(ms):.1f}", f"{rss0:.0f}",
-            f"{rss1:.0f}", detail[:90]]  # fmt: skip
+    return [
+        f"{len(ms)}",
+        f"{np.median(ms):.1f}",
+        f"{max(ms):.1f}",
+        f"{rss0:.0f}",
+        f"{rss1:.0f}",
+        detail[:90],
+    ]
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--clients", type=int, nargs="+", default=[0, 100])
-    ap.add_argument("--readers", type=int, default=0,
-                    help="dashboard-like clients reading full-size raw frames")  # fmt: skip
+    ap.add_argument(
+        "--readers", type=int, default=0, help="dashboard-like clients reading full-size raw frames"
+    )
     ap.add_argument("--rate", type=float, default=20.0, help="camera frame rate, Hz")
     ap.add_argument("--stops", type=int, default=40)
-    ap.add_argument("--settle", type=float, default=5.0,
-                    help="seconds between the last client and the first STOP")  # fmt: skip
-    ap.add_argument("--exports", type=int, default=60,
-                    help="concurrent report/MCAP downloads while STOP is timed (0: skip)")
-    ap.add_argument("--caps", type=int, default=1000,
-                    help="per-address and total /ws/live caps for the run (0: the defaults)")
+    ap.add_argument(
+        "--settle",
+        type=float,
+        default=5.0,
+        help="seconds between the last client and the first STOP",
+    )
+    ap.add_argument(
+        "--exports",
+        type=int,
+        default=60,
+        help="concurrent report/MCAP downloads while STOP is timed (0: skip)",
+    )
+    ap.add_argument(
+        "--caps",
+        type=int,
+        default=1000,
+        help="per-address and total /ws/live caps for the run (0: the defaults)",
+    )
     args = ap.parse_args()
     all_cores()
-    rows = [run(n, args.readers, args.rate, args.stops, args.settle, args.caps)
-            for n in args.clients]  # fmt: skip
+    rows = [
+        run(n, args.readers, args.rate, args.stops, args.settle, args.caps) for n in args.clients
+    ]
     print(f"camera {args.rate:g} Hz, {args.stops} STOPs 0.2 s apart, {os.cpu_count()} cores")
-    print(table(["mute clients", "served", "raw readers", "readers MB/s", "STOP median ms",
-                 "p95 ms", "max ms", "server CPU %"], rows))  # fmt: skip
+    print(
+        table(
+            [
+                "mute clients",
+                "served",
+                "raw readers",
+                "readers MB/s",
+                "STOP median ms",
+                "p95 ms",
+                "max ms",
+                "server CPU %",
+            ],
+            rows,
+        )
+    )
     if args.exports:
         exp = run_exports(args.exports, args.rate, args.stops)
         print()
-        print(f"STOP during {args.exports} concurrent downloads (PDF report and MCAP, half each) "
-              "of one campaign (4 set-points x 30 frames, raw recording)")
-        print(table(["downloads", "served (200)", "refused (503)", "still running at last STOP",
-                     "STOP median ms", "p95 ms", "max ms"], [exp]))  # fmt: skip
+        print(
+            f"STOP during {args.exports} concurrent downloads (PDF report and MCAP, half each) "
+            "of one campaign (4 set-points x 30 frames, raw recording)"
+        )
+        print(
+            table(
+                [
+                    "downloads",
+                    "served (200)",
+                    "refused (503)",
+                    "still running at last STOP",
+                    "STOP median ms",
+                    "p95 ms",
+                    "max ms",
+                ],
+                [exp],
+            )
+        )
     ref = run_study_refusals()
     print()
     print("POST /api/studies with a 1,835,008-cell spec (refused, 422)")
-    print(table(["requests", "median ms", "max ms", "server RSS before MB", "after MB",
-                 "the refusal"], [ref]))  # fmt: skip
+    print(
+        table(
+            ["requests", "median ms", "max ms", "server RSS before MB", "after MB", "the refusal"],
+            [ref],
+        )
+    )
 
 
 if __name__ == "__main__":

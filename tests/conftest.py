@@ -44,10 +44,16 @@ def catalog():
 _BROWSER = ("tests/e2e/",)
 #: tests that run the server, devices, subprocesses, clusters or whole benchmarks
 _INTEGRATION = (
-    "tests/backend/", "tests/bench/", "tests/frontend/", "tests/tofpose/batch/",
-    "tests/tofpose/study/", "tests/tofpose/io/interop/", "tests/tofpose/test_cli.py",
-    "tests/tofpose/core/test_threads.py", "tests/test_packaging.py",
-)  # fmt: skip
+    "tests/backend/",
+    "tests/bench/",
+    "tests/frontend/",
+    "tests/tofpose/batch/",
+    "tests/tofpose/study/",
+    "tests/tofpose/io/interop/",
+    "tests/tofpose/test_cli.py",
+    "tests/tofpose/core/test_threads.py",
+    "tests/test_packaging.py",
+)
 #: long runs under load (memory and rate over seconds of traffic)
 _SOAK = ("tests/backend/test_soak.py",)
 _ROOT = Path(__file__).resolve().parents[1]

@@ -44,10 +44,22 @@ def test_declared_packages_are_every_package_in_the_tree():
 def wheel(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("wheel")
     subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation",
-         "-w", str(out), str(ROOT)],
-        check=True, capture_output=True, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "-q",
+            "--no-deps",
+            "--no-build-isolation",
+            "-w",
+            str(out),
+            str(ROOT),
+        ],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
     (whl,) = out.glob("tofpose-*.whl")
     return whl
 
@@ -65,10 +77,21 @@ def installed(wheel, tmp_path_factory) -> Path:
     """The wheel installed into a bare directory (run with it as PYTHONPATH)."""
     target = tmp_path_factory.mktemp("site")
     subprocess.run(
-        [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(target),
-         str(wheel)],
-        check=True, capture_output=True, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "-q",
+            "--no-deps",
+            "--target",
+            str(target),
+            str(wheel),
+        ],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
     return target
 
 
@@ -78,8 +101,12 @@ def _run_installed(target: Path, script: str, cwd: Path) -> str:
     env = _clean_env(PYTHONPATH=str(target), PYTHONSAFEPATH="1")
     out = subprocess.run(
         [sys.executable, "-c", script],
-        check=True, capture_output=True, text=True, cwd=cwd, env=env,
-    )  # fmt: skip
+        check=True,
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env=env,
+    )
     return out.stdout
 
 
@@ -141,8 +168,12 @@ def sdist(tmp_path_factory) -> Path:
     script = "import sys\nfrom setuptools import build_meta\nbuild_meta.build_sdist(sys.argv[1])"
     subprocess.run(
         [sys.executable, "-c", script, str(out)],
-        check=True, capture_output=True, text=True, cwd=ROOT, env=_clean_env(),
-    )  # fmt: skip
+        check=True,
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=_clean_env(),
+    )
     (tar,) = out.glob("tofpose-*.tar.gz")
     return tar
 
@@ -167,8 +198,15 @@ def test_sdist_carries_the_dashboard_and_its_sources(sdist):
         names = {n.split("/", 1)[1] for n in tar.getnames() if "/" in n}
     assert {"setup.py", "MANIFEST.in", "pyproject.toml", "frontend/dist/index.html"} <= names
     assert {f"frontend/dist/assets/{p.name}" for p in (DIST / "assets").iterdir()} <= names
-    sources = {"index.html", "package.json", "package-lock.json", "tsconfig.json",
-               "vite.config.ts", "src/main.tsx", "src/api/schema.d.ts"}  # fmt: skip
+    sources = {
+        "index.html",
+        "package.json",
+        "package-lock.json",
+        "tsconfig.json",
+        "vite.config.ts",
+        "src/main.tsx",
+        "src/api/schema.d.ts",
+    }
     assert {f"frontend/{f}" for f in sources} <= names
     assert not any(n.startswith("frontend/node_modules") for n in names)
 
@@ -178,10 +216,23 @@ def test_pip_install_from_the_sdist_ships_the_dashboard(sdist, tmp_path):
     dashboard comes from the sdist's frontend/dist: no Node.js needed."""
     target = tmp_path / "site"
     subprocess.run(
-        [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
-         "--target", str(target), str(sdist)],
-        check=True, capture_output=True, text=True, env=_no_npm_env(),
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "-q",
+            "--no-deps",
+            "--no-build-isolation",
+            "--target",
+            str(target),
+            str(sdist),
+        ],
+        check=True,
+        capture_output=True,
+        text=True,
+        env=_no_npm_env(),
+    )
     page = target / "backend" / "dashboard" / "index.html"
     assert page.read_bytes() == (DIST / "index.html").read_bytes()
 
@@ -190,10 +241,21 @@ def test_a_wheel_without_a_built_dashboard_or_npm_fails_saying_how_to_build_it(
     unpacked_without_dashboard, tmp_path
 ):
     run = subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation",
-         "-w", str(tmp_path / "out"), str(unpacked_without_dashboard)],
-        capture_output=True, text=True, env=_no_npm_env(),
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "--no-build-isolation",
+            "-w",
+            str(tmp_path / "out"),
+            str(unpacked_without_dashboard),
+        ],
+        capture_output=True,
+        text=True,
+        env=_no_npm_env(),
+    )
     assert run.returncode != 0
     text = run.stdout + run.stderr
     assert "is not built and npm is not on PATH" in text, text[-3000:]
@@ -209,8 +271,11 @@ def test_an_editable_build_needs_no_dashboard(unpacked_without_dashboard, tmp_pa
     script = "import sys\nfrom setuptools import build_meta\nbuild_meta.build_editable(sys.argv[1])"
     subprocess.run(
         [sys.executable, "-c", script, str(out)],
-        check=True, capture_output=True, text=True, cwd=unpacked_without_dashboard,
+        check=True,
+        capture_output=True,
+        text=True,
+        cwd=unpacked_without_dashboard,
         env=_no_npm_env(),
-    )  # fmt: skip
+    )
     (whl,) = out.glob("tofpose-*.whl")
     assert not [n for n in zipfile.ZipFile(whl).namelist() if "dashboard/" in n]

@@ -36,18 +36,23 @@ from tofpose.sim.pixel_truth import true_pixel_distances
 def _reference(rec, reference: str, rec_path: str) -> tuple[np.ndarray, np.ndarray]:
     """The recording's reference poses (``/truth`` or ``/lab_truth``): R (N, 3, 3), t (N, 3)."""
     R_all, t_all = (
-        (rec.truth_R, rec.truth_t_mm) if reference == "truth"
+        (rec.truth_R, rec.truth_t_mm)
+        if reference == "truth"
         else (rec.lab_truth_R, rec.lab_truth_t_mm)
-    )  # fmt: skip
+    )
     if R_all is None:
         raise SystemExit(f"tofpose: {rec_path} has no /{reference}: nothing to calibrate against")
     return R_all, t_all
 
 
 def calibrate_covariance(
-    rec_path: str, out: str, camera_path: str | None, reference: str,
-    knots_mm: list[float] | None, progress: bool = True,
-) -> str:  # fmt: skip
+    rec_path: str,
+    out: str,
+    camera_path: str | None,
+    reference: str,
+    knots_mm: list[float] | None,
+    progress: bool = True,
+) -> str:
     """Run the pipeline over a recording of the known target (with the camera's range
     correction, if any), compare each pose and its covariance with the reference, fit
     the covariance's factor per range (``tofpose.calibration.covariance``) and write the
@@ -61,8 +66,13 @@ def calibrate_covariance(
             camera, correction, _ = load_camera(read_text_file(camera_path, "camera"))
         pipe = PosePipeline(camera, rec.catalog, range_correction=correction)
         ranges, nees = [], []
-        for i in tqdm(range(rec.n_frames), desc="calibrate-covariance", unit="frame",
-                      disable=not progress, file=sys.stderr):  # fmt: skip
+        for i in tqdm(
+            range(rec.n_frames),
+            desc="calibrate-covariance",
+            unit="frame",
+            disable=not progress,
+            file=sys.stderr,
+        ):
             gray, dist, t = rec.frame(i)
             r = pipe.process(gray, dist, t)
             if r.ok and r.covariance is not None:
@@ -75,9 +85,15 @@ def calibrate_covariance(
     Path(out).write_text(json.dumps(doc, indent=1) + "\n")
     per_knot = "; ".join(
         f"{k:.0f} mm: {n} frames ({o} failed poses left out), mean NEES {m:.2f} -> x{f:.3g}"
-        for k, n, o, m, f in zip(fit.scale.ranges_mm, fit.frames, fit.outliers, fit.mean_nees,
-                                 fit.scale.factors, strict=True)
-    )  # fmt: skip
+        for k, n, o, m, f in zip(
+            fit.scale.ranges_mm,
+            fit.frames,
+            fit.outliers,
+            fit.mean_nees,
+            fit.scale.factors,
+            strict=True,
+        )
+    )
     return f"{len(nees)} of {rec.n_frames} frames with a pose; {per_knot} -> {out}"
 
 
@@ -92,8 +108,13 @@ def calibrate_range(
             raise SystemExit(f"tofpose: {rec_path} has no /catalog: the target's shape is unknown")
 
         def samples():
-            for i in tqdm(range(rec.n_frames), desc="calibrate-range", unit="frame",
-                          disable=not progress, file=sys.stderr):  # fmt: skip
+            for i in tqdm(
+                range(rec.n_frames),
+                desc="calibrate-range",
+                unit="frame",
+                disable=not progress,
+                file=sys.stderr,
+            ):
                 gray, dist, _ = rec.frame(i)
                 T = RigidTransform(R_all[i], t_all[i])
                 if T.t_mm[2] <= 0:
@@ -106,11 +127,13 @@ def calibrate_range(
     Path(out).write_text(json.dumps(doc, indent=1) + "\n")
     c = fit.correction
     harm = ", ".join(f"{np.hypot(a, b):.2f}" for a, b in c.harmonics_mm)
-    return (f"{fit.n_frames} frames, {fit.n_samples} pixel samples: constant {c.offset_mm:.2f} mm, "
-            f"cyclic amplitudes {harm} mm, amplitude term {c.amplitude_mm_per_decade:.2f} "
-            f"mm/decade, {fit.pixels_with_offset} per-pixel offsets; residual RMS "
-            f"{fit.rms_before_mm:.2f} -> {fit.rms_after_mm:.2f} mm; calibrated span "
-            f"{c.calibrated_span_mm[0]:.0f}-{c.calibrated_span_mm[1]:.0f} mm -> {out}")  # fmt: skip
+    return (
+        f"{fit.n_frames} frames, {fit.n_samples} pixel samples: constant {c.offset_mm:.2f} mm, "
+        f"cyclic amplitudes {harm} mm, amplitude term {c.amplitude_mm_per_decade:.2f} "
+        f"mm/decade, {fit.pixels_with_offset} per-pixel offsets; residual RMS "
+        f"{fit.rms_before_mm:.2f} -> {fit.rms_after_mm:.2f} mm; calibrated span "
+        f"{c.calibrated_span_mm[0]:.0f}-{c.calibrated_span_mm[1]:.0f} mm -> {out}"
+    )
 
 
 def estimate(
@@ -134,8 +157,13 @@ def estimate(
         with open(out_csv, "w", newline="") as fh:
             wr = csv.writer(fh)
             wr.writerow(CSV_COLUMNS + (FILTER_COLUMNS if rel else ()))
-            bar = tqdm(total=rec.n_frames, desc="estimate", unit="frame", disable=not progress,
-                       file=sys.stderr)  # fmt: skip
+            bar = tqdm(
+                total=rec.n_frames,
+                desc="estimate",
+                unit="frame",
+                disable=not progress,
+                file=sys.stderr,
+            )
             for first, (grays, dists, times) in rec.blocks():  # reads aligned to the chunks
                 for k, t in enumerate(times.tolist()):
                     r = pipe.process(grays[k], dists[k], t)
@@ -161,7 +189,8 @@ def simulate(
 
     scenario = get_scenario(scenario_name)
     catalog = (
-        Catalog.from_json(read_text_file(catalog_path, "catalog")) if catalog_path
+        Catalog.from_json(read_text_file(catalog_path, "catalog"))
+        if catalog_path
         else paper_target()
     )
     camera = CameraModel()
@@ -266,8 +295,11 @@ def export_file(args: argparse.Namespace) -> str:
     from tofpose.io.interop.mcap_export import export_mcap  # lazy: foxglove-sdk loads a runtime
 
     with open_recording(args.recording) as rec:
-        pipe = (pipeline_for(rec, args.recording, args.catalog, args.camera, args.tracking)
-                if args.estimate else None)  # fmt: skip
+        pipe = (
+            pipeline_for(rec, args.recording, args.catalog, args.camera, args.tracking)
+            if args.estimate
+            else None
+        )
         s = export_mcap(rec, args.out, pipe, overwrite=args.force, previews=args.previews)
     poses = f", {s['ok']} with a pose" if args.estimate else ""
     return f"{s['frames']} frames{poses} -> {args.out}"
@@ -277,15 +309,23 @@ def import_file(args: argparse.Namespace) -> str:
     """``tofpose import mcap``."""
     from tofpose.io.interop.mcap_import import import_mcap
 
-    s = import_mcap(args.file, args.out, gray_topic=args.gray_topic,
-                    distance_topic=args.distance_topic, overwrite=args.force)  # fmt: skip
+    s = import_mcap(
+        args.file,
+        args.out,
+        gray_topic=args.gray_topic,
+        distance_topic=args.distance_topic,
+        overwrite=args.force,
+    )
     return f"{s['frames']} frames -> {args.out}"
 
 
 def _cluster_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--workers", type=int,
-                   help="worker processes of a LocalCluster on this machine (default: its cores)")
+    g.add_argument(
+        "--workers",
+        type=int,
+        help="worker processes of a LocalCluster on this machine (default: its cores)",
+    )
     g.add_argument("--scheduler", help="address of a running Dask scheduler, tcp://host:8786")
 
 
@@ -309,13 +349,18 @@ def study(args) -> int:
         print(f"tofpose study: {exc}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, StudyCancelledError):
-        print(f"tofpose study: interrupted; {args.out} holds the chunks that finished "
-              "(study.json: incomplete); run the same command again to resume", file=sys.stderr)
+        print(
+            f"tofpose study: interrupted; {args.out} holds the chunks that finished "
+            "(study.json: incomplete); run the same command again to resume",
+            file=sys.stderr,
+        )
         return 130
     a = summary["all"]
-    print(f"{summary['frames_stored']} frames in {len(spec.cells)} cells: success "
-          f"{a['success_pct']:.1f} %, {a['wrong']} wrong, {a['confidently_wrong']} confidently "
-          f"wrong -> {Path(args.out) / 'report.html'}")
+    print(
+        f"{summary['frames_stored']} frames in {len(spec.cells)} cells: success "
+        f"{a['success_pct']:.1f} %, {a['wrong']} wrong, {a['confidently_wrong']} confidently "
+        f"wrong -> {Path(args.out) / 'report.html'}"
+    )
     return 0
 
 
@@ -327,9 +372,15 @@ def reprocess(args) -> int:
 
     settings = Settings(args.camera, args.catalog, args.tracking)
     try:
-        s = run(args.recordings, args.out, settings=settings, workers=args.workers,
-                scheduler=args.scheduler, filter_state=args.filter,
-                chunk_frames=args.chunk_frames)  # fmt: skip
+        s = run(
+            args.recordings,
+            args.out,
+            settings=settings,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            filter_state=args.filter,
+            chunk_frames=args.chunk_frames,
+        )
     except (RecordingError, ReprocessError, ClusterError) as exc:
         print(f"tofpose reprocess: {exc}", file=sys.stderr)
         return 2
@@ -351,10 +402,12 @@ def compare(args) -> int:
         return 2
     for name, r in s["recordings"].items():
         att, pos = r["attitude_diff_deg"], r["position_diff_mm"]
-        print(f"{name}: {r['frames']} frames, poses {r['ok_a']} -> {r['ok_b']} "
-              f"(gained {r['gained']}, lost {r['lost']}); attitude difference p50 "
-              f"{att['p50']} / max {att['max']} deg, position p50 {pos['p50']} / max "
-              f"{pos['max']} mm")  # fmt: skip
+        print(
+            f"{name}: {r['frames']} frames, poses {r['ok_a']} -> {r['ok_b']} "
+            f"(gained {r['gained']}, lost {r['lost']}); attitude difference p50 "
+            f"{att['p50']} / max {att['max']} deg, position p50 {pos['p50']} / max "
+            f"{pos['max']} mm"
+        )
     print(f"-> {Path(args.out) / 'compare.json'}")
     return 0
 
@@ -366,35 +419,59 @@ def _add_measurement_commands(sub) -> None:
     p.add_argument("--catalog", help="catalog JSON (default: the recording's)")
     p.add_argument("--camera", help="camera JSON (default: the recording's)")
     p.add_argument("--out", required=True, help="output CSV")
-    p.add_argument("--tracking", action="store_true",
-                   help="tracking mode: look for reflectors near their last position")  # fmt: skip
-    p.add_argument("--filter", action="store_true",
-                   help="add the relative-state filter's angular rate and velocity with "
-                        "their 1-sigma (rate_*, vel_*, sigma_rate_*, sigma_vel_*)")  # fmt: skip
+    p.add_argument(
+        "--tracking",
+        action="store_true",
+        help="tracking mode: look for reflectors near their last position",
+    )
+    p.add_argument(
+        "--filter",
+        action="store_true",
+        help="add the relative-state filter's angular rate and velocity with "
+        "their 1-sigma (rate_*, vel_*, sigma_rate_*, sigma_vel_*)",
+    )
     p = sub.add_parser(
         "calibrate-range",
         help="fit the camera's range correction from a recording of the known target",
     )
     p.add_argument("recording")
     p.add_argument("--out", required=True, help="camera JSON with its range_correction")
-    p.add_argument("--reference", choices=("truth", "lab_truth"), default="truth",
-                   help="reference pose per frame (default: /truth)")  # fmt: skip
-    p.add_argument("--modulation-mhz", type=float, default=6.0,
-                   help="the recording's modulation frequency (default 6 MHz)")  # fmt: skip
+    p.add_argument(
+        "--reference",
+        choices=("truth", "lab_truth"),
+        default="truth",
+        help="reference pose per frame (default: /truth)",
+    )
+    p.add_argument(
+        "--modulation-mhz",
+        type=float,
+        default=6.0,
+        help="the recording's modulation frequency (default 6 MHz)",
+    )
     p = sub.add_parser(
         "calibrate-covariance",
         help="fit the camera's covariance factor per range from a recording of the known target",
     )
     p.add_argument("recording")
     p.add_argument("--out", required=True, help="camera JSON with its covariance_scale")
-    p.add_argument("--camera", help="camera JSON to start from, e.g. with its range correction "
-                                    "(default: the recording's camera)")  # fmt: skip
-    p.add_argument("--reference", choices=("truth", "lab_truth"), default="truth",
-                   help="reference pose per frame (default: /truth); its own error must be "
-                        "well below the pose's")  # fmt: skip
-    p.add_argument("--knots-mm", type=lambda v: [float(x) for x in v.split(",")],
-                   help="target distances of the factors, comma separated (default: every "
-                        "1.5x over the recording's range, each with >= 20 frames)")  # fmt: skip
+    p.add_argument(
+        "--camera",
+        help="camera JSON to start from, e.g. with its range correction "
+        "(default: the recording's camera)",
+    )
+    p.add_argument(
+        "--reference",
+        choices=("truth", "lab_truth"),
+        default="truth",
+        help="reference pose per frame (default: /truth); its own error must be "
+        "well below the pose's",
+    )
+    p.add_argument(
+        "--knots-mm",
+        type=lambda v: [float(x) for x in v.split(",")],
+        help="target distances of the factors, comma separated (default: every "
+        "1.5x over the recording's range, each with >= 20 frames)",
+    )
 
 
 def _add_simulation_commands(sub) -> None:
@@ -427,20 +504,29 @@ def _add_server_commands(sub) -> None:
     p.add_argument("--rate", dest="replay_rate_hz", type=float, help="replay rate, Hz")
     p.add_argument("--viser-port", type=int, help="port of the 3-D scene (default 8080, 0 = any)")
     p.add_argument(
-        "--no-viser", dest="viser", action="store_false", default=None,
+        "--no-viser",
+        dest="viser",
+        action="store_false",
+        default=None,
         help="do not run the 3-D scene",
-    )  # fmt: skip
-    p.add_argument("--foxglove-port", type=int,
-                   help="publish the live stream to Foxglove on this port (default off; "
-                        "0 = any free port; docs/interop.md)")  # fmt: skip
+    )
+    p.add_argument(
+        "--foxglove-port",
+        type=int,
+        help="publish the live stream to Foxglove on this port (default off; "
+        "0 = any free port; docs/interop.md)",
+    )
     p = sub.add_parser("report", help="write a campaign's accuracy report from the database")
     p.add_argument("campaign_id", type=int)
     p.add_argument("--db", required=True, help="SQLAlchemy URL, e.g. sqlite:///data/tofpose.db")
     p.add_argument("--format", choices=("html", "pdf", "csv", "json"), default="html")
     p.add_argument("--reference", choices=("lab", "exact"), default="lab")
-    p.add_argument("--calibration", type=int, metavar="ID",
-                   help="reference = encoders + this stored bench calibration (as the API's "
-                        "?calibration=ID)")  # fmt: skip
+    p.add_argument(
+        "--calibration",
+        type=int,
+        metavar="ID",
+        help="reference = encoders + this stored bench calibration (as the API's ?calibration=ID)",
+    )
     p.add_argument("--out", required=True, help="output file")
     p = sub.add_parser("keys", help="API keys of the server's database: create, list, revoke")
     p.add_argument("--data-dir", help="data directory (default ./data)")
@@ -448,23 +534,35 @@ def _add_server_commands(sub) -> None:
     keys = p.add_subparsers(dest="action", required=True)
     q = keys.add_parser("create", help="make a key and print it (once: only its hash is kept)")
     q.add_argument("name")
-    q.add_argument("--scope", required=True, choices=("read", "operate", "admin"),
-                   help="read: live data and reports; operate: also every state change; "
-                        "admin: also keys, the audit trail and deletions")  # fmt: skip
+    q.add_argument(
+        "--scope",
+        required=True,
+        choices=("read", "operate", "admin"),
+        help="read: live data and reports; operate: also every state change; "
+        "admin: also keys, the audit trail and deletions",
+    )
     keys.add_parser("list", help="every key: name, scope, created, revoked")
     q = keys.add_parser("revoke", help="revoke a key (a running server follows within 5 s)")
     q.add_argument("name")
-    p = sub.add_parser("record", help="record a running server's live stream to HDF5 "
-                       "(POST /api/recordings; docs/server.md)")  # fmt: skip
+    p = sub.add_parser(
+        "record",
+        help="record a running server's live stream to HDF5 (POST /api/recordings; docs/server.md)",
+    )
     p.add_argument("--duration", type=float, required=True, help="seconds to record")
     p.add_argument("--name", help="what it is for (default: 'tofpose record' and the UTC time)")
     p.add_argument("--url", default="http://127.0.0.1:8000", help="the server")
-    p.add_argument("--key", help="API key of scope operate or admin (default: $TOFPOSE_API_KEY, "
-                   "else the key file)")  # fmt: skip
+    p.add_argument(
+        "--key",
+        help="API key of scope operate or admin (default: $TOFPOSE_API_KEY, else the key file)",
+    )
     p.add_argument("--key-file", default="data/api_token", help="default data/api_token")
     p.add_argument("--out", help="the HDF5 file to write (default: NAME-ID.h5 here)")
-    p.add_argument("--no-download", dest="download", action="store_false",
-                   help="leave the recording on the server and print its URL")  # fmt: skip
+    p.add_argument(
+        "--no-download",
+        dest="download",
+        action="store_false",
+        help="leave the recording on the server and print its URL",
+    )
     p = sub.add_parser("emulate", help="run device emulators over a simulated lab")
     emu = p.add_subparsers(dest="device", required=True)
     for name, text in (
@@ -496,11 +594,19 @@ def _add_interop_commands(sub) -> None:
     p.add_argument("--catalog", help="catalog JSON (default: the recording's)")
     p.add_argument("--camera", help="camera JSON (default: the recording's)")
     p.add_argument("--tracking", action="store_true", help="estimate in tracking mode")
-    p.add_argument("--no-estimate", dest="estimate", action="store_false",
-                   help="frames and reference poses only, no pipeline run")  # fmt: skip
-    p.add_argument("--no-previews", dest="previews", action="store_false",
-                   help="leave out the viewer images (/tof/gray_preview, /tof/distance_preview): "
-                        "a smaller file")  # fmt: skip
+    p.add_argument(
+        "--no-estimate",
+        dest="estimate",
+        action="store_false",
+        help="frames and reference poses only, no pipeline run",
+    )
+    p.add_argument(
+        "--no-previews",
+        dest="previews",
+        action="store_false",
+        help="leave out the viewer images (/tof/gray_preview, /tof/distance_preview): "
+        "a smaller file",
+    )
     p.add_argument("--force", action="store_true", help="overwrite --out")
     p = sub.add_parser("import", help="make a recording from another format (docs/interop.md)")
     p.add_argument("format", choices=("mcap",))
@@ -533,8 +639,7 @@ def _add_batch_commands(sub) -> None:
     p.add_argument("--catalog", help="catalog JSON (default: each recording's)")
     p.add_argument("--tracking", action="store_true", help="the pipeline's tracking mode")
     p.add_argument("--filter", action="store_true", help="add the relative-state filter's columns")
-    p.add_argument("--chunk-frames", type=int, default=512,
-                   help="frames per task (default 512)")  # fmt: skip
+    p.add_argument("--chunk-frames", type=int, default=512, help="frames per task (default 512)")
     _cluster_arguments(p)
     p = sub.add_parser(
         "compare", help="compare two runs of estimate/reprocess: per-frame pose differences"
@@ -552,8 +657,13 @@ def build_parser() -> argparse.ArgumentParser:
     """The ``tofpose`` command line: every subcommand and its options."""
     ap = argparse.ArgumentParser(prog="tofpose", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
-    for add in (_add_measurement_commands, _add_simulation_commands, _add_server_commands,
-                _add_interop_commands, _add_batch_commands):  # fmt: skip
+    for add in (
+        _add_measurement_commands,
+        _add_simulation_commands,
+        _add_server_commands,
+        _add_interop_commands,
+        _add_batch_commands,
+    ):
         add(sub)
     return ap
 
@@ -604,16 +714,25 @@ def main(argv: list[str] | None = None) -> int:
         return code
     try:
         if args.cmd == "estimate":
-            s = estimate(args.recording, args.out, args.catalog, args.camera,
-                         tracking=args.tracking, filter_state=args.filter)  # fmt: skip
+            s = estimate(
+                args.recording,
+                args.out,
+                args.catalog,
+                args.camera,
+                tracking=args.tracking,
+                filter_state=args.filter,
+            )
             print(f"{s['ok']}/{s['frames']} frames with a pose -> {args.out}")
         elif args.cmd == "export":
             print(export_file(args))
         elif args.cmd == "import":
             print(import_file(args))
         elif args.cmd == "calibrate-covariance":
-            print(calibrate_covariance(args.recording, args.out, args.camera, args.reference,
-                                       args.knots_mm))  # fmt: skip
+            print(
+                calibrate_covariance(
+                    args.recording, args.out, args.camera, args.reference, args.knots_mm
+                )
+            )
         elif args.cmd == "calibrate-range":
             print(calibrate_range(args.recording, args.out, args.reference, args.modulation_mhz))
         elif args.cmd == "simulate":

@@ -231,13 +231,20 @@ class PosePipeline:
         self._catalog_d = catalog.diameters_mm
         self._catalog_ids = catalog.ids
         self._rng = np.random.default_rng(self.config.ransac_seed)
-        self._solver = PoseSolver(camera, catalog, self.config.solve, range_correction,
-                                  arithmetic=arithmetic.pose)  # fmt: skip
+        self._solver = PoseSolver(
+            camera, catalog, self.config.solve, range_correction, arithmetic=arithmetic.pose
+        )
         self._track: TrackState | None = None
         self._compiled_tracker = CompiledTracker(
-            camera, catalog, self.config.solve, self.config.tracking, self._solver,
-            self._persistence, range_correction, arithmetic=arithmetic.tracking,
-        )  # fmt: skip
+            camera,
+            catalog,
+            self.config.solve,
+            self.config.tracking,
+            self._solver,
+            self._persistence,
+            range_correction,
+            arithmetic=arithmetic.tracking,
+        )
 
     def reset(self) -> None:
         """Forget multi-frame history (call when the stream is discontinuous)."""
@@ -258,8 +265,17 @@ class PosePipeline:
         else:
             h.update(np.ascontiguousarray(tr.R, float).tobytes())
             h.update(np.ascontiguousarray(tr.t_mm, float).tobytes())
-            h.update(np.array([tr.threshold_counts, tr.background_counts, tr.dark_counts,
-                               tr.frames_since_acquisition], float).tobytes())  # fmt: skip
+            h.update(
+                np.array(
+                    [
+                        tr.threshold_counts,
+                        tr.background_counts,
+                        tr.dark_counts,
+                        tr.frames_since_acquisition,
+                    ],
+                    float,
+                ).tobytes()
+            )
         h.update(repr(self._rng.bit_generator.state).encode())
         return h.digest()
 
@@ -290,8 +306,14 @@ class PosePipeline:
         timer.lap("levels")
 
         def fail(reason: str, unmatched=(), diagnostics=NO_DIAGNOSTICS) -> PoseResult:
-            return PoseResult(ok=False, reason=reason, time_s=time_s, timings_ms=timer.total(),
-                              unmatched=list(unmatched), diagnostics=diagnostics)  # fmt: skip
+            return PoseResult(
+                ok=False,
+                reason=reason,
+                time_s=time_s,
+                timings_ms=timer.total(),
+                unmatched=list(unmatched),
+                diagnostics=diagnostics,
+            )
 
         if stats.saturated_fraction > 0.5:
             self.reset()
@@ -307,13 +329,17 @@ class PosePipeline:
         active = ThresholdedFrame(g, stats.raw_threshold)  # A, for the pose check
         # The motion gate compares the cheap moment centroids of find_candidate_blobs;
         # the precise centroids and ranges are measured once, on the combined frames.
-        meas, unmatched, n_kept, pinfo = self._measure(blobs, g, d, stats.background,
-                                                       stats.dark_level)  # fmt: skip
+        meas, unmatched, n_kept, pinfo = self._measure(
+            blobs, g, d, stats.background, stats.dark_level
+        )
         timer.lap("measurement")  # §3.4, Eqs. 7-9 and the sigmas
         diag = FrameDiagnostics(
-            n_candidates=n_kept, frames_used=pinfo.frames_used, motion=pinfo.motion,
-            rejected=tuple(found.rejected), active_threshold_counts=stats.raw_threshold,
-        )  # fmt: skip
+            n_candidates=n_kept,
+            frames_used=pinfo.frames_used,
+            motion=pinfo.motion,
+            rejected=tuple(found.rejected),
+            active_threshold_counts=stats.raw_threshold,
+        )
         if len(meas.range_mm) < cfg.matching.min_matches:
             return fail(
                 f"found {len(meas.range_mm)} candidate reflector(s) with a valid range "
@@ -325,18 +351,23 @@ class PosePipeline:
         m = self._match(meas)
         timer.lap("matching")
         if not m.ok:
-            return fail(f"matching failed: {m.reason}",
-                        unmatched=unmatched + meas.as_unmatched(), diagnostics=diag)  # fmt: skip
+            return fail(
+                f"matching failed: {m.reason}",
+                unmatched=unmatched + meas.as_unmatched(),
+                diagnostics=diag,
+            )
         solved = self._solve_with_fallback(meas, m, active)
         timer.lap("refine")
         if isinstance(solved, Rejected):
-            return fail(solved.reason, unmatched=unmatched + meas.as_unmatched(),
-                        diagnostics=diag)  # fmt: skip
+            return fail(solved.reason, unmatched=unmatched + meas.as_unmatched(), diagnostics=diag)
         result = self._pose_result(solved, meas, unmatched, time_s, timer, diag)
-        self._track = TrackState(R=result.R, t_mm=result.t_mm,
-                                 threshold_counts=stats.raw_threshold,
-                                 background_counts=stats.background,
-                                 dark_counts=stats.dark_level)  # fmt: skip
+        self._track = TrackState(
+            R=result.R,
+            t_mm=result.t_mm,
+            threshold_counts=stats.raw_threshold,
+            background_counts=stats.background,
+            dark_counts=stats.dark_level,
+        )
         return result
 
     # -- stages ---------------------------------------------------------------------------
@@ -344,14 +375,22 @@ class PosePipeline:
         """§3.1-§3.3: candidate blobs through the gates, then ellipse confirmation (which
         may split merged components); returns the extraction record and the blobs."""
         cfg = self.config
-        found = self.arithmetic.extraction.find_candidate_blobs(g, d, self.camera, self._catalog_d,
-                                                     cfg.extraction, stats)  # fmt: skip
+        found = self.arithmetic.extraction.find_candidate_blobs(
+            g, d, self.camera, self._catalog_d, cfg.extraction, stats
+        )
         timer.lap("blobs")
         blobs = found.accepted
         if cfg.ellipse_confirmation:
-            blobs = confirm_ellipses(blobs, found.oversize, g, found.stats, fx_px=self.camera.fx,
-                                     catalog_diameters_mm=self._catalog_d,
-                                     config=cfg.extraction, arithmetic=self.arithmetic.ellipses)
+            blobs = confirm_ellipses(
+                blobs,
+                found.oversize,
+                g,
+                found.stats,
+                fx_px=self.camera.fx,
+                catalog_diameters_mm=self._catalog_d,
+                config=cfg.extraction,
+                arithmetic=self.arithmetic.ellipses,
+            )
         timer.lap("ellipses")
         # ellipse-supplemented blobs have no moment centroid yet: the ellipse's centre
         blobs = [
@@ -375,13 +414,24 @@ class PosePipeline:
         cam, persistence, ar = self.camera, self._persistence, self.arithmetic
         cur, flat, starts, bbox = blob_arrays(blobs)
         split = np.array([b.source == "split" for b in blobs], bool)
-        (n_used, motion, keep, uv, rho, ranged, rho_r, sp, sr, y, w,
-         mix) = ar.persistence.measure_and_back_project(
-            g, d, flat, starts, bbox, cur, split, persistence.history(g, d),
-            float(background), float(dark),
-            self._camera_record, *persistence.scratch(g.shape), self._correction_kernel_args,
-            self._sigma_constants,
-        )  # fmt: skip
+        (n_used, motion, keep, uv, rho, ranged, rho_r, sp, sr, y, w, mix) = (
+            ar.persistence.measure_and_back_project(
+                g,
+                d,
+                flat,
+                starts,
+                bbox,
+                cur,
+                split,
+                persistence.history(g, d),
+                float(background),
+                float(dark),
+                self._camera_record,
+                *persistence.scratch(g.shape),
+                self._correction_kernel_args,
+                self._sigma_constants,
+            )
+        )
         persistence.commit(cur, flat, g, d, n_used, motion)
         unranged = [(uv[j, 0], uv[j, 1], rho[j]) for j in np.flatnonzero(keep & ~np.isfinite(rho))]
         ranged_blobs = tuple(blobs[j] for j in ranged.tolist())
@@ -407,11 +457,14 @@ class PosePipeline:
             return self._match_ransac(meas.y_mm, meas.weights)
         diam = np.array([self._apparent_diameter_px(b) for b in meas.blobs])
         return match_reflectors(
-            meas.y_mm, self._catalog_xyz, cfg.matching,
+            meas.y_mm,
+            self._catalog_xyz,
+            cfg.matching,
             observed_diameter_mm=diam * meas.range_mm / self.camera.fx,
-            catalog_diameter_mm=self._catalog_d, weights=meas.weights,
+            catalog_diameter_mm=self._catalog_d,
+            weights=meas.weights,
             arithmetic=self.arithmetic.matching,
-        )  # fmt: skip
+        )
 
     def _solve_with_fallback(self, meas: Measurements, m: MatchResult, active):
         """§5 on the matched pairs; when annealing's assignment gives an implausible pose
@@ -419,16 +472,24 @@ class PosePipeline:
         possible poses (ours) are solved instead."""
         cfg = self.config
         solved = self._solver.solve(m.pairs, meas, m.alpha_mm, active)
-        if not (isinstance(solved, Rejected) and solved.implausible and cfg.triplet_fallback
-                and cfg.matcher == "annealing"):  # fmt: skip
+        if not (
+            isinstance(solved, Rejected)
+            and solved.implausible
+            and cfg.triplet_fallback
+            and cfg.matcher == "annealing"
+        ):
             return solved
         tol = cfg.matching.pair_tolerance_mm(m.alpha_mm, meas.weights)
         pairs = match_by_triplets(
-            meas.y_mm, self._catalog_xyz, m.alpha_mm, tol,
+            meas.y_mm,
+            self._catalog_xyz,
+            m.alpha_mm,
+            tol,
             self._solver.facing,
-            weights=meas.weights, min_matches=cfg.matching.min_matches,
+            weights=meas.weights,
+            min_matches=cfg.matching.min_matches,
             arithmetic=self.arithmetic.matching,
-        )  # fmt: skip
+        )
         return self._solver.solve(pairs, meas, m.alpha_mm, active) if len(pairs) else solved
 
     def _process_tracking(self, g, d, time_s, track: TrackState, timer) -> PoseResult | None:
@@ -441,27 +502,41 @@ class PosePipeline:
         timer.lap("tracking")
         if tracked is None:
             return None
-        return self._tracked_result(tracked.solution, tracked.measurements, tracked.persistence,
-                                    time_s, timer, track)  # fmt: skip
+        return self._tracked_result(
+            tracked.solution, tracked.measurements, tracked.persistence, time_s, timer, track
+        )
 
-    def _tracked_result(self, solved: Solution, meas: Measurements, info, time_s, timer,
-                        track: TrackState) -> PoseResult:  # fmt: skip
+    def _tracked_result(
+        self, solved: Solution, meas: Measurements, info, time_s, timer, track: TrackState
+    ) -> PoseResult:
         """The ok result of a tracked frame; the track moves on to its pose."""
         diag = FrameDiagnostics(
-            n_candidates=len(meas.range_mm), frames_used=info.frames_used, motion=info.motion,
+            n_candidates=len(meas.range_mm),
+            frames_used=info.frames_used,
+            motion=info.motion,
             active_threshold_counts=track.threshold_counts,
-        )  # fmt: skip
+        )
         result = self._pose_result(solved, meas, [], time_s, timer, diag, mode="tracking")
         self._track = TrackState(
-            R=result.R, t_mm=result.t_mm, threshold_counts=track.threshold_counts,
-            background_counts=track.background_counts, dark_counts=track.dark_counts,
+            R=result.R,
+            t_mm=result.t_mm,
+            threshold_counts=track.threshold_counts,
+            background_counts=track.background_counts,
+            dark_counts=track.dark_counts,
             frames_since_acquisition=track.frames_since_acquisition + 1,
-        )  # fmt: skip
+        )
         return result
 
-    def _pose_result(self, solved: Solution, meas: Measurements, unmatched, time_s, timer,
-                     diagnostics: FrameDiagnostics,
-                     mode: str = "acquisition") -> PoseResult:  # fmt: skip
+    def _pose_result(
+        self,
+        solved: Solution,
+        meas: Measurements,
+        unmatched,
+        time_s,
+        timer,
+        diagnostics: FrameDiagnostics,
+        mode: str = "acquisition",
+    ) -> PoseResult:
         """The ok result of a ``Solution`` found from ``meas``; ``unmatched`` lists the
         blobs without a range, the unmatched candidates are added."""
         obs, T, ml, iterations = (
@@ -476,14 +551,27 @@ class PosePipeline:
         sig_px = meas.sigma_px
         res, rms = self.arithmetic.pose.point_residuals_mm(x, y_m, R, t)
         per_reflector = zip(
-            self._catalog_ids[i_idx].tolist(), uv_m, y_m, res.tolist(), rho_m.tolist(),
-            area[k_idx].tolist(), sig_px[k_idx].tolist(), obs.sigma_range_mm.tolist(),
+            self._catalog_ids[i_idx].tolist(),
+            uv_m,
+            y_m,
+            res.tolist(),
+            rho_m.tolist(),
+            area[k_idx].tolist(),
+            sig_px[k_idx].tolist(),
+            obs.sigma_range_mm.tolist(),
             strict=True,
-        )  # fmt: skip
+        )
         matched = [
-            MatchedReflector(catalog_id=i, centroid_uv=c, point_mm=y, residual_mm=r,
-                             distance_mm=d, area_px=a, centroid_sigma_px=sp,
-                             range_sigma_mm=sr)  # fmt: skip
+            MatchedReflector(
+                catalog_id=i,
+                centroid_uv=c,
+                point_mm=y,
+                residual_mm=r,
+                distance_mm=d,
+                area_px=a,
+                centroid_sigma_px=sp,
+                range_sigma_mm=sr,
+            )
             for i, c, y, r, d, a, sp, sr in per_reflector
         ]
         used = set(k_idx.tolist())

@@ -106,8 +106,9 @@ def warm_up() -> float:
     # the merged-pair fit runs only where two reflectors merge (and a frame at 6 m need
     # not have them merged): compiled here on a one-pixel problem
     p0 = np.array([0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 1.0, 0.5, 0.0])
-    fit_pair_lm(np.zeros((1, 9)), np.zeros((1, 9)), np.ones(1), p0, p0 - 1.0, p0 + 1.0, 1,
-                1e-4, 1e-9)  # fmt: skip
+    fit_pair_lm(
+        np.zeros((1, 9)), np.zeros((1, 9)), np.ones(1), p0, p0 - 1.0, p0 + 1.0, 1, 1e-4, 1e-9
+    )
     two_centre_split(np.array([0.0, 1.0, 2.0]), np.zeros(3), np.ones(3), 1)
     _done = True
     return time.perf_counter() - t0

@@ -57,8 +57,9 @@ SessionDep = Annotated[Session, Depends(get_session)]
 # which exports and reports can fill, and STOP must never wait for one.
 
 
-def _authorize(request: Request, state: AppState, creds: HTTPAuthorizationCredentials | None,
-               needed: Scope) -> ApiKey:  # fmt: skip
+def _authorize(
+    request: Request, state: AppState, creds: HTTPAuthorizationCredentials | None, needed: Scope
+) -> ApiKey:
     """The key of this request if it has at least ``needed``: 401 without a valid key,
     403 (naming the scope needed) for a valid key of a lower scope. The key's name goes
     to the audit trail (``KEY_NAME_STATE``)."""
@@ -127,9 +128,15 @@ def finished_recording(state: AppState, campaign_id: int, missing_status: int = 
         raise HTTPException(404, str(exc)) from exc
     path = state.campaigns.recording_path(campaign_id)
     if not campaign.record_raw or not path.exists():
-        raise HTTPException(missing_status, f"campaign {campaign_id} has no raw recording"
-                            + ("" if campaign.record_raw else " (record_raw was off)"))  # fmt: skip
+        raise HTTPException(
+            missing_status,
+            f"campaign {campaign_id} has no raw recording"
+            + ("" if campaign.record_raw else " (record_raw was off)"),
+        )
     if campaign.status is CampaignState.RUNNING:
-        raise HTTPException(409, f"campaign {campaign_id} is running and writing its "
-                                 "recording: pause it or wait until it is done")  # fmt: skip
+        raise HTTPException(
+            409,
+            f"campaign {campaign_id} is running and writing its "
+            "recording: pause it or wait until it is done",
+        )
     return path

@@ -58,9 +58,12 @@ def _device_state(device, h) -> DeviceStatePublic:
     describe = getattr(device, "describe", None)
     info = describe() if describe is not None else {}
     return DeviceStatePublic(
-        driver=device.name, state=h.state, last_error=h.last_error, error_count=h.error_count,
+        driver=device.name,
+        state=h.state,
+        last_error=h.last_error,
+        error_count=h.error_count,
         **{k: info.get(k) for k in ("model", "firmware", "link", "address")},
-    )  # fmt: skip
+    )
 
 
 def camera_state(state: AppState) -> DeviceStatePublic:
@@ -87,8 +90,12 @@ def pipeline_state(state: AppState) -> PipelineStatePublic:
         detail = f"{kernels.error}; poses from the reference implementation (NumPy/SciPy)"
     else:
         detail = ""
-    return PipelineStatePublic(state=kernels.state, implementation=implementation,
-                               seconds=round(kernels.elapsed_s, 1), detail=detail)  # fmt: skip
+    return PipelineStatePublic(
+        state=kernels.state,
+        implementation=implementation,
+        seconds=round(kernels.elapsed_s, 1),
+        detail=detail,
+    )
 
 
 def motion_public(state: AppState) -> MotionPublic:
@@ -98,30 +105,52 @@ def motion_public(state: AppState) -> MotionPublic:
     if not motion.present:
         return MotionPublic(driver="none", state="absent")
     axes = [
-        AxisPublic(name=a.name, unit=a.unit, min_pos=a.min_pos, max_pos=a.max_pos,
-                   max_rate_per_s=a.max_rate, max_accel_per_s2=a.max_accel)
+        AxisPublic(
+            name=a.name,
+            unit=a.unit,
+            min_pos=a.min_pos,
+            max_pos=a.max_pos,
+            max_rate_per_s=a.max_rate,
+            max_accel_per_s2=a.max_accel,
+        )
         for a in motion.axes.values()
-    ]  # fmt: skip
+    ]
     owner = motion.owner
     latched_at = motion.stop_latched_at
-    owned = {"owner_campaign_id": owner.campaign_id if owner else None,
-             "owner_campaign_name": owner.name if owner else None,
-             "stop_latched": latched_at is not None,
-             "stop_latched_at": latched_at.isoformat() if latched_at else None}  # fmt: skip
+    owned = {
+        "owner_campaign_id": owner.campaign_id if owner else None,
+        "owner_campaign_name": owner.name if owner else None,
+        "stop_latched": latched_at is not None,
+        "stop_latched_at": latched_at.isoformat() if latched_at else None,
+    }
     try:
         st = motion.status()
     except MotionDeviceError:
         return MotionPublic(**motion_state(state).model_dump(), axes=axes, **owned)
     p = st.profile
-    profile = None if p is None else ProfilePublic(
-        axis=p.axis, kind=p.kind, elapsed_s=p.elapsed_s, remaining_s=p.remaining_s,
-        duration_s=p.duration_s,
-    )  # fmt: skip
+    profile = (
+        None
+        if p is None
+        else ProfilePublic(
+            axis=p.axis,
+            kind=p.kind,
+            elapsed_s=p.elapsed_s,
+            remaining_s=p.remaining_s,
+            duration_s=p.duration_s,
+        )
+    )
     return MotionPublic(
-        **motion_state(state).model_dump(), axes=axes, positions=st.positions,
-        time_s=st.time_s, targets=st.targets, busy=st.busy, settled=st.settled,
-        stopped=st.stopped, profile=profile, **owned,
-    )  # fmt: skip
+        **motion_state(state).model_dump(),
+        axes=axes,
+        positions=st.positions,
+        time_s=st.time_s,
+        targets=st.targets,
+        busy=st.busy,
+        settled=st.settled,
+        stopped=st.stopped,
+        profile=profile,
+        **owned,
+    )
 
 
 def camera_settings_public(s: CameraSettings) -> CameraSettingsPublic:
@@ -210,7 +239,7 @@ def pose_from_sample(s: LiveSample) -> PosePublic:
                 reason_text=REJECT_REASONS[b.reason],
             )
             for b in r.rejected[:MAX_REJECTED_SHOWN]
-        ],  # fmt: skip
+        ],
         active_threshold_counts=finite_or_none(r.active_threshold_counts),
         residual_mm=finite_or_none(r.residual_mm),
         iterations=r.iterations,
@@ -237,9 +266,16 @@ def _truth(
         err_ang = float(rotation_angle_deg(T.R, R))
     x, yy, z = (float(v) for v in T.t_mm)
     return TruthPublic(
-        x_mm=x, y_mm=yy, z_mm=z, pitch_deg=p, yaw_deg=y, roll_deg=r,
-        position_error_mm=err_pos, attitude_error_deg=err_ang, reference=reference,
-    )  # fmt: skip
+        x_mm=x,
+        y_mm=yy,
+        z_mm=z,
+        pitch_deg=p,
+        yaw_deg=y,
+        roll_deg=r,
+        position_error_mm=err_pos,
+        attitude_error_deg=err_ang,
+        reference=reference,
+    )
 
 
 def campaign_public(
@@ -250,23 +286,42 @@ def campaign_public(
     with_setpoints: bool = False,
 ) -> CampaignPublic:
     return CampaignPublic(
-        id=c.id, name=c.name, status=c.status, status_reason=c.status_reason,
-        catalog=c.catalog_name, frames_per_point=c.frames_per_point,
-        settle_s=c.settle_s, lock_timeout_s=c.lock_timeout_s,
-        requirements=Requirements(**c.requirements), generator=c.generator,
-        camera=c.camera_settings, record_raw=c.record_raw, notes=c.notes,
+        id=c.id,
+        name=c.name,
+        status=c.status,
+        status_reason=c.status_reason,
+        catalog=c.catalog_name,
+        frames_per_point=c.frames_per_point,
+        settle_s=c.settle_s,
+        lock_timeout_s=c.lock_timeout_s,
+        requirements=Requirements(**c.requirements),
+        generator=c.generator,
+        camera=c.camera_settings,
+        record_raw=c.record_raw,
+        notes=c.notes,
         created_at=_utc(c.created_at),
-        scheduled_at=_utc(c.scheduled_at), started_at=_utc(c.started_at),
-        finished_at=_utc(c.finished_at), n_setpoints=len(c.setpoints), n_done=c.n_done,
+        scheduled_at=_utc(c.scheduled_at),
+        started_at=_utc(c.started_at),
+        finished_at=_utc(c.finished_at),
+        n_setpoints=len(c.setpoints),
+        n_done=c.n_done,
         estimated_duration_s=estimated_duration_s,
         progress=ProgressPublic(**progress) if progress else None,
         setpoints=[
-            SetPointPublic(index=sp.index, yaw_deg=sp.yaw_deg, pitch_deg=sp.pitch_deg,
-                           roll_deg=sp.roll_deg, rail_mm=sp.rail_mm, profile=sp.profile,
-                           status=sp.status)
+            SetPointPublic(
+                index=sp.index,
+                yaw_deg=sp.yaw_deg,
+                pitch_deg=sp.pitch_deg,
+                roll_deg=sp.roll_deg,
+                rail_mm=sp.rail_mm,
+                profile=sp.profile,
+                status=sp.status,
+            )
             for sp in c.setpoints
-        ] if with_setpoints else None,
-    )  # fmt: skip
+        ]
+        if with_setpoints
+        else None,
+    )
 
 
 def campaign_states_public() -> CampaignStatesPublic:
@@ -274,9 +329,11 @@ def campaign_states_public() -> CampaignStatesPublic:
     return CampaignStatesPublic(
         states=list(CampaignState),
         finished=[s for s in CampaignState if s in FINISHED],
-        transitions=[CampaignTransitionPublic(from_state=a, command=c, to_state=b)
-                     for a, c, b in transition_table()],
-    )  # fmt: skip
+        transitions=[
+            CampaignTransitionPublic(from_state=a, command=c, to_state=b)
+            for a, c, b in transition_table()
+        ],
+    )
 
 
 def _utc(dt: datetime | None) -> datetime | None:
@@ -291,12 +348,24 @@ def _pose_dict(m: MeasurementRow, prefix: str) -> dict[str, float] | None:
 
 def measurement_public(m: MeasurementRow, setpoint_index: int) -> MeasurementPublic:
     return MeasurementPublic(
-        setpoint_index=setpoint_index, frame_index=m.frame_index, time_s=m.frame_time_s,
-        ok=m.ok, reason=m.reason, n_matched=m.n_matched, residual_mm=m.residual_mm,
-        x_mm=m.x_mm, y_mm=m.y_mm, z_mm=m.z_mm, pitch_deg=m.pitch_deg, yaw_deg=m.yaw_deg,
-        roll_deg=m.roll_deg, truth=_pose_dict(m, "truth_"),
-        lab_truth=_pose_dict(m, "lab_truth_"), encoders=m.encoders, in_motion=m.in_motion,
-    )  # fmt: skip
+        setpoint_index=setpoint_index,
+        frame_index=m.frame_index,
+        time_s=m.frame_time_s,
+        ok=m.ok,
+        reason=m.reason,
+        n_matched=m.n_matched,
+        residual_mm=m.residual_mm,
+        x_mm=m.x_mm,
+        y_mm=m.y_mm,
+        z_mm=m.z_mm,
+        pitch_deg=m.pitch_deg,
+        yaw_deg=m.yaw_deg,
+        roll_deg=m.roll_deg,
+        truth=_pose_dict(m, "truth_"),
+        lab_truth=_pose_dict(m, "lab_truth_"),
+        encoders=m.encoders,
+        in_motion=m.in_motion,
+    )
 
 
 def _transform_public(matrix: list[list[float]]) -> TransformPublic:
@@ -311,22 +380,30 @@ def _transform_public(matrix: list[list[float]]) -> TransformPublic:
 def calibration_public(row: CalibrationRow) -> CalibrationPublic:
     s = row.sigmas
     return CalibrationPublic(
-        id=row.id, name=row.name, campaign_id=row.campaign_id,
-        created_at=_utc(row.created_at), mount=_transform_public(row.mount),
-        placement=_transform_public(row.placement), mount_sigma_deg=s[0:3],
-        mount_sigma_mm=s[3:6], placement_sigma_deg=s[6:9], placement_sigma_mm=s[9:12],
+        id=row.id,
+        name=row.name,
+        campaign_id=row.campaign_id,
+        created_at=_utc(row.created_at),
+        mount=_transform_public(row.mount),
+        placement=_transform_public(row.placement),
+        mount_sigma_deg=s[0:3],
+        mount_sigma_mm=s[3:6],
+        placement_sigma_deg=s[6:9],
+        placement_sigma_mm=s[9:12],
         residual_rms_mm=float(np.sqrt(np.mean(np.square(row.residual_mm)))),
         residual_rms_deg=float(np.sqrt(np.mean(np.square(row.residual_deg)))),
-        chi2_per_dof=row.chi2_per_dof, n_observations=row.n_observations,
-    )  # fmt: skip
+        chi2_per_dof=row.chi2_per_dof,
+        n_observations=row.n_observations,
+    )
 
 
 def foxglove_public(state: AppState) -> FoxglovePublic:
     fox = state.foxglove
     if fox is None:
         return FoxglovePublic(running=False, reason=state.foxglove_reason)
-    return FoxglovePublic(running=True, url=fox.url, port=fox.port, published=fox.published,
-                          dropped=fox.dropped)  # fmt: skip
+    return FoxglovePublic(
+        running=True, url=fox.url, port=fox.port, published=fox.published, dropped=fox.dropped
+    )
 
 
 def scene_public(state: AppState) -> ScenePublic:
@@ -334,6 +411,9 @@ def scene_public(state: AppState) -> ScenePublic:
     if scene is None:
         return ScenePublic(running=False, reason=state.scene_reason)
     return ScenePublic(
-        running=True, port=scene.port, paused=scene.paused, updates=scene.updates,
+        running=True,
+        port=scene.port,
+        paused=scene.paused,
+        updates=scene.updates,
         last_frame_index=scene.last_frame_index,
-    )  # fmt: skip
+    )

@@ -104,9 +104,10 @@ class AxisPublic(BaseModel):
     max_pos: float
     max_rate_per_s: float
     max_accel_per_s2: float | None = Field(
-        None, description="acceleration limit; null when the motion system does not report "
+        None,
+        description="acceleration limit; null when the motion system does not report "
         "one (then it runs no profiles on that axis)",
-    )  # fmt: skip
+    )
 
 
 class ProfilePublic(BaseModel):
@@ -123,10 +124,11 @@ class MotionPublic(DeviceStatePublic):
     axes: list[AxisPublic] = []
     positions: dict[str, float] = Field(default_factory=dict, description="encoders, deg / mm")
     time_s: float | None = Field(
-        None, description="when the encoders were read, s, on the clock of the camera's "
+        None,
+        description="when the encoders were read, s, on the clock of the camera's "
         "frames where the motion system shares it (the simulated lab), else the server's "
         "monotonic clock",
-    )  # fmt: skip
+    )
     targets: dict[str, float] = Field(default_factory=dict)
     busy: bool = False
     settled: bool = True
@@ -142,7 +144,7 @@ class MotionPublic(DeviceStatePublic):
         False,
         description="a person's STOP holds the motion system: every move, jog, profile and "
         "campaign is refused until POST /api/motion/release (or a campaign's resume)",
-    )  # fmt: skip
+    )
     stop_latched_at: str | None = Field(None, description="when that STOP was pressed (UTC)")
 
 
@@ -369,13 +371,23 @@ JOG_MAX_MM = 1000.0
 
 
 JogDeg = Annotated[
-    float, Field(ge=-JOG_MAX_DEG, le=JOG_MAX_DEG, description="signed step, deg (not 0)",
-                 json_schema_extra={"not": {"const": 0}})
-]  # fmt: skip
+    float,
+    Field(
+        ge=-JOG_MAX_DEG,
+        le=JOG_MAX_DEG,
+        description="signed step, deg (not 0)",
+        json_schema_extra={"not": {"const": 0}},
+    ),
+]
 JogMm = Annotated[
-    float, Field(ge=-JOG_MAX_MM, le=JOG_MAX_MM, description="signed step, mm (not 0)",
-                 json_schema_extra={"not": {"const": 0}})
-]  # fmt: skip
+    float,
+    Field(
+        ge=-JOG_MAX_MM,
+        le=JOG_MAX_MM,
+        description="signed step, mm (not 0)",
+        json_schema_extra={"not": {"const": 0}},
+    ),
+]
 
 
 class JogRequest(AxisBody):
@@ -440,21 +452,25 @@ class RampProfileRequest(StrictBody):
     axis: ProfileAxis
     kind: Literal["ramp"]
     rate_deg_s: float = Field(
-        ge=-1000.0, le=1000.0, description="signed rate, deg/s (not 0)",
+        ge=-1000.0,
+        le=1000.0,
+        description="signed rate, deg/s (not 0)",
         json_schema_extra={"not": {"const": 0}},
-    )  # fmt: skip
+    )
     hold_s: float = Field(ge=0.0, le=PROFILE_MAX_S, description="time at the constant rate")
     accel_deg_s2: Annotated[float, Field(gt=0, le=10_000.0)] | SkipJsonSchema[None] = Field(
-        None, description="default: the axis' acceleration limit (leave it out; null is not "
+        None,
+        description="default: the axis' acceleration limit (leave it out; null is not "
         "an acceleration)",
-    )  # fmt: skip
+    )
 
     @model_validator(mode="before")
     @classmethod
     def _no_null(cls, data: object) -> object:
         if isinstance(data, dict) and "accel_deg_s2" in data and data["accel_deg_s2"] is None:
-            raise ValueError("accel_deg_s2: null is not an acceleration; leave it out for the "
-                             "axis' limit")  # fmt: skip
+            raise ValueError(
+                "accel_deg_s2: null is not an acceleration; leave it out for the axis' limit"
+            )
         return data
 
     @model_validator(mode="after")
@@ -676,9 +692,10 @@ class SetPointPublic(BaseModel):
     roll_deg: float | None
     rail_mm: float | None
     profile: dict | None = Field(
-        None, description="a dynamic set-point's motion profile (axis, kind, its fields, "
+        None,
+        description="a dynamic set-point's motion profile (axis, kind, its fields, "
         "rest_s), null at a static one",
-    )  # fmt: skip
+    )
     status: Literal["pending", "done"]
 
 
@@ -744,9 +761,9 @@ class MeasurementPublic(BaseModel):
     lab_truth: dict[str, float] | None = Field(description="encoders + nominal geometry")
     encoders: dict[str, float] | None
     in_motion: bool | None = Field(
-        None, description="taken while the set-point's motion profile ran (null at a "
-        "static set-point)",
-    )  # fmt: skip
+        None,
+        description="taken while the set-point's motion profile ran (null at a static set-point)",
+    )
 
 
 class MeasurementPage(BaseModel):
@@ -824,17 +841,25 @@ class StudyGrid(StrictBody):
     one value: 3 m, +-20 deg, 0.5 of the half field of view, 1000 lx, ideal,
     paper-target, default."""
 
-    range_m: list[RangeM] | None = Field(None, min_length=1, max_length=64,
-                                         description="target distance (m)")
+    range_m: list[RangeM] | None = Field(
+        None, min_length=1, max_length=64, description="target distance (m)"
+    )
     attitude_deg: list[AttitudeDeg] | None = Field(
-        None, min_length=1, max_length=64,
-        description="attitude spread: pitch, yaw, roll each within +- this (deg)")
+        None,
+        min_length=1,
+        max_length=64,
+        description="attitude spread: pitch, yaw, roll each within +- this (deg)",
+    )
     offset_fraction: list[OffsetFraction] | None = Field(
-        None, min_length=1, max_length=64,
-        description="target centre up to this fraction of the half field of view off axis")
+        None,
+        min_length=1,
+        max_length=64,
+        description="target centre up to this fraction of the half field of view off axis",
+    )
     ambient_lux: list[AmbientLux] | None = Field(None, min_length=1, max_length=64)
     physics: list[PhysicsFamily] | None = Field(
-        None, min_length=1, description="domain-randomisation families (docs/simulator.md)")
+        None, min_length=1, description="domain-randomisation families (docs/simulator.md)"
+    )
     catalog: list[str] | None = Field(None, min_length=1, max_length=16)
     preset: list[Literal["default", "paper"]] | None = Field(None, min_length=1)
 
@@ -864,17 +889,20 @@ class StudyPublic(BaseModel):
     finished: str | None = None
     cluster: str | None = Field(None, description="the Dask cluster it ran on")
     reports: list[Literal["html", "pdf", "json"]] = Field(
-        description="report files available at /api/studies/{id}/report.{html,pdf,json}")
+        description="report files available at /api/studies/{id}/report.{html,pdf,json}"
+    )
 
 
 class ReprocessCreate(StrictBody):
     """Re-process a campaign's recording with another camera calibration."""
 
     camera: dict[str, Any] | None = Field(
-        None, description="a camera JSON (tofpose.core.camera.CameraModel, with the "
+        None,
+        description="a camera JSON (tofpose.core.camera.CameraModel, with the "
         "range_correction "
         "and covariance_scale tofpose calibrate-range / calibrate-covariance add); omitted: "
-        "the recording's own camera")  # fmt: skip
+        "the recording's own camera",
+    )
     tracking: bool = Field(False, description="the pipeline's tracking mode")
     filter: bool = Field(False, description="add the relative-state filter's columns")
 
@@ -897,7 +925,8 @@ class ReprocessPublic(BaseModel):
     id: int
     campaign_id: int
     camera: Literal["given", "recording"] = Field(
-        description="the camera the run used: the request's or the recording's own")
+        description="the camera the run used: the request's or the recording's own"
+    )
     tracking: bool
     filter: bool
     status: Literal["queued", "running", "complete", "failed", "cancelled"]
@@ -907,6 +936,6 @@ class ReprocessPublic(BaseModel):
     error: str | None = None
     frames: int | None = None
     summary: ReprocessComparison | None = None
-    files: list[Literal["poses.csv", "baseline.csv", "compare.csv", "compare.json",
-                        "compare.png"]] = Field(
-        description="downloadable at /api/reprocessings/{id}/files/{name}")  # fmt: skip
+    files: list[
+        Literal["poses.csv", "baseline.csv", "compare.csv", "compare.json", "compare.png"]
+    ] = Field(description="downloadable at /api/reprocessings/{id}/files/{name}")

@@ -92,8 +92,11 @@ class ReplayCamera:
         return self._settings
 
     def describe(self) -> dict[str, str]:
-        return {"model": f"replay of {self._rec.camera.name}", "address": str(self.path),
-                "link": "up"}  # fmt: skip
+        return {
+            "model": f"replay of {self._rec.camera.name}",
+            "address": str(self.path),
+            "link": "up",
+        }
 
     def apply_settings(self, settings: CameraSettings) -> CameraSettings:
         """Only the frame rate can change; the rest is fixed by the recording."""

@@ -170,8 +170,9 @@ class ScpiRateTable:
                 continue
             numbers[name] = n
             accel = self._optional_number(f":LIM:ACC? {n}")
-            axes[name] = AxisLimits(name, unit.strip().lower(), float(low), float(high),
-                                    float(vel), accel)  # fmt: skip
+            axes[name] = AxisLimits(
+                name, unit.strip().lower(), float(low), float(high), float(vel), accel
+            )
         return numbers, axes
 
     def _optional_number(self, query: str) -> float | None:
@@ -192,8 +193,10 @@ class ScpiRateTable:
         except MotionError as exc:
             if self._session is None:
                 raise
-            return (f"the controller at {self.resource} has no synthesis mode ({exc}), so it "
-                    "cannot run motion profiles")  # fmt: skip
+            return (
+                f"the controller at {self.resource} has no synthesis mode ({exc}), so it "
+                "cannot run motion profiles"
+            )
         return None
 
     def _prepare(self, inst: Any, n: int, mode: str) -> None:
@@ -221,11 +224,15 @@ class ScpiRateTable:
             raise MotionError(self.profile_unavailable)
         n = self.axis_numbers[axis]
         if isinstance(profile, SineProfile):
-            load = (f":SYNT:SINE {n},{profile.amplitude_deg:.6f},{1.0 / profile.period_s:.12g},"
-                    f"{profile.cycles}")  # fmt: skip
+            load = (
+                f":SYNT:SINE {n},{profile.amplitude_deg:.6f},{1.0 / profile.period_s:.12g},"
+                f"{profile.cycles}"
+            )
         else:
-            load = (f":SYNT:RAMP {n},{profile.rate_deg_s:.6f},{profile.accel_deg_s2:.6f},"
-                    f"{profile.hold_s:.6f}")  # fmt: skip
+            load = (
+                f":SYNT:RAMP {n},{profile.rate_deg_s:.6f},{profile.accel_deg_s2:.6f},"
+                f"{profile.hold_s:.6f}"
+            )
         with self._lock:
             inst = self._ensure()
             self._prepare(inst, n, "SYNT")
@@ -268,10 +275,12 @@ class ScpiRateTable:
             stopped |= bool(b & STATUS_ABORTED)
             if synthesis and synthesis[0].strip().upper() != "IDLE":
                 kind, elapsed, remaining = synthesis[0].split(",")
-                profile = ProfileStatus(name, kind.strip().lower(), float(elapsed),
-                                        float(elapsed) + float(remaining))  # fmt: skip
-        return MotionStatus(positions, targets, busy, settled and not busy, stopped, time_s,
-                            profile)  # fmt: skip
+                profile = ProfileStatus(
+                    name, kind.strip().lower(), float(elapsed), float(elapsed) + float(remaining)
+                )
+        return MotionStatus(
+            positions, targets, busy, settled and not busy, stopped, time_s, profile
+        )
 
     def reset_faults(self) -> None:
         """Clear the controller's axis faults (the operator's acknowledgement after the

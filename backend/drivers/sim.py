@@ -58,9 +58,14 @@ class SimWorld:
             subframes = self.bench.subframe_poses(t, T_true)
             sensor = self.bench.sensor
         frame = render_frame(
-            self.bench.camera, self.bench.scene, T_true, sensor, self.bench.rng, time_s=t,
+            self.bench.camera,
+            self.bench.scene,
+            T_true,
+            sensor,
+            self.bench.rng,
+            time_s=t,
             subframe_poses=subframes,
-        )  # fmt: skip
+        )
         return t, frame, T_lab, T_true, enc
 
     def move_to(self, setpoints: dict[str, float]) -> None:
@@ -210,8 +215,11 @@ class SimMotion:
         return self.world.motion_status()
 
     def describe(self) -> dict[str, str]:
-        return {"model": "tofpose simulated turntable + rail", "firmware": __version__,
-                "link": "up"}  # fmt: skip
+        return {
+            "model": "tofpose simulated turntable + rail",
+            "firmware": __version__,
+            "link": "up",
+        }
 
     def close(self) -> None:
         pass

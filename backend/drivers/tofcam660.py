@@ -223,8 +223,7 @@ class TofCam660Driver:
             iface.transmit(command)
             response = iface.receive()
         if response.isError():
-            raise CameraError(f"tofcam660 {self.address}: the camera refused {command}: "
-                              f"{response}")  # fmt: skip
+            raise CameraError(f"tofcam660 {self.address}: the camera refused {command}: {response}")
         return response
 
     # -- settings -----------------------------------------------------------------------
@@ -233,8 +232,9 @@ class TofCam660Driver:
         left, top, right, bottom = self.roi
         mhz = min(MODULATION_MHZ, key=lambda f: abs(f - s.modulation_frequency_mhz))
         code = {12.0: 0, 24.0: 1, 6.0: 2, 3.0: 3, 1.5: 4, 0.75: 5}[mhz]
-        self._transceive(Command.create("setModulationFrequency",
-                                        {"frequencyCode": code, "channel": 0}))  # fmt: skip
+        self._transceive(
+            Command.create("setModulationFrequency", {"frequencyCode": code, "channel": 0})
+        )
         roi = {"leftColumn": left, "topRow": top, "rightColumn": right, "bottomRow": bottom}
         self._transceive(Command.create("setRoi", roi))
         self._transceive(Command.create("setHdr", 0))
@@ -245,9 +245,12 @@ class TofCam660Driver:
         Command = self._vendor[1]
         lo, hi = INTEGRATION_LIMITS_US
         t = int(round(min(max(t_us, lo), hi)))
-        self._transceive(Command.create("setIntTimes", {"lowIntTime": t, "midIntTime": 0,
-                                                        "highIntTime": 0,
-                                                        "grayscaleIntTime": 50}))  # fmt: skip
+        self._transceive(
+            Command.create(
+                "setIntTimes",
+                {"lowIntTime": t, "midIntTime": 0, "highIntTime": 0, "grayscaleIntTime": 50},
+            )
+        )
         self._integration_us = float(t)
 
     def get_settings(self) -> CameraSettings:
@@ -316,8 +319,9 @@ class TofCam660Driver:
 
     def _auto_expose(self, gray: np.ndarray, dist: np.ndarray, n_saturated: int) -> None:
         peak = float(gray[np.isfinite(dist)].max()) if np.isfinite(dist).any() else 0.0
-        t = next_integration_time_us(self._integration_us, peak, n_saturated,
-                                     self.full_scale_counts, self.auto_exposure_fill)  # fmt: skip
+        t = next_integration_time_us(
+            self._integration_us, peak, n_saturated, self.full_scale_counts, self.auto_exposure_fill
+        )
         if t != self._integration_us:
             try:
                 self._set_integration(t)

@@ -28,9 +28,11 @@ def run(opts: dict) -> int:
             lines = [_table_line(*emu.address)]
         else:
             emu = EmulatedLab(
-                camera_address=opts["camera_address"], table_host=opts["host"],
-                table_port=opts["table_port"], world=world,
-            )  # fmt: skip
+                camera_address=opts["camera_address"],
+                table_host=opts["host"],
+                table_port=opts["table_port"],
+                world=world,
+            )
             lines = [_camera_line(opts["camera_address"]), _table_line(*emu.table.address)]
     except OSError as exc:
         print(f"tofpose emulate {device}: cannot listen: {exc}", file=sys.stderr)
@@ -47,10 +49,14 @@ def run(opts: dict) -> int:
 
 
 def _camera_line(address: str) -> str:
-    return (f"  TOFcam-660     {address}  (TCP {COMMAND_PORT}, images over UDP to port "
-            f"{DATA_PORT});  tofpose serve --camera tofcam660:{address}")  # fmt: skip
+    return (
+        f"  TOFcam-660     {address}  (TCP {COMMAND_PORT}, images over UDP to port "
+        f"{DATA_PORT});  tofpose serve --camera tofcam660:{address}"
+    )
 
 
 def _table_line(host: str, port: int) -> str:
-    return (f"  rate table     TCPIP::{host}::{port}::SOCKET  (SCPI);  "
-            f"tofpose serve --motion scpi:{host}:{port}")  # fmt: skip
+    return (
+        f"  rate table     TCPIP::{host}::{port}::SOCKET  (SCPI);  "
+        f"tofpose serve --motion scpi:{host}:{port}"
+    )

@@ -27,9 +27,11 @@ class EmulatedLab:
         self.table = RateTableEmulator(self.world, table_host, table_port)
         try:
             self.camera = TofCam660Emulator(
-                self.world, camera_address,
-                command_port=camera_command_port, data_port=camera_data_port,
-            )  # fmt: skip
+                self.world,
+                camera_address,
+                command_port=camera_command_port,
+                data_port=camera_data_port,
+            )
         except OSError:
             self.table.close()
             raise

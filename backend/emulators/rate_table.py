@@ -541,9 +541,13 @@ class RateTableEmulator(ServedEmulator):
     thread_name = "rate-table-emulator"
 
     def __init__(
-        self, world: SimWorld, host: str = "127.0.0.1", port: int = 5025, *,
+        self,
+        world: SimWorld,
+        host: str = "127.0.0.1",
+        port: int = 5025,
+        *,
         synthesis: bool = True,
-    ) -> None:  # fmt: skip
+    ) -> None:
         self.controller = RateTableController(world, synthesis=synthesis)
         self._server = _Server((host, port), self.controller)
 

@@ -61,8 +61,9 @@ class ServedEmulator:
         return str(host), int(port)
 
     def start(self):
-        self._thread = threading.Thread(target=self._server.serve_forever, args=(0.05,),
-                                        name=self.thread_name, daemon=True)  # fmt: skip
+        self._thread = threading.Thread(
+            target=self._server.serve_forever, args=(0.05,), name=self.thread_name, daemon=True
+        )
         self._thread.start()
         return self
 

@@ -125,9 +125,20 @@ def encode_frame(
     left, top, right, bottom = state.roi
     low, mid, high, _ = state.int_times_us
     header = FRAME_HEADER.pack(
-        HEADER_VERSION, data_type, cols, rows, left, top, right, bottom, low, mid, high,
-        int(round(state.temperature_c * 100)), FRAME_HEADER.size,
-    )  # fmt: skip
+        HEADER_VERSION,
+        data_type,
+        cols,
+        rows,
+        left,
+        top,
+        right,
+        bottom,
+        low,
+        mid,
+        high,
+        int(round(state.temperature_c * 100)),
+        FRAME_HEADER.size,
+    )
     return header + pixels.tobytes()
 
 
@@ -322,8 +333,9 @@ class _Handler(TrackedHandler):
             if not self._send(response):
                 return
             if frame is not None:
-                self.server.send_frame(frame, camera.state.data_ip or peer_ip,
-                                       camera.state.measurement_id)  # fmt: skip
+                self.server.send_frame(
+                    frame, camera.state.data_ip or peer_ip, camera.state.measurement_id
+                )
 
     def _flush(self) -> None:
         """Drop what is already buffered: framing is lost, start afresh."""

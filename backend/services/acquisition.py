@@ -214,8 +214,9 @@ class AcquisitionService:
         implementation when the kernels have become ready; None: no pipeline yet."""
         wanted = self._live_implementation()
         if wanted is not None and wanted != self._pipeline.implementation:
-            self._pipeline = PosePipeline(self.camera.model, self._pipeline.catalog,
-                                          self._config, implementation=wanted)  # fmt: skip
+            self._pipeline = PosePipeline(
+                self.camera.model, self._pipeline.catalog, self._config, implementation=wanted
+            )
             log.info("live poses now from the %s pipeline", wanted)
         return None if wanted is None else self._pipeline
 
@@ -244,8 +245,12 @@ class AcquisitionService:
 
     def set_catalog(self, name: str, catalog: Catalog) -> Future:
         def swap() -> None:
-            self._pipeline = PosePipeline(self.camera.model, catalog, self._config,
-                                          implementation=self._pipeline.implementation)  # fmt: skip
+            self._pipeline = PosePipeline(
+                self.camera.model,
+                catalog,
+                self._config,
+                implementation=self._pipeline.implementation,
+            )
             self._filter.reset()  # another target: its motion starts again
             self._catalog_name = name
 
@@ -302,10 +307,16 @@ class AcquisitionService:
             self.health.record_ok()
             state = self._relative_state(result, frame.time_s) if measured else None
             sample = LiveSample(
-                frame, result, self._catalog_name, captured, time.time(), measured=measured,
+                frame,
+                result,
+                self._catalog_name,
+                captured,
+                time.time(),
+                measured=measured,
                 implementation=pipeline.implementation if pipeline is not None else None,
-                reference=self.reference, state=state,
-            )  # fmt: skip
+                reference=self.reference,
+                state=state,
+            )
             self._latest = sample
             self._history.append(sample.without_images())
             self.frames_processed += 1

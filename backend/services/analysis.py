@@ -22,8 +22,20 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 AXES = ("x_mm", "y_mm", "z_mm", "pitch_deg", "yaw_deg", "roll_deg")
-SIGMA_COLUMNS = dict(zip(AXES, ("sigma_x_mm", "sigma_y_mm", "sigma_z_mm", "sigma_pitch_deg",
-                                "sigma_yaw_deg", "sigma_roll_deg"), strict=True))  # fmt: skip
+SIGMA_COLUMNS = dict(
+    zip(
+        AXES,
+        (
+            "sigma_x_mm",
+            "sigma_y_mm",
+            "sigma_z_mm",
+            "sigma_pitch_deg",
+            "sigma_yaw_deg",
+            "sigma_roll_deg",
+        ),
+        strict=True,
+    )
+)
 SINGULAR_K = 5.0
 MAD_TO_SIGMA = 1.4826
 RULE = (
@@ -137,8 +149,9 @@ def analyse(
         for a in AXES:
             m, ref = _column(ok, a), _column(ok, prefix + a)
             good = np.isfinite(m) & np.isfinite(ref)
-            st = axis_stats(m[good], ref[good], _column(ok, SIGMA_COLUMNS[a])[good],
-                            requirements[a])  # fmt: skip
+            st = axis_stats(
+                m[good], ref[good], _column(ok, SIGMA_COLUMNS[a])[good], requirements[a]
+            )
             entry["axes"][a] = asdict(st)
             err = m[good] - ref[good]
             pooled[a].append(err[keep_mask(err)])
@@ -148,8 +161,13 @@ def analyse(
     for a in AXES:
         e = np.concatenate(pooled[a]) if pooled[a] else np.zeros(0)
         all_ok = [r for r in rows if _truthy(r["ok"])]
-        st = axis_stats(e, np.zeros_like(e), _column(all_ok, SIGMA_COLUMNS[a]), requirements[a],
-                        remove_singular=False)  # fmt: skip
+        st = axis_stats(
+            e,
+            np.zeros_like(e),
+            _column(all_ok, SIGMA_COLUMNS[a]),
+            requirements[a],
+            remove_singular=False,
+        )
         d = asdict(st)
         d["n_removed"] = sum(sp["axes"][a]["n_removed"] for sp in per_sp)
         for k in ("average", "maximum", "minimum", "fluctuation"):

@@ -105,15 +105,20 @@ def _text_safe(text: str) -> str:
 
 def _row(entry: AuditEntry) -> AuditRow:
     return AuditRow(
-        at=entry.at, key_name=entry.key_name, client=_text_safe(entry.client[:64]),
-        method=_text_safe(entry.method[:8]), path=_text_safe(entry.path),
-        body=body_summary(entry.body, entry.body_size), status=entry.status,
-    )  # fmt: skip
+        at=entry.at,
+        key_name=entry.key_name,
+        client=_text_safe(entry.client[:64]),
+        method=_text_safe(entry.method[:8]),
+        path=_text_safe(entry.path),
+        body=body_summary(entry.body, entry.body_size),
+        status=entry.status,
+    )
 
 
 def _record(row: AuditRow) -> AuditRecord:
-    return AuditRecord(row.id, row.at, row.key_name, row.client, row.method, row.path,
-                       row.body, row.status)  # fmt: skip
+    return AuditRecord(
+        row.id, row.at, row.key_name, row.client, row.method, row.path, row.body, row.status
+    )
 
 
 _STOP = object()
@@ -122,8 +127,9 @@ _STOP = object()
 class AuditService:
     """The audit writer thread and the audit trail's reads."""
 
-    def __init__(self, sessions: sessionmaker[Session], *, max_queue: int = 10_000,
-                 batch: int = 200) -> None:  # fmt: skip
+    def __init__(
+        self, sessions: sessionmaker[Session], *, max_queue: int = 10_000, batch: int = 200
+    ) -> None:
         self._sessions = sessions
         self._queue: queue.Queue[Any] = queue.Queue(max_queue)
         self._batch = batch
@@ -192,8 +198,12 @@ class AuditService:
                     self._store([entry])
                 except Exception as exc:  # noqa: BLE001
                     self.dropped += 1
-                    log.error("an audit entry (%s %s) was not stored: %s", entry.method,
-                              entry.path[:100], exc)  # fmt: skip
+                    log.error(
+                        "an audit entry (%s %s) was not stored: %s",
+                        entry.method,
+                        entry.path[:100],
+                        exc,
+                    )
 
     def _store(self, entries: list[AuditEntry]) -> None:
         with self._sessions() as session:

@@ -42,10 +42,12 @@ def observations(session: Session, campaign_id: int) -> list[BenchObservation]:
         if len(rows) < 2:
             continue
         poses = [
-            RigidTransform(rotation_from_quaternion_wxyz([m.qw, m.qx, m.qy, m.qz]),
-                           np.array([m.x_mm, m.y_mm, m.z_mm]))
+            RigidTransform(
+                rotation_from_quaternion_wxyz([m.qw, m.qx, m.qy, m.qz]),
+                np.array([m.x_mm, m.y_mm, m.z_mm]),
+            )
             for m in rows
-        ]  # fmt: skip
+        ]
         mean = mean_pose(poses)
         n = len(rows)
         t_sd = np.std([p.t_mm for p in poses], axis=0, ddof=1)
@@ -53,11 +55,12 @@ def observations(session: Session, campaign_id: int) -> list[BenchObservation]:
         enc = {a: float(np.mean([m.encoders[a] for m in rows])) for a in rows[0].encoders}
         out.append(
             BenchObservation(
-                enc, mean,
+                enc,
+                mean,
                 sigma_mm=max(float(np.sqrt(np.mean(t_sd**2)) / np.sqrt(n)), SIGMA_FLOOR_MM),
                 sigma_deg=max(float(np.sqrt(np.mean(r_sd**2)) / np.sqrt(n)), SIGMA_FLOOR_DEG),
             )
-        )  # fmt: skip
+        )
     return out
 
 
@@ -72,14 +75,16 @@ def calibrate_from_campaign(
     obs = observations(session, campaign_id)
     cal = calibrate_bench(obs, nominal_mount, nominal_placement)
     row = CalibrationRow(
-        name=name, campaign_id=campaign_id,
+        name=name,
+        campaign_id=campaign_id,
         mount=cal.T_inner_camera.as_matrix().tolist(),
         placement=cal.T_lab_target.as_matrix().tolist(),
         sigmas=[float(v) for v in cal.sigmas],
         residual_mm=[float(v) for v in cal.residual_mm],
         residual_deg=[float(v) for v in cal.residual_deg],
-        chi2_per_dof=float(cal.chi2_per_dof), n_observations=len(obs),
-    )  # fmt: skip
+        chi2_per_dof=float(cal.chi2_per_dof),
+        n_observations=len(obs),
+    )
     session.add(row)
     commit_unique(session, f"a calibration named {name!r}")
     return row

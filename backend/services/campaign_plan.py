@@ -91,9 +91,16 @@ def calibration(*, rails_mm: Sequence[float], amplitude_deg: float = 8.0) -> lis
         raise ValueError("a calibration needs at least 2 rail positions")
     a = float(amplitude_deg)
     attitudes = [
-        (0.0, 0.0, 0.0), (a, 0.0, 0.0), (-a, 0.0, 0.0), (0.0, a, 0.0), (0.0, -a, 0.0),
-        (0.0, 0.0, 2 * a), (0.0, 0.0, -2 * a), (a, a / 2, a), (-a, -a / 2, -a),
-    ]  # fmt: skip
+        (0.0, 0.0, 0.0),
+        (a, 0.0, 0.0),
+        (-a, 0.0, 0.0),
+        (0.0, a, 0.0),
+        (0.0, -a, 0.0),
+        (0.0, 0.0, 2 * a),
+        (0.0, 0.0, -2 * a),
+        (a, a / 2, a),
+        (-a, -a / 2, -a),
+    ]
     return [
         {"yaw": y, "pitch": p, "roll": r, "rail": float(rail)}
         for rail in rails_mm

@@ -58,8 +58,11 @@ class SetPointView:
     @property
     def axes(self) -> dict[str, float]:
         """{axis: deg / mm} of the axes this set-point moves."""
-        return {a: float(getattr(self, c)) for a, c in AXIS_COLUMNS.items()
-                if getattr(self, c) is not None}  # fmt: skip
+        return {
+            a: float(getattr(self, c))
+            for a, c in AXIS_COLUMNS.items()
+            if getattr(self, c) is not None
+        }
 
 
 @dataclass(frozen=True)
@@ -111,8 +114,11 @@ def _view(row: CampaignRow) -> CampaignView:
     setpoints = tuple(
         SetPointView(**{k: getattr(sp, k) for k in _SETPOINT_FIELDS}) for sp in row.setpoints
     )
-    return CampaignView(status=CampaignState(row.status), setpoints=setpoints,
-                        **{k: _utc(getattr(row, k)) for k in _CAMPAIGN_FIELDS})  # fmt: skip
+    return CampaignView(
+        status=CampaignState(row.status),
+        setpoints=setpoints,
+        **{k: _utc(getattr(row, k)) for k in _CAMPAIGN_FIELDS},
+    )
 
 
 def create_campaign(
@@ -134,11 +140,19 @@ def create_campaign(
     """Store a draft campaign with its set-points (and, for a dynamic one, the motion
     profile of each) in session ``s``; ``NameTakenError`` if the name exists."""
     row = CampaignRow(
-        name=name, status=CampaignState.DRAFT.value, status_reason="", catalog_name=catalog_name,
-        frames_per_point=frames_per_point, settle_s=settle_s, lock_timeout_s=lock_timeout_s,
-        requirements=requirements, generator=generator, camera_settings=camera, notes=notes,
+        name=name,
+        status=CampaignState.DRAFT.value,
+        status_reason="",
+        catalog_name=catalog_name,
+        frames_per_point=frames_per_point,
+        settle_s=settle_s,
+        lock_timeout_s=lock_timeout_s,
+        requirements=requirements,
+        generator=generator,
+        camera_settings=camera,
+        notes=notes,
         record_raw=record_raw,
-    )  # fmt: skip
+    )
     for i, sp in enumerate(setpoints):
         row.setpoints.append(
             SetPointRow(
@@ -146,7 +160,7 @@ def create_campaign(
                 status="pending",
                 profile=profiles[i] if profiles else None,
                 **{AXIS_COLUMNS[a]: float(v) for a, v in sp.items()},
-            )  # fmt: skip
+            )
         )
     s.add(row)
     commit_unique(s, f"a campaign named {name!r}")
@@ -180,8 +194,11 @@ class CampaignRepository:
     def list(self) -> list[CampaignView]:
         """Every campaign, newest first."""
         with self.sessions() as s:
-            rows = s.scalars(select(CampaignRow).options(selectinload(CampaignRow.setpoints))
-                             .order_by(CampaignRow.id.desc())).all()  # fmt: skip
+            rows = s.scalars(
+                select(CampaignRow)
+                .options(selectinload(CampaignRow.setpoints))
+                .order_by(CampaignRow.id.desc())
+            ).all()
             return [_view(r) for r in rows]
 
     def measurements(
@@ -221,7 +238,7 @@ class CampaignRepository:
                 .where(CampaignRow.status == CampaignState.QUEUED.value)
                 .order_by(
                     CampaignRow.scheduled_at.is_not(None), CampaignRow.scheduled_at, CampaignRow.id
-                )  # fmt: skip
+                )
             ).all()
             for row in rows:
                 at = _utc(row.scheduled_at)
@@ -236,9 +253,13 @@ class CampaignRepository:
             return _view(create_campaign(s, **campaign))
 
     def apply(
-        self, campaign_id: int, command: CampaignCommand, *, reason: str = "",
+        self,
+        campaign_id: int,
+        command: CampaignCommand,
+        *,
+        reason: str = "",
         scheduled_at: datetime | None = None,
-    ) -> CampaignState:  # fmt: skip
+    ) -> CampaignState:
         """A person's ``command`` on the stored campaign, checked against
         ``TRANSITIONS`` (``CampaignTransitionError``); ``scheduled_at`` is set by start
         and resume. Returns the new state."""
@@ -279,21 +300,27 @@ class CampaignRepository:
             ).all()
             for row in running:
                 row.status = CampaignState.INTERRUPTED.value
-                row.status_reason = (f"the server stopped while this campaign was running "
-                                     f"(restarted {when}): resume it to continue")  # fmt: skip
+                row.status_reason = (
+                    f"the server stopped while this campaign was running "
+                    f"(restarted {when}): resume it to continue"
+                )
             queued = s.scalars(
                 select(CampaignRow).where(CampaignRow.status == CampaignState.QUEUED.value)
             ).all()
             for row in queued:
                 row.status = CampaignState.PAUSED.value
-                row.status_reason = (f"held at server start ({when}): nothing moves after a "
-                                     "restart until a person resumes it")  # fmt: skip
+                row.status_reason = (
+                    f"held at server start ({when}): nothing moves after a "
+                    "restart until a person resumes it"
+                )
             return len(running), len(queued)
 
     def store_setpoint(
-        self, setpoint_id: int, frames: Iterable[tuple[LiveSample, bool | None]],
+        self,
+        setpoint_id: int,
+        frames: Iterable[tuple[LiveSample, bool | None]],
         first_recording_index: int | None = None,
-    ) -> None:  # fmt: skip
+    ) -> None:
         """The set-point's frames (with whether a profile ran at each) and its ``done``
         mark, in one transaction; ``first_recording_index``: where the first of them is
         in the campaign's raw recording, None without one."""
@@ -338,10 +365,11 @@ def measurement_row(setpoint_id: int, sample: LiveSample) -> MeasurementRow:
     if st is not None:
         row.filter_status = st.status
         for name, values in (
-            ("rate_{}_deg_s", st.angular_rate_deg_s), ("vel_{}_mm_s", st.velocity_mm_s),
+            ("rate_{}_deg_s", st.angular_rate_deg_s),
+            ("vel_{}_mm_s", st.velocity_mm_s),
             ("sigma_rate_{}_deg_s", st.angular_rate_sigma_deg_s),
             ("sigma_vel_{}_mm_s", st.velocity_sigma_mm_s),
-        ):  # fmt: skip
+        ):
             for axis, v in zip("xyz", values, strict=True):
                 setattr(row, name.format(axis), _finite(v))
     _set_reference(row, "truth_", f.T_camera_target_exact)
@@ -396,17 +424,23 @@ class RawRecorder:
         if self._writer is None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._writer = RecordingWriter(
-                self.path, self._camera, self._catalog,
-                with_truth=exact is not None, with_lab_truth=lab is not None,
-            )  # fmt: skip
+                self.path,
+                self._camera,
+                self._catalog,
+                with_truth=exact is not None,
+                with_lab_truth=lab is not None,
+            )
         w = self._writer
         index = w.n
         w.append(
-            f.gray, f.distance_mm, float(f.time_s),
-            exact.R if exact is not None else None, exact.t_mm if exact is not None else None,
+            f.gray,
+            f.distance_mm,
+            float(f.time_s),
+            exact.R if exact is not None else None,
+            exact.t_mm if exact is not None else None,
             lab_R_camera_target=lab.R if lab is not None else None,
             lab_t_camera_target_mm=lab.t_mm if lab is not None else None,
-        )  # fmt: skip
+        )
         return index
 
     def rollback(self, n: int) -> None:

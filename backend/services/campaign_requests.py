@@ -50,8 +50,12 @@ def dynamic_spec(generator: dict | None, motion: MotionService) -> dict | None:
     spec = {k: v for k, v in generator["profile"].items() if v is not None}
     spec["rest_s"] = generator["rest_s"]
     limits = motion.axes.get(spec["axis"])
-    if "accel_deg_s2" not in spec and spec["kind"] == "ramp" and limits is not None \
-            and limits.max_accel is not None:  # fmt: skip
+    if (
+        "accel_deg_s2" not in spec
+        and spec["kind"] == "ramp"
+        and limits is not None
+        and limits.max_accel is not None
+    ):
         spec["accel_deg_s2"] = float(limits.max_accel)
     return spec
 
@@ -134,11 +138,14 @@ class Planning:
         """Seconds the set-points not done yet take from where the axes are now."""
         pending = campaign.pending
         return campaign_plan.estimate_duration_s(
-            [sp.axes for sp in pending], self.start, self.rates,
-            settle_s=campaign.settle_s, frames_per_point=campaign.frames_per_point,
+            [sp.axes for sp in pending],
+            self.start,
+            self.rates,
+            settle_s=campaign.settle_s,
+            frames_per_point=campaign.frames_per_point,
             frame_rate_hz=self.frame_rate_hz,
             dynamic_s=[_dynamic_s(sp.profile) for sp in pending],
-        )  # fmt: skip
+        )
 
 
 def _dynamic_s(spec: dict | None) -> float | None:

@@ -82,11 +82,17 @@ class Progress:
         remaining = self.n_setpoints - self.n_done
         eta = (elapsed / self.done_this_run * remaining) if self.done_this_run else None
         return {
-            "campaign_id": self.campaign_id, "name": self.name, "status": self.status,
-            "setpoint_index": self.setpoint_index, "n_setpoints": self.n_setpoints,
-            "n_done": self.n_done, "frames_collected": self.frames_collected,
-            "frames_per_point": self.frames_per_point, "elapsed_s": elapsed, "eta_s": eta,
-        }  # fmt: skip
+            "campaign_id": self.campaign_id,
+            "name": self.name,
+            "status": self.status,
+            "setpoint_index": self.setpoint_index,
+            "n_setpoints": self.n_setpoints,
+            "n_done": self.n_done,
+            "frames_collected": self.frames_collected,
+            "frames_per_point": self.frames_per_point,
+            "elapsed_s": elapsed,
+            "eta_s": eta,
+        }
 
 
 class CampaignService:
@@ -195,11 +201,13 @@ class CampaignService:
         self._halt(campaign_id, CampaignCommand.PAUSE, CampaignState.PAUSED, reason)
 
     def cancel(self, campaign_id: int) -> None:
-        self._halt(campaign_id, CampaignCommand.CANCEL, CampaignState.CANCELLED,
-                   "cancelled by request")  # fmt: skip
+        self._halt(
+            campaign_id, CampaignCommand.CANCEL, CampaignState.CANCELLED, "cancelled by request"
+        )
 
-    def _halt(self, campaign_id: int, command: CampaignCommand, status: CampaignState,
-              reason: str) -> None:  # fmt: skip
+    def _halt(
+        self, campaign_id: int, command: CampaignCommand, status: CampaignState, reason: str
+    ) -> None:
         """Ask the runner to leave campaign ``campaign_id`` as ``status``, or, when the
         runner does not hold it, change the stored state. Under the lock the runner takes
         a campaign with (``_begin``), so a command cannot fall between the scheduler's
@@ -243,9 +251,11 @@ class CampaignService:
                 # the STOP count at the pick: a STOP before the runner claims the motion
                 # system keeps the campaign from starting (``_begin``)
                 self._runner = threading.Thread(
-                    target=self._run, args=(nxt, self.motion.stops), name=f"campaign-{nxt}",
+                    target=self._run,
+                    args=(nxt, self.motion.stops),
+                    name=f"campaign-{nxt}",
                     daemon=True,
-                )  # fmt: skip
+                )
                 self._runner.start()
 
     # -- runner ---------------------------------------------------------------------------
@@ -259,8 +269,9 @@ class CampaignService:
     def _check(self, index: int) -> None:
         """Leave the set-point on shutdown or on a pause or cancel request."""
         if self._shutdown.is_set():
-            raise SetPointHalt(CampaignState.INTERRUPTED,
-                               f"the server shut down during set-point {index}")  # fmt: skip
+            raise SetPointHalt(
+                CampaignState.INTERRUPTED, f"the server shut down during set-point {index}"
+            )
         with self._lock:
             req = self._request
         if req is not None:
@@ -276,21 +287,32 @@ class CampaignService:
         with self._lock:
             stopped = stops_at_pick is not None and self.motion.stops != stops_at_pick
             if stopped or (self.motion.present and self.motion.stop_latched):
-                self.repository.apply(campaign.id, CampaignCommand.PAUSE,
-                                      reason="STOP pressed before it started (resume it to "
-                                             "release STOP and run it)")  # fmt: skip
+                self.repository.apply(
+                    campaign.id,
+                    CampaignCommand.PAUSE,
+                    reason="STOP pressed before it started (resume it to release STOP and run it)",
+                )
                 return False
             if not self.repository.set_status(campaign.id, CampaignState.RUNNING):
-                log.info("campaign %d was not run: %s since the scheduler picked it",
-                         campaign.id, self.repository.get(campaign.id).status)  # fmt: skip
+                log.info(
+                    "campaign %d was not run: %s since the scheduler picked it",
+                    campaign.id,
+                    self.repository.get(campaign.id).status,
+                )
                 return False
             self._running_id = campaign.id
             self._request = None
             self._progress = Progress(
-                campaign.id, campaign.name, CampaignState.RUNNING,
-                pending[0].index if pending else 0, len(campaign.setpoints), campaign.n_done,
-                0, campaign.frames_per_point, time.monotonic(),
-            )  # fmt: skip
+                campaign.id,
+                campaign.name,
+                CampaignState.RUNNING,
+                pending[0].index if pending else 0,
+                len(campaign.setpoints),
+                campaign.n_done,
+                0,
+                campaign.frames_per_point,
+                time.monotonic(),
+            )
             self.motion.claim(campaign.id, campaign.name)
         self._bump()
         return True
@@ -298,8 +320,11 @@ class CampaignService:
     def _end(self, campaign_id: int, final: CampaignState, reason: str) -> None:
         try:
             if not self.repository.set_status(campaign_id, final, reason):
-                log.warning("campaign %d: the runner's %s was not stored (the stored state "
-                            "had changed)", campaign_id, final)  # fmt: skip
+                log.warning(
+                    "campaign %d: the runner's %s was not stored (the stored state had changed)",
+                    campaign_id,
+                    final,
+                )
         finally:
             with self._lock:
                 self._running_id = None
@@ -324,9 +349,11 @@ class CampaignService:
                 self._apply_camera(dict(campaign.camera_settings))
             if campaign.record_raw:
                 recorder = RawRecorder(
-                    self.recording_path(campaign_id), self.acquisition.camera.model,
-                    self.acquisition.catalog, committed_frames,
-                )  # fmt: skip
+                    self.recording_path(campaign_id),
+                    self.acquisition.camera.model,
+                    self.acquisition.catalog,
+                    committed_frames,
+                )
             self._run_setpoints(campaign, HubFrames(sub, self.acquisition.health), recorder)
         except SetPointHalt as halt:
             final, reason = halt.status, halt.reason
@@ -354,18 +381,25 @@ class CampaignService:
             self._bump(frames_collected=n)
 
         collector = SetPointCollector(
-            self.motion, frames, timing=self.timing, owner=campaign.id, check=self._check,
-            on_frame=on_frame, lab_geometry=self.lab_geometry,
-        )  # fmt: skip
-        policy = CollectPolicy(campaign.frames_per_point, campaign.settle_s,
-                               campaign.lock_timeout_s)  # fmt: skip
+            self.motion,
+            frames,
+            timing=self.timing,
+            owner=campaign.id,
+            check=self._check,
+            on_frame=on_frame,
+            lab_geometry=self.lab_geometry,
+        )
+        policy = CollectPolicy(
+            campaign.frames_per_point, campaign.settle_s, campaign.lock_timeout_s
+        )
         for sp in pending:
             self._bump(setpoint_index=sp.index, frames_collected=0)
             start_n = recorder.n if recorder is not None else 0
             try:
                 if sp.profile:
-                    record = collector.collect_profile(sp.index, sp.axes, sp.profile,
-                                                       campaign.settle_s)  # fmt: skip
+                    record = collector.collect_profile(
+                        sp.index, sp.axes, sp.profile, campaign.settle_s
+                    )
                 else:
                     record = collector.collect(sp.index, sp.axes, policy)
                 if recorder is not None:
@@ -391,5 +425,6 @@ class CampaignService:
         try:
             self.acquisition.submit(lambda: cam.apply_settings(target)).result(10.0)
         except Exception as exc:
-            raise SetPointHalt(CampaignState.PAUSED,
-                               f"the camera refused the campaign's settings: {exc}") from exc
+            raise SetPointHalt(
+                CampaignState.PAUSED, f"the camera refused the campaign's settings: {exc}"
+            ) from exc

@@ -65,8 +65,11 @@ def setpoint_dynamics(rows: list[dict], reference: str) -> dict:
     moving = np.array([_num(r["in_motion"]) == 1 for r in rows])
     ok = np.array([str(r["ok"]) in ("1", "True") for r in rows])
     has_ref = np.array([np.isfinite(_num(r[prefix + "yaw_deg"])) for r in rows])
-    out: dict = {"n_frames": len(rows), "n_in_motion": int(moving.sum()),
-                 "n_ok_in_motion": int((moving & ok).sum())}  # fmt: skip
+    out: dict = {
+        "n_frames": len(rows),
+        "n_in_motion": int(moving.sum()),
+        "n_ok_in_motion": int((moving & ok).sum()),
+    }
     idx = np.array([_num(r["frame_index"]) for r in rows])
     if moving.any():
         span = int(idx[moving].max() - idx[moving].min() + 1)
@@ -79,15 +82,20 @@ def setpoint_dynamics(rows: list[dict], reference: str) -> dict:
         e[~ok] = np.nan
         error[a] = e
         out[a] = {
-            "rms_in_motion": _rms(e[moving]), "max_in_motion": _max_abs(e[moving]),
-            "rms_at_rest": _rms(e[~moving]), "max_at_rest": _max_abs(e[~moving]),
-        }  # fmt: skip
-    series = {"t": t.tolist(), "in_motion": moving.astype(int).tolist(),
-              "error": {a: error[a].tolist() for a in ANGLES}}  # fmt: skip
+            "rms_in_motion": _rms(e[moving]),
+            "max_in_motion": _max_abs(e[moving]),
+            "rms_at_rest": _rms(e[~moving]),
+            "max_at_rest": _max_abs(e[~moving]),
+        }
+    series = {
+        "t": t.tolist(),
+        "in_motion": moving.astype(int).tolist(),
+        "error": {a: error[a].tolist() for a in ANGLES},
+    }
     if has_ref.sum() >= 4:
-        spline = reference_spline(t[has_ref], _rotations([r for r, h in zip(rows, has_ref,
-                                                                           strict=True) if h],
-                                                        prefix))  # fmt: skip
+        spline = reference_spline(
+            t[has_ref], _rotations([r for r, h in zip(rows, has_ref, strict=True) if h], prefix)
+        )
         inside = (t >= t[has_ref][0]) & (t <= t[has_ref][-1])
         w_ref = np.full((len(t), 3), np.nan)
         w_ref[inside] = angular_rate_deg_s(spline, t[inside])
@@ -96,24 +104,30 @@ def setpoint_dynamics(rows: list[dict], reference: str) -> dict:
         peak = float(np.nanmax(np.linalg.norm(w_ref[moving], axis=1))) if moving.any() else 0.0
         axis = int(np.nanargmax(np.nanmax(np.abs(w_ref), axis=0)))
         out["rate"] = {
-            "peak_reference_deg_s": peak, "rms_error_in_motion_deg_s": _rms(err[moving]),
+            "peak_reference_deg_s": peak,
+            "rms_error_in_motion_deg_s": _rms(err[moving]),
             "max_error_in_motion_deg_s": _max_abs(err[moving]),
             "rms_error_at_rest_deg_s": _rms(err[~moving]),
             "rms_error_share_of_peak": _rms(err[moving]) / peak if peak > 0 else None,
             "component": "xyz"[axis],
-        }  # fmt: skip
+        }
         series["rate_reference"] = w_ref[:, axis].tolist()
         series["rate_measured"] = w_meas[:, axis].tolist()
         good = ok & inside & moving  # at rest a frame shows no delay, only noise
         try:
-            fit = fit_latency(t[good], _rotations([r for r, g in zip(rows, good, strict=True)
-                                                   if g], ""),
-                              t[has_ref], spline(t[has_ref]).as_matrix())  # fmt: skip
+            fit = fit_latency(
+                t[good],
+                _rotations([r for r, g in zip(rows, good, strict=True) if g], ""),
+                t[has_ref],
+                spline(t[has_ref]).as_matrix(),
+            )
             out["latency"] = {
-                "delay_s": fit.delay_s, "sigma_s": fit.sigma_s,
-                "residual_rms_deg": fit.residual_rms_deg, "n_frames": fit.n_frames,
+                "delay_s": fit.delay_s,
+                "sigma_s": fit.sigma_s,
+                "residual_rms_deg": fit.residual_rms_deg,
+                "n_frames": fit.n_frames,
                 "n_effective": fit.n_effective,
-            }  # fmt: skip
+            }
         except ValueError as exc:
             out["latency"] = {"why_none": str(exc)}
     out["series"] = series
@@ -130,8 +144,12 @@ def pooled_latency(fits: list[dict]) -> dict | None:
     s = np.array([f["sigma_s"] for f in good])
     w = 1.0 / s**2
     mean = float(np.sum(w * d) / np.sum(w))
-    return {"delay_s": mean, "sigma_s": float(1.0 / np.sqrt(np.sum(w))),
-            "chi2": float(np.sum(w * (d - mean) ** 2)), "n_setpoints": len(good)}  # fmt: skip
+    return {
+        "delay_s": mean,
+        "sigma_s": float(1.0 / np.sqrt(np.sum(w))),
+        "chi2": float(np.sum(w * (d - mean) ** 2)),
+        "n_setpoints": len(good),
+    }
 
 
 def analyse_dynamic(rows: list[dict], reference: str) -> dict | None:

@@ -30,9 +30,14 @@ class LiveFoxglove:
     """Owns a Foxglove WebSocket server fed by the live hub."""
 
     def __init__(
-        self, hub: LiveHub, acquisition: AcquisitionService, *, host: str, port: int,
+        self,
+        hub: LiveHub,
+        acquisition: AcquisitionService,
+        *,
+        host: str,
+        port: int,
         backlog_messages: int = 64,
-    ) -> None:  # fmt: skip
+    ) -> None:
         import foxglove  # imported here: the server runs without it when it is off
 
         from tofpose.io.interop.channels import ToFChannels
@@ -41,12 +46,16 @@ class LiveFoxglove:
         self.context = foxglove.Context()
         # the reference channels are advertised whether or not the source has them (the
         # simulator knows the exact truth, a real lab only its reference)
-        self.channels = ToFChannels(self.context, acquisition.camera.model, truth=True,
-                                    lab_truth=True)  # fmt: skip
+        self.channels = ToFChannels(
+            self.context, acquisition.camera.model, truth=True, lab_truth=True
+        )
         self.server = foxglove.start_server(
-            name="tofpose", host=host, port=port, context=self.context,
+            name="tofpose",
+            host=host,
+            port=port,
+            context=self.context,
             message_backlog_size=backlog_messages,
-        )  # fmt: skip
+        )
         self.host = host
         self.published = 0
         self._stop = threading.Event()
@@ -91,10 +100,13 @@ class LiveFoxglove:
         exact = f.T_camera_target_exact
         lab = sample.reference.pose(f)
         self.channels.log_frame(
-            f.index, f.gray, f.distance_mm, float(f.time_s),
+            f.index,
+            f.gray,
+            f.distance_mm,
+            float(f.time_s),
             int(round(sample.captured_unix_s * 1e9)),
             sample.result if sample.measured else None,
             (exact.R, exact.t_mm) if exact is not None else None,
             (lab.R, lab.t_mm) if lab is not None else None,
-        )  # fmt: skip
+        )
         self.published += 1

@@ -56,8 +56,9 @@ def decode_raw_frame(message: bytes) -> tuple[int, int, np.ndarray, np.ndarray]:
         raise ValueError(f"not a raw frame (magic {magic!r}, version {version})")
     n = w * h
     if len(message) != HEADER_BYTES + 4 * n:
-        raise ValueError(f"raw frame of {w} x {h} px needs {HEADER_BYTES + 4 * n} bytes, "
-                         f"got {len(message)}")  # fmt: skip
+        raise ValueError(
+            f"raw frame of {w} x {h} px needs {HEADER_BYTES + 4 * n} bytes, got {len(message)}"
+        )
     pix = np.frombuffer(message, "<u2", offset=HEADER_BYTES)
     gray = pix[:n].reshape(h, w).copy()
     d = pix[n:].reshape(h, w).astype(np.float32)

@@ -33,8 +33,9 @@ class HeavyWork:
 
     def __init__(self, workers: int = 2, max_waiting: int = 8) -> None:
         if workers < 1 or max_waiting < 0:
-            raise ValueError(f"workers must be >= 1 and max_waiting >= 0, got {workers}, "
-                             f"{max_waiting}")  # fmt: skip
+            raise ValueError(
+                f"workers must be >= 1 and max_waiting >= 0, got {workers}, {max_waiting}"
+            )
         self.workers = workers
         self.max_waiting = max_waiting
         self._limiter: anyio.CapacityLimiter | None = None  # made on the event loop

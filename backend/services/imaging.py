@@ -41,18 +41,29 @@ def draw_overlay(bgr: np.ndarray, result: PoseResult, scale: int) -> np.ndarray:
         cv2.line(out, (c[0], c[1] - arm), (c[0], c[1] + arm), MATCHED_BGR, 1, cv2.LINE_AA, shift)
         org = (int((u + r + 1) * scale), int((v - r) * scale))
         cv2.putText(
-            out, str(m.catalog_id), org, cv2.FONT_HERSHEY_SIMPLEX, 0.35 * scale, LABEL_BGR, 1,
+            out,
+            str(m.catalog_id),
+            org,
+            cv2.FONT_HERSHEY_SIMPLEX,
+            0.35 * scale,
+            LABEL_BGR,
+            1,
             cv2.LINE_AA,
-        )  # fmt: skip
+        )
     for u, v, _d in result.unmatched:
         cv2.circle(out, px(u, v), int(3 * k), UNMATCHED_BGR, 1, cv2.LINE_AA, shift)
     return out
 
 
 def render_png(
-    kind: str, gray: np.ndarray, distance_mm: np.ndarray, result: PoseResult | None, *,
-    overlay: bool, scale: int = 1,
-) -> bytes:  # fmt: skip
+    kind: str,
+    gray: np.ndarray,
+    distance_mm: np.ndarray,
+    result: PoseResult | None,
+    *,
+    overlay: bool,
+    scale: int = 1,
+) -> bytes:
     """PNG bytes of the ``gray`` or ``distance`` image, upscaled ``scale`` x (nearest)."""
     if kind == "gray":
         img = cv2.cvtColor(gray_to_u8(gray), cv2.COLOR_GRAY2BGR)
@@ -134,9 +145,16 @@ class ImageRenderer:
             return fut
 
     def png(
-        self, frame_index: int, kind: str, gray: np.ndarray, distance_mm: np.ndarray,
-        result: PoseResult | None, *, overlay: bool, scale: int,
-    ) -> Future:  # fmt: skip
+        self,
+        frame_index: int,
+        kind: str,
+        gray: np.ndarray,
+        distance_mm: np.ndarray,
+        result: PoseResult | None,
+        *,
+        overlay: bool,
+        scale: int,
+    ) -> Future:
         """Future of (frame_index, PNG bytes) of ``render_png(...)``."""
         return self._get(
             ("png", kind, overlay, scale),

@@ -79,8 +79,9 @@ class KernelWarmup:
             self.seconds = time.monotonic() - self._t0
             self.ready.set()
         if self.state == "ready" and self.seconds > 5:
-            log.info("pipeline kernels ready after %.0f s (compiled; numba caches them)",
-                     self.seconds)  # fmt: skip
+            log.info(
+                "pipeline kernels ready after %.0f s (compiled; numba caches them)", self.seconds
+            )
 
     def join(self, timeout_s: float | None = None) -> bool:
         """Wait for the warm-up; True when it has finished."""

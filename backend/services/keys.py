@@ -135,9 +135,12 @@ class KeyService:
         source = "database"
         shown = None
         with self._sessions() as session:
-            empty = session.scalar(
-                select(ApiKeyRow.id).where(ApiKeyRow.scope == Scope.ADMIN.label).limit(1)
-            ) is None
+            empty = (
+                session.scalar(
+                    select(ApiKeyRow.id).where(ApiKeyRow.scope == Scope.ADMIN.label).limit(1)
+                )
+                is None
+            )
         if empty:
             if configured:
                 token, source = configured, "configured"
@@ -146,16 +149,20 @@ class KeyService:
                 source = "generated" if created else "file"
                 shown = token if created else None
             with self._sessions() as session:
-                session.add(ApiKeyRow(name=BOOTSTRAP_NAME, scope=Scope.ADMIN.label,
-                                      key_sha256=key_hash(token)))  # fmt: skip
+                session.add(
+                    ApiKeyRow(
+                        name=BOOTSTRAP_NAME, scope=Scope.ADMIN.label, key_sha256=key_hash(token)
+                    )
+                )
                 try:
                     session.commit()
                 except IntegrityError:  # another process bootstrapped at the same moment
                     session.rollback()
         if configured:
             self._configured = (
-                key_hash(configured).encode(), ApiKey(CONFIGURED_NAME, Scope.ADMIN, None)
-            )  # fmt: skip
+                key_hash(configured).encode(),
+                ApiKey(CONFIGURED_NAME, Scope.ADMIN, None),
+            )
         self.reload()
         return Bootstrap(shown, source)
 
@@ -215,8 +222,9 @@ class KeyService:
                 f"a letter or digit), got {name!r}"
             )
         if name == CONFIGURED_NAME:  # the audit trail's name for the configured token
-            raise KeyNameTakenError(f"the key name {name!r} is reserved for the token set in "
-                                    "the server's environment")  # fmt: skip
+            raise KeyNameTakenError(
+                f"the key name {name!r} is reserved for the token set in the server's environment"
+            )
         key = secrets.token_urlsafe(32)
         with self._sessions() as session:
             if session.scalar(select(ApiKeyRow.id).where(ApiKeyRow.name == name)) is not None:
@@ -253,5 +261,7 @@ class KeyService:
 
 
 def _taken(name: str) -> str:
-    return (f"a key named {name!r} exists already (revoked keys keep their names, so that "
-            "the audit trail's names stay unambiguous): choose another name")  # fmt: skip
+    return (
+        f"a key named {name!r} exists already (revoked keys keep their names, so that "
+        "the audit trail's names stay unambiguous): choose another name"
+    )

@@ -66,8 +66,9 @@ def recording_mcap(recording_path: Path, min_free_mb: float = 0.0) -> Path:
         try:
             shutil.copyfile(recording_path, copy)
             with open_recording(copy) as rec:
-                pipeline = (PosePipeline(rec.camera, rec.catalog)
-                            if rec.catalog is not None else None)  # fmt: skip
+                pipeline = (
+                    PosePipeline(rec.camera, rec.catalog) if rec.catalog is not None else None
+                )
                 export_mcap(rec, out, pipeline, progress=False, overwrite=True)
         finally:
             copy.unlink(missing_ok=True)

@@ -140,8 +140,9 @@ class MotionService:
         with self._commands, self._lock:
             held = self._owner
             if held is not None and held.campaign_id != campaign_id:
-                raise MotionConflictError(f"campaign {held.campaign_id} ({held.name!r}) owns "
-                                          "the motion system")  # fmt: skip
+                raise MotionConflictError(
+                    f"campaign {held.campaign_id} ({held.name!r}) owns the motion system"
+                )
             self._owner = MotionOwner(campaign_id, name)
 
     def release(self, campaign_id: int) -> None:
@@ -175,8 +176,11 @@ class MotionService:
         """Whether campaign ``campaign_id`` owns the motion system and STOP holds it."""
         with self._lock:
             owner = self._owner
-            return (self._latched_at is not None and owner is not None
-                    and owner.campaign_id == campaign_id)  # fmt: skip
+            return (
+                self._latched_at is not None
+                and owner is not None
+                and owner.campaign_id == campaign_id
+            )
 
     def check_free(self) -> None:
         """``MotionConflictError`` while a campaign owns the motion system."""
@@ -202,16 +206,23 @@ class MotionService:
         elif (owner := self.owner) is None or owner.campaign_id != by:
             raise MotionConflictError(f"campaign {by} does not own the motion system")
 
-    def _send_unless_stopped(self, what: str, refused: str, command: Callable[[], object],
-                             driver: MotionDriver, stops_at_check: int) -> None:  # fmt: skip
+    def _send_unless_stopped(
+        self,
+        what: str,
+        refused: str,
+        command: Callable[[], object],
+        driver: MotionDriver,
+        stops_at_check: int,
+    ) -> None:
         """Send ``command``; a STOP pressed since the checks (``stops_at_check``), whose
         stop the driver may have received before this command, is sent again after it."""
         self._send(what, refused, command)
         if self.stops != stops_at_check:
             log.warning("STOP came while a %s was on its way: stopping again", what)
             self._send("stop", "the motion system did not confirm the stop", driver.stop)
-            raise MotionConflictError(f"STOP was pressed while the {what} was sent: the "
-                                      "motion system was stopped again")  # fmt: skip
+            raise MotionConflictError(
+                f"STOP was pressed while the {what} was sent: the motion system was stopped again"
+            )
 
     def on_stop(self, listener: Callable[[], None]) -> None:
         """Call ``listener`` whenever STOP is pressed (whether or not the driver confirms)."""
@@ -295,8 +306,13 @@ class MotionService:
             self._check_caller(by)
             if by is None:
                 self._refuse_during_a_profile(driver, setpoints)
-            self._send_unless_stopped("move", "the motion system refused the move",
-                                      lambda: driver.move_to(setpoints), driver, stops)  # fmt: skip
+            self._send_unless_stopped(
+                "move",
+                "the motion system refused the move",
+                lambda: driver.move_to(setpoints),
+                driver,
+                stops,
+            )
 
     def _refuse_during_a_profile(self, driver: MotionDriver, setpoints: dict[str, float]) -> None:
         """A profile running on one of the axes to move. A status that cannot be read does
@@ -316,9 +332,11 @@ class MotionService:
         refused while anything moves or a campaign owns the motion system)."""
         driver = self.require()
         if axis not in driver.axes:
-            raise MotionLimitError(_body_problems(
-                [f"this motion system has no {axis} axis (axes: {sorted(driver.axes)})"]
-            ))  # fmt: skip
+            raise MotionLimitError(
+                _body_problems(
+                    [f"this motion system has no {axis} axis (axes: {sorted(driver.axes)})"]
+                )
+            )
         with self._commands:
             stops = self.stops
             self._check_caller(None)
@@ -327,8 +345,13 @@ class MotionService:
             problems = self.limit_problems(setpoint)
             if problems:
                 raise MotionLimitError(_body_problems(problems))
-            self._send_unless_stopped("move", "the motion system refused the move",
-                                      lambda: driver.move_to(setpoint), driver, stops)  # fmt: skip
+            self._send_unless_stopped(
+                "move",
+                "the motion system refused the move",
+                lambda: driver.move_to(setpoint),
+                driver,
+                stops,
+            )
 
     def start_profile(self, axis: str, spec: dict) -> MotionProfile:
         """A person's motion profile on ``axis`` from its encoder position read now
@@ -355,9 +378,13 @@ class MotionService:
         with self._commands:
             stops = self.stops
             self._check_caller(by)
-            self._send_unless_stopped("profile", "the motion system refused the profile",
-                                      lambda: driver.run_profile(axis, profile), driver,
-                                      stops)  # fmt: skip
+            self._send_unless_stopped(
+                "profile",
+                "the motion system refused the profile",
+                lambda: driver.run_profile(axis, profile),
+                driver,
+                stops,
+            )
 
     def latch_stop(self) -> None:
         """The first half of a person's STOP, with no I/O: from now on every motion command

@@ -161,13 +161,15 @@ class RecordingInfo:
     def from_json(cls, doc: dict) -> RecordingInfo:
         stopped = doc.get("stopped_utc")
         reason = doc.get("stop_reason")
-        return cls(**{
-            **doc,
-            "state": RecordingState(doc["state"]),
-            "started_utc": datetime.fromisoformat(doc["started_utc"]),
-            "stopped_utc": datetime.fromisoformat(stopped) if stopped else None,
-            "stop_reason": StopReason(reason) if reason else None,
-        })  # fmt: skip
+        return cls(
+            **{
+                **doc,
+                "state": RecordingState(doc["state"]),
+                "started_utc": datetime.fromisoformat(doc["started_utc"]),
+                "stopped_utc": datetime.fromisoformat(stopped) if stopped else None,
+                "stop_reason": StopReason(reason) if reason else None,
+            }
+        )
 
 
 @dataclass(frozen=True)
@@ -216,11 +218,13 @@ def frame_row(
         "relative_state/status": st.status if st is not None else "",
     }
     for name, attr, shape in (
-        ("R_camera_target", "R", (3, 3)), ("t_camera_target_mm", "t_mm", (3,)),
+        ("R_camera_target", "R", (3, 3)),
+        ("t_camera_target_mm", "t_mm", (3,)),
         ("angular_rate_deg_s", "angular_rate_deg_s", (3,)),
         ("angular_rate_target_deg_s", "angular_rate_target_deg_s", (3,)),
-        ("velocity_mm_s", "velocity_mm_s", (3,)), ("covariance", "covariance", (12, 12)),
-    ):  # fmt: skip
+        ("velocity_mm_s", "velocity_mm_s", (3,)),
+        ("covariance", "covariance", (12, 12)),
+    ):
         row[f"relative_state/{name}"] = _or_nan(getattr(st, attr, None), shape)
     if axes:
         encoders = sample.frame.meta.get("encoders") or (motion.positions if motion else {})
@@ -237,42 +241,57 @@ class LiveRecordingWriter(RecordingWriter):
     datasets (``frame_row``): one file in the project's format, with more in it."""
 
     def __init__(
-        self, path: Path, camera: CameraModel, catalog: Catalog | None, *, with_truth: bool,
-        with_lab_truth: bool, axes: dict[str, str], attrs: dict[str, str | int],
-    ) -> None:  # fmt: skip
-        super().__init__(path, camera, catalog, with_truth=with_truth,
-                         with_lab_truth=with_lab_truth)  # fmt: skip
+        self,
+        path: Path,
+        camera: CameraModel,
+        catalog: Catalog | None,
+        *,
+        with_truth: bool,
+        with_lab_truth: bool,
+        axes: dict[str, str],
+        attrs: dict[str, str | int],
+    ) -> None:
+        super().__init__(
+            path, camera, catalog, with_truth=with_truth, with_lab_truth=with_lab_truth
+        )
         f = self._f
         for key, value in attrs.items():
             f.attrs[key] = value
         text = h5py.string_dtype()
         columns: list[tuple[str, tuple[int, ...], object]] = [
-            ("frames/index", (), np.int64), ("frames/wall_time_ns", (), np.int64),
-            ("pose/ok", (), np.bool_), ("pose/reason", (), text),
+            ("frames/index", (), np.int64),
+            ("frames/wall_time_ns", (), np.int64),
+            ("pose/ok", (), np.bool_),
+            ("pose/reason", (), text),
             ("pose/R_camera_target", (3, 3), np.float64),
             ("pose/t_camera_target_mm", (3,), np.float64),
-            ("pose/covariance", (6, 6), np.float64), ("pose/residual_mm", (), np.float64),
+            ("pose/covariance", (6, 6), np.float64),
+            ("pose/residual_mm", (), np.float64),
             ("pose/n_matched", (), np.int32),
-            ("relative_state/valid", (), np.bool_), ("relative_state/status", (), text),
+            ("relative_state/valid", (), np.bool_),
+            ("relative_state/status", (), text),
             ("relative_state/R_camera_target", (3, 3), np.float64),
             ("relative_state/t_camera_target_mm", (3,), np.float64),
             ("relative_state/angular_rate_deg_s", (3,), np.float64),
             ("relative_state/angular_rate_target_deg_s", (3,), np.float64),
             ("relative_state/velocity_mm_s", (3,), np.float64),
             ("relative_state/covariance", (12, 12), np.float64),
-        ]  # fmt: skip
+        ]
         self.axes = tuple(axes)
         if axes:
             n_axes = (len(axes),)
-            columns += [("motion/positions", n_axes, np.float64),
-                        ("motion/targets", n_axes, np.float64), ("motion/busy", (), np.bool_),
-                        ("motion/status_wall_time_ns", (), np.int64)]  # fmt: skip
+            columns += [
+                ("motion/positions", n_axes, np.float64),
+                ("motion/targets", n_axes, np.float64),
+                ("motion/busy", (), np.bool_),
+                ("motion/status_wall_time_ns", (), np.int64),
+            ]
         self._columns: dict[str, h5py.Dataset] = {}
         for name, shape, dtype in columns:
             rows = max(1, 16384 // max(1, math.prod(shape)))  # chunks of ~128 kB or less
             self._columns[name] = f.create_dataset(
                 name, (0, *shape), dtype, maxshape=(None, *shape), chunks=(min(rows, 256), *shape)
-            )  # fmt: skip
+            )
         if axes:
             f["motion"].attrs["axes"] = list(axes)
             f["motion"].attrs["units"] = list(axes.values())
@@ -286,12 +305,14 @@ class LiveRecordingWriter(RecordingWriter):
         exact, lab = f.T_camera_target_exact, f.T_camera_target_lab
         try:
             self.append(
-                f.gray, f.distance_mm, float(f.time_s),
+                f.gray,
+                f.distance_mm,
+                float(f.time_s),
                 exact.R if exact is not None else _NAN33,
                 exact.t_mm if exact is not None else _NAN3,
                 lab_R_camera_target=lab.R if lab is not None else _NAN33,
                 lab_t_camera_target_mm=lab.t_mm if lab is not None else _NAN3,
-            )  # fmt: skip
+            )
             for name, ds in self._columns.items():
                 ds.resize(n + 1, axis=0)
                 ds[n] = row[name]
@@ -324,8 +345,11 @@ class _Recorder:
         self._motion: MotionReading | None = None
         self._motion_read_at = -math.inf
         self._flushed_at = -math.inf  # the first frame is flushed at once (its size shown)
-        self._deadline_unix_s = (info.started_utc.timestamp() + info.duration_s
-                                 if info.duration_s is not None else math.inf)  # fmt: skip
+        self._deadline_unix_s = (
+            info.started_utc.timestamp() + info.duration_s
+            if info.duration_s is not None
+            else math.inf
+        )
         self.thread = threading.Thread(target=self._run, name=f"recording-{info.id}", daemon=True)
 
     def request_stop(self, reason: StopReason) -> None:
@@ -409,8 +433,9 @@ class _Recorder:
             except Exception as exc:  # noqa: BLE001 - the motion service's health says it
                 log.debug("recording %d: no motion status (%s)", self.info.id, exc)
             else:
-                self._motion = MotionReading(dict(st.positions), dict(st.targets),
-                                             bool(st.busy), _ns(time.time()))  # fmt: skip
+                self._motion = MotionReading(
+                    dict(st.positions), dict(st.targets), bool(st.busy), _ns(time.time())
+                )
         return self._motion
 
     def _close(self, detail: str) -> str:
@@ -449,10 +474,16 @@ class RecordingService:
     """
 
     def __init__(
-        self, directory: Path, hub: LiveHub, camera: CameraModel,
-        catalog: Callable[[], Catalog], motion: MotionService | None = None, *,
-        min_free_mb: float = 1000.0, max_active: int = MAX_ACTIVE,
-    ) -> None:  # fmt: skip
+        self,
+        directory: Path,
+        hub: LiveHub,
+        camera: CameraModel,
+        catalog: Callable[[], Catalog],
+        motion: MotionService | None = None,
+        *,
+        min_free_mb: float = 1000.0,
+        max_active: int = MAX_ACTIVE,
+    ) -> None:
         self.directory = Path(directory)
         self.hub = hub
         self.camera = camera
@@ -473,8 +504,11 @@ class RecordingService:
         """Read the index; entries left ``recording`` (the server died) become stopped,
         ``interrupted``, with the frames their file holds."""
         # a new id never takes the name of a file already there (whatever the index says)
-        ids = [int(p.stem.split("-", 1)[1]) for p in self.directory.glob("recording-*.h5")
-               if p.stem.split("-", 1)[1].isdigit()]  # fmt: skip
+        ids = [
+            int(p.stem.split("-", 1)[1])
+            for p in self.directory.glob("recording-*.h5")
+            if p.stem.split("-", 1)[1].isdigit()
+        ]
         self._next_id = max(ids, default=0) + 1
         path = self.directory / INDEX
         if not path.exists():
@@ -486,8 +520,13 @@ class RecordingService:
         except (OSError, ValueError, TypeError, KeyError) as exc:
             aside = path.with_name(f"{INDEX}.unreadable-{int(time.time())}")
             os.replace(path, aside)
-            log.error("the recordings index %s cannot be read (%s): moved to %s; the files "
-                      "stay, unlisted", path, exc, aside)  # fmt: skip
+            log.error(
+                "the recordings index %s cannot be read (%s): moved to %s; the files "
+                "stay, unlisted",
+                path,
+                exc,
+                aside,
+            )
             return
         self._next_id = max(self._next_id, next_id)
         for info in entries:
@@ -507,11 +546,21 @@ class RecordingService:
         except RecordingError as exc:
             detail += f"; the file cannot be read ({exc})"
         stopped = datetime.fromtimestamp(file.stat().st_mtime, UTC) if file.exists() else None
-        log.warning("recording %d (%s) was interrupted by a server stop: %d frames kept",
-                    info.id, info.name, frames)  # fmt: skip
-        return replace(info, state=RecordingState.STOPPED, stopped_utc=stopped or info.started_utc,
-                       frames=frames, size_bytes=_size(file),
-                       stop_reason=StopReason.INTERRUPTED, stop_detail=detail)  # fmt: skip
+        log.warning(
+            "recording %d (%s) was interrupted by a server stop: %d frames kept",
+            info.id,
+            info.name,
+            frames,
+        )
+        return replace(
+            info,
+            state=RecordingState.STOPPED,
+            stopped_utc=stopped or info.started_utc,
+            frames=frames,
+            size_bytes=_size(file),
+            stop_reason=StopReason.INTERRUPTED,
+            stop_detail=detail,
+        )
 
     def _save(self) -> None:
         """Rewrite the index atomically (callers hold the lock, or own the service)."""
@@ -548,23 +597,31 @@ class RecordingService:
                 raise RecordingConflictError(
                     f"{len(self._active)} recordings run already (at most {self.max_active} at "
                     f"once): {running}; stop one first"
-                )  # fmt: skip
+                )
             rid = self._next_id
             self._next_id += 1
-            info = RecordingInfo(rid, name, RecordingState.RECORDING, datetime.now(UTC),
-                                 f"recording-{rid}.h5", duration_s)  # fmt: skip
+            info = RecordingInfo(
+                rid,
+                name,
+                RecordingState.RECORDING,
+                datetime.now(UTC),
+                f"recording-{rid}.h5",
+                duration_s,
+            )
             sub = self.hub.subscribe(maxsize=SUBSCRIPTION_FRAMES)
             recorder = _Recorder(self, info, sub)
             self._infos[rid] = info
             self._active[rid] = recorder
             self._save()
         recorder.thread.start()
-        log.info("recording %d (%s) started%s", rid, name,
-                 f" for {duration_s:g} s" if duration_s else "")  # fmt: skip
+        log.info(
+            "recording %d (%s) started%s", rid, name, f" for {duration_s:g} s" if duration_s else ""
+        )
         return self.get(rid)
 
-    def stop(self, recording_id: int, reason: StopReason = StopReason.REQUESTED,
-             timeout_s: float = 30.0) -> RecordingInfo:  # fmt: skip
+    def stop(
+        self, recording_id: int, reason: StopReason = StopReason.REQUESTED, timeout_s: float = 30.0
+    ) -> RecordingInfo:
         """Stop a recording (the frames the hub delivered until now are written first) and
         return its final entry; a stopped one is returned as it is."""
         with self._lock:
@@ -593,7 +650,8 @@ class RecordingService:
             info = self._info(recording_id)
             if info.state is RecordingState.RECORDING:
                 raise RecordingConflictError(
-                    f"recording {recording_id} is recording: stop it first")  # fmt: skip
+                    f"recording {recording_id} is recording: stop it first"
+                )
             del self._infos[recording_id]
             self._save()
         h5 = self.directory / info.file
@@ -607,8 +665,12 @@ class RecordingService:
             raise RecordingNotFoundError(f"no recording with id {recording_id}")
         recorder = self._active.get(recording_id)
         if recorder is not None:  # the live counts
-            return replace(info, frames=recorder.frames, size_bytes=recorder.size_bytes,
-                           dropped_frames=recorder.sub.dropped)  # fmt: skip
+            return replace(
+                info,
+                frames=recorder.frames,
+                size_bytes=recorder.size_bytes,
+                dropped_frames=recorder.sub.dropped,
+            )
         return info
 
     def get(self, recording_id: int) -> RecordingInfo:
@@ -626,7 +688,8 @@ class RecordingService:
         if info.state is RecordingState.RECORDING:
             raise RecordingConflictError(
                 f"recording {recording_id} is recording: stop it (POST "
-                f"/api/recordings/{recording_id}/stop) or wait for its end")  # fmt: skip
+                f"/api/recordings/{recording_id}/stop) or wait for its end"
+            )
         path = self.directory / info.file
         if not path.exists():
             raise RecordingNotFoundError(f"recording {recording_id}'s file {info.file} is gone")
@@ -646,16 +709,26 @@ class RecordingService:
     def _open_writer(self, info: RecordingInfo, path: Path, first: LiveSample | None):
         """The file, made at the first frame (which says which references it stores)."""
         frame = first.frame if first is not None else None
-        axes = {a.name: a.unit for a in self.motion.axes.values()} if (
-            self.motion is not None and self.motion.present) else {}  # fmt: skip
-        attrs = {"source": "tofpose live recording", "recording_id": info.id,
-                 "name": info.name, "started_utc": info.started_utc.isoformat()}  # fmt: skip
+        axes = (
+            {a.name: a.unit for a in self.motion.axes.values()}
+            if (self.motion is not None and self.motion.present)
+            else {}
+        )
+        attrs = {
+            "source": "tofpose live recording",
+            "recording_id": info.id,
+            "name": info.name,
+            "started_utc": info.started_utc.isoformat(),
+        }
         return LiveRecordingWriter(
-            path, self.camera, self.catalog(),
+            path,
+            self.camera,
+            self.catalog(),
             with_truth=frame is not None and frame.T_camera_target_exact is not None,
             with_lab_truth=frame is not None and frame.T_camera_target_lab is not None,
-            axes=axes, attrs=attrs,
-        )  # fmt: skip
+            axes=axes,
+            attrs=attrs,
+        )
 
     def _finished(self, recorder: _Recorder, reason: StopReason, detail: str) -> None:
         with self._lock:
@@ -664,13 +737,23 @@ class RecordingService:
             if rid not in self._infos:
                 return
             self._infos[rid] = replace(
-                recorder.info, state=RecordingState.STOPPED, stopped_utc=datetime.now(UTC),
-                frames=recorder.frames, size_bytes=recorder.size_bytes,
-                dropped_frames=recorder.sub.dropped, stop_reason=reason, stop_detail=detail,
-            )  # fmt: skip
+                recorder.info,
+                state=RecordingState.STOPPED,
+                stopped_utc=datetime.now(UTC),
+                frames=recorder.frames,
+                size_bytes=recorder.size_bytes,
+                dropped_frames=recorder.sub.dropped,
+                stop_reason=reason,
+                stop_detail=detail,
+            )
             self._save()
-        log.info("recording %d stopped (%s): %d frames, %.1f MB", rid, reason.value,
-                 recorder.frames, recorder.size_bytes / MB)  # fmt: skip
+        log.info(
+            "recording %d stopped (%s): %d frames, %.1f MB",
+            rid,
+            reason.value,
+            recorder.frames,
+            recorder.size_bytes / MB,
+        )
 
 
 __all__ = [

@@ -15,15 +15,27 @@ from dataclasses import dataclass, field
 
 from backend.services.analysis import AXES, MAD_TO_SIGMA, SINGULAR_K
 
-AXIS_NAMES = {"x_mm": "x", "y_mm": "y", "z_mm": "z", "pitch_deg": "pitch", "yaw_deg": "yaw",
-              "roll_deg": "roll"}  # fmt: skip
+AXIS_NAMES = {
+    "x_mm": "x",
+    "y_mm": "y",
+    "z_mm": "z",
+    "pitch_deg": "pitch",
+    "yaw_deg": "yaw",
+    "roll_deg": "roll",
+}
 AXIS_UNITS = {a: a.rsplit("_", 1)[1] for a in AXES}
 AXIS_GROUPS = (("Translation", "mm", AXES[:3]), ("Attitude", "deg", AXES[3:]))
 
 # The default of ``requirements`` in POST /api/campaigns (backend/api/schemas.py,
 # ``Requirements``): the accuracy goals of the paper.
-PAPER_REQUIREMENTS = {"x_mm": 6.0, "y_mm": 6.0, "z_mm": 28.3, "pitch_deg": 0.15,
-                      "yaw_deg": 0.15, "roll_deg": 0.15}  # fmt: skip
+PAPER_REQUIREMENTS = {
+    "x_mm": 6.0,
+    "y_mm": 6.0,
+    "z_mm": 28.3,
+    "pitch_deg": 0.15,
+    "yaw_deg": 0.15,
+    "roll_deg": 0.15,
+}
 PAPER = (
     'Zhu et al., "System Design for Pose Determination of Spacecraft Using Time-of-Flight '
     'Sensors" (Space: Science & Technology, 2022), section 6.4'
@@ -49,8 +61,12 @@ MEASURED_HEADERS = {
     "minimum": ("minimum", True),
     "fluctuation": ("fluctuation (max - min)", True),
 }
-COMMANDED_AXES = (("yaw", "setpoint_yaw_deg"), ("pitch", "setpoint_pitch_deg"),
-                  ("roll", "setpoint_roll_deg"), ("rail", "setpoint_rail_mm"))  # fmt: skip
+COMMANDED_AXES = (
+    ("yaw", "setpoint_yaw_deg"),
+    ("pitch", "setpoint_pitch_deg"),
+    ("roll", "setpoint_roll_deg"),
+    ("rail", "setpoint_rail_mm"),
+)
 
 
 @dataclass
@@ -127,10 +143,12 @@ def reference_label(report: dict) -> str:
     if cal:
         own = ""
         if "mount_sigma_deg" in cal:  # reports made before the sigmas were carried lack them
-            own = (f"; the reference's own 1-sigma: camera mount {cal['mount_sigma_deg']:.3f} "
-                   f"deg / {cal['mount_sigma_mm']:.2f} mm, target placement "
-                   f"{cal['placement_sigma_deg']:.3f} deg / {cal['placement_sigma_mm']:.2f} mm, "
-                   "part of every error below")  # fmt: skip
+            own = (
+                f"; the reference's own 1-sigma: camera mount {cal['mount_sigma_deg']:.3f} "
+                f"deg / {cal['mount_sigma_mm']:.2f} mm, target placement "
+                f"{cal['placement_sigma_deg']:.3f} deg / {cal['placement_sigma_mm']:.2f} mm, "
+                "part of every error below"
+            )
         return f"calibrated reference (encoders + calibration {cal['id']} '{cal['name']}'{own})"
     labels = {
         "lab": "lab reference (encoders + nominal geometry; uncalibrated: the errors include "
@@ -152,14 +170,18 @@ def summary(report: dict) -> str:
     dyn = report.get("dynamic")
     if dyn:  # a dynamic campaign: every frame of its rests and profiles, not a count
         moving = sum(s["n_in_motion"] for s in dyn["setpoints"].values())
-        how = (f"each a motion profile between two rests, after a settling time of "
-               f"{c['settle_s']:g} s; every frame kept, {moving} during the profiles; of "
-               f"the {report['n_frames']} at rest {report['n_ok']} gave a pose "
-               f"({_percent(rate)}), and the statistics below are theirs")  # fmt: skip
+        how = (
+            f"each a motion profile between two rests, after a settling time of "
+            f"{c['settle_s']:g} s; every frame kept, {moving} during the profiles; of "
+            f"the {report['n_frames']} at rest {report['n_ok']} gave a pose "
+            f"({_percent(rate)}), and the statistics below are theirs"
+        )
     else:
-        how = (f"{c['frames_per_point']} frames each after a settling time of "
-               f"{c['settle_s']:g} s; {report['n_ok']} of {report['n_frames']} frames gave a "
-               f"pose ({_percent(rate)})")  # fmt: skip
+        how = (
+            f"{c['frames_per_point']} frames each after a settling time of "
+            f"{c['settle_s']:g} s; {report['n_ok']} of {report['n_frames']} frames gave a "
+            f"pose ({_percent(rate)})"
+        )
     return (
         f"Status {c['status']}; target catalog {c['catalog']}; {c['n_done']} of "
         f"{c['n_setpoints']} set-points measured, {how}. Errors are measured minus the "
@@ -180,12 +202,17 @@ def axis_verdicts(report: dict) -> list[AxisVerdict]:
         over = report["overall"]["axes"][a]
         judged = [sp for sp in sps if sp["axes"][a]["passed"] is not None]
         worst = max(judged, key=lambda sp: _num(sp["axes"][a]["max_abs"]), default=None)
-        out.append(AxisVerdict(
-            axis=a, requirement=float(report["requirements"][a]), max_abs=_num(over["max_abs"]),
-            worst_setpoint=worst["setpoint_index"] if worst else None,
-            n_within=sum(1 for sp in judged if sp["axes"][a]["passed"]),
-            n_judged=len(judged), passed=over["passed"],
-        ))  # fmt: skip
+        out.append(
+            AxisVerdict(
+                axis=a,
+                requirement=float(report["requirements"][a]),
+                max_abs=_num(over["max_abs"]),
+                worst_setpoint=worst["setpoint_index"] if worst else None,
+                n_within=sum(1 for sp in judged if sp["axes"][a]["passed"]),
+                n_judged=len(judged),
+                passed=over["passed"],
+            )
+        )
     return out
 
 
@@ -195,8 +222,9 @@ def verdict_line(report: dict) -> str:
     failing = [v for v in verdicts if v.passed is False]
     n_sp = len(report["setpoints"])
     if failing:
-        parts = [f"{AXIS_NAMES[v.axis]} at {v.n_judged - v.n_within} of {v.n_judged}"
-                 for v in failing]  # fmt: skip
+        parts = [
+            f"{AXIS_NAMES[v.axis]} at {v.n_judged - v.n_within} of {v.n_judged}" for v in failing
+        ]
         return (
             f"FAIL: {len(failing)} of {len(AXES)} axes exceed their requirement "
             f"({', '.join(parts)} set-points)."
@@ -256,15 +284,28 @@ def reading_notes(report: dict) -> str:
 def verdict_table(report: dict) -> Table:
     """Axis, requirement, measured max |error|, its share of the requirement, the worst
     set-point, set-points within, result."""
-    header = ["axis", "requirement", "measured max |error|", "share of requirement",
-              "worst set-point", "set-points within", "result"]  # fmt: skip
+    header = [
+        "axis",
+        "requirement",
+        "measured max |error|",
+        "share of requirement",
+        "worst set-point",
+        "set-points within",
+        "result",
+    ]
     rows, status = [], {}
     for i, v in enumerate(axis_verdicts(report)):
-        rows.append([
-            AXIS_NAMES[v.axis], with_unit(v.requirement, v.axis), with_unit(v.max_abs, v.axis),
-            _percent(v.share), fmt(v.worst_setpoint), f"{v.n_within} of {v.n_judged}",
-            fmt(v.passed),
-        ])  # fmt: skip
+        rows.append(
+            [
+                AXIS_NAMES[v.axis],
+                with_unit(v.requirement, v.axis),
+                with_unit(v.max_abs, v.axis),
+                _percent(v.share),
+                fmt(v.worst_setpoint),
+                f"{v.n_within} of {v.n_judged}",
+                fmt(v.passed),
+            ]
+        )
         if v.passed is not None:
             status[(i, 6)] = status[(i, 2)] = v.passed
     return Table(header, rows, status)
@@ -340,8 +381,7 @@ def axis_tables(axes: dict[str, dict], headers: dict[str, tuple[str, bool]]) -> 
     header that carries one."""
     tables = []
     for name, unit, group in AXIS_GROUPS:
-        header = ["axis"] + [f"{h} ({unit})" if has_unit else h
-                             for h, has_unit in headers.values()]  # fmt: skip
+        header = ["axis"] + [f"{h} ({unit})" if has_unit else h for h, has_unit in headers.values()]
         rows, status = [], {}
         for i, a in enumerate(group):
             rows.append([AXIS_NAMES[a]] + [fmt(axes[a][k]) for k in headers])
@@ -369,8 +409,12 @@ def setpoint_table(report: dict) -> Table:
     rows, status = [], {}
     for i, sp in enumerate(report["setpoints"]):
         z_mm = _num(sp["reference"]["z_mm"])
-        row = [str(sp["setpoint_index"]), commanded_text(sp.get("commanded") or {}),
-               fmt(z_mm / 1000.0), f"{sp['n_ok']} of {sp['n_frames']}"]  # fmt: skip
+        row = [
+            str(sp["setpoint_index"]),
+            commanded_text(sp.get("commanded") or {}),
+            fmt(z_mm / 1000.0),
+            f"{sp['n_ok']} of {sp['n_frames']}",
+        ]
         for j, a in enumerate(AXES):
             row.append(fmt(sp["axes"][a]["max_abs"]))
             if sp["axes"][a]["passed"] is not None:
@@ -385,6 +429,9 @@ def setpoint_table(report: dict) -> Table:
 
 def commanded_text(commanded: dict) -> str:
     """``yaw 5, pitch 0, roll 0, rail 11000``; axes the set-point left alone are omitted."""
-    parts = [f"{name} {commanded[name]:g}" for name, _ in COMMANDED_AXES
-             if commanded.get(name) is not None]  # fmt: skip
+    parts = [
+        f"{name} {commanded[name]:g}"
+        for name, _ in COMMANDED_AXES
+        if commanded.get(name) is not None
+    ]
     return ", ".join(parts) or "-"

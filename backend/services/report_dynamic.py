@@ -36,30 +36,56 @@ def dynamic_tables(report: dict) -> list[Table]:
     for k, s in dyn["setpoints"].items():
         lat = s.get("latency", {})
         rate = s.get("rate", {})
-        att_rows.append([
-            str(k), str(s["n_in_motion"]), _pct(s.get("lost_in_motion_share")),
-            *(f"{fmt(s[a]['rms_in_motion'])} / {fmt(s[a]['max_in_motion'])}" for a in ANGLE_NAMES),
-            *(f"{fmt(s[a]['rms_at_rest'])} / {fmt(s[a]['max_at_rest'])}" for a in ANGLE_NAMES),
-        ])  # fmt: skip
-        rate_rows.append([
-            str(k), fmt(rate.get("peak_reference_deg_s")),
-            fmt(rate.get("rms_error_in_motion_deg_s")), _pct(rate.get("rms_error_share_of_peak")),
-            fmt(rate.get("max_error_in_motion_deg_s")), fmt(rate.get("rms_error_at_rest_deg_s")),
-            _ms(lat.get("delay_s")), _ms(lat.get("sigma_s")),
-        ])  # fmt: skip
+        att_rows.append(
+            [
+                str(k),
+                str(s["n_in_motion"]),
+                _pct(s.get("lost_in_motion_share")),
+                *(
+                    f"{fmt(s[a]['rms_in_motion'])} / {fmt(s[a]['max_in_motion'])}"
+                    for a in ANGLE_NAMES
+                ),
+                *(f"{fmt(s[a]['rms_at_rest'])} / {fmt(s[a]['max_at_rest'])}" for a in ANGLE_NAMES),
+            ]
+        )
+        rate_rows.append(
+            [
+                str(k),
+                fmt(rate.get("peak_reference_deg_s")),
+                fmt(rate.get("rms_error_in_motion_deg_s")),
+                _pct(rate.get("rms_error_share_of_peak")),
+                fmt(rate.get("max_error_in_motion_deg_s")),
+                fmt(rate.get("rms_error_at_rest_deg_s")),
+                _ms(lat.get("delay_s")),
+                _ms(lat.get("sigma_s")),
+            ]
+        )
     att = Table(
-        ["set-point", "frames in motion", "lost in motion",
-         *(f"{n} in motion RMS / max (deg)" for n in ANGLE_NAMES.values()),
-         *(f"{n} at rest RMS / max (deg)" for n in ANGLE_NAMES.values())],
-        att_rows, caption="Attitude error during the profile and at rest around it",
-    )  # fmt: skip
+        [
+            "set-point",
+            "frames in motion",
+            "lost in motion",
+            *(f"{n} in motion RMS / max (deg)" for n in ANGLE_NAMES.values()),
+            *(f"{n} at rest RMS / max (deg)" for n in ANGLE_NAMES.values()),
+        ],
+        att_rows,
+        caption="Attitude error during the profile and at rest around it",
+    )
     rate = Table(
-        ["set-point", "peak reference rate (deg/s)", "rate error RMS in motion (deg/s)",
-         "RMS / peak", "rate error max in motion (deg/s)", "rate error RMS at rest (deg/s)",
-         "latency (ms)", "latency 1-sigma (ms)"],
-        rate_rows, caption="Angular rate of the relative-state filter against the reference's, "
+        [
+            "set-point",
+            "peak reference rate (deg/s)",
+            "rate error RMS in motion (deg/s)",
+            "RMS / peak",
+            "rate error max in motion (deg/s)",
+            "rate error RMS at rest (deg/s)",
+            "latency (ms)",
+            "latency 1-sigma (ms)",
+        ],
+        rate_rows,
+        caption="Angular rate of the relative-state filter against the reference's, "
         "and the measurement latency",
-    )  # fmt: skip
+    )
     return [att, rate]
 
 
@@ -81,12 +107,17 @@ def dynamic_findings(report: dict) -> list[str]:
                 f"The profiles' latencies disagree beyond their sigmas (chi-square "
                 f"{pooled['chi2']:.1f} for {pooled['n_setpoints'] - 1} degrees of freedom)."
             )
-    lost = [(k, s["lost_in_motion_share"]) for k, s in dyn["setpoints"].items()
-            if s.get("lost_in_motion_share", 0) > 0]  # fmt: skip
+    lost = [
+        (k, s["lost_in_motion_share"])
+        for k, s in dyn["setpoints"].items()
+        if s.get("lost_in_motion_share", 0) > 0
+    ]
     if lost:
         worst = max(lost, key=lambda x: x[1])
-        out.append(f"Frames lost in motion at {len(lost)} profile(s), worst {100 * worst[1]:.1f} "
-                   f"% at set-point {worst[0]}.")  # fmt: skip
+        out.append(
+            f"Frames lost in motion at {len(lost)} profile(s), worst {100 * worst[1]:.1f} "
+            f"% at set-point {worst[0]}."
+        )
     return out
 
 
@@ -104,8 +135,14 @@ def dynamic_plots(report: dict) -> list[Plot]:
 
 def _shade(ax, t: np.ndarray, moving: np.ndarray) -> None:
     if moving.any():
-        ax.axvspan(t[moving].min(), t[moving].max(), color="#f0e0b0", alpha=0.5, lw=0,
-                   label="profile running")  # fmt: skip
+        ax.axvspan(
+            t[moving].min(),
+            t[moving].max(),
+            color="#f0e0b0",
+            alpha=0.5,
+            lw=0,
+            label="profile running",
+        )
 
 
 def _draw(report: dict, k, s: dict) -> Callable[[plt.Figure, Rect], None]:
@@ -127,10 +164,22 @@ def _draw(report: dict, k, s: dict) -> Callable[[plt.Figure, Rect], None]:
         _shade(ax, t, moving)
         comp = s.get("rate", {}).get("component", "y")
         if "rate_reference" in ser:
-            ax.plot(t, np.asarray(ser["rate_reference"], dtype=float), "-", lw=1.2,
-                    color="#444444", label="reference")  # fmt: skip
-            ax.plot(t, np.asarray(ser["rate_measured"], dtype=float), ".", ms=2.5,
-                    color="#1f5fa8", label="filter")  # fmt: skip
+            ax.plot(
+                t,
+                np.asarray(ser["rate_reference"], dtype=float),
+                "-",
+                lw=1.2,
+                color="#444444",
+                label="reference",
+            )
+            ax.plot(
+                t,
+                np.asarray(ser["rate_measured"], dtype=float),
+                ".",
+                ms=2.5,
+                color="#1f5fa8",
+                label="filter",
+            )
             ax.legend(fontsize=7, loc="upper right", ncols=3)
         ax.set_ylabel(f"rate about camera {comp} (deg/s)", fontsize=8)
         ax.set_xlabel("time from the first frame of the set-point (s)", fontsize=8)

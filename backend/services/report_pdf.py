@@ -72,8 +72,9 @@ class Text:
         out = []
         for p in self.paragraphs:
             first, rest = ("- ", "  ") if self.bullets else ("", "")
-            out += textwrap.wrap(p, n, initial_indent=first, subsequent_indent=rest,
-                                 break_on_hyphens=False) or [""]  # fmt: skip
+            out += textwrap.wrap(
+                p, n, initial_indent=first, subsequent_indent=rest, break_on_hyphens=False
+            ) or [""]
         return out
 
     def _line_in(self) -> float:
@@ -95,9 +96,17 @@ class Text:
     def draw(self, fig: plt.Figure, rect: Rect) -> None:
         x, y, w, h = rect
         fw, fh = fig.get_size_inches()
-        fig.text(x / fw, (y + h) / fh, "\n".join(self.lines(w)), fontsize=self.fontsize_pt,
-                 weight=self.weight, color=self.colour, va="top", ha="left",
-                 linespacing=LINE_SPACING)  # fmt: skip
+        fig.text(
+            x / fw,
+            (y + h) / fh,
+            "\n".join(self.lines(w)),
+            fontsize=self.fontsize_pt,
+            weight=self.weight,
+            color=self.colour,
+            va="top",
+            ha="left",
+            linespacing=LINE_SPACING,
+        )
 
 
 @dataclass
@@ -129,8 +138,10 @@ class TableBlock:
     def column_widths(self, width_in: float) -> list[float]:
         """Column widths (in) in proportion to their longest line, filling ``width_in``."""
         heads = self.header_lines(width_in)
-        chars = [max([len(r[c]) for r in self.table.rows] + [len(s) for s in heads[c]]) + 2
-                 for c in range(len(heads))]  # fmt: skip
+        chars = [
+            max([len(r[c]) for r in self.table.rows] + [len(s) for s in heads[c]]) + 2
+            for c in range(len(heads))
+        ]
         total = sum(chars)
         return [width_in * n / total for n in chars]
 
@@ -151,8 +162,9 @@ class TableBlock:
             return None
         cont = (self.table.caption + " (continued)") if self.table.caption else ""
         head = TableBlock(self.table.sliced(0, n), self.fontsize_pt, 0.0)
-        tail = TableBlock(self.table.sliced(n, len(self.table.rows), cont), self.fontsize_pt,
-                          self.space_after_in)  # fmt: skip
+        tail = TableBlock(
+            self.table.sliced(n, len(self.table.rows), cont), self.fontsize_pt, self.space_after_in
+        )
         return head, tail
 
     def draw(self, fig: plt.Figure, rect: Rect) -> None:
@@ -163,17 +175,30 @@ class TableBlock:
         ax.set_ylim(h, 0.0)  # inches from the top
         top = 0.0
         if self.table.caption:
-            ax.text(0.0, top, self.table.caption, fontsize=self.fontsize_pt + 1.5,
-                    weight="bold", va="top")  # fmt: skip
+            ax.text(
+                0.0,
+                top,
+                self.table.caption,
+                fontsize=self.fontsize_pt + 1.5,
+                weight="bold",
+                va="top",
+            )
             top += self._caption_in()
         widths = self.column_widths(w)
         lefts = [sum(widths[:c]) for c in range(len(widths))]
         hh = self._header_in(w)
         ax.add_patch(Rectangle((0.0, top), w, hh, color="#e6e6e6", lw=0))
         for c, lines in enumerate(self.header_lines(w)):
-            ax.text(lefts[c] + widths[c] / 2, top + hh / 2, "\n".join(lines), ha="center",
-                    va="center", fontsize=self.fontsize_pt, weight="bold",
-                    linespacing=1.1)  # fmt: skip
+            ax.text(
+                lefts[c] + widths[c] / 2,
+                top + hh / 2,
+                "\n".join(lines),
+                ha="center",
+                va="center",
+                fontsize=self.fontsize_pt,
+                weight="bold",
+                linespacing=1.1,
+            )
         top += hh
         self._draw_rows(ax, top, widths, lefts, w)
 
@@ -189,8 +214,16 @@ class TableBlock:
                 weight = "bold" if state is False else "normal"
                 left = c == 0 or not _numeric(v)
                 xt = lefts[c] + (0.05 if left else widths[c] - 0.05)
-                ax.text(xt, y0 + rh / 2, v, ha="left" if left else "right", va="center",
-                        fontsize=self.fontsize_pt, color=colour, weight=weight)  # fmt: skip
+                ax.text(
+                    xt,
+                    y0 + rh / 2,
+                    v,
+                    ha="left" if left else "right",
+                    va="center",
+                    fontsize=self.fontsize_pt,
+                    color=colour,
+                    weight=weight,
+                )
         bottom = top + len(self.table.rows) * rh
         ax.plot([0.0, w], [top, top], color="0.4", lw=0.6)
         ax.plot([0.0, w], [bottom, bottom], color="0.4", lw=0.6)
@@ -343,10 +376,12 @@ def blocks(report: dict, rows: list[dict]) -> list:
     """The report's content in reading order: summary, verdict, findings, statistics,
     per-set-point table, plots."""
     note = "Full per-set-point statistics and the measured-value tables are in the HTML and JSON."
-    verdict = Text([rc.verdict_line(report)], 11.0, "bold", space_after_in=0.08,
-                   colour=_verdict_colour(report))  # fmt: skip
-    verdict_row = Row([TableBlock(rc.verdict_table(report), 8.0),
-                       PlotBlock(share_plot(report), 0.0)], [0.6, 0.4])  # fmt: skip
+    verdict = Text(
+        [rc.verdict_line(report)], 11.0, "bold", space_after_in=0.08, colour=_verdict_colour(report)
+    )
+    verdict_row = Row(
+        [TableBlock(rc.verdict_table(report), 8.0), PlotBlock(share_plot(report), 0.0)], [0.6, 0.4]
+    )
     out = [
         Text([rc.title(report)], 17.0, "bold", space_after_in=0.1),
         Text([rc.summary(report)]),
@@ -364,9 +399,11 @@ def blocks(report: dict, rows: list[dict]) -> list:
         Text([note], 8.0, colour=NOTE_COLOUR),
     ]
     if report.get("dynamic"):
-        out += [heading("Dynamic accuracy (motion profiles)"),
-                *(TableBlock(t, 7.0) for t in dynamic_tables(report)),
-                *(PlotBlock(p) for p in dynamic_plots(report))]  # fmt: skip
+        out += [
+            heading("Dynamic accuracy (motion profiles)"),
+            *(TableBlock(t, 7.0) for t in dynamic_tables(report)),
+            *(PlotBlock(p) for p in dynamic_plots(report)),
+        ]
     plots = [PlotBlock(p) for p in evidence_plots(report, rows)]
     return out + (plots or [Text([NO_PLOTS])])
 
@@ -378,8 +415,10 @@ def _verdict_colour(report: dict) -> str:
 def _footer(fig: plt.Figure, report: dict, page: int, n_pages: int) -> None:
     fw, fh = fig.get_size_inches()
     generated = report["generated_at"][:19].replace("T", " ")
-    text = (f"{rc.title(report)} - tofpose campaign report, generated {generated} UTC - "
-            f"page {page} of {n_pages}")  # fmt: skip
+    text = (
+        f"{rc.title(report)} - tofpose campaign report, generated {generated} UTC - "
+        f"page {page} of {n_pages}"
+    )
     fig.text(0.5, 0.22 / fh, text, ha="center", fontsize=7, color="#666666")
 
 

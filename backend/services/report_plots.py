@@ -54,17 +54,29 @@ def axes_grid(
     ``gap_y_in`` between rows, more where every row has its own x label)."""
     x, y, w, h = rect
     fw, fh = fig.get_size_inches()
-    fig.text((x + w / 2) / fw, (y + h - 0.06) / fh, title, ha="center", va="top", fontsize=10.5,
-             weight="bold")  # fmt: skip
+    fig.text(
+        (x + w / 2) / fw,
+        (y + h - 0.06) / fh,
+        title,
+        ha="center",
+        va="top",
+        fontsize=10.5,
+        weight="bold",
+    )
     inner_w = w - LEFT_IN - RIGHT_IN
     inner_h = h - TITLE_H_IN - BOTTOM_IN
     cell_w = (inner_w - GAP_X_IN * (ncols - 1)) / ncols
     cell_h = (inner_h - gap_y_in * (nrows - 1)) / nrows
     gs = fig.add_gridspec(
-        nrows, ncols, left=(x + LEFT_IN) / fw, right=(x + w - RIGHT_IN) / fw,
-        bottom=(y + BOTTOM_IN) / fh, top=(y + h - TITLE_H_IN) / fh,
-        wspace=GAP_X_IN / max(cell_w, 0.1), hspace=gap_y_in / max(cell_h, 0.1),
-    )  # fmt: skip
+        nrows,
+        ncols,
+        left=(x + LEFT_IN) / fw,
+        right=(x + w - RIGHT_IN) / fw,
+        bottom=(y + BOTTOM_IN) / fh,
+        top=(y + h - TITLE_H_IN) / fh,
+        wspace=GAP_X_IN / max(cell_w, 0.1),
+        hspace=gap_y_in / max(cell_h, 0.1),
+    )
     axs = gs.subplots(squeeze=False, **kw)
     for ax in axs.ravel():
         ax.tick_params(labelsize=7.5)
@@ -151,8 +163,7 @@ def draw_measured_vs_reference(report: dict) -> Callable[[plt.Figure, Rect], Non
 
     def draw(fig: plt.Figure, rect: Rect) -> None:
         sps = report["setpoints"]
-        axs = axes_grid(fig, rect, 2, 3, "Measured (mean per set-point) vs reference",
-                        gap_y_in=0.6)  # fmt: skip
+        axs = axes_grid(fig, rect, 2, 3, "Measured (mean per set-point) vs reference", gap_y_in=0.6)
         for ax, a in zip(axs.ravel(), AXES, strict=True):
             ref_v = np.array([_num(sp["reference"][a]) for sp in sps])
             mean = ref_v + np.array([_num(sp["axes"][a]["bias"]) for sp in sps])
@@ -179,8 +190,9 @@ def draw_error_vs_range(report: dict) -> Callable[[plt.Figure, Rect], None]:
             for a in group:
                 bias = np.array([_num(sp["axes"][a]["bias"]) for sp in sps])
                 std = np.array([_num(sp["axes"][a]["std"]) for sp in sps])
-                ax.errorbar(x, bias, yerr=np.nan_to_num(std), fmt="o", ms=4, capsize=2,
-                            label=AXIS_NAMES[a])  # fmt: skip
+                ax.errorbar(
+                    x, bias, yerr=np.nan_to_num(std), fmt="o", ms=4, capsize=2, label=AXIS_NAMES[a]
+                )
             ax.set_xlabel(xlabel, fontsize=8)
             ax.xaxis.set_major_locator(MaxNLocator(6, integer=what == "set-point"))
             ax.set_ylabel(f"mean error +/- 1 std ({unit})", fontsize=8)
@@ -201,8 +213,9 @@ def range_or_index(setpoints: list[dict]) -> tuple[np.ndarray, str]:
 
 def share_plot(report: dict) -> Plot:
     """The verdict's bar chart (beside the verdict table in the PDF)."""
-    return Plot("max |error| as a share of the requirement", draw_requirement_share(report),
-                1.6, 2.4)  # fmt: skip
+    return Plot(
+        "max |error| as a share of the requirement", draw_requirement_share(report), 1.6, 2.4
+    )
 
 
 def evidence_plots(report: dict, rows: list[dict]) -> list[Plot]:

@@ -45,18 +45,34 @@ from tofpose.lab.relative_state import STATE_COLUMNS  # noqa: E402
 
 POSE = AXES
 CSV_COLUMNS = (
-    "setpoint_index", "frame_index", "time_s", "ok", "n_matched", "residual_mm", "reason",
+    "setpoint_index",
+    "frame_index",
+    "time_s",
+    "ok",
+    "n_matched",
+    "residual_mm",
+    "reason",
     *POSE,
     *(f"truth_{a}" for a in POSE),
     *(f"lab_truth_{a}" for a in POSE),
-    "sigma_x_mm", "sigma_y_mm", "sigma_z_mm", "sigma_pitch_deg", "sigma_yaw_deg",
+    "sigma_x_mm",
+    "sigma_y_mm",
+    "sigma_z_mm",
+    "sigma_pitch_deg",
+    "sigma_yaw_deg",
     "sigma_roll_deg",
-    "setpoint_yaw_deg", "setpoint_pitch_deg", "setpoint_roll_deg", "setpoint_rail_mm",
-    "encoder_yaw_deg", "encoder_pitch_deg", "encoder_roll_deg", "encoder_rail_mm",
+    "setpoint_yaw_deg",
+    "setpoint_pitch_deg",
+    "setpoint_roll_deg",
+    "setpoint_rail_mm",
+    "encoder_yaw_deg",
+    "encoder_pitch_deg",
+    "encoder_roll_deg",
+    "encoder_rail_mm",
     *(f"calibrated_truth_{a}" for a in POSE),
     *STATE_COLUMNS,
     "in_motion",
-)  # fmt: skip
+)
 
 
 class ReportError(ValueError):
@@ -78,15 +94,23 @@ def campaign_rows(
     for m, sp in session.execute(q).all():
         enc = m.encoders or {}
         row = {
-            "setpoint_index": sp.index, "frame_index": m.frame_index, "time_s": m.frame_time_s,
-            "ok": int(m.ok), "n_matched": m.n_matched, "residual_mm": m.residual_mm,
+            "setpoint_index": sp.index,
+            "frame_index": m.frame_index,
+            "time_s": m.frame_time_s,
+            "ok": int(m.ok),
+            "n_matched": m.n_matched,
+            "residual_mm": m.residual_mm,
             "reason": m.reason,
-            "setpoint_yaw_deg": sp.yaw_deg, "setpoint_pitch_deg": sp.pitch_deg,
-            "setpoint_roll_deg": sp.roll_deg, "setpoint_rail_mm": sp.rail_mm,
-            "encoder_yaw_deg": enc.get("yaw"), "encoder_pitch_deg": enc.get("pitch"),
-            "encoder_roll_deg": enc.get("roll"), "encoder_rail_mm": enc.get("rail"),
+            "setpoint_yaw_deg": sp.yaw_deg,
+            "setpoint_pitch_deg": sp.pitch_deg,
+            "setpoint_roll_deg": sp.roll_deg,
+            "setpoint_rail_mm": sp.rail_mm,
+            "encoder_yaw_deg": enc.get("yaw"),
+            "encoder_pitch_deg": enc.get("pitch"),
+            "encoder_roll_deg": enc.get("roll"),
+            "encoder_rail_mm": enc.get("rail"),
             "in_motion": None if m.in_motion is None else int(m.in_motion),
-        }  # fmt: skip
+        }
         if calibration is not None and {"yaw", "pitch", "roll", "rail"} <= set(enc):
             ref = calibrated_reference(calibration, enc)
             row.update({f"calibrated_truth_{a}": v for a, v in ref.items()})
@@ -144,18 +168,23 @@ def build(
     result = analyse([r for r in rows if is_static(r)], row.requirements, reference)
     report = {
         "campaign": {
-            "id": row.id, "name": row.name, "status": row.status, "catalog": row.catalog_name,
-            "frames_per_point": row.frames_per_point, "settle_s": row.settle_s,
+            "id": row.id,
+            "name": row.name,
+            "status": row.status,
+            "catalog": row.catalog_name,
+            "frames_per_point": row.frames_per_point,
+            "settle_s": row.settle_s,
             "n_setpoints": len(row.setpoints),
             "n_done": sum(1 for sp in row.setpoints if sp.status == "done"),
-            "generator": row.generator, "notes": row.notes,
+            "generator": row.generator,
+            "notes": row.notes,
             "started_at": row.started_at.isoformat() if row.started_at else None,
             "finished_at": row.finished_at.isoformat() if row.finished_at else None,
         },
         "generated_at": datetime.now(UTC).isoformat(),
         "calibration": calibration_summary(calibration) if calibration is not None else None,
         **result,
-    }  # fmt: skip
+    }
     _add_commanded(report["setpoints"], rows)
     report["dynamic"] = analyse_dynamic(rows, reference)
     report["findings"] = rc.findings(report) + dynamic_findings(report)
@@ -167,9 +196,14 @@ def calibration_summary(calibration: CalibrationRow) -> dict:
     per-axis sigma of the camera mount and of the target placement (deg, mm), the
     reference's uncertainty that the errors of the report include."""
     s = [float(v) for v in calibration.sigmas]
-    return {"id": calibration.id, "name": calibration.name,
-            "mount_sigma_deg": max(s[0:3]), "mount_sigma_mm": max(s[3:6]),
-            "placement_sigma_deg": max(s[6:9]), "placement_sigma_mm": max(s[9:12])}  # fmt: skip
+    return {
+        "id": calibration.id,
+        "name": calibration.name,
+        "mount_sigma_deg": max(s[0:3]),
+        "mount_sigma_mm": max(s[3:6]),
+        "placement_sigma_deg": max(s[6:9]),
+        "placement_sigma_mm": max(s[9:12]),
+    }
 
 
 def _add_commanded(setpoints: list[dict], rows: list[dict]) -> None:
@@ -214,8 +248,10 @@ def _html_table(t: rc.Table, bars: dict[int, float] | None = None) -> str:
         if bars is not None and c == 3 and math.isfinite(bars.get(r, math.nan)):
             width = min(100.0, bars[r] * 100.0 / 1.5)  # the bar spans 0-150 %
             colour = "#b00000" if bars[r] > 1.0 else "#2a7d2a"
-            body = (f"<span class='bar'><span style='width:{width:.0f}%;background:{colour}'>"
-                    f"</span><i style='left:{100 / 1.5:.0f}%'></i></span> {body}")  # fmt: skip
+            body = (
+                f"<span class='bar'><span style='width:{width:.0f}%;background:{colour}'>"
+                f"</span><i style='left:{100 / 1.5:.0f}%'></i></span> {body}"
+            )
         return f"<td{cls}>{body}</td>"
 
     cap = f"<caption>{esc(t.caption)}</caption>" if t.caption else ""
@@ -285,11 +321,14 @@ def to_html(report: dict, rows: list[dict]) -> str:
         parts += [_html_table(t) for t in dynamic_tables(report)]
         plots = dynamic_plots(report) + plots
     for plot in plots:
-        parts.append(f"<p><img alt='{esc(plot.title)}' "
-                     f"src='data:image/png;base64,{_png_b64(standalone(plot))}'></p>")  # fmt: skip
+        parts.append(
+            f"<p><img alt='{esc(plot.title)}' "
+            f"src='data:image/png;base64,{_png_b64(standalone(plot))}'></p>"
+        )
     parts += _html_setpoint_details(report)
-    parts.append(f"<p class='note'>Generated {esc(report['generated_at'])} by tofpose.</p>"
-                 "</body></html>")  # fmt: skip
+    parts.append(
+        f"<p class='note'>Generated {esc(report['generated_at'])} by tofpose.</p></body></html>"
+    )
     return "\n".join(parts)
 
 

@@ -80,16 +80,23 @@ def check_camera(camera: dict, recording: Path) -> str:
     with open_recording(recording) as rec:
         if model.shape != rec.camera.shape:
             raise ReprocessRequestError(
-                "camera", f"camera {model.width}x{model.height} does not match the "
-                f"recording's {rec.camera.width}x{rec.camera.height} frames")  # fmt: skip
+                "camera",
+                f"camera {model.width}x{model.height} does not match the "
+                f"recording's {rec.camera.width}x{rec.camera.height} frames",
+            )
     return text
 
 
 class ReprocessService:
     """Submit, list, follow and cancel re-processing jobs (module docstring)."""
 
-    def __init__(self, root: Path, scheduler: str | None = None, workers: int | None = None,
-                 jobs: BatchQueue | None = None):  # fmt: skip
+    def __init__(
+        self,
+        root: Path,
+        scheduler: str | None = None,
+        workers: int | None = None,
+        jobs: BatchQueue | None = None,
+    ):
         self.root = Path(root)
         self.scheduler = scheduler or None
         self.workers = workers if workers is not None else default_workers(reserve=1)
@@ -119,8 +126,15 @@ class ReprocessService:
             self.jobs.stop()
 
     # -- commands ---------------------------------------------------------------------
-    def submit(self, campaign_id: int, recording: Path, camera: dict | None, *,
-               tracking: bool = False, filter_state: bool = False) -> dict:  # fmt: skip
+    def submit(
+        self,
+        campaign_id: int,
+        recording: Path,
+        camera: dict | None,
+        *,
+        tracking: bool = False,
+        filter_state: bool = False,
+    ) -> dict:
         """Store and queue a job over ``recording`` (campaign ``campaign_id``'s) with
         ``camera`` (a camera JSON object; None: the recording's own camera, then the run
         and the baseline agree). ``ReprocessRequestError`` naming the field for a bad
@@ -128,19 +142,30 @@ class ReprocessService:
         try:
             text = check_camera(camera, recording) if camera is not None else None
         except RecordingError as exc:
-            raise ReprocessRequestError("campaign_id",
-                                        f"its recording cannot be read: {exc}") from exc
+            raise ReprocessRequestError(
+                "campaign_id", f"its recording cannot be read: {exc}"
+            ) from exc
         with self._lock:
             jid = max(self._ids(), default=0) + 1
             d = self._dir(jid)
             d.mkdir(parents=True)
             if text is not None:
                 (d / "camera.json").write_text(text)
-            job = {"id": jid, "campaign_id": campaign_id, "recording": str(recording),
-                   "camera": "given" if text is not None else "recording",
-                   "tracking": tracking, "filter": filter_state, "status": "queued",
-                   "created": _now(), "started": None, "finished": None, "error": None,
-                   "frames": None, "summary": None}  # fmt: skip
+            job = {
+                "id": jid,
+                "campaign_id": campaign_id,
+                "recording": str(recording),
+                "camera": "given" if text is not None else "recording",
+                "tracking": tracking,
+                "filter": filter_state,
+                "status": "queued",
+                "created": _now(),
+                "started": None,
+                "finished": None,
+                "error": None,
+                "frames": None,
+                "summary": None,
+            }
             _write_json(d / "job.json", job)
         self.jobs.put(("reprocess", jid), partial(self._run_one, jid))
         return self.status(jid)
@@ -193,17 +218,30 @@ class ReprocessService:
             return
         job.update(status="running", started=_now(), error=None)
         _write_json(d / "job.json", job)
-        common = dict(workers=None if self.scheduler else self.workers, scheduler=self.scheduler,
-                      filter_state=job["filter"], progress=False, should_stop=should_stop,
-                      niceness=0 if self.scheduler else WORKER_NICENESS)  # fmt: skip
+        common = dict(
+            workers=None if self.scheduler else self.workers,
+            scheduler=self.scheduler,
+            filter_state=job["filter"],
+            progress=False,
+            should_stop=should_stop,
+            niceness=0 if self.scheduler else WORKER_NICENESS,
+        )
         camera_path = str(d / "camera.json") if job["camera"] == "given" else None
         try:
             for sub in ("run", "baseline"):
                 shutil.rmtree(d / sub, ignore_errors=True)
-            run = reprocess([job["recording"]], d / "run", **common,
-                            settings=Settings(camera_path=camera_path, tracking=job["tracking"]))
-            reprocess([job["recording"]], d / "baseline", **common,
-                      settings=Settings(tracking=job["tracking"]))  # fmt: skip
+            run = reprocess(
+                [job["recording"]],
+                d / "run",
+                **common,
+                settings=Settings(camera_path=camera_path, tracking=job["tracking"]),
+            )
+            reprocess(
+                [job["recording"]],
+                d / "baseline",
+                **common,
+                settings=Settings(tracking=job["tracking"]),
+            )
             summary = compare_runs(str(d / "baseline"), str(d / "run"), d)
         except ReprocessCancelledError:
             if self.jobs.is_cancelled(("reprocess", jid)):
@@ -221,8 +259,9 @@ class ReprocessService:
             return
         rec = summary["recordings"][Path(job["recording"]).stem]
         job = self._read(jid)
-        job.update(status="complete", finished=_now(), frames=run["recordings"][0]["frames"],
-                   summary=rec)  # fmt: skip
+        job.update(
+            status="complete", finished=_now(), frames=run["recordings"][0]["frames"], summary=rec
+        )
         _write_json(d / "job.json", job)
 
     def _finish(self, jid: int, status: str, error: str | None) -> None:

@@ -193,16 +193,20 @@ class SceneAccess:
             return None
         host_header = hosts[0] if len(hosts) == 1 else ""
         if len(origins) > 1 or not self.origin_allowed(origins[0], host_header, name or ""):
-            return Refusal(403, "cross-origin request to the 3-D scene refused "
-                                "(TOFPOSE_ALLOWED_ORIGINS)")  # fmt: skip
+            return Refusal(
+                403, "cross-origin request to the 3-D scene refused (TOFPOSE_ALLOWED_ORIGINS)"
+            )
         return None
 
     def frame_ancestors(self, hosts: Sequence[str]) -> str:
         """The CSP directive for an answer to a request with these ``Host`` headers: the
         dashboard's origins on that host name, and ``allowed_origins``."""
         name = self.host_name(hosts)
-        sources = [f"{scheme}://{name}:{self.dashboard_port}" for scheme in DEFAULT_PORTS
-                   if name is not None and self.dashboard_port]  # fmt: skip
+        sources = [
+            f"{scheme}://{name}:{self.dashboard_port}"
+            for scheme in DEFAULT_PORTS
+            if name is not None and self.dashboard_port
+        ]
         sources += self.allowed_origins
         return "frame-ancestors " + (" ".join(sources) or "'none'")
 
@@ -219,12 +223,10 @@ def _checked_request(access: SceneAccess, viser_hook: Hook | None) -> Hook:
     """A ``process_request`` that refuses what ``access`` refuses, then asks viser's."""
 
     async def process_request(connection, request):
-        refused = access.refusal(request.headers.get_all("Host"),
-                                 request.headers.get_all("Origin"))  # fmt: skip
+        refused = access.refusal(request.headers.get_all("Host"), request.headers.get_all("Origin"))
         if refused is not None:
             hosts, origins = request.headers.get_all("Host"), request.headers.get_all("Origin")
-            log.info("3-D scene: %s (Host %.100r, Origin %.100r)", refused.reason, hosts,
-                     origins)  # fmt: skip
+            log.info("3-D scene: %s (Host %.100r, Origin %.100r)", refused.reason, hosts, origins)
             return connection.respond(refused.status, refused.reason + "\n")
         answer = viser_hook(connection, request) if viser_hook is not None else None
         return await answer if inspect.isawaitable(answer) else answer
@@ -263,10 +265,13 @@ def _guarded_serve(access: SceneAccess) -> Iterator[list[Hook]]:
 
     def serve(handler, *args, process_request=None, process_response=None, **kwargs):
         guarded.append(handler)
-        return original(handler, *args,
-                        process_request=_checked_request(access, process_request),
-                        process_response=_hardened_response(access, process_response),
-                        **kwargs)  # fmt: skip
+        return original(
+            handler,
+            *args,
+            process_request=_checked_request(access, process_request),
+            process_response=_hardened_response(access, process_response),
+            **kwargs,
+        )
 
     with _SERVE_LOCK:
         ws_server.serve = serve
@@ -362,16 +367,23 @@ class LiveScene:
         m = self._camera
         fov_v = 2.0 * np.arctan(m.height / 2.0 / m.fy)
         self.frustum = s.add_camera_frustum(
-            "/camera/frustum", fov=float(fov_v), aspect=m.width / m.height, scale=0.35,
+            "/camera/frustum",
+            fov=float(fov_v),
+            aspect=m.width / m.height,
+            scale=0.35,
             color=(30, 30, 30),
-        )  # fmt: skip
+        )
         self.cloud = s.add_point_cloud(
             "/camera/cloud", np.zeros((1, 3), np.float32), (150, 150, 150), point_size=0.007
         )
         self.measured = s.add_point_cloud(
-            "/camera/reflectors", np.zeros((1, 3), np.float32), (0, 0, 0), point_size=0.05,
-            point_shape="circle", visible=False,
-        )  # fmt: skip
+            "/camera/reflectors",
+            np.zeros((1, 3), np.float32),
+            (0, 0, 0),
+            point_size=0.05,
+            point_shape="circle",
+            visible=False,
+        )
         self._pause = self.server.gui.add_checkbox("Pause scene", initial_value=False)
         self.status = self.server.gui.add_markdown("waiting for the first frame")
         self.estimate = self.truth = None

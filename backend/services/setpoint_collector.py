@@ -172,8 +172,10 @@ class SetPointCollector:
             if sample.result.ok:
                 last_ok_s = t
             elif t - last_ok_s > policy.lock_timeout_s:
-                raise _paused(f"pose lock lost for {t - last_ok_s:.1f} s at set-point {index}: "
-                              f"{sample.result.reason}")  # fmt: skip
+                raise _paused(
+                    f"pose lock lost for {t - last_ok_s:.1f} s at set-point {index}: "
+                    f"{sample.result.reason}"
+                )
             out.append(CollectedFrame(sample, None))
             self.on_frame(sample, len(out))
         return SetPointRecord(index, dict(axes), out)
@@ -214,8 +216,9 @@ class SetPointCollector:
             if st.settled and not st.busy:
                 return
             if time.monotonic() > deadline:
-                raise _paused(f"set-point {index} not settled within "
-                              f"{self.timing.move_timeout_s:g} s")  # fmt: skip
+                raise _paused(
+                    f"set-point {index} not settled within {self.timing.move_timeout_s:g} s"
+                )
             time.sleep(self.timing.poll_s)
 
     def _at_rest(self, index: int, settle_s: float) -> Iterator[tuple[LiveSample, float, float]]:
@@ -244,8 +247,10 @@ class SetPointCollector:
                 return sample
             if time.monotonic() - waited_since > self.timing.frame_timeout_s:
                 h = self.frames.health
-                raise _paused(f"no frame for {self.timing.frame_timeout_s:g} s at set-point "
-                              f"{index} (camera {h.state}: {h.last_error})")  # fmt: skip
+                raise _paused(
+                    f"no frame for {self.timing.frame_timeout_s:g} s at set-point "
+                    f"{index} (camera {h.state}: {h.last_error})"
+                )
 
     # -- dynamic set-points -----------------------------------------------------------------
     def collect_profile(
@@ -272,8 +277,9 @@ class SetPointCollector:
                 in_motion = t0 is not None and t0 <= t <= t_end
                 out.append(CollectedFrame(self._referenced(sample, trace), in_motion))
                 self.on_frame(out[-1].sample, len(out))
-                if t0 is not None and self._profile_over(index, axis, trace, t,
-                                                         t_end + rest_s, deadline):  # fmt: skip
+                if t0 is not None and self._profile_over(
+                    index, axis, trace, t, t_end + rest_s, deadline
+                ):
                     running = False
                     return SetPointRecord(index, dict(axes), out)
             raise _paused(f"the frames ended at set-point {index}")  # an endless source
@@ -295,16 +301,23 @@ class SetPointCollector:
         return trace
 
     def _profile_over(
-        self, index: int, axis: str, trace: EncoderTrace, t: float, t_done: float,
+        self,
+        index: int,
+        axis: str,
+        trace: EncoderTrace,
+        t: float,
+        t_done: float,
         deadline: float,
-    ) -> bool:  # fmt: skip
+    ) -> bool:
         """Whether the profile has ended and the table rests again at device time ``t``
         (from ``t_done`` on); pauses when the encoders go unread, the table is stopped or
         the profile runs past ``deadline`` (monotonic)."""
         if trace.stale_s() > STALE_TRACE_S:
             why = trace.error or "no answer"
-            raise _paused(f"the motion status was not read for {trace.stale_s():.1f} s during "
-                          f"the profile of set-point {index}: {why}")  # fmt: skip
+            raise _paused(
+                f"the motion status was not read for {trace.stale_s():.1f} s during "
+                f"the profile of set-point {index}: {why}"
+            )
         st = trace.latest
         if st.stopped:
             raise _paused(f"the turntable was stopped at set-point {index}")
@@ -313,8 +326,10 @@ class SetPointCollector:
         if st.profile is None and st.settled and not st.busy:
             return True
         if time.monotonic() > deadline:
-            raise _paused(f"the {axis} profile of set-point {index} did not end within "
-                          f"{self.timing.move_timeout_s:g} s of its duration")  # fmt: skip
+            raise _paused(
+                f"the {axis} profile of set-point {index} did not end within "
+                f"{self.timing.move_timeout_s:g} s of its duration"
+            )
         return False
 
     def _start_profile(self, index: int, axis: str, spec: dict) -> tuple[float, float]:
@@ -322,9 +337,12 @@ class SetPointCollector:
         (start, end) on the encoders' clock."""
         motion = self.motion
         if (why := motion.profile_unavailable) is not None:
-            raise SetPointHalt(CampaignState.FAILED, f"set-point {index}: the "
-                               f"{motion.require().name!r} motion system cannot run motion "
-                               f"profiles ({why})")  # fmt: skip
+            raise SetPointHalt(
+                CampaignState.FAILED,
+                f"set-point {index}: the "
+                f"{motion.require().name!r} motion system cannot run motion "
+                f"profiles ({why})",
+            )
         try:
             start_deg = motion.status().positions[axis]
             profile = motion.profile_of(axis, spec).started_at(start_deg)
@@ -332,8 +350,10 @@ class SetPointCollector:
             raise _paused(f"set-point {index}: cannot prepare the profile: {exc}") from exc
         problems = motion.profile_problems(axis, profile)
         if problems:
-            raise SetPointHalt(CampaignState.FAILED, f"set-point {index}: "
-                               + "; ".join(p.message for p in problems))  # fmt: skip
+            raise SetPointHalt(
+                CampaignState.FAILED,
+                f"set-point {index}: " + "; ".join(p.message for p in problems),
+            )
         try:
             motion.run_profile(axis, profile, by=self.owner)
             st = motion.status()
@@ -369,7 +389,10 @@ class SetPointCollector:
 def _check_at_setpoint(index: int, axes: dict[str, float], sample: LiveSample) -> None:
     """Pauses when the frame's encoder read-back (if any) is off the set-point."""
     enc = sample.frame.meta.get("encoders") or {}
-    off = [a for a, v in axes.items()
-           if a in enc and abs(enc[a] - v) > AT_SETPOINT_TOLERANCE.get(a, 0.05)]  # fmt: skip
+    off = [
+        a
+        for a, v in axes.items()
+        if a in enc and abs(enc[a] - v) > AT_SETPOINT_TOLERANCE.get(a, 0.05)
+    ]
     if off:
         raise _paused(f"the turntable left set-point {index} (axes {off})")

@@ -48,8 +48,11 @@ class TooManyStudiesError(RuntimeError):
 def study_limits(settings) -> StudyLimits:
     """The server's limits on one study: ``settings.study_max_cells`` and
     ``study_max_frames`` (``backend.settings.Settings``), named by their variables."""
-    return StudyLimits(max_cells=settings.study_max_cells, max_frames=settings.study_max_frames,
-                       source="TOFPOSE_STUDY_MAX_{what}")  # fmt: skip
+    return StudyLimits(
+        max_cells=settings.study_max_cells,
+        max_frames=settings.study_max_frames,
+        source="TOFPOSE_STUDY_MAX_{what}",
+    )
 
 
 @dataclass(frozen=True)
@@ -77,8 +80,13 @@ class StudyService:
     they run on, shared with re-processing (``backend.services.batch_queue``); without
     one the service makes and owns its own."""
 
-    def __init__(self, root: Path, scheduler: str | None = None, workers: int | None = None,
-                 jobs: BatchQueue | None = None):  # fmt: skip
+    def __init__(
+        self,
+        root: Path,
+        scheduler: str | None = None,
+        workers: int | None = None,
+        jobs: BatchQueue | None = None,
+    ):
         self.root = Path(root)
         self.scheduler = scheduler or None
         self.workers = workers if workers is not None else default_workers(reserve=1)
@@ -163,12 +171,21 @@ class StudyService:
         spec = StudySpec.from_dict(m["spec"], limits=None)  # accepted when it was stored
         reports = tuple(k for k, name in REPORT_FILES.items() if (d / name).exists())
         return StudyStatus(
-            id=sid, name=spec.name, status=m["status"], cells=spec.n_cells,
-            frames_planned=spec.n_frames, frames_done=m.get("frames_done", 0),
-            chunks=m["chunks"], chunks_done=m.get("chunks_done", 0), eta_s=m.get("eta_s"),
-            error=m.get("error"), started=m.get("started"), finished=m.get("finished"),
-            cluster=m.get("cluster"), reports=reports,
-        )  # fmt: skip
+            id=sid,
+            name=spec.name,
+            status=m["status"],
+            cells=spec.n_cells,
+            frames_planned=spec.n_frames,
+            frames_done=m.get("frames_done", 0),
+            chunks=m["chunks"],
+            chunks_done=m.get("chunks_done", 0),
+            eta_s=m.get("eta_s"),
+            error=m.get("error"),
+            started=m.get("started"),
+            finished=m.get("finished"),
+            cluster=m.get("cluster"),
+            reports=reports,
+        )
 
     def report_path(self, sid: int, kind: str) -> Path | None:
         """The study's report file of ``kind`` (``REPORT_FILES``), None before it exists."""
@@ -181,9 +198,15 @@ class StudyService:
         """The job: run study ``sid`` to its end, or until ``should_stop``."""
         try:
             spec = StudySpec.from_dict(read_manifest(self._dir(sid))["spec"], limits=None)
-            run_study(spec, self._dir(sid), workers=None if self.scheduler else self.workers,
-                      scheduler=self.scheduler, progress=False, should_stop=should_stop,
-                      niceness=0 if self.scheduler else WORKER_NICENESS)  # fmt: skip
+            run_study(
+                spec,
+                self._dir(sid),
+                workers=None if self.scheduler else self.workers,
+                scheduler=self.scheduler,
+                progress=False,
+                should_stop=should_stop,
+                niceness=0 if self.scheduler else WORKER_NICENESS,
+            )
         except StudyCancelledError:
             log.info("study %d stopped (its finished chunks are kept)", sid)
             if not self.jobs.is_cancelled(("study", sid)):  # the server stops: resume later

@@ -21,8 +21,13 @@ depends_on = None
 
 POSE_COLUMNS = ("x_mm", "y_mm", "z_mm", "pitch_deg", "yaw_deg", "roll_deg")
 SIGMA_COLUMNS = (
-    "sigma_x_mm", "sigma_y_mm", "sigma_z_mm", "sigma_pitch_deg", "sigma_yaw_deg", "sigma_roll_deg",
-)  # fmt: skip
+    "sigma_x_mm",
+    "sigma_y_mm",
+    "sigma_z_mm",
+    "sigma_pitch_deg",
+    "sigma_yaw_deg",
+    "sigma_roll_deg",
+)
 
 
 def _floats(names) -> list[sa.Column]:

@@ -183,8 +183,13 @@ class LiveServer:
         port = port or free_port()
         settings = settings.model_copy(update={"port": port})
         app = create_app(settings, devices)
-        config = uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning",
-                                timeout_graceful_shutdown=settings.shutdown_timeout_s)  # fmt: skip
+        config = uvicorn.Config(
+            app,
+            host="127.0.0.1",
+            port=port,
+            log_level="warning",
+            timeout_graceful_shutdown=settings.shutdown_timeout_s,
+        )
         self.server = uvicorn.Server(config)
         self.thread = threading.Thread(target=self.server.run, daemon=True)
 

@@ -28,17 +28,31 @@ class ServeProcess:
         self.port = free_port()
         self.data_dir = data_dir
         self.base_url = f"http://127.0.0.1:{self.port}"
-        cmd = [sys.executable, "-m", "tofpose.cli", "serve", "--port", str(self.port),
-               "--data-dir", str(data_dir), "--viser-port", "0", *args]  # fmt: skip
+        cmd = [
+            sys.executable,
+            "-m",
+            "tofpose.cli",
+            "serve",
+            "--port",
+            str(self.port),
+            "--data-dir",
+            str(data_dir),
+            "--viser-port",
+            "0",
+            *args,
+        ]
         # Output to a file, not a pipe: a server logging every request would block on a
         # full pipe that nobody reads.
         data_dir.parent.mkdir(parents=True, exist_ok=True)
         self._log_path = data_dir.parent / f"serve-{self.port}.log"
         self._log = open(self._log_path, "w")  # noqa: SIM115 (closed in stop)
         self.proc = subprocess.Popen(
-            cmd, stdout=self._log, stderr=subprocess.STDOUT, text=True,
+            cmd,
+            stdout=self._log,
+            stderr=subprocess.STDOUT,
+            text=True,
             env={**os.environ, **(env or {})},
-        )  # fmt: skip
+        )
 
     @property
     def output(self) -> str:
@@ -60,8 +74,11 @@ class ServeProcess:
                 h = self.get_json("/api/health", 2.0)
                 # camera up, the kernels compiled in the background (docs/server.md,
                 # "First start") and a pose measured with them
-                if (h["camera"]["state"] == "ok" and h["pipeline"]["state"] == "ready"
-                        and self.get_json("/api/pose/latest", 2.0)["ok"]):  # fmt: skip
+                if (
+                    h["camera"]["state"] == "ok"
+                    and h["pipeline"]["state"] == "ready"
+                    and self.get_json("/api/pose/latest", 2.0)["ok"]
+                ):
                     return h
             except OSError:
                 pass

@@ -78,8 +78,11 @@ def test_stop_halts_a_move_midway(client):
     assert (
         client.post("/api/motion/move", json={"roll_deg": 170.0}, headers=AUTH).status_code == 202
     )
-    wait_for(lambda: abs(client.get("/api/motion").json()["positions"]["roll"]) > 5.0, 5.0,
-             "the roll axis to move")  # fmt: skip
+    wait_for(
+        lambda: abs(client.get("/api/motion").json()["positions"]["roll"]) > 5.0,
+        5.0,
+        "the roll axis to move",
+    )
     r = client.post("/api/motion/stop", headers=AUTH)
     assert r.status_code == 200
     stopped_at = r.json()["positions"]["roll"]
@@ -103,8 +106,10 @@ def test_auth_required_for_every_state_change(client):
             assert r.status_code == 401, (method, path, headers, r.text)
             assert "token" in r.json()["detail"].lower()
     assert client.post("/api/motion/stop", headers=AUTH).status_code == 200
-    assert client.put("/api/camera/settings", json={"frame_rate_hz": 15.0},
-                      headers=AUTH).status_code == 200  # fmt: skip
+    assert (
+        client.put("/api/camera/settings", json={"frame_rate_hz": 15.0}, headers=AUTH).status_code
+        == 200
+    )
     # Reads are open on loopback.
     assert client.get("/api/motion").status_code == 200
     assert client.get("/api/camera/settings").json()["frame_rate_hz"] == 15.0
@@ -141,8 +146,11 @@ def test_camera_failure_degrades_and_recovers(settings, spy_devices):
     with running_app(settings, spy_devices) as c:
         first = latest_pose(c)
         cam.failing.set()
-        h = wait_for(lambda: (h := c.get("/api/health").json())["status"] == "degraded" and h,
-                     5.0, "degraded status")  # fmt: skip
+        h = wait_for(
+            lambda: (h := c.get("/api/health").json())["status"] == "degraded" and h,
+            5.0,
+            "degraded status",
+        )
         assert h["camera"]["state"] == "degraded"
         assert "camera unplugged" in h["camera"]["last_error"]
         reads = cam.reads
@@ -161,10 +169,11 @@ def test_restart_on_the_same_database_keeps_its_data(tmp_path):
         "name": "square-4",
         "reflectors": [
             {"id": i + 1, "position_mm": [x, y, z], "diameter_mm": 50.0}
-            for i, (x, y, z) in enumerate([(-200, -200, 0), (200, -200, 50), (200, 200, 0),
-                                           (-200, 200, 100)])
+            for i, (x, y, z) in enumerate(
+                [(-200, -200, 0), (200, -200, 50), (200, 200, 0), (-200, 200, 100)]
+            )
         ],
-    }  # fmt: skip
+    }
     with running_app(settings) as c:
         token = (settings.data_dir / "api_token").read_text().strip()
         auth = {"Authorization": f"Bearer {token}"}
@@ -207,8 +216,11 @@ def test_replay_camera_without_motion(tmp_path):
 def test_live_pipeline_tracks_after_the_first_pose_unless_switched_off(tmp_path):
     with running_app(make_settings(tmp_path / "a")) as client:
         first = latest_pose(client)
-        later = wait_for(lambda: (p := latest_pose(client, first["frame_index"]))["mode"]
-                         == "tracking" and p, 10.0, "a tracked pose")  # fmt: skip
+        later = wait_for(
+            lambda: (p := latest_pose(client, first["frame_index"]))["mode"] == "tracking" and p,
+            10.0,
+            "a tracked pose",
+        )
         assert later["ok"] and later["n_matched"] >= 6
     with running_app(make_settings(tmp_path / "b", tracking=False)) as client:
         p = latest_pose(client, latest_pose(client)["frame_index"] + 2)

@@ -15,9 +15,11 @@ from tests.backend.serve_process import ServeProcess
 
 N_POINTS, FRAMES = 4, 20
 BODY = {
-    "name": "crash", "frames_per_point": FRAMES, "settle_s": 0.2,
+    "name": "crash",
+    "frames_per_point": FRAMES,
+    "settle_s": 0.2,
     "setpoints": [{"yaw_deg": 2.0 * i, "rail_mm": 12000} for i in range(N_POINTS)],
-}  # fmt: skip
+}
 ENV = {"TOFPOSE_SIM_TIME_SCALE": "5", "TOFPOSE_FRAME_RATE_HZ": "20"}
 
 
@@ -58,8 +60,14 @@ def test_sigkill_at_several_moments_loses_and_duplicates_nothing(tmp_path, datab
         c = httpx.Client(base_url=s.base_url, headers={"Authorization": f"Bearer {s.token}"})
         cid = c.post("/api/campaigns", json=BODY).json()["id"]
         c.post(f"/api/campaigns/{cid}/start")
-        _wait(lambda: (p := _campaign(c, cid)["progress"]) and p["n_done"] >= 1
-              and p["frames_collected"] >= 5, what="mid-set-point")  # fmt: skip
+        _wait(
+            lambda: (
+                (p := _campaign(c, cid)["progress"])
+                and p["n_done"] >= 1
+                and p["frames_collected"] >= 5
+            ),
+            what="mid-set-point",
+        )
         s.stop(signal.SIGKILL)
     committed = 0
     # 2. restarted: interrupted; resume; killed right after a set-point was committed

@@ -26,9 +26,11 @@ def lab():
 def client(lab, tmp_path):
     host, port = lab.table.address
     settings = make_settings(
-        tmp_path / "data", camera=f"tofcam660:{CAMERA_ADDRESS}", motion=f"scpi:{host}:{port}",
+        tmp_path / "data",
+        camera=f"tofcam660:{CAMERA_ADDRESS}",
+        motion=f"scpi:{host}:{port}",
         retry_backoff_s=(0.02, 0.2),
-    )  # fmt: skip
+    )
     devices = build_devices(settings)
     devices.camera.backoff_s = (0.05, 0.2)
     with running_app(settings, devices) as c:
@@ -40,21 +42,33 @@ def test_devices_show_model_firmware_and_link(client):
     devs = client.get("/api/devices").json()
     cam, motion = devs["camera"], devs["motion"]
     assert (cam["driver"], cam["model"], cam["firmware"], cam["link"]) == (
-        "tofcam660", "ESPROS TOFcam-660", "3.59", "up",
-    )  # fmt: skip
+        "tofcam660",
+        "ESPROS TOFcam-660",
+        "3.59",
+        "up",
+    )
     assert cam["address"] == CAMERA_ADDRESS and cam["width_px"] == 320
     assert motion["driver"] == "scpi" and "ACUTROL3000" in motion["model"]
     assert motion["link"] == "up" and {a["name"] for a in motion["axes"]} == {
-        "yaw", "pitch", "roll", "rail",
-    }  # fmt: skip
+        "yaw",
+        "pitch",
+        "roll",
+        "rail",
+    }
 
 
 def test_a_move_through_scpi_changes_what_the_camera_sees(lab, client):
     before = latest_pose(client)
     r = client.post("/api/motion/move", json={"yaw_deg": 6.0}, headers=AUTH)
     assert r.status_code == 202, r.text
-    wait_for(lambda: (m := client.get("/api/motion").json())["settled"]
-             and abs(m["positions"]["yaw"] - 6.0) < 1e-3, 15.0, "the table to settle")  # fmt: skip
+    wait_for(
+        lambda: (
+            (m := client.get("/api/motion").json())["settled"]
+            and abs(m["positions"]["yaw"] - 6.0) < 1e-3
+        ),
+        15.0,
+        "the table to settle",
+    )
     after = latest_pose(client, before["frame_index"] + 3)
     turned = abs(after["yaw_deg"] - before["yaw_deg"])
     assert turned == pytest.approx(6.0, abs=0.3)  # the camera saw the table turn
@@ -93,8 +107,11 @@ def test_rate_table_link_drop_degrades_motion_not_the_server(lab, client):
     from backend.emulators.rate_table import RateTableEmulator
 
     with RateTableEmulator(world, host, port):
-        m = wait_for(lambda: (j := client.get("/api/motion").json())["state"] == "ok" and j,
-                     10.0, "motion to come back")  # fmt: skip
+        m = wait_for(
+            lambda: (j := client.get("/api/motion").json())["state"] == "ok" and j,
+            10.0,
+            "motion to come back",
+        )
         assert m["link"] == "up"
 
 

@@ -41,12 +41,22 @@ def _tree(root: Path, files: dict[str, int], dirs: dict[str, int]) -> None:
 def test_an_open_tree_becomes_owner_only(tmp_path):
     data = tmp_path / "data"
     files = {
-        "tofpose.db": 0o644, "tofpose.db-journal": 0o664, "api_token": 0o600,
-        "campaigns/3/raw.h5": 0o644, "campaigns/3/notes.txt": 0o755,
-        "studies/7/study.json": 0o666, "studies/7/frames/f000.npz": 0o444,
-    }  # fmt: skip
-    dirs = {".": 0o755, "campaigns": 0o755, "campaigns/3": 0o775, "studies": 0o777,
-            "studies/7": 0o755, "studies/7/frames": 0o700}  # fmt: skip
+        "tofpose.db": 0o644,
+        "tofpose.db-journal": 0o664,
+        "api_token": 0o600,
+        "campaigns/3/raw.h5": 0o644,
+        "campaigns/3/notes.txt": 0o755,
+        "studies/7/study.json": 0o666,
+        "studies/7/frames/f000.npz": 0o444,
+    }
+    dirs = {
+        ".": 0o755,
+        "campaigns": 0o755,
+        "campaigns/3": 0o775,
+        "studies": 0o777,
+        "studies/7": 0o755,
+        "studies/7/frames": 0o700,
+    }
     _tree(data, files, dirs)
 
     restrict_data_dir(data)

@@ -51,9 +51,11 @@ def test_create_list_revoke_on_the_servers_database(tmp_path, capsys):
 
 @pytest.mark.parametrize(
     ("argv", "message"),
-    [(["create", "bad name", "--scope", "read"], "key name must be 1-64 letters"),
-     (["revoke", "nobody"], "no active key named 'nobody'")],
-)  # fmt: skip
+    [
+        (["create", "bad name", "--scope", "read"], "key name must be 1-64 letters"),
+        (["revoke", "nobody"], "no active key named 'nobody'"),
+    ],
+)
 def test_bad_requests_are_refused_with_a_message(tmp_path, capsys, argv, message):
     assert main(["keys", "--data-dir", str(tmp_path), *argv]) == 2
     assert message in capsys.readouterr().err

@@ -38,8 +38,10 @@ def test_serve_refuses_bad_options_with_a_message(tmp_path, capsys):
         capsys.readouterr().err
     )
     # a rate table that does not answer: its axes and limits come from it, so no start
-    assert main(["serve", "--motion", "scpi:127.0.0.1:9", "--data-dir", str(tmp_path),
-                 "--no-viser"]) == 2  # fmt: skip
+    assert (
+        main(["serve", "--motion", "scpi:127.0.0.1:9", "--data-dir", str(tmp_path), "--no-viser"])
+        == 2
+    )
     err = capsys.readouterr().err
     assert "cannot reach the rate-table controller at TCPIP::127.0.0.1::9::SOCKET" in err
     missing = tmp_path / "missing.h5"
@@ -121,14 +123,27 @@ def test_the_redaction_filter_on_uvicorns_record_shapes():
 
     from backend.main import RedactSecretQuery
 
-    access = logging.LogRecord("uvicorn.access", logging.INFO, __file__, 1,
-                               '%s - "%s %s HTTP/%s" %d',
-                               ("127.0.0.1:5", "GET", f"/a?x=1&Token={KEY}&api_key={KEY}&k=2",
-                                "1.1", 200), None)  # fmt: skip
-    ws = logging.LogRecord("uvicorn.error", logging.INFO, __file__, 1,
-                           f'127.0.0.1:5 - "WebSocket /ws/live?ticket={KEY}" 403', None, None)
+    access = logging.LogRecord(
+        "uvicorn.access",
+        logging.INFO,
+        __file__,
+        1,
+        '%s - "%s %s HTTP/%s" %d',
+        ("127.0.0.1:5", "GET", f"/a?x=1&Token={KEY}&api_key={KEY}&k=2", "1.1", 200),
+        None,
+    )
+    ws = logging.LogRecord(
+        "uvicorn.error",
+        logging.INFO,
+        __file__,
+        1,
+        f'127.0.0.1:5 - "WebSocket /ws/live?ticket={KEY}" 403',
+        None,
+        None,
+    )
     f = RedactSecretQuery()
     assert f.filter(access) and f.filter(ws)
     assert access.getMessage() == (
-        '127.0.0.1:5 - "GET /a?x=1&Token=***&api_key=***&k=2 HTTP/1.1" 200')
+        '127.0.0.1:5 - "GET /a?x=1&Token=***&api_key=***&k=2 HTTP/1.1" 200'
+    )
     assert ws.getMessage() == '127.0.0.1:5 - "WebSocket /ws/live?ticket=***" 403'

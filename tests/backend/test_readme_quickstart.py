@@ -21,8 +21,8 @@ AXES = ("x_mm", "y_mm", "z_mm", "pitch_deg", "yaw_deg", "roll_deg")
 def _quickstart_bodies() -> list[dict]:
     """The ``-d '...'`` JSON bodies of the quick start's code block, in order."""
     text = README.read_text()
-    section = text[text.index("## Run a campaign and get its report"):]
-    block = section[section.index("```sh"):section.index("```", section.index("```sh") + 5)]
+    section = text[text.index("## Run a campaign and get its report") :]
+    block = section[section.index("```sh") : section.index("```", section.index("```sh") + 5)]
     return [json.loads(b) for b in re.findall(r"-d '(\{.*?\})'", block, flags=re.DOTALL)]
 
 
@@ -43,8 +43,11 @@ def test_the_readme_quick_start_ends_in_the_right_verdict(tmp_path, capsys):
     over_cal, over_exact = calibrated["overall"]["axes"], exact["overall"]["axes"]
     verdicts = {a: (over_cal[a]["passed"], over_exact[a]["passed"]) for a in AXES}
     with capsys.disabled():
-        print("max |error| calibrated / exact:",
-              {a: (over_cal[a]["max_abs"], over_exact[a]["max_abs"]) for a in AXES}, verdicts)
+        print(
+            "max |error| calibrated / exact:",
+            {a: (over_cal[a]["max_abs"], over_exact[a]["max_abs"]) for a in AXES},
+            verdicts,
+        )
     for a, (cal_v, exact_v) in verdicts.items():
         # where the rendered pose's own error lies within 15 % of the requirement, the
         # reference's 1-sigma can tip the verdict either way: there the errors must agree
@@ -55,15 +58,25 @@ def test_the_readme_quick_start_ends_in_the_right_verdict(tmp_path, capsys):
             assert cal_v == exact_v, (a, verdicts)
     # the uncalibrated reference carries the bench's own ~11 mm: far from the rendered pose
     assert max(nominal["overall"]["axes"][a]["rms"] for a in ("x_mm", "y_mm")) > 3.0 * max(
-        over_cal[a]["rms"] for a in ("x_mm", "y_mm"))
+        over_cal[a]["rms"] for a in ("x_mm", "y_mm")
+    )
     own = calibrated["calibration"]
     assert own["id"] == 1 and own["name"] == "bench-1"
     assert 0 < own["mount_sigma_mm"] < 1.0 and 0 < own["placement_sigma_deg"] < 0.05
     # the CLI takes the same option and writes the same verdict
     out = tmp_path / "report.json"
-    code = report_cli({"campaign_id": 2, "db": settings.resolved_database_url, "format": "json",
-                       "reference": "lab", "calibration": 1, "out": str(out)})  # fmt: skip
+    code = report_cli(
+        {
+            "campaign_id": 2,
+            "db": settings.resolved_database_url,
+            "format": "json",
+            "reference": "lab",
+            "calibration": 1,
+            "out": str(out),
+        }
+    )
     assert code == 0 and "reference calibration 1" in capsys.readouterr().out
     from_cli = json.loads(out.read_text())
     assert {a: from_cli["overall"]["axes"][a]["passed"] for a in AXES} == {
-        a: v[0] for a, v in verdicts.items()}
+        a: v[0] for a, v in verdicts.items()
+    }

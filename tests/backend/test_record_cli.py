@@ -26,8 +26,16 @@ def server(tmp_path_factory):
 
 
 def _opts(server, **kw) -> dict:
-    return {"duration": 1.5, "name": None, "url": server.base_url, "key": TOKEN,
-            "key_file": None, "out": None, "download": True, **kw}  # fmt: skip
+    return {
+        "duration": 1.5,
+        "name": None,
+        "url": server.base_url,
+        "key": TOKEN,
+        "key_file": None,
+        "out": None,
+        "download": True,
+        **kw,
+    }
 
 
 def test_it_records_shows_progress_stops_and_downloads_a_readable_recording(server, tmp_path):
@@ -49,8 +57,9 @@ def test_it_records_shows_progress_stops_and_downloads_a_readable_recording(serv
 
 
 def test_through_tofpose_record_without_download_it_prints_the_url(server, capsys):
-    code = tofpose_main(["record", "--duration", "0.5", "--url", server.base_url,
-                         "--key", TOKEN, "--no-download"])  # fmt: skip
+    code = tofpose_main(
+        ["record", "--duration", "0.5", "--url", server.base_url, "--key", TOKEN, "--no-download"]
+    )
     captured = capsys.readouterr()
     assert code == 0, captured.err
     url = captured.out.splitlines()[-1]
@@ -59,8 +68,9 @@ def test_through_tofpose_record_without_download_it_prints_the_url(server, capsy
 
 
 def test_a_read_key_is_refused_with_the_servers_reason(server):
-    r = httpx.post(server.base_url + "/api/keys", json={"name": "cli-viewer", "scope": "read"},
-                   headers=AUTH)  # fmt: skip
+    r = httpx.post(
+        server.base_url + "/api/keys", json={"name": "cli-viewer", "scope": "read"}, headers=AUTH
+    )
     err = io.StringIO()
     code = record_cli.run(_opts(server, key=r.json()["key"]), io.StringIO(), err)
     assert code == 2

@@ -59,8 +59,11 @@ def test_refusals_before_any_route_carry_them_too(built_app):
     foreign_host = built_app.get("/api/health", headers={"Host": "evil.example"})
     assert foreign_host.status_code == 400
     assert hardening(foreign_host) == NO_FRAMING
-    too_large = built_app.post("/api/catalogs", content=b"x" * 2_000_000,
-                               headers={**AUTH, "Content-Type": "application/json"})  # fmt: skip
+    too_large = built_app.post(
+        "/api/catalogs",
+        content=b"x" * 2_000_000,
+        headers={**AUTH, "Content-Type": "application/json"},
+    )
     assert too_large.status_code == 413
     assert hardening(too_large) == NO_FRAMING
     no_token = built_app.post("/api/motion/stop")
@@ -106,6 +109,7 @@ def test_a_routes_own_header_is_kept_and_the_policy_is_added_beside_its_own():
     r = TestClient(app).get("/own")
     assert r.headers["referrer-policy"] == "same-origin"
     assert r.headers.get_list("content-security-policy") == [
-        "default-src 'self'", "frame-ancestors 'none'"
-    ]  # fmt: skip
+        "default-src 'self'",
+        "frame-ancestors 'none'",
+    ]
     assert r.headers["x-frame-options"] == "DENY"

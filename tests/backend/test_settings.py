@@ -29,20 +29,38 @@ def test_defaults_bind_loopback_with_open_reads():
     assert (s.host, s.port) == ("127.0.0.1", 8000) and s.reads_are_open
 
 
-@pytest.mark.parametrize(("host", "loop"), [("127.0.0.1", True), ("127.3.2.1", True),
-                                            ("::1", True), ("localhost", True),
-                                            ("0.0.0.0", False), ("192.168.1.5", False),
-                                            ("lab-pc", False)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("host", "loop"),
+    [
+        ("127.0.0.1", True),
+        ("127.3.2.1", True),
+        ("::1", True),
+        ("localhost", True),
+        ("0.0.0.0", False),
+        ("192.168.1.5", False),
+        ("lab-pc", False),
+    ],
+)
 def test_loopback_detection(host, loop):
     assert is_loopback_host(host) is loop
     assert Settings(host=host).reads_are_open is loop
 
 
-@pytest.mark.parametrize("kw", [{"camera": "usb"}, {"camera": "replay:"}, {"motion": "acutrol"},
-                                {"camera": "tofcam660:"}, {"camera": "tofcam660:camera.lab"},
-                                {"motion": "scpi:"}, {"motion": "scpi:host"},
-                                {"motion": "scpi:host:99999"},
-                                {"port": 70000}, {"frame_rate_hz": 0}])  # fmt: skip
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {"camera": "usb"},
+        {"camera": "replay:"},
+        {"motion": "acutrol"},
+        {"camera": "tofcam660:"},
+        {"camera": "tofcam660:camera.lab"},
+        {"motion": "scpi:"},
+        {"motion": "scpi:host"},
+        {"motion": "scpi:host:99999"},
+        {"port": 70000},
+        {"frame_rate_hz": 0},
+    ],
+)
 def test_bad_settings_are_named(kw):
     with pytest.raises(ValidationError) as exc:
         Settings(**kw)

@@ -185,18 +185,25 @@ def test_common_scale_error_is_the_centroids_scale_about_their_mean_times_the_rm
     from types import SimpleNamespace
 
     cat = paper_target()
-    true_uv = np.array([[100.0, 80.0], [140.0, 82.0], [120.0, 130.0], [90.0, 120.0],
-                        [150.0, 125.0]])  # fmt: skip
-    truth = TrueImages(np.zeros((5, 3)), true_uv, np.full(5, 4000.0), np.full(5, 2.0),
-                       np.ones(5, bool))  # fmt: skip
+    true_uv = np.array(
+        [[100.0, 80.0], [140.0, 82.0], [120.0, 130.0], [90.0, 120.0], [150.0, 125.0]]
+    )
+    truth = TrueImages(
+        np.zeros((5, 3)), true_uv, np.full(5, 4000.0), np.full(5, 2.0), np.ones(5, bool)
+    )
     centre = true_uv.mean(axis=0)
     measured = centre + 1.002 * (true_uv - centre) + [0.3, -0.2]
 
     def result(uv, ids):
-        return SimpleNamespace(ok=True, matched=[
-            SimpleNamespace(centroid_uv=p, distance_mm=4000.0, catalog_id=i,
-                            centroid_sigma_px=0.05)
-            for p, i in zip(uv, ids, strict=True)])  # fmt: skip
+        return SimpleNamespace(
+            ok=True,
+            matched=[
+                SimpleNamespace(
+                    centroid_uv=p, distance_mm=4000.0, catalog_id=i, centroid_sigma_px=0.05
+                )
+                for p, i in zip(uv, ids, strict=True)
+            ],
+        )
 
     c, random_px = common_scale_error_px(result(measured, cat.ids[:5]), truth, cat)
     r_rms = np.sqrt(((true_uv - centre) ** 2).sum(axis=1).mean())

@@ -12,11 +12,17 @@ import pytest
 
 CHROMIUM = "/usr/bin/chromium"
 ARGS = [
-    "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
     # WebGL for the 3-D scene without a GPU: SwiftShader, software rendering
-    "--use-gl=swiftshader", "--enable-unsafe-swiftshader",
-]  # fmt: skip
+    "--use-gl=swiftshader",
+    "--enable-unsafe-swiftshader",
+]
 SHOTS = Path(__file__).resolve().parents[2] / "out" / "screenshots"  # gitignored
 
 

@@ -136,8 +136,9 @@ def test_stop_halts_a_move_and_a_missing_token_shows_the_error(server, page_for)
     assert m["stopped"] and 1.0 < m["positions"]["roll"] < 165.0, m["positions"]
     roll = m["positions"]["roll"]
     page2.wait_for_timeout(500)
-    assert np.isclose(httpx.get(server.base_url + "/api/motion").json()["positions"]["roll"],
-                      roll, atol=0.01)  # fmt: skip
+    assert np.isclose(
+        httpx.get(server.base_url + "/api/motion").json()["positions"]["roll"], roll, atol=0.01
+    )
 
 
 def test_the_page_reconnects_after_the_server_restarts(tmp_path, page_for):
@@ -231,10 +232,12 @@ def _focus_walk(page, n: int) -> list[str]:
     seen = []
     for _ in range(n):
         page.keyboard.press("Tab")
-        seen.append(page.evaluate(
-            "() => { const e = document.activeElement;"
-            " return e ? (e.dataset.testid || e.tagName.toLowerCase()) : ''; }"
-        ))  # fmt: skip
+        seen.append(
+            page.evaluate(
+                "() => { const e = document.activeElement;"
+                " return e ? (e.dataset.testid || e.tagName.toLowerCase()) : ''; }"
+            )
+        )
     return seen
 
 
@@ -243,8 +246,15 @@ def test_the_page_is_keyboard_reachable_and_escape_stops_a_move(server, page_for
     page.goto(server.base_url + "/")
     page.get_by_test_id("new-create").wait_for(timeout=20_000)
     seen = _focus_walk(page, 80)
-    for control in ("stop", "toggle-active", "toggle-rejected", "target-yaw", "go-yaw",
-                    "cam-apply", "new-create"):  # fmt: skip
+    for control in (
+        "stop",
+        "toggle-active",
+        "toggle-rejected",
+        "target-yaw",
+        "go-yaw",
+        "cam-apply",
+        "new-create",
+    ):
         assert control in seen, (control, seen)
     # Type a go-to with the keyboard alone, start it with Enter, then stop it with Esc.
     page.get_by_test_id("target-roll").focus()

@@ -91,14 +91,20 @@ def test_a_jog_is_a_relative_step_the_server_applies(server, page_for):
     page, sent = _open(server, page_for)
     r = httpx.post(server.base_url + "/api/motion/move", json={"yaw_deg": 6.0}, headers=AUTH)
     assert r.status_code == 202
-    wait_for(lambda: (m := _motion(server))["settled"] and abs(m["positions"]["yaw"] - 6) < 0.01,
-             20.0, "yaw at 6 deg")  # fmt: skip
+    wait_for(
+        lambda: (m := _motion(server))["settled"] and abs(m["positions"]["yaw"] - 6) < 0.01,
+        20.0,
+        "yaw at 6 deg",
+    )
     page.get_by_test_id("jog-yaw-plus").dblclick()  # one jog: the second click waits
     wait_for(lambda: sent, 5.0, "the jog request")
     page.wait_for_timeout(800)
     assert sent == [("/api/motion/jog", {"yaw_deg": 1})]
-    wait_for(lambda: (m := _motion(server))["settled"] and abs(m["positions"]["yaw"] - 7) < 0.02,
-             20.0, "yaw at 7 deg")  # fmt: skip
+    wait_for(
+        lambda: (m := _motion(server))["settled"] and abs(m["positions"]["yaw"] - 7) < 0.02,
+        20.0,
+        "yaw at 7 deg",
+    )
 
 
 def test_controls_lock_while_the_turntable_status_is_stale(server, page_for):
@@ -124,12 +130,15 @@ def test_controls_lock_while_the_turntable_status_is_stale(server, page_for):
 def test_controls_lock_while_a_campaign_owns_the_turntable(server, page_for):
     page, sent = _open(server, page_for)
     body = {
-        "name": "owner", "frames_per_point": 400, "settle_s": 0.5,
+        "name": "owner",
+        "frames_per_point": 400,
+        "settle_s": 0.5,
         "setpoints": [{"yaw_deg": 0, "pitch_deg": 0, "roll_deg": 0, "rail_mm": 11000}],
-    }  # fmt: skip
+    }
     cid = httpx.post(server.base_url + "/api/campaigns", json=body, headers=AUTH).json()["id"]
-    assert httpx.post(f"{server.base_url}/api/campaigns/{cid}/start",
-                      headers=AUTH).status_code == 200  # fmt: skip
+    assert (
+        httpx.post(f"{server.base_url}/api/campaigns/{cid}/start", headers=AUTH).status_code == 200
+    )
     locked = page.get_by_test_id("motion-locked")
     locked.wait_for(timeout=10_000)
     assert f"campaign {cid}" in locked.inner_text() and "owns the turntable" in locked.inner_text()

@@ -38,8 +38,11 @@ def test_record_from_the_page_stop_download_and_read_it(server, page_for, tmp_pa
     live.wait_for(timeout=15_000)
     rid = int(live.get_attribute("data-testid").rsplit("-", 1)[1])
     page.wait_for_timeout(2000)  # ~2 s of the live stream
-    wait_for(lambda: float(page.get_by_test_id(f"rec-size-{rid}").inner_text()) > 0, 15.0,
-             "the size on the page")  # fmt: skip
+    wait_for(
+        lambda: float(page.get_by_test_id(f"rec-size-{rid}").inner_text()) > 0,
+        15.0,
+        "the size on the page",
+    )
     assert int(page.get_by_test_id(f"rec-frames-{rid}").inner_text()) > 0
     page.get_by_test_id("recorder").screenshot(path=SHOTS / "recorder-running.png")
 
@@ -57,8 +60,11 @@ def test_record_from_the_page_stop_download_and_read_it(server, page_for, tmp_pa
     assert download.value.suggested_filename == f"from-the-page-{rid}.h5"
 
     entry = httpx.get(f"{server.base_url}/api/recordings/{rid}").json()
-    assert (entry["name"], entry["state"], entry["stop_reason"]) == ("from the page", "stopped",
-                                                                     "requested")  # fmt: skip
+    assert (entry["name"], entry["state"], entry["stop_reason"]) == (
+        "from the page",
+        "stopped",
+        "requested",
+    )
     with open_recording(path) as rec:
         assert rec.n_frames == entry["frames"] > 0
         assert rec.lab_truth_R is not None  # the simulated lab's reference, as in any recording

@@ -41,11 +41,15 @@ def test_the_reference_is_named_and_a_calibration_can_be_set_up_or_selected(serv
     g = state.devices.world.bench.geometry
     with state.sessions() as s, s.begin():
         row = CalibrationRow(
-            name="bench-1", mount=g.T_inner_camera.compose(g.mount_error).as_matrix().tolist(),
+            name="bench-1",
+            mount=g.T_inner_camera.compose(g.mount_error).as_matrix().tolist(),
             placement=g.T_lab_target.compose(g.placement_error).as_matrix().tolist(),
-            sigmas=[0.0] * 12, residual_mm=[0.0], residual_deg=[0.0], chi2_per_dof=1.0,
+            sigmas=[0.0] * 12,
+            residual_mm=[0.0],
+            residual_deg=[0.0],
+            chi2_per_dof=1.0,
             n_observations=0,
-        )  # fmt: skip
+        )
         s.add(row)
         s.flush()
         cid = row.id

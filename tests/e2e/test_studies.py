@@ -24,8 +24,12 @@ def test_a_study_submitted_in_the_page_runs_and_its_report_opens(server, page_fo
     page.goto(server.base_url + "/")
     page.get_by_text("new study").click()
     spec = page.get_by_test_id("study-spec")
-    bad = {"name": "page", "frames_per_cell": 3, "chunk_frames": 1,
-           "grid": {"range_m": [2.5, 2.5], "physics": ["ideal", "grey plate"]}}  # fmt: skip
+    bad = {
+        "name": "page",
+        "frames_per_cell": 3,
+        "chunk_frames": 1,
+        "grid": {"range_m": [2.5, 2.5], "physics": ["ideal", "grey plate"]},
+    }
     spec.fill(json.dumps(bad))
     page.get_by_test_id("study-submit").click()
     err = page.get_by_test_id("error")

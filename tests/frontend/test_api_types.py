@@ -23,10 +23,16 @@ def test_the_committed_openapi_document_is_the_servers():
 def test_the_committed_types_are_generated_from_it(tmp_path):
     out = tmp_path / "schema.d.ts"
     subprocess.run(
-        [str(FRONTEND / "node_modules" / ".bin" / "openapi-typescript"), "openapi.json",
-         "-o", str(out)],
-        cwd=FRONTEND, check=True, capture_output=True,
-    )  # fmt: skip
+        [
+            str(FRONTEND / "node_modules" / ".bin" / "openapi-typescript"),
+            "openapi.json",
+            "-o",
+            str(out),
+        ],
+        cwd=FRONTEND,
+        check=True,
+        capture_output=True,
+    )
     committed = (FRONTEND / "src" / "api" / "schema.d.ts").read_text()
     assert out.read_text() == committed, "schema.d.ts is stale: run `npm run types`"
     assert "ErrorPublic" in committed and "PosePublic" in committed  # error bodies typed

@@ -27,9 +27,13 @@ def test_the_dashboards_unit_tests_pass():
         "frontend/node_modules lacks vitest: run `make frontend` (npm ci)"
     )
     r = subprocess.run(
-        [npm, "test", "--silent"], cwd=FRONTEND, capture_output=True, text=True, timeout=600,
+        [npm, "test", "--silent"],
+        cwd=FRONTEND,
+        capture_output=True,
+        text=True,
+        timeout=600,
         env={**os.environ, "NO_COLOR": "1", "CI": "1"},
-    )  # fmt: skip
+    )
     assert r.returncode == 0, f"npm test failed ({r.returncode}):\n{r.stdout}\n{r.stderr}"
     assert " passed" in r.stdout and " failed" not in r.stdout, r.stdout
 
@@ -38,9 +42,11 @@ def test_the_raw_frame_fixture_is_what_the_server_sends():
     fx = json.loads(FIXTURE.read_text())
     nan_for_null = [[np.nan if v is None else v for v in row] for row in fx["distance_mm_in"]]
     message = encode_raw_frame(
-        fx["frame_index"], np.array(fx["gray_in"], dtype=np.uint16),
-        np.array(nan_for_null, dtype=float), step=fx["step"],
-    )  # fmt: skip
+        fx["frame_index"],
+        np.array(fx["gray_in"], dtype=np.uint16),
+        np.array(nan_for_null, dtype=float),
+        step=fx["step"],
+    )
     assert message.hex() == fx["hex"], "frame_codec's encoding changed: update raw-frame.json"
     index, step, gray, distance = decode_raw_frame(message)
     assert (index, step, gray.shape) == (fx["frame_index"], fx["step"], (fx["height"], fx["width"]))

@@ -79,8 +79,9 @@ def assert_agree(a, b):
 
 
 @pytest.mark.parametrize(("distance_mm", "pitch", "yaw", "roll", "offset_mm"), FRAMES)
-def test_the_reference_pipeline_agrees_with_the_compiled_one(distance_mm, pitch, yaw, roll,
-                                                             offset_mm):  # fmt: skip
+def test_the_reference_pipeline_agrees_with_the_compiled_one(
+    distance_mm, pitch, yaw, roll, offset_mm
+):
     frame = render(facing_pose(distance_mm, pitch, yaw, roll, offset_mm), seed=3)
     a, b = (p.process(frame.gray, frame.distance_mm) for p in both())
     assert a.ok
@@ -128,11 +129,13 @@ NOT_COVERED = {"checked_frame", "clean_distance", "pixel_mask"}
 def test_the_reference_pipeline_calls_no_kernel(monkeypatch):
     """Every compiled kernel the library's modules hold, and every field of ``COMPILED``,
     raises; the reference pipeline still tracks and splits markers 7 and 8 at 5.7 m."""
-    pipe = PosePipeline(CAM, paper_target(),
-                        PipelineConfig(tracking=TrackingConfig(enabled=True)),
-                        implementation="reference")  # fmt: skip
-    frames = [render(facing_pose(5700.0 + 3.0 * f, 5.0, -8.0, 20.0), seed=40 + f)
-              for f in range(3)]  # fmt: skip
+    pipe = PosePipeline(
+        CAM,
+        paper_target(),
+        PipelineConfig(tracking=TrackingConfig(enabled=True)),
+        implementation="reference",
+    )
+    frames = [render(facing_pose(5700.0 + 3.0 * f, 5.0, -8.0, 20.0), seed=40 + f) for f in range(3)]
 
     def raiser(name):
         def call(*args, **kwargs):
@@ -148,8 +151,12 @@ def test_the_reference_pipeline_calls_no_kernel(monkeypatch):
                 monkeypatch.setattr(mod, name, raiser(f"{mod_name}.{name}"))
     # every stage's compiled functions, restored below
     stages = [getattr(COMPILED, f.name) for f in dataclasses.fields(COMPILED) if f.name != "name"]
-    saved = [(stage, f.name, getattr(stage, f.name)) for stage in stages
-             for f in dataclasses.fields(stage) if f.name != "name"]  # fmt: skip
+    saved = [
+        (stage, f.name, getattr(stage, f.name))
+        for stage in stages
+        for f in dataclasses.fields(stage)
+        if f.name != "name"
+    ]
     assert len(saved) >= 30
     try:
         for stage, field, _ in saved:

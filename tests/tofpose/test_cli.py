@@ -55,8 +55,9 @@ def test_estimate_with_the_filter_adds_rate_and_velocity_of_a_static_target(tmp_
     from tofpose.cli import FILTER_COLUMNS
 
     rec, out = tmp_path / "r.h5", tmp_path / "poses.csv"
-    assert main(["simulate", "--scenario", "stability-697", "--frames", "12", "--out",
-                 str(rec)]) == 0  # fmt: skip
+    assert (
+        main(["simulate", "--scenario", "stability-697", "--frames", "12", "--out", str(rec)]) == 0
+    )
     assert main(["estimate", str(rec), "--out", str(out), "--filter"]) == 0
     rows = list(csv.reader(out.open()))
     assert tuple(rows[0]) == CSV_COLUMNS + FILTER_COLUMNS
@@ -98,8 +99,11 @@ def test_calibrate_range_writes_a_camera_the_estimate_uses(tmp_path, capsys):
     errs = {}
     for name, path in (("raw", raw_csv), ("cal", cal_csv)):
         rows = list(csv.DictReader(path.open()))
-        far = [abs(float(x["z_mm"]) - true_z[i]) for i, x in enumerate(rows)
-               if x["ok"] == "1" and 2500 < true_z[i] < 6500]  # fmt: skip
+        far = [
+            abs(float(x["z_mm"]) - true_z[i])
+            for i, x in enumerate(rows)
+            if x["ok"] == "1" and 2500 < true_z[i] < 6500
+        ]
         errs[name] = float(np.median(far))
     assert errs["cal"] < 0.5 * errs["raw"], errs
 
@@ -128,8 +132,12 @@ def test_calibrate_covariance_writes_a_camera_whose_sigmas_the_estimate_reports(
     raw, cal = (list(csv.DictReader(p.open())) for p in (raw_csv, cal_csv))
     n_ok = 0
     for a, b in zip(raw, cal, strict=True):
-        assert (a["ok"], a["x_mm"], a["z_mm"], a["yaw_deg"]) == (b["ok"], b["x_mm"], b["z_mm"],
-                                                                   b["yaw_deg"])  # fmt: skip
+        assert (a["ok"], a["x_mm"], a["z_mm"], a["yaw_deg"]) == (
+            b["ok"],
+            b["x_mm"],
+            b["z_mm"],
+            b["yaw_deg"],
+        )
         if a["ok"] == "1":
             n_ok += 1
             t = np.array([float(a[k]) for k in ("x_mm", "y_mm", "z_mm")])
@@ -138,8 +146,9 @@ def test_calibrate_covariance_writes_a_camera_whose_sigmas_the_estimate_reports(
                 assert float(b[k]) == pytest.approx(float(a[k]) * root, rel=2e-3, abs=2e-4)
     assert n_ok >= 20
     # a knot the recording has no frames near is refused, by name
-    assert main(["calibrate-covariance", str(rec), "--out", str(cam),
-                 "--knots-mm", "2000,1e9"]) == 2  # fmt: skip
+    assert (
+        main(["calibrate-covariance", str(rec), "--out", str(cam), "--knots-mm", "2000,1e9"]) == 2
+    )
     assert "too few at 1000000000 mm (0)" in capsys.readouterr().err
 
 

@@ -122,9 +122,11 @@ def test_refinement_modes_compared_on_the_same_frames():
             pipe.reset()
             rs.append(pipe.process(f.gray, f.distance_mm))
         assert all(r.ok for r in rs)
-        err[mode] = (np.median([np.linalg.norm(r.t_mm - T.t_mm) for r in rs]),
-                     np.median([rotation_angle_deg(r.R, T.R) for r in rs]),
-                     [r.R for r in rs])  # fmt: skip
+        err[mode] = (
+            np.median([np.linalg.norm(r.t_mm - T.t_mm) for r in rs]),
+            np.median([rotation_angle_deg(r.R, T.R) for r in rs]),
+            [r.R for r in rs],
+        )
     for mode in ("ml", "los"):
         assert err[mode][1] < 0.5 * err["none"][1], err
         assert err[mode][0] < 0.67 * err["none"][0], err
@@ -230,8 +232,9 @@ def test_ransac_matcher_recovers_the_pose_with_clutter():
     # the budget is wall-clock: with a cold numba cache (after `make kernels-clean`) the
     # first call compiles the hypothesis kernel inside it (`tofpose warm-up` does that
     # after installing), so the same frame goes once through RANSAC without a budget
-    unbudgeted = PipelineConfig(matcher="ransac", ransac_time_budget_ms=None,
-                                ransac_confidence=0.99)  # fmt: skip
+    unbudgeted = PipelineConfig(
+        matcher="ransac", ransac_time_budget_ms=None, ransac_confidence=0.99
+    )
     assert (
         PosePipeline(CameraModel(), paper_target(), unbudgeted)
         .process(bf.frame.gray, bf.frame.distance_mm)
@@ -270,8 +273,9 @@ def test_covered_markers_do_not_veto_a_well_determined_pose():
 
     g = f.gray.astype(np.float32)
     matched = {int(np.flatnonzero(cat.ids == i)[0]) for i in (1, 2, 4, 5, 7, 8)}
-    verdict = pipe._solver.verify(RigidTransform(res.R, res.t_mm), ThresholdedFrame(g, 400.0),
-                                  np.array(sorted(matched)))  # fmt: skip
+    verdict = pipe._solver.verify(
+        RigidTransform(res.R, res.t_mm), ThresholdedFrame(g, 400.0), np.array(sorted(matched))
+    )
     assert verdict == _dark_reflector_reference(res.R, res.t_mm, cat, matched, g >= 400.0)
     assert "reflector 3 should be visible" in verdict
 
@@ -297,8 +301,10 @@ def _dark_reflector_reference(R, t, cat, matched, active):
         r = max(1, int(round(d_px[i] / 3)))
         iu, iv = int(round(u)), int(round(v))
         if not active[iv - r : iv + r + 1, iu - r : iu + r + 1].any():
-            return (f"reflector {int(cat.ids[i])} should be visible at ({u:.0f}, {v:.0f}) px "
-                    "but the frame is dark there")  # fmt: skip
+            return (
+                f"reflector {int(cat.ids[i])} should be visible at ({u:.0f}, {v:.0f}) px "
+                "but the frame is dark there"
+            )
     return ""
 
 
@@ -481,11 +487,17 @@ def test_the_compiled_measurement_is_persistence_then_the_reference_equations(co
     from tofpose.stages.extraction.uncertainty import SigmaFloors, kernel_constants
 
     cam, cat = CameraModel(), paper_target()
-    correction = RangeCorrection(
-        SensorModel().unambiguous_range_mm, offset_mm=3.0, harmonics_mm=((2.0, -1.5),),
-        amplitude_mm_per_decade=1.5,
-        pixel_offsets_mm=np.random.default_rng(7).normal(0.0, 2.0, cam.shape),
-    ) if corrected else None  # fmt: skip
+    correction = (
+        RangeCorrection(
+            SensorModel().unambiguous_range_mm,
+            offset_mm=3.0,
+            harmonics_mm=((2.0, -1.5),),
+            amplitude_mm_per_decade=1.5,
+            pixel_offsets_mm=np.random.default_rng(7).normal(0.0, 2.0, cam.shape),
+        )
+        if corrected
+        else None
+    )
     compiled = PosePipeline(cam, cat, range_correction=correction)
     staged = PosePipeline(cam, cat, range_correction=correction)
     cfg = compiled.config
@@ -496,38 +508,55 @@ def test_the_compiled_measurement_is_persistence_then_the_reference_equations(co
     for k, T in enumerate(poses):
         f = render(T, seed=k)
         g, d = check_frame(cam, f.gray, f.distance_mm)
-        found, blobs = compiled._candidates(g, d, frame_levels(g, compiled.config.extraction),
-                                            _Timer())  # fmt: skip
+        found, blobs = compiled._candidates(
+            g, d, frame_levels(g, compiled.config.extraction), _Timer()
+        )
         sources |= {b.source for b in blobs}
         bg, dark = found.stats.background, found.stats.dark_level
         meas, unranged, n_kept, info = compiled._measure(blobs, g, d, bg, dark)
         kept, mean_g, med_d, ref_info = staged._persistence.measure(blobs, g, d, cam, bg, dark)
         ranged = [b for b in kept if isfinite(b.distance_mm)]
         assert (n_kept, info) == (len(kept), ref_info)
-        assert unranged == [(b.centroid_uv[0], b.centroid_uv[1], b.distance_mm)
-                            for b in kept if not isfinite(b.distance_mm)]  # fmt: skip
+        assert unranged == [
+            (b.centroid_uv[0], b.centroid_uv[1], b.distance_mm)
+            for b in kept
+            if not isfinite(b.distance_mm)
+        ]
         # the same blobs, in order
         assert all(b.pixels is r.pixels for b, r in zip(meas.blobs, ranged, strict=True))
         uv = np.array([b.centroid_uv for b in ranged]).reshape(-1, 2)
         rho = np.array([b.distance_mm for b in ranged])
         if corrected:
-            rho = np.array([r - np.median(correction.error_mm(
-                np.full(len(b.pixels), r), mean_g.ravel()[b.pixels], b.pixels))
-                for b, r in zip(ranged, rho, strict=True)])  # fmt: skip
+            rho = np.array(
+                [
+                    r
+                    - np.median(
+                        correction.error_mm(
+                            np.full(len(b.pixels), r), mean_g.ravel()[b.pixels], b.pixels
+                        )
+                    )
+                    for b, r in zip(ranged, rho, strict=True)
+                ]
+            )
         pixels = [b.pixels for b in ranged]
-        sp = np.array([ref_sigmas.centroid_sigma_px(mean_g, b.pixels, b.centroid_uv, bg,
-                                                    b.source == "split", constants)
-                       for b in ranged])  # fmt: skip
+        sp = np.array(
+            [
+                ref_sigmas.centroid_sigma_px(
+                    mean_g, b.pixels, b.centroid_uv, bg, b.source == "split", constants
+                )
+                for b in ranged
+            ]
+        )
         sr = ref_sigmas.range_sigmas_mm(mean_g, med_d, pixels, bg, constants)
         np.testing.assert_array_equal(meas.uv_px, uv)
         np.testing.assert_allclose(meas.range_mm, rho, rtol=0, atol=1e-9)
         np.testing.assert_array_equal(meas.area_px, [b.area_px for b in ranged])
         np.testing.assert_allclose(meas.sigma_px, sp, rtol=1e-12)
         np.testing.assert_allclose(meas.sigma_range_mm, sr, rtol=1e-6)
-        np.testing.assert_allclose(meas.y_mm, ref_camera.back_project(uv, rho, cam.K,
-                                   cam.dist_array), rtol=0, atol=1e-8)  # fmt: skip
-        np.testing.assert_allclose(meas.weights, ref_sigmas.weights(rho, sr, sp, cam.fx),
-                                   rtol=1e-5)  # fmt: skip
+        np.testing.assert_allclose(
+            meas.y_mm, ref_camera.back_project(uv, rho, cam.K, cam.dist_array), rtol=0, atol=1e-8
+        )
+        np.testing.assert_allclose(meas.weights, ref_sigmas.weights(rho, sr, sp, cam.fx), rtol=1e-5)
         with_sums += int(np.isfinite(meas.mixing).all(axis=1).sum())
     assert "split" in sources
     assert with_sums > 0  # blobs whose surround has a range (the plate at 1.5 m) have sums

@@ -24,8 +24,10 @@ REALISTIC = SensorModel(systematic=SystematicErrors())
 
 def _poses(z_mm: float, n: int, seed: int):
     rng = np.random.default_rng(seed)
-    return [facing_pose(z_mm, *rng.uniform(-4, 4, 3), offset_mm=tuple(rng.uniform(-80, 80, 2)))
-            for _ in range(n)]  # fmt: skip
+    return [
+        facing_pose(z_mm, *rng.uniform(-4, 4, 3), offset_mm=tuple(rng.uniform(-80, 80, 2)))
+        for _ in range(n)
+    ]
 
 
 def _run(pipe, sensor, poses, seed=5):
@@ -49,8 +51,7 @@ def test_markers_with_systematic_range_errors_are_kept(z_mm):
     at most one), where the noise model alone drops them one by one to 3-4."""
     poses = _poses(z_mm, 4, seed=int(z_mm))
     adaptive = _run(PosePipeline(CAM, CAT), REALISTIC, poses)
-    fixed = _run(PosePipeline(CAM, CAT, PipelineConfig(adapt_range_sigma=False)), REALISTIC,
-                 poses)  # fmt: skip
+    fixed = _run(PosePipeline(CAM, CAT, PipelineConfig(adapt_range_sigma=False)), REALISTIC, poses)
     assert all(r.ok for r, _, _ in adaptive)
     assert all(r.n_matched >= n_view - 1 and n_view >= 6 for r, _, n_view in adaptive)
     assert np.median([r.n_matched for r, _, _ in fixed]) <= 5  # what the change fixes
@@ -60,8 +61,9 @@ def test_markers_with_systematic_range_errors_are_kept(z_mm):
 
 
 def _calibration(errors: SystematicErrors):
-    poses = [facing_pose(z, 3.0, -4.0, offset_mm=(100.0, -50.0))
-             for z in np.linspace(1200.0, 8000.0, 14)]  # fmt: skip
+    poses = [
+        facing_pose(z, 3.0, -4.0, offset_mm=(100.0, -50.0)) for z in np.linspace(1200.0, 8000.0, 14)
+    ]
     return calibration_frames(CAM, CAT, errors, poses, np.random.default_rng(11), time_s=WARM_S)
 
 
@@ -115,13 +117,20 @@ def test_outside_the_calibrated_span_the_covariance_takes_the_uncalibrated_range
         range_bias_sigma_mm=8.0, calibrated_range_bias_sigma_mm=2.0, estimate_range_offset=False
     )
     out = {}
-    for name, span in (("inside", (1200.0, 8000.0)), ("outside", (1200.0, 3000.0)),
-                       ("no span", None), ("bare", (1200.0, 8000.0))):  # fmt: skip
+    for name, span in (
+        ("inside", (1200.0, 8000.0)),
+        ("outside", (1200.0, 3000.0)),
+        ("no span", None),
+        ("bare", (1200.0, 8000.0)),
+    ):
         c = RangeCorrection(u, calibrated_span_mm=span)
         bias = 0.0 if name == "bare" else 1.0
-        pipe = PosePipeline(CAM, CAT, replace(cfg, range_bias_sigma_mm=8.0 * bias,
-                                                   calibrated_range_bias_sigma_mm=2.0 * bias),
-                            range_correction=c)  # fmt: skip
+        pipe = PosePipeline(
+            CAM,
+            CAT,
+            replace(cfg, range_bias_sigma_mm=8.0 * bias, calibrated_range_bias_sigma_mm=2.0 * bias),
+            range_correction=c,
+        )
         out[name] = pipe.process(f.gray, f.distance_mm)
     assert all(r.ok for r in out.values())
     np.testing.assert_allclose(out["outside"].t_mm, out["inside"].t_mm, atol=1e-9)

@@ -45,8 +45,20 @@ def _read(path: Path) -> dict[str, np.ndarray]:
             rows = list(csv.DictReader(fh))
     except OSError as exc:
         raise CompareError(f"{path}: cannot read ({exc.strerror})") from exc
-    need = ("frame", "ok", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz",
-            "pitch_deg", "yaw_deg", "roll_deg")  # fmt: skip
+    need = (
+        "frame",
+        "ok",
+        "x_mm",
+        "y_mm",
+        "z_mm",
+        "qw",
+        "qx",
+        "qy",
+        "qz",
+        "pitch_deg",
+        "yaw_deg",
+        "roll_deg",
+    )
     if not rows or any(k not in rows[0] for k in need):
         missing = [k for k in need if not rows or k not in rows[0]]
         raise CompareError(f"{path}: not a pose CSV (missing column {missing[0]})")
@@ -62,16 +74,23 @@ def _read(path: Path) -> dict[str, np.ndarray]:
 def _stats(x: np.ndarray) -> dict[str, float | None]:
     if not len(x):
         return {"p50": None, "p95": None, "max": None}
-    return {"p50": round(float(np.median(x)), 6), "p95": round(float(np.percentile(x, 95)), 6),
-            "max": round(float(np.max(x)), 6)}  # fmt: skip
+    return {
+        "p50": round(float(np.median(x)), 6),
+        "p95": round(float(np.percentile(x, 95)), 6),
+        "max": round(float(np.max(x)), 6),
+    }
 
 
 def compare_runs(run_a: str, run_b: str, out_dir: str | Path) -> dict:
     """Compare (module docstring); returns compare.json's content."""
     a_runs, b_runs = _runs(run_a), _runs(run_b)
     if Path(run_a).is_file() and Path(run_b).is_file():
-        pairs = {a_runs[next(iter(a_runs))].stem: (next(iter(a_runs.values())),
-                                                   next(iter(b_runs.values())))}  # fmt: skip
+        pairs = {
+            a_runs[next(iter(a_runs))].stem: (
+                next(iter(a_runs.values())),
+                next(iter(b_runs.values())),
+            )
+        }
     else:
         common = sorted(set(a_runs) & set(b_runs))
         if not common:
@@ -85,35 +104,57 @@ def compare_runs(run_a: str, run_b: str, out_dir: str | Path) -> dict:
     for name, (pa, pb) in pairs.items():
         a, b = _read(pa), _read(pb)
         if len(a["frame"]) != len(b["frame"]) or not np.array_equal(a["frame"], b["frame"]):
-            raise CompareError(f"{pa} and {pb} hold different frames "
-                               f"({len(a['frame'])} and {len(b['frame'])})")  # fmt: skip
+            raise CompareError(
+                f"{pa} and {pb} hold different frames ({len(a['frame'])} and {len(b['frame'])})"
+            )
         both = a["ok"] & b["ok"]
         att = np.full(len(both), np.nan)
         if both.any():  # angle of R_b R_a^T, stable near 0 (quaternions normalised)
-            qa, qb = (Rotation.from_quat(np.stack([q[k][both] for k in ("qx", "qy", "qz", "qw")],
-                                                  axis=1)) for q in (a, b))  # fmt: skip
+            qa, qb = (
+                Rotation.from_quat(np.stack([q[k][both] for k in ("qx", "qy", "qz", "qw")], axis=1))
+                for q in (a, b)
+            )
             att[both] = np.degrees((qb * qa.inv()).magnitude())
         shift = {k: b[k] - a[k] for k in SHIFTS}
         for k in ("pitch_deg", "yaw_deg", "roll_deg"):
             shift[k] = (shift[k] + 180.0) % 360.0 - 180.0
         pos = np.sqrt(shift["x_mm"] ** 2 + shift["y_mm"] ** 2 + shift["z_mm"] ** 2)
         summary["recordings"][name] = {
-            "frames": int(len(a["frame"])), "ok_a": int(a["ok"].sum()), "ok_b": int(b["ok"].sum()),
-            "gained": int((~a["ok"] & b["ok"]).sum()), "lost": int((a["ok"] & ~b["ok"]).sum()),
-            "attitude_diff_deg": _stats(att[both]), "position_diff_mm": _stats(pos[both]),
-            "mean_shift": {k: (round(float(np.mean(v[both])), 6) if both.any() else None)
-                           for k, v in shift.items()},
-        }  # fmt: skip
+            "frames": int(len(a["frame"])),
+            "ok_a": int(a["ok"].sum()),
+            "ok_b": int(b["ok"].sum()),
+            "gained": int((~a["ok"] & b["ok"]).sum()),
+            "lost": int((a["ok"] & ~b["ok"]).sum()),
+            "attitude_diff_deg": _stats(att[both]),
+            "position_diff_mm": _stats(pos[both]),
+            "mean_shift": {
+                k: (round(float(np.mean(v[both])), 6) if both.any() else None)
+                for k, v in shift.items()
+            },
+        }
         curves[name] = (a["frame"][both], att[both], pos[both])
         for i in range(len(a["frame"])):
-            per_frame.append([name, int(a["frame"][i]), int(a["ok"][i]), int(b["ok"][i])]
-                             + ([f"{att[i]:.6f}", f"{pos[i]:.4f}"]
-                                + [f"{shift[k][i]:.5f}" for k in SHIFTS]
-                                if both[i] else [""] * 8))  # fmt: skip
+            per_frame.append(
+                [name, int(a["frame"][i]), int(a["ok"][i]), int(b["ok"][i])]
+                + (
+                    [f"{att[i]:.6f}", f"{pos[i]:.4f}"] + [f"{shift[k][i]:.5f}" for k in SHIFTS]
+                    if both[i]
+                    else [""] * 8
+                )
+            )
     with open(out / "compare.csv", "w", newline="") as fh:
         wr = csv.writer(fh)
-        wr.writerow(["recording", "frame", "ok_a", "ok_b", "attitude_diff_deg",
-                     "position_diff_mm", *[f"d_{k}" for k in SHIFTS]])  # fmt: skip
+        wr.writerow(
+            [
+                "recording",
+                "frame",
+                "ok_a",
+                "ok_b",
+                "attitude_diff_deg",
+                "position_diff_mm",
+                *[f"d_{k}" for k in SHIFTS],
+            ]
+        )
         wr.writerows(per_frame)
     (out / "compare.json").write_text(json.dumps(summary, indent=2))
     fig = Figure(figsize=(11, 3.8))

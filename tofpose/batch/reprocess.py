@@ -91,8 +91,9 @@ def warmup_origin(start: int, k_frames: int, tracking: bool, reacquire_every: in
     return max(0, (start - (k_frames - 1) - n) // n * n)
 
 
-def plan(path: str, n_frames: int, chunk_frames: int, k_frames: int, tracking: bool,
-         reacquire_every: int) -> list[Chunk]:  # fmt: skip
+def plan(
+    path: str, n_frames: int, chunk_frames: int, k_frames: int, tracking: bool, reacquire_every: int
+) -> list[Chunk]:
     """The chunks of one recording of ``n_frames``."""
     starts = list(range(0, n_frames, chunk_frames))
     origins = [warmup_origin(s, k_frames, tracking, reacquire_every) for s in starts]
@@ -130,8 +131,9 @@ def run_chunk(chunk: Chunk, settings: Settings, out_dir: str) -> dict:
     times = np.zeros(n)
     warm, tail = [], []
     with open_recording(chunk.path) as rec:
-        pipe = pipeline_for(rec, chunk.path, settings.catalog_path, settings.camera_path,
-                            settings.tracking)  # fmt: skip
+        pipe = pipeline_for(
+            rec, chunk.path, settings.catalog_path, settings.camera_path, settings.tracking
+        )
         for first, (grays, dists, ts) in rec.blocks(chunk.origin, chunk.stop):
             for k, tk in enumerate(ts.tolist()):
                 i = first + k
@@ -152,8 +154,13 @@ def run_chunk(chunk: Chunk, settings: Settings, out_dir: str) -> dict:
     buf = io.BytesIO()
     np.savez(buf, ok=ok, R=R, t_mm=t_mm, covariance=cov, time_s=times)
     _write_atomic(chunks / f"{chunk.name}.npz", buf.getvalue())
-    return {"name": chunk.name, "warm": warm, "tail": tail, "ok": int(ok.sum()),
-            "seconds": time.perf_counter() - t0}  # fmt: skip
+    return {
+        "name": chunk.name,
+        "warm": warm,
+        "tail": tail,
+        "ok": int(ok.sum()),
+        "seconds": time.perf_counter() - t0,
+    }
 
 
 def synced_frame(previous: Chunk, prev_result: dict, chunk: Chunk, result: dict) -> int | None:
@@ -173,11 +180,18 @@ def _now() -> str:
 
 
 def reprocess(
-    recordings: list[str], out_dir: str | Path, *, settings: Settings | None = None,
-    workers: int | None = None, scheduler: str | None = None, filter_state: bool = False,
-    chunk_frames: int = DEFAULT_CHUNK_FRAMES, progress: bool = True,
-    should_stop=None, niceness: int = 0,
-) -> dict:  # fmt: skip
+    recordings: list[str],
+    out_dir: str | Path,
+    *,
+    settings: Settings | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    filter_state: bool = False,
+    chunk_frames: int = DEFAULT_CHUNK_FRAMES,
+    progress: bool = True,
+    should_stop=None,
+    niceness: int = 0,
+) -> dict:
     """Re-process ``recordings`` into ``out_dir``: ``<stem>.csv`` per recording (what
     ``tofpose estimate`` writes for it), ``chunks/``, and ``reprocess.json`` (returned):
     settings, per recording its frames, poses and chunk boundaries, and the run's
@@ -202,22 +216,31 @@ def reprocess(
     chunks: dict[str, list[Chunk]] = {}
     for path in recordings:
         with open_recording(path) as rec:  # RecordingError names what is wrong
-            pipe = pipeline_for(rec, path, settings.catalog_path, settings.camera_path,
-                                settings.tracking)  # fmt: skip
+            pipe = pipeline_for(
+                rec, path, settings.catalog_path, settings.camera_path, settings.tracking
+            )
             cfg = pipe.config
-            chunks[path] = plan(str(path), rec.n_frames, chunk_frames, cfg.persistence.k_frames,
-                                settings.tracking, cfg.tracking.reacquire_every)  # fmt: skip
+            chunks[path] = plan(
+                str(path),
+                rec.n_frames,
+                chunk_frames,
+                cfg.persistence.k_frames,
+                settings.tracking,
+                cfg.tracking.reacquire_every,
+            )
     total = sum(c.stop - c.start for cs in chunks.values() for c in cs)
     t0 = time.perf_counter()
     results: dict[Chunk, dict] = {}
     boundaries: dict[str, list[dict]] = {p: [] for p in recordings}
-    bar = tqdm(total=total, unit="frame", desc="reprocess", disable=not progress,
-               file=sys.stderr)  # fmt: skip
+    bar = tqdm(total=total, unit="frame", desc="reprocess", disable=not progress, file=sys.stderr)
     with dask_client(workers, scheduler, niceness=niceness) as client:
         n_workers = len(client.scheduler_info()["workers"])
         t_connected = time.perf_counter()
-        futures = {client.submit(run_chunk, c, settings, str(out), pure=False): c
-                   for cs in chunks.values() for c in cs}  # fmt: skip
+        futures = {
+            client.submit(run_chunk, c, settings, str(out), pure=False): c
+            for cs in chunks.values()
+            for c in cs
+        }
         for fut in as_completed(list(futures)):
             if should_stop is not None and should_stop():
                 client.cancel(list(futures))
@@ -235,32 +258,51 @@ def reprocess(
                     continue
                 # run again from the previous chunk's origin: its verified run, carried on
                 again = Chunk(path, j, prev.origin, cur.start, cur.stop, cur.tail)
-                results[cur] = client.submit(run_chunk, again, settings, str(out),
-                                             pure=False).result()  # fmt: skip
+                results[cur] = client.submit(
+                    run_chunk, again, settings, str(out), pure=False
+                ).result()
                 cs[j] = again
                 results[again] = results[cur]
                 reruns += 1
-                boundaries[path].append({"chunk": j, "start": cur.start,
-                                         "continued_from_frame": prev.origin})  # fmt: skip
+                boundaries[path].append(
+                    {"chunk": j, "start": cur.start, "continued_from_frame": prev.origin}
+                )
     bar.close()
     wall_s = time.perf_counter() - t0
     work_s = time.perf_counter() - t_connected
-    summary = {"format": "tofpose-reprocess", "finished": _now(), "settings": asdict(settings),
-               "filter": filter_state, "chunk_frames": chunk_frames, "recordings": []}  # fmt: skip
+    summary = {
+        "format": "tofpose-reprocess",
+        "finished": _now(),
+        "settings": asdict(settings),
+        "filter": filter_state,
+        "chunk_frames": chunk_frames,
+        "recordings": [],
+    }
     for path, cs in chunks.items():
         csv_path = out / f"{Path(path).stem}.csv"
         n_ok = _concatenate(cs, out, csv_path, filter_state)
-        summary["recordings"].append({
-            "path": str(path), "csv": csv_path.name, "frames": cs[-1].stop if cs else 0,
-            "ok": n_ok, "chunks": len(cs), "boundaries": boundaries[path]})  # fmt: skip
-    summary["run"] = {"workers": n_workers, "cluster": scheduler or f"LocalCluster({n_workers})",
-                      "frames": total, "wall_s": wall_s, "cluster_start_s": wall_s - work_s,
-                      # from the cluster's start to the last chunk's CSV
-                      "frames_per_s": total / work_s if work_s > 0 else None,
-                      # once warm: frames output over the chunks' own time, times the workers
-                      "frames_per_s_warm": total * n_workers
-                      / sum(r["seconds"] for r in results.values()),
-                      "chunks_run_again": reruns}  # fmt: skip
+        summary["recordings"].append(
+            {
+                "path": str(path),
+                "csv": csv_path.name,
+                "frames": cs[-1].stop if cs else 0,
+                "ok": n_ok,
+                "chunks": len(cs),
+                "boundaries": boundaries[path],
+            }
+        )
+    summary["run"] = {
+        "workers": n_workers,
+        "cluster": scheduler or f"LocalCluster({n_workers})",
+        "frames": total,
+        "wall_s": wall_s,
+        "cluster_start_s": wall_s - work_s,
+        # from the cluster's start to the last chunk's CSV
+        "frames_per_s": total / work_s if work_s > 0 else None,
+        # once warm: frames output over the chunks' own time, times the workers
+        "frames_per_s_warm": total * n_workers / sum(r["seconds"] for r in results.values()),
+        "chunks_run_again": reruns,
+    }
     import json
 
     (out / "reprocess.json").write_text(json.dumps(summary, indent=2))
@@ -285,8 +327,7 @@ def _concatenate(cs: list[Chunk], out: Path, csv_path: Path, filter_state: bool)
                 fh.write(text)
                 continue
             for k, row in enumerate(csv.reader(io.StringIO(text))):
-                pose = ((raw["R"][k], raw["t_mm"][k], raw["covariance"][k])
-                        if raw["ok"][k] else ())  # fmt: skip
+                pose = (raw["R"][k], raw["t_mm"][k], raw["covariance"][k]) if raw["ok"][k] else ()
                 wr.writerow(row + filter_row(rel, float(raw["time_s"][k]), *pose))
     os.replace(tmp, csv_path)
     return n_ok

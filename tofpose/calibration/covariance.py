@@ -46,8 +46,12 @@ def pose_nees(
 ) -> float:
     """NEES of one pose (R (3, 3), t (3,) mm) with its covariance (6, 6) over (rotation
     vector rad, translation mm), the pipeline's left perturbation, against a reference."""
-    e = np.concatenate([Rotation.from_matrix(R @ np.asarray(R_ref).T).as_rotvec(),
-                        np.asarray(t_mm) - np.asarray(t_ref_mm)])  # fmt: skip
+    e = np.concatenate(
+        [
+            Rotation.from_matrix(R @ np.asarray(R_ref).T).as_rotvec(),
+            np.asarray(t_mm) - np.asarray(t_ref_mm),
+        ]
+    )
     return float(e @ np.linalg.solve(covariance, e))
 
 
@@ -80,15 +84,18 @@ class CovarianceScale:
         return float(np.interp(math.log(max(range_mm, 1e-9)), logs, self.factors))
 
     def to_dict(self) -> dict:
-        return {"ranges_mm": [float(v) for v in self.ranges_mm],
-                "factors": [float(v) for v in self.factors]}  # fmt: skip
+        return {
+            "ranges_mm": [float(v) for v in self.ranges_mm],
+            "factors": [float(v) for v in self.factors],
+        }
 
     @staticmethod
     def from_dict(d: dict) -> CovarianceScale:
         """Parse ``to_dict``'s form; ``ValueError`` naming what is missing or wrong."""
         try:
-            return CovarianceScale(tuple(float(v) for v in d["ranges_mm"]),
-                                   tuple(float(v) for v in d["factors"]))  # fmt: skip
+            return CovarianceScale(
+                tuple(float(v) for v in d["ranges_mm"]), tuple(float(v) for v in d["factors"])
+            )
         except KeyError as exc:
             raise ValueError(f"covariance scale lacks {exc.args[0]!r}") from None
         except TypeError as exc:
@@ -110,9 +117,11 @@ class CovarianceFit:
 
 
 def fit_covariance_scale(
-    range_mm: Sequence[float], nees: Sequence[float], knots_mm: Sequence[float],
+    range_mm: Sequence[float],
+    nees: Sequence[float],
+    knots_mm: Sequence[float],
     min_frames: int = MIN_FRAMES_PER_KNOT,
-) -> CovarianceFit:  # fmt: skip
+) -> CovarianceFit:
     """Factors at ``knots_mm`` from frames at target distances ``range_mm`` (n,) whose
     unscaled covariance gave ``nees`` (n,). ``ValueError`` naming the knots with fewer
     than ``min_frames`` frames."""
@@ -152,8 +161,9 @@ def auto_knots(
     n = max(int(np.ceil((logs.max() - logs.min()) / math.log(ratio))), 0) + 1
     knots = list(np.linspace(logs.min(), logs.max(), n)) if n > 1 else [float(logs.mean())]
     while len(knots) > 1:
-        counts = np.bincount(np.argmin(np.abs(logs[:, None] - np.array(knots)[None]), axis=1),
-                             minlength=len(knots))  # fmt: skip
+        counts = np.bincount(
+            np.argmin(np.abs(logs[:, None] - np.array(knots)[None]), axis=1), minlength=len(knots)
+        )
         if counts.min() >= min_frames:
             break
         knots.pop(int(np.argmin(counts)))

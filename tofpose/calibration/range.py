@@ -80,13 +80,20 @@ class RangeCorrection:
         (4,)
         (unambiguous range, offset, amplitude mm per decade, amplitude reference), (k, 2)
         harmonics, (H * W,) pixel offsets (empty when not fitted), all float64."""
-        model = np.array([
-            self.unambiguous_range_mm, self.offset_mm, self.amplitude_mm_per_decade,
-            self.amplitude_reference_counts,
-        ])  # fmt: skip
+        model = np.array(
+            [
+                self.unambiguous_range_mm,
+                self.offset_mm,
+                self.amplitude_mm_per_decade,
+                self.amplitude_reference_counts,
+            ]
+        )
         harmonics = np.array(self.harmonics_mm, float).reshape(-1, 2)
-        offsets = (np.zeros(0) if self.pixel_offsets_mm is None
-                   else np.ascontiguousarray(self.pixel_offsets_mm, float).ravel())  # fmt: skip
+        offsets = (
+            np.zeros(0)
+            if self.pixel_offsets_mm is None
+            else np.ascontiguousarray(self.pixel_offsets_mm, float).ravel()
+        )
         return model, harmonics, offsets
 
     def to_dict(self) -> dict:

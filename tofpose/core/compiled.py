@@ -62,8 +62,10 @@ def kernel_cache_dir() -> Path:
     name = f"{_PREFIX}{kernel_sources_digest()}"
     if os.environ.get("NUMBA_CACHE_DIR"):
         return Path(os.environ["NUMBA_CACHE_DIR"]) / name
-    for base in (_HERE / "__pycache__",
-                 Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "tofpose"):
+    for base in (
+        _HERE / "__pycache__",
+        Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "tofpose",
+    ):
         if _writable(base / name):
             return base / name
     return _HERE / "__pycache__" / name  # numba then compiles in memory, each process

@@ -136,11 +136,14 @@ class GateSettings(NamedTuple):
 def camera_record(camera) -> CameraRecord:
     """A ``tofpose.core.camera.CameraModel`` as kernels read it (contiguous float64 arrays)."""
     return CameraRecord(
-        fx=float(camera.fx), fy=float(camera.fy), cx=float(camera.cx), cy=float(camera.cy),
+        fx=float(camera.fx),
+        fy=float(camera.fy),
+        cx=float(camera.cx),
+        cy=float(camera.cy),
         dist=np.ascontiguousarray(camera.dist_array, dtype=np.float64),
         K=np.ascontiguousarray(camera.K, dtype=np.float64),
         pixel_bearings=np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3)),
-    )  # fmt: skip
+    )
 
 
 def catalog_record(catalog) -> CatalogRecord:

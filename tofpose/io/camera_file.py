@@ -24,8 +24,11 @@ def load_camera(text: str) -> tuple[CameraModel, RangeCorrection | None, Covaria
     camera = CameraModel.from_json(text)
     doc = json.loads(text)
     rc, cs = doc.get("range_correction"), doc.get("covariance_scale")
-    return (camera, RangeCorrection.from_dict(rc) if rc is not None else None,
-            CovarianceScale.from_dict(cs) if cs is not None else None)  # fmt: skip
+    return (
+        camera,
+        RangeCorrection.from_dict(rc) if rc is not None else None,
+        CovarianceScale.from_dict(cs) if cs is not None else None,
+    )
 
 
 def read_text_file(path: str, what: str) -> str:
@@ -56,5 +59,6 @@ def pipeline_for(
             f"{rec.camera.width}x{rec.camera.height} frames"
         )
     config = PipelineConfig(tracking=TrackingConfig(enabled=tracking))
-    return PosePipeline(camera, catalog, config, range_correction=correction,
-                        covariance_scale=scale)  # fmt: skip
+    return PosePipeline(
+        camera, catalog, config, range_correction=correction, covariance_scale=scale
+    )

@@ -10,12 +10,30 @@ import numpy as np
 from tofpose.lab.relative_state import STATE_COLUMNS, RelativeStateFilter
 
 CSV_COLUMNS = (
-    "frame", "time_s", "ok", "n_matched", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz",
-    "pitch_deg", "yaw_deg", "roll_deg", "residual_mm",
+    "frame",
+    "time_s",
+    "ok",
+    "n_matched",
+    "x_mm",
+    "y_mm",
+    "z_mm",
+    "qw",
+    "qx",
+    "qy",
+    "qz",
+    "pitch_deg",
+    "yaw_deg",
+    "roll_deg",
+    "residual_mm",
     # appended later (readers of the columns above keep working): the pose's predicted
     # 1-sigma, position and rotation-vector components
-    "sigma_x_mm", "sigma_y_mm", "sigma_z_mm", "sigma_rx_deg", "sigma_ry_deg", "sigma_rz_deg",
-)  # fmt: skip
+    "sigma_x_mm",
+    "sigma_y_mm",
+    "sigma_z_mm",
+    "sigma_rx_deg",
+    "sigma_ry_deg",
+    "sigma_rz_deg",
+)
 
 #: with ``estimate --filter``: the relative-state filter's state at each frame
 #: (``tofpose.lab.relative_state``): angular rate in the camera frame, velocity, their 1-sigma,
@@ -45,6 +63,10 @@ def filter_row(rel: RelativeStateFilter, time_s: float, R=None, t_mm=None, covar
     s = rel.step(time_s, R, t_mm, covariance)
     if s is None:
         return [""] * len(FILTER_COLUMNS)
-    return ([f"{v:.4f}" for v in s.angular_rate_deg_s] + [f"{v:.3f}" for v in s.velocity_mm_s]
-            + [f"{v:.4f}" for v in s.angular_rate_sigma_deg_s]
-            + [f"{v:.3f}" for v in s.velocity_sigma_mm_s] + [s.status])  # fmt: skip
+    return (
+        [f"{v:.4f}" for v in s.angular_rate_deg_s]
+        + [f"{v:.3f}" for v in s.velocity_mm_s]
+        + [f"{v:.4f}" for v in s.angular_rate_sigma_deg_s]
+        + [f"{v:.3f}" for v in s.velocity_sigma_mm_s]
+        + [s.status]
+    )

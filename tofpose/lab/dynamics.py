@@ -107,9 +107,11 @@ def fit_latency(
     best = grid[int(np.argmin([cost(d) for d in grid]))]
     step = grid[1] - grid[0]
     sol = minimize_scalar(
-        cost, bounds=(max(best - step, -max_delay_s), min(best + step, max_delay_s)),
-        method="bounded", options={"xatol": 1e-6},
-    )  # fmt: skip
+        cost,
+        bounds=(max(best - step, -max_delay_s), min(best + step, max_delay_s)),
+        method="bounded",
+        options={"xatol": 1e-6},
+    )
     delay = float(sol.x)
     e = _residuals(spline, t, meas, delay)
     offset = e.mean(axis=0)
@@ -127,10 +129,14 @@ def fit_latency(
     n_eff = n * (1 - rho) / (1 + rho)
     sigma = np.sqrt(s2 / info) * np.sqrt(n / max(n_eff, 1.0))
     return LatencyFit(
-        delay_s=delay, sigma_s=float(sigma), offset_deg=np.degrees(offset),
+        delay_s=delay,
+        sigma_s=float(sigma),
+        offset_deg=np.degrees(offset),
         residual_rms_deg=float(np.degrees(np.sqrt(np.mean(np.sum(r**2, axis=1))))),
-        n_frames=n, n_effective=float(n_eff), peak_rate_deg_s=peak,
-    )  # fmt: skip
+        n_frames=n,
+        n_effective=float(n_eff),
+        peak_rate_deg_s=peak,
+    )
 
 
 def _lag_one_autocorrelation(r: np.ndarray) -> float:

@@ -74,31 +74,51 @@ class _Profile:
         return replace(self, start_deg=float(start_deg))
 
     def limit_problems(
-        self, axis: str, min_deg: float, max_deg: float, max_rate_deg_s: float,
+        self,
+        axis: str,
+        min_deg: float,
+        max_deg: float,
+        max_rate_deg_s: float,
         max_accel_deg_s2: float,
-    ) -> list[LimitProblem]:  # fmt: skip
+    ) -> list[LimitProblem]:
         """Every limit of ``axis`` this profile (run from its ``start_deg``) would break:
         soft limits, rate limit, acceleration limit (empty when it can run)."""
         lo, hi = self.angle_range_deg
         travel_field, rate_field, accel_field = self.limit_fields
         out = []
         if lo < min_deg or hi > max_deg:
-            out.append(LimitProblem(travel_field, (
-                f"{axis} would sweep [{lo:.6g}, {hi:.6g}] deg from {self.start_deg:.6g} deg, "
-                f"beyond its soft limits [{min_deg:.6g}, {max_deg:.6g}] deg "
-                f"({self._travel_words})"
-            )))  # fmt: skip
+            out.append(
+                LimitProblem(
+                    travel_field,
+                    (
+                        f"{axis} would sweep [{lo:.6g}, {hi:.6g}] deg "
+                        f"from {self.start_deg:.6g} deg, "
+                        f"beyond its soft limits [{min_deg:.6g}, {max_deg:.6g}] deg "
+                        f"({self._travel_words})"
+                    ),
+                )
+            )
         if self.peak_rate_deg_s > max_rate_deg_s:
-            out.append(LimitProblem(rate_field, (
-                f"peak rate {self.peak_rate_deg_s:.6g} deg/s ({self.rate_words}) exceeds "
-                f"the {axis} rate limit of {max_rate_deg_s:.6g} deg/s"
-            )))  # fmt: skip
+            out.append(
+                LimitProblem(
+                    rate_field,
+                    (
+                        f"peak rate {self.peak_rate_deg_s:.6g} deg/s ({self.rate_words}) exceeds "
+                        f"the {axis} rate limit of {max_rate_deg_s:.6g} deg/s"
+                    ),
+                )
+            )
         if self.peak_accel_deg_s2 > max_accel_deg_s2:
-            out.append(LimitProblem(accel_field, (
-                f"peak acceleration {self.peak_accel_deg_s2:.6g} deg/s^2 "
-                f"({self.accel_words}) exceeds the {axis} acceleration limit of "
-                f"{max_accel_deg_s2:.6g} deg/s^2"
-            )))  # fmt: skip
+            out.append(
+                LimitProblem(
+                    accel_field,
+                    (
+                        f"peak acceleration {self.peak_accel_deg_s2:.6g} deg/s^2 "
+                        f"({self.accel_words}) exceeds the {axis} acceleration limit of "
+                        f"{max_accel_deg_s2:.6g} deg/s^2"
+                    ),
+                )
+            )
         return out
 
 
@@ -159,8 +179,9 @@ class SineProfile(_Profile):
     def accel_deg_s2_at(self, t_s):
         """Acceleration, deg/s^2 (0 at both ends)."""
         w, e, de, d2e, s, c = self._terms(t_s)
-        return _scalar_or_array(self.amplitude_deg * (d2e * s + 2 * de * w * c - e * w * w * s),
-                                t_s)  # fmt: skip
+        return _scalar_or_array(
+            self.amplitude_deg * (d2e * s + 2 * de * w * c - e * w * w * s), t_s
+        )
 
     @cached_property
     def _fade_peaks(self) -> tuple[float, float]:
@@ -238,10 +259,14 @@ class RampProfile(_Profile):
         """Angle, deg, at ``t_s`` seconds from the start (scalar or array)."""
         t, left, speeding, slowing, a = self._phases(t_s)
         s = np.where(
-            speeding, 0.5 * a * t * t,
-            np.where(slowing, self.travel_deg - 0.5 * a * left * left,
-                     self.rate_deg_s * (t - 0.5 * self.ramp_s)),
-        )  # fmt: skip
+            speeding,
+            0.5 * a * t * t,
+            np.where(
+                slowing,
+                self.travel_deg - 0.5 * a * left * left,
+                self.rate_deg_s * (t - 0.5 * self.ramp_s),
+            ),
+        )
         return _scalar_or_array(self.start_deg + s, t_s)
 
     def rate_deg_s_at(self, t_s):
@@ -268,8 +293,10 @@ class RampProfile(_Profile):
 
     @property
     def _travel_words(self) -> str:
-        return (f"rate_deg_s {self.rate_deg_s:.6g} for hold_s {self.hold_s:.6g} plus "
-                f"the ramps: {self.travel_deg:.6g} deg")  # fmt: skip
+        return (
+            f"rate_deg_s {self.rate_deg_s:.6g} for hold_s {self.hold_s:.6g} plus "
+            f"the ramps: {self.travel_deg:.6g} deg"
+        )
 
 
 MotionProfile = SineProfile | RampProfile

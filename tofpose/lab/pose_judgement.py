@@ -84,5 +84,9 @@ def judge(ok, attitude_error_deg, position_error_mm, d2, range_mm) -> dict[str, 
         success = ok & (att <= SUCCESS_ATTITUDE_DEG) & (pos <= tol)
         wrong = ok & ((att > WRONG_ATTITUDE_DEG) | (pos > WRONG_POSITION_FACTOR * tol))
         beyond = ok & ~(np.asarray(d2, float) <= CHI2_6_3SIGMA)
-    return {"success": success, "wrong": wrong, "beyond_3sigma": beyond,
-            "confidently_wrong": wrong & beyond}  # fmt: skip
+    return {
+        "success": success,
+        "wrong": wrong,
+        "beyond_3sigma": beyond,
+        "confidently_wrong": wrong & beyond,
+    }

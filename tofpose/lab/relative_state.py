@@ -70,10 +70,20 @@ Status = Literal["initialised", "updated", "rejected", "reset", "predicted"]
 #: a state as table columns (the CSV of ``tofpose estimate --filter``, campaign rows and
 #: reports): camera-frame angular rate deg/s and velocity mm/s, their 1-sigma, status
 STATE_COLUMNS = (
-    "rate_x_deg_s", "rate_y_deg_s", "rate_z_deg_s", "vel_x_mm_s", "vel_y_mm_s", "vel_z_mm_s",
-    "sigma_rate_x_deg_s", "sigma_rate_y_deg_s", "sigma_rate_z_deg_s",
-    "sigma_vel_x_mm_s", "sigma_vel_y_mm_s", "sigma_vel_z_mm_s", "filter_status",
-)  # fmt: skip
+    "rate_x_deg_s",
+    "rate_y_deg_s",
+    "rate_z_deg_s",
+    "vel_x_mm_s",
+    "vel_y_mm_s",
+    "vel_z_mm_s",
+    "sigma_rate_x_deg_s",
+    "sigma_rate_y_deg_s",
+    "sigma_rate_z_deg_s",
+    "sigma_vel_x_mm_s",
+    "sigma_vel_y_mm_s",
+    "sigma_vel_z_mm_s",
+    "filter_status",
+)
 
 
 @dataclass(frozen=True)
@@ -115,8 +125,10 @@ class RelativeStateConfig:
         changes over seconds (a turntable's sine of a few deg and seconds, a nutating
         tumble): white angular jerk of density (30 deg)^2 / s^5, and white angular
         acceleration of (1 deg)^2 / s^3 beside it."""
-        base = {"angular_accel_psd": math.radians(1.0) ** 2,
-                "angular_jerk_psd": math.radians(30.0) ** 2}  # fmt: skip
+        base = {
+            "angular_accel_psd": math.radians(1.0) ** 2,
+            "angular_jerk_psd": math.radians(30.0) ** 2,
+        }
         return cls(**{**base, **changes})
 
     @property
@@ -193,8 +205,11 @@ def _left_jacobian(phi: np.ndarray) -> np.ndarray:
     K = _skew(phi)
     if angle < 1e-6:
         return np.eye(3) + 0.5 * K + K @ K / 6.0
-    return (np.eye(3) + (1.0 - math.cos(angle)) / angle**2 * K
-            + (angle - math.sin(angle)) / angle**3 * K @ K)  # fmt: skip
+    return (
+        np.eye(3)
+        + (1.0 - math.cos(angle)) / angle**2 * K
+        + (angle - math.sin(angle)) / angle**3 * K @ K
+    )
 
 
 def _lever_arm(q: float, t_mm: np.ndarray) -> np.ndarray:
@@ -284,8 +299,14 @@ class RelativeStateFilter:
         P = F @ self._P @ F.T + Q
         return R, t_new, w_new, v_new, a.copy(), b.copy(), 0.5 * (P + P.T)
 
-    def _start(self, time_s: float, R: np.ndarray, t_mm: np.ndarray, cov: np.ndarray,
-               before: tuple | None = None) -> None:  # fmt: skip
+    def _start(
+        self,
+        time_s: float,
+        R: np.ndarray,
+        t_mm: np.ndarray,
+        cov: np.ndarray,
+        before: tuple | None = None,
+    ) -> None:
         """Start from a pose (rate and velocity unknown: the initial sigmas), or, with
         ``before`` = (time_s, R, t_mm, cov) of an earlier pose of the same motion, with the
         rate and velocity of the two and their covariance (the difference of two poses
@@ -305,8 +326,9 @@ class RelativeStateFilter:
             self._P[15:18, 15:18] = _lever_arm(var_a * cfg.centre_fraction**2, self._t)
         if before is not None and time_s - before[0] > 1e-6:
             dt = float(time_s - before[0])
-            x = np.concatenate([_log(self._R @ np.asarray(before[1]).T),
-                                self._t - np.asarray(before[2], float)])  # fmt: skip
+            x = np.concatenate(
+                [_log(self._R @ np.asarray(before[1]).T), self._t - np.asarray(before[2], float)]
+            )
             self._w, self._v = x[:3] / dt, x[3:] / dt
             self._P[6:12, 6:12] = (cov + before[3]) / dt**2  # of (x1 - x0) / dt
             self._P[:6, 6:12] = self._P[6:12, :6] = cov / dt  # cov(x1, (x1 - x0) / dt)
@@ -317,8 +339,9 @@ class RelativeStateFilter:
                 var_a = math.radians(cfg.initial_accel_sigma_deg_s2) ** 2
                 h2 = (dt / 2) ** 2
                 self._P[6:9, 6:9] += h2 * var_a * np.eye(3)
-                self._P[9:12, 9:12] += h2 * _lever_arm(var_a * (1 + cfg.centre_fraction**2),
-                                                       self._t)  # fmt: skip
+                self._P[9:12, 9:12] += h2 * _lever_arm(
+                    var_a * (1 + cfg.centre_fraction**2), self._t
+                )
                 self._P[6:9, 12:15] = self._P[12:15, 6:9] = dt / 2 * var_a * np.eye(3)
         self._rejected = []
 
@@ -333,8 +356,9 @@ class RelativeStateFilter:
         self._time_s = float(time_s)
 
     # -- the interface ---------------------------------------------------------------------
-    def update(self, time_s: float, R: np.ndarray, t_mm: np.ndarray,
-               covariance: np.ndarray) -> RelativeState:  # fmt: skip
+    def update(
+        self, time_s: float, R: np.ndarray, t_mm: np.ndarray, covariance: np.ndarray
+    ) -> RelativeState:
         """Fuse a pose (R (3, 3) R_camera_target, t_mm (3,), covariance (6, 6) rotation
         vector rad then mm, the pipeline's) taken at ``time_s``."""
         cov = np.asarray(covariance, float)
@@ -347,8 +371,9 @@ class RelativeStateFilter:
             self._status, self._d2 = "initialised", float("nan")
             return self.state()
         self._advance(time_s)
-        y = np.concatenate([_log(np.asarray(R, float) @ self._R.T),
-                            np.asarray(t_mm, float) - self._t])  # fmt: skip
+        y = np.concatenate(
+            [_log(np.asarray(R, float) @ self._R.T), np.asarray(t_mm, float) - self._t]
+        )
         S = self._P[:6, :6] + cov
         d2 = float(y @ np.linalg.solve(S, y))
         self._d2 = d2
@@ -399,8 +424,13 @@ class RelativeStateFilter:
                 return False
         return True
 
-    def step(self, time_s: float, R: np.ndarray | None, t_mm: np.ndarray | None,
-             covariance: np.ndarray | None) -> RelativeState | None:  # fmt: skip
+    def step(
+        self,
+        time_s: float,
+        R: np.ndarray | None,
+        t_mm: np.ndarray | None,
+        covariance: np.ndarray | None,
+    ) -> RelativeState | None:
         """One frame as it comes from the pipeline: its pose fused (``update``) when it
         has one, else the state predicted to its time (``predict``); None before the
         first pose. A frame older than the filter's state (a replayed recording that
@@ -434,24 +464,38 @@ class RelativeStateFilter:
         """The state at the last step's time."""
         if not self.initialised:
             raise RuntimeError("the filter has no state yet: it starts with a pose")
-        return self._state(self._time_s, self._R, self._t, self._w, self._v, self._P,
-                           self._status)  # fmt: skip
+        return self._state(self._time_s, self._R, self._t, self._w, self._v, self._P, self._status)
 
     def _state(self, time_s, R, t, w, v, P, status) -> RelativeState:
         return RelativeState(
-            time_s=time_s, R=R.copy(), t_mm=t.copy(), angular_rate_deg_s=np.degrees(w),
-            angular_rate_target_deg_s=np.degrees(R.T @ w), velocity_mm_s=v.copy(),
-            covariance=P[:12, :12].copy(), status=status, innovation_d2=self._d2,
+            time_s=time_s,
+            R=R.copy(),
+            t_mm=t.copy(),
+            angular_rate_deg_s=np.degrees(w),
+            angular_rate_target_deg_s=np.degrees(R.T @ w),
+            velocity_mm_s=v.copy(),
+            covariance=P[:12, :12].copy(),
+            status=status,
+            innovation_d2=self._d2,
             n_rejected=len(self._rejected),
-        )  # fmt: skip
+        )
 
 
-def state_error(state: RelativeState, R_true: np.ndarray, t_true_mm: np.ndarray,
-                w_true_rad_s: np.ndarray, v_true_mm_s: np.ndarray) -> np.ndarray:  # fmt: skip
+def state_error(
+    state: RelativeState,
+    R_true: np.ndarray,
+    t_true_mm: np.ndarray,
+    w_true_rad_s: np.ndarray,
+    v_true_mm_s: np.ndarray,
+) -> np.ndarray:
     """(12,) error of a state against truth in the filter's error-state convention
     (rotation vector of ``R R_true^T`` rad, mm, rad/s, mm/s); ``e @ inv(P) @ e`` is its
     NEES."""
-    return np.concatenate([
-        _log(state.R @ np.asarray(R_true).T), state.t_mm - t_true_mm,
-        np.radians(state.angular_rate_deg_s) - w_true_rad_s, state.velocity_mm_s - v_true_mm_s,
-    ])  # fmt: skip
+    return np.concatenate(
+        [
+            _log(state.R @ np.asarray(R_true).T),
+            state.t_mm - t_true_mm,
+            np.radians(state.angular_rate_deg_s) - w_true_rad_s,
+            state.velocity_mm_s - v_true_mm_s,
+        ]
+    )

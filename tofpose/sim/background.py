@@ -53,9 +53,14 @@ class SceneBackground:
 
     @classmethod
     def from_frame(
-        cls, gray: np.ndarray, distance_mm: np.ndarray, camera: CameraModel,
-        illumination_gain: float, integration_time_us: float, dark_counts: float = 0.0,
-    ) -> SceneBackground:  # fmt: skip
+        cls,
+        gray: np.ndarray,
+        distance_mm: np.ndarray,
+        camera: CameraModel,
+        illumination_gain: float,
+        integration_time_us: float,
+        dark_counts: float = 0.0,
+    ) -> SceneBackground:
         """From a recorded (gray, distance) pair of a scene without the target: the
         reflectance each pixel's amplitude implies at its distance, ``(gray - dark) *
         d^2 / (K * T)`` (``K`` = ``illumination_gain``, ``T`` = ``integration_time_us``
@@ -77,9 +82,13 @@ class SceneBackground:
 
     @classmethod
     def from_recording(
-        cls, path: str | Path, index: int, illumination_gain: float,
-        integration_time_us: float, dark_counts: float = 0.0,
-    ) -> SceneBackground:  # fmt: skip
+        cls,
+        path: str | Path,
+        index: int,
+        illumination_gain: float,
+        integration_time_us: float,
+        dark_counts: float = 0.0,
+    ) -> SceneBackground:
         """Frame ``index`` of a recording (``tofpose.io.recording``) as a background, through
         the recording's camera (``from_frame``)."""
         from tofpose.io.recording import open_recording
@@ -88,8 +97,9 @@ class SceneBackground:
             if not 0 <= index < rec.n_frames:
                 raise IndexError(f"{path} has {rec.n_frames} frames, no frame {index}")
             gray, dist, _ = rec.frame(index)
-            return cls.from_frame(gray, dist, rec.camera, illumination_gain,
-                                  integration_time_us, dark_counts)  # fmt: skip
+            return cls.from_frame(
+                gray, dist, rec.camera, illumination_gain, integration_time_us, dark_counts
+            )
 
     def along(self, bearings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(distance_mm, reflectance), each (M,), for unit rays (M, 3) from the camera
@@ -158,9 +168,12 @@ def _keep(hits, s, rho):
 
 
 def synthetic_room(
-    camera: CameraModel, rng: np.random.Generator, target_range_mm: float,
-    target_centre_mm: np.ndarray | None = None, arm_probability: float = 0.3,
-) -> SceneBackground:  # fmt: skip
+    camera: CameraModel,
+    rng: np.random.Generator,
+    target_range_mm: float,
+    target_centre_mm: np.ndarray | None = None,
+    arm_probability: float = 0.3,
+) -> SceneBackground:
     """A random indoor lab scene around a target at ``target_range_mm`` (its centre at
     ``target_centre_mm`` in the camera frame, default on the optical axis): a back wall
     1-4 m behind the target (reflectance 0.2-0.8), a floor 0.8-1.5 m below the camera
@@ -177,8 +190,11 @@ def synthetic_room(
     d = np.full(len(rays), np.inf)
     rho = np.zeros(len(rays))
     hits = (d, rho)
-    centre = (np.array([0.0, 0.0, target_range_mm]) if target_centre_mm is None
-              else np.asarray(target_centre_mm, float))  # fmt: skip
+    centre = (
+        np.array([0.0, 0.0, target_range_mm])
+        if target_centre_mm is None
+        else np.asarray(target_centre_mm, float)
+    )
     z_t = float(centre[2])
     wall_z = z_t + rng.uniform(1000.0, 4000.0)
     _planes(rays, hits, np.array([0.0, 0.0, 1.0]), wall_z, rng.uniform(0.2, 0.8))
@@ -195,8 +211,15 @@ def synthetic_room(
         _box(rays, hits, lo, lo + size, rng.uniform(0.05, 0.9))
     zp = rng.uniform(z_t + 300.0, z_t + 2000.0)
     xp = rng.choice([-1.0, 1.0]) * rng.uniform(0.3, 1.2) * half_fov[0] * zp
-    _cylinder(rays, hits, np.array([xp, 0.0, zp]), np.array([0.0, 1.0, 0.0]), 200.0, 900.0,
-              rng.uniform(0.2, 0.7))  # fmt: skip
+    _cylinder(
+        rays,
+        hits,
+        np.array([xp, 0.0, zp]),
+        np.array([0.0, 1.0, 0.0]),
+        200.0,
+        900.0,
+        rng.uniform(0.2, 0.7),
+    )
     for _ in range(rng.integers(0, 5)):
         # a shiny fitting on whatever lies along a random ray
         uv = rng.uniform([0, 0], [w - 1, h - 1])
@@ -222,6 +245,13 @@ def synthetic_room(
         # the hand ends near the target's line of sight, the arm comes in from one side
         tip = reach + axis * side * rng.uniform(-150.0, 150.0)
         mid = tip + axis * side * 400.0
-        _cylinder(rays, hits, mid + np.array([0.0, rng.uniform(-80.0, 80.0), 0.0]), axis,
-                  rng.uniform(40.0, 60.0), 400.0, rng.uniform(0.3, 0.6))  # fmt: skip
+        _cylinder(
+            rays,
+            hits,
+            mid + np.array([0.0, rng.uniform(-80.0, 80.0), 0.0]),
+            axis,
+            rng.uniform(40.0, 60.0),
+            400.0,
+            rng.uniform(0.3, 0.6),
+        )
     return SceneBackground(d.reshape(h, w), rho.reshape(h, w), camera)

@@ -106,6 +106,13 @@ class SimulatedBench:
     def capture(self, time_s: float) -> BenchFrame:
         T_true, T_lab, enc = self.poses_at(time_s)
         subframes = self.subframe_poses(time_s, T_true)
-        frame = render_frame(self.camera, self.scene, T_true, self.sensor, self.rng,
-                             time_s=time_s, subframe_poses=subframes)  # fmt: skip
+        frame = render_frame(
+            self.camera,
+            self.scene,
+            T_true,
+            self.sensor,
+            self.rng,
+            time_s=time_s,
+            subframe_poses=subframes,
+        )
         return BenchFrame(time_s, frame, T_true, T_lab, enc)

@@ -36,7 +36,8 @@ def calibration_frames(
         truth = true_pixel_distances(camera, catalog, T)
         t_auto_us = SensorModel().exposure_for(float(T.t_mm[2]))
         for frac in exposure_fractions:
-            sensor = SensorModel(systematic=errors, auto_exposure=False,
-                                 integration_time_us=t_auto_us * frac)  # fmt: skip
+            sensor = SensorModel(
+                systematic=errors, auto_exposure=False, integration_time_us=t_auto_us * frac
+            )
             f = render_frame(camera, scene, T, sensor, rng, time_s=time_s)
             yield f.distance_mm.astype(float), f.gray.astype(float), truth

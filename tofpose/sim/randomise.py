@@ -78,9 +78,12 @@ def draw_physics(
 
 
 def draw_background(
-    family: str, scene: TargetScene, rng: np.random.Generator, camera: CameraModel,
+    family: str,
+    scene: TargetScene,
+    rng: np.random.Generator,
+    camera: CameraModel,
     T_camera_target: RigidTransform,
-) -> TargetScene:  # fmt: skip
+) -> TargetScene:
     """``scene`` with the real scene of family ``background`` around the target at
     ``T_camera_target`` (``synthetic_room``; the arm reaches across the target's line of
     sight); other families' scenes are returned as they are, and draw nothing from
@@ -88,8 +91,7 @@ def draw_background(
     if family != "background":
         return scene
     t = np.asarray(T_camera_target.t_mm, float)
-    room = synthetic_room(camera, rng, float(np.linalg.norm(t)), t,
-                          arm_probability=ARM_PROBABILITY)  # fmt: skip
+    room = synthetic_room(camera, rng, float(np.linalg.norm(t)), t, arm_probability=ARM_PROBABILITY)
     return replace(scene, background=room)
 
 
@@ -115,9 +117,12 @@ def draw_systematic_errors(rng: np.random.Generator) -> SystematicErrors:
 
 
 def draw_pose(
-    range_m: float, rng: np.random.Generator, camera: CameraModel,
-    max_attitude_deg: float = 20.0, offset_fraction: float = 0.5,
-) -> RigidTransform:  # fmt: skip
+    range_m: float,
+    rng: np.random.Generator,
+    camera: CameraModel,
+    max_attitude_deg: float = 20.0,
+    offset_fraction: float = 0.5,
+) -> RigidTransform:
     """T_camera_target of one frame: the target centre at ``range_m``, up to
     ``offset_fraction`` of the half field of view off the optical axis (uniform in the
     image plane), attitude uniform within +-``max_attitude_deg`` per axis (pitch, yaw,

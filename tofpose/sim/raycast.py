@@ -20,9 +20,17 @@ NO_HIT, WALL, PLATE, FIRST_DISC = 0, 1, 2, 3
 
 @jit
 def cast_rays(
-    bearings, wall_point, has_wall, plate_centre, plate_normal, plate_axes, plate_half,
-    disc_centres, disc_normals, disc_radii,
-):  # fmt: skip
+    bearings,
+    wall_point,
+    has_wall,
+    plate_centre,
+    plate_normal,
+    plate_axes,
+    plate_half,
+    disc_centres,
+    disc_normals,
+    disc_radii,
+):
     """Nearest intersection of unit rays ``bearings`` (M, 3) with the scene.
 
     wall_point (3,) on the wall (parallel to the plate) when ``has_wall``; plate_centre,
@@ -48,9 +56,11 @@ def cast_rays(
             c_unit[k, j] = disc_centres[k, j] / dc
         sin_half = min(max(disc_radii[k] * 1.001 / dc, 0.0), 1.0)
         cos_half[k] = np.sqrt(1.0 - sin_half**2)
-        centre_n[k] = (disc_centres[k, 0] * disc_normals[k, 0]
-                       + disc_centres[k, 1] * disc_normals[k, 1]
-                       + disc_centres[k, 2] * disc_normals[k, 2])  # fmt: skip
+        centre_n[k] = (
+            disc_centres[k, 0] * disc_normals[k, 0]
+            + disc_centres[k, 1] * disc_normals[k, 1]
+            + disc_centres[k, 2] * disc_normals[k, 2]
+        )
     for i in range(m):
         bx, by, bz = bearings[i, 0], bearings[i, 1], bearings[i, 2]
         denom = bx * nx + by * ny + bz * nz

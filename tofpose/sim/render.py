@@ -398,10 +398,11 @@ def render_frame(
         # the four phase samples see the scene at their own times (a slewing table); a
         # sub-frame at the frame's own pose (the first, usually) is not rendered again
         subs = [
-            static if _same_pose(T, T_camera_target)
+            static
+            if _same_pose(T, T_camera_target)
             else _phasor_images(camera, scene, T, sensor, t_int)
             for T in subframe_poses
-        ]  # fmt: skip
+        ]
         re_img, im_img, b_img = combine_subframes(
             [x[:3] for x in subs], sensor.ambient_gray_fraction
         )

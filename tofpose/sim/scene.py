@@ -87,9 +87,10 @@ class TargetScene:
         centres = T_camera_target.apply(cat.positions_mm)
         radii = cat.diameters_mm / 2
         gains = (
-            np.ones(len(cat)) if self.reflector_gains is None
+            np.ones(len(cat))
+            if self.reflector_gains is None
             else np.asarray(self.reflector_gains, float)
-        )  # fmt: skip
+        )
         normals = np.repeat(normal[None], len(cat), axis=0)
         if self.clutter:
             c_pos = np.array([c.position_mm for c in self.clutter], float)
@@ -152,11 +153,13 @@ class SceneInCamera:
         has_wall = self.wall_point is not None
         return cast_rays(
             np.ascontiguousarray(bearings, dtype=np.float64),
-            np.asarray(self.wall_point if has_wall else np.zeros(3), np.float64), has_wall,
-            np.asarray(self.plate_centre, np.float64), np.asarray(self.plate_normal, np.float64),
+            np.asarray(self.wall_point if has_wall else np.zeros(3), np.float64),
+            has_wall,
+            np.asarray(self.plate_centre, np.float64),
+            np.asarray(self.plate_normal, np.float64),
             np.ascontiguousarray(self.plate_axes, dtype=np.float64),
             np.asarray(self.plate_half_size, np.float64),
             np.ascontiguousarray(self.disc_centres, dtype=np.float64).reshape(-1, 3),
             np.ascontiguousarray(self.disc_normals, dtype=np.float64).reshape(-1, 3),
             np.ascontiguousarray(self.disc_radii, dtype=np.float64).reshape(-1),
-        )  # fmt: skip
+        )

@@ -101,8 +101,9 @@ class SystematicErrors:
         """Cyclic error at these distances, same shape."""
         phi = 2.0 * np.pi * np.asarray(distance_mm, float) / unambiguous_range_mm
         out = np.zeros_like(phi)
-        for k, (a, p) in enumerate(zip(self.wiggle_amplitudes_mm, self.wiggle_phases_rad,
-                                       strict=True), start=1):  # fmt: skip
+        for k, (a, p) in enumerate(
+            zip(self.wiggle_amplitudes_mm, self.wiggle_phases_rad, strict=True), start=1
+        ):
             if a:
                 out += a * np.sin(4 * k * phi + p)
         return out
@@ -114,8 +115,13 @@ class SystematicErrors:
 
     def pixel_offsets_mm(self, height: int, width: int) -> np.ndarray:
         """The camera's fixed per-pixel offsets, shape (height, width) (read-only: cached)."""
-        return _pixel_offsets(self.pixel_offset_corner_mm, self.pixel_offset_sigma_mm,
-                              self.pixel_offset_seed, height, width)  # fmt: skip
+        return _pixel_offsets(
+            self.pixel_offset_corner_mm,
+            self.pixel_offset_sigma_mm,
+            self.pixel_offset_seed,
+            height,
+            width,
+        )
 
     def drift_mm(self, time_s: float) -> float:
         """Temperature drift after ``time_s`` seconds of operation."""

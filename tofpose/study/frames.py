@@ -58,16 +58,21 @@ def kernel_load() -> dict:
                     if isinstance(obj, CPUDispatcher):
                         hits += sum(obj.stats.cache_hits.values())
                         misses += sum(obj.stats.cache_misses.values())
-        _kernel_load = {"pid": os.getpid(), "seconds": seconds, "cache_hits": hits,
-                        "cache_misses": misses}  # fmt: skip
+        _kernel_load = {
+            "pid": os.getpid(),
+            "seconds": seconds,
+            "cache_hits": hits,
+            "cache_misses": misses,
+        }
     return _kernel_load
 
 
 def _pipeline(camera: CameraModel, cell: Cell) -> PosePipeline:
     key = (cell.catalog, cell.preset)
     if key not in _pipelines:
-        _pipelines[key] = PosePipeline(camera, BUILTIN_CATALOGS[cell.catalog](),
-                                       PRESETS[cell.preset]())  # fmt: skip
+        _pipelines[key] = PosePipeline(
+            camera, BUILTIN_CATALOGS[cell.catalog](), PRESETS[cell.preset]()
+        )
     return _pipelines[key]
 
 
@@ -84,20 +89,35 @@ def measure_frame(spec: StudySpec, cell: Cell, frame: int, camera: CameraModel) 
     gains = scene.reflector_gains or (1.0,)
     nan = math.nan
     row = {
-        "cell": cell.index, "frame": frame, "range_m": cell.range_m,
-        "attitude_deg": cell.attitude_deg, "offset_fraction": cell.offset_fraction,
-        "ambient_lux": cell.ambient_lux, "physics": cell.physics, "catalog": cell.catalog,
-        "preset": cell.preset, "plate_reflectance": scene.plate_reflectance,
+        "cell": cell.index,
+        "frame": frame,
+        "range_m": cell.range_m,
+        "attitude_deg": cell.attitude_deg,
+        "offset_fraction": cell.offset_fraction,
+        "ambient_lux": cell.ambient_lux,
+        "physics": cell.physics,
+        "catalog": cell.catalog,
+        "preset": cell.preset,
+        "plate_reflectance": scene.plate_reflectance,
         "wall_distance_mm": nan if scene.wall_distance_mm is None else scene.wall_distance_mm,
-        "blur_sigma_px": sensor.blur_sigma_px, "psf_halo_fraction": sensor.psf_halo_fraction,
-        "gain_min": min(gains), "gain_max": max(gains),
+        "blur_sigma_px": sensor.blur_sigma_px,
+        "psf_halo_fraction": sensor.psf_halo_fraction,
+        "gain_min": min(gains),
+        "gain_max": max(gains),
         "retro_falloff_exponent": scene.retro_falloff_exponent,
         "true_range_mm": float(np.linalg.norm(T.t_mm)),
         **dict(zip(("true_x_mm", "true_y_mm", "true_z_mm"), T.t_mm.tolist(), strict=True)),
-        **dict(zip(("true_qw", "true_qx", "true_qy", "true_qz"),
-                   quaternion_wxyz_from_rotation(T.R).tolist(), strict=True)),
-        "ok": bool(r.ok), "reason": r.reason, "n_matched": r.n_matched,
-    }  # fmt: skip
+        **dict(
+            zip(
+                ("true_qw", "true_qx", "true_qy", "true_qz"),
+                quaternion_wxyz_from_rotation(T.R).tolist(),
+                strict=True,
+            )
+        ),
+        "ok": bool(r.ok),
+        "reason": r.reason,
+        "n_matched": r.n_matched,
+    }
     est = ("est_x_mm", "est_y_mm", "est_z_mm", "est_qw", "est_qx", "est_qy", "est_qz")
     if r.ok:
         e = pose_error(r.R, r.t_mm, T.R, T.t_mm)
@@ -110,10 +130,26 @@ def measure_frame(spec: StudySpec, cell: Cell, frame: int, camera: CameraModel) 
         row["attitude_error_deg"] = math.degrees(float(np.linalg.norm(e[:3])))
         row["position_error_mm"] = float(np.linalg.norm(e[3:]))
     else:
-        row.update(dict.fromkeys((*est, *ERROR_COLUMNS, *SIGMA_COLUMNS, "d2",
-                                  "attitude_error_deg", "position_error_mm"), nan))  # fmt: skip
-    verdict = judge([row["ok"]], [row["attitude_error_deg"]], [row["position_error_mm"]],
-                    [row["d2"]], [row["true_range_mm"]])  # fmt: skip
+        row.update(
+            dict.fromkeys(
+                (
+                    *est,
+                    *ERROR_COLUMNS,
+                    *SIGMA_COLUMNS,
+                    "d2",
+                    "attitude_error_deg",
+                    "position_error_mm",
+                ),
+                nan,
+            )
+        )
+    verdict = judge(
+        [row["ok"]],
+        [row["attitude_error_deg"]],
+        [row["position_error_mm"]],
+        [row["d2"]],
+        [row["true_range_mm"]],
+    )
     row.update({k: bool(v[0]) for k, v in verdict.items()})
     return row
 
@@ -133,5 +169,11 @@ def run_chunk(spec_doc: dict, cell_index: int, start: int, stop: int, store_dir:
     seconds = time.perf_counter() - t0
     table = pa.Table.from_pylist(rows, schema=COLUMNS)
     write_chunk(store_dir, cell_index, start, stop, table)
-    return {"cell": cell_index, "start": start, "stop": stop, "frames": stop - start,
-            "seconds": seconds, "kernel_load": load}  # fmt: skip
+    return {
+        "cell": cell_index,
+        "start": start,
+        "stop": stop,
+        "frames": stop - start,
+        "seconds": seconds,
+        "kernel_load": load,
+    }

@@ -31,8 +31,10 @@ def write_summary(root: str | Path, summary: dict) -> Path:
 
 
 def _condition(cell: dict) -> str:
-    return (f"off {cell['offset_fraction']:g}, {cell['ambient_lux']:g} lx, {cell['physics']}, "
-            f"{cell['catalog']}, {cell['preset']}")  # fmt: skip
+    return (
+        f"off {cell['offset_fraction']:g}, {cell['ambient_lux']:g} lx, {cell['physics']}, "
+        f"{cell['catalog']}, {cell['preset']}"
+    )
 
 
 def _row_label(cell: dict) -> str:
@@ -75,8 +77,9 @@ def _figures(summary: dict) -> list[Figure]:
     labels = sorted({_row_label(c) for c in cells})
     cell_at = {(_row_label(c), c["range_m"]): c for c in cells}
     grid = np.full((len(labels), len(ranges)), np.nan)
-    fig2 = Figure(figsize=(2.0 + 1.1 * len(ranges) + 0.06 * max(map(len, labels)),
-                           1.5 + 0.45 * len(labels)))  # fmt: skip
+    fig2 = Figure(
+        figsize=(2.0 + 1.1 * len(ranges) + 0.06 * max(map(len, labels)), 1.5 + 0.45 * len(labels))
+    )
     ax = fig2.subplots()
     for i, lab in enumerate(labels):
         for j, r in enumerate(ranges):
@@ -102,10 +105,20 @@ def _figures(summary: dict) -> list[Figure]:
     a1, a2 = fig3.subplots(1, 2)
     for k, lab in enumerate(labels):
         cs = [cell_at.get((lab, r)) for r in ranges]
-        a1.plot(ranges, [_nan(c["nees_over_6"]) if c else math.nan for c in cs], "o-",
-                color=f"C{k % 10}", label=lab)  # fmt: skip
-        a2.plot(ranges, [_nan(c["beyond_3sigma_pct"]) if c else math.nan for c in cs], "o-",
-                color=f"C{k % 10}", label=lab)  # fmt: skip
+        a1.plot(
+            ranges,
+            [_nan(c["nees_over_6"]) if c else math.nan for c in cs],
+            "o-",
+            color=f"C{k % 10}",
+            label=lab,
+        )
+        a2.plot(
+            ranges,
+            [_nan(c["beyond_3sigma_pct"]) if c else math.nan for c in cs],
+            "o-",
+            color=f"C{k % 10}",
+            label=lab,
+        )
     a1.axhline(1.0, color="k", lw=0.8, ls=":")
     a1.set_ylabel("mean NEES / 6 (1 = consistent)")
     a2.axhline(0.27, color="k", lw=0.8, ls=":")
@@ -120,9 +133,19 @@ def _figures(summary: dict) -> list[Figure]:
     return [fig1, fig2, fig3]
 
 
-TABLE_HEAD = ("cell", "frames", "success %", "wrong", "conf. wrong", "no pose",
-              "> 3 sigma %", "NEES/6", "att p50/p95/p99 deg", "pos p50/p95/p99 mm",
-              "main failure")  # fmt: skip
+TABLE_HEAD = (
+    "cell",
+    "frames",
+    "success %",
+    "wrong",
+    "conf. wrong",
+    "no pose",
+    "> 3 sigma %",
+    "NEES/6",
+    "att p50/p95/p99 deg",
+    "pos p50/p95/p99 mm",
+    "main failure",
+)
 
 
 def table_rows(summary: dict) -> list[tuple[str, ...]]:
@@ -136,11 +159,21 @@ def table_rows(summary: dict) -> list[tuple[str, ...]]:
         a, p = c["attitude_error_deg"], c["position_error_mm"]
         fails = c["failures"]
         main = max(fails, key=fails.get) + f" ({fails[max(fails, key=fails.get)]})" if fails else ""
-        out.append((c["label"], str(c["frames"]), f(c["success_pct"]), str(c["wrong"]),
-                    str(c["confidently_wrong"]), str(c["no_pose"]), f(c["beyond_3sigma_pct"]),
-                    f(c["nees_over_6"], 2),
-                    "/".join(f(a[k], 3) for k in ("p50", "p95", "p99")),
-                    "/".join(f(p[k], 1) for k in ("p50", "p95", "p99")), main))  # fmt: skip
+        out.append(
+            (
+                c["label"],
+                str(c["frames"]),
+                f(c["success_pct"]),
+                str(c["wrong"]),
+                str(c["confidently_wrong"]),
+                str(c["no_pose"]),
+                f(c["beyond_3sigma_pct"]),
+                f(c["nees_over_6"], 2),
+                "/".join(f(a[k], 3) for k in ("p50", "p95", "p99")),
+                "/".join(f(p[k], 1) for k in ("p50", "p95", "p99")),
+                main,
+            )
+        )
     return out
 
 
@@ -161,7 +194,9 @@ def write_report(root: str | Path, spec: StudySpec, summary: dict, run: dict | N
             fig = Figure(figsize=(16, 9))
             ax = fig.subplots()
             ax.axis("off")
-            tab = ax.table(cellText=rows[k:k + per_page], colLabels=TABLE_HEAD, loc="upper center")
+            tab = ax.table(
+                cellText=rows[k : k + per_page], colLabels=TABLE_HEAD, loc="upper center"
+            )
             tab.auto_set_font_size(False)
             tab.set_fontsize(6)
             tab.auto_set_column_width(range(len(TABLE_HEAD)))
@@ -172,14 +207,15 @@ def write_report(root: str | Path, spec: StudySpec, summary: dict, run: dict | N
     if run:
         fps = run.get("frames_per_s")
         n = run["workers"]
-        run_text = (f"<p>Run: {run['frames_run']} frames on {esc(str(run['cluster']))} "
-                    f"({n} worker{'s' if n != 1 else ''}) in {run['wall_s']:.1f} s, of which "
-                    f"{run.get('cluster_start_s', 0.0):.1f} s starting the cluster"
-                    + (f"; {fps:.1f} frames/s after that" if fps else "") + ".</p>")  # fmt: skip
+        run_text = (
+            f"<p>Run: {run['frames_run']} frames on {esc(str(run['cluster']))} "
+            f"({n} worker{'s' if n != 1 else ''}) in {run['wall_s']:.1f} s, of which "
+            f"{run.get('cluster_start_s', 0.0):.1f} s starting the cluster"
+            + (f"; {fps:.1f} frames/s after that" if fps else "")
+            + ".</p>"
+        )
     total = summary["all"] or {}
-    body = "\n".join(
-        "<tr>" + "".join(f"<td>{esc(x)}</td>" for x in r) + "</tr>" for r in rows
-    )
+    body = "\n".join("<tr>" + "".join(f"<td>{esc(x)}</td>" for x in r) + "</tr>" for r in rows)
     page = f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>Study {esc(spec.name)}</title>
 <style>body{{font-family:sans-serif;margin:2em;max-width:1400px}}
@@ -187,16 +223,16 @@ table{{border-collapse:collapse;font-size:13px}}td,th{{border:1px solid #ccc;pad
 th{{background:#eee}}img{{max-width:100%;margin:1em 0}}</style></head><body>
 <h1>Accuracy study {esc(spec.name)}</h1>
 <p>{spec.n_cells} cells x {spec.frames_per_cell} frames (seed {spec.seed});
-{summary['frames_stored']} of {summary['frames_planned']} frames
-stored{'' if summary['complete'] else ' <strong>(incomplete)</strong>'}.
-All frames: success {total.get('success_pct') or 0:.1f} %, {total.get('wrong', 0)} wrong,
-{total.get('confidently_wrong', 0)} confidently wrong.</p>
+{summary["frames_stored"]} of {summary["frames_planned"]} frames
+stored{"" if summary["complete"] else " <strong>(incomplete)</strong>"}.
+All frames: success {total.get("success_pct") or 0:.1f} %, {total.get("wrong", 0)} wrong,
+{total.get("confidently_wrong", 0)} confidently wrong.</p>
 {run_text}
 <p>Rules: success is a pose within 1 deg and max(20 mm, 0.5 % of the range); wrong is a
 pose beyond 2 deg or 2.5 times that; confidently wrong is wrong and beyond 3 reported sigmas
 (chi-square(6) at 0.9973). Percentiles are over every reported pose.</p>
-{''.join(f'<img src="plots/{p}" alt="{p}">' for p in PLOTS)}
-<table><tr>{''.join(f'<th>{esc(h)}</th>' for h in TABLE_HEAD)}</tr>
+{"".join(f'<img src="plots/{p}" alt="{p}">' for p in PLOTS)}
+<table><tr>{"".join(f"<th>{esc(h)}</th>" for h in TABLE_HEAD)}</tr>
 {body}
 </table>
 <p>Per-frame results: <code>frames/*.parquet</code>; statistics: <code>summary.json</code>;

@@ -43,10 +43,16 @@ def _now() -> str:
 
 
 def run_study(
-    spec: StudySpec, out_dir: str | Path, *, workers: int | None = None,
-    scheduler: str | None = None, progress: bool = True,
-    should_stop: Callable[[], bool] | None = None, report: bool = True, niceness: int = 0,
-) -> dict:  # fmt: skip
+    spec: StudySpec,
+    out_dir: str | Path,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: bool = True,
+    should_stop: Callable[[], bool] | None = None,
+    report: bool = True,
+    niceness: int = 0,
+) -> dict:
     """Run ``spec`` into ``out_dir`` (``tofpose.study.store``); returns the summary
     (``summary.json``). ``workers`` / ``scheduler``: ``batch.cluster.dask_client``.
     ``report``: also write report.html and report.pdf (``tofpose.study.report``);
@@ -62,25 +68,44 @@ def run_study(
     todo = [c for c in chunks if c not in done]
     frames_done = sum(b - a for _, a, b in done & set(chunks))
     token = hashlib.sha1(spec.to_json().encode()).hexdigest()[:12]
-    manifest.update(status="running", started=_now(), error=None,
-                    cluster=scheduler or f"LocalCluster({workers or 'auto'})",
-                    chunks_done=len(chunks) - len(todo), frames_done=frames_done,
-                    eta_s=None)  # fmt: skip
+    manifest.update(
+        status="running",
+        started=_now(),
+        error=None,
+        cluster=scheduler or f"LocalCluster({workers or 'auto'})",
+        chunks_done=len(chunks) - len(todo),
+        frames_done=frames_done,
+        eta_s=None,
+    )
     write_manifest(root, manifest)
     results: list[dict] = []
     t0 = time.perf_counter()
-    bar = tqdm(total=spec.n_frames, initial=frames_done, unit="frame", desc=f"study {spec.name}",
-               disable=not progress, file=sys.stderr)  # fmt: skip
+    bar = tqdm(
+        total=spec.n_frames,
+        initial=frames_done,
+        unit="frame",
+        desc=f"study {spec.name}",
+        disable=not progress,
+        file=sys.stderr,
+    )
     try:
         with dask_client(workers, scheduler, niceness) as client:
             manifest["workers"] = len(client.scheduler_info()["workers"])
             t_connected = time.perf_counter()
             doc = spec.to_dict()
             pending = {
-                client.submit(run_chunk, doc, c, a, b, str(root), pure=False,
-                              key=f"tofpose-study-{token}-{c}-{a}")
+                client.submit(
+                    run_chunk,
+                    doc,
+                    c,
+                    a,
+                    b,
+                    str(root),
+                    pure=False,
+                    key=f"tofpose-study-{token}-{c}-{a}",
+                )
                 for c, a, b in todo
-            }  # fmt: skip
+            }
             while pending:
                 try:
                     finished, pending = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED")
@@ -118,17 +143,24 @@ def run_study(
     # how this run went (study.json; summary.json holds only what the frames say, so
     # that the same spec gives the same file on any cluster)
     manifest["run"] = {
-        "workers": manifest.get("workers"), "cluster": manifest["cluster"],
-        "frames_run": sum(r["frames"] for r in results), "wall_s": wall_s,
+        "workers": manifest.get("workers"),
+        "cluster": manifest["cluster"],
+        "frames_run": sum(r["frames"] for r in results),
+        "wall_s": wall_s,
         "cluster_start_s": wall_s - measure_s,
         # from the cluster's start to the last chunk (the workers' kernel loads included)
         "frames_per_s": sum(r["frames"] for r in results) / measure_s if results else None,
         # the workers' rate once warm: frames over the chunks' own measuring time, times
         # the workers
-        "frames_per_s_warm": (sum(r["frames"] for r in results) * manifest["workers"]
-                              / sum(r["seconds"] for r in results)) if results else None,
+        "frames_per_s_warm": (
+            sum(r["frames"] for r in results)
+            * manifest["workers"]
+            / sum(r["seconds"] for r in results)
+        )
+        if results
+        else None,
         "worker_kernel_load": sorted(loads.values(), key=lambda d: d["pid"]),
-    }  # fmt: skip
+    }
     from tofpose.study.report import write_summary
 
     write_summary(root, summary)

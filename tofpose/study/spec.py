@@ -52,11 +52,24 @@ PRESETS = {"default": PipelineConfig, "paper": PipelineConfig.paper}
 MAX_CELLS = 100_000
 MAX_FRAMES = 100_000_000
 
-GRID_AXES = ("range_m", "attitude_deg", "offset_fraction", "ambient_lux", "physics",
-             "catalog", "preset")  # fmt: skip
-_DEFAULT_GRID = {"range_m": [3.0], "attitude_deg": [20.0], "offset_fraction": [0.5],
-                 "ambient_lux": [1000.0], "physics": ["ideal"], "catalog": ["paper-target"],
-                 "preset": ["default"]}  # fmt: skip
+GRID_AXES = (
+    "range_m",
+    "attitude_deg",
+    "offset_fraction",
+    "ambient_lux",
+    "physics",
+    "catalog",
+    "preset",
+)
+_DEFAULT_GRID = {
+    "range_m": [3.0],
+    "attitude_deg": [20.0],
+    "offset_fraction": [0.5],
+    "ambient_lux": [1000.0],
+    "physics": ["ideal"],
+    "catalog": ["paper-target"],
+    "preset": ["default"],
+}
 
 
 class StudySpecError(ValueError):
@@ -94,11 +107,15 @@ class StudyLimits:
         ``axis_lengths``: the number of values on each axis (``GRID_AXES`` order)."""
         n_cells = math.prod(axis_lengths)
         if n_cells > self.max_cells:
-            shape = " x ".join(f"{n} {a}" for a, n in zip(GRID_AXES, axis_lengths, strict=True)
-                               if n > 1)  # fmt: skip
+            shape = " x ".join(
+                f"{n} {a}" for a, n in zip(GRID_AXES, axis_lengths, strict=True) if n > 1
+            )
             where = self.source.format(what="CELLS")
-            raise StudySpecError("grid", f"{n_cells:,} cells ({shape}) is more than the limit "
-                                         f"of {self.max_cells:,} ({where})")  # fmt: skip
+            raise StudySpecError(
+                "grid",
+                f"{n_cells:,} cells ({shape}) is more than the limit "
+                f"of {self.max_cells:,} ({where})",
+            )
         n_frames = n_cells * frames_per_cell
         if n_frames > self.max_frames:
             where = self.source.format(what="FRAMES")
@@ -128,9 +145,11 @@ class Cell:
 
     @property
     def label(self) -> str:
-        return (f"{self.range_m:g} m, +-{self.attitude_deg:g} deg, "
-                f"off {self.offset_fraction:g}, {self.ambient_lux:g} lx, {self.physics}, "
-                f"{self.catalog}, {self.preset}")  # fmt: skip
+        return (
+            f"{self.range_m:g} m, +-{self.attitude_deg:g} deg, "
+            f"off {self.offset_fraction:g}, {self.ambient_lux:g} lx, {self.physics}, "
+            f"{self.catalog}, {self.preset}"
+        )
 
 
 class CellGrid(Sequence[Cell]):
@@ -204,8 +223,11 @@ class StudySpec:
         ``chunk_frames`` frames each, cell by cell."""
         step = self.chunk_frames
         frames = self.frames_per_cell
-        return [(c, a, min(a + step, frames))
-                for c in range(self.n_cells) for a in range(0, frames, step)]  # fmt: skip
+        return [
+            (c, a, min(a + step, frames))
+            for c in range(self.n_cells)
+            for a in range(0, frames, step)
+        ]
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -216,8 +238,9 @@ class StudySpec:
         return json.dumps(self.to_dict(), indent=2)
 
     @classmethod
-    def from_json(cls, text: str, source: str = "study spec",
-                  limits: StudyLimits | None = CLI_LIMITS) -> StudySpec:  # fmt: skip
+    def from_json(
+        cls, text: str, source: str = "study spec", limits: StudyLimits | None = CLI_LIMITS
+    ) -> StudySpec:
         """``from_dict`` of the JSON ``text``; ``source`` names it when it is not JSON."""
         try:
             doc = json.loads(text)
@@ -269,8 +292,11 @@ def _axis(name: str, values) -> list:
     for k, v in enumerate(values):
         where = f"grid.{name}[{k}]"
         if name in ("physics", "catalog", "preset"):
-            allowed = {"physics": FAMILIES, "catalog": tuple(BUILTIN_CATALOGS),
-                       "preset": tuple(PRESETS)}[name]  # fmt: skip
+            allowed = {
+                "physics": FAMILIES,
+                "catalog": tuple(BUILTIN_CATALOGS),
+                "preset": tuple(PRESETS),
+            }[name]
             if v not in allowed:
                 raise StudySpecError(where, f"{v!r} is not one of {', '.join(allowed)}")
             out.append(v)
@@ -278,8 +304,12 @@ def _axis(name: str, values) -> list:
         if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
             raise StudySpecError(where, f"must be a number (got {v!r})")
         v = float(v)
-        lo, hi = {"range_m": (0.3, 20.0), "attitude_deg": (0.0, 60.0),
-                  "offset_fraction": (0.0, 0.9), "ambient_lux": (0.0, 150000.0)}[name]  # fmt: skip
+        lo, hi = {
+            "range_m": (0.3, 20.0),
+            "attitude_deg": (0.0, 60.0),
+            "offset_fraction": (0.0, 0.9),
+            "ambient_lux": (0.0, 150000.0),
+        }[name]
         if not lo <= v <= hi:
             raise StudySpecError(where, f"{v:g} is outside [{lo:g}, {hi:g}]")
         out.append(v)
@@ -291,8 +321,17 @@ def _axis(name: str, values) -> list:
 #: ``tofpose study --example``: 3 ranges x 2 attitude spreads x 2 physics families, 16
 #: frames per cell (192 frames); about a minute on a 2-core machine
 EXAMPLE = {
-    "name": "example", "seed": 1, "frames_per_cell": 16, "chunk_frames": 8,
-    "grid": {"range_m": [3.0, 5.0, 8.0], "attitude_deg": [5.0, 20.0], "offset_fraction": [0.5],
-             "ambient_lux": [1000.0], "physics": ["ideal", "lens blur"],
-             "catalog": ["paper-target"], "preset": ["default"]},
-}  # fmt: skip
+    "name": "example",
+    "seed": 1,
+    "frames_per_cell": 16,
+    "chunk_frames": 8,
+    "grid": {
+        "range_m": [3.0, 5.0, 8.0],
+        "attitude_deg": [5.0, 20.0],
+        "offset_fraction": [0.5],
+        "ambient_lux": [1000.0],
+        "physics": ["ideal", "lens blur"],
+        "catalog": ["paper-target"],
+        "preset": ["default"],
+    },
+}

@@ -109,8 +109,14 @@ def open_store(store_dir: str | Path, spec: StudySpec) -> dict:
     if root.exists() and any(root.iterdir()):
         raise StudyStoreError(f"{root} is not empty and holds no study; choose another --out")
     root.mkdir(parents=True, exist_ok=True)
-    manifest = {"format": "tofpose-study", "version": 1, "spec": spec.to_dict(),
-                "status": "created", "chunks": spec.n_chunks, "chunks_done": 0}  # fmt: skip
+    manifest = {
+        "format": "tofpose-study",
+        "version": 1,
+        "spec": spec.to_dict(),
+        "status": "created",
+        "chunks": spec.n_chunks,
+        "chunks_done": 0,
+    }
     write_manifest(root, manifest)
     return manifest
 

@@ -62,7 +62,9 @@ def cell_statistics(columns: dict[str, np.ndarray]) -> dict:
         }
     failed = Counter(reason_kind(r) for r, o in zip(columns["reason"], ok, strict=True) if not o)
     return {
-        "frames": n, "poses": n_ok, "no_pose": n - n_ok,
+        "frames": n,
+        "poses": n_ok,
+        "no_pose": n - n_ok,
         "success_pct": _num(100.0 * columns["success"].sum() / n) if n else None,
         "wrong": int(columns["wrong"].sum()),
         "confidently_wrong": int(columns["confidently_wrong"].sum()),
@@ -72,7 +74,7 @@ def cell_statistics(columns: dict[str, np.ndarray]) -> dict:
         "position_error_mm": _percentiles(columns["position_error_mm"][ok]),
         "axes": axes,
         "failures": dict(sorted(failed.items())),
-    }  # fmt: skip
+    }
 
 
 def summarise(spec: StudySpec, table: pa.Table) -> dict:
@@ -84,15 +86,27 @@ def summarise(spec: StudySpec, table: pa.Table) -> dict:
     for c in spec.cells:
         sel = cell_of == c.index
         stats = cell_statistics({k: v[sel] for k, v in cols.items()})
-        cells.append({"cell": c.index, "label": c.label, "range_m": c.range_m,
-                      "attitude_deg": c.attitude_deg, "offset_fraction": c.offset_fraction,
-                      "ambient_lux": c.ambient_lux, "physics": c.physics,
-                      "catalog": c.catalog, "preset": c.preset,
-                      "frames_planned": spec.frames_per_cell, **stats})  # fmt: skip
+        cells.append(
+            {
+                "cell": c.index,
+                "label": c.label,
+                "range_m": c.range_m,
+                "attitude_deg": c.attitude_deg,
+                "offset_fraction": c.offset_fraction,
+                "ambient_lux": c.ambient_lux,
+                "physics": c.physics,
+                "catalog": c.catalog,
+                "preset": c.preset,
+                "frames_planned": spec.frames_per_cell,
+                **stats,
+            }
+        )
     return {
-        "name": spec.name, "seed": spec.seed, "frames_planned": spec.n_frames,
+        "name": spec.name,
+        "seed": spec.seed,
+        "frames_planned": spec.n_frames,
         "frames_stored": int(table.num_rows),
         "complete": int(table.num_rows) == spec.n_frames,
         "all": cell_statistics(cols) if table.num_rows else None,
         "cells": cells,
-    }  # fmt: skip
+    }

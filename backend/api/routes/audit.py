@@ -34,8 +34,10 @@ class AuditEntryPublic(BaseModel):
     client: str = Field(description="the client's address")
     method: str
     path: str
-    body: str = Field(description="the JSON body, at most ~300 characters, with every field "
-                      "whose name contains token, key, secret or password redacted")  # fmt: skip
+    body: str = Field(
+        description="the JSON body, at most ~300 characters, with every field "
+        "whose name contains token, key, secret or password redacted"
+    )
     status: int
 
 
@@ -63,13 +65,25 @@ def _utc(t: datetime | None) -> datetime | None:
 
 
 def _audit_public(r: AuditRecord) -> AuditEntryPublic:
-    return AuditEntryPublic(id=r.id, at=_utc(r.at), key_name=r.key_name, client=r.client,
-                            method=r.method, path=r.path, body=r.body, status=r.status)  # fmt: skip
+    return AuditEntryPublic(
+        id=r.id,
+        at=_utc(r.at),
+        key_name=r.key_name,
+        client=r.client,
+        method=r.method,
+        path=r.path,
+        body=r.body,
+        status=r.status,
+    )
 
 
 def _key_public(k: ApiKey) -> dict[str, Any]:
-    return {"name": k.name, "scope": k.scope.label, "created_at": _utc(k.created_at),
-            "revoked_at": _utc(k.revoked_at)}  # fmt: skip
+    return {
+        "name": k.name,
+        "scope": k.scope.label,
+        "created_at": _utc(k.created_at),
+        "revoked_at": _utc(k.revoked_at),
+    }
 
 
 @router.get("/audit", responses=ADMIN_ONLY)
@@ -89,8 +103,7 @@ def list_keys(state: StateDep) -> list[KeyPublic]:
     return [KeyPublic(**_key_public(k)) for k in state.keys.list()]
 
 
-@router.post("/keys", status_code=status.HTTP_201_CREATED,
-             responses={**ADMIN_ONLY, **errors(409)})  # fmt: skip
+@router.post("/keys", status_code=status.HTTP_201_CREATED, responses={**ADMIN_ONLY, **errors(409)})
 def create_key(body: KeyCreate, state: StateDep, response: Response) -> KeyCreated:
     """Make a key of this scope; the answer holds the key, which is not shown again.
     409 when the name is taken (also by a revoked key)."""

@@ -16,9 +16,11 @@ router = APIRouter(prefix="/api/calibrations", tags=["calibrations"])
 
 
 @router.post(
-    "", status_code=status.HTTP_201_CREATED, dependencies=[WriteAuth],
+    "",
+    status_code=status.HTTP_201_CREATED,
+    dependencies=[WriteAuth],
     responses=errors(404, 409),
-)  # fmt: skip
+)
 def create_calibration(
     body: CalibrationCreate, state: StateDep, session: SessionDep
 ) -> CalibrationPublic:
@@ -30,18 +32,25 @@ def create_calibration(
         raise HTTPException(404, f"no campaign with id {body.campaign_id}")
     world = state.devices.world
     if world is None:
-        raise unprocessable(["body"], ["the lab's nominal camera mount and target placement "
-                                       "are unknown for these devices (only the simulated lab "
-                                       "defines them today)"])  # fmt: skip
+        raise unprocessable(
+            ["body"],
+            [
+                "the lab's nominal camera mount and target placement "
+                "are unknown for these devices (only the simulated lab "
+                "defines them today)"
+            ],
+        )
     geometry = world.bench.geometry
     try:
-        row = calibrate_from_campaign(session, body.campaign_id, body.name,
-                                      geometry.T_inner_camera, geometry.T_lab_target)  # fmt: skip
+        row = calibrate_from_campaign(
+            session, body.campaign_id, body.name, geometry.T_inner_camera, geometry.T_lab_target
+        )
     except NameTakenError as exc:
         raise HTTPException(409, str(exc)) from exc
     except ValueError as exc:
-        raise unprocessable(["body", "campaign_id"],
-                            [f"campaign {body.campaign_id}: {exc}"]) from exc  # fmt: skip
+        raise unprocessable(
+            ["body", "campaign_id"], [f"campaign {body.campaign_id}: {exc}"]
+        ) from exc
     return calibration_public(row)
 
 

@@ -49,10 +49,19 @@ from backend.state import AppState
 
 router = APIRouter(prefix="/api/campaigns", tags=["campaigns"])
 IdParam = Annotated[int, Path(ge=1, le=2**31 - 1)]
-EXPORT_SPACE = {507: {**errors(503)[503], "description": "too little free disk space to export: "
-                     "twice the recording plus TOFPOSE_RECORDING_MIN_FREE_MB are needed"}}
-BUSY = {503: {**errors(503)[503],
-              "description": "busy with other reports and exports: try again (Retry-After)"}}
+EXPORT_SPACE = {
+    507: {
+        **errors(503)[503],
+        "description": "too little free disk space to export: "
+        "twice the recording plus TOFPOSE_RECORDING_MIN_FREE_MB are needed",
+    }
+}
+BUSY = {
+    503: {
+        **errors(503)[503],
+        "description": "busy with other reports and exports: try again (Retry-After)",
+    }
+}
 
 
 async def _heavy(state: AppState, work, what: str):
@@ -61,8 +70,7 @@ async def _heavy(state: AppState, work, what: str):
     try:
         return await state.heavy_work.run(work, what)
     except HeavyWorkBusyError as exc:
-        raise HTTPException(503, str(exc),
-                            headers={"Retry-After": str(exc.retry_after_s)}) from exc  # fmt: skip
+        raise HTTPException(503, str(exc), headers={"Retry-After": str(exc.retry_after_s)}) from exc
 
 
 def _planning(state: AppState) -> Planning:
@@ -70,9 +78,12 @@ def _planning(state: AppState) -> Planning:
 
 
 def _public(
-    state: AppState, campaign: CampaignView, planning: Planning | None = None, *,
+    state: AppState,
+    campaign: CampaignView,
+    planning: Planning | None = None,
+    *,
     with_setpoints: bool = False,
-) -> CampaignPublic:  # fmt: skip
+) -> CampaignPublic:
     estimate_s = (planning or _planning(state)).estimate_s(campaign)
     progress = state.campaigns.progress(campaign.id)
     return campaign_public(campaign, progress, estimate_s, with_setpoints=with_setpoints)
@@ -110,10 +121,12 @@ def create_campaign(body: CampaignCreate, state: StateDep, session: SessionDep) 
     setpoints = _setpoints(body)
     motion = state.motion
     problems = plan_problems(
-        setpoints, motion.axes if motion.present else None,
-        frames_per_point=body.frames_per_point, max_setpoints=MAX_SETPOINTS,
+        setpoints,
+        motion.axes if motion.present else None,
+        frames_per_point=body.frames_per_point,
+        max_setpoints=MAX_SETPOINTS,
         max_frames=MAX_FRAMES_PER_CAMPAIGN,
-    )  # fmt: skip
+    )
     if find_catalog(session, body.catalog) is None:
         problems.append(f"no catalog named {body.catalog!r} (GET /api/catalogs lists them)")
     generator = body.generator.model_dump() if body.generator else None
@@ -123,14 +136,19 @@ def create_campaign(body: CampaignCreate, state: StateDep, session: SessionDep) 
         raise unprocessable_at([(["body"], p) for p in problems] + located)
     try:
         campaign = state.campaigns.repository.create(
-            name=body.name, catalog_name=body.catalog, setpoints=setpoints,
-            frames_per_point=body.frames_per_point, settle_s=body.settle_s,
-            lock_timeout_s=body.lock_timeout_s, requirements=body.requirements.model_dump(),
+            name=body.name,
+            catalog_name=body.catalog,
+            setpoints=setpoints,
+            frames_per_point=body.frames_per_point,
+            settle_s=body.settle_s,
+            lock_timeout_s=body.lock_timeout_s,
+            requirements=body.requirements.model_dump(),
             generator=generator,
             camera=body.camera.model_dump(exclude_none=True) if body.camera else None,
-            notes=body.notes, record_raw=body.record_raw,
+            notes=body.notes,
+            record_raw=body.record_raw,
             profiles=[spec] * len(setpoints) if spec is not None else None,
-        )  # fmt: skip
+        )
     except NameTakenError as exc:
         raise HTTPException(409, str(exc)) from exc
     return _public(state, campaign, with_setpoints=True)
@@ -176,9 +194,10 @@ def start_campaign(
     409 while a STOP is latched (POST /api/motion/release first)."""
     body = body or CampaignStart()
     return _command(
-        state, campaign_id,
+        state,
+        campaign_id,
         lambda: state.campaigns.start_campaign(campaign_id, body.at, queue=body.queue),
-    )  # fmt: skip
+    )
 
 
 @router.post("/{campaign_id}/pause", dependencies=[WriteAuth], responses=errors(404, 409))
@@ -301,24 +320,31 @@ async def get_campaign_report(
     "/{campaign_id}/recording.h5",
     dependencies=[ReadAuth],
     response_class=FileResponse,
-    responses={200: {"content": {"application/x-hdf5": {}}, "description": "the recording"},
-               **errors(404, 409)},
-)  # fmt: skip
+    responses={
+        200: {"content": {"application/x-hdf5": {}}, "description": "the recording"},
+        **errors(404, 409),
+    },
+)
 def get_campaign_recording(campaign_id: IdParam, state: StateDep):
     """The campaign's raw frames (HDF5, docs/architecture.md §7): exactly the stored
     measurements, in order (``recording_index`` of each). Only with ``record_raw``."""
     path = finished_recording(state, campaign_id)
-    return FileResponse(path, media_type="application/x-hdf5",
-                        filename=f"campaign-{campaign_id}.h5")  # fmt: skip
+    return FileResponse(
+        path, media_type="application/x-hdf5", filename=f"campaign-{campaign_id}.h5"
+    )
 
 
 @router.get(
     "/{campaign_id}/recording.mcap",
     dependencies=[ReadAuth],
     response_class=FileResponse,
-    responses={200: {"content": {"application/x-mcap": {}}, "description": "the recording"},
-               **errors(404, 409), **BUSY, **EXPORT_SPACE},
-)  # fmt: skip
+    responses={
+        200: {"content": {"application/x-mcap": {}}, "description": "the recording"},
+        **errors(404, 409),
+        **BUSY,
+        **EXPORT_SPACE,
+    },
+)
 async def get_campaign_recording_mcap(campaign_id: IdParam, state: StateDep):
     """The campaign's raw recording as MCAP for Foxglove and Rerun (docs/interop.md): the
     frames, the references and an estimate of each frame by the pipeline re-run over the
@@ -326,13 +352,16 @@ async def get_campaign_recording_mcap(campaign_id: IdParam, state: StateDep):
     measurement rows). Made on the first request (a long recording
     takes a while) and kept, on the server's export workers (503 with Retry-After while
     they and their queue are full). Only with ``record_raw``."""
+
     def export():  # the recording's lookup reads the database: off the event loop too
-        return recording_mcap(finished_recording(state, campaign_id),
-                              state.settings.recording_min_free_mb)
+        return recording_mcap(
+            finished_recording(state, campaign_id), state.settings.recording_min_free_mb
+        )
 
     try:
         out = await _heavy(state, export, f"the MCAP of campaign {campaign_id}")
     except ExportSpaceError as exc:
         raise HTTPException(507, str(exc)) from exc
-    return FileResponse(out, media_type="application/x-mcap",
-                        filename=f"campaign-{campaign_id}.mcap")  # fmt: skip
+    return FileResponse(
+        out, media_type="application/x-mcap", filename=f"campaign-{campaign_id}.mcap"
+    )

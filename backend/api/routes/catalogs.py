@@ -71,8 +71,9 @@ def get_catalog(name: NameParam, state: StateDep, session: SessionDep) -> Catalo
     cat = find_catalog(session, name)
     if cat is None:
         raise HTTPException(404, f"no catalog named {name!r}")
-    return _public(name, cat, builtin=name in BUILTIN_CATALOGS,
-                   active=state.acquisition.catalog_name)  # fmt: skip
+    return _public(
+        name, cat, builtin=name in BUILTIN_CATALOGS, active=state.acquisition.catalog_name
+    )
 
 
 @router.post("/{name}/activate", dependencies=[WriteAuth], responses=errors(404, 409, 503, 504))

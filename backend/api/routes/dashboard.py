@@ -58,8 +58,9 @@ def not_built_page(dist: Path) -> str:
 
 def _serve_built(app: FastAPI, dist: Path) -> None:
     """``/`` -> ``index.html`` (revalidated: it names the current hashed assets)."""
-    app.mount("/assets", StaticFiles(directory=dist / "assets", check_dir=False),
-              name="dashboard-assets")  # fmt: skip
+    app.mount(
+        "/assets", StaticFiles(directory=dist / "assets", check_dir=False), name="dashboard-assets"
+    )
 
     @app.get("/", include_in_schema=False)
     def dashboard() -> FileResponse:
@@ -69,8 +70,11 @@ def _serve_built(app: FastAPI, dist: Path) -> None:
 def _serve_not_built(app: FastAPI, dist: Path) -> None:
     """``/`` -> the not-built page, 503, not cached (build the dashboard, then restart
     the server)."""
-    log.warning("dashboard not built (no index.html in %s): / says how to build it "
-                "(%s)", dist, BUILD_COMMANDS[0])  # fmt: skip
+    log.warning(
+        "dashboard not built (no index.html in %s): / says how to build it (%s)",
+        dist,
+        BUILD_COMMANDS[0],
+    )
     page = not_built_page(dist)
 
     @app.get("/", include_in_schema=False)

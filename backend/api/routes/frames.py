@@ -36,8 +36,9 @@ async def get_latest_frame_png(
     f = sample.frame
     # Rendered on the renderer's own thread (not the event loop, not the acquisition
     # thread), shared with identical requests, kept in a small LRU: see ImageRenderer.
-    fut = state.renderer.png(f.index, kind.value, f.gray, f.distance_mm, sample.result,
-                             overlay=overlay, scale=scale)  # fmt: skip
+    fut = state.renderer.png(
+        f.index, kind.value, f.gray, f.distance_mm, sample.result, overlay=overlay, scale=scale
+    )
     index, png = await asyncio.wrap_future(fut)
     return Response(
         png,

@@ -93,10 +93,15 @@ async def image_message(sample: LiveSample, state: AppState, kind: str, step: in
     f = sample.frame
     fut = state.renderer.stream_png(f.index, kind, f.gray, f.distance_mm, step)
     index, png = await asyncio.wrap_future(fut)
-    return json.dumps({
-        "type": "image", "kind": kind, "frame_index": index, "step": step,
-        "png_base64": base64.b64encode(png).decode(),
-    })  # fmt: skip
+    return json.dumps(
+        {
+            "type": "image",
+            "kind": kind,
+            "frame_index": index,
+            "step": step,
+            "png_base64": base64.b64encode(png).decode(),
+        }
+    )
 
 
 def raw_message(sample: LiveSample, step: int) -> bytes:
@@ -109,10 +114,14 @@ def raw_message(sample: LiveSample, step: int) -> bytes:
 def points_message(sample: LiveSample, state: AppState) -> str:
     def make() -> str:
         pts, ids = frame_point_cloud_mm(sample, state.devices.camera.model)
-        return json.dumps({
-            "type": "points", "frame_index": sample.frame.index,
-            "points_mm": [[round(float(c), 2) for c in p] for p in pts], "catalog_ids": ids,
-        })  # fmt: skip
+        return json.dumps(
+            {
+                "type": "points",
+                "frame_index": sample.frame.index,
+                "points_mm": [[round(float(c), 2) for c in p] for p in pts],
+                "catalog_ids": ids,
+            }
+        )
 
     return sample.cached("points", make)
 
@@ -156,8 +165,9 @@ async def _read_options(ws: WebSocket, opts: dict[str, LiveOptions], flow: RawFl
         try:
             opts["current"] = LiveOptions.model_validate_json(text)
         except ValidationError as exc:
-            msg = "; ".join(f"{'.'.join(map(str, e['loc'])) or 'body'}: {e['msg']}"
-                            for e in exc.errors())  # fmt: skip
+            msg = "; ".join(
+                f"{'.'.join(map(str, e['loc'])) or 'body'}: {e['msg']}" for e in exc.errors()
+            )
             await ws.send_text(json.dumps({"type": "error", "message": f"bad options: {msg}"}))
 
 
@@ -180,21 +190,24 @@ def offered_key(subprotocols: list[str]) -> str | None:
     """The key a client offers as the subprotocol ``tofpose.bearer.<key>``, or None."""
     for p in subprotocols:
         if p.startswith(KEY_PREFIX):
-            return p[len(KEY_PREFIX):]
+            return p[len(KEY_PREFIX) :]
     return None
 
 
 def auth_refusal(ws: WebSocket, state: AppState) -> str | None:
     """Why this handshake is refused (close code 1008), or None to go on."""
     if any(name in ws.query_params for name in URL_SECRETS):
-        return ("API key in the URL refused (URLs land in access logs): offer the "
-                "subprotocols 'tofpose.bearer' and 'tofpose.bearer.<key>' instead")  # fmt: skip
+        return (
+            "API key in the URL refused (URLs land in access logs): offer the "
+            "subprotocols 'tofpose.bearer' and 'tofpose.bearer.<key>' instead"
+        )
     key_text = offered_key(ws.scope.get("subprotocols", []))
     if key_text is not None and state.keys.verify(key_text) is None:
         return "invalid API key (unknown or revoked)"
     if key_text is None and not state.settings.reads_are_open:
-        return ("API key required: offer the subprotocols 'tofpose.bearer' and "
-                "'tofpose.bearer.<key>'")  # fmt: skip
+        return (
+            "API key required: offer the subprotocols 'tofpose.bearer' and 'tofpose.bearer.<key>'"
+        )
     return None
 
 
@@ -204,8 +217,10 @@ def cap_refusal(state: AppState, address: str) -> str | None:
     if sum(state.live_clients.values()) >= s.live_max_clients:
         return f"too many live clients ({s.live_max_clients}, TOFPOSE_LIVE_MAX_CLIENTS)"
     if state.live_clients.get(address, 0) >= s.live_max_clients_per_address:
-        return (f"too many live clients from {address[:64]} ({s.live_max_clients_per_address}, "
-                "TOFPOSE_LIVE_MAX_CLIENTS_PER_ADDRESS)")  # fmt: skip
+        return (
+            f"too many live clients from {address[:64]} ({s.live_max_clients_per_address}, "
+            "TOFPOSE_LIVE_MAX_CLIENTS_PER_ADDRESS)"
+        )
     return None
 
 
@@ -263,8 +278,11 @@ async def live(ws: WebSocket) -> None:
         await ws.accept(subprotocol=subprotocol)
         await _stream(ws, state)
     except SendTimeoutError:
-        log.info("live client %s let go: it took no message for %.1f s", address,
-                 state.settings.live_send_timeout_s)  # fmt: skip
+        log.info(
+            "live client %s let go: it took no message for %.1f s",
+            address,
+            state.settings.live_send_timeout_s,
+        )
     finally:
         state.live_clients[address] -= 1
         if not state.live_clients[address]:
@@ -275,12 +293,25 @@ async def _stream(ws: WebSocket, state: AppState) -> None:
     """The hello, then every frame's messages until the client goes or stops reading."""
     timeout_s = state.settings.live_send_timeout_s
     m = state.devices.camera.model
-    await send(ws, json.dumps({
-        "type": "hello", "catalog": state.acquisition.catalog_name,
-        "camera": {"driver": state.devices.camera.name, "width_px": m.width,
-                   "height_px": m.height, "fx_px": m.fx, "fy_px": m.fy, "cx_px": m.cx,
-                   "cy_px": m.cy},
-    }), timeout_s)  # fmt: skip
+    await send(
+        ws,
+        json.dumps(
+            {
+                "type": "hello",
+                "catalog": state.acquisition.catalog_name,
+                "camera": {
+                    "driver": state.devices.camera.name,
+                    "width_px": m.width,
+                    "height_px": m.height,
+                    "fx_px": m.fx,
+                    "fy_px": m.fy,
+                    "cx_px": m.cx,
+                    "cy_px": m.cy,
+                },
+            }
+        ),
+        timeout_s,
+    )
     sub = state.hub.subscribe(loop=asyncio.get_running_loop())
     opts = {"current": LiveOptions()}
     flow = RawFlow()

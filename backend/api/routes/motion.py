@@ -32,8 +32,11 @@ from backend.services.motion import (
 )
 
 router = APIRouter(prefix="/api/motion", tags=["motion"])
-STARTS_MOTION = {"status_code": status.HTTP_202_ACCEPTED, "dependencies": [WriteAuth],
-                 "responses": errors(409, 503)}  # fmt: skip
+STARTS_MOTION = {
+    "status_code": status.HTTP_202_ACCEPTED,
+    "dependencies": [WriteAuth],
+    "responses": errors(409, 503),
+}
 """Move, jog and profile: accepted at once (202), token, refused (409) or failed (503)."""
 
 

@@ -36,31 +36,44 @@ from backend.state import AppState
 
 router = APIRouter(prefix="/api/recordings", tags=["recordings"])
 RecordingIdParam = Annotated[int, Path(ge=1, le=2**31 - 1)]
-NO_SPACE_TEXT = ("Less free space on the data directory's disk than "
-                 "TOFPOSE_RECORDING_MIN_FREE_MB: nothing was started")  # fmt: skip
+NO_SPACE_TEXT = (
+    "Less free space on the data directory's disk than "
+    "TOFPOSE_RECORDING_MIN_FREE_MB: nothing was started"
+)
 NO_SPACE: dict[int | str, dict[str, Any]] = {
     507: {"model": ErrorPublic, "description": NO_SPACE_TEXT}
 }
 EXPORT_SPACE: dict[int | str, dict[str, Any]] = {
-    507: {"model": ErrorPublic, "description": "too little free disk space to export: twice "
-          "the recording plus TOFPOSE_RECORDING_MIN_FREE_MB are needed"}
+    507: {
+        "model": ErrorPublic,
+        "description": "too little free disk space to export: twice "
+        "the recording plus TOFPOSE_RECORDING_MIN_FREE_MB are needed",
+    }
 }
 BUSY: dict[int | str, dict[str, Any]] = {
-    503: {"model": ErrorPublic,
-          "description": "busy with other reports and exports: try again (Retry-After)"}
-}  # fmt: skip
+    503: {
+        "model": ErrorPublic,
+        "description": "busy with other reports and exports: try again (Retry-After)",
+    }
+}
 
 
 class RecordingCreate(StrictBody):
     """A recording to start now."""
 
-    name: str = Field(min_length=1, max_length=200, pattern=r"^[^\x00-\x1f]+$",
-                      description="what it is for (need not be unique)")  # fmt: skip
+    name: str = Field(
+        min_length=1,
+        max_length=200,
+        pattern=r"^[^\x00-\x1f]+$",
+        description="what it is for (need not be unique)",
+    )
     duration_s: float | None = Field(
-        None, gt=0, le=MAX_DURATION_S,
+        None,
+        gt=0,
+        le=MAX_DURATION_S,
         description="stop after this many seconds; null (the default): until stopped, "
         "or until the disk's free space falls below the floor",
-    )  # fmt: skip
+    )
 
 
 class RecordingPublic(BaseModel):
@@ -76,8 +89,10 @@ class RecordingPublic(BaseModel):
     elapsed_s: float = Field(description="from start to stop (or to now, while it records)")
     frames: int
     size_bytes: int
-    dropped_frames: int = Field(description="frames the live stream delivered faster than the "
-                                "disk took them: not in the file")  # fmt: skip
+    dropped_frames: int = Field(
+        description="frames the live stream delivered faster than the "
+        "disk took them: not in the file"
+    )
     stop_reason: StopReason | None
     stop_detail: str
 
@@ -87,8 +102,9 @@ class RecordingsPublic(BaseModel):
 
     recordings: list[RecordingPublic]
     free_mb: float = Field(description="free space on the data directory's disk, MB (10^6 B)")
-    min_free_mb: float = Field(description="below this a recording is refused or stops "
-                               "(TOFPOSE_RECORDING_MIN_FREE_MB)")  # fmt: skip
+    min_free_mb: float = Field(
+        description="below this a recording is refused or stops (TOFPOSE_RECORDING_MIN_FREE_MB)"
+    )
     used_mb: float = Field(description="what the recordings (HDF5 and MCAP files) take")
     max_active: int = Field(description="recordings that may run at once")
 
@@ -101,11 +117,19 @@ def _service(state: AppState) -> RecordingService:
 
 def _public(info: RecordingInfo) -> RecordingPublic:
     return RecordingPublic(
-        id=info.id, name=info.name, state=info.state, started_utc=info.started_utc,
-        stopped_utc=info.stopped_utc, duration_s=info.duration_s, elapsed_s=info.elapsed_s,
-        frames=info.frames, size_bytes=info.size_bytes, dropped_frames=info.dropped_frames,
-        stop_reason=info.stop_reason, stop_detail=info.stop_detail,
-    )  # fmt: skip
+        id=info.id,
+        name=info.name,
+        state=info.state,
+        started_utc=info.started_utc,
+        stopped_utc=info.stopped_utc,
+        duration_s=info.duration_s,
+        elapsed_s=info.elapsed_s,
+        frames=info.frames,
+        size_bytes=info.size_bytes,
+        dropped_frames=info.dropped_frames,
+        stop_reason=info.stop_reason,
+        stop_detail=info.stop_detail,
+    )
 
 
 def _download_name(info: RecordingInfo, suffix: str) -> str:
@@ -123,8 +147,12 @@ def _file(service: RecordingService, recording_id: int) -> tuple[RecordingInfo, 
         raise HTTPException(409, str(exc)) from exc
 
 
-@router.post("", status_code=status.HTTP_201_CREATED, dependencies=[WriteAuth],
-             responses={**errors(409), **NO_SPACE})  # fmt: skip
+@router.post(
+    "",
+    status_code=status.HTTP_201_CREATED,
+    dependencies=[WriteAuth],
+    responses={**errors(409), **NO_SPACE},
+)
 def start_recording(body: RecordingCreate, state: StateDep) -> RecordingPublic:
     """Start recording the live stream now: every frame with its pose and covariance, the
     relative state, the references, the turntable's encoders and targets and a UTC
@@ -145,10 +173,12 @@ def list_recordings(state: StateDep) -> RecordingsPublic:
     """Every recording, newest first, with the free space left on the disk they go to."""
     service = _service(state)
     return RecordingsPublic(
-        recordings=[_public(i) for i in service.list()], free_mb=service.free_mb(),
-        min_free_mb=service.min_free_mb, used_mb=service.used_bytes / MB,
+        recordings=[_public(i) for i in service.list()],
+        free_mb=service.free_mb(),
+        min_free_mb=service.min_free_mb,
+        used_mb=service.used_bytes / MB,
         max_active=service.max_active,
-    )  # fmt: skip
+    )
 
 
 @router.get("/{recording_id}", dependencies=[ReadAuth], responses=errors(404))
@@ -175,24 +205,29 @@ def stop_recording(recording_id: RecordingIdParam, state: StateDep) -> Recording
     "/{recording_id}/recording.h5",
     dependencies=[ReadAuth],
     response_class=FileResponse,
-    responses={200: {"content": {"application/x-hdf5": {}}, "description": "the recording"},
-               **errors(404, 409)},
-)  # fmt: skip
+    responses={
+        200: {"content": {"application/x-hdf5": {}}, "description": "the recording"},
+        **errors(404, 409),
+    },
+)
 def get_recording_h5(recording_id: RecordingIdParam, state: StateDep):
     """The recording (HDF5): readable with ``tofpose.io.recording.open_recording`` and every
     ``tofpose`` command that takes a recording. 409 while it records."""
     info, path = _file(_service(state), recording_id)
-    return FileResponse(path, media_type="application/x-hdf5",
-                        filename=_download_name(info, "h5"))  # fmt: skip
+    return FileResponse(path, media_type="application/x-hdf5", filename=_download_name(info, "h5"))
 
 
 @router.get(
     "/{recording_id}/recording.mcap",
     dependencies=[ReadAuth],
     response_class=FileResponse,
-    responses={200: {"content": {"application/x-mcap": {}}, "description": "the recording"},
-               **errors(404, 409), **BUSY, **EXPORT_SPACE},
-)  # fmt: skip
+    responses={
+        200: {"content": {"application/x-mcap": {}}, "description": "the recording"},
+        **errors(404, 409),
+        **BUSY,
+        **EXPORT_SPACE,
+    },
+)
 async def get_recording_mcap(recording_id: RecordingIdParam, state: StateDep):
     """The recording as MCAP for Foxglove and Rerun (docs/interop.md), made as a
     campaign's is: frames, references and an estimate of each frame by the pipeline
@@ -203,18 +238,21 @@ async def get_recording_mcap(recording_id: RecordingIdParam, state: StateDep):
     try:
         out = await state.heavy_work.run(
             lambda: recording_mcap(path, state.settings.recording_min_free_mb),
-            f"the MCAP of recording {recording_id}")  # fmt: skip
+            f"the MCAP of recording {recording_id}",
+        )
     except ExportSpaceError as exc:
         raise HTTPException(507, str(exc)) from exc
     except HeavyWorkBusyError as exc:
-        raise HTTPException(503, str(exc),
-                            headers={"Retry-After": str(exc.retry_after_s)}) from exc  # fmt: skip
-    return FileResponse(out, media_type="application/x-mcap",
-                        filename=_download_name(info, "mcap"))  # fmt: skip
+        raise HTTPException(503, str(exc), headers={"Retry-After": str(exc.retry_after_s)}) from exc
+    return FileResponse(out, media_type="application/x-mcap", filename=_download_name(info, "mcap"))
 
 
-@router.delete("/{recording_id}", status_code=status.HTTP_204_NO_CONTENT,
-               dependencies=[AdminAuth], responses=errors(404, 409))  # fmt: skip
+@router.delete(
+    "/{recording_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    dependencies=[AdminAuth],
+    responses=errors(404, 409),
+)
 def delete_recording(recording_id: RecordingIdParam, state: StateDep) -> None:
     """Delete a recording's files (HDF5 and its MCAP) and entry; admin scope. 409 while it
     records (stop it first)."""

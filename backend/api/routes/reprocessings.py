@@ -30,8 +30,12 @@ IdParam = Annotated[int, Path(ge=1, le=2**31 - 1)]
 FileName = Literal["poses.csv", "baseline.csv", "compare.csv", "compare.json", "compare.png"]
 
 
-@router.post("/campaigns/{campaign_id}/reprocess", status_code=status.HTTP_201_CREATED,
-             dependencies=[WriteAuth], responses=errors(404, 409))  # fmt: skip
+@router.post(
+    "/campaigns/{campaign_id}/reprocess",
+    status_code=status.HTTP_201_CREATED,
+    dependencies=[WriteAuth],
+    responses=errors(404, 409),
+)
 def create_reprocessing(
     campaign_id: IdParam, body: ReprocessCreate, state: StateDep
 ) -> ReprocessPublic:
@@ -42,8 +46,9 @@ def create_reprocessing(
     nothing is stored then."""
     path = finished_recording(state, campaign_id, missing_status=409)
     try:
-        job = state.reprocessings.submit(campaign_id, path, body.camera,
-                                         tracking=body.tracking, filter_state=body.filter)
+        job = state.reprocessings.submit(
+            campaign_id, path, body.camera, tracking=body.tracking, filter_state=body.filter
+        )
     except ReprocessRequestError as exc:
         where = "path" if exc.field == "campaign_id" else "body"
         raise unprocessable([where, exc.field], [str(exc)]) from exc
@@ -78,9 +83,11 @@ def cancel_reprocessing(job_id: IdParam, state: StateDep) -> ReprocessPublic:
 
 
 @router.get(
-    "/reprocessings/{job_id}/files/{name}", dependencies=[ReadAuth], response_class=FileResponse,
+    "/reprocessings/{job_id}/files/{name}",
+    dependencies=[ReadAuth],
+    response_class=FileResponse,
     responses={**errors(404, 409), 200: {"content": {m: {} for _, m in FILES.values()}}},
-)  # fmt: skip
+)
 def reprocessing_file(job_id: IdParam, name: FileName, state: StateDep):
     """A result file: ``poses.csv`` (the new calibration's, as ``tofpose estimate`` writes
     it), ``baseline.csv`` (the recording's own camera), ``compare.csv|json|png``. 409 until
@@ -91,5 +98,4 @@ def reprocessing_file(job_id: IdParam, name: FileName, state: StateDep):
         raise HTTPException(404, f"no re-processing with id {job_id}") from exc
     if path is None:
         raise HTTPException(409, f"re-processing {job_id} has no {name} yet (it is not complete)")
-    return FileResponse(path, media_type=FILES[name][1],
-                        filename=f"reprocessing-{job_id}-{name}")  # fmt: skip
+    return FileResponse(path, media_type=FILES[name][1], filename=f"reprocessing-{job_id}-{name}")

@@ -25,8 +25,9 @@ def _public(s) -> StudyPublic:
     return StudyPublic(**{**asdict(s), "reports": list(s.reports)})
 
 
-@router.post("", status_code=status.HTTP_201_CREATED, dependencies=[WriteAuth],
-             responses=errors(409))  # fmt: skip
+@router.post(
+    "", status_code=status.HTTP_201_CREATED, dependencies=[WriteAuth], responses=errors(409)
+)
 def create_study(body: StudyCreate, state: StateDep) -> StudyPublic:
     """Queue a study. 422 names the field when the spec cannot run (a range outside
     0.3-20 m, an unknown catalog, a value listed twice, more cells or frames than the
@@ -71,9 +72,11 @@ def cancel_study(study_id: int, state: StateDep) -> StudyPublic:
 
 
 @router.get(
-    "/{study_id}/report.{fmt}", dependencies=[ReadAuth], response_class=FileResponse,
+    "/{study_id}/report.{fmt}",
+    dependencies=[ReadAuth],
+    response_class=FileResponse,
     responses={**errors(404, 409), 200: {"content": {m: {} for m in MEDIA.values()}}},
-)  # fmt: skip
+)
 def study_report(study_id: int, fmt: Literal["html", "pdf", "json"], state: StateDep):
     """The study's report: ``html`` (shown in the browser, its plots from ``plots/``),
     ``pdf``, or ``json``
@@ -85,12 +88,20 @@ def study_report(study_id: int, fmt: Literal["html", "pdf", "json"], state: Stat
     if path is None:
         raise HTTPException(409, f"study {study_id} has no {fmt} report yet (it is not complete)")
     # the HTML opens in the browser (its plots load relative to it); the others download
-    return FileResponse(path, media_type=MEDIA[fmt], filename=f"study-{study_id}.{fmt}",
-                        content_disposition_type="inline" if fmt == "html" else "attachment")
+    return FileResponse(
+        path,
+        media_type=MEDIA[fmt],
+        filename=f"study-{study_id}.{fmt}",
+        content_disposition_type="inline" if fmt == "html" else "attachment",
+    )
 
 
-@router.get("/{study_id}/plots/{name}", dependencies=[ReadAuth], response_class=FileResponse,
-            responses={**errors(404), 200: {"content": {"image/png": {}}}})  # fmt: skip
+@router.get(
+    "/{study_id}/plots/{name}",
+    dependencies=[ReadAuth],
+    response_class=FileResponse,
+    responses={**errors(404), 200: {"content": {"image/png": {}}}},
+)
 def study_plot(study_id: int, name: PlotName, state: StateDep):
     """A plot of the report (report.html links them relative to itself)."""
     try:

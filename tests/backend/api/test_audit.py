@@ -50,10 +50,16 @@ def test_each_scope_gets_what_it_may_and_a_403_naming_the_scope_otherwise(client
     for key, name in ((read, "viewer"), (operate, "operator")):
         r = client.get("/api/audit", headers=_bearer(key))
         assert r.status_code == 403
-        assert r.json()["detail"] == (f"this request needs the 'admin' scope; key {name!r} has "
-                                      f"{'read' if key == read else 'operate'!r}")  # fmt: skip
-        assert client.post("/api/keys", json={"name": "x", "scope": "admin"},
-                           headers=_bearer(key)).status_code == 403  # fmt: skip
+        assert r.json()["detail"] == (
+            f"this request needs the 'admin' scope; key {name!r} has "
+            f"{'read' if key == read else 'operate'!r}"
+        )
+        assert (
+            client.post(
+                "/api/keys", json={"name": "x", "scope": "admin"}, headers=_bearer(key)
+            ).status_code
+            == 403
+        )
     # no key or a wrong one: 401, as before keys had scopes
     for headers in ({}, _bearer("wrong")):
         r = client.post(stop, headers=headers)
@@ -82,11 +88,14 @@ def test_keys_are_listed_without_the_key_and_revoked_over_http(client):
     assert r.status_code == 404 and r.json()["detail"] == "no active key named 'temp'"
     r = client.post("/api/keys", json={"name": "temp", "scope": "read"}, headers=AUTH)
     assert r.status_code == 409 and "exists already" in r.json()["detail"]
-    r = client.post("/api/keys", json={"name": "TOFPOSE_API_TOKEN", "scope": "read"},
-                    headers=AUTH)  # fmt: skip
+    r = client.post("/api/keys", json={"name": "TOFPOSE_API_TOKEN", "scope": "read"}, headers=AUTH)
     assert r.status_code == 409 and "reserved" in r.json()["detail"]
-    for bad in ({"name": "has space", "scope": "read"}, {"name": "ok", "scope": "root"},
-                {"name": "ok"}, {"name": "ok", "scope": "read", "key": "mine"}):  # fmt: skip
+    for bad in (
+        {"name": "has space", "scope": "read"},
+        {"name": "ok", "scope": "root"},
+        {"name": "ok"},
+        {"name": "ok", "scope": "read", "key": "mine"},
+    ):
         assert client.post("/api/keys", json=bad, headers=AUTH).status_code == 422, bad
 
 
@@ -123,8 +132,9 @@ def test_every_state_change_is_audited_answered_or_refused(client):
 
 
 def test_secrets_in_bodies_are_redacted_and_refusals_before_any_route_recorded(client):
-    r = client.post("/api/keys", json={"name": "n", "scope": "read", "api_key": "hunter2"},
-                    headers=AUTH)  # fmt: skip
+    r = client.post(
+        "/api/keys", json={"name": "n", "scope": "read", "api_key": "hunter2"}, headers=AUTH
+    )
     assert r.status_code == 422
     r = client.post("/api/motion/stop", headers={**AUTH, "Host": "evil.example"})
     assert r.status_code == 400  # a Host this server does not serve (DNS rebinding)
@@ -132,7 +142,10 @@ def test_secrets_in_bodies_are_redacted_and_refusals_before_any_route_recorded(c
     assert "hunter2" not in str(entries)
     assert entries[1]["body"] == '{"name":"n","scope":"read","api_key":"***"}'
     assert (entries[0]["path"], entries[0]["status"], entries[0]["key_name"]) == (
-        "/api/motion/stop", 400, None)
+        "/api/motion/stop",
+        400,
+        None,
+    )
 
 
 def test_the_audit_trail_pages_newest_first_and_survives_a_restart(settings):

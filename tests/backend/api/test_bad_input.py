@@ -54,14 +54,17 @@ def test_unusable_catalog_geometry_is_422_and_nothing_is_stored(client):
     before = client.get("/api/catalogs").json()
     collinear = {
         "name": "line",
-        "reflectors": [{"id": i, "position_mm": [100.0 * i, 0, 0], "diameter_mm": 40}
-                       for i in range(4)],
-    }  # fmt: skip
+        "reflectors": [
+            {"id": i, "position_mm": [100.0 * i, 0, 0], "diameter_mm": 40} for i in range(4)
+        ],
+    }
     r = client.post("/api/catalogs", json=collinear, headers=AUTH)
     assert r.status_code == 422 and "collinear" in _detail_text(r)
     dup = {**collinear, "name": "dup"}
-    dup["reflectors"] = [{**x, "id": 1, "position_mm": [x["position_mm"][0], x["id"] * 50.0, 0]}
-                         for x in collinear["reflectors"]]  # fmt: skip
+    dup["reflectors"] = [
+        {**x, "id": 1, "position_mm": [x["position_mm"][0], x["id"] * 50.0, 0]}
+        for x in collinear["reflectors"]
+    ]
     r = client.post("/api/catalogs", json=dup, headers=AUTH)
     assert r.status_code == 422 and "duplicate" in _detail_text(r)
     assert client.get("/api/catalogs").json() == before
@@ -69,8 +72,9 @@ def test_unusable_catalog_geometry_is_422_and_nothing_is_stored(client):
 
 def test_bad_settings_leave_the_settings_unchanged(client):
     before = client.get("/api/camera/settings").json()
-    r = client.put("/api/camera/settings", json={"frame_rate_hz": 15, "auto_exposure": "maybe"},
-                   headers=AUTH)  # fmt: skip
+    r = client.put(
+        "/api/camera/settings", json={"frame_rate_hz": 15, "auto_exposure": "maybe"}, headers=AUTH
+    )
     assert r.status_code == 422
     assert client.get("/api/camera/settings").json() == before
 

@@ -15,12 +15,15 @@ from tests.backend.conftest import AUTH, make_settings, running_app, wait_for
 from tests.tofpose.io.interop.test_mcap_export import read_back
 
 GRID = {
-    "name": "grid-1", "catalog": "paper-target", "frames_per_point": 10, "settle_s": 0.5,
+    "name": "grid-1",
+    "catalog": "paper-target",
+    "frames_per_point": 10,
+    "settle_s": 0.5,
     "setpoints": [
         {"yaw_deg": 0, "pitch_deg": 0, "roll_deg": 0, "rail_mm": 11000},
         {"yaw_deg": 5, "pitch_deg": 0, "roll_deg": 0, "rail_mm": 11000},
     ],
-}  # fmt: skip
+}
 
 
 @pytest.fixture
@@ -38,10 +41,14 @@ def _run(client, body, timeout_s=60.0) -> dict:
     cid = r.json()["id"]
     assert client.post(f"/api/campaigns/{cid}/start", headers=AUTH).status_code == 200
     return wait_for(
-        lambda: (c := client.get(f"/api/campaigns/{cid}").json())["status"] in
-        ("done", "paused", "failed") and c,
-        timeout_s, "the campaign to finish",
-    )  # fmt: skip
+        lambda: (
+            (c := client.get(f"/api/campaigns/{cid}").json())["status"]
+            in ("done", "paused", "failed")
+            and c
+        ),
+        timeout_s,
+        "the campaign to finish",
+    )
 
 
 class _Tables(HTMLParser):
@@ -64,8 +71,13 @@ def _recompute(rows: list[dict], axis: str, ref: str = "lab_truth_") -> dict:
     med = np.median(e)
     mad = 1.4826 * np.median(np.abs(e - med))
     k = e if mad == 0 else e[np.abs(e - med) <= 5.0 * mad]
-    return {"n": len(k), "bias": k.mean(), "std": k.std(ddof=1), "max_abs": np.abs(k).max(),
-            "rms": np.sqrt(np.mean(k**2))}  # fmt: skip
+    return {
+        "n": len(k),
+        "bias": k.mean(),
+        "std": k.std(ddof=1),
+        "max_abs": np.abs(k).max(),
+        "rms": np.sqrt(np.mean(k**2)),
+    }
 
 
 def test_a_grid_campaign_runs_to_completion_and_every_report_downloads(fast_client, tmp_path):
@@ -86,9 +98,24 @@ def test_a_grid_campaign_runs_to_completion_and_every_report_downloads(fast_clie
     r = c.get(base + ".csv")
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/csv")
     rows = list(csv.DictReader(io.StringIO(r.text)))
-    required = ["setpoint_index", "frame_index", "time_s", "ok", "x_mm", "y_mm", "z_mm",
-                "pitch_deg", "yaw_deg", "roll_deg", "truth_x_mm", "truth_y_mm", "truth_z_mm",
-                "truth_pitch_deg", "truth_yaw_deg", "truth_roll_deg"]  # fmt: skip
+    required = [
+        "setpoint_index",
+        "frame_index",
+        "time_s",
+        "ok",
+        "x_mm",
+        "y_mm",
+        "z_mm",
+        "pitch_deg",
+        "yaw_deg",
+        "roll_deg",
+        "truth_x_mm",
+        "truth_y_mm",
+        "truth_z_mm",
+        "truth_pitch_deg",
+        "truth_yaw_deg",
+        "truth_roll_deg",
+    ]
     assert set(required) <= set(rows[0]) and len(rows) == 20
     # every frame keeps the relative state at it; where the filter fused the pose, the
     # target is at rest within its sigmas (the table stands still at a set-point). This
@@ -134,8 +161,10 @@ def test_a_grid_campaign_runs_to_completion_and_every_report_downloads(fast_clie
     assert r.status_code == 200 and r.content[:5] == b"%PDF-"
     pdf = tmp_path / "report.pdf"
     pdf.write_bytes(r.content)
-    subprocess.run(["pdftoppm", "-r", "40", "-png", "-f", "1", "-l", "1", str(pdf),
-                    str(tmp_path / "page")], check=True)  # fmt: skip
+    subprocess.run(
+        ["pdftoppm", "-r", "40", "-png", "-f", "1", "-l", "1", str(pdf), str(tmp_path / "page")],
+        check=True,
+    )
     page1 = cv2.imread(str(next(tmp_path.glob("page*.png"))), cv2.IMREAD_GRAYSCALE)
     ink = (page1 < 128).mean()
     assert 0.005 < ink < 0.5, f"page 1 ink fraction {ink:.4f}: blank or black"
@@ -174,15 +203,29 @@ def test_generators_make_the_set_points(fast_client):
         ({**GRID, "setpoints": [{}]}, 422, "at least one of yaw_deg"),
         ({**GRID, "setpoints": [{"yaw_deg": 200}]}, 422, "set-point 0: yaw set-point 200"),
         ({**GRID, "setpoints": [{"yaw_deg": 0}] * 5001}, 422, "setpoints"),
-        ({**GRID, "frames_per_point": 100_000, "setpoints": [{"yaw_deg": 0}] * 11}, 422,
-         "maximum 1000000 frames"),
+        (
+            {**GRID, "frames_per_point": 100_000, "setpoints": [{"yaw_deg": 0}] * 11},
+            422,
+            "maximum 1000000 frames",
+        ),
         ({**GRID, "catalog": "nope"}, 422, "no catalog named 'nope'"),
         ({**GRID, "generator": {"kind": "stability"}}, 422, "not both"),
-        ({"name": "x", "generator": {"kind": "range_sweep", "rail_start_mm": 1,
-                                     "rail_stop_mm": 2, "points": 1}}, 422, "points"),
+        (
+            {
+                "name": "x",
+                "generator": {
+                    "kind": "range_sweep",
+                    "rail_start_mm": 1,
+                    "rail_stop_mm": 2,
+                    "points": 1,
+                },
+            },
+            422,
+            "points",
+        ),
         ({**GRID, "setpoints": [{"yaw_deg": None}]}, 422, "null is not a set-point"),
     ],
-)  # fmt: skip
+)
 def test_bad_campaigns_are_refused_and_nothing_is_stored(fast_client, body, status, needle):
     client = fast_client
     r = client.post("/api/campaigns", json=body, headers=AUTH)
@@ -209,8 +252,16 @@ def test_the_state_machine_is_served_and_is_what_the_commands_obey(client):
     """``GET /api/campaigns/states`` (what the dashboard offers per state) and the 409s
     of the commands come from one table; the API document names the states' enum."""
     table = client.get("/api/campaigns/states").json()
-    assert table["states"] == ["draft", "queued", "running", "paused", "interrupted", "done",
-                               "failed", "cancelled"]  # fmt: skip
+    assert table["states"] == [
+        "draft",
+        "queued",
+        "running",
+        "paused",
+        "interrupted",
+        "done",
+        "failed",
+        "cancelled",
+    ]
     assert table["finished"] == ["done", "failed", "cancelled"]
     moves = {(t["from_state"], t["command"]): t["to_state"] for t in table["transitions"]}
     assert moves[("draft", "start")] == "queued" and ("draft", "pause") not in moves
@@ -224,8 +275,10 @@ def test_the_state_machine_is_served_and_is_what_the_commands_obey(client):
         assert ("draft", command) not in moves
         r = client.post(f"/api/campaigns/{cid}/{command}", headers=AUTH)
         assert r.status_code == 409 and r.json()["detail"].startswith(f"campaign {cid} is draft:")
-    assert client.post(f"/api/campaigns/{cid}/cancel", headers=AUTH).json()["status"] == (
-        moves[("draft", "cancel")])
+    assert (
+        client.post(f"/api/campaigns/{cid}/cancel", headers=AUTH).json()["status"]
+        == (moves[("draft", "cancel")])
+    )
 
 
 def test_a_running_campaign_owns_the_turntable_and_stop_pauses_it(fast_client):
@@ -245,12 +298,16 @@ def test_a_running_campaign_owns_the_turntable_and_stop_pauses_it(fast_client):
     assert r.status_code == 409 and "queue" in r.json()["detail"]
     assert c.post(f"/api/campaigns/{cid}/resume", headers=AUTH).status_code == 409
     assert c.post("/api/motion/stop", headers=AUTH).status_code == 200
-    paused = wait_for(lambda: (x := c.get(f"/api/campaigns/{cid}").json())["status"] == "paused"
-                      and x)  # fmt: skip
+    paused = wait_for(
+        lambda: (x := c.get(f"/api/campaigns/{cid}").json())["status"] == "paused" and x
+    )
     assert "STOP pressed" in paused["status_reason"]
     # the runner stores "paused", then gives the motion system back
-    motion = wait_for(lambda: (m := c.get("/api/motion").json())["owner_campaign_id"] is None
-                      and m, 5.0, "the campaign to let go of the motion system")  # fmt: skip
+    motion = wait_for(
+        lambda: (m := c.get("/api/motion").json())["owner_campaign_id"] is None and m,
+        5.0,
+        "the campaign to let go of the motion system",
+    )
     assert motion["stop_latched"] is True
     r = c.post("/api/motion/move", json={"yaw_deg": 1}, headers=AUTH)
     assert r.status_code == 409 and "release it first" in r.json()["detail"]  # STOP latched
@@ -271,10 +328,15 @@ def test_a_campaign_paused_or_cancelled_after_the_scheduler_picked_it_never_runs
     svc = client.app.state.tofpose.campaigns
     far = "2099-01-01T00:00:00+00:00"  # queued, but never due: the scheduler leaves it
     for command, state in (("pause", "paused"), ("cancel", "cancelled")):
-        cid = client.post("/api/campaigns", json={**GRID, "name": command},
-                          headers=AUTH).json()["id"]  # fmt: skip
-        assert client.post(f"/api/campaigns/{cid}/start", json={"at": far},
-                           headers=AUTH).json()["status"] == "queued"  # fmt: skip
+        cid = client.post("/api/campaigns", json={**GRID, "name": command}, headers=AUTH).json()[
+            "id"
+        ]
+        assert (
+            client.post(f"/api/campaigns/{cid}/start", json={"at": far}, headers=AUTH).json()[
+                "status"
+            ]
+            == "queued"
+        )
         assert client.post(f"/api/campaigns/{cid}/{command}", headers=AUTH).status_code == 200
         svc._run(cid)  # the runner, as if the scheduler had picked it a moment before
         c = client.get(f"/api/campaigns/{cid}").json()
@@ -290,10 +352,13 @@ def test_a_stop_pressed_between_the_pick_and_the_claim_keeps_the_campaign_from_s
     with the STOP count of that moment): the campaign is paused, never run, and the
     table is not claimed."""
     svc = client.app.state.tofpose.campaigns
-    cid = client.post("/api/campaigns", json={**GRID, "name": "stopped"},
-                      headers=AUTH).json()["id"]  # fmt: skip
-    assert client.post(f"/api/campaigns/{cid}/start", json={"at": "2099-01-01T00:00:00+00:00"},
-                       headers=AUTH).json()["status"] == "queued"  # fmt: skip
+    cid = client.post("/api/campaigns", json={**GRID, "name": "stopped"}, headers=AUTH).json()["id"]
+    assert (
+        client.post(
+            f"/api/campaigns/{cid}/start", json={"at": "2099-01-01T00:00:00+00:00"}, headers=AUTH
+        ).json()["status"]
+        == "queued"
+    )
     stops_at_pick = svc.motion.stops
     assert client.post("/api/motion/stop", headers=AUTH).status_code == 200
     svc._run(cid, stops_at_pick)  # the runner the scheduler started before the STOP
@@ -304,14 +369,18 @@ def test_a_stop_pressed_between_the_pick_and_the_claim_keeps_the_campaign_from_s
     # the latch alone (no STOP since the pick) keeps a queued campaign from starting, and
     # a campaign cannot be started while it holds
     assert client.get("/api/motion").json()["stop_latched"] is True
-    cid = client.post("/api/campaigns", json={**GRID, "name": "latched"},
-                      headers=AUTH).json()["id"]  # fmt: skip
-    r = client.post(f"/api/campaigns/{cid}/start", json={"at": "2099-01-01T00:00:00+00:00"},
-                    headers=AUTH)  # fmt: skip
+    cid = client.post("/api/campaigns", json={**GRID, "name": "latched"}, headers=AUTH).json()["id"]
+    r = client.post(
+        f"/api/campaigns/{cid}/start", json={"at": "2099-01-01T00:00:00+00:00"}, headers=AUTH
+    )
     assert r.status_code == 409 and "release it" in r.json()["detail"]
     assert client.post("/api/motion/release", headers=AUTH).status_code == 200
-    assert client.post(f"/api/campaigns/{cid}/start", json={"at": "2099-01-01T00:00:00+00:00"},
-                       headers=AUTH).json()["status"] == "queued"  # fmt: skip
+    assert (
+        client.post(
+            f"/api/campaigns/{cid}/start", json={"at": "2099-01-01T00:00:00+00:00"}, headers=AUTH
+        ).json()["status"]
+        == "queued"
+    )
     assert client.post("/api/motion/stop", headers=AUTH).json()["stop_latched"] is True
     svc._run(cid)
     assert client.get(f"/api/campaigns/{cid}").json()["status"] == "paused"
@@ -320,8 +389,12 @@ def test_a_stop_pressed_between_the_pick_and_the_claim_keeps_the_campaign_from_s
 
 def test_pause_then_resume_measures_every_set_point_once(fast_client):
     c = fast_client
-    body = {**GRID, "name": "pr", "frames_per_point": 15,
-            "setpoints": [{"yaw_deg": y, "rail_mm": 12000} for y in (0, 2, 4, 6)]}  # fmt: skip
+    body = {
+        **GRID,
+        "name": "pr",
+        "frames_per_point": 15,
+        "setpoints": [{"yaw_deg": y, "rail_mm": 12000} for y in (0, 2, 4, 6)],
+    }
     cid = c.post("/api/campaigns", json=body, headers=AUTH).json()["id"]
     c.post(f"/api/campaigns/{cid}/start", headers=AUTH)
     wait_for(lambda: c.get(f"/api/campaigns/{cid}").json()["n_done"] >= 1, 60)
@@ -330,8 +403,9 @@ def test_pause_then_resume_measures_every_set_point_once(fast_client):
     done_at_pause = c.get(f"/api/campaigns/{cid}").json()["n_done"]
     assert c.get(f"/api/campaigns/{cid}/measurements").json()["total"] == 15 * done_at_pause
     assert c.post(f"/api/campaigns/{cid}/resume", headers=AUTH).status_code == 200
-    final = wait_for(lambda: (x := c.get(f"/api/campaigns/{cid}").json())["status"] == "done"
-                     and x, 60)  # fmt: skip
+    final = wait_for(
+        lambda: (x := c.get(f"/api/campaigns/{cid}").json())["status"] == "done" and x, 60
+    )
     assert final["n_done"] == 4
     items = c.get(f"/api/campaigns/{cid}/measurements").json()["items"]
     assert len(items) == 60
@@ -365,12 +439,10 @@ def test_the_cli_writes_the_same_report_from_the_database(tmp_path, capsys):
         api_csv = c.get(f"/api/campaigns/{done['id']}/report.csv").text
     url = f"sqlite:///{data / 'tofpose.db'}"
     out = tmp_path / "r.csv"
-    assert main(["report", "--db", url, str(done["id"]), "--format", "csv", "--out",
-                 str(out)]) == 0  # fmt: skip
+    assert main(["report", "--db", url, str(done["id"]), "--format", "csv", "--out", str(out)]) == 0
     assert out.read_text() == api_csv
     pdf = tmp_path / "r.pdf"
-    assert main(["report", "--db", url, str(done["id"]), "--format", "pdf", "--out",
-                 str(pdf)]) == 0  # fmt: skip
+    assert main(["report", "--db", url, str(done["id"]), "--format", "pdf", "--out", str(pdf)]) == 0
     assert pdf.read_bytes()[:5] == b"%PDF-"
     assert main(["report", "--db", url, "77", "--out", str(out)]) == 2
     assert "no campaign with id 77" in capsys.readouterr().err
@@ -385,12 +457,23 @@ def test_raw_recording_holds_exactly_the_stored_frames_and_reprocesses(fast_clie
     from tofpose.io.recording import open_recording
 
     c = fast_client
-    body = {**GRID, "name": "raw", "frames_per_point": 12, "record_raw": True,
-            "setpoints": [{"yaw_deg": y, "rail_mm": 12000} for y in (0, 3, 6)]}  # fmt: skip
+    body = {
+        **GRID,
+        "name": "raw",
+        "frames_per_point": 12,
+        "record_raw": True,
+        "setpoints": [{"yaw_deg": y, "rail_mm": 12000} for y in (0, 3, 6)],
+    }
     cid = c.post("/api/campaigns", json=body, headers=AUTH).json()["id"]
     c.post(f"/api/campaigns/{cid}/start", headers=AUTH)
-    wait_for(lambda: (p := c.get(f"/api/campaigns/{cid}").json()["progress"]) and
-             p["n_done"] >= 1 and p["frames_collected"] >= 3, 60)  # fmt: skip
+    wait_for(
+        lambda: (
+            (p := c.get(f"/api/campaigns/{cid}").json()["progress"])
+            and p["n_done"] >= 1
+            and p["frames_collected"] >= 3
+        ),
+        60,
+    )
     assert c.get(f"/api/campaigns/{cid}/recording.h5").status_code == 409  # still writing
     c.post(f"/api/campaigns/{cid}/pause", headers=AUTH)
     wait_for(lambda: c.get(f"/api/campaigns/{cid}").json()["status"] == "paused")
@@ -416,8 +499,11 @@ def test_raw_recording_holds_exactly_the_stored_frames_and_reprocesses(fast_clie
     out = tmp_path / "poses.csv"
     assert main(["estimate", str(rec_path), "--out", str(out)]) == 0
     poses = list(csv.DictReader(out.open()))
-    diffs = [abs(float(p["x_mm"]) - m["x_mm"]) for p, m in zip(poses, items, strict=True)
-             if p["ok"] == "1" and m["ok"]]  # fmt: skip
+    diffs = [
+        abs(float(p["x_mm"]) - m["x_mm"])
+        for p, m in zip(poses, items, strict=True)
+        if p["ok"] == "1" and m["ok"]
+    ]
     assert len(diffs) >= 30 and np.median(diffs) < 0.5
     # the same recording as MCAP: its frames, the references and a pose per frame
     r = c.get(f"/api/campaigns/{cid}/recording.mcap")
@@ -428,8 +514,9 @@ def test_raw_recording_holds_exactly_the_stored_frames_and_reprocesses(fast_clie
         assert len(messages[topics.GRAY]) == rec.n_frames
         for k in (0, rec.n_frames - 1):
             g = messages[topics.GRAY][k][1]
-            np.testing.assert_array_equal(np.frombuffer(g.data, "<u2").reshape(240, 320),
-                                          rec.frame(k)[0])  # fmt: skip
+            np.testing.assert_array_equal(
+                np.frombuffer(g.data, "<u2").reshape(240, 320), rec.frame(k)[0]
+            )
             lab = messages[topics.LAB_TRUTH][k][1]
             assert lab["t_camera_target_mm"] == rec.lab_truth_t_mm[k].tolist()
     est = [p for _, p in messages[topics.ESTIMATE]]
@@ -442,8 +529,12 @@ def test_raw_recording_holds_exactly_the_stored_frames_and_reprocesses(fast_clie
 
 def test_the_campaigns_camera_settings_are_applied_before_it_measures(fast_client):
     c = fast_client
-    body = {**GRID, "name": "cam", "frames_per_point": 3,
-            "camera": {"modulation_frequency_mhz": 12.0, "frame_rate_hz": 15.0}}  # fmt: skip
+    body = {
+        **GRID,
+        "name": "cam",
+        "frames_per_point": 3,
+        "camera": {"modulation_frequency_mhz": 12.0, "frame_rate_hz": 15.0},
+    }
     assert c.get("/api/camera/settings").json()["modulation_frequency_mhz"] == 6.0
     done = _run(c, body)
     assert done["status"] == "done" and done["camera"]["modulation_frequency_mhz"] == 12.0
@@ -462,14 +553,22 @@ def _write_recording_with_both_truths(path, n_frames: int) -> None:
     from tofpose.io.recording import RecordingWriter
 
     T_lab_exact = RigidTransform.from_euler_deg(0.5, -0.4, 0.3, (4.0, -3.0, 6.0))
-    with RecordingWriter(path, CameraModel(), paper_target(), with_truth=True,
-                         with_lab_truth=True) as w:  # fmt: skip
+    with RecordingWriter(
+        path, CameraModel(), paper_target(), with_truth=True, with_lab_truth=True
+    ) as w:
         for i in range(n_frames):
             T_exact = facing_pose(2000.0, yaw_deg=float(i), offset_mm=(30.0, -20.0))
             T_lab = T_lab_exact.compose(T_exact)
             f = render(T_exact, seed=100 + i)
-            w.append(f.gray, f.distance_mm, 0.05 * i, T_exact.R, T_exact.t_mm,
-                     lab_R_camera_target=T_lab.R, lab_t_camera_target_mm=T_lab.t_mm)  # fmt: skip
+            w.append(
+                f.gray,
+                f.distance_mm,
+                0.05 * i,
+                T_exact.R,
+                T_exact.t_mm,
+                lab_R_camera_target=T_lab.R,
+                lab_t_camera_target_mm=T_lab.t_mm,
+            )
 
 
 def _facing_pose_columns(R, t_mm) -> dict[str, float]:
@@ -492,10 +591,16 @@ def test_a_replayed_recordings_truth_and_lab_truth_are_stored_where_they_belong(
     _write_recording_with_both_truths(source, n_in)
     # the simulated turntable only gives the campaign something to move: a replay's
     # frames carry no encoder reading, so nothing of the table reaches the rows
-    settings = make_settings(tmp_path / "data", camera=f"replay:{source}", motion="sim",
-                             sim_time_scale=5.0)  # fmt: skip
-    body = {"name": "replayed", "frames_per_point": 8, "settle_s": 0.1, "record_raw": True,
-            "setpoints": [{"yaw_deg": 0.0}]}  # fmt: skip
+    settings = make_settings(
+        tmp_path / "data", camera=f"replay:{source}", motion="sim", sim_time_scale=5.0
+    )
+    body = {
+        "name": "replayed",
+        "frames_per_point": 8,
+        "settle_s": 0.1,
+        "record_raw": True,
+        "setpoints": [{"yaw_deg": 0.0}],
+    }
     with running_app(settings) as c:
         done = _run(c, body)
         assert done["status"] == "done", done

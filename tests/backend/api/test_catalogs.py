@@ -30,8 +30,7 @@ def test_a_name_taken_between_the_check_and_the_insert_is_409(client, monkeypatc
 def test_concurrent_creates_of_one_name_give_one_201_and_409s(live_server):
     def post(i: int) -> int:
         body = {"name": f"race-{i // 10}", "reflectors": TRIANGLE}
-        r = httpx.post(f"{live_server.base_url}/api/catalogs", json=body, headers=AUTH,
-                       timeout=30)  # fmt: skip
+        r = httpx.post(f"{live_server.base_url}/api/catalogs", json=body, headers=AUTH, timeout=30)
         return r.status_code
 
     with ThreadPoolExecutor(10) as pool:

@@ -48,8 +48,12 @@ class LateCamera(FlakyCamera):
         frame = self.inner.read(timeout_s)
         time.sleep(self.delay_s)
         stamp = frame.time_s + (self.delay_s if self.stamp_on_arrival else 0.0)
-        return replace(frame, time_s=stamp, T_camera_target_lab=None,
-                       meta={k: v for k, v in frame.meta.items() if k != "encoders"})  # fmt: skip
+        return replace(
+            frame,
+            time_s=stamp,
+            T_camera_target_lab=None,
+            meta={k: v for k, v in frame.meta.items() if k != "encoders"},
+        )
 
 
 def _late_lab(tmp_path, *, stamp_on_arrival: bool = False, motion_artefacts: bool = True):
@@ -135,8 +139,9 @@ def test_the_report_gives_latency_dynamic_errors_and_frame_loss(stamped_late_lab
     rows = _rows(late_lab, c["id"])
     moving = [r for r in rows if r["in_motion"] == "1"]
     # recomputed from the CSV: the yaw error RMS in motion, and the loss in motion
-    e = np.array([float(r["yaw_deg"]) - float(r["lab_truth_yaw_deg"]) for r in moving
-                  if r["ok"] == "1"])  # fmt: skip
+    e = np.array(
+        [float(r["yaw_deg"]) - float(r["lab_truth_yaw_deg"]) for r in moving if r["ok"] == "1"]
+    )
     assert dyn["yaw_deg"]["rms_in_motion"] == pytest.approx(np.sqrt(np.mean(e**2)), rel=1e-9)
     idx = [int(r["frame_index"]) for r in moving]
     n_ok = sum(r["ok"] == "1" for r in moving)
@@ -197,8 +202,11 @@ def test_a_pause_during_the_profile_stops_the_slew(spied_lab):
     client, motion = spied_lab
     cid = _start_and_wait_for_the_profile(client, motion, "dyn-pause")
     assert client.post(f"/api/campaigns/{cid}/pause", headers=AUTH).status_code == 200
-    c = wait_for(lambda: (x := client.get(f"/api/campaigns/{cid}").json())["status"] == "paused"
-                 and x, 20.0, "the pause")  # fmt: skip
+    c = wait_for(
+        lambda: (x := client.get(f"/api/campaigns/{cid}").json())["status"] == "paused" and x,
+        20.0,
+        "the pause",
+    )
     assert "paused by request" in c["status_reason"]
     assert [name for name, _ in motion.calls][-1] == "stop"
     m = client.get("/api/motion").json()
@@ -214,8 +222,11 @@ def test_a_motion_link_lost_during_the_profile_pauses_and_stops(spied_lab):
     # the profile runs and the status is polled
     wait_for(lambda: motion.status_reads_in_profile >= 3, 20.0, "the profile's status polls")
     motion.dead = True
-    c = wait_for(lambda: (x := client.get(f"/api/campaigns/{cid}").json())["status"] == "paused"
-                 and x, 20.0, "the pause")  # fmt: skip
+    c = wait_for(
+        lambda: (x := client.get(f"/api/campaigns/{cid}").json())["status"] == "paused" and x,
+        20.0,
+        "the pause",
+    )
     assert "motion status was not read" in c["status_reason"], c["status_reason"]
     assert "rate table link lost" in c["status_reason"]
     assert [name for name, _ in motion.calls][-1] == "stop"

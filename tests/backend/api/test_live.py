@@ -50,8 +50,11 @@ def test_stream_sends_hello_then_every_pose(client):
 def test_images_and_point_cloud_on_request(client):
     with client.websocket_connect("/ws/live") as ws:
         ws.receive_json()
-        ws.send_text(json.dumps({"images": ["gray", "distance"], "image_every": 2,
-                                 "image_step": 2, "points": True}))  # fmt: skip
+        ws.send_text(
+            json.dumps(
+                {"images": ["gray", "distance"], "image_every": 2, "image_step": 2, "points": True}
+            )
+        )
         seen: dict[str, list] = {"image": [], "points": [], "pose": []}
         while len(seen["pose"]) < 8 or not seen["points"] or len(seen["image"]) < 2:
             m = ws.receive_json()
@@ -106,9 +109,10 @@ BEARER = ["tofpose.bearer", f"tofpose.bearer.{TOKEN}"]
 
 def _refusal(c, url: str, subprotocols: list[str] | None = None) -> tuple[int, str]:
     """The close code and reason of a handshake the server refuses."""
-    with pytest.raises(WebSocketDisconnect) as exc, c.websocket_connect(
-        url, subprotocols=subprotocols
-    ) as ws:
+    with (
+        pytest.raises(WebSocketDisconnect) as exc,
+        c.websocket_connect(url, subprotocols=subprotocols) as ws,
+    ):
         ws.receive_json()
     return exc.value.code, exc.value.reason
 
@@ -168,14 +172,15 @@ def test_the_subprotocol_handshake_over_a_real_socket(tmp_path):
 
 @pytest.mark.parametrize(
     ("per_address", "total", "reason"),
-    [(2, 10, "too many live clients from testclient (2, TOFPOSE_LIVE_MAX_CLIENTS_PER_ADDRESS)"),
-     (10, 2, "too many live clients (2, TOFPOSE_LIVE_MAX_CLIENTS)")],
-)  # fmt: skip
+    [
+        (2, 10, "too many live clients from testclient (2, TOFPOSE_LIVE_MAX_CLIENTS_PER_ADDRESS)"),
+        (10, 2, "too many live clients (2, TOFPOSE_LIVE_MAX_CLIENTS)"),
+    ],
+)
 def test_live_clients_are_capped_per_address_and_in_all(tmp_path, per_address, total, reason):
     """The client over the cap is accepted and closed at once with 1013 (try again
     later) and a reason naming the cap; a slot frees when a client leaves."""
-    s = make_settings(tmp_path, live_max_clients_per_address=per_address,
-                      live_max_clients=total)  # fmt: skip
+    s = make_settings(tmp_path, live_max_clients_per_address=per_address, live_max_clients=total)
     with running_app(s) as c:
         state = c.app.state.tofpose
         first = c.websocket_connect("/ws/live").__enter__()
@@ -221,13 +226,14 @@ def test_a_client_that_never_reads_is_let_go_after_the_send_timeout(tmp_path):
             f"GET /ws/live HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
             "Connection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
             "Sec-WebSocket-Version: 13\r\n\r\n".encode()
-        )  # fmt: skip
+        )
         head = b""
         while b"\r\n\r\n" not in head:  # the 101, then the options
             head += mute.recv(1)
         assert head.startswith(b"HTTP/1.1 101")
-        mute.sendall(_masked_text_frame('{"raw":true,"raw_credit":0,"image_every":1,'
-                                        '"image_step":1}'))  # fmt: skip
+        mute.sendall(
+            _masked_text_frame('{"raw":true,"raw_credit":0,"image_every":1,"image_step":1}')
+        )
         wait_for(lambda: state.live_clients.get("127.0.0.1") == 1, what="the mute client")
         # never read from `mute` again: the server lets it go on its own
         wait_for(lambda: not state.live_clients, 30.0, "the server to let the mute client go")

@@ -11,8 +11,11 @@ from tests.backend.conftest import AUTH, running_app, wait_for
 
 
 def _settled(c) -> dict:
-    return wait_for(lambda: (m := c.get("/api/motion").json())["settled"] and m, 20.0,
-                    "the motion system to settle")  # fmt: skip
+    return wait_for(
+        lambda: (m := c.get("/api/motion").json())["settled"] and m,
+        20.0,
+        "the motion system to settle",
+    )
 
 
 def test_a_jog_moves_from_the_encoder_position_not_from_a_stale_view(settings, spy_devices):
@@ -37,8 +40,11 @@ def test_after_a_stop_a_jog_starts_where_the_axis_stopped_not_at_its_target(sett
     added to the encoder reading."""
     with running_app(settings, spy_devices) as c:
         assert c.post("/api/motion/move", json={"roll_deg": 170.0}, headers=AUTH).status_code == 202
-        wait_for(lambda: c.get("/api/motion").json()["positions"]["roll"] > 5.0, 10.0,
-                 "the roll axis to move")  # fmt: skip
+        wait_for(
+            lambda: c.get("/api/motion").json()["positions"]["roll"] > 5.0,
+            10.0,
+            "the roll axis to move",
+        )
         assert c.post("/api/motion/stop", headers=AUTH).status_code == 200
         wait_for(lambda: not c.get("/api/motion").json()["busy"], 5.0, "the stop")
         stopped_at = c.get("/api/motion").json()["positions"]["roll"]
@@ -57,8 +63,7 @@ def test_after_a_stop_a_jog_starts_where_the_axis_stopped_not_at_its_target(sett
 def test_a_second_jog_while_moving_is_refused(settings, spy_devices):
     with running_app(settings, spy_devices) as c:
         _settled(c)
-        assert c.post("/api/motion/jog", json={"rail_mm": 1000.0},
-                      headers=AUTH).status_code == 202  # fmt: skip
+        assert c.post("/api/motion/jog", json={"rail_mm": 1000.0}, headers=AUTH).status_code == 202
         wait_for(lambda: c.get("/api/motion").json()["busy"], 2.0, "the move to start")
         r = c.post("/api/motion/jog", json={"rail_mm": 1000.0}, headers=AUTH)
         assert r.status_code == 409 and "still moving" in r.json()["detail"]
@@ -91,8 +96,7 @@ RAMP = {"axis": "yaw", "kind": "ramp", "rate_deg_s": 3.0, "hold_s": 1.0}
         ("profile", {**SINE, "period_s": "4"}, "period_s"),
     ],
 )
-def test_bad_jogs_and_profiles_are_refused_with_a_reason(settings, spy_devices, path, body,
-                                                         needle):  # fmt: skip
+def test_bad_jogs_and_profiles_are_refused_with_a_reason(settings, spy_devices, path, body, needle):
     with running_app(settings, spy_devices) as c:
         r = c.post(f"/api/motion/{path}", json=body, headers=AUTH)
         assert r.status_code == 422, r.text
@@ -103,8 +107,12 @@ def test_bad_jogs_and_profiles_are_refused_with_a_reason(settings, spy_devices, 
 def test_a_jog_past_the_soft_limit_is_refused(settings, spy_devices):
     with running_app(settings, spy_devices) as c:
         limit = next(a for a in c.get("/api/motion").json()["axes"] if a["name"] == "pitch")
-        assert c.post("/api/motion/move", json={"pitch_deg": limit["max_pos"] - 0.5},
-                      headers=AUTH).status_code == 202  # fmt: skip
+        assert (
+            c.post(
+                "/api/motion/move", json={"pitch_deg": limit["max_pos"] - 0.5}, headers=AUTH
+            ).status_code
+            == 202
+        )
         _settled(c)
         spy_devices.motion.calls.clear()
         r = c.post("/api/motion/jog", json={"pitch_deg": 1.0}, headers=AUTH)

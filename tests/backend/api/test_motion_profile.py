@@ -76,19 +76,40 @@ def test_the_simulated_table_follows_a_sine_slew(fast_devices):
 @pytest.mark.parametrize(
     ("body", "field", "needle"),
     [
-        ({**SINE, "amplitude_deg": 10.0, "period_s": 2.0}, "amplitude_deg",
-         "exceeds the yaw rate limit of 20 deg/s"),
+        (
+            {**SINE, "amplitude_deg": 10.0, "period_s": 2.0},
+            "amplitude_deg",
+            "exceeds the yaw rate limit of 20 deg/s",
+        ),
         # 4 deg at 2 s: 39.5 deg/s^2 at full amplitude, 41.4 in the fades, limit 40
-        ({**SINE, "amplitude_deg": 4.0, "period_s": 2.0}, "period_s",
-         "peak acceleration 41.4195 deg/s^2"),
-        ({"axis": "pitch", "kind": "ramp", "rate_deg_s": 10.0, "hold_s": 10.0}, "hold_s",
-         "beyond its soft limits [-60, 60] deg"),
-        ({"axis": "roll", "kind": "ramp", "rate_deg_s": -5.0, "hold_s": 1.0,
-          "accel_deg_s2": 80.0}, "accel_deg_s2", "acceleration limit of 60"),
-        ({"axis": "roll", "kind": "ramp", "rate_deg_s": 31.0, "hold_s": 1.0}, "rate_deg_s",
-         "peak rate 31 deg/s"),
+        (
+            {**SINE, "amplitude_deg": 4.0, "period_s": 2.0},
+            "period_s",
+            "peak acceleration 41.4195 deg/s^2",
+        ),
+        (
+            {"axis": "pitch", "kind": "ramp", "rate_deg_s": 10.0, "hold_s": 10.0},
+            "hold_s",
+            "beyond its soft limits [-60, 60] deg",
+        ),
+        (
+            {
+                "axis": "roll",
+                "kind": "ramp",
+                "rate_deg_s": -5.0,
+                "hold_s": 1.0,
+                "accel_deg_s2": 80.0,
+            },
+            "accel_deg_s2",
+            "acceleration limit of 60",
+        ),
+        (
+            {"axis": "roll", "kind": "ramp", "rate_deg_s": 31.0, "hold_s": 1.0},
+            "rate_deg_s",
+            "peak rate 31 deg/s",
+        ),
     ],
-)  # fmt: skip
+)
 def test_a_profile_beyond_a_limit_is_refused_and_the_table_does_not_move(
     settings, spy_devices, body, field, needle
 ):
@@ -105,16 +126,20 @@ def test_a_profile_beyond_a_limit_is_refused_and_the_table_does_not_move(
         assert not after["busy"] and after["profile"] is None
         assert after["targets"] == before["targets"]
         for axis, value in before["positions"].items():  # within encoder noise
-            assert after["positions"][axis] == pytest.approx(value, abs=0.1 if axis == "rail"
-                                                             else 2e-3)  # fmt: skip
+            assert after["positions"][axis] == pytest.approx(
+                value, abs=0.1 if axis == "rail" else 2e-3
+            )
 
 
 def test_stop_ends_a_running_profile_where_the_axis_is(settings, spy_devices):
     with running_app(settings, spy_devices) as c:
         ramp = {"axis": "roll", "kind": "ramp", "rate_deg_s": 10.0, "hold_s": 8.0}
         assert c.post("/api/motion/profile", json=ramp, headers=AUTH).status_code == 202
-        wait_for(lambda: c.get("/api/motion").json()["positions"]["roll"] > 2.0, 5.0,
-                 "the ramp to move the roll axis")  # fmt: skip
+        wait_for(
+            lambda: c.get("/api/motion").json()["positions"]["roll"] > 2.0,
+            5.0,
+            "the ramp to move the roll axis",
+        )
         r = c.post("/api/motion/stop", headers=AUTH)
         assert r.status_code == 200
         stopped = r.json()
@@ -136,8 +161,9 @@ def test_moves_of_the_profiled_axis_wait_for_stop(settings, spy_devices):
         r = c.post("/api/motion/profile", json={**SINE, "axis": "pitch"}, headers=AUTH)
         assert r.status_code == 409 and "still moving" in r.json()["detail"]
         # another axis may move meanwhile
-        assert c.post("/api/motion/move", json={"rail_mm": 12990.0},
-                      headers=AUTH).status_code == 202  # fmt: skip
+        assert (
+            c.post("/api/motion/move", json={"rail_mm": 12990.0}, headers=AUTH).status_code == 202
+        )
         assert [name for name, _ in spy_devices.motion.calls] == ["run_profile", "move_to"]
         assert c.get("/api/motion").json()["profile"]["axis"] == "yaw"
 
@@ -178,6 +204,9 @@ def test_the_scpi_table_runs_a_profile_through_the_api(tmp_path):
             r = c.post("/api/motion/profile", json=body, headers=AUTH)
             assert r.status_code == 202, r.text
             assert r.json()["profile"]["kind"] == "sine"
-            wait_for(lambda: abs(c.get("/api/motion").json()["positions"]["yaw"]) > 0.5, 3.0,
-                     "the yaw axis to swing")  # fmt: skip
+            wait_for(
+                lambda: abs(c.get("/api/motion").json()["positions"]["yaw"]) > 0.5,
+                3.0,
+                "the yaw axis to swing",
+            )
             assert c.post("/api/motion/stop", headers=AUTH).json()["profile"] is None

@@ -100,14 +100,15 @@ def test_a_recording_holds_every_frame_the_hub_delivered_with_the_live_results(
         valid = f["relative_state/valid"][...]
         states = [s.state for s in run if s.state is not None]
         np.testing.assert_array_equal(valid, [s.state is not None for s in run])
-        np.testing.assert_array_equal(f["relative_state/velocity_mm_s"][valid],
-                                      [s.velocity_mm_s for s in states])  # fmt: skip
+        np.testing.assert_array_equal(
+            f["relative_state/velocity_mm_s"][valid], [s.velocity_mm_s for s in states]
+        )
         # the simulated camera reads the encoders at each frame; rail, pitch, roll, yaw
         axes = [a.decode() if isinstance(a, bytes) else a for a in f["motion"].attrs["axes"]]
         np.testing.assert_array_equal(
             f["motion/positions"][...],
             [[by_index[i].frame.meta["encoders"][a] for a in axes] for i in index],
-        )  # fmt: skip
+        )
         assert np.isfinite(f["motion/targets"][...]).all()
         # wall-clock stamps: UTC ns, within a minute of now, in order
         wall = f["frames/wall_time_ns"][...]
@@ -149,7 +150,7 @@ def test_start_is_refused_with_507_below_the_free_space_floor(app_client, monkey
         ({"name": "x", "duration_s": 1e9}, "duration_s"),
         ({"name": "x", "seconds": 10}, "seconds"),
     ],
-)  # fmt: skip
+)
 def test_a_bad_body_gets_422_naming_the_field(app_client, body, field):
     r = app_client.post("/api/recordings", json=body, headers=AUTH)
     assert r.status_code == 422, r.text
@@ -165,8 +166,9 @@ def test_each_scope_may_do_what_it_should(app_client):
     r = c.post("/api/recordings", json={"name": "nope"}, headers=keys["read"])
     assert r.status_code == 403 and "'operate'" in r.json()["detail"]
     assert c.post("/api/recordings", json={"name": "nope"}).status_code == 401
-    r = c.post("/api/recordings", json={"name": "operator's", "duration_s": 60},
-               headers=keys["operate"])  # fmt: skip
+    r = c.post(
+        "/api/recordings", json={"name": "operator's", "duration_s": 60}, headers=keys["operate"]
+    )
     assert r.status_code == 201
     rid = r.json()["id"]
     assert c.post(f"/api/recordings/{rid}/stop", headers=keys["read"]).status_code == 403
@@ -203,8 +205,11 @@ def test_downloads_and_deletion_wait_for_the_stop_and_unknown_ids_are_404(app_cl
 def test_a_duration_stops_it_and_the_list_shows_the_disk(app_client):
     c = app_client
     rid = _start(c, name="timed", duration_s=1.0)["id"]
-    done = wait_for(lambda: (r := c.get(f"/api/recordings/{rid}").json())["state"] == "stopped"
-                    and r, 30.0, "the recording's end")  # fmt: skip
+    done = wait_for(
+        lambda: (r := c.get(f"/api/recordings/{rid}").json())["state"] == "stopped" and r,
+        30.0,
+        "the recording's end",
+    )
     assert done["stop_reason"] == StopReason.DURATION and done["frames"] > 0
     assert done["elapsed_s"] >= 1.0
     listing = c.get("/api/recordings").json()

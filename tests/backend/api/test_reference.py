@@ -19,9 +19,15 @@ def _store_true_geometry(client) -> int:
     placement = g.T_lab_target.compose(g.placement_error).as_matrix().tolist()
     with state.sessions() as s, s.begin():
         row = CalibrationRow(
-            name="true-geometry", mount=mount, placement=placement, sigmas=[0.0] * 12,
-            residual_mm=[0.0], residual_deg=[0.0], chi2_per_dof=1.0, n_observations=0,
-        )  # fmt: skip
+            name="true-geometry",
+            mount=mount,
+            placement=placement,
+            sigmas=[0.0] * 12,
+            residual_mm=[0.0],
+            residual_deg=[0.0],
+            chi2_per_dof=1.0,
+            n_observations=0,
+        )
         s.add(row)
         s.flush()
         return row.id

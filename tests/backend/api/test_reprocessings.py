@@ -10,33 +10,46 @@ import json
 
 from tests.backend.conftest import AUTH, make_settings, running_app, wait_for
 
-CAMPAIGN = {"name": "raw", "catalog": "paper-target", "frames_per_point": 6, "settle_s": 0.2,
-            "record_raw": True,
-            "setpoints": [{"yaw_deg": y, "rail_mm": 11000} for y in (0, 4)]}  # fmt: skip
+CAMPAIGN = {
+    "name": "raw",
+    "catalog": "paper-target",
+    "frames_per_point": 6,
+    "settle_s": 0.2,
+    "record_raw": True,
+    "setpoints": [{"yaw_deg": y, "rail_mm": 11000} for y in (0, 4)],
+}
 
 
 def _campaign(c, body=CAMPAIGN) -> int:
     cid = c.post("/api/campaigns", json=body, headers=AUTH).json()["id"]
     assert c.post(f"/api/campaigns/{cid}/start", headers=AUTH).status_code == 200
-    wait_for(lambda: c.get(f"/api/campaigns/{cid}").json()["status"] == "done", 60,
-             "the campaign to finish")  # fmt: skip
+    wait_for(
+        lambda: c.get(f"/api/campaigns/{cid}").json()["status"] == "done",
+        60,
+        "the campaign to finish",
+    )
     return cid
 
 
 def _finished(c, jid: int) -> dict:
     return wait_for(
-        lambda: (j := c.get(f"/api/reprocessings/{jid}").json())["status"]
-        in ("complete", "failed", "cancelled") and j,
-        240, "the re-processing",
-    )  # fmt: skip
+        lambda: (
+            (j := c.get(f"/api/reprocessings/{jid}").json())["status"]
+            in ("complete", "failed", "cancelled")
+            and j
+        ),
+        240,
+        "the re-processing",
+    )
 
 
 def test_a_recording_is_reprocessed_as_the_cli_would_with_each_camera(tmp_path):
     from tofpose.cli import main
     from tofpose.io.recording import open_recording
 
-    settings = make_settings(tmp_path / "data", sim_time_scale=5.0, dask_scheduler="",
-                             study_workers=1)  # fmt: skip
+    settings = make_settings(
+        tmp_path / "data", sim_time_scale=5.0, dask_scheduler="", study_workers=1
+    )
     with running_app(settings) as c:
         cid = _campaign(c)
         rec_path = tmp_path / f"campaign-{cid}.h5"
@@ -65,14 +78,26 @@ def test_a_recording_is_reprocessed_as_the_cli_would_with_each_camera(tmp_path):
         # byte for byte what `tofpose estimate` writes for the recording, with each camera
         cam_file = tmp_path / "longer.json"
         cam_file.write_text(json.dumps(longer))
-        main(["estimate", str(rec_path), "--out", str(tmp_path / "longer.csv"),
-              "--camera", str(cam_file)])  # fmt: skip
+        main(
+            [
+                "estimate",
+                str(rec_path),
+                "--out",
+                str(tmp_path / "longer.csv"),
+                "--camera",
+                str(cam_file),
+            ]
+        )
         main(["estimate", str(rec_path), "--out", str(tmp_path / "own.csv")])
         jid = other["id"]
-        assert c.get(f"/api/reprocessings/{jid}/files/poses.csv").content == \
-            (tmp_path / "longer.csv").read_bytes()
-        assert c.get(f"/api/reprocessings/{jid}/files/baseline.csv").content == \
-            (tmp_path / "own.csv").read_bytes()
+        assert (
+            c.get(f"/api/reprocessings/{jid}/files/poses.csv").content
+            == (tmp_path / "longer.csv").read_bytes()
+        )
+        assert (
+            c.get(f"/api/reprocessings/{jid}/files/baseline.csv").content
+            == (tmp_path / "own.csv").read_bytes()
+        )
         png = c.get(f"/api/reprocessings/{jid}/files/compare.png")
         assert png.status_code == 200 and png.content[:4] == b"\x89PNG"
         rows = c.get(f"/api/reprocessings/{jid}/files/compare.csv").text.splitlines()
@@ -91,8 +116,19 @@ def test_bad_requests_are_named_and_nothing_is_stored(tmp_path):
         assert with_cam.status_code == 200
         bad = [
             ({"camera": {"fx": 100.0}}, "missing"),  # not a camera
-            ({"camera": {"width": 64, "height": 48, "fx": 50.0, "fy": 50.0, "cx": 32.0,
-                         "cy": 24.0}}, "does not match the recording's 320x240"),  # fmt: skip
+            (
+                {
+                    "camera": {
+                        "width": 64,
+                        "height": 48,
+                        "fx": 50.0,
+                        "fy": 50.0,
+                        "cx": 32.0,
+                        "cy": 24.0,
+                    }
+                },
+                "does not match the recording's 320x240",
+            ),
         ]
         for body, words in bad:
             r = c.post(f"/api/campaigns/{cid}/reprocess", json=body, headers=AUTH)
@@ -106,8 +142,9 @@ def test_bad_requests_are_named_and_nothing_is_stored(tmp_path):
         assert r.status_code == 409 and "record_raw was off" in r.json()["detail"]
         assert c.post("/api/campaigns/99/reprocess", json={}, headers=AUTH).status_code == 404
         assert c.get("/api/reprocessings").json() == []
-        assert not (settings.data_dir / "reprocessings").exists() or \
-            not any((settings.data_dir / "reprocessings").iterdir())
+        assert not (settings.data_dir / "reprocessings").exists() or not any(
+            (settings.data_dir / "reprocessings").iterdir()
+        )
         assert c.get("/api/reprocessings/3").status_code == 404
         assert c.get("/api/reprocessings/3/files/poses.csv").status_code == 404
 

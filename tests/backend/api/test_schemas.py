@@ -40,8 +40,9 @@ def sample_with_gaps() -> tuple[LiveSample, CameraModel]:
     res = dataclasses.replace(
         res, unmatched=[(10.0, 20.0, float("nan")), (30.0, 40.0, 2500.0)], covariance=cov
     )
-    frame = CameraFrame(gray=f.gray, distance_mm=f.distance_mm, time_s=1.0, index=7,
-                        T_camera_target_lab=T)  # fmt: skip
+    frame = CameraFrame(
+        gray=f.gray, distance_mm=f.distance_mm, time_s=1.0, index=7, T_camera_target_lab=T
+    )
     return LiveSample(frame, res, "paper-target", 1.0, 1.01), cam
 
 
@@ -90,8 +91,9 @@ def test_attitude_sigmas_are_those_of_pitch_yaw_and_roll():
     f = render(T, seed=4)
     res = PosePipeline(cam, paper_target()).process(f.gray, f.distance_mm)
     assert res.ok
-    frame = CameraFrame(gray=f.gray, distance_mm=f.distance_mm, time_s=1.0, index=1,
-                        T_camera_target_lab=T)  # fmt: skip
+    frame = CameraFrame(
+        gray=f.gray, distance_mm=f.distance_mm, time_s=1.0, index=1, T_camera_target_lab=T
+    )
     body = pose_from_sample(LiveSample(frame, res, "paper-target", 1.0, 1.01)).model_dump()
     want = facing_euler_sigma_deg(res.R, res.covariance)
     np.testing.assert_allclose(body["attitude_sigma_deg"], want, rtol=1e-12)

@@ -41,15 +41,28 @@ def server(tmp_path_factory):
 def test_schemathesis_all_checks_and_phases_pass(server):
     cli = Path(sys.executable).with_name("schemathesis")
     cmd = [
-        str(cli), "run", f"{server.base_url}/openapi.json",
-        "--checks", "all", "--phases", "examples,coverage,fuzzing,stateful",
-        "-H", f"Authorization: Bearer {TOKEN}",
-        "--max-examples", str(EXAMPLES_PER_OPERATION), "--seed", "1",
-    ]  # fmt: skip
+        str(cli),
+        "run",
+        f"{server.base_url}/openapi.json",
+        "--checks",
+        "all",
+        "--phases",
+        "examples,coverage,fuzzing,stateful",
+        "-H",
+        f"Authorization: Bearer {TOKEN}",
+        "--max-examples",
+        str(EXAMPLES_PER_OPERATION),
+        "--seed",
+        "1",
+    ]
     run = subprocess.run(
-        cmd, cwd=REPO, capture_output=True, text=True, timeout=900,
+        cmd,
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=900,
         env={**os.environ, "NO_COLOR": "1"},
-    )  # fmt: skip
+    )
     assert run.returncode == 0, run.stdout[-6000:] + run.stderr[-2000:]
     assert "Tested: 14" in run.stdout or "Tested:" in run.stdout
     # an operation for which nothing was generated would pass vacuously ("2020 generated"

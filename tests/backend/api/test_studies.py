@@ -23,14 +23,24 @@ from tofpose.study.run import StudyCancelledError
 from tofpose.study.spec import Cell, StudySpec, StudySpecError
 from tofpose.study.store import read_manifest, write_manifest
 
-SPEC = {"name": "api", "seed": 5, "frames_per_cell": 2, "chunk_frames": 1,
-        "grid": {"range_m": [2.0, 4.0]}}  # fmt: skip
+SPEC = {
+    "name": "api",
+    "seed": 5,
+    "frames_per_cell": 2,
+    "chunk_frames": 1,
+    "grid": {"range_m": [2.0, 4.0]},
+}
 #: 64 x 64 x 64 x 7 = 1,835,008 cells: 64 values is the most the schema takes on an axis
-HUGE = {"name": "huge", "frames_per_cell": 1, "grid": {
-    "range_m": [1.0 + 0.25 * i for i in range(64)],
-    "attitude_deg": [0.5 * i for i in range(64)],
-    "offset_fraction": [0.01 * i for i in range(64)],
-    "physics": list(FAMILIES)}}  # fmt: skip
+HUGE = {
+    "name": "huge",
+    "frames_per_cell": 1,
+    "grid": {
+        "range_m": [1.0 + 0.25 * i for i in range(64)],
+        "attitude_deg": [0.5 * i for i in range(64)],
+        "offset_fraction": [0.01 * i for i in range(64)],
+        "physics": list(FAMILIES),
+    },
+}
 HUGE_CELLS = 64**3 * len(FAMILIES)
 
 
@@ -107,10 +117,18 @@ def test_bad_specs_are_named_and_nothing_is_stored(client):
         ({**SPEC, "grid": {"range_m": [3.0, 3.0]}}, ["body", "grid", "range_m"]),
         ({**SPEC, "grid": {"catalog": ["nope"]}}, ["body", "grid", "catalog", 0]),
         ({**SPEC, "colour": "red"}, ["body", "colour"]),
-        ({**SPEC, "frames_per_cell": 10**6, "grid": {"range_m": [1.0 + 0.25 * i for i in range(64)],
-                                                      "attitude_deg": [1.0, 2.0]}},
-         ["body", "frames_per_cell"]),
-    ]  # fmt: skip
+        (
+            {
+                **SPEC,
+                "frames_per_cell": 10**6,
+                "grid": {
+                    "range_m": [1.0 + 0.25 * i for i in range(64)],
+                    "attitude_deg": [1.0, 2.0],
+                },
+            },
+            ["body", "frames_per_cell"],
+        ),
+    ]
     for body, loc in bad:
         r = client.post("/api/studies", json=body, headers=AUTH)
         assert r.status_code == 422, (body, r.text)
@@ -122,8 +140,11 @@ def test_bad_specs_are_named_and_nothing_is_stored(client):
 
 def test_an_unreachable_scheduler_fails_the_study_naming_it(client):
     sid = client.post("/api/studies", json=SPEC, headers=AUTH).json()["id"]
-    s = wait_for(lambda: (x := client.get(f"/api/studies/{sid}").json())["status"] == "failed"
-                 and x, timeout_s=60, what="the study to fail")  # fmt: skip
+    s = wait_for(
+        lambda: (x := client.get(f"/api/studies/{sid}").json())["status"] == "failed" and x,
+        timeout_s=60,
+        what="the study to fail",
+    )
     assert "tcp://127.0.0.1:9" in s["error"]
     assert client.get(f"/api/studies/{sid}/report.html").status_code == 409
 
@@ -134,28 +155,40 @@ def test_a_queued_study_can_be_cancelled(client):
     assert client.post(f"/api/studies/{second['id']}/cancel").status_code == 401
     r = client.post(f"/api/studies/{second['id']}/cancel", headers=AUTH)
     assert r.status_code == 200 and r.json()["status"] == "incomplete"
-    wait_for(lambda: client.get(f"/api/studies/{first}").json()["status"] == "failed",
-             timeout_s=60, what="the first study to end")  # fmt: skip
+    wait_for(
+        lambda: client.get(f"/api/studies/{first}").json()["status"] == "failed",
+        timeout_s=60,
+        what="the first study to end",
+    )
     # the cancelled one never ran
     assert client.get(f"/api/studies/{second['id']}").json()["status"] == "incomplete"
     assert json.loads(json.dumps(client.get("/api/studies").json()))[0]["name"] == "second"
 
 
-def test_too_many_cells_or_frames_are_refused_naming_the_limit_and_the_numbers(held_runs,
-                                                                              client):  # fmt: skip
+def test_too_many_cells_or_frames_are_refused_naming_the_limit_and_the_numbers(held_runs, client):
     r = client.post("/api/studies", json=HUGE, headers=AUTH)
     assert r.status_code == 422, r.text
-    assert r.json()["detail"] == [{
-        "loc": ["body", "grid"], "type": "value_error",
-        "msg": "1,835,008 cells (64 range_m x 64 attitude_deg x 64 offset_fraction x 7 physics) "
-               "is more than the limit of 10,000 (TOFPOSE_STUDY_MAX_CELLS)"}]  # fmt: skip
+    assert r.json()["detail"] == [
+        {
+            "loc": ["body", "grid"],
+            "type": "value_error",
+            "msg": "1,835,008 cells (64 range_m x 64 attitude_deg x 64 offset_fraction x 7 "
+            "physics) "
+            "is more than the limit of 10,000 (TOFPOSE_STUDY_MAX_CELLS)",
+        }
+    ]
     frames = {**SPEC, "frames_per_cell": 600_000}  # 2 cells: 1.2 M frames
     r = client.post("/api/studies", json=frames, headers=AUTH)
     assert r.status_code == 422, r.text
-    assert r.json()["detail"] == [{
-        "loc": ["body", "frames_per_cell"], "type": "value_error",
-        "msg": "2 cells x 600,000 frames = 1,200,000 frames is more than the limit of 1,000,000 "
-               "(TOFPOSE_STUDY_MAX_FRAMES)"}]  # fmt: skip
+    assert r.json()["detail"] == [
+        {
+            "loc": ["body", "frames_per_cell"],
+            "type": "value_error",
+            "msg": "2 cells x 600,000 frames = 1,200,000 frames is more than the limit of "
+            "1,000,000 "
+            "(TOFPOSE_STUDY_MAX_FRAMES)",
+        }
+    ]
     at_limit = {**SPEC, "frames_per_cell": 500_000, "chunk_frames": 100_000}  # 10^6 frames
     r = client.post("/api/studies", json=at_limit, headers=AUTH)
     assert r.status_code == 201 and r.json()["frames_planned"] == 1_000_000, r.text
@@ -179,16 +212,19 @@ def test_refusing_a_huge_grid_makes_nothing_of_it_and_stores_nothing(client, gri
     assert not any(tofpose.studies.root.iterdir())
 
 
-def test_reading_the_largest_accepted_study_makes_nothing_of_its_grid(tmp_path, held_runs,
-                                                                       grid_built):  # fmt: skip
-    settings = make_settings(tmp_path / "data", study_max_cells=HUGE_CELLS,
-                             study_max_frames=HUGE_CELLS)  # fmt: skip
+def test_reading_the_largest_accepted_study_makes_nothing_of_its_grid(
+    tmp_path, held_runs, grid_built
+):
+    settings = make_settings(
+        tmp_path / "data", study_max_cells=HUGE_CELLS, study_max_frames=HUGE_CELLS
+    )
     with running_app(settings) as c:
         r = c.post("/api/studies", json=HUGE, headers=AUTH)
         assert r.status_code == 201, r.text
         sid = r.json()["id"]
-        wait_for(lambda: c.get(f"/api/studies/{sid}").json()["status"] == "running",
-                 what="the held run")  # fmt: skip
+        wait_for(
+            lambda: c.get(f"/api/studies/{sid}").json()["status"] == "running", what="the held run"
+        )
         for _ in range(3):
             one = c.get(f"/api/studies/{sid}").json()
             (listed,) = c.get("/api/studies").json()
@@ -196,8 +232,10 @@ def test_reading_the_largest_accepted_study_makes_nothing_of_its_grid(tmp_path, 
             assert (one["cells"], one["frames_planned"], one["chunks"]) == (HUGE_CELLS,) * 3
         assert grid_built == {"cells": 0, "chunk lists": 0}  # nor when it was submitted
         assert c.post(f"/api/studies/{sid}/cancel", headers=AUTH).status_code == 200
-        wait_for(lambda: c.get(f"/api/studies/{sid}").json()["status"] == "incomplete",
-                 what="the cancelled run to end")  # fmt: skip
+        wait_for(
+            lambda: c.get(f"/api/studies/{sid}").json()["status"] == "incomplete",
+            what="the cancelled run to end",
+        )
 
 
 def test_too_many_active_studies_is_409_until_one_ends(tmp_path, held_runs):
@@ -205,13 +243,17 @@ def test_too_many_active_studies_is_409_until_one_ends(tmp_path, held_runs):
     with running_app(settings) as c:
         first = c.post("/api/studies", json=SPEC, headers=AUTH).json()["id"]
         second = c.post("/api/studies", json={**SPEC, "name": "b"}, headers=AUTH).json()["id"]
-        wait_for(lambda: c.get(f"/api/studies/{first}").json()["status"] == "running",
-                 what="the first study to run")  # fmt: skip
+        wait_for(
+            lambda: c.get(f"/api/studies/{first}").json()["status"] == "running",
+            what="the first study to run",
+        )
         r = c.post("/api/studies", json={**SPEC, "name": "c"}, headers=AUTH)
         assert r.status_code == 409, r.text
-        assert r.json()["detail"] == ("2 studies are queued or running, the limit is 2 "
-                                      "(TOFPOSE_STUDIES_MAX_ACTIVE): cancel one or wait for "
-                                      "one to end")  # fmt: skip
+        assert r.json()["detail"] == (
+            "2 studies are queued or running, the limit is 2 "
+            "(TOFPOSE_STUDIES_MAX_ACTIVE): cancel one or wait for "
+            "one to end"
+        )
         assert [s["id"] for s in c.get("/api/studies").json()] == [second, first]  # none stored
         cancelled = c.post(f"/api/studies/{second}/cancel", headers=AUTH).json()
         assert cancelled["status"] == "incomplete"

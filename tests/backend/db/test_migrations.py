@@ -45,12 +45,15 @@ def test_an_old_database_is_upgraded_at_start_keeping_its_data(tmp_path, setting
     with engine.begin() as conn:
         conn.execute(
             text("INSERT INTO catalogs (name, catalog_json, created_at) VALUES (:n, :j, :t)"),
-            {"n": "old-target", "t": "2026-01-01 00:00:00",
-             "j": '{"name": "old-target", "reflectors": ['
-                  '{"id": 1, "position_mm": [0, 0, 0], "diameter_mm": 50},'
-                  '{"id": 2, "position_mm": [300, 0, 0], "diameter_mm": 50},'
-                  '{"id": 3, "position_mm": [0, 200, 40], "diameter_mm": 50}]}'},
-        )  # fmt: skip
+            {
+                "n": "old-target",
+                "t": "2026-01-01 00:00:00",
+                "j": '{"name": "old-target", "reflectors": ['
+                '{"id": 1, "position_mm": [0, 0, 0], "diameter_mm": 50},'
+                '{"id": 2, "position_mm": [300, 0, 0], "diameter_mm": 50},'
+                '{"id": 3, "position_mm": [0, 200, 40], "diameter_mm": 50}]}',
+            },
+        )
     engine.dispose()
     assert "campaigns" not in _tables(db)
     with running_app(settings) as c:
@@ -69,8 +72,9 @@ def test_campaign_rows_cascade_to_setpoints_and_measurements(tmp_path):
     with Session(engine) as s:
         camp = CampaignRow(name="yaw sweep", catalog_name="paper-target", requirements={})
         sp = SetPointRow(index=0, yaw_deg=10.0)
-        sp.measurements.append(MeasurementRow(frame_index=1, frame_time_s=0.1, ok=True,
-                                              x_mm=1.0, truth_x_mm=1.2))  # fmt: skip
+        sp.measurements.append(
+            MeasurementRow(frame_index=1, frame_time_s=0.1, ok=True, x_mm=1.0, truth_x_mm=1.2)
+        )
         camp.setpoints.append(sp)
         s.add(camp)
         s.commit()

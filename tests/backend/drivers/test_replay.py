@@ -35,8 +35,15 @@ def test_loops_over_the_frames_with_truth_and_stream_time(recording):
     frames = [cam.read(1.0) for _ in range(7)]
     assert [int(f.gray[0, 0]) for f in frames] == [100, 101, 102, 100, 101, 102, 100]
     assert [f.meta["loop"] for f in frames] == [0, 0, 0, 1, 1, 1, 2]
-    assert [f.meta["discontinuity"] for f in frames] == [True, False, False, True, False, False,
-                                                         True]  # fmt: skip
+    assert [f.meta["discontinuity"] for f in frames] == [
+        True,
+        False,
+        False,
+        True,
+        False,
+        False,
+        True,
+    ]
     assert all(np.diff([f.time_s for f in frames]) > 0)  # stream time keeps increasing
     assert frames[4].T_camera_target_exact.t_mm[2] == 1001.0
     assert frames[4].T_camera_target_lab is None  # the recording has no /lab_truth
@@ -51,13 +58,21 @@ def test_truth_and_lab_truth_fill_the_exact_and_the_lab_pose(tmp_path):
     exact_t_mm = [np.array([10.0 * i, -5.0, 2000.0 + i]) for i in range(3)]
     lab_R = Rotation.from_euler("xyz", [0.2, -0.3, 0.1], degrees=True).as_matrix()
     lab_t_mm = [t + np.array([3.0, -2.0, 1.5]) for t in exact_t_mm]
-    with RecordingWriter(path, cam_model, paper_target(), with_truth=True,
-                         with_lab_truth=True) as w:  # fmt: skip
+    with RecordingWriter(
+        path, cam_model, paper_target(), with_truth=True, with_lab_truth=True
+    ) as w:
         for i in range(3):
             gray = np.full(cam_model.shape, 100 + i, np.uint16)
             dist = np.full(cam_model.shape, 1000.0 + i, np.float32)
-            w.append(gray, dist, 0.04 * i, np.eye(3), exact_t_mm[i],
-                     lab_R_camera_target=lab_R, lab_t_camera_target_mm=lab_t_mm[i])  # fmt: skip
+            w.append(
+                gray,
+                dist,
+                0.04 * i,
+                np.eye(3),
+                exact_t_mm[i],
+                lab_R_camera_target=lab_R,
+                lab_t_camera_target_mm=lab_t_mm[i],
+            )
     cam = ReplayCamera(path, rate_hz=100.0)
     for k in range(4):  # past the end: the loop restarts at frame 0
         f = cam.read(1.0)

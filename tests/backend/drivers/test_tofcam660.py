@@ -120,7 +120,7 @@ def test_settings_are_clamped_and_sent_to_the_camera(world, emu):
         applied = drv.apply_settings(
             CameraSettings(
                 integration_time_us=9000.0, modulation_frequency_mhz=10.0, auto_exposure=False
-            )  # fmt: skip
+            )
         )
         assert applied.integration_time_us == 4000.0
         assert applied.modulation_frequency_mhz == 12.0  # the nearest the camera has
@@ -172,8 +172,9 @@ def _try_read(drv):
 def test_absent_camera_is_an_error_naming_it_or_a_degraded_start():
     with pytest.raises(CameraError, match="127.0.0.4: cannot connect"):
         TofCam660Driver("127.0.0.4")
-    drv = TofCam660Driver("127.0.0.4", settings=FIXED, connect_now=False,
-                          reconnect_backoff_s=(0.05, 0.1))  # fmt: skip
+    drv = TofCam660Driver(
+        "127.0.0.4", settings=FIXED, connect_now=False, reconnect_backoff_s=(0.05, 0.1)
+    )
     try:
         with pytest.raises(CameraError, match="cannot connect"):
             drv.read(1.0)
@@ -181,8 +182,9 @@ def test_absent_camera_is_an_error_naming_it_or_a_degraded_start():
         with TofCam660Emulator(world, "127.0.0.4"):  # the camera is switched on
             time.sleep(0.1)
             assert wait_for(lambda: _try_read(drv), 5.0, "the first frame").gray.shape == (
-                240, 320,
-            )  # fmt: skip
+                240,
+                320,
+            )
     finally:
         drv.close()
 

@@ -18,10 +18,21 @@ CAMERA_ADDRESS = "127.0.0.7"
 
 def test_emulate_lab_serves_both_devices_over_one_world():
     proc = subprocess.Popen(
-        [sys.executable, "-m", "tofpose.cli", "emulate", "lab", "--camera-address",
-         CAMERA_ADDRESS, "--table-port", "0"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "tofpose.cli",
+            "emulate",
+            "lab",
+            "--camera-address",
+            CAMERA_ADDRESS,
+            "--table-port",
+            "0",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         lines = [proc.stdout.readline() for _ in range(3)]
         assert f"tofpose serve --camera tofcam660:{CAMERA_ADDRESS}" in lines[1], lines

@@ -132,15 +132,19 @@ FIRMWARE = 37
     ("what", "wire"),
     [
         ("unknown command id", frame_message(struct.pack("!H", 999) + bytes(32))),
-        ("wrong start marker", struct.pack("!II", 0x12345678, 34) + bytes(34)
-         + struct.pack("!I", MARKER_END)),
-        ("wrong end marker", struct.pack("!II", MARKER_START, 34) + bytes(34)
-         + struct.pack("!I", 0xDEADBEEF)),
+        (
+            "wrong start marker",
+            struct.pack("!II", 0x12345678, 34) + bytes(34) + struct.pack("!I", MARKER_END),
+        ),
+        (
+            "wrong end marker",
+            struct.pack("!II", MARKER_START, 34) + bytes(34) + struct.pack("!I", 0xDEADBEEF),
+        ),
         ("oversized length", struct.pack("!II", MARKER_START, 1 << 30)),
         ("short payload", frame_message(b"\x00")),
         ("truncated message", struct.pack("!II", MARKER_START, 34) + bytes(10)),
     ],
-)  # fmt: skip
+)
 def test_bad_bytes_on_the_wire_get_a_nak_and_the_link_goes_on(emu, what, wire):
     raw = Raw()
     raw.sock.sendall(wire)

@@ -68,8 +68,15 @@ class ScriptedCamera:
 def service():
     cam = ScriptedCamera()
     hub = LiveHub()
-    svc = AcquisitionService(cam, paper_target(), "paper-target", hub, history_size=20,
-                             timeout_s=0.05, backoff_s=(0.01, 0.04))  # fmt: skip
+    svc = AcquisitionService(
+        cam,
+        paper_target(),
+        "paper-target",
+        hub,
+        history_size=20,
+        timeout_s=0.05,
+        backoff_s=(0.01, 0.04),
+    )
     svc.start()
     yield svc, cam, hub
     svc.stop()
@@ -96,8 +103,9 @@ def test_results_history_and_publication(service):
     assert pts.shape == (8 + len(s.result.unmatched), 3) and len(ids) == len(pts)
 
 
-@pytest.mark.parametrize(("mode", "needle"), [("raise", "link down"), ("hang", "timed out"),
-                                              ("junk", "malformed frame")])  # fmt: skip
+@pytest.mark.parametrize(
+    ("mode", "needle"), [("raise", "link down"), ("hang", "timed out"), ("junk", "malformed frame")]
+)
 def test_camera_trouble_degrades_then_recovers(service, mode, needle):
     svc, cam, _ = service
     wait_for(lambda: svc.frames_processed > 2, what="first frames")
@@ -183,8 +191,15 @@ def test_the_live_loop_gives_the_targets_angular_rate(rate_deg_s):
     camera's y axis for a turning one), the mean over the last 2 s within 15 %, and every
     frame of the history keeps its state."""
     cam = TurningCamera(rate_deg_s)
-    svc = AcquisitionService(cam, paper_target(), "paper-target", LiveHub(), history_size=100,
-                             timeout_s=0.05, backoff_s=(0.01, 0.04))  # fmt: skip
+    svc = AcquisitionService(
+        cam,
+        paper_target(),
+        "paper-target",
+        LiveHub(),
+        history_size=100,
+        timeout_s=0.05,
+        backoff_s=(0.01, 0.04),
+    )
     svc.start()
     try:
         wait_for(lambda: svc.frames_processed >= len(cam.frames), timeout_s=60, what="all frames")
@@ -259,9 +274,16 @@ def test_the_reference_pipeline_measures_while_the_kernels_compile(monkeypatch, 
     hub = LiveHub()
     sub = hub.subscribe(maxsize=10_000)  # every frame, in order
     config = PipelineConfig(tracking=TrackingConfig(enabled=True))  # as the server's
-    svc = AcquisitionService(cam, paper_target(), "paper-target", hub, timeout_s=0.05,
-                             backoff_s=(0.01, 0.04), pipeline_config=config,
-                             kernels=kernels)  # fmt: skip
+    svc = AcquisitionService(
+        cam,
+        paper_target(),
+        "paper-target",
+        hub,
+        timeout_s=0.05,
+        backoff_s=(0.01, 0.04),
+        pipeline_config=config,
+        kernels=kernels,
+    )
     assert svc.implementation is None
     svc.start()
     try:
@@ -300,8 +322,9 @@ def test_the_reference_pipeline_measures_while_the_kernels_compile(monkeypatch, 
     # the reference pipeline tracked; the compiled one starts with a fresh history: a
     # full acquisition, then tracking from its pose
     assert [s.result.mode for s in samples[first_compiled : first_compiled + 2]] == [
-        "acquisition", "tracking",
-    ]  # fmt: skip
+        "acquisition",
+        "tracking",
+    ]
     assert "tracking" in {s.result.mode for s in samples[first_ref:first_compiled]}
     # the filter went on across the switch: initialised once, at the first reference pose
     statuses = [s.state.status for s in measured]
@@ -320,8 +343,15 @@ def test_a_failed_warm_up_keeps_the_reference_pipeline(monkeypatch, compiled_cal
     kernels.run()
     assert kernels.state == "failed" and "no LLVM today" in kernels.error
     cam = ScriptedCamera()
-    svc = AcquisitionService(cam, paper_target(), "paper-target", LiveHub(), timeout_s=0.05,
-                             backoff_s=(0.01, 0.04), kernels=kernels)  # fmt: skip
+    svc = AcquisitionService(
+        cam,
+        paper_target(),
+        "paper-target",
+        LiveHub(),
+        timeout_s=0.05,
+        backoff_s=(0.01, 0.04),
+        kernels=kernels,
+    )
     svc.start()
     try:
         wait_for(lambda: svc.frames_processed >= 3, what="3 poses")

@@ -7,8 +7,7 @@ import pytest
 
 from backend.services.analysis import AXES, analyse, axis_stats, findings, keep_mask
 
-REQ = {"x_mm": 6.0, "y_mm": 6.0, "z_mm": 28.3, "pitch_deg": 0.15, "yaw_deg": 0.15,
-       "roll_deg": 0.15}  # fmt: skip
+REQ = {"x_mm": 6.0, "y_mm": 6.0, "z_mm": 28.3, "pitch_deg": 0.15, "yaw_deg": 0.15, "roll_deg": 0.15}
 
 
 def test_stats_recover_a_known_bias_and_spread():
@@ -30,8 +29,10 @@ def test_singular_points_are_removed_by_the_stated_rule():
     assert not keep[-1] and not keep[-2] and keep[:200].mean() > 0.99
     st = axis_stats(e, np.zeros_like(e), np.ones_like(e), requirement=10.0)
     assert st.n_removed >= 2 and st.max_abs < 10.0 and st.passed is True
-    assert axis_stats(e, np.zeros_like(e), np.ones_like(e), 10.0,
-                      remove_singular=False).passed is False  # fmt: skip
+    assert (
+        axis_stats(e, np.zeros_like(e), np.ones_like(e), 10.0, remove_singular=False).passed
+        is False
+    )
 
 
 def _rows(n_sp=2, n=30, offset=0.0, fail_every=0):

@@ -29,23 +29,36 @@ def sessions(tmp_path):
 
 
 def _entry(i: int, body: bytes = b"", status: int = 200) -> AuditEntry:
-    return AuditEntry(at=datetime(2026, 12, 1, 12, 0, i % 60, tzinfo=UTC), key_name=f"k{i}",
-                      client="10.0.0.7", method="POST", path=f"/api/things/{i}", status=status,
-                      body=body, body_size=len(body))  # fmt: skip
+    return AuditEntry(
+        at=datetime(2026, 12, 1, 12, 0, i % 60, tzinfo=UTC),
+        key_name=f"k{i}",
+        client="10.0.0.7",
+        method="POST",
+        path=f"/api/things/{i}",
+        status=status,
+        body=body,
+        body_size=len(body),
+    )
 
 
 @pytest.mark.parametrize(
     ("body", "summary"),
-    [(b"", ""),
-     (b'{"yaw_deg": 10.5}', '{"yaw_deg":10.5}'),
-     (b'{"name": "x", "api_key": "s3cret", "Token": 1, "nested": [{"password": "p"}]}',
-      f'{{"name":"x","api_key":"{REDACTED}","Token":"{REDACTED}",'
-      f'"nested":[{{"password":"{REDACTED}"}}]}}'),
-     (b'{"client_secret": {"a": 1}, "keys": ["k"]}',
-      f'{{"client_secret":"{REDACTED}","keys":"{REDACTED}"}}'),
-     (b"not json at all", "<15 bytes, not JSON>"),
-     (b"\xff\xfe", "<2 bytes, not JSON>")],
-)  # fmt: skip
+    [
+        (b"", ""),
+        (b'{"yaw_deg": 10.5}', '{"yaw_deg":10.5}'),
+        (
+            b'{"name": "x", "api_key": "s3cret", "Token": 1, "nested": [{"password": "p"}]}',
+            f'{{"name":"x","api_key":"{REDACTED}","Token":"{REDACTED}",'
+            f'"nested":[{{"password":"{REDACTED}"}}]}}',
+        ),
+        (
+            b'{"client_secret": {"a": 1}, "keys": ["k"]}',
+            f'{{"client_secret":"{REDACTED}","keys":"{REDACTED}"}}',
+        ),
+        (b"not json at all", "<15 bytes, not JSON>"),
+        (b"\xff\xfe", "<2 bytes, not JSON>"),
+    ],
+)
 def test_body_summary_redacts_every_secret_looking_field(body, summary):
     assert body_summary(body) == summary
 
@@ -69,7 +82,11 @@ def test_entries_are_written_in_order_and_read_newest_first(sessions):
     assert [e.path for e in page] == [f"/api/things/{i}" for i in range(30, 20, -1)]
     assert page[0].body == f'{{"token":"{REDACTED}","yaw_deg":1}}'
     assert (page[0].key_name, page[0].client, page[0].method, page[0].status) == (
-        "k30", "10.0.0.7", "POST", 230)
+        "k30",
+        "10.0.0.7",
+        "POST",
+        230,
+    )
     older = audit.entries(limit=10, before_id=page[-1].id)
     assert [e.path for e in older] == [f"/api/things/{i}" for i in range(20, 10, -1)]
     assert [e.id for e in audit.entries(limit=1000)] == list(range(30, 0, -1))

@@ -24,8 +24,11 @@ def test_range_sweep_attitude_steps_stability_and_calibration():
     assert len(cal) == 18 and {sp["rail"] for sp in cal} == {9000.0, 12000.0}
     # each rotary axis is exercised on its own, in both directions
     for axis in ("yaw", "pitch", "roll"):
-        alone = [sp for sp in cal if sp[axis] != 0 and sum(sp[a] != 0 for a in
-                 ("yaw", "pitch", "roll")) == 1]  # fmt: skip
+        alone = [
+            sp
+            for sp in cal
+            if sp[axis] != 0 and sum(sp[a] != 0 for a in ("yaw", "pitch", "roll")) == 1
+        ]
         assert {sp[axis] > 0 for sp in alone} == {True, False}
 
 
@@ -47,8 +50,13 @@ def test_generator_errors_name_the_problem(call, message):
 def test_duration_adds_moves_settling_and_frames():
     sps = [{"yaw": 10.0}, {"yaw": 10.0, "rail": 1000.0}]
     t = plan.estimate_duration_s(
-        sps, {"yaw": 0.0, "rail": 0.0}, {"yaw": 20.0, "rail": 500.0},
-        settle_s=1.0, frames_per_point=20, frame_rate_hz=10.0, settle_overhead_s=0.5,
-    )  # fmt: skip
+        sps,
+        {"yaw": 0.0, "rail": 0.0},
+        {"yaw": 20.0, "rail": 500.0},
+        settle_s=1.0,
+        frames_per_point=20,
+        frame_rate_hz=10.0,
+        settle_overhead_s=0.5,
+    )
     # point 1: 0.5 s move + 0.5 overhead + 1 settle + 2 s frames; point 2: 2 s rail move ...
     assert t == pytest.approx((0.5 + 0.5 + 1 + 2) + (2.0 + 0.5 + 1 + 2))

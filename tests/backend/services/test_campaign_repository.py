@@ -29,13 +29,25 @@ def repo(tmp_path) -> CampaignRepository:
 
 def _create(repo: CampaignRepository, name: str = "grid", **kw):
     kw.setdefault("setpoints", [{"yaw": 0.0, "rail": 11000.0}, {"yaw": 5.0}, {}])
-    return repo.create(name=name, catalog_name="paper-target", frames_per_point=3, settle_s=0.5,
-                       lock_timeout_s=5.0, requirements={"x_mm": 6.0}, **kw)  # fmt: skip
+    return repo.create(
+        name=name,
+        catalog_name="paper-target",
+        frames_per_point=3,
+        settle_s=0.5,
+        lock_timeout_s=5.0,
+        requirements={"x_mm": 6.0},
+        **kw,
+    )
 
 
 def _sample(index: int) -> LiveSample:
-    frame = CameraFrame(np.zeros((2, 2), np.uint16), np.zeros((2, 2), np.float32), 0.1 * index,
-                        index, meta={"encoders": {"yaw": 5.0}})  # fmt: skip
+    frame = CameraFrame(
+        np.zeros((2, 2), np.uint16),
+        np.zeros((2, 2), np.float32),
+        0.1 * index,
+        index,
+        meta={"encoders": {"yaw": 5.0}},
+    )
     return LiveSample(frame, PoseResult(False, "no blobs", 0.1 * index), "paper-target", 0.0, 0.0)
 
 
@@ -167,4 +179,3 @@ def test_the_runner_never_takes_a_paused_or_cancelled_campaign_back_to_running(r
     assert repo.set_status(queued, CampaignState.RUNNING)  # the one still queued is taken
     assert not repo.set_status(queued, CampaignState.QUEUED)  # not a runner's transition
     assert repo.get(queued).status is CampaignState.RUNNING
-

@@ -65,20 +65,37 @@ def test_every_other_command_is_refused_naming_the_campaign_state_and_command(st
 @pytest.mark.parametrize(
     ("state", "command", "message"),
     [
-        (S.RUNNING, C.START, "campaign 3 is running: only a draft or queued campaign can be "
-                             "started (resume a paused or interrupted one)"),
-        (S.DONE, C.RESUME, "campaign 3 is done: only a paused or interrupted campaign can be "
-                           "resumed; it has nothing left to do"),
-        (S.FAILED, C.RESUME, "campaign 3 is failed: only a paused or interrupted campaign "
-                             "can be resumed"),
-        (S.PAUSED, C.PAUSE, "campaign 3 is paused: only a queued or running campaign can be "
-                            "paused"),
-        (S.DRAFT, C.RESUME, "campaign 3 is draft: only a paused or interrupted campaign can "
-                            "be resumed"),
+        (
+            S.RUNNING,
+            C.START,
+            "campaign 3 is running: only a draft or queued campaign can be "
+            "started (resume a paused or interrupted one)",
+        ),
+        (
+            S.DONE,
+            C.RESUME,
+            "campaign 3 is done: only a paused or interrupted campaign can be "
+            "resumed; it has nothing left to do",
+        ),
+        (
+            S.FAILED,
+            C.RESUME,
+            "campaign 3 is failed: only a paused or interrupted campaign can be resumed",
+        ),
+        (
+            S.PAUSED,
+            C.PAUSE,
+            "campaign 3 is paused: only a queued or running campaign can be paused",
+        ),
+        (
+            S.DRAFT,
+            C.RESUME,
+            "campaign 3 is draft: only a paused or interrupted campaign can be resumed",
+        ),
         (S.CANCELLED, C.CANCEL, "campaign 3 is already cancelled"),
         (S.DONE, C.CANCEL, "campaign 3 is already done"),
     ],
-)  # fmt: skip
+)
 def test_the_refusals_read_as_sentences(state, command, message):
     with pytest.raises(CampaignTransitionError) as info:
         check_transition(state, command, 3)
@@ -107,5 +124,4 @@ def test_finished_and_resumable_states_come_from_the_table():
 def test_only_the_runner_makes_a_campaign_run_and_ends_a_run():
     assert not any(to is S.RUNNING for _, _, to in transition_table())
     assert RUNNER_TRANSITIONS[S.QUEUED] == {S.RUNNING}
-    assert RUNNER_TRANSITIONS[S.RUNNING] == {S.DONE, S.FAILED, S.PAUSED, S.CANCELLED,
-                                             S.INTERRUPTED}  # fmt: skip
+    assert RUNNER_TRANSITIONS[S.RUNNING] == {S.DONE, S.FAILED, S.PAUSED, S.CANCELLED, S.INTERRUPTED}

@@ -45,8 +45,16 @@ def subscribe(ws, wanted: dict[str, int]) -> dict[str, dict]:
     while not set(wanted) <= set(seen):
         for ch in receive_json(ws, "advertise")["channels"]:
             seen[ch["topic"]] = ch
-    ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-        {"id": sid, "channelId": seen[t]["id"]} for t, sid in wanted.items()]}))  # fmt: skip
+    ws.send(
+        json.dumps(
+            {
+                "op": "subscribe",
+                "subscriptions": [
+                    {"id": sid, "channelId": seen[t]["id"]} for t, sid in wanted.items()
+                ],
+            }
+        )
+    )
     return seen
 
 
@@ -70,9 +78,10 @@ def test_a_foxglove_client_gets_the_frames_the_server_measured(tmp_path):
                     continue
                 op, sid, log_ns = struct.unpack_from("<BIQ", msg)
                 assert op == MESSAGE_DATA
-                payload = msg[struct.calcsize("<BIQ"):]
+                payload = msg[struct.calcsize("<BIQ") :]
                 (images if sid == 1 else transforms)[log_ns] = (
-                    RawImage if sid == 1 else Transform).FromString(payload)
+                    RawImage if sid == 1 else Transform
+                ).FromString(payload)
         # a client that shows only the 3-D pose (no image panel) gets it too: channels
         # are converted for whoever subscribes to them
         with connect(info["url"], subprotocols=SUBPROTOCOLS, open_timeout=10) as ws:
@@ -80,7 +89,7 @@ def test_a_foxglove_client_gets_the_frames_the_server_measured(tmp_path):
             while isinstance(msg := ws.recv(timeout=10), str):
                 pass
             assert struct.unpack_from("<BI", msg) == (MESSAGE_DATA, 7)
-            tf = Transform.FromString(msg[struct.calcsize("<BIQ"):])
+            tf = Transform.FromString(msg[struct.calcsize("<BIQ") :])
             assert (tf.parent_frame_id, tf.child_frame_id) == ("camera", "target")
         # stop the subscription first, then drain what it holds: draining a live one
         # with a 0.1 s wait never ends while the camera delivers a frame every 0.1 s
@@ -98,8 +107,7 @@ def test_a_foxglove_client_gets_the_frames_the_server_measured(tmp_path):
             np.testing.assert_array_equal(gray, sample.frame.gray)
             if log_ns in transforms and sample.result.ok:
                 t = transforms[log_ns].translation
-                np.testing.assert_allclose([t.x, t.y, t.z], sample.result.t_mm / 1000.0,
-                                           atol=1e-12)  # fmt: skip
+                np.testing.assert_allclose([t.x, t.y, t.z], sample.result.t_mm / 1000.0, atol=1e-12)
                 compared += 1
             matched += 1
         assert matched >= 2 and compared >= 1

@@ -62,20 +62,28 @@ def test_frames_stream_while_the_kernels_compile_and_poses_follow(tmp_path, monk
             assert p["detail"] == kernel_warmup.REFERENCE_DETAIL
         # a campaign counts the reference poses (they are the compiled ones to ~0.01 mm)
         body = {
-            "name": "early", "frames_per_point": 3, "settle_s": 0.0,
+            "name": "early",
+            "frames_per_point": 3,
+            "settle_s": 0.0,
             "setpoints": [{"yaw_deg": 0, "pitch_deg": 0, "roll_deg": 0, "rail_mm": 13000}],
-        }  # fmt: skip
+        }
         cid = c.post("/api/campaigns", json=body, headers=AUTH).json()["id"]
         assert c.post(f"/api/campaigns/{cid}/start", headers=AUTH).status_code == 200
-        wait_for(lambda: c.get(f"/api/campaigns/{cid}").json()["status"] == "done", 30.0,
-                 "the campaign to finish")  # fmt: skip
+        wait_for(
+            lambda: c.get(f"/api/campaigns/{cid}").json()["status"] == "done",
+            30.0,
+            "the campaign to finish",
+        )
         rows = c.get(f"/api/campaigns/{cid}/measurements").json()["items"]
         assert len(rows) == 3 and all(r["ok"] for r in rows), rows
         assert acq.kernels.state == "compiling"
         # the kernels ready: the compiled pipeline from the next frame on
         compiled_gate.set()
-        wait_for(lambda: c.get("/api/health").json()["pipeline"]["implementation"] == "compiled",
-                 10.0, "the compiled pipeline")  # fmt: skip
+        wait_for(
+            lambda: c.get("/api/health").json()["pipeline"]["implementation"] == "compiled",
+            10.0,
+            "the compiled pipeline",
+        )
         p = c.get("/api/devices").json()["pipeline"]
         assert (p["state"], p["implementation"], p["detail"]) == ("ready", "compiled", "")
         pose = latest_pose(c, pose["frame_index"], ok=True)
@@ -126,8 +134,9 @@ def test_after_the_first_stage_the_reference_pipeline_compiles_nothing():
     """In a fresh process (nothing compiled or loaded yet), ``warm_up_reference`` asks
     numba for the frame check's and the history's kernels, and the reference pipeline
     then asks it for none: it never compiles in the live loop's thread."""
-    out = subprocess.run([sys.executable, "-c", FRESH_PROCESS], cwd=ROOT, capture_output=True,
-                         text=True, check=True).stdout.splitlines()  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", FRESH_PROCESS], cwd=ROOT, capture_output=True, text=True, check=True
+    ).stdout.splitlines()
     stage1 = set(out[0].split()[2:])
     assert {"checked_frame", "clean_distance", "pixel_mask"} <= stage1, out
     assert out[1].split()[1:] == ["acquisition", "tracking"]

@@ -81,12 +81,14 @@ def test_revoked_keys_stop_working_and_keep_their_names(keys):
 
 @pytest.mark.parametrize(
     ("name", "scope", "message"),
-    [("", "read", "key name must be 1-64 letters"),
-     ("-dash-first", "read", "key name must be"),
-     ("a" * 65, "read", "key name must be"),
-     ("has space", "read", "key name must be"),
-     ("dave", "superuser", "scope must be read, operate or admin, got 'superuser'")],
-)  # fmt: skip
+    [
+        ("", "read", "key name must be 1-64 letters"),
+        ("-dash-first", "read", "key name must be"),
+        ("a" * 65, "read", "key name must be"),
+        ("has space", "read", "key name must be"),
+        ("dave", "superuser", "scope must be read, operate or admin, got 'superuser'"),
+    ],
+)
 def test_bad_names_and_scopes_are_refused_naming_the_problem(keys, name, scope, message):
     with pytest.raises(ValueError, match=message):
         keys.create(name, scope)
@@ -139,8 +141,7 @@ def test_keys_made_before_the_first_start_do_not_replace_the_admin_key(keys, tmp
     still makes the admin key."""
     keys.create("viewer", "read")
     assert keys.bootstrap(tmp_path, None).source == "generated"
-    assert {k.name: k.scope for k in keys.list()} == {"viewer": Scope.READ,
-                                                       "admin": Scope.ADMIN}  # fmt: skip
+    assert {k.name: k.scope for k in keys.list()} == {"viewer": Scope.READ, "admin": Scope.ADMIN}
 
 
 def test_another_processs_changes_reach_a_running_service(sessions, tmp_path):

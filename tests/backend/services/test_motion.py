@@ -42,8 +42,10 @@ def test_a_setpoint_outside_the_soft_limits_names_the_axis_and_the_limit(motion,
         motion.move({"yaw": yaw.max_pos + 1.0, "rail": 11000.0})
     (problem,) = info.value.problems
     assert problem.field == ""  # the set-point as a whole, not one request field
-    assert problem.message == (f"yaw set-point {yaw.max_pos + 1.0:.15g} deg is outside the soft "
-                               f"limits [{yaw.min_pos:.15g}, {yaw.max_pos:.15g}] deg")  # fmt: skip
+    assert problem.message == (
+        f"yaw set-point {yaw.max_pos + 1.0:.15g} deg is outside the soft "
+        f"limits [{yaw.min_pos:.15g}, {yaw.max_pos:.15g}] deg"
+    )
     with pytest.raises(MotionLimitError, match="this motion system has no tilt axis"):
         motion.move({"tilt": 1.0})
     with pytest.raises(MotionLimitError, match="pitch set-point must be a finite number"):
@@ -61,8 +63,9 @@ def test_a_jog_past_the_soft_limit_is_refused_from_where_the_axis_is(motion, spy
     ((name, target),) = spy.calls
     # from the encoder reading, which jitters by up to ~0.01 deg when settled (one full
     # run read 168.4985 for 168.5)
-    assert name == "move_to" and target["yaw"] == pytest.approx(motion.axes["yaw"].max_pos - 1.5,
-                                                                abs=0.01)  # fmt: skip
+    assert name == "move_to" and target["yaw"] == pytest.approx(
+        motion.axes["yaw"].max_pos - 1.5, abs=0.01
+    )
 
 
 def test_a_campaign_that_owns_the_table_keeps_everyone_else_off(motion, spy):
@@ -72,8 +75,11 @@ def test_a_campaign_that_owns_the_table_keeps_everyone_else_off(motion, spy):
         "campaign 7 ('grid-1') owns the motion system while it runs: pause or "
         "cancel it first (STOP always works)"
     )
-    for attempt in (lambda: motion.move({"yaw": 1.0}), lambda: motion.jog("yaw", 1.0),
-                    lambda: motion.start_profile("yaw", SINE)):  # fmt: skip
+    for attempt in (
+        lambda: motion.move({"yaw": 1.0}),
+        lambda: motion.jog("yaw", 1.0),
+        lambda: motion.start_profile("yaw", SINE),
+    ):
         with pytest.raises(MotionConflictError, match=refused):
             attempt()
     with pytest.raises(MotionConflictError, match="campaign 8 does not own the motion system"):
@@ -134,8 +140,9 @@ def test_health_follows_what_the_driver_answers(motion, spy):
     )
     with pytest.raises(MotionDeviceError) as info:
         motion.jog("yaw", 1.0)
-    assert info.value.detail == ("cannot read the yaw position to jog from: no answer from the "
-                                 "controller")  # fmt: skip
+    assert info.value.detail == (
+        "cannot read the yaw position to jog from: no answer from the controller"
+    )
     assert motion.health.error_count == 2
     spy.status = inner
     motion.status()
@@ -184,16 +191,21 @@ def test_a_controller_without_profile_mode_is_a_conflict_naming_it(spy):
 
     motion = MotionService(NoProfiles())
     assert motion.profile_unavailable == "it has no profile mode"
-    with pytest.raises(MotionConflictError, match="^the 'plain' motion system cannot run motion "
-                                                  "profiles$"):  # fmt: skip
+    with pytest.raises(
+        MotionConflictError, match="^the 'plain' motion system cannot run motion profiles$"
+    ):
         motion.start_profile("yaw", SINE)
 
 
 def test_without_a_motion_system_every_command_says_so():
     motion = MotionService(None)
     assert not motion.present and motion.axes == {} and motion.owner is None
-    for attempt in (lambda: motion.move({"yaw": 1.0}), motion.stop, motion.status,
-                    lambda: motion.jog("yaw", 1.0)):  # fmt: skip
+    for attempt in (
+        lambda: motion.move({"yaw": 1.0}),
+        motion.stop,
+        motion.status,
+        lambda: motion.jog("yaw", 1.0),
+    ):
         with pytest.raises(MotionAbsentError, match="no motion system configured"):
             attempt()
     motion.claim(1, "static")  # a campaign without set-points still owns the queue's slot
@@ -240,8 +252,11 @@ def test_stop_latches_for_everyone_until_a_person_releases_it(motion, spy):
     are refused until ``release_stop``; releasing twice is harmless."""
     motion.stop()
     spy.calls.clear()
-    for attempt in (lambda: motion.move({"yaw": 1.0}), lambda: motion.jog("yaw", 1.0),
-                    lambda: motion.start_profile("yaw", SINE)):  # fmt: skip
+    for attempt in (
+        lambda: motion.move({"yaw": 1.0}),
+        lambda: motion.jog("yaw", 1.0),
+        lambda: motion.start_profile("yaw", SINE),
+    ):
         with pytest.raises(MotionConflictError, match="release it first"):
             attempt()
     assert spy.calls == []
@@ -341,9 +356,11 @@ def _race_round(motion: MotionService, round_: int) -> list[str]:
         finally:
             done.set()
 
-    threads = [threading.Thread(target=person, args=("jog",), name=f"person-jog-{round_}"),
-               threading.Thread(target=person, args=("move",), name=f"person-move-{round_}"),
-               threading.Thread(target=campaign, name=f"campaign-{round_}")]  # fmt: skip
+    threads = [
+        threading.Thread(target=person, args=("jog",), name=f"person-jog-{round_}"),
+        threading.Thread(target=person, args=("move",), name=f"person-move-{round_}"),
+        threading.Thread(target=campaign, name=f"campaign-{round_}"),
+    ]
     for t in threads:
         t.start()
     for t in threads:
@@ -361,8 +378,11 @@ def test_no_command_from_a_non_owner_reaches_the_driver_while_a_campaign_claims_
     motion = MotionService(spy)
     ref.append(motion)
     outcomes = [o for round_ in range(25) for o in _race_round(motion, round_)]
-    by_non_owner = [(name, owner) for _, name, owner in spy.arrivals
-                    if owner is not None and not name.startswith("campaign-")]  # fmt: skip
+    by_non_owner = [
+        (name, owner)
+        for _, name, owner in spy.arrivals
+        if owner is not None and not name.startswith("campaign-")
+    ]
     assert by_non_owner == []
     assert "refused" in outcomes  # the race was real: people were refused while campaigns held it
     assert any(name.startswith("campaign-") for _, name, _ in spy.arrivals)

@@ -41,8 +41,10 @@ from tofpose.lab.relative_state import RelativeState
 from tofpose.pipeline import PoseResult
 
 CAMERA = CameraModel(width=40, height=30, fx=40.0, fy=40.0, cx=19.5, cy=14.5, name="small")
-AXES = {"yaw": AxisLimits("yaw", "deg", -170, 170, 20),
-        "rail": AxisLimits("rail", "mm", 0, 13000, 100)}  # fmt: skip
+AXES = {
+    "yaw": AxisLimits("yaw", "deg", -170, 170, 20),
+    "rail": AxisLimits("rail", "mm", 0, 13000, 100),
+}
 Usage = namedtuple("Usage", "total used free")
 PLENTY = Usage(10**12, 0, 10**12)
 
@@ -58,31 +60,60 @@ class TableDriver:
 
     def status(self) -> MotionStatus:
         self.reads += 1
-        return MotionStatus({"yaw": 11.5, "rail": 250.0}, {"yaw": 12.0, "rail": 300.0},
-                            busy=True, settled=False)  # fmt: skip
+        return MotionStatus(
+            {"yaw": 11.5, "rail": 250.0}, {"yaw": 12.0, "rail": 300.0}, busy=True, settled=False
+        )
 
 
-def make_sample(i: int, rng: np.random.Generator, *, captured_unix_s: float | None = None,
-                ok: bool = True, state: bool = True) -> LiveSample:  # fmt: skip
+def make_sample(
+    i: int,
+    rng: np.random.Generator,
+    *,
+    captured_unix_s: float | None = None,
+    ok: bool = True,
+    state: bool = True,
+) -> LiveSample:
     """Sample ``i``: random images, a random pose with a covariance, references, the
     relative state (or none) and the encoders at the frame."""
     R = Rotation.random(random_state=rng).as_matrix()
     t = rng.normal(0.0, 500.0, 3) + [0.0, 0.0, 5000.0]
     A = rng.normal(size=(6, 6))
-    result = (PoseResult(True, time_s=0.05 * i, R=R, t_mm=t, covariance=A @ A.T,
-                         residual_mm=float(rng.uniform(0.1, 2.0)))
-              if ok else PoseResult(False, "too few reflectors", 0.05 * i))  # fmt: skip
+    result = (
+        PoseResult(
+            True,
+            time_s=0.05 * i,
+            R=R,
+            t_mm=t,
+            covariance=A @ A.T,
+            residual_mm=float(rng.uniform(0.1, 2.0)),
+        )
+        if ok
+        else PoseResult(False, "too few reflectors", 0.05 * i)
+    )
     B = rng.normal(size=(12, 12))
-    rel = RelativeState(0.05 * i, R, t, rng.normal(size=3), rng.normal(size=3),
-                        rng.normal(size=3), B @ B.T, "updated") if state else None  # fmt: skip
+    rel = (
+        RelativeState(
+            0.05 * i,
+            R,
+            t,
+            rng.normal(size=3),
+            rng.normal(size=3),
+            rng.normal(size=3),
+            B @ B.T,
+            "updated",
+        )
+        if state
+        else None
+    )
     frame = CameraFrame(
         gray=rng.integers(0, 4096, (30, 40)).astype(np.uint16),
         distance_mm=rng.uniform(300.0, 15000.0, (30, 40)).astype(np.float32),
-        time_s=0.05 * i, index=1000 + i,
+        time_s=0.05 * i,
+        index=1000 + i,
         T_camera_target_exact=RigidTransform(R, t),
         T_camera_target_lab=RigidTransform(R, t + 1.0),
         meta={"encoders": {"yaw": 0.1 * i, "rail": 100.0 + i}},
-    )  # fmt: skip
+    )
     captured = time.time() if captured_unix_s is None else captured_unix_s
     return LiveSample(frame, result, "paper-target", captured, captured + 0.01, state=rel)
 
@@ -99,8 +130,9 @@ def motion():
 
 @pytest.fixture
 def service(tmp_path, hub, motion):
-    svc = RecordingService(tmp_path / "recordings", hub, CAMERA, paper_target, motion,
-                           min_free_mb=1000)  # fmt: skip
+    svc = RecordingService(
+        tmp_path / "recordings", hub, CAMERA, paper_target, motion, min_free_mb=1000
+    )
     yield svc
     svc.stop_all()
 
@@ -114,8 +146,11 @@ def test_every_frame_the_hub_delivers_is_written_with_pose_state_motion_and_stam
         hub.publish(s)
     done = service.stop(info.id)
 
-    assert (done.state, done.stop_reason, done.frames) == (RecordingState.STOPPED,
-                                                            StopReason.REQUESTED, 30)  # fmt: skip
+    assert (done.state, done.stop_reason, done.frames) == (
+        RecordingState.STOPPED,
+        StopReason.REQUESTED,
+        30,
+    )
     assert hub.n_subscribers == 0 and done.dropped_frames == 0
     path = service.directory / done.file
     assert done.size_bytes == path.stat().st_size > 0
@@ -127,12 +162,14 @@ def test_every_frame_the_hub_delivers_is_written_with_pose_state_motion_and_stam
             np.testing.assert_array_equal(gray, sent[k].frame.gray)
             np.testing.assert_array_equal(dist, sent[k].frame.distance_mm)
         np.testing.assert_array_equal(rec.truth_R, [s.frame.T_camera_target_exact.R for s in sent])
-        np.testing.assert_array_equal(rec.lab_truth_t_mm,
-                                      [s.frame.T_camera_target_lab.t_mm for s in sent])  # fmt: skip
+        np.testing.assert_array_equal(
+            rec.lab_truth_t_mm, [s.frame.T_camera_target_lab.t_mm for s in sent]
+        )
     with h5py.File(path, "r") as f:
         np.testing.assert_array_equal(f["frames/index"][...], [s.frame.index for s in sent])
-        np.testing.assert_array_equal(f["frames/wall_time_ns"][...],
-                                      [round(s.captured_unix_s * 1e9) for s in sent])  # fmt: skip
+        np.testing.assert_array_equal(
+            f["frames/wall_time_ns"][...], [round(s.captured_unix_s * 1e9) for s in sent]
+        )
         ok = np.array([s.result.ok for s in sent])
         np.testing.assert_array_equal(f["pose/ok"][...], ok)
         assert [r.decode() for r in f["pose/reason"][...]] == [s.result.reason for s in sent]
@@ -147,16 +184,19 @@ def test_every_frame_the_hub_delivers_is_written_with_pose_state_motion_and_stam
         states = [s.state for s in sent if s.state is not None]
         group = f["relative_state"]
         np.testing.assert_array_equal(group["covariance"][has], [s.covariance for s in states])
-        np.testing.assert_array_equal(group["angular_rate_deg_s"][has],
-                                      [s.angular_rate_deg_s for s in states])  # fmt: skip
-        np.testing.assert_array_equal(group["velocity_mm_s"][has],
-                                      [s.velocity_mm_s for s in states])  # fmt: skip
+        np.testing.assert_array_equal(
+            group["angular_rate_deg_s"][has], [s.angular_rate_deg_s for s in states]
+        )
+        np.testing.assert_array_equal(
+            group["velocity_mm_s"][has], [s.velocity_mm_s for s in states]
+        )
         assert np.isnan(f["relative_state/covariance"][~has]).all()
         # the encoders at each frame, the targets of the status read at most every 0.2 s
         assert list(f["motion"].attrs["axes"]) == ["yaw", "rail"]
         assert list(f["motion"].attrs["units"]) == ["deg", "mm"]
-        np.testing.assert_array_equal(f["motion/positions"][...],
-                                      [[0.1 * i, 100.0 + i] for i in range(30)])  # fmt: skip
+        np.testing.assert_array_equal(
+            f["motion/positions"][...], [[0.1 * i, 100.0 + i] for i in range(30)]
+        )
         np.testing.assert_array_equal(f["motion/targets"][...], [[12.0, 300.0]] * 30)
         assert f["motion/busy"][...].all()
         status_ns = f["motion/status_wall_time_ns"][...]
@@ -179,10 +219,13 @@ def test_the_recording_exports_to_an_mcap_that_mcaps_reader_reads(service, hub, 
     messages, _, _ = read_back(recording_mcap(path))  # every message decoded by its schema
     assert len(messages[topics.GRAY]) == 5
     for k, (_, msg) in enumerate(messages[topics.GRAY]):
-        np.testing.assert_array_equal(np.frombuffer(msg.data, "<u2").reshape(30, 40),
-                                      sent[k].frame.gray)  # fmt: skip
-    np.testing.assert_allclose([p["t_camera_target_mm"] for _, p in messages[topics.TRUTH]],
-                               [s.frame.T_camera_target_exact.t_mm for s in sent])  # fmt: skip
+        np.testing.assert_array_equal(
+            np.frombuffer(msg.data, "<u2").reshape(30, 40), sent[k].frame.gray
+        )
+    np.testing.assert_allclose(
+        [p["t_camera_target_mm"] for _, p in messages[topics.TRUTH]],
+        [s.frame.T_camera_target_exact.t_mm for s in sent],
+    )
 
 
 def test_start_is_refused_below_the_free_space_floor(service, hub, monkeypatch):
@@ -206,8 +249,10 @@ def test_a_filling_disk_stops_the_recording_with_the_file_closed_and_readable(
     info = service.start("during a problem")
     for i in range(20):
         hub.publish(make_sample(i, rng))
-    done = wait_for(lambda: (i := service.get(info.id)).state is RecordingState.STOPPED and i,
-                    what="the recording to stop on the full disk")  # fmt: skip
+    done = wait_for(
+        lambda: (i := service.get(info.id)).state is RecordingState.STOPPED and i,
+        what="the recording to stop on the full disk",
+    )
     assert done.stop_reason is StopReason.DISK_FULL
     assert "10 MB free" in done.stop_detail and "1000 MB" in done.stop_detail
     assert done.frames == 7 and hub.n_subscribers == 0
@@ -224,16 +269,20 @@ def test_a_duration_stops_the_recording_at_the_first_frame_after_its_end(service
     for i in range(4):
         hub.publish(make_sample(i, rng, captured_unix_s=t0 + 5.0 * i))  # 0, 5, 10, 15 s
     hub.publish(make_sample(4, rng, captured_unix_s=t0 + 30.5))  # after the end: not written
-    done = wait_for(lambda: (i := service.get(info.id)).state is RecordingState.STOPPED and i,
-                    what="the recording's end")  # fmt: skip
+    done = wait_for(
+        lambda: (i := service.get(info.id)).state is RecordingState.STOPPED and i,
+        what="the recording's end",
+    )
     assert (done.stop_reason, done.frames) == (StopReason.DURATION, 4)
     assert "duration of 30 s" in done.stop_detail
 
 
 def test_a_duration_stops_the_recording_without_frames_too(service):
     info = service.start("nothing comes", duration_s=0.2)
-    done = wait_for(lambda: (i := service.get(info.id)).state is RecordingState.STOPPED and i,
-                    what="the recording's end")  # fmt: skip
+    done = wait_for(
+        lambda: (i := service.get(info.id)).state is RecordingState.STOPPED and i,
+        what="the recording's end",
+    )
     assert (done.stop_reason, done.frames) == (StopReason.DURATION, 0)
     with open_recording(service.directory / done.file) as rec:  # an empty file, readable
         assert rec.n_frames == 0
@@ -263,8 +312,10 @@ def test_a_write_failing_part_way_is_cut_off_and_stops_the_recording(service, hu
     info = service.start("broken")
     for i in range(6):
         hub.publish(make_sample(i, rng))
-    done = wait_for(lambda: (i := service.get(info.id)).state is RecordingState.STOPPED and i,
-                    what="the recording to stop")  # fmt: skip
+    done = wait_for(
+        lambda: (i := service.get(info.id)).state is RecordingState.STOPPED and i,
+        what="the recording to stop",
+    )
     assert done.stop_reason is StopReason.ERROR and "pose/covariance" in done.stop_detail
     assert done.frames == 3
     with h5py.File(service.directory / done.file, "r") as f:

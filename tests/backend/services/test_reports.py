@@ -23,23 +23,55 @@ from backend.services.report_plots import Plot
 from backend.services.reports import build, to_html, to_pdf
 
 REQ = dict(rc.PAPER_REQUIREMENTS)
-NOISE = {"x_mm": 0.3, "y_mm": 0.3, "z_mm": 1.0, "pitch_deg": 0.02, "yaw_deg": 0.02,
-         "roll_deg": 0.01}  # fmt: skip
+NOISE = {
+    "x_mm": 0.3,
+    "y_mm": 0.3,
+    "z_mm": 1.0,
+    "pitch_deg": 0.02,
+    "yaw_deg": 0.02,
+    "roll_deg": 0.01,
+}
 # Errors of the failing campaign: x 8 mm at every set-point (requirement 6 mm), yaw
 # 0.25 deg at set-point 1 only (requirement 0.15 deg); every other axis only noise.
 BAD_OFFSETS = {0: {"x_mm": 8.0}, 1: {"x_mm": 8.0, "yaw_deg": 0.25}, 2: {"x_mm": 8.0}}
-SETPOINTS = [{"yaw": 0.0, "rail": 9000.0}, {"yaw": 5.0, "rail": 10500.0},
-             {"yaw": -5.0, "rail": 12000.0}]  # fmt: skip
+SETPOINTS = [
+    {"yaw": 0.0, "rail": 9000.0},
+    {"yaw": 5.0, "rail": 10500.0},
+    {"yaw": -5.0, "rail": 12000.0},
+]
 FRAMES = 40
 # What must never reach a reader: axis and statistic names of the code and the JSON.
-IDENTIFIERS = [*AXES, "n_removed", "max_abs", "three_sigma", "predicted_sigma",
-               "sigma_ratio", "lab_truth", "setpoint_index", "n_ok", "passed"]  # fmt: skip
+IDENTIFIERS = [
+    *AXES,
+    "n_removed",
+    "max_abs",
+    "three_sigma",
+    "predicted_sigma",
+    "sigma_ratio",
+    "lab_truth",
+    "setpoint_index",
+    "n_ok",
+    "passed",
+]
 # Headers as a reader sees them (whitespace collapsed: a header may wrap over lines).
-HEADERS = ["removed outliers", "bias (mean error) (mm)", "std (1 sigma) (deg)", "RMS error (mm)",
-           "max |error| (mm)", "max |error| (deg)", "3 sigma (mm)", "predicted 1-sigma (deg)",
-           "sigma ratio (measured / predicted)", "requirement (mm)", "frames used",
-           "share of requirement", "measured max |error|", "worst set-point",
-           "commanded (deg; rail mm)", "frames with a pose"]  # fmt: skip
+HEADERS = [
+    "removed outliers",
+    "bias (mean error) (mm)",
+    "std (1 sigma) (deg)",
+    "RMS error (mm)",
+    "max |error| (mm)",
+    "max |error| (deg)",
+    "3 sigma (mm)",
+    "predicted 1-sigma (deg)",
+    "sigma ratio (measured / predicted)",
+    "requirement (mm)",
+    "frames used",
+    "share of requirement",
+    "measured max |error|",
+    "worst set-point",
+    "commanded (deg; rail mm)",
+    "frames with a pose",
+]
 SECTIONS = ["Verdict", "Findings", "Accuracy over the whole campaign", "Per set-point"]
 
 
@@ -49,16 +81,34 @@ def _store(sessions, name: str, offsets: dict[int, dict], requirements: dict, se
     rng = np.random.default_rng(seed)
     with sessions() as s:
         row = create_campaign(
-            s, name=name, catalog_name="paper-target", setpoints=SETPOINTS,
-            frames_per_point=FRAMES, settle_s=1.0, lock_timeout_s=5.0, requirements=requirements,
-        )  # fmt: skip
+            s,
+            name=name,
+            catalog_name="paper-target",
+            setpoints=SETPOINTS,
+            frames_per_point=FRAMES,
+            settle_s=1.0,
+            lock_timeout_s=5.0,
+            requirements=requirements,
+        )
         for sp in s.query(SetPointRow).filter_by(campaign_id=row.id):
-            ref = {"x_mm": 0.0, "y_mm": 0.0, "z_mm": 15000.0 - sp.rail_mm, "pitch_deg": 0.0,
-                   "yaw_deg": -sp.yaw_deg, "roll_deg": 0.0}  # fmt: skip
+            ref = {
+                "x_mm": 0.0,
+                "y_mm": 0.0,
+                "z_mm": 15000.0 - sp.rail_mm,
+                "pitch_deg": 0.0,
+                "yaw_deg": -sp.yaw_deg,
+                "roll_deg": 0.0,
+            }
             for k in range(FRAMES):
-                m = MeasurementRow(setpoint_id=sp.id, frame_index=k, ok=True, reason="",
-                                   frame_time_s=20.0 * sp.index + 0.1 * k, n_matched=8,
-                                   residual_mm=0.5)  # fmt: skip
+                m = MeasurementRow(
+                    setpoint_id=sp.id,
+                    frame_index=k,
+                    ok=True,
+                    reason="",
+                    frame_time_s=20.0 * sp.index + 0.1 * k,
+                    n_matched=8,
+                    residual_mm=0.5,
+                )
                 for a, v in ref.items():
                     off = offsets.get(sp.index, {}).get(a, 0.0)
                     setattr(m, a, v + off + rng.normal(0.0, NOISE[a]))
@@ -85,9 +135,11 @@ def sessions(tmp_path_factory):
 def reports(sessions) -> dict[str, tuple[dict, list[dict]]]:
     """(report, rows) of: ``good`` (noise only), ``bad`` (BAD_OFFSETS), ``strict`` (noise
     only, but a 0.5 mm requirement in x set at creation)."""
-    ids = {"good": _store(sessions, "good", {}, REQ, 1),
-           "bad": _store(sessions, "bad", BAD_OFFSETS, REQ, 2),
-           "strict": _store(sessions, "strict", {}, {**REQ, "x_mm": 0.5}, 3)}  # fmt: skip
+    ids = {
+        "good": _store(sessions, "good", {}, REQ, 1),
+        "bad": _store(sessions, "bad", BAD_OFFSETS, REQ, 2),
+        "strict": _store(sessions, "strict", {}, {**REQ, "x_mm": 0.5}, 3),
+    }
     with sessions() as s:
         return {name: build(s, cid) for name, cid in ids.items()}
 
@@ -101,16 +153,22 @@ def rendered(reports, tmp_path_factory) -> dict[str, dict]:
         pdf = tmp / f"{name}.pdf"
         pdf.write_bytes(to_pdf(rep, rows))
         html = to_html(rep, rows)
-        out[name] = {"pdf": pdf, "pdf_text": _pdftotext(pdf), "pdf_raw": _pdftotext(pdf, "-raw"),
-                     "html": html, "html_text": _visible(html)}  # fmt: skip
+        out[name] = {
+            "pdf": pdf,
+            "pdf_text": _pdftotext(pdf),
+            "pdf_raw": _pdftotext(pdf, "-raw"),
+            "html": html,
+            "html_text": _visible(html),
+        }
     return out
 
 
 def _pdftotext(pdf: Path, *options: str) -> str:
     """The PDF's text, whitespace collapsed: in reading order, or with ``-raw`` in the
     order it was drawn (a table's header cell by cell, however each is wrapped)."""
-    text = subprocess.run(["pdftotext", *options, str(pdf), "-"], check=True,
-                          capture_output=True, text=True).stdout  # fmt: skip
+    text = subprocess.run(
+        ["pdftotext", *options, str(pdf), "-"], check=True, capture_output=True, text=True
+    ).stdout
     return " ".join(text.split())
 
 
@@ -188,8 +246,12 @@ def test_the_requirement_source_is_named(reports):
 def test_findings_name_axes_and_units(reports):
     f = reports["bad"][0]["findings"]
     assert "x: 3 of 3 set-points exceed the requirement of 6 mm" in f[0]
-    assert any(s.startswith("yaw: 1 of 3 set-points exceed the requirement of 0.15 deg (worst: "
-                            "set-point 1") for s in f)  # fmt: skip
+    assert any(
+        s.startswith(
+            "yaw: 1 of 3 set-points exceed the requirement of 0.15 deg (worst: set-point 1"
+        )
+        for s in f
+    )
     assert any(s.startswith("x: the mean error 8") and " mm is more than 3" in s for s in f)
     assert reports["good"][0]["findings"][0] == "All 3 set-points meet every requirement."
     for s in f + reports["good"][0]["findings"]:
@@ -198,8 +260,7 @@ def test_findings_name_axes_and_units(reports):
 
 def test_per_setpoint_table_marks_the_failing_axes(reports):
     t = rc.setpoint_table(reports["bad"][0])
-    assert [r[1] for r in t.rows] == ["yaw 0, rail 9000", "yaw 5, rail 10500",
-                                      "yaw -5, rail 12000"]  # fmt: skip
+    assert [r[1] for r in t.rows] == ["yaw 0, rail 9000", "yaw 5, rail 10500", "yaw -5, rail 12000"]
     assert [r[2] for r in t.rows] == ["6", "4.5", "3"]  # range (m) from the reference z
     assert [r[-1] for r in t.rows] == ["FAIL (x)", "FAIL (x, yaw)", "FAIL (x)"]
     yaw_col = t.header.index("yaw max |error| (deg)")
@@ -208,9 +269,16 @@ def test_per_setpoint_table_marks_the_failing_axes(reports):
 
 def test_a_campaign_without_frames_reports_no_verdict_and_no_plots(sessions, tmp_path):
     with sessions() as s:
-        cid = create_campaign(s, name="empty", catalog_name="paper-target", setpoints=SETPOINTS,
-                              frames_per_point=5, settle_s=1.0, lock_timeout_s=5.0,
-                              requirements=REQ).id  # fmt: skip
+        cid = create_campaign(
+            s,
+            name="empty",
+            catalog_name="paper-target",
+            setpoints=SETPOINTS,
+            frames_per_point=5,
+            settle_s=1.0,
+            lock_timeout_s=5.0,
+            requirements=REQ,
+        ).id
         rep, rows = build(s, cid)
     assert rc.verdict_line(rep) == "NO VERDICT: no set-point has a pose to judge."
     html = to_html(rep, rows)
@@ -267,8 +335,12 @@ def _ink_rows(png: Path) -> tuple[float, float]:
 def test_every_pdf_page_is_a4_landscape_and_filled(rendered, reports, tmp_path):
     # A larger campaign too, so that the per-set-point table spans pages.
     rep, rows = reports["bad"]
-    many = {**rep, "setpoints": [{**sp, "setpoint_index": i} for i in range(60)
-                                 for sp in rep["setpoints"][:1]]}  # fmt: skip
+    many = {
+        **rep,
+        "setpoints": [
+            {**sp, "setpoint_index": i} for i in range(60) for sp in rep["setpoints"][:1]
+        ],
+    }
     big = tmp_path / "big.pdf"
     big.write_bytes(to_pdf(many, rows))
     for pdf in [rendered[n]["pdf"] for n in rendered] + [big]:
@@ -294,8 +366,7 @@ def test_paginate_splits_tables_floats_plots_keeps_headings_and_fills_pages():
     per_page = int((height - 0.3 - fixed) / probe._row_in())
     n_rows = 2 * per_page + per_page // 2  # the third page half full of table
     table = report_pdf.TableBlock(rc.Table(["a", "b"], [[str(i), "x"] for i in range(n_rows)]))
-    blocks = [report_pdf.heading("Table"), table, _plot("big", 5.0, 7.0),
-              _plot("small", 2.0, 3.0)]  # fmt: skip
+    blocks = [report_pdf.heading("Table"), table, _plot("big", 5.0, 7.0), _plot("small", 2.0, 3.0)]
     pages = report_pdf.paginate(blocks, width, height)
     tables = [b for page in pages for b, _ in page if isinstance(b, report_pdf.TableBlock)]
     assert [len(t.table.rows) for t in tables][0] >= per_page - 1

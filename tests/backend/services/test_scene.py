@@ -12,10 +12,17 @@ from tests.backend.conftest import AUTH, make_settings, running_app, wait_for
 from tofpose.core.geometry import rotation_from_quaternion_wxyz
 
 NODES = (
-    "/camera", "/camera/frustum", "/camera/cloud", "/camera/reflectors", "/turntable",
-    "/estimate", "/estimate/plate", "/truth", "/truth/plate",
+    "/camera",
+    "/camera/frustum",
+    "/camera/cloud",
+    "/camera/reflectors",
+    "/turntable",
+    "/estimate",
+    "/estimate/plate",
+    "/truth",
+    "/truth/plate",
     *(f"/estimate/reflector_{i}" for i in range(1, 9)),
-)  # fmt: skip
+)
 
 
 @pytest.fixture
@@ -81,8 +88,11 @@ def test_pausing_freezes_the_scene_and_the_api_reports_it(scene_app):
     assert scene.paused  # the scene's own GUI checkbox shows it too
     frozen = scene.updates
     n = client.app.state.tofpose.acquisition.frames_processed
-    wait_for(lambda: client.app.state.tofpose.acquisition.frames_processed > n + 5, 10.0,
-             "frames while paused")  # fmt: skip
+    wait_for(
+        lambda: client.app.state.tofpose.acquisition.frames_processed > n + 5,
+        10.0,
+        "frames while paused",
+    )
     assert scene.updates <= frozen + 1  # at most the update that was under way
     client.put("/api/scene", json={"paused": False}, headers=AUTH)
     _after(scene, frozen + 3)

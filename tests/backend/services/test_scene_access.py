@@ -40,8 +40,12 @@ def open_scene(port: int, *, host: str | None = None, origin: str | None = None)
     """The scene's WebSocket as a browser opens it: ``host`` is the Host header (the name
     the page was loaded from), the TCP connection goes to 127.0.0.1 whatever it says."""
     sock = socket.create_connection(("127.0.0.1", port))
-    return connect(f"ws://{host or f'127.0.0.1:{port}'}/", sock=sock, origin=origin,
-                   subprotocols=[f"viser-v{viser.__version__}"])  # fmt: skip
+    return connect(
+        f"ws://{host or f'127.0.0.1:{port}'}/",
+        sock=sock,
+        origin=origin,
+        subprotocols=[f"viser-v{viser.__version__}"],
+    )
 
 
 def scene_nodes(ws) -> set[str]:
@@ -99,7 +103,9 @@ def test_a_foreign_host_is_refused_on_the_websocket_and_the_page(app_scene):
     _, scene = app_scene
     rebound = f"evil.example:{scene.port}"
     assert refused(scene.port, host=rebound, origin=f"http://{rebound}") == (
-        400, "Invalid host header\n")  # fmt: skip
+        400,
+        "Invalid host header\n",
+    )
     assert refused(scene.port, host=rebound)[0] == 400  # without an Origin too
     status, headers, body = http_get(scene.port, rebound)
     assert status == 400 and b"<html" not in body.lower()
@@ -133,7 +139,8 @@ def test_the_page_may_be_framed_by_the_dashboard_only(app_scene):
         assert status == 200 and b"<html" in body.lower()  # viser's client
         dashboard = f"{name}:{DASHBOARD_PORT}"
         assert headers["Content-Security-Policy"] == (
-            f"frame-ancestors http://{dashboard} https://{dashboard}")  # fmt: skip
+            f"frame-ancestors http://{dashboard} https://{dashboard}"
+        )
         assert headers["X-Content-Type-Options"] == "nosniff"
         assert headers["Referrer-Policy"] == "no-referrer"
 
@@ -143,9 +150,15 @@ def test_a_scene_with_its_own_names_and_origins(app_scene):
     client, _ = app_scene
     state = client.app.state.tofpose
     serve = websockets.asyncio.server.serve
-    scene = LiveScene(state.hub, state.acquisition, host="127.0.0.1", port=0,
-                      trusted_hosts=["127.0.0.1", "Bench-PC.lab"],
-                      allowed_origins=["http://localhost:5173/"], dashboard_port=8123)  # fmt: skip
+    scene = LiveScene(
+        state.hub,
+        state.acquisition,
+        host="127.0.0.1",
+        port=0,
+        trusted_hosts=["127.0.0.1", "Bench-PC.lab"],
+        allowed_origins=["http://localhost:5173/"],
+        dashboard_port=8123,
+    )
     try:
         assert websockets.asyncio.server.serve is serve  # the wrapper is gone again
         port = scene.port
@@ -158,7 +171,8 @@ def test_a_scene_with_its_own_names_and_origins(app_scene):
         _, headers, _ = http_get(port, f"bench-pc.lab:{port}")
         assert headers["Content-Security-Policy"] == (
             "frame-ancestors http://bench-pc.lab:8123 https://bench-pc.lab:8123 "
-            "http://localhost:5173")  # fmt: skip
+            "http://localhost:5173"
+        )
     finally:
         scene.close()
 
@@ -175,8 +189,9 @@ def test_a_viser_that_starts_its_server_another_way_is_not_served(app_scene, mon
     real = websockets.asyncio.server
     elsewhere = SimpleNamespace(
         asyncio=SimpleNamespace(server=SimpleNamespace(serve=real.serve)),
-        exceptions=infra.websockets.exceptions, datastructures=infra.websockets.datastructures,
-    )  # fmt: skip
+        exceptions=infra.websockets.exceptions,
+        datastructures=infra.websockets.datastructures,
+    )
     monkeypatch.setattr(infra, "websockets", elsewhere)
     with socket.socket() as probe:  # a free port, to see it closed again afterwards
         probe.bind(("127.0.0.1", 0))
@@ -189,8 +204,9 @@ def test_a_viser_that_starts_its_server_another_way_is_not_served(app_scene, mon
 
 # -- the rules, table-driven --------------------------------------------------------------
 LOOPBACK = SceneAccess(dashboard_port=8000)
-LAB = SceneAccess(trusted_hosts=("*.lab", "10.0.0.5"), allowed_origins=("https://ops.lab",),
-                  dashboard_port=443)  # fmt: skip
+LAB = SceneAccess(
+    trusted_hosts=("*.lab", "10.0.0.5"), allowed_origins=("https://ops.lab",), dashboard_port=443
+)
 ANY = SceneAccess(trusted_hosts=("*",), dashboard_port=8000)
 
 
@@ -235,8 +251,10 @@ def test_host_headers_are_split_like_the_main_servers():
 
 def test_the_frame_ancestors_name_only_the_dashboard():
     assert LOOPBACK.frame_ancestors(["localhost:8080"]) == (
-        "frame-ancestors http://localhost:8000 https://localhost:8000")  # fmt: skip
+        "frame-ancestors http://localhost:8000 https://localhost:8000"
+    )
     assert LOOPBACK.frame_ancestors(["evil.example"]) == "frame-ancestors 'none'"
     assert SceneAccess().frame_ancestors(["127.0.0.1:8080"]) == "frame-ancestors 'none'"
     assert LAB.frame_ancestors(["x.lab:8080"]) == (
-        "frame-ancestors http://x.lab:443 https://x.lab:443 https://ops.lab")  # fmt: skip
+        "frame-ancestors http://x.lab:443 https://x.lab:443 https://ops.lab"
+    )

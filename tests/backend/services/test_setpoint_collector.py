@@ -126,8 +126,9 @@ def test_a_camera_that_drops_out_pauses_naming_the_camera_state(lab):
     collector = _collector(lab, on_frame=lambda sample, n: camera.failing.set())
     halt = _halt(lambda: collector.collect(1, SETPOINT, POLICY))
     assert halt.status is CampaignState.PAUSED
-    assert halt.reason == ("no frame for 2 s at set-point 1 (camera degraded: camera failed: "
-                           "camera unplugged (test))")  # fmt: skip
+    assert halt.reason == (
+        "no frame for 2 s at set-point 1 (camera degraded: camera failed: camera unplugged (test))"
+    )
 
 
 def test_a_motion_system_that_drops_out_pauses_and_degrades_its_health(lab):
@@ -156,8 +157,9 @@ def test_a_setpoint_outside_the_soft_limits_pauses_before_the_driver_moves(lab):
     _, _, driver = lab
     halt = _halt(lambda: _collector(lab).collect(0, {"yaw": 1000.0}, POLICY))
     assert halt.status is CampaignState.PAUSED
-    assert halt.reason.startswith("move to set-point 0 failed: yaw set-point 1000 deg is "
-                                  "outside the soft limits")  # fmt: skip
+    assert halt.reason.startswith(
+        "move to set-point 0 failed: yaw set-point 1000 deg is outside the soft limits"
+    )
     assert driver.calls == []
 
 
@@ -209,15 +211,20 @@ def test_the_callers_check_leaves_the_setpoint_with_its_state(lab):
 
     collector.check, collector.on_frame = check, lambda sample, n: frames.append(n)
     halt = _halt(lambda: collector.collect(7, SETPOINT, POLICY))
-    assert (halt.status, halt.reason) == (CampaignState.CANCELLED,
-                                          "cancelled (during set-point 7)")  # fmt: skip
+    assert (halt.status, halt.reason) == (CampaignState.CANCELLED, "cancelled (during set-point 7)")
     assert frames == [1, 2]
 
 
 def test_a_dynamic_setpoint_keeps_every_frame_and_marks_those_in_motion(lab):
     _, _, driver = lab
-    spec = {"axis": "yaw", "kind": "sine", "amplitude_deg": 2.0, "period_s": 2.0, "cycles": 1,
-            "rest_s": 0.5}  # fmt: skip
+    spec = {
+        "axis": "yaw",
+        "kind": "sine",
+        "amplitude_deg": 2.0,
+        "period_s": 2.0,
+        "cycles": 1,
+        "rest_s": 0.5,
+    }
     collector = _collector(lab, owner=9)
     collector.motion.claim(9, "dynamic")
     record = collector.collect_profile(0, {"yaw": 0.0, "rail": 12000.0}, spec, settle_s=0.3)
@@ -252,4 +259,3 @@ def test_a_pause_while_the_table_travels_stops_it(lab):
     names = [c for c, _ in driver.calls]
     assert names.index("move_to") < names.index("stop")  # the stop after the move it ends
     assert not driver.inner.status().busy  # nothing travels once the campaign lets go
-

@@ -17,8 +17,9 @@ from tofpose.core.camera import CameraModel
 def runs(tmp_path_factory):
     d = tmp_path_factory.mktemp("cmp")
     rec = d / "r.h5"
-    assert main(["simulate", "--scenario", "stability-697", "--frames", "6", "--out",
-                 str(rec)]) == 0  # fmt: skip
+    assert (
+        main(["simulate", "--scenario", "stability-697", "--frames", "6", "--out", str(rec)]) == 0
+    )
     a, b = d / "a" / "r.csv", d / "b" / "r.csv"
     a.parent.mkdir()
     b.parent.mkdir()

@@ -19,10 +19,38 @@ from tofpose.io.recording import RecordingError
 def recordings(tmp_path_factory):
     d = tmp_path_factory.mktemp("rec")
     sweep, grid = d / "sweep.h5", d / "grid.h5"
-    assert main(["simulate", "--scenario", "range-sweep", "--frames", "90", "--out", str(sweep),
-                 "--seed", "2"]) == 0  # fmt: skip
-    assert main(["simulate", "--scenario", "attitude-grid", "--frames", "60", "--out", str(grid),
-                 "--seed", "3"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                "range-sweep",
+                "--frames",
+                "90",
+                "--out",
+                str(sweep),
+                "--seed",
+                "2",
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                "attitude-grid",
+                "--frames",
+                "60",
+                "--out",
+                str(grid),
+                "--seed",
+                "3",
+            ]
+        )
+        == 0
+    )
     return sweep, grid
 
 
@@ -49,11 +77,19 @@ def test_the_plan_outputs_each_frame_once_after_a_warm_up(n_frames, tracking):
 def test_two_workers_reproduce_estimate_byte_for_byte(recordings, tmp_path, tracking):
     sweep, grid = recordings
     flags = ["--tracking"] if tracking else []
-    serial = {r.stem: _estimate(r, tmp_path / f"{r.stem}.csv", *flags, "--filter")
-              for r in recordings}  # fmt: skip
+    serial = {
+        r.stem: _estimate(r, tmp_path / f"{r.stem}.csv", *flags, "--filter") for r in recordings
+    }
     out = tmp_path / "out"
-    s = reprocess([str(sweep), str(grid)], out, settings=Settings(tracking=tracking), workers=2,
-                  filter_state=True, chunk_frames=20, progress=False)  # fmt: skip
+    s = reprocess(
+        [str(sweep), str(grid)],
+        out,
+        settings=Settings(tracking=tracking),
+        workers=2,
+        filter_state=True,
+        chunk_frames=20,
+        progress=False,
+    )
     for r in recordings:
         assert (out / f"{r.stem}.csv").read_bytes() == serial[r.stem]
     assert s["run"]["workers"] == 2
@@ -74,10 +110,16 @@ def test_a_chunk_that_never_catches_up_runs_on_from_the_previous_origin(
     sweep, _ = recordings
     serial = _estimate(sweep, tmp_path / "serial.csv")
     monkeypatch.setattr(PosePipeline, "state_digest", lambda self: os.urandom(16))
-    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
-                      dashboard_address=None) as cluster:  # fmt: skip
-        s = reprocess([str(sweep)], tmp_path / "out", scheduler=cluster.scheduler_address,
-                      chunk_frames=30, progress=False)  # fmt: skip
+    with LocalCluster(
+        n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None
+    ) as cluster:
+        s = reprocess(
+            [str(sweep)],
+            tmp_path / "out",
+            scheduler=cluster.scheduler_address,
+            chunk_frames=30,
+            progress=False,
+        )
     assert (tmp_path / "out" / "sweep.csv").read_bytes() == serial
     b = s["recordings"][0]["boundaries"]
     assert [x.get("continued_from_frame") for x in b] == [0, 0]  # each from chunk 0's origin
@@ -103,5 +145,4 @@ def test_bad_input_is_named(recordings, tmp_path):
     (other / "sweep.h5").write_bytes(sweep.read_bytes())
     with pytest.raises(ReprocessError, match="two recordings are named 'sweep'"):
         reprocess([str(sweep), str(other / "sweep.h5")], tmp_path / "o", workers=1)
-    assert main(["reprocess", str(sweep), "--out", str(tmp_path / "o"), "--chunk-frames",
-                 "0"]) == 2  # fmt: skip
+    assert main(["reprocess", str(sweep), "--out", str(tmp_path / "o"), "--chunk-frames", "0"]) == 2

@@ -28,8 +28,11 @@ def _observe(setpoints, sigma_mm, sigma_deg, seed=0, noisy=True):
     for sp in setpoints:
         T = camera_target(sp, TRUE_X, TRUE_Y)
         if noisy:
-            T = T.compose(RigidTransform.from_euler_deg(*rng.normal(0, sigma_deg, 3),
-                                                        rng.normal(0, sigma_mm, 3)))  # fmt: skip
+            T = T.compose(
+                RigidTransform.from_euler_deg(
+                    *rng.normal(0, sigma_deg, 3), rng.normal(0, sigma_mm, 3)
+                )
+            )
         obs.append(BenchObservation(sp, T, sigma_mm, sigma_deg))
     return obs
 

@@ -74,12 +74,14 @@ def test_the_factor_interpolates_in_log_range_and_holds_at_the_ends():
 
 @pytest.mark.parametrize(
     ("doc", "message"),
-    [({"ranges_mm": [1000.0]}, "lacks 'factors'"),
-     ({"ranges_mm": [1000.0, 900.0], "factors": [1.0, 1.0]}, "positive and increasing"),
-     ({"ranges_mm": [1000.0], "factors": [0.0]}, "factors must be positive"),
-     ({"ranges_mm": [1000.0, 2000.0], "factors": [1.0]}, "2 ranges and 1 factors"),
-     ({"ranges_mm": 1000.0, "factors": [1.0]}, "must be lists")],
-)  # fmt: skip
+    [
+        ({"ranges_mm": [1000.0]}, "lacks 'factors'"),
+        ({"ranges_mm": [1000.0, 900.0], "factors": [1.0, 1.0]}, "positive and increasing"),
+        ({"ranges_mm": [1000.0], "factors": [0.0]}, "factors must be positive"),
+        ({"ranges_mm": [1000.0, 2000.0], "factors": [1.0]}, "2 ranges and 1 factors"),
+        ({"ranges_mm": 1000.0, "factors": [1.0]}, "must be lists"),
+    ],
+)
 def test_a_bad_stored_scale_is_refused_with_what_is_wrong(doc, message):
     with pytest.raises(ValueError, match=message):
         CovarianceScale.from_dict(doc)
@@ -111,8 +113,9 @@ def _nees_of_frames(pipe, z_mm, n, seed):
         pipe.reset()
         r = pipe.process(f.gray, f.distance_mm)
         if r.ok:
-            out.append((float(np.linalg.norm(T.t_mm)), pose_nees(r.R, r.t_mm, r.covariance,
-                                                                  T.R, T.t_mm)))  # fmt: skip
+            out.append(
+                (float(np.linalg.norm(T.t_mm)), pose_nees(r.R, r.t_mm, r.covariance, T.R, T.t_mm))
+            )
     return np.array(out)
 
 

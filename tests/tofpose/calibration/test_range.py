@@ -33,8 +33,14 @@ def _calibration_set(errors: SystematicErrors, n_per_pose: int = 3, seed: int = 
         for p, y, ox, oy in ((0, 0, 0, 0), (4, -5, 150, -80), (-3, 6, -200, 60))
     ]
     fractions = tuple(EXPOSURE_FRACTIONS[k % 3] for k in range(n_per_pose))
-    return calibration_frames(CAM, paper_target(), errors, poses, np.random.default_rng(seed),
-                              exposure_fractions=fractions)  # fmt: skip
+    return calibration_frames(
+        CAM,
+        paper_target(),
+        errors,
+        poses,
+        np.random.default_rng(seed),
+        exposure_fractions=fractions,
+    )
 
 
 def test_the_fit_recovers_the_cyclic_amplitude_and_pixel_errors():
@@ -75,9 +81,13 @@ def test_the_fit_recovers_the_cyclic_amplitude_and_pixel_errors():
 
 def test_a_correction_survives_its_json_form():
     c = RangeCorrection(
-        24_982.0, 3.5, ((1.0, -2.0), (0.5, 0.25)), -6.0,
-        pixel_offsets_mm=np.arange(12.0).reshape(3, 4) / 7, calibrated_span_mm=(900.0, 6000.0),
-    )  # fmt: skip
+        24_982.0,
+        3.5,
+        ((1.0, -2.0), (0.5, 0.25)),
+        -6.0,
+        pixel_offsets_mm=np.arange(12.0).reshape(3, 4) / 7,
+        calibrated_span_mm=(900.0, 6000.0),
+    )
     back = RangeCorrection.from_dict(c.to_dict())
     assert back.calibrated_span_mm == (900.0, 6000.0)
     d, a, i = np.array([1000.0, 5000.0]), np.array([50.0, 3000.0]), np.array([0, 11])

@@ -49,9 +49,18 @@ def test_a_user_cache_base_is_kept_and_a_compiled_kernel_lands_there(tmp_path):
         "median_inplace(np.arange(5.0))\n"
         "print(compiled.kernel_cache_dir())\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         env={"NUMBA_CACHE_DIR": str(tmp_path), "PATH": "/usr/bin:/bin"},
-                         check=True, timeout=600).stdout.strip().splitlines()[-1]  # fmt: skip
+    out = (
+        subprocess.run(
+            [sys.executable, "-c", code],
+            capture_output=True,
+            text=True,
+            env={"NUMBA_CACHE_DIR": str(tmp_path), "PATH": "/usr/bin:/bin"},
+            check=True,
+            timeout=600,
+        )
+        .stdout.strip()
+        .splitlines()[-1]
+    )
     assert out == str(tmp_path / f"tofpose-kernels-{compiled.kernel_sources_digest()}")
     assert any(p.suffix == ".nbi" for p in Path(out).rglob("*"))
 
@@ -79,7 +88,8 @@ def test_an_unwritable_package_directory_falls_back_to_the_users_cache(tmp_path,
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     real = compiled._writable
-    monkeypatch.setattr(compiled, "_writable",
-                        lambda p: False if compiled._HERE in p.parents else real(p))  # fmt: skip
+    monkeypatch.setattr(
+        compiled, "_writable", lambda p: False if compiled._HERE in p.parents else real(p)
+    )
     path = compiled.kernel_cache_dir()
     assert path == tmp_path / "tofpose" / f"tofpose-kernels-{compiled.kernel_sources_digest()}"

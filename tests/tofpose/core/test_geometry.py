@@ -76,8 +76,7 @@ def test_closed_form_euler_and_quaternion_agree_with_scipy():
         np.testing.assert_allclose(quaternion_wxyz_from_rotation(R), q, atol=1e-12)
     # gimbal lock (yaw 90 deg): the angles still give back the rotation
     R = rotation_from_euler_deg(20.0, 90.0, 5.0)
-    np.testing.assert_allclose(rotation_from_euler_deg(*euler_deg_from_rotation(R)), R,
-                               atol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(rotation_from_euler_deg(*euler_deg_from_rotation(R)), R, atol=1e-9)
 
 
 @pytest.mark.parametrize("euler", [(10.0, 20.0, 5.0), (-30.0, 60.0, 170.0), (0.0, 0.0, 0.0)])

@@ -19,20 +19,22 @@ def _derivative(f, t: np.ndarray) -> np.ndarray:
 
 @pytest.mark.parametrize(
     "profile",
-    [SineProfile(5.0, 4.0, 2, start_deg=3.0), RampProfile(-10.0, 2.0, 40.0, start_deg=1.0),
-     RampProfile(2.5, 0.0, 5.0)],
-)  # fmt: skip
+    [
+        SineProfile(5.0, 4.0, 2, start_deg=3.0),
+        RampProfile(-10.0, 2.0, 40.0, start_deg=1.0),
+        RampProfile(2.5, 0.0, 5.0),
+    ],
+)
 def test_rate_and_acceleration_are_the_derivatives_of_the_angle(profile):
     t = np.linspace(-0.5, profile.duration_s + 0.5, 5001)
-    assert np.allclose(_derivative(profile.angle_deg_at, t), profile.rate_deg_s_at(t),
-                       atol=1e-4)  # fmt: skip (a * h / 2 where a ramp's acceleration jumps)
+    assert np.allclose(
+        _derivative(profile.angle_deg_at, t), profile.rate_deg_s_at(t), atol=1e-4
+    )  # atol: a * h / 2 where a ramp's acceleration jumps
     # the ramp's acceleration jumps at its phase boundaries: compare away from them
     if isinstance(profile, RampProfile):
-        edges = np.array([0.0, profile.ramp_s, profile.ramp_s + profile.hold_s,
-                          profile.duration_s])  # fmt: skip
+        edges = np.array([0.0, profile.ramp_s, profile.ramp_s + profile.hold_s, profile.duration_s])
         t = t[np.min(np.abs(t[:, None] - edges[None, :]), axis=1) > 1e-3]
-    assert np.allclose(_derivative(profile.rate_deg_s_at, t), profile.accel_deg_s2_at(t),
-                       atol=1e-4)  # fmt: skip
+    assert np.allclose(_derivative(profile.rate_deg_s_at, t), profile.accel_deg_s2_at(t), atol=1e-4)
     for edge in (0.0, profile.duration_s):  # at rest at both ends, and outside
         assert profile.rate_deg_s_at(edge) == pytest.approx(0.0, abs=1e-12)
     assert profile.angle_deg_at(-1.0) == profile.start_deg
@@ -79,8 +81,13 @@ def test_a_ramp_holds_its_rate_and_travels_what_it_says():
     assert p.started_at(5.0).end_deg == pytest.approx(-17.5)
 
 
-LIMITS = {"axis": "yaw", "min_deg": -170.0, "max_deg": 170.0, "max_rate_deg_s": 20.0,
-          "max_accel_deg_s2": 40.0}  # fmt: skip
+LIMITS = {
+    "axis": "yaw",
+    "min_deg": -170.0,
+    "max_deg": 170.0,
+    "max_rate_deg_s": 20.0,
+    "max_accel_deg_s2": 40.0,
+}
 
 
 def test_within_the_limits_there_is_no_problem():
@@ -91,17 +98,25 @@ def test_within_the_limits_there_is_no_problem():
 @pytest.mark.parametrize(
     ("profile", "fields", "needles"),
     [
-        (SineProfile(10.0, 2.0, 1, start_deg=165.0), ["amplitude_deg", "amplitude_deg",
-                                                      "period_s"],
-         ["soft limits [-170, 170]", "rate limit of 20", "acceleration limit of 40"]),
+        (
+            SineProfile(10.0, 2.0, 1, start_deg=165.0),
+            ["amplitude_deg", "amplitude_deg", "period_s"],
+            ["soft limits [-170, 170]", "rate limit of 20", "acceleration limit of 40"],
+        ),
         # 4 (2 pi / 2)^2 = 39.5 is within 40; the fades take it over
         (SineProfile(4.0, 2.0, 1), ["period_s"], ["peak acceleration 41.4"]),
-        (RampProfile(25.0, 1.0, 50.0), ["rate_deg_s", "accel_deg_s2"],
-         ["peak rate 25 deg/s", "peak acceleration 50 deg/s^2"]),
-        (RampProfile(-10.0, 20.0, 40.0, start_deg=-10.0), ["hold_s"],
-         ["would sweep [-212.5, -10]", "rate_deg_s -10 for hold_s 20"]),
+        (
+            RampProfile(25.0, 1.0, 50.0),
+            ["rate_deg_s", "accel_deg_s2"],
+            ["peak rate 25 deg/s", "peak acceleration 50 deg/s^2"],
+        ),
+        (
+            RampProfile(-10.0, 20.0, 40.0, start_deg=-10.0),
+            ["hold_s"],
+            ["would sweep [-212.5, -10]", "rate_deg_s -10 for hold_s 20"],
+        ),
     ],
-)  # fmt: skip
+)
 def test_each_limit_broken_is_named_with_its_field(profile, fields, needles):
     problems = profile.limit_problems(**LIMITS)
     assert [p.field for p in problems] == fields
@@ -111,11 +126,17 @@ def test_each_limit_broken_is_named_with_its_field(profile, fields, needles):
 
 @pytest.mark.parametrize(
     "make",
-    [lambda: SineProfile(0.0, 4.0, 1), lambda: SineProfile(5.0, -1.0, 1),
-     lambda: SineProfile(5.0, 4.0, 0), lambda: SineProfile(5.0, 4.0, 1.5),
-     lambda: RampProfile(0.0, 1.0, 40.0), lambda: RampProfile(5.0, -1.0, 40.0),
-     lambda: RampProfile(5.0, 1.0, 0.0), lambda: RampProfile(float("nan"), 1.0, 40.0)],
-)  # fmt: skip
+    [
+        lambda: SineProfile(0.0, 4.0, 1),
+        lambda: SineProfile(5.0, -1.0, 1),
+        lambda: SineProfile(5.0, 4.0, 0),
+        lambda: SineProfile(5.0, 4.0, 1.5),
+        lambda: RampProfile(0.0, 1.0, 40.0),
+        lambda: RampProfile(5.0, -1.0, 40.0),
+        lambda: RampProfile(5.0, 1.0, 0.0),
+        lambda: RampProfile(float("nan"), 1.0, 40.0),
+    ],
+)
 def test_meaningless_profiles_are_refused(make):
     with pytest.raises(ValueError):
         make()

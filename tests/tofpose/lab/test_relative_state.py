@@ -55,8 +55,9 @@ def _fed(cfg, n, n_fed, seed, w0, v0):
     return f, frames
 
 
-CONSTANT_TWIST = RelativeStateConfig(angular_accel_psd=math.radians(5) ** 2,
-                                     linear_accel_psd=50.0**2)  # fmt: skip
+CONSTANT_TWIST = RelativeStateConfig(
+    angular_accel_psd=math.radians(5) ** 2, linear_accel_psd=50.0**2
+)
 CONSTANT_ACCELERATION = RelativeStateConfig.constant_acceleration(
     angular_jerk_psd=math.radians(1) ** 2, linear_accel_psd=50.0**2
 )
@@ -181,8 +182,9 @@ def _rendered(truth, n, cfg):
 def test_a_tumbling_target_rendered_by_the_simulator_gives_its_rate():
     w = np.radians([0.0, 8.0, 3.0])  # 8.5 deg/s about a fixed axis in the camera frame
     cfg = RelativeStateConfig(angular_accel_psd=math.radians(1.0) ** 2, linear_accel_psd=100.0)
-    rms, nees, peak = _rendered(lambda tt, R0: (Rotation.from_rotvec(w * tt).as_matrix() @ R0,
-                                                w), 80, cfg)  # fmt: skip
+    rms, nees, peak = _rendered(
+        lambda tt, R0: (Rotation.from_rotvec(w * tt).as_matrix() @ R0, w), 80, cfg
+    )
     assert rms < 0.05 * peak  # 0.3 deg/s
     # the pipeline's covariance at 3 m is wider than its errors (docs/results.md), so the
     # filter's is too; it must not claim less than it knows
@@ -234,8 +236,15 @@ def _on_the_table(cfg: RelativeStateConfig, move, seconds: float, dt_s: float):
     for k in range(int(seconds / dt_s)):
         tt = k * dt_s
         T, _, _ = bench.poses_at(tt)
-        frame = render_frame(bench.camera, bench.scene, T, bench.sensor, bench.rng, time_s=tt,
-                             subframe_poses=bench.subframe_poses(tt, T))  # fmt: skip
+        frame = render_frame(
+            bench.camera,
+            bench.scene,
+            T,
+            bench.sensor,
+            bench.rng,
+            time_s=tt,
+            subframe_poses=bench.subframe_poses(tt, T),
+        )
         r = pipe.process(frame.gray, frame.distance_mm, tt)
         s = f.step(tt, *((r.R, r.t_mm, r.covariance) if r.ok else (None,) * 3))
         ahead, _, _ = bench.poses_at(tt + 1e-3)

@@ -94,8 +94,9 @@ def test_no_pose_on_real_scenes_without_the_target():
     for _ in range(12):
         room = synthetic_room(CAM, rng, 3000.0)
         bright += int((room.reflectance > 1.0).any())
-        f = render_frame(CAM, TargetScene(wall_distance_mm=None, background=room), away,
-                         SensorModel(), rng)  # fmt: skip
+        f = render_frame(
+            CAM, TargetScene(wall_distance_mm=None, background=room), away, SensorModel(), rng
+        )
         assert not (f.surface_id >= FIRST_DISC).any()
         pipe.reset()
         assert not pipe.process(f.gray, f.distance_mm).ok

@@ -11,9 +11,11 @@ from tofpose.sim.turntable import Turntable
 
 def _bench(**sensor) -> SimulatedBench:
     return SimulatedBench(
-        scene=TargetScene(paper_target()), geometry=LabGeometry(target_distance_mm=3000.0),
-        turntable=Turntable(), sensor=SensorModel(**sensor),
-    )  # fmt: skip
+        scene=TargetScene(paper_target()),
+        geometry=LabGeometry(target_distance_mm=3000.0),
+        turntable=Turntable(),
+        sensor=SensorModel(**sensor),
+    )
 
 
 def test_subframes_only_while_the_table_moves():

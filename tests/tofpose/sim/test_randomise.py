@@ -32,8 +32,12 @@ def test_each_family_draws_its_own_knobs_in_their_ranges():
     rng = np.random.default_rng(1)
     for _ in range(30):
         scene, sensor = draw_physics("ideal", rng, CAT)
-        assert (scene.plate_reflectance, sensor.blur_sigma_px, scene.reflector_gains,
-                sensor.systematic) == (0.10, 0.0, None, None)  # fmt: skip
+        assert (
+            scene.plate_reflectance,
+            sensor.blur_sigma_px,
+            scene.reflector_gains,
+            sensor.systematic,
+        ) == (0.10, 0.0, None, None)
         scene, _ = draw_physics("grey plate", rng, CAT)
         assert 0.25 <= scene.plate_reflectance <= 0.6 and scene.wall_distance_mm is None
         _, sensor = draw_physics("lens blur", rng, CAT)
@@ -78,8 +82,9 @@ def test_the_background_family_puts_a_room_around_the_target_others_draw_nothing
     from tofpose.sim.background import synthetic_room
 
     plate = CAT.plate_size_mm
-    corners = np.array([[sx * plate[0] / 2, sy * plate[1] / 2, 0.0]
-                        for sx in (-1, 1) for sy in (-1, 1)])  # fmt: skip
+    corners = np.array(
+        [[sx * plate[0] / 2, sy * plate[1] / 2, 0.0] for sx in (-1, 1) for sy in (-1, 1)]
+    )
     uv = cam.project(T.apply(corners))
     u0, v0 = np.floor(uv.min(axis=0)).astype(int)
     u1, v1 = np.ceil(uv.max(axis=0)).astype(int)

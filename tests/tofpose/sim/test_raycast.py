@@ -23,8 +23,9 @@ def _oracle(sc, b):
         local = sc.plate_axes @ (b * s - sc.plate_centre)
         if s > 0 and np.all(np.abs(local) <= sc.plate_half_size):
             hits.append((s, PLATE, abs(b @ n)))
-    for k, (c, dn_vec, r) in enumerate(zip(sc.disc_centres, sc.disc_normals, sc.disc_radii,
-                                           strict=True)):  # fmt: skip
+    for k, (c, dn_vec, r) in enumerate(
+        zip(sc.disc_centres, sc.disc_normals, sc.disc_radii, strict=True)
+    ):
         dn = b @ dn_vec
         if dn >= 0:
             continue
@@ -37,12 +38,15 @@ def _oracle(sc, b):
 def test_every_ray_hits_what_the_geometry_says():
     rng = np.random.default_rng(4)
     scene = TargetScene()
-    T = RigidTransform(rotation_from_euler_deg(8.0, -12.0, 30.0) @ R_FACING,
-                       np.array([40.0, -25.0, 1500.0]))  # fmt: skip
+    T = RigidTransform(
+        rotation_from_euler_deg(8.0, -12.0, 30.0) @ R_FACING, np.array([40.0, -25.0, 1500.0])
+    )
     sc = scene.in_camera(T)
     # rays at the disc centres and around their rims, across the plate and beside it
-    aims = [sc.disc_centres + rng.normal(0, 1, sc.disc_centres.shape) * sc.disc_radii[:, None]
-            for _ in range(30)]  # fmt: skip
+    aims = [
+        sc.disc_centres + rng.normal(0, 1, sc.disc_centres.shape) * sc.disc_radii[:, None]
+        for _ in range(30)
+    ]
     aims.append(sc.plate_centre + rng.uniform(-600, 600, (800, 3)))
     b = np.vstack(aims)
     b /= np.linalg.norm(b, axis=1, keepdims=True)

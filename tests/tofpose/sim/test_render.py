@@ -109,8 +109,7 @@ def test_four_equal_subframes_are_the_static_frame():
     static = render_frame(cam, scene, T, sensor)
     moving = render_frame(cam, scene, T, sensor, subframe_poses=[T, T, T, T])
     np.testing.assert_array_equal(moving.gray, static.gray)
-    np.testing.assert_allclose(moving.distance_mm, static.distance_mm, rtol=1e-12,
-                               equal_nan=True)  # fmt: skip
+    np.testing.assert_allclose(moving.distance_mm, static.distance_mm, rtol=1e-12, equal_nan=True)
 
 
 def test_subframe_combination_is_the_four_phase_estimator():

@@ -19,8 +19,9 @@ DEFAULTS = SystematicErrors()
 
 def _frame(errors: SystematicErrors, distance_mm: float = 2000.0, time_s: float = 0.0, **kw):
     sensor = SensorModel(noise=False, systematic=errors, supersampling=1)
-    return render_frame(CameraModel(), TargetScene(), facing_pose(distance_mm, **kw), sensor,
-                        None, time_s=time_s)  # fmt: skip
+    return render_frame(
+        CameraModel(), TargetScene(), facing_pose(distance_mm, **kw), sensor, None, time_s=time_s
+    )
 
 
 def _error(f) -> np.ndarray:

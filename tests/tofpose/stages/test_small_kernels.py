@@ -48,8 +48,13 @@ def test_perspective_offsets_match_the_conic_over_ranges_and_tilts():
     rng = np.random.default_rng(3)
     for _ in range(300):
         z = rng.uniform(400.0, 12000.0)
-        centres = np.column_stack((rng.uniform(-0.4, 0.4, 8) * z, rng.uniform(-0.3, 0.3, 8) * z,
-                                   z + rng.uniform(-200.0, 200.0, 8)))  # fmt: skip
+        centres = np.column_stack(
+            (
+                rng.uniform(-0.4, 0.4, 8) * z,
+                rng.uniform(-0.3, 0.3, 8) * z,
+                z + rng.uniform(-200.0, 200.0, 8),
+            )
+        )
         normal = np.array([*rng.uniform(-1.5, 1.5, 2), -1.0])
         radii = rng.uniform(5.0, 40.0, 8)
         got = disc_centre_offsets(cam.K, centres, normal, radii)
@@ -101,13 +106,28 @@ def test_blob_sigmas_equal_the_numpy_model(pooled):
     dist.reshape(-1)[flat[starts[-2] :]] = np.nan  # the last blob has no range
     cen = rng.uniform(5, 50, (len(sizes), 2))
     split = np.arange(len(sizes)) % 2 == 1
-    got = blob_sigmas(flat, starts, cen, gray, dist, 50.0, split, 0.03, 1.0,
-                      u.SINGLE_PIXEL_SIGMA_PX, u.SPLIT_CENTROID_PX, u.POOL_MIN_PIXELS,
-                      u.MEDIAN_EFFICIENCY, u.UNCALIBRATED_RANGE_SIGMA_MM)  # fmt: skip
+    got = blob_sigmas(
+        flat,
+        starts,
+        cen,
+        gray,
+        dist,
+        50.0,
+        split,
+        0.03,
+        1.0,
+        u.SINGLE_PIXEL_SIGMA_PX,
+        u.SPLIT_CENTROID_PX,
+        u.POOL_MIN_PIXELS,
+        u.MEDIAN_EFFICIENCY,
+        u.UNCALIBRATED_RANGE_SIGMA_MM,
+    )
     constants = u.kernel_constants(u.SigmaFloors(0.03, 1.0))
     blobs = [flat[starts[j] : starts[j + 1]] for j in range(len(sizes))]
-    want_px = [reference.centroid_sigma_px(gray, b, c, 50.0, bool(sp), constants)
-               for b, c, sp in zip(blobs, cen, split, strict=True)]  # fmt: skip
+    want_px = [
+        reference.centroid_sigma_px(gray, b, c, 50.0, bool(sp), constants)
+        for b, c, sp in zip(blobs, cen, split, strict=True)
+    ]
     np.testing.assert_allclose(got[0], want_px, rtol=1e-12)
     want_mm = reference.range_sigmas_mm(gray, dist, blobs, 50.0, constants)
     np.testing.assert_allclose(got[1], want_mm, rtol=1e-6)

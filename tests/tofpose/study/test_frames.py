@@ -9,8 +9,13 @@ from tofpose.core.camera import CameraModel
 from tofpose.study.frames import frame_rng, measure_frame
 from tofpose.study.spec import StudySpec
 
-SPEC = StudySpec.from_dict({"seed": 7, "frames_per_cell": 4, "grid": {
-    "range_m": [2.0, 3.0], "physics": ["ideal", "grey plate"]}})  # fmt: skip
+SPEC = StudySpec.from_dict(
+    {
+        "seed": 7,
+        "frames_per_cell": 4,
+        "grid": {"range_m": [2.0, 3.0], "physics": ["ideal", "grey plate"]},
+    }
+)
 
 
 def test_a_frame_depends_on_seed_cell_and_frame_only():

@@ -25,8 +25,13 @@ from tofpose.study.spec import StudySpec
 from tofpose.study.store import StudyStoreError, present_chunks, read_frames, read_manifest
 
 BIN = Path(sys.executable).parent
-DOC = {"name": "t", "seed": 3, "frames_per_cell": 6, "chunk_frames": 2,
-       "grid": {"range_m": [3.0, 6.0], "physics": ["ideal", "lens blur"]}}  # fmt: skip
+DOC = {
+    "name": "t",
+    "seed": 3,
+    "frames_per_cell": 6,
+    "chunk_frames": 2,
+    "grid": {"range_m": [3.0, 6.0], "physics": ["ideal", "lens blur"]},
+}
 SPEC = StudySpec.from_dict(DOC)
 
 
@@ -87,19 +92,28 @@ def test_an_external_scheduler_and_worker_give_identical_bytes(reference, tmp_pa
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    sched = subprocess.Popen([BIN / "dask", "scheduler", "--host", "127.0.0.1", "--port",
-                              str(port), "--no-dashboard"], env=env,
-                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
-    worker = subprocess.Popen([BIN / "dask", "worker", address, "--nthreads", "1",
-                               "--nworkers", "1", "--no-dashboard"], env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    sched = subprocess.Popen(
+        [BIN / "dask", "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    worker = subprocess.Popen(
+        [BIN / "dask", "worker", address, "--nthreads", "1", "--nworkers", "1", "--no-dashboard"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         spec_path = tmp_path / "spec.json"
         spec_path.write_text(json.dumps(DOC))
         out = tmp_path / "ext"
-        cli = subprocess.run([BIN / "tofpose", "study", str(spec_path), "--out", str(out),
-                              "--scheduler", address], capture_output=True, text=True,
-                             timeout=300)  # fmt: skip
+        cli = subprocess.run(
+            [BIN / "tofpose", "study", str(spec_path), "--out", str(out), "--scheduler", address],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
         assert cli.returncode == 0, cli.stderr
         assert "24 frames in 4 cells" in cli.stdout
         assert (out / "summary.json").read_bytes() == (reference / "summary.json").read_bytes()
@@ -116,14 +130,23 @@ def test_a_worker_killed_mid_study_changes_nothing(reference_fine, tmp_path):
     spec = StudySpec.from_dict(FINE)
     ref = reference_fine
     out = tmp_path / "killed"
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as cluster, Client(cluster) as client:  # fmt: skip
+    with (
+        LocalCluster(
+            n_workers=2,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
+        ) as cluster,
+        Client(cluster) as client,
+    ):
         errors: list[BaseException] = []
 
         def run() -> None:
             try:
-                run_study(spec, out, scheduler=cluster.scheduler_address, progress=False,
-                          report=False)  # fmt: skip
+                run_study(
+                    spec, out, scheduler=cluster.scheduler_address, progress=False, report=False
+                )
             except BaseException as exc:  # noqa: BLE001 (reported below)
                 errors.append(exc)
 
@@ -146,8 +169,10 @@ def test_a_worker_killed_mid_study_changes_nothing(reference_fine, tmp_path):
 
 def test_an_unreachable_scheduler_is_named():
     port = _free_port()
-    with pytest.raises(ClusterError, match=f"tcp://127.0.0.1:{port}"), \
-            dask_client(scheduler=f"tcp://127.0.0.1:{port}"):  # fmt: skip
+    with (
+        pytest.raises(ClusterError, match=f"tcp://127.0.0.1:{port}"),
+        dask_client(scheduler=f"tcp://127.0.0.1:{port}"),
+    ):
         pass
 
 
@@ -161,9 +186,12 @@ def test_ctrl_c_leaves_an_incomplete_store_that_resumes(reference_fine, tmp_path
     spec_path = tmp_path / "spec.json"
     spec_path.write_text(json.dumps(FINE))
     out = tmp_path / "study"
-    proc = subprocess.Popen([BIN / "tofpose", "study", str(spec_path), "--out", str(out),
-                             "--workers", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)  # fmt: skip
+    proc = subprocess.Popen(
+        [BIN / "tofpose", "study", str(spec_path), "--out", str(out), "--workers", "1"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.monotonic() + 120
     while len(present_chunks(out)) < 2 and time.monotonic() < deadline:
         time.sleep(0.05)

@@ -13,11 +13,16 @@ from tofpose.study import spec as spec_module
 from tofpose.study.spec import EXAMPLE, Cell, StudyLimits, StudySpec, StudySpecError
 
 #: 64 x 64 x 64 x 7 = 1,835,008 cells (64 values: the most the server's schema takes per axis)
-HUGE = {"name": "huge", "frames_per_cell": 1, "grid": {
-    "range_m": [1.0 + 0.25 * i for i in range(64)],
-    "attitude_deg": [0.5 * i for i in range(64)],
-    "offset_fraction": [0.01 * i for i in range(64)],
-    "physics": list(FAMILIES)}}  # fmt: skip
+HUGE = {
+    "name": "huge",
+    "frames_per_cell": 1,
+    "grid": {
+        "range_m": [1.0 + 0.25 * i for i in range(64)],
+        "attitude_deg": [0.5 * i for i in range(64)],
+        "offset_fraction": [0.01 * i for i in range(64)],
+        "physics": list(FAMILIES),
+    },
+}
 HUGE_CELLS = 64**3 * len(FAMILIES)
 
 
@@ -79,12 +84,18 @@ def test_text_that_is_not_json_names_the_source():
 
 
 def test_the_cells_made_on_demand_are_itertools_products_order():
-    grid = {"range_m": [2.0, 4.0, 8.0], "attitude_deg": [5.0, 20.0], "offset_fraction": [0.1, 0.5],
-            "ambient_lux": [1000.0, 10000.0], "physics": ["ideal", "gains", "all"],
-            "preset": ["default", "paper"]}  # fmt: skip
+    grid = {
+        "range_m": [2.0, 4.0, 8.0],
+        "attitude_deg": [5.0, 20.0],
+        "offset_fraction": [0.1, 0.5],
+        "ambient_lux": [1000.0, 10000.0],
+        "physics": ["ideal", "gains", "all"],
+        "preset": ["default", "paper"],
+    }
     spec = StudySpec.from_dict({"grid": grid})
-    axes = [grid.get(a, [3.0]) if a != "catalog" else ["paper-target"]
-            for a in spec_module.GRID_AXES]  # fmt: skip
+    axes = [
+        grid.get(a, [3.0]) if a != "catalog" else ["paper-target"] for a in spec_module.GRID_AXES
+    ]
     truth = [Cell(i, *v) for i, v in enumerate(itertools.product(*axes))]
     assert spec.n_cells == len(spec.cells) == len(truth) == 3 * 2 * 2 * 2 * 3 * 2
     assert spec.shape == (3, 2, 2, 2, 3, 1, 2)
@@ -108,21 +119,30 @@ def test_a_study_at_its_limits_runs_and_one_more_cell_or_frame_is_refused():
     with pytest.raises(StudySpecError) as cells:
         StudySpec.from_dict(EXAMPLE, StudyLimits(max_cells=11, max_frames=192, source="X_{what}"))
     assert cells.value.field == "grid" and cells.value.loc == ["grid"]
-    assert cells.value.problem == ("12 cells (3 range_m x 2 attitude_deg x 2 physics) is more "
-                                   "than the limit of 11 (X_CELLS)")  # fmt: skip
+    assert cells.value.problem == (
+        "12 cells (3 range_m x 2 attitude_deg x 2 physics) is more than the limit of 11 (X_CELLS)"
+    )
     with pytest.raises(StudySpecError) as frames:
         StudySpec.from_dict(EXAMPLE, StudyLimits(max_cells=12, max_frames=191, source="X_{what}"))
-    assert str(frames.value) == ("frames_per_cell: 12 cells x 16 frames = 192 frames is more "
-                                 "than the limit of 191 (X_FRAMES)")  # fmt: skip
+    assert str(frames.value) == (
+        "frames_per_cell: 12 cells x 16 frames = 192 frames is more "
+        "than the limit of 191 (X_FRAMES)"
+    )
 
 
 def test_tofpose_studys_own_limits_and_none_for_a_stored_spec():
-    with pytest.raises(StudySpecError, match=r"^grid: 1,835,008 cells .* limit of 100,000 "
-                                             r"\(tofpose.study.spec.MAX_CELLS\)$"):  # fmt: skip
+    with pytest.raises(
+        StudySpecError,
+        match=r"^grid: 1,835,008 cells .* limit of 100,000 "
+        r"\(tofpose.study.spec.MAX_CELLS\)$",
+    ):
         StudySpec.from_dict(HUGE)
-    with pytest.raises(StudySpecError, match=r"^frames_per_cell: 12 cells x 10,000,000 frames "
-                                             r"= 120,000,000 frames is more than the limit of "
-                                             r"100,000,000 \(tofpose.study.spec.MAX_FRAMES\)$"):
+    with pytest.raises(
+        StudySpecError,
+        match=r"^frames_per_cell: 12 cells x 10,000,000 frames "
+        r"= 120,000,000 frames is more than the limit of "
+        r"100,000,000 \(tofpose.study.spec.MAX_FRAMES\)$",
+    ):
         StudySpec.from_dict({**EXAMPLE, "frames_per_cell": 10**7})
     assert StudySpec.from_dict(HUGE, limits=None).n_cells == HUGE_CELLS  # no cell made
 
@@ -149,5 +169,9 @@ def test_an_accepted_huge_grid_answers_its_size_and_any_cell_without_making_the_
     assert len(spec.cells) == HUGE_CELLS and cells_made == []
     last = spec.cells[HUGE_CELLS - 1]
     assert (last.range_m, last.attitude_deg, last.offset_fraction, last.physics) == (
-        16.75, 31.5, 0.63, "all")  # fmt: skip
+        16.75,
+        31.5,
+        0.63,
+        "all",
+    )
     assert cells_made == [HUGE_CELLS - 1]

@@ -16,8 +16,9 @@ def project(points_mm, K, dist) -> np.ndarray:
     """Eq. 7 (with lens distortion): pixels (n, 2) of camera-frame points (n, 3) in front
     of the camera, by ``cv2.projectPoints``."""
     p = np.asarray(points_mm, float).reshape(-1, 3)
-    uv, _ = cv2.projectPoints(p, np.zeros(3), np.zeros(3), np.asarray(K, float),
-                              np.asarray(dist, float))  # fmt: skip
+    uv, _ = cv2.projectPoints(
+        p, np.zeros(3), np.zeros(3), np.asarray(K, float), np.asarray(dist, float)
+    )
     return uv.reshape(-1, 2)
 
 

@@ -50,15 +50,24 @@ class ToFChannels:
     """
 
     def __init__(
-        self, context: foxglove.Context, camera: CameraModel, *, estimate: bool = True,
-        truth: bool = False, lab_truth: bool = False, previews: bool = True,
-    ) -> None:  # fmt: skip
+        self,
+        context: foxglove.Context,
+        camera: CameraModel,
+        *,
+        estimate: bool = True,
+        truth: bool = False,
+        lab_truth: bool = False,
+        previews: bool = True,
+    ) -> None:
         self.camera = camera
         self.previews = (
-            (RawImageChannel(topics.GRAY_PREVIEW, context=context),
-             RawImageChannel(topics.DISTANCE_PREVIEW, context=context))
-            if previews else ()
-        )  # fmt: skip
+            (
+                RawImageChannel(topics.GRAY_PREVIEW, context=context),
+                RawImageChannel(topics.DISTANCE_PREVIEW, context=context),
+            )
+            if previews
+            else ()
+        )
         self.gray = RawImageChannel(topics.GRAY, context=context)
         self.distance = RawImageChannel(
             topics.DISTANCE, context=context, metadata=topics.DISTANCE_CHANNEL_METADATA
@@ -67,14 +76,19 @@ class ToFChannels:
         self.frame = json_channel(topics.FRAME, topics.FRAME_SCHEMA, context)
         self.optional: dict[str, object] = {}
         if estimate:
-            self.optional.update({
-                topics.ESTIMATE: json_channel(topics.ESTIMATE, topics.ESTIMATE_SCHEMA, context),
-                topics.ANNOTATIONS: ImageAnnotationsChannel(topics.ANNOTATIONS, context=context),
-                topics.POSE_TRANSFORM: FrameTransformChannel(topics.POSE_TRANSFORM,
-                                                             context=context),
-                topics.POSE: PoseInFrameChannel(topics.POSE, context=context),
-                topics.REFLECTORS: PointCloudChannel(topics.REFLECTORS, context=context),
-            })  # fmt: skip
+            self.optional.update(
+                {
+                    topics.ESTIMATE: json_channel(topics.ESTIMATE, topics.ESTIMATE_SCHEMA, context),
+                    topics.ANNOTATIONS: ImageAnnotationsChannel(
+                        topics.ANNOTATIONS, context=context
+                    ),
+                    topics.POSE_TRANSFORM: FrameTransformChannel(
+                        topics.POSE_TRANSFORM, context=context
+                    ),
+                    topics.POSE: PoseInFrameChannel(topics.POSE, context=context),
+                    topics.REFLECTORS: PointCloudChannel(topics.REFLECTORS, context=context),
+                }
+            )
         for wanted, topic, transform in (
             (truth, topics.TRUTH, topics.TRUTH_TRANSFORM),
             (lab_truth, topics.LAB_TRUTH, topics.LAB_TRUTH_TRANSFORM),
@@ -91,8 +105,14 @@ class ToFChannels:
 
     @property
     def channels(self) -> list:
-        return [self.gray, self.distance, self.calibration, self.frame, *self.previews,
-                *self.optional.values()]  # fmt: skip
+        return [
+            self.gray,
+            self.distance,
+            self.calibration,
+            self.frame,
+            *self.previews,
+            *self.optional.values(),
+        ]
 
     def has_sinks(self) -> bool:
         """Whether anything (an MCAP writer, a subscribed client) takes any channel."""
@@ -106,13 +126,22 @@ class ToFChannels:
             ch.log(make(), log_time=log_time_ns)
 
     def _log_pose(
-        self, topic: str, transform_topic: str, child: str, index: int,
-        pose: tuple[np.ndarray, np.ndarray], ts, log_time_ns: int,
-    ) -> None:  # fmt: skip
+        self,
+        topic: str,
+        transform_topic: str,
+        child: str,
+        index: int,
+        pose: tuple[np.ndarray, np.ndarray],
+        ts,
+        log_time_ns: int,
+    ) -> None:
         R, t_mm = pose
         self._emit(self._channel(topic), lambda: msg.pose_payload(index, R, t_mm), log_time_ns)
-        self._emit(self._channel(transform_topic),
-                   lambda: msg.frame_transform(R, t_mm, child, ts), log_time_ns)  # fmt: skip
+        self._emit(
+            self._channel(transform_topic),
+            lambda: msg.frame_transform(R, t_mm, child, ts),
+            log_time_ns,
+        )
 
     def log_frame(
         self,
@@ -137,26 +166,54 @@ class ToFChannels:
         if self.previews:
             gray_preview, distance_preview = self.previews
             emit(gray_preview, lambda: msg.gray_preview_image(gray, ts), log_time_ns)
-            emit(distance_preview, lambda: msg.distance_preview_image(distance_mm, ts),
-                 log_time_ns)  # fmt: skip
+            emit(distance_preview, lambda: msg.distance_preview_image(distance_mm, ts), log_time_ns)
         if result is not None:
-            emit(self._channel(topics.ESTIMATE), lambda: json.dumps(
-                msg.estimate_payload(index, time_s, result), allow_nan=False), log_time_ns)
-            emit(self._channel(topics.ANNOTATIONS),
-                 lambda: msg.image_annotations(result, ts), log_time_ns)  # fmt: skip
+            emit(
+                self._channel(topics.ESTIMATE),
+                lambda: json.dumps(msg.estimate_payload(index, time_s, result), allow_nan=False),
+                log_time_ns,
+            )
+            emit(
+                self._channel(topics.ANNOTATIONS),
+                lambda: msg.image_annotations(result, ts),
+                log_time_ns,
+            )
             if result.ok:
-                emit(self._channel(topics.POSE_TRANSFORM), lambda: msg.frame_transform(
-                    result.R, result.t_mm, topics.TARGET_FRAME_ID, ts), log_time_ns)
-                emit(self._channel(topics.POSE),
-                     lambda: msg.pose_in_frame(result.R, result.t_mm, ts), log_time_ns)
-            emit(self._channel(topics.REFLECTORS),
-                 lambda: msg.reflector_cloud(result, ts), log_time_ns)  # fmt: skip
+                emit(
+                    self._channel(topics.POSE_TRANSFORM),
+                    lambda: msg.frame_transform(result.R, result.t_mm, topics.TARGET_FRAME_ID, ts),
+                    log_time_ns,
+                )
+                emit(
+                    self._channel(topics.POSE),
+                    lambda: msg.pose_in_frame(result.R, result.t_mm, ts),
+                    log_time_ns,
+                )
+            emit(
+                self._channel(topics.REFLECTORS),
+                lambda: msg.reflector_cloud(result, ts),
+                log_time_ns,
+            )
         if truth is not None:
-            self._log_pose(topics.TRUTH, topics.TRUTH_TRANSFORM, topics.TRUTH_FRAME_ID,
-                           index, truth, ts, log_time_ns)  # fmt: skip
+            self._log_pose(
+                topics.TRUTH,
+                topics.TRUTH_TRANSFORM,
+                topics.TRUTH_FRAME_ID,
+                index,
+                truth,
+                ts,
+                log_time_ns,
+            )
         if lab_truth is not None:
-            self._log_pose(topics.LAB_TRUTH, topics.LAB_TRUTH_TRANSFORM, topics.LAB_FRAME_ID,
-                           index, lab_truth, ts, log_time_ns)  # fmt: skip
+            self._log_pose(
+                topics.LAB_TRUTH,
+                topics.LAB_TRUTH_TRANSFORM,
+                topics.LAB_FRAME_ID,
+                index,
+                lab_truth,
+                ts,
+                log_time_ns,
+            )
 
     def close(self) -> None:
         for ch in self.channels:

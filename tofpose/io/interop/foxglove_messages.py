@@ -44,9 +44,14 @@ def _raw_image(image: np.ndarray, dtype: str, encoding: str, ts: fm.Timestamp) -
     a = np.ascontiguousarray(image, dtype=dtype)
     h, w = a.shape
     return fm.RawImage(
-        timestamp=ts, frame_id=topics.CAMERA_FRAME_ID, width=w, height=h,
-        encoding=encoding, step=a.itemsize * w, data=a.tobytes(),
-    )  # fmt: skip
+        timestamp=ts,
+        frame_id=topics.CAMERA_FRAME_ID,
+        width=w,
+        height=h,
+        encoding=encoding,
+        step=a.itemsize * w,
+        data=a.tobytes(),
+    )
 
 
 def gray_image(gray: np.ndarray, ts: fm.Timestamp) -> fm.RawImage:
@@ -73,22 +78,30 @@ def distance_preview_image(distance_mm: np.ndarray, ts: fm.Timestamp) -> fm.RawI
     rgb = distance_to_rgb(distance_mm)
     h, w, _ = rgb.shape
     return fm.RawImage(
-        timestamp=ts, frame_id=topics.CAMERA_FRAME_ID, width=w, height=h,
-        encoding="rgb8", step=3 * w, data=rgb.tobytes(),
-    )  # fmt: skip
+        timestamp=ts,
+        frame_id=topics.CAMERA_FRAME_ID,
+        width=w,
+        height=h,
+        encoding="rgb8",
+        step=3 * w,
+        data=rgb.tobytes(),
+    )
 
 
 def camera_calibration(camera: CameraModel, ts: fm.Timestamp) -> fm.CameraCalibration:
     """The pinhole model and its OpenCV distortion (k1, k2, p1, p2, k3 = ``plumb_bob``)."""
     fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
     return fm.CameraCalibration(
-        timestamp=ts, frame_id=topics.CAMERA_FRAME_ID, width=camera.width,
-        height=camera.height, distortion_model="plumb_bob",
+        timestamp=ts,
+        frame_id=topics.CAMERA_FRAME_ID,
+        width=camera.width,
+        height=camera.height,
+        distortion_model="plumb_bob",
         D=[float(v) for v in np.asarray(camera.dist, float)],
         K=[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
         R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
         P=[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0],
-    )  # fmt: skip
+    )
 
 
 def _quaternion(R: np.ndarray) -> fm.Quaternion:
@@ -106,18 +119,22 @@ def frame_transform(
 ) -> fm.FrameTransform:
     """T_camera_child (R (3, 3), t (3,) mm) as a FrameTransform camera -> child, metres."""
     return fm.FrameTransform(
-        timestamp=ts, parent_frame_id=topics.CAMERA_FRAME_ID, child_frame_id=child_frame_id,
-        translation=_vector_m(t_mm), rotation=_quaternion(R),
-    )  # fmt: skip
+        timestamp=ts,
+        parent_frame_id=topics.CAMERA_FRAME_ID,
+        child_frame_id=child_frame_id,
+        translation=_vector_m(t_mm),
+        rotation=_quaternion(R),
+    )
 
 
 def pose_in_frame(R: np.ndarray, t_mm: np.ndarray, ts: fm.Timestamp) -> fm.PoseInFrame:
     """The target's pose in the camera frame, metres."""
     p = _vector_m(t_mm)
     return fm.PoseInFrame(
-        timestamp=ts, frame_id=topics.CAMERA_FRAME_ID,
+        timestamp=ts,
+        frame_id=topics.CAMERA_FRAME_ID,
         pose=fm.Pose(position=p, orientation=_quaternion(R)),
-    )  # fmt: skip
+    )
 
 
 #: PointCloud layout of the reflectors: x, y, z metres (float32), catalog id (uint32),
@@ -141,13 +158,16 @@ def reflector_cloud(result: PoseResult, ts: fm.Timestamp) -> fm.PointCloud:
         x, y, z = (float(v) / 1000.0 for v in m.point_mm)
         pts[k] = (x, y, z, m.catalog_id, m.residual_mm)
     return fm.PointCloud(
-        timestamp=ts, frame_id=topics.CAMERA_FRAME_ID,
-        pose=fm.Pose(position=fm.Vector3(x=0.0, y=0.0, z=0.0),
-                     orientation=fm.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+        timestamp=ts,
+        frame_id=topics.CAMERA_FRAME_ID,
+        pose=fm.Pose(
+            position=fm.Vector3(x=0.0, y=0.0, z=0.0),
+            orientation=fm.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
+        ),
         point_stride=CLOUD_DTYPE.itemsize,
         fields=[fm.PackedElementField(name=n, offset=o, type=t) for n, o, t in _CLOUD_FIELDS],
         data=pts.tobytes(),
-    )  # fmt: skip
+    )
 
 
 def _color(rgba: tuple[float, float, float, float]) -> fm.Color:
@@ -166,32 +186,60 @@ def image_annotations(result: PoseResult, ts: fm.Timestamp) -> fm.ImageAnnotatio
     for m in result.matched:
         d_px = 2.0 * max(math.sqrt(m.area_px / math.pi), 1.0) + 2.0
         x, y = float(m.centroid_uv[0]) + 0.5, float(m.centroid_uv[1]) + 0.5
-        circles.append(fm.CircleAnnotation(
-            timestamp=ts, position=fm.Point2(x=x, y=y), diameter=d_px, thickness=1.0,
-            fill_color=_color((0.0, 0.0, 0.0, 0.0)), outline_color=_color(MATCHED_RGBA),
-        ))  # fmt: skip
-        texts.append(fm.TextAnnotation(
-            timestamp=ts, position=fm.Point2(x=x + d_px / 2 + 1.0, y=y - d_px / 2),
-            text=str(m.catalog_id), font_size=9.0, text_color=_color(LABEL_RGBA),
-            background_color=_color(LABEL_BACKGROUND_RGBA),
-        ))  # fmt: skip
+        circles.append(
+            fm.CircleAnnotation(
+                timestamp=ts,
+                position=fm.Point2(x=x, y=y),
+                diameter=d_px,
+                thickness=1.0,
+                fill_color=_color((0.0, 0.0, 0.0, 0.0)),
+                outline_color=_color(MATCHED_RGBA),
+            )
+        )
+        texts.append(
+            fm.TextAnnotation(
+                timestamp=ts,
+                position=fm.Point2(x=x + d_px / 2 + 1.0, y=y - d_px / 2),
+                text=str(m.catalog_id),
+                font_size=9.0,
+                text_color=_color(LABEL_RGBA),
+                background_color=_color(LABEL_BACKGROUND_RGBA),
+            )
+        )
     for u, v, _d in result.unmatched:
-        circles.append(fm.CircleAnnotation(
-            timestamp=ts, position=_point(u, v), diameter=6.0, thickness=1.0,
-            fill_color=_color((0.0, 0.0, 0.0, 0.0)), outline_color=_color(UNMATCHED_RGBA),
-        ))  # fmt: skip
+        circles.append(
+            fm.CircleAnnotation(
+                timestamp=ts,
+                position=_point(u, v),
+                diameter=6.0,
+                thickness=1.0,
+                fill_color=_color((0.0, 0.0, 0.0, 0.0)),
+                outline_color=_color(UNMATCHED_RGBA),
+            )
+        )
     for rb in result.rejected:
         x, y = float(rb.u_px) + 0.5, float(rb.v_px) + 0.5
         d_px = max(float(rb.diameter_px), 2.0) + 2.0
-        circles.append(fm.CircleAnnotation(
-            timestamp=ts, position=fm.Point2(x=x, y=y), diameter=d_px, thickness=1.0,
-            fill_color=_color((0.0, 0.0, 0.0, 0.0)), outline_color=_color(REJECTED_RGBA),
-        ))  # fmt: skip
-        texts.append(fm.TextAnnotation(
-            timestamp=ts, position=fm.Point2(x=x + d_px / 2 + 1.0, y=y + d_px / 2),
-            text=rb.reason, font_size=7.0, text_color=_color(REJECTED_RGBA),
-            background_color=_color(LABEL_BACKGROUND_RGBA),
-        ))  # fmt: skip
+        circles.append(
+            fm.CircleAnnotation(
+                timestamp=ts,
+                position=fm.Point2(x=x, y=y),
+                diameter=d_px,
+                thickness=1.0,
+                fill_color=_color((0.0, 0.0, 0.0, 0.0)),
+                outline_color=_color(REJECTED_RGBA),
+            )
+        )
+        texts.append(
+            fm.TextAnnotation(
+                timestamp=ts,
+                position=fm.Point2(x=x + d_px / 2 + 1.0, y=y + d_px / 2),
+                text=rb.reason,
+                font_size=7.0,
+                text_color=_color(REJECTED_RGBA),
+                background_color=_color(LABEL_BACKGROUND_RGBA),
+            )
+        )
     return fm.ImageAnnotations(circles=circles, points=[], texts=texts)
 
 
@@ -211,8 +259,7 @@ def frame_payload(index: int, time_s: float) -> dict:
 
 def pose_payload(index: int, R: np.ndarray, t_mm: np.ndarray) -> dict:
     """``topics.POSE_SCHEMA``: a reference pose, exact."""
-    return {"index": int(index), "R_camera_target": _floats(R),
-            "t_camera_target_mm": _floats(t_mm)}  # fmt: skip
+    return {"index": int(index), "R_camera_target": _floats(R), "t_camera_target_mm": _floats(t_mm)}
 
 
 def estimate_payload(index: int, time_s: float, result: PoseResult) -> dict:
@@ -221,9 +268,14 @@ def estimate_payload(index: int, time_s: float, result: PoseResult) -> dict:
     cov = result.covariance if result.ok else None
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None)) if cov is not None else None
     return {
-        "index": int(index), "time_s": float(time_s), "ok": bool(result.ok),
-        "reason": result.reason, "mode": result.mode, "n_matched": result.n_matched,
-        "n_candidates": int(result.n_candidates), "frames_used": int(result.frames_used),
+        "index": int(index),
+        "time_s": float(time_s),
+        "ok": bool(result.ok),
+        "reason": result.reason,
+        "mode": result.mode,
+        "n_matched": result.n_matched,
+        "n_candidates": int(result.n_candidates),
+        "frames_used": int(result.frames_used),
         "R_camera_target": _floats(result.R) if result.ok else None,
         "t_camera_target_mm": _floats(result.t_mm) if result.ok else None,
         "quaternion_wxyz": _floats(result.quaternion_wxyz) if result.ok else None,
@@ -234,15 +286,24 @@ def estimate_payload(index: int, time_s: float, result: PoseResult) -> dict:
         "residual_mm": _finite(result.residual_mm),
         "timings_ms": {k: float(v) for k, v in result.timings_ms.items()},
         "matched": [
-            {"id": int(m.catalog_id), "u_px": float(m.centroid_uv[0]),
-             "v_px": float(m.centroid_uv[1]), "distance_mm": float(m.distance_mm),
-             "residual_mm": _finite(m.residual_mm), "point_mm": _floats(m.point_mm)}
+            {
+                "id": int(m.catalog_id),
+                "u_px": float(m.centroid_uv[0]),
+                "v_px": float(m.centroid_uv[1]),
+                "distance_mm": float(m.distance_mm),
+                "residual_mm": _finite(m.residual_mm),
+                "point_mm": _floats(m.point_mm),
+            }
             for m in result.matched
         ],
         "unmatched": [[float(u), float(v), _finite(d)] for u, v, d in result.unmatched],
         "rejected": [
-            {"u_px": float(r.u_px), "v_px": float(r.v_px),
-             "diameter_px": float(r.diameter_px), "reason": r.reason}
+            {
+                "u_px": float(r.u_px),
+                "v_px": float(r.v_px),
+                "diameter_px": float(r.diameter_px),
+                "reason": r.reason,
+            }
             for r in result.rejected
         ],
-    }  # fmt: skip
+    }

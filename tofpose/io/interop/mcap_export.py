@@ -44,8 +44,9 @@ def export_metadata(rec: Recording, pipeline: PosePipeline | None) -> dict[str, 
         "recording_catalog": rec.catalog.to_json() if rec.catalog is not None else "",
         "pipeline_config": (
             json.dumps(dataclasses.asdict(pipeline.config), default=str)
-            if pipeline is not None else ""
-        ),  # fmt: skip
+            if pipeline is not None
+            else ""
+        ),
         "distance_unit": topics.DISTANCE_CHANNEL_METADATA["unit"],
         "has_truth": str(rec.truth_R is not None).lower(),
         "has_lab_truth": str(rec.lab_truth_R is not None).lower(),
@@ -71,26 +72,34 @@ def export_mcap(
         raise ValueError(f"{out} exists (pass --force to overwrite it)")
     times_ns = [time_ns_from_seconds(float(t)) for t in rec.time_s]
     context = foxglove.Context()
-    channels = ToFChannels(context, rec.camera, estimate=pipeline is not None,
-                           truth=rec.truth_R is not None,
-                           lab_truth=rec.lab_truth_R is not None,
-                           previews=previews)  # fmt: skip
+    channels = ToFChannels(
+        context,
+        rec.camera,
+        estimate=pipeline is not None,
+        truth=rec.truth_R is not None,
+        lab_truth=rec.lab_truth_R is not None,
+        previews=previews,
+    )
     n_ok = 0
     partial = out.with_name(out.name + ".partial")  # renamed when complete
     writer = foxglove.open_mcap(partial, allow_overwrite=True, context=context)
     done = False
     try:
         writer.write_metadata(topics.METADATA_NAME, export_metadata(rec, pipeline))
-        for i in tqdm(range(rec.n_frames), desc="export mcap", unit="frame",
-                      disable=not progress, file=sys.stderr):  # fmt: skip
+        for i in tqdm(
+            range(rec.n_frames),
+            desc="export mcap",
+            unit="frame",
+            disable=not progress,
+            file=sys.stderr,
+        ):
             gray, dist, t = rec.frame(i)
             result = pipeline.process(gray, dist, t) if pipeline is not None else None
             n_ok += int(result is not None and result.ok)
             truth = (rec.truth_R[i], rec.truth_t_mm[i]) if rec.truth_R is not None else None
             lab = (
-                (rec.lab_truth_R[i], rec.lab_truth_t_mm[i])
-                if rec.lab_truth_R is not None else None
-            )  # fmt: skip
+                (rec.lab_truth_R[i], rec.lab_truth_t_mm[i]) if rec.lab_truth_R is not None else None
+            )
             channels.log_frame(i, gray, dist, t, times_ns[i], result, truth, lab)
         done = True
     finally:

@@ -29,8 +29,12 @@ from tofpose.core.catalog import Catalog
 from tofpose.io.interop import topics
 from tofpose.io.recording import RecordingWriter
 
-GRAY_ENCODINGS = {"mono16": np.dtype("<u2"), "16UC1": np.dtype("<u2"),
-                  "mono8": np.dtype("u1"), "8UC1": np.dtype("u1")}  # fmt: skip
+GRAY_ENCODINGS = {
+    "mono16": np.dtype("<u2"),
+    "16UC1": np.dtype("<u2"),
+    "mono8": np.dtype("u1"),
+    "8UC1": np.dtype("u1"),
+}
 DISTANCE_ENCODINGS = {"32FC1": np.dtype("<f4"), "16UC1": np.dtype("<u2")}
 RAW_IMAGE = "foxglove.RawImage"
 CALIBRATION = "foxglove.CameraCalibration"
@@ -49,8 +53,9 @@ def image_array(msg, encodings: dict[str, np.dtype], what: str, where: str) -> n
         )
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     if step < w * dtype.itemsize or len(msg.data) < h * step:
-        raise McapImportError(f"{where}: {what} image of {w}x{h} has {len(msg.data)} bytes, "
-                              f"step {step}")  # fmt: skip
+        raise McapImportError(
+            f"{where}: {what} image of {w}x{h} has {len(msg.data)} bytes, step {step}"
+        )
     rows = np.frombuffer(msg.data, np.uint8, count=h * step).reshape(h, step)
     return rows[:, : w * dtype.itemsize].copy().view(dtype).reshape(h, w)
 
@@ -74,8 +79,16 @@ def _camera_from_calibration(msg) -> CameraModel:
     if len(K) != 9 or K[0] == 0.0:
         raise ValueError("CameraCalibration has no K (uncalibrated camera)")
     dist = list(msg.D)[:5] + [0.0] * max(0, 5 - len(msg.D))
-    return CameraModel(width=int(msg.width), height=int(msg.height), fx=K[0], fy=K[4],
-                       cx=K[2], cy=K[5], dist=tuple(dist), name="mcap")  # fmt: skip
+    return CameraModel(
+        width=int(msg.width),
+        height=int(msg.height),
+        fx=K[0],
+        fy=K[4],
+        cx=K[2],
+        cy=K[5],
+        dist=tuple(dist),
+        name="mcap",
+    )
 
 
 def _pose(payload: dict, where: str) -> tuple[np.ndarray, np.ndarray]:
@@ -106,8 +119,10 @@ class _Source:
                 "properly; `mcap recover` repairs it)"
             )
         self.by_topic = {c.topic: c for c in self.summary.channels.values()}
-        self.counts = {self.summary.channels[cid].topic: n for cid, n
-                       in self.summary.statistics.channel_message_counts.items()}  # fmt: skip
+        self.counts = {
+            self.summary.channels[cid].topic: n
+            for cid, n in self.summary.statistics.channel_message_counts.items()
+        }
 
     def schema_name(self, topic: str) -> str:
         ch = self.by_topic[topic]
@@ -140,11 +155,13 @@ class _Source:
                 dec = decoders.get(channel.id)
                 if dec is None:
                     dec = decoders[channel.id] = self._factory.decoder_for(
-                        channel.message_encoding, schema)
+                        channel.message_encoding, schema
+                    )
                     if dec is None:
                         raise McapImportError(
                             f"{self.path}: {channel.topic} is {channel.message_encoding!r} "
-                            f"with schema {schema.name if schema else None!r}: no decoder")
+                            f"with schema {schema.name if schema else None!r}: no decoder"
+                        )
                 yield channel.topic, message.log_time, dec(message.data)
 
     def first(self, topic: str):
@@ -162,8 +179,9 @@ def _pick_topic(src: _Source, requested: str | None, default: str, what: str) ->
             f"{raw or 'none'} (pass --{what}-topic)"
         )
     if src.schema_name(topic) != RAW_IMAGE:
-        raise McapImportError(f"{src.path}: {topic} has schema {src.schema_name(topic)!r}, "
-                              f"not {RAW_IMAGE}")  # fmt: skip
+        raise McapImportError(
+            f"{src.path}: {topic} has schema {src.schema_name(topic)!r}, not {RAW_IMAGE}"
+        )
     return topic
 
 
@@ -176,8 +194,10 @@ def _camera_and_catalog(src: _Source) -> tuple[CameraModel, Catalog | None]:
         return CameraModel.from_json(meta["recording_camera"]), catalog
     calib = src.topics_with_schema(CALIBRATION)
     if not calib:
-        raise McapImportError(f"{src.path}: no camera model (neither a 'tofpose' metadata "
-                              f"record nor a {CALIBRATION} channel)")  # fmt: skip
+        raise McapImportError(
+            f"{src.path}: no camera model (neither a 'tofpose' metadata "
+            f"record nor a {CALIBRATION} channel)"
+        )
     try:
         return _camera_from_calibration(src.first(calib[0])), catalog
     except ValueError as exc:
@@ -207,21 +227,26 @@ def import_mcap(
     dist_t = _pick_topic(src, distance_topic, topics.DISTANCE, "distance")
     n = src.counts.get(gray_t, 0)
     if n == 0 or src.counts.get(dist_t, 0) != n:
-        raise McapImportError(f"{path}: {n} gray and {src.counts.get(dist_t, 0)} distance "
-                              "images: a frame needs one of each")  # fmt: skip
+        raise McapImportError(
+            f"{path}: {n} gray and {src.counts.get(dist_t, 0)} distance "
+            "images: a frame needs one of each"
+        )
     camera, catalog = _camera_and_catalog(src)
     unit = src.by_topic[dist_t].metadata.get("unit")
-    extra = [t for t in (topics.FRAME, topics.TRUTH, topics.LAB_TRUTH)
-             if src.counts.get(t, 0) == n]  # fmt: skip
+    extra = [t for t in (topics.FRAME, topics.TRUTH, topics.LAB_TRUTH) if src.counts.get(t, 0) == n]
     partial = out.with_name(out.name + ".partial")  # renamed when complete
-    writer = RecordingWriter(partial, camera, catalog, with_truth=topics.TRUTH in extra,
-                             with_lab_truth=topics.LAB_TRUTH in extra)  # fmt: skip
+    writer = RecordingWriter(
+        partial,
+        camera,
+        catalog,
+        with_truth=topics.TRUTH in extra,
+        with_lab_truth=topics.LAB_TRUTH in extra,
+    )
     frames = 0
     try:
         group: dict[str, object] = {}
         group_ns: int | None = None
-        bar = tqdm(total=n, desc="import mcap", unit="frame", disable=not progress,
-                   file=sys.stderr)  # fmt: skip
+        bar = tqdm(total=n, desc="import mcap", unit="frame", disable=not progress, file=sys.stderr)
 
         def flush() -> None:
             nonlocal frames
@@ -232,8 +257,10 @@ def import_mcap(
             gray = image_array(group[gray_t], GRAY_ENCODINGS, "gray", where).astype(np.uint16)
             dist = distance_mm(group[dist_t], unit, where)
             if gray.shape != (camera.height, camera.width) or dist.shape != gray.shape:
-                raise McapImportError(f"{where}: images {gray.shape} / {dist.shape} do not "
-                                      f"match the camera's {camera.width}x{camera.height}")
+                raise McapImportError(
+                    f"{where}: images {gray.shape} / {dist.shape} do not "
+                    f"match the camera's {camera.width}x{camera.height}"
+                )
             frame = group.get(topics.FRAME)
             time_s = float(frame["time_s"]) if frame is not None else group_ns * 1e-9
             poses = {}
@@ -243,8 +270,15 @@ def import_mcap(
                         raise McapImportError(f"{where}: no {topic} message for this frame")
                     poses[key] = _pose(group[topic], where)
             truth, lab = poses.get("truth", (None, None)), poses.get("lab", (None, None))
-            writer.append(gray, dist, time_s, truth[0], truth[1],
-                          lab_R_camera_target=lab[0], lab_t_camera_target_mm=lab[1])  # fmt: skip
+            writer.append(
+                gray,
+                dist,
+                time_s,
+                truth[0],
+                truth[1],
+                lab_R_camera_target=lab[0],
+                lab_t_camera_target_mm=lab[1],
+            )
             frames += 1
             bar.update(1)
 

@@ -105,8 +105,11 @@ ESTIMATE_SCHEMA = {
         "unmatched": {
             "type": "array",
             "items": {
-                "type": "array", "items": {"type": ["number", "null"]},
-                "minItems": 3, "maxItems": 3, "description": "u_px, v_px, distance_mm",
+                "type": "array",
+                "items": {"type": ["number", "null"]},
+                "minItems": 3,
+                "maxItems": 3,
+                "description": "u_px, v_px, distance_mm",
             },
         },
         "rejected": {

@@ -38,10 +38,18 @@ def _reference_two_centre_split(cols, rows, weight, iterations):
 
 
 COMPILED = EllipsesArithmetic(
-    "compiled", ellipses.blob_mask, ellipses.ellipse_rms_px, ellipses.arc_points,
-    two_centres.two_centre_split, pair_fit.fit_pair_lm,
-)  # fmt: skip
+    "compiled",
+    ellipses.blob_mask,
+    ellipses.ellipse_rms_px,
+    ellipses.arc_points,
+    two_centres.two_centre_split,
+    pair_fit.fit_pair_lm,
+)
 REFERENCE = EllipsesArithmetic(
-    "reference", ref_ellipses.blob_mask, ref_ellipses.ellipse_rms_px, ref_ellipses.arc_points,
-    _reference_two_centre_split, ref_pair_fit.fit_pair_lm,
-)  # fmt: skip
+    "reference",
+    ref_ellipses.blob_mask,
+    ref_ellipses.ellipse_rms_px,
+    ref_ellipses.arc_points,
+    _reference_two_centre_split,
+    ref_pair_fit.fit_pair_lm,
+)

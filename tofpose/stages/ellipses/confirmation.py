@@ -23,10 +23,16 @@ from tofpose.stages.extraction.extraction import Blob, FrameStats, predicted_dia
 
 
 def confirm_ellipses(
-    blobs: list[Blob], oversize: list[Blob], gray: np.ndarray, stats: FrameStats, *,
-    fx_px: float, catalog_diameters_mm: np.ndarray, config: ExtractionConfig,
+    blobs: list[Blob],
+    oversize: list[Blob],
+    gray: np.ndarray,
+    stats: FrameStats,
+    *,
+    fx_px: float,
+    catalog_diameters_mm: np.ndarray,
+    config: ExtractionConfig,
     arithmetic: EllipsesArithmetic = COMPILED,
-) -> list[Blob]:  # fmt: skip
+) -> list[Blob]:
     """§3.3: confirm candidate shapes; split oversize components into ellipses.
 
     ``blobs`` are the accepted candidates, ``oversize`` the components too large for
@@ -64,20 +70,24 @@ def confirm_ellipses(
         )
         arcs = split_arcs(pts, min_points=cfg.ellipse_min_points, arithmetic=ar)
         found = ellipses_from_arcs(
-            arcs, d_min_px=d_lo, d_max_px=d_hi, max_residual_px=cfg.ellipse_max_residual_px,
+            arcs,
+            d_min_px=d_lo,
+            d_max_px=d_hi,
+            max_residual_px=cfg.ellipse_max_residual_px,
             arithmetic=ar,
-        )  # fmt: skip
+        )
         if not found:
-            found_parts = split_by_threshold(comp, gray, stats.raw_threshold, d_hi,
-                                              cfg.min_area_px, ar)  # fmt: skip
-            out += found_parts or split_in_two(comp, gray, stats.background, d_lo,
-                                                d_hi, cfg.min_area_px, ar)  # fmt: skip
+            found_parts = split_by_threshold(
+                comp, gray, stats.raw_threshold, d_hi, cfg.min_area_px, ar
+            )
+            out += found_parts or split_in_two(
+                comp, gray, stats.background, d_lo, d_hi, cfg.min_area_px, ar
+            )
         elif len(found) == 1:
             # one ellipse for a component too large for one reflector: at a few px
             # the outline of a merged pair fits one ellipse of a reflector's size
             # over part of it; a pair's two centres explain all of it
-            pair = split_in_two(comp, gray, stats.background, d_lo, d_hi,
-                                 cfg.min_area_px, ar)  # fmt: skip
+            pair = split_in_two(comp, gray, stats.background, d_lo, d_hi, cfg.min_area_px, ar)
             if pair:
                 out += pair
                 continue
@@ -105,13 +115,18 @@ def confirm_ellipses(
             out.append(nb)
     return out
 
+
 SPLIT_LEVELS = 12
 
 
 def split_by_threshold(
-    comp: Blob, gray: np.ndarray, raw_threshold: float, d_max_px: float, min_area_px: int,
+    comp: Blob,
+    gray: np.ndarray,
+    raw_threshold: float,
+    d_max_px: float,
+    min_area_px: int,
     arithmetic: EllipsesArithmetic = COMPILED,
-) -> list[Blob]:  # fmt: skip
+) -> list[Blob]:
     """Ours (after §3.3): a component too large for one reflector whose outline gives no
     elliptical arcs (small merged markers, e.g. 7 and 8 beyond ~4 m, a few px each) is
     thresholded again at rising levels between I_t and its peak; at the first level where
@@ -140,15 +155,21 @@ def split_by_threshold(
         out = []
         for k in parts:
             pr, pc = np.nonzero(labels == k)
-            out.append(Blob(
-                pixels=(pr + y0) * w + (pc + x0),
-                area_px=len(pr),
-                bbox=(int(pc.min() + x0), int(pr.min() + y0), int(np.ptp(pc) + 1),
-                      int(np.ptp(pr) + 1)),
-                peak_counts=float(patch[pr, pc].max()),
-                distance_mm=comp.distance_mm,
-                source="split",
-            ))  # fmt: skip
+            out.append(
+                Blob(
+                    pixels=(pr + y0) * w + (pc + x0),
+                    area_px=len(pr),
+                    bbox=(
+                        int(pc.min() + x0),
+                        int(pr.min() + y0),
+                        int(np.ptp(pc) + 1),
+                        int(np.ptp(pr) + 1),
+                    ),
+                    peak_counts=float(patch[pr, pc].max()),
+                    distance_mm=comp.distance_mm,
+                    source="split",
+                )
+            )
         return out
     return []
 
@@ -161,9 +182,14 @@ PAIR_LIGHT_RATIO = 3.0
 
 
 def split_in_two(
-    comp: Blob, gray: np.ndarray, background: float, d_lo_px: float, d_hi_px: float,
-    min_area_px: int, arithmetic: EllipsesArithmetic = COMPILED,
-) -> list[Blob]:  # fmt: skip
+    comp: Blob,
+    gray: np.ndarray,
+    background: float,
+    d_lo_px: float,
+    d_hi_px: float,
+    min_area_px: int,
+    arithmetic: EllipsesArithmetic = COMPILED,
+) -> list[Blob]:
     """Ours (after ``split_by_threshold``): a component the size of two reflectors whose
     light shows no dip between them (two discs a fraction of a pixel apart, integrated
     over the pixel area and blurred by the lens: markers 7 and 8 beyond ~6 m) is cut in
@@ -183,8 +209,9 @@ def split_in_two(
     weight = np.maximum(gray[rows, cols].astype(float) - background, 0.0)
     if len(rows) < 2 * min_area_px or weight.sum() <= 0:
         return []
-    near, centres, status = arithmetic.two_centre_split(cols.astype(float), rows.astype(float),
-                                                        weight, TWO_CENTRE_ITERATIONS)  # fmt: skip
+    near, centres, status = arithmetic.two_centre_split(
+        cols.astype(float), rows.astype(float), weight, TWO_CENTRE_ITERATIONS
+    )
     if status != SPLIT_OK:
         return []  # not elongated as two discs side by side are, or one-sided
     light = np.bincount(near, weights=weight, minlength=2)
@@ -197,22 +224,23 @@ def split_in_two(
     if fit is None:
         return []  # the halves' moment centroids lean towards each other: not used
     # the fitted disc nearest each half's centroid is that half's centre
-    order = np.argmin(((centres[:, None, :] - fit.centres_px[None, :, :]) ** 2).sum(axis=2),
-                      axis=1)  # fmt: skip
+    order = np.argmin(((centres[:, None, :] - fit.centres_px[None, :, :]) ** 2).sum(axis=2), axis=1)
     if order[0] == order[1]:
         return []
     out = []
     for k in range(2):
         pr, pc = rows[near == k], cols[near == k]
-        out.append(Blob(
-            pixels=pr * w + pc,
-            area_px=len(pr),
-            bbox=(int(pc.min()), int(pr.min()), int(np.ptp(pc) + 1), int(np.ptp(pr) + 1)),
-            peak_counts=float(gray[pr, pc].max()),
-            distance_mm=comp.distance_mm,
-            source="split",
-            fitted_uv=fit.centres_px[order[k]],
-        ))  # fmt: skip
+        out.append(
+            Blob(
+                pixels=pr * w + pc,
+                area_px=len(pr),
+                bbox=(int(pc.min()), int(pr.min()), int(np.ptp(pc) + 1), int(np.ptp(pr) + 1)),
+                peak_counts=float(gray[pr, pc].max()),
+                distance_mm=comp.distance_mm,
+                source="split",
+                fitted_uv=fit.centres_px[order[k]],
+            )
+        )
     return out
 
 

@@ -60,14 +60,19 @@ def ellipse_residual_px(
     (cx, cy), (a1, a2), ang = ellipse
     pts = points if points.dtype == np.float32 else np.asarray(points, np.float64)
     pts = np.ascontiguousarray(pts).reshape(-1, 2)  # float32 exact in the float64 sums
-    return float(arithmetic.ellipse_rms_px(float(cx), float(cy), float(a1), float(a2),
-                                           float(ang), pts))  # fmt: skip
+    return float(
+        arithmetic.ellipse_rms_px(float(cx), float(cy), float(a1), float(a2), float(ang), pts)
+    )
 
 
 def split_arcs(
-    contour: np.ndarray, *, angle_deg: float = 40.0, min_points: int = 6,
-    smooth_sigma: float = 2.0, arithmetic: EllipsesArithmetic = COMPILED,
-) -> list[np.ndarray]:  # fmt: skip
+    contour: np.ndarray,
+    *,
+    angle_deg: float = 40.0,
+    min_points: int = 6,
+    smooth_sigma: float = 2.0,
+    arithmetic: EllipsesArithmetic = COMPILED,
+) -> list[np.ndarray]:
     """Split a closed contour (P, 2) into elliptical arcs (§3.3 AC, CC, PC).
 
     The contour is smoothed along its length (Gaussian, ``smooth_sigma`` points, so pixel
@@ -80,16 +85,23 @@ def split_arcs(
     n = len(contour)
     if n < 2 * min_points:
         return [contour] if n >= min_points else []
-    index, starts = arithmetic.arc_points(np.ascontiguousarray(contour, np.float64),
-                                          float(angle_deg), int(min_points),
-                                          float(smooth_sigma))  # fmt: skip
+    index, starts = arithmetic.arc_points(
+        np.ascontiguousarray(contour, np.float64),
+        float(angle_deg),
+        int(min_points),
+        float(smooth_sigma),
+    )
     return [contour[index[starts[a] : starts[a + 1]]] for a in range(len(starts) - 1)]
 
 
 def ellipses_from_arcs(
-    arcs: list[np.ndarray], *, d_min_px: float, d_max_px: float, max_residual_px: float,
+    arcs: list[np.ndarray],
+    *,
+    d_min_px: float,
+    d_max_px: float,
+    max_residual_px: float,
     arithmetic: EllipsesArithmetic = COMPILED,
-) -> list[tuple[Ellipse, np.ndarray]]:  # fmt: skip
+) -> list[tuple[Ellipse, np.ndarray]]:
     """Fit each arc, keep ellipses of plausible size, merge arcs with agreeing ellipses.
 
     Returns a list of (ellipse, supporting points (P, 2)).

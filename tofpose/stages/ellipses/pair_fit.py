@@ -62,8 +62,7 @@ class PairFit:
     blur_px: float
 
 
-def _problem(gray: np.ndarray, pixels: np.ndarray, centres0_px: np.ndarray,
-             background: float):
+def _problem(gray: np.ndarray, pixels: np.ndarray, centres0_px: np.ndarray, background: float):
     """The fit's sub-samples su, sv (n, S), pixel values (n,), start (9,) and box
     lower, upper (9,) for the blob of flat ``pixels`` in ``gray``."""
     h, w = gray.shape
@@ -78,18 +77,25 @@ def _problem(gray: np.ndarray, pixels: np.ndarray, centres0_px: np.ndarray,
     # start: each disc's area half the blob's, its light the blob's half above the level
     radius0 = max(np.sqrt(len(rows) / (2.0 * np.pi)), 0.8)
     peak = float(values.max() - background)
-    start = np.array([*centres0_px[0], *centres0_px[1], peak, peak, radius0, 0.5,
-                      background])  # fmt: skip
-    lower = np.array([c0, r0, c0, r0, 0.0, 0.0, radius0 / RADIUS_FACTOR,
-                      BLUR_BOUNDS_PX[0], -np.inf])  # fmt: skip
-    upper = np.array([c1, r1, c1, r1, np.inf, np.inf, radius0 * RADIUS_FACTOR,
-                      BLUR_BOUNDS_PX[1], np.inf])  # fmt: skip
+    start = np.array([*centres0_px[0], *centres0_px[1], peak, peak, radius0, 0.5, background])
+    lower = np.array(
+        [c0, r0, c0, r0, 0.0, 0.0, radius0 / RADIUS_FACTOR, BLUR_BOUNDS_PX[0], -np.inf]
+    )
+    upper = np.array(
+        [c1, r1, c1, r1, np.inf, np.inf, radius0 * RADIUS_FACTOR, BLUR_BOUNDS_PX[1], np.inf]
+    )
     start = np.clip(start, lower + 1e-9, upper - 1e-9)
     return su, sv, values, start, lower, upper
 
 
-def _result(p: np.ndarray, normal: np.ndarray, cost: float, n_values: int,
-            lower: np.ndarray, upper: np.ndarray) -> PairFit | None:
+def _result(
+    p: np.ndarray,
+    normal: np.ndarray,
+    cost: float,
+    n_values: int,
+    lower: np.ndarray,
+    upper: np.ndarray,
+) -> PairFit | None:
     """PairFit of the parameters p (9,) with J^T J ``normal`` (9, 9) and residual sum
     of squares ``cost`` over ``n_values`` pixels; None at a bound of the radius (not two
     discs of one size) or with a singular covariance."""
@@ -108,9 +114,13 @@ def _result(p: np.ndarray, normal: np.ndarray, cost: float, n_values: int,
 
 
 def fit_pair(
-    gray: np.ndarray, pixels: np.ndarray, centres0_px: np.ndarray, background: float, *,
+    gray: np.ndarray,
+    pixels: np.ndarray,
+    centres0_px: np.ndarray,
+    background: float,
+    *,
     arithmetic: EllipsesArithmetic = COMPILED,
-) -> PairFit | None:  # fmt: skip
+) -> PairFit | None:
     """Fit two blurred discs to the blob of flat ``pixels`` (P,) in ``gray`` (H, W),
     starting from ``centres0_px`` (2, 2) (u, v; e.g. the 2-means halves' centroids) over
     the frame's ``background`` level, by the compiled Levenberg-Marquardt loop
@@ -119,9 +129,16 @@ def fit_pair(
     bound of the radius (not two discs of one size)."""
     su, sv, values, start, lower, upper = _problem(gray, pixels, centres0_px, background)
     p, normal, cost, converged = arithmetic.fit_pair_lm(
-        su, sv, values, start, lower, upper, MAX_EVALUATIONS, CENTRE_TOLERANCE_PX,
+        su,
+        sv,
+        values,
+        start,
+        lower,
+        upper,
+        MAX_EVALUATIONS,
+        CENTRE_TOLERANCE_PX,
         COST_TOLERANCE,
-    )  # fmt: skip
+    )
     if not converged:
         return None
     return _result(p, normal, cost, len(values), lower, upper)

@@ -36,42 +36,71 @@ def _reference_frame_levels(gray: np.ndarray, config: ExtractionConfig) -> Frame
     """``reference.extraction.frame_levels`` as an ``extraction.FrameStats``."""
     v = ref_extraction.frame_levels(gray, config)
     return FrameStats(
-        background=v.background, noise_sigma=v.noise_sigma, i_max=v.i_max,
-        raw_threshold=v.raw_threshold, peak_threshold=v.peak_threshold, n_active=v.n_active,
-        saturated_fraction=v.saturated_fraction, dark_level=v.dark_level,
-    )  # fmt: skip
+        background=v.background,
+        noise_sigma=v.noise_sigma,
+        i_max=v.i_max,
+        raw_threshold=v.raw_threshold,
+        peak_threshold=v.peak_threshold,
+        n_active=v.n_active,
+        saturated_fraction=v.saturated_fraction,
+        dark_level=v.dark_level,
+    )
 
 
 def _reference_find_candidate_blobs(
-    gray: np.ndarray, distance_mm: np.ndarray, camera: CameraModel, diameters_mm: np.ndarray,
-    config: ExtractionConfig, stats: FrameStats,
-) -> CandidateBlobs:  # fmt: skip
+    gray: np.ndarray,
+    distance_mm: np.ndarray,
+    camera: CameraModel,
+    diameters_mm: np.ndarray,
+    config: ExtractionConfig,
+    stats: FrameStats,
+) -> CandidateBlobs:
     """``reference.extraction.find_candidates`` as ``extraction.find_candidate_blobs``
     returns it (``Blob`` records, the active mask as uint8)."""
     levels = ref_extraction.FrameLevels(
-        stats.background, stats.noise_sigma, stats.i_max, stats.raw_threshold,
-        stats.peak_threshold, stats.saturated_fraction, stats.dark_level, stats.n_active,
-    )  # fmt: skip
-    found = ref_extraction.find_candidates(gray, distance_mm, levels, fx=float(camera.fx),
-                                           diameters_mm=np.asarray(diameters_mm, float),
-                                           config=config)  # fmt: skip
+        stats.background,
+        stats.noise_sigma,
+        stats.i_max,
+        stats.raw_threshold,
+        stats.peak_threshold,
+        stats.saturated_fraction,
+        stats.dark_level,
+        stats.n_active,
+    )
+    found = ref_extraction.find_candidates(
+        gray,
+        distance_mm,
+        levels,
+        fx=float(camera.fx),
+        diameters_mm=np.asarray(diameters_mm, float),
+        config=config,
+    )
     # the reference's records carry Blob's fields under Blob's names
     accepted = [Blob(**b._asdict()) for b in found.accepted]
     oversize = [Blob(**b._asdict()) for b in found.oversize]
     v = found.levels
     applied = FrameStats(
-        background=v.background, noise_sigma=v.noise_sigma, i_max=v.i_max,
-        raw_threshold=v.raw_threshold, peak_threshold=v.peak_threshold, n_active=v.n_active,
-        saturated_fraction=v.saturated_fraction, dark_level=v.dark_level,
+        background=v.background,
+        noise_sigma=v.noise_sigma,
+        i_max=v.i_max,
+        raw_threshold=v.raw_threshold,
+        peak_threshold=v.peak_threshold,
+        n_active=v.n_active,
+        saturated_fraction=v.saturated_fraction,
+        dark_level=v.dark_level,
         psf_sigma_px=float(found.psf_sigma_px),
-    )  # fmt: skip
+    )
     return CandidateBlobs(
-        accepted, oversize, found.active_mask.astype(np.uint8),
+        accepted,
+        oversize,
+        found.active_mask.astype(np.uint8),
         tuple(WrongSizeBlob(*(float(x) for x in w)) for w in found.wrong_size),
-        tuple(RejectedBlob(float(r.u_px), float(r.v_px), float(r.diameter_px), r.reason)
-              for r in found.rejected),
+        tuple(
+            RejectedBlob(float(r.u_px), float(r.v_px), float(r.diameter_px), r.reason)
+            for r in found.rejected
+        ),
         applied,
-    )  # fmt: skip
+    )
 
 
 COMPILED = ExtractionArithmetic("compiled", frame_levels, find_candidate_blobs)

@@ -98,8 +98,9 @@ def pixel_lists(blobs: list[Blob]) -> tuple[np.ndarray, np.ndarray]:
     if not blobs:
         return np.zeros(0, np.int64), np.zeros(1, np.int64)
     pieces = [b.pixels for b in blobs]
-    starts = np.fromiter(accumulate((p.shape[0] for p in pieces), initial=0), np.int64,
-                         len(pieces) + 1)  # fmt: skip
+    starts = np.fromiter(
+        accumulate((p.shape[0] for p in pieces), initial=0), np.int64, len(pieces) + 1
+    )
     return np.concatenate(pieces).astype(np.int64, copy=False), starts
 
 
@@ -238,10 +239,15 @@ def frame_levels(gray: np.ndarray, config: ExtractionConfig) -> FrameStats:
     i_peak = config.peak_abs if config.peak_abs is not None else bg + config.peak_rel * contrast
     sat = float(n_sat) / gray.size
     return FrameStats(
-        background=bg, noise_sigma=sigma, i_max=i_max, raw_threshold=i_t,
-        peak_threshold=max(i_peak, i_t), n_active=0, saturated_fraction=sat,
+        background=bg,
+        noise_sigma=sigma,
+        i_max=i_max,
+        raw_threshold=i_t,
+        peak_threshold=max(i_peak, i_t),
+        n_active=0,
+        saturated_fraction=sat,
         dark_level=min(float(dark), bg),
-    )  # fmt: skip
+    )
 
 
 def active_pixel_mask(
@@ -271,10 +277,15 @@ def _active_set(
         threshold = float(cut)
         mask, runs, n, *_ = threshold_mask(gray32, threshold)
     applied = FrameStats(
-        background=stats.background, noise_sigma=stats.noise_sigma, i_max=stats.i_max,
-        raw_threshold=threshold, peak_threshold=stats.peak_threshold, n_active=n,
-        saturated_fraction=stats.saturated_fraction, dark_level=stats.dark_level,
-    )  # fmt: skip
+        background=stats.background,
+        noise_sigma=stats.noise_sigma,
+        i_max=stats.i_max,
+        raw_threshold=threshold,
+        peak_threshold=stats.peak_threshold,
+        n_active=n,
+        saturated_fraction=stats.saturated_fraction,
+        dark_level=stats.dark_level,
+    )
     return mask, applied, runs
 
 
@@ -315,12 +326,32 @@ def find_candidate_blobs(
     ecc_max = np.sqrt(1.0 - cos_t**2)
     # the components of A from its runs, numbered as cv2.connectedComponents numbers them
     # (kernels.components.run_labels), and every gate, in one call
-    (area_k, bbox_k, peak_k, starts, flat, inner, listed, testable, rho_k, which, status,
-     size, mom, keep_starts, keep_flat, blur_var_px2) = label_table_and_gates(
-        runs, gray32, np.asarray(distance_mm, np.float32).reshape(-1), float(camera.fx),
-        np.asarray(diameters_mm, np.float64), _gate_params(config, stats, cos_t, ecc_max),
+    (
+        area_k,
+        bbox_k,
+        peak_k,
+        starts,
+        flat,
+        inner,
+        listed,
+        testable,
+        rho_k,
+        which,
+        status,
+        size,
+        mom,
+        keep_starts,
+        keep_flat,
+        blur_var_px2,
+    ) = label_table_and_gates(
+        runs,
+        gray32,
+        np.asarray(distance_mm, np.float32).reshape(-1),
+        float(camera.fx),
+        np.asarray(diameters_mm, np.float64),
+        _gate_params(config, stats, cos_t, ecc_max),
         int(config.min_area_px),
-    )  # fmt: skip
+    )
     accepted: list[Blob] = []
     oversize: list[Blob] = []
     wrong_size: list[WrongSizeBlob] = []
@@ -339,28 +370,44 @@ def find_candidate_blobs(
             wrong_size.append(WrongSizeBlob(*size[j, :3].tolist(), float(rho_k[k])))
         bbox = tuple(bbox_k[k].tolist())
         if code == OVERSIZE:
-            oversize.append(Blob(
-                pixels=flat[starts[k] : starts[k + 1]].copy(), area_px=int(area_k[k]),
-                bbox=bbox, peak_counts=float(peak_k[k]), distance_mm=float(rho_k[k]),
-            ))  # fmt: skip
+            oversize.append(
+                Blob(
+                    pixels=flat[starts[k] : starts[k + 1]].copy(),
+                    area_px=int(area_k[k]),
+                    bbox=bbox,
+                    peak_counts=float(peak_k[k]),
+                    distance_mm=float(rho_k[k]),
+                )
+            )
         if code != ACCEPTED:
             reject(k, _GATE_REASONS[code])
             continue
         pixels = keep_flat[keep_starts[j] : keep_starts[j + 1]]
-        accepted.append(Blob(
-            pixels=pixels, area_px=len(pixels), bbox=bbox, centroid_uv=mom[j, :2].copy(),
-            distance_mm=float(rho_k[k]), peak_counts=float(peak_k[k]),
-            eccentricity=float(mom[j, 2]), penalty=float(mom[j, 3]),
-        ))  # fmt: skip
+        accepted.append(
+            Blob(
+                pixels=pixels,
+                area_px=len(pixels),
+                bbox=bbox,
+                centroid_uv=mom[j, :2].copy(),
+                distance_mm=float(rho_k[k]),
+                peak_counts=float(peak_k[k]),
+                eccentricity=float(mom[j, 2]),
+                penalty=float(mom[j, 3]),
+            )
+        )
     accepted.sort(key=lambda b: (b.penalty, -b.peak_counts))
     rejected = [r for _, r in sorted(refused, key=lambda kr: kr[0])]
     for b in accepted[config.max_candidates :]:
         rejected.append(RejectedBlob(*b.centroid_uv, 2.0 * np.sqrt(b.area_px / np.pi), "rank"))
     stats = replace(stats, psf_sigma_px=float(np.sqrt(blur_var_px2)))
     return CandidateBlobs(
-        accepted[: config.max_candidates], oversize, mask, tuple(wrong_size), tuple(rejected),
+        accepted[: config.max_candidates],
+        oversize,
+        mask,
+        tuple(wrong_size),
+        tuple(rejected),
         stats,
-    )  # fmt: skip
+    )
 
 
 _GATE_REASONS = {1: "oversize", 2: "size", 3: "nlog", 4: "shape", 5: "penalty"}
@@ -375,15 +422,18 @@ def _gate_params(
     return GateSettings(
         h_min_px=-1.0 if config.h_min_px is None else float(config.h_min_px),
         h_max_px=-1.0 if config.h_max_px is None else float(config.h_max_px),
-        cos_max_tilt=float(cos_t), size_tolerance=float(config.size_tolerance),
+        cos_max_tilt=float(cos_t),
+        size_tolerance=float(config.size_tolerance),
         size_margin_px=float(config.size_margin_px),
         nlog_sigma_px=float(config.nlog_sigma_px) if paper else -1.0,
         j_peak=float(config.nlog_peak_abs if paper else config.nlog_peak_rel),
         j_t=float(config.nlog_floor_abs if paper else config.nlog_floor_rel),
-        background=float(stats.background), eccentricity_max=float(ecc_max),
-        i_peak=float(stats.peak_threshold), i_t=float(stats.raw_threshold),
+        background=float(stats.background),
+        eccentricity_max=float(ecc_max),
+        i_peak=float(stats.peak_threshold),
+        i_t=float(stats.raw_threshold),
         q_max=float(config.q_max),
-    )  # fmt: skip
+    )
 
 
 def measure_blobs(
@@ -446,20 +496,48 @@ def measure_blobs(
     s_gray, s_mm, crowded = blob_surrounds(bbox, sg, sd, owner, ox, oy, use_owner)
     level = np.where(np.isfinite(s_gray), s_gray, float(background))
     uv = blob_centroids(
-        flat, starts, bbox, g32, level, weighting == "coverage", owner, ox, oy, use_owner,
-    )  # fmt: skip
-    mix = blob_mixing(flat, starts, bbox, g32, d32, sd, s_gray, s_mm, crowded, float(dark),
-                      owner, ox, oy, use_owner)  # fmt: skip
+        flat,
+        starts,
+        bbox,
+        g32,
+        level,
+        weighting == "coverage",
+        owner,
+        ox,
+        oy,
+        use_owner,
+    )
+    mix = blob_mixing(
+        flat,
+        starts,
+        bbox,
+        g32,
+        d32,
+        sd,
+        s_gray,
+        s_mm,
+        crowded,
+        float(dark),
+        owner,
+        ox,
+        oy,
+        use_owner,
+    )
     bearings = camera.pixel_bearings().reshape(-1, 3)
     rho = blob_ranges(
-        flat, starts, np.asarray(distance_mm, np.float32).reshape(-1), bearings,
+        flat,
+        starts,
+        np.asarray(distance_mm, np.float32).reshape(-1),
+        bearings,
         camera.bearings(uv),
-    )  # fmt: skip
+    )
     # partly hidden by something nearer (read on the surround frame): no range
     hidden = occluded_blobs(flat, starts, bbox, sd, rho, owner, ox, oy, use_owner)
     rho = np.where(hidden, np.nan, rho)
-    return [b.with_values(centroid_uv=uv[j], distance_mm=float(rho[j]), mixing=mix[j])
-            for j, b in enumerate(blobs)]  # fmt: skip
+    return [
+        b.with_values(centroid_uv=uv[j], distance_mm=float(rho[j]), mixing=mix[j])
+        for j, b in enumerate(blobs)
+    ]
 
 
 def disc_image_centre_offsets_px(
@@ -478,10 +556,11 @@ def disc_image_centre_offsets_px(
     """
     c = np.ascontiguousarray(np.atleast_2d(np.asarray(centres_mm, float)))
     return disc_centre_offsets(
-        np.ascontiguousarray(camera.K, dtype=float), c,
+        np.ascontiguousarray(camera.K, dtype=float),
+        c,
         np.ascontiguousarray(normal, dtype=float),
         np.ascontiguousarray(np.broadcast_to(np.asarray(radii_mm, float), (len(c),))),
-    )  # fmt: skip
+    )
 
 
 def disc_image_centre_offset_px(

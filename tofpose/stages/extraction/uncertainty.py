@@ -71,10 +71,14 @@ def kernel_constants(floors: SigmaFloors) -> SigmaConstants:
     ``core.records.SigmaConstants``; its fields are ``kernels.sigmas.blob_sigmas``'
     arguments after ``split``, in order)."""
     return SigmaConstants(
-        floor_px=float(floors.centroid_px), floor_mm=float(floors.range_mm),
-        single_px=SINGLE_PIXEL_SIGMA_PX, split_px=SPLIT_CENTROID_PX, pool_min=POOL_MIN_PIXELS,
-        median_eff=MEDIAN_EFFICIENCY, uncal_mm=UNCALIBRATED_RANGE_SIGMA_MM,
-    )  # fmt: skip
+        floor_px=float(floors.centroid_px),
+        floor_mm=float(floors.range_mm),
+        single_px=SINGLE_PIXEL_SIGMA_PX,
+        split_px=SPLIT_CENTROID_PX,
+        pool_min=POOL_MIN_PIXELS,
+        median_eff=MEDIAN_EFFICIENCY,
+        uncal_mm=UNCALIBRATED_RANGE_SIGMA_MM,
+    )
 
 
 def measurement_sigmas(
@@ -92,7 +96,12 @@ def measurement_sigmas(
     centroids = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
     split = np.array([b.source == "split" for b in blobs], bool)
     return blob_sigmas(
-        flat, starts, centroids, np.asarray(gray, np.float32),
-        np.asarray(distance_mm, np.float32), float(background_counts), split,
+        flat,
+        starts,
+        centroids,
+        np.asarray(gray, np.float32),
+        np.asarray(distance_mm, np.float32),
+        float(background_counts),
+        split,
         *kernel_constants(floors),
-    )  # fmt: skip
+    )

@@ -37,8 +37,9 @@ def _compiled_one_to_one(A: np.ndarray) -> tuple[np.ndarray, list[int]]:
     assignment SciPy's."""
     cost = annealing.assignment_costs(-np.log(np.maximum(A, 1e-300)))  # finite: A > 0
     rows, cols = linear_sum_assignment(cost)
-    pairs, unmatched = annealing.assigned_pairs(rows.astype(np.int64), cols.astype(np.int64),
-                                                cost, A.shape[1] - 1)  # fmt: skip
+    pairs, unmatched = annealing.assigned_pairs(
+        rows.astype(np.int64), cols.astype(np.int64), cost, A.shape[1] - 1
+    )
     return pairs, unmatched.tolist()
 
 
@@ -51,18 +52,31 @@ def _reference_anneal(Pm, unary, psi, psi_end, growth):
 def _reference_prune_pairs(observed, catalog, pairs, weights, tol, min_matches):
     """``reference.matching.rigid_residual_check`` with the rejected blobs as an int64
     array, as ``kernels.residual_check.prune_pairs`` returns them."""
-    kept, rejected, ok = ref_matching.rigid_residual_check(observed, catalog, pairs, weights,
-                                                           tol, min_matches)  # fmt: skip
+    kept, rejected, ok = ref_matching.rigid_residual_check(
+        observed, catalog, pairs, weights, tol, min_matches
+    )
     return kept, np.asarray(rejected, np.int64), ok
 
 
 COMPILED = MatchingArithmetic(
-    "compiled", annealing.pair_potentials, annealing.size_mismatch,
-    annealing.anneal_assignment, _compiled_one_to_one, residual_check.prune_pairs,
-    triplets.catalog_triplets, triplets.triplet_search, triplets.trials_needed,
-)  # fmt: skip
+    "compiled",
+    annealing.pair_potentials,
+    annealing.size_mismatch,
+    annealing.anneal_assignment,
+    _compiled_one_to_one,
+    residual_check.prune_pairs,
+    triplets.catalog_triplets,
+    triplets.triplet_search,
+    triplets.trials_needed,
+)
 REFERENCE = MatchingArithmetic(
-    "reference", ref_matching.pair_potentials, ref_matching.size_mismatch, _reference_anneal,
-    ref_matching.one_to_one, _reference_prune_pairs, ref_triplets.catalog_triplets,
-    ref_triplets.triplet_search, ref_triplets.trials_needed,
-)  # fmt: skip
+    "reference",
+    ref_matching.pair_potentials,
+    ref_matching.size_mismatch,
+    _reference_anneal,
+    ref_matching.one_to_one,
+    _reference_prune_pairs,
+    ref_triplets.catalog_triplets,
+    ref_triplets.triplet_search,
+    ref_triplets.trials_needed,
+)

@@ -56,9 +56,13 @@ class MatchResult:
 
 
 def pair_compatibility(
-    observed_mm: np.ndarray, catalog_mm: np.ndarray, alpha_mm: float, clip_factor: float, *,
+    observed_mm: np.ndarray,
+    catalog_mm: np.ndarray,
+    alpha_mm: float,
+    clip_factor: float,
+    *,
     arithmetic: MatchingArithmetic = COMPILED,
-) -> np.ndarray:  # fmt: skip
+) -> np.ndarray:
     """Pair potential rho_kilj^2 - alpha^2 (Eq. 36), shape (gamma, eta, gamma, eta).
 
     rho_kilj = |d_kl - D_ij| compares the distance between observed blobs k and l (Eq. 26)
@@ -67,15 +71,19 @@ def pair_compatibility(
     Computed by ``kernels.annealing.pair_potentials`` (``arithmetic``'s).
     """
     return arithmetic.pair_potentials(
-        np.ascontiguousarray(observed_mm, float), np.ascontiguousarray(catalog_mm, float),
-        float(alpha_mm), float(clip_factor),
-    )  # fmt: skip
+        np.ascontiguousarray(observed_mm, float),
+        np.ascontiguousarray(catalog_mm, float),
+        float(alpha_mm),
+        float(clip_factor),
+    )
 
 
 def size_unary(
-    observed_diameter_mm: np.ndarray | None, catalog_diameter_mm: np.ndarray, *,
+    observed_diameter_mm: np.ndarray | None,
+    catalog_diameter_mm: np.ndarray,
+    *,
     arithmetic: MatchingArithmetic = COMPILED,
-) -> np.ndarray | None:  # fmt: skip
+) -> np.ndarray | None:
     """Unary mismatch (gamma, eta) of apparent vs catalog diameter, 0 where unknown.
 
     ``(ln(d_obs / D_i) / ln 1.6)^2`` capped at 4: a 35 mm blob seen as 80 mm costs ~3.
@@ -89,16 +97,23 @@ def size_unary(
 
 
 def anneal(
-    P: np.ndarray, unary: np.ndarray | None, alpha_mm: float, config: MatchingConfig, *,
+    P: np.ndarray,
+    unary: np.ndarray | None,
+    alpha_mm: float,
+    config: MatchingConfig,
+    *,
     arithmetic: MatchingArithmetic = COMPILED,
-) -> tuple[np.ndarray, int]:  # fmt: skip
+) -> tuple[np.ndarray, int]:
     """Run Eqs. 35-39; returns A of shape (gamma, eta + 1) and the iteration count."""
     g, e = P.shape[0], P.shape[1]
     u = np.zeros((g, e)) if unary is None else config.size_weight * alpha_mm**2 * unary
     return arithmetic.anneal_assignment(
-        np.ascontiguousarray(P.reshape(g * e, g * e)), np.ascontiguousarray(u, float),
-        config.psi_start / alpha_mm**2, config.psi_end / alpha_mm**2, config.growth,
-    )  # fmt: skip
+        np.ascontiguousarray(P.reshape(g * e, g * e)),
+        np.ascontiguousarray(u, float),
+        config.psi_start / alpha_mm**2,
+        config.psi_end / alpha_mm**2,
+        config.growth,
+    )
 
 
 def one_to_one(
@@ -147,8 +162,7 @@ def match_reflectors(
             alpha,
             f"only {g} candidate reflector(s), need {cfg.min_matches}",
         )
-    P = pair_compatibility(observed_mm, catalog_mm, alpha, cfg.clip_factor,
-                           arithmetic=arithmetic)  # fmt: skip
+    P = pair_compatibility(observed_mm, catalog_mm, alpha, cfg.clip_factor, arithmetic=arithmetic)
     unary = None
     if cfg.size_weight > 0 and catalog_diameter_mm is not None:
         unary = size_unary(observed_diameter_mm, catalog_diameter_mm, arithmetic=arithmetic)
@@ -187,10 +201,13 @@ def rigid_residual_check(
     if tol_all.ndim == 0:
         tol_all = np.full(len(observed_mm), float(tol_all))
     kept, rejected, ok = arithmetic.prune_pairs(
-        observed_mm, np.ascontiguousarray(catalog_mm, dtype=float),
+        observed_mm,
+        np.ascontiguousarray(catalog_mm, dtype=float),
         np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2),
-        np.ascontiguousarray(weights, dtype=float), np.ascontiguousarray(tol_all), min_matches,
-    )  # fmt: skip
+        np.ascontiguousarray(weights, dtype=float),
+        np.ascontiguousarray(tol_all),
+        min_matches,
+    )
     if ok:
         return kept, rejected.tolist(), ""
     return (
@@ -254,18 +271,30 @@ def match_by_triplets(
     cat_tri, cat_sides = arithmetic.catalog_triplets(catalog)
     centroid, cos_min = (np.zeros(3), -np.inf) if facing is None else facing
     fixed = (observed, catalog, w, tol, float(alpha_mm))
-    rule = (facing is not None, np.ascontiguousarray(centroid, dtype=float), float(cos_min),
-            int(min_matches), confidence is not None,
-            0.0 if confidence is None else float(confidence))  # fmt: skip
+    rule = (
+        facing is not None,
+        np.ascontiguousarray(centroid, dtype=float),
+        float(cos_min),
+        int(min_matches),
+        confidence is not None,
+        0.0 if confidence is None else float(confidence),
+    )
     best, best_n, best_cost, tried = np.empty((0, 2), np.int64), 0, np.inf, 0
     step = max(len(triplets) if deadline_s is None else DEADLINE_CHUNK, 1)
     for s in range(0, len(triplets), step):
         if deadline_s is not None and time.perf_counter() > deadline_s:
             break
         best, best_n, best_cost, tried, done = arithmetic.triplet_search(
-            *fixed, triplets[s : s + step], cat_tri, cat_sides, *rule, best, best_n,
-            best_cost, tried,
-        )  # fmt: skip
+            *fixed,
+            triplets[s : s + step],
+            cat_tri,
+            cat_sides,
+            *rule,
+            best,
+            best_n,
+            best_cost,
+            tried,
+        )
         if done:
             break
     if stats is not None:

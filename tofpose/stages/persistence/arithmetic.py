@@ -31,9 +31,7 @@ def _reference_bearings(camera: CameraModel, uv: np.ndarray) -> np.ndarray:
     return ref_camera.bearings(np.asarray(uv, float).reshape(-1, 2), camera.K, camera.dist_array)
 
 
-COMPILED = PersistenceArithmetic(
-    "compiled", measure.measure_and_back_project, CameraModel.bearings
-)
+COMPILED = PersistenceArithmetic("compiled", measure.measure_and_back_project, CameraModel.bearings)
 REFERENCE = PersistenceArithmetic(
     "reference", ref_measure.measure_and_back_project, _reference_bearings
 )

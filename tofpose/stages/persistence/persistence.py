@@ -84,9 +84,14 @@ class Persistence:
         self._history.extend(snapshot)
 
     def measure(
-        self, blobs: list[Blob], gray: np.ndarray, distance: np.ndarray,
-        camera: CameraModel, background: float, dark: float = float("nan"),
-    ) -> tuple[list[Blob], np.ndarray, np.ndarray, PersistenceInfo]:  # fmt: skip
+        self,
+        blobs: list[Blob],
+        gray: np.ndarray,
+        distance: np.ndarray,
+        camera: CameraModel,
+        background: float,
+        dark: float = float("nan"),
+    ) -> tuple[list[Blob], np.ndarray, np.ndarray, PersistenceInfo]:
         """The §3.4 combination (``tofpose.stages.persistence.reference.persistence.History``)
         followed by
         ``extraction.measure_blobs`` on the kept blobs, in one
@@ -99,17 +104,35 @@ class Persistence:
         frame (``scratch``)."""
         cur, flat, starts, bbox = blob_arrays(blobs)
         n_used, motion, keep, mean_gray, med_dist, uv, rho, mix = persist_and_measure(
-            gray, distance, flat, starts, bbox, cur, self.history(gray, distance),
-            float(background), float(dark), camera.fx, camera.fy, camera.cx, camera.cy,
+            gray,
+            distance,
+            flat,
+            starts,
+            bbox,
+            cur,
+            self.history(gray, distance),
+            float(background),
+            float(dark),
+            camera.fx,
+            camera.fy,
+            camera.cx,
+            camera.cy,
             camera.dist_array,
             np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3)),
             *self.scratch(gray.shape),
-        )  # fmt: skip
+        )
         self.commit(cur, flat, gray, distance, n_used, motion)
-        kept = [b.with_values(centroid_uv=uv[j], distance_mm=float(rho[j]), mixing=mix[j])
-                for j, b in enumerate(blobs) if keep[j]]  # fmt: skip
-        return kept, mean_gray, med_dist, PersistenceInfo(1 + n_used, motion,
-                                                          len(blobs) - len(kept))  # fmt: skip
+        kept = [
+            b.with_values(centroid_uv=uv[j], distance_mm=float(rho[j]), mixing=mix[j])
+            for j, b in enumerate(blobs)
+            if keep[j]
+        ]
+        return (
+            kept,
+            mean_gray,
+            med_dist,
+            PersistenceInfo(1 + n_used, motion, len(blobs) - len(kept)),
+        )
 
     def history(self, gray: np.ndarray, distance: np.ndarray) -> PersistenceHistory:
         """The history newest first with the settings, as the kernels take it (a
@@ -124,12 +147,20 @@ class Persistence:
             distance=tuple([e.distance for e in entries] + [distance] * pad),
             mask=tuple([e.mask for e in entries] + [np.zeros(gray.size, bool)] * pad),
             centroids=tuple([e.centroids for e in entries] + [np.zeros((0, 2))] * pad),
-            count=len(entries), tol_px=float(self.config.motion_tolerance_px),
+            count=len(entries),
+            tol_px=float(self.config.motion_tolerance_px),
             c_min=int(self.config.c_min),
-        )  # fmt: skip
+        )
 
-    def commit(self, centroids: np.ndarray, pixels: np.ndarray, gray: np.ndarray,
-               distance: np.ndarray, n_used: int, motion: bool) -> None:  # fmt: skip
+    def commit(
+        self,
+        centroids: np.ndarray,
+        pixels: np.ndarray,
+        gray: np.ndarray,
+        distance: np.ndarray,
+        n_used: int,
+        motion: bool,
+    ) -> None:
         """Record a frame combined by ``track_frame`` as ``apply`` would have: with
         motion, only the ``n_used`` newest entries stay; then this frame is appended.
         centroids : (n, 2) its blobs' centroids; pixels : their flat pixel indices."""

@@ -28,14 +28,22 @@ class PoseArithmetic:
     point_residuals_mm: Callable
 
 
-_FIELDS = ("facing_cosine", "absolute_orientation", "range_bias_covariance",
-           "class_scale_covariance", "leave_one_out_spread", "covariance_envelope",
-           "point_residuals_mm")  # fmt: skip
+_FIELDS = (
+    "facing_cosine",
+    "absolute_orientation",
+    "range_bias_covariance",
+    "class_scale_covariance",
+    "leave_one_out_spread",
+    "covariance_envelope",
+    "point_residuals_mm",
+)
 
 COMPILED = PoseArithmetic(
     "compiled", solve.solve_pairs, verify.pose_check, **{f: getattr(pose, f) for f in _FIELDS}
 )
 REFERENCE = PoseArithmetic(
-    "reference", ref_solve.solve_pairs, ref_verify.pose_check,
+    "reference",
+    ref_solve.solve_pairs,
+    ref_verify.pose_check,
     **{f: getattr(ref_pose, f) for f in _FIELDS},
-)  # fmt: skip
+)

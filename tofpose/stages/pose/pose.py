@@ -193,8 +193,9 @@ def systematic_sigmas(
     """
 
     e, rho, sr, sb = _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
-    er, eb = kernel_systematic_sigmas(_f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb,
-                                      float(max_range_mm), float(max_bearing_rad))  # fmt: skip
+    er, eb = kernel_systematic_sigmas(
+        _f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb, float(max_range_mm), float(max_bearing_rad)
+    )
     return float(er), float(eb)
 
 
@@ -214,8 +215,7 @@ def common_range_bias_covariance(
     g the whitened residuals' response to a unit offset (-1 / sigma_range on each range
     row). An uncalibrated camera's constant and drift errors are such an offset."""
     e, rho, sr, sb = _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
-    return range_bias_covariance(_f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb,
-                                 float(bias_sigma_mm))  # fmt: skip
+    return range_bias_covariance(_f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb, float(bias_sigma_mm))
 
 
 @dataclass
@@ -268,16 +268,29 @@ def refine_maximum_likelihood(
     """
     e, rho, sr, sb = _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
     R, t, cov, chi2, iterations, norms = ml_refine(
-        _f64(x_mm), e, rho, _f64(R0), _f64(t0), sr, sb, int(max_iterations), float(tol),
+        _f64(x_mm),
+        e,
+        rho,
+        _f64(R0),
+        _f64(t0),
+        sr,
+        sb,
+        int(max_iterations),
+        float(tol),
         STEP_SIGMA2,
-    )  # fmt: skip
+    )
     return MLResult(R, t, cov, float(chi2), int(iterations), norms)
 
 
 def leave_one_out_covariance(
-    x_mm: np.ndarray, bearings: np.ndarray, ranges_mm: np.ndarray, R: np.ndarray,
-    t: np.ndarray, sigma_range_mm: np.ndarray, sigma_bearing_rad: np.ndarray,
-) -> np.ndarray | None:  # fmt: skip
+    x_mm: np.ndarray,
+    bearings: np.ndarray,
+    ranges_mm: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+    sigma_range_mm: np.ndarray,
+    sigma_bearing_rad: np.ndarray,
+) -> np.ndarray | None:
     """(6, 6) jackknife covariance of the ML pose (R, t) of m reflectors (ours): the
     spread ``(m - 1) / m sum_j d_j d_j^T`` of the poses fitted without reflector j
     about (R, t), each one Gauss-Newton step from (R, t)

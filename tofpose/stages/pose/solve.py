@@ -56,8 +56,11 @@ def offset_prior(config: SolveConfig, sigma_mm: float, fx_px: float) -> RangeOff
     ``sigma_mm`` (the uncalibrated or calibrated range-bias sigma), and the image scale's
     uncertainty from ``focal_length_sigma_rel`` and ``common_centroid_bias_px`` (over the
     focal length ``fx_px``)."""
-    return RangeOffsetPrior(float(sigma_mm), float(config.focal_length_sigma_rel),
-                            float(config.common_centroid_bias_px) / fx_px)  # fmt: skip
+    return RangeOffsetPrior(
+        float(sigma_mm),
+        float(config.focal_length_sigma_rel),
+        float(config.common_centroid_bias_px) / fx_px,
+    )
 
 
 @dataclass(frozen=True)
@@ -122,9 +125,9 @@ class MatchedObservations:
         """The rows where the (m,) bool mask ``keep`` is true (itself when all are)."""
         if keep.all():
             return self
-        return MatchedObservations(**{
-            name: getattr(self, name)[keep] for name in self.__dataclass_fields__
-        })  # fmt: skip
+        return MatchedObservations(
+            **{name: getattr(self, name)[keep] for name in self.__dataclass_fields__}
+        )
 
 
 @dataclass(frozen=True)
@@ -173,13 +176,17 @@ def fit_settings(config: SolveConfig) -> FitSettings:
     configuration: the one place they are built, for the acquisition and the tracking
     paths alike."""
     return FitSettings(
-        refinement=_REFINEMENT[config.refinement], los_tolerance=config.los_tolerance,
-        step_sigma2=STEP_SIGMA2, adapt=config.adapt_range_sigma,
+        refinement=_REFINEMENT[config.refinement],
+        los_tolerance=config.los_tolerance,
+        step_sigma2=STEP_SIGMA2,
+        adapt=config.adapt_range_sigma,
         max_systematic_range_mm=config.max_systematic_range_sigma_mm,
         max_systematic_centroid_px=config.max_systematic_centroid_sigma_px,
-        reject=config.reject_outliers, min_matches=config.min_matches,
-        outlier_sigma=config.outlier_sigma, chi2_per_dof=config.outlier_chi2_per_dof,
-    )  # fmt: skip
+        reject=config.reject_outliers,
+        min_matches=config.min_matches,
+        outlier_sigma=config.outlier_sigma,
+        chi2_per_dof=config.outlier_chi2_per_dof,
+    )
 
 
 class PoseSolver:
@@ -261,16 +268,51 @@ class PoseSolver:
             alone = self._fit_pairs(pairs, meas, 0.0)
             if alone[7].sum() > kept.sum():
                 fit = alone
-        (k_idx, i_idx, uv, e, y, rho, sigma_range, kept, R, t, iterations, cov, chi2, norms,
-         sr, sb, offset, offset_sigma) = fit  # fmt: skip
+        (
+            k_idx,
+            i_idx,
+            uv,
+            e,
+            y,
+            rho,
+            sigma_range,
+            kept,
+            R,
+            t,
+            iterations,
+            cov,
+            chi2,
+            norms,
+            sr,
+            sb,
+            offset,
+            offset_sigma,
+        ) = fit
         obs = MatchedObservations(
-            k_idx=k_idx, i_idx=i_idx, x_mm=self._xyz[i_idx], uv_px=uv, bearings=e,
-            range_mm=rho - offset, y_mm=y - e * offset,
+            k_idx=k_idx,
+            i_idx=i_idx,
+            x_mm=self._xyz[i_idx],
+            uv_px=uv,
+            bearings=e,
+            range_mm=rho - offset,
+            y_mm=y - e * offset,
             sigma_bearing_rad=meas.sigma_px[k_idx] / self.camera.fx,
             sigma_range_mm=sigma_range,
-        )  # fmt: skip
-        return self.conclude(obs.subset(kept), R, t, iterations, cov, chi2, norms, sr, sb,
-                             active, offset, offset_sigma)  # fmt: skip
+        )
+        return self.conclude(
+            obs.subset(kept),
+            R,
+            t,
+            iterations,
+            cov,
+            chi2,
+            norms,
+            sr,
+            sb,
+            active,
+            offset,
+            offset_sigma,
+        )
 
     def _fit_pairs(self, pairs: np.ndarray, meas: Measurements, complete_mm: float) -> tuple:
         """``kernels.solve.solve_pairs`` on matched pairs (m, 2) with completion within
@@ -283,12 +325,23 @@ class PoseSolver:
             else np.full((len(meas.range_mm), MIX_FIELDS), np.nan)
         )
         return self.arithmetic.solve_pairs(
-            meas.y_mm, meas.weights, meas.uv_px, meas.range_mm, meas.sigma_px,
-            meas.sigma_range_mm, mixing, np.ascontiguousarray(pairs[:, 0]),
-            np.ascontiguousarray(pairs[:, 1]), self._catalog_record, self._camera_record,
-            cfg.correct_perspective_bias, float(cfg.mixed_pixel_radius_px), float(complete_mm),
-            self._fit_settings, prior,
-        )  # fmt: skip
+            meas.y_mm,
+            meas.weights,
+            meas.uv_px,
+            meas.range_mm,
+            meas.sigma_px,
+            meas.sigma_range_mm,
+            mixing,
+            np.ascontiguousarray(pairs[:, 0]),
+            np.ascontiguousarray(pairs[:, 1]),
+            self._catalog_record,
+            self._camera_record,
+            cfg.correct_perspective_bias,
+            float(cfg.mixed_pixel_radius_px),
+            float(complete_mm),
+            self._fit_settings,
+            prior,
+        )
 
     def offset_prior(self, range_mm: np.ndarray) -> RangeOffsetPrior:
         """What the fit knows of the common range offset before the frame (the module's
@@ -299,9 +352,20 @@ class PoseSolver:
         return offset_prior(self.config, self.range_bias_sigma_mm(range_mm), self.camera.fx)
 
     def conclude(
-        self, obs: MatchedObservations, R, t, iterations, cov, chi2, norms, sr, sb, active,
-        offset_mm: float = 0.0, offset_sigma_mm: float | None = None,
-    ) -> Solution | Rejected:  # fmt: skip
+        self,
+        obs: MatchedObservations,
+        R,
+        t,
+        iterations,
+        cov,
+        chi2,
+        norms,
+        sr,
+        sb,
+        active,
+        offset_mm: float = 0.0,
+        offset_sigma_mm: float | None = None,
+    ) -> Solution | Rejected:
         """The fitted pose of ``obs`` (the reflectors kept; ``sr`` mm, ``sb`` rad (m,):
         the sigmas the fit used, the frame's excess components included): verified
         against the frame (``active`` : the frame and its I_t; it is only read when few
@@ -320,13 +384,16 @@ class PoseSolver:
         if self.config.consistency_p is not None and dof > 0 and self.config.refinement == "ml":
             limit = chi2_limit(dof, self.config.consistency_p)
             if not chi2 <= limit:
-                return Rejected(self._inconsistent(obs, norms, float(chi2), dof, limit),
-                                implausible=True)  # fmt: skip
+                return Rejected(
+                    self._inconsistent(obs, norms, float(chi2), dof, limit), implausible=True
+                )
         # the common offset's uncertainty: its posterior sigma when the fit estimated it
         # (``obs`` then holds the ranges with the offset taken out), else the prior's
-        bias = offset_sigma_mm if offset_sigma_mm is not None and offset_mm != 0 else (
-            self.range_bias_sigma_mm(obs.range_mm)
-        )  # fmt: skip
+        bias = (
+            offset_sigma_mm
+            if offset_sigma_mm is not None and offset_mm != 0
+            else (self.range_bias_sigma_mm(obs.range_mm))
+        )
         extra = (
             ar.range_bias_covariance(obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, sb, bias)
             if bias > 0
@@ -338,11 +405,20 @@ class PoseSolver:
         spread = None  # pose.leave_one_out_covariance, without its input conversions
         if self.config.leave_one_out_covariance and len(obs.i_idx) >= MIN_LEAVE_ONE_OUT:
             c = np.ascontiguousarray
-            spread = ar.leave_one_out_spread(c(obs.x_mm), c(obs.bearings), c(obs.range_mm), R,
-                                             t, c(sr), c(sb))  # fmt: skip
-        ml = MLResult(R, t, cov, float(chi2), int(iterations), norms, bias_covariance=extra,
-                      range_offset_mm=float(offset_mm),
-                      leave_one_out_covariance=spread)  # fmt: skip
+            spread = ar.leave_one_out_spread(
+                c(obs.x_mm), c(obs.bearings), c(obs.range_mm), R, t, c(sr), c(sb)
+            )
+        ml = MLResult(
+            R,
+            t,
+            cov,
+            float(chi2),
+            int(iterations),
+            norms,
+            bias_covariance=extra,
+            range_offset_mm=float(offset_mm),
+            leave_one_out_covariance=spread,
+        )
         c = np.ascontiguousarray
         weights = 1.0 / (sr**2 + (obs.range_mm * sb) ** 2)  # as kernels.pose.fit_pose's
         T_svd = RigidTransform(*ar.absolute_orientation(c(obs.x_mm), c(obs.y_mm), c(weights)))
@@ -359,11 +435,18 @@ class PoseSolver:
             return None
         cls = self._size_class[obs.i_idx]
         return self.arithmetic.class_scale_covariance(
-            obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, sb,
-            np.ascontiguousarray(cls, dtype=np.int64), self._n_sizes,
+            obs.x_mm,
+            obs.bearings,
+            obs.range_mm,
+            R,
+            t,
+            sr,
+            sb,
+            np.ascontiguousarray(cls, dtype=np.int64),
+            self._n_sizes,
             float(cfg.common_centroid_bias_px) / self.camera.fx,
             float(cfg.focal_length_sigma_rel),
-        )  # fmt: skip
+        )
 
     def _inconsistent(self, obs, norms, chi2: float, dof: int, limit: float) -> str:
         """The reason for a pose whose residuals the measurement model cannot explain,
@@ -390,9 +473,11 @@ class PoseSolver:
     def view_cosine(self, R: np.ndarray, t: np.ndarray) -> float:
         """Cosine between the target normal and the direction to the camera
         (``stages.matching.kernels.triplets.facing_cosine``)."""
-        return self.arithmetic.facing_cosine(np.ascontiguousarray(R, dtype=float),
-                                             np.ascontiguousarray(t, dtype=float),
-                                             self._xyz_mean)  # fmt: skip
+        return self.arithmetic.facing_cosine(
+            np.ascontiguousarray(R, dtype=float),
+            np.ascontiguousarray(t, dtype=float),
+            self._xyz_mean,
+        )
 
     @property
     def facing(self) -> tuple[np.ndarray, float]:
@@ -400,8 +485,9 @@ class PoseSolver:
         centroid (3,) and the least cosine of the view angle."""
         return self._xyz_mean, self._cos_max_view
 
-    def verify(self, T: RigidTransform, active: ThresholdedFrame | None,
-               matched: np.ndarray) -> str:  # fmt: skip
+    def verify(
+        self, T: RigidTransform, active: ThresholdedFrame | None, matched: np.ndarray
+    ) -> str:
         """Physical consistency of a pose with the frame; empty string when consistent:
         the target faces the camera within ``max_view_angle_deg``, every reflector is in
         front of it, and (at most ``dark_check_max_matches`` reflectors matched) no
@@ -422,10 +508,20 @@ class PoseSolver:
         frame = active if dark_check else _NO_FRAME
         cam = self.camera
         outcome, i, u, v = self.arithmetic.pose_check(
-            self._xyz, self._d, is_matched, np.ascontiguousarray(R, dtype=float),
-            np.ascontiguousarray(t, dtype=float), cam.fx, cam.fy, cam.cx, cam.cy,
-            self._dist, frame.gray, float(frame.threshold), dark_check,
-        )  # fmt: skip
+            self._xyz,
+            self._d,
+            is_matched,
+            np.ascontiguousarray(R, dtype=float),
+            np.ascontiguousarray(t, dtype=float),
+            cam.fx,
+            cam.fy,
+            cam.cx,
+            cam.cy,
+            self._dist,
+            frame.gray,
+            float(frame.threshold),
+            dark_check,
+        )
         if outcome == BEHIND_CAMERA:
             return "reflectors would be behind the camera"
         if outcome == DARK_REFLECTOR:

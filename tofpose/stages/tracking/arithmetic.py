@@ -23,10 +23,16 @@ class TrackingArithmetic:
 
 
 COMPILED = TrackingArithmetic(
-    "compiled", tracking.camera_windows, tracking.search_windows, tracking.any_shared,
+    "compiled",
+    tracking.camera_windows,
+    tracking.search_windows,
+    tracking.any_shared,
     tracking_frame.track_frame,
-)  # fmt: skip
+)
 REFERENCE = TrackingArithmetic(
-    "reference", ref_tracking.camera_windows, ref_tracking.search_windows,
-    ref_tracking.any_shared, ref_tracking_frame.track_frame,
-)  # fmt: skip
+    "reference",
+    ref_tracking.camera_windows,
+    ref_tracking.search_windows,
+    ref_tracking.any_shared,
+    ref_tracking_frame.track_frame,
+)

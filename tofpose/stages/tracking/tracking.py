@@ -76,10 +76,19 @@ def predict_windows(
     """
     idx, bounds, uv, d_px = arithmetic.camera_windows(
         np.ascontiguousarray(catalog_mm, dtype=float),
-        np.ascontiguousarray(catalog_diameter_mm, dtype=float), np.asarray(R, float),
-        np.asarray(t_mm, float), camera.fx, camera.fy, camera.cx, camera.cy, camera.dist_array,
-        float(margin_px), float(min_diameter_px), camera.width, camera.height,
-    )  # fmt: skip
+        np.ascontiguousarray(catalog_diameter_mm, dtype=float),
+        np.asarray(R, float),
+        np.asarray(t_mm, float),
+        camera.fx,
+        camera.fy,
+        camera.cx,
+        camera.cy,
+        camera.dist_array,
+        float(margin_px),
+        float(min_diameter_px),
+        camera.width,
+        camera.height,
+    )
     return [
         Window(int(i), uv[n], float(d_px[n]), *(int(v) for v in bounds[n]))
         for n, i in enumerate(idx.tolist())
@@ -94,9 +103,13 @@ _WHY_NOT = {
 
 
 def find_in_windows(
-    gray: np.ndarray, windows: list[Window], threshold_counts: float, background_counts: float,
-    *, arithmetic: TrackingArithmetic = COMPILED,
-) -> list[Blob] | str:  # fmt: skip
+    gray: np.ndarray,
+    windows: list[Window],
+    threshold_counts: float,
+    background_counts: float,
+    *,
+    arithmetic: TrackingArithmetic = COMPILED,
+) -> list[Blob] | str:
     """Each window's reflector blob, or why one is not there (the first failing window).
 
     gray : (H, W) frame. Each window is thresholded at ``threshold_counts`` (the active
@@ -113,9 +126,13 @@ def find_in_windows(
     centres = np.array([w.centre_uv for w in windows], np.float64)
     diameters = np.array([w.diameter_px for w in windows], np.float64)
     status, bbox, peak, centroid, starts, flat = arithmetic.search_windows(
-        np.asarray(gray, np.float32), bounds, centres, diameters,
-        np.float32(threshold_counts), float(background_counts),
-    )  # fmt: skip
+        np.asarray(gray, np.float32),
+        bounds,
+        centres,
+        diameters,
+        np.float32(threshold_counts),
+        float(background_counts),
+    )
     for code in status.tolist():
         if code != FOUND:
             return _WHY_NOT[code]
@@ -129,16 +146,21 @@ def find_in_windows(
             centroid_uv=centroid[j],
             peak_counts=float(peak[j]),
             source="tracking",
-        )  # fmt: skip
+        )
         for j in range(len(windows))
     ]
 
 
 def find_in_window(
-    gray: np.ndarray, window: Window, threshold_counts: float, background_counts: float, *,
+    gray: np.ndarray,
+    window: Window,
+    threshold_counts: float,
+    background_counts: float,
+    *,
     arithmetic: TrackingArithmetic = COMPILED,
-) -> Blob | str:  # fmt: skip
+) -> Blob | str:
     """One window of ``find_in_windows``: the reflector's blob, or why it is not there."""
-    found = find_in_windows(gray, [window], threshold_counts, background_counts,
-                            arithmetic=arithmetic)  # fmt: skip
+    found = find_in_windows(
+        gray, [window], threshold_counts, background_counts, arithmetic=arithmetic
+    )
     return found if isinstance(found, str) else found[0]

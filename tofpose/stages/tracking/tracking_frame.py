@@ -49,10 +49,18 @@ class CompiledTracker:
     """Runs tracking frames through ``track_frame`` for one pipeline's camera, catalog,
     §5 and tracking settings, solver and persistence history."""
 
-    def __init__(self, camera: CameraModel, catalog: Catalog, config: SolveConfig,
-                 tracking: TrackingConfig, solver: PoseSolver, persistence: Persistence,
-                 correction: RangeCorrection | None = None, *,
-                 arithmetic: TrackingArithmetic = COMPILED) -> None:  # fmt: skip
+    def __init__(
+        self,
+        camera: CameraModel,
+        catalog: Catalog,
+        config: SolveConfig,
+        tracking: TrackingConfig,
+        solver: PoseSolver,
+        persistence: Persistence,
+        correction: RangeCorrection | None = None,
+        *,
+        arithmetic: TrackingArithmetic = COMPILED,
+    ) -> None:
         """``correction``: the camera's calibrated range correction, or None;
         ``arithmetic``: whose ``track_frame`` and ``camera_windows`` run the frames
         (``tofpose.arithmetic``)."""
@@ -69,12 +77,14 @@ class CompiledTracker:
         # kernels' records (``core.records``), built where the acquisition path builds them
         self._camera_args = (camera_record(camera), catalog_record(catalog))
         self._fit_args = (
-            config.correct_perspective_bias, float(config.mixed_pixel_radius_px),
+            config.correct_perspective_bias,
+            float(config.mixed_pixel_radius_px),
             correction_kernel_arguments(correction),
-            kernel_constants(SigmaFloors(config.centroid_sigma_floor_px,
-                                         config.range_sigma_floor_mm)),
+            kernel_constants(
+                SigmaFloors(config.centroid_sigma_floor_px, config.range_sigma_floor_mm)
+            ),
             fit_settings(config),
-        )  # fmt: skip
+        )
 
     def _offset_prior(self, track: TrackState, cat_idx: np.ndarray) -> RangeOffsetPrior:
         """The common range offset's prior for this frame: the solver's, for the ranges of
@@ -94,31 +104,83 @@ class CompiledTracker:
         tc = self.tracking
         arith = self._arithmetic
         cat_idx, bounds, centres, diameters = arith.camera_windows(
-            self._xyz, self._diameters, track.R, track.t_mm, cam.fx, cam.fy, cam.cx, cam.cy,
-            self._dist, float(tc.margin_px), float(tc.min_diameter_px), cam.width, cam.height,
-        )  # fmt: skip
+            self._xyz,
+            self._diameters,
+            track.R,
+            track.t_mm,
+            cam.fx,
+            cam.fy,
+            cam.cx,
+            cam.cy,
+            self._dist,
+            float(tc.margin_px),
+            float(tc.min_diameter_px),
+            cam.width,
+            cam.height,
+        )
         if len(cat_idx) < cfg.min_matches:
             return None
-        (code, n_used, motion, cent, flat, starts, uv, rho, sp, sr, y, w, uv_obs,
-         e_obs, y_obs, R, t, its, cov, chi2, norms, sr_fit, sb_fit, offset,
-         offset_sigma) = arith.track_frame(
-            g, d, bounds, centres, diameters, cat_idx, np.float32(track.threshold_counts),
-            float(track.background_counts), float(track.dark_counts),
-            self._persistence.history(g, d), *self._camera_args, *self._fit_args,
-            self._offset_prior(track, cat_idx), *self._persistence.scratch(g.shape),
-        )  # fmt: skip
+        (
+            code,
+            n_used,
+            motion,
+            cent,
+            flat,
+            starts,
+            uv,
+            rho,
+            sp,
+            sr,
+            y,
+            w,
+            uv_obs,
+            e_obs,
+            y_obs,
+            R,
+            t,
+            its,
+            cov,
+            chi2,
+            norms,
+            sr_fit,
+            sb_fit,
+            offset,
+            offset_sigma,
+        ) = arith.track_frame(
+            g,
+            d,
+            bounds,
+            centres,
+            diameters,
+            cat_idx,
+            np.float32(track.threshold_counts),
+            float(track.background_counts),
+            float(track.dark_counts),
+            self._persistence.history(g, d),
+            *self._camera_args,
+            *self._fit_args,
+            self._offset_prior(track, cat_idx),
+            *self._persistence.scratch(g.shape),
+        )
         if code != TRACKED:
             return None
         n = len(cat_idx)
         k_idx = np.arange(n)
         obs = MatchedObservations(
-            k_idx=k_idx, i_idx=cat_idx, x_mm=self._xyz[cat_idx], uv_px=uv_obs, bearings=e_obs,
-            range_mm=rho - offset, y_mm=y_obs - e_obs * offset, sigma_bearing_rad=sp / cam.fx,
+            k_idx=k_idx,
+            i_idx=cat_idx,
+            x_mm=self._xyz[cat_idx],
+            uv_px=uv_obs,
+            bearings=e_obs,
+            range_mm=rho - offset,
+            y_mm=y_obs - e_obs * offset,
+            sigma_bearing_rad=sp / cam.fx,
             sigma_range_mm=sr,
-        )  # fmt: skip
+        )
         active = ThresholdedFrame(g, track.threshold_counts)
-        solved = self._solver.conclude(obs, R, t, its, cov, chi2, norms, sr_fit, sb_fit,
-                                       active, offset, offset_sigma)  # fmt: skip
+        solved = self._solver.conclude(
+            obs, R, t, its, cov, chi2, norms, sr_fit, sb_fit, active, offset, offset_sigma
+        )
         if not isinstance(solved, Solution):
             return None
         if solved.ml.chi2 > cfg.outlier_chi2_per_dof * max(3 * n - 6, 1):

@@ -47,8 +47,12 @@ def test_rotation_from_correlation_recovers_an_exact_rotation():
     rng = np.random.default_rng(4)
     x = rng.normal(0.0, 100.0, (6, 3))
     xc = x - x.mean(axis=0)
-    for R_true in [np.diag([1.0, -1.0, -1.0]), np.diag([-1.0, -1.0, 1.0]), np.eye(3),
-                   Rotation.from_rotvec([0.3, -2.0, 1.1]).as_matrix()]:  # fmt: skip
+    for R_true in [
+        np.diag([1.0, -1.0, -1.0]),
+        np.diag([-1.0, -1.0, 1.0]),
+        np.eye(3),
+        Rotation.from_rotvec([0.3, -2.0, 1.1]).as_matrix(),
+    ]:
         S = xc.T @ (xc @ R_true.T)
         np.testing.assert_allclose(sm.rotation_from_correlation(S), R_true, atol=1e-12)
 
@@ -63,8 +67,9 @@ def test_cholesky_solves_and_inverts_the_normal_equations():
         np.testing.assert_allclose(sm.transposed_times(J, r), J.T @ r, rtol=1e-12, atol=1e-12)
         L, ok = sm.cholesky(H)
         assert ok
-        np.testing.assert_allclose(sm.cholesky_solve(L, J.T @ r), np.linalg.solve(H, J.T @ r),
-                                   rtol=1e-9)  # fmt: skip
+        np.testing.assert_allclose(
+            sm.cholesky_solve(L, J.T @ r), np.linalg.solve(H, J.T @ r), rtol=1e-9
+        )
         inv = sm.cholesky_inverse(L)
         np.testing.assert_allclose(inv, np.linalg.inv(H), rtol=1e-9, atol=1e-15)
         assert np.array_equal(inv, inv.T)

@@ -22,10 +22,12 @@ def test_a_pinhole_projects_by_similar_triangles_and_back_projects_to_the_point(
 @pytest.mark.parametrize("dist", [np.zeros(5), LENS])
 def test_bearings_are_unit_lines_of_sight_through_the_projected_points(dist):
     rng = np.random.default_rng(4)
-    p = np.column_stack((rng.uniform(-500, 500, 50), rng.uniform(-400, 400, 50),
-                         rng.uniform(1000, 6000, 50)))  # fmt: skip
+    p = np.column_stack(
+        (rng.uniform(-500, 500, 50), rng.uniform(-400, 400, 50), rng.uniform(1000, 6000, 50))
+    )
     e = reference.bearings(reference.project(p, K, dist), K, dist)
     np.testing.assert_allclose(np.linalg.norm(e, axis=1), 1.0, atol=1e-14)
     # undistortPoints' five fixed-point iterations leave ~1e-6 of this lens's distortion
-    np.testing.assert_allclose(e, p / np.linalg.norm(p, axis=1, keepdims=True),
-                               atol=1e-12 if not dist.any() else 2e-5)  # fmt: skip
+    np.testing.assert_allclose(
+        e, p / np.linalg.norm(p, axis=1, keepdims=True), atol=1e-12 if not dist.any() else 2e-5
+    )

@@ -12,8 +12,22 @@ def recording(tmp_path_factory):
     """An 8-frame simulated recording with /truth and /lab_truth (the realistic scene:
     blobs rejected by gates, an unmatched candidate and one frame without a pose)."""
     path = tmp_path_factory.mktemp("rec") / "rec.h5"
-    assert main(["simulate", "--scenario", "realistic", "--frames", "8",
-                 "--out", str(path), "--seed", "3"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                "realistic",
+                "--frames",
+                "8",
+                "--out",
+                str(path),
+                "--seed",
+                "3",
+            ]
+        )
+        == 0
+    )
     return path
 
 

@@ -173,8 +173,9 @@ def test_reflectors_and_overlay_show_the_matches(contents, results):
     ):
         names = [f.name for f in cloud.fields]
         assert names[:3] == ["x", "y", "z"] and "id" in names
-        dtype = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("id", "<u4"),
-                          ("residual_mm", "<f4")])  # fmt: skip
+        dtype = np.dtype(
+            [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("id", "<u4"), ("residual_mm", "<f4")]
+        )
         assert cloud.point_stride == dtype.itemsize
         pts = np.frombuffer(cloud.data, dtype)
         assert pts["id"].tolist() == [m.catalog_id for m in r.matched]
@@ -183,7 +184,7 @@ def test_reflectors_and_overlay_show_the_matches(contents, results):
         assert len(ann.circles) == len(r.matched) + len(r.unmatched) + len(r.rejected)
         labels = [t.text for t in ann.texts]
         assert labels[: len(r.matched)] == [str(m.catalog_id) for m in r.matched]
-        assert labels[len(r.matched):] == [rb.reason for rb in r.rejected]
+        assert labels[len(r.matched) :] == [rb.reason for rb in r.rejected]
         for c, m in zip(ann.circles[: len(r.matched)], r.matched, strict=True):
             # Foxglove's image origin is the top-left corner of the top-left pixel
             assert (c.position.x, c.position.y) == pytest.approx(tuple(m.centroid_uv + 0.5))

@@ -20,8 +20,9 @@ from tofpose.io.recording import open_recording
 def datasets(path) -> dict[str, np.ndarray]:
     out = {}
     with h5py.File(path, "r") as f:
-        f.visititems(lambda n, o: out.__setitem__(n, o[...]) if isinstance(o, h5py.Dataset)
-                     else None)  # fmt: skip
+        f.visititems(
+            lambda n, o: out.__setitem__(n, o[...]) if isinstance(o, h5py.Dataset) else None
+        )
         attrs = {k: f["camera"].attrs[k] for k in f["camera"].attrs}
         catalog = f["catalog"].attrs["json"] if "catalog" in f else None
     return out, attrs, catalog
@@ -32,15 +33,27 @@ def test_round_trip_is_exact_and_gives_the_same_poses(recording, exported, tmp_p
     assert main(["import", "mcap", str(exported), "--out", str(back)]) == 0
     a, cam_a, cat_a = datasets(recording)
     b, cam_b, cat_b = datasets(back)
-    assert sorted(a) == sorted(b) == sorted([
-        "frames/gray", "frames/distance_mm", "frames/time_s", "truth/R_camera_target",
-        "truth/t_camera_target_mm", "lab_truth/R_camera_target", "lab_truth/t_camera_target_mm",
-    ])  # fmt: skip
+    assert (
+        sorted(a)
+        == sorted(b)
+        == sorted(
+            [
+                "frames/gray",
+                "frames/distance_mm",
+                "frames/time_s",
+                "truth/R_camera_target",
+                "truth/t_camera_target_mm",
+                "lab_truth/R_camera_target",
+                "lab_truth/t_camera_target_mm",
+            ]
+        )
+    )
     for name in a:
         assert a[name].dtype == b[name].dtype, name
         np.testing.assert_array_equal(a[name], b[name], strict=True, err_msg=name)
     assert {k: np.asarray(v).tolist() for k, v in cam_a.items()} == {
-        k: np.asarray(v).tolist() for k, v in cam_b.items()}  # fmt: skip
+        k: np.asarray(v).tolist() for k, v in cam_b.items()
+    }
     assert cat_a == cat_b
     # the poses of the re-processed import are those of the source, to the last digit
     csv_a, csv_b = tmp_path / "a.csv", tmp_path / "b.csv"
@@ -53,8 +66,9 @@ def test_round_trip_is_exact_and_gives_the_same_poses(recording, exported, tmp_p
 def _foreign_mcap(path, n=3, bad_frame=None):
     """An MCAP written by another tool: its own topics, distance in metres (Foxglove's
     32FC1 convention), a CameraCalibration, no tofpose metadata."""
-    camera = CameraModel(width=8, height=6, fx=10.0, fy=11.0, cx=3.5, cy=2.5,
-                         dist=(0.1, -0.01, 0.0, 0.0, 0.0))  # fmt: skip
+    camera = CameraModel(
+        width=8, height=6, fx=10.0, fy=11.0, cx=3.5, cy=2.5, dist=(0.1, -0.01, 0.0, 0.0, 0.0)
+    )
     ctx = foxglove.Context()
     gray_ch = RawImageChannel("/cam/amplitude", context=ctx)
     depth_ch = RawImageChannel("/cam/depth", context=ctx)
@@ -72,13 +86,30 @@ def _foreign_mcap(path, n=3, bad_frame=None):
             depth_m[0, 0] = np.nan
             truth.append((gray, depth_m, ns))
             calib_ch.log(camera_calibration(camera, ts), log_time=ns)
-            gray_ch.log(fm.RawImage(timestamp=ts, frame_id="cam", width=gray.shape[1],
-                                    height=6, encoding="16UC1", step=2 * gray.shape[1],
-                                    data=gray.tobytes()),
-                        log_time=ns)  # fmt: skip
-            depth_ch.log(fm.RawImage(timestamp=ts, frame_id="cam", width=8, height=6,
-                                     encoding="32FC1", step=32, data=depth_m.tobytes()),
-                         log_time=ns)  # fmt: skip
+            gray_ch.log(
+                fm.RawImage(
+                    timestamp=ts,
+                    frame_id="cam",
+                    width=gray.shape[1],
+                    height=6,
+                    encoding="16UC1",
+                    step=2 * gray.shape[1],
+                    data=gray.tobytes(),
+                ),
+                log_time=ns,
+            )
+            depth_ch.log(
+                fm.RawImage(
+                    timestamp=ts,
+                    frame_id="cam",
+                    width=8,
+                    height=6,
+                    encoding="32FC1",
+                    step=32,
+                    data=depth_m.tobytes(),
+                ),
+                log_time=ns,
+            )
     return camera, truth
 
 
@@ -88,8 +119,9 @@ def test_an_mcap_from_elsewhere_imports_from_its_own_topics(tmp_path):
     with pytest.raises(McapImportError, match=r"/cam/amplitude.*--gray-topic"):
         import_mcap(src, tmp_path / "x.h5", progress=False)
     out = tmp_path / "foreign.h5"
-    s = import_mcap(src, out, gray_topic="/cam/amplitude", distance_topic="/cam/depth",
-                    progress=False)  # fmt: skip
+    s = import_mcap(
+        src, out, gray_topic="/cam/amplitude", distance_topic="/cam/depth", progress=False
+    )
     assert s == {"frames": 3}
     with open_recording(out) as rec:
         assert rec.camera.to_dict() == {**camera.to_dict(), "name": "mcap"}
@@ -127,7 +159,13 @@ def test_a_bad_frame_part_way_leaves_the_existing_output_alone(tmp_path):
     keep = tmp_path / "keep.h5"
     keep.write_bytes(b"precious")
     with pytest.raises(McapImportError, match=r"at log time \d+ ns: images \(6, 6\)"):
-        import_mcap(src, keep, gray_topic="/cam/amplitude", distance_topic="/cam/depth",
-                    progress=False, overwrite=True)  # fmt: skip
+        import_mcap(
+            src,
+            keep,
+            gray_topic="/cam/amplitude",
+            distance_topic="/cam/depth",
+            progress=False,
+            overwrite=True,
+        )
     assert keep.read_bytes() == b"precious"
     assert not list(tmp_path.glob("*.partial"))

@@ -15,9 +15,14 @@ def test_the_analytic_jacobian_is_the_model_derivative():
     p = np.array([13.0, 11.5, 18.0, 12.0, 1500.0, 1800.0, 2.1, 0.7, 100.0])
     jac = np.empty((30, 9))
     pair_model(p, su, sv, values, jac)  # the reference's model and analytic Jacobian
-    numeric = np.array([approx_fprime(p, lambda q, i=i: pair_model(q, su, sv, values,
-                                                                   np.empty((30, 9)))[i],
-                                      1e-6) for i in range(30)])  # fmt: skip
+    numeric = np.array(
+        [
+            approx_fprime(
+                p, lambda q, i=i: pair_model(q, su, sv, values, np.empty((30, 9)))[i], 1e-6
+            )
+            for i in range(30)
+        ]
+    )
     np.testing.assert_allclose(jac, numeric, atol=1e-4 * np.abs(numeric).max())
 
 

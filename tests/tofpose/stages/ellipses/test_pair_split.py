@@ -31,9 +31,12 @@ def _component(img, threshold):
     """The above-threshold pixels as one Blob."""
     rows, cols = np.nonzero(img >= threshold)
     w = img.shape[1]
-    return Blob(pixels=rows * w + cols, area_px=len(rows),
-                bbox=(int(cols.min()), int(rows.min()), int(np.ptp(cols) + 1),
-                      int(np.ptp(rows) + 1)), distance_mm=6000.0)  # fmt: skip
+    return Blob(
+        pixels=rows * w + cols,
+        area_px=len(rows),
+        bbox=(int(cols.min()), int(rows.min()), int(np.ptp(cols) + 1), int(np.ptp(rows) + 1)),
+        distance_mm=6000.0,
+    )
 
 
 def _centroid(img, blob):

@@ -187,8 +187,14 @@ def test_blob_with_values_is_dataclasses_replace():
 
     from tofpose.stages.extraction.extraction import Blob
 
-    b = Blob(pixels=np.arange(5), area_px=5, bbox=(1, 2, 3, 4), peak_counts=900.0,
-             ellipse=((1.0, 2.0), (3.0, 2.5), 10.0), source="ellipse")  # fmt: skip
+    b = Blob(
+        pixels=np.arange(5),
+        area_px=5,
+        bbox=(1, 2, 3, 4),
+        peak_counts=900.0,
+        ellipse=((1.0, 2.0), (3.0, 2.5), 10.0),
+        source="ellipse",
+    )
     changes = {"centroid_uv": np.array([3.5, 4.5]), "distance_mm": 1234.5}
     got, want = b.with_values(**changes), replace(b, **changes)
     assert type(got) is Blob and got is not b

@@ -30,8 +30,11 @@ def test_small_markers_on_a_grey_plate_have_their_own_range():
         pipe.reset()
         r = pipe.process(f.gray, f.distance_mm)
         assert r.ok, r.reason
-        errors += [m.range_error_mm for m in marker_errors(r, true_images(cam, cat, T), cat, 0)
-                   if m.correct and m.diameter_mm == 35.0]  # fmt: skip
+        errors += [
+            m.range_error_mm
+            for m in marker_errors(r, true_images(cam, cat, T), cat, 0)
+            if m.correct and m.diameter_mm == 35.0
+        ]
     assert len(errors) >= 48
     assert abs(np.median(errors)) < 1.0, np.median(errors)
 

@@ -23,9 +23,12 @@ def test_sampling_sigma_is_one_pixel_uniform_for_one_pixel_and_falls_with_size()
 
 def _square_blob(u0: int, v0: int, side: int, width: int) -> Blob:
     rows, cols = np.mgrid[v0 : v0 + side, u0 : u0 + side]
-    return Blob(pixels=(rows * width + cols).ravel(), area_px=side * side,
-                bbox=(u0, v0, side, side),
-                centroid_uv=np.array([u0 + (side - 1) / 2, v0 + (side - 1) / 2]))  # fmt: skip
+    return Blob(
+        pixels=(rows * width + cols).ravel(),
+        area_px=side * side,
+        bbox=(u0, v0, side, side),
+        centroid_uv=np.array([u0 + (side - 1) / 2, v0 + (side - 1) / 2]),
+    )
 
 
 def test_few_pixel_blob_takes_the_range_noise_the_frame_pools_from_larger_blobs():

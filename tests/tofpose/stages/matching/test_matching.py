@@ -100,8 +100,9 @@ def test_size_term_decides_a_mirror_symmetric_target(seed):
     y = (cat @ R.T + np.array([20.0, 10.0, 3000.0]) + rng.normal(0, 1.0, (4, 3)))[perm]
     seen_diam = diam[perm] * rng.uniform(0.9, 1.1, 4)
     truth = {k: int(perm[k]) for k in range(4)}
-    res = match_reflectors(y, cat, MatchingConfig(), observed_diameter_mm=seen_diam,
-                           catalog_diameter_mm=diam)  # fmt: skip
+    res = match_reflectors(
+        y, cat, MatchingConfig(), observed_diameter_mm=seen_diam, catalog_diameter_mm=diam
+    )
     assert res.ok and {int(k): int(i) for k, i in res.pairs} == truth
 
 
@@ -164,10 +165,16 @@ def test_ransac_to_confidence_stops_early_and_finds_the_markers():
     observed = observed[order]
     stats: dict = {}
     pairs = match_by_triplets(
-        observed, cat, 15.0, np.full(len(observed), 15.0), None,
-        max_observed=len(observed), observed_triplets=random_triplets(len(observed), rng),
-        confidence=0.99, stats=stats,
-    )  # fmt: skip
+        observed,
+        cat,
+        15.0,
+        np.full(len(observed), 15.0),
+        None,
+        max_observed=len(observed),
+        observed_triplets=random_triplets(len(observed), rng),
+        confidence=0.99,
+        stats=stats,
+    )
     assert stats["triplets"] < 60  # log(0.01) / log(1 - 56/364) = 28 once all 8 are found
     truth = {int(np.flatnonzero(order == i)[0]): i for i in range(len(cat))}
     assert {int(k): int(i) for k, i in pairs} == truth

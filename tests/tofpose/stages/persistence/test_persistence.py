@@ -9,8 +9,9 @@ from tofpose.stages.persistence.persistence import Persistence
 from tofpose.stages.persistence.reference.persistence import History
 
 H, W = 40, 60
-CAM = CameraModel(width=W, height=H, fx=60.0, fy=60.0, cx=29.5, cy=19.5,
-                  dist=(-0.05, 0.01, 0.0, 0.0, 0.0))  # fmt: skip
+CAM = CameraModel(
+    width=W, height=H, fx=60.0, fy=60.0, cx=29.5, cy=19.5, dist=(-0.05, 0.01, 0.0, 0.0, 0.0)
+)
 
 
 def _frame(cx, cy, level=1000.0, rng=None, r=4):
@@ -21,8 +22,12 @@ def _frame(cx, cy, level=1000.0, rng=None, r=4):
     if rng is not None:
         d = d + rng.normal(0, 5, d.shape).astype(np.float32)
     idx = np.flatnonzero(inside)
-    b = Blob(pixels=idx, area_px=len(idx), bbox=(cx - r, cy - r, 2 * r + 1, 2 * r + 1),
-             centroid_uv=np.array([cx, cy], float))  # fmt: skip
+    b = Blob(
+        pixels=idx,
+        area_px=len(idx),
+        bbox=(cx - r, cy - r, 2 * r + 1, 2 * r + 1),
+        centroid_uv=np.array([cx, cy], float),
+    )
     return [b], g, d
 
 
@@ -78,13 +83,16 @@ def test_the_compiled_combination_is_the_reference_statement():
     stream.append(([replace(blobs[0], centroid_uv=np.full(2, np.nan))], g, d))
     stream += [_frame(27, 22, rng=rng) for _ in range(3)]
     cfg = PersistenceConfig(k_frames=4, c_min=2)
-    compiled, reference = Persistence(cfg), History(cfg.k_frames, cfg.c_min,
-                                                    cfg.motion_tolerance_px)  # fmt: skip
+    compiled, reference = (
+        Persistence(cfg),
+        History(cfg.k_frames, cfg.c_min, cfg.motion_tolerance_px),
+    )
     seen_drop = seen_motion = seen_combined = False
     for blobs, g, d in stream:
         got, got_g, got_d, info = compiled.measure(blobs, g, d, CAM, 10.0)
-        want = reference.combine([b.pixels for b in blobs],
-                                 np.array([b.centroid_uv for b in blobs]), g, d)  # fmt: skip
+        want = reference.combine(
+            [b.pixels for b in blobs], np.array([b.centroid_uv for b in blobs]), g, d
+        )
         assert (info.frames_used, info.motion) == (want.frames_used, want.motion)
         assert [b.pixels.tolist() for b in got] == [
             b.pixels.tolist() for b, k in zip(blobs, want.keep, strict=True) if k
@@ -93,8 +101,9 @@ def test_the_compiled_combination_is_the_reference_statement():
             box = np.s_[max(y - 2, 0) : y + bh + 2, max(x - 2, 0) : x + bw + 2]
             np.testing.assert_array_equal(got_g[box], want.mean_gray[box])
         for b in got:
-            np.testing.assert_array_equal(got_d.ravel()[b.pixels],
-                                          want.median_distance.ravel()[b.pixels])  # fmt: skip
+            np.testing.assert_array_equal(
+                got_d.ravel()[b.pixels], want.median_distance.ravel()[b.pixels]
+            )
         seen_drop |= info.dropped_blobs > 0
         seen_motion |= info.motion
         seen_combined |= info.frames_used == cfg.k_frames

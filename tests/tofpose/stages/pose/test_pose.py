@@ -142,11 +142,16 @@ def test_excess_sigmas_go_to_the_kind_of_measurement_that_has_them(
     ranges: the range component takes that (~2 mm), where one range sigma for all
     residuals had to reach its 200 mm cap (lateral errors of ~1 mm at 3 m over a 0.03 mm
     model)."""
-    estimates = np.array([
-        systematic_sigmas(*_noisy_observations(s, bearing_sigma_rad, range_sigma_mm),
-                          max_range_mm=200.0, max_bearing_rad=0.1)
-        for s in range(40)
-    ])  # fmt: skip
+    estimates = np.array(
+        [
+            systematic_sigmas(
+                *_noisy_observations(s, bearing_sigma_rad, range_sigma_mm),
+                max_range_mm=200.0,
+                max_bearing_rad=0.1,
+            )
+            for s in range(40)
+        ]
+    )
     er, eb = np.median(estimates, axis=0)
     if bearing_sigma_rad > 0:
         assert er < 5.0  # mm, of a 200 mm cap
@@ -158,8 +163,7 @@ def test_excess_sigmas_go_to_the_kind_of_measurement_that_has_them(
 
 def test_excess_sigmas_stop_at_what_the_sensor_can_do():
     x, e, rho, R, t, sr, sb = _noisy_observations(3, 3e-3, 60.0)
-    er, eb = systematic_sigmas(x, e, rho, R, t, sr, sb, max_range_mm=25.0,
-                               max_bearing_rad=5e-4)  # fmt: skip
+    er, eb = systematic_sigmas(x, e, rho, R, t, sr, sb, max_range_mm=25.0, max_bearing_rad=5e-4)
     assert (er, eb) == (25.0, 5e-4)
     assert systematic_sigmas(x, e, rho, R, t, sr, sb, 25.0, 5e-4) == (er, eb)
 
@@ -225,11 +229,13 @@ def test_an_image_scale_error_is_not_read_as_a_range_offset():
     sr, sb = np.full(len(x), 1.0), np.full(len(x), 2e-5)
     R0, t0 = weighted_absolute_orientation(x, e * rho_measured[:, None])
     ml = refine_maximum_likelihood(x, e, rho_measured, R0, t0, sr, sb)
-    naive, naive_sigma = common_range_offset(x, e, rho_measured, ml.R, ml.t, sr, sb,
-                                             RangeOffsetPrior(8.0, 0.0, 0.0))  # fmt: skip
+    naive, naive_sigma = common_range_offset(
+        x, e, rho_measured, ml.R, ml.t, sr, sb, RangeOffsetPrior(8.0, 0.0, 0.0)
+    )
     assert abs(naive) > 10 * naive_sigma and abs(naive) > 5.0
-    offset, sigma = common_range_offset(x, e, rho_measured, ml.R, ml.t, sr, sb,
-                                        RangeOffsetPrior(8.0, 0.005, 0.0))  # fmt: skip
+    offset, sigma = common_range_offset(
+        x, e, rho_measured, ml.R, ml.t, sr, sb, RangeOffsetPrior(8.0, 0.005, 0.0)
+    )
     assert abs(offset) < 3 * sigma
     assert sigma > 0.3 * 0.005 * np.linalg.norm(t)
 
@@ -240,8 +246,14 @@ def test_the_image_scale_prior_adds_the_centroid_bias_over_the_pattern_radius():
     from tofpose.stages.pose.kernels.pose import RangeOffsetPrior, pattern_scale_sigma
 
     a = 0.01
-    e = np.array([[np.sin(a), 0, np.cos(a)], [-np.sin(a), 0, np.cos(a)],
-                  [0, np.sin(a), np.cos(a)], [0, -np.sin(a), np.cos(a)]])  # fmt: skip
+    e = np.array(
+        [
+            [np.sin(a), 0, np.cos(a)],
+            [-np.sin(a), 0, np.cos(a)],
+            [0, np.sin(a), np.cos(a)],
+            [0, -np.sin(a), np.cos(a)],
+        ]
+    )
     sigma, mean = pattern_scale_sigma(e, RangeOffsetPrior(8.0, 0.002, 1e-4))
     assert mean == pytest.approx([0, 0, 1])
     assert sigma == pytest.approx(np.hypot(0.002, 1e-4 / np.sin(a)), rel=1e-9)
@@ -280,8 +292,9 @@ def test_per_size_scale_errors_give_the_covariance_the_pose_errors_have():
         rho_m = rho + rng.normal(0, sr_mm, len(x))
         ml = refine_maximum_likelihood(x, e, rho_m, R, t, sr, sb)
         err = np.concatenate([Rotation.from_matrix(ml.R @ R.T).as_rotvec(), ml.t - t])
-        extra = class_scale_covariance(x, e, rho_m, ml.R, ml.t, sr, sb, size, 2, bias_rad,
-                                       focal_rel)  # fmt: skip
+        extra = class_scale_covariance(
+            x, e, rho_m, ml.R, ml.t, sr, sb, size, 2, bias_rad, focal_rel
+        )
         d2["with"].append(err @ np.linalg.solve(ml.covariance + extra, err))
         d2["without"].append(err @ np.linalg.solve(ml.covariance, err))
     assert np.mean(d2["with"]) == pytest.approx(6.0, rel=0.2)
@@ -388,8 +401,10 @@ def test_a_biased_marker_that_alone_fixes_the_tilt_is_caught_by_the_leave_one_ou
             env = covariance_envelope(
                 ml.covariance, leave_one_out_covariance(x, e_b, rho, ml.R, ml.t, sr, sb)
             )
-            fits[biased] = (err @ np.linalg.solve(ml.covariance, err),
-                            err @ np.linalg.solve(env, err))  # fmt: skip
+            fits[biased] = (
+                err @ np.linalg.solve(ml.covariance, err),
+                err @ np.linalg.solve(env, err),
+            )
         d2["model"].append(fits[True][0])
         d2["envelope"].append(fits[True][1])
         clean["model"].append(fits[False][0])

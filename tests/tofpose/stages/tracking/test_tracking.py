@@ -20,8 +20,9 @@ TRACKING = PipelineConfig(tracking=TrackingConfig(enabled=True))
 def test_windows_sit_on_the_predicted_reflectors_and_skip_merging_ones():
     cam, cat = CameraModel(), paper_target()
     T = facing_pose(3000.0, 2, -3, 10)
-    ws = predict_windows(cam, cat.positions_mm, cat.diameters_mm, T.R, T.t_mm,
-                         margin_px=4.0, min_diameter_px=1.0)  # fmt: skip
+    ws = predict_windows(
+        cam, cat.positions_mm, cat.diameters_mm, T.R, T.t_mm, margin_px=4.0, min_diameter_px=1.0
+    )
     uv = cam.project(T.apply(cat.positions_mm))
     assert len(ws) == 8
     for w in ws:
@@ -29,9 +30,18 @@ def test_windows_sit_on_the_predicted_reflectors_and_skip_merging_ones():
         assert w.u0 <= uv[w.catalog_index, 0] < w.u1 and w.v0 <= uv[w.catalog_index, 1] < w.v1
         assert w.u1 - w.u0 >= w.diameter_px + 8
     far = facing_pose(8000.0)
-    ids = {int(cat.ids[w.catalog_index]) for w in predict_windows(
-        cam, cat.positions_mm, cat.diameters_mm, far.R, far.t_mm,
-        margin_px=4.0, min_diameter_px=1.0)}  # fmt: skip
+    ids = {
+        int(cat.ids[w.catalog_index])
+        for w in predict_windows(
+            cam,
+            cat.positions_mm,
+            cat.diameters_mm,
+            far.R,
+            far.t_mm,
+            margin_px=4.0,
+            min_diameter_px=1.0,
+        )
+    }
     assert 7 not in ids and 8 not in ids and len(ids) == 6  # 7 and 8 merge at 8 m
 
 
@@ -48,8 +58,9 @@ def test_find_in_window_takes_the_disc_and_says_why_not():
     assert "edge" in find_in_window(gray, shifted, 500.0, 0.0)
 
 
-@pytest.mark.parametrize(("z", "offset"), [(700.0, (-110.0, -55.0)), (3000.0, (0.0, -30.0)),
-                                         (5712.0, (2.0, -10.0))])  # fmt: skip
+@pytest.mark.parametrize(
+    ("z", "offset"), [(700.0, (-110.0, -55.0)), (3000.0, (0.0, -30.0)), (5712.0, (2.0, -10.0))]
+)
 def test_tracking_gives_the_acquisition_pose_within_its_sigma(z, offset):
     """The same static stream with tracking off and on: after the first (acquisition)
     frame tracking takes over, and each pose differs from acquisition's by less than its
@@ -87,8 +98,18 @@ def test_tracking_recovers_after_the_target_jumps_and_is_never_stale():
         assert rotation_angle_deg(r.R, T.R) < 0.3 and np.linalg.norm(r.t_mm - T.t_mm) < 3.0
         modes.append(r.mode)
     # the frame after each jump is measured afresh, the ones after it tracked again
-    assert modes == ["acquisition", "tracking", "tracking", "tracking", "acquisition",
-                     "tracking", "tracking", "tracking", "acquisition", "tracking"]  # fmt: skip
+    assert modes == [
+        "acquisition",
+        "tracking",
+        "tracking",
+        "tracking",
+        "acquisition",
+        "tracking",
+        "tracking",
+        "tracking",
+        "acquisition",
+        "tracking",
+    ]
 
 
 def test_a_slewing_target_is_tracked_frame_by_frame():
@@ -110,8 +131,9 @@ def test_acquisition_again_every_reacquire_every_frames():
     cfg = PipelineConfig(tracking=TrackingConfig(enabled=True, reacquire_every=4))
     pipe = PosePipeline(cam, cat, cfg)
     T = facing_pose(2000.0, 1, 2, 3)
-    modes = [pipe.process(*(lambda f: (f.gray, f.distance_mm))(render(T, seed=s))).mode
-             for s in range(9)]  # fmt: skip
+    modes = [
+        pipe.process(*(lambda f: (f.gray, f.distance_mm))(render(T, seed=s))).mode for s in range(9)
+    ]
     assert modes == ["acquisition", "tracking", "tracking", "tracking"] * 2 + ["acquisition"]
 
 

@@ -47,21 +47,34 @@ def _windows_numpy(cam, xyz, diameters, T, margin_px, min_diameter_px):
 
 
 @pytest.mark.parametrize("cam", [CameraModel(), LENS], ids=["pinhole", "distorted"])
-@pytest.mark.parametrize(("z", "offset"), [(700.0, (60.0, -40.0)), (3000.0, (-120.0, 40.0)),
-                                         (8000.0, (-120.0, 40.0))])  # fmt: skip
+@pytest.mark.parametrize(
+    ("z", "offset"), [(700.0, (60.0, -40.0)), (3000.0, (-120.0, 40.0)), (8000.0, (-120.0, 40.0))]
+)
 def test_camera_windows_are_the_window_rule(cam, z, offset):
     cat = paper_target()
     T = facing_pose(z, 3, -4, 20, offset_mm=offset)
     want = _windows_numpy(cam, cat.positions_mm, cat.diameters_mm, T, 4.0, 1.0)
-    got = predict_windows(cam, cat.positions_mm, cat.diameters_mm, T.R, T.t_mm,
-                          margin_px=4.0, min_diameter_px=1.0)  # fmt: skip
+    got = predict_windows(
+        cam, cat.positions_mm, cat.diameters_mm, T.R, T.t_mm, margin_px=4.0, min_diameter_px=1.0
+    )
     assert [(w.catalog_index, w.u0, w.u1, w.v0, w.v1) for w in got] == [
         (w.catalog_index, w.u0, w.u1, w.v0, w.v1) for w in want
     ]
     idx, bounds, centres, diam = camera_windows(
-        cat.positions_mm, cat.diameters_mm, T.R, T.t_mm, cam.fx, cam.fy, cam.cx, cam.cy,
-        cam.dist_array, 4.0, 1.0, cam.width, cam.height,
-    )  # fmt: skip
+        cat.positions_mm,
+        cat.diameters_mm,
+        T.R,
+        T.t_mm,
+        cam.fx,
+        cam.fy,
+        cam.cx,
+        cam.cy,
+        cam.dist_array,
+        4.0,
+        1.0,
+        cam.width,
+        cam.height,
+    )
     assert idx.tolist() == [w.catalog_index for w in want] and len(want) >= 3
     assert bounds.tolist() == [[w.u0, w.u1, w.v0, w.v1] for w in want]
     np.testing.assert_allclose(centres, [w.centre_uv for w in want], atol=1e-9)
@@ -107,19 +120,25 @@ def _stream():
 #: a calibrated range correction with every term of the model (offsets of a few mm, as
 #: a real camera's calibration gives)
 CORRECTION = RangeCorrection(
-    SensorModel().unambiguous_range_mm, offset_mm=3.0, harmonics_mm=((2.0, -1.5), (0.5, 0.3)),
+    SensorModel().unambiguous_range_mm,
+    offset_mm=3.0,
+    harmonics_mm=((2.0, -1.5), (0.5, 0.3)),
     amplitude_mm_per_decade=1.5,
     pixel_offsets_mm=np.random.default_rng(7).normal(0.0, 2.0, CameraModel().shape),
-)  # fmt: skip
+)
 
 
 @pytest.mark.parametrize(
     ("cam", "persistence", "correction"),
-    [(CameraModel(), PersistenceConfig(), None), (CameraModel(), PersistenceConfig(1, 1), None),
-     (CameraModel(), PersistenceConfig(3, 3), None), (LENS, PersistenceConfig(), None),
-     (CameraModel(), PersistenceConfig(), CORRECTION)],
+    [
+        (CameraModel(), PersistenceConfig(), None),
+        (CameraModel(), PersistenceConfig(1, 1), None),
+        (CameraModel(), PersistenceConfig(3, 3), None),
+        (LENS, PersistenceConfig(), None),
+        (CameraModel(), PersistenceConfig(), CORRECTION),
+    ],
     ids=["K=5", "K=1", "K=3,C=3", "distorted", "range-corrected"],
-)  # fmt: skip
+)
 def test_each_tracked_pose_is_the_reference_fit_of_its_own_measurements(
     cam, persistence, correction
 ):
@@ -130,8 +149,9 @@ def test_each_tracked_pose_is_the_reference_fit_of_its_own_measurements(
     from tofpose.stages.pose.reference.pose import ml_refine
 
     cat = paper_target()
-    cfg = replace(TRACKING, persistence=persistence, adapt_range_sigma=False,
-                  estimate_range_offset=False)  # fmt: skip
+    cfg = replace(
+        TRACKING, persistence=persistence, adapt_range_sigma=False, estimate_range_offset=False
+    )
     pipe = PosePipeline(cam, cat, cfg, range_correction=correction)
     xyz = dict(zip(cat.ids, cat.positions_mm, strict=True))
     modes = []
@@ -158,8 +178,7 @@ def test_each_tracked_pose_is_the_reference_fit_of_its_own_measurements(
     # fit cannot absorb its made-up errors here without the frame's sigma estimate)
     assert modes.count("tracking") >= (5 if correction is not None else 10)
     pairs = zip(modes[:-1], modes[1:], strict=True)
-    assert correction is not None or any(p == "tracking" and m == "acquisition"
-                                         for p, m in pairs)  # fmt: skip
+    assert correction is not None or any(p == "tracking" and m == "acquisition" for p, m in pairs)
 
 
 def test_range_offsets_of_another_image_size_are_refused():

@@ -110,8 +110,9 @@ def _normal_equations(res, jac):
 
 
 @jit
-def fit_pair_lm(su, sv, values, start, lower, upper, max_iterations, centre_tolerance_px,
-                cost_tolerance):
+def fit_pair_lm(
+    su, sv, values, start, lower, upper, max_iterations, centre_tolerance_px, cost_tolerance
+):
     """Levenberg-Marquardt (Marquardt's diagonal scaling) from ``start`` (9,) inside the
     box ``lower``..``upper`` (9,): each step is clipped to the box (a projected step).
     Returns (p (9,), J^T J (9, 9) at p, r^T r at p, converged): converged when the next

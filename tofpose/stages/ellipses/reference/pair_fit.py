@@ -61,8 +61,9 @@ def _normal_equations(res, jac):
     return jac.T @ jac, jac.T @ res, float(res @ res)
 
 
-def fit_pair_lm(su, sv, values, start, lower, upper, max_iterations, centre_tolerance_px,
-                cost_tolerance):  # fmt: skip
+def fit_pair_lm(
+    su, sv, values, start, lower, upper, max_iterations, centre_tolerance_px, cost_tolerance
+):
     """The least-squares fit of ``pair_model`` from ``start`` (9,) clipped into the box
     ``lower``..``upper`` (9,), by SciPy's bounded trust-region reflective
     ``least_squares`` (analytic Jacobian, Jacobian scaling, at most ``max_iterations``
@@ -83,10 +84,17 @@ def fit_pair_lm(su, sv, values, start, lower, upper, max_iterations, centre_tole
         pair_model(p, su, sv, values, jac)
         return jac
 
-    fit = least_squares(residuals, np.clip(start, lower, upper), jac=jacobian,
-                        bounds=(lower, upper), x_scale="jac", ftol=cost_tolerance,
-                        xtol=FIT_TOLERANCE, gtol=FIT_TOLERANCE,
-                        max_nfev=max_iterations)  # fmt: skip
+    fit = least_squares(
+        residuals,
+        np.clip(start, lower, upper),
+        jac=jacobian,
+        bounds=(lower, upper),
+        x_scale="jac",
+        ftol=cost_tolerance,
+        xtol=FIT_TOLERANCE,
+        gtol=FIT_TOLERANCE,
+        max_nfev=max_iterations,
+    )
     jac = jacobian(fit.x)
     H, _, cost = _normal_equations(residuals(fit.x), jac)
     return fit.x, H, cost, bool(fit.success)

@@ -29,6 +29,10 @@ def two_centre_split(cols, rows, weight, iterations):
         near = np.argmin(((pts[:, None, :] - centres[None]) ** 2).sum(axis=2), axis=1)
         if near.min() == near.max():
             return None
-        centres = np.array([(weight[near == k, None] * pts[near == k]).sum(axis=0)
-                            / weight[near == k].sum() for k in range(2)])  # fmt: skip
+        centres = np.array(
+            [
+                (weight[near == k, None] * pts[near == k]).sum(axis=0) / weight[near == k].sum()
+                for k in range(2)
+            ]
+        )
     return near, centres

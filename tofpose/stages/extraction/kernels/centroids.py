@@ -21,8 +21,9 @@ PLATEAU_MIN_PX = 9
 
 
 @jit
-def blob_centroids(flat, starts, bbox, gray, background, coverage, owner, owner_x0, owner_y0,
-                   use_owner):  # fmt: skip
+def blob_centroids(
+    flat, starts, bbox, gray, background, coverage, owner, owner_x0, owner_y0, use_owner
+):
     """Centroid (u, v) px of each blob.
 
     flat, starts : blob j's pixels are ``flat[starts[j]:starts[j + 1]]`` (flat indices);
@@ -167,10 +168,12 @@ def owner_map(flat, starts, bbox, h, w):
     near = False
     for a in range(n):
         for b in range(n):
-            if a != b and (bbox[a, 0] - 3 < bbox[b, 0] + bbox[b, 2]
-                           and bbox[b, 0] - 3 < bbox[a, 0] + bbox[a, 2]
-                           and bbox[a, 1] - 3 < bbox[b, 1] + bbox[b, 3]
-                           and bbox[b, 1] - 3 < bbox[a, 1] + bbox[a, 3]):  # fmt: skip
+            if a != b and (
+                bbox[a, 0] - 3 < bbox[b, 0] + bbox[b, 2]
+                and bbox[b, 0] - 3 < bbox[a, 0] + bbox[a, 2]
+                and bbox[a, 1] - 3 < bbox[b, 1] + bbox[b, 3]
+                and bbox[b, 1] - 3 < bbox[a, 1] + bbox[a, 3]
+            ):
                 near = True
     if not near:
         return np.full((1, 1), -1, np.int32), 0, 0, False

@@ -205,8 +205,22 @@ def blob_brightness(peak, flux, m2, rho, blur_var_px2, fx, d_min_mm, background)
 
 
 @jit
-def gate_components(gray, runs, run_order, run_starts, bbox, area, peak, rho, which, fx,
-                    diameters_mm, params, brightness, blur_var_px2):  # fmt: skip
+def gate_components(
+    gray,
+    runs,
+    run_order,
+    run_starts,
+    bbox,
+    area,
+    peak,
+    rho,
+    which,
+    fx,
+    diameters_mm,
+    params,
+    brightness,
+    blur_var_px2,
+):
     """Run the §3.2 gates on the listed components (already past the border and dim
     gates).
 
@@ -261,9 +275,15 @@ def gate_components(gray, runs, run_order, run_starts, bbox, area, peak, rho, wh
             else:
                 d_lo = (fx * d_min_cat / r) * np.sqrt(cos_t) / size_tol - size_margin
                 # the margin covers blur up to its size; a wider PSF widens the window
-                d_hi = (fx * d_max_cat / r) * size_tol + max(size_margin, blur_widening_px(
-                    fx * d_max_cat / r * size_tol, blur_var_px2, peak[k] - background,
-                    i_t - background))  # fmt: skip
+                d_hi = (fx * d_max_cat / r) * size_tol + max(
+                    size_margin,
+                    blur_widening_px(
+                        fx * d_max_cat / r * size_tol,
+                        blur_var_px2,
+                        peak[k] - background,
+                        i_t - background,
+                    ),
+                )
                 d_lo = max(d_lo, 1.0)
             too_big = d_eq > d_hi or extent > d_hi + 1
             size_ok = d_lo <= d_eq <= d_hi and extent <= d_hi + 1 and extent >= d_lo
@@ -379,8 +399,12 @@ def label_table_and_gates(runs, gray, distance_flat, fx, diameters_mm, params, m
     )
     inner = np.empty(n_labels, np.bool_)
     for k in range(n_labels):
-        inner[k] = (bbox[k, 0] > 0 and bbox[k, 1] > 0 and bbox[k, 0] + bbox[k, 2] < w
-                    and bbox[k, 1] + bbox[k, 3] < h)  # fmt: skip
+        inner[k] = (
+            bbox[k, 0] > 0
+            and bbox[k, 1] > 0
+            and bbox[k, 0] + bbox[k, 2] < w
+            and bbox[k, 1] + bbox[k, 3] < h
+        )
     brightness = peak.astype(np.float64)
     rho = np.full(n_labels, np.nan)
     blur_var = 0.0
@@ -391,12 +415,11 @@ def label_table_and_gates(runs, gray, distance_flat, fx, diameters_mm, params, m
         flux, m2 = window_moments(gray, bbox, ranged)
         # the PSF from the components bright by their peak, then every component's
         # surface brightness with it, then the PSF again with all that are bright
-        blur_var = psf_variance_px2(m2, rho[ranged], brightness[ranged] >= params.i_peak, fx,
-                                    d_min)  # fmt: skip
-        brightness[ranged] = blob_brightness(brightness[ranged], flux, m2, rho[ranged],
-                                             blur_var, fx, d_min, params.background)  # fmt: skip
-        blur_var = psf_variance_px2(m2, rho[ranged], brightness[ranged] >= params.i_peak, fx,
-                                    d_min)  # fmt: skip
+        blur_var = psf_variance_px2(m2, rho[ranged], brightness[ranged] >= params.i_peak, fx, d_min)
+        brightness[ranged] = blob_brightness(
+            brightness[ranged], flux, m2, rho[ranged], blur_var, fx, d_min, params.background
+        )
+        blur_var = psf_variance_px2(m2, rho[ranged], brightness[ranged] >= params.i_peak, fx, d_min)
     bright = brightness >= params.i_peak
     if params.h_min_px >= 0:  # the paper's fixed window: its peak criterion as written
         ranged = np.flatnonzero(inner & bright & (area >= min_area_px))
@@ -405,8 +428,36 @@ def label_table_and_gates(runs, gray, distance_flat, fx, diameters_mm, params, m
     testable = inner[listed] & bright[listed]
     which = listed[testable]
     status, size, moments, keep_starts, keep_flat = gate_components(
-        gray, runs, run_order, run_starts, bbox, area, peak, rho, which, fx, diameters_mm,
-        params, brightness, blur_var,
-    )  # fmt: skip
-    return (area, bbox, peak, starts, flat, inner, listed, testable, rho, which, status, size,
-            moments, keep_starts, keep_flat, blur_var)  # fmt: skip
+        gray,
+        runs,
+        run_order,
+        run_starts,
+        bbox,
+        area,
+        peak,
+        rho,
+        which,
+        fx,
+        diameters_mm,
+        params,
+        brightness,
+        blur_var,
+    )
+    return (
+        area,
+        bbox,
+        peak,
+        starts,
+        flat,
+        inner,
+        listed,
+        testable,
+        rho,
+        which,
+        status,
+        size,
+        moments,
+        keep_starts,
+        keep_flat,
+        blur_var,
+    )

@@ -162,9 +162,11 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
         for r in range(ph):
             for c in range(pw):
                 d = distance[r + y0, c + x0]
-                ranged[r, c] = (not member[r, c] and np.isfinite(d)
-                                and not _owned_by_other(owner, ox, oy, use_owner, r + y0,
-                                                        c + x0, j))  # fmt: skip
+                ranged[r, c] = (
+                    not member[r, c]
+                    and np.isfinite(d)
+                    and not _owned_by_other(owner, ox, oy, use_owner, r + y0, c + x0, j)
+                )
                 near[r, c] = ranged[r, c] and d < limit
         if not near.any():  # the usual case: nothing in front, no flood to run
             continue
@@ -189,8 +191,7 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
                     for dr in range(-1, 2):
                         for dc in range(-1, 2):
                             rr, cc = kr + dr, kc + dc
-                            if (0 <= rr < ph and 0 <= cc < pw and near[rr, cc]
-                                    and not patch[rr, cc]):  # fmt: skip
+                            if 0 <= rr < ph and 0 <= cc < pw and near[rr, cc] and not patch[rr, cc]:
                                 patch[rr, cc] = True
                                 stack[top] = rr * pw + cc
                                 top += 1
@@ -200,8 +201,7 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
         for r in range(ph):
             row_out = r + y0 < y - so + 1 or r + y0 >= y + bh + so - 1
             for c in range(pw):
-                if patch[r, c] and (row_out or c + x0 < x - so + 1
-                                    or c + x0 >= x + bw + so - 1):  # fmt: skip
+                if patch[r, c] and (row_out or c + x0 < x - so + 1 or c + x0 >= x + bw + so - 1):
                     outer += 1
         if outer < OCCLUSION_MIN_OUTER_PX:
             continue
@@ -228,8 +228,22 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
 
 
 @jit
-def blob_mixing(flat, starts, bbox, gray, member_distance, distance, surround_gray,
-                surround_mm, crowded, dark, owner, ox, oy, use_owner):  # fmt: skip
+def blob_mixing(
+    flat,
+    starts,
+    bbox,
+    gray,
+    member_distance,
+    distance,
+    surround_gray,
+    surround_mm,
+    crowded,
+    dark,
+    owner,
+    ox,
+    oy,
+    use_owner,
+):
     """The sums of the mixing model (module docstring) of each blob over its support
     (its pixels dilated by one, other blobs' pixels left out): (n, ``MIX_FIELDS``) rows
     (a_b, d_b, S_a, S_ad, C_unranged, n_support), NaN rows where the surround is unknown
@@ -266,8 +280,9 @@ def blob_mixing(flat, starts, bbox, gray, member_distance, distance, surround_gr
         s_a, s_ad, c_unranged, n_sup = 0.0, 0.0, 0.0, 0
         for r in range(ph):
             for c in range(pw):
-                if not _next_to(member, r, c) or _owned_by_other(owner, ox, oy, use_owner,
-                                                                 r + y0, c + x0, j):  # fmt: skip
+                if not _next_to(member, r, c) or _owned_by_other(
+                    owner, ox, oy, use_owner, r + y0, c + x0, j
+                ):
                     continue
                 n_sup += 1
                 g = float(gray[r + y0, c + x0])

@@ -69,9 +69,21 @@ def blob_pixel_stats(flat, starts, centroids, gray, distance, background):
 
 @jit
 def blob_sigmas(
-    flat, starts, centroids, gray, distance, background, split, floor_px, floor_mm,
-    single_pixel_px, split_px, pool_min_pixels, median_efficiency, uncalibrated_mm,
-):  # fmt: skip
+    flat,
+    starts,
+    centroids,
+    gray,
+    distance,
+    background,
+    split,
+    floor_px,
+    floor_mm,
+    single_pixel_px,
+    split_px,
+    pool_min_pixels,
+    median_efficiency,
+    uncalibrated_mm,
+):
     """Centroid sigma (n,) px and range sigma (n,) mm of each blob: the model of
     ``uncertainty.measurement_sigmas`` (its docstring) on ``blob_pixel_stats``, in one
     call. split : (n,) bool, blob cut out of a merged component; the rest are that

@@ -47,8 +47,9 @@ def centroid_weights(gray, pixels, bbox, level, coverage=True):
     value = np.maximum(gray[y0:y1, x0:x1] - level, 0.0).astype(np.float32)
     member_value = np.where(member > 0, value, 0).astype(np.float32)
     local_max = cv2.dilate(member_value, np.ones((3, 3), np.uint8))
-    plateau = (member > 0) & (member_value > 0) & (member_value >= np.float32(PLATEAU_RATIO)
-                                                  * local_max)  # fmt: skip
+    plateau = (
+        (member > 0) & (member_value > 0) & (member_value >= np.float32(PLATEAU_RATIO) * local_max)
+    )
     if coverage and plateau.sum() >= PLATEAU_MIN_PX:
         with np.errstate(divide="ignore", invalid="ignore"):
             weights = np.clip(value / local_max, 0, 1)

@@ -168,15 +168,20 @@ def raw_threshold(background, i_max, sigma, config: ExtractionConfig) -> float:
     if config.raw_threshold_abs is not None:
         return float(config.raw_threshold_abs)
     contrast = i_max - background
-    return max(background + config.raw_threshold_rel * contrast,
-               background + config.noise_floor_sigma * sigma)  # fmt: skip
+    return max(
+        background + config.raw_threshold_rel * contrast,
+        background + config.noise_floor_sigma * sigma,
+    )
 
 
 def peak_threshold(background, i_max, i_t, config: ExtractionConfig) -> float:
     """I_peak of criterion 1 (Eq. 16): ``peak_abs`` in the paper preset, ours
     ``bg + peak_rel (I_max - bg)``; never below I_t."""
-    i_peak = (config.peak_abs if config.peak_abs is not None
-              else background + config.peak_rel * (i_max - background))  # fmt: skip
+    i_peak = (
+        config.peak_abs
+        if config.peak_abs is not None
+        else background + config.peak_rel * (i_max - background)
+    )
     return max(i_peak, i_t)
 
 
@@ -197,11 +202,14 @@ def frame_levels(
     i_max = float(g.max())
     i_t = raw_threshold(bg, i_max, sigma, config)
     return FrameLevels(
-        background=bg, noise_sigma=sigma, i_max=i_max, raw_threshold=i_t,
+        background=bg,
+        noise_sigma=sigma,
+        i_max=i_max,
+        raw_threshold=i_t,
         peak_threshold=peak_threshold(bg, i_max, i_t, config),
         saturated_fraction=saturated_fraction(g, saturated_counts=saturated_counts),
         dark_level=dark_level(sub, bg),
-    )  # fmt: skip
+    )
 
 
 def active_pixel_set(gray, levels: FrameLevels, *, n_max) -> tuple[np.ndarray, FrameLevels]:
@@ -332,9 +340,15 @@ def diameter_window_px(
 
 
 def size_gate(
-    area_px, extent_px, distance_mm, *, fx, diameters_mm, config: ExtractionConfig,
+    area_px,
+    extent_px,
+    distance_mm,
+    *,
+    fx,
+    diameters_mm,
+    config: ExtractionConfig,
     widening_px=0.0,
-) -> SizeVerdict:  # fmt: skip
+) -> SizeVerdict:
     """The size window (§3.2) on a component of ``area_px`` pixels whose box spans
     ``extent_px`` at most. The paper's: ``H_min <= area <= H_max`` (``config.h_min_px``
     set; too big above H_max). Ours (``diameter_window_px``): the equivalent diameter and
@@ -343,10 +357,16 @@ def size_gate(
     if config.h_min_px is not None:
         hi_a = config.h_max_px if config.h_max_px is not None else np.inf
         inside, too_big = config.h_min_px <= area_px <= hi_a, area_px > hi_a
-        return SizeVerdict(d_eq, equivalent_diameter_px(config.h_min_px),
-                           equivalent_diameter_px(hi_a), bool(inside), bool(too_big))  # fmt: skip
-    d_lo, d_hi = diameter_window_px(distance_mm, fx=fx, diameters_mm=diameters_mm,
-                                    config=config, widening_px=widening_px)  # fmt: skip
+        return SizeVerdict(
+            d_eq,
+            equivalent_diameter_px(config.h_min_px),
+            equivalent_diameter_px(hi_a),
+            bool(inside),
+            bool(too_big),
+        )
+    d_lo, d_hi = diameter_window_px(
+        distance_mm, fx=fx, diameters_mm=diameters_mm, config=config, widening_px=widening_px
+    )
     too_big = d_eq > d_hi or extent_px > d_hi + 1
     inside = d_lo <= d_eq <= d_hi and d_lo <= extent_px <= d_hi + 1
     return SizeVerdict(d_eq, d_lo, d_hi, bool(inside), bool(too_big))
@@ -359,8 +379,9 @@ def nlog_response(image, sigma_px, *, normalise=True) -> np.ndarray:
     sigma^2): a disc of contrast C at its matched scale sigma = r / sqrt(2) gives about
     2/e C at its centre, whatever its size. Returns (h, w) float32."""
     ksize = 2 * int(np.ceil(3.0 * sigma_px)) + 1
-    smooth = cv2.GaussianBlur(np.asarray(image, np.float32), (ksize, ksize), sigma_px,
-                              borderType=cv2.BORDER_CONSTANT)  # fmt: skip
+    smooth = cv2.GaussianBlur(
+        np.asarray(image, np.float32), (ksize, ksize), sigma_px, borderType=cv2.BORDER_CONSTANT
+    )
     lap = cv2.Laplacian(smooth, cv2.CV_32F, ksize=1, borderType=cv2.BORDER_CONSTANT)
     return -lap * np.float32(sigma_px**2 if normalise else 1.0)
 
@@ -414,8 +435,15 @@ def moment_centroid(us, vs, weights) -> tuple[np.ndarray, float]:
     us, vs, wt = (np.asarray(a, float) for a in (us, vs, weights))
     cu, cv = (wt * us).sum() / wt.sum(), (wt * vs).sum() / wt.sum()
     du, dv = us - cu, vs - cv
-    cov = np.array([[(wt * du * du).sum(), (wt * du * dv).sum()],
-                    [(wt * du * dv).sum(), (wt * dv * dv).sum()]]) / wt.sum()  # fmt: skip
+    cov = (
+        np.array(
+            [
+                [(wt * du * du).sum(), (wt * du * dv).sum()],
+                [(wt * du * dv).sum(), (wt * dv * dv).sum()],
+            ]
+        )
+        / wt.sum()
+    )
     l2, l1 = np.linalg.eigvalsh(cov)
     ecc = float(np.sqrt(max(0.0, 1.0 - l2 / l1))) if l1 > 1e-12 else 0.0
     return np.array([cu, cv]), ecc
@@ -434,9 +462,17 @@ def shape_gate(n_pixels, eccentricity, max_eccentricity) -> bool:
 
 
 def penalty_score(
-    area_px, eccentricity, distance_mm, brightness, *, fx, diameters_mm, i_peak, i_t,
+    area_px,
+    eccentricity,
+    distance_mm,
+    brightness,
+    *,
+    fx,
+    diameters_mm,
+    i_peak,
+    i_t,
     max_eccentricity,
-) -> float:  # fmt: skip
+) -> float:
     """The penalty score q in [0, 1] (§3.4; the paper does not define it):
     ``1 - (1 - q_size)(1 - q_shape)(1 - q_int)``. q_size: the smallest
     ``|ln(d_eq / (fx D / rho))| / ln 3`` over the catalog's D, clipped to [0, 1] (0 under a
@@ -484,9 +520,15 @@ def _components(gray, mask, min_area_px) -> tuple[np.ndarray, list[_Component]]:
         if stats[k, cv2.CC_STAT_AREA] < max(min_area_px, 1):
             continue
         pixels = np.flatnonzero(flat_labels == k)
-        out.append(_Component(k, pixels, int(stats[k, cv2.CC_STAT_AREA]),
-                              tuple(int(v) for v in stats[k, :4]),
-                              float(gray.ravel()[pixels].max())))  # fmt: skip
+        out.append(
+            _Component(
+                k,
+                pixels,
+                int(stats[k, cv2.CC_STAT_AREA]),
+                tuple(int(v) for v in stats[k, :4]),
+                float(gray.ravel()[pixels].max()),
+            )
+        )
     return labels, out
 
 
@@ -529,25 +571,37 @@ def find_candidates(
         common = {"fx": fx, "d_min_mm": d_min}
         blur_var = psf_variance_px2(m2, rhos, [c.peak >= i_peak for c in inner], **common)
         for c in inner:
-            brightness[c.label] = blob_brightness(c.peak, *moments[c.label], rho[c.label],
-                                                  blur_var_px2=blur_var, background=bg,
-                                                  **common)  # fmt: skip
-        blur_var = psf_variance_px2(m2, rhos, [brightness[c.label] >= i_peak for c in inner],
-                                    **common)  # fmt: skip
+            brightness[c.label] = blob_brightness(
+                c.peak,
+                *moments[c.label],
+                rho[c.label],
+                blur_var_px2=blur_var,
+                background=bg,
+                **common,
+            )
+        blur_var = psf_variance_px2(
+            m2, rhos, [brightness[c.label] >= i_peak for c in inner], **common
+        )
     e_max = max_eccentricity(config.max_tilt_deg)
     accepted, oversize, rejected, wrong_size = [], [], [], []
     for c in components:
         if touches_border(c.bbox, g.shape) or brightness[c.label] < i_peak:
-            rejected.append(_box_centre(c, "border" if touches_border(c.bbox, g.shape)
-                                        else "dim"))  # fmt: skip
+            rejected.append(_box_centre(c, "border" if touches_border(c.bbox, g.shape) else "dim"))
             continue
         r = rho[c.label]
         widening = 0.0
         if np.isfinite(r) and r > 0:
             d_sharp = fx * np.max(diameters_mm) / r * config.size_tolerance
             widening = blur_widening_px(d_sharp, blur_var, c.peak - bg, i_t - bg)
-        size = size_gate(c.area_px, max(c.bbox[2:]), r, fx=fx, diameters_mm=diameters_mm,
-                         config=config, widening_px=widening)  # fmt: skip
+        size = size_gate(
+            c.area_px,
+            max(c.bbox[2:]),
+            r,
+            fx=fx,
+            diameters_mm=diameters_mm,
+            config=config,
+            widening_px=widening,
+        )
         if not size.inside:
             wrong_size.append(WrongSize(*size[:3], r))
         if size.too_big:
@@ -557,8 +611,16 @@ def find_candidates(
         if not size.inside:
             rejected.append(_box_centre(c, "size"))
             continue
-        kept = nlog_gate(g, labels, c.label, bbox=c.bbox, area_px=c.area_px, peak=c.peak,
-                         background=bg, config=config)  # fmt: skip
+        kept = nlog_gate(
+            g,
+            labels,
+            c.label,
+            bbox=c.bbox,
+            area_px=c.area_px,
+            peak=c.peak,
+            background=bg,
+            config=config,
+        )
         if kept is None:
             rejected.append(_box_centre(c, "nlog"))
             continue
@@ -567,15 +629,31 @@ def find_candidates(
         if not shape_gate(len(kept), ecc, e_max):
             rejected.append(_box_centre(c, "shape"))
             continue
-        q = penalty_score(len(kept), ecc, r, brightness[c.label], fx=fx,
-                          diameters_mm=diameters_mm, i_peak=i_peak, i_t=i_t,
-                          max_eccentricity=e_max)  # fmt: skip
+        q = penalty_score(
+            len(kept),
+            ecc,
+            r,
+            brightness[c.label],
+            fx=fx,
+            diameters_mm=diameters_mm,
+            i_peak=i_peak,
+            i_t=i_t,
+            max_eccentricity=e_max,
+        )
         if q > config.q_max:
             rejected.append(_box_centre(c, "penalty"))
             continue
         accepted.append(CandidateBlob(kept, len(kept), c.bbox, uv, r, c.peak, ecc, q))
     best, beyond = rank_candidates(accepted, config.max_candidates)
-    rejected += [Rejected(*b.centroid_uv, equivalent_diameter_px(b.area_px), "rank")
-                 for b in beyond]  # fmt: skip
-    return Candidates(tuple(best), tuple(oversize), tuple(rejected), tuple(wrong_size), levels,
-                      float(np.sqrt(blur_var)), mask)  # fmt: skip
+    rejected += [
+        Rejected(*b.centroid_uv, equivalent_diameter_px(b.area_px), "rank") for b in beyond
+    ]
+    return Candidates(
+        tuple(best),
+        tuple(oversize),
+        tuple(rejected),
+        tuple(wrong_size),
+        levels,
+        float(np.sqrt(blur_var)),
+        mask,
+    )

@@ -92,8 +92,12 @@ def owner_map(flat, starts, bbox, h, w):
     b = np.asarray(bbox, np.int64).reshape(-1, 4)
     x, y, bw, bh = b[:, 0], b[:, 1], b[:, 2], b[:, 3]
     s = SURROUND_OUTER_PX
-    overlap = ((x[:, None] - s < (x + bw)[None]) & (x[None] - s < (x + bw)[:, None])
-               & (y[:, None] - s < (y + bh)[None]) & (y[None] - s < (y + bh)[:, None]))  # fmt: skip
+    overlap = (
+        (x[:, None] - s < (x + bw)[None])
+        & (x[None] - s < (x + bw)[:, None])
+        & (y[:, None] - s < (y + bh)[None])
+        & (y[None] - s < (y + bh)[:, None])
+    )
     np.fill_diagonal(overlap, False)
     if not overlap.any():
         return np.full((1, 1), -1, np.int32), 0, 0, False
@@ -121,8 +125,10 @@ def blob_surrounds(bbox, gray, distance, owner, ox, oy, use_owner):
         x, y, bw, bh = (int(v) for v in bbox[j])
         si = SURROUND_INNER_PX
         ring = np.ones((y1 - y0, x1 - x0), bool)
-        ring[max(y - si - y0, 0) : max(y + bh + si - y0, 0),
-             max(x - si - x0, 0) : max(x + bw + si - x0, 0)] = False  # fmt: skip
+        ring[
+            max(y - si - y0, 0) : max(y + bh + si - y0, 0),
+            max(x - si - x0, 0) : max(x + bw + si - x0, 0),
+        ] = False
         others = _others(owner, ox, oy, use_owner, j, window)
         crowded[j] = (ring & others).any()
         ring &= ~others
@@ -144,8 +150,12 @@ def _outer_ring(bbox, j, window) -> np.ndarray:
     so = SURROUND_OUTER_PX
     rows = np.arange(y0, y1)[:, None]
     cols = np.arange(x0, x1)[None, :]
-    return ((rows < y - so + 1) | (rows >= y + bh + so - 1)
-            | (cols < x - so + 1) | (cols >= x + bw + so - 1))  # fmt: skip
+    return (
+        (rows < y - so + 1)
+        | (rows >= y + bh + so - 1)
+        | (cols < x - so + 1)
+        | (cols >= x + bw + so - 1)
+    )
 
 
 def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
@@ -186,8 +196,22 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
     return out
 
 
-def blob_mixing(flat, starts, bbox, gray, member_distance, distance, surround_gray,
-                surround_mm, crowded, dark, owner, ox, oy, use_owner):  # fmt: skip
+def blob_mixing(
+    flat,
+    starts,
+    bbox,
+    gray,
+    member_distance,
+    distance,
+    surround_gray,
+    surround_mm,
+    crowded,
+    dark,
+    owner,
+    ox,
+    oy,
+    use_owner,
+):
     """The mixing model's sums of each blob over its support (its pixels dilated by one,
     other blobs' pixels left out): (n, ``MIX_FIELDS``) rows (a_b, d_b, S_a, S_ad,
     C_unranged, n_support), NaN rows for a crowded blob or an unknown surround.

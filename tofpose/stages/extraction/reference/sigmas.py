@@ -68,8 +68,11 @@ def range_sigmas_mm(gray, distance, blobs_pixels, background, constants) -> np.n
     efficiency over sqrt(n_valid), at least the floor; uncal_mm when nothing calibrates
     k and the blob has fewer than 3 ranges."""
     spreads = [range_spread(gray, distance, p, background) for p in blobs_pixels]
-    ratios = [mad / unit for mad, unit, n in spreads
-              if n >= constants.pool_min and np.isfinite(mad) and unit > 0]  # fmt: skip
+    ratios = [
+        mad / unit
+        for mad, unit, n in spreads
+        if n >= constants.pool_min and np.isfinite(mad) and unit > 0
+    ]
     k = float(np.median(ratios)) if ratios else np.nan
     out = []
     for mad, unit, n in spreads:

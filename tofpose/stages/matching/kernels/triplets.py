@@ -85,10 +85,25 @@ def catalog_triplets(catalog):
 
 @jit
 def triplet_search(
-    observed, catalog, w, tol, alpha, obs_triplets, cat_tri, cat_sides, constrain,
-    centroid, cos_min, min_matches, use_confidence, confidence, best, best_n, best_cost,
+    observed,
+    catalog,
+    w,
+    tol,
+    alpha,
+    obs_triplets,
+    cat_tri,
+    cat_sides,
+    constrain,
+    centroid,
+    cos_min,
+    min_matches,
+    use_confidence,
+    confidence,
+    best,
+    best_n,
+    best_cost,
     tried,
-):  # fmt: skip
+):
     """Try the observed triplets ``obs_triplets`` (T, 3) in order, continuing a search
     whose best hypothesis so far is ``best`` (k, 2) (observed, catalog) pairs with
     ``best_n`` inliers and weighted squared residual ``best_cost``, after ``tried``
@@ -121,8 +136,11 @@ def triplet_search(
         o1 = _distance(observed[b], observed[c])
         o2 = _distance(observed[a], observed[c])
         for p in range(cat_tri.shape[0]):
-            if not (abs(cat_sides[p, 0] - o0) <= alpha and abs(cat_sides[p, 1] - o1) <= alpha
-                    and abs(cat_sides[p, 2] - o2) <= alpha):  # fmt: skip
+            if not (
+                abs(cat_sides[p, 0] - o0) <= alpha
+                and abs(cat_sides[p, 1] - o1) <= alpha
+                and abs(cat_sides[p, 2] - o2) <= alpha
+            ):
                 continue
             for r in range(3):
                 x3[r] = catalog[cat_tri[p, r]]
@@ -133,8 +151,12 @@ def triplet_search(
                 continue
             for i in range(e):
                 for r in range(3):
-                    pred[i, r] = (catalog[i, 0] * R[r, 0] + catalog[i, 1] * R[r, 1]
-                                  + catalog[i, 2] * R[r, 2] + t[r])  # fmt: skip
+                    pred[i, r] = (
+                        catalog[i, 0] * R[r, 0]
+                        + catalog[i, 1] * R[r, 1]
+                        + catalog[i, 2] * R[r, 2]
+                        + t[r]
+                    )
             for k in range(n_obs):
                 for i in range(e):
                     dist[k, i] = _distance(observed[k], pred[i])

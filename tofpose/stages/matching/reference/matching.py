@@ -41,8 +41,10 @@ def size_mismatch(observed_diameter_mm, catalog_diameter_mm) -> np.ndarray:
     """Ours: the unary size term (ln(d_obs / D_i) / ln 1.6)^2, capped at 4, 0 where a
     diameter is unknown (NaN). (g,), (e,) -> (g, e)."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.log(np.asarray(observed_diameter_mm, float)[:, None]
-                       / np.asarray(catalog_diameter_mm, float)[None, :])  # fmt: skip
+        ratio = np.log(
+            np.asarray(observed_diameter_mm, float)[:, None]
+            / np.asarray(catalog_diameter_mm, float)[None, :]
+        )
         v = (ratio / np.log(1.6)) ** 2
     return np.where(np.isnan(v), 0.0, np.minimum(v, 4.0))
 

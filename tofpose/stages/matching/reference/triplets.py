@@ -64,10 +64,25 @@ def hypothesis_inliers(observed, catalog, R, t, w, tol):
 
 
 def triplet_search(
-    observed, catalog, w, tol, alpha, obs_triplets, cat_tri, cat_sides, constrain,
-    centroid, cos_min, min_matches, use_confidence, confidence, best, best_n, best_cost,
+    observed,
+    catalog,
+    w,
+    tol,
+    alpha,
+    obs_triplets,
+    cat_tri,
+    cat_sides,
+    constrain,
+    centroid,
+    cos_min,
+    min_matches,
+    use_confidence,
+    confidence,
+    best,
+    best_n,
+    best_cost,
     tried,
-):  # fmt: skip
+):
     """Try the observed triplets ``obs_triplets`` (T, 3) in order, continuing a search
     whose best so far is ``best`` (k, 2) with ``best_n`` inliers and cost ``best_cost``
     after ``tried`` triplets. w (n,) weights; tol (n,) inlier tolerances mm; alpha the

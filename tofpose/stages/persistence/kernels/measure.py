@@ -45,9 +45,24 @@ def pixel_list_subset(flat, starts, idx):
 
 @jit
 def persist_and_measure(
-    gray, distance, flat, starts, bbox, centroids, history, background, dark, fx, fy, cx,
-    cy, dist, pixel_bearings, mean_buf, med_buf,
-):  # fmt: skip
+    gray,
+    distance,
+    flat,
+    starts,
+    bbox,
+    centroids,
+    history,
+    background,
+    dark,
+    fx,
+    fy,
+    cx,
+    cy,
+    dist,
+    pixel_bearings,
+    mean_buf,
+    med_buf,
+):
     """The frame's blobs (pixels ``flat[starts[j]:starts[j + 1]]``, boxes (n, 4) (x, y,
     w, h), single-frame centroids (n, 2), NaN allowed) combined with the history (a
     ``records.PersistenceHistory``: ``Persistence.history``) and measured.
@@ -78,7 +93,7 @@ def persist_and_measure(
     for f in range(history.count):
         if consistent(centroids, history.centroids[f], history.tol_px) and ranges_consistent(
             distance, history.distance[f], flat, starts, RANGE_TEST_Z
-        ):  # fmt: skip
+        ):
             n_used += 1
         else:
             motion = True
@@ -89,8 +104,9 @@ def persist_and_measure(
     med_dist = distance
     if frames > 1 and n > 0:
         # D-bar at every blob's pixels (only the kept ones' are read) and the counter
-        counts = medians_and_counts_at((distance,) + history.distance, history.mask, n_used,
-                                       flat, med_buf)  # fmt: skip
+        counts = medians_and_counts_at(
+            (distance,) + history.distance, history.mask, n_used, flat, med_buf
+        )
         med_dist = med_buf
         if frames >= history.c_min:
             keep = blob_count_medians(counts, starts, frames + 1) >= history.c_min
@@ -106,14 +122,29 @@ def persist_and_measure(
     level = np.empty(kept.shape[0])
     for a in range(kept.shape[0]):
         level[a] = s_gray[a] if np.isfinite(s_gray[a]) else background
-    k_uv = blob_centroids(k_flat, k_starts, k_bbox, mean_gray, level, True, owner, ox,
-                          oy, use_owner)  # fmt: skip
-    k_mix = blob_mixing(k_flat, k_starts, k_bbox, mean_gray, med_dist, distance, s_gray, s_mm,
-                        crowded, dark, owner, ox, oy, use_owner)  # fmt: skip
-    k_rho = blob_ranges(k_flat, k_starts, med_dist.reshape(-1), pixel_bearings,
-                        bearings(k_uv, fx, fy, cx, cy, dist))  # fmt: skip
-    hidden = occluded_blobs(k_flat, k_starts, k_bbox, distance, k_rho, owner, ox, oy,
-                            use_owner)  # fmt: skip
+    k_uv = blob_centroids(
+        k_flat, k_starts, k_bbox, mean_gray, level, True, owner, ox, oy, use_owner
+    )
+    k_mix = blob_mixing(
+        k_flat,
+        k_starts,
+        k_bbox,
+        mean_gray,
+        med_dist,
+        distance,
+        s_gray,
+        s_mm,
+        crowded,
+        dark,
+        owner,
+        ox,
+        oy,
+        use_owner,
+    )
+    k_rho = blob_ranges(
+        k_flat, k_starts, med_dist.reshape(-1), pixel_bearings, bearings(k_uv, fx, fy, cx, cy, dist)
+    )
+    hidden = occluded_blobs(k_flat, k_starts, k_bbox, distance, k_rho, owner, ox, oy, use_owner)
     for a in range(kept.shape[0]):
         if hidden[a]:  # partly hidden: no range, so no measurement
             k_rho[a] = np.nan
@@ -129,9 +160,22 @@ def persist_and_measure(
 
 @jit
 def measure_and_back_project(
-    gray, distance, flat, starts, bbox, centroids, split, history, background, dark, camera,
-    mean_buf, med_buf, correction, sigmas,
-):  # fmt: skip
+    gray,
+    distance,
+    flat,
+    starts,
+    bbox,
+    centroids,
+    split,
+    history,
+    background,
+    dark,
+    camera,
+    mean_buf,
+    med_buf,
+    correction,
+    sigmas,
+):
     """§3.4 and Eqs. 7-8 in one call: ``persist_and_measure``, then of the kept blobs
     with a range (the "ranged" ones): the calibrated range correction (``correct_range``,
     ``range_correction.corrected_ranges``), the measurement sigmas
@@ -155,9 +199,24 @@ def measure_and_back_project(
     """
     fx, fy, cx, cy, dist = camera.fx, camera.fy, camera.cx, camera.cy, camera.dist
     n_used, motion, keep, mean_gray, med_dist, uv, rho, mix = persist_and_measure(
-        gray, distance, flat, starts, bbox, centroids, history, background, dark, fx, fy,
-        cx, cy, dist, camera.pixel_bearings, mean_buf, med_buf,
-    )  # fmt: skip
+        gray,
+        distance,
+        flat,
+        starts,
+        bbox,
+        centroids,
+        history,
+        background,
+        dark,
+        fx,
+        fy,
+        cx,
+        cy,
+        dist,
+        camera.pixel_bearings,
+        mean_buf,
+        med_buf,
+    )
     ranged = np.flatnonzero(keep & np.isfinite(rho))
     n_ranged = ranged.shape[0]
     r_flat, r_starts = pixel_list_subset(flat, starts, ranged)
@@ -165,13 +224,33 @@ def measure_and_back_project(
     r_mix = mix[ranged]
     if correction.apply and n_ranged:
         raw = r_rho
-        r_rho = corrected_ranges(r_rho, r_flat, r_starts, mean_gray, correction.model,
-                                 correction.harmonics, correction.offsets)  # fmt: skip
+        r_rho = corrected_ranges(
+            r_rho,
+            r_flat,
+            r_starts,
+            mean_gray,
+            correction.model,
+            correction.harmonics,
+            correction.offsets,
+        )
         for a in range(n_ranged):  # the same shift of every distance in the mixing sums
             shift_mixing(r_mix[a], r_rho[a] - raw[a])
-    sp, sr = blob_sigmas(r_flat, r_starts, r_uv, mean_gray, med_dist, background, r_split,
-                         sigmas.floor_px, sigmas.floor_mm, sigmas.single_px, sigmas.split_px,
-                         sigmas.pool_min, sigmas.median_eff, sigmas.uncal_mm)  # fmt: skip
+    sp, sr = blob_sigmas(
+        r_flat,
+        r_starts,
+        r_uv,
+        mean_gray,
+        med_dist,
+        background,
+        r_split,
+        sigmas.floor_px,
+        sigmas.floor_mm,
+        sigmas.single_px,
+        sigmas.split_px,
+        sigmas.pool_min,
+        sigmas.median_eff,
+        sigmas.uncal_mm,
+    )
     e = bearings(r_uv, fx, fy, cx, cy, dist)
     y = np.empty((n_ranged, 3))
     w = np.empty(n_ranged)

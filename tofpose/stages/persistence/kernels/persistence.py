@@ -74,8 +74,13 @@ def _median_of_five(v0, v1, v2, v3, v4):
 @jit
 def _finite5(v0, v1, v2, v3, v4):
     """Are the five values finite?"""
-    return (np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2) and np.isfinite(v3)
-            and np.isfinite(v4))  # fmt: skip
+    return (
+        np.isfinite(v0)
+        and np.isfinite(v1)
+        and np.isfinite(v2)
+        and np.isfinite(v3)
+        and np.isfinite(v4)
+    )
 
 
 @jit

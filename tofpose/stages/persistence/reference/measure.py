@@ -87,9 +87,24 @@ def combined_frames(gray, distance, blobs, history, n_used):
 
 
 def persist_and_measure(
-    gray, distance, flat, starts, bbox, centroids, history, background, dark, fx, fy, cx,
-    cy, dist, pixel_bearings, mean_buf, med_buf,
-):  # fmt: skip
+    gray,
+    distance,
+    flat,
+    starts,
+    bbox,
+    centroids,
+    history,
+    background,
+    dark,
+    fx,
+    fy,
+    cx,
+    cy,
+    dist,
+    pixel_bearings,
+    mean_buf,
+    med_buf,
+):
     """The frame's blobs combined with the history and measured: ``consistent_history``
     and ``combined_frames``; then of the kept blobs, on I-bar and D-bar: the surround
     (``mixed_pixels.blob_surrounds`` on this frame, neighbours left out by
@@ -115,8 +130,9 @@ def persist_and_measure(
     k_flat, k_starts = _pixel_lists([blobs[j] for j in kept])
     k_bbox = np.asarray(bbox, np.int64).reshape(-1, 4)[kept]
     owner, ox, oy, use_owner = mixed_pixels.owner_map(k_flat, k_starts, k_bbox, h, w)
-    s_gray, s_mm, crowded = mixed_pixels.blob_surrounds(k_bbox, gray, distance, owner, ox,
-                                                        oy, use_owner)  # fmt: skip
+    s_gray, s_mm, crowded = mixed_pixels.blob_surrounds(
+        k_bbox, gray, distance, owner, ox, oy, use_owner
+    )
     owner_full = _owner_image(owner, ox, oy, use_owner, (h, w))
     K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
     bearing_image = np.asarray(pixel_bearings).reshape(h, w, 3)
@@ -124,16 +140,31 @@ def persist_and_measure(
     k_rho = np.empty(len(kept))
     for a, j in enumerate(kept):
         level = s_gray[a] if np.isfinite(s_gray[a]) else background
-        k_uv[a] = blob_centroid(mean_gray, blobs[j], tuple(k_bbox[a]), np.float32(level),
-                                owner_full, a, coverage=True)  # fmt: skip
+        k_uv[a] = blob_centroid(
+            mean_gray, blobs[j], tuple(k_bbox[a]), np.float32(level), owner_full, a, coverage=True
+        )
         e_c = bearings(k_uv[a][None], K, dist)[0]
         k_rho[a] = blob_range(med_dist, blobs[j], bearing_image, e_c)
-    hidden = mixed_pixels.occluded_blobs(k_flat, k_starts, k_bbox, distance, k_rho, owner,
-                                         ox, oy, use_owner)  # fmt: skip
+    hidden = mixed_pixels.occluded_blobs(
+        k_flat, k_starts, k_bbox, distance, k_rho, owner, ox, oy, use_owner
+    )
     k_rho[hidden] = np.nan
-    k_mix = mixed_pixels.blob_mixing(k_flat, k_starts, k_bbox, mean_gray, med_dist,
-                                     distance, s_gray, s_mm, crowded, dark, owner, ox, oy,
-                                     use_owner)  # fmt: skip
+    k_mix = mixed_pixels.blob_mixing(
+        k_flat,
+        k_starts,
+        k_bbox,
+        mean_gray,
+        med_dist,
+        distance,
+        s_gray,
+        s_mm,
+        crowded,
+        dark,
+        owner,
+        ox,
+        oy,
+        use_owner,
+    )
     uv = np.full((n, 2), np.nan)
     rho = np.full(n, np.nan)
     mix = np.full((n, mixed_pixels.MIX_FIELDS), np.nan)
@@ -162,15 +193,29 @@ def corrected_range(rho, pixels, gray, correction) -> float:
     """A blob's range less the median of ``range_error_mm`` over its pixels, with gray
     (I-bar) as the amplitude."""
     amplitude = np.asarray(gray).reshape(-1)[pixels]
-    err = range_error_mm(rho, amplitude, pixels, correction.model, correction.harmonics,
-                         correction.offsets)  # fmt: skip
+    err = range_error_mm(
+        rho, amplitude, pixels, correction.model, correction.harmonics, correction.offsets
+    )
     return rho - float(np.median(err))
 
 
 def measure_and_back_project(
-    gray, distance, flat, starts, bbox, centroids, split, history, background, dark, camera,
-    mean_buf, med_buf, correction, sigmas,
-):  # fmt: skip
+    gray,
+    distance,
+    flat,
+    starts,
+    bbox,
+    centroids,
+    split,
+    history,
+    background,
+    dark,
+    camera,
+    mean_buf,
+    med_buf,
+    correction,
+    sigmas,
+):
     """``persist_and_measure``, then of the kept blobs with a range ("ranged"): the range
     correction when ``correction.apply`` (``corrected_range``; its shift applied to the
     mixing sums by ``mixed_pixels.shift_mixing``), the sigmas on I-bar and D-bar
@@ -181,9 +226,24 @@ def measure_and_back_project(
     int64, and of the ranged blobs: rho (r,) corrected, sigma_px (r,), sigma_range
     (r,), y (r, 3), weights (r,), mix (r, ``MIX_FIELDS``)."""
     n_used, motion, keep, mean_gray, med_dist, uv, rho, mix = persist_and_measure(
-        gray, distance, flat, starts, bbox, centroids, history, background, dark, camera.fx,
-        camera.fy, camera.cx, camera.cy, camera.dist, camera.pixel_bearings, mean_buf, med_buf,
-    )  # fmt: skip
+        gray,
+        distance,
+        flat,
+        starts,
+        bbox,
+        centroids,
+        history,
+        background,
+        dark,
+        camera.fx,
+        camera.fy,
+        camera.cx,
+        camera.cy,
+        camera.dist,
+        camera.pixel_bearings,
+        mean_buf,
+        med_buf,
+    )
     blobs = _blobs(flat, starts)
     ranged = np.flatnonzero(keep & np.isfinite(rho))
     r_blobs = [blobs[j] for j in ranged]
@@ -193,12 +253,28 @@ def measure_and_back_project(
             raw = r_rho[a]
             r_rho[a] = corrected_range(raw, p, mean_gray, correction)
             mixed_pixels.shift_mixing(r_mix[a], r_rho[a] - raw)
-    sp = np.array([centroid_sigma_px(mean_gray, p, r_uv[a], background, bool(split[j]), sigmas)
-                   for a, (j, p) in enumerate(zip(ranged, r_blobs, strict=True))])  # fmt: skip
+    sp = np.array(
+        [
+            centroid_sigma_px(mean_gray, p, r_uv[a], background, bool(split[j]), sigmas)
+            for a, (j, p) in enumerate(zip(ranged, r_blobs, strict=True))
+        ]
+    )
     sr = range_sigmas_mm(mean_gray, med_dist, r_blobs, background, sigmas)
     y = np.zeros((0, 3))
     if len(ranged):
         y = back_project(r_uv, r_rho, np.asarray(camera.K, float), camera.dist)  # Eq. 8
     wt = weights(r_rho, sr, sp, camera.fx)  # Eq. 21
-    return (n_used, motion, keep, uv, rho, ranged.astype(np.int64), r_rho, sp.reshape(-1),
-            np.asarray(sr, float).reshape(-1), y.reshape(-1, 3), wt, r_mix)  # fmt: skip
+    return (
+        n_used,
+        motion,
+        keep,
+        uv,
+        rho,
+        ranged.astype(np.int64),
+        r_rho,
+        sp.reshape(-1),
+        np.asarray(sr, float).reshape(-1),
+        y.reshape(-1, 3),
+        wt,
+        r_mix,
+    )

@@ -55,8 +55,9 @@ def centroids_consistent(current, previous, tol_px: float) -> bool:
     current, previous = np.asarray(current, float), np.asarray(previous, float)
     if len(current) == 0 or len(previous) == 0:
         return len(current) == len(previous)
-    d = np.hypot(current[:, None, 0] - previous[None, :, 0],
-                 current[:, None, 1] - previous[None, :, 1])  # fmt: skip
+    d = np.hypot(
+        current[:, None, 0] - previous[None, :, 0], current[:, None, 1] - previous[None, :, 1]
+    )
     nearest = np.min(np.where(np.isnan(d), np.inf, d), axis=1)
     near = nearest[nearest < max(4 * tol_px, 2.0)]
     if len(near) < max(1, int(np.ceil(0.5 * len(current)))):
@@ -105,8 +106,9 @@ class History:
         used = []
         motion = False
         for entry in reversed(self.entries):
-            if (centroids_consistent(centroids, entry.centroids, self.tol_px)
-                    and ranges_consistent(distance, entry.distance, blobs)):  # fmt: skip
+            if centroids_consistent(centroids, entry.centroids, self.tol_px) and ranges_consistent(
+                distance, entry.distance, blobs
+            ):
                 used.append(entry)
             else:
                 motion = True

@@ -386,9 +386,16 @@ def fit_without(j, x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2):
     kept rows (m,) bool and the pose R, t."""
     keep = np.arange(x.shape[0]) != j
     R, t, _, _, _, _, _ = fit_pose(
-        x[keep], e[keep], rho[keep], y[keep], sr[keep], sb[keep], refinement, los_tol,
+        x[keep],
+        e[keep],
+        rho[keep],
+        y[keep],
+        sr[keep],
+        sb[keep],
+        refinement,
+        los_tol,
         step_sigma2,
-    )  # fmt: skip
+    )
     return keep, R, t
 
 
@@ -415,9 +422,16 @@ def fit_adaptive(
         for j in order:
             keep, Rj, tj = fit_without(j, x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2)
             er_j, eb_j = systematic_sigmas(
-                x[keep], e[keep], rho[keep], Rj, tj, sr0[keep], sb0[keep], max_sys,
+                x[keep],
+                e[keep],
+                rho[keep],
+                Rj,
+                tj,
+                sr0[keep],
+                sb0[keep],
+                max_sys,
                 max_sys_bearing,
-            )  # fmt: skip
+            )
             er, eb = min(er, er_j), min(eb, eb_j)
             if er <= 0 and eb <= 0:
                 break
@@ -604,8 +618,12 @@ def fit_with_outliers(x, e, rho, y, sr0, sb0, fit, max_sys_bearing, offset_prior
     catalog points, bearings, ranges, points and sigmas (mm, rad); fit : the
     ``records.FitSettings``; max_sys_bearing : its centroid cap in rad (px over fx);
     offset_prior : a ``RangeOffsetPrior``."""
-    refinement, los_tol, step_sigma2, adapt = (fit.refinement, fit.los_tolerance,
-                                               fit.step_sigma2, fit.adapt)  # fmt: skip
+    refinement, los_tol, step_sigma2, adapt = (
+        fit.refinement,
+        fit.los_tolerance,
+        fit.step_sigma2,
+        fit.adapt,
+    )
     max_sys, reject, min_matches = fit.max_systematic_range_mm, fit.reject, fit.min_matches
     outlier_sigma, chi2_per_dof = fit.outlier_sigma, fit.chi2_per_dof
     m = x.shape[0]
@@ -643,9 +661,19 @@ def fit_with_outliers(x, e, rho, y, sr0, sb0, fit, max_sys_bearing, offset_prior
             sb0[keep],
         )
         R, t, its, cov, chi2, norms, sr, sb = fit_adaptive(
-            x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2, adapt, max_sys,
+            x,
+            e,
+            rho,
+            y,
+            sr0,
+            sb0,
+            refinement,
+            los_tol,
+            step_sigma2,
+            adapt,
+            max_sys,
             max_sys_bearing,
-        )  # fmt: skip
+        )
     # the common offset from the reflectors kept: a reflection left in would bend the
     # fit the offset is estimated from
     offset, offset_sigma = 0.0, offset_prior.sigma_mm
@@ -659,9 +687,19 @@ def fit_with_outliers(x, e, rho, y, sr0, sb0, fit, max_sys_bearing, offset_prior
             for k in range(3):
                 y[i, k] = e[i, k] * rho[i]
         R, t, its, cov, chi2, norms, sr, sb = fit_adaptive(
-            x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2, adapt, max_sys,
+            x,
+            e,
+            rho,
+            y,
+            sr0,
+            sb0,
+            refinement,
+            los_tol,
+            step_sigma2,
+            adapt,
+            max_sys,
             max_sys_bearing,
-        )  # fmt: skip
+        )
     return kept, R, t, its, cov, chi2, norms, sr, sb, offset, offset_sigma
 
 
@@ -682,8 +720,7 @@ def range_bias_covariance(x, e, rho, R, t, sr, sb, bias_sigma_mm):
 
 
 @jit
-def class_scale_covariance(x, e, rho, R, t, sr, sb, group, n_groups, bias_rad,
-                           common_scale_sigma):  # fmt: skip
+def class_scale_covariance(x, e, rho, R, t, sr, sb, group, n_groups, bias_rad, common_scale_sigma):
     """(6, 6) pose covariance from image-scale errors (bearings scaled about the
     pattern's mean bearing by 1 + kappa, as in ``common_range_offset``): one common to
     every reflector, of relative sigma ``common_scale_sigma`` (the focal length's

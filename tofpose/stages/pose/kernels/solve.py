@@ -64,9 +64,23 @@ def complete_pairs(y, k_idx, i_idx, xyz, R, t, tol_mm):
 
 @jit
 def solve_pairs(
-    y, w, uv, rho, sigma_px, sigma_range, mix, k_idx, i_idx, catalog, camera,
-    correct_perspective, mixing_radius_px, complete_tol_mm, fit, offset_prior,
-):  # fmt: skip
+    y,
+    w,
+    uv,
+    rho,
+    sigma_px,
+    sigma_range,
+    mix,
+    k_idx,
+    i_idx,
+    catalog,
+    camera,
+    correct_perspective,
+    mixing_radius_px,
+    complete_tol_mm,
+    fit,
+    offset_prior,
+):
     """The pose of matched pairs (module docstring).
 
     y (g, 3), w (g,), uv (g, 2), rho (g,), sigma_px (g,), sigma_range (g,) : the
@@ -119,8 +133,9 @@ def solve_pairs(
             c = centres[a]
             norm_c = np.sqrt(c[0] ** 2 + c[1] ** 2 + c[2] ** 2)
             cos_inc = abs(R[0, 2] * c[0] + R[1, 2] * c[1] + R[2, 2] * c[2]) / norm_c
-            d, sens = unmixed_range(rho_m[a], mix[k_idx[a]], r_disc[a] * fx / rho_m[a],
-                                    cos_inc, mixing_radius_px)  # fmt: skip
+            d, sens = unmixed_range(
+                rho_m[a], mix[k_idx[a]], r_disc[a] * fx / rho_m[a], cos_inc, mixing_radius_px
+            )
             rho_m[a] = d
             sr[a] = np.sqrt(sr[a] ** 2 + sens**2)
     if correct_perspective:
@@ -134,5 +149,23 @@ def solve_pairs(
     kept, R, t, its, cov, chi2, norms, sr_fit, sb_fit, offset, offset_sigma = fit_with_outliers(
         x, e_obs, rho_m, y_obs, sr, sb, fit, fit.max_systematic_centroid_px / fx, offset_prior
     )
-    return (k_idx, i_idx, uv_obs, e_obs, y_obs, rho_m, sr, kept, R, t, its, cov, chi2, norms,
-            sr_fit, sb_fit, offset, offset_sigma)  # fmt: skip
+    return (
+        k_idx,
+        i_idx,
+        uv_obs,
+        e_obs,
+        y_obs,
+        rho_m,
+        sr,
+        kept,
+        R,
+        t,
+        its,
+        cov,
+        chi2,
+        norms,
+        sr_fit,
+        sb_fit,
+        offset,
+        offset_sigma,
+    )

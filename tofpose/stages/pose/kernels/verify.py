@@ -13,8 +13,7 @@ CONSISTENT, BEHIND_CAMERA, DARK_REFLECTOR = 0, 1, 2
 
 
 @jit
-def pose_check(xyz, diameters, matched, R, t, fx, fy, cx, cy, dist, gray, threshold,
-               dark_check):  # fmt: skip
+def pose_check(xyz, diameters, matched, R, t, fx, fy, cx, cy, dist, gray, threshold, dark_check):
     """Whether the pose (R, t) puts every reflector in front of the camera, and (with
     ``dark_check``) whether a reflector that is not matched but should be clearly
     visible falls where the frame has no active pixel.

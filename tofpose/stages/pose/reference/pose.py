@@ -208,8 +208,9 @@ def fit_pose(x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2):
 def fit_without(j, x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2):
     """``fit_pose`` of every reflector but row j: the kept rows (m,) bool, R, t."""
     keep = np.arange(len(x)) != j
-    R, t, *_ = fit_pose(x[keep], e[keep], rho[keep], y[keep], sr[keep], sb[keep], refinement,
-                        los_tol, step_sigma2)  # fmt: skip
+    R, t, *_ = fit_pose(
+        x[keep], e[keep], rho[keep], y[keep], sr[keep], sb[keep], refinement, los_tol, step_sigma2
+    )
     return keep, R, t
 
 
@@ -258,24 +259,26 @@ def fit_adaptive(
 
     Returns R, t, iterations, covariance, chi^2, norms (m,), range sigmas (m,) and
     bearing sigmas (m,) used."""
-    R, t, its, cov, chi2, norms, _ = fit_pose(x, e, rho, y, sr0, sb0, refinement, los_tol,
-                                              step_sigma2)  # fmt: skip
+    R, t, its, cov, chi2, norms, _ = fit_pose(
+        x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2
+    )
     m = len(x)
     if not adapt or m < 4:
         return R, t, its, cov, chi2, norms, sr0, sb0
     er, eb = systematic_sigmas(x, e, rho, R, t, sr0, sb0, max_sys, max_sys_bearing)
     if (er > 0 or eb > 0) and m >= 5:
         for j in range(m):
-            keep, Rj, tj = fit_without(j, x, e, rho, y, sr0, sb0, refinement, los_tol,
-                                       step_sigma2)  # fmt: skip
-            er_j, eb_j = systematic_sigmas(x[keep], e[keep], rho[keep], Rj, tj, sr0[keep],
-                                           sb0[keep], max_sys, max_sys_bearing)  # fmt: skip
+            keep, Rj, tj = fit_without(j, x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2)
+            er_j, eb_j = systematic_sigmas(
+                x[keep], e[keep], rho[keep], Rj, tj, sr0[keep], sb0[keep], max_sys, max_sys_bearing
+            )
             er, eb = min(er, er_j), min(eb, eb_j)
     if er <= 0 and eb <= 0:
         return R, t, its, cov, chi2, norms, sr0, sb0
     sr, sb = np.sqrt(sr0**2 + er**2), np.sqrt(sb0**2 + eb**2)
-    R, t, its, cov, chi2, norms, _ = fit_pose(x, e, rho, y, sr, sb, refinement, los_tol,
-                                              step_sigma2)  # fmt: skip
+    R, t, its, cov, chi2, norms, _ = fit_pose(
+        x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2
+    )
     return R, t, its, cov, chi2, norms, sr, sb
 
 
@@ -369,8 +372,7 @@ def common_range_offset(x, e, rho, R0, t0, sr, sb, prior):
         return np.concatenate((r.ravel(), priors))
 
     n = 8 if fit_scale else 7
-    sol = least_squares(residuals, np.zeros(n), method="lm", xtol=1e-14, ftol=1e-14,
-                        gtol=1e-14)  # fmt: skip
+    sol = least_squares(residuals, np.zeros(n), method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14)
     steps = np.array([1e-7, 1e-7, 1e-7, 1e-4, 1e-4, 1e-4, 1e-4, 1e-7])[:n]
     J = _central_jacobian(residuals, sol.x, steps)
     cov = _inverse_or_nan(J.T @ J)
@@ -395,14 +397,31 @@ def fit_with_outliers(x, e, rho, y, sr0, sb0, fit, max_sys_bearing, offset_prior
     covariance, chi^2, norms, range sigmas, bearing sigmas (of the kept reflectors), b
     (mm, 0 when not estimated) and its posterior sigma (the prior's when not
     estimated)."""
-    settings = (fit.refinement, fit.los_tolerance, fit.step_sigma2, fit.adapt,
-                fit.max_systematic_range_mm, max_sys_bearing)  # fmt: skip
+    settings = (
+        fit.refinement,
+        fit.los_tolerance,
+        fit.step_sigma2,
+        fit.adapt,
+        fit.max_systematic_range_mm,
+        max_sys_bearing,
+    )
     rows = np.arange(len(x))
     R, t, its, cov, chi2, norms, sr, sb = fit_adaptive(x, e, rho, y, sr0, sb0, *settings)
     while fit.reject and len(rows) > fit.min_matches:
-        worst = worst_outlier(x[rows], e[rows], rho[rows], y[rows], sr, sb, norms,
-                              fit.refinement, fit.los_tolerance, fit.step_sigma2,
-                              fit.outlier_sigma, fit.chi2_per_dof)  # fmt: skip
+        worst = worst_outlier(
+            x[rows],
+            e[rows],
+            rho[rows],
+            y[rows],
+            sr,
+            sb,
+            norms,
+            fit.refinement,
+            fit.los_tolerance,
+            fit.step_sigma2,
+            fit.outlier_sigma,
+            fit.chi2_per_dof,
+        )
         if worst < 0:
             break
         rows = np.delete(rows, worst)
@@ -411,8 +430,9 @@ def fit_with_outliers(x, e, rho, y, sr0, sb0, fit, max_sys_bearing, offset_prior
         )
     offset, offset_sigma = 0.0, offset_prior.sigma_mm
     if offset_prior.sigma_mm > 0 and fit.refinement == REFINE_ML and len(rows) >= 4:
-        offset, offset_sigma = common_range_offset(x[rows], e[rows], rho[rows], R, t, sr, sb,
-                                                   offset_prior)  # fmt: skip
+        offset, offset_sigma = common_range_offset(
+            x[rows], e[rows], rho[rows], R, t, sr, sb, offset_prior
+        )
     if offset != 0.0:
         rho_b = rho[rows] - offset
         R, t, its, cov, chi2, norms, sr, sb = fit_adaptive(
@@ -442,8 +462,9 @@ def range_bias_covariance(x, e, rho, R, t, sr, sb, bias_sigma_mm) -> np.ndarray:
     return bias_sigma_mm**2 * np.outer(s, s)
 
 
-def class_scale_covariance(x, e, rho, R, t, sr, sb, group, n_groups, bias_rad,
-                           common_scale_sigma) -> np.ndarray:  # fmt: skip
+def class_scale_covariance(
+    x, e, rho, R, t, sr, sb, group, n_groups, bias_rad, common_scale_sigma
+) -> np.ndarray:
     """(6, 6), ours: the pose covariance from image-scale errors (bearings scaled about
     the mean bearing by 1 + kappa, as in ``common_range_offset``): one common scale of
     sigma ``common_scale_sigma``, and one per group g in [0, n_groups) of reflectors

@@ -62,9 +62,23 @@ def complete_pairs(y, k_idx, i_idx, xyz, R, t, tol_mm):
 
 
 def solve_pairs(
-    y, w, uv, rho, sigma_px, sigma_range, mix, k_idx, i_idx, catalog, camera,
-    correct_perspective, mixing_radius_px, complete_tol_mm, fit, offset_prior,
-):  # fmt: skip
+    y,
+    w,
+    uv,
+    rho,
+    sigma_px,
+    sigma_range,
+    mix,
+    k_idx,
+    i_idx,
+    catalog,
+    camera,
+    correct_perspective,
+    mixing_radius_px,
+    complete_tol_mm,
+    fit,
+    offset_prior,
+):
     """The pose of matched pairs (§5 as the pipeline runs it):
 
     1. the weighted absolute orientation (Eqs. 40-50) of the pairs' points y[k] (Eq. 8)
@@ -103,8 +117,9 @@ def solve_pairs(
     if mixing_radius_px > 0:
         cos_inc = np.abs(centres @ R[:, 2]) / np.linalg.norm(centres, axis=1)
         for a, k in enumerate(k_idx):
-            d, sensitivity = unmixed_range(rho_m[a], mix[k], r_disc[a] * camera.fx / rho_m[a],
-                                           cos_inc[a], mixing_radius_px)  # fmt: skip
+            d, sensitivity = unmixed_range(
+                rho_m[a], mix[k], r_disc[a] * camera.fx / rho_m[a], cos_inc[a], mixing_radius_px
+            )
             rho_m[a] = d
             sr[a] = np.hypot(sr[a], sensitivity)
     uv_obs = uv[k_idx].astype(float)

@@ -21,8 +21,7 @@ CLEAR_DIAMETERS = 1.5
 SEARCH_DIVISOR = 3.0
 
 
-def pose_check(xyz, diameters, matched, R, t, fx, fy, cx, cy, dist, gray, threshold,
-               dark_check):  # fmt: skip
+def pose_check(xyz, diameters, matched, R, t, fx, fy, cx, cy, dist, gray, threshold, dark_check):
     """The pose (R (3, 3), t (3,)) against the frame. ``BEHIND_CAMERA`` when any
     reflector's centre R x + t has z <= 0; else (with ``dark_check``) ``DARK_REFLECTOR``
     for the first reflector in catalog order that is unmatched, imaged d_px = fx d / z
@@ -51,9 +50,13 @@ def pose_check(xyz, diameters, matched, R, t, fx, fy, cx, cy, dist, gray, thresh
     for i in range(len(centres)):
         u, v = uv[i]
         margin = EDGE_MARGIN_DIAMETERS * d_px[i] + EDGE_MARGIN_PX
-        tested = (not matched[i] and d_px[i] >= MIN_TESTED_PX
-                  and margin <= u < w - margin and margin <= v < h - margin
-                  and gaps[i].min() >= CLEAR_DIAMETERS * d_px[i])  # fmt: skip
+        tested = (
+            not matched[i]
+            and d_px[i] >= MIN_TESTED_PX
+            and margin <= u < w - margin
+            and margin <= v < h - margin
+            and gaps[i].min() >= CLEAR_DIAMETERS * d_px[i]
+        )
         if not tested:
             continue
         r = max(1, round(d_px[i] / SEARCH_DIVISOR))

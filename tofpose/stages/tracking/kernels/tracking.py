@@ -177,9 +177,12 @@ def any_shared(flat, starts, bbox):
     n = starts.shape[0] - 1
     for a in range(n):
         for b in range(a + 1, n):
-            if not (bbox[a, 0] < bbox[b, 0] + bbox[b, 2] and bbox[b, 0] < bbox[a, 0] + bbox[a, 2]
-                    and bbox[a, 1] < bbox[b, 1] + bbox[b, 3]
-                    and bbox[b, 1] < bbox[a, 1] + bbox[a, 3]):  # fmt: skip
+            if not (
+                bbox[a, 0] < bbox[b, 0] + bbox[b, 2]
+                and bbox[b, 0] < bbox[a, 0] + bbox[a, 2]
+                and bbox[a, 1] < bbox[b, 1] + bbox[b, 3]
+                and bbox[b, 1] < bbox[a, 1] + bbox[a, 3]
+            ):
                 continue
             i, j = starts[a], starts[b]
             while i < starts[a + 1] and j < starts[b + 1]:
@@ -193,8 +196,9 @@ def any_shared(flat, starts, bbox):
 
 
 @jit
-def camera_windows(xyz, diameters_mm, R, t, fx, fy, cx, cy, dist, margin_px,
-                   min_diameter_px, width, height):  # fmt: skip
+def camera_windows(
+    xyz, diameters_mm, R, t, fx, fy, cx, cy, dist, margin_px, min_diameter_px, width, height
+):
     """``tracking.predict_windows`` as arrays (dist (5,): the lens distortion): the
     catalog indices (m,) of the reflectors to track, their window bounds (m, 4) int64
     (u0, u1, v0, v1), predicted centres (m, 2) px and diameters (m,) px. No windows when
@@ -207,8 +211,12 @@ def camera_windows(xyz, diameters_mm, R, t, fx, fy, cx, cy, dist, margin_px,
     d_px = np.empty(n)
     for i in range(n):
         if centres[i, 2] <= 0:
-            return (np.empty(0, np.int64), np.empty((0, 4), np.int64), np.empty((0, 2)),
-                    np.empty(0))  # fmt: skip
+            return (
+                np.empty(0, np.int64),
+                np.empty((0, 4), np.int64),
+                np.empty((0, 2)),
+                np.empty(0),
+            )
         d_px[i] = fx * diameters_mm[i] / centres[i, 2]
     uv = project(centres, fx, fy, cx, cy, dist)
     use = np.zeros(n, np.bool_)
@@ -223,7 +231,13 @@ def camera_windows(xyz, diameters_mm, R, t, fx, fy, cx, cy, dist, margin_px,
         u0, u1 = int(np.floor(uv[i, 0] - half)), int(np.ceil(uv[i, 0] + half)) + 1
         v0, v1 = int(np.floor(uv[i, 1] - half)), int(np.ceil(uv[i, 1] + half)) + 1
         bounds[i, 0], bounds[i, 1], bounds[i, 2], bounds[i, 3] = u0, u1, v0, v1
-        use[i] = (d_px[i] >= min_diameter_px and gap >= 2.0 and u0 >= 0 and v0 >= 0
-                  and u1 <= width and v1 <= height)  # fmt: skip
+        use[i] = (
+            d_px[i] >= min_diameter_px
+            and gap >= 2.0
+            and u0 >= 0
+            and v0 >= 0
+            and u1 <= width
+            and v1 <= height
+        )
     idx = np.flatnonzero(use)
     return idx, bounds[idx], uv[idx], d_px[idx]

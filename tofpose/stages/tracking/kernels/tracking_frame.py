@@ -28,10 +28,27 @@ TRACKED, LOST, SHARED, NOT_PERSISTENT, NO_RANGE, OUTLIER = 0, 1, 2, 3, 4, 5
 
 @jit
 def track_frame(
-    gray, distance, bounds, centres, diameters, cat_idx, threshold, background, dark,
-    history, camera, catalog, correct_perspective, mixing_radius_px, correction, sigmas, fit,
-    offset_prior, mean_buf, med_buf,
-):  # fmt: skip
+    gray,
+    distance,
+    bounds,
+    centres,
+    diameters,
+    cat_idx,
+    threshold,
+    background,
+    dark,
+    history,
+    camera,
+    catalog,
+    correct_perspective,
+    mixing_radius_px,
+    correction,
+    sigmas,
+    fit,
+    offset_prior,
+    mean_buf,
+    med_buf,
+):
     """One tracking frame (module docstring).
 
     gray, distance : (H, W) float32 checked frame; bounds (n, 4), centres (n, 2),
@@ -92,12 +109,23 @@ def track_frame(
 
         # §3.4 (persistence over the consistent history, then Eqs. 19-20), the range
         # correction, Eqs. 7-8 with the sigmas and Eq. 21's weights
-        n_used, motion, keep, uv, _, ranged, rho, sp, sr, y, wts, mix = (
-            measure_and_back_project(
-                gray, distance, flat, starts, bbox, cent, np.zeros(n, np.bool_), history,
-                background, dark, camera, mean_buf, med_buf, correction, sigmas,
-            )
-        )  # fmt: skip
+        n_used, motion, keep, uv, _, ranged, rho, sp, sr, y, wts, mix = measure_and_back_project(
+            gray,
+            distance,
+            flat,
+            starts,
+            bbox,
+            cent,
+            np.zeros(n, np.bool_),
+            history,
+            background,
+            dark,
+            camera,
+            mean_buf,
+            med_buf,
+            correction,
+            sigmas,
+        )
         if not keep.all():
             code = NOT_PERSISTENT
             break
@@ -106,11 +134,43 @@ def track_frame(
             break
 
         # §5 on the known correspondences (every blob matched: nothing to complete)
-        (_, _, uv_obs, e_obs, y_obs, rho_obs, sr_obs, kept, R, t, its, cov, chi2, norms,
-         sr_fit, sb_fit, offset, offset_sigma) = solve_pairs(
-            y, wts, uv, rho, sp, sr, mix, np.arange(n), cat_idx, catalog, camera,
-            correct_perspective, mixing_radius_px, 0.0, fit, offset_prior,
-        )  # fmt: skip
+        (
+            _,
+            _,
+            uv_obs,
+            e_obs,
+            y_obs,
+            rho_obs,
+            sr_obs,
+            kept,
+            R,
+            t,
+            its,
+            cov,
+            chi2,
+            norms,
+            sr_fit,
+            sb_fit,
+            offset,
+            offset_sigma,
+        ) = solve_pairs(
+            y,
+            wts,
+            uv,
+            rho,
+            sp,
+            sr,
+            mix,
+            np.arange(n),
+            cat_idx,
+            catalog,
+            camera,
+            correct_perspective,
+            mixing_radius_px,
+            0.0,
+            fit,
+            offset_prior,
+        )
         rho, sr = rho_obs, sr_obs  # every blob is matched, in order
         if not kept.all():
             code = OUTLIER

@@ -24,8 +24,9 @@ FOUND, NOT_FOUND, NO_SIZE, AT_EDGE = 0, 1, 2, 3
 MIN_GAP_PX = 2.0
 
 
-def camera_windows(xyz, diameters_mm, R, t, fx, fy, cx, cy, dist, margin_px,
-                   min_diameter_px, width, height):  # fmt: skip
+def camera_windows(
+    xyz, diameters_mm, R, t, fx, fy, cx, cy, dist, margin_px, min_diameter_px, width, height
+):
     """``tracking.predict_windows`` as arrays. xyz (N, 3) catalog mm; diameters_mm (N,);
     the pose (R (3, 3), t (3,)); the intrinsics and dist (5,) the lens distortion.
 
@@ -46,12 +47,23 @@ def camera_windows(xyz, diameters_mm, R, t, fx, fy, cx, cy, dist, margin_px,
     gap = cdist(uv, uv) - 0.5 * (d_px[:, None] + d_px[None, :])
     np.fill_diagonal(gap, np.inf)
     half = 0.5 * d_px + margin_px
-    bounds = np.column_stack((np.floor(uv[:, 0] - half), np.ceil(uv[:, 0] + half) + 1,
-                              np.floor(uv[:, 1] - half), np.ceil(uv[:, 1] + half) + 1))  # fmt: skip
+    bounds = np.column_stack(
+        (
+            np.floor(uv[:, 0] - half),
+            np.ceil(uv[:, 0] + half) + 1,
+            np.floor(uv[:, 1] - half),
+            np.ceil(uv[:, 1] + half) + 1,
+        )
+    )
     bounds = bounds.astype(np.int64)
-    use = ((d_px >= min_diameter_px) & (gap.min(axis=1, initial=np.inf) >= MIN_GAP_PX)
-           & (bounds[:, 0] >= 0) & (bounds[:, 2] >= 0) & (bounds[:, 1] <= width)
-           & (bounds[:, 3] <= height))  # fmt: skip
+    use = (
+        (d_px >= min_diameter_px)
+        & (gap.min(axis=1, initial=np.inf) >= MIN_GAP_PX)
+        & (bounds[:, 0] >= 0)
+        & (bounds[:, 2] >= 0)
+        & (bounds[:, 1] <= width)
+        & (bounds[:, 3] <= height)
+    )
     idx = np.flatnonzero(use).astype(np.int64)
     return idx, bounds[idx], uv[idx], d_px[idx]
 
@@ -64,14 +76,20 @@ def window_components(gray, u0, u1, v0, v1, threshold):
     (u, v) and box (n + 1, 4) (x, y, w, h), window coordinates."""
     patch = np.asarray(gray)[v0:v1, u0:u1].astype(np.float64)
     n, labels, stats, cents = cv2.connectedComponentsWithStats(
-        (patch >= float(threshold)).astype(np.uint8), connectivity=8)  # fmt: skip
+        (patch >= float(threshold)).astype(np.uint8), connectivity=8
+    )
     first = [np.flatnonzero(labels.ravel() == k)[0] for k in range(1, n)]
     order = np.argsort(np.array(first, np.int64)) + 1  # OpenCV's numbers by first pixel
     renumber = np.zeros(n, np.int64)
     renumber[order] = np.arange(1, n)
     keep = np.concatenate(([0], order))
-    return (renumber[labels], n - 1, stats[keep, cv2.CC_STAT_AREA].astype(np.int64),
-            cents[keep], stats[keep, :4].astype(np.int64))  # fmt: skip
+    return (
+        renumber[labels],
+        n - 1,
+        stats[keep, cv2.CC_STAT_AREA].astype(np.int64),
+        cents[keep],
+        stats[keep, :4].astype(np.int64),
+    )
 
 
 def _window_runs(gray, u0, u1, v0, v1, threshold):
@@ -90,8 +108,9 @@ def _window_runs(gray, u0, u1, v0, v1, threshold):
         c0 += edges[0::2].tolist()
         c1 += edges[1::2].tolist()
     row, c0, c1 = (np.array(v, np.int64) for v in (row, c0, c1))
-    box = np.column_stack((stats[:, 0], stats[:, 0] + stats[:, 2] - 1, stats[:, 1],
-                           stats[:, 1] + stats[:, 3] - 1))  # fmt: skip
+    box = np.column_stack(
+        (stats[:, 0], stats[:, 0] + stats[:, 2] - 1, stats[:, 1], stats[:, 1] + stats[:, 3] - 1)
+    )
     box[0] = (pw, -1, ph, -1)
     area[0] = 0
     sums = np.vstack(([0.0, 0.0], np.round(cents[1:] * area[1:, None])))  # whole numbers
@@ -125,8 +144,9 @@ def search_windows(gray, bounds, centres, diameters, threshold, background):
         if n_lab == 0:
             continue
         a = np.pi * (0.5 * diameters[j]) ** 2
-        sized = [k for k in range(1, n_lab + 1)
-                 if max(1.0, 0.25 * a) <= area[k] <= max(4.0, 4.0 * a)]  # fmt: skip
+        sized = [
+            k for k in range(1, n_lab + 1) if max(1.0, 0.25 * a) <= area[k] <= max(4.0, 4.0 * a)
+        ]
         if not sized:
             status[j] = NO_SIZE
             continue
@@ -153,5 +173,8 @@ def any_shared(flat, starts, bbox) -> bool:
     blob serving two reflectors)? bbox (n, 4), each list's bounding box, only spares the
     kernel work: the answer does not depend on it."""
     lists = [flat[starts[j] : starts[j + 1]] for j in range(len(starts) - 1)]
-    return any(np.intersect1d(lists[a], lists[b]).size
-               for a in range(len(lists)) for b in range(a + 1, len(lists)))  # fmt: skip
+    return any(
+        np.intersect1d(lists[a], lists[b]).size
+        for a in range(len(lists))
+        for b in range(a + 1, len(lists))
+    )

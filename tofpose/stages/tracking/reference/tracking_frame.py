@@ -18,10 +18,27 @@ TRACKED, LOST, SHARED, NOT_PERSISTENT, NO_RANGE, OUTLIER = 0, 1, 2, 3, 4, 5
 
 
 def track_frame(
-    gray, distance, bounds, centres, diameters, cat_idx, threshold, background, dark,
-    history, camera, catalog, correct_perspective, mixing_radius_px, correction, sigmas, fit,
-    offset_prior, mean_buf, med_buf,
-):  # fmt: skip
+    gray,
+    distance,
+    bounds,
+    centres,
+    diameters,
+    cat_idx,
+    threshold,
+    background,
+    dark,
+    history,
+    camera,
+    catalog,
+    correct_perspective,
+    mixing_radius_px,
+    correction,
+    sigmas,
+    fit,
+    offset_prior,
+    mean_buf,
+    med_buf,
+):
     """One tracking frame: every window's blob (``search_windows``; ``LOST`` unless each
     is found, ``SHARED`` when two windows hold one component), their persistence,
     centroids, ranges, sigmas and points (``measure_and_back_project``;
@@ -33,33 +50,87 @@ def track_frame(
     iterations, covariance, chi2, norms, sr, sb, offset, offset sigma); the arrays after
     ``code`` are NaN past the step that set it."""
     n = len(bounds)
-    status, bbox, _, cent, starts, flat = search_windows(gray, bounds, centres, diameters,
-                                                         threshold, background)  # fmt: skip
+    status, bbox, _, cent, starts, flat = search_windows(
+        gray, bounds, centres, diameters, threshold, background
+    )
     uv, uv_obs = np.full((n, 2), np.nan), np.full((n, 2), np.nan)
     y, e_obs, y_obs = (np.full((n, 3), np.nan) for _ in range(3))
     rho, sp, sr, wts = (np.full(n, np.nan) for _ in range(4))
-    fit_out = (np.eye(3), np.zeros(3), 0, np.full((6, 6), np.nan), np.inf, np.full(n, np.nan),
-               np.full(n, np.nan), np.full(n, np.nan), 0.0, offset_prior.sigma_mm)  # fmt: skip
+    fit_out = (
+        np.eye(3),
+        np.zeros(3),
+        0,
+        np.full((6, 6), np.nan),
+        np.inf,
+        np.full(n, np.nan),
+        np.full(n, np.nan),
+        np.full(n, np.nan),
+        0.0,
+        offset_prior.sigma_mm,
+    )
     n_used, motion = 0, False
 
     def result(code):
-        return (code, n_used, motion, cent, flat, starts, uv, rho, sp, sr, y, wts, uv_obs,
-                e_obs, y_obs, *fit_out)  # fmt: skip
+        return (
+            code,
+            n_used,
+            motion,
+            cent,
+            flat,
+            starts,
+            uv,
+            rho,
+            sp,
+            sr,
+            y,
+            wts,
+            uv_obs,
+            e_obs,
+            y_obs,
+            *fit_out,
+        )
 
     if not all(s == FOUND for s in np.asarray(status).tolist()):
         return result(LOST)
     if any_shared(flat, starts, bbox):
         return result(SHARED)
     n_used, motion, keep, uv, _, ranged, rho, sp, sr, y, wts, mix = measure_and_back_project(
-        gray, distance, flat, starts, bbox, cent, np.zeros(n, bool), history, background,
-        dark, camera, mean_buf, med_buf, correction, sigmas,
-    )  # fmt: skip
+        gray,
+        distance,
+        flat,
+        starts,
+        bbox,
+        cent,
+        np.zeros(n, bool),
+        history,
+        background,
+        dark,
+        camera,
+        mean_buf,
+        med_buf,
+        correction,
+        sigmas,
+    )
     if not np.all(keep):
         return result(NOT_PERSISTENT)
     if len(ranged) < n:
         return result(NO_RANGE)
     (_, _, uv_obs, e_obs, y_obs, rho, sr, kept, *fit_out) = solve_pairs(
-        y, wts, uv, rho, sp, sr, mix, np.arange(n), np.asarray(cat_idx), catalog, camera,
-        correct_perspective, mixing_radius_px, 0.0, fit, offset_prior,
-    )  # fmt: skip
+        y,
+        wts,
+        uv,
+        rho,
+        sp,
+        sr,
+        mix,
+        np.arange(n),
+        np.asarray(cat_idx),
+        catalog,
+        camera,
+        correct_perspective,
+        mixing_radius_px,
+        0.0,
+        fit,
+        offset_prior,
+    )
     return result(TRACKED if np.all(kept) else OUTLIER)

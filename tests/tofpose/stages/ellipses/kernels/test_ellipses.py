@@ -18,8 +18,9 @@ def _split_arcs_reference(contour, angle_deg=40.0, min_points=6, smooth_sigma=2.
     n = len(contour)
     if n < 2 * min_points:
         return [contour] if n >= min_points else []
-    index, starts = reference.arc_points(contour.astype(np.float64), angle_deg, min_points,
-                                         smooth_sigma)  # fmt: skip
+    index, starts = reference.arc_points(
+        contour.astype(np.float64), angle_deg, min_points, smooth_sigma
+    )
     return [contour[index[starts[a] : starts[a + 1]]] for a in range(len(starts) - 1)]
 
 

@@ -17,9 +17,16 @@ def _reference_fit(img, pixels, start, background):
     ``reference.pair_fit.fit_pair_lm``) in place of the compiled loop."""
     su, sv, values, p0, lower, upper = library._problem(img, pixels, start, background)
     p, normal, cost, converged = reference.fit_pair_lm(
-        su, sv, values, p0, lower, upper, library.MAX_EVALUATIONS,
-        library.CENTRE_TOLERANCE_PX, library.COST_TOLERANCE,
-    )  # fmt: skip
+        su,
+        sv,
+        values,
+        p0,
+        lower,
+        upper,
+        library.MAX_EVALUATIONS,
+        library.CENTRE_TOLERANCE_PX,
+        library.COST_TOLERANCE,
+    )
     return library._result(p, normal, cost, len(values), lower, upper) if converged else None
 
 
@@ -40,9 +47,14 @@ def test_the_model_is_the_numpy_model_and_its_jacobian_is_its_derivative():
     res = pair_model(p, su, sv, values, jac)
     want = reference.pair_model(p, su, sv, values, np.empty((40, 9)))
     np.testing.assert_allclose(res, want, atol=1e-3)
-    numeric = np.array([approx_fprime(p, lambda q, i=i: pair_model(q, su, sv, values,
-                                                                   np.empty((40, 9)))[i],
-                                      1e-6) for i in range(40)])  # fmt: skip
+    numeric = np.array(
+        [
+            approx_fprime(
+                p, lambda q, i=i: pair_model(q, su, sv, values, np.empty((40, 9)))[i], 1e-6
+            )
+            for i in range(40)
+        ]
+    )
     np.testing.assert_allclose(jac, numeric, atol=1e-3 * np.abs(numeric).max())
 
 

@@ -30,9 +30,11 @@ def _rendered_blobs(distance_mm, distorted):
     cam = CameraModel(dist=(-0.02, 0.008, 0.0004, -0.0003, 0.0)) if distorted else CameraModel()
     gray = render(facing_pose(distance_mm, 5, -8, 15), seed=3, camera=cam).gray
     n, labels, stats, _ = cv2.connectedComponentsWithStats(
-        (gray >= 0.25 * gray.max()).astype(np.uint8), connectivity=8)  # fmt: skip
-    blobs = [(np.flatnonzero(labels == k), tuple(int(v) for v in stats[k, :4]))
-             for k in range(1, n)]  # fmt: skip
+        (gray >= 0.25 * gray.max()).astype(np.uint8), connectivity=8
+    )
+    blobs = [
+        (np.flatnonzero(labels == k), tuple(int(v) for v in stats[k, :4])) for k in range(1, n)
+    ]
     return blobs, gray.shape[1]
 
 
@@ -75,8 +77,10 @@ def test_blob_mask_equals_the_kernel_on_random_pixel_sets():
         rows, cols = np.mgrid[y : y + bh, x : x + bw]
         keep = rng.random(rows.size) < 0.6
         pixels = (rows.ravel() * width + cols.ravel())[keep].astype(np.int64)
-        np.testing.assert_array_equal(reference.blob_mask(pixels, x, y, bw, bh, width),
-                                      kernel.blob_mask(pixels, x, y, bw, bh, width))  # fmt: skip
+        np.testing.assert_array_equal(
+            reference.blob_mask(pixels, x, y, bw, bh, width),
+            kernel.blob_mask(pixels, x, y, bw, bh, width),
+        )
 
 
 def test_the_mask_of_a_drawn_disc_is_the_disc():
@@ -94,8 +98,9 @@ def test_the_mask_of_a_drawn_disc_is_the_disc():
 
 
 def _arcs_agree(contour, **kw):
-    want_index, want_starts = kernel.arc_points(contour, kw["angle_deg"], kw["min_points"],
-                                                kw["smooth_sigma"])  # fmt: skip
+    want_index, want_starts = kernel.arc_points(
+        contour, kw["angle_deg"], kw["min_points"], kw["smooth_sigma"]
+    )
     got_index, got_starts = reference.arc_points(contour, **kw)
     np.testing.assert_array_equal(got_starts, want_starts)
     np.testing.assert_array_equal(got_index, want_index)
@@ -110,8 +115,9 @@ def test_arc_points_equals_the_kernel_on_random_contours():
         for min_points, angle_deg, sigma in ((4, 40.0, 2.0), (6, 40.0, 2.0), (9, 30.0, 1.5)):
             if len(contour) < 2 * min_points:
                 continue
-            n_arcs += _arcs_agree(contour, angle_deg=angle_deg, min_points=min_points,
-                                  smooth_sigma=sigma)  # fmt: skip
+            n_arcs += _arcs_agree(
+                contour, angle_deg=angle_deg, min_points=min_points, smooth_sigma=sigma
+            )
             n_checked += 1
     assert n_checked > 600 and n_arcs > n_checked  # the contours do break into arcs
 
@@ -125,8 +131,7 @@ def test_arc_points_and_the_residual_equal_the_kernel_on_rendered_blobs(distance
         if len(pts) < 8:
             continue
         min_points = 6 if len(pts) >= 12 else 4
-        _arcs_agree(pts.astype(np.float64), angle_deg=40.0, min_points=min_points,
-                    smooth_sigma=2.0)  # fmt: skip
+        _arcs_agree(pts.astype(np.float64), angle_deg=40.0, min_points=min_points, smooth_sigma=2.0)
         e = fit_ellipse(pts)
         assert e is not None
         (cx, cy), (a1, a2), ang = e
@@ -146,12 +151,14 @@ def test_ellipse_rms_equals_the_kernel_near_random_ellipses():
         s = rng.uniform(0, 2 * np.pi, 30)
         turn = np.radians(ang)
         local = np.column_stack((np.cos(s), np.sin(s))) * axes / 2 + rng.normal(0, 0.7, (30, 2))
-        pts = centre + local @ np.array([[np.cos(turn), np.sin(turn)],
-                                         [-np.sin(turn), np.cos(turn)]])  # fmt: skip
+        pts = centre + local @ np.array(
+            [[np.cos(turn), np.sin(turn)], [-np.sin(turn), np.cos(turn)]]
+        )
         pts = np.vstack((centre, pts))
         args = (*centre, *axes, ang, pts)
-        assert reference.ellipse_rms_px(*args) == pytest.approx(kernel.ellipse_rms_px(*args),
-                                                                rel=1e-12)  # fmt: skip
+        assert reference.ellipse_rms_px(*args) == pytest.approx(
+            kernel.ellipse_rms_px(*args), rel=1e-12
+        )
 
 
 def test_the_residual_of_known_points():

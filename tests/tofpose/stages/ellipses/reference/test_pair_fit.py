@@ -53,7 +53,8 @@ def _rendered_pair(distance_mm, distorted, seed=1):
     truth = cam.project(T.apply(paper_target().positions_mm))[6:8]
     level = float(np.median(gray))
     _, labels, _, _ = cv2.connectedComponentsWithStats(
-        (gray >= level + 0.25 * (gray.max() - level)).astype(np.uint8), connectivity=8)  # fmt: skip
+        (gray >= level + 0.25 * (gray.max() - level)).astype(np.uint8), connectivity=8
+    )
     ours = [labels[int(round(v)), int(round(u))] for u, v in truth]
     pixels = np.flatnonzero(np.isin(labels, ours))
     start = truth + np.random.default_rng(seed).uniform(-0.3, 0.3, (2, 2))
@@ -62,8 +63,15 @@ def _rendered_pair(distance_mm, distorted, seed=1):
 
 def _random_model_point(rng, n=40):
     su, sv = rng.uniform(10, 20, (n, 9)), rng.uniform(9, 14, (n, 9))
-    p = np.array([*rng.uniform(11, 19, 4), *rng.uniform(500, 2500, 2), rng.uniform(1.2, 3.0),
-                  rng.uniform(0.2, 1.5), rng.uniform(0, 300)])  # fmt: skip
+    p = np.array(
+        [
+            *rng.uniform(11, 19, 4),
+            *rng.uniform(500, 2500, 2),
+            rng.uniform(1.2, 3.0),
+            rng.uniform(0.2, 1.5),
+            rng.uniform(0, 300),
+        ]
+    )
     return p, su, sv, rng.uniform(0, 2000, n)
 
 
@@ -125,8 +133,9 @@ def test_the_fit_equals_the_kernel_and_finds_drawn_discs():
         c1 = np.array([12.0, 11.0]) + rng.uniform(-0.5, 0.5, 2)
         angle, sep = rng.uniform(0, np.pi), rng.uniform(3.5, 6.0)
         centres = np.array([c1, c1 + sep * np.array([np.cos(angle), np.sin(angle)])])
-        img = _discs(centres, rng.uniform(1.6, 2.6), (1.0, rng.uniform(0.7, 1.3)),
-                     rng.uniform(0.4, 1.2))  # fmt: skip
+        img = _discs(
+            centres, rng.uniform(1.6, 2.6), (1.0, rng.uniform(0.7, 1.3)), rng.uniform(0.4, 1.2)
+        )
         img += rng.normal(0.0, 15.0, img.shape).astype(np.float32)
         comp = _component(img, BACKGROUND + 0.25 * (img.max() - BACKGROUND))
         problem = _problem(img, comp.pixels, centres + rng.uniform(-0.3, 0.3, (2, 2)), BACKGROUND)

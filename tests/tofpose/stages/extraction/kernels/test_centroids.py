@@ -142,8 +142,9 @@ def _disc_image(shape, centre_uv, radius_px, blur_px, peak, rng=None, supersampl
     h, w = shape
     s = supersample
     v, u = np.mgrid[0 : h * s, 0 : w * s]
-    inside = (((u + 0.5) / s - 0.5 - centre_uv[0]) ** 2
-              + ((v + 0.5) / s - 0.5 - centre_uv[1]) ** 2) <= radius_px**2  # fmt: skip
+    inside = (
+        ((u + 0.5) / s - 0.5 - centre_uv[0]) ** 2 + ((v + 0.5) / s - 0.5 - centre_uv[1]) ** 2
+    ) <= radius_px**2
     img = inside.reshape(h, s, w, s).mean(axis=(1, 3))
     if blur_px > 0:
         img = cv2.GaussianBlur(img, (0, 0), blur_px)

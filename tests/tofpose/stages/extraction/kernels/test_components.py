@@ -41,8 +41,9 @@ def _assert_is_opencvs(table, mask, gray):
     np.testing.assert_array_equal(bbox[1:], stats[1:, :4])
     runs = threshold_mask(mask.astype(np.float32), 0.5)[1]
     for k in range(1, n):
-        np.testing.assert_array_equal(flat[starts[k] : starts[k + 1]],
-                                      np.flatnonzero(labels.ravel() == k))  # fmt: skip
+        np.testing.assert_array_equal(
+            flat[starts[k] : starts[k + 1]], np.flatnonzero(labels.ravel() == k)
+        )
         assert peak[k] == gray[labels == k].max()
         own = runs[run_order[run_starts[k] : run_starts[k + 1]]]
         assert all((labels[r, a:b] == k).all() for r, a, b in own)
@@ -80,8 +81,9 @@ def test_a_frames_active_set_is_labelled_as_opencv_labels_it():
     for distance_mm in (700.0, 3000.0, 9000.0):
         frame = render(facing_pose(distance_mm, 3, -4, 12), seed=2)
         g, d = check_frame(cam, frame.gray, frame.distance_mm)
-        found = find_candidate_blobs(g, d, cam, paper_target().diameters_mm, cfg,
-                                     frame_levels(g, cfg))  # fmt: skip
+        found = find_candidate_blobs(
+            g, d, cam, paper_target().diameters_mm, cfg, frame_levels(g, cfg)
+        )
         _assert_is_opencvs(_table(found.active_mask, g), found.active_mask, g)
 
 
@@ -107,5 +109,6 @@ def test_nlog_patch_matches_opencv(sigma):
     want = nlog_response(patch, sigma)
     # float32 rounding of the smoothed values (~1e-4 counts) is amplified by the
     # Laplacian's differences and the sigma^2 normalisation: compare at 1e-5 of the peak
-    np.testing.assert_allclose(nlog_patch(patch, sigma, True), want, rtol=0,
-                               atol=1e-5 * np.abs(want).max())  # fmt: skip
+    np.testing.assert_allclose(
+        nlog_patch(patch, sigma, True), want, rtol=0, atol=1e-5 * np.abs(want).max()
+    )

@@ -88,7 +88,7 @@ def test_surface_brightness_credits_an_unresolved_reflector_and_not_a_dim_patch(
     for gray, bbox, expect in (
         (disc, [11, 12, 7, 7], 2000.0),
         (patch, [11, 11, 8, 8], 300.0),
-    ):  # fmt: skip
+    ):
         b = np.array([bbox], np.int64)
         flux, m2 = window_moments(gray, b, np.array([0], np.int64))
         peak = np.array([float(gray.max())])

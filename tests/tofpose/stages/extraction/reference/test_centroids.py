@@ -15,8 +15,10 @@ def test_a_uniform_square_on_a_flat_surround_is_centred_exactly():
     g[10:15, 10:15] = 900.0
     g[30:32, 20:22] = 500.0
     w = g.shape[1]
-    for rows, cols, centre in (((10, 15), (10, 15), (12.0, 12.0)),
-                               ((30, 32), (20, 22), (20.5, 30.5))):  # fmt: skip
+    for rows, cols, centre in (
+        ((10, 15), (10, 15), (12.0, 12.0)),
+        ((30, 32), (20, 22), (20.5, 30.5)),
+    ):
         r, c = np.mgrid[rows[0] : rows[1], cols[0] : cols[1]]
         pixels = (r * w + c).ravel()
         bbox = (cols[0], rows[0], cols[1] - cols[0], rows[1] - rows[0])

@@ -44,8 +44,12 @@ def _rendered(distance_mm, seed, blur_px):
     room, through a lens PSF of ``blur_px``, as ``check_frame`` hands them on."""
     rng = np.random.default_rng(seed)
     scene = TargetScene(clutter=CLUTTER, background=synthetic_room(CAM, rng, distance_mm))
-    frame = render(facing_pose(distance_mm, 4, -6, 12, offset_mm=(-110.0, -55.0)), seed=seed,
-                   scene=scene, sensor=SensorModel(blur_sigma_px=blur_px))  # fmt: skip
+    frame = render(
+        facing_pose(distance_mm, 4, -6, 12, offset_mm=(-110.0, -55.0)),
+        seed=seed,
+        scene=scene,
+        sensor=SensorModel(blur_sigma_px=blur_px),
+    )
     g, d = extraction.check_frame(CAM, frame.gray, frame.distance_mm)
     return g, d, paper_target().diameters_mm
 
@@ -84,8 +88,7 @@ def _found(frame, cfg):
     levels = extraction.frame_levels(g, cfg)
     found = extraction.find_candidate_blobs(g, d, CAM, diameters, cfg, levels)
     ref_levels = reference.frame_levels(g, cfg)
-    got = reference.find_candidates(g, d, ref_levels, fx=CAM.fx, diameters_mm=diameters,
-                                    config=cfg)  # fmt: skip
+    got = reference.find_candidates(g, d, ref_levels, fx=CAM.fx, diameters_mm=diameters, config=cfg)
     return levels, found, ref_levels, got
 
 
@@ -97,15 +100,17 @@ CASES = {
     "0.7 m paper": (lambda: _rendered(700.0, 1, 0.0), ExtractionConfig.paper()),
     "1.5 m psf 0.5": (lambda: _rendered(1500.0, 1, 0.5), ExtractionConfig()),
     "3 m psf 1": (lambda: _rendered(3000.0, 2, 1.0), ExtractionConfig()),
-    "3 m N_max 300 L 4": (lambda: _rendered(3000.0, 0, 0.0),
-                          ExtractionConfig(n_max=300, max_candidates=4)),
+    "3 m N_max 300 L 4": (
+        lambda: _rendered(3000.0, 0, 0.0),
+        ExtractionConfig(n_max=300, max_candidates=4),
+    ),
     "5.7 m psf 1": (lambda: _rendered(5700.0, 2, 1.0), ExtractionConfig()),
     "8 m": (lambda: _rendered(8000.0, 0, 0.0), ExtractionConfig()),
     "12 m psf 0.5": (lambda: _rendered(12000.0, 1, 0.5), ExtractionConfig()),
     "drawn": (_drawn, ExtractionConfig()),
     "drawn paper": (_drawn, ExtractionConfig.paper()),
     "drawn L 0": (_drawn, ExtractionConfig(max_candidates=0)),
-}  # fmt: skip
+}
 
 
 @pytest.mark.parametrize("case", list(CASES))
@@ -131,24 +136,40 @@ def test_the_reference_finds_what_the_compiled_path_finds(case):
     assert len(got.accepted) == len(found.accepted)
     for b, c in zip(got.accepted, found.accepted, strict=True):
         np.testing.assert_array_equal(b.pixels, c.pixels)
-        np.testing.assert_equal((b.area_px, b.bbox, b.distance_mm, b.peak_counts),
-                                (c.area_px, c.bbox, c.distance_mm, c.peak_counts))  # fmt: skip
+        np.testing.assert_equal(
+            (b.area_px, b.bbox, b.distance_mm, b.peak_counts),
+            (c.area_px, c.bbox, c.distance_mm, c.peak_counts),
+        )
         np.testing.assert_allclose(b.centroid_uv, c.centroid_uv, rtol=0, atol=1e-9)
         assert b.eccentricity == pytest.approx(c.eccentricity, rel=0, abs=1e-9)
         assert b.penalty == pytest.approx(c.penalty, rel=0, abs=1e-9)
     assert len(got.oversize) == len(found.oversize)
     for b, c in zip(got.oversize, found.oversize, strict=True):
         np.testing.assert_array_equal(b.pixels, c.pixels)
-        np.testing.assert_equal((b.area_px, b.bbox, b.peak_counts, b.distance_mm),
-                                (c.area_px, c.bbox, c.peak_counts, c.distance_mm))  # fmt: skip
+        np.testing.assert_equal(
+            (b.area_px, b.bbox, b.peak_counts, b.distance_mm),
+            (c.area_px, c.bbox, c.peak_counts, c.distance_mm),
+        )
     assert [r.reason for r in got.rejected] == [r.reason for r in found.rejected]
     places = [(r.u_px, r.v_px, r.diameter_px) for r in found.rejected]
-    np.testing.assert_allclose(np.reshape([r[:3] for r in got.rejected], (-1, 3)),
-                               np.reshape(places, (-1, 3)), rtol=0, atol=1e-9)  # fmt: skip
-    np.testing.assert_allclose(np.reshape(got.wrong_size, (-1, 4)),
-                               np.reshape([(w.diameter_px, w.expected_min_px, w.expected_max_px,
-                                            w.distance_mm) for w in found.wrong_size], (-1, 4)),
-                               rtol=0, atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        np.reshape([r[:3] for r in got.rejected], (-1, 3)),
+        np.reshape(places, (-1, 3)),
+        rtol=0,
+        atol=1e-9,
+    )
+    np.testing.assert_allclose(
+        np.reshape(got.wrong_size, (-1, 4)),
+        np.reshape(
+            [
+                (w.diameter_px, w.expected_min_px, w.expected_max_px, w.distance_mm)
+                for w in found.wrong_size
+            ],
+            (-1, 4),
+        ),
+        rtol=0,
+        atol=1e-12,
+    )
 
 
 def test_the_cases_exercise_every_rule():
@@ -161,8 +182,7 @@ def test_the_cases_exercise_every_rule():
     for make, cfg in CASES.values():
         g, d, diameters = make()
         levels = reference.frame_levels(g, cfg)
-        got = reference.find_candidates(g, d, levels, fx=CAM.fx, diameters_mm=diameters,
-                                        config=cfg)  # fmt: skip
+        got = reference.find_candidates(g, d, levels, fx=CAM.fx, diameters_mm=diameters, config=cfg)
         reasons |= {r.reason for r in got.rejected}
         capped += got.levels.raw_threshold > levels.raw_threshold
         blurred += got.psf_sigma_px > 0.5
@@ -197,8 +217,9 @@ def test_frame_levels_of_a_frame_of_known_levels():
     # distinct counts, the pixel's index: the subsample (80 rows of 107) is 960 i + 3 j;
     # its 2nd percentile is its value of rank int(8560 0.02) = 171 (row 1, column 64)
     # and its median that of ranks 4279 and 4280 (row 39, column 106 and row 40, column 0)
-    ramp = reference.frame_levels(np.arange(g.size, dtype=np.float32).reshape(g.shape),
-                                  ExtractionConfig())  # fmt: skip
+    ramp = reference.frame_levels(
+        np.arange(g.size, dtype=np.float32).reshape(g.shape), ExtractionConfig()
+    )
     assert (ramp.dark_level, ramp.background) == (960 + 3 * 64, (960 * 39 + 318 + 960 * 40) / 2)
 
 
@@ -212,8 +233,9 @@ def test_a_drawn_frame_gives_its_one_disc_and_each_shape_its_gate():
     PSF (the sharp 2 x 2 square reads a negative one). With L = 0 the disc is "rank"."""
     g, d, diameters = _drawn()
     cfg = ExtractionConfig()
-    got = reference.find_candidates(g, d, reference.frame_levels(g, cfg), fx=CAM.fx,
-                                    diameters_mm=diameters, config=cfg)  # fmt: skip
+    got = reference.find_candidates(
+        g, d, reference.frame_levels(g, cfg), fx=CAM.fx, diameters_mm=diameters, config=cfg
+    )
     lv = got.levels
     assert (lv.background, lv.noise_sigma, lv.i_max, lv.dark_level) == (10, np.sqrt(10.0), 4095, 10)
     assert (lv.raw_threshold, lv.peak_threshold) == (10 + 0.15 * 4085, 10 + 0.25 * 4085)
@@ -231,16 +253,26 @@ def test_a_drawn_frame_gives_its_one_disc_and_each_shape_its_gate():
     (big,) = got.oversize
     np.testing.assert_array_equal(big.pixels, np.flatnonzero(DRAWN["oversize"][0]))
     assert (big.area_px, big.bbox, big.peak_counts, big.distance_mm) == (
-        2821, (220, 30, 61, 61), 4095.0, 2000.0)  # fmt: skip
+        2821,
+        (220, 30, 61, 61),
+        4095.0,
+        2000.0,
+    )
     where = {}
     for name, (mask, _) in DRAWN.items():
         rows, cols = np.nonzero(mask)
         where[name] = ((cols.min() + cols.max()) / 2, (rows.min() + rows.max()) / 2)
     assert sorted((r.reason, (r.u_px, r.v_px)) for r in got.rejected) == sorted(
-        (name, uv) for name, uv in where.items() if name != "accepted")  # fmt: skip
-    none = reference.find_candidates(g, d, reference.frame_levels(g, cfg), fx=CAM.fx,
-                                     diameters_mm=diameters,
-                                     config=ExtractionConfig(max_candidates=0))  # fmt: skip
+        (name, uv) for name, uv in where.items() if name != "accepted"
+    )
+    none = reference.find_candidates(
+        g,
+        d,
+        reference.frame_levels(g, cfg),
+        fx=CAM.fx,
+        diameters_mm=diameters,
+        config=ExtractionConfig(max_candidates=0),
+    )
     assert none.accepted == () and none.rejected[-1][:2] == (60.0, 60.0)
     assert none.rejected[-1].reason == "rank"
 
@@ -253,8 +285,10 @@ def test_the_cap_keeps_the_n_max_brightest_and_every_pixel_of_the_cut_value():
     order = np.random.default_rng(7).permutation(CAM.height * CAM.width).reshape(CAM.shape)
     distinct, pairs = order.astype(np.float32), (order // 2).astype(np.float32)
     # the 1001st brightest of the pairs is the first of the pair 37899 (38399 the brightest)
-    for g, n_max, cut, n in ((distinct, 1000, order.size - 1000, 1000),
-                             (pairs, 1001, (order.size - 1001) // 2, 1002)):  # fmt: skip
+    for g, n_max, cut, n in (
+        (distinct, 1000, order.size - 1000, 1000),
+        (pairs, 1001, (order.size - 1001) // 2, 1002),
+    ):
         levels = reference.frame_levels(g, ExtractionConfig(raw_threshold_abs=0.0))
         mask, applied = reference.active_pixel_set(g, levels, n_max=n_max)
         assert (applied.raw_threshold, applied.n_active, int(mask.sum())) == (cut, n, n)
@@ -274,9 +308,14 @@ def test_a_marker_cut_by_the_border_is_refused_as_such():
     frame = render(pose, noise=False)
     g, d = extraction.check_frame(CAM, frame.gray, frame.distance_mm)
     cfg = ExtractionConfig()
-    got = reference.find_candidates(g, d, reference.frame_levels(g, cfg), fx=CAM.fx,
-                                    diameters_mm=paper_target().diameters_mm,
-                                    config=cfg)  # fmt: skip
+    got = reference.find_candidates(
+        g,
+        d,
+        reference.frame_levels(g, cfg),
+        fx=CAM.fx,
+        diameters_mm=paper_target().diameters_mm,
+        config=cfg,
+    )
     (border,) = got.rejected
     assert border.reason == "border" and border.u_px > CAM.width - 20
     assert len(got.accepted) == 7
@@ -322,8 +361,13 @@ def test_two_pixel_blob_of_a_distant_small_marker_has_no_penalty():
     """A 35 mm marker at 10 m covers ~1 px and often lights a 1 x 2 pixel pair. Two pixels
     side by side have eccentricity 1, which must not count as a bad shape: the blob is too
     small for its shape to mean anything; eight in a line are all shape."""
-    opts = {"fx": 325.0, "diameters_mm": paper_target().diameters_mm, "i_peak": 220.0,
-            "i_t": 150.0, "max_eccentricity": 0.95}  # fmt: skip
+    opts = {
+        "fx": 325.0,
+        "diameters_mm": paper_target().diameters_mm,
+        "i_peak": 220.0,
+        "i_t": 150.0,
+        "max_eccentricity": 0.95,
+    }
     assert reference.penalty_score(2, 1.0, 10000.0, 580.0, **opts) == 0.0
     assert reference.penalty_score(8, 1.0, 10000.0, 580.0, **opts) == 1.0
     assert reference.penalty_score(2, 0.0, 10000.0, 185.0, **opts) == pytest.approx(0.5)

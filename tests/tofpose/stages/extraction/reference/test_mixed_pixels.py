@@ -16,20 +16,33 @@ from tofpose.stages.extraction.kernels import mixed_pixels as compiled
 from tofpose.stages.extraction.reference import mixed_pixels as reference
 
 #: (range mm, room seed, frame): frames of ``test_measure``'s streams
-FRAMES = [(1500.0, 0, 0), (3000.0, 0, 2), (3000.0, 0, 5), (8000.0, 3, 1), (8000.0, 5, 4),
-          (5000.0, 7, 3)]  # fmt: skip
+FRAMES = [
+    (1500.0, 0, 0),
+    (3000.0, 0, 2),
+    (3000.0, 0, 5),
+    (8000.0, 3, 1),
+    (8000.0, 5, 4),
+    (5000.0, 7, 3),
+]
 
 
 def _arrays(flat, starts, bbox):
-    return (np.asarray(flat, np.int64), np.asarray(starts, np.int64),
-            np.asarray(bbox, np.int64).reshape(-1, 4))  # fmt: skip
+    return (
+        np.asarray(flat, np.int64),
+        np.asarray(starts, np.int64),
+        np.asarray(bbox, np.int64).reshape(-1, 4),
+    )
 
 
 def _blob_ranges(flat, starts, distance):
     """Each blob's median range (NaN with none), the range occlusion is tested against."""
     d = distance.reshape(-1)
-    return np.array([np.nanmedian(d[flat[a:b]]) if np.isfinite(d[flat[a:b]]).any() else np.nan
-                     for a, b in zip(starts[:-1], starts[1:], strict=True)])  # fmt: skip
+    return np.array(
+        [
+            np.nanmedian(d[flat[a:b]]) if np.isfinite(d[flat[a:b]]).any() else np.nan
+            for a, b in zip(starts[:-1], starts[1:], strict=True)
+        ]
+    )
 
 
 def _both(flat, starts, bbox, gray, distance, dark):
@@ -45,10 +58,13 @@ def _both(flat, starts, bbox, gray, distance, dark):
     out["blob_surrounds"] = sur_c, sur_r
     rho = _blob_ranges(flat, starts, distance)
     pairs = ((compiled, own_c), (reference, own_r))
-    out["occluded_blobs"] = tuple(m.occluded_blobs(flat, starts, bbox, distance, rho, *own)
-                                  for m, own in pairs)  # fmt: skip
-    mix = [m.blob_mixing(flat, starts, bbox, gray, distance, distance, *sur_c, dark, *own)
-           for m, own in pairs]  # fmt: skip
+    out["occluded_blobs"] = tuple(
+        m.occluded_blobs(flat, starts, bbox, distance, rho, *own) for m, own in pairs
+    )
+    mix = [
+        m.blob_mixing(flat, starts, bbox, gray, distance, distance, *sur_c, dark, *own)
+        for m, own in pairs
+    ]
     out["blob_mixing"] = tuple(mix)
     return out
 
@@ -103,8 +119,9 @@ def test_the_rendered_frames_reach_every_branch():
         mix = r["blob_mixing"][1]
         seen["mixed"] += np.isfinite(mix[:, 0]).sum()
         rho = _blob_ranges(flat, starts, args[1])
-        seen["unmixed"] += sum(reference.unmixed_range(rho[j], mix[j], 1.0, 1.0, 4.0)[1] > 0
-                               for j in range(len(rho)))  # fmt: skip
+        seen["unmixed"] += sum(
+            reference.unmixed_range(rho[j], mix[j], 1.0, 1.0, 4.0)[1] > 0 for j in range(len(rho))
+        )
     assert all(v > 0 for v in seen.values()), seen
 
 
@@ -138,8 +155,10 @@ def test_a_tilted_plate_around_a_blob_has_the_level_at_its_centre():
     level, depth, crowded = reference.blob_surrounds(bbox, gray, distance, *owner)
     assert (level[0], depth[0], crowded[0]) == (100.0, 4000.0, False)
     distance[17, 17:26] = np.nan  # the top row of the ring without a range: median shifts
-    assert reference.blob_surrounds(bbox, gray, distance, np.full((1, 1), -1), 0, 0,
-                                     False)[1][0] == 4002.0  # fmt: skip
+    assert (
+        reference.blob_surrounds(bbox, gray, distance, np.full((1, 1), -1), 0, 0, False)[1][0]
+        == 4002.0
+    )
     # a bright neighbour two columns to the right: its pixels reach the ring
     neighbour = _square(25, 20, 3)
     gray[20:23, 25:28] = 3000.0
@@ -202,9 +221,19 @@ def test_the_mixing_sums_of_a_partly_covering_disc_give_its_coverage_and_range()
     bbox = np.array([[cols.min(), rows.min(), np.ptp(cols) + 1, np.ptp(rows) + 1]], np.int64)
     flat, starts = member.astype(np.int64), np.array([0, len(member)], np.int64)
     owner = reference.owner_map(flat, starts, bbox, H, W)
-    mix = reference.blob_mixing(flat, starts, bbox, gray, distance, distance,
-                                np.array([a_b + dark]), np.array([d_b]), np.array([False]),
-                                dark, *owner)[0]  # fmt: skip
+    mix = reference.blob_mixing(
+        flat,
+        starts,
+        bbox,
+        gray,
+        distance,
+        distance,
+        np.array([a_b + dark]),
+        np.array([d_b]),
+        np.array([False]),
+        dark,
+        *owner,
+    )[0]
     # the float32 gray holds the amplitudes to ~3e-5 counts
     area = cover.sum()
     assert mix[4] == 0.0 and mix[5] == 21  # the plus of members dilated: 5 x 5 less corners
@@ -214,9 +243,19 @@ def test_the_mixing_sums_of_a_partly_covering_disc_give_its_coverage_and_range()
     assert reference.unmixed_range(5100.0, mix, radius, 1.0, 4.0)[0] == pytest.approx(d_r, abs=0.01)
     # the corner pixel (coverage 0.2) has no range: C_unranged is its gray's estimate
     distance[32, 42] = np.nan
-    mix = reference.blob_mixing(flat, starts, bbox, gray, distance, distance,
-                                np.array([a_b + dark]), np.array([d_b]), np.array([False]),
-                                dark, *owner)[0]  # fmt: skip
+    mix = reference.blob_mixing(
+        flat,
+        starts,
+        bbox,
+        gray,
+        distance,
+        distance,
+        np.array([a_b + dark]),
+        np.array([d_b]),
+        np.array([False]),
+        dark,
+        *owner,
+    )[0]
     assert mix[4] == pytest.approx(0.2, abs=1e-6)
     assert reference.unmixed_range(5100.0, mix, radius, 1.0, 4.0)[0] == pytest.approx(d_r, abs=0.01)
     shifted = mix.copy()

@@ -14,8 +14,9 @@ CONSTANTS = kernel_constants(SigmaFloors(0.03, 1.0))
 def test_a_single_pixel_is_located_no_better_than_uniform_over_the_pixel():
     gray = np.full((5, 5), 100.0)
     gray[2, 2] = 4000.0
-    sigma = reference.centroid_sigma_px(gray, np.array([12]), np.array([2.0, 2.0]), 100.0,
-                                        False, CONSTANTS)  # fmt: skip
+    sigma = reference.centroid_sigma_px(
+        gray, np.array([12]), np.array([2.0, 2.0]), 100.0, False, CONSTANTS
+    )
     # no shot-noise lever arm at the centroid itself: the floor and the grid's 1/sqrt(12)
     assert sigma == pytest.approx(np.hypot(0.03, 1 / np.sqrt(12)), rel=1e-12)
 

@@ -15,8 +15,9 @@ from tofpose.stages.matching.reference import matching as reference
 def test_anneal_assignment_equals_the_equations():
     rng = np.random.default_rng(0)
     catalog = rng.uniform(-300, 300, (8, 3))
-    observed = np.vstack((catalog[[0, 2, 3, 5, 6]] + rng.normal(0, 2, (5, 3)),
-                          rng.uniform(-300, 300, (2, 3))))  # fmt: skip
+    observed = np.vstack(
+        (catalog[[0, 2, 3, 5, 6]] + rng.normal(0, 2, (5, 3)), rng.uniform(-300, 300, (2, 3)))
+    )
     cfg = MatchingConfig()
     alpha = 15.0
     P = pair_compatibility(observed, catalog, alpha, cfg.clip_factor)

@@ -14,8 +14,9 @@ def _matrices(rng):
         nr, nc = rng.integers(1, 13, 2)
         kind = rng.integers(4)
         if kind == 0:  # distances, as the hypothesis loops give them
-            c = np.linalg.norm(rng.normal(0, 50, (nr, 1, 3)) - rng.normal(0, 50, (1, nc, 3)),
-                               axis=-1)  # fmt: skip
+            c = np.linalg.norm(
+                rng.normal(0, 50, (nr, 1, 3)) - rng.normal(0, 50, (1, nc, 3)), axis=-1
+            )
         elif kind == 1:  # small integers: many ties and several optimal answers
             c = rng.integers(0, 4, (nr, nc)).astype(float)
         elif kind == 2:  # constant

@@ -21,12 +21,30 @@ def _reference(observed, catalog, alpha, tol, centroid, cos_min, w, max_observed
     triplet of equal sides: pose, facing constraint, one-to-one assignment of all points,
     inliers within tol; the most inliers win, then the least sum of w d^2
     (``reference.triplets.triplet_search``)."""
-    triplets = np.array(list(combinations(range(min(len(observed), max_observed)), 3)),
-                        np.int64).reshape(-1, 3)  # fmt: skip
+    triplets = np.array(
+        list(combinations(range(min(len(observed), max_observed)), 3)), np.int64
+    ).reshape(-1, 3)
     cat_tri, cat_sides = reference.catalog_triplets(catalog)
-    best, *_ = reference.triplet_search(observed, catalog, w, tol, alpha, triplets, cat_tri,
-                                        cat_sides, True, centroid, cos_min, 3, False, 0.0,
-                                        np.empty((0, 2), np.int64), 0, np.inf, 0)  # fmt: skip
+    best, *_ = reference.triplet_search(
+        observed,
+        catalog,
+        w,
+        tol,
+        alpha,
+        triplets,
+        cat_tri,
+        cat_sides,
+        True,
+        centroid,
+        cos_min,
+        3,
+        False,
+        0.0,
+        np.empty((0, 2), np.int64),
+        0,
+        np.inf,
+        0,
+    )
     return best
 
 

@@ -33,11 +33,14 @@ def test_annealing_and_the_one_to_one_step_find_every_reflector_and_no_spurious_
         alpha = cfg.alpha_for(observed)
         P = reference.pair_potentials(observed, x, alpha, cfg.clip_factor)
         unary = np.zeros((len(observed), len(x)))
-        A, iterations = reference.anneal(P, unary, cfg.psi_start / alpha**2,
-                                         cfg.psi_end / alpha**2, cfg.growth)  # fmt: skip
+        A, iterations = reference.anneal(
+            P, unary, cfg.psi_start / alpha**2, cfg.psi_end / alpha**2, cfg.growth
+        )
         # psi grows from psi_start to psi_end by the factor growth (Eq. 35)
-        assert iterations == int(np.floor(np.log(cfg.psi_end / cfg.psi_start)
-                                          / np.log(cfg.growth))) + 1  # fmt: skip
+        assert (
+            iterations
+            == int(np.floor(np.log(cfg.psi_end / cfg.psi_start) / np.log(cfg.growth))) + 1
+        )
         np.testing.assert_allclose(A.sum(axis=1), 1.0, atol=1e-12)
         pairs, unmatched = reference.one_to_one(A)
         assert {(int(k), int(i)) for k, i in pairs} == {
@@ -64,12 +67,11 @@ def test_the_rigid_residual_check_drops_a_planted_wrong_pair_first():
     y = x @ R.T + [0.0, 0.0, 3000.0]
     pairs = np.column_stack((np.arange(8), np.arange(8)))
     pairs[3, 1], pairs[5, 1] = 5, 3  # two blobs swapped
-    kept, rejected, ok = reference.rigid_residual_check(y, x, pairs, np.ones(8),
-                                                        np.full(8, 5.0), 3)  # fmt: skip
+    kept, rejected, ok = reference.rigid_residual_check(y, x, pairs, np.ones(8), np.full(8, 5.0), 3)
     assert ok and sorted(rejected) == [3, 5] and len(kept) == 6
     R_fit, _ = absolute_orientation(x[kept[:, 1]], y[kept[:, 0]], np.ones(6))
     np.testing.assert_allclose(R_fit, R, atol=1e-9)
-    _, rejected, ok = reference.rigid_residual_check(y[:3] + [[0, 0, 0], [0, 0, 0], [90, 0, 0]],
-                                                     x, pairs[:3], np.ones(8),
-                                                     np.full(8, 5.0), 3)  # fmt: skip
+    _, rejected, ok = reference.rigid_residual_check(
+        y[:3] + [[0, 0, 0], [0, 0, 0], [90, 0, 0]], x, pairs[:3], np.ones(8), np.full(8, 5.0), 3
+    )
     assert not ok and sorted(rejected) == [0, 1, 2]

@@ -48,12 +48,27 @@ def _search(module, observed, triplets, cos_min=None, confidence=None, w=None, s
     n = len(observed)
     w = np.ones(n) if w is None else w
     tri, sides = module.catalog_triplets(CATALOG)
-    rule = (cos_min is not None, CENTROID, -np.inf if cos_min is None else float(cos_min), 3,
-            confidence is not None, 0.0 if confidence is None else float(confidence))  # fmt: skip
+    rule = (
+        cos_min is not None,
+        CENTROID,
+        -np.inf if cos_min is None else float(cos_min),
+        3,
+        confidence is not None,
+        0.0 if confidence is None else float(confidence),
+    )
     start = (np.empty((0, 2), np.int64), 0, np.inf, 0) if start is None else start
-    return module.triplet_search(observed, CATALOG, w, np.full(n, 15.0), 12.0,
-                                 np.ascontiguousarray(triplets, np.int64), tri, sides, *rule,
-                                 *start)  # fmt: skip
+    return module.triplet_search(
+        observed,
+        CATALOG,
+        w,
+        np.full(n, 15.0),
+        12.0,
+        np.ascontiguousarray(triplets, np.int64),
+        tri,
+        sides,
+        *rule,
+        *start,
+    )
 
 
 def _assert_same(got, want):
@@ -114,10 +129,8 @@ def test_the_ransac_search_equals_the_kernel_in_chunks_with_its_stopping_rule():
         triplets = triplets[rng.permutation(len(triplets))]
         got = want = (np.empty((0, 2), np.int64), 0, np.inf, 0)
         for s in range(0, len(triplets), 4):
-            want = _search(kernel, observed, triplets[s : s + 4], confidence=0.99,
-                           start=want[:4])  # fmt: skip
-            got = _search(reference, observed, triplets[s : s + 4], confidence=0.99,
-                          start=got[:4])  # fmt: skip
+            want = _search(kernel, observed, triplets[s : s + 4], confidence=0.99, start=want[:4])
+            got = _search(reference, observed, triplets[s : s + 4], confidence=0.99, start=got[:4])
             _assert_same(got, want)
             if want[4]:
                 stopped += 1
@@ -131,9 +144,9 @@ def test_the_search_finds_the_true_correspondences():
     rng = np.random.default_rng(5)
     for _ in range(10):
         observed, truth = _scene(rng)
-        best, best_n, _, tried, done = _search(reference, observed,
-                                               list(combinations(range(len(observed)), 3)),
-                                               np.cos(np.radians(75)))  # fmt: skip
+        best, best_n, _, tried, done = _search(
+            reference, observed, list(combinations(range(len(observed)), 3)), np.cos(np.radians(75))
+        )
         assert not done and tried == len(list(combinations(range(len(observed)), 3)))
         assert best_n == (truth >= 0).sum()
         assert {(int(k), int(i)) for k, i in best} == {

@@ -68,8 +68,7 @@ def test_means_counts_and_stacks_use_only_the_counted_frames():
     rng = np.random.default_rng(1)
     frames = [rng.uniform(0, 100, (20, 30)).astype(np.float32) for _ in range(4)]
     boxes = np.array([[5, 5, 4, 3]], np.int64)
-    out = mean_in_boxes(frames[0], (frames[1], frames[2], frames[0]), 2, boxes,
-                        frames[0].copy())  # fmt: skip
+    out = mean_in_boxes(frames[0], (frames[1], frames[2], frames[0]), 2, boxes, frames[0].copy())
     sl = np.s_[3:10, 3:11]
     np.testing.assert_array_equal(out[sl], (frames[0][sl] + (frames[1][sl] + frames[2][sl])) / 3)
     np.testing.assert_array_equal(out[0, :], frames[0][0, :])  # outside the box: this frame
@@ -123,13 +122,17 @@ def test_ranges_consistent_keeps_static_frames_and_cuts_moving_markers():
     static = [ranges_consistent(*_blob_ranges(rng, 8, 40, np.zeros(8)), z) for _ in range(500)]
     assert np.mean(static) >= 0.99
     se = 1.2533 * 4.0 * np.sqrt(2.0) / np.sqrt(40)  # the median difference's standard error
-    moving = [ranges_consistent(*_blob_ranges(rng, 8, 40, 4 * se * np.linspace(-1, 1, 8)), z)
-              for _ in range(200)]  # fmt: skip
+    moving = [
+        ranges_consistent(*_blob_ranges(rng, 8, 40, 4 * se * np.linspace(-1, 1, 8)), z)
+        for _ in range(200)
+    ]
     assert np.mean(moving) <= 0.05
     one_off = np.zeros(8)
     one_off[3] = 30 * se
-    assert np.mean([ranges_consistent(*_blob_ranges(rng, 8, 40, one_off), z)
-                    for _ in range(200)]) >= 0.95  # fmt: skip
+    assert (
+        np.mean([ranges_consistent(*_blob_ranges(rng, 8, 40, one_off), z) for _ in range(200)])
+        >= 0.95
+    )
     a, b, flat, starts = _blob_ranges(rng, 8, 4, np.full(8, 50.0))  # 4 pixels a blob
     assert ranges_consistent(a, b, flat, starts, z)
     b[:] = np.nan

@@ -25,10 +25,13 @@ def _blobs(rng, n):
 def test_corrected_ranges_subtract_the_median_modelled_error(with_offsets):
     rng = np.random.default_rng(3)
     model = RangeCorrection(
-        25000.0, offset_mm=-4.0, harmonics_mm=((3.0, -2.0), (0.7, 0.4), (0.1, -0.2)),
-        amplitude_mm_per_decade=2.5, amplitude_reference_counts=150.0,
+        25000.0,
+        offset_mm=-4.0,
+        harmonics_mm=((3.0, -2.0), (0.7, 0.4), (0.1, -0.2)),
+        amplitude_mm_per_decade=2.5,
+        amplitude_reference_counts=150.0,
         pixel_offsets_mm=rng.normal(0.0, 3.0, (H, W)) if with_offsets else None,
-    )  # fmt: skip
+    )
     gray = rng.uniform(0.0, 4000.0, (H, W)).astype(np.float32)
     gray[0, :5] = 0.0  # amplitudes clipped at 1e-3 by the model
     pixels, rho = _blobs(rng, 9)
@@ -39,8 +42,7 @@ def test_corrected_ranges_subtract_the_median_modelled_error(with_offsets):
         if not np.isfinite(rho[j]):
             assert np.isnan(got[j])
             continue
-        err = model.error_mm(np.full(len(p), rho[j]), gray.ravel()[p],
-                             p if with_offsets else None)  # fmt: skip
+        err = model.error_mm(np.full(len(p), rho[j]), gray.ravel()[p], p if with_offsets else None)
         assert got[j] == pytest.approx(rho[j] - np.median(err), abs=1e-9)
     # the correction is not nothing: the model's errors are millimetres here
     finite = np.isfinite(rho)

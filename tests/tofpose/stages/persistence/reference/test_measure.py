@@ -27,14 +27,25 @@ from tofpose.stages.persistence.reference import measure as reference
 CAM = CameraModel()
 #: (range mm, room seed): an arm in front of the target hides a marker in each (a
 #: marker then has no range); at 5 and 8 m markers 7 and 8 merge and are split
-STREAMS = [(1500.0, 0), (3000.0, 0), (5000.0, 7),
-           (8000.0, 3), (8000.0, 5)]  # fmt: skip
+STREAMS = [(1500.0, 0), (3000.0, 0), (5000.0, 7), (8000.0, 3), (8000.0, 5)]
 #: frames per stream: the history (K - 1 = 4 frames) fills up
 FRAMES = 6
 #: a spurious disc seen in one frame only: the counter drops it
 TRANSIENT = Clutter((250.0, 180.0, 20.0), 60.0, 1.2)
-NAMES = ("n_used", "motion", "keep", "uv", "rho", "ranged", "rho_corrected", "sigma_px",
-         "sigma_range", "y", "weights", "mix")  # fmt: skip
+NAMES = (
+    "n_used",
+    "motion",
+    "keep",
+    "uv",
+    "rho",
+    "ranged",
+    "rho_corrected",
+    "sigma_px",
+    "sigma_range",
+    "y",
+    "weights",
+    "mix",
+)
 
 
 def correction() -> RangeCorrection:
@@ -42,9 +53,12 @@ def correction() -> RangeCorrection:
     amplitude term and per-pixel offsets."""
     rng = np.random.default_rng(11)
     return RangeCorrection(
-        unambiguous_range_mm=25000.0, offset_mm=14.0, harmonics_mm=((6.0, -3.5), (1.2, 0.8)),
-        amplitude_mm_per_decade=-9.0, pixel_offsets_mm=rng.normal(0.0, 4.0, CAM.shape),
-    )  # fmt: skip
+        unambiguous_range_mm=25000.0,
+        offset_mm=14.0,
+        harmonics_mm=((6.0, -3.5), (1.2, 0.8)),
+        amplitude_mm_per_decade=-9.0,
+        pixel_offsets_mm=rng.normal(0.0, 4.0, CAM.shape),
+    )
 
 
 @cache
@@ -63,8 +77,9 @@ def captured_stream(distance_mm, seed, corrected, moving=False):
 
     rng = np.random.default_rng(seed)
     T = facing_pose(distance_mm, 4, -6, 12, offset_mm=(-110.0, -55.0))
-    scene = TargetScene(background=synthetic_room(CAM, rng, distance_mm, T.t_mm,
-                                                  arm_probability=1.0))  # fmt: skip
+    scene = TargetScene(
+        background=synthetic_room(CAM, rng, distance_mm, T.t_mm, arm_probability=1.0)
+    )
     pipe = PosePipeline(CAM, paper_target(), range_correction=correction() if corrected else None)
     # the pipeline's measurement calls go through its Arithmetic record: spy there
     pipe.arithmetic = replace(
@@ -137,8 +152,23 @@ def test_persist_and_measure_returns_the_combined_frames_where_they_are_read():
 
     args, _ = captured_stream(3000.0, 0, False)[4]
     g, d, flat, starts, bbox, cur, _, history, background, dark, cam, mean_buf, med_buf = args[:13]
-    common = (g, d, flat, starts, bbox, cur, history, background, dark, cam.fx, cam.fy,
-              cam.cx, cam.cy, cam.dist, cam.pixel_bearings)  # fmt: skip
+    common = (
+        g,
+        d,
+        flat,
+        starts,
+        bbox,
+        cur,
+        history,
+        background,
+        dark,
+        cam.fx,
+        cam.fy,
+        cam.cx,
+        cam.cy,
+        cam.dist,
+        cam.pixel_bearings,
+    )
     got = reference.persist_and_measure(*common, None, None)
     want = persist_and_measure(*common, mean_buf.copy(), med_buf.copy())
     assert got[0] == want[0] == 4

@@ -109,6 +109,9 @@ def test_leave_one_out_spread_and_envelope_equal_the_reference(seed):
     spread = leave_one_out_spread(x, e, rho, R, t, sr, sb)
     want = reference.leave_one_out_spread(x, e, rho, R, t, sr, sb)
     np.testing.assert_allclose(spread, want, rtol=1e-5, atol=1e-7 * np.abs(want).max())
-    np.testing.assert_allclose(covariance_envelope(cov, spread),
-                               reference.covariance_envelope(cov, spread), rtol=1e-9,
-                               atol=1e-12 * np.abs(cov).max())  # fmt: skip
+    np.testing.assert_allclose(
+        covariance_envelope(cov, spread),
+        reference.covariance_envelope(cov, spread),
+        rtol=1e-9,
+        atol=1e-12 * np.abs(cov).max(),
+    )

@@ -15,9 +15,20 @@ from tofpose.stages.pose.kernels.verify import BEHIND_CAMERA, CONSISTENT, DARK_R
 def _check(T, gray, matched, dark_check=True):
     cam, cat = CameraModel(), paper_target()
     return pose_check(
-        cat.positions_mm, cat.diameters_mm, matched, T.R, T.t_mm, cam.fx, cam.fy, cam.cx,
-        cam.cy, cam.dist_array, gray, 400.0, dark_check,
-    )  # fmt: skip
+        cat.positions_mm,
+        cat.diameters_mm,
+        matched,
+        T.R,
+        T.t_mm,
+        cam.fx,
+        cam.fy,
+        cam.cx,
+        cam.cy,
+        cam.dist_array,
+        gray,
+        400.0,
+        dark_check,
+    )
 
 
 def test_a_lit_frame_is_consistent_and_a_dark_one_names_the_first_clear_reflector():

@@ -115,10 +115,18 @@ def _sigmas(R, t, R_ref, t_ref, cov):
 
 
 def _settings(mode, reject=True, adapt=True, min_matches=3):
-    return FitSettings(refinement=MODES[mode], los_tolerance=0.002, step_sigma2=1e-8,
-                       adapt=adapt, max_systematic_range_mm=25.0,
-                       max_systematic_centroid_px=0.5, reject=reject,
-                       min_matches=min_matches, outlier_sigma=6.0, chi2_per_dof=4.0)  # fmt: skip
+    return FitSettings(
+        refinement=MODES[mode],
+        los_tolerance=0.002,
+        step_sigma2=1e-8,
+        adapt=adapt,
+        max_systematic_range_mm=25.0,
+        max_systematic_centroid_px=0.5,
+        reject=reject,
+        min_matches=min_matches,
+        outlier_sigma=6.0,
+        chi2_per_dof=4.0,
+    )
 
 
 def test_small_rules_equal_the_kernels():
@@ -129,10 +137,12 @@ def test_small_rules_equal_the_kernels():
         x, e, rho, y, sr, sb, R, t = _scene(seed, m=4 + seed % 5)
         centroid = np.random.default_rng(seed).normal(0, 100, 3)
         assert reference.facing_cosine(R, t, centroid) == pytest.approx(
-            kernel.facing_cosine(R, t, centroid), abs=1e-14)  # fmt: skip
+            kernel.facing_cosine(R, t, centroid), abs=1e-14
+        )
         r = np.random.default_rng(seed).normal(0, 3, 3 * len(x))
-        np.testing.assert_allclose(reference.reflector_norms(r), kernel.reflector_norms(r),
-                                   rtol=1e-14)  # fmt: skip
+        np.testing.assert_allclose(
+            reference.reflector_norms(r), kernel.reflector_norms(r), rtol=1e-14
+        )
         np.testing.assert_allclose(reference.mean_bearing(e), kernel.mean_bearing(e), atol=1e-15)
         prior = kernel.RangeOffsetPrior(15.0, 0.002 * (seed % 2), 1e-4 * (seed % 3))
         s_ref, mean_ref = reference.pattern_scale_sigma(e, prior)
@@ -140,8 +150,9 @@ def test_small_rules_equal_the_kernels():
         assert s_ref == pytest.approx(s, rel=1e-12, abs=1e-18)
         np.testing.assert_allclose(mean_ref, mean, atol=1e-15)
         B = kernel.tangent_bases(e)
-        np.testing.assert_allclose(reference.scale_directions(e, B, mean),
-                                   kernel.scale_directions(e, B, mean), atol=1e-15)  # fmt: skip
+        np.testing.assert_allclose(
+            reference.scale_directions(e, B, mean), kernel.scale_directions(e, B, mean), atol=1e-15
+        )
         got, rms = reference.point_residuals_mm(x, y, R, t)
         want, want_rms = kernel.point_residuals_mm(x, y, R, t)
         np.testing.assert_allclose(got, want, rtol=1e-12)
@@ -177,8 +188,9 @@ def test_fit_pose_equals_the_kernel(mode, seed):
 def test_fit_pose_of_noiseless_measurements_is_the_true_pose_with_zero_chi2():
     for mode in MODES.values():
         x, e, rho, y, sr, sb, R, t = _scene(7, noise=0.0)
-        R_est, t_est, _, cov, chi2, norms, _ = reference.fit_pose(x, e, rho, y, sr, sb, mode,
-                                                                  1e-6, 1e-8)  # fmt: skip
+        R_est, t_est, _, cov, chi2, norms, _ = reference.fit_pose(
+            x, e, rho, y, sr, sb, mode, 1e-6, 1e-8
+        )
         assert _sigmas(R_est, t_est, R, t, cov) < 1e-6
         assert chi2 < 1e-12 and norms.max() < 1e-6
 
@@ -204,9 +216,10 @@ def test_systematic_sigmas_equal_the_kernel_and_are_the_rule(seed):
     np.testing.assert_allclose(got, want, rtol=1e-12)
     assert got[0] > 0 or got[1] > 0
     r = reference.whitened_residuals(x, e, rho, R, t, sr, sb).reshape(-1, 3)
-    for extra, z2, var, target, cap in ((got[0], r[:, 2] ** 2, sr**2, 0.45494, caps[0]),
-                                        (got[1], (r[:, :2] ** 2).sum(1), sb**2, 1.38629,
-                                         caps[1])):  # fmt: skip
+    for extra, z2, var, target, cap in (
+        (got[0], r[:, 2] ** 2, sr**2, 0.45494, caps[0]),
+        (got[1], (r[:, :2] ** 2).sum(1), sb**2, 1.38629, caps[1]),
+    ):
         if 0 < extra < cap:
             assert np.median(z2 * var / (var + extra**2)) <= target
             lower = extra - cap / 2**16
@@ -280,10 +293,18 @@ def test_worst_outlier_is_none_for_a_consistent_fit_and_the_largest_norm_below_f
     norms = reference.fit_pose(x, e, rho, y, sr, sb, 1, 0.002, 1e-8)[5]
     assert reference.worst_outlier(x, e, rho, y, sr, sb, norms, 1, 0.002, 1e-8, 6.0, 4.0) == -1
     norms = np.array([1.0, 7.0, 2.0, 6.5])
-    assert reference.worst_outlier(x[:4], e[:4], rho[:4], y[:4], sr[:4], sb[:4], norms, 1,
-                                   0.002, 1e-8, 6.0, 4.0) == 1  # fmt: skip
-    assert reference.worst_outlier(x[:4], e[:4], rho[:4], y[:4], sr[:4], sb[:4], norms / 2, 1,
-                                   0.002, 1e-8, 6.0, 4.0) == -1  # fmt: skip
+    assert (
+        reference.worst_outlier(
+            x[:4], e[:4], rho[:4], y[:4], sr[:4], sb[:4], norms, 1, 0.002, 1e-8, 6.0, 4.0
+        )
+        == 1
+    )
+    assert (
+        reference.worst_outlier(
+            x[:4], e[:4], rho[:4], y[:4], sr[:4], sb[:4], norms / 2, 1, 0.002, 1e-8, 6.0, 4.0
+        )
+        == -1
+    )
 
 
 #: ranges near enough for the image scale to fix the distance (the offset is observable)
@@ -308,10 +329,13 @@ def test_common_range_offset_equals_the_kernel_and_recovers_a_planted_offset(see
     assert sigma == pytest.approx(sigma_k, rel=1e-6)
     # not estimated without a prior; the image scale alone when it is exact
     assert reference.common_range_offset(x, e, rho, R0, t0, sr, sb, Prior(0.0, 0.0, 0.0)) == (
-        0.0, 0.0)  # fmt: skip
+        0.0,
+        0.0,
+    )
     b0, s0 = reference.common_range_offset(x, e, rho, R0, t0, sr, sb, Prior(50.0, 0.0, 0.0))
-    b0_k, s0_k = kernel.common_range_offset(x, e, rho, R0, t0, sr, sb,
-                                            kernel.RangeOffsetPrior(50.0, 0.0, 0.0))  # fmt: skip
+    b0_k, s0_k = kernel.common_range_offset(
+        x, e, rho, R0, t0, sr, sb, kernel.RangeOffsetPrior(50.0, 0.0, 0.0)
+    )
     assert abs(b0 - b0_k) < 0.1 * s0 and s0 == pytest.approx(s0_k, rel=1e-3) and s0 < sigma
 
 
@@ -346,8 +370,20 @@ def test_fit_with_outliers_with_an_offset_prior_equals_the_kernel(mode, seed):
     assert abs(got[9] - want[9]) < 0.1 * got[10] and abs(got[9] - OFFSET_MM) < 3 * got[10]
     k = want[0]
     rho_b = rho[k] - want[9]
-    refit = reference.fit_adaptive(x[k], e[k], rho_b, e[k] * rho_b[:, None], sr[k], sb[k], 1,
-                                   0.002, 1e-8, True, 25.0, 0.5 / 300.0)  # fmt: skip
+    refit = reference.fit_adaptive(
+        x[k],
+        e[k],
+        rho_b,
+        e[k] * rho_b[:, None],
+        sr[k],
+        sb[k],
+        1,
+        0.002,
+        1e-8,
+        True,
+        25.0,
+        0.5 / 300.0,
+    )
     assert _sigmas(refit[0], refit[1], want[1], want[2], want[4]) < OPTIMISER_SIGMA
     np.testing.assert_allclose(refit[6], want[7], rtol=1e-9)
 
@@ -372,8 +408,7 @@ def test_a_range_bias_moves_the_pose_along_the_line_of_sight_by_itself():
     response range_bias_covariance is built from (its square root, times b)."""
     x, e, rho, y, sr, sb, R, t = _scene(5, noise=0.0)
     b = 1.0
-    R1, t1, *_ = reference.fit_pose(x, e, rho + b, e * (rho + b)[:, None], sr, sb, 1, 0.002,
-                                    1e-8)  # fmt: skip
+    R1, t1, *_ = reference.fit_pose(x, e, rho + b, e * (rho + b)[:, None], sr, sb, 1, 0.002, 1e-8)
     moved = np.concatenate((Rotation.from_matrix(R1 @ R.T).as_rotvec(), t1 - t))
     cov = reference.range_bias_covariance(x, e, rho, R, t, sr, sb, b)
     np.testing.assert_allclose(np.outer(moved, moved), cov, atol=1e-4 * np.abs(cov).max())

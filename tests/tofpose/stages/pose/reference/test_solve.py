@@ -96,10 +96,19 @@ def _compare(args):
         x = args[9].xyz[want[1][kept]]
         sb = args[4][want[0][kept]] / args[10].fx
         refit = reference_pose.fit_adaptive(
-            x, e, rho_b, e * rho_b[:, None], want[6][kept], sb, fit.refinement,
-            fit.los_tolerance, fit.step_sigma2, fit.adapt, fit.max_systematic_range_mm,
+            x,
+            e,
+            rho_b,
+            e * rho_b[:, None],
+            want[6][kept],
+            sb,
+            fit.refinement,
+            fit.los_tolerance,
+            fit.step_sigma2,
+            fit.adapt,
+            fit.max_systematic_range_mm,
             fit.max_systematic_centroid_px / args[10].fx,
-        )  # fmt: skip
+        )
         assert _sigmas(refit[0], refit[1], want[8], want[9], want[11]) < OPTIMISER_SIGMA
         return got, want
     assert got[16:] == want[16:] == (0.0, prior.sigma_mm)
@@ -153,7 +162,8 @@ def test_completion_restores_pairs_left_out_as_the_kernel_does(distance_mm):
     args[7], args[8] = k_idx[:-2].copy(), i_idx[:-2].copy()
     got, _ = _compare(tuple(args))
     assert dict(zip(got[0].tolist(), got[1].tolist(), strict=True)) == dict(
-        zip(k_idx.tolist(), i_idx.tolist(), strict=True))  # fmt: skip
+        zip(k_idx.tolist(), i_idx.tolist(), strict=True)
+    )
     args[13] = 0.0  # no completion: the pairs stay out
     got, _ = _compare(tuple(args))
     assert len(got[0]) == len(k_idx) - 2
@@ -188,18 +198,30 @@ def test_solve_pairs_of_noiseless_measurements_is_the_true_pose():
     truth = facing_pose(3000.0, **POSE)
     centres = cat.positions_mm @ truth.R.T + truth.t_mm
     radii = cat.diameters_mm / 2
-    uv = cam.project(centres) + reference.disc_centre_offsets(cam.K, centres, truth.R[:, 2],
-                                                              radii)  # fmt: skip
+    uv = cam.project(centres) + reference.disc_centre_offsets(cam.K, centres, truth.R[:, 2], radii)
     rho = np.linalg.norm(centres, axis=1)
     n = len(cat)
     args = _captured("default", 4000.0)
     camera, catalog, fit, prior = args[10], args[9], args[14], args[15]
     order = np.arange(n)[::-1].copy()  # candidate k shows reflector order[k]
     out = reference.solve_pairs(
-        centres[order], np.ones(n), uv[order], rho[order], np.full(n, 0.1), np.full(n, 3.0),
-        np.full((n, 6), np.nan), np.arange(n), order, catalog, camera, True, 4.0, 0.0, fit,
+        centres[order],
+        np.ones(n),
+        uv[order],
+        rho[order],
+        np.full(n, 0.1),
+        np.full(n, 3.0),
+        np.full((n, 6), np.nan),
+        np.arange(n),
+        order,
+        catalog,
+        camera,
+        True,
+        4.0,
+        0.0,
+        fit,
         prior,
-    )  # fmt: skip
+    )
     assert out[7].all()
     assert _sigmas(out[8], out[9], truth.R, truth.t_mm, out[11]) < 1e-4
     assert out[12] < 1e-6
@@ -215,20 +237,31 @@ def test_disc_centre_offsets_and_completion_equal_the_kernels():
     rng = np.random.default_rng(3)
     for _ in range(100):
         z = rng.uniform(400.0, 12000.0)
-        centres = np.column_stack((rng.uniform(-0.4, 0.4, 8) * z, rng.uniform(-0.3, 0.3, 8) * z,
-                                   z + rng.uniform(-200.0, 200.0, 8)))  # fmt: skip
+        centres = np.column_stack(
+            (
+                rng.uniform(-0.4, 0.4, 8) * z,
+                rng.uniform(-0.3, 0.3, 8) * z,
+                z + rng.uniform(-200.0, 200.0, 8),
+            )
+        )
         normal = np.array([*rng.uniform(-1.5, 1.5, 2), -1.0])
         radii = rng.uniform(5.0, 40.0, 8)
-        np.testing.assert_allclose(reference.disc_centre_offsets(cam.K, centres, normal, radii),
-                                   disc_centre_offsets(cam.K, centres, normal, radii),
-                                   atol=1e-10)  # fmt: skip
+        np.testing.assert_allclose(
+            reference.disc_centre_offsets(cam.K, centres, normal, radii),
+            disc_centre_offsets(cam.K, centres, normal, radii),
+            atol=1e-10,
+        )
     for _ in range(100):
         e = int(rng.integers(4, 10))
         xyz = rng.uniform(-200, 200, (e, 3))
         R = Rotation.random(random_state=int(rng.integers(1 << 31))).as_matrix()
         t = np.array([10.0, -40.0, 3000.0])
-        y = np.vstack((xyz[rng.permutation(e)] @ R.T + t + rng.normal(0, 3.0, (e, 3)),
-                       rng.uniform(-300, 300, (2, 3)) + t))  # fmt: skip
+        y = np.vstack(
+            (
+                xyz[rng.permutation(e)] @ R.T + t + rng.normal(0, 3.0, (e, 3)),
+                rng.uniform(-300, 300, (2, 3)) + t,
+            )
+        )
         n = int(rng.integers(0, e + 1))
         k_idx, i_idx = np.arange(n), rng.permutation(e)[:n]
         got = reference.complete_pairs(y, k_idx, i_idx, xyz, R, t, 8.0)

@@ -20,8 +20,21 @@ CAM, CAT = CameraModel(), paper_target()
 
 def _both(T, gray, matched, threshold=400.0, dark_check=True, dist=None):
     dist = CAM.dist_array if dist is None else dist
-    args = (CAT.positions_mm, CAT.diameters_mm, matched, T.R, T.t_mm, CAM.fx, CAM.fy, CAM.cx,
-            CAM.cy, dist, gray, threshold, dark_check)  # fmt: skip
+    args = (
+        CAT.positions_mm,
+        CAT.diameters_mm,
+        matched,
+        T.R,
+        T.t_mm,
+        CAM.fx,
+        CAM.fy,
+        CAM.cx,
+        CAM.cy,
+        dist,
+        gray,
+        threshold,
+        dark_check,
+    )
     got, want = reference.pose_check(*args), kernel.pose_check(*args)
     assert got[:2] == want[:2]
     np.testing.assert_allclose(got[2:], want[2:], atol=1e-9)
@@ -30,7 +43,10 @@ def _both(T, gray, matched, threshold=400.0, dark_check=True, dist=None):
 
 def test_codes_are_the_kernels():
     assert (reference.CONSISTENT, reference.BEHIND_CAMERA, reference.DARK_REFLECTOR) == (
-        kernel.CONSISTENT, kernel.BEHIND_CAMERA, kernel.DARK_REFLECTOR)  # fmt: skip
+        kernel.CONSISTENT,
+        kernel.BEHIND_CAMERA,
+        kernel.DARK_REFLECTOR,
+    )
 
 
 @pytest.mark.parametrize("distance_mm", [800.0, 2000.0, 5000.0, 10000.0])
@@ -65,8 +81,10 @@ def test_random_poses_and_frames_agree_with_the_kernel():
     rng = np.random.default_rng(5)
     outcomes = set()
     for trial in range(400):
-        R = rotation_from_euler_deg(*rng.uniform(-60, 60, 2), rng.uniform(-180, 180)) @ facing_pose(
-            1.0).R  # fmt: skip
+        R = (
+            rotation_from_euler_deg(*rng.uniform(-60, 60, 2), rng.uniform(-180, 180))
+            @ facing_pose(1.0).R
+        )
         if trial % 10 == 0:
             R = rotation_from_euler_deg(0, 100, 0) @ R  # likely facing away / behind
         T = RigidTransform(R, np.array([*rng.uniform(-400, 400, 2), rng.uniform(150, 9000)]))
@@ -84,12 +102,14 @@ def test_a_pose_facing_away_is_refused_as_the_kernel_refuses_it():
     R = T.R @ np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
     lit = np.full((240, 320), 1000.0, np.float32)
     assert _both(RigidTransform(R, T.t_mm), lit, np.zeros(len(CAT), bool))[0] == (
-        reference.BEHIND_CAMERA)  # fmt: skip
+        reference.BEHIND_CAMERA
+    )
     T = facing_pose(2000.0)
     dark = np.zeros((240, 320), np.float32)
     outcome, i, u, v = _both(T, dark, np.zeros(len(CAT), bool))
     assert outcome == reference.DARK_REFLECTOR
     np.testing.assert_allclose((u, v), CAM.project((CAT.positions_mm[i] @ T.R.T + T.t_mm)[None])[0])
     assert _both(T, np.full((240, 320), 400.0, np.float32), np.zeros(len(CAT), bool))[0] == (
-        reference.CONSISTENT)  # fmt: skip
+        reference.CONSISTENT
+    )
     assert _both(T, dark, np.zeros(len(CAT), bool), dark_check=False)[0] == reference.CONSISTENT

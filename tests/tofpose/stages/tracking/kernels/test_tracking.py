@@ -30,8 +30,9 @@ def test_search_windows_takes_the_component_opencv_takes():
     bounds = np.array([[28, 53, 28, 53], [90, 111, 50, 71], [0, 10, 0, 10], [37, 44, 30, 50]])
     centres = np.array([[40.0, 40.0], [100.0, 60.0], [5.0, 5.0], [40.0, 40.0]])
     diam = np.array([10.0, 6.0, 4.0, 10.0])
-    status, bbox, peak, cen, starts, flat = search_windows(gray, bounds, centres, diam,
-                                                           np.float32(400.0), 10.0)  # fmt: skip
+    status, bbox, peak, cen, starts, flat = search_windows(
+        gray, bounds, centres, diam, np.float32(400.0), 10.0
+    )
     assert status.tolist() == [FOUND, FOUND, NOT_FOUND, AT_EDGE]
     want = _reference(gray, bounds, centres, diam, np.float32(400.0))
     np.testing.assert_array_equal(status, want[0])

@@ -28,9 +28,21 @@ DISTANCES = (700.0, 1500.0, 3000.0, 5000.0, 8000.0)
 
 
 def _windows(module, cam, T, margin_px=4.0, min_diameter_px=1.0):
-    return module.camera_windows(CAT.positions_mm, CAT.diameters_mm, T.R, T.t_mm, cam.fx,
-                                 cam.fy, cam.cx, cam.cy, cam.dist_array, margin_px,
-                                 min_diameter_px, cam.width, cam.height)  # fmt: skip
+    return module.camera_windows(
+        CAT.positions_mm,
+        CAT.diameters_mm,
+        T.R,
+        T.t_mm,
+        cam.fx,
+        cam.fy,
+        cam.cx,
+        cam.cy,
+        cam.dist_array,
+        margin_px,
+        min_diameter_px,
+        cam.width,
+        cam.height,
+    )
 
 
 @cache
@@ -55,8 +67,11 @@ def test_camera_windows_equal_the_kernel(distance_mm, distorted):
     rng = np.random.default_rng(int(distance_mm))
     for margin in (2.0, 4.0, 8.0):
         for _ in range(5):
-            pose = facing_pose(distance_mm + rng.uniform(-100, 100), *rng.uniform(-8, 8, 3),
-                               offset_mm=rng.uniform(-300, 300, 2))  # fmt: skip
+            pose = facing_pose(
+                distance_mm + rng.uniform(-100, 100),
+                *rng.uniform(-8, 8, 3),
+                offset_mm=rng.uniform(-300, 300, 2),
+            )
             want = _windows(kernel, cam, pose, margin)
             got = _windows(reference, cam, pose, margin)
             np.testing.assert_array_equal(got[0], want[0])
@@ -79,9 +94,17 @@ def test_search_windows_equals_the_kernel_on_rendered_frames(distance_mm, distor
     for fraction in (0.1, 0.3, 0.5):
         threshold = np.float32(background + fraction * (gray.max() - background))
         for shift in range(4):
-            pose = T if shift == 0 else facing_pose(
-                distance_mm, 3 + rng.normal(0, 1), -5 + rng.normal(0, 1), 12 + rng.normal(0, 1),
-                offset_mm=(-60.0 + rng.normal(0, 10), 40.0 + rng.normal(0, 10)))  # fmt: skip
+            pose = (
+                T
+                if shift == 0
+                else facing_pose(
+                    distance_mm,
+                    3 + rng.normal(0, 1),
+                    -5 + rng.normal(0, 1),
+                    12 + rng.normal(0, 1),
+                    offset_mm=(-60.0 + rng.normal(0, 10), 40.0 + rng.normal(0, 10)),
+                )
+            )
             idx, bounds, uv, d_px = _windows(kernel, cam, pose, 3.0)
             assert len(idx) >= (2 if distance_mm < 1000 else 6)  # 0.7 m: most leave the image
             want = kernel.search_windows(gray, bounds, uv, d_px, threshold, background)
@@ -89,7 +112,8 @@ def test_search_windows_equals_the_kernel_on_rendered_frames(distance_mm, distor
                 reference.search_windows(gray, bounds, uv, d_px, threshold, background), want
             )
             assert kernel.any_shared(want[5], want[4], want[1]) == reference.any_shared(
-                want[5], want[4], want[1])  # fmt: skip
+                want[5], want[4], want[1]
+            )
             statuses.update(want[0].tolist())
     assert kernel.FOUND in statuses
 
@@ -105,8 +129,9 @@ def test_search_windows_equals_the_kernel_on_random_speckle():
         gray[rng.random(gray.shape) < rng.uniform(0.05, 0.5)] = rng.uniform(500, 900)
         u0, v0 = rng.integers(0, 60, 8), rng.integers(0, 40, 8)
         size = rng.integers(2, 30, (8, 2))
-        bounds = np.column_stack((u0, np.minimum(u0 + size[:, 0], 90), v0,
-                                  np.minimum(v0 + size[:, 1], 70))).astype(np.int64)  # fmt: skip
+        bounds = np.column_stack(
+            (u0, np.minimum(u0 + size[:, 0], 90), v0, np.minimum(v0 + size[:, 1], 70))
+        ).astype(np.int64)
         gray[:12, :12] = 5.0  # a dark corner: window 0 finds nothing there
         bounds[0] = (0, 12, 0, 12)
         centres = np.column_stack((bounds[:, :2].mean(axis=1), bounds[:, 2:].mean(axis=1)))
@@ -141,8 +166,13 @@ def test_any_shared_equals_the_kernel():
         lists = [np.unique(rng.integers(0, 400, rng.integers(1, 30))) for _ in range(3)]
         flat = np.concatenate(lists).astype(np.int64)
         starts = np.cumsum([0] + [len(v) for v in lists]).astype(np.int64)
-        bbox = np.array([[(v % 20).min(), (v // 20).min(), np.ptp(v % 20) + 1,
-                          np.ptp(v // 20) + 1] for v in lists], np.int64)  # fmt: skip
+        bbox = np.array(
+            [
+                [(v % 20).min(), (v // 20).min(), np.ptp(v % 20) + 1, np.ptp(v // 20) + 1]
+                for v in lists
+            ],
+            np.int64,
+        )
         want = kernel.any_shared(flat, starts, bbox)
         assert reference.any_shared(flat, starts, bbox) == want
         answers.add(bool(want))
@@ -162,9 +192,14 @@ def test_a_drawn_disc_is_found_and_one_at_the_edge_is_reported():
     centres = np.array([[30.5, 24.6], [36.0, 25.0], [60.0, 47.0], [30.0, 25.0]])
     diameters = np.array([7.0, 7.0, 7.0, 40.0])
     status, bbox, peak, centroid, starts, flat = reference.search_windows(
-        gray, bounds, centres, diameters, np.float32(700.0), 20.0)  # fmt: skip
-    assert status.tolist() == [reference.FOUND, reference.AT_EDGE, reference.NOT_FOUND,
-                               reference.NO_SIZE]  # fmt: skip
+        gray, bounds, centres, diameters, np.float32(700.0), 20.0
+    )
+    assert status.tolist() == [
+        reference.FOUND,
+        reference.AT_EDGE,
+        reference.NOT_FOUND,
+        reference.NO_SIZE,
+    ]
     np.testing.assert_array_equal(flat[starts[0] : starts[1]], np.flatnonzero(disc))
     assert starts.tolist() == [0, disc.sum()] + [disc.sum()] * 3
     assert bbox[0].tolist() == [27, 22, 7, 7] and peak[0] == 1500.0
