@@ -1,7 +1,7 @@
 """Evaluation harness for recordings with truth (issue 26: frames of another renderer).
 
 Runs the pipeline over each recording exactly as ``tofpose estimate`` does (it calls
-``tofpose.cli.estimate`` itself, with its camera / catalog / tracking options, and
+``tofpose.workflows.measurement.estimate`` itself, with its camera / catalog / tracking options, and
 records the ``PoseResult`` of every frame on the way), then, against ``/truth``, per
 range bin (the distinct true ranges present, or ``--bin-m`` wide bins):
 
@@ -67,13 +67,13 @@ from bench._foreign_metrics import (  # noqa: E402
     true_correspondences,
     true_images,
 )
-from tofpose import cli  # noqa: E402
 from tofpose.core.geometry import RigidTransform  # noqa: E402
 from tofpose.core.threads import single_threaded_blas  # noqa: E402
 from tofpose.io import camera_file  # noqa: E402
 from tofpose.io.recording import RecordingError, open_recording  # noqa: E402
 from tofpose.pipeline import PosePipeline, PoseResult  # noqa: E402
 from tofpose.stages.matching.matching import MatchResult  # noqa: E402
+from tofpose.workflows import measurement  # noqa: E402
 
 RUNS = ("pipeline", "oracle")
 
@@ -103,7 +103,8 @@ def run_estimate(
     catalog_path: str | None = None,
     progress: bool = True,
 ) -> tuple[list[PoseResult], PosePipeline]:
-    """``tofpose.cli.estimate`` over a recording (its CSV to a temporary file), with the
+    """``tofpose.workflows.measurement.estimate`` over a recording (its CSV to a temporary
+    file), with the
     pipeline it builds made to keep each frame's ``PoseResult``: (results, one per frame
     in order; the pipeline, for its camera, catalog, config and calibrations)."""
     results: list[PoseResult] = []
@@ -122,7 +123,7 @@ def run_estimate(
     # the pipeline estimate runs is built by tofpose.io.camera_file.pipeline_for
     patched = mock.patch.object(camera_file, "PosePipeline", RecordingPipeline)
     with tempfile.TemporaryDirectory() as tmp, patched:
-        summary = cli.estimate(
+        summary = measurement.estimate(
             str(rec_path),
             str(Path(tmp) / "poses.csv"),
             catalog_path,
@@ -132,7 +133,7 @@ def run_estimate(
         )
     if len(built) != 1 or len(results) != summary["frames"]:
         raise RuntimeError(
-            f"tofpose.cli.estimate built {len(built)} pipeline(s) and processed "
+            f"tofpose.workflows.measurement.estimate built {len(built)} pipeline(s) and processed "
             f"{len(results)} of {summary['frames']} frames; bench/foreign.py expects one "
             "pipeline and one process() call per frame"
         )

@@ -197,7 +197,7 @@ def test_restart_on_the_same_database_keeps_its_data(tmp_path):
 
 
 def test_replay_camera_without_motion(tmp_path):
-    from tofpose.cli import simulate
+    from tofpose.workflows.simulation import simulate
 
     rec = tmp_path / "stability.h5"
     simulate("stability-697", 6, str(rec), seed=2, catalog_path=None, progress=False)

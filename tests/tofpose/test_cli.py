@@ -2,7 +2,8 @@ import csv
 
 import pytest
 
-from tofpose.cli import CSV_COLUMNS, main
+from tofpose.cli import main
+from tofpose.io.pose_csv import CSV_COLUMNS
 
 
 def test_simulate_then_estimate_writes_the_documented_csv(tmp_path, capsys):
@@ -52,7 +53,7 @@ def test_estimate_with_the_filter_adds_rate_and_velocity_of_a_static_target(tmp_
     """``estimate --filter``: the relative-state filter's columns after the pose's; the
     stability recording's target does not move, so the rates and velocities it reports
     are zero within their own 3 sigma once it has seen a few frames."""
-    from tofpose.cli import FILTER_COLUMNS
+    from tofpose.io.pose_csv import FILTER_COLUMNS
 
     rec, out = tmp_path / "r.h5", tmp_path / "poses.csv"
     assert (
@@ -80,7 +81,7 @@ def test_calibrate_range_writes_a_camera_the_estimate_uses(tmp_path, capsys):
     extrapolate)."""
     import numpy as np
 
-    from tofpose.cli import load_camera
+    from tofpose.io.camera_file import load_camera
     from tofpose.io.recording import open_recording
 
     rec, cam, raw_csv, cal_csv = (tmp_path / n for n in ("r.h5", "c.json", "a.csv", "b.csv"))
@@ -116,7 +117,7 @@ def test_calibrate_covariance_writes_a_camera_whose_sigmas_the_estimate_reports(
 
     import numpy as np
 
-    from tofpose.cli import load_camera
+    from tofpose.io.camera_file import load_camera
 
     rec, cam, raw_csv, cal_csv = (tmp_path / n for n in ("r.h5", "c.json", "a.csv", "b.csv"))
     assert main(["simulate", "--scenario", "range-sweep", "--frames", "54", "--out", str(rec)]) == 0
@@ -205,3 +206,51 @@ def test_simulated_truth_is_what_was_rendered_and_lab_truth_is_apart(tmp_path):
         for i, row in enumerate(rows):
             est = np.array([float(row[k]) for k in ("x_mm", "y_mm", "z_mm")])
             assert np.linalg.norm(est - r.truth_t_mm[i]) < 2.0 < lab_off[i] + 2.0
+
+
+def test_the_library_commands_run_without_the_server_package(tmp_path):
+    """With ``backend`` and the web stack unimportable (a finder refuses them), the
+    command line still parses, leaves out the server's commands and simulates and
+    estimates a recording; ``serve`` is then an unknown command."""
+    import subprocess
+    import sys
+
+    code = f"""
+import sys
+class Refuse:
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in ("backend", "fastapi", "sqlalchemy", "uvicorn", "viser"):
+            raise ImportError("refused: " + name)
+sys.meta_path.insert(0, Refuse())
+from tofpose.cli import build_parser, main
+assert main(["simulate", "--scenario", "attitude-grid", "--frames", "2",
+             "--out", r"{tmp_path / "rec.h5"}"]) == 0
+assert main(["estimate", r"{tmp_path / "rec.h5"}", "--out", r"{tmp_path / "p.csv"}"]) == 0
+assert not any(m.split(".")[0] == "backend" for m in sys.modules)
+try:
+    build_parser().parse_args(["serve"])
+except SystemExit as exc:
+    print("serve refused", exc.code)
+"""
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=900, check=True
+    )
+    assert "serve refused 2" in out.stdout, out.stdout + out.stderr
+    assert (tmp_path / "p.csv").read_text().count("\n") == 3  # header and two frames
+
+
+def test_version_is_the_installed_distributions(capsys):
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"tofpose {version('tofpose')}"
+
+
+def test_the_server_commands_come_from_the_entry_point_group():
+    from tofpose.cli import registered_commands
+
+    commands = registered_commands()
+    assert {"serve", "report", "keys", "record", "emulate", "openapi"} <= set(commands)
+    assert all(c.name == name for name, c in commands.items())

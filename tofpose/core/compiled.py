@@ -72,14 +72,13 @@ def kernel_cache_dir() -> Path:
 
 
 def _writable(path: Path) -> bool:
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        probe = path / f".probe-{os.getpid()}"
-        probe.write_bytes(b"")
-        probe.unlink()
-        return True
-    except OSError:
-        return False
+    """Whether ``path`` could be created and written by this process: its nearest
+    existing ancestor is a writable directory (checked with ``os.access``; nothing is
+    written, so importing the library leaves the file system as it was)."""
+    for candidate in (path, *path.parents):
+        if candidate.exists():
+            return candidate.is_dir() and os.access(candidate, os.W_OK | os.X_OK)
+    return False
 
 
 def prune_stale_kernel_caches(min_age_s: float = 86400.0) -> list[Path]:

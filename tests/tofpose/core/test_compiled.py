@@ -93,3 +93,34 @@ def test_an_unwritable_package_directory_falls_back_to_the_users_cache(tmp_path,
     )
     path = compiled.kernel_cache_dir()
     assert path == tmp_path / "tofpose" / f"tofpose-kernels-{compiled.kernel_sources_digest()}"
+
+
+def test_importing_the_library_writes_nothing(tmp_path):
+    """``import tofpose`` and the command line's parser in a fresh process create no
+    file or directory in a new cache base (the kernels are imported, and numba makes
+    its cache directories, only when a name of the pipeline is first used)."""
+    base = tmp_path / "cache"
+    code = (
+        "import tofpose, sys\nfrom tofpose.cli import build_parser\nbuild_parser()\n"
+        "assert 'numba' not in sys.modules and 'cv2' not in sys.modules\nprint('ok')\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        env={"NUMBA_CACHE_DIR": str(base), "PATH": "/usr/bin:/bin"},
+        check=True,
+        timeout=600,
+    ).stdout
+    assert out.strip() == "ok"
+    assert not base.exists()
+
+
+def test_writability_is_read_from_the_nearest_existing_ancestor(tmp_path):
+    """A cache path under a new directory of a writable one is writable; one under a
+    regular file cannot be made; neither check creates anything."""
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    assert compiled._writable(tmp_path / "new" / "tofpose-kernels-x")
+    assert not compiled._writable(blocker / "tofpose-kernels-x")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file"]

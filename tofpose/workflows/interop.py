@@ -1,0 +1,37 @@
+"""``tofpose export mcap`` and ``tofpose import mcap`` as functions."""
+
+from __future__ import annotations
+
+import argparse
+
+from tofpose.io.camera_file import pipeline_for
+from tofpose.io.recording import open_recording
+
+
+def export_file(args: argparse.Namespace) -> str:
+    """``tofpose export mcap``: the recording, and with ``--estimate`` each frame's pose."""
+    from tofpose.io.interop.mcap_export import export_mcap  # lazy: foxglove-sdk loads a runtime
+
+    with open_recording(args.recording) as rec:
+        pipe = (
+            pipeline_for(rec, args.recording, args.catalog, args.camera, args.tracking)
+            if args.estimate
+            else None
+        )
+        s = export_mcap(rec, args.out, pipe, overwrite=args.force, previews=args.previews)
+    poses = f", {s['ok']} with a pose" if args.estimate else ""
+    return f"{s['frames']} frames{poses} -> {args.out}"
+
+
+def import_file(args: argparse.Namespace) -> str:
+    """``tofpose import mcap``."""
+    from tofpose.io.interop.mcap_import import import_mcap
+
+    s = import_mcap(
+        args.file,
+        args.out,
+        gray_topic=args.gray_topic,
+        distance_topic=args.distance_topic,
+        overwrite=args.force,
+    )
+    return f"{s['frames']} frames -> {args.out}"
