@@ -225,14 +225,6 @@ class CampaignService:
             if self._running_id is not None:
                 self._request = (CampaignState.PAUSED, "STOP pressed")
 
-    def wait_idle(self, timeout_s: float) -> bool:
-        """Wait until no runner is active (tests, shutdown)."""
-        t = self._runner
-        if t is not None:
-            t.join(timeout_s)
-            return not t.is_alive()
-        return True
-
     # -- scheduler --------------------------------------------------------------------------
     def _schedule(self) -> None:
         while not self._shutdown.is_set():
