@@ -9,14 +9,20 @@ disc: moving the disc's centre by du changes pixel p's expected amplitude by
 ``A_disc * dc_p / du``, where ``dc_p / du`` is the integral of the rim's outward normal
 over the part of the rim inside pixel p (a uniform disc's coverage changes only at its
 rim), with shot-noise variance ``A_p + B_p``. Fisher information ``sum_p (A_disc dc_p /
-du)^2 / (A_p + B_p)`` per image axis, the inverse is the bearing's variance. The bound is
-(J^T J)^-1 over the six pose parameters. It leaves out blur (the default sensor has
-none) and the surround's share of mixed pixels.
+du)^2 / (A_p + B_p)``, a 2 x 2 information matrix I_k over the image axes (u, v) of the
+disc's centre. The pose's Fisher information is, over the visible markers k,
+
+    F = sum_k  J_uv,k^T I_k J_uv,k  +  J_rho,k^T J_rho,k / sigma_rho,k^2
+
+with J the derivatives of the marker centre's pixel and range with respect to the pose
+(a small rotation, rad, left-multiplied, then the translation, mm: the errors the
+benches report), and the bound is F^-1. The whole 2 x 2 I_k enters: an isotropic
+bearing sigma from its larger diagonal term would overstate the bound (it is then no
+lower bound); one from 1 / lambda_max(I_k) would understate it. It leaves out blur (the
+default sensor has none) and the surround's share of mixed pixels.
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
@@ -25,7 +31,6 @@ from tofpose.core.catalog import Catalog
 from tofpose.core.geometry import RigidTransform
 from tofpose.sim.render import RenderedFrame, SensorModel
 from tofpose.sim.scene import FIRST_DISC
-from tofpose.stages.pose.pose import measurement_jacobian
 
 #: rim samples per disc for the coverage gradient
 RIM_SAMPLES = 2048
@@ -36,41 +41,64 @@ def pose_crlb(
 ) -> tuple[float, float]:
     """(position bound mm, attitude bound deg): sqrt of the traces of the bound's blocks;
     NaN when fewer than three markers are visible."""
-    x, e, rho, s_r, s_b = [], [], [], [], []
+    F = np.zeros((6, 6))
+    visible = 0
     radii_mm = cat.diameters_mm / 2
     for k, pos in enumerate(cat.positions_mm):
         m = (f.surface_id == FIRST_DISC + k) & (f.amplitude >= sensor.min_amplitude_counts)
         if not m.any():
             continue
-        a, b = f.amplitude[m], f.background[m]
-        var_px2 = bearing_variance_px2(f, cam, T, pos, radii_mm[k], m)
-        if not math.isfinite(var_px2):
+        info_uv = bearing_information_px2(f, cam, T, pos, radii_mm[k], m)
+        if info_uv is None:
             continue
-        s_r.append(1.0 / np.sqrt(np.sum(1.0 / sensor.distance_sigma_mm(a, b) ** 2)))
-        s_b.append(np.sqrt(var_px2) / cam.fx)
-        p = T.R @ pos + T.t_mm
-        x.append(pos)
-        rho.append(np.linalg.norm(p))
-        e.append(p / np.linalg.norm(p))
-    if len(x) < 3:
+        a, b = f.amplitude[m], f.background[m]
+        var_range_mm2 = 1.0 / np.sum(1.0 / sensor.distance_sigma_mm(a, b) ** 2)
+        J_uv, J_rho = marker_jacobians(cam, T, pos)
+        F += J_uv.T @ info_uv @ J_uv + np.outer(J_rho, J_rho) / var_range_mm2
+        visible += 1
+    if visible < 3:
         return float("nan"), float("nan")
-    _, J = measurement_jacobian(
-        np.array(x), np.array(e), np.array(rho), T.R, T.t_mm, np.array(s_r), np.array(s_b)
-    )
-    cov = np.linalg.inv(J.T @ J)
+    cov = np.linalg.inv(F)
     return float(np.sqrt(np.trace(cov[3:, 3:]))), float(np.degrees(np.sqrt(np.trace(cov[:3, :3]))))
 
 
-def bearing_variance_px2(
+#: finite-difference step of the projection's derivative, mm in the camera frame
+PROJECTION_STEP_MM = 1e-3
+
+
+def marker_jacobians(
+    cam: CameraModel, T: RigidTransform, pos_mm: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Derivatives of a marker centre's pixel (2, 6) and range (6,) with respect to the
+    pose: a small rotation omega (rad) left-multiplied (``R' = exp([omega]) R``), then the
+    translation (mm). The projection's derivative (lens distortion included) is a central
+    difference of ``CameraModel.project``."""
+    rx = T.R @ np.asarray(pos_mm, float)
+    p = rx + T.t_mm
+    dp_dpose = np.hstack([-_cross_matrix(rx), np.eye(3)])  # (3, 6)
+    h = PROJECTION_STEP_MM
+    steps = np.vstack([p + h * np.eye(3), p - h * np.eye(3)])
+    uv = cam.project(steps)
+    duv_dp = ((uv[:3] - uv[3:]) / (2 * h)).T  # (2, 3)
+    return duv_dp @ dp_dpose, (p / np.linalg.norm(p)) @ dp_dpose
+
+
+def _cross_matrix(v: np.ndarray) -> np.ndarray:
+    """[v]_x (3, 3): [v]_x w = v x w."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def bearing_information_px2(
     f: RenderedFrame,
     cam: CameraModel,
     T: RigidTransform,
     pos_mm,
     radius_mm: float,
     covered: np.ndarray,
-) -> float:
-    """Lower bound (px^2, per image axis, the larger of the two) of the variance of the
-    disc's image centre (module docstring). The rim is the projected circle of the disc
+) -> np.ndarray | None:
+    """Fisher information (2, 2), px^-2, of the disc's image centre (u, v) (module
+    docstring); None when the image carries none (the disc edge-on or out of the
+    image). The rim is the projected circle of the disc
     (centre ``pos_mm`` in the target frame, normal the target's z axis); ``covered`` (H,
     W) marks the pixels the disc covers at their centre; with the pixels its rim crosses,
     their summed amplitude over the disc's image area is its amplitude per px^2."""
@@ -101,5 +129,5 @@ def bearing_variance_px2(
     var_pixel = np.maximum(f.amplitude + f.background, 1.0)
     info = np.einsum("hwi,hwj->ij", grad, grad / var_pixel[..., None]) * a_disc**2
     if not np.all(np.isfinite(info)) or np.linalg.det(info) <= 1e-12 * np.trace(info) ** 2:
-        return math.inf  # no bearing information (the disc edge-on, or out of the image)
-    return float(np.max(np.diag(np.linalg.inv(info))))
+        return None  # no bearing information (the disc edge-on, or out of the image)
+    return info

@@ -16,13 +16,9 @@ from scipy.spatial.transform import Rotation
 EULER_SEQUENCE = "xyz"  # extrinsic x (pitch), then y (yaw), then z (roll)
 
 
-def rotation_from_euler_rad(pitch_rad: float, yaw_rad: float, roll_rad: float) -> np.ndarray:
-    """Rotation matrix, shape (3, 3), ``Rz(roll) @ Ry(yaw) @ Rx(pitch)``."""
-    return Rotation.from_euler(EULER_SEQUENCE, [pitch_rad, yaw_rad, roll_rad]).as_matrix()
-
-
 def rotation_from_euler_deg(pitch_deg: float, yaw_deg: float, roll_deg: float) -> np.ndarray:
-    """Rotation matrix, shape (3, 3), from (pitch, yaw, roll) in degrees."""
+    """Rotation matrix, shape (3, 3), ``Rz(roll) @ Ry(yaw) @ Rx(pitch)`` from (pitch,
+    yaw, roll) in degrees."""
     return Rotation.from_euler(
         EULER_SEQUENCE, [pitch_deg, yaw_deg, roll_deg], degrees=True
     ).as_matrix()
@@ -130,11 +126,6 @@ def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
     """Angle in degrees of the relative rotation ``R_a^T R_b`` (geodesic distance)."""
     cos = (np.trace(R_a.T @ R_b) - 1.0) / 2.0
     return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
-
-
-def skew(v: np.ndarray) -> np.ndarray:
-    """Cross-product matrix, shape (3, 3), of a vector of shape (3,)."""
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 @dataclass(frozen=True)

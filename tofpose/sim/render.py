@@ -23,7 +23,7 @@ sensor's background suppression (``ambient_gray_fraction * B``), quantised to 12
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -146,9 +146,6 @@ class SensorModel:
     def subframe_period_s(self, distance_mm: float) -> float:
         """Time from one phase sub-frame to the next: exposure plus readout, s."""
         return (self.exposure_for(distance_mm) + self.subframe_readout_us) * 1e-6
-
-    def with_ambient(self, lux: float) -> SensorModel:
-        return replace(self, ambient_lux=lux)
 
 
 @dataclass(frozen=True)
