@@ -459,6 +459,25 @@ def replace_section(begin: str, end: str, section: str) -> None:
     DOC.write_text(text)
 
 
+def replace_heading_block(heading: str, section: str) -> None:
+    """Put ``section`` in place of docs/results.md's block from the line ``heading`` to
+    the next "## " heading."""
+    text = DOC.read_text()
+    i = text.index(heading + "\n")
+    j = text.index("\n## ", i + len(heading))
+    DOC.write_text(text[:i] + section.rstrip("\n") + "\n" + text[j:])
+
+
+def accuracy_section(quick: bool) -> str:
+    """ "Accuracy over the operating range" (``--only accuracy`` regenerates just this
+    block, with its plot)."""
+    n_acc = 4 if quick else 20
+    acc_summary = accuracy.summarise(accuracy.run(n_acc))
+    IMG.mkdir(parents=True, exist_ok=True)
+    accuracy.plot(acc_summary, IMG / "accuracy-range.png")
+    return accuracy.markdown(acc_summary, _rel(IMG / "accuracy-range.png"), n_acc)
+
+
 def replace_dynamics(section: str) -> None:
     replace_section(DYN_BEGIN, DYN_END, section)
 
@@ -468,7 +487,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument(
         "--only",
-        choices=["dynamics", "scaleout", "safety"],
+        choices=["accuracy", "dynamics", "scaleout", "safety"],
         help="regenerate one section of docs/results.md in place",
     )
     ap.add_argument(
@@ -481,6 +500,10 @@ def main() -> None:
     )
     args = ap.parse_args()
     q = args.quick
+    if args.only == "accuracy":
+        replace_heading_block("## Accuracy over the operating range", accuracy_section(q))
+        print(f"rewrote the accuracy section of {DOC}", file=sys.stderr)
+        return
     if args.only == "dynamics":
         replace_dynamics(dynamics_section(q))
         print(f"rewrote the dynamics section of {DOC}", file=sys.stderr)
