@@ -574,6 +574,7 @@ def main() -> None:
 
     pipe_tab = _script("pipeline.py", "--frames", "20" if q else "60")
     sim_tab = _script("sim.py", "--frames", "10" if q else "40")
+    startup_tab = _script("startup.py", "--repeats", "3" if q else "10")
     live_tab = _script(
         "live.py",
         "--clients",
@@ -635,6 +636,12 @@ def main() -> None:
         "Simulator (`bench/sim.py`):",
         "",
         sim_tab,
+        "",
+        "Start-up, each in a fresh process (`bench/startup.py`): the command line, the "
+        "library, the pipeline with its kernels from numba's cache, and a first pose; "
+        "and which heavy packages each loaded:",
+        "",
+        startup_tab,
         "",
         "Live server end to end (`bench/live.py`): simulated camera in the server "
         "process, N WebSocket clients in another process on the same 2 cores; latency "
