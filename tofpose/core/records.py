@@ -87,7 +87,8 @@ class FitSettings(NamedTuple):
     """The settings of the §5 fit (``stages.pose.kernels.pose.fit_with_outliers``):
 
     refinement : 0 none, 1 maximum likelihood, 2 the paper's line of sight
-    (``pose.REFINE_NONE``, ``REFINE_ML``, ``REFINE_LOS``; ``solve._REFINEMENT``);
+    (``stages.pose.constants.REFINE_NONE``, ``REFINE_ML``, ``REFINE_LOS``;
+    ``solve._REFINEMENT``);
     los_tolerance : the LOS iteration's tolerance;
     step_sigma2 : the ML iteration's convergence threshold (squared step in sigmas);
     adapt : add the frame's excess range and bearing sigmas and fit again;

@@ -18,6 +18,7 @@ import numpy as np
 from tofpose.config import ExtractionConfig
 from tofpose.core.camera import CameraModel
 from tofpose.core.records import GateSettings
+from tofpose.stages.extraction.constants import LEVEL_STRIDE, MAD_TO_SIGMA, SATURATED_COUNTS
 from tofpose.stages.extraction.kernels.centroids import blob_centroids, blob_ranges, owner_map
 from tofpose.stages.extraction.kernels.gates import ACCEPTED, OVERSIZE, label_table_and_gates
 from tofpose.stages.extraction.kernels.levels import (
@@ -32,8 +33,6 @@ from tofpose.stages.extraction.kernels.mixed_pixels import (
     occluded_blobs,
 )
 from tofpose.stages.extraction.kernels.perspective import disc_centre_offsets
-
-SATURATED_COUNTS = 4095
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,7 +56,7 @@ class Blob:
     fitted_uv : ndarray (2,), the centre from a model fit of the pixels
         (``pair_fit.fit_pair``: one of two markers imaged as one blob), which replaces
         the moment centroid in the measurement; None for the others.
-    mixing : ndarray (``kernels.mixed_pixels.MIX_FIELDS``,), the mixing sums of its
+    mixing : ndarray (``constants.MIX_FIELDS``,), the mixing sums of its
         support against its surround (measured with the centroid), or None.
     """
 
@@ -228,9 +227,9 @@ def frame_levels(gray: np.ndarray, config: ExtractionConfig) -> FrameStats:
     Background and its noise come from a strided subsample (median and MAD).
     """
     gray32 = np.ascontiguousarray(gray, np.float32)
-    bg, mad, n_sat, dark = frame_level_stats(gray32, 3, float(SATURATED_COUNTS))
+    bg, mad, n_sat, dark = frame_level_stats(gray32, LEVEL_STRIDE, float(SATURATED_COUNTS))
     i_max = float(gray32.max())
-    sigma = max(1.4826 * mad, np.sqrt(max(bg, 1.0)))
+    sigma = max(MAD_TO_SIGMA * mad, np.sqrt(max(bg, 1.0)))
     contrast = i_max - bg
     if config.raw_threshold_abs is not None:
         i_t = config.raw_threshold_abs

@@ -25,18 +25,21 @@ from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import Catalog
 from tofpose.core.geometry import RigidTransform
 from tofpose.core.records import FitSettings, camera_record, catalog_record
+from tofpose.stages.extraction.constants import MIX_FIELDS
 from tofpose.stages.extraction.extraction import Blob
-from tofpose.stages.extraction.kernels.mixed_pixels import MIX_FIELDS
 from tofpose.stages.pose.arithmetic import COMPILED, PoseArithmetic
-from tofpose.stages.pose.kernels.pose import (
-    MIN_LEAVE_ONE_OUT,
-    NO_OFFSET,
+from tofpose.stages.pose.constants import (
+    BEHIND_CAMERA,
+    DARK_REFLECTOR,
     REFINE_LOS,
     REFINE_ML,
     REFINE_NONE,
+)
+from tofpose.stages.pose.kernels.pose import (
+    MIN_LEAVE_ONE_OUT,
+    NO_OFFSET,
     RangeOffsetPrior,
 )
-from tofpose.stages.pose.kernels.verify import BEHIND_CAMERA, DARK_REFLECTOR
 from tofpose.stages.pose.pose import STEP_SIGMA2, MLResult
 
 _REFINEMENT = {"none": REFINE_NONE, "ml": REFINE_ML, "los": REFINE_LOS}
@@ -74,7 +77,7 @@ class Measurements:
     weights : (n,) the weights of Eq. 21, ``1 / (sigma_range^2 + (range sigma_px / f)^2)``;
     sigma_px, sigma_range_mm : (n,) per-reflector sigmas
     (``uncertainty.measurement_sigmas``); mixing : (n,
-    ``stages.extraction.kernels.mixed_pixels.MIX_FIELDS``)
+    ``stages.extraction.constants.MIX_FIELDS``)
     their mixing sums (NaN rows, or None: none).
     """
 

@@ -26,7 +26,7 @@ import numpy as np
 from tofpose.core.camera import CameraModel
 from tofpose.stages.extraction.extraction import Blob
 from tofpose.stages.tracking.arithmetic import COMPILED, TrackingArithmetic
-from tofpose.stages.tracking.kernels.tracking import AT_EDGE, FOUND, NO_SIZE, NOT_FOUND
+from tofpose.stages.tracking.constants import AT_EDGE, FOUND, NO_SIZE, NOT_FOUND
 
 
 @dataclass(frozen=True)

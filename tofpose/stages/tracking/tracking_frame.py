@@ -31,7 +31,7 @@ from tofpose.stages.pose.solve import (
     fit_settings,
 )
 from tofpose.stages.tracking.arithmetic import COMPILED, TrackingArithmetic
-from tofpose.stages.tracking.kernels.tracking_frame import TRACKED
+from tofpose.stages.tracking.constants import TRACKED
 from tofpose.stages.tracking.tracking import TrackState
 
 

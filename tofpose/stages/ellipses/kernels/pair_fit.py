@@ -18,8 +18,8 @@ import numpy as np
 
 from tofpose.core.compiled import jit
 from tofpose.core.kernels.small_matrices import cholesky, cholesky_solve
+from tofpose.stages.ellipses.constants import N_PARAMS
 
-N_PARAMS = 9
 _SQRT2 = math.sqrt(2.0)
 _SQRTPI = math.sqrt(math.pi)
 

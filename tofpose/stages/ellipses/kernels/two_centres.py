@@ -8,12 +8,11 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.core.compiled import jit
+from tofpose.stages.ellipses.constants import MIN_ELONGATION
 
 #: ``two_centre_split`` status: split done; not elongated as two discs side by side are;
 #: every pixel nearer one centre
 SPLIT_OK, SPLIT_ROUND, SPLIT_ONE_SIDED = 0, 1, 2
-#: major over minor axis (standard deviations) of a pair of touching like discs, at least
-MIN_ELONGATION = 1.5
 
 
 @jit

@@ -19,7 +19,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.special import erfc
 
-N_PARAMS = 9
+from tofpose.stages.ellipses.constants import N_PARAMS
+
 #: SciPy's step and gradient tolerances of the fit: tight, so that it ends at the optimum
 #: the kernel's tolerances stop near
 FIT_TOLERANCE = 1e-12

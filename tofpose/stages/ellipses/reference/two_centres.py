@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-#: major over minor axis (standard deviations) of a pair of touching like discs, at least
-MIN_ELONGATION = 1.5
+from tofpose.stages.ellipses.constants import MIN_ELONGATION
 
 
 def two_centre_split(cols, rows, weight, iterations):

@@ -11,13 +11,7 @@ import numpy as np
 from tofpose.core.compiled import jit
 from tofpose.core.kernels.indexing import row_col, run_end
 from tofpose.core.kernels.stats import median_inplace
-
-#: a member pixel at or above this fraction of the largest member value of its 3 x 3
-#: neighbourhood is covered whole (the shot noise of a bright marker's pixel is ~3 %)
-PLATEAU_RATIO = 0.9
-#: coverage weights from this many whole-covered pixels (a 3 x 3 interior) on; below,
-#: intensity weights
-PLATEAU_MIN_PX = 9
+from tofpose.stages.extraction.constants import PLATEAU_MIN_PX, PLATEAU_RATIO
 
 
 @jit
@@ -159,7 +153,7 @@ def owner_map(flat, starts, bbox, h, w):
     """Index of the blob owning each pixel (-1: none) over the part of the (H, W) image
     that holds every blob's box grown by 2 px, and whether it is needed: only when a
     blob's box (n, 4) (x, y, w, h) grown by 3 px (the reach of its surround ring,
-    ``mixed_pixels.SURROUND_OUTER_PX``) meets another's box (the usual case is that none
+    ``constants.SURROUND_OUTER_PX``) meets another's box (the usual case is that none
     does, and nothing needs excluding). The ring of a blob must not reach into a
     neighbour's pixels (markers 7 and 8 split apart touch each other), or that
     neighbour's light pulls the centroid towards it. Returns owner (h', w') int32, its

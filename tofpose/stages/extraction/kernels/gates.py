@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.core.compiled import jit
+from tofpose.stages.extraction.constants import MAX_PSF_SIGMA_PX, SHAPE_MIN_PIXELS, WINDOW_PAD_PX
 from tofpose.stages.extraction.kernels.components import (
     component_median_ranges,
     component_table,
@@ -23,17 +24,6 @@ from tofpose.stages.extraction.kernels.components import (
 
 #: outcome codes of ``gate_components``
 ACCEPTED, OVERSIZE, SIZE, NLOG, SHAPE, PENALTY = 0, 1, 2, 3, 4, 5
-#: fewest pixels for which a blob's eccentricity means anything
-#: (``reference.extraction.SHAPE_MIN_PIXELS``)
-SHAPE_MIN_PIXELS = 6
-#: how far (px) the window of ``window_moments`` reaches beyond a component's box: the
-#: active set cuts a blurred blob at ~1-2 PSF sigmas, and 3 px more hold the tails of a
-#: PSF of up to ~1.5 px (2 px read a 1.4 px PSF as ~1.1)
-WINDOW_PAD_PX = 3
-#: the widest lens PSF (1-sigma, px) the gates adapt to: a lens this far out of focus
-#: smears a 35 mm marker at 3 m over ~5 px; a component that reads wider is taken for
-#: a disc larger than the catalog's smallest, not for blur
-MAX_PSF_SIGMA_PX = 2.0
 
 
 @jit

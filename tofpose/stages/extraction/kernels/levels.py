@@ -6,6 +6,7 @@ import numpy as np
 
 from tofpose.core.compiled import jit
 from tofpose.core.kernels.stats import median_inplace
+from tofpose.stages.extraction.constants import DARK_PERCENTILE
 
 
 @jit
@@ -39,10 +40,6 @@ def checked_frame(gray, distance_mm):
             d_out[c] = v if (v > 0) & (v < np.float32(np.inf)) else nan  # NaN > 0 is False
     return g, d
 
-
-#: the no-return level is this percentile of the frame's gray: on a target seen against
-#: a hall or space most pixels see nothing; with a wall behind it, the darkest 2 %
-DARK_PERCENTILE = 2.0
 
 #: the counting median handles values v with 2 v an integer in [0, this)
 _COUNTING_LIMIT = 1 << 17

@@ -30,14 +30,16 @@ import numpy as np
 from tofpose.core.compiled import jit
 from tofpose.core.kernels.indexing import row_col
 from tofpose.core.kernels.stats import median_inplace
-
-#: the surround is read in the box of the blob grown by this many pixels ...
-SURROUND_OUTER_PX = 3
-#: ... outside the box grown by this many (the support reaches 1 px beyond the blob)
-SURROUND_INNER_PX = 1
-#: (n, MIX_FIELDS) per blob: a_b, d_b, S_a, S_ad, covered area of the support pixels
-#: without a range (px^2, their gray's coverage estimate), n_support
-MIX_FIELDS = 6
+from tofpose.stages.extraction.constants import (
+    MAD_TO_SIGMA,
+    MIX_FIELDS,
+    OCCLUSION_MARGIN_MM,
+    OCCLUSION_MIN_OUTER_PX,
+    OCCLUSION_MIN_PATCH_PX,
+    OCCLUSION_NOISE_SIGMAS,
+    SURROUND_INNER_PX,
+    SURROUND_OUTER_PX,
+)
 
 
 @jit
@@ -107,22 +109,6 @@ def blob_surrounds(bbox, gray, distance, owner, ox, oy, use_owner):
         if nd >= 3:
             depth[j] = median_inplace(d_ring[:nd])
     return level, depth, crowded
-
-
-#: a pixel near a blob is something in front of it (an arm, a cable, the target's own
-#: structure) when it reads nearer than the blob's range by more than this (a raised
-#: marker's plate lies 100-150 mm behind it) ...
-OCCLUSION_MARGIN_MM = 250.0
-#: ... and by more than this many robust sigmas of the range scatter of the rest of the
-#: blob's surround (a dark plate under strong ambient light scatters by 100s of mm) ...
-OCCLUSION_NOISE_SIGMAS = 4.0
-#: ... and such pixels touch the blob and make a connected patch of at least this many
-#: pixels within its surround (isolated pixels that read near by chance do not chain up)
-OCCLUSION_MIN_PATCH_PX = 4
-#: ... reaching at least this many pixels of the surround's outermost ring (an occluder
-#: is larger than the blob's rim; the rim's pixels alone read wrong while the target
-#: moves, when the four phase sub-frames see the marker's edge at different places)
-OCCLUSION_MIN_OUTER_PX = 2
 
 
 @jit
@@ -221,7 +207,7 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
             med = median_inplace(rest[:n_rest].copy())  # it scrambles its input
             for i in range(n_rest):
                 rest[i] = abs(rest[i] - med)
-            scatter = 1.4826 * median_inplace(rest[:n_rest])
+            scatter = MAD_TO_SIGMA * median_inplace(rest[:n_rest])
         margin = max(OCCLUSION_MARGIN_MM, OCCLUSION_NOISE_SIGMAS * scatter)
         out[j] = median_inplace(inside[:n_in]) < rho[j] - margin
     return out

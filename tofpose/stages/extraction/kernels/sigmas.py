@@ -9,6 +9,7 @@ import numpy as np
 from tofpose.core.compiled import jit
 from tofpose.core.kernels.indexing import row_col
 from tofpose.core.kernels.stats import median_inplace
+from tofpose.stages.extraction.constants import MAD_TO_SIGMA
 
 
 @jit
@@ -63,7 +64,7 @@ def blob_pixel_stats(flat, starts, centroids, gray, distance, background):
             dev = np.empty(m, np.float32)
             for i in range(m):
                 dev[i] = abs(d_ok[i] - med)
-            own_mad[j] = 1.4826 * median_inplace(dev)
+            own_mad[j] = MAD_TO_SIGMA * median_inplace(dev)
     return shot, n_px, own_mad, model_unit, n_valid
 
 

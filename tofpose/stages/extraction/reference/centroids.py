@@ -10,11 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-#: a member at or above this fraction of the largest member of its 3 x 3 neighbourhood is
-#: covered whole
-PLATEAU_RATIO = 0.9
-#: coverage weights from this many whole-covered members on (a 3 x 3 interior)
-PLATEAU_MIN_PX = 9
+from tofpose.stages.extraction.constants import PLATEAU_MIN_PX, PLATEAU_RATIO
 
 
 def surround_level(gray, bbox, owner=None, j=0, frame_level=0.0) -> float:

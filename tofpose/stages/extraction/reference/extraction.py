@@ -21,21 +21,16 @@ import cv2
 import numpy as np
 
 from tofpose.config import ExtractionConfig
+from tofpose.stages.extraction.constants import (
+    DARK_PERCENTILE,
+    LEVEL_STRIDE,
+    MAD_TO_SIGMA,
+    MAX_PSF_SIGMA_PX,
+    SATURATED_COUNTS,
+    SHAPE_MIN_PIXELS,
+    WINDOW_PAD_PX,
+)
 
-#: the camera's full scale (12 bit): a pixel at or above it is saturated
-SATURATED_COUNTS = 4095
-#: the background and its noise are read on every this-many-th row and column
-LEVEL_STRIDE = 3
-#: the no-return (dark) level is this percentile of the subsample (nearest rank)
-DARK_PERCENTILE = 2.0
-#: sigma of a normal distribution over its median absolute deviation
-MAD_TO_SIGMA = 1.4826
-#: fewest pixels for which a blob's eccentricity means anything (shape gate and q_shape)
-SHAPE_MIN_PIXELS = 6
-#: the window moments' reach beyond a component's box, px
-WINDOW_PAD_PX = 3
-#: the widest lens PSF (1-sigma, px) the gates adapt to
-MAX_PSF_SIGMA_PX = 2.0
 #: the nLoG patch's reach beyond a component's box, px (zeros outside A, §3.1.2)
 NLOG_PAD_PX = 2
 #: why a component is not a candidate (``tofpose.stages.extraction.extraction.REJECT_REASONS``'

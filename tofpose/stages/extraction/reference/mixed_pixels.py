@@ -28,23 +28,17 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-#: the surround is read in the box of the blob grown by this many pixels ...
-SURROUND_OUTER_PX = 3
-#: ... outside the box grown by this many (the support reaches 1 px beyond the blob)
-SURROUND_INNER_PX = 1
-#: fields of a ``blob_mixing`` row: a_b, d_b, S_a, S_ad, C_unranged, n_support
-MIX_FIELDS = 6
-#: a pixel reads in front of a blob when it is nearer than the blob's range by more
-#: than this (a raised marker's plate lies 100-150 mm behind it) ...
-OCCLUSION_MARGIN_MM = 250.0
-#: ... and by more than this many robust sigmas of the rest of the surround's ranges
-OCCLUSION_NOISE_SIGMAS = 4.0
-#: the near patch touching the blob has at least this many pixels ...
-OCCLUSION_MIN_PATCH_PX = 4
-#: ... and reaches at least this many pixels of the window's outermost ring
-OCCLUSION_MIN_OUTER_PX = 2
-#: the median absolute deviation's factor to a normal sigma
-MAD_TO_SIGMA = 1.4826
+from tofpose.stages.extraction.constants import (
+    MAD_TO_SIGMA,
+    MIX_FIELDS,
+    OCCLUSION_MARGIN_MM,
+    OCCLUSION_MIN_OUTER_PX,
+    OCCLUSION_MIN_PATCH_PX,
+    OCCLUSION_NOISE_SIGMAS,
+    SURROUND_INNER_PX,
+    SURROUND_OUTER_PX,
+)
+
 #: 8-connectivity
 _EIGHT = np.ones((3, 3), bool)
 

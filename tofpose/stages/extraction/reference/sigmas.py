@@ -13,8 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-#: the median absolute deviation's factor to a normal sigma
-MAD_TO_SIGMA = 1.4826
+from tofpose.stages.extraction.constants import MAD_TO_SIGMA
 
 
 def _pixels(shape, pixels):

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.core.compiled import jit
+from tofpose.stages.matching.constants import FORBIDDEN
 
 
 @jit
@@ -100,10 +101,6 @@ def size_mismatch(observed_diameter, catalog_diameter):
                 v = 4.0
             out[k, i] = v
     return out
-
-
-#: the cost of a forbidden cell of the one-to-one step (a blob's other blobs' nulls)
-FORBIDDEN = 1e6
 
 
 @jit

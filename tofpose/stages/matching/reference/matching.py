@@ -12,10 +12,8 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial.distance import cdist
 from scipy.special import softmax
 
+from tofpose.stages.matching.constants import FORBIDDEN
 from tofpose.stages.pose.reference.pose import absolute_orientation
-
-#: the cost of a forbidden cell of the one-to-one step (another blob's null label)
-FORBIDDEN = 1e6
 
 
 def pair_distances(points) -> np.ndarray:

@@ -10,17 +10,17 @@ import numpy as np
 
 from tofpose.core.compiled import jit
 from tofpose.core.kernels.camera import bearings
+from tofpose.stages.extraction.constants import MIX_FIELDS
 from tofpose.stages.extraction.kernels.centroids import blob_centroids, blob_ranges, owner_map
 from tofpose.stages.extraction.kernels.mixed_pixels import (
-    MIX_FIELDS,
     blob_mixing,
     blob_surrounds,
     occluded_blobs,
     shift_mixing,
 )
 from tofpose.stages.extraction.kernels.sigmas import blob_sigmas
+from tofpose.stages.persistence.constants import RANGE_TEST_Z
 from tofpose.stages.persistence.kernels.persistence import (
-    RANGE_TEST_Z,
     blob_count_medians,
     consistent,
     mean_in_boxes,

@@ -6,6 +6,12 @@ import numpy as np
 
 from tofpose.core.compiled import jit
 from tofpose.core.kernels.stats import median_inplace
+from tofpose.stages.extraction.constants import MAD_TO_SIGMA
+from tofpose.stages.persistence.constants import (
+    RANGE_TEST_CLIP,
+    RANGE_TEST_MAX_PIXELS,
+    RANGE_TEST_MIN_PIXELS,
+)
 
 
 @jit
@@ -273,19 +279,6 @@ def gather_stack(frames, n_frames, flat):
     return out
 
 
-#: the standard normal quantile of ``ranges_consistent``'s test (0.999: a static scene
-#: is cut one frame pair in a thousand)
-RANGE_TEST_Z = 3.09
-#: the most one blob adds to ``ranges_consistent``'s statistic (3 sigma squared)
-RANGE_TEST_CLIP = 9.0
-#: most pixels of a blob ``ranges_consistent`` reads (every k-th of a larger blob): 48
-#: pixel pairs already see a millimetre a frame at 3 m, and a 0.7 m blob has thousands
-RANGE_TEST_MAX_PIXELS = 48
-#: fewest pixels with a range in both frames for a blob to take part in
-#: ``ranges_consistent`` (a median and a MAD of fewer say little about the noise)
-RANGE_TEST_MIN_PIXELS = 5
-
-
 @jit
 def ranges_consistent(current, previous, flat, starts, z):
     """Do two distance frames show the blobs at the same ranges, within their noise?
@@ -325,7 +318,7 @@ def ranges_consistent(current, previous, flat, starts, z):
         med = median_inplace(d[:m].copy())
         dev = np.abs(d[:m] - med)
         mad = median_inplace(dev)
-        se = 1.4826 * mad * np.sqrt(0.5 * np.pi / m)
+        se = MAD_TO_SIGMA * mad * np.sqrt(0.5 * np.pi / m)
         if se <= 0.0:
             continue
         stat += min((med / se) ** 2, RANGE_TEST_CLIP)

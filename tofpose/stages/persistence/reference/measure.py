@@ -21,11 +21,12 @@ import warnings
 import numpy as np
 
 from tofpose.core.reference.camera import back_project, bearings
+from tofpose.stages.extraction.constants import MIX_FIELDS
 from tofpose.stages.extraction.reference import mixed_pixels
 from tofpose.stages.extraction.reference.centroids import blob_centroid, blob_range
 from tofpose.stages.extraction.reference.sigmas import centroid_sigma_px, range_sigmas_mm, weights
+from tofpose.stages.persistence.constants import RANGE_TEST_Z
 from tofpose.stages.persistence.reference.persistence import (
-    RANGE_TEST_Z,
     centroids_consistent,
     ranges_consistent,
 )
@@ -167,7 +168,7 @@ def persist_and_measure(
     )
     uv = np.full((n, 2), np.nan)
     rho = np.full(n, np.nan)
-    mix = np.full((n, mixed_pixels.MIX_FIELDS), np.nan)
+    mix = np.full((n, MIX_FIELDS), np.nan)
     uv[kept], rho[kept], mix[kept] = k_uv, k_rho, k_mix
     return n_used, motion, keep, mean_gray, med_dist, uv, rho, mix
 

@@ -15,15 +15,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-#: the standard normal quantile of the range test (a static scene is cut one frame
-#: pair in a thousand)
-RANGE_TEST_Z = 3.09
-#: the most one blob adds to the range test's statistic (3 sigma squared)
-RANGE_TEST_CLIP = 9.0
-#: most pixels of a blob the range test reads (every k-th of a larger blob)
-RANGE_TEST_MAX_PIXELS = 48
-#: fewest pixels with a range in both frames for a blob to take part in the range test
-RANGE_TEST_MIN_PIXELS = 5
+from tofpose.stages.extraction.constants import MAD_TO_SIGMA
+from tofpose.stages.persistence.constants import (
+    RANGE_TEST_CLIP,
+    RANGE_TEST_MAX_PIXELS,
+    RANGE_TEST_MIN_PIXELS,
+    RANGE_TEST_Z,
+)
 
 
 class Entry(NamedTuple):
@@ -80,7 +78,7 @@ def ranges_consistent(current, previous, blobs, z: float = RANGE_TEST_Z) -> bool
         if len(delta) < RANGE_TEST_MIN_PIXELS:
             continue
         med = np.median(delta)
-        se = 1.4826 * np.median(np.abs(delta - med)) * np.sqrt(0.5 * np.pi / len(delta))
+        se = MAD_TO_SIGMA * np.median(np.abs(delta - med)) * np.sqrt(0.5 * np.pi / len(delta))
         if se <= 0.0:
             continue
         stat += min((med / se) ** 2, RANGE_TEST_CLIP)

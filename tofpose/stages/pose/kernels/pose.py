@@ -26,6 +26,7 @@ from tofpose.core.kernels.small_matrices import (
     transposed_times,
 )
 from tofpose.core.kernels.stats import median_inplace
+from tofpose.stages.pose.constants import MEDIAN_CHI2_1DOF, MEDIAN_CHI2_2DOF, REFINE_LOS, REFINE_ML
 
 
 @jit
@@ -273,11 +274,6 @@ def covariance_envelope(A, B):
     return out
 
 
-#: medians of chi-square with 1 (a range residual) and 2 (a lateral pair) degrees of freedom
-MEDIAN_CHI2_1DOF = 0.45494
-MEDIAN_CHI2_2DOF = 1.38629
-
-
 @jit
 def _excess_sigma(z2, var, median_target, max_extra):
     """The smallest extra >= 0 with median(z2 * var / (var + extra^2)) <= median_target,
@@ -326,10 +322,6 @@ def systematic_sigmas(x, e, rho, R, t, sr, sb, max_range_mm, max_bearing_rad):
     extra_range = _excess_sigma(rng2, sr**2, MEDIAN_CHI2_1DOF, max_range_mm)
     extra_bearing = _excess_sigma(lat2, var_b, MEDIAN_CHI2_2DOF, max_bearing_rad)
     return extra_range, extra_bearing
-
-
-#: refinement modes of ``fit_pose`` (PipelineConfig.refinement)
-REFINE_NONE, REFINE_ML, REFINE_LOS = 0, 1, 2
 
 
 @jit

@@ -85,7 +85,7 @@ def solve_pairs(
 
     y (g, 3), w (g,), uv (g, 2), rho (g,), sigma_px (g,), sigma_range (g,) : the
     candidates' points (Eq. 8), weights (Eq. 21), centroids, ranges and sigmas; mix
-    (g, ``mixed_pixels.MIX_FIELDS``) : their mixing sums (NaN rows: none); k_idx,
+    (g, ``extraction.constants.MIX_FIELDS``) : their mixing sums (NaN rows: none); k_idx,
     i_idx (m,) : matched (candidate, catalog) pairs; catalog : ``records.CatalogRecord``;
     camera : ``records.CameraRecord``; mixing_radius_px : matched discs whose
     apparent radius is below it take the mixing model's range instead of the median

@@ -7,9 +7,7 @@ import numpy as np
 
 from tofpose.core.compiled import jit
 from tofpose.core.kernels.camera import project
-
-#: outcomes of ``pose_check``
-CONSISTENT, BEHIND_CAMERA, DARK_REFLECTOR = 0, 1, 2
+from tofpose.stages.pose.constants import BEHIND_CAMERA, CONSISTENT, DARK_REFLECTOR
 
 
 @jit

@@ -16,6 +16,13 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
+from tofpose.stages.pose.constants import (
+    MEDIAN_CHI2_1DOF,
+    MEDIAN_CHI2_2DOF,
+    REFINE_LOS,
+    REFINE_ML,
+)
+
 #: a lateral sigma never below this, mm (a bearing sigma of 0 at any range)
 MIN_LATERAL_SIGMA_MM = 1e-6
 
@@ -144,14 +151,8 @@ def line_of_sight(x, e, R, t, w, tol, max_iterations):
 # Same names, arguments and returns as the kernels. ``fit`` and ``prior`` are read by field
 # name (duck typing: core.records.FitSettings, kernels.pose.RangeOffsetPrior).
 
-#: the refinement codes of ``fit_pose`` (the kernels' ``REFINE_*``)
-REFINE_NONE, REFINE_ML, REFINE_LOS = 0, 1, 2
 #: the line-of-sight iteration's cap in ``fit_pose``
 LOS_MAX_ITERATIONS = 200
-#: medians of chi^2 with 1 (a range residual) and 2 (a lateral pair) degrees of freedom,
-#: to five digits (scipy.stats.chi2(k).median(): 0.454936..., 2 ln 2 = 1.386294...)
-MEDIAN_CHI2_1DOF = 0.45494
-MEDIAN_CHI2_2DOF = 1.38629
 #: ``_excess_sigma``'s resolution: max_extra / 2^EXCESS_BITS
 EXCESS_BITS = 16
 

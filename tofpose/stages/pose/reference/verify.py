@@ -7,9 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.core.reference.camera import project
+from tofpose.stages.pose.constants import BEHIND_CAMERA, CONSISTENT, DARK_REFLECTOR
 
-#: outcomes of ``pose_check`` (the kernel's codes)
-CONSISTENT, BEHIND_CAMERA, DARK_REFLECTOR = 0, 1, 2
 #: a reflector is tested when its image is at least this many px across ...
 MIN_TESTED_PX = 2.5
 #: ... its disc lies this many diameters (+ ``EDGE_MARGIN_PX``) inside the image ...

@@ -9,9 +9,7 @@ import numpy as np
 
 from tofpose.core.compiled import jit
 from tofpose.core.kernels.camera import project
-
-#: outcome codes of ``search_windows``
-FOUND, NOT_FOUND, NO_SIZE, AT_EDGE = 0, 1, 2, 3
+from tofpose.stages.tracking.constants import AT_EDGE, FOUND, NO_SIZE, NOT_FOUND
 
 
 @jit

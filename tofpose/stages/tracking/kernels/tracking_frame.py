@@ -20,10 +20,16 @@ import numpy as np
 from tofpose.core.compiled import jit
 from tofpose.stages.persistence.kernels.measure import measure_and_back_project
 from tofpose.stages.pose.kernels.solve import solve_pairs
-from tofpose.stages.tracking.kernels.tracking import FOUND, any_shared, search_windows
-
-#: outcome codes of ``track_frame`` (anything but TRACKED: fall back to acquisition)
-TRACKED, LOST, SHARED, NOT_PERSISTENT, NO_RANGE, OUTLIER = 0, 1, 2, 3, 4, 5
+from tofpose.stages.tracking.constants import (
+    FOUND,
+    LOST,
+    NO_RANGE,
+    NOT_PERSISTENT,
+    OUTLIER,
+    SHARED,
+    TRACKED,
+)
+from tofpose.stages.tracking.kernels.tracking import any_shared, search_windows
 
 
 @jit

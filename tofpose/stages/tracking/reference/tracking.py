@@ -17,9 +17,8 @@ import numpy as np
 from scipy.spatial.distance import cdist
 
 from tofpose.core.reference.camera import project
+from tofpose.stages.tracking.constants import AT_EDGE, FOUND, NO_SIZE, NOT_FOUND
 
-#: outcome codes of ``search_windows``
-FOUND, NOT_FOUND, NO_SIZE, AT_EDGE = 0, 1, 2, 3
 #: predicted discs closer than this (px, rim to rim) merge into one blob: not tracked
 MIN_GAP_PX = 2.0
 

@@ -11,10 +11,16 @@ import numpy as np
 
 from tofpose.stages.persistence.reference.measure import measure_and_back_project
 from tofpose.stages.pose.reference.solve import solve_pairs
-from tofpose.stages.tracking.reference.tracking import FOUND, any_shared, search_windows
-
-#: outcome codes (anything but TRACKED: fall back to acquisition), the compiled ones
-TRACKED, LOST, SHARED, NOT_PERSISTENT, NO_RANGE, OUTLIER = 0, 1, 2, 3, 4, 5
+from tofpose.stages.tracking.constants import (
+    FOUND,
+    LOST,
+    NO_RANGE,
+    NOT_PERSISTENT,
+    OUTLIER,
+    SHARED,
+    TRACKED,
+)
+from tofpose.stages.tracking.reference.tracking import any_shared, search_windows
 
 
 def track_frame(

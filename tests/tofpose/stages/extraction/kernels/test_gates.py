@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
+from tofpose.stages.extraction.constants import WINDOW_PAD_PX
 from tofpose.stages.extraction.kernels.gates import (
-    WINDOW_PAD_PX,
     blob_brightness,
     blur_widening_px,
     psf_variance_px2,

@@ -9,7 +9,8 @@ from tests.conftest import facing_pose
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import paper_target
 from tofpose.core.geometry import RigidTransform
-from tofpose.stages.pose.kernels.verify import BEHIND_CAMERA, CONSISTENT, DARK_REFLECTOR, pose_check
+from tofpose.stages.pose.constants import BEHIND_CAMERA, CONSISTENT, DARK_REFLECTOR
+from tofpose.stages.pose.kernels.verify import pose_check
 
 
 def _check(T, gray, matched, dark_check=True):

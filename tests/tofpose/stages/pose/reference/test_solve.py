@@ -27,6 +27,7 @@ from tofpose.config import PipelineConfig
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import paper_target
 from tofpose.stages.extraction.reference import mixed_pixels
+from tofpose.stages.pose.constants import REFINE_ML
 from tofpose.stages.pose.kernels import solve as kernel
 from tofpose.stages.pose.kernels.pose import class_scale_covariance, range_bias_covariance
 from tofpose.stages.pose.kernels.solve import complete_pairs, solve_pairs
@@ -85,7 +86,7 @@ def _compare(args):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-9)
     np.testing.assert_array_equal(got[7], want[7])  # kept
     fit, prior = args[14], args[15]
-    ml = fit.refinement == reference_pose.REFINE_ML
+    ml = fit.refinement == REFINE_ML
     if got[16] != 0.0 or want[16] != 0.0:  # the offset was estimated: within 0.1 sigma
         assert abs(got[16] - want[16]) < 0.1 * got[17]
         assert got[17] == pytest.approx(want[17], rel=1e-3)

@@ -19,6 +19,7 @@ import pytest
 from tests.conftest import facing_pose, render
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import paper_target
+from tofpose.stages.tracking import constants as codes
 from tofpose.stages.tracking.kernels import tracking as kernel
 from tofpose.stages.tracking.reference import tracking as reference
 
@@ -115,7 +116,7 @@ def test_search_windows_equals_the_kernel_on_rendered_frames(distance_mm, distor
                 want[5], want[4], want[1]
             )
             statuses.update(want[0].tolist())
-    assert kernel.FOUND in statuses
+    assert codes.FOUND in statuses
 
 
 def test_search_windows_equals_the_kernel_on_random_speckle():
@@ -142,7 +143,7 @@ def test_search_windows_equals_the_kernel_on_random_speckle():
             got = reference.search_windows(gray, bounds, centres, diameters, threshold, 10.0)
             _assert_same_search(got, want)
             statuses.update(want[0].tolist())
-    assert statuses == {kernel.FOUND, kernel.NOT_FOUND, kernel.NO_SIZE, kernel.AT_EDGE}
+    assert statuses == {codes.FOUND, codes.NOT_FOUND, codes.NO_SIZE, codes.AT_EDGE}
 
 
 def test_the_window_components_as_runs_equal_the_kernel():
@@ -195,10 +196,10 @@ def test_a_drawn_disc_is_found_and_one_at_the_edge_is_reported():
         gray, bounds, centres, diameters, np.float32(700.0), 20.0
     )
     assert status.tolist() == [
-        reference.FOUND,
-        reference.AT_EDGE,
-        reference.NOT_FOUND,
-        reference.NO_SIZE,
+        codes.FOUND,
+        codes.AT_EDGE,
+        codes.NOT_FOUND,
+        codes.NO_SIZE,
     ]
     np.testing.assert_array_equal(flat[starts[0] : starts[1]], np.flatnonzero(disc))
     assert starts.tolist() == [0, disc.sum()] + [disc.sum()] * 3
