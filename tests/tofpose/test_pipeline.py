@@ -468,23 +468,21 @@ def test_markers_7_and_8_merged_into_one_blob_are_split_and_both_matched():
 
 
 @pytest.mark.parametrize("corrected", [False, True], ids=["plain", "range-corrected"])
-def test_the_compiled_measurement_is_persistence_then_the_reference_equations(corrected):
+def test_the_compiled_measurement_is_the_reference_statement(corrected):
     """``_measure`` (one compiled call: persistence, centroids, ranges, the range
-    correction, back-projection, sigmas, weights) against ``Persistence.measure`` (the
-    combination and Eqs. 19-20, tested against the reference on their own) followed by
-    the calibrated correction as ``RangeCorrection.error_mm`` defines it (the median over
-    the blob's pixels of the model on I-bar), the reference sigmas, Eq. 8 by the
-    reference camera and Eq. 21's weights, on a stream whose history builds up, with the
-    split halves of the merged markers 7 and 8 at 8 m."""
-    from math import isfinite
-
+    correction, back-projection, sigmas and weights, then the pipeline's records of
+    them) against the same method of a pipeline of the reference statement
+    (``stages.persistence.reference.measure``: the history's combination, Eqs. 19-20,
+    the correction as ``RangeCorrection.error_mm`` defines it, the reference sigmas,
+    Eq. 8 by OpenCV's camera and Eq. 21), each pipeline with its own history, on the
+    same blobs of a stream whose history builds up, with the split halves of the
+    merged markers 7 and 8 at 8 m: the same blobs kept, ranged and combined, centroids
+    to 1e-9 px, ranges, sigmas, points and weights to 1e-12 relative (float64 sums and
+    medians taken in another order), the mixing sums to 1e-12 relative or 1e-6."""
     from tofpose.calibration.range import RangeCorrection
-    from tofpose.core.reference import camera as ref_camera
     from tofpose.pipeline import _Timer
     from tofpose.sim.render import SensorModel
     from tofpose.stages.extraction.extraction import check_frame, frame_levels
-    from tofpose.stages.extraction.reference import sigmas as ref_sigmas
-    from tofpose.stages.extraction.uncertainty import SigmaFloors, kernel_constants
 
     cam, cat = CameraModel(), paper_target()
     correction = (
@@ -499,11 +497,9 @@ def test_the_compiled_measurement_is_persistence_then_the_reference_equations(co
         else None
     )
     compiled = PosePipeline(cam, cat, range_correction=correction)
-    staged = PosePipeline(cam, cat, range_correction=correction)
-    cfg = compiled.config
-    constants = kernel_constants(SigmaFloors(cfg.centroid_sigma_floor_px, cfg.range_sigma_floor_mm))
+    reference = PosePipeline(cam, cat, range_correction=correction, implementation="reference")
     sources = set()
-    with_sums = 0
+    with_sums = combined = 0
     poses = [facing_pose(8000.0, 2, -3, 10)] * 4 + [facing_pose(1500.0, 3, 2, -5)] * 3
     for k, T in enumerate(poses):
         f = render(T, seed=k)
@@ -514,51 +510,22 @@ def test_the_compiled_measurement_is_persistence_then_the_reference_equations(co
         sources |= {b.source for b in blobs}
         bg, dark = found.stats.background, found.stats.dark_level
         meas, unranged, n_kept, info = compiled._measure(blobs, g, d, bg, dark)
-        kept, mean_g, med_d, ref_info = staged._persistence.measure(blobs, g, d, cam, bg, dark)
-        ranged = [b for b in kept if isfinite(b.distance_mm)]
-        assert (n_kept, info) == (len(kept), ref_info)
-        assert unranged == [
-            (b.centroid_uv[0], b.centroid_uv[1], b.distance_mm)
-            for b in kept
-            if not isfinite(b.distance_mm)
-        ]
-        # the same blobs, in order
-        assert all(b.pixels is r.pixels for b, r in zip(meas.blobs, ranged, strict=True))
-        uv = np.array([b.centroid_uv for b in ranged]).reshape(-1, 2)
-        rho = np.array([b.distance_mm for b in ranged])
-        if corrected:
-            rho = np.array(
-                [
-                    r
-                    - np.median(
-                        correction.error_mm(
-                            np.full(len(b.pixels), r), mean_g.ravel()[b.pixels], b.pixels
-                        )
-                    )
-                    for b, r in zip(ranged, rho, strict=True)
-                ]
-            )
-        pixels = [b.pixels for b in ranged]
-        sp = np.array(
-            [
-                ref_sigmas.centroid_sigma_px(
-                    mean_g, b.pixels, b.centroid_uv, bg, b.source == "split", constants
-                )
-                for b in ranged
-            ]
-        )
-        sr = ref_sigmas.range_sigmas_mm(mean_g, med_d, pixels, bg, constants)
-        np.testing.assert_array_equal(meas.uv_px, uv)
-        np.testing.assert_allclose(meas.range_mm, rho, rtol=0, atol=1e-9)
-        np.testing.assert_array_equal(meas.area_px, [b.area_px for b in ranged])
-        np.testing.assert_allclose(meas.sigma_px, sp, rtol=1e-12)
-        np.testing.assert_allclose(meas.sigma_range_mm, sr, rtol=1e-6)
+        want, want_unranged, want_kept, want_info = reference._measure(blobs, g, d, bg, dark)
+        assert (n_kept, info) == (want_kept, want_info)
+        combined = max(combined, info.frames_used)
+        assert all(b is r for b, r in zip(meas.blobs, want.blobs, strict=True))
         np.testing.assert_allclose(
-            meas.y_mm, ref_camera.back_project(uv, rho, cam.K, cam.dist_array), rtol=0, atol=1e-8
+            np.reshape(unranged, (-1, 3)), np.reshape(want_unranged, (-1, 3)), rtol=0, atol=1e-9
         )
-        np.testing.assert_allclose(meas.weights, ref_sigmas.weights(rho, sr, sp, cam.fx), rtol=1e-5)
+        np.testing.assert_array_equal(meas.area_px, want.area_px)
+        np.testing.assert_allclose(meas.uv_px, want.uv_px, rtol=0, atol=1e-9)
+        for name in ("range_mm", "y_mm", "weights", "sigma_px", "sigma_range_mm"):
+            got_v, want_v = getattr(meas, name), getattr(want, name)
+            np.testing.assert_allclose(got_v, want_v, rtol=1e-12, atol=1e-12, err_msg=name)
+        np.testing.assert_allclose(meas.mixing, want.mixing, rtol=1e-12, atol=1e-6)
         with_sums += int(np.isfinite(meas.mixing).all(axis=1).sum())
     assert "split" in sources
+    assert combined == 4  # the four frames at 8 m combined
     assert with_sums > 0  # blobs whose surround has a range (the plate at 1.5 m) have sums
 
 
