@@ -29,6 +29,7 @@ import numpy as np
 
 from tofpose.config import MatchingConfig
 from tofpose.stages.matching.arithmetic import COMPILED, MatchingArithmetic
+from tofpose.stages.matching.records import TripletBest, TripletProblem, TripletRule
 
 
 @dataclass
@@ -270,36 +271,34 @@ def match_by_triplets(
     triplets = np.ascontiguousarray(observed_triplets, dtype=np.int64).reshape(-1, 3)
     cat_tri, cat_sides = arithmetic.catalog_triplets(catalog)
     centroid, cos_min = (np.zeros(3), -np.inf) if facing is None else facing
-    fixed = (observed, catalog, w, tol, float(alpha_mm))
-    rule = (
-        facing is not None,
-        np.ascontiguousarray(centroid, dtype=float),
-        float(cos_min),
-        int(min_matches),
-        confidence is not None,
-        0.0 if confidence is None else float(confidence),
+    problem = TripletProblem(
+        observed=observed,
+        catalog=catalog,
+        weights=w,
+        tol_mm=tol,
+        alpha_mm=float(alpha_mm),
+        cat_tri=cat_tri,
+        cat_sides=cat_sides,
     )
-    best, best_n, best_cost, tried = np.empty((0, 2), np.int64), 0, np.inf, 0
+    rule = TripletRule(
+        constrain=facing is not None,
+        centroid=np.ascontiguousarray(centroid, dtype=float),
+        cos_min=float(cos_min),
+        min_matches=int(min_matches),
+        use_confidence=confidence is not None,
+        confidence=0.0 if confidence is None else float(confidence),
+    )
+    best = TripletBest(pairs=np.empty((0, 2), np.int64), n_inliers=0, cost=np.inf, tried=0)
     step = max(len(triplets) if deadline_s is None else DEADLINE_CHUNK, 1)
     for s in range(0, len(triplets), step):
         if deadline_s is not None and time.perf_counter() > deadline_s:
             break
-        best, best_n, best_cost, tried, done = arithmetic.triplet_search(
-            *fixed,
-            triplets[s : s + step],
-            cat_tri,
-            cat_sides,
-            *rule,
-            best,
-            best_n,
-            best_cost,
-            tried,
-        )
+        best, done = arithmetic.triplet_search(problem, triplets[s : s + step], rule, best)
         if done:
             break
     if stats is not None:
-        stats["triplets"] = tried
-    return best
+        stats["triplets"] = best.tried
+    return best.pairs
 
 
 #: observed triplets tried between two looks at the clock (a few microseconds of work)

@@ -12,6 +12,7 @@ import numpy as np
 
 from tofpose.core.compiled import jit
 from tofpose.stages.matching.kernels.assignment import linear_sum_assignment
+from tofpose.stages.matching.records import TripletBest
 from tofpose.stages.pose.kernels.pose import absolute_orientation, facing_cosine
 
 
@@ -84,42 +85,27 @@ def catalog_triplets(catalog):
 
 
 @jit
-def triplet_search(
-    observed,
-    catalog,
-    w,
-    tol,
-    alpha,
-    obs_triplets,
-    cat_tri,
-    cat_sides,
-    constrain,
-    centroid,
-    cos_min,
-    min_matches,
-    use_confidence,
-    confidence,
-    best,
-    best_n,
-    best_cost,
-    tried,
-):
+def triplet_search(problem, obs_triplets, rule, best):
     """Try the observed triplets ``obs_triplets`` (T, 3) in order, continuing a search
-    whose best hypothesis so far is ``best`` (k, 2) (observed, catalog) pairs with
-    ``best_n`` inliers and weighted squared residual ``best_cost``, after ``tried``
-    triplets.
+    whose state is ``best`` (a ``records.TripletBest``: the best hypothesis so far as
+    (observed, catalog) pairs, its inliers and weighted squared residual, the triplets
+    tried).
 
-    observed (n, 3), catalog (e, 3) mm; w (n,) weights; tol (n,) inlier tolerances mm;
-    alpha : side-length tolerance mm; cat_tri, cat_sides : ``catalog_triplets``;
-    constrain : keep only poses with ``facing_cosine(R, t, centroid) >= cos_min``;
-    use_confidence : stop once ``tried`` reaches ``trials_needed`` for the best inlier
-    count (``confidence``).
+    problem : a ``records.TripletProblem`` (the observed and catalog points, weights,
+    inlier tolerances, side tolerance, ``catalog_triplets``); rule : a
+    ``records.TripletRule`` (the facing constraint, ``min_matches``, the confidence
+    rule: stop once the triplets tried reach ``trials_needed`` for the best inlier
+    count).
 
-    A hypothesis: the rigid pose of the triplet's three pairs (``absolute_orientation``); each
-    observed point is assigned one-to-one to the predicted reflectors (least total
+    A hypothesis: the rigid pose of the triplet's three pairs (``absolute_orientation``);
+    each observed point is assigned one-to-one to the predicted reflectors (least total
     distance), and the pairs within their tolerance are its inliers. The best has the
-    most inliers (at least ``min_matches``), then the smallest sum of w d^2. Returns
-    best, best_n, best_cost, tried and whether the confidence rule ended the search."""
+    most inliers (at least ``min_matches``), then the smallest sum of w d^2. Returns the
+    search's state after these triplets (a ``TripletBest``) and whether the confidence
+    rule ended the search."""
+    observed, catalog, w, tol = problem.observed, problem.catalog, problem.weights, problem.tol_mm
+    cat_tri, cat_sides, alpha = problem.cat_tri, problem.cat_sides, problem.alpha_mm
+    pairs, best_n, best_cost, tried = best.pairs, best.n_inliers, best.cost, best.tried
     n_obs, e = observed.shape[0], catalog.shape[0]
     pred = np.empty((e, 3))
     dist = np.empty((n_obs, e))
@@ -128,8 +114,8 @@ def triplet_search(
     w3 = np.empty(3)
     terms = np.empty(min(n_obs, e))
     for q in range(obs_triplets.shape[0]):
-        if use_confidence and tried >= trials_needed(best_n, n_obs, confidence):
-            return best, best_n, best_cost, tried, True
+        if rule.use_confidence and tried >= trials_needed(best_n, n_obs, rule.confidence):
+            return TripletBest(pairs=pairs, n_inliers=best_n, cost=best_cost, tried=tried), True
         tried += 1
         a, b, c = obs_triplets[q, 0], obs_triplets[q, 1], obs_triplets[q, 2]
         o0 = _distance(observed[a], observed[b])
@@ -147,7 +133,7 @@ def triplet_search(
                 y3[r] = observed[obs_triplets[q, r]]
                 w3[r] = w[obs_triplets[q, r]]
             R, t = absolute_orientation(x3, y3, w3)
-            if constrain and not facing_cosine(R, t, centroid) >= cos_min:
+            if rule.constrain and not facing_cosine(R, t, rule.centroid) >= rule.cos_min:
                 continue
             for i in range(e):
                 for r in range(3):
@@ -168,12 +154,12 @@ def triplet_search(
                     terms[n] = d * d * w[rows[z]]
                     n += 1
             cost = _numpy_sum(terms, n)
-            if n >= min_matches and (n > best_n or (n == best_n and cost < best_cost)):
-                best = np.empty((n, 2), np.int64)
+            if n >= rule.min_matches and (n > best_n or (n == best_n and cost < best_cost)):
+                pairs = np.empty((n, 2), np.int64)
                 m = 0
                 for z in range(rows.shape[0]):
                     if dist[rows[z], cols[z]] <= tol[rows[z]]:
-                        best[m, 0], best[m, 1] = rows[z], cols[z]
+                        pairs[m, 0], pairs[m, 1] = rows[z], cols[z]
                         m += 1
                 best_n, best_cost = n, cost
-    return best, best_n, best_cost, tried, False
+    return TripletBest(pairs=pairs, n_inliers=best_n, cost=best_cost, tried=tried), False

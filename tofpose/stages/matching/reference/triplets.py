@@ -19,6 +19,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial.distance import cdist
 
+from tofpose.stages.matching.records import TripletBest
 from tofpose.stages.pose.reference.pose import absolute_orientation, facing_cosine
 
 
@@ -63,52 +64,42 @@ def hypothesis_inliers(observed, catalog, R, t, w, tol):
     return pairs, float(np.sum(d[ok] * d[ok] * w[rows[ok]]))
 
 
-def triplet_search(
-    observed,
-    catalog,
-    w,
-    tol,
-    alpha,
-    obs_triplets,
-    cat_tri,
-    cat_sides,
-    constrain,
-    centroid,
-    cos_min,
-    min_matches,
-    use_confidence,
-    confidence,
-    best,
-    best_n,
-    best_cost,
-    tried,
-):
+def triplet_search(problem, obs_triplets, rule, best):
     """Try the observed triplets ``obs_triplets`` (T, 3) in order, continuing a search
-    whose best so far is ``best`` (k, 2) with ``best_n`` inliers and cost ``best_cost``
-    after ``tried`` triplets. w (n,) weights; tol (n,) inlier tolerances mm; alpha the
-    side tolerance mm; cat_tri, cat_sides from ``catalog_triplets``.
+    whose state is ``best`` (a ``records.TripletBest``: pairs (k, 2), n_inliers, cost,
+    tried). problem : a ``records.TripletProblem`` (observed, catalog, weights w (n,),
+    inlier tolerances tol_mm (n,), the side tolerance alpha_mm, cat_tri and cat_sides
+    from ``catalog_triplets``); rule : a ``records.TripletRule``.
 
-    Before each observed triplet: with ``use_confidence``, stop once ``tried`` reaches
-    ``trials_needed(best_n, n, confidence)``. For each ordered catalog triplet whose three
-    sides are each within ``alpha`` of the observed triplet's: the pose of its three
-    pairs (``absolute_orientation``, weights w), dropped with ``constrain`` unless
-    ``stages.pose.reference.pose.facing_cosine`` (the target's normal against the direction to the
-    camera) is at least ``cos_min``; its ``hypothesis_inliers``. The best hypothesis has
-    the most inliers (at least ``min_matches``), then the smallest cost. Returns best,
-    best_n, best_cost, tried and whether the confidence rule ended the search."""
-    observed, catalog = np.asarray(observed, float), np.asarray(catalog, float)
-    w, tol = np.asarray(w, float), np.asarray(tol, float)
+    Before each observed triplet: with ``rule.use_confidence``, stop once ``tried``
+    reaches ``trials_needed(n_inliers, n, rule.confidence)``. For each ordered catalog
+    triplet whose three sides are each within ``alpha_mm`` of the observed triplet's:
+    the pose of its three pairs (``absolute_orientation``, weights w), dropped with
+    ``rule.constrain`` unless ``stages.pose.reference.pose.facing_cosine`` (the target's
+    normal against the direction to the camera) at ``rule.centroid`` is at least
+    ``rule.cos_min``; its ``hypothesis_inliers``. The best hypothesis has the most
+    inliers (at least ``rule.min_matches``), then the smallest cost. Returns the search's
+    state after these triplets (a ``TripletBest``) and whether the confidence rule ended
+    the search."""
+    observed, catalog = np.asarray(problem.observed, float), np.asarray(problem.catalog, float)
+    w, tol = np.asarray(problem.weights, float), np.asarray(problem.tol_mm, float)
+    pairs, n_inliers, cost, tried = best
     for a, b, c in np.asarray(obs_triplets, np.int64).reshape(-1, 3):
-        if use_confidence and tried >= trials_needed(best_n, len(observed), confidence):
-            return best, best_n, best_cost, tried, True
+        if rule.use_confidence and tried >= trials_needed(
+            n_inliers, len(observed), rule.confidence
+        ):
+            return TripletBest(pairs=pairs, n_inliers=n_inliers, cost=cost, tried=tried), True
         tried += 1
         sides = triangle_sides(observed, a, b, c)
-        for p in np.flatnonzero(np.all(np.abs(cat_sides - sides) <= alpha, axis=1)):
-            R, t = absolute_orientation(catalog[cat_tri[p]], observed[[a, b, c]], w[[a, b, c]])
-            if constrain and not facing_cosine(R, t, centroid) >= cos_min:
+        near = np.all(np.abs(problem.cat_sides - sides) <= problem.alpha_mm, axis=1)
+        for p in np.flatnonzero(near):
+            R, t = absolute_orientation(
+                catalog[problem.cat_tri[p]], observed[[a, b, c]], w[[a, b, c]]
+            )
+            if rule.constrain and not facing_cosine(R, t, rule.centroid) >= rule.cos_min:
                 continue
-            pairs, cost = hypothesis_inliers(observed, catalog, R, t, w, tol)
-            n = len(pairs)
-            if n >= min_matches and (n > best_n or (n == best_n and cost < best_cost)):
-                best, best_n, best_cost = pairs, n, cost
-    return best, best_n, best_cost, tried, False
+            found, found_cost = hypothesis_inliers(observed, catalog, R, t, w, tol)
+            n = len(found)
+            if n >= rule.min_matches and (n > n_inliers or (n == n_inliers and found_cost < cost)):
+                pairs, n_inliers, cost = found, n, found_cost
+    return TripletBest(pairs=pairs, n_inliers=n_inliers, cost=cost, tried=tried), False

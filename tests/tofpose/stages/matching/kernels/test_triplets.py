@@ -13,6 +13,7 @@ from tofpose.core.catalog import paper_target
 from tofpose.core.geometry import rotation_from_euler_deg
 from tofpose.stages.matching.kernels.triplets import catalog_triplets
 from tofpose.stages.matching.matching import match_by_triplets
+from tofpose.stages.matching.records import TripletBest, TripletProblem, TripletRule
 from tofpose.stages.matching.reference import triplets as reference
 
 
@@ -25,27 +26,26 @@ def _reference(observed, catalog, alpha, tol, centroid, cos_min, w, max_observed
         list(combinations(range(min(len(observed), max_observed)), 3)), np.int64
     ).reshape(-1, 3)
     cat_tri, cat_sides = reference.catalog_triplets(catalog)
-    best, *_ = reference.triplet_search(
-        observed,
-        catalog,
-        w,
-        tol,
-        alpha,
-        triplets,
-        cat_tri,
-        cat_sides,
-        True,
-        centroid,
-        cos_min,
-        3,
-        False,
-        0.0,
-        np.empty((0, 2), np.int64),
-        0,
-        np.inf,
-        0,
+    problem = TripletProblem(
+        observed=observed,
+        catalog=catalog,
+        weights=w,
+        tol_mm=tol,
+        alpha_mm=alpha,
+        cat_tri=cat_tri,
+        cat_sides=cat_sides,
     )
-    return best
+    rule = TripletRule(
+        constrain=True,
+        centroid=centroid,
+        cos_min=cos_min,
+        min_matches=3,
+        use_confidence=False,
+        confidence=0.0,
+    )
+    start = TripletBest(pairs=np.empty((0, 2), np.int64), n_inliers=0, cost=np.inf, tried=0)
+    best, _ = reference.triplet_search(problem, triplets, rule, start)
+    return best.pairs
 
 
 def test_catalog_triplets_in_permutation_order_with_their_sides():

@@ -20,6 +20,7 @@ import pytest
 from tofpose.core.catalog import paper_target
 from tofpose.core.geometry import rotation_from_euler_deg
 from tofpose.stages.matching.kernels import triplets as kernel
+from tofpose.stages.matching.records import TripletBest, TripletProblem, TripletRule
 from tofpose.stages.matching.reference import triplets as reference
 
 CATALOG = paper_target().positions_mm
@@ -44,11 +45,11 @@ def _scene(rng, n_spurious_max=5, noise_mm=2.0):
 def _search(module, observed, triplets, cos_min=None, confidence=None, w=None, start=None):
     """``module.triplet_search`` over ``triplets`` as ``match_by_triplets`` calls it
     (alpha 12 mm, tolerance 15 mm, at least 3 inliers), from ``start`` (best, best_n,
-    best_cost, tried) or from nothing."""
+    best_cost, tried) or from nothing: (best, best_n, best_cost, tried, done)."""
     n = len(observed)
     w = np.ones(n) if w is None else w
     tri, sides = module.catalog_triplets(CATALOG)
-    rule = (
+    rule = (  # TripletRule's fields, in order
         cos_min is not None,
         CENTROID,
         -np.inf if cos_min is None else float(cos_min),
@@ -57,18 +58,18 @@ def _search(module, observed, triplets, cos_min=None, confidence=None, w=None, s
         0.0 if confidence is None else float(confidence),
     )
     start = (np.empty((0, 2), np.int64), 0, np.inf, 0) if start is None else start
-    return module.triplet_search(
-        observed,
-        CATALOG,
-        w,
-        np.full(n, 15.0),
-        12.0,
-        np.ascontiguousarray(triplets, np.int64),
-        tri,
-        sides,
-        *rule,
-        *start,
+    problem = TripletProblem(
+        observed=observed,
+        catalog=CATALOG,
+        weights=w,
+        tol_mm=np.full(n, 15.0),
+        alpha_mm=12.0,
+        cat_tri=tri,
+        cat_sides=sides,
     )
+    triplets = np.ascontiguousarray(triplets, np.int64)
+    best, done = module.triplet_search(problem, triplets, TripletRule(*rule), TripletBest(*start))
+    return (*best, done)
 
 
 def _assert_same(got, want):
