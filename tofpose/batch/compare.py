@@ -15,6 +15,7 @@ import csv
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -98,7 +99,8 @@ def compare_runs(run_a: str, run_b: str, out_dir: str | Path) -> dict:
         pairs = {k: (a_runs[k], b_runs[k]) for k in common}
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    summary = {"run_a": str(run_a), "run_b": str(run_b), "recordings": {}}
+    recordings: dict[str, dict[str, Any]] = {}
+    summary: dict[str, Any] = {"run_a": str(run_a), "run_b": str(run_b), "recordings": recordings}
     per_frame = []
     curves = {}
     for name, (pa, pb) in pairs.items():
@@ -119,7 +121,7 @@ def compare_runs(run_a: str, run_b: str, out_dir: str | Path) -> dict:
         for k in ("pitch_deg", "yaw_deg", "roll_deg"):
             shift[k] = (shift[k] + 180.0) % 360.0 - 180.0
         pos = np.sqrt(shift["x_mm"] ** 2 + shift["y_mm"] ** 2 + shift["z_mm"] ** 2)
-        summary["recordings"][name] = {
+        recordings[name] = {
             "frames": int(len(a["frame"])),
             "ok_a": int(a["ok"].sum()),
             "ok_b": int(b["ok"].sum()),

@@ -35,6 +35,7 @@ import uuid
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm
@@ -270,18 +271,19 @@ def reprocess(
     bar.close()
     wall_s = time.perf_counter() - t0
     work_s = time.perf_counter() - t_connected
-    summary = {
+    summary_recordings: list[dict[str, Any]] = []
+    summary: dict[str, Any] = {
         "format": "tofpose-reprocess",
         "finished": _now(),
         "settings": asdict(settings),
         "filter": filter_state,
         "chunk_frames": chunk_frames,
-        "recordings": [],
+        "recordings": summary_recordings,
     }
     for path, cs in chunks.items():
         csv_path = out / f"{Path(path).stem}.csv"
         n_ok = _concatenate(cs, out, csv_path, filter_state)
-        summary["recordings"].append(
+        summary_recordings.append(
             {
                 "path": str(path),
                 "csv": csv_path.name,

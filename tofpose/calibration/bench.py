@@ -134,12 +134,11 @@ def calibrate_bench(
     starts = [("nominal", nominal_inner_camera, nominal_lab_target)]
     if (cv := _opencv_start(obs)) is not None:
         starts.append(("opencv", *cv))
-    best = None
-    for label, X0, Y0 in starts:
-        fit = least_squares(_residuals, np.zeros(12), args=(X0, Y0, obs), method="lm")
-        if best is None or fit.cost < best[0].cost:
-            best = (fit, label, X0, Y0)
-    fit, label, X0, Y0 = best
+    fits = [
+        (least_squares(_residuals, np.zeros(12), args=(X0, Y0, obs), method="lm"), label, X0, Y0)
+        for label, X0, Y0 in starts
+    ]
+    fit, label, X0, Y0 = min(fits, key=lambda f: f[0].cost)  # the first of equal costs
     X, Y = _perturb(X0, fit.x[:6]), _perturb(Y0, fit.x[6:])
     dof = max(fit.fun.size - 12, 1)
     chi2 = float(fit.fun @ fit.fun) / dof

@@ -189,7 +189,7 @@ def fit_range_correction(
     only where it is determined to ``max_offset_se_mm`` (standard error) from at least
     ``min_samples_per_pixel`` samples; elsewhere it stays 0."""
     d_list, a_list, t_list, i_list = [], [], [], []
-    shape = None
+    shape: tuple[int, ...] | None = None
     n_frames = 0
     for meas, gray, true in samples:
         shape = meas.shape
@@ -200,7 +200,7 @@ def fit_range_correction(
         t_list.append(true.ravel()[idx])
         i_list.append(idx)
         n_frames += 1
-    if not n_frames or not sum(len(x) for x in d_list):
+    if shape is None or not sum(len(x) for x in d_list):  # shape is None: no frame
         raise ValueError("no pixel with a known true distance and enough amplitude to fit")
     d, a, t, pix = (np.concatenate(x) for x in (d_list, a_list, t_list, i_list))
     err = d - t
@@ -216,8 +216,8 @@ def fit_range_correction(
     for _ in range(4):
         coef = solve(err - offsets[pix])
         resid = err - X @ coef
-        per_pix = np.zeros(len(offsets))
-        wsum = np.ones(len(offsets))
+        per_pix: np.ndarray = np.zeros(len(offsets))
+        wsum: np.ndarray = np.ones(len(offsets))
         if per_pixel:
             wk = np.where(keep, a, 0.0)
             wsum = np.bincount(pix, weights=wk, minlength=len(offsets))

@@ -141,6 +141,9 @@ class CameraModel:
         missing = [k for k in required if k not in d]
         if missing:
             raise ValueError(f"camera description is missing {', '.join(missing)}")
+        dist = tuple(float(x) for x in d.get("dist", (0, 0, 0, 0, 0)))
+        if len(dist) != 5:  # as __post_init__ checks it (and with its message)
+            raise ValueError(f"dist must have 5 coefficients (k1,k2,p1,p2,k3), got {dist}")
         return CameraModel(
             width=int(d["width"]),
             height=int(d["height"]),
@@ -148,7 +151,7 @@ class CameraModel:
             fy=float(d["fy"]),
             cx=float(d["cx"]),
             cy=float(d["cy"]),
-            dist=tuple(float(x) for x in d.get("dist", (0, 0, 0, 0, 0))),
+            dist=dist,
             name=str(d.get("name", "")),
         )
 

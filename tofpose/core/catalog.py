@@ -105,6 +105,8 @@ class Catalog:
                     "'position_mm' [x, y, z] and 'diameter_mm'"
                 ) from exc
         plate = tuple(float(v) for v in d.get("plate_size_mm", (990.0, 550.0)))
+        if len(plate) != 2:
+            raise ValueError(f"plate_size_mm must be [width, height], got {list(plate)}")
         return Catalog(str(d.get("name", "unnamed")), tuple(reflectors), plate)
 
     @staticmethod

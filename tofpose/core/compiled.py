@@ -99,7 +99,8 @@ def prune_stale_kernel_caches(min_age_s: float = 86400.0) -> list[Path]:
     return removed
 
 
-numba.config.CACHE_DIR = str(kernel_cache_dir())
+# numba.config sets its settings at import, from the environment: no stub declares them
+numba.config.CACHE_DIR = str(kernel_cache_dir())  # type: ignore[attr-defined]
 
 #: the decorator of every kernel: compiled once, cached on disk, releases the GIL (the
 #: server's acquisition thread and its HTTP threads then do not wait on each other)

@@ -25,9 +25,10 @@ profile's peaks can follow it exactly:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from abc import ABC, abstractmethod
+from dataclasses import Field, dataclass, replace
 from functools import cached_property
-from typing import ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple, Self
 
 import numpy as np
 
@@ -54,9 +55,12 @@ def _scalar_or_array(value: np.ndarray, like) -> float | np.ndarray:
     return float(value) if np.ndim(like) == 0 else value
 
 
-class _Profile:
-    """What both kinds share: the end position, a restart, and the limit check."""
+class _Profile(ABC):
+    """What both kinds share: the end position, a restart, and the limit check. Each
+    kind is a frozen dataclass that defines the abstract members below."""
 
+    __dataclass_fields__: ClassVar[dict[str, Field[Any]]]
+    """Set by ``@dataclass`` on each kind (lets ``started_at`` use ``replace``)."""
     kind: ClassVar[str]
     start_deg: float
     limit_fields: ClassVar[tuple[str, str, str]]
@@ -66,10 +70,39 @@ class _Profile:
     """How the peak rate and acceleration follow from those fields, for messages."""
 
     @property
+    @abstractmethod
+    def duration_s(self) -> float:
+        """Seconds from the start to the end at rest."""
+
+    @property
+    @abstractmethod
+    def angle_range_deg(self) -> tuple[float, float]:
+        """The lowest and highest angle swept, deg."""
+
+    @property
+    @abstractmethod
+    def peak_rate_deg_s(self) -> float:
+        """The largest |rate|, deg/s."""
+
+    @property
+    @abstractmethod
+    def peak_accel_deg_s2(self) -> float:
+        """The largest |acceleration|, deg/s^2."""
+
+    @property
+    @abstractmethod
+    def _travel_words(self) -> str:
+        """What sets the sweep, for the soft-limit message."""
+
+    @abstractmethod
+    def angle_deg_at(self, t_s: Any) -> float | np.ndarray:
+        """Angle, deg, at ``t_s`` seconds from the start (scalar or array)."""
+
+    @property
     def end_deg(self) -> float:
         return float(self.angle_deg_at(self.duration_s))
 
-    def started_at(self, start_deg: float):
+    def started_at(self, start_deg: float) -> Self:
         """The same profile run from ``start_deg``."""
         return replace(self, start_deg=float(start_deg))
 
@@ -85,7 +118,7 @@ class _Profile:
         soft limits, rate limit, acceleration limit (empty when it can run)."""
         lo, hi = self.angle_range_deg
         travel_field, rate_field, accel_field = self.limit_fields
-        out = []
+        out: list[LimitProblem] = []
         if lo < min_deg or hi > max_deg:
             out.append(
                 LimitProblem(

@@ -283,13 +283,16 @@ class RelativeStateFilter:
         Qc = np.zeros((n, n))
         Qc[6:9, 6:9] = cfg.angular_accel_psd * np.eye(3)
         Qc[9:12, 9:12] = _linear_density(cfg, t_c)
-        if n == 18:  # dw/dt = a, dv/dt = w x v + a x t + b, da/dt, db/dt white
+        # 18 states (n_states: a jerk density set): dw/dt = a, dv/dt = w x v + a x t + b,
+        # da/dt, db/dt white
+        jerk_psd = cfg.angular_jerk_psd
+        if jerk_psd is not None:
             A[6:9, 12:15] = np.eye(3)
             A[9:12, 12:15] = -_skew(t_c)
             A[9:12, 3:6] = _skew(a)
             A[9:12, 15:18] = np.eye(3)
-            Qc[12:15, 12:15] = cfg.angular_jerk_psd * np.eye(3)
-            Qc[15:18, 15:18] = _lever_arm(cfg.angular_jerk_psd * cfg.centre_fraction**2, t_c)
+            Qc[12:15, 12:15] = jerk_psd * np.eye(3)
+            Qc[15:18, 15:18] = _lever_arm(jerk_psd * cfg.centre_fraction**2, t_c)
         # Van Loan: expm([[-A, Qc], [0, A^T]] dt) = [[., F^-1 Q], [0, F^T]]
         M = np.zeros((2 * n, 2 * n))
         M[:n, :n], M[:n, n:], M[n:, n:] = -A * dt, Qc * dt, A.T * dt
@@ -346,6 +349,8 @@ class RelativeStateFilter:
         self._rejected = []
 
     def _advance(self, time_s: float) -> None:
+        if self._time_s is None:
+            raise RuntimeError("the filter has no state yet: it starts with a pose")
         dt = float(time_s) - self._time_s
         if dt < 0:
             raise ValueError(
@@ -435,7 +440,7 @@ class RelativeStateFilter:
         has one, else the state predicted to its time (``predict``); None before the
         first pose. A frame older than the filter's state (a replayed recording that
         started over, a clock reset) restarts it from that frame's pose."""
-        if self.initialised and time_s < self._time_s:
+        if self._time_s is not None and time_s < self._time_s:
             self.reset()
         if R is not None and t_mm is not None and covariance is not None:
             return self.update(time_s, R, t_mm, covariance)
@@ -452,7 +457,7 @@ class RelativeStateFilter:
     def state_at(self, time_s: float) -> RelativeState:
         """The state predicted to ``time_s`` (>= the last step's time), the filter left as
         it is: the controller's time, ahead of the frame's by the latency."""
-        if not self.initialised:
+        if self._time_s is None:
             raise RuntimeError("the filter has no state yet: it starts with a pose")
         dt = float(time_s) - self._time_s
         if dt < 0:

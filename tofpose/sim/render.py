@@ -210,11 +210,12 @@ def _with_systematic_errors(
     im: np.ndarray,
     amp: np.ndarray,
     sensor: SensorModel,
+    e: SystematicErrors,
     time_s: float,
 ) -> np.ndarray:
-    """Distances (H, W) as an uncalibrated camera reads them: lens scatter mixes the
-    phasors, then cyclic, amplitude-related, per-pixel, drift and zero-offset errors add."""
-    e = sensor.systematic
+    """Distances (H, W) as an uncalibrated camera reads them (``sensor.systematic`` =
+    ``e``): lens scatter mixes the phasors, then cyclic, amplitude-related, per-pixel,
+    drift and zero-offset errors add."""
     if e.scatter_fraction:
         re_s, im_s = e.scatter(re, im)
         phase = np.mod(np.arctan2(im_s, re_s), 2 * np.pi) * sensor.mm_per_radian
@@ -384,8 +385,11 @@ def render_frame(
     -------
     RenderedFrame
     """
-    if sensor.noise and rng is None:
-        raise ValueError("a seeded numpy Generator is required when sensor.noise is True")
+    noise_rng = None  # rng when the sensor adds noise
+    if sensor.noise:
+        if rng is None:
+            raise ValueError("a seeded numpy Generator is required when sensor.noise is True")
+        noise_rng = rng
     h, w = camera.height, camera.width
     t_int = sensor.exposure_for(float(np.linalg.norm(T_camera_target.t_mm)))
     static = _phasor_images(camera, scene, T_camera_target, sensor, t_int)
@@ -420,12 +424,12 @@ def render_frame(
     dist = true_distance.copy()
     sys_err = sensor.systematic
     if sys_err is not None:
-        dist = _with_systematic_errors(dist, re_img, im_img, amp, sensor, time_s)
+        dist = _with_systematic_errors(dist, re_img, im_img, amp, sensor, sys_err, time_s)
     gray = amp + sensor.ambient_gray_fraction * b_img
-    if sensor.noise:
+    if noise_rng is not None:
         sigma = sensor.distance_sigma_mm(amp, b_img)
-        dist = dist + sigma * rng.standard_normal((h, w))
-        gray = gray + np.sqrt(amp + b_img) * rng.standard_normal((h, w))
+        dist = dist + sigma * noise_rng.standard_normal((h, w))
+        gray = gray + np.sqrt(amp + b_img) * noise_rng.standard_normal((h, w))
     dist = np.mod(dist, sensor.unambiguous_range_mm)
     saturated = (amp + b_img) >= FULL_SCALE_COUNTS
     invalid = saturated | (amp < sensor.min_amplitude_counts)

@@ -120,13 +120,18 @@ def measure_frame(spec: StudySpec, cell: Cell, frame: int, camera: CameraModel) 
     }
     est = ("est_x_mm", "est_y_mm", "est_z_mm", "est_qw", "est_qx", "est_qy", "est_qz")
     if r.ok:
-        e = pose_error(r.R, r.t_mm, T.R, T.t_mm)
-        sd = np.sqrt(np.clip(np.diag(r.covariance), 0.0, None))
+        R, t_mm, q, cov = r.R, r.t_mm, r.quaternion_wxyz, r.covariance
+        if R is None or t_mm is None or q is None or cov is None:
+            raise ValueError(
+                "a result marked ok lacks its pose (R, t_mm, quaternion_wxyz) or covariance"
+            )
+        e = pose_error(R, t_mm, T.R, T.t_mm)
+        sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         scale = np.array([180.0 / math.pi] * 3 + [1.0] * 3)
-        row.update(zip(est, [*r.t_mm.tolist(), *r.quaternion_wxyz.tolist()], strict=True))
+        row.update(zip(est, [*t_mm.tolist(), *q.tolist()], strict=True))
         row.update(zip(ERROR_COLUMNS, (e * scale).tolist(), strict=True))
         row.update(zip(SIGMA_COLUMNS, (sd * scale).tolist(), strict=True))
-        row["d2"] = mahalanobis2(e, r.covariance)
+        row["d2"] = mahalanobis2(e, cov)
         row["attitude_error_deg"] = math.degrees(float(np.linalg.norm(e[:3])))
         row["position_error_mm"] = float(np.linalg.norm(e[3:]))
     else:

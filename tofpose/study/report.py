@@ -154,7 +154,7 @@ def table_rows(summary: dict) -> list[tuple[str, ...]]:
     def f(x, digits=1):
         return "-" if x is None else f"{x:.{digits}f}"
 
-    out = []
+    out: list[tuple[str, ...]] = []
     for c in summary["cells"]:
         a, p = c["attitude_error_deg"], c["position_error_mm"]
         fails = c["failures"]

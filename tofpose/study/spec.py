@@ -270,8 +270,8 @@ class StudySpec:
             raise StudySpecError("grid", "must be an object of axes (" + ", ".join(GRID_AXES) + ")")
         unknown = sorted(set(grid_doc) - set(GRID_AXES))
         if unknown:
-            known = ", ".join(GRID_AXES)
-            raise StudySpecError(f"grid.{unknown[0]}", f"unknown axis (known: {known})")
+            axes = ", ".join(GRID_AXES)
+            raise StudySpecError(f"grid.{unknown[0]}", f"unknown axis (known: {axes})")
         grid = {a: tuple(_axis(a, grid_doc.get(a, _DEFAULT_GRID[a]))) for a in GRID_AXES}
         if limits is not None:
             limits.check([len(grid[a]) for a in GRID_AXES], frames)

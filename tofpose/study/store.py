@@ -56,11 +56,12 @@ def present_chunks(store_dir: str | Path) -> set[tuple[int, int, int]]:
     frames = Path(store_dir) / "frames"
     if not frames.is_dir():
         return set()
-    out = set()
+    out: set[tuple[int, int, int]] = set()
     for p in frames.iterdir():
         m = _CHUNK.match(p.name)
         if m:
-            out.add(tuple(int(g) for g in m.groups()))
+            cell, start, stop = (int(g) for g in m.groups())
+            out.add((cell, start, stop))
     return out
 
 

@@ -25,7 +25,7 @@ from tofpose.study.spec import StudySpec
 PERCENTILES = (50, 95, 99)
 
 
-def _num(x: float) -> float | None:
+def _num(x: float | np.floating) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 

@@ -18,20 +18,20 @@ from tofpose.core.geometry import RigidTransform
 from tofpose.core.tof import unambiguous_range_mm
 from tofpose.io.camera_file import load_camera, pipeline_for, read_text_file
 from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
-from tofpose.io.recording import open_recording
+from tofpose.io.recording import Recording, open_recording
 from tofpose.lab.relative_state import RelativeStateConfig, RelativeStateFilter
 from tofpose.pipeline import PosePipeline
 from tofpose.sim.pixel_truth import true_pixel_distances
 
 
-def _reference(rec, reference: str, rec_path: str) -> tuple[np.ndarray, np.ndarray]:
+def _reference(rec: Recording, reference: str, rec_path: str) -> tuple[np.ndarray, np.ndarray]:
     """The recording's reference poses (``/truth`` or ``/lab_truth``): R (N, 3, 3), t (N, 3)."""
     R_all, t_all = (
         (rec.truth_R, rec.truth_t_mm)
         if reference == "truth"
         else (rec.lab_truth_R, rec.lab_truth_t_mm)
     )
-    if R_all is None:
+    if R_all is None or t_all is None:  # a recording holds both or neither
         raise SystemExit(f"tofpose: {rec_path} has no /{reference}: nothing to calibrate against")
     return R_all, t_all
 
@@ -67,6 +67,8 @@ def calibrate_covariance(
             gray, dist, t = rec.frame(i)
             r = pipe.process(gray, dist, t)
             if r.ok and r.covariance is not None:
+                if r.R is None or r.t_mm is None:
+                    raise RuntimeError(f"frame {i}: a result marked ok has no pose (R, t_mm)")
                 ranges.append(float(np.linalg.norm(t_all[i])))
                 nees.append(pose_nees(r.R, r.t_mm, r.covariance, R_all[i], t_all[i]))
     fit = fit_covariance_scale(ranges, nees, knots_mm or auto_knots(ranges))
@@ -117,13 +119,16 @@ def calibrate_range(
         doc = {**rec.camera.to_dict(), "range_correction": fit.correction.to_dict()}
     Path(out).write_text(json.dumps(doc, indent=1) + "\n")
     c = fit.correction
+    span = c.calibrated_span_mm
+    if span is None:  # fit_range_correction sets it from the samples it used
+        raise RuntimeError("the fitted range correction has no calibrated span")
     harm = ", ".join(f"{np.hypot(a, b):.2f}" for a, b in c.harmonics_mm)
     return (
         f"{fit.n_frames} frames, {fit.n_samples} pixel samples: constant {c.offset_mm:.2f} mm, "
         f"cyclic amplitudes {harm} mm, amplitude term {c.amplitude_mm_per_decade:.2f} "
         f"mm/decade, {fit.pixels_with_offset} per-pixel offsets; residual RMS "
         f"{fit.rms_before_mm:.2f} -> {fit.rms_after_mm:.2f} mm; calibrated span "
-        f"{c.calibrated_span_mm[0]:.0f}-{c.calibrated_span_mm[1]:.0f} mm -> {out}"
+        f"{span[0]:.0f}-{span[1]:.0f} mm -> {out}"
     )
 
 

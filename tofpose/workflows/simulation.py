@@ -96,10 +96,13 @@ def demo(n_frames: int = 48, seed: int = 1) -> int:
             )
             print(hdr)
             print("-" * len(hdr))
+            truth_R, truth_t_mm = r.truth_R, r.truth_t_mm
+            if truth_R is None or truth_t_mm is None:
+                raise RuntimeError(f"{rec}: the simulated recording has no /truth")
             errs = []
             for i in range(0, r.n_frames, max(1, r.n_frames // 24)):
                 row = rows[i]
-                R_t, t_t = r.truth_R[i], r.truth_t_mm[i]
+                R_t, t_t = truth_R[i], truth_t_mm[i]
                 e_t = facing_euler_deg(R_t)
                 print(
                     f"{i:>5} {'':>2} {'':>2} | {t_t[0]:8.2f} {t_t[1]:8.2f} {t_t[2]:9.2f} "

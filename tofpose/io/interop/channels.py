@@ -179,14 +179,17 @@ class ToFChannels:
                 log_time_ns,
             )
             if result.ok:
+                R, t_mm = result.R, result.t_mm
+                if R is None or t_mm is None:
+                    raise ValueError(f"frame {index}: a result marked ok has no pose (R, t_mm)")
                 emit(
                     self._channel(topics.POSE_TRANSFORM),
-                    lambda: msg.frame_transform(result.R, result.t_mm, topics.TARGET_FRAME_ID, ts),
+                    lambda: msg.frame_transform(R, t_mm, topics.TARGET_FRAME_ID, ts),
                     log_time_ns,
                 )
                 emit(
                     self._channel(topics.POSE),
-                    lambda: msg.pose_in_frame(result.R, result.t_mm, ts),
+                    lambda: msg.pose_in_frame(R, t_mm, ts),
                     log_time_ns,
                 )
             emit(

@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import foxglove
+import numpy as np
 from tqdm import tqdm
 
 import tofpose
@@ -51,6 +52,16 @@ def export_metadata(rec: Recording, pipeline: PosePipeline | None) -> dict[str, 
         "has_truth": str(rec.truth_R is not None).lower(),
         "has_lab_truth": str(rec.lab_truth_R is not None).lower(),
     }
+
+
+def _pose_at(
+    R: np.ndarray | None, t_mm: np.ndarray | None, i: int
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """(R (3, 3), t (3,) mm) of frame ``i`` of a recording's reference poses (R (N, 3, 3),
+    t (N, 3)), None where the recording has none (it holds both or neither)."""
+    if R is None or t_mm is None:
+        return None
+    return R[i], t_mm[i]
 
 
 def export_mcap(
@@ -96,10 +107,8 @@ def export_mcap(
             gray, dist, t = rec.frame(i)
             result = pipeline.process(gray, dist, t) if pipeline is not None else None
             n_ok += int(result is not None and result.ok)
-            truth = (rec.truth_R[i], rec.truth_t_mm[i]) if rec.truth_R is not None else None
-            lab = (
-                (rec.lab_truth_R[i], rec.lab_truth_t_mm[i]) if rec.lab_truth_R is not None else None
-            )
+            truth = _pose_at(rec.truth_R, rec.truth_t_mm, i)
+            lab = _pose_at(rec.lab_truth_R, rec.lab_truth_t_mm, i)
             channels.log_frame(i, gray, dist, t, times_ns[i], result, truth, lab)
         done = True
     finally:

@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from mcap.exceptions import McapError
@@ -29,13 +30,13 @@ from tofpose.core.catalog import Catalog
 from tofpose.io.interop import topics
 from tofpose.io.recording import RecordingWriter
 
-GRAY_ENCODINGS = {
+GRAY_ENCODINGS: dict[str, np.dtype] = {
     "mono16": np.dtype("<u2"),
     "16UC1": np.dtype("<u2"),
     "mono8": np.dtype("u1"),
     "8UC1": np.dtype("u1"),
 }
-DISTANCE_ENCODINGS = {"32FC1": np.dtype("<f4"), "16UC1": np.dtype("<u2")}
+DISTANCE_ENCODINGS: dict[str, np.dtype] = {"32FC1": np.dtype("<f4"), "16UC1": np.dtype("<u2")}
 RAW_IMAGE = "foxglove.RawImage"
 CALIBRATION = "foxglove.CameraCalibration"
 
@@ -109,19 +110,20 @@ class _Source:
         try:
             with open(path, "rb") as fh:
                 reader = make_reader(fh)
-                self.summary = reader.get_summary()
+                summary = reader.get_summary()
                 self.metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
         except (OSError, McapError, ValueError) as exc:
             raise McapImportError(f"{path}: not a readable MCAP file ({exc})") from exc
-        if self.summary is None or self.summary.statistics is None:
+        if summary is None or summary.statistics is None:
             raise McapImportError(
                 f"{path}: no summary section with statistics (an MCAP file not closed "
                 "properly; `mcap recover` repairs it)"
             )
-        self.by_topic = {c.topic: c for c in self.summary.channels.values()}
+        self.summary = summary
+        self.by_topic = {c.topic: c for c in summary.channels.values()}
         self.counts = {
-            self.summary.channels[cid].topic: n
-            for cid, n in self.summary.statistics.channel_message_counts.items()
+            summary.channels[cid].topic: n
+            for cid, n in summary.statistics.channel_message_counts.items()
         }
 
     def schema_name(self, topic: str) -> str:
@@ -137,11 +139,11 @@ class _Source:
         meta = self.metadata.get(topics.METADATA_NAME, {})
         return meta.get("format") == "tofpose-mcap"
 
-    def messages(self, wanted: list[str]) -> Iterator[tuple[str, int, object]]:
+    def messages(self, wanted: list[str]) -> Iterator[tuple[str, int, Any]]:
         """(topic, log_time_ns, decoded) of ``wanted``: in the order written for a file
         we exported (frame order, even where capture times go back), else in log-time
-        order."""
-        decoders = {}
+        order. Decoded: the JSON value, or the protobuf message."""
+        decoders: dict[int, Callable[[bytes], Any]] = {}
         with open(self.path, "rb") as fh:
             # file order through the non-seeking reader, which streams chunk by chunk (the
             # seeking one queues every chunk before the first message in file order)
@@ -154,14 +156,13 @@ class _Source:
                     continue
                 dec = decoders.get(channel.id)
                 if dec is None:
-                    dec = decoders[channel.id] = self._factory.decoder_for(
-                        channel.message_encoding, schema
-                    )
+                    dec = self._factory.decoder_for(channel.message_encoding, schema)
                     if dec is None:
                         raise McapImportError(
                             f"{self.path}: {channel.topic} is {channel.message_encoding!r} "
                             f"with schema {schema.name if schema else None!r}: no decoder"
                         )
+                    decoders[channel.id] = dec
                 yield channel.topic, message.log_time, dec(message.data)
 
     def first(self, topic: str):
@@ -244,13 +245,14 @@ def import_mcap(
     )
     frames = 0
     try:
-        group: dict[str, object] = {}
+        group: dict[str, Any] = {}
         group_ns: int | None = None
         bar = tqdm(total=n, desc="import mcap", unit="frame", disable=not progress, file=sys.stderr)
 
-        def flush() -> None:
+        def flush(ns: int) -> None:
+            """Write the frame of the messages in ``group``, logged at ``ns``."""
             nonlocal frames
-            where = f"{path} at log time {group_ns} ns"
+            where = f"{path} at log time {ns} ns"
             if gray_t not in group or dist_t not in group:
                 missing = gray_t if gray_t not in group else dist_t
                 raise McapImportError(f"{where}: no {missing} message for this frame")
@@ -262,7 +264,7 @@ def import_mcap(
                     f"match the camera's {camera.width}x{camera.height}"
                 )
             frame = group.get(topics.FRAME)
-            time_s = float(frame["time_s"]) if frame is not None else group_ns * 1e-9
+            time_s = float(frame["time_s"]) if frame is not None else ns * 1e-9
             poses = {}
             for key, topic in (("truth", topics.TRUTH), ("lab", topics.LAB_TRUTH)):
                 if topic in extra:
@@ -284,14 +286,14 @@ def import_mcap(
 
         for topic, ns, decoded in src.messages([gray_t, dist_t, *extra]):
             if group_ns is not None and ns != group_ns:
-                flush()
+                flush(group_ns)
                 group = {}
             group_ns = ns
             if topic in group:
                 raise McapImportError(f"{path}: two {topic} messages at log time {ns} ns")
             group[topic] = decoded
-        if group:
-            flush()
+        if group_ns is not None:  # the last frame, its messages in group
+            flush(group_ns)
         bar.close()
     except BaseException:
         writer.close()
