@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import sys
 from importlib.metadata import entry_points
+from pathlib import Path
 from typing import Any, Protocol
 
 #: the entry-point group of commands that other packages add to ``tofpose``
@@ -289,6 +290,33 @@ def _run_library(args: argparse.Namespace) -> int:
     return 0
 
 
+#: the library's commands whose ``--out`` (or ``--out-prefix``) is a file to write; its
+#: directory must exist (study, reprocess and compare make their output directory)
+FILE_OUTPUTS = (
+    "estimate",
+    "calibrate-range",
+    "calibrate-covariance",
+    "simulate",
+    "render",
+    "export",
+    "import",
+)
+
+
+def output_directory_error(args: argparse.Namespace) -> str | None:
+    """A sentence naming the missing directory of a command's output file, or None."""
+    if args.cmd not in FILE_OUTPUTS:
+        return None
+    out = getattr(args, "out", None) or getattr(args, "out_prefix", None)
+    if out is None:
+        return None
+    parent = Path(out).expanduser().parent
+    if parent.is_dir():
+        return None
+    what = "is a file, not a directory" if parent.exists() else "does not exist"
+    return f"tofpose {args.cmd}: the output's directory {str(parent)!r} {what}: {out}"
+
+
 def main(argv: list[str] | None = None) -> int:
     from tofpose.core.threads import single_threaded_blas
 
@@ -298,6 +326,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.cmd in commands:
         opts = vars(args)
         return commands[opts.pop("cmd")].run(opts)
+    missing = output_directory_error(args)
+    if missing is not None:
+        print(missing, file=sys.stderr)
+        return 2
     code = _run_batch(args)
     if code is not None:
         return code

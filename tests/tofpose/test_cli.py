@@ -254,3 +254,20 @@ def test_the_server_commands_come_from_the_entry_point_group():
     commands = registered_commands()
     assert {"serve", "report", "keys", "record", "emulate", "openapi"} <= set(commands)
     assert all(c.name == name for name, c in commands.items())
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["simulate", "--scenario", "attitude-grid", "--frames", "2", "--out", "{d}/none/x.h5"],
+        ["estimate", "{d}/r.h5", "--out", "{d}/none/p.csv"],
+        ["render", "--out-prefix", "{d}/none/frame"],
+        ["export", "mcap", "{d}/r.h5", "--out", "{d}/none/r.mcap"],
+    ],
+)
+def test_a_missing_output_directory_is_named_before_any_work(tmp_path, capsys, argv):
+    code = main([a.format(d=tmp_path) for a in argv])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert f"the output's directory '{tmp_path / 'none'}' does not exist" in err
+    assert not (tmp_path / "none").exists()
