@@ -33,6 +33,13 @@ class CameraModel:
         OpenCV distortion coefficients (k1, k2, p1, p2, k3).
     name : str
         Free text, e.g. the device model.
+    full_scale_counts : float
+        The gray (amplitude) value at which the sensor saturates: a pixel at or above it
+        is clipped and carries no distance. 4095 for the paper's 12-bit EPC660; another
+        sensor states its own (a recording's ``/camera`` attribute; a camera JSON key).
+    modulation_frequency_hz : float
+        The modulation frequency of the distance image (its unambiguous range is
+        ``tofpose.core.tof.unambiguous_range_mm``); 6 MHz by default, the simulator's.
     """
 
     width: int = 320
@@ -43,6 +50,8 @@ class CameraModel:
     cy: float = 119.5
     dist: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
     name: str = "EPC660 f=6.5mm"
+    full_scale_counts: float = 4095.0
+    modulation_frequency_hz: float = 6.0e6
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -52,6 +61,12 @@ class CameraModel:
             raise ValueError(f"focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
         if len(self.dist) != 5:
             raise ValueError(f"dist must have 5 coefficients (k1,k2,p1,p2,k3), got {self.dist}")
+        if not self.full_scale_counts > 0:
+            raise ValueError(f"full_scale_counts must be positive, got {self.full_scale_counts}")
+        if not self.modulation_frequency_hz > 0:
+            raise ValueError(
+                f"modulation_frequency_hz must be positive, got {self.modulation_frequency_hz}"
+            )
         object.__setattr__(self, "dist", tuple(float(d) for d in self.dist))
 
     @staticmethod
@@ -133,6 +148,8 @@ class CameraModel:
             "cx": self.cx,
             "cy": self.cy,
             "dist": list(self.dist),
+            "full_scale_counts": self.full_scale_counts,
+            "modulation_frequency_hz": self.modulation_frequency_hz,
         }
 
     @staticmethod
@@ -153,6 +170,9 @@ class CameraModel:
             cy=float(d["cy"]),
             dist=dist,
             name=str(d.get("name", "")),
+            # older files carry neither: the EPC660's 12 bits and the simulator's 6 MHz
+            full_scale_counts=float(d.get("full_scale_counts", 4095.0)),
+            modulation_frequency_hz=float(d.get("modulation_frequency_hz", 6.0e6)),
         )
 
     def to_json(self) -> str:

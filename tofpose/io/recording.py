@@ -3,7 +3,9 @@
 ::
 
     /            attrs: format = "tofpose-recording", version = 1
-    /camera      attrs: width, height, fx, fy, cx, cy, dist (5), name
+    /camera      attrs: width, height, fx, fy, cx, cy, dist (5), name,
+                        full_scale_counts, modulation_frequency_hz (optional: a
+                        recording without them reads as 4095 counts and 6 MHz)
     /catalog     attrs: json                                              optional
     /frames/gray          uint16  (N, H, W)
     /frames/distance_mm   float32 (N, H, W)  radial distance, NaN = invalid
@@ -62,7 +64,16 @@ class RecordingWriter:
         f.attrs["format"] = FORMAT
         f.attrs["version"] = VERSION
         cam = f.create_group("camera")
-        for k in ("width", "height", "fx", "fy", "cx", "cy"):
+        for k in (
+            "width",
+            "height",
+            "fx",
+            "fy",
+            "cx",
+            "cy",
+            "full_scale_counts",
+            "modulation_frequency_hz",
+        ):
             cam.attrs[k] = getattr(camera, k)
         cam.attrs["dist"] = np.asarray(camera.dist, float)
         cam.attrs["name"] = camera.name

@@ -47,3 +47,18 @@ def test_json_round_trip_and_errors():
         CameraModel.from_json("{")
     with pytest.raises(ValueError, match="5 coefficients"):
         CameraModel(dist=(0, 0))
+
+
+def test_full_scale_and_modulation_travel_through_json_and_default_for_old_files():
+    cam = CameraModel(full_scale_counts=65535.0, modulation_frequency_hz=20e6, name="other")
+    back = CameraModel.from_json(cam.to_json())
+    assert (back.full_scale_counts, back.modulation_frequency_hz) == (65535.0, 20e6)
+    old = {
+        k: v
+        for k, v in cam.to_dict().items()
+        if k not in ("full_scale_counts", "modulation_frequency_hz")
+    }
+    assert CameraModel.from_dict(old).full_scale_counts == 4095.0
+    assert CameraModel.from_dict(old).modulation_frequency_hz == 6.0e6
+    with pytest.raises(ValueError, match="full_scale_counts must be positive"):
+        CameraModel(full_scale_counts=0.0)

@@ -133,3 +133,22 @@ def test_blocks_read_what_frames_read_in_aligned_reads(tmp_path):
         assert spans == [(5, 32), (32, 40)]  # reads end on multiples of 32 frames
         with pytest.raises(IndexError, match="frames 30..41"):
             rec.block(30, 41)
+
+
+def test_the_cameras_full_scale_and_modulation_are_stored_and_old_files_read_as_before(
+    tmp_path,
+):
+    cam = CameraModel(full_scale_counts=16383.0, modulation_frequency_hz=12e6)
+    path = tmp_path / "r.h5"
+    with RecordingWriter(path, cam, paper_target()) as w:
+        w.append(np.zeros(cam.shape, np.uint16), np.full(cam.shape, np.nan, np.float32), 0.0)
+    with open_recording(path) as rec:
+        assert rec.camera == cam
+    with h5py.File(path, "r+") as f:  # a recording written before these attributes
+        del f["camera"].attrs["full_scale_counts"]
+        del f["camera"].attrs["modulation_frequency_hz"]
+    with open_recording(path) as rec:
+        assert (rec.camera.full_scale_counts, rec.camera.modulation_frequency_hz) == (
+            4095.0,
+            6.0e6,
+        )
