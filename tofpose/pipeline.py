@@ -224,7 +224,10 @@ class PosePipeline:
         self.catalog = catalog
         self.config = config or PipelineConfig()
         self._sigma_constants = kernel_constants(
-            SigmaFloors(self.config.centroid_sigma_floor_px, self.config.range_sigma_floor_mm)
+            SigmaFloors(
+                centroid_sigma_floor_px=self.config.centroid_sigma_floor_px,
+                range_sigma_floor_mm=self.config.range_sigma_floor_mm,
+            )
         )
         self._persistence = Persistence(self.config.persistence)
         self._catalog_xyz = catalog.positions_mm

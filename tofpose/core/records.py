@@ -40,19 +40,21 @@ class CatalogRecord(NamedTuple):
 
 
 class SigmaConstants(NamedTuple):
-    """The measurement sigmas' floors and constants (``tofpose.stages.extraction.uncertainty``):
-    floor_px / floor_mm the centroid and range floors, single_px a one-pixel blob's
-    centroid sigma, split_px a split blob's, pool_min the pixels below which a blob's
-    noise is pooled, median_eff the median's efficiency, uncal_mm the uncalibrated range
-    sigma."""
+    """The measurement sigmas' floors and constants (``tofpose.stages.extraction.uncertainty``,
+    each field named as its setting or constant there): centroid_sigma_floor_px and
+    range_sigma_floor_mm the floors (``PipelineConfig``'s), single_pixel_sigma_px a
+    one-pixel blob's centroid sigma, split_centroid_px a split blob's, pool_min_pixels the
+    valid ranges from which a blob's spread joins the pooled noise model,
+    median_efficiency the median's efficiency, uncalibrated_range_sigma_mm the range sigma
+    when nothing calibrates the model."""
 
-    floor_px: float
-    floor_mm: float
-    single_px: float
-    split_px: float
-    pool_min: int
-    median_eff: float
-    uncal_mm: float
+    centroid_sigma_floor_px: float
+    range_sigma_floor_mm: float
+    single_pixel_sigma_px: float
+    split_centroid_px: float
+    pool_min_pixels: int
+    median_efficiency: float
+    uncalibrated_range_sigma_mm: float
 
 
 class PersistenceHistory(NamedTuple):

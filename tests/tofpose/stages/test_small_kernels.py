@@ -106,23 +106,8 @@ def test_blob_sigmas_equal_the_numpy_model(pooled):
     dist.reshape(-1)[flat[starts[-2] :]] = np.nan  # the last blob has no range
     cen = rng.uniform(5, 50, (len(sizes), 2))
     split = np.arange(len(sizes)) % 2 == 1
-    got = blob_sigmas(
-        flat,
-        starts,
-        cen,
-        gray,
-        dist,
-        50.0,
-        split,
-        0.03,
-        1.0,
-        u.SINGLE_PIXEL_SIGMA_PX,
-        u.SPLIT_CENTROID_PX,
-        u.POOL_MIN_PIXELS,
-        u.MEDIAN_EFFICIENCY,
-        u.UNCALIBRATED_RANGE_SIGMA_MM,
-    )
     constants = u.kernel_constants(u.SigmaFloors(0.03, 1.0))
+    got = blob_sigmas(flat, starts, cen, gray, dist, 50.0, split, constants)
     blobs = [flat[starts[j] : starts[j + 1]] for j in range(len(sizes))]
     want_px = [
         reference.centroid_sigma_px(gray, b, c, 50.0, bool(sp), constants)

@@ -269,12 +269,12 @@ def _active_set(
     applies."""
     gray32 = np.ascontiguousarray(gray, np.float32)
     threshold = stats.raw_threshold
-    mask, runs, n, *_ = threshold_mask(gray32, float(threshold))
+    mask, runs, n, _ = threshold_mask(gray32, float(threshold))
     if n > n_max:
         values = gray32[mask.view(bool)]
         cut = np.partition(values, n - n_max)[n - n_max]
         threshold = float(cut)
-        mask, runs, n, *_ = threshold_mask(gray32, threshold)
+        mask, runs, n, _ = threshold_mask(gray32, threshold)
     applied = FrameStats(
         background=stats.background,
         noise_sigma=stats.noise_sigma,
@@ -325,24 +325,7 @@ def find_candidate_blobs(
     ecc_max = np.sqrt(1.0 - cos_t**2)
     # the components of A from its runs, numbered as cv2.connectedComponents numbers them
     # (kernels.components.run_labels), and every gate, in one call
-    (
-        area_k,
-        bbox_k,
-        peak_k,
-        starts,
-        flat,
-        inner,
-        listed,
-        testable,
-        rho_k,
-        which,
-        status,
-        size,
-        mom,
-        keep_starts,
-        keep_flat,
-        blur_var_px2,
-    ) = label_table_and_gates(
+    found = label_table_and_gates(
         runs,
         gray32,
         np.asarray(distance_mm, np.float32).reshape(-1),
@@ -351,6 +334,15 @@ def find_candidate_blobs(
         _gate_params(config, stats, cos_t, ecc_max),
         int(config.min_area_px),
     )
+    table, gates, rho_k = found.table, found.gates, found.rho
+    area_k, bbox_k, peak_k, starts, flat = (
+        table.area,
+        table.bbox,
+        table.peak,
+        table.starts,
+        table.flat,
+    )
+    status, size, mom = gates.status, gates.size, gates.moments
     accepted: list[Blob] = []
     oversize: list[Blob] = []
     wrong_size: list[WrongSizeBlob] = []
@@ -361,9 +353,9 @@ def find_candidate_blobs(
         d_eq = 2.0 * np.sqrt(area_k[k] / np.pi)
         refused.append((k, RejectedBlob(x + (bw - 1) / 2, y + (bh - 1) / 2, float(d_eq), reason)))
 
-    for k in listed[~testable].tolist():
-        reject(k, "border" if not inner[k] else "dim")
-    for j, k in enumerate(which.tolist()):
+    for k in found.listed[~found.testable].tolist():
+        reject(k, "border" if not found.inner[k] else "dim")
+    for j, k in enumerate(found.which.tolist()):
         code = int(status[j])
         if size[j, 3] == 0.0:
             wrong_size.append(WrongSizeBlob(*size[j, :3].tolist(), float(rho_k[k])))
@@ -381,7 +373,7 @@ def find_candidate_blobs(
         if code != ACCEPTED:
             reject(k, _GATE_REASONS[code])
             continue
-        pixels = keep_flat[keep_starts[j] : keep_starts[j + 1]]
+        pixels = gates.keep_flat[gates.keep_starts[j] : gates.keep_starts[j + 1]]
         accepted.append(
             Blob(
                 pixels=pixels,
@@ -398,7 +390,7 @@ def find_candidate_blobs(
     rejected = [r for _, r in sorted(refused, key=lambda kr: kr[0])]
     for b in accepted[config.max_candidates :]:
         rejected.append(RejectedBlob(*b.centroid_uv, 2.0 * np.sqrt(b.area_px / np.pi), "rank"))
-    stats = replace(stats, psf_sigma_px=float(np.sqrt(blur_var_px2)))
+    stats = replace(stats, psf_sigma_px=float(np.sqrt(found.blur_var_px2)))
     return CandidateBlobs(
         accepted[: config.max_candidates],
         oversize,
@@ -484,7 +476,7 @@ def measure_blobs(
     h, w = gray.shape
     flat, starts = pixel_lists(blobs)
     bbox = np.array([b.bbox for b in blobs], np.int64)
-    owner, ox, oy, use_owner = owner_map(flat, starts, bbox, h, w)  # whose pixel is it
+    owners = owner_map(flat, starts, bbox, h, w)  # whose pixel is it
     g32 = np.asarray(gray, np.float32)
     d32 = np.asarray(distance_mm, np.float32)
     sg, sd = (
@@ -492,36 +484,10 @@ def measure_blobs(
         if surround is None
         else (np.asarray(surround[0], np.float32), np.asarray(surround[1], np.float32))
     )
-    s_gray, s_mm, crowded = blob_surrounds(bbox, sg, sd, owner, ox, oy, use_owner)
-    level = np.where(np.isfinite(s_gray), s_gray, float(background))
-    uv = blob_centroids(
-        flat,
-        starts,
-        bbox,
-        g32,
-        level,
-        weighting == "coverage",
-        owner,
-        ox,
-        oy,
-        use_owner,
-    )
-    mix = blob_mixing(
-        flat,
-        starts,
-        bbox,
-        g32,
-        d32,
-        sd,
-        s_gray,
-        s_mm,
-        crowded,
-        float(dark),
-        owner,
-        ox,
-        oy,
-        use_owner,
-    )
+    surrounds = blob_surrounds(bbox, sg, sd, owners)
+    level = np.where(np.isfinite(surrounds.gray), surrounds.gray, float(background))
+    uv = blob_centroids(flat, starts, bbox, g32, level, weighting == "coverage", owners)
+    mix = blob_mixing(flat, starts, bbox, g32, d32, sd, surrounds, float(dark), owners)
     bearings = camera.pixel_bearings().reshape(-1, 3)
     rho = blob_ranges(
         flat,
@@ -531,7 +497,7 @@ def measure_blobs(
         camera.bearings(uv),
     )
     # partly hidden by something nearer (read on the surround frame): no range
-    hidden = occluded_blobs(flat, starts, bbox, sd, rho, owner, ox, oy, use_owner)
+    hidden = occluded_blobs(flat, starts, bbox, sd, rho, owners)
     rho = np.where(hidden, np.nan, rho)
     return [
         b.with_values(centroid_uv=uv[j], distance_mm=float(rho[j]), mixing=mix[j])

@@ -54,10 +54,11 @@ MEDIAN_EFFICIENCY = 1.2533
 
 @dataclass(frozen=True)
 class SigmaFloors:
-    """Lower bounds of the sigmas (what the pixel statistics cannot see)."""
+    """Lower bounds of the sigmas (what the pixel statistics cannot see):
+    ``PipelineConfig``'s settings of the same names."""
 
-    centroid_px: float = 0.03
-    range_mm: float = 1.0
+    centroid_sigma_floor_px: float = 0.03
+    range_sigma_floor_mm: float = 1.0
 
 
 def sampling_sigma_px(n_pixels: np.ndarray) -> np.ndarray:
@@ -68,16 +69,15 @@ def sampling_sigma_px(n_pixels: np.ndarray) -> np.ndarray:
 
 def kernel_constants(floors: SigmaFloors) -> SigmaConstants:
     """The floors and this module's constants as the compiled sigmas take them (a
-    ``core.records.SigmaConstants``; its fields are ``kernels.sigmas.blob_sigmas``'
-    arguments after ``split``, in order)."""
+    ``core.records.SigmaConstants``, ``kernels.sigmas.blob_sigmas``' last argument)."""
     return SigmaConstants(
-        floor_px=float(floors.centroid_px),
-        floor_mm=float(floors.range_mm),
-        single_px=SINGLE_PIXEL_SIGMA_PX,
-        split_px=SPLIT_CENTROID_PX,
-        pool_min=POOL_MIN_PIXELS,
-        median_eff=MEDIAN_EFFICIENCY,
-        uncal_mm=UNCALIBRATED_RANGE_SIGMA_MM,
+        centroid_sigma_floor_px=float(floors.centroid_sigma_floor_px),
+        range_sigma_floor_mm=float(floors.range_sigma_floor_mm),
+        single_pixel_sigma_px=SINGLE_PIXEL_SIGMA_PX,
+        split_centroid_px=SPLIT_CENTROID_PX,
+        pool_min_pixels=POOL_MIN_PIXELS,
+        median_efficiency=MEDIAN_EFFICIENCY,
+        uncalibrated_range_sigma_mm=UNCALIBRATED_RANGE_SIGMA_MM,
     )
 
 
@@ -103,5 +103,5 @@ def measurement_sigmas(
         np.asarray(distance_mm, np.float32),
         float(background_counts),
         split,
-        *kernel_constants(floors),
+        kernel_constants(floors),
     )

@@ -81,7 +81,10 @@ class CompiledTracker:
             float(config.mixed_pixel_radius_px),
             correction_kernel_arguments(correction),
             kernel_constants(
-                SigmaFloors(config.centroid_sigma_floor_px, config.range_sigma_floor_mm)
+                SigmaFloors(
+                    centroid_sigma_floor_px=config.centroid_sigma_floor_px,
+                    range_sigma_floor_mm=config.range_sigma_floor_mm,
+                )
             ),
             fit_settings(config),
         )

@@ -12,12 +12,11 @@ from tofpose.core.compiled import jit
 from tofpose.core.kernels.indexing import row_col, run_end
 from tofpose.core.kernels.stats import median_inplace
 from tofpose.stages.extraction.constants import PLATEAU_MIN_PX, PLATEAU_RATIO
+from tofpose.stages.extraction.records import OwnerMap
 
 
 @jit
-def blob_centroids(
-    flat, starts, bbox, gray, background, coverage, owner, owner_x0, owner_y0, use_owner
-):
+def blob_centroids(flat, starts, bbox, gray, background, coverage, owners):
     """Centroid (u, v) px of each blob.
 
     flat, starts : blob j's pixels are ``flat[starts[j]:starts[j + 1]]`` (flat indices);
@@ -25,9 +24,8 @@ def blob_centroids(
     blob's surround level (``mixed_pixels.blob_surrounds``), counts; coverage : coverage
     weights for a blob with a plateau of whole-covered pixels (``PLATEAU_MIN_PX`` at
     ``PLATEAU_RATIO``) and intensity weights for the others (else intensity for all, Eq.
-    19 as written); owner, owner_x0, owner_y0 : ``owner_map``'s
-    index of the blob owning each pixel (-1 none) and its top-left pixel, read when
-    ``use_owner``. Returns (n, 2) float64.
+    19 as written); owners : ``owner_map``'s ``records.OwnerMap`` (the blob owning
+    each pixel, read when used). Returns (n, 2) float64.
     """
     h, w = gray.shape
     n = bbox.shape[0]
@@ -93,9 +91,9 @@ def blob_centroids(
                 else:
                     v = value
                 wt[c] = float(v) if local_max >= 0 else 0.0
-            if use_owner:
+            if owners.used:
                 for c in range(pw):
-                    o = owner[r + y0 - owner_y0, c + x0 - owner_x0]
+                    o = owners.owner[r + y0 - owners.y0, c + x0 - owners.x0]
                     if o != -1 and o != j:
                         wt[c] = 0.0
             row_v = float(r + y0)
@@ -108,7 +106,7 @@ def blob_centroids(
             for r in range(ph):
                 for c in range(pw):
                     local_max = max(max(row_max[r, c], row_max[r + 1, c]), row_max[r + 2, c])
-                    o = owner[r + y0 - owner_y0, c + x0 - owner_x0] if use_owner else -1
+                    o = owners.owner[r + y0 - owners.y0, c + x0 - owners.x0] if owners.used else -1
                     if local_max >= 0 and (o == -1 or o == j):
                         sw += 1.0
                         su += c + x0
@@ -157,7 +155,8 @@ def owner_map(flat, starts, bbox, h, w):
     does, and nothing needs excluding). The ring of a blob must not reach into a
     neighbour's pixels (markers 7 and 8 split apart touch each other), or that
     neighbour's light pulls the centroid towards it. Returns owner (h', w') int32, its
-    top-left pixel (x0, y0) in the image, and use_owner."""
+    top-left pixel (x0, y0) in the image, and whether it is used: a
+    ``records.OwnerMap``."""
     n = bbox.shape[0]
     near = False
     for a in range(n):
@@ -170,7 +169,7 @@ def owner_map(flat, starts, bbox, h, w):
             ):
                 near = True
     if not near:
-        return np.full((1, 1), -1, np.int32), 0, 0, False
+        return OwnerMap(owner=np.full((1, 1), -1, np.int32), x0=0, y0=0, used=False)
     x0, y0, x1, y1 = w, h, 0, 0
     for j in range(n):
         x0 = min(x0, max(bbox[j, 0] - 2, 0))
@@ -183,4 +182,4 @@ def owner_map(flat, starts, bbox, h, w):
         for i in range(starts[j], starts[j + 1]):
             r, c = row_col(flat[i], w, inv_w)
             owner[r - y0, c - x0] = j
-    return owner, x0, y0, True
+    return OwnerMap(owner=owner, x0=x0, y0=y0, used=True)

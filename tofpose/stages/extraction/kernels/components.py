@@ -12,10 +12,30 @@ order) and runs; ``component_median_ranges`` the median of its valid ranges.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from tofpose.core.compiled import jit
 from tofpose.core.kernels.stats import median_inplace
+
+
+class ComponentTable(NamedTuple):
+    """Per component k = 0 .. K - 1 of a set given as its runs (``component_table``; 0,
+    the background, left empty): ``area`` (K,) int64; ``bbox`` (K, 4) int64 (x, y, w, h);
+    ``peak`` (K,) float32 counts; ``starts`` (K + 1,) and ``flat`` (P,) int64: the flat
+    indices (row * W + col) of component k's pixels, in raster order, are
+    ``flat[starts[k]:starts[k + 1]]``; ``run_order`` (R,) and ``run_starts`` (K + 1,)
+    int64: its runs, in raster order, are ``run_order[run_starts[k]:run_starts[k + 1]]``
+    (indices into the runs)."""
+
+    area: np.ndarray
+    bbox: np.ndarray
+    peak: np.ndarray
+    starts: np.ndarray
+    flat: np.ndarray
+    run_order: np.ndarray
+    run_starts: np.ndarray
 
 
 @jit
@@ -94,11 +114,7 @@ def run_labels(runs):
 def component_table(runs, labels, n_labels, gray):
     """Per component k = 0 .. n_labels - 1 (0, the background, is left empty) of a set
     given as its runs (R, 3) in raster order and their ``run_labels``; gray : (H, W)
-    float32. Returns area (K,) int64, bbox (K, 4) int64 as (x, y, w, h), peak (K,)
-    float32 counts, starts (K + 1,) int64 and flat (P,) int64: the flat indices
-    (row * W + col) of component k's pixels, in raster order, are
-    ``flat[starts[k]:starts[k + 1]]``; and its runs, in raster order, as
-    ``run_order[run_starts[k]:run_starts[k + 1]]`` (indices into ``runs``)."""
+    float32. Returns its ``ComponentTable``."""
     h_img, w_img = gray.shape
     area = np.zeros(n_labels, np.int64)
     x0 = np.full(n_labels, w_img, np.int64)  # (the background's box: as OpenCV's)
@@ -146,7 +162,15 @@ def component_table(runs, labels, n_labels, gray):
         bbox[k, 1] = y0[k]
         bbox[k, 2] = x1[k] - x0[k] + 1
         bbox[k, 3] = y1[k] - y0[k] + 1
-    return area, bbox, peak, starts, flat, run_order, run_starts
+    return ComponentTable(
+        area=area,
+        bbox=bbox,
+        peak=peak,
+        starts=starts,
+        flat=flat,
+        run_order=run_order,
+        run_starts=run_starts,
+    )
 
 
 @jit

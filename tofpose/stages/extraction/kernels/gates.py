@@ -11,11 +11,14 @@ specification this is tested against
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from tofpose.core.compiled import jit
 from tofpose.stages.extraction.constants import MAX_PSF_SIGMA_PX, SHAPE_MIN_PIXELS, WINDOW_PAD_PX
 from tofpose.stages.extraction.kernels.components import (
+    ComponentTable,
     component_median_ranges,
     component_table,
     run_labels,
@@ -24,6 +27,38 @@ from tofpose.stages.extraction.kernels.components import (
 
 #: outcome codes of ``gate_components``
 ACCEPTED, OVERSIZE, SIZE, NLOG, SHAPE, PENALTY = 0, 1, 2, 3, 4, 5
+
+
+class GateOutcome(NamedTuple):
+    """The §3.2 gates on n listed components (``gate_components``): ``status`` (n,)
+    int64 (``ACCEPTED`` ... ``PENALTY``); ``size`` (n, 4) float64 (equivalent diameter,
+    window low, window high, inside the window); ``moments`` (n, 4) float64 (u, v,
+    eccentricity, penalty q); ``keep_starts`` (n + 1,) and ``keep_flat``: the flat indices
+    of the pixels the nLoG keeps (Eq. 18), raster order."""
+
+    status: np.ndarray
+    size: np.ndarray
+    moments: np.ndarray
+    keep_starts: np.ndarray
+    keep_flat: np.ndarray
+
+
+class GatedComponents(NamedTuple):
+    """The active set's components and the blob criteria on them
+    (``label_table_and_gates``): the ``table`` (a ``ComponentTable``), ``inner`` (K,) bool
+    (clear of the image border), ``listed`` (L,) labels of at least the smallest area,
+    ``testable`` (L,) bool (inner and bright enough to test), ``rho`` (K,) median ranges
+    mm (NaN where not read), ``which`` = listed[testable], the ``gates`` on them (a
+    ``GateOutcome``) and the frame's PSF variance ``blur_var_px2`` (px^2)."""
+
+    table: ComponentTable
+    inner: np.ndarray
+    listed: np.ndarray
+    testable: np.ndarray
+    rho: np.ndarray
+    which: np.ndarray
+    gates: GateOutcome
+    blur_var_px2: float
 
 
 @jit
@@ -196,42 +231,27 @@ def blob_brightness(peak, flux, m2, rho, blur_var_px2, fx, d_min_mm, background)
 
 @jit
 def gate_components(
-    gray,
-    runs,
-    run_order,
-    run_starts,
-    bbox,
-    area,
-    peak,
-    rho,
-    which,
-    fx,
-    diameters_mm,
-    params,
-    brightness,
-    blur_var_px2,
+    gray, runs, table, rho, which, brightness, blur_var_px2, fx, diameters_mm, params
 ):
     """Run the §3.2 gates on the listed components (already past the border and dim
     gates).
 
-    gray : (H, W) float32; runs (R, 3) : the active set's runs; run_order, run_starts,
-    bbox (K, 4), area (K,), peak (K,), rho (K,) per label from
-    ``components.component_table`` (component k's runs, raster order, are
-    ``runs[run_order[run_starts[k]:run_starts[k + 1]]]``; rho: median range, mm);
-    which : (n,) labels to test; diameters_mm : (N,) catalog diameters; params : a
-    ``records.GateSettings`` (the size window, tilt, nLoG, shape, intensity and
-    penalty settings, by name); brightness (K,) the level
-    criterion 1 credits each component with (``blob_brightness``: its peak, or what its
-    flux is worth for an unresolved reflector); blur_var_px2 : the frame's PSF variance
+    gray : (H, W) float32; runs (R, 3) : the active set's runs; table : their
+    ``components.component_table`` (a ``ComponentTable``: component k's runs, raster
+    order, are ``runs[run_order[run_starts[k]:run_starts[k + 1]]]``); rho (K,) : median
+    ranges, mm; which : (n,) labels to test; brightness (K,) the level criterion 1
+    credits each component with (``blob_brightness``: its peak, or what its flux is worth
+    for an unresolved reflector); blur_var_px2 : the frame's PSF variance
     (``psf_variance_px2``; 0 for none), which widens the window's upper end
-    (``blur_widening_px``).
+    (``blur_widening_px``); diameters_mm : (N,) catalog diameters; params : a
+    ``records.GateSettings`` (the size window, tilt, nLoG, shape, intensity and penalty
+    settings, by name).
 
-    Returns status (n,) int64 (``ACCEPTED`` ... ``PENALTY``), size (n, 4) float64 as
-    (equivalent diameter, window low, window high, inside the window), moments (n, 4)
-    float64 as (u, v, eccentricity, penalty q) and keep_starts (n + 1,), keep_flat: the
-    flat indices of the pixels the nLoG keeps (Eq. 18), raster order.
+    Returns the ``GateOutcome`` of the listed components.
     """
     h_img, w_img = gray.shape
+    area, bbox, peak = table.area, table.bbox, table.peak
+    run_order, run_starts = table.run_order, table.run_starts
     h_min, h_max, cos_t = params.h_min_px, params.h_max_px, params.cos_max_tilt
     size_tol, size_margin = params.size_tolerance, params.size_margin_px
     sigma_abs, j_peak_p, j_t_p = params.nlog_sigma_px, params.j_peak, params.j_t
@@ -362,7 +382,9 @@ def gate_components(
     keep_flat = np.empty(keep_starts[n], np.int64)
     for j in range(n):
         keep_flat[keep_starts[j] : keep_starts[j + 1]] = pieces[j]
-    return status, size, moments, keep_starts, keep_flat
+    return GateOutcome(
+        status=status, size=size, moments=moments, keep_starts=keep_starts, keep_flat=keep_flat
+    )
 
 
 @jit
@@ -378,15 +400,14 @@ def label_table_and_gates(runs, gray, distance_flat, fx, diameters_mm, params, m
     ``gate_components`` (``params.i_peak`` is I_peak); min_area_px : the smallest component
     listed.
 
-    Returns the table (area, bbox, peak, starts, flat), inner (K,) bool (clear of the
-    image border), listed (L,) labels of at least ``max(min_area_px, 1)`` pixels,
-    testable (L,) bool (inner and bright enough to test), rho (K,) median ranges (NaN
-    where not read), and ``gate_components``' results for ``listed[testable]``."""
+    Returns the ``GatedComponents``: the table, which components are inner (clear of
+    the image border), listed (of at least ``max(min_area_px, 1)`` pixels) and testable
+    (inner and bright enough), their median ranges (NaN where not read), and
+    ``gate_components``' outcome for ``listed[testable]``."""
     h, w = gray.shape
     labels, n_labels = run_labels(runs)
-    area, bbox, peak, starts, flat, run_order, run_starts = component_table(
-        runs, labels, n_labels, gray
-    )
+    table = component_table(runs, labels, n_labels, gray)
+    area, bbox, peak, starts, flat = table.area, table.bbox, table.peak, table.starts, table.flat
     inner = np.empty(n_labels, np.bool_)
     for k in range(n_labels):
         inner[k] = (
@@ -417,37 +438,16 @@ def label_table_and_gates(runs, gray, distance_flat, fx, diameters_mm, params, m
     listed = np.flatnonzero(area >= max(min_area_px, 1))
     testable = inner[listed] & bright[listed]
     which = listed[testable]
-    status, size, moments, keep_starts, keep_flat = gate_components(
-        gray,
-        runs,
-        run_order,
-        run_starts,
-        bbox,
-        area,
-        peak,
-        rho,
-        which,
-        fx,
-        diameters_mm,
-        params,
-        brightness,
-        blur_var,
+    gates = gate_components(
+        gray, runs, table, rho, which, brightness, blur_var, fx, diameters_mm, params
     )
-    return (
-        area,
-        bbox,
-        peak,
-        starts,
-        flat,
-        inner,
-        listed,
-        testable,
-        rho,
-        which,
-        status,
-        size,
-        moments,
-        keep_starts,
-        keep_flat,
-        blur_var,
+    return GatedComponents(
+        table=table,
+        inner=inner,
+        listed=listed,
+        testable=testable,
+        rho=rho,
+        which=which,
+        gates=gates,
+        blur_var_px2=blur_var,
     )

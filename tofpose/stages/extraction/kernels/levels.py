@@ -158,8 +158,8 @@ def frame_level_stats(gray, stride, saturated_counts):
 @jit
 def threshold_mask(gray, threshold):
     """The active pixel set ``gray >= threshold`` (§3.1.1) in one pass: uint8 mask
-    (H, W), its runs, its size, and its bounding box (x, y, w, h) as ``cv2.boundingRect``
-    gives it ((0, 0, 0, 0) when empty). gray : (H, W) float32.
+    (H, W), its runs, its size, and its bounding box as a tuple (x, y, w, h), as
+    ``cv2.boundingRect`` gives it ((0, 0, 0, 0) when empty). gray : (H, W) float32.
 
     runs : (R, 3) int64, the set's maximal horizontal runs of pixels in raster order, as
     (row, first column, last column + 1): the labelled components are read run by run
@@ -196,5 +196,5 @@ def threshold_mask(gray, threshold):
                 else:
                     c += 1
     if n == 0:
-        return mask, runs[:0], 0, 0, 0, 0, 0
-    return mask, runs[:n_runs], n, x0, y0, x1 - x0 + 1, y1 - y0 + 1
+        return mask, runs[:0], 0, (0, 0, 0, 0)
+    return mask, runs[:n_runs], n, (x0, y0, x1 - x0 + 1, y1 - y0 + 1)

@@ -40,17 +40,19 @@ from tofpose.stages.extraction.constants import (
     SURROUND_INNER_PX,
     SURROUND_OUTER_PX,
 )
+from tofpose.stages.extraction.records import Surrounds
 
 
 @jit
-def _owned_by_other(owner, ox, oy, use_owner, r, c, j):
-    """Whether pixel (r, c) belongs to a blob other than j (``centroids.owner_map``)."""
-    if not use_owner:
+def _owned_by_other(owners, r, c, j):
+    """Whether pixel (r, c) belongs to a blob other than j (owners: a
+    ``records.OwnerMap``, ``centroids.owner_map``)."""
+    if not owners.used:
         return False
-    rr, cc = r - oy, c - ox
-    if rr < 0 or cc < 0 or rr >= owner.shape[0] or cc >= owner.shape[1]:
+    rr, cc = r - owners.y0, c - owners.x0
+    if rr < 0 or cc < 0 or rr >= owners.owner.shape[0] or cc >= owners.owner.shape[1]:
         return False
-    o = owner[rr, cc]
+    o = owners.owner[rr, cc]
     return o != -1 and o != j
 
 
@@ -66,17 +68,18 @@ def _next_to(mask, r, c):
 
 
 @jit
-def blob_surrounds(bbox, gray, distance, owner, ox, oy, use_owner):
+def blob_surrounds(bbox, gray, distance, owners):
     """The gray level (counts) and distance (mm) of the surface around each blob: the
     medians over the ring between its box grown by ``SURROUND_INNER_PX`` and by
     ``SURROUND_OUTER_PX`` (clipped to the image; other blobs' pixels left out). A tilted
     plate's gradient cancels in the median of a ring centred on the blob.
 
     bbox : (n, 4) int64 (x, y, w, h); gray : (H, W) float32; distance : (H, W) float32
-    (NaN invalid); owner, ox, oy, use_owner : ``centroids.owner_map``. Returns
-    surround_gray (n,) (NaN with no ring pixel), surround_mm (n,) (NaN with fewer than 3
-    ranged ring pixels) and crowded (n,) bool: another blob's pixels lie in the ring (its
-    light then spills into this blob's support, and the mixing sums are not used)."""
+    (NaN invalid); owners : ``centroids.owner_map``'s ``records.OwnerMap``. Returns a
+    ``records.Surrounds``: gray (n,) (NaN with no ring pixel), distance_mm (n,) (NaN with
+    fewer than 3 ranged ring pixels) and crowded (n,) bool: another blob's pixels lie in
+    the ring (its light then spills into this blob's support, and the mixing sums are not
+    used)."""
     h, w = gray.shape
     n = bbox.shape[0]
     level = np.full(n, np.nan)
@@ -95,7 +98,7 @@ def blob_surrounds(bbox, gray, distance, owner, ox, oy, use_owner):
             for c in range(x0, x1):
                 if inner_row and x - si <= c < x + bw + si:
                     continue
-                if _owned_by_other(owner, ox, oy, use_owner, r, c, j):
+                if _owned_by_other(owners, r, c, j):
                     crowded[j] = True
                     continue
                 g_ring[ng] = gray[r, c]
@@ -108,11 +111,11 @@ def blob_surrounds(bbox, gray, distance, owner, ox, oy, use_owner):
             level[j] = median_inplace(g_ring[:ng])
         if nd >= 3:
             depth[j] = median_inplace(d_ring[:nd])
-    return level, depth, crowded
+    return Surrounds(gray=level, distance_mm=depth, crowded=crowded)
 
 
 @jit
-def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
+def occluded_blobs(flat, starts, bbox, distance, rho, owners):
     """(n,) bool: blobs partly hidden by something in front of them. Within the blob's
     box grown by ``SURROUND_OUTER_PX`` (other blobs' pixels left out), the pixels that
     read nearer than its range ``rho`` (n,) by more than ``OCCLUSION_MARGIN_MM`` and
@@ -124,8 +127,8 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
     of the part of a marker left visible: its centroid lies off the marker's centre by
     up to its radius and its range mixes in the occluder's, so it carries no
     measurement (ours, not the paper's). flat, starts : the pixel lists; bbox (n, 4);
-    distance (H, W) float32 (NaN invalid); owner, ox, oy, use_owner:
-    ``centroids.owner_map``. NaN ranges are never occluded."""
+    distance (H, W) float32 (NaN invalid); owners : ``centroids.owner_map``'s
+    ``records.OwnerMap``. NaN ranges are never occluded."""
     h, w = distance.shape
     n = bbox.shape[0]
     out = np.zeros(n, np.bool_)
@@ -151,7 +154,7 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
                 ranged[r, c] = (
                     not member[r, c]
                     and np.isfinite(d)
-                    and not _owned_by_other(owner, ox, oy, use_owner, r + y0, c + x0, j)
+                    and not _owned_by_other(owners, r + y0, c + x0, j)
                 )
                 near[r, c] = ranged[r, c] and d < limit
         if not near.any():  # the usual case: nothing in front, no flood to run
@@ -214,22 +217,7 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
 
 
 @jit
-def blob_mixing(
-    flat,
-    starts,
-    bbox,
-    gray,
-    member_distance,
-    distance,
-    surround_gray,
-    surround_mm,
-    crowded,
-    dark,
-    owner,
-    ox,
-    oy,
-    use_owner,
-):
+def blob_mixing(flat, starts, bbox, gray, member_distance, distance, surrounds, dark, owners):
     """The sums of the mixing model (module docstring) of each blob over its support
     (its pixels dilated by one, other blobs' pixels left out): (n, ``MIX_FIELDS``) rows
     (a_b, d_b, S_a, S_ad, C_unranged, n_support), NaN rows where the surround is unknown
@@ -239,8 +227,9 @@ def blob_mixing(
     persistence combined frames: it holds them inside the boxes grown by 2 px);
     member_distance (H, W) float32, read at the blobs' own pixels (D-bar, the
     combination's median, as the blob's median range reads it), and distance, the
-    frame's own, read at the support's other pixels; surround_gray, surround_mm, crowded (n,) :
-    ``blob_surrounds``; dark : the frame's no-return gray level (counts). Support pixels
+    frame's own, read at the support's other pixels; surrounds : ``blob_surrounds``'
+    ``records.Surrounds``; dark : the frame's no-return gray level (counts); owners :
+    ``centroids.owner_map``'s ``records.OwnerMap``. Support pixels
     without a range (saturated, or too dark) are left out of the sums; their covered
     area, estimated from their gray as ``(g - g_b) / (g_max - g_b)`` clipped to [0, 1]
     (1 for a saturated centre), is returned so that the caller takes it off C."""
@@ -249,8 +238,8 @@ def blob_mixing(
     out = np.full((n, MIX_FIELDS), np.nan)
     inv_w = 1.0 / w
     for j in range(n):
-        gb, db = surround_gray[j], surround_mm[j]
-        if crowded[j] or not (np.isfinite(gb) and np.isfinite(db)):
+        gb, db = surrounds.gray[j], surrounds.distance_mm[j]
+        if surrounds.crowded[j] or not (np.isfinite(gb) and np.isfinite(db)):
             continue
         x, y, bw, bh = bbox[j, 0], bbox[j, 1], bbox[j, 2], bbox[j, 3]
         y0, y1 = max(y - 1, 0), min(y + bh + 1, h)
@@ -266,9 +255,7 @@ def blob_mixing(
         s_a, s_ad, c_unranged, n_sup = 0.0, 0.0, 0.0, 0
         for r in range(ph):
             for c in range(pw):
-                if not _next_to(member, r, c) or _owned_by_other(
-                    owner, ox, oy, use_owner, r + y0, c + x0, j
-                ):
+                if not _next_to(member, r, c) or _owned_by_other(owners, r + y0, c + x0, j):
                     continue
                 n_sup += 1
                 g = float(gray[r + y0, c + x0])

@@ -69,39 +69,26 @@ def blob_pixel_stats(flat, starts, centroids, gray, distance, background):
 
 
 @jit
-def blob_sigmas(
-    flat,
-    starts,
-    centroids,
-    gray,
-    distance,
-    background,
-    split,
-    floor_px,
-    floor_mm,
-    single_pixel_px,
-    split_px,
-    pool_min_pixels,
-    median_efficiency,
-    uncalibrated_mm,
-):
+def blob_sigmas(flat, starts, centroids, gray, distance, background, split, sigmas):
     """Centroid sigma (n,) px and range sigma (n,) mm of each blob: the model of
     ``uncertainty.measurement_sigmas`` (its docstring) on ``blob_pixel_stats``, in one
-    call. split : (n,) bool, blob cut out of a merged component; the rest are that
-    module's constants and the floors."""
+    call. split : (n,) bool, blob cut out of a merged component; sigmas : that module's
+    constants and the floors (a ``core.records.SigmaConstants``,
+    ``uncertainty.kernel_constants``)."""
     shot, n_px, own_mad, unit, n_valid = blob_pixel_stats(
         flat, starts, centroids, gray, distance, background
     )
     n = shot.shape[0]
     sigma_px = np.empty(n)
     for j in range(n):
-        sampling = single_pixel_px * max(float(n_px[j]), 1.0) ** -1.5
-        neighbour = split_px / np.sqrt(n_px[j]) if split[j] else 0.0
-        sigma_px[j] = np.sqrt(shot[j] ** 2 + floor_px**2 + sampling**2 + neighbour**2)
+        sampling = sigmas.single_pixel_sigma_px * max(float(n_px[j]), 1.0) ** -1.5
+        neighbour = sigmas.split_centroid_px / np.sqrt(n_px[j]) if split[j] else 0.0
+        floor = sigmas.centroid_sigma_floor_px
+        sigma_px[j] = np.sqrt(shot[j] ** 2 + floor**2 + sampling**2 + neighbour**2)
     ratios = np.empty(n)
     m = 0
     for j in range(n):
-        if n_valid[j] >= pool_min_pixels and np.isfinite(own_mad[j]) and unit[j] > 0:
+        if n_valid[j] >= sigmas.pool_min_pixels and np.isfinite(own_mad[j]) and unit[j] > 0:
             ratios[m] = own_mad[j] / unit[j]
             m += 1
     k = median_inplace(ratios[:m]) if m else np.nan
@@ -110,8 +97,8 @@ def blob_sigmas(
         per_pixel = own_mad[j] if np.isfinite(own_mad[j]) else 0.0
         if np.isfinite(k):
             per_pixel = max(per_pixel, k * (unit[j] if np.isfinite(unit[j]) else 0.0))
-        s = median_efficiency * per_pixel / np.sqrt(max(n_valid[j], 1))
+        s = sigmas.median_efficiency * per_pixel / np.sqrt(max(n_valid[j], 1))
         if not np.isfinite(k) and n_valid[j] < 3:
-            s = uncalibrated_mm
-        sigma_range[j] = max(s, floor_mm)
+            s = sigmas.uncalibrated_range_sigma_mm
+        sigma_range[j] = max(s, sigmas.range_sigma_floor_mm)
     return sigma_px, sigma_range

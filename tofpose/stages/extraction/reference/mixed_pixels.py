@@ -19,8 +19,8 @@ Same names, arguments and returns as ``tofpose.stages.extraction.kernels.mixed_p
 (H, W) float32 counts; distance (H, W) float32 mm, NaN where invalid; blobs as pixel
 lists ``flat`` (P,) int64 flat indices (row * W + col) with blob j's at
 ``flat[starts[j]:starts[j + 1]]``, and boxes ``bbox`` (n, 4) int64 (x, y, w, h); the
-owner map as ``owner_map`` returns it: owner (h', w') int32 (-1 none), its top-left
-pixel (ox, oy) in the image and ``use_owner``.
+owner map and the surrounds as the records ``owner_map`` and ``blob_surrounds`` return
+(``stages.extraction.records.OwnerMap``, ``Surrounds``).
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ from tofpose.stages.extraction.constants import (
     SURROUND_INNER_PX,
     SURROUND_OUTER_PX,
 )
+from tofpose.stages.extraction.records import OwnerMap, Surrounds
 
 #: 8-connectivity
 _EIGHT = np.ones((3, 3), bool)
@@ -63,12 +64,14 @@ def _members(flat, starts, j, window, width) -> np.ndarray:
     return member
 
 
-def _others(owner, ox, oy, use_owner, j, window) -> np.ndarray:
-    """(h', w') bool: the window's pixels that belong to a blob other than j."""
+def _others(owners, j, window) -> np.ndarray:
+    """(h', w') bool: the window's pixels that belong to a blob other than j (owners:
+    an ``OwnerMap``)."""
     y0, y1, x0, x1 = window
     out = np.zeros((y1 - y0, x1 - x0), bool)
-    if not use_owner:
+    if not owners.used:
         return out
+    owner, ox, oy = owners.owner, owners.x0, owners.y0
     oh, ow = owner.shape
     r0, r1, c0, c1 = max(y0, oy), min(y1, oy + oh), max(x0, ox), min(x1, ox + ow)
     if r0 < r1 and c0 < c1:
@@ -82,7 +85,7 @@ def owner_map(flat, starts, bbox, h, w):
     some blob's box grown by ``SURROUND_OUTER_PX`` overlaps another's box. Then owner
     (h', w') int32 (blob index, -1 none) over the union of the boxes grown by 2 px
     (clipped to the (h, w) image), its top-left pixel x0, y0 and True; else a (1, 1)
-    map of -1, 0, 0, False."""
+    map of -1, 0, 0, False: an ``OwnerMap``."""
     b = np.asarray(bbox, np.int64).reshape(-1, 4)
     x, y, bw, bh = b[:, 0], b[:, 1], b[:, 2], b[:, 3]
     s = SURROUND_OUTER_PX
@@ -94,22 +97,23 @@ def owner_map(flat, starts, bbox, h, w):
     )
     np.fill_diagonal(overlap, False)
     if not overlap.any():
-        return np.full((1, 1), -1, np.int32), 0, 0, False
+        return OwnerMap(owner=np.full((1, 1), -1, np.int32), x0=0, y0=0, used=False)
     x0, y0 = int(np.maximum(x - 2, 0).min()), int(np.maximum(y - 2, 0).min())
     x1, y1 = int(np.minimum(x + bw + 2, w).max()), int(np.minimum(y + bh + 2, h).max())
     owner = np.full((y1 - y0, x1 - x0), -1, np.int32)
     for j in range(len(b)):
         rows, cols = np.divmod(_blob(flat, starts, j), w)
         owner[rows - y0, cols - x0] = j
-    return owner, x0, y0, True
+    return OwnerMap(owner=owner, x0=x0, y0=y0, used=True)
 
 
-def blob_surrounds(bbox, gray, distance, owner, ox, oy, use_owner):
+def blob_surrounds(bbox, gray, distance, owners):
     """Each blob's surround: the ring between its box grown by ``SURROUND_INNER_PX`` and
-    by ``SURROUND_OUTER_PX`` (clipped to the image), other blobs' pixels left out.
-    Returns surround_gray (n,) the ring's median gray (NaN: no ring pixel), surround_mm
-    (n,) the median of its ranges (NaN with fewer than 3) and crowded (n,) bool: another
-    blob's pixels lie in the ring. Medians in float32, as ``np.median`` of float32."""
+    by ``SURROUND_OUTER_PX`` (clipped to the image), other blobs' pixels (``owners``, an
+    ``OwnerMap``) left out. Returns ``Surrounds``: gray (n,) the ring's median gray (NaN:
+    no ring pixel), distance_mm (n,) the median of its ranges (NaN with fewer than 3) and
+    crowded (n,) bool: another blob's pixels lie in the ring. Medians in float32, as
+    ``np.median`` of float32."""
     n = len(bbox)
     level, depth = np.full(n, np.nan), np.full(n, np.nan)
     crowded = np.zeros(n, bool)
@@ -123,7 +127,7 @@ def blob_surrounds(bbox, gray, distance, owner, ox, oy, use_owner):
             max(y - si - y0, 0) : max(y + bh + si - y0, 0),
             max(x - si - x0, 0) : max(x + bw + si - x0, 0),
         ] = False
-        others = _others(owner, ox, oy, use_owner, j, window)
+        others = _others(owners, j, window)
         crowded[j] = (ring & others).any()
         ring &= ~others
         g = gray[y0:y1, x0:x1][ring]
@@ -133,7 +137,7 @@ def blob_surrounds(bbox, gray, distance, owner, ox, oy, use_owner):
             level[j] = np.median(g)
         if len(d) >= 3:
             depth[j] = np.median(d)
-    return level, depth, crowded
+    return Surrounds(gray=level, distance_mm=depth, crowded=crowded)
 
 
 def _outer_ring(bbox, j, window) -> np.ndarray:
@@ -152,7 +156,7 @@ def _outer_ring(bbox, j, window) -> np.ndarray:
     )
 
 
-def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
+def occluded_blobs(flat, starts, bbox, distance, rho, owners):
     """(n,) bool: blob j is partly hidden by something in front of it. In its box grown
     by ``SURROUND_OUTER_PX`` (its own and other blobs' pixels left out), the ranged
     pixels nearer than ``rho[j] - OCCLUSION_MARGIN_MM`` that are 8-connected to a near
@@ -161,7 +165,7 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
     ``OCCLUSION_MIN_OUTER_PX`` of them on the window's outermost ring, and its median
     range is nearer than rho[j] by more than the larger of ``OCCLUSION_MARGIN_MM`` and
     ``OCCLUSION_NOISE_SIGMAS`` x 1.4826 MAD of the window's other ranged pixels (0 with
-    fewer than 3). rho (n,) mm; a NaN range is never occluded."""
+    fewer than 3). rho (n,) mm; owners : an ``OwnerMap``; a NaN range is never occluded."""
     n = len(bbox)
     w = distance.shape[1]
     out = np.zeros(n, bool)
@@ -172,7 +176,7 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
         y0, y1, x0, x1 = window
         member = _members(flat, starts, j, window, w)
         d = distance[y0:y1, x0:x1]
-        ranged = ~member & np.isfinite(d) & ~_others(owner, ox, oy, use_owner, j, window)
+        ranged = ~member & np.isfinite(d) & ~_others(owners, j, window)
         near = ranged & (d.astype(float) < rho[j] - OCCLUSION_MARGIN_MM)
         touching = near & ndimage.binary_dilation(member, _EIGHT)
         labels, _ = ndimage.label(near, _EIGHT)
@@ -190,44 +194,29 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owner, ox, oy, use_owner):
     return out
 
 
-def blob_mixing(
-    flat,
-    starts,
-    bbox,
-    gray,
-    member_distance,
-    distance,
-    surround_gray,
-    surround_mm,
-    crowded,
-    dark,
-    owner,
-    ox,
-    oy,
-    use_owner,
-):
+def blob_mixing(flat, starts, bbox, gray, member_distance, distance, surrounds, dark, owners):
     """The mixing model's sums of each blob over its support (its pixels dilated by one,
     other blobs' pixels left out): (n, ``MIX_FIELDS``) rows (a_b, d_b, S_a, S_ad,
     C_unranged, n_support), NaN rows for a crowded blob or an unknown surround.
 
-    a_b = surround_gray - dark, d_b = surround_mm; a support pixel with a range (from
+    a_b = surrounds.gray - dark, d_b = surrounds.distance_mm; a support pixel with a range (from
     ``member_distance`` at the blob's pixels, ``distance`` elsewhere) adds
     a_p - a_b to S_a and a_p d_p - a_b d_b to S_ad (a_p = gray - dark); one without adds
     its covered fraction ``clip((g - g_b) / (g_max - g_b), 0, 1)`` to C_unranged, g_max
     the brightest member (nothing when no member is brighter than the surround).
-    surround_gray, surround_mm, crowded (n,): ``blob_surrounds``; dark : counts."""
+    surrounds : ``blob_surrounds``' ``Surrounds``; dark : counts; owners : an ``OwnerMap``."""
     n = len(bbox)
     w = gray.shape[1]
     out = np.full((n, MIX_FIELDS), np.nan)
     for j in range(n):
-        gb, db = surround_gray[j], surround_mm[j]
-        if crowded[j] or not (np.isfinite(gb) and np.isfinite(db)):
+        gb, db = surrounds.gray[j], surrounds.distance_mm[j]
+        if surrounds.crowded[j] or not (np.isfinite(gb) and np.isfinite(db)):
             continue
         window = _box(bbox, j, 1, gray.shape)
         y0, y1, x0, x1 = window
         member = _members(flat, starts, j, window, w)
         support = ndimage.binary_dilation(member, _EIGHT)
-        support &= ~_others(owner, ox, oy, use_owner, j, window)
+        support &= ~_others(owners, j, window)
         g = gray[y0:y1, x0:x1].astype(float)
         d = np.where(member, member_distance[y0:y1, x0:x1], distance[y0:y1, x0:x1])
         d = d.astype(float)

@@ -4,9 +4,11 @@ docs/algorithm.md, "Measurement sigmas").
 
 Shapes: gray (H, W) counts; distance (H, W) mm (NaN: no range); a blob is its member
 pixels as flat indices (P,) and its centroid (2,) px (u, v). ``constants`` are the
-model's constants and floors (fields ``floor_px``, ``floor_mm``, ``single_px``,
-``split_px``, ``pool_min``, ``median_eff``, ``uncal_mm``: what
-``tofpose.stages.extraction.uncertainty.kernel_constants`` builds).
+model's constants and floors (a ``core.records.SigmaConstants``, read by field name:
+``centroid_sigma_floor_px``, ``range_sigma_floor_mm``, ``single_pixel_sigma_px``,
+``split_centroid_px``, ``pool_min_pixels``, ``median_efficiency``,
+``uncalibrated_range_sigma_mm``; what ``tofpose.stages.extraction.uncertainty.kernel_constants``
+builds).
 """
 
 from __future__ import annotations
@@ -33,13 +35,15 @@ def shot_noise_centroid_px(gray, pixels, centroid_uv, background) -> float:
 
 def centroid_sigma_px(gray, pixels, centroid_uv, background, split: bool, constants) -> float:
     """A blob's centroid sigma per image axis, px: shot noise, the floor, the pixel
-    grid's sampling error (single_px n^-1.5) and, for a half cut out of a merged pair,
-    the neighbour's light at the cut (split_px / sqrt(n)), in quadrature."""
+    grid's sampling error (single_pixel_sigma_px n^-1.5) and, for a half cut out of a
+    merged pair, the neighbour's light at the cut (split_centroid_px / sqrt(n)), in
+    quadrature."""
     n = len(pixels)
-    sampling = constants.single_px * max(float(n), 1.0) ** -1.5
-    neighbour = constants.split_px / np.sqrt(n) if split else 0.0
+    sampling = constants.single_pixel_sigma_px * max(float(n), 1.0) ** -1.5
+    neighbour = constants.split_centroid_px / np.sqrt(n) if split else 0.0
     shot = shot_noise_centroid_px(gray, pixels, centroid_uv, background)
-    return float(np.sqrt(shot**2 + constants.floor_px**2 + sampling**2 + neighbour**2))
+    floor = constants.centroid_sigma_floor_px
+    return float(np.sqrt(shot**2 + floor**2 + sampling**2 + neighbour**2))
 
 
 def range_spread(gray, distance, pixels, background) -> tuple[float, float, int]:
@@ -62,15 +66,16 @@ def range_spread(gray, distance, pixels, background) -> tuple[float, float, int]
 
 def range_sigmas_mm(gray, distance, blobs_pixels, background, constants) -> np.ndarray:
     """Each blob's range sigma (n,), mm: k (the median over the frame's blobs with at
-    least pool_min valid ranges of their MAD / unit) pools the noise model; a blob's
-    per-pixel sigma is the larger of its own MAD and k times its unit, times the median's
-    efficiency over sqrt(n_valid), at least the floor; uncal_mm when nothing calibrates
-    k and the blob has fewer than 3 ranges."""
+    least pool_min_pixels valid ranges of their MAD / unit) pools the noise model; a
+    blob's per-pixel sigma is the larger of its own MAD and k times its unit, times the
+    median's efficiency over sqrt(n_valid), at least the floor;
+    uncalibrated_range_sigma_mm when nothing calibrates k and the blob has fewer than 3
+    ranges."""
     spreads = [range_spread(gray, distance, p, background) for p in blobs_pixels]
     ratios = [
         mad / unit
         for mad, unit, n in spreads
-        if n >= constants.pool_min and np.isfinite(mad) and unit > 0
+        if n >= constants.pool_min_pixels and np.isfinite(mad) and unit > 0
     ]
     k = float(np.median(ratios)) if ratios else np.nan
     out = []
@@ -78,10 +83,10 @@ def range_sigmas_mm(gray, distance, blobs_pixels, background, constants) -> np.n
         per_pixel = mad if np.isfinite(mad) else 0.0
         if np.isfinite(k):
             per_pixel = max(per_pixel, k * (unit if np.isfinite(unit) else 0.0))
-        s = constants.median_eff * per_pixel / np.sqrt(max(n, 1))
+        s = constants.median_efficiency * per_pixel / np.sqrt(max(n, 1))
         if not np.isfinite(k) and n < 3:
-            s = constants.uncal_mm
-        out.append(max(s, constants.floor_mm))
+            s = constants.uncalibrated_range_sigma_mm
+        out.append(max(s, constants.range_sigma_floor_mm))
     return np.array(out)
 
 

@@ -117,34 +117,20 @@ def persist_and_measure(
 
     # Eqs. 19-20 on the combined frames
     k_bbox = bbox[kept]
-    owner, ox, oy, use_owner = owner_map(k_flat, k_starts, k_bbox, h, w)
-    s_gray, s_mm, crowded = blob_surrounds(k_bbox, gray, distance, owner, ox, oy, use_owner)
+    owners = owner_map(k_flat, k_starts, k_bbox, h, w)
+    surrounds = blob_surrounds(k_bbox, gray, distance, owners)
     level = np.empty(kept.shape[0])
     for a in range(kept.shape[0]):
-        level[a] = s_gray[a] if np.isfinite(s_gray[a]) else background
-    k_uv = blob_centroids(
-        k_flat, k_starts, k_bbox, mean_gray, level, True, owner, ox, oy, use_owner
-    )
+        s_gray = surrounds.gray[a]
+        level[a] = s_gray if np.isfinite(s_gray) else background
+    k_uv = blob_centroids(k_flat, k_starts, k_bbox, mean_gray, level, True, owners)
     k_mix = blob_mixing(
-        k_flat,
-        k_starts,
-        k_bbox,
-        mean_gray,
-        med_dist,
-        distance,
-        s_gray,
-        s_mm,
-        crowded,
-        dark,
-        owner,
-        ox,
-        oy,
-        use_owner,
+        k_flat, k_starts, k_bbox, mean_gray, med_dist, distance, surrounds, dark, owners
     )
     k_rho = blob_ranges(
         k_flat, k_starts, med_dist.reshape(-1), pixel_bearings, bearings(k_uv, fx, fy, cx, cy, dist)
     )
-    hidden = occluded_blobs(k_flat, k_starts, k_bbox, distance, k_rho, owner, ox, oy, use_owner)
+    hidden = occluded_blobs(k_flat, k_starts, k_bbox, distance, k_rho, owners)
     for a in range(kept.shape[0]):
         if hidden[a]:  # partly hidden: no range, so no measurement
             k_rho[a] = np.nan
@@ -243,13 +229,7 @@ def measure_and_back_project(
         med_dist,
         background,
         r_split,
-        sigmas.floor_px,
-        sigmas.floor_mm,
-        sigmas.single_px,
-        sigmas.split_px,
-        sigmas.pool_min,
-        sigmas.median_eff,
-        sigmas.uncal_mm,
+        sigmas,
     )
     e = bearings(r_uv, fx, fy, cx, cy, dist)
     y = np.empty((n_ranged, 3))

@@ -43,12 +43,14 @@ def _pixel_lists(blobs) -> tuple[np.ndarray, np.ndarray]:
     return flat, starts
 
 
-def _owner_image(owner, ox, oy, use_owner, shape):
-    """``owner_map``'s map pasted into a (H, W) image of -1, or None when not used."""
-    if not use_owner:
+def _owner_image(owners, shape):
+    """``owner_map``'s map (an ``OwnerMap``) pasted into a (H, W) image of -1, or None
+    when not used."""
+    if not owners.used:
         return None
     full = np.full(shape, -1, np.int32)
-    full[oy : oy + owner.shape[0], ox : ox + owner.shape[1]] = owner
+    oy, ox = owners.y0, owners.x0
+    full[oy : oy + owners.owner.shape[0], ox : ox + owners.owner.shape[1]] = owners.owner
     return full
 
 
@@ -130,41 +132,24 @@ def persist_and_measure(
     kept = np.flatnonzero(keep)
     k_flat, k_starts = _pixel_lists([blobs[j] for j in kept])
     k_bbox = np.asarray(bbox, np.int64).reshape(-1, 4)[kept]
-    owner, ox, oy, use_owner = mixed_pixels.owner_map(k_flat, k_starts, k_bbox, h, w)
-    s_gray, s_mm, crowded = mixed_pixels.blob_surrounds(
-        k_bbox, gray, distance, owner, ox, oy, use_owner
-    )
-    owner_full = _owner_image(owner, ox, oy, use_owner, (h, w))
+    owners = mixed_pixels.owner_map(k_flat, k_starts, k_bbox, h, w)
+    surrounds = mixed_pixels.blob_surrounds(k_bbox, gray, distance, owners)
+    owner_full = _owner_image(owners, (h, w))
     K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
     bearing_image = np.asarray(pixel_bearings).reshape(h, w, 3)
     k_uv = np.empty((len(kept), 2))
     k_rho = np.empty(len(kept))
     for a, j in enumerate(kept):
-        level = s_gray[a] if np.isfinite(s_gray[a]) else background
+        level = surrounds.gray[a] if np.isfinite(surrounds.gray[a]) else background
         k_uv[a] = blob_centroid(
             mean_gray, blobs[j], tuple(k_bbox[a]), np.float32(level), owner_full, a, coverage=True
         )
         e_c = bearings(k_uv[a][None], K, dist)[0]
         k_rho[a] = blob_range(med_dist, blobs[j], bearing_image, e_c)
-    hidden = mixed_pixels.occluded_blobs(
-        k_flat, k_starts, k_bbox, distance, k_rho, owner, ox, oy, use_owner
-    )
+    hidden = mixed_pixels.occluded_blobs(k_flat, k_starts, k_bbox, distance, k_rho, owners)
     k_rho[hidden] = np.nan
     k_mix = mixed_pixels.blob_mixing(
-        k_flat,
-        k_starts,
-        k_bbox,
-        mean_gray,
-        med_dist,
-        distance,
-        s_gray,
-        s_mm,
-        crowded,
-        dark,
-        owner,
-        ox,
-        oy,
-        use_owner,
+        k_flat, k_starts, k_bbox, mean_gray, med_dist, distance, surrounds, dark, owners
     )
     uv = np.full((n, 2), np.nan)
     rho = np.full(n, np.nan)

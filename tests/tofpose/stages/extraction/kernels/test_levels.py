@@ -69,7 +69,7 @@ def test_threshold_mask_is_numpy_threshold_with_opencv_bounding_box():
     for trial in range(200):
         g = rng.gamma(2.0, 30.0, (60, 80)).astype(np.float32)
         threshold = float(rng.uniform(50.0, 400.0)) if trial % 5 else 1e9  # some empty
-        mask, runs, n, *box = threshold_mask(g, threshold)
+        mask, runs, n, box = threshold_mask(g, threshold)
         want = (g >= np.float32(threshold)).view(np.uint8)
         np.testing.assert_array_equal(mask, want)
         assert n == int(want.sum())

@@ -88,11 +88,9 @@ def _occluded(blob, dist):
     flat = np.asarray(blob.pixels, np.int64)
     starts = np.array([0, len(flat)], np.int64)
     bbox = np.array([blob.bbox], np.int64)
-    owner, ox, oy, use = owner_map(flat, starts, bbox, *dist.shape)
+    owners = owner_map(flat, starts, bbox, *dist.shape)
     rho = np.array([float(np.median(dist.reshape(-1)[flat]))])
-    return bool(
-        occluded_blobs(flat, starts, bbox, dist.astype(np.float32), rho, owner, ox, oy, use)[0]
-    )
+    return bool(occluded_blobs(flat, starts, bbox, dist.astype(np.float32), rho, owners)[0])
 
 
 def test_a_marker_with_an_arm_across_its_edge_is_occluded_and_noise_is_not():

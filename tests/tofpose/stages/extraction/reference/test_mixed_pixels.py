@@ -13,6 +13,7 @@ import pytest
 from tests.tofpose.stages.persistence.reference.test_measure import captured_stream
 from tofpose.stages.extraction.kernels import centroids as compiled_centroids
 from tofpose.stages.extraction.kernels import mixed_pixels as compiled
+from tofpose.stages.extraction.records import OwnerMap, Surrounds
 from tofpose.stages.extraction.reference import mixed_pixels as reference
 
 #: (range mm, room seed, frame): frames of ``test_measure``'s streams
@@ -53,16 +54,16 @@ def _both(flat, starts, bbox, gray, distance, dark):
     own_c = compiled_centroids.owner_map(flat, starts, bbox, h, w)
     own_r = reference.owner_map(flat, starts, bbox, h, w)
     out["owner_map"] = own_c, own_r
-    sur_c = compiled.blob_surrounds(bbox, gray, distance, *own_c)
-    sur_r = reference.blob_surrounds(bbox, gray, distance, *own_r)
+    sur_c = compiled.blob_surrounds(bbox, gray, distance, own_c)
+    sur_r = reference.blob_surrounds(bbox, gray, distance, own_r)
     out["blob_surrounds"] = sur_c, sur_r
     rho = _blob_ranges(flat, starts, distance)
     pairs = ((compiled, own_c), (reference, own_r))
     out["occluded_blobs"] = tuple(
-        m.occluded_blobs(flat, starts, bbox, distance, rho, *own) for m, own in pairs
+        m.occluded_blobs(flat, starts, bbox, distance, rho, own) for m, own in pairs
     )
     mix = [
-        m.blob_mixing(flat, starts, bbox, gray, distance, distance, *sur_c, dark, *own)
+        m.blob_mixing(flat, starts, bbox, gray, distance, distance, sur_c, dark, own)
         for m, own in pairs
     ]
     out["blob_mixing"] = tuple(mix)
@@ -113,8 +114,8 @@ def test_the_rendered_frames_reach_every_branch():
         args, _ = captured_stream(distance_mm, seed, False)[frame]
         flat, starts, bbox = _arrays(*args[2:5])
         r = _both(flat, starts, bbox, args[0], args[1], float(args[9]))
-        seen["use_owner"] += r["owner_map"][1][3]
-        seen["crowded"] += r["blob_surrounds"][1][2].sum()
+        seen["use_owner"] += r["owner_map"][1].used
+        seen["crowded"] += r["blob_surrounds"][1].crowded.sum()
         seen["occluded"] += r["occluded_blobs"][1].sum()
         mix = r["blob_mixing"][1]
         seen["mixed"] += np.isfinite(mix[:, 0]).sum()
@@ -123,6 +124,10 @@ def test_the_rendered_frames_reach_every_branch():
             reference.unmixed_range(rho[j], mix[j], 1.0, 1.0, 4.0)[1] > 0 for j in range(len(rho))
         )
     assert all(v > 0 for v in seen.values()), seen
+
+
+#: no blob owns a pixel (no neighbour to leave out)
+NO_OWNERS = OwnerMap(owner=np.full((1, 1), -1, np.int32), x0=0, y0=0, used=False)
 
 
 # -- known truth --------------------------------------------------------------------------
@@ -152,20 +157,17 @@ def test_a_tilted_plate_around_a_blob_has_the_level_at_its_centre():
     gray[20:23, 20:23] = 900.0
     flat, starts, bbox = _lists(blob)
     owner = reference.owner_map(flat, starts, bbox, H, W)
-    level, depth, crowded = reference.blob_surrounds(bbox, gray, distance, *owner)
+    level, depth, crowded = reference.blob_surrounds(bbox, gray, distance, owner)
     assert (level[0], depth[0], crowded[0]) == (100.0, 4000.0, False)
     distance[17, 17:26] = np.nan  # the top row of the ring without a range: median shifts
-    assert (
-        reference.blob_surrounds(bbox, gray, distance, np.full((1, 1), -1), 0, 0, False)[1][0]
-        == 4002.0
-    )
+    assert reference.blob_surrounds(bbox, gray, distance, NO_OWNERS).distance_mm[0] == 4002.0
     # a bright neighbour two columns to the right: its pixels reach the ring
     neighbour = _square(25, 20, 3)
     gray[20:23, 25:28] = 3000.0
     flat, starts, bbox = _lists(blob, neighbour)
     owner = reference.owner_map(flat, starts, bbox, H, W)
-    assert owner[3] and owner[0][20 - owner[2], 25 - owner[1]] == 1
-    level, _, crowded = reference.blob_surrounds(bbox, gray, distance, *owner)
+    assert owner.used and owner.owner[20 - owner.y0, 25 - owner.x0] == 1
+    level, _, crowded = reference.blob_surrounds(bbox, gray, distance, owner)
     assert crowded.tolist() == [True, True] and level[0] < 900.0
 
 
@@ -178,7 +180,7 @@ def _occlusion_frame():
 
 def _occluded(distance, flat, starts, bbox):
     rho = np.array([5000.0])
-    args = (flat, starts, bbox, distance, rho, *reference.owner_map(flat, starts, bbox, H, W))
+    args = (flat, starts, bbox, distance, rho, reference.owner_map(flat, starts, bbox, H, W))
     got = bool(reference.occluded_blobs(*args)[0])
     assert got == bool(compiled.occluded_blobs(*args)[0])
     return got
@@ -221,6 +223,9 @@ def test_the_mixing_sums_of_a_partly_covering_disc_give_its_coverage_and_range()
     bbox = np.array([[cols.min(), rows.min(), np.ptp(cols) + 1, np.ptp(rows) + 1]], np.int64)
     flat, starts = member.astype(np.int64), np.array([0, len(member)], np.int64)
     owner = reference.owner_map(flat, starts, bbox, H, W)
+    surround = Surrounds(
+        gray=np.array([a_b + dark]), distance_mm=np.array([d_b]), crowded=np.array([False])
+    )
     mix = reference.blob_mixing(
         flat,
         starts,
@@ -228,11 +233,9 @@ def test_the_mixing_sums_of_a_partly_covering_disc_give_its_coverage_and_range()
         gray,
         distance,
         distance,
-        np.array([a_b + dark]),
-        np.array([d_b]),
-        np.array([False]),
+        surround,
         dark,
-        *owner,
+        owner,
     )[0]
     # the float32 gray holds the amplitudes to ~3e-5 counts
     area = cover.sum()
@@ -250,11 +253,9 @@ def test_the_mixing_sums_of_a_partly_covering_disc_give_its_coverage_and_range()
         gray,
         distance,
         distance,
-        np.array([a_b + dark]),
-        np.array([d_b]),
-        np.array([False]),
+        surround,
         dark,
-        *owner,
+        owner,
     )[0]
     assert mix[4] == pytest.approx(0.2, abs=1e-6)
     assert reference.unmixed_range(5100.0, mix, radius, 1.0, 4.0)[0] == pytest.approx(d_r, abs=0.01)

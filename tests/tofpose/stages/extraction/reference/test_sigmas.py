@@ -43,7 +43,7 @@ def test_without_any_pooled_blob_a_rangeless_blob_gets_the_uncalibrated_sigma():
     gray = np.full((4, 4), 300.0)
     dist = np.full((4, 4), np.nan, np.float32)
     got = reference.range_sigmas_mm(gray, dist, [np.array([0, 1])], 50.0, CONSTANTS)
-    assert got.tolist() == [CONSTANTS.uncal_mm]
+    assert got.tolist() == [CONSTANTS.uncalibrated_range_sigma_mm]
 
 
 def test_eq_21_weights_are_the_inverse_point_variances():
