@@ -34,6 +34,7 @@ from tofpose.core.tof import SPEED_OF_LIGHT_MM_S
 from tofpose.sim.scene import FIRST_DISC, NO_HIT, PLATE, WALL, SceneInCamera, TargetScene
 from tofpose.sim.systematic import SystematicErrors
 
+#: the EPC660's 12-bit full scale: the auto exposure's reference level
 FULL_SCALE_COUNTS = 4095
 
 AMBIENT_NORMAL_LUX = 1000.0
@@ -431,11 +432,12 @@ def render_frame(
         dist = dist + sigma * noise_rng.standard_normal((h, w))
         gray = gray + np.sqrt(amp + b_img) * noise_rng.standard_normal((h, w))
     dist = np.mod(dist, sensor.unambiguous_range_mm)
-    saturated = (amp + b_img) >= FULL_SCALE_COUNTS
+    full_scale = camera.full_scale_counts  # the camera's clip level (4095: 12 bits)
+    saturated = (amp + b_img) >= full_scale
     invalid = saturated | (amp < sensor.min_amplitude_counts)
     dist[invalid] = np.nan
-    gray = np.clip(np.rint(gray), 0, FULL_SCALE_COUNTS)
-    gray[saturated] = FULL_SCALE_COUNTS
+    gray = np.clip(np.rint(gray), 0, full_scale)
+    gray[saturated] = full_scale
     return RenderedFrame(
         gray=gray.astype(np.uint16),
         distance_mm=dist.astype(np.float32),

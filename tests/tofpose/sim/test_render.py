@@ -156,3 +156,23 @@ def test_a_slewing_table_smears_edges_along_the_motion():
     markers = sid >= FIRST_DISC
     hit_markers = {int(sid[r, c]) for r, c in zip(rows, cols, strict=True) if markers[r, c]}
     assert len(hit_markers) >= 6  # the markers' own edge pixels are among them
+
+
+def test_saturation_is_the_cameras_full_scale():
+    """The same over-exposed scene clips at 4095 on the default camera and at the full
+    scale of a camera that states another; the clipped pixels have no distance."""
+    import numpy as np
+
+    from tofpose.core.camera import CameraModel
+    from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg
+    from tofpose.sim.bench import R_FACING
+    from tofpose.sim.render import SensorModel, render_frame
+    from tofpose.sim.scene import TargetScene
+
+    T = RigidTransform(rotation_from_euler_deg(0, 0, 5) @ R_FACING, np.array([0, 0, 2000.0]))
+    hot = SensorModel(auto_exposure=False, integration_time_us=4000.0, noise=False)
+    for full_scale in (4095.0, 1000.0):
+        f = render_frame(CameraModel(full_scale_counts=full_scale), TargetScene(), T, hot)
+        clipped = f.gray >= full_scale
+        assert clipped.any() and f.gray.max() == full_scale
+        assert np.isnan(f.distance_mm[clipped]).all()
