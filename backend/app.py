@@ -49,18 +49,18 @@ from backend.drivers.base import CameraSettings
 from backend.drivers.factory import Devices, build_devices
 from backend.file_modes import restrict_data_dir
 from backend.limits import BodySizeLimit
-from backend.services.acquisition import AcquisitionService
 from backend.services.audit import AuditService
-from backend.services.batch_queue import BatchQueue
-from backend.services.campaigns import CampaignService
-from backend.services.hub import LiveHub
-from backend.services.kernel_warmup import KernelWarmup
+from backend.services.campaigns.campaigns import CampaignService
+from backend.services.jobs.batch_queue import BatchQueue
+from backend.services.jobs.reprocessing import ReprocessService
+from backend.services.jobs.studies import StudyService
 from backend.services.keys import KeyService
+from backend.services.live.acquisition import AcquisitionService
+from backend.services.live.hub import LiveHub
+from backend.services.live.kernel_warmup import KernelWarmup
 from backend.services.motion import MotionService
 from backend.services.recordings import RecordingService
-from backend.services.reprocessing import ReprocessService
 from backend.services.store import find_catalog, load_device_settings
-from backend.services.studies import StudyService
 from backend.settings import Settings
 from backend.state import AppState
 from tofpose.config import TrackingConfig
@@ -125,13 +125,13 @@ def _start_scene(state: AppState) -> None:
     if refusal is not None:
         state.scene_reason = refusal
         return
-    from backend.services.scene import LiveScene
+    from backend.services.live.scene import LiveScene
 
     rail = state.motion.axes.get("rail")
     s = state.settings
     try:
         # The scene's port answers the main port's names and origins only (its Host and
-        # Origin check, backend/services/scene.py); the dashboard, on s.port, frames it.
+        # Origin check, backend/services/live/scene.py); the dashboard, on s.port, frames it.
         state.scene = LiveScene(
             state.hub,
             state.acquisition,
@@ -154,7 +154,7 @@ def _start_foxglove(state: AppState) -> None:
     if refusal is not None:
         state.foxglove_reason = refusal
         return
-    from backend.services.foxglove_live import LiveFoxglove
+    from backend.services.live.foxglove_live import LiveFoxglove
 
     try:
         state.foxglove = LiveFoxglove(
@@ -288,7 +288,7 @@ def _lifespan(settings: Settings, devices: Devices | None):
             recordings=recordings,
         )
         # the pipeline's compiled kernels (tofpose.warmup): in the background while frames
-        # already stream (backend/services/kernel_warmup.py), or before the first frame
+        # already stream (backend/services/live/kernel_warmup.py), or before the first frame
         if settings.kernels_in_background:
             kernels.start()
         else:

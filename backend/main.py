@@ -201,7 +201,14 @@ def report(opts: dict) -> int:
     from backend.db.engine import make_engine, make_session_factory
     from backend.db.models import CampaignRow
     from backend.services.calibrations import get_calibration
-    from backend.services.reports import ReportError, build, to_csv, to_html, to_json, to_pdf
+    from backend.services.reports.reports import (
+        ReportError,
+        build,
+        to_csv,
+        to_html,
+        to_json,
+        to_pdf,
+    )
 
     try:
         engine = make_engine(opts["db"])

@@ -20,7 +20,7 @@ receives, so a second one can only restrict). Installed outermost by
 limit's 413 too; an unhandled exception's 500, written by Starlette's outermost error
 middleware, has none of them (a bare error text, nothing to frame or sniff usefully).
 
-The 3-D scene's port (``backend.services.scene``) sends the same ``nosniff`` and
+The 3-D scene's port (``backend.services.live.scene``) sends the same ``nosniff`` and
 ``Referrer-Policy`` (``SCENE_HEADERS``), with a ``frame-ancestors`` naming the dashboard
 instead of ``'none'``: the dashboard shows the scene in a frame.
 """

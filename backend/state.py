@@ -11,17 +11,17 @@ from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
 from backend.drivers.factory import Devices
-from backend.services.acquisition import AcquisitionService
 from backend.services.audit import AuditService
-from backend.services.campaigns import CampaignService
+from backend.services.campaigns.campaigns import CampaignService
 from backend.services.heavy_work import HeavyWork
-from backend.services.hub import LiveHub
-from backend.services.imaging import ImageRenderer
+from backend.services.jobs.reprocessing import ReprocessService
+from backend.services.jobs.studies import StudyService
 from backend.services.keys import KeyService
+from backend.services.live.acquisition import AcquisitionService
+from backend.services.live.hub import LiveHub
+from backend.services.live.imaging import ImageRenderer
 from backend.services.motion import MotionService
 from backend.services.recordings import RecordingService
-from backend.services.reprocessing import ReprocessService
-from backend.services.studies import StudyService
 from backend.settings import Settings
 
 
@@ -43,9 +43,9 @@ class AppState:
     heavy_work: HeavyWork = field(default_factory=HeavyWork)  # reports and exports, bounded
     recordings: RecordingService | None = None  # recordings on demand (the lifespan makes it)
     started_monotonic: float = field(default_factory=time.monotonic)
-    scene: Any = None  # backend.services.scene.LiveScene when the 3-D scene runs
+    scene: Any = None  # backend.services.live.scene.LiveScene when the 3-D scene runs
     scene_reason: str = ""  # why it does not run
-    foxglove: Any = None  # backend.services.foxglove_live.LiveFoxglove when it runs
+    foxglove: Any = None  # backend.services.live.foxglove_live.LiveFoxglove when it runs
     foxglove_reason: str = ""  # why it does not run
     live_clients: dict[str, int] = field(default_factory=dict)  # /ws/live connections by address
 

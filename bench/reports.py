@@ -23,8 +23,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from backend.db.engine import make_engine, make_session_factory, upgrade_database  # noqa: E402
 from backend.db.models import MeasurementRow, SetPointRow  # noqa: E402
-from backend.services.campaigns import create_campaign  # noqa: E402
-from backend.services.reports import build, to_csv, to_html, to_json, to_pdf  # noqa: E402
+from backend.services.campaigns.campaigns import create_campaign  # noqa: E402
+from backend.services.reports.reports import build, to_csv, to_html, to_json, to_pdf  # noqa: E402
 from bench._common import single_core, table  # noqa: E402
 
 REQ = {"x_mm": 6.0, "y_mm": 6.0, "z_mm": 28.3, "pitch_deg": 0.15, "yaw_deg": 0.15, "roll_deg": 0.15}

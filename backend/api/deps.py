@@ -11,8 +11,8 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
 
 from backend.services.audit import KEY_NAME_STATE
-from backend.services.campaign_repository import CampaignNotFoundError
-from backend.services.campaign_states import CampaignState
+from backend.services.campaigns.campaign_repository import CampaignNotFoundError
+from backend.services.campaigns.campaign_states import CampaignState
 from backend.services.keys import ApiKey, Scope
 from backend.services.motion import MotionService
 from backend.state import AppState

@@ -37,10 +37,10 @@ from backend.api.schemas import (
 )
 from backend.db.models import POSE_FIELDS, CalibrationRow, MeasurementRow
 from backend.drivers.base import CameraSettings
-from backend.services.acquisition import LiveSample
-from backend.services.campaign_repository import CampaignView
-from backend.services.campaign_states import FINISHED, CampaignState, transition_table
-from backend.services.kernel_warmup import COMPILING_REASON, REFERENCE_DETAIL
+from backend.services.campaigns.campaign_repository import CampaignView
+from backend.services.campaigns.campaign_states import FINISHED, CampaignState, transition_table
+from backend.services.live.acquisition import LiveSample
+from backend.services.live.kernel_warmup import COMPILING_REASON, REFERENCE_DETAIL
 from backend.services.motion import MotionDeviceError
 from backend.state import AppState
 from tofpose.core.geometry import (
@@ -79,7 +79,7 @@ def motion_state(state: AppState) -> DeviceStatePublic:
 def pipeline_state(state: AppState) -> PipelineStatePublic:
     """Whether the live pipeline's compiled kernels are ready (backend/services/
     kernel_warmup.py) and which implementation measures the live frames: the reference
-    one while they compile, the compiled one after (backend/services/acquisition.py)."""
+    one while they compile, the compiled one after (backend/services/live/acquisition.py)."""
     acq = state.acquisition
     kernels, implementation = acq.kernels, acq.implementation
     if kernels is None:
@@ -325,7 +325,7 @@ def campaign_public(
 
 
 def campaign_states_public() -> CampaignStatesPublic:
-    """The campaign state machine (``backend.services.campaign_states``)."""
+    """The campaign state machine (``backend.services.campaigns.campaign_states``)."""
     return CampaignStatesPublic(
         states=list(CampaignState),
         finished=[s for s in CampaignState if s in FINISHED],

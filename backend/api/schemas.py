@@ -16,7 +16,7 @@ from pydantic import (
 )
 from pydantic.json_schema import SkipJsonSchema
 
-from backend.services.campaign_states import CampaignCommand, CampaignState
+from backend.services.campaigns.campaign_states import CampaignCommand, CampaignState
 
 
 class StrictBody(BaseModel):

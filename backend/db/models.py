@@ -59,7 +59,7 @@ POSE_FIELDS = ("x_mm", "y_mm", "z_mm", "pitch_deg", "yaw_deg", "roll_deg")
 class CampaignRow(Base):
     """A turntable test campaign: a set-point sequence measured N frames per point.
 
-    status : a ``backend.services.campaign_states.CampaignState`` (docs/campaigns.md has
+    status : a ``backend.services.campaigns.campaign_states.CampaignState`` (docs/campaigns.md has
         the state diagram; that module has the transition table).
     settle_s : wait after the turntable reports settled before frames count (device time).
     requirements : per-axis accuracy requirements, e.g. {"x_mm": 6.0, ..., "roll_deg": 0.15}.

@@ -44,7 +44,7 @@ from backend.drivers.base import (
     profile_problems,
     soft_limit_problems,
 )
-from backend.services.acquisition import DeviceHealth
+from backend.services.live.acquisition import DeviceHealth
 from tofpose.lab.motion_profile import LimitProblem, MotionProfile, profile_from_spec
 
 log = logging.getLogger(__name__)

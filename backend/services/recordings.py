@@ -67,8 +67,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from backend.services.acquisition import LiveSample
-from backend.services.hub import LiveHub, Subscription
+from backend.services.live.acquisition import LiveSample
+from backend.services.live.hub import LiveHub, Subscription
 from backend.services.motion import MotionService
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import Catalog

@@ -9,7 +9,7 @@ import pytest
 from playwright.sync_api import expect
 
 from backend.db.models import CalibrationRow
-from backend.services.live_reference import NOMINAL_LABEL
+from backend.services.live.live_reference import NOMINAL_LABEL
 from tests.backend.conftest import TOKEN, LiveServer, make_settings
 from tests.e2e.conftest import SHOTS
 

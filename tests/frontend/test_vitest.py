@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from backend.services.frame_codec import decode_raw_frame, encode_raw_frame
+from backend.services.live.frame_codec import decode_raw_frame, encode_raw_frame
 
 FRONTEND = Path(__file__).resolve().parents[2] / "frontend"
 FIXTURE = FRONTEND / "src" / "fixtures" / "raw-frame.json"

@@ -32,18 +32,18 @@ from backend.api.schemas import (
     MeasurementPage,
 )
 from backend.services.calibrations import get_calibration
-from backend.services.campaign_repository import CampaignNotFoundError, CampaignView
-from backend.services.campaign_requests import (
+from backend.services.campaigns.campaign_repository import CampaignNotFoundError, CampaignView
+from backend.services.campaigns.campaign_requests import (
     Planning,
     dynamic_spec,
     expand,
     plan_problems,
     profile_plan_problems,
 )
-from backend.services.campaign_states import CampaignConflictError
+from backend.services.campaigns.campaign_states import CampaignConflictError
+from backend.services.campaigns.mcap_files import ExportSpaceError, recording_mcap
 from backend.services.heavy_work import HeavyWorkBusyError
-from backend.services.mcap_files import ExportSpaceError, recording_mcap
-from backend.services.reports import ReportError, build, to_csv, to_html, to_json, to_pdf
+from backend.services.reports.reports import ReportError, build, to_csv, to_html, to_json, to_pdf
 from backend.services.store import NameTakenError, find_catalog
 from backend.state import AppState
 

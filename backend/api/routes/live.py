@@ -9,7 +9,7 @@ Protocol (JSON text messages):
   "image_every": 5, "image_step": 2, "raw": false, "points": true}``. Then every
   ``image_every``-th frame also brings ``{"type": "image", "kind", "frame_index",
   "png_base64"}`` (the image shrunk ``image_step`` times) or, with ``raw``, one binary
-  message holding both images as uint16 (``backend.services.frame_codec``; the browser
+  message holding both images as uint16 (``backend.services.live.frame_codec``; the browser
   colour-maps them). Images are skipped, never queued, when a newer frame is already
   waiting for this client (its pose messages still all go out). Raw frames are also
   flow-controlled: at most ``raw_credit`` (default 2; 0 = no limit) may be unacknowledged;
@@ -58,8 +58,8 @@ from pydantic import Field, ValidationError, field_validator
 
 from backend.api.presenters import pose_public
 from backend.api.schemas import StrictBody
-from backend.services.acquisition import LiveSample, frame_point_cloud_mm
-from backend.services.frame_codec import encode_raw_frame
+from backend.services.live.acquisition import LiveSample, frame_point_cloud_mm
+from backend.services.live.frame_codec import encode_raw_frame
 from backend.state import AppState
 
 log = logging.getLogger("tofpose.server")

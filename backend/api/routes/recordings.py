@@ -19,8 +19,8 @@ from pydantic import BaseModel, Field
 from backend.api.contract import ErrorPublic, errors
 from backend.api.deps import AdminAuth, ReadAuth, StateDep, WriteAuth
 from backend.api.schemas import StrictBody
+from backend.services.campaigns.mcap_files import ExportSpaceError, recording_mcap
 from backend.services.heavy_work import HeavyWorkBusyError
-from backend.services.mcap_files import ExportSpaceError, recording_mcap
 from backend.services.recordings import (
     MAX_DURATION_S,
     MB,

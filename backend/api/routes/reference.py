@@ -1,5 +1,5 @@
 """GET / PUT /api/reference: which lab reference the live error is measured against
-(backend/services/live_reference.py): the nominal lab geometry, or a stored calibration.
+(backend/services/live/live_reference.py): the nominal lab geometry, or a stored calibration.
 Campaign rows keep the nominal reference; reports apply a calibration with
 ``?calibration=ID``."""
 
@@ -11,7 +11,7 @@ from backend.api.contract import errors
 from backend.api.deps import ReadAuth, SessionDep, StateDep, WriteAuth
 from backend.api.schemas import ReferencePublic, ReferenceUpdate
 from backend.services.calibrations import count_calibrations, get_calibration
-from backend.services.live_reference import LiveReference
+from backend.services.live.live_reference import LiveReference
 from backend.state import AppState
 
 router = APIRouter(prefix="/api/reference", tags=["calibrations"])

@@ -18,7 +18,7 @@ from backend.api.deps import (
     unprocessable,
 )
 from backend.api.schemas import ReprocessCreate, ReprocessPublic
-from backend.services.reprocessing import (
+from backend.services.jobs.reprocessing import (
     FILES,
     ReprocessRequestError,
     UnknownReprocessingError,

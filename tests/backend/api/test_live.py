@@ -316,7 +316,7 @@ class KeepingCamera:
 
 def test_raw_frames_are_binary_uint16_pairs_equal_to_what_the_camera_delivered(settings):
     from backend.drivers.factory import build_devices
-    from backend.services.frame_codec import decode_raw_frame
+    from backend.services.live.frame_codec import decode_raw_frame
 
     devs = build_devices(settings)
     devs.camera = KeepingCamera(devs.camera)
@@ -342,7 +342,7 @@ def test_raw_frames_wait_for_the_clients_acknowledgement_and_poses_do_not(client
     """Flow control: with a credit of 2 a client that has drawn nothing gets two raw
     frames and then poses only; acknowledging a frame lets the newest one through (never
     a queue of stale frames); a slow reader still gets every pose."""
-    from backend.services.frame_codec import decode_raw_frame
+    from backend.services.live.frame_codec import decode_raw_frame
 
     def next_kind(ws):
         m = ws.receive()
@@ -371,7 +371,7 @@ def test_raw_frames_wait_for_the_clients_acknowledgement_and_poses_do_not(client
 
 
 def test_raw_frame_decoding_names_what_is_wrong():
-    from backend.services.frame_codec import decode_raw_frame, encode_raw_frame
+    from backend.services.live.frame_codec import decode_raw_frame, encode_raw_frame
 
     good = encode_raw_frame(7, np.zeros((4, 6), np.uint16), np.full((4, 6), np.nan, np.float32))
     assert decode_raw_frame(good)[0] == 7

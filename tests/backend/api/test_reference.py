@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from backend.db.models import CalibrationRow
-from backend.services.live_reference import NOMINAL_LABEL
+from backend.services.live.live_reference import NOMINAL_LABEL
 from tests.backend.conftest import AUTH, latest_pose
 
 

@@ -12,7 +12,7 @@ import pytest
 from backend.api.presenters import pose_from_sample
 from backend.api.schemas import PosePublic
 from backend.drivers.base import CameraFrame
-from backend.services.acquisition import LiveSample, frame_point_cloud_mm
+from backend.services.live.acquisition import LiveSample, frame_point_cloud_mm
 from tests.conftest import facing_pose, render
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import paper_target

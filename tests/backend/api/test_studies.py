@@ -13,9 +13,9 @@ import tracemalloc
 
 import pytest
 
-from backend.services import studies as studies_service
-from backend.services.batch_queue import BatchQueue
-from backend.services.studies import StudyService, TooManyStudiesError, study_limits
+from backend.services.jobs import studies as studies_service
+from backend.services.jobs.batch_queue import BatchQueue
+from backend.services.jobs.studies import StudyService, TooManyStudiesError, study_limits
 from backend.settings import Settings
 from tests.backend.conftest import AUTH, make_settings, running_app, wait_for
 from tofpose.sim.randomise import FAMILIES

@@ -19,9 +19,9 @@ from scipy.spatial.transform import Rotation
 
 from backend.drivers.base import AxisLimits, CameraFrame, MotionStatus
 from backend.services import recordings
-from backend.services.acquisition import LiveSample
-from backend.services.hub import LiveHub
-from backend.services.mcap_files import recording_mcap
+from backend.services.campaigns.mcap_files import recording_mcap
+from backend.services.live.acquisition import LiveSample
+from backend.services.live.hub import LiveHub
 from backend.services.motion import MotionService
 from backend.services.recordings import (
     InsufficientSpaceError,

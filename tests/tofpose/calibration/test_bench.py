@@ -17,7 +17,7 @@ TRUE_Y = NOMINAL_Y.compose(RigidTransform.from_euler_deg(-0.15, 0.1, 0.3, (3.0, 
 
 
 def _set_points(rails=(11000.0, 12500.0), a=8.0):
-    from backend.services.campaign_plan import calibration  # the generator the lab uses
+    from backend.services.campaigns.campaign_plan import calibration  # the generator the lab uses
 
     return calibration(rails_mm=list(rails), amplitude_deg=a)
 

@@ -1,0 +1,287 @@
+"""Re-processing of a stored campaign's recording with another camera calibration, run
+by the server on Dask (``tofpose.batch.reprocess``; docs/scaleout.md).
+
+A job re-runs the pipeline over ``campaign-<id>.h5`` twice, on the batch queue the
+studies use (one job at a time, workers at a lower priority): once with the camera JSON
+the request gave (intrinsics, and the ``range_correction`` / ``covariance_scale`` that
+``tofpose calibrate-range`` and ``calibrate-covariance`` add), and once with the camera
+the recording was made with (the baseline), then compares them frame by frame
+(``tofpose.batch.compare``: B = the new calibration, A = the baseline). Each job lives in
+``<data_dir>/reprocessings/<id>/``: ``job.json`` (the source of truth for its status, so a
+restarted server finds it again), ``camera.json``, ``run/`` and ``baseline/`` (each a
+``tofpose reprocess`` directory: ``campaign-<id>.csv`` is what ``tofpose estimate``
+writes), and ``compare.csv|json|png``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+import threading
+import uuid
+from datetime import UTC, datetime
+from functools import partial
+from pathlib import Path
+
+from backend.services.jobs.batch_queue import BatchQueue
+from tofpose.batch.cluster import default_workers
+from tofpose.batch.compare import compare_runs
+from tofpose.batch.reprocess import ReprocessCancelledError, Settings, reprocess
+from tofpose.io.camera_file import load_camera
+from tofpose.io.recording import RecordingError, open_recording
+
+log = logging.getLogger(__name__)
+
+WORKER_NICENESS = 10
+STATES = ("queued", "running", "complete", "failed", "cancelled")
+# files a client may download, by name: the new calibration's poses, the baseline's, the comparison
+FILES = {
+    "poses.csv": ("run", "text/csv"),
+    "baseline.csv": ("baseline", "text/csv"),
+    "compare.csv": ("compare.csv", "text/csv"),
+    "compare.json": ("compare.json", "application/json"),
+    "compare.png": ("compare.png", "image/png"),
+}
+
+
+class UnknownReprocessingError(KeyError):
+    """No re-processing with that id."""
+
+
+class ReprocessRequestError(ValueError):
+    """A request that cannot run; ``field`` names the request field, the message why."""
+
+    def __init__(self, field: str, message: str):
+        super().__init__(message)
+        self.field = field
+
+
+def _now() -> str:
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+def _write_json(path: Path, doc: dict) -> None:
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+    tmp.write_text(json.dumps(doc, indent=2))
+    os.replace(tmp, path)
+
+
+def check_camera(camera: dict, recording: Path) -> str:
+    """The camera JSON text for ``recording``'s frames; ``ReprocessRequestError`` naming
+    the field when it is not a camera (``tofpose.core.camera.CameraModel``) or its image size
+    differs from the recording's."""
+    text = json.dumps(camera)
+    try:
+        model, _, _ = load_camera(text)
+    except Exception as exc:  # noqa: BLE001 (any field of any JSON type may be wrong)
+        raise ReprocessRequestError("camera", f"not a camera JSON: {exc}") from exc
+    with open_recording(recording) as rec:
+        if model.shape != rec.camera.shape:
+            raise ReprocessRequestError(
+                "camera",
+                f"camera {model.width}x{model.height} does not match the "
+                f"recording's {rec.camera.width}x{rec.camera.height} frames",
+            )
+    return text
+
+
+class ReprocessService:
+    """Submit, list, follow and cancel re-processing jobs (module docstring)."""
+
+    def __init__(
+        self,
+        root: Path,
+        scheduler: str | None = None,
+        workers: int | None = None,
+        jobs: BatchQueue | None = None,
+    ):
+        self.root = Path(root)
+        self.scheduler = scheduler or None
+        self.workers = workers if workers is not None else default_workers(reserve=1)
+        self._own_jobs = jobs is None
+        self.jobs = jobs if jobs is not None else BatchQueue()
+        self._lock = threading.Lock()
+
+    # -- lifecycle --------------------------------------------------------------------
+    def start(self) -> int:
+        """Queue again the jobs a stopped server left queued or running (they start
+        over: a job is a few passes over one recording). Returns how many."""
+        self.root.mkdir(parents=True, exist_ok=True)
+        again = 0
+        for jid in sorted(self._ids()):
+            job = self._read(jid)
+            if job is not None and job["status"] in ("queued", "running"):
+                job["status"] = "queued"
+                _write_json(self._dir(jid) / "job.json", job)
+                self.jobs.put(("reprocess", jid), partial(self._run_one, jid))
+                again += 1
+        if self._own_jobs:
+            self.jobs.start()
+        return again
+
+    def stop(self) -> None:
+        if self._own_jobs:
+            self.jobs.stop()
+
+    # -- commands ---------------------------------------------------------------------
+    def submit(
+        self,
+        campaign_id: int,
+        recording: Path,
+        camera: dict | None,
+        *,
+        tracking: bool = False,
+        filter_state: bool = False,
+    ) -> dict:
+        """Store and queue a job over ``recording`` (campaign ``campaign_id``'s) with
+        ``camera`` (a camera JSON object; None: the recording's own camera, then the run
+        and the baseline agree). ``ReprocessRequestError`` naming the field for a bad
+        camera; nothing is stored then. Returns the job's status."""
+        try:
+            text = check_camera(camera, recording) if camera is not None else None
+        except RecordingError as exc:
+            raise ReprocessRequestError(
+                "campaign_id", f"its recording cannot be read: {exc}"
+            ) from exc
+        with self._lock:
+            jid = max(self._ids(), default=0) + 1
+            d = self._dir(jid)
+            d.mkdir(parents=True)
+            if text is not None:
+                (d / "camera.json").write_text(text)
+            job = {
+                "id": jid,
+                "campaign_id": campaign_id,
+                "recording": str(recording),
+                "camera": "given" if text is not None else "recording",
+                "tracking": tracking,
+                "filter": filter_state,
+                "status": "queued",
+                "created": _now(),
+                "started": None,
+                "finished": None,
+                "error": None,
+                "frames": None,
+                "summary": None,
+            }
+            _write_json(d / "job.json", job)
+        self.jobs.put(("reprocess", jid), partial(self._run_one, jid))
+        return self.status(jid)
+
+    def cancel(self, jid: int) -> dict:
+        """Cancel a queued or running job (its partial output is removed)."""
+        job = self.status(jid)
+        if job["status"] in ("queued", "running"):
+            with self._lock:
+                if not self.jobs.cancel(("reprocess", jid)):
+                    self._finish(jid, "cancelled", None)
+        return self.status(jid)
+
+    # -- queries ----------------------------------------------------------------------
+    def status(self, jid: int) -> dict:
+        job = self._read(jid)
+        if job is None:
+            raise UnknownReprocessingError(jid)
+        job["files"] = [n for n in FILES if self.file_path(jid, n, check=False) is not None]
+        return job
+
+    def list(self, campaign_id: int | None = None) -> list[dict]:
+        """Every job (of ``campaign_id`` when given), newest first."""
+        out = []
+        for jid in sorted(self._ids(), reverse=True):
+            try:
+                job = self.status(jid)
+            except UnknownReprocessingError:
+                continue
+            if campaign_id is None or job["campaign_id"] == campaign_id:
+                out.append(job)
+        return out
+
+    def file_path(self, jid: int, name: str, check: bool = True) -> Path | None:
+        """The job's file ``name`` (``FILES``), None before it exists."""
+        if check:
+            self.status(jid)
+        where, _ = FILES[name]
+        d = self._dir(jid)
+        stem = f"{Path(self._read(jid)['recording']).stem}.csv"
+        p = d / where / stem if where in ("run", "baseline") else d / where
+        return p if p.exists() else None
+
+    # -- the runner -------------------------------------------------------------------
+    def _run_one(self, jid: int, should_stop) -> None:
+        """The job: run, baseline, compare (module docstring)."""
+        d = self._dir(jid)
+        job = self._read(jid)
+        if job is None:
+            return
+        job.update(status="running", started=_now(), error=None)
+        _write_json(d / "job.json", job)
+        common = dict(
+            workers=None if self.scheduler else self.workers,
+            scheduler=self.scheduler,
+            filter_state=job["filter"],
+            progress=False,
+            should_stop=should_stop,
+            niceness=0 if self.scheduler else WORKER_NICENESS,
+        )
+        camera_path = str(d / "camera.json") if job["camera"] == "given" else None
+        try:
+            for sub in ("run", "baseline"):
+                shutil.rmtree(d / sub, ignore_errors=True)
+            run = reprocess(
+                [job["recording"]],
+                d / "run",
+                **common,
+                settings=Settings(camera_path=camera_path, tracking=job["tracking"]),
+            )
+            reprocess(
+                [job["recording"]],
+                d / "baseline",
+                **common,
+                settings=Settings(tracking=job["tracking"]),
+            )
+            summary = compare_runs(str(d / "baseline"), str(d / "run"), d)
+        except ReprocessCancelledError:
+            if self.jobs.is_cancelled(("reprocess", jid)):
+                self._finish(jid, "cancelled", None)
+            else:  # the server stops: run it again at its next start
+                job.update(status="queued", started=None)
+                _write_json(d / "job.json", job)
+            return
+        except SystemExit as exc:  # tofpose.io.camera_file.pipeline_for's message for the user
+            self._finish(jid, "failed", str(exc.code).removeprefix("tofpose: "))
+            return
+        except Exception as exc:  # noqa: BLE001 (the job says failed, with the error)
+            log.exception("re-processing %d failed", jid)
+            self._finish(jid, "failed", f"{type(exc).__name__}: {exc}")
+            return
+        rec = summary["recordings"][Path(job["recording"]).stem]
+        job = self._read(jid)
+        job.update(
+            status="complete", finished=_now(), frames=run["recordings"][0]["frames"], summary=rec
+        )
+        _write_json(d / "job.json", job)
+
+    def _finish(self, jid: int, status: str, error: str | None) -> None:
+        job = self._read(jid)
+        job.update(status=status, finished=_now(), error=error)
+        if status == "cancelled":
+            for sub in ("run", "baseline"):
+                shutil.rmtree(self._dir(jid) / sub, ignore_errors=True)
+        _write_json(self._dir(jid) / "job.json", job)
+
+    def _read(self, jid: int) -> dict | None:
+        try:
+            return json.loads((self._dir(jid) / "job.json").read_text())
+        except (OSError, ValueError):
+            return None
+
+    def _dir(self, jid: int) -> Path:
+        return self.root / str(jid)
+
+    def _ids(self) -> list[int]:
+        if not self.root.is_dir():
+            return []
+        return [int(p.name) for p in self.root.iterdir() if p.name.isdigit()]

@@ -1,0 +1,235 @@
+"""Accuracy studies run by the server (``tofpose.study``), one at a time, on Dask.
+
+Each study lives in ``<data_dir>/studies/<id>/`` (the study store: ``study.json`` is the
+source of truth for its status and progress, so a restarted server finds them again).
+Studies queue in submission order and run in a background thread; a study that was
+queued or running when the server stopped is queued again at start and resumes from the
+chunks it had finished. The cluster: ``TOFPOSE_DASK_SCHEDULER`` when set, else a
+LocalCluster of the cores less one (the live camera loop keeps its core) whose workers
+run at a lower priority (nice +10), so a study takes what the live loop leaves.
+
+Limits (docs/scaleout.md): a study's size is checked from its axes before anything is
+made (``study_limits``, ``tofpose.study.spec.StudyLimits``), and ``submit`` refuses a
+study while ``max_active`` are queued or running (``TooManyStudiesError``). Reading a
+study's status costs the same however large its grid: cells and frames are computed
+from the axis lengths, the chunks are counted in ``study.json``.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+
+from backend.services.jobs.batch_queue import BatchQueue
+from tofpose.batch.cluster import default_workers
+from tofpose.study.run import StudyCancelledError, run_study
+from tofpose.study.spec import StudyLimits, StudySpec, StudySpecError
+from tofpose.study.store import StudyStoreError, open_store, read_manifest, write_manifest
+
+log = logging.getLogger(__name__)
+
+WORKER_NICENESS = 10
+REPORT_FILES = {"html": "report.html", "pdf": "report.pdf", "json": "summary.json"}
+ACTIVE = ("created", "queued", "running")
+
+
+class UnknownStudyError(KeyError):
+    """No study with that id."""
+
+
+class TooManyStudiesError(RuntimeError):
+    """As many studies as allowed are queued or running; the message says how many and
+    which setting sets the limit."""
+
+
+def study_limits(settings) -> StudyLimits:
+    """The server's limits on one study: ``settings.study_max_cells`` and
+    ``study_max_frames`` (``backend.settings.Settings``), named by their variables."""
+    return StudyLimits(
+        max_cells=settings.study_max_cells,
+        max_frames=settings.study_max_frames,
+        source="TOFPOSE_STUDY_MAX_{what}",
+    )
+
+
+@dataclass(frozen=True)
+class StudyStatus:
+    """What ``GET /api/studies/{id}`` shows: the manifest's status and progress."""
+
+    id: int
+    name: str
+    status: str
+    cells: int
+    frames_planned: int
+    frames_done: int
+    chunks: int
+    chunks_done: int
+    eta_s: float | None
+    error: str | None
+    started: str | None
+    finished: str | None
+    cluster: str | None
+    reports: tuple[str, ...]
+
+
+class StudyService:
+    """Submit, list, follow and cancel studies (module docstring). ``jobs``: the queue
+    they run on, shared with re-processing (``backend.services.jobs.batch_queue``); without
+    one the service makes and owns its own."""
+
+    def __init__(
+        self,
+        root: Path,
+        scheduler: str | None = None,
+        workers: int | None = None,
+        jobs: BatchQueue | None = None,
+    ):
+        self.root = Path(root)
+        self.scheduler = scheduler or None
+        self.workers = workers if workers is not None else default_workers(reserve=1)
+        self._own_jobs = jobs is None
+        self.jobs = jobs if jobs is not None else BatchQueue()
+        self._lock = threading.Lock()
+
+    # -- lifecycle --------------------------------------------------------------------
+    def start(self) -> int:
+        """Queue the studies a stopped server left queued or running (and start the
+        queue when the service owns it). Returns how many were queued again."""
+        self.root.mkdir(parents=True, exist_ok=True)
+        again = 0
+        for sid in sorted(self._ids()):
+            try:
+                status = read_manifest(self._dir(sid))["status"]
+            except StudyStoreError:
+                continue
+            if status in ACTIVE:
+                self.jobs.put(("study", sid), partial(self._run_one, sid))
+                again += 1
+        if self._own_jobs:
+            self.jobs.start()
+        return again
+
+    def stop(self) -> None:
+        """Cancel the running study (it stays resumable) and end the queue when the
+        service owns it."""
+        if self._own_jobs:
+            self.jobs.stop()
+
+    # -- commands ---------------------------------------------------------------------
+    def submit(self, spec: StudySpec, max_active: int | None = None) -> int:
+        """Store ``spec`` as a new study and queue it; returns its id.
+        ``TooManyStudiesError`` (nothing stored) when ``max_active`` studies are already
+        queued or running (None: no limit). Its size was checked when it was made
+        (``StudySpec.from_dict``'s limits)."""
+        with self._lock:
+            if max_active is not None:
+                active = self._active()
+                if active >= max_active:
+                    raise TooManyStudiesError(
+                        f"{active} studies are queued or running, the limit is {max_active} "
+                        "(TOFPOSE_STUDIES_MAX_ACTIVE): cancel one or wait for one to end"
+                    )
+            sid = max(self._ids(), default=0) + 1
+            manifest = open_store(self._dir(sid), spec)
+            manifest["status"] = "queued"
+            write_manifest(self._dir(sid), manifest)
+        self.jobs.put(("study", sid), partial(self._run_one, sid))
+        return sid
+
+    def cancel(self, sid: int) -> StudyStatus:
+        """Stop a queued or running study; its finished chunks stay (``incomplete``)."""
+        status = self.status(sid)
+        if status.status in ACTIVE:
+            with self._lock:
+                if not self.jobs.cancel(("study", sid)):  # queued: it will never run
+                    m = read_manifest(self._dir(sid))
+                    m["status"] = "incomplete"
+                    write_manifest(self._dir(sid), m)
+        return self.status(sid)
+
+    # -- queries ----------------------------------------------------------------------
+    def list(self) -> list[StudyStatus]:
+        """Every study, newest first (unreadable directories left out)."""
+        out = []
+        for sid in sorted(self._ids(), reverse=True):
+            try:
+                out.append(self.status(sid))
+            except (UnknownStudyError, StudyStoreError, StudySpecError):
+                continue
+        return out
+
+    def status(self, sid: int) -> StudyStatus:
+        """Study ``sid``'s status (``StudyStatus``), from its ``study.json``: the same cost
+        for any size (nothing of its grid is made)."""
+        d = self._dir(sid)
+        if not (d / "study.json").exists():
+            raise UnknownStudyError(sid)
+        m = read_manifest(d)
+        spec = StudySpec.from_dict(m["spec"], limits=None)  # accepted when it was stored
+        reports = tuple(k for k, name in REPORT_FILES.items() if (d / name).exists())
+        return StudyStatus(
+            id=sid,
+            name=spec.name,
+            status=m["status"],
+            cells=spec.n_cells,
+            frames_planned=spec.n_frames,
+            frames_done=m.get("frames_done", 0),
+            chunks=m["chunks"],
+            chunks_done=m.get("chunks_done", 0),
+            eta_s=m.get("eta_s"),
+            error=m.get("error"),
+            started=m.get("started"),
+            finished=m.get("finished"),
+            cluster=m.get("cluster"),
+            reports=reports,
+        )
+
+    def report_path(self, sid: int, kind: str) -> Path | None:
+        """The study's report file of ``kind`` (``REPORT_FILES``), None before it exists."""
+        self.status(sid)
+        p = self._dir(sid) / REPORT_FILES[kind]
+        return p if p.exists() else None
+
+    # -- the runner -------------------------------------------------------------------
+    def _run_one(self, sid: int, should_stop) -> None:
+        """The job: run study ``sid`` to its end, or until ``should_stop``."""
+        try:
+            spec = StudySpec.from_dict(read_manifest(self._dir(sid))["spec"], limits=None)
+            run_study(
+                spec,
+                self._dir(sid),
+                workers=None if self.scheduler else self.workers,
+                scheduler=self.scheduler,
+                progress=False,
+                should_stop=should_stop,
+                niceness=0 if self.scheduler else WORKER_NICENESS,
+            )
+        except StudyCancelledError:
+            log.info("study %d stopped (its finished chunks are kept)", sid)
+            if not self.jobs.is_cancelled(("study", sid)):  # the server stops: resume later
+                m = read_manifest(self._dir(sid))
+                m["status"] = "queued"
+                write_manifest(self._dir(sid), m)
+        except Exception:  # noqa: BLE001 (the store says failed, with the error)
+            log.exception("study %d failed", sid)
+
+    def _active(self) -> int:
+        """How many studies are queued or running (their ``study.json`` says so)."""
+        n = 0
+        for sid in self._ids():
+            try:
+                n += read_manifest(self._dir(sid))["status"] in ACTIVE
+            except StudyStoreError:
+                continue
+        return n
+
+    def _dir(self, sid: int) -> Path:
+        return self.root / str(sid)
+
+    def _ids(self) -> list[int]:
+        if not self.root.is_dir():
+            return []
+        return [int(p.name) for p in self.root.iterdir() if p.name.isdigit()]
