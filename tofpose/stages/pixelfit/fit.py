@@ -50,11 +50,11 @@ from tofpose.stages.pixelfit.constants import (
     WINDOW_PAD_PX,
 )
 from tofpose.stages.pixelfit.model import (
+    GAIN_TERMS,
     DiscImages,
     Discs,
     Prediction,
     Windows,
-    GAIN_TERMS,
     build_windows,
     disc_images,
     gain_basis,
@@ -438,7 +438,7 @@ def fit_pose_to_pixels(
     discs = Discs.from_catalog(catalog, catalog_ids)
     start = PixelFitResult(ok=False, reason="", R=R, t_mm=t_mm, catalog_ids=discs.ids)
     if len(discs.ids) < MIN_MARKERS:
-        return replace(start, reason=f"{len(discs.ids)} markers, the fit needs {MIN_MARKERS}")
+        return replace(start, reason=f"{len(discs.ids)} markers: the fit needs {MIN_MARKERS}")
     centres_cam = discs.centres_mm @ R.T + t_mm
     if np.any(centres_cam[:, 2] <= 0):
         return replace(start, reason="a matched disc is behind the camera at the start pose")
@@ -504,7 +504,8 @@ def fit_pose_to_pixels(
     converged = False
     iterations = 0
     info = None
-    for iterations in range(1, max_iterations + 1):
+    for iteration in range(1, max_iterations + 1):
+        iterations = iteration
         pred = pb.predict(images, state)
         sig = _sigmas(pb, pred, extra_var)
         r = _residuals(pb, pred, sig)
@@ -576,18 +577,22 @@ def fit_pose_to_pixels(
 
 
 def _verdict(res: PixelFitResult, extra_var: float, max_rms: float) -> dict:
-    """ok and reason of a finished fit (``fit_pose_to_pixels``' fallback rules)."""
-    if not res.converged:
-        return {"ok": False, "reason": f"not converged in {res.iterations} iterations"}
-    if res.covariance is None or not np.all(np.isfinite(res.covariance)):
-        return {"ok": False, "reason": "singular information matrix"}
+    """ok and reason of a finished fit (``fit_pose_to_pixels``' fallback rules); the
+    reason names every rule that failed, the discs beyond their noise first."""
+    reasons = []
     bad = res.marker_rms_sigma > max_rms
     if np.any(bad):
         worst = ", ".join(
             f"{i} ({v:.1f})"
             for i, v in zip(res.catalog_ids[bad], res.marker_rms_sigma[bad], strict=True)
         )
-        return {"ok": False, "reason": f"residual RMS beyond {max_rms:g} sigma at markers {worst}"}
+        reasons.append(f"residual RMS beyond {max_rms:g} sigma at markers {worst}")
+    if not res.converged:
+        reasons.append(f"not converged in {res.iterations} iterations")
+    if res.covariance is None or not np.all(np.isfinite(res.covariance)):
+        reasons.append("singular information matrix")
+    if reasons:
+        return {"ok": False, "reason": "; ".join(reasons)}
     surround_sigma = np.sqrt(np.maximum(res.levels, 0.0) + extra_var + QUANTISATION_VAR)
     dark = (res.gains[:, 0] - res.levels) < MIN_CONTRAST_SIGMA * surround_sigma
     if np.any(dark):

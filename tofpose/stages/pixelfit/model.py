@@ -224,7 +224,9 @@ def box_coverage(s: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     def r2(x):
         return 0.5 * np.maximum(x, 0.0) ** 2
 
-    return (r2(s + a + b) - r2(s + a - b) - r2(s - a + b) + r2(s - a - b)) / (4.0 * a * b)
+    area = (r2(s + a + b) - r2(s + a - b) - r2(s - a + b) + r2(s - a - b)) / (4.0 * a * b)
+    # beyond the corners exactly 1 or 0 (no cancellation of large squares)
+    return np.where(s >= a + b, 1.0, np.where(s <= -(a + b), 0.0, area))
 
 
 def _rim_geometry(
