@@ -1,0 +1,45 @@
+"""The pixel-level fit's constants (defined once)."""
+
+from __future__ import annotations
+
+from tofpose.stages.extraction.constants import SATURATED_COUNTS
+
+#: the camera's full scale: gray at or above it is a censored (saturated) measurement
+FULL_SCALE_COUNTS = SATURATED_COUNTS
+#: sub-cells per pixel side for the pixels a disc's rim crosses (S x S per pixel)
+SUBSAMPLES = 4
+#: window margin beyond the predicted ellipse's bounding box, px
+WINDOW_PAD_PX = 3
+#: rim samples used to predict each disc's ellipse (its bounding box)
+RIM_POINTS = 64
+#: a pixel whose centre is further than this from the rim (px) is fully inside or
+#: outside its disc (a sub-cell reaches at most sqrt(2)/2 px from the centre)
+BAND_PX = 1.0
+#: a pixel's distance is fitted when the discs cover at least this part of it (its
+#: phasor is mixed with the plate's by the model; below it the surround's return, which
+#: the model knows less well, would dominate)
+DISTANCE_MIN_COVERAGE = 0.5
+#: pixels within this margin (px) of an unmatched catalog disc's predicted image are left
+#: out of the fit (the model does not carry its gain)
+UNMATCHED_MARGIN_PX = 2.0
+#: Levenberg-Marquardt: iterations, initial damping and its factors
+MAX_ITERATIONS = 30
+INITIAL_DAMPING = 1e-3
+DAMPING_DOWN, DAMPING_UP = 0.3, 10.0
+#: converged when the pose step is below this many of its own sigmas (step' F step)
+STEP_TOLERANCE_SIGMA2 = 1e-4
+#: central-difference steps of the pose derivative: rotation, rad; translation, mm
+ROTATION_STEP_RAD = 1e-5
+TRANSLATION_STEP_MM = 1e-2
+#: a disc whose residual RMS (whitened: sigmas) exceeds this is not what the model says
+#: (a glint, an occluded or cut disc): fall back
+MAX_MARKER_RMS_SIGMA = 3.0
+#: a disc whose fitted gain is not this many surround sigmas above its surround is dark
+#: (occluded, or not there): fall back
+MIN_CONTRAST_SIGMA = 10.0
+#: fewest discs the fit needs (three points fix a pose)
+MIN_MARKERS = 3
+#: robust scale of normal samples: sigma = MAD_TO_SIGMA * median absolute deviation
+MAD_TO_SIGMA = 1.4826
+#: variance of the 12-bit quantisation of the gray image, counts^2
+QUANTISATION_VAR = 1.0 / 12.0

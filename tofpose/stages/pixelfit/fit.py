@@ -1,0 +1,600 @@
+"""The pixel-level pose fit: Levenberg-Marquardt over the pose and the discs' nuisance
+parameters on the gray and distance pixels around the matched reflectors (``model.py``
+for the forward model; the package docstring for what this adds to the paper's §5).
+
+Parameters, in order: a small rotation ``w`` (rad, left-multiplied: ``R' = exp([w]) R``),
+the translation step (mm), per disc its gain and its surround's level (counts), and
+optionally one range offset common to all pixels (mm). The pose's order and
+parametrisation are those of ``bench/crlb.py`` and of ``PoseResult.covariance``, so the
+covariance blocks compare with the Cramer-Rao bound.
+
+Noise (the sensor's own, not fitted): a gray pixel's variance is its shot noise, the
+model's gray plus the ambient's share the gray does not show (``gray_extra_var``; by
+default measured on the surround: its variance minus its level) plus quantisation; a
+distance pixel's sigma is ``range_k_mm * sqrt(A + B) / A`` (CW-ToF, Lange 2000) with A the
+model's mixed amplitude and ``A + B`` the gray's variance. Residuals are whitened by
+these sigmas, re-evaluated at each iteration from the current model.
+
+Saturated pixels (gray at full scale) are censored: the measurement says "at least full
+scale", so a model at or above it leaves no residual and a model below it is pulled up
+by ``(full scale - model) / sigma``; their distance (NaN) is not used.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from tofpose.core.camera import CameraModel
+from tofpose.core.catalog import Catalog
+from tofpose.core.tof import SPEED_OF_LIGHT_MM_S
+from tofpose.stages.pixelfit.constants import (
+    DAMPING_DOWN,
+    DAMPING_UP,
+    DISTANCE_MIN_COVERAGE,
+    FULL_SCALE_COUNTS,
+    INITIAL_DAMPING,
+    MAD_TO_SIGMA,
+    MAX_ITERATIONS,
+    MAX_MARKER_RMS_SIGMA,
+    MIN_CONTRAST_SIGMA,
+    MIN_MARKERS,
+    QUANTISATION_VAR,
+    ROTATION_STEP_RAD,
+    STEP_TOLERANCE_SIGMA2,
+    SUBSAMPLES,
+    TRANSLATION_STEP_MM,
+    WINDOW_PAD_PX,
+)
+from tofpose.stages.pixelfit.model import (
+    GAIN_TERMS,
+    DiscImages,
+    Discs,
+    Prediction,
+    Windows,
+    build_windows,
+    disc_images,
+    gain_basis,
+    predict,
+    predicted_rims,
+)
+
+#: the simulator's and the paper's camera default, Hz (c / (2 f) = 24.98 m)
+DEFAULT_MODULATION_HZ = 6.0e6
+#: damping increases tried before an iteration gives up
+MAX_DAMPING_TRIES = 12
+#: discs smaller than this (radius, px) get one gain, larger ones a gain and its slopes
+#: over the image (a few per cent across an 80 mm disc: the incidence fall-off), from
+#: the second radius on its curvatures too (the fall-off is a dome over a large disc)
+GAIN_SLOPE_MIN_RADIUS_PX = 4.0
+GAIN_CURVE_MIN_RADIUS_PX = 8.0
+G = GAIN_TERMS
+#: least summed coverage a disc needs in its window, px (less: it is not in the image)
+MIN_DISC_AREA_PX = 0.5
+
+
+@dataclass(frozen=True)
+class PixelNoise:
+    """The sensor's noise model as the fit whitens its residuals with it.
+
+    modulation_frequency_hz : float
+        Sets ``mm_per_radian = c / (4 pi f)`` (phasor mixing) and the unambiguous range.
+    range_k_mm : float or None
+        ``sigma_d = range_k_mm * sqrt(A + B) / A`` per pixel (the simulator's
+        ``mm_per_radian / demod_gain``; the pipeline pools it per frame). None: measured
+        on the frame's distance residuals at each iteration.
+    gray_extra_var : float or None
+        Gray variance beyond the model's level, counts^2 (the ambient B that background
+        suppression removes from the gray but not from its noise). None: measured on the
+        surround pixels (their variance minus their level).
+    full_scale_counts : float
+        Gray at or above it is saturated (censored).
+    """
+
+    modulation_frequency_hz: float = DEFAULT_MODULATION_HZ
+    range_k_mm: float | None = None
+    gray_extra_var: float | None = None
+    full_scale_counts: float = FULL_SCALE_COUNTS
+
+    def __post_init__(self) -> None:
+        if not self.modulation_frequency_hz > 0:
+            raise ValueError(
+                f"modulation_frequency_hz must be positive, got {self.modulation_frequency_hz}"
+            )
+        if self.range_k_mm is not None and not self.range_k_mm > 0:
+            raise ValueError(f"range_k_mm must be positive or None, got {self.range_k_mm}")
+        if self.gray_extra_var is not None and not self.gray_extra_var >= 0:
+            raise ValueError(f"gray_extra_var must be >= 0 or None, got {self.gray_extra_var}")
+
+    @property
+    def mm_per_radian(self) -> float:
+        """c / (4 pi f): distance per radian of phase, mm."""
+        return SPEED_OF_LIGHT_MM_S / (4.0 * np.pi * self.modulation_frequency_hz)
+
+    @property
+    def unambiguous_range_mm(self) -> float:
+        return SPEED_OF_LIGHT_MM_S / (2.0 * self.modulation_frequency_hz)
+
+    @staticmethod
+    def from_sensor(sensor) -> PixelNoise:
+        """The noise of a sensor record with ``modulation_frequency_hz``,
+        ``mm_per_radian`` and ``demod_gain`` (``tofpose.sim.render.SensorModel``); the
+        gray's extra variance is still measured on the frame."""
+        return PixelNoise(
+            modulation_frequency_hz=float(sensor.modulation_frequency_hz),
+            range_k_mm=float(sensor.mm_per_radian / sensor.demod_gain),
+        )
+
+
+@dataclass(frozen=True)
+class PixelFitResult:
+    """Outcome of ``fit_pose_to_pixels``.
+
+    ok : bool
+        The fit converged and every disc agrees with the model: use ``R``, ``t_mm`` and
+        ``covariance``. False: keep the centroid pose; ``reason`` says why.
+    reason : str
+        Empty when ok.
+    R : ndarray of shape (3, 3); t_mm : ndarray of shape (3,)
+        The fitted pose (the starting pose when the fit could not start).
+    covariance : ndarray of shape (6, 6) or None
+        Over (rotation vector, rad, left-multiplied; translation, mm): the inverse Fisher
+        information at the solution, nuisance parameters marginalised.
+    catalog_ids : ndarray of shape (K,); marker_rms_sigma : ndarray of shape (K,)
+        Each disc's residual RMS in sigmas (gray and distance pixels it owns).
+    gains : ndarray of shape (K, GAIN_TERMS)
+        Fitted gain of a fully covered pixel, counts, over ``model.gain_basis`` (at the
+        disc's predicted centre, then its slopes and curvatures over the disc; 0 for
+        the terms of discs too small to measure them).
+    levels : ndarray of shape (K,)
+        Fitted surround level, counts.
+    range_offset_mm : float
+        Fitted common range offset (0 unless fitted).
+    iterations : int; converged : bool
+    n_gray_pixels, n_distance_pixels, n_saturated : int
+        Pixels in the gray residuals, in the distance residuals, and censored.
+    range_k_mm, gray_extra_var : float
+        The noise model used (given or measured).
+    """
+
+    ok: bool
+    reason: str
+    R: np.ndarray
+    t_mm: np.ndarray
+    covariance: np.ndarray | None = None
+    catalog_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    marker_rms_sigma: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    gains: np.ndarray = field(default_factory=lambda: np.zeros((0, G)))
+    levels: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    range_offset_mm: float = 0.0
+    iterations: int = 0
+    converged: bool = False
+    n_gray_pixels: int = 0
+    n_distance_pixels: int = 0
+    n_saturated: int = 0
+    range_k_mm: float = float("nan")
+    gray_extra_var: float = float("nan")
+
+
+@dataclass(frozen=True)
+class _State:
+    R: np.ndarray
+    t_mm: np.ndarray
+    gains: np.ndarray
+    levels: np.ndarray
+    offset_mm: float
+
+    def stepped(self, delta: np.ndarray, k: int) -> _State:
+        """The state moved by ``delta`` (all parameters, ``_Problem.n_params``)."""
+        return _State(
+            R=Rotation.from_rotvec(delta[:3]).as_matrix() @ self.R,
+            t_mm=self.t_mm + delta[3:6],
+            gains=self.gains + delta[6 : 6 + G * k].reshape(k, G),
+            levels=self.levels + delta[6 + G * k : 6 + (G + 1) * k],
+            offset_mm=self.offset_mm
+            + (float(delta[6 + (G + 1) * k]) if len(delta) > 6 + (G + 1) * k else 0.0),
+        )
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """What stays fixed over the fit: the pixels, their roles and the model's constants."""
+
+    discs: Discs
+    win: Windows
+    gray_rows: np.ndarray  # indices of unsaturated pixels
+    sat_rows: np.ndarray  # indices of saturated pixels
+    dist_rows: np.ndarray  # indices of pixels whose distance is fitted
+    noise: PixelNoise
+    reference_mm: float
+    fit_offset: bool
+    basis: np.ndarray  # (K, P, GAIN_TERMS) the discs' gain basis at the pixels
+    free: np.ndarray  # (n_params,) bool: the parameters fitted (the rest stay at 0 step)
+
+    @property
+    def n_params(self) -> int:
+        return 6 + (G + 1) * len(self.discs.ids) + (1 if self.fit_offset else 0)
+
+    def images(self, R: np.ndarray, t_mm: np.ndarray) -> DiscImages:
+        return disc_images(
+            R,
+            t_mm,
+            self.discs,
+            self.win,
+            mm_per_radian=self.noise.mm_per_radian,
+            reference_mm=self.reference_mm,
+        )
+
+    def predict(self, images: DiscImages, s: _State) -> Prediction:
+        return predict(
+            images,
+            self.win.owner,
+            s.gains,
+            s.levels,
+            mm_per_radian=self.noise.mm_per_radian,
+            basis=self.basis,
+            reference_mm=self.reference_mm,
+            range_offset_mm=s.offset_mm,
+        )
+
+
+@dataclass(frozen=True)
+class _Sigmas:
+    gray: np.ndarray  # (P,) counts
+    distance_mm: np.ndarray  # (P,) mm
+    range_k_mm: float
+
+
+def _wrap(x: np.ndarray, period: float) -> np.ndarray:
+    return (x + period / 2) % period - period / 2
+
+
+def _gray_variance(pred: Prediction, extra_var: float) -> np.ndarray:
+    return np.maximum(pred.gray, 0.0) + extra_var + QUANTISATION_VAR
+
+
+def _sigmas(pb: _Problem, pred: Prediction, extra_var: float) -> _Sigmas:
+    """Per-pixel sigmas at the current model (module docstring); the range constant
+    measured on the distance residuals when the noise model leaves it open."""
+    var = _gray_variance(pred, extra_var)
+    amp = np.maximum(np.abs(pred.phasor), 1e-6)
+    shape = np.sqrt(var) / amp  # sigma_d / k
+    k = pb.noise.range_k_mm
+    if k is None:
+        j = pb.dist_rows
+        if len(j) >= 3:
+            z = _wrap(pb.win.distance_mm[j] - pred.distance_mm[j], pb.noise.unambiguous_range_mm)
+            z = z / shape[j]
+            k = float(MAD_TO_SIGMA * np.median(np.abs(z - np.median(z))))
+        k = k if k and np.isfinite(k) and k > 0 else 1.0
+    return _Sigmas(gray=np.sqrt(var), distance_mm=k * shape, range_k_mm=float(k))
+
+
+def _residuals(pb: _Problem, pred: Prediction, sig: _Sigmas) -> np.ndarray:
+    """Whitened residuals: unsaturated gray, censored gray, distance."""
+    w = pb.win
+    r_gray = (w.gray[pb.gray_rows] - pred.gray[pb.gray_rows]) / sig.gray[pb.gray_rows]
+    fs = pb.noise.full_scale_counts
+    r_sat = np.maximum(fs - pred.gray[pb.sat_rows], 0.0) / sig.gray[pb.sat_rows]
+    dd = _wrap(
+        w.distance_mm[pb.dist_rows] - pred.distance_mm[pb.dist_rows], pb.noise.unambiguous_range_mm
+    )
+    r_dist = dd / sig.distance_mm[pb.dist_rows]
+    return np.concatenate([r_gray, r_sat, r_dist])
+
+
+def _row_owners(pb: _Problem) -> np.ndarray:
+    o = pb.win.owner
+    return np.concatenate([o[pb.gray_rows], o[pb.sat_rows], o[pb.dist_rows]])
+
+
+def _jacobian(
+    pb: _Problem, s: _State, images: DiscImages, pred: Prediction, sig: _Sigmas
+) -> np.ndarray:
+    """d residuals / d parameters (rows as ``_residuals``): the pose's six columns by
+    central differences of the model, the gains', levels' and offset's analytically."""
+    k_count = len(pb.discs.ids)
+    n_par = pb.n_params
+    p_count = pb.win.n_pixels
+    d_gray = np.zeros((p_count, n_par))
+    d_dist = np.zeros((p_count, n_par))
+    steps = [ROTATION_STEP_RAD] * 3 + [TRANSLATION_STEP_MM] * 3
+    for i, h in enumerate(steps):
+        e = np.zeros(6)
+        e[i] = h
+        out = []
+        for sign in (1.0, -1.0):
+            R = Rotation.from_rotvec(sign * e[:3]).as_matrix() @ s.R
+            p = pb.predict(pb.images(R, s.t_mm + sign * e[3:]), s)
+            out.append(p)
+        d_gray[:, i] = (out[0].gray - out[1].gray) / (2 * h)
+        dd = _wrap(out[0].distance_mm - out[1].distance_mm, pb.noise.unambiguous_range_mm)
+        d_dist[:, i] = dd / (2 * h)
+    mpr = pb.noise.mm_per_radian
+    inv_w = 1.0 / np.where(np.abs(pred.phasor) > 0, pred.phasor, 1.0)
+    owner = pb.win.owner
+    for j in range(G):
+        factor = pb.basis[..., j]  # (K, P)
+        cols = 6 + G * np.arange(k_count) + j
+        d_gray[:, cols] = (images.coverage * factor).T
+        d_dist[:, cols] = mpr * np.imag(images.phasor * factor * inv_w).T
+    surround_phasor = pred.surround * images.plate_phasor * inv_w
+    for k in range(k_count):
+        mine = owner == k
+        d_gray[mine, 6 + G * k_count + k] = pred.surround[mine]
+        d_dist[mine, 6 + G * k_count + k] = mpr * np.imag(surround_phasor[mine])
+    if pb.fit_offset:
+        d_dist[:, -1] = 1.0
+    fs = pb.noise.full_scale_counts
+    below = pred.gray[pb.sat_rows] < fs  # censored rows with a residual
+    j_gray = -d_gray[pb.gray_rows] / sig.gray[pb.gray_rows, None]
+    j_sat = -d_gray[pb.sat_rows] / sig.gray[pb.sat_rows, None] * below[:, None]
+    j_dist = -d_dist[pb.dist_rows] / sig.distance_mm[pb.dist_rows, None]
+    return np.vstack([j_gray, j_sat, j_dist])[:, pb.free]
+
+
+def _surround_extra_var(pb: _Problem, images: DiscImages, s: _State) -> float:
+    """The gray variance of the surround beyond its level (the ambient's share): the
+    robust variance of the pixels no disc reaches, minus their fitted level."""
+    w = pb.win
+    free = (images.coverage.sum(axis=0) == 0) & (w.gray < pb.noise.full_scale_counts)
+    if free.sum() < 8:
+        return 0.0
+    level = s.levels[w.owner[free]]
+    z = w.gray[free] - level
+    var = (MAD_TO_SIGMA * np.median(np.abs(z - np.median(z)))) ** 2
+    return float(max(var - np.median(np.maximum(level, 0.0)), 0.0))
+
+
+def _initial_linear(pb: _Problem, images: DiscImages) -> tuple[np.ndarray, np.ndarray]:
+    """Gains (K, 3: level, no slope) and levels (K,) by least squares at the starting
+    pose (they enter linearly)."""
+    k_count = len(pb.discs.ids)
+    rows = pb.gray_rows
+    surround = np.clip(1.0 - images.coverage.sum(axis=0), 0.0, 1.0)
+    A = np.zeros((len(rows), 2 * k_count))
+    A[:, :k_count] = images.coverage[:, rows].T
+    A[np.arange(len(rows)), k_count + pb.win.owner[rows]] = surround[rows]
+    x, *_ = np.linalg.lstsq(A, pb.win.gray[rows], rcond=None)
+    g0, levels = x[:k_count], x[k_count:]
+    # a disc all of whose pixels are saturated has no unsaturated gain: start at full scale
+    sat_only = A[:, :k_count].sum(axis=0) < MIN_DISC_AREA_PX
+    g0 = np.where(sat_only, pb.noise.full_scale_counts, g0)
+    gains = np.zeros((k_count, G))
+    gains[:, 0] = g0
+    return gains, levels
+
+
+def fit_pose_to_pixels(
+    gray: np.ndarray,
+    distance_mm: np.ndarray,
+    camera: CameraModel,
+    catalog: Catalog,
+    R: np.ndarray,
+    t_mm: np.ndarray,
+    catalog_ids: Sequence[int],
+    *,
+    noise: PixelNoise | None = None,
+    fit_range_offset: bool = False,
+    exclude_unmatched: bool = True,
+    subsamples: int = SUBSAMPLES,
+    pad_px: int = WINDOW_PAD_PX,
+    max_iterations: int = MAX_ITERATIONS,
+    max_marker_rms_sigma: float = MAX_MARKER_RMS_SIGMA,
+) -> PixelFitResult:
+    """Refine a pose on the raw pixels of the matched reflectors.
+
+    Parameters
+    ----------
+    gray : ndarray of shape (H, W)
+        Gray (amplitude) image, counts; at ``noise.full_scale_counts`` saturated.
+    distance_mm : ndarray of shape (H, W)
+        Radial distance image, mm, NaN where invalid.
+    camera : CameraModel
+    catalog : Catalog
+    R : ndarray of shape (3, 3); t_mm : ndarray of shape (3,)
+        The starting pose ``T_camera_target`` (the centroid pipeline's).
+    catalog_ids : sequence of int
+        The matched reflectors' catalog ids (at least three).
+    noise : PixelNoise, optional
+        The sensor's noise model (default: ``PixelNoise()``, everything measured on the
+        frame but the modulation frequency).
+    fit_range_offset : bool
+        Fit one range offset common to all distance pixels (an uncalibrated camera).
+    exclude_unmatched : bool
+        Leave out the pixels near the predicted image of catalog discs not in
+        ``catalog_ids`` (the model does not carry them).
+    subsamples : int
+        S: sub-cells per pixel side on the discs' rims.
+    pad_px : int
+        Window margin beyond each disc's predicted bounding box, px.
+    max_iterations : int
+    max_marker_rms_sigma : float
+        A disc whose residual RMS (sigmas) exceeds it makes the fit fall back.
+
+    Returns
+    -------
+    PixelFitResult
+        ``ok`` False (with ``reason``) when the fit could not start, did not converge or
+        a disc disagrees with the model: keep the starting pose then.
+    """
+    noise = PixelNoise() if noise is None else noise
+    gray = np.asarray(gray)
+    distance_mm = np.asarray(distance_mm)
+    if gray.shape != camera.shape or distance_mm.shape != camera.shape:
+        raise ValueError(
+            f"gray {gray.shape} and distance_mm {distance_mm.shape} must have the camera's "
+            f"shape {camera.shape}"
+        )
+    R = np.asarray(R, float)
+    t_mm = np.asarray(t_mm, float).reshape(-1)
+    if R.shape != (3, 3) or t_mm.shape != (3,):
+        raise ValueError(f"R must be (3, 3) and t_mm (3,), got {R.shape} and {t_mm.shape}")
+    if subsamples < 1:
+        raise ValueError(f"subsamples must be >= 1, got {subsamples}")
+    discs = Discs.from_catalog(catalog, catalog_ids)
+    start = PixelFitResult(ok=False, reason="", R=R, t_mm=t_mm, catalog_ids=discs.ids)
+    if len(discs.ids) < MIN_MARKERS:
+        return replace(start, reason=f"{len(discs.ids)} markers: the fit needs {MIN_MARKERS}")
+    centres_cam = discs.centres_mm @ R.T + t_mm
+    if np.any(centres_cam[:, 2] <= 0):
+        return replace(start, reason="a matched disc is behind the camera at the start pose")
+    others = None
+    if exclude_unmatched:
+        rest = [int(i) for i in catalog.ids if int(i) not in set(discs.ids.tolist())]
+        if rest:
+            o = Discs.from_catalog(catalog, rest)
+            front = (o.centres_mm @ R.T + t_mm)[:, 2] > 0
+            others = Discs(o.ids[front], o.centres_mm[front], o.radii_mm[front])
+    win = build_windows(
+        gray,
+        distance_mm,
+        camera,
+        discs,
+        R,
+        t_mm,
+        others=others,
+        pad_px=pad_px,
+        subsamples=subsamples,
+    )
+    saturated = win.gray >= noise.full_scale_counts
+    reference_mm = float(np.linalg.norm(t_mm))
+    rims = predicted_rims(camera, R, t_mm, discs)
+    centre_px = rims.mean(axis=1)  # (K, 2)
+    radius_px = np.max(np.linalg.norm(rims - centre_px[:, None], axis=2), axis=1)
+    uv = np.column_stack([win.cols, win.rows]).astype(float)
+    k_count = len(discs.ids)
+    free = np.ones(6 + (G + 1) * k_count + (1 if fit_range_offset else 0), bool)
+    for k in range(k_count):  # a small disc's gain shape is not measurable
+        terms = 1 if radius_px[k] < GAIN_SLOPE_MIN_RADIUS_PX else 3
+        terms = G if radius_px[k] >= GAIN_CURVE_MIN_RADIUS_PX else terms
+        free[6 + G * k + terms : 6 + G * (k + 1)] = False
+    pb0 = _Problem(
+        discs=discs,
+        win=win,
+        gray_rows=np.flatnonzero(~saturated),
+        sat_rows=np.flatnonzero(saturated),
+        dist_rows=np.zeros(0, int),
+        noise=noise,
+        reference_mm=reference_mm,
+        fit_offset=fit_range_offset,
+        basis=gain_basis(uv[None] - centre_px[:, None], radius_px),
+        free=free,
+    )
+    images = pb0.images(R, t_mm)
+    area = images.coverage.sum(axis=1)
+    if np.any(area < MIN_DISC_AREA_PX):
+        lost = discs.ids[area < MIN_DISC_AREA_PX].tolist()
+        return replace(start, reason=f"markers {lost} are not in the image at the start pose")
+    covered = images.coverage.sum(axis=0)
+    usable_distance = np.isfinite(win.distance_mm) & ~saturated & (covered >= DISTANCE_MIN_COVERAGE)
+    pb = replace(pb0, dist_rows=np.flatnonzero(usable_distance))
+    gains, levels = _initial_linear(pb, images)
+    state = _State(R=R, t_mm=t_mm, gains=gains, levels=levels, offset_mm=0.0)
+    extra_var = (
+        _surround_extra_var(pb, images, state)
+        if noise.gray_extra_var is None
+        else float(noise.gray_extra_var)
+    )
+
+    damping = INITIAL_DAMPING
+    converged = False
+    iterations = 0
+    info = None
+    for iteration in range(1, max_iterations + 1):
+        iterations = iteration
+        pred = pb.predict(images, state)
+        sig = _sigmas(pb, pred, extra_var)
+        r = _residuals(pb, pred, sig)
+        J = _jacobian(pb, state, images, pred, sig)
+        info = J.T @ J
+        grad = J.T @ r
+        cost = float(r @ r)
+        diag = np.maximum(np.diag(info), 1e-12)
+        accepted = False
+        for _ in range(MAX_DAMPING_TRIES):
+            try:
+                step = np.linalg.solve(info + damping * np.diag(diag), -grad)
+            except np.linalg.LinAlgError:
+                damping *= DAMPING_UP
+                continue
+            delta = np.zeros(pb.n_params)
+            delta[pb.free] = step
+            trial = state.stepped(delta, k_count)
+            trial_images = pb.images(trial.R, trial.t_mm)
+            trial_cost = float(np.sum(_residuals(pb, pb.predict(trial_images, trial), sig) ** 2))
+            if trial_cost <= cost:
+                state, images, accepted = trial, trial_images, True
+                damping = max(damping * DAMPING_DOWN, 1e-9)
+                break
+            damping *= DAMPING_UP
+        step2 = float(step @ info @ step) if accepted else 0.0
+        if not accepted or step2 < STEP_TOLERANCE_SIGMA2:
+            # no step lowers the cost any more, or the last one was negligible
+            converged = True
+            break
+
+    pred = pb.predict(images, state)
+    sig = _sigmas(pb, pred, extra_var)
+    r = _residuals(pb, pred, sig)
+    owners = _row_owners(pb)
+    rms = np.array(
+        [
+            np.sqrt(np.mean(r[owners == k] ** 2)) if np.any(owners == k) else np.nan
+            for k in range(k_count)
+        ]
+    )
+    covariance = None
+    if info is not None:
+        try:
+            covariance = np.linalg.inv(info)[:6, :6]
+            covariance = 0.5 * (covariance + covariance.T)
+        except np.linalg.LinAlgError:
+            covariance = None
+    result = PixelFitResult(
+        ok=False,
+        reason="",
+        R=state.R,
+        t_mm=state.t_mm,
+        covariance=covariance,
+        catalog_ids=discs.ids,
+        marker_rms_sigma=rms,
+        gains=state.gains,
+        levels=state.levels,
+        range_offset_mm=state.offset_mm,
+        iterations=iterations,
+        converged=converged,
+        n_gray_pixels=len(pb.gray_rows),
+        n_distance_pixels=len(pb.dist_rows),
+        n_saturated=len(pb.sat_rows),
+        range_k_mm=sig.range_k_mm,
+        gray_extra_var=extra_var,
+    )
+    return replace(result, **_verdict(result, extra_var, max_marker_rms_sigma))
+
+
+def _verdict(res: PixelFitResult, extra_var: float, max_rms: float) -> dict:
+    """ok and reason of a finished fit (``fit_pose_to_pixels``' fallback rules); the
+    reason names every rule that failed, the discs beyond their noise first."""
+    reasons = []
+    bad = res.marker_rms_sigma > max_rms
+    if np.any(bad):
+        worst = ", ".join(
+            f"{i} ({v:.1f})"
+            for i, v in zip(res.catalog_ids[bad], res.marker_rms_sigma[bad], strict=True)
+        )
+        reasons.append(f"residual RMS beyond {max_rms:g} sigma at markers {worst}")
+    if not res.converged:
+        reasons.append(f"not converged in {res.iterations} iterations")
+    if res.covariance is None or not np.all(np.isfinite(res.covariance)):
+        reasons.append("singular information matrix")
+    if reasons:
+        return {"ok": False, "reason": "; ".join(reasons)}
+    surround_sigma = np.sqrt(np.maximum(res.levels, 0.0) + extra_var + QUANTISATION_VAR)
+    dark = (res.gains[:, 0] - res.levels) < MIN_CONTRAST_SIGMA * surround_sigma
+    if np.any(dark):
+        return {"ok": False, "reason": f"markers {res.catalog_ids[dark].tolist()} are dark"}
+    return {"ok": True, "reason": ""}
