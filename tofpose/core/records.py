@@ -1,13 +1,17 @@
-"""The typed records the compiled kernels take instead of long positional argument lists.
+"""The typed records the compiled kernels of several stages take and return instead of
+long positional argument lists and result tuples (a stage's own records are in its
+``records.py``).
 
 Each is a ``typing.NamedTuple`` (numba compiles them as tuples with named fields, so a
-kernel reads ``camera.fx`` rather than argument 17), built in one place from the
-configuration (``camera_record``, ``catalog_record``, ``fit_settings`` here; the sigma
-constants in ``tofpose.stages.extraction.uncertainty.kernel_constants``, the range correction in
+kernel reads ``camera.fx`` rather than argument 17), built by keyword in one place
+(``camera_record``, ``catalog_record`` here; the §5 settings in
+``tofpose.stages.pose.solve.fit_settings``, the sigma constants in
+``tofpose.stages.extraction.uncertainty.kernel_constants``, the range correction in
 ``tofpose.calibration.range.correction_kernel_arguments``, the gate settings in
-``tofpose.stages.extraction.extraction``) and passed whole. Two settings swapped by position cannot
-be
-written: a record is built by keyword.
+``tofpose.stages.extraction.extraction``, the persistence history in
+``tofpose.stages.persistence.persistence.Persistence.history``) and passed whole: two
+settings swapped by position cannot be written. A setting keeps its
+``PipelineConfig`` name from the configuration to the kernel.
 """
 
 from __future__ import annotations
@@ -86,28 +90,50 @@ class RangeCorrectionRecord(NamedTuple):
 
 
 class FitSettings(NamedTuple):
-    """The settings of the §5 fit (``stages.pose.kernels.pose.fit_with_outliers``):
+    """The settings of §5 as the compiled solve reads them (``stages.pose.kernels.solve.
+    solve_pairs`` and the fit it runs, ``stages.pose.kernels.pose.fit_with_outliers``),
+    built by ``stages.pose.solve.fit_settings``; each field carries the
+    ``PipelineConfig`` setting of its name (documented there), but:
 
     refinement : 0 none, 1 maximum likelihood, 2 the paper's line of sight
-    (``stages.pose.constants.REFINE_NONE``, ``REFINE_ML``, ``REFINE_LOS``;
-    ``solve._REFINEMENT``);
-    los_tolerance : the LOS iteration's tolerance;
-    step_sigma2 : the ML iteration's convergence threshold (squared step in sigmas);
-    adapt : add the frame's excess range and bearing sigmas and fit again;
-    max_systematic_range_mm / max_systematic_centroid_px : their caps; reject : drop
-    outliers; min_matches : never below this many reflectors; outlier_sigma,
-    chi2_per_dof : the outlier step's thresholds."""
+    (``stages.pose.constants.REFINE_NONE``, ``REFINE_ML``, ``REFINE_LOS``; the
+    setting's "none", "ml", "los");
+    step_sigma2 : the ML iteration's convergence threshold (squared step in sigmas;
+    ``stages.pose.pose.STEP_SIGMA2``);
+    min_matches : ``MatchingConfig.min_matches``, the fewest reflectors the outlier step
+    leaves."""
 
     refinement: int
     los_tolerance: float
     step_sigma2: float
-    adapt: bool
-    max_systematic_range_mm: float
-    max_systematic_centroid_px: float
-    reject: bool
+    correct_perspective_bias: bool
+    mixed_pixel_radius_px: float
+    adapt_range_sigma: bool
+    max_systematic_range_sigma_mm: float
+    max_systematic_centroid_sigma_px: float
+    reject_outliers: bool
     min_matches: int
     outlier_sigma: float
-    chi2_per_dof: float
+    outlier_chi2_per_dof: float
+
+
+class Candidates(NamedTuple):
+    """A frame's g candidate reflectors (blobs) as measured and back-projected, what the
+    measurement gives §5 (``stages.persistence.kernels.measure.measure_and_back_project``
+    returns them, ``stages.pose.kernels.solve.solve_pairs`` takes them; the fields are
+    ``stages.pose.solve.Measurements``'): ``uv_px`` (g, 2) centroids (Eq. 19),
+    ``range_mm`` (g,) ranges (Eq. 20), ``y_mm`` (g, 3) points in the camera frame (Eq. 8),
+    ``weights`` (g,) (Eq. 21), ``sigma_px`` and ``sigma_range_mm`` (g,) their sigmas, and
+    ``mixing`` (g, ``stages.extraction.constants.MIX_FIELDS``) their mixing sums (NaN
+    rows: none)."""
+
+    uv_px: np.ndarray
+    range_mm: np.ndarray
+    y_mm: np.ndarray
+    weights: np.ndarray
+    sigma_px: np.ndarray
+    sigma_range_mm: np.ndarray
+    mixing: np.ndarray
 
 
 class GateSettings(NamedTuple):

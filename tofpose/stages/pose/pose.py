@@ -25,6 +25,7 @@ from tofpose.stages.pose.kernels.pose import (
     systematic_sigmas as kernel_systematic_sigmas,
 )
 from tofpose.stages.pose.kernels.pose import tangent_bases as bearing_tangent_bases
+from tofpose.stages.pose.records import Reflectors
 
 
 def weighted_absolute_orientation(
@@ -124,24 +125,28 @@ def measurement_jacobian(
     depends only on the measured bearings: an iteration passes it in instead of
     recomputing it.
     """
-    e, rho, sr, sb = _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
-    B = bearing_tangent_bases(e) if tangent_bases is None else tangent_bases
-    return residuals_jacobian(_f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb, B)
+    refl = _reflectors(x_mm, bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
+    B = bearing_tangent_bases(refl.e) if tangent_bases is None else tangent_bases
+    return residuals_jacobian(refl, _f64(R), _f64(t), B)
 
 
 def _f64(a) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float64)
 
 
-def _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad):
-    """The measurement arrays as the kernels take them: bearings (m, 3) and ranges,
-    range sigmas and bearing sigmas (m,), contiguous float64 (sigmas may be scalars)."""
+def _reflectors(x_mm, bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad) -> Reflectors:
+    """The matched reflectors as the kernels take them (a ``records.Reflectors``):
+    catalog points and bearings (m, 3), ranges, range sigmas and bearing sigmas (m,),
+    contiguous float64 (sigmas may be scalars)."""
     e = _f64(bearings)
     m = len(e)
-    rho = _f64(ranges_mm)
-    sr = _f64(np.broadcast_to(np.asarray(sigma_range_mm, float), (m,)))
-    sb = _f64(np.broadcast_to(np.asarray(sigma_bearing_rad, float), (m,)))
-    return e, rho, sr, sb
+    return Reflectors(
+        x=_f64(x_mm),
+        e=e,
+        rho=_f64(ranges_mm),
+        sr=_f64(np.broadcast_to(np.asarray(sigma_range_mm, float), (m,))),
+        sb=_f64(np.broadcast_to(np.asarray(sigma_bearing_rad, float), (m,))),
+    )
 
 
 def reflector_whitened_norms(
@@ -192,9 +197,9 @@ def systematic_sigmas(
     ranges, sigmas (m,). (0, 0) when the model already fits.
     """
 
-    e, rho, sr, sb = _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
+    refl = _reflectors(x_mm, bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
     er, eb = kernel_systematic_sigmas(
-        _f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb, float(max_range_mm), float(max_bearing_rad)
+        refl, _f64(R), _f64(t), float(max_range_mm), float(max_bearing_rad)
     )
     return float(er), float(eb)
 
@@ -214,8 +219,8 @@ def common_range_bias_covariance(
     the translation along the line of sight): s s^T sigma_b^2 with s = (J^T J)^-1 J^T g,
     g the whitened residuals' response to a unit offset (-1 / sigma_range on each range
     row). An uncalibrated camera's constant and drift errors are such an offset."""
-    e, rho, sr, sb = _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
-    return range_bias_covariance(_f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb, float(bias_sigma_mm))
+    refl = _reflectors(x_mm, bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
+    return range_bias_covariance(refl, _f64(R), _f64(t), float(bias_sigma_mm))
 
 
 @dataclass
@@ -266,18 +271,9 @@ def refine_maximum_likelihood(
     likelihood pose; unlike the pure line-of-sight iteration it keeps the ToF ranges,
     which dominate depth accuracy at long range. The covariance is (J^T J)^-1.
     """
-    e, rho, sr, sb = _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
+    refl = _reflectors(x_mm, bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
     R, t, cov, chi2, iterations, norms = ml_refine(
-        _f64(x_mm),
-        e,
-        rho,
-        _f64(R0),
-        _f64(t0),
-        sr,
-        sb,
-        int(max_iterations),
-        float(tol),
-        STEP_SIGMA2,
+        refl, _f64(R0), _f64(t0), int(max_iterations), float(tol), STEP_SIGMA2
     )
     return MLResult(R, t, cov, float(chi2), int(iterations), norms)
 
@@ -307,8 +303,8 @@ def leave_one_out_covariance(
     x_mm, bearings (m, 3); ranges_mm, sigma_range_mm, sigma_bearing_rad (m,)."""
     if len(x_mm) < MIN_LEAVE_ONE_OUT:
         return None
-    e, rho, sr, sb = _model_arrays(bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
-    return leave_one_out_spread(_f64(x_mm), e, rho, _f64(R), _f64(t), sr, sb)
+    refl = _reflectors(x_mm, bearings, ranges_mm, sigma_range_mm, sigma_bearing_rad)
+    return leave_one_out_spread(refl, _f64(R), _f64(t))
 
 
 def covariance_envelope(model: np.ndarray, other: np.ndarray | None) -> np.ndarray:

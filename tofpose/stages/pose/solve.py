@@ -24,7 +24,7 @@ from tofpose.config import SolveConfig
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import Catalog
 from tofpose.core.geometry import RigidTransform
-from tofpose.core.records import FitSettings, camera_record, catalog_record
+from tofpose.core.records import Candidates, FitSettings, camera_record, catalog_record
 from tofpose.stages.extraction.constants import MIX_FIELDS
 from tofpose.stages.extraction.extraction import Blob
 from tofpose.stages.pose.arithmetic import COMPILED, PoseArithmetic
@@ -35,12 +35,16 @@ from tofpose.stages.pose.constants import (
     REFINE_ML,
     REFINE_NONE,
 )
-from tofpose.stages.pose.kernels.pose import (
-    MIN_LEAVE_ONE_OUT,
-    NO_OFFSET,
-    RangeOffsetPrior,
-)
+from tofpose.stages.pose.kernels.pose import MIN_LEAVE_ONE_OUT
 from tofpose.stages.pose.pose import STEP_SIGMA2, MLResult
+from tofpose.stages.pose.records import (
+    NO_OFFSET,
+    OutlierFit,
+    PoseFit,
+    RangeOffsetPrior,
+    Reflectors,
+    SolvedPairs,
+)
 
 _REFINEMENT = {"none": REFINE_NONE, "ml": REFINE_ML, "los": REFINE_LOS}
 
@@ -60,9 +64,9 @@ def offset_prior(config: SolveConfig, sigma_mm: float, fx_px: float) -> RangeOff
     uncertainty from ``focal_length_sigma_rel`` and ``common_centroid_bias_px`` (over the
     focal length ``fx_px``)."""
     return RangeOffsetPrior(
-        float(sigma_mm),
-        float(config.focal_length_sigma_rel),
-        float(config.common_centroid_bias_px) / fx_px,
+        sigma_mm=float(sigma_mm),
+        focal_length_sigma_rel=float(config.focal_length_sigma_rel),
+        centroid_bias_rad=float(config.common_centroid_bias_px) / fx_px,
     )
 
 
@@ -174,21 +178,54 @@ class ThresholdedFrame:
 _NO_FRAME = ThresholdedFrame(np.zeros((1, 1), np.float32), 0.0)
 
 
+def matched_observations(solved: SolvedPairs) -> MatchedObservations:
+    """The reflectors ``kernels.solve.solve_pairs`` kept, as the solver reports them: the
+    common range offset its fit estimated taken out of their ranges and points (y = rho e,
+    Eq. 8), their sigmas the noise model's."""
+    observed, offset = solved.observed, solved.result.offset_mm
+    e = observed.e
+    y = e * observed.rho[:, None]
+    obs = MatchedObservations(
+        k_idx=solved.k_idx,
+        i_idx=solved.i_idx,
+        x_mm=observed.x,
+        uv_px=solved.uv,
+        bearings=e,
+        range_mm=observed.rho - offset,
+        y_mm=y - e * offset,
+        sigma_bearing_rad=observed.sb,
+        sigma_range_mm=observed.sr,
+    )
+    return obs.subset(solved.result.kept)
+
+
+def fitted_reflectors(obs: MatchedObservations, fit: PoseFit) -> Reflectors:
+    """The reflectors ``obs`` with the sigmas their fit used (the frame's excess
+    components included), as the covariance kernels take them."""
+    c = np.ascontiguousarray
+    return Reflectors(
+        x=c(obs.x_mm), e=c(obs.bearings), rho=c(obs.range_mm), sr=c(fit.sr), sb=c(fit.sb)
+    )
+
+
 def fit_settings(config: SolveConfig) -> FitSettings:
-    """The §5 fit's settings (``kernels.pose.fit_with_outliers``) from the stage's
-    configuration: the one place they are built, for the acquisition and the tracking
-    paths alike."""
+    """The §5 settings as the compiled solve reads them (``kernels.solve.solve_pairs``,
+    ``kernels.pose.fit_with_outliers``) from the stage's configuration, each under the
+    configuration's name: the one place they are built, for the acquisition and the
+    tracking paths alike."""
     return FitSettings(
         refinement=_REFINEMENT[config.refinement],
-        los_tolerance=config.los_tolerance,
+        los_tolerance=float(config.los_tolerance),
         step_sigma2=STEP_SIGMA2,
-        adapt=config.adapt_range_sigma,
-        max_systematic_range_mm=config.max_systematic_range_sigma_mm,
-        max_systematic_centroid_px=config.max_systematic_centroid_sigma_px,
-        reject=config.reject_outliers,
-        min_matches=config.min_matches,
-        outlier_sigma=config.outlier_sigma,
-        chi2_per_dof=config.outlier_chi2_per_dof,
+        correct_perspective_bias=bool(config.correct_perspective_bias),
+        mixed_pixel_radius_px=float(config.mixed_pixel_radius_px),
+        adapt_range_sigma=bool(config.adapt_range_sigma),
+        max_systematic_range_sigma_mm=float(config.max_systematic_range_sigma_mm),
+        max_systematic_centroid_sigma_px=float(config.max_systematic_centroid_sigma_px),
+        reject_outliers=bool(config.reject_outliers),
+        min_matches=int(config.min_matches),
+        outlier_sigma=float(config.outlier_sigma),
+        outlier_chi2_per_dof=float(config.outlier_chi2_per_dof),
     )
 
 
@@ -216,8 +253,6 @@ class PoseSolver:
         self._xyz_mean = self._xyz.mean(axis=0)
         self._cos_max_view = math.cos(math.radians(config.max_view_angle_deg))
         self._d = np.ascontiguousarray(catalog.diameters_mm, dtype=float)
-        self._K = np.ascontiguousarray(camera.K, dtype=float)
-        self._dist = np.ascontiguousarray(camera.dist_array, dtype=float)
         self._ids = catalog.ids
         self._correction = range_correction
         self._camera_record = camera_record(camera)
@@ -260,8 +295,8 @@ class PoseSolver:
         fit without completion is taken if it keeps more reflectors."""
         cfg = self.config
         complete_mm = alpha_mm * cfg.residual_factor
-        fit = self._fit_pairs(pairs, meas, complete_mm)
-        kept = fit[7]
+        solved = self._fit_pairs(pairs, meas, complete_mm)
+        kept = solved.result.kept
         n = len(pairs)
         if len(kept) > n and kept[n:].any() and not kept[:n].all():
             # completion added a blob and the outlier step then dropped matched ones: the
@@ -269,81 +304,36 @@ class PoseSolver:
             # near a predicted reflector); the fit without completion is taken when it
             # keeps more reflectors
             alone = self._fit_pairs(pairs, meas, 0.0)
-            if alone[7].sum() > kept.sum():
-                fit = alone
-        (
-            k_idx,
-            i_idx,
-            uv,
-            e,
-            y,
-            rho,
-            sigma_range,
-            kept,
-            R,
-            t,
-            iterations,
-            cov,
-            chi2,
-            norms,
-            sr,
-            sb,
-            offset,
-            offset_sigma,
-        ) = fit
-        obs = MatchedObservations(
-            k_idx=k_idx,
-            i_idx=i_idx,
-            x_mm=self._xyz[i_idx],
-            uv_px=uv,
-            bearings=e,
-            range_mm=rho - offset,
-            y_mm=y - e * offset,
-            sigma_bearing_rad=meas.sigma_px[k_idx] / self.camera.fx,
-            sigma_range_mm=sigma_range,
-        )
-        return self.conclude(
-            obs.subset(kept),
-            R,
-            t,
-            iterations,
-            cov,
-            chi2,
-            norms,
-            sr,
-            sb,
-            active,
-            offset,
-            offset_sigma,
-        )
+            if alone.result.kept.sum() > kept.sum():
+                solved = alone
+        return self.conclude(matched_observations(solved), solved.result, active)
 
-    def _fit_pairs(self, pairs: np.ndarray, meas: Measurements, complete_mm: float) -> tuple:
+    def _fit_pairs(self, pairs: np.ndarray, meas: Measurements, complete_mm: float) -> SolvedPairs:
         """``kernels.solve.solve_pairs`` on matched pairs (m, 2) with completion within
-        ``complete_mm`` (0: none): its return tuple."""
-        cfg = self.config
-        prior = self.offset_prior(meas.range_mm[pairs[:, 0]])
+        ``complete_mm`` (0: none)."""
         mixing = (
             meas.mixing
             if meas.mixing is not None
             else np.full((len(meas.range_mm), MIX_FIELDS), np.nan)
         )
+        candidates = Candidates(
+            uv_px=meas.uv_px,
+            range_mm=meas.range_mm,
+            y_mm=meas.y_mm,
+            weights=meas.weights,
+            sigma_px=meas.sigma_px,
+            sigma_range_mm=meas.sigma_range_mm,
+            mixing=mixing,
+        )
         return self.arithmetic.solve_pairs(
-            meas.y_mm,
-            meas.weights,
-            meas.uv_px,
-            meas.range_mm,
-            meas.sigma_px,
-            meas.sigma_range_mm,
-            mixing,
+            candidates,
             np.ascontiguousarray(pairs[:, 0]),
             np.ascontiguousarray(pairs[:, 1]),
             self._catalog_record,
             self._camera_record,
-            cfg.correct_perspective_bias,
-            float(cfg.mixed_pixel_radius_px),
-            float(complete_mm),
             self._fit_settings,
-            prior,
+            float(complete_mm),
+            self.offset_prior(meas.range_mm[pairs[:, 0]]),
         )
 
     def offset_prior(self, range_mm: np.ndarray) -> RangeOffsetPrior:
@@ -355,27 +345,19 @@ class PoseSolver:
         return offset_prior(self.config, self.range_bias_sigma_mm(range_mm), self.camera.fx)
 
     def conclude(
-        self,
-        obs: MatchedObservations,
-        R,
-        t,
-        iterations,
-        cov,
-        chi2,
-        norms,
-        sr,
-        sb,
-        active,
-        offset_mm: float = 0.0,
-        offset_sigma_mm: float | None = None,
+        self, obs: MatchedObservations, result: OutlierFit, active: ThresholdedFrame | None
     ) -> Solution | Rejected:
-        """The fitted pose of ``obs`` (the reflectors kept; ``sr`` mm, ``sb`` rad (m,):
-        the sigmas the fit used, the frame's excess components included): verified
-        against the frame (``active`` : the frame and its I_t; it is only read when few
-        reflectors are matched, ``dark_check_max_matches``), refused when its residuals
-        stay inconsistent with those sigmas (chi^2 beyond ``consistency_p``), with the
-        covariance of the fit (6, 6; the pipeline scales it by the a-posteriori variance
-        factor) and of the common range bias the data cannot reveal."""
+        """The fitted pose of ``obs`` (the reflectors kept, the common range offset taken
+        out: ``matched_observations``) from ``result`` (the fit with its outlier step;
+        its ``fit``'s sigmas are the ones the fit used, the frame's excess components
+        included): verified against the frame (``active`` : the frame and its I_t; it is
+        only read when few reflectors are matched, ``dark_check_max_matches``), refused
+        when its residuals stay inconsistent with those sigmas (chi^2 beyond
+        ``consistency_p``), with the covariance of the fit (6, 6; the pipeline scales it
+        by the a-posteriori variance factor) and of the common range bias the data cannot
+        reveal."""
+        fit = result.fit
+        R, t = fit.R, fit.t
         T = RigidTransform(R, t)
         ar = self.arithmetic
         if self.config.verify_pose:
@@ -386,65 +368,60 @@ class PoseSolver:
         # chi^2 at the ML optimum only: an SVD or LOS pose's chi^2 is not minimised
         if self.config.consistency_p is not None and dof > 0 and self.config.refinement == "ml":
             limit = chi2_limit(dof, self.config.consistency_p)
-            if not chi2 <= limit:
+            if not fit.chi2 <= limit:
                 return Rejected(
-                    self._inconsistent(obs, norms, float(chi2), dof, limit), implausible=True
+                    self._inconsistent(obs, fit.norms, float(fit.chi2), dof, limit),
+                    implausible=True,
                 )
         # the common offset's uncertainty: its posterior sigma when the fit estimated it
         # (``obs`` then holds the ranges with the offset taken out), else the prior's
         bias = (
-            offset_sigma_mm
-            if offset_sigma_mm is not None and offset_mm != 0
+            result.offset_sigma_mm
+            if result.offset_mm != 0
             else (self.range_bias_sigma_mm(obs.range_mm))
         )
-        extra = (
-            ar.range_bias_covariance(obs.x_mm, obs.bearings, obs.range_mm, R, t, sr, sb, bias)
-            if bias > 0
-            else None
-        )
-        by_size = self.size_scale_covariance(obs, R, t, sr, sb)
+        fitted = fitted_reflectors(obs, fit)
+        extra = ar.range_bias_covariance(fitted, R, t, bias) if bias > 0 else None
+        by_size = self.size_scale_covariance(fitted, R, t, obs.i_idx)
         if by_size is not None:
             extra = by_size if extra is None else extra + by_size
         spread = None  # pose.leave_one_out_covariance, without its input conversions
         if self.config.leave_one_out_covariance and len(obs.i_idx) >= MIN_LEAVE_ONE_OUT:
-            c = np.ascontiguousarray
-            spread = ar.leave_one_out_spread(
-                c(obs.x_mm), c(obs.bearings), c(obs.range_mm), R, t, c(sr), c(sb)
-            )
+            spread = ar.leave_one_out_spread(fitted, R, t)
         ml = MLResult(
             R,
             t,
-            cov,
-            float(chi2),
-            int(iterations),
-            norms,
+            fit.covariance,
+            float(fit.chi2),
+            int(fit.iterations),
+            fit.norms,
             bias_covariance=extra,
-            range_offset_mm=float(offset_mm),
+            range_offset_mm=float(result.offset_mm),
             leave_one_out_covariance=spread,
         )
         c = np.ascontiguousarray
-        weights = 1.0 / (sr**2 + (obs.range_mm * sb) ** 2)  # as kernels.pose.fit_pose's
+        # the fit's weights (as kernels.pose.fit_pose's)
+        weights = 1.0 / (fit.sr**2 + (obs.range_mm * fit.sb) ** 2)
         T_svd = RigidTransform(*ar.absolute_orientation(c(obs.x_mm), c(obs.y_mm), c(weights)))
-        return Solution(T, obs, int(iterations), ml, T_svd=T_svd)
+        return Solution(T, obs, int(fit.iterations), ml, T_svd=T_svd)
 
-    def size_scale_covariance(self, obs: MatchedObservations, R, t, sr, sb) -> np.ndarray | None:
-        """(6, 6) covariance of image-scale errors (``kernels.pose.class_scale_covariance``):
-        the focal length's (``focal_length_sigma_rel``), common to the kept reflectors,
-        and one per diameter from ``common_centroid_bias_px``; None when both are 0. The
-        fit estimates the scale error only to read the range offset, and the pose is
-        refitted without it, so its uncertainty enters here."""
+    def size_scale_covariance(
+        self, fitted: Reflectors, R: np.ndarray, t: np.ndarray, i_idx: np.ndarray
+    ) -> np.ndarray | None:
+        """(6, 6) covariance of image-scale errors (``kernels.pose.class_scale_covariance``)
+        of the fitted reflectors of catalog indices ``i_idx`` (m,): the focal length's
+        (``focal_length_sigma_rel``), common to the kept reflectors, and one per diameter
+        from ``common_centroid_bias_px``; None when both are 0. The fit estimates the
+        scale error only to read the range offset, and the pose is refitted without it, so
+        its uncertainty enters here."""
         cfg = self.config
         if cfg.common_centroid_bias_px <= 0 and cfg.focal_length_sigma_rel <= 0:
             return None
-        cls = self._size_class[obs.i_idx]
+        cls = self._size_class[i_idx]
         return self.arithmetic.class_scale_covariance(
-            obs.x_mm,
-            obs.bearings,
-            obs.range_mm,
+            fitted,
             R,
             t,
-            sr,
-            sb,
             np.ascontiguousarray(cls, dtype=np.int64),
             self._n_sizes,
             float(cfg.common_centroid_bias_px) / self.camera.fx,
@@ -509,18 +486,12 @@ class PoseSolver:
         is_matched = np.zeros(len(self._xyz), bool)
         is_matched[matched] = True
         frame = active if dark_check else _NO_FRAME
-        cam = self.camera
         outcome, i, u, v = self.arithmetic.pose_check(
-            self._xyz,
-            self._d,
+            self._catalog_record,
             is_matched,
             np.ascontiguousarray(R, dtype=float),
             np.ascontiguousarray(t, dtype=float),
-            cam.fx,
-            cam.fy,
-            cam.cx,
-            cam.cy,
-            self._dist,
+            self._camera_record,
             frame.gray,
             float(frame.threshold),
             dark_check,

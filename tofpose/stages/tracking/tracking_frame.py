@@ -21,14 +21,14 @@ from tofpose.core.catalog import Catalog
 from tofpose.core.records import camera_record, catalog_record
 from tofpose.stages.extraction.uncertainty import SigmaFloors, kernel_constants
 from tofpose.stages.persistence.persistence import Persistence, PersistenceInfo
-from tofpose.stages.pose.kernels.pose import NO_OFFSET, RangeOffsetPrior
+from tofpose.stages.pose.records import NO_OFFSET, RangeOffsetPrior
 from tofpose.stages.pose.solve import (
-    MatchedObservations,
     Measurements,
     PoseSolver,
     Solution,
     ThresholdedFrame,
     fit_settings,
+    matched_observations,
 )
 from tofpose.stages.tracking.arithmetic import COMPILED, TrackingArithmetic
 from tofpose.stages.tracking.constants import TRACKED
@@ -77,8 +77,6 @@ class CompiledTracker:
         # kernels' records (``core.records``), built where the acquisition path builds them
         self._camera_args = (camera_record(camera), catalog_record(catalog))
         self._fit_args = (
-            config.correct_perspective_bias,
-            float(config.mixed_pixel_radius_px),
             correction_kernel_arguments(correction),
             kernel_constants(
                 SigmaFloors(
@@ -136,19 +134,7 @@ class CompiledTracker:
             sr,
             y,
             w,
-            uv_obs,
-            e_obs,
-            y_obs,
-            R,
-            t,
-            its,
-            cov,
-            chi2,
-            norms,
-            sr_fit,
-            sb_fit,
-            offset,
-            offset_sigma,
+            solved_pairs,
         ) = arith.track_frame(
             g,
             d,
@@ -168,21 +154,9 @@ class CompiledTracker:
         if code != TRACKED:
             return None
         n = len(cat_idx)
-        k_idx = np.arange(n)
-        obs = MatchedObservations(
-            k_idx=k_idx,
-            i_idx=cat_idx,
-            x_mm=self._xyz[cat_idx],
-            uv_px=uv_obs,
-            bearings=e_obs,
-            range_mm=rho - offset,
-            y_mm=y_obs - e_obs * offset,
-            sigma_bearing_rad=sp / cam.fx,
-            sigma_range_mm=sr,
-        )
         active = ThresholdedFrame(g, track.threshold_counts)
         solved = self._solver.conclude(
-            obs, R, t, its, cov, chi2, norms, sr_fit, sb_fit, active, offset, offset_sigma
+            matched_observations(solved_pairs), solved_pairs.result, active
         )
         if not isinstance(solved, Solution):
             return None

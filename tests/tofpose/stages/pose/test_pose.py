@@ -11,6 +11,7 @@ from tofpose.stages.pose.pose import (
     systematic_sigmas,
     weighted_absolute_orientation,
 )
+from tofpose.stages.pose.records import RangeOffsetPrior, Reflectors
 from tofpose.stages.pose.reference import pose as reference
 
 
@@ -176,7 +177,7 @@ def test_a_common_range_offset_is_found_when_the_image_scale_fixes_the_distance(
     the target's image scale fixes its distance and the offset is estimated (posterior
     sigma well below the 8 mm prior); with blurred ones the data hardly know it: it is
     shrunk towards the prior's 0, with most of the prior's sigma."""
-    from tofpose.stages.pose.kernels.pose import RangeOffsetPrior, common_range_offset
+    from tofpose.stages.pose.kernels.pose import common_range_offset
 
     x = paper_target().positions_mm
     R, t = _truth(5)
@@ -190,8 +191,9 @@ def test_a_common_range_offset_is_found_when_the_image_scale_fixes_the_distance(
     sr, sb = np.full(len(x), 1.0), np.full(len(x), bearing_sigma_rad)
     R0, t0 = weighted_absolute_orientation(x, e * rho_measured[:, None])
     ml = refine_maximum_likelihood(x, e, rho_measured, R0, t0, sr, sb)
-    exact_scale = RangeOffsetPrior(8.0, 0.0, 0.0)
-    offset, sigma = common_range_offset(x, e, rho_measured, ml.R, ml.t, sr, sb, exact_scale)
+    exact_scale = RangeOffsetPrior(sigma_mm=8.0, focal_length_sigma_rel=0.0, centroid_bias_rad=0.0)
+    refl = Reflectors(x=x, e=e, rho=rho_measured, sr=sr, sb=sb)
+    offset, sigma = common_range_offset(refl, ml.R, ml.t, exact_scale)
     if expect_found:
         assert offset == pytest.approx(20.0, abs=3 * sigma) and sigma < 2.0
     else:
@@ -216,7 +218,7 @@ def test_an_image_scale_error_is_not_read_as_a_range_offset():
     sigmas (the confidently wrong pose it would feed); with the scale's uncertainty as a
     parameter (``pattern_scale_sigma``) the offset stays within 3 of its sigmas of the
     true 0, and the sigma says the image cannot fix it to better than ~the scale's."""
-    from tofpose.stages.pose.kernels.pose import RangeOffsetPrior, common_range_offset
+    from tofpose.stages.pose.kernels.pose import common_range_offset
 
     x = paper_target().positions_mm
     R, t = _truth(5)
@@ -229,13 +231,10 @@ def test_an_image_scale_error_is_not_read_as_a_range_offset():
     sr, sb = np.full(len(x), 1.0), np.full(len(x), 2e-5)
     R0, t0 = weighted_absolute_orientation(x, e * rho_measured[:, None])
     ml = refine_maximum_likelihood(x, e, rho_measured, R0, t0, sr, sb)
-    naive, naive_sigma = common_range_offset(
-        x, e, rho_measured, ml.R, ml.t, sr, sb, RangeOffsetPrior(8.0, 0.0, 0.0)
-    )
+    refl = Reflectors(x=x, e=e, rho=rho_measured, sr=sr, sb=sb)
+    naive, naive_sigma = common_range_offset(refl, ml.R, ml.t, RangeOffsetPrior(8.0, 0.0, 0.0))
     assert abs(naive) > 10 * naive_sigma and abs(naive) > 5.0
-    offset, sigma = common_range_offset(
-        x, e, rho_measured, ml.R, ml.t, sr, sb, RangeOffsetPrior(8.0, 0.005, 0.0)
-    )
+    offset, sigma = common_range_offset(refl, ml.R, ml.t, RangeOffsetPrior(8.0, 0.005, 0.0))
     assert abs(offset) < 3 * sigma
     assert sigma > 0.3 * 0.005 * np.linalg.norm(t)
 
@@ -243,7 +242,7 @@ def test_an_image_scale_error_is_not_read_as_a_range_offset():
 def test_the_image_scale_prior_adds_the_centroid_bias_over_the_pattern_radius():
     """sigma_kappa^2 = sigma_f^2 + (c / r_rms)^2, r_rms the rms angle of the bearings
     from their mean (here four bearings 0.01 rad off axis: r_rms = 0.01)."""
-    from tofpose.stages.pose.kernels.pose import RangeOffsetPrior, pattern_scale_sigma
+    from tofpose.stages.pose.kernels.pose import pattern_scale_sigma
 
     a = 0.01
     e = np.array(
@@ -292,9 +291,8 @@ def test_per_size_scale_errors_give_the_covariance_the_pose_errors_have():
         rho_m = rho + rng.normal(0, sr_mm, len(x))
         ml = refine_maximum_likelihood(x, e, rho_m, R, t, sr, sb)
         err = np.concatenate([Rotation.from_matrix(ml.R @ R.T).as_rotvec(), ml.t - t])
-        extra = class_scale_covariance(
-            x, e, rho_m, ml.R, ml.t, sr, sb, size, 2, bias_rad, focal_rel
-        )
+        refl = Reflectors(x=x, e=e, rho=rho_m, sr=sr, sb=sb)
+        extra = class_scale_covariance(refl, ml.R, ml.t, size, 2, bias_rad, focal_rel)
         d2["with"].append(err @ np.linalg.solve(ml.covariance + extra, err))
         d2["without"].append(err @ np.linalg.solve(ml.covariance, err))
     assert np.mean(d2["with"]) == pytest.approx(6.0, rel=0.2)
@@ -340,7 +338,7 @@ def test_leave_one_out_covariance_is_the_spread_of_the_refits_about_the_pose():
         want += np.outer(d, d)
     want *= 7 / 8
     # the statement (one step each, by tofpose.reference) to rounding
-    stated = reference.leave_one_out_spread(x, e, rho, ml.R, ml.t, sr, sb)
+    stated = reference.leave_one_out_spread(Reflectors(x, e, rho, sr, sb), ml.R, ml.t)
     np.testing.assert_allclose(got, stated, rtol=1e-5, atol=1e-6 * np.abs(stated).max())
     ratio = np.diag(got) / np.diag(want)
     assert np.all((ratio > 0.9) & (ratio < 1.2)), ratio

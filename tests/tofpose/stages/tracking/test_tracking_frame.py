@@ -146,6 +146,7 @@ def test_each_tracked_pose_is_the_reference_fit_of_its_own_measurements(
     ml_refine``, SciPy's least squares) of the reflectors it reports (bearings, ranges,
     sigmas), to a thousandth of its sigma; the frame-level sigma estimate and the range
     offset are off here, so that the fit's sigmas are the reported ones."""
+    from tofpose.stages.pose.records import Reflectors
     from tofpose.stages.pose.reference.pose import ml_refine
 
     cat = paper_target()
@@ -167,7 +168,7 @@ def test_each_tracked_pose_is_the_reference_fit_of_its_own_measurements(
         e = np.array([m.point_mm for m in r.matched]) / rho[:, None]
         sr = np.array([m.range_sigma_mm for m in r.matched])
         sb = np.array([m.centroid_sigma_px for m in r.matched]) / cam.fx
-        R, t, cov, _ = ml_refine(x, e, rho, r.R, r.t_mm, sr, sb)
+        R, t, cov, _ = ml_refine(Reflectors(x=x, e=e, rho=rho, sr=sr, sb=sb), r.R, r.t_mm)
         sigma = np.sqrt(np.diag(cov))
         d_rot = Rotation.from_matrix(R @ r.R.T).as_rotvec()
         assert np.all(np.abs(d_rot) < 1e-3 * sigma[:3]), (d_rot, sigma[:3])

@@ -3,13 +3,12 @@ residuals and Jacobian of the ToF measurement model (Eq. 10), Gauss-Newton maxim
 likelihood refinement with its covariance, and the frame's excess range and bearing
 sigmas (variance components).
 
-The readable specification, input checks and docstrings are in ``tofpose.stages.pose.pose``, whose
-functions call these; shapes: x, e (m, 3); rho, sigmas (m,); R (3, 3); t (3,).
+The readable specification, input checks and docstrings are in ``tofpose.stages.pose.pose``,
+whose functions call these. The matched reflectors travel as one ``records.Reflectors``
+(x, e (m, 3); rho, sr, sb (m,)), a fit as a ``records.PoseFit``; R (3, 3); t (3,).
 """
 
 from __future__ import annotations
-
-from typing import NamedTuple
 
 import numpy as np
 
@@ -27,6 +26,7 @@ from tofpose.core.kernels.small_matrices import (
 )
 from tofpose.core.kernels.stats import median_inplace
 from tofpose.stages.pose.constants import MEDIAN_CHI2_1DOF, MEDIAN_CHI2_2DOF, REFINE_LOS, REFINE_ML
+from tofpose.stages.pose.records import OutlierFit, PoseFit, Reflectors
 
 
 @jit
@@ -93,11 +93,13 @@ def tangent_bases(e):
 
 
 @jit
-def residuals_jacobian(x, e, rho, R, t, sr, sb, B):
-    """Whitened residuals r (3m,) and Jacobian J (3m, 6) of the ToF model (Eq. 10): per
-    reflector two lateral residuals (over range * sigma_bearing) and one range residual
-    (over sigma_range); parameters: small left rotation (rad) then translation (mm).
-    B : ``tangent_bases(e)``."""
+def residuals_jacobian(refl, R, t, B):
+    """Whitened residuals r (3m,) and Jacobian J (3m, 6) of the ToF model (Eq. 10) of the
+    reflectors ``refl`` (a ``records.Reflectors``) at the pose (R, t): per reflector two
+    lateral residuals (over range * sigma_bearing) and one range residual (over
+    sigma_range); parameters: small left rotation (rad) then translation (mm).
+    B : ``tangent_bases(refl.e)``."""
+    x, e, rho, sr, sb = refl.x, refl.e, refl.rho, refl.sr, refl.sb
     m = x.shape[0]
     r = np.empty(3 * m)
     J = np.zeros((3 * m, 6))
@@ -151,19 +153,20 @@ def rotation_step(w):
 
 
 @jit
-def ml_refine(x, e, rho, R0, t0, sr, sb, max_iterations, tol, step_sigma2):
-    """Gauss-Newton on bearings and ranges together (ours, beyond §5.2) from (R0, t0).
+def ml_refine(refl, R0, t0, max_iterations, tol, step_sigma2):
+    """Gauss-Newton on bearings and ranges together (ours, beyond §5.2) from (R0, t0), of
+    the reflectors ``refl`` (a ``records.Reflectors``).
 
     Stops when a step is below ``tol`` (mm / rad) or below ``step_sigma2`` in squared
     sigmas of the pose. Returns R, t, covariance (6, 6) = (J^T J)^-1 at the final pose
     (NaN when singular), chi^2, iterations, per-reflector whitened norms (m,).
     """
     R, t = R0.copy(), t0.copy()
-    B = tangent_bases(e)
+    B = tangent_bases(refl.e)
     iterations = 0
     for it in range(1, max_iterations + 1):
         iterations = it
-        r, J = residuals_jacobian(x, e, rho, R, t, sr, sb, B)
+        r, J = residuals_jacobian(refl, R, t, B)
         H = gram(J)
         L, ok = cholesky(H)
         if not ok:  # singular normal equations
@@ -177,7 +180,7 @@ def ml_refine(x, e, rho, R0, t0, sr, sb, max_iterations, tol, step_sigma2):
                 step2 += delta[a] * H[a, b] * delta[b]
         if np.sqrt((delta**2).sum()) < tol or step2 < step_sigma2:
             break
-    r, J = residuals_jacobian(x, e, rho, R, t, sr, sb, B)
+    r, J = residuals_jacobian(refl, R, t, B)
     L, ok = cholesky(gram(J))
     cov = cholesky_inverse(L) if ok else np.full((6, 6), np.nan)
     return R, t, cov, (r**2).sum(), iterations, reflector_norms(r)
@@ -189,23 +192,23 @@ MIN_LEAVE_ONE_OUT = 4
 
 
 @jit
-def leave_one_out_spread(x, e, rho, R, t, sr, sb):
+def leave_one_out_spread(refl, R, t):
     """(6, 6) spread of the leave-one-out poses about the pose (R, t) of all m
-    reflectors: ``(m - 1) / m sum_j d_j d_j^T`` (ours: the jackknife estimate of the
-    pose's error covariance, beside the model's (J^T J)^-1), with d_j the Gauss-Newton
-    step from (R, t) of the fit without reflector j, ``-(H - H_j)^-1 (J^T r - J_j^T
-    r_j)`` (H = J^T J; J_j, r_j reflector j's three rows), over (rotation vector rad,
-    translation mm) with the covariance's left perturbation. One step from the full
-    optimum is the refit to second order in the step. A biased reflector that the fit
-    cannot single out (it alone fixes some direction of the pose) moves the pose when
-    it is left out; the model's covariance does not see it. Zeros below
-    ``MIN_LEAVE_ONE_OUT`` reflectors; a j without which the normal equations are
-    singular counts as no move."""
-    m = x.shape[0]
+    reflectors ``refl`` (a ``records.Reflectors``): ``(m - 1) / m sum_j d_j d_j^T``
+    (ours: the jackknife estimate of the pose's error covariance, beside the model's
+    (J^T J)^-1), with d_j the Gauss-Newton step from (R, t) of the fit without reflector
+    j, ``-(H - H_j)^-1 (J^T r - J_j^T r_j)`` (H = J^T J; J_j, r_j reflector j's three
+    rows), over (rotation vector rad, translation mm) with the covariance's left
+    perturbation. One step from the full optimum is the refit to second order in the
+    step. A biased reflector that the fit cannot single out (it alone fixes some
+    direction of the pose) moves the pose when it is left out; the model's covariance
+    does not see it. Zeros below ``MIN_LEAVE_ONE_OUT`` reflectors; a j without which the
+    normal equations are singular counts as no move."""
+    m = refl.x.shape[0]
     out = np.zeros((6, 6))
     if m < MIN_LEAVE_ONE_OUT:
         return out
-    r, J = residuals_jacobian(x, e, rho, R, t, sr, sb, tangent_bases(e))
+    r, J = residuals_jacobian(refl, R, t, tangent_bases(refl.e))
     H = gram(J)
     g = transposed_times(J, r)
     Hj = np.empty((6, 6))
@@ -301,25 +304,26 @@ def _excess_sigma(z2, var, median_target, max_extra):
 
 
 @jit
-def systematic_sigmas(x, e, rho, R, t, sr, sb, max_range_mm, max_bearing_rad):
+def systematic_sigmas(refl, R, t, max_range_mm, max_bearing_rad):
     """The frame's excess range sigma (mm) and excess bearing sigma (rad) that its noise
     model lacks, estimated separately from the range and the lateral residuals (variance
-    components): the smallest values with which the median squared whitened range
-    residual equals the median of chi^2(1) and the median squared lateral pair that of
-    chi^2(2), each capped by what the sensor can do (``max_range_mm``: uncalibrated ToF
-    range errors; ``max_bearing_rad``: a matched centroid off by more than about half a
-    pixel is a blend or a wrong blob, not noise). Separate components keep a range sigma
-    from growing to absorb bearing errors (and the reverse)."""
-    m = x.shape[0]
-    r, _ = residuals_jacobian(x, e, rho, R, t, sr, sb, tangent_bases(e))
+    components) of the reflectors ``refl`` (a ``records.Reflectors``) at the pose (R, t):
+    the smallest values with which the median squared whitened range residual equals the
+    median of chi^2(1) and the median squared lateral pair that of chi^2(2), each capped
+    by what the sensor can do (``max_range_mm``: uncalibrated ToF range errors;
+    ``max_bearing_rad``: a matched centroid off by more than about half a pixel is a
+    blend or a wrong blob, not noise). Separate components keep a range sigma from
+    growing to absorb bearing errors (and the reverse)."""
+    m = refl.x.shape[0]
+    r, _ = residuals_jacobian(refl, R, t, tangent_bases(refl.e))
     lat2 = np.empty(m)
     rng2 = np.empty(m)
     var_b = np.empty(m)
     for i in range(m):
         lat2[i] = r[3 * i] ** 2 + r[3 * i + 1] ** 2
         rng2[i] = r[3 * i + 2] ** 2
-        var_b[i] = sb[i] ** 2
-    extra_range = _excess_sigma(rng2, sr**2, MEDIAN_CHI2_1DOF, max_range_mm)
+        var_b[i] = refl.sb[i] ** 2
+    extra_range = _excess_sigma(rng2, refl.sr**2, MEDIAN_CHI2_1DOF, max_range_mm)
     extra_bearing = _excess_sigma(lat2, var_b, MEDIAN_CHI2_2DOF, max_bearing_rad)
     return extra_range, extra_bearing
 
@@ -354,143 +358,124 @@ def line_of_sight(x, e, R, t, w, tol, max_iterations):
 
 
 @jit
-def fit_pose(x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2):
-    """One fit: weighted SVD (Eqs. 40-50, weights 1 / (sr^2 + (rho sb)^2)), then the
-    refinement; the ML evaluation at the final pose always. Returns R, t, iterations,
-    covariance, chi^2, norms (m,), weights (m,)."""
-    w = 1.0 / (sr**2 + (rho * sb) ** 2)
-    R, t = absolute_orientation(x, y, w)
-    iterations = 0
-    if refinement == REFINE_LOS:
-        R, t, iterations = line_of_sight(x, e, R, t, w, los_tol, 200)
-    max_it = 10 if refinement == REFINE_ML else 0
-    R_ml, t_ml, cov, chi2, its, norms = ml_refine(
-        x, e, rho, R, t, sr, sb, max_it, 1e-7, step_sigma2
+def subset(refl, keep):
+    """The reflectors ``refl`` (a ``records.Reflectors``) of the rows where ``keep`` (m,)
+    is true (a bool mask) or of the rows ``keep`` lists (indices)."""
+    return Reflectors(
+        x=refl.x[keep], e=refl.e[keep], rho=refl.rho[keep], sr=refl.sr[keep], sb=refl.sb[keep]
     )
-    if refinement == REFINE_ML:
-        R, t, iterations = R_ml, t_ml, its
-    return R, t, iterations, cov, chi2, norms, w
 
 
 @jit
-def fit_without(j, x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2):
+def points(refl):
+    """y = rho e (m, 3) mm of the reflectors ``refl`` (Eq. 8)."""
+    y = np.empty(refl.e.shape)
+    for i in range(y.shape[0]):
+        for k in range(3):
+            y[i, k] = refl.e[i, k] * refl.rho[i]
+    return y
+
+
+@jit
+def fit_pose(refl, fit):
+    """One fit of the reflectors ``refl`` (a ``records.Reflectors``): weighted SVD (Eqs.
+    40-50) of their points rho e (Eq. 8), weights 1 / (sr^2 + (rho sb)^2), then the
+    refinement ``fit.refinement`` (``fit`` : the ``core.records.FitSettings``); the ML
+    evaluation at the final pose always. Returns its ``records.PoseFit`` (with the sigmas
+    given)."""
+    x, e, rho, sr, sb = refl.x, refl.e, refl.rho, refl.sr, refl.sb
+    w = 1.0 / (sr**2 + (rho * sb) ** 2)
+    R, t = absolute_orientation(x, points(refl), w)
+    iterations = 0
+    if fit.refinement == REFINE_LOS:
+        R, t, iterations = line_of_sight(x, e, R, t, w, fit.los_tolerance, 200)
+    max_it = 10 if fit.refinement == REFINE_ML else 0
+    R_ml, t_ml, cov, chi2, its, norms = ml_refine(refl, R, t, max_it, 1e-7, fit.step_sigma2)
+    if fit.refinement == REFINE_ML:
+        R, t, iterations = R_ml, t_ml, its
+    return PoseFit(
+        R=R, t=t, iterations=iterations, covariance=cov, chi2=chi2, norms=norms, sr=sr, sb=sb
+    )
+
+
+@jit
+def fit_without(j, refl, fit):
     """``fit_pose`` of every reflector but row j (the leave-one-out fits): returns the
     kept rows (m,) bool and the pose R, t."""
-    keep = np.arange(x.shape[0]) != j
-    R, t, _, _, _, _, _ = fit_pose(
-        x[keep],
-        e[keep],
-        rho[keep],
-        y[keep],
-        sr[keep],
-        sb[keep],
-        refinement,
-        los_tol,
-        step_sigma2,
-    )
-    return keep, R, t
+    keep = np.arange(refl.x.shape[0]) != j
+    without = fit_pose(subset(refl, keep), fit)
+    return keep, without.R, without.t
 
 
 @jit
-def fit_adaptive(
-    x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2, adapt, max_sys, max_sys_bearing
-):
-    """``fit_pose`` with the noise model's sigmas sr0 (mm), sb0 (rad), then (``adapt``,
-    from 4 reflectors) again with the frame's excess range and bearing sigmas added
-    (``systematic_sigmas``): for each, the smallest estimate over the full fit and the
-    fits leaving one reflector out, worst-fitting first, stopping at 0
-    (``tofpose.stages.pose.solve.PoseSolver.solve`` documents why).
-    Returns R, t, iterations, covariance, chi^2, norms, and the range sigmas (m,) and
-    bearing sigmas (m,) used."""
-    R, t, its, cov, chi2, norms, w = fit_pose(
-        x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2
-    )
-    m = x.shape[0]
-    if not adapt or m < 4:
-        return R, t, its, cov, chi2, norms, sr0, sb0
-    er, eb = systematic_sigmas(x, e, rho, R, t, sr0, sb0, max_sys, max_sys_bearing)
+def fit_adaptive(refl, fit, max_bearing_rad):
+    """``fit_pose`` with the noise model's sigmas ``refl.sr`` (mm), ``refl.sb`` (rad), then
+    (``fit.adapt_range_sigma``, from 4 reflectors) again with the frame's excess range and
+    bearing sigmas added (``systematic_sigmas``, capped at
+    ``fit.max_systematic_range_sigma_mm`` and ``max_bearing_rad``, the centroid cap in
+    rad): for each, the smallest estimate over the full fit and the fits leaving one
+    reflector out, worst-fitting first, stopping at 0
+    (``tofpose.stages.pose.solve.PoseSolver.solve`` documents why). Returns the
+    ``records.PoseFit`` (its sigmas the ones used)."""
+    first = fit_pose(refl, fit)
+    m = refl.x.shape[0]
+    if not fit.adapt_range_sigma or m < 4:
+        return first
+    max_range = fit.max_systematic_range_sigma_mm
+    er, eb = systematic_sigmas(refl, first.R, first.t, max_range, max_bearing_rad)
     if (er > 0 or eb > 0) and m >= 5:
-        order = np.argsort(-norms, kind="mergesort")
+        order = np.argsort(-first.norms, kind="mergesort")
         for j in order:
-            keep, Rj, tj = fit_without(j, x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2)
-            er_j, eb_j = systematic_sigmas(
-                x[keep],
-                e[keep],
-                rho[keep],
-                Rj,
-                tj,
-                sr0[keep],
-                sb0[keep],
-                max_sys,
-                max_sys_bearing,
-            )
+            keep, Rj, tj = fit_without(j, refl, fit)
+            er_j, eb_j = systematic_sigmas(subset(refl, keep), Rj, tj, max_range, max_bearing_rad)
             er, eb = min(er, er_j), min(eb, eb_j)
             if er <= 0 and eb <= 0:
                 break
     if er <= 0 and eb <= 0:
-        return R, t, its, cov, chi2, norms, sr0, sb0
-    sr = np.sqrt(sr0**2 + er**2)
-    sb = np.sqrt(sb0**2 + eb**2)
-    R, t, its, cov, chi2, norms, w = fit_pose(
-        x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2
-    )
-    return R, t, its, cov, chi2, norms, sr, sb
+        return first
+    sr = np.sqrt(refl.sr**2 + er**2)
+    sb = np.sqrt(refl.sb**2 + eb**2)
+    return fit_pose(Reflectors(x=refl.x, e=refl.e, rho=refl.rho, sr=sr, sb=sb), fit)
 
 
 @jit
-def worst_outlier(
-    x, e, rho, y, sr, sb, norms, refinement, los_tol, step_sigma2, outlier_sigma, chi2_per_dof
-):
-    """Index of the reflector to drop, -1 when the fit is consistent
-    (``tofpose.stages.pose.solve.PoseSolver.solve`` documents the rule)."""
+def worst_outlier(refl, norms, fit):
+    """Index of the reflector of ``refl`` (a ``records.Reflectors``, whose fit left the
+    whitened norms ``norms`` (m,)) to drop, -1 when the fit is consistent
+    (``tofpose.stages.pose.solve.PoseSolver.solve`` documents the rule; ``fit`` : the
+    ``core.records.FitSettings``, its outlier_sigma and outlier_chi2_per_dof)."""
     m = norms.shape[0]
     worst = int(np.argmax(norms))
     dof = 3 * m - 6
-    inconsistent = (norms**2).sum() > chi2_per_dof * dof
+    inconsistent = (norms**2).sum() > fit.outlier_chi2_per_dof * dof
     if m < 5:
-        return worst if norms[worst] > outlier_sigma else -1
-    if norms[worst] <= outlier_sigma and not inconsistent:
+        return worst if norms[worst] > fit.outlier_sigma else -1
+    if norms[worst] <= fit.outlier_sigma and not inconsistent:
         return -1
     # the one to drop is the one the others predict worst: a biased point with a small
     # sigma drags the fit towards itself, so that its own residual is small and good
     # points' residuals are large (masking); a fit without it shows it
     predicted = np.empty(m)
     for j in range(m):
-        _, Rj, tj = fit_without(j, x, e, rho, y, sr, sb, refinement, los_tol, step_sigma2)
-        r, _ = residuals_jacobian(
-            x[j : j + 1],
-            e[j : j + 1],
-            rho[j : j + 1],
-            Rj,
-            tj,
-            sr[j : j + 1],
-            sb[j : j + 1],
-            tangent_bases(e[j : j + 1]),
+        _, Rj, tj = fit_without(j, refl, fit)
+        one = Reflectors(
+            x=refl.x[j : j + 1],
+            e=refl.e[j : j + 1],
+            rho=refl.rho[j : j + 1],
+            sr=refl.sr[j : j + 1],
+            sb=refl.sb[j : j + 1],
         )
+        r, _ = residuals_jacobian(one, Rj, tj, tangent_bases(one.e))
         predicted[j] = np.sqrt((r**2).sum())
     worst = int(np.argmax(predicted))
-    return worst if predicted[worst] > outlier_sigma else -1
+    return worst if predicted[worst] > fit.outlier_sigma else -1
 
 
 #: Gauss-Newton steps of the common range offset's estimate (from a converged 6-parameter fit)
 OFFSET_ITERATIONS = 3
 
 
-class RangeOffsetPrior(NamedTuple):
-    """What is known of the common range offset before a frame (``common_range_offset``).
-
-    sigma_mm : prior sigma of the offset (0: not estimated); scale_sigma_rel : relative
-    sigma of the focal length's calibration (the image scale); centroid_bias_rad : a
-    systematic centroid error common to the frame's markers (rad: px over fx), which
-    scales the pattern by ``centroid_bias_rad / r_rms`` (r_rms its rms angular radius)."""
-
-    sigma_mm: float
-    scale_sigma_rel: float
-    centroid_bias_rad: float
-
-
 #: no offset estimated
-NO_OFFSET = RangeOffsetPrior(0.0, 0.0, 0.0)
 
 
 @jit
@@ -515,7 +500,7 @@ def pattern_scale_sigma(e, prior):
         r2 += 1.0 - c * c
     r_rms = np.sqrt(max(r2 / m, 1e-12))
     bias = prior.centroid_bias_rad / r_rms
-    return np.sqrt(prior.scale_sigma_rel**2 + bias * bias), mean
+    return np.sqrt(prior.focal_length_sigma_rel**2 + bias * bias), mean
 
 
 @jit
@@ -534,18 +519,20 @@ def scale_directions(e, B, mean):
 
 
 @jit
-def common_range_offset(x, e, rho, R0, t0, sr, sb, prior):
-    """The range offset b (mm) common to every reflector (ranges read ``|p| + b``), with
-    the pose and the image scale, by Gauss-Newton on (rotation, translation, b, kappa)
-    from (R0, t0). kappa: the measured bearings' offsets from the pattern's mean bearing
-    are (1 + kappa) times the true ones (a focal-length error, or a centroid error common
-    to the frame's small markers); it is what lets the image scale fix the distance, so
-    it is estimated with its prior (``pattern_scale_sigma``) rather than assumed exact: a
-    scale error of 1 % at 6 m is 60 mm of range. Priors b ~ N(0, prior.sigma_mm^2) and
-    kappa ~ N(0, sigma_kappa^2) enter as two more residuals. The image scale determines
-    b when the target is large enough in the image and the scale is known well enough;
-    otherwise the priors keep it near 0. Returns b, its posterior sigma (mm, kappa
-    marginalised)."""
+def common_range_offset(refl, R0, t0, prior):
+    """The range offset b (mm) common to every reflector of ``refl`` (a
+    ``records.Reflectors``; ranges read ``|p| + b``), with the pose and the image scale,
+    by Gauss-Newton on (rotation, translation, b, kappa) from (R0, t0). kappa: the
+    measured bearings' offsets from the pattern's mean bearing are (1 + kappa) times the
+    true ones (a focal-length error, or a centroid error common to the frame's small
+    markers); it is what lets the image scale fix the distance, so it is estimated with
+    its prior (``pattern_scale_sigma``) rather than assumed exact: a scale error of 1 %
+    at 6 m is 60 mm of range. Priors b ~ N(0, prior.sigma_mm^2) and kappa ~ N(0,
+    sigma_kappa^2) enter as two more residuals (prior: a ``records.RangeOffsetPrior``).
+    The image scale determines b when the target is large enough in the image and the
+    scale is known well enough; otherwise the priors keep it near 0. Returns b, its
+    posterior sigma (mm, kappa marginalised)."""
+    x, e, rho, sr, sb = refl.x, refl.e, refl.rho, refl.sr, refl.sb
     m = x.shape[0]
     prior_sigma_mm = prior.sigma_mm
     if prior_sigma_mm <= 0:
@@ -563,7 +550,7 @@ def common_range_offset(x, e, rho, R0, t0, sr, sb, prior):
     kappa = 0.0
     sigma_b = prior_sigma_mm
     for _ in range(OFFSET_ITERATIONS):
-        r, J = residuals_jacobian(x, e, rho - b, R, t, sr, sb, B)
+        r, J = residuals_jacobian(Reflectors(x=x, e=e, rho=rho - b, sr=sr, sb=sb), R, t, B)
         for i in range(3 * m):
             r8[i] = r[i]
             for k in range(6):
@@ -595,115 +582,59 @@ def common_range_offset(x, e, rho, R0, t0, sr, sb, prior):
 
 
 @jit
-def fit_with_outliers(x, e, rho, y, sr0, sb0, fit, max_sys_bearing, offset_prior):
-    """``fit_adaptive``; then (``reject``) drop the worst outlier and refit while one is
-    found and more than ``min_matches`` remain; then (``offset_prior.sigma_mm`` > 0, a
-    ``RangeOffsetPrior``; ML refinement, 4 reflectors kept or more) the range offset
-    common to the kept reflectors (``common_range_offset``: its posterior mean, which
-    the priors shrink towards 0 when the frame cannot tell it) taken out of their ranges
-    and the fit repeated. Returns the kept rows
-    (m,) bool and the final fit: R, t, iterations, covariance, chi^2, norms (kept,),
-    range sigmas (kept,), bearing sigmas (kept,), the common offset b (mm, 0 when not
-    estimated) and its posterior sigma (mm; the prior's when not estimated).
+def fit_with_outliers(refl, fit, max_bearing_rad, offset_prior):
+    """``fit_adaptive``; then (``fit.reject_outliers``) drop the worst outlier and refit
+    while one is found and more than ``fit.min_matches`` remain; then
+    (``offset_prior.sigma_mm`` > 0, a ``records.RangeOffsetPrior``; ML refinement, 4
+    reflectors kept or more) the range offset common to the kept reflectors
+    (``common_range_offset``: its posterior mean, which the priors shrink towards 0 when
+    the frame cannot tell it) taken out of their ranges and the fit repeated.
 
-    x (m, 3), e (m, 3), rho (m,), y (m, 3), sr0 (m,), sb0 (m,) : the matched reflectors'
-    catalog points, bearings, ranges, points and sigmas (mm, rad); fit : the
-    ``records.FitSettings``; max_sys_bearing : its centroid cap in rad (px over fx);
-    offset_prior : a ``RangeOffsetPrior``."""
-    refinement, los_tol, step_sigma2, adapt = (
-        fit.refinement,
-        fit.los_tolerance,
-        fit.step_sigma2,
-        fit.adapt,
-    )
-    max_sys, reject, min_matches = fit.max_systematic_range_mm, fit.reject, fit.min_matches
-    outlier_sigma, chi2_per_dof = fit.outlier_sigma, fit.chi2_per_dof
-    m = x.shape[0]
+    refl : the matched reflectors (a ``records.Reflectors``: catalog points, bearings,
+    ranges and the noise model's sigmas, mm and rad); fit : the ``core.records.
+    FitSettings``; max_bearing_rad : its centroid cap in rad (px over fx). Returns the
+    ``records.OutlierFit``: the kept rows (m,) bool, the final fit of the kept
+    reflectors, the common offset b (mm, 0 when not estimated) and its posterior sigma
+    (mm; the prior's when not estimated)."""
+    m = refl.x.shape[0]
     kept = np.ones(m, np.bool_)
     rows = np.arange(m)
-    R, t, its, cov, chi2, norms, sr, sb = fit_adaptive(
-        x, e, rho, y, sr0, sb0, refinement, los_tol, step_sigma2, adapt, max_sys, max_sys_bearing
-    )
-    while reject and rows.shape[0] > min_matches:
+    result = fit_adaptive(refl, fit, max_bearing_rad)
+    while fit.reject_outliers and rows.shape[0] > fit.min_matches:
         worst = worst_outlier(
-            x,
-            e,
-            rho,
-            y,
-            sr,
-            sb,
-            norms,
-            refinement,
-            los_tol,
-            step_sigma2,
-            outlier_sigma,
-            chi2_per_dof,
+            Reflectors(x=refl.x, e=refl.e, rho=refl.rho, sr=result.sr, sb=result.sb),
+            result.norms,
+            fit,
         )
         if worst < 0:
             break
         kept[rows[worst]] = False
         keep = np.arange(rows.shape[0]) != worst
-        rows, x, e, rho, y, sr0, sb0 = (
-            rows[keep],
-            x[keep],
-            e[keep],
-            rho[keep],
-            y[keep],
-            sr0[keep],
-            sb0[keep],
-        )
-        R, t, its, cov, chi2, norms, sr, sb = fit_adaptive(
-            x,
-            e,
-            rho,
-            y,
-            sr0,
-            sb0,
-            refinement,
-            los_tol,
-            step_sigma2,
-            adapt,
-            max_sys,
-            max_sys_bearing,
-        )
+        rows = rows[keep]
+        refl = subset(refl, keep)
+        result = fit_adaptive(refl, fit, max_bearing_rad)
     # the common offset from the reflectors kept: a reflection left in would bend the
     # fit the offset is estimated from
     offset, offset_sigma = 0.0, offset_prior.sigma_mm
-    n_kept = rows.shape[0]
-    if offset_prior.sigma_mm > 0 and refinement == REFINE_ML and n_kept >= 4:
-        offset, offset_sigma = common_range_offset(x, e, rho, R, t, sr, sb, offset_prior)
+    if offset_prior.sigma_mm > 0 and fit.refinement == REFINE_ML and rows.shape[0] >= 4:
+        used = Reflectors(x=refl.x, e=refl.e, rho=refl.rho, sr=result.sr, sb=result.sb)
+        offset, offset_sigma = common_range_offset(used, result.R, result.t, offset_prior)
     if offset != 0.0:
-        rho = rho - offset
-        y = np.empty_like(y)
-        for i in range(n_kept):
-            for k in range(3):
-                y[i, k] = e[i, k] * rho[i]
-        R, t, its, cov, chi2, norms, sr, sb = fit_adaptive(
-            x,
-            e,
-            rho,
-            y,
-            sr0,
-            sb0,
-            refinement,
-            los_tol,
-            step_sigma2,
-            adapt,
-            max_sys,
-            max_sys_bearing,
-        )
-    return kept, R, t, its, cov, chi2, norms, sr, sb, offset, offset_sigma
+        shifted = Reflectors(x=refl.x, e=refl.e, rho=refl.rho - offset, sr=refl.sr, sb=refl.sb)
+        result = fit_adaptive(shifted, fit, max_bearing_rad)
+    return OutlierFit(kept=kept, fit=result, offset_mm=offset, offset_sigma_mm=offset_sigma)
 
 
 @jit
-def range_bias_covariance(x, e, rho, R, t, sr, sb, bias_sigma_mm):
-    """(6, 6) pose covariance from a range offset common to every reflector, of sigma
-    ``bias_sigma_mm``: s s^T sigma_b^2 with s = (J^T J)^-1 J^T g, g the whitened
-    residuals' response to a unit offset (-1 / sr on each range row)."""
-    _, J = residuals_jacobian(x, e, rho, R, t, sr, sb, tangent_bases(e))
+def range_bias_covariance(refl, R, t, bias_sigma_mm):
+    """(6, 6) pose covariance from a range offset common to every reflector of ``refl``
+    (a ``records.Reflectors``), of sigma ``bias_sigma_mm``: s s^T sigma_b^2 with s =
+    (J^T J)^-1 J^T g, g the whitened residuals' response to a unit offset (-1 / sr on
+    each range row)."""
+    _, J = residuals_jacobian(refl, R, t, tangent_bases(refl.e))
     g = np.zeros(J.shape[0])
-    for i in range(x.shape[0]):
-        g[3 * i + 2] = -1.0 / sr[i]
+    for i in range(refl.x.shape[0]):
+        g[3 * i + 2] = -1.0 / refl.sr[i]
     L, ok = cholesky(gram(J))
     if not ok:
         return np.full((6, 6), np.nan)
@@ -712,18 +643,20 @@ def range_bias_covariance(x, e, rho, R, t, sr, sb, bias_sigma_mm):
 
 
 @jit
-def class_scale_covariance(x, e, rho, R, t, sr, sb, group, n_groups, bias_rad, common_scale_sigma):
-    """(6, 6) pose covariance from image-scale errors (bearings scaled about the
-    pattern's mean bearing by 1 + kappa, as in ``common_range_offset``): one common to
-    every reflector, of relative sigma ``common_scale_sigma`` (the focal length's
-    calibration), and one per group of reflectors (``group`` (m,) int in [0, n_groups):
-    the markers of one diameter), independent between groups, from a centroid error
-    ``bias_rad`` common to a group's markers: sigma ``bias_rad / r_g`` (r_g the group's
-    rms angle from the mean bearing). Sum of s s^T sigma^2, s = (J^T J)^-1 J^T g, g the
-    whitened residuals' response to a unit kappa."""
-    m = x.shape[0]
+def class_scale_covariance(refl, R, t, group, n_groups, bias_rad, common_scale_sigma):
+    """(6, 6) pose covariance from image-scale errors of the reflectors ``refl`` (a
+    ``records.Reflectors``; bearings scaled about the pattern's mean bearing by 1 + kappa,
+    as in ``common_range_offset``): one common to every reflector, of relative sigma
+    ``common_scale_sigma`` (the focal length's calibration), and one per group of
+    reflectors (``group`` (m,) int in [0, n_groups): the markers of one diameter),
+    independent between groups, from a centroid error ``bias_rad`` common to a group's
+    markers: sigma ``bias_rad / r_g`` (r_g the group's rms angle from the mean bearing).
+    Sum of s s^T sigma^2, s = (J^T J)^-1 J^T g, g the whitened residuals' response to a
+    unit kappa."""
+    e, rho, sb = refl.e, refl.rho, refl.sb
+    m = e.shape[0]
     B = tangent_bases(e)
-    _, J = residuals_jacobian(x, e, rho, R, t, sr, sb, B)
+    _, J = residuals_jacobian(refl, R, t, B)
     L, ok = cholesky(gram(J))
     if not ok:
         return np.full((6, 6), np.nan)

@@ -14,6 +14,7 @@ from tofpose.core.kernels.camera import bearings
 from tofpose.stages.extraction.kernels.mixed_pixels import unmixed_range
 from tofpose.stages.extraction.kernels.perspective import disc_centre_offsets
 from tofpose.stages.pose.kernels.pose import absolute_orientation, fit_with_outliers
+from tofpose.stages.pose.records import Reflectors, SolvedPairs
 
 
 @jit
@@ -63,47 +64,30 @@ def complete_pairs(y, k_idx, i_idx, xyz, R, t, tol_mm):
 
 
 @jit
-def solve_pairs(
-    y,
-    w,
-    uv,
-    rho,
-    sigma_px,
-    sigma_range,
-    mix,
-    k_idx,
-    i_idx,
-    catalog,
-    camera,
-    correct_perspective,
-    mixing_radius_px,
-    complete_tol_mm,
-    fit,
-    offset_prior,
-):
+def solve_pairs(candidates, k_idx, i_idx, catalog, camera, fit, complete_tol_mm, offset_prior):
     """The pose of matched pairs (module docstring).
 
-    y (g, 3), w (g,), uv (g, 2), rho (g,), sigma_px (g,), sigma_range (g,) : the
-    candidates' points (Eq. 8), weights (Eq. 21), centroids, ranges and sigmas; mix
-    (g, ``extraction.constants.MIX_FIELDS``) : their mixing sums (NaN rows: none); k_idx,
-    i_idx (m,) : matched (candidate, catalog) pairs; catalog : ``records.CatalogRecord``;
-    camera : ``records.CameraRecord``; mixing_radius_px : matched discs whose
-    apparent radius is below it take the mixing model's range instead of the median
-    (``mixed_pixels.unmixed_range``, with the disc's area and incidence from the SVD
-    pose; <= 0: never); complete_tol_mm : completion's tolerance (<= 0: none); fit :
-    ``fit_with_outliers``'s ``records.FitSettings`` (the bearing cap given in px, taken
-    to rad with fx); offset_prior : a ``pose.RangeOffsetPrior``.
+    candidates : the frame's candidate reflectors (a ``core.records.Candidates``: their
+    centroids, ranges, points (Eq. 8), weights (Eq. 21), sigmas and mixing sums (NaN
+    rows: none)); k_idx, i_idx (m,) : matched (candidate, catalog) pairs; catalog :
+    ``records.CatalogRecord``; camera : ``records.CameraRecord``; fit : the
+    ``records.FitSettings`` (``fit_with_outliers``'; its bearing cap given in px, taken to
+    rad with fx; with ``correct_perspective_bias`` the centroids less the perspective
+    bias; matched discs whose apparent radius is below ``mixed_pixel_radius_px`` take the
+    mixing model's range instead of the median, ``mixed_pixels.unmixed_range``, with the
+    disc's area and incidence from the SVD pose; <= 0: never); complete_tol_mm :
+    completion's tolerance (<= 0: none); offset_prior : a ``pose.RangeOffsetPrior``.
 
-    Returns k_idx, i_idx (m',) after completion, uv_obs (m', 2) corrected centroids,
-    e_obs (m', 3) their bearings, y_obs (m', 3) points, rho_obs (m',) their ranges and
-    sr_obs (m',) range sigmas (the model's own uncertainty added where it replaced the
-    median), then what ``fit_with_outliers`` returns (kept (m',) bool, R, t,
-    iterations, covariance, chi^2, norms, range sigmas, bearing sigmas, common range
-    offset mm and its sigma). ``y_obs`` and the ranges are as measured: the offset is
-    not taken out of them here.
+    Returns the ``pose.records.SolvedPairs``: k_idx, i_idx (m',) after completion, the
+    corrected centroids (m', 2), the matched reflectors as observed (bearings of the
+    corrected centroids, ranges and range sigmas with the mixing model's own uncertainty
+    added where it replaced the median, the noise model's bearing sigmas) and what
+    ``fit_with_outliers`` returns. The observed ranges are as measured: the offset is not
+    taken out of them here.
     """
     xyz, radii = catalog.xyz, catalog.radii_mm
     K, fx, fy, cx, cy, dist = camera.K, camera.fx, camera.fy, camera.cx, camera.cy, camera.dist
+    y, w = candidates.y_mm, candidates.weights
     x = np.empty((k_idx.shape[0], 3))
     for a in range(k_idx.shape[0]):
         x[a] = xyz[i_idx[a]]
@@ -122,50 +106,34 @@ def solve_pairs(
     sr = np.empty(m)
     centres = np.empty((m, 3))  # x R^T + t, the discs' centres in the camera frame
     for a in range(m):
-        uv_obs[a] = uv[k_idx[a]]
+        uv_obs[a] = candidates.uv_px[k_idx[a]]
         r_disc[a] = radii[i_idx[a]]
-        rho_m[a] = rho[k_idx[a]]
-        sr[a] = sigma_range[k_idx[a]]
+        rho_m[a] = candidates.range_mm[k_idx[a]]
+        sr[a] = candidates.sigma_range_mm[k_idx[a]]
         for b in range(3):
             centres[a, b] = R[b, 0] * x[a, 0] + R[b, 1] * x[a, 1] + R[b, 2] * x[a, 2] + t[b]
-    if mixing_radius_px > 0:
+    if fit.mixed_pixel_radius_px > 0:
         for a in range(m):
             c = centres[a]
             norm_c = np.sqrt(c[0] ** 2 + c[1] ** 2 + c[2] ** 2)
             cos_inc = abs(R[0, 2] * c[0] + R[1, 2] * c[1] + R[2, 2] * c[2]) / norm_c
             d, sens = unmixed_range(
-                rho_m[a], mix[k_idx[a]], r_disc[a] * fx / rho_m[a], cos_inc, mixing_radius_px
+                rho_m[a],
+                candidates.mixing[k_idx[a]],
+                r_disc[a] * fx / rho_m[a],
+                cos_inc,
+                fit.mixed_pixel_radius_px,
             )
             rho_m[a] = d
             sr[a] = np.sqrt(sr[a] ** 2 + sens**2)
-    if correct_perspective:
+    if fit.correct_perspective_bias:
         uv_obs -= disc_centre_offsets(K, centres, R[:, 2].copy(), r_disc)
     e_obs = bearings(uv_obs, fx, fy, cx, cy, dist)
-    y_obs = np.empty((m, 3))
     sb = np.empty(m)
     for a in range(m):
-        y_obs[a] = e_obs[a] * rho_m[a]
-        sb[a] = sigma_px[k_idx[a]] / fx
-    kept, R, t, its, cov, chi2, norms, sr_fit, sb_fit, offset, offset_sigma = fit_with_outliers(
-        x, e_obs, rho_m, y_obs, sr, sb, fit, fit.max_systematic_centroid_px / fx, offset_prior
+        sb[a] = candidates.sigma_px[k_idx[a]] / fx
+    observed = Reflectors(x=x, e=e_obs, rho=rho_m, sr=sr, sb=sb)
+    result = fit_with_outliers(
+        observed, fit, fit.max_systematic_centroid_sigma_px / fx, offset_prior
     )
-    return (
-        k_idx,
-        i_idx,
-        uv_obs,
-        e_obs,
-        y_obs,
-        rho_m,
-        sr,
-        kept,
-        R,
-        t,
-        its,
-        cov,
-        chi2,
-        norms,
-        sr_fit,
-        sb_fit,
-        offset,
-        offset_sigma,
-    )
+    return SolvedPairs(k_idx=k_idx, i_idx=i_idx, uv=uv_obs, observed=observed, result=result)

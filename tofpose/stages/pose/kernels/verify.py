@@ -11,19 +11,21 @@ from tofpose.stages.pose.constants import BEHIND_CAMERA, CONSISTENT, DARK_REFLEC
 
 
 @jit
-def pose_check(xyz, diameters, matched, R, t, fx, fy, cx, cy, dist, gray, threshold, dark_check):
+def pose_check(catalog, matched, R, t, camera, gray, threshold, dark_check):
     """Whether the pose (R, t) puts every reflector in front of the camera, and (with
     ``dark_check``) whether a reflector that is not matched but should be clearly
     visible falls where the frame has no active pixel.
 
-    xyz (N, 3), diameters (N,) mm : the catalog; matched (N,) bool; gray (H, W) float32
-    and threshold : the frame and its I_t (the active set is ``gray >= threshold`` in
+    catalog : a ``records.CatalogRecord`` (N reflectors; diameters 2 r); matched (N,)
+    bool; camera : a ``records.CameraRecord``; gray (H, W) float32 and threshold : the
+    frame and its I_t (the active set is ``gray >= threshold`` in
     float32, as ``levels.threshold_mask`` has it). A reflector is tested when it is at
     least 2.5 px across, its disc lies inside the image with a margin of 3/4 diameter
     + 2 px, and no other reflector's image is within 1.5 diameters (a merged pair gives
     no clean prediction); it is dark when no pixel within d/3 px (at least 1) of its
     projected centre is active. Returns (outcome, reflector index, u, v) px, the first
     dark reflector in catalog order (-1 and NaN otherwise)."""
+    xyz, radii, fx = catalog.xyz, catalog.radii_mm, camera.fx
     n = xyz.shape[0]
     centres = np.empty((n, 3))
     for i in range(n):
@@ -33,11 +35,11 @@ def pose_check(xyz, diameters, matched, R, t, fx, fy, cx, cy, dist, gray, thresh
             return BEHIND_CAMERA, -1, np.nan, np.nan
     if not dark_check:
         return CONSISTENT, -1, np.nan, np.nan
-    uv = project(centres, fx, fy, cx, cy, dist)
+    uv = project(centres, fx, camera.fy, camera.cx, camera.cy, camera.dist)
     h, w = gray.shape
     t32 = np.float32(threshold)
     for i in range(n):
-        d_px = fx * diameters[i] / centres[i, 2]
+        d_px = fx * (2.0 * radii[i]) / centres[i, 2]
         if matched[i] or d_px < 2.5:
             continue
         u, v = uv[i, 0], uv[i, 1]

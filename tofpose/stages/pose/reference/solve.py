@@ -6,10 +6,10 @@ perspective bias of the discs' image centres (§3.3) taken off the centroids, th
 bearings (Eq. 9) and points (Eq. 8), and the fit with its outlier step
 (``pose.fit_with_outliers``).
 
-Shapes: g candidates (blobs), m matched pairs, N catalog reflectors. ``catalog`` and
-``camera`` are read by field name (``core.records.CatalogRecord``: xyz, radii_mm;
-``CameraRecord``: K, fx, fy, cx, cy, dist), ``fit`` and ``offset_prior`` as in
-``pose.fit_with_outliers``.
+Shapes: g candidates (blobs), m matched pairs, N catalog reflectors. ``candidates``,
+``catalog`` and ``camera`` are read by field name (``core.records.Candidates``;
+``CatalogRecord``: xyz, radii_mm; ``CameraRecord``: K, fx, dist), ``fit`` and
+``offset_prior`` as in ``pose.fit_with_outliers``.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import numpy as np
 
 from tofpose.core.reference.camera import bearings
 from tofpose.stages.extraction.reference.mixed_pixels import unmixed_range
+from tofpose.stages.pose.records import Reflectors, SolvedPairs
 from tofpose.stages.pose.reference.pose import absolute_orientation, fit_with_outliers
 
 
@@ -61,48 +62,31 @@ def complete_pairs(y, k_idx, i_idx, xyz, R, t, tol_mm):
     return np.array(ks, np.int64), np.array(is_, np.int64)
 
 
-def solve_pairs(
-    y,
-    w,
-    uv,
-    rho,
-    sigma_px,
-    sigma_range,
-    mix,
-    k_idx,
-    i_idx,
-    catalog,
-    camera,
-    correct_perspective,
-    mixing_radius_px,
-    complete_tol_mm,
-    fit,
-    offset_prior,
-):
+def solve_pairs(candidates, k_idx, i_idx, catalog, camera, fit, complete_tol_mm, offset_prior):
     """The pose of matched pairs (§5 as the pipeline runs it):
 
     1. the weighted absolute orientation (Eqs. 40-50) of the pairs' points y[k] (Eq. 8)
        with weights w[k] (Eq. 21) to the catalog points xyz[i];
     2. (``complete_tol_mm`` > 0) ``complete_pairs`` at that pose, and when it added
        pairs the absolute orientation of them all;
-    3. (``mixing_radius_px`` > 0) the range of each matched disc from its mixing sums
-       (``mixed_pixels.unmixed_range``: apparent radius r fx / rho, the incidence
+    3. (``fit.mixed_pixel_radius_px`` > 0) the range of each matched disc from its mixing
+       sums (``mixed_pixels.unmixed_range``: apparent radius r fx / rho, the incidence
        |R e_z . c| / |c| at its centre c = R x + t of that pose), its range sigma
        widened in quadrature by the model's sensitivity;
-    4. (``correct_perspective``) the centroids less ``disc_centre_offsets`` at those
-       centres with the plate's normal R e_z;
-    5. bearings e (Eq. 9) of the centroids, points e rho (Eq. 8), bearing sigmas
-       sigma_px / fx, and ``pose.fit_with_outliers`` with the bearing cap
-       ``fit.max_systematic_centroid_px / fx``.
+    4. (``fit.correct_perspective_bias``) the centroids less ``disc_centre_offsets`` at
+       those centres with the plate's normal R e_z;
+    5. bearings e (Eq. 9) of the centroids, bearing sigmas sigma_px / fx, and
+       ``pose.fit_with_outliers`` of those reflectors with the bearing cap
+       ``fit.max_systematic_centroid_sigma_px / fx``.
 
-    y (g, 3), w (g,), uv (g, 2), rho (g,), sigma_px (g,), sigma_range (g,) : the
-    candidates' points, weights, centroids, ranges and sigmas; mix (g, 6): their mixing
-    sums (NaN rows: none); k_idx, i_idx (m,): the matched (candidate, catalog) pairs.
-    Returns k_idx, i_idx (m',) after completion, uv_obs (m', 2), e_obs (m', 3), y_obs
-    (m', 3), rho_obs (m',), sr_obs (m',), then ``fit_with_outliers``'s kept (m',), R, t,
-    iterations, covariance, chi^2, norms, range sigmas, bearing sigmas, offset (mm) and
-    its sigma. The offset is not taken out of y_obs and rho_obs."""
+    candidates : the candidates' centroids, ranges, points, weights, sigmas and mixing
+    sums (a ``core.records.Candidates``, read by field name; mixing (g, 6), NaN rows:
+    none); k_idx, i_idx (m,): the matched (candidate, catalog) pairs. Returns the
+    ``SolvedPairs``: k_idx, i_idx (m',) after completion, uv (m', 2), the observed
+    ``Reflectors`` (x, e, rho, sr, sb) and ``fit_with_outliers``' ``OutlierFit``. The
+    offset is not taken out of the observed ranges."""
     xyz, radii = np.asarray(catalog.xyz, float), np.asarray(catalog.radii_mm, float)
+    y, w = candidates.y_mm, candidates.weights
     R, t = absolute_orientation(xyz[i_idx], y[k_idx], w[k_idx])
     if complete_tol_mm > 0:
         n = len(k_idx)
@@ -112,22 +96,26 @@ def solve_pairs(
     x = xyz[i_idx]
     centres = x @ R.T + t
     r_disc = radii[i_idx]
-    rho_m = rho[k_idx].astype(float)
-    sr = sigma_range[k_idx].astype(float)
-    if mixing_radius_px > 0:
+    rho_m = candidates.range_mm[k_idx].astype(float)
+    sr = candidates.sigma_range_mm[k_idx].astype(float)
+    if fit.mixed_pixel_radius_px > 0:
         cos_inc = np.abs(centres @ R[:, 2]) / np.linalg.norm(centres, axis=1)
         for a, k in enumerate(k_idx):
             d, sensitivity = unmixed_range(
-                rho_m[a], mix[k], r_disc[a] * camera.fx / rho_m[a], cos_inc[a], mixing_radius_px
+                rho_m[a],
+                candidates.mixing[k],
+                r_disc[a] * camera.fx / rho_m[a],
+                cos_inc[a],
+                fit.mixed_pixel_radius_px,
             )
             rho_m[a] = d
             sr[a] = np.hypot(sr[a], sensitivity)
-    uv_obs = uv[k_idx].astype(float)
-    if correct_perspective:
+    uv_obs = candidates.uv_px[k_idx].astype(float)
+    if fit.correct_perspective_bias:
         uv_obs = uv_obs - disc_centre_offsets(camera.K, centres, R[:, 2], r_disc)
     e_obs = bearings(uv_obs, camera.K, camera.dist)
-    y_obs = e_obs * rho_m[:, None]
-    sb = sigma_px[k_idx] / camera.fx
-    cap = fit.max_systematic_centroid_px / camera.fx
-    result = fit_with_outliers(x, e_obs, rho_m, y_obs, sr, sb, fit, cap, offset_prior)
-    return (k_idx, i_idx, uv_obs, e_obs, y_obs, rho_m, sr, *result)
+    sb = candidates.sigma_px[k_idx] / camera.fx
+    observed = Reflectors(x=x, e=e_obs, rho=rho_m, sr=sr, sb=sb)
+    cap = fit.max_systematic_centroid_sigma_px / camera.fx
+    result = fit_with_outliers(observed, fit, cap, offset_prior)
+    return SolvedPairs(k_idx=k_idx, i_idx=i_idx, uv=uv_obs, observed=observed, result=result)

@@ -20,7 +20,7 @@ CLEAR_DIAMETERS = 1.5
 SEARCH_DIVISOR = 3.0
 
 
-def pose_check(xyz, diameters, matched, R, t, fx, fy, cx, cy, dist, gray, threshold, dark_check):
+def pose_check(catalog, matched, R, t, camera, gray, threshold, dark_check):
     """The pose (R (3, 3), t (3,)) against the frame. ``BEHIND_CAMERA`` when any
     reflector's centre R x + t has z <= 0; else (with ``dark_check``) ``DARK_REFLECTOR``
     for the first reflector in catalog order that is unmatched, imaged d_px = fx d / z
@@ -31,19 +31,20 @@ def pose_check(xyz, diameters, matched, R, t, fx, fy, cx, cy, dist, gray, thresh
     (half to even) about (round(u), round(v)), clipped to the image; else
     ``CONSISTENT``.
 
-    xyz (N, 3), diameters (N,) mm : the catalog; matched (N,) bool; gray (H, W) float32.
+    catalog : xyz (N, 3) and radii_mm (N,) (a ``core.records.CatalogRecord``, read by
+    field name; the diameters d are 2 r); matched (N,) bool; camera : fx and the lens
+    (K, dist) of a ``core.records.CameraRecord``; gray (H, W) float32.
     Returns (outcome, reflector index, u, v): the dark reflector's, -1 and NaN
     otherwise."""
-    centres = np.asarray(xyz, float) @ R.T + t
+    centres = np.asarray(catalog.xyz, float) @ R.T + t
     if (centres[:, 2] <= 0).any():
         return BEHIND_CAMERA, -1, np.nan, np.nan
     if not dark_check:
         return CONSISTENT, -1, np.nan, np.nan
-    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-    uv = project(centres, K, dist)
+    uv = project(centres, camera.K, camera.dist)
     active = gray >= np.float32(threshold)
     h, w = gray.shape
-    d_px = fx * np.asarray(diameters, float) / centres[:, 2]
+    d_px = camera.fx * (2.0 * np.asarray(catalog.radii_mm, float)) / centres[:, 2]
     gaps = np.linalg.norm(uv[:, None, :] - uv[None, :, :], axis=-1)
     np.fill_diagonal(gaps, np.inf)
     for i in range(len(centres)):

@@ -18,8 +18,10 @@ from __future__ import annotations
 import numpy as np
 
 from tofpose.core.compiled import jit
+from tofpose.core.records import Candidates
 from tofpose.stages.persistence.kernels.measure import measure_and_back_project
 from tofpose.stages.pose.kernels.solve import solve_pairs
+from tofpose.stages.pose.records import OutlierFit, PoseFit, Reflectors, SolvedPairs
 from tofpose.stages.tracking.constants import (
     FOUND,
     LOST,
@@ -46,8 +48,6 @@ def track_frame(
     history,
     camera,
     catalog,
-    correct_perspective,
-    mixing_radius_px,
     correction,
     sigmas,
     fit,
@@ -63,21 +63,17 @@ def track_frame(
     level, counts;
     history : the persistence history and its settings (``records.PersistenceHistory``,
     ``Persistence.history``); camera, catalog : a
-    ``records.CameraRecord`` and ``records.CatalogRecord``; correct_perspective,
-    mixing_radius_px : ``solve.solve_pairs``'s; correction : the calibrated range
+    ``records.CameraRecord`` and ``records.CatalogRecord``; correction : the calibrated range
     correction (``records.RangeCorrectionRecord``); sigmas : the ``uncertainty``
     constants and floors (``records.SigmaConstants``); fit : ``PoseSolver``'s
     ``records.FitSettings``; offset_prior : a ``pose.RangeOffsetPrior``; mean_buf,
     med_buf : the persistence's scratch frames (``Persistence.scratch``).
 
     Returns (code, n_used, motion, centroids (n, 2) moment centroids, flat, starts,
-    uv (n, 2) measured centroids, rho (n,), sigma_px (n,), sigma_range (n,),
-    y (n, 3) back-projected points (Eq. 8), weights (n,) (Eq. 21), uv_obs (n, 2)
-    perspective-corrected, e_obs (n, 3), y_obs (n, 3), R, t, iterations, covariance
-    (6, 6), chi2, norms (n,), sr (n,), sb (n,) the range and bearing sigmas of the fit,
-    the common range offset mm and its sigma);
-    the arrays after ``code`` are only meaningful up
-    to the step that set it.
+    uv (n, 2) measured centroids, rho (n,) ranges (the mixing model's where it applied),
+    sigma_px (n,), sigma_range (n,), y (n, 3) back-projected points (Eq. 8), weights (n,)
+    (Eq. 21), and ``solve_pairs``' ``SolvedPairs``); the arrays after ``code`` are only
+    meaningful up to the step that set it.
     """
     n = bounds.shape[0]
     status, bbox, peak, cent, starts, flat = search_windows(
@@ -89,18 +85,7 @@ def track_frame(
     sr = np.full(n, np.nan)
     y = np.full((n, 3), np.nan)
     wts = np.full(n, np.nan)
-    uv_obs = np.full((n, 2), np.nan)
-    e_obs = np.full((n, 3), np.nan)
-    y_obs = np.full((n, 3), np.nan)
-    R = np.eye(3)
-    t = np.zeros(3)
-    its = 0
-    cov = np.full((6, 6), np.nan)
-    chi2 = np.inf
-    norms = np.full(n, np.nan)
-    sr_fit = np.full(n, np.nan)
-    sb_fit = np.full(n, np.nan)
-    offset, offset_sigma = 0.0, offset_prior.sigma_mm
+    solved = unsolved(cat_idx, offset_prior.sigma_mm)
     n_used, motion = 0, False
     code = TRACKED
     for _ in range(1):  # one pass; ``break`` ends the frame with ``code``
@@ -140,70 +125,49 @@ def track_frame(
             break
 
         # §5 on the known correspondences (every blob matched: nothing to complete)
-        (
-            _,
-            _,
-            uv_obs,
-            e_obs,
-            y_obs,
-            rho_obs,
-            sr_obs,
-            kept,
-            R,
-            t,
-            its,
-            cov,
-            chi2,
-            norms,
-            sr_fit,
-            sb_fit,
-            offset,
-            offset_sigma,
-        ) = solve_pairs(
-            y,
-            wts,
-            uv,
-            rho,
-            sp,
-            sr,
-            mix,
-            np.arange(n),
-            cat_idx,
-            catalog,
-            camera,
-            correct_perspective,
-            mixing_radius_px,
-            0.0,
-            fit,
-            offset_prior,
+        candidates = Candidates(
+            uv_px=uv, range_mm=rho, y_mm=y, weights=wts, sigma_px=sp, sigma_range_mm=sr, mixing=mix
         )
-        rho, sr = rho_obs, sr_obs  # every blob is matched, in order
-        if not kept.all():
+        solved = solve_pairs(
+            candidates, np.arange(n), cat_idx, catalog, camera, fit, 0.0, offset_prior
+        )
+        rho, sr = solved.observed.rho, solved.observed.sr  # every blob is matched, in order
+        if not solved.result.kept.all():
             code = OUTLIER
-    return (
-        code,
-        n_used,
-        motion,
-        cent,
-        flat,
-        starts,
-        uv,
-        rho,
-        sp,
-        sr,
-        y,
-        wts,
-        uv_obs,
-        e_obs,
-        y_obs,
-        R,
-        t,
-        its,
-        cov,
-        chi2,
-        norms,
-        sr_fit,
-        sb_fit,
-        offset,
-        offset_sigma,
+    return code, n_used, motion, cent, flat, starts, uv, rho, sp, sr, y, wts, solved
+
+
+@jit
+def unsolved(cat_idx, offset_sigma_mm):
+    """A ``SolvedPairs`` of the n windows' reflectors ``cat_idx`` (n,) that no fit has
+    seen: NaN observations and fit, nothing kept, no offset (its prior sigma
+    ``offset_sigma_mm``)."""
+    n = cat_idx.shape[0]
+    nothing = np.full(n, np.nan)
+    fit = PoseFit(
+        R=np.eye(3),
+        t=np.zeros(3),
+        iterations=0,
+        covariance=np.full((6, 6), np.nan),
+        chi2=np.inf,
+        norms=nothing.copy(),
+        sr=nothing.copy(),
+        sb=nothing.copy(),
+    )
+    observed = Reflectors(
+        x=np.full((n, 3), np.nan),
+        e=np.full((n, 3), np.nan),
+        rho=nothing.copy(),
+        sr=nothing.copy(),
+        sb=nothing.copy(),
+    )
+    result = OutlierFit(
+        kept=np.zeros(n, np.bool_), fit=fit, offset_mm=0.0, offset_sigma_mm=offset_sigma_mm
+    )
+    return SolvedPairs(
+        k_idx=np.arange(n),
+        i_idx=cat_idx,
+        uv=np.full((n, 2), np.nan),
+        observed=observed,
+        result=result,
     )

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from tofpose.core.records import Candidates
 from tofpose.stages.persistence.reference.measure import measure_and_back_project
+from tofpose.stages.pose.records import OutlierFit, PoseFit, Reflectors, SolvedPairs
 from tofpose.stages.pose.reference.solve import solve_pairs
 from tofpose.stages.tracking.constants import (
     FOUND,
@@ -36,8 +38,6 @@ def track_frame(
     history,
     camera,
     catalog,
-    correct_perspective,
-    mixing_radius_px,
     correction,
     sigmas,
     fit,
@@ -52,49 +52,20 @@ def track_frame(
     then ``solve_pairs`` with blob j matched to catalog reflector ``cat_idx[j]`` and no
     completion (``OUTLIER`` when the fit drops one). Arguments and returns as the
     compiled ``kernels.tracking_frame.track_frame``: (code, n_used, motion, centroids,
-    flat, starts, uv, rho, sigma_px, sigma_range, y, weights, uv_obs, e_obs, y_obs, R, t,
-    iterations, covariance, chi2, norms, sr, sb, offset, offset sigma); the arrays after
-    ``code`` are NaN past the step that set it."""
+    flat, starts, uv, rho, sigma_px, sigma_range, y, weights, the ``SolvedPairs``); the
+    arrays after ``code`` are NaN past the step that set it."""
     n = len(bounds)
     status, bbox, _, cent, starts, flat = search_windows(
         gray, bounds, centres, diameters, threshold, background
     )
-    uv, uv_obs = np.full((n, 2), np.nan), np.full((n, 2), np.nan)
-    y, e_obs, y_obs = (np.full((n, 3), np.nan) for _ in range(3))
+    uv = np.full((n, 2), np.nan)
+    y = np.full((n, 3), np.nan)
     rho, sp, sr, wts = (np.full(n, np.nan) for _ in range(4))
-    fit_out = (
-        np.eye(3),
-        np.zeros(3),
-        0,
-        np.full((6, 6), np.nan),
-        np.inf,
-        np.full(n, np.nan),
-        np.full(n, np.nan),
-        np.full(n, np.nan),
-        0.0,
-        offset_prior.sigma_mm,
-    )
+    solved = unsolved(np.asarray(cat_idx), offset_prior.sigma_mm)
     n_used, motion = 0, False
 
     def result(code):
-        return (
-            code,
-            n_used,
-            motion,
-            cent,
-            flat,
-            starts,
-            uv,
-            rho,
-            sp,
-            sr,
-            y,
-            wts,
-            uv_obs,
-            e_obs,
-            y_obs,
-            *fit_out,
-        )
+        return code, n_used, motion, cent, flat, starts, uv, rho, sp, sr, y, wts, solved
 
     if not all(s == FOUND for s in np.asarray(status).tolist()):
         return result(LOST)
@@ -121,22 +92,44 @@ def track_frame(
         return result(NOT_PERSISTENT)
     if len(ranged) < n:
         return result(NO_RANGE)
-    (_, _, uv_obs, e_obs, y_obs, rho, sr, kept, *fit_out) = solve_pairs(
-        y,
-        wts,
-        uv,
-        rho,
-        sp,
-        sr,
-        mix,
-        np.arange(n),
-        np.asarray(cat_idx),
-        catalog,
-        camera,
-        correct_perspective,
-        mixing_radius_px,
-        0.0,
-        fit,
-        offset_prior,
+    candidates = Candidates(
+        uv_px=uv, range_mm=rho, y_mm=y, weights=wts, sigma_px=sp, sigma_range_mm=sr, mixing=mix
     )
-    return result(TRACKED if np.all(kept) else OUTLIER)
+    solved = solve_pairs(
+        candidates, np.arange(n), np.asarray(cat_idx), catalog, camera, fit, 0.0, offset_prior
+    )
+    rho, sr = solved.observed.rho, solved.observed.sr
+    return result(TRACKED if np.all(solved.result.kept) else OUTLIER)
+
+
+def unsolved(cat_idx, offset_sigma_mm) -> SolvedPairs:
+    """A ``SolvedPairs`` of the n windows' reflectors ``cat_idx`` (n,) that no fit has
+    seen: NaN observations and fit, nothing kept, no offset (its prior sigma)."""
+    n = len(cat_idx)
+    fit = PoseFit(
+        R=np.eye(3),
+        t=np.zeros(3),
+        iterations=0,
+        covariance=np.full((6, 6), np.nan),
+        chi2=np.inf,
+        norms=np.full(n, np.nan),
+        sr=np.full(n, np.nan),
+        sb=np.full(n, np.nan),
+    )
+    observed = Reflectors(
+        x=np.full((n, 3), np.nan),
+        e=np.full((n, 3), np.nan),
+        rho=np.full(n, np.nan),
+        sr=np.full(n, np.nan),
+        sb=np.full(n, np.nan),
+    )
+    result = OutlierFit(
+        kept=np.zeros(n, bool), fit=fit, offset_mm=0.0, offset_sigma_mm=offset_sigma_mm
+    )
+    return SolvedPairs(
+        k_idx=np.arange(n),
+        i_idx=cat_idx,
+        uv=np.full((n, 2), np.nan),
+        observed=observed,
+        result=result,
+    )

@@ -8,6 +8,7 @@ import pytest
 
 from tofpose.core.geometry import rotation_from_euler_deg
 from tofpose.stages.pose.kernels.pose import facing_cosine
+from tofpose.stages.pose.records import Reflectors
 
 
 def test_facing_cosine_is_the_cosine_of_the_view_angle():
@@ -70,8 +71,9 @@ def test_ml_refinement_reaches_scipys_least_squares_optimum(seed):
 
     x, e, rho, sr, sb, _, _ = _scene(seed, m=5 + seed % 4)
     R0, t0 = absolute_orientation(x, e * rho[:, None], 1.0 / (sr**2 + (rho * sb) ** 2))
-    R, t, cov, chi2, _, _ = ml_refine(x, e, rho, R0, t0, sr, sb, 30, 1e-12, 0.0)
-    R_ref, t_ref, cov_ref, chi2_ref = reference.ml_refine(x, e, rho, R0, t0, sr, sb)
+    refl = Reflectors(x=x, e=e, rho=rho, sr=sr, sb=sb)
+    R, t, cov, chi2, _, _ = ml_refine(refl, R0, t0, 30, 1e-12, 0.0)
+    R_ref, t_ref, cov_ref, chi2_ref = reference.ml_refine(refl, R0, t0)
     from scipy.spatial.transform import Rotation
 
     d = np.concatenate([Rotation.from_matrix(R @ R_ref.T).as_rotvec(), t - t_ref])
@@ -105,9 +107,10 @@ def test_leave_one_out_spread_and_envelope_equal_the_reference(seed):
     from tofpose.stages.pose.reference import pose as reference
 
     x, e, rho, sr, sb, R, t = _scene(seed, m=4 + seed % 5, range_mm=7000.0)
-    R, t, cov, _, _, _ = ml_refine(x, e, rho, R, t, sr, sb, 30, 1e-12, 0.0)
-    spread = leave_one_out_spread(x, e, rho, R, t, sr, sb)
-    want = reference.leave_one_out_spread(x, e, rho, R, t, sr, sb)
+    refl = Reflectors(x=x, e=e, rho=rho, sr=sr, sb=sb)
+    R, t, cov, _, _, _ = ml_refine(refl, R, t, 30, 1e-12, 0.0)
+    spread = leave_one_out_spread(refl, R, t)
+    want = reference.leave_one_out_spread(refl, R, t)
     np.testing.assert_allclose(spread, want, rtol=1e-5, atol=1e-7 * np.abs(want).max())
     np.testing.assert_allclose(
         covariance_envelope(cov, spread),

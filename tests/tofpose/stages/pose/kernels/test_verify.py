@@ -9,6 +9,7 @@ from tests.conftest import facing_pose
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import paper_target
 from tofpose.core.geometry import RigidTransform
+from tofpose.core.records import camera_record, catalog_record
 from tofpose.stages.pose.constants import BEHIND_CAMERA, CONSISTENT, DARK_REFLECTOR
 from tofpose.stages.pose.kernels.verify import pose_check
 
@@ -16,19 +17,7 @@ from tofpose.stages.pose.kernels.verify import pose_check
 def _check(T, gray, matched, dark_check=True):
     cam, cat = CameraModel(), paper_target()
     return pose_check(
-        cat.positions_mm,
-        cat.diameters_mm,
-        matched,
-        T.R,
-        T.t_mm,
-        cam.fx,
-        cam.fy,
-        cam.cx,
-        cam.cy,
-        cam.dist_array,
-        gray,
-        400.0,
-        dark_check,
+        catalog_record(cat), matched, T.R, T.t_mm, camera_record(cam), gray, 400.0, dark_check
     )
 
 

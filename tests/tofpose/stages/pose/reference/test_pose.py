@@ -4,8 +4,6 @@ test oracle must itself be right) and against the compiled fit
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -14,6 +12,7 @@ from tofpose.core.catalog import paper_target
 from tofpose.core.records import FitSettings
 from tofpose.stages.pose import constants
 from tofpose.stages.pose.kernels import pose as kernel
+from tofpose.stages.pose.records import NO_OFFSET, RangeOffsetPrior, Reflectors
 from tofpose.stages.pose.reference import pose as reference
 
 
@@ -44,7 +43,8 @@ def test_ml_refine_recovers_the_pose_of_noiseless_measurements_with_zero_chi2():
     e = y / rho[:, None]
     sr, sb = np.full(8, 5.0), np.full(8, 3e-4)
     R0 = Rotation.from_rotvec([0.02, -0.01, 0.03]).as_matrix() @ R
-    R_est, t_est, cov, chi2 = reference.ml_refine(x, e, rho, R0, t + [5.0, -3.0, 20.0], sr, sb)
+    refl = Reflectors(x=x, e=e, rho=rho, sr=sr, sb=sb)
+    R_est, t_est, cov, chi2 = reference.ml_refine(refl, R0, t + [5.0, -3.0, 20.0])
     np.testing.assert_allclose(R_est, R, atol=1e-9)
     np.testing.assert_allclose(t_est, t, atol=1e-6)
     assert chi2 < 1e-12
@@ -66,7 +66,8 @@ def test_whitened_residuals_count_sigmas():
     y1 = y[1] + 2.0 * side / np.linalg.norm(side)
     e_m = e.copy()
     e_m[1] = y1 / np.linalg.norm(y1)
-    r = reference.whitened_residuals(x, e_m, rho_m, R, t, np.full(8, 5.0), np.full(8, 1e-3))
+    refl = Reflectors(x=x, e=e_m, rho=rho_m, sr=np.full(8, 5.0), sb=np.full(8, 1e-3))
+    r = reference.whitened_residuals(refl, R, t)
     assert abs(r[2] - 2.0) < 1e-9
     assert abs(np.linalg.norm(r[3:5]) - 2.0 / (rho[1] * 1e-3)) < 1e-3 * 2.0 / (rho[1] * 1e-3)
     assert np.abs(r[6:]).max() < 1e-9
@@ -81,14 +82,6 @@ MODES = {"none": constants.REFINE_NONE, "ml": constants.REFINE_ML, "los": consta
 OPTIMISER_SIGMA = 1e-3
 #: ... and within which the same arithmetic (SVD vs Horn's closed form) gives the same pose
 EXACT_SIGMA = 1e-8
-
-
-class Prior(NamedTuple):
-    """A duck-typed ``RangeOffsetPrior`` (the reference reads fields by name)."""
-
-    sigma_mm: float
-    scale_sigma_rel: float
-    centroid_bias_rad: float
 
 
 def _scene(seed, m=8, range_mm=5000.0, sb_rad=2e-4, sr_mm=6.0, noise=1.0):
@@ -120,14 +113,20 @@ def _settings(mode, reject=True, adapt=True, min_matches=3):
         refinement=MODES[mode],
         los_tolerance=0.002,
         step_sigma2=1e-8,
-        adapt=adapt,
-        max_systematic_range_mm=25.0,
-        max_systematic_centroid_px=0.5,
-        reject=reject,
+        correct_perspective_bias=True,
+        mixed_pixel_radius_px=4.0,
+        adapt_range_sigma=adapt,
+        max_systematic_range_sigma_mm=25.0,
+        max_systematic_centroid_sigma_px=0.5,
+        reject_outliers=reject,
         min_matches=min_matches,
         outlier_sigma=6.0,
-        chi2_per_dof=4.0,
+        outlier_chi2_per_dof=4.0,
     )
+
+
+def _refl(x, e, rho, sr, sb):
+    return Reflectors(x=x, e=e, rho=rho, sr=sr, sb=sb)
 
 
 def test_small_rules_equal_the_kernels():
@@ -145,7 +144,7 @@ def test_small_rules_equal_the_kernels():
             reference.reflector_norms(r), kernel.reflector_norms(r), rtol=1e-14
         )
         np.testing.assert_allclose(reference.mean_bearing(e), kernel.mean_bearing(e), atol=1e-15)
-        prior = kernel.RangeOffsetPrior(15.0, 0.002 * (seed % 2), 1e-4 * (seed % 3))
+        prior = RangeOffsetPrior(15.0, 0.002 * (seed % 2), 1e-4 * (seed % 3))
         s_ref, mean_ref = reference.pattern_scale_sigma(e, prior)
         s, mean = kernel.pattern_scale_sigma(e, prior)
         assert s_ref == pytest.approx(s, rel=1e-12, abs=1e-18)
@@ -174,26 +173,28 @@ def test_fit_pose_equals_the_kernel(mode, seed):
     the kernel's Gauss-Newton, the pose to ``OPTIMISER_SIGMA`` (1e-3 sigma), chi^2 to
     1e-6. The covariance to 1e-5 (the reference's Jacobian is by central differences)."""
     x, e, rho, y, sr, sb, _, _ = _scene(seed, m=5 + seed)
-    got = reference.fit_pose(x, e, rho, y, sr, sb, MODES[mode], 0.002, 1e-8)
-    want = kernel.fit_pose(x, e, rho, y, sr, sb, MODES[mode], 0.002, 1e-8)
+    got = reference.fit_pose(_refl(x, e, rho, sr, sb), _settings(mode))
+    want = kernel.fit_pose(_refl(x, e, rho, sr, sb), _settings(mode))
     tol = OPTIMISER_SIGMA if mode == "ml" else EXACT_SIGMA
-    assert _sigmas(got[0], got[1], want[0], want[1], want[3]) < tol
+    assert _sigmas(got.R, got.t, want.R, want.t, want.covariance) < tol
     if mode != "ml":
-        assert got[2] == want[2]
-    np.testing.assert_allclose(got[3], want[3], rtol=1e-5, atol=1e-9 * np.abs(want[3]).max())
-    assert got[4] == pytest.approx(want[4], rel=1e-6 if mode == "ml" else 1e-9)
-    np.testing.assert_allclose(got[5], want[5], rtol=1e-5 if mode == "ml" else 1e-9)
-    np.testing.assert_array_equal(got[6], want[6])
+        assert got.iterations == want.iterations
+    atol = 1e-9 * np.abs(want.covariance).max()
+    np.testing.assert_allclose(got.covariance, want.covariance, rtol=1e-5, atol=atol)
+    assert got.chi2 == pytest.approx(want.chi2, rel=1e-6 if mode == "ml" else 1e-9)
+    np.testing.assert_allclose(got.norms, want.norms, rtol=1e-5 if mode == "ml" else 1e-9)
+    np.testing.assert_array_equal(got.sr, want.sr)
+    np.testing.assert_array_equal(got.sb, want.sb)
 
 
 def test_fit_pose_of_noiseless_measurements_is_the_true_pose_with_zero_chi2():
-    for mode in MODES.values():
+    for mode in MODES:
         x, e, rho, y, sr, sb, R, t = _scene(7, noise=0.0)
-        R_est, t_est, _, cov, chi2, norms, _ = reference.fit_pose(
-            x, e, rho, y, sr, sb, mode, 1e-6, 1e-8
+        fit = reference.fit_pose(
+            _refl(x, e, rho, sr, sb), _settings(mode)._replace(los_tolerance=1e-6)
         )
-        assert _sigmas(R_est, t_est, R, t, cov) < 1e-6
-        assert chi2 < 1e-12 and norms.max() < 1e-6
+        assert _sigmas(fit.R, fit.t, R, t, fit.covariance) < 1e-6
+        assert fit.chi2 < 1e-12 and fit.norms.max() < 1e-6
 
 
 def test_median_constants_are_the_chi2_medians():
@@ -210,11 +211,11 @@ def test_systematic_sigmas_equal_the_kernel_and_are_the_rule(seed):
     (the rule: just below at the result, above one grid step lower)."""
     x, e, rho, y, sr, sb, R, t = _scene(seed, m=3 + seed, noise=3.0)
     caps = (25.0, 0.5 / 300.0 * (1 + seed % 2))
-    got = reference.systematic_sigmas(x, e, rho, R, t, sr, sb, *caps)
-    want = kernel.systematic_sigmas(x, e, rho, R, t, sr, sb, *caps)
+    got = reference.systematic_sigmas(_refl(x, e, rho, sr, sb), R, t, *caps)
+    want = kernel.systematic_sigmas(_refl(x, e, rho, sr, sb), R, t, *caps)
     np.testing.assert_allclose(got, want, rtol=1e-12)
     assert got[0] > 0 or got[1] > 0
-    r = reference.whitened_residuals(x, e, rho, R, t, sr, sb).reshape(-1, 3)
+    r = reference.whitened_residuals(_refl(x, e, rho, sr, sb), R, t).reshape(-1, 3)
     for extra, z2, var, target, cap in (
         (got[0], r[:, 2] ** 2, sr**2, 0.45494, caps[0]),
         (got[1], (r[:, :2] ** 2).sum(1), sb**2, 1.38629, caps[1]),
@@ -225,7 +226,7 @@ def test_systematic_sigmas_equal_the_kernel_and_are_the_rule(seed):
             assert np.median(z2 * var / (var + lower**2)) > target
     # consistent measurements need no excess
     x, e, rho, y, sr, sb, R, t = _scene(seed, noise=0.0)
-    assert reference.systematic_sigmas(x, e, rho, R, t, sr, sb, *caps) == (0.0, 0.0)
+    assert reference.systematic_sigmas(_refl(x, e, rho, sr, sb), R, t, *caps) == (0.0, 0.0)
 
 
 @pytest.mark.parametrize("mode", MODES)
@@ -237,17 +238,17 @@ def test_fit_adaptive_equals_the_kernel(mode, seed):
     1e-5 sigma off the optimum, may move the bisection by one step) and pose
     (``EXACT_SIGMA`` none / los, ``OPTIMISER_SIGMA`` ml)."""
     x, e, rho, y, sr, sb, _, _ = _scene(seed, m=6 + seed, noise=3.0)
-    args = (MODES[mode], 0.002, 1e-8, True, 25.0, 0.5 / 300.0)
-    got = reference.fit_adaptive(x, e, rho, y, sr, sb, *args)
-    want = kernel.fit_adaptive(x, e, rho, y, sr, sb, *args)
-    assert (got[6] > sr).any() or (got[7] > sb).any()
+    args = (_settings(mode), 0.5 / 300.0)
+    got = reference.fit_adaptive(_refl(x, e, rho, sr, sb), *args)
+    want = kernel.fit_adaptive(_refl(x, e, rho, sr, sb), *args)
+    assert (got.sr > sr).any() or (got.sb > sb).any()
     step = 0.0 if mode != "ml" else 1.0 / 2**16
-    extra = np.sqrt(got[6] ** 2 - sr**2), np.sqrt(got[7] ** 2 - sb**2)
-    extra_k = np.sqrt(want[6] ** 2 - sr**2), np.sqrt(want[7] ** 2 - sb**2)
+    extra = np.sqrt(got.sr**2 - sr**2), np.sqrt(got.sb**2 - sb**2)
+    extra_k = np.sqrt(want.sr**2 - sr**2), np.sqrt(want.sb**2 - sb**2)
     np.testing.assert_allclose(extra[0], extra_k[0], rtol=1e-9, atol=1.01 * step * 25.0)
     np.testing.assert_allclose(extra[1], extra_k[1], rtol=1e-9, atol=1.01 * step * 0.5 / 300)
     tol = OPTIMISER_SIGMA if mode == "ml" else EXACT_SIGMA
-    assert _sigmas(got[0], got[1], want[0], want[1], want[3]) < tol
+    assert _sigmas(got.R, got.t, want.R, want.t, want.covariance) < tol
 
 
 def _with_outlier(seed, m=8, outlier_mm=60.0, range_mm=5000.0):
@@ -268,42 +269,34 @@ def test_worst_outlier_and_fit_with_outliers_drop_the_planted_outlier(mode, seed
     the pose is the truth's within 5 sigma."""
     x, e, rho, y, sr, sb, R, t, bad = _with_outlier(seed)
     fit = _settings(mode)
-    R0, t0, _, _, _, norms, _ = reference.fit_pose(x, e, rho, y, sr, sb, MODES[mode], 0.002, 1e-8)
-    args = (MODES[mode], 0.002, 1e-8, 6.0, 4.0)
-    assert reference.worst_outlier(x, e, rho, y, sr, sb, norms, *args) == bad
-    assert kernel.worst_outlier(x, e, rho, y, sr, sb, norms, *args) == bad
-    none = kernel.NO_OFFSET
-    got = reference.fit_with_outliers(x, e, rho, y, sr, sb, fit, 0.5 / 300.0, none)
-    want = kernel.fit_with_outliers(x, e, rho, y, sr, sb, fit, 0.5 / 300.0, none)
+    refl = _refl(x, e, rho, sr, sb)
+    norms = reference.fit_pose(refl, fit).norms
+    assert reference.worst_outlier(refl, norms, fit) == bad
+    assert kernel.worst_outlier(refl, norms, fit) == bad
+    got = reference.fit_with_outliers(refl, fit, 0.5 / 300.0, NO_OFFSET)
+    want = kernel.fit_with_outliers(refl, fit, 0.5 / 300.0, NO_OFFSET)
     expected = np.arange(len(x)) != bad
-    np.testing.assert_array_equal(got[0], expected)
-    np.testing.assert_array_equal(want[0], expected)
+    np.testing.assert_array_equal(got.kept, expected)
+    np.testing.assert_array_equal(want.kept, expected)
     tol = OPTIMISER_SIGMA if mode == "ml" else EXACT_SIGMA
-    assert _sigmas(got[1], got[2], want[1], want[2], want[4]) < tol
-    np.testing.assert_allclose(got[7], want[7], rtol=1e-9)
-    np.testing.assert_allclose(got[8], want[8], rtol=1e-9)
-    assert got[5] == pytest.approx(want[5], rel=1e-5 if mode == "ml" else 1e-9)
-    assert got[9:] == (0.0, 0.0) and want[9:] == (0.0, 0.0)
-    assert _sigmas(got[1], got[2], R, t, got[4]) < 5.0
+    g, w = got.fit, want.fit
+    assert _sigmas(g.R, g.t, w.R, w.t, w.covariance) < tol
+    np.testing.assert_allclose(g.sr, w.sr, rtol=1e-9)
+    np.testing.assert_allclose(g.sb, w.sb, rtol=1e-9)
+    assert g.chi2 == pytest.approx(w.chi2, rel=1e-5 if mode == "ml" else 1e-9)
+    assert got[2:] == (0.0, 0.0) and want[2:] == (0.0, 0.0)
+    assert _sigmas(g.R, g.t, R, t, g.covariance) < 5.0
 
 
 def test_worst_outlier_is_none_for_a_consistent_fit_and_the_largest_norm_below_five():
     x, e, rho, y, sr, sb, _, _ = _scene(3, m=8)
-    norms = reference.fit_pose(x, e, rho, y, sr, sb, 1, 0.002, 1e-8)[5]
-    assert reference.worst_outlier(x, e, rho, y, sr, sb, norms, 1, 0.002, 1e-8, 6.0, 4.0) == -1
+    fit = _settings("ml")
+    norms = reference.fit_pose(_refl(x, e, rho, sr, sb), fit).norms
+    assert reference.worst_outlier(_refl(x, e, rho, sr, sb), norms, fit) == -1
+    four = _refl(x[:4], e[:4], rho[:4], sr[:4], sb[:4])
     norms = np.array([1.0, 7.0, 2.0, 6.5])
-    assert (
-        reference.worst_outlier(
-            x[:4], e[:4], rho[:4], y[:4], sr[:4], sb[:4], norms, 1, 0.002, 1e-8, 6.0, 4.0
-        )
-        == 1
-    )
-    assert (
-        reference.worst_outlier(
-            x[:4], e[:4], rho[:4], y[:4], sr[:4], sb[:4], norms / 2, 1, 0.002, 1e-8, 6.0, 4.0
-        )
-        == -1
-    )
+    assert reference.worst_outlier(four, norms, fit) == 1
+    assert reference.worst_outlier(four, norms / 2, fit) == -1
 
 
 #: ranges near enough for the image scale to fix the distance (the offset is observable)
@@ -319,22 +312,20 @@ def test_common_range_offset_equals_the_kernel_and_recovers_a_planted_offset(see
     posterior mode; this test, at 0.1 sigma then, is what found it.)"""
     x, e, rho, _, sr, sb, R, t = _scene(seed, range_mm=NEAR_MM, sb_rad=5e-5, sr_mm=3.0)
     rho = rho + 30.0
-    prior = Prior(50.0, 0.0005, 0.01 / 300.0)
-    R0, t0, *_ = kernel.fit_pose(x, e, rho, e * rho[:, None], sr, sb, 1, 0.002, 1e-8)
-    b, sigma = reference.common_range_offset(x, e, rho, R0, t0, sr, sb, prior)
-    b_k, sigma_k = kernel.common_range_offset(x, e, rho, R0, t0, sr, sb, prior)
+    prior = RangeOffsetPrior(50.0, 0.0005, 0.01 / 300.0)
+    refl = _refl(x, e, rho, sr, sb)
+    first = kernel.fit_pose(refl, _settings("ml"))
+    R0, t0 = first.R, first.t
+    b, sigma = reference.common_range_offset(refl, R0, t0, prior)
+    b_k, sigma_k = kernel.common_range_offset(refl, R0, t0, prior)
     assert abs(b - 30.0) < sigma < 10.0
     assert abs(b - b_k) < 1e-4 * sigma
     assert sigma == pytest.approx(sigma_k, rel=1e-6)
     # not estimated without a prior; the image scale alone when it is exact
-    assert reference.common_range_offset(x, e, rho, R0, t0, sr, sb, Prior(0.0, 0.0, 0.0)) == (
-        0.0,
-        0.0,
-    )
-    b0, s0 = reference.common_range_offset(x, e, rho, R0, t0, sr, sb, Prior(50.0, 0.0, 0.0))
-    b0_k, s0_k = kernel.common_range_offset(
-        x, e, rho, R0, t0, sr, sb, kernel.RangeOffsetPrior(50.0, 0.0, 0.0)
-    )
+    assert reference.common_range_offset(refl, R0, t0, NO_OFFSET) == (0.0, 0.0)
+    exact_scale = RangeOffsetPrior(50.0, 0.0, 0.0)
+    b0, s0 = reference.common_range_offset(refl, R0, t0, exact_scale)
+    b0_k, s0_k = kernel.common_range_offset(refl, R0, t0, exact_scale)
     assert abs(b0 - b0_k) < 0.1 * s0 and s0 == pytest.approx(s0_k, rel=1e-3) and s0 < sigma
 
 
@@ -354,37 +345,26 @@ def test_fit_with_outliers_with_an_offset_prior_equals_the_kernel(mode, seed):
     the offset step and the refit are each as tight as their arithmetic allows."""
     x, e, rho, _, sr, sb, R, t, bad = _with_outlier(seed, range_mm=NEAR_MM)
     rho = rho + OFFSET_MM
-    y = e * rho[:, None]
-    prior = kernel.RangeOffsetPrior(50.0, 0.0005, 0.01 / 300.0)
+    prior = RangeOffsetPrior(50.0, 0.0005, 0.01 / 300.0)
     fit = _settings(mode)
-    got = reference.fit_with_outliers(x, e, rho, y, sr, sb, fit, 0.5 / 300.0, prior)
-    want = kernel.fit_with_outliers(x, e, rho, y, sr, sb, fit, 0.5 / 300.0, prior)
-    np.testing.assert_array_equal(got[0], want[0])
+    got = reference.fit_with_outliers(_refl(x, e, rho, sr, sb), fit, 0.5 / 300.0, prior)
+    want = kernel.fit_with_outliers(_refl(x, e, rho, sr, sb), fit, 0.5 / 300.0, prior)
+    np.testing.assert_array_equal(got.kept, want.kept)
     if mode != "los":  # the line of sight's excess range sigma may hide it (the kernel's too)
-        np.testing.assert_array_equal(got[0], np.arange(len(x)) != bad)
+        np.testing.assert_array_equal(got.kept, np.arange(len(x)) != bad)
+    g, w = got.fit, want.fit
     if mode != "ml":
-        assert got[9:] == want[9:] == (0.0, 50.0)
-        assert _sigmas(got[1], got[2], want[1], want[2], want[4]) < EXACT_SIGMA
+        assert got[2:] == want[2:] == (0.0, 50.0)
+        assert _sigmas(g.R, g.t, w.R, w.t, w.covariance) < EXACT_SIGMA
         return
-    assert abs(got[9] - want[9]) < 0.1 * got[10] and abs(got[9] - OFFSET_MM) < 3 * got[10]
-    k = want[0]
-    rho_b = rho[k] - want[9]
+    offset, sigma = got.offset_mm, got.offset_sigma_mm
+    assert abs(offset - want.offset_mm) < 0.1 * sigma and abs(offset - OFFSET_MM) < 3 * sigma
+    k = want.kept
     refit = reference.fit_adaptive(
-        x[k],
-        e[k],
-        rho_b,
-        e[k] * rho_b[:, None],
-        sr[k],
-        sb[k],
-        1,
-        0.002,
-        1e-8,
-        True,
-        25.0,
-        0.5 / 300.0,
+        _refl(x[k], e[k], rho[k] - want.offset_mm, sr[k], sb[k]), fit, 0.5 / 300.0
     )
-    assert _sigmas(refit[0], refit[1], want[1], want[2], want[4]) < OPTIMISER_SIGMA
-    np.testing.assert_allclose(refit[6], want[7], rtol=1e-9)
+    assert _sigmas(refit.R, refit.t, w.R, w.t, w.covariance) < OPTIMISER_SIGMA
+    np.testing.assert_allclose(refit.sr, w.sr, rtol=1e-9)
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -392,13 +372,14 @@ def test_bias_covariances_equal_the_kernels(seed):
     """range_bias_covariance and class_scale_covariance (three size classes, one of them
     empty): to 1e-6 (the reference's Jacobian is by central differences)."""
     x, e, rho, _, sr, sb, R, t = _scene(seed, m=5 + seed)
-    got = reference.range_bias_covariance(x, e, rho, R, t, sr, sb, 15.0)
-    want = kernel.range_bias_covariance(x, e, rho, R, t, sr, sb, 15.0)
+    refl = _refl(x, e, rho, sr, sb)
+    got = reference.range_bias_covariance(refl, R, t, 15.0)
+    want = kernel.range_bias_covariance(refl, R, t, 15.0)
     np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-9 * np.abs(want).max())
     group = np.arange(len(x)) % 3
     group[group == 1] = 3  # class 1 has no reflector
-    got = reference.class_scale_covariance(x, e, rho, R, t, sr, sb, group, 4, 1e-4, 0.002)
-    want = kernel.class_scale_covariance(x, e, rho, R, t, sr, sb, group, 4, 1e-4, 0.002)
+    got = reference.class_scale_covariance(refl, R, t, group, 4, 1e-4, 0.002)
+    want = kernel.class_scale_covariance(refl, R, t, group, 4, 1e-4, 0.002)
     np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-9 * np.abs(want).max())
 
 
@@ -407,7 +388,7 @@ def test_a_range_bias_moves_the_pose_along_the_line_of_sight_by_itself():
     response range_bias_covariance is built from (its square root, times b)."""
     x, e, rho, y, sr, sb, R, t = _scene(5, noise=0.0)
     b = 1.0
-    R1, t1, *_ = reference.fit_pose(x, e, rho + b, e * (rho + b)[:, None], sr, sb, 1, 0.002, 1e-8)
-    moved = np.concatenate((Rotation.from_matrix(R1 @ R.T).as_rotvec(), t1 - t))
-    cov = reference.range_bias_covariance(x, e, rho, R, t, sr, sb, b)
+    shifted = reference.fit_pose(_refl(x, e, rho + b, sr, sb), _settings("ml"))
+    moved = np.concatenate((Rotation.from_matrix(shifted.R @ R.T).as_rotvec(), shifted.t - t))
+    cov = reference.range_bias_covariance(_refl(x, e, rho, sr, sb), R, t, b)
     np.testing.assert_allclose(np.outer(moved, moved), cov, atol=1e-4 * np.abs(cov).max())

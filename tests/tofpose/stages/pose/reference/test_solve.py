@@ -26,11 +26,13 @@ from tofpose import PosePipeline
 from tofpose.config import PipelineConfig
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import paper_target
+from tofpose.core.records import Candidates
 from tofpose.stages.extraction.reference import mixed_pixels
 from tofpose.stages.pose.constants import REFINE_ML
 from tofpose.stages.pose.kernels import solve as kernel
 from tofpose.stages.pose.kernels.pose import class_scale_covariance, range_bias_covariance
 from tofpose.stages.pose.kernels.solve import complete_pairs, solve_pairs
+from tofpose.stages.pose.records import Reflectors
 from tofpose.stages.pose.reference import pose as reference_pose
 from tofpose.stages.pose.reference import solve as reference
 
@@ -77,47 +79,41 @@ def _sigmas(R, t, R_ref, t_ref, cov):
 
 def _compare(args):
     """solve_pairs and its reference on ``args``: equal as the module docstring says.
-    Returns both outputs."""
+    Returns both outputs (``SolvedPairs``)."""
     got, want = reference.solve_pairs(*args), kernel.solve_pairs(*args)
-    assert len(got) == len(want) == 18
-    for a, b in zip(got[:2], want[:2], strict=True):  # pairs after completion
-        np.testing.assert_array_equal(a, b)
-    for a, b in zip(got[2:7], want[2:7], strict=True):  # uv, e, y, rho, sr before the fit
+    np.testing.assert_array_equal(got.k_idx, want.k_idx)  # pairs after completion
+    np.testing.assert_array_equal(got.i_idx, want.i_idx)
+    np.testing.assert_allclose(got.uv, want.uv, rtol=1e-12, atol=1e-9)  # before the fit
+    for a, b in zip(got.observed, want.observed, strict=True):  # x, e, rho, sr, sb
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-9)
-    np.testing.assert_array_equal(got[7], want[7])  # kept
-    fit, prior = args[14], args[15]
+    g, w = got.result, want.result
+    np.testing.assert_array_equal(g.kept, w.kept)
+    fit, prior = args[5], args[7]
     ml = fit.refinement == REFINE_ML
-    if got[16] != 0.0 or want[16] != 0.0:  # the offset was estimated: within 0.1 sigma
-        assert abs(got[16] - want[16]) < 0.1 * got[17]
-        assert got[17] == pytest.approx(want[17], rel=1e-3)
+    if g.offset_mm != 0.0 or w.offset_mm != 0.0:  # the offset was estimated: within 0.1 sigma
+        assert abs(g.offset_mm - w.offset_mm) < 0.1 * g.offset_sigma_mm
+        assert g.offset_sigma_mm == pytest.approx(w.offset_sigma_mm, rel=1e-3)
         # and the refit at the kernel's offset is the kernel's
-        kept = want[7]
-        rho_b = want[5][kept] - want[16]
-        e = want[3][kept]
-        x = args[9].xyz[want[1][kept]]
-        sb = args[4][want[0][kept]] / args[10].fx
-        refit = reference_pose.fit_adaptive(
-            x,
-            e,
-            rho_b,
-            e * rho_b[:, None],
-            want[6][kept],
-            sb,
-            fit.refinement,
-            fit.los_tolerance,
-            fit.step_sigma2,
-            fit.adapt,
-            fit.max_systematic_range_mm,
-            fit.max_systematic_centroid_px / args[10].fx,
-        )
-        assert _sigmas(refit[0], refit[1], want[8], want[9], want[11]) < OPTIMISER_SIGMA
+        x, e, rho, sr, sb = (a[w.kept] for a in want.observed)
+        shifted = Reflectors(x=x, e=e, rho=rho - w.offset_mm, sr=sr, sb=sb)
+        cap = fit.max_systematic_centroid_sigma_px / args[4].fx
+        refit = reference_pose.fit_adaptive(shifted, fit, cap)
+        assert _sigmas(refit.R, refit.t, w.fit.R, w.fit.t, w.fit.covariance) < OPTIMISER_SIGMA
         return got, want
-    assert got[16:] == want[16:] == (0.0, prior.sigma_mm)
+    assert (
+        (g.offset_mm, g.offset_sigma_mm)
+        == (w.offset_mm, w.offset_sigma_mm)
+        == (
+            0.0,
+            prior.sigma_mm,
+        )
+    )
     tol = OPTIMISER_SIGMA if ml else EXACT_SIGMA
-    assert _sigmas(got[8], got[9], want[8], want[9], want[11]) < tol
-    np.testing.assert_allclose(got[14], want[14], rtol=1e-9, atol=25.0 / 2**16 * ml)
-    assert got[12] == pytest.approx(want[12], rel=1e-5 if ml else 1e-8)
-    np.testing.assert_allclose(got[11], want[11], rtol=1e-5, atol=1e-9 * np.abs(want[11]).max())
+    assert _sigmas(g.fit.R, g.fit.t, w.fit.R, w.fit.t, w.fit.covariance) < tol
+    np.testing.assert_allclose(g.fit.sr, w.fit.sr, rtol=1e-9, atol=25.0 / 2**16 * ml)
+    assert g.fit.chi2 == pytest.approx(w.fit.chi2, rel=1e-5 if ml else 1e-8)
+    cov, want_cov = g.fit.covariance, w.fit.covariance
+    np.testing.assert_allclose(cov, want_cov, rtol=1e-5, atol=1e-9 * np.abs(want_cov).max())
     return got, want
 
 
@@ -127,8 +123,9 @@ def test_solve_pairs_equals_the_kernel_on_the_pipelines_inputs(config_name, dist
     """The pipeline's own solver inputs replayed; the pose within 5 sigma of the truth."""
     got, _ = _compare(_captured(config_name, distance_mm))
     truth = facing_pose(distance_mm, **POSE)
-    assert got[7].all() and len(got[0]) == len(paper_target())
-    assert _sigmas(got[8], got[9], truth.R, truth.t_mm, got[11]) < 6.0
+    fit = got.result.fit
+    assert got.result.kept.all() and len(got.k_idx) == len(paper_target())
+    assert _sigmas(fit.R, fit.t, truth.R, truth.t_mm, fit.covariance) < 6.0
 
 
 @pytest.mark.parametrize("distance_mm", DISTANCES_MM)
@@ -140,18 +137,21 @@ def test_a_planted_outlier_is_dropped_as_by_the_kernel(config_name, distance_mm)
     another); the line of sight's excess range sigma (up to 25 mm) may hide it at 8 m,
     in the kernel as here."""
     args = list(_captured(config_name, distance_mm))
-    k = int(args[7][2])
-    y, rho, mix = args[0].copy(), args[3].copy(), args[6].copy()
+    k = int(args[1][2])
+    candidates = args[0]
+    y, rho = candidates.y_mm.copy(), candidates.range_mm.copy()
+    mix = candidates.mixing.copy()
     y[k] *= (rho[k] + 60.0) / rho[k]
     rho[k] += 60.0
     if np.isfinite(mix[k, 0]):
         mixed_pixels.shift_mixing(mix[k], 60.0)
-    args[0], args[3], args[6] = y, rho, mix
+    args[0] = candidates._replace(y_mm=y, range_mm=rho, mixing=mix)
     got, _ = _compare(tuple(args))
+    kept = got.result.kept
     if config_name in ("default", "none"):
-        assert not got[7][list(got[0]).index(k)]
+        assert not kept[list(got.k_idx).index(k)]
     if config_name == "default":
-        assert got[7].sum() == len(got[7]) - 1
+        assert kept.sum() == len(kept) - 1
 
 
 @pytest.mark.parametrize("distance_mm", DISTANCES_MM)
@@ -159,15 +159,15 @@ def test_completion_restores_pairs_left_out_as_the_kernel_does(distance_mm):
     """Two matched pairs left out of the input: completion adds them back (to the
     blobs they came from), the rest as before."""
     args = list(_captured("default", distance_mm))
-    k_idx, i_idx = args[7], args[8]
-    args[7], args[8] = k_idx[:-2].copy(), i_idx[:-2].copy()
+    k_idx, i_idx = args[1], args[2]
+    args[1], args[2] = k_idx[:-2].copy(), i_idx[:-2].copy()
     got, _ = _compare(tuple(args))
-    assert dict(zip(got[0].tolist(), got[1].tolist(), strict=True)) == dict(
+    assert dict(zip(got.k_idx.tolist(), got.i_idx.tolist(), strict=True)) == dict(
         zip(k_idx.tolist(), i_idx.tolist(), strict=True)
     )
-    args[13] = 0.0  # no completion: the pairs stay out
+    args[6] = 0.0  # no completion: the pairs stay out
     got, _ = _compare(tuple(args))
-    assert len(got[0]) == len(k_idx) - 2
+    assert len(got.k_idx) == len(k_idx) - 2
 
 
 @pytest.mark.parametrize("distance_mm", DISTANCES_MM)
@@ -177,14 +177,15 @@ def test_the_covariances_of_the_real_fit_equal_the_kernels(distance_mm):
     differences)."""
     args = _captured("no-offset", distance_mm)
     out = kernel.solve_pairs(*args)
-    kept = out[7]
-    x = args[9].xyz[out[1][kept]]
-    fit_args = (x, out[3][kept], out[5][kept], out[8], out[9], out[14], out[15])
+    kept, fit = out.result.kept, out.result.fit
+    x, e, rho, _, _ = (a[kept] for a in out.observed)
+    fitted = Reflectors(x=x, e=e, rho=rho, sr=fit.sr, sb=fit.sb)
+    fit_args = (fitted, fit.R, fit.t)
     got = reference_pose.range_bias_covariance(*fit_args, 15.0)
     want = range_bias_covariance(*fit_args, 15.0)
     np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-9 * np.abs(want).max())
     _, size_class = np.unique(np.round(paper_target().diameters_mm, 3), return_inverse=True)
-    group = size_class[out[1][kept]]
+    group = size_class[out.i_idx[kept]]
     n = int(size_class.max()) + 1
     assert n > 1
     got = reference_pose.class_scale_covariance(*fit_args, group, n, 0.05 / 300, 0.002)
@@ -203,29 +204,22 @@ def test_solve_pairs_of_noiseless_measurements_is_the_true_pose():
     rho = np.linalg.norm(centres, axis=1)
     n = len(cat)
     args = _captured("default", 4000.0)
-    camera, catalog, fit, prior = args[10], args[9], args[14], args[15]
+    catalog, camera, fit, prior = args[3], args[4], args[5], args[7]
     order = np.arange(n)[::-1].copy()  # candidate k shows reflector order[k]
-    out = reference.solve_pairs(
-        centres[order],
-        np.ones(n),
-        uv[order],
-        rho[order],
-        np.full(n, 0.1),
-        np.full(n, 3.0),
-        np.full((n, 6), np.nan),
-        np.arange(n),
-        order,
-        catalog,
-        camera,
-        True,
-        4.0,
-        0.0,
-        fit,
-        prior,
+    candidates = Candidates(
+        uv_px=uv[order],
+        range_mm=rho[order],
+        y_mm=centres[order],
+        weights=np.ones(n),
+        sigma_px=np.full(n, 0.1),
+        sigma_range_mm=np.full(n, 3.0),
+        mixing=np.full((n, 6), np.nan),
     )
-    assert out[7].all()
-    assert _sigmas(out[8], out[9], truth.R, truth.t_mm, out[11]) < 1e-4
-    assert out[12] < 1e-6
+    out = reference.solve_pairs(candidates, np.arange(n), order, catalog, camera, fit, 0.0, prior)
+    assert out.result.kept.all()
+    f = out.result.fit
+    assert _sigmas(f.R, f.t, truth.R, truth.t_mm, f.covariance) < 1e-4
+    assert f.chi2 < 1e-6
 
 
 def test_disc_centre_offsets_and_completion_equal_the_kernels():

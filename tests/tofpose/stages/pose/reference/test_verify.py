@@ -12,6 +12,7 @@ from tests.conftest import facing_pose, render
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import paper_target
 from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg
+from tofpose.core.records import camera_record, catalog_record
 from tofpose.stages.pose import constants as codes
 from tofpose.stages.pose.kernels import verify as kernel
 from tofpose.stages.pose.reference import verify as reference
@@ -20,22 +21,10 @@ CAM, CAT = CameraModel(), paper_target()
 
 
 def _both(T, gray, matched, threshold=400.0, dark_check=True, dist=None):
-    dist = CAM.dist_array if dist is None else dist
-    args = (
-        CAT.positions_mm,
-        CAT.diameters_mm,
-        matched,
-        T.R,
-        T.t_mm,
-        CAM.fx,
-        CAM.fy,
-        CAM.cx,
-        CAM.cy,
-        dist,
-        gray,
-        threshold,
-        dark_check,
-    )
+    camera = camera_record(CAM)
+    if dist is not None:
+        camera = camera._replace(dist=dist)
+    args = (catalog_record(CAT), matched, T.R, T.t_mm, camera, gray, threshold, dark_check)
     got, want = reference.pose_check(*args), kernel.pose_check(*args)
     assert got[:2] == want[:2]
     np.testing.assert_allclose(got[2:], want[2:], atol=1e-9)

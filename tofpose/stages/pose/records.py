@@ -1,0 +1,90 @@
+"""The records of §5 as the compiled fit and its reference statement take and return them
+(``kernels.pose``, ``kernels.solve`` and ``reference.pose``, ``reference.solve``): the
+matched reflectors, a fit, the fit with its outlier step, the pose of matched pairs, and
+the prior of the common range offset. ``typing.NamedTuple``s: numba compiles them as
+tuples with named fields; each is built by keyword.
+
+Shapes: m matched reflectors; x, e (m, 3); rho, sr, sb (m,); R (3, 3); t (3,).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+class Reflectors(NamedTuple):
+    """m matched reflectors as the fit reads them, row i one reflector: ``x`` (m, 3) mm
+    catalog points (target frame), ``e`` (m, 3) unit bearings (Eq. 9), ``rho`` (m,) mm
+    ranges, and the sigmas the fit weighs them with, ``sr`` (m,) mm (range) and ``sb``
+    (m,) rad (bearing). Their points are ``y = rho e`` (Eq. 8)."""
+
+    x: np.ndarray
+    e: np.ndarray
+    rho: np.ndarray
+    sr: np.ndarray
+    sb: np.ndarray
+
+
+class PoseFit(NamedTuple):
+    """One fit of m reflectors (``fit_pose``, ``fit_adaptive``): the pose ``R`` (3, 3),
+    ``t`` (3,) mm, its refinement's ``iterations``, the ``covariance`` (6, 6) (J^T J)^-1
+    at the pose (rotation vector rad, translation mm; NaN when singular), ``chi2`` and
+    the whitened residual ``norms`` (m,) there, and the sigmas the fit used, ``sr`` (m,)
+    mm and ``sb`` (m,) rad (the frame's excess components included)."""
+
+    R: np.ndarray
+    t: np.ndarray
+    iterations: int
+    covariance: np.ndarray
+    chi2: float
+    norms: np.ndarray
+    sr: np.ndarray
+    sb: np.ndarray
+
+
+class OutlierFit(NamedTuple):
+    """The fit with its outlier step and the common range offset
+    (``fit_with_outliers``): ``kept`` (m,) bool, the reflectors the final ``fit`` (a
+    ``PoseFit`` of the kept ones) is of, the range offset ``offset_mm`` common to them
+    (0 when not estimated; taken out of their ranges before the final fit) and its
+    posterior sigma ``offset_sigma_mm`` (the prior's when not estimated)."""
+
+    kept: np.ndarray
+    fit: PoseFit
+    offset_mm: float
+    offset_sigma_mm: float
+
+
+class SolvedPairs(NamedTuple):
+    """The pose of matched pairs (``solve_pairs``): ``k_idx``, ``i_idx`` (m,) int64 the
+    (candidate, catalog) pairs after completion, ``uv`` (m, 2) px their centroids after
+    the perspective-bias correction, ``observed`` the matched reflectors as measured (a
+    ``Reflectors``: the unmixed ranges and their sigmas, the noise model's bearing sigmas;
+    the offset not taken out), and ``result`` the fit with its outlier step (an
+    ``OutlierFit``)."""
+
+    k_idx: np.ndarray
+    i_idx: np.ndarray
+    uv: np.ndarray
+    observed: Reflectors
+    result: OutlierFit
+
+
+class RangeOffsetPrior(NamedTuple):
+    """What is known of the common range offset before a frame (``common_range_offset``).
+
+    sigma_mm : prior sigma of the offset (0: not estimated); focal_length_sigma_rel :
+    relative sigma of the focal length's calibration (the image scale;
+    ``PipelineConfig.focal_length_sigma_rel``); centroid_bias_rad : a systematic centroid
+    error common to the frame's markers (rad: ``common_centroid_bias_px`` over fx), which
+    scales the pattern by ``centroid_bias_rad / r_rms`` (r_rms its rms angular radius)."""
+
+    sigma_mm: float
+    focal_length_sigma_rel: float
+    centroid_bias_rad: float
+
+
+#: no offset estimated
+NO_OFFSET = RangeOffsetPrior(sigma_mm=0.0, focal_length_sigma_rel=0.0, centroid_bias_rad=0.0)
