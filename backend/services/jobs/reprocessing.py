@@ -21,12 +21,12 @@ import os
 import shutil
 import threading
 import uuid
+from collections.abc import Callable
 from datetime import UTC, datetime
-from functools import partial
 from pathlib import Path
 
 from backend.services.jobs.batch_queue import BatchQueue
-from tofpose.batch.cluster import default_workers
+from backend.services.jobs.batch_service import BatchJobService
 from tofpose.batch.compare import compare_runs
 from tofpose.batch.reprocess import ReprocessCancelledError, Settings, reprocess
 from tofpose.io.camera_file import load_camera
@@ -34,7 +34,6 @@ from tofpose.io.recording import RecordingError, open_recording
 
 log = logging.getLogger(__name__)
 
-WORKER_NICENESS = 10
 STATES = ("queued", "running", "complete", "failed", "cancelled")
 # files a client may download, by name: the new calibration's poses, the baseline's, the comparison
 FILES = {
@@ -87,8 +86,11 @@ def check_camera(camera: dict, recording: Path) -> str:
     return text
 
 
-class ReprocessService:
-    """Submit, list, follow and cancel re-processing jobs (module docstring)."""
+class ReprocessService(BatchJobService):
+    """Submit, list, follow and cancel re-processing jobs (module docstring; the queue,
+    the cluster and the start and stop: ``batch_service``)."""
+
+    kind = "reprocess"
 
     def __init__(
         self,
@@ -96,34 +98,19 @@ class ReprocessService:
         scheduler: str | None = None,
         workers: int | None = None,
         jobs: BatchQueue | None = None,
-    ):
-        self.root = Path(root)
-        self.scheduler = scheduler or None
-        self.workers = workers if workers is not None else default_workers(reserve=1)
-        self._own_jobs = jobs is None
-        self.jobs = jobs if jobs is not None else BatchQueue()
+    ) -> None:
+        super().__init__(root, scheduler, workers, jobs)
         self._lock = threading.Lock()
 
-    # -- lifecycle --------------------------------------------------------------------
-    def start(self) -> int:
-        """Queue again the jobs a stopped server left queued or running (they start
-        over: a job is a few passes over one recording). Returns how many."""
-        self.root.mkdir(parents=True, exist_ok=True)
-        again = 0
-        for jid in sorted(self._ids()):
-            job = self._read(jid)
-            if job is not None and job["status"] in ("queued", "running"):
-                job["status"] = "queued"
-                _write_json(self._dir(jid) / "job.json", job)
-                self.jobs.put(("reprocess", jid), partial(self._run_one, jid))
-                again += 1
-        if self._own_jobs:
-            self.jobs.start()
-        return again
-
-    def stop(self) -> None:
-        if self._own_jobs:
-            self.jobs.stop()
+    def _requeue(self, jid: int) -> bool:
+        """A job a stopped server left queued or running starts over (a job is a few
+        passes over one recording): stored as queued again."""
+        job = self._read(jid)
+        if job is None or job["status"] not in ("queued", "running"):
+            return False
+        job["status"] = "queued"
+        _write_json(self._dir(jid) / "job.json", job)
+        return True
 
     # -- commands ---------------------------------------------------------------------
     def submit(
@@ -167,7 +154,7 @@ class ReprocessService:
                 "summary": None,
             }
             _write_json(d / "job.json", job)
-        self.jobs.put(("reprocess", jid), partial(self._run_one, jid))
+        self._enqueue(jid)
         return self.status(jid)
 
     def cancel(self, jid: int) -> dict:
@@ -175,7 +162,7 @@ class ReprocessService:
         job = self.status(jid)
         if job["status"] in ("queued", "running"):
             with self._lock:
-                if not self.jobs.cancel(("reprocess", jid)):
+                if not self.jobs.cancel(self._key(jid)):
                     self._finish(jid, "cancelled", None)
         return self.status(jid)
 
@@ -210,7 +197,7 @@ class ReprocessService:
         return p if p.exists() else None
 
     # -- the runner -------------------------------------------------------------------
-    def _run_one(self, jid: int, should_stop) -> None:
+    def _run_one(self, jid: int, should_stop: Callable[[], bool]) -> None:
         """The job: run, baseline, compare (module docstring)."""
         d = self._dir(jid)
         job = self._read(jid)
@@ -219,12 +206,10 @@ class ReprocessService:
         job.update(status="running", started=_now(), error=None)
         _write_json(d / "job.json", job)
         common = dict(
-            workers=None if self.scheduler else self.workers,
-            scheduler=self.scheduler,
             filter_state=job["filter"],
             progress=False,
             should_stop=should_stop,
-            niceness=0 if self.scheduler else WORKER_NICENESS,
+            **self._cluster(),
         )
         camera_path = str(d / "camera.json") if job["camera"] == "given" else None
         try:
@@ -244,7 +229,7 @@ class ReprocessService:
             )
             summary = compare_runs(str(d / "baseline"), str(d / "run"), d)
         except ReprocessCancelledError:
-            if self.jobs.is_cancelled(("reprocess", jid)):
+            if self.jobs.is_cancelled(self._key(jid)):
                 self._finish(jid, "cancelled", None)
             else:  # the server stops: run it again at its next start
                 job.update(status="queued", started=None)
@@ -277,11 +262,3 @@ class ReprocessService:
             return json.loads((self._dir(jid) / "job.json").read_text())
         except (OSError, ValueError):
             return None
-
-    def _dir(self, jid: int) -> Path:
-        return self.root / str(jid)
-
-    def _ids(self) -> list[int]:
-        if not self.root.is_dir():
-            return []
-        return [int(p.name) for p in self.root.iterdir() if p.name.isdigit()]

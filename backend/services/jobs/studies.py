@@ -4,9 +4,8 @@ Each study lives in ``<data_dir>/studies/<id>/`` (the study store: ``study.json`
 source of truth for its status and progress, so a restarted server finds them again).
 Studies queue in submission order and run in a background thread; a study that was
 queued or running when the server stopped is queued again at start and resumes from the
-chunks it had finished. The cluster: ``TOFPOSE_DASK_SCHEDULER`` when set, else a
-LocalCluster of the cores less one (the live camera loop keeps its core) whose workers
-run at a lower priority (nice +10), so a study takes what the live loop leaves.
+chunks it had finished. The queue, the cluster and the start and stop are those of every
+batch job (``batch_service``).
 
 Limits (docs/scaleout.md): a study's size is checked from its axes before anything is
 made (``study_limits``, ``tofpose.study.spec.StudyLimits``), and ``submit`` refuses a
@@ -19,19 +18,18 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 
 from backend.services.jobs.batch_queue import BatchQueue
-from tofpose.batch.cluster import default_workers
+from backend.services.jobs.batch_service import BatchJobService
 from tofpose.study.run import StudyCancelledError, run_study
 from tofpose.study.spec import StudyLimits, StudySpec, StudySpecError
 from tofpose.study.store import StudyStoreError, open_store, read_manifest, write_manifest
 
 log = logging.getLogger(__name__)
 
-WORKER_NICENESS = 10
 REPORT_FILES = {"html": "report.html", "pdf": "report.pdf", "json": "summary.json"}
 ACTIVE = ("created", "queued", "running")
 
@@ -75,10 +73,12 @@ class StudyStatus:
     reports: tuple[str, ...]
 
 
-class StudyService:
+class StudyService(BatchJobService):
     """Submit, list, follow and cancel studies (module docstring). ``jobs``: the queue
     they run on, shared with re-processing (``backend.services.jobs.batch_queue``); without
     one the service makes and owns its own."""
+
+    kind = "study"
 
     def __init__(
         self,
@@ -86,37 +86,17 @@ class StudyService:
         scheduler: str | None = None,
         workers: int | None = None,
         jobs: BatchQueue | None = None,
-    ):
-        self.root = Path(root)
-        self.scheduler = scheduler or None
-        self.workers = workers if workers is not None else default_workers(reserve=1)
-        self._own_jobs = jobs is None
-        self.jobs = jobs if jobs is not None else BatchQueue()
+    ) -> None:
+        super().__init__(root, scheduler, workers, jobs)
         self._lock = threading.Lock()
 
-    # -- lifecycle --------------------------------------------------------------------
-    def start(self) -> int:
-        """Queue the studies a stopped server left queued or running (and start the
-        queue when the service owns it). Returns how many were queued again."""
-        self.root.mkdir(parents=True, exist_ok=True)
-        again = 0
-        for sid in sorted(self._ids()):
-            try:
-                status = read_manifest(self._dir(sid))["status"]
-            except StudyStoreError:
-                continue
-            if status in ACTIVE:
-                self.jobs.put(("study", sid), partial(self._run_one, sid))
-                again += 1
-        if self._own_jobs:
-            self.jobs.start()
-        return again
-
-    def stop(self) -> None:
-        """Cancel the running study (it stays resumable) and end the queue when the
-        service owns it."""
-        if self._own_jobs:
-            self.jobs.stop()
+    def _requeue(self, sid: int) -> bool:
+        """A study a stopped server left queued or running resumes (its manifest still
+        says so)."""
+        try:
+            return read_manifest(self._dir(sid))["status"] in ACTIVE
+        except StudyStoreError:
+            return False
 
     # -- commands ---------------------------------------------------------------------
     def submit(self, spec: StudySpec, max_active: int | None = None) -> int:
@@ -136,7 +116,7 @@ class StudyService:
             manifest = open_store(self._dir(sid), spec)
             manifest["status"] = "queued"
             write_manifest(self._dir(sid), manifest)
-        self.jobs.put(("study", sid), partial(self._run_one, sid))
+        self._enqueue(sid)
         return sid
 
     def cancel(self, sid: int) -> StudyStatus:
@@ -144,7 +124,7 @@ class StudyService:
         status = self.status(sid)
         if status.status in ACTIVE:
             with self._lock:
-                if not self.jobs.cancel(("study", sid)):  # queued: it will never run
+                if not self.jobs.cancel(self._key(sid)):  # queued: it will never run
                     m = read_manifest(self._dir(sid))
                     m["status"] = "incomplete"
                     write_manifest(self._dir(sid), m)
@@ -194,22 +174,20 @@ class StudyService:
         return p if p.exists() else None
 
     # -- the runner -------------------------------------------------------------------
-    def _run_one(self, sid: int, should_stop) -> None:
+    def _run_one(self, sid: int, should_stop: Callable[[], bool]) -> None:
         """The job: run study ``sid`` to its end, or until ``should_stop``."""
         try:
             spec = StudySpec.from_dict(read_manifest(self._dir(sid))["spec"], limits=None)
             run_study(
                 spec,
                 self._dir(sid),
-                workers=None if self.scheduler else self.workers,
-                scheduler=self.scheduler,
                 progress=False,
                 should_stop=should_stop,
-                niceness=0 if self.scheduler else WORKER_NICENESS,
+                **self._cluster(),
             )
         except StudyCancelledError:
             log.info("study %d stopped (its finished chunks are kept)", sid)
-            if not self.jobs.is_cancelled(("study", sid)):  # the server stops: resume later
+            if not self.jobs.is_cancelled(self._key(sid)):  # the server stops: resume later
                 m = read_manifest(self._dir(sid))
                 m["status"] = "queued"
                 write_manifest(self._dir(sid), m)
@@ -225,11 +203,3 @@ class StudyService:
             except StudyStoreError:
                 continue
         return n
-
-    def _dir(self, sid: int) -> Path:
-        return self.root / str(sid)
-
-    def _ids(self) -> list[int]:
-        if not self.root.is_dir():
-            return []
-        return [int(p.name) for p in self.root.iterdir() if p.name.isdigit()]
