@@ -68,19 +68,21 @@ class SetPointView:
 @dataclass(frozen=True)
 class CampaignView:
     """A stored campaign with its set-points in index order (``backend.db.models``
-    describes each field)."""
+    describes each field). Its fields have the API's names (``CampaignPublic``), so
+    that the presenter copies them as they are; the row's columns that are named
+    otherwise are listed in ``_ROW_COLUMNS``."""
 
     id: int
     name: str
     status: CampaignState
     status_reason: str
-    catalog_name: str
+    catalog: str
     frames_per_point: int
     settle_s: float
     lock_timeout_s: float
     requirements: dict[str, float]
     generator: dict | None
-    camera_settings: dict | None
+    camera: dict | None
     record_raw: bool
     notes: str
     created_at: datetime
@@ -101,6 +103,8 @@ class CampaignView:
 
 _SETPOINT_FIELDS = [f.name for f in fields(SetPointView)]
 _CAMPAIGN_FIELDS = [f.name for f in fields(CampaignView) if f.name not in ("status", "setpoints")]
+#: the view's fields that the row's columns name otherwise (view field -> column)
+_ROW_COLUMNS = {"catalog": "catalog_name", "camera": "camera_settings"}
 
 
 def _utc(value):
@@ -117,7 +121,7 @@ def _view(row: CampaignRow) -> CampaignView:
     return CampaignView(
         status=CampaignState(row.status),
         setpoints=setpoints,
-        **{k: _utc(getattr(row, k)) for k in _CAMPAIGN_FIELDS},
+        **{k: _utc(getattr(row, _ROW_COLUMNS.get(k, k))) for k in _CAMPAIGN_FIELDS},
     )
 
 

@@ -337,8 +337,8 @@ class CampaignService:
         recorder: RawRecorder | None = None
         try:
             sub = self.hub.subscribe(maxsize=256)
-            if campaign.camera_settings:
-                self._apply_camera(dict(campaign.camera_settings))
+            if campaign.camera:
+                self._apply_camera(dict(campaign.camera))
             if campaign.record_raw:
                 recorder = RawRecorder(
                     self.recording_path(campaign_id),

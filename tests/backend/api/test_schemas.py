@@ -1,4 +1,5 @@
-"""Response schemas: what the pipeline could not compute is sent as JSON null, never NaN."""
+"""Response schemas: what the pipeline could not compute is sent as JSON null, never NaN;
+a campaign's internal view and its public record share their field names."""
 
 from __future__ import annotations
 
@@ -10,8 +11,9 @@ import numpy as np
 import pytest
 
 from backend.api.presenters import pose_from_sample
-from backend.api.schemas import PosePublic
+from backend.api.schemas import CampaignPublic, PosePublic
 from backend.drivers.base import CameraFrame
+from backend.services.campaigns.campaign_repository import CampaignView
 from backend.services.live.acquisition import LiveSample, frame_point_cloud_mm
 from tests.conftest import facing_pose, render
 from tofpose.core.camera import CameraModel
@@ -99,3 +101,12 @@ def test_attitude_sigmas_are_those_of_pitch_yaw_and_roll():
     np.testing.assert_allclose(body["attitude_sigma_deg"], want, rtol=1e-12)
     rotvec = np.degrees(np.sqrt(np.diag(res.covariance)[:3]))
     assert np.abs(want - rotvec).max() > 0.05 * rotvec.max()
+
+
+def test_the_campaign_view_has_the_public_records_names():
+    """Every field of the internal view is a field of ``CampaignPublic`` by the same name
+    (the presenter copies, never renames); the public record adds what is computed."""
+    view = {f.name for f in dataclasses.fields(CampaignView)}
+    public = set(CampaignPublic.model_fields)
+    assert view <= public, view - public
+    assert public - view == {"n_setpoints", "n_done", "estimated_duration_s", "progress"}

@@ -62,9 +62,27 @@ def test_a_created_campaign_reads_back_as_a_draft_with_its_setpoints(repo):
     assert got.status is CampaignState.DRAFT and got.status_reason == ""
     assert [sp.axes for sp in got.setpoints] == [{"yaw": 0.0, "rail": 11000.0}, {"yaw": 5.0}, {}]
     assert [sp.index for sp in got.pending] == [0, 1, 2] and got.n_done == 0
+    assert got.catalog == "paper-target" and got.camera is None  # the API's names
     assert repo.exists(made.id) and not repo.exists(made.id + 1)
     with pytest.raises(CampaignNotFoundError, match=f"no campaign with id {made.id + 1}"):
         repo.get(made.id + 1)
+
+
+def test_the_view_reads_the_columns_its_fields_rename(repo):
+    """``catalog`` and ``camera`` (the API's names) come from the row's ``catalog_name``
+    and ``camera_settings``."""
+    made = repo.create(
+        name="with camera",
+        catalog_name="first-four",
+        setpoints=[{}],
+        frames_per_point=1,
+        settle_s=0.0,
+        lock_timeout_s=1.0,
+        requirements={},
+        camera={"integration_time_us": 500},
+    )
+    got = repo.get(made.id)
+    assert (got.catalog, got.camera) == ("first-four", {"integration_time_us": 500})
 
 
 def test_the_list_is_newest_first_with_every_setpoint(repo):
