@@ -10,7 +10,7 @@ fit, their ratios to the bound (``bench/crlb.py``, RMS over the same frames), th
 fit's errors over its own sigmas (RMS of the whitened 3-D errors over sqrt(3)), its
 fallback count and its time per frame.
 
-    python -m bench.pixelfit --ranges 1 2 3 4 5 6 7 8 --frames 20 --repeats 3
+    python bench/pixelfit.py --ranges 1 2 3 4 5 6 7 8 --frames 20 --repeats 3
 
 Judge the pixel fit on frames rendered with ``--supersampling 32`` or more: the
 renderer's 16 x 16 point sampling of an edge pixel leaves +-10-40 counts on each rim
@@ -24,19 +24,23 @@ sub-cells with straight rims are what it leaves).
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from bench.crlb import pose_crlb
-from tofpose import CameraModel, PosePipeline, paper_target
-from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg
-from tofpose.sim.bench import R_FACING
-from tofpose.sim.render import SensorModel, render_frame
-from tofpose.sim.scene import TargetScene
-from tofpose.stages.pixelfit.fit import PixelNoise, fit_pose_to_pixels
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.crlb import pose_crlb  # noqa: E402
+from tofpose import CameraModel, PosePipeline, paper_target  # noqa: E402
+from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
+from tofpose.sim.bench import R_FACING  # noqa: E402
+from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
+from tofpose.sim.scene import TargetScene  # noqa: E402
+from tofpose.stages.pixelfit.fit import PixelNoise, fit_pose_to_pixels  # noqa: E402
 
 
 @dataclass(frozen=True)
