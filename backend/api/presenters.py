@@ -11,30 +11,28 @@ from datetime import UTC, datetime
 
 import numpy as np
 
-from backend.api.schemas import (
-    AxisPublic,
-    BlobPublic,
-    CalibrationPublic,
-    CameraSettingsPublic,
+from backend.api.schemas.calibrations import CalibrationPublic, TransformPublic
+from backend.api.schemas.camera import CameraSettingsPublic
+from backend.api.schemas.campaigns import (
     CampaignPublic,
     CampaignStatesPublic,
     CampaignTransitionPublic,
-    DeviceStatePublic,
-    FoxglovePublic,
-    MatchedPublic,
     MeasurementPublic,
-    MotionPublic,
-    PipelineStatePublic,
-    PosePublic,
-    ProfilePublic,
     ProgressPublic,
-    RejectedBlobPublic,
     Requirements,
-    ScenePublic,
     SetPointPublic,
-    TransformPublic,
+)
+from backend.api.schemas.common import DeviceStatePublic, PipelineStatePublic
+from backend.api.schemas.foxglove import FoxglovePublic
+from backend.api.schemas.motion import AxisPublic, MotionPublic, ProfilePublic
+from backend.api.schemas.pose import (
+    BlobPublic,
+    MatchedPublic,
+    PosePublic,
+    RejectedBlobPublic,
     TruthPublic,
 )
+from backend.api.schemas.scene import ScenePublic
 from backend.db.models import POSE_FIELDS, CalibrationRow, MeasurementRow
 from backend.drivers.base import CameraSettings
 from backend.services.campaigns.campaign_repository import CampaignView

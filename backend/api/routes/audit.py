@@ -5,14 +5,14 @@ creates it; the server keeps its SHA-256 only (backend/services/keys.py)."""
 from __future__ import annotations
 
 from datetime import UTC, datetime
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 from fastapi import APIRouter, HTTPException, Path, Query, Response, status
-from pydantic import BaseModel, Field
 
 from backend.api.contract import ErrorPublic, errors
 from backend.api.deps import AdminAuth, StateDep
-from backend.api.schemas import StrictBody
+from backend.api.schemas.audit import AuditEntryPublic
+from backend.api.schemas.keys import KeyCreate, KeyCreated, KeyPublic
 from backend.services.audit import MAX_LIMIT, AuditRecord
 from backend.services.keys import ApiKey, KeyNameTakenError, KeyNotFoundError
 
@@ -21,42 +21,6 @@ ADMIN_ONLY: dict[int | str, dict[str, Any]] = {
     403: {"model": ErrorPublic, "description": "The API key's scope is below 'admin'"}
 }
 KeyNameParam = Annotated[str, Path(min_length=1, max_length=64)]
-ScopeName = Literal["read", "operate", "admin"]
-
-
-class AuditEntryPublic(BaseModel):
-    """One state-changing request: when (UTC), by which key (null: none valid), from
-    where, what, and the HTTP status answered."""
-
-    id: int
-    at: datetime
-    key_name: str | None
-    client: str = Field(description="the client's address")
-    method: str
-    path: str
-    body: str = Field(
-        description="the JSON body, at most ~300 characters, with every field "
-        "whose name contains token, key, secret or password redacted"
-    )
-    status: int
-
-
-class KeyPublic(BaseModel):
-    """An API key as the server knows it (never the key itself)."""
-
-    name: str
-    scope: ScopeName
-    created_at: datetime | None
-    revoked_at: datetime | None
-
-
-class KeyCreate(StrictBody):
-    name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9][A-Za-z0-9._@-]*$")
-    scope: ScopeName
-
-
-class KeyCreated(KeyPublic):
-    key: str = Field(description="the key: shown this once, only its hash is stored")
 
 
 def _utc(t: datetime | None) -> datetime | None:

@@ -8,7 +8,7 @@ from fastapi import APIRouter, HTTPException, status
 from backend.api.contract import errors
 from backend.api.deps import ReadAuth, SessionDep, StateDep, WriteAuth, unprocessable
 from backend.api.presenters import calibration_public
-from backend.api.schemas import CalibrationCreate, CalibrationPublic
+from backend.api.schemas.calibrations import CalibrationCreate, CalibrationPublic
 from backend.services.calibrations import calibrate_from_campaign, stored_calibrations
 from backend.services.store import NameTakenError
 

@@ -11,7 +11,7 @@ from fastapi import APIRouter, HTTPException
 from backend.api.contract import errors
 from backend.api.deps import ReadAuth, StateDep, WriteAuth
 from backend.api.presenters import camera_settings_public
-from backend.api.schemas import CameraSettingsPublic, CameraSettingsUpdate
+from backend.api.schemas.camera import CameraSettingsPublic, CameraSettingsUpdate
 from backend.services.store import save_device_settings
 
 router = APIRouter(prefix="/api/camera", tags=["camera"])

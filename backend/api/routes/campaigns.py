@@ -22,7 +22,7 @@ from backend.api.deps import (
     unprocessable_at,
 )
 from backend.api.presenters import campaign_public, campaign_states_public, measurement_public
-from backend.api.schemas import (
+from backend.api.schemas.campaigns import (
     MAX_FRAMES_PER_CAMPAIGN,
     MAX_SETPOINTS,
     CampaignCreate,

@@ -9,7 +9,12 @@ from fastapi import APIRouter, HTTPException, Path, status
 
 from backend.api.contract import errors
 from backend.api.deps import ReadAuth, SessionDep, StateDep, WriteAuth, unprocessable
-from backend.api.schemas import ActiveCatalogPublic, CatalogCreate, CatalogPublic, ReflectorModel
+from backend.api.schemas.catalogs import (
+    ActiveCatalogPublic,
+    CatalogCreate,
+    CatalogPublic,
+    ReflectorModel,
+)
 from backend.services.store import (
     NameTakenError,
     add_catalog,

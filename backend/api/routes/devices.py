@@ -6,7 +6,7 @@ from fastapi import APIRouter
 
 from backend.api.deps import ReadAuth, StateDep
 from backend.api.presenters import camera_state, motion_public, pipeline_state
-from backend.api.schemas import CameraDevicePublic, DevicesPublic
+from backend.api.schemas.devices import CameraDevicePublic, DevicesPublic
 
 router = APIRouter(prefix="/api", tags=["status"], dependencies=[ReadAuth])
 

@@ -6,7 +6,7 @@ from fastapi import APIRouter
 
 from backend.api.deps import ReadAuth, StateDep
 from backend.api.presenters import foxglove_public
-from backend.api.schemas import FoxglovePublic
+from backend.api.schemas.foxglove import FoxglovePublic
 
 router = APIRouter(prefix="/api", tags=["status"])
 

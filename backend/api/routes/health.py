@@ -7,7 +7,7 @@ from fastapi import APIRouter
 import backend
 from backend.api.deps import StateDep
 from backend.api.presenters import camera_state, motion_state, pipeline_state
-from backend.api.schemas import HealthPublic
+from backend.api.schemas.health import HealthPublic
 from backend.services.store import database_answers
 
 router = APIRouter(prefix="/api", tags=["status"])

@@ -50,14 +50,13 @@ import contextlib
 import json
 import logging
 from collections import deque
-from typing import Literal
 from urllib.parse import urlsplit
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
-from pydantic import Field, ValidationError, field_validator
+from pydantic import ValidationError
 
 from backend.api.presenters import pose_public
-from backend.api.schemas import StrictBody
+from backend.api.schemas.live import LiveOptions
 from backend.services.live.acquisition import LiveSample, frame_point_cloud_mm
 from backend.services.live.frame_codec import encode_raw_frame
 from backend.state import AppState
@@ -69,20 +68,6 @@ TRY_AGAIN_LATER = 1013
 SUBPROTOCOL = "tofpose.bearer"
 KEY_PREFIX = SUBPROTOCOL + "."
 URL_SECRETS = ("token", "key")
-
-
-class LiveOptions(StrictBody):
-    images: list[Literal["gray", "distance"]] = Field(default_factory=list, max_length=2)
-    image_every: int = Field(5, ge=1, le=1000)
-    image_step: int = Field(2, ge=1, le=8)
-    raw: bool = False
-    raw_credit: int = Field(2, ge=0, le=100)
-    points: bool = False
-
-    @field_validator("images")
-    @classmethod
-    def _each_kind_once(cls, kinds: list[str]) -> list[str]:
-        return list(dict.fromkeys(kinds))  # ["gray", "gray"] sends gray once
 
 
 def pose_json(sample: LiveSample) -> str:

@@ -24,7 +24,7 @@ from fastapi import APIRouter, HTTPException, status
 from backend.api.contract import errors
 from backend.api.deps import MotionDep, ReadAuth, StateDep, WriteAuth, unprocessable_at
 from backend.api.presenters import motion_public
-from backend.api.schemas import JogRequest, MotionPublic, MoveRequest, ProfileRequest
+from backend.api.schemas.motion import JogRequest, MotionPublic, MoveRequest, ProfileRequest
 from backend.services.motion import (
     MotionConflictError,
     MotionDeviceError,

@@ -9,7 +9,7 @@ from fastapi import APIRouter, HTTPException, Query
 from backend.api.contract import errors
 from backend.api.deps import ReadAuth, StateDep
 from backend.api.presenters import pose_public
-from backend.api.schemas import PosePublic
+from backend.api.schemas.pose import PosePublic
 
 router = APIRouter(prefix="/api/pose", tags=["pose"], dependencies=[ReadAuth])
 

@@ -9,7 +9,7 @@ from fastapi import APIRouter, HTTPException
 
 from backend.api.contract import errors
 from backend.api.deps import ReadAuth, SessionDep, StateDep, WriteAuth
-from backend.api.schemas import ReferencePublic, ReferenceUpdate
+from backend.api.schemas.reference import ReferencePublic, ReferenceUpdate
 from backend.services.calibrations import count_calibrations, get_calibration
 from backend.services.live.live_reference import LiveReference
 from backend.state import AppState

@@ -17,7 +17,7 @@ from backend.api.deps import (
     finished_recording,
     unprocessable,
 )
-from backend.api.schemas import ReprocessCreate, ReprocessPublic
+from backend.api.schemas.reprocessings import ReprocessCreate, ReprocessPublic
 from backend.services.jobs.reprocessing import (
     FILES,
     ReprocessRequestError,

@@ -7,7 +7,7 @@ from fastapi import APIRouter, HTTPException
 from backend.api.contract import errors
 from backend.api.deps import ReadAuth, StateDep, WriteAuth
 from backend.api.presenters import scene_public
-from backend.api.schemas import ScenePublic, SceneUpdate
+from backend.api.schemas.scene import ScenePublic, SceneUpdate
 
 router = APIRouter(prefix="/api", tags=["status"])
 

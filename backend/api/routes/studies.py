@@ -11,7 +11,7 @@ from fastapi.responses import FileResponse
 
 from backend.api.contract import errors
 from backend.api.deps import ReadAuth, StateDep, WriteAuth, unprocessable
-from backend.api.schemas import StudyCreate, StudyPublic
+from backend.api.schemas.studies import StudyCreate, StudyPublic
 from backend.services.jobs.studies import TooManyStudiesError, UnknownStudyError, study_limits
 from tofpose.study.spec import StudySpec, StudySpecError
 

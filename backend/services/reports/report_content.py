@@ -26,7 +26,7 @@ AXIS_NAMES = {
 AXIS_UNITS = {a: a.rsplit("_", 1)[1] for a in AXES}
 AXIS_GROUPS = (("Translation", "mm", AXES[:3]), ("Attitude", "deg", AXES[3:]))
 
-# The default of ``requirements`` in POST /api/campaigns (backend/api/schemas.py,
+# The default of ``requirements`` in POST /api/campaigns (backend/api/schemas/campaigns.py,
 # ``Requirements``): the accuracy goals of the paper.
 PAPER_REQUIREMENTS = {
     "x_mm": 6.0,

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from backend.api.presenters import pose_from_sample
-from backend.api.schemas import CampaignPublic, PosePublic
+from backend.api.schemas.campaigns import CampaignPublic
+from backend.api.schemas.pose import PosePublic
 from backend.drivers.base import CameraFrame
 from backend.services.campaigns.campaign_repository import CampaignView
 from backend.services.live.acquisition import LiveSample, frame_point_cloud_mm
@@ -76,7 +77,7 @@ def test_the_study_specs_physics_families_are_the_simulators():
     simulator draws (a family added to one and not the other is a 422 or a crash)."""
     from typing import get_args
 
-    from backend.api.schemas import PhysicsFamily
+    from backend.api.schemas.studies import PhysicsFamily
     from tofpose.sim.randomise import FAMILIES
 
     assert get_args(PhysicsFamily) == FAMILIES

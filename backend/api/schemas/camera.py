@@ -1,0 +1,24 @@
+"""The camera's settings (GET, PUT /api/camera/settings)."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, Field
+
+from backend.api.schemas.common import StrictBody
+
+
+class CameraSettingsPublic(BaseModel):
+    integration_time_us: float
+    modulation_frequency_mhz: float
+    frame_rate_hz: float
+    auto_exposure: bool
+    unambiguous_range_mm: float
+
+
+class CameraSettingsUpdate(StrictBody):
+    """Fields left out keep their current value."""
+
+    integration_time_us: float | None = Field(None, ge=1.0, le=20000.0)
+    modulation_frequency_mhz: float | None = Field(None, ge=1.0, le=24.0)
+    frame_rate_hz: float | None = Field(None, ge=1.0, le=60.0)
+    auto_exposure: bool | None = None

@@ -1,0 +1,20 @@
+"""The live Foxglove server (GET /api/foxglove)."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, Field
+
+
+class FoxglovePublic(BaseModel):
+    """The live Foxglove WebSocket server (``foxglove-sdk``) run by this process."""
+
+    running: bool
+    url: str | None = Field(None, description="ws:// address for the Foxglove app")
+    port: int | None = None
+    reason: str = Field("", description="why it does not run (empty when it does)")
+    published: int = Field(0, description="frames published to subscribed clients")
+    dropped: int = Field(
+        0,
+        description="frames skipped because the publisher was still busy with one "
+        "(the camera loop never waits for it)",
+    )

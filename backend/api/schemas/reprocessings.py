@@ -1,0 +1,57 @@
+"""Re-processing of a campaign's recording (/api/reprocessings)."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, Field
+
+from backend.api.schemas.common import StrictBody
+
+
+class ReprocessCreate(StrictBody):
+    """Re-process a campaign's recording with another camera calibration."""
+
+    camera: dict[str, Any] | None = Field(
+        None,
+        description="a camera JSON (tofpose.core.camera.CameraModel, with the "
+        "range_correction "
+        "and covariance_scale tofpose calibrate-range / calibrate-covariance add); omitted: "
+        "the recording's own camera",
+    )
+    tracking: bool = Field(False, description="the pipeline's tracking mode")
+    filter: bool = Field(False, description="add the relative-state filter's columns")
+
+
+class ReprocessComparison(BaseModel):
+    """The new calibration (B) against the recording's own camera (A), over the frames
+    where both gave a pose (tofpose.batch.compare)."""
+
+    frames: int
+    ok_a: int
+    ok_b: int
+    gained: int
+    lost: int
+    attitude_diff_deg: dict[str, float | None]
+    position_diff_mm: dict[str, float | None]
+    mean_shift: dict[str, float | None]
+
+
+class ReprocessPublic(BaseModel):
+    id: int
+    campaign_id: int
+    camera: Literal["given", "recording"] = Field(
+        description="the camera the run used: the request's or the recording's own"
+    )
+    tracking: bool
+    filter: bool
+    status: Literal["queued", "running", "complete", "failed", "cancelled"]
+    created: str
+    started: str | None = None
+    finished: str | None = None
+    error: str | None = None
+    frames: int | None = None
+    summary: ReprocessComparison | None = None
+    files: list[
+        Literal["poses.csv", "baseline.csv", "compare.csv", "compare.json", "compare.png"]
+    ] = Field(description="downloadable at /api/reprocessings/{id}/files/{name}")
