@@ -26,7 +26,7 @@ from tofpose.config import PipelineConfig
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import Catalog
 from tofpose.core.geometry import facing_euler_deg, quaternion_wxyz_from_rotation
-from tofpose.core.records import camera_record
+from tofpose.core.records import FrameRecord, camera_record
 from tofpose.stages.ellipses.confirmation import confirm_ellipses
 from tofpose.stages.extraction.extraction import (
     Blob,
@@ -45,7 +45,7 @@ from tofpose.stages.matching.matching import (
     match_reflectors,
     random_triplets,
 )
-from tofpose.stages.persistence.persistence import Persistence, PersistenceInfo, blob_arrays
+from tofpose.stages.persistence.persistence import Persistence, PersistenceInfo, blob_lists
 from tofpose.stages.pose.solve import Measurements, PoseSolver, Rejected, Solution, ThresholdedFrame
 from tofpose.stages.tracking.tracking import (
     TrackState,
@@ -406,39 +406,40 @@ class PosePipeline:
 
     def _measure(self, blobs: list[Blob], g, d, background: float, dark: float):
         """§3.4 and Eqs. 7-8 in one compiled call
-        (``stages.persistence.kernels.measure.measure_and_back_project``): the blobs combined with
-        the
-        consistent persistence history (the frame is then committed to it), their
+        (``stages.persistence.kernels.measure.measure_and_back_project``): the blobs
+        combined with the consistent persistence history (the frame is then committed to
+        it), their
         centroids (Eq. 19) and ranges (Eq. 20) measured, the calibrated range correction
         applied, and those with a range back-projected (Eq. 8) with their sigmas and the
         weights of Eq. 21. Returns the ``Measurements`` of the kept blobs with a range,
         (u, v, range) of the kept ones without, how many were kept, and what persistence
         combined."""
         cam, persistence, ar = self.camera, self._persistence, self.arithmetic
-        cur, flat, starts, bbox = blob_arrays(blobs)
-        split = np.array([b.source == "split" for b in blobs], bool)
-        (n_used, motion, keep, uv, rho, ranged, rho_r, sp, sr, y, w, mix) = (
-            ar.persistence.measure_and_back_project(
-                g,
-                d,
-                flat,
-                starts,
-                bbox,
-                cur,
-                split,
-                persistence.history(g, d),
-                float(background),
-                float(dark),
-                self._camera_record,
-                *persistence.scratch(g.shape),
-                self._correction_kernel_args,
-                self._sigma_constants,
-            )
+        lists = blob_lists(blobs)
+        frame = FrameRecord(gray=g, distance=d, background=float(background), dark=float(dark))
+        m = ar.persistence.measure_and_back_project(
+            frame,
+            lists,
+            persistence.history(g, d),
+            self._camera_record,
+            self._correction_kernel_args,
+            self._sigma_constants,
         )
-        persistence.commit(cur, flat, g, d, n_used, motion)
-        unranged = [(uv[j, 0], uv[j, 1], rho[j]) for j in np.flatnonzero(keep & ~np.isfinite(rho))]
-        ranged_blobs = tuple(blobs[j] for j in ranged.tolist())
-        uv = uv[ranged]
+        n_used, motion, keep, rho = m.n_used, m.motion, m.keep, m.rho
+        persistence.commit(lists.centroids, lists.flat, g, d, n_used, motion)
+        unranged = [
+            (m.uv[j, 0], m.uv[j, 1], rho[j]) for j in np.flatnonzero(keep & ~np.isfinite(rho))
+        ]
+        ranged_blobs = tuple(blobs[j] for j in m.ranged.tolist())
+        c = m.candidates
+        uv, rho_r, y, w, sp, sr = (
+            c.uv_px,
+            c.range_mm,
+            c.y_mm,
+            c.weights,
+            c.sigma_px,
+            c.sigma_range_mm,
+        )
         fitted = [a for a, b in enumerate(ranged_blobs) if b.fitted_uv is not None]
         if fitted:  # centres from the pair fit replace the halves' moment centroids
             uv, y, w, sr = uv.copy(), y.copy(), w.copy(), sr.copy()
@@ -449,7 +450,7 @@ class PosePipeline:
             y[fitted] = ar.persistence.bearings(cam, uv[fitted]) * rho_r[fitted, None]  # Eq. 8
             w[fitted] = 1.0 / (sr[fitted] ** 2 + (rho_r[fitted] * sp[fitted] / cam.fx) ** 2)
         area = np.array([b.area_px for b in ranged_blobs], np.int64)
-        meas = Measurements(ranged_blobs, area, uv, rho_r, y, w, sp, sr, mix)
+        meas = Measurements(ranged_blobs, area, uv, rho_r, y, w, sp, sr, c.mixing)
         n_kept = int(keep.sum())
         return meas, unranged, n_kept, PersistenceInfo(1 + n_used, motion, len(blobs) - n_kept)
 

@@ -23,8 +23,9 @@ import numpy as np
 
 class CameraRecord(NamedTuple):
     """The camera as kernels read it: pinhole intrinsics fx, fy, cx, cy (px), the
-    distortion ``dist`` (5,) (k1, k2, p1, p2, k3), ``K`` (3, 3) and the unit bearing of
-    every pixel ``pixel_bearings`` (H * W, 3), row-major."""
+    distortion ``dist`` (5,) (k1, k2, p1, p2, k3), ``K`` (3, 3), the unit bearing of
+    every pixel ``pixel_bearings`` (H * W, 3), row-major, and the image's ``width`` W
+    and ``height`` H (px)."""
 
     fx: float
     fy: float
@@ -33,6 +34,8 @@ class CameraRecord(NamedTuple):
     dist: np.ndarray
     K: np.ndarray
     pixel_bearings: np.ndarray
+    width: int
+    height: int
 
 
 class CatalogRecord(NamedTuple):
@@ -66,16 +69,32 @@ class PersistenceHistory(NamedTuple):
     (``Persistence.history``): ``gray``, ``distance`` ((H, W) float32 each), ``mask``
     ((H * W,) bool each) and ``centroids`` ((m, 2) float64 each) are tuples of one length
     (K - 1, at least 1), newest first, of which the first ``count`` are real frames (the
-    rest pad with the current frame's arrays and are never read); ``tol_px`` and
-    ``c_min`` are ``PersistenceConfig``'s motion tolerance and C_min."""
+    rest pad with the current frame's arrays and are never read);
+    ``motion_tolerance_px`` and ``c_min`` are ``PersistenceConfig``'s; ``scratch_gray``
+    and ``scratch_distance`` ((H, W) float32) the two frames the compiled measurement
+    writes I-bar and D-bar into where they are read (``Persistence.scratch``, lent to
+    every frame)."""
 
     gray: tuple
     distance: tuple
     mask: tuple
     centroids: tuple
     count: int
-    tol_px: float
+    motion_tolerance_px: float
     c_min: int
+    scratch_gray: np.ndarray
+    scratch_distance: np.ndarray
+
+
+class FrameRecord(NamedTuple):
+    """A checked frame as the measurement kernels read it: ``gray`` and ``distance``
+    ((H, W) float32: counts and mm, NaN where invalid), its ``background`` level and its
+    no-return (``dark``) level, counts (``extraction.FrameStats``)."""
+
+    gray: np.ndarray
+    distance: np.ndarray
+    background: float
+    dark: float
 
 
 class RangeCorrectionRecord(NamedTuple):
@@ -172,6 +191,8 @@ def camera_record(camera) -> CameraRecord:
         dist=np.ascontiguousarray(camera.dist_array, dtype=np.float64),
         K=np.ascontiguousarray(camera.K, dtype=np.float64),
         pixel_bearings=np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3)),
+        width=int(camera.width),
+        height=int(camera.height),
     )
 
 

@@ -17,10 +17,11 @@ import numpy as np
 
 from tofpose.config import PersistenceConfig
 from tofpose.core.camera import CameraModel
-from tofpose.core.records import PersistenceHistory
+from tofpose.core.records import FrameRecord, PersistenceHistory, camera_record
 from tofpose.stages.extraction.extraction import Blob, pixel_lists
 from tofpose.stages.persistence.kernels.measure import persist_and_measure
 from tofpose.stages.persistence.kernels.persistence import pixel_mask
+from tofpose.stages.persistence.records import BlobLists
 
 
 @dataclass
@@ -38,12 +39,18 @@ class PersistenceInfo:
     dropped_blobs: int
 
 
-def blob_arrays(blobs: list[Blob]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The blobs as the compiled measurement takes them: single-frame centroids (n, 2),
-    flat pixel indices and starts (``pixel_lists``), boxes (n, 4) (x, y, w, h)."""
-    cur = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
+def blob_lists(blobs: list[Blob]) -> BlobLists:
+    """The blobs as the compiled measurement takes them (a ``records.BlobLists``): flat
+    pixel indices and starts (``pixel_lists``), boxes (n, 4) (x, y, w, h), single-frame
+    centroids (n, 2) and whether each was cut out of a merged component."""
     flat, starts = pixel_lists(blobs)
-    return cur, flat, starts, np.array([b.bbox for b in blobs], np.int64).reshape(-1, 4)
+    return BlobLists(
+        flat=flat,
+        starts=starts,
+        bbox=np.array([b.bbox for b in blobs], np.int64).reshape(-1, 4),
+        centroids=np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2),
+        split=np.array([b.source == "split" for b in blobs], bool),
+    )
 
 
 class Persistence:
@@ -102,54 +109,41 @@ class Persistence:
         frames are defined where the next steps read them, inside the blobs' boxes grown
         by 2 px (I-bar) and at the kept blobs' pixels (D-bar), and are reused by the next
         frame (``scratch``)."""
-        cur, flat, starts, bbox = blob_arrays(blobs)
-        n_used, motion, keep, mean_gray, med_dist, uv, rho, mix = persist_and_measure(
-            gray,
-            distance,
-            flat,
-            starts,
-            bbox,
-            cur,
-            self.history(gray, distance),
-            float(background),
-            float(dark),
-            camera.fx,
-            camera.fy,
-            camera.cx,
-            camera.cy,
-            camera.dist_array,
-            np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3)),
-            *self.scratch(gray.shape),
+        lists = blob_lists(blobs)
+        frame = FrameRecord(
+            gray=gray, distance=distance, background=float(background), dark=float(dark)
         )
-        self.commit(cur, flat, gray, distance, n_used, motion)
+        out = persist_and_measure(frame, lists, self.history(gray, distance), camera_record(camera))
+        self.commit(lists.centroids, lists.flat, gray, distance, out.n_used, out.motion)
         kept = [
-            b.with_values(centroid_uv=uv[j], distance_mm=float(rho[j]), mixing=mix[j])
+            b.with_values(
+                centroid_uv=out.uv[j], distance_mm=float(out.rho[j]), mixing=out.mixing[j]
+            )
             for j, b in enumerate(blobs)
-            if keep[j]
+            if out.keep[j]
         ]
-        return (
-            kept,
-            mean_gray,
-            med_dist,
-            PersistenceInfo(1 + n_used, motion, len(blobs) - len(kept)),
-        )
+        info = PersistenceInfo(1 + out.n_used, out.motion, len(blobs) - len(kept))
+        return kept, out.mean_gray, out.med_distance, info
 
     def history(self, gray: np.ndarray, distance: np.ndarray) -> PersistenceHistory:
         """The history newest first with the settings, as the kernels take it (a
         ``core.records.PersistenceHistory``): tuples of gray, distance, mask and
         centroids, each padded to K - 1 entries (at least one) with this frame's arrays
-        (never read), and the number of real entries."""
+        (never read), the number of real entries, and the scratch frames (``scratch``)."""
         k = max(self.config.k_frames - 1, 1)
         entries = list(reversed(self._history))
         pad = k - len(entries)
+        scratch_gray, scratch_distance = self.scratch(gray.shape)
         return PersistenceHistory(
             gray=tuple([e.gray for e in entries] + [gray] * pad),
             distance=tuple([e.distance for e in entries] + [distance] * pad),
             mask=tuple([e.mask for e in entries] + [np.zeros(gray.size, bool)] * pad),
             centroids=tuple([e.centroids for e in entries] + [np.zeros((0, 2))] * pad),
             count=len(entries),
-            tol_px=float(self.config.motion_tolerance_px),
+            motion_tolerance_px=float(self.config.motion_tolerance_px),
             c_min=int(self.config.c_min),
+            scratch_gray=scratch_gray,
+            scratch_distance=scratch_distance,
         )
 
     def commit(

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tofpose.core.camera import CameraModel
+from tofpose.core.records import CatalogRecord, camera_record
 from tofpose.stages.extraction.extraction import Blob
 from tofpose.stages.tracking.arithmetic import COMPILED, TrackingArithmetic
 from tofpose.stages.tracking.constants import AT_EDGE, FOUND, NO_SIZE, NOT_FOUND
@@ -74,24 +75,26 @@ def predict_windows(
     markers 7 and 8 beyond ~4.5 m) are skipped; the others carry the pose. The window is
     the predicted disc plus ``margin_px`` on every side.
     """
-    idx, bounds, uv, d_px = arithmetic.camera_windows(
-        np.ascontiguousarray(catalog_mm, dtype=float),
-        np.ascontiguousarray(catalog_diameter_mm, dtype=float),
+    catalog = CatalogRecord(
+        xyz=np.ascontiguousarray(catalog_mm, dtype=float),
+        radii_mm=np.ascontiguousarray(catalog_diameter_mm, dtype=float) / 2,
+    )
+    found = arithmetic.camera_windows(
+        catalog,
         np.asarray(R, float),
         np.asarray(t_mm, float),
-        camera.fx,
-        camera.fy,
-        camera.cx,
-        camera.cy,
-        camera.dist_array,
+        camera_record(camera),
         float(margin_px),
         float(min_diameter_px),
-        camera.width,
-        camera.height,
     )
     return [
-        Window(int(i), uv[n], float(d_px[n]), *(int(v) for v in bounds[n]))
-        for n, i in enumerate(idx.tolist())
+        Window(
+            int(i),
+            found.centres[n],
+            float(found.diameters_px[n]),
+            *(int(v) for v in found.bounds[n]),
+        )
+        for n, i in enumerate(found.catalog_index.tolist())
     ]
 
 

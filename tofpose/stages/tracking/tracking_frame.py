@@ -18,7 +18,7 @@ from tofpose.calibration.range import RangeCorrection, correction_kernel_argumen
 from tofpose.config import SolveConfig, TrackingConfig
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import Catalog
-from tofpose.core.records import camera_record, catalog_record
+from tofpose.core.records import FrameRecord, camera_record, catalog_record
 from tofpose.stages.extraction.uncertainty import SigmaFloors, kernel_constants
 from tofpose.stages.persistence.persistence import Persistence, PersistenceInfo
 from tofpose.stages.pose.records import NO_OFFSET, RangeOffsetPrior
@@ -71,11 +71,10 @@ class CompiledTracker:
         self._solver = solver
         self._persistence = persistence
         self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
-        self._diameters = np.ascontiguousarray(catalog.diameters_mm, dtype=float)
-        self._dist = np.ascontiguousarray(camera.dist_array)
         # the arguments of ``track_frame`` that do not change from frame to frame, as the
         # kernels' records (``core.records``), built where the acquisition path builds them
-        self._camera_args = (camera_record(camera), catalog_record(catalog))
+        self._camera_record = camera_record(camera)
+        self._catalog_record = catalog_record(catalog)
         self._fit_args = (
             correction_kernel_arguments(correction),
             kernel_constants(
@@ -101,67 +100,50 @@ class CompiledTracker:
         track than a pose needs, one lost or not persistent, a range missing, one dropped
         as an outlier, verification failed or the fit inconsistent), and leaves the
         persistence history as it was."""
-        cfg, cam = self.config, self.camera
-        tc = self.tracking
-        arith = self._arithmetic
-        cat_idx, bounds, centres, diameters = arith.camera_windows(
-            self._xyz,
-            self._diameters,
+        cfg, tc, arith = self.config, self.tracking, self._arithmetic
+        camera, catalog = self._camera_record, self._catalog_record
+        windows = arith.camera_windows(
+            catalog,
             track.R,
             track.t_mm,
-            cam.fx,
-            cam.fy,
-            cam.cx,
-            cam.cy,
-            self._dist,
+            camera,
             float(tc.margin_px),
             float(tc.min_diameter_px),
-            cam.width,
-            cam.height,
         )
+        cat_idx = windows.catalog_index
         if len(cat_idx) < cfg.min_matches:
             return None
-        (
-            code,
-            n_used,
-            motion,
-            cent,
-            flat,
-            starts,
-            uv,
-            rho,
-            sp,
-            sr,
-            y,
-            w,
-            solved_pairs,
-        ) = arith.track_frame(
-            g,
-            d,
-            bounds,
-            centres,
-            diameters,
-            cat_idx,
+        frame = FrameRecord(
+            gray=g,
+            distance=d,
+            background=float(track.background_counts),
+            dark=float(track.dark_counts),
+        )
+        out = arith.track_frame(
+            frame,
             np.float32(track.threshold_counts),
-            float(track.background_counts),
-            float(track.dark_counts),
+            windows,
             self._persistence.history(g, d),
-            *self._camera_args,
+            camera,
+            catalog,
             *self._fit_args,
             self._offset_prior(track, cat_idx),
-            *self._persistence.scratch(g.shape),
         )
-        if code != TRACKED:
+        if out.code != TRACKED:
             return None
         n = len(cat_idx)
         active = ThresholdedFrame(g, track.threshold_counts)
-        solved = self._solver.conclude(
-            matched_observations(solved_pairs), solved_pairs.result, active
-        )
+        solved = self._solver.conclude(matched_observations(out.solved), out.solved.result, active)
         if not isinstance(solved, Solution):
             return None
         if solved.ml.chi2 > cfg.outlier_chi2_per_dof * max(3 * n - 6, 1):
             return None  # an inconsistent fit: the windows may hold the wrong blobs
-        self._persistence.commit(cent, flat, g, d, n_used, motion)
-        meas = Measurements((), starts[1:] - starts[:-1], uv, rho, y, w, sp, sr)
-        return Tracked(solved, meas, PersistenceInfo(1 + n_used, motion, 0))
+        m = out.measurement
+        self._persistence.commit(out.centroids, out.flat, g, d, m.n_used, m.motion)
+        # every blob is ranged and matched, in order: the fit's observed ranges are its own
+        c, observed = m.candidates, out.solved.observed
+        area = out.starts[1:] - out.starts[:-1]
+        meas = Measurements(
+            (), area, c.uv_px, observed.rho, c.y_mm, c.weights, c.sigma_px, observed.sr
+        )
+        return Tracked(solved, meas, PersistenceInfo(1 + m.n_used, m.motion, 0))

@@ -16,6 +16,7 @@ from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
 from tofpose.calibration.range import RangeCorrection
 from tofpose.config import PersistenceConfig, TrackingConfig
 from tofpose.core.catalog import Catalog
+from tofpose.core.records import camera_record, catalog_record
 from tofpose.sim.render import SensorModel
 from tofpose.sim.scene import Clutter, TargetScene
 from tofpose.stages.tracking.kernels.tracking import camera_windows
@@ -61,19 +62,7 @@ def test_camera_windows_are_the_window_rule(cam, z, offset):
         (w.catalog_index, w.u0, w.u1, w.v0, w.v1) for w in want
     ]
     idx, bounds, centres, diam = camera_windows(
-        cat.positions_mm,
-        cat.diameters_mm,
-        T.R,
-        T.t_mm,
-        cam.fx,
-        cam.fy,
-        cam.cx,
-        cam.cy,
-        cam.dist_array,
-        4.0,
-        1.0,
-        cam.width,
-        cam.height,
+        catalog_record(cat), T.R, T.t_mm, camera_record(cam), 4.0, 1.0
     )
     assert idx.tolist() == [w.catalog_index for w in want] and len(want) >= 3
     assert bounds.tolist() == [[w.u0, w.u1, w.v0, w.v1] for w in want]
@@ -81,21 +70,9 @@ def test_camera_windows_are_the_window_rule(cam, z, offset):
     np.testing.assert_allclose(diam, [w.diameter_px for w in want], rtol=1e-12)
     behind = facing_pose(-500.0)
     nothing = camera_windows(
-        cat.positions_mm,
-        cat.diameters_mm,
-        behind.R,
-        behind.t_mm,
-        cam.fx,
-        cam.fy,
-        cam.cx,
-        cam.cy,
-        cam.dist_array,
-        4.0,
-        1.0,
-        320,
-        240,
+        catalog_record(cat), behind.R, behind.t_mm, camera_record(cam), 4.0, 1.0
     )
-    assert len(nothing[0]) == 0
+    assert len(nothing.catalog_index) == 0
 
 
 def _stream():

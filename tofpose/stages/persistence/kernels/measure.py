@@ -10,6 +10,7 @@ import numpy as np
 
 from tofpose.core.compiled import jit
 from tofpose.core.kernels.camera import bearings
+from tofpose.core.records import Candidates
 from tofpose.stages.extraction.constants import MIX_FIELDS
 from tofpose.stages.extraction.kernels.centroids import blob_centroids, blob_ranges, owner_map
 from tofpose.stages.extraction.kernels.mixed_pixels import (
@@ -28,6 +29,7 @@ from tofpose.stages.persistence.kernels.persistence import (
     ranges_consistent,
 )
 from tofpose.stages.persistence.kernels.range_correction import corrected_ranges
+from tofpose.stages.persistence.records import Measurement, PersistedBlobs
 
 
 @jit
@@ -44,54 +46,42 @@ def pixel_list_subset(flat, starts, idx):
 
 
 @jit
-def persist_and_measure(
-    gray,
-    distance,
-    flat,
-    starts,
-    bbox,
-    centroids,
-    history,
-    background,
-    dark,
-    fx,
-    fy,
-    cx,
-    cy,
-    dist,
-    pixel_bearings,
-    mean_buf,
-    med_buf,
-):
-    """The frame's blobs (pixels ``flat[starts[j]:starts[j + 1]]``, boxes (n, 4) (x, y,
-    w, h), single-frame centroids (n, 2), NaN allowed) combined with the history (a
+def persist_and_measure(frame, blobs, history, camera):
+    """The frame's blobs (a ``persistence.records.BlobLists``: pixel lists, boxes,
+    single-frame centroids, NaN allowed) combined with the history (a
     ``records.PersistenceHistory``: ``Persistence.history``) and measured.
 
-    background : the frame's level, counts (the centroids' level where a blob's own
-    surround cannot be read); dark : its no-return level (``mixed_pixels``).
+    frame : a ``records.FrameRecord``: its gray and distance, its background level,
+    counts (the centroids' level where a blob's own surround cannot be read) and its
+    no-return level (``mixed_pixels``); camera : a ``records.CameraRecord``.
 
-    Returns n_used (consistent history frames combined), motion (the history was cut),
-    keep (n,) bool (counter C >= c_min, or every blob while fewer than c_min frames are
-    combined), mean_gray (H, W) float32, med_distance (H, W) float32, uv (n, 2) and rho
-    (n,) of the kept blobs (NaN for the others): coverage-weighted centroids on I-bar
-    above each blob's surround level and ranges on D-bar along each centroid's line of
-    sight; and mix (n, ``MIX_FIELDS``) the mixing sums of the kept blobs
+    Returns ``PersistedBlobs``: n_used (consistent history frames combined), motion (the
+    history was cut), keep (n,) bool (counter C >= c_min, or every blob while fewer than
+    c_min frames are combined), mean_gray (H, W) float32, med_distance (H, W) float32,
+    uv (n, 2) and rho (n,) of the kept blobs (NaN for the others): coverage-weighted
+    centroids on I-bar above each blob's surround level and ranges on D-bar along each
+    centroid's line of sight; and mixing (n, ``MIX_FIELDS``) the mixing sums of the kept
+    blobs
     (``mixed_pixels.blob_mixing`` on I-bar, D-bar at the blobs' pixels, and this frame's
     distance elsewhere; the surround from this frame: the combined frames hold I-bar
     and D-bar only inside the boxes and at the blobs' pixels). A blob partly hidden by
     something nearer (``mixed_pixels.occluded_blobs``) gets a NaN range.
 
     With one frame, mean_gray and med_distance are the frame's gray and distance. With
-    more, they are the scratch frames ``mean_buf`` and ``med_buf`` (H, W) float32
-    (``Persistence`` owns them and lends them to every frame: copying two whole frames
-    cost more than the rest of this call at far range), holding I-bar inside the boxes
-    grown by 2 px and D-bar at the blobs' pixels, the only places anything reads;
-    elsewhere they hold whatever an earlier frame left there."""
+    more, they are the history's scratch frames (H, W) float32 (``Persistence`` owns them
+    and lends them to every frame: copying two whole frames cost more than the rest of
+    this call at far range), holding I-bar inside the boxes grown by 2 px and D-bar at
+    the blobs' pixels, the only places anything reads; elsewhere they hold whatever an
+    earlier frame left there."""
+    gray, distance, background, dark = frame.gray, frame.distance, frame.background, frame.dark
+    flat, starts, bbox, centroids = blobs.flat, blobs.starts, blobs.bbox, blobs.centroids
+    mean_buf, med_buf = history.scratch_gray, history.scratch_distance
     h, w = gray.shape
     n = starts.shape[0] - 1
     n_used, motion = 0, False
+    tol = history.motion_tolerance_px
     for f in range(history.count):
-        if consistent(centroids, history.centroids[f], history.tol_px) and ranges_consistent(
+        if consistent(centroids, history.centroids[f], tol) and ranges_consistent(
             distance, history.distance[f], flat, starts, RANGE_TEST_Z
         ):
             n_used += 1
@@ -127,9 +117,8 @@ def persist_and_measure(
     k_mix = blob_mixing(
         k_flat, k_starts, k_bbox, mean_gray, med_dist, distance, surrounds, dark, owners
     )
-    k_rho = blob_ranges(
-        k_flat, k_starts, med_dist.reshape(-1), pixel_bearings, bearings(k_uv, fx, fy, cx, cy, dist)
-    )
+    e_c = bearings(k_uv, camera.fx, camera.fy, camera.cx, camera.cy, camera.dist)
+    k_rho = blob_ranges(k_flat, k_starts, med_dist.reshape(-1), camera.pixel_bearings, e_c)
     hidden = occluded_blobs(k_flat, k_starts, k_bbox, distance, k_rho, owners)
     for a in range(kept.shape[0]):
         if hidden[a]:  # partly hidden: no range, so no measurement
@@ -141,73 +130,48 @@ def persist_and_measure(
         uv[kept[a]] = k_uv[a]
         rho[kept[a]] = k_rho[a]
         mix[kept[a]] = k_mix[a]
-    return n_used, motion, keep, mean_gray, med_dist, uv, rho, mix
+    return PersistedBlobs(
+        n_used=n_used,
+        motion=motion,
+        keep=keep,
+        mean_gray=mean_gray,
+        med_distance=med_dist,
+        uv=uv,
+        rho=rho,
+        mixing=mix,
+    )
 
 
 @jit
-def measure_and_back_project(
-    gray,
-    distance,
-    flat,
-    starts,
-    bbox,
-    centroids,
-    split,
-    history,
-    background,
-    dark,
-    camera,
-    mean_buf,
-    med_buf,
-    correction,
-    sigmas,
-):
+def measure_and_back_project(frame, blobs, history, camera, correction, sigmas):
     """§3.4 and Eqs. 7-8 in one call: ``persist_and_measure``, then of the kept blobs
     with a range (the "ranged" ones): the calibrated range correction (``correct_range``,
     ``range_correction.corrected_ranges``), the measurement sigmas
     (``sigmas.blob_sigmas``), the points y = rho e(uv) (Eq. 8) and the weights of Eq. 21,
     ``1 / (sigma_range^2 + (rho sigma_px / fx)^2)``: ``Persistence.measure``, then
     ``RangeCorrection.error_mm``'s median over the blob, ``stages.extraction.reference.sigmas``,
-    Eq. 8 and
-    Eq. 21 (as ``tests/tofpose/test_pipeline.py`` checks).
+    Eq. 8 and Eq. 21 (as ``tests/tofpose/test_pipeline.py`` checks).
 
-    The arguments are ``persist_and_measure``'s (the camera as a
-    ``records.CameraRecord``), ``split`` (n,) bool (blobs cut out of a merged
-    component), the range correction (``records.RangeCorrectionRecord``) and the
+    The arguments are ``persist_and_measure``'s (the blobs' ``split`` flags read for the
+    sigmas), the range correction (``records.RangeCorrectionRecord``) and the
     ``uncertainty`` constants and floors (``records.SigmaConstants``).
 
-    Returns n_used, motion, keep (n,), uv (n, 2) and rho (n,) as ``persist_and_measure``
-    gives them (rho uncorrected), ranged (r,) int64 the indices of the ranged blobs, and
-    for those: rho (r,) corrected, sigma_px (r,), sigma_range (r,), y (r, 3), weights (r,),
-    mix (r, ``MIX_FIELDS``) their mixing sums, with the calibrated correction's shift of
-    each blob's range applied to every distance in them (``solve.solve_pairs`` turns
-    them into ranges once the blobs are matched).
+    Returns the ``persistence.records.Measurement``: n_used, motion, keep (n,), uv (n, 2)
+    and rho (n,) as ``persist_and_measure`` gives them (rho uncorrected), ranged (r,)
+    int64 the indices of the ranged blobs, and those as ``Candidates``: their centroids,
+    ranges corrected, points, weights, sigmas and mixing sums, with the calibrated
+    correction's shift of each blob's range applied to every distance in them
+    (``solve.solve_pairs`` turns them into ranges once the blobs are matched).
     """
-    fx, fy, cx, cy, dist = camera.fx, camera.fy, camera.cx, camera.cy, camera.dist
-    n_used, motion, keep, mean_gray, med_dist, uv, rho, mix = persist_and_measure(
-        gray,
-        distance,
-        flat,
-        starts,
-        bbox,
-        centroids,
-        history,
-        background,
-        dark,
-        fx,
-        fy,
-        cx,
-        cy,
-        dist,
-        camera.pixel_bearings,
-        mean_buf,
-        med_buf,
-    )
+    fx = camera.fx
+    persisted = persist_and_measure(frame, blobs, history, camera)
+    keep, uv, rho = persisted.keep, persisted.uv, persisted.rho
+    mean_gray, med_dist = persisted.mean_gray, persisted.med_distance
     ranged = np.flatnonzero(keep & np.isfinite(rho))
     n_ranged = ranged.shape[0]
-    r_flat, r_starts = pixel_list_subset(flat, starts, ranged)
-    r_uv, r_rho, r_split = uv[ranged], rho[ranged], split[ranged]
-    r_mix = mix[ranged]
+    r_flat, r_starts = pixel_list_subset(blobs.flat, blobs.starts, ranged)
+    r_uv, r_rho, r_split = uv[ranged], rho[ranged], blobs.split[ranged]
+    r_mix = persisted.mixing[ranged]
     if correction.apply and n_ranged:
         raw = r_rho
         r_rho = corrected_ranges(
@@ -222,20 +186,30 @@ def measure_and_back_project(
         for a in range(n_ranged):  # the same shift of every distance in the mixing sums
             shift_mixing(r_mix[a], r_rho[a] - raw[a])
     sp, sr = blob_sigmas(
-        r_flat,
-        r_starts,
-        r_uv,
-        mean_gray,
-        med_dist,
-        background,
-        r_split,
-        sigmas,
+        r_flat, r_starts, r_uv, mean_gray, med_dist, frame.background, r_split, sigmas
     )
-    e = bearings(r_uv, fx, fy, cx, cy, dist)
+    e = bearings(r_uv, fx, camera.fy, camera.cx, camera.cy, camera.dist)
     y = np.empty((n_ranged, 3))
     w = np.empty(n_ranged)
     for a in range(n_ranged):
         for b in range(3):
             y[a, b] = e[a, b] * r_rho[a]  # Eq. 8
         w[a] = 1.0 / (sr[a] ** 2 + (r_rho[a] * sp[a] / fx) ** 2)  # Eq. 21
-    return n_used, motion, keep, uv, rho, ranged, r_rho, sp, sr, y, w, r_mix
+    candidates = Candidates(
+        uv_px=r_uv,
+        range_mm=r_rho,
+        y_mm=y,
+        weights=w,
+        sigma_px=sp,
+        sigma_range_mm=sr,
+        mixing=r_mix,
+    )
+    return Measurement(
+        n_used=persisted.n_used,
+        motion=persisted.motion,
+        keep=keep,
+        uv=uv,
+        rho=rho,
+        ranged=ranged,
+        candidates=candidates,
+    )

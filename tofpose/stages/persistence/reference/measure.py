@@ -3,15 +3,15 @@ combined with the consistent persistence history and measured (centroids, ranges
 mixing sums, occlusion), then range-corrected, back-projected and weighted; the
 measurement stage that acquisition and tracking share.
 
-Same names, arguments and returns as ``tofpose.stages.persistence.kernels.measure``, so that one
-can stand
-in for the other. The records are read by field name: ``history`` (gray, distance, mask,
-centroids: tuples newest first of which the first ``count`` are real frames; tol_px,
-c_min), ``camera`` (fx, fy, cx, cy, dist, K, pixel_bearings), ``correction`` (apply,
-model, harmonics, offsets) and ``sigmas`` (``stages.extraction.reference.sigmas``'s constants).
-Blobs are
-pixel lists ``flat`` (P,) with blob j's at ``flat[starts[j]:starts[j + 1]]``, boxes
-``bbox`` (n, 4) (x, y, w, h).
+Same names, arguments and returns (the records of ``stages.persistence.records``) as
+``tofpose.stages.persistence.kernels.measure``, so that one can stand in for the other.
+The records are read by field name: ``frame`` (gray, distance, background, dark),
+``blobs`` (pixel lists ``flat`` (P,) with blob j's at ``flat[starts[j]:starts[j + 1]]``,
+boxes ``bbox`` (n, 4) (x, y, w, h), centroids, split), ``history`` (gray, distance, mask,
+centroids: tuples newest first of which the first ``count`` are real frames;
+motion_tolerance_px, c_min), ``camera`` (fx, fy, cx, cy, dist, K, pixel_bearings),
+``correction`` (apply, model, harmonics, offsets) and ``sigmas``
+(``stages.extraction.reference.sigmas``'s constants).
 """
 
 from __future__ import annotations
@@ -20,12 +20,14 @@ import warnings
 
 import numpy as np
 
+from tofpose.core.records import Candidates
 from tofpose.core.reference.camera import back_project, bearings
 from tofpose.stages.extraction.constants import MIX_FIELDS
 from tofpose.stages.extraction.reference import mixed_pixels
 from tofpose.stages.extraction.reference.centroids import blob_centroid, blob_range
 from tofpose.stages.extraction.reference.sigmas import centroid_sigma_px, range_sigmas_mm, weights
 from tofpose.stages.persistence.constants import RANGE_TEST_Z
+from tofpose.stages.persistence.records import Measurement, PersistedBlobs
 from tofpose.stages.persistence.reference.persistence import (
     centroids_consistent,
     ranges_consistent,
@@ -56,10 +58,12 @@ def _owner_image(owners, shape):
 
 def consistent_history(centroids_uv, distance, blobs, history) -> tuple[int, bool]:
     """How many of the history's frames, newest first, are consistent with this frame
-    (``centroids_consistent`` at tol_px and ``ranges_consistent`` at ``RANGE_TEST_Z``)
+    (``centroids_consistent`` at motion_tolerance_px and ``ranges_consistent`` at ``RANGE_TEST_Z``)
     before the first that is not, and whether one is not (motion)."""
     for f in range(history.count):
-        still = centroids_consistent(centroids_uv, history.centroids[f], history.tol_px)
+        still = centroids_consistent(
+            centroids_uv, history.centroids[f], history.motion_tolerance_px
+        )
         if not (still and ranges_consistent(distance, history.distance[f], blobs, RANGE_TEST_Z)):
             return f, True
     return history.count, False
@@ -89,48 +93,36 @@ def combined_frames(gray, distance, blobs, history, n_used):
     return keep, mean_gray, median_distance
 
 
-def persist_and_measure(
-    gray,
-    distance,
-    flat,
-    starts,
-    bbox,
-    centroids,
-    history,
-    background,
-    dark,
-    fx,
-    fy,
-    cx,
-    cy,
-    dist,
-    pixel_bearings,
-    mean_buf,
-    med_buf,
-):
+def persist_and_measure(frame, blobs, history, camera):
     """The frame's blobs combined with the history and measured: ``consistent_history``
     and ``combined_frames``; then of the kept blobs, on I-bar and D-bar: the surround
     (``mixed_pixels.blob_surrounds`` on this frame, neighbours left out by
     ``mixed_pixels.owner_map``), the coverage-weighted centroid above the surround's level
-    (``background`` where the ring is empty; Eq. 19, ``centroids.blob_centroid``), the
-    range along its line of sight (Eq. 20, ``centroids.blob_range``), NaN when
-    ``mixed_pixels.occluded_blobs`` (on this frame's distance) finds it partly hidden,
-    and the mixing sums (``mixed_pixels.blob_mixing``: I-bar, D-bar at the blob's pixels,
-    this frame's distance elsewhere). centroids (n, 2) : the single-frame centroids
-    the history is tested with; dark : the no-return level; fx, fy, cx, cy, dist : the
-    camera; pixel_bearings (H * W, 3). ``mean_buf`` and ``med_buf`` are not used (the
-    combined frames are computed whole).
+    (the frame's ``background`` where the ring is empty; Eq. 19,
+    ``centroids.blob_centroid``), the range along its line of sight (Eq. 20,
+    ``centroids.blob_range``), NaN when ``mixed_pixels.occluded_blobs`` (on this frame's
+    distance) finds it partly hidden, and the mixing sums (``mixed_pixels.blob_mixing``:
+    I-bar, D-bar at the blob's pixels, this frame's distance elsewhere, the frame's
+    no-return level ``dark``). blobs : a ``BlobLists`` (its single-frame centroids (n, 2)
+    are what the history is tested with); camera : fx, fy, cx, cy, dist and
+    pixel_bearings (H * W, 3). The history's scratch frames are not used (the combined
+    frames are computed whole).
 
-    Returns n_used, motion, keep (n,), mean_gray and med_distance (H, W) float32, uv
-    (n, 2) and rho (n,) (NaN for blobs not kept), mix (n, ``MIX_FIELDS``)."""
+    Returns ``PersistedBlobs``: n_used, motion, keep (n,), mean_gray and med_distance
+    (H, W) float32, uv (n, 2) and rho (n,) (NaN for blobs not kept), mixing (n,
+    ``MIX_FIELDS``)."""
+    gray, distance, background, dark = frame.gray, frame.distance, frame.background, frame.dark
+    flat, starts, bbox, centroids = blobs.flat, blobs.starts, blobs.bbox, blobs.centroids
+    fx, fy, cx, cy, dist = camera.fx, camera.fy, camera.cx, camera.cy, camera.dist
+    pixel_bearings = camera.pixel_bearings
     h, w = gray.shape
-    blobs = _blobs(flat, starts)
-    n = len(blobs)
-    n_used, motion = consistent_history(centroids, distance, blobs, history)
-    keep, mean_gray, med_dist = combined_frames(gray, distance, blobs, history, n_used)
+    pixels = _blobs(flat, starts)
+    n = len(pixels)
+    n_used, motion = consistent_history(centroids, distance, pixels, history)
+    keep, mean_gray, med_dist = combined_frames(gray, distance, pixels, history, n_used)
 
     kept = np.flatnonzero(keep)
-    k_flat, k_starts = _pixel_lists([blobs[j] for j in kept])
+    k_flat, k_starts = _pixel_lists([pixels[j] for j in kept])
     k_bbox = np.asarray(bbox, np.int64).reshape(-1, 4)[kept]
     owners = mixed_pixels.owner_map(k_flat, k_starts, k_bbox, h, w)
     surrounds = mixed_pixels.blob_surrounds(k_bbox, gray, distance, owners)
@@ -142,10 +134,10 @@ def persist_and_measure(
     for a, j in enumerate(kept):
         level = surrounds.gray[a] if np.isfinite(surrounds.gray[a]) else background
         k_uv[a] = blob_centroid(
-            mean_gray, blobs[j], tuple(k_bbox[a]), np.float32(level), owner_full, a, coverage=True
+            mean_gray, pixels[j], tuple(k_bbox[a]), np.float32(level), owner_full, a, coverage=True
         )
         e_c = bearings(k_uv[a][None], K, dist)[0]
-        k_rho[a] = blob_range(med_dist, blobs[j], bearing_image, e_c)
+        k_rho[a] = blob_range(med_dist, pixels[j], bearing_image, e_c)
     hidden = mixed_pixels.occluded_blobs(k_flat, k_starts, k_bbox, distance, k_rho, owners)
     k_rho[hidden] = np.nan
     k_mix = mixed_pixels.blob_mixing(
@@ -155,7 +147,16 @@ def persist_and_measure(
     rho = np.full(n, np.nan)
     mix = np.full((n, MIX_FIELDS), np.nan)
     uv[kept], rho[kept], mix[kept] = k_uv, k_rho, k_mix
-    return n_used, motion, keep, mean_gray, med_dist, uv, rho, mix
+    return PersistedBlobs(
+        n_used=n_used,
+        motion=motion,
+        keep=keep,
+        mean_gray=mean_gray,
+        med_distance=med_dist,
+        uv=uv,
+        rho=rho,
+        mixing=mix,
+    )
 
 
 def range_error_mm(distance_mm, amplitude, pixel_index, model, harmonics, offsets):
@@ -185,82 +186,55 @@ def corrected_range(rho, pixels, gray, correction) -> float:
     return rho - float(np.median(err))
 
 
-def measure_and_back_project(
-    gray,
-    distance,
-    flat,
-    starts,
-    bbox,
-    centroids,
-    split,
-    history,
-    background,
-    dark,
-    camera,
-    mean_buf,
-    med_buf,
-    correction,
-    sigmas,
-):
+def measure_and_back_project(frame, blobs, history, camera, correction, sigmas):
     """``persist_and_measure``, then of the kept blobs with a range ("ranged"): the range
     correction when ``correction.apply`` (``corrected_range``; its shift applied to the
     mixing sums by ``mixed_pixels.shift_mixing``), the sigmas on I-bar and D-bar
-    (``stages.extraction.reference.sigmas``), the points y = rho e(uv) (Eq. 8) and Eq. 21's weights.
-    split (n,) bool : blobs cut out of a merged component.
+    (``stages.extraction.reference.sigmas``; ``blobs.split``: blobs cut out of a merged
+    component), the points y = rho e(uv) (Eq. 8) and Eq. 21's weights.
 
-    Returns n_used, motion, keep (n,), uv (n, 2), rho (n,) uncorrected, ranged (r,)
-    int64, and of the ranged blobs: rho (r,) corrected, sigma_px (r,), sigma_range
-    (r,), y (r, 3), weights (r,), mix (r, ``MIX_FIELDS``)."""
-    n_used, motion, keep, mean_gray, med_dist, uv, rho, mix = persist_and_measure(
-        gray,
-        distance,
-        flat,
-        starts,
-        bbox,
-        centroids,
-        history,
-        background,
-        dark,
-        camera.fx,
-        camera.fy,
-        camera.cx,
-        camera.cy,
-        camera.dist,
-        camera.pixel_bearings,
-        mean_buf,
-        med_buf,
-    )
-    blobs = _blobs(flat, starts)
+    Returns the ``Measurement``: n_used, motion, keep (n,), uv (n, 2), rho (n,)
+    uncorrected, ranged (r,) int64, and the ranged blobs as ``Candidates``: uv (r, 2),
+    ranges (r,) corrected, points (r, 3), weights (r,), sigma_px (r,), sigma_range (r,),
+    mixing (r, ``MIX_FIELDS``)."""
+    persisted = persist_and_measure(frame, blobs, history, camera)
+    keep, uv, rho = persisted.keep, persisted.uv, persisted.rho
+    mean_gray, med_dist, background = persisted.mean_gray, persisted.med_distance, frame.background
+    pixels = _blobs(blobs.flat, blobs.starts)
     ranged = np.flatnonzero(keep & np.isfinite(rho))
-    r_blobs = [blobs[j] for j in ranged]
-    r_uv, r_rho, r_mix = uv[ranged], rho[ranged].copy(), mix[ranged].copy()
+    r_pixels = [pixels[j] for j in ranged]
+    r_uv, r_rho, r_mix = uv[ranged], rho[ranged].copy(), persisted.mixing[ranged].copy()
     if correction.apply:
-        for a, p in enumerate(r_blobs):
+        for a, p in enumerate(r_pixels):
             raw = r_rho[a]
             r_rho[a] = corrected_range(raw, p, mean_gray, correction)
             mixed_pixels.shift_mixing(r_mix[a], r_rho[a] - raw)
     sp = np.array(
         [
-            centroid_sigma_px(mean_gray, p, r_uv[a], background, bool(split[j]), sigmas)
-            for a, (j, p) in enumerate(zip(ranged, r_blobs, strict=True))
+            centroid_sigma_px(mean_gray, p, r_uv[a], background, bool(blobs.split[j]), sigmas)
+            for a, (j, p) in enumerate(zip(ranged, r_pixels, strict=True))
         ]
     )
-    sr = range_sigmas_mm(mean_gray, med_dist, r_blobs, background, sigmas)
+    sr = range_sigmas_mm(mean_gray, med_dist, r_pixels, background, sigmas)
     y = np.zeros((0, 3))
     if len(ranged):
         y = back_project(r_uv, r_rho, np.asarray(camera.K, float), camera.dist)  # Eq. 8
     wt = weights(r_rho, sr, sp, camera.fx)  # Eq. 21
-    return (
-        n_used,
-        motion,
-        keep,
-        uv,
-        rho,
-        ranged.astype(np.int64),
-        r_rho,
-        sp.reshape(-1),
-        np.asarray(sr, float).reshape(-1),
-        y.reshape(-1, 3),
-        wt,
-        r_mix,
+    candidates = Candidates(
+        uv_px=r_uv,
+        range_mm=r_rho,
+        y_mm=y.reshape(-1, 3),
+        weights=wt,
+        sigma_px=sp.reshape(-1),
+        sigma_range_mm=np.asarray(sr, float).reshape(-1),
+        mixing=r_mix,
+    )
+    return Measurement(
+        n_used=persisted.n_used,
+        motion=persisted.motion,
+        keep=keep,
+        uv=uv,
+        rho=rho,
+        ranged=ranged.astype(np.int64),
+        candidates=candidates,
     )

@@ -93,8 +93,8 @@ class History:
     """The persistence history of K - 1 frames (``PersistenceConfig``'s k_frames, c_min,
     motion_tolerance_px)."""
 
-    def __init__(self, k_frames: int, c_min: int, tol_px: float) -> None:
-        self.c_min, self.tol_px = c_min, tol_px
+    def __init__(self, k_frames: int, c_min: int, motion_tolerance_px: float) -> None:
+        self.c_min, self.motion_tolerance_px = c_min, motion_tolerance_px
         self.entries: deque[Entry] = deque(maxlen=max(k_frames - 1, 0))
 
     def combine(self, blobs, centroids, gray, distance) -> Combined:
@@ -104,9 +104,9 @@ class History:
         used = []
         motion = False
         for entry in reversed(self.entries):
-            if centroids_consistent(centroids, entry.centroids, self.tol_px) and ranges_consistent(
-                distance, entry.distance, blobs
-            ):
+            if centroids_consistent(
+                centroids, entry.centroids, self.motion_tolerance_px
+            ) and ranges_consistent(distance, entry.distance, blobs):
                 used.append(entry)
             else:
                 motion = True

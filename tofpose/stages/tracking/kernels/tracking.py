@@ -10,6 +10,7 @@ import numpy as np
 from tofpose.core.compiled import jit
 from tofpose.core.kernels.camera import project
 from tofpose.stages.tracking.constants import AT_EDGE, FOUND, NO_SIZE, NOT_FOUND
+from tofpose.stages.tracking.records import WindowRuns, Windows
 
 
 @jit
@@ -26,11 +27,12 @@ def _find(parent, i):
 @jit
 def _window_runs(gray, u0, u1, v0, v1, threshold):
     """8-connected components of the pixels >= ``threshold`` in the window [u0, u1) x
-    [v0, v1) of gray (H, W), as runs: run q covers row ``row[q]`` (window coordinates),
-    columns [c0[q], c1[q]), and belongs to component ``label[q]``; runs are in raster
-    order and components are numbered 1.. in the raster order of their first pixel.
-    Per component (index 1..n): area, the sums of the pixels' columns and rows, and the
-    bounding box (x0, x1, y0, y1) inclusive, window coordinates.
+    [v0, v1) of gray (H, W), as runs (a ``records.WindowRuns``): run q covers row
+    ``row[q]`` (window coordinates), columns [c0[q], c1[q]), and belongs to component
+    ``label[q]``; runs are in raster order and components are numbered 1.. in the raster
+    order of their first pixel. Per component (index 1..n): area, the sums of the pixels'
+    columns and rows, and the bounding box (x0, x1, y0, y1) inclusive, window
+    coordinates.
 
     Runs joined by union-find, each root the earliest run of its component: a few
     operations per run instead of nine neighbour tests per pixel."""
@@ -86,7 +88,17 @@ def _window_runs(gray, u0, u1, v0, v1, threshold):
         box[k, 1] = max(box[k, 1], c1[q] - 1)
         box[k, 2] = min(box[k, 2], row[q])
         box[k, 3] = max(box[k, 3], row[q])
-    return row[:n_runs], c0[:n_runs], c1[:n_runs], label, n, area, su, sv, box
+    return WindowRuns(
+        row=row[:n_runs],
+        c0=c0[:n_runs],
+        c1=c1[:n_runs],
+        label=label,
+        n=n,
+        area=area,
+        sum_u=su,
+        sum_v=sv,
+        box=box,
+    )
 
 
 @jit
@@ -116,7 +128,9 @@ def search_windows(gray, bounds, centres, diameters, threshold, background):
     for j in range(n):
         u0, u1, v0, v1 = bounds[j, 0], bounds[j, 1], bounds[j, 2], bounds[j, 3]
         ph, pw = v1 - v0, u1 - u0
-        row, c0, c1, label, n_lab, area, su, sv, box = _window_runs(gray, u0, u1, v0, v1, threshold)
+        runs = _window_runs(gray, u0, u1, v0, v1, threshold)
+        row, c0, c1, label, n_lab = runs.row, runs.c0, runs.c1, runs.label, runs.n
+        area, su, sv, box = runs.area, runs.sum_u, runs.sum_v, runs.box
         pieces.append(np.empty(0, np.int64))
         if n_lab == 0:
             continue
@@ -194,13 +208,14 @@ def any_shared(flat, starts, bbox):
 
 
 @jit
-def camera_windows(
-    xyz, diameters_mm, R, t, fx, fy, cx, cy, dist, margin_px, min_diameter_px, width, height
-):
-    """``tracking.predict_windows`` as arrays (dist (5,): the lens distortion): the
-    catalog indices (m,) of the reflectors to track, their window bounds (m, 4) int64
-    (u0, u1, v0, v1), predicted centres (m, 2) px and diameters (m,) px. No windows when
-    a reflector would be behind the camera."""
+def camera_windows(catalog, R, t, camera, margin_px, min_diameter_px):
+    """``tracking.predict_windows`` as arrays: the windows (a ``records.Windows``: catalog
+    indices (m,) of the reflectors to track, window bounds (m, 4) int64 (u0, u1, v0, v1),
+    predicted centres (m, 2) px and diameters (m,) px) of the catalog (a
+    ``records.CatalogRecord``; diameters 2 r) at the pose (R, t), seen by the camera (a
+    ``records.CameraRecord``: its lens and image size). No windows when a reflector
+    would be behind the camera."""
+    xyz, radii, fx = catalog.xyz, catalog.radii_mm, camera.fx
     n = xyz.shape[0]
     centres = np.empty((n, 3))
     for i in range(n):  # R x + t by loops: BLAS's code is cold on every frame
@@ -209,14 +224,14 @@ def camera_windows(
     d_px = np.empty(n)
     for i in range(n):
         if centres[i, 2] <= 0:
-            return (
-                np.empty(0, np.int64),
-                np.empty((0, 4), np.int64),
-                np.empty((0, 2)),
-                np.empty(0),
+            return Windows(
+                catalog_index=np.empty(0, np.int64),
+                bounds=np.empty((0, 4), np.int64),
+                centres=np.empty((0, 2)),
+                diameters_px=np.empty(0),
             )
-        d_px[i] = fx * diameters_mm[i] / centres[i, 2]
-    uv = project(centres, fx, fy, cx, cy, dist)
+        d_px[i] = fx * (2.0 * radii[i]) / centres[i, 2]
+    uv = project(centres, fx, camera.fy, camera.cx, camera.cy, camera.dist)
     use = np.zeros(n, np.bool_)
     bounds = np.empty((n, 4), np.int64)
     for i in range(n):
@@ -234,8 +249,8 @@ def camera_windows(
             and gap >= 2.0
             and u0 >= 0
             and v0 >= 0
-            and u1 <= width
-            and v1 <= height
+            and u1 <= camera.width
+            and v1 <= camera.height
         )
     idx = np.flatnonzero(use)
-    return idx, bounds[idx], uv[idx], d_px[idx]
+    return Windows(catalog_index=idx, bounds=bounds[idx], centres=uv[idx], diameters_px=d_px[idx])

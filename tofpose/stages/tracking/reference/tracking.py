@@ -18,31 +18,36 @@ from scipy.spatial.distance import cdist
 
 from tofpose.core.reference.camera import project
 from tofpose.stages.tracking.constants import AT_EDGE, FOUND, NO_SIZE, NOT_FOUND
+from tofpose.stages.tracking.records import WindowRuns, Windows
 
 #: predicted discs closer than this (px, rim to rim) merge into one blob: not tracked
 MIN_GAP_PX = 2.0
 
 
-def camera_windows(
-    xyz, diameters_mm, R, t, fx, fy, cx, cy, dist, margin_px, min_diameter_px, width, height
-):
-    """``tracking.predict_windows`` as arrays. xyz (N, 3) catalog mm; diameters_mm (N,);
-    the pose (R (3, 3), t (3,)); the intrinsics and dist (5,) the lens distortion.
+def camera_windows(catalog, R, t, camera, margin_px, min_diameter_px):
+    """``tracking.predict_windows`` as arrays. catalog : xyz (N, 3) mm and radii_mm (N,)
+    (the diameters D are 2 r); the pose (R (3, 3), t (3,)); camera : the lens (K, dist)
+    and the image size (width x height) of a ``core.records.CameraRecord``, read by field
+    name.
 
     Each reflector's centre R x + t is projected (Eq. 7, ``core.reference.camera.project``);
     its predicted diameter is fx D / z px. Its window is the disc plus ``margin_px``:
     [floor(u - h), ceil(u + h) + 1) x [floor(v - h), ceil(v + h) + 1), h = d / 2 +
     margin. A reflector is tracked when its diameter is at least ``min_diameter_px``,
     its rim is at least ``MIN_GAP_PX`` from every other's (centre distance minus half
-    the two diameters) and its window lies in the image (width x height). Returns the
+    the two diameters) and its window lies in the image. Returns the ``Windows``: the
     catalog indices (m,) int64 of those, their windows (m, 4) int64, predicted centres
     (m, 2) px and diameters (m,) px; nothing when any reflector is behind the camera."""
-    centres = np.asarray(xyz, float) @ np.asarray(R, float).T + np.asarray(t, float)
+    centres = np.asarray(catalog.xyz, float) @ np.asarray(R, float).T + np.asarray(t, float)
     if np.any(centres[:, 2] <= 0):
-        return np.empty(0, np.int64), np.empty((0, 4), np.int64), np.empty((0, 2)), np.empty(0)
-    d_px = fx * np.asarray(diameters_mm, float) / centres[:, 2]
-    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-    uv = project(centres, K, dist)
+        return Windows(
+            catalog_index=np.empty(0, np.int64),
+            bounds=np.empty((0, 4), np.int64),
+            centres=np.empty((0, 2)),
+            diameters_px=np.empty(0),
+        )
+    d_px = camera.fx * (2.0 * np.asarray(catalog.radii_mm, float)) / centres[:, 2]
+    uv = project(centres, camera.K, camera.dist)
     gap = cdist(uv, uv) - 0.5 * (d_px[:, None] + d_px[None, :])
     np.fill_diagonal(gap, np.inf)
     half = 0.5 * d_px + margin_px
@@ -60,11 +65,11 @@ def camera_windows(
         & (gap.min(axis=1, initial=np.inf) >= MIN_GAP_PX)
         & (bounds[:, 0] >= 0)
         & (bounds[:, 2] >= 0)
-        & (bounds[:, 1] <= width)
-        & (bounds[:, 3] <= height)
+        & (bounds[:, 1] <= camera.width)
+        & (bounds[:, 3] <= camera.height)
     )
     idx = np.flatnonzero(use).astype(np.int64)
-    return idx, bounds[idx], uv[idx], d_px[idx]
+    return Windows(catalog_index=idx, bounds=bounds[idx], centres=uv[idx], diameters_px=d_px[idx])
 
 
 def window_components(gray, u0, u1, v0, v1, threshold):
@@ -92,7 +97,8 @@ def window_components(gray, u0, u1, v0, v1, threshold):
 
 
 def _window_runs(gray, u0, u1, v0, v1, threshold):
-    """``window_components`` in the kernel's form: the components as runs, run q on row
+    """``window_components`` in the kernel's form (a ``WindowRuns``): the components as
+    runs, run q on row
     ``row[q]`` (window coordinates) over columns [c0[q], c1[q]) of component
     ``label[q]``, runs in raster order; n; per component (0..n) area, the sums of the
     pixels' columns and rows, and the box (x0, x1, y0, y1) inclusive (component 0: the
@@ -113,7 +119,17 @@ def _window_runs(gray, u0, u1, v0, v1, threshold):
     box[0] = (pw, -1, ph, -1)
     area[0] = 0
     sums = np.vstack(([0.0, 0.0], np.round(cents[1:] * area[1:, None])))  # whole numbers
-    return row, c0, c1, labels[row, c0], n, area, sums[:, 0], sums[:, 1], box
+    return WindowRuns(
+        row=row,
+        c0=c0,
+        c1=c1,
+        label=labels[row, c0],
+        n=n,
+        area=area,
+        sum_u=sums[:, 0],
+        sum_v=sums[:, 1],
+        box=box,
+    )
 
 
 def search_windows(gray, bounds, centres, diameters, threshold, background):

@@ -88,9 +88,9 @@ def _assert_equal(name, got_compiled, got_reference):
 @pytest.mark.parametrize(("distance_mm", "seed", "frame"), FRAMES)
 def test_each_rule_equals_the_kernel_on_rendered_frames(distance_mm, seed, frame):
     args, _ = captured_stream(distance_mm, seed, False)[frame]
-    gray, distance = args[0], args[1]
-    flat, starts, bbox = _arrays(*args[2:5])
-    results = _both(flat, starts, bbox, gray, distance, float(args[9]))
+    gray, distance = args[0].gray, args[0].distance
+    flat, starts, bbox = _arrays(args[1].flat, args[1].starts, args[1].bbox)
+    results = _both(flat, starts, bbox, gray, distance, float(args[0].dark))
     for name, (got_c, got_r) in results.items():
         _assert_equal(name, got_c, got_r)
     mix = results["blob_mixing"][1]
@@ -112,14 +112,16 @@ def test_the_rendered_frames_reach_every_branch():
     seen = {"use_owner": 0, "crowded": 0, "occluded": 0, "mixed": 0, "unmixed": 0}
     for distance_mm, seed, frame in [f for f in FRAMES if not hasattr(f, "marks")]:
         args, _ = captured_stream(distance_mm, seed, False)[frame]
-        flat, starts, bbox = _arrays(*args[2:5])
-        r = _both(flat, starts, bbox, args[0], args[1], float(args[9]))
+        frame_record, blobs = args[0], args[1]
+        flat, starts, bbox = _arrays(blobs.flat, blobs.starts, blobs.bbox)
+        gray, distance = frame_record.gray, frame_record.distance
+        r = _both(flat, starts, bbox, gray, distance, float(frame_record.dark))
         seen["use_owner"] += r["owner_map"][1].used
         seen["crowded"] += r["blob_surrounds"][1].crowded.sum()
         seen["occluded"] += r["occluded_blobs"][1].sum()
         mix = r["blob_mixing"][1]
         seen["mixed"] += np.isfinite(mix[:, 0]).sum()
-        rho = _blob_ranges(flat, starts, args[1])
+        rho = _blob_ranges(flat, starts, distance)
         seen["unmixed"] += sum(
             reference.unmixed_range(rho[j], mix[j], 1.0, 1.0, 4.0)[1] > 0 for j in range(len(rho))
         )

@@ -32,20 +32,6 @@ STREAMS = [(1500.0, 0), (3000.0, 0), (5000.0, 7), (8000.0, 3), (8000.0, 5)]
 FRAMES = 6
 #: a spurious disc seen in one frame only: the counter drops it
 TRANSIENT = Clutter((250.0, 180.0, 20.0), 60.0, 1.2)
-NAMES = (
-    "n_used",
-    "motion",
-    "keep",
-    "uv",
-    "rho",
-    "ranged",
-    "rho_corrected",
-    "sigma_px",
-    "sigma_range",
-    "y",
-    "weights",
-    "mix",
-)
 
 
 def correction() -> RangeCorrection:
@@ -97,21 +83,30 @@ def captured_stream(distance_mm, seed, corrected, moving=False):
 
 
 def assert_same_measurement(got, want):
-    """Reference ``got`` and compiled ``want`` results of ``measure_and_back_project``:
-    counts, flags and indices exactly; centroids to 1e-9 px; ranges, points, sigmas and
-    weights to 1e-12 relative (float64 sums and medians taken in another order; the
-    ranges' medians pick the same pixel); the mixing sums to 1e-12 relative or 1e-6
-    (S_ad sums products of ~1e3 counts and ~1e4 mm over tens of pixels)."""
-    assert len(got) == len(want) == len(NAMES)
-    for name, g, w in zip(NAMES, got, want, strict=True):
+    """Reference ``got`` and compiled ``want`` results of ``measure_and_back_project``
+    (``Measurement`` records): counts, flags and indices exactly; centroids to 1e-9 px;
+    ranges, points, sigmas and weights to 1e-12 relative (float64 sums and medians taken
+    in another order; the ranges' medians pick the same pixel); the mixing sums to 1e-12
+    relative or 1e-6 (S_ad sums products of ~1e3 counts and ~1e4 mm over tens of
+    pixels)."""
+
+    def flat(m):
+        return {
+            **{k: v for k, v in m._asdict().items() if k != "candidates"},
+            **{f"candidates.{k}": v for k, v in m.candidates._asdict().items()},
+        }
+
+    fields, wanted = flat(got), flat(want)
+    for name in fields:
+        g, w = fields[name], wanted[name]
         if name in ("n_used", "motion", "keep", "ranged"):
             np.testing.assert_array_equal(g, w, err_msg=name)
             continue
         g, w = np.asarray(g, float), np.asarray(w, float)
         assert g.shape == w.shape, name
-        if name == "uv":
+        if name in ("uv", "candidates.uv_px"):
             np.testing.assert_allclose(g, w, rtol=0, atol=1e-9, err_msg=name)
-        elif name == "mix":
+        elif name == "candidates.mixing":
             np.testing.assert_allclose(g, w, rtol=1e-12, atol=1e-6, err_msg=name)
         else:
             np.testing.assert_allclose(g, w, rtol=1e-12, atol=1e-12, err_msg=name)
@@ -123,17 +118,18 @@ def test_the_reference_measures_a_stream_as_the_kernel_does(distance_mm, seed, c
     calls = captured_stream(distance_mm, seed, corrected)
     for args, want in calls:
         assert_same_measurement(reference.measure_and_back_project(*args), want)
-    n_used = [int(out[0]) for _, out in calls]
+    n_used = [int(out.n_used) for _, out in calls]
     assert n_used[:5] == [0, 1, 2, 3, 4]  # the history filled up
     last_args, last = calls[-1]
-    assert not last[2].all()  # the transient disc fails the counter
-    hidden = sum(int((out[2] & ~np.isfinite(out[4])).sum()) for _, out in calls)
+    assert not last.keep.all()  # the transient disc fails the counter
+    hidden = sum(int((out.keep & ~np.isfinite(out.rho)).sum()) for _, out in calls)
     assert hidden > 0  # the arm hides a marker: a kept blob without a range
     if distance_mm >= 5000.0:
-        assert last_args[6].sum() == 2  # markers 7 and 8 merged, split in two
+        split = last_args[1].split
+        assert split.sum() == 2  # markers 7 and 8 merged, split in two
         # and measured: both halves ranged, or at 5 m (room seed 7) one left out as
         # hidden, the arm's patch reaching it
-        split_ranged = set(np.flatnonzero(last_args[6])) & set(last[5].tolist())
+        split_ranged = set(np.flatnonzero(split)) & set(last.ranged.tolist())
         assert len(split_ranged) >= (1 if distance_mm == 5000.0 else 2)
 
 
@@ -141,8 +137,8 @@ def test_a_moving_target_cuts_the_history_in_both():
     calls = captured_stream(3000.0, 0, True, moving=True)
     for args, want in calls:
         assert_same_measurement(reference.measure_and_back_project(*args), want)
-    assert [bool(out[1]) for _, out in calls] == [False, False, False, True, False, False]
-    assert [int(out[0]) for _, out in calls] == [0, 1, 2, 0, 1, 2]
+    assert [bool(out.motion) for _, out in calls] == [False, False, False, True, False, False]
+    assert [int(out.n_used) for _, out in calls] == [0, 1, 2, 0, 1, 2]
 
 
 def test_persist_and_measure_returns_the_combined_frames_where_they_are_read():
@@ -151,32 +147,20 @@ def test_persist_and_measure_returns_the_combined_frames_where_they_are_read():
     from tofpose.stages.persistence.kernels.measure import persist_and_measure
 
     args, _ = captured_stream(3000.0, 0, False)[4]
-    g, d, flat, starts, bbox, cur, _, history, background, dark, cam, mean_buf, med_buf = args[:13]
-    common = (
-        g,
-        d,
-        flat,
-        starts,
-        bbox,
-        cur,
-        history,
-        background,
-        dark,
-        cam.fx,
-        cam.fy,
-        cam.cx,
-        cam.cy,
-        cam.dist,
-        cam.pixel_bearings,
+    frame, blobs, history, cam = args[:4]
+    got = reference.persist_and_measure(frame, blobs, history, cam)
+    scratch = history._replace(
+        scratch_gray=history.scratch_gray.copy(), scratch_distance=history.scratch_distance.copy()
     )
-    got = reference.persist_and_measure(*common, None, None)
-    want = persist_and_measure(*common, mean_buf.copy(), med_buf.copy())
-    assert got[0] == want[0] == 4
-    for x, y, bw, bh in bbox:
+    want = persist_and_measure(frame, blobs, scratch, cam)
+    assert got.n_used == want.n_used == 4
+    for x, y, bw, bh in blobs.bbox:
         box = np.s_[max(y - 2, 0) : y + bh + 2, max(x - 2, 0) : x + bw + 2]
-        np.testing.assert_array_equal(got[3][box], want[3][box])
-    np.testing.assert_array_equal(got[4].reshape(-1)[flat], want[4].reshape(-1)[flat])
-    np.testing.assert_allclose(got[5], want[5], rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(got.mean_gray[box], want.mean_gray[box])
+    flat = blobs.flat
+    got_d, want_d = got.med_distance.reshape(-1), want.med_distance.reshape(-1)
+    np.testing.assert_array_equal(got_d[flat], want_d[flat])
+    np.testing.assert_allclose(got.uv, want.uv, rtol=0, atol=1e-9)
 
 
 def test_the_range_error_is_the_models_definition():

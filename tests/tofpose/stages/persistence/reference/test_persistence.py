@@ -28,7 +28,7 @@ def test_ranges_are_inconsistent_when_every_marker_moved_beyond_its_noise():
 
 
 def test_a_static_stream_is_averaged_and_a_transient_blob_fails_the_counter():
-    h = reference.History(k_frames=3, c_min=2, tol_px=0.35)
+    h = reference.History(k_frames=3, c_min=2, motion_tolerance_px=0.35)
     gray = np.full((4, 5), 100.0, np.float32)
     blob = np.array([6, 7])
     for level in (100.0, 200.0):

@@ -19,6 +19,7 @@ import pytest
 from tests.conftest import facing_pose, render
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import paper_target
+from tofpose.core.records import camera_record, catalog_record
 from tofpose.stages.tracking import constants as codes
 from tofpose.stages.tracking.kernels import tracking as kernel
 from tofpose.stages.tracking.reference import tracking as reference
@@ -30,19 +31,7 @@ DISTANCES = (700.0, 1500.0, 3000.0, 5000.0, 8000.0)
 
 def _windows(module, cam, T, margin_px=4.0, min_diameter_px=1.0):
     return module.camera_windows(
-        CAT.positions_mm,
-        CAT.diameters_mm,
-        T.R,
-        T.t_mm,
-        cam.fx,
-        cam.fy,
-        cam.cx,
-        cam.cy,
-        cam.dist_array,
-        margin_px,
-        min_diameter_px,
-        cam.width,
-        cam.height,
+        catalog_record(CAT), T.R, T.t_mm, camera_record(cam), margin_px, min_diameter_px
     )
 
 
