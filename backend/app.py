@@ -23,6 +23,7 @@ from starlette.middleware.trustedhost import TrustedHostMiddleware
 
 import backend
 from backend.api.contract import complete_openapi, operation_id
+from backend.api.deps import located
 from backend.api.routes import audit as audit_route
 from backend.api.routes import (
     calibrations,
@@ -50,17 +51,35 @@ from backend.drivers.factory import Devices, build_devices
 from backend.file_modes import restrict_data_dir
 from backend.limits import BodySizeLimit
 from backend.services.audit import AuditService
+from backend.services.campaigns.campaign_repository import CampaignNotFoundError
+from backend.services.campaigns.campaign_states import CampaignConflictError
 from backend.services.campaigns.campaigns import CampaignService
+from backend.services.campaigns.mcap_files import ExportSpaceError
+from backend.services.heavy_work import HeavyWorkBusyError
 from backend.services.jobs.batch_queue import BatchQueue
-from backend.services.jobs.reprocessing import ReprocessService
-from backend.services.jobs.studies import StudyService
-from backend.services.keys import KeyService
+from backend.services.jobs.reprocessing import (
+    ReprocessRequestError,
+    ReprocessService,
+    UnknownReprocessingError,
+)
+from backend.services.jobs.studies import StudyService, TooManyStudiesError, UnknownStudyError
+from backend.services.keys import KeyNameTakenError, KeyNotFoundError, KeyService
 from backend.services.live.acquisition import AcquisitionService
 from backend.services.live.hub import LiveHub
 from backend.services.live.kernel_warmup import KernelWarmup
-from backend.services.motion import MotionService
-from backend.services.recordings import RecordingService
-from backend.services.store import find_catalog, load_device_settings
+from backend.services.motion import (
+    MotionConflictError,
+    MotionDeviceError,
+    MotionLimitError,
+    MotionService,
+)
+from backend.services.recordings import (
+    InsufficientSpaceError,
+    RecordingConflictError,
+    RecordingNotFoundError,
+    RecordingService,
+)
+from backend.services.store import NameTakenError, find_catalog, load_device_settings
 from backend.settings import Settings
 from backend.state import AppState
 from tofpose.config import TrackingConfig
@@ -356,6 +375,61 @@ def _install_error_answers(app: FastAPI) -> None:
         )
 
 
+#: the services' refusals a route lets through, and the status each is answered with; the
+#: answer's ``detail`` is the error's own sentence (``_install_service_errors``)
+SERVICE_ERRORS: dict[type[Exception], int] = {
+    CampaignNotFoundError: 404,
+    CampaignConflictError: 409,  # a command the state does not allow, STOP latched, ...
+    NameTakenError: 409,  # a campaign's, a calibration's or a catalog's name
+    KeyNameTakenError: 409,
+    KeyNotFoundError: 404,
+    MotionConflictError: 409,
+    RecordingNotFoundError: 404,
+    RecordingConflictError: 409,
+    InsufficientSpaceError: 507,
+    ExportSpaceError: 507,
+    UnknownStudyError: 404,
+    TooManyStudiesError: 409,
+    UnknownReprocessingError: 404,
+}
+
+
+def _install_service_errors(app: FastAPI) -> None:
+    """The services' errors as HTTP answers, in one place: each of ``SERVICE_ERRORS``
+    with its status, and four that say more: a busy report or export pool (503 with
+    Retry-After), a motion device failure (503 with what was refused), a set-point, jog
+    or profile beyond the limits (422 at each request field that sets the limit) and a
+    re-processing request that cannot run (422 at its field)."""
+
+    def answer(status_code: int):
+        async def handler(_request: Request, exc: Exception) -> JSONResponse:
+            return JSONResponse({"detail": str(exc)}, status_code=status_code)
+
+        return handler
+
+    for error, status_code in SERVICE_ERRORS.items():
+        app.add_exception_handler(error, answer(status_code))
+
+    @app.exception_handler(HeavyWorkBusyError)
+    async def _busy(_request: Request, exc: HeavyWorkBusyError) -> JSONResponse:
+        headers = {"Retry-After": str(exc.retry_after_s)}
+        return JSONResponse({"detail": str(exc)}, status_code=503, headers=headers)
+
+    @app.exception_handler(MotionDeviceError)
+    async def _motion_device(_request: Request, exc: MotionDeviceError) -> JSONResponse:
+        return JSONResponse({"detail": exc.detail}, status_code=503)
+
+    @app.exception_handler(MotionLimitError)
+    async def _motion_limits(_request: Request, exc: MotionLimitError) -> JSONResponse:
+        problems = [(["body", p.field] if p.field else ["body"], p.message) for p in exc.problems]
+        return JSONResponse({"detail": located(problems)}, status_code=422)
+
+    @app.exception_handler(ReprocessRequestError)
+    async def _reprocess_request(_request: Request, exc: ReprocessRequestError) -> JSONResponse:
+        where = "path" if exc.field == "campaign_id" else "body"
+        return JSONResponse({"detail": located([([where, exc.field], str(exc))])}, status_code=422)
+
+
 def _audit_service(app: FastAPI) -> AuditService | None:
     """The running app's audit writer (None before the lifespan built it)."""
     state = getattr(app.state, "tofpose", None)
@@ -412,6 +486,7 @@ def create_app(settings: Settings | None = None, devices: Devices | None = None)
     app.add_middleware(AuditMiddleware, audit=lambda: _audit_service(app))
 
     _install_error_answers(app)
+    _install_service_errors(app)
     _include_routes(app)
 
     # The dashboard at / (its assets under /assets), or a page saying how to build it.

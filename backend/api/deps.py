@@ -4,14 +4,13 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import Depends, HTTPException, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
 
 from backend.services.audit import KEY_NAME_STATE
-from backend.services.campaigns.campaign_repository import CampaignNotFoundError
 from backend.services.campaigns.campaign_states import CampaignState
 from backend.services.keys import ApiKey, Scope
 from backend.services.motion import MotionService
@@ -33,8 +32,12 @@ def unprocessable(loc: list[str | int], messages: list[str]) -> HTTPException:
 
 def unprocessable_at(problems: list[tuple[list[str | int], str]]) -> HTTPException:
     """As ``unprocessable``, with a location of its own for each message."""
-    detail = [{"loc": loc, "msg": m, "type": "value_error"} for loc, m in problems]
-    return HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, detail)
+    return HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, located(problems))
+
+
+def located(problems: list[tuple[list[str | int], str]]) -> list[dict[str, Any]]:
+    """A 422's ``detail``: each message at its location, as FastAPI's validation errors."""
+    return [{"loc": loc, "msg": m, "type": "value_error"} for loc, m in problems]
 
 
 async def get_state(request: Request) -> AppState:
@@ -122,10 +125,7 @@ def finished_recording(state: AppState, campaign_id: int, missing_status: int = 
     ``missing_status`` for one without a recording (404 where the recording is the
     resource asked for, a download; 409 where the campaign is, and its state does not
     allow the request), 409 while it is being written."""
-    try:
-        campaign = state.campaigns.repository.get(campaign_id)
-    except CampaignNotFoundError as exc:
-        raise HTTPException(404, str(exc)) from exc
+    campaign = state.campaigns.repository.get(campaign_id)  # CampaignNotFoundError: 404
     path = state.campaigns.recording_path(campaign_id)
     if not campaign.record_raw or not path.exists():
         raise HTTPException(

@@ -7,14 +7,14 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Annotated, Any
 
-from fastapi import APIRouter, HTTPException, Path, Query, Response, status
+from fastapi import APIRouter, Path, Query, Response, status
 
 from backend.api.contract import ErrorPublic, errors
 from backend.api.deps import AdminAuth, StateDep
 from backend.api.schemas.audit import AuditEntryPublic
 from backend.api.schemas.keys import KeyCreate, KeyCreated, KeyPublic
 from backend.services.audit import MAX_LIMIT, AuditRecord
-from backend.services.keys import ApiKey, KeyNameTakenError, KeyNotFoundError
+from backend.services.keys import ApiKey
 
 router = APIRouter(prefix="/api", tags=["admin"], dependencies=[AdminAuth])
 ADMIN_ONLY: dict[int | str, dict[str, Any]] = {
@@ -71,10 +71,7 @@ def list_keys(state: StateDep) -> list[KeyPublic]:
 def create_key(body: KeyCreate, state: StateDep, response: Response) -> KeyCreated:
     """Make a key of this scope; the answer holds the key, which is not shown again.
     409 when the name is taken (also by a revoked key)."""
-    try:
-        key = state.keys.create(body.name, body.scope)
-    except KeyNameTakenError as exc:
-        raise HTTPException(409, str(exc)) from exc
+    key = state.keys.create(body.name, body.scope)
     record = next(k for k in state.keys.list() if k.name == body.name)
     response.headers["Cache-Control"] = "no-store"  # the key itself: kept by no cache
     return KeyCreated(**_key_public(record), key=key)
@@ -84,7 +81,4 @@ def create_key(body: KeyCreate, state: StateDep, response: Response) -> KeyCreat
 def revoke_key(name: KeyNameParam, state: StateDep) -> KeyPublic:
     """Revoke a key: it stops working at once (its row and name stay, for the audit
     trail). 404 when no active key has this name."""
-    try:
-        return KeyPublic(**_key_public(state.keys.revoke(name)))
-    except KeyNotFoundError as exc:
-        raise HTTPException(404, str(exc)) from exc
+    return KeyPublic(**_key_public(state.keys.revoke(name)))

@@ -45,8 +45,8 @@ def create_calibration(
         row = calibrate_from_campaign(
             session, body.campaign_id, body.name, geometry.T_inner_camera, geometry.T_lab_target
         )
-    except NameTakenError as exc:
-        raise HTTPException(409, str(exc)) from exc
+    except NameTakenError:
+        raise  # 409 (backend/app.py, SERVICE_ERRORS), not the 422 of the other ValueErrors
     except ValueError as exc:
         raise unprocessable(
             ["body", "campaign_id"], [f"campaign {body.campaign_id}: {exc}"]

@@ -32,7 +32,7 @@ from backend.api.schemas.campaigns import (
     MeasurementPage,
 )
 from backend.services.calibrations import get_calibration
-from backend.services.campaigns.campaign_repository import CampaignNotFoundError, CampaignView
+from backend.services.campaigns.campaign_repository import CampaignView
 from backend.services.campaigns.campaign_requests import (
     Planning,
     dynamic_spec,
@@ -40,11 +40,9 @@ from backend.services.campaigns.campaign_requests import (
     plan_problems,
     profile_plan_problems,
 )
-from backend.services.campaigns.campaign_states import CampaignConflictError
-from backend.services.campaigns.mcap_files import ExportSpaceError, recording_mcap
-from backend.services.heavy_work import HeavyWorkBusyError
+from backend.services.campaigns.mcap_files import recording_mcap
 from backend.services.reports.reports import ReportError, build, to_csv, to_html, to_json, to_pdf
-from backend.services.store import NameTakenError, find_catalog
+from backend.services.store import find_catalog
 from backend.state import AppState
 
 router = APIRouter(prefix="/api/campaigns", tags=["campaigns"])
@@ -64,15 +62,6 @@ BUSY = {
 }
 
 
-async def _heavy(state: AppState, work, what: str):
-    """``work`` on the app's report/export workers (backend/services/heavy_work.py): 503
-    with Retry-After when they and their wait queue are full."""
-    try:
-        return await state.heavy_work.run(work, what)
-    except HeavyWorkBusyError as exc:
-        raise HTTPException(503, str(exc), headers={"Retry-After": str(exc.retry_after_s)}) from exc
-
-
 def _planning(state: AppState) -> Planning:
     return Planning.read(state.motion, state.devices.camera.get_settings().frame_rate_hz)
 
@@ -87,13 +76,6 @@ def _public(
     estimate_s = (planning or _planning(state)).estimate_s(campaign)
     progress = state.campaigns.progress(campaign.id)
     return campaign_public(campaign, progress, estimate_s, with_setpoints=with_setpoints)
-
-
-def _campaign(state: AppState, campaign_id: int) -> CampaignView:
-    try:
-        return state.campaigns.repository.get(campaign_id)
-    except CampaignNotFoundError as exc:
-        raise HTTPException(404, str(exc)) from exc
 
 
 def _setpoints(body: CampaignCreate) -> list[dict[str, float]]:
@@ -134,23 +116,20 @@ def create_campaign(body: CampaignCreate, state: StateDep, session: SessionDep) 
     located = profile_plan_problems(setpoints, spec, motion) if spec is not None else []
     if problems or located:
         raise unprocessable_at([(["body"], p) for p in problems] + located)
-    try:
-        campaign = state.campaigns.repository.create(
-            name=body.name,
-            catalog_name=body.catalog,
-            setpoints=setpoints,
-            frames_per_point=body.frames_per_point,
-            settle_s=body.settle_s,
-            lock_timeout_s=body.lock_timeout_s,
-            requirements=body.requirements.model_dump(),
-            generator=generator,
-            camera=body.camera.model_dump(exclude_none=True) if body.camera else None,
-            notes=body.notes,
-            record_raw=body.record_raw,
-            profiles=[spec] * len(setpoints) if spec is not None else None,
-        )
-    except NameTakenError as exc:
-        raise HTTPException(409, str(exc)) from exc
+    campaign = state.campaigns.repository.create(
+        name=body.name,
+        catalog_name=body.catalog,
+        setpoints=setpoints,
+        frames_per_point=body.frames_per_point,
+        settle_s=body.settle_s,
+        lock_timeout_s=body.lock_timeout_s,
+        requirements=body.requirements.model_dump(),
+        generator=generator,
+        camera=body.camera.model_dump(exclude_none=True) if body.camera else None,
+        notes=body.notes,
+        record_raw=body.record_raw,
+        profiles=[spec] * len(setpoints) if spec is not None else None,
+    )
     return _public(state, campaign, with_setpoints=True)
 
 
@@ -172,18 +151,13 @@ def get_campaign_states() -> CampaignStatesPublic:
 @router.get("/{campaign_id}", dependencies=[ReadAuth], responses=errors(404))
 def get_campaign(campaign_id: IdParam, state: StateDep) -> CampaignPublic:
     """One campaign with its set-points and, while it runs, its progress."""
-    return _public(state, _campaign(state, campaign_id), with_setpoints=True)
+    return _public(state, state.campaigns.repository.get(campaign_id), with_setpoints=True)
 
 
 def _command(state: AppState, campaign_id: int, fn) -> CampaignPublic:
-    _campaign(state, campaign_id)
-    try:
-        fn()
-    except CampaignNotFoundError as exc:
-        raise HTTPException(404, str(exc)) from exc
-    except CampaignConflictError as exc:
-        raise HTTPException(409, str(exc)) from exc
-    return _public(state, _campaign(state, campaign_id), with_setpoints=True)
+    state.campaigns.repository.get(campaign_id)  # 404 before any command
+    fn()
+    return _public(state, state.campaigns.repository.get(campaign_id), with_setpoints=True)
 
 
 @router.post("/{campaign_id}/start", dependencies=[WriteAuth], responses=errors(404, 409))
@@ -229,10 +203,7 @@ def list_measurements(
     limit: Annotated[int, Query(ge=1, le=10_000)] = 1000,
 ) -> MeasurementPage:
     """Stored frames of the campaign, in set-point then frame order, a page at a time."""
-    try:
-        total, rows = state.campaigns.repository.measurements(campaign_id, offset, limit)
-    except CampaignNotFoundError as exc:
-        raise HTTPException(404, str(exc)) from exc
+    total, rows = state.campaigns.repository.measurements(campaign_id, offset, limit)
     return MeasurementPage(
         total=total, offset=offset, items=[measurement_public(m, i) for m, i in rows]
     )
@@ -288,7 +259,7 @@ async def get_campaign_report(
     server's report workers: 503 with Retry-After while they and their queue are full."""
 
     def render() -> str | bytes:
-        _campaign(state, campaign_id)
+        state.campaigns.repository.get(campaign_id)  # 404 for no such campaign
         with state.sessions() as session:
             cal = None
             if calibration is not None and (cal := get_calibration(session, calibration)) is None:
@@ -305,7 +276,8 @@ async def get_campaign_report(
             return to_html(report, rows)
         return to_pdf(report, rows)
 
-    body = await _heavy(state, render, f"the {fmt.value} report of campaign {campaign_id}")
+    # on the report and export workers: 503 with Retry-After when they and their queue are full
+    body = await state.heavy_work.run(render, f"the {fmt.value} report of campaign {campaign_id}")
     filename = f"campaign-{campaign_id}-report.{fmt.value}"
     return Response(
         body,
@@ -358,10 +330,7 @@ async def get_campaign_recording_mcap(campaign_id: IdParam, state: StateDep):
             finished_recording(state, campaign_id), state.settings.recording_min_free_mb
         )
 
-    try:
-        out = await _heavy(state, export, f"the MCAP of campaign {campaign_id}")
-    except ExportSpaceError as exc:
-        raise HTTPException(507, str(exc)) from exc
+    out = await state.heavy_work.run(export, f"the MCAP of campaign {campaign_id}")
     return FileResponse(
         out, media_type="application/x-mcap", filename=f"campaign-{campaign_id}.mcap"
     )

@@ -16,7 +16,6 @@ from backend.api.schemas.catalogs import (
     ReflectorModel,
 )
 from backend.services.store import (
-    NameTakenError,
     add_catalog,
     find_catalog,
     save_device_settings,
@@ -64,10 +63,8 @@ def create_catalog(body: CatalogCreate, state: StateDep, session: SessionDep) ->
         )
     except ValueError as exc:
         raise unprocessable(["body", "reflectors"], [f"catalog rejected: {exc}"]) from exc
-    try:
-        add_catalog(session, body.name, cat)
-    except NameTakenError as exc:  # lost a race with a concurrent request for the same name
-        raise HTTPException(409, str(exc)) from exc
+    # NameTakenError (409): lost a race with a concurrent request for the same name
+    add_catalog(session, body.name, cat)
     return _public(body.name, cat, builtin=False, active=state.acquisition.catalog_name)
 
 

@@ -4,32 +4,26 @@ POST /api/motion/reset-faults.
 
 The motion service (backend/services/motion.py) checks set-points against the driver's
 soft limits before the driver sees them, and refuses a person's commands while a
-campaign owns the motion system. A jog is relative to the axis' encoder position read
-when the request arrives, so a client whose view is stale cannot jog from an old
-position. A profile (tofpose.lab.motion_profile) is checked the same way, from the axis'
-encoder position, against the soft, rate and acceleration limits. Stop is accepted from
-any authenticated caller at any time, ends a running profile and latches: every motion
-command is refused (409) until a person releases it. STOP is an async route whose
-driver command runs on a thread pool of its own (``motion.STOP_LANE``): exports,
-reports and readers that fill the web server's worker threads cannot delay it.
+campaign owns the motion system; the app answers its refusals (backend/app.py's service
+errors: a limit 422 at the request field that sets it, a conflict 409, a device failure
+503). A jog is relative to the axis' encoder position read when the request arrives, so
+a client whose view is stale cannot jog from an old position. A profile
+(tofpose.lab.motion_profile) is checked the same way, from the axis' encoder position,
+against the soft, rate and acceleration limits. Stop is accepted from any authenticated
+caller at any time, ends a running profile and latches: every motion command is refused
+(409) until a person releases it. STOP is an async route whose driver command runs on a
+thread pool of its own (``motion.STOP_LANE``): exports, reports and readers that fill
+the web server's worker threads cannot delay it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
-
-from fastapi import APIRouter, HTTPException, status
+from fastapi import APIRouter, status
 
 from backend.api.contract import errors
-from backend.api.deps import MotionDep, ReadAuth, StateDep, WriteAuth, unprocessable_at
+from backend.api.deps import MotionDep, ReadAuth, StateDep, WriteAuth
 from backend.api.presenters import motion_public
 from backend.api.schemas.motion import JogRequest, MotionPublic, MoveRequest, ProfileRequest
-from backend.services.motion import (
-    MotionConflictError,
-    MotionDeviceError,
-    MotionLimitError,
-)
 
 router = APIRouter(prefix="/api/motion", tags=["motion"])
 STARTS_MOTION = {
@@ -38,22 +32,6 @@ STARTS_MOTION = {
     "responses": errors(409, 503),
 }
 """Move, jog and profile: accepted at once (202), token, refused (409) or failed (503)."""
-
-
-@contextmanager
-def _answers() -> Iterator[None]:
-    """The motion service's refusals as HTTP answers: a limit 422 (at the request field
-    that sets it), a conflict 409, a device failure 503."""
-    try:
-        yield
-    except MotionLimitError as exc:
-        raise unprocessable_at(
-            [(["body", p.field] if p.field else ["body"], p.message) for p in exc.problems]
-        ) from exc
-    except MotionConflictError as exc:
-        raise HTTPException(409, str(exc)) from exc
-    except MotionDeviceError as exc:
-        raise HTTPException(503, exc.detail) from exc
 
 
 @router.get("", dependencies=[ReadAuth])
@@ -70,8 +48,7 @@ def move_axes(body: MoveRequest, state: StateDep, motion: MotionDep) -> MotionPu
     limits; in that case nothing is sent to the driver. 409 while a campaign owns the
     motion system or a profile runs on one of the axes (STOP ends it).
     """
-    with _answers():
-        motion.move(body.axes())  # at least one axis: the schema's validator
+    motion.move(body.axes())  # at least one axis: the schema's validator
     return motion_public(state)
 
 
@@ -83,8 +60,7 @@ def jog_axis(body: JogRequest, state: StateDep, motion: MotionDep) -> MotionPubl
     stack on a move in progress) or a campaign owns it; 422 when the axis is unknown or the
     target is outside the soft limits; 503 when the position cannot be read.
     """
-    with _answers():
-        motion.jog(*body.axis_step())
+    motion.jog(*body.axis_step())
     return motion_public(state)
 
 
@@ -101,8 +77,7 @@ def run_profile(body: ProfileRequest, state: StateDep, motion: MotionDep) -> Mot
     request field that sets it), in which case nothing moves; 503 when the position
     cannot be read or the controller refuses.
     """
-    with _answers():
-        motion.start_profile(body.axis, body.model_dump())
+    motion.start_profile(body.axis, body.model_dump())
     return motion_public(state)
 
 
@@ -112,8 +87,7 @@ async def stop_motion(state: StateDep, motion: MotionDep) -> MotionPublic:
     runs (the campaign pauses, reason "STOP pressed"), and never queued behind other
     requests. STOP latches: every move, jog, profile and campaign start is refused (409)
     until a person releases it (POST /api/motion/release, or resuming the campaign)."""
-    with _answers():
-        await motion.stop_in_lane()
+    await motion.stop_in_lane()
     return await motion.after_stop(lambda: motion_public(state))
 
 
@@ -130,6 +104,5 @@ def reset_faults(state: StateDep, motion: MotionDep) -> MotionPublic:
     """Acknowledge the controller's axis faults once their cause is fixed (real rate
     tables; docs/devices.md). Interlocks stay open until the next move closes them. 409
     when this motion system has no faults to acknowledge (the simulator)."""
-    with _answers():
-        motion.reset_faults()
+    motion.reset_faults()
     return motion_public(state)

@@ -17,14 +17,10 @@ from fastapi.responses import FileResponse
 from backend.api.contract import ErrorPublic, errors
 from backend.api.deps import AdminAuth, ReadAuth, StateDep, WriteAuth
 from backend.api.schemas.recordings import RecordingCreate, RecordingPublic, RecordingsPublic
-from backend.services.campaigns.mcap_files import ExportSpaceError, recording_mcap
-from backend.services.heavy_work import HeavyWorkBusyError
+from backend.services.campaigns.mcap_files import recording_mcap
 from backend.services.recordings import (
     MB,
-    InsufficientSpaceError,
-    RecordingConflictError,
     RecordingInfo,
-    RecordingNotFoundError,
     RecordingService,
 )
 from backend.state import AppState
@@ -83,12 +79,7 @@ def _download_name(info: RecordingInfo, suffix: str) -> str:
 
 def _file(service: RecordingService, recording_id: int) -> tuple[RecordingInfo, pathlib.Path]:
     """(entry, HDF5 path) of a stopped recording: 404 unknown, 409 while it records."""
-    try:
-        return service.get(recording_id), service.file(recording_id)
-    except RecordingNotFoundError as exc:
-        raise HTTPException(404, str(exc)) from exc
-    except RecordingConflictError as exc:
-        raise HTTPException(409, str(exc)) from exc
+    return service.get(recording_id), service.file(recording_id)
 
 
 @router.post(
@@ -103,13 +94,7 @@ def start_recording(body: RecordingCreate, state: StateDep) -> RecordingPublic:
     stamp, into one HDF5 recording (docs/architecture.md §7 plus the groups listed in
     docs/server.md). 507 below the free-space floor; 409 while the most recordings that
     may run at once (``max_active`` of the list) already run."""
-    service = _service(state)
-    try:
-        return _public(service.start(body.name, body.duration_s))
-    except InsufficientSpaceError as exc:
-        raise HTTPException(status.HTTP_507_INSUFFICIENT_STORAGE, str(exc)) from exc
-    except RecordingConflictError as exc:
-        raise HTTPException(status.HTTP_409_CONFLICT, str(exc)) from exc
+    return _public(_service(state).start(body.name, body.duration_s))
 
 
 @router.get("", dependencies=[ReadAuth])
@@ -128,10 +113,7 @@ def list_recordings(state: StateDep) -> RecordingsPublic:
 @router.get("/{recording_id}", dependencies=[ReadAuth], responses=errors(404))
 def get_recording(recording_id: RecordingIdParam, state: StateDep) -> RecordingPublic:
     """One recording: while it records, its frames, size and time so far."""
-    try:
-        return _public(_service(state).get(recording_id))
-    except RecordingNotFoundError as exc:
-        raise HTTPException(404, str(exc)) from exc
+    return _public(_service(state).get(recording_id))
 
 
 @router.post("/{recording_id}/stop", dependencies=[WriteAuth], responses=errors(404))
@@ -139,10 +121,7 @@ def stop_recording(recording_id: RecordingIdParam, state: StateDep) -> Recording
     """Stop a recording: the frames the live stream delivered until now are written, the
     file is closed, and the answer is its final entry. A stopped recording is answered as
     it is (stopping twice changes nothing)."""
-    try:
-        return _public(_service(state).stop(recording_id))
-    except RecordingNotFoundError as exc:
-        raise HTTPException(404, str(exc)) from exc
+    return _public(_service(state).stop(recording_id))
 
 
 @router.get(
@@ -179,15 +158,10 @@ async def get_recording_mcap(recording_id: RecordingIdParam, state: StateDep):
     export workers (503 with Retry-After while they and their queue are full). 409 while
     it records."""
     info, path = _file(_service(state), recording_id)
-    try:
-        out = await state.heavy_work.run(
-            lambda: recording_mcap(path, state.settings.recording_min_free_mb),
-            f"the MCAP of recording {recording_id}",
-        )
-    except ExportSpaceError as exc:
-        raise HTTPException(507, str(exc)) from exc
-    except HeavyWorkBusyError as exc:
-        raise HTTPException(503, str(exc), headers={"Retry-After": str(exc.retry_after_s)}) from exc
+    out = await state.heavy_work.run(
+        lambda: recording_mcap(path, state.settings.recording_min_free_mb),
+        f"the MCAP of recording {recording_id}",
+    )
     return FileResponse(out, media_type="application/x-mcap", filename=_download_name(info, "mcap"))
 
 
@@ -200,9 +174,4 @@ async def get_recording_mcap(recording_id: RecordingIdParam, state: StateDep):
 def delete_recording(recording_id: RecordingIdParam, state: StateDep) -> None:
     """Delete a recording's files (HDF5 and its MCAP) and entry; admin scope. 409 while it
     records (stop it first)."""
-    try:
-        _service(state).delete(recording_id)
-    except RecordingNotFoundError as exc:
-        raise HTTPException(404, str(exc)) from exc
-    except RecordingConflictError as exc:
-        raise HTTPException(409, str(exc)) from exc
+    _service(state).delete(recording_id)

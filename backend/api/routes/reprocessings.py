@@ -15,13 +15,10 @@ from backend.api.deps import (
     StateDep,
     WriteAuth,
     finished_recording,
-    unprocessable,
 )
 from backend.api.schemas.reprocessings import ReprocessCreate, ReprocessPublic
 from backend.services.jobs.reprocessing import (
     FILES,
-    ReprocessRequestError,
-    UnknownReprocessingError,
 )
 
 router = APIRouter(prefix="/api", tags=["reprocessing"])
@@ -45,13 +42,9 @@ def create_reprocessing(
     ``camera`` when it is not a camera JSON or does not fit the recording's frames;
     nothing is stored then."""
     path = finished_recording(state, campaign_id, missing_status=409)
-    try:
-        job = state.reprocessings.submit(
-            campaign_id, path, body.camera, tracking=body.tracking, filter_state=body.filter
-        )
-    except ReprocessRequestError as exc:
-        where = "path" if exc.field == "campaign_id" else "body"
-        raise unprocessable([where, exc.field], [str(exc)]) from exc
+    job = state.reprocessings.submit(
+        campaign_id, path, body.camera, tracking=body.tracking, filter_state=body.filter
+    )
     return ReprocessPublic(**job)
 
 
@@ -67,19 +60,13 @@ def list_reprocessings(
 @router.get("/reprocessings/{job_id}", dependencies=[ReadAuth], responses=errors(404))
 def get_reprocessing(job_id: IdParam, state: StateDep) -> ReprocessPublic:
     """A re-processing's status and, once complete, its comparison."""
-    try:
-        return ReprocessPublic(**state.reprocessings.status(job_id))
-    except UnknownReprocessingError as exc:
-        raise HTTPException(404, f"no re-processing with id {job_id}") from exc
+    return ReprocessPublic(**state.reprocessings.status(job_id))
 
 
 @router.post("/reprocessings/{job_id}/cancel", dependencies=[WriteAuth], responses=errors(404))
 def cancel_reprocessing(job_id: IdParam, state: StateDep) -> ReprocessPublic:
     """Cancel a queued or running re-processing; a finished one is returned as it is."""
-    try:
-        return ReprocessPublic(**state.reprocessings.cancel(job_id))
-    except UnknownReprocessingError as exc:
-        raise HTTPException(404, f"no re-processing with id {job_id}") from exc
+    return ReprocessPublic(**state.reprocessings.cancel(job_id))
 
 
 @router.get(
@@ -92,10 +79,7 @@ def reprocessing_file(job_id: IdParam, name: FileName, state: StateDep):
     """A result file: ``poses.csv`` (the new calibration's, as ``tofpose estimate`` writes
     it), ``baseline.csv`` (the recording's own camera), ``compare.csv|json|png``. 409 until
     the re-processing is complete."""
-    try:
-        path = state.reprocessings.file_path(job_id, name)
-    except UnknownReprocessingError as exc:
-        raise HTTPException(404, f"no re-processing with id {job_id}") from exc
+    path = state.reprocessings.file_path(job_id, name)
     if path is None:
         raise HTTPException(409, f"re-processing {job_id} has no {name} yet (it is not complete)")
     return FileResponse(path, media_type=FILES[name][1], filename=f"reprocessing-{job_id}-{name}")

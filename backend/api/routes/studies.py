@@ -12,7 +12,7 @@ from fastapi.responses import FileResponse
 from backend.api.contract import errors
 from backend.api.deps import ReadAuth, StateDep, WriteAuth, unprocessable
 from backend.api.schemas.studies import StudyCreate, StudyPublic
-from backend.services.jobs.studies import TooManyStudiesError, UnknownStudyError, study_limits
+from backend.services.jobs.studies import study_limits
 from tofpose.study.spec import StudySpec, StudySpecError
 
 router = APIRouter(prefix="/api/studies", tags=["studies"])
@@ -39,10 +39,7 @@ def create_study(body: StudyCreate, state: StateDep) -> StudyPublic:
         spec = StudySpec.from_dict(doc, limits=study_limits(state.settings))
     except StudySpecError as exc:
         raise unprocessable(["body", *exc.loc], [exc.problem]) from exc
-    try:
-        sid = state.studies.submit(spec, max_active=state.settings.studies_max_active)
-    except TooManyStudiesError as exc:
-        raise HTTPException(status.HTTP_409_CONFLICT, str(exc)) from exc
+    sid = state.studies.submit(spec, max_active=state.settings.studies_max_active)
     return _public(state.studies.status(sid))
 
 
@@ -55,20 +52,14 @@ def list_studies(state: StateDep) -> list[StudyPublic]:
 @router.get("/{study_id}", dependencies=[ReadAuth], responses=errors(404))
 def get_study(study_id: int, state: StateDep) -> StudyPublic:
     """A study's status, progress (frames and chunks done) and ETA."""
-    try:
-        return _public(state.studies.status(study_id))
-    except UnknownStudyError as exc:
-        raise HTTPException(404, f"no study with id {study_id}") from exc
+    return _public(state.studies.status(study_id))
 
 
 @router.post("/{study_id}/cancel", dependencies=[WriteAuth], responses=errors(404))
 def cancel_study(study_id: int, state: StateDep) -> StudyPublic:
     """Stop a queued or running study; the chunks it finished stay (status
     ``incomplete``). A finished study is returned as it is."""
-    try:
-        return _public(state.studies.cancel(study_id))
-    except UnknownStudyError as exc:
-        raise HTTPException(404, f"no study with id {study_id}") from exc
+    return _public(state.studies.cancel(study_id))
 
 
 @router.get(
@@ -81,10 +72,7 @@ def study_report(study_id: int, fmt: Literal["html", "pdf", "json"], state: Stat
     """The study's report: ``html`` (shown in the browser, its plots from ``plots/``),
     ``pdf``, or ``json``
     (summary.json, the per-cell statistics). 409 until the study is complete."""
-    try:
-        path = state.studies.report_path(study_id, fmt)
-    except UnknownStudyError as exc:
-        raise HTTPException(404, f"no study with id {study_id}") from exc
+    path = state.studies.report_path(study_id, fmt)
     if path is None:
         raise HTTPException(409, f"study {study_id} has no {fmt} report yet (it is not complete)")
     # the HTML opens in the browser (its plots load relative to it); the others download
@@ -104,10 +92,7 @@ def study_report(study_id: int, fmt: Literal["html", "pdf", "json"], state: Stat
 )
 def study_plot(study_id: int, name: PlotName, state: StateDep):
     """A plot of the report (report.html links them relative to itself)."""
-    try:
-        path = state.studies.report_path(study_id, "html")
-    except UnknownStudyError as exc:
-        raise HTTPException(404, f"no study with id {study_id}") from exc
+    path = state.studies.report_path(study_id, "html")
     plot = None if path is None else path.parent / "plots" / name
     if plot is None or not plot.exists():
         raise HTTPException(404, f"study {study_id} has no plot {name}")

@@ -45,8 +45,8 @@ FILES = {
 }
 
 
-class UnknownReprocessingError(KeyError):
-    """No re-processing with that id."""
+class UnknownReprocessingError(LookupError):
+    """No re-processing with that id (the message says which)."""
 
 
 class ReprocessRequestError(ValueError):
@@ -170,7 +170,7 @@ class ReprocessService(BatchJobService):
     def status(self, jid: int) -> dict:
         job = self._read(jid)
         if job is None:
-            raise UnknownReprocessingError(jid)
+            raise UnknownReprocessingError(f"no re-processing with id {jid}")
         job["files"] = [n for n in FILES if self.file_path(jid, n, check=False) is not None]
         return job
 

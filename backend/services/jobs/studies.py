@@ -34,8 +34,8 @@ REPORT_FILES = {"html": "report.html", "pdf": "report.pdf", "json": "summary.jso
 ACTIVE = ("created", "queued", "running")
 
 
-class UnknownStudyError(KeyError):
-    """No study with that id."""
+class UnknownStudyError(LookupError):
+    """No study with that id (the message says which)."""
 
 
 class TooManyStudiesError(RuntimeError):
@@ -146,7 +146,7 @@ class StudyService(BatchJobService):
         for any size (nothing of its grid is made)."""
         d = self._dir(sid)
         if not (d / "study.json").exists():
-            raise UnknownStudyError(sid)
+            raise UnknownStudyError(f"no study with id {sid}")
         m = read_manifest(d)
         spec = StudySpec.from_dict(m["spec"], limits=None)  # accepted when it was stored
         reports = tuple(k for k, name in REPORT_FILES.items() if (d / name).exists())
