@@ -365,8 +365,8 @@ class PosePipeline:
             return fail(solved.reason, unmatched=unmatched + meas.as_unmatched(), diagnostics=diag)
         result = self._pose_result(solved, meas, unmatched, time_s, timer, diag)
         self._track = TrackState(
-            R=result.R,
-            t_mm=result.t_mm,
+            R=solved.T_camera_target.R,
+            t_mm=solved.T_camera_target.t_mm,
             threshold_counts=stats.raw_threshold,
             background_counts=stats.background,
             dark_counts=stats.dark_level,
@@ -522,8 +522,8 @@ class PosePipeline:
         )
         result = self._pose_result(solved, meas, [], time_s, timer, diag, mode="tracking")
         self._track = TrackState(
-            R=result.R,
-            t_mm=result.t_mm,
+            R=solved.T_camera_target.R,
+            t_mm=solved.T_camera_target.t_mm,
             threshold_counts=track.threshold_counts,
             background_counts=track.background_counts,
             dark_counts=track.dark_counts,
@@ -539,7 +539,7 @@ class PosePipeline:
         time_s,
         timer,
         diagnostics: FrameDiagnostics,
-        mode: str = "acquisition",
+        mode: Literal["acquisition", "tracking"] = "acquisition",
     ) -> PoseResult:
         """The ok result of a ``Solution`` found from ``meas``; ``unmatched`` lists the
         blobs without a range, the unmatched candidates are added."""

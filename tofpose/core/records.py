@@ -68,7 +68,7 @@ class PersistenceHistory(NamedTuple):
     """The persistence history and its settings as the kernels read them
     (``Persistence.history``): ``gray``, ``distance`` ((H, W) float32 each), ``mask``
     ((H * W,) bool each) and ``centroids`` ((m, 2) float64 each) are tuples of one length
-    (K - 1, at least 1), newest first, of which the first ``count`` are real frames (the
+    (K - 1, at least 1), newest first, of which the first ``n_frames`` are real frames (the
     rest pad with the current frame's arrays and are never read);
     ``motion_tolerance_px`` and ``c_min`` are ``PersistenceConfig``'s; ``scratch_gray``
     and ``scratch_distance`` ((H, W) float32) the two frames the compiled measurement
@@ -79,7 +79,7 @@ class PersistenceHistory(NamedTuple):
     distance: tuple
     mask: tuple
     centroids: tuple
-    count: int
+    n_frames: int
     motion_tolerance_px: float
     c_min: int
     scratch_gray: np.ndarray

@@ -10,6 +10,7 @@ literal numbers as a preset.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from itertools import accumulate
 
@@ -91,7 +92,7 @@ class Blob:
 _BLOB_FIELDS = frozenset(Blob.__dataclass_fields__)
 
 
-def pixel_lists(blobs: list[Blob]) -> tuple[np.ndarray, np.ndarray]:
+def pixel_lists(blobs: Sequence[Blob]) -> tuple[np.ndarray, np.ndarray]:
     """The blobs' pixels as the kernels take them: flat (P,) int64 flat indices, blob j's
     being ``flat[starts[j]:starts[j + 1]]``, and starts (B + 1,) int64."""
     if not blobs:
@@ -177,9 +178,9 @@ class CandidateBlobs:
     accepted: list[Blob]
     oversize: list[Blob]
     active_mask: np.ndarray
-    wrong_size: tuple[WrongSizeBlob, ...] = ()
-    rejected: tuple[RejectedBlob, ...] = ()
-    stats: FrameStats | None = None
+    wrong_size: tuple[WrongSizeBlob, ...]
+    rejected: tuple[RejectedBlob, ...]
+    stats: FrameStats
 
 
 class FrameError(ValueError):
@@ -358,7 +359,8 @@ def find_candidate_blobs(
     for j, k in enumerate(found.which.tolist()):
         code = int(status[j])
         if size[j, 3] == 0.0:
-            wrong_size.append(WrongSizeBlob(*size[j, :3].tolist(), float(rho_k[k])))
+            d_eq, low, high = (float(v) for v in size[j, :3])
+            wrong_size.append(WrongSizeBlob(d_eq, low, high, float(rho_k[k])))
         bbox = tuple(bbox_k[k].tolist())
         if code == OVERSIZE:
             oversize.append(
@@ -389,7 +391,8 @@ def find_candidate_blobs(
     accepted.sort(key=lambda b: (b.penalty, -b.peak_counts))
     rejected = [r for _, r in sorted(refused, key=lambda kr: kr[0])]
     for b in accepted[config.max_candidates :]:
-        rejected.append(RejectedBlob(*b.centroid_uv, 2.0 * np.sqrt(b.area_px / np.pi), "rank"))
+        u, v = (float(c) for c in b.centroid_uv)
+        rejected.append(RejectedBlob(u, v, 2.0 * np.sqrt(b.area_px / np.pi), "rank"))
     stats = replace(stats, psf_sigma_px=float(np.sqrt(found.blur_var_px2)))
     return CandidateBlobs(
         accepted[: config.max_candidates],
@@ -409,22 +412,37 @@ def _gate_params(
 ) -> GateSettings:
     """The scalar settings of ``kernels.gates.gate_components`` (a
     ``core.records.GateSettings``) for this frame."""
-    paper = config.nlog_sigma_px is not None
+    if config.nlog_sigma_px is not None:  # the paper's preset: a fixed nLoG sigma, absolute J
+        nlog_sigma_px = float(config.nlog_sigma_px)
+        j_peak = _preset(config.nlog_peak_abs, "nlog_peak_abs")
+        j_t = _preset(config.nlog_floor_abs, "nlog_floor_abs")
+    else:  # matched to each blob, J relative to its contrast
+        nlog_sigma_px, j_peak, j_t = -1.0, float(config.nlog_peak_rel), float(config.nlog_floor_rel)
     return GateSettings(
         h_min_px=-1.0 if config.h_min_px is None else float(config.h_min_px),
         h_max_px=-1.0 if config.h_max_px is None else float(config.h_max_px),
         cos_max_tilt=float(cos_t),
         size_tolerance=float(config.size_tolerance),
         size_margin_px=float(config.size_margin_px),
-        nlog_sigma_px=float(config.nlog_sigma_px) if paper else -1.0,
-        j_peak=float(config.nlog_peak_abs if paper else config.nlog_peak_rel),
-        j_t=float(config.nlog_floor_abs if paper else config.nlog_floor_rel),
+        nlog_sigma_px=nlog_sigma_px,
+        j_peak=j_peak,
+        j_t=j_t,
         background=float(stats.background),
         eccentricity_max=float(ecc_max),
         i_peak=float(stats.peak_threshold),
         i_t=float(stats.raw_threshold),
         q_max=float(config.q_max),
     )
+
+
+def _preset(value: float | None, name: str) -> float:
+    """A threshold the paper's preset sets (with ``nlog_sigma_px``); ``ValueError``
+    naming it when it is not set."""
+    if value is None:
+        raise ValueError(
+            f"ExtractionConfig.{name} must be set with nlog_sigma_px (the paper's preset)"
+        )
+    return float(value)
 
 
 def measure_blobs(

@@ -139,7 +139,7 @@ class Persistence:
             distance=tuple([e.distance for e in entries] + [distance] * pad),
             mask=tuple([e.mask for e in entries] + [np.zeros(gray.size, bool)] * pad),
             centroids=tuple([e.centroids for e in entries] + [np.zeros((0, 2))] * pad),
-            count=len(entries),
+            n_frames=len(entries),
             motion_tolerance_px=float(self.config.motion_tolerance_px),
             c_min=int(self.config.c_min),
             scratch_gray=scratch_gray,

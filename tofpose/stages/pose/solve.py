@@ -485,7 +485,11 @@ class PoseSolver:
         dark_check = len(matched) <= self.config.dark_check_max_matches
         is_matched = np.zeros(len(self._xyz), bool)
         is_matched[matched] = True
-        frame = active if dark_check else _NO_FRAME
+        frame = _NO_FRAME
+        if dark_check:
+            if active is None:
+                raise ValueError("the dark check reads the frame: pass its ThresholdedFrame")
+            frame = active
         outcome, i, u, v = self.arithmetic.pose_check(
             self._catalog_record,
             is_matched,

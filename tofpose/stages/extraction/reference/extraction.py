@@ -520,7 +520,7 @@ def _components(gray, mask, min_area_px) -> tuple[np.ndarray, list[_Component]]:
                 k,
                 pixels,
                 int(stats[k, cv2.CC_STAT_AREA]),
-                tuple(int(v) for v in stats[k, :4]),
+                (int(stats[k, 0]), int(stats[k, 1]), int(stats[k, 2]), int(stats[k, 3])),
                 float(gray.ravel()[pixels].max()),
             )
         )
@@ -641,7 +641,13 @@ def find_candidates(
         accepted.append(CandidateBlob(kept, len(kept), c.bbox, uv, r, c.peak, ecc, q))
     best, beyond = rank_candidates(accepted, config.max_candidates)
     rejected += [
-        Rejected(*b.centroid_uv, equivalent_diameter_px(b.area_px), "rank") for b in beyond
+        Rejected(
+            float(b.centroid_uv[0]),
+            float(b.centroid_uv[1]),
+            equivalent_diameter_px(b.area_px),
+            "rank",
+        )
+        for b in beyond
     ]
     return Candidates(
         tuple(best),

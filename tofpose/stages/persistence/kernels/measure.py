@@ -80,7 +80,7 @@ def persist_and_measure(frame, blobs, history, camera):
     n = starts.shape[0] - 1
     n_used, motion = 0, False
     tol = history.motion_tolerance_px
-    for f in range(history.count):
+    for f in range(history.n_frames):
         if consistent(centroids, history.centroids[f], tol) and ranges_consistent(
             distance, history.distance[f], flat, starts, RANGE_TEST_Z
         ):

@@ -8,7 +8,7 @@ Same names, arguments and returns (the records of ``stages.persistence.records``
 The records are read by field name: ``frame`` (gray, distance, background, dark),
 ``blobs`` (pixel lists ``flat`` (P,) with blob j's at ``flat[starts[j]:starts[j + 1]]``,
 boxes ``bbox`` (n, 4) (x, y, w, h), centroids, split), ``history`` (gray, distance, mask,
-centroids: tuples newest first of which the first ``count`` are real frames;
+centroids: tuples newest first of which the first ``n_frames`` are real frames;
 motion_tolerance_px, c_min), ``camera`` (fx, fy, cx, cy, dist, K, pixel_bearings),
 ``correction`` (apply, model, harmonics, offsets) and ``sigmas``
 (``stages.extraction.reference.sigmas``'s constants).
@@ -60,13 +60,13 @@ def consistent_history(centroids_uv, distance, blobs, history) -> tuple[int, boo
     """How many of the history's frames, newest first, are consistent with this frame
     (``centroids_consistent`` at motion_tolerance_px and ``ranges_consistent`` at ``RANGE_TEST_Z``)
     before the first that is not, and whether one is not (motion)."""
-    for f in range(history.count):
+    for f in range(history.n_frames):
         still = centroids_consistent(
             centroids_uv, history.centroids[f], history.motion_tolerance_px
         )
         if not (still and ranges_consistent(distance, history.distance[f], blobs, RANGE_TEST_Z)):
             return f, True
-    return history.count, False
+    return history.n_frames, False
 
 
 def combined_frames(gray, distance, blobs, history, n_used):
