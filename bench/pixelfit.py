@@ -168,7 +168,7 @@ def main(argv: list[str] | None = None) -> str:
             f"| {1e3 * m['bound_att_deg']:.2f} | {m['bound_pos_mm']:.3f} "
             f"| {m['z_att']:.2f} | {m['z_pos']:.2f} | {m['fallbacks']:.0f} | {m['ms']:.0f} |"
         )
-        print(lines[-1], flush=True)
+        print(lines[-1], file=sys.stderr, flush=True)  # progress; the table goes to stdout
     text = "\n".join(lines)
     print(text)
     return text
