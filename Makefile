@@ -50,6 +50,7 @@ lint: $(VENV)/.dev
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/lint-imports
+	$(VENV)/bin/mypy
 
 # System tools the tests and the bench use: pdftoppm (poppler-utils) renders report PDFs to PNG;
 # Debian's chromium runs the dashboard's browser tests.
