@@ -169,10 +169,11 @@ def _start_scene(state: AppState) -> None:
 def _start_foxglove(state: AppState) -> None:
     """Start the live Foxglove server when the settings ask for it; one that cannot start
     (a taken port) is logged and reported by ``GET /api/foxglove``, never fatal."""
-    refusal = state.settings.foxglove_refusal
+    refusal, port = state.settings.foxglove_refusal, state.settings.foxglove_port
     if refusal is not None:
         state.foxglove_reason = refusal
         return
+    assert port is not None  # without one, foxglove_refusal says "off"
     from backend.services.live.foxglove_live import LiveFoxglove
 
     try:
@@ -180,7 +181,7 @@ def _start_foxglove(state: AppState) -> None:
             state.hub,
             state.acquisition,
             host=state.settings.host,
-            port=state.settings.foxglove_port,
+            port=port,
         )
     except Exception as exc:  # noqa: BLE001 - any failure leaves the API running
         log.error("Foxglove server not started: %s", exc)

@@ -155,7 +155,8 @@ def serve(overrides: dict) -> int:
         host=settings.host,
         port=settings.port,
         log_level="info",
-        timeout_graceful_shutdown=settings.shutdown_timeout_s,
+        # typed int by uvicorn, which waits with asyncio.wait_for: seconds as a float work
+        timeout_graceful_shutdown=settings.shutdown_timeout_s,  # type: ignore[arg-type]
         ws_per_message_deflate=False,
     )
     return 0

@@ -16,6 +16,7 @@ import os
 import re
 import sys
 import time
+from collections.abc import Mapping
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TextIO
@@ -32,15 +33,15 @@ class RecordError(RuntimeError):
 
 
 def resolve_key(
-    key: str | None, key_file: str | Path | None, environ: dict[str, str] | None = None
+    key: str | None, key_file: str | Path | None, environ: Mapping[str, str] | None = None
 ) -> str:
     """The API key: ``key`` if given, else ``$TOFPOSE_API_KEY``, else the first line of
     ``key_file``; ``RecordError`` naming the three places when none has one."""
-    environ = os.environ if environ is None else environ
+    env: Mapping[str, str] = os.environ if environ is None else environ
     if key:
         return key
-    if environ.get(KEY_ENV):
-        return environ[KEY_ENV]
+    if env.get(KEY_ENV):
+        return env[KEY_ENV]
     if key_file is not None and Path(key_file).is_file():
         text = Path(key_file).read_text().strip()
         if text:

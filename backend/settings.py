@@ -85,59 +85,59 @@ class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="TOFPOSE_", extra="ignore")
 
     host: str = "127.0.0.1"
-    port: int = Field(8000, ge=0, le=65535)
+    port: int = Field(default=8000, ge=0, le=65535)
     data_dir: Path = Path("data")
     database_url: str | None = None
     api_token: SecretStr | None = None
     open_reads: bool | None = None
     camera: str = "sim"
     motion: str = "sim"
-    replay_rate_hz: float | None = Field(None, gt=0, le=1000)
+    replay_rate_hz: float | None = Field(default=None, gt=0, le=1000)
     catalog: str = "paper-target"
-    frame_rate_hz: float = Field(10.0, gt=0, le=60)
-    sim_target_distance_mm: float = Field(15000.0, gt=0)
-    lab_target_distance_mm: float = Field(15000.0, gt=0)
-    sim_start_rail_mm: float = Field(13000.0, ge=0)
+    frame_rate_hz: float = Field(default=10.0, gt=0, le=60)
+    sim_target_distance_mm: float = Field(default=15000.0, gt=0)
+    lab_target_distance_mm: float = Field(default=15000.0, gt=0)
+    sim_start_rail_mm: float = Field(default=13000.0, ge=0)
     sim_seed: int = 0
-    sim_time_scale: float = Field(1.0, ge=0.01, le=1000.0)
-    history_size: int = Field(600, ge=1, le=100_000)
-    subscriber_queue: int = Field(8, ge=1, le=1000)
+    sim_time_scale: float = Field(default=1.0, ge=0.01, le=1000.0)
+    history_size: int = Field(default=600, ge=1, le=100_000)
+    subscriber_queue: int = Field(default=8, ge=1, le=1000)
     # /ws/live connections: at most this many from one client address and in all (more
     # are refused with close code 1013, "try again later"); a client whose socket has not
     # taken a message within live_send_timeout_s is let go (its slot freed).
-    live_max_clients_per_address: int = Field(16, ge=1, le=10_000)
-    live_max_clients: int = Field(64, ge=1, le=10_000)
-    live_send_timeout_s: float = Field(5.0, gt=0, le=600)
-    camera_timeout_s: float = Field(2.0, gt=0)
+    live_max_clients_per_address: int = Field(default=16, ge=1, le=10_000)
+    live_max_clients: int = Field(default=64, ge=1, le=10_000)
+    live_send_timeout_s: float = Field(default=5.0, gt=0, le=600)
+    camera_timeout_s: float = Field(default=2.0, gt=0)
     kernels_in_background: bool = Field(
-        True,
+        default=True,
         description="compile the pipeline's kernels in a background thread while "
         "frames already stream (poses follow when the compile is done); False waits for "
         "them before the camera loop starts",
     )
     retry_backoff_s: tuple[float, float] = (0.05, 2.0)
-    max_body_bytes: int = Field(1_000_000, ge=1024)
-    shutdown_timeout_s: float = Field(3.0, gt=0, le=60)
+    max_body_bytes: int = Field(default=1_000_000, ge=1024)
+    shutdown_timeout_s: float = Field(default=3.0, gt=0, le=60)
     frontend_dir: Path | None = None
     tracking: bool = True
     filter_model: Literal["acceleration", "twist"] = "acceleration"
-    filter_jerk_deg: float = Field(30.0, gt=0, le=10_000)
+    filter_jerk_deg: float = Field(default=30.0, gt=0, le=10_000)
     dask_scheduler: str = ""
-    study_workers: int | None = Field(None, ge=1, le=1024)
+    study_workers: int | None = Field(default=None, ge=1, le=1024)
     # How large an accepted study may be, and how many may wait (docs/scaleout.md). The
     # defaults suit a 2-core lab PC, whose LocalCluster is 1 worker at ~28 frames/s: 10^6
     # frames is ~10 h (a night), 10^4 cells keeps summary.json to ~20 MB (1.7 kB a cell),
     # and 4 studies queued or running is up to ~2 days of that worker's time. Raise them
     # for a cluster (TOFPOSE_DASK_SCHEDULER).
-    study_max_cells: int = Field(10_000, ge=1)
-    study_max_frames: int = Field(1_000_000, ge=1)
-    studies_max_active: int = Field(4, ge=1, le=10_000)
+    study_max_cells: int = Field(default=10_000, ge=1)
+    study_max_frames: int = Field(default=1_000_000, ge=1)
+    studies_max_active: int = Field(default=4, ge=1, le=10_000)
     # Recordings on demand (docs/server.md): refused to start below this much free space
     # (MB) on the data directory's disk; a running one stops, file closed, when it falls below.
-    recording_min_free_mb: float = Field(1000.0, ge=0)
+    recording_min_free_mb: float = Field(default=1000.0, ge=0)
     viser: bool = True
-    viser_port: int = Field(8080, ge=0, le=65535)
-    foxglove_port: int | None = Field(None, ge=0, le=65535)
+    viser_port: int = Field(default=8080, ge=0, le=65535)
+    foxglove_port: int | None = Field(default=None, ge=0, le=65535)
     allowed_hosts: Annotated[list[str], NoDecode] = Field(default_factory=list)
     allowed_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
 

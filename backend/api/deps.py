@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -24,18 +24,22 @@ bearer_scheme = HTTPBearer(
 )
 
 
-def unprocessable(loc: list[str | int], messages: list[str]) -> HTTPException:
+Location = Sequence[str | int]
+"""Where a problem is in the request, as FastAPI's ``loc``: ``["body", "generator"]``."""
+
+
+def unprocessable(loc: Location, messages: list[str]) -> HTTPException:
     """A 422 shaped like FastAPI's own validation errors (``detail`` = list of
     ``{loc, msg, type}``), so clients handle every 422 the same way."""
     return unprocessable_at([(loc, m) for m in messages])
 
 
-def unprocessable_at(problems: list[tuple[list[str | int], str]]) -> HTTPException:
+def unprocessable_at(problems: Sequence[tuple[Location, str]]) -> HTTPException:
     """As ``unprocessable``, with a location of its own for each message."""
     return HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, located(problems))
 
 
-def located(problems: list[tuple[list[str | int], str]]) -> list[dict[str, Any]]:
+def located(problems: Sequence[tuple[Location, str]]) -> list[dict[str, Any]]:
     """A 422's ``detail``: each message at its location, as FastAPI's validation errors."""
     return [{"loc": loc, "msg": m, "type": "value_error"} for loc, m in problems]
 

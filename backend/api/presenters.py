@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import asdict
 from datetime import UTC, datetime
+from typing import Any, cast, overload
 
 import numpy as np
 
@@ -24,17 +25,18 @@ from backend.api.schemas.campaigns import (
 )
 from backend.api.schemas.common import DeviceStatePublic, PipelineStatePublic
 from backend.api.schemas.foxglove import FoxglovePublic
-from backend.api.schemas.motion import AxisPublic, MotionPublic, ProfilePublic
+from backend.api.schemas.motion import AxisPublic, MotionPublic, ProfileKind, ProfilePublic
 from backend.api.schemas.pose import (
     BlobPublic,
     MatchedPublic,
     PosePublic,
     RejectedBlobPublic,
+    RejectReason,
     TruthPublic,
 )
 from backend.api.schemas.scene import ScenePublic
 from backend.db.models import POSE_FIELDS, CalibrationRow, MeasurementRow
-from backend.drivers.base import CameraSettings
+from backend.drivers.base import CameraSettings, MotionStatus
 from backend.services.campaigns.campaign_repository import CampaignView
 from backend.services.campaigns.campaign_states import FINISHED, CampaignState, transition_table
 from backend.services.live.acquisition import LiveSample
@@ -96,6 +98,10 @@ def pipeline_state(state: AppState) -> PipelineStatePublic:
     )
 
 
+#: what ``motion_public`` shows when the status read fails: no positions or targets, idle
+NO_READING = MotionStatus(positions={}, targets={}, busy=False, settled=True)
+
+
 def motion_public(state: AppState) -> MotionPublic:
     """Axes with soft limits and the encoder read-back; a failing status read degrades
     the motion state instead of failing the request."""
@@ -115,30 +121,24 @@ def motion_public(state: AppState) -> MotionPublic:
     ]
     owner = motion.owner
     latched_at = motion.stop_latched_at
-    owned = {
-        "owner_campaign_id": owner.campaign_id if owner else None,
-        "owner_campaign_name": owner.name if owner else None,
-        "stop_latched": latched_at is not None,
-        "stop_latched_at": latched_at.isoformat() if latched_at else None,
-    }
     try:
         st = motion.status()
-    except MotionDeviceError:
-        return MotionPublic(**motion_state(state).model_dump(), axes=axes, **owned)
+    except MotionDeviceError:  # the device state says why; nothing was read
+        st = NO_READING
     p = st.profile
     profile = (
         None
         if p is None
         else ProfilePublic(
             axis=p.axis,
-            kind=p.kind,
+            kind=cast(ProfileKind, p.kind),  # a driver's profile kind; pydantic checks it
             elapsed_s=p.elapsed_s,
             remaining_s=p.remaining_s,
             duration_s=p.duration_s,
         )
     )
     return MotionPublic(
-        **motion_state(state).model_dump(),
+        **motion_state(state).model_dump(),  # after the status read, which sets the health
         axes=axes,
         positions=st.positions,
         time_s=st.time_s,
@@ -147,7 +147,10 @@ def motion_public(state: AppState) -> MotionPublic:
         settled=st.settled,
         stopped=st.stopped,
         profile=profile,
-        **owned,
+        owner_campaign_id=owner.campaign_id if owner else None,
+        owner_campaign_name=owner.name if owner else None,
+        stop_latched=latched_at is not None,
+        stop_latched_at=latched_at.isoformat() if latched_at else None,
     )
 
 
@@ -175,8 +178,14 @@ MAX_REJECTED_SHOWN = 50  # a cluttered frame must not make every pose message hu
 def pose_from_sample(s: LiveSample) -> PosePublic:
     """The public form of one processed frame; values that are not finite become null."""
     r = s.result
-    pose: dict = {}
-    if r.ok and r.R is not None:
+    pose: dict[str, Any] = {}
+    if (
+        r.ok
+        and r.R is not None
+        and r.t_mm is not None
+        and r.euler_deg is not None
+        and r.quaternion_wxyz is not None
+    ):
         x, y, z = (float(v) for v in r.t_mm)
         p, yw, rl = (float(v) for v in r.euler_deg)
         pose = dict(x_mm=x, y_mm=y, z_mm=z, pitch_deg=p, yaw_deg=yw, roll_deg=rl)
@@ -233,7 +242,7 @@ def pose_from_sample(s: LiveSample) -> PosePublic:
                 u_px=float(b.u_px),
                 v_px=float(b.v_px),
                 diameter_px=float(b.diameter_px),
-                reason=b.reason,
+                reason=cast(RejectReason, b.reason),  # one of REJECT_REASONS; pydantic checks it
                 reason_text=REJECT_REASONS[b.reason],
             )
             for b in r.rejected[:MAX_REJECTED_SHOWN]
@@ -297,10 +306,10 @@ def campaign_public(
         camera=c.camera,
         record_raw=c.record_raw,
         notes=c.notes,
-        created_at=_utc(c.created_at),
-        scheduled_at=_utc(c.scheduled_at),
-        started_at=_utc(c.started_at),
-        finished_at=_utc(c.finished_at),
+        created_at=as_utc(c.created_at),
+        scheduled_at=as_utc(c.scheduled_at),
+        started_at=as_utc(c.started_at),
+        finished_at=as_utc(c.finished_at),
         n_setpoints=len(c.setpoints),
         n_done=c.n_done,
         estimated_duration_s=estimated_duration_s,
@@ -334,7 +343,11 @@ def campaign_states_public() -> CampaignStatesPublic:
     )
 
 
-def _utc(dt: datetime | None) -> datetime | None:
+@overload
+def as_utc(dt: datetime) -> datetime: ...
+@overload
+def as_utc(dt: None) -> None: ...
+def as_utc(dt: datetime | None) -> datetime | None:
     """Stored times are UTC; SQLite hands them back without a zone."""
     return dt.replace(tzinfo=UTC) if dt is not None and dt.tzinfo is None else dt
 
@@ -381,7 +394,7 @@ def calibration_public(row: CalibrationRow) -> CalibrationPublic:
         id=row.id,
         name=row.name,
         campaign_id=row.campaign_id,
-        created_at=_utc(row.created_at),
+        created_at=as_utc(row.created_at),
         mount=_transform_public(row.mount),
         placement=_transform_public(row.placement),
         mount_sigma_deg=s[0:3],

@@ -148,6 +148,7 @@ def profile_problems(
     if (problem := profile_axis_problem(axes, axis)) is not None:
         return [problem]
     lim = axes[axis]
+    assert lim.max_accel is not None  # profile_axis_problem refuses an axis without one
     return profile.limit_problems(axis, lim.min_pos, lim.max_pos, lim.max_rate, lim.max_accel)
 
 
@@ -204,3 +205,10 @@ class MotionDriver(Protocol):
     def status(self) -> MotionStatus: ...
 
     def close(self) -> None: ...
+
+
+@runtime_checkable
+class ProfileMotionDriver(MotionDriver, Protocol):
+    """A motion system that runs motion profiles (``MotionDriver``'s optional part)."""
+
+    def run_profile(self, axis: str, profile: MotionProfile) -> None: ...

@@ -56,6 +56,7 @@ def build_devices(settings: Settings, catalog: Catalog | None = None) -> Devices
     hint = None
     initial = CameraSettings(frame_rate_hz=settings.frame_rate_hz)
     if settings.camera == "sim":
+        assert world is not None  # made above for a simulated camera or motion
         camera: CameraDriver = SimCamera(world, initial)
     elif settings.camera.startswith("tofcam660:"):
         from backend.drivers.tofcam660 import TofCam660Driver  # the optional vendor client
@@ -68,6 +69,7 @@ def build_devices(settings: Settings, catalog: Catalog | None = None) -> Devices
         hint = camera.catalog
     motion: MotionDriver | None = None
     if settings.motion == "sim":
+        assert world is not None
         motion = SimMotion(world)
     elif settings.motion.startswith("scpi:"):
         from backend.drivers.scpi import ScpiRateTable  # the optional PyVISA

@@ -19,6 +19,7 @@ def run(opts: dict) -> int:
         start_rail_mm=opts["start_rail_mm"],
         seed=opts["seed"],
     )
+    emu: TofCam660Emulator | RateTableEmulator | EmulatedLab
     try:
         if device == "camera":
             emu = TofCam660Emulator(world, opts["address"])
@@ -27,13 +28,14 @@ def run(opts: dict) -> int:
             emu = RateTableEmulator(world, opts["host"], opts["port"])
             lines = [_table_line(*emu.address)]
         else:
-            emu = EmulatedLab(
+            lab = EmulatedLab(
                 camera_address=opts["camera_address"],
                 table_host=opts["host"],
                 table_port=opts["table_port"],
                 world=world,
             )
-            lines = [_camera_line(opts["camera_address"]), _table_line(*emu.table.address)]
+            lines = [_camera_line(opts["camera_address"]), _table_line(*lab.table.address)]
+            emu = lab
     except OSError as exc:
         print(f"tofpose emulate {device}: cannot listen: {exc}", file=sys.stderr)
         return 2

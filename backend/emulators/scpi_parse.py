@@ -46,7 +46,9 @@ def match_node(token: str, long_form: str) -> bool:
 
 def split_message(line: str) -> list[str]:
     """The commands of one program message (``;``-separated; quotes respected)."""
-    out, cur, quoted = [], [], False
+    out: list[str] = []
+    cur: list[str] = []
+    quoted = False
     for ch in line.strip():
         if ch == '"':
             quoted = not quoted

@@ -382,6 +382,7 @@ class TofCam660Emulator(ServedEmulator):
     ports are fixed): ``start()`` serves in a thread; ``close()`` also drops clients."""
 
     thread_name = "tofcam660-emulator"
+    _server: _Server
 
     def __init__(
         self,

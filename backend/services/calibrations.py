@@ -52,7 +52,8 @@ def observations(session: Session, campaign_id: int) -> list[BenchObservation]:
         n = len(rows)
         t_sd = np.std([p.t_mm for p in poses], axis=0, ddof=1)
         r_sd = np.std([facing_euler_deg(p.R) for p in poses], axis=0, ddof=1)
-        enc = {a: float(np.mean([m.encoders[a] for m in rows])) for a in rows[0].encoders}
+        readings = [m.encoders or {} for m in rows]  # every one has encoders (above)
+        enc = {a: float(np.mean([r[a] for r in readings])) for a in readings[0]}
         out.append(
             BenchObservation(
                 enc,
@@ -100,7 +101,7 @@ def stored_calibrations(session: Session) -> list[CalibrationRow]:
 
 
 def count_calibrations(session: Session) -> int:
-    return session.scalar(select(func.count()).select_from(CalibrationRow))
+    return session.scalar(select(func.count()).select_from(CalibrationRow)) or 0
 
 
 def transform(matrix: list[list[float]]) -> RigidTransform:

@@ -40,6 +40,7 @@ from backend.drivers.base import (
     AxisLimits,
     MotionDriver,
     MotionStatus,
+    ProfileMotionDriver,
     profile_axis_problem,
     profile_problems,
     soft_limit_problems,
@@ -372,6 +373,10 @@ class MotionService:
         """Run ``profile`` (already started at the axis' position) on ``axis``, for a
         person or for campaign ``by``; its limits are checked first."""
         driver = self.require()
+        if not isinstance(driver, ProfileMotionDriver):
+            raise MotionConflictError(
+                f"the {driver.name!r} motion system cannot run motion profiles"
+            )
         problems = self.profile_problems(axis, profile)
         if problems:
             raise MotionLimitError(problems)

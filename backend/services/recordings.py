@@ -714,7 +714,7 @@ class RecordingService:
             if (self.motion is not None and self.motion.present)
             else {}
         )
-        attrs = {
+        attrs: dict[str, str | int] = {
             "source": "tofpose live recording",
             "recording_id": info.id,
             "name": info.name,

@@ -4,13 +4,13 @@ creates it; the server keeps its SHA-256 only (backend/services/keys.py)."""
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Query, Response, status
 
 from backend.api.contract import ErrorPublic, errors
 from backend.api.deps import AdminAuth, StateDep
+from backend.api.presenters import as_utc
 from backend.api.schemas.audit import AuditEntryPublic
 from backend.api.schemas.keys import KeyCreate, KeyCreated, KeyPublic
 from backend.services.audit import MAX_LIMIT, AuditRecord
@@ -23,15 +23,10 @@ ADMIN_ONLY: dict[int | str, dict[str, Any]] = {
 KeyNameParam = Annotated[str, Path(min_length=1, max_length=64)]
 
 
-def _utc(t: datetime | None) -> datetime | None:
-    """SQLite gives back naive datetimes: they were stored in UTC."""
-    return t.replace(tzinfo=UTC) if t is not None and t.tzinfo is None else t
-
-
 def _audit_public(r: AuditRecord) -> AuditEntryPublic:
     return AuditEntryPublic(
         id=r.id,
-        at=_utc(r.at),
+        at=as_utc(r.at),
         key_name=r.key_name,
         client=r.client,
         method=r.method,
@@ -45,8 +40,8 @@ def _key_public(k: ApiKey) -> dict[str, Any]:
     return {
         "name": k.name,
         "scope": k.scope.label,
-        "created_at": _utc(k.created_at),
-        "revoked_at": _utc(k.revoked_at),
+        "created_at": as_utc(k.created_at),
+        "revoked_at": as_utc(k.revoked_at),
     }
 
 

@@ -6,13 +6,14 @@ States and what each command does: docs/campaigns.md.
 from __future__ import annotations
 
 from enum import StrEnum
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import APIRouter, HTTPException, Path, Query, Response, status
 from fastapi.responses import FileResponse
 
 from backend.api.contract import errors
 from backend.api.deps import (
+    Location,
     ReadAuth,
     SessionDep,
     StateDep,
@@ -47,14 +48,14 @@ from backend.state import AppState
 
 router = APIRouter(prefix="/api/campaigns", tags=["campaigns"])
 IdParam = Annotated[int, Path(ge=1, le=2**31 - 1)]
-EXPORT_SPACE = {
+EXPORT_SPACE: dict[int | str, dict[str, Any]] = {
     507: {
         **errors(503)[503],
         "description": "too little free disk space to export: "
         "twice the recording plus TOFPOSE_RECORDING_MIN_FREE_MB are needed",
     }
 }
-BUSY = {
+BUSY: dict[int | str, dict[str, Any]] = {
     503: {
         **errors(503)[503],
         "description": "busy with other reports and exports: try again (Retry-After)",
@@ -114,8 +115,9 @@ def create_campaign(body: CampaignCreate, state: StateDep, session: SessionDep) 
     generator = body.generator.model_dump() if body.generator else None
     spec = dynamic_spec(generator, motion)
     located = profile_plan_problems(setpoints, spec, motion) if spec is not None else []
-    if problems or located:
-        raise unprocessable_at([(["body"], p) for p in problems] + located)
+    at_body: list[tuple[Location, str]] = [(["body"], p) for p in problems]
+    if at_body or located:
+        raise unprocessable_at([*at_body, *located])
     campaign = state.campaigns.repository.create(
         name=body.name,
         catalog_name=body.catalog,

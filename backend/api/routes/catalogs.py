@@ -27,6 +27,11 @@ router = APIRouter(prefix="/api/catalogs", tags=["catalogs"])
 NameParam = Annotated[str, Path(min_length=1, max_length=128)]
 
 
+def _reflector(r: ReflectorModel) -> Reflector:
+    x, y, z = r.position_mm  # three: the schema's length
+    return Reflector(r.id, (x, y, z), r.diameter_mm)
+
+
 def _public(name: str, cat: Catalog, *, builtin: bool, active: str) -> CatalogPublic:
     return CatalogPublic(
         name=name,
@@ -59,7 +64,7 @@ def create_catalog(body: CatalogCreate, state: StateDep, session: SessionDep) ->
     try:
         cat = Catalog(
             body.name,
-            tuple(Reflector(r.id, tuple(r.position_mm), r.diameter_mm) for r in body.reflectors),
+            tuple(_reflector(r) for r in body.reflectors),
         )
     except ValueError as exc:
         raise unprocessable(["body", "reflectors"], [f"catalog rejected: {exc}"]) from exc

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Literal
+
 from fastapi import APIRouter
 
 import backend
@@ -18,7 +20,7 @@ def get_health(state: StateDep) -> HealthPublic:
     """Always answers (no auth): overall status, the state of each device and of the
     pipeline (its compiled kernels, and which implementation gives the live poses:
     the reference one while the kernels compile)."""
-    db = "ok" if database_answers(state.engine) else "error"
+    db: Literal["ok", "error"] = "ok" if database_answers(state.engine) else "error"
     cam, mot = camera_state(state), motion_state(state)
     healthy = db == "ok" and cam.state in ("ok", "starting") and mot.state in ("ok", "absent")
     return HealthPublic(

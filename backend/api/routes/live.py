@@ -150,10 +150,10 @@ async def _read_options(ws: WebSocket, opts: dict[str, LiveOptions], flow: RawFl
         try:
             opts["current"] = LiveOptions.model_validate_json(text)
         except ValidationError as exc:
-            msg = "; ".join(
+            problems = "; ".join(
                 f"{'.'.join(map(str, e['loc'])) or 'body'}: {e['msg']}" for e in exc.errors()
             )
-            await ws.send_text(json.dumps({"type": "error", "message": f"bad options: {msg}"}))
+            await ws.send_text(json.dumps({"type": "error", "message": f"bad options: {problems}"}))
 
 
 def origin_allowed(origin: str | None, host: str | None, allowed: list[str]) -> bool:
@@ -241,7 +241,8 @@ async def live(ws: WebSocket) -> None:
     if not origin_allowed(origin, ws.headers.get("host"), state.settings.allowed_origins):
         await ws.close(
             code=POLICY_VIOLATION,
-            reason=f"cross-origin WebSocket refused: {origin[:100]} (TOFPOSE_ALLOWED_ORIGINS)",
+            reason=f"cross-origin WebSocket refused: {(origin or '')[:100]} "
+            "(TOFPOSE_ALLOWED_ORIGINS)",
         )
         return
     subprotocol = SUBPROTOCOL if SUBPROTOCOL in ws.scope.get("subprotocols", []) else None

@@ -18,6 +18,8 @@ the web server's worker threads cannot delay it.
 
 from __future__ import annotations
 
+from typing import Any
+
 from fastapi import APIRouter, status
 
 from backend.api.contract import errors
@@ -26,7 +28,7 @@ from backend.api.presenters import motion_public
 from backend.api.schemas.motion import JogRequest, MotionPublic, MoveRequest, ProfileRequest
 
 router = APIRouter(prefix="/api/motion", tags=["motion"])
-STARTS_MOTION = {
+STARTS_MOTION: dict[str, Any] = {
     "status_code": status.HTTP_202_ACCEPTED,
     "dependencies": [WriteAuth],
     "responses": errors(409, 503),

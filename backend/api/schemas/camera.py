@@ -18,7 +18,7 @@ class CameraSettingsPublic(BaseModel):
 class CameraSettingsUpdate(StrictBody):
     """Fields left out keep their current value."""
 
-    integration_time_us: float | None = Field(None, ge=1.0, le=20000.0)
-    modulation_frequency_mhz: float | None = Field(None, ge=1.0, le=24.0)
-    frame_rate_hz: float | None = Field(None, ge=1.0, le=60.0)
+    integration_time_us: float | None = Field(default=None, ge=1.0, le=20000.0)
+    modulation_frequency_mhz: float | None = Field(default=None, ge=1.0, le=24.0)
+    frame_rate_hz: float | None = Field(default=None, ge=1.0, le=60.0)
     auto_exposure: bool | None = None

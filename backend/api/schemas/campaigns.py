@@ -34,12 +34,12 @@ class Requirements(StrictBody):
     """Accuracy requirements per axis (default: the paper's, §6.4): a set-point passes an
     axis when the largest |error| after singular-point removal is within it."""
 
-    x_mm: float = Field(6.0, gt=0, le=1e5)
-    y_mm: float = Field(6.0, gt=0, le=1e5)
-    z_mm: float = Field(28.3, gt=0, le=1e5)
-    pitch_deg: float = Field(0.15, gt=0, le=180)
-    yaw_deg: float = Field(0.15, gt=0, le=180)
-    roll_deg: float = Field(0.15, gt=0, le=180)
+    x_mm: float = Field(default=6.0, gt=0, le=1e5)
+    y_mm: float = Field(default=6.0, gt=0, le=1e5)
+    z_mm: float = Field(default=28.3, gt=0, le=1e5)
+    pitch_deg: float = Field(default=0.15, gt=0, le=180)
+    yaw_deg: float = Field(default=0.15, gt=0, le=180)
+    roll_deg: float = Field(default=0.15, gt=0, le=180)
 
 
 AxisValues = Annotated[list[AngleDeg], Field(min_length=1, max_length=200)]
@@ -84,7 +84,7 @@ class AttitudeStepsGenerator(StrictBody):
 class CalibrationGenerator(StrictBody):
     kind: Literal["calibration"]
     rails_mm: Annotated[list[RailMm], Field(min_length=2, max_length=20)]
-    amplitude_deg: float = Field(8.0, gt=0, le=45)
+    amplitude_deg: float = Field(default=8.0, gt=0, le=45)
 
 
 class ProfileGenerator(StrictBody):
@@ -98,7 +98,7 @@ class ProfileGenerator(StrictBody):
 
     kind: Literal["profile"]
     profile: ProfileRequest
-    rest_s: float = Field(2.0, ge=0.5, le=600.0, description="rest before and after, s")
+    rest_s: float = Field(default=2.0, ge=0.5, le=600.0, description="rest before and after, s")
     yaw_deg: AxisValues | None = None
     pitch_deg: AxisValues | None = None
     roll_deg: AxisValues | None = None
@@ -141,10 +141,10 @@ class CampaignCreate(StrictBody):
     )
 
     name: str = Field(min_length=1, max_length=200, pattern=r"^[^\x00-\x1f]+$")
-    catalog: str = Field("paper-target", min_length=1, max_length=128)
-    frames_per_point: int = Field(30, ge=1, le=MAX_FRAMES_PER_POINT)
-    settle_s: float = Field(1.0, ge=0.0, le=3600.0)
-    lock_timeout_s: float = Field(5.0, gt=0.0, le=3600.0)
+    catalog: str = Field(default="paper-target", min_length=1, max_length=128)
+    frames_per_point: int = Field(default=30, ge=1, le=MAX_FRAMES_PER_POINT)
+    settle_s: float = Field(default=1.0, ge=0.0, le=3600.0)
+    lock_timeout_s: float = Field(default=5.0, gt=0.0, le=3600.0)
     setpoints: (
         Annotated[list[SetPointModel], Field(min_length=1, max_length=MAX_SETPOINTS)] | None
     ) = None
@@ -152,11 +152,11 @@ class CampaignCreate(StrictBody):
     requirements: Requirements = Field(default_factory=Requirements)
     camera: CameraSettingsUpdate | None = None
     record_raw: bool = Field(
-        False,
+        default=False,
         description="keep every measured frame pair in an HDF5 recording "
         "(GET /api/campaigns/{id}/recording.h5), so the campaign can be re-processed",
     )
-    notes: str = Field("", max_length=4000)
+    notes: str = Field(default="", max_length=4000)
 
 
 def _iso_text(v: object) -> object:
@@ -172,7 +172,9 @@ class CampaignStart(StrictBody):
     While another campaign owns the motion system, starting now is refused (409) unless
     ``queue`` is true: then this one runs when the other finishes."""
 
-    at: Annotated[AwareDatetime, BeforeValidator(_iso_text)] | None = Field(None, strict=False)
+    at: Annotated[AwareDatetime, BeforeValidator(_iso_text)] | None = Field(
+        default=None, strict=False
+    )
     queue: bool = False
 
 
@@ -196,7 +198,7 @@ class SetPointPublic(BaseModel):
     roll_deg: float | None
     rail_mm: float | None
     profile: dict | None = Field(
-        None,
+        default=None,
         description="a dynamic set-point's motion profile (axis, kind, its fields, "
         "rest_s), null at a static one",
     )
@@ -265,7 +267,7 @@ class MeasurementPublic(BaseModel):
     lab_truth: dict[str, float] | None = Field(description="encoders + nominal geometry")
     encoders: dict[str, float] | None
     in_motion: bool | None = Field(
-        None,
+        default=None,
         description="taken while the set-point's motion profile ran (null at a static set-point)",
     )
 

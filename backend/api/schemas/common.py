@@ -36,12 +36,12 @@ class DeviceStatePublic(BaseModel):
     state: Literal["starting", "ok", "degraded", "stopped", "absent"]
     last_error: str | None = None
     error_count: int = 0
-    model: str | None = Field(None, description="device model as the device reports it")
-    firmware: str | None = Field(None, description="firmware or software version")
+    model: str | None = Field(default=None, description="device model as the device reports it")
+    firmware: str | None = Field(default=None, description="firmware or software version")
     link: Literal["up", "down"] | None = Field(
-        None, description="connection to the device (real devices and their emulators)"
+        default=None, description="connection to the device (real devices and their emulators)"
     )
-    address: str | None = Field(None, description="where the device is reached")
+    address: str | None = Field(default=None, description="where the device is reached")
 
 
 class PipelineStatePublic(BaseModel):

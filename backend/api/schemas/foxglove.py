@@ -9,12 +9,12 @@ class FoxglovePublic(BaseModel):
     """The live Foxglove WebSocket server (``foxglove-sdk``) run by this process."""
 
     running: bool
-    url: str | None = Field(None, description="ws:// address for the Foxglove app")
+    url: str | None = Field(default=None, description="ws:// address for the Foxglove app")
     port: int | None = None
-    reason: str = Field("", description="why it does not run (empty when it does)")
-    published: int = Field(0, description="frames published to subscribed clients")
+    reason: str = Field(default="", description="why it does not run (empty when it does)")
+    published: int = Field(default=0, description="frames published to subscribed clients")
     dropped: int = Field(
-        0,
+        default=0,
         description="frames skipped because the publisher was still busy with one "
         "(the camera loop never waits for it)",
     )

@@ -11,10 +11,10 @@ from backend.api.schemas.common import StrictBody
 
 class LiveOptions(StrictBody):
     images: list[Literal["gray", "distance"]] = Field(default_factory=list, max_length=2)
-    image_every: int = Field(5, ge=1, le=1000)
-    image_step: int = Field(2, ge=1, le=8)
+    image_every: int = Field(default=5, ge=1, le=1000)
+    image_step: int = Field(default=2, ge=1, le=8)
     raw: bool = False
-    raw_credit: int = Field(2, ge=0, le=100)
+    raw_credit: int = Field(default=2, ge=0, le=100)
     points: bool = False
 
     @field_validator("images")

@@ -18,17 +18,20 @@ class AxisPublic(BaseModel):
     max_pos: float
     max_rate_per_s: float
     max_accel_per_s2: float | None = Field(
-        None,
+        default=None,
         description="acceleration limit; null when the motion system does not report "
         "one (then it runs no profiles on that axis)",
     )
+
+
+ProfileKind = Literal["sine", "ramp"]
 
 
 class ProfilePublic(BaseModel):
     """The motion profile running now (POST /api/motion/profile)."""
 
     axis: str
-    kind: Literal["sine", "ramp"]
+    kind: ProfileKind
     elapsed_s: float
     remaining_s: float
     duration_s: float = Field(description="the whole profile, fades and ramps included")
@@ -38,7 +41,7 @@ class MotionPublic(DeviceStatePublic):
     axes: list[AxisPublic] = []
     positions: dict[str, float] = Field(default_factory=dict, description="encoders, deg / mm")
     time_s: float | None = Field(
-        None,
+        default=None,
         description="when the encoders were read, s, on the clock of the camera's "
         "frames where the motion system shares it (the simulated lab), else the server's "
         "monotonic clock",
@@ -47,19 +50,21 @@ class MotionPublic(DeviceStatePublic):
     busy: bool = False
     settled: bool = True
     stopped: bool = False
-    profile: ProfilePublic | None = Field(None, description="the profile running, if any")
+    profile: ProfilePublic | None = Field(default=None, description="the profile running, if any")
     owner_campaign_id: int | None = Field(
-        None,
+        default=None,
         description="the campaign that owns the motion system while it runs (manual "
         "moves and jogs are refused with 409 then); null when it is free",
     )
     owner_campaign_name: str | None = None
     stop_latched: bool = Field(
-        False,
+        default=False,
         description="a person's STOP holds the motion system: every move, jog, profile and "
         "campaign is refused until POST /api/motion/release (or a campaign's resume)",
     )
-    stop_latched_at: str | None = Field(None, description="when that STOP was pressed (UTC)")
+    stop_latched_at: str | None = Field(
+        default=None, description="when that STOP was pressed (UTC)"
+    )
 
 
 class AxisBody(StrictBody):
@@ -176,7 +181,7 @@ class SineProfileRequest(StrictBody):
     kind: Literal["sine"]
     amplitude_deg: float = Field(gt=0, le=180.0, description="either side of the start, deg")
     period_s: float = Field(ge=0.1, le=PROFILE_MAX_S)
-    cycles: JsonInt = Field(1, ge=1, le=1000, description="periods at full amplitude")
+    cycles: JsonInt = Field(default=1, ge=1, le=1000, description="periods at full amplitude")
 
 
 class RampProfileRequest(StrictBody):
@@ -194,7 +199,7 @@ class RampProfileRequest(StrictBody):
     )
     hold_s: float = Field(ge=0.0, le=PROFILE_MAX_S, description="time at the constant rate")
     accel_deg_s2: Annotated[float, Field(gt=0, le=10_000.0)] | SkipJsonSchema[None] = Field(
-        None,
+        default=None,
         description="default: the axis' acceleration limit (leave it out; null is not "
         "an acceleration)",
     )

@@ -17,9 +17,9 @@ class MatchedPublic(BaseModel):
     residual_mm: float
     area_px: int
     centroid_sigma_px: float | None = Field(
-        None, description="predicted 1-sigma of the centroid per image axis"
+        default=None, description="predicted 1-sigma of the centroid per image axis"
     )
-    range_sigma_mm: float | None = Field(None, description="predicted 1-sigma of the range")
+    range_sigma_mm: float | None = Field(default=None, description="predicted 1-sigma of the range")
 
 
 class BlobPublic(BaseModel):
@@ -30,13 +30,17 @@ class BlobPublic(BaseModel):
     )
 
 
+RejectReason = Literal["border", "dim", "size", "oversize", "nlog", "shape", "penalty", "rank"]
+"""The blob criteria's gates (``tofpose.stages.extraction.extraction.REJECT_REASONS``)."""
+
+
 class RejectedBlobPublic(BaseModel):
     """A bright component of the active pixel set that is not a candidate reflector."""
 
     u_px: float = Field(description="centre of its bounding box")
     v_px: float
     diameter_px: float = Field(description="equivalent diameter of its area")
-    reason: Literal["border", "dim", "size", "oversize", "nlog", "shape", "penalty", "rank"]
+    reason: RejectReason
     reason_text: str = Field(description="the gate that refused it, in words")
 
 
@@ -51,9 +55,9 @@ class TruthPublic(BaseModel):
     yaw_deg: float
     roll_deg: float
     position_error_mm: float | None = None
-    attitude_error_deg: float | None = Field(None, description="geodesic angle")
+    attitude_error_deg: float | None = Field(default=None, description="geodesic angle")
     reference: str = Field(
-        "nominal lab geometry (uncalibrated)",
+        default="nominal lab geometry (uncalibrated)",
         description="which reference: the nominal lab geometry, or a calibration "
         "(PUT /api/reference)",
     )
@@ -78,9 +82,9 @@ class PosePublic(BaseModel):
     yaw_deg: float | None = None
     roll_deg: float | None = None
     quaternion_wxyz: list[float] | None = None
-    position_sigma_mm: list[float] | None = Field(None, description="1-sigma, x y z")
+    position_sigma_mm: list[float] | None = Field(default=None, description="1-sigma, x y z")
     attitude_sigma_deg: list[float] | None = Field(
-        None,
+        default=None,
         description="1-sigma of pitch, yaw and roll (deg), propagated from the rotation-"
         "vector covariance through the Euler angles' derivative (large near gimbal lock)",
     )
@@ -92,12 +96,12 @@ class PosePublic(BaseModel):
         default_factory=list, description="components refused by a gate (at most 50)"
     )
     active_threshold_counts: float | None = Field(
-        None,
+        default=None,
         description="I_t as applied: the active pixel set is the pixels with gray >= this",
     )
     residual_mm: float | None
     mode: Literal["acquisition", "tracking"] = Field(
-        "acquisition",
+        default="acquisition",
         description="acquisition: the full pass; tracking: windows around the reflectors "
         "predicted from the last pose",
     )
@@ -108,7 +112,7 @@ class PosePublic(BaseModel):
     truth: TruthPublic | None = None
     filter_status: Literal["initialised", "updated", "rejected", "reset", "predicted"] | None = (
         Field(
-            None,
+            default=None,
             description="what the relative-state filter did with this frame: started from "
             "its pose (initialised), fused it (updated), refused it as inconsistent with the "
             "motion so far (rejected), restarted after rejections that agree (reset), or "
@@ -116,15 +120,17 @@ class PosePublic(BaseModel):
         )
     )
     angular_rate_deg_s: list[float] | None = Field(
-        None, description="the target's angular rate, camera frame (x y z), deg/s"
+        default=None, description="the target's angular rate, camera frame (x y z), deg/s"
     )
     angular_rate_target_deg_s: list[float] | None = Field(
-        None, description="the same rate in the target frame (x y z), deg/s"
+        default=None, description="the same rate in the target frame (x y z), deg/s"
     )
     angular_rate_sigma_deg_s: list[float] | None = Field(
-        None, description="1-sigma of angular_rate_deg_s"
+        default=None, description="1-sigma of angular_rate_deg_s"
     )
     velocity_mm_s: list[float] | None = Field(
-        None, description="the target origin's velocity, camera frame (x y z), mm/s"
+        default=None, description="the target origin's velocity, camera frame (x y z), mm/s"
     )
-    velocity_sigma_mm_s: list[float] | None = Field(None, description="1-sigma of velocity_mm_s")
+    velocity_sigma_mm_s: list[float] | None = Field(
+        default=None, description="1-sigma of velocity_mm_s"
+    )

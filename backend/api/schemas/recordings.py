@@ -20,7 +20,7 @@ class RecordingCreate(StrictBody):
         description="what it is for (need not be unique)",
     )
     duration_s: float | None = Field(
-        None,
+        default=None,
         gt=0,
         le=MAX_DURATION_S,
         description="stop after this many seconds; null (the default): until stopped, "

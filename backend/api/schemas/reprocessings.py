@@ -13,14 +13,14 @@ class ReprocessCreate(StrictBody):
     """Re-process a campaign's recording with another camera calibration."""
 
     camera: dict[str, Any] | None = Field(
-        None,
+        default=None,
         description="a camera JSON (tofpose.core.camera.CameraModel, with the "
         "range_correction "
         "and covariance_scale tofpose calibrate-range / calibrate-covariance add); omitted: "
         "the recording's own camera",
     )
-    tracking: bool = Field(False, description="the pipeline's tracking mode")
-    filter: bool = Field(False, description="add the relative-state filter's columns")
+    tracking: bool = Field(default=False, description="the pipeline's tracking mode")
+    filter: bool = Field(default=False, description="add the relative-state filter's columns")
 
 
 class ReprocessComparison(BaseModel):

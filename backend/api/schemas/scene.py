@@ -11,10 +11,10 @@ class ScenePublic(BaseModel):
     """The viser 3-D scene served by this process on a port of its own."""
 
     running: bool
-    port: int | None = Field(None, description="the scene's port on this server's host")
+    port: int | None = Field(default=None, description="the scene's port on this server's host")
     paused: bool = False
-    reason: str = Field("", description="why the scene does not run (empty when it does)")
-    updates: int = Field(0, description="scene updates since start")
+    reason: str = Field(default="", description="why the scene does not run (empty when it does)")
+    updates: int = Field(default=0, description="scene updates since start")
     last_frame_index: int | None = None
 
 

@@ -26,35 +26,35 @@ class StudyGrid(StrictBody):
     paper-target, default."""
 
     range_m: list[RangeM] | None = Field(
-        None, min_length=1, max_length=64, description="target distance (m)"
+        default=None, min_length=1, max_length=64, description="target distance (m)"
     )
     attitude_deg: list[AttitudeDeg] | None = Field(
-        None,
+        default=None,
         min_length=1,
         max_length=64,
         description="attitude spread: pitch, yaw, roll each within +- this (deg)",
     )
     offset_fraction: list[OffsetFraction] | None = Field(
-        None,
+        default=None,
         min_length=1,
         max_length=64,
         description="target centre up to this fraction of the half field of view off axis",
     )
-    ambient_lux: list[AmbientLux] | None = Field(None, min_length=1, max_length=64)
+    ambient_lux: list[AmbientLux] | None = Field(default=None, min_length=1, max_length=64)
     physics: list[PhysicsFamily] | None = Field(
-        None, min_length=1, description="domain-randomisation families (docs/simulator.md)"
+        default=None, min_length=1, description="domain-randomisation families (docs/simulator.md)"
     )
-    catalog: list[str] | None = Field(None, min_length=1, max_length=16)
-    preset: list[Literal["default", "paper"]] | None = Field(None, min_length=1)
+    catalog: list[str] | None = Field(default=None, min_length=1, max_length=16)
+    preset: list[Literal["default", "paper"]] | None = Field(default=None, min_length=1)
 
 
 class StudyCreate(StrictBody):
     """A study spec (``tofpose study --example`` prints one)."""
 
-    name: str = Field("study", min_length=1, max_length=200, pattern=r"^[^\x00-\x1f]+$")
-    seed: JsonInt = Field(0, ge=0, le=2**63 - 1)
-    frames_per_cell: JsonInt = Field(100, ge=1, le=1_000_000)
-    chunk_frames: JsonInt | None = Field(None, ge=1, le=100_000)
+    name: str = Field(default="study", min_length=1, max_length=200, pattern=r"^[^\x00-\x1f]+$")
+    seed: JsonInt = Field(default=0, ge=0, le=2**63 - 1)
+    frames_per_cell: JsonInt = Field(default=100, ge=1, le=1_000_000)
+    chunk_frames: JsonInt | None = Field(default=None, ge=1, le=100_000)
     grid: StudyGrid
 
 
@@ -67,11 +67,11 @@ class StudyPublic(BaseModel):
     frames_done: int
     chunks: int
     chunks_done: int
-    eta_s: float | None = Field(None, description="seconds to go at the rate so far")
+    eta_s: float | None = Field(default=None, description="seconds to go at the rate so far")
     error: str | None = None
     started: str | None = None
     finished: str | None = None
-    cluster: str | None = Field(None, description="the Dask cluster it ran on")
+    cluster: str | None = Field(default=None, description="the Dask cluster it ran on")
     reports: list[Literal["html", "pdf", "json"]] = Field(
         description="report files available at /api/studies/{id}/report.{html,pdf,json}"
     )

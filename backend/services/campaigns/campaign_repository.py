@@ -12,11 +12,12 @@ committed measurements (docs/campaigns.md, "What counts as a measurement").
 
 from __future__ import annotations
 
+import builtins
 from collections.abc import Iterable
 from dataclasses import dataclass, fields
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from sqlalchemy import func, select
@@ -53,7 +54,7 @@ class SetPointView:
     roll_deg: float | None
     rail_mm: float | None
     profile: dict | None
-    status: str
+    status: Literal["pending", "done"]
 
     @property
     def axes(self) -> dict[str, float]:
@@ -179,8 +180,8 @@ class CampaignRepository:
         self.sessions = sessions
 
     @staticmethod
-    def _row(s: Session, campaign_id: int) -> CampaignRow:
-        row = s.get(CampaignRow, campaign_id)
+    def _row(s: Session, campaign_id: int, *, for_update: bool = False) -> CampaignRow:
+        row = s.get(CampaignRow, campaign_id, with_for_update=True if for_update else None)
         if row is None:
             raise CampaignNotFoundError(f"no campaign with id {campaign_id}")
         return row
@@ -207,7 +208,7 @@ class CampaignRepository:
 
     def measurements(
         self, campaign_id: int, offset: int, limit: int
-    ) -> tuple[int, list[tuple[MeasurementRow, int]]]:
+    ) -> tuple[int, builtins.list[tuple[MeasurementRow, int]]]:
         """(total, a page of (measurement, set-point index)) in set-point then frame order;
         ``CampaignNotFoundError`` for an unknown campaign."""
         with self.sessions() as s:
@@ -217,7 +218,7 @@ class CampaignRepository:
                 .join(SetPointRow, MeasurementRow.setpoint_id == SetPointRow.id)
                 .where(SetPointRow.campaign_id == campaign_id)
             )
-            total = s.scalar(select(func.count()).select_from(base.subquery()))
+            total = s.scalar(select(func.count()).select_from(base.subquery())) or 0
             rows = s.execute(
                 base.order_by(SetPointRow.index, MeasurementRow.id).offset(offset).limit(limit)
             ).all()
@@ -226,12 +227,13 @@ class CampaignRepository:
     def committed_frames(self, campaign_id: int) -> int:
         """Measurements stored for the campaign (= frames its recording should hold)."""
         with self.sessions() as s:
-            return s.scalar(
+            count = s.scalar(
                 select(func.count())
                 .select_from(MeasurementRow)
                 .join(SetPointRow, MeasurementRow.setpoint_id == SetPointRow.id)
                 .where(SetPointRow.campaign_id == campaign_id)
             )
+            return count or 0
 
     def next_due(self, now: datetime) -> int | None:
         """The queued campaign to run next: unscheduled ones first (by id), then those
@@ -283,7 +285,7 @@ class CampaignRepository:
         read and written), so a campaign a person paused or cancelled after the scheduler
         picked it is never taken back to running. Returns whether the state changed."""
         with self.sessions() as s, s.begin():
-            row = s.get(CampaignRow, campaign_id, with_for_update=True)
+            row = self._row(s, campaign_id, for_update=True)
             if status not in RUNNER_TRANSITIONS.get(CampaignState(row.status), frozenset()):
                 return False
             row.status, row.status_reason = status.value, reason
@@ -335,7 +337,7 @@ class CampaignRepository:
                 if first_recording_index is not None:
                     m.recording_index = first_recording_index + k
                 s.add(m)
-            sp = s.get(SetPointRow, setpoint_id)
+            sp = s.get_one(SetPointRow, setpoint_id)
             sp.status, sp.completed_at = "done", utcnow()
 
 
@@ -355,7 +357,7 @@ def measurement_row(setpoint_id: int, sample: LiveSample) -> MeasurementRow:
         residual_mm=_finite(r.residual_mm),
         encoders={k: float(v) for k, v in f.meta.get("encoders", {}).items()} or None,
     )
-    if r.ok and r.R is not None:
+    if r.ok and r.R is not None and r.t_mm is not None and r.quaternion_wxyz is not None:
         row.x_mm, row.y_mm, row.z_mm = (float(v) for v in r.t_mm)
         row.pitch_deg, row.yaw_deg, row.roll_deg = (float(v) for v in facing_euler_deg(r.R))
         row.qw, row.qx, row.qy, row.qz = (float(v) for v in r.quaternion_wxyz)

@@ -405,8 +405,9 @@ class CampaignService:
     def _store(self, setpoint_id: int, record: SetPointRecord, first_index: int | None) -> None:
         self.repository.store_setpoint(setpoint_id, record.frames, first_index)
         with self._lock:
-            self._progress.n_done += 1
-            self._progress.done_this_run += 1
+            if self._progress is not None:
+                self._progress.n_done += 1
+                self._progress.done_this_run += 1
         self._bump()
 
     def _apply_camera(self, wanted: dict) -> None:

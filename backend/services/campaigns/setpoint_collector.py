@@ -268,17 +268,17 @@ class SetPointCollector:
         running = False
         try:
             out: list[CollectedFrame] = []
-            t0 = t_end = deadline = None
+            ran: tuple[float, float, float] | None = None  # (t0, t_end, deadline) once started
             for sample, t, t_ready in self._at_rest(index, settle_s):
-                if t0 is None and t >= t_ready + rest_s:
+                if ran is None and t >= t_ready + rest_s:
                     running = True  # from here on, any way out stops the table first
                     t0, t_end = self._start_profile(index, axis, spec)
-                    deadline = time.monotonic() + (t_end - t0) + self.timing.move_timeout_s
-                in_motion = t0 is not None and t0 <= t <= t_end
+                    ran = t0, t_end, time.monotonic() + (t_end - t0) + self.timing.move_timeout_s
+                in_motion = ran is not None and ran[0] <= t <= ran[1]
                 out.append(CollectedFrame(self._referenced(sample, trace), in_motion))
                 self.on_frame(out[-1].sample, len(out))
-                if t0 is not None and self._profile_over(
-                    index, axis, trace, t, t_end + rest_s, deadline
+                if ran is not None and self._profile_over(
+                    index, axis, trace, t, ran[1] + rest_s, ran[2]
                 ):
                     running = False
                     return SetPointRecord(index, dict(axes), out)
@@ -359,6 +359,10 @@ class SetPointCollector:
             st = motion.status()
         except Exception as exc:
             raise _paused(f"set-point {index}: the profile failed: {exc}") from exc
+        if st.time_s is None:
+            raise _paused(
+                f"set-point {index}: the motion system does not say when it read its encoders"
+            )
         elapsed = st.profile.elapsed_s if st.profile is not None else 0.0
         t0 = float(st.time_s) - elapsed
         return t0, t0 + profile.duration_s

@@ -192,7 +192,7 @@ class ReprocessService(BatchJobService):
             self.status(jid)
         where, _ = FILES[name]
         d = self._dir(jid)
-        stem = f"{Path(self._read(jid)['recording']).stem}.csv"
+        stem = f"{Path(self._job(jid)['recording']).stem}.csv"
         p = d / where / stem if where in ("run", "baseline") else d / where
         return p if p.exists() else None
 
@@ -243,14 +243,14 @@ class ReprocessService(BatchJobService):
             self._finish(jid, "failed", f"{type(exc).__name__}: {exc}")
             return
         rec = summary["recordings"][Path(job["recording"]).stem]
-        job = self._read(jid)
+        job = self._job(jid)
         job.update(
             status="complete", finished=_now(), frames=run["recordings"][0]["frames"], summary=rec
         )
         _write_json(d / "job.json", job)
 
     def _finish(self, jid: int, status: str, error: str | None) -> None:
-        job = self._read(jid)
+        job = self._job(jid)
         job.update(status=status, finished=_now(), error=error)
         if status == "cancelled":
             for sub in ("run", "baseline"):
@@ -262,3 +262,10 @@ class ReprocessService(BatchJobService):
             return json.loads((self._dir(jid) / "job.json").read_text())
         except (OSError, ValueError):
             return None
+
+    def _job(self, jid: int) -> dict:
+        """Job ``jid``'s ``job.json``; ``UnknownReprocessingError`` when it cannot be read."""
+        job = self._read(jid)
+        if job is None:
+            raise UnknownReprocessingError(f"no re-processing with id {jid}")
+        return job

@@ -51,6 +51,18 @@ from tofpose.stages.extraction.extraction import FrameError
 log = logging.getLogger(__name__)
 
 
+Implementation = Literal["reference", "compiled"]
+"""The pipeline implementations the live loop runs (``tofpose.arithmetic.IMPLEMENTATIONS``)."""
+
+
+def _implementation(pipeline: PosePipeline | None) -> Implementation | None:
+    """The implementation ``pipeline`` runs (``PosePipeline`` names it as text), None
+    without a pipeline."""
+    if pipeline is None:
+        return None
+    return "reference" if pipeline.implementation == "reference" else "compiled"
+
+
 @dataclass
 class LiveSample:
     """One processed frame: the frame pair, its result and when things happened.
@@ -74,7 +86,7 @@ class LiveSample:
     captured_unix_s: float
     processed_unix_s: float
     measured: bool = True
-    implementation: Literal["reference", "compiled"] | None = "compiled"
+    implementation: Implementation | None = "compiled"
     reference: LiveReference = field(default_factory=LiveReference)
     state: RelativeState | None = None
     cache: dict[str, Any] = field(default_factory=dict)
@@ -191,7 +203,7 @@ class AcquisitionService:
         return self._pipeline.catalog
 
     @property
-    def implementation(self) -> Literal["reference", "compiled"] | None:
+    def implementation(self) -> Implementation | None:
         """The pipeline implementation that measured the latest frame; before a frame
         was measured, the one that will measure the next (None: none can yet)."""
         latest = self._latest
@@ -199,7 +211,7 @@ class AcquisitionService:
             return latest.implementation
         return self._live_implementation()
 
-    def _live_implementation(self) -> Literal["reference", "compiled"] | None:
+    def _live_implementation(self) -> Implementation | None:
         """The implementation for the next frame: "compiled" once the kernels are ready
         (or when nothing warms them up: ``kernels`` None), "reference" while they compile
         and after a failed warm-up (rather than compile them in the loop's thread, which
@@ -313,7 +325,7 @@ class AcquisitionService:
                 captured,
                 time.time(),
                 measured=measured,
-                implementation=pipeline.implementation if pipeline is not None else None,
+                implementation=_implementation(pipeline),
                 reference=self.reference,
                 state=state,
             )

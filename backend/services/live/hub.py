@@ -34,7 +34,7 @@ class Subscription:
             self._items.append(item)
             self.offered += 1
             self._cond.notify()
-        if self._loop is not None:
+        if self._loop is not None and self._event is not None:
             try:
                 self._loop.call_soon_threadsafe(self._event.set)
             except RuntimeError:  # the subscriber's loop is closed

@@ -48,8 +48,8 @@ class LiveReference:
         """``T_camera_target`` of the reference for this frame, or None when the frame has
         none (nominal: the frame's ``T_camera_target_lab``, never its exact pose; for a
         calibration, None without an encoder reading of every axis)."""
-        if self.calibration_id is None:
-            return frame.T_camera_target_lab
+        if self.calibration_id is None or self.mount is None or self.placement is None:
+            return frame.T_camera_target_lab  # nominal (a calibration has both transforms)
         encoders = frame.meta.get("encoders") or {}
         if not set(AXES) <= set(encoders):
             return None

@@ -68,7 +68,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
 import numpy as np
@@ -88,6 +88,9 @@ from backend.services.live.scene_model import (
 from backend.settings import LOOPBACK_HOST_HEADERS
 from tofpose.core.catalog import Catalog
 from tofpose.core.geometry import RigidTransform, quaternion_wxyz_from_rotation
+
+if TYPE_CHECKING:  # viser is imported when a scene starts (LiveScene)
+    from viser import FrameHandle, IcosphereHandle
 
 log = logging.getLogger("tofpose.scene")
 TRUTH_COLOUR = (70, 120, 230)
@@ -273,12 +276,14 @@ def _guarded_serve(access: SceneAccess) -> Iterator[list[Hook]]:
             **kwargs,
         )
 
+    # a patch while viser starts its server: websockets' ``serve`` is a class, for mypy not
+    # something to assign a function to
     with _SERVE_LOCK:
-        ws_server.serve = serve
+        ws_server.serve = serve  # type: ignore[misc, assignment]
         try:
             yield guarded
         finally:
-            ws_server.serve = original
+            ws_server.serve = original  # type: ignore[misc]
 
 
 class LiveScene:
@@ -341,7 +346,8 @@ class LiveScene:
         return bool(self._pause.value)
 
     def set_paused(self, paused: bool) -> None:
-        self._pause.value = paused
+        # viser's setter takes ``T | ndarray``, unlike its getter: mypy reads no setter
+        self._pause.value = paused  # type: ignore[misc]
 
     def close(self) -> None:
         self._stop.set()
@@ -386,9 +392,10 @@ class LiveScene:
         )
         self._pause = self.server.gui.add_checkbox("Pause scene", initial_value=False)
         self.status = self.server.gui.add_markdown("waiting for the first frame")
-        self.estimate = self.truth = None
-        self.estimate_reflectors: dict[int, object] = {}
-        self.truth_reflectors: dict[int, object] = {}
+        self.estimate: FrameHandle | None = None
+        self.truth: FrameHandle | None = None
+        self.estimate_reflectors: dict[int, IcosphereHandle] = {}
+        self.truth_reflectors: dict[int, IcosphereHandle] = {}
 
     def _build_target(self, catalog: Catalog) -> None:
         """(Re)build the two target models for the active catalog."""
@@ -440,6 +447,8 @@ class LiveScene:
         if catalog.name != self._catalog_name or self.estimate is None:
             self._build_target(catalog)
             self._catalog_name = catalog.name
+        estimate, truth = self.estimate, self.truth
+        assert estimate is not None and truth is not None  # _build_target made them
         res, frame = sample.result, sample.frame
         T_lab_cam = lab_camera_pose(frame.meta.get("encoders"))
         T_shown = _shown_truth(frame)  # the lab reference; the exact pose only without one
@@ -448,16 +457,20 @@ class LiveScene:
         with self.server.atomic():
             _place(self.turntable, T_lab_cam)
             _place(self.camera_node, T_lab_cam)
-            T_est = RigidTransform(res.R, res.t_mm) if res.ok else None
+            T_est = (
+                RigidTransform(res.R, res.t_mm)
+                if res.ok and res.R is not None and res.t_mm is not None
+                else None
+            )
             states = reflector_states(catalog, res, self._camera, T_est or T_shown)
             for r, state in zip(catalog.reflectors, states, strict=True):
                 self.estimate_reflectors[r.id].color = STATE_COLOURS[state]
-            self.estimate.visible = T_est is not None
+            estimate.visible = T_est is not None
             if T_est is not None:
-                _place(self.estimate, T_lab_cam.compose(T_est))
-            self.truth.visible = T_shown is not None
+                _place(estimate, T_lab_cam.compose(T_est))
+            truth.visible = T_shown is not None
             if T_shown is not None:
-                _place(self.truth, T_lab_cam.compose(T_shown))
+                _place(truth, T_lab_cam.compose(T_shown))
             if sample.has_images:
                 cloud = distance_cloud(
                     self._camera, frame.gray, frame.distance_mm, self._max_cloud_points

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
@@ -133,12 +134,12 @@ def analyse(
     by_sp: dict[int, list[dict]] = {}
     for r in rows:
         by_sp.setdefault(int(r["setpoint_index"]), []).append(r)
-    per_sp = []
+    per_sp: list[dict[str, Any]] = []
     pooled: dict[str, list[np.ndarray]] = {a: [] for a in AXES}
     for index in sorted(by_sp):
         sp_rows = by_sp[index]
         ok = [r for r in sp_rows if _truthy(r["ok"])]
-        entry = {
+        entry: dict[str, Any] = {
             "setpoint_index": index,
             "n_frames": len(sp_rows),
             "n_ok": len(ok),

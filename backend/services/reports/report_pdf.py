@@ -90,8 +90,11 @@ class Text:
         n = int((height_in - self.space_after_in) / self._line_in())
         if n < MIN_SPLIT_ROWS or len(lines) - n < MIN_SPLIT_ROWS:
             return None
-        plain = {"fontsize_pt": self.fontsize_pt, "weight": self.weight, "colour": self.colour}
-        return Text(lines[:n], **plain, space_after_in=0.0), Text(lines[n:], **plain)
+        size, weight, colour = self.fontsize_pt, self.weight, self.colour
+        return (
+            Text(lines[:n], size, weight, space_after_in=0.0, colour=colour),
+            Text(lines[n:], size, weight, colour=colour),
+        )
 
     def draw(self, fig: plt.Figure, rect: Rect) -> None:
         x, y, w, h = rect
@@ -210,7 +213,7 @@ class TableBlock:
                 ax.add_patch(Rectangle((0.0, y0), w, rh, color="#f5f5f5", lw=0))
             for c, v in enumerate(row):
                 state = self.table.status.get((r, c))
-                colour = {True: PASS_COLOUR, False: FAIL_COLOUR}.get(state, "#222222")
+                colour = "#222222" if state is None else PASS_COLOUR if state else FAIL_COLOUR
                 weight = "bold" if state is False else "normal"
                 left = c == 0 or not _numeric(v)
                 xt = lefts[c] + (0.05 if left else widths[c] - 0.05)
@@ -265,7 +268,7 @@ class PlotBlock:
 class Row:
     """Blocks side by side (fractions of the width); a plot in it takes the row's height."""
 
-    blocks: list
+    blocks: list[Block]
     fractions: list[float]
     gap_in: float = 0.3
     keep_with_next: bool = False
@@ -289,12 +292,18 @@ class Row:
             x += bw + self.gap_in
 
 
+Block = Text | TableBlock | PlotBlock | Row
+"""What goes down a page."""
+
+
 # -- pagination ------------------------------------------------------------------------------
 def heading(text: str, size_pt: float = 12.0) -> Text:
     return Text([text], size_pt, "bold", space_after_in=0.03, keep_with_next=True)
 
 
-def paginate(blocks: list, width_in: float, height_in: float) -> list[list[tuple[object, float]]]:
+def paginate(
+    blocks: list[Block], width_in: float, height_in: float
+) -> list[list[tuple[Block, float]]]:
     """Pages of (block, height in): in order, splitting what does not fit, headings kept
     with what follows, a plot that does not fit swapped for a later one that does (like
     a float), each page's spare height shared out among its plots."""
@@ -372,7 +381,7 @@ def _stretch(page: list[list], height_in: float) -> None:
 
 
 # -- the report ------------------------------------------------------------------------------
-def blocks(report: dict, rows: list[dict]) -> list:
+def blocks(report: dict, rows: list[dict]) -> list[Block]:
     """The report's content in reading order: summary, verdict, findings, statistics,
     per-set-point table, plots."""
     note = "Full per-set-point statistics and the measured-value tables are in the HTML and JSON."
@@ -382,7 +391,7 @@ def blocks(report: dict, rows: list[dict]) -> list:
     verdict_row = Row(
         [TableBlock(rc.verdict_table(report), 8.0), PlotBlock(share_plot(report), 0.0)], [0.6, 0.4]
     )
-    out = [
+    out: list[Block] = [
         Text([rc.title(report)], 17.0, "bold", space_after_in=0.1),
         Text([rc.summary(report)]),
         heading("Verdict"),
@@ -404,7 +413,7 @@ def blocks(report: dict, rows: list[dict]) -> list:
             *(TableBlock(t, 7.0) for t in dynamic_tables(report)),
             *(PlotBlock(p) for p in dynamic_plots(report)),
         ]
-    plots = [PlotBlock(p) for p in evidence_plots(report, rows)]
+    plots: list[Block] = [PlotBlock(p) for p in evidence_plots(report, rows)]
     return out + (plots or [Text([NO_PLOTS])])
 
 

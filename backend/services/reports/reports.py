@@ -154,6 +154,8 @@ def build(
     if calibration is not None:
         reference = "calibrated"
     row = session.get(CampaignRow, campaign_id)
+    if row is None:  # the routes and the command look it up first
+        raise LookupError(f"no campaign with id {campaign_id}")
     rows = campaign_rows(session, campaign_id, calibration)
     prefix = REFERENCE_PREFIX[reference]
     if rows and all(r[prefix + "x_mm"] is None for r in rows):
@@ -243,7 +245,7 @@ def _html_table(t: rc.Table, bars: dict[int, float] | None = None) -> str:
 
     def cell(r: int, c: int, v: str) -> str:
         state = t.status.get((r, c))
-        cls = {True: " class='pass'", False: " class='fail'"}.get(state, "")
+        cls = "" if state is None else " class='pass'" if state else " class='fail'"
         body = esc(v)
         if bars is not None and c == 3 and math.isfinite(bars.get(r, math.nan)):
             width = min(100.0, bars[r] * 100.0 / 1.5)  # the bar spans 0-150 %
