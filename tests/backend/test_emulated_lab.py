@@ -102,7 +102,10 @@ def test_rate_table_link_drop_degrades_motion_not_the_server(lab, client):
     world = lab.table.controller.world
     lab.table.close()
     m = client.get("/api/motion").json()
-    assert m["state"] == "degraded" and "no answer" in m["last_error"]
+    # the first read after the drop finds no answer; a read after that (another thread's)
+    # cannot reach the controller for a new connection
+    assert m["state"] == "degraded"
+    assert "no answer" in m["last_error"] or "cannot reach" in m["last_error"]
     assert client.get("/api/health").status_code == 200
     from backend.emulators.rate_table import RateTableEmulator
 
