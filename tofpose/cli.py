@@ -74,6 +74,12 @@ def _add_measurement_commands(sub) -> None:
         help="add the relative-state filter's angular rate and velocity with "
         "their 1-sigma (rate_*, vel_*, sigma_rate_*, sigma_vel_*)",
     )
+    p.add_argument(
+        "--pixel-fit",
+        action="store_true",
+        help="refine each pose on the markers' raw pixels (slow: 0.1-1 s a frame; "
+        "docs/algorithm.md, 'Pixel-level fit')",
+    )
     p = sub.add_parser(
         "calibrate-range",
         help="fit the camera's range correction from a recording of the known target",
@@ -259,6 +265,7 @@ def _run_library(args: argparse.Namespace) -> int:
             args.camera,
             tracking=args.tracking,
             filter_state=args.filter,
+            pixel_fit=args.pixel_fit,
         )
         print(f"{s['ok']}/{s['frames']} frames with a pose -> {args.out}")
     elif args.cmd == "export":

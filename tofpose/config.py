@@ -162,6 +162,31 @@ class TrackingConfig:
             raise ValueError(f"margin_px must be >= 1, got {self.margin_px}")
 
 
+@dataclass(frozen=True)
+class PixelFitConfig:
+    """The pixel-level pose fit after §5 (``tofpose.stages.pixelfit``): the pose refined
+    on the matched markers' raw gray and distance pixels, its covariance the model's
+    inverse Fisher information; the centroid pose stays when the fit falls back.
+
+    enabled : run it on every ok pose (off by default: in plain NumPy it costs 0.1-1 s a
+        frame, docs/results.md "Pixel-level fit against the bound").
+    fit_range_offset : also fit a range offset common to every marker (an uncalibrated
+        camera).
+    max_marker_rms_sigma : a marker whose pixels' residual RMS exceeds this many sigmas
+        (a glint, an occluded disc) makes the fit fall back.
+    """
+
+    enabled: bool = False
+    fit_range_offset: bool = False
+    max_marker_rms_sigma: float = 3.0
+
+    def __post_init__(self) -> None:
+        if not self.max_marker_rms_sigma > 0:
+            raise ValueError(
+                f"max_marker_rms_sigma must be positive, got {self.max_marker_rms_sigma}"
+            )
+
+
 Refinement = Literal["ml", "los", "none"]
 
 
@@ -311,6 +336,7 @@ class PipelineConfig(FitSettingsFields):
     persistence: PersistenceConfig = field(default_factory=PersistenceConfig)
     matching: MatchingConfig = field(default_factory=MatchingConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    pixel_fit: PixelFitConfig = field(default_factory=PixelFitConfig)
     ellipse_confirmation: bool = True
     matcher: Literal["annealing", "ransac"] = "annealing"
     triplet_fallback: bool = True

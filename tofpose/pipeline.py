@@ -14,7 +14,7 @@ from __future__ import annotations
 import hashlib
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -46,6 +46,7 @@ from tofpose.stages.matching.matching import (
     random_triplets,
 )
 from tofpose.stages.persistence.persistence import Persistence, PersistenceInfo, blob_lists
+from tofpose.stages.pixelfit.fit import PixelNoise, fit_pose_to_pixels
 from tofpose.stages.pose.solve import Measurements, PoseSolver, Rejected, Solution, ThresholdedFrame
 from tofpose.stages.tracking.tracking import (
     TrackState,
@@ -112,6 +113,9 @@ class PoseResult:
     R_svd, t_svd_mm : (3, 3), (3,) the weighted SVD pose (Eqs. 40-50) of the matched
         reflectors with the fit's weights, before refinement (``solve.Solution.T_svd``):
         the paper's §5.1 answer on the same measurements, to see what refinement did.
+    pixel_fit : "" when the pixel-level fit did not run (``PipelineConfig.pixel_fit``),
+        "ok" when ``R``, ``t_mm`` and ``covariance`` are its answer, otherwise why it fell
+        back to the centroid pose (which the result then carries).
     """
 
     ok: bool
@@ -131,6 +135,7 @@ class PoseResult:
     mode: Literal["acquisition", "tracking"] = "acquisition"
     R_svd: np.ndarray | None = None
     t_svd_mm: np.ndarray | None = None
+    pixel_fit: str = ""
 
     @property
     def n_matched(self) -> int:
@@ -289,8 +294,55 @@ class PosePipeline:
         """Estimate the pose from one (gray, distance) frame pair.
 
         Raises ``FrameError`` (a ValueError) for arrays of the wrong shape or dtype;
-        every other failure is an ``ok = False`` result with a reason.
+        every other failure is an ``ok = False`` result with a reason. With
+        ``config.pixel_fit.enabled`` an ok pose is refined on the matched markers' pixels
+        (``PoseResult.pixel_fit`` says how that went).
         """
+        result = self._process(gray, distance_mm, time_s)
+        if not (self.config.pixel_fit.enabled and result.ok):
+            return result
+        return self._refine_on_pixels(result, gray, distance_mm)
+
+    def _refine_on_pixels(
+        self, result: PoseResult, gray: np.ndarray, distance_mm: np.ndarray
+    ) -> PoseResult:
+        """The pixel-level fit (``stages.pixelfit``) from the ok ``result``'s pose and
+        matches: its pose and covariance when it holds, else ``result`` with the reason."""
+        assert result.R is not None and result.t_mm is not None  # an ok result has both
+        cfg = self.config.pixel_fit
+        t0 = time.perf_counter()
+        fit = fit_pose_to_pixels(
+            np.asarray(gray),
+            np.asarray(distance_mm),
+            self.camera,
+            self.catalog,
+            result.R,
+            result.t_mm,
+            [m.catalog_id for m in result.matched],
+            noise=PixelNoise(
+                modulation_frequency_hz=self.camera.modulation_frequency_hz,
+                full_scale_counts=self.camera.full_scale_counts,
+            ),
+            fit_range_offset=cfg.fit_range_offset,
+            max_marker_rms_sigma=cfg.max_marker_rms_sigma,
+        )
+        timings = {**result.timings_ms, "pixel fit": 1e3 * (time.perf_counter() - t0)}
+        if not fit.ok or fit.covariance is None:
+            return replace(result, pixel_fit=fit.reason or "no covariance", timings_ms=timings)
+        return replace(
+            result,
+            R=fit.R,
+            t_mm=fit.t_mm,
+            euler_deg=facing_euler_deg(fit.R),
+            quaternion_wxyz=quaternion_wxyz_from_rotation(fit.R),
+            covariance=fit.covariance,
+            pixel_fit="ok",
+            timings_ms=timings,
+        )
+
+    def _process(
+        self, gray: np.ndarray, distance_mm: np.ndarray, time_s: float | None
+    ) -> PoseResult:
         cfg = self.config
         timer = _Timer()
         g, d = check_frame(self.camera, gray, distance_mm)

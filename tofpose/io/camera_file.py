@@ -11,7 +11,7 @@ from pathlib import Path
 
 from tofpose.calibration.covariance import CovarianceScale
 from tofpose.calibration.range import RangeCorrection
-from tofpose.config import TrackingConfig
+from tofpose.config import PixelFitConfig, TrackingConfig
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import Catalog
 from tofpose.pipeline import PipelineConfig, PosePipeline
@@ -40,10 +40,17 @@ def read_text_file(path: str, what: str) -> str:
 
 
 def pipeline_for(
-    rec, rec_path: str, catalog_path: str | None, camera_path: str | None, tracking: bool
+    rec,
+    rec_path: str,
+    catalog_path: str | None,
+    camera_path: str | None,
+    tracking: bool,
+    *,
+    pixel_fit: bool = False,
 ) -> PosePipeline:
     """The pipeline ``estimate`` runs over an open recording: its camera and catalog, or
-    the ones given (a camera JSON with its range correction and covariance scale)."""
+    the ones given (a camera JSON with its range correction and covariance scale);
+    ``pixel_fit``: refine each pose on the markers' pixels (``PixelFitConfig``)."""
     camera, correction, scale = rec.camera, None, None
     if camera_path:
         camera, correction, scale = load_camera(read_text_file(camera_path, "camera"))
@@ -58,7 +65,9 @@ def pipeline_for(
             f"tofpose: camera {camera.width}x{camera.height} does not match the recording's "
             f"{rec.camera.width}x{rec.camera.height} frames"
         )
-    config = PipelineConfig(tracking=TrackingConfig(enabled=tracking))
+    config = PipelineConfig(
+        tracking=TrackingConfig(enabled=tracking), pixel_fit=PixelFitConfig(enabled=pixel_fit)
+    )
     return PosePipeline(
         camera, catalog, config, range_correction=correction, covariance_scale=scale
     )

@@ -140,13 +140,15 @@ def estimate(
     progress: bool = True,
     tracking: bool = False,
     filter_state: bool = False,
+    pixel_fit: bool = False,
 ) -> dict[str, float]:
     """Run the pipeline over a recording and write the CSV; returns summary numbers.
     ``tracking``: the pipeline's tracking mode (faster on a continuous recording);
     ``filter_state``: run the relative-state filter over the poses and add
-    ``FILTER_COLUMNS`` (empty until its first pose)."""
+    ``FILTER_COLUMNS`` (empty until its first pose); ``pixel_fit``: refine each pose on
+    the markers' pixels (``PipelineConfig.pixel_fit``)."""
     with open_recording(rec_path) as rec:
-        pipe = pipeline_for(rec, rec_path, catalog_path, camera_path, tracking)
+        pipe = pipeline_for(rec, rec_path, catalog_path, camera_path, tracking, pixel_fit=pixel_fit)
         n_ok = 0
         model = RelativeStateConfig.constant_acceleration()
         rel = RelativeStateFilter(model) if filter_state else None

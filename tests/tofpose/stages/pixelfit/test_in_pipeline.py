@@ -1,0 +1,56 @@
+"""The pixel fit as the pipeline runs it (``PipelineConfig.pixel_fit``): an ok pose is
+replaced by the fit's, with the fit's covariance, and says so; a disc the model cannot
+explain leaves the centroid pose, with the reason; off by default."""
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
+from tofpose.config import PixelFitConfig
+from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg
+from tofpose.sim.bench import R_FACING
+from tofpose.sim.render import SensorModel, render_frame
+from tofpose.sim.scene import TargetScene
+
+CAM = CameraModel()
+CAT = paper_target()
+ON = PipelineConfig(pixel_fit=PixelFitConfig(enabled=True))
+
+
+def _frame(seed=3):
+    T = RigidTransform(rotation_from_euler_deg(2, -3, 10) @ R_FACING, np.array([40, -20, 3000.0]))
+    f = render_frame(
+        CAM, TargetScene(), T, SensorModel(supersampling=32), np.random.default_rng(seed)
+    )
+    return T, f
+
+
+def test_an_ok_pose_is_the_pixel_fits_and_within_its_covariance():
+    T, f = _frame()
+    plain = PosePipeline(CAM, CAT).process(f.gray, f.distance_mm)
+    fitted = PosePipeline(CAM, CAT, ON).process(f.gray, f.distance_mm)
+    assert plain.ok and plain.pixel_fit == "" and "pixel fit" not in plain.timings_ms
+    assert fitted.ok and fitted.pixel_fit == "ok", fitted.pixel_fit
+    assert "pixel fit" in fitted.timings_ms
+    assert not np.allclose(fitted.t_mm, plain.t_mm)  # the fit moved the pose
+    e = np.concatenate([Rotation.from_matrix(fitted.R @ T.R.T).as_rotvec(), fitted.t_mm - T.t_mm])
+    assert e @ np.linalg.solve(fitted.covariance, e) < 20.06  # chi2_6 at 3 sigma
+    assert np.allclose(fitted.euler_deg, plain.euler_deg, atol=0.2)
+    # the fit's covariance is the model's, tighter than the centroid pose's
+    assert np.trace(fitted.covariance[:3, :3]) < np.trace(plain.covariance[:3, :3])
+
+
+def test_a_half_shadowed_disc_keeps_the_centroid_pose_and_says_why():
+    """Disc 6's left half at 30 % of its light (a shadow, a smudge): the centroid pipeline
+    still matches it; its pixels do not fit a disc, so the fit falls back naming it."""
+    T, f = _frame()
+    gray = f.gray.copy()
+    rows, cols = np.nonzero(f.surface_id == 3 + int(np.flatnonzero(CAT.ids == 6)[0]))
+    left = cols < np.median(cols)
+    gray[rows[left], cols[left]] = (gray[rows[left], cols[left]] * 0.3).astype(np.uint16)
+    plain = PosePipeline(CAM, CAT).process(gray, f.distance_mm)
+    fitted = PosePipeline(CAM, CAT, ON).process(gray, f.distance_mm)
+    assert plain.ok and fitted.ok and 6 in [m.catalog_id for m in plain.matched]
+    assert "markers 6" in fitted.pixel_fit, fitted.pixel_fit
+    assert np.array_equal(fitted.R, plain.R) and np.array_equal(fitted.t_mm, plain.t_mm)
+    assert np.array_equal(fitted.covariance, plain.covariance)
