@@ -5,7 +5,7 @@ a
 fresh install, ~0.3 s once the cache exists. The warm-up does it once, at a moment of the
 caller's choosing: ``tofpose warm-up`` after installing (``make test`` and the Dockerfile
 run it), and the server in a background thread while its acquisition loop already runs
-(``backend/services/kernel_warmup.py``). It has two stages, what a live loop needs first:
+(``backend/services/live/kernel_warmup.py``). It has two stages, what a live loop needs first:
 
 1. ``warm_up_reference()``: the few kernels that the reference implementation
    (``PosePipeline(..., implementation="reference")``, every stage in NumPy/SciPy) still

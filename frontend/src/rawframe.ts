@@ -1,4 +1,4 @@
-// Raw frames from /ws/live (binary messages, backend/services/frame_codec.py): parsing.
+// Raw frames from /ws/live (binary messages, backend/services/live/frame_codec.py): parsing.
 // Their colour maps are in colormap.ts.
 
 export type RawFrame = {

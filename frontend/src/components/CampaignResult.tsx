@@ -7,7 +7,7 @@ import { usePolling } from "../polling";
 type AxisStats = { n: number; bias: number; std: number; rms: number; max_abs: number;
   predicted_sigma: number; requirement: number; passed: boolean | null };
 // The report's JSON is not described by the OpenAPI schema (its answer is `unknown`):
-// these types are what the server writes (backend/services/reports.py), checked for shape by isReport.
+// these types are what the server writes (backend/services/reports/reports.py), checked for shape by isReport.
 // The dynamic section (null for a static campaign): the latency pooled over the set-points
 // and, per dynamic set-point (by index), frames in motion and the rate's error.
 type Latency = { delay_s: number; sigma_s: number; n_setpoints: number };
