@@ -9,7 +9,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from tofpose.stages.persistence.records import Measurement
+from tofpose.core.records import Candidates
 from tofpose.stages.pose.records import SolvedPairs
 
 
@@ -47,14 +47,17 @@ class WindowRuns(NamedTuple):
 class TrackedFrame(NamedTuple):
     """One tracking frame (``track_frame``): its outcome ``code`` (``constants.TRACKED``,
     or why the frame falls back to acquisition), the windows' blobs (``centroids`` (n, 2)
-    their moment centroids, pixel lists ``flat``, ``starts``), their ``measurement`` (a
-    ``persistence.records.Measurement``) and the pose of the known correspondences
-    (``solved``, a ``pose.records.SolvedPairs``); what follows the step that set
-    ``code`` is NaN."""
+    their moment centroids, pixel lists ``flat``, ``starts``), what persistence combined
+    (``n_used`` history frames; ``motion``: it cut the history), the blobs measured (a
+    ``core.records.Candidates``: every one ranged, in window order, when tracked) and the
+    pose of the known correspondences (``solved``, a ``pose.records.SolvedPairs``); what
+    follows the step that set ``code`` is NaN."""
 
     code: int
     centroids: np.ndarray
     flat: np.ndarray
     starts: np.ndarray
-    measurement: Measurement
+    n_used: int
+    motion: bool
+    candidates: Candidates
     solved: SolvedPairs

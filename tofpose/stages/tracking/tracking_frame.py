@@ -29,6 +29,7 @@ from tofpose.stages.pose.solve import (
     ThresholdedFrame,
     fit_settings,
     matched_observations,
+    offset_prior,
 )
 from tofpose.stages.tracking.arithmetic import COMPILED, TrackingArithmetic
 from tofpose.stages.tracking.constants import TRACKED
@@ -73,6 +74,13 @@ class CompiledTracker:
         self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
         # the arguments of ``track_frame`` that do not change from frame to frame, as the
         # kernels' records (``core.records``), built where the acquisition path builds them
+        # without a range correction the prior's sigma is the uncalibrated one, whatever
+        # the ranges (``PoseSolver.range_bias_sigma_mm``)
+        self._uncalibrated_prior = (
+            offset_prior(config, config.range_bias_sigma_mm, camera.fx)
+            if correction is None
+            else None
+        )
         self._camera_record = camera_record(camera)
         self._catalog_record = catalog_record(catalog)
         self._fit_args = (
@@ -92,6 +100,8 @@ class CompiledTracker:
         range correction's span holds them all)."""
         if not self.config.estimate_range_offset:
             return NO_OFFSET
+        if self._uncalibrated_prior is not None:  # no calibrated span: no range to read
+            return self._uncalibrated_prior
         p = self._xyz[cat_idx] @ np.asarray(track.R).T + np.asarray(track.t_mm)
         return self._solver.offset_prior(np.linalg.norm(p, axis=1))
 
@@ -138,12 +148,11 @@ class CompiledTracker:
             return None
         if solved.ml.chi2 > cfg.outlier_chi2_per_dof * max(3 * n - 6, 1):
             return None  # an inconsistent fit: the windows may hold the wrong blobs
-        m = out.measurement
-        self._persistence.commit(out.centroids, out.flat, g, d, m.n_used, m.motion)
+        self._persistence.commit(out.centroids, out.flat, g, d, out.n_used, out.motion)
         # every blob is ranged and matched, in order: the fit's observed ranges are its own
-        c, observed = m.candidates, out.solved.observed
+        c, observed = out.candidates, out.solved.observed
         area = out.starts[1:] - out.starts[:-1]
         meas = Measurements(
             (), area, c.uv_px, observed.rho, c.y_mm, c.weights, c.sigma_px, observed.sr
         )
-        return Tracked(solved, meas, PersistenceInfo(1 + m.n_used, m.motion, 0))
+        return Tracked(solved, meas, PersistenceInfo(1 + out.n_used, out.motion, 0))

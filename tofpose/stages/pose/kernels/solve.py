@@ -76,7 +76,7 @@ def solve_pairs(candidates, k_idx, i_idx, catalog, camera, fit, complete_tol_mm,
     bias; matched discs whose apparent radius is below ``mixed_pixel_radius_px`` take the
     mixing model's range instead of the median, ``mixed_pixels.unmixed_range``, with the
     disc's area and incidence from the SVD pose; <= 0: never); complete_tol_mm :
-    completion's tolerance (<= 0: none); offset_prior : a ``pose.RangeOffsetPrior``.
+    completion's tolerance (<= 0: none); offset_prior : a ``records.RangeOffsetPrior``.
 
     Returns the ``pose.records.SolvedPairs``: k_idx, i_idx (m',) after completion, the
     corrected centroids (m', 2), the matched reflectors as observed (bearings of the

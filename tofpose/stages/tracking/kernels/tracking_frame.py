@@ -51,11 +51,11 @@ def track_frame(
     range correction (``records.RangeCorrectionRecord``); sigmas : the ``uncertainty``
     constants and floors (``records.SigmaConstants``); fit : ``PoseSolver``'s
     ``records.FitSettings``; offset_prior : the common range offset's
-    ``pose.RangeOffsetPrior``.
+    ``pose.records.RangeOffsetPrior``.
 
-    Returns the ``tracking.records.TrackedFrame``: its code, the windows' blobs, their
-    measurement and the fit of the known correspondences; what follows the step that set
-    the code is NaN.
+    Returns the ``tracking.records.TrackedFrame``: its code, the windows' blobs, what
+    persistence combined, their measurement and the fit of the known correspondences;
+    what follows the step that set the code is NaN.
     """
     cat_idx = windows.catalog_index
     n = cat_idx.shape[0]
@@ -101,7 +101,14 @@ def track_frame(
         if not solved.result.kept.all():
             code = OUTLIER
     return TrackedFrame(
-        code=code, centroids=cent, flat=flat, starts=starts, measurement=measured, solved=solved
+        code=code,
+        centroids=cent,
+        flat=flat,
+        starts=starts,
+        n_used=measured.n_used,
+        motion=measured.motion,
+        candidates=measured.candidates,
+        solved=solved,
     )
 
 

@@ -54,7 +54,14 @@ def track_frame(
 
     def result(code):
         return TrackedFrame(
-            code=code, centroids=cent, flat=flat, starts=starts, measurement=measured, solved=solved
+            code=code,
+            centroids=cent,
+            flat=flat,
+            starts=starts,
+            n_used=measured.n_used,
+            motion=measured.motion,
+            candidates=measured.candidates,
+            solved=solved,
         )
 
     if not all(s == FOUND for s in np.asarray(status).tolist()):
