@@ -335,55 +335,53 @@ def find_candidate_blobs(
         _gate_params(config, stats, cos_t, ecc_max),
         int(config.min_area_px),
     )
-    table, gates, rho_k = found.table, found.gates, found.rho
-    area_k, bbox_k, peak_k, starts, flat = (
-        table.area,
-        table.bbox,
-        table.peak,
-        table.starts,
-        table.flat,
-    )
-    status, size, mom = gates.status, gates.size, gates.moments
+    table, gates = found.table, found.gates
+    flat, starts = table.flat, table.starts
+    # per component as Python numbers (the loop reads each a few times)
+    area_k, bbox_k, peak_k = table.area.tolist(), table.bbox.tolist(), table.peak.tolist()
+    rho_k, inner = found.rho.tolist(), found.inner.tolist()
+    status, size, mom = gates.status.tolist(), gates.size.tolist(), gates.moments
+    keep_flat, keep_starts = gates.keep_flat, gates.keep_starts.tolist()
     accepted: list[Blob] = []
     oversize: list[Blob] = []
     wrong_size: list[WrongSizeBlob] = []
     refused: list[tuple[int, RejectedBlob]] = []  # (label, why), listed in label order
 
     def reject(k: int, reason: str) -> None:
-        x, y, bw, bh = bbox_k[k].tolist()
+        x, y, bw, bh = bbox_k[k]
         d_eq = 2.0 * np.sqrt(area_k[k] / np.pi)
         refused.append((k, RejectedBlob(x + (bw - 1) / 2, y + (bh - 1) / 2, float(d_eq), reason)))
 
     for k in found.listed[~found.testable].tolist():
-        reject(k, "border" if not found.inner[k] else "dim")
+        reject(k, "border" if not inner[k] else "dim")
     for j, k in enumerate(found.which.tolist()):
-        code = int(status[j])
-        if size[j, 3] == 0.0:
-            d_eq, low, high = (float(v) for v in size[j, :3])
-            wrong_size.append(WrongSizeBlob(d_eq, low, high, float(rho_k[k])))
-        bbox = tuple(bbox_k[k].tolist())
+        code = status[j]
+        d_eq, low, high, inside = size[j]
+        if inside == 0.0:
+            wrong_size.append(WrongSizeBlob(d_eq, low, high, rho_k[k]))
+        bbox = tuple(bbox_k[k])
         if code == OVERSIZE:
             oversize.append(
                 Blob(
                     pixels=flat[starts[k] : starts[k + 1]].copy(),
-                    area_px=int(area_k[k]),
+                    area_px=area_k[k],
                     bbox=bbox,
-                    peak_counts=float(peak_k[k]),
-                    distance_mm=float(rho_k[k]),
+                    peak_counts=peak_k[k],
+                    distance_mm=rho_k[k],
                 )
             )
         if code != ACCEPTED:
             reject(k, _GATE_REASONS[code])
             continue
-        pixels = gates.keep_flat[gates.keep_starts[j] : gates.keep_starts[j + 1]]
+        pixels = keep_flat[keep_starts[j] : keep_starts[j + 1]]
         accepted.append(
             Blob(
                 pixels=pixels,
                 area_px=len(pixels),
                 bbox=bbox,
                 centroid_uv=mom[j, :2].copy(),
-                distance_mm=float(rho_k[k]),
-                peak_counts=float(peak_k[k]),
+                distance_mm=rho_k[k],
+                peak_counts=peak_k[k],
                 eccentricity=float(mom[j, 2]),
                 penalty=float(mom[j, 3]),
             )
