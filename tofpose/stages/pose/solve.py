@@ -445,7 +445,7 @@ class PoseSolver:
         every reflector, the uncalibrated one otherwise."""
         cfg = self.config
         c = self._correction
-        if c is not None and all(c.covers(float(f(range_mm))) for f in (np.min, np.max)):
+        if c is not None and c.covers(float(range_mm.min())) and c.covers(float(range_mm.max())):
             return cfg.calibrated_range_bias_sigma_mm
         return cfg.range_bias_sigma_mm
 

@@ -103,7 +103,7 @@ class CompiledTracker:
         if self._uncalibrated_prior is not None:  # no calibrated span: no range to read
             return self._uncalibrated_prior
         p = self._xyz[cat_idx] @ np.asarray(track.R).T + np.asarray(track.t_mm)
-        return self._solver.offset_prior(np.linalg.norm(p, axis=1))
+        return self._solver.offset_prior(np.sqrt((p * p).sum(axis=1)))  # |p| (linalg.norm's)
 
     def track(self, g: np.ndarray, d: np.ndarray, track: TrackState) -> Tracked | None:
         """One frame; None means "fall back to the acquisition pass" (fewer reflectors to
