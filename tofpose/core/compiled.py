@@ -38,6 +38,10 @@ _PACKAGE = _HERE.parent
 KERNEL_SOURCES = (
     *sorted(_HERE.glob("kernels/*.py")),
     *sorted(_PACKAGE.glob("stages/*/kernels/*.py")),
+    # what the kernels freeze at compile time or build their records from
+    _HERE / "records.py",
+    *sorted(_PACKAGE.glob("stages/*/constants.py")),
+    *sorted(_PACKAGE.glob("stages/*/records.py")),
     _PACKAGE / "sim" / "raycast.py",
 )
 _PREFIX = "tofpose-kernels-"
