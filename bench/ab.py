@@ -1,9 +1,10 @@
 """A/B harness for pipeline changes that must not change the answer: the same fixed
 frames (the speed bench's ranges as a stream, plus independent random poses from 0.5 to
 12 m, with and without spurious blobs) through the pipeline, with tracking off and on;
-``--save`` stores every frame's ok flag, matched ids, R, t and mode; ``--compare``
-reports the largest differences against a saved run and fails when any exceeds 1e-6 mm
-/ 1e-6 deg or a flag or mode differs.
+``--save`` stores every frame's ok flag, matched ids, R, t, reported covariance and
+mode; ``--compare`` reports the largest differences against a saved run and fails when
+any exceeds 1e-6 mm / 1e-6 deg / 1e-6 of the covariance's largest entry, or a flag or
+mode differs (a saved run without covariances is compared without them).
 
 Run: ``python bench/ab.py --save before.npz`` (old code), then
 ``python bench/ab.py --compare before.npz`` (new code).
@@ -11,8 +12,9 @@ Run: ``python bench/ab.py --save before.npz`` (old code), then
 ``--implementation reference`` runs the frames through ``PosePipeline(...,
 implementation="reference")`` (every stage's arithmetic by ``tofpose.reference``; slow)
 instead of the kernels; compared against a saved compiled run it needs stated
-tolerances, ``--tolerance-mm`` and ``--tolerance-deg`` (the reference's ML fit is SciPy's
-``least_squares``, equal to the kernels' only to its tolerance).
+tolerances, ``--tolerance-mm``, ``--tolerance-deg`` and ``--tolerance-cov`` (the
+reference's ML fit is SciPy's ``least_squares``, equal to the kernels' only to its
+tolerance).
 """
 
 from __future__ import annotations
@@ -71,7 +73,7 @@ def run(
 ) -> dict[str, np.ndarray]:
     cam, cat = CameraModel(), paper_target()
     pipes: dict[str, PosePipeline] = {}
-    ok, ids, Rs, ts, modes = [], [], [], [], []
+    ok, ids, Rs, ts, covs, modes = [], [], [], [], [], []
     for stream, gray, dist in tqdm(list(frames()), desc="A/B frames", file=sys.stderr):
         key = stream if stream.startswith("stream") else "single"
         if key not in pipes:
@@ -84,12 +86,14 @@ def run(
         ids.append(",".join(str(m.catalog_id) for m in r.matched) if r.ok else "")
         Rs.append(r.R if r.ok else np.full((3, 3), np.nan))
         ts.append(r.t_mm if r.ok else np.full(3, np.nan))
+        covs.append(r.covariance if r.ok and r.covariance is not None else np.full((6, 6), np.nan))
         modes.append(r.mode)
     return {
         "ok": np.array(ok),
         "ids": np.array(ids),
         "R": np.array(Rs),
         "t": np.array(ts),
+        "cov": np.array(covs),
         "mode": np.array(modes),
     }
 
@@ -110,6 +114,7 @@ def compare(
     tol_mm: float = TOL,
     tol_deg: float = TOL,
     ids_as_sets: bool = False,
+    tol_cov: float = TOL,
 ) -> int:
     """Print and return (1: beyond the tolerances) the differences of run ``b`` from
     ``a``; ``ids_as_sets``: matched ids compared regardless of order (the reference's
@@ -131,15 +136,26 @@ def compare(
     dt = np.linalg.norm(a["t"][both] - b["t"][both], axis=1)
     # small-angle difference from the Frobenius norm (arccos near 1 loses ~1e-6 deg)
     dR = np.degrees(np.linalg.norm(a["R"][both] - b["R"][both], axis=(1, 2)) / np.sqrt(2.0))
+    # each frame's covariance difference relative to its largest entry (NaN-free frames)
+    dC = np.zeros(0)
+    if "cov" in a and "cov" in b:
+        Ca, Cb = a["cov"][both], b["cov"][both]
+        scale = np.nanmax(np.abs(Ca), axis=(1, 2), initial=0.0)
+        dC = np.nanmax(np.abs(Ca - Cb), axis=(1, 2), initial=0.0) / np.maximum(scale, 1e-300)
+    cov_text = f", max dcov {dC.max(initial=0):.3g} (relative)" if "cov" in a else ""
     print(
         f"{label}: frames {len(a['ok'])}, ok {int(a['ok'].sum())} / {int(b['ok'].sum())}; "
         f"ok flags differ {len(flags)}, matched ids differ {len(idd)}; "
-        f"max |dt| {dt.max(initial=0):.3g} mm, max dR {dR.max(initial=0):.3g} deg"
+        f"max |dt| {dt.max(initial=0):.3g} mm, max dR {dR.max(initial=0):.3g} deg{cov_text}"
     )
     for i in np.argsort(-dt)[:5] if len(dt) and dt.max() > tol_mm else []:
         print(f"  frame {np.flatnonzero(both)[i]}: |dt| {dt[i]:.3g} mm, dR {dR[i]:.3g} deg")
     return int(
-        len(flags) > 0 or len(idd) > 0 or dt.max(initial=0) > tol_mm or dR.max(initial=0) > tol_deg
+        len(flags) > 0
+        or len(idd) > 0
+        or dt.max(initial=0) > tol_mm
+        or dR.max(initial=0) > tol_deg
+        or dC.max(initial=0) > tol_cov
     )
 
 
@@ -166,8 +182,20 @@ def main() -> None:
         default=TOL,
         help=f"largest accepted rotation difference in --compare, deg (default {TOL:g})",
     )
+    ap.add_argument(
+        "--tolerance-cov",
+        type=float,
+        default=TOL,
+        help="largest accepted covariance difference in --compare, relative to the "
+        f"covariance's largest entry (default {TOL:g})",
+    )
     args = ap.parse_args()
-    tols = (args.tolerance_mm, args.tolerance_deg, args.implementation == "reference")
+    tols = (
+        args.tolerance_mm,
+        args.tolerance_deg,
+        args.implementation == "reference",
+        args.tolerance_cov,
+    )
     result = run_both(args.implementation)
     if args.save:
         np.savez(args.save, **result)

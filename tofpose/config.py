@@ -297,7 +297,7 @@ class PipelineConfig(FitSettingsFields):
         image it is a scale error, estimated with the range offset. Markers of one size
         share it apart from the others (their blobs mix with the surround, the PSF and the
         fall-off alike), so each size's own scale error also enters the reported
-        covariance (``solve.PoseSolver.size_scale_covariance``): where the sizes sit on
+        covariance (``kernels.pose.class_scale_covariance``): where the sizes sit on
         different sides of the pattern, the fit reads it as a tilt.
     max_systematic_centroid_sigma_px : cap of the frame's excess centroid sigma, estimated
         beside the range one from the lateral residuals alone (``pose.systematic_sigmas``:

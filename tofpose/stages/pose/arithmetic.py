@@ -21,9 +21,7 @@ class PoseArithmetic:
     pose_check: Callable
     facing_cosine: Callable
     absolute_orientation: Callable
-    range_bias_covariance: Callable
-    class_scale_covariance: Callable
-    leave_one_out_spread: Callable
+    concluding_covariances: Callable
     covariance_envelope: Callable
     point_residuals_mm: Callable
 
@@ -31,9 +29,7 @@ class PoseArithmetic:
 _FIELDS = (
     "facing_cosine",
     "absolute_orientation",
-    "range_bias_covariance",
-    "class_scale_covariance",
-    "leave_one_out_spread",
+    "concluding_covariances",
     "covariance_envelope",
     "point_residuals_mm",
 )

@@ -12,3 +12,6 @@ MEDIAN_CHI2_1DOF = 0.45494
 MEDIAN_CHI2_2DOF = 1.38629
 #: outcomes of ``pose_check``
 CONSISTENT, BEHIND_CAMERA, DARK_REFLECTOR = 0, 1, 2
+#: fewest reflectors whose leave-one-out fits are determined (each keeps 3 x 3
+#: measurements for the 6 pose parameters)
+MIN_LEAVE_ONE_OUT = 4

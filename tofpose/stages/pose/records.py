@@ -88,3 +88,32 @@ class RangeOffsetPrior(NamedTuple):
 
 #: no offset estimated
 NO_OFFSET = RangeOffsetPrior(sigma_mm=0.0, focal_length_sigma_rel=0.0, centroid_bias_rad=0.0)
+
+
+class CovarianceTerms(NamedTuple):
+    """Which covariances a concluded fit reports beside the model's
+    (``concluding_covariances``), with their sigmas: ``bias_sigma_mm`` of the range
+    offset common to the reflectors (0: none); ``by_size`` whether the image scale's
+    errors enter, one common of relative sigma ``common_scale_sigma`` (the focal
+    length's) and one per size class from ``bias_rad`` (``group`` (m,) int64 each
+    reflector's class in [0, ``n_groups``)); ``leave_one_out`` whether the jackknife
+    spread is computed."""
+
+    bias_sigma_mm: float
+    by_size: bool
+    group: np.ndarray
+    n_groups: int
+    bias_rad: float
+    common_scale_sigma: float
+    leave_one_out: bool
+
+
+class ConcludingCovariances(NamedTuple):
+    """The (6, 6) covariances of ``concluding_covariances`` over (rotation vector rad,
+    translation mm): ``range_bias`` (of the common range offset), ``by_size`` (of the
+    image scale's errors) and ``spread`` (the leave-one-out spread); zeros where the
+    term is off."""
+
+    range_bias: np.ndarray
+    by_size: np.ndarray
+    spread: np.ndarray

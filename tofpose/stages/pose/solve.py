@@ -31,14 +31,15 @@ from tofpose.stages.pose.arithmetic import COMPILED, PoseArithmetic
 from tofpose.stages.pose.constants import (
     BEHIND_CAMERA,
     DARK_REFLECTOR,
+    MIN_LEAVE_ONE_OUT,
     REFINE_LOS,
     REFINE_ML,
     REFINE_NONE,
 )
-from tofpose.stages.pose.kernels.pose import MIN_LEAVE_ONE_OUT
 from tofpose.stages.pose.pose import STEP_SIGMA2, MLResult
 from tofpose.stages.pose.records import (
     NO_OFFSET,
+    CovarianceTerms,
     OutlierFit,
     PoseFit,
     RangeOffsetPrior,
@@ -381,13 +382,25 @@ class PoseSolver:
             else (self.range_bias_sigma_mm(obs.range_mm))
         )
         fitted = fitted_reflectors(obs, fit)
-        extra = ar.range_bias_covariance(fitted, R, t, bias) if bias > 0 else None
-        by_size = self.size_scale_covariance(fitted, R, t, obs.i_idx)
-        if by_size is not None:
-            extra = by_size if extra is None else extra + by_size
-        spread = None  # pose.leave_one_out_covariance, without its input conversions
-        if self.config.leave_one_out_covariance and len(obs.i_idx) >= MIN_LEAVE_ONE_OUT:
-            spread = ar.leave_one_out_spread(fitted, R, t)
+        cfg = self.config
+        # the image scale's errors (the focal length's, one per size class)
+        by_size = cfg.common_centroid_bias_px > 0 or cfg.focal_length_sigma_rel > 0
+        leave_one_out = cfg.leave_one_out_covariance and len(obs.i_idx) >= MIN_LEAVE_ONE_OUT
+        terms = CovarianceTerms(
+            bias_sigma_mm=float(bias),
+            by_size=by_size,
+            group=np.ascontiguousarray(self._size_class[obs.i_idx], dtype=np.int64),
+            n_groups=self._n_sizes,
+            bias_rad=float(cfg.common_centroid_bias_px) / self.camera.fx,
+            common_scale_sigma=float(cfg.focal_length_sigma_rel),
+            leave_one_out=bool(leave_one_out),
+        )
+        # one compiled call for the three (they share the Jacobian at the pose)
+        reported = ar.concluding_covariances(fitted, R, t, terms)
+        extra = reported.range_bias if bias > 0 else None
+        if by_size:
+            extra = reported.by_size if extra is None else extra + reported.by_size
+        spread = reported.spread if leave_one_out else None
         ml = MLResult(
             R,
             t,
@@ -404,29 +417,6 @@ class PoseSolver:
         weights = 1.0 / (fit.sr**2 + (obs.range_mm * fit.sb) ** 2)
         T_svd = RigidTransform(*ar.absolute_orientation(c(obs.x_mm), c(obs.y_mm), c(weights)))
         return Solution(T, obs, int(fit.iterations), ml, T_svd=T_svd)
-
-    def size_scale_covariance(
-        self, fitted: Reflectors, R: np.ndarray, t: np.ndarray, i_idx: np.ndarray
-    ) -> np.ndarray | None:
-        """(6, 6) covariance of image-scale errors (``kernels.pose.class_scale_covariance``)
-        of the fitted reflectors of catalog indices ``i_idx`` (m,): the focal length's
-        (``focal_length_sigma_rel``), common to the kept reflectors, and one per diameter
-        from ``common_centroid_bias_px``; None when both are 0. The fit estimates the
-        scale error only to read the range offset, and the pose is refitted without it, so
-        its uncertainty enters here."""
-        cfg = self.config
-        if cfg.common_centroid_bias_px <= 0 and cfg.focal_length_sigma_rel <= 0:
-            return None
-        cls = self._size_class[i_idx]
-        return self.arithmetic.class_scale_covariance(
-            fitted,
-            R,
-            t,
-            np.ascontiguousarray(cls, dtype=np.int64),
-            self._n_sizes,
-            float(cfg.common_centroid_bias_px) / self.camera.fx,
-            float(cfg.focal_length_sigma_rel),
-        )
 
     def _inconsistent(self, obs, norms, chi2: float, dof: int, limit: float) -> str:
         """The reason for a pose whose residuals the measurement model cannot explain,

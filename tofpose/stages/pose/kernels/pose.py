@@ -25,8 +25,14 @@ from tofpose.core.kernels.small_matrices import (
     transposed_times,
 )
 from tofpose.core.kernels.stats import median_inplace
-from tofpose.stages.pose.constants import MEDIAN_CHI2_1DOF, MEDIAN_CHI2_2DOF, REFINE_LOS, REFINE_ML
-from tofpose.stages.pose.records import OutlierFit, PoseFit, Reflectors
+from tofpose.stages.pose.constants import (
+    MEDIAN_CHI2_1DOF,
+    MEDIAN_CHI2_2DOF,
+    MIN_LEAVE_ONE_OUT,
+    REFINE_LOS,
+    REFINE_ML,
+)
+from tofpose.stages.pose.records import ConcludingCovariances, OutlierFit, PoseFit, Reflectors
 
 
 @jit
@@ -186,11 +192,6 @@ def ml_refine(refl, R0, t0, max_iterations, tol, step_sigma2):
     return R, t, cov, (r**2).sum(), iterations, reflector_norms(r)
 
 
-#: fewest reflectors whose leave-one-out fits are determined (each keeps 3 x 3
-#: measurements for the 6 pose parameters)
-MIN_LEAVE_ONE_OUT = 4
-
-
 @jit
 def leave_one_out_spread(refl, R, t):
     """(6, 6) spread of the leave-one-out poses about the pose (R, t) of all m
@@ -204,11 +205,18 @@ def leave_one_out_spread(refl, R, t):
     direction of the pose) moves the pose when it is left out; the model's covariance
     does not see it. Zeros below ``MIN_LEAVE_ONE_OUT`` reflectors; a j without which the
     normal equations are singular counts as no move."""
-    m = refl.x.shape[0]
-    out = np.zeros((6, 6))
-    if m < MIN_LEAVE_ONE_OUT:
-        return out
+    if refl.x.shape[0] < MIN_LEAVE_ONE_OUT:
+        return np.zeros((6, 6))
     r, J = residuals_jacobian(refl, R, t, tangent_bases(refl.e))
+    return _spread_from(r, J)
+
+
+@jit
+def _spread_from(r, J):
+    """``leave_one_out_spread``'s sum from the whitened residuals ``r`` (3m,) and their
+    Jacobian ``J`` (3m, 6) at the pose (m >= ``MIN_LEAVE_ONE_OUT``)."""
+    m = J.shape[0] // 3
+    out = np.zeros((6, 6))
     H = gram(J)
     g = transposed_times(J, r)
     Hj = np.empty((6, 6))
@@ -632,12 +640,19 @@ def range_bias_covariance(refl, R, t, bias_sigma_mm):
     (J^T J)^-1 J^T g, g the whitened residuals' response to a unit offset (-1 / sr on
     each range row)."""
     _, J = residuals_jacobian(refl, R, t, tangent_bases(refl.e))
+    L, ok = cholesky(gram(J))
+    return _range_bias_from(refl, J, L, ok, bias_sigma_mm)
+
+
+@jit
+def _range_bias_from(refl, J, L, ok, bias_sigma_mm):
+    """``range_bias_covariance`` from the Jacobian ``J`` (3m, 6) at the pose and the
+    Cholesky factor ``L`` (6, 6) of J^T J (``ok`` False: singular, NaN)."""
+    if not ok:
+        return np.full((6, 6), np.nan)
     g = np.zeros(J.shape[0])
     for i in range(refl.x.shape[0]):
         g[3 * i + 2] = -1.0 / refl.sr[i]
-    L, ok = cholesky(gram(J))
-    if not ok:
-        return np.full((6, 6), np.nan)
     s = cholesky_solve(L, transposed_times(J, g))
     return bias_sigma_mm**2 * np.outer(s, s)
 
@@ -653,13 +668,21 @@ def class_scale_covariance(refl, R, t, group, n_groups, bias_rad, common_scale_s
     markers: sigma ``bias_rad / r_g`` (r_g the group's rms angle from the mean bearing).
     Sum of s s^T sigma^2, s = (J^T J)^-1 J^T g, g the whitened residuals' response to a
     unit kappa."""
-    e, rho, sb = refl.e, refl.rho, refl.sb
-    m = e.shape[0]
-    B = tangent_bases(e)
+    B = tangent_bases(refl.e)
     _, J = residuals_jacobian(refl, R, t, B)
     L, ok = cholesky(gram(J))
+    return _class_scale_from(refl, B, J, L, ok, group, n_groups, bias_rad, common_scale_sigma)
+
+
+@jit
+def _class_scale_from(refl, B, J, L, ok, group, n_groups, bias_rad, common_scale_sigma):
+    """``class_scale_covariance`` from the tangent bases ``B`` (m, 2, 3), the Jacobian
+    ``J`` (3m, 6) at the pose and the Cholesky factor ``L`` of J^T J (``ok`` False:
+    singular, NaN)."""
     if not ok:
         return np.full((6, 6), np.nan)
+    e, rho, sb = refl.e, refl.rho, refl.sb
+    m = e.shape[0]
     mean = mean_bearing(e)
     response = scale_directions(e, B, mean)  # d(lateral residual) / d(kappa), whitened
     r2 = np.zeros(m)
@@ -686,6 +709,45 @@ def class_scale_covariance(refl, R, t, group, n_groups, bias_rad, common_scale_s
         s = cholesky_solve(L, transposed_times(J, g))
         out += sigma**2 * np.outer(s, s)
     return out
+
+
+@jit
+def concluding_covariances(refl, R, t, terms):
+    """The covariances a concluded fit reports beside the model's (ours), in one call
+    and from one Jacobian: ``range_bias_covariance`` (when ``terms.bias_sigma_mm`` > 0),
+    ``class_scale_covariance`` (when ``terms.by_size``) and ``leave_one_out_spread``
+    (when ``terms.leave_one_out``) of the fitted reflectors ``refl`` (a
+    ``records.Reflectors``) at the pose R (3, 3), t (3,) mm; ``terms`` a
+    ``records.CovarianceTerms``. Returns a ``records.ConcludingCovariances``: each (6, 6),
+    zeros where its term is off, the values of the three kernels."""
+    B = tangent_bases(refl.e)
+    r, J = residuals_jacobian(refl, R, t, B)
+    L, ok = cholesky(gram(J))
+    zeros = np.zeros((6, 6))
+    range_bias = (
+        _range_bias_from(refl, J, L, ok, terms.bias_sigma_mm) if terms.bias_sigma_mm > 0 else zeros
+    )
+    by_size = (
+        _class_scale_from(
+            refl,
+            B,
+            J,
+            L,
+            ok,
+            terms.group,
+            terms.n_groups,
+            terms.bias_rad,
+            terms.common_scale_sigma,
+        )
+        if terms.by_size
+        else zeros
+    )
+    spread = (
+        _spread_from(r, J)
+        if terms.leave_one_out and refl.x.shape[0] >= MIN_LEAVE_ONE_OUT
+        else zeros
+    )
+    return ConcludingCovariances(range_bias=range_bias, by_size=by_size, spread=spread)
 
 
 @jit

@@ -20,10 +20,17 @@ from scipy.spatial.transform import Rotation
 from tofpose.stages.pose.constants import (
     MEDIAN_CHI2_1DOF,
     MEDIAN_CHI2_2DOF,
+    MIN_LEAVE_ONE_OUT,
     REFINE_LOS,
     REFINE_ML,
 )
-from tofpose.stages.pose.records import OutlierFit, PoseFit, Reflectors
+from tofpose.stages.pose.records import (
+    ConcludingCovariances,
+    CovarianceTerms,
+    OutlierFit,
+    PoseFit,
+    Reflectors,
+)
 
 #: a lateral sigma never below this, mm (a bearing sigma of 0 at any range)
 MIN_LATERAL_SIGMA_MM = 1e-6
@@ -109,10 +116,10 @@ def leave_one_out_spread(refl, R, t) -> np.ndarray:
     """(6, 6), ours: ``(m - 1) / m sum_j d_j d_j^T``, d_j the Gauss-Newton step from (R, t)
     of the fit of the reflectors ``refl`` without reflector j, ``-(H - H_j)^-1 (g -
     g_j)`` with H = J^T J, g = J^T r and H_j, g_j reflector j's part; a j without which
-    H - H_j is singular adds nothing; zeros below 4 reflectors."""
+    H - H_j is singular adds nothing; zeros below ``MIN_LEAVE_ONE_OUT`` reflectors."""
     m = len(refl.x)
     out = np.zeros((6, 6))
-    if m < 4:
+    if m < MIN_LEAVE_ONE_OUT:
         return out
     r = whitened_residuals(refl, R, t)
     J = jacobian(refl, R, t)
@@ -493,3 +500,30 @@ def point_residuals_mm(x, y, R, t):
     (camera frame), and their RMS."""
     d = np.linalg.norm(np.asarray(y, float) - (np.asarray(x, float) @ R.T + t), axis=1)
     return d, float(np.sqrt(np.mean(d**2)))
+
+
+def concluding_covariances(refl, R, t, terms: CovarianceTerms) -> ConcludingCovariances:
+    """The covariances a concluded fit reports beside the model's (ours):
+    ``range_bias_covariance`` when ``terms.bias_sigma_mm`` > 0, ``class_scale_covariance``
+    when ``terms.by_size`` and ``leave_one_out_spread`` when ``terms.leave_one_out`` (and
+    at least ``MIN_LEAVE_ONE_OUT`` reflectors), each (6, 6), zeros where off."""
+    zeros = np.zeros((6, 6))
+    return ConcludingCovariances(
+        range_bias=(
+            range_bias_covariance(refl, R, t, terms.bias_sigma_mm)
+            if terms.bias_sigma_mm > 0
+            else zeros
+        ),
+        by_size=(
+            class_scale_covariance(
+                refl, R, t, terms.group, terms.n_groups, terms.bias_rad, terms.common_scale_sigma
+            )
+            if terms.by_size
+            else zeros
+        ),
+        spread=(
+            leave_one_out_spread(refl, R, t)
+            if terms.leave_one_out and len(refl.x) >= MIN_LEAVE_ONE_OUT
+            else zeros
+        ),
+    )

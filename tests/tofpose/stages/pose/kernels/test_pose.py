@@ -118,3 +118,50 @@ def test_leave_one_out_spread_and_envelope_equal_the_reference(seed):
         rtol=1e-9,
         atol=1e-12 * np.abs(cov).max(),
     )
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_concluding_covariances_are_the_three_kernels_and_the_reference(seed):
+    """One call, one Jacobian: exactly (bit for bit) what ``range_bias_covariance``,
+    ``class_scale_covariance`` and ``leave_one_out_spread`` give one by one, zeros for a
+    term that is off, and the reference statement's values to its tolerance."""
+    from tofpose.stages.pose.kernels.pose import (
+        class_scale_covariance,
+        concluding_covariances,
+        leave_one_out_spread,
+        ml_refine,
+        range_bias_covariance,
+    )
+    from tofpose.stages.pose.records import CovarianceTerms
+    from tofpose.stages.pose.reference import pose as reference
+
+    m = 4 + seed
+    x, e, rho, sr, sb, R, t = _scene(seed, m=m, range_mm=4000.0)
+    refl = Reflectors(x=x, e=e, rho=rho, sr=sr, sb=sb)
+    R, t, *_ = ml_refine(refl, R, t, 30, 1e-12, 0.0)
+    group = np.arange(m, dtype=np.int64) % 2
+    terms = CovarianceTerms(
+        bias_sigma_mm=12.0,
+        by_size=True,
+        group=group,
+        n_groups=2,
+        bias_rad=0.05 / 325.0,
+        common_scale_sigma=0.002,
+        leave_one_out=True,
+    )
+    got = concluding_covariances(refl, R, t, terms)
+    assert np.array_equal(got.range_bias, range_bias_covariance(refl, R, t, 12.0))
+    assert np.array_equal(
+        got.by_size, class_scale_covariance(refl, R, t, group, 2, 0.05 / 325.0, 0.002)
+    )
+    assert np.array_equal(got.spread, leave_one_out_spread(refl, R, t))
+    assert np.abs(got.range_bias).max() > 0 and np.abs(got.spread).max() > 0
+    want = reference.concluding_covariances(refl, R, t, terms)
+    for name in ("range_bias", "by_size", "spread"):
+        a, b = getattr(got, name), getattr(want, name)
+        np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-7 * np.abs(b).max())
+    off = concluding_covariances(
+        refl, R, t, terms._replace(bias_sigma_mm=0.0, by_size=False, leave_one_out=False)
+    )
+    for name in ("range_bias", "by_size", "spread"):
+        assert not getattr(off, name).any()
