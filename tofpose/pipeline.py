@@ -357,7 +357,9 @@ class PosePipeline:
             if tracked is not None:
                 return tracked
             timer.lap("tracking fallback")
-        stats = self.arithmetic.extraction.frame_levels(g, cfg.extraction)
+        stats = self.arithmetic.extraction.frame_levels(
+            g, cfg.extraction, saturated_counts=self.camera.full_scale_counts
+        )
         timer.lap("levels")
 
         def fail(reason: str, unmatched=(), diagnostics=NO_DIAGNOSTICS) -> PoseResult:

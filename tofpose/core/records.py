@@ -36,6 +36,7 @@ class CameraRecord(NamedTuple):
     pixel_bearings: np.ndarray
     width: int
     height: int
+    full_scale_counts: float
 
 
 class CatalogRecord(NamedTuple):
@@ -193,6 +194,7 @@ def camera_record(camera) -> CameraRecord:
         pixel_bearings=np.ascontiguousarray(camera.pixel_bearings().reshape(-1, 3)),
         width=int(camera.width),
         height=int(camera.height),
+        full_scale_counts=float(camera.full_scale_counts),
     )
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from tofpose.config import ExtractionConfig
 from tofpose.core.camera import CameraModel
+from tofpose.stages.extraction.constants import SATURATED_COUNTS
 from tofpose.stages.extraction.extraction import (
     Blob,
     CandidateBlobs,
@@ -28,13 +29,15 @@ class ExtractionArithmetic:
     """§3.1-§3.2 in one implementation, with ``extraction``'s records in and out."""
 
     name: str
-    frame_levels: Callable[[np.ndarray, ExtractionConfig], FrameStats]
+    frame_levels: Callable[..., FrameStats]
     find_candidate_blobs: Callable[..., CandidateBlobs]
 
 
-def _reference_frame_levels(gray: np.ndarray, config: ExtractionConfig) -> FrameStats:
+def _reference_frame_levels(
+    gray: np.ndarray, config: ExtractionConfig, *, saturated_counts: float = SATURATED_COUNTS
+) -> FrameStats:
     """``reference.extraction.frame_levels`` as an ``extraction.FrameStats``."""
-    v = ref_extraction.frame_levels(gray, config)
+    v = ref_extraction.frame_levels(gray, config, saturated_counts=saturated_counts)
     return FrameStats(
         background=v.background,
         noise_sigma=v.noise_sigma,

@@ -42,8 +42,20 @@ SURROUND_OUTER_PX = 3
 #: ... outside the box grown by this many (the support reaches 1 px beyond the blob)
 SURROUND_INNER_PX = 1
 #: fields of a ``blob_mixing`` row: a_b, d_b, S_a, S_ad, covered area of the support
-#: pixels without a range (px^2, their gray's coverage estimate), n_support
-MIX_FIELDS = 6
+#: pixels without a range (px^2, their gray's coverage estimate), n_support, and for a
+#: blob with a saturated pixel the bounded-coverage range and its sigma (mm; NaN else)
+MIX_FIELDS = 8
+#: a saturated blob's range is read from its ranged pixels at least this many times as
+#: bright (above the no-return level) as its surround (dimmer ones are mostly surround:
+#: unmixing them divides by a difference near 0)
+SATURATED_MIN_CONTRAST = 2.0
+#: ... and only when saturation took the range of more than this fraction of its disc's
+#: area (then its ranged pixels are its rim; with most of the disc ranged, the median or
+#: the mixing sums hold: a disc brighter on one side saturates there only)
+SATURATED_AREA_FRACTION = 0.5
+#: floor of a ranged pixel's half-interval in the saturated-blob range (mm): weights
+#: stay finite where the interval closes
+SATURATED_HALF_WIDTH_FLOOR_MM = 0.5
 #: a pixel near a blob is something in front of it (an arm, a cable, the target's own
 #: structure) when it reads nearer than the blob's range by more than this (a raised
 #: marker's plate lies 100-150 mm behind it) ...

@@ -222,13 +222,17 @@ def check_frame(
 _CHECKED_DISTANCE_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
 
 
-def frame_levels(gray: np.ndarray, config: ExtractionConfig) -> FrameStats:
+def frame_levels(
+    gray: np.ndarray, config: ExtractionConfig, *, saturated_counts: float = SATURATED_COUNTS
+) -> FrameStats:
     """Background, noise and the raw/peak thresholds I_t, I_peak of §3.1.1 and Eq. 16.
 
-    Background and its noise come from a strided subsample (median and MAD).
+    Background and its noise come from a strided subsample (median and MAD);
+    ``saturated_counts`` is the camera's full scale (``CameraModel.full_scale_counts``),
+    at or above which a pixel counts as saturated.
     """
     gray32 = np.ascontiguousarray(gray, np.float32)
-    bg, mad, n_sat, dark = frame_level_stats(gray32, LEVEL_STRIDE, float(SATURATED_COUNTS))
+    bg, mad, n_sat, dark = frame_level_stats(gray32, LEVEL_STRIDE, float(saturated_counts))
     i_max = float(gray32.max())
     sigma = max(MAD_TO_SIGMA * mad, np.sqrt(max(bg, 1.0)))
     contrast = i_max - bg
@@ -503,7 +507,18 @@ def measure_blobs(
     surrounds = blob_surrounds(bbox, sg, sd, owners)
     level = np.where(np.isfinite(surrounds.gray), surrounds.gray, float(background))
     uv = blob_centroids(flat, starts, bbox, g32, level, weighting == "coverage", owners)
-    mix = blob_mixing(flat, starts, bbox, g32, d32, sd, surrounds, float(dark), owners)
+    mix = blob_mixing(
+        flat,
+        starts,
+        bbox,
+        g32,
+        d32,
+        sd,
+        surrounds,
+        float(dark),
+        owners,
+        float(camera.full_scale_counts),
+    )
     bearings = camera.pixel_bearings().reshape(-1, 3)
     rho = blob_ranges(
         flat,

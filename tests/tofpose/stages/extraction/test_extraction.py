@@ -207,3 +207,23 @@ def test_blob_with_values_is_dataclasses_replace():
         b.with_values(distance=3.0)
     with pytest.raises(AttributeError):  # still frozen
         got.distance_mm = 1.0
+
+
+def test_a_frame_is_saturated_at_the_cameras_own_full_scale():
+    """Saturation is counted at ``CameraModel.full_scale_counts``, not at 12 bits: a
+    frame at 4095 everywhere is saturated for the TOFcam-660 (full scale 4095), not for
+    a 16-bit camera, which saturates at 65535; the pipeline refuses the first alone."""
+    from tofpose import CameraModel, PosePipeline, paper_target
+    from tofpose.config import ExtractionConfig
+    from tofpose.stages.extraction.extraction import frame_levels
+
+    gray = np.full((240, 320), 4095.0, np.float32)
+    distance = np.full((240, 320), 3000.0, np.float32)
+    assert frame_levels(gray, ExtractionConfig()).saturated_fraction == 1.0
+    wide = frame_levels(gray, ExtractionConfig(), saturated_counts=65535.0)
+    assert wide.saturated_fraction == 0.0
+    twelve_bit = PosePipeline(CameraModel(), paper_target()).process(gray, distance)
+    assert twelve_bit.reason.startswith("frame saturated")
+    sixteen_bit = CameraModel(full_scale_counts=65535.0)
+    result = PosePipeline(sixteen_bit, paper_target()).process(gray, distance)
+    assert not result.ok and not result.reason.startswith("frame saturated")

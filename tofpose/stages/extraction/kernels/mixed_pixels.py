@@ -21,6 +21,22 @@ it once the blob is matched: ``pi r_px^2 cos(incidence)``. Then
 is the reflector's own distance. The median over the blob's pixels (Eq. 20 as we
 measure it) is pulled towards the surround by the mixed pixels; ``bench/foreign.py``
 and ``bench/physics.py`` measure both against truth by marker size (docs/results.md).
+
+A saturated reflector (its core at the camera's full scale, no distance there) breaks
+the sums: A_r is unknown (only A_r >= full scale), and a saturated pixel's coverage is
+anything from FS / A_r to 1. Its range comes from the ranged pixels alone, each with its
+own bounds: pixel p (amplitude a_p, distance d_p) is ``c_p A_r + (1 - c_p) a_b``, so
+``0 <= c_p <= c_max = (a_p - a_b) / (FS - a_b)``, and its reflector distance
+
+    d_r(c) = (a_p d_p - (1 - c) a_b d_b) / (a_p - (1 - c) a_b)
+
+lies between d_r(0) (all of the surround's return removed) and d_r(c_max). The blob's
+range is the weighted median of those intervals' mid-points, weights 1 / half-width^2
+(the brightest, least mixed pixels count most; a median, as Eq. 20's, so that a dim,
+noisy rim pixel cannot pull it), and its sigma combines the weighted half-width /
+sqrt(3) (a uniform over the interval; not divided by sqrt(n): one unknown A_r drives
+every pixel's coverage) with the mid-points' scatter (1.4826 MAD / sqrt(n)).
+``bench/foreign.py`` on ``foreign-saturating.h5`` measures it.
 """
 
 from __future__ import annotations
@@ -37,6 +53,9 @@ from tofpose.stages.extraction.constants import (
     OCCLUSION_MIN_OUTER_PX,
     OCCLUSION_MIN_PATCH_PX,
     OCCLUSION_NOISE_SIGMAS,
+    SATURATED_AREA_FRACTION,
+    SATURATED_HALF_WIDTH_FLOOR_MM,
+    SATURATED_MIN_CONTRAST,
     SURROUND_INNER_PX,
     SURROUND_OUTER_PX,
 )
@@ -217,7 +236,9 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owners):
 
 
 @jit
-def blob_mixing(flat, starts, bbox, gray, member_distance, distance, surrounds, dark, owners):
+def blob_mixing(
+    flat, starts, bbox, gray, member_distance, distance, surrounds, dark, owners, full_scale
+):
     """The sums of the mixing model (module docstring) of each blob over its support
     (its pixels dilated by one, other blobs' pixels left out): (n, ``MIX_FIELDS``) rows
     (a_b, d_b, S_a, S_ad, C_unranged, n_support), NaN rows where the surround is unknown
@@ -234,6 +255,7 @@ def blob_mixing(flat, starts, bbox, gray, member_distance, distance, surrounds, 
     area, estimated from their gray as ``(g - g_b) / (g_max - g_b)`` clipped to [0, 1]
     (1 for a saturated centre), is returned so that the caller takes it off C."""
     h, w = gray.shape
+    fs_a = full_scale - dark
     n = bbox.shape[0]
     out = np.full((n, MIX_FIELDS), np.nan)
     inv_w = 1.0 / w
@@ -252,6 +274,11 @@ def blob_mixing(flat, starts, bbox, gray, member_distance, distance, surrounds, 
             member[r - y0, c - x0] = True
             g_max = max(g_max, float(gray[r, c]))
         a_b = gb - dark
+        saturated = g_max >= full_scale
+        a_bp = max(a_b, 0.0)
+        mids = np.empty(ph * pw)
+        halves = np.empty(ph * pw)
+        n_mid = 0
         s_a, s_ad, c_unranged, n_sup = 0.0, 0.0, 0.0, 0
         for r in range(ph):
             for c in range(pw):
@@ -265,11 +292,50 @@ def blob_mixing(flat, starts, bbox, gray, member_distance, distance, surrounds, 
                     a = g - dark
                     s_a += a - a_b
                     s_ad += a * d - a_b * db
+                    if saturated and a > 0 and a >= SATURATED_MIN_CONTRAST * a_bp and fs_a > a_bp:
+                        c_max = min(max((a - a_bp) / (fs_a - a_bp), 0.0), 1.0)
+                        lo = (a * d - a_bp * db) / (a - a_bp) if a > a_bp else d
+                        wb = (1.0 - c_max) * a_bp
+                        hi = (a * d - wb * db) / (a - wb)
+                        mids[n_mid] = 0.5 * (lo + hi)
+                        halves[n_mid] = max(0.5 * abs(hi - lo), SATURATED_HALF_WIDTH_FLOOR_MM)
+                        n_mid += 1
                 elif g_max > gb:
                     c_unranged += min(max((g - gb) / (g_max - gb), 0.0), 1.0)
         out[j, 0], out[j, 1], out[j, 2], out[j, 3] = a_b, db, s_a, s_ad
         out[j, 4], out[j, 5] = c_unranged, n_sup
+        if n_mid > 0:
+            out[j, 6], out[j, 7] = _saturated_estimate(mids[:n_mid], halves[:n_mid])
     return out
+
+
+@jit
+def _saturated_estimate(mids, halves):
+    """(range mm, sigma mm) of a saturated blob from its pixels' interval mid-points
+    ``mids`` (k,) and half-widths ``halves`` (k,) (module docstring): the weighted
+    median of the mid-points, weights 1 / half^2 (the first mid-point, in ascending
+    order, where the cumulative weight reaches half), and sqrt(hbar^2 / 3 + (1.4826
+    MAD)^2 / k), hbar the weighted mean half-width."""
+    k = mids.shape[0]
+    order = np.argsort(mids)
+    total, w_half = 0.0, 0.0
+    for i in range(k):
+        wt = 1.0 / (halves[i] * halves[i])
+        total += wt
+        w_half += wt * halves[i]
+    acc = 0.0
+    med = mids[order[k - 1]]
+    for i in range(k):
+        h = halves[order[i]]
+        acc += 1.0 / (h * h)
+        if acc >= 0.5 * total:
+            med = mids[order[i]]
+            break
+    dev = np.abs(mids - med)
+    mad = median_inplace(dev)
+    spread = 1.4826 * mad
+    hbar = w_half / total
+    return med, np.sqrt(hbar * hbar / 3.0 + spread * spread / k)
 
 
 @jit
@@ -279,6 +345,7 @@ def shift_mixing(row, shift_mm):
     that the model's range moves by the same shift."""
     row[1] += shift_mm
     row[3] += shift_mm * row[2]
+    row[6] += shift_mm
 
 
 @jit
@@ -292,10 +359,16 @@ def unmixed_range(rho, mix, radius_px, cos_incidence, median_radius_px):
     rho : mm; mix : (``MIX_FIELDS``,) ``blob_mixing`` row; radius_px : the catalog disc's
     apparent radius at rho; cos_incidence : of the disc's normal to the line of sight.
     Returns (range mm, C-sensitivity mm): the change of the range when C is 15 %
-    larger, the model's own uncertainty (edges, the lens's spill beyond the support)."""
+    larger, the model's own uncertainty (edges, the lens's spill beyond the support).
+    A saturated blob (``mix[6]`` finite) whose unranged area C_unranged exceeds
+    ``SATURATED_AREA_FRACTION`` of the disc's gets its bounded-coverage range and sigma
+    instead, at any size (its core has no distance: the median reads the rim)."""
+    disc_area = np.pi * radius_px * radius_px * max(cos_incidence, 0.1)
+    if np.isfinite(mix[6]) and mix[4] > SATURATED_AREA_FRACTION * disc_area:
+        return mix[6], mix[7]
     if not radius_px < median_radius_px or not np.isfinite(mix[0]):
         return rho, 0.0
-    area = np.pi * radius_px * radius_px * max(cos_incidence, 0.1)
+    area = disc_area
     c = area - mix[4]
     if not c > 0.25 * area:
         return rho, 0.0

@@ -35,6 +35,9 @@ from tofpose.stages.extraction.constants import (
     OCCLUSION_MIN_OUTER_PX,
     OCCLUSION_MIN_PATCH_PX,
     OCCLUSION_NOISE_SIGMAS,
+    SATURATED_AREA_FRACTION,
+    SATURATED_HALF_WIDTH_FLOOR_MM,
+    SATURATED_MIN_CONTRAST,
     SURROUND_INNER_PX,
     SURROUND_OUTER_PX,
 )
@@ -194,10 +197,14 @@ def occluded_blobs(flat, starts, bbox, distance, rho, owners):
     return out
 
 
-def blob_mixing(flat, starts, bbox, gray, member_distance, distance, surrounds, dark, owners):
+def blob_mixing(
+    flat, starts, bbox, gray, member_distance, distance, surrounds, dark, owners, full_scale
+):
     """The mixing model's sums of each blob over its support (its pixels dilated by one,
     other blobs' pixels left out): (n, ``MIX_FIELDS``) rows (a_b, d_b, S_a, S_ad,
-    C_unranged, n_support), NaN rows for a crowded blob or an unknown surround.
+    C_unranged, n_support, d_sat, sigma_sat), NaN rows for a crowded blob or an unknown
+    surround; d_sat, sigma_sat as ``saturated_range``, NaN unless a member reaches
+    ``full_scale`` (counts).
 
     a_b = surrounds.gray - dark, d_b = surrounds.distance_mm; a support pixel with a range (from
     ``member_distance`` at the blob's pixels, ``distance`` elsewhere) adds
@@ -229,8 +236,42 @@ def blob_mixing(flat, starts, bbox, gray, member_distance, distance, surrounds, 
         c_unranged = 0.0
         if g_max > gb:
             c_unranged = float(np.sum(np.clip((g[support & ~ok] - gb) / (g_max - gb), 0, 1)))
-        out[j] = a_b, db, s_a, s_ad, c_unranged, support.sum()
+        out[j, :6] = a_b, db, s_a, s_ad, c_unranged, support.sum()
+        if g_max >= full_scale:
+            out[j, 6:] = saturated_range(a, d[ok], a_b, db, full_scale - dark)
     return out
+
+
+def saturated_range(a, d, a_b, d_b, fs_a) -> tuple[float, float]:
+    """A saturated reflector's distance and its sigma (mm) from its ranged support
+    pixels, amplitudes ``a`` (k,) and distances ``d`` (k,) mm, the surround's amplitude
+    ``a_b`` and distance ``d_b`` and the full scale's amplitude ``fs_a`` (counts above
+    the no-return level). Each pixel with ``a >= SATURATED_MIN_CONTRAST max(a_b, 0)``
+    bounds it between d_r(0) and d_r(c_max), ``d_r(c) = (a d - (1 - c) a_b d_b) / (a -
+    (1 - c) a_b)``, ``c_max = clip((a - a_b) / (fs_a - a_b), 0, 1)`` (its coverage, A_r
+    >= full scale); the weighted median of the mid-points, weights 1 / half-width^2
+    (floor ``SATURATED_HALF_WIDTH_FLOOR_MM``; the first mid-point in ascending order
+    where the cumulative weight reaches half), and the sigma sqrt(hbar^2 / 3 + (1.4826
+    MAD)^2 / k), hbar the weighted mean half-width, MAD the mid-points' median absolute
+    deviation from that median. (NaN, NaN) when no pixel qualifies."""
+    a_b = max(float(a_b), 0.0)
+    use = (a > 0) & (a >= SATURATED_MIN_CONTRAST * a_b)
+    if not (use.any() and fs_a > a_b):
+        return np.nan, np.nan
+    a, d = a[use], d[use]
+    c_max = np.clip((a - a_b) / (fs_a - a_b), 0.0, 1.0)
+    lo = np.where(a > a_b, (a * d - a_b * d_b) / np.where(a > a_b, a - a_b, 1.0), d)
+    wb = (1.0 - c_max) * a_b
+    hi = (a * d - wb * d_b) / (a - wb)
+    half = np.maximum(0.5 * np.abs(hi - lo), SATURATED_HALF_WIDTH_FLOOR_MM)
+    wt = 1.0 / half**2
+    mid = 0.5 * (lo + hi)
+    order = np.argsort(mid, kind="stable")
+    at = int(np.searchsorted(np.cumsum(wt[order]), 0.5 * wt.sum()))
+    med = float(mid[order[min(at, len(mid) - 1)]])
+    spread = 1.4826 * float(np.median(np.abs(mid - med)))
+    hbar = float(np.sum(wt * half) / wt.sum())
+    return med, float(np.sqrt(hbar**2 / 3.0 + spread**2 / len(mid)))
 
 
 def shift_mixing(row, shift_mm):
@@ -238,17 +279,23 @@ def shift_mixing(row, shift_mm):
     in place: d_b + shift and S_ad + shift S_a (every distance in the sums moved)."""
     row[1] += shift_mm
     row[3] += shift_mm * row[2]
+    row[6] += shift_mm
 
 
 def unmixed_range(rho, mix, radius_px, cos_incidence, median_radius_px):
     """The reflector's own distance d_r from its mixing sums ``mix`` (``MIX_FIELDS``,),
     with C = pi radius_px^2 max(cos_incidence, 0.1) - C_unranged, and its sensitivity
-    |d_r(1.15 C) - d_r(C)|: (d_r mm, sensitivity mm). (rho, 0) where the model does not
+    |d_r(1.15 C) - d_r(C)|: (d_r mm, sensitivity mm); a saturated blob's ``mix[6:8]``
+    (``saturated_range``) whatever its size when C_unranged exceeds
+    ``SATURATED_AREA_FRACTION`` of the disc's area. (rho, 0) where the model does not
     apply: radius_px not below ``median_radius_px``, no sums, C at most a quarter of the
     disc's area, A_r = a_b + S_a / C not above 2 max(a_b, 0) or not positive, or a
     d_r that is not finite."""
-    a_b, d_b, s_a, s_ad, c_unranged = (float(v) for v in mix[:5])
     disc_area = np.pi * radius_px**2 * max(cos_incidence, 0.1)
+    if np.isfinite(mix[6]) and mix[4] > SATURATED_AREA_FRACTION * disc_area:
+        # saturation took most of the disc's range: the bounded-coverage range, any size
+        return float(mix[6]), float(mix[7])
+    a_b, d_b, s_a, s_ad, c_unranged = (float(v) for v in mix[:5])
     c = disc_area - c_unranged
     small = radius_px < median_radius_px and np.isfinite(a_b)
     if not (small and c > 0.25 * disc_area):

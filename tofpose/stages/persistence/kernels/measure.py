@@ -115,7 +115,16 @@ def persist_and_measure(frame, blobs, history, camera):
         level[a] = s_gray if np.isfinite(s_gray) else background
     k_uv = blob_centroids(k_flat, k_starts, k_bbox, mean_gray, level, True, owners)
     k_mix = blob_mixing(
-        k_flat, k_starts, k_bbox, mean_gray, med_dist, distance, surrounds, dark, owners
+        k_flat,
+        k_starts,
+        k_bbox,
+        mean_gray,
+        med_dist,
+        distance,
+        surrounds,
+        dark,
+        owners,
+        camera.full_scale_counts,
     )
     e_c = bearings(k_uv, camera.fx, camera.fy, camera.cx, camera.cy, camera.dist)
     k_rho = blob_ranges(k_flat, k_starts, med_dist.reshape(-1), camera.pixel_bearings, e_c)

@@ -141,7 +141,16 @@ def persist_and_measure(frame, blobs, history, camera):
     hidden = mixed_pixels.occluded_blobs(k_flat, k_starts, k_bbox, distance, k_rho, owners)
     k_rho[hidden] = np.nan
     k_mix = mixed_pixels.blob_mixing(
-        k_flat, k_starts, k_bbox, mean_gray, med_dist, distance, surrounds, dark, owners
+        k_flat,
+        k_starts,
+        k_bbox,
+        mean_gray,
+        med_dist,
+        distance,
+        surrounds,
+        dark,
+        owners,
+        camera.full_scale_counts,
     )
     uv = np.full((n, 2), np.nan)
     rho = np.full(n, np.nan)

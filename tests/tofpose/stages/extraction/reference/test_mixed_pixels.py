@@ -16,6 +16,8 @@ from tofpose.stages.extraction.kernels import mixed_pixels as compiled
 from tofpose.stages.extraction.records import OwnerMap, Surrounds
 from tofpose.stages.extraction.reference import mixed_pixels as reference
 
+#: the rendered frames' camera's saturation level (counts)
+FULL_SCALE = 4095.0
 #: (range mm, room seed, frame): frames of ``test_measure``'s streams
 FRAMES = [
     (1500.0, 0, 0),
@@ -63,7 +65,7 @@ def _both(flat, starts, bbox, gray, distance, dark):
         m.occluded_blobs(flat, starts, bbox, distance, rho, own) for m, own in pairs
     )
     mix = [
-        m.blob_mixing(flat, starts, bbox, gray, distance, distance, sur_c, dark, own)
+        m.blob_mixing(flat, starts, bbox, gray, distance, distance, sur_c, dark, own, FULL_SCALE)
         for m, own in pairs
     ]
     out["blob_mixing"] = tuple(mix)
@@ -238,6 +240,7 @@ def test_the_mixing_sums_of_a_partly_covering_disc_give_its_coverage_and_range()
         surround,
         dark,
         owner,
+        FULL_SCALE,
     )[0]
     # the float32 gray holds the amplitudes to ~3e-5 counts
     area = cover.sum()
@@ -258,6 +261,7 @@ def test_the_mixing_sums_of_a_partly_covering_disc_give_its_coverage_and_range()
         surround,
         dark,
         owner,
+        FULL_SCALE,
     )[0]
     assert mix[4] == pytest.approx(0.2, abs=1e-6)
     assert reference.unmixed_range(5100.0, mix, radius, 1.0, 4.0)[0] == pytest.approx(d_r, abs=0.01)
@@ -266,3 +270,80 @@ def test_the_mixing_sums_of_a_partly_covering_disc_give_its_coverage_and_range()
     assert reference.unmixed_range(5100.0, shifted, radius, 1.0, 4.0)[0] == pytest.approx(
         d_r + 30.0, abs=0.01
     )
+
+
+#: the drawn saturated disc's image area (px^2): the sum of its coverages
+SATURATED_DISC_AREA = 10.6
+
+
+def _saturated_disc(a_r, full_scale=FULL_SCALE):
+    """A reflector of amplitude ``a_r`` over a 5 x 5 patch of known coverages (its core
+    clipped at ``full_scale`` and without distance, as a CW-ToF pixel that saturates
+    gives none), 130 mm in front of a plate: (flat, starts, bbox, gray, distance,
+    surround, owner, d_r, dark)."""
+    cover = np.array(
+        [
+            [0.0, 0.15, 0.3, 0.15, 0.0],
+            [0.15, 0.8, 1.0, 0.8, 0.15],
+            [0.3, 1.0, 1.0, 1.0, 0.3],
+            [0.15, 0.8, 1.0, 0.8, 0.15],
+            [0.0, 0.15, 0.3, 0.15, 0.0],
+        ]
+    )
+    dark, a_b, d_b, d_r = 90.0, 370.0, 6130.0, 6000.0
+    c = np.zeros((H, W))
+    c[30:35, 40:45] = cover
+    amp = c * a_r + (1 - c) * a_b
+    distance = (c * a_r * d_r + (1 - c) * a_b * d_b) / amp
+    gray = amp + dark
+    clipped = gray >= full_scale
+    gray = np.minimum(gray, full_scale).astype(np.float32)
+    distance[clipped] = np.nan
+    member = np.flatnonzero(c > 0.1)
+    rows, cols = np.divmod(member, W)
+    bbox = np.array([[cols.min(), rows.min(), np.ptp(cols) + 1, np.ptp(rows) + 1]], np.int64)
+    flat, starts = member.astype(np.int64), np.array([0, len(member)], np.int64)
+    owner = reference.owner_map(flat, starts, bbox, H, W)
+    surround = Surrounds(
+        gray=np.array([a_b + dark]), distance_mm=np.array([d_b]), crowded=np.array([False])
+    )
+    return flat, starts, bbox, gray, distance, surround, owner, d_r, dark
+
+
+@pytest.mark.parametrize("ratio", [1.5, 3.6, 6.0])
+def test_a_saturated_reflector_reads_its_own_range_within_its_sigma(ratio):
+    """A reflector ``ratio`` x full scale, its core clipped: the median of its ranged
+    (rim) pixels reads long, pulled towards the plate; the bounded-coverage range
+    (``blob_mixing``'s d_sat, what ``unmixed_range`` returns for it at any size) holds
+    the truth within 2 of its sigmas, and that sigma is honest (below the median's
+    bias); compiled and reference agree. Unsaturated, the fields stay NaN."""
+    flat, starts, bbox, gray, distance, surround, owner, d_r, dark = _saturated_disc(
+        ratio * (FULL_SCALE - 90.0)
+    )
+    rows = [
+        m.blob_mixing(
+            flat, starts, bbox, gray, distance, distance, surround, dark, owner, FULL_SCALE
+        )[0]
+        for m in (compiled, reference)
+    ]
+    np.testing.assert_allclose(rows[0], rows[1], rtol=1e-12, atol=1e-6)
+    mix = rows[1]
+    median_error = np.nanmedian(distance.reshape(-1)[flat]) - d_r
+    radius = np.sqrt(SATURATED_DISC_AREA / np.pi)
+    got, sigma = reference.unmixed_range(6010.0, mix, radius, 1.0, 4.0)
+    assert (got, sigma) == compiled.unmixed_range(6010.0, mix, radius, 1.0, 4.0)
+    assert median_error > 3.0  # the rim reads towards the plate
+    assert 0 < sigma < median_error
+    assert abs(got - d_r) < 2.0 * sigma
+    assert abs(got - d_r) < 0.5 * median_error
+    # a disc four times that area, of which saturation took less than half: not this
+    # model (the median, or the mixing sums)
+    assert reference.unmixed_range(6010.0, mix, 2 * radius, 1.0, 4.0)[0] != got
+    # the same disc below full scale: no saturated estimate
+    flat, starts, bbox, gray, distance, surround, owner, d_r, dark = _saturated_disc(
+        0.5 * (FULL_SCALE - 90.0)
+    )
+    row = reference.blob_mixing(
+        flat, starts, bbox, gray, distance, distance, surround, dark, owner, FULL_SCALE
+    )[0]
+    assert np.isnan(row[6:]).all()

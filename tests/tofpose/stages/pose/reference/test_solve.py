@@ -27,6 +27,7 @@ from tofpose.config import PipelineConfig
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import paper_target
 from tofpose.core.records import Candidates
+from tofpose.stages.extraction.constants import MIX_FIELDS
 from tofpose.stages.extraction.reference import mixed_pixels
 from tofpose.stages.pose.constants import REFINE_ML
 from tofpose.stages.pose.kernels import solve as kernel
@@ -213,7 +214,7 @@ def test_solve_pairs_of_noiseless_measurements_is_the_true_pose():
         weights=np.ones(n),
         sigma_px=np.full(n, 0.1),
         sigma_range_mm=np.full(n, 3.0),
-        mixing=np.full((n, 6), np.nan),
+        mixing=np.full((n, MIX_FIELDS), np.nan),
     )
     out = reference.solve_pairs(candidates, np.arange(n), order, catalog, camera, fit, 0.0, prior)
     assert out.result.kept.all()
