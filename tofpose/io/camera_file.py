@@ -1,7 +1,8 @@
 """The files a pipeline over a recording is built from, as ``tofpose`` commands read
 them: a camera JSON (the camera model, ``tofpose.core.camera.CameraModel``, with, when
 present, the ``range_correction`` that ``tofpose calibrate-range`` adds and the
-``covariance_scale`` that ``tofpose calibrate-covariance`` adds) and a catalog JSON.
+``covariance_scale`` that ``tofpose calibrate-covariance`` adds), or the name of a
+shipped camera profile (``tofpose.core.camera_profiles``), and a catalog JSON.
 Errors are ``SystemExit`` with a message for the user, as the commands print them."""
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from tofpose.calibration.covariance import CovarianceScale
 from tofpose.calibration.range import RangeCorrection
 from tofpose.config import PixelFitConfig, TrackingConfig
 from tofpose.core.camera import CameraModel
+from tofpose.core.camera_profiles import camera_from_profile, profile_names, profile_text
 from tofpose.core.catalog import Catalog
 from tofpose.pipeline import PipelineConfig, PosePipeline
 
@@ -20,9 +22,12 @@ from tofpose.pipeline import PipelineConfig, PosePipeline
 def load_camera(text: str) -> tuple[CameraModel, RangeCorrection | None, CovarianceScale | None]:
     """The camera, its range correction and its covariance scale (None where absent)
     from a camera JSON text; ``ValueError`` (or ``KeyError``/``TypeError``) naming what
-    is wrong when it is not one."""
+    is wrong when it is not one. A JSON with a ``profile`` key is a camera profile and
+    must state every field (``camera_profiles.REQUIRED_KEYS``)."""
     camera = CameraModel.from_json(text)
     doc = json.loads(text)
+    if "profile" in doc:
+        camera = camera_from_profile(doc, where=f"camera profile {doc['profile']}")
     rc, cs = doc.get("range_correction"), doc.get("covariance_scale")
     return (
         camera,
@@ -39,6 +44,29 @@ def read_text_file(path: str, what: str) -> str:
         raise SystemExit(f"tofpose: cannot read {what} {path}: {exc.strerror}") from exc
 
 
+def read_camera_text(name_or_path: str) -> str:
+    """The camera JSON text of a ``--camera`` argument: a shipped profile's name
+    (``tofcam660``, ``azure-kinect-nfov``, ...) or a camera JSON file; ``SystemExit``
+    naming the file, or listing the profiles when the argument is neither."""
+    if name_or_path in profile_names():
+        return profile_text(name_or_path)
+    if not Path(name_or_path).exists() and not name_or_path.endswith(".json"):
+        raise SystemExit(
+            f"tofpose: camera {name_or_path!r} is neither a camera JSON file nor a "
+            f"camera profile ({', '.join(profile_names())})"
+        )
+    return read_text_file(name_or_path, "camera")
+
+
+def camera_from_arg(name_or_path: str) -> CameraModel:
+    """The camera of a ``--camera`` argument (``read_camera_text``); ``SystemExit``
+    naming what is wrong."""
+    try:
+        return load_camera(read_camera_text(name_or_path))[0]
+    except (ValueError, KeyError, TypeError) as exc:
+        raise SystemExit(f"tofpose: camera {name_or_path}: {exc}") from exc
+
+
 def pipeline_for(
     rec,
     rec_path: str,
@@ -53,7 +81,7 @@ def pipeline_for(
     ``pixel_fit``: refine each pose on the markers' pixels (``PixelFitConfig``)."""
     camera, correction, scale = rec.camera, None, None
     if camera_path:
-        camera, correction, scale = load_camera(read_text_file(camera_path, "camera"))
+        camera, correction, scale = load_camera(read_camera_text(camera_path))
     if catalog_path:
         catalog = Catalog.from_json(read_text_file(catalog_path, "catalog"))
     elif rec.catalog is not None:

@@ -16,7 +16,7 @@ from tofpose.calibration.covariance import auto_knots, fit_covariance_scale, pos
 from tofpose.calibration.range import fit_range_correction
 from tofpose.core.geometry import RigidTransform
 from tofpose.core.tof import unambiguous_range_mm
-from tofpose.io.camera_file import load_camera, pipeline_for, read_text_file
+from tofpose.io.camera_file import load_camera, pipeline_for, read_camera_text
 from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
 from tofpose.io.recording import Recording, open_recording
 from tofpose.lab.relative_state import RelativeStateConfig, RelativeStateFilter
@@ -54,7 +54,7 @@ def calibrate_covariance(
             raise SystemExit(f"tofpose: {rec_path} has no /catalog: the target is unknown")
         camera, correction = rec.camera, None
         if camera_path:
-            camera, correction, _ = load_camera(read_text_file(camera_path, "camera"))
+            camera, correction, _ = load_camera(read_camera_text(camera_path))
         pipe = PosePipeline(camera, rec.catalog, range_correction=correction)
         ranges, nees = [], []
         for i in tqdm(
