@@ -2,9 +2,6 @@
 
 import json
 import math
-import tomllib
-from fnmatch import fnmatch
-from pathlib import Path
 
 import pytest
 
@@ -17,8 +14,6 @@ from tofpose.core.camera_profiles import (
     profile_text,
 )
 from tofpose.core.tof import unambiguous_range_mm
-
-ROOT = Path(__file__).resolve().parents[3]
 
 
 def test_three_profiles_ship_and_the_tofcam660_is_todays_default_camera():
@@ -106,14 +101,3 @@ def test_a_profile_that_is_not_json_or_not_an_object_is_named():
     with pytest.raises(ValueError, match="must be a JSON object"):
         parse_profile("[1]")
     assert len(REQUIRED_KEYS) == len(set(REQUIRED_KEYS))
-
-
-def test_the_profile_files_are_package_data():
-    """The wheel carries them: pyproject's package-data for tofpose.core matches each."""
-    with (ROOT / "pyproject.toml").open("rb") as fh:
-        patterns = tomllib.load(fh)["tool"]["setuptools"]["package-data"]["tofpose.core"]
-    files = sorted((ROOT / "tofpose/core/profiles").glob("*.json"))
-    assert [f.stem for f in files] == list(profile_names())
-    for f in files:
-        rel = f.relative_to(ROOT / "tofpose/core").as_posix()
-        assert any(fnmatch(rel, p) for p in patterns), rel
