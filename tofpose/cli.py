@@ -141,6 +141,7 @@ def _add_simulation_commands(sub) -> None:
     p.add_argument("--scenario", default="stability-697")
     p.add_argument("--out-prefix", required=True)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--camera", help="camera profile or camera JSON (default: tofcam660)")
     p = sub.add_parser("demo", help="simulate, estimate and print estimate vs truth")
     p.add_argument("--frames", type=int, default=48)
 
@@ -299,7 +300,9 @@ def _run_library(args: argparse.Namespace) -> int:
         )
         print(f"wrote {args.frames} frames -> {args.out}")
     elif args.cmd == "render":
-        for path in simulation.render_pngs(args.scenario, args.out_prefix, args.seed):
+        for path in simulation.render_pngs(
+            args.scenario, args.out_prefix, args.seed, camera_arg=args.camera
+        ):
             print(path)
     elif args.cmd == "demo":
         return simulation.demo(args.frames)

@@ -304,3 +304,13 @@ def test_simulate_through_a_z_depth_profile_then_estimate(tmp_path, capsys):
     capsys.readouterr()
     with pytest.raises(SystemExit, match="azure-kinect-nfov, hololens2-ahat, tofcam660"):
         main([*argv, "--camera", "kinect"])
+
+
+def test_render_through_a_profile_writes_its_image_size(tmp_path, capsys):
+    import cv2
+
+    prefix = str(tmp_path / "ahat")
+    argv = ["render", "--scenario", "stability-697", "--out-prefix", prefix]
+    assert main([*argv, "--camera", "hololens2-ahat"]) == 0
+    for kind in ("gray", "distance"):
+        assert cv2.imread(f"{prefix}-{kind}.png").shape[:2] == (1024, 1024)  # 512 x 512, x2

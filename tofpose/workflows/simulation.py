@@ -70,13 +70,17 @@ def simulate(
             )
 
 
-def render_pngs(scenario_name: str, prefix: str, seed: int) -> list[str]:
-    """Write PREFIX-gray.png and PREFIX-distance.png of a scenario's first frame."""
+def render_pngs(
+    scenario_name: str, prefix: str, seed: int, camera_arg: str | None = None
+) -> list[str]:
+    """Write PREFIX-gray.png and PREFIX-distance.png of a scenario's first frame;
+    ``camera_arg``: through this camera profile or camera JSON (default: TOFcam-660)."""
     import cv2
 
     from tofpose.sim.scenarios import get_scenario, run_scenario
 
-    bf = next(run_scenario(get_scenario(scenario_name), 1, seed=seed))
+    camera = camera_from_arg(camera_arg) if camera_arg else None
+    bf = next(run_scenario(get_scenario(scenario_name), 1, seed=seed, camera=camera))
     g = bf.frame.gray.astype(np.float64)
     g8 = np.clip(255 * np.sqrt(g / max(g.max(), 1)), 0, 255).astype(np.uint8)  # gamma 0.5
     d = bf.frame.distance_mm
