@@ -24,10 +24,16 @@ def load_camera(text: str) -> tuple[CameraModel, RangeCorrection | None, Covaria
     from a camera JSON text; ``ValueError`` (or ``KeyError``/``TypeError``) naming what
     is wrong when it is not one. A JSON with a ``profile`` key is a camera profile and
     must state every field (``camera_profiles.REQUIRED_KEYS``)."""
-    camera = CameraModel.from_json(text)
-    doc = json.loads(text)
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"camera JSON is not valid JSON: {exc}") from exc
+    if not isinstance(doc, dict):
+        raise ValueError("camera JSON must be an object")
     if "profile" in doc:
         camera = camera_from_profile(doc, where=f"camera profile {doc['profile']}")
+    else:
+        camera = CameraModel.from_dict(doc)
     rc, cs = doc.get("range_correction"), doc.get("covariance_scale")
     return (
         camera,

@@ -31,12 +31,19 @@ def test_neither_a_file_nor_a_profile_lists_the_profiles(tmp_path):
         read_camera_text(str(tmp_path / "missing.json"))
 
 
-def test_a_profile_file_missing_a_field_names_it(tmp_path):
+@pytest.mark.parametrize("key", ["distance_kind", "fx", "count_scale"])
+def test_a_profile_file_missing_a_field_names_it(tmp_path, key):
     doc = json.loads(profile_text("azure-kinect-nfov"))
-    del doc["distance_kind"]
+    del doc[key]
     path = tmp_path / "my-kinect.json"
     path.write_text(json.dumps(doc))
-    with pytest.raises(
-        SystemExit, match="camera profile azure-kinect-nfov is missing distance_kind"
-    ):
+    with pytest.raises(SystemExit, match=f"camera profile azure-kinect-nfov is missing {key}$"):
         camera_from_arg(str(path))
+
+
+def test_a_camera_file_that_is_not_a_camera_is_named(tmp_path):
+    path = tmp_path / "cam.json"
+    for text, message in (("{", "not valid JSON"), ("[]", "must be an object")):
+        path.write_text(text)
+        with pytest.raises(SystemExit, match=message):
+            camera_from_arg(str(path))
