@@ -61,6 +61,8 @@ def test_the_same_scene_through_each_profile_gives_the_pose_within_its_sigmas(na
         sigma = np.sqrt(np.diag(r.covariance))
         assert np.all(np.abs(e) < 4 * sigma), (e, sigma)
         assert e @ np.linalg.solve(r.covariance, e) < CHI2_6_999
+        # and close in absolute terms (its sigmas are wide: seeds 0-7 reach 0.7 sigma)
+        assert np.linalg.norm(e[3:]) < 2.0 and np.degrees(np.linalg.norm(e[:3])) < 0.15
 
 
 def test_a_16_bit_camera_renders_16x_the_counts_and_clips_at_its_own_full_scale():
