@@ -95,8 +95,9 @@ def _add_measurement_commands(sub) -> None:
     p.add_argument(
         "--modulation-mhz",
         type=float,
-        default=6.0,
-        help="the recording's modulation frequency (default 6 MHz)",
+        default=None,
+        help="the recording's modulation frequency (default: its camera's, 6 MHz on "
+        "recordings that do not state one)",
     )
     p = sub.add_parser(
         "calibrate-covariance",

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from tofpose.calibration.covariance import CovarianceScale
 from tofpose.calibration.range import RangeCorrection
-from tofpose.config import PixelFitConfig, TrackingConfig
+from tofpose.config import PixelFitConfig, TrackingConfig, config_for_camera
 from tofpose.core.camera import CameraModel
 from tofpose.core.camera_profiles import camera_from_profile, profile_names, profile_text
 from tofpose.core.catalog import Catalog
@@ -83,7 +83,8 @@ def pipeline_for(
     pixel_fit: bool = False,
 ) -> PosePipeline:
     """The pipeline ``estimate`` runs over an open recording: its camera and catalog, or
-    the ones given (a camera JSON with its range correction and covariance scale);
+    the ones given (a camera JSON with its range correction and covariance scale), with
+    the pixel- and count-valued settings scaled to the camera (``config_for_camera``);
     ``pixel_fit``: refine each pose on the markers' pixels (``PixelFitConfig``)."""
     camera, correction, scale = rec.camera, None, None
     if camera_path:
@@ -99,8 +100,13 @@ def pipeline_for(
             f"tofpose: camera {camera.width}x{camera.height} does not match the recording's "
             f"{rec.camera.width}x{rec.camera.height} frames"
         )
-    config = PipelineConfig(
-        tracking=TrackingConfig(enabled=tracking), pixel_fit=PixelFitConfig(enabled=pixel_fit)
+    config = config_for_camera(
+        PipelineConfig(
+            tracking=TrackingConfig(enabled=tracking), pixel_fit=PixelFitConfig(enabled=pixel_fit)
+        ),
+        width=camera.width,
+        height=camera.height,
+        count_scale=camera.count_scale,
     )
     return PosePipeline(
         camera, catalog, config, range_correction=correction, covariance_scale=scale

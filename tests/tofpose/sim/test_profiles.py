@@ -111,3 +111,24 @@ def test_a_multi_frequency_camera_reads_its_mixed_pixels_unwrapped():
     assert d.size > 50
     # the markers stand 100-150 mm off a plate ~2.5 m away (up to ~2.8 m at the edges)
     assert np.all((d > 2200.0) & (d < 2900.0))
+
+
+def test_the_azure_kinect_at_half_a_metre_needs_the_active_cap_scaled_to_its_frame():
+    """At 0.5 m the markers in the Azure Kinect profile's view cover ~21 000 pixels: the
+    EPC660's 12 000-pixel active cap cuts them into fragments (no pose); scaled to the
+    640 x 576 frame (``config_for_camera``) the same frames give the pose."""
+    from tofpose.config import PipelineConfig, config_for_camera
+
+    camera = load_profile("azure-kinect-nfov")
+    T = facing_pose(500.0, 2.0, -3.0, 10.0, offset_mm=(30.0, -20.0))
+    frames = list(_device_frames(camera, T, n=2, seed=1))
+    fixed = PosePipeline(camera, paper_target(), PipelineConfig())
+    assert not any(fixed.process(g, d).ok for g, d in frames)
+    config = config_for_camera(
+        PipelineConfig(), width=camera.width, height=camera.height, count_scale=camera.count_scale
+    )
+    scaled = PosePipeline(camera, paper_target(), config)
+    for g, d in frames:
+        r = scaled.process(g, d)
+        assert r.ok, r.reason
+        assert np.linalg.norm(r.t_mm - T.t_mm) < 1.0
