@@ -23,9 +23,13 @@ from tofpose.core.camera import CameraModel
 
 
 def _checked(image: np.ndarray, camera: CameraModel, what: str) -> np.ndarray:
+    """``image`` as an array of shape (..., H, W) of numbers; ``ValueError`` naming
+    ``what`` otherwise."""
     image = np.asarray(image)
-    if image.shape != camera.shape:
-        raise ValueError(f"{what} has shape {image.shape}, camera expects {camera.shape}")
+    if image.shape[-2:] != camera.shape:
+        raise ValueError(
+            f"{what} has shape {image.shape}, camera expects {camera.shape} (or a stack of them)"
+        )
     if image.dtype.kind not in "iuf":
         raise ValueError(f"{what} must be numbers, got dtype {image.dtype}")
     return image
@@ -41,14 +45,14 @@ def radial_from_z(z_mm: np.ndarray, camera: CameraModel) -> np.ndarray:
 
     Parameters
     ----------
-    z_mm : ndarray of shape (H, W)
+    z_mm : ndarray of shape (H, W), or a stack (..., H, W)
         Depth along the boresight, mm; NaN where invalid (kept NaN).
     camera : CameraModel
         The camera whose pixels' rays (with its lens distortion) the image is on.
 
     Returns
     -------
-    ndarray of shape (H, W), float32
+    ndarray of ``z_mm``'s shape, float32
         ``rho = z / e_z`` per pixel, mm.
     """
     z = _checked(z_mm, camera, "z-depth image").astype(np.float64)
@@ -60,13 +64,13 @@ def z_from_radial(distance_mm: np.ndarray, camera: CameraModel) -> np.ndarray:
 
     Parameters
     ----------
-    distance_mm : ndarray of shape (H, W)
+    distance_mm : ndarray of shape (H, W), or a stack (..., H, W)
         Radial distance along each pixel's ray, mm; NaN where invalid (kept NaN).
     camera : CameraModel
 
     Returns
     -------
-    ndarray of shape (H, W), float32
+    ndarray of ``distance_mm``'s shape, float32
         ``z = rho * e_z`` per pixel, mm.
     """
     rho = _checked(distance_mm, camera, "distance image").astype(np.float64)

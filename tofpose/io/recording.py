@@ -279,10 +279,7 @@ class Recording:
         """Stored distances (H, W) or (n, H, W) as radial distances."""
         if self.stored_distance_kind != "z":
             return distance_mm
-        camera = self._stored_camera or self.camera
-        if distance_mm.ndim == 2:
-            return radial_from_z(distance_mm, camera)
-        return np.stack([radial_from_z(d, camera) for d in distance_mm]).reshape(distance_mm.shape)
+        return radial_from_z(distance_mm, self._stored_camera or self.camera)
 
     def frame(self, i: int) -> tuple[np.ndarray, np.ndarray, float]:
         """(gray (H, W) uint16, distance (H, W) float32, time_s) of frame i."""

@@ -47,6 +47,16 @@ def test_the_paper_cameras_corner_reads_15_percent_nearer_as_z():
     assert 1 - e_z == pytest.approx(0.15, abs=0.005)
 
 
+def test_a_stack_of_frames_converts_frame_by_frame():
+    camera = CameraModel()
+    z = np.stack([np.full(camera.shape, v, np.float32) for v in (1000.0, 2000.0, 3000.0)])
+    rho = radial_from_z(z, camera)
+    assert rho.shape == (3, 240, 320)
+    for k in range(3):
+        np.testing.assert_array_equal(rho[k], radial_from_z(z[k], camera))
+    assert radial_from_z(z[:0], camera).shape == (0, 240, 320)
+
+
 def test_invalid_pixels_stay_invalid_both_ways():
     camera = CameraModel()
     d = np.full(camera.shape, 3000.0, np.float32)
