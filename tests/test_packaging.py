@@ -72,6 +72,13 @@ def test_wheel_carries_the_alembic_scripts(wheel):
     assert {f"backend/migrations/versions/{v}" for v in versions} <= names
 
 
+def test_wheel_carries_the_camera_profiles(wheel):
+    names = set(zipfile.ZipFile(wheel).namelist())
+    profiles = sorted((ROOT / "tofpose" / "core" / "profiles").glob("*.json"))
+    assert len(profiles) >= 3
+    assert {f"tofpose/core/profiles/{p.name}" for p in profiles} <= names
+
+
 @pytest.fixture(scope="module")
 def installed(wheel, tmp_path_factory) -> Path:
     """The wheel installed into a bare directory (run with it as PYTHONPATH)."""

@@ -61,7 +61,7 @@ def _add_measurement_commands(sub) -> None:
     p = sub.add_parser("estimate", help="estimate the pose of every frame of a recording")
     p.add_argument("recording")
     p.add_argument("--catalog", help="catalog JSON (default: the recording's)")
-    p.add_argument("--camera", help="camera JSON (default: the recording's)")
+    p.add_argument("--camera", help="camera JSON or camera profile name (default: the recording's)")
     p.add_argument("--out", required=True, help="output CSV")
     p.add_argument(
         "--tracking",
@@ -95,8 +95,9 @@ def _add_measurement_commands(sub) -> None:
     p.add_argument(
         "--modulation-mhz",
         type=float,
-        default=6.0,
-        help="the recording's modulation frequency (default 6 MHz)",
+        default=None,
+        help="the recording's modulation frequency (default: its camera's, 6 MHz on "
+        "recordings that do not state one)",
     )
     p = sub.add_parser(
         "calibrate-covariance",
@@ -132,10 +133,16 @@ def _add_simulation_commands(sub) -> None:
     p.add_argument("--out", required=True)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--catalog")
+    p.add_argument(
+        "--camera",
+        help="camera profile (tofcam660, azure-kinect-nfov, hololens2-ahat) or camera JSON "
+        "to render through (default: tofcam660; docs/devices.md)",
+    )
     p = sub.add_parser("render", help="write gray and distance PNGs of a scenario frame")
     p.add_argument("--scenario", default="stability-697")
     p.add_argument("--out-prefix", required=True)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--camera", help="camera profile or camera JSON (default: tofcam660)")
     p = sub.add_parser("demo", help="simulate, estimate and print estimate vs truth")
     p.add_argument("--frames", type=int, default=48)
 
@@ -147,7 +154,7 @@ def _add_interop_commands(sub) -> None:
     p.add_argument("recording")
     p.add_argument("--out", required=True, help="output file (REC.mcap)")
     p.add_argument("--catalog", help="catalog JSON (default: the recording's)")
-    p.add_argument("--camera", help="camera JSON (default: the recording's)")
+    p.add_argument("--camera", help="camera JSON or camera profile name (default: the recording's)")
     p.add_argument("--tracking", action="store_true", help="estimate in tracking mode")
     p.add_argument(
         "--no-estimate",
@@ -188,7 +195,9 @@ def _add_batch_commands(sub) -> None:
     )
     p.add_argument("recordings", nargs="+", metavar="REC.h5")
     p.add_argument("--out", required=True, help="output directory: <recording>.csv each")
-    p.add_argument("--camera", help="camera JSON (default: each recording's)")
+    p.add_argument(
+        "--camera", help="camera JSON or camera profile name (default: each recording's)"
+    )
     p.add_argument("--catalog", help="catalog JSON (default: each recording's)")
     p.add_argument("--tracking", action="store_true", help="the pipeline's tracking mode")
     p.add_argument("--filter", action="store_true", help="add the relative-state filter's columns")
@@ -287,10 +296,14 @@ def _run_library(args: argparse.Namespace) -> int:
     elif args.cmd == "simulate":
         if args.frames < 1:
             raise SystemExit("tofpose: --frames must be >= 1")
-        simulation.simulate(args.scenario, args.frames, args.out, args.seed, args.catalog)
+        simulation.simulate(
+            args.scenario, args.frames, args.out, args.seed, args.catalog, camera_arg=args.camera
+        )
         print(f"wrote {args.frames} frames -> {args.out}")
     elif args.cmd == "render":
-        for path in simulation.render_pngs(args.scenario, args.out_prefix, args.seed):
+        for path in simulation.render_pngs(
+            args.scenario, args.out_prefix, args.seed, camera_arg=args.camera
+        ):
             print(path)
     elif args.cmd == "demo":
         return simulation.demo(args.frames)

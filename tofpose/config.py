@@ -11,7 +11,7 @@ import its own record without an import circle.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Literal
 
 import numpy as np
@@ -375,3 +375,49 @@ class PipelineConfig(FitSettingsFields):
 
 #: the §5 fields of ``PipelineConfig`` that make up its ``SolveConfig``
 _SOLVE_FIELDS = tuple(f.name for f in fields(FitSettingsFields))
+
+
+#: the frame the pixel- and count-valued defaults are tuned on: the EPC660's 320 x 240 at
+#: count scale 1 (``CameraModel()``)
+REFERENCE_FRAME_PIXELS = 320 * 240
+
+
+def config_for_camera(
+    config: PipelineConfig, *, width: int, height: int, count_scale: float
+) -> PipelineConfig:
+    """``config`` with the settings that are pixel counts or gray counts scaled from the
+    EPC660's frame to another camera's (``CameraModel.width``, ``height``,
+    ``count_scale``; docs/devices.md, "What the pipeline needs per camera").
+
+    ``extraction.n_max`` (the active pixel cap) grows with the frame's pixel count: the
+    paper's 120 x 100 is 16 % of a 320 x 240 frame but 3 % of an Azure Kinect's
+    640 x 576, where the markers of a target at 0.5 m alone cover more. The gray-count
+    thresholds (``min_contrast_counts``, and the paper preset's absolute ones) scale by
+    the count scale. On the EPC660 (320 x 240, count scale 1) ``config`` comes back
+    unchanged.
+    """
+    if width <= 0 or height <= 0 or not count_scale > 0:
+        raise ValueError(
+            f"camera size and count scale must be positive, got {width} x {height}, "
+            f"count scale {count_scale}"
+        )
+    ex = config.extraction
+    pixels = width * height
+    if pixels == REFERENCE_FRAME_PIXELS and count_scale == 1.0:
+        return config
+
+    def counts(value: float | None) -> float | None:
+        return None if value is None else value * count_scale
+
+    return replace(
+        config,
+        extraction=replace(
+            ex,
+            n_max=max(1, round(ex.n_max * pixels / REFERENCE_FRAME_PIXELS)),
+            min_contrast_counts=ex.min_contrast_counts * count_scale,
+            raw_threshold_abs=counts(ex.raw_threshold_abs),
+            peak_abs=counts(ex.peak_abs),
+            nlog_peak_abs=counts(ex.nlog_peak_abs),
+            nlog_floor_abs=counts(ex.nlog_floor_abs),
+        ),
+    )

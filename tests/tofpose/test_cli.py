@@ -271,3 +271,46 @@ def test_a_missing_output_directory_is_named_before_any_work(tmp_path, capsys, a
     err = capsys.readouterr().err
     assert f"the output's directory '{tmp_path / 'none'}' does not exist" in err
     assert not (tmp_path / "none").exists()
+
+
+def test_simulate_through_a_z_depth_profile_then_estimate(tmp_path, capsys):
+    """``simulate --camera azure-kinect-nfov`` writes the device's frames (640 x 576, z
+    depth in mm, 16-bit counts); ``estimate`` reads them as radial and gets the pose."""
+    import h5py
+    import numpy as np
+
+    from tofpose.core.depth import z_from_radial
+    from tofpose.io.recording import open_recording
+
+    rec, out = tmp_path / "k.h5", tmp_path / "poses.csv"
+    argv = ["simulate", "--scenario", "stability-697", "--frames", "3", "--out", str(rec)]
+    assert main([*argv, "--camera", "azure-kinect-nfov"]) == 0
+    with h5py.File(rec, "r") as f:
+        assert f["camera"].attrs["distance_kind"] == "z"
+        assert f["frames/distance_mm"].shape == (3, 576, 640)
+        stored_z = f["frames/distance_mm"][0]
+    with open_recording(rec) as r:
+        radial = r.frame(0)[1]
+        np.testing.assert_allclose(z_from_radial(radial, r.camera), stored_z, rtol=1e-6)
+        assert r.frame(0)[0].max() > 4095  # the 16-bit count scale
+        truth_t = r.truth_t_mm
+    assert main(["estimate", str(rec), "--out", str(out)]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert [r["ok"] for r in rows] == ["1", "1", "1"]
+    for row, t in zip(rows, truth_t, strict=True):
+        err = np.array([float(row[k]) for k in ("x_mm", "y_mm", "z_mm")]) - t
+        sigma = np.array([float(row[k]) for k in ("sigma_x_mm", "sigma_y_mm", "sigma_z_mm")])
+        assert np.all(np.abs(err) < 4 * sigma)
+    capsys.readouterr()
+    with pytest.raises(SystemExit, match="azure-kinect-nfov, hololens2-ahat, tofcam660"):
+        main([*argv, "--camera", "kinect"])
+
+
+def test_render_through_a_profile_writes_its_image_size(tmp_path, capsys):
+    import cv2
+
+    prefix = str(tmp_path / "ahat")
+    argv = ["render", "--scenario", "stability-697", "--out-prefix", prefix]
+    assert main([*argv, "--camera", "hololens2-ahat"]) == 0
+    for kind in ("gray", "distance"):
+        assert cv2.imread(f"{prefix}-{kind}.png").shape[:2] == (1024, 1024)  # 512 x 512, x2

@@ -10,13 +10,20 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import cv2
 import numpy as np
 
 from tofpose.core.kernels.camera import bearings as kernel_bearings
 from tofpose.core.kernels.camera import project as kernel_project
+from tofpose.core.tof import SPEED_OF_LIGHT_MM_S
+
+#: what a device's distance image holds: the radial distance along each pixel's ray (a
+#: CW-ToF camera's own reading, the pipeline's quantity) or the z depth (the coordinate
+#: along the boresight: Azure Kinect, ROS depth images)
+DistanceKind = Literal["radial", "z"]
+DISTANCE_KINDS: tuple[str, ...] = ("radial", "z")
 
 
 @dataclass(frozen=True)
@@ -40,6 +47,28 @@ class CameraModel:
     modulation_frequency_hz : float
         The modulation frequency of the distance image (its unambiguous range is
         ``tofpose.core.tof.unambiguous_range_mm``); 6 MHz by default, the simulator's.
+        On a device that combines several frequencies, the highest: its phase sets the
+        distance noise.
+    unwrapped_range_mm : float or None
+        Where the distance wraps on a device that unwraps the phases of several
+        modulation frequencies (or stops reporting beyond its range); None: the single
+        frequency's ``c / (2 f)``. ``unambiguous_range_mm`` is the one that applies.
+    count_scale : float
+        Gray (amplitude) counts of this device per count of the reference 12-bit EPC660
+        for the same return: the simulator renders its radiometry in reference counts
+        and scales the gray image by this; an absolute count threshold tuned on the
+        EPC660 scales by it. 1 for the EPC660.
+    distance_kind : {"radial", "z"}
+        What the distance images that come with this camera hold: "radial" (along each
+        pixel's ray: the pipeline's quantity, the EPC660's) or "z" (depth along the
+        boresight: Azure Kinect, ROS depth images). ``tofpose.core.depth`` converts.
+    depth_unit_mm : float
+        Millimetres per unit of the device's raw distance codes (1: mm codes).
+    depth_invalid_code, depth_max_valid_code : int
+        The device's raw distance code for "no distance" (0 on most devices) and the
+        largest code that is a distance (higher codes are status codes: the TOFcam-660's
+        64000 on, the HoloLens 2 AHAT's 4090 on). ``tofpose.core.depth.decode_depth``
+        turns both into NaN.
     """
 
     width: int = 320
@@ -52,6 +81,12 @@ class CameraModel:
     name: str = "EPC660 f=6.5mm"
     full_scale_counts: float = 4095.0
     modulation_frequency_hz: float = 6.0e6
+    unwrapped_range_mm: float | None = None
+    count_scale: float = 1.0
+    distance_kind: DistanceKind = "radial"
+    depth_unit_mm: float = 1.0
+    depth_invalid_code: int = 0
+    depth_max_valid_code: int = 63999
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -67,12 +102,32 @@ class CameraModel:
             raise ValueError(
                 f"modulation_frequency_hz must be positive, got {self.modulation_frequency_hz}"
             )
+        if self.unwrapped_range_mm is not None and not self.unwrapped_range_mm > 0:
+            raise ValueError(f"unwrapped_range_mm must be positive, got {self.unwrapped_range_mm}")
+        if not self.count_scale > 0:
+            raise ValueError(f"count_scale must be positive, got {self.count_scale}")
+        if self.distance_kind not in DISTANCE_KINDS:
+            raise ValueError(
+                f"distance_kind must be one of {', '.join(DISTANCE_KINDS)}, "
+                f"got {self.distance_kind!r}"
+            )
+        if not self.depth_unit_mm > 0:
+            raise ValueError(f"depth_unit_mm must be positive, got {self.depth_unit_mm}")
         object.__setattr__(self, "dist", tuple(float(d) for d in self.dist))
 
     @staticmethod
     def epc660() -> CameraModel:
         """The paper's camera (§2.1): 320 x 240, 20 um pixels, f = 6.5 mm -> 325 px."""
         return CameraModel()
+
+    @property
+    def unambiguous_range_mm(self) -> float:
+        """The radial distance at which the device's distance wraps (mm):
+        ``unwrapped_range_mm`` when the device unwraps several frequencies, else
+        ``c / (2 f)`` of ``modulation_frequency_hz``."""
+        if self.unwrapped_range_mm is not None:
+            return self.unwrapped_range_mm
+        return SPEED_OF_LIGHT_MM_S / (2.0 * self.modulation_frequency_hz)
 
     @property
     def K(self) -> np.ndarray:
@@ -150,29 +205,64 @@ class CameraModel:
             "dist": list(self.dist),
             "full_scale_counts": self.full_scale_counts,
             "modulation_frequency_hz": self.modulation_frequency_hz,
+            **(
+                {}
+                if self.unwrapped_range_mm is None
+                else {"unwrapped_range_mm": self.unwrapped_range_mm}
+            ),
+            "count_scale": self.count_scale,
+            "distance_kind": self.distance_kind,
+            "depth_unit_mm": self.depth_unit_mm,
+            "depth_invalid_code": self.depth_invalid_code,
+            "depth_max_valid_code": self.depth_max_valid_code,
         }
 
     @staticmethod
     def from_dict(d: dict[str, Any]) -> CameraModel:
+        """The camera of a description (``to_dict``'s keys); ``ValueError`` naming a
+        missing or invalid key. The keys after the intrinsics are optional, with the
+        EPC660's values as defaults (so older files read as they did): 4095 counts,
+        6 MHz, no unwrapping, count scale 1, radial distances in mm codes, 0 and codes
+        above 63999 invalid."""
         required = ("width", "height", "fx", "fy", "cx", "cy")
         missing = [k for k in required if k not in d]
         if missing:
             raise ValueError(f"camera description is missing {', '.join(missing)}")
-        dist = tuple(float(x) for x in d.get("dist", (0, 0, 0, 0, 0)))
+
+        def get(key: str, kind: type, default: Any = None) -> Any:
+            value = d.get(key, default)
+            if value is None:
+                return None
+            try:
+                return kind(value)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"camera {key} must be {kind.__name__}, got {value!r}") from exc
+
+        try:
+            dist = tuple(float(x) for x in d.get("dist", (0, 0, 0, 0, 0)))
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"camera dist must be 5 numbers, got {d.get('dist')!r}") from exc
         if len(dist) != 5:  # as __post_init__ checks it (and with its message)
             raise ValueError(f"dist must have 5 coefficients (k1,k2,p1,p2,k3), got {dist}")
         return CameraModel(
-            width=int(d["width"]),
-            height=int(d["height"]),
-            fx=float(d["fx"]),
-            fy=float(d["fy"]),
-            cx=float(d["cx"]),
-            cy=float(d["cy"]),
+            width=get("width", int),
+            height=get("height", int),
+            fx=get("fx", float),
+            fy=get("fy", float),
+            cx=get("cx", float),
+            cy=get("cy", float),
             dist=dist,
-            name=str(d.get("name", "")),
-            # older files carry neither: the EPC660's 12 bits and the simulator's 6 MHz
-            full_scale_counts=float(d.get("full_scale_counts", 4095.0)),
-            modulation_frequency_hz=float(d.get("modulation_frequency_hz", 6.0e6)),
+            name=get("name", str, ""),
+            # older files carry none of these: the EPC660's 12 bits, the simulator's 6 MHz,
+            # radial distances in mm
+            full_scale_counts=get("full_scale_counts", float, 4095.0),
+            modulation_frequency_hz=get("modulation_frequency_hz", float, 6.0e6),
+            unwrapped_range_mm=get("unwrapped_range_mm", float),
+            count_scale=get("count_scale", float, 1.0),
+            distance_kind=get("distance_kind", str, "radial"),
+            depth_unit_mm=get("depth_unit_mm", float, 1.0),
+            depth_invalid_code=get("depth_invalid_code", int, 0),
+            depth_max_valid_code=get("depth_max_valid_code", int, 63999),
         )
 
     def to_json(self) -> str:

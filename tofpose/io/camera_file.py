@@ -1,7 +1,8 @@
 """The files a pipeline over a recording is built from, as ``tofpose`` commands read
 them: a camera JSON (the camera model, ``tofpose.core.camera.CameraModel``, with, when
 present, the ``range_correction`` that ``tofpose calibrate-range`` adds and the
-``covariance_scale`` that ``tofpose calibrate-covariance`` adds) and a catalog JSON.
+``covariance_scale`` that ``tofpose calibrate-covariance`` adds), or the name of a
+shipped camera profile (``tofpose.core.camera_profiles``), and a catalog JSON.
 Errors are ``SystemExit`` with a message for the user, as the commands print them."""
 
 from __future__ import annotations
@@ -11,8 +12,9 @@ from pathlib import Path
 
 from tofpose.calibration.covariance import CovarianceScale
 from tofpose.calibration.range import RangeCorrection
-from tofpose.config import PixelFitConfig, TrackingConfig
+from tofpose.config import PixelFitConfig, TrackingConfig, config_for_camera
 from tofpose.core.camera import CameraModel
+from tofpose.core.camera_profiles import camera_from_profile, profile_names, profile_text
 from tofpose.core.catalog import Catalog
 from tofpose.pipeline import PipelineConfig, PosePipeline
 
@@ -20,9 +22,18 @@ from tofpose.pipeline import PipelineConfig, PosePipeline
 def load_camera(text: str) -> tuple[CameraModel, RangeCorrection | None, CovarianceScale | None]:
     """The camera, its range correction and its covariance scale (None where absent)
     from a camera JSON text; ``ValueError`` (or ``KeyError``/``TypeError``) naming what
-    is wrong when it is not one."""
-    camera = CameraModel.from_json(text)
-    doc = json.loads(text)
+    is wrong when it is not one. A JSON with a ``profile`` key is a camera profile and
+    must state every field (``camera_profiles.REQUIRED_KEYS``)."""
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"camera JSON is not valid JSON: {exc}") from exc
+    if not isinstance(doc, dict):
+        raise ValueError("camera JSON must be an object")
+    if "profile" in doc:
+        camera = camera_from_profile(doc, where=f"camera profile {doc['profile']}")
+    else:
+        camera = CameraModel.from_dict(doc)
     rc, cs = doc.get("range_correction"), doc.get("covariance_scale")
     return (
         camera,
@@ -39,6 +50,29 @@ def read_text_file(path: str, what: str) -> str:
         raise SystemExit(f"tofpose: cannot read {what} {path}: {exc.strerror}") from exc
 
 
+def read_camera_text(name_or_path: str) -> str:
+    """The camera JSON text of a ``--camera`` argument: a shipped profile's name
+    (``tofcam660``, ``azure-kinect-nfov``, ...) or a camera JSON file; ``SystemExit``
+    naming the file, or listing the profiles when the argument is neither."""
+    if name_or_path in profile_names():
+        return profile_text(name_or_path)
+    if not Path(name_or_path).exists() and not name_or_path.endswith(".json"):
+        raise SystemExit(
+            f"tofpose: camera {name_or_path!r} is neither a camera JSON file nor a "
+            f"camera profile ({', '.join(profile_names())})"
+        )
+    return read_text_file(name_or_path, "camera")
+
+
+def camera_from_arg(name_or_path: str) -> CameraModel:
+    """The camera of a ``--camera`` argument (``read_camera_text``); ``SystemExit``
+    naming what is wrong."""
+    try:
+        return load_camera(read_camera_text(name_or_path))[0]
+    except (ValueError, KeyError, TypeError) as exc:
+        raise SystemExit(f"tofpose: camera {name_or_path}: {exc}") from exc
+
+
 def pipeline_for(
     rec,
     rec_path: str,
@@ -49,11 +83,12 @@ def pipeline_for(
     pixel_fit: bool = False,
 ) -> PosePipeline:
     """The pipeline ``estimate`` runs over an open recording: its camera and catalog, or
-    the ones given (a camera JSON with its range correction and covariance scale);
+    the ones given (a camera JSON with its range correction and covariance scale), with
+    the pixel- and count-valued settings scaled to the camera (``config_for_camera``);
     ``pixel_fit``: refine each pose on the markers' pixels (``PixelFitConfig``)."""
     camera, correction, scale = rec.camera, None, None
     if camera_path:
-        camera, correction, scale = load_camera(read_text_file(camera_path, "camera"))
+        camera, correction, scale = load_camera(read_camera_text(camera_path))
     if catalog_path:
         catalog = Catalog.from_json(read_text_file(catalog_path, "catalog"))
     elif rec.catalog is not None:
@@ -65,8 +100,13 @@ def pipeline_for(
             f"tofpose: camera {camera.width}x{camera.height} does not match the recording's "
             f"{rec.camera.width}x{rec.camera.height} frames"
         )
-    config = PipelineConfig(
-        tracking=TrackingConfig(enabled=tracking), pixel_fit=PixelFitConfig(enabled=pixel_fit)
+    config = config_for_camera(
+        PipelineConfig(
+            tracking=TrackingConfig(enabled=tracking), pixel_fit=PixelFitConfig(enabled=pixel_fit)
+        ),
+        width=camera.width,
+        height=camera.height,
+        count_scale=camera.count_scale,
     )
     return PosePipeline(
         camera, catalog, config, range_correction=correction, covariance_scale=scale

@@ -4,11 +4,17 @@
 
     /            attrs: format = "tofpose-recording", version = 1
     /camera      attrs: width, height, fx, fy, cx, cy, dist (5), name,
-                        full_scale_counts, modulation_frequency_hz (optional: a
-                        recording without them reads as 4095 counts and 6 MHz)
+                        full_scale_counts, modulation_frequency_hz,
+                        unwrapped_range_mm (only when set), count_scale,
+                        distance_kind, depth_unit_mm, depth_invalid_code,
+                        depth_max_valid_code (all optional: a recording without
+                        them reads as the EPC660's: 4095 counts, 6 MHz, count
+                        scale 1, radial distances, mm codes, 0 and > 63999 invalid)
     /catalog     attrs: json                                              optional
     /frames/gray          uint16  (N, H, W)
-    /frames/distance_mm   float32 (N, H, W)  radial distance, NaN = invalid
+    /frames/distance_mm   float32 (N, H, W)  mm, NaN = invalid: radial distance,
+                                             or z depth where /camera's
+                                             distance_kind is "z"
     /frames/time_s        float64 (N,)
     /truth/R_camera_target     float64 (N, 3, 3)                          optional
     /truth/t_camera_target_mm  float64 (N, 3)                             optional
@@ -18,12 +24,19 @@
 ``/truth`` is the pose that produced each frame (on the simulator: what was rendered);
 ``/lab_truth`` is what the lab believed (encoders + nominal mount and placement), the
 only reference a real lab has. A simulated recording carries both.
+
+The pipeline always sees radial distance: a recording of a z-depth device (an Azure
+Kinect's frames, a ROS depth image; ``distance_kind = "z"``) stores its frames as the
+device gave them, and the reader converts them per pixel through the undistorted ray
+(``tofpose.core.depth.radial_from_z``), so ``Recording.frame`` and ``block`` return
+radial distances and ``Recording.camera`` says ``distance_kind = "radial"``
+(``Recording.stored_distance_kind`` keeps what the file holds).
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import h5py
@@ -31,6 +44,7 @@ import numpy as np
 
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import Catalog
+from tofpose.core.depth import radial_from_z
 
 FORMAT = "tofpose-recording"
 VERSION = 1
@@ -45,6 +59,8 @@ class RecordingWriter:
 
     Frames are written in chunks of one frame (resizable datasets), so a recording
     interrupted part-way still holds every frame written before the interruption.
+    The distance images are stored as given, in ``camera.distance_kind`` (radial, or
+    the z depth of a z-depth device: the reader converts those to radial).
     """
 
     def __init__(
@@ -73,8 +89,15 @@ class RecordingWriter:
             "cy",
             "full_scale_counts",
             "modulation_frequency_hz",
+            "count_scale",
+            "distance_kind",
+            "depth_unit_mm",
+            "depth_invalid_code",
+            "depth_max_valid_code",
         ):
             cam.attrs[k] = getattr(camera, k)
+        if camera.unwrapped_range_mm is not None:
+            cam.attrs["unwrapped_range_mm"] = camera.unwrapped_range_mm
         cam.attrs["dist"] = np.asarray(camera.dist, float)
         cam.attrs["name"] = camera.name
         if catalog is not None:
@@ -197,8 +220,9 @@ def _pose_datasets(f: h5py.File, group: str) -> tuple[h5py.Dataset, h5py.Dataset
 def _camera_from_attrs(attrs, path=None) -> CameraModel:
     """The CameraModel stored in /camera's attributes; RecordingError if invalid."""
     cam_attrs = {k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in attrs.items()}
-    if isinstance(cam_attrs.get("name"), bytes):
-        cam_attrs["name"] = cam_attrs["name"].decode()
+    for key in ("name", "distance_kind"):
+        if isinstance(cam_attrs.get(key), bytes):
+            cam_attrs[key] = cam_attrs[key].decode()
     try:
         return CameraModel.from_dict(cam_attrs)
     except ValueError as exc:
@@ -230,9 +254,12 @@ def _read_poses(f: h5py.File, group: str, n: int, path) -> tuple[np.ndarray, np.
 class Recording:
     """An open recording (read-only). Frames are read lazily; use as a context manager.
 
-    camera : CameraModel; catalog : Catalog or None; n_frames : int;
+    camera : CameraModel (``distance_kind`` "radial": what ``frame`` and ``block``
+    return); catalog : Catalog or None; n_frames : int;
     time_s : ndarray (N,); truth_R : ndarray (N, 3, 3) or None; truth_t_mm : (N, 3) or None.
     lab_truth_R, lab_truth_t_mm : the lab's reference, same shapes, or None.
+    stored_distance_kind : "radial" or "z": what /frames/distance_mm holds (z depth is
+    converted to radial distance as frames are read).
     """
 
     path: Path
@@ -245,6 +272,14 @@ class Recording:
     _file: h5py.File
     lab_truth_R: np.ndarray | None = None
     lab_truth_t_mm: np.ndarray | None = None
+    stored_distance_kind: str = "radial"
+    _stored_camera: CameraModel | None = None
+
+    def _radial(self, distance_mm: np.ndarray) -> np.ndarray:
+        """Stored distances (H, W) or (n, H, W) as radial distances."""
+        if self.stored_distance_kind != "z":
+            return distance_mm
+        return radial_from_z(distance_mm, self._stored_camera or self.camera)
 
     def frame(self, i: int) -> tuple[np.ndarray, np.ndarray, float]:
         """(gray (H, W) uint16, distance (H, W) float32, time_s) of frame i."""
@@ -255,7 +290,7 @@ class Recording:
             d = self._file["frames/distance_mm"][i]
         except (OSError, KeyError) as exc:
             raise RecordingError(f"{self.path}: frame {i} cannot be read ({exc})") from exc
-        return g, d, float(self.time_s[i])
+        return g, self._radial(d), float(self.time_s[i])
 
     def frames(self) -> Iterator[tuple[np.ndarray, np.ndarray, float]]:
         for i in range(self.n_frames):
@@ -280,7 +315,7 @@ class Recording:
             raise RecordingError(
                 f"{self.path}: frames {start}..{stop - 1} cannot be read ({exc})"
             ) from exc
-        return g, d, np.asarray(self.time_s[start:stop], float)
+        return g, self._radial(d), np.asarray(self.time_s[start:stop], float)
 
     def blocks(self, start: int = 0, stop: int | None = None) -> Iterator[tuple[int, tuple]]:
         """(first frame, ``block``) over [start, stop) in reads aligned to the file's
@@ -357,7 +392,22 @@ def open_recording(path: str | Path) -> Recording:
         lab = _read_poses(f, "lab_truth", n, path)
         truth_R, truth_t = truth if truth is not None else (None, None)
         lab_R, lab_t = lab if lab is not None else (None, None)
-        return Recording(path, camera, catalog, n, t[...], truth_R, truth_t, f, lab_R, lab_t)
+        # z-depth frames are read as radial (Recording._radial): the camera says so
+        stored_kind = camera.distance_kind
+        return Recording(
+            path,
+            replace(camera, distance_kind="radial"),
+            catalog,
+            n,
+            t[...],
+            truth_R,
+            truth_t,
+            f,
+            lab_R,
+            lab_t,
+            stored_distance_kind=stored_kind,
+            _stored_camera=camera,
+        )
     except RecordingError:
         f.close()
         raise

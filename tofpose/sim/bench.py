@@ -20,7 +20,7 @@ import numpy as np
 from tofpose.core.camera import CameraModel
 from tofpose.core.geometry import RigidTransform
 from tofpose.lab.kinematics import axes_transform
-from tofpose.sim.render import RenderedFrame, SensorModel, render_frame
+from tofpose.sim.render import RenderedFrame, SensorModel, reference_full_scale, render_frame
 from tofpose.sim.scene import TargetScene
 from tofpose.sim.turntable import Turntable
 
@@ -97,7 +97,9 @@ class SimulatedBench:
         off): a slewing table gives motion artefacts (``render.combine_subframes``)."""
         if not self.sensor.motion_artefacts:
             return None
-        period = self.sensor.subframe_period_s(float(np.linalg.norm(T_true.t_mm)))
+        period = self.sensor.subframe_period_s(
+            float(np.linalg.norm(T_true.t_mm)), full_scale_counts=reference_full_scale(self.camera)
+        )
         positions = [self.turntable.true_position(time_s + k * period) for k in range(4)]
         if all(p == positions[0] for p in positions[1:]):
             return None

@@ -12,18 +12,25 @@ Physics (docs/architecture.md §6), per pixel:
 4. Ambient light gives a background ``B = K_amb * lux * T * rho_diffuse`` (counts).
 5. Noise: distance ``sigma_d = c / (4 pi f) * sqrt(A + B) / (demod_gain * A)`` (the
    standard CW-ToF model), gray shot noise ``sqrt(A + B)`` counts.
-6. The measured distance wraps at the unambiguous range ``c / (2 f)``. Pixels with
-   ``A + B`` at full scale are saturated (gray = 4095, distance NaN); pixels with
-   ``A < min_amplitude`` are invalid (distance NaN).
+6. The measured distance wraps at the unambiguous range ``c / (2 f)`` (or at the
+   unwrapped range of a multi-frequency sensor). Pixels with ``A + B`` at the camera's
+   full scale are saturated (gray = full scale, 4095 on the EPC660; distance NaN);
+   pixels with ``A < min_amplitude`` are invalid (distance NaN).
 
 The gray image is the active amplitude plus the residual ambient offset left by the
-sensor's background suppression (``ambient_gray_fraction * B``), quantised to 12 bits.
+sensor's background suppression (``ambient_gray_fraction * B``), quantised to counts.
+The radiometry is in counts of the reference 12-bit EPC660; a camera of another count
+scale (``CameraModel.count_scale``: a 16-bit sensor, say) gets its gray image scaled by
+it, its saturation at its own full scale, and its auto exposure aims at the same
+fraction of its full scale. ``sensor_for_camera`` gives a sensor the camera's modulation
+frequency and range: with both, the simulator renders any camera profile
+(``tofpose.core.camera_profiles``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -34,7 +41,8 @@ from tofpose.core.tof import SPEED_OF_LIGHT_MM_S
 from tofpose.sim.scene import FIRST_DISC, NO_HIT, PLATE, WALL, SceneInCamera, TargetScene
 from tofpose.sim.systematic import SystematicErrors
 
-#: the EPC660's 12-bit full scale: the auto exposure's reference level
+#: the EPC660's 12-bit full scale: the auto exposure's reference level (a camera of
+#: another count scale: ``reference_full_scale``)
 FULL_SCALE_COUNTS = 4095
 
 AMBIENT_NORMAL_LUX = 1000.0
@@ -88,6 +96,9 @@ class SensorModel:
         (``combine_subframes``; the bench and the live simulator pass the poses).
     subframe_readout_us : float
         Readout between sub-frames; the sub-frame period is exposure + readout.
+    unwrapped_range_mm : float or None
+        Where the distance wraps on a sensor that unwraps several modulation
+        frequencies (``CameraModel.unwrapped_range_mm``); None: ``c / (2 f)``.
     """
 
     modulation_frequency_hz: float = 6.0e6
@@ -110,10 +121,13 @@ class SensorModel:
     systematic: SystematicErrors | None = None
     motion_artefacts: bool = True
     subframe_readout_us: float = 1500.0
+    unwrapped_range_mm: float | None = None
 
     def __post_init__(self) -> None:
         if self.modulation_frequency_hz <= 0:
             raise ValueError("modulation_frequency_hz must be positive")
+        if self.unwrapped_range_mm is not None and not self.unwrapped_range_mm > 0:
+            raise ValueError(f"unwrapped_range_mm must be positive, got {self.unwrapped_range_mm}")
         if self.supersampling < 1:
             raise ValueError("supersampling must be >= 1")
         lo, hi = self.integration_limits_us
@@ -126,6 +140,14 @@ class SensorModel:
         return SPEED_OF_LIGHT_MM_S / (2.0 * self.modulation_frequency_hz)
 
     @property
+    def reading_range_mm(self) -> float:
+        """Where the distance the camera reads wraps, mm: ``unwrapped_range_mm`` when
+        set, else the unambiguous range."""
+        if self.unwrapped_range_mm is not None:
+            return self.unwrapped_range_mm
+        return self.unambiguous_range_mm
+
+    @property
     def mm_per_radian(self) -> float:
         """c / (4 pi f_mod): distance per radian of phase, mm."""
         return SPEED_OF_LIGHT_MM_S / (4.0 * np.pi * self.modulation_frequency_hz)
@@ -135,18 +157,42 @@ class SensorModel:
         a = np.maximum(np.asarray(amplitude, float), 1e-9)
         return self.mm_per_radian * np.sqrt(a + background) / (self.demod_gain * a)
 
-    def exposure_for(self, distance_mm: float) -> float:
-        """Integration time (us) used at a target distance under ``auto_exposure``."""
+    def exposure_for(
+        self, distance_mm: float, *, full_scale_counts: float = FULL_SCALE_COUNTS
+    ) -> float:
+        """Integration time (us) used at a target distance under ``auto_exposure``:
+        a face-on reflector there reaches ``auto_exposure_fill`` of ``full_scale_counts``
+        (in reference counts: ``reference_full_scale(camera)``)."""
         if not self.auto_exposure:
             return self.integration_time_us
         peak_per_us = self.illumination_gain * self.retro_gain / distance_mm**2
-        t = self.auto_exposure_fill * FULL_SCALE_COUNTS / peak_per_us
+        t = self.auto_exposure_fill * full_scale_counts / peak_per_us
         lo, hi = self.integration_limits_us
         return float(np.clip(t, lo, hi))
 
-    def subframe_period_s(self, distance_mm: float) -> float:
+    def subframe_period_s(
+        self, distance_mm: float, *, full_scale_counts: float = FULL_SCALE_COUNTS
+    ) -> float:
         """Time from one phase sub-frame to the next: exposure plus readout, s."""
-        return (self.exposure_for(distance_mm) + self.subframe_readout_us) * 1e-6
+        t_int = self.exposure_for(distance_mm, full_scale_counts=full_scale_counts)
+        return (t_int + self.subframe_readout_us) * 1e-6
+
+
+def reference_full_scale(camera: CameraModel) -> float:
+    """The camera's full scale in the simulator's reference (EPC660) counts:
+    ``full_scale_counts / count_scale``."""
+    return camera.full_scale_counts / camera.count_scale
+
+
+def sensor_for_camera(sensor: SensorModel, camera: CameraModel) -> SensorModel:
+    """``sensor`` with the camera's modulation frequency and unwrapped range: the
+    simulated sensor of a camera profile (its distance noise, flying pixels and wrap
+    follow the device's frequency)."""
+    return replace(
+        sensor,
+        modulation_frequency_hz=camera.modulation_frequency_hz,
+        unwrapped_range_mm=camera.unwrapped_range_mm,
+    )
 
 
 @dataclass(frozen=True)
@@ -392,7 +438,10 @@ def render_frame(
             raise ValueError("a seeded numpy Generator is required when sensor.noise is True")
         noise_rng = rng
     h, w = camera.height, camera.width
-    t_int = sensor.exposure_for(float(np.linalg.norm(T_camera_target.t_mm)))
+    t_int = sensor.exposure_for(
+        float(np.linalg.norm(T_camera_target.t_mm)),
+        full_scale_counts=reference_full_scale(camera),
+    )
     static = _phasor_images(camera, scene, T_camera_target, sensor, t_int)
     re_img, im_img, b_img, sid_img, d_img, mixed = static
     moved = np.zeros_like(mixed)  # pixels whose surface changes between sub-frames
@@ -416,6 +465,12 @@ def render_frame(
     true_d = np.mod(np.arctan2(im_img, re_img), 2 * np.pi) * sensor.mm_per_radian
     # The phasor angle is already wrapped; keep the unwrapped truth for tests where we can.
     unwrapped = np.where(sid_img != NO_HIT, d_img, np.nan)
+    if sensor.unwrapped_range_mm is not None:
+        # a multi-frequency sensor unwraps its phase: a mixed pixel reads the period
+        # next to its centre's surface (or the target's, where the centre sees nothing)
+        u = sensor.unambiguous_range_mm
+        ref = np.where(np.isfinite(unwrapped), unwrapped, np.linalg.norm(T_camera_target.t_mm))
+        true_d = ref + (np.mod(true_d - ref + u / 2, u) - u / 2)
     from_mixture = mixed if sensor.supersampling > 1 else np.zeros_like(mixed)
     if sensor.blur_sigma_px > 0:
         from_mixture = np.ones_like(mixed)
@@ -431,12 +486,13 @@ def render_frame(
         sigma = sensor.distance_sigma_mm(amp, b_img)
         dist = dist + sigma * noise_rng.standard_normal((h, w))
         gray = gray + np.sqrt(amp + b_img) * noise_rng.standard_normal((h, w))
-    dist = np.mod(dist, sensor.unambiguous_range_mm)
+    dist = np.mod(dist, sensor.reading_range_mm)
     full_scale = camera.full_scale_counts  # the camera's clip level (4095: 12 bits)
-    saturated = (amp + b_img) >= full_scale
+    scale = camera.count_scale  # the camera's counts per reference count
+    saturated = (amp + b_img) * scale >= full_scale
     invalid = saturated | (amp < sensor.min_amplitude_counts)
     dist[invalid] = np.nan
-    gray = np.clip(np.rint(gray), 0, full_scale)
+    gray = np.clip(np.rint(gray * scale), 0, full_scale)
     gray[saturated] = full_scale
     return RenderedFrame(
         gray=gray.astype(np.uint16),

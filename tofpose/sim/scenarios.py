@@ -12,10 +12,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import Catalog, paper_target
 from tofpose.core.geometry import RigidTransform
 from tofpose.sim.bench import BenchFrame, LabGeometry, SimulatedBench
-from tofpose.sim.render import AMBIENT_HIGH_LUX, SensorModel
+from tofpose.sim.render import AMBIENT_HIGH_LUX, SensorModel, sensor_for_camera
 from tofpose.sim.scene import Clutter, TargetScene
 from tofpose.sim.systematic import SystematicErrors
 from tofpose.sim.turntable import Turntable
@@ -145,11 +146,25 @@ def get_scenario(name: str) -> Scenario:
     return SCENARIOS[name]()
 
 
-def make_bench(scenario: Scenario, catalog: Catalog | None = None, seed: int = 0) -> SimulatedBench:
+def make_bench(
+    scenario: Scenario,
+    catalog: Catalog | None = None,
+    seed: int = 0,
+    *,
+    camera: CameraModel | None = None,
+) -> SimulatedBench:
+    """The scenario's bench; ``camera``: render through this camera (a profile, e.g.
+    ``camera_profiles.load_profile("azure-kinect-nfov")``) with the scenario's sensor
+    at its modulation frequency and range (``sensor_for_camera``); None: the EPC660."""
     scene = TargetScene(catalog=catalog or paper_target(), clutter=scenario.clutter)
+    if camera is None:
+        camera, sensor = CameraModel(), scenario.sensor
+    else:
+        sensor = sensor_for_camera(scenario.sensor, camera)
     return SimulatedBench(
+        camera=camera,
         scene=scene,
-        sensor=scenario.sensor,
+        sensor=sensor,
         geometry=replace(scenario.geometry),
         turntable=Turntable(seed=seed + 1),
         seed=seed,
@@ -157,12 +172,19 @@ def make_bench(scenario: Scenario, catalog: Catalog | None = None, seed: int = 0
 
 
 def run_scenario(
-    scenario: Scenario, n_frames: int, *, seed: int = 0, catalog: Catalog | None = None
+    scenario: Scenario,
+    n_frames: int,
+    *,
+    seed: int = 0,
+    catalog: Catalog | None = None,
+    camera: CameraModel | None = None,
 ) -> Iterator[BenchFrame]:
-    """Yield ``n_frames`` captures: for each set-point, move, wait until settled, dwell."""
+    """Yield ``n_frames`` captures: for each set-point, move, wait until settled, dwell.
+    ``camera``: as ``make_bench``'s (the frames' distances are radial, whatever the
+    camera's ``distance_kind``)."""
     if n_frames < 1:
         raise ValueError("n_frames must be >= 1")
-    bench = make_bench(scenario, catalog, seed)
+    bench = make_bench(scenario, catalog, seed, camera=camera)
     n_sp = len(scenario.setpoints)
     per = np.diff(np.linspace(0, n_frames, n_sp + 1).round().astype(int))
     t = 0.0

@@ -14,13 +14,14 @@ from tqdm import tqdm
 
 from tofpose.calibration.covariance import auto_knots, fit_covariance_scale, pose_nees
 from tofpose.calibration.range import fit_range_correction
+from tofpose.config import config_for_camera
 from tofpose.core.geometry import RigidTransform
 from tofpose.core.tof import unambiguous_range_mm
-from tofpose.io.camera_file import load_camera, pipeline_for, read_text_file
+from tofpose.io.camera_file import load_camera, pipeline_for, read_camera_text
 from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
 from tofpose.io.recording import Recording, open_recording
 from tofpose.lab.relative_state import RelativeStateConfig, RelativeStateFilter
-from tofpose.pipeline import PosePipeline
+from tofpose.pipeline import PipelineConfig, PosePipeline
 from tofpose.sim.pixel_truth import true_pixel_distances
 
 
@@ -54,8 +55,14 @@ def calibrate_covariance(
             raise SystemExit(f"tofpose: {rec_path} has no /catalog: the target is unknown")
         camera, correction = rec.camera, None
         if camera_path:
-            camera, correction, _ = load_camera(read_text_file(camera_path, "camera"))
-        pipe = PosePipeline(camera, rec.catalog, range_correction=correction)
+            camera, correction, _ = load_camera(read_camera_text(camera_path))
+        config = config_for_camera(
+            PipelineConfig(),
+            width=camera.width,
+            height=camera.height,
+            count_scale=camera.count_scale,
+        )
+        pipe = PosePipeline(camera, rec.catalog, config, range_correction=correction)
         ranges, nees = [], []
         for i in tqdm(
             range(rec.n_frames),
@@ -91,11 +98,19 @@ def calibrate_covariance(
 
 
 def calibrate_range(
-    rec_path: str, out: str, reference: str, modulation_mhz: float, progress: bool = True
+    rec_path: str,
+    out: str,
+    reference: str,
+    modulation_mhz: float | None,
+    progress: bool = True,
 ) -> str:
     """Fit the range correction from a recording of the known target with a reference
-    pose per frame (``/truth`` or ``/lab_truth``); write the camera JSON with it."""
+    pose per frame (``/truth`` or ``/lab_truth``); write the camera JSON with it.
+    ``modulation_mhz``: the frequency whose period the cyclic error has (None: the
+    recording's camera's)."""
     with open_recording(rec_path) as rec:
+        if modulation_mhz is None:
+            modulation_mhz = rec.camera.modulation_frequency_hz / 1e6
         R_all, t_all = _reference(rec, reference, rec_path)
         if rec.catalog is None:
             raise SystemExit(f"tofpose: {rec_path} has no /catalog: the target's shape is unknown")

@@ -12,8 +12,9 @@ from tqdm import tqdm
 
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import Catalog, paper_target
+from tofpose.core.depth import z_from_radial
 from tofpose.core.geometry import facing_euler_deg, rotation_angle_deg
-from tofpose.io.camera_file import read_text_file
+from tofpose.io.camera_file import camera_from_arg, read_text_file
 from tofpose.io.recording import RecordingWriter, open_recording
 from tofpose.workflows.measurement import estimate
 
@@ -25,7 +26,12 @@ def simulate(
     seed: int,
     catalog_path: str | None,
     progress: bool = True,
+    camera_arg: str | None = None,
 ) -> None:
+    """Write a simulated recording of a scenario with its truths. ``camera_arg``: a
+    camera profile's name or a camera JSON (default: the TOFcam-660, ``CameraModel()``);
+    a z-depth camera's recording holds z depth, as the device would give it (the
+    recording reader converts it back to radial)."""
     from tofpose.sim.scenarios import get_scenario, run_scenario
 
     scenario = get_scenario(scenario_name)
@@ -34,19 +40,28 @@ def simulate(
         if catalog_path
         else paper_target()
     )
-    camera = CameraModel()
+    camera = camera_from_arg(camera_arg) if camera_arg else CameraModel()
     with RecordingWriter(out, camera, catalog, with_truth=True, with_lab_truth=True) as w:
         for bf in tqdm(
-            run_scenario(scenario, n_frames, seed=seed, catalog=catalog),
+            run_scenario(
+                scenario,
+                n_frames,
+                seed=seed,
+                catalog=catalog,
+                camera=camera if camera_arg else None,
+            ),
             total=n_frames,
             desc=f"simulate {scenario_name}",
             unit="frame",
             disable=not progress,
             file=sys.stderr,
         ):
+            distance_mm = bf.frame.distance_mm  # radial, as rendered
+            if camera.distance_kind == "z":
+                distance_mm = z_from_radial(distance_mm, camera)
             w.append(
                 bf.frame.gray,
-                bf.frame.distance_mm,
+                distance_mm,
                 bf.time_s,
                 bf.T_true.R,  # /truth: the pose the simulator rendered
                 bf.T_true.t_mm,
@@ -55,13 +70,17 @@ def simulate(
             )
 
 
-def render_pngs(scenario_name: str, prefix: str, seed: int) -> list[str]:
-    """Write PREFIX-gray.png and PREFIX-distance.png of a scenario's first frame."""
+def render_pngs(
+    scenario_name: str, prefix: str, seed: int, camera_arg: str | None = None
+) -> list[str]:
+    """Write PREFIX-gray.png and PREFIX-distance.png of a scenario's first frame;
+    ``camera_arg``: through this camera profile or camera JSON (default: TOFcam-660)."""
     import cv2
 
     from tofpose.sim.scenarios import get_scenario, run_scenario
 
-    bf = next(run_scenario(get_scenario(scenario_name), 1, seed=seed))
+    camera = camera_from_arg(camera_arg) if camera_arg else None
+    bf = next(run_scenario(get_scenario(scenario_name), 1, seed=seed, camera=camera))
     g = bf.frame.gray.astype(np.float64)
     g8 = np.clip(255 * np.sqrt(g / max(g.max(), 1)), 0, 255).astype(np.uint8)  # gamma 0.5
     d = bf.frame.distance_mm

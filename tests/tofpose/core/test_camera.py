@@ -62,3 +62,27 @@ def test_full_scale_and_modulation_travel_through_json_and_default_for_old_files
     assert CameraModel.from_dict(old).modulation_frequency_hz == 6.0e6
     with pytest.raises(ValueError, match="full_scale_counts must be positive"):
         CameraModel(full_scale_counts=0.0)
+
+
+def test_the_device_fields_travel_through_json_and_default_to_the_epc660s():
+    cam = CameraModel(
+        unwrapped_range_mm=3860.0,
+        count_scale=16.0,
+        distance_kind="z",
+        depth_unit_mm=0.25,
+        depth_invalid_code=65535,
+        depth_max_valid_code=65534,
+    )
+    assert CameraModel.from_json(cam.to_json()) == cam
+    assert cam.unambiguous_range_mm == 3860.0
+    old = {k: CameraModel().to_dict()[k] for k in ("width", "height", "fx", "fy", "cx", "cy")}
+    back = CameraModel.from_dict(old)
+    assert back == CameraModel(name="")
+    assert (back.count_scale, back.distance_kind, back.depth_unit_mm) == (1.0, "radial", 1.0)
+    assert (back.depth_invalid_code, back.depth_max_valid_code) == (0, 63999)
+    assert "unwrapped_range_mm" not in CameraModel().to_dict()  # single frequency: c / (2 f)
+    assert CameraModel(modulation_frequency_hz=12e6).unambiguous_range_mm == pytest.approx(
+        299_792_458_000.0 / (2 * 12e6)
+    )
+    with pytest.raises(ValueError, match="distance_kind must be one of radial, z"):
+        CameraModel(distance_kind="depth")  # type: ignore[arg-type]

@@ -1,3 +1,5 @@
+from dataclasses import replace
+
 import h5py
 import numpy as np
 import pytest
@@ -152,3 +154,59 @@ def test_the_cameras_full_scale_and_modulation_are_stored_and_old_files_read_as_
             4095.0,
             6.0e6,
         )
+
+
+def test_a_z_depth_recording_reads_as_radial_distance(tmp_path):
+    """A z-depth device's frames are stored as it gave them; frame() and block() return
+    the radial distance through each pixel's ray (a plane at z = 1500 mm reads
+    1500 / e_z), and the camera the reader hands out says so."""
+    from tofpose.core.camera_profiles import load_profile
+
+    cam = load_profile("azure-kinect-nfov")
+    path = tmp_path / "k.h5"
+    z = np.full(cam.shape, 1500.0, np.float32)
+    z[0, 0] = np.nan
+    with RecordingWriter(path, cam) as w:
+        for i in range(3):
+            w.append(np.zeros(cam.shape, np.uint16), z, 0.1 * i)
+    with h5py.File(path, "r") as f:
+        assert f["camera"].attrs["distance_kind"] == "z"
+        np.testing.assert_array_equal(f["frames/distance_mm"][1], z)  # stored as given
+        assert f["camera"].attrs["unwrapped_range_mm"] == 3860.0
+    e_z = cam.pixel_bearings()[:, :, 2]
+    with open_recording(path) as rec:
+        assert rec.stored_distance_kind == "z"
+        assert rec.camera.distance_kind == "radial"
+        assert rec.camera == replace(cam, distance_kind="radial")
+        _, d, _ = rec.frame(1)
+        assert np.isnan(d[0, 0])
+        np.testing.assert_allclose(d[1:], (1500.0 / e_z)[1:], rtol=1e-6)
+        assert d[0, 1] > 1500.0 * 1.4  # the corner's ray is 45 deg off axis
+        _, block, _ = rec.block(0, 3)
+        np.testing.assert_array_equal(block[2], d)
+    # a recording of the camera the reader hands out stores radial: no second conversion
+    copy = tmp_path / "copy.h5"
+    with open_recording(path) as rec, RecordingWriter(copy, rec.camera) as w:
+        g, d, t = rec.frame(0)
+        w.append(g, d, t)
+    with open_recording(copy) as rec2:
+        assert rec2.stored_distance_kind == "radial"
+        np.testing.assert_array_equal(rec2.frame(0)[1], d)
+
+
+def test_a_recording_without_the_device_attributes_reads_as_the_epc660s(tmp_path):
+    p = tmp_path / "r.h5"
+    frames = _write(p, n=1, truth=False)
+    with h5py.File(p, "r+") as f:  # a recording written before these attributes
+        for k in (
+            "count_scale",
+            "distance_kind",
+            "depth_unit_mm",
+            "depth_invalid_code",
+            "depth_max_valid_code",
+        ):
+            del f["camera"].attrs[k]
+    with open_recording(p) as rec:
+        assert rec.camera == CameraModel()
+        assert rec.stored_distance_kind == "radial"
+        np.testing.assert_array_equal(rec.frame(0)[1], frames[0][1])
