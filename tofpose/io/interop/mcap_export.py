@@ -19,7 +19,7 @@ import numpy as np
 from tqdm import tqdm
 
 import tofpose
-from tofpose.io.interop import topics
+from tofpose.io.interop import DEFAULT_MCAP_PROFILE, MCAP_PROFILES, topics
 from tofpose.io.interop.channels import ToFChannels
 from tofpose.io.interop.foxglove_messages import time_ns_from_seconds
 from tofpose.io.recording import Recording
@@ -54,7 +54,7 @@ def export_metadata(rec: Recording, pipeline: PosePipeline | None) -> dict[str, 
     }
 
 
-def _pose_at(
+def pose_at(
     R: np.ndarray | None, t_mm: np.ndarray | None, i: int
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """(R (3, 3), t (3,) mm) of frame ``i`` of a recording's reference poses (R (N, 3, 3),
@@ -107,8 +107,8 @@ def export_mcap(
             gray, dist, t = rec.frame(i)
             result = pipeline.process(gray, dist, t) if pipeline is not None else None
             n_ok += int(result is not None and result.ok)
-            truth = _pose_at(rec.truth_R, rec.truth_t_mm, i)
-            lab = _pose_at(rec.lab_truth_R, rec.lab_truth_t_mm, i)
+            truth = pose_at(rec.truth_R, rec.truth_t_mm, i)
+            lab = pose_at(rec.lab_truth_R, rec.lab_truth_t_mm, i)
             channels.log_frame(i, gray, dist, t, times_ns[i], result, truth, lab)
         done = True
     finally:
@@ -119,3 +119,34 @@ def export_mcap(
         else:
             partial.unlink(missing_ok=True)
     return {"frames": rec.n_frames, "ok": n_ok}
+
+
+def check_profile(profile: str) -> str:
+    """``profile`` when it is one of ``MCAP_PROFILES``, else ValueError naming it and them."""
+    if profile not in MCAP_PROFILES:
+        raise ValueError(
+            f"unknown MCAP profile {profile!r}: expected one of {', '.join(MCAP_PROFILES)}"
+        )
+    return profile
+
+
+def export_mcap_profile(
+    rec: Recording,
+    out: str | Path,
+    pipeline: PosePipeline | None = None,
+    *,
+    profile: str = DEFAULT_MCAP_PROFILE,
+    progress: bool = True,
+    overwrite: bool = False,
+    previews: bool = True,
+) -> dict[str, int]:
+    """``export_mcap`` (``foxglove``) or ``ros2_export.export_ros2_mcap`` (``ros2``, which
+    has no preview images: ``previews`` is the Foxglove profile's only); ValueError for
+    another profile, before anything is written."""
+    if check_profile(profile) == "ros2":
+        from tofpose.io.interop.ros2_export import export_ros2_mcap  # imports this module
+
+        return export_ros2_mcap(rec, out, pipeline, progress=progress, overwrite=overwrite)
+    return export_mcap(
+        rec, out, pipeline, progress=progress, overwrite=overwrite, previews=previews
+    )
