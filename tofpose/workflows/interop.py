@@ -12,7 +12,7 @@ from tofpose.io.recording import open_recording
 def export_file(args: argparse.Namespace) -> str:
     """``tofpose export mcap``: the recording, and with ``--estimate`` each frame's pose,
     as the ``--profile`` (foxglove or ros2) says."""
-    from tofpose.io.interop.mcap_export import (  # lazy: foxglove-sdk loads a runtime
+    from tofpose.io.interop.mcap_profiles import (  # lazy: foxglove-sdk loads a runtime
         check_profile,
         export_mcap_profile,
     )

@@ -19,7 +19,7 @@ import numpy as np
 from tqdm import tqdm
 
 import tofpose
-from tofpose.io.interop import DEFAULT_MCAP_PROFILE, MCAP_PROFILES, topics
+from tofpose.io.interop import topics
 from tofpose.io.interop.channels import ToFChannels
 from tofpose.io.interop.foxglove_messages import time_ns_from_seconds
 from tofpose.io.recording import Recording
@@ -119,34 +119,3 @@ def export_mcap(
         else:
             partial.unlink(missing_ok=True)
     return {"frames": rec.n_frames, "ok": n_ok}
-
-
-def check_profile(profile: str) -> str:
-    """``profile`` when it is one of ``MCAP_PROFILES``, else ValueError naming it and them."""
-    if profile not in MCAP_PROFILES:
-        raise ValueError(
-            f"unknown MCAP profile {profile!r}: expected one of {', '.join(MCAP_PROFILES)}"
-        )
-    return profile
-
-
-def export_mcap_profile(
-    rec: Recording,
-    out: str | Path,
-    pipeline: PosePipeline | None = None,
-    *,
-    profile: str = DEFAULT_MCAP_PROFILE,
-    progress: bool = True,
-    overwrite: bool = False,
-    previews: bool = True,
-) -> dict[str, int]:
-    """``export_mcap`` (``foxglove``) or ``ros2_export.export_ros2_mcap`` (``ros2``, which
-    has no preview images: ``previews`` is the Foxglove profile's only); ValueError for
-    another profile, before anything is written."""
-    if check_profile(profile) == "ros2":
-        from tofpose.io.interop.ros2_export import export_ros2_mcap  # imports this module
-
-        return export_ros2_mcap(rec, out, pipeline, progress=progress, overwrite=overwrite)
-    return export_mcap(
-        rec, out, pipeline, progress=progress, overwrite=overwrite, previews=previews
-    )

@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from tofpose.cli import main
 from tofpose.io.interop import ros2_topics as topics
-from tofpose.io.interop.mcap_export import export_mcap_profile
+from tofpose.io.interop.mcap_profiles import export_mcap_profile
 from tofpose.io.interop.ros2_schemas import definition
 from tofpose.io.recording import open_recording
 from tofpose.lab.relative_state import RelativeStateConfig, RelativeStateFilter
