@@ -304,3 +304,11 @@ def test_an_existing_output_is_kept_without_force(recording, tmp_path):
     with open_recording(recording) as rec, pytest.raises(ValueError, match="exists"):
         export_mcap_profile(rec, out, profile="ros2")
     assert out.read_bytes() == b"keep"
+
+
+def test_import_mcap_refuses_a_ros2_export_saying_what_it_is(exported_ros2, tmp_path, capsys):
+    out = tmp_path / "back.h5"
+    assert main(["import", "mcap", str(exported_ros2), "--out", str(out)]) != 0
+    err = capsys.readouterr().err
+    assert "ROS 2 messages (cdr: /tf, /tf_static" in err and "without --profile ros2" in err
+    assert not out.exists()
