@@ -169,7 +169,7 @@ def _add_interop_commands(sub) -> None:
         dest="previews",
         action="store_false",
         help="leave out the viewer images (/tof/gray_preview, /tof/distance_preview): "
-        "a smaller file",
+        "a smaller file (the foxglove profile; ros2 has none)",
     )
     p.add_argument("--force", action="store_true", help="overwrite --out")
     p = sub.add_parser("import", help="make a recording from another format (docs/interop.md)")
