@@ -79,6 +79,15 @@ def test_wheel_carries_the_camera_profiles(wheel):
     assert {f"tofpose/core/profiles/{p.name}" for p in profiles} <= names
 
 
+def test_wheel_carries_the_ros2_message_definitions(wheel):
+    """The ROS 2 MCAP export declares ROS 2's .msg files, read at run time: they ship."""
+    names = set(zipfile.ZipFile(wheel).namelist())
+    msgs = sorted((ROOT / "tofpose" / "io" / "interop" / "ros2_msgs").rglob("*.msg"))
+    assert len(msgs) >= 10
+    assert {p.relative_to(ROOT).as_posix() for p in msgs} <= names
+    assert "tofpose/io/interop/ros2_msgs/NOTICE.md" in names
+
+
 @pytest.fixture(scope="module")
 def installed(wheel, tmp_path_factory) -> Path:
     """The wheel installed into a bare directory (run with it as PYTHONPATH)."""

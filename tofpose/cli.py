@@ -17,6 +17,8 @@ from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any, Protocol
 
+from tofpose.io.interop import DEFAULT_MCAP_PROFILE, MCAP_PROFILES
+
 #: the entry-point group of commands that other packages add to ``tofpose``
 COMMAND_GROUP = "tofpose.commands"
 
@@ -153,6 +155,13 @@ def _add_interop_commands(sub) -> None:
     p.add_argument("format", choices=("mcap",), help="mcap: Foxglove / ROS 2 / Rerun")
     p.add_argument("recording")
     p.add_argument("--out", required=True, help="output file (REC.mcap)")
+    p.add_argument(
+        "--profile",
+        choices=MCAP_PROFILES,
+        default=DEFAULT_MCAP_PROFILE,
+        help="foxglove: Foxglove's schemas, mm (default; Foxglove, Rerun, `import mcap`); "
+        "ros2: ROS 2 messages (cdr), m and rad, REP 103 frames (ros2 bag, rosbags)",
+    )
     p.add_argument("--catalog", help="catalog JSON (default: the recording's)")
     p.add_argument("--camera", help="camera JSON or camera profile name (default: the recording's)")
     p.add_argument("--tracking", action="store_true", help="estimate in tracking mode")
@@ -167,7 +176,7 @@ def _add_interop_commands(sub) -> None:
         dest="previews",
         action="store_false",
         help="leave out the viewer images (/tof/gray_preview, /tof/distance_preview): "
-        "a smaller file",
+        "a smaller file (the foxglove profile; ros2 has none)",
     )
     p.add_argument("--force", action="store_true", help="overwrite --out")
     p = sub.add_parser("import", help="make a recording from another format (docs/interop.md)")

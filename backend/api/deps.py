@@ -6,7 +6,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Annotated, Any
 
-from fastapi import Depends, HTTPException, Request, status
+from fastapi import Depends, HTTPException, Query, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
 
@@ -15,6 +15,7 @@ from backend.services.campaigns.campaign_states import CampaignState
 from backend.services.keys import ApiKey, Scope
 from backend.services.motion import MotionService
 from backend.state import AppState
+from tofpose.io.interop import McapProfile
 
 bearer_scheme = HTTPBearer(
     auto_error=False,
@@ -58,6 +59,17 @@ def get_session(state: StateDep) -> Iterator[Session]:
 
 
 SessionDep = Annotated[Session, Depends(get_session)]
+
+#: ``?profile=`` of the MCAP downloads (docs/interop.md); 422 naming the allowed values
+#: for any other
+McapProfileQuery = Annotated[
+    McapProfile,
+    Query(
+        description="foxglove: Foxglove's schemas, mm (Foxglove, Rerun, `tofpose import "
+        "mcap`); ros2: ROS 2 messages (cdr, ros2msg), m and rad, REP 103 frame ids "
+        "(ros2 bag, rosbags)"
+    ),
+]
 
 # Every auth dependency is ``async`` and does no I/O (keys are checked against the key
 # service's copy in memory): FastAPI runs sync dependencies on AnyIO's worker threads,

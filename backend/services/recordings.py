@@ -72,6 +72,7 @@ from backend.services.live.hub import LiveHub, Subscription
 from backend.services.motion import MotionService
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import Catalog
+from tofpose.io.interop import MCAP_SUFFIXES
 from tofpose.io.recording import RecordingError, RecordingWriter, open_recording
 
 log = logging.getLogger(__name__)
@@ -457,6 +458,12 @@ class _Recorder:
         return detail
 
 
+def _export_files(h5: Path) -> list[Path]:
+    """Every file an MCAP export (``campaigns.mcap_files``) may leave beside the recording
+    ``h5``: each profile's MCAP (``MCAP_SUFFIXES``) and its note."""
+    return [h5.with_suffix(s + extra) for s in MCAP_SUFFIXES.values() for extra in ("", ".json")]
+
+
 def _size(path: Path) -> int:
     try:
         return path.stat().st_size
@@ -644,7 +651,7 @@ class RecordingService:
             recorder.thread.join(30.0)
 
     def delete(self, recording_id: int) -> None:
-        """Delete a stopped recording's entry and files (its HDF5 and MCAP);
+        """Delete a stopped recording's entry and files (its HDF5 and MCAP exports);
         ``RecordingConflictError`` while it records."""
         with self._lock:
             info = self._info(recording_id)
@@ -655,7 +662,7 @@ class RecordingService:
             del self._infos[recording_id]
             self._save()
         h5 = self.directory / info.file
-        for path in (h5, h5.with_suffix(".mcap"), h5.with_suffix(".mcap.json")):
+        for path in (h5, *_export_files(h5)):
             path.unlink(missing_ok=True)
 
     # -- reads --------------------------------------------------------------------------
@@ -700,10 +707,10 @@ class RecordingService:
 
     @property
     def used_bytes(self) -> int:
-        """What the recordings take on disk (HDF5 files and their MCAP exports)."""
+        """What the recordings take on disk (HDF5 files and each profile's MCAP export)."""
         with self._lock:
             files = [self.directory / i.file for i in self._infos.values()]
-        return sum(_size(p) + _size(p.with_suffix(".mcap")) for p in files)
+        return sum(_size(p) + sum(_size(e) for e in _export_files(p)) for p in files)
 
     # -- for the recorders --------------------------------------------------------------
     def _open_writer(self, info: RecordingInfo, path: Path, first: LiveSample | None):

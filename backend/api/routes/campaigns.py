@@ -14,6 +14,7 @@ from fastapi.responses import FileResponse
 from backend.api.contract import errors
 from backend.api.deps import (
     Location,
+    McapProfileQuery,
     ReadAuth,
     SessionDep,
     StateDep,
@@ -45,6 +46,7 @@ from backend.services.campaigns.mcap_files import recording_mcap
 from backend.services.reports.reports import ReportError, build, to_csv, to_html, to_json, to_pdf
 from backend.services.store import find_catalog
 from backend.state import AppState
+from tofpose.io.interop import DEFAULT_MCAP_PROFILE, MCAP_SUFFIXES
 
 router = APIRouter(prefix="/api/campaigns", tags=["campaigns"])
 IdParam = Annotated[int, Path(ge=1, le=2**31 - 1)]
@@ -319,20 +321,29 @@ def get_campaign_recording(campaign_id: IdParam, state: StateDep):
         **EXPORT_SPACE,
     },
 )
-async def get_campaign_recording_mcap(campaign_id: IdParam, state: StateDep):
-    """The campaign's raw recording as MCAP for Foxglove and Rerun (docs/interop.md): the
-    frames, the references and an estimate of each frame by the pipeline re-run over the
-    recording (its camera and catalog, default settings, tracking off; not the stored
-    measurement rows). Made on the first request (a long recording
-    takes a while) and kept, on the server's export workers (503 with Retry-After while
-    they and their queue are full). Only with ``record_raw``."""
+async def get_campaign_recording_mcap(
+    campaign_id: IdParam,
+    state: StateDep,
+    profile: McapProfileQuery = DEFAULT_MCAP_PROFILE,
+):
+    """The campaign's raw recording as MCAP for Foxglove and Rerun, or with
+    ``profile=ros2`` as ROS 2 messages (docs/interop.md): the frames, the references and
+    an estimate of each frame by the pipeline re-run over the recording (its camera and
+    catalog, default settings, tracking off; not the stored measurement rows). Made on
+    the first request (a long recording takes a while) and kept, on the server's export
+    workers (503 with Retry-After while they and their queue are full). Only with
+    ``record_raw``."""
 
     def export():  # the recording's lookup reads the database: off the event loop too
         return recording_mcap(
-            finished_recording(state, campaign_id), state.settings.recording_min_free_mb
+            finished_recording(state, campaign_id),
+            state.settings.recording_min_free_mb,
+            profile,
         )
 
-    out = await state.heavy_work.run(export, f"the MCAP of campaign {campaign_id}")
+    out = await state.heavy_work.run(export, f"the {profile} MCAP of campaign {campaign_id}")
     return FileResponse(
-        out, media_type="application/x-mcap", filename=f"campaign-{campaign_id}.mcap"
+        out,
+        media_type="application/x-mcap",
+        filename=f"campaign-{campaign_id}{MCAP_SUFFIXES[profile]}",
     )

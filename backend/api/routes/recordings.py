@@ -15,7 +15,7 @@ from fastapi import APIRouter, HTTPException, Path, status
 from fastapi.responses import FileResponse
 
 from backend.api.contract import ErrorPublic, errors
-from backend.api.deps import AdminAuth, ReadAuth, StateDep, WriteAuth
+from backend.api.deps import AdminAuth, McapProfileQuery, ReadAuth, StateDep, WriteAuth
 from backend.api.schemas.recordings import RecordingCreate, RecordingPublic, RecordingsPublic
 from backend.services.campaigns.mcap_files import recording_mcap
 from backend.services.recordings import (
@@ -24,6 +24,7 @@ from backend.services.recordings import (
     RecordingService,
 )
 from backend.state import AppState
+from tofpose.io.interop import DEFAULT_MCAP_PROFILE, MCAP_SUFFIXES
 
 router = APIRouter(prefix="/api/recordings", tags=["recordings"])
 RecordingIdParam = Annotated[int, Path(ge=1, le=2**31 - 1)]
@@ -151,18 +152,23 @@ def get_recording_h5(recording_id: RecordingIdParam, state: StateDep):
         **EXPORT_SPACE,
     },
 )
-async def get_recording_mcap(recording_id: RecordingIdParam, state: StateDep):
-    """The recording as MCAP for Foxglove and Rerun (docs/interop.md), made as a
-    campaign's is: frames, references and an estimate of each frame by the pipeline
-    re-run over the recording. Made on the first request and kept, on the server's
-    export workers (503 with Retry-After while they and their queue are full). 409 while
-    it records."""
+async def get_recording_mcap(
+    recording_id: RecordingIdParam,
+    state: StateDep,
+    profile: McapProfileQuery = DEFAULT_MCAP_PROFILE,
+):
+    """The recording as MCAP for Foxglove and Rerun, or with ``profile=ros2`` as ROS 2
+    messages (docs/interop.md), made as a campaign's is: frames, references and an
+    estimate of each frame by the pipeline re-run over the recording. Made on the first
+    request and kept, on the server's export workers (503 with Retry-After while they
+    and their queue are full). 409 while it records."""
     info, path = _file(_service(state), recording_id)
     out = await state.heavy_work.run(
-        lambda: recording_mcap(path, state.settings.recording_min_free_mb),
-        f"the MCAP of recording {recording_id}",
+        lambda: recording_mcap(path, state.settings.recording_min_free_mb, profile),
+        f"the {profile} MCAP of recording {recording_id}",
     )
-    return FileResponse(out, media_type="application/x-mcap", filename=_download_name(info, "mcap"))
+    name = _download_name(info, MCAP_SUFFIXES[profile].lstrip("."))
+    return FileResponse(out, media_type="application/x-mcap", filename=name)
 
 
 @router.delete(

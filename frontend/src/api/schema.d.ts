@@ -234,12 +234,13 @@ export interface paths {
         };
         /**
          * Get Campaign Recording Mcap
-         * @description The campaign's raw recording as MCAP for Foxglove and Rerun (docs/interop.md): the
-         *     frames, the references and an estimate of each frame by the pipeline re-run over the
-         *     recording (its camera and catalog, default settings, tracking off; not the stored
-         *     measurement rows). Made on the first request (a long recording
-         *     takes a while) and kept, on the server's export workers (503 with Retry-After while
-         *     they and their queue are full). Only with ``record_raw``.
+         * @description The campaign's raw recording as MCAP for Foxglove and Rerun, or with
+         *     ``profile=ros2`` as ROS 2 messages (docs/interop.md): the frames, the references and
+         *     an estimate of each frame by the pipeline re-run over the recording (its camera and
+         *     catalog, default settings, tracking off; not the stored measurement rows). Made on
+         *     the first request (a long recording takes a while) and kept, on the server's export
+         *     workers (503 with Retry-After while they and their queue are full). Only with
+         *     ``record_raw``.
          */
         get: operations["getCampaignRecordingMcap"];
         put?: never;
@@ -812,11 +813,11 @@ export interface paths {
         };
         /**
          * Get Recording Mcap
-         * @description The recording as MCAP for Foxglove and Rerun (docs/interop.md), made as a
-         *     campaign's is: frames, references and an estimate of each frame by the pipeline
-         *     re-run over the recording. Made on the first request and kept, on the server's
-         *     export workers (503 with Retry-After while they and their queue are full). 409 while
-         *     it records.
+         * @description The recording as MCAP for Foxglove and Rerun, or with ``profile=ros2`` as ROS 2
+         *     messages (docs/interop.md), made as a campaign's is: frames, references and an
+         *     estimate of each frame by the pipeline re-run over the recording. Made on the first
+         *     request and kept, on the server's export workers (503 with Retry-After while they
+         *     and their queue are full). 409 while it records.
          */
         get: operations["getRecordingMcap"];
         put?: never;
@@ -3667,7 +3668,10 @@ export interface operations {
     };
     getCampaignRecordingMcap: {
         parameters: {
-            query?: never;
+            query?: {
+                /** @description foxglove: Foxglove's schemas, mm (Foxglove, Rerun, `tofpose import mcap`); ros2: ROS 2 messages (cdr, ros2msg), m and rad, REP 103 frame ids (ros2 bag, rosbags) */
+                profile?: "foxglove" | "ros2";
+            };
             header?: never;
             path: {
                 campaign_id: number;
@@ -5732,7 +5736,10 @@ export interface operations {
     };
     getRecordingMcap: {
         parameters: {
-            query?: never;
+            query?: {
+                /** @description foxglove: Foxglove's schemas, mm (Foxglove, Rerun, `tofpose import mcap`); ros2: ROS 2 messages (cdr, ros2msg), m and rad, REP 103 frame ids (ros2 bag, rosbags) */
+                profile?: "foxglove" | "ros2";
+            };
             header?: never;
             path: {
                 recording_id: number;

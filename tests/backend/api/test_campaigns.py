@@ -13,6 +13,7 @@ import pytest
 
 from tests.backend.conftest import AUTH, make_settings, running_app, wait_for
 from tests.tofpose.io.interop.test_mcap_export import read_back
+from tests.tofpose.io.interop.test_ros2_export import read_back as read_back_ros2
 
 GRID = {
     "name": "grid-1",
@@ -453,7 +454,7 @@ def test_raw_recording_holds_exactly_the_stored_frames_and_reprocesses(fast_clie
     after resume the downloaded recording re-processed by `tofpose estimate` gives the
     stored poses."""
     from tofpose.cli import main
-    from tofpose.io.interop import topics
+    from tofpose.io.interop import ros2_topics, topics
     from tofpose.io.recording import open_recording
 
     c = fast_client
@@ -521,6 +522,17 @@ def test_raw_recording_holds_exactly_the_stored_frames_and_reprocesses(fast_clie
             assert lab["t_camera_target_mm"] == rec.lab_truth_t_mm[k].tolist()
     est = [p for _, p in messages[topics.ESTIMATE]]
     assert sum(e["ok"] for e in est) >= 30
+    # as ROS 2 messages: the same frames and a pose with its covariance where there is one
+    r = c.get(f"/api/campaigns/{cid}/recording.mcap", params={"profile": "ros2"})
+    assert r.status_code == 200 and r.headers["content-type"] == "application/x-mcap"
+    assert f'filename="campaign-{cid}.ros2.mcap"' in r.headers["content-disposition"]
+    (tmp_path / "raw.ros2.mcap").write_bytes(r.content)
+    ros2 = read_back_ros2(tmp_path / "raw.ros2.mcap")
+    with open_recording(rec_path) as rec:
+        assert len(ros2[ros2_topics.AMPLITUDE]) == rec.n_frames
+        _, amplitude = ros2[ros2_topics.AMPLITUDE][0]
+        np.testing.assert_array_equal(amplitude.data.view("<u2").reshape(240, 320), rec.frame(0)[0])
+    assert len(ros2[ros2_topics.POSE]) == sum(e["ok"] for e in est)
     other = c.post("/api/campaigns", json={**GRID, "name": "no-raw"}, headers=AUTH).json()
     for suffix in ("h5", "mcap"):
         r = c.get(f"/api/campaigns/{other['id']}/recording.{suffix}")

@@ -20,7 +20,8 @@ import pytest
 from backend.services.recordings import StopReason
 from tests.backend.conftest import AUTH, make_settings, running_app, wait_for
 from tests.tofpose.io.interop.test_mcap_export import read_back
-from tofpose.io.interop import topics
+from tests.tofpose.io.interop.test_ros2_export import read_back as read_back_ros2
+from tofpose.io.interop import ros2_topics, topics
 from tofpose.io.recording import open_recording
 
 Usage = namedtuple("Usage", "total used free")
@@ -122,6 +123,35 @@ def test_a_recording_holds_every_frame_the_hub_delivered_with_the_live_results(
     messages, _, _ = read_back(tmp_path / "rec.mcap")
     assert len(messages[topics.GRAY]) == n
     assert len(messages[topics.LAB_TRUTH]) == n
+
+    # as ROS 2 messages (?profile=ros2): an independent ROS 2 reader decodes every message
+    r = c.get(f"/api/recordings/{rec['id']}/recording.mcap", params={"profile": "ros2"})
+    assert r.status_code == 200 and r.headers["content-type"] == "application/x-mcap"
+    assert 'filename="before-the-test-' in r.headers["content-disposition"]
+    assert '.ros2.mcap"' in r.headers["content-disposition"]
+    (tmp_path / "rec.ros2.mcap").write_bytes(r.content)
+    ros2 = read_back_ros2(tmp_path / "rec.ros2.mcap")
+    assert len(ros2[ros2_topics.AMPLITUDE]) == len(ros2[ros2_topics.TF]) == n
+    with open_recording(path) as rec_file:
+        gray, dist_mm, _ = rec_file.frame(n - 1)
+    _, amplitude = ros2[ros2_topics.AMPLITUDE][n - 1]
+    np.testing.assert_array_equal(amplitude.data.view("<u2").reshape(gray.shape), gray)
+    _, distance = ros2[ros2_topics.DISTANCE][n - 1]
+    dist_m = distance.data.view("<f4").reshape(gray.shape)
+    np.testing.assert_allclose(dist_m, dist_mm / 1000.0, rtol=2**-24, atol=0)
+    labs = [t for _, m in ros2[ros2_topics.TF] for t in m.transforms]
+    assert [t.child_frame_id for t in labs].count("tofpose_target_lab") == n
+
+
+def test_an_unknown_mcap_profile_is_refused_naming_the_parameter_and_the_choices(app_client):
+    c = app_client
+    rid = _start(c, name="profile")["id"]
+    _stop(c, rid)
+    r = c.get(f"/api/recordings/{rid}/recording.mcap", params={"profile": "ros1"})
+    assert r.status_code == 422
+    (detail,) = r.json()["detail"]
+    assert detail["loc"] == ["query", "profile"]
+    assert "'foxglove'" in detail["msg"] and "'ros2'" in detail["msg"]
 
 
 def test_start_is_refused_with_507_below_the_free_space_floor(app_client, monkeypatch):

@@ -350,10 +350,12 @@ def test_delete_removes_the_files_and_the_entry_but_not_while_recording(service,
         service.delete(info.id)
     hub.publish(make_sample(0, np.random.default_rng(0)))
     path = service.file(service.stop(info.id).id)
-    recording_mcap(path)
-    assert path.with_suffix(".mcap").exists()
+    exports = [recording_mcap(path), recording_mcap(path, profile="ros2")]
+    assert [p.name for p in exports] == [f"{path.stem}.mcap", f"{path.stem}.ros2.mcap"]
+    assert all(p.exists() and p.with_name(p.name + ".json").exists() for p in exports)
+    assert service.used_bytes >= sum(p.stat().st_size for p in [path, *exports])
     service.delete(info.id)
-    assert not path.exists() and not path.with_suffix(".mcap").exists()
+    assert sorted(path.parent.glob(f"{path.stem}.*")) == []  # HDF5, both exports, notes
     assert service.list() == []
     # a new recording never reuses a deleted one's id
     assert service.start("new").id == info.id + 1

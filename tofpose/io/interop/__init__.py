@@ -6,7 +6,24 @@
 - ``channels``: one set of channels on a ``foxglove.Context``, logged per frame; the MCAP
   export and the live Foxglove server both write through it.
 - ``mcap_export`` / ``mcap_import``: HDF5 recording <-> MCAP file.
+- ``mcap_profiles``: the export in either profile (``foxglove`` or ``ros2``).
+- ``ros2_export`` (``--profile ros2``): HDF5 recording -> MCAP of ROS 2 messages, with
+  ``ros2_topics`` (its contract), ``ros2_messages`` (the conversions),
+  ``ros2_covariance`` (ROS's covariance order and units) and ``ros2_schemas`` (ROS 2's
+  ``.msg`` definitions, shipped in ``ros2_msgs/``).
 
 Encoding is the SDK's (protobuf for the well-known schemas, JSON for ours) and decoding
-the ``mcap`` reader's with ``mcap-protobuf-support``: no encoder or decoder of our own.
+the ``mcap`` reader's with ``mcap-protobuf-support``; the ROS 2 profile's CDR is
+``mcap-ros2-support``'s: no encoder or decoder of our own.
 """
+
+from typing import Literal, get_args
+
+#: the MCAP profiles a recording exports to: Foxglove's well-known schemas (the default)
+#: or ROS 2's messages
+McapProfile = Literal["foxglove", "ros2"]
+MCAP_PROFILES: tuple[str, ...] = get_args(McapProfile)
+DEFAULT_MCAP_PROFILE: McapProfile = "foxglove"
+#: the file name suffix of each profile's export (``rec.h5`` -> ``rec.mcap``,
+#: ``rec.ros2.mcap``): the server keeps one export of each beside a recording
+MCAP_SUFFIXES: dict[str, str] = {"foxglove": ".mcap", "ros2": ".ros2.mcap"}

@@ -54,7 +54,7 @@ def export_metadata(rec: Recording, pipeline: PosePipeline | None) -> dict[str, 
     }
 
 
-def _pose_at(
+def pose_at(
     R: np.ndarray | None, t_mm: np.ndarray | None, i: int
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """(R (3, 3), t (3,) mm) of frame ``i`` of a recording's reference poses (R (N, 3, 3),
@@ -107,8 +107,8 @@ def export_mcap(
             gray, dist, t = rec.frame(i)
             result = pipeline.process(gray, dist, t) if pipeline is not None else None
             n_ok += int(result is not None and result.ok)
-            truth = _pose_at(rec.truth_R, rec.truth_t_mm, i)
-            lab = _pose_at(rec.lab_truth_R, rec.lab_truth_t_mm, i)
+            truth = pose_at(rec.truth_R, rec.truth_t_mm, i)
+            lab = pose_at(rec.lab_truth_R, rec.lab_truth_t_mm, i)
             channels.log_frame(i, gray, dist, t, times_ns[i], result, truth, lab)
         done = True
     finally:

@@ -121,6 +121,13 @@ class _Source:
             )
         self.summary = summary
         self.by_topic = {c.topic: c for c in summary.channels.values()}
+        cdr = sorted(c.topic for c in summary.channels.values() if c.message_encoding == "cdr")
+        if cdr and len(cdr) == len(self.by_topic):
+            named = ", ".join(cdr[:4]) + (", ..." if len(cdr) > 4 else "")
+            raise McapImportError(
+                f"{path}: ROS 2 messages (cdr: {named}); `import mcap` reads Foxglove's "
+                "schemas (an `export mcap` without --profile ros2)"
+            )
         self.counts = {
             summary.channels[cid].topic: n
             for cid, n in summary.statistics.channel_message_counts.items()
