@@ -92,6 +92,14 @@ class FrameDiagnostics:
 #: the diagnostics of a frame refused before extraction
 NO_DIAGNOSTICS = FrameDiagnostics()
 
+#: when annealing finds no rigid match, the triplet hypotheses over every blob stop at
+#: the standard RANSAC count for this confidence (the inlier fraction read from the best
+#: hypothesis so far: a count, not a clock, so the answer does not depend on the
+#: machine's load) ...
+FALLBACK_CONFIDENCE = 0.999
+#: ... or after this long (ms), whichever comes first (23 blobs: 1771 triplets, ~5 ms)
+FALLBACK_BUDGET_MS = 100.0
+
 
 @dataclass
 class PoseResult:
@@ -406,6 +414,18 @@ class PosePipeline:
                 diagnostics=diag,
             )
         m = self._match(meas)
+        if not m.ok and cfg.triplet_fallback and cfg.matcher == "annealing":
+            # many look-alike blobs (glints, other reflectors) can leave annealing's soft
+            # assignment without a rigid match although one is there: the triplet
+            # hypotheses over every blob (the RANSAC matcher's search) are tried instead
+            hypotheses = self._match_ransac(
+                meas.y_mm,
+                meas.weights,
+                budget_ms=FALLBACK_BUDGET_MS,
+                confidence=FALLBACK_CONFIDENCE,
+            )
+            if hypotheses.ok:
+                m = hypotheses
         timer.lap("matching")
         if not m.ok:
             return fail(
@@ -682,13 +702,22 @@ class PosePipeline:
             "is the right catalog active?"
         )
 
-    def _match_ransac(self, y: np.ndarray, w: np.ndarray) -> MatchResult:
+    def _match_ransac(
+        self,
+        y: np.ndarray,
+        w: np.ndarray,
+        *,
+        budget_ms: float | None = None,
+        confidence: float | None = None,
+    ) -> MatchResult:
         """Random triplet hypotheses over all blobs, best inlier count, until the time
-        budget is spent or (``ransac_confidence``) the standard RANSAC count is reached;
-        ``iterations`` of the result = observed triplets tried."""
+        budget is spent or the standard RANSAC count for ``confidence`` is reached
+        (defaults: ``ransac_time_budget_ms``, ``ransac_confidence``); ``iterations`` of
+        the result = observed triplets tried."""
         cfg = self.config
         stats: dict = {}
-        budget = cfg.ransac_time_budget_ms
+        budget = cfg.ransac_time_budget_ms if budget_ms is None else budget_ms
+        confidence = cfg.ransac_confidence if confidence is None else confidence
         alpha = cfg.matching.alpha_for(y)
         tol = cfg.matching.pair_tolerance_mm(alpha, w)
         pairs = match_by_triplets(
@@ -701,7 +730,7 @@ class PosePipeline:
             min_matches=cfg.matching.min_matches,
             observed_triplets=random_triplets(len(y), self._rng),
             deadline_s=None if budget is None else time.perf_counter() + budget / 1000.0,
-            confidence=cfg.ransac_confidence,
+            confidence=confidence,
             stats=stats,
             arithmetic=self.arithmetic.matching,
         )
