@@ -513,6 +513,26 @@ def accuracy_section(quick: bool) -> str:
     return accuracy.markdown(acc_summary, _rel(IMG / "accuracy-range.png"), n_acc)
 
 
+def foreign_section(recordings: list[str]) -> str:
+    """ "Frames from another renderer": ``bench/foreign.py`` on ``recordings`` (``--only
+    foreign --foreign REC.h5 ...`` regenerates just this block)."""
+    return "\n".join(
+        [
+            "## Frames from another renderer",
+            "",
+            "`bench/foreign.py` on recordings made by a ToF renderer that shares no code "
+            "with `tofpose.sim` (area-integrated pixels, cos^4 fall-off, a dark but not black "
+            "plate mixing into partly covered pixels, no wall; per file: far poses, "
+            "uncalibrated systematic range errors, reflectors saturating a fixed exposure, "
+            "marker-like specular glints). They are not shipped with the project; the oracle "
+            "rows give the pipeline the true correspondences.",
+            "",
+            _script("foreign.py", *recordings, "--quiet"),
+            "",
+        ]
+    )
+
+
 def replace_dynamics(section: str) -> None:
     replace_section(DYN_BEGIN, DYN_END, section)
 
@@ -522,7 +542,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument(
         "--only",
-        choices=["accuracy", "pixelfit", "dynamics", "scaleout", "safety"],
+        choices=["accuracy", "pixelfit", "dynamics", "scaleout", "safety", "foreign"],
         help="regenerate one section of docs/results.md in place",
     )
     ap.add_argument(
@@ -550,6 +570,12 @@ def main() -> None:
     if args.only == "scaleout":
         replace_section(SCALE_BEGIN, SCALE_END, scaleout_section(q))
         print(f"rewrote the scale-out section of {DOC}", file=sys.stderr)
+        return
+    if args.only == "foreign":
+        if not args.foreign:
+            ap.error("--only foreign needs the recordings: --foreign REC.h5 [REC.h5 ...]")
+        replace_heading_block("## Frames from another renderer", foreign_section(args.foreign))
+        print(f"rewrote the foreign-renderer section of {DOC}", file=sys.stderr)
         return
     if args.only == "safety":
         replace_section(SAFETY_BEGIN, SAFETY_END, safety_section(q))
@@ -582,22 +608,7 @@ def main() -> None:
     sec_phys = physics.markdown(phys, _rel(IMG / "physics.png"), n_phys)
     print(sec_phys, flush=True)
 
-    sec_foreign = ""
-    if args.foreign:
-        sec_foreign = "\n".join(
-            [
-                "## Frames from another renderer",
-                "",
-                "`bench/foreign.py` on recordings made by a ToF renderer that shares no code "
-                "with `tofpose.sim` (area-integrated pixels, cos^4 fall-off, a dark but not black "
-                "plate mixing into partly covered pixels, no wall; one set with uncalibrated "
-                "systematic range errors). They are not shipped with the project; the oracle "
-                "rows give the pipeline the true correspondences.",
-                "",
-                _script("foreign.py", *args.foreign, "--quiet"),
-                "",
-            ]
-        )
+    sec_foreign = foreign_section(args.foreign) if args.foreign else ""
 
     n_real, n_long, n_cal = (4, 20, 30) if q else (16, 90, 150)
     real = realistic.run(n_real, long_frames=n_long, cal_frames=n_cal)
