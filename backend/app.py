@@ -24,6 +24,7 @@ from starlette.middleware.trustedhost import TrustedHostMiddleware
 import backend
 from backend.api.contract import complete_openapi, operation_id
 from backend.api.deps import located
+from backend.api.field_hints import fields_at, unknown_field_message
 from backend.api.routes import audit as audit_route
 from backend.api.routes import (
     calibrations,
@@ -347,9 +348,17 @@ def _install_error_answers(app: FastAPI) -> None:
     (405 listing every method of the path) and a conflict with stored data (409)."""
 
     @app.exception_handler(RequestValidationError)
-    async def _validation_error(_request: Request, exc: RequestValidationError) -> JSONResponse:
-        # FastAPI's default, minus the echoed input (which can be a huge body).
+    async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
+        # FastAPI's default, minus the echoed input (which can be a huge body); an unknown
+        # field of the body names the closest valid one (api/field_hints.py)
         errors = [{k: v for k, v in e.items() if k in ("loc", "msg", "type")} for e in exc.errors()]
+        route = request.scope.get("route")
+        body = getattr(getattr(route, "body_field", None), "field_info", None)
+        for e in errors:
+            loc = list(e.get("loc") or [])
+            if e.get("type") == "extra_forbidden" and body is not None and loc[:1] == ["body"]:
+                valid = fields_at(body.annotation, loc[1:-1])
+                e["msg"] = unknown_field_message(str(loc[-1]), valid)
         return JSONResponse({"detail": errors}, status_code=422)
 
     @app.exception_handler(StarletteHTTPException)
