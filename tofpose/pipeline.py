@@ -424,7 +424,10 @@ class PosePipeline:
                 budget_ms=FALLBACK_BUDGET_MS,
                 confidence=FALLBACK_CONFIDENCE,
             )
-            if hypotheses.ok:
+            # at least one reflector beyond the fewest: a hypothesis of 3 is checked by
+            # its own 3 distances only (on 8 m frames with every physics knob on, one
+            # such pose was 5.8 deg off at 30 of its chi^2)
+            if hypotheses.ok and len(hypotheses.pairs) > cfg.matching.min_matches:
                 m = hypotheses
         timer.lap("matching")
         if not m.ok:
