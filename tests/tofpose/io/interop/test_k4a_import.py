@@ -169,3 +169,10 @@ def test_existing_output_is_kept(tmp_path):
     with pytest.raises(K4aImportError, match="exists"):
         import_k4a(MKV, out, progress=False)
     assert out.read_text() == "mine"
+
+
+def test_options_of_another_format_are_refused(tmp_path, capsys):
+    out = tmp_path / "out.h5"
+    assert main(["import", "k4a", str(MKV), "--out", str(out), "--depth", "/d"]) == 2
+    assert "import k4a does not take --depth" in capsys.readouterr().err
+    assert not out.exists()
