@@ -135,7 +135,10 @@ def _import(path: Path, out: Path, logs: list, progress: bool) -> dict:
             k4a: K4aCamera = depth_camera(_calibration(container, path), mode)
         except ValueError as exc:
             raise K4aImportError(f"{path}: {exc}") from exc
-        camera = k4a.camera
+        serial = container.metadata.get("K4A_DEVICE_SERIAL_NUMBER")
+        camera = replace(
+            k4a.camera, name=f"Azure Kinect {serial} {mode}" if serial else k4a.camera.name
+        )
         if (depth_s.width, depth_s.height) != (ir_s.width, ir_s.height) or (
             depth_s.width,
             depth_s.height,

@@ -78,6 +78,7 @@ def test_camera_is_the_files_factory_calibration(imported):
     )
     assert cam.full_scale_counts == 65535.0
     assert cam.distance_kind == "radial"  # stored converted
+    assert cam.name == "Azure Kinect 001514394512 NFOV_UNBINNED"  # the file's device
 
 
 def test_lens_follows_the_rational_model_over_the_depth_field(imported):
