@@ -28,6 +28,7 @@ import av.logging
 import numpy as np
 from tqdm import tqdm
 
+from tofpose.core.camera import CameraModel
 from tofpose.core.depth import decode_depth
 from tofpose.io.interop.k4a_calibration import K4aCamera, depth_camera
 from tofpose.io.recording import RecordingWriter
@@ -124,55 +125,77 @@ def _open(path: Path) -> av.container.InputContainer:
         raise K4aImportError(f"{path}: not a readable Matroska file ({exc})") from exc
 
 
+def _camera(container: av.container.InputContainer, depth_s, ir_s, path: Path) -> K4aCamera:
+    """The depth camera of the file's calibration in its DEPTH track's mode, named after
+    the device; ``K4aImportError`` when the tracks' size is not the mode's."""
+    mode = depth_s.metadata.get("K4A_DEPTH_MODE", "")
+    try:
+        k4a = depth_camera(_calibration(container, path), mode)
+    except ValueError as exc:
+        raise K4aImportError(f"{path}: {exc}") from exc
+    serial = container.metadata.get("K4A_DEVICE_SERIAL_NUMBER")
+    if serial:
+        k4a = replace(k4a, camera=replace(k4a.camera, name=f"Azure Kinect {serial} {mode}"))
+    size = (k4a.camera.width, k4a.camera.height)
+    if (depth_s.width, depth_s.height) != size or (ir_s.width, ir_s.height) != size:
+        raise K4aImportError(
+            f"{path}: DEPTH {depth_s.width} x {depth_s.height} and IR {ir_s.width} x "
+            f"{ir_s.height} images, depth mode {mode} has {size[0]} x {size[1]}"
+        )
+    return k4a
+
+
+def _write_captures(
+    container: av.container.InputContainer,
+    tracks: tuple,
+    camera: CameraModel,
+    writer: RecordingWriter,
+    path: Path,
+    progress: bool,
+) -> tuple[int, dict[int, str]]:
+    """Append each capture (a DEPTH and an IR block at one block time) to ``writer``.
+    Returns (captures written, {block time: track} of the blocks left without a partner)."""
+    depth_s, ir_s = tracks
+    offset_s = int(container.metadata.get("K4A_START_OFFSET_NS", "0")) * 1e-9
+    pending: dict[int, tuple[str, np.ndarray]] = {}
+    frames = 0
+    bar = tqdm(desc="import k4a", unit="frame", disable=not progress, file=sys.stderr)
+    for packet in container.demux(depth_s, ir_s):
+        if packet.pts is None or packet.size == 0:  # the demuxer's end-of-stream
+            continue
+        what = DEPTH_TRACK if packet.stream is depth_s else IR_TRACK
+        time_s = float(packet.pts * packet.time_base) + offset_s
+        where = f"{path} at {time_s:.6f} s"
+        image = _image(packet, camera.width, camera.height, what, where)
+        other = pending.pop(packet.pts, None)
+        if other is None:
+            pending[packet.pts] = (what, image)
+            continue
+        if other[0] == what:
+            raise K4aImportError(f"{where}: two {what} images in one capture")
+        depth, ir = (image, other[1]) if what == DEPTH_TRACK else (other[1], image)
+        writer.append(ir, decode_depth(depth, camera), time_s)
+        frames += 1
+        bar.update(1)
+    bar.close()
+    return frames, {pts: what for pts, (what, _) in pending.items()}
+
+
 def _import(path: Path, out: Path, logs: list, progress: bool) -> dict:
     container = _open(path)
     with container:
         if "matroska" not in container.format.name:
             raise K4aImportError(f"{path}: a {container.format.name} file, not Matroska (.mkv)")
         depth_s, ir_s = _track(container, DEPTH_TRACK, path), _track(container, IR_TRACK, path)
-        mode = depth_s.metadata.get("K4A_DEPTH_MODE", "")
-        try:
-            k4a: K4aCamera = depth_camera(_calibration(container, path), mode)
-        except ValueError as exc:
-            raise K4aImportError(f"{path}: {exc}") from exc
-        serial = container.metadata.get("K4A_DEVICE_SERIAL_NUMBER")
-        camera = replace(
-            k4a.camera, name=f"Azure Kinect {serial} {mode}" if serial else k4a.camera.name
-        )
-        if (depth_s.width, depth_s.height) != (ir_s.width, ir_s.height) or (
-            depth_s.width,
-            depth_s.height,
-        ) != (camera.width, camera.height):
-            raise K4aImportError(
-                f"{path}: DEPTH {depth_s.width} x {depth_s.height} and IR {ir_s.width} x "
-                f"{ir_s.height} images, depth mode {mode} has {camera.width} x {camera.height}"
-            )
-        offset_s = int(container.metadata.get("K4A_START_OFFSET_NS", "0")) * 1e-9
+        k4a = _camera(container, depth_s, ir_s, path)
+        camera = k4a.camera
         partial = out.with_name(out.name + ".partial")  # renamed when complete
         # stored radial: decode_depth converts the device's z (distance_kind "z")
         writer = RecordingWriter(partial, replace(camera, distance_kind="radial"))
-        frames = 0
         try:
-            pending: dict[int, tuple[str, np.ndarray]] = {}
-            bar = tqdm(desc="import k4a", unit="frame", disable=not progress, file=sys.stderr)
-            for packet in container.demux(depth_s, ir_s):
-                if packet.pts is None or packet.size == 0:  # the demuxer's end-of-stream
-                    continue
-                what = DEPTH_TRACK if packet.stream is depth_s else IR_TRACK
-                time_s = float(packet.pts * packet.time_base) + offset_s
-                where = f"{path} at {time_s:.6f} s"
-                image = _image(packet, camera.width, camera.height, what, where)
-                other = pending.pop(packet.pts, None)
-                if other is None:
-                    pending[packet.pts] = (what, image)
-                    continue
-                if other[0] == what:
-                    raise K4aImportError(f"{where}: two {what} images in one capture")
-                depth, ir = (image, other[1]) if what == DEPTH_TRACK else (other[1], image)
-                writer.append(ir, decode_depth(depth, camera), time_s)
-                frames += 1
-                bar.update(1)
-            bar.close()
+            frames, pending = _write_captures(
+                container, (depth_s, ir_s), camera, writer, path, progress
+            )
             errors = _errors(logs)
             if errors:
                 raise K4aImportError(
@@ -181,12 +204,12 @@ def _import(path: Path, out: Path, logs: list, progress: bool) -> dict:
                 )
             if pending:
                 pts = min(pending)
-                what, _ = pending[pts]
+                offset_s = int(container.metadata.get("K4A_START_OFFSET_NS", "0")) * 1e-9
                 time_s = float(pts * depth_s.time_base) + offset_s
                 raise K4aImportError(
                     f"{path}: {len(pending)} captures with only one of DEPTH and IR "
-                    f"(the first at {time_s:.6f} s has only {what}): a truncated file, "
-                    "or a track the recorder dropped"
+                    f"(the first at {time_s:.6f} s has only {pending[pts]}): a truncated "
+                    "file, or a track the recorder dropped"
                 )
             if frames == 0:
                 raise K4aImportError(f"{path}: no capture with both DEPTH and IR images")
