@@ -180,11 +180,38 @@ def _add_interop_commands(sub) -> None:
     )
     p.add_argument("--force", action="store_true", help="overwrite --out")
     p = sub.add_parser("import", help="make a recording from another format (docs/interop.md)")
-    p.add_argument("format", choices=("mcap",))
-    p.add_argument("file", help="input file (REC.mcap)")
+    p.add_argument(
+        "format",
+        choices=("mcap", "ros2", "k4a"),
+        help="mcap: our (Foxglove-schema) MCAP export; ros2: a ROS 2 bag (MCAP or sqlite3); "
+        "k4a: an Azure Kinect recording (.mkv)",
+    )
+    p.add_argument("file", help="input file (REC.mcap, a ROS 2 bag directory, REC.mkv)")
     p.add_argument("--out", required=True, help="output recording (REC.h5)")
-    p.add_argument("--gray-topic", help="gray image topic (default /tof/gray)")
-    p.add_argument("--distance-topic", help="distance image topic (default /tof/distance)")
+    p.add_argument("--gray-topic", help="mcap: gray image topic (default /tof/gray)")
+    p.add_argument("--distance-topic", help="mcap: distance image topic (default /tof/distance)")
+    p.add_argument(
+        "--image",
+        help="ros2: amplitude/IR sensor_msgs/Image topic (default /tofpose/camera/amplitude)",
+    )
+    p.add_argument(
+        "--depth", help="ros2: depth sensor_msgs/Image topic (default /tofpose/camera/depth)"
+    )
+    p.add_argument(
+        "--camera-info",
+        help="ros2: sensor_msgs/CameraInfo topic (default: camera_info beside --image, "
+        "else the bag's only one)",
+    )
+    p.add_argument(
+        "--depth-kind",
+        choices=("z", "radial"),
+        help="ros2: what --depth holds (default: z, REP 118; radial for /tofpose/camera/distance)",
+    )
+    p.add_argument(
+        "--camera",
+        help="ros2: camera profile or camera JSON giving the device's full scale, count "
+        "scale and range (default: tofcam660); K and D come from the bag",
+    )
     p.add_argument("--force", action="store_true", help="overwrite --out")
 
 

@@ -1,10 +1,10 @@
-"""``tofpose export mcap`` and ``tofpose import mcap`` as functions."""
+"""``tofpose export mcap`` and ``tofpose import mcap|ros2|k4a`` as functions."""
 
 from __future__ import annotations
 
 import argparse
 
-from tofpose.io.camera_file import pipeline_for
+from tofpose.io.camera_file import camera_from_arg, pipeline_for
 from tofpose.io.interop import DEFAULT_MCAP_PROFILE
 from tofpose.io.recording import open_recording
 
@@ -33,7 +33,32 @@ def export_file(args: argparse.Namespace) -> str:
 
 
 def import_file(args: argparse.Namespace) -> str:
-    """``tofpose import mcap``."""
+    """``tofpose import mcap|ros2|k4a``; ``ValueError`` naming an option the format
+    does not take."""
+    fmt = args.format
+    taken = {
+        "mcap": ("gray_topic", "distance_topic"),
+        "ros2": ("image", "depth", "camera_info", "depth_kind", "camera"),
+        "k4a": (),
+    }
+    options = ("gray_topic", "distance_topic", "image", "depth", "camera_info", "depth_kind")
+    wrong = [
+        "--" + o.replace("_", "-")
+        for o in (*options, "camera")
+        if getattr(args, o, None) is not None and o not in taken[fmt]
+    ]
+    if wrong:
+        raise ValueError(f"import {fmt} does not take {', '.join(wrong)}")
+    if fmt == "ros2":
+        return _import_ros2(args)
+    if fmt == "k4a":
+        from tofpose.io.interop.k4a_import import import_k4a
+
+        s = import_k4a(args.file, args.out, overwrite=args.force)
+        return (
+            f"{s['frames']} frames -> {args.out} ({s['camera'].name}, lens as 5 "
+            f"coefficients within {s['lens_fit_max_px']:.2f} px)"
+        )
     from tofpose.io.interop.mcap_import import import_mcap
 
     s = import_mcap(
@@ -44,3 +69,30 @@ def import_file(args: argparse.Namespace) -> str:
         overwrite=args.force,
     )
     return f"{s['frames']} frames -> {args.out}"
+
+
+def _import_ros2(args: argparse.Namespace) -> str:
+    from tofpose.io.interop import ros2_topics
+    from tofpose.io.interop.ros2_import import import_ros2
+
+    camera = camera_from_arg(args.camera) if args.camera else None
+    s = import_ros2(
+        args.file,
+        args.out,
+        image_topic=args.image or ros2_topics.AMPLITUDE,
+        depth_topic=args.depth or ros2_topics.DEPTH,
+        camera_info_topic=args.camera_info,
+        depth_kind=args.depth_kind,
+        camera=camera,
+        overwrite=args.force,
+    )
+    skipped = (
+        f", left out {s.unpaired_image} images and {s.unpaired_depth} depth images "
+        "without a partner at their stamp"
+        if s.unpaired_image or s.unpaired_depth
+        else ""
+    )
+    lens = (
+        f", lens as 5 coefficients within {s.lens_fit_max_px:.2f} px" if s.lens_fit_max_px else ""
+    )
+    return f"{s.frames} frames -> {args.out}{skipped}{lens}"

@@ -11,10 +11,19 @@
   ``ros2_topics`` (its contract), ``ros2_messages`` (the conversions),
   ``ros2_covariance`` (ROS's covariance order and units) and ``ros2_schemas`` (ROS 2's
   ``.msg`` definitions, shipped in ``ros2_msgs/``).
+- ``ros2_import`` (``tofpose import ros2``): ROS 2 bag (MCAP or sqlite3, read by
+  ``rosbags``) -> HDF5 recording, with ``ros2_images`` (Image and CameraInfo messages to
+  arrays and camera).
+- ``k4a_import`` (``tofpose import k4a``): Azure Kinect recording (Matroska, decoded by
+  PyAV) -> HDF5 recording, with ``k4a_calibration`` (its ``calibration.json`` to the
+  depth camera of the recording's mode).
+- ``distortion_fit``: a rational lens model (k4..k6) as the nearest five coefficients
+  that ``CameraModel`` holds.
 
 Encoding is the SDK's (protobuf for the well-known schemas, JSON for ours) and decoding
 the ``mcap`` reader's with ``mcap-protobuf-support``; the ROS 2 profile's CDR is
-``mcap-ros2-support``'s: no encoder or decoder of our own.
+``mcap-ros2-support``'s (the ROS 2 import decodes with ``rosbags``): no encoder or
+decoder of our own.
 """
 
 from typing import Literal, get_args

@@ -126,7 +126,8 @@ class _Source:
             named = ", ".join(cdr[:4]) + (", ..." if len(cdr) > 4 else "")
             raise McapImportError(
                 f"{path}: ROS 2 messages (cdr: {named}); `import mcap` reads Foxglove's "
-                "schemas (an `export mcap` without --profile ros2)"
+                "schemas (an `export mcap` without --profile ros2), `import ros2` reads "
+                "ROS 2 bags"
             )
         self.counts = {
             summary.channels[cid].topic: n
