@@ -157,7 +157,7 @@ def test_the_reference_pipeline_calls_no_kernel(monkeypatch):
         for f in dataclasses.fields(stage)
         if f.name != "name"
     ]
-    assert len(saved) >= 30
+    assert len(saved) >= 25  # every field of every stage (28 now): not an empty table
     try:
         for stage, field, _ in saved:
             object.__setattr__(stage, field, raiser(f"COMPILED.{field}"))
