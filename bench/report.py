@@ -371,7 +371,8 @@ def dynamics_section(quick: bool) -> str:
             "runs the sine of issue 29's done-when (5 deg, 4 s) with the camera on it, frames "
             "rendered with the sensor's motion artefacts and measured by the server's pipeline; "
             "the filter's rate "
-            "error for both motion models; the latency fit (`tofpose.lab.dynamics`) on poses "
+            "error for each motion model (and on a free tumble, measured by the default "
+            "pipeline); the latency fit (`tofpose.lab.dynamics`) on poses "
             "stamped "
             "late by a programmed delay; the filter's cost per frame. This section was "
             f"regenerated on {datetime.date.today().isoformat()}.",

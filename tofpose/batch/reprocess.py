@@ -313,9 +313,9 @@ def reprocess(
 
 def _concatenate(cs: list[Chunk], out: Path, csv_path: Path, filter_state: bool) -> int:
     """Write one recording's CSV from its chunks, in order; returns its poses."""
-    from tofpose.lab.relative_state import RelativeStateConfig, RelativeStateFilter
+    from tofpose.lab.motion_models import TwoModelRelativeState
 
-    rel = RelativeStateFilter(RelativeStateConfig.constant_acceleration()) if filter_state else None
+    rel = TwoModelRelativeState() if filter_state else None  # as estimate --filter
     n_ok = 0
     tmp = csv_path.with_name(f".{csv_path.name}.tmp")
     with open(tmp, "w", newline="") as fh:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from tofpose.lab.motion_models import TwoModelRelativeState
 from tofpose.lab.relative_state import STATE_COLUMNS, RelativeStateFilter
 
 CSV_COLUMNS = (
@@ -56,7 +57,13 @@ def pose_row(frame: int, time_s: float, r) -> list:
     return row
 
 
-def filter_row(rel: RelativeStateFilter, time_s: float, R=None, t_mm=None, covariance=None) -> list:
+def filter_row(
+    rel: RelativeStateFilter | TwoModelRelativeState,
+    time_s: float,
+    R=None,
+    t_mm=None,
+    covariance=None,
+) -> list:
     """``FILTER_COLUMNS`` of one frame: its pose (R (3, 3), t (3,) mm, covariance (6, 6))
     fused (or rejected), or without one (None) the state predicted to the frame's time;
     empty before the filter's first pose."""

@@ -171,6 +171,10 @@ class RelativeState:
         return np.sqrt(np.diag(self.covariance)[9:12])
 
 
+#: log(2 pi), for the innovation's Gaussian log-likelihood
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
 def _exp(w: np.ndarray) -> np.ndarray:
     """(3, 3) rotation of the rotation vector ``w`` (3,) (Rodrigues; scipy's Rotation
     costs ~30 us a call, and the filter makes several per frame)."""
@@ -243,11 +247,18 @@ class RelativeStateFilter:
     _P: np.ndarray = field(default_factory=lambda: np.eye(12))
     _status: Status = "initialised"
     _d2: float = float("nan")
+    _log_likelihood: float = float("nan")  # of the last pose, before the gate
     _rejected: list = field(default_factory=list)
 
     @property
     def initialised(self) -> bool:
         return self._time_s is not None
+
+    @property
+    def log_likelihood(self) -> float:
+        """log N(y; 0, S) of the last pose's innovation y under the predicted covariance
+        S (before the gate; NaN when the last step fused no pose against a prediction)."""
+        return self._log_likelihood
 
     def reset(self) -> None:
         """Forget everything: the next pose starts the filter again."""
@@ -371,6 +382,7 @@ class RelativeStateFilter:
             raise ValueError("a pose's covariance must be a finite 6 x 6 matrix")
         # the gap counts from the last pose fused, not from the last prediction: a
         # dropout bridged by predict() on every frame still restarts the filter
+        self._log_likelihood = float("nan")
         if not self.initialised or time_s - self._fused_s > self.config.max_gap_s:
             self._start(time_s, R, t_mm, cov)
             self._status, self._d2 = "initialised", float("nan")
@@ -382,6 +394,7 @@ class RelativeStateFilter:
         S = self._P[:6, :6] + cov
         d2 = float(y @ np.linalg.solve(S, y))
         self._d2 = d2
+        self._log_likelihood = -0.5 * (d2 + float(np.linalg.slogdet(S)[1]) + 6 * _LOG_2PI)
         if d2 > self.config.gate_chi2:
             self._rejected.append((float(time_s), np.array(R, float), np.array(t_mm, float), cov))
             if len(self._rejected) >= self.config.reset_after and self._rejected_agree():
@@ -452,6 +465,7 @@ class RelativeStateFilter:
             raise RuntimeError("the filter has no state yet: it starts with a pose")
         self._advance(time_s)
         self._status = "predicted"
+        self._log_likelihood = float("nan")
         return self.state()
 
     def state_at(self, time_s: float) -> RelativeState:

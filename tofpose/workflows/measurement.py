@@ -20,7 +20,7 @@ from tofpose.core.tof import unambiguous_range_mm
 from tofpose.io.camera_file import load_camera, pipeline_for, read_camera_text
 from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
 from tofpose.io.recording import Recording, open_recording
-from tofpose.lab.relative_state import RelativeStateConfig, RelativeStateFilter
+from tofpose.lab.motion_models import TwoModelRelativeState
 from tofpose.pipeline import PipelineConfig, PosePipeline
 from tofpose.sim.pixel_truth import true_pixel_distances
 
@@ -165,8 +165,8 @@ def estimate(
     with open_recording(rec_path) as rec:
         pipe = pipeline_for(rec, rec_path, catalog_path, camera_path, tracking, pixel_fit=pixel_fit)
         n_ok = 0
-        model = RelativeStateConfig.constant_acceleration()
-        rel = RelativeStateFilter(model) if filter_state else None
+        # both motion models, the state from the one the poses favour (lab.motion_models)
+        rel = TwoModelRelativeState() if filter_state else None
         with open(out_csv, "w", newline="") as fh:
             wr = csv.writer(fh)
             wr.writerow(CSV_COLUMNS + (FILTER_COLUMNS if rel else ()))

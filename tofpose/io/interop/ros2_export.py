@@ -27,7 +27,8 @@ from tofpose.io.interop.foxglove_messages import time_ns_from_seconds
 from tofpose.io.interop.mcap_export import export_metadata, pose_at
 from tofpose.io.interop.ros2_schemas import definition
 from tofpose.io.recording import Recording
-from tofpose.lab.relative_state import RelativeState, RelativeStateConfig, RelativeStateFilter
+from tofpose.lab.motion_models import TwoModelRelativeState
+from tofpose.lab.relative_state import RelativeState
 from tofpose.pipeline import PosePipeline, PoseResult
 
 
@@ -108,11 +109,7 @@ def export_ros2_mcap(
         "profile": topics.MCAP_PROFILE,
         "distance_unit": "m",
     }
-    rel = (
-        RelativeStateFilter(RelativeStateConfig.constant_acceleration())
-        if pipeline is not None
-        else None
-    )
+    rel = TwoModelRelativeState() if pipeline is not None else None  # as estimate --filter
     n_ok = 0
     partial = out.with_name(out.name + ".partial")  # renamed when complete
     done = False

@@ -20,7 +20,7 @@ from tofpose.io.interop import ros2_topics as topics
 from tofpose.io.interop.mcap_profiles import export_mcap_profile
 from tofpose.io.interop.ros2_schemas import definition
 from tofpose.io.recording import open_recording
-from tofpose.lab.relative_state import RelativeStateConfig, RelativeStateFilter
+from tofpose.lab.motion_models import TwoModelRelativeState
 from tofpose.pipeline import PosePipeline
 
 OPTICAL = "tofpose_camera_optical_frame"  # REP 103's optical frame, as the docs name it
@@ -68,7 +68,7 @@ def run(recording):
     """The pipeline's results and the filter's states on the recording's frames."""
     with open_recording(recording) as rec:
         pipe = PosePipeline(rec.camera, rec.catalog)
-        rel = RelativeStateFilter(RelativeStateConfig.constant_acceleration())
+        rel = TwoModelRelativeState()  # as the export (and estimate --filter)
         results, states = [], []
         for i in range(rec.n_frames):
             gray, dist, time_s = rec.frame(i)
