@@ -1,0 +1,109 @@
+"""Both Foxglove subprotocols on the live port: the published ``@foxglove/ws-protocol``
+client (npm, not our code) with its default subprotocol ``foxglove.websocket.v1`` gets the
+channel list and the live messages that the SDK's own subprotocol gets; a client offering
+neither is told which to offer. The name mapping itself is table-tested."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+from websockets.exceptions import InvalidStatus
+from websockets.sync.client import connect
+
+from backend.services.live.foxglove_relay import client_subprotocol, upstream_offer
+from tests.backend.conftest import make_settings, running_app, wait_for
+from tofpose.io.interop import topics
+
+FRONTEND = Path(__file__).resolve().parents[4] / "frontend"
+CLIENT = FRONTEND / "scripts" / "foxglove-client.mjs"
+
+
+@pytest.mark.parametrize(
+    ("offered", "upstream"),
+    [
+        (["foxglove.websocket.v1"], ["foxglove.sdk.v1"]),
+        (["foxglove.sdk.v1"], ["foxglove.sdk.v1"]),
+        (["foxglove.sdk.v1.1", "foxglove.websocket.v1"], ["foxglove.sdk.v1.1", "foxglove.sdk.v1"]),
+        (["foxglove.websocket.v1", "foxglove.sdk.v1"], ["foxglove.sdk.v1"]),
+        (["chat", "graphql-ws"], []),
+        ([], []),
+    ],
+)
+def test_the_sdk_is_offered_the_clients_subprotocols_under_its_own_names(offered, upstream):
+    assert upstream_offer(offered) == upstream
+
+
+@pytest.mark.parametrize(
+    ("offered", "chosen", "answer"),
+    [
+        (["foxglove.websocket.v1"], "foxglove.sdk.v1", "foxglove.websocket.v1"),
+        (["foxglove.sdk.v1", "foxglove.websocket.v1"], "foxglove.sdk.v1", "foxglove.sdk.v1"),
+        (["foxglove.sdk.v1.1", "foxglove.websocket.v1"], "foxglove.sdk.v1.1", "foxglove.sdk.v1.1"),
+    ],
+)
+def test_the_client_is_answered_with_the_name_it_offered(offered, chosen, answer):
+    assert client_subprotocol(offered, chosen) == answer
+
+
+def test_a_choice_the_client_did_not_offer_is_named():
+    with pytest.raises(ValueError, match="foxglove.sdk.v2"):
+        client_subprotocol(["foxglove.websocket.v1"], "foxglove.sdk.v2")
+
+
+def run_npm_client(url: str, seconds: float) -> dict:
+    node = shutil.which("node")
+    assert node, "node is not on PATH (the Foxglove client test needs Node.js)"
+    assert (FRONTEND / "node_modules" / "@foxglove" / "ws-protocol").exists(), (
+        "frontend/node_modules lacks @foxglove/ws-protocol: run `make frontend` (npm ci)"
+    )
+    r = subprocess.run(
+        [node, "--experimental-websocket", "--no-warnings", str(CLIENT), url, str(seconds)],
+        cwd=FRONTEND,
+        capture_output=True,
+        text=True,
+        timeout=seconds + 60,
+        env={**os.environ, "NO_COLOR": "1"},
+    )
+    assert r.returncode == 0, f"the npm client failed ({r.returncode}):\n{r.stdout}\n{r.stderr}"
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def test_the_published_client_gets_the_live_channels_with_its_default_subprotocol(tmp_path):
+    # 20 frames/s (make_settings), 4 s: ~80 frames; the pose channel has one per measured
+    # frame with a pose, so at least 20 leaves room for a loaded machine
+    settings = make_settings(tmp_path / "data", foxglove_port=0)
+    with running_app(settings) as c:
+        info = wait_for(lambda: (r := c.get("/api/foxglove").json())["running"] and r, 10)
+        assert set(info["subprotocols"]) == {"foxglove.sdk.v1", "foxglove.websocket.v1"}
+        advertised = {ch.topic() for ch in c.app.state.tofpose.foxglove.channels.channels}
+        report = run_npm_client(info["url"], 4.0)
+        published = c.get("/api/foxglove").json()["published"]
+    assert report["offered"] == report["subprotocol"] == "foxglove.websocket.v1"
+    assert report["serverName"] == "tofpose"
+    assert {ch["topic"] for ch in report["channels"]} == advertised
+    assert len(report["channels"]) == len(advertised) == 15
+    assert report["messages"].get(topics.POSE_TRANSFORM, 0) >= 20, report["messages"]
+    assert report["messages"][topics.GRAY] >= 20
+    # the gray image's RawImage carries the 320x240 mono16 pixels (+ a small header)
+    assert 320 * 240 * 2 < report["lastBytes"][topics.GRAY] < 320 * 240 * 2 + 200
+    assert report["messages"][topics.GRAY] <= published
+
+
+def test_a_client_offering_no_foxglove_subprotocol_is_told_which_to_offer(tmp_path):
+    with running_app(make_settings(tmp_path / "data", foxglove_port=0)) as c:
+        info = wait_for(lambda: (r := c.get("/api/foxglove").json())["running"] and r, 10)
+        with pytest.raises(InvalidStatus) as err:
+            connect(info["url"], subprotocols=["graphql-ws"], open_timeout=10)
+        response = err.value.response
+        assert response.status_code == 400
+        body = response.body.decode()
+        assert "foxglove.websocket.v1" in body and "graphql-ws" in body
+        # the SDK's own subprotocol is still served on the same port
+        with connect(info["url"], subprotocols=["foxglove.sdk.v1"], open_timeout=10) as ws:
+            assert ws.subprotocol == "foxglove.sdk.v1"
+            assert json.loads(ws.recv(timeout=10))["op"] == "serverInfo"
