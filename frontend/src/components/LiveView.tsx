@@ -9,7 +9,10 @@ import type { Shown } from "../live";
 import { activePixels, distancePixels, grayPixels, grayTop, turboCss } from "../colormap";
 import type { RawFrame } from "../rawframe";
 
-const SCALE = 2; // overlay canvas pixels per image pixel
+// Overlay canvas pixels per image pixel: about 640 canvas pixels across whatever the
+// camera's width (2 for the TOFcam-660's 320, 1 for an Azure Kinect's 640), so that marks
+// and labels drawn in canvas pixels keep their size on the page.
+const OVERLAY_WIDTH = 640;
 
 type Layers = { active: boolean; candidates: boolean; matched: boolean; rejected: boolean };
 const LAYER_LABELS: Record<keyof Layers, string> = {
@@ -49,7 +52,8 @@ function Overlay({ shown, layers }: { shown: Shown | null; layers: Layers }) {
     const { raw, pose } = shown;
     const W = raw.width * raw.step;
     const H = raw.height * raw.step;
-    if (c.width !== W * SCALE) {
+    const SCALE = Math.max(1, Math.round(OVERLAY_WIDTH / W));
+    if (c.width !== W * SCALE || c.height !== H * SCALE) {
       c.width = W * SCALE;
       c.height = H * SCALE;
     }
