@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import socket
 import subprocess
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from websockets.sync.client import connect
 from backend.services.live.foxglove_relay import client_subprotocol, upstream_offer
 from tests.backend.conftest import make_settings, running_app, wait_for
 from tofpose.io.interop import topics
+from tofpose.workflows.simulation import simulate
 
 FRONTEND = Path(__file__).resolve().parents[4] / "frontend"
 CLIENT = FRONTEND / "scripts" / "foxglove-client.mjs"
@@ -92,6 +94,33 @@ def test_the_published_client_gets_the_live_channels_with_its_default_subprotoco
     # the gray image's RawImage carries the 320x240 mono16 pixels (+ a small header)
     assert 320 * 240 * 2 < report["lastBytes"][topics.GRAY] < 320 * 240 * 2 + 200
     assert report["messages"][topics.GRAY] <= published
+
+
+def test_another_cameras_images_reach_the_client_whole(tmp_path):
+    """A replayed Azure Kinect NFOV recording: its 640 x 576 distance image (32FC1, 1.4 MB,
+    more than a WebSocket library's usual 1 MiB message limit) reaches the npm client."""
+    rec = tmp_path / "ak.h5"
+    simulate("stability-697", 4, str(rec), 3, None, progress=False, camera_arg="azure-kinect-nfov")
+    settings = make_settings(tmp_path / "data", camera=f"replay:{rec}", foxglove_port=0)
+    with running_app(settings) as c:
+        info = wait_for(lambda: (r := c.get("/api/foxglove").json())["running"] and r, 10)
+        report = run_npm_client(info["url"], 3.0)
+    assert report["subprotocol"] == "foxglove.websocket.v1"
+    assert report["messages"][topics.DISTANCE] >= 5, report["messages"]
+    assert 640 * 576 * 4 < report["lastBytes"][topics.DISTANCE] < 640 * 576 * 4 + 200
+    assert 640 * 576 * 2 < report["lastBytes"][topics.GRAY] < 640 * 576 * 2 + 200
+
+
+def test_a_taken_port_leaves_the_server_up_with_the_reason(tmp_path):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        with running_app(make_settings(tmp_path / "data", foxglove_port=port)) as c:
+            r = c.get("/api/foxglove").json()
+            assert r["running"] is False
+            assert "failed to start" in r["reason"] and str(port) in r["reason"], r
+            assert c.get("/api/pose/latest").status_code in (200, 404)  # the API runs
 
 
 def test_a_client_offering_no_foxglove_subprotocol_is_told_which_to_offer(tmp_path):
