@@ -160,6 +160,9 @@ class FoxgloveRelay:
                 subprotocols=[Subprotocol(p) for p in offer],
                 compression=None,
                 max_size=None,  # images of any camera's size
+                # a couple of messages buffered here, not 16 images: a client that stops
+                # reading soon stops the relay reading, and the SDK drops its oldest
+                max_queue=2,
                 open_timeout=5.0,
             )
         except Exception as exc:  # noqa: BLE001 - the client is told why

@@ -10,6 +10,7 @@ import os
 import shutil
 import socket
 import subprocess
+import time
 from pathlib import Path
 
 import pytest
@@ -136,3 +137,32 @@ def test_a_client_offering_no_foxglove_subprotocol_is_told_which_to_offer(tmp_pa
         with connect(info["url"], subprotocols=["foxglove.sdk.v1"], open_timeout=10) as ws:
             assert ws.subprotocol == "foxglove.sdk.v1"
             assert json.loads(ws.recv(timeout=10))["op"] == "serverInfo"
+
+
+# Load: the loop's frame rate is what is measured
+@pytest.mark.load_sensitive
+def test_a_client_that_never_reads_does_not_slow_the_camera_loop(tmp_path):
+    """Through the relay as straight to the SDK: a client subscribed to every channel that
+    reads nothing for 3 s leaves the loop at its frame rate, and the publisher keeps
+    publishing (the SDK drops that client's oldest messages)."""
+    settings = make_settings(tmp_path / "data", foxglove_port=0)  # 20 frames/s
+    with running_app(settings) as c:
+        info = wait_for(lambda: (r := c.get("/api/foxglove").json())["running"] and r, 10)
+        state = c.app.state.tofpose
+        with connect(info["url"], subprotocols=["foxglove.websocket.v1"], open_timeout=10) as ws:
+            ids: list[int] = []
+            while len(ids) < 15:
+                msg = json.loads(ws.recv(timeout=10))
+                if msg["op"] == "advertise":
+                    ids += [ch["id"] for ch in msg["channels"]]
+            subs = [{"id": i, "channelId": ch} for i, ch in enumerate(ids)]
+            ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+            time.sleep(0.5)
+            frames0, published0 = state.acquisition.frames_processed, state.foxglove.published
+            time.sleep(3.0)  # the client reads nothing
+            frames = state.acquisition.frames_processed - frames0
+            published = state.foxglove.published - published0
+            assert frames >= 0.6 * 20 * 3.0, frames
+            assert published >= 0.7 * frames, (published, frames)
+            # and it still gets messages when it reads again
+            assert any(isinstance(ws.recv(timeout=10), bytes) for _ in range(50))
