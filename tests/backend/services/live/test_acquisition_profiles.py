@@ -1,7 +1,8 @@
 """``serve --camera replay:REC`` with a recording of another camera than the TOFcam-660:
-an Azure Kinect NFOV recording (640 x 576, 16-bit IR, count scale 16) made by the
-simulator streams its own frames, at its own size and gray full scale, and the live
-pipeline runs with the profile's scaled settings and measures the target."""
+an Azure Kinect NFOV (640 x 576) or HoloLens 2 AHAT-like (512 x 512, 1 m wrap) recording
+(16-bit IR, count scale 16) made by the simulator streams its own frames, at its own size
+and gray full scale, and the live pipeline runs with the profile's saturation level,
+range and scaled settings and measures the target."""
 
 from __future__ import annotations
 
@@ -23,14 +24,15 @@ from tofpose.core.camera_profiles import load_profile
 from tofpose.io.recording import open_recording
 from tofpose.workflows.simulation import simulate
 
-AK = "azure-kinect-nfov"
+PROFILES = {"azure-kinect-nfov": (640, 576), "hololens2-ahat": (512, 512)}
 
 
-@pytest.fixture(scope="module")
-def kinect_recording(tmp_path_factory):
-    path = tmp_path_factory.mktemp("ak") / "ak.h5"
-    simulate("stability-697", 6, str(path), 3, None, progress=False, camera_arg=AK)
-    return path
+@pytest.fixture(scope="module", params=sorted(PROFILES))
+def recording(request, tmp_path_factory):
+    """(profile name, a 6-frame recording of the target at 697 mm through it)"""
+    path = tmp_path_factory.mktemp("rec") / f"{request.param}.h5"
+    simulate("stability-697", 6, str(path), 3, None, progress=False, camera_arg=request.param)
+    return request.param, path
 
 
 def test_the_raw_frame_states_the_cameras_full_scale():
@@ -58,36 +60,45 @@ def test_gray_images_top_out_at_the_cameras_full_scale(full_scale, counts, u8):
         gray_u8(np.zeros((1, 1), np.uint16), 0.0)
 
 
-def test_a_replayed_azure_kinect_recording_streams_at_its_own_size_and_scale(
-    tmp_path, kinect_recording
+def test_a_replayed_recording_of_another_camera_streams_at_its_own_size_and_scale(
+    tmp_path, recording
 ):
-    profile = load_profile(AK)
-    with open_recording(kinect_recording) as rec:
+    name, path = recording
+    width, height = PROFILES[name]
+    profile = load_profile(name)
+    with open_recording(path) as rec:
         camera = rec.camera
         recorded = [rec.frame(i)[0] for i in range(rec.n_frames)]
-    assert (camera.width, camera.height, camera.full_scale_counts) == (640, 576, 65535.0)
+    assert (camera.width, camera.height, camera.full_scale_counts) == (width, height, 65535.0)
     assert camera.count_scale == profile.count_scale == 16.0
-    settings = make_settings(tmp_path / "data", camera=f"replay:{kinect_recording}")
+    settings = make_settings(tmp_path / "data", camera=f"replay:{path}")
     with running_app(settings) as c:
         acq = c.app.state.tofpose.acquisition
+        # the pipeline measures with the recording's camera: its saturation level and its
+        # unambiguous range (not the TOFcam-660's 4095 counts and 25 m)
+        live = acq.camera.model
+        assert live.full_scale_counts == profile.full_scale_counts == 65535.0
+        assert live.unambiguous_range_mm == pytest.approx(profile.unambiguous_range_mm)
+        assert (live.width, live.height) == (width, height)
         # the pipeline's pixel cap and count thresholds scaled to the camera
         base = PipelineConfig(tracking=TrackingConfig(enabled=settings.tracking))
-        want = config_for_camera(base, width=640, height=576, count_scale=16.0)
+        want = config_for_camera(base, width=width, height=height, count_scale=16.0)
         assert acq.pipeline_config == want
         ex, ex0 = acq.pipeline_config.extraction, base.extraction
-        assert ex.n_max == round(ex0.n_max * 640 * 576 / (320 * 240))
+        assert ex.n_max == round(ex0.n_max * width * height / (320 * 240))
         assert ex.min_contrast_counts == 16.0 * ex0.min_contrast_counts
-        # the frames the dashboard gets: 640 x 576, the recording's pixels, full scale 65535
+        # the frames the dashboard gets: the camera's size, the recording's pixels, full
+        # scale 65535
         with c.websocket_connect("/ws/live") as ws:
             hello = ws.receive_json()
-            assert hello["camera"]["width_px"] == 640 and hello["camera"]["height_px"] == 576
+            assert (hello["camera"]["width_px"], hello["camera"]["height_px"]) == (width, height)
             assert hello["camera"]["full_scale_counts"] == 65535.0
             ws.send_text(json.dumps({"raw": True, "image_every": 1, "image_step": 1}))
             while (m := ws.receive()).get("bytes") is None:
                 pass
         msg = m["bytes"]
         _, step, gray, _ = decode_raw_frame(msg)
-        assert step == 1 and gray.shape == (576, 640)
+        assert step == 1 and gray.shape == (height, width)
         assert raw_frame_full_scale(msg) == 65535
         assert any(np.array_equal(gray, g) for g in recorded)
         # the target measured on the camera's frames
@@ -97,7 +108,7 @@ def test_a_replayed_azure_kinect_recording_streams_at_its_own_size_and_scale(
         r = c.get("/api/frames/latest/gray.png")
         assert r.status_code == 200
         png = cv2.imdecode(np.frombuffer(r.content, np.uint8), cv2.IMREAD_GRAYSCALE)
-        assert png.shape == (576, 640)
+        assert png.shape == (height, width)
         index = int(r.headers["X-Frame-Index"])
         shown = recorded[(index - 1) % len(recorded)]
         np.testing.assert_array_equal(png, gray_u8(shown, 65535.0))
