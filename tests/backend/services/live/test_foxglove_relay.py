@@ -133,10 +133,14 @@ def test_a_client_offering_no_foxglove_subprotocol_is_told_which_to_offer(tmp_pa
         assert response.status_code == 400
         body = response.body.decode()
         assert "foxglove.websocket.v1" in body and "graphql-ws" in body
-        # the SDK's own subprotocol is still served on the same port
-        with connect(info["url"], subprotocols=["foxglove.sdk.v1"], open_timeout=10) as ws:
-            assert ws.subprotocol == "foxglove.sdk.v1"
-            assert json.loads(ws.recv(timeout=10))["op"] == "serverInfo"
+        # the SDK's own subprotocols are still served on the same port, as the SDK picks
+        for offered, chosen in [
+            (["foxglove.sdk.v1"], "foxglove.sdk.v1"),
+            (["foxglove.sdk.v1.1", "foxglove.websocket.v1"], "foxglove.sdk.v1.1"),
+        ]:
+            with connect(info["url"], subprotocols=offered, open_timeout=10) as ws:
+                assert ws.subprotocol == chosen
+                assert json.loads(ws.recv(timeout=10))["op"] == "serverInfo"
 
 
 # Load: the loop's frame rate is what is measured
