@@ -134,6 +134,10 @@ class FoxgloveRelay:
             select_subprotocol=self._select,
             compression=None,  # images; the SDK does not compress either
             max_size=2**20,  # client -> server: subscriptions, small JSON
+            # no keepalive pings of the relay's own, on either side: a pong queued behind
+            # images a slow client has not read yet would time out and cut a client the
+            # SDK alone would keep (feeding it its newest messages)
+            ping_interval=None,
         ) as server:
             self._server = server
             self._ready.set()
@@ -163,6 +167,7 @@ class FoxgloveRelay:
                 # a couple of messages buffered here, not 16 images: a client that stops
                 # reading soon stops the relay reading, and the SDK drops its oldest
                 max_queue=2,
+                ping_interval=None,  # loopback to this process's own SDK server
                 open_timeout=5.0,
             )
         except Exception as exc:  # noqa: BLE001 - the client is told why
