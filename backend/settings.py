@@ -74,8 +74,9 @@ class Settings(BaseSettings):
         ``GET /api/scene``). It has no token check of its own, so on a bind beyond
         loopback it runs only when reads are open.
     foxglove_port : publish the live stream to Foxglove (a ``foxglove-sdk`` WebSocket
-        server on this host, docs/interop.md); None (the default) = off, 0 = any free
-        port. Like the 3-D scene it has no token check: beyond loopback only with open reads.
+        server on this host serving both ``foxglove.sdk.v1`` and the open protocol's
+        ``foxglove.websocket.v1``, docs/interop.md); None (the default) = off, 0 = any
+        free port. Like the 3-D scene it has no token check: beyond loopback only with open reads.
     dask_scheduler : where accuracy studies (``POST /api/studies``) run: the address of a
         Dask scheduler (``tcp://host:8786``); empty = a LocalCluster on this machine of
         its cores less one (``study_workers`` to override), workers at a lower priority

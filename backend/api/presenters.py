@@ -413,7 +413,12 @@ def foxglove_public(state: AppState) -> FoxglovePublic:
     if fox is None:
         return FoxglovePublic(running=False, reason=state.foxglove_reason)
     return FoxglovePublic(
-        running=True, url=fox.url, port=fox.port, published=fox.published, dropped=fox.dropped
+        running=True,
+        url=fox.url,
+        port=fox.port,
+        subprotocols=list(fox.subprotocols),
+        published=fox.published,
+        dropped=fox.dropped,
     )
 
 

@@ -3,8 +3,8 @@ import { describe, expect, it } from "vitest";
 import { activePixels, distancePixels, grayPixels, quantile, turboCss, turboRgb } from "./colormap";
 import type { RawFrame } from "./rawframe";
 
-function frame(gray: number[], distance: number[], width = gray.length): RawFrame {
-  return { frameIndex: 1, step: 1, width, height: gray.length / width, gray: Uint16Array.from(gray), distance: Uint16Array.from(distance) };
+function frame(gray: number[], distance: number[], width = gray.length, fullScale = 0): RawFrame {
+  return { frameIndex: 1, step: 1, width, height: gray.length / width, fullScale, gray: Uint16Array.from(gray), distance: Uint16Array.from(distance) };
 }
 const pixels = (n: number) => ({ data: new Uint8ClampedArray(4 * n) });
 const rgba = (p: { data: Uint8ClampedArray }, i: number) => Array.from(p.data.slice(4 * i, 4 * i + 4));
@@ -64,6 +64,23 @@ describe("grayPixels", () => {
     expect(rgba(out, 2)).toEqual([64, 64, 64, 255]);
     expect(rgba(out, 3)).toEqual([255, 255, 255, 255]);
     expect(rgba(out, 4)).toEqual([255, 255, 255, 255]);
+  });
+
+  it("maps counts with gamma 0.5 up to the camera's full scale when the frame states one", () => {
+    // an Azure Kinect's 16-bit IR: full scale 65535, counts far above a 12-bit camera's
+    const gray = [0, 16384, 4096, 65535, 4095];
+    const out = pixels(gray.length);
+    grayPixels(frame(gray, gray.map(() => 0), gray.length, 65535), out);
+    expect(rgba(out, 0)).toEqual([0, 0, 0, 255]);
+    expect(rgba(out, 1)).toEqual([128, 128, 128, 255]); // (16384 / 65535)^0.5 = 0.500004 -> 128
+    expect(rgba(out, 2)).toEqual([64, 64, 64, 255]); // 0.250002 -> 63.75 -> 64
+    expect(rgba(out, 3)).toEqual([255, 255, 255, 255]); // full scale: white
+    expect(rgba(out, 4)).toEqual([64, 64, 64, 255]); // a 12-bit camera's white is dark here
+    // the TOFcam-660's 4095: its own full scale is white
+    const tof = pixels(2);
+    grayPixels(frame([4095, 1024], [0, 0], 2, 4095), tof);
+    expect(rgba(tof, 0)).toEqual([255, 255, 255, 255]);
+    expect(rgba(tof, 1)).toEqual([128, 128, 128, 255]); // (1024 / 4095)^0.5 = 0.50006 -> 127.5
   });
 
   it("draws an all-black frame black (no division by zero)", () => {

@@ -37,9 +37,16 @@ export function turboCss(t: number): string {
   return interpolateTurbo(t);
 }
 
-/** Gray image, gamma 0.5 up to the 99.5th percentile. */
+/** The count the gray image's white stands for: the camera's full scale (4095 for the
+ * TOFcam-660, 65535 for an Azure Kinect's IR), or the 99.5th percentile when the frame
+ * does not state one. */
+export function grayTop(f: RawFrame): number {
+  return f.fullScale > 0 ? f.fullScale : Math.max(quantile(f.gray, 0.995, () => true), 1);
+}
+
+/** Gray image, gamma 0.5 up to ``grayTop``. */
 export function grayPixels(f: RawFrame, out: Pixels): void {
-  const top = Math.max(quantile(f.gray, 0.995, () => true), 1);
+  const top = grayTop(f);
   const d = out.data;
   for (let i = 0; i < f.gray.length; i++) {
     const g = Math.min(255, Math.sqrt(f.gray[i] / top) * 255);

@@ -10,7 +10,7 @@ function fromHex(hex: string): ArrayBuffer {
 
 /** A message built field by field as frame_codec.py documents its layout. */
 function message(width: number, height: number, gray: number[], distance: number[],
-  { magic = "TOFR", version = 1, step = 1, index = 7, extra = 0 } = {}): ArrayBuffer {
+  { magic = "TOFR", version = 1, step = 1, index = 7, extra = 0, fullScale = 0 } = {}): ArrayBuffer {
   const buf = new ArrayBuffer(HEADER_BYTES + 4 * width * height + extra);
   const v = new DataView(buf);
   for (let i = 0; i < 4; i++) v.setUint8(i, magic.charCodeAt(i));
@@ -19,6 +19,7 @@ function message(width: number, height: number, gray: number[], distance: number
   v.setUint32(8, index, true);
   v.setUint16(12, width, true);
   v.setUint16(14, height, true);
+  v.setUint32(16, fullScale, true);
   gray.forEach((g, i) => v.setUint16(HEADER_BYTES + 2 * i, g, true));
   distance.forEach((d, i) => v.setUint16(HEADER_BYTES + 2 * width * height + 2 * i, d, true));
   return buf;
@@ -33,8 +34,14 @@ describe("parseRawFrame", () => {
     expect(Array.from(f.gray)).toEqual([0, 1, 65535, 300, 4096, 7]);
     // 1000.4 -> 1000, NaN and 0 -> 0 (invalid), 70000 -> 65535, 1.2 -> 1, 12345.5 -> 12346
     expect(Array.from(f.distance)).toEqual([1000, 0, 0, 65535, 1, 12346]);
+    expect(f.fullScale).toBe(0); // encoded without a full scale: not stated
     expect(Array.from(f.gray)).toEqual(fixture.gray);
     expect(Array.from(f.distance)).toEqual(fixture.distance_mm);
+  });
+
+  it("reads the camera's gray full scale from the header (an Azure Kinect's 65535)", () => {
+    expect(parseRawFrame(message(1, 1, [9], [9], { fullScale: 65535 })).fullScale).toBe(65535);
+    expect(parseRawFrame(message(1, 1, [9], [9], { fullScale: 4095 })).fullScale).toBe(4095);
   });
 
   it("reads rows first: pixel (row 1, column 0) of a 3 x 2 frame is the 4th value", () => {

@@ -6,6 +6,7 @@ export type RawFrame = {
   step: number;
   width: number;
   height: number;
+  fullScale: number; // the camera's gray full scale (counts); 0 = not stated
   gray: Uint16Array; // counts
   distance: Uint16Array; // mm, 0 = invalid
 };
@@ -26,6 +27,7 @@ export function parseRawFrame(buf: ArrayBuffer): RawFrame {
     step: v.getUint16(6, true),
     width,
     height,
+    fullScale: v.getUint32(16, true),
     gray: new Uint16Array(buf, HEADER_BYTES, n),
     distance: new Uint16Array(buf, HEADER_BYTES + 2 * n, n),
   };

@@ -37,7 +37,14 @@ async def get_latest_frame_png(
     # Rendered on the renderer's own thread (not the event loop, not the acquisition
     # thread), shared with identical requests, kept in a small LRU: see ImageRenderer.
     fut = state.renderer.png(
-        f.index, kind.value, f.gray, f.distance_mm, sample.result, overlay=overlay, scale=scale
+        f.index,
+        kind.value,
+        f.gray,
+        f.distance_mm,
+        sample.result,
+        overlay=overlay,
+        scale=scale,
+        full_scale_counts=state.acquisition.camera.model.full_scale_counts,
     )
     index, png = await asyncio.wrap_future(fut)
     return Response(

@@ -76,7 +76,14 @@ def pose_json(sample: LiveSample) -> str:
 
 async def image_message(sample: LiveSample, state: AppState, kind: str, step: int) -> str:
     f = sample.frame
-    fut = state.renderer.stream_png(f.index, kind, f.gray, f.distance_mm, step)
+    fut = state.renderer.stream_png(
+        f.index,
+        kind,
+        f.gray,
+        f.distance_mm,
+        step,
+        full_scale_counts=state.acquisition.camera.model.full_scale_counts,
+    )
     index, png = await asyncio.wrap_future(fut)
     return json.dumps(
         {
@@ -89,10 +96,13 @@ async def image_message(sample: LiveSample, state: AppState, kind: str, step: in
     )
 
 
-def raw_message(sample: LiveSample, step: int) -> bytes:
+def raw_message(sample: LiveSample, step: int, full_scale_counts: float) -> bytes:
     f = sample.frame
     return sample.cached(
-        f"raw:{step}", lambda: encode_raw_frame(f.index, f.gray, f.distance_mm, step)
+        f"raw:{step}",
+        lambda: encode_raw_frame(
+            f.index, f.gray, f.distance_mm, step, full_scale_counts=full_scale_counts
+        ),
     )
 
 
@@ -289,6 +299,7 @@ async def _stream(ws: WebSocket, state: AppState) -> None:
                     "driver": state.devices.camera.name,
                     "width_px": m.width,
                     "height_px": m.height,
+                    "full_scale_counts": m.full_scale_counts,
                     "fx_px": m.fx,
                     "fy_px": m.fy,
                     "cx_px": m.cx,
@@ -325,7 +336,8 @@ async def _stream(ws: WebSocket, state: AppState) -> None:
             if n % o.image_every == 0 and not sub.pending and sample.has_images:
                 if o.raw and flow.may_send(o.raw_credit):
                     flow.unacked.append(sample.frame.index)
-                    await send(ws, raw_message(sample, o.image_step), timeout_s)
+                    full_scale = state.acquisition.camera.model.full_scale_counts
+                    await send(ws, raw_message(sample, o.image_step, full_scale), timeout_s)
                 for kind in o.images if not o.raw else ():
                     text = await image_message(sample, state, kind, o.image_step)
                     await send(ws, text, timeout_s)

@@ -11,6 +11,11 @@ class FoxglovePublic(BaseModel):
     running: bool
     url: str | None = Field(default=None, description="ws:// address for the Foxglove app")
     port: int | None = None
+    subprotocols: list[str] = Field(
+        default_factory=list,
+        description="WebSocket subprotocols served on the port: the SDK's foxglove.sdk.v1 "
+        "and the open protocol's foxglove.websocket.v1",
+    )
     reason: str = Field(default="", description="why it does not run (empty when it does)")
     published: int = Field(default=0, description="frames published to subscribed clients")
     dropped: int = Field(

@@ -43,6 +43,7 @@ from backend.drivers.base import CameraDriver, CameraFrame
 from backend.services.live.hub import LiveHub
 from backend.services.live.kernel_warmup import COMPILING_REASON, KernelWarmup
 from backend.services.live.live_reference import LiveReference
+from tofpose.config import config_for_camera
 from tofpose.core.catalog import Catalog
 from tofpose.lab.relative_state import RelativeState, RelativeStateConfig, RelativeStateFilter
 from tofpose.pipeline import PipelineConfig, PosePipeline, PoseResult
@@ -158,7 +159,15 @@ class AcquisitionService:
         self.timeout_s = timeout_s
         self.backoff_s = backoff_s
         self.health = DeviceHealth()
-        self._config = pipeline_config or PipelineConfig()
+        # the pixel- and count-valued settings follow the camera (its frame size and
+        # count scale; saturation and range the pipeline takes from the model itself)
+        m = camera.model
+        self._config = config_for_camera(
+            pipeline_config or PipelineConfig(),
+            width=m.width,
+            height=m.height,
+            count_scale=m.count_scale,
+        )
         self.kernels = kernels  # None: the kernels are ready (or compile on first use)
         self.reference = LiveReference()  # nominal until a calibration is selected
         self._catalog_name = catalog_name
@@ -193,6 +202,11 @@ class AcquisitionService:
     @property
     def latest(self) -> LiveSample | None:
         return self._latest
+
+    @property
+    def pipeline_config(self) -> PipelineConfig:
+        """The live pipeline's settings, scaled to the camera (``config_for_camera``)."""
+        return self._config
 
     @property
     def catalog_name(self) -> str:

@@ -13,6 +13,10 @@ hub subscription (older ones are dropped and counted, never queued), converts ea
 channel's message only when a client subscribes to that channel, and hands it to the
 SDK, which keeps at most ``backlog_messages`` per client and drops the oldest for a
 client that reads too slowly.
+
+Clients connect to the public port through ``foxglove_relay``, which serves both the
+SDK's subprotocol (``foxglove.sdk.v1``) and the open protocol's (``foxglove.websocket.v1``)
+on that port; the SDK server itself listens on a free loopback port.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import logging
 import threading
 
 from backend.services.live.acquisition import AcquisitionService, LiveSample
+from backend.services.live.foxglove_relay import SERVED_SUBPROTOCOLS, FoxgloveRelay
 from backend.services.live.hub import LiveHub
 
 log = logging.getLogger("tofpose.foxglove")
@@ -51,11 +56,19 @@ class LiveFoxglove:
         )
         self.server = foxglove.start_server(
             name="tofpose",
-            host=host,
-            port=port,
+            host="127.0.0.1",
+            port=0,
             context=self.context,
             message_backlog_size=backlog_messages,
         )
+        try:
+            self.relay = FoxgloveRelay(
+                host=host, port=port, upstream_url=f"ws://127.0.0.1:{self.server.port}"
+            )
+        except BaseException:
+            self.server.stop()
+            self.channels.close()
+            raise
         self.host = host
         self.published = 0
         self._stop = threading.Event()
@@ -65,7 +78,12 @@ class LiveFoxglove:
 
     @property
     def port(self) -> int:
-        return int(self.server.port)
+        return self.relay.port
+
+    @property
+    def subprotocols(self) -> tuple[str, ...]:
+        """The WebSocket subprotocols a client may offer."""
+        return SERVED_SUBPROTOCOLS
 
     @property
     def url(self) -> str:
@@ -81,6 +99,7 @@ class LiveFoxglove:
         self._stop.set()
         self._hub.unsubscribe(self._sub)
         self._thread.join(timeout=2.0)
+        self.relay.close()
         self.server.stop()
         self.channels.close()
 

@@ -10,6 +10,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import cv2
 import numpy as np
 
+from tofpose.io.interop.previews import FULL_SCALE_COUNTS as PREVIEW_FULL_SCALE
 from tofpose.io.interop.previews import distance_to_bgr, gray_to_u8
 from tofpose.pipeline import PoseResult
 
@@ -55,6 +56,16 @@ def draw_overlay(bgr: np.ndarray, result: PoseResult, scale: int) -> np.ndarray:
     return out
 
 
+def gray_u8(gray: np.ndarray, full_scale_counts: float) -> np.ndarray:
+    """(H, W) counts -> (H, W) uint8 as ``gray_to_u8`` draws it (gamma 0.5, full scale
+    255), at the camera's own full scale (``CameraModel.full_scale_counts``: 4095 for
+    the TOFcam-660, 65535 for an Azure Kinect's IR) instead of the preview's 4095."""
+    if not full_scale_counts > 0:
+        raise ValueError(f"full_scale_counts must be positive, got {full_scale_counts}")
+    ratio = np.float32(PREVIEW_FULL_SCALE / full_scale_counts)
+    return gray_to_u8(gray.astype(np.float32) * ratio)
+
+
 def render_png(
     kind: str,
     gray: np.ndarray,
@@ -63,10 +74,12 @@ def render_png(
     *,
     overlay: bool,
     scale: int = 1,
+    full_scale_counts: float = PREVIEW_FULL_SCALE,
 ) -> bytes:
-    """PNG bytes of the ``gray`` or ``distance`` image, upscaled ``scale`` x (nearest)."""
+    """PNG bytes of the ``gray`` or ``distance`` image, upscaled ``scale`` x (nearest);
+    gray up to the camera's ``full_scale_counts``."""
     if kind == "gray":
-        img = cv2.cvtColor(gray_to_u8(gray), cv2.COLOR_GRAY2BGR)
+        img = cv2.cvtColor(gray_u8(gray, full_scale_counts), cv2.COLOR_GRAY2BGR)
     elif kind == "distance":
         img = distance_to_bgr(distance_mm)
     else:
@@ -81,9 +94,16 @@ def render_png(
     return buf.tobytes()
 
 
-def downsample_png(kind: str, gray: np.ndarray, distance_mm: np.ndarray, step: int) -> bytes:
+def downsample_png(
+    kind: str,
+    gray: np.ndarray,
+    distance_mm: np.ndarray,
+    step: int,
+    *,
+    full_scale_counts: float = PREVIEW_FULL_SCALE,
+) -> bytes:
     """A small PNG for live streaming: every ``step``-th pixel (area-averaged)."""
-    img = gray_to_u8(gray) if kind == "gray" else distance_to_bgr(distance_mm)
+    img = gray_u8(gray, full_scale_counts) if kind == "gray" else distance_to_bgr(distance_mm)
     if step > 1:
         h, w = img.shape[:2]
         img = cv2.resize(img, (w // step, h // step), interpolation=cv2.INTER_AREA)
@@ -154,22 +174,40 @@ class ImageRenderer:
         *,
         overlay: bool,
         scale: int,
+        full_scale_counts: float = PREVIEW_FULL_SCALE,
     ) -> Future:
         """Future of (frame_index, PNG bytes) of ``render_png(...)``."""
         return self._get(
-            ("png", kind, overlay, scale),
+            ("png", kind, overlay, scale, full_scale_counts),
             frame_index,
-            lambda: render_png(kind, gray, distance_mm, result, overlay=overlay, scale=scale),
+            lambda: render_png(
+                kind,
+                gray,
+                distance_mm,
+                result,
+                overlay=overlay,
+                scale=scale,
+                full_scale_counts=full_scale_counts,
+            ),
         )
 
     def stream_png(
-        self, frame_index: int, kind: str, gray: np.ndarray, distance_mm: np.ndarray, step: int
+        self,
+        frame_index: int,
+        kind: str,
+        gray: np.ndarray,
+        distance_mm: np.ndarray,
+        step: int,
+        *,
+        full_scale_counts: float = PREVIEW_FULL_SCALE,
     ) -> Future:
         """Future of (frame_index, PNG bytes) of ``downsample_png(...)`` (live images)."""
         return self._get(
-            ("stream", kind, step),
+            ("stream", kind, step, full_scale_counts),
             frame_index,
-            lambda: downsample_png(kind, gray, distance_mm, step),
+            lambda: downsample_png(
+                kind, gray, distance_mm, step, full_scale_counts=full_scale_counts
+            ),
         )
 
     def cached_entries(self) -> int:

@@ -1587,6 +1587,11 @@ export interface components {
             /** Running */
             running: boolean;
             /**
+             * Subprotocols
+             * @description WebSocket subprotocols served on the port: the SDK's foxglove.sdk.v1 and the open protocol's foxglove.websocket.v1
+             */
+            subprotocols?: string[];
+            /**
              * Url
              * @description ws:// address for the Foxglove app
              */

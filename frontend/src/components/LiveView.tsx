@@ -1,14 +1,18 @@
-// Gray and distance images side by side, colour-mapped here from the raw uint16 frames;
+// Gray and distance images side by side, colour-mapped here from the raw uint16 frames at
+// the camera's own resolution (the frames' aspect ratio) and gray full scale;
 // overlays drawn here and toggled without a server round-trip: the active pixel set,
 // candidate blobs, matched reflectors with catalog ids, and rejected blobs with the gate
 // that refused them. Each drawn frame is acknowledged (flow control, see live.ts).
 import { useEffect, useRef, useState } from "preact/hooks";
 import type { Pose } from "../api/client";
 import type { Shown } from "../live";
-import { activePixels, distancePixels, grayPixels, turboCss } from "../colormap";
+import { activePixels, distancePixels, grayPixels, grayTop, turboCss } from "../colormap";
 import type { RawFrame } from "../rawframe";
 
-const SCALE = 2; // overlay canvas pixels per image pixel
+// Overlay canvas pixels per image pixel: about 640 canvas pixels across whatever the
+// camera's width (2 for the TOFcam-660's 320, 1 for an Azure Kinect's 640), so that marks
+// and labels drawn in canvas pixels keep their size on the page.
+const OVERLAY_WIDTH = 640;
 
 type Layers = { active: boolean; candidates: boolean; matched: boolean; rejected: boolean };
 const LAYER_LABELS: Record<keyof Layers, string> = {
@@ -48,7 +52,8 @@ function Overlay({ shown, layers }: { shown: Shown | null; layers: Layers }) {
     const { raw, pose } = shown;
     const W = raw.width * raw.step;
     const H = raw.height * raw.step;
-    if (c.width !== W * SCALE) {
+    const SCALE = Math.max(1, Math.round(OVERLAY_WIDTH / W));
+    if (c.width !== W * SCALE || c.height !== H * SCALE) {
       c.width = W * SCALE;
       c.height = H * SCALE;
     }
@@ -126,6 +131,8 @@ export function LiveView({ shown, onDrawn }: { shown: Shown | null; onDrawn: (fr
   const raw = shown?.raw;
   const grayRef = useImage(grayPixels, raw);
   const distRef = useImage((f, img) => setRange(distancePixels(f, img)), raw);
+  // the camera's own shape (640 x 576 for an Azure Kinect), not the TOFcam-660's 4:3
+  const aspect = raw ? { aspectRatio: `${raw.width * raw.step} / ${raw.height * raw.step}` } : undefined;
   useEffect(() => {
     if (!raw) return;
     window.__tofposeFramesDrawn = (window.__tofposeFramesDrawn ?? 0) + 1;
@@ -145,13 +152,13 @@ export function LiveView({ shown, onDrawn }: { shown: Shown | null; onDrawn: (fr
       <div class="images">
         {(["gray", "distance"] as const).map((k) => (
           <figure key={k}>
-            <div class="frame">
+            <div class="frame" style={aspect} data-testid={`frame-${k}`}>
               <canvas ref={k === "gray" ? grayRef : distRef} class="image" aria-label={`${k} image`} data-testid={`image-${k}`} />
               {!raw && <div class="placeholder">waiting for images</div>}
               <Overlay shown={shown} layers={layers} />
             </div>
             <figcaption>
-              {k === "gray" ? "gray (counts, gamma 0.5)" : <>distance (turbo, 2nd–98th percentile; black = invalid) <ColourBar range={range} /></>}
+              {k === "gray" ? <span data-testid="gray-scale">gray (counts 0–{raw ? grayTop(raw) : "?"}, gamma 0.5)</span> : <>distance (turbo, 2nd–98th percentile; black = invalid) <ColourBar range={range} /></>}
             </figcaption>
           </figure>
         ))}
