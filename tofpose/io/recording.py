@@ -260,6 +260,9 @@ class Recording:
     lab_truth_R, lab_truth_t_mm : the lab's reference, same shapes, or None.
     stored_distance_kind : "radial" or "z": what /frames/distance_mm holds (z depth is
     converted to radial distance as frames are read).
+    wall_time_ns : (N,) int64 the host's wall clock (Unix ns) when each frame was
+    captured (``/frames/wall_time_ns``, written by the server's recordings), or None
+    when the file has none or not for every frame (``time_s`` is the device's clock).
     """
 
     path: Path
@@ -274,6 +277,7 @@ class Recording:
     lab_truth_t_mm: np.ndarray | None = None
     stored_distance_kind: str = "radial"
     _stored_camera: CameraModel | None = None
+    wall_time_ns: np.ndarray | None = None
 
     def _radial(self, distance_mm: np.ndarray) -> np.ndarray:
         """Stored distances (H, W) or (n, H, W) as radial distances."""
@@ -337,6 +341,18 @@ class Recording:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _wall_times(f: h5py.File, n: int) -> np.ndarray | None:
+    """``/frames/wall_time_ns`` (n,) int64 when present for every frame (positive and
+    non-decreasing), else None."""
+    ds = f.get("frames/wall_time_ns")
+    if ds is None or ds.shape != (n,) or n == 0:
+        return None
+    ns = np.asarray(ds[...], dtype=np.int64)
+    if not (ns > 0).all() or (np.diff(ns) < 0).any():
+        return None
+    return ns
 
 
 def open_recording(path: str | Path) -> Recording:
@@ -407,6 +423,7 @@ def open_recording(path: str | Path) -> Recording:
             lab_t,
             stored_distance_kind=stored_kind,
             _stored_camera=camera,
+            wall_time_ns=_wall_times(f, n),
         )
     except RecordingError:
         f.close()

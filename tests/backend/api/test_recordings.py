@@ -123,6 +123,8 @@ def test_a_recording_holds_every_frame_the_hub_delivered_with_the_live_results(
     messages, _, _ = read_back(tmp_path / "rec.mcap")
     assert len(messages[topics.GRAY]) == n
     assert len(messages[topics.LAB_TRUTH]) == n
+    # the messages carry the wall clock of each frame's capture, not the device's clock
+    assert [t for t, _ in messages[topics.GRAY]] == wall.tolist()
 
     # as ROS 2 messages (?profile=ros2): an independent ROS 2 reader decodes every message
     r = c.get(f"/api/recordings/{rec['id']}/recording.mcap", params={"profile": "ros2"})
@@ -132,6 +134,7 @@ def test_a_recording_holds_every_frame_the_hub_delivered_with_the_live_results(
     (tmp_path / "rec.ros2.mcap").write_bytes(r.content)
     ros2 = read_back_ros2(tmp_path / "rec.ros2.mcap")
     assert len(ros2[ros2_topics.AMPLITUDE]) == len(ros2[ros2_topics.TF]) == n
+    assert [t for t, _ in ros2[ros2_topics.AMPLITUDE]] == wall.tolist()
     with open_recording(path) as rec_file:
         gray, dist_mm, _ = rec_file.frame(n - 1)
     _, amplitude = ros2[ros2_topics.AMPLITUDE][n - 1]

@@ -210,3 +210,26 @@ def test_a_recording_without_the_device_attributes_reads_as_the_epc660s(tmp_path
         assert rec.camera == CameraModel()
         assert rec.stored_distance_kind == "radial"
         np.testing.assert_array_equal(rec.frame(0)[1], frames[0][1])
+
+
+def test_a_recordings_wall_clock_is_read_when_every_frame_has_one(tmp_path):
+    """``/frames/wall_time_ns`` (the server's recordings) is the message time of an
+    export; a file without it, or with a gap or a step back in it, has none."""
+    stamps = {
+        "ok": [1_765_000_000_000_000_000 + k * 100_000_000 for k in range(3)],
+        "zero": [1_765_000_000_000_000_000, 0, 1_765_000_000_200_000_000],
+        "back": [1_765_000_000_200_000_000, 1_765_000_000_100_000_000, 1_765_000_000_300_000_000],
+    }
+    for name, ns in stamps.items():
+        path = tmp_path / f"{name}.h5"
+        _write(path)
+        with h5py.File(path, "a") as f:
+            f["frames/wall_time_ns"] = np.array(ns, np.int64)
+        with open_recording(path) as rec:
+            if name == "ok":
+                np.testing.assert_array_equal(rec.wall_time_ns, ns)
+            else:
+                assert rec.wall_time_ns is None
+    _write(tmp_path / "none.h5")
+    with open_recording(tmp_path / "none.h5") as rec:
+        assert rec.wall_time_ns is None

@@ -64,6 +64,15 @@ def pose_at(
     return R[i], t_mm[i]
 
 
+def message_times_ns(rec) -> list[int]:
+    """Each frame's message time (Unix ns): the wall clock when the recording has it
+    (``Recording.wall_time_ns``: a recording made by the server), else its own time
+    stamps (a simulated or imported recording's clock, which may start at 0)."""
+    if rec.wall_time_ns is not None:
+        return [int(t) for t in rec.wall_time_ns]
+    return [time_ns_from_seconds(float(t)) for t in rec.time_s]
+
+
 def export_mcap(
     rec: Recording,
     out: str | Path,
@@ -81,7 +90,7 @@ def export_mcap(
     out = Path(out)
     if out.exists() and not overwrite:
         raise ValueError(f"{out} exists (pass --force to overwrite it)")
-    times_ns = [time_ns_from_seconds(float(t)) for t in rec.time_s]
+    times_ns = message_times_ns(rec)
     context = foxglove.Context()
     channels = ToFChannels(
         context,

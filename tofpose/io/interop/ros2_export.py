@@ -23,8 +23,7 @@ from tqdm import tqdm
 from tofpose.io.interop import ros2_messages as msg
 from tofpose.io.interop import ros2_topics as topics
 from tofpose.io.interop import topics as foxglove_topics
-from tofpose.io.interop.foxglove_messages import time_ns_from_seconds
-from tofpose.io.interop.mcap_export import export_metadata, pose_at
+from tofpose.io.interop.mcap_export import export_metadata, message_times_ns, pose_at
 from tofpose.io.interop.ros2_schemas import definition
 from tofpose.io.recording import Recording
 from tofpose.lab.motion_models import TwoModelRelativeState
@@ -103,7 +102,7 @@ def export_ros2_mcap(
     out = Path(out)
     if out.exists() and not overwrite:
         raise ValueError(f"{out} exists (pass --force to overwrite it)")
-    times_ns = [time_ns_from_seconds(float(t)) for t in rec.time_s]
+    times_ns = message_times_ns(rec)  # the wall clock when the recording has it
     metadata = {
         **export_metadata(rec, pipeline),
         "profile": topics.MCAP_PROFILE,
