@@ -94,10 +94,10 @@ export const CHARTS: ChartDef[] = [
     line("pitch", "pitch", "deg"), line("yaw", "yaw", "deg"), line("roll", "roll", "deg"),
     line("ref_pitch", "reference pitch", "deg", true), line("ref_yaw", "reference yaw", "deg", true),
     line("ref_roll", "reference roll", "deg", true)] },
-  { id: "error-position", title: "position error (pose − reference)", unit: "mm", againstReference: true, series: [
+  { id: "error-position", title: "position error", unit: "mm", againstReference: true, series: [
     line("err_x", "error x", "mm"), line("err_y", "error y", "mm"), line("err_z", "error z", "mm"),
     line("err_position", "|error|", "mm")] },
-  { id: "error-attitude", title: "attitude error (pose − reference)", unit: "deg", againstReference: true, series: [
+  { id: "error-attitude", title: "attitude error", unit: "deg", againstReference: true, series: [
     line("err_pitch", "error pitch", "deg"), line("err_yaw", "error yaw", "deg"), line("err_roll", "error roll", "deg"),
     line("err_attitude", "angle error", "deg")] },
   { id: "rate", title: "angular rate (camera frame)", unit: "deg/s", series: [
@@ -108,6 +108,6 @@ export const CHARTS: ChartDef[] = [
  * the server gives (the nominal one says "uncalibrated"), or that there is none. */
 export function referenceTitle(samples: readonly Sample[]): string {
   const labels = [...new Set(samples.map((s) => s.reference).filter((r): r is string => r !== null))];
-  if (labels.length === 0) return "no lab reference from this source";
-  return labels.length === 1 ? `against ${labels[0]}` : `against ${labels.length} references: ${labels.join("; ")}`;
+  if (labels.length === 0) return "(no lab reference from this source)";
+  return labels.length === 1 ? `vs ${labels[0]}` : `vs ${labels.length} references: ${labels.join("; ")}`;
 }

@@ -73,10 +73,10 @@ describe("wrapDeg", () => {
 
 describe("referenceTitle", () => {
   it("names the reference, and says so when it is uncalibrated or when there is none", () => {
-    expect(referenceTitle([sample(1, {}, NOMINAL), sample(2, {}, NOMINAL)])).toBe(`against ${NOMINAL}`);
-    expect(referenceTitle([sample(1), sample(2)])).toBe("no lab reference from this source");
+    expect(referenceTitle([sample(1, {}, NOMINAL), sample(2, {}, NOMINAL)])).toBe(`vs ${NOMINAL}`);
+    expect(referenceTitle([sample(1), sample(2)])).toBe("(no lab reference from this source)");
     expect(referenceTitle([sample(1, {}, NOMINAL), sample(2, {}, "calibration 3 ('bench')")]))
-      .toBe(`against 2 references: ${NOMINAL}; calibration 3 ('bench')`);
+      .toBe(`vs 2 references: ${NOMINAL}; calibration 3 ('bench')`);
   });
 });
 
