@@ -79,8 +79,8 @@ function App() {
             <StatusPanel pose={live.pose} />
             <CameraPanel />
             <Recorder />
+            <ScenePanel />
           </div>
-          <ScenePanel />
           <Campaigns />
           <NewCampaign calibrationRequest={preset} />
           <Studies />

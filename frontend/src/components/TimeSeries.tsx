@@ -5,6 +5,7 @@
 import { useEffect, useMemo, useRef, useState } from "preact/hooks";
 import uPlot from "uplot";
 import "uplot/dist/uPlot.min.css";
+import { fmtClock } from "../format";
 import { csvFileName, csvText } from "../plotCsv";
 import { CHARTS, legendLabel, referenceTitle, type ChartDef, type Sample, type SeriesKey } from "../plotSeries";
 import { columns, inRange, windowLabel, windowRange, WINDOWS_S, zoomAt, type Range, type SampleBuffer } from "../plotWindow";
@@ -12,8 +13,7 @@ import { columns, inRange, windowLabel, windowRange, WINDOWS_S, zoomAt, type Ran
 const REDRAW_MS = 250;
 const COLORS = ["#1f77b4", "#d62728", "#2ca02c", "#222"];
 const WHEEL_STEP = 0.8;
-
-const clock = (t: number) => new Date(t * 1000).toLocaleTimeString([], { hour12: false });
+const TIME_STEPS_S = [0.1, 0.2, 0.5, 1, 2, 5, 10, 15, 30, 60, 120, 300, 600, 900, 1800, 3600];
 
 interface ChartProps {
   def: ChartDef;
@@ -41,7 +41,14 @@ function Chart({ def, shown, range, height, onZoom, onWheel, onReset, onToggle }
       {
         width: box.clientWidth || 300, height,
         scales: { x: { time: true } },
-        axes: [{ size: 28 }, { label: def.unit, size: 52, labelSize: 14 }],
+        axes: [
+          // 24 h wall clock, tenths of a second once zoomed below a second a tick; steps of
+          // 2 s as well (uPlot's own go from 1 s to 5 s: a 3 s zoom would get no tick)
+          { size: 28, font: "10px system-ui, sans-serif", incrs: TIME_STEPS_S,
+            space: (_u, _i, min, max, dim) => ((max - min) * 52 / dim < 1 ? 64 : 52),
+            values: (_u, ticks, _i, _space, incr) => ticks.map((t) => fmtClock(t, incr < 1 ? 1 : 0)) },
+          { label: def.unit, size: 52, labelSize: 14 },
+        ],
         legend: { live: true },
         cursor: {
           sync: { key: "tofpose-plots", setSeries: false },
@@ -49,7 +56,7 @@ function Chart({ def, shown, range, height, onZoom, onWheel, onReset, onToggle }
           bind: { dblclick: () => () => { calls.current.onReset(); return null; } },
         },
         series: [
-          { label: "time", value: (_u, v) => (v == null ? "-" : clock(v)) },
+          { label: "time", value: (_u, v) => (v == null ? "-" : fmtClock(v)) },
           ...def.series.map((s) => ({
             label: legendLabel(s),
             stroke: COLORS[s.dashed ? dashed++ : solid++],
@@ -180,7 +187,7 @@ export function TimeSeries({ samples }: { samples: SampleBuffer }) {
         <button data-testid="plot-csv" disabled={shown.length === 0} onClick={exportCsv}
           title="the shown series over the shown time, one row per sample">CSV</button>
         <span class="small" data-testid="plot-status">
-          {range ? `${clock(range[0])} – ${clock(range[1])}` : "no frame yet"}
+          {range ? `${fmtClock(range[0])} – ${fmtClock(range[1])}` : "no frame yet"}
           {frozen && ", paused (the stream goes on)"}
           {zoom && ", zoomed"}
           {!zoom && " · drag or wheel to zoom"}
