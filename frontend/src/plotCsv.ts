@@ -24,6 +24,12 @@ export function csvText(samples: readonly Sample[], series: readonly SeriesDef[]
   return [header, ...rows].join("\n") + "\n";
 }
 
+/** The series a CSV of the shown plots carries: those not hidden in a legend that have a
+ * value in the shown samples, in the charts' order. */
+export function exportedSeries(all: readonly SeriesDef[], samples: readonly Sample[], hidden: ReadonlySet<string>): SeriesDef[] {
+  return all.filter((d) => !hidden.has(d.key) && samples.some((s) => s.values[d.key] !== undefined));
+}
+
 /** "tofpose-plots-2026-12-06T14-05-03Z.csv", named after the first shown sample. */
 export function csvFileName(samples: readonly Sample[]): string {
   const t = samples[0]?.t ?? 0;

@@ -1,6 +1,6 @@
 import { describe, expect, it } from "vitest";
 import type { Pose } from "./api/client";
-import { csvFileName, csvText } from "./plotCsv";
+import { csvFileName, csvText, exportedSeries } from "./plotCsv";
 import { CHARTS, legendLabel, referenceTitle, sampleOf, wrapDeg, type Sample } from "./plotSeries";
 import { columns, inRange, SampleBuffer, windowLabel, windowRange, zoomAt } from "./plotWindow";
 
@@ -170,6 +170,14 @@ describe("csvText", () => {
   it("quotes a label with a comma", () => {
     const text = csvText([], [{ key: "x", name: "x, lab", unit: "mm" }]);
     expect(text).toBe('capture time (UTC),capture time (Unix s),frame,frame time (s),"x, lab (mm)"\n');
+  });
+
+  it("exports the series shown: not hidden, with a value in the shown samples", () => {
+    const all = CHARTS.flatMap((c) => c.series);
+    const shown = [sample(1, { x: 1, ref_x: 0 }), sample(2, { y: 2, rate_z: 1 })];
+    expect(exportedSeries(all, shown, new Set()).map((d) => d.key)).toEqual(["x", "y", "ref_x", "rate_z"]);
+    expect(exportedSeries(all, shown, new Set(["ref_x", "rate_z"])).map((d) => d.key)).toEqual(["x", "y"]);
+    expect(exportedSeries(all, [], new Set())).toEqual([]);
   });
 
   it("names the file after the first sample", () => {

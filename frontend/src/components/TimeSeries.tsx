@@ -6,7 +6,7 @@ import { useEffect, useMemo, useRef, useState } from "preact/hooks";
 import uPlot from "uplot";
 import "uplot/dist/uPlot.min.css";
 import { fmtClock } from "../format";
-import { csvFileName, csvText } from "../plotCsv";
+import { csvFileName, csvText, exportedSeries } from "../plotCsv";
 import { CHARTS, legendLabel, referenceTitle, type ChartDef, type Sample, type SeriesKey } from "../plotSeries";
 import { columns, inRange, windowLabel, windowRange, WINDOWS_S, zoomAt, type Range, type SampleBuffer } from "../plotWindow";
 
@@ -153,8 +153,7 @@ export function TimeSeries({ samples }: { samples: SampleBuffer }) {
     setZoom(null);
   };
   const exportCsv = () => {
-    const series = CHARTS.flatMap((c) => c.series)
-      .filter((s) => !hidden.current.has(s.key) && shown.some((x) => x.values[s.key] !== undefined));
+    const series = exportedSeries(CHARTS.flatMap((c) => c.series), shown, hidden.current);
     const url = URL.createObjectURL(new Blob([csvText(shown, series)], { type: "text/csv" }));
     const a = document.createElement("a");
     a.href = url;
