@@ -5,6 +5,8 @@
 // (sessionStorage, api/client.ts) goes in the handshake as the subprotocol
 // "tofpose.bearer.<key>", never in the URL (docs/server.md, Security).
 import { token, type Pose } from "./api/client";
+import { sampleOf } from "./plotSeries";
+import { SampleBuffer } from "./plotWindow";
 import { parseRawFrame, type RawFrame } from "./rawframe";
 
 export type Shown = { raw: RawFrame; pose: Pose | null };
@@ -13,11 +15,11 @@ export type LiveState = {
   stale: boolean;
   pose: Pose | null;
   shown: Shown | null; // the newest raw frame and the pose of that same frame
-  history: Pose[];
+  /** the plotted numbers of the last 10 minutes (mutable: its version counts the pushes) */
+  samples: SampleBuffer;
 };
 
 const STALE_AFTER_MS = 2000;
-const HISTORY = 300;
 const RAW_CREDIT = 2;
 const BEARER = "tofpose.bearer";
 
@@ -31,7 +33,7 @@ export function liveProtocols(key: string | null): string[] {
 export type LiveHandle = { close: () => void; ack: (frameIndex: number) => void };
 
 export function connectLive(onChange: (s: LiveState) => void): LiveHandle {
-  const state: LiveState = { connected: false, stale: true, pose: null, shown: null, history: [] };
+  const state: LiveState = { connected: false, stale: true, pose: null, shown: null, samples: new SampleBuffer() };
   const recent = new Map<number, Pose>(); // pose by frame index, to pair with raw frames
   let ws: WebSocket | null = null;
   let lastFrame = 0;
@@ -77,7 +79,7 @@ export function connectLive(onChange: (s: LiveState) => void): LiveHandle {
         state.pose = p;
         recent.set(p.frame_index, p);
         if (recent.size > 60) recent.delete(recent.keys().next().value!);
-        state.history = [...state.history.slice(-(HISTORY - 1)), p];
+        state.samples.push(sampleOf(p));
         lastFrame = Date.now();
         state.stale = false;
         emit();

@@ -16,10 +16,12 @@ import { Studies } from "./components/Studies";
 import { TimeSeries } from "./components/TimeSeries";
 import { ErrorContext, errorText } from "./errors";
 import { connectLive, type LiveHandle, type LiveState } from "./live";
+import { SampleBuffer } from "./plotWindow";
 import "./style.css";
 
 function App() {
-  const [live, setLive] = useState<LiveState>({ connected: false, stale: true, pose: null, shown: null, history: [] });
+  const [live, setLive] = useState<LiveState>(
+    { connected: false, stale: true, pose: null, shown: null, samples: new SampleBuffer() });
   const [link, setLink] = useState<LiveHandle | null>(null);
   const [error, setError] = useState<string | null>(null);
   const [hasToken, setHasToken] = useState(!!token());
@@ -64,7 +66,11 @@ function App() {
         </header>
         {error && <p class="error banner" role="alert" data-testid="error">{error}</p>}
         <main>
-          <LiveView shown={live.shown} onDrawn={(i) => link?.ack(i)} />
+          {/* the images and the plots in one column, beside the pose: all on the first screen */}
+          <div class="primary">
+            <LiveView shown={live.shown} onDrawn={(i) => link?.ack(i)} />
+            <TimeSeries samples={live.samples} />
+          </div>
           <div class="side">
             <PosePanel pose={live.pose} stale={live.stale}>
               <ReferenceBar onCalibrate={() => setPreset((n) => n + 1)} />
@@ -73,9 +79,8 @@ function App() {
             <StatusPanel pose={live.pose} />
             <CameraPanel />
             <Recorder />
+            <ScenePanel />
           </div>
-          <TimeSeries history={live.history} />
-          <ScenePanel />
           <Campaigns />
           <NewCampaign calibrationRequest={preset} />
           <Studies />

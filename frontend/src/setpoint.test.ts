@@ -1,5 +1,5 @@
 import { describe, expect, it } from "vitest";
-import { fmtDuration } from "./format";
+import { fmtClock, fmtDuration } from "./format";
 import { parseNumber, parseNumberList, parseSetpoint } from "./setpoint";
 
 const yaw = { name: "yaw", unit: "deg", min_pos: -170, max_pos: 170 };
@@ -40,5 +40,14 @@ describe("fmtDuration", () => {
     expect(fmtDuration(45.4)).toBe("45 s");
     expect(fmtDuration(null)).toBe("-");
     expect(fmtDuration(undefined)).toBe("-");
+  });
+});
+
+describe("fmtClock", () => {
+  it("reads the local wall clock in 24 h, with tenths when asked", () => {
+    const t = new Date(2026, 11, 6, 14, 5, 3, 250).getTime() / 1000;
+    expect(fmtClock(t)).toBe("14:05:03");
+    expect(fmtClock(t, 1)).toBe("14:05:03.2");
+    expect(fmtClock(new Date(2026, 11, 6, 9, 0, 0).getTime() / 1000)).toBe("09:00:00");
   });
 });

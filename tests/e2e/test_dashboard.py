@@ -45,7 +45,7 @@ def test_live_pose_follows_a_move_made_in_the_page(server, page_for):
     assert "total" in stages and ("refine" in stages or "tracking" in stages), stages
     x0 = _num(page, "pose-x")
     assert page.get_by_test_id("filter-status").inner_text() in ("updated", "initialised")
-    page.get_by_test_id("rate-chart").wait_for()
+    page.get_by_test_id("chart-rate").wait_for()
     # while the table turns, the relative state shows the target turning about the
     # camera's vertical axis (the table's yaw seen from the camera it carries), sampled
     # while the turn lasts (up to 5 s: under load the page and the filter lag)
