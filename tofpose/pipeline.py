@@ -99,6 +99,11 @@ NO_DIAGNOSTICS = FrameDiagnostics()
 FALLBACK_CONFIDENCE = 0.999
 #: ... or after this long (ms), whichever comes first (23 blobs: 1771 triplets, ~5 ms)
 FALLBACK_BUDGET_MS = 100.0
+#: and its answer is taken only when its reflectors span a plane: the second singular
+#: value of their catalog points at least this fraction of the first (a row of bright
+#: fittings in a room matched the paper target's nearly collinear lower four markers,
+#: ratio 0.11; a row's pose turns freely about it)
+FALLBACK_MIN_SPREAD = 0.25
 
 
 @dataclass
@@ -414,6 +419,7 @@ class PosePipeline:
                 diagnostics=diag,
             )
         m = self._match(meas)
+        from_hypotheses = False
         if not m.ok and cfg.triplet_fallback and cfg.matcher == "annealing":
             # many look-alike blobs (glints, other reflectors) can leave annealing's soft
             # assignment without a rigid match although one is there: the triplet
@@ -427,8 +433,12 @@ class PosePipeline:
             # at least one reflector beyond the fewest: a hypothesis of 3 is checked by
             # its own 3 distances only (on 8 m frames with every physics knob on, one
             # such pose was 5.8 deg off at 30 of its chi^2)
-            if hypotheses.ok and len(hypotheses.pairs) > cfg.matching.min_matches:
-                m = hypotheses
+            if (
+                hypotheses.ok
+                and len(hypotheses.pairs) > cfg.matching.min_matches
+                and self._spread_ratio(hypotheses.pairs[:, 1]) >= FALLBACK_MIN_SPREAD
+            ):
+                m, from_hypotheses = hypotheses, True
         timer.lap("matching")
         if not m.ok:
             return fail(
@@ -436,7 +446,10 @@ class PosePipeline:
                 unmatched=unmatched + meas.as_unmatched(),
                 diagnostics=diag,
             )
-        solved = self._solve_with_fallback(meas, m, active)
+        # a pose from hypotheses over every blob must also leave no reflector it predicts
+        # clearly visible on a dark part of the frame: bright clutter (a room's fittings)
+        # can hold four points rigidly like the catalog's, it does not hold the rest
+        solved = self._solve_with_fallback(meas, m, active, dark_check_all=from_hypotheses)
         timer.lap("refine")
         if isinstance(solved, Rejected):
             return fail(solved.reason, unmatched=unmatched + meas.as_unmatched(), diagnostics=diag)
@@ -547,12 +560,17 @@ class PosePipeline:
             arithmetic=self.arithmetic.matching,
         )
 
-    def _solve_with_fallback(self, meas: Measurements, m: MatchResult, active):
+    def _solve_with_fallback(
+        self, meas: Measurements, m: MatchResult, active, *, dark_check_all: bool = False
+    ):
         """§5 on the matched pairs; when annealing's assignment gives an implausible pose
         (a mirror image), the exhaustive triplet hypotheses restricted to physically
-        possible poses (ours) are solved instead."""
+        possible poses (ours) are solved instead. ``dark_check_all``: verify with the
+        dark check whatever the number matched (``PoseSolver.verify``)."""
         cfg = self.config
-        solved = self._solver.solve(m.pairs, meas, m.alpha_mm, active)
+        solved = self._solver.solve(
+            m.pairs, meas, m.alpha_mm, active, dark_check_all=dark_check_all
+        )
         if not (
             isinstance(solved, Rejected)
             and solved.implausible
@@ -571,7 +589,9 @@ class PosePipeline:
             min_matches=cfg.matching.min_matches,
             arithmetic=self.arithmetic.matching,
         )
-        return self._solver.solve(pairs, meas, m.alpha_mm, active) if len(pairs) else solved
+        if not len(pairs):
+            return solved
+        return self._solver.solve(pairs, meas, m.alpha_mm, active, dark_check_all=dark_check_all)
 
     def _process_tracking(self, g, d, time_s, track: TrackState, timer) -> PoseResult | None:
         """Tracking mode (``tofpose.stages.tracking.tracking``,
@@ -742,6 +762,14 @@ class PosePipeline:
         reason = "" if len(pairs) else "no triplet hypothesis with enough inliers"
         tried = stats.get("triplets", 0)
         return MatchResult(pairs, unmatched, np.zeros((len(y), 0)), tried, alpha, reason)
+
+    def _spread_ratio(self, catalog_idx: np.ndarray) -> float:
+        """Second over first singular value of the catalog points ``catalog_idx`` (m,)
+        about their mean: near 0 for reflectors along a line, about which their pose
+        turns freely."""
+        x = self._catalog_xyz[catalog_idx]
+        s = np.linalg.svd(x - x.mean(axis=0), compute_uv=False)
+        return float(s[1] / s[0]) if s[0] > 0 else 0.0
 
     # ------------------------------------------------------------------------------------
     @staticmethod

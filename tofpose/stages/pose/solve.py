@@ -270,6 +270,8 @@ class PoseSolver:
         meas: Measurements,
         alpha_mm: float,
         active: ThresholdedFrame | None,
+        *,
+        dark_check_all: bool = False,
     ) -> Solution | Rejected:
         """Pose from matched pairs (m, 2) of observed and catalog indices: weighted SVD
         (Eqs. 40-50), completion, perspective-bias correction, refinement, outlier step
@@ -307,7 +309,9 @@ class PoseSolver:
             alone = self._fit_pairs(pairs, meas, 0.0)
             if alone.result.kept.sum() > kept.sum():
                 solved = alone
-        return self.conclude(matched_observations(solved), solved.result, active)
+        return self.conclude(
+            matched_observations(solved), solved.result, active, dark_check_all=dark_check_all
+        )
 
     def _fit_pairs(self, pairs: np.ndarray, meas: Measurements, complete_mm: float) -> SolvedPairs:
         """``kernels.solve.solve_pairs`` on matched pairs (m, 2) with completion within
@@ -346,7 +350,12 @@ class PoseSolver:
         return offset_prior(self.config, self.range_bias_sigma_mm(range_mm), self.camera.fx)
 
     def conclude(
-        self, obs: MatchedObservations, result: OutlierFit, active: ThresholdedFrame | None
+        self,
+        obs: MatchedObservations,
+        result: OutlierFit,
+        active: ThresholdedFrame | None,
+        *,
+        dark_check_all: bool = False,
     ) -> Solution | Rejected:
         """The fitted pose of ``obs`` (the reflectors kept, the common range offset taken
         out: ``matched_observations``) from ``result`` (the fit with its outlier step;
@@ -362,7 +371,7 @@ class PoseSolver:
         T = RigidTransform(R, t)
         ar = self.arithmetic
         if self.config.verify_pose:
-            problem = self.verify(T, active, obs.i_idx)
+            problem = self.verify(T, active, obs.i_idx, dark_check_all=dark_check_all)
             if problem:
                 return Rejected(f"pose rejected: {problem}", implausible=True)
         dof = 3 * len(obs.i_idx) - 6
@@ -456,7 +465,12 @@ class PoseSolver:
         return self._xyz_mean, self._cos_max_view
 
     def verify(
-        self, T: RigidTransform, active: ThresholdedFrame | None, matched: np.ndarray
+        self,
+        T: RigidTransform,
+        active: ThresholdedFrame | None,
+        matched: np.ndarray,
+        *,
+        dark_check_all: bool = False,
     ) -> str:
         """Physical consistency of a pose with the frame; empty string when consistent:
         the target faces the camera within ``max_view_angle_deg``, every reflector is in
@@ -464,7 +478,9 @@ class PoseSolver:
         reflector that should be clearly visible falls on a dark part of the frame
         (``kernels.verify.pose_check`` states the rule). ``active`` : the frame and its
         I_t; read only for the dark check, and may be None otherwise. ``matched`` :
-        (m,) int, the catalog indices of the matched reflectors, each once."""
+        (m,) int, the catalog indices of the matched reflectors, each once.
+        ``dark_check_all``: the dark check whatever the number matched (a pose from
+        hypotheses over every blob, which clutter can also satisfy)."""
         R, t = T.R, T.t_mm
         cos_view = self.view_cosine(R, t)
         if cos_view < self._cos_max_view:
@@ -472,7 +488,7 @@ class PoseSolver:
                 f"the target would face away from the camera (view angle "
                 f"{np.degrees(np.arccos(np.clip(cos_view, -1, 1))):.0f} deg)"
             )
-        dark_check = len(matched) <= self.config.dark_check_max_matches
+        dark_check = dark_check_all or len(matched) <= self.config.dark_check_max_matches
         is_matched = np.zeros(len(self._xyz), bool)
         is_matched[matched] = True
         frame = _NO_FRAME
