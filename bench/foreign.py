@@ -175,8 +175,8 @@ class OraclePipeline(PosePipeline):
             reason,
         )
 
-    def _solve_with_fallback(self, meas, m: MatchResult, active):
-        return self._solver.solve(m.pairs, meas, m.alpha_mm, active)
+    def _solve_with_fallback(self, meas, m: MatchResult, active, *, dark_check_all=False):
+        return self._solver.solve(m.pairs, meas, m.alpha_mm, active, dark_check_all=dark_check_all)
 
 
 def run_oracle(rec, pipe: PosePipeline, truth: list[TrueImages], progress: bool = True):
