@@ -24,6 +24,24 @@ from tofpose.core.tof import SPEED_OF_LIGHT_MM_S
 #: along the boresight: Azure Kinect, ROS depth images)
 DistanceKind = Literal["radial", "z"]
 DISTANCE_KINDS: tuple[str, ...] = ("radial", "z")
+#: the camera's scalar description, every one stated by a camera profile and stored as a
+#: recording's /camera attribute (``dist``, ``name`` and the optional
+#: ``unwrapped_range_mm`` beside them)
+SCALAR_FIELDS: tuple[str, ...] = (
+    "width",
+    "height",
+    "fx",
+    "fy",
+    "cx",
+    "cy",
+    "full_scale_counts",
+    "modulation_frequency_hz",
+    "count_scale",
+    "distance_kind",
+    "depth_unit_mm",
+    "depth_invalid_code",
+    "depth_max_valid_code",
+)
 
 
 @dataclass(frozen=True)

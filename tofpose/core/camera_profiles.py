@@ -15,28 +15,10 @@ import json
 from importlib import resources
 from typing import Any
 
-from tofpose.core.camera import CameraModel
+from tofpose.core.camera import SCALAR_FIELDS, CameraModel
 
 #: the keys a profile must state (``unwrapped_range_mm`` is optional: single frequency)
-REQUIRED_KEYS: tuple[str, ...] = (
-    "profile",
-    "source",
-    "name",
-    "width",
-    "height",
-    "fx",
-    "fy",
-    "cx",
-    "cy",
-    "dist",
-    "full_scale_counts",
-    "modulation_frequency_hz",
-    "count_scale",
-    "distance_kind",
-    "depth_unit_mm",
-    "depth_invalid_code",
-    "depth_max_valid_code",
-)
+REQUIRED_KEYS: tuple[str, ...] = ("profile", "source", "name", "dist", *SCALAR_FIELDS)
 #: optional keys: a multi-frequency device's range, and what ``tofpose calibrate-range``
 #: and ``calibrate-covariance`` add to a camera JSON (``tofpose.io.camera_file``)
 OPTIONAL_KEYS: tuple[str, ...] = ("unwrapped_range_mm", "range_correction", "covariance_scale")

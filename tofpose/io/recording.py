@@ -42,7 +42,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from tofpose.core.camera import CameraModel
+from tofpose.core.camera import SCALAR_FIELDS, CameraModel
 from tofpose.core.catalog import Catalog
 from tofpose.core.depth import radial_from_z
 
@@ -80,21 +80,7 @@ class RecordingWriter:
         f.attrs["format"] = FORMAT
         f.attrs["version"] = VERSION
         cam = f.create_group("camera")
-        for k in (
-            "width",
-            "height",
-            "fx",
-            "fy",
-            "cx",
-            "cy",
-            "full_scale_counts",
-            "modulation_frequency_hz",
-            "count_scale",
-            "distance_kind",
-            "depth_unit_mm",
-            "depth_invalid_code",
-            "depth_max_valid_code",
-        ):
+        for k in SCALAR_FIELDS:
             cam.attrs[k] = getattr(camera, k)
         if camera.unwrapped_range_mm is not None:
             cam.attrs["unwrapped_range_mm"] = camera.unwrapped_range_mm
