@@ -208,7 +208,7 @@ class FitSettingsFields:
     estimate_range_offset: bool = True
     range_bias_sigma_mm: float = 15.0
     calibrated_range_bias_sigma_mm: float = 2.0
-    focal_length_sigma_rel: float = 0.002
+    focal_length_sigma_rel: float | None = None
     common_centroid_bias_px: float = 0.05
     outlier_sigma: float = 6.0
     outlier_chi2_per_dof: float = 4.0
@@ -287,8 +287,14 @@ class PipelineConfig(FitSettingsFields):
         (``focal_length_sigma_rel``, ``common_centroid_bias_px``), so an image-scale
         error is not read as a range offset. From 4 reflectors. On by default; a camera
         whose driver states a range-bias sigma of 0 turns it off.
-    focal_length_sigma_rel : relative sigma of the focal length's calibration (0.2 %: a
-        checkerboard calibration's typical focal-length uncertainty).
+    focal_length_sigma_rel : relative sigma of the focal length's calibration; None (the
+        default): the camera's own (``CameraModel.focal_length_sigma_rel``: what its
+        description states, 0 when it states none). A camera description gives the
+        intrinsics its frames are to be measured with, so an unstated uncertainty is
+        taken as none; 0.002 (0.2 %) is a checkerboard calibration's typical one. Until
+        2026-12 this was a fixed 0.2 % for every camera: on frames rendered with exact
+        intrinsics (ours and another renderer's) it made the reported z sigma ~0.2 % of
+        the range (2 mm at 1 m) where the errors were a tenth of that.
     common_centroid_bias_px : sigma of a centroid error common to a frame's markers
         (0.05 px: the largest common-mode error of the matched centroids measured over
         the physics robustness study's families, 0.046 px rms beyond their random

@@ -59,15 +59,23 @@ def chi2_limit(dof: int, p: float) -> float:
     return float(scipy.stats.chi2.ppf(p, dof))
 
 
-def offset_prior(config: SolveConfig, sigma_mm: float, fx_px: float) -> RangeOffsetPrior:
+def focal_length_sigma_rel(config: SolveConfig, camera: CameraModel) -> float:
+    """The focal length's relative sigma the fit assumes: ``config``'s when it sets one,
+    else the camera's (``CameraModel.focal_length_sigma_rel``)."""
+    if config.focal_length_sigma_rel is not None:
+        return float(config.focal_length_sigma_rel)
+    return float(camera.focal_length_sigma_rel)
+
+
+def offset_prior(config: SolveConfig, sigma_mm: float, camera: CameraModel) -> RangeOffsetPrior:
     """The common range offset's prior for ``kernels.pose.common_range_offset``: sigma
     ``sigma_mm`` (the uncalibrated or calibrated range-bias sigma), and the image scale's
-    uncertainty from ``focal_length_sigma_rel`` and ``common_centroid_bias_px`` (over the
-    focal length ``fx_px``)."""
+    uncertainty from the focal length's (``focal_length_sigma_rel``) and
+    ``common_centroid_bias_px`` (over the camera's focal length)."""
     return RangeOffsetPrior(
         sigma_mm=float(sigma_mm),
-        focal_length_sigma_rel=float(config.focal_length_sigma_rel),
-        centroid_bias_rad=float(config.common_centroid_bias_px) / fx_px,
+        focal_length_sigma_rel=focal_length_sigma_rel(config, camera),
+        centroid_bias_rad=float(config.common_centroid_bias_px) / camera.fx,
     )
 
 
@@ -347,7 +355,7 @@ class PoseSolver:
         reflectors at ``range_mm`` (m,)."""
         if not self.config.estimate_range_offset:
             return NO_OFFSET
-        return offset_prior(self.config, self.range_bias_sigma_mm(range_mm), self.camera.fx)
+        return offset_prior(self.config, self.range_bias_sigma_mm(range_mm), self.camera)
 
     def conclude(
         self,
@@ -393,7 +401,8 @@ class PoseSolver:
         fitted = fitted_reflectors(obs, fit)
         cfg = self.config
         # the image scale's errors (the focal length's, one per size class)
-        by_size = cfg.common_centroid_bias_px > 0 or cfg.focal_length_sigma_rel > 0
+        focal_sigma = focal_length_sigma_rel(cfg, self.camera)
+        by_size = cfg.common_centroid_bias_px > 0 or focal_sigma > 0
         leave_one_out = cfg.leave_one_out_covariance and len(obs.i_idx) >= MIN_LEAVE_ONE_OUT
         terms = CovarianceTerms(
             bias_sigma_mm=float(bias),
@@ -401,7 +410,7 @@ class PoseSolver:
             group=np.ascontiguousarray(self._size_class[obs.i_idx], dtype=np.int64),
             n_groups=self._n_sizes,
             bias_rad=float(cfg.common_centroid_bias_px) / self.camera.fx,
-            common_scale_sigma=float(cfg.focal_length_sigma_rel),
+            common_scale_sigma=focal_sigma,
             leave_one_out=bool(leave_one_out),
         )
         # one compiled call for the three (they share the Jacobian at the pose)
