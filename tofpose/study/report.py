@@ -286,12 +286,16 @@ def attitude_figures(summary: dict) -> list[Figure]:
 
 def verdict_map_figures(summary: dict) -> list[Figure]:
     """Frames within every requirement (%) per cell, condition x range, each cell marked
-    PASS / FAIL; at most 14 conditions a page."""
+    PASS / FAIL; at most 14 conditions and 10 ranges a page."""
     cells = summary["cells"]
-    ranges = sorted({c["range_m"] for c in cells})
     cell_at = {(_row_label(c), c["range_m"]): c for c in cells}
     figures = []
-    for labels in _chunks(sorted({_row_label(c) for c in cells}), 14):
+    pages = [
+        (labels, ranges)
+        for labels in _chunks(sorted({_row_label(c) for c in cells}), 14)
+        for ranges in _chunks(sorted({c["range_m"] for c in cells}), 10)
+    ]
+    for labels, ranges in pages:
         grid = np.full((len(labels), len(ranges)), np.nan)
         fig = Figure(figsize=PAGE_IN)
         ax = fig.subplots()

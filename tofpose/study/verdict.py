@@ -50,6 +50,13 @@ def with_unit(value: float, axis: str) -> str:
     return f"{value:.3g} {axis_unit(axis)}"
 
 
+def share_pct(share: float) -> str:
+    """A share of a requirement in %: whole numbers, one decimal near 100 % (so that
+    28.4 of 28.3 reads 100.4, not 100)."""
+    pct = 100.0 * share
+    return f"{pct:.1f}" if abs(pct - 100.0) < 0.5 else f"{pct:.0f}"
+
+
 def requirement_values(req: StudyRequirements) -> str:
     """``x and y 6 mm, z 28.3 mm, pitch, yaw and roll 0.15 deg``: axes with equal values
     grouped, in ``REQUIREMENT_AXES`` order."""
@@ -201,7 +208,7 @@ def judge_cell(
     else:
         number = (
             f"{axis_name(worst.axis)} {pct} |error| {with_unit(worst.value, worst.axis)} = "
-            f"{100.0 * worst.share:.0f} % of {with_unit(worst.requirement, worst.axis)}"
+            f"{share_pct(worst.share)} % of {with_unit(worst.requirement, worst.axis)}"
         )
     if passed:
         text = f"PASS: every axis within its requirement; closest {number}"
