@@ -60,6 +60,20 @@ describe("spec -> form -> spec", () => {
     expect(JSON.parse(specText(parsed.form))).toEqual(spec);
   });
 
+  it("keeps an axis as it was typed while the JSON edit leaves its values alone", () => {
+    const before = form({ axes: { ...INITIAL_FORM.axes, range_m: range("2.5", "5", "2.5") } });
+    const spec = JSON.parse(specText(before));
+    expect(spec.grid.range_m).toEqual([2.5, 5]);
+    const kept = studyForm({ ...spec, seed: 7 }, before);
+    if (!("form" in kept)) throw new Error(kept.error);
+    expect(kept.form.axes.range_m).toEqual(range("2.5", "5", "2.5"));
+    expect(kept.form.seed).toBe("7");
+    // values changed in the JSON: the axis shows them
+    const changed = studyForm({ ...spec, grid: { ...spec.grid, range_m: [2.5, 6] } }, before);
+    if (!("form" in changed)) throw new Error(changed.error);
+    expect(changed.form.axes.range_m).toEqual({ mode: "list", list: "2.5, 6", start: "", stop: "", step: "" });
+  });
+
   it("keeps what the form has no field for, so that the server names it", () => {
     const parsed = studyForm({ name: "s", grid: { range_m: [3] }, colour: "red" });
     if (!("form" in parsed)) throw new Error(parsed.error);

@@ -137,9 +137,19 @@ function axisForm(values: unknown): AxisForm {
 const text = (v: unknown): string => (v === undefined || v === null ? "" : typeof v === "string" ? v : JSON.stringify(v));
 const strings = (v: unknown): string[] => (Array.isArray(v) ? v.map(String) : []);
 
+/** Whether an axis as typed stands for these values. */
+function same(axis: AxisForm, values: unknown): boolean {
+  const v = axisValues(axis);
+  if ("error" in v) return false;
+  if (v.values === null) return values === undefined;
+  return Array.isArray(values) && values.length === v.values.length && values.every((x, k) => x === v.values?.[k]);
+}
+
 /** The form that stands for a spec (the JSON view's parsed text), or why it cannot. What the
- * form has no field for is kept in `extra` and sent as it was. */
-export function studyForm(spec: unknown): { form: StudyForm } | { error: string } {
+ * form has no field for is kept in `extra` and sent as it was. `previous`: the form as it
+ * was; an axis whose values did not change keeps the way it was typed (a range stays a
+ * range). */
+export function studyForm(spec: unknown, previous?: StudyForm): { form: StudyForm } | { error: string } {
   if (typeof spec !== "object" || spec === null || Array.isArray(spec)) return { error: "the study spec must be a JSON object" };
   const doc = spec as Record<string, unknown>;
   const grid = (doc.grid ?? {}) as Record<string, unknown>;
@@ -153,7 +163,9 @@ export function studyForm(spec: unknown): { form: StudyForm } | { error: string 
   const unknownReq = Object.keys(req).filter((k) => !(REQUIREMENTS as readonly string[]).includes(k));
   if (unknownAxes.length) return { error: `grid.${unknownAxes[0]}: not an axis of the form (${known.join(", ")})` };
   if (unknownReq.length) return { error: `requirements.${unknownReq[0]}: not a requirement (${REQUIREMENTS.join(", ")})` };
-  const axes = Object.fromEntries(NUMBER_AXES.map((a) => [a, axisForm(grid[a])])) as Record<NumberAxis, AxisForm>;
+  const axes = Object.fromEntries(NUMBER_AXES.map((a) => [
+    a, previous && same(previous.axes[a], grid[a]) ? previous.axes[a] : axisForm(grid[a]),
+  ])) as Record<NumberAxis, AxisForm>;
   const requirements = Object.fromEntries(REQUIREMENTS.map((k) => [k, text(req[k])])) as Record<RequirementKey, string>;
   return {
     form: {

@@ -83,7 +83,7 @@ function NewStudy({ submitted }: { submitted: () => void }) {
       setJsonNote(`not JSON (${(e as Error).message}); the form keeps its last valid spec`);
       return;
     }
-    const parsed = studyForm(doc);
+    const parsed = studyForm(doc, form);
     if ("error" in parsed) setJsonNote(`${parsed.error}; the form keeps its last valid spec`);
     else {
       setJsonNote(null);
@@ -155,7 +155,7 @@ function NewStudy({ submitted }: { submitted: () => void }) {
               <input data-testid="study-catalog" size={20} value={form.catalog} placeholder="paper-target" onInput={(e) => change({ catalog: value(e) })} />
               <FieldError path="grid.catalog" errors={errors} /></div>
           </fieldset>
-          <fieldset><legend>requirements (empty: the campaign's)</legend>
+          <fieldset class="study-req"><legend>requirements (empty: the campaign's)</legend>
             {REQUIREMENTS.map((k) => (
               <label key={k}>{REQUIREMENT_LABEL[k]} <input data-testid={`study-req-${k}`} size={5} value={form.requirements[k]}
                 placeholder={defaults[k] ?? "default"} aria-invalid={errors[`requirements.${k}`] ? "true" : undefined}
