@@ -313,7 +313,8 @@ def verdict_map_figures(summary: dict) -> list[Figure]:
                 v = c["verdict"]
                 word = {True: "PASS", False: "FAIL", None: "-"}[v["passed"]]
                 pct = "-" if v["within_all_pct"] is None else f"{v['within_all_pct']:.0f} %"
-                dark = v["within_all_pct"] is not None and v["within_all_pct"] < 25.0
+                # the colour map's ends are dark: white text there
+                dark = v["within_all_pct"] is not None and not 25.0 <= v["within_all_pct"] <= 85.0
                 ax.text(
                     j,
                     i,
