@@ -15,6 +15,7 @@ from backend.api.routes.studies import _public
 from backend.api.schemas.campaigns import Requirements
 from backend.api.schemas.studies import StudyRequirements
 from backend.services.jobs import studies as studies_service
+from backend.services.reports import report_content
 from tests.backend.conftest import AUTH
 from tofpose.lab.requirements import PAPER_REQUIREMENTS, REQUIREMENT_AXES
 from tofpose.study.run import StudyCancelledError
@@ -79,6 +80,9 @@ def test_campaigns_and_studies_default_to_the_same_requirements():
     campaign, study = Requirements(), StudyRequirements()
     for axis in REQUIREMENT_AXES:
         assert getattr(campaign, axis) == getattr(study, axis) == PAPER_REQUIREMENTS[axis]
+    # the campaign report's own copy (backend/services/reports/report_content.py), which
+    # says whether a campaign's requirements are the defaults, holds the same numbers
+    assert dict(PAPER_REQUIREMENTS) == report_content.PAPER_REQUIREMENTS
 
 
 def test_a_dashboard_url_in_the_status_is_passed_on():
