@@ -18,6 +18,7 @@ from tofpose.study.summary import summarise
 
 N = 20
 A4_LANDSCAPE_PT = (841.68, 595.44)  # 297 x 210 mm
+LIGATURES = {"ff", "fi", "fl", "ffi", "ffl"}
 
 
 def _rows(cells: int) -> list[dict]:
@@ -96,3 +97,31 @@ def test_every_failing_cell_names_its_failure(tmp_path):
         < page.index("Statistics per cell")
     )
     assert page.count("class='fail'") == 2 and page.count("class='pass'") == 2
+
+
+def _word_heights(pdf: Path, page: int) -> list[tuple[float, float, str]]:
+    """(top, height, word) of every word on ``page`` (pdftotext -bbox, pt)."""
+    out = subprocess.run(
+        ["pdftotext", "-bbox", "-f", str(page), "-l", str(page), str(pdf), "-"],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
+    words = re.findall(r'yMin="([\d.]+)" xMax="[\d.]+" yMax="([\d.]+)">([^<]*)</word>', out)
+    return [(float(a), float(b) - float(a), w) for a, b, w in words]
+
+
+def test_no_text_but_the_footer_is_smaller_than_9_pt(tmp_path):
+    pdf, _ = _pdf(tmp_path, [1.0 + 0.5 * k for k in range(30)])
+    n_table_pages = sum(1 for _ in _page_sizes(pdf)) - 5  # the last are plots
+    for page in range(1, n_table_pages + 1):
+        words = _word_heights(pdf, page)
+        footer_top = A4_LANDSCAPE_PT[1] - 0.5 * 72  # the footer's line, 8 pt
+        footer = [h for top, h, _ in words if top > footer_top]
+        # a ligature glyph ("off" is drawn o + ff) has a box of its own, shorter than
+        # its line's: not a word
+        body = [h for top, h, w in words if top <= footer_top and w not in LIGATURES]
+        assert footer and body
+        pt_per_height = 8.0 / max(footer)  # the word boxes' height per point of font size
+        smallest = min(body) * pt_per_height
+        assert smallest >= 9.0 - 0.05, (page, smallest)
