@@ -13,6 +13,7 @@ from backend.api.schemas.camera import CameraSettingsUpdate
 from backend.api.schemas.common import StrictBody
 from backend.api.schemas.motion import AxisBody, ProfileRequest
 from backend.services.campaigns.campaign_states import CampaignCommand, CampaignState
+from tofpose.lab.requirements import PAPER_REQUIREMENTS
 
 MAX_SETPOINTS = 5000
 MAX_FRAMES_PER_POINT = 100_000
@@ -31,15 +32,16 @@ class SetPointModel(AxisBody):
 
 
 class Requirements(StrictBody):
-    """Accuracy requirements per axis (default: the paper's, §6.4): a set-point passes an
+    """Accuracy requirements per axis (default: the paper's, §6.4,
+    ``tofpose.lab.requirements.PAPER_REQUIREMENTS``): a set-point passes an
     axis when the largest |error| after singular-point removal is within it."""
 
-    x_mm: float = Field(default=6.0, gt=0, le=1e5)
-    y_mm: float = Field(default=6.0, gt=0, le=1e5)
-    z_mm: float = Field(default=28.3, gt=0, le=1e5)
-    pitch_deg: float = Field(default=0.15, gt=0, le=180)
-    yaw_deg: float = Field(default=0.15, gt=0, le=180)
-    roll_deg: float = Field(default=0.15, gt=0, le=180)
+    x_mm: float = Field(default=PAPER_REQUIREMENTS["x_mm"], gt=0, le=1e5)
+    y_mm: float = Field(default=PAPER_REQUIREMENTS["y_mm"], gt=0, le=1e5)
+    z_mm: float = Field(default=PAPER_REQUIREMENTS["z_mm"], gt=0, le=1e5)
+    pitch_deg: float = Field(default=PAPER_REQUIREMENTS["pitch_deg"], gt=0, le=180)
+    yaw_deg: float = Field(default=PAPER_REQUIREMENTS["yaw_deg"], gt=0, le=180)
+    roll_deg: float = Field(default=PAPER_REQUIREMENTS["roll_deg"], gt=0, le=180)
 
 
 AxisValues = Annotated[list[AngleDeg], Field(min_length=1, max_length=200)]

@@ -997,8 +997,11 @@ export interface paths {
         put?: never;
         /**
          * Create Study
-         * @description Queue a study. 422 names the field when the spec cannot run (a range outside
-         *     0.3-20 m, an unknown catalog, a value listed twice, more cells or frames than the
+         * @description Queue a study. ``requirements`` (optional, each field optional: the campaign's
+         *     defaults, 95 % of a cell's frames) is what each cell's verdict in the report is
+         *     judged against. 422 names the field when the spec cannot run (a range outside
+         *     0.3-20 m, an unknown catalog, a value listed twice, a requirement <= 0, more cells
+         *     or frames than the
          *     server takes: TOFPOSE_STUDY_MAX_CELLS, TOFPOSE_STUDY_MAX_FRAMES); 409 while
          *     TOFPOSE_STUDIES_MAX_ACTIVE studies are queued or running. Nothing is stored then.
          */
@@ -2476,7 +2479,8 @@ export interface components {
         };
         /**
          * Requirements
-         * @description Accuracy requirements per axis (default: the paper's, §6.4): a set-point passes an
+         * @description Accuracy requirements per axis (default: the paper's, §6.4,
+         *     ``tofpose.lab.requirements.PAPER_REQUIREMENTS``): a set-point passes an
          *     axis when the largest |error| after singular-point removal is within it.
          */
         Requirements: {
@@ -2661,6 +2665,7 @@ export interface components {
              * @default study
              */
             name: string;
+            requirements?: components["schemas"]["StudyRequirements"];
             /**
              * Seed
              * @default 0
@@ -2714,6 +2719,11 @@ export interface components {
              * @description the Dask cluster it ran on
              */
             cluster?: string | null;
+            /**
+             * Dashboard Url
+             * @description the Dask dashboard of the cluster running it, while it runs
+             */
+            dashboard_url?: string | null;
             /** Error */
             error?: string | null;
             /**
@@ -2743,6 +2753,50 @@ export interface components {
              * @enum {string}
              */
             status: "created" | "queued" | "running" | "complete" | "incomplete" | "failed";
+        };
+        /**
+         * StudyRequirements
+         * @description The accuracy a cell is judged against (``tofpose.study.spec``): per axis the
+         *     campaign's requirement (same fields, same defaults), and the share of a cell's frames
+         *     that must have a pose within it.
+         */
+        StudyRequirements: {
+            /**
+             * Percentile
+             * @description share of a cell's frames (%) that must be within each requirement
+             * @default 95
+             */
+            percentile: number;
+            /**
+             * Pitch Deg
+             * @default 0.15
+             */
+            pitch_deg: number;
+            /**
+             * Roll Deg
+             * @default 0.15
+             */
+            roll_deg: number;
+            /**
+             * X Mm
+             * @default 6
+             */
+            x_mm: number;
+            /**
+             * Y Mm
+             * @default 6
+             */
+            y_mm: number;
+            /**
+             * Yaw Deg
+             * @default 0.15
+             */
+            yaw_deg: number;
+            /**
+             * Z Mm
+             * @default 28.3
+             */
+            z_mm: number;
         };
         /** TransformPublic */
         TransformPublic: {
