@@ -55,9 +55,8 @@ import base64
 import contextlib
 import json
 import logging
-from collections import deque
-
 import time
+from collections import deque
 from urllib.parse import urlsplit
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
@@ -116,9 +115,7 @@ def live_stats(state: AppState) -> LiveStatsPublic:
         capture_to_sent=_summary(snap.capture_to_sent),
         dropped_in_window=_dropped(snap.dropped_in_window),
         dropped_total=_dropped(snap.dropped_total),
-        clock=ClockAnchorPublic(
-            monotonic_ns=snap.anchor.monotonic_ns, wall_ns=snap.anchor.wall_ns
-        ),
+        clock=ClockAnchorPublic(monotonic_ns=snap.anchor.monotonic_ns, wall_ns=snap.anchor.wall_ns),
         clients=[
             LiveClientPublic(address=sub.label, offered=sub.offered, dropped=sub.dropped)
             for sub in state.hub.subscriptions()

@@ -3,8 +3,8 @@
 Each subscriber has a small bounded buffer; when it is full the *oldest* item is dropped
 and counted (``dropped``; a subscription made with ``on_drop`` also reports each drop
 there: the live WebSocket clients' drops go to the latency statistics,
-``backend.services.live.latency``). The publisher (the acquisition thread) only appends to deques and, for
-asyncio subscribers, schedules a wake-up on their event loop.
+``backend.services.live.latency``). The publisher (the acquisition thread) only appends
+to deques and, for asyncio subscribers, schedules a wake-up on their event loop.
 """
 
 from __future__ import annotations
