@@ -143,6 +143,7 @@ def make_recording(path: Path) -> None:
         ],
         check=True,
         stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
     )
 
 
