@@ -52,9 +52,7 @@ def test_stamps_are_written_and_read_back(service):
         # the anchor puts the first capture (taken just before the recording) at UTC now
         first_wall = int(st.wall_ns(st.capture_ns[:1])[0])
         assert abs(first_wall - wall_before) < 5e9
-        np.testing.assert_array_equal(
-            np.diff(st.wall_ns(st.capture_ns)), np.full(11, 50_000_000)
-        )
+        np.testing.assert_array_equal(np.diff(st.wall_ns(st.capture_ns)), np.full(11, 50_000_000))
 
 
 def test_a_recording_without_stamps_reads_without_them(tmp_path):
