@@ -210,11 +210,20 @@ class LiveStatistics:
             self._client_drops.append((now_ns or time.monotonic_ns(), n))
             self.clients_dropped_total += n
 
+    def _forget_before(self, start_ns: int) -> None:
+        """Drop what left the window (each deque is in time order; the lock is held)."""
+        while self._frames and self._frames[0].stamps.arrival_ns < start_ns:
+            self._frames.popleft()
+        for timed in (self._sends, self._client_drops):
+            while timed and timed[0][0] < start_ns:
+                timed.popleft()
+
     def snapshot(self, now_ns: int | None = None) -> LatencySnapshot:
         """The statistics over the window ending at ``now_ns`` (monotonic ns; now)."""
         now_ns = time.monotonic_ns() if now_ns is None else now_ns
         start_ns = now_ns - int(self.window_s * 1e9)
         with self._lock:
+            self._forget_before(start_ns)
             frames = [r for r in self._frames if r.stamps.arrival_ns >= start_ns]
             sent_ms = np.array([ms for t, ms in self._sends if t >= start_ns], float)
             client_drops = sum(n for t, n in self._client_drops if t >= start_ns)
