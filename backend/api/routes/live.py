@@ -2,7 +2,9 @@
 
 Protocol (JSON text messages):
 
-- server -> client on connect: ``{"type": "hello", "camera": {...}, "catalog": name}``
+- server -> client on connect: ``{"type": "hello", "camera": {...}, "catalog": name,
+  "clock": {"monotonic_ns", "wall_ns"}}`` (the stamps' clock: a stamp's UTC ns is
+  ``wall_ns + (stamp - monotonic_ns)``)
 - server -> client per frame: ``{"type": "pose", "dropped": n, "sent_ns": t,
   "capture_to_sent_ms": ms, "stamps": FrameStampsPublic, "latency": FrameLatencyPublic,
   "data": PosePublic}``; ``dropped`` counts frames this client missed because it read
@@ -403,6 +405,11 @@ async def _stream(ws: WebSocket, state: AppState) -> None:
             {
                 "type": "hello",
                 "catalog": state.acquisition.catalog_name,
+                # the stamps' clock against UTC: wall_ns + (stamp - monotonic_ns)
+                "clock": {
+                    "monotonic_ns": state.acquisition.latency.anchor.monotonic_ns,
+                    "wall_ns": state.acquisition.latency.anchor.wall_ns,
+                },
                 "camera": {
                     "driver": state.devices.camera.name,
                     "width_px": m.width,

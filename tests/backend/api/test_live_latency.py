@@ -31,7 +31,7 @@ def _poses(ws, n: int) -> list[dict]:
 def test_stamps_are_positive_and_ordered_and_summarised(client):
     t_before = time.monotonic_ns()
     with client.websocket_connect("/ws/live") as ws:
-        ws.receive_json()
+        hello = ws.receive_json()
         msgs = _poses(ws, 12)
         stats = client.get("/api/live/stats").json()
     t_after = time.monotonic_ns()
@@ -63,6 +63,7 @@ def test_stamps_are_positive_and_ordered_and_summarised(client):
     assert stats["dropped_total"]["camera"] == 0
     assert stats["clients"] and stats["clients"][0]["offered"] >= 12
     clock = stats["clock"]
+    assert hello["clock"] == clock  # one anchor for the stream and the API
     # the anchor turns a stamp into UTC: the last frame's capture within a minute of now
     capture_wall_ns = clock["wall_ns"] + (msgs[-1]["stamps"]["capture_ns"] - clock["monotonic_ns"])
     assert abs(capture_wall_ns - time.time_ns()) < 60e9
