@@ -56,6 +56,15 @@ class CameraFrame:
         ``EncoderReferencedCamera``), or a recording's ``/lab_truth``; else None. It
         differs from the exact pose by the bench's own mount and placement errors.
     meta : driver-specific extras (integration time, encoder readings, recording index).
+    capture_ns : when the device captured the frame, on the host's monotonic clock
+        (``time.monotonic_ns``): the device's own clock mapped to the host's (the
+        simulator's render time, the TOFcam-660's acquisition command, a replay's
+        recorded stamp mapped to playback; docs/server.md, "Latency and dropped
+        frames"); None when the driver cannot say.
+    sequence : the device's own frame counter, unwrapped (never decreasing within a
+        stream), whose gaps are frames the camera lost; None when it has none.
+    slots_skipped : frames the camera's rate offered since the previous ``read`` that
+        the reader was too busy to take (``FramePacer.wait``): the pipeline's drops.
     """
 
     gray: np.ndarray
@@ -65,6 +74,9 @@ class CameraFrame:
     T_camera_target_exact: RigidTransform | None = None
     T_camera_target_lab: RigidTransform | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    capture_ns: int | None = None
+    sequence: int | None = None
+    slots_skipped: int = 0
 
 
 @runtime_checkable

@@ -526,6 +526,30 @@ export interface paths {
         patch?: never;
         trace?: never;
     };
+    "/api/live/stats": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * Get Live Stats
+         * @description Latency of the live stream over a sliding window (median and 95th percentile of
+         *     capture -> arrival, capture -> pose ready, capture -> WebSocket sent; stamps on the
+         *     host's monotonic clock, ``clock`` anchors them to UTC) and the frames dropped by the
+         *     camera, the pipeline and the live clients (docs/server.md, "Latency and dropped
+         *     frames").
+         */
+        get: operations["getLiveStats"];
+        put?: never;
+        post?: never;
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
     "/api/motion": {
         parameters: {
             query?: never;
@@ -1511,6 +1535,16 @@ export interface components {
             /** Reflectors */
             reflectors: components["schemas"]["ReflectorModel"][];
         };
+        /**
+         * ClockAnchorPublic
+         * @description One moment on both clocks: a stamp's UTC ns is wall_ns + (stamp - monotonic_ns).
+         */
+        ClockAnchorPublic: {
+            /** Monotonic Ns */
+            monotonic_ns: number;
+            /** Wall Ns */
+            wall_ns: number;
+        };
         /** DeviceStatePublic */
         DeviceStatePublic: {
             /**
@@ -1553,6 +1587,27 @@ export interface components {
             camera: components["schemas"]["CameraDevicePublic"];
             motion: components["schemas"]["MotionPublic"];
             pipeline: components["schemas"]["PipelineStatePublic"];
+        };
+        /**
+         * DroppedFramesPublic
+         * @description Frames lost, by where.
+         */
+        DroppedFramesPublic: {
+            /**
+             * Camera
+             * @description gaps in the camera's own frame counter (None: it has none)
+             */
+            camera: number | null;
+            /**
+             * Clients
+             * @description frames live WebSocket clients' mailboxes dropped (slow readers)
+             */
+            clients: number;
+            /**
+             * Pipeline
+             * @description frames the camera's rate offered while the pipeline was busy
+             */
+            pipeline: number;
         };
         /**
          * ErrorPublic
@@ -1721,6 +1776,62 @@ export interface components {
              * @enum {string}
              */
             scope: "read" | "operate" | "admin";
+        };
+        /**
+         * LatencySummaryPublic
+         * @description Median and 95th percentile of one latency over the window (None: no frame).
+         */
+        LatencySummaryPublic: {
+            /** Median Ms */
+            median_ms: number | null;
+            /**
+             * N
+             * @description latencies in the window
+             */
+            n: number;
+            /** P95 Ms */
+            p95_ms: number | null;
+        };
+        /**
+         * LiveClientPublic
+         * @description One live WebSocket client: frames offered to it and dropped from its mailbox.
+         */
+        LiveClientPublic: {
+            /** Address */
+            address: string;
+            /** Dropped */
+            dropped: number;
+            /** Offered */
+            offered: number;
+        };
+        /**
+         * LiveStatsPublic
+         * @description Latency and frame accounting of the live stream, over a sliding window.
+         *
+         *     Stamps are host monotonic ns: capture (``capture_source`` says what it is on this
+         *     camera), arrival at the server, pose ready, WebSocket sent (per client).
+         */
+        LiveStatsPublic: {
+            /** Capture Source */
+            capture_source: string;
+            capture_to_arrival: components["schemas"]["LatencySummaryPublic"];
+            capture_to_pose: components["schemas"]["LatencySummaryPublic"];
+            capture_to_sent: components["schemas"]["LatencySummaryPublic"];
+            /** Clients */
+            clients: components["schemas"]["LiveClientPublic"][];
+            clock: components["schemas"]["ClockAnchorPublic"];
+            dropped_in_window: components["schemas"]["DroppedFramesPublic"];
+            /** @description since the server started */
+            dropped_total: components["schemas"]["DroppedFramesPublic"];
+            /** Frames In Window */
+            frames_in_window: number;
+            /**
+             * Frames Total
+             * @description frames through the pipeline since the start
+             */
+            frames_total: number;
+            /** Window S */
+            window_s: number;
         };
         /** MatchedPublic */
         MatchedPublic: {
@@ -4833,6 +4944,47 @@ export interface operations {
                 };
                 content: {
                     "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    getLiveStats: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["LiveStatsPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
                 };
             };
         };
