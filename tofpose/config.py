@@ -214,6 +214,7 @@ class FitSettingsFields:
     outlier_chi2_per_dof: float = 4.0
     max_view_angle_deg: float = 80.0
     dark_check_max_matches: int = 3
+    photometric_check: bool = True
     centroid_sigma_floor_px: float = 0.03
     range_sigma_floor_mm: float = 1.0
     los_tolerance: float = 0.002
@@ -333,6 +334,13 @@ class PipelineConfig(FitSettingsFields):
         from four on, a wrong assignment either fails the rigid residual check or (a
         mirror image of the nearly planar pattern) makes the target face away, so a dark
         predicted marker is an occluded one.
+    photometric_check : refuse a pose whose matched reflectors differ by more than
+        ``stages.pose.photometry.MAX_RADIANCE_RATIO`` (8x) in return per disc area
+        (aperture photometry at their centroids, saturated and unmeasurably faint ones
+        left out): one target's reflectors are one material under one incidence, and
+        correct matches differ by at most 5x over every physics the project renders; a
+        match that gives an 80 mm disc a speck of noise and a 35 mm disc the frame's
+        brightest blob does not.
     centroid_sigma_floor_px, range_sigma_floor_mm : floors of the per-reflector
         measurement sigmas (``tofpose.stages.extraction.uncertainty``) used as weights and in the
         covariance.

@@ -36,6 +36,7 @@ from tofpose.stages.pose.constants import (
     REFINE_ML,
     REFINE_NONE,
 )
+from tofpose.stages.pose.photometry import MAX_RADIANCE_RATIO, aperture_returns, radiance_ratio
 from tofpose.stages.pose.pose import STEP_SIGMA2, MLResult
 from tofpose.stages.pose.records import (
     NO_OFFSET,
@@ -380,6 +381,8 @@ class PoseSolver:
         ar = self.arithmetic
         if self.config.verify_pose:
             problem = self.verify(T, active, obs.i_idx, dark_check_all=dark_check_all)
+            if not problem and self.config.photometric_check and active is not None:
+                problem = self.photometric_problem(T, active, obs)
             if problem:
                 return Rejected(f"pose rejected: {problem}", implausible=True)
         dof = 3 * len(obs.i_idx) - 6
@@ -456,6 +459,26 @@ class PoseSolver:
         if c is not None and c.covers(float(range_mm.min())) and c.covers(float(range_mm.max())):
             return cfg.calibrated_range_bias_sigma_mm
         return cfg.range_bias_sigma_mm
+
+    def photometric_problem(
+        self, T: RigidTransform, active: ThresholdedFrame, obs: MatchedObservations
+    ) -> str:
+        """Why the matched reflectors' returns per disc area cannot be one target's
+        (``photometry``), or '' when they can: ``active``'s frame read by aperture
+        photometry at ``obs``' centroids, each disc's image radius predicted at the pose
+        ``T``."""
+        centres = self._xyz[obs.i_idx] @ T.R.T + T.t_mm
+        radius_px = 0.5 * self.camera.fx * self._d[obs.i_idx] / np.maximum(centres[:, 2], 1e-6)
+        returns = aperture_returns(active.gray, obs.uv_px, radius_px, self.camera.full_scale_counts)
+        ratio, hi, lo = radiance_ratio(returns)
+        if not ratio > MAX_RADIANCE_RATIO:
+            return ""
+        ids = self._ids[obs.i_idx]
+        return (
+            f"the matched reflectors' returns differ {ratio:.1f}x per disc area (reflector "
+            f"{int(ids[hi])} against {int(ids[lo])}; one target's differ by less than "
+            f"{MAX_RADIANCE_RATIO:g}x): a match of other light to the catalog"
+        )
 
     # ------------------------------------------------------------------------------------
     def view_cosine(self, R: np.ndarray, t: np.ndarray) -> float:
