@@ -160,7 +160,8 @@ def metadata_text(report: dict) -> str:
     given say so)."""
     c = report["campaign"]
     parts = [f"{label} {c.get(key) or 'not given'}" for key, label in METADATA_LABELS]
-    text = "; ".join(parts).capitalize()
+    text = "; ".join(parts)
+    text = text[:1].upper() + text[1:]
     notes = (c.get("notes") or "").strip()
     return f"{text}. Notes: {notes}" if notes else f"{text}. No notes."
 

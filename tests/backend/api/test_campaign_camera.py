@@ -229,4 +229,7 @@ def test_the_report_groups_by_integration_time_and_prints_the_metadata(fast_clie
             ["pdftotext", str(pdf), "-"], check=True, capture_output=True, text=True
         ).stdout
     )
-    assert "integration time (us)" in html
+    for g in groups:  # the table's rows: the setting, then the numbers of the JSON
+        t = g["setting"]["integration_time_us"]
+        row = f"<td>integration time {t:g} us</td><td>1</td><td>4 of 4 (100 %)</td>"
+        assert row + f"<td>{g['range_error_mean_mm']:.3g}</td>" in html
