@@ -152,7 +152,11 @@ def create_campaign(body: CampaignCreate, state: StateDep, session: SessionDep) 
         profiles=[spec] * len(setpoints) if spec is not None else None,
         cameras=cameras,
         camera_sweep=body.camera_sweep.model_dump(exclude_none=True) if body.camera_sweep else None,
-        metadata={"operator": body.operator, "target_name": body.target_name, **identity},
+        metadata={
+            "operator": body.operator or "",
+            "target_name": body.target_name or "",
+            **identity,
+        },
     )
     return _public(state, campaign, with_setpoints=True)
 

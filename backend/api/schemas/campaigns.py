@@ -195,9 +195,11 @@ class CampaignCreate(StrictBody):
         description="measure every set-point at each of these camera settings "
         "(not with a per-set-point 'camera')",
     )
-    operator: str = Field(default="", max_length=200, pattern=r"^[^\x00-\x1f]*$")
-    target_name: str = Field(
-        default="", max_length=200, pattern=r"^[^\x00-\x1f]*$", description="the target measured"
+    operator: str | None = Field(
+        default=None, max_length=200, pattern=r"^[^\x00-\x1f]*$", description="who runs it"
+    )
+    target_name: str | None = Field(
+        default=None, max_length=200, pattern=r"^[^\x00-\x1f]*$", description="the target measured"
     )
     camera_model: str | None = Field(
         default=None, max_length=200, description="when the camera's driver does not report it"

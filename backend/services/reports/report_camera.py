@@ -149,8 +149,8 @@ def camera_table(report: dict) -> Table:
         if g["passed"] is not None:
             status[(i, 7)] = g["passed"]
     caption = (
-        "By camera setting: range error = measured minus reference distance from the camera "
-        "to the target, every frame with a pose (no outlier removal)"
+        "Range error = measured minus reference distance from the camera to the target, "
+        "over every frame with a pose (no outlier removal)"
     )
     return Table(header, rows, status, caption)
 
@@ -167,57 +167,38 @@ def metadata_text(report: dict) -> str:
 
 
 def draw_range_error_vs_setting(report: dict) -> Callable[[plt.Figure, Rect], None]:
-    """Range error mean +/- 1 sigma against the integration time (one series per
-    modulation frequency), success rate on the right axis."""
+    """Range error mean +/- 1 sigma (left) and frames with a pose (right) against the
+    integration time, one series per modulation frequency."""
 
     def draw(fig: plt.Figure, rect: Rect) -> None:
-        groups = report["camera_settings"]
-        (ax,) = axes_grid(fig, rect, 1, 1, "Range error vs integration time")[0]
-        right = ax.twinx()
+        groups = [g for g in report["camera_settings"] if "integration_time_us" in g["setting"]]
+        err_ax, ok_ax = axes_grid(fig, rect, 1, 2, "Range error and success vs integration time")[0]
         by_mod: dict[float | None, list[dict]] = {}
         for g in groups:
             by_mod.setdefault(g["setting"].get("modulation_frequency_mhz"), []).append(g)
         for mod, gs in by_mod.items():
-            gs = [g for g in gs if "integration_time_us" in g["setting"]]
             t = np.array([g["setting"]["integration_time_us"] for g in gs], float)
-            mean = np.array(
-                [
-                    np.nan if g["range_error_mean_mm"] is None else g["range_error_mean_mm"]
-                    for g in gs
-                ],
-                float,
+            mean, std = (
+                np.array([np.nan if g[k] is None else g[k] for g in gs], float)
+                for k in ("range_error_mean_mm", "range_error_std_mm")
             )
-            std = np.array(
-                [
-                    np.nan if g["range_error_std_mm"] is None else g["range_error_std_mm"]
-                    for g in gs
-                ],
-                float,
-            )
-            label = "range error" + (f", {mod:g} MHz" if mod is not None else "")
-            line = ax.errorbar(
+            label = f"{mod:g} MHz" if mod is not None else None
+            err_ax.errorbar(
                 t, mean, yerr=np.nan_to_num(std), fmt="o-", ms=4, capsize=3, label=label
             )
-            success = 100.0 * np.array([g["success_rate"] for g in gs])
-            right.plot(
-                t,
-                success,
-                "s--",
-                ms=3,
-                color=line[0].get_color(),
-                alpha=0.5,
-                label=f"success{label[11:]}",
-            )
-        ax.axhline(0.0, color="k", lw=0.6)
-        ax.set_xscale("log")
-        ax.set_xlabel("integration time (us, log scale)", fontsize=8)
-        ax.set_ylabel("range error, mean +/- 1 sigma (mm)", fontsize=8)
-        right.set_ylabel("frames with a pose (%)", fontsize=8)
-        right.set_ylim(0.0, 105.0)
-        right.tick_params(labelsize=7.5)
-        lines = ax.get_legend_handles_labels()
-        more = right.get_legend_handles_labels()
-        ax.legend(lines[0] + more[0], lines[1] + more[1], fontsize=7, loc="best")
+            ok_ax.plot(t, [100.0 * g["success_rate"] for g in gs], "s-", ms=4, label=label)
+        ticks = sorted({g["setting"]["integration_time_us"] for g in groups})
+        for ax in (err_ax, ok_ax):
+            ax.set_xscale("log")
+            ax.set_xticks(ticks, [f"{v:g}" for v in ticks])
+            ax.minorticks_off()
+            ax.set_xlabel("integration time (us, log scale)", fontsize=8)
+            if len(by_mod) > 1:
+                ax.legend(fontsize=7, title="modulation", title_fontsize=7)
+        err_ax.axhline(0.0, color="k", lw=0.6)
+        err_ax.set_ylabel("range error, mean +/- 1 sigma (mm)", fontsize=8)
+        ok_ax.set_ylabel("frames with a pose (%)", fontsize=8)
+        ok_ax.set_ylim(0.0, 105.0)
 
     return draw
 

@@ -49,7 +49,7 @@ export function Campaigns() {
           <tbody>
             {list.map((c) => (
               <tr key={c.id} data-testid={`campaign-${c.id}`}>
-                <td>{c.id}</td><td>{c.name}</td>
+                <td>{c.id}</td><td>{c.name}{c.operator ? <span class="small" data-testid={`operator-${c.id}`}> ({c.operator})</span> : null}</td>
                 <td data-testid={`status-${c.id}`}>{c.status}{c.status_reason ? `: ${c.status_reason}` : ""}</td>
                 <td>
                   <progress max={c.n_setpoints} value={c.n_done} /> {c.n_done} / {c.n_setpoints}
