@@ -96,7 +96,8 @@ function MetadataLine({ id, c }: { id: number; c: CampaignMeta }) {
 
 function CameraSummary({ id, groups }: { id: number; groups: CameraGroup[] }) {
   return (
-    <table class="small" data-testid={`camera-settings-${id}`}>
+    <table class="small" style={{ marginTop: "0.8em" }} data-testid={`camera-settings-${id}`}>
+      <caption style={{ textAlign: "left", fontWeight: "bold" }}>by camera setting</caption>
       <thead><tr><th>camera setting</th><th>frames with a pose</th><th>range error mean (mm)</th>
         <th>range error 1-sigma (mm)</th><th /></tr></thead>
       <tbody>

@@ -73,7 +73,6 @@ export function NewCampaign({ calibrationRequest = 0 }: { calibrationRequest?: n
         <label title="every measured frame pair in a recording (HDF5, also downloadable as MCAP for Foxglove / Rerun)">
           <input type="checkbox" data-testid="new-record-raw" checked={recordRaw}
             onChange={(e) => change({ recordRaw: (e.target as HTMLInputElement).checked })} /> keep raw frames</label>
-        <button data-testid="new-create" onClick={create} disabled={busy}>create draft</button>
       </div>
       <div class="form" data-testid="new-metadata">
         {METADATA_FIELDS.map(({ key, label, title }) => (
@@ -81,6 +80,7 @@ export function NewCampaign({ calibrationRequest = 0 }: { calibrationRequest?: n
             placeholder={key.startsWith("camera_") ? "from the device" : ""}
             onInput={(e) => change({ metadata: { ...metadata, [key]: (e.target as HTMLInputElement).value } })} /></label>
         ))}
+        <button data-testid="new-create" onClick={create} disabled={busy}>create draft</button>
       </div>
       {formError && <p class="field-error" role="alert" data-testid="new-error">{formError}</p>}
       {draft && (
