@@ -248,6 +248,9 @@ class ProgressPublic(BaseModel):
     frames_per_point: int
     elapsed_s: float
     eta_s: float | None
+    camera: dict[str, float] | None = Field(
+        default=None, description="camera settings of the set-point in progress (null: as it is)"
+    )
 
 
 class SetPointPublic(BaseModel):

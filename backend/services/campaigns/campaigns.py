@@ -77,6 +77,7 @@ class Progress:
     frames_per_point: int
     started_monotonic: float
     done_this_run: int = 0
+    camera: dict | None = None  # the camera settings of the set-point in progress
 
     def as_dict(self) -> dict:
         elapsed = time.monotonic() - self.started_monotonic
@@ -93,6 +94,7 @@ class Progress:
             "frames_per_point": self.frames_per_point,
             "elapsed_s": elapsed,
             "eta_s": eta,
+            "camera": self.camera,
         }
 
 
@@ -390,7 +392,7 @@ class CampaignService:
             lab_geometry=self.lab_geometry,
         )
         for sp in pending:
-            self._bump(setpoint_index=sp.index, frames_collected=0)
+            self._bump(setpoint_index=sp.index, frames_collected=0, camera=sp.camera)
             start_n = recorder.n if recorder is not None else 0
             self._setpoint_camera(camera, sp.index, sp.camera)
             expected_us = camera.expected_integration_us

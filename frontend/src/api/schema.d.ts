@@ -2204,6 +2204,13 @@ export interface components {
         };
         /** ProgressPublic */
         ProgressPublic: {
+            /**
+             * Camera
+             * @description camera settings of the set-point in progress (null: as it is)
+             */
+            camera?: {
+                [key: string]: number;
+            } | null;
             /** Campaign Id */
             campaign_id: number;
             /** Elapsed S */

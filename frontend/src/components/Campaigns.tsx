@@ -2,6 +2,7 @@
 // for a finished one its statistics and pass/fail (CampaignResult).
 import { useState } from "preact/hooks";
 import { api, unwrap, type Campaign } from "../api/client";
+import { cameraText } from "../campaignForm";
 import { commandsIn, type CampaignCommand } from "../campaignStates";
 import { reported, useReportError } from "../errors";
 import { fmtDuration } from "../format";
@@ -53,7 +54,7 @@ export function Campaigns() {
                 <td data-testid={`status-${c.id}`}>{c.status}{c.status_reason ? `: ${c.status_reason}` : ""}</td>
                 <td>
                   <progress max={c.n_setpoints} value={c.n_done} /> {c.n_done} / {c.n_setpoints}
-                  {c.progress && c.status === "running" ? ` (set-point ${c.progress.setpoint_index}: ${c.progress.frames_collected}/${c.progress.frames_per_point} frames)` : ""}
+                  {c.progress && c.status === "running" ? ` (set-point ${c.progress.setpoint_index}: ${c.progress.frames_collected}/${c.progress.frames_per_point} frames${c.progress.camera ? `, ${cameraText(c.progress.camera)}` : ""})` : ""}
                 </td>
                 <td>{fmtDuration(c.status === "running" ? c.progress?.eta_s : c.estimated_duration_s)}</td>
                 <td>{commandsIn(states.data, c.status).map((a) => (

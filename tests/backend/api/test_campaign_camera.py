@@ -180,6 +180,9 @@ def test_stop_restores_the_cameras_settings(fast_client):
         60,
         "frames at the set-point",
     )
+    assert c.get(f"/api/campaigns/{cid}").json()["progress"]["camera"] == {
+        "integration_time_us": 300.0
+    }
     during = c.get("/api/camera/settings").json()
     assert (during["integration_time_us"], during["auto_exposure"]) == (300.0, False)
     assert c.post("/api/motion/stop", headers=AUTH).status_code == 200
