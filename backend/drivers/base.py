@@ -41,6 +41,24 @@ class CameraSettings:
     auto_exposure: bool = True
 
 
+@dataclass(frozen=True)
+class CameraLimits:
+    """What a camera's settings may be set to (a campaign's camera settings are checked
+    against them before it is stored).
+
+    integration_time_us : (min, max) exposure, us.
+    modulation_frequencies_mhz : the modulation frequencies the camera supports, MHz;
+        None when any frequency in ``modulation_range_mhz`` is accepted.
+    modulation_range_mhz : (min, max) MHz, for a camera without a fixed list.
+    settable : False for a source whose settings cannot change (a replayed recording).
+    """
+
+    integration_time_us: tuple[float, float]
+    modulation_frequencies_mhz: tuple[float, ...] | None = None
+    modulation_range_mhz: tuple[float, float] = (1.0, 24.0)
+    settable: bool = True
+
+
 @dataclass
 class CameraFrame:
     """One frame pair.
@@ -94,6 +112,8 @@ class CameraDriver(Protocol):
     def apply_settings(self, settings: CameraSettings) -> CameraSettings:
         """Apply and return what the device actually uses (it may clamp)."""
         ...
+
+    # Optional: ``limits() -> CameraLimits`` (what the settings may be set to).
 
     def close(self) -> None: ...
 

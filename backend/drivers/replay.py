@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from backend.drivers.base import CameraError, CameraFrame, CameraSettings
+from backend.drivers.base import CameraError, CameraFrame, CameraLimits, CameraSettings
 from backend.drivers.pacing import FramePacer
 from tofpose.core.geometry import RigidTransform
 from tofpose.io.recording import RecordingError, open_recording
@@ -137,6 +137,10 @@ class ReplayCamera:
             "address": str(self.path),
             "link": "up",
         }
+
+    def limits(self) -> CameraLimits:
+        """A recording's exposure and modulation are what they were: not settable."""
+        return CameraLimits(integration_time_us=(0.0, 0.0), settable=False)
 
     def apply_settings(self, settings: CameraSettings) -> CameraSettings:
         """Only the frame rate can change; the rest is fixed by the recording."""

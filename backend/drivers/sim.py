@@ -17,6 +17,7 @@ import numpy as np
 from backend.drivers.base import (
     AxisLimits,
     CameraFrame,
+    CameraLimits,
     CameraSettings,
     MotionStatus,
     ProfileStatus,
@@ -179,6 +180,10 @@ class SimCamera:
 
     def get_settings(self) -> CameraSettings:
         return self._settings
+
+    def limits(self) -> CameraLimits:
+        """The simulated sensor's integration limits; any modulation frequency of 1-24 MHz."""
+        return CameraLimits(integration_time_us=self.world.bench.sensor.integration_limits_us)
 
     def describe(self) -> dict[str, str]:
         return {"model": "tofpose simulated ToF camera", "firmware": __version__, "link": "up"}

@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from backend.drivers.base import CameraError, CameraFrame, CameraSettings
+from backend.drivers.base import CameraError, CameraFrame, CameraLimits, CameraSettings
 from backend.drivers.pacing import FramePacer
 from tofpose.core.camera import CameraModel
 
@@ -164,6 +164,7 @@ class TofCam660Driver:
         self._sequence = MeasurementIdUnwrap()
         self._integration_us = self._settings.integration_time_us
         self.firmware = ""
+        self.serial = ""
         self.link_changes = 0
         if connect_now:
             self._connect()  # a camera that is not there is an error here
@@ -188,6 +189,8 @@ class TofCam660Driver:
             self._sequence = MeasurementIdUnwrap()  # counted afresh on a new link
             self.firmware = cam._version
             self._cam = cam
+            chip = self._transceive(self._vendor[1].create("readChipInformation")).data
+            self.serial = f"wafer {chip['waferid']} chip {chip['chipid']}"
             self._push_settings(self._settings)
         except Exception as exc:
             self._cam = None
@@ -265,6 +268,12 @@ class TofCam660Driver:
 
     def get_settings(self) -> CameraSettings:
         return replace(self._settings, integration_time_us=self._integration_us)
+
+    def limits(self) -> CameraLimits:
+        """The EPC660's integration range and its six modulation frequencies."""
+        return CameraLimits(
+            integration_time_us=INTEGRATION_LIMITS_US, modulation_frequencies_mhz=MODULATION_MHZ
+        )
 
     def apply_settings(self, settings: CameraSettings) -> CameraSettings:
         mhz = min(MODULATION_MHZ, key=lambda f: abs(f - settings.modulation_frequency_mhz))
@@ -350,6 +359,7 @@ class TofCam660Driver:
         return {
             "model": "ESPROS TOFcam-660",
             "firmware": self.firmware,
+            "serial": self.serial,
             "link": "up" if self._cam is not None else "down",
             "address": self.address,
         }

@@ -409,9 +409,12 @@ def setpoint_table(report: dict) -> Table:
     rows, status = [], {}
     for i, sp in enumerate(report["setpoints"]):
         z_mm = _num(sp["reference"]["z_mm"])
+        commanded = commanded_text(sp.get("commanded") or {})
+        if sp.get("camera"):
+            commanded += f"; {setting_text(sp['camera'])}"
         row = [
             str(sp["setpoint_index"]),
-            commanded_text(sp.get("commanded") or {}),
+            commanded,
             fmt(z_mm / 1000.0),
             f"{sp['n_ok']} of {sp['n_frames']}",
         ]
@@ -425,6 +428,23 @@ def setpoint_table(report: dict) -> Table:
             status[(i, len(row) - 1)] = sp["passed"]
         rows.append(row)
     return Table(header, rows, status)
+
+
+SETTING_LABELS = {
+    "integration_time_us": ("integration time", "us"),
+    "modulation_frequency_mhz": ("modulation", "MHz"),
+}
+
+
+def setting_text(setting: dict | None) -> str:
+    """``integration time 200 us, modulation 12 MHz``; ``-`` for none."""
+    if not setting:
+        return "-"
+    return ", ".join(
+        f"{SETTING_LABELS[k][0]} {v:g} {SETTING_LABELS[k][1]}"
+        for k, v in setting.items()
+        if k in SETTING_LABELS
+    )
 
 
 def commanded_text(commanded: dict) -> str:

@@ -92,7 +92,9 @@ export interface paths {
          *
          *     422 names every problem: no set-points, both or neither of ``setpoints`` and
          *     ``generator``, set-points outside the soft limits, too many set-points or frames, an
-         *     unknown catalog. 409 if the name is taken. Nothing is stored on an error.
+         *     unknown catalog, camera settings outside the camera's limits (the field and the allowed
+         *     range named), a camera serial or firmware the connected camera contradicts. 409 if
+         *     the name is taken. Nothing is stored on an error.
          */
         post: operations["createCampaign"];
         delete?: never;
@@ -1359,6 +1361,17 @@ export interface components {
             modulation_frequency_mhz?: number | null;
         };
         /**
+         * CameraSweep
+         * @description Every set-point measured at every combination of these lists (the set-point
+         *     outermost, then integration time).
+         */
+        CameraSweep: {
+            /** Integration Time Us */
+            integration_time_us?: number[] | null;
+            /** Modulation Frequency Mhz */
+            modulation_frequency_mhz?: number[] | null;
+        };
+        /**
          * CampaignCommand
          * @description What a person asks of a campaign (``POST /api/campaigns/{id}/{command}``).
          * @enum {string}
@@ -1370,6 +1383,23 @@ export interface components {
          */
         CampaignCreate: {
             camera?: components["schemas"]["CameraSettingsUpdate"] | null;
+            /**
+             * Camera Firmware
+             * @description when the camera's driver does not report it
+             */
+            camera_firmware?: string | null;
+            /**
+             * Camera Model
+             * @description when the camera's driver does not report it
+             */
+            camera_model?: string | null;
+            /**
+             * Camera Serial
+             * @description when the camera's driver does not report it
+             */
+            camera_serial?: string | null;
+            /** @description measure every set-point at each of these camera settings (not with a per-set-point 'camera') */
+            camera_sweep?: components["schemas"]["CameraSweep"] | null;
             /**
              * Catalog
              * @default paper-target
@@ -1395,6 +1425,11 @@ export interface components {
              */
             notes: string;
             /**
+             * Operator
+             * @description who runs it
+             */
+            operator?: string | null;
+            /**
              * Record Raw
              * @description keep every measured frame pair in an HDF5 recording (GET /api/campaigns/{id}/recording.h5), so the campaign can be re-processed
              * @default false
@@ -1408,6 +1443,11 @@ export interface components {
              * @default 1
              */
             settle_s: number;
+            /**
+             * Target Name
+             * @description the target measured
+             */
+            target_name?: string | null;
         } & ({
             generator?: null;
             setpoints: unknown[];
@@ -1421,6 +1461,25 @@ export interface components {
         CampaignPublic: {
             /** Camera */
             camera: {
+                [key: string]: unknown;
+            } | null;
+            /**
+             * Camera Firmware
+             * @default
+             */
+            camera_firmware: string;
+            /**
+             * Camera Model
+             * @default
+             */
+            camera_model: string;
+            /**
+             * Camera Serial
+             * @default
+             */
+            camera_serial: string;
+            /** Camera Sweep */
+            camera_sweep?: {
                 [key: string]: unknown;
             } | null;
             /** Catalog */
@@ -1452,6 +1511,11 @@ export interface components {
             name: string;
             /** Notes */
             notes: string;
+            /**
+             * Operator
+             * @default
+             */
+            operator: string;
             progress?: components["schemas"]["ProgressPublic"] | null;
             /** Record Raw */
             record_raw: boolean;
@@ -1467,6 +1531,11 @@ export interface components {
             status: components["schemas"]["CampaignState"];
             /** Status Reason */
             status_reason: string;
+            /**
+             * Target Name
+             * @default
+             */
+            target_name: string;
         };
         /**
          * CampaignStart
@@ -1886,6 +1955,11 @@ export interface components {
              */
             in_motion?: boolean | null;
             /**
+             * Integration Time Us
+             * @description the exposure the camera reports for the frame
+             */
+            integration_time_us?: number | null;
+            /**
              * Lab Truth
              * @description encoders + nominal geometry
              */
@@ -2244,6 +2318,13 @@ export interface components {
         };
         /** ProgressPublic */
         ProgressPublic: {
+            /**
+             * Camera
+             * @description camera settings of the set-point in progress (null: as it is)
+             */
+            camera?: {
+                [key: string]: number;
+            } | null;
             /** Campaign Id */
             campaign_id: number;
             /** Elapsed S */
@@ -2664,10 +2745,26 @@ export interface components {
             paused: boolean;
         };
         /**
+         * SetPointCamera
+         * @description Camera settings applied before a set-point's frames (docs/campaigns.md, "Camera
+         *     settings and metadata"); a field left out keeps the camera's. Checked against the
+         *     camera's limits when the campaign is created. An integration time turns the camera's
+         *     auto exposure off for the set-point.
+         */
+        SetPointCamera: {
+            /** Integration Time Us */
+            integration_time_us?: number | null;
+            /** Modulation Frequency Mhz */
+            modulation_frequency_mhz?: number | null;
+        };
+        /**
          * SetPointModel
-         * @description Axis set-points of one campaign point; an axis left out stays where it is.
+         * @description Axis set-points of one campaign point; an axis left out stays where it is;
+         *     ``camera``: the camera settings for its frames.
          */
         SetPointModel: {
+            /** Camera */
+            camera?: components["schemas"]["SetPointCamera"];
             /** Pitch Deg */
             pitch_deg?: number;
             /** Rail Mm */
@@ -2679,6 +2776,13 @@ export interface components {
         };
         /** SetPointPublic */
         SetPointPublic: {
+            /**
+             * Camera
+             * @description camera settings for its frames; null: the camera as it is
+             */
+            camera?: {
+                [key: string]: number;
+            } | null;
             /** Index */
             index: number;
             /** Pitch Deg */
