@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass, field
 
 from backend.services.reports.analysis import AXES, MAD_TO_SIGMA, SINGULAR_K
+from tofpose.lab.requirements import PAPER_REQUIREMENTS as PAPER_REQUIREMENTS_DEFAULTS
 
 AXIS_NAMES = {
     "x_mm": "x",
@@ -26,16 +27,9 @@ AXIS_NAMES = {
 AXIS_UNITS = {a: a.rsplit("_", 1)[1] for a in AXES}
 AXIS_GROUPS = (("Translation", "mm", AXES[:3]), ("Attitude", "deg", AXES[3:]))
 
-# The default of ``requirements`` in POST /api/campaigns (backend/api/schemas/campaigns.py,
-# ``Requirements``): the accuracy goals of the paper.
-PAPER_REQUIREMENTS = {
-    "x_mm": 6.0,
-    "y_mm": 6.0,
-    "z_mm": 28.3,
-    "pitch_deg": 0.15,
-    "yaw_deg": 0.15,
-    "roll_deg": 0.15,
-}
+# The default of ``requirements`` in POST /api/campaigns and of a study's: the accuracy
+# goals of the paper (their one home: ``tofpose.lab.requirements``).
+PAPER_REQUIREMENTS = PAPER_REQUIREMENTS_DEFAULTS
 PAPER = (
     'Zhu et al., "System Design for Pose Determination of Spacecraft Using Time-of-Flight '
     'Sensors" (Space: Science & Technology, 2022), section 6.4'

@@ -82,7 +82,7 @@ def test_campaigns_and_studies_default_to_the_same_requirements():
         assert getattr(campaign, axis) == getattr(study, axis) == PAPER_REQUIREMENTS[axis]
     # the campaign report's own copy (backend/services/reports/report_content.py), which
     # says whether a campaign's requirements are the defaults, holds the same numbers
-    assert dict(PAPER_REQUIREMENTS) == report_content.PAPER_REQUIREMENTS
+    assert report_content.PAPER_REQUIREMENTS is PAPER_REQUIREMENTS
 
 
 def test_a_dashboard_url_in_the_status_is_passed_on():
