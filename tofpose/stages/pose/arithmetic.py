@@ -19,6 +19,7 @@ class PoseArithmetic:
     name: str
     solve_pairs: Callable
     pose_check: Callable
+    aperture_returns: Callable
     facing_cosine: Callable
     absolute_orientation: Callable
     concluding_covariances: Callable
@@ -35,11 +36,16 @@ _FIELDS = (
 )
 
 COMPILED = PoseArithmetic(
-    "compiled", solve.solve_pairs, verify.pose_check, **{f: getattr(pose, f) for f in _FIELDS}
+    "compiled",
+    solve.solve_pairs,
+    verify.pose_check,
+    verify.aperture_returns,
+    **{f: getattr(pose, f) for f in _FIELDS},
 )
 REFERENCE = PoseArithmetic(
     "reference",
     ref_solve.solve_pairs,
     ref_verify.pose_check,
+    ref_verify.aperture_returns,
     **{f: getattr(ref_pose, f) for f in _FIELDS},
 )

@@ -62,38 +62,27 @@ class ApertureReturns:
 
 
 def aperture_returns(
-    gray: np.ndarray, uv_px: np.ndarray, disc_radius_px: np.ndarray, full_scale_counts: float
+    arithmetic,
+    gray: np.ndarray,
+    uv_px: np.ndarray,
+    disc_radius_px: np.ndarray,
+    full_scale_counts: float,
 ) -> ApertureReturns:
     """Aperture photometry of m reflectors of the (H, W) ``gray`` frame at their
     centroids ``uv_px`` (m, 2), with predicted image radii ``disc_radius_px`` (m,) px;
-    ``full_scale_counts`` the sensor's saturation level."""
-    g = np.asarray(gray, dtype=np.float64)
-    h, w = g.shape
-    m = len(uv_px)
-    flux, noise, per_area = np.zeros(m), np.full(m, np.inf), np.zeros(m)
-    saturated = np.zeros(m, bool)
-    for i in range(m):
-        u, v = float(uv_px[i, 0]), float(uv_px[i, 1])
-        r_ap = float(disc_radius_px[i]) + APERTURE_MARGIN_PX
-        r_in = r_ap + ANNULUS_GAP_PX
-        r_out = r_in + ANNULUS_WIDTH_PX
-        v0, v1 = max(int(v - r_out) - 1, 0), min(int(v + r_out) + 2, h)
-        u0, u1 = max(int(u - r_out) - 1, 0), min(int(u + r_out) + 2, w)
-        if v0 >= v1 or u0 >= u1:
-            continue
-        rows, cols = np.mgrid[v0:v1, u0:u1]
-        d = np.hypot(cols - u, rows - v)
-        window = g[v0:v1, u0:u1]
-        inside = d < r_ap
-        ring = window[(d >= r_in) & (d < r_out)]
-        if not inside.any() or ring.size < 4:
-            continue
-        level = float(np.median(ring))
-        spread = MAD_TO_SIGMA * float(np.median(np.abs(ring - level)))
-        flux[i] = float(np.sum(window[inside] - level))
-        noise[i] = max(spread, 1.0) * float(np.sqrt(inside.sum()))
-        per_area[i] = flux[i] / (np.pi * float(disc_radius_px[i]) ** 2)
-        saturated[i] = bool(np.any(window[inside] >= full_scale_counts))
+    ``full_scale_counts`` the sensor's saturation level; ``arithmetic`` a
+    ``PoseArithmetic`` (its ``aperture_returns``: ``kernels.verify``'s or the
+    reference's)."""
+    flux, noise, per_area, saturated = arithmetic.aperture_returns(
+        np.ascontiguousarray(gray, dtype=np.float32),
+        np.ascontiguousarray(uv_px, dtype=np.float64).reshape(-1, 2),
+        np.ascontiguousarray(disc_radius_px, dtype=np.float64),
+        float(full_scale_counts),
+        APERTURE_MARGIN_PX,
+        ANNULUS_GAP_PX,
+        ANNULUS_WIDTH_PX,
+        MAD_TO_SIGMA,
+    )
     return ApertureReturns(flux, noise, per_area, saturated)
 
 

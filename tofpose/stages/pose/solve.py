@@ -469,7 +469,9 @@ class PoseSolver:
         ``T``."""
         centres = self._xyz[obs.i_idx] @ T.R.T + T.t_mm
         radius_px = 0.5 * self.camera.fx * self._d[obs.i_idx] / np.maximum(centres[:, 2], 1e-6)
-        returns = aperture_returns(active.gray, obs.uv_px, radius_px, self.camera.full_scale_counts)
+        returns = aperture_returns(
+            self.arithmetic, active.gray, obs.uv_px, radius_px, self.camera.full_scale_counts
+        )
         ratio, hi, lo = radiance_ratio(returns)
         if not ratio > MAX_RADIANCE_RATIO:
             return ""

@@ -7,6 +7,7 @@ from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
 from tofpose.lab.pose_judgement import pose_error
 from tofpose.sim.randomise import FAMILIES, draw_background, draw_physics, draw_pose
 from tofpose.sim.render import render_frame
+from tofpose.stages.pose.arithmetic import COMPILED, REFERENCE
 from tofpose.stages.pose.photometry import (
     MAX_RADIANCE_RATIO,
     aperture_returns,
@@ -32,7 +33,9 @@ def _disc_frame(discs, level=40.0, noise=3.0, seed=0):
 
 def test_discs_of_one_radiance_read_alike_whatever_their_size():
     g = _disc_frame([(20.3, 30.1, 2.0, 300.0), (55.6, 28.4, 5.0, 300.0)])
-    ret = aperture_returns(g, np.array([[20.3, 30.1], [55.6, 28.4]]), np.array([2.0, 5.0]), 4095)
+    ret = aperture_returns(
+        COMPILED, g, np.array([[20.3, 30.1], [55.6, 28.4]]), np.array([2.0, 5.0]), 4095
+    )
     assert ret.measured.all()
     # flux: 300 counts over pi r^2 each, read back to a few per cent
     assert ret.flux_counts == pytest.approx([300 * np.pi * 4, 300 * np.pi * 25], rel=0.05)
@@ -43,12 +46,12 @@ def test_discs_of_one_radiance_read_alike_whatever_their_size():
 def test_a_faint_speck_on_a_big_disc_is_eight_fold_darker_and_a_clipped_disc_is_left_out():
     g = _disc_frame([(20.3, 30.1, 2.0, 600.0), (55.6, 28.4, 5.0, 40.0), (40.0, 45.0, 3.0, 5000.0)])
     uv = np.array([[20.3, 30.1], [55.6, 28.4], [40.0, 45.0]])
-    ret = aperture_returns(np.minimum(g, 4095), uv, np.array([2.0, 5.0, 3.0]), 4095)
+    ret = aperture_returns(COMPILED, np.minimum(g, 4095), uv, np.array([2.0, 5.0, 3.0]), 4095)
     assert list(ret.saturated) == [False, False, True]
     ratio, hi, lo = radiance_ratio(ret)
     assert (hi, lo) == (0, 1) and ratio > MAX_RADIANCE_RATIO
     # fewer than two measurable apertures: nothing to compare
-    one = aperture_returns(g, uv[:1], np.array([2.0]), 4095)
+    one = aperture_returns(COMPILED, g, uv[:1], np.array([2.0]), 4095)
     assert np.isnan(radiance_ratio(one)[0])
 
 
@@ -78,3 +81,19 @@ def test_the_flipped_pose_of_faint_specks_at_8_m_is_not_reported():
 
 def _attitude_error_deg(res, T) -> float:
     return float(np.degrees(np.linalg.norm(pose_error(res.R, res.t_mm, T.R, T.t_mm)[:3])))
+
+
+def test_the_compiled_and_the_reference_photometry_agree():
+    g = _disc_frame([(20.3, 30.1, 2.0, 600.0), (55.6, 28.4, 5.0, 40.0), (3.0, 2.0, 3.0, 900.0)])
+    uv = np.array([[20.3, 30.1], [55.6, 28.4], [3.0, 2.0], [200.0, 10.0]])  # last: off frame
+    radius = np.array([2.0, 5.0, 3.0, 2.0])
+    a = aperture_returns(COMPILED, np.minimum(g, 800), uv, radius, 800)
+    b = aperture_returns(REFERENCE, np.minimum(g, 800), uv, radius, 800)
+    for x, y in zip(
+        (a.flux_counts, a.noise_counts, a.per_area),
+        (b.flux_counts, b.noise_counts, b.per_area),
+        strict=True,
+    ):
+        np.testing.assert_allclose(x, y, rtol=1e-9)
+    assert list(a.saturated) == list(b.saturated) == [False, False, True, False]
+    assert a.noise_counts[3] == np.inf and not a.measured[3]

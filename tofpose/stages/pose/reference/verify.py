@@ -1,6 +1,7 @@
 """The physical checks of a fitted pose against its frame (ours; ``kernels.verify``,
 ``solve.PoseSolver.verify``) stated in NumPy: every reflector in front of the camera,
-and no clearly visible unmatched reflector where the frame is dark."""
+and no clearly visible unmatched reflector where the frame is dark; the matched
+reflectors' aperture photometry (``photometry``)."""
 
 from __future__ import annotations
 
@@ -65,3 +66,38 @@ def pose_check(catalog, matched, R, t, camera, gray, threshold, dark_check):
         if not window.any():
             return DARK_REFLECTOR, i, float(u), float(v)
     return CONSISTENT, -1, np.nan, np.nan
+
+
+def aperture_returns(
+    gray, uv, radius_px, full_scale, margin_px, gap_px, width_px, mad_to_sigma
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``kernels.verify.aperture_returns`` in NumPy: each aperture's pixels by their
+    distance from its centroid, the annulus' median and MAD."""
+    g = np.asarray(gray, dtype=np.float64)
+    h, w = g.shape
+    m = len(uv)
+    flux, noise, per_area = np.zeros(m), np.full(m, np.inf), np.zeros(m)
+    saturated = np.zeros(m, bool)
+    for i in range(m):
+        u, v = float(uv[i, 0]), float(uv[i, 1])
+        r_ap = float(radius_px[i]) + margin_px
+        r_in = r_ap + gap_px
+        r_out = r_in + width_px
+        v0, v1 = max(int(v - r_out) - 1, 0), min(int(v + r_out) + 2, h)
+        u0, u1 = max(int(u - r_out) - 1, 0), min(int(u + r_out) + 2, w)
+        if v0 >= v1 or u0 >= u1:
+            continue
+        rows, cols = np.mgrid[v0:v1, u0:u1]
+        d = np.hypot(cols - u, rows - v)
+        window = g[v0:v1, u0:u1]
+        inside = d < r_ap
+        ring = window[(d >= r_in) & (d < r_out)]
+        if not inside.any() or ring.size < 4:
+            continue
+        level = float(np.median(ring))
+        spread = mad_to_sigma * float(np.median(np.abs(ring - level)))
+        flux[i] = float(np.sum(window[inside])) - int(inside.sum()) * level
+        noise[i] = max(spread, 1.0) * float(np.sqrt(inside.sum()))
+        per_area[i] = flux[i] / (np.pi * float(radius_px[i]) ** 2)
+        saturated[i] = bool(np.any(window[inside] >= full_scale))
+    return flux, noise, per_area, saturated
