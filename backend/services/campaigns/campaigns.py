@@ -387,6 +387,8 @@ class CampaignService:
         for sp in pending:
             self._bump(setpoint_index=sp.index, frames_collected=0)
             start_n = recorder.n if recorder is not None else 0
+            if recorder is not None:
+                recorder.begin_setpoint(sp)
             try:
                 if sp.profile:
                     record = collector.collect_profile(
