@@ -24,6 +24,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session, selectinload, sessionmaker
 
 from backend.db.models import CampaignRow, MeasurementRow, SetPointRow, utcnow
+from backend.services.campaigns.campaign_recording import CampaignRecordingWriter
 from backend.services.campaigns.campaign_states import (
     FINISHED,
     RUNNER_TRANSITIONS,
@@ -34,7 +35,6 @@ from backend.services.campaigns.campaign_states import (
 from backend.services.live.acquisition import LiveSample
 from backend.services.store import commit_unique
 from tofpose.core.geometry import RigidTransform, facing_euler_deg, facing_euler_sigma_deg
-from backend.services.campaigns.campaign_recording import CampaignRecordingWriter
 
 AXIS_COLUMNS = {"yaw": "yaw_deg", "pitch": "pitch_deg", "roll": "roll_deg", "rail": "rail_mm"}
 

@@ -57,9 +57,7 @@ def test_campaign_mcap_has_the_encoders_and_set_points_in_wall_clock_time(client
     encoders, setpoints = messages[topics.ENCODERS], messages[topics.SETPOINT]
     gray_times = [t for t, _ in messages[topics.GRAY]]
     assert len(encoders) == len(setpoints) == len(gray_times) == len(items)
-    for k, (m, (t_enc, enc), (t_sp, sp)) in enumerate(
-        zip(items, encoders, setpoints, strict=True)
-    ):
+    for k, (m, (t_enc, enc), (t_sp, sp)) in enumerate(zip(items, encoders, setpoints, strict=True)):
         assert t_enc == t_sp == gray_times[k] == wall_ns[k]  # with its frame, wall clock
         assert wall_ns[0] <= t_enc <= wall_ns[-1]
         assert enc == {"index": k, **{f"{a}_{UNITS[a]}": v for a, v in m["encoders"].items()}}

@@ -155,8 +155,12 @@ def motion_schema(title: str, fields: tuple[str, ...], what: str) -> dict:
 
 
 def encoders_schema(fields: tuple[str, ...]) -> dict:
-    return motion_schema("tofpose.Encoders", fields, "axis position read back, deg / mm (null: none)")
+    return motion_schema(
+        "tofpose.Encoders", fields, "axis position read back, deg / mm (null: none)"
+    )
 
 
 def setpoint_schema(fields: tuple[str, ...]) -> dict:
-    return motion_schema("tofpose.SetPoint", fields, "commanded position, deg / mm (null: left as is)")
+    return motion_schema(
+        "tofpose.SetPoint", fields, "commanded position, deg / mm (null: left as is)"
+    )
