@@ -92,4 +92,3 @@ def save_blueprint(
     path = Path(path)
     build_blueprint(series=series).save(application_id, str(path))
     return path
-
