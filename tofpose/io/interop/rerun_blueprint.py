@@ -30,7 +30,10 @@ TIMELINE = "message_log_time"
 SERIES = "/tofpose/series"
 POSITION_SERIES = f"{SERIES}/position"
 ATTITUDE_SERIES = f"{SERIES}/attitude"
-TURNTABLE_SERIES = f"{SERIES}/turntable"
+TURNTABLE_SERIES = f"{SERIES}/turntable"  # the rotary axes, deg
+RAIL_SERIES = f"{SERIES}/rail"  # the rail, mm (in no view: its scale would flatten the rest)
+EYE_POSITION_M = (-2.5, -2.0, -1.5)
+EYE_TARGET_M = (0.0, 0.0, 2.5)
 TRAIL = "/tofpose/trail"
 TARGET_MODEL = "/tofpose/target_model"
 OVERLAY = f"{topics.GRAY_PREVIEW}/overlay"
@@ -60,6 +63,11 @@ def build_blueprint(*, series: bool = True) -> Any:
         spatial_information=rrb.SpatialInformation(
             target_frame=topics.CAMERA_FRAME_ID, show_axes=True
         ),
+        # from behind the camera, up and to its left, along the boresight; camera frame
+        # (x right, y down, z ahead), m
+        eye_controls=rrb.EyeControls3D(
+            position=EYE_POSITION_M, look_target=EYE_TARGET_M, eye_up=(0.0, -1.0, 0.0)
+        ),
         time_ranges=history,
     )
     images = rrb.Vertical(
@@ -69,7 +77,7 @@ def build_blueprint(*, series: bool = True) -> Any:
     plots = rrb.Vertical(
         rrb.TimeSeriesView(name="position (mm)", origin=POSITION_SERIES),
         rrb.TimeSeriesView(name="attitude (deg)", origin=ATTITUDE_SERIES),
-        rrb.TimeSeriesView(name="turntable: encoders and set-point", origin=TURNTABLE_SERIES),
+        rrb.TimeSeriesView(name="turntable: encoders and set-point (deg)", origin=TURNTABLE_SERIES),
     )
     columns: list[Any] = [scene, images, plots] if series else [scene, images]
     return rrb.Blueprint(

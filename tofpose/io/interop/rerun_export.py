@@ -14,9 +14,10 @@ recording, on the same timeline and named frames, so that the shipped blueprint
 - ``/tofpose/target_model``: the catalog's reflectors and the plate in the ``target``
   frame, so the target stands at its estimated pose;
 - ``/tofpose/trail``: the estimated target origin over the last ``TRAIL_POSES`` poses;
-- ``/tofpose/series/{position,attitude,turntable}/...``: scalars per frame, x/y/z mm and
+- ``/tofpose/series/{position,attitude}/...``: scalars per frame, x/y/z mm and
   pitch/yaw/roll deg (the estimate, and the lab's reference when the recording has
-  one), the encoders and set-point per axis.
+  one); ``/tofpose/series/turntable/{encoders,setpoint}/<axis>_deg`` the rotary axes and
+  ``/tofpose/series/rail/...`` the rail (mm, in no view of the blueprint: add one).
 
 Lengths in the 3-D entities are metres (Rerun's and Foxglove's convention), in the
 series millimetres and degrees as everywhere else.
@@ -37,7 +38,7 @@ from tofpose.core.geometry import facing_euler_deg, quaternion_wxyz_from_rotatio
 from tofpose.io.interop import rerun_blueprint as bp
 from tofpose.io.interop import topics
 from tofpose.io.interop.mcap_export import message_times_ns, pose_at
-from tofpose.io.interop.motion_track import read_motion_track
+from tofpose.io.interop.motion_track import MotionTrack, read_motion_track
 from tofpose.io.interop.previews import distance_to_rgb, gray_to_u8
 from tofpose.io.recording import Recording
 from tofpose.pipeline import PosePipeline, PoseResult
@@ -140,6 +141,23 @@ def _log_static(rr, stream, camera: CameraModel, catalog: Catalog | None) -> Non
             stream.log(f"{bp.ATTITUDE_SERIES}/{name}/{axis}", style, static=True)
 
 
+def _motion_paths(motion: MotionTrack) -> list[tuple[str, str]]:
+    """(series entity, field) per axis: the rotary axes (deg) in the turntable's plot,
+    the others (the rail, mm) apart."""
+    return [
+        (bp.TURNTABLE_SERIES if unit == "deg" else bp.RAIL_SERIES, field)
+        for unit, field in zip(motion.units, motion.fields, strict=True)
+    ]
+
+
+def _log_motion_styles(rr, stream, motion: MotionTrack) -> None:
+    for (series, field), axis in zip(_motion_paths(motion), motion.axes, strict=True):
+        unit = field.rsplit("_", 1)[1]
+        for kind, label in (("encoders", "encoder"), ("setpoint", "set-point")):
+            style = rr.SeriesLines(names=f"{axis} {unit}, {label}")
+            stream.log(f"{series}/{kind}/{field}", style, static=True)
+
+
 def _log_result(rr, stream, result: PoseResult, trail: list[np.ndarray]) -> None:
     strips, colours, labels = overlay_strips(result)
     stream.log(bp.OVERLAY, rr.LineStrips2D(strips, colors=colours, labels=labels))
@@ -199,6 +217,8 @@ def export_rrd(
     trail: list[np.ndarray] = []
     try:
         _log_static(rr, stream, rec.camera, catalog)
+        if motion is not None:
+            _log_motion_styles(rr, stream, motion)
         for i in tqdm(
             range(rec.n_frames),
             desc="export rrd",
@@ -226,12 +246,12 @@ def export_rrd(
                 if name == "lab":
                     _log_series(rr, stream, "lab_reference", *pose)
             if motion is not None:
-                for field, enc, target in zip(
-                    motion.fields, motion.positions[i], motion.targets[i], strict=True
+                for path, enc, target in zip(
+                    _motion_paths(motion), motion.positions[i], motion.targets[i], strict=True
                 ):
                     for kind, v in (("encoders", enc), ("setpoint", target)):
                         if np.isfinite(v):
-                            stream.log(f"{bp.TURNTABLE_SERIES}/{kind}/{field}", rr.Scalars(v))
+                            stream.log(f"{path[0]}/{kind}/{path[1]}", rr.Scalars(v))
         done = True
     finally:
         stream.flush()

@@ -249,6 +249,8 @@ def test_export_rrd_logs_the_pose_its_trail_overlay_and_turntable_series(
     assert sum(len(c) for c in circles) >= sum(len(r.matched) for r in results)
     yaw = logged["/tofpose/series/turntable/encoders/yaw_deg"]["Scalars:scalars"]
     np.testing.assert_allclose([v[0] for v in yaw if v], positions[:, 0])
+    rail = logged["/tofpose/series/rail/encoders/rail_mm"]["Scalars:scalars"]
+    np.testing.assert_allclose([v[0] for v in rail if v], positions[:, 3])
     pitch_sp = logged["/tofpose/series/turntable/setpoint/pitch_deg"]["Scalars:scalars"]
     np.testing.assert_allclose(
         [v[0] for v in pitch_sp if v], targets[:, 1][~np.isnan(targets[:, 1])]
