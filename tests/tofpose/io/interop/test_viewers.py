@@ -104,7 +104,7 @@ def _layout_references(layout: dict) -> tuple[set[str], list[str], set[str]]:
             subscribed |= set(config.get("topics", {}))
             mode = config.get("imageMode", {})
             subscribed |= {mode[k] for k in ("imageTopic", "calibrationTopic") if k in mode}
-            subscribed |= set(mode.get("annotations", {}))
+            subscribed |= {a["topic"] for a in mode.get("annotations", [])}
             frames |= {k.removeprefix("frame:") for k in config.get("transforms", {})}
             frames |= {config[k] for k in ("followTf",) if k in config}
             frames |= {layer["frameId"] for layer in config.get("layers", {}).values()}
@@ -149,6 +149,9 @@ def test_the_foxglove_layout_names_only_what_the_export_writes(turntable_export)
             values = [_resolve(m, "." + fields) for _, m in messages[topic]]
             assert any(isinstance(v, float) for v in values), path  # a number to plot
     assert subscribed <= set(channels), sorted(subscribed - set(channels))
+    for panel in ("Image!tofpose-gray", "Image!tofpose-distance"):  # Studio's ImageModeConfig
+        for a in layout["configById"][panel]["imageMode"]["annotations"]:
+            assert a["schemaName"] == channels[a["topic"]][0] and a["settings"]["visible"]
     assert {topics.ENCODERS, topics.SETPOINT, topics.TARGET_ORIGIN, topics.ANNOTATIONS} <= (
         subscribed
     )
