@@ -90,6 +90,77 @@ def los_vs_ml(acc_summary) -> list[str]:
     return out
 
 
+def realistic_findings(real) -> list[str]:
+    """The findings the realistic-sensor run gives (``findings``' share of them, and
+    what ``--only realistic`` rewrites in the Findings list)."""
+    out: list[str] = []
+    s = realistic.summarise(real)
+    gains = [
+        (
+            r,
+            s[("realistic", r)]["pos"]["median"],
+            s[("realistic, calibrated", r)]["pos"]["median"],
+            s[("ideal", r)]["pos"]["median"],
+        )
+        for r in realistic.RANGES_M
+    ]
+    helped = [g for g in gains if g[2] < 0.5 * g[1]]
+    if helped:
+        out.append(
+            "Range calibration halves the realistic sensor's median position error "
+            "or better at "
+            + ", ".join(f"{r:g} m ({a:.2f} -> {b:.2f} mm; ideal {c:.2f})" for r, a, b, c in helped)
+            + "."
+        )
+    far = [x for x in real["long"] if x[1] >= 3.0 and x[2]]  # the rule's 3-8 m
+    out.append(
+        f"Long range (3-8 m, attitudes up to 20 deg): {sum(x[3] for x in far)} "
+        f"wrong `ok` poses of {len(far)} over the three sensors with the model's "
+        f"covariance, {sum(x[7] for x in far)} with the calibrated one (3 of its "
+        "sigmas are a narrower bound)."
+    )
+    nees: dict[tuple, list[float]] = {}
+    nees_cal: dict[tuple, list[float]] = {}
+    for x in real["long"]:
+        if x[2]:
+            nees.setdefault((x[0], x[1]), []).append(x[4])
+            nees_cal.setdefault((x[0], x[1]), []).append(x[6])
+    spread = [float(np.sqrt(np.mean(v) / 6.0)) for v in nees.values()]
+    if spread:
+        lo, hi = min(spread), max(spread)
+        verdict = (
+            "the reported sigmas are wider than the errors at every range and sensor"
+            if hi < 0.9
+            else "**worse:** the reported sigmas are narrower than the "
+            "errors at every range and sensor"
+            if lo > 1.1
+            else "the reported sigmas are wider than the errors in some cases, narrower "
+            "or level in others"
+        )
+        out.append(
+            f"Pose covariance, 0.7-8 m, three sensors: the errors' spread is "
+            f"{lo:.2f}-{hi:.2f} x the reported one (sqrt of mean NEES / 6); "
+            f"{verdict}."
+        )
+        cells = [realistic.consistency(np.array(v)) for v in nees_cal.values()]
+        inside = sum(c[3] == "in band" for c in cells)
+        sc = [float(np.sqrt(c[0] / 6.0)) for c in cells]
+        narrow = [
+            f"{k[1]:g} m ({k[0]})"
+            for k, c in zip(nees_cal, cells, strict=True)
+            if c[3] == "too narrow"
+        ]
+        out.append(
+            f"With the covariance calibrated per sensor on other frames "
+            f"(`tofpose calibrate-covariance`): mean NEES inside its 95 % band in "
+            f"{inside} of {len(cells)} range-sensor cells, errors / reported sigmas "
+            f"{min(sc):.2f}-{max(sc):.2f}"
+            + (f"; too narrow at {', '.join(narrow)}" if narrow else "")
+            + "."
+        )
+    return out
+
+
 def findings(acc_summary, rob, base_rows, stab, step_data, real=None) -> list[str]:
     """Plain statements computed from this run, including where we are worse."""
     out = []
@@ -113,72 +184,7 @@ def findings(acc_summary, rob, base_rows, stab, step_data, real=None) -> list[st
             + "."
         )
     if real is not None:
-        s = realistic.summarise(real)
-        gains = [
-            (
-                r,
-                s[("realistic", r)]["pos"]["median"],
-                s[("realistic, calibrated", r)]["pos"]["median"],
-                s[("ideal", r)]["pos"]["median"],
-            )
-            for r in realistic.RANGES_M
-        ]
-        helped = [g for g in gains if g[2] < 0.5 * g[1]]
-        if helped:
-            out.append(
-                "Range calibration halves the realistic sensor's median position error "
-                "or better at "
-                + ", ".join(
-                    f"{r:g} m ({a:.2f} -> {b:.2f} mm; ideal {c:.2f})" for r, a, b, c in helped
-                )
-                + "."
-            )
-        far = [x for x in real["long"] if x[1] >= 3.0 and x[2]]  # the rule's 3-8 m
-        out.append(
-            f"Long range (3-8 m, attitudes up to 20 deg): {sum(x[3] for x in far)} "
-            f"wrong `ok` poses of {len(far)} over the three sensors with the model's "
-            f"covariance, {sum(x[7] for x in far)} with the calibrated one (3 of its "
-            "sigmas are a narrower bound)."
-        )
-        nees: dict[tuple, list[float]] = {}
-        nees_cal: dict[tuple, list[float]] = {}
-        for x in real["long"]:
-            if x[2]:
-                nees.setdefault((x[0], x[1]), []).append(x[4])
-                nees_cal.setdefault((x[0], x[1]), []).append(x[6])
-        spread = [float(np.sqrt(np.mean(v) / 6.0)) for v in nees.values()]
-        if spread:
-            lo, hi = min(spread), max(spread)
-            verdict = (
-                "the reported sigmas are wider than the errors at every range and sensor"
-                if hi < 0.9
-                else "**worse:** the reported sigmas are narrower than the "
-                "errors at every range and sensor"
-                if lo > 1.1
-                else "the reported sigmas are wider than the errors in some cases, narrower "
-                "or level in others"
-            )
-            out.append(
-                f"Pose covariance, 0.7-8 m, three sensors: the errors' spread is "
-                f"{lo:.2f}-{hi:.2f} x the reported one (sqrt of mean NEES / 6); "
-                f"{verdict}."
-            )
-            cells = [realistic.consistency(np.array(v)) for v in nees_cal.values()]
-            inside = sum(c[3] == "in band" for c in cells)
-            sc = [float(np.sqrt(c[0] / 6.0)) for c in cells]
-            narrow = [
-                f"{k[1]:g} m ({k[0]})"
-                for k, c in zip(nees_cal, cells, strict=True)
-                if c[3] == "too narrow"
-            ]
-            out.append(
-                f"With the covariance calibrated per sensor on other frames "
-                f"(`tofpose calibrate-covariance`): mean NEES inside its 95 % band in "
-                f"{inside} of {len(cells)} range-sensor cells, errors / reported sigmas "
-                f"{min(sc):.2f}-{max(sc):.2f}"
-                + (f"; too narrow at {', '.join(narrow)}" if narrow else "")
-                + "."
-            )
+        out.extend(realistic_findings(real))
     for light in accuracy.LUX:
         ml, svd = acc_summary[(light, "full (ML)")], acc_summary[(light, "no refinement")]
         ranges = [
@@ -514,6 +520,50 @@ def accuracy_section(quick: bool) -> str:
     return accuracy.markdown(acc_summary, _rel(IMG / "accuracy-range.png"), n_acc)
 
 
+def physics_section(quick: bool) -> str:
+    """ "Physics robustness study" (``--only physics`` regenerates just this block, with
+    its plots)."""
+    n_phys = 4 if quick else 24
+    phys = physics.run(n_phys)
+    IMG.mkdir(parents=True, exist_ok=True)
+    physics.plot(phys, IMG / "physics.png")
+    return physics.markdown(phys, _rel(IMG / "physics.png"), n_phys)
+
+
+#: how the Findings that ``realistic_findings`` writes begin (``--only realistic``
+#: replaces the ones that do)
+REALISTIC_FINDING_STARTS = (
+    "Range calibration ",
+    "Long range (3-8 m",
+    "Pose covariance, 0.7-8 m",
+    "With the covariance calibrated",
+)
+
+
+def realistic_section(quick: bool) -> tuple[str, list[str]]:
+    """ "Realistic sensor and range calibration" and its findings (``--only realistic``
+    regenerates both, with the plot)."""
+    n_real, n_long, n_cal = (4, 20, 30) if quick else (16, 90, 150)
+    real = realistic.run(n_real, long_frames=n_long, cal_frames=n_cal)
+    IMG.mkdir(parents=True, exist_ok=True)
+    realistic.plot(real, IMG / "realistic.png")
+    return realistic.markdown(real, _rel(IMG / "realistic.png"), n_real), realistic_findings(real)
+
+
+def replace_findings(starts: tuple[str, ...], found: list[str]) -> None:
+    """In docs/results.md's Findings list, the bullets that begin with one of ``starts``
+    replaced by ``found``, where the first of them stood."""
+    text = DOC.read_text()
+    i = text.index("## Findings\n")
+    j = text.index("\n## ", i + 1)
+    lines = text[i:j].split("\n")
+    old = [k for k, line in enumerate(lines) if line.startswith(tuple(f"- {s}" for s in starts))]
+    at = old[0] if old else len(lines)
+    kept = [line for k, line in enumerate(lines) if k not in old]
+    new = kept[:at] + [f"- {s}" for s in found] + kept[at:]
+    DOC.write_text(text[:i] + "\n".join(new) + text[j:])
+
+
 def foreign_section(recordings: list[str]) -> str:
     """ "Frames from another renderer": ``bench/foreign.py`` on ``recordings`` (``--only
     foreign --foreign REC.h5 ...`` regenerates just this block)."""
@@ -543,7 +593,16 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument(
         "--only",
-        choices=["accuracy", "pixelfit", "dynamics", "scaleout", "safety", "foreign"],
+        choices=[
+            "accuracy",
+            "pixelfit",
+            "dynamics",
+            "scaleout",
+            "safety",
+            "foreign",
+            "physics",
+            "realistic",
+        ],
         help="regenerate one section of docs/results.md in place",
     )
     ap.add_argument(
@@ -559,6 +618,16 @@ def main() -> None:
     if args.only == "accuracy":
         replace_heading_block("## Accuracy over the operating range", accuracy_section(q))
         print(f"rewrote the accuracy section of {DOC}", file=sys.stderr)
+        return
+    if args.only == "physics":
+        replace_heading_block("## Physics robustness study", physics_section(q))
+        print(f"rewrote the physics section of {DOC}", file=sys.stderr)
+        return
+    if args.only == "realistic":
+        section, found = realistic_section(q)
+        replace_heading_block("## Realistic sensor and range calibration", section)
+        replace_findings(REALISTIC_FINDING_STARTS, found)
+        print(f"rewrote the realistic-sensor section and its findings of {DOC}", file=sys.stderr)
         return
     if args.only == "pixelfit":
         replace_section(PIXEL_BEGIN, PIXEL_END, pixelfit_section(q))

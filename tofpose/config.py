@@ -208,12 +208,13 @@ class FitSettingsFields:
     estimate_range_offset: bool = True
     range_bias_sigma_mm: float = 15.0
     calibrated_range_bias_sigma_mm: float = 2.0
-    focal_length_sigma_rel: float = 0.002
+    focal_length_sigma_rel: float | None = None
     common_centroid_bias_px: float = 0.05
     outlier_sigma: float = 6.0
     outlier_chi2_per_dof: float = 4.0
     max_view_angle_deg: float = 80.0
     dark_check_max_matches: int = 3
+    photometric_check: bool = True
     centroid_sigma_floor_px: float = 0.03
     range_sigma_floor_mm: float = 1.0
     los_tolerance: float = 0.002
@@ -287,8 +288,14 @@ class PipelineConfig(FitSettingsFields):
         (``focal_length_sigma_rel``, ``common_centroid_bias_px``), so an image-scale
         error is not read as a range offset. From 4 reflectors. On by default; a camera
         whose driver states a range-bias sigma of 0 turns it off.
-    focal_length_sigma_rel : relative sigma of the focal length's calibration (0.2 %: a
-        checkerboard calibration's typical focal-length uncertainty).
+    focal_length_sigma_rel : relative sigma of the focal length's calibration; None (the
+        default): the camera's own (``CameraModel.focal_length_sigma_rel``: what its
+        description states, 0 when it states none). A camera description gives the
+        intrinsics its frames are to be measured with, so an unstated uncertainty is
+        taken as none; 0.002 (0.2 %) is a checkerboard calibration's typical one. Until
+        2026-12 this was a fixed 0.2 % for every camera: on frames rendered with exact
+        intrinsics (ours and another renderer's) it made the reported z sigma ~0.2 % of
+        the range (2 mm at 1 m) where the errors were a tenth of that.
     common_centroid_bias_px : sigma of a centroid error common to a frame's markers
         (0.05 px: the largest common-mode error of the matched centroids measured over
         the physics robustness study's families, 0.046 px rms beyond their random
@@ -327,6 +334,13 @@ class PipelineConfig(FitSettingsFields):
         from four on, a wrong assignment either fails the rigid residual check or (a
         mirror image of the nearly planar pattern) makes the target face away, so a dark
         predicted marker is an occluded one.
+    photometric_check : refuse a pose whose matched reflectors differ by more than
+        ``stages.pose.photometry.MAX_RADIANCE_RATIO`` (8x) in return per disc area
+        (aperture photometry at their centroids, saturated and unmeasurably faint ones
+        left out): one target's reflectors are one material under one incidence, and
+        correct matches differ by at most 5x over every physics the project renders; a
+        match that gives an 80 mm disc a speck of noise and a 35 mm disc the frame's
+        brightest blob does not.
     centroid_sigma_floor_px, range_sigma_floor_mm : floors of the per-reflector
         measurement sigmas (``tofpose.stages.extraction.uncertainty``) used as weights and in the
         covariance.

@@ -47,7 +47,19 @@ from tofpose.stages.matching.matching import (
 )
 from tofpose.stages.persistence.persistence import Persistence, PersistenceInfo, blob_lists
 from tofpose.stages.pixelfit.fit import PixelNoise, fit_pose_to_pixels
-from tofpose.stages.pose.solve import Measurements, PoseSolver, Rejected, Solution, ThresholdedFrame
+from tofpose.stages.pose.constants import (
+    MIN_VARIANCE_FACTOR,
+    NARROWING_CONFIDENCE,
+    NARROWING_MIN_REFLECTORS,
+)
+from tofpose.stages.pose.solve import (
+    Measurements,
+    PoseSolver,
+    Rejected,
+    Solution,
+    ThresholdedFrame,
+    chi2_limit,
+)
 from tofpose.stages.tracking.tracking import (
     TrackState,
 )
@@ -176,14 +188,33 @@ class PoseResult:
 
 
 def variance_factor(chi2: float, n_reflectors: int) -> float:
-    """A-posteriori variance factor max(1, chi^2 / dof), dof = 3 n - 6.
+    """A-posteriori variance factor of the fit's covariance, dof = 3 n - 6.
 
-    The covariance (J^T J)^-1 assumes the measurement sigmas are right. When the fit is
-    worse than they allow (a biased blob the outlier step could not single out, e.g. one
-    of 4), the reported uncertainty grows with it instead of claiming sub-millimetre.
+    Above 1, chi^2 / dof: when the fit is worse than the measurement sigmas allow (a
+    biased blob the outlier step could not single out, e.g. one of 4), the reported
+    uncertainty grows with it instead of claiming sub-millimetre.
+
+    Below 1, from ``NARROWING_MIN_REFLECTORS`` reflectors on: the upper
+    ``NARROWING_CONFIDENCE`` bound of the variance factor that chi^2 allows,
+    chi^2 / chi^2_dof(1 - confidence), when that is below 1, never below
+    ``MIN_VARIANCE_FACTOR``. The per-reflector sigmas have floors for what no pixel
+    statistic sees (``extraction.uncertainty``); on a sharp, bright frame the reflectors
+    agree with each other far better than those floors say, and a covariance that
+    ignores it is several times too wide (0.3 of the reported sigmas at 1 m on the
+    simulator's ideal frames). The bound uses only what the residuals show, with the
+    chance of a small chi^2 by luck priced in: it narrows only what the reflectors'
+    mutual agreement measures, not the priors added beside it (a range offset or an
+    image scale common to all of them leaves no residual).
     """
     dof = 3 * n_reflectors - 6
-    return max(1.0, chi2 / dof) if dof > 0 and np.isfinite(chi2) else 1.0
+    if dof <= 0 or not np.isfinite(chi2):
+        return 1.0
+    if chi2 >= dof:
+        return chi2 / dof
+    if n_reflectors < NARROWING_MIN_REFLECTORS:
+        return 1.0
+    upper = chi2 / chi2_limit(dof, 1.0 - NARROWING_CONFIDENCE)
+    return min(1.0, max(MIN_VARIANCE_FACTOR, upper))
 
 
 class _Timer:

@@ -304,6 +304,12 @@ def campaign_public(
         requirements=Requirements(**c.requirements),
         generator=c.generator,
         camera=c.camera,
+        camera_sweep=c.camera_sweep,
+        operator=c.operator,
+        target_name=c.target_name,
+        camera_model=c.camera_model,
+        camera_serial=c.camera_serial,
+        camera_firmware=c.camera_firmware,
         record_raw=c.record_raw,
         notes=c.notes,
         created_at=as_utc(c.created_at),
@@ -322,6 +328,7 @@ def campaign_public(
                 roll_deg=sp.roll_deg,
                 rail_mm=sp.rail_mm,
                 profile=sp.profile,
+                camera=sp.camera,
                 status=sp.status,
             )
             for sp in c.setpoints
@@ -375,6 +382,7 @@ def measurement_public(m: MeasurementRow, setpoint_index: int) -> MeasurementPub
         truth=_pose_dict(m, "truth_"),
         lab_truth=_pose_dict(m, "lab_truth_"),
         encoders=m.encoders,
+        integration_time_us=m.integration_time_us,
         in_motion=m.in_motion,
     )
 

@@ -65,6 +65,12 @@ class CampaignRow(Base):
     requirements : per-axis accuracy requirements, e.g. {"x_mm": 6.0, ..., "roll_deg": 0.15}.
     generator : the generator request the set-points came from, or None for explicit ones.
     status_reason : why the campaign is paused / failed / interrupted.
+    camera_settings : settings applied before the first set-point (under each set-point's own).
+    camera_sweep : the sweep the set-points' camera settings came from, e.g.
+        {"integration_time_us": [250, 500, 1000]}, or None.
+    operator, target_name : who ran it and the target measured (free text).
+    camera_model, camera_serial, camera_firmware : the camera, read from the device where
+        its driver reports them, else as given when the campaign was created.
     """
 
     __tablename__ = "campaigns"
@@ -80,6 +86,12 @@ class CampaignRow(Base):
     requirements: Mapped[dict[str, float]] = mapped_column(JSON)
     generator: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
     camera_settings: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    camera_sweep: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    operator: Mapped[str] = mapped_column(String(200), default="", server_default="")
+    target_name: Mapped[str] = mapped_column(String(200), default="", server_default="")
+    camera_model: Mapped[str] = mapped_column(String(200), default="", server_default="")
+    camera_serial: Mapped[str] = mapped_column(String(200), default="", server_default="")
+    camera_firmware: Mapped[str] = mapped_column(String(200), default="", server_default="")
     record_raw: Mapped[bool] = mapped_column(Boolean, default=False)
     recording_path: Mapped[str | None] = mapped_column(Text, nullable=True)
     notes: Mapped[str] = mapped_column(Text, default="")
@@ -101,6 +113,9 @@ class SetPointRow(Base):
     profile : a dynamic set-point's motion profile (``axis``, ``kind`` and its fields, as
     POST /api/motion/profile takes them), run from the set-point after a rest; None at a
     static one.
+    camera : camera settings applied before the set-point's frames
+    ({"integration_time_us": .., "modulation_frequency_mhz": ..}, either may be absent),
+    or None (the camera as it is).
     """
 
     __tablename__ = "setpoints"
@@ -114,6 +129,7 @@ class SetPointRow(Base):
     roll_deg: Mapped[float | None] = mapped_column(Float, nullable=True)
     rail_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
     profile: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    camera: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
     status: Mapped[str] = mapped_column(String(16), default="pending")
     completed_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
 
@@ -140,6 +156,8 @@ class MeasurementRow(Base):
     (null before its first pose). ``in_motion``: taken while the set-point's motion
     profile ran (null at a set-point without one; ``encoders`` and ``lab_truth_*`` of a
     profile set-point are interpolated to the frame's capture time).
+    ``integration_time_us``: the exposure the frame was taken with, as the camera reports
+    it per frame (null when it does not).
     """
 
     __tablename__ = "measurements"
@@ -201,6 +219,7 @@ class MeasurementRow(Base):
     sigma_vel_z_mm_s: Mapped[float | None] = mapped_column(Float, nullable=True)
     filter_status: Mapped[str | None] = mapped_column(String(16), nullable=True)
     in_motion: Mapped[bool | None] = mapped_column(Boolean, nullable=True)
+    integration_time_us: Mapped[float | None] = mapped_column(Float, nullable=True)
 
     setpoint: Mapped[SetPointRow] = relationship(back_populates="measurements")
 

@@ -41,6 +41,24 @@ class CameraSettings:
     auto_exposure: bool = True
 
 
+@dataclass(frozen=True)
+class CameraLimits:
+    """What a camera's settings may be set to (a campaign's camera settings are checked
+    against them before it is stored).
+
+    integration_time_us : (min, max) exposure, us.
+    modulation_frequencies_mhz : the modulation frequencies the camera supports, MHz;
+        None when any frequency in ``modulation_range_mhz`` is accepted.
+    modulation_range_mhz : (min, max) MHz, for a camera without a fixed list.
+    settable : False for a source whose settings cannot change (a replayed recording).
+    """
+
+    integration_time_us: tuple[float, float]
+    modulation_frequencies_mhz: tuple[float, ...] | None = None
+    modulation_range_mhz: tuple[float, float] = (1.0, 24.0)
+    settable: bool = True
+
+
 @dataclass
 class CameraFrame:
     """One frame pair.
@@ -56,6 +74,15 @@ class CameraFrame:
         ``EncoderReferencedCamera``), or a recording's ``/lab_truth``; else None. It
         differs from the exact pose by the bench's own mount and placement errors.
     meta : driver-specific extras (integration time, encoder readings, recording index).
+    capture_ns : when the device captured the frame, on the host's monotonic clock
+        (``time.monotonic_ns``): the device's own clock mapped to the host's (the
+        simulator's render time, the TOFcam-660's acquisition command, a replay's
+        recorded stamp mapped to playback; docs/server.md, "Latency and dropped
+        frames"); None when the driver cannot say.
+    sequence : the device's own frame counter, unwrapped (never decreasing within a
+        stream), whose gaps are frames the camera lost; None when it has none.
+    slots_skipped : frames the camera's rate offered since the previous ``read`` that
+        the reader was too busy to take (``FramePacer.wait``): the pipeline's drops.
     """
 
     gray: np.ndarray
@@ -65,6 +92,9 @@ class CameraFrame:
     T_camera_target_exact: RigidTransform | None = None
     T_camera_target_lab: RigidTransform | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    capture_ns: int | None = None
+    sequence: int | None = None
+    slots_skipped: int = 0
 
 
 @runtime_checkable
@@ -82,6 +112,8 @@ class CameraDriver(Protocol):
     def apply_settings(self, settings: CameraSettings) -> CameraSettings:
         """Apply and return what the device actually uses (it may clamp)."""
         ...
+
+    # Optional: ``limits() -> CameraLimits`` (what the settings may be set to).
 
     def close(self) -> None: ...
 

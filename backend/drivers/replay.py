@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from backend.drivers.base import CameraError, CameraFrame, CameraSettings
+from backend.drivers.base import CameraError, CameraFrame, CameraLimits, CameraSettings
 from backend.drivers.pacing import FramePacer
 from tofpose.core.geometry import RigidTransform
 from tofpose.io.recording import RecordingError, open_recording
@@ -34,6 +34,36 @@ def _pose_at(
     return RigidTransform(R_all[i], t_all_mm[i])
 
 
+class PlaybackClock:
+    """A recording's own stamps (``time_s``, s) mapped to the host's monotonic clock
+    during playback: ``capture_ns(recorded_s, released_ns, period_s)``.
+
+    The first frame, the first of every loop (``restart``) and any frame released more
+    than one period away from where the mapping puts it (a pipeline slower than the
+    recording, or a gap in the recorded stamps, which the pacer plays at its steady
+    rate) anchor the mapping at their release; from an anchor on, a frame's capture is
+    the anchor's release plus its recorded time since the anchor's, scaled by
+    ``speed`` (the playback rate over the recorded one), and never later than its own
+    release.
+    """
+
+    def __init__(self, speed: float = 1.0) -> None:
+        self.speed = speed
+        self._anchor: tuple[float, int] | None = None  # (recorded s, host ns)
+
+    def restart(self) -> None:
+        self._anchor = None
+
+    def capture_ns(self, recorded_s: float, released_ns: int, period_s: float) -> int:
+        if self._anchor is not None:
+            rec0, host0 = self._anchor
+            mapped = host0 + int(round((recorded_s - rec0) / self.speed * 1e9))
+            if abs(released_ns - mapped) <= period_s * 1e9:
+                return min(mapped, released_ns)  # never after the frame was released
+        self._anchor = (recorded_s, released_ns)
+        return released_ns
+
+
 class ReplayCamera:
     """Plays a recording's frames in a loop (implements ``CameraDriver``).
 
@@ -42,6 +72,8 @@ class ReplayCamera:
     count, and ``meta["discontinuity"]`` is True on the first frame of every loop. The
     recording's ``/truth`` is each frame's exact pose and its ``/lab_truth`` the lab's
     reference (``T_camera_target_exact`` / ``T_camera_target_lab``, None when absent).
+    A frame's ``capture_ns`` is its recorded stamp mapped to playback (``PlaybackClock``);
+    its ``sequence`` the frames played (a replay loses none).
     Raises ``RecordingError`` at construction if the file is not a valid recording.
     """
 
@@ -59,11 +91,13 @@ class ReplayCamera:
         rate = rate_hz or self.recorded_rate_hz
         self._settings = CameraSettings(frame_rate_hz=rate, auto_exposure=False)
         self._pacer = FramePacer(rate)
+        self._clock = PlaybackClock(rate / self.recorded_rate_hz)
         self._count = 0
         self._t0: float | None = None
 
     def read(self, timeout_s: float) -> CameraFrame:
-        self._pacer.wait(timeout_s)
+        skipped = self._pacer.wait(timeout_s)
+        released_ns = time.monotonic_ns()
         if self._t0 is None:
             self._t0 = time.monotonic()
         n = self._rec.n_frames
@@ -72,6 +106,9 @@ class ReplayCamera:
             gray, dist, rec_t = self._rec.frame(i)
         except RecordingError as exc:
             raise CameraError(str(exc)) from exc
+        if i == 0:
+            self._clock.restart()
+        capture_ns = self._clock.capture_ns(rec_t, released_ns, 1.0 / self._pacer.rate_hz)
         self._count += 1
         return CameraFrame(
             gray=gray,
@@ -86,6 +123,9 @@ class ReplayCamera:
                 "loop": (self._count - 1) // n,
                 "discontinuity": i == 0,
             },
+            capture_ns=capture_ns,
+            sequence=self._count,
+            slots_skipped=skipped,
         )
 
     def get_settings(self) -> CameraSettings:
@@ -98,10 +138,15 @@ class ReplayCamera:
             "link": "up",
         }
 
+    def limits(self) -> CameraLimits:
+        """A recording's exposure and modulation are what they were: not settable."""
+        return CameraLimits(integration_time_us=(0.0, 0.0), settable=False)
+
     def apply_settings(self, settings: CameraSettings) -> CameraSettings:
         """Only the frame rate can change; the rest is fixed by the recording."""
         self._settings = replace(self._settings, frame_rate_hz=settings.frame_rate_hz)
         self._pacer.set_rate(settings.frame_rate_hz)
+        self._clock = PlaybackClock(settings.frame_rate_hz / self.recorded_rate_hz)
         return self._settings
 
     def close(self) -> None:

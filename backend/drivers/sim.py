@@ -17,6 +17,7 @@ import numpy as np
 from backend.drivers.base import (
     AxisLimits,
     CameraFrame,
+    CameraLimits,
     CameraSettings,
     MotionStatus,
     ProfileStatus,
@@ -47,6 +48,11 @@ class SimWorld:
         """Lab time: wall time since the world was made, times ``time_scale`` (a scale of
         10 runs moves, settling and frame times 10x faster than real time)."""
         return (time.monotonic() - self._t0) * self.time_scale
+
+    def host_monotonic_ns(self, lab_time_s: float) -> int:
+        """The host's ``time.monotonic_ns`` at lab time ``lab_time_s`` (``now_s``'s
+        inverse): how a frame's render time becomes its capture stamp."""
+        return int(round((self._t0 + lab_time_s / self.time_scale) * 1e9))
 
     def capture(self):
         """Render the scene as the turntable stands now; returns (time_s, frame, T_lab,
@@ -146,7 +152,11 @@ class SimCamera:
         self.apply_settings(settings or self._settings)
 
     def read(self, timeout_s: float) -> CameraFrame:
-        self._pacer.wait(timeout_s)
+        """Renders the scene now. Its stamps: ``capture_ns`` the render's lab time on the
+        host's clock (the frame then takes the render's duration to arrive, as a real
+        frame takes its exposure and read-out), ``sequence`` the renders made (the
+        simulated camera renders only the frames it delivers: it loses none)."""
+        skipped = self._pacer.wait(timeout_s)
         t, frame, T_lab, T_true, enc = self.world.capture()
         self._index += 1
         return CameraFrame(
@@ -157,6 +167,9 @@ class SimCamera:
             T_camera_target_exact=T_true,
             T_camera_target_lab=T_lab,
             meta={"integration_time_us": frame.integration_time_us, "encoders": enc},
+            capture_ns=self.world.host_monotonic_ns(t),
+            sequence=self._index,
+            slots_skipped=skipped,
         )
 
     @property
@@ -167,6 +180,10 @@ class SimCamera:
 
     def get_settings(self) -> CameraSettings:
         return self._settings
+
+    def limits(self) -> CameraLimits:
+        """The simulated sensor's integration limits; any modulation frequency of 1-24 MHz."""
+        return CameraLimits(integration_time_us=self.world.bench.sensor.integration_limits_us)
 
     def describe(self) -> dict[str, str]:
         return {"model": "tofpose simulated ToF camera", "firmware": __version__, "link": "up"}

@@ -15,6 +15,12 @@ and speaks the protocol; this driver adds what a server needs around it:
   camera's invalid-pixel codes (>= 64000: low amplitude, ADC overflow, saturation)
   become NaN distances, and saturated or overflowing amplitudes become the frame's full
   scale (so a saturated reflector core stays the brightest part of its blob);
+- stamps (docs/server.md, "Latency and dropped frames"): the camera stamps no time in
+  its frames, so a frame's ``capture_ns`` is the host's monotonic clock when the
+  acquisition command went out (the exposure follows it by the command's way over the
+  link and lasts the integration time); its ``sequence`` is the measurement id of the
+  image's UDP packets (a 16-bit counter the camera advances per acquisition),
+  unwrapped, so an image the camera took and the network lost shows as a gap;
 - time-outs of its own (the vendor client retries for up to half a minute) and
   reconnection: a command-link error drops the link, ``read`` raises ``CameraError`` and
   the next ``read`` reconnects after a back-off, while the server shows the camera
@@ -27,6 +33,7 @@ import contextlib
 import logging
 import math
 import socket
+import struct
 import threading
 import time
 from dataclasses import replace
@@ -34,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from backend.drivers.base import CameraError, CameraFrame, CameraSettings
+from backend.drivers.base import CameraError, CameraFrame, CameraLimits, CameraSettings
 from backend.drivers.pacing import FramePacer
 from tofpose.core.camera import CameraModel
 
@@ -154,8 +161,10 @@ class TofCam660Driver:
         self._next_attempt = 0.0
         self._backoff = reconnect_backoff_s[0]
         self._index = 0
+        self._sequence = MeasurementIdUnwrap()
         self._integration_us = self._settings.integration_time_us
         self.firmware = ""
+        self.serial = ""
         self.link_changes = 0
         if connect_now:
             self._connect()  # a camera that is not there is an error here
@@ -176,8 +185,12 @@ class TofCam660Driver:
         try:
             cam.tcpInterface.socket.settimeout(self.io_timeout_s)
             cam.rxInterface.udpSocket.settimeout(self.io_timeout_s)
+            cam.rxInterface.udpSocket = MeasurementIdTap(cam.rxInterface.udpSocket, self.address)
+            self._sequence = MeasurementIdUnwrap()  # counted afresh on a new link
             self.firmware = cam._version
             self._cam = cam
+            chip = self._transceive(self._vendor[1].create("readChipInformation")).data
+            self.serial = f"wafer {chip['waferid']} chip {chip['chipid']}"
             self._push_settings(self._settings)
         except Exception as exc:
             self._cam = None
@@ -256,6 +269,12 @@ class TofCam660Driver:
     def get_settings(self) -> CameraSettings:
         return replace(self._settings, integration_time_us=self._integration_us)
 
+    def limits(self) -> CameraLimits:
+        """The EPC660's integration range and its six modulation frequencies."""
+        return CameraLimits(
+            integration_time_us=INTEGRATION_LIMITS_US, modulation_frequencies_mhz=MODULATION_MHZ
+        )
+
     def apply_settings(self, settings: CameraSettings) -> CameraSettings:
         mhz = min(MODULATION_MHZ, key=lambda f: abs(f - settings.modulation_frequency_mhz))
         lo, hi = INTEGRATION_LIMITS_US
@@ -282,12 +301,15 @@ class TofCam660Driver:
         """One distance + amplitude image; ``CameraError`` when the command link fails
         (the link is dropped and re-opened later) or the image does not arrive within
         ``io_timeout_s`` (a lost UDP image fails only this frame)."""
-        self._pacer.wait(timeout_s)
+        skipped = self._pacer.wait(timeout_s)
         with self._lock:
             cam = self._ensure()
             _, Command, Parser, _ = self._vendor
+            tap: MeasurementIdTap = cam.rxInterface.udpSocket
             try:
-                _flush_datagrams(cam.rxInterface.udpSocket)  # no stale packets of a lost frame
+                _flush_datagrams(tap)  # no stale packets of a lost frame
+                tap.last_id = None
+                capture_ns = time.monotonic_ns()
                 self._transceive(Command.create("getDistanceAndAmplitude", 0))
             except (OSError, EOFError, ValueError, RuntimeError) as exc:
                 self._drop(str(exc) or type(exc).__name__)
@@ -315,6 +337,9 @@ class TofCam660Driver:
                     "temperature_c": float(frame.temperature),
                     "saturated_px": n_sat,
                 },
+                capture_ns=capture_ns,
+                sequence=self._sequence.unwrap(tap.last_id),
+                slots_skipped=skipped,
             )
 
     def _auto_expose(self, gray: np.ndarray, dist: np.ndarray, n_saturated: int) -> None:
@@ -334,6 +359,7 @@ class TofCam660Driver:
         return {
             "model": "ESPROS TOFcam-660",
             "firmware": self.firmware,
+            "serial": self.serial,
             "link": "up" if self._cam is not None else "down",
             "address": self.address,
         }
@@ -344,6 +370,43 @@ class TofCam660Driver:
             if self._cam is not None:
                 self._close_cam(self._cam)
                 self._cam = None
+
+
+class MeasurementIdTap:
+    """The vendor client's UDP socket, keeping the measurement id (the first uint16 of a
+    packet's ``!HIHIII`` header) of the last packet from the camera's ``address``: the
+    vendor's ``receiveFrame`` reads it and drops it. Everything else is the socket's."""
+
+    def __init__(self, sock: socket.socket, address: str) -> None:
+        self._sock = sock
+        self._address = address
+        self.last_id: int | None = None
+
+    def recvfrom(self, bufsize: int) -> tuple[bytes, Any]:
+        data, peer = self._sock.recvfrom(bufsize)
+        if peer[0] == self._address and len(data) >= 2:
+            (self.last_id,) = struct.unpack_from("!H", data)
+        return data, peer
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._sock, name)
+
+
+class MeasurementIdUnwrap:
+    """The camera's 16-bit measurement ids as a running count: each id adds its
+    distance from the previous one modulo 2**16 (None: the frame brought no id)."""
+
+    def __init__(self) -> None:
+        self._last: int | None = None
+        self._count = 0
+
+    def unwrap(self, measurement_id: int | None) -> int | None:
+        if measurement_id is None:
+            return None
+        if self._last is not None:
+            self._count += (measurement_id - self._last) & 0xFFFF
+        self._last = measurement_id
+        return self._count
 
 
 def _flush_datagrams(sock) -> None:

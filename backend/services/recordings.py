@@ -12,6 +12,11 @@ carries, in optional groups that other readers skip:
 
     /frames/index                  int64 (N,)   the driver's frame number
     /frames/wall_time_ns           int64 (N,)   UTC ns when the frame came from the driver
+    /frames/capture_ns             int64 (N,)   host monotonic ns: the frame's capture,
+    /frames/arrival_ns             int64 (N,)   its arrival and when its pose was ready
+    /frames/pose_ready_ns          int64 (N,)   (``backend.services.live.latency``; 0:
+                                                none), anchored to UTC by /frames' attrs
+                                                monotonic_anchor_ns, wall_anchor_ns
     /pose/ok                       bool (N,)
     /pose/reason                   str (N,)     why not ok ("" when ok)
     /pose/R_camera_target          float64 (N, 3, 3)   NaN when not ok
@@ -69,11 +74,18 @@ import numpy as np
 
 from backend.services.live.acquisition import LiveSample
 from backend.services.live.hub import LiveHub, Subscription
+from backend.services.live.latency import ClockAnchor
 from backend.services.motion import MotionService
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import Catalog
 from tofpose.io.interop import MCAP_SUFFIXES
-from tofpose.io.recording import RecordingError, RecordingWriter, open_recording
+from tofpose.io.recording import (
+    STAMP_ANCHOR_ATTRS,
+    STAMP_DATASETS,
+    RecordingError,
+    RecordingWriter,
+    open_recording,
+)
 
 log = logging.getLogger(__name__)
 
@@ -205,9 +217,16 @@ def frame_row(
 ) -> dict[str, object]:
     """The optional datasets' values for one live sample (module docstring), by path."""
     res, st = sample.result, sample.state
+    stamps = sample.stamps
+    capture, arrival, pose_ready = (
+        (stamps.capture_ns, stamps.arrival_ns, stamps.pose_ready_ns) if stamps else (0, 0, 0)
+    )
     row: dict[str, object] = {
         "frames/index": int(sample.frame.index),
         "frames/wall_time_ns": _ns(sample.captured_unix_s),
+        STAMP_DATASETS[0]: capture,
+        STAMP_DATASETS[1]: arrival,
+        STAMP_DATASETS[2]: pose_ready,
         "pose/ok": bool(res.ok),
         "pose/reason": res.reason or "",
         "pose/R_camera_target": _or_nan(res.R if res.ok else None, (3, 3)),
@@ -262,6 +281,7 @@ class LiveRecordingWriter(RecordingWriter):
         columns: list[tuple[str, tuple[int, ...], object]] = [
             ("frames/index", (), np.int64),
             ("frames/wall_time_ns", (), np.int64),
+            *((name, (), np.int64) for name in STAMP_DATASETS),
             ("pose/ok", (), np.bool_),
             ("pose/reason", (), text),
             ("pose/R_camera_target", (3, 3), np.float64),
@@ -293,6 +313,11 @@ class LiveRecordingWriter(RecordingWriter):
             self._columns[name] = f.create_dataset(
                 name, (0, *shape), dtype, maxshape=(None, *shape), chunks=(min(rows, 256), *shape)
             )
+        anchor = ClockAnchor.now()  # the stamps' monotonic clock against UTC
+        for key, value in zip(
+            STAMP_ANCHOR_ATTRS, (anchor.monotonic_ns, anchor.wall_ns), strict=True
+        ):
+            f["frames"].attrs[key] = value
         if axes:
             f["motion"].attrs["axes"] = list(axes)
             f["motion"].attrs["units"] = list(axes.values())

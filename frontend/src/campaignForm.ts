@@ -108,6 +108,17 @@ export function generator(kind: Kind, shape: Shape, fields: Record<string, strin
   return { generator: out as Generator };
 }
 
+/** The campaign's metadata, as typed (empty: not sent; the camera's serial and firmware are
+ * read from the device where its driver reports them, docs/campaigns.md). */
+export type Metadata = { operator: string; target_name: string; camera_serial: string; camera_firmware: string; notes: string };
+export const METADATA_FIELDS: { key: keyof Metadata; label: string; title: string }[] = [
+  { key: "operator", label: "operator", title: "who runs the campaign" },
+  { key: "target_name", label: "target", title: "the target measured" },
+  { key: "camera_serial", label: "camera serial", title: "empty: read from the camera where its driver reports it" },
+  { key: "camera_firmware", label: "camera firmware", title: "empty: read from the camera where its driver reports it" },
+  { key: "notes", label: "notes", title: "free text, printed in the report" },
+];
+
 /** Everything the form holds, as typed. */
 export type CampaignForm = {
   name: string;
@@ -116,9 +127,15 @@ export type CampaignForm = {
   fields: Record<string, string>; // by parameter key; empty or missing: the placeholder
   frames: string;
   recordRaw: boolean;
+  integrationTimes: string; // a list: every set-point measured at each; empty: the camera's own
+  modulations: string; // a list of MHz; empty: the camera's own
+  metadata: Metadata;
 };
 
-export const INITIAL_FORM: CampaignForm = { name: "", kind: "grid", shape: "sine", fields: {}, frames: "20", recordRaw: false };
+export const INITIAL_FORM: CampaignForm = {
+  name: "", kind: "grid", shape: "sine", fields: {}, frames: "20", recordRaw: false, integrationTimes: "", modulations: "",
+  metadata: { operator: "", target_name: "", camera_serial: "", camera_firmware: "", notes: "" },
+};
 
 /** Another generator: its fields start empty. */
 export function withKind(form: CampaignForm, kind: Kind): CampaignForm {
@@ -137,7 +154,31 @@ export function takesFrames(kind: Kind): boolean {
 }
 
 /** The fields the form leaves to the server's defaults (catalog, settle time, ...). */
-type ServerDefaulted = "catalog" | "frames_per_point" | "lock_timeout_s" | "notes" | "settle_s";
+type ServerDefaulted = "catalog" | "frames_per_point" | "lock_timeout_s" | "notes" | "settle_s" | "camera_sweep"
+  | "operator" | "target_name" | "camera_model" | "camera_serial" | "camera_firmware";
+
+/** The camera sweep part of the body ({} when neither list is typed), or the list that is not
+ * one. The camera's limits are the server's to check (its 422 names the field and the range). */
+export function cameraSweep(form: CampaignForm): { camera_sweep?: Schemas["CameraSweep"] } | { error: string } {
+  const sweep: Schemas["CameraSweep"] = {};
+  for (const [key, label, typed] of [
+    ["integration_time_us", "integration times us (list)", form.integrationTimes],
+    ["modulation_frequency_mhz", "modulation MHz (list)", form.modulations],
+  ] as const) {
+    if (typed.trim() === "") continue;
+    const parsed = parseNumberList(typed);
+    if ("error" in parsed) return { error: `${label}: ${parsed.error}` };
+    sweep[key] = parsed.values;
+  }
+  return Object.keys(sweep).length ? { camera_sweep: sweep } : {};
+}
+
+/** The metadata fields typed (trimmed; the empty ones are left out). */
+export function metadataBody(metadata: Metadata): Partial<Metadata> {
+  return Object.fromEntries(
+    Object.entries(metadata).map(([k, v]) => [k, v.trim()]).filter(([, v]) => v !== ""),
+  ) as Partial<Metadata>;
+}
 
 /** The POST /api/campaigns body, or what is wrong with the form (then nothing is sent). */
 export function campaignRequest(form: CampaignForm): { body: CampaignBody } | { error: string } {
@@ -145,11 +186,23 @@ export function campaignRequest(form: CampaignForm): { body: CampaignBody } | { 
   if ("error" in gen) return gen;
   const frames = takesFrames(form.kind) ? parseNumber(form.frames) : null;
   if (frames && "error" in frames) return { error: `frames per set-point: ${frames.error}` };
+  const sweep = cameraSweep(form);
+  if ("error" in sweep) return sweep;
   return {
     body: serverDefaults<CampaignBody, ServerDefaulted>({
       name: form.name, ...(frames ? { frames_per_point: frames.value } : {}), generator: gen.generator, record_raw: form.recordRaw,
+      ...sweep, ...metadataBody(form.metadata),
     }),
   };
+}
+
+/** A set-point's camera settings in a few words ("200 us, 12 MHz"); "-" for none. */
+export function cameraText(camera: Record<string, number> | null | undefined): string {
+  if (!camera) return "-";
+  const parts = [];
+  if (camera.integration_time_us != null) parts.push(`${camera.integration_time_us} us`);
+  if (camera.modulation_frequency_mhz != null) parts.push(`${camera.modulation_frequency_mhz} MHz`);
+  return parts.join(", ") || "-";
 }
 
 /** A set-point's motion profile in a few words ("sine yaw 2 deg / 2 s x1, rests 0.5 s"). */

@@ -5,6 +5,7 @@
 // (sessionStorage, api/client.ts) goes in the handshake as the subprotocol
 // "tofpose.bearer.<key>", never in the URL (docs/server.md, Security).
 import { token, type Pose } from "./api/client";
+import { latencyOf, type LiveLatency } from "./latency";
 import { sampleOf } from "./plotSeries";
 import { SampleBuffer } from "./plotWindow";
 import { parseRawFrame, type RawFrame } from "./rawframe";
@@ -17,6 +18,8 @@ export type LiveState = {
   shown: Shown | null; // the newest raw frame and the pose of that same frame
   /** the plotted numbers of the last 10 minutes (mutable: its version counts the pushes) */
   samples: SampleBuffer;
+  /** the server's latency statistics and this client's drops, from the newest pose message */
+  latency?: LiveLatency | null;
 };
 
 const STALE_AFTER_MS = 2000;
@@ -77,6 +80,7 @@ export function connectLive(onChange: (s: LiveState) => void): LiveHandle {
       if (m.type === "pose") {
         const p = m.data as Pose;
         state.pose = p;
+        state.latency = latencyOf(m);
         recent.set(p.frame_index, p);
         if (recent.size > 60) recent.delete(recent.keys().next().value!);
         state.samples.push(sampleOf(p));

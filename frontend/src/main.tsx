@@ -72,7 +72,7 @@ function App() {
             <TimeSeries samples={live.samples} />
           </div>
           <div class="side">
-            <PosePanel pose={live.pose} stale={live.stale}>
+            <PosePanel pose={live.pose} stale={live.stale} latency={live.latency}>
               <ReferenceBar onCalibrate={() => setPreset((n) => n + 1)} />
             </PosePanel>
             <MotionPanel />

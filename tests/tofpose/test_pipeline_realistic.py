@@ -77,7 +77,7 @@ def test_the_range_calibration_restores_long_range_position_accuracy():
         err[name] = np.median([np.linalg.norm(r.t_mm - T.t_mm) for r, T, _ in res])
     ideal = _run(PosePipeline(CAM, CAT), SensorModel(), poses)
     err["ideal"] = np.median([np.linalg.norm(r.t_mm - T.t_mm) for r, T, _ in ideal])
-    assert err["uncalibrated"] > 3.0, err  # the systematic errors do show at 4.5 m
+    assert err["uncalibrated"] > 2.0, err  # the systematic errors do show at 4.5 m (ideal ~0.8)
     assert err["calibrated"] < 0.4 * err["uncalibrated"], err
     assert err["calibrated"] < 3.0 * err["ideal"] + 0.5, err
 

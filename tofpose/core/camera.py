@@ -41,7 +41,10 @@ SCALAR_FIELDS: tuple[str, ...] = (
     "depth_unit_mm",
     "depth_invalid_code",
     "depth_max_valid_code",
+    "focal_length_sigma_rel",
 )
+#: a relative focal-length sigma this large is not a calibration (10 %)
+MAX_FOCAL_LENGTH_SIGMA_REL = 0.1
 
 
 @dataclass(frozen=True)
@@ -87,6 +90,13 @@ class CameraModel:
         largest code that is a distance (higher codes are status codes: the TOFcam-660's
         64000 on, the HoloLens 2 AHAT's 4090 on). ``tofpose.core.depth.decode_depth``
         turns both into NaN.
+    focal_length_sigma_rel : float
+        Relative 1-sigma of the focal lengths as calibrated (e.g. OpenCV's
+        ``stdDeviationsIntrinsics`` fx over fx): the image scale is known to it, and the
+        pose covariance carries it (docs/algorithm.md, "A common range offset and the
+        image scale"). 0: the intrinsics are taken as stated, exact (a simulator's, a
+        renderer's, or a description that gives no uncertainty); state the calibration's
+        uncertainty for a real camera.
     """
 
     width: int = 320
@@ -105,6 +115,7 @@ class CameraModel:
     depth_unit_mm: float = 1.0
     depth_invalid_code: int = 0
     depth_max_valid_code: int = 63999
+    focal_length_sigma_rel: float = 0.0
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -124,6 +135,11 @@ class CameraModel:
             raise ValueError(f"unwrapped_range_mm must be positive, got {self.unwrapped_range_mm}")
         if not self.count_scale > 0:
             raise ValueError(f"count_scale must be positive, got {self.count_scale}")
+        if not 0.0 <= self.focal_length_sigma_rel < MAX_FOCAL_LENGTH_SIGMA_REL:
+            raise ValueError(
+                f"focal_length_sigma_rel must be in [0, {MAX_FOCAL_LENGTH_SIGMA_REL:g}) (a "
+                f"relative sigma: 0.002 is 0.2 %), got {self.focal_length_sigma_rel}"
+            )
         if self.distance_kind not in DISTANCE_KINDS:
             raise ValueError(
                 f"distance_kind must be one of {', '.join(DISTANCE_KINDS)}, "
@@ -233,6 +249,7 @@ class CameraModel:
             "depth_unit_mm": self.depth_unit_mm,
             "depth_invalid_code": self.depth_invalid_code,
             "depth_max_valid_code": self.depth_max_valid_code,
+            "focal_length_sigma_rel": self.focal_length_sigma_rel,
         }
 
     @staticmethod
@@ -241,7 +258,7 @@ class CameraModel:
         missing or invalid key. The keys after the intrinsics are optional, with the
         EPC660's values as defaults (so older files read as they did): 4095 counts,
         6 MHz, no unwrapping, count scale 1, radial distances in mm codes, 0 and codes
-        above 63999 invalid."""
+        above 63999 invalid, intrinsics exact (focal_length_sigma_rel 0)."""
         required = ("width", "height", "fx", "fy", "cx", "cy")
         missing = [k for k in required if k not in d]
         if missing:
@@ -281,6 +298,8 @@ class CameraModel:
             depth_unit_mm=get("depth_unit_mm", float, 1.0),
             depth_invalid_code=get("depth_invalid_code", int, 0),
             depth_max_valid_code=get("depth_max_valid_code", int, 63999),
+            # none stated: the intrinsics as given, exact
+            focal_length_sigma_rel=get("focal_length_sigma_rel", float, 0.0),
         )
 
     def to_json(self) -> str:

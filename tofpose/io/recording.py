@@ -21,6 +21,20 @@
     /lab_truth/R_camera_target     float64 (N, 3, 3)                      optional
     /lab_truth/t_camera_target_mm  float64 (N, 3)                         optional
 
+Recordings of the server's live stream may also carry each frame's stamps on the host's
+monotonic clock (int64 ns, ``time.monotonic_ns``), with the anchor that turns them into
+UTC in ``/frames``' attributes (``monotonic_anchor_ns``, ``wall_anchor_ns``: one moment
+read on both clocks)::
+
+    /frames/capture_ns     int64 (N,)  when the device captured the frame (its clock
+                                       mapped to the host's; docs/server.md, "Latency
+                                       and dropped frames")
+    /frames/arrival_ns     int64 (N,)  when the frame reached the server
+    /frames/pose_ready_ns  int64 (N,)  when its pose was ready
+
+A recording without them (every recording written before them, and ``tofpose
+simulate``'s) reads as before, with ``Recording.stamps`` None.
+
 ``/truth`` is the pose that produced each frame (on the simulator: what was rendered);
 ``/lab_truth`` is what the lab believed (encoders + nominal mount and placement), the
 only reference a real lab has. A simulated recording carries both.
@@ -48,6 +62,10 @@ from tofpose.core.depth import radial_from_z
 
 FORMAT = "tofpose-recording"
 VERSION = 1
+STAMP_DATASETS = ("frames/capture_ns", "frames/arrival_ns", "frames/pose_ready_ns")
+"""The per-frame host stamps (module docstring), in the order of ``RecordingStamps``."""
+STAMP_ANCHOR_ATTRS = ("monotonic_anchor_ns", "wall_anchor_ns")
+"""``/frames``' attributes: one moment on the host's monotonic clock and in UTC ns."""
 
 
 class RecordingError(ValueError):
@@ -236,6 +254,22 @@ def _read_poses(f: h5py.File, group: str, n: int, path) -> tuple[np.ndarray, np.
     return R, t
 
 
+@dataclass(frozen=True)
+class RecordingStamps:
+    """A live recording's per-frame stamps: ndarrays of shape (N,), int64 ns on the
+    recording host's monotonic clock; ``wall_ns`` turns any of them into UTC ns."""
+
+    capture_ns: np.ndarray
+    arrival_ns: np.ndarray
+    pose_ready_ns: np.ndarray
+    monotonic_anchor_ns: int
+    wall_anchor_ns: int
+
+    def wall_ns(self, stamps_ns: np.ndarray) -> np.ndarray:
+        """UTC ns (Unix epoch) of monotonic stamps: ndarray of the same shape."""
+        return np.asarray(stamps_ns, np.int64) - self.monotonic_anchor_ns + self.wall_anchor_ns
+
+
 @dataclass
 class Recording:
     """An open recording (read-only). Frames are read lazily; use as a context manager.
@@ -249,6 +283,8 @@ class Recording:
     wall_time_ns : (N,) int64 the host's wall clock (Unix ns) when each frame was
     captured (``/frames/wall_time_ns``, written by the server's recordings), or None
     when the file has none or not for every frame (``time_s`` is the device's clock).
+    stamps : the live stream's capture, arrival and pose-ready stamps per frame
+    (``RecordingStamps``), or None when the file has none or not for every frame.
     """
 
     path: Path
@@ -264,6 +300,7 @@ class Recording:
     stored_distance_kind: str = "radial"
     _stored_camera: CameraModel | None = None
     wall_time_ns: np.ndarray | None = None
+    stamps: RecordingStamps | None = None
 
     def _radial(self, distance_mm: np.ndarray) -> np.ndarray:
         """Stored distances (H, W) or (n, H, W) as radial distances."""
@@ -341,6 +378,19 @@ def _wall_times(f: h5py.File, n: int) -> np.ndarray | None:
     return ns
 
 
+def _stamps(f: h5py.File, n: int) -> RecordingStamps | None:
+    """``STAMP_DATASETS`` and their anchor when all are there for every frame, else
+    None (an older recording, or one cut off part-way through a frame)."""
+    frames = f["frames"]
+    if any(f.get(name) is None or f[name].shape != (n,) for name in STAMP_DATASETS):
+        return None
+    if any(a not in frames.attrs for a in STAMP_ANCHOR_ATTRS):
+        return None
+    capture, arrival, pose_ready = (np.asarray(f[name][...], np.int64) for name in STAMP_DATASETS)
+    mono, wall = (int(frames.attrs[a]) for a in STAMP_ANCHOR_ATTRS)
+    return RecordingStamps(capture, arrival, pose_ready, mono, wall)
+
+
 def open_recording(path: str | Path) -> Recording:
     """Open and validate a recording; raises ``RecordingError`` naming the problem."""
     path = Path(path)
@@ -410,6 +460,7 @@ def open_recording(path: str | Path) -> Recording:
             stored_distance_kind=stored_kind,
             _stored_camera=camera,
             wall_time_ns=_wall_times(f, n),
+            stamps=_stamps(f, n),
         )
     except RecordingError:
         f.close()

@@ -18,6 +18,14 @@ every combination)::
 * ``catalog``: a built-in catalog's name (``tofpose.core.catalog.BUILTIN_CATALOGS``);
 * ``preset``: the pipeline's settings, ``PRESETS``.
 
+``requirements`` (optional; every key optional): the accuracy each cell is judged
+against, per axis as a campaign's (``x_mm``, ``y_mm``, ``z_mm`` in mm, ``pitch_deg``,
+``yaw_deg``, ``roll_deg`` in deg; defaults ``tofpose.lab.requirements.PAPER_REQUIREMENTS``,
+the campaign's), and ``percentile``: the share of a cell's frames (%) that must have a
+pose within an axis' requirement for the cell to pass it (default 95; 100 = every
+frame). ``tofpose.study.verdict`` applies them. A spec written before requirements
+existed loads with the defaults.
+
 Every frame is a fresh acquisition. Frame ``i`` of cell ``c`` draws everything from
 ``numpy.random.SeedSequence(seed).spawn``'s child ``(c, i)``, so a frame's result
 depends on the spec alone: not on the chunking, the number of workers or their order.
@@ -31,14 +39,21 @@ costs memory in proportion to its grid.
 
 from __future__ import annotations
 
+import difflib
 import itertools
 import json
 import math
 import operator
 from collections.abc import Iterator, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field, fields
 
 from tofpose.core.catalog import BUILTIN_CATALOGS
+from tofpose.lab.requirements import (
+    MAX_REQUIREMENT,
+    PAPER_REQUIREMENTS,
+    REQUIREMENT_AXES,
+    axis_unit,
+)
 from tofpose.pipeline import PipelineConfig
 from tofpose.sim.randomise import FAMILIES
 
@@ -88,6 +103,78 @@ class StudySpecError(ValueError):
         "range_m", 1]`` (empty for the spec as a whole)."""
         parts = self.field.replace("[", ".").replace("]", "").split(".")
         return [int(p) if p.isdigit() else p for p in parts if p]
+
+
+#: the share of a cell's frames (%) that must be within a requirement, by default
+DEFAULT_PERCENTILE = 95.0
+#: the smallest ``percentile`` a spec may ask for: a verdict on fewer than half the frames
+#: would say nothing of the cell
+MIN_PERCENTILE = 50.0
+
+
+@dataclass(frozen=True)
+class StudyRequirements:
+    """What a cell is judged against (module docstring): the largest |error| allowed on
+    each axis (mm, deg; the campaign's defaults) and the share of the cell's frames
+    (``percentile``, %) that must be within it."""
+
+    x_mm: float = PAPER_REQUIREMENTS["x_mm"]
+    y_mm: float = PAPER_REQUIREMENTS["y_mm"]
+    z_mm: float = PAPER_REQUIREMENTS["z_mm"]
+    pitch_deg: float = PAPER_REQUIREMENTS["pitch_deg"]
+    yaw_deg: float = PAPER_REQUIREMENTS["yaw_deg"]
+    roll_deg: float = PAPER_REQUIREMENTS["roll_deg"]
+    percentile: float = DEFAULT_PERCENTILE
+
+    def axis(self, name: str) -> float:
+        """The requirement of axis ``name`` (``REQUIREMENT_AXES``)."""
+        return float(getattr(self, name))
+
+    @classmethod
+    def from_dict(cls, doc) -> StudyRequirements:
+        """Validate a spec's ``requirements`` object (None: the defaults);
+        ``StudySpecError`` naming ``requirements.<key>``."""
+        if doc is None:
+            return cls()
+        if not isinstance(doc, dict):
+            raise StudySpecError("requirements", "must be an object of axes (" + _KNOWN_REQ + ")")
+        known = [f.name for f in fields(cls)]
+        for key in doc:
+            if key not in known:
+                close = difflib.get_close_matches(str(key), known, n=1)
+                hint = f"did you mean {close[0]!r}? " if close else ""
+                raise StudySpecError(
+                    f"requirements.{key}", f"unknown field ({hint}known: {_KNOWN_REQ})"
+                )
+        values: dict[str, float] = {}
+        for axis in REQUIREMENT_AXES:
+            if axis in doc:
+                hi = MAX_REQUIREMENT[axis_unit(axis)]
+                v = _number(doc[axis], f"requirements.{axis}")
+                if not 0.0 < v <= hi:
+                    raise StudySpecError(
+                        f"requirements.{axis}",
+                        f"must be > 0 and <= {hi:g} {axis_unit(axis)} (got {v:g})",
+                    )
+                values[axis] = v
+        if "percentile" in doc:
+            v = _number(doc["percentile"], "requirements.percentile")
+            if not MIN_PERCENTILE <= v <= 100.0:
+                raise StudySpecError(
+                    "requirements.percentile",
+                    f"must be a share of frames in [{MIN_PERCENTILE:g}, 100] % (got {v:g})",
+                )
+            values["percentile"] = v
+        return cls(**values)
+
+
+_KNOWN_REQ = ", ".join([*REQUIREMENT_AXES, "percentile"])
+
+
+def _number(v, where: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise StudySpecError(where, f"must be a number (got {v!r})")
+    return float(v)
 
 
 @dataclass(frozen=True)
@@ -192,6 +279,7 @@ class StudySpec:
     seed: int = 0
     frames_per_cell: int = 100
     chunk_frames: int = 25
+    requirements: StudyRequirements = field(default_factory=StudyRequirements)
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -255,7 +343,7 @@ class StudySpec:
         the axis lengths before the spec is made."""
         if not isinstance(doc, dict):
             raise StudySpecError("", "the study spec must be a JSON object")
-        known = {"name", "seed", "frames_per_cell", "chunk_frames", "grid"}
+        known = {"name", "seed", "frames_per_cell", "chunk_frames", "grid", "requirements"}
         unknown = sorted(set(doc) - known)
         if unknown:
             raise StudySpecError(unknown[0], f"unknown field (known: {', '.join(sorted(known))})")
@@ -273,9 +361,17 @@ class StudySpec:
             axes = ", ".join(GRID_AXES)
             raise StudySpecError(f"grid.{unknown[0]}", f"unknown axis (known: {axes})")
         grid = {a: tuple(_axis(a, grid_doc.get(a, _DEFAULT_GRID[a]))) for a in GRID_AXES}
+        requirements = StudyRequirements.from_dict(doc.get("requirements"))
         if limits is not None:
             limits.check([len(grid[a]) for a in GRID_AXES], frames)
-        return cls(grid=grid, name=name, seed=seed, frames_per_cell=frames, chunk_frames=chunk)
+        return cls(
+            grid=grid,
+            name=name,
+            seed=seed,
+            frames_per_cell=frames,
+            chunk_frames=chunk,
+            requirements=requirements,
+        )
 
 
 def _integer(doc: dict, key: str, default: int, minimum: int) -> int:
@@ -319,7 +415,8 @@ def _axis(name: str, values) -> list:
 
 
 #: ``tofpose study --example``: 3 ranges x 2 attitude spreads x 2 physics families, 16
-#: frames per cell (192 frames); about a minute on a 2-core machine
+#: frames per cell (192 frames), the default requirements spelt out; about a minute on
+#: a 2-core machine
 EXAMPLE = {
     "name": "example",
     "seed": 1,
@@ -334,4 +431,5 @@ EXAMPLE = {
         "catalog": ["paper-target"],
         "preset": ["default"],
     },
+    "requirements": {**PAPER_REQUIREMENTS, "percentile": DEFAULT_PERCENTILE},
 }

@@ -6,21 +6,34 @@ share of poses beyond 3 reported sigmas, mean NEES / 6 (the rules of
 mm) over the poses: bias (mean), std, RMS and the RMS of error over reported sigma
 (1 = a right covariance); attitude and position error p50 / p95 / p99 over the poses
 (every pose, not only the successes: a 99th percentile of an envelope has to see the
-bad ones); failure reasons by kind. Computed in one order (cells, then frames), so the
-same stored rows give the same bits.
+bad ones); failure reasons by kind; and the verdict against the spec's requirements
+(``tofpose.study.verdict``: per axis the deciding percentile of |error|, pass / fail, the
+failure modes and the main one). The study's verdict in one paragraph heads the
+summary. Computed in one order (cells, then frames), so the same stored rows give the
+same bits.
+
+``success_pct`` is ``tofpose.lab.pose_judgement``'s gross rule (within 1 deg and
+max(20 mm, 0.5 % of the range), the rule every bench figure uses), not the
+requirements: ``verdict.within_all_pct`` is the share of frames within every
+requirement.
 """
 
 from __future__ import annotations
 
 import math
 from collections import Counter
+from dataclasses import asdict
 
 import numpy as np
 import pyarrow as pa
 
 from tofpose.lab.pose_judgement import AXES
+from tofpose.study.axis_errors import requirement_axis_errors
 from tofpose.study.columns import ERROR_COLUMNS, SIGMA_COLUMNS
-from tofpose.study.spec import StudySpec
+from tofpose.study.spec import StudyRequirements, StudySpec
+from tofpose.study.verdict import judge_cell, reason_kind, study_verdict
+
+__all__ = ["PERCENTILES", "cell_statistics", "reason_kind", "summarise"]
 
 PERCENTILES = (50, 95, 99)
 
@@ -35,15 +48,11 @@ def _percentiles(values: np.ndarray) -> dict[str, float | None]:
     return {f"p{q}": _num(np.percentile(values, q)) for q in PERCENTILES}
 
 
-def reason_kind(reason: str) -> str:
-    """A failure reason without its numbers: the words before the first ':' or '('."""
-    for sep in (":", "("):
-        reason = reason.split(sep)[0]
-    return reason.strip() or "unknown"
-
-
-def cell_statistics(columns: dict[str, np.ndarray]) -> dict:
-    """The statistics (module docstring) of one cell's rows (column -> (N,) array)."""
+def cell_statistics(
+    columns: dict[str, np.ndarray], requirements: StudyRequirements | None = None
+) -> dict:
+    """The statistics (module docstring) of one cell's rows (column -> (N,) array), and
+    its verdict against ``requirements`` (None: the defaults)."""
     n = len(columns["frame"])
     ok = columns["ok"].astype(bool)
     n_ok = int(ok.sum())
@@ -61,7 +70,13 @@ def cell_statistics(columns: dict[str, np.ndarray]) -> dict:
             "spread_over_sigma": _num(np.sqrt(np.mean((e / sig[:, k]) ** 2))) if n_ok else None,
         }
     failed = Counter(reason_kind(r) for r, o in zip(columns["reason"], ok, strict=True) if not o)
+    verdict = judge_cell(
+        requirement_axis_errors(columns),
+        [str(r or "") for r in columns["reason"]],
+        requirements or StudyRequirements(),
+    )
     return {
+        "verdict": verdict.to_dict(),
         "frames": n,
         "poses": n_ok,
         "no_pose": n - n_ok,
@@ -85,7 +100,7 @@ def summarise(spec: StudySpec, table: pa.Table) -> dict:
     cells = []
     for c in spec.cells:
         sel = cell_of == c.index
-        stats = cell_statistics({k: v[sel] for k, v in cols.items()})
+        stats = cell_statistics({k: v[sel] for k, v in cols.items()}, spec.requirements)
         cells.append(
             {
                 "cell": c.index,
@@ -107,6 +122,8 @@ def summarise(spec: StudySpec, table: pa.Table) -> dict:
         "frames_planned": spec.n_frames,
         "frames_stored": int(table.num_rows),
         "complete": int(table.num_rows) == spec.n_frames,
-        "all": cell_statistics(cols) if table.num_rows else None,
+        "requirements": asdict(spec.requirements),
+        "verdict": study_verdict(cells, spec.requirements),
+        "all": cell_statistics(cols, spec.requirements) if table.num_rows else None,
         "cells": cells,
     }

@@ -39,8 +39,9 @@ def study(args) -> int:
         )
         return 130
     a = summary["all"]
+    print(summary["verdict"]["text"])
     print(
-        f"{summary['frames_stored']} frames in {len(spec.cells)} cells: success "
+        f"{summary['frames_stored']} frames in {len(spec.cells)} cells: gross success "
         f"{a['success_pct']:.1f} %, {a['wrong']} wrong, {a['confidently_wrong']} confidently "
         f"wrong -> {Path(args.out) / 'report.html'}"
     )

@@ -34,6 +34,7 @@ from backend.api.schemas.campaigns import (
     MeasurementPage,
 )
 from backend.services.calibrations import get_calibration
+from backend.services.campaigns.camera_plan import camera_identity, camera_limits, plan_cameras
 from backend.services.campaigns.campaign_repository import CampaignView
 from backend.services.campaigns.campaign_requests import (
     Planning,
@@ -99,11 +100,26 @@ def create_campaign(body: CampaignCreate, state: StateDep, session: SessionDep) 
 
     422 names every problem: no set-points, both or neither of ``setpoints`` and
     ``generator``, set-points outside the soft limits, too many set-points or frames, an
-    unknown catalog. 409 if the name is taken. Nothing is stored on an error.
+    unknown catalog, camera settings outside the camera's limits (the field and the allowed
+    range named), a camera serial or firmware the connected camera contradicts. 409 if
+    the name is taken. Nothing is stored on an error.
     """
     if body.setpoints is not None and body.generator is not None:
         raise unprocessable(["body"], ["give either 'setpoints' or 'generator', not both"])
-    setpoints = _setpoints(body)
+    camera = state.devices.camera
+    setpoints, cameras, camera_problems = plan_cameras(
+        _setpoints(body),
+        [sp.camera_setting() for sp in body.setpoints] if body.setpoints else None,
+        body.camera_sweep.model_dump(exclude_none=True) if body.camera_sweep else None,
+        body.camera.model_dump(exclude_none=True) if body.camera else None,
+        camera_limits(camera),
+        camera.name,
+    )
+    describe = getattr(camera, "describe", None)
+    identity, identity_problems = camera_identity(
+        describe() if callable(describe) else {},
+        body.model_dump(include={"camera_model", "camera_serial", "camera_firmware"}),
+    )
     motion = state.motion
     problems = plan_problems(
         setpoints,
@@ -117,6 +133,7 @@ def create_campaign(body: CampaignCreate, state: StateDep, session: SessionDep) 
     generator = body.generator.model_dump() if body.generator else None
     spec = dynamic_spec(generator, motion)
     located = profile_plan_problems(setpoints, spec, motion) if spec is not None else []
+    located += camera_problems + identity_problems
     at_body: list[tuple[Location, str]] = [(["body"], p) for p in problems]
     if at_body or located:
         raise unprocessable_at([*at_body, *located])
@@ -133,6 +150,13 @@ def create_campaign(body: CampaignCreate, state: StateDep, session: SessionDep) 
         notes=body.notes,
         record_raw=body.record_raw,
         profiles=[spec] * len(setpoints) if spec is not None else None,
+        cameras=cameras,
+        camera_sweep=body.camera_sweep.model_dump(exclude_none=True) if body.camera_sweep else None,
+        metadata={
+            "operator": body.operator or "",
+            "target_name": body.target_name or "",
+            **identity,
+        },
     )
     return _public(state, campaign, with_setpoints=True)
 

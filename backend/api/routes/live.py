@@ -2,9 +2,17 @@
 
 Protocol (JSON text messages):
 
-- server -> client on connect: ``{"type": "hello", "camera": {...}, "catalog": name}``
-- server -> client per frame: ``{"type": "pose", "dropped": n, "data": PosePublic}``;
-  ``dropped`` counts frames this client missed because it read too slowly.
+- server -> client on connect: ``{"type": "hello", "camera": {...}, "catalog": name,
+  "clock": {"monotonic_ns", "wall_ns"}}`` (the stamps' clock: a stamp's UTC ns is
+  ``wall_ns + (stamp - monotonic_ns)``)
+- server -> client per frame: ``{"type": "pose", "dropped": n, "sent_ns": t,
+  "capture_to_sent_ms": ms, "stamps": FrameStampsPublic, "latency": FrameLatencyPublic,
+  "data": PosePublic}``; ``dropped`` counts frames this client missed because it read
+  too slowly; ``sent_ns`` is when this message was handed to this client's socket and
+  ``stamps`` the frame's capture, arrival and pose-ready stamps (host monotonic ns);
+  ``latency`` the median and 95th percentile of capture -> pose and capture -> sent
+  over the last seconds and the frames dropped since the start (camera, pipeline,
+  clients); ``GET /api/live/stats`` has the whole of it.
 - client -> server, any time: options ``{"images": ["gray", "distance"],
   "image_every": 5, "image_step": 2, "raw": false, "points": true}``. Then every
   ``image_every``-th frame also brings ``{"type": "image", "kind", "frame_index",
@@ -49,16 +57,28 @@ import base64
 import contextlib
 import json
 import logging
+import time
 from collections import deque
 from urllib.parse import urlsplit
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
 
+from backend.api.deps import ReadAuth, StateDep
 from backend.api.presenters import pose_public
+from backend.api.schemas.latency import (
+    ClockAnchorPublic,
+    DroppedFramesPublic,
+    FrameLatencyPublic,
+    FrameStampsPublic,
+    LatencySummaryPublic,
+    LiveClientPublic,
+    LiveStatsPublic,
+)
 from backend.api.schemas.live import LiveOptions
 from backend.services.live.acquisition import LiveSample, frame_point_cloud_mm
 from backend.services.live.frame_codec import encode_raw_frame
+from backend.services.live.latency import DropCounts, LatencySummary, capture_source
 from backend.state import AppState
 
 log = logging.getLogger("tofpose.server")
@@ -72,6 +92,96 @@ URL_SECRETS = ("token", "key")
 
 def pose_json(sample: LiveSample) -> str:
     return sample.cached("pose_json", lambda: pose_public(sample).model_dump_json())
+
+
+def _summary(s: LatencySummary) -> LatencySummaryPublic:
+    return LatencySummaryPublic(median_ms=s.median_ms, p95_ms=s.p95_ms, n=s.n)
+
+
+def _dropped(d: DropCounts) -> DroppedFramesPublic:
+    return DroppedFramesPublic(camera=d.camera, pipeline=d.pipeline, clients=d.clients)
+
+
+def live_stats(state: AppState) -> LiveStatsPublic:
+    """The latency statistics now (``LiveStatistics.snapshot``) with the live clients."""
+    snap = state.acquisition.latency.snapshot()
+    latest = state.acquisition.latest
+    from_device = latest is None or latest.stamps is None or latest.stamps.capture_from_device
+    return LiveStatsPublic(
+        window_s=snap.window_s,
+        frames_in_window=snap.frames_in_window,
+        frames_total=snap.frames_total,
+        capture_source=capture_source(state.acquisition.camera.name, from_device),
+        capture_to_arrival=_summary(snap.capture_to_arrival),
+        capture_to_pose=_summary(snap.capture_to_pose),
+        capture_to_sent=_summary(snap.capture_to_sent),
+        dropped_in_window=_dropped(snap.dropped_in_window),
+        dropped_total=_dropped(snap.dropped_total),
+        clock=ClockAnchorPublic(monotonic_ns=snap.anchor.monotonic_ns, wall_ns=snap.anchor.wall_ns),
+        clients=[
+            LiveClientPublic(address=sub.label, offered=sub.offered, dropped=sub.dropped)
+            for sub in state.hub.subscriptions()
+            if sub.label is not None
+        ],
+    )
+
+
+@router.get("/api/live/stats", dependencies=[ReadAuth], tags=["status"])
+def get_live_stats(state: StateDep) -> LiveStatsPublic:
+    """Latency of the live stream over a sliding window (median and 95th percentile of
+    capture -> arrival, capture -> pose ready, capture -> WebSocket sent; stamps on the
+    host's monotonic clock, ``clock`` anchors them to UTC) and the frames dropped by the
+    camera, the pipeline and the live clients (docs/server.md, "Latency and dropped
+    frames")."""
+    return live_stats(state)
+
+
+def frame_stamps_json(sample: LiveSample) -> str:
+    """The frame's stamps (``FrameStampsPublic``), "null" for a sample without any."""
+
+    def make() -> str:
+        st = sample.stamps
+        if st is None:
+            return "null"
+        return FrameStampsPublic(
+            capture_ns=st.capture_ns,
+            arrival_ns=st.arrival_ns,
+            pose_ready_ns=st.pose_ready_ns,
+            capture_from_device=st.capture_from_device,
+            capture_to_pose_ms=st.capture_to_pose_ms,
+        ).model_dump_json()
+
+    return sample.cached("stamps_json", make)
+
+
+def frame_latency_json(sample: LiveSample, state: AppState) -> str:
+    """The window's statistics as this frame goes out (``FrameLatencyPublic``): made
+    once per frame, by its first client."""
+
+    def make() -> str:
+        snap = state.acquisition.latency.snapshot()
+        return FrameLatencyPublic(
+            capture_to_pose=_summary(snap.capture_to_pose),
+            capture_to_sent=_summary(snap.capture_to_sent),
+            dropped_total=_dropped(snap.dropped_total),
+            window_s=snap.window_s,
+        ).model_dump_json()
+
+    return sample.cached("latency_json", make)
+
+
+def pose_message(sample: LiveSample, state: AppState, dropped: int) -> tuple[str, int]:
+    """A client's pose message for ``sample`` and the ``sent_ns`` stamped in it (the
+    moment it is handed to the socket, taken as it is made)."""
+    sent_ns = time.monotonic_ns()
+    st = sample.stamps
+    to_sent = "null" if st is None else f"{st.capture_to_sent_ms(sent_ns):.3f}"
+    head = (
+        f'{{"type":"pose","dropped":{dropped},"sent_ns":{sent_ns},'
+        f'"capture_to_sent_ms":{to_sent},"stamps":{frame_stamps_json(sample)},'
+        f'"latency":{frame_latency_json(sample, state)},"data":'
+    )
+    return head + pose_json(sample) + "}", sent_ns
 
 
 async def image_message(sample: LiveSample, state: AppState, kind: str, step: int) -> str:
@@ -295,6 +405,11 @@ async def _stream(ws: WebSocket, state: AppState) -> None:
             {
                 "type": "hello",
                 "catalog": state.acquisition.catalog_name,
+                # the stamps' clock against UTC: wall_ns + (stamp - monotonic_ns)
+                "clock": {
+                    "monotonic_ns": state.acquisition.latency.anchor.monotonic_ns,
+                    "wall_ns": state.acquisition.latency.anchor.wall_ns,
+                },
                 "camera": {
                     "driver": state.devices.camera.name,
                     "width_px": m.width,
@@ -309,7 +424,11 @@ async def _stream(ws: WebSocket, state: AppState) -> None:
         ),
         timeout_s,
     )
-    sub = state.hub.subscribe(loop=asyncio.get_running_loop())
+    latency = state.acquisition.latency
+    address = ws.client.host if ws.client else ""
+    sub = state.hub.subscribe(
+        loop=asyncio.get_running_loop(), label=address, on_drop=latency.record_client_drops
+    )
     opts = {"current": LiveOptions()}
     flow = RawFlow()
     reader = asyncio.create_task(_read_options(ws, opts, flow))
@@ -324,8 +443,10 @@ async def _stream(ws: WebSocket, state: AppState) -> None:
                 reader.result()  # re-raises the disconnect
                 return
             sample: LiveSample = getter.result()
-            head = f'{{"type":"pose","dropped":{sub.dropped},"data":'
-            await send(ws, head + pose_json(sample) + "}", timeout_s)
+            message, sent_ns = pose_message(sample, state, sub.dropped)
+            await send(ws, message, timeout_s)
+            if sample.stamps is not None:
+                latency.record_sent(sample.stamps, sent_ns)
             if (v := state.campaigns.progress_version) != campaign_version:
                 campaign_version = v
                 if (progress := state.campaigns.progress()) is not None:

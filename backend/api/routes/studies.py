@@ -22,19 +22,26 @@ MEDIA = {"html": "text/html", "pdf": "application/pdf", "json": "application/jso
 
 
 def _public(s) -> StudyPublic:
-    return StudyPublic(**{**asdict(s), "reports": list(s.reports)})
+    # fields the status has and the answer does not are left out; ``dashboard_url`` is
+    # passed on when the job service's status carries one (Dask runs)
+    fields = {**asdict(s), "reports": list(s.reports)}
+    return StudyPublic(**{k: v for k, v in fields.items() if k in StudyPublic.model_fields})
 
 
 @router.post(
     "", status_code=status.HTTP_201_CREATED, dependencies=[WriteAuth], responses=errors(409)
 )
 def create_study(body: StudyCreate, state: StateDep) -> StudyPublic:
-    """Queue a study. 422 names the field when the spec cannot run (a range outside
-    0.3-20 m, an unknown catalog, a value listed twice, more cells or frames than the
+    """Queue a study. ``requirements`` (optional, each field optional: the campaign's
+    defaults, 95 % of a cell's frames) is what each cell's verdict in the report is
+    judged against. 422 names the field when the spec cannot run (a range outside
+    0.3-20 m, an unknown catalog, a value listed twice, a requirement <= 0, more cells
+    or frames than the
     server takes: TOFPOSE_STUDY_MAX_CELLS, TOFPOSE_STUDY_MAX_FRAMES); 409 while
     TOFPOSE_STUDIES_MAX_ACTIVE studies are queued or running. Nothing is stored then."""
     doc = body.model_dump(exclude_none=True)
     doc["grid"] = body.grid.model_dump(exclude_none=True)
+    doc["requirements"] = body.requirements.model_dump()
     try:  # the size is checked from the axis lengths before anything is made
         spec = StudySpec.from_dict(doc, limits=study_limits(state.settings))
     except StudySpecError as exc:

@@ -13,6 +13,7 @@ from backend.api.schemas.camera import CameraSettingsUpdate
 from backend.api.schemas.common import StrictBody
 from backend.api.schemas.motion import AxisBody, ProfileRequest
 from backend.services.campaigns.campaign_states import CampaignCommand, CampaignState
+from tofpose.lab.requirements import PAPER_REQUIREMENTS
 
 MAX_SETPOINTS = 5000
 MAX_FRAMES_PER_POINT = 100_000
@@ -21,25 +22,65 @@ AngleDeg = Annotated[float, Field(ge=-360.0, le=360.0)]
 RailMm = Annotated[float, Field(ge=0.0, le=100_000.0)]
 
 
+class SetPointCamera(StrictBody):
+    """Camera settings applied before a set-point's frames (docs/campaigns.md, "Camera
+    settings and metadata"); a field left out keeps the camera's. Checked against the
+    camera's limits when the campaign is created. An integration time turns the camera's
+    auto exposure off for the set-point."""
+
+    integration_time_us: float | None = Field(default=None, gt=0.0, le=1.0e6)
+    modulation_frequency_mhz: float | None = Field(default=None, gt=0.0, le=1000.0)
+
+
+Microseconds = Annotated[float, Field(gt=0.0, le=1.0e6)]
+Megahertz = Annotated[float, Field(gt=0.0, le=1000.0)]
+IntegrationTimes = Annotated[list[Microseconds], Field(min_length=1, max_length=50)]
+ModulationFrequencies = Annotated[list[Megahertz], Field(min_length=1, max_length=10)]
+
+
+class CameraSweep(StrictBody):
+    """Every set-point measured at every combination of these lists (the set-point
+    outermost, then integration time)."""
+
+    model_config = ConfigDict(json_schema_extra={"minProperties": 1})
+
+    integration_time_us: IntegrationTimes | None = None
+    modulation_frequency_mhz: ModulationFrequencies | None = None
+
+
 class SetPointModel(AxisBody):
-    """Axis set-points of one campaign point; an axis left out stays where it is."""
+    """Axis set-points of one campaign point; an axis left out stays where it is;
+    ``camera``: the camera settings for its frames."""
 
     yaw_deg: AngleDeg | SkipJsonSchema[None] = None
     pitch_deg: AngleDeg | SkipJsonSchema[None] = None
     roll_deg: AngleDeg | SkipJsonSchema[None] = None
     rail_mm: RailMm | SkipJsonSchema[None] = None
+    camera: SetPointCamera | SkipJsonSchema[None] = None
+
+    def axes(self) -> dict[str, float]:
+        return {
+            k.rsplit("_", 1)[0]: v
+            for k, v in self.model_dump(exclude={"camera"}).items()
+            if v is not None
+        }
+
+    def camera_setting(self) -> dict[str, float]:
+        """The fields of ``camera`` given ({} for none)."""
+        return self.camera.model_dump(exclude_none=True) if self.camera else {}
 
 
 class Requirements(StrictBody):
-    """Accuracy requirements per axis (default: the paper's, §6.4): a set-point passes an
+    """Accuracy requirements per axis (default: the paper's, §6.4,
+    ``tofpose.lab.requirements.PAPER_REQUIREMENTS``): a set-point passes an
     axis when the largest |error| after singular-point removal is within it."""
 
-    x_mm: float = Field(default=6.0, gt=0, le=1e5)
-    y_mm: float = Field(default=6.0, gt=0, le=1e5)
-    z_mm: float = Field(default=28.3, gt=0, le=1e5)
-    pitch_deg: float = Field(default=0.15, gt=0, le=180)
-    yaw_deg: float = Field(default=0.15, gt=0, le=180)
-    roll_deg: float = Field(default=0.15, gt=0, le=180)
+    x_mm: float = Field(default=PAPER_REQUIREMENTS["x_mm"], gt=0, le=1e5)
+    y_mm: float = Field(default=PAPER_REQUIREMENTS["y_mm"], gt=0, le=1e5)
+    z_mm: float = Field(default=PAPER_REQUIREMENTS["z_mm"], gt=0, le=1e5)
+    pitch_deg: float = Field(default=PAPER_REQUIREMENTS["pitch_deg"], gt=0, le=180)
+    yaw_deg: float = Field(default=PAPER_REQUIREMENTS["yaw_deg"], gt=0, le=180)
+    roll_deg: float = Field(default=PAPER_REQUIREMENTS["roll_deg"], gt=0, le=180)
 
 
 AxisValues = Annotated[list[AngleDeg], Field(min_length=1, max_length=200)]
@@ -151,6 +192,26 @@ class CampaignCreate(StrictBody):
     generator: Generator | None = None
     requirements: Requirements = Field(default_factory=Requirements)
     camera: CameraSettingsUpdate | None = None
+    camera_sweep: CameraSweep | None = Field(
+        default=None,
+        description="measure every set-point at each of these camera settings "
+        "(not with a per-set-point 'camera')",
+    )
+    operator: str | None = Field(
+        default=None, max_length=200, pattern=r"^[^\x00-\x1f]*$", description="who runs it"
+    )
+    target_name: str | None = Field(
+        default=None, max_length=200, pattern=r"^[^\x00-\x1f]*$", description="the target measured"
+    )
+    camera_model: str | None = Field(
+        default=None, max_length=200, description="when the camera's driver does not report it"
+    )
+    camera_serial: str | None = Field(
+        default=None, max_length=200, description="when the camera's driver does not report it"
+    )
+    camera_firmware: str | None = Field(
+        default=None, max_length=200, description="when the camera's driver does not report it"
+    )
     record_raw: bool = Field(
         default=False,
         description="keep every measured frame pair in an HDF5 recording "
@@ -189,6 +250,9 @@ class ProgressPublic(BaseModel):
     frames_per_point: int
     elapsed_s: float
     eta_s: float | None
+    camera: dict[str, float] | None = Field(
+        default=None, description="camera settings of the set-point in progress (null: as it is)"
+    )
 
 
 class SetPointPublic(BaseModel):
@@ -201,6 +265,9 @@ class SetPointPublic(BaseModel):
         default=None,
         description="a dynamic set-point's motion profile (axis, kind, its fields, "
         "rest_s), null at a static one",
+    )
+    camera: dict[str, float] | None = Field(
+        default=None, description="camera settings for its frames; null: the camera as it is"
     )
     status: Literal["pending", "done"]
 
@@ -217,6 +284,12 @@ class CampaignPublic(BaseModel):
     requirements: Requirements
     generator: dict | None
     camera: dict | None
+    camera_sweep: dict | None = None
+    operator: str = ""
+    target_name: str = ""
+    camera_model: str = ""
+    camera_serial: str = ""
+    camera_firmware: str = ""
     record_raw: bool
     notes: str
     created_at: datetime
@@ -266,6 +339,9 @@ class MeasurementPublic(BaseModel):
     truth: dict[str, float] | None = Field(description="pose that produced the frame")
     lab_truth: dict[str, float] | None = Field(description="encoders + nominal geometry")
     encoders: dict[str, float] | None
+    integration_time_us: float | None = Field(
+        default=None, description="the exposure the camera reports for the frame"
+    )
     in_motion: bool | None = Field(
         default=None,
         description="taken while the set-point's motion profile ran (null at a static set-point)",

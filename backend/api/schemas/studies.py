@@ -6,7 +6,9 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, Field
 
+from backend.api.schemas.campaigns import Requirements
 from backend.api.schemas.common import JsonInt, StrictBody
+from tofpose.study.spec import DEFAULT_PERCENTILE, MIN_PERCENTILE
 
 RangeM = Annotated[float, Field(ge=0.3, le=20.0)]
 AttitudeDeg = Annotated[float, Field(ge=0.0, le=60.0)]
@@ -48,6 +50,19 @@ class StudyGrid(StrictBody):
     preset: list[Literal["default", "paper"]] | None = Field(default=None, min_length=1)
 
 
+class StudyRequirements(Requirements):
+    """The accuracy a cell is judged against (``tofpose.study.spec``): per axis the
+    campaign's requirement (same fields, same defaults), and the share of a cell's frames
+    that must have a pose within it."""
+
+    percentile: float = Field(
+        default=DEFAULT_PERCENTILE,
+        ge=MIN_PERCENTILE,
+        le=100.0,
+        description="share of a cell's frames (%) that must be within each requirement",
+    )
+
+
 class StudyCreate(StrictBody):
     """A study spec (``tofpose study --example`` prints one)."""
 
@@ -56,6 +71,7 @@ class StudyCreate(StrictBody):
     frames_per_cell: JsonInt = Field(default=100, ge=1, le=1_000_000)
     chunk_frames: JsonInt | None = Field(default=None, ge=1, le=100_000)
     grid: StudyGrid
+    requirements: StudyRequirements = Field(default_factory=StudyRequirements)
 
 
 class StudyPublic(BaseModel):
@@ -74,4 +90,7 @@ class StudyPublic(BaseModel):
     cluster: str | None = Field(default=None, description="the Dask cluster it ran on")
     reports: list[Literal["html", "pdf", "json"]] = Field(
         description="report files available at /api/studies/{id}/report.{html,pdf,json}"
+    )
+    dashboard_url: str | None = Field(
+        default=None, description="the Dask dashboard of the cluster running it, while it runs"
     )

@@ -54,6 +54,7 @@ class SetPointView:
     roll_deg: float | None
     rail_mm: float | None
     profile: dict | None
+    camera: dict | None
     status: Literal["pending", "done"]
 
     @property
@@ -84,6 +85,12 @@ class CampaignView:
     requirements: dict[str, float]
     generator: dict | None
     camera: dict | None
+    camera_sweep: dict | None
+    operator: str
+    target_name: str
+    camera_model: str
+    camera_serial: str
+    camera_firmware: str
     record_raw: bool
     notes: str
     created_at: datetime
@@ -141,9 +148,14 @@ def create_campaign(
     notes: str = "",
     record_raw: bool = False,
     profiles: list[dict | None] | None = None,
+    cameras: list[dict | None] | None = None,
+    camera_sweep: dict | None = None,
+    metadata: dict[str, str] | None = None,
 ) -> CampaignRow:
     """Store a draft campaign with its set-points (and, for a dynamic one, the motion
-    profile of each) in session ``s``; ``NameTakenError`` if the name exists."""
+    profile of each; ``cameras``: each one's camera settings) in session ``s``;
+    ``metadata``: ``operator``, ``target_name``, ``camera_model``, ``camera_serial``,
+    ``camera_firmware``. ``NameTakenError`` if the name exists."""
     row = CampaignRow(
         name=name,
         status=CampaignState.DRAFT.value,
@@ -157,6 +169,8 @@ def create_campaign(
         camera_settings=camera,
         notes=notes,
         record_raw=record_raw,
+        camera_sweep=camera_sweep,
+        **(metadata or {}),
     )
     for i, sp in enumerate(setpoints):
         row.setpoints.append(
@@ -164,6 +178,7 @@ def create_campaign(
                 index=i,
                 status="pending",
                 profile=profiles[i] if profiles else None,
+                camera=(cameras[i] or None) if cameras else None,
                 **{AXIS_COLUMNS[a]: float(v) for a, v in sp.items()},
             )
         )
@@ -356,6 +371,7 @@ def measurement_row(setpoint_id: int, sample: LiveSample) -> MeasurementRow:
         n_matched=int(r.n_matched),
         residual_mm=_finite(r.residual_mm),
         encoders={k: float(v) for k, v in f.meta.get("encoders", {}).items()} or None,
+        integration_time_us=_reported_us(f.meta.get("integration_time_us")),
     )
     if r.ok and r.R is not None and r.t_mm is not None and r.quaternion_wxyz is not None:
         row.x_mm, row.y_mm, row.z_mm = (float(v) for v in r.t_mm)
@@ -396,6 +412,11 @@ def _set_reference(row: MeasurementRow, prefix: str, T: RigidTransform | None) -
         strict=True,
     ):
         setattr(row, prefix + name, v)
+
+
+def _reported_us(v) -> float | None:
+    """A frame's reported integration time (us), None when the camera gives none."""
+    return None if v is None else _finite(v)
 
 
 def _finite(v) -> float | None:

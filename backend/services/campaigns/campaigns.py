@@ -22,12 +22,13 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from backend.services.campaigns.campaign_camera import CampaignCamera
 from backend.services.campaigns.campaign_repository import (
     CampaignNotFoundError,
     CampaignRepository,
@@ -76,6 +77,7 @@ class Progress:
     frames_per_point: int
     started_monotonic: float
     done_this_run: int = 0
+    camera: dict | None = None  # the camera settings of the set-point in progress
 
     def as_dict(self) -> dict:
         elapsed = time.monotonic() - self.started_monotonic
@@ -92,6 +94,7 @@ class Progress:
             "frames_per_point": self.frames_per_point,
             "elapsed_s": elapsed,
             "eta_s": eta,
+            "camera": self.camera,
         }
 
 
@@ -335,10 +338,10 @@ class CampaignService:
         sub = None
         final, reason = CampaignState.DONE, ""
         recorder: RawRecorder | None = None
+        camera = CampaignCamera(self.acquisition)
         try:
             sub = self.hub.subscribe(maxsize=256)
-            if campaign.camera:
-                self._apply_camera(dict(campaign.camera))
+            self._begin_camera(camera, campaign)
             if campaign.record_raw:
                 recorder = RawRecorder(
                     self.recording_path(campaign_id),
@@ -346,7 +349,7 @@ class CampaignService:
                     self.acquisition.catalog,
                     committed_frames,
                 )
-            self._run_setpoints(campaign, HubFrames(sub, self.acquisition.health), recorder)
+            self._run_setpoints(campaign, HubFrames(sub, self.acquisition.health), recorder, camera)
         except SetPointHalt as halt:
             final, reason = halt.status, halt.reason
         except Exception as exc:
@@ -357,12 +360,19 @@ class CampaignService:
                 self.hub.unsubscribe(sub)
             if recorder is not None:
                 recorder.close()
+            if (why := camera.restore()) is not None:
+                reason = f"{reason}; {why}" if reason else why
             self._end(campaign_id, final, reason)
 
     def _run_setpoints(
-        self, campaign: CampaignView, frames: HubFrames, recorder: RawRecorder | None
+        self,
+        campaign: CampaignView,
+        frames: HubFrames,
+        recorder: RawRecorder | None,
+        camera: CampaignCamera,
     ) -> None:
-        """Collect and store each set-point not done yet, in order."""
+        """Collect and store each set-point not done yet, in order, each with its camera
+        settings applied first."""
         pending = campaign.pending
         if not self.motion.present and any(sp.axes or sp.profile for sp in pending):
             raise SetPointHalt(CampaignState.FAILED, "no motion system is configured")
@@ -381,20 +391,25 @@ class CampaignService:
             on_frame=on_frame,
             lab_geometry=self.lab_geometry,
         )
-        policy = CollectPolicy(
-            campaign.frames_per_point, campaign.settle_s, campaign.lock_timeout_s
-        )
         for sp in pending:
-            self._bump(setpoint_index=sp.index, frames_collected=0)
+            self._bump(setpoint_index=sp.index, frames_collected=0, camera=sp.camera)
             start_n = recorder.n if recorder is not None else 0
             if recorder is not None:
                 recorder.begin_setpoint(sp)
+            self._setpoint_camera(camera, sp.index, sp.camera)
+            expected_us = camera.expected_integration_us
             try:
                 if sp.profile:
                     record = collector.collect_profile(
-                        sp.index, sp.axes, sp.profile, campaign.settle_s
+                        sp.index, sp.axes, sp.profile, campaign.settle_s, expected_us
                     )
                 else:
+                    policy = CollectPolicy(
+                        campaign.frames_per_point,
+                        campaign.settle_s,
+                        campaign.lock_timeout_s,
+                        expected_us,
+                    )
                     record = collector.collect(sp.index, sp.axes, policy)
                 if recorder is not None:
                     recorder.flush()  # the frames are on disk before the rows commit
@@ -412,14 +427,25 @@ class CampaignService:
                 self._progress.done_this_run += 1
         self._bump()
 
-    def _apply_camera(self, wanted: dict) -> None:
-        """The campaign's camera settings, applied on the acquisition thread before the
-        first set-point (the camera keeps them afterwards, as with PUT /api/camera)."""
-        cam = self.acquisition.camera
-        target = replace(cam.get_settings(), **wanted)
+    @staticmethod
+    def _begin_camera(camera: CampaignCamera, campaign: CampaignView) -> None:
+        """Remember the camera's settings (restored when the campaign leaves) and apply
+        the campaign-wide ones before the first set-point."""
         try:
-            self.acquisition.submit(lambda: cam.apply_settings(target)).result(10.0)
+            camera.begin(dict(campaign.camera) if campaign.camera else None)
         except Exception as exc:
             raise SetPointHalt(
                 CampaignState.PAUSED, f"the camera refused the campaign's settings: {exc}"
+            ) from exc
+
+    @staticmethod
+    def _setpoint_camera(camera: CampaignCamera, index: int, setting: dict | None) -> None:
+        """The set-point's camera settings, applied before it moves (so every frame it
+        counts, captured after the settle, was taken with them)."""
+        try:
+            camera.for_setpoint(setting)
+        except Exception as exc:
+            raise SetPointHalt(
+                CampaignState.PAUSED,
+                f"the camera refused the settings of set-point {index} ({setting}): {exc}",
             ) from exc

@@ -36,6 +36,12 @@ log = logging.getLogger(__name__)
 AT_SETPOINT_TOLERANCE = {"yaw": 0.05, "pitch": 0.05, "roll": 0.05, "rail": 1.0}
 # A profile pauses when the motion status has not been read for this long (s, wall time).
 STALE_TRACE_S = 1.0
+# Frames in a row that may report another integration time than the one set before the
+# set-point pauses (the settings are applied before the move, so none should).
+MAX_OTHER_EXPOSURE_FRAMES = 20
+# A frame's reported integration time matches the one set within this (the TOFcam-660
+# reports whole microseconds).
+EXPOSURE_MATCH_US = 0.5
 
 
 class SetPointHalt(Exception):  # noqa: N818 (control flow, not an error)
@@ -86,11 +92,13 @@ class HubFrames:
 class CollectPolicy:
     """How a static set-point is measured: ``frames`` frames, counted from ``settle_s``
     (device time) after the first frame at rest; a pose lost for ``lock_timeout_s``
-    pauses the campaign."""
+    pauses the campaign; ``integration_time_us``: the exposure set for the set-point
+    (frames that report another do not count), None for any."""
 
     frames: int
     settle_s: float
     lock_timeout_s: float
+    integration_time_us: float | None = None
 
 
 @dataclass(frozen=True)
@@ -162,7 +170,7 @@ class SetPointCollector:
     def collect(self, index: int, axes: dict[str, float], policy: CollectPolicy) -> SetPointRecord:
         """Move to ``axes`` and collect ``policy.frames`` frames taken at rest."""
         self.move_and_settle(index, axes)
-        at_rest = self._at_rest(index, policy.settle_s)
+        at_rest = self._at_rest(index, policy.settle_s, policy.integration_time_us)
         last_ok_s = None
         out: list[CollectedFrame] = []
         while len(out) < policy.frames:
@@ -221,17 +229,31 @@ class SetPointCollector:
                 )
             time.sleep(self.timing.poll_s)
 
-    def _at_rest(self, index: int, settle_s: float) -> Iterator[tuple[LiveSample, float, float]]:
+    def _at_rest(
+        self, index: int, settle_s: float, integration_time_us: float | None = None
+    ) -> Iterator[tuple[LiveSample, float, float]]:
         """(sample, its device time, the device time from which frames count) of every
         frame captured after now (the motion system has settled) that the pipeline
-        measured, from ``settle_s`` after the first of them."""
+        measured, from ``settle_s`` after the first of them; with ``integration_time_us``
+        only frames that report it (or none)."""
         settled_unix_s = time.time()
         self.frames.drain()  # frames queued before the settle do not count
         t_ready = None
+        other_exposure = 0
         while True:
             sample = self._next_sample(index)
             if sample.captured_unix_s < settled_unix_s or not sample.measured:
                 continue  # before the settle, or while the pipeline's kernels compile
+            if not _exposed_as_set(sample, integration_time_us):
+                other_exposure += 1
+                if other_exposure > MAX_OTHER_EXPOSURE_FRAMES:
+                    raise _paused(
+                        f"the camera's frames at set-point {index} report an integration "
+                        f"time of {sample.frame.meta.get('integration_time_us')} us, not the "
+                        f"{integration_time_us:g} us set for it"
+                    )
+                continue
+            other_exposure = 0
             t = float(sample.frame.time_s)
             t_ready = t + settle_s if t_ready is None else t_ready
             if t >= t_ready:
@@ -254,7 +276,12 @@ class SetPointCollector:
 
     # -- dynamic set-points -----------------------------------------------------------------
     def collect_profile(
-        self, index: int, axes: dict[str, float], spec: dict, settle_s: float
+        self,
+        index: int,
+        axes: dict[str, float],
+        spec: dict,
+        settle_s: float,
+        integration_time_us: float | None = None,
     ) -> SetPointRecord:
         """A dynamic set-point (docs/campaigns.md, "Dynamic campaigns"): move and settle;
         rest ``rest_s``; run the profile from the axis' encoder position; rest ``rest_s``
@@ -269,7 +296,7 @@ class SetPointCollector:
         try:
             out: list[CollectedFrame] = []
             ran: tuple[float, float, float] | None = None  # (t0, t_end, deadline) once started
-            for sample, t, t_ready in self._at_rest(index, settle_s):
+            for sample, t, t_ready in self._at_rest(index, settle_s, integration_time_us):
                 if ran is None and t >= t_ready + rest_s:
                     running = True  # from here on, any way out stops the table first
                     t0, t_end = self._start_profile(index, axis, spec)
@@ -388,6 +415,15 @@ class SetPointCollector:
             T_lab = self.lab_geometry.T_camera_target(enc, true=False)
         frame = replace(f, T_camera_target_lab=T_lab, meta={**f.meta, "encoders": enc})
         return replace(sample, frame=frame, cache={})
+
+
+def _exposed_as_set(sample: LiveSample, integration_time_us: float | None) -> bool:
+    """Whether the frame was taken with ``integration_time_us`` (True when none is set or
+    the camera reports none)."""
+    reported = sample.frame.meta.get("integration_time_us")
+    if integration_time_us is None or reported is None:
+        return True
+    return abs(float(reported) - integration_time_us) <= EXPOSURE_MATCH_US
 
 
 def _check_at_setpoint(index: int, axes: dict[str, float], sample: LiveSample) -> None:

@@ -23,6 +23,11 @@ pipeline slower than the camera measures the newest frame each time and lowers t
 delivered frame rate while it is slower; nothing queues. The reference pipeline takes
 ~60 ms a frame on 2 cores, ~85 ms (median; 95th percentile ~190 ms) while the other core
 compiles (``bench/first_run.py``): the camera delivers ~7.6 of its 10 frames/s meanwhile.
+
+Every frame is stamped on the host's monotonic clock (``backend.services.live.latency``):
+its capture (the driver's, else its arrival), its arrival from the driver, and when its
+pose was ready; ``latency`` (``LiveStatistics``) keeps them with the frames the camera
+and the pipeline dropped, and the live WebSocket adds when each client was sent it.
 """
 
 from __future__ import annotations
@@ -42,6 +47,7 @@ import numpy as np
 from backend.drivers.base import CameraDriver, CameraFrame
 from backend.services.live.hub import LiveHub
 from backend.services.live.kernel_warmup import COMPILING_REASON, KernelWarmup
+from backend.services.live.latency import FrameStamps, LiveStatistics
 from backend.services.live.live_reference import LiveReference
 from tofpose.config import config_for_camera
 from tofpose.core.catalog import Catalog
@@ -70,6 +76,11 @@ class LiveSample:
 
     captured_unix_s : wall-clock time the frame arrived from the driver.
     processed_unix_s : wall-clock time the pipeline finished.
+    stamps : the frame's capture, arrival and pose-ready stamps (host monotonic ns,
+        ``FrameStamps``); None for a sample not made by the loop.
+    camera_gap : frames the camera lost just before this one (its counter's gap).
+    pipeline_skipped : frames the camera's rate offered while the loop was busy with
+        the previous one (skipped, never measured).
     measured : False for a frame no pipeline saw (the first second of a first start,
         before the warm-up's first stage): shown live, never counted by a campaign.
     implementation : the pipeline implementation that measured it: "reference" while
@@ -91,6 +102,9 @@ class LiveSample:
     reference: LiveReference = field(default_factory=LiveReference)
     state: RelativeState | None = None
     cache: dict[str, Any] = field(default_factory=dict)
+    stamps: FrameStamps | None = None
+    camera_gap: int = 0
+    pipeline_skipped: int = 0
 
     def cached(self, key: str, make: Callable[[], Any]) -> Any:
         """Serialised forms of this sample (JSON, the raw binary frame). PNGs live in the
@@ -153,8 +167,11 @@ class AcquisitionService:
         pipeline_config: PipelineConfig | None = None,
         kernels: KernelWarmup | None = None,
         state_config: RelativeStateConfig | None = None,
+        latency: LiveStatistics | None = None,
     ) -> None:
         self.camera = camera
+        #: the frames' stamps and drops over a sliding window (``latency.LiveStatistics``)
+        self.latency = latency or LiveStatistics()
         self.hub = hub
         self.timeout_s = timeout_s
         self.backoff_s = backoff_s
@@ -310,8 +327,9 @@ class AcquisitionService:
                 self._stop.wait(backoff)
                 backoff = min(2.0 * backoff, self.backoff_s[1])
                 continue
+            arrival_ns = time.monotonic_ns()
             captured = time.time()
-            self._arrivals.append(time.monotonic())
+            self._arrivals.append(arrival_ns / 1e9)
             if frame.meta.get("discontinuity"):
                 self._pipeline.reset()
                 self._filter.reset()
@@ -332,6 +350,15 @@ class AcquisitionService:
             backoff = self.backoff_s[0]
             self.health.record_ok()
             state = self._relative_state(result, frame.time_s) if measured else None
+            stamps = FrameStamps(
+                capture_ns=frame.capture_ns if frame.capture_ns is not None else arrival_ns,
+                arrival_ns=arrival_ns,
+                pose_ready_ns=time.monotonic_ns(),
+                capture_from_device=frame.capture_ns is not None,
+            )
+            gap, skipped = self.latency.record_frame(
+                stamps, sequence=frame.sequence, slots_skipped=frame.slots_skipped
+            )
             sample = LiveSample(
                 frame,
                 result,
@@ -342,6 +369,9 @@ class AcquisitionService:
                 implementation=_implementation(pipeline),
                 reference=self.reference,
                 state=state,
+                stamps=stamps,
+                camera_gap=gap,
+                pipeline_skipped=skipped,
             )
             self._latest = sample
             self._history.append(sample.without_images())

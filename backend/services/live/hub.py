@@ -1,8 +1,10 @@
 """Fan-out of live samples to many subscribers without ever blocking the publisher.
 
 Each subscriber has a small bounded buffer; when it is full the *oldest* item is dropped
-and counted. The publisher (the acquisition thread) only appends to deques and, for
-asyncio subscribers, schedules a wake-up on their event loop.
+and counted (``dropped``; a subscription made with ``on_drop`` also reports each drop
+there: the live WebSocket clients' drops go to the latency statistics,
+``backend.services.live.latency``). The publisher (the acquisition thread) only appends
+to deques and, for asyncio subscribers, schedules a wake-up on their event loop.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import threading
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 
@@ -17,8 +20,17 @@ class Subscription:
     """A bounded, drop-oldest mailbox usable from threads (``get``) or asyncio
     (``get_async``, when created with a loop)."""
 
-    def __init__(self, maxsize: int, loop: asyncio.AbstractEventLoop | None = None) -> None:
+    def __init__(
+        self,
+        maxsize: int,
+        loop: asyncio.AbstractEventLoop | None = None,
+        *,
+        label: str | None = None,
+        on_drop: Callable[[int], None] | None = None,
+    ) -> None:
         self._items: deque[Any] = deque(maxlen=maxsize)
+        self.label = label  # who reads it (a WebSocket client's address), None: internal
+        self._on_drop = on_drop
         self._cond = threading.Condition()
         self._loop = loop
         self._event = asyncio.Event() if loop is not None else None
@@ -29,11 +41,14 @@ class Subscription:
     def offer(self, item: Any) -> None:
         """Called by the publisher; never blocks for long."""
         with self._cond:
-            if len(self._items) == self._items.maxlen:
+            full = len(self._items) == self._items.maxlen
+            if full:
                 self.dropped += 1
             self._items.append(item)
             self.offered += 1
             self._cond.notify()
+        if full and self._on_drop is not None:
+            self._on_drop(1)
         if self._loop is not None and self._event is not None:
             try:
                 self._loop.call_soon_threadsafe(self._event.set)
@@ -77,9 +92,16 @@ class LiveHub:
         self._lock = threading.Lock()
 
     def subscribe(
-        self, maxsize: int | None = None, loop: asyncio.AbstractEventLoop | None = None
+        self,
+        maxsize: int | None = None,
+        loop: asyncio.AbstractEventLoop | None = None,
+        *,
+        label: str | None = None,
+        on_drop: Callable[[int], None] | None = None,
     ) -> Subscription:
-        sub = Subscription(maxsize or self.default_maxsize, loop)
+        """A new mailbox; ``label`` names its reader, ``on_drop(n)`` is told of each drop
+        (called on the publisher's thread, outside the mailbox's lock)."""
+        sub = Subscription(maxsize or self.default_maxsize, loop, label=label, on_drop=on_drop)
         with self._lock:
             self._subs.add(sub)
         return sub

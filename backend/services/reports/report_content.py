@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass, field
 
 from backend.services.reports.analysis import AXES, MAD_TO_SIGMA, SINGULAR_K
+from tofpose.lab.requirements import PAPER_REQUIREMENTS as PAPER_REQUIREMENTS_DEFAULTS
 
 AXIS_NAMES = {
     "x_mm": "x",
@@ -26,16 +27,9 @@ AXIS_NAMES = {
 AXIS_UNITS = {a: a.rsplit("_", 1)[1] for a in AXES}
 AXIS_GROUPS = (("Translation", "mm", AXES[:3]), ("Attitude", "deg", AXES[3:]))
 
-# The default of ``requirements`` in POST /api/campaigns (backend/api/schemas/campaigns.py,
-# ``Requirements``): the accuracy goals of the paper.
-PAPER_REQUIREMENTS = {
-    "x_mm": 6.0,
-    "y_mm": 6.0,
-    "z_mm": 28.3,
-    "pitch_deg": 0.15,
-    "yaw_deg": 0.15,
-    "roll_deg": 0.15,
-}
+# The default of ``requirements`` in POST /api/campaigns and of a study's: the accuracy
+# goals of the paper (their one home: ``tofpose.lab.requirements``).
+PAPER_REQUIREMENTS = PAPER_REQUIREMENTS_DEFAULTS
 PAPER = (
     'Zhu et al., "System Design for Pose Determination of Spacecraft Using Time-of-Flight '
     'Sensors" (Space: Science & Technology, 2022), section 6.4'
@@ -409,9 +403,12 @@ def setpoint_table(report: dict) -> Table:
     rows, status = [], {}
     for i, sp in enumerate(report["setpoints"]):
         z_mm = _num(sp["reference"]["z_mm"])
+        commanded = commanded_text(sp.get("commanded") or {})
+        if sp.get("camera"):
+            commanded += f"; {setting_text(sp['camera'])}"
         row = [
             str(sp["setpoint_index"]),
-            commanded_text(sp.get("commanded") or {}),
+            commanded,
             fmt(z_mm / 1000.0),
             f"{sp['n_ok']} of {sp['n_frames']}",
         ]
@@ -425,6 +422,23 @@ def setpoint_table(report: dict) -> Table:
             status[(i, len(row) - 1)] = sp["passed"]
         rows.append(row)
     return Table(header, rows, status)
+
+
+SETTING_LABELS = {
+    "integration_time_us": ("integration time", "us"),
+    "modulation_frequency_mhz": ("modulation", "MHz"),
+}
+
+
+def setting_text(setting: dict | None) -> str:
+    """``integration time 200 us, modulation 12 MHz``; ``-`` for none."""
+    if not setting:
+        return "-"
+    return ", ".join(
+        f"{SETTING_LABELS[k][0]} {v:g} {SETTING_LABELS[k][1]}"
+        for k, v in setting.items()
+        if k in SETTING_LABELS
+    )
 
 
 def commanded_text(commanded: dict) -> str:

@@ -21,6 +21,11 @@ from matplotlib.backends.backend_pdf import PdfPages  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
 from backend.services.reports import report_content as rc
+from backend.services.reports.report_camera import (  # noqa: E402
+    camera_plots,
+    camera_table,
+    metadata_text,
+)
 from backend.services.reports.report_dynamic import dynamic_plots, dynamic_tables  # noqa: E402
 from backend.services.reports.report_plots import (  # noqa: E402
     FAIL_COLOUR,
@@ -393,7 +398,8 @@ def blocks(report: dict, rows: list[dict]) -> list[Block]:
     )
     out: list[Block] = [
         Text([rc.title(report)], 17.0, "bold", space_after_in=0.1),
-        Text([rc.summary(report)]),
+        Text([rc.summary(report)], space_after_in=0.05),
+        Text([metadata_text(report)]),
         heading("Verdict"),
         verdict,
         verdict_row,
@@ -407,6 +413,12 @@ def blocks(report: dict, rows: list[dict]) -> list[Block]:
         TableBlock(rc.setpoint_table(report), 7.0),
         Text([note], 8.0, colour=NOTE_COLOUR),
     ]
+    if report.get("camera_settings"):
+        out += [
+            heading("By camera setting"),
+            TableBlock(camera_table(report), 7.5),
+            *(PlotBlock(p) for p in camera_plots(report)),
+        ]
     if report.get("dynamic"):
         out += [
             heading("Dynamic accuracy (motion profiles)"),

@@ -35,6 +35,14 @@ from backend.services.reports import report_content as rc  # noqa: E402
 from backend.services.reports import report_pdf  # noqa: E402
 from backend.services.reports.analysis import AXES, REFERENCE_PREFIX, analyse  # noqa: E402
 from backend.services.reports.dynamic_analysis import analyse_dynamic, is_static  # noqa: E402
+from backend.services.reports.report_camera import (  # noqa: E402
+    SETTING_COLUMNS,
+    camera_groups,
+    camera_plots,
+    camera_table,
+    metadata_text,
+    row_setting,
+)
 from backend.services.reports.report_dynamic import (  # noqa: E402
     dynamic_findings,
     dynamic_plots,
@@ -72,6 +80,9 @@ CSV_COLUMNS = (
     *(f"calibrated_truth_{a}" for a in POSE),
     *STATE_COLUMNS,
     "in_motion",
+    "integration_time_us",
+    "setpoint_integration_time_us",
+    "setpoint_modulation_frequency_mhz",
 )
 
 
@@ -110,6 +121,7 @@ def campaign_rows(
             "encoder_roll_deg": enc.get("roll"),
             "encoder_rail_mm": enc.get("rail"),
             "in_motion": None if m.in_motion is None else int(m.in_motion),
+            **{col: (sp.camera or {}).get(k) for k, col in SETTING_COLUMNS.items()},
         }
         if calibration is not None and {"yaw", "pitch", "roll", "rail"} <= set(enc):
             ref = calibrated_reference(calibration, enc)
@@ -167,7 +179,8 @@ def build(
                 else ""
             )
         )
-    result = analyse([r for r in rows if is_static(r)], row.requirements, reference)
+    static = [r for r in rows if is_static(r)]
+    result = analyse(static, row.requirements, reference)
     report = {
         "campaign": {
             "id": row.id,
@@ -179,7 +192,13 @@ def build(
             "n_setpoints": len(row.setpoints),
             "n_done": sum(1 for sp in row.setpoints if sp.status == "done"),
             "generator": row.generator,
+            "camera_sweep": row.camera_sweep,
             "notes": row.notes,
+            "operator": row.operator,
+            "target_name": row.target_name,
+            "camera_model": row.camera_model,
+            "camera_serial": row.camera_serial,
+            "camera_firmware": row.camera_firmware,
             "started_at": row.started_at.isoformat() if row.started_at else None,
             "finished_at": row.finished_at.isoformat() if row.finished_at else None,
         },
@@ -188,6 +207,7 @@ def build(
         **result,
     }
     _add_commanded(report["setpoints"], rows)
+    report["camera_settings"] = camera_groups(static, report["setpoints"], reference)
     report["dynamic"] = analyse_dynamic(rows, reference)
     report["findings"] = rc.findings(report) + dynamic_findings(report)
     return jsonable(report), rows
@@ -210,13 +230,15 @@ def calibration_summary(calibration: CalibrationRow) -> dict:
 
 def _add_commanded(setpoints: list[dict], rows: list[dict]) -> None:
     """Each set-point's commanded axes (``yaw``, ``pitch``, ``roll`` deg, ``rail`` mm; None
-    for an axis it left alone), from its first frame's row."""
+    for an axis it left alone) and camera setting (``camera``, None for none), from its
+    first frame's row."""
     first: dict[int, dict] = {}
     for r in rows:
         first.setdefault(int(r["setpoint_index"]), r)
     for sp in setpoints:
         r = first.get(sp["setpoint_index"], {})
         sp["commanded"] = {name: r.get(col) for name, col in rc.COMMANDED_AXES}
+        sp["camera"] = row_setting(r) or None
 
 
 def to_json(report: dict) -> str:
@@ -304,6 +326,7 @@ def to_html(report: dict, rows: list[dict]) -> str:
         f"<title>{esc(title)}</title><style>{STYLE}</style></head><body>",
         f"<h1>{esc(title)}</h1>",
         f"<p>{esc(rc.summary(report))}</p>",
+        f"<p>{esc(metadata_text(report))}</p>",
         *_html_verdict(report),
         "<h2>Findings</h2><ul>",
         *(f"<li>{esc(f)}</li>" for f in findings),
@@ -313,9 +336,11 @@ def to_html(report: dict, rows: list[dict]) -> str:
         f"<p class='note'>{esc(rc.reading_notes(report))}</p>",
         "<h2>Per set-point</h2>",
         _html_table(rc.setpoint_table(report)),
-        "<h2>Plots</h2>",
     ]
-    plots = evidence_plots(report, rows)
+    if report.get("camera_settings"):
+        parts += ["<h2>By camera setting</h2>", _html_table(camera_table(report))]
+    parts.append("<h2>Plots</h2>")
+    plots = camera_plots(report) + evidence_plots(report, rows)
     if not plots:
         parts.append(f"<p>{esc(NO_PLOTS)}</p>")
     if report.get("dynamic"):

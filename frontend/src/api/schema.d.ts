@@ -92,7 +92,9 @@ export interface paths {
          *
          *     422 names every problem: no set-points, both or neither of ``setpoints`` and
          *     ``generator``, set-points outside the soft limits, too many set-points or frames, an
-         *     unknown catalog. 409 if the name is taken. Nothing is stored on an error.
+         *     unknown catalog, camera settings outside the camera's limits (the field and the allowed
+         *     range named), a camera serial or firmware the connected camera contradicts. 409 if
+         *     the name is taken. Nothing is stored on an error.
          */
         post: operations["createCampaign"];
         delete?: never;
@@ -521,6 +523,30 @@ export interface paths {
          *     trail). 404 when no active key has this name.
          */
         delete: operations["revokeKey"];
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/api/live/stats": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * Get Live Stats
+         * @description Latency of the live stream over a sliding window (median and 95th percentile of
+         *     capture -> arrival, capture -> pose ready, capture -> WebSocket sent; stamps on the
+         *     host's monotonic clock, ``clock`` anchors them to UTC) and the frames dropped by the
+         *     camera, the pipeline and the live clients (docs/server.md, "Latency and dropped
+         *     frames").
+         */
+        get: operations["getLiveStats"];
+        put?: never;
+        post?: never;
+        delete?: never;
         options?: never;
         head?: never;
         patch?: never;
@@ -997,8 +1023,11 @@ export interface paths {
         put?: never;
         /**
          * Create Study
-         * @description Queue a study. 422 names the field when the spec cannot run (a range outside
-         *     0.3-20 m, an unknown catalog, a value listed twice, more cells or frames than the
+         * @description Queue a study. ``requirements`` (optional, each field optional: the campaign's
+         *     defaults, 95 % of a cell's frames) is what each cell's verdict in the report is
+         *     judged against. 422 names the field when the spec cannot run (a range outside
+         *     0.3-20 m, an unknown catalog, a value listed twice, a requirement <= 0, more cells
+         *     or frames than the
          *     server takes: TOFPOSE_STUDY_MAX_CELLS, TOFPOSE_STUDY_MAX_FRAMES); 409 while
          *     TOFPOSE_STUDIES_MAX_ACTIVE studies are queued or running. Nothing is stored then.
          */
@@ -1376,6 +1405,17 @@ export interface components {
             modulation_frequency_mhz?: number | null;
         };
         /**
+         * CameraSweep
+         * @description Every set-point measured at every combination of these lists (the set-point
+         *     outermost, then integration time).
+         */
+        CameraSweep: {
+            /** Integration Time Us */
+            integration_time_us?: number[] | null;
+            /** Modulation Frequency Mhz */
+            modulation_frequency_mhz?: number[] | null;
+        };
+        /**
          * CampaignCommand
          * @description What a person asks of a campaign (``POST /api/campaigns/{id}/{command}``).
          * @enum {string}
@@ -1387,6 +1427,23 @@ export interface components {
          */
         CampaignCreate: {
             camera?: components["schemas"]["CameraSettingsUpdate"] | null;
+            /**
+             * Camera Firmware
+             * @description when the camera's driver does not report it
+             */
+            camera_firmware?: string | null;
+            /**
+             * Camera Model
+             * @description when the camera's driver does not report it
+             */
+            camera_model?: string | null;
+            /**
+             * Camera Serial
+             * @description when the camera's driver does not report it
+             */
+            camera_serial?: string | null;
+            /** @description measure every set-point at each of these camera settings (not with a per-set-point 'camera') */
+            camera_sweep?: components["schemas"]["CameraSweep"] | null;
             /**
              * Catalog
              * @default paper-target
@@ -1412,6 +1469,11 @@ export interface components {
              */
             notes: string;
             /**
+             * Operator
+             * @description who runs it
+             */
+            operator?: string | null;
+            /**
              * Record Raw
              * @description keep every measured frame pair in an HDF5 recording (GET /api/campaigns/{id}/recording.h5), so the campaign can be re-processed
              * @default false
@@ -1425,6 +1487,11 @@ export interface components {
              * @default 1
              */
             settle_s: number;
+            /**
+             * Target Name
+             * @description the target measured
+             */
+            target_name?: string | null;
         } & ({
             generator?: null;
             setpoints: unknown[];
@@ -1438,6 +1505,25 @@ export interface components {
         CampaignPublic: {
             /** Camera */
             camera: {
+                [key: string]: unknown;
+            } | null;
+            /**
+             * Camera Firmware
+             * @default
+             */
+            camera_firmware: string;
+            /**
+             * Camera Model
+             * @default
+             */
+            camera_model: string;
+            /**
+             * Camera Serial
+             * @default
+             */
+            camera_serial: string;
+            /** Camera Sweep */
+            camera_sweep?: {
                 [key: string]: unknown;
             } | null;
             /** Catalog */
@@ -1469,6 +1555,11 @@ export interface components {
             name: string;
             /** Notes */
             notes: string;
+            /**
+             * Operator
+             * @default
+             */
+            operator: string;
             progress?: components["schemas"]["ProgressPublic"] | null;
             /** Record Raw */
             record_raw: boolean;
@@ -1484,6 +1575,11 @@ export interface components {
             status: components["schemas"]["CampaignState"];
             /** Status Reason */
             status_reason: string;
+            /**
+             * Target Name
+             * @default
+             */
+            target_name: string;
         };
         /**
          * CampaignStart
@@ -1552,6 +1648,16 @@ export interface components {
             /** Reflectors */
             reflectors: components["schemas"]["ReflectorModel"][];
         };
+        /**
+         * ClockAnchorPublic
+         * @description One moment on both clocks: a stamp's UTC ns is wall_ns + (stamp - monotonic_ns).
+         */
+        ClockAnchorPublic: {
+            /** Monotonic Ns */
+            monotonic_ns: number;
+            /** Wall Ns */
+            wall_ns: number;
+        };
         /** DeviceStatePublic */
         DeviceStatePublic: {
             /**
@@ -1594,6 +1700,27 @@ export interface components {
             camera: components["schemas"]["CameraDevicePublic"];
             motion: components["schemas"]["MotionPublic"];
             pipeline: components["schemas"]["PipelineStatePublic"];
+        };
+        /**
+         * DroppedFramesPublic
+         * @description Frames lost, by where.
+         */
+        DroppedFramesPublic: {
+            /**
+             * Camera
+             * @description gaps in the camera's own frame counter (None: it has none)
+             */
+            camera: number | null;
+            /**
+             * Clients
+             * @description frames live WebSocket clients' mailboxes dropped (slow readers)
+             */
+            clients: number;
+            /**
+             * Pipeline
+             * @description frames the camera's rate offered while the pipeline was busy
+             */
+            pipeline: number;
         };
         /**
          * ErrorPublic
@@ -1763,6 +1890,62 @@ export interface components {
              */
             scope: "read" | "operate" | "admin";
         };
+        /**
+         * LatencySummaryPublic
+         * @description Median and 95th percentile of one latency over the window (None: no frame).
+         */
+        LatencySummaryPublic: {
+            /** Median Ms */
+            median_ms: number | null;
+            /**
+             * N
+             * @description latencies in the window
+             */
+            n: number;
+            /** P95 Ms */
+            p95_ms: number | null;
+        };
+        /**
+         * LiveClientPublic
+         * @description One live WebSocket client: frames offered to it and dropped from its mailbox.
+         */
+        LiveClientPublic: {
+            /** Address */
+            address: string;
+            /** Dropped */
+            dropped: number;
+            /** Offered */
+            offered: number;
+        };
+        /**
+         * LiveStatsPublic
+         * @description Latency and frame accounting of the live stream, over a sliding window.
+         *
+         *     Stamps are host monotonic ns: capture (``capture_source`` says what it is on this
+         *     camera), arrival at the server, pose ready, WebSocket sent (per client).
+         */
+        LiveStatsPublic: {
+            /** Capture Source */
+            capture_source: string;
+            capture_to_arrival: components["schemas"]["LatencySummaryPublic"];
+            capture_to_pose: components["schemas"]["LatencySummaryPublic"];
+            capture_to_sent: components["schemas"]["LatencySummaryPublic"];
+            /** Clients */
+            clients: components["schemas"]["LiveClientPublic"][];
+            clock: components["schemas"]["ClockAnchorPublic"];
+            dropped_in_window: components["schemas"]["DroppedFramesPublic"];
+            /** @description since the server started */
+            dropped_total: components["schemas"]["DroppedFramesPublic"];
+            /** Frames In Window */
+            frames_in_window: number;
+            /**
+             * Frames Total
+             * @description frames through the pipeline since the start
+             */
+            frames_total: number;
+            /** Window S */
+            window_s: number;
+        };
         /** MatchedPublic */
         MatchedPublic: {
             /** Area Px */
@@ -1815,6 +1998,11 @@ export interface components {
              * @description taken while the set-point's motion profile ran (null at a static set-point)
              */
             in_motion?: boolean | null;
+            /**
+             * Integration Time Us
+             * @description the exposure the camera reports for the frame
+             */
+            integration_time_us?: number | null;
             /**
              * Lab Truth
              * @description encoders + nominal geometry
@@ -2174,6 +2362,13 @@ export interface components {
         };
         /** ProgressPublic */
         ProgressPublic: {
+            /**
+             * Camera
+             * @description camera settings of the set-point in progress (null: as it is)
+             */
+            camera?: {
+                [key: string]: number;
+            } | null;
             /** Campaign Id */
             campaign_id: number;
             /** Elapsed S */
@@ -2520,7 +2715,8 @@ export interface components {
         };
         /**
          * Requirements
-         * @description Accuracy requirements per axis (default: the paper's, §6.4): a set-point passes an
+         * @description Accuracy requirements per axis (default: the paper's, §6.4,
+         *     ``tofpose.lab.requirements.PAPER_REQUIREMENTS``): a set-point passes an
          *     axis when the largest |error| after singular-point removal is within it.
          */
         Requirements: {
@@ -2593,10 +2789,26 @@ export interface components {
             paused: boolean;
         };
         /**
+         * SetPointCamera
+         * @description Camera settings applied before a set-point's frames (docs/campaigns.md, "Camera
+         *     settings and metadata"); a field left out keeps the camera's. Checked against the
+         *     camera's limits when the campaign is created. An integration time turns the camera's
+         *     auto exposure off for the set-point.
+         */
+        SetPointCamera: {
+            /** Integration Time Us */
+            integration_time_us?: number | null;
+            /** Modulation Frequency Mhz */
+            modulation_frequency_mhz?: number | null;
+        };
+        /**
          * SetPointModel
-         * @description Axis set-points of one campaign point; an axis left out stays where it is.
+         * @description Axis set-points of one campaign point; an axis left out stays where it is;
+         *     ``camera``: the camera settings for its frames.
          */
         SetPointModel: {
+            /** Camera */
+            camera?: components["schemas"]["SetPointCamera"];
             /** Pitch Deg */
             pitch_deg?: number;
             /** Rail Mm */
@@ -2608,6 +2820,13 @@ export interface components {
         };
         /** SetPointPublic */
         SetPointPublic: {
+            /**
+             * Camera
+             * @description camera settings for its frames; null: the camera as it is
+             */
+            camera?: {
+                [key: string]: number;
+            } | null;
             /** Index */
             index: number;
             /** Pitch Deg */
@@ -2705,6 +2924,7 @@ export interface components {
              * @default study
              */
             name: string;
+            requirements?: components["schemas"]["StudyRequirements"];
             /**
              * Seed
              * @default 0
@@ -2758,6 +2978,11 @@ export interface components {
              * @description the Dask cluster it ran on
              */
             cluster?: string | null;
+            /**
+             * Dashboard Url
+             * @description the Dask dashboard of the cluster running it, while it runs
+             */
+            dashboard_url?: string | null;
             /** Error */
             error?: string | null;
             /**
@@ -2787,6 +3012,50 @@ export interface components {
              * @enum {string}
              */
             status: "created" | "queued" | "running" | "complete" | "incomplete" | "failed";
+        };
+        /**
+         * StudyRequirements
+         * @description The accuracy a cell is judged against (``tofpose.study.spec``): per axis the
+         *     campaign's requirement (same fields, same defaults), and the share of a cell's frames
+         *     that must have a pose within it.
+         */
+        StudyRequirements: {
+            /**
+             * Percentile
+             * @description share of a cell's frames (%) that must be within each requirement
+             * @default 95
+             */
+            percentile: number;
+            /**
+             * Pitch Deg
+             * @default 0.15
+             */
+            pitch_deg: number;
+            /**
+             * Roll Deg
+             * @default 0.15
+             */
+            roll_deg: number;
+            /**
+             * X Mm
+             * @default 6
+             */
+            x_mm: number;
+            /**
+             * Y Mm
+             * @default 6
+             */
+            y_mm: number;
+            /**
+             * Yaw Deg
+             * @default 0.15
+             */
+            yaw_deg: number;
+            /**
+             * Z Mm
+             * @default 28.3
+             */
+            z_mm: number;
         };
         /** TransformPublic */
         TransformPublic: {
@@ -4823,6 +5092,47 @@ export interface operations {
                 };
                 content: {
                     "application/json": components["schemas"]["HTTPValidationError"];
+                };
+            };
+        };
+    };
+    getLiveStats: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description Successful Response */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["LiveStatsPublic"];
+                };
+            };
+            /** @description The body could not be parsed, or the Host header names a host this server does not serve */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                    "text/plain": string;
+                };
+            };
+            /** @description No API token, or a wrong one (send 'Authorization: Bearer <token>') (only when the server is not bound to loopback) */
+            401: {
+                headers: {
+                    /** @description Bearer */
+                    "WWW-Authenticate"?: string;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
                 };
             };
         };

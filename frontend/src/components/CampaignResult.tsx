@@ -2,6 +2,7 @@
 // report), a dynamic campaign's latency and rate errors, with the report's plots (its
 // HTML page) below.
 import { api, unwrap } from "../api/client";
+import { cameraText } from "../campaignForm";
 import { usePolling } from "../polling";
 
 type AxisStats = { n: number; bias: number; std: number; rms: number; max_abs: number;
@@ -16,9 +17,15 @@ type DynamicSetpoint = { n_in_motion: number; lost_in_motion_share?: number | nu
     rms_error_share_of_peak: number | null };
   latency?: { delay_s?: number; sigma_s?: number; why_none?: string } };
 type Dynamic = { latency: Latency | null; setpoints: Record<string, DynamicSetpoint> };
+// The campaign's metadata (who, what target, which camera) and, when it varied the camera,
+// the statistics per camera setting (backend/services/reports/report_camera.py).
+type CampaignMeta = { operator?: string; target_name?: string; camera_model?: string; camera_serial?: string;
+  camera_firmware?: string; notes?: string };
+type CameraGroup = { setting: Record<string, number>; n_frames: number; n_ok: number; success_rate: number;
+  range_error_mean_mm: number | null; range_error_std_mm: number | null; passed: boolean | null };
 type Report = { n_frames: number; n_ok: number; success_rate: number; reference: string;
   overall: { passed: boolean | null; axes: Record<string, AxisStats> }; findings: string[];
-  dynamic?: Dynamic | null };
+  dynamic?: Dynamic | null; campaign?: CampaignMeta; camera_settings?: CameraGroup[] | null };
 
 /** Whether an answer has the report's top-level shape (else the page says it is not one). */
 export function isReport(x: unknown): x is Report {
@@ -42,6 +49,7 @@ export function CampaignResult({ id }: { id: number }) {
   if (!rep) return <p class="small">loading the report…</p>;
   return (
     <div class="result" data-testid={`result-${id}`}>
+      {rep.campaign && <MetadataLine id={id} c={rep.campaign} />}
       <p>
         <strong data-testid={`verdict-${id}`} class={rep.overall.passed === false ? "error" : ""}>
           {verdict(rep.overall.passed)}
@@ -66,10 +74,41 @@ export function CampaignResult({ id }: { id: number }) {
           })}
         </tbody>
       </table>
+      {rep.camera_settings && <CameraSummary id={id} groups={rep.camera_settings} />}
       {rep.dynamic && <DynamicSummary id={id} dyn={rep.dynamic} />}
       {rep.findings.length > 0 && <ul class="small">{rep.findings.map((f) => <li key={f}>{f}</li>)}</ul>}
       <iframe title={`campaign ${id} report`} class="report" src={`/api/campaigns/${id}/report.html?inline=true`} />
     </div>
+  );
+}
+
+const given = (v: string | undefined) => (v ? v : "not given");
+
+function MetadataLine({ id, c }: { id: number; c: CampaignMeta }) {
+  return (
+    <p class="small" data-testid={`metadata-${id}`}>
+      operator <strong>{given(c.operator)}</strong>; target <strong>{given(c.target_name)}</strong>; camera{" "}
+      {given(c.camera_model)}, serial <strong>{given(c.camera_serial)}</strong>, firmware {given(c.camera_firmware)}
+      {c.notes ? <>; notes: {c.notes}</> : null}
+    </p>
+  );
+}
+
+function CameraSummary({ id, groups }: { id: number; groups: CameraGroup[] }) {
+  return (
+    <table class="small" style={{ marginTop: "0.8em" }} data-testid={`camera-settings-${id}`}>
+      <caption style={{ textAlign: "left", fontWeight: "bold" }}>by camera setting</caption>
+      <thead><tr><th>camera setting</th><th>frames with a pose</th><th>range error mean (mm)</th>
+        <th>range error 1-sigma (mm)</th><th /></tr></thead>
+      <tbody>
+        {groups.map((g) => (
+          <tr key={cameraText(g.setting)}>
+            <th>{cameraText(g.setting)}</th><td>{g.n_ok} of {g.n_frames} ({pct(g.success_rate)})</td>
+            <td>{fmt(g.range_error_mean_mm, 2)}</td><td>{fmt(g.range_error_std_mm, 2)}</td><td>{verdict(g.passed)}</td>
+          </tr>
+        ))}
+      </tbody>
+    </table>
   );
 }
 

@@ -2,6 +2,7 @@
 // for a finished one its statistics and pass/fail (CampaignResult).
 import { useState } from "preact/hooks";
 import { api, unwrap, type Campaign } from "../api/client";
+import { cameraText } from "../campaignForm";
 import { commandsIn, type CampaignCommand } from "../campaignStates";
 import { reported, useReportError } from "../errors";
 import { fmtDuration } from "../format";
@@ -49,11 +50,11 @@ export function Campaigns() {
           <tbody>
             {list.map((c) => (
               <tr key={c.id} data-testid={`campaign-${c.id}`}>
-                <td>{c.id}</td><td>{c.name}</td>
+                <td>{c.id}</td><td>{c.name}{c.operator ? <span class="small" data-testid={`operator-${c.id}`}> ({c.operator})</span> : null}</td>
                 <td data-testid={`status-${c.id}`}>{c.status}{c.status_reason ? `: ${c.status_reason}` : ""}</td>
                 <td>
                   <progress max={c.n_setpoints} value={c.n_done} /> {c.n_done} / {c.n_setpoints}
-                  {c.progress && c.status === "running" ? ` (set-point ${c.progress.setpoint_index}: ${c.progress.frames_collected}/${c.progress.frames_per_point} frames)` : ""}
+                  {c.progress && c.status === "running" ? ` (set-point ${c.progress.setpoint_index}: ${c.progress.frames_collected}/${c.progress.frames_per_point} frames${c.progress.camera ? `, ${cameraText(c.progress.camera)}` : ""})` : ""}
                 </td>
                 <td>{fmtDuration(c.status === "running" ? c.progress?.eta_s : c.estimated_duration_s)}</td>
                 <td>{commandsIn(states.data, c.status).map((a) => (

@@ -1,10 +1,12 @@
 import type { ComponentChildren } from "preact";
 import type { Pose } from "../api/client";
+import type { LiveLatency } from "../latency";
+import { LatencyReadout } from "./LatencyReadout";
 
 const fmt = (v: number | null | undefined, d = 2) => (v === null || v === undefined ? "-" : v.toFixed(d));
 
-export function PosePanel({ pose, stale, children }: { pose: Pose | null; stale: boolean; children?: ComponentChildren }) {
-  if (!pose) return <section class="card"><h2>Pose</h2><p>no frame yet</p>{children}</section>;
+export function PosePanel({ pose, stale, latency, children }: { pose: Pose | null; stale: boolean; latency?: LiveLatency | null; children?: ComponentChildren }) {
+  if (!pose) return <section class="card"><h2>Pose</h2><p>no frame yet</p><LatencyReadout latency={latency ?? null} />{children}</section>;
   const ps = pose.position_sigma_mm ?? [];
   const as = pose.attitude_sigma_deg ?? [];
   const rows: [string, number | null | undefined, number | undefined, string, number][] = [
@@ -29,6 +31,7 @@ export function PosePanel({ pose, stale, children }: { pose: Pose | null; stale:
         residual {fmt(pose.residual_mm, 3)} mm, {fmt(pose.timings_ms["total"], 1)} ms
         (<span data-testid="pose-mode">{pose.mode}</span>);
         attitude relative to the facing reference (face-on reads 0, 0, 0)</p>
+      <LatencyReadout latency={latency ?? null} />
       {pose.angular_rate_deg_s && (
         <table class="pose" data-testid="rates">
           <thead><tr><th></th><th>rate (deg/s)</th><th>velocity (mm/s)</th></tr></thead>

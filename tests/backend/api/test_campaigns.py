@@ -539,19 +539,30 @@ def test_raw_recording_holds_exactly_the_stored_frames_and_reprocesses(fast_clie
         assert r.status_code == 404 and "record_raw was off" in r.json()["detail"]
 
 
-def test_the_campaigns_camera_settings_are_applied_before_it_measures(fast_client):
+def test_the_campaigns_camera_settings_are_applied_and_then_restored(fast_client):
     c = fast_client
     body = {
         **GRID,
         "name": "cam",
-        "frames_per_point": 3,
+        "frames_per_point": 40,
         "camera": {"modulation_frequency_mhz": 12.0, "frame_rate_hz": 15.0},
     }
-    assert c.get("/api/camera/settings").json()["modulation_frequency_mhz"] == 6.0
-    done = _run(c, body)
+    before = c.get("/api/camera/settings").json()
+    assert before["modulation_frequency_mhz"] == 6.0
+    cid = c.post("/api/campaigns", json=body, headers=AUTH).json()["id"]
+    c.post(f"/api/campaigns/{cid}/start", headers=AUTH)
+    wait_for(
+        lambda: (p := c.get(f"/api/campaigns/{cid}").json()["progress"]) and p["frames_collected"],
+        60,
+        "a measured frame",
+    )
+    during = c.get("/api/camera/settings").json()
+    assert (during["modulation_frequency_mhz"], during["frame_rate_hz"]) == (12.0, 15.0)
+    done = wait_for(
+        lambda: (x := c.get(f"/api/campaigns/{cid}").json())["status"] != "running" and x, 60
+    )
     assert done["status"] == "done" and done["camera"]["modulation_frequency_mhz"] == 12.0
-    s = c.get("/api/camera/settings").json()
-    assert s["modulation_frequency_mhz"] == 12.0 and s["frame_rate_hz"] == 15.0
+    assert c.get("/api/camera/settings").json() == before  # the camera's own again
 
 
 def _write_recording_with_both_truths(path, n_frames: int) -> None:

@@ -30,7 +30,7 @@ def test_empty_file_becomes_a_current_wal_database(tmp_path):
     upgrade_database(engine)
     with engine.connect() as conn:
         assert conn.execute(text("PRAGMA journal_mode")).scalar() == "wal"
-        assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0007"
+        assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0008"
     assert {"catalogs", "campaigns", "setpoints", "measurements"} <= set(
         inspect(engine).get_table_names()
     )

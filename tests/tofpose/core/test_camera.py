@@ -86,3 +86,13 @@ def test_the_device_fields_travel_through_json_and_default_to_the_epc660s():
     )
     with pytest.raises(ValueError, match="distance_kind must be one of radial, z"):
         CameraModel(distance_kind="depth")  # type: ignore[arg-type]
+
+
+def test_the_focal_length_sigma_travels_through_json_and_is_exact_when_not_stated():
+    cam = CameraModel(focal_length_sigma_rel=0.002)
+    assert CameraModel.from_json(cam.to_json()).focal_length_sigma_rel == 0.002
+    old = {k: v for k, v in cam.to_dict().items() if k != "focal_length_sigma_rel"}
+    assert CameraModel.from_dict(old).focal_length_sigma_rel == 0.0
+    for bad in (-0.001, 0.1, float("nan")):
+        with pytest.raises(ValueError, match="focal_length_sigma_rel must be in"):
+            CameraModel(focal_length_sigma_rel=bad)

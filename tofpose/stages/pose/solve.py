@@ -36,6 +36,7 @@ from tofpose.stages.pose.constants import (
     REFINE_ML,
     REFINE_NONE,
 )
+from tofpose.stages.pose.photometry import MAX_RADIANCE_RATIO, aperture_returns, radiance_ratio
 from tofpose.stages.pose.pose import STEP_SIGMA2, MLResult
 from tofpose.stages.pose.records import (
     NO_OFFSET,
@@ -59,15 +60,23 @@ def chi2_limit(dof: int, p: float) -> float:
     return float(scipy.stats.chi2.ppf(p, dof))
 
 
-def offset_prior(config: SolveConfig, sigma_mm: float, fx_px: float) -> RangeOffsetPrior:
+def focal_length_sigma_rel(config: SolveConfig, camera: CameraModel) -> float:
+    """The focal length's relative sigma the fit assumes: ``config``'s when it sets one,
+    else the camera's (``CameraModel.focal_length_sigma_rel``)."""
+    if config.focal_length_sigma_rel is not None:
+        return float(config.focal_length_sigma_rel)
+    return float(camera.focal_length_sigma_rel)
+
+
+def offset_prior(config: SolveConfig, sigma_mm: float, camera: CameraModel) -> RangeOffsetPrior:
     """The common range offset's prior for ``kernels.pose.common_range_offset``: sigma
     ``sigma_mm`` (the uncalibrated or calibrated range-bias sigma), and the image scale's
-    uncertainty from ``focal_length_sigma_rel`` and ``common_centroid_bias_px`` (over the
-    focal length ``fx_px``)."""
+    uncertainty from the focal length's (``focal_length_sigma_rel``) and
+    ``common_centroid_bias_px`` (over the camera's focal length)."""
     return RangeOffsetPrior(
         sigma_mm=float(sigma_mm),
-        focal_length_sigma_rel=float(config.focal_length_sigma_rel),
-        centroid_bias_rad=float(config.common_centroid_bias_px) / fx_px,
+        focal_length_sigma_rel=focal_length_sigma_rel(config, camera),
+        centroid_bias_rad=float(config.common_centroid_bias_px) / camera.fx,
     )
 
 
@@ -347,7 +356,7 @@ class PoseSolver:
         reflectors at ``range_mm`` (m,)."""
         if not self.config.estimate_range_offset:
             return NO_OFFSET
-        return offset_prior(self.config, self.range_bias_sigma_mm(range_mm), self.camera.fx)
+        return offset_prior(self.config, self.range_bias_sigma_mm(range_mm), self.camera)
 
     def conclude(
         self,
@@ -372,6 +381,8 @@ class PoseSolver:
         ar = self.arithmetic
         if self.config.verify_pose:
             problem = self.verify(T, active, obs.i_idx, dark_check_all=dark_check_all)
+            if not problem and self.config.photometric_check and active is not None:
+                problem = self.photometric_problem(T, active, obs)
             if problem:
                 return Rejected(f"pose rejected: {problem}", implausible=True)
         dof = 3 * len(obs.i_idx) - 6
@@ -393,7 +404,8 @@ class PoseSolver:
         fitted = fitted_reflectors(obs, fit)
         cfg = self.config
         # the image scale's errors (the focal length's, one per size class)
-        by_size = cfg.common_centroid_bias_px > 0 or cfg.focal_length_sigma_rel > 0
+        focal_sigma = focal_length_sigma_rel(cfg, self.camera)
+        by_size = cfg.common_centroid_bias_px > 0 or focal_sigma > 0
         leave_one_out = cfg.leave_one_out_covariance and len(obs.i_idx) >= MIN_LEAVE_ONE_OUT
         terms = CovarianceTerms(
             bias_sigma_mm=float(bias),
@@ -401,7 +413,7 @@ class PoseSolver:
             group=np.ascontiguousarray(self._size_class[obs.i_idx], dtype=np.int64),
             n_groups=self._n_sizes,
             bias_rad=float(cfg.common_centroid_bias_px) / self.camera.fx,
-            common_scale_sigma=float(cfg.focal_length_sigma_rel),
+            common_scale_sigma=focal_sigma,
             leave_one_out=bool(leave_one_out),
         )
         # one compiled call for the three (they share the Jacobian at the pose)
@@ -447,6 +459,26 @@ class PoseSolver:
         if c is not None and c.covers(float(range_mm.min())) and c.covers(float(range_mm.max())):
             return cfg.calibrated_range_bias_sigma_mm
         return cfg.range_bias_sigma_mm
+
+    def photometric_problem(
+        self, T: RigidTransform, active: ThresholdedFrame, obs: MatchedObservations
+    ) -> str:
+        """Why the matched reflectors' returns per disc area cannot be one target's
+        (``photometry``), or '' when they can: ``active``'s frame read by aperture
+        photometry at ``obs``' centroids, each disc's image radius predicted at the pose
+        ``T``."""
+        centres = self._xyz[obs.i_idx] @ T.R.T + T.t_mm
+        radius_px = 0.5 * self.camera.fx * self._d[obs.i_idx] / np.maximum(centres[:, 2], 1e-6)
+        returns = aperture_returns(active.gray, obs.uv_px, radius_px, self.camera.full_scale_counts)
+        ratio, hi, lo = radiance_ratio(returns)
+        if not ratio > MAX_RADIANCE_RATIO:
+            return ""
+        ids = self._ids[obs.i_idx]
+        return (
+            f"the matched reflectors' returns differ {ratio:.1f}x per disc area (reflector "
+            f"{int(ids[hi])} against {int(ids[lo])}; one target's differ by less than "
+            f"{MAX_RADIANCE_RATIO:g}x): a match of other light to the catalog"
+        )
 
     # ------------------------------------------------------------------------------------
     def view_cosine(self, R: np.ndarray, t: np.ndarray) -> float:

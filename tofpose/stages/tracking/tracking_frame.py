@@ -77,9 +77,7 @@ class CompiledTracker:
         # without a range correction the prior's sigma is the uncalibrated one, whatever
         # the ranges (``PoseSolver.range_bias_sigma_mm``)
         self._uncalibrated_prior = (
-            offset_prior(config, config.range_bias_sigma_mm, camera.fx)
-            if correction is None
-            else None
+            offset_prior(config, config.range_bias_sigma_mm, camera) if correction is None else None
         )
         self._camera_record = camera_record(camera)
         self._catalog_record = catalog_record(catalog)

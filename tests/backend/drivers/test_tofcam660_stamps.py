@@ -1,0 +1,50 @@
+"""The TOFcam-660 driver's stamps through the emulator: the capture time is taken when
+the acquisition command goes out, and an image the camera took but the network lost is
+a gap in the camera's measurement ids (a camera drop)."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from backend.drivers.base import CameraError, CameraSettings
+from backend.drivers.sim import make_sim_world
+from backend.drivers.tofcam660 import TofCam660Driver
+from backend.emulators.tofcam660 import TofCam660Emulator
+from backend.services.live.latency import SequenceGaps
+
+ADDRESS = "127.0.0.46"
+FIXED = CameraSettings(integration_time_us=300.0, auto_exposure=False, frame_rate_hz=60.0)
+
+
+@pytest.fixture
+def emu():
+    world = make_sim_world(start_rail_mm=13000.0)
+    world.set_sensor(noise=False)
+    with TofCam660Emulator(world, ADDRESS) as e:
+        yield e
+
+
+def test_capture_stamp_and_a_lost_image_as_a_counter_gap(emu):
+    drv = TofCam660Driver(ADDRESS, settings=FIXED, io_timeout_s=0.5)
+    gaps = SequenceGaps()
+    try:
+        before = time.monotonic_ns()
+        first = drv.read(2.0)
+        arrived = time.monotonic_ns()
+        assert first.capture_ns is not None and before <= first.capture_ns <= arrived
+        second = drv.read(2.0)
+        assert [gaps.observe(f.sequence) for f in (first, second)] == [0, 0]
+        assert second.sequence == first.sequence + 1
+        emu.lose_images()  # the camera takes the image, the network loses it
+        with pytest.raises(CameraError, match="image lost"):
+            drv.read(2.0)
+        emu.lose_images(False)
+        third = drv.read(2.0)
+    finally:
+        drv.close()
+    # the camera's own counter went on: one image missing between the second and third
+    assert third.sequence == second.sequence + 2
+    assert gaps.observe(third.sequence) == 1
+    assert emu.camera.frames_sent == 4
