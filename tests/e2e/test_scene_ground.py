@@ -40,5 +40,12 @@ def test_the_dashboards_scene_has_grid_rulers_and_a_trail_that_clears(server, pa
     own.get_by_text(re.compile(r"frame \d+: 8 matched")).wait_for(timeout=30_000)
     own.wait_for_timeout(2000)
     own.screenshot(path=str(SHOTS / "scene-ground-own-tab.png"))
+    # paused, the trail stops growing: the button must empty it
+    page.get_by_test_id("scene-pause").check()
+    wait_for(lambda: scene.paused, 10.0, "the scene to pause")
+    assert len(scene.trail) >= 10
     inner.get_by_role("button", name="Clear trail").click()
-    wait_for(lambda: len(scene.trail) <= 3, 10.0, "the trail to be cleared")
+    wait_for(lambda: len(scene.trail) == 0, 10.0, "the trail to be cleared")
+    assert not scene.trail_node.visible
+    page.get_by_test_id("scene-pause").uncheck()
+    wait_for(lambda: len(scene.trail) >= 2, 20.0, "the trail to grow again")
