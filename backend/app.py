@@ -45,6 +45,7 @@ from backend.api.routes import devices as devices_route
 from backend.api.routes import recordings as recordings_route
 from backend.api.routes import reprocessings as reprocessings_route
 from backend.api.routes import studies as studies_route
+from backend.api.routes import viewers as viewers_route
 from backend.audit_middleware import AuditMiddleware
 from backend.db.engine import make_engine, make_session_factory, upgrade_database
 from backend.drivers.base import CameraSettings
@@ -465,6 +466,7 @@ def _include_routes(app: FastAPI) -> None:
         studies_route,
         reprocessings_route,
         recordings_route,
+        viewers_route,
         audit_route,
     )
     for module in routers:

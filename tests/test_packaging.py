@@ -88,6 +88,16 @@ def test_wheel_carries_the_ros2_message_definitions(wheel):
     assert "tofpose/io/interop/ros2_msgs/NOTICE.md" in names
 
 
+def test_wheel_carries_the_viewer_layouts(wheel):
+    """``tofpose export mcap`` copies the shipped Foxglove layout beside its file: it
+    ships, with the Rerun blueprint (tofpose/io/interop/viewers.py)."""
+    from tofpose.io.interop.viewers import FOXGLOVE_LAYOUT, RERUN_BLUEPRINT
+
+    names = set(zipfile.ZipFile(wheel).namelist())
+    for path in (FOXGLOVE_LAYOUT, RERUN_BLUEPRINT):
+        assert path.relative_to(ROOT).as_posix() in names
+
+
 @pytest.fixture(scope="module")
 def installed(wheel, tmp_path_factory) -> Path:
     """The wheel installed into a bare directory (run with it as PYTHONPATH)."""

@@ -152,9 +152,21 @@ def _add_simulation_commands(sub) -> None:
 def _add_interop_commands(sub) -> None:
     """The subcommands export and import, on the subparsers ``sub``."""
     p = sub.add_parser("export", help="write a recording in another format (docs/interop.md)")
-    p.add_argument("format", choices=("mcap",), help="mcap: Foxglove / ROS 2 / Rerun")
+    p.add_argument(
+        "format",
+        choices=("mcap", "rrd"),
+        help="mcap: Foxglove / ROS 2 / Rerun; rrd: Rerun's own format, with the pose's time "
+        "series and the image overlay (needs rerun-sdk)",
+    )
     p.add_argument("recording")
-    p.add_argument("--out", required=True, help="output file (REC.mcap)")
+    p.add_argument("--out", required=True, help="output file (REC.mcap, REC.rrd)")
+    p.add_argument(
+        "--no-viewers",
+        dest="viewers",
+        action="store_false",
+        help="mcap: do not write the Foxglove layout and the Rerun blueprint beside the "
+        "file (REC.foxglove-layout.json, REC.rbl; an .rrd carries its blueprint)",
+    )
     p.add_argument(
         "--profile",
         choices=MCAP_PROFILES,

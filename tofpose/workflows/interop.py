@@ -10,14 +10,20 @@ from tofpose.io.recording import open_recording
 
 
 def export_file(args: argparse.Namespace) -> str:
-    """``tofpose export mcap``: the recording, and with ``--estimate`` each frame's pose,
-    as the ``--profile`` (foxglove or ros2) says."""
+    """``tofpose export mcap|rrd``: the recording, and with ``--estimate`` each frame's
+    pose, as MCAP in the ``--profile`` (foxglove or ros2) or as a Rerun recording (its
+    blueprint embedded); beside a Foxglove-profile MCAP, unless ``--no-viewers``, the
+    Foxglove layout and a Rerun blueprint (``viewers.write_viewers``)."""
     from tofpose.io.interop.mcap_profiles import (  # lazy: foxglove-sdk loads a runtime
         check_profile,
         export_mcap_profile,
     )
+    from tofpose.io.interop.viewers import write_viewers
 
+    fmt = getattr(args, "format", "mcap")
     profile = check_profile(getattr(args, "profile", DEFAULT_MCAP_PROFILE))
+    if fmt == "rrd" and profile != DEFAULT_MCAP_PROFILE:
+        raise ValueError("--profile is an MCAP option: export rrd does not take it")
 
     with open_recording(args.recording) as rec:
         pipe = (
@@ -25,11 +31,23 @@ def export_file(args: argparse.Namespace) -> str:
             if args.estimate
             else None
         )
-        s = export_mcap_profile(
-            rec, args.out, pipe, profile=profile, overwrite=args.force, previews=args.previews
-        )
+        if fmt == "rrd":
+            from tofpose.io.interop.rerun_export import export_rrd
+
+            s = export_rrd(rec, args.out, pipe, overwrite=args.force)
+        else:
+            s = export_mcap_profile(
+                rec, args.out, pipe, profile=profile, overwrite=args.force, previews=args.previews
+            )
     poses = f", {s['ok']} with a pose" if args.estimate else ""
-    return f"{s['frames']} frames{poses} -> {args.out} ({profile})"
+    viewers = ""
+    if fmt == "mcap" and profile == DEFAULT_MCAP_PROFILE and getattr(args, "viewers", True):
+        written = write_viewers(args.out)
+        viewers = f"; beside it: {', '.join(p.name for p in written)}"
+        if len(written) == 1:
+            viewers += " (no Rerun blueprint: rerun-sdk is not installed)"
+    kind = "rrd" if fmt == "rrd" else profile
+    return f"{s['frames']} frames{poses} -> {args.out} ({kind}){viewers}"
 
 
 def import_file(args: argparse.Namespace) -> str:

@@ -24,6 +24,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session, selectinload, sessionmaker
 
 from backend.db.models import CampaignRow, MeasurementRow, SetPointRow, utcnow
+from backend.services.campaigns.campaign_recording import CampaignRecordingWriter
 from backend.services.campaigns.campaign_states import (
     FINISHED,
     RUNNER_TRANSITIONS,
@@ -34,7 +35,6 @@ from backend.services.campaigns.campaign_states import (
 from backend.services.live.acquisition import LiveSample
 from backend.services.store import commit_unique
 from tofpose.core.geometry import RigidTransform, facing_euler_deg, facing_euler_sigma_deg
-from tofpose.io.recording import RecordingWriter
 
 AXIS_COLUMNS = {"yaw": "yaw_deg", "pitch": "pitch_deg", "roll": "roll_deg", "rail": "rail_mm"}
 
@@ -434,26 +434,33 @@ class RawRecorder:
     def __init__(self, path: Path, camera, catalog, committed_frames: int) -> None:
         self.path = path
         self._camera, self._catalog = camera, catalog
-        self._writer: RecordingWriter | None = None
+        self._writer: CampaignRecordingWriter | None = None
+        self._setpoint: SetPointView | None = None
         if path.exists():
-            self._writer = RecordingWriter.reopen(path)
+            self._writer = CampaignRecordingWriter.reopen(path)
             self._writer.truncate(min(committed_frames, self._writer.n))
 
     @property
     def n(self) -> int:
         return self._writer.n if self._writer is not None else 0
 
+    def begin_setpoint(self, setpoint: SetPointView) -> None:
+        """The set-point the frames appended from now on are measured at."""
+        self._setpoint = setpoint
+
     def append(self, sample: LiveSample) -> int:
         """Write the sample's frame (``/truth`` from its exact pose, ``/lab_truth`` from
-        its lab reference, each when the first frame has it); returns its index."""
+        its lab reference, each when the first frame has it) with its wall clock,
+        encoders and set-point (``campaign_recording``); returns its index."""
         f = sample.frame
         exact, lab = f.T_camera_target_exact, f.T_camera_target_lab
         if self._writer is None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._writer = RecordingWriter(
+            self._writer = CampaignRecordingWriter(
                 self.path,
                 self._camera,
                 self._catalog,
+                axes={a: c.rsplit("_", 1)[1] for a, c in AXIS_COLUMNS.items()},
                 with_truth=exact is not None,
                 with_lab_truth=lab is not None,
             )
@@ -467,6 +474,13 @@ class RawRecorder:
             exact.t_mm if exact is not None else None,
             lab_R_camera_target=lab.R if lab is not None else None,
             lab_t_camera_target_mm=lab.t_mm if lab is not None else None,
+        )
+        sp = self._setpoint
+        w.append_motion(
+            round(sample.captured_unix_s * 1e9),
+            f.meta.get("encoders") or {},
+            sp.axes if sp is not None else {},
+            sp.index if sp is not None else -1,
         )
         return index
 

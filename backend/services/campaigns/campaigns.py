@@ -394,6 +394,8 @@ class CampaignService:
         for sp in pending:
             self._bump(setpoint_index=sp.index, frames_collected=0, camera=sp.camera)
             start_n = recorder.n if recorder is not None else 0
+            if recorder is not None:
+                recorder.begin_setpoint(sp)
             self._setpoint_camera(camera, sp.index, sp.camera)
             expected_us = camera.expected_integration_us
             try:

@@ -13,8 +13,17 @@ metres (``scene_model``):
   reference (when the source knows it; else at the exact pose, when that is known:
   ``_shown_truth``): ``.../plate`` and ``.../reflector_<id>``, each
   reflector coloured matched / unmatched / out of view (``scene_model.STATE_COLOURS``).
-- GUI: a "Pause scene" checkbox (freezes the scene; the pipeline keeps running) and a
-  status line.
+- ``/ground/grid``: a grid on the ground plane (``scene_model.GROUND_DROP_M`` below
+  the lab origin; lab y points down), cells of one scale step; ``/ground/scale``: rulers
+  along the lab's x and z axes on it, ticked every step, with ``/ground/scale/label_<k>``
+  reading the distance in metres and ``/ground/scale/axis_x``, ``.../axis_z`` naming the
+  axes. Grid and rulers reach past the farthest of camera and target, and grow when
+  either goes beyond them.
+- ``/trail``: the estimated target origin over the last ``scene_model.TRAIL_POSES``
+  poses, a polyline in the lab frame; emptied by the GUI's "Clear trail" button
+  (``LiveScene.clear_trail``).
+- GUI: a "Pause scene" checkbox (freezes the scene; the pipeline keeps running), a
+  "Clear trail" button and a status line.
 
 One thread takes the newest sample from a one-deep hub subscription (older ones are
 dropped, never queued) and updates the nodes at most ``max_rate_hz`` times a second.
@@ -78,12 +87,17 @@ from backend.security_headers import SCENE_HEADERS
 from backend.services.live.acquisition import AcquisitionService, LiveSample
 from backend.services.live.hub import LiveHub
 from backend.services.live.scene_model import (
+    GROUND_DROP_M,
     MATCHED,
     STATE_COLOURS,
     UNMATCHED,
+    PoseTrail,
     distance_cloud,
     lab_camera_pose,
     reflector_states,
+    scale_marks,
+    scale_segments,
+    scene_extent_m,
 )
 from backend.settings import LOOPBACK_HOST_HEADERS
 from tofpose.core.catalog import Catalog
@@ -95,6 +109,8 @@ if TYPE_CHECKING:  # viser is imported when a scene starts (LiveScene)
 log = logging.getLogger("tofpose.scene")
 TRUTH_COLOUR = (70, 120, 230)
 PLATE_COLOUR = (200, 200, 205)
+TRAIL_COLOUR = (170, 60, 200)
+SCALE_COLOUR = (60, 60, 60)
 
 
 def _shown_truth(frame: CameraFrame) -> RigidTransform | None:
@@ -105,6 +121,10 @@ def _shown_truth(frame: CameraFrame) -> RigidTransform | None:
     if frame.T_camera_target_lab is not None:
         return frame.T_camera_target_lab
     return frame.T_camera_target_exact
+
+
+def _lab(T_lab_cam: RigidTransform, T_cam: RigidTransform | None) -> RigidTransform | None:
+    return T_lab_cam.compose(T_cam) if T_cam is not None else None
 
 
 def _place(handle, T: RigidTransform) -> None:
@@ -365,6 +385,20 @@ class LiveScene:
         self.server.initial_camera.up = (0.0, -1.0, 0.0)
         self._aimed = False
         s.add_frame("/lab", axes_length=0.25, axes_radius=0.008)
+        self._extent_m = 0.0
+        self._ground_nodes: list[Any] = []
+        reach = [[0.0, 0.0, (rail_length_mm or 0.0) / 1000.0]]
+        self._build_ground(scene_extent_m(np.asarray(reach)))
+        self.trail = PoseTrail()
+        self._trail_lock = threading.Lock()
+        self.trail_node = s.add_line_segments(
+            "/trail",
+            np.zeros((1, 2, 3)),
+            TRAIL_COLOUR,
+            thickness=3.0,
+            thickness_units="screen",
+            visible=False,
+        )
         if rail_length_mm:
             end = (0.0, 0.0, rail_length_mm / 1000.0)
             s.add_line_segments("/rail", np.array([[(0.0, 0.0, 0.0), end]]), colors=(90, 90, 90))
@@ -391,11 +425,71 @@ class LiveScene:
             visible=False,
         )
         self._pause = self.server.gui.add_checkbox("Pause scene", initial_value=False)
+        self._clear = self.server.gui.add_button("Clear trail")
+        self._clear.on_click(lambda _event: self.clear_trail())
         self.status = self.server.gui.add_markdown("waiting for the first frame")
         self.estimate: FrameHandle | None = None
         self.truth: FrameHandle | None = None
         self.estimate_reflectors: dict[int, IcosphereHandle] = {}
         self.truth_reflectors: dict[int, IcosphereHandle] = {}
+
+    def _build_ground(self, extent_m: float) -> None:
+        """(Re)build the ground grid and the rulers out to ``extent_m`` from the origin."""
+        s = self.server.scene
+        for node in self._ground_nodes:
+            node.remove()
+        marks, step = scale_marks(extent_m)
+        self._ground_nodes = [
+            s.add_grid(
+                "/ground/grid",
+                width=extent_m,
+                height=extent_m,
+                plane="xz",
+                cell_size=step,
+                cell_color=(175, 175, 175),
+                section_size=step * 5,
+                section_color=(110, 110, 110),
+                position=(0.0, GROUND_DROP_M, extent_m / 2.0),
+            ),
+            s.add_line_segments(
+                "/ground/scale",
+                scale_segments(marks, extent_m),
+                SCALE_COLOUR,
+                thickness=2.0,
+                thickness_units="screen",
+            ),
+        ]
+        for k, mark in enumerate(marks):
+            self._ground_nodes.append(
+                s.add_label(f"/ground/scale/label_{k}", mark.text, position=mark.position_m)
+            )
+        for axis, position in (
+            ("x", (extent_m / 2.0 + step / 2.0, GROUND_DROP_M, 0.0)),
+            ("z", (0.0, GROUND_DROP_M, extent_m + step / 2.0)),
+        ):
+            self._ground_nodes.append(
+                s.add_label(f"/ground/scale/axis_{axis}", f"lab {axis} (m)", position=position)
+            )
+        self._extent_m = extent_m
+
+    def clear_trail(self) -> None:
+        """Forget the trail's poses (the GUI's "Clear trail"); it grows again from the
+        next pose."""
+        with self._trail_lock:
+            self.trail.clear()
+            self.trail_node.visible = False
+
+    def _update_trail(self, position_m: np.ndarray | None) -> None:
+        with self._trail_lock:
+            if position_m is not None:
+                self.trail.add(position_m)
+            if len(self.trail) >= 2:
+                segments = self.trail.segments_m()
+                self.trail_node.points = segments.astype(np.float32)
+                self.trail_node.colors = np.broadcast_to(
+                    np.asarray(TRAIL_COLOUR, np.uint8), segments.shape
+                ).copy()
+            self.trail_node.visible = len(self.trail) >= 2
 
     def _build_target(self, catalog: Catalog) -> None:
         """(Re)build the two target models for the active catalog."""
@@ -466,8 +560,16 @@ class LiveScene:
             for r, state in zip(catalog.reflectors, states, strict=True):
                 self.estimate_reflectors[r.id].color = STATE_COLOURS[state]
             estimate.visible = T_est is not None
-            if T_est is not None:
-                _place(estimate, T_lab_cam.compose(T_est))
+            T_lab_est = T_lab_cam.compose(T_est) if T_est is not None else None
+            if T_lab_est is not None:
+                _place(estimate, T_lab_est)
+            self._update_trail(T_lab_est.t_mm / 1000.0 if T_lab_est is not None else None)
+            reach = [T_lab_cam.t_mm / 1000.0]
+            reach += [
+                T.t_mm / 1000.0 for T in (T_lab_est, _lab(T_lab_cam, T_shown)) if T is not None
+            ]
+            if (needed := scene_extent_m(np.asarray(reach))) > self._extent_m:
+                self._build_ground(needed)
             truth.visible = T_shown is not None
             if T_shown is not None:
                 _place(truth, T_lab_cam.compose(T_shown))
@@ -494,10 +596,15 @@ class LiveScene:
             return  # wait for a frame that says where the target is
         cam = T_lab_cam.t_mm / 1000.0
         ahead = T_lab_cam.R[:, 2]
-        self.server.initial_camera.look_at = cam + ahead * range_m / 2.0
-        self.server.initial_camera.position = cam + T_lab_cam.R @ np.array(
-            [-1.1 * range_m, -0.6 * range_m, -0.15 * range_m]
-        )
+        look_at = cam + ahead * range_m / 2.0
+        position = cam + T_lab_cam.R @ np.array([-1.1 * range_m, -0.6 * range_m, -0.15 * range_m])
+        self.server.initial_camera.look_at = look_at
+        self.server.initial_camera.position = position
+        # a browser that connected before the first pose (the dashboard's frame, loaded
+        # with the page) keeps the default view unless it is aimed too
+        for client in self.server.get_clients().values():
+            client.camera.look_at = look_at
+            client.camera.position = position
         self._aimed = True
 
     def _update_measured(self, res) -> None:

@@ -58,6 +58,8 @@ class ToFChannels:
         truth: bool = False,
         lab_truth: bool = False,
         previews: bool = True,
+        trail: bool = False,
+        motion_fields: tuple[str, ...] = (),
     ) -> None:
         self.camera = camera
         self.previews = (
@@ -88,6 +90,18 @@ class ToFChannels:
                     topics.POSE: PoseInFrameChannel(topics.POSE, context=context),
                     topics.REFLECTORS: PointCloudChannel(topics.REFLECTORS, context=context),
                 }
+            )
+            if trail:
+                self.optional[topics.TARGET_ORIGIN] = PointCloudChannel(
+                    topics.TARGET_ORIGIN, context=context
+                )
+        self.motion_fields = motion_fields
+        if motion_fields:
+            self.optional[topics.ENCODERS] = json_channel(
+                topics.ENCODERS, topics.encoders_schema(motion_fields), context
+            )
+            self.optional[topics.SETPOINT] = json_channel(
+                topics.SETPOINT, topics.setpoint_schema(motion_fields), context
             )
         for wanted, topic, transform in (
             (truth, topics.TRUTH, topics.TRUTH_TRANSFORM),
@@ -192,6 +206,12 @@ class ToFChannels:
                     lambda: msg.pose_in_frame(R, t_mm, ts),
                     log_time_ns,
                 )
+                if topics.TARGET_ORIGIN in self.optional:
+                    emit(
+                        self.optional[topics.TARGET_ORIGIN],
+                        lambda: msg.target_origin_cloud(t_mm, ts),
+                        log_time_ns,
+                    )
             emit(
                 self._channel(topics.REFLECTORS),
                 lambda: msg.reflector_cloud(result, ts),
@@ -217,6 +237,32 @@ class ToFChannels:
                 ts,
                 log_time_ns,
             )
+
+    def log_motion(
+        self,
+        index: int,
+        positions: np.ndarray,
+        targets: np.ndarray,
+        setpoint_index: int | None,
+        log_time_ns: int,
+    ) -> None:
+        """The turntable at frame ``index``: encoders ``positions`` and set-point
+        ``targets`` (A,) deg / mm in the order of ``motion_fields`` (NaN: none), the
+        campaign's ``setpoint_index`` (None outside a campaign)."""
+        fields = self.motion_fields
+        self._emit(
+            self._channel(topics.ENCODERS),
+            lambda: json.dumps(msg.motion_payload(index, fields, positions), allow_nan=False),
+            log_time_ns,
+        )
+        self._emit(
+            self._channel(topics.SETPOINT),
+            lambda: json.dumps(
+                {**msg.motion_payload(index, fields, targets), "setpoint_index": setpoint_index},
+                allow_nan=False,
+            ),
+            log_time_ns,
+        )
 
     def close(self) -> None:
         for ch in self.channels:

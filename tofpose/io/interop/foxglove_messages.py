@@ -170,6 +170,29 @@ def reflector_cloud(result: PoseResult, ts: fm.Timestamp) -> fm.PointCloud:
     )
 
 
+_ORIGIN_FIELDS = _CLOUD_FIELDS[:3]
+ORIGIN_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
+
+
+def target_origin_cloud(t_mm: np.ndarray, ts: fm.Timestamp) -> fm.PointCloud:
+    """One point: the estimated target origin ``t_camera_target`` (3,) mm, in the camera
+    frame in metres. Shown with its history (Foxglove's decay time, Rerun's visible
+    time range), the points are the pose's trail."""
+    pts = np.zeros(1, ORIGIN_DTYPE)
+    pts[0] = tuple(float(v) / 1000.0 for v in t_mm)
+    return fm.PointCloud(
+        timestamp=ts,
+        frame_id=topics.CAMERA_FRAME_ID,
+        pose=fm.Pose(
+            position=fm.Vector3(x=0.0, y=0.0, z=0.0),
+            orientation=fm.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
+        ),
+        point_stride=ORIGIN_DTYPE.itemsize,
+        fields=[fm.PackedElementField(name=n, offset=o, type=t) for n, o, t in _ORIGIN_FIELDS],
+        data=pts.tobytes(),
+    )
+
+
 def _color(rgba: tuple[float, float, float, float]) -> fm.Color:
     r, g, b, a = rgba
     return fm.Color(r=r, g=g, b=b, a=a)
@@ -307,3 +330,9 @@ def estimate_payload(index: int, time_s: float, result: PoseResult) -> dict:
             for r in result.rejected
         ],
     }
+
+
+def motion_payload(index: int, fields: tuple[str, ...], values: np.ndarray) -> dict:
+    """``topics.encoders_schema`` / ``setpoint_schema``: frame ``index`` and one value
+    per axis field (values (A,) deg / mm; NaN -> null)."""
+    return {"index": int(index), **{f: _finite(v) for f, v in zip(fields, values, strict=True)}}

@@ -2,7 +2,9 @@
 
 The file is written by ``foxglove-sdk``'s MCAP writer through ``ToFChannels``: one frame
 at a time (memory stays bounded by the writer's chunk, ~1 MiB, whatever the length of
-the recording), log times = the frames' capture times. What no channel carries (the
+the recording), log times = the frames' capture times. A recording with ``/motion``
+(the server's: recordings on demand, a campaign's raw recording) adds the turntable's
+encoders and set-point of each frame (``motion_track``). What no channel carries (the
 camera and catalog JSON, the pipeline's settings and version) is the MCAP metadata
 record ``tofpose``.
 """
@@ -22,6 +24,7 @@ import tofpose
 from tofpose.io.interop import topics
 from tofpose.io.interop.channels import ToFChannels
 from tofpose.io.interop.foxglove_messages import time_ns_from_seconds
+from tofpose.io.interop.motion_track import read_motion_track
 from tofpose.io.recording import Recording
 from tofpose.pipeline import PosePipeline
 
@@ -91,6 +94,7 @@ def export_mcap(
     if out.exists() and not overwrite:
         raise ValueError(f"{out} exists (pass --force to overwrite it)")
     times_ns = message_times_ns(rec)
+    motion = read_motion_track(rec.path, rec.n_frames)
     context = foxglove.Context()
     channels = ToFChannels(
         context,
@@ -99,6 +103,8 @@ def export_mcap(
         truth=rec.truth_R is not None,
         lab_truth=rec.lab_truth_R is not None,
         previews=previews,
+        trail=True,
+        motion_fields=motion.fields if motion is not None else (),
     )
     n_ok = 0
     partial = out.with_name(out.name + ".partial")  # renamed when complete
@@ -119,6 +125,15 @@ def export_mcap(
             truth = pose_at(rec.truth_R, rec.truth_t_mm, i)
             lab = pose_at(rec.lab_truth_R, rec.lab_truth_t_mm, i)
             channels.log_frame(i, gray, dist, t, times_ns[i], result, truth, lab)
+            if motion is not None:
+                sp = motion.setpoint_index
+                channels.log_motion(
+                    i,
+                    motion.positions[i],
+                    motion.targets[i],
+                    int(sp[i]) if sp is not None and sp[i] >= 0 else None,
+                    times_ns[i],
+                )
         done = True
     finally:
         writer.close()

@@ -22,6 +22,9 @@ TRUTH = "/tofpose/truth"  # JSON: the recording's /truth pose, exact
 TRUTH_TRANSFORM = "/tofpose/truth_transform"  # foxglove.FrameTransform camera -> target_truth
 LAB_TRUTH = "/tofpose/lab_truth"  # JSON: the lab's reference (/lab_truth), exact
 LAB_TRUTH_TRANSFORM = "/tofpose/lab_truth_transform"  # camera -> target_lab
+TARGET_ORIGIN = "/tofpose/target_origin"  # foxglove.PointCloud: the estimate's origin (trail)
+ENCODERS = "/tofpose/motion/encoders"  # JSON: the turntable's encoders at each frame
+SETPOINT = "/tofpose/motion/setpoint"  # JSON: the set-point each frame was measured at
 
 CAMERA_FRAME_ID = "camera"
 TARGET_FRAME_ID = "target"
@@ -127,3 +130,37 @@ ESTIMATE_SCHEMA = {
     },
     "required": ["index", "time_s", "ok", "reason", "n_matched"],
 }
+
+
+def motion_schema(title: str, fields: tuple[str, ...], what: str) -> dict:
+    """The JSON schema of an encoder (``tofpose.Encoders``) or set-point
+    (``tofpose.SetPoint``) message: one number per axis named with its unit
+    (``yaw_deg``, ``rail_mm``; null = ``what``)."""
+    axes = {f: {"type": ["number", "null"], "description": what} for f in fields}
+    properties = {
+        "index": {"type": "integer", "description": "frame number in the recording"},
+        **axes,
+    }
+    if title == "tofpose.SetPoint":
+        properties["setpoint_index"] = {
+            "type": ["integer", "null"],
+            "description": "the campaign's set-point number (null: not a campaign)",
+        }
+    return {
+        "title": title,
+        "type": "object",
+        "properties": properties,
+        "required": ["index", *fields],
+    }
+
+
+def encoders_schema(fields: tuple[str, ...]) -> dict:
+    return motion_schema(
+        "tofpose.Encoders", fields, "axis position read back, deg / mm (null: none)"
+    )
+
+
+def setpoint_schema(fields: tuple[str, ...]) -> dict:
+    return motion_schema(
+        "tofpose.SetPoint", fields, "commanded position, deg / mm (null: left as is)"
+    )

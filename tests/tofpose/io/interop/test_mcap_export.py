@@ -38,7 +38,11 @@ PER_FRAME = {
     topics.LAB_TRUTH: "tofpose.Pose",
     topics.LAB_TRUTH_TRANSFORM: "foxglove.FrameTransform",
 }
-PER_POSE = {topics.POSE_TRANSFORM: "foxglove.FrameTransform", topics.POSE: "foxglove.PoseInFrame"}
+PER_POSE = {
+    topics.POSE_TRANSFORM: "foxglove.FrameTransform",
+    topics.POSE: "foxglove.PoseInFrame",
+    topics.TARGET_ORIGIN: "foxglove.PointCloud",
+}
 
 
 def read_back(path):
@@ -86,6 +90,19 @@ def test_every_channel_has_the_declared_schema_and_one_message_per_frame(content
         assert len(messages[topic]) == len(results), topic
     for topic in PER_POSE:
         assert len(messages[topic]) == n_ok, topic
+
+
+def test_the_trail_channel_is_each_poses_target_origin_in_metres(contents, results):
+    messages, _, _ = contents
+    with_pose = [r for r in results if r.ok]
+    origins = messages[topics.TARGET_ORIGIN]
+    pose_times = [t for t, _ in messages[topics.POSE_TRANSFORM]]
+    assert [t for t, _ in origins] == pose_times
+    for (_t, cloud), r in zip(origins, with_pose, strict=True):
+        assert [f.name for f in cloud.fields] == ["x", "y", "z"] and cloud.point_stride == 12
+        assert cloud.frame_id == topics.CAMERA_FRAME_ID
+        xyz = np.frombuffer(cloud.data, "<f4")
+        np.testing.assert_array_equal(xyz, (r.t_mm / 1000.0).astype(np.float32))
 
 
 def test_images_are_the_recordings_frames_at_their_capture_times(recording, contents):
