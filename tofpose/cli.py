@@ -62,7 +62,10 @@ def _add_measurement_commands(sub) -> None:
     """The subcommands estimate, calibrate-range and calibrate-covariance, on ``sub``."""
     p = sub.add_parser("estimate", help="estimate the pose of every frame of a recording")
     p.add_argument("recording")
-    p.add_argument("--catalog", help="catalog JSON (default: the recording's)")
+    p.add_argument(
+        "--catalog",
+        help="built-in catalog name (paper-target) or catalog JSON (default: the recording's)",
+    )
     p.add_argument("--camera", help="camera JSON or camera profile name (default: the recording's)")
     p.add_argument("--out", required=True, help="output CSV")
     p.add_argument(
@@ -134,7 +137,9 @@ def _add_simulation_commands(sub) -> None:
     p.add_argument("--frames", type=int, required=True)
     p.add_argument("--out", required=True)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--catalog")
+    p.add_argument(
+        "--catalog", help="built-in catalog name (paper-target) or catalog JSON (default: it)"
+    )
     p.add_argument(
         "--camera",
         help="camera profile (tofcam660, azure-kinect-nfov, hololens2-ahat) or camera JSON "
@@ -174,7 +179,10 @@ def _add_interop_commands(sub) -> None:
         help="foxglove: Foxglove's schemas, mm (default; Foxglove, Rerun, `import mcap`); "
         "ros2: ROS 2 messages (cdr), m and rad, REP 103 frames (ros2 bag, rosbags)",
     )
-    p.add_argument("--catalog", help="catalog JSON (default: the recording's)")
+    p.add_argument(
+        "--catalog",
+        help="built-in catalog name (paper-target) or catalog JSON (default: the recording's)",
+    )
     p.add_argument("--camera", help="camera JSON or camera profile name (default: the recording's)")
     p.add_argument("--tracking", action="store_true", help="estimate in tracking mode")
     p.add_argument(
@@ -246,7 +254,10 @@ def _add_batch_commands(sub) -> None:
     p.add_argument(
         "--camera", help="camera JSON or camera profile name (default: each recording's)"
     )
-    p.add_argument("--catalog", help="catalog JSON (default: each recording's)")
+    p.add_argument(
+        "--catalog",
+        help="built-in catalog name (paper-target) or catalog JSON (default: each recording's)",
+    )
     p.add_argument("--tracking", action="store_true", help="the pipeline's tracking mode")
     p.add_argument("--filter", action="store_true", help="add the relative-state filter's columns")
     p.add_argument("--chunk-frames", type=int, default=512, help="frames per task (default 512)")

@@ -15,7 +15,7 @@ from tofpose.calibration.range import RangeCorrection
 from tofpose.config import PixelFitConfig, TrackingConfig, config_for_camera
 from tofpose.core.camera import CameraModel
 from tofpose.core.camera_profiles import camera_from_profile, profile_names, profile_text
-from tofpose.core.catalog import Catalog
+from tofpose.core.catalog import BUILTIN_CATALOGS, Catalog
 from tofpose.pipeline import PipelineConfig, PosePipeline
 
 
@@ -64,6 +64,18 @@ def read_camera_text(name_or_path: str) -> str:
     return read_text_file(name_or_path, "camera")
 
 
+def catalog_from_arg(name_or_path: str) -> Catalog:
+    """The catalog of a ``--catalog`` argument: a built-in catalog's name
+    (``BUILTIN_CATALOGS``: ``paper-target``) or a catalog JSON file; ``SystemExit``
+    naming what is wrong."""
+    if name_or_path in BUILTIN_CATALOGS:
+        return BUILTIN_CATALOGS[name_or_path]()
+    try:
+        return Catalog.from_json(read_text_file(name_or_path, "catalog"))
+    except (ValueError, KeyError, TypeError) as exc:
+        raise SystemExit(f"tofpose: catalog {name_or_path}: {exc}") from exc
+
+
 def camera_from_arg(name_or_path: str) -> CameraModel:
     """The camera of a ``--camera`` argument (``read_camera_text``); ``SystemExit``
     naming what is wrong."""
@@ -90,11 +102,15 @@ def pipeline_for(
     if camera_path:
         camera, correction, scale = load_camera(read_camera_text(camera_path))
     if catalog_path:
-        catalog = Catalog.from_json(read_text_file(catalog_path, "catalog"))
+        catalog = catalog_from_arg(catalog_path)
     elif rec.catalog is not None:
         catalog = rec.catalog
     else:
-        raise SystemExit(f"tofpose: {rec_path} has no /catalog; pass --catalog CAT.json")
+        raise SystemExit(
+            f"tofpose: {rec_path} has no /catalog; pass --catalog with a built-in catalog's "
+            f"name ({', '.join(BUILTIN_CATALOGS)}) or a catalog JSON file "
+            "(its format: docs/architecture.md, 'Catalog JSON')"
+        )
     if camera.shape != rec.camera.shape:
         raise SystemExit(
             f"tofpose: camera {camera.width}x{camera.height} does not match the recording's "

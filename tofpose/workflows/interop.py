@@ -113,4 +113,13 @@ def _import_ros2(args: argparse.Namespace) -> str:
     lens = (
         f", lens as 5 coefficients within {s.lens_fit_max_px:.2f} px" if s.lens_fit_max_px else ""
     )
-    return f"{s.frames} frames -> {args.out}{skipped}{lens}"
+    clipped = (
+        f"; warning: amplitudes up to {s.max_amplitude_counts:.0f} counts, above the "
+        f"camera's full scale of {s.camera.full_scale_counts:.0f} ("
+        + ("the TOFcam-660's: no --camera given" if camera is None else "--camera's")
+        + "): every pixel above it reads as saturated; give --camera with this device's "
+        "profile or camera JSON (docs/devices.md) and import again"
+        if s.max_amplitude_counts > s.camera.full_scale_counts
+        else ""
+    )
+    return f"{s.frames} frames -> {args.out}{skipped}{lens}{clipped}"

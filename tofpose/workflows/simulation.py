@@ -11,10 +11,10 @@ import numpy as np
 from tqdm import tqdm
 
 from tofpose.core.camera import CameraModel
-from tofpose.core.catalog import Catalog, paper_target
+from tofpose.core.catalog import paper_target
 from tofpose.core.depth import z_from_radial
 from tofpose.core.geometry import facing_euler_deg, rotation_angle_deg
-from tofpose.io.camera_file import camera_from_arg, read_text_file
+from tofpose.io.camera_file import camera_from_arg, catalog_from_arg
 from tofpose.io.recording import RecordingWriter, open_recording
 from tofpose.workflows.measurement import estimate
 
@@ -35,11 +35,7 @@ def simulate(
     from tofpose.sim.scenarios import get_scenario, run_scenario
 
     scenario = get_scenario(scenario_name)
-    catalog = (
-        Catalog.from_json(read_text_file(catalog_path, "catalog"))
-        if catalog_path
-        else paper_target()
-    )
+    catalog = catalog_from_arg(catalog_path) if catalog_path else paper_target()
     camera = camera_from_arg(camera_arg) if camera_arg else CameraModel()
     with RecordingWriter(out, camera, catalog, with_truth=True, with_lab_truth=True) as w:
         for bf in tqdm(

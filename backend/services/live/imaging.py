@@ -59,11 +59,8 @@ def draw_overlay(bgr: np.ndarray, result: PoseResult, scale: int) -> np.ndarray:
 def gray_u8(gray: np.ndarray, full_scale_counts: float) -> np.ndarray:
     """(H, W) counts -> (H, W) uint8 as ``gray_to_u8`` draws it (gamma 0.5, full scale
     255), at the camera's own full scale (``CameraModel.full_scale_counts``: 4095 for
-    the TOFcam-660, 65535 for an Azure Kinect's IR) instead of the preview's 4095."""
-    if not full_scale_counts > 0:
-        raise ValueError(f"full_scale_counts must be positive, got {full_scale_counts}")
-    ratio = np.float32(PREVIEW_FULL_SCALE / full_scale_counts)
-    return gray_to_u8(gray.astype(np.float32) * ratio)
+    the TOFcam-660, 65535 for an Azure Kinect's IR)."""
+    return gray_to_u8(gray, full_scale_counts)
 
 
 def render_png(

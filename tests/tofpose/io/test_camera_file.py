@@ -47,3 +47,18 @@ def test_a_camera_file_that_is_not_a_camera_is_named(tmp_path):
         path.write_text(text)
         with pytest.raises(SystemExit, match=message):
             camera_from_arg(str(path))
+
+
+def test_a_catalog_argument_is_a_built_in_name_or_a_json_file(tmp_path):
+    from tofpose.core.catalog import paper_target
+    from tofpose.io.camera_file import catalog_from_arg
+
+    assert catalog_from_arg("paper-target") == paper_target()
+    path = tmp_path / "cat.json"
+    path.write_text(paper_target().to_json())
+    assert catalog_from_arg(str(path)) == paper_target()
+    with pytest.raises(SystemExit, match="cannot read catalog"):
+        catalog_from_arg(str(tmp_path / "missing.json"))
+    path.write_text("{}")
+    with pytest.raises(SystemExit, match=f"catalog {path}"):
+        catalog_from_arg(str(path))

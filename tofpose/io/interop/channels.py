@@ -179,7 +179,11 @@ class ToFChannels:
         emit(self.calibration, lambda: msg.camera_calibration(self.camera, ts), log_time_ns)
         if self.previews:
             gray_preview, distance_preview = self.previews
-            emit(gray_preview, lambda: msg.gray_preview_image(gray, ts), log_time_ns)
+            emit(
+                gray_preview,
+                lambda: msg.gray_preview_image(gray, ts, self.camera.full_scale_counts),
+                log_time_ns,
+            )
             emit(distance_preview, lambda: msg.distance_preview_image(distance_mm, ts), log_time_ns)
         if result is not None:
             emit(

@@ -16,7 +16,7 @@ from foxglove import messages as fm
 from tofpose.core.camera import CameraModel
 from tofpose.core.geometry import quaternion_wxyz_from_rotation
 from tofpose.io.interop import topics
-from tofpose.io.interop.previews import distance_to_rgb, gray_to_u8
+from tofpose.io.interop.previews import FULL_SCALE_COUNTS, distance_to_rgb, gray_to_u8
 from tofpose.pipeline import PoseResult
 
 MATCHED_RGBA = (0.31, 0.86, 0.31, 1.0)
@@ -66,10 +66,13 @@ def distance_image(distance_mm: np.ndarray, ts: fm.Timestamp) -> fm.RawImage:
     return _raw_image(distance_mm, "<f4", "32FC1", ts)
 
 
-def gray_preview_image(gray: np.ndarray, ts: fm.Timestamp) -> fm.RawImage:
+def gray_preview_image(
+    gray: np.ndarray, ts: fm.Timestamp, full_scale_counts: float = FULL_SCALE_COUNTS
+) -> fm.RawImage:
     """(H, W) uint16 counts -> RawImage ``mono8`` as the dashboard shows it
-    (``previews.gray_to_u8``): a 12-bit image in ``mono16`` looks black in a viewer."""
-    return _raw_image(gray_to_u8(gray), "u1", "mono8", ts)
+    (``previews.gray_to_u8`` at the camera's ``full_scale_counts``): a 12-bit image in
+    ``mono16`` looks black in a viewer."""
+    return _raw_image(gray_to_u8(gray, full_scale_counts), "u1", "mono8", ts)
 
 
 def distance_preview_image(distance_mm: np.ndarray, ts: fm.Timestamp) -> fm.RawImage:

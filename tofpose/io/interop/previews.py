@@ -15,10 +15,14 @@ import numpy as np
 FULL_SCALE_COUNTS = 4095
 
 
-def gray_to_u8(gray: np.ndarray) -> np.ndarray:
+def gray_to_u8(gray: np.ndarray, full_scale_counts: float = FULL_SCALE_COUNTS) -> np.ndarray:
     """(H, W) uint16 counts -> (H, W) uint8, gamma 0.5 so that the dark plate stays
-    visible beside bright reflectors; full scale maps to 255 (the dashboard's view)."""
-    g = np.clip(gray.astype(np.float32) / FULL_SCALE_COUNTS, 0.0, 1.0)
+    visible beside bright reflectors; the camera's full scale (``CameraModel.
+    full_scale_counts``: 4095 for the EPC660, 65535 for a 16-bit device) maps to 255 (the
+    dashboard's view)."""
+    if not full_scale_counts > 0:
+        raise ValueError(f"full_scale_counts must be positive, got {full_scale_counts}")
+    g = np.clip(gray.astype(np.float32) / np.float32(full_scale_counts), 0.0, 1.0)
     return np.round(255.0 * np.sqrt(g)).astype(np.uint8)
 
 

@@ -229,7 +229,10 @@ def export_rrd(
             gray, dist, t = rec.frame(i)
             stream.set_time(bp.TIMELINE, timestamp=np.datetime64(int(times_ns[i]), "ns"))
             stream.set_time("frame", sequence=i)
-            stream.log(topics.GRAY_PREVIEW, rr.Image(gray_to_u8(gray), color_model="L"))
+            stream.log(
+                topics.GRAY_PREVIEW,
+                rr.Image(gray_to_u8(gray, rec.camera.full_scale_counts), color_model="L"),
+            )
             stream.log(topics.DISTANCE_PREVIEW, rr.Image(distance_to_rgb(dist), color_model="RGB"))
             if pipeline is not None:
                 result = pipeline.process(gray, dist, t)

@@ -52,13 +52,16 @@ class Ros2ImportError(ValueError):
 class Ros2ImportSummary:
     """frames : written; unpaired_image, unpaired_depth : images left out (no partner at
     their stamp); camera : the recording's; lens_fit_max_px : the five-coefficient lens's
-    largest pixel error against a ``rational_polynomial`` CameraInfo (0 otherwise)."""
+    largest pixel error against a ``rational_polynomial`` CameraInfo (0 otherwise);
+    max_amplitude_counts : the largest amplitude of any frame (above the camera's
+    ``full_scale_counts``: the camera's device fields are not the bag's camera's)."""
 
     frames: int
     unpaired_image: int
     unpaired_depth: int
     camera: CameraModel
     lens_fit_max_px: float
+    max_amplitude_counts: float = 0.0
 
 
 def _stamp_ns(msg) -> int:
@@ -171,7 +174,7 @@ def import_ros2(
             cam = camera_from_info(info, camera if camera is not None else CameraModel())
         except Ros2MessageError as exc:
             raise Ros2ImportError(f"{path}: {info_topic}: {exc}") from exc
-        frames, unpaired = _write(
+        frames, unpaired, brightest = _write(
             reader, path, out, (image_c, depth_c), cam.camera, depth_kind, progress
         )
     finally:
@@ -182,6 +185,7 @@ def import_ros2(
         unpaired_depth=unpaired[1],
         camera=cam.camera,
         lens_fit_max_px=cam.lens_fit_max_px,
+        max_amplitude_counts=brightest,
     )
 
 
@@ -214,9 +218,9 @@ def _write(
     camera: CameraModel,
     depth_kind: DepthKind,
     progress: bool,
-) -> tuple[int, tuple[int, int]]:
+) -> tuple[int, tuple[int, int], float]:
     """Pair the image and depth messages by stamp and append each pair to ``out``.
-    Returns (frames, (unpaired images, unpaired depths))."""
+    Returns (frames, (unpaired images, unpaired depths), the largest amplitude)."""
     image_c, depth_c = connections
     image_topic = image_c[0].topic
     total = sum(c.msgcount for c in image_c)
@@ -224,6 +228,7 @@ def _write(
     writer = RecordingWriter(partial, camera)
     pending: tuple[dict[int, object], dict[int, object]] = ({}, {})
     frames = 0
+    brightest = 0.0
     try:
         bar = tqdm(
             total=total, desc="import ros2", unit="frame", disable=not progress, file=sys.stderr
@@ -242,6 +247,7 @@ def _write(
             where = f"{path} at stamp {ns} ns"
             gray, distance = _frame_images(image_msg, depth_msg, camera, depth_kind, where)
             writer.append(gray, distance, ns * 1e-9)
+            brightest = max(brightest, float(gray.max()))
             frames += 1
             bar.update(1)
         bar.close()
@@ -257,4 +263,4 @@ def _write(
         raise
     writer.close()
     partial.replace(out)
-    return frames, (len(pending[0]), len(pending[1]))
+    return frames, (len(pending[0]), len(pending[1])), brightest

@@ -32,6 +32,15 @@ def test_gray_scale_is_monotonic_with_full_scale_white():
     assert list(u8[0]) == sorted(u8[0]) and u8[0, 0] == 0 and u8[0, 3] == 255 == u8[0, 4]
 
 
+def test_a_16_bit_cameras_full_scale_is_white_and_its_half_as_bright_as_the_12_bit_half():
+    g = np.array([[0, 2048, 4095, 32768, 65535]], np.uint16)
+    u8 = gray_to_u8(g, 65535.0)
+    assert u8[0, 4] == 255 and u8[0, 2] < 70  # a 12-bit full scale is dim on 16 bits
+    assert u8[0, 3] == gray_to_u8(np.array([[2048]], np.uint16))[0, 0]  # half is half
+    with pytest.raises(ValueError, match="full_scale_counts must be positive"):
+        gray_to_u8(g, 0.0)
+
+
 def test_invalid_distances_are_black_and_valid_ones_are_coloured():
     d = np.full((4, 4), 2000.0, np.float32)
     d[0, 0] = np.nan

@@ -265,3 +265,19 @@ def test_not_a_bag_is_named(tmp_path):
         import_ros2(junk, tmp_path / "o.h5", progress=False)
     with pytest.raises(Ros2ImportError, match="no such bag"):
         import_ros2(tmp_path / "absent", tmp_path / "o.h5", progress=False)
+
+
+def test_amplitudes_above_the_cameras_full_scale_are_named_in_a_warning(tmp_path, capsys):
+    """A 16-bit device's bag imported without --camera: the TOFcam-660's 4095 counts
+    would call every brighter pixel saturated, so the CLI says so and how to fix it; with
+    the device's profile there is nothing to say."""
+    bright = tiny()
+    bright[1] = (IMAGE, NS, image(np.full((6, 8), 9000, np.uint16), "mono16", NS))
+    bag = write_bag(tmp_path / "bag", bright)
+    topics = ["--image", IMAGE, "--depth", DEPTH]
+    assert main(["import", "ros2", str(bag), "--out", str(tmp_path / "a.h5"), *topics]) == 0
+    out = capsys.readouterr().out
+    assert "amplitudes up to 9000 counts" in out and "no --camera given" in out
+    args = ["import", "ros2", str(bag), "--out", str(tmp_path / "b.h5"), *topics]
+    assert main([*args, "--camera", "azure-kinect-nfov"]) == 0
+    assert "warning" not in capsys.readouterr().out
