@@ -314,3 +314,26 @@ def test_render_through_a_profile_writes_its_image_size(tmp_path, capsys):
     assert main([*argv, "--camera", "hololens2-ahat"]) == 0
     for kind in ("gray", "distance"):
         assert cv2.imread(f"{prefix}-{kind}.png").shape[:2] == (1024, 1024)  # 512 x 512, x2
+
+
+def test_a_camera_that_replaces_the_recordings_intrinsics_is_named(tmp_path, capsys):
+    """``estimate --camera`` measures with that camera's intrinsics: when they are not the
+    recording's, it says so (a profile's nominal focal length on another unit's frames
+    moves the pose); the recording's own intrinsics pass without a word."""
+    import json
+
+    from tofpose.core.camera import CameraModel
+
+    rec, out = tmp_path / "r.h5", tmp_path / "poses.csv"
+    assert (
+        main(["simulate", "--scenario", "stability-697", "--frames", "1", "--out", str(rec)]) == 0
+    )
+    same, other = tmp_path / "same.json", tmp_path / "other.json"
+    same.write_text(CameraModel().to_json())
+    other.write_text(json.dumps({**CameraModel().to_dict(), "fx": 330.0}))
+    capsys.readouterr()
+    assert main(["estimate", str(rec), "--out", str(out), "--camera", str(same)]) == 0
+    assert "warning" not in capsys.readouterr().err
+    assert main(["estimate", str(rec), "--out", str(out), "--camera", str(other)]) == 0
+    err = capsys.readouterr().err
+    assert "replaces the recording's intrinsics (fx 325, fy 325" in err and "(fx 330," in err

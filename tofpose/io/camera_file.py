@@ -8,7 +8,10 @@ Errors are ``SystemExit`` with a message for the user, as the commands print the
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
+
+import numpy as np
 
 from tofpose.calibration.covariance import CovarianceScale
 from tofpose.calibration.range import RangeCorrection
@@ -85,6 +88,19 @@ def camera_from_arg(name_or_path: str) -> CameraModel:
         raise SystemExit(f"tofpose: camera {name_or_path}: {exc}") from exc
 
 
+def intrinsics_differ(a: CameraModel, b: CameraModel) -> bool:
+    """Whether two cameras' pinhole intrinsics or distortion differ (beyond 1e-6 px)."""
+    ka = np.array([a.fx, a.fy, a.cx, a.cy, *a.dist])
+    kb = np.array([b.fx, b.fy, b.cx, b.cy, *b.dist])
+    return not np.allclose(ka, kb, rtol=0.0, atol=1e-6)
+
+
+def intrinsics_text(c: CameraModel) -> str:
+    """``fx 325.0, fy 325.0, cx 159.5, cy 119.5`` (+ ``distorted`` with a lens model)."""
+    text = f"fx {c.fx:g}, fy {c.fy:g}, cx {c.cx:g}, cy {c.cy:g}"
+    return text + (", distorted" if any(c.dist) else "")
+
+
 def pipeline_for(
     rec,
     rec_path: str,
@@ -115,6 +131,14 @@ def pipeline_for(
         raise SystemExit(
             f"tofpose: camera {camera.width}x{camera.height} does not match the recording's "
             f"{rec.camera.width}x{rec.camera.height} frames"
+        )
+    if camera_path and intrinsics_differ(camera, rec.camera):
+        print(
+            f"tofpose: warning: --camera {camera_path} replaces the recording's intrinsics "
+            f"({intrinsics_text(rec.camera)}) with its own ({intrinsics_text(camera)}): the "
+            "poses are measured with --camera's; give a camera JSON with the recording's "
+            "intrinsics to keep them",
+            file=sys.stderr,
         )
     config = config_for_camera(
         PipelineConfig(
