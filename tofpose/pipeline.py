@@ -304,7 +304,9 @@ class PosePipeline:
             )
         h.update(repr(self._rng.bit_generator.state).encode())
         if self.config.tracking.enabled:  # where the stream is in the re-acquisition period
-            h.update((self._frames_seen % self.config.tracking.reacquire_every).to_bytes(4, "little"))
+            h.update(
+                (self._frames_seen % self.config.tracking.reacquire_every).to_bytes(4, "little")
+            )
         return h.digest()
 
     # ------------------------------------------------------------------------------------

@@ -75,3 +75,9 @@ class StudyPublic(BaseModel):
     reports: list[Literal["html", "pdf", "json"]] = Field(
         description="report files available at /api/studies/{id}/report.{html,pdf,json}"
     )
+    dashboard_url: str | None = Field(
+        default=None, description="the Dask dashboard while the study runs on a cluster"
+    )
+    warnings: list[str] = Field(
+        default_factory=list, description="what slows its cluster down (more workers than cores)"
+    )
