@@ -123,7 +123,8 @@ def run_chunk(
     """The task: run frames [origin, stop), write the rows of [start, stop) as
     ``chunks/<name>.csv`` (no header) and their raw poses as ``chunks/<name>.npz``
     (atomically); returns {"name", "warm": digests of frames [origin, start), "tail":
-    digests of the last ``tail`` frames, "ok", "seconds"} (digests as hex strings).
+    digests of the last ``tail`` frames (those it ran), "tail_first": the frame of the
+    first of them, "ok", "seconds"} (digests as hex strings).
     ``progress_topic``: the run's event topic, on which the frames output so far are
     reported while it runs (``tofpose.batch.worker.ProgressReporter``)."""
     from tofpose.core.threads import single_threaded_blas
@@ -140,6 +141,9 @@ def run_chunk(
     cov = np.full((n, 6, 6), np.nan)
     times = np.zeros(n)
     warm, tail = [], []
+    # the next chunk's warm-up may reach back past this chunk's start (a chunk shorter
+    # than a warm-up): its digests then include warm-up frames of this one
+    tail_first = max(chunk.origin, chunk.stop - chunk.tail)
     report = ProgressReporter(progress_topic, chunk.name)
     with open_recording(chunk.path) as rec:
         pipe = pipeline_for(
@@ -149,16 +153,18 @@ def run_chunk(
             for k, tk in enumerate(ts.tolist()):
                 i = first + k
                 r = pipe.process(grays[k], dists[k], tk)
-                if i < chunk.start:
-                    warm.append(pipe.state_digest().hex())
-                    continue
+                if i < chunk.start or i >= tail_first:
+                    digest = pipe.state_digest().hex()
+                    if i >= tail_first:
+                        tail.append(digest)
+                    if i < chunk.start:
+                        warm.append(digest)
+                        continue
                 j = i - chunk.start
                 wr.writerow(pose_row(i, tk, r))
                 times[j] = tk
                 if r.ok:
                     ok[j], R[j], t_mm[j], cov[j] = True, r.R, r.t_mm, r.covariance
-                if i >= chunk.stop - chunk.tail:
-                    tail.append(pipe.state_digest().hex())
                 report(j + 1)
     chunks = Path(out_dir) / "chunks"
     chunks.mkdir(parents=True, exist_ok=True)
@@ -170,6 +176,7 @@ def run_chunk(
         "name": chunk.name,
         "warm": warm,
         "tail": tail,
+        "tail_first": tail_first,
         "ok": int(ok.sum()),
         "seconds": time.perf_counter() - t0,
     }
@@ -178,7 +185,7 @@ def run_chunk(
 def synced_frame(previous: Chunk, prev_result: dict, chunk: Chunk, result: dict) -> int | None:
     """The first warm-up frame of ``chunk`` at which its state equals the previous
     chunk's (equal digests), or None."""
-    first_tail = previous.stop - previous.tail
+    first_tail = prev_result.get("tail_first", previous.stop - previous.tail)
     for k, digest in enumerate(result["warm"]):
         frame = chunk.origin + k
         m = frame - first_tail
@@ -269,8 +276,18 @@ def reprocess(
         client = cluster.client
         t_connected = time.perf_counter()
         with RunProgress(client) as live:
+            # a chunk's task is named by the run and the chunk (Dask's task stream and
+            # dashboard show which chunk ran where, and how often)
+            run_id = uuid.uuid4().hex[:12]
             futures = {
-                client.submit(run_chunk, c, settings, str(out), live.topic, pure=False): c
+                client.submit(
+                    run_chunk,
+                    c,
+                    settings,
+                    str(out),
+                    live.topic,
+                    key=f"tofpose-reprocess-{run_id}-{c.name}",
+                ): c
                 for cs in chunks.values()
                 for c in cs
             }
@@ -309,7 +326,11 @@ def reprocess(
                 # run again from the previous chunk's origin: its verified run, carried on
                 again = Chunk(path, j, prev.origin, cur.start, cur.stop, cur.tail)
                 results[cur] = client.submit(
-                    run_chunk, again, settings, str(out), pure=False
+                    run_chunk,
+                    again,
+                    settings,
+                    str(out),
+                    key=f"tofpose-reprocess-{run_id}-{cur.name}-again",
                 ).result()
                 cs[j] = again
                 results[again] = results[cur]
