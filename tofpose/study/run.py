@@ -104,6 +104,7 @@ def run_study(
             client = session.client
             manifest["workers"] = session.workers
             manifest["warnings"] = list(session.warnings)
+            write_manifest(root, manifest)
             t_connected = time.perf_counter()
             if on_cluster is not None:
                 on_cluster(session)
