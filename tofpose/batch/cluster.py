@@ -212,3 +212,18 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, nicene
     """``open_cluster``'s ``distributed.Client`` alone."""
     with open_cluster(workers, scheduler, niceness) as session:
         yield session.client
+
+
+@contextmanager
+def session_or_open(
+    session: ClusterSession | None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    niceness: int = 0,
+) -> Iterator[ClusterSession]:
+    """``session`` when given (the caller's: left open), else ``open_cluster``'s."""
+    if session is not None:
+        yield session
+        return
+    with open_cluster(workers, scheduler, niceness) as own:
+        yield own

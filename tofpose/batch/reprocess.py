@@ -32,8 +32,7 @@ import os
 import sys
 import time
 import uuid
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -42,7 +41,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from tofpose.batch.cluster import ClusterSession, open_cluster
+from tofpose.batch.cluster import ClusterSession, session_or_open
 from tofpose.batch.progress import RunProgress
 from tofpose.batch.worker import ProgressReporter
 from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
@@ -124,14 +123,15 @@ def run_chunk(
     ``chunks/<name>.csv`` (no header) and their raw poses as ``chunks/<name>.npz``
     (atomically); returns {"name", "warm": digests of frames [origin, start), "tail":
     digests of the last ``tail`` frames (those it ran), "tail_first": the frame of the
-    first of them, "ok", "seconds"} (digests as hex strings).
+    first of them, "ok", "seconds", "cpu_s" (its thread's CPU time)} (digests as hex
+    strings).
     ``progress_topic``: the run's event topic, on which the frames output so far are
     reported while it runs (``tofpose.batch.worker.ProgressReporter``)."""
     from tofpose.core.threads import single_threaded_blas
     from tofpose.io.camera_file import pipeline_for
 
     single_threaded_blas()
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.thread_time()
     rows = io.StringIO()
     wr = csv.writer(rows)
     n = chunk.stop - chunk.start
@@ -179,6 +179,7 @@ def run_chunk(
         "tail_first": tail_first,
         "ok": int(ok.sum()),
         "seconds": time.perf_counter() - t0,
+        "cpu_s": time.thread_time() - cpu0,
     }
 
 
@@ -196,18 +197,6 @@ def synced_frame(previous: Chunk, prev_result: dict, chunk: Chunk, result: dict)
 
 def _now() -> str:
     return datetime.now(UTC).isoformat(timespec="seconds")
-
-
-@contextmanager
-def _session(
-    session: ClusterSession | None, workers: int | None, scheduler: str | None, niceness: int
-) -> Iterator[ClusterSession]:
-    """``session`` when given (the caller's, left open), else a new one."""
-    if session is not None:
-        yield session
-        return
-    with open_cluster(workers, scheduler, niceness) as own:
-        yield own
 
 
 def reprocess(
@@ -272,7 +261,7 @@ def reprocess(
     results: dict[Chunk, dict] = {}
     boundaries: dict[str, list[dict]] = {p: [] for p in recordings}
     bar = tqdm(total=total, unit="frame", desc="reprocess", disable=not progress, file=sys.stderr)
-    with _session(session, workers, scheduler, niceness) as cluster:
+    with session_or_open(session, workers, scheduler, niceness) as cluster:
         client = cluster.client
         t_connected = time.perf_counter()
         with RunProgress(client) as live:
@@ -293,6 +282,7 @@ def reprocess(
             }
             pending = set(futures)
             stored = shown = 0
+            cpu_s = 0.0
             while pending:
                 try:
                     finished, pending = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED")
@@ -301,6 +291,7 @@ def reprocess(
                 for fut in finished:
                     c = futures[fut]
                     results[c] = fut.result()  # a task's exception surfaces here
+                    cpu_s += results[c]["cpu_s"]
                     live.finished(c.name)
                     stored += c.stop - c.start
                 done = stored + live.running_frames()
@@ -334,6 +325,7 @@ def reprocess(
                 ).result()
                 cs[j] = again
                 results[again] = results[cur]
+                cpu_s += results[cur]["cpu_s"]
                 reruns += 1
                 boundaries[path].append(
                     {"chunk": j, "start": cur.start, "continued_from_frame": prev.origin}
@@ -379,6 +371,8 @@ def reprocess(
         # once warm: frames output over the chunks' own time, times the workers
         "frames_per_s_warm": total * n_workers / sum(r["seconds"] for r in results.values()),
         "chunks_run_again": reruns,
+        # the chunks' threads' CPU time, re-runs included
+        "cpu_s": cpu_s,
     }
     import json
 

@@ -169,21 +169,22 @@ def run_chunk(
     task overwrites the same file with the same rows). ``progress_topic``: the run's
     event topic, on which the frames done are reported while it runs
     (``tofpose.batch.worker.ProgressReporter``). Returns {"cell", "start", "stop",
-    "frames", "seconds" (measuring), "kernel_load" (``kernel_load``)}."""
+    "frames", "seconds" (measuring), "cpu_s" (its thread's CPU time meanwhile),
+    "kernel_load" (``kernel_load``)}."""
     global _first_frame_s
     single_threaded_blas()
     spec = StudySpec.from_dict(spec_doc, limits=None)  # the client checked its size
     cell = spec.cells[cell_index]
     camera = CameraModel()
     report = ProgressReporter(progress_topic, chunk_name(cell_index, start, stop))
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.thread_time()
     rows = []
     for i in range(start, stop):
         rows.append(measure_frame(spec, cell, i, camera))
         if _first_frame_s is None:
             _first_frame_s = time.perf_counter() - t0
         report(len(rows))
-    seconds = time.perf_counter() - t0
+    seconds, cpu_s = time.perf_counter() - t0, time.thread_time() - cpu0
     table = pa.Table.from_pylist(rows, schema=COLUMNS)
     write_chunk(store_dir, cell_index, start, stop, table)
     return {
@@ -192,5 +193,6 @@ def run_chunk(
         "stop": stop,
         "frames": stop - start,
         "seconds": seconds,
+        "cpu_s": cpu_s,
         "kernel_load": kernel_load(),
     }

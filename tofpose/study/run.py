@@ -22,7 +22,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from tofpose.batch.cluster import ClusterSession, open_cluster
+from tofpose.batch.cluster import ClusterSession, session_or_open
 from tofpose.batch.progress import RunProgress
 from tofpose.study.frames import run_chunk
 from tofpose.study.spec import StudySpec
@@ -58,13 +58,15 @@ def run_study(
     report: bool = True,
     niceness: int = 0,
     on_cluster: Callable[[ClusterSession | None], None] | None = None,
+    session: ClusterSession | None = None,
 ) -> dict:
     """Run ``spec`` into ``out_dir`` (``tofpose.study.store``); returns the summary
     (``summary.json``). ``workers`` / ``scheduler``: ``batch.cluster.open_cluster``.
     ``report``: also write report.html and report.pdf (``tofpose.study.report``);
     ``niceness``: lower a LocalCluster's workers' priority (``open_cluster``);
     ``on_cluster``: called with the cluster once it is up and with None when it is
-    closed (the server shows its dashboard meanwhile)."""
+    closed (the server shows its dashboard meanwhile); ``session``: an open cluster to
+    run on (left open) instead of one opened for the study."""
     from dask.distributed import TimeoutError as DaskTimeout
     from dask.distributed import wait
 
@@ -100,14 +102,14 @@ def run_study(
         file=sys.stderr,
     )
     try:
-        with open_cluster(workers, scheduler, niceness) as session:
-            client = session.client
-            manifest["workers"] = session.workers
-            manifest["warnings"] = list(session.warnings)
+        with session_or_open(session, workers, scheduler, niceness) as cluster:
+            client = cluster.client
+            manifest["workers"] = cluster.workers
+            manifest["warnings"] = list(cluster.warnings)
             write_manifest(root, manifest)
             t_connected = time.perf_counter()
             if on_cluster is not None:
-                on_cluster(session)
+                on_cluster(cluster)
             doc = spec.to_dict()
             with RunProgress(client) as live:
                 names = {}
@@ -206,6 +208,8 @@ def run_study(
         )
         if results
         else None,
+        # the chunks' threads' CPU time (a frame's cost, whatever else the machine runs)
+        "cpu_s": sum(r["cpu_s"] for r in results),
         "worker_kernel_load": sorted(loads.values(), key=lambda d: d["pid"]),
     }
     from tofpose.study.report import write_summary
