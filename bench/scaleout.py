@@ -371,6 +371,19 @@ def main() -> None:
             rows,
         )
     )
+    print()
+    print(
+        "Why workers were slower (bench/scaleout_workers.py): thread CPU time and minor "
+        "page faults per frame of the same chunks serially and in a worker, with Dask's "
+        "default worker environment and with ours"
+    )
+    causes = subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "scaleout_workers.py"), "--recording", str(rec)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    print(causes.stdout.strip())
     loads = [x for r in study.values() for run in r for x in run["loads"]]
     misses = sum(x["cache_misses"] for x in loads)
     first = [x["first_frame_s"] for x in loads if x["first_frame_s"] is not None]
