@@ -279,7 +279,8 @@ class PosePipeline:
 
     def state_digest(self) -> bytes:
         """A digest (16 bytes) of everything a frame leaves for the next ones: the
-        persistence history, the tracking state and the RANSAC generator. Two pipelines
+        persistence history, the tracking state, the RANSAC generator and (in tracking
+        mode) the stream's position in the re-acquisition period. Two pipelines
         of one configuration whose digests are equal give identical results on the same
         following frames (``tofpose.batch.reprocess`` finds where a chunk started
         mid-recording has caught up with the serial run this way)."""
