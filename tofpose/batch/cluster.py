@@ -15,7 +15,7 @@ How a LocalCluster's workers are made (each measured in ``bench/scaleout.py``):
   is mapped and unmapped again at each allocation: 60-78 thousand page faults per
   8-frame study chunk against ~10 without, +70 % CPU per study frame and +30 % per
   re-processed frame. Workers of an external scheduler get the same fix at connection
-  (``tofpose.batch.worker.relax_malloc_trim``).
+  (``tofpose.batch.worker.relax_malloc_trim``, a no-op where the variable is unset).
 - **how they start**: from a ``forkserver`` that imported the task modules once
   (``PRELOAD``), so a worker is a fork of a process that has numpy, numba, the pipeline
   and distributed loaded, not a fresh interpreter that imports them again (and with
@@ -129,6 +129,9 @@ def _local_cluster(workers: int):
         **dask.config.get("distributed.nanny.pre-spawn-environ"),
         **WORKER_ENVIRONMENT,
     }
+    for name, value in WORKER_ENVIRONMENT.items():
+        if value is None:  # a nanny of an earlier cluster may have set it in this process
+            os.environ.pop(name, None)
     with dask.config.set(
         {
             "distributed.worker.multiprocessing-method": "forkserver",
@@ -181,7 +184,9 @@ def open_cluster(
     try:
         if scheduler:
             client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
-            client.run(relax_malloc_trim)
+        # a no-op where the variable is not set (our LocalCluster's workers, unless this
+        # process's forkserver started before with it)
+        client.run(relax_malloc_trim)
         infos = client.run(worker_info)
         for address, info in infos.items():
             if info["tofpose"] != tofpose.__version__:
