@@ -16,12 +16,12 @@ How a LocalCluster's workers are made (each measured in ``bench/scaleout.py``):
   8-frame study chunk against ~10 without, +70 % CPU per study frame and +30 % per
   re-processed frame. Workers of an external scheduler get the same fix at connection
   (``tofpose.batch.worker.relax_malloc_trim``, a no-op where the variable is unset).
-- **how they start**: from a ``forkserver`` that imported the task modules once
-  (``PRELOAD``), so a worker is a fork of a process that has numpy, numba, the pipeline
-  and distributed loaded, not a fresh interpreter that imports them again (and with
-  ``spawn``, the caller's main module too). The kernels load from numba's on-disk cache
-  on first use, in the worker; they are not compiled there (``cache_misses`` in
-  ``study.json``).
+- **how they start**: from a ``forkserver`` that imported the task modules and loaded
+  the pipeline's kernels from numba's on-disk cache once (``PRELOAD``,
+  ``tofpose.batch.warm_worker``), so a worker is a fork of a process that has numpy,
+  numba, the pipeline, its kernels and distributed loaded, not a fresh interpreter that
+  imports them again (and with ``spawn``, the caller's main module too) and then loads
+  the kernels itself (``cache_misses`` in ``study.json``: none compiled).
 - **the dashboard**: on a free loopback port; ``dashboard_url`` gives its address.
 
 ``ClusterWarning``: more worker threads on a host than it has cores (they share the
@@ -53,7 +53,12 @@ WORKER_ENVIRONMENT: dict[str, str | None] = {
     "MALLOC_TRIM_THRESHOLD_": None,
 }
 #: what the forkserver imports once, so that every worker forked from it has it
-PRELOAD = ("tofpose.batch.worker", "tofpose.batch.reprocess", "tofpose.study.frames")
+PRELOAD = (
+    "tofpose.batch.worker",
+    "tofpose.batch.reprocess",
+    "tofpose.study.frames",
+    "tofpose.batch.warm_worker",
+)
 
 
 class ClusterError(RuntimeError):

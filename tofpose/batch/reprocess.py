@@ -48,7 +48,7 @@ from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_ro
 from tofpose.io.recording import open_recording
 
 DEFAULT_CHUNK_FRAMES = 512
-POLL_S = 0.5
+POLL_S = 0.1
 
 
 class ReprocessError(ValueError):

@@ -36,7 +36,7 @@ from tofpose.study.store import (
 )
 from tofpose.study.summary import summarise
 
-POLL_S = 0.5
+POLL_S = 0.1
 
 
 class StudyCancelledError(RuntimeError):

@@ -92,28 +92,55 @@ def test_a_tracking_reprocess_gives_estimates_poses_and_runs_each_chunk_once(lat
     assert all("synced_at_frame" in b for b in s["recordings"][0]["boundaries"])
 
 
-def test_a_running_chunk_reports_progress_before_it_ends(late_track, tmp_path):
-    """One chunk of 80 frames: the client hears of frames done while it runs (the last
-    report before the result says fewer than 80)."""
+def _reporting_task(topic: str) -> int:
+    """A task that reports 3 frames done, then waits for the client to let it end."""
+    from distributed import Event
+
+    from tofpose.batch.worker import ProgressReporter
+
+    ProgressReporter(topic, "chunk-a")(3)
+    Event("tofpose-test-go").wait(timeout=120)
+    return 3
+
+
+def test_the_client_hears_of_a_running_tasks_frames_before_it_ends():
+    """The task reports and then waits on an event only the client sets once it has
+    heard: progress reaches the client while the task runs."""
+    from distributed import Event
+
+    from tofpose.batch.progress import RunProgress
+
+    with open_cluster(workers=1) as session, RunProgress(session.client) as live:
+        fut = session.client.submit(_reporting_task, live.topic, pure=False)
+        deadline = time.monotonic() + 120
+        while live.running_frames() == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert live.running_frames() == 3 and not fut.done()
+        Event("tofpose-test-go", client=session.client).set()
+        assert fut.result() == 3
+        live.finished("chunk-a")
+        assert live.running_frames() == 0
+
+
+def test_a_reprocessing_reports_its_frames_as_they_are_done(late_track, tmp_path):
     seen: list[int] = []
     s = reprocess(
         [str(late_track)],
         tmp_path / "out",
         workers=1,
-        chunk_frames=FRAMES,
+        chunk_frames=CHUNK,
         progress=False,
         on_progress=lambda done, total: seen.append(done),
     )
-    assert s["recordings"][0]["chunks"] == 1
-    assert seen[-1] == FRAMES and 0 < seen[0] < FRAMES
+    assert seen == sorted(seen) and seen[-1] == FRAMES
     assert s["run"]["first_progress_s"] is not None
 
 
 def test_a_study_chunk_moves_study_json_while_it_runs(tmp_path):
-    """One cell, one chunk of 24 frames: study.json's frames_done takes values between 0
-    and 24 while the study is running."""
+    """One cell, one chunk of 96 frames (~2 s): study.json's frames_done takes values
+    between 0 and 96 while the study is running."""
     spec = StudySpec.from_dict(
-        {"name": "one", "seed": 2, "frames_per_cell": 24, "chunk_frames": 24, "grid": {}}
+        {"name": "one", "seed": 2, "frames_per_cell": 96, "chunk_frames": 96, "grid": {}}
     )
     out = tmp_path / "study"
     seen: set[int] = set()
@@ -136,9 +163,9 @@ def test_a_study_chunk_moves_study_json_while_it_runs(tmp_path):
     finally:
         done.set()
         watcher.join()
-    assert any(0 < n < 24 for n in seen), seen
+    assert any(0 < n < 96 for n in seen), seen
     m = read_manifest(out)
-    assert m["status"] == "complete" and m["frames_done"] == 24
+    assert m["status"] == "complete" and m["frames_done"] == 96
     assert 0 < m["run"]["first_progress_s"] <= m["run"]["wall_s"]
 
 
