@@ -86,6 +86,10 @@ def measure(where: str, rec: str) -> dict:
     }
     if where == "dask":
         cluster.WORKER_ENVIRONMENT = {}  # Dask's own pre-spawn environment
+        # and no mallopt at connection (open_cluster sends this function to the workers)
+        import tofpose.batch.worker
+
+        tofpose.batch.worker.relax_malloc_trim = lambda: False
     out: dict = {}
     with cluster.open_cluster(workers=1) as session:
         c = session.client

@@ -194,3 +194,18 @@ def test_a_local_cluster_of_more_workers_than_cores_warns_and_its_workers_are_se
         assert session.dashboard_url.startswith("http://127.0.0.1:")
     expected = {"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
     assert all(e == expected for e in env.values())
+
+
+def test_the_command_line_says_when_workers_outnumber_the_cores(late_track, tmp_path):
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    cores = len(os.sched_getaffinity(0))
+    exe = Path(sys.executable).with_name("tofpose")
+    cmd = [exe, "reprocess", late_track, "--out", tmp_path / "o", "--workers", str(cores + 1)]
+    done = subprocess.run([str(c) for c in cmd], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert f"ClusterWarning: {cores + 1} worker threads on" in done.stderr
+    assert f"which has {cores} cores" in done.stderr
