@@ -2448,6 +2448,11 @@ export interface components {
             campaign_id: number;
             /** Created */
             created: string;
+            /**
+             * Dashboard Url
+             * @description the Dask dashboard while the job runs on a cluster
+             */
+            dashboard_url?: string | null;
             /** Error */
             error?: string | null;
             /**
@@ -2461,6 +2466,16 @@ export interface components {
             finished?: string | null;
             /** Frames */
             frames?: number | null;
+            /**
+             * Frames Done
+             * @description frames output so far over both passes, while it runs
+             */
+            frames_done?: number | null;
+            /**
+             * Frames Planned
+             * @description frames of both passes (twice the recording's), while it runs
+             */
+            frames_planned?: number | null;
             /** Id */
             id: number;
             /** Started */
@@ -2473,6 +2488,11 @@ export interface components {
             summary?: components["schemas"]["ReprocessComparison"] | null;
             /** Tracking */
             tracking: boolean;
+            /**
+             * Warnings
+             * @description what slows its cluster down (more workers than cores)
+             */
+            warnings?: string[];
         };
         /**
          * Requirements
@@ -2714,6 +2734,11 @@ export interface components {
              * @description the Dask cluster it ran on
              */
             cluster?: string | null;
+            /**
+             * Dashboard Url
+             * @description the Dask dashboard while the study runs on a cluster
+             */
+            dashboard_url?: string | null;
             /** Error */
             error?: string | null;
             /**
@@ -2743,6 +2768,11 @@ export interface components {
              * @enum {string}
              */
             status: "created" | "queued" | "running" | "complete" | "incomplete" | "failed";
+            /**
+             * Warnings
+             * @description what slows its cluster down (more workers than cores)
+             */
+            warnings?: string[];
         };
         /** TransformPublic */
         TransformPublic: {
