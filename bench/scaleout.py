@@ -1,15 +1,20 @@
 """Scale-out on Dask (docs/scaleout.md; docs/results.md, "Scale-out on Dask"): what a
-study and a re-processing run do per second on 1 and 2 workers of this machine, against
-the same work in one process without Dask; whether workers load the numba kernels from
-the cache; what a task costs the scheduler and a chunk costs the store; and the live
-camera loop's frame rate while a study runs in the server.
+study and a re-processing (acquisition and tracking mode) do per worker on 1 and 2 workers
+of this machine against the same work serially in one process, in the same repeat; the
+cluster's start-up; the time to the first progress update; chunks run more than once
+(counted in Dask's task stream, and the re-processing's own re-runs); whether workers
+load the numba kernels from the cache; what a task costs the scheduler and a chunk costs
+the store; the live camera loop's frame rate while a study runs in the server; and
+``tofpose study --example`` on 2 workers from the command line.
 
-Each throughput is the median of ``--repeats`` runs, counted from the cluster's start to
-the last chunk (start-up itself is reported apart); the serial baseline measures the same
-frames in this process (kernels already loaded). Scaling efficiency = rate on 2 workers /
-(2 x rate on 1 worker).
+Per-worker efficiency = frames/s on W workers / (W x frames/s of the serial run of the
+same repeat), counted from the cluster being up to the last chunk (start-up is reported
+apart); its CPU form = the serial run's CPU seconds per frame / a worker's (each chunk's
+thread CPU time), which other processes on a shared machine disturb much less. Every
+figure is the median over ``--repeats`` repeats, each repeat running serial, 1 worker
+and 2 workers one after the other.
 
-Run: ``python bench/scaleout.py [--repeats 3] [--quick]``
+Run: ``python bench/scaleout.py [--repeats 3] [--quick] [--recording REC.h5]``
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -49,76 +55,124 @@ def study_spec(frames_per_cell: int) -> StudySpec:
     )
 
 
-def serial_study_fps(spec: StudySpec) -> float:
-    """The spec's frames measured in this process, no Dask: frames / s."""
+def serial_study(spec: StudySpec) -> tuple[float, float]:
+    """The spec's frames measured in this process, no Dask: (frames/s, CPU s per
+    frame)."""
+    from tofpose.warmup import warm_up
+
+    warm_up()
     kernel_load()
     cam = CameraModel()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for c in spec.cells:
         for i in range(spec.frames_per_cell):
             measure_frame(spec, c, i, cam)
-    return spec.n_frames / (time.perf_counter() - t0)
+    return spec.n_frames / (time.perf_counter() - t0), (time.process_time() - c0) / spec.n_frames
 
 
-def study_runs(spec: StudySpec, workers: int, repeats: int) -> dict:
+def _executions(stream) -> Counter:
+    """How often each tofpose task ran, by key (Dask's task stream)."""
+    return Counter(str(t["key"]) for t in stream.data if "tofpose" in str(t["key"]))
+
+
+def study_run(spec: StudySpec, workers: int) -> dict:
+    """One run on a new LocalCluster of ``workers``: frames/s once up, CPU s per frame in
+    the workers, cluster start, first progress (from the call), tasks run twice, the
+    workers' kernel loads."""
+    from dask.distributed import get_task_stream
+
+    from tofpose.batch.cluster import open_cluster
     from tofpose.study.run import run_study
     from tofpose.study.store import read_manifest
 
-    fps, warm, start, loads = [], [], [], []
-    for _ in range(repeats):
-        with tempfile.TemporaryDirectory() as d:
-            run_study(spec, Path(d) / "s", workers=workers, progress=False, report=False)
-            run = read_manifest(Path(d) / "s")["run"]
-            fps.append(run["frames_per_s"])
-            warm.append(run["frames_per_s_warm"])
-            start.append(run["cluster_start_s"])
-            loads += run["worker_kernel_load"]
+    with tempfile.TemporaryDirectory() as d:
+        t0 = time.perf_counter()
+        with open_cluster(workers) as session, get_task_stream(session.client) as stream:
+            start_s = time.perf_counter() - t0
+            run_study(spec, Path(d) / "s", session=session, progress=False, report=False)
+        run = read_manifest(Path(d) / "s")["run"]
+    ran = _executions(stream)
     return {
-        "fps": float(np.median(fps)),
-        "warm": float(np.median(warm)),
-        "start_s": float(np.median(start)),
-        "loads": loads,
+        "fps": run["frames_per_s"],
+        "cpu_per_frame": run["cpu_s"] / run["frames_run"],
+        "start_s": start_s,
+        "first_progress_s": start_s + run["first_progress_s"],
+        "twice": sum(n - 1 for n in ran.values()),
+        "loads": run["worker_kernel_load"],
     }
 
 
 def make_recording(path: Path, n: int) -> None:
-    from tofpose.cli import simulate
+    from tofpose.workflows.simulation import simulate
 
     simulate("range-sweep", n, str(path), 4, None, progress=False)
 
 
-def serial_estimate_fps(rec: Path, tracking: bool) -> float:
-    from tofpose.cli import estimate
+def serial_estimate(rec: Path, tracking: bool) -> tuple[float, float]:
+    """``tofpose estimate`` of ``rec``: (frames/s, CPU s per frame)."""
+    from tofpose.workflows.measurement import estimate
 
     with tempfile.TemporaryDirectory() as d:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         s = estimate(
             str(rec), str(Path(d) / "e.csv"), None, None, progress=False, tracking=tracking
         )
-        return s["frames"] / (time.perf_counter() - t0)
+        n = s["frames"]
+        return n / (time.perf_counter() - t0), (time.process_time() - c0) / n
 
 
-def reprocess_fps(rec: Path, workers: int, tracking: bool, repeats: int) -> tuple:
-    """Medians: (frames/s after the cluster's start, frames/s once warm, chunks run
-    again %)."""
+def reprocess_run(rec: Path, workers: int, tracking: bool, chunk_frames: int) -> dict:
+    """One re-processing on a new LocalCluster of ``workers`` (as ``study_run``)."""
+    from dask.distributed import get_task_stream
+
+    from tofpose.batch.cluster import open_cluster
     from tofpose.batch.reprocess import Settings, reprocess
 
-    fps, warm, extra = [], [], []
-    for _ in range(repeats):
-        with tempfile.TemporaryDirectory() as d:
+    with tempfile.TemporaryDirectory() as d:
+        t0 = time.perf_counter()
+        with open_cluster(workers) as session, get_task_stream(session.client) as stream:
+            start_s = time.perf_counter() - t0
             s = reprocess(
                 [str(rec)],
                 d,
                 settings=Settings(tracking=tracking),
-                workers=workers,
-                chunk_frames=100,
+                chunk_frames=chunk_frames,
                 progress=False,
+                session=session,
             )
-            fps.append(s["run"]["frames_per_s"])
-            warm.append(s["run"]["frames_per_s_warm"])
-            chunks = max(1, s["recordings"][0]["chunks"])
-            extra.append(100.0 * s["run"]["chunks_run_again"] / chunks)
-    return float(np.median(fps)), float(np.median(warm)), float(np.median(extra))
+    ran = _executions(stream)
+    run = s["run"]
+    return {
+        "fps": run["frames_per_s"],
+        "cpu_per_frame": run["cpu_s"] / run["frames"],
+        "start_s": start_s,
+        "first_progress_s": start_s + run["first_progress_s"],
+        "twice": sum(n - 1 for n in ran.values()) + run["chunks_run_again"],
+        "chunks": s["recordings"][0]["chunks"],
+    }
+
+
+def study_example_cli(workers: int) -> dict:
+    """``tofpose study --example`` into a new directory on ``workers`` workers, from the
+    command line as a user runs it: wall time, and study.json's cluster start and first
+    progress."""
+    exe = str(Path(sys.executable).with_name("tofpose"))
+    with tempfile.TemporaryDirectory() as d:
+        spec = Path(d) / "spec.json"
+        spec.write_text(
+            subprocess.run(
+                [exe, "study", "--example"], capture_output=True, text=True, check=True
+            ).stdout
+        )
+        t0 = time.perf_counter()
+        subprocess.run(
+            [exe, "study", str(spec), "--out", str(Path(d) / "s"), "--workers", str(workers)],
+            capture_output=True,
+            check=True,
+        )
+        wall = time.perf_counter() - t0
+        run = json.loads((Path(d) / "s" / "study.json").read_text())["run"]
+    return {"wall_s": wall, "start_s": run["cluster_start_s"], "first": run["first_progress_s"]}
 
 
 def scheduler_overhead_ms(n_tasks: int = 2000) -> float:
@@ -222,99 +276,134 @@ def live_rates(seconds: float) -> dict:
             proc.wait(timeout=60)
 
 
+def _med(values) -> float:
+    return float(np.median(values))
+
+
+def _rows(name: str, serial: list[tuple[float, float]], runs: dict[int, list[dict]]) -> list:
+    """Table rows of one kind of work: per worker count, medians over the repeats of the
+    rate, the per-worker efficiency against the serial run of the same repeat, its CPU
+    form, the cluster start, the first progress, and the tasks that ran twice (summed)."""
+    rows = [[name, "serial", f"{_med([f for f, _ in serial]):.1f}", "1", "1", "-", "-", "-"]]
+    for w, rs in runs.items():
+        eff = [r["fps"] / (w * f) for r, (f, _) in zip(rs, serial, strict=True)]
+        cpu = [c / r["cpu_per_frame"] for r, (_, c) in zip(rs, serial, strict=True)]
+        rows.append(
+            [
+                name,
+                str(w),
+                f"{_med([r['fps'] for r in rs]):.1f}",
+                f"{_med(eff):.2f}",
+                f"{_med(cpu):.2f}",
+                f"{_med([r['start_s'] for r in rs]):.1f}",
+                f"{_med([r['first_progress_s'] for r in rs]):.1f}",
+                str(sum(r["twice"] for r in rs)),
+            ]
+        )
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--recording", help="a range-sweep recording to re-process (else made)")
+    ap.add_argument("--chunk-frames", type=int, default=500, help="re-processing chunks")
     args = ap.parse_args()
     all_cores()
     reps = 1 if args.quick else args.repeats
-    spec = study_spec(12 if args.quick else 64)
-    serial = serial_study_fps(spec)
-    runs = {w: study_runs(spec, w, reps) for w in (1, 2)}
-    rows = [["serial (one process, no Dask)", "-", f"{serial:.1f}", "-", f"{serial:.1f}", "-"]]
-    for w, r in runs.items():
-        eff = r["fps"] / (w * runs[1]["fps"])
-        rows.append(
-            [
-                f"LocalCluster, {w} worker{'s' if w > 1 else ''}",
-                f"{r['start_s']:.1f}",
-                f"{r['fps']:.1f}",
-                f"{eff:.2f}",
-                f"{r['warm']:.1f}",
-                f"{r['warm'] / (w * runs[1]['warm']):.2f}",
-            ]
-        )
+    load_before = os.getloadavg()[0]
+    spec = study_spec(16 if args.quick else 96)
+    study_serial, study = [], {1: [], 2: []}
+    for _ in range(reps):
+        study_serial.append(serial_study(spec))
+        for w in study:
+            study[w].append(study_run(spec, w))
+    rows = _rows("study", study_serial, study)
+    n_rec = 600 if args.quick else 3000
+    # the simulated recording is deterministic (seed 4): made once, kept in the temporary
+    # directory for the next run
+    rec = Path(args.recording or Path(tempfile.gettempdir()) / f"tofpose-bench-sweep-{n_rec}.h5")
+    if not rec.exists():
+        make_recording(rec, n_rec)
+    for tracking in (False, True):
+        serial, runs = [], {1: [], 2: []}
+        for _ in range(reps):
+            serial.append(serial_estimate(rec, tracking))
+            for w in runs:
+                runs[w].append(reprocess_run(rec, w, tracking, args.chunk_frames))
+        mode = "tracking" if tracking else "acquisition"
+        rows += _rows(f"re-processing, {mode}", serial, runs)
+        chunks = runs[1][0]["chunks"]
+    cli = [study_example_cli(2) for _ in range(reps)]
+    load_after = os.getloadavg()[0]
     print(
-        f"study: {spec.n_frames} frames ({len(spec.cells)} cells at 3 and 6 m, ideal and "
-        f"lens blur; chunks of {spec.chunk_frames}); medians of {reps} runs"
+        f"Medians of {reps} repeats; each repeat runs the serial reference, then 1 and 2 "
+        f"workers, so every ratio compares runs minutes apart on the same machine. This "
+        f"2-core machine is shared with other developers' test runs (load average "
+        f"{load_before:.1f} at the start, {load_after:.1f} at the end): absolute frames/s "
+        "are noisy, the ratios much less so, and the CPU efficiency (serial CPU seconds "
+        "per frame over a worker's) hardly at all."
+    )
+    print()
+    print(
+        f"study: {spec.n_frames} frames (4 cells at 3 and 6 m, ideal and lens blur; "
+        f"chunks of {spec.chunk_frames}); re-processing: a {n_rec}-frame range sweep in "
+        f"{chunks} chunks of {args.chunk_frames} (its CSV is estimate's byte for byte); "
+        "serial = the same frames in one process without Dask (`tofpose estimate` for "
+        "re-processing). Cluster start: a LocalCluster opened in a process that opened "
+        "one before, as the server does for every job after its first (its forkserver, "
+        "which imported the task modules, still runs); the command line's start in a "
+        "fresh process is given below."
     )
     print(
         table(
             [
-                "run",
+                "work",
+                "workers",
+                "frames/s once up",
+                "per-worker efficiency",
+                "CPU efficiency",
                 "cluster start (s)",
-                "frames/s after start",
-                "scaling efficiency",
-                "frames/s once warm",
-                "scaling efficiency (warm)",
+                "first progress (s)",
+                "tasks run twice",
             ],
             rows,
         )
     )
-    loads = [x for r in runs.values() for x in r["loads"]]
+    print()
+    print(
+        "Why workers were slower (bench/scaleout_workers.py): thread CPU time and minor "
+        "page faults per frame of the same chunks serially and in a worker, with Dask's "
+        "default worker environment and with ours"
+    )
+    causes = subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "scaleout_workers.py"), "--recording", str(rec)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    print(causes.stdout.strip())
+    loads = [x for r in study.values() for run in r for x in run["loads"]]
     misses = sum(x["cache_misses"] for x in loads)
-    secs = [x["seconds"] for x in loads]
+    first = [x["first_frame_s"] for x in loads if x["first_frame_s"] is not None]
     print()
     print(
-        f"numba kernels on the workers: {len(loads)} worker starts, cache misses {misses} "
-        f"(0 = every kernel loaded from the cache, none compiled), warm-up "
-        f"{min(secs):.1f}-{max(secs):.1f} s per worker"
+        f"numba kernels on the study workers: {len(loads)} worker starts, cache misses "
+        f"{misses} (0 = every kernel loaded from the cache, none compiled); a worker's first "
+        f"frame, which loads them, took {min(first):.1f}-{max(first):.1f} s"
     )
     print()
-    n_rec = 240 if args.quick else 3000
-    with tempfile.TemporaryDirectory() as d:
-        rec = Path(d) / "sweep.h5"
-        make_recording(rec, n_rec)
-        rrows = []
-        for tracking in (False, True):
-            s = serial_estimate_fps(rec, tracking)
-            r1, w1, _ = reprocess_fps(rec, 1, tracking, reps)
-            r2, w2, again = reprocess_fps(rec, 2, tracking, reps)
-            mode = "tracking" if tracking else "acquisition"
-            eff = f"{r2 / (2 * r1):.2f} ({w2 / (2 * w1):.2f})"
-            rrows.append(
-                [
-                    mode,
-                    f"{s:.1f}",
-                    f"{r1:.1f} ({w1:.1f})",
-                    f"{r2:.1f} ({w2:.1f})",
-                    eff,
-                    f"{again:.0f} %",
-                ]
-            )
     print(
-        f"re-processing a {n_rec}-frame recording (range sweep) in chunks of 100, "
-        f"medians of {reps} runs (the CSV is estimate's byte for byte); frames/s after "
-        "the cluster's start (in brackets: once warm, over the chunks' own time)"
-    )
-    print(
-        table(
-            [
-                "mode",
-                "tofpose estimate (frames/s)",
-                "1 worker",
-                "2 workers",
-                "scaling efficiency",
-                "chunks run again",
-            ],
-            rrows,
-        )
+        f"`tofpose study --example` (192 frames) on 2 workers from the command line: "
+        f"{_med([c['wall_s'] for c in cli]):.1f} s in all, of which "
+        f"{_med([c['start_s'] for c in cli]):.1f} s starting the cluster; first progress "
+        f"{_med([c['first'] for c in cli]):.1f} s after the study started (medians of {reps})"
     )
     print()
     task_ms = scheduler_overhead_ms(500 if args.quick else 2000)
     chunk_ms, chunk_kb = store_chunk_ms()
-    per_frame_s = 1.0 / serial
+    per_frame_s = 1.0 / _med([f for f, _ in study_serial])
     print(
         f"scheduler: {task_ms:.2f} ms per no-op task (round trip, 2 local workers); "
         f"store: {chunk_ms:.1f} ms and {chunk_kb:.0f} kB per chunk of 25 frames"

@@ -287,6 +287,11 @@ class PosePipeline:
             camera, catalog, self.config.solve, range_correction, arithmetic=arithmetic.pose
         )
         self._track: TrackState | None = None
+        # frames this pipeline was given: in tracking mode every ``reacquire_every``-th
+        # frame of the stream is a full acquisition, whatever happened before, so the
+        # schedule depends on the frame's index alone (``tofpose.batch.reprocess`` starts
+        # a chunk at a multiple of it and catches up with the serial run)
+        self._frames_seen = 0
         self._compiled_tracker = CompiledTracker(
             camera,
             catalog,
@@ -305,7 +310,8 @@ class PosePipeline:
 
     def state_digest(self) -> bytes:
         """A digest (16 bytes) of everything a frame leaves for the next ones: the
-        persistence history, the tracking state and the RANSAC generator. Two pipelines
+        persistence history, the tracking state, the RANSAC generator and (in tracking
+        mode) the stream's position in the re-acquisition period. Two pipelines
         of one configuration whose digests are equal give identical results on the same
         following frames (``tofpose.batch.reprocess`` finds where a chunk started
         mid-recording has caught up with the serial run this way)."""
@@ -329,6 +335,10 @@ class PosePipeline:
                 ).tobytes()
             )
         h.update(repr(self._rng.bit_generator.state).encode())
+        if self.config.tracking.enabled:  # where the stream is in the re-acquisition period
+            h.update(
+                (self._frames_seen % self.config.tracking.reacquire_every).to_bytes(4, "little")
+            )
         return h.digest()
 
     # ------------------------------------------------------------------------------------
@@ -390,12 +400,14 @@ class PosePipeline:
         cfg = self.config
         timer = _Timer()
         g, d = check_frame(self.camera, gray, distance_mm)
+        frame_number = self._frames_seen
+        self._frames_seen += 1
         track = self._track
         self._track = None  # set again below by a confident pose
         if (
             cfg.tracking.enabled
             and track is not None
-            and track.frames_since_acquisition + 1 < cfg.tracking.reacquire_every
+            and frame_number % cfg.tracking.reacquire_every != 0
         ):
             tracked = self._process_tracking(g, d, time_s, track, timer)
             if tracked is not None:

@@ -32,6 +32,7 @@ import os
 import sys
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -40,11 +41,14 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from tofpose.batch.cluster import dask_client
+from tofpose.batch.cluster import ClusterSession, session_or_open
+from tofpose.batch.progress import RunProgress
+from tofpose.batch.worker import ProgressReporter
 from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
 from tofpose.io.recording import open_recording
 
 DEFAULT_CHUNK_FRAMES = 512
+POLL_S = 0.1
 
 
 class ReprocessError(ValueError):
@@ -112,16 +116,22 @@ def _write_atomic(path: Path, data: bytes) -> None:
     os.replace(tmp, path)
 
 
-def run_chunk(chunk: Chunk, settings: Settings, out_dir: str) -> dict:
+def run_chunk(
+    chunk: Chunk, settings: Settings, out_dir: str, progress_topic: str | None = None
+) -> dict:
     """The task: run frames [origin, stop), write the rows of [start, stop) as
     ``chunks/<name>.csv`` (no header) and their raw poses as ``chunks/<name>.npz``
     (atomically); returns {"name", "warm": digests of frames [origin, start), "tail":
-    digests of the last ``tail`` frames, "ok", "seconds"} (digests as hex strings)."""
+    digests of the last ``tail`` frames (those it ran), "tail_first": the frame of the
+    first of them, "ok", "seconds", "cpu_s" (its thread's CPU time)} (digests as hex
+    strings).
+    ``progress_topic``: the run's event topic, on which the frames output so far are
+    reported while it runs (``tofpose.batch.worker.ProgressReporter``)."""
     from tofpose.core.threads import single_threaded_blas
     from tofpose.io.camera_file import pipeline_for
 
     single_threaded_blas()
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.thread_time()
     rows = io.StringIO()
     wr = csv.writer(rows)
     n = chunk.stop - chunk.start
@@ -131,6 +141,10 @@ def run_chunk(chunk: Chunk, settings: Settings, out_dir: str) -> dict:
     cov = np.full((n, 6, 6), np.nan)
     times = np.zeros(n)
     warm, tail = [], []
+    # the next chunk's warm-up may reach back past this chunk's start (a chunk shorter
+    # than a warm-up): its digests then include warm-up frames of this one
+    tail_first = max(chunk.origin, chunk.stop - chunk.tail)
+    report = ProgressReporter(progress_topic, chunk.name)
     with open_recording(chunk.path) as rec:
         pipe = pipeline_for(
             rec, chunk.path, settings.catalog_path, settings.camera_path, settings.tracking
@@ -139,16 +153,19 @@ def run_chunk(chunk: Chunk, settings: Settings, out_dir: str) -> dict:
             for k, tk in enumerate(ts.tolist()):
                 i = first + k
                 r = pipe.process(grays[k], dists[k], tk)
-                if i < chunk.start:
-                    warm.append(pipe.state_digest().hex())
-                    continue
+                if i < chunk.start or i >= tail_first:
+                    digest = pipe.state_digest().hex()
+                    if i >= tail_first:
+                        tail.append(digest)
+                    if i < chunk.start:
+                        warm.append(digest)
+                        continue
                 j = i - chunk.start
                 wr.writerow(pose_row(i, tk, r))
                 times[j] = tk
                 if r.ok:
                     ok[j], R[j], t_mm[j], cov[j] = True, r.R, r.t_mm, r.covariance
-                if i >= chunk.stop - chunk.tail:
-                    tail.append(pipe.state_digest().hex())
+                report(j + 1)
     chunks = Path(out_dir) / "chunks"
     chunks.mkdir(parents=True, exist_ok=True)
     _write_atomic(chunks / f"{chunk.name}.csv", rows.getvalue().encode())
@@ -159,15 +176,17 @@ def run_chunk(chunk: Chunk, settings: Settings, out_dir: str) -> dict:
         "name": chunk.name,
         "warm": warm,
         "tail": tail,
+        "tail_first": tail_first,
         "ok": int(ok.sum()),
         "seconds": time.perf_counter() - t0,
+        "cpu_s": time.thread_time() - cpu0,
     }
 
 
 def synced_frame(previous: Chunk, prev_result: dict, chunk: Chunk, result: dict) -> int | None:
     """The first warm-up frame of ``chunk`` at which its state equals the previous
     chunk's (equal digests), or None."""
-    first_tail = previous.stop - previous.tail
+    first_tail = prev_result.get("tail_first", previous.stop - previous.tail)
     for k, digest in enumerate(result["warm"]):
         frame = chunk.origin + k
         m = frame - first_tail
@@ -192,16 +211,23 @@ def reprocess(
     progress: bool = True,
     should_stop=None,
     niceness: int = 0,
+    session: ClusterSession | None = None,
+    on_progress: Callable[[int, int], None] | None = None,
 ) -> dict:
     """Re-process ``recordings`` into ``out_dir``: ``<stem>.csv`` per recording (what
     ``tofpose estimate`` writes for it), ``chunks/``, and ``reprocess.json`` (returned):
     settings, per recording its frames, poses and chunk boundaries, and the run's
     throughput. ``ReprocessError`` for recordings that cannot be read or named apart.
-    ``should_stop() -> bool``, polled between chunks: when it turns true the chunks still
-    queued are cancelled and ``ReprocessCancelledError`` raised (no CSV is written).
-    ``niceness``: the LocalCluster workers' priority is lowered by it (a server's live
-    loop keeps its core)."""
-    from dask.distributed import as_completed
+    ``should_stop() -> bool``, polled every ``POLL_S``: when it turns true the chunks
+    still queued are cancelled and ``ReprocessCancelledError`` raised (no CSV is
+    written). ``niceness``: the LocalCluster workers' priority is lowered by it (a
+    server's live loop keeps its core). ``session``: an open cluster to run on (the
+    server runs two passes of a job on one); else one is opened from ``workers`` /
+    ``scheduler`` (``tofpose.batch.cluster.open_cluster``) and closed at the end.
+    ``on_progress(frames_done, frames)``: called as running chunks report their frames
+    (``tofpose.batch.progress``), not only at a chunk's end."""
+    from dask.distributed import TimeoutError as DaskTimeout
+    from dask.distributed import wait
 
     from tofpose.io.camera_file import pipeline_for
 
@@ -231,24 +257,55 @@ def reprocess(
             )
     total = sum(c.stop - c.start for cs in chunks.values() for c in cs)
     t0 = time.perf_counter()
+    first_progress_s: float | None = None
     results: dict[Chunk, dict] = {}
     boundaries: dict[str, list[dict]] = {p: [] for p in recordings}
     bar = tqdm(total=total, unit="frame", desc="reprocess", disable=not progress, file=sys.stderr)
-    with dask_client(workers, scheduler, niceness=niceness) as client:
-        n_workers = len(client.scheduler_info()["workers"])
+    with session_or_open(session, workers, scheduler, niceness) as cluster:
+        client = cluster.client
         t_connected = time.perf_counter()
-        futures = {
-            client.submit(run_chunk, c, settings, str(out), pure=False): c
-            for cs in chunks.values()
-            for c in cs
-        }
-        for fut in as_completed(list(futures)):
-            if should_stop is not None and should_stop():
-                client.cancel(list(futures))
-                bar.close()
-                raise ReprocessCancelledError("re-processing cancelled")
-            results[futures[fut]] = fut.result()
-            bar.update(futures[fut].stop - futures[fut].start)
+        with RunProgress(client) as live:
+            # a chunk's task is named by the run and the chunk (Dask's task stream and
+            # dashboard show which chunk ran where, and how often)
+            run_id = uuid.uuid4().hex[:12]
+            futures = {
+                client.submit(
+                    run_chunk,
+                    c,
+                    settings,
+                    str(out),
+                    live.topic,
+                    key=f"tofpose-reprocess-{run_id}-{c.name}",
+                ): c
+                for cs in chunks.values()
+                for c in cs
+            }
+            pending = set(futures)
+            stored = shown = 0
+            cpu_s = 0.0
+            while pending:
+                try:
+                    finished, pending = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED")
+                except DaskTimeout:
+                    finished = set()
+                for fut in finished:
+                    c = futures[fut]
+                    results[c] = fut.result()  # a task's exception surfaces here
+                    cpu_s += results[c]["cpu_s"]
+                    live.finished(c.name)
+                    stored += c.stop - c.start
+                done = stored + live.running_frames()
+                if done != shown:
+                    if first_progress_s is None:
+                        first_progress_s = time.perf_counter() - t0
+                    bar.update(done - shown)
+                    shown = done
+                    if on_progress is not None:
+                        on_progress(done, total)
+                if should_stop is not None and should_stop():
+                    client.cancel(list(pending))
+                    bar.close()
+                    raise ReprocessCancelledError("re-processing cancelled")
         reruns = 0
         for path, cs in chunks.items():
             for j in range(1, len(cs)):
@@ -260,10 +317,15 @@ def reprocess(
                 # run again from the previous chunk's origin: its verified run, carried on
                 again = Chunk(path, j, prev.origin, cur.start, cur.stop, cur.tail)
                 results[cur] = client.submit(
-                    run_chunk, again, settings, str(out), pure=False
+                    run_chunk,
+                    again,
+                    settings,
+                    str(out),
+                    key=f"tofpose-reprocess-{run_id}-{cur.name}-again",
                 ).result()
                 cs[j] = again
                 results[again] = results[cur]
+                cpu_s += results[cur]["cpu_s"]
                 reruns += 1
                 boundaries[path].append(
                     {"chunk": j, "start": cur.start, "continued_from_frame": prev.origin}
@@ -293,17 +355,24 @@ def reprocess(
                 "boundaries": boundaries[path],
             }
         )
+    n_workers = cluster.workers
     summary["run"] = {
         "workers": n_workers,
         "cluster": scheduler or f"LocalCluster({n_workers})",
+        "warnings": list(cluster.warnings),
         "frames": total,
         "wall_s": wall_s,
+        # 0 on a cluster the caller opened
         "cluster_start_s": wall_s - work_s,
+        # from the call to the first frame output (reported by a running chunk)
+        "first_progress_s": first_progress_s,
         # from the cluster's start to the last chunk's CSV
         "frames_per_s": total / work_s if work_s > 0 else None,
         # once warm: frames output over the chunks' own time, times the workers
         "frames_per_s_warm": total * n_workers / sum(r["seconds"] for r in results.values()),
         "chunks_run_again": reruns,
+        # the chunks' threads' CPU time, re-runs included
+        "cpu_s": cpu_s,
     }
     import json
 

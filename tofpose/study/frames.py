@@ -17,6 +17,7 @@ import time
 import numpy as np
 import pyarrow as pa
 
+from tofpose.batch.worker import ProgressReporter
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import BUILTIN_CATALOGS
 from tofpose.core.geometry import quaternion_wxyz_from_rotation
@@ -27,11 +28,11 @@ from tofpose.sim.randomise import draw_background, draw_physics, draw_pose
 from tofpose.sim.render import render_frame
 from tofpose.study.columns import COLUMNS, ERROR_COLUMNS, SIGMA_COLUMNS
 from tofpose.study.spec import PRESETS, Cell, StudySpec
-from tofpose.study.store import write_chunk
+from tofpose.study.store import chunk_name, write_chunk
 
-#: this process's pipelines, by (catalog, preset), and what loading its kernels cost
+#: this process's pipelines, by (catalog, preset), and how long its first frame took
 _pipelines: dict[tuple[str, str], PosePipeline] = {}
-_kernel_load: dict | None = None
+_first_frame_s: float | None = None
 
 
 def frame_rng(seed: int, cell: int, frame: int) -> np.random.Generator:
@@ -41,30 +42,26 @@ def frame_rng(seed: int, cell: int, frame: int) -> np.random.Generator:
 
 
 def kernel_load() -> dict:
-    """Once per process: warm the pipeline's kernels up and say whether numba loaded
-    them from its on-disk cache: {"seconds", "cache_hits", "cache_misses"} (misses are
-    kernels this process compiled)."""
-    global _kernel_load
-    if _kernel_load is None:
-        from numba.core.registry import CPUDispatcher
+    """How this process came by the numba kernels it ran so far: {"pid",
+    "first_frame_s" (its first frame, which loaded them: None before one ran),
+    "cache_hits", "cache_misses"} (misses are kernels this process compiled, 0 when
+    every one came from the on-disk cache). The kernels load on first use, only those
+    a study's frames take (no warm-up of the live loop's paths in a worker)."""
+    from numba.core.registry import CPUDispatcher
 
-        from tofpose.warmup import warm_up
-
-        seconds = warm_up()
-        hits = misses = 0
-        for name, module in list(sys.modules.items()):
-            if name.startswith("tofpose"):
-                for obj in vars(module).values():
-                    if isinstance(obj, CPUDispatcher):
-                        hits += sum(obj.stats.cache_hits.values())
-                        misses += sum(obj.stats.cache_misses.values())
-        _kernel_load = {
-            "pid": os.getpid(),
-            "seconds": seconds,
-            "cache_hits": hits,
-            "cache_misses": misses,
-        }
-    return _kernel_load
+    hits = misses = 0
+    for name, module in list(sys.modules.items()):
+        if name.startswith("tofpose"):
+            for obj in vars(module).values():
+                if isinstance(obj, CPUDispatcher):
+                    hits += sum(obj.stats.cache_hits.values())
+                    misses += sum(obj.stats.cache_misses.values())
+    return {
+        "pid": os.getpid(),
+        "first_frame_s": _first_frame_s,
+        "cache_hits": hits,
+        "cache_misses": misses,
+    }
 
 
 def _pipeline(camera: CameraModel, cell: Cell) -> PosePipeline:
@@ -159,19 +156,35 @@ def measure_frame(spec: StudySpec, cell: Cell, frame: int, camera: CameraModel) 
     return row
 
 
-def run_chunk(spec_doc: dict, cell_index: int, start: int, stop: int, store_dir: str) -> dict:
+def run_chunk(
+    spec_doc: dict,
+    cell_index: int,
+    start: int,
+    stop: int,
+    store_dir: str,
+    progress_topic: str | None = None,
+) -> dict:
     """The task: frames [start, stop) of cell ``cell_index``, written to the store as one
     Parquet file (``store.write_chunk``: atomic, named by the chunk, so a rescheduled
-    task overwrites the same file with the same rows). Returns {"cell", "start",
-    "stop", "frames", "seconds" (measuring), "kernel_load" (``kernel_load``)}."""
+    task overwrites the same file with the same rows). ``progress_topic``: the run's
+    event topic, on which the frames done are reported while it runs
+    (``tofpose.batch.worker.ProgressReporter``). Returns {"cell", "start", "stop",
+    "frames", "seconds" (measuring), "cpu_s" (its thread's CPU time meanwhile),
+    "kernel_load" (``kernel_load``)}."""
+    global _first_frame_s
     single_threaded_blas()
     spec = StudySpec.from_dict(spec_doc, limits=None)  # the client checked its size
-    load = kernel_load()
     cell = spec.cells[cell_index]
     camera = CameraModel()
-    t0 = time.perf_counter()
-    rows = [measure_frame(spec, cell, i, camera) for i in range(start, stop)]
-    seconds = time.perf_counter() - t0
+    report = ProgressReporter(progress_topic, chunk_name(cell_index, start, stop))
+    t0, cpu0 = time.perf_counter(), time.thread_time()
+    rows = []
+    for i in range(start, stop):
+        rows.append(measure_frame(spec, cell, i, camera))
+        if _first_frame_s is None:
+            _first_frame_s = time.perf_counter() - t0
+        report(len(rows))
+    seconds, cpu_s = time.perf_counter() - t0, time.thread_time() - cpu0
     table = pa.Table.from_pylist(rows, schema=COLUMNS)
     write_chunk(store_dir, cell_index, start, stop, table)
     return {
@@ -180,5 +193,6 @@ def run_chunk(spec_doc: dict, cell_index: int, start: int, stop: int, store_dir:
         "stop": stop,
         "frames": stop - start,
         "seconds": seconds,
-        "kernel_load": load,
+        "cpu_s": cpu_s,
+        "kernel_load": kernel_load(),
     }

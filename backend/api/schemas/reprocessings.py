@@ -55,3 +55,15 @@ class ReprocessPublic(BaseModel):
     files: list[
         Literal["poses.csv", "baseline.csv", "compare.csv", "compare.json", "compare.png"]
     ] = Field(description="downloadable at /api/reprocessings/{id}/files/{name}")
+    dashboard_url: str | None = Field(
+        default=None, description="the Dask dashboard while the job runs on a cluster"
+    )
+    frames_done: int | None = Field(
+        default=None, description="frames output so far over both passes, while it runs"
+    )
+    frames_planned: int | None = Field(
+        default=None, description="frames of both passes (twice the recording's), while it runs"
+    )
+    warnings: list[str] = Field(
+        default_factory=list, description="what slows its cluster down (more workers than cores)"
+    )

@@ -94,3 +94,6 @@ class StudyPublic(BaseModel):
     dashboard_url: str | None = Field(
         default=None, description="the Dask dashboard of the cluster running it, while it runs"
     )
+    warnings: list[str] = Field(
+        default_factory=list, description="what slows its cluster down (more workers than cores)"
+    )

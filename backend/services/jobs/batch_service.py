@@ -8,10 +8,16 @@ starting and stopping it to its owner; one made without makes and owns its own. 
 cluster: ``scheduler`` (``TOFPOSE_DASK_SCHEDULER``) when set, else a LocalCluster of
 ``workers`` (the cores less one: the live camera loop keeps its core) whose workers run at
 a lower priority (``WORKER_NICENESS``), so a job takes what the live loop leaves.
+
+While a job runs on a cluster the service keeps that cluster's session in memory
+(``_on_cluster``): ``dashboard_url(id)`` is the Dask dashboard's address then, None
+otherwise (after a restart no cluster runs). A cluster's warnings (more workers than
+cores, ``tofpose.batch.cluster.ClusterWarning``) are stored with the job's status.
 """
 
 from __future__ import annotations
 
+import threading
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from functools import partial
@@ -19,7 +25,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from backend.services.jobs.batch_queue import BatchQueue
-from tofpose.batch.cluster import default_workers
+from tofpose.batch.cluster import ClusterSession, default_workers
 
 WORKER_NICENESS = 10
 
@@ -44,6 +50,8 @@ class BatchJobService(ABC):
         self.workers = workers if workers is not None else default_workers(reserve=1)
         self._own_jobs = jobs is None
         self.jobs = jobs if jobs is not None else BatchQueue()
+        self._sessions: dict[int, ClusterSession] = {}
+        self._sessions_lock = threading.Lock()
 
     # -- lifecycle --------------------------------------------------------------------
     def start(self) -> int:
@@ -91,6 +99,21 @@ class BatchJobService(ABC):
             "scheduler": self.scheduler,
             "niceness": 0 if self.scheduler else WORKER_NICENESS,
         }
+
+    def dashboard_url(self, jid: int) -> str | None:
+        """The Dask dashboard of the cluster job ``jid`` runs on; None when it runs on
+        none (queued, finished, or between its cluster's start and stop)."""
+        with self._sessions_lock:
+            session = self._sessions.get(jid)
+        return session.dashboard_url if session is not None else None
+
+    def _on_cluster(self, jid: int, session: ClusterSession | None) -> None:
+        """Job ``jid``'s cluster is up (``session``) or closed (None)."""
+        with self._sessions_lock:
+            if session is None:
+                self._sessions.pop(jid, None)
+            else:
+                self._sessions[jid] = session
 
     def _dir(self, jid: int) -> Path:
         return self.root / str(jid)

@@ -10,7 +10,11 @@ the recording was made with (the baseline), then compares them frame by frame
 ``<data_dir>/reprocessings/<id>/``: ``job.json`` (the source of truth for its status, so a
 restarted server finds it again), ``camera.json``, ``run/`` and ``baseline/`` (each a
 ``tofpose reprocess`` directory: ``campaign-<id>.csv`` is what ``tofpose estimate``
-writes), and ``compare.csv|json|png``.
+writes), and ``compare.csv|json|png``. Both passes run on one cluster (started once
+per job); while they run, the status carries the Dask dashboard's address
+(``dashboard_url``) and the frames done so far over both passes (``frames_done`` of
+``frames_planned``, reported by the running chunks), and the cluster's warnings (more
+workers than cores) are stored with the job.
 """
 
 from __future__ import annotations
@@ -23,10 +27,12 @@ import threading
 import uuid
 from collections.abc import Callable
 from datetime import UTC, datetime
+from functools import partial
 from pathlib import Path
 
 from backend.services.jobs.batch_queue import BatchQueue
 from backend.services.jobs.batch_service import BatchJobService
+from tofpose.batch.cluster import open_cluster
 from tofpose.batch.compare import compare_runs
 from tofpose.batch.reprocess import ReprocessCancelledError, Settings, reprocess
 from tofpose.io.camera_file import load_camera
@@ -101,6 +107,8 @@ class ReprocessService(BatchJobService):
     ) -> None:
         super().__init__(root, scheduler, workers, jobs)
         self._lock = threading.Lock()
+        # job id -> (frames done, frames planned) over both passes, while it runs
+        self._progress: dict[int, tuple[int, int]] = {}
 
     def _requeue(self, jid: int) -> bool:
         """A job a stopped server left queued or running starts over (a job is a few
@@ -172,6 +180,11 @@ class ReprocessService(BatchJobService):
         if job is None:
             raise UnknownReprocessingError(f"no re-processing with id {jid}")
         job["files"] = [n for n in FILES if self.file_path(jid, n, check=False) is not None]
+        running = job["status"] == "running"
+        job["dashboard_url"] = self.dashboard_url(jid) if running else None
+        done, planned = self._progress.get(jid, (None, None)) if running else (None, None)
+        job["frames_done"], job["frames_planned"] = done, planned
+        job.setdefault("warnings", [])
         return job
 
     def list(self, campaign_id: int | None = None) -> list[dict]:
@@ -205,28 +218,34 @@ class ReprocessService(BatchJobService):
             return
         job.update(status="running", started=_now(), error=None)
         _write_json(d / "job.json", job)
-        common = dict(
-            filter_state=job["filter"],
-            progress=False,
-            should_stop=should_stop,
-            **self._cluster(),
-        )
         camera_path = str(d / "camera.json") if job["camera"] == "given" else None
         try:
             for sub in ("run", "baseline"):
                 shutil.rmtree(d / sub, ignore_errors=True)
-            run = reprocess(
-                [job["recording"]],
-                d / "run",
-                **common,
-                settings=Settings(camera_path=camera_path, tracking=job["tracking"]),
-            )
-            reprocess(
-                [job["recording"]],
-                d / "baseline",
-                **common,
-                settings=Settings(tracking=job["tracking"]),
-            )
+            with open_cluster(**self._cluster()) as session:
+                self._on_cluster(jid, session)
+                job["warnings"] = list(session.warnings)
+                _write_json(d / "job.json", job)
+                common = dict(
+                    filter_state=job["filter"],
+                    progress=False,
+                    should_stop=should_stop,
+                    session=session,
+                )
+                run = reprocess(
+                    [job["recording"]],
+                    d / "run",
+                    **common,
+                    settings=Settings(camera_path=camera_path, tracking=job["tracking"]),
+                    on_progress=partial(self._on_progress, jid, 0),
+                )
+                reprocess(
+                    [job["recording"]],
+                    d / "baseline",
+                    **common,
+                    settings=Settings(tracking=job["tracking"]),
+                    on_progress=partial(self._on_progress, jid, 1),
+                )
             summary = compare_runs(str(d / "baseline"), str(d / "run"), d)
         except ReprocessCancelledError:
             if self.jobs.is_cancelled(self._key(jid)):
@@ -242,12 +261,20 @@ class ReprocessService(BatchJobService):
             log.exception("re-processing %d failed", jid)
             self._finish(jid, "failed", f"{type(exc).__name__}: {exc}")
             return
+        finally:
+            self._on_cluster(jid, None)
+            self._progress.pop(jid, None)
         rec = summary["recordings"][Path(job["recording"]).stem]
         job = self._job(jid)
         job.update(
             status="complete", finished=_now(), frames=run["recordings"][0]["frames"], summary=rec
         )
         _write_json(d / "job.json", job)
+
+    def _on_progress(self, jid: int, run: int, frames_done: int, frames: int) -> None:
+        """Pass ``run`` (0: the new calibration, 1: the baseline) of job ``jid`` has
+        ``frames_done`` of its ``frames`` output."""
+        self._progress[jid] = (run * frames + frames_done, 2 * frames)
 
     def _finish(self, jid: int, status: str, error: str | None) -> None:
         job = self._job(jid)

@@ -20,6 +20,7 @@ import logging
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 from backend.services.jobs.batch_queue import BatchQueue
@@ -71,6 +72,10 @@ class StudyStatus:
     finished: str | None
     cluster: str | None
     reports: tuple[str, ...]
+    #: the Dask dashboard while the study runs on a cluster, else None
+    dashboard_url: str | None = None
+    #: what slows its cluster down (more workers than cores), from its last run
+    warnings: tuple[str, ...] = ()
 
 
 class StudyService(BatchJobService):
@@ -165,6 +170,8 @@ class StudyService(BatchJobService):
             finished=m.get("finished"),
             cluster=m.get("cluster"),
             reports=reports,
+            dashboard_url=self.dashboard_url(sid) if m["status"] == "running" else None,
+            warnings=tuple(m.get("warnings") or ()),
         )
 
     def report_path(self, sid: int, kind: str) -> Path | None:
@@ -183,6 +190,7 @@ class StudyService(BatchJobService):
                 self._dir(sid),
                 progress=False,
                 should_stop=should_stop,
+                on_cluster=partial(self._on_cluster, sid),
                 **self._cluster(),
             )
         except StudyCancelledError:

@@ -2687,6 +2687,11 @@ export interface components {
             campaign_id: number;
             /** Created */
             created: string;
+            /**
+             * Dashboard Url
+             * @description the Dask dashboard while the job runs on a cluster
+             */
+            dashboard_url?: string | null;
             /** Error */
             error?: string | null;
             /**
@@ -2700,6 +2705,16 @@ export interface components {
             finished?: string | null;
             /** Frames */
             frames?: number | null;
+            /**
+             * Frames Done
+             * @description frames output so far over both passes, while it runs
+             */
+            frames_done?: number | null;
+            /**
+             * Frames Planned
+             * @description frames of both passes (twice the recording's), while it runs
+             */
+            frames_planned?: number | null;
             /** Id */
             id: number;
             /** Started */
@@ -2712,6 +2727,11 @@ export interface components {
             summary?: components["schemas"]["ReprocessComparison"] | null;
             /** Tracking */
             tracking: boolean;
+            /**
+             * Warnings
+             * @description what slows its cluster down (more workers than cores)
+             */
+            warnings?: string[];
         };
         /**
          * Requirements
@@ -3012,6 +3032,11 @@ export interface components {
              * @enum {string}
              */
             status: "created" | "queued" | "running" | "complete" | "incomplete" | "failed";
+            /**
+             * Warnings
+             * @description what slows its cluster down (more workers than cores)
+             */
+            warnings?: string[];
         };
         /**
          * StudyRequirements
