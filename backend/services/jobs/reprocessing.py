@@ -27,7 +27,6 @@ from pathlib import Path
 
 from backend.services.jobs.batch_queue import BatchQueue
 from backend.services.jobs.batch_service import BatchJobService
-from tofpose.batch.compare import compare_runs
 from tofpose.batch.reprocess import ReprocessCancelledError, Settings, reprocess
 from tofpose.io.camera_file import load_camera
 from tofpose.io.recording import RecordingError, open_recording
@@ -227,6 +226,9 @@ class ReprocessService(BatchJobService):
                 **common,
                 settings=Settings(tracking=job["tracking"]),
             )
+            # matplotlib with it: imported by the first comparison, not with the server
+            from tofpose.batch.compare import compare_runs
+
             summary = compare_runs(str(d / "baseline"), str(d / "run"), d)
         except ReprocessCancelledError:
             if self.jobs.is_cancelled(self._key(jid)):
