@@ -240,6 +240,7 @@ def one_repeat(rounds: int, ws_seconds: float) -> list[tuple[str, float, float]]
     def note(step: str, server: Server) -> None:
         rows.append((step, *server.memory()))
         print(f"  {step}: RSS {rows[-1][1]:.0f}, private {rows[-1][2]:.0f} MiB", file=sys.stderr)
+
     with tempfile.TemporaryDirectory(prefix="tofpose-memory-") as tmp:
         server = Server(Path(tmp) / "data")
         try:
