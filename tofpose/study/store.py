@@ -20,12 +20,12 @@ import os
 import re
 import uuid
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import pyarrow as pa
-import pyarrow.parquet as pq
-
-from tofpose.study.columns import COLUMNS
 from tofpose.study.spec import StudySpec
+
+if TYPE_CHECKING:  # pyarrow is imported where chunks are read or written: a server that
+    import pyarrow as pa  # only lists studies does not load it (docs/server.md, "Memory")
 
 MANIFEST = "study.json"
 # at least 5 and 7 digits: a larger number takes more (``chunk_name``)
@@ -46,6 +46,8 @@ def write_chunk(store_dir: str | Path, cell: int, start: int, stop: int, table: 
     frames.mkdir(parents=True, exist_ok=True)
     final = frames / chunk_name(cell, start, stop)
     tmp = frames / f".{final.name}.{uuid.uuid4().hex}.tmp"
+    import pyarrow.parquet as pq
+
     pq.write_table(table, tmp)
     os.replace(tmp, final)
     return final
@@ -77,6 +79,9 @@ def remove_temporary(store_dir: str | Path) -> int:
 def read_frames(store_dir: str | Path, spec: StudySpec) -> pa.Table:
     """Every stored row of the spec's chunks, sorted by (cell, frame); ``StudyStoreError``
     when a chunk file is unreadable (names it)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     frames = Path(store_dir) / "frames"
     tables = []
     for cell, start, stop in spec.chunks():
@@ -88,6 +93,8 @@ def read_frames(store_dir: str | Path, spec: StudySpec) -> pa.Table:
         except (OSError, pa.ArrowInvalid) as exc:
             raise StudyStoreError(f"{p}: unreadable chunk ({exc})") from exc
     if not tables:
+        from tofpose.study.columns import COLUMNS
+
         return COLUMNS.empty_table()
     table = pa.concat_tables(tables)
     return table.sort_by([("cell", "ascending"), ("frame", "ascending")])

@@ -33,7 +33,6 @@ from pathlib import Path
 from backend.services.jobs.batch_queue import BatchQueue
 from backend.services.jobs.batch_service import BatchJobService
 from tofpose.batch.cluster import open_cluster
-from tofpose.batch.compare import compare_runs
 from tofpose.batch.reprocess import ReprocessCancelledError, Settings, reprocess
 from tofpose.io.camera_file import load_camera
 from tofpose.io.recording import RecordingError, open_recording
@@ -246,6 +245,9 @@ class ReprocessService(BatchJobService):
                     settings=Settings(tracking=job["tracking"]),
                     on_progress=partial(self._on_progress, jid, 1),
                 )
+            # matplotlib with it: imported by the first comparison, not with the server
+            from tofpose.batch.compare import compare_runs
+
             summary = compare_runs(str(d / "baseline"), str(d / "run"), d)
         except ReprocessCancelledError:
             if self.jobs.is_cancelled(self._key(jid)):

@@ -25,7 +25,6 @@ from pathlib import Path
 
 from backend.services.jobs.batch_queue import BatchQueue
 from backend.services.jobs.batch_service import BatchJobService
-from tofpose.study.run import StudyCancelledError, run_study
 from tofpose.study.spec import StudyLimits, StudySpec, StudySpecError
 from tofpose.study.store import StudyStoreError, open_store, read_manifest, write_manifest
 
@@ -183,6 +182,9 @@ class StudyService(BatchJobService):
     # -- the runner -------------------------------------------------------------------
     def _run_one(self, sid: int, should_stop: Callable[[], bool]) -> None:
         """The job: run study ``sid`` to its end, or until ``should_stop``."""
+        # imported by the first study, not with the server (docs/server.md, "Memory")
+        from tofpose.study.run import StudyCancelledError, run_study
+
         try:
             spec = StudySpec.from_dict(read_manifest(self._dir(sid))["spec"], limits=None)
             run_study(

@@ -13,16 +13,16 @@ sigma) and the success against the integration time.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from backend.services.reports.analysis import REFERENCE_PREFIX
+from backend.services.reports.report_content import Table, fmt, setting_text
+from backend.services.reports.report_plots import Plot, Rect, axes_grid
 
-from backend.services.reports.analysis import REFERENCE_PREFIX  # noqa: E402
-from backend.services.reports.report_content import Table, fmt, setting_text  # noqa: E402
-from backend.services.reports.report_plots import Plot, Rect, axes_grid  # noqa: E402
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 SETTING_COLUMNS = {
     "integration_time_us": "setpoint_integration_time_us",
@@ -166,11 +166,11 @@ def metadata_text(report: dict) -> str:
     return f"{text}. Notes: {notes}" if notes else f"{text}. No notes."
 
 
-def draw_range_error_vs_setting(report: dict) -> Callable[[plt.Figure, Rect], None]:
+def draw_range_error_vs_setting(report: dict) -> Callable[[Figure, Rect], None]:
     """Range error mean +/- 1 sigma (left) and frames with a pose (right) against the
     integration time, one series per modulation frequency."""
 
-    def draw(fig: plt.Figure, rect: Rect) -> None:
+    def draw(fig: Figure, rect: Rect) -> None:
         groups = [g for g in report["camera_settings"] if "integration_time_us" in g["setting"]]
         err_ax, ok_ax = axes_grid(fig, rect, 1, 2, "Range error and success vs integration time")[0]
         by_mod: dict[float | None, list[dict]] = {}

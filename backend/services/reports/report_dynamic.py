@@ -4,15 +4,15 @@ the PDF show the same); the numbers come from ``dynamic_analysis``."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from backend.services.reports.report_content import Table, fmt
+from backend.services.reports.report_plots import Plot, Rect, axes_grid
 
-from backend.services.reports.report_content import Table, fmt  # noqa: E402
-from backend.services.reports.report_plots import Plot, Rect, axes_grid  # noqa: E402
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 ANGLE_NAMES = {"pitch_deg": "pitch", "yaw_deg": "yaw", "roll_deg": "roll"}
 MAX_PLOTTED_SETPOINTS = 6
@@ -145,8 +145,8 @@ def _shade(ax, t: np.ndarray, moving: np.ndarray) -> None:
         )
 
 
-def _draw(report: dict, k, s: dict) -> Callable[[plt.Figure, Rect], None]:
-    def draw(fig: plt.Figure, rect: Rect) -> None:
+def _draw(report: dict, k, s: dict) -> Callable[[Figure, Rect], None]:
+    def draw(fig: Figure, rect: Rect) -> None:
         ser = s["series"]
         t = np.asarray(ser["t"], float)
         t = t - t[0]

@@ -12,22 +12,16 @@ from __future__ import annotations
 import io
 import textwrap
 from dataclasses import dataclass
-
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.backends.backend_pdf import PdfPages  # noqa: E402
-from matplotlib.patches import Rectangle  # noqa: E402
+from typing import TYPE_CHECKING
 
 from backend.services.reports import report_content as rc
-from backend.services.reports.report_camera import (  # noqa: E402
+from backend.services.reports.report_camera import (
     camera_plots,
     camera_table,
     metadata_text,
 )
-from backend.services.reports.report_dynamic import dynamic_plots, dynamic_tables  # noqa: E402
-from backend.services.reports.report_plots import (  # noqa: E402
+from backend.services.reports.report_dynamic import dynamic_plots, dynamic_tables
+from backend.services.reports.report_plots import (
     FAIL_COLOUR,
     NO_PLOTS,
     PASS_COLOUR,
@@ -36,6 +30,9 @@ from backend.services.reports.report_plots import (  # noqa: E402
     evidence_plots,
     share_plot,
 )
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 PAGE_IN = (11.69, 8.27)  # A4 landscape
 MARGIN_X_IN, MARGIN_TOP_IN, MARGIN_BOTTOM_IN = 0.5, 0.45, 0.5
@@ -52,7 +49,7 @@ def chars_per_line(width_in: float, fontsize_pt: float, em: float = CHAR_EM) -> 
     return max(10, int(width_in * PT_PER_IN / (em * fontsize_pt)))
 
 
-def _frac(fig: plt.Figure, rect: Rect) -> tuple[float, float, float, float]:
+def _frac(fig: Figure, rect: Rect) -> tuple[float, float, float, float]:
     fw, fh = fig.get_size_inches()
     x, y, w, h = rect
     return x / fw, y / fh, w / fw, h / fh
@@ -101,7 +98,7 @@ class Text:
             Text(lines[n:], size, weight, colour=colour),
         )
 
-    def draw(self, fig: plt.Figure, rect: Rect) -> None:
+    def draw(self, fig: Figure, rect: Rect) -> None:
         x, y, w, h = rect
         fw, fh = fig.get_size_inches()
         fig.text(
@@ -175,7 +172,7 @@ class TableBlock:
         )
         return head, tail
 
-    def draw(self, fig: plt.Figure, rect: Rect) -> None:
+    def draw(self, fig: Figure, rect: Rect) -> None:
         x, y, w, h = rect
         ax = fig.add_axes(_frac(fig, rect))
         ax.set_axis_off()
@@ -195,6 +192,8 @@ class TableBlock:
         widths = self.column_widths(w)
         lefts = [sum(widths[:c]) for c in range(len(widths))]
         hh = self._header_in(w)
+        from matplotlib.patches import Rectangle
+
         ax.add_patch(Rectangle((0.0, top), w, hh, color="#e6e6e6", lw=0))
         for c, lines in enumerate(self.header_lines(w)):
             ax.text(
@@ -211,6 +210,8 @@ class TableBlock:
         self._draw_rows(ax, top, widths, lefts, w)
 
     def _draw_rows(self, ax, top: float, widths: list[float], lefts: list[float], w: float):
+        from matplotlib.patches import Rectangle
+
         rh = self._row_in()
         for r, row in enumerate(self.table.rows):
             y0 = top + r * rh
@@ -264,7 +265,7 @@ class PlotBlock:
     def split(self, height_in: float, width_in: float):
         return None
 
-    def draw(self, fig: plt.Figure, rect: Rect) -> None:
+    def draw(self, fig: Figure, rect: Rect) -> None:
         x, y, w, h = rect
         self.plot.draw(fig, (x, y + self.space_after_in, w, h - self.space_after_in))
 
@@ -289,7 +290,7 @@ class Row:
     def split(self, height_in: float, width_in: float):
         return None
 
-    def draw(self, fig: plt.Figure, rect: Rect) -> None:
+    def draw(self, fig: Figure, rect: Rect) -> None:
         x, y, w, h = rect
         for b, bw in zip(self.blocks, self._widths(w), strict=True):
             bh = h if b.flexible else b.height_in(bw)
@@ -433,7 +434,7 @@ def _verdict_colour(report: dict) -> str:
     return {True: PASS_COLOUR, False: FAIL_COLOUR}.get(report["overall"]["passed"], "#222222")
 
 
-def _footer(fig: plt.Figure, report: dict, page: int, n_pages: int) -> None:
+def _footer(fig: Figure, report: dict, page: int, n_pages: int) -> None:
     fw, fh = fig.get_size_inches()
     generated = report["generated_at"][:19].replace("T", " ")
     text = (
@@ -448,15 +449,20 @@ def to_pdf(report: dict, rows: list[dict]) -> bytes:
     width_in = PAGE_IN[0] - 2 * MARGIN_X_IN
     height_in = PAGE_IN[1] - MARGIN_TOP_IN - MARGIN_BOTTOM_IN
     pages = paginate(blocks(report, rows), width_in, height_in)
+    # matplotlib is imported on the first report, not with the server (docs/server.md,
+    # "Memory"); a Figure made without pyplot is in no global registry: it is freed when
+    # the last reference goes, also when drawing raises
+    from matplotlib.backends.backend_pdf import PdfPages
+    from matplotlib.figure import Figure
+
     buf = io.BytesIO()
     with PdfPages(buf) as pdf:
         for k, page in enumerate(pages, start=1):
-            fig = plt.figure(figsize=PAGE_IN)
+            fig = Figure(figsize=PAGE_IN)
             top = PAGE_IN[1] - MARGIN_TOP_IN
             for b, h in page:
                 b.draw(fig, (MARGIN_X_IN, top - h, width_in, h))
                 top -= h
             _footer(fig, report, k, len(pages))
             pdf.savefig(fig)
-            plt.close(fig)
     return buf.getvalue()

@@ -8,21 +8,20 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.ticker import MaxNLocator  # noqa: E402
-
-from backend.services.reports.analysis import AXES, REFERENCE_PREFIX  # noqa: E402
-from backend.services.reports.report_content import (  # noqa: E402
+from backend.services.reports.analysis import AXES, REFERENCE_PREFIX
+from backend.services.reports.report_content import (
     AXIS_NAMES,
     AXIS_UNITS,
     axis_label,
     axis_verdicts,
 )
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 Rect = tuple[float, float, float, float]
 NO_PLOTS = "No frame gave a pose yet: nothing to plot."
@@ -36,13 +35,20 @@ class Plot:
     """A plot of the report: its title, how to draw it, and the heights it reads well at."""
 
     title: str
-    draw: Callable[[plt.Figure, Rect], None]
+    draw: Callable[[Figure, Rect], None]
     min_height_in: float
     max_height_in: float
 
 
+def _max_n_locator(nbins: int, integer: bool = False):
+    """matplotlib's ``MaxNLocator``, imported when a plot is drawn (docs/server.md, "Memory")."""
+    from matplotlib.ticker import MaxNLocator
+
+    return MaxNLocator(nbins, integer=integer)
+
+
 def axes_grid(
-    fig: plt.Figure,
+    fig: Figure,
     rect: Rect,
     nrows: int,
     ncols: int,
@@ -80,7 +86,7 @@ def axes_grid(
     axs = gs.subplots(squeeze=False, **kw)
     for ax in axs.ravel():
         ax.tick_params(labelsize=7.5)
-        ax.xaxis.set_major_locator(MaxNLocator(6))
+        ax.xaxis.set_major_locator(_max_n_locator(6))
         ax.grid(alpha=0.3)
     return axs
 
@@ -104,10 +110,10 @@ def _num(v) -> float:
 
 
 # -- the plots -------------------------------------------------------------------------------
-def draw_requirement_share(report: dict) -> Callable[[plt.Figure, Rect], None]:
+def draw_requirement_share(report: dict) -> Callable[[Figure, Rect], None]:
     """Bars of max |error| / requirement per axis, the requirement at 100 %."""
 
-    def draw(fig: plt.Figure, rect: Rect) -> None:
+    def draw(fig: Figure, rect: Rect) -> None:
         verdicts = axis_verdicts(report)
         (ax,) = axes_grid(fig, rect, 1, 1, "max |error| as a share of the requirement")[0]
         share = np.array([100.0 * v.share for v in verdicts])
@@ -127,10 +133,10 @@ def draw_requirement_share(report: dict) -> Callable[[plt.Figure, Rect], None]:
     return draw
 
 
-def draw_error_series(report: dict, d: dict) -> Callable[[plt.Figure, Rect], None]:
+def draw_error_series(report: dict, d: dict) -> Callable[[Figure, Rect], None]:
     """Error per frame over time, one panel per axis (the paper's Figs. 8-10)."""
 
-    def draw(fig: plt.Figure, rect: Rect) -> None:
+    def draw(fig: Figure, rect: Rect) -> None:
         title = f"Error per frame against the {report['reference']} reference"
         axs = axes_grid(fig, rect, 3, 2, title, sharex=True)
         for ax, a in zip(axs.T.ravel(), AXES, strict=True):
@@ -142,10 +148,10 @@ def draw_error_series(report: dict, d: dict) -> Callable[[plt.Figure, Rect], Non
     return draw
 
 
-def draw_measured_series(report: dict, d: dict) -> Callable[[plt.Figure, Rect], None]:
+def draw_measured_series(report: dict, d: dict) -> Callable[[Figure, Rect], None]:
     """Measured pose and reference over time: the steps and holds (Figs. 11-13)."""
 
-    def draw(fig: plt.Figure, rect: Rect) -> None:
+    def draw(fig: Figure, rect: Rect) -> None:
         axs = axes_grid(fig, rect, 3, 2, "Measured pose and reference over time", sharex=True)
         for ax, a in zip(axs.T.ravel(), AXES, strict=True):
             ax.plot(d["t"], d["ref_" + a], "-", color="0.6", lw=1.0, label="reference")
@@ -158,10 +164,10 @@ def draw_measured_series(report: dict, d: dict) -> Callable[[plt.Figure, Rect], 
     return draw
 
 
-def draw_measured_vs_reference(report: dict) -> Callable[[plt.Figure, Rect], None]:
+def draw_measured_vs_reference(report: dict) -> Callable[[Figure, Rect], None]:
     """Mean measured value per set-point against the reference (Fig. 14)."""
 
-    def draw(fig: plt.Figure, rect: Rect) -> None:
+    def draw(fig: Figure, rect: Rect) -> None:
         sps = report["setpoints"]
         axs = axes_grid(fig, rect, 2, 3, "Measured (mean per set-point) vs reference", gap_y_in=0.6)
         for ax, a in zip(axs.ravel(), AXES, strict=True):
@@ -170,18 +176,18 @@ def draw_measured_vs_reference(report: dict) -> Callable[[plt.Figure, Rect], Non
             ax.plot(ref_v, mean, "o", ms=4)
             lo, hi = np.nanmin(np.r_[ref_v, mean, 0.0]), np.nanmax(np.r_[ref_v, mean, 0.0])
             ax.plot([lo, hi], [lo, hi], "k--", lw=0.8)
-            ax.xaxis.set_major_locator(MaxNLocator(4))
+            ax.xaxis.set_major_locator(_max_n_locator(4))
             ax.set_xlabel(f"reference {axis_label(a)}", fontsize=8)
             ax.set_ylabel(f"measured ({AXIS_UNITS[a]})", fontsize=8)
 
     return draw
 
 
-def draw_error_vs_range(report: dict) -> Callable[[plt.Figure, Rect], None]:
+def draw_error_vs_range(report: dict) -> Callable[[Figure, Rect], None]:
     """Mean error +/- 1 std per set-point against range, translation and attitude; against
     the set-point number when every set-point is at about the same range."""
 
-    def draw(fig: plt.Figure, rect: Rect) -> None:
+    def draw(fig: Figure, rect: Rect) -> None:
         sps = report["setpoints"]
         x, xlabel = range_or_index(sps)
         what = "range" if xlabel.startswith("range") else "set-point"
@@ -194,7 +200,7 @@ def draw_error_vs_range(report: dict) -> Callable[[plt.Figure, Rect], None]:
                     x, bias, yerr=np.nan_to_num(std), fmt="o", ms=4, capsize=2, label=AXIS_NAMES[a]
                 )
             ax.set_xlabel(xlabel, fontsize=8)
-            ax.xaxis.set_major_locator(MaxNLocator(6, integer=what == "set-point"))
+            ax.xaxis.set_major_locator(_max_n_locator(6, integer=what == "set-point"))
             ax.set_ylabel(f"mean error +/- 1 std ({unit})", fontsize=8)
             ax.legend(fontsize=7)
 
@@ -232,9 +238,11 @@ def evidence_plots(report: dict, rows: list[dict]) -> list[Plot]:
     ]
 
 
-def standalone(plot: Plot, width_in: float = 10.0, height_in: float | None = None) -> plt.Figure:
+def standalone(plot: Plot, width_in: float = 10.0, height_in: float | None = None) -> Figure:
     """The plot alone in a figure (the HTML report's images)."""
     h = height_in if height_in is not None else min(plot.max_height_in, 1.25 * plot.min_height_in)
-    fig = plt.figure(figsize=(width_in, h))
+    from matplotlib.figure import Figure  # on the first report (docs/server.md, "Memory")
+
+    fig = Figure(figsize=(width_in, h))  # no pyplot: freed with its last reference
     plot.draw(fig, (0.0, 0.0, width_in, h))
     return fig

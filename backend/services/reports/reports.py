@@ -16,26 +16,23 @@ import io
 import json
 import math
 from datetime import UTC, datetime
+from typing import TYPE_CHECKING
 
-import matplotlib
+from sqlalchemy import select
+from sqlalchemy.orm import Session
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from sqlalchemy import select  # noqa: E402
-from sqlalchemy.orm import Session  # noqa: E402
-
-from backend.db.models import (  # noqa: E402
+from backend.db.models import (
     CalibrationRow,
     CampaignRow,
     MeasurementRow,
     SetPointRow,
 )
-from backend.services.calibrations import calibrated_reference  # noqa: E402
-from backend.services.reports import report_content as rc  # noqa: E402
-from backend.services.reports import report_pdf  # noqa: E402
-from backend.services.reports.analysis import AXES, REFERENCE_PREFIX, analyse  # noqa: E402
-from backend.services.reports.dynamic_analysis import analyse_dynamic, is_static  # noqa: E402
-from backend.services.reports.report_camera import (  # noqa: E402
+from backend.services.calibrations import calibrated_reference
+from backend.services.reports import report_content as rc
+from backend.services.reports import report_pdf
+from backend.services.reports.analysis import AXES, REFERENCE_PREFIX, analyse
+from backend.services.reports.dynamic_analysis import analyse_dynamic, is_static
+from backend.services.reports.report_camera import (
     SETTING_COLUMNS,
     camera_groups,
     camera_plots,
@@ -43,13 +40,16 @@ from backend.services.reports.report_camera import (  # noqa: E402
     metadata_text,
     row_setting,
 )
-from backend.services.reports.report_dynamic import (  # noqa: E402
+from backend.services.reports.report_dynamic import (
     dynamic_findings,
     dynamic_plots,
     dynamic_tables,
 )
-from backend.services.reports.report_plots import NO_PLOTS, evidence_plots, standalone  # noqa: E402
-from tofpose.lab.relative_state import STATE_COLUMNS  # noqa: E402
+from backend.services.reports.report_plots import NO_PLOTS, evidence_plots, standalone
+from tofpose.lab.relative_state import STATE_COLUMNS
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 POSE = AXES
 CSV_COLUMNS = (
@@ -359,10 +359,9 @@ def to_html(report: dict, rows: list[dict]) -> str:
     return "\n".join(parts)
 
 
-def _png_b64(fig: plt.Figure) -> str:
+def _png_b64(fig: Figure) -> str:
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90)
-    plt.close(fig)
+    fig.savefig(buf, format="png", dpi=90)  # a pyplot-free Figure: nothing to close
     return base64.b64encode(buf.getvalue()).decode()
 
 

@@ -13,12 +13,12 @@ import tracemalloc
 
 import pytest
 
-from backend.services.jobs import studies as studies_service
 from backend.services.jobs.batch_queue import BatchQueue
 from backend.services.jobs.studies import StudyService, TooManyStudiesError, study_limits
 from backend.settings import Settings
 from tests.backend.conftest import AUTH, make_settings, running_app, wait_for
 from tofpose.sim.randomise import FAMILIES
+from tofpose.study import run as study_run
 from tofpose.study.run import StudyCancelledError
 from tofpose.study.spec import Cell, StudySpec, StudySpecError
 from tofpose.study.store import read_manifest, write_manifest
@@ -78,7 +78,8 @@ def held_runs(monkeypatch) -> None:
         write_manifest(out_dir, {**read_manifest(out_dir), "status": "incomplete"})
         raise StudyCancelledError("held run stopped")
 
-    monkeypatch.setattr(studies_service, "run_study", held)
+    # the service imports run_study when a study runs (docs/server.md, "Memory")
+    monkeypatch.setattr(study_run, "run_study", held)
 
 
 def test_a_study_runs_to_its_report(tmp_path):

@@ -14,10 +14,10 @@ import pytest
 from backend.api.routes.studies import _public
 from backend.api.schemas.campaigns import Requirements
 from backend.api.schemas.studies import StudyRequirements
-from backend.services.jobs import studies as studies_service
 from backend.services.reports import report_content
 from tests.backend.conftest import AUTH
 from tofpose.lab.requirements import PAPER_REQUIREMENTS, REQUIREMENT_AXES
+from tofpose.study import run as study_run
 from tofpose.study.run import StudyCancelledError
 from tofpose.study.store import read_manifest, write_manifest
 
@@ -35,7 +35,8 @@ def held_runs(monkeypatch) -> None:
         write_manifest(out_dir, {**read_manifest(out_dir), "status": "incomplete"})
         raise StudyCancelledError("held run stopped")
 
-    monkeypatch.setattr(studies_service, "run_study", held)
+    # the service imports run_study when a study runs (docs/server.md, "Memory")
+    monkeypatch.setattr(study_run, "run_study", held)
 
 
 def _stored(settings, sid: int) -> dict:
