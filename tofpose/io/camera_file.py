@@ -70,13 +70,11 @@ def read_camera_text(name_or_path: str) -> str:
 def catalog_from_arg(name_or_path: str) -> Catalog:
     """The catalog of a ``--catalog`` argument: a built-in catalog's name
     (``BUILTIN_CATALOGS``: ``paper-target``) or a catalog JSON file; ``SystemExit``
-    naming what is wrong."""
+    naming a file that cannot be read, ``ValueError`` naming what is wrong in one that
+    can (the CLI prints it and exits with 2)."""
     if name_or_path in BUILTIN_CATALOGS:
         return BUILTIN_CATALOGS[name_or_path]()
-    try:
-        return Catalog.from_json(read_text_file(name_or_path, "catalog"))
-    except (ValueError, KeyError, TypeError) as exc:
-        raise SystemExit(f"tofpose: catalog {name_or_path}: {exc}") from exc
+    return Catalog.from_json(read_text_file(name_or_path, "catalog"))
 
 
 def camera_from_arg(name_or_path: str) -> CameraModel:

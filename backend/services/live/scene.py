@@ -476,8 +476,10 @@ class LiveScene:
         """Forget the trail's poses (the GUI's "Clear trail"); it grows again from the
         next pose."""
         with self._trail_lock:
-            self.trail.clear()
+            # hidden before emptied: whoever sees the trail empty (a reader without the
+            # lock, the browser test) sees the node hidden too
             self.trail_node.visible = False
+            self.trail.clear()
 
     def _update_trail(self, position_m: np.ndarray | None) -> None:
         with self._trail_lock:

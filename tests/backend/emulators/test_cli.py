@@ -58,7 +58,9 @@ def test_emulate_lab_serves_both_devices_over_one_world():
         cols = [np.nonzero((a > 1000) & (a < 64000))[1].mean() for a in (before, after)]
         assert abs(cols[1] - cols[0]) > 20, cols
         proc.send_signal(signal.SIGINT)
-        assert proc.wait(10) == 0
+        # a liveness bound, not a speed claim: under a full suite's load (load average
+        # ~12 on 2 cores) the emulator's exit took over 10 s in every full run, never alone
+        assert proc.wait(45) == 0
     finally:
         if proc.poll() is None:
             proc.kill()

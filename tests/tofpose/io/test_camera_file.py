@@ -59,6 +59,6 @@ def test_a_catalog_argument_is_a_built_in_name_or_a_json_file(tmp_path):
     assert catalog_from_arg(str(path)) == paper_target()
     with pytest.raises(SystemExit, match="cannot read catalog"):
         catalog_from_arg(str(tmp_path / "missing.json"))
-    path.write_text("{}")
-    with pytest.raises(SystemExit, match=f"catalog {path}"):
+    path.write_text('{"name": "x", "reflectors": []}')
+    with pytest.raises(ValueError, match="at least 3 reflectors"):
         catalog_from_arg(str(path))

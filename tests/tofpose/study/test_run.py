@@ -41,7 +41,10 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-FINE = {**DOC, "chunk_frames": 1}  # 24 tasks: an interruption lands mid-study
+# 96 one-frame tasks: an interruption lands mid-study (with 24, warm workers finished the
+# whole study within a loaded machine's poll, before the test's Ctrl-C)
+FINE = {**DOC, "frames_per_cell": 24, "chunk_frames": 1}
+FINE_FRAMES = 96
 
 
 @pytest.fixture(scope="module")
@@ -160,11 +163,11 @@ def test_a_worker_killed_mid_study_changes_nothing(reference_fine, tmp_path):
         os.kill(next(iter(pids.values())), signal.SIGKILL)
         th.join(timeout=300)
         assert not errors, errors
-    assert 3 <= done_before_kill < 24
+    assert 3 <= done_before_kill < FINE_FRAMES
     assert (out / "summary.json").read_bytes() == (ref / "summary.json").read_bytes()
     files = sorted(p.name for p in (out / "frames").iterdir())
-    assert len(files) == 24 and not [f for f in files if f.endswith(".tmp")]
-    assert sum(pq.read_table(out / "frames" / f).num_rows for f in files) == 24
+    assert len(files) == FINE_FRAMES and not [f for f in files if f.endswith(".tmp")]
+    assert sum(pq.read_table(out / "frames" / f).num_rows for f in files) == FINE_FRAMES
 
 
 def test_an_unreachable_scheduler_is_named():
@@ -193,9 +196,8 @@ def test_ctrl_c_leaves_an_incomplete_store_that_resumes(reference_fine, tmp_path
         text=True,
     )
     deadline = time.monotonic() + 120
-    # interrupt at the first stored chunk: the 24 one-frame chunks of this spec take ~1 s
-    # once the worker is up, and waiting for a second one let a loaded machine's poll
-    # arrive after the last
+    # interrupt at the first stored chunk: the 96 one-frame chunks of this spec take a few
+    # seconds once the worker is up
     while not present_chunks(out) and time.monotonic() < deadline:
         time.sleep(0.01)
     proc.send_signal(signal.SIGINT)
@@ -204,12 +206,12 @@ def test_ctrl_c_leaves_an_incomplete_store_that_resumes(reference_fine, tmp_path
     assert "interrupted" in err
     manifest = read_manifest(out)
     kept = present_chunks(out)
-    assert manifest["status"] == "incomplete" and 1 <= len(kept) < 24
+    assert manifest["status"] == "incomplete" and 1 <= len(kept) < FINE_FRAMES
     assert not (out / "summary.json").exists()
     # the same command again runs only what is missing, to the same result
     cmd = [BIN / "tofpose", "study", str(spec_path), "--out", str(out), "--workers", "1"]
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert again.returncode == 0, again.stderr
     assert read_manifest(out)["status"] == "complete"
-    assert read_manifest(out)["run"]["frames_run"] == 24 - len(kept)
+    assert read_manifest(out)["run"]["frames_run"] == FINE_FRAMES - len(kept)
     assert (out / "summary.json").read_bytes() == (reference_fine / "summary.json").read_bytes()
