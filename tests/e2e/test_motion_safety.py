@@ -10,6 +10,7 @@ import json
 
 import httpx
 import pytest
+from playwright.sync_api import expect
 
 from tests.backend.conftest import AUTH, TOKEN, LiveServer, make_settings, wait_for
 from tests.e2e.conftest import SHOTS
@@ -72,6 +73,9 @@ def test_an_out_of_limit_target_is_refused_in_the_field(server, page_for):
     # typing again clears the message; a valid number then moves the axis, once
     page.get_by_test_id("target-pitch").fill("2.5")
     assert page.get_by_test_id("target-error-pitch").count() == 0
+    # on a loaded machine the status can go stale for a moment (locked, Enter refused
+    # in the field): the user presses Enter once the controls are usable
+    expect(page.get_by_test_id("go-pitch")).to_be_enabled(timeout=15_000)
     page.get_by_test_id("target-pitch").press("Enter")
     wait_for(lambda: sent, 15.0, "the move request")  # chromium + server on 2 busy cores
     page.wait_for_timeout(500)
@@ -117,6 +121,10 @@ def test_controls_lock_while_the_turntable_status_is_stale(server, page_for):
     assert page.get_by_test_id("go-yaw").is_disabled()
     assert page.get_by_test_id("jog-yaw-plus").is_disabled()
     page.get_by_test_id("target-yaw").press("Enter")
+    # Enter on a locked field says why nothing was sent
+    refused = page.get_by_test_id("target-error-yaw")
+    refused.wait_for(timeout=5000)
+    assert "not sent" in refused.inner_text() and "stale" in refused.inner_text()
     page.get_by_test_id("go-yaw").click(force=True)
     page.get_by_test_id("jog-yaw-plus").click(force=True)
     page.wait_for_timeout(800)
@@ -175,8 +183,11 @@ def test_stop_latches_in_the_page_until_a_person_releases_it(server, page_for):
     page.get_by_test_id("release-stop").click()
     wait_for(lambda: page.get_by_test_id("stop-latched").count() == 0, 6.0, "the latch to go")
     assert _motion(server)["stop_latched"] is False
+    expect(page.get_by_test_id("go-yaw")).to_be_enabled(timeout=15_000)
     page.get_by_test_id("go-yaw").click()
-    wait_for(lambda: sent == [("/api/motion/move", {"yaw_deg": 5.0})], 5.0, "the move")
+    wait_for(lambda: sent == [("/api/motion/move", {"yaw_deg": 5.0})], 15.0, "the move")
+    # the audit lists a request once the server has answered it
+    wait_for(lambda: _motion(server)["targets"].get("yaw") == 5.0, 15.0, "the move's answer")
     page.get_by_test_id("audit-toggle").click()
     audit = page.get_by_test_id("audit")
     audit.wait_for(timeout=6000)

@@ -58,8 +58,14 @@ export function MotionPanel() {
   const motion = polled.data;
   if (!motion) return <section class="card"><h2>Turntable</h2><p>loading</p></section>;
   const locked = lockReason(motion, polled.updatedAt, polled.now);
-  const goTo = (axis: Motion["axes"][number]) => {
-    const parsed = parseSetpoint(targets[axis.name] ?? "", axis);
+  // `typed`: the field's text when the form is submitted (read from the input itself, so
+  // an Enter that arrives before the re-render still sends what is in the field)
+  const goTo = (axis: Motion["axes"][number], typed: string) => {
+    if (locked) {
+      setFieldErrors({ ...fieldErrors, [axis.name]: `not sent: ${locked}` });
+      return;
+    }
+    const parsed = parseSetpoint(typed, axis);
     if ("error" in parsed) {
       setFieldErrors({ ...fieldErrors, [axis.name]: parsed.error });
       return;
@@ -94,10 +100,16 @@ export function MotionPanel() {
                 <td data-testid={`pos-${a.name}`}>{pos === undefined ? "-" : pos.toFixed(a.unit === "mm" ? 1 : 3)} {a.unit}</td>
                 <td class="small">{a.min_pos} .. {a.max_pos}</td>
                 <td>
-                  <form class="goto" onSubmit={(e) => { e.preventDefault(); if (!locked) goTo(a); }}>
+                  <form class="goto" onSubmit={(e) => {
+                    e.preventDefault();
+                    const input = (e.currentTarget as HTMLFormElement).querySelector("input");
+                    goTo(a, input?.value ?? targets[a.name] ?? "");
+                  }}>
                     <input aria-label={`${a.name} target (${a.unit})`} data-testid={`target-${a.name}`} size={7}
                       inputMode="decimal" aria-invalid={err ? "true" : undefined}
                       aria-describedby={err ? `target-error-${a.name}` : undefined}
+                      // a disabled "go" blocks the form's Enter: say why here instead
+                      onKeyDown={(e) => { if (e.key === "Enter" && locked) goTo(a, ""); }}
                       value={targets[a.name] ?? ""} onInput={(e) => {
                         setTargets({ ...targets, [a.name]: (e.target as HTMLInputElement).value });
                         if (err) setFieldErrors({ ...fieldErrors, [a.name]: "" });
