@@ -365,9 +365,15 @@ class PosePipeline:
         assert result.R is not None and result.t_mm is not None  # an ok result has both
         cfg = self.config.pixel_fit
         t0 = time.perf_counter()
+        ranges_mm = np.array([np.linalg.norm(m.point_mm) for m in result.matched])
+        offset_sigma_mm = (
+            self._solver.range_bias_sigma_mm(ranges_mm)
+            if self.config.solve.estimate_range_offset
+            else 0.0
+        )
         fit = fit_pose_to_pixels(
             np.asarray(gray),
-            np.asarray(distance_mm),
+            self._range_corrected(np.asarray(gray), np.asarray(distance_mm)),
             self.camera,
             self.catalog,
             result.R,
@@ -377,7 +383,10 @@ class PosePipeline:
                 modulation_frequency_hz=self.camera.modulation_frequency_hz,
                 full_scale_counts=self.camera.full_scale_counts,
             ),
-            fit_range_offset=cfg.fit_range_offset,
+            # a free offset when asked; else the pose fit's prior on it (none when the
+            # camera states a range-bias sigma of 0)
+            fit_range_offset=cfg.fit_range_offset or offset_sigma_mm > 0,
+            range_offset_sigma_mm=float("inf") if cfg.fit_range_offset else offset_sigma_mm or 1.0,
             max_marker_rms_sigma=cfg.max_marker_rms_sigma,
         )
         timings = {**result.timings_ms, "pixel fit": 1e3 * (time.perf_counter() - t0)}
@@ -393,6 +402,19 @@ class PosePipeline:
             pixel_fit="ok",
             timings_ms=timings,
         )
+
+    def _range_corrected(self, gray: np.ndarray, distance_mm: np.ndarray) -> np.ndarray:
+        """``distance_mm`` (H, W) less the calibrated range error of each pixel
+        (``range_correction``; the pixel fit reads whole pixels, the §3 stages correct
+        each reflector's range in their kernel instead); unchanged without one."""
+        c = self.range_correction
+        if c is None:
+            return distance_mm
+        valid = np.isfinite(distance_mm)
+        out = distance_mm.astype(float, copy=True)
+        index = np.flatnonzero(valid)
+        out.ravel()[index] -= c.error_mm(distance_mm.ravel()[index], gray.ravel()[index], index)
+        return out
 
     def _process(
         self, gray: np.ndarray, distance_mm: np.ndarray, time_s: float | None

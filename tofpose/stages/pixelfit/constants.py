@@ -43,3 +43,7 @@ MIN_MARKERS = 3
 MAD_TO_SIGMA = 1.4826
 #: variance of the 12-bit quantisation of the gray image, counts^2
 QUANTISATION_VAR = 1.0 / 12.0
+#: a disc covers a pixel partly (a rim pixel) when its coverage is inside (eps, 1 - eps)
+RIM_COVERAGE_EPS = 1e-3
+#: fewest unsaturated rim pixels on which the rim's model error is measured
+MIN_RIM_PIXELS = 12

@@ -42,7 +42,9 @@ from tofpose.stages.pixelfit.constants import (
     MAX_MARKER_RMS_SIGMA,
     MIN_CONTRAST_SIGMA,
     MIN_MARKERS,
+    MIN_RIM_PIXELS,
     QUANTISATION_VAR,
+    RIM_COVERAGE_EPS,
     ROTATION_STEP_RAD,
     STEP_TOLERANCE_SIGMA2,
     SUBSAMPLES,
@@ -58,6 +60,7 @@ from tofpose.stages.pixelfit.model import (
     build_windows,
     disc_images,
     gain_basis,
+    pixel_gains,
     predict,
     predicted_rims,
 )
@@ -92,12 +95,21 @@ class PixelNoise:
         surround pixels (their variance minus their level).
     full_scale_counts : float
         Gray at or above it is saturated (censored).
+    coverage_sigma : float or None
+        The rim's model error: sigma of a partly covered pixel's coverage beyond what the
+        exact-area model predicts (a pixel's response is not uniform over its area,
+        a renderer samples it at points, the rim is not a perfect circle), as a fraction
+        of the pixel. A rim pixel's gray then has the extra variance ``(coverage_sigma *
+        dgray/dcoverage)^2`` and its distance ``(coverage_sigma * ddistance/dcoverage)^2``.
+        None: measured on the frame's rim pixels after a first fit (their residuals'
+        excess over the shot noise), 0 when they show none.
     """
 
     modulation_frequency_hz: float = DEFAULT_MODULATION_HZ
     range_k_mm: float | None = None
     gray_extra_var: float | None = None
     full_scale_counts: float = FULL_SCALE_COUNTS
+    coverage_sigma: float | None = None
 
     def __post_init__(self) -> None:
         if not self.modulation_frequency_hz > 0:
@@ -108,6 +120,8 @@ class PixelNoise:
             raise ValueError(f"range_k_mm must be positive or None, got {self.range_k_mm}")
         if self.gray_extra_var is not None and not self.gray_extra_var >= 0:
             raise ValueError(f"gray_extra_var must be >= 0 or None, got {self.gray_extra_var}")
+        if self.coverage_sigma is not None and not 0 <= self.coverage_sigma < 1:
+            raise ValueError(f"coverage_sigma must be in [0, 1) or None, got {self.coverage_sigma}")
 
     @property
     def mm_per_radian(self) -> float:
@@ -156,7 +170,7 @@ class PixelFitResult:
     iterations : int; converged : bool
     n_gray_pixels, n_distance_pixels, n_saturated : int
         Pixels in the gray residuals, in the distance residuals, and censored.
-    range_k_mm, gray_extra_var : float
+    range_k_mm, gray_extra_var, coverage_sigma : float
         The noise model used (given or measured).
     """
 
@@ -177,6 +191,7 @@ class PixelFitResult:
     n_saturated: int = 0
     range_k_mm: float = float("nan")
     gray_extra_var: float = float("nan")
+    coverage_sigma: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -199,6 +214,10 @@ class _State:
         )
 
 
+#: a state whose offset is 0 (for the prior row's count)
+_NO_STATE = _State(np.eye(3), np.zeros(3), np.zeros((0, G)), np.zeros(0), 0.0)
+
+
 @dataclass(frozen=True)
 class _Problem:
     """What stays fixed over the fit: the pixels, their roles and the model's constants."""
@@ -211,6 +230,7 @@ class _Problem:
     noise: PixelNoise
     reference_mm: float
     fit_offset: bool
+    offset_sigma_mm: float  # the offset's prior sigma (inf: free)
     basis: np.ndarray  # (K, P, GAIN_TERMS) the discs' gain basis at the pixels
     free: np.ndarray  # (n_params,) bool: the parameters fitted (the rest stay at 0 step)
 
@@ -256,12 +276,67 @@ def _gray_variance(pred: Prediction, extra_var: float) -> np.ndarray:
     return np.maximum(pred.gray, 0.0) + extra_var + QUANTISATION_VAR
 
 
-def _sigmas(pb: _Problem, pred: Prediction, extra_var: float) -> _Sigmas:
-    """Per-pixel sigmas at the current model (module docstring); the range constant
-    measured on the distance residuals when the noise model leaves it open."""
+@dataclass(frozen=True)
+class _RimSensitivity:
+    """How a rim pixel's model moves with its coverage: summed over the discs that cover
+    it partly, ``gray2`` = sum (d gray / d c_k)^2, counts^2, and ``distance2`` = sum
+    (d distance / d c_k)^2, mm^2 (both (P,); 0 off the rims)."""
+
+    gray2: np.ndarray
+    distance2: np.ndarray
+
+
+def _rim_sensitivity(
+    pb: _Problem, images: DiscImages, pred: Prediction, s: _State
+) -> _RimSensitivity:
+    """d gray / d c_k = gain_k - level; d mixed / d c_k = gain_k u_k - level plate, with
+    u_k the disc's unit phasor at the pixel, and d distance = mm_per_radian Im(d mixed /
+    mixed) (``model.predict``)."""
+    cov = images.coverage  # (K, P)
+    partial = (cov > RIM_COVERAGE_EPS) & (cov < 1.0 - RIM_COVERAGE_EPS)
+    g = pixel_gains(s.gains, pb.basis)  # (K, P)
+    level = s.levels[pb.win.owner]  # (P,)
+    d_gray = np.where(partial, g - level, 0.0)
+    unit = images.phasor / np.where(cov > 0, cov, 1.0)
+    mixed = np.where(np.abs(pred.phasor) > 0, pred.phasor, 1.0)
+    d_mixed = g * unit - level * images.plate_phasor
+    d_dist = np.where(partial, pb.noise.mm_per_radian * np.imag(d_mixed / mixed), 0.0)
+    return _RimSensitivity(gray2=np.sum(d_gray**2, axis=0), distance2=np.sum(d_dist**2, axis=0))
+
+
+def _measured_coverage_sigma(
+    pb: _Problem, pred: Prediction, sig: _Sigmas, rim: _RimSensitivity
+) -> float:
+    """The rim's model error (``PixelNoise.coverage_sigma``) measured on the fitted
+    frame: the unsaturated rim pixels' squared gray residuals beyond their shot noise,
+    over their summed squared sensitivity; 0 unless the excess is beyond twice the
+    chi-square's own scatter (it then only adds noise to the sigmas)."""
+    rows = pb.gray_rows[rim.gray2[pb.gray_rows] > 0]
+    if len(rows) < MIN_RIM_PIXELS:
+        return 0.0
+    r2 = (pb.win.gray[rows] - pred.gray[rows]) ** 2
+    var = sig.gray[rows] ** 2
+    if np.sum(r2 / var) <= len(rows) + 2.0 * np.sqrt(2.0 * len(rows)):
+        return 0.0
+    excess = float(np.sum(r2 - var) / np.sum(rim.gray2[rows]))
+    return float(np.sqrt(excess)) if excess > 0 else 0.0
+
+
+def _sigmas(
+    pb: _Problem,
+    pred: Prediction,
+    extra_var: float,
+    rim: _RimSensitivity | None = None,
+    coverage_sigma: float = 0.0,
+) -> _Sigmas:
+    """Per-pixel sigmas at the current model (module docstring), with the rim's model
+    error when ``coverage_sigma`` > 0; the range constant measured on the distance
+    residuals when the noise model leaves it open."""
     var = _gray_variance(pred, extra_var)
     amp = np.maximum(np.abs(pred.phasor), 1e-6)
     shape = np.sqrt(var) / amp  # sigma_d / k
+    if rim is not None and coverage_sigma > 0:
+        var = var + coverage_sigma**2 * rim.gray2
     k = pb.noise.range_k_mm
     if k is None:
         j = pb.dist_rows
@@ -270,11 +345,23 @@ def _sigmas(pb: _Problem, pred: Prediction, extra_var: float) -> _Sigmas:
             z = z / shape[j]
             k = float(MAD_TO_SIGMA * np.median(np.abs(z - np.median(z))))
         k = k if k and np.isfinite(k) and k > 0 else 1.0
-    return _Sigmas(gray=np.sqrt(var), distance_mm=k * shape, range_k_mm=float(k))
+    sigma_d = k * shape
+    if rim is not None and coverage_sigma > 0:
+        sigma_d = np.sqrt(sigma_d**2 + coverage_sigma**2 * rim.distance2)
+    return _Sigmas(gray=np.sqrt(var), distance_mm=sigma_d, range_k_mm=float(k))
 
 
-def _residuals(pb: _Problem, pred: Prediction, sig: _Sigmas) -> np.ndarray:
-    """Whitened residuals: unsaturated gray, censored gray, distance."""
+def _prior_residual(pb: _Problem, s: _State) -> np.ndarray:
+    """The range offset's prior as a residual row ((1,) when it has a finite prior, else
+    (0,))."""
+    if not (pb.fit_offset and np.isfinite(pb.offset_sigma_mm)):
+        return np.zeros(0)
+    return np.array([-s.offset_mm / pb.offset_sigma_mm])
+
+
+def _residuals(pb: _Problem, pred: Prediction, sig: _Sigmas, s: _State) -> np.ndarray:
+    """Whitened residuals: unsaturated gray, censored gray, distance, and the range
+    offset's prior (``_prior_residual``)."""
     w = pb.win
     r_gray = (w.gray[pb.gray_rows] - pred.gray[pb.gray_rows]) / sig.gray[pb.gray_rows]
     fs = pb.noise.full_scale_counts
@@ -283,12 +370,14 @@ def _residuals(pb: _Problem, pred: Prediction, sig: _Sigmas) -> np.ndarray:
         w.distance_mm[pb.dist_rows] - pred.distance_mm[pb.dist_rows], pb.noise.unambiguous_range_mm
     )
     r_dist = dd / sig.distance_mm[pb.dist_rows]
-    return np.concatenate([r_gray, r_sat, r_dist])
+    return np.concatenate([r_gray, r_sat, r_dist, _prior_residual(pb, s)])
 
 
 def _row_owners(pb: _Problem) -> np.ndarray:
+    """The disc each residual row belongs to (-1: the prior's row)."""
     o = pb.win.owner
-    return np.concatenate([o[pb.gray_rows], o[pb.sat_rows], o[pb.dist_rows]])
+    prior = np.full(len(_prior_residual(pb, _NO_STATE)), -1)
+    return np.concatenate([o[pb.gray_rows], o[pb.sat_rows], o[pb.dist_rows], prior])
 
 
 def _jacobian(
@@ -333,7 +422,9 @@ def _jacobian(
     j_gray = -d_gray[pb.gray_rows] / sig.gray[pb.gray_rows, None]
     j_sat = -d_gray[pb.sat_rows] / sig.gray[pb.sat_rows, None] * below[:, None]
     j_dist = -d_dist[pb.dist_rows] / sig.distance_mm[pb.dist_rows, None]
-    return np.vstack([j_gray, j_sat, j_dist])[:, pb.free]
+    j_prior = np.zeros((len(_prior_residual(pb, s)), n_par))
+    j_prior[:, -1] = -1.0 / pb.offset_sigma_mm
+    return np.vstack([j_gray, j_sat, j_dist, j_prior])[:, pb.free]
 
 
 def _surround_extra_var(pb: _Problem, images: DiscImages, s: _State) -> float:
@@ -379,6 +470,7 @@ def fit_pose_to_pixels(
     *,
     noise: PixelNoise | None = None,
     fit_range_offset: bool = False,
+    range_offset_sigma_mm: float = float("inf"),
     exclude_unmatched: bool = True,
     subsamples: int = SUBSAMPLES,
     pad_px: int = WINDOW_PAD_PX,
@@ -404,6 +496,9 @@ def fit_pose_to_pixels(
         frame but the modulation frequency).
     fit_range_offset : bool
         Fit one range offset common to all distance pixels (an uncalibrated camera).
+    range_offset_sigma_mm : float
+        That offset's prior sigma, mm (the camera's range-bias sigma: the pose
+        pipeline's ``range_bias_sigma_mm``); inf: no prior, the offset is free.
     exclude_unmatched : bool
         Leave out the pixels near the predicted image of catalog discs not in
         ``catalog_ids`` (the model does not carry them).
@@ -433,6 +528,8 @@ def fit_pose_to_pixels(
     t_mm = np.asarray(t_mm, float).reshape(-1)
     if R.shape != (3, 3) or t_mm.shape != (3,):
         raise ValueError(f"R must be (3, 3) and t_mm (3,), got {R.shape} and {t_mm.shape}")
+    if not range_offset_sigma_mm > 0:
+        raise ValueError(f"range_offset_sigma_mm must be positive, got {range_offset_sigma_mm}")
     if subsamples < 1:
         raise ValueError(f"subsamples must be >= 1, got {subsamples}")
     discs = Discs.from_catalog(catalog, catalog_ids)
@@ -481,6 +578,7 @@ def fit_pose_to_pixels(
         noise=noise,
         reference_mm=reference_mm,
         fit_offset=fit_range_offset,
+        offset_sigma_mm=float(range_offset_sigma_mm),
         basis=gain_basis(uv[None] - centre_px[:, None], radius_px),
         free=free,
     )
@@ -500,6 +598,86 @@ def fit_pose_to_pixels(
         else float(noise.gray_extra_var)
     )
 
+    solved = _levenberg_marquardt(pb, state, images, extra_var, 0.0, max_iterations)
+    coverage_sigma = noise.coverage_sigma
+    if coverage_sigma is None:
+        # the rim's model error, measured at the first solution; then fitted again with it
+        st, im = solved.state, solved.images
+        pred = pb.predict(im, st)
+        coverage_sigma = _measured_coverage_sigma(
+            pb, pred, _sigmas(pb, pred, extra_var), _rim_sensitivity(pb, im, pred, st)
+        )
+    if coverage_sigma > 0:
+        again = _levenberg_marquardt(
+            pb, solved.state, solved.images, extra_var, coverage_sigma, max_iterations
+        )
+        solved = replace(again, iterations=solved.iterations + again.iterations)
+    state, images = solved.state, solved.images
+    pred = pb.predict(images, state)
+    sig = _sigmas(pb, pred, extra_var, _rim_sensitivity(pb, images, pred, state), coverage_sigma)
+    r = _residuals(pb, pred, sig, state)
+    owners = _row_owners(pb)
+    rms = np.array(
+        [
+            np.sqrt(np.mean(r[owners == k] ** 2)) if np.any(owners == k) else np.nan
+            for k in range(k_count)
+        ]
+    )
+    covariance = None
+    if solved.info is not None:
+        try:
+            covariance = np.linalg.inv(solved.info)[:6, :6]
+            covariance = 0.5 * (covariance + covariance.T)
+        except np.linalg.LinAlgError:
+            covariance = None
+    result = PixelFitResult(
+        ok=False,
+        reason="",
+        R=state.R,
+        t_mm=state.t_mm,
+        covariance=covariance,
+        catalog_ids=discs.ids,
+        marker_rms_sigma=rms,
+        gains=state.gains,
+        levels=state.levels,
+        range_offset_mm=state.offset_mm,
+        iterations=solved.iterations,
+        converged=solved.converged,
+        n_gray_pixels=len(pb.gray_rows),
+        n_distance_pixels=len(pb.dist_rows),
+        n_saturated=len(pb.sat_rows),
+        range_k_mm=sig.range_k_mm,
+        gray_extra_var=extra_var,
+        coverage_sigma=float(coverage_sigma),
+    )
+    return replace(result, **_verdict(result, extra_var, max_marker_rms_sigma))
+
+
+@dataclass(frozen=True)
+class _Solved:
+    state: _State
+    images: DiscImages
+    info: np.ndarray | None  # Fisher information at the last iteration's Jacobian
+    iterations: int
+    converged: bool
+
+
+def _levenberg_marquardt(
+    pb: _Problem,
+    state: _State,
+    images: DiscImages,
+    extra_var: float,
+    coverage_sigma: float,
+    max_iterations: int,
+) -> _Solved:
+    """Levenberg-Marquardt from ``state`` (``images`` its discs' images) with the noise
+    model's sigmas re-evaluated at each iteration; the rim's model error, when
+    ``coverage_sigma`` > 0, with the rim's sensitivity of the starting state (so that the
+    weights of the rim pixels do not follow the fit from one iteration to the next)."""
+    k_count = len(pb.discs.ids)
+    rim = None
+    if coverage_sigma > 0:
+        rim = _rim_sensitivity(pb, images, pb.predict(images, state), state)
     damping = INITIAL_DAMPING
     converged = False
     iterations = 0
@@ -507,8 +685,8 @@ def fit_pose_to_pixels(
     for iteration in range(1, max_iterations + 1):
         iterations = iteration
         pred = pb.predict(images, state)
-        sig = _sigmas(pb, pred, extra_var)
-        r = _residuals(pb, pred, sig)
+        sig = _sigmas(pb, pred, extra_var, rim, coverage_sigma)
+        r = _residuals(pb, pred, sig, state)
         J = _jacobian(pb, state, images, pred, sig)
         info = J.T @ J
         grad = J.T @ r
@@ -525,7 +703,8 @@ def fit_pose_to_pixels(
             delta[pb.free] = step
             trial = state.stepped(delta, k_count)
             trial_images = pb.images(trial.R, trial.t_mm)
-            trial_cost = float(np.sum(_residuals(pb, pb.predict(trial_images, trial), sig) ** 2))
+            trial_pred = pb.predict(trial_images, trial)
+            trial_cost = float(np.sum(_residuals(pb, trial_pred, sig, trial) ** 2))
             if trial_cost <= cost:
                 state, images, accepted = trial, trial_images, True
                 damping = max(damping * DAMPING_DOWN, 1e-9)
@@ -536,44 +715,7 @@ def fit_pose_to_pixels(
             # no step lowers the cost any more, or the last one was negligible
             converged = True
             break
-
-    pred = pb.predict(images, state)
-    sig = _sigmas(pb, pred, extra_var)
-    r = _residuals(pb, pred, sig)
-    owners = _row_owners(pb)
-    rms = np.array(
-        [
-            np.sqrt(np.mean(r[owners == k] ** 2)) if np.any(owners == k) else np.nan
-            for k in range(k_count)
-        ]
-    )
-    covariance = None
-    if info is not None:
-        try:
-            covariance = np.linalg.inv(info)[:6, :6]
-            covariance = 0.5 * (covariance + covariance.T)
-        except np.linalg.LinAlgError:
-            covariance = None
-    result = PixelFitResult(
-        ok=False,
-        reason="",
-        R=state.R,
-        t_mm=state.t_mm,
-        covariance=covariance,
-        catalog_ids=discs.ids,
-        marker_rms_sigma=rms,
-        gains=state.gains,
-        levels=state.levels,
-        range_offset_mm=state.offset_mm,
-        iterations=iterations,
-        converged=converged,
-        n_gray_pixels=len(pb.gray_rows),
-        n_distance_pixels=len(pb.dist_rows),
-        n_saturated=len(pb.sat_rows),
-        range_k_mm=sig.range_k_mm,
-        gray_extra_var=extra_var,
-    )
-    return replace(result, **_verdict(result, extra_var, max_marker_rms_sigma))
+    return _Solved(state, images, info, iterations, converged)
 
 
 def _verdict(res: PixelFitResult, extra_var: float, max_rms: float) -> dict:
