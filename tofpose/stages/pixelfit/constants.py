@@ -47,3 +47,5 @@ QUANTISATION_VAR = 1.0 / 12.0
 RIM_COVERAGE_EPS = 1e-3
 #: fewest unsaturated rim pixels on which the rim's model error is measured
 MIN_RIM_PIXELS = 12
+#: fewest distance pixels a disc needs for its mean range residual to count
+MIN_DISC_DISTANCE_PIXELS = 3

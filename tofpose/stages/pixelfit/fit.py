@@ -41,6 +41,7 @@ from tofpose.stages.pixelfit.constants import (
     MAX_ITERATIONS,
     MAX_MARKER_RMS_SIGMA,
     MIN_CONTRAST_SIGMA,
+    MIN_DISC_DISTANCE_PIXELS,
     MIN_MARKERS,
     MIN_RIM_PIXELS,
     QUANTISATION_VAR,
@@ -103,6 +104,12 @@ class PixelNoise:
         dgray/dcoverage)^2`` and its distance ``(coverage_sigma * ddistance/dcoverage)^2``.
         None: measured on the frame's rim pixels after a first fit (their residuals'
         excess over the shot noise), 0 when they show none.
+    disc_range_sigma_mm : float or None
+        Sigma of a range error of each disc's own (the same on all its pixels,
+        independent between discs: an uncalibrated camera's amplitude-related and
+        per-pixel errors), mm; fitted as one nuisance parameter per disc with this prior.
+        None: measured after a first fit on the spread of the discs' mean distance
+        residuals, 0 when they show none.
     """
 
     modulation_frequency_hz: float = DEFAULT_MODULATION_HZ
@@ -110,6 +117,7 @@ class PixelNoise:
     gray_extra_var: float | None = None
     full_scale_counts: float = FULL_SCALE_COUNTS
     coverage_sigma: float | None = None
+    disc_range_sigma_mm: float | None = None
 
     def __post_init__(self) -> None:
         if not self.modulation_frequency_hz > 0:
@@ -122,6 +130,10 @@ class PixelNoise:
             raise ValueError(f"gray_extra_var must be >= 0 or None, got {self.gray_extra_var}")
         if self.coverage_sigma is not None and not 0 <= self.coverage_sigma < 1:
             raise ValueError(f"coverage_sigma must be in [0, 1) or None, got {self.coverage_sigma}")
+        if self.disc_range_sigma_mm is not None and not self.disc_range_sigma_mm >= 0:
+            raise ValueError(
+                f"disc_range_sigma_mm must be >= 0 or None, got {self.disc_range_sigma_mm}"
+            )
 
     @property
     def mm_per_radian(self) -> float:
@@ -170,7 +182,7 @@ class PixelFitResult:
     iterations : int; converged : bool
     n_gray_pixels, n_distance_pixels, n_saturated : int
         Pixels in the gray residuals, in the distance residuals, and censored.
-    range_k_mm, gray_extra_var, coverage_sigma : float
+    range_k_mm, gray_extra_var, coverage_sigma, disc_range_sigma_mm : float
         The noise model used (given or measured).
     """
 
@@ -192,6 +204,7 @@ class PixelFitResult:
     range_k_mm: float = float("nan")
     gray_extra_var: float = float("nan")
     coverage_sigma: float = 0.0
+    disc_range_sigma_mm: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -201,21 +214,48 @@ class _State:
     gains: np.ndarray
     levels: np.ndarray
     offset_mm: float
+    disc_offsets_mm: np.ndarray  # (K,) each disc's own range error (0: not fitted)
 
-    def stepped(self, delta: np.ndarray, k: int) -> _State:
+    def stepped(self, delta: np.ndarray, layout: _Layout) -> _State:
         """The state moved by ``delta`` (all parameters, ``_Problem.n_params``)."""
+        k = layout.k
         return _State(
             R=Rotation.from_rotvec(delta[:3]).as_matrix() @ self.R,
             t_mm=self.t_mm + delta[3:6],
             gains=self.gains + delta[6 : 6 + G * k].reshape(k, G),
             levels=self.levels + delta[6 + G * k : 6 + (G + 1) * k],
             offset_mm=self.offset_mm
-            + (float(delta[6 + (G + 1) * k]) if len(delta) > 6 + (G + 1) * k else 0.0),
+            + (float(delta[layout.offset_col]) if layout.offset_col >= 0 else 0.0),
+            disc_offsets_mm=self.disc_offsets_mm
+            + (delta[layout.disc_cols] if layout.disc_cols.size else 0.0),
         )
 
 
-#: a state whose offset is 0 (for the prior row's count)
-_NO_STATE = _State(np.eye(3), np.zeros(3), np.zeros((0, G)), np.zeros(0), 0.0)
+@dataclass(frozen=True)
+class _Layout:
+    """Where the parameters sit: the pose (6), per disc its gain terms (K x GAIN_TERMS)
+    and its surround level (K), then the common range offset (``offset_col``, -1 when
+    not fitted), then each disc's own range error (``disc_cols``, empty when not
+    fitted)."""
+
+    k: int
+    fit_offset: bool
+    fit_disc_offsets: bool
+
+    @property
+    def offset_col(self) -> int:
+        return 6 + (G + 1) * self.k if self.fit_offset else -1
+
+    @property
+    def disc_cols(self) -> np.ndarray:
+        if not self.fit_disc_offsets:
+            return np.zeros(0, int)
+        return 6 + (G + 1) * self.k + int(self.fit_offset) + np.arange(self.k)
+
+    @property
+    def n_params(self) -> int:
+        discs = self.k if self.fit_disc_offsets else 0
+        return 6 + (G + 1) * self.k + int(self.fit_offset) + discs
 
 
 @dataclass(frozen=True)
@@ -233,10 +273,15 @@ class _Problem:
     offset_sigma_mm: float  # the offset's prior sigma (inf: free)
     basis: np.ndarray  # (K, P, GAIN_TERMS) the discs' gain basis at the pixels
     free: np.ndarray  # (n_params,) bool: the parameters fitted (the rest stay at 0 step)
+    disc_range_sigma_mm: float = 0.0  # each disc's own range error's prior (0: none)
+
+    @property
+    def layout(self) -> _Layout:
+        return _Layout(len(self.discs.ids), self.fit_offset, self.disc_range_sigma_mm > 0)
 
     @property
     def n_params(self) -> int:
-        return 6 + (G + 1) * len(self.discs.ids) + (1 if self.fit_offset else 0)
+        return self.layout.n_params
 
     def images(self, R: np.ndarray, t_mm: np.ndarray) -> DiscImages:
         return disc_images(
@@ -257,7 +302,7 @@ class _Problem:
             mm_per_radian=self.noise.mm_per_radian,
             basis=self.basis,
             reference_mm=self.reference_mm,
-            range_offset_mm=s.offset_mm,
+            range_offset_mm=s.offset_mm + s.disc_offsets_mm[self.win.owner],
         )
 
 
@@ -322,6 +367,32 @@ def _measured_coverage_sigma(
     return float(np.sqrt(excess)) if excess > 0 else 0.0
 
 
+def _measured_disc_range_sigma(pb: _Problem, pred: Prediction, sig: _Sigmas) -> float:
+    """Each disc's own range error (``PixelNoise.disc_range_sigma_mm``) measured on the
+    fitted frame: the spread of the discs' weighted mean distance residuals beyond their
+    standard errors; 0 unless their chi-square exceeds its own scatter twice over (an
+    uncalibrated camera's amplitude-related and per-pixel range errors differ from
+    disc to disc; a calibrated one leaves none)."""
+    j = pb.dist_rows
+    dd = _wrap(pb.win.distance_mm[j] - pred.distance_mm[j], pb.noise.unambiguous_range_mm)
+    w = 1.0 / sig.distance_mm[j] ** 2
+    owner = pb.win.owner[j]
+    means, var = [], []
+    for k in range(len(pb.discs.ids)):
+        mine = owner == k
+        if mine.sum() >= MIN_DISC_DISTANCE_PIXELS:
+            means.append(np.sum(w[mine] * dd[mine]) / np.sum(w[mine]))
+            var.append(1.0 / np.sum(w[mine]))
+    n = len(means)
+    if n < MIN_MARKERS:
+        return 0.0
+    m, v = np.asarray(means), np.asarray(var)
+    if np.sum(m**2 / v) <= n + 2.0 * np.sqrt(2.0 * n):
+        return 0.0
+    excess = float(np.mean(m**2 - v))
+    return float(np.sqrt(excess)) if excess > 0 else 0.0
+
+
 def _sigmas(
     pb: _Problem,
     pred: Prediction,
@@ -351,12 +422,21 @@ def _sigmas(
     return _Sigmas(gray=np.sqrt(var), distance_mm=sigma_d, range_k_mm=float(k))
 
 
+def _n_prior_rows(pb: _Problem) -> int:
+    """Rows of ``_prior_residual``."""
+    common = pb.fit_offset and np.isfinite(pb.offset_sigma_mm)
+    return int(common) + (len(pb.discs.ids) if pb.disc_range_sigma_mm > 0 else 0)
+
+
 def _prior_residual(pb: _Problem, s: _State) -> np.ndarray:
     """The range offset's prior as a residual row ((1,) when it has a finite prior, else
     (0,))."""
-    if not (pb.fit_offset and np.isfinite(pb.offset_sigma_mm)):
-        return np.zeros(0)
-    return np.array([-s.offset_mm / pb.offset_sigma_mm])
+    rows = []
+    if pb.fit_offset and np.isfinite(pb.offset_sigma_mm):
+        rows.append(np.array([-s.offset_mm / pb.offset_sigma_mm]))
+    if pb.disc_range_sigma_mm > 0:
+        rows.append(-s.disc_offsets_mm / pb.disc_range_sigma_mm)
+    return np.concatenate(rows) if rows else np.zeros(0)
 
 
 def _residuals(pb: _Problem, pred: Prediction, sig: _Sigmas, s: _State) -> np.ndarray:
@@ -376,7 +456,7 @@ def _residuals(pb: _Problem, pred: Prediction, sig: _Sigmas, s: _State) -> np.nd
 def _row_owners(pb: _Problem) -> np.ndarray:
     """The disc each residual row belongs to (-1: the prior's row)."""
     o = pb.win.owner
-    prior = np.full(len(_prior_residual(pb, _NO_STATE)), -1)
+    prior = np.full(_n_prior_rows(pb), -1)
     return np.concatenate([o[pb.gray_rows], o[pb.sat_rows], o[pb.dist_rows], prior])
 
 
@@ -415,15 +495,23 @@ def _jacobian(
         mine = owner == k
         d_gray[mine, 6 + G * k_count + k] = pred.surround[mine]
         d_dist[mine, 6 + G * k_count + k] = mpr * np.imag(surround_phasor[mine])
+    layout = pb.layout
     if pb.fit_offset:
-        d_dist[:, -1] = 1.0
+        d_dist[:, layout.offset_col] = 1.0
+    for k, col in enumerate(layout.disc_cols):
+        d_dist[owner == k, col] = 1.0
     fs = pb.noise.full_scale_counts
     below = pred.gray[pb.sat_rows] < fs  # censored rows with a residual
     j_gray = -d_gray[pb.gray_rows] / sig.gray[pb.gray_rows, None]
     j_sat = -d_gray[pb.sat_rows] / sig.gray[pb.sat_rows, None] * below[:, None]
     j_dist = -d_dist[pb.dist_rows] / sig.distance_mm[pb.dist_rows, None]
-    j_prior = np.zeros((len(_prior_residual(pb, s)), n_par))
-    j_prior[:, -1] = -1.0 / pb.offset_sigma_mm
+    j_prior = np.zeros((_n_prior_rows(pb), n_par))
+    row = 0
+    if pb.fit_offset and np.isfinite(pb.offset_sigma_mm):
+        j_prior[0, layout.offset_col] = -1.0 / pb.offset_sigma_mm
+        row = 1
+    for i, col in enumerate(layout.disc_cols):
+        j_prior[row + i, col] = -1.0 / pb.disc_range_sigma_mm
     return np.vstack([j_gray, j_sat, j_dist, j_prior])[:, pb.free]
 
 
@@ -591,7 +679,9 @@ def fit_pose_to_pixels(
     usable_distance = np.isfinite(win.distance_mm) & ~saturated & (covered >= DISTANCE_MIN_COVERAGE)
     pb = replace(pb0, dist_rows=np.flatnonzero(usable_distance))
     gains, levels = _initial_linear(pb, images)
-    state = _State(R=R, t_mm=t_mm, gains=gains, levels=levels, offset_mm=0.0)
+    state = _State(
+        R=R, t_mm=t_mm, gains=gains, levels=levels, offset_mm=0.0, disc_offsets_mm=np.zeros(k_count)
+    )
     extra_var = (
         _surround_extra_var(pb, images, state)
         if noise.gray_extra_var is None
@@ -599,18 +689,25 @@ def fit_pose_to_pixels(
     )
 
     solved = _levenberg_marquardt(pb, state, images, extra_var, 0.0, max_iterations)
+    # the model errors the frame shows at the first solution; then fitted again with them
+    st, im = solved.state, solved.images
+    pred = pb.predict(im, st)
+    rim = _rim_sensitivity(pb, im, pred, st)
     coverage_sigma = noise.coverage_sigma
     if coverage_sigma is None:
-        # the rim's model error, measured at the first solution; then fitted again with it
-        st, im = solved.state, solved.images
-        pred = pb.predict(im, st)
-        coverage_sigma = _measured_coverage_sigma(
-            pb, pred, _sigmas(pb, pred, extra_var), _rim_sensitivity(pb, im, pred, st)
-        )
-    if coverage_sigma > 0:
-        again = _levenberg_marquardt(
-            pb, solved.state, solved.images, extra_var, coverage_sigma, max_iterations
-        )
+        coverage_sigma = _measured_coverage_sigma(pb, pred, _sigmas(pb, pred, extra_var), rim)
+    disc_range_sigma = noise.disc_range_sigma_mm
+    if disc_range_sigma is None:
+        sig = _sigmas(pb, pred, extra_var, rim, coverage_sigma)
+        disc_range_sigma = _measured_disc_range_sigma(pb, pred, sig)
+    if coverage_sigma > 0 or disc_range_sigma > 0:
+        if disc_range_sigma > 0:
+            pb = replace(
+                pb,
+                disc_range_sigma_mm=disc_range_sigma,
+                free=np.concatenate([pb.free, np.ones(k_count, bool)]),
+            )
+        again = _levenberg_marquardt(pb, st, im, extra_var, coverage_sigma, max_iterations)
         solved = replace(again, iterations=solved.iterations + again.iterations)
     state, images = solved.state, solved.images
     pred = pb.predict(images, state)
@@ -649,6 +746,7 @@ def fit_pose_to_pixels(
         range_k_mm=sig.range_k_mm,
         gray_extra_var=extra_var,
         coverage_sigma=float(coverage_sigma),
+        disc_range_sigma_mm=float(disc_range_sigma),
     )
     return replace(result, **_verdict(result, extra_var, max_marker_rms_sigma))
 
@@ -674,7 +772,6 @@ def _levenberg_marquardt(
     model's sigmas re-evaluated at each iteration; the rim's model error, when
     ``coverage_sigma`` > 0, with the rim's sensitivity of the starting state (so that the
     weights of the rim pixels do not follow the fit from one iteration to the next)."""
-    k_count = len(pb.discs.ids)
     rim = None
     if coverage_sigma > 0:
         rim = _rim_sensitivity(pb, images, pb.predict(images, state), state)
@@ -701,7 +798,7 @@ def _levenberg_marquardt(
                 continue
             delta = np.zeros(pb.n_params)
             delta[pb.free] = step
-            trial = state.stepped(delta, k_count)
+            trial = state.stepped(delta, pb.layout)
             trial_images = pb.images(trial.R, trial.t_mm)
             trial_pred = pb.predict(trial_images, trial)
             trial_cost = float(np.sum(_residuals(pb, trial_pred, sig, trial) ** 2))

@@ -170,6 +170,43 @@ def test_a_coarsely_sampled_rim_is_measured_as_model_error_and_widens_the_sigmas
     assert all(0.4 < _nees_per_dof(errs, covs, b) < 1.8 for b in blocks)
 
 
+def test_range_errors_of_each_disc_are_measured_and_widen_the_sigmas():
+    """An uncalibrated camera's range error differs from disc to disc (amplitude-related
+    and per-pixel offsets): here each disc's distance pixels carry their own offset, drawn
+    with sigma 6 mm. The fit measures that spread on the discs' mean residuals and
+    carries one range nuisance per disc; told there is none, its sigmas are far too
+    narrow."""
+    sensor = SensorModel(supersampling=32)
+    rng = np.random.default_rng([49, 6])
+    errs, covs, errs0, covs0, measured = [], [], [], [], []
+    for _ in range(10):
+        T = _pose(rng, 3000.0)
+        f = render_frame(CAM, TargetScene(), T, sensor, rng)
+        r = PosePipeline(CAM, CAT).process(f.gray, f.distance_mm)
+        assert r.ok, r.reason
+        distance = f.distance_mm.copy()
+        for i in CAT.ids:
+            distance[_disc_pixels(f, i)] += rng.normal(0.0, 6.0)
+        ids = [m.catalog_id for m in r.matched]
+        base = replace(PixelNoise.from_sensor(sensor), coverage_sigma=0.0)
+        for noise, e_out, c_out in (
+            (base, errs, covs),
+            (replace(base, disc_range_sigma_mm=0.0), errs0, covs0),
+        ):
+            res = fit_pose_to_pixels(
+                f.gray, distance, CAM, CAT, r.R, r.t_mm, ids, noise=noise, max_marker_rms_sigma=10
+            )
+            assert res.ok, res.reason
+            e_out.append(_error(res.R, res.t_mm, T))
+            c_out.append(res.covariance)
+            if noise.disc_range_sigma_mm is None:
+                measured.append(res.disc_range_sigma_mm)
+    assert 2.0 < np.median(measured) < 12.0
+    blocks = (slice(0, 3), slice(3, 6))
+    assert all(_nees_per_dof(errs0, covs0, b) > 4.0 for b in blocks)
+    assert all(0.3 < _nees_per_dof(errs, covs, b) < 2.0 for b in blocks)
+
+
 def _frame_and_start(seed=5):
     sensor = SensorModel(supersampling=16)
     T = RigidTransform(rotation_from_euler_deg(2, -3, 10) @ R_FACING, np.array([0, 0, 3000.0]))
