@@ -518,7 +518,7 @@ def test_raw_recording_holds_exactly_the_stored_frames_and_reprocesses(fast_clie
             np.testing.assert_array_equal(
                 np.frombuffer(g.data, "<u2").reshape(240, 320), rec.frame(k)[0]
             )
-            lab = messages[topics.LAB_TRUTH][k][1]
+            lab = messages[topics.REFERENCE][k][1]
             assert lab["t_camera_target_mm"] == rec.lab_truth_t_mm[k].tolist()
     est = [p for _, p in messages[topics.ESTIMATE]]
     assert sum(e["ok"] for e in est) >= 30

@@ -122,7 +122,7 @@ def test_a_recording_holds_every_frame_the_hub_delivered_with_the_live_results(
     (tmp_path / "rec.mcap").write_bytes(r.content)
     messages, _, _ = read_back(tmp_path / "rec.mcap")
     assert len(messages[topics.GRAY]) == n
-    assert len(messages[topics.LAB_TRUTH]) == n
+    assert len(messages[topics.REFERENCE]) == n
     # the messages carry the wall clock of each frame's capture, not the device's clock
     assert [t for t, _ in messages[topics.GRAY]] == wall.tolist()
 
@@ -143,7 +143,7 @@ def test_a_recording_holds_every_frame_the_hub_delivered_with_the_live_results(
     dist_m = distance.data.view("<f4").reshape(gray.shape)
     np.testing.assert_allclose(dist_m, dist_mm / 1000.0, rtol=2**-24, atol=0)
     labs = [t for _, m in ros2[ros2_topics.TF] for t in m.transforms]
-    assert [t.child_frame_id for t in labs].count("tofpose_target_lab") == n
+    assert [t.child_frame_id for t in labs].count("tofpose_target_reference") == n
 
 
 def test_an_unknown_mcap_profile_is_refused_naming_the_parameter_and_the_choices(app_client):
