@@ -115,7 +115,7 @@ def test_a_recording_holds_every_frame_the_hub_delivered_with_the_live_results(
         wall = f["frames/wall_time_ns"][...]
         assert (np.abs(wall / 1e9 - time.time()) < 60).all() and (np.diff(wall) > 0).all()
     with open_recording(path) as rec_file:  # the project's reader takes it as any recording
-        assert rec_file.n_frames == n and rec_file.lab_truth_R is not None
+        assert rec_file.n_frames == n and rec_file.reference_R is not None
 
     r = c.get(f"/api/recordings/{rec['id']}/recording.mcap")
     assert r.status_code == 200 and r.headers["content-type"] == "application/x-mcap"
