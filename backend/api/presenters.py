@@ -32,7 +32,7 @@ from backend.api.schemas.pose import (
     PosePublic,
     RejectedBlobPublic,
     RejectReason,
-    ReferencePublic,
+    FrameReferencePublic,
     TruthPublic,
 )
 from backend.api.schemas.scene import ScenePublic
@@ -272,7 +272,7 @@ def pose_public(sample: LiveSample) -> PosePublic:
 
 def _reference(
     T: RigidTransform, R: np.ndarray | None, t_mm: np.ndarray | None, label: str
-) -> ReferencePublic:
+) -> FrameReferencePublic:
     """The lab's reference pose ``T`` and the error of the measured ``R``, ``t_mm`` (None
     without a pose) against it; ``label`` names the reference."""
     p, y, r = (float(v) for v in facing_euler_deg(T.R))
@@ -281,7 +281,7 @@ def _reference(
         err_pos = float(np.linalg.norm(np.asarray(t_mm) - T.t_mm))
         err_ang = float(rotation_angle_deg(T.R, R))
     x, yy, z = (float(v) for v in T.t_mm)
-    return ReferencePublic(
+    return FrameReferencePublic(
         x_mm=x,
         y_mm=yy,
         z_mm=z,

@@ -44,7 +44,7 @@ class RejectedBlobPublic(BaseModel):
     reason_text: str = Field(description="the gate that refused it, in words")
 
 
-class ReferencePublic(BaseModel):
+class FrameReferencePublic(BaseModel):
     """The lab's reference for this frame (encoders + nominal geometry, or + a selected
     calibration's mount and placement) and the error of the measurement against it: the
     lab's estimate of the pose, never the truth (docs/interop.md, "Names: truth and
@@ -70,7 +70,7 @@ class ReferencePublic(BaseModel):
 
 
 class TruthPublic(BaseModel):
-    """Deprecated: the older shape of ``ReferencePublic`` (its ``label`` was ``reference``),
+    """Deprecated: the older shape of ``FrameReferencePublic`` (its ``label`` was ``reference``),
     kept in ``PosePublic.truth`` for one release."""
 
     x_mm: float
@@ -134,7 +134,7 @@ class PosePublic(BaseModel):
     frames_used: int
     motion: bool
     timings_ms: dict[str, float]
-    reference: ReferencePublic | None = Field(
+    reference: FrameReferencePublic | None = Field(
         default=None,
         description="the lab's reference for this frame and the error against it; null when "
         "the source has none",
