@@ -28,11 +28,11 @@ from backend.api.schemas.foxglove import FoxglovePublic
 from backend.api.schemas.motion import AxisPublic, MotionPublic, ProfileKind, ProfilePublic
 from backend.api.schemas.pose import (
     BlobPublic,
+    FrameReferencePublic,
     MatchedPublic,
     PosePublic,
     RejectedBlobPublic,
     RejectReason,
-    FrameReferencePublic,
     TruthPublic,
 )
 from backend.api.schemas.scene import ScenePublic

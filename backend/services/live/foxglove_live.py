@@ -5,8 +5,8 @@ docs/interop.md) for every live frame: the gray and distance images, the camera 
 the overlay, the estimate (transform, pose, reflectors, JSON with its covariance), the
 lab reference (``/tofpose/reference``: the reference the live error is measured against)
 and, where the source knows it (the simulator, a replayed recording's ``/truth``), the
-truth: the pose the simulator rendered (``CameraFrame.T_camera_target_exact``). Log times are the frames' arrival
-times (unix ns).
+truth: the pose the simulator rendered (``CameraFrame.T_camera_target_exact``). Log
+times are the frames' arrival times (unix ns).
 
 The camera loop never waits for it: one thread takes the newest sample from a one-deep
 hub subscription (older ones are dropped and counted, never queued), converts each

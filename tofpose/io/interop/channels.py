@@ -44,7 +44,8 @@ class ToFChannels:
     camera : the model logged as ``CameraCalibration`` with every frame (so a client that
     joins late, or a player that seeks, has it at once).
     estimate / truth / reference : create the channels of the pipeline's results, of the
-    pose the simulator rendered (truth) and of the lab's reference; ``log_frame`` refuses what has no channel.
+    pose the simulator rendered (truth) and of the lab's reference; ``log_frame``
+    refuses what has no channel.
     previews : also the images viewers display as they are (``previews``): the gray
     image in 8 bits and the distance colour-mapped.
     """

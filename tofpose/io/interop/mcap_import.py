@@ -239,7 +239,8 @@ def import_mcap(
     A frame is a gray and a distance image with the same log time; ``/tofpose/truth``
     and ``/tofpose/reference`` become ``/truth`` and ``/reference`` when every frame has
     one (a file written before the rename has ``/tofpose/lab_truth``: read as
-    ``/tofpose/reference``, ``topics.LEGACY_TOPICS``). Returns {"frames": N}. ``McapImportError`` names what is missing or malformed.
+    ``/tofpose/reference``, ``topics.LEGACY_TOPICS``). Returns {"frames": N}.
+    ``McapImportError`` names what is missing or malformed.
     """
     path, out = Path(path), Path(out)
     if out.exists() and not overwrite:
