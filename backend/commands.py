@@ -57,7 +57,13 @@ def _report_parser(sub: Any) -> None:
     p.add_argument("campaign_id", type=int)
     p.add_argument("--db", required=True, help="SQLAlchemy URL, e.g. sqlite:///data/tofpose.db")
     p.add_argument("--format", choices=("html", "pdf", "csv", "json"), default="html")
-    p.add_argument("--reference", choices=("lab", "exact"), default="lab")
+    p.add_argument(
+        "--reference",
+        choices=("lab", "truth", "exact"),
+        default="lab",
+        help="lab: the lab's reference (encoders + nominal geometry); truth: the pose the "
+        "simulator rendered (exact: its older name)",
+    )
     p.add_argument(
         "--calibration",
         type=int,

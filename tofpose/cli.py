@@ -93,9 +93,11 @@ def _add_measurement_commands(sub) -> None:
     p.add_argument("--out", required=True, help="camera JSON with its range_correction")
     p.add_argument(
         "--reference",
-        choices=("truth", "lab_truth"),
+        choices=("truth", "reference", "lab_truth"),
         default="truth",
-        help="reference pose per frame (default: /truth)",
+        help="pose per frame to fit against: truth (/truth, the pose a simulator rendered; "
+        "default) or reference (/reference, the lab's encoders + geometry; lab_truth is "
+        "its older name)",
     )
     p.add_argument(
         "--modulation-mhz",
@@ -117,10 +119,11 @@ def _add_measurement_commands(sub) -> None:
     )
     p.add_argument(
         "--reference",
-        choices=("truth", "lab_truth"),
+        choices=("truth", "reference", "lab_truth"),
         default="truth",
-        help="reference pose per frame (default: /truth); its own error must be "
-        "well below the pose's",
+        help="pose per frame to fit against: truth (/truth, the pose a simulator rendered; "
+        "default) or reference (/reference, the lab's; lab_truth is its older name); its "
+        "own error must be well below the pose's",
     )
     p.add_argument(
         "--knots-mm",

@@ -28,6 +28,7 @@ from backend.api.schemas.foxglove import FoxglovePublic
 from backend.api.schemas.motion import AxisPublic, MotionPublic, ProfileKind, ProfilePublic
 from backend.api.schemas.pose import (
     BlobPublic,
+    FrameReferencePublic,
     MatchedPublic,
     PosePublic,
     RejectedBlobPublic,
@@ -204,10 +205,15 @@ def pose_from_sample(s: LiveSample) -> PosePublic:
         pose["angular_rate_sigma_deg_s"] = finite_list_or_none(st.angular_rate_sigma_deg_s)
         pose["velocity_mm_s"] = finite_list_or_none(st.velocity_mm_s)
         pose["velocity_sigma_mm_s"] = finite_list_or_none(st.velocity_sigma_mm_s)
-    truth = None
+    reference = truth = None
     T = s.reference.pose(s.frame)
     if T is not None:
-        truth = _truth(T, r.R if r.ok else None, r.t_mm if r.ok else None, s.reference.label)
+        reference = _reference(
+            T, r.R if r.ok else None, r.t_mm if r.ok else None, s.reference.label
+        )
+        truth = TruthPublic(  # the deprecated older name, the same values
+            **reference.model_dump(exclude={"label"}), reference=reference.label
+        )
     return PosePublic(
         frame_index=s.frame.index,
         frame_time_s=s.frame.time_s,
@@ -253,6 +259,7 @@ def pose_from_sample(s: LiveSample) -> PosePublic:
         frames_used=r.frames_used,
         motion=r.motion,
         timings_ms={k: float(v) for k, v in r.timings_ms.items()},
+        reference=reference,
         truth=truth,
         **pose,
     )
@@ -263,16 +270,18 @@ def pose_public(sample: LiveSample) -> PosePublic:
     return sample.cached("pose_public", lambda: pose_from_sample(sample))
 
 
-def _truth(
-    T: RigidTransform, R: np.ndarray | None, t_mm: np.ndarray | None, reference: str
-) -> TruthPublic:
+def _reference(
+    T: RigidTransform, R: np.ndarray | None, t_mm: np.ndarray | None, label: str
+) -> FrameReferencePublic:
+    """The lab's reference pose ``T`` and the error of the measured ``R``, ``t_mm`` (None
+    without a pose) against it; ``label`` names the reference."""
     p, y, r = (float(v) for v in facing_euler_deg(T.R))
     err_pos = err_ang = None
     if R is not None and t_mm is not None:
         err_pos = float(np.linalg.norm(np.asarray(t_mm) - T.t_mm))
         err_ang = float(rotation_angle_deg(T.R, R))
     x, yy, z = (float(v) for v in T.t_mm)
-    return TruthPublic(
+    return FrameReferencePublic(
         x_mm=x,
         y_mm=yy,
         z_mm=z,
@@ -281,7 +290,7 @@ def _truth(
         roll_deg=r,
         position_error_mm=err_pos,
         attitude_error_deg=err_ang,
-        reference=reference,
+        label=label,
     )
 
 
@@ -380,6 +389,7 @@ def measurement_public(m: MeasurementRow, setpoint_index: int) -> MeasurementPub
         yaw_deg=m.yaw_deg,
         roll_deg=m.roll_deg,
         truth=_pose_dict(m, "truth_"),
+        reference=_pose_dict(m, "lab_truth_"),  # the database keeps the older column names
         lab_truth=_pose_dict(m, "lab_truth_"),
         encoders=m.encoders,
         integration_time_us=m.integration_time_us,

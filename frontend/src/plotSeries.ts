@@ -51,7 +51,7 @@ const num = (v: number | null | undefined): v is number => typeof v === "number"
  * attitude error, and the angular rate of the relative-state filter. */
 export function sampleOf(p: Pose): Sample {
   const values: Partial<Record<SeriesKey, number>> = {};
-  const ref = p.truth ?? null;
+  const ref = p.reference ?? null;
   for (const a of POSITION) {
     const v = p.ok ? p[`${a}_mm`] : null;
     if (num(v)) values[a] = v;
@@ -70,7 +70,7 @@ export function sampleOf(p: Pose): Sample {
   (["rate_x", "rate_y", "rate_z"] as const).forEach((k, i) => {
     if (num(rate?.[i])) values[k] = rate[i];
   });
-  return { t: p.captured_unix_s, frame: p.frame_index, frameTime: p.frame_time_s, reference: ref?.reference ?? null, values };
+  return { t: p.captured_unix_s, frame: p.frame_index, frameTime: p.frame_time_s, reference: ref?.label ?? null, values };
 }
 
 export interface ChartDef {

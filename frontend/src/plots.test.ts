@@ -11,7 +11,7 @@ function pose(over: Partial<Pose> = {}): Pose {
   return {
     ok: true, frame_index: 7, frame_time_s: 0.35, captured_unix_s: 1_765_000_000.25,
     x_mm: 7.25, y_mm: 8, z_mm: 1999.5, pitch_deg: -0.2, yaw_deg: 179.5, roll_deg: 0.1,
-    truth: { reference: NOMINAL, x_mm: 0, y_mm: -1, z_mm: 2000, pitch_deg: 0, yaw_deg: -179.5, roll_deg: 0,
+    reference: { label: NOMINAL, x_mm: 0, y_mm: -1, z_mm: 2000, pitch_deg: 0, yaw_deg: -179.5, roll_deg: 0,
       position_error_mm: 10.8, attitude_error_deg: 0.34 },
     angular_rate_deg_s: [0.5, -1, 2],
     ...over,
@@ -59,7 +59,7 @@ describe("sampleOf", () => {
   });
 
   it("has no reference or error without a lab reference", () => {
-    const s = sampleOf(pose({ truth: null, angular_rate_deg_s: null }));
+    const s = sampleOf(pose({ reference: null, angular_rate_deg_s: null }));
     expect(s.reference).toBeNull();
     expect(Object.keys(s.values).sort()).toEqual(["pitch", "roll", "x", "y", "yaw", "z"]);
   });

@@ -17,8 +17,8 @@ def _R(p: dict) -> np.ndarray:
     return Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_matrix()
 
 
-def _truth_R(p: dict) -> np.ndarray:
-    t = p["truth"]
+def _reference_R(p: dict) -> np.ndarray:
+    t = p["reference"]
     return Rotation.from_euler("xyz", [t["pitch_deg"], t["yaw_deg"], t["roll_deg"]], degrees=True)
 
 
@@ -40,11 +40,11 @@ def test_live_pose_is_accurate_and_follows_the_turntable(client):
     # The simulated lab starts with the camera 2 m from the target (rail 13 m of 15 m).
     assert abs(before["z_mm"] - 2000.0) < 30.0
     assert before["n_matched"] == 8
-    assert before["truth"]["position_error_mm"] < 25.0  # unknown mount error ~0.3 deg
+    assert before["reference"]["position_error_mm"] < 25.0  # unknown mount error ~0.3 deg
     # Attitude as people read it: face-on reads ~(0, 0, 0), never +-180 (the raw
     # quaternion is that of R_camera_target = diag(1, -1, -1): w ~ 0, x ~ 1).
     assert max(abs(before[k]) for k in ("pitch_deg", "yaw_deg", "roll_deg")) < 1.5
-    assert max(abs(before["truth"][k]) for k in ("pitch_deg", "yaw_deg", "roll_deg")) < 1.5
+    assert max(abs(before["reference"][k]) for k in ("pitch_deg", "yaw_deg", "roll_deg")) < 1.5
     assert abs(before["quaternion_wxyz"][1]) > 0.99
     r = client.post("/api/motion/move", json={"yaw_deg": 10.0, "roll_deg": -5.0}, headers=AUTH)
     assert r.status_code == 202, r.text
@@ -66,9 +66,9 @@ def test_live_pose_is_accurate_and_follows_the_turntable(client):
     assert abs(motion["positions"]["yaw"] - 10.0) < 0.01
     # The measured relative rotation is the commanded one (11.2 deg geodesic), to 0.2 deg.
     measured = np.degrees(Rotation.from_matrix(_R(before).T @ _R(after)).magnitude())
-    truth = (_truth_R(before).inv() * _truth_R(after)).magnitude()
-    assert abs(np.degrees(truth) - 11.18) < 0.05
-    assert abs(measured - np.degrees(truth)) < 0.2
+    turned = (_reference_R(before).inv() * _reference_R(after)).magnitude()
+    assert abs(np.degrees(turned) - 11.18) < 0.05
+    assert abs(measured - np.degrees(turned)) < 0.2
     # Yawing the camera by +10 deg moves the target towards -x in the image frame.
     assert after["x_mm"] < before["x_mm"] - 300.0
 
@@ -205,7 +205,7 @@ def test_replay_camera_without_motion(tmp_path):
     with running_app(settings) as c:
         p = latest_pose(c)
         assert p["catalog"] == "recording:paper-target"
-        assert p["truth"]["position_error_mm"] < 15.0
+        assert p["reference"]["position_error_mm"] < 15.0
         assert abs(p["z_mm"] - 697.0) < 30.0
         h = c.get("/api/health").json()
         assert h["motion"]["state"] == "absent" and h["camera"]["driver"] == "replay"

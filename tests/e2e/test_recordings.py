@@ -67,7 +67,7 @@ def test_record_from_the_page_stop_download_and_read_it(server, page_for, tmp_pa
     )
     with open_recording(path) as rec:
         assert rec.n_frames == entry["frames"] > 0
-        assert rec.lab_truth_R is not None  # the simulated lab's reference, as in any recording
+        assert rec.reference_R is not None  # the simulated lab's reference, as in any recording
     with h5py.File(path, "r") as f:
         wall_s = f["frames/wall_time_ns"][...] / 1e9
         assert (np.abs(wall_s - time.time()) < 60).all()

@@ -27,9 +27,17 @@ def test_the_reference_is_named_and_a_calibration_can_be_set_up_or_selected(serv
     label.wait_for(timeout=20_000)
     assert label.inner_text() == NOMINAL_LABEL
     assert "mount and placement errors" in page.get_by_test_id("reference-warning").inner_text()
-    page.get_by_test_id("truth").wait_for(timeout=20_000)
-    assert NOMINAL_LABEL in page.get_by_test_id("truth").inner_text()
+    # the pose panel names the lab's estimate "reference", never "truth" (only the pose a
+    # simulator rendered is called truth: docs/interop.md, "Names: truth and reference")
+    shown = page.get_by_test_id("pose-reference")
+    shown.wait_for(timeout=20_000)
+    text = shown.inner_text()
+    assert text.startswith(f"lab reference, {NOMINAL_LABEL}:") and "error vs reference" in text
+    assert float(page.get_by_test_id("pose-reference-error-mm").inner_text()) > 0.0
+    panel = page.locator("section.card", has=page.get_by_test_id("pose")).inner_text()
+    assert "truth" not in panel.lower(), panel
     page.screenshot(path=str(SHOTS / "dashboard-reference.png"), full_page=False)
+    shown.screenshot(path=str(SHOTS / "pose-panel-reference.png"))
     # one click fills the new-campaign form with the calibration generator
     page.get_by_test_id("reference-calibrate").click()
     # the form fills in an effect after the click's render: wait for it, as a person would
@@ -64,6 +72,6 @@ def test_the_reference_is_named_and_a_calibration_can_be_set_up_or_selected(serv
     assert page.get_by_test_id("reference-warning").count() == 0
     assert httpx.get(server.base_url + "/api/reference").json()["calibration_id"] == cid
     page.wait_for_function(
-        "document.querySelector('[data-testid=truth]').innerText.includes('bench-1')",
+        "document.querySelector('[data-testid=pose-reference]').innerText.includes('bench-1')",
         timeout=10_000,
     )

@@ -179,9 +179,10 @@ def test_bad_inputs_exit_with_a_message(tmp_path, capsys):
     assert "duplicate reflector ids" in capsys.readouterr().err
 
 
-def test_simulated_truth_is_what_was_rendered_and_lab_truth_is_apart(tmp_path):
-    """/truth is the rendered pose; /lab_truth (encoders + nominal geometry) differs from
+def test_simulated_truth_is_what_was_rendered_and_the_reference_is_apart(tmp_path):
+    """/truth is the rendered pose; /reference (encoders + nominal geometry) differs from
     it by the simulated mount and placement errors, and the pipeline agrees with /truth."""
+    import h5py
     import numpy as np
 
     from tofpose.io.recording import open_recording
@@ -191,13 +192,15 @@ def test_simulated_truth_is_what_was_rendered_and_lab_truth_is_apart(tmp_path):
     assert (
         main(["simulate", "--scenario", "stability-697", "--frames", "3", "--out", str(rec)]) == 0
     )
+    with h5py.File(rec) as f:
+        assert "truth" in f and "reference" in f and "lab_truth" not in f
     expected = list(run_scenario(get_scenario("stability-697"), 3, seed=0))
     with open_recording(rec) as r:
         for i, bf in enumerate(expected):
             np.testing.assert_allclose(r.truth_R[i], bf.T_true.R, atol=1e-12)
             np.testing.assert_allclose(r.truth_t_mm[i], bf.T_true.t_mm, atol=1e-9)
-            np.testing.assert_allclose(r.lab_truth_t_mm[i], bf.T_lab_truth.t_mm, atol=1e-9)
-        lab_off = np.linalg.norm(r.lab_truth_t_mm - r.truth_t_mm, axis=1)
+            np.testing.assert_allclose(r.reference_t_mm[i], bf.T_lab_truth.t_mm, atol=1e-9)
+        lab_off = np.linalg.norm(r.reference_t_mm - r.truth_t_mm, axis=1)
         assert np.all(lab_off > 0.5)  # the mount error the lab does not know
     out = tmp_path / "poses.csv"
     assert main(["estimate", str(rec), "--out", str(out)]) == 0
@@ -337,3 +340,28 @@ def test_a_camera_that_replaces_the_recordings_intrinsics_is_named(tmp_path, cap
     assert main(["estimate", str(rec), "--out", str(out), "--camera", str(other)]) == 0
     err = capsys.readouterr().err
     assert "replaces the recording's intrinsics (fx 325, fy 325" in err and "(fx 330," in err
+
+
+@pytest.mark.parametrize("reference", ["truth", "reference", "lab_truth"])
+def test_calibrate_range_names_the_pose_group_a_recording_lacks(tmp_path, reference):
+    """``--reference`` takes truth (the rendered pose), reference (the lab's) or the
+    older name lab_truth; a recording without it is refused naming the group."""
+    import numpy as np
+
+    from tofpose.core.camera import CameraModel
+    from tofpose.io.recording import RecordingWriter
+
+    rec = tmp_path / "frames-only.h5"
+    with RecordingWriter(rec, CameraModel()) as w:
+        w.append(np.zeros((240, 320), np.uint16), np.full((240, 320), 1e3, np.float32), 0.0)
+    with pytest.raises(SystemExit, match=f"has no /{reference}: nothing to calibrate against"):
+        main(
+            [
+                "calibrate-range",
+                str(rec),
+                "--out",
+                str(tmp_path / "c.json"),
+                "--reference",
+                reference,
+            ]
+        )

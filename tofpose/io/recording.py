@@ -1,4 +1,5 @@
-"""HDF5 recordings (docs/architecture.md §7): one file per recording, frames with optional truth.
+"""HDF5 recordings (docs/architecture.md §7): one file per recording, frames with optional
+truth and reference poses.
 
 ::
 
@@ -18,8 +19,8 @@
     /frames/time_s        float64 (N,)
     /truth/R_camera_target     float64 (N, 3, 3)                          optional
     /truth/t_camera_target_mm  float64 (N, 3)                             optional
-    /lab_truth/R_camera_target     float64 (N, 3, 3)                      optional
-    /lab_truth/t_camera_target_mm  float64 (N, 3)                         optional
+    /reference/R_camera_target     float64 (N, 3, 3)                      optional
+    /reference/t_camera_target_mm  float64 (N, 3)                         optional
 
 Recordings of the server's live stream may also carry each frame's stamps on the host's
 monotonic clock (int64 ns, ``time.monotonic_ns``), with the anchor that turns them into
@@ -35,9 +36,14 @@ read on both clocks)::
 A recording without them (every recording written before them, and ``tofpose
 simulate``'s) reads as before, with ``Recording.stamps`` None.
 
-``/truth`` is the pose that produced each frame (on the simulator: what was rendered);
-``/lab_truth`` is what the lab believed (encoders + nominal mount and placement), the
-only reference a real lab has. A simulated recording carries both.
+``/truth`` is the pose that produced each frame, known only where a simulator rendered it;
+``/reference`` is the lab's estimate of it (encoders + nominal mount and placement), the
+only reference a real lab has. A simulated recording carries both; a campaign on real
+hardware only ``/reference`` (docs/interop.md, "Names: truth and reference").
+
+Recordings written before the rename hold the reference as ``/lab_truth``: the reader
+takes it as ``/reference`` (``LEGACY_GROUPS``) and ``RecordingWriter.reopen`` appends to it
+as it is, so such a file reads and grows as before.
 
 The pipeline always sees radial distance: a recording of a z-depth device (an Azure
 Kinect's frames, a ROS depth image; ``distance_kind = "z"``) stores its frames as the
@@ -62,6 +68,12 @@ from tofpose.core.depth import radial_from_z
 
 FORMAT = "tofpose-recording"
 VERSION = 1
+TRUTH_GROUP = "truth"
+"""The pose a simulator rendered, per frame."""
+REFERENCE_GROUP = "reference"
+"""The lab's estimate of the pose (encoders + bench geometry), per frame."""
+LEGACY_GROUPS = {REFERENCE_GROUP: ("lab_truth",)}
+"""Older names of a pose group, read when the current one is absent."""
 STAMP_DATASETS = ("frames/capture_ns", "frames/arrival_ns", "frames/pose_ready_ns")
 """The per-frame host stamps (module docstring), in the order of ``RecordingStamps``."""
 STAMP_ANCHOR_ATTRS = ("monotonic_anchor_ns", "wall_anchor_ns")
@@ -79,6 +91,8 @@ class RecordingWriter:
     interrupted part-way still holds every frame written before the interruption.
     The distance images are stored as given, in ``camera.distance_kind`` (radial, or
     the z depth of a z-depth device: the reader converts those to radial).
+    ``with_truth``: store ``/truth`` (the rendered pose); ``with_reference``: store
+    ``/reference`` (the lab's estimate); ``with_lab_truth`` is its older name, the same.
     """
 
     def __init__(
@@ -88,6 +102,7 @@ class RecordingWriter:
         catalog: Catalog | None = None,
         *,
         with_truth: bool = False,
+        with_reference: bool = False,
         with_lab_truth: bool = False,
         compression: str | None = "gzip",
     ) -> None:
@@ -116,8 +131,9 @@ class RecordingWriter:
             "distance_mm", (0, h, w), np.float32, maxshape=(None, h, w), chunks=(1, h, w), **opts
         )
         self._time = fr.create_dataset("time_s", (0,), np.float64, maxshape=(None,), chunks=(1024,))
-        self._truth = _pose_datasets(f, "truth") if with_truth else None
-        self._lab_truth = _pose_datasets(f, "lab_truth") if with_lab_truth else None
+        self._truth = _pose_datasets(f, TRUTH_GROUP) if with_truth else None
+        with_reference = with_reference or with_lab_truth
+        self._reference = _pose_datasets(f, REFERENCE_GROUP) if with_reference else None
         self.n = 0
 
     def append(
@@ -131,8 +147,9 @@ class RecordingWriter:
         lab_R_camera_target: np.ndarray | None = None,
         lab_t_camera_target_mm: np.ndarray | None = None,
     ) -> None:
-        """Add one frame; truth (lab truth) is required iff the writer was opened
-        ``with_truth`` (``with_lab_truth``)."""
+        """Add one frame; the truth (``R_camera_target``, ``t_camera_target_mm``) is
+        required iff the writer was opened ``with_truth``, the reference
+        (``lab_R_camera_target``, ``lab_t_camera_target_mm``) iff ``with_reference``."""
         shape = (self.camera.height, self.camera.width)
         if gray.shape != shape or distance_mm.shape != shape:
             raise ValueError(f"frame shapes {gray.shape}, {distance_mm.shape} != camera {shape}")
@@ -144,7 +161,7 @@ class RecordingWriter:
         self._time[n] = time_s
         for name, datasets, R, t in (
             ("truth", self._truth, R_camera_target, t_camera_target_mm),
-            ("lab truth", self._lab_truth, lab_R_camera_target, lab_t_camera_target_mm),
+            ("reference", self._reference, lab_R_camera_target, lab_t_camera_target_mm),
         ):
             if datasets is None:
                 continue
@@ -175,8 +192,8 @@ class RecordingWriter:
             self.camera = _camera_from_attrs(f["camera"].attrs, path)
             self._gray, self._dist = f["frames/gray"], f["frames/distance_mm"]
             self._time = f["frames/time_s"]
-            self._truth = _existing_pose_datasets(f, "truth")
-            self._lab_truth = _existing_pose_datasets(f, "lab_truth")
+            self._truth = _existing_pose_datasets(f, TRUTH_GROUP)
+            self._reference = _existing_pose_datasets(f, REFERENCE_GROUP)
             self.n = int(self._time.shape[0])
             return self
         except BaseException:
@@ -188,7 +205,7 @@ class RecordingWriter:
         if not 0 <= n <= self.n:
             raise ValueError(f"cannot truncate a recording of {self.n} frames to {n}")
         datasets = [self._gray, self._dist, self._time]
-        for group in (self._truth, self._lab_truth):
+        for group in (self._truth, self._reference):
             if group is not None:
                 datasets += list(group)
         for ds in datasets:
@@ -233,16 +250,30 @@ def _camera_from_attrs(attrs, path=None) -> CameraModel:
         raise RecordingError(f"{path}: /camera attributes are invalid ({exc})") from exc
 
 
+def _stored_group(f: h5py.File, group: str) -> str | None:
+    """The name ``group`` is stored under: itself, or an older name of it
+    (``LEGACY_GROUPS``); None when the file has neither."""
+    for name in (group, *LEGACY_GROUPS.get(group, ())):
+        if name in f:
+            return name
+    return None
+
+
 def _existing_pose_datasets(f: h5py.File, group: str):
-    if group not in f:
+    """``group``'s (R, t) datasets to append to, under its current or older name."""
+    name = _stored_group(f, group)
+    if name is None:
         return None
-    return f[f"{group}/R_camera_target"], f[f"{group}/t_camera_target_mm"]
+    return f[f"{name}/R_camera_target"], f[f"{name}/t_camera_target_mm"]
 
 
 def _read_poses(f: h5py.File, group: str, n: int, path) -> tuple[np.ndarray, np.ndarray] | None:
-    """(R (N, 3, 3), t (N, 3)) of ``/group``, None if absent; RecordingError if malformed."""
-    if group not in f:
+    """(R (N, 3, 3), t (N, 3)) of ``/group`` (or of its older name, ``LEGACY_GROUPS``),
+    None if absent; RecordingError if malformed."""
+    stored = _stored_group(f, group)
+    if stored is None:
         return None
+    group = stored
     if f"{group}/R_camera_target" not in f or f"{group}/t_camera_target_mm" not in f:
         raise RecordingError(f"{path}: /{group} needs both R_camera_target and t_camera_target_mm")
     R = f[f"{group}/R_camera_target"][...]
@@ -277,7 +308,9 @@ class Recording:
     camera : CameraModel (``distance_kind`` "radial": what ``frame`` and ``block``
     return); catalog : Catalog or None; n_frames : int;
     time_s : ndarray (N,); truth_R : ndarray (N, 3, 3) or None; truth_t_mm : (N, 3) or None.
-    lab_truth_R, lab_truth_t_mm : the lab's reference, same shapes, or None.
+    reference_R, reference_t_mm : the lab's reference (``/reference``, or ``/lab_truth`` in
+    older files), same shapes, or None; ``lab_truth_R``, ``lab_truth_t_mm`` are their
+    older names.
     stored_distance_kind : "radial" or "z": what /frames/distance_mm holds (z depth is
     converted to radial distance as frames are read).
     wall_time_ns : (N,) int64 the host's wall clock (Unix ns) when each frame was
@@ -295,12 +328,22 @@ class Recording:
     truth_R: np.ndarray | None
     truth_t_mm: np.ndarray | None
     _file: h5py.File
-    lab_truth_R: np.ndarray | None = None
-    lab_truth_t_mm: np.ndarray | None = None
+    reference_R: np.ndarray | None = None
+    reference_t_mm: np.ndarray | None = None
     stored_distance_kind: str = "radial"
     _stored_camera: CameraModel | None = None
     wall_time_ns: np.ndarray | None = None
     stamps: RecordingStamps | None = None
+
+    @property
+    def lab_truth_R(self) -> np.ndarray | None:
+        """The older name of ``reference_R``."""
+        return self.reference_R
+
+    @property
+    def lab_truth_t_mm(self) -> np.ndarray | None:
+        """The older name of ``reference_t_mm``."""
+        return self.reference_t_mm
 
     def _radial(self, distance_mm: np.ndarray) -> np.ndarray:
         """Stored distances (H, W) or (n, H, W) as radial distances."""
@@ -440,8 +483,8 @@ def open_recording(path: str | Path) -> Recording:
                 f"{path}: frame counts disagree (gray {n}, distance {d.shape[0]}, "
                 f"time_s {t.shape[0]})"
             )
-        truth = _read_poses(f, "truth", n, path)
-        lab = _read_poses(f, "lab_truth", n, path)
+        truth = _read_poses(f, TRUTH_GROUP, n, path)
+        lab = _read_poses(f, REFERENCE_GROUP, n, path)
         truth_R, truth_t = truth if truth is not None else (None, None)
         lab_R, lab_t = lab if lab is not None else (None, None)
         # z-depth frames are read as radial (Recording._radial): the camera says so

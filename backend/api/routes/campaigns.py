@@ -245,7 +245,12 @@ class ReportFormat(StrEnum):
 
 
 class Reference(StrEnum):
+    """What a report's errors are measured against: ``lab`` the lab's reference (encoders
+    + nominal geometry), ``truth`` the pose the simulator rendered; ``exact`` is the older
+    name of ``truth`` (docs/interop.md, "Names: truth and reference")."""
+
     lab = "lab"
+    truth = "truth"
     exact = "exact"
 
 
@@ -272,7 +277,11 @@ async def get_campaign_report(
     fmt: ReportFormat,
     state: StateDep,
     reference: Annotated[
-        Reference, Query(description="lab: encoders + nominal geometry; exact: simulator only")
+        Reference,
+        Query(
+            description="lab: the lab's reference (encoders + nominal geometry); truth: the "
+            "pose the simulator rendered (simulator only); exact: older name of truth"
+        ),
     ] = Reference.lab,
     calibration: Annotated[
         int | None,

@@ -17,7 +17,8 @@ router = APIRouter(prefix="/api/pose", tags=["pose"], dependencies=[ReadAuth])
 @router.get("/latest", responses=errors(404))
 def get_latest_pose(state: StateDep) -> PosePublic:
     """The last result: ok/reason, pose (mm, deg, quaternion), matched reflectors with
-    pixel centroids and 3-D points, residual, stage timings, frame time, truth if known."""
+    pixel centroids and 3-D points, residual, stage timings, frame time, the lab reference
+    and the error against it when the source has one."""
     sample = state.acquisition.latest
     if sample is None:
         raise HTTPException(404, "no frame has been processed yet")

@@ -336,8 +336,17 @@ class MeasurementPublic(BaseModel):
     pitch_deg: float | None
     yaw_deg: float | None
     roll_deg: float | None
-    truth: dict[str, float] | None = Field(description="pose that produced the frame")
-    lab_truth: dict[str, float] | None = Field(description="encoders + nominal geometry")
+    truth: dict[str, float] | None = Field(
+        description="the pose the simulator rendered (null on real hardware)"
+    )
+    reference: dict[str, float] | None = Field(
+        default=None, description="the lab's reference: encoders + nominal geometry"
+    )
+    lab_truth: dict[str, float] | None = Field(
+        default=None,
+        deprecated=True,
+        description="deprecated, removed in the next release: `reference` under its older name",
+    )
     encoders: dict[str, float] | None
     integration_time_us: float | None = Field(
         default=None, description="the exposure the camera reports for the frame"

@@ -44,9 +44,34 @@ class RejectedBlobPublic(BaseModel):
     reason_text: str = Field(description="the gate that refused it, in words")
 
 
-class TruthPublic(BaseModel):
+class FrameReferencePublic(BaseModel):
     """The lab's reference for this frame (encoders + nominal geometry, or + a selected
-    calibration's mount and placement) and the error of the measurement against it."""
+    calibration's mount and placement) and the error of the measurement against it: the
+    lab's estimate of the pose, never the truth (docs/interop.md, "Names: truth and
+    reference")."""
+
+    x_mm: float
+    y_mm: float
+    z_mm: float
+    pitch_deg: float
+    yaw_deg: float
+    roll_deg: float
+    position_error_mm: float | None = Field(
+        default=None, description="|measured - reference| of the position; null without a pose"
+    )
+    attitude_error_deg: float | None = Field(
+        default=None, description="geodesic angle between measured and reference attitude"
+    )
+    label: str = Field(
+        default="nominal lab geometry (uncalibrated)",
+        description="which reference: the nominal lab geometry, or a calibration "
+        "(PUT /api/reference)",
+    )
+
+
+class TruthPublic(BaseModel):
+    """Deprecated: the older shape of ``FrameReferencePublic`` (its ``label`` was ``reference``),
+    kept in ``PosePublic.truth`` for one release."""
 
     x_mm: float
     y_mm: float
@@ -109,7 +134,17 @@ class PosePublic(BaseModel):
     frames_used: int
     motion: bool
     timings_ms: dict[str, float]
-    truth: TruthPublic | None = None
+    reference: FrameReferencePublic | None = Field(
+        default=None,
+        description="the lab's reference for this frame and the error against it; null when "
+        "the source has none",
+    )
+    truth: TruthPublic | None = Field(
+        default=None,
+        deprecated=True,
+        description="deprecated, removed in the next release: the same lab reference as "
+        "`reference` under its older name (it never held the simulator's rendered pose)",
+    )
     filter_status: Literal["initialised", "updated", "rejected", "reset", "predicted"] | None = (
         Field(
             default=None,

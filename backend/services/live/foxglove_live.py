@@ -3,10 +3,10 @@
 It publishes the channels of an exported MCAP file (``tofpose.io.interop.topics``, see
 docs/interop.md) for every live frame: the gray and distance images, the camera model,
 the overlay, the estimate (transform, pose, reflectors, JSON with its covariance), the
-lab reference (``/tofpose/lab_truth``: the reference the live error is measured against)
+lab reference (``/tofpose/reference``: the reference the live error is measured against)
 and, where the source knows it (the simulator, a replayed recording's ``/truth``), the
-exact truth (``CameraFrame.T_camera_target_exact``). Log times are the frames' arrival
-times (unix ns).
+truth: the pose the simulator rendered (``CameraFrame.T_camera_target_exact``). Log
+times are the frames' arrival times (unix ns).
 
 The camera loop never waits for it: one thread takes the newest sample from a one-deep
 hub subscription (older ones are dropped and counted, never queued), converts each
@@ -52,7 +52,7 @@ class LiveFoxglove:
         # the reference channels are advertised whether or not the source has them (the
         # simulator knows the exact truth, a real lab only its reference)
         self.channels = ToFChannels(
-            self.context, acquisition.camera.model, truth=True, lab_truth=True
+            self.context, acquisition.camera.model, truth=True, reference=True
         )
         self.server = foxglove.start_server(
             name="tofpose",

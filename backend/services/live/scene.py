@@ -9,10 +9,13 @@ metres (``scene_model``):
   ``/camera/cloud`` (the back-projected distance image, downsampled to
   ``max_cloud_points``) and ``/camera/reflectors`` (the measured reflector points,
   coloured matched / unmatched).
-- ``/estimate`` and ``/truth``: the target model at the estimated pose and at the lab's
-  reference (when the source knows it; else at the exact pose, when that is known:
-  ``_shown_truth``): ``.../plate`` and ``.../reflector_<id>``, each
-  reflector coloured matched / unmatched / out of view (``scene_model.STATE_COLOURS``).
+- ``/estimate``: the target model at the estimated pose, ``.../plate`` and
+  ``.../reflector_<id>``, each reflector coloured matched / unmatched / out of view
+  (``scene_model.STATE_COLOURS``).
+- ``/reference``: the same model, wireframe, at the lab's reference (encoders + nominal
+  geometry or a calibration's; a recording's ``/reference``), shown when the source has
+  one; ``/truth``: at the pose the simulator rendered (a recording's ``/truth``), shown
+  only when the source knows it (docs/interop.md, "Names: truth and reference").
 - ``/ground/grid``: a grid on the ground plane (``scene_model.GROUND_DROP_M`` below
   the lab origin; lab y points down), cells of one scale step; ``/ground/scale``: rulers
   along the lab's x and z axes on it, ticked every step, with ``/ground/scale/label_<k>``
@@ -107,17 +110,17 @@ if TYPE_CHECKING:  # viser is imported when a scene starts (LiveScene)
     from viser import FrameHandle, IcosphereHandle
 
 log = logging.getLogger("tofpose.scene")
-TRUTH_COLOUR = (70, 120, 230)
+REFERENCE_COLOUR = (70, 120, 230)
+TRUTH_COLOUR = (20, 150, 150)
 PLATE_COLOUR = (200, 200, 205)
 TRAIL_COLOUR = (170, 60, 200)
 SCALE_COLOUR = (60, 60, 60)
 
 
-def _shown_truth(frame: CameraFrame) -> RigidTransform | None:
-    """The pose ``/truth`` shows (``T_camera_target``): the lab's reference (encoders +
-    nominal geometry, or a recording's ``/lab_truth``), as it always has on the
-    simulator; the exact pose only when the frame has no lab reference (a replayed
-    recording with ``/truth`` alone); None when it has neither."""
+def _known_pose(frame: CameraFrame) -> RigidTransform | None:
+    """The pose the scene aims at and judges reflectors in view by when there is no
+    estimate (``T_camera_target``): the lab's reference, else the truth (a replayed
+    recording with ``/truth`` alone); None when the frame has neither."""
     if frame.T_camera_target_lab is not None:
         return frame.T_camera_target_lab
     return frame.T_camera_target_exact
@@ -429,8 +432,10 @@ class LiveScene:
         self._clear.on_click(lambda _event: self.clear_trail())
         self.status = self.server.gui.add_markdown("waiting for the first frame")
         self.estimate: FrameHandle | None = None
+        self.reference: FrameHandle | None = None
         self.truth: FrameHandle | None = None
         self.estimate_reflectors: dict[int, IcosphereHandle] = {}
+        self.reference_reflectors: dict[int, IcosphereHandle] = {}
         self.truth_reflectors: dict[int, IcosphereHandle] = {}
 
     def _build_ground(self, extent_m: float) -> None:
@@ -494,29 +499,54 @@ class LiveScene:
             self.trail_node.visible = len(self.trail) >= 2
 
     def _build_target(self, catalog: Catalog) -> None:
-        """(Re)build the two target models for the active catalog."""
+        """(Re)build the three target models for the active catalog."""
         s = self.server.scene
-        for node in (self.estimate, self.truth):
+        for node in (self.estimate, self.reference, self.truth):
             if node is not None:
                 node.remove()
         self.estimate = s.add_frame("/estimate", axes_length=0.15, axes_radius=0.006)
-        self.truth = s.add_frame("/truth", axes_length=0.15, axes_radius=0.006, visible=False)
         w, h = catalog.plate_size_mm
         dims = (w / 1000.0, h / 1000.0, 0.01)
         s.add_box("/estimate/plate", PLATE_COLOUR, dims, position=(0.0, 0.0, -0.005))
-        s.add_box("/truth/plate", TRUTH_COLOUR, dims, wireframe=True, position=(0, 0, -0.005))
-        self.estimate_reflectors, self.truth_reflectors = {}, {}
+        self.estimate_reflectors = {}
         for r in catalog.reflectors:
             pos = np.asarray(r.position_mm, float) / 1000.0
-            radius = r.diameter_mm / 2000.0
             self.estimate_reflectors[r.id] = s.add_icosphere(
-                f"/estimate/reflector_{r.id}", radius, STATE_COLOURS[UNMATCHED], position=pos
-            )
-            self.truth_reflectors[r.id] = s.add_icosphere(
-                f"/truth/reflector_{r.id}", radius, TRUTH_COLOUR, position=pos, wireframe=True
+                f"/estimate/reflector_{r.id}",
+                r.diameter_mm / 2000.0,
+                STATE_COLOURS[UNMATCHED],
+                position=pos,
             )
         s.add_label("/estimate/label", "estimate", position=(-w / 2000.0, h / 2000.0, 0.0))
-        s.add_label("/truth/label", "truth", position=(w / 2000.0, -h / 2000.0, 0.0))
+        self.reference, self.reference_reflectors = self._wireframe_target(
+            catalog, "/reference", REFERENCE_COLOUR, label_at=(w / 2000.0, -h / 2000.0, 0.0)
+        )
+        self.truth, self.truth_reflectors = self._wireframe_target(
+            catalog, "/truth", TRUTH_COLOUR, label_at=(-w / 2000.0, -h / 2000.0, 0.0)
+        )
+
+    def _wireframe_target(
+        self, catalog: Catalog, name: str, colour: tuple[int, int, int], label_at
+    ) -> tuple[FrameHandle, dict[int, IcosphereHandle]]:
+        """A hidden wireframe target model at node ``name`` (plate, reflectors and a label
+        reading the node's name at ``label_at``, m in the target frame)."""
+        s = self.server.scene
+        node = s.add_frame(name, axes_length=0.15, axes_radius=0.006, visible=False)
+        w, h = catalog.plate_size_mm
+        dims = (w / 1000.0, h / 1000.0, 0.01)
+        s.add_box(f"{name}/plate", colour, dims, wireframe=True, position=(0, 0, -0.005))
+        reflectors = {
+            r.id: s.add_icosphere(
+                f"{name}/reflector_{r.id}",
+                r.diameter_mm / 2000.0,
+                colour,
+                position=np.asarray(r.position_mm, float) / 1000.0,
+                wireframe=True,
+            )
+            for r in catalog.reflectors
+        }
+        s.add_label(f"{name}/label", name.lstrip("/"), position=label_at)
+        return node, reflectors
 
     # -- live updates ----------------------------------------------------------------------
     def _run(self) -> None:
@@ -543,11 +573,12 @@ class LiveScene:
         if catalog.name != self._catalog_name or self.estimate is None:
             self._build_target(catalog)
             self._catalog_name = catalog.name
-        estimate, truth = self.estimate, self.truth
-        assert estimate is not None and truth is not None  # _build_target made them
+        estimate, reference, truth = self.estimate, self.reference, self.truth
+        assert estimate is not None and reference is not None and truth is not None
         res, frame = sample.result, sample.frame
         T_lab_cam = lab_camera_pose(frame.meta.get("encoders"))
-        T_shown = _shown_truth(frame)  # the lab reference; the exact pose only without one
+        T_shown = _known_pose(frame)  # the lab reference; the truth only without one
+        T_reference, T_truth = frame.T_camera_target_lab, frame.T_camera_target_exact
         if not self._aimed:
             self._aim_view(T_lab_cam, res, T_shown)
         with self.server.atomic():
@@ -568,13 +599,16 @@ class LiveScene:
             self._update_trail(T_lab_est.t_mm / 1000.0 if T_lab_est is not None else None)
             reach = [T_lab_cam.t_mm / 1000.0]
             reach += [
-                T.t_mm / 1000.0 for T in (T_lab_est, _lab(T_lab_cam, T_shown)) if T is not None
+                T.t_mm / 1000.0
+                for T in (T_lab_est, _lab(T_lab_cam, T_reference), _lab(T_lab_cam, T_truth))
+                if T is not None
             ]
             if (needed := scene_extent_m(np.asarray(reach))) > self._extent_m:
                 self._build_ground(needed)
-            truth.visible = T_shown is not None
-            if T_shown is not None:
-                _place(truth, T_lab_cam.compose(T_shown))
+            for node, T in ((reference, T_reference), (truth, T_truth)):
+                node.visible = T is not None
+                if T is not None:
+                    _place(node, T_lab_cam.compose(T))
             if sample.has_images:
                 cloud = distance_cloud(
                     self._camera, frame.gray, frame.distance_mm, self._max_cloud_points

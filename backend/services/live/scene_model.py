@@ -40,7 +40,8 @@ def reflector_states(
     the image, facing the camera, but the pipeline did not match it) or out_of_view.
 
     ``T_camera_target`` is the pose used to decide visibility (the estimate, else the
-    truth); without any pose every reflector that is not matched is out_of_view.
+    lab's reference or the truth); without any pose every reflector that is not matched
+    is out_of_view.
     """
     matched_ids = {m.catalog_id for m in result.matched}
     states = []

@@ -2,8 +2,9 @@
 
 Errors are measured minus reference per axis: x, y, z in mm and the facing Euler angles
 pitch, yaw, roll in degrees (docs/architecture.md §3). The reference is the lab's
-(``lab``: encoders + nominal geometry, what a real lab has) or, on the simulator, the
-pose that produced the frame (``exact``).
+(``lab``: encoders + nominal geometry, what a real lab has; ``calibrated``: encoders + a
+bench calibration) or, on the simulator, the truth: the pose it rendered (``truth``;
+``exact`` is its older name).
 
 Singular-point removal (the paper's Table 1 -> Table 2): within a set-point, an error
 farther than ``SINGULAR_K`` scaled MADs (1.4826 x median absolute deviation, a robust
@@ -43,7 +44,16 @@ RULE = (
     f"singular point: |error - median| > {SINGULAR_K:g} x {MAD_TO_SIGMA} x MAD of its axis "
     "within its set-point; pass: max |error| after removal <= requirement"
 )
-REFERENCE_PREFIX = {"lab": "lab_truth_", "exact": "truth_", "calibrated": "calibrated_truth_"}
+REFERENCE_PREFIX = {
+    "lab": "reference_",
+    "calibrated": "calibrated_reference_",
+    "truth": "truth_",
+    "exact": "truth_",  # the older name of "truth"
+}
+"""The columns a report's errors are measured against, per ``reference``: ``reference_*``
+the lab's reference (encoders + nominal geometry), ``calibrated_reference_*`` the same
+with a calibration's mount and placement, ``truth_*`` the pose the simulator rendered
+(docs/interop.md, "Names: truth and reference")."""
 
 
 @dataclass
@@ -128,7 +138,7 @@ def analyse(
     reference: str = "lab",
 ) -> dict:
     """Per-set-point and whole-campaign statistics of frame ``rows`` (dicts with the CSV
-    columns: ``setpoint_index``, ``ok``, the pose, ``truth_*``, ``lab_truth_*``,
+    columns: ``setpoint_index``, ``ok``, the pose, ``truth_*``, ``reference_*``,
     ``sigma_*``). Returns plain data (JSON-ready)."""
     prefix = REFERENCE_PREFIX[reference]
     by_sp: dict[int, list[dict]] = {}

@@ -148,7 +148,7 @@ def reference_label(report: dict) -> str:
         "lab": "lab reference (encoders + nominal geometry; uncalibrated: the errors include "
         "the bench's own camera-mount and target-placement errors, which a calibration "
         "campaign measures and ?calibration=ID / --calibration ID removes)",
-        "exact": "exact reference (the rendered pose, simulator only)",
+        "truth": "truth (the pose the simulator rendered; simulator only)",
     }
     return labels.get(report["reference"], f"{report['reference']} reference")
 

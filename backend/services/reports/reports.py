@@ -62,7 +62,7 @@ CSV_COLUMNS = (
     "reason",
     *POSE,
     *(f"truth_{a}" for a in POSE),
-    *(f"lab_truth_{a}" for a in POSE),
+    *(f"reference_{a}" for a in POSE),
     "sigma_x_mm",
     "sigma_y_mm",
     "sigma_z_mm",
@@ -77,24 +77,31 @@ CSV_COLUMNS = (
     "encoder_pitch_deg",
     "encoder_roll_deg",
     "encoder_rail_mm",
-    *(f"calibrated_truth_{a}" for a in POSE),
+    *(f"calibrated_reference_{a}" for a in POSE),
     *STATE_COLUMNS,
     "in_motion",
     "integration_time_us",
     "setpoint_integration_time_us",
     "setpoint_modulation_frequency_mhz",
 )
+"""The report CSV's columns. ``truth_*``: the pose the simulator rendered (empty on real
+hardware); ``reference_*``: the lab's reference (encoders + nominal geometry);
+``calibrated_reference_*``: encoders + a calibration (docs/interop.md, "Names: truth and
+reference"). ``report_csv.read_csv`` also reads the older names."""
+MEASUREMENT_COLUMN = {f"reference_{a}": f"lab_truth_{a}" for a in POSE}
+"""The stored measurement's attribute behind a CSV column where the two names differ
+(the database keeps the older name: renaming it would need a migration)."""
 
 
 class ReportError(ValueError):
-    """A report that cannot be made as asked (e.g. no exact truth on real hardware)."""
+    """A report that cannot be made as asked (e.g. no truth on real hardware)."""
 
 
 def campaign_rows(
     session: Session, campaign_id: int, calibration: CalibrationRow | None = None
 ) -> list[dict]:
     """Every stored frame of the campaign as a dict of ``CSV_COLUMNS``; the
-    ``calibrated_truth_*`` columns are filled when a calibration is given."""
+    ``calibrated_reference_*`` columns are filled when a calibration is given."""
     q = (
         select(MeasurementRow, SetPointRow)
         .join(SetPointRow, MeasurementRow.setpoint_id == SetPointRow.id)
@@ -125,10 +132,10 @@ def campaign_rows(
         }
         if calibration is not None and {"yaw", "pitch", "roll", "rail"} <= set(enc):
             ref = calibrated_reference(calibration, enc)
-            row.update({f"calibrated_truth_{a}": v for a, v in ref.items()})
+            row.update({f"calibrated_reference_{a}": v for a, v in ref.items()})
         for col in CSV_COLUMNS:
             if col not in row:
-                row[col] = getattr(m, col, None)
+                row[col] = getattr(m, MEASUREMENT_COLUMN.get(col, col), None)
         out.append(row)
     return out
 
@@ -165,6 +172,8 @@ def build(
     and placement."""
     if calibration is not None:
         reference = "calibrated"
+    if reference == "exact":  # the older name of the truth
+        reference = "truth"
     row = session.get(CampaignRow, campaign_id)
     if row is None:  # the routes and the command look it up first
         raise LookupError(f"no campaign with id {campaign_id}")
@@ -174,8 +183,9 @@ def build(
         raise ReportError(
             f"no {reference} reference in this campaign's frames"
             + (
-                " (exact truth exists only on the simulator or in a replayed recording's /truth)"
-                if reference == "exact"
+                " (the truth, the pose a simulator rendered, exists only on the simulator or in"
+                " a replayed recording's /truth)"
+                if reference == "truth"
                 else ""
             )
         )

@@ -745,7 +745,8 @@ export interface paths {
         /**
          * Get Latest Pose
          * @description The last result: ok/reason, pose (mm, deg, quaternion), matched reflectors with
-         *     pixel centroids and 3-D points, residual, stage timings, frame time, truth if known.
+         *     pixel centroids and 3-D points, residual, stage timings, frame time, the lab reference
+         *     and the error against it when the source has one.
          */
         get: operations["getLatestPose"];
         put?: never;
@@ -1768,6 +1769,43 @@ export interface components {
              */
             url?: string | null;
         };
+        /**
+         * FrameReferencePublic
+         * @description The lab's reference for this frame (encoders + nominal geometry, or + a selected
+         *     calibration's mount and placement) and the error of the measurement against it: the
+         *     lab's estimate of the pose, never the truth (docs/interop.md, "Names: truth and
+         *     reference").
+         */
+        FrameReferencePublic: {
+            /**
+             * Attitude Error Deg
+             * @description geodesic angle between measured and reference attitude
+             */
+            attitude_error_deg?: number | null;
+            /**
+             * Label
+             * @description which reference: the nominal lab geometry, or a calibration (PUT /api/reference)
+             * @default nominal lab geometry (uncalibrated)
+             */
+            label: string;
+            /** Pitch Deg */
+            pitch_deg: number;
+            /**
+             * Position Error Mm
+             * @description |measured - reference| of the position; null without a pose
+             */
+            position_error_mm?: number | null;
+            /** Roll Deg */
+            roll_deg: number;
+            /** X Mm */
+            x_mm: number;
+            /** Y Mm */
+            y_mm: number;
+            /** Yaw Deg */
+            yaw_deg: number;
+            /** Z Mm */
+            z_mm: number;
+        };
         /** GridGenerator */
         GridGenerator: {
             /**
@@ -2005,9 +2043,10 @@ export interface components {
             integration_time_us?: number | null;
             /**
              * Lab Truth
-             * @description encoders + nominal geometry
+             * @deprecated
+             * @description deprecated, removed in the next release: `reference` under its older name
              */
-            lab_truth: {
+            lab_truth?: {
                 [key: string]: number;
             } | null;
             /** N Matched */
@@ -2018,6 +2057,13 @@ export interface components {
             pitch_deg: number | null;
             /** Reason */
             reason: string;
+            /**
+             * Reference
+             * @description the lab's reference: encoders + nominal geometry
+             */
+            reference?: {
+                [key: string]: number;
+            } | null;
             /** Residual Mm */
             residual_mm: number | null;
             /** Roll Deg */
@@ -2028,7 +2074,7 @@ export interface components {
             time_s: number;
             /**
              * Truth
-             * @description pose that produced the frame
+             * @description the pose the simulator rendered (null on real hardware)
              */
             truth: {
                 [key: string]: number;
@@ -2270,6 +2316,8 @@ export interface components {
             quaternion_wxyz?: number[] | null;
             /** Reason */
             reason: string;
+            /** @description the lab's reference for this frame and the error against it; null when the source has none */
+            reference?: components["schemas"]["FrameReferencePublic"] | null;
             /**
              * Rejected
              * @description components refused by a gate (at most 50)
@@ -2283,6 +2331,10 @@ export interface components {
             timings_ms: {
                 [key: string]: number;
             };
+            /**
+             * @deprecated
+             * @description deprecated, removed in the next release: the same lab reference as `reference` under its older name (it never held the simulator's rendered pose)
+             */
             truth?: components["schemas"]["TruthPublic"] | null;
             /** Unmatched */
             unmatched: components["schemas"]["BlobPublic"][];
@@ -2540,9 +2592,12 @@ export interface components {
         };
         /**
          * Reference
+         * @description What a report's errors are measured against: ``lab`` the lab's reference (encoders
+         *     + nominal geometry), ``truth`` the pose the simulator rendered; ``exact`` is the older
+         *     name of ``truth`` (docs/interop.md, "Names: truth and reference").
          * @enum {string}
          */
-        Reference: "lab" | "exact";
+        Reference: "lab" | "truth" | "exact";
         /**
          * ReferencePublic
          * @description The live reference: nominal lab geometry, or a stored calibration.
@@ -3099,8 +3154,8 @@ export interface components {
         };
         /**
          * TruthPublic
-         * @description The lab's reference for this frame (encoders + nominal geometry, or + a selected
-         *     calibration's mount and placement) and the error of the measurement against it.
+         * @description Deprecated: the older shape of ``FrameReferencePublic`` (its ``label`` was ``reference``),
+         *     kept in ``PosePublic.truth`` for one release.
          */
         TruthPublic: {
             /**
@@ -4103,7 +4158,7 @@ export interface operations {
     getCampaignReport: {
         parameters: {
             query?: {
-                /** @description lab: encoders + nominal geometry; exact: simulator only */
+                /** @description lab: the lab's reference (encoders + nominal geometry); truth: the pose the simulator rendered (simulator only); exact: older name of truth */
                 reference?: components["schemas"]["Reference"];
                 /** @description reference = encoders + this calibration */
                 calibration?: number | null;

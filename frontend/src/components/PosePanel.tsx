@@ -50,9 +50,9 @@ export function PosePanel({ pose, stale, latency, children }: { pose: Pose | nul
         <p class="small">relative state (camera frame): <span data-testid="filter-status">{pose.filter_status}</span>
           {pose.filter_status === "rejected" && " (this pose disagrees with the motion so far and was not fused)"}</p>
       )}
-      {pose.truth && (
-        <p class="small" data-testid="truth">lab reference ({pose.truth.reference}): x {fmt(pose.truth.x_mm)} y {fmt(pose.truth.y_mm)} z {fmt(pose.truth.z_mm)} mm;
-          error <span data-testid="truth-error-mm">{fmt(pose.truth.position_error_mm)}</span> mm, {fmt(pose.truth.attitude_error_deg, 3)} deg</p>
+      {pose.reference && (
+        <p class="small" data-testid="pose-reference">lab reference, {pose.reference.label}: x {fmt(pose.reference.x_mm)} y {fmt(pose.reference.y_mm)} z {fmt(pose.reference.z_mm)} mm;
+          error vs reference <span data-testid="pose-reference-error-mm">{fmt(pose.reference.position_error_mm)}</span> mm, {fmt(pose.reference.attitude_error_deg, 3)} deg</p>
       )}
       {children}
     </section>

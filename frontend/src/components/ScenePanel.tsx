@@ -37,7 +37,7 @@ export function ScenePanel() {
             <a href={sceneUrl(scene.port)} target="_blank" rel="noopener" data-testid="scene-link">
               open in its own tab
             </a>
-            <span class="small" data-testid="scene-legend">green: matched, orange: in view but not matched, gray: out of view; blue wireframe: lab reference; purple line: the target's trail ("Clear trail" in the scene's panel); grid and rulers in metres</span>
+            <span class="small" data-testid="scene-legend">green: matched, orange: in view but not matched, gray: out of view; blue wireframe: lab reference; teal wireframe: truth (the pose the simulator rendered, simulator only); purple line: the target's trail ("Clear trail" in the scene's panel); grid and rulers in metres</span>
           </div>
           <iframe title="3-D scene (viser)" data-testid="scene-frame" src={sceneUrl(scene.port)} />
         </>

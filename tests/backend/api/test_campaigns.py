@@ -65,7 +65,7 @@ class _Tables(HTMLParser):
         self.cells.append(data.strip())
 
 
-def _recompute(rows: list[dict], axis: str, ref: str = "lab_truth_") -> dict:
+def _recompute(rows: list[dict], axis: str, ref: str = "reference_") -> dict:
     """Independent recomputation of one set-point's statistics from CSV rows."""
     ok = [r for r in rows if r["ok"] == "1"]
     e = np.array([float(r[axis]) - float(r[ref + axis]) for r in ok])
@@ -93,7 +93,8 @@ def test_a_grid_campaign_runs_to_completion_and_every_report_downloads(fast_clie
         sp = GRID["setpoints"][m["setpoint_index"]]
         assert abs(m["encoders"]["yaw"] - sp["yaw_deg"]) < 0.01
         assert abs(m["encoders"]["rail"] - sp["rail_mm"]) < 0.5
-        assert m["truth"] is not None and m["lab_truth"] is not None
+        assert m["truth"] is not None and m["reference"] is not None
+        assert m["lab_truth"] == m["reference"]  # the deprecated older name, one release
     base = f"/api/campaigns/{done['id']}/report"
 
     r = c.get(base + ".csv")
@@ -116,8 +117,10 @@ def test_a_grid_campaign_runs_to_completion_and_every_report_downloads(fast_clie
         "truth_pitch_deg",
         "truth_yaw_deg",
         "truth_roll_deg",
+        *(f"reference_{a}" for a in ("x_mm", "y_mm", "z_mm", "pitch_deg", "yaw_deg", "roll_deg")),
     ]
     assert set(required) <= set(rows[0]) and len(rows) == 20
+    assert not [k for k in rows[0] if "lab_truth" in k or "calibrated_truth" in k]
     # every frame keeps the relative state at it; where the filter fused the pose, the
     # target is at rest within its sigmas (the table stands still at a set-point). This
     # simulated bench runs faster than real time, so the filter, tuned for a real table's
@@ -491,11 +494,11 @@ def test_raw_recording_holds_exactly_the_stored_frames_and_reprocesses(fast_clie
     items = c.get(f"/api/campaigns/{cid}/measurements").json()["items"]
     with open_recording(rec_path) as rec:
         assert rec.n_frames == len(items) == 36
-        assert rec.truth_t_mm is not None and rec.lab_truth_t_mm is not None
+        assert rec.truth_t_mm is not None and rec.reference_t_mm is not None
         for k, m in enumerate(items):
             assert rec.time_s[k] == pytest.approx(m["time_s"])
             np.testing.assert_allclose(
-                rec.lab_truth_t_mm[k], [m["lab_truth"][a] for a in ("x_mm", "y_mm", "z_mm")]
+                rec.reference_t_mm[k], [m["reference"][a] for a in ("x_mm", "y_mm", "z_mm")]
             )
     out = tmp_path / "poses.csv"
     assert main(["estimate", str(rec_path), "--out", str(out)]) == 0
@@ -518,8 +521,8 @@ def test_raw_recording_holds_exactly_the_stored_frames_and_reprocesses(fast_clie
             np.testing.assert_array_equal(
                 np.frombuffer(g.data, "<u2").reshape(240, 320), rec.frame(k)[0]
             )
-            lab = messages[topics.LAB_TRUTH][k][1]
-            assert lab["t_camera_target_mm"] == rec.lab_truth_t_mm[k].tolist()
+            lab = messages[topics.REFERENCE][k][1]
+            assert lab["t_camera_target_mm"] == rec.reference_t_mm[k].tolist()
     est = [p for _, p in messages[topics.ESTIMATE]]
     assert sum(e["ok"] for e in est) >= 30
     # as ROS 2 messages: the same frames and a pose with its covariance where there is one
@@ -566,7 +569,7 @@ def test_the_campaigns_camera_settings_are_applied_and_then_restored(fast_client
 
 
 def _write_recording_with_both_truths(path, n_frames: int) -> None:
-    """A small simulated recording whose /lab_truth is its /truth off by a known error
+    """A small simulated recording whose /reference is its /truth off by a known error
     (0.5, -0.4, 0.3 deg and (4, -3, 6) mm, as a mis-mounted bench would be): frame i
     shows the target at 2 m, turned by i deg of yaw, 20 frames/s."""
     from tests.conftest import facing_pose, render
@@ -577,7 +580,7 @@ def _write_recording_with_both_truths(path, n_frames: int) -> None:
 
     T_lab_exact = RigidTransform.from_euler_deg(0.5, -0.4, 0.3, (4.0, -3.0, 6.0))
     with RecordingWriter(
-        path, CameraModel(), paper_target(), with_truth=True, with_lab_truth=True
+        path, CameraModel(), paper_target(), with_truth=True, with_reference=True
     ) as w:
         for i in range(n_frames):
             T_exact = facing_pose(2000.0, yaw_deg=float(i), offset_mm=(30.0, -20.0))
@@ -603,10 +606,10 @@ def _facing_pose_columns(R, t_mm) -> dict[str, float]:
     return {"x_mm": x, "y_mm": yy, "z_mm": z, "pitch_deg": p, "yaw_deg": y, "roll_deg": r}
 
 
-def test_a_replayed_recordings_truth_and_lab_truth_are_stored_where_they_belong(tmp_path):
-    """A campaign on a replayed simulated recording with both references: each row's
-    ``truth_*`` is the input's /truth and its ``lab_truth_*`` the input's /lab_truth (not
-    /truth as lab truth), and the campaign's raw recording keeps both as they came in."""
+def test_a_replayed_recordings_truth_and_reference_are_stored_where_they_belong(tmp_path):
+    """A campaign on a replayed simulated recording with a truth and a reference: each row's
+    ``truth_*`` is the input's /truth and its ``reference_*`` the input's /reference (not
+    /truth as the reference), and the campaign's raw recording keeps both as they came in."""
     from tofpose.io.recording import open_recording
 
     n_in = 5
@@ -634,19 +637,19 @@ def test_a_replayed_recordings_truth_and_lab_truth_are_stored_where_they_belong(
     assert len(items) == 8
     with open_recording(source) as src, open_recording(raw) as out:
         assert out.n_frames == len(items)
-        assert out.truth_R is not None and out.lab_truth_R is not None
+        assert out.truth_R is not None and out.reference_R is not None
         for k, m in enumerate(items):
             i = (m["frame_index"] - 1) % n_in  # the replay's frame numbers start at 1
             assert m["encoders"] is None
             for got, R, t in (
                 (m["truth"], src.truth_R[i], src.truth_t_mm[i]),
-                (m["lab_truth"], src.lab_truth_R[i], src.lab_truth_t_mm[i]),
+                (m["reference"], src.reference_R[i], src.reference_t_mm[i]),
             ):
                 assert got == pytest.approx(_facing_pose_columns(R, t), abs=1e-9), (k, i)
             np.testing.assert_array_equal(out.truth_R[k], src.truth_R[i])
             np.testing.assert_array_equal(out.truth_t_mm[k], src.truth_t_mm[i])
-            np.testing.assert_array_equal(out.lab_truth_R[k], src.lab_truth_R[i])
-            np.testing.assert_array_equal(out.lab_truth_t_mm[k], src.lab_truth_t_mm[i])
+            np.testing.assert_array_equal(out.reference_R[k], src.reference_R[i])
+            np.testing.assert_array_equal(out.reference_t_mm[k], src.reference_t_mm[i])
         # the two references really differ, so a swap or a copy could not pass
-        assert abs(items[0]["truth"]["x_mm"] - items[0]["lab_truth"]["x_mm"]) > 1.0
+        assert abs(items[0]["truth"]["x_mm"] - items[0]["reference"]["x_mm"]) > 1.0
     assert exact_report.status_code == 200, exact_report.text  # the rows have an exact truth

@@ -112,7 +112,7 @@ def test_every_frame_of_a_profile_is_stored_with_its_capture_time_reference(late
     # reference at capture time: lab reference minus the exact pose is the bench's constant
     # mount error, also at 9.4 deg/s; the encoders read at arrival (80 ms late) would be
     # up to 0.75 deg off
-    d = np.array([float(r["lab_truth_yaw_deg"]) - float(r["truth_yaw_deg"]) for r in rows])
+    d = np.array([float(r["reference_yaw_deg"]) - float(r["truth_yaw_deg"]) for r in rows])
     assert np.ptp(d) < 0.03, np.ptp(d)
 
 
@@ -140,7 +140,7 @@ def test_the_report_gives_latency_dynamic_errors_and_frame_loss(stamped_late_lab
     moving = [r for r in rows if r["in_motion"] == "1"]
     # recomputed from the CSV: the yaw error RMS in motion, and the loss in motion
     e = np.array(
-        [float(r["yaw_deg"]) - float(r["lab_truth_yaw_deg"]) for r in moving if r["ok"] == "1"]
+        [float(r["yaw_deg"]) - float(r["reference_yaw_deg"]) for r in moving if r["ok"] == "1"]
     )
     assert dyn["yaw_deg"]["rms_in_motion"] == pytest.approx(np.sqrt(np.mean(e**2)), rel=1e-9)
     idx = [int(r["frame_index"]) for r in moving]

@@ -45,6 +45,11 @@ def test_stream_sends_hello_then_every_pose(client):
     for w, s in zip(last["angular_rate_deg_s"], last["angular_rate_sigma_deg_s"], strict=True):
         assert abs(w) < 3 * s + 0.05
     assert len(last["velocity_mm_s"]) == len(last["velocity_sigma_mm_s"]) == 3
+    # the lab's reference (the simulated bench's encoders + nominal geometry) under its
+    # name, 2 m ahead; the deprecated older name carries the same values for one release
+    ref = last["reference"]
+    assert abs(ref["z_mm"] - 2000.0) < 30.0 and ref["label"].startswith("nominal lab geometry")
+    assert last["truth"]["z_mm"] == ref["z_mm"] and last["truth"]["reference"] == ref["label"]
 
 
 def test_images_and_point_cloud_on_request(client):

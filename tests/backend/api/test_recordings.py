@@ -115,14 +115,14 @@ def test_a_recording_holds_every_frame_the_hub_delivered_with_the_live_results(
         wall = f["frames/wall_time_ns"][...]
         assert (np.abs(wall / 1e9 - time.time()) < 60).all() and (np.diff(wall) > 0).all()
     with open_recording(path) as rec_file:  # the project's reader takes it as any recording
-        assert rec_file.n_frames == n and rec_file.lab_truth_R is not None
+        assert rec_file.n_frames == n and rec_file.reference_R is not None
 
     r = c.get(f"/api/recordings/{rec['id']}/recording.mcap")
     assert r.status_code == 200 and r.headers["content-type"] == "application/x-mcap"
     (tmp_path / "rec.mcap").write_bytes(r.content)
     messages, _, _ = read_back(tmp_path / "rec.mcap")
     assert len(messages[topics.GRAY]) == n
-    assert len(messages[topics.LAB_TRUTH]) == n
+    assert len(messages[topics.REFERENCE]) == n
     # the messages carry the wall clock of each frame's capture, not the device's clock
     assert [t for t, _ in messages[topics.GRAY]] == wall.tolist()
 
@@ -143,7 +143,7 @@ def test_a_recording_holds_every_frame_the_hub_delivered_with_the_live_results(
     dist_m = distance.data.view("<f4").reshape(gray.shape)
     np.testing.assert_allclose(dist_m, dist_mm / 1000.0, rtol=2**-24, atol=0)
     labs = [t for _, m in ros2[ros2_topics.TF] for t in m.transforms]
-    assert [t.child_frame_id for t in labs].count("tofpose_target_lab") == n
+    assert [t.child_frame_id for t in labs].count("tofpose_target_reference") == n
 
 
 def test_an_unknown_mcap_profile_is_refused_naming_the_parameter_and_the_choices(app_client):

@@ -37,7 +37,7 @@ def _mean_error_mm(client, n: int = 10) -> float:
     p, errors = latest_pose(client), []
     for _ in range(n):
         p = latest_pose(client, p["frame_index"])
-        errors.append(p["truth"]["position_error_mm"])
+        errors.append(p["reference"]["position_error_mm"])
     return float(np.median(errors))
 
 
@@ -45,7 +45,14 @@ def test_the_live_error_says_its_reference_and_a_calibration_removes_the_bench_e
     ref = client.get("/api/reference").json()
     assert ref["source"] == "nominal" and ref["label"] == NOMINAL_LABEL
     assert ref["n_calibrations"] == 0 and ref["calibrated_available"] is True
-    assert latest_pose(client)["truth"]["reference"] == NOMINAL_LABEL
+    pose = latest_pose(client)
+    assert pose["reference"]["label"] == NOMINAL_LABEL
+    # the deprecated older name carries the same lab reference for one release
+    old = pose["truth"]
+    assert old == {
+        **{k: v for k, v in pose["reference"].items() if k != "label"},
+        "reference": NOMINAL_LABEL,
+    }
     nominal_error_mm = _mean_error_mm(client)
     assert nominal_error_mm > 5.0  # the simulated bench's mount error shows in it
     cid = _store_true_geometry(client)
@@ -53,7 +60,7 @@ def test_the_live_error_says_its_reference_and_a_calibration_removes_the_bench_e
     assert r.status_code == 200, r.text
     assert r.json()["source"] == "calibration" and r.json()["n_calibrations"] == 1
     pose = latest_pose(client, latest_pose(client)["frame_index"] + 1)
-    assert pose["truth"]["reference"] == f"calibration {cid} ('true-geometry')"
+    assert pose["reference"]["label"] == f"calibration {cid} ('true-geometry')"
     calibrated_error_mm = _mean_error_mm(client)
     assert calibrated_error_mm < 2.0 < nominal_error_mm, (calibrated_error_mm, nominal_error_mm)
     back = client.put("/api/reference", json={"calibration_id": None}, headers=AUTH)

@@ -111,3 +111,25 @@ def test_the_campaign_view_has_the_public_records_names():
     public = set(CampaignPublic.model_fields)
     assert view <= public, view - public
     assert public - view == {"n_setpoints", "n_done", "estimated_duration_s", "progress"}
+
+
+def test_the_lab_reference_is_named_reference_and_its_older_names_are_marked_deprecated(
+    sample_with_gaps, client
+):
+    """One meaning per word (docs/interop.md, "Names: truth and reference"): the live
+    pose's lab reference is ``reference``; ``truth`` (live) and ``lab_truth`` (campaign
+    frames) hold it under the older names, deprecated in the OpenAPI for one release."""
+    sample, _ = sample_with_gaps
+    body = _strict_json(pose_from_sample(sample).model_dump_json())
+    T = sample.frame.T_camera_target_lab
+    assert body["reference"]["z_mm"] == pytest.approx(T.t_mm[2])
+    assert body["reference"]["position_error_mm"] < 5.0  # the pose of a clean render
+    assert body["truth"]["reference"] == body["reference"]["label"]
+    assert body["truth"]["position_error_mm"] == body["reference"]["position_error_mm"]
+    schemas = client.get("/openapi.json").json()["components"]["schemas"]
+    pose = schemas["PosePublic"]["properties"]
+    assert pose["truth"].get("deprecated") is True and not pose["reference"].get("deprecated")
+    frames = schemas["MeasurementPublic"]["properties"]
+    assert frames["lab_truth"].get("deprecated") is True
+    assert not frames["reference"].get("deprecated") and not frames["truth"].get("deprecated")
+    assert "rendered" in frames["truth"]["description"]

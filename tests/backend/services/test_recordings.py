@@ -163,7 +163,7 @@ def test_every_frame_the_hub_delivers_is_written_with_pose_state_motion_and_stam
             np.testing.assert_array_equal(dist, sent[k].frame.distance_mm)
         np.testing.assert_array_equal(rec.truth_R, [s.frame.T_camera_target_exact.R for s in sent])
         np.testing.assert_array_equal(
-            rec.lab_truth_t_mm, [s.frame.T_camera_target_lab.t_mm for s in sent]
+            rec.reference_t_mm, [s.frame.T_camera_target_lab.t_mm for s in sent]
         )
     with h5py.File(path, "r") as f:
         np.testing.assert_array_equal(f["frames/index"][...], [s.frame.index for s in sent])

@@ -80,21 +80,78 @@ def test_truncated_file_is_a_clear_error(tmp_path):
             pass
 
 
-def test_lab_truth_is_stored_beside_truth_and_checked(tmp_path):
+def test_the_reference_is_stored_beside_the_truth_under_its_own_name_and_checked(tmp_path):
     p = tmp_path / "r.h5"
     cam = CameraModel()
     g = np.zeros((240, 320), np.uint16)
     d = np.full((240, 320), 1000.0, np.float32)
-    with RecordingWriter(p, cam, with_truth=True, with_lab_truth=True) as w:
-        with pytest.raises(ValueError, match="stores lab truth"):
+    with RecordingWriter(p, cam, with_truth=True, with_reference=True) as w:
+        with pytest.raises(ValueError, match="stores reference"):
             w.append(g, d, 0.0, np.eye(3), np.zeros(3))
         lab = {"lab_R_camera_target": np.eye(3), "lab_t_camera_target_mm": np.array([2, 0, 1e3])}
         w.append(g, d, 0.0, np.eye(3), np.array([0, 0, 1000.0]), **lab)
+    with h5py.File(p) as f:
+        assert sorted(k for k in f if k not in ("camera", "frames")) == ["reference", "truth"]
+        assert "lab_truth" not in f
     with open_recording(p) as rec:
         np.testing.assert_allclose(rec.truth_t_mm, [[0, 0, 1000]])
-        np.testing.assert_allclose(rec.lab_truth_t_mm, [[2, 0, 1000]])
+        np.testing.assert_allclose(rec.reference_t_mm, [[2, 0, 1000]])
+        np.testing.assert_allclose(rec.lab_truth_t_mm, rec.reference_t_mm)  # the older name
     with h5py.File(p, "a") as f:
-        del f["lab_truth/R_camera_target"]
+        del f["reference/R_camera_target"]
+    with pytest.raises(RecordingError, match="/reference needs both"):
+        open_recording(p)
+
+
+def _write_old_layout(path, t_truth_mm, t_reference_mm):
+    """A recording as versions before the rename wrote it, by hand: the lab's reference
+    under ``/lab_truth``. (N, 3) translations; identity rotations."""
+    n = len(t_truth_mm)
+    cam = CameraModel()
+    with h5py.File(path, "w") as f:
+        f.attrs["format"], f.attrs["version"] = "tofpose-recording", 1
+        c = f.create_group("camera")
+        for k in ("width", "height", "fx", "fy", "cx", "cy"):
+            c.attrs[k] = getattr(cam, k)
+        c.attrs["dist"] = np.asarray(cam.dist, float)
+        c.attrs["name"] = cam.name
+        fr = f.create_group("frames")
+        fr.create_dataset(
+            "gray", data=np.zeros((n, 240, 320), np.uint16), maxshape=(None, 240, 320)
+        )
+        fr.create_dataset(
+            "distance_mm",
+            data=np.full((n, 240, 320), 1000.0, np.float32),
+            maxshape=(None, 240, 320),
+        )
+        fr.create_dataset("time_s", data=np.arange(n) * 0.1, maxshape=(None,))
+        for group, t in (("truth", t_truth_mm), ("lab_truth", t_reference_mm)):
+            g = f.create_group(group)
+            g.create_dataset(
+                "R_camera_target", data=np.tile(np.eye(3), (n, 1, 1)), maxshape=(None, 3, 3)
+            )
+            g.create_dataset("t_camera_target_mm", data=np.asarray(t, float), maxshape=(None, 3))
+
+
+def test_a_recording_written_before_the_rename_reads_its_lab_truth_as_the_reference(tmp_path):
+    p = tmp_path / "old.h5"
+    _write_old_layout(p, [[0, 0, 1000.0], [0, 0, 1001.0]], [[3, 0, 1000.0], [3, 0, 1001.0]])
+    with open_recording(p) as rec:
+        np.testing.assert_allclose(rec.truth_t_mm[:, 0], [0, 0])
+        np.testing.assert_allclose(rec.reference_t_mm, [[3, 0, 1000], [3, 0, 1001]])
+        np.testing.assert_allclose(rec.reference_R, np.tile(np.eye(3), (2, 1, 1)))
+    # appending to it grows the group it has, not a second one beside it
+    w = RecordingWriter.reopen(p)
+    g, d = np.zeros((240, 320), np.uint16), np.full((240, 320), 1000.0, np.float32)
+    lab = {"lab_R_camera_target": np.eye(3), "lab_t_camera_target_mm": np.array([3, 0, 1002.0])}
+    w.append(g, d, 0.2, np.eye(3), np.array([0, 0, 1002.0]), **lab)
+    w.close()
+    with h5py.File(p) as f:
+        assert "reference" not in f and f["lab_truth/t_camera_target_mm"].shape == (3, 3)
+    with open_recording(p) as rec:
+        np.testing.assert_allclose(rec.reference_t_mm[:, 2], [1000, 1001, 1002])
+    with h5py.File(p, "a") as f:
+        del f["lab_truth/t_camera_target_mm"]
     with pytest.raises(RecordingError, match="/lab_truth needs both"):
         open_recording(p)
 

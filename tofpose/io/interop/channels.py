@@ -43,8 +43,9 @@ class ToFChannels:
 
     camera : the model logged as ``CameraCalibration`` with every frame (so a client that
     joins late, or a player that seeks, has it at once).
-    estimate / truth / lab_truth : create the channels of the pipeline's results and of
-    the two reference poses; ``log_frame`` refuses what has no channel.
+    estimate / truth / reference : create the channels of the pipeline's results, of the
+    pose the simulator rendered (truth) and of the lab's reference; ``log_frame``
+    refuses what has no channel.
     previews : also the images viewers display as they are (``previews``): the gray
     image in 8 bits and the distance colour-mapped.
     """
@@ -56,7 +57,7 @@ class ToFChannels:
         *,
         estimate: bool = True,
         truth: bool = False,
-        lab_truth: bool = False,
+        reference: bool = False,
         previews: bool = True,
         trail: bool = False,
         motion_fields: tuple[str, ...] = (),
@@ -105,7 +106,7 @@ class ToFChannels:
             )
         for wanted, topic, transform in (
             (truth, topics.TRUTH, topics.TRUTH_TRANSFORM),
-            (lab_truth, topics.LAB_TRUTH, topics.LAB_TRUTH_TRANSFORM),
+            (reference, topics.REFERENCE, topics.REFERENCE_TRANSFORM),
         ):
             if wanted:
                 self.optional[topic] = json_channel(topic, topics.POSE_SCHEMA, context)
@@ -166,11 +167,12 @@ class ToFChannels:
         log_time_ns: int,
         result: PoseResult | None = None,
         truth: tuple[np.ndarray, np.ndarray] | None = None,
-        lab_truth: tuple[np.ndarray, np.ndarray] | None = None,
+        reference: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> None:
         """Log one frame (gray (H, W) uint16, distance (H, W) float32 mm) at
         ``log_time_ns``; with the pipeline's ``result`` its estimate, pose, reflectors
-        and overlay; with ``truth`` / ``lab_truth`` = (R (3, 3), t (3,) mm) those poses."""
+        and overlay; with ``truth`` (the rendered pose) / ``reference`` (the lab's) = (R (3, 3),
+        t (3,) mm) those poses."""
         ts = msg.timestamp(log_time_ns)
         emit = self._emit
         emit(self.frame, lambda: msg.frame_payload(index, time_s), log_time_ns)
@@ -231,13 +233,13 @@ class ToFChannels:
                 ts,
                 log_time_ns,
             )
-        if lab_truth is not None:
+        if reference is not None:
             self._log_pose(
-                topics.LAB_TRUTH,
-                topics.LAB_TRUTH_TRANSFORM,
-                topics.LAB_FRAME_ID,
+                topics.REFERENCE,
+                topics.REFERENCE_TRANSFORM,
+                topics.REFERENCE_FRAME_ID,
                 index,
-                lab_truth,
+                reference,
                 ts,
                 log_time_ns,
             )

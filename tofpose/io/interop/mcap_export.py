@@ -53,7 +53,7 @@ def export_metadata(rec: Recording, pipeline: PosePipeline | None) -> dict[str, 
         ),
         "distance_unit": topics.DISTANCE_CHANNEL_METADATA["unit"],
         "has_truth": str(rec.truth_R is not None).lower(),
-        "has_lab_truth": str(rec.lab_truth_R is not None).lower(),
+        "has_reference": str(rec.reference_R is not None).lower(),
     }
 
 
@@ -101,7 +101,7 @@ def export_mcap(
         rec.camera,
         estimate=pipeline is not None,
         truth=rec.truth_R is not None,
-        lab_truth=rec.lab_truth_R is not None,
+        reference=rec.reference_R is not None,
         previews=previews,
         trail=True,
         motion_fields=motion.fields if motion is not None else (),
@@ -123,7 +123,7 @@ def export_mcap(
             result = pipeline.process(gray, dist, t) if pipeline is not None else None
             n_ok += int(result is not None and result.ok)
             truth = pose_at(rec.truth_R, rec.truth_t_mm, i)
-            lab = pose_at(rec.lab_truth_R, rec.lab_truth_t_mm, i)
+            lab = pose_at(rec.reference_R, rec.reference_t_mm, i)
             channels.log_frame(i, gray, dist, t, times_ns[i], result, truth, lab)
             if motion is not None:
                 sp = motion.setpoint_index

@@ -213,6 +213,18 @@ def _camera_and_catalog(src: _Source) -> tuple[CameraModel, Catalog | None]:
         raise McapImportError(f"{src.path}: {calib[0]}: {exc}") from exc
 
 
+def _stored_topic(src: _Source, topic: str, n: int) -> str:
+    """The name ``topic`` has in ``src``: itself, or an older name of it
+    (``topics.LEGACY_TOPICS``) when only that one has a message for each of the ``n``
+    frames."""
+    if src.counts.get(topic, 0) == n:
+        return topic
+    for old, new in topics.LEGACY_TOPICS.items():
+        if new == topic and src.counts.get(old, 0) == n:
+            return old
+    return topic
+
+
 def import_mcap(
     path: str | Path,
     out: str | Path,
@@ -225,8 +237,10 @@ def import_mcap(
     """Write the frames of the MCAP file ``path`` to the recording ``out``.
 
     A frame is a gray and a distance image with the same log time; ``/tofpose/truth``
-    and ``/tofpose/lab_truth`` become ``/truth`` and ``/lab_truth`` when every frame has
-    one. Returns {"frames": N}. ``McapImportError`` names what is missing or malformed.
+    and ``/tofpose/reference`` become ``/truth`` and ``/reference`` when every frame has
+    one (a file written before the rename has ``/tofpose/lab_truth``: read as
+    ``/tofpose/reference``, ``topics.LEGACY_TOPICS``). Returns {"frames": N}.
+    ``McapImportError`` names what is missing or malformed.
     """
     path, out = Path(path), Path(out)
     if out.exists() and not overwrite:
@@ -242,14 +256,15 @@ def import_mcap(
         )
     camera, catalog = _camera_and_catalog(src)
     unit = src.by_topic[dist_t].metadata.get("unit")
-    extra = [t for t in (topics.FRAME, topics.TRUTH, topics.LAB_TRUTH) if src.counts.get(t, 0) == n]
+    reference_t = _stored_topic(src, topics.REFERENCE, n)
+    extra = [t for t in (topics.FRAME, topics.TRUTH, reference_t) if src.counts.get(t, 0) == n]
     partial = out.with_name(out.name + ".partial")  # renamed when complete
     writer = RecordingWriter(
         partial,
         camera,
         catalog,
         with_truth=topics.TRUTH in extra,
-        with_lab_truth=topics.LAB_TRUTH in extra,
+        with_reference=reference_t in extra,
     )
     frames = 0
     try:
@@ -274,7 +289,7 @@ def import_mcap(
             frame = group.get(topics.FRAME)
             time_s = float(frame["time_s"]) if frame is not None else ns * 1e-9
             poses = {}
-            for key, topic in (("truth", topics.TRUTH), ("lab", topics.LAB_TRUTH)):
+            for key, topic in (("truth", topics.TRUTH), ("lab", reference_t)):
                 if topic in extra:
                     if topic not in group:
                         raise McapImportError(f"{where}: no {topic} message for this frame")

@@ -240,13 +240,17 @@ def export_rrd(
                 _log_result(rr, stream, result, trail)
             for name, pose, child in (
                 ("truth", pose_at(rec.truth_R, rec.truth_t_mm, i), topics.TRUTH_FRAME_ID),
-                ("lab", pose_at(rec.lab_truth_R, rec.lab_truth_t_mm, i), topics.LAB_FRAME_ID),
+                (
+                    "reference",
+                    pose_at(rec.reference_R, rec.reference_t_mm, i),
+                    topics.REFERENCE_FRAME_ID,
+                ),
             ):
                 if pose is None or not np.all(np.isfinite(pose[1])):
                     continue
-                topic = topics.TRUTH_TRANSFORM if name == "truth" else topics.LAB_TRUTH_TRANSFORM
+                topic = topics.TRUTH_TRANSFORM if name == "truth" else topics.REFERENCE_TRANSFORM
                 stream.log(topic, _transform(rr, pose[0], pose[1], child))
-                if name == "lab":
+                if name == "reference":
                     _log_series(rr, stream, "lab_reference", *pose)
             if motion is not None:
                 for path, enc, target in zip(

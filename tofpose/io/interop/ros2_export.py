@@ -47,11 +47,11 @@ class _Ros2Channels:
 
 
 def _reference_transforms(rec: Recording, i: int, time_ns: int) -> list[dict]:
-    """Frame ``i``'s /truth and /lab_truth as transforms from the optical frame."""
+    """Frame ``i``'s /truth and /reference as transforms from the optical frame."""
     out = []
     for pose, child in (
         (pose_at(rec.truth_R, rec.truth_t_mm, i), topics.TRUTH_FRAME_ID),
-        (pose_at(rec.lab_truth_R, rec.lab_truth_t_mm, i), topics.LAB_FRAME_ID),
+        (pose_at(rec.reference_R, rec.reference_t_mm, i), topics.REFERENCE_FRAME_ID),
     ):
         if pose is not None:
             R, t_mm = pose

@@ -21,7 +21,7 @@ POSE = "/tofpose/pose"  # geometry_msgs/msg/PoseWithCovarianceStamped: each fram
 STATE_POSE = "/tofpose/relative_state/pose"  # PoseWithCovarianceStamped: the filter's pose
 STATE_TWIST = "/tofpose/relative_state/twist"  # geometry_msgs/msg/TwistWithCovarianceStamped
 # transforms
-TF = "/tf"  # tf2_msgs/msg/TFMessage: optical frame -> target, target_truth, target_lab
+TF = "/tf"  # tf2_msgs/msg/TFMessage: optical frame -> target, target_truth, target_reference
 TF_STATIC = "/tf_static"  # TFMessage, once: camera_link -> camera optical frame
 
 IMAGE_TYPE = "sensor_msgs/msg/Image"
@@ -47,7 +47,7 @@ CAMERA_LINK_FRAME_ID = "tofpose_camera_link"  # REP 103 body frame: x forward, y
 CAMERA_OPTICAL_FRAME_ID = "tofpose_camera_optical_frame"  # x right, y down, z forward
 TARGET_FRAME_ID = "tofpose_target"  # the pipeline's estimate
 TRUTH_FRAME_ID = "tofpose_target_truth"  # the recording's /truth
-LAB_FRAME_ID = "tofpose_target_lab"  # the recording's /lab_truth
+REFERENCE_FRAME_ID = "tofpose_target_reference"  # the recording's /reference (the lab's)
 
 #: the MCAP profile name of the file (MCAP's ``profile`` header field)
 MCAP_PROFILE = "ros2"

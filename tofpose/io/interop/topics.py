@@ -18,10 +18,10 @@ POSE_TRANSFORM = "/tofpose/pose_transform"  # foxglove.FrameTransform camera -> 
 POSE = "/tofpose/pose"  # foxglove.PoseInFrame: the estimate in the camera frame
 REFLECTORS = "/tofpose/reflectors"  # foxglove.PointCloud: matched reflector points
 ESTIMATE = "/tofpose/estimate"  # JSON: ok/reason, covariance, sigmas, timings, matches
-TRUTH = "/tofpose/truth"  # JSON: the recording's /truth pose, exact
+TRUTH = "/tofpose/truth"  # JSON: the pose the simulator rendered (a recording's /truth)
 TRUTH_TRANSFORM = "/tofpose/truth_transform"  # foxglove.FrameTransform camera -> target_truth
-LAB_TRUTH = "/tofpose/lab_truth"  # JSON: the lab's reference (/lab_truth), exact
-LAB_TRUTH_TRANSFORM = "/tofpose/lab_truth_transform"  # camera -> target_lab
+REFERENCE = "/tofpose/reference"  # JSON: the lab's reference (a recording's /reference)
+REFERENCE_TRANSFORM = "/tofpose/reference_transform"  # camera -> target_reference
 TARGET_ORIGIN = "/tofpose/target_origin"  # foxglove.PointCloud: the estimate's origin (trail)
 ENCODERS = "/tofpose/motion/encoders"  # JSON: the turntable's encoders at each frame
 SETPOINT = "/tofpose/motion/setpoint"  # JSON: the set-point each frame was measured at
@@ -29,7 +29,14 @@ SETPOINT = "/tofpose/motion/setpoint"  # JSON: the set-point each frame was meas
 CAMERA_FRAME_ID = "camera"
 TARGET_FRAME_ID = "target"
 TRUTH_FRAME_ID = "target_truth"
-LAB_FRAME_ID = "target_lab"
+REFERENCE_FRAME_ID = "target_reference"
+
+#: older names of channels, read by the importer as the current ones (files written before
+#: "truth" came to mean only the rendered pose called the lab's reference "lab_truth")
+LEGACY_TOPICS = {
+    "/tofpose/lab_truth": REFERENCE,
+    "/tofpose/lab_truth_transform": REFERENCE_TRANSFORM,
+}
 
 #: the MCAP metadata record with what no channel carries
 METADATA_NAME = "tofpose"

@@ -19,8 +19,12 @@ NODES = (
     "/turntable",
     "/estimate",
     "/estimate/plate",
+    "/reference",
+    "/reference/plate",
+    "/reference/label",
     "/truth",
     "/truth/plate",
+    "/truth/label",
     *(f"/estimate/reflector_{i}" for i in range(1, 9)),
 )
 
@@ -51,6 +55,7 @@ def test_the_scene_has_its_nodes_and_shows_the_live_pose(scene_app):
     camera_z_m = scene.camera_node.position[2]
     assert camera_z_m == pytest.approx(13.0, abs=1e-3)
     np.testing.assert_allclose(scene.estimate.position, [0.0, 0.0, 15.0], atol=0.03)
+    np.testing.assert_allclose(scene.reference.position, [0.0, 0.0, 15.0], atol=0.03)
     np.testing.assert_allclose(scene.truth.position, [0.0, 0.0, 15.0], atol=0.03)
     assert all(h.color == STATE_COLOURS["matched"] for h in scene.estimate_reflectors.values())
     # The back-projected image holds the plate at 2 m (and the lab's wall behind it).
@@ -114,21 +119,32 @@ def test_a_scene_on_a_wide_bind_with_closed_reads_is_refused_with_a_reason(tmp_p
     assert opened.scene_refusal is None
 
 
-def test_the_truth_node_shows_the_lab_reference_else_the_exact_pose():
-    """``/truth`` keeps showing the lab's reference (as on the simulator); a frame with
-    the exact pose alone (a replayed recording with /truth only) shows that."""
-    from backend.drivers.base import CameraFrame
-    from backend.services.live.scene import _shown_truth
-    from tofpose.core.geometry import RigidTransform
+def test_the_reference_node_shows_the_labs_reference_and_the_truth_node_the_rendered_pose(
+    scene_app,
+):
+    """On the simulator a frame has both: ``/reference`` sits at the lab's reference
+    (encoders + nominal geometry, off by the bench's mount and placement errors) and
+    ``/truth`` at the pose rendered; a frame without one hides its node."""
+    from dataclasses import replace
 
-    exact = RigidTransform(np.eye(3), np.array([0.0, 0.0, 2000.0]))
-    lab = RigidTransform(np.eye(3), np.array([5.0, 0.0, 2000.0]))
-    image = np.zeros((2, 2), np.uint16)
+    from backend.services.live.scene_model import lab_camera_pose
 
-    def frame(**poses):
-        return CameraFrame(image, image.astype(np.float32), 0.0, 1, **poses)
-
-    assert _shown_truth(frame(T_camera_target_exact=exact, T_camera_target_lab=lab)) is lab
-    assert _shown_truth(frame(T_camera_target_exact=exact)) is exact
-    assert _shown_truth(frame(T_camera_target_lab=lab)) is lab
-    assert _shown_truth(frame()) is None
+    client, scene = scene_app
+    _after(scene, 2)
+    assert client.put("/api/scene", json={"paused": True}, headers=AUTH).status_code == 200
+    sample = client.app.state.tofpose.acquisition.latest
+    f = sample.frame
+    assert f.T_camera_target_lab is not None and f.T_camera_target_exact is not None
+    scene.update(sample)
+    T_lab_cam = lab_camera_pose(f.meta.get("encoders"))
+    for node, T in (
+        (scene.reference, f.T_camera_target_lab),
+        (scene.truth, f.T_camera_target_exact),
+    ):
+        assert node.visible
+        np.testing.assert_allclose(node.position, T_lab_cam.compose(T).t_mm / 1000.0, atol=1e-9)
+    apart_mm = 1000.0 * np.linalg.norm(np.subtract(scene.reference.position, scene.truth.position))
+    assert apart_mm > 1.0  # the nominal geometry is not what the simulator rendered
+    # a real camera's frame: the lab's reference only
+    scene.update(replace(sample, frame=replace(f, T_camera_target_exact=None), cache={}))
+    assert scene.reference.visible and not scene.truth.visible

@@ -43,7 +43,7 @@ def _rows(n_sp=2, n=30, offset=0.0, fail_every=0):
             r = {"setpoint_index": sp, "ok": 0 if fail_every and k % fail_every == 0 else 1}
             for a in AXES:
                 ref = 100.0 * sp
-                r["lab_truth_" + a] = ref
+                r["reference_" + a] = ref
                 r["truth_" + a] = ref
                 r[a] = ref + offset + rng.normal(0, 0.01)
                 r["sigma_" + a] = 0.01

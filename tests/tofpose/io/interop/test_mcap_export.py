@@ -35,8 +35,8 @@ PER_FRAME = {
     topics.REFLECTORS: "foxglove.PointCloud",
     topics.TRUTH: "tofpose.Pose",
     topics.TRUTH_TRANSFORM: "foxglove.FrameTransform",
-    topics.LAB_TRUTH: "tofpose.Pose",
-    topics.LAB_TRUTH_TRANSFORM: "foxglove.FrameTransform",
+    topics.REFERENCE: "tofpose.Pose",
+    topics.REFERENCE_TRANSFORM: "foxglove.FrameTransform",
 }
 PER_POSE = {
     topics.POSE_TRANSFORM: "foxglove.FrameTransform",
@@ -173,7 +173,7 @@ def test_reference_poses_are_exact(recording, contents):
     with open_recording(recording) as rec:
         for topic, tf_topic, R_all, t_all in (
             (topics.TRUTH, topics.TRUTH_TRANSFORM, rec.truth_R, rec.truth_t_mm),
-            (topics.LAB_TRUTH, topics.LAB_TRUTH_TRANSFORM, rec.lab_truth_R, rec.lab_truth_t_mm),
+            (topics.REFERENCE, topics.REFERENCE_TRANSFORM, rec.reference_R, rec.reference_t_mm),
         ):
             for i, ((_, pose), (_, tf)) in enumerate(
                 zip(messages[topic], messages[tf_topic], strict=True)
@@ -219,7 +219,7 @@ def test_camera_model_and_metadata(recording, contents):
     assert Catalog.from_json(meta["catalog"]) == catalog
     assert json.loads(meta["recording_camera"]) == cam.to_dict()
     assert json.loads(meta["pipeline_config"])["refinement"] == "ml"
-    assert meta["has_truth"] == meta["has_lab_truth"] == "true"
+    assert meta["has_truth"] == meta["has_reference"] == "true"
 
 
 def test_no_estimate_writes_frames_only(recording, tmp_path):

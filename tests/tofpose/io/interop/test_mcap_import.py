@@ -12,7 +12,9 @@ from foxglove.channels import CameraCalibrationChannel, RawImageChannel
 
 from tofpose.cli import main
 from tofpose.core.camera import CameraModel
-from tofpose.io.interop.foxglove_messages import camera_calibration, timestamp
+from tofpose.io.interop import topics
+from tofpose.io.interop.channels import json_channel
+from tofpose.io.interop.foxglove_messages import camera_calibration, pose_payload, timestamp
 from tofpose.io.interop.mcap_import import McapImportError, import_mcap
 from tofpose.io.recording import open_recording
 
@@ -43,8 +45,8 @@ def test_round_trip_is_exact_and_gives_the_same_poses(recording, exported, tmp_p
                 "frames/time_s",
                 "truth/R_camera_target",
                 "truth/t_camera_target_mm",
-                "lab_truth/R_camera_target",
-                "lab_truth/t_camera_target_mm",
+                "reference/R_camera_target",
+                "reference/t_camera_target_mm",
             ]
         )
     )
@@ -61,6 +63,48 @@ def test_round_trip_is_exact_and_gives_the_same_poses(recording, exported, tmp_p
     assert main(["estimate", str(back), "--out", str(csv_b)]) == 0
     assert csv_a.read_bytes() == csv_b.read_bytes()
     assert csv_a.read_text().count("\n") == 9
+
+
+def test_an_mcap_written_before_the_rename_imports_its_lab_truth_as_the_reference(tmp_path):
+    """A file of the older naming, written here channel by channel: the lab's reference
+    on ``/tofpose/lab_truth`` becomes the recording's ``/reference``."""
+    camera = CameraModel(width=8, height=6, fx=10.0, fy=11.0, cx=3.5, cy=2.5)
+    ctx = foxglove.Context()
+    gray_ch = RawImageChannel(topics.GRAY, context=ctx)
+    dist_ch = RawImageChannel(topics.DISTANCE, context=ctx, metadata={"unit": "mm"})
+    calib_ch = CameraCalibrationChannel(topics.CALIBRATION, context=ctx)
+    old_ch = json_channel("/tofpose/lab_truth", topics.POSE_SCHEMA, ctx)
+    t_reference_mm = [[5.0, -2.0, 1000.0 + i] for i in range(3)]
+    src = tmp_path / "old.mcap"
+    with foxglove.open_mcap(src, context=ctx):
+        for i, t_mm in enumerate(t_reference_mm):
+            ns = 1_700_000_000_000_000_000 + i * 50_000_000
+            ts = timestamp(ns)
+            calib_ch.log(camera_calibration(camera, ts), log_time=ns)
+            gray = np.full((6, 8), 100 + i, "<u2")
+            dist = np.full((6, 8), 1000.0 + i, "<f4")
+            for ch, img, enc in ((gray_ch, gray, "16UC1"), (dist_ch, dist, "32FC1")):
+                ch.log(
+                    fm.RawImage(
+                        timestamp=ts,
+                        frame_id="camera",
+                        width=8,
+                        height=6,
+                        encoding=enc,
+                        step=8 * img.itemsize,
+                        data=img.tobytes(),
+                    ),
+                    log_time=ns,
+                )
+            old_ch.log(pose_payload(i, np.eye(3), np.array(t_mm)), log_time=ns)
+    out = tmp_path / "old.h5"
+    assert import_mcap(src, out, progress=False) == {"frames": 3}
+    with h5py.File(out) as f:
+        assert "reference" in f and "lab_truth" not in f and "truth" not in f
+    with open_recording(out) as rec:
+        np.testing.assert_array_equal(rec.reference_t_mm, t_reference_mm)
+        np.testing.assert_array_equal(rec.reference_R, np.tile(np.eye(3), (3, 1, 1)))
+        assert rec.truth_R is None
 
 
 def _foreign_mcap(path, n=3, bad_frame=None):

@@ -224,7 +224,7 @@ def test_transforms_are_the_estimate_and_the_recordings_references(recording, ro
     with open_recording(recording) as rec:
         refs = {
             "tofpose_target_truth": (rec.truth_R, rec.truth_t_mm),
-            "tofpose_target_lab": (rec.lab_truth_R, rec.lab_truth_t_mm),
+            "tofpose_target_reference": (rec.reference_R, rec.reference_t_mm),
         }
     for i, (r, (_, tf)) in enumerate(zip(results, ros2[topics.TF], strict=True)):
         by_child = {t.child_frame_id: t for t in tf.transforms}

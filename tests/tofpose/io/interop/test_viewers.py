@@ -156,7 +156,7 @@ def test_the_foxglove_layout_names_only_what_the_export_writes(turntable_export)
         subscribed
     )
     ids = {topics.CAMERA_FRAME_ID, topics.TARGET_FRAME_ID, topics.TRUTH_FRAME_ID}
-    assert frames <= ids | {topics.LAB_FRAME_ID}
+    assert frames <= ids | {topics.REFERENCE_FRAME_ID}
     layout_3d = layout["configById"]["3D!tofpose-scene"]["topics"][topics.TARGET_ORIGIN]
     assert layout_3d["decayTime"] > 0  # the origin's history is the trail
 
