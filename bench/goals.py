@@ -28,8 +28,8 @@ Each figure is the median over repeats (min-max beside it); the ratio is the med
 measured over the median reference; "met" is computed from them. ``--quick``: tiny
 workloads, one repeat (for trying it out and for the tests).
 
-Run: ``python bench/goals.py [--quick] [--only first_pose help ...]``. Prints the table
-(progress on stderr).
+Run: ``python bench/goals.py [--quick] [--only first_pose startup ...]`` (``GROUPS``).
+Prints the table (progress on stderr).
 """
 
 from __future__ import annotations
