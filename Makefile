@@ -66,6 +66,8 @@ test: lint system-deps frontend $(VENV)/.kernels
 	$(PY) -m pytest -q -m load_sensitive; load=$$?; \
 	[ $$rest -eq 0 ] && [ $$load -eq 0 ]
 
+# docs/results.md and the README's generated tables; one section alone with
+# BENCH_ARGS="--only SECTION" (e.g. --only goals: issue 47's goals table).
 bench: system-deps frontend $(VENV)/.kernels
 	$(PY) bench/report.py $(BENCH_ARGS)
 

@@ -24,8 +24,6 @@ import asyncio
 import contextlib
 import io
 import json
-import os
-import signal
 import statistics
 import subprocess
 import sys
@@ -40,8 +38,9 @@ from tqdm import tqdm
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench._common import all_cores, table  # noqa: E402
-from bench.live import CHROMIUM, CHROMIUM_ARGS, Server, _free_port, _run  # noqa: E402
+from bench._common import all_cores, free_port, table  # noqa: E402
+from bench._rerun_web import rerun_web_screenshot  # noqa: E402
+from bench.live import Server, _run  # noqa: E402
 from tofpose.cli import main as tofpose_cli  # noqa: E402
 from tofpose.io.recording import RecordingWriter, open_recording  # noqa: E402
 
@@ -212,7 +211,7 @@ def live_table(rate_hz: float, seconds: float, repeats: int) -> str:
     for label, client in cases:
         runs = []
         for _ in range(repeats):
-            fox_port = _free_port()
+            fox_port = free_port()
             env = {"TOFPOSE_FOXGLOVE_PORT": str(fox_port)} if client is not None else {}
             server = Server(rate_hz, env=env)
             fc = None
@@ -266,8 +265,6 @@ def live_table(rate_hz: float, seconds: float, repeats: int) -> str:
 
 def rerun_screenshot(out_png: Path, tmp: Path) -> None:
     """Rerun's web viewer on an export of the cluttered scene, in headless chromium."""
-    from playwright.sync_api import sync_playwright
-
     rec, mcap = tmp / "shot.h5", tmp / "shot.mcap"
     assert (
         tofpose(
@@ -286,30 +283,7 @@ def rerun_screenshot(out_png: Path, tmp: Path) -> None:
         == 0
     )
     assert tofpose(["export", "mcap", str(rec), "--out", str(mcap), "--force"]) == 0
-    web, grpc = _free_port(), _free_port()
-    rerun = Path(sys.executable).parent / "rerun"
-    # its own session: ``rerun`` is a wrapper that starts the viewer binary as a child,
-    # and both must go when we are done
-    proc = subprocess.Popen(
-        [str(rerun), "--serve-web", str(mcap), "--web-viewer-port", str(web), "--port", str(grpc)],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-    )
-    try:
-        time.sleep(5.0)
-        args = [a for a in CHROMIUM_ARGS if a != "--disable-gpu"] + ["--ignore-gpu-blocklist"]
-        with sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=CHROMIUM, args=args)
-            page = browser.new_page(viewport={"width": 1400, "height": 900})
-            page.goto(f"http://127.0.0.1:{web}/?url=rerun%2Bhttp://127.0.0.1:{grpc}/proxy")
-            time.sleep(25.0)  # the wasm viewer loads, then streams the recording
-            out_png.parent.mkdir(parents=True, exist_ok=True)
-            page.screenshot(path=str(out_png))
-            browser.close()
-    finally:
-        os.killpg(proc.pid, signal.SIGTERM)
-        proc.wait(10)
+    rerun_web_screenshot([mcap], out_png, viewport=(1400, 900), load_s=25.0)
     docs = ROOT / "docs"
     shown = out_png.relative_to(docs) if out_png.is_relative_to(docs) else out_png
     print(f"![Rerun's web viewer on an exported recording (`rerun REC.mcap`)]({shown})")

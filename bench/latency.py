@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
 import subprocess
 import sys
 import tempfile
@@ -37,7 +36,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench._common import all_cores, free_port, table  # noqa: E402
+from bench._common import all_cores, table  # noqa: E402
+from bench._serve import start_serve, stop_serve  # noqa: E402
 
 EMULATOR_ADDRESS = "127.0.0.47"
 
@@ -46,9 +46,7 @@ class Server:
     """``tofpose serve`` on a free port with a fresh data directory and ``camera``."""
 
     def __init__(self, camera: str, rate_hz: float, data_dir: Path) -> None:
-        self.port = free_port()
         env = {
-            **os.environ,
             "TOFPOSE_CAMERA": camera,
             "TOFPOSE_MOTION": "sim" if camera == "sim" else "none",
             "TOFPOSE_FRAME_RATE_HZ": str(rate_hz),
@@ -56,37 +54,14 @@ class Server:
         }
         if camera.startswith("replay:"):
             env["TOFPOSE_REPLAY_RATE_HZ"] = str(rate_hz)
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "tofpose.cli", "serve", "--port", str(self.port), "--no-viser"],
-            env=env,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )
-        deadline = time.monotonic() + 900  # a first start compiles the kernels
-        while time.monotonic() < deadline:
-            if self.proc.poll() is not None:
-                raise RuntimeError(f"server for {camera} exited ({self.proc.returncode})")
-            try:
-                h = self.get("/api/health")
-                if h["camera"]["state"] == "ok" and h["pipeline"]["state"] == "ready":
-                    return
-            except OSError:
-                pass
-            time.sleep(0.2)
-        self.stop()
-        raise RuntimeError(f"server for {camera} did not start")
+        self.proc, self.port = start_serve(env, camera, poll_timeout_s=5.0)
 
     def get(self, path: str) -> dict:
         with urllib.request.urlopen(f"http://127.0.0.1:{self.port}{path}", timeout=5) as r:
             return json.load(r)
 
     def stop(self) -> None:
-        self.proc.send_signal(signal.SIGINT)
-        try:
-            self.proc.wait(30)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
+        stop_serve(self.proc)
 
 
 def read_poses(port: int, seconds: float) -> list[tuple[dict, int]]:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import os
 import platform
 import subprocess
 import sys
@@ -19,7 +20,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench import accuracy, baseline, paper, physics, realistic, robustness  # noqa: E402
+from bench import accuracy, baseline, goals, paper, physics, realistic, robustness  # noqa: E402
 
 DOC = ROOT / "docs" / "results.md"
 IMG = ROOT / "docs" / "img" / "results"
@@ -415,6 +416,72 @@ def scaleout_section(quick: bool) -> str:
     )
 
 
+GOALS_BEGIN, GOALS_END = "<!-- goals:begin -->", "<!-- goals:end -->"
+
+
+def goals_table(quick: bool) -> str:
+    """Issue 47's table measured (``bench/goals.py``, in this process: its progress shows
+    on stderr), printed and returned as Markdown."""
+    before = os.getloadavg()[0]
+    rows, offenders = goals.run(quick)
+    text = goals.report(rows, offenders, (before, os.getloadavg()[0]))
+    print(text, flush=True)
+    return text
+
+
+def goals_section(table_md: str) -> str:
+    """The "Where users wait" section of docs/results.md around ``table_md``, between its
+    markers (``--only goals`` regenerates just this block, and the README's copy)."""
+    return "\n".join(
+        [
+            GOALS_BEGIN,
+            "## Where users wait: issue 47's goals",
+            "",
+            "`bench/goals.py`: every row of issue 47's table measured in one run on this "
+            "machine, each beside a reference measured in the same run (medians over "
+            "repeats, min-max in brackets; ratio = median measured / median reference; "
+            '"met" is computed from these numbers). The first pose is counted from '
+            "`tofpose serve`'s start as `make run` starts it, with an empty numba cache (the "
+            "venv and the dashboard's build, which a fresh clone's `make run` does first, "
+            "are not counted: `bench/first_run.py` times those). This section was "
+            f"regenerated on {datetime.date.today().isoformat()}.",
+            "",
+            table_md,
+            "",
+            GOALS_END,
+        ]
+    )
+
+
+def readme_goals(table_md: str) -> list[str]:
+    """The README's copy of the goals table, between the goals markers (inside its
+    generated block)."""
+    return [
+        GOALS_BEGIN,
+        "`python bench/goals.py`: issue 47's goals, each beside a reference measured in "
+        "the same run (details in [docs/results.md](docs/results.md)):",
+        "",
+        table_md,
+        GOALS_END,
+    ]
+
+
+def update_readme_goals(table_md: str) -> None:
+    """Replace the README's goals block (inserted at the end of its generated block when
+    it has none yet)."""
+    text = README.read_text()
+    block = "\n".join(readme_goals(table_md))
+    i, j = text.find(GOALS_BEGIN), text.find(GOALS_END)
+    if i >= 0 and j > i:
+        text = text[:i] + block + text[j + len(GOALS_END) :]
+    else:
+        k = text.find(END)
+        if k < 0:
+            raise SystemExit(f"{README}: the bench markers are missing")
+        text = text[:k] + "\n" + block + "\n" + text[k:]
+    README.write_text(text)
+
+
 SAFETY_BEGIN, SAFETY_END = "<!-- safety:begin -->", "<!-- safety:end -->"
 PIXEL_BEGIN, PIXEL_END = "<!-- pixelfit:begin -->", "<!-- pixelfit:end -->"
 
@@ -602,6 +669,7 @@ def main() -> None:
             "foreign",
             "physics",
             "realistic",
+            "goals",
         ],
         help="regenerate one section of docs/results.md in place",
     )
@@ -646,6 +714,12 @@ def main() -> None:
             ap.error("--only foreign needs the recordings: --foreign REC.h5 [REC.h5 ...]")
         replace_heading_block("## Frames from another renderer", foreign_section(args.foreign))
         print(f"rewrote the foreign-renderer section of {DOC}", file=sys.stderr)
+        return
+    if args.only == "goals":
+        table_md = goals_table(q)
+        replace_section(GOALS_BEGIN, GOALS_END, goals_section(table_md))
+        update_readme_goals(table_md)
+        print(f"rewrote the goals section of {DOC} and its table in {README}", file=sys.stderr)
         return
     if args.only == "safety":
         replace_section(SAFETY_BEGIN, SAFETY_END, safety_section(q))
@@ -797,6 +871,8 @@ def main() -> None:
     sec_scale = scaleout_section(q)
     sec_safety = safety_section(q)
     sec_pixel = pixelfit_section(q)
+    goals_md = goals_table(q)
+    sec_goals = goals_section(goals_md)
     text = "\n".join(
         head
         + [
@@ -811,6 +887,7 @@ def main() -> None:
             sec_dyn,
             sec_scale,
             sec_safety,
+            sec_goals,
         ]
         + speed
     )
@@ -842,6 +919,8 @@ def main() -> None:
             "loss and recovery:",
             "",
             dev_tab,
+            "",
+            *readme_goals(goals_md),
         ]
     )
     print(f"wrote {DOC} in {minutes:.1f} min", file=sys.stderr)

@@ -25,9 +25,7 @@ import argparse
 import base64
 import json
 import os
-import signal
 import socket
-import subprocess
 import sys
 import tempfile
 import threading
@@ -40,44 +38,22 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench._common import all_cores, free_port, table  # noqa: E402
+from bench._common import all_cores, table  # noqa: E402
+from bench._serve import start_serve, stop_serve  # noqa: E402
 
 
 class Server:
     """``tofpose serve`` on a free port with a fresh data directory."""
 
     def __init__(self, rate_hz: float, caps: int) -> None:
-        self.port = free_port()
         self.tmp = tempfile.TemporaryDirectory()
-        env = {
-            **os.environ,
-            "TOFPOSE_FRAME_RATE_HZ": str(rate_hz),
-            "TOFPOSE_DATA_DIR": self.tmp.name,
-        }
+        env = {"TOFPOSE_FRAME_RATE_HZ": str(rate_hz), "TOFPOSE_DATA_DIR": self.tmp.name}
         if caps:
             env |= {
                 "TOFPOSE_LIVE_MAX_CLIENTS_PER_ADDRESS": str(caps),
                 "TOFPOSE_LIVE_MAX_CLIENTS": str(caps),
             }
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "tofpose.cli", "serve", "--port", str(self.port), "--no-viser"],
-            env=env,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )
-        deadline = time.monotonic() + 900  # a first start compiles the kernels
-        while time.monotonic() < deadline:
-            try:
-                with urllib.request.urlopen(self.url("/api/health"), timeout=1) as r:
-                    h = json.load(r)
-                if h["camera"]["state"] == "ok" and h["pipeline"]["state"] == "ready":
-                    break
-            except OSError:
-                pass
-            time.sleep(0.2)
-        else:
-            self.proc.kill()
-            raise RuntimeError("server did not start")
+        self.proc, self.port = start_serve(env, "the STOP bench", poll_timeout_s=1.0)
         self.key = (Path(self.tmp.name) / "api_token").read_text().strip()
 
     def url(self, path: str) -> str:
@@ -111,12 +87,7 @@ class Server:
         return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
     def stop(self) -> None:
-        self.proc.send_signal(signal.SIGINT)
-        try:
-            self.proc.wait(30)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
+        stop_serve(self.proc)
         self.tmp.cleanup()
 
 

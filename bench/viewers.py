@@ -16,9 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import signal
-import subprocess
 import sys
 import tempfile
 import time
@@ -29,8 +26,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.live import CHROMIUM, CHROMIUM_ARGS, Server  # noqa: E402
-from tests.backend.serve_process import free_port  # noqa: E402
+from bench._rerun_web import rerun_web_screenshot  # noqa: E402
+from bench.live import Server  # noqa: E402
 from tofpose.cli import main as tofpose  # noqa: E402
 from tofpose.io.interop import topics  # noqa: E402
 
@@ -95,31 +92,7 @@ def mcap_summary(mcap: Path) -> str:
 
 def rerun_screenshot(files: list[Path], out_png: Path) -> None:
     """Rerun's web viewer on ``files`` (a recording and a blueprint), 1366 x 768."""
-    from playwright.sync_api import sync_playwright
-
-    web, grpc = free_port(), free_port()
-    rerun = Path(sys.executable).parent / "rerun"
-    command = [str(rerun), "--serve-web", *map(str, files)]
-    proc = subprocess.Popen(  # its own session: the wrapper starts the viewer as a child
-        [*command, "--web-viewer-port", str(web), "--port", str(grpc)],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-    )
-    try:
-        time.sleep(5.0)
-        args = [a for a in CHROMIUM_ARGS if a != "--disable-gpu"] + ["--ignore-gpu-blocklist"]
-        with sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=CHROMIUM, args=args)
-            page = browser.new_page(viewport={"width": 1366, "height": 768})
-            page.goto(f"http://127.0.0.1:{web}/?url=rerun%2Bhttp://127.0.0.1:{grpc}/proxy")
-            time.sleep(30.0)  # the wasm viewer loads, then streams the recording
-            out_png.parent.mkdir(parents=True, exist_ok=True)
-            page.screenshot(path=str(out_png))
-            browser.close()
-    finally:
-        os.killpg(proc.pid, signal.SIGTERM)
-        proc.wait(10)
+    rerun_web_screenshot(files, out_png, viewport=(1366, 768), load_s=30.0)
 
 
 def main() -> None:
