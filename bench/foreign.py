@@ -102,6 +102,7 @@ def run_estimate(
     camera_path: str | None = None,
     catalog_path: str | None = None,
     progress: bool = True,
+    pixel_fit: bool = False,
 ) -> tuple[list[PoseResult], PosePipeline]:
     """``tofpose.workflows.measurement.estimate`` over a recording (its CSV to a temporary
     file), with the
@@ -130,6 +131,7 @@ def run_estimate(
             camera_path,
             progress=progress,
             tracking=tracking,
+            pixel_fit=pixel_fit,
         )
     if len(built) != 1 or len(results) != summary["frames"]:
         raise RuntimeError(
@@ -227,6 +229,7 @@ def evaluate(
     bin_width_m: float | None = None,
     oracle: bool = True,
     progress: bool = True,
+    pixel_fit: bool = False,
 ) -> dict:
     """One recording: the pose, spread and per-marker numbers per range bin and run, and
     the per-frame outcomes (``FrameOutcome``), as a dict (``report`` prints it; JSON-ready
@@ -237,6 +240,7 @@ def evaluate(
         camera_path=camera_path,
         catalog_path=catalog_path,
         progress=progress,
+        pixel_fit=pixel_fit,
     )
     with open_recording(rec_path) as rec:
         if rec.truth_R is None:
@@ -253,6 +257,7 @@ def evaluate(
         "path": str(rec_path),
         "frames": len(results),
         "tracking": tracking,
+        "pixel_fit": pixel_fit,
         "catalog": pipe.catalog.name,
         "bins": labels,
         "oracle_frames_matched": matched_by_truth,
@@ -300,8 +305,9 @@ def _int(x: int) -> str:
 def report(ev: dict) -> str:
     """The tables of one evaluated recording (``evaluate``)."""
     mode = "tracking" if ev["tracking"] else "acquisition"
+    mode += " mode with the pixel fit (`--pixel-fit`)" if ev.get("pixel_fit") else " mode"
     name = Path(ev["path"]).name
-    head = f"### {name}: {ev['frames']} frames, {mode} mode, catalog {ev['catalog']!r}"
+    head = f"### {name}: {ev['frames']} frames, {mode}, catalog {ev['catalog']!r}"
     n_truth = ev["oracle_frames_matched"]
     if n_truth is not None:
         head += f"; the oracle matched {n_truth} frames by truth"
@@ -462,6 +468,9 @@ def main(argv: list[str] | None = None) -> int:
         help="range bins this wide (default: the distinct ranges present)",
     )
     ap.add_argument("--no-oracle", action="store_true", help="skip the true-correspondence run")
+    ap.add_argument(
+        "--pixel-fit", action="store_true", help="the estimate's --pixel-fit (the pipeline rows)"
+    )
     ap.add_argument("--json", help="write every number and the per-frame outcomes here")
     ap.add_argument("--quiet", action="store_true", help="no progress bars")
     args = ap.parse_args(argv)
@@ -476,6 +485,7 @@ def main(argv: list[str] | None = None) -> int:
                 bin_width_m=args.bin_m,
                 oracle=not args.no_oracle,
                 progress=not args.quiet,
+                pixel_fit=args.pixel_fit,
             )
         except RecordingError as exc:
             print(f"bench/foreign.py: {exc}", file=sys.stderr)

@@ -647,6 +647,12 @@ def foreign_section(recordings: list[str]) -> str:
             "",
             _script("foreign.py", *recordings, "--quiet"),
             "",
+            "The same recordings with the pixel-level fit after the pipeline (`tofpose "
+            "estimate --pixel-fit`, docs/algorithm.md): its pose and covariance where it "
+            "holds, the centroid pipeline's where it falls back.",
+            "",
+            _script("foreign.py", *recordings, "--quiet", "--no-oracle", "--pixel-fit"),
+            "",
         ]
     )
 
