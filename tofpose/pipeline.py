@@ -388,6 +388,7 @@ class PosePipeline:
             fit_range_offset=cfg.fit_range_offset or offset_sigma_mm > 0,
             range_offset_sigma_mm=float("inf") if cfg.fit_range_offset else offset_sigma_mm or 1.0,
             max_marker_rms_sigma=cfg.max_marker_rms_sigma,
+            implementation=self.implementation,
         )
         timings = {**result.timings_ms, "pixel fit": 1e3 * (time.perf_counter() - t0)}
         if not fit.ok or fit.covariance is None:

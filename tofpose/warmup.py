@@ -34,7 +34,7 @@ import time
 import numpy as np
 
 from tofpose.calibration.range import RangeCorrection
-from tofpose.config import TrackingConfig
+from tofpose.config import PixelFitConfig, TrackingConfig
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import paper_target
 from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg
@@ -89,6 +89,7 @@ def warm_up() -> float:
         PipelineConfig.paper(),
         PipelineConfig(matcher="ransac"),
         PipelineConfig(refinement="none"),
+        PipelineConfig(pixel_fit=PixelFitConfig(enabled=True)),  # estimate --pixel-fit
     )
     # 1.5 m (ellipses confirmed), 6 m (markers 7 and 8 merge: split by threshold)
     for z_mm in (1500.0, 6000.0):

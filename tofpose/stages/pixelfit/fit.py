@@ -274,6 +274,8 @@ class _Problem:
     basis: np.ndarray  # (K, P, GAIN_TERMS) the discs' gain basis at the pixels
     free: np.ndarray  # (n_params,) bool: the parameters fitted (the rest stay at 0 step)
     disc_range_sigma_mm: float = 0.0  # each disc's own range error's prior (0: none)
+    compiled: bool = True  # the model's compiled kernel, else its NumPy reference
+    near_flat: tuple[np.ndarray, np.ndarray] | None = None  # win.near_flat, kept
 
     @property
     def layout(self) -> _Layout:
@@ -291,6 +293,8 @@ class _Problem:
             self.win,
             mm_per_radian=self.noise.mm_per_radian,
             reference_mm=self.reference_mm,
+            compiled=self.compiled,
+            near_flat=self.near_flat,
         )
 
     def predict(self, images: DiscImages, s: _State) -> Prediction:
@@ -564,6 +568,7 @@ def fit_pose_to_pixels(
     pad_px: int = WINDOW_PAD_PX,
     max_iterations: int = MAX_ITERATIONS,
     max_marker_rms_sigma: float = MAX_MARKER_RMS_SIGMA,
+    implementation: str = "compiled",
 ) -> PixelFitResult:
     """Refine a pose on the raw pixels of the matched reflectors.
 
@@ -597,6 +602,9 @@ def fit_pose_to_pixels(
     max_iterations : int
     max_marker_rms_sigma : float
         A disc whose residual RMS (sigmas) exceeds it makes the fit fall back.
+    implementation : str
+        "compiled" (the discs' images by ``kernels.images``) or "reference" (the same
+        arithmetic in NumPy, ``model.disc_images``).
 
     Returns
     -------
@@ -616,6 +624,10 @@ def fit_pose_to_pixels(
     t_mm = np.asarray(t_mm, float).reshape(-1)
     if R.shape != (3, 3) or t_mm.shape != (3,):
         raise ValueError(f"R must be (3, 3) and t_mm (3,), got {R.shape} and {t_mm.shape}")
+    if implementation not in ("compiled", "reference"):
+        raise ValueError(
+            f"implementation must be 'compiled' or 'reference', got {implementation!r}"
+        )
     if not range_offset_sigma_mm > 0:
         raise ValueError(f"range_offset_sigma_mm must be positive, got {range_offset_sigma_mm}")
     if subsamples < 1:
@@ -667,6 +679,8 @@ def fit_pose_to_pixels(
         reference_mm=reference_mm,
         fit_offset=fit_range_offset,
         offset_sigma_mm=float(range_offset_sigma_mm),
+        compiled=implementation == "compiled",
+        near_flat=win.near_flat,
         basis=gain_basis(uv[None] - centre_px[:, None], radius_px),
         free=free,
     )

@@ -40,6 +40,7 @@ from tofpose.stages.pixelfit.constants import (
     UNMATCHED_MARGIN_PX,
     WINDOW_PAD_PX,
 )
+from tofpose.stages.pixelfit.kernels import images as images_kernel
 
 #: step of the bearing's derivative over the pixel coordinates, px
 BEARING_STEP_PX = 1e-3
@@ -102,6 +103,14 @@ class Windows:
     sample_dbdv: np.ndarray
     near: tuple[np.ndarray, ...]
     subsamples: int
+
+    @property
+    def near_flat(self) -> tuple[np.ndarray, np.ndarray]:
+        """``near`` as one index array and the K + 1 offsets of each disc's part in it
+        (the compiled kernel's form)."""
+        index = np.concatenate([*self.near, np.zeros(0, np.int64)]).astype(np.int64)
+        start = np.concatenate([[0], np.cumsum([len(x) for x in self.near])]).astype(np.int64)
+        return index, start
 
     @property
     def n_pixels(self) -> int:
@@ -261,13 +270,39 @@ def disc_images(
     *,
     mm_per_radian: float,
     reference_mm: float,
+    compiled: bool = True,
+    near_flat: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> DiscImages:
     """The discs' coverage and phasors over the window pixels at the pose ``(R, t_mm)``
-    (module docstring). Phases are taken relative to ``reference_mm``."""
+    (module docstring). Phases are taken relative to ``reference_mm``. ``compiled``: the
+    compiled kernel (``kernels.images.disc_images``), else this module's NumPy (the
+    reference); ``near_flat``: ``win.near_flat`` when the caller keeps it."""
+    n = R[:, 2]
+    plate_range = (n @ t_mm) / (win.bearings @ n)
+    plate = np.exp(1j * (plate_range - reference_mm) / mm_per_radian)
+    if compiled:
+        index, start = win.near_flat if near_flat is None else near_flat
+        coverage, phasor = images_kernel.disc_images(
+            np.ascontiguousarray(R, dtype=float),
+            np.ascontiguousarray(t_mm, dtype=float),
+            discs.centres_mm,
+            discs.radii_mm,
+            win.bearings,
+            win.dbdu,
+            win.dbdv,
+            win.sample_bearings,
+            win.sample_dbdu,
+            win.sample_dbdv,
+            index,
+            start,
+            BAND_PX,
+            float(mm_per_radian),
+            float(reference_mm),
+        )
+        return DiscImages(coverage=coverage, phasor=phasor, plate_phasor=plate)
     k_count, p_count = len(discs.ids), win.n_pixels
     coverage = np.zeros((k_count, p_count))
     phasor = np.zeros((k_count, p_count), complex)
-    n = R[:, 2]
     half = 0.5 / win.subsamples
     floor = 1e-4 * half  # an axis-aligned rim: the box integral's limit, kept finite
     for k in range(k_count):
@@ -290,8 +325,6 @@ def disc_images(
             coverage[k, j] = cov_s.mean(axis=1)
             phase = np.exp(1j * (lam_s - reference_mm) / mm_per_radian)
             phasor[k, j] = np.mean(cov_s * phase, axis=1)
-    plate_range = (n @ t_mm) / (win.bearings @ n)
-    plate = np.exp(1j * (plate_range - reference_mm) / mm_per_radian)
     return DiscImages(coverage=coverage, phasor=phasor, plate_phasor=plate)
 
 
