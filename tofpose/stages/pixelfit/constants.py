@@ -49,3 +49,14 @@ RIM_COVERAGE_EPS = 1e-3
 MIN_RIM_PIXELS = 12
 #: fewest distance pixels a disc needs for its mean range residual to count
 MIN_DISC_DISTANCE_PIXELS = 3
+#: fewest rim pixels a disc needs for its own rim model error to count (the median over
+#: the discs is the frame's)
+MIN_DISC_RIM_PIXELS = 4
+#: a disc whose residual RMS exceeds this many times the matched discs' median (and
+#: RELATIVE_RMS_MIN_SIGMA) is unlike the others: a glint on or beside it, fall back
+RELATIVE_RMS_FACTOR = 2.0
+RELATIVE_RMS_MIN_SIGMA = 2.0
+#: discs whose rims come within this gap of each other on the target (mm) are crowded:
+#: exempt from the relative residual test (raised to different heights, one may hide
+#: the other's rim at an angle: 50 mm of height at 20 deg shifts a rim by 18 mm)
+CROWDED_GAP_MM = 30.0

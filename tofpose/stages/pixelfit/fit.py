@@ -32,6 +32,7 @@ from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import Catalog
 from tofpose.core.tof import SPEED_OF_LIGHT_MM_S
 from tofpose.stages.pixelfit.constants import (
+    CROWDED_GAP_MM,
     DAMPING_DOWN,
     DAMPING_UP,
     DISTANCE_MIN_COVERAGE,
@@ -42,9 +43,12 @@ from tofpose.stages.pixelfit.constants import (
     MAX_MARKER_RMS_SIGMA,
     MIN_CONTRAST_SIGMA,
     MIN_DISC_DISTANCE_PIXELS,
+    MIN_DISC_RIM_PIXELS,
     MIN_MARKERS,
     MIN_RIM_PIXELS,
     QUANTISATION_VAR,
+    RELATIVE_RMS_FACTOR,
+    RELATIVE_RMS_MIN_SIGMA,
     RIM_COVERAGE_EPS,
     ROTATION_STEP_RAD,
     STEP_TOLERANCE_SIGMA2,
@@ -183,7 +187,7 @@ class PixelFitResult:
     n_gray_pixels, n_distance_pixels, n_saturated : int
         Pixels in the gray residuals, in the distance residuals, and censored.
     range_k_mm, gray_extra_var, coverage_sigma, disc_range_sigma_mm : float
-        The noise model used (given or measured).
+        The noise model used (given or measured; coverage_sigma: the discs' median).
     """
 
     ok: bool
@@ -327,12 +331,21 @@ def _gray_variance(pred: Prediction, extra_var: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _RimSensitivity:
-    """How a rim pixel's model moves with its coverage: summed over the discs that cover
-    it partly, ``gray2`` = sum (d gray / d c_k)^2, counts^2, and ``distance2`` = sum
-    (d distance / d c_k)^2, mm^2 (both (P,); 0 off the rims)."""
+    """How a rim pixel's model moves with each disc's coverage: ``gray2_k`` = (d gray /
+    d c_k)^2, counts^2, and ``distance2_k`` = (d distance / d c_k)^2, mm^2 (both (K, P);
+    0 where disc k covers the pixel wholly or not at all); ``gray2`` and ``distance2``
+    (P,) their sums over the discs."""
 
-    gray2: np.ndarray
-    distance2: np.ndarray
+    gray2_k: np.ndarray
+    distance2_k: np.ndarray
+
+    @property
+    def gray2(self) -> np.ndarray:
+        return self.gray2_k.sum(axis=0)
+
+    @property
+    def distance2(self) -> np.ndarray:
+        return self.distance2_k.sum(axis=0)
 
 
 def _rim_sensitivity(
@@ -350,25 +363,44 @@ def _rim_sensitivity(
     mixed = np.where(np.abs(pred.phasor) > 0, pred.phasor, 1.0)
     d_mixed = g * unit - level * images.plate_phasor
     d_dist = np.where(partial, pb.noise.mm_per_radian * np.imag(d_mixed / mixed), 0.0)
-    return _RimSensitivity(gray2=np.sum(d_gray**2, axis=0), distance2=np.sum(d_dist**2, axis=0))
+    return _RimSensitivity(gray2_k=d_gray**2, distance2_k=d_dist**2)
 
 
 def _measured_coverage_sigma(
-    pb: _Problem, pred: Prediction, sig: _Sigmas, rim: _RimSensitivity
-) -> float:
-    """The rim's model error (``PixelNoise.coverage_sigma``) measured on the fitted
-    frame: the unsaturated rim pixels' squared gray residuals beyond their shot noise,
-    over their summed squared sensitivity; 0 unless the excess is beyond twice the
-    chi-square's own scatter (it then only adds noise to the sigmas)."""
-    rows = pb.gray_rows[rim.gray2[pb.gray_rows] > 0]
+    pb: _Problem, pred: Prediction, sig: _Sigmas, rim: _RimSensitivity, crowded: np.ndarray
+) -> np.ndarray:
+    """The rim's model error per disc (K,) (``PixelNoise.coverage_sigma``) measured on
+    the fitted frame. Per disc: its unsaturated rim pixels' squared gray residuals beyond
+    their shot noise, over their summed squared sensitivity. The frame's value is the
+    median over the discs, and every disc gets it, so that one disc the model does not
+    explain (a glint on its rim) neither widens the others' sigmas nor hides from the
+    per-disc residual check; a ``crowded`` disc (K,) bool, whose rim a neighbour may
+    hide, gets its own when that is larger. All 0 unless the rims' excess as a whole is
+    beyond twice the chi-square's own scatter."""
+    k_count = len(pb.discs.ids)
+    none = np.zeros(k_count)
+    gray2 = rim.gray2
+    rows = pb.gray_rows[gray2[pb.gray_rows] > 0]
     if len(rows) < MIN_RIM_PIXELS:
-        return 0.0
+        return none
     r2 = (pb.win.gray[rows] - pred.gray[rows]) ** 2
     var = sig.gray[rows] ** 2
     if np.sum(r2 / var) <= len(rows) + 2.0 * np.sqrt(2.0 * len(rows)):
-        return 0.0
-    excess = float(np.sum(r2 - var) / np.sum(rim.gray2[rows]))
-    return float(np.sqrt(excess)) if excess > 0 else 0.0
+        return none
+    owner = pb.win.owner[rows]
+    own = np.full(k_count, np.nan)
+    for k in range(k_count):
+        mine = owner == k
+        if mine.sum() >= MIN_DISC_RIM_PIXELS:
+            own[k] = np.sum(r2[mine] - var[mine]) / np.sum(gray2[rows][mine])
+    if np.sum(np.isfinite(own)) >= MIN_MARKERS:
+        typical = float(np.nanmedian(own))
+    else:
+        typical = float(np.sum(r2 - var) / np.sum(gray2[rows]))
+    excess = np.full(k_count, typical)
+    larger = crowded & np.isfinite(own) & (own > typical)
+    excess[larger] = own[larger]
+    return np.sqrt(np.maximum(excess, 0.0))
 
 
 def _measured_disc_range_sigma(pb: _Problem, pred: Prediction, sig: _Sigmas) -> float:
@@ -402,7 +434,7 @@ def _sigmas(
     pred: Prediction,
     extra_var: float,
     rim: _RimSensitivity | None = None,
-    coverage_sigma: float = 0.0,
+    coverage_sigma: np.ndarray | None = None,
 ) -> _Sigmas:
     """Per-pixel sigmas at the current model (module docstring), with the rim's model
     error when ``coverage_sigma`` > 0; the range constant measured on the distance
@@ -410,8 +442,11 @@ def _sigmas(
     var = _gray_variance(pred, extra_var)
     amp = np.maximum(np.abs(pred.phasor), 1e-6)
     shape = np.sqrt(var) / amp  # sigma_d / k
-    if rim is not None and coverage_sigma > 0:
-        var = var + coverage_sigma**2 * rim.gray2
+    edge_var_gray = edge_var_distance = None
+    if rim is not None and coverage_sigma is not None and np.any(coverage_sigma > 0):
+        edge_var_gray = np.einsum("k,kp->p", coverage_sigma**2, rim.gray2_k)
+        edge_var_distance = np.einsum("k,kp->p", coverage_sigma**2, rim.distance2_k)
+        var = var + edge_var_gray
     k = pb.noise.range_k_mm
     if k is None:
         j = pb.dist_rows
@@ -421,8 +456,8 @@ def _sigmas(
             k = float(MAD_TO_SIGMA * np.median(np.abs(z - np.median(z))))
         k = k if k and np.isfinite(k) and k > 0 else 1.0
     sigma_d = k * shape
-    if rim is not None and coverage_sigma > 0:
-        sigma_d = np.sqrt(sigma_d**2 + coverage_sigma**2 * rim.distance2)
+    if edge_var_distance is not None:
+        sigma_d = np.sqrt(sigma_d**2 + edge_var_distance)
     return _Sigmas(gray=np.sqrt(var), distance_mm=sigma_d, range_k_mm=float(k))
 
 
@@ -702,19 +737,23 @@ def fit_pose_to_pixels(
         else float(noise.gray_extra_var)
     )
 
-    solved = _levenberg_marquardt(pb, state, images, extra_var, 0.0, max_iterations)
+    solved = _levenberg_marquardt(pb, state, images, extra_var, np.zeros(k_count), max_iterations)
     # the model errors the frame shows at the first solution; then fitted again with them
     st, im = solved.state, solved.images
     pred = pb.predict(im, st)
     rim = _rim_sensitivity(pb, im, pred, st)
-    coverage_sigma = noise.coverage_sigma
-    if coverage_sigma is None:
-        coverage_sigma = _measured_coverage_sigma(pb, pred, _sigmas(pb, pred, extra_var), rim)
+    crowded = _crowded(discs)
+    if noise.coverage_sigma is None:
+        coverage_sigma = _measured_coverage_sigma(
+            pb, pred, _sigmas(pb, pred, extra_var), rim, crowded
+        )
+    else:
+        coverage_sigma = np.full(k_count, float(noise.coverage_sigma))
     disc_range_sigma = noise.disc_range_sigma_mm
     if disc_range_sigma is None:
         sig = _sigmas(pb, pred, extra_var, rim, coverage_sigma)
         disc_range_sigma = _measured_disc_range_sigma(pb, pred, sig)
-    if coverage_sigma > 0 or disc_range_sigma > 0:
+    if np.any(coverage_sigma > 0) or disc_range_sigma > 0:
         if disc_range_sigma > 0:
             pb = replace(
                 pb,
@@ -759,10 +798,11 @@ def fit_pose_to_pixels(
         n_saturated=len(pb.sat_rows),
         range_k_mm=sig.range_k_mm,
         gray_extra_var=extra_var,
-        coverage_sigma=float(coverage_sigma),
+        coverage_sigma=float(np.median(coverage_sigma)),
         disc_range_sigma_mm=float(disc_range_sigma),
     )
-    return replace(result, **_verdict(result, extra_var, max_marker_rms_sigma))
+    result = replace(result, **_verdict(result, extra_var, max_marker_rms_sigma))
+    return result
 
 
 @dataclass(frozen=True)
@@ -779,7 +819,7 @@ def _levenberg_marquardt(
     state: _State,
     images: DiscImages,
     extra_var: float,
-    coverage_sigma: float,
+    coverage_sigma: np.ndarray,
     max_iterations: int,
 ) -> _Solved:
     """Levenberg-Marquardt from ``state`` (``images`` its discs' images) with the noise
@@ -787,7 +827,7 @@ def _levenberg_marquardt(
     ``coverage_sigma`` > 0, with the rim's sensitivity of the starting state (so that the
     weights of the rim pixels do not follow the fit from one iteration to the next)."""
     rim = None
-    if coverage_sigma > 0:
+    if np.any(coverage_sigma > 0):
         rim = _rim_sensitivity(pb, images, pb.predict(images, state), state)
     damping = INITIAL_DAMPING
     converged = False
@@ -829,17 +869,52 @@ def _levenberg_marquardt(
     return _Solved(state, images, info, iterations, converged)
 
 
+def _crowded(discs: Discs) -> np.ndarray:
+    """(K,) bool: discs whose rim comes within ``CROWDED_GAP_MM`` of another's on the
+    target (across its plane): where discs raised to different heights may hide each
+    other's rim at an angle, which the model does not draw."""
+    xy = discs.centres_mm[:, :2]
+    gap = np.linalg.norm(xy[:, None] - xy[None], axis=2)
+    gap -= discs.radii_mm[:, None] + discs.radii_mm[None]
+    np.fill_diagonal(gap, np.inf)
+    return np.min(gap, axis=1) < CROWDED_GAP_MM if len(gap) > 1 else np.zeros(len(gap), bool)
+
+
+def _unexplained(res: PixelFitResult, max_rms: float) -> np.ndarray:
+    """(K,) bool: the discs whose pixels the model does not explain: residual RMS beyond
+    ``max_rms`` sigmas, or a disc far worse than its siblings (over
+    ``RELATIVE_RMS_FACTOR`` times their median and ``RELATIVE_RMS_MIN_SIGMA``): not one of
+    them (a glint on or beside it; the frame's rim model error is the discs' median, so
+    it cannot hide in it)."""
+    rms = res.marker_rms_sigma
+    if not np.any(np.isfinite(rms)):
+        return np.zeros(len(rms), bool)
+    typical = float(np.nanmedian(rms))
+    unlike = (rms > RELATIVE_RMS_MIN_SIGMA) & (rms > RELATIVE_RMS_FACTOR * typical)
+    return (rms > max_rms) | unlike
+
+
 def _verdict(res: PixelFitResult, extra_var: float, max_rms: float) -> dict:
     """ok and reason of a finished fit (``fit_pose_to_pixels``' fallback rules); the
     reason names every rule that failed, the discs beyond their noise first."""
     reasons = []
-    bad = res.marker_rms_sigma > max_rms
+    rms = res.marker_rms_sigma
+    bad = rms > max_rms
+    unlike = _unexplained(res, max_rms) & ~bad
     if np.any(bad):
         worst = ", ".join(
-            f"{i} ({v:.1f})"
-            for i, v in zip(res.catalog_ids[bad], res.marker_rms_sigma[bad], strict=True)
+            f"{i} ({v:.1f})" for i, v in zip(res.catalog_ids[bad], rms[bad], strict=True)
         )
         reasons.append(f"residual RMS beyond {max_rms:g} sigma at markers {worst}")
+    typical = float(np.nanmedian(rms)) if np.any(np.isfinite(rms)) else np.nan
+    if np.any(unlike):
+        worst = ", ".join(
+            f"{i} ({v:.1f})" for i, v in zip(res.catalog_ids[unlike], rms[unlike], strict=True)
+        )
+        reasons.append(
+            f"residual RMS over {RELATIVE_RMS_FACTOR:g}x the discs' median ({typical:.1f} "
+            f"sigma) at markers {worst}"
+        )
     if not res.converged:
         reasons.append(f"not converged in {res.iterations} iterations")
     if res.covariance is None or not np.all(np.isfinite(res.covariance)):

@@ -285,3 +285,36 @@ def test_bad_inputs_are_named(kwargs, message):
         return
     with pytest.raises(ValueError, match=message):
         fit_pose_to_pixels(camera=CAM, catalog=CAT, **args)
+
+
+@pytest.mark.parametrize(
+    "rms, expected",
+    [
+        ([0.7, 0.8, 2.6, 1.2], [False, False, True, False]),  # one disc unlike the rest
+        ([1.9, 2.1, 2.0, 2.2], [False, False, False, False]),  # all alike: the frame's
+        ([0.5, 0.6, 1.9, 0.5], [False, False, False, False]),  # within 2 sigma
+        ([0.9, 3.4, 1.0, 1.1], [False, True, False, False]),  # beyond 3 sigma
+    ],
+)
+def test_a_disc_unlike_its_siblings_is_unexplained(rms, expected):
+    """A glint on a disc's rim leaves that disc's residuals well above the others': the
+    rim model error is the discs' median, so the disc cannot hide in it."""
+    from tofpose.stages.pixelfit.fit import PixelFitResult, _unexplained, _verdict
+
+    res = PixelFitResult(
+        ok=False,
+        reason="",
+        R=np.eye(3),
+        t_mm=np.zeros(3),
+        covariance=np.eye(6),
+        catalog_ids=np.arange(1, 5),
+        marker_rms_sigma=np.array(rms),
+        gains=np.tile([2000.0, 0, 0, 0, 0, 0], (4, 1)),
+        levels=np.full(4, 100.0),
+        converged=True,
+    )
+    assert _unexplained(res, 3.0).tolist() == expected
+    verdict = _verdict(res, 0.0, 3.0)
+    assert verdict["ok"] == (not any(expected))
+    for i, bad in zip(res.catalog_ids, expected, strict=True):
+        assert (f" {i} (" in verdict["reason"]) == bad, verdict["reason"]
