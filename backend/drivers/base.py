@@ -71,7 +71,7 @@ class CameraFrame:
         else None. Reports call it the ``exact`` reference.
     T_camera_target_lab : the lab's reference for the frame: the encoders through the
         nominal camera mount and target placement (the simulator, or a real bench through
-        ``EncoderReferencedCamera``), or a recording's ``/lab_truth``; else None. It
+        ``EncoderReferencedCamera``), or a recording's ``/reference``; else None. It
         differs from the exact pose by the bench's own mount and placement errors.
     meta : driver-specific extras (integration time, encoder readings, recording index).
     capture_ns : when the device captured the frame, on the host's monotonic clock

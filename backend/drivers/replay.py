@@ -70,8 +70,9 @@ class ReplayCamera:
     Frame times are stream times (seconds since the replay started), so they increase
     across loops; ``meta`` carries the recording index, its own time stamp and the loop
     count, and ``meta["discontinuity"]`` is True on the first frame of every loop. The
-    recording's ``/truth`` is each frame's exact pose and its ``/lab_truth`` the lab's
-    reference (``T_camera_target_exact`` / ``T_camera_target_lab``, None when absent).
+    recording's ``/truth`` is each frame's exact pose and its ``/reference`` (older
+    files: ``/lab_truth``) the lab's reference (``T_camera_target_exact`` /
+    ``T_camera_target_lab``, None when absent).
     A frame's ``capture_ns`` is its recorded stamp mapped to playback (``PlaybackClock``);
     its ``sequence`` the frames played (a replay loses none).
     Raises ``RecordingError`` at construction if the file is not a valid recording.

@@ -3,7 +3,7 @@ wants it (``POST /api/recordings``, ``tofpose record``, the dashboard's Record p
 
 Each recording subscribes to the live hub, as a campaign's runner does, and writes every
 frame the hub delivers to one file in the project's recording format (docs/architecture.md
-§7, ``tofpose.io.recording.RecordingWriter``: ``/frames``, ``/truth`` and ``/lab_truth`` when
+§7, ``tofpose.io.recording.RecordingWriter``: ``/frames``, ``/truth`` and ``/reference`` when
 the source knows them, so ``open_recording``, ``tofpose estimate`` and the MCAP export
 read it as they read any recording). Besides those, each frame gets what the live sample
 carries, in optional groups that other readers skip:
@@ -267,12 +267,12 @@ class LiveRecordingWriter(RecordingWriter):
         catalog: Catalog | None,
         *,
         with_truth: bool,
-        with_lab_truth: bool,
+        with_reference: bool,
         axes: dict[str, str],
         attrs: dict[str, str | int],
     ) -> None:
         super().__init__(
-            path, camera, catalog, with_truth=with_truth, with_lab_truth=with_lab_truth
+            path, camera, catalog, with_truth=with_truth, with_reference=with_reference
         )
         f = self._f
         for key, value in attrs.items():
@@ -323,7 +323,7 @@ class LiveRecordingWriter(RecordingWriter):
             f["motion"].attrs["units"] = list(axes.values())
 
     def append_sample(self, sample: LiveSample, motion: MotionReading | None) -> None:
-        """Write one live sample: its frame and references (``/truth``, ``/lab_truth``;
+        """Write one live sample: its frame and references (``/truth``, ``/reference``;
         NaN for a frame without the reference this file stores) and ``frame_row``. A
         write that fails part-way is cut off again, so every dataset keeps ``n`` rows."""
         row = frame_row(sample, self.axes, motion)
@@ -757,7 +757,7 @@ class RecordingService:
             self.camera,
             self.catalog(),
             with_truth=frame is not None and frame.T_camera_target_exact is not None,
-            with_lab_truth=frame is not None and frame.T_camera_target_lab is not None,
+            with_reference=frame is not None and frame.T_camera_target_lab is not None,
             axes=axes,
             attrs=attrs,
         )

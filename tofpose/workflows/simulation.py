@@ -37,7 +37,7 @@ def simulate(
     scenario = get_scenario(scenario_name)
     catalog = catalog_from_arg(catalog_path) if catalog_path else paper_target()
     camera = camera_from_arg(camera_arg) if camera_arg else CameraModel()
-    with RecordingWriter(out, camera, catalog, with_truth=True, with_lab_truth=True) as w:
+    with RecordingWriter(out, camera, catalog, with_truth=True, with_reference=True) as w:
         for bf in tqdm(
             run_scenario(
                 scenario,

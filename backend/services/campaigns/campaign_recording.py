@@ -49,10 +49,10 @@ class CampaignRecordingWriter(RecordingWriter):
         *,
         axes: dict[str, str],
         with_truth: bool = False,
-        with_lab_truth: bool = False,
+        with_reference: bool = False,
     ) -> None:
         super().__init__(
-            path, camera, catalog, with_truth=with_truth, with_lab_truth=with_lab_truth
+            path, camera, catalog, with_truth=with_truth, with_reference=with_reference
         )
         f, a = self._f, (len(axes),)
         self._columns: dict[str, h5py.Dataset] = {}

@@ -449,7 +449,7 @@ class RawRecorder:
         self._setpoint = setpoint
 
     def append(self, sample: LiveSample) -> int:
-        """Write the sample's frame (``/truth`` from its exact pose, ``/lab_truth`` from
+        """Write the sample's frame (``/truth`` from its exact pose, ``/reference`` from
         its lab reference, each when the first frame has it) with its wall clock,
         encoders and set-point (``campaign_recording``); returns its index."""
         f = sample.frame
@@ -462,7 +462,7 @@ class RawRecorder:
                 self._catalog,
                 axes={a: c.rsplit("_", 1)[1] for a, c in AXIS_COLUMNS.items()},
                 with_truth=exact is not None,
-                with_lab_truth=lab is not None,
+                with_reference=lab is not None,
             )
         w = self._writer
         index = w.n
