@@ -77,7 +77,8 @@ def _add_measurement_commands(sub) -> None:
         "--filter",
         action="store_true",
         help="add the relative-state filter's angular rate and velocity with "
-        "their 1-sigma (rate_*, vel_*, sigma_rate_*, sigma_vel_*)",
+        "their 1-sigma (rate_*, vel_*, sigma_rate_*, sigma_vel_*); each pose is then "
+        "measured on its own frame (frames combined over time lag a moving target)",
     )
     p.add_argument(
         "--pixel-fit",
@@ -262,7 +263,12 @@ def _add_batch_commands(sub) -> None:
         help="built-in catalog name (paper-target) or catalog JSON (default: each recording's)",
     )
     p.add_argument("--tracking", action="store_true", help="the pipeline's tracking mode")
-    p.add_argument("--filter", action="store_true", help="add the relative-state filter's columns")
+    p.add_argument(
+        "--filter",
+        action="store_true",
+        help="add the relative-state filter's columns (poses from single frames, as "
+        "estimate --filter)",
+    )
     p.add_argument("--chunk-frames", type=int, default=512, help="frames per task (default 512)")
     _cluster_arguments(p)
     p = sub.add_parser(

@@ -103,6 +103,12 @@ class PersistenceConfig:
         if self.k_frames < 1 or self.c_min < 1:
             raise ValueError("k_frames and c_min must be >= 1")
 
+    @staticmethod
+    def single_frame() -> PersistenceConfig:
+        """Each frame on its own (K = C_min = 1): the honest setting for a moving target
+        (docs/algorithm.md §3.4)."""
+        return PersistenceConfig(k_frames=1, c_min=1)
+
 
 @dataclass(frozen=True)
 class MatchingConfig:

@@ -33,7 +33,7 @@ import sys
 import time
 import uuid
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -66,6 +66,7 @@ class Settings:
     camera_path: str | None = None
     catalog_path: str | None = None
     tracking: bool = False
+    moving: bool = False  # each pose from its own frame (as ``estimate --filter``)
 
 
 @dataclass(frozen=True)
@@ -147,7 +148,12 @@ def run_chunk(
     report = ProgressReporter(progress_topic, chunk.name)
     with open_recording(chunk.path) as rec:
         pipe = pipeline_for(
-            rec, chunk.path, settings.catalog_path, settings.camera_path, settings.tracking
+            rec,
+            chunk.path,
+            settings.catalog_path,
+            settings.camera_path,
+            settings.tracking,
+            moving=settings.moving,
         )
         for first, (grays, dists, ts) in rec.blocks(chunk.origin, chunk.stop):
             for k, tk in enumerate(ts.tolist()):
@@ -232,6 +238,8 @@ def reprocess(
     from tofpose.io.camera_file import pipeline_for
 
     settings = settings or Settings()
+    if filter_state:  # poses the filter follows: from single frames, as estimate --filter
+        settings = replace(settings, moving=True)
     if chunk_frames < 1:
         raise ReprocessError(f"--chunk-frames must be >= 1 (got {chunk_frames})")
     stems = [Path(p).stem for p in recordings]
@@ -244,7 +252,12 @@ def reprocess(
     for path in recordings:
         with open_recording(path) as rec:  # RecordingError names what is wrong
             pipe = pipeline_for(
-                rec, path, settings.catalog_path, settings.camera_path, settings.tracking
+                rec,
+                path,
+                settings.catalog_path,
+                settings.camera_path,
+                settings.tracking,
+                moving=settings.moving,
             )
             cfg = pipe.config
             chunks[path] = plan(

@@ -15,7 +15,12 @@ import numpy as np
 
 from tofpose.calibration.covariance import CovarianceScale
 from tofpose.calibration.range import RangeCorrection
-from tofpose.config import PixelFitConfig, TrackingConfig, config_for_camera
+from tofpose.config import (
+    PersistenceConfig,
+    PixelFitConfig,
+    TrackingConfig,
+    config_for_camera,
+)
 from tofpose.core.camera import CameraModel
 from tofpose.core.camera_profiles import camera_from_profile, profile_names, profile_text
 from tofpose.core.catalog import BUILTIN_CATALOGS, Catalog
@@ -107,11 +112,15 @@ def pipeline_for(
     tracking: bool,
     *,
     pixel_fit: bool = False,
+    moving: bool = False,
 ) -> PosePipeline:
     """The pipeline ``estimate`` runs over an open recording: its camera and catalog, or
     the ones given (a camera JSON with its range correction and covariance scale), with
     the pixel- and count-valued settings scaled to the camera (``config_for_camera``);
-    ``pixel_fit``: refine each pose on the markers' pixels (``PixelFitConfig``)."""
+    ``pixel_fit``: refine each pose on the markers' pixels (``PixelFitConfig``);
+    ``moving``: a target whose motion a filter follows (``estimate --filter``): each pose
+    from its own frame (``PersistenceConfig.single_frame``), since combining frames
+    makes a pose lag a motion too slow for persistence's gates to see."""
     camera, correction, scale = rec.camera, None, None
     if camera_path:
         camera, correction, scale = load_camera(read_camera_text(camera_path))
@@ -140,7 +149,9 @@ def pipeline_for(
         )
     config = config_for_camera(
         PipelineConfig(
-            tracking=TrackingConfig(enabled=tracking), pixel_fit=PixelFitConfig(enabled=pixel_fit)
+            tracking=TrackingConfig(enabled=tracking),
+            pixel_fit=PixelFitConfig(enabled=pixel_fit),
+            persistence=PersistenceConfig.single_frame() if moving else PersistenceConfig(),
         ),
         width=camera.width,
         height=camera.height,

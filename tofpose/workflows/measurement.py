@@ -160,10 +160,19 @@ def estimate(
     """Run the pipeline over a recording and write the CSV; returns summary numbers.
     ``tracking``: the pipeline's tracking mode (faster on a continuous recording);
     ``filter_state``: run the relative-state filter over the poses and add
-    ``FILTER_COLUMNS`` (empty until its first pose); ``pixel_fit``: refine each pose on
+    ``FILTER_COLUMNS`` (empty until its first pose), each pose measured on its own frame
+    (``pipeline_for``'s ``moving``); ``pixel_fit``: refine each pose on
     the markers' pixels (``PipelineConfig.pixel_fit``)."""
     with open_recording(rec_path) as rec:
-        pipe = pipeline_for(rec, rec_path, catalog_path, camera_path, tracking, pixel_fit=pixel_fit)
+        pipe = pipeline_for(
+            rec,
+            rec_path,
+            catalog_path,
+            camera_path,
+            tracking,
+            pixel_fit=pixel_fit,
+            moving=filter_state,  # a filter follows a motion: poses from single frames
+        )
         n_ok = 0
         # both motion models, the state from the one the poses favour (lab.motion_models)
         rel = TwoModelRelativeState() if filter_state else None
