@@ -83,8 +83,8 @@ def _add_measurement_commands(sub) -> None:
     p.add_argument(
         "--pixel-fit",
         action="store_true",
-        help="refine each pose on the markers' raw pixels (slow: 0.1-1 s a frame; "
-        "docs/algorithm.md, 'Pixel-level fit')",
+        help="refine each pose on the markers' raw pixels (slow: tens to hundreds of ms a "
+        "frame; docs/algorithm.md, 'Pixel-level fit')",
     )
     p = sub.add_parser(
         "calibrate-range",

@@ -174,7 +174,7 @@ class PixelFitConfig:
     on the matched markers' raw gray and distance pixels, its covariance the model's
     inverse Fisher information; the centroid pose stays when the fit falls back.
 
-    enabled : run it on every ok pose (off by default: in plain NumPy it costs 0.1-1 s a
+    enabled : run it on every ok pose (off by default: it costs tens to hundreds of ms a
         frame, docs/results.md "Pixel-level fit against the bound").
     fit_range_offset : also fit a range offset common to every marker (an uncalibrated
         camera).
