@@ -128,6 +128,41 @@ def _nees_per_dof(errs, covs, block):
     )
 
 
+def _measured_against_none(sensor, rng, range_mm, frames, measured, none, damage=None):
+    """Fits of ``frames`` rendered poses with the model error ``measured`` (a
+    ``PixelNoise``) and with it set to 0 (``none``): (errors, covariances) of each, and
+    the measured value (``PixelFitResult`` attribute of the same name as the noise
+    field that is None) per frame. ``damage(frame, distance, rng)`` alters the distance
+    image in place before the fit."""
+    field = next(
+        k for k in ("coverage_sigma", "disc_range_sigma_mm") if getattr(measured, k) is None
+    )
+    out = {"measured": ([], []), "none": ([], [])}
+    values = []
+    for _ in range(frames):
+        T = _pose(rng, range_mm)
+        f = render_frame(CAM, TargetScene(), T, sensor, rng)
+        r = PosePipeline(CAM, CAT).process(f.gray, f.distance_mm)
+        assert r.ok, r.reason
+        distance = f.distance_mm.copy()
+        if damage is not None:
+            damage(f, distance, rng)
+        ids = [m.catalog_id for m in r.matched]
+        for name, noise in (("measured", measured), ("none", none)):
+            res = fit_pose_to_pixels(
+                f.gray, distance, CAM, CAT, r.R, r.t_mm, ids, noise=noise, max_marker_rms_sigma=10
+            )
+            assert res.ok, res.reason
+            out[name][0].append(_error(res.R, res.t_mm, T))
+            out[name][1].append(res.covariance)
+            if name == "measured":
+                values.append(getattr(res, field))
+    return out["measured"], out["none"], values
+
+
+BLOCKS = (slice(0, 3), slice(3, 6))  # attitude, position
+
+
 def test_a_coarsely_sampled_rim_is_measured_as_model_error_and_widens_the_sigmas():
     """A renderer that samples each rim pixel at 4 x 4 points (as many renderers do)
     gets rim coverages wrong by a few hundredths of a pixel: the same in every frame of a
@@ -135,39 +170,19 @@ def test_a_coarsely_sampled_rim_is_measured_as_model_error_and_widens_the_sigmas
     narrow. Measured on the frame's rim residuals, that error brings the sigmas back to
     the errors; given as 0, it does not."""
     sensor = SensorModel(supersampling=4)
-    rng = np.random.default_rng([49, 4])
-    errs, covs, errs0, covs0, measured = [], [], [], [], []
-    for _ in range(12):
-        T = _pose(rng, 4000.0)
-        f = render_frame(CAM, TargetScene(), T, sensor, rng)
-        r = PosePipeline(CAM, CAT).process(f.gray, f.distance_mm)
-        assert r.ok, r.reason
-        ids = [m.catalog_id for m in r.matched]
-        for noise, e_out, c_out in (
-            (PixelNoise.from_sensor(sensor), errs, covs),
-            (replace(PixelNoise.from_sensor(sensor), coverage_sigma=0.0), errs0, covs0),
-        ):
-            res = fit_pose_to_pixels(
-                f.gray,
-                f.distance_mm,
-                CAM,
-                CAT,
-                r.R,
-                r.t_mm,
-                ids,
-                noise=noise,
-                max_marker_rms_sigma=10,
-            )
-            assert res.ok, res.reason
-            e_out.append(_error(res.R, res.t_mm, T))
-            c_out.append(res.covariance)
-            if noise.coverage_sigma is None:
-                measured.append(res.coverage_sigma)
+    noise = PixelNoise.from_sensor(sensor)
+    (errs, covs), (errs0, covs0), measured = _measured_against_none(
+        sensor,
+        np.random.default_rng([49, 4]),
+        4000.0,
+        12,
+        noise,
+        replace(noise, coverage_sigma=0.0),
+    )
     # 16 points per pixel: a straight rim's coverage is off by up to ~1/8 of a pixel
     assert 0.015 < np.median(measured) < 0.15
-    blocks = (slice(0, 3), slice(3, 6))
-    assert all(_nees_per_dof(errs0, covs0, b) > 2.5 for b in blocks)
-    assert all(0.4 < _nees_per_dof(errs, covs, b) < 1.8 for b in blocks)
+    assert all(_nees_per_dof(errs0, covs0, b) > 2.5 for b in BLOCKS)
+    assert all(0.4 < _nees_per_dof(errs, covs, b) < 1.8 for b in BLOCKS)
 
 
 def test_range_errors_of_each_disc_are_measured_and_widen_the_sigmas():
@@ -176,35 +191,25 @@ def test_range_errors_of_each_disc_are_measured_and_widen_the_sigmas():
     with sigma 6 mm. The fit measures that spread on the discs' mean residuals and
     carries one range nuisance per disc; told there is none, its sigmas are far too
     narrow."""
-    sensor = SensorModel(supersampling=32)
-    rng = np.random.default_rng([49, 6])
-    errs, covs, errs0, covs0, measured = [], [], [], [], []
-    for _ in range(10):
-        T = _pose(rng, 3000.0)
-        f = render_frame(CAM, TargetScene(), T, sensor, rng)
-        r = PosePipeline(CAM, CAT).process(f.gray, f.distance_mm)
-        assert r.ok, r.reason
-        distance = f.distance_mm.copy()
+
+    def offsets(f, distance, rng):
         for i in CAT.ids:
             distance[_disc_pixels(f, i)] += rng.normal(0.0, 6.0)
-        ids = [m.catalog_id for m in r.matched]
-        base = replace(PixelNoise.from_sensor(sensor), coverage_sigma=0.0)
-        for noise, e_out, c_out in (
-            (base, errs, covs),
-            (replace(base, disc_range_sigma_mm=0.0), errs0, covs0),
-        ):
-            res = fit_pose_to_pixels(
-                f.gray, distance, CAM, CAT, r.R, r.t_mm, ids, noise=noise, max_marker_rms_sigma=10
-            )
-            assert res.ok, res.reason
-            e_out.append(_error(res.R, res.t_mm, T))
-            c_out.append(res.covariance)
-            if noise.disc_range_sigma_mm is None:
-                measured.append(res.disc_range_sigma_mm)
+
+    sensor = SensorModel(supersampling=32)
+    base = replace(PixelNoise.from_sensor(sensor), coverage_sigma=0.0)
+    (errs, covs), (errs0, covs0), measured = _measured_against_none(
+        sensor,
+        np.random.default_rng([49, 6]),
+        3000.0,
+        10,
+        base,
+        replace(base, disc_range_sigma_mm=0.0),
+        damage=offsets,
+    )
     assert 2.0 < np.median(measured) < 12.0
-    blocks = (slice(0, 3), slice(3, 6))
-    assert all(_nees_per_dof(errs0, covs0, b) > 4.0 for b in blocks)
-    assert all(0.3 < _nees_per_dof(errs, covs, b) < 2.0 for b in blocks)
+    assert all(_nees_per_dof(errs0, covs0, b) > 4.0 for b in BLOCKS)
+    assert all(0.3 < _nees_per_dof(errs, covs, b) < 2.0 for b in BLOCKS)
 
 
 def _frame_and_start(seed=5):
