@@ -44,11 +44,9 @@ class RejectedBlobPublic(BaseModel):
     reason_text: str = Field(description="the gate that refused it, in words")
 
 
-class FrameReferencePublic(BaseModel):
-    """The lab's reference for this frame (encoders + nominal geometry, or + a selected
-    calibration's mount and placement) and the error of the measurement against it: the
-    lab's estimate of the pose, never the truth (docs/interop.md, "Names: truth and
-    reference")."""
+class _ReferencePose(BaseModel):
+    """The reference's pose: position, mm, and Euler angles, deg (the live pose's
+    convention)."""
 
     x_mm: float
     y_mm: float
@@ -56,6 +54,14 @@ class FrameReferencePublic(BaseModel):
     pitch_deg: float
     yaw_deg: float
     roll_deg: float
+
+
+class FrameReferencePublic(_ReferencePose):
+    """The lab's reference for this frame (encoders + nominal geometry, or + a selected
+    calibration's mount and placement) and the error of the measurement against it: the
+    lab's estimate of the pose, never the truth (docs/interop.md, "Names: truth and
+    reference")."""
+
     position_error_mm: float | None = Field(
         default=None, description="|measured - reference| of the position; null without a pose"
     )
@@ -69,16 +75,10 @@ class FrameReferencePublic(BaseModel):
     )
 
 
-class TruthPublic(BaseModel):
+class TruthPublic(_ReferencePose):
     """Deprecated: the older shape of ``FrameReferencePublic`` (its ``label`` was ``reference``),
     kept in ``PosePublic.truth`` for one release."""
 
-    x_mm: float
-    y_mm: float
-    z_mm: float
-    pitch_deg: float
-    yaw_deg: float
-    roll_deg: float
     position_error_mm: float | None = None
     attitude_error_deg: float | None = Field(default=None, description="geodesic angle")
     reference: str = Field(
