@@ -41,6 +41,7 @@ from tofpose.stages.pixelfit.constants import (
     WINDOW_PAD_PX,
 )
 from tofpose.stages.pixelfit.kernels import images as images_kernel
+from tofpose.stages.pixelfit.records import DiscRecord, WindowRays
 
 #: step of the bearing's derivative over the pixel coordinates, px
 BEARING_STEP_PX = 1e-3
@@ -282,19 +283,21 @@ def disc_images(
     plate = np.exp(1j * (plate_range - reference_mm) / mm_per_radian)
     if compiled:
         index, start = win.near_flat if near_flat is None else near_flat
+        rays = WindowRays(
+            bearings=win.bearings,
+            dbdu=win.dbdu,
+            dbdv=win.dbdv,
+            sample_bearings=win.sample_bearings,
+            sample_dbdu=win.sample_dbdu,
+            sample_dbdv=win.sample_dbdv,
+            near_index=index,
+            near_start=start,
+        )
         coverage, phasor = images_kernel.disc_images(
             np.ascontiguousarray(R, dtype=float),
             np.ascontiguousarray(t_mm, dtype=float),
-            discs.centres_mm,
-            discs.radii_mm,
-            win.bearings,
-            win.dbdu,
-            win.dbdv,
-            win.sample_bearings,
-            win.sample_dbdu,
-            win.sample_dbdv,
-            index,
-            start,
+            DiscRecord(centres_mm=discs.centres_mm, radii_mm=discs.radii_mm),
+            rays,
             BAND_PX,
             float(mm_per_radian),
             float(reference_mm),

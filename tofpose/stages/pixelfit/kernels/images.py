@@ -52,32 +52,23 @@ def _box_coverage(s, a, b):
 
 
 @jit
-def disc_images(
-    R,
-    t_mm,
-    centres_mm,
-    radii_mm,
-    bearings,
-    dbdu,
-    dbdv,
-    sample_bearings,
-    sample_dbdu,
-    sample_dbdv,
-    near_index,
-    near_start,
-    band_px,
-    mm_per_radian,
-    reference_mm,
-):
+def disc_images(R, t_mm, discs, rays, band_px, mm_per_radian, reference_mm):
     """Coverage (K, P) and unit-gain phasor (K, P) complex of K discs over P window pixels
     at the pose ``(R, t_mm)`` (``model.disc_images``' arithmetic).
 
-    centres_mm (K, 3), radii_mm (K,): the discs on the target; bearings, dbdu, dbdv (P, 3):
-    the pixels' centre rays and their derivatives; sample_* (P, S*S, 3): the same for the
-    sub-cells; disc k is evaluated at ``near_index[near_start[k]:near_start[k + 1]]``;
-    ``band_px``: a pixel whose centre is further than this from the rim is wholly inside
-    or outside.
+    discs : a ``records.DiscRecord`` (the discs on the target); rays : a
+    ``records.WindowRays`` (the pixels' and sub-cells' rays, and which pixels each disc
+    is evaluated at); ``band_px``: a pixel whose centre is further than this from the
+    rim is wholly inside or outside.
     """
+    centres_mm, radii_mm = discs.centres_mm, discs.radii_mm
+    bearings, dbdu, dbdv = rays.bearings, rays.dbdu, rays.dbdv
+    sample_bearings, sample_dbdu, sample_dbdv = (
+        rays.sample_bearings,
+        rays.sample_dbdu,
+        rays.sample_dbdv,
+    )
+    near_index, near_start = rays.near_index, rays.near_start
     k_count = centres_mm.shape[0]
     p_count = bearings.shape[0]
     n_sub = sample_bearings.shape[1]
