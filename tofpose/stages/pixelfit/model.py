@@ -42,6 +42,7 @@ from tofpose.stages.pixelfit.constants import (
 )
 from tofpose.stages.pixelfit.kernels import images as images_kernel
 from tofpose.stages.pixelfit.records import DiscRecord, WindowRays
+from tofpose.stages.pixelfit.reference import images as images_reference
 
 #: step of the bearing's derivative over the pixel coordinates, px
 BEARING_STEP_PX = 1e-3
@@ -225,44 +226,6 @@ def build_windows(
     )
 
 
-def box_coverage(s: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Area fraction of the square ``|x| <= hx, |y| <= hy`` inside the half-plane
-    ``g . x <= s`` (unit normal g), with ``a = |g_x| hx`` and ``b = |g_y| hy``: the box
-    integral ``[R2(s + a + b) - R2(s + a - b) - R2(s - a + b) + R2(s - a - b)] / (4 a b)``,
-    ``R2(x) = max(x, 0)^2 / 2``. All arrays broadcast; ``a, b > 0``."""
-
-    def r2(x):
-        return 0.5 * np.maximum(x, 0.0) ** 2
-
-    area = (r2(s + a + b) - r2(s + a - b) - r2(s - a + b) + r2(s - a - b)) / (4.0 * a * b)
-    # beyond the corners exactly 1 or 0 (no cancellation of large squares)
-    return np.where(s >= a + b, 1.0, np.where(s <= -(a + b), 0.0, area))
-
-
-def _rim_geometry(
-    b: np.ndarray,
-    bu: np.ndarray,
-    bv: np.ndarray,
-    c: np.ndarray,
-    n: np.ndarray,
-    radius_mm: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """For rays ``b`` (..., 3) with derivatives ``bu, bv``: the signed distance to the
-    disc's rim (px, positive inside), the outward normal's |u| and |v| components, and
-    the range to the disc's plane (mm)."""
-    nb = b @ n
-    lam = (n @ c) / nb
-    d = lam[..., None] * b - c
-    rho = np.maximum(np.linalg.norm(d, axis=-1), 1e-12)
-    # d lam / du = -lam (n . b_u) / (n . b); d q / du = lam_u b + lam b_u
-    qu = (-lam * (bu @ n) / nb)[..., None] * b + lam[..., None] * bu
-    qv = (-lam * (bv @ n) / nb)[..., None] * b + lam[..., None] * bv
-    gu = np.sum(d * qu, axis=-1) / rho
-    gv = np.sum(d * qv, axis=-1) / rho
-    gn = np.maximum(np.hypot(gu, gv), 1e-12)
-    return (radius_mm - rho) / gn, np.abs(gu) / gn, np.abs(gv) / gn, lam
-
-
 def disc_images(
     R: np.ndarray,
     t_mm: np.ndarray,
@@ -276,58 +239,34 @@ def disc_images(
 ) -> DiscImages:
     """The discs' coverage and phasors over the window pixels at the pose ``(R, t_mm)``
     (module docstring). Phases are taken relative to ``reference_mm``. ``compiled``: the
-    compiled kernel (``kernels.images.disc_images``), else this module's NumPy (the
-    reference); ``near_flat``: ``win.near_flat`` when the caller keeps it."""
+    compiled kernel (``kernels.images.disc_images``), else the same arithmetic in NumPy
+    (``reference.images.disc_images``); ``near_flat``: ``win.near_flat`` when the caller
+    keeps it."""
     n = R[:, 2]
     plate_range = (n @ t_mm) / (win.bearings @ n)
     plate = np.exp(1j * (plate_range - reference_mm) / mm_per_radian)
-    if compiled:
-        index, start = win.near_flat if near_flat is None else near_flat
-        rays = WindowRays(
-            bearings=win.bearings,
-            dbdu=win.dbdu,
-            dbdv=win.dbdv,
-            sample_bearings=win.sample_bearings,
-            sample_dbdu=win.sample_dbdu,
-            sample_dbdv=win.sample_dbdv,
-            near_index=index,
-            near_start=start,
-        )
-        coverage, phasor = images_kernel.disc_images(
-            np.ascontiguousarray(R, dtype=float),
-            np.ascontiguousarray(t_mm, dtype=float),
-            DiscRecord(centres_mm=discs.centres_mm, radii_mm=discs.radii_mm),
-            rays,
-            BAND_PX,
-            float(mm_per_radian),
-            float(reference_mm),
-        )
-        return DiscImages(coverage=coverage, phasor=phasor, plate_phasor=plate)
-    k_count, p_count = len(discs.ids), win.n_pixels
-    coverage = np.zeros((k_count, p_count))
-    phasor = np.zeros((k_count, p_count), complex)
-    half = 0.5 / win.subsamples
-    floor = 1e-4 * half  # an axis-aligned rim: the box integral's limit, kept finite
-    for k in range(k_count):
-        idx = win.near[k]
-        if not len(idx):
-            continue
-        c = R @ discs.centres_mm[k] + t_mm
-        r = discs.radii_mm[k]
-        s, _, _, lam = _rim_geometry(win.bearings[idx], win.dbdu[idx], win.dbdv[idx], c, n, r)
-        inside = s >= BAND_PX
-        band = np.abs(s) < BAND_PX
-        coverage[k, idx[inside]] = 1.0
-        phasor[k, idx[inside]] = np.exp(1j * (lam[inside] - reference_mm) / mm_per_radian)
-        if band.any():
-            j = idx[band]
-            ss, au, av, lam_s = _rim_geometry(
-                win.sample_bearings[j], win.sample_dbdu[j], win.sample_dbdv[j], c, n, r
-            )
-            cov_s = box_coverage(ss, np.maximum(au * half, floor), np.maximum(av * half, floor))
-            coverage[k, j] = cov_s.mean(axis=1)
-            phase = np.exp(1j * (lam_s - reference_mm) / mm_per_radian)
-            phasor[k, j] = np.mean(cov_s * phase, axis=1)
+    index, start = win.near_flat if near_flat is None else near_flat
+    rays = WindowRays(
+        bearings=win.bearings,
+        dbdu=win.dbdu,
+        dbdv=win.dbdv,
+        sample_bearings=win.sample_bearings,
+        sample_dbdu=win.sample_dbdu,
+        sample_dbdv=win.sample_dbdv,
+        near_index=index,
+        near_start=start,
+    )
+    images = images_kernel.disc_images if compiled else images_reference.disc_images
+    coverage, phasor = images(
+        np.ascontiguousarray(R, dtype=float),
+        np.ascontiguousarray(t_mm, dtype=float),
+        DiscRecord(centres_mm=discs.centres_mm, radii_mm=discs.radii_mm),
+        rays,
+        BAND_PX,
+        float(mm_per_radian),
+        float(reference_mm),
+    )
+    return DiscImages(coverage=coverage, phasor=phasor, plate_phasor=plate)
     return DiscImages(coverage=coverage, phasor=phasor, plate_phasor=plate)
 
 

@@ -5,12 +5,8 @@ from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import paper_target
 from tofpose.core.geometry import RigidTransform
 from tofpose.sim.bench import R_FACING
-from tofpose.stages.pixelfit.model import (
-    Discs,
-    box_coverage,
-    build_windows,
-    disc_images,
-)
+from tofpose.stages.pixelfit.model import Discs, build_windows, disc_images
+from tofpose.stages.pixelfit.reference.images import box_coverage
 
 
 @pytest.mark.parametrize(

@@ -1,0 +1,1 @@
+"""The pixel fit's arithmetic in NumPy: the compiled kernels' statement and test oracle."""
