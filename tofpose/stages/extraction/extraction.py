@@ -346,7 +346,10 @@ def find_candidate_blobs(
     rho_k, inner = found.rho.tolist(), found.inner.tolist()
     status, size, mom = gates.status.tolist(), gates.size.tolist(), gates.moments
     keep_flat, keep_starts = gates.keep_flat, gates.keep_starts.tolist()
-    accepted: list[Blob] = []
+    # the accepted blobs' centroids are rows of one copy; eccentricity and penalty numbers
+    centroids, ecc_q = mom[:, :2].copy(), mom[:, 2:4].tolist()
+    # (penalty, -peak, order found, blob): sorted as is, best first (ties in found order)
+    ranked: list[tuple[float, float, int, Blob]] = []
     oversize: list[Blob] = []
     wrong_size: list[WrongSizeBlob] = []
     refused: list[tuple[int, RejectedBlob]] = []  # (label, why), listed in label order
@@ -377,20 +380,27 @@ def find_candidate_blobs(
         if code != ACCEPTED:
             reject(k, _GATE_REASONS[code])
             continue
-        pixels = keep_flat[keep_starts[j] : keep_starts[j + 1]]
-        accepted.append(
-            Blob(
-                pixels=pixels,
-                area_px=len(pixels),
-                bbox=bbox,
-                centroid_uv=mom[j, :2].copy(),
-                distance_mm=rho_k[k],
-                peak_counts=peak_k[k],
-                eccentricity=float(mom[j, 2]),
-                penalty=float(mom[j, 3]),
+        first, end = keep_starts[j], keep_starts[j + 1]
+        eccentricity, penalty = ecc_q[j]
+        ranked.append(
+            (
+                penalty,
+                -peak_k[k],
+                j,
+                Blob(
+                    pixels=keep_flat[first:end],
+                    area_px=end - first,
+                    bbox=bbox,
+                    centroid_uv=centroids[j],
+                    distance_mm=rho_k[k],
+                    peak_counts=peak_k[k],
+                    eccentricity=eccentricity,
+                    penalty=penalty,
+                ),
             )
         )
-    accepted.sort(key=lambda b: (b.penalty, -b.peak_counts))
+    ranked.sort()
+    accepted = [r[3] for r in ranked]
     rejected = [r for _, r in sorted(refused, key=lambda kr: kr[0])]
     for b in accepted[config.max_candidates :]:
         u, v = (float(c) for c in b.centroid_uv)
