@@ -11,7 +11,7 @@ literal numbers as a preset.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from itertools import accumulate
 
 import numpy as np
@@ -79,13 +79,11 @@ class Blob:
         """A new blob with the named fields changed: ``dataclasses.replace`` for the
         per-frame path (a copy of the field values, ~5x cheaper; the class has no
         ``__post_init__``, so nothing that ``replace`` would run is skipped)."""
-        unknown = changes.keys() - _BLOB_FIELDS
-        if unknown:
-            raise TypeError(f"Blob has no field(s) {sorted(unknown)}")
         new = object.__new__(Blob)
         fields_of_new = new.__dict__
-        fields_of_new.update(self.__dict__)
-        fields_of_new.update(changes)
+        fields_of_new.update(self.__dict__, **changes)
+        if len(fields_of_new) != len(_BLOB_FIELDS):  # a name that is not a field
+            raise TypeError(f"Blob has no field(s) {sorted(changes.keys() - _BLOB_FIELDS)}")
         return new
 
 
@@ -405,7 +403,17 @@ def find_candidate_blobs(
     for b in accepted[config.max_candidates :]:
         u, v = (float(c) for c in b.centroid_uv)
         rejected.append(RejectedBlob(u, v, 2.0 * np.sqrt(b.area_px / np.pi), "rank"))
-    stats = replace(stats, psf_sigma_px=float(np.sqrt(found.blur_var_px2)))
+    stats = FrameStats(  # dataclasses.replace's, built directly (a tenth of its calls)
+        background=stats.background,
+        noise_sigma=stats.noise_sigma,
+        i_max=stats.i_max,
+        raw_threshold=stats.raw_threshold,
+        peak_threshold=stats.peak_threshold,
+        n_active=stats.n_active,
+        saturated_fraction=stats.saturated_fraction,
+        dark_level=stats.dark_level,
+        psf_sigma_px=float(np.sqrt(found.blur_var_px2)),
+    )
     return CandidateBlobs(
         accepted[: config.max_candidates],
         oversize,
