@@ -187,6 +187,16 @@ class Persistence:
             keep = list(self._history)[len(self._history) - n_used :] if n_used else []
             self._history.clear()
             self._history.extend(keep)
+            self._newest_first = None
         mask = pixel_mask(pixels, gray.size)
         self._history.append(_Entry(centroids, mask, gray, distance))
-        self._newest_first = None
+        newest_first = self._newest_first
+        if newest_first is not None:  # this frame first, the oldest dropped as the deque did
+            n = len(self._history)
+            grays, distances, masks, centroid_sets = newest_first
+            self._newest_first = (
+                ((gray,) + grays)[:n],
+                ((distance,) + distances)[:n],
+                ((mask,) + masks)[:n],
+                ((centroids,) + centroid_sets)[:n],
+            )
