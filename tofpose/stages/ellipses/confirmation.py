@@ -12,9 +12,8 @@ from tofpose.config import ExtractionConfig
 from tofpose.stages.ellipses.arithmetic import COMPILED, EllipsesArithmetic
 from tofpose.stages.ellipses.ellipse import (
     blob_contour,
-    ellipse_residual_px,
     ellipses_from_arcs,
-    fit_ellipse,
+    outline_ellipse,
     split_arcs,
 )
 from tofpose.stages.ellipses.kernels.two_centres import SPLIT_OK
@@ -48,17 +47,17 @@ def confirm_ellipses(
     ar = arithmetic
     h, w = gray.shape
     out = []
+    min_points, max_rms_px = cfg.ellipse_min_points, cfg.ellipse_max_residual_px
     for b in blobs:
         if b.area_px >= 20:
-            mask, x0, y0 = blob_mask(b, w, ar)
-            pts = blob_contour(mask, (x0, y0))  # in image coordinates
-            if len(pts) >= cfg.ellipse_min_points:
-                e = fit_ellipse(pts)
-                if e is not None:
-                    rms_px = ellipse_residual_px(e, pts, arithmetic=ar)
-                    if rms_px > cfg.ellipse_max_residual_px:
-                        continue
-                    b = b.with_values(ellipse=e, ellipse_residual_px=rms_px)
+            x, y, bw, bh = b.bbox
+            mask = ar.blob_mask(b.pixels, x, y, bw, bh, w)  # blob_mask's, inlined
+            fitted = outline_ellipse(mask, (x - 1, y - 1), min_points, arithmetic=ar)
+            if fitted is not None:
+                e, rms_px = fitted
+                if rms_px > max_rms_px:
+                    continue
+                b = b.with_values(ellipse=e, ellipse_residual_px=rms_px)
         out.append(b)
     if len(out) >= len(catalog_diameters_mm) or not oversize:
         return out

@@ -65,6 +65,39 @@ def ellipse_residual_px(
     )
 
 
+def outline_ellipse(
+    mask: np.ndarray,
+    origin: tuple[int, int],
+    min_points: int,
+    *,
+    arithmetic: EllipsesArithmetic = COMPILED,
+) -> tuple[Ellipse, float] | None:
+    """A candidate blob's confirmation step in one pass: its outer boundary
+    (``blob_contour`` of the uint8 mask (h, w) whose top-left pixel is ``origin``), the
+    direct least-squares ellipse of it (``fit_ellipse``) and the boundary's RMS distance
+    from that ellipse, px (``ellipse_residual_px``), with the same arithmetic and no
+    intermediate copies (``confirmation.confirm_ellipses`` runs it on every candidate).
+    Returns (ellipse, rms_px), or None when the boundary has fewer than ``min_points``
+    (or 5) points or no ellipse fits it."""
+    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE, offset=origin)
+    if not contours:
+        return None
+    c = contours[0] if len(contours) == 1 else max(contours, key=len)
+    n = c.shape[0]
+    if n < min_points or n < 5:
+        return None
+    pts = c.astype(np.float32)  # (P, 1, 2), as fitEllipseDirect takes it
+    try:
+        (cx, cy), (a1, a2), ang = cv2.fitEllipseDirect(pts)
+    except cv2.error:
+        return None
+    if not (math.isfinite(cx + cy + a1 + a2) and a1 > 0 and a2 > 0):
+        return None
+    e = (float(cx), float(cy)), (float(a1), float(a2)), float(ang)
+    rms_px = arithmetic.ellipse_rms_px(e[0][0], e[0][1], e[1][0], e[1][1], e[2], pts.reshape(n, 2))
+    return e, float(rms_px)
+
+
 def split_arcs(
     contour: np.ndarray,
     *,

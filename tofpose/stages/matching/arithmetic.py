@@ -24,6 +24,8 @@ class MatchingArithmetic:
     pair_potentials: Callable
     size_mismatch: Callable
     anneal_assignment: Callable
+    #: pair potentials, size term and annealing in one call (``kernels.annealing``'s)
+    soft_assignment: Callable
     one_to_one: Callable  # A (g, e + 1) -> (pairs (m, 2) int64, unmatched list)
     prune_pairs: Callable
     catalog_triplets: Callable
@@ -63,6 +65,7 @@ COMPILED = MatchingArithmetic(
     annealing.pair_potentials,
     annealing.size_mismatch,
     annealing.anneal_assignment,
+    annealing.soft_assignment,
     _compiled_one_to_one,
     residual_check.prune_pairs,
     triplets.catalog_triplets,
@@ -74,6 +77,7 @@ REFERENCE = MatchingArithmetic(
     ref_matching.pair_potentials,
     ref_matching.size_mismatch,
     _reference_anneal,
+    ref_matching.soft_assignment,
     ref_matching.one_to_one,
     _reference_prune_pairs,
     ref_triplets.catalog_triplets,

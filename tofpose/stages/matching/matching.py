@@ -163,11 +163,24 @@ def match_reflectors(
             alpha,
             f"only {g} candidate reflector(s), need {cfg.min_matches}",
         )
-    P = pair_compatibility(observed_mm, catalog_mm, alpha, cfg.clip_factor, arithmetic=arithmetic)
-    unary = None
-    if cfg.size_weight > 0 and catalog_diameter_mm is not None:
-        unary = size_unary(observed_diameter_mm, catalog_diameter_mm, arithmetic=arithmetic)
-    A, iters = anneal(P, unary, alpha, cfg, arithmetic=arithmetic)
+    # pair_compatibility, size_unary and anneal in one call (kernels.annealing)
+    use_size = (
+        cfg.size_weight > 0 and catalog_diameter_mm is not None and observed_diameter_mm is not None
+    )
+    no_size = np.empty(0)
+    A, iters = arithmetic.soft_assignment(
+        np.ascontiguousarray(observed_mm, float),
+        np.ascontiguousarray(catalog_mm, float),
+        float(alpha),
+        float(cfg.clip_factor),
+        use_size,
+        np.ascontiguousarray(observed_diameter_mm, float).reshape(-1) if use_size else no_size,
+        np.ascontiguousarray(catalog_diameter_mm, float).reshape(-1) if use_size else no_size,
+        cfg.size_weight * alpha**2 if use_size else 0.0,
+        cfg.psi_start / alpha**2,
+        cfg.psi_end / alpha**2,
+        cfg.growth,
+    )
     pairs, unmatched = one_to_one(A, arithmetic=arithmetic)
     w = np.ones(g) if weights is None else np.asarray(weights, float)
     # Without weights every pair gets sigma = alpha, i.e. the tolerance residual_factor alpha.

@@ -60,6 +60,11 @@ class Persistence:
         self.config = config or PersistenceConfig()
         self._history: deque[_Entry] = deque(maxlen=max(self.config.k_frames - 1, 0))
         self._scratch: tuple[np.ndarray, np.ndarray] | None = None
+        #: the history's (gray, distance, mask, centroids) tuples newest first, built
+        #: once per change of the history (``history`` reads them every frame)
+        self._newest_first: tuple[tuple, tuple, tuple, tuple] | None = None
+        #: the padding's empty mask (H * W,) and centroids (0, 2), never written
+        self._empty: tuple[np.ndarray, np.ndarray] | None = None
 
     def scratch(self, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
         """The two (H, W) float32 frames the compiled measurement writes I-bar and D-bar
@@ -71,6 +76,7 @@ class Persistence:
 
     def reset(self) -> None:
         self._history.clear()
+        self._newest_first = None
 
     def update_digest(self, h) -> None:
         """Feed the history (every entry's arrays, oldest first) into the hashlib object
@@ -89,6 +95,7 @@ class Persistence:
     def restore(self, snapshot: list) -> None:
         self._history.clear()
         self._history.extend(snapshot)
+        self._newest_first = None
 
     def measure(
         self,
@@ -131,15 +138,33 @@ class Persistence:
         centroids, each padded to K - 1 entries (at least one) with this frame's arrays
         (never read), the number of real entries, and the scratch frames (``scratch``)."""
         k = max(self.config.k_frames - 1, 1)
-        entries = list(reversed(self._history))
-        pad = k - len(entries)
+        newest_first = self._newest_first
+        if newest_first is None:
+            entries = list(reversed(self._history))
+            newest_first = self._newest_first = (
+                tuple([e.gray for e in entries]),
+                tuple([e.distance for e in entries]),
+                tuple([e.mask for e in entries]),
+                tuple([e.centroids for e in entries]),
+            )
+        grays, distances, masks, centroids = newest_first
+        n_frames = len(grays)
+        pad = k - n_frames
         scratch_gray, scratch_distance = self.scratch(gray.shape)
+        if pad:
+            empty = self._empty
+            if empty is None or empty[0].shape[0] != gray.size:
+                empty = self._empty = (np.zeros(gray.size, bool), np.zeros((0, 2)))
+            grays += (gray,) * pad
+            distances += (distance,) * pad
+            masks += (empty[0],) * pad
+            centroids += (empty[1],) * pad
         return PersistenceHistory(
-            gray=tuple([e.gray for e in entries] + [gray] * pad),
-            distance=tuple([e.distance for e in entries] + [distance] * pad),
-            mask=tuple([e.mask for e in entries] + [np.zeros(gray.size, bool)] * pad),
-            centroids=tuple([e.centroids for e in entries] + [np.zeros((0, 2))] * pad),
-            n_frames=len(entries),
+            gray=grays,
+            distance=distances,
+            mask=masks,
+            centroids=centroids,
+            n_frames=n_frames,
             motion_tolerance_px=float(self.config.motion_tolerance_px),
             c_min=int(self.config.c_min),
             scratch_gray=scratch_gray,
@@ -162,5 +187,16 @@ class Persistence:
             keep = list(self._history)[len(self._history) - n_used :] if n_used else []
             self._history.clear()
             self._history.extend(keep)
+            self._newest_first = None
         mask = pixel_mask(pixels, gray.size)
         self._history.append(_Entry(centroids, mask, gray, distance))
+        newest_first = self._newest_first
+        if newest_first is not None:  # this frame first, the oldest dropped as the deque did
+            n = len(self._history)
+            grays, distances, masks, centroid_sets = newest_first
+            self._newest_first = (
+                ((gray,) + grays)[:n],
+                ((distance,) + distances)[:n],
+                ((mask,) + masks)[:n],
+                ((centroids,) + centroid_sets)[:n],
+            )

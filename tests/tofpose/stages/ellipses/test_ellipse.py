@@ -4,12 +4,14 @@ import pytest
 
 from tofpose.core.camera import CameraModel
 from tofpose.core.geometry import rotation_from_euler_deg
+from tofpose.stages.ellipses.arithmetic import REFERENCE
 from tofpose.stages.ellipses.ellipse import (
     blob_contour,
     cone_distance_mm,
     ellipse_residual_px,
     ellipses_from_arcs,
     fit_ellipse,
+    outline_ellipse,
     split_arcs,
 )
 
@@ -61,3 +63,28 @@ def test_contour_with_an_origin_is_the_contour_shifted():
     shifted = blob_contour(mask, (140, 61))
     assert shifted.dtype == np.float32 and len(plain) == 2 * (6 + 9) - 4
     np.testing.assert_array_equal(shifted, plain + [140, 61])
+
+
+@pytest.mark.parametrize("arithmetic", ["compiled", "reference"])
+def test_outline_ellipse_is_contour_fit_and_residual_in_one(arithmetic):
+    """The per-candidate confirmation step gives exactly what blob_contour, fit_ellipse
+    and ellipse_residual_px give one after the other (the same ellipse, the same RMS),
+    in image coordinates, and None where they find no ellipse."""
+    kw = {"arithmetic": REFERENCE} if arithmetic == "reference" else {}
+    mask = np.zeros((40, 50), np.uint8)
+    cv2.ellipse(mask, ((24.3, 19.6), (30.0, 17.0), 25.0), 1, -1)
+    mask[2:5, 40:44] = 1  # a smaller second region: the larger outline is fitted
+    origin = (301, 117)
+    got = outline_ellipse(mask, origin, 10, **kw)
+    pts = blob_contour(mask, origin)
+    want = fit_ellipse(pts)
+    assert got is not None and want is not None
+    assert got[0] == want
+    assert got[1] == ellipse_residual_px(want, pts, **kw)
+    assert got[0][0] == pytest.approx((24.3 + 301, 19.6 + 117), abs=0.3)
+    assert got[1] < 0.5
+    assert outline_ellipse(mask, origin, len(pts) + 1, **kw) is None  # too few points
+    tiny = np.zeros((5, 5), np.uint8)
+    tiny[2, 1:3] = 1  # a 2-pixel outline: no ellipse
+    assert outline_ellipse(tiny, (0, 0), 0, **kw) is None
+    assert outline_ellipse(np.zeros((5, 5), np.uint8), (0, 0), 0, **kw) is None

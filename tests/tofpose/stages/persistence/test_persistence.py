@@ -171,3 +171,44 @@ def test_the_state_digest_says_when_two_pipelines_will_agree(camera, catalog):
     assert a.state_digest() == b.state_digest()
     ra, rb = (p.process(frames[4].gray, frames[4].distance_mm) for p in (a, b))
     np.testing.assert_array_equal(ra.t_mm, rb.t_mm)  # ... and the same next result
+
+
+def test_history_kept_between_frames_is_the_history_built_afresh():
+    """``history`` keeps its newest-first tuples from frame to frame (updated by
+    ``commit``): after every commit (with and without motion), ``reset`` and ``restore``
+    they hold the same arrays, in the same order, as a Persistence given the same
+    entries and asked for the first time, padded with this frame's arrays."""
+    rng = np.random.default_rng(2)
+    p = Persistence(PersistenceConfig(k_frames=4))
+
+    def fresh(gray, distance):
+        q = Persistence(p.config)
+        q.restore(p.snapshot())
+        return q.history(gray, distance)
+
+    def same(a, b):
+        assert a.n_frames == b.n_frames
+        for name in ("gray", "distance", "mask", "centroids"):
+            got, want = getattr(a, name), getattr(b, name)
+            assert len(got) == len(want) == 3, name
+            for g, w in zip(got[: a.n_frames], want[: a.n_frames], strict=True):
+                assert g is w, name  # the entries' own arrays, newest first
+            for g, w in zip(got[a.n_frames :], want[a.n_frames :], strict=True):
+                np.testing.assert_array_equal(g, w)  # the padding
+
+    steps = [(False, 0)] * 5 + [(True, 1), (False, 0), (True, 0), (False, 0), (False, 0)]
+    for k, (motion, n_used) in enumerate(steps):
+        blobs, g, d = _frame(20 + k % 3, 18, rng=rng)
+        h = p.history(g, d)
+        same(h, fresh(g, d))
+        p.commit(np.array([blobs[0].centroid_uv]), blobs[0].pixels, g, d, n_used, motion)
+        assert p.history(g, d).n_frames == min(len(p.snapshot()), 3)
+        if k == 6:
+            saved = p.snapshot()
+        if k == 7:
+            p.restore(saved)
+            assert p.history(g, d).n_frames == len(saved)
+    same(p.history(g, d), fresh(g, d))
+    p.reset()
+    assert p.history(g, d).n_frames == 0
+    same(p.history(g, d), fresh(g, d))

@@ -104,6 +104,36 @@ def size_mismatch(observed_diameter, catalog_diameter):
 
 
 @jit
+def soft_assignment(
+    observed,
+    catalog,
+    alpha,
+    clip,
+    use_size,
+    observed_diameter,
+    catalog_diameter,
+    size_scale,
+    psi,
+    psi_end,
+    growth,
+):
+    """§4's soft assignment in one call (the first steps of ``matching.match_reflectors``):
+    ``pair_potentials`` of observed (g, 3) and catalog (e, 3) mm with tolerance
+    ``alpha`` mm and clip factor ``clip``; the unary size term ``size_scale *
+    size_mismatch(observed_diameter (g,), catalog_diameter (e,))`` when ``use_size``
+    (``size_scale`` = the size weight times alpha^2), else all zero; then
+    ``anneal_assignment`` from ``psi`` to ``psi_end`` (1 / mm^2) by ``growth``.
+    Returns A (g, e + 1), column 0 the null label, and the iterations."""
+    g, e = observed.shape[0], catalog.shape[0]
+    P = pair_potentials(observed, catalog, alpha, clip)
+    if use_size:
+        unary = size_scale * size_mismatch(observed_diameter, catalog_diameter)
+    else:
+        unary = np.zeros((g, e))
+    return anneal_assignment(P.reshape(g * e, g * e), unary, psi, psi_end, growth)
+
+
+@jit
 def assignment_costs(neg_log_a):
     """The cost matrix (g, e + g) of ``matching.one_to_one`` from -log A (g, e + 1):
     catalog columns first, then one private null column per blob (its own null cost on

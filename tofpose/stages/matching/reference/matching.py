@@ -65,6 +65,32 @@ def anneal(P, unary, psi_start: float, psi_end: float, growth: float):
     return A, iterations
 
 
+def soft_assignment(
+    observed,
+    catalog,
+    alpha_mm: float,
+    clip: float,
+    use_size: bool,
+    observed_diameter_mm,
+    catalog_diameter_mm,
+    size_scale: float,
+    psi_start: float,
+    psi_end: float,
+    growth: float,
+):
+    """Eqs. 35-39 from the points: ``anneal`` of the ``pair_potentials`` with the unary
+    term ``size_scale * size_mismatch`` (``use_size``; else none: all zero).
+    Returns A (g, e + 1), iterations."""
+    P = pair_potentials(observed, catalog, alpha_mm, clip)
+    g, e = P.shape[0], P.shape[1]
+    unary = (
+        size_scale * size_mismatch(observed_diameter_mm, catalog_diameter_mm)
+        if use_size
+        else np.zeros((g, e))
+    )
+    return anneal(P, unary, psi_start, psi_end, growth)
+
+
 def one_to_one(A) -> tuple[np.ndarray, list[int]]:
     """The most probable one-to-one reading of A: the assignment (SciPy's) minimising
     sum -log A over catalog labels and one private null label per blob. Returns the pairs

@@ -70,3 +70,35 @@ def test_one_to_one_is_the_hungarian_assignment_with_private_null_columns():
         np.testing.assert_array_equal(pairs, want_pairs)
         assert unmatched == want_unmatched
         assert len(set(pairs[:, 1].tolist())) == len(pairs)  # one blob per reflector
+
+
+@pytest.mark.parametrize("use_size", [True, False])
+def test_soft_assignment_is_potentials_size_term_and_annealing_in_one(use_size):
+    """The one-call soft assignment gives exactly what pair_potentials, size_mismatch
+    and anneal_assignment give one after the other (and what the reference's equations
+    give, to rounding), with and without the size term; the size term changes A."""
+    from tofpose.stages.matching.kernels.annealing import size_mismatch, soft_assignment
+
+    rng = np.random.default_rng(5)
+    catalog = rng.uniform(-300, 300, (8, 3))
+    observed = np.vstack(
+        (catalog[[1, 2, 4, 7]] + rng.normal(0, 2, (4, 3)), rng.uniform(-300, 300, (2, 3)))
+    )
+    cat_d = rng.uniform(30, 80, 8)
+    obs_d = np.concatenate((cat_d[[1, 2, 4, 7]] * 1.05, [np.nan, 200.0]))
+    cfg, alpha = MatchingConfig(), 14.0
+    scale = cfg.size_weight * alpha**2
+    psi = (cfg.psi_start / alpha**2, cfg.psi_end / alpha**2, cfg.growth)
+    args = (observed, catalog, alpha, cfg.clip_factor, use_size, obs_d, cat_d, scale, *psi)
+    A, it = soft_assignment(*args)
+    P = pair_potentials(observed, catalog, alpha, cfg.clip_factor)
+    u = scale * size_mismatch(obs_d, cat_d) if use_size else np.zeros((6, 8))
+    A_steps, it_steps = anneal_assignment(np.ascontiguousarray(P.reshape(48, 48)), u, *psi)
+    assert it == it_steps > 30
+    np.testing.assert_array_equal(A, A_steps)
+    A_ref, it_ref = reference.soft_assignment(*args)
+    assert it_ref == it
+    np.testing.assert_allclose(A, A_ref, atol=1e-12)
+    assert [int(np.argmax(A[k])) for k in range(4)] == [2, 3, 5, 8]  # markers found
+    A_other, _ = soft_assignment(*args[:4], not use_size, *args[5:])
+    assert not np.array_equal(A, A_other)
