@@ -104,7 +104,32 @@ def prune_stale_kernel_caches(min_age_s: float = 86400.0) -> list[Path]:
 
 
 # numba.config sets its settings at import, from the environment: no stub declares them
-numba.config.CACHE_DIR = str(kernel_cache_dir())  # type: ignore[attr-defined]
+_CACHE_DIR = str(kernel_cache_dir())
+numba.config.CACHE_DIR = _CACHE_DIR  # type: ignore[attr-defined]
+
+
+def _keep_cache_dir_across_reloads() -> None:
+    """numba re-reads its whole configuration from the environment whenever a ``NUMBA_*``
+    variable of this process changed since the last compile (``numba.core.config``'s
+    ``_EnvReloader``), and ``CACHE_DIR`` then falls back to ``NUMBA_CACHE_DIR`` or ''. A
+    Dask nanny sets ``NUMBA_NUM_THREADS`` in the process that starts its workers (the
+    server, a study): every kernel first compiled after that would be cached beside its
+    source, where a caller's cached code outlives an edit of a kernel it inlines. So the
+    reload is wrapped to set this state's directory again."""
+    reloader = getattr(numba.core.config, "_env_reloader", None)
+    process = getattr(reloader, "process_environ", None)
+    if reloader is None or process is None or getattr(process, "_tofpose_keeps", False):
+        return
+
+    def process_keeping_cache_dir(environ):
+        process(environ)
+        numba.config.CACHE_DIR = _CACHE_DIR
+
+    process_keeping_cache_dir._tofpose_keeps = True  # type: ignore[attr-defined]
+    reloader.process_environ = process_keeping_cache_dir
+
+
+_keep_cache_dir_across_reloads()
 
 #: the decorator of every kernel: compiled once, cached on disk, releases the GIL (the
 #: server's acquisition thread and its HTTP threads then do not wait on each other)

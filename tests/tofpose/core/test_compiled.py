@@ -65,6 +65,34 @@ def test_a_user_cache_base_is_kept_and_a_compiled_kernel_lands_there(tmp_path):
     assert any(p.suffix == ".nbi" for p in Path(out).rglob("*"))
 
 
+def test_a_numba_variable_set_later_keeps_the_kernels_cache(tmp_path):
+    """A Dask nanny sets ``NUMBA_NUM_THREADS`` in the process that starts its workers;
+    numba then re-reads its configuration at the next compile, and its ``CACHE_DIR``
+    fell back to '' (kernels cached beside their sources). In a fresh process: the
+    variable set after import, a kernel compiled, the cache is still the sources'
+    state's and the kernel's cache files land there."""
+    code = (
+        "import os\n"
+        "import numba, numpy as np\n"
+        "from tofpose.core import compiled\n"
+        "os.environ['NUMBA_NUM_THREADS'] = '1'\n"
+        "from tofpose.core.kernels.stats import median_inplace\n"
+        "median_inplace(np.arange(5.0))\n"
+        "print(numba.config.NUMBA_NUM_THREADS, numba.config.CACHE_DIR)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        env={"NUMBA_CACHE_DIR": str(tmp_path), "PATH": "/usr/bin:/bin"},
+        check=True,
+        timeout=600,
+    ).stdout.split()
+    expected = tmp_path / f"tofpose-kernels-{compiled.kernel_sources_digest()}"
+    assert out[-2:] == ["1", str(expected)]  # the variable took effect, the cache stayed
+    assert any(p.suffix == ".nbi" for p in expected.rglob("*"))
+
+
 def test_only_old_caches_of_other_states_are_pruned(tmp_path, monkeypatch):
     """``prune_stale_kernel_caches`` (run by ``tofpose warm-up``) removes the directories
     of other source states idle for a day; a recent one (another checkout running now),
