@@ -39,6 +39,19 @@ def test_an_edit_of_any_kernel_source_is_another_cache(tmp_path, monkeypatch):
     assert compiled.kernel_sources_digest() == before  # the state, not the file's time
 
 
+def _fresh_process(code: str, cache_base: Path) -> str:
+    """stdout of ``code`` run by a fresh interpreter whose ``NUMBA_CACHE_DIR`` is
+    ``cache_base`` (nothing else of this process's environment but a PATH)."""
+    return subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        env={"NUMBA_CACHE_DIR": str(cache_base), "PATH": "/usr/bin:/bin"},
+        check=True,
+        timeout=600,
+    ).stdout
+
+
 def test_a_user_cache_base_is_kept_and_a_compiled_kernel_lands_there(tmp_path):
     """In a fresh process with ``NUMBA_CACHE_DIR`` set, the kernels' directory is inside
     it and a compiled kernel's cache files land there."""
@@ -49,18 +62,7 @@ def test_a_user_cache_base_is_kept_and_a_compiled_kernel_lands_there(tmp_path):
         "median_inplace(np.arange(5.0))\n"
         "print(compiled.kernel_cache_dir())\n"
     )
-    out = (
-        subprocess.run(
-            [sys.executable, "-c", code],
-            capture_output=True,
-            text=True,
-            env={"NUMBA_CACHE_DIR": str(tmp_path), "PATH": "/usr/bin:/bin"},
-            check=True,
-            timeout=600,
-        )
-        .stdout.strip()
-        .splitlines()[-1]
-    )
+    out = _fresh_process(code, tmp_path).strip().splitlines()[-1]
     assert out == str(tmp_path / f"tofpose-kernels-{compiled.kernel_sources_digest()}")
     assert any(p.suffix == ".nbi" for p in Path(out).rglob("*"))
 
@@ -80,14 +82,7 @@ def test_a_numba_variable_set_later_keeps_the_kernels_cache(tmp_path):
         "median_inplace(np.arange(5.0))\n"
         "print(numba.config.NUMBA_NUM_THREADS, numba.config.CACHE_DIR)\n"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code],
-        capture_output=True,
-        text=True,
-        env={"NUMBA_CACHE_DIR": str(tmp_path), "PATH": "/usr/bin:/bin"},
-        check=True,
-        timeout=600,
-    ).stdout.split()
+    out = _fresh_process(code, tmp_path).split()
     expected = tmp_path / f"tofpose-kernels-{compiled.kernel_sources_digest()}"
     assert out[-2:] == ["1", str(expected)]  # the variable took effect, the cache stayed
     assert any(p.suffix == ".nbi" for p in expected.rglob("*"))
@@ -132,15 +127,7 @@ def test_importing_the_library_writes_nothing(tmp_path):
         "import tofpose, sys\nfrom tofpose.cli import build_parser\nbuild_parser()\n"
         "assert 'numba' not in sys.modules and 'cv2' not in sys.modules\nprint('ok')\n"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code],
-        capture_output=True,
-        text=True,
-        env={"NUMBA_CACHE_DIR": str(base), "PATH": "/usr/bin:/bin"},
-        check=True,
-        timeout=600,
-    ).stdout
-    assert out.strip() == "ok"
+    assert _fresh_process(code, base).strip() == "ok"
     assert not base.exists()
 
 
