@@ -125,6 +125,8 @@ def test_controls_lock_while_the_turntable_status_is_stale(server, page_for):
     refused = page.get_by_test_id("target-error-yaw")
     refused.wait_for(timeout=5000)
     assert "not sent" in refused.inner_text() and "stale" in refused.inner_text()
+    panel = page.get_by_test_id("motion-locked").locator("xpath=..")  # the turntable card
+    panel.screenshot(path=str(SHOTS / "motion-enter-while-locked.png"))
     page.get_by_test_id("go-yaw").click(force=True)
     page.get_by_test_id("jog-yaw-plus").click(force=True)
     page.wait_for_timeout(800)
