@@ -595,7 +595,13 @@ def physics_section(quick: bool) -> str:
     phys = physics.run(n_phys)
     IMG.mkdir(parents=True, exist_ok=True)
     physics.plot(phys, IMG / "physics.png")
-    return physics.markdown(phys, _rel(IMG / "physics.png"), n_phys)
+    compared = physics.compare_pixel_fit(n_phys // 2 if not quick else n_phys)
+    return "\n".join(
+        [
+            physics.markdown(phys, _rel(IMG / "physics.png"), n_phys),
+            physics.pixel_fit_markdown(compared, n_phys // 2 if not quick else n_phys),
+        ]
+    )
 
 
 #: how the Findings that ``realistic_findings`` writes begin (``--only realistic``

@@ -180,17 +180,26 @@ class PixelFitConfig:
         camera).
     max_marker_rms_sigma : a marker whose pixels' residual RMS exceeds this many sigmas
         (a glint, an occluded disc) makes the fit fall back.
+    max_shift_chi2 : the fit refines the centroid pose; a fitted pose further from it
+        than this squared Mahalanobis distance under the centroid pose's own covariance
+        (default chi^2 with 6 degrees of freedom at 99.73 %: 3 sigma) is another answer,
+        not a refinement of the same one (a model the frame does not follow, such as a
+        blurred lens, drawn to a wrong minimum): the centroid pose stays, and the reason
+        says how far the fit went.
     """
 
     enabled: bool = False
     fit_range_offset: bool = False
     max_marker_rms_sigma: float = 3.0
+    max_shift_chi2: float = 20.06
 
     def __post_init__(self) -> None:
         if not self.max_marker_rms_sigma > 0:
             raise ValueError(
                 f"max_marker_rms_sigma must be positive, got {self.max_marker_rms_sigma}"
             )
+        if not self.max_shift_chi2 > 0:
+            raise ValueError(f"max_shift_chi2 must be positive, got {self.max_shift_chi2}")
 
 
 Refinement = Literal["ml", "los", "none"]

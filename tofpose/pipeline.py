@@ -18,6 +18,7 @@ from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from tofpose.arithmetic import Arithmetic, arithmetic_for
 from tofpose.calibration.covariance import CovarianceScale
@@ -185,6 +186,22 @@ class PoseResult:
     @property
     def active_threshold_counts(self) -> float:
         return self.diagnostics.active_threshold_counts
+
+
+def pose_shift_chi2(result: PoseResult, R: np.ndarray, t_mm: np.ndarray) -> float:
+    """Squared Mahalanobis distance of the pose ``(R (3, 3), t_mm (3,))`` from
+    ``result``'s pose under ``result.covariance`` (6, 6): the shift ``(rotation vector of
+    R R_result^T rad, t - t_result mm)``, the covariance's parametrisation; inf without a
+    covariance or when it is singular."""
+    if result.R is None or result.t_mm is None or result.covariance is None:
+        return math.inf
+    shift = np.concatenate(
+        [Rotation.from_matrix(R @ result.R.T).as_rotvec(), np.asarray(t_mm) - result.t_mm]
+    )
+    try:
+        return float(shift @ np.linalg.solve(result.covariance, shift))
+    except np.linalg.LinAlgError:
+        return math.inf
 
 
 def variance_factor(chi2: float, n_reflectors: int) -> float:
@@ -393,6 +410,17 @@ class PosePipeline:
         timings = {**result.timings_ms, "pixel fit": 1e3 * (time.perf_counter() - t0)}
         if not fit.ok or fit.covariance is None:
             return replace(result, pixel_fit=fit.reason or "no covariance", timings_ms=timings)
+        shift2 = pose_shift_chi2(result, fit.R, fit.t_mm)
+        if not shift2 <= cfg.max_shift_chi2:
+            return replace(
+                result,
+                pixel_fit=(
+                    f"the fitted pose lies {np.sqrt(shift2):.1f} sigma from the centroid pose "
+                    f"(at most {np.sqrt(cfg.max_shift_chi2):.1f}): another answer, not a "
+                    "refinement"
+                ),
+                timings_ms=timings,
+            )
         return replace(
             result,
             R=fit.R,

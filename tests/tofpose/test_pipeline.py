@@ -669,3 +669,63 @@ def test_the_focal_length_uncertainty_is_the_cameras_unless_the_config_sets_one(
     exact, stated = z_sigma(CameraModel()), z_sigma(CameraModel(focal_length_sigma_rel=0.002))
     assert 2.5 < stated < 5.0 and exact < 0.5 * stated
     assert z_sigma(CameraModel(), PipelineConfig(focal_length_sigma_rel=0.002)) == stated
+
+
+def test_pose_shift_chi2_is_the_shifts_mahalanobis_distance():
+    """A pose 0.01 rad about x and 2 mm along z from the result's, under sigmas 0.005 rad
+    and 1 mm: (0.01 / 0.005)^2 + (2 / 1)^2 = 8."""
+    from scipy.spatial.transform import Rotation
+
+    from tofpose.pipeline import PoseResult, pose_shift_chi2
+
+    R0 = Rotation.from_euler("xyz", [0.2, -0.1, 0.3]).as_matrix()
+    t0 = np.array([10.0, -5.0, 3000.0])
+    cov = np.diag([0.005**2] * 3 + [1.0] * 3)
+    result = PoseResult(ok=True, R=R0, t_mm=t0, covariance=cov)
+    R1 = Rotation.from_rotvec([0.01, 0.0, 0.0]).as_matrix() @ R0
+    assert pose_shift_chi2(result, R1, t0 + [0.0, 0.0, 2.0]) == pytest.approx(8.0, rel=1e-6)
+    assert pose_shift_chi2(result, R0, t0) == 0.0
+    assert pose_shift_chi2(PoseResult(ok=True, R=R0, t_mm=t0), R1, t0) == float("inf")
+
+
+@pytest.mark.parametrize(("shift_deg", "held"), [(0.0005, True), (3.0, False)])
+def test_a_pixel_fit_far_from_the_centroid_pose_is_not_taken(monkeypatch, shift_deg, held):
+    """The pixel fit refines the centroid pose: a fitted pose 3 deg away from it (far
+    beyond the centroid pose's own 3 sigma at 3 m) is another answer, and the centroid
+    pose stays with the reason; one a hair away is taken. The fit is replaced by one that
+    returns the centroid pose turned by ``shift_deg`` about the camera's x axis."""
+    from dataclasses import replace as dc_replace
+
+    from scipy.spatial.transform import Rotation
+
+    import tofpose.pipeline as pipeline_module
+    from tofpose.config import PixelFitConfig
+
+    real_fit = pipeline_module.fit_pose_to_pixels
+
+    def shifted_fit(gray, distance_mm, camera, catalog, R, t_mm, ids, **kwargs):
+        fit = real_fit(gray, distance_mm, camera, catalog, R, t_mm, ids, **kwargs)
+        turn = Rotation.from_euler("x", shift_deg, degrees=True).as_matrix()
+        return dc_replace(fit, ok=True, reason="", R=turn @ R, t_mm=np.asarray(t_mm))
+
+    monkeypatch.setattr(pipeline_module, "fit_pose_to_pixels", shifted_fit)
+    f = render(facing_pose(3000.0, 2, -3, 10), seed=4)
+    plain = PosePipeline(CameraModel(), paper_target()).process(f.gray, f.distance_mm)
+    on = PipelineConfig(pixel_fit=PixelFitConfig(enabled=True))
+    fitted = PosePipeline(CameraModel(), paper_target(), on).process(f.gray, f.distance_mm)
+    assert plain.ok and fitted.ok
+    angle = rotation_angle_deg(fitted.R, plain.R)
+    if held:
+        assert fitted.pixel_fit == "ok"
+        assert angle == pytest.approx(shift_deg, abs=1e-6)
+    else:
+        assert "sigma from the centroid pose" in fitted.pixel_fit, fitted.pixel_fit
+        assert angle < 1e-9 and np.allclose(fitted.t_mm, plain.t_mm)
+        assert np.allclose(fitted.covariance, plain.covariance)
+
+
+def test_pixel_fit_config_refuses_a_shift_limit_that_is_not_positive():
+    from tofpose.config import PixelFitConfig
+
+    with pytest.raises(ValueError, match="max_shift_chi2"):
+        PixelFitConfig(max_shift_chi2=0.0)
