@@ -241,8 +241,8 @@ def blob_mixing(
 ):
     """The sums of the mixing model (module docstring) of each blob over its support
     (its pixels dilated by one, other blobs' pixels left out): (n, ``MIX_FIELDS``) rows
-    (a_b, d_b, S_a, S_ad, C_unranged, n_support), NaN rows where the surround is unknown
-    or crowded.
+    (a_b, d_b, S_a, S_ad, C_unranged, n_support), NaN rows where the surround is unknown,
+    or crowded and the blob not saturated (``reference.mixed_pixels.blob_mixing``).
 
     flat, starts : the pixel lists; bbox (n, 4); gray (H, W) float32 (I-bar where
     persistence combined frames: it holds them inside the boxes grown by 2 px);
@@ -261,7 +261,7 @@ def blob_mixing(
     inv_w = 1.0 / w
     for j in range(n):
         gb, db = surrounds.gray[j], surrounds.distance_mm[j]
-        if surrounds.crowded[j] or not (np.isfinite(gb) and np.isfinite(db)):
+        if not (np.isfinite(gb) and np.isfinite(db)):
             continue
         x, y, bw, bh = bbox[j, 0], bbox[j, 1], bbox[j, 2], bbox[j, 3]
         y0, y1 = max(y - 1, 0), min(y + bh + 1, h)
@@ -273,8 +273,10 @@ def blob_mixing(
             r, c = row_col(flat[i], w, inv_w)
             member[r - y0, c - x0] = True
             g_max = max(g_max, float(gray[r, c]))
-        a_b = gb - dark
         saturated = g_max >= full_scale
+        if surrounds.crowded[j] and not saturated:
+            continue
+        a_b = gb - dark
         a_bp = max(a_b, 0.0)
         mids = np.empty(ph * pw)
         halves = np.empty(ph * pw)

@@ -202,9 +202,11 @@ def blob_mixing(
 ):
     """The mixing model's sums of each blob over its support (its pixels dilated by one,
     other blobs' pixels left out): (n, ``MIX_FIELDS``) rows (a_b, d_b, S_a, S_ad,
-    C_unranged, n_support, d_sat, sigma_sat), NaN rows for a crowded blob or an unknown
-    surround; d_sat, sigma_sat as ``saturated_range``, NaN unless a member reaches
-    ``full_scale`` (counts).
+    C_unranged, n_support, d_sat, sigma_sat), NaN rows for an unknown surround or a crowded
+    blob that is not saturated (a saturated one's rims read towards the plate whatever
+    its neighbours, so its bounded-coverage range is taken from the ring's median);
+    d_sat, sigma_sat as ``saturated_range``, NaN unless a member reaches ``full_scale``
+    (counts).
 
     a_b = surrounds.gray - dark, d_b = surrounds.distance_mm; a support pixel with a range (from
     ``member_distance`` at the blob's pixels, ``distance`` elsewhere) adds
@@ -217,17 +219,19 @@ def blob_mixing(
     out = np.full((n, MIX_FIELDS), np.nan)
     for j in range(n):
         gb, db = surrounds.gray[j], surrounds.distance_mm[j]
-        if surrounds.crowded[j] or not (np.isfinite(gb) and np.isfinite(db)):
+        if not (np.isfinite(gb) and np.isfinite(db)):
             continue
         window = _box(bbox, j, 1, gray.shape)
         y0, y1, x0, x1 = window
         member = _members(flat, starts, j, window, w)
+        g = gray[y0:y1, x0:x1].astype(float)
+        g_max = max(gb, float(g[member].max()))
+        if surrounds.crowded[j] and g_max < full_scale:
+            continue
         support = ndimage.binary_dilation(member, _EIGHT)
         support &= ~_others(owners, j, window)
-        g = gray[y0:y1, x0:x1].astype(float)
         d = np.where(member, member_distance[y0:y1, x0:x1], distance[y0:y1, x0:x1])
         d = d.astype(float)
-        g_max = max(gb, float(g[member].max()))
         a_b = gb - dark
         ok = support & np.isfinite(d)
         a = g[ok] - dark

@@ -347,3 +347,32 @@ def test_a_saturated_reflector_reads_its_own_range_within_its_sigma(ratio):
         flat, starts, bbox, gray, distance, distance, surround, dark, owner, FULL_SCALE
     )[0]
     assert np.isnan(row[6:]).all()
+
+
+@pytest.mark.parametrize(("ratio", "measured"), [(3.6, True), (0.5, False)])
+def test_a_crowded_saturated_reflector_still_reads_its_own_range(ratio, measured):
+    """Two raised reflectors side by side (the paper target's 7 and 8) put each other's
+    pixels in their surround rings: crowded. Unsaturated, the mixing model is left out
+    for such a blob (its centre and median range serve); saturated, the median of its
+    rims reads towards the plate (the other foreign renderer's saturating frames: +10 to
+    +24 mm), so its bounded-coverage range is still taken, from the surround's median
+    (the neighbour's own pixels are out of the ring): within 2 of its sigmas here, and
+    the same in the compiled kernel and its reference."""
+    flat, starts, bbox, gray, distance, surround, owner, d_r, dark = _saturated_disc(
+        ratio * (FULL_SCALE - 90.0)
+    )
+    crowded = Surrounds(
+        gray=surround.gray, distance_mm=surround.distance_mm, crowded=np.array([True])
+    )
+    rows = [
+        m.blob_mixing(
+            flat, starts, bbox, gray, distance, distance, crowded, dark, owner, FULL_SCALE
+        )[0]
+        for m in (compiled, reference)
+    ]
+    np.testing.assert_allclose(rows[0], rows[1], rtol=1e-12, atol=1e-6)
+    if not measured:
+        assert np.isnan(rows[1]).all()
+        return
+    got, sigma = rows[1][6], rows[1][7]
+    assert sigma > 0 and abs(got - d_r) < 2.0 * sigma
