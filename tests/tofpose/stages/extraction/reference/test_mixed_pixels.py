@@ -310,6 +310,19 @@ def _saturated_disc(a_r, full_scale=FULL_SCALE):
     return flat, starts, bbox, gray, distance, surround, owner, d_r, dark
 
 
+def _mixing_row(flat, starts, bbox, gray, distance, surround, owner, dark):
+    """The one blob's ``blob_mixing`` row (``MIX_FIELDS``,), after checking that the
+    compiled kernel gives the reference's."""
+    rows = [
+        m.blob_mixing(
+            flat, starts, bbox, gray, distance, distance, surround, dark, owner, FULL_SCALE
+        )[0]
+        for m in (compiled, reference)
+    ]
+    np.testing.assert_allclose(rows[0], rows[1], rtol=1e-12, atol=1e-6)
+    return rows[1]
+
+
 @pytest.mark.parametrize("ratio", [1.5, 3.6, 6.0])
 def test_a_saturated_reflector_reads_its_own_range_within_its_sigma(ratio):
     """A reflector ``ratio`` x full scale, its core clipped: the median of its ranged
@@ -320,14 +333,7 @@ def test_a_saturated_reflector_reads_its_own_range_within_its_sigma(ratio):
     flat, starts, bbox, gray, distance, surround, owner, d_r, dark = _saturated_disc(
         ratio * (FULL_SCALE - 90.0)
     )
-    rows = [
-        m.blob_mixing(
-            flat, starts, bbox, gray, distance, distance, surround, dark, owner, FULL_SCALE
-        )[0]
-        for m in (compiled, reference)
-    ]
-    np.testing.assert_allclose(rows[0], rows[1], rtol=1e-12, atol=1e-6)
-    mix = rows[1]
+    mix = _mixing_row(flat, starts, bbox, gray, distance, surround, owner, dark)
     median_error = np.nanmedian(distance.reshape(-1)[flat]) - d_r
     radius = np.sqrt(SATURATED_DISC_AREA / np.pi)
     got, sigma = reference.unmixed_range(6010.0, mix, radius, 1.0, 4.0)
@@ -364,15 +370,9 @@ def test_a_crowded_saturated_reflector_still_reads_its_own_range(ratio, measured
     crowded = Surrounds(
         gray=surround.gray, distance_mm=surround.distance_mm, crowded=np.array([True])
     )
-    rows = [
-        m.blob_mixing(
-            flat, starts, bbox, gray, distance, distance, crowded, dark, owner, FULL_SCALE
-        )[0]
-        for m in (compiled, reference)
-    ]
-    np.testing.assert_allclose(rows[0], rows[1], rtol=1e-12, atol=1e-6)
+    row = _mixing_row(flat, starts, bbox, gray, distance, crowded, owner, dark)
     if not measured:
-        assert np.isnan(rows[1]).all()
+        assert np.isnan(row).all()
         return
-    got, sigma = rows[1][6], rows[1][7]
+    got, sigma = row[6], row[7]
     assert sigma > 0 and abs(got - d_r) < 2.0 * sigma
