@@ -529,8 +529,7 @@ def _pose_columns_analytic(
     d_surround = np.where((covered < 1.0)[:, None], -d_images.coverage.sum(axis=0), 0.0)
     d_gray = np.einsum("kp,kpj->pj", g, d_images.coverage) + level * d_surround
     d_mixed = np.einsum("kp,kpj->pj", g, d_images.phasor) + level * (
-        d_surround * images.plate_phasor[:, None]
-        + pred.surround[:, None] * d_images.plate_phasor
+        d_surround * images.plate_phasor[:, None] + pred.surround[:, None] * d_images.plate_phasor
     )
     inv_w = 1.0 / np.where(np.abs(pred.phasor) > 0, pred.phasor, 1.0)
     return d_gray, pb.noise.mm_per_radian * np.imag(d_mixed * inv_w[:, None])
@@ -728,9 +727,7 @@ def fit_pose_to_pixels(
             f"implementation must be 'compiled' or 'reference', got {implementation!r}"
         )
     if jacobian not in ("analytic", "central-differences"):
-        raise ValueError(
-            f"jacobian must be 'analytic' or 'central-differences', got {jacobian!r}"
-        )
+        raise ValueError(f"jacobian must be 'analytic' or 'central-differences', got {jacobian!r}")
     if not range_offset_sigma_mm > 0:
         raise ValueError(f"range_offset_sigma_mm must be positive, got {range_offset_sigma_mm}")
     if subsamples < 1:

@@ -213,7 +213,9 @@ def disc_images_with_derivatives(R, t_mm, discs, rays, band_px, mm_per_radian, r
         r = radii_mm[k]
         for j in range(near_start[k], near_start[k + 1]):
             p = near_index[j]
-            s, _, _, lam = _rim_point_derivatives(bearings[p], dbdu[p], dbdv[p], c, n, r, dc, dn, out)
+            s, _, _, lam = _rim_point_derivatives(
+                bearings[p], dbdu[p], dbdv[p], c, n, r, dc, dn, out
+            )
             if s >= band_px:
                 phase = (lam - reference_mm) / mm_per_radian
                 ph = complex(math.cos(phase), math.sin(phase))

@@ -31,7 +31,12 @@ def box_coverage_derivatives(
     d_b = (ramp(pp) + ramp(pm) - ramp(mp) - ramp(mm)) * inv - cov / b
     corner = (s >= a + b) | (s <= -(a + b))
     zero = np.zeros_like(d_s)
-    return cov, np.where(corner, zero, d_s), np.where(corner, zero, d_a), np.where(corner, zero, d_b)
+    return (
+        cov,
+        np.where(corner, zero, d_s),
+        np.where(corner, zero, d_a),
+        np.where(corner, zero, d_b),
+    )
 
 
 def pose_directions(R: np.ndarray, centre_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -136,9 +141,7 @@ def disc_images_with_derivatives(
     phasor = np.zeros((k_count, p_count), complex)
     d_coverage = np.zeros((k_count, p_count, N_POSE))
     d_phasor = np.zeros((k_count, p_count, N_POSE), complex)
-    plate, d_plate = plate_with_derivatives(
-        R, t_mm, rays.bearings, mm_per_radian, reference_mm
-    )
+    plate, d_plate = plate_with_derivatives(R, t_mm, rays.bearings, mm_per_radian, reference_mm)
     subsamples = int(round(np.sqrt(rays.sample_bearings.shape[1])))
     half = 0.5 / subsamples
     floor = 1e-4 * half  # an axis-aligned rim: the box integral's limit, kept finite
