@@ -568,47 +568,50 @@ def _jacobian(
     the pose's six columns from the images' analytic derivatives ``d_images`` (by central
     differences of the model when None), the gains', levels' and offsets' analytically."""
     k_count = len(pb.discs.ids)
-    n_par = pb.n_params
-    p_count = pb.win.n_pixels
     layout = pb.layout
     owner = pb.win.owner
-    pixels = np.arange(p_count)
     mpr = pb.noise.mm_per_radian
-    d_gray = np.zeros((p_count, n_par))
-    d_dist = np.zeros((p_count, n_par))
     if d_images is None:
-        d_gray[:, :6], d_dist[:, :6] = _pose_columns_numeric(pb, s)
+        pose_gray, pose_dist = _pose_columns_numeric(pb, s)
     else:
-        d_gray[:, :6], d_dist[:, :6] = _pose_columns_analytic(pb, s, images, d_images, pred)
+        pose_gray, pose_dist = _pose_columns_analytic(pb, s, images, d_images, pred)
     inv_w = 1.0 / np.where(np.abs(pred.phasor) > 0, pred.phasor, 1.0)
-    # gain terms: column 6 + G k + j is disc k's term j (K, P, G) -> (P, K G)
-    gain_cols = slice(6, 6 + G * k_count)
-    d_gray[:, gain_cols] = (
-        (images.coverage[..., None] * pb.basis).transpose(1, 0, 2).reshape(p_count, -1)
-    )
-    d_phasor = images.phasor[..., None] * pb.basis * inv_w[None, :, None]
-    d_dist[:, gain_cols] = mpr * np.imag(d_phasor).transpose(1, 0, 2).reshape(p_count, -1)
+    # d distance / d gain term = mm_per_radian Im(phasor_k basis / mixed): the basis is real
+    dist_per_gain = mpr * np.imag(images.phasor * inv_w)  # (K, P)
+    dist_per_level = mpr * np.imag(pred.surround * images.plate_phasor * inv_w)  # (P,)
+    # rows: unsaturated gray, censored gray (a residual only below full scale), distance
+    gray_px = np.concatenate([pb.gray_rows, pb.sat_rows])
+    below = pred.gray[pb.sat_rows] < pb.noise.full_scale_counts
+    gray_w = -np.concatenate([1.0 / sig.gray[pb.gray_rows], below / sig.gray[pb.sat_rows]])
+    dist_px = pb.dist_rows
+    dist_w = -1.0 / sig.distance_mm[dist_px]
+    n_gray, n_dist = len(gray_px), len(dist_px)
+    J = np.zeros((n_gray + n_dist + _n_prior_rows(pb), pb.n_params))
+    gray_block, dist_block = J[:n_gray], J[n_gray : n_gray + n_dist]
+    gain_cols = slice(6, 6 + G * k_count)  # column 6 + G k + j: disc k's gain term j
+    for block, px, w, pose, per_gain in (
+        (gray_block, gray_px, gray_w, pose_gray, images.coverage),
+        (dist_block, dist_px, dist_w, pose_dist, dist_per_gain),
+    ):
+        block[:, :6] = pose[px] * w[:, None]
+        gain = per_gain[:, px, None] * pb.basis[:, px] * w[None, :, None]  # (K, rows, G)
+        block[:, gain_cols] = gain.transpose(1, 0, 2).reshape(len(px), -1)
+    rows_g, rows_d = np.arange(n_gray), np.arange(n_dist)
     # each pixel's surround level: its owner's column
-    level_cols = 6 + G * k_count + owner
-    d_gray[pixels, level_cols] = pred.surround
-    d_dist[pixels, level_cols] = mpr * np.imag(pred.surround * images.plate_phasor * inv_w)
+    gray_block[rows_g, 6 + G * k_count + owner[gray_px]] = pred.surround[gray_px] * gray_w
+    dist_block[rows_d, 6 + G * k_count + owner[dist_px]] = dist_per_level[dist_px] * dist_w
     if pb.fit_offset:
-        d_dist[:, layout.offset_col] = 1.0
+        dist_block[:, layout.offset_col] = dist_w
     if layout.disc_cols.size:
-        d_dist[pixels, layout.disc_cols[owner]] = 1.0
-    fs = pb.noise.full_scale_counts
-    below = pred.gray[pb.sat_rows] < fs  # censored rows with a residual
-    j_gray = -d_gray[pb.gray_rows] / sig.gray[pb.gray_rows, None]
-    j_sat = -d_gray[pb.sat_rows] / sig.gray[pb.sat_rows, None] * below[:, None]
-    j_dist = -d_dist[pb.dist_rows] / sig.distance_mm[pb.dist_rows, None]
-    j_prior = np.zeros((_n_prior_rows(pb), n_par))
+        dist_block[rows_d, layout.disc_cols[owner[dist_px]]] = dist_w
+    prior = J[n_gray + n_dist :]
     row = 0
     if pb.fit_offset and np.isfinite(pb.offset_sigma_mm):
-        j_prior[0, layout.offset_col] = -1.0 / pb.offset_sigma_mm
+        prior[0, layout.offset_col] = -1.0 / pb.offset_sigma_mm
         row = 1
     if layout.disc_cols.size:
-        j_prior[row + np.arange(k_count), layout.disc_cols] = -1.0 / pb.disc_range_sigma_mm
-    return np.vstack([j_gray, j_sat, j_dist, j_prior])[:, pb.free]
+        prior[row + np.arange(k_count), layout.disc_cols] = -1.0 / pb.disc_range_sigma_mm
+    return J[:, pb.free]
 
 
 def _surround_extra_var(pb: _Problem, images: DiscImages, s: _State) -> float:
