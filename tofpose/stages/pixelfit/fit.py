@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -304,6 +305,17 @@ class _Problem:
             near_flat=self.near_flat,
         )
 
+    @cached_property
+    def gray_pixels(self) -> np.ndarray:
+        """The gray residuals' pixels: the unsaturated ones, then the censored ones."""
+        return np.concatenate([self.gray_rows, self.sat_rows])
+
+    @cached_property
+    def row_basis(self) -> tuple[np.ndarray, np.ndarray]:
+        """The gain basis (K, rows, GAIN_TERMS) at the gray residuals' pixels and at the
+        distance residuals' (the Jacobian's gain columns; kept over the iterations)."""
+        return self.basis[:, self.gray_pixels], self.basis[:, self.dist_rows]
+
     def images_with_derivatives(
         self, R: np.ndarray, t_mm: np.ndarray
     ) -> tuple[DiscImages, DiscImageDerivatives]:
@@ -528,7 +540,9 @@ def _pose_columns_analytic(
     covered = images.coverage.sum(axis=0)
     d_surround = np.where((covered < 1.0)[:, None], -d_images.coverage.sum(axis=0), 0.0)
     d_gray = np.einsum("kp,kpj->pj", g, d_images.coverage) + level * d_surround
-    d_mixed = np.einsum("kp,kpj->pj", g, d_images.phasor) + level * (
+    # the gains are real: the complex sum over the discs as one of (re, im) pairs
+    d_disc_phasor = np.einsum("kp,kpj->pj", g, d_images.phasor.view(np.float64))
+    d_mixed = d_disc_phasor.view(np.complex128) + level * (
         d_surround * images.plate_phasor[:, None] + pred.surround[:, None] * d_images.plate_phasor
     )
     inv_w = 1.0 / np.where(np.abs(pred.phasor) > 0, pred.phasor, 1.0)
@@ -580,7 +594,7 @@ def _jacobian(
     dist_per_gain = mpr * np.imag(images.phasor * inv_w)  # (K, P)
     dist_per_level = mpr * np.imag(pred.surround * images.plate_phasor * inv_w)  # (P,)
     # rows: unsaturated gray, censored gray (a residual only below full scale), distance
-    gray_px = np.concatenate([pb.gray_rows, pb.sat_rows])
+    gray_px = pb.gray_pixels
     below = pred.gray[pb.sat_rows] < pb.noise.full_scale_counts
     gray_w = -np.concatenate([1.0 / sig.gray[pb.gray_rows], below / sig.gray[pb.sat_rows]])
     dist_px = pb.dist_rows
@@ -589,12 +603,12 @@ def _jacobian(
     J = np.zeros((n_gray + n_dist + _n_prior_rows(pb), pb.n_params))
     gray_block, dist_block = J[:n_gray], J[n_gray : n_gray + n_dist]
     gain_cols = slice(6, 6 + G * k_count)  # column 6 + G k + j: disc k's gain term j
-    for block, px, w, pose, per_gain in (
-        (gray_block, gray_px, gray_w, pose_gray, images.coverage),
-        (dist_block, dist_px, dist_w, pose_dist, dist_per_gain),
+    for block, px, w, pose, per_gain, basis in (
+        (gray_block, gray_px, gray_w, pose_gray, images.coverage, pb.row_basis[0]),
+        (dist_block, dist_px, dist_w, pose_dist, dist_per_gain, pb.row_basis[1]),
     ):
         block[:, :6] = pose[px] * w[:, None]
-        gain = per_gain[:, px, None] * pb.basis[:, px] * w[None, :, None]  # (K, rows, G)
+        gain = per_gain[:, px, None] * basis * w[None, :, None]  # (K, rows, G)
         block[:, gain_cols] = gain.transpose(1, 0, 2).reshape(len(px), -1)
     rows_g, rows_d = np.arange(n_gray), np.arange(n_dist)
     # each pixel's surround level: its owner's column

@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 from tofpose.core.compiled import jit
+from tofpose.stages.pixelfit.kernels.images import _rim_point
 
 #: the pose's perturbation directions: three small rotations, three translations
 N_POSE = 6
@@ -57,6 +58,17 @@ def _box_coverage_derivatives(s, a, b):
     d_a = (_ramp(pp) - _ramp(pm) + _ramp(mp) - _ramp(mm)) * inv - cov / a
     d_b = (_ramp(pp) + _ramp(pm) - _ramp(mp) - _ramp(mm)) * inv - cov / b
     return cov, d_s, d_a, d_b
+
+
+@jit
+def _range_derivative(b, c, n, nb, lam, dc, dn):
+    """d lam along one pose direction (``dc``, ``dn`` (3,)): the range ``lam = (n . c) /
+    (n . b)`` of ray ``b`` to the disc's plane (``nb`` = n . b); all a wholly covered
+    pixel needs."""
+    d_nb = b[0] * dn[0] + b[1] * dn[1] + b[2] * dn[2]
+    d_nc = dn[0] * c[0] + dn[1] * c[1] + dn[2] * c[2] + n[0] * dc[0] + n[1] * dc[1]
+    d_nc += n[2] * dc[2]
+    return (d_nc - lam * d_nb) / nb
 
 
 @jit
@@ -215,16 +227,20 @@ def disc_images_with_derivatives(R, t_mm, discs, rays, band_px, mm_per_radian, r
         r = radii_mm[k]
         for j in range(near_start[k], near_start[k + 1]):
             p = near_index[j]
-            s, _, _, lam = _rim_point_derivatives(
-                bearings[p], dbdu[p], dbdv[p], c, n, r, dc, dn, out
-            )
+            s, _, _, lam = _rim_point(bearings[p], dbdu[p], dbdv[p], c, n, r)
             if s >= band_px:
                 phase = (lam - reference_mm) / mm_per_radian
                 ph = complex(math.cos(phase), math.sin(phase))
                 coverage[k, p] = 1.0
                 phasor[k, p] = ph
+                b = bearings[p]
+                nb = b[0] * n[0] + b[1] * n[1] + b[2] * n[2]
                 for e in range(N_POSE):
-                    d_phasor[k, p, e] = 1j * (out[3, e] / mm_per_radian) * ph
+                    d_phasor[k, p, e] = (
+                        1j
+                        * (_range_derivative(b, c, n, nb, lam, dc[e], dn[e]) / mm_per_radian)
+                        * ph
+                    )
             elif abs(s) < band_px:
                 cov_sum = 0.0
                 re_sum = 0.0
@@ -233,24 +249,16 @@ def disc_images_with_derivatives(R, t_mm, discs, rays, band_px, mm_per_radian, r
                 d_re_sum[:] = 0.0
                 d_im_sum[:] = 0.0
                 for q in range(n_sub):
-                    ss, au, av, lam_s = _rim_point_derivatives(
-                        sample_bearings[p, q],
-                        sample_dbdu[p, q],
-                        sample_dbdv[p, q],
-                        c,
-                        n,
-                        r,
-                        dc,
-                        dn,
-                        out,
-                    )
+                    sb, sbu, sbv = sample_bearings[p, q], sample_dbdu[p, q], sample_dbdv[p, q]
+                    ss, au, av, lam_s = _rim_point(sb, sbu, sbv, c, n, r)
                     a_half = au * half
                     b_half = av * half
+                    if ss <= -(max(a_half, floor) + max(b_half, floor)):
+                        continue  # wholly outside: coverage and derivatives 0
+                    _rim_point_derivatives(sb, sbu, sbv, c, n, r, dc, dn, out)
                     cov_s, c_s, c_a, c_b = _box_coverage_derivatives(
                         ss, max(a_half, floor), max(b_half, floor)
                     )
-                    if cov_s <= 0.0:
-                        continue  # wholly outside: coverage and derivatives 0
                     phase = (lam_s - reference_mm) / mm_per_radian
                     cos_p = math.cos(phase)
                     sin_p = math.sin(phase)
