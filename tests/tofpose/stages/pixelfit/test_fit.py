@@ -420,3 +420,27 @@ def test_jacobian_is_the_residuals_derivative_in_every_parameter(monkeypatch):
         scale = np.abs(numeric).max()
         assert scale > 0, col
         np.testing.assert_allclose(J[:, j], numeric, rtol=0, atol=1e-5 * scale, err_msg=str(col))
+
+
+def test_reference_implementation_fits_the_same_pose():
+    """The NumPy images and derivatives (``implementation="reference"``) and the compiled
+    kernels are one arithmetic: the same iterations and the same pose to rounding."""
+    sensor, f, r = _pipeline_frame(3000.0, 0)
+    fits = [
+        fit_pose_to_pixels(
+            f.gray,
+            f.distance_mm,
+            CAM,
+            CAT,
+            r.R,
+            r.t_mm,
+            [m.catalog_id for m in r.matched],
+            noise=PixelNoise.from_sensor(sensor),
+            implementation=implementation,
+        )
+        for implementation in ("compiled", "reference")
+    ]
+    assert all(x.ok for x in fits), [x.reason for x in fits]
+    assert fits[0].iterations == fits[1].iterations
+    diff = _error(fits[0].R, fits[0].t_mm, RigidTransform(fits[1].R, fits[1].t_mm))
+    assert np.all(np.abs(diff) < 1e-6 * np.sqrt(np.diag(fits[1].covariance))), diff
