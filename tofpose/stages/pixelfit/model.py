@@ -305,9 +305,10 @@ def disc_images_with_derivatives(
     (``kernels.derivatives``' docstring gives the chain rule), in one call: the compiled
     kernel (``kernels.derivatives.disc_images_with_derivatives``), else the same
     arithmetic in NumPy (``reference.derivatives``). Arguments as ``disc_images``; the
-    images equal ``disc_images``' to rounding. Dearer than ``disc_images`` (about six
-    times the arithmetic on the rim pixels), so the fit calls it once an iteration, for
-    the Jacobian, and ``disc_images`` for its trial steps."""
+    images equal ``disc_images``' to rounding. Dearer than ``disc_images`` (the chain
+    rule on every rim sub-cell a disc reaches, and (K, P, 6) arrays to fill), so it is a
+    kernel of its own rather than a flag: the fit calls it once an iteration, for the
+    Jacobian, and ``disc_images`` for its trial steps, which need no derivatives."""
     images = (
         derivatives_kernel.disc_images_with_derivatives
         if compiled
