@@ -8,7 +8,12 @@ markers' pixels. Reported per range, medians over repeats of ``--frames`` frames
 RMS attitude (deg, geodesic) and position (mm) errors of the pipeline and of the pixel
 fit, their ratios to the bound (``bench/crlb.py``, RMS over the same frames), the pixel
 fit's errors over its own sigmas (RMS of the whitened 3-D errors over sqrt(3)), its
-fallback count and its time per frame.
+fallback count and its time per frame (one BLAS thread, as the CLI runs: with
+OpenBLAS's two threads on a busy 2-core machine the fit's products of a (rows, ~70)
+Jacobian dominated, and a profile of 9 fits at 1-8 m took 2.9 s against 0.38 s with
+one). ``--jacobian central-differences`` fits with the pose's Jacobian by central
+differences (twelve model calls an iteration) instead of the analytic derivatives: the
+same frames, to compare.
 
     python bench/pixelfit.py --ranges 1 2 3 4 5 6 7 8 --frames 20 --repeats 3
 
@@ -37,6 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.crlb import pose_crlb  # noqa: E402
 from tofpose import CameraModel, PosePipeline, paper_target  # noqa: E402
 from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
+from tofpose.core.threads import single_threaded_blas  # noqa: E402
 from tofpose.sim.bench import R_FACING  # noqa: E402
 from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
 from tofpose.sim.scene import TargetScene  # noqa: E402
@@ -75,8 +81,10 @@ def run_frame(
     *,
     sensor: SensorModel,
     camera: CameraModel | None = None,
+    jacobian: str = "analytic",
 ) -> FrameOutcome:
-    """Render one frame at ``range_mm``, run the pipeline and the pixel fit on it."""
+    """Render one frame at ``range_mm``, run the pipeline and the pixel fit (its
+    ``jacobian`` option) on it."""
     cam = CameraModel() if camera is None else camera
     cat = paper_target()
     T = draw_pose(rng, range_mm)
@@ -95,6 +103,7 @@ def run_frame(
         r.t_mm,
         [m.catalog_id for m in r.matched],
         noise=PixelNoise.from_sensor(sensor),
+        jacobian=jacobian,
     )
     dt = time.perf_counter() - t0
     pixel_err = pose_error(fit.R, fit.t_mm, T) if fit.ok else None
@@ -141,12 +150,14 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--supersampling", type=int, default=16)
     ap.add_argument("--seed", type=int, default=49)
+    ap.add_argument("--jacobian", choices=("analytic", "central-differences"), default="analytic")
     args = ap.parse_args(argv)
+    single_threaded_blas()
     sensor = SensorModel(supersampling=args.supersampling)
     lines = [
         f"Pixel fit vs centroid pipeline vs bound: {args.frames} frames x {args.repeats} "
         f"repeats per range (medians over repeats), renderer supersampling "
-        f"{args.supersampling}.",
+        f"{args.supersampling}, {args.jacobian} pose Jacobian.",
         "",
         "| range m | pipeline att / bound | pixel att / bound | pipeline pos / bound "
         "| pixel pos / bound | bound att mdeg | bound pos mm | err/sigma att | err/sigma pos "
@@ -157,7 +168,10 @@ def main(argv: list[str] | None = None) -> str:
         rows = []
         for rep in range(args.repeats):
             rng = np.random.default_rng([args.seed, int(z * 1000), rep])
-            out = [run_frame(rng, z * 1000.0, sensor=sensor) for _ in range(args.frames)]
+            out = [
+                run_frame(rng, z * 1000.0, sensor=sensor, jacobian=args.jacobian)
+                for _ in range(args.frames)
+            ]
             rows.append(summarise(out))
         m = {k: float(np.nanmedian([r[k] for r in rows])) for k in rows[0]}
         lines.append(

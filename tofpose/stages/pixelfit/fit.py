@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -58,12 +59,14 @@ from tofpose.stages.pixelfit.constants import (
 )
 from tofpose.stages.pixelfit.model import (
     GAIN_TERMS,
+    DiscImageDerivatives,
     DiscImages,
     Discs,
     Prediction,
     Windows,
     build_windows,
     disc_images,
+    disc_images_with_derivatives,
     gain_basis,
     pixel_gains,
     predict,
@@ -280,6 +283,7 @@ class _Problem:
     disc_range_sigma_mm: float = 0.0  # each disc's own range error's prior (0: none)
     compiled: bool = True  # the model's compiled kernel, else its NumPy reference
     near_flat: tuple[np.ndarray, np.ndarray] | None = None  # win.near_flat, kept
+    numeric_jacobian: bool = False  # the pose's columns by central differences
 
     @property
     def layout(self) -> _Layout:
@@ -291,6 +295,31 @@ class _Problem:
 
     def images(self, R: np.ndarray, t_mm: np.ndarray) -> DiscImages:
         return disc_images(
+            R,
+            t_mm,
+            self.discs,
+            self.win,
+            mm_per_radian=self.noise.mm_per_radian,
+            reference_mm=self.reference_mm,
+            compiled=self.compiled,
+            near_flat=self.near_flat,
+        )
+
+    @cached_property
+    def gray_pixels(self) -> np.ndarray:
+        """The gray residuals' pixels: the unsaturated ones, then the censored ones."""
+        return np.concatenate([self.gray_rows, self.sat_rows])
+
+    @cached_property
+    def row_basis(self) -> tuple[np.ndarray, np.ndarray]:
+        """The gain basis (K, rows, GAIN_TERMS) at the gray residuals' pixels and at the
+        distance residuals' (the Jacobian's gain columns; kept over the iterations)."""
+        return self.basis[:, self.gray_pixels], self.basis[:, self.dist_rows]
+
+    def images_with_derivatives(
+        self, R: np.ndarray, t_mm: np.ndarray
+    ) -> tuple[DiscImages, DiscImageDerivatives]:
+        return disc_images_with_derivatives(
             R,
             t_mm,
             self.discs,
@@ -499,16 +528,34 @@ def _row_owners(pb: _Problem) -> np.ndarray:
     return np.concatenate([o[pb.gray_rows], o[pb.sat_rows], o[pb.dist_rows], prior])
 
 
-def _jacobian(
-    pb: _Problem, s: _State, images: DiscImages, pred: Prediction, sig: _Sigmas
-) -> np.ndarray:
-    """d residuals / d parameters (rows as ``_residuals``): the pose's six columns by
-    central differences of the model, the gains', levels' and offset's analytically."""
-    k_count = len(pb.discs.ids)
-    n_par = pb.n_params
+def _pose_columns_analytic(
+    pb: _Problem, s: _State, images: DiscImages, d_images: DiscImageDerivatives, pred: Prediction
+) -> tuple[np.ndarray, np.ndarray]:
+    """d gray (P, 6) and d distance (P, 6) over the pose from the discs' analytic image
+    derivatives (``model.disc_images_with_derivatives``) through ``model.predict``: gray
+    ``sum_k g_k c_k + level (1 - sum_k c_k)``, distance ``mm_per_radian arg(mixed)`` with
+    ``d arg(mixed) = Im(d mixed / mixed)``; the surround's clip at 0 holds it still."""
+    g = pixel_gains(s.gains, pb.basis)  # (K, P)
+    level = s.levels[pb.win.owner][:, None]  # (P, 1)
+    covered = images.coverage.sum(axis=0)
+    d_surround = np.where((covered < 1.0)[:, None], -d_images.coverage.sum(axis=0), 0.0)
+    d_gray = np.einsum("kp,kpj->pj", g, d_images.coverage) + level * d_surround
+    # the gains are real: the complex sum over the discs as one of (re, im) pairs
+    d_disc_phasor = np.einsum("kp,kpj->pj", g, d_images.phasor.view(np.float64))
+    d_mixed = d_disc_phasor.view(np.complex128) + level * (
+        d_surround * images.plate_phasor[:, None] + pred.surround[:, None] * d_images.plate_phasor
+    )
+    inv_w = 1.0 / np.where(np.abs(pred.phasor) > 0, pred.phasor, 1.0)
+    return d_gray, pb.noise.mm_per_radian * np.imag(d_mixed * inv_w[:, None])
+
+
+def _pose_columns_numeric(pb: _Problem, s: _State) -> tuple[np.ndarray, np.ndarray]:
+    """d gray (P, 6) and d distance (P, 6) over the pose by central differences of the
+    model (twelve evaluations; steps ``ROTATION_STEP_RAD``, ``TRANSLATION_STEP_MM``):
+    the check of the analytic columns."""
     p_count = pb.win.n_pixels
-    d_gray = np.zeros((p_count, n_par))
-    d_dist = np.zeros((p_count, n_par))
+    d_gray = np.zeros((p_count, 6))
+    d_dist = np.zeros((p_count, 6))
     steps = [ROTATION_STEP_RAD] * 3 + [TRANSLATION_STEP_MM] * 3
     for i, h in enumerate(steps):
         e = np.zeros(6)
@@ -516,42 +563,69 @@ def _jacobian(
         out = []
         for sign in (1.0, -1.0):
             R = Rotation.from_rotvec(sign * e[:3]).as_matrix() @ s.R
-            p = pb.predict(pb.images(R, s.t_mm + sign * e[3:]), s)
-            out.append(p)
+            out.append(pb.predict(pb.images(R, s.t_mm + sign * e[3:]), s))
         d_gray[:, i] = (out[0].gray - out[1].gray) / (2 * h)
         dd = _wrap(out[0].distance_mm - out[1].distance_mm, pb.noise.unambiguous_range_mm)
         d_dist[:, i] = dd / (2 * h)
-    mpr = pb.noise.mm_per_radian
-    inv_w = 1.0 / np.where(np.abs(pred.phasor) > 0, pred.phasor, 1.0)
-    owner = pb.win.owner
-    for j in range(G):
-        factor = pb.basis[..., j]  # (K, P)
-        cols = 6 + G * np.arange(k_count) + j
-        d_gray[:, cols] = (images.coverage * factor).T
-        d_dist[:, cols] = mpr * np.imag(images.phasor * factor * inv_w).T
-    surround_phasor = pred.surround * images.plate_phasor * inv_w
-    for k in range(k_count):
-        mine = owner == k
-        d_gray[mine, 6 + G * k_count + k] = pred.surround[mine]
-        d_dist[mine, 6 + G * k_count + k] = mpr * np.imag(surround_phasor[mine])
+    return d_gray, d_dist
+
+
+def _jacobian(
+    pb: _Problem,
+    s: _State,
+    images: DiscImages,
+    pred: Prediction,
+    sig: _Sigmas,
+    d_images: DiscImageDerivatives | None = None,
+) -> np.ndarray:
+    """d residuals / d parameters (rows as ``_residuals``; the free parameters' columns):
+    the pose's six columns from the images' analytic derivatives ``d_images`` (by central
+    differences of the model when None), the gains', levels' and offsets' analytically."""
+    k_count = len(pb.discs.ids)
     layout = pb.layout
+    owner = pb.win.owner
+    mpr = pb.noise.mm_per_radian
+    if d_images is None:
+        pose_gray, pose_dist = _pose_columns_numeric(pb, s)
+    else:
+        pose_gray, pose_dist = _pose_columns_analytic(pb, s, images, d_images, pred)
+    inv_w = 1.0 / np.where(np.abs(pred.phasor) > 0, pred.phasor, 1.0)
+    # d distance / d gain term = mm_per_radian Im(phasor_k basis / mixed): the basis is real
+    dist_per_gain = mpr * np.imag(images.phasor * inv_w)  # (K, P)
+    dist_per_level = mpr * np.imag(pred.surround * images.plate_phasor * inv_w)  # (P,)
+    # rows: unsaturated gray, censored gray (a residual only below full scale), distance
+    gray_px = pb.gray_pixels
+    below = pred.gray[pb.sat_rows] < pb.noise.full_scale_counts
+    gray_w = -np.concatenate([1.0 / sig.gray[pb.gray_rows], below / sig.gray[pb.sat_rows]])
+    dist_px = pb.dist_rows
+    dist_w = -1.0 / sig.distance_mm[dist_px]
+    n_gray, n_dist = len(gray_px), len(dist_px)
+    J = np.zeros((n_gray + n_dist + _n_prior_rows(pb), pb.n_params))
+    gray_block, dist_block = J[:n_gray], J[n_gray : n_gray + n_dist]
+    gain_cols = slice(6, 6 + G * k_count)  # column 6 + G k + j: disc k's gain term j
+    for block, px, w, pose, per_gain, basis in (
+        (gray_block, gray_px, gray_w, pose_gray, images.coverage, pb.row_basis[0]),
+        (dist_block, dist_px, dist_w, pose_dist, dist_per_gain, pb.row_basis[1]),
+    ):
+        block[:, :6] = pose[px] * w[:, None]
+        gain = per_gain[:, px, None] * basis * w[None, :, None]  # (K, rows, G)
+        block[:, gain_cols] = gain.transpose(1, 0, 2).reshape(len(px), -1)
+    rows_g, rows_d = np.arange(n_gray), np.arange(n_dist)
+    # each pixel's surround level: its owner's column
+    gray_block[rows_g, 6 + G * k_count + owner[gray_px]] = pred.surround[gray_px] * gray_w
+    dist_block[rows_d, 6 + G * k_count + owner[dist_px]] = dist_per_level[dist_px] * dist_w
     if pb.fit_offset:
-        d_dist[:, layout.offset_col] = 1.0
-    for k, col in enumerate(layout.disc_cols):
-        d_dist[owner == k, col] = 1.0
-    fs = pb.noise.full_scale_counts
-    below = pred.gray[pb.sat_rows] < fs  # censored rows with a residual
-    j_gray = -d_gray[pb.gray_rows] / sig.gray[pb.gray_rows, None]
-    j_sat = -d_gray[pb.sat_rows] / sig.gray[pb.sat_rows, None] * below[:, None]
-    j_dist = -d_dist[pb.dist_rows] / sig.distance_mm[pb.dist_rows, None]
-    j_prior = np.zeros((_n_prior_rows(pb), n_par))
+        dist_block[:, layout.offset_col] = dist_w
+    if layout.disc_cols.size:
+        dist_block[rows_d, layout.disc_cols[owner[dist_px]]] = dist_w
+    prior = J[n_gray + n_dist :]
     row = 0
     if pb.fit_offset and np.isfinite(pb.offset_sigma_mm):
-        j_prior[0, layout.offset_col] = -1.0 / pb.offset_sigma_mm
+        prior[0, layout.offset_col] = -1.0 / pb.offset_sigma_mm
         row = 1
-    for i, col in enumerate(layout.disc_cols):
-        j_prior[row + i, col] = -1.0 / pb.disc_range_sigma_mm
-    return np.vstack([j_gray, j_sat, j_dist, j_prior])[:, pb.free]
+    if layout.disc_cols.size:
+        prior[row + np.arange(k_count), layout.disc_cols] = -1.0 / pb.disc_range_sigma_mm
+    return J[:, pb.free]
 
 
 def _surround_extra_var(pb: _Problem, images: DiscImages, s: _State) -> float:
@@ -604,6 +678,7 @@ def fit_pose_to_pixels(
     max_iterations: int = MAX_ITERATIONS,
     max_marker_rms_sigma: float = MAX_MARKER_RMS_SIGMA,
     implementation: str = "compiled",
+    jacobian: str = "analytic",
 ) -> PixelFitResult:
     """Refine a pose on the raw pixels of the matched reflectors.
 
@@ -640,6 +715,11 @@ def fit_pose_to_pixels(
     implementation : str
         "compiled" (the discs' images by ``kernels.images``) or "reference" (the same
         arithmetic in NumPy, ``model.disc_images``).
+    jacobian : str
+        "analytic" (the pose's Jacobian columns from the images' analytic derivatives,
+        ``model.disc_images_with_derivatives``: one model call an iteration) or
+        "central-differences" (twelve model calls an iteration: the check of the
+        analytic one; the converged poses agree to a small part of a sigma).
 
     Returns
     -------
@@ -663,6 +743,8 @@ def fit_pose_to_pixels(
         raise ValueError(
             f"implementation must be 'compiled' or 'reference', got {implementation!r}"
         )
+    if jacobian not in ("analytic", "central-differences"):
+        raise ValueError(f"jacobian must be 'analytic' or 'central-differences', got {jacobian!r}")
     if not range_offset_sigma_mm > 0:
         raise ValueError(f"range_offset_sigma_mm must be positive, got {range_offset_sigma_mm}")
     if subsamples < 1:
@@ -716,6 +798,7 @@ def fit_pose_to_pixels(
         offset_sigma_mm=float(range_offset_sigma_mm),
         compiled=implementation == "compiled",
         near_flat=win.near_flat,
+        numeric_jacobian=jacobian == "central-differences",
         basis=gain_basis(uv[None] - centre_px[:, None], radius_px),
         free=free,
     )
@@ -835,10 +918,13 @@ def _levenberg_marquardt(
     info = None
     for iteration in range(1, max_iterations + 1):
         iterations = iteration
+        d_images = None
+        if not pb.numeric_jacobian:
+            images, d_images = pb.images_with_derivatives(state.R, state.t_mm)
         pred = pb.predict(images, state)
         sig = _sigmas(pb, pred, extra_var, rim, coverage_sigma)
         r = _residuals(pb, pred, sig, state)
-        J = _jacobian(pb, state, images, pred, sig)
+        J = _jacobian(pb, state, images, pred, sig, d_images)
         info = J.T @ J
         grad = J.T @ r
         cost = float(r @ r)

@@ -40,8 +40,10 @@ from tofpose.stages.pixelfit.constants import (
     UNMATCHED_MARGIN_PX,
     WINDOW_PAD_PX,
 )
+from tofpose.stages.pixelfit.kernels import derivatives as derivatives_kernel
 from tofpose.stages.pixelfit.kernels import images as images_kernel
 from tofpose.stages.pixelfit.records import DiscRecord, WindowRays
+from tofpose.stages.pixelfit.reference import derivatives as derivatives_reference
 from tofpose.stages.pixelfit.reference import images as images_reference
 
 #: step of the bearing's derivative over the pixel coordinates, px
@@ -245,17 +247,7 @@ def disc_images(
     n = R[:, 2]
     plate_range = (n @ t_mm) / (win.bearings @ n)
     plate = np.exp(1j * (plate_range - reference_mm) / mm_per_radian)
-    index, start = win.near_flat if near_flat is None else near_flat
-    rays = WindowRays(
-        bearings=win.bearings,
-        dbdu=win.dbdu,
-        dbdv=win.dbdv,
-        sample_bearings=win.sample_bearings,
-        sample_dbdu=win.sample_dbdu,
-        sample_dbdv=win.sample_dbdv,
-        near_index=index,
-        near_start=start,
-    )
+    rays = _window_rays(win, near_flat)
     images = images_kernel.disc_images if compiled else images_reference.disc_images
     coverage, phasor = images(
         np.ascontiguousarray(R, dtype=float),
@@ -267,7 +259,74 @@ def disc_images(
         float(reference_mm),
     )
     return DiscImages(coverage=coverage, phasor=phasor, plate_phasor=plate)
-    return DiscImages(coverage=coverage, phasor=phasor, plate_phasor=plate)
+
+
+@dataclass(frozen=True)
+class DiscImageDerivatives:
+    """The discs' images' derivatives over the pose (a small left-multiplied rotation
+    ``w``, rad, then the translation, mm: the last axis, 6), at the pose of the
+    ``DiscImages`` they come with.
+
+    coverage : ndarray of shape (K, P, 6); phasor : (K, P, 6) complex; plate_phasor :
+    (P, 6) complex.
+    """
+
+    coverage: np.ndarray
+    phasor: np.ndarray
+    plate_phasor: np.ndarray
+
+
+def _window_rays(win: Windows, near_flat: tuple[np.ndarray, np.ndarray] | None) -> WindowRays:
+    index, start = win.near_flat if near_flat is None else near_flat
+    return WindowRays(
+        bearings=win.bearings,
+        dbdu=win.dbdu,
+        dbdv=win.dbdv,
+        sample_bearings=win.sample_bearings,
+        sample_dbdu=win.sample_dbdu,
+        sample_dbdv=win.sample_dbdv,
+        near_index=index,
+        near_start=start,
+    )
+
+
+def disc_images_with_derivatives(
+    R: np.ndarray,
+    t_mm: np.ndarray,
+    discs: Discs,
+    win: Windows,
+    *,
+    mm_per_radian: float,
+    reference_mm: float,
+    compiled: bool = True,
+    near_flat: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[DiscImages, DiscImageDerivatives]:
+    """``disc_images`` and the images' analytic derivatives over the pose
+    (``kernels.derivatives``' docstring gives the chain rule), in one call: the compiled
+    kernel (``kernels.derivatives.disc_images_with_derivatives``), else the same
+    arithmetic in NumPy (``reference.derivatives``). Arguments as ``disc_images``; the
+    images equal ``disc_images``' to rounding. Dearer than ``disc_images`` (the chain
+    rule on every rim sub-cell a disc reaches, and (K, P, 6) arrays to fill), so it is a
+    kernel of its own rather than a flag: the fit calls it once an iteration, for the
+    Jacobian, and ``disc_images`` for its trial steps, which need no derivatives."""
+    images = (
+        derivatives_kernel.disc_images_with_derivatives
+        if compiled
+        else derivatives_reference.disc_images_with_derivatives
+    )
+    coverage, phasor, plate, d_coverage, d_phasor, d_plate = images(
+        np.ascontiguousarray(R, dtype=float),
+        np.ascontiguousarray(t_mm, dtype=float),
+        DiscRecord(centres_mm=discs.centres_mm, radii_mm=discs.radii_mm),
+        _window_rays(win, near_flat),
+        BAND_PX,
+        float(mm_per_radian),
+        float(reference_mm),
+    )
+    return (
+        DiscImages(coverage=coverage, phasor=phasor, plate_phasor=plate),
+        DiscImageDerivatives(coverage=d_coverage, phasor=d_phasor, plate_phasor=d_plate),
+    )
 
 
 @dataclass(frozen=True)
@@ -297,7 +356,7 @@ def gain_basis(offsets_px: np.ndarray, radius_px: np.ndarray) -> np.ndarray:
 def pixel_gains(gains: np.ndarray, basis: np.ndarray) -> np.ndarray:
     """Each disc's gain at each window pixel (K, P): ``gains`` (K, GAIN_TERMS) its
     coefficients over ``basis`` (K, P, GAIN_TERMS) (``gain_basis``), counts."""
-    return np.einsum("kpj,kj->kp", basis, gains)
+    return np.matmul(basis, gains[:, :, None])[..., 0]
 
 
 def predict(

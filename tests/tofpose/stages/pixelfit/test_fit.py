@@ -273,6 +273,7 @@ def test_clean_frame_is_ok_and_reports_its_pixels():
         ({"catalog_ids": [1, 2, 42]}, "not in the catalog"),
         ({"gray": np.zeros((10, 10))}, "camera's shape"),
         ({"t_mm": np.zeros(2)}, "t_mm"),
+        ({"jacobian": "forward"}, "jacobian must be 'analytic' or 'central-differences'"),
     ],
 )
 def test_bad_inputs_are_named(kwargs, message):
@@ -324,3 +325,122 @@ def test_a_disc_unlike_its_siblings_is_unexplained(rms, expected):
     assert verdict["ok"] == (not any(expected))
     for i, bad in zip(res.catalog_ids, expected, strict=True):
         assert (f" {i} (" in verdict["reason"]) == bad, verdict["reason"]
+
+
+def _pipeline_frame(range_mm, seed):
+    sensor = SensorModel(supersampling=16)
+    rng = np.random.default_rng([49, int(range_mm), seed])
+    T = _pose(rng, range_mm)
+    f = render_frame(CAM, TargetScene(), T, sensor, rng)
+    r = PosePipeline(CAM, CAT).process(f.gray, f.distance_mm)
+    assert r.ok, r.reason
+    return sensor, f, r
+
+
+@pytest.mark.parametrize("range_mm", [1000.0, 3000.0, 8000.0])
+def test_analytic_and_numeric_jacobians_converge_to_the_same_pose(range_mm):
+    """The analytic pose derivatives change the iterations' path a little (central
+    differences err by up to 1e-2 of a derivative on a few rim pixels: see
+    test_derivatives.py); the converged poses agree to well under their sigma."""
+    for seed in range(2):
+        sensor, f, r = _pipeline_frame(range_mm, seed)
+        fits = [
+            fit_pose_to_pixels(
+                f.gray,
+                f.distance_mm,
+                CAM,
+                CAT,
+                r.R,
+                r.t_mm,
+                [m.catalog_id for m in r.matched],
+                noise=PixelNoise.from_sensor(sensor),
+                jacobian=jacobian,
+            )
+            for jacobian in ("analytic", "central-differences")
+        ]
+        assert all(x.ok for x in fits), [x.reason for x in fits]
+        diff = _error(fits[0].R, fits[0].t_mm, RigidTransform(fits[1].R, fits[1].t_mm))
+        sigma = np.sqrt(np.diag(fits[1].covariance))
+        assert np.all(np.abs(diff) < 0.05 * sigma), diff / sigma
+        np.testing.assert_allclose(np.sqrt(np.diag(fits[0].covariance)), sigma, rtol=0.02)
+
+
+def test_jacobian_is_the_residuals_derivative_in_every_parameter(monkeypatch):
+    """``fit._jacobian`` at an iteration of a fit with every kind of parameter (pose,
+    gain terms, levels, a common range offset with its prior, each disc's own range
+    error) and censored pixels, against central differences of the whitened residuals
+    (``fit._residuals`` at the same sigmas): pose steps 1e-8 rad and 1e-5 mm (the
+    images' derivatives are exact: test_derivatives.py), 1e-3 counts or mm for the rest
+    (the gray is linear in them, the distance smooth)."""
+    from tofpose.stages.pixelfit import fit
+
+    seen = []
+    original = fit._jacobian
+
+    def spy(pb, s, images, pred, sig, d_images=None):
+        J = original(pb, s, images, pred, sig, d_images)
+        if pb.disc_range_sigma_mm > 0 and not seen:
+            seen.append((pb, s, sig, J))
+        return J
+
+    monkeypatch.setattr(fit, "_jacobian", spy)
+    sensor, f, r = _pipeline_frame(3000.0, 0)
+    gray = f.gray.copy()
+    bright = gray > np.percentile(gray[_disc_pixels(f, 6)], 70)
+    gray[bright & _disc_pixels(f, 6)] = 4095  # the disc's brightest pixels clipped
+    noise = replace(PixelNoise.from_sensor(sensor), disc_range_sigma_mm=3.0, coverage_sigma=0.02)
+    fit_pose_to_pixels(
+        gray,
+        f.distance_mm,
+        CAM,
+        CAT,
+        r.R,
+        r.t_mm,
+        [m.catalog_id for m in r.matched],
+        noise=noise,
+        fit_range_offset=True,
+        range_offset_sigma_mm=5.0,
+    )
+    pb, s, sig, J = seen[0]
+    assert len(pb.sat_rows) > 0 and pb.fit_offset
+    columns = np.flatnonzero(pb.free)
+    assert J.shape == (
+        len(fit._residuals(pb, pb.predict(pb.images(s.R, s.t_mm), s), sig, s)),
+        len(columns),
+    )
+    for j, col in enumerate(columns):
+        h = 1e-8 if col < 3 else 1e-5 if col < 6 else 1e-3
+        delta = np.zeros(pb.n_params)
+        delta[col] = h
+        out = []
+        for sign in (1.0, -1.0):
+            st = s.stepped(sign * delta, pb.layout)
+            out.append(fit._residuals(pb, pb.predict(pb.images(st.R, st.t_mm), st), sig, st))
+        numeric = (out[0] - out[1]) / (2 * h)
+        scale = np.abs(numeric).max()
+        assert scale > 0, col
+        np.testing.assert_allclose(J[:, j], numeric, rtol=0, atol=1e-5 * scale, err_msg=str(col))
+
+
+def test_reference_implementation_fits_the_same_pose():
+    """The NumPy images and derivatives (``implementation="reference"``) and the compiled
+    kernels are one arithmetic: the same iterations and the same pose to rounding."""
+    sensor, f, r = _pipeline_frame(3000.0, 0)
+    fits = [
+        fit_pose_to_pixels(
+            f.gray,
+            f.distance_mm,
+            CAM,
+            CAT,
+            r.R,
+            r.t_mm,
+            [m.catalog_id for m in r.matched],
+            noise=PixelNoise.from_sensor(sensor),
+            implementation=implementation,
+        )
+        for implementation in ("compiled", "reference")
+    ]
+    assert all(x.ok for x in fits), [x.reason for x in fits]
+    assert fits[0].iterations == fits[1].iterations
+    diff = _error(fits[0].R, fits[0].t_mm, RigidTransform(fits[1].R, fits[1].t_mm))
+    assert np.all(np.abs(diff) < 1e-6 * np.sqrt(np.diag(fits[1].covariance))), diff

@@ -1,6 +1,7 @@
 """The discs' pixel-integrated images (``model.disc_images``), compiled: one call per
-pose instead of a dozen NumPy operations per disc, since the fit evaluates the model
-thirteen times an iteration (the pose's central differences and the trial step)."""
+pose instead of a dozen NumPy operations per disc. The fit's trial steps use it;
+``derivatives`` adds the pose derivatives for the Jacobian (dearer, so not paid on a
+trial)."""
 
 from __future__ import annotations
 
