@@ -509,9 +509,9 @@ def pixelfit_section(quick: bool) -> str:
             "both as RMS error over the Cramer-Rao bound of the same frames (`bench/crlb.py`), "
             "and the fit's errors over its own sigmas (1 = its inverse-Fisher covariance is "
             "right). Frames rendered with 32 x 32 sampling of rim pixels (a coarser renderer "
-            "is itself a model error of a bound or two). The discs' images are one compiled "
-            "kernel, the pose derivatives still central differences over it: its ms per frame "
-            "are the cost to bring down before it runs in the live loop. This "
+            "is itself a model error of a bound or two). The discs' images and their analytic "
+            "pose derivatives are compiled kernels; its ms per frame are the cost to bring "
+            "down before it runs in the live loop. This "
             f"section was regenerated on {datetime.date.today().isoformat()}.",
             "",
             out,
