@@ -35,6 +35,7 @@ from tofpose.stages.extraction.extraction import (
     RejectedBlob,
     check_frame,
 )
+from tofpose.stages.extraction.saturation import blobs_at_full_scale
 from tofpose.stages.extraction.uncertainty import (
     UNCALIBRATED_RANGE_SIGMA_MM,
     SigmaFloors,
@@ -64,7 +65,7 @@ from tofpose.stages.pose.solve import (
 from tofpose.stages.tracking.tracking import (
     TrackState,
 )
-from tofpose.stages.tracking.tracking_frame import CompiledTracker
+from tofpose.stages.tracking.tracking_frame import CompiledTracker, Tracked
 
 
 @dataclass
@@ -79,6 +80,9 @@ class MatchedReflector:
     area_px: int
     centroid_sigma_px: float = float("nan")  # per image axis (extraction.uncertainty)
     range_sigma_mm: float = float("nan")
+    #: a pixel of its blob reads at or above the camera's full scale in this frame's gray
+    #: image (``CameraModel.full_scale_counts``): clipped, without a distance there
+    saturated: bool = False
 
 
 @dataclass(frozen=True)
@@ -508,7 +512,8 @@ class PosePipeline:
             return fail(
                 f"found {len(meas.range_mm)} candidate reflector(s) with a valid range "
                 f"(of {n_kept} blobs), need {cfg.matching.min_matches}"
-                + self._size_hint(found.wrong_size),
+                + self._size_hint(found.wrong_size)
+                + self._saturation_hint(g, blobs),
                 unmatched=unmatched + meas.as_unmatched(),
                 diagnostics=diag,
             )
@@ -536,7 +541,7 @@ class PosePipeline:
         timer.lap("matching")
         if not m.ok:
             return fail(
-                f"matching failed: {m.reason}",
+                f"matching failed: {m.reason}" + self._saturation_hint(g, blobs),
                 unmatched=unmatched + meas.as_unmatched(),
                 diagnostics=diag,
             )
@@ -546,8 +551,15 @@ class PosePipeline:
         solved = self._solve_with_fallback(meas, m, active, dark_check_all=from_hypotheses)
         timer.lap("refine")
         if isinstance(solved, Rejected):
-            return fail(solved.reason, unmatched=unmatched + meas.as_unmatched(), diagnostics=diag)
-        result = self._pose_result(solved, meas, unmatched, time_s, timer, diag)
+            return fail(
+                solved.reason + self._saturation_hint(g, blobs),
+                unmatched=unmatched + meas.as_unmatched(),
+                diagnostics=diag,
+            )
+        saturated = blobs_at_full_scale(
+            g, meas.blobs, full_scale_counts=self.camera.full_scale_counts
+        )
+        result = self._pose_result(solved, meas, saturated, unmatched, time_s, timer, diag)
         self._track = TrackState(
             R=solved.T_camera_target.R,
             t_mm=solved.T_camera_target.t_mm,
@@ -697,21 +709,20 @@ class PosePipeline:
         timer.lap("tracking")
         if tracked is None:
             return None
-        return self._tracked_result(
-            tracked.solution, tracked.measurements, tracked.persistence, time_s, timer, track
-        )
+        return self._tracked_result(tracked, time_s, timer, track)
 
-    def _tracked_result(
-        self, solved: Solution, meas: Measurements, info, time_s, timer, track: TrackState
-    ) -> PoseResult:
+    def _tracked_result(self, tracked: Tracked, time_s, timer, track: TrackState) -> PoseResult:
         """The ok result of a tracked frame; the track moves on to its pose."""
+        solved, meas, info = tracked.solution, tracked.measurements, tracked.persistence
         diag = FrameDiagnostics(
             n_candidates=len(meas.range_mm),
             frames_used=info.frames_used,
             motion=info.motion,
             active_threshold_counts=track.threshold_counts,
         )
-        result = self._pose_result(solved, meas, [], time_s, timer, diag, mode="tracking")
+        result = self._pose_result(
+            solved, meas, tracked.saturated, [], time_s, timer, diag, mode="tracking"
+        )
         self._track = TrackState(
             R=solved.T_camera_target.R,
             t_mm=solved.T_camera_target.t_mm,
@@ -726,14 +737,16 @@ class PosePipeline:
         self,
         solved: Solution,
         meas: Measurements,
+        saturated: np.ndarray,
         unmatched,
         time_s,
         timer,
         diagnostics: FrameDiagnostics,
         mode: Literal["acquisition", "tracking"] = "acquisition",
     ) -> PoseResult:
-        """The ok result of a ``Solution`` found from ``meas``; ``unmatched`` lists the
-        blobs without a range, the unmatched candidates are added."""
+        """The ok result of a ``Solution`` found from ``meas``; ``saturated`` (n,) bool
+        whether each of ``meas``' n blobs has a pixel at full scale; ``unmatched`` lists
+        the blobs without a range, the unmatched candidates are added."""
         obs, T, ml, iterations = (
             solved.observations,
             solved.T_camera_target,
@@ -754,6 +767,7 @@ class PosePipeline:
             area[k_idx].tolist(),
             sig_px[k_idx].tolist(),
             obs.sigma_range_mm.tolist(),
+            saturated[k_idx].tolist(),
             strict=True,
         )
         matched = [
@@ -766,8 +780,9 @@ class PosePipeline:
                 area_px=a,
                 centroid_sigma_px=sp,
                 range_sigma_mm=sr,
+                saturated=sat,
             )
-            for i, c, y, r, d, a, sp, sr in per_reflector
+            for i, c, y, r, d, a, sp, sr, sat in per_reflector
         ]
         used = set(k_idx.tolist())
         unmatched += [(uv[k, 0], uv[k, 1], rho[k]) for k in range(len(rho)) if k not in used]
@@ -817,6 +832,18 @@ class PosePipeline:
             f"{self.catalog.name!r} predicts at their range (e.g. {w.diameter_px:.0f} px "
             f"across{where}, expected {w.expected_min_px:.1f}-{w.expected_max_px:.1f} px): "
             "is the right catalog active?"
+        )
+
+    def _saturation_hint(self, gray: np.ndarray, blobs: list[Blob]) -> str:
+        """A clause counting the candidate ``blobs`` with a pixel at the camera's full
+        scale in ``gray`` (H, W) and what to do about it, or ''."""
+        full_scale = self.camera.full_scale_counts
+        n = int(np.count_nonzero(blobs_at_full_scale(gray, blobs, full_scale_counts=full_scale)))
+        if n == 0:
+            return ""
+        return (
+            f"; {n} candidate{' saturates' if n == 1 else 's saturate'} (gray at full scale "
+            f"{full_scale:.0f}): lower the integration time or turn auto exposure on"
         )
 
     def _match_ransac(

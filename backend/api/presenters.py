@@ -225,6 +225,7 @@ def pose_from_sample(s: LiveSample) -> PosePublic:
         mode=r.mode,
         n_candidates=r.n_candidates,
         n_matched=r.n_matched,
+        saturated_reflectors=sum(m.saturated for m in r.matched),
         matched=[
             MatchedPublic(
                 catalog_id=m.catalog_id,
@@ -236,6 +237,7 @@ def pose_from_sample(s: LiveSample) -> PosePublic:
                 area_px=int(m.area_px),
                 centroid_sigma_px=finite_or_none(m.centroid_sigma_px),
                 range_sigma_mm=finite_or_none(m.range_sigma_mm),
+                saturated=bool(m.saturated),
             )
             for m in r.matched
         ],

@@ -20,6 +20,11 @@ class MatchedPublic(BaseModel):
         default=None, description="predicted 1-sigma of the centroid per image axis"
     )
     range_sigma_mm: float | None = Field(default=None, description="predicted 1-sigma of the range")
+    saturated: bool = Field(
+        default=False,
+        description="a pixel of its blob reads at or above the camera's full scale "
+        "(clipped, no distance there): lower the integration time or turn auto exposure on",
+    )
 
 
 class BlobPublic(BaseModel):
@@ -115,6 +120,9 @@ class PosePublic(BaseModel):
     )
     n_candidates: int
     n_matched: int
+    saturated_reflectors: int = Field(
+        default=0, description="how many of the matched reflectors are saturated"
+    )
     matched: list[MatchedPublic]
     unmatched: list[BlobPublic]
     rejected: list[RejectedBlobPublic] = Field(

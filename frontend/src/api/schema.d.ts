@@ -2009,6 +2009,12 @@ export interface components {
             range_sigma_mm?: number | null;
             /** Residual Mm */
             residual_mm: number;
+            /**
+             * Saturated
+             * @description a pixel of its blob reads at or above the camera's full scale (clipped, no distance there): lower the integration time or turn auto exposure on
+             * @default false
+             */
+            saturated: boolean;
             /** U Px */
             u_px: number;
             /** V Px */
@@ -2327,6 +2333,12 @@ export interface components {
             residual_mm: number | null;
             /** Roll Deg */
             roll_deg?: number | null;
+            /**
+             * Saturated Reflectors
+             * @description how many of the matched reflectors are saturated
+             * @default 0
+             */
+            saturated_reflectors: number;
             /** Timings Ms */
             timings_ms: {
                 [key: string]: number;

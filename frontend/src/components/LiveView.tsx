@@ -1,18 +1,23 @@
 // Gray and distance images side by side, colour-mapped here from the raw uint16 frames at
 // the camera's own resolution (the frames' aspect ratio) and gray full scale;
 // overlays drawn here and toggled without a server round-trip: the active pixel set,
-// candidate blobs, matched reflectors with catalog ids, and rejected blobs with the gate
-// that refused them. Each drawn frame is acknowledged (flow control, see live.ts).
+// candidate blobs, matched reflectors with catalog ids (an orange ring and "saturated"
+// where the server says a reflector's pixels reach full scale, with a warning under the
+// images), and rejected blobs with the gate that refused them. Each drawn frame is
+// acknowledged (flow control, see live.ts).
 import { useEffect, useRef, useState } from "preact/hooks";
 import type { Pose } from "../api/client";
 import type { Shown } from "../live";
 import { activePixels, distancePixels, grayPixels, grayTop, turboCss } from "../colormap";
 import type { RawFrame } from "../rawframe";
+import { reflectorLabel, saturationWarning } from "../saturation";
 
 // Overlay canvas pixels per image pixel: about 640 canvas pixels across whatever the
 // camera's width (2 for the TOFcam-660's 320, 1 for an Azure Kinect's 640), so that marks
 // and labels drawn in canvas pixels keep their size on the page.
 const OVERLAY_WIDTH = 640;
+const MATCHED_COLOUR = "#3ddc6a";
+const SATURATED_COLOUR = "#ff8c1a";
 
 type Layers = { active: boolean; candidates: boolean; matched: boolean; rejected: boolean };
 const LAYER_LABELS: Record<keyof Layers, string> = {
@@ -59,6 +64,8 @@ function Overlay({ shown, layers }: { shown: Shown | null; layers: Layers }) {
     }
     const ctx = c.getContext("2d")!;
     ctx.clearRect(0, 0, c.width, c.height);
+    const labels: string[] = []; // the reflector labels drawn, in the DOM as data-labels
+    c.dataset.labels = "";
     if (!pose) return;
     const px = (u: number) => (u + 0.5) * SCALE;
     if (layers.active && pose.active_threshold_counts != null) {
@@ -81,10 +88,11 @@ function Overlay({ shown, layers }: { shown: Shown | null; layers: Layers }) {
       for (const [u, v] of all) ctx.strokeRect(px(u) - 9, px(v) - 9, 18, 18);
     }
     if (layers.matched) {
-      ctx.strokeStyle = "#3ddc6a";
-      ctx.fillStyle = "#ffffff";
       for (const m of pose.matched) {
         const r = Math.max(Math.sqrt(m.area_px / Math.PI), 1) * SCALE + 3;
+        ctx.strokeStyle = m.saturated ? SATURATED_COLOUR : MATCHED_COLOUR;
+        ctx.fillStyle = m.saturated ? SATURATED_COLOUR : "#ffffff";
+        ctx.lineWidth = m.saturated ? 3 : 1.5;
         ctx.beginPath();
         ctx.arc(px(m.u_px), px(m.v_px), r, 0, 2 * Math.PI);
         ctx.moveTo(px(m.u_px) - 4, px(m.v_px));
@@ -92,8 +100,12 @@ function Overlay({ shown, layers }: { shown: Shown | null; layers: Layers }) {
         ctx.moveTo(px(m.u_px), px(m.v_px) - 4);
         ctx.lineTo(px(m.u_px), px(m.v_px) + 4);
         ctx.stroke();
-        ctx.fillText(String(m.catalog_id), px(m.u_px) + r + 2, px(m.v_px) - r);
+        const label = reflectorLabel(m);
+        ctx.fillText(label, px(m.u_px) + r + 2, px(m.v_px) - r);
+        labels.push(label);
       }
+      ctx.lineWidth = 1.5;
+      c.dataset.labels = labels.join("|");
     }
     if (layers.rejected) {
       ctx.strokeStyle = "#ff4dd2";
@@ -129,6 +141,7 @@ export function LiveView({ shown, onDrawn }: { shown: Shown | null; onDrawn: (fr
   const [layers, setLayers] = useState<Layers>({ active: false, candidates: true, matched: true, rejected: true });
   const [range, setRange] = useState<[number, number] | null>(null);
   const raw = shown?.raw;
+  const warning = saturationWarning(shown?.pose);
   const grayRef = useImage(grayPixels, raw);
   const distRef = useImage((f, img) => setRange(distancePixels(f, img)), raw);
   // the camera's own shape (640 x 576 for an Azure Kinect), not the TOFcam-660's 4:3
@@ -149,6 +162,7 @@ export function LiveView({ shown, onDrawn }: { shown: Shown | null; onDrawn: (fr
           </label>
         ))}
       </div>
+      {warning && <p class="warn" role="status" data-testid="saturation-warning">{warning}</p>}
       <div class="images">
         {(["gray", "distance"] as const).map((k) => (
           <figure key={k}>
