@@ -52,8 +52,9 @@ class Blob:
     penalty : q in [0, 1] (§3.4).
     ellipse : ((cx, cy), (major, minor), angle_deg) from the edge fit, or None.
     ellipse_residual_px : RMS edge-to-ellipse distance, or NaN.
-    source : "morphology" or "ellipse" (supplemented by §3.3), "split" (cut out of a
-        merged component).
+    source : "morphology", or one of ``CUT_FROM_MERGED``: "ellipse" (inside an ellipse
+        found on the outline of a component too large for one reflector, §3.3) or
+        "split" (cut out of a merged component by threshold or two centres).
     fitted_uv : ndarray (2,), the centre from a model fit of the pixels
         (``pair_fit.fit_pair``: one of two markers imaged as one blob), which replaces
         the moment centroid in the measurement; None for the others.
@@ -146,6 +147,11 @@ class RejectedBlob:
     diameter_px: float
     reason: str
 
+
+#: the sources of blobs cut out of a component too large for one reflector (two markers
+#: merged in the image): the cut assigns part of the contact band's light to the wrong
+#: side (``uncertainty.SPLIT_CENTROID_PX``)
+CUT_FROM_MERGED = ("ellipse", "split")
 
 REJECT_REASONS = {
     "border": "cut by the image border (its centroid would be biased)",

@@ -13,10 +13,17 @@ Centroid (px, per image axis), independent terms in quadrature:
   error falls quickly as edge pixels are added, as ``n**-1.5`` over the simulated range.
   Without this term a 1-3 px blob at 10-15 m claims 0.03 px and the refinement
   over-trusts its bearing;
-* for a blob cut out of a merged component (``source == "split"``: markers 7 and 8
-  beyond ~4.5 m), the neighbour's light it keeps at the cut, ``SPLIT_CENTROID_PX /
-  sqrt(n)``. Without it the halves claimed 0.037 px at 8 m and were off by 0.085 px
-  along the pair (normalised error 3.2), and the fit leaned on them.
+* for a blob cut out of a merged component (``CUT_FROM_MERGED`` sources: markers 7 and
+  8 touching in the image, at any range once the target is tilted), the light of the
+  contact band assigned to the wrong side of the cut, ``SPLIT_CENTROID_PX`` per axis.
+  A band about half a pixel wide along the cut, misassigned, moves the centroid by its
+  share of the light times its lever arm: ``0.5 L r / (pi r^2) ~ 0.5 / pi`` px for a
+  cut of length L ~ r, whatever the disc's size r. Measured on the simulator's poses
+  with up to 20 deg of tilt (true correspondences), per axis RMS: 0.08 px at 2 m
+  (171-px parts), 0.06-0.14 px at 3 m in two sets of 40 frames (75-px parts; the
+  errors are heavy-tailed), 0.085 px at 8 m (8-px halves). Without it the parts claimed
+  0.03-0.04 px and the fit leaned on them, rejecting good markers instead (a frame at
+  3 m: markers 5 and 6 dropped, 7 and 8 off by 0.35-0.48 px, the pose 7.8 sigma off).
 
 Range (mm): the CW-ToF noise model ``sigma_pix = k sqrt(G) / A`` (Lange 2000; G the
 pixel's gray level, A its amplitude above background) with ``k`` pooled over every blob
@@ -34,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tofpose.core.records import SigmaConstants
-from tofpose.stages.extraction.extraction import Blob, pixel_lists
+from tofpose.stages.extraction.extraction import CUT_FROM_MERGED, Blob, pixel_lists
 from tofpose.stages.extraction.kernels.sigmas import blob_sigmas
 
 #: centroid sampling error of a single-pixel blob, px (uniform over one pixel)
@@ -43,11 +50,10 @@ SINGLE_PIXEL_SIGMA_PX = 1.0 / np.sqrt(12.0)
 POOL_MIN_PIXELS = 8
 #: sigma of a blob's range when no blob of the frame can calibrate the model, mm
 UNCALIBRATED_RANGE_SIGMA_MM = 30.0
-#: a blob cut out of a merged component (markers 7 and 8 beyond ~4.5 m) keeps part of
-#: its neighbour's light at the cut: its centroid sigma gets this over sqrt(pixels) in
-#: quadrature, px (0.085 px measured for the 8-px halves at 8 m; the accuracy gain of
-#: not over-trusting them is flat between 0.12 and 1.0)
-SPLIT_CENTROID_PX = 0.25
+#: a blob cut out of a merged component keeps part of its neighbour's light at the cut
+#: and loses part of its own: its centroid sigma gets this in quadrature, px per axis
+#: (module docstring: 0.06-0.14 px measured at 2-8 m)
+SPLIT_CENTROID_PX = 0.08
 #: efficiency factor of the median of normal samples
 MEDIAN_EFFICIENCY = 1.2533
 
@@ -94,7 +100,7 @@ def measurement_sigmas(
     """
     flat, starts = pixel_lists(blobs)
     centroids = np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2)
-    split = np.array([b.source == "split" for b in blobs], bool)
+    split = np.array([b.source in CUT_FROM_MERGED for b in blobs], bool)
     return blob_sigmas(
         flat,
         starts,

@@ -18,7 +18,7 @@ import numpy as np
 from tofpose.config import PersistenceConfig
 from tofpose.core.camera import CameraModel
 from tofpose.core.records import FrameRecord, PersistenceHistory, camera_record
-from tofpose.stages.extraction.extraction import Blob, pixel_lists
+from tofpose.stages.extraction.extraction import CUT_FROM_MERGED, Blob, pixel_lists
 from tofpose.stages.persistence.kernels.measure import persist_and_measure
 from tofpose.stages.persistence.kernels.persistence import pixel_mask
 from tofpose.stages.persistence.records import BlobLists
@@ -42,14 +42,15 @@ class PersistenceInfo:
 def blob_lists(blobs: list[Blob]) -> BlobLists:
     """The blobs as the compiled measurement takes them (a ``records.BlobLists``): flat
     pixel indices and starts (``pixel_lists``), boxes (n, 4) (x, y, w, h), single-frame
-    centroids (n, 2) and whether each was cut out of a merged component."""
+    centroids (n, 2) and whether each was cut out of a merged component (its source one
+    of ``extraction.CUT_FROM_MERGED``)."""
     flat, starts = pixel_lists(blobs)
     return BlobLists(
         flat=flat,
         starts=starts,
         bbox=np.array([b.bbox for b in blobs], np.int64).reshape(-1, 4),
         centroids=np.array([b.centroid_uv for b in blobs], np.float64).reshape(-1, 2),
-        split=np.array([b.source == "split" for b in blobs], bool),
+        split=np.array([b.source in CUT_FROM_MERGED for b in blobs], bool),
     )
 
 

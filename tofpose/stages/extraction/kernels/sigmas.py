@@ -82,7 +82,7 @@ def blob_sigmas(flat, starts, centroids, gray, distance, background, split, sigm
     sigma_px = np.empty(n)
     for j in range(n):
         sampling = sigmas.single_pixel_sigma_px * max(float(n_px[j]), 1.0) ** -1.5
-        neighbour = sigmas.split_centroid_px / np.sqrt(n_px[j]) if split[j] else 0.0
+        neighbour = sigmas.split_centroid_px if split[j] else 0.0
         floor = sigmas.centroid_sigma_floor_px
         sigma_px[j] = np.sqrt(shot[j] ** 2 + floor**2 + sampling**2 + neighbour**2)
     ratios = np.empty(n)

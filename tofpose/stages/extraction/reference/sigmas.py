@@ -36,11 +36,10 @@ def shot_noise_centroid_px(gray, pixels, centroid_uv, background) -> float:
 def centroid_sigma_px(gray, pixels, centroid_uv, background, split: bool, constants) -> float:
     """A blob's centroid sigma per image axis, px: shot noise, the floor, the pixel
     grid's sampling error (single_pixel_sigma_px n^-1.5) and, for a half cut out of a
-    merged pair, the neighbour's light at the cut (split_centroid_px / sqrt(n)), in
-    quadrature."""
+    merged pair, the light misassigned at the cut (split_centroid_px), in quadrature."""
     n = len(pixels)
     sampling = constants.single_pixel_sigma_px * max(float(n), 1.0) ** -1.5
-    neighbour = constants.split_centroid_px / np.sqrt(n) if split else 0.0
+    neighbour = constants.split_centroid_px if split else 0.0
     shot = shot_noise_centroid_px(gray, pixels, centroid_uv, background)
     floor = constants.centroid_sigma_floor_px
     return float(np.sqrt(shot**2 + floor**2 + sampling**2 + neighbour**2))
