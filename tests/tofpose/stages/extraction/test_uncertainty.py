@@ -87,21 +87,16 @@ def test_predicted_sigmas_match_the_actual_errors(range_m, centroid_rms, range_r
     assert range_rms[0] < np.sqrt(np.mean(np.square(z_rng))) < range_rms[1]
 
 
-def test_split_halves_of_merged_markers_get_sigmas_that_cover_their_errors():
-    """At 8 m markers 7 and 8 image as one component, split into two halves (§3.3, ours)
-    whose centroids keep some of the neighbour's light. Their normalised centroid errors
-    must have an RMS near 1 (the spread of an RMS of 64 values is ~9 %): with shot noise,
-    floor and sampling only it was ~3 on these frames, and the fit leaned on two biased
-    bearings."""
-    from bench.realistic import long_range_pose
-
+def _merged_pair_z_px(draw, rng, n_frames):
+    """Normalised centroid errors (per image axis) of markers 7 and 8 over ``n_frames``
+    simulated frames at the poses ``draw()`` gives, in the frames where they merged into
+    one component (an "oversize" rejection): a list of floats."""
     cam, cat = CameraModel(), paper_target()
     scene, pipe = TargetScene(cat), PosePipeline(cam, cat)
     xyz = dict(zip(cat.ids.tolist(), cat.positions_mm, strict=True))
-    rng = np.random.default_rng(5)
-    z_px = []
-    for _ in range(16):
-        T = long_range_pose(8.0, rng)
+    z_px: list[float] = []
+    for _ in range(n_frames):
+        T = draw()
         f = render_frame(cam, scene, T, SensorModel(), rng)
         pipe.reset()
         res = pipe.process(f.gray, f.distance_mm)
@@ -111,6 +106,19 @@ def test_split_halves_of_merged_markers_get_sigmas_that_cover_their_errors():
             if m.catalog_id in (7, 8):
                 true = T.apply(xyz[m.catalog_id][None])[0]
                 z_px.extend((m.centroid_uv - cam.project(true[None])[0]) / m.centroid_sigma_px)
+    return z_px
+
+
+def test_split_halves_of_merged_markers_get_sigmas_that_cover_their_errors():
+    """At 8 m markers 7 and 8 image as one component, split into two halves (§3.3, ours)
+    whose centroids keep some of the neighbour's light. Their normalised centroid errors
+    must have an RMS near 1 (the spread of an RMS of 64 values is ~9 %): with shot noise,
+    floor and sampling only it was ~3 on these frames, and the fit leaned on two biased
+    bearings."""
+    from bench.realistic import long_range_pose
+
+    rng = np.random.default_rng(5)
+    z_px = _merged_pair_z_px(lambda: long_range_pose(8.0, rng), rng, 16)
     assert len(z_px) >= 20
     assert 0.8 < np.sqrt(np.mean(np.square(z_px))) < 1.4  # 1.13 in this run, 64 values
 
@@ -125,21 +133,10 @@ def test_parts_of_merged_markers_near_range_get_sigmas_that_cover_their_errors()
     from bench.physics import MAX_ATTITUDE_DEG, OFFSET_FRACTION
     from tofpose.sim.randomise import draw_pose
 
-    cam, cat = CameraModel(), paper_target()
-    scene, pipe = TargetScene(cat), PosePipeline(cam, cat)
-    xyz = dict(zip(cat.ids.tolist(), cat.positions_mm, strict=True))
     rng = np.random.default_rng(11)
-    z_px = []
-    for _ in range(40):
-        T = draw_pose(3.0, rng, cam, MAX_ATTITUDE_DEG, OFFSET_FRACTION)
-        f = render_frame(cam, scene, T, SensorModel(), rng)
-        pipe.reset()
-        res = pipe.process(f.gray, f.distance_mm)
-        if not res.ok or not any(b.reason == "oversize" for b in res.rejected):
-            continue  # no merged component in this frame
-        for m in res.matched:
-            if m.catalog_id in (7, 8):
-                true = T.apply(xyz[m.catalog_id][None])[0]
-                z_px.extend((m.centroid_uv - cam.project(true[None])[0]) / m.centroid_sigma_px)
+    cam = CameraModel()
+    z_px = _merged_pair_z_px(
+        lambda: draw_pose(3.0, rng, cam, MAX_ATTITUDE_DEG, OFFSET_FRACTION), rng, 40
+    )
     assert len(z_px) >= 20
     assert 0.6 < np.sqrt(np.mean(np.square(z_px))) < 1.5
