@@ -609,7 +609,7 @@ def _jacobian(
     ):
         block[:, :6] = pose[px] * w[:, None]
         gain = per_gain[:, px, None] * basis * w[None, :, None]  # (K, rows, G)
-        block[:, gain_cols] = gain.transpose(1, 0, 2).reshape(len(px), -1)
+        block[:, gain_cols] = gain.transpose(1, 0, 2).reshape(len(px), G * k_count)
     rows_g, rows_d = np.arange(n_gray), np.arange(n_dist)
     # each pixel's surround level: its owner's column
     gray_block[rows_g, 6 + G * k_count + owner[gray_px]] = pred.surround[gray_px] * gray_w

@@ -266,6 +266,20 @@ def test_clean_frame_is_ok_and_reports_its_pixels():
     assert list(res.catalog_ids) == list(CAT.ids)
 
 
+def test_a_frame_without_a_usable_distance_fits_on_gray_alone():
+    """Every distance pixel invalid (NaN: saturated cores, a camera that gave none): no
+    distance residual rows at all. The fit still runs on the gray pixels, which fix the
+    pose's bearings, and says it used no distance pixel (the other renderer's saturating
+    frames made the Jacobian's empty distance block fail to reshape)."""
+    sensor, T, f = _frame_and_start()
+    no_distance = np.full_like(f.distance_mm, np.nan)
+    res = fit_pose_to_pixels(
+        f.gray, no_distance, CAM, CAT, T.R, T.t_mm, CAT.ids, noise=PixelNoise.from_sensor(sensor)
+    )
+    assert res.n_distance_pixels == 0 and res.n_gray_pixels > 0
+    assert np.degrees(np.linalg.norm(_error(res.R, res.t_mm, T)[:3])) < 0.1
+
+
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
