@@ -20,3 +20,21 @@ def test_a_short_run_judges_every_cell_and_reports_it(tmp_path):
     physics.plot(out, tmp_path / "physics.png")
     assert (tmp_path / "physics.png").stat().st_size > 10_000
     assert (tmp_path / "physics-examples.png").stat().st_size > 10_000
+
+
+def test_the_pixel_fit_comparison_measures_both_modes_on_the_same_frames():
+    """``compare_pixel_fit`` runs every family's frames through the default pipeline and
+    the pixel fit: the same frames (counts equal per family), the fit holding on some ok
+    poses of the ideal family (sharp, no background), and a table row per family and
+    mode."""
+    cmp = physics.compare_pixel_fit(1)
+    assert set(cmp) == set(physics.FAMILIES)
+    for base, pixel, held, ok in cmp.values():
+        assert len(base) == len(pixel) == len(physics.RANGES_M)
+        assert 0 <= held <= ok <= len(pixel)
+    base, pixel, held, ok = cmp["ideal"]
+    assert ok == len(physics.RANGES_M) and held >= 1
+    # the frames are the same: the centroid poses' range is the pixel-fit frames' range
+    assert [o.range_mm for o in base] == [o.range_mm for o in pixel]
+    text = physics.pixel_fit_markdown(cmp, 1)
+    assert text.count("\n|") == 2 + 2 * len(physics.FAMILIES)
