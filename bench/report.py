@@ -571,10 +571,13 @@ def replace_section(begin: str, end: str, section: str) -> None:
 
 def replace_heading_block(heading: str, section: str) -> None:
     """Put ``section`` in place of docs/results.md's block from the line ``heading`` to
-    the next "## " heading."""
+    the next "## " heading or the next section marker ("<!-- name:begin -->" of a block
+    that ``replace_section`` owns), whichever comes first (the marker stays), or to the
+    end of the document."""
     text = DOC.read_text()
     i = text.index(heading + "\n")
-    j = text.index("\n## ", i + len(heading))
+    ends = [text.find(m, i + len(heading)) for m in ("\n## ", "\n<!-- ")]
+    j = min([k for k in ends if k >= 0], default=len(text))
     DOC.write_text(text[:i] + section.rstrip("\n") + "\n" + text[j:])
 
 
