@@ -33,6 +33,10 @@ from tofpose.study.store import chunk_name, write_chunk
 #: this process's pipelines, by (catalog, preset), and how long its first frame took
 _pipelines: dict[tuple[str, str], PosePipeline] = {}
 _first_frame_s: float | None = None
+#: the camera of this process's chunks: one for all of them, as a serial run has (it
+#: keeps the pixel bearings it computed at its first frame; a new one per chunk computed
+#: them again)
+_camera: CameraModel | None = None
 #: whether this process's BLAS is limited to one thread: done by its first chunk only
 #: (the call looks through every loaded library, about a millisecond a chunk)
 _blas_limited = False
@@ -192,13 +196,15 @@ def run_chunk(
     (``tofpose.batch.worker.ProgressReporter``). Returns {"cell", "start", "stop",
     "frames", "seconds" (measuring), "cpu_s" (its thread's CPU time meanwhile),
     "kernel_load" (``kernel_load``)}."""
-    global _first_frame_s, _blas_limited
+    global _first_frame_s, _blas_limited, _camera
     if not _blas_limited:
         single_threaded_blas()
         _blas_limited = True
     spec = StudySpec.from_dict(spec_doc, limits=None)  # the client checked its size
     cell = spec.cells[cell_index]
-    camera = CameraModel()
+    if _camera is None:
+        _camera = CameraModel()
+    camera = _camera
     report = ProgressReporter(progress_topic, chunk_name(cell_index, start, stop))
     t0, cpu0 = time.perf_counter(), time.thread_time()
     rows = []

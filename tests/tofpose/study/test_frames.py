@@ -1,6 +1,7 @@
 """A study's frames: each depends on (seed, cell, frame) alone, and is judged against the
 truth it was rendered at. A chunk's fixed costs are paid once per process: its BLAS
-limit, and the search for the kernels whose cache loads it reports."""
+limit, its camera (and the pixel bearings it keeps), and the search for the kernels
+whose cache loads it reports."""
 
 import math
 import sys
@@ -102,3 +103,20 @@ def test_chunks_run_with_one_blas_thread_limited_by_the_first_chunk_only(monkeyp
     assert len(calls) == 1
     blas = [lib for lib in threadpool_info() if lib["user_api"] == "blas"]
     assert blas and all(lib["num_threads"] == 1 for lib in blas)
+
+
+def test_chunks_of_a_process_share_one_camera(monkeypatch, tmp_path):
+    made = []
+
+    def counted_camera():
+        made.append(CameraModel())
+        return made[-1]
+
+    monkeypatch.setattr(frames, "CameraModel", counted_camera)
+    monkeypatch.setattr(frames, "_camera", None)  # as in a new worker process
+    doc = SPEC.to_dict()
+    rows = [run_chunk(doc, 2, start, start + 1, str(tmp_path)) for start in (0, 1, 2)]
+    assert [r["frames"] for r in rows] == [1, 1, 1]
+    assert len(made) == 1
+    # the bearings the first chunk computed are kept for the next
+    assert "pixel_bearings" in made[0]._cache
