@@ -33,6 +33,17 @@ from tofpose.study.store import chunk_name, write_chunk
 #: this process's pipelines, by (catalog, preset), and how long its first frame took
 _pipelines: dict[tuple[str, str], PosePipeline] = {}
 _first_frame_s: float | None = None
+#: the camera of this process's chunks: one for all of them, as a serial run has (it
+#: keeps the pixel bearings it computed at its first frame; a new one per chunk computed
+#: them again)
+_camera: CameraModel | None = None
+#: whether this process's BLAS is limited to one thread: done by its first chunk only
+#: (the call looks through every loaded library, about a millisecond a chunk)
+_blas_limited = False
+#: the numba kernels in this process's tofpose modules, found when as many modules were
+#: loaded as the count says (looked for again once more are: a scan of every module's
+#: names, about a millisecond, not repeated at every chunk)
+_kernels: tuple[int, list] = (0, [])
 
 
 def frame_rng(seed: int, cell: int, frame: int) -> np.random.Generator:
@@ -47,21 +58,35 @@ def kernel_load() -> dict:
     "cache_hits", "cache_misses"} (misses are kernels this process compiled, 0 when
     every one came from the on-disk cache). The kernels load on first use, only those
     a study's frames take (no warm-up of the live loop's paths in a worker)."""
-    from numba.core.registry import CPUDispatcher
-
     hits = misses = 0
-    for name, module in list(sys.modules.items()):
-        if name.startswith("tofpose"):
-            for obj in vars(module).values():
-                if isinstance(obj, CPUDispatcher):
-                    hits += sum(obj.stats.cache_hits.values())
-                    misses += sum(obj.stats.cache_misses.values())
+    for kernel in _loaded_kernels():
+        hits += sum(kernel.stats.cache_hits.values())
+        misses += sum(kernel.stats.cache_misses.values())
     return {
         "pid": os.getpid(),
         "first_frame_s": _first_frame_s,
         "cache_hits": hits,
         "cache_misses": misses,
     }
+
+
+def _loaded_kernels() -> list:
+    """The numba dispatchers bound to a name in a loaded tofpose module (one entry per
+    module that binds one), looked for again only when more modules are loaded."""
+    global _kernels
+    if len(sys.modules) != _kernels[0]:
+        from numba.core.registry import CPUDispatcher
+
+        modules = list(sys.modules.items())
+        found = [
+            obj
+            for name, module in modules
+            if name.startswith("tofpose")
+            for obj in vars(module).values()
+            if isinstance(obj, CPUDispatcher)
+        ]
+        _kernels = (len(modules), found)
+    return _kernels[1]
 
 
 def _pipeline(camera: CameraModel, cell: Cell) -> PosePipeline:
@@ -171,11 +196,15 @@ def run_chunk(
     (``tofpose.batch.worker.ProgressReporter``). Returns {"cell", "start", "stop",
     "frames", "seconds" (measuring), "cpu_s" (its thread's CPU time meanwhile),
     "kernel_load" (``kernel_load``)}."""
-    global _first_frame_s
-    single_threaded_blas()
+    global _first_frame_s, _blas_limited, _camera
+    if not _blas_limited:
+        single_threaded_blas()
+        _blas_limited = True
     spec = StudySpec.from_dict(spec_doc, limits=None)  # the client checked its size
     cell = spec.cells[cell_index]
-    camera = CameraModel()
+    if _camera is None:
+        _camera = CameraModel()
+    camera = _camera
     report = ProgressReporter(progress_topic, chunk_name(cell_index, start, stop))
     t0, cpu0 = time.perf_counter(), time.thread_time()
     rows = []
