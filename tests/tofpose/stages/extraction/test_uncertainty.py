@@ -120,7 +120,7 @@ def test_split_halves_of_merged_markers_get_sigmas_that_cover_their_errors():
     rng = np.random.default_rng(5)
     z_px = _merged_pair_z_px(lambda: long_range_pose(8.0, rng), rng, 16)
     assert len(z_px) >= 20
-    assert 0.8 < np.sqrt(np.mean(np.square(z_px))) < 1.4  # 1.13 in this run, 64 values
+    assert 0.8 < np.sqrt(np.mean(np.square(z_px))) < 1.4  # 1.31 in this run, 64 values
 
 
 def test_parts_of_merged_markers_near_range_get_sigmas_that_cover_their_errors():
@@ -139,4 +139,4 @@ def test_parts_of_merged_markers_near_range_get_sigmas_that_cover_their_errors()
         lambda: draw_pose(3.0, rng, cam, MAX_ATTITUDE_DEG, OFFSET_FRACTION), rng, 40
     )
     assert len(z_px) >= 20
-    assert 0.6 < np.sqrt(np.mean(np.square(z_px))) < 1.5
+    assert 0.6 < np.sqrt(np.mean(np.square(z_px))) < 1.5  # 0.62 here, 60 values (1.72 before)
