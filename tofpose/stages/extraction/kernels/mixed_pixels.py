@@ -241,8 +241,9 @@ def blob_mixing(
 ):
     """The sums of the mixing model (module docstring) of each blob over its support
     (its pixels dilated by one, other blobs' pixels left out): (n, ``MIX_FIELDS``) rows
-    (a_b, d_b, S_a, S_ad, C_unranged, n_support), NaN rows where the surround is unknown,
-    or crowded and the blob not saturated (``reference.mixed_pixels.blob_mixing``).
+    (a_b, d_b, S_a, S_ad, C_unranged, n_support), NaN rows where the surround is unknown;
+    a crowded blob's sums stay NaN and only a saturated one gets d_sat, sigma_sat
+    (``reference.mixed_pixels.blob_mixing``).
 
     flat, starts : the pixel lists; bbox (n, 4); gray (H, W) float32 (I-bar where
     persistence combined frames: it holds them inside the boxes grown by 2 px);
@@ -304,8 +305,9 @@ def blob_mixing(
                         n_mid += 1
                 elif g_max > gb:
                     c_unranged += min(max((g - gb) / (g_max - gb), 0.0), 1.0)
-        out[j, 0], out[j, 1], out[j, 2], out[j, 3] = a_b, db, s_a, s_ad
-        out[j, 4], out[j, 5] = c_unranged, n_sup
+        if not surrounds.crowded[j]:  # a neighbour's light would bias the sums
+            out[j, 0], out[j, 1], out[j, 2], out[j, 3] = a_b, db, s_a, s_ad
+            out[j, 4], out[j, 5] = c_unranged, n_sup
         if n_mid > 0:
             out[j, 6], out[j, 7] = _saturated_estimate(mids[:n_mid], halves[:n_mid])
     return out
@@ -363,10 +365,11 @@ def unmixed_range(rho, mix, radius_px, cos_incidence, median_radius_px):
     Returns (range mm, C-sensitivity mm): the change of the range when C is 15 %
     larger, the model's own uncertainty (edges, the lens's spill beyond the support).
     A saturated blob (``mix[6]`` finite) whose unranged area C_unranged exceeds
-    ``SATURATED_AREA_FRACTION`` of the disc's gets its bounded-coverage range and sigma
-    instead, at any size (its core has no distance: the median reads the rim)."""
+    ``SATURATED_AREA_FRACTION`` of the disc's, or that has no sums (crowded: NaN
+    C_unranged), gets its bounded-coverage range and sigma instead, at any size (its
+    core has no distance: the median reads the rim)."""
     disc_area = np.pi * radius_px * radius_px * max(cos_incidence, 0.1)
-    if np.isfinite(mix[6]) and mix[4] > SATURATED_AREA_FRACTION * disc_area:
+    if np.isfinite(mix[6]) and not mix[4] <= SATURATED_AREA_FRACTION * disc_area:
         return mix[6], mix[7]
     if not radius_px < median_radius_px or not np.isfinite(mix[0]):
         return rho, 0.0

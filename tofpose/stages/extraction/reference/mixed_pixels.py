@@ -202,9 +202,10 @@ def blob_mixing(
 ):
     """The mixing model's sums of each blob over its support (its pixels dilated by one,
     other blobs' pixels left out): (n, ``MIX_FIELDS``) rows (a_b, d_b, S_a, S_ad,
-    C_unranged, n_support, d_sat, sigma_sat), NaN rows for an unknown surround or a crowded
-    blob that is not saturated (a saturated one's rims read towards the plate whatever
-    its neighbours, so its bounded-coverage range is taken from the ring's median);
+    C_unranged, n_support, d_sat, sigma_sat), NaN rows for an unknown surround; a crowded
+    blob has NaN sums (a neighbour's light would bias them), and only when saturated
+    its d_sat, sigma_sat (its rims read towards the plate whatever its neighbours, so its
+    bounded-coverage range is taken from the ring's median);
     d_sat, sigma_sat as ``saturated_range``, NaN unless a member reaches ``full_scale``
     (counts).
 
@@ -240,7 +241,8 @@ def blob_mixing(
         c_unranged = 0.0
         if g_max > gb:
             c_unranged = float(np.sum(np.clip((g[support & ~ok] - gb) / (g_max - gb), 0, 1)))
-        out[j, :6] = a_b, db, s_a, s_ad, c_unranged, support.sum()
+        if not surrounds.crowded[j]:  # a neighbour's light would bias the sums
+            out[j, :6] = a_b, db, s_a, s_ad, c_unranged, support.sum()
         if g_max >= full_scale:
             out[j, 6:] = saturated_range(a, d[ok], a_b, db, full_scale - dark)
     return out
@@ -291,13 +293,14 @@ def unmixed_range(rho, mix, radius_px, cos_incidence, median_radius_px):
     with C = pi radius_px^2 max(cos_incidence, 0.1) - C_unranged, and its sensitivity
     |d_r(1.15 C) - d_r(C)|: (d_r mm, sensitivity mm); a saturated blob's ``mix[6:8]``
     (``saturated_range``) whatever its size when C_unranged exceeds
-    ``SATURATED_AREA_FRACTION`` of the disc's area. (rho, 0) where the model does not
-    apply: radius_px not below ``median_radius_px``, no sums, C at most a quarter of the
-    disc's area, A_r = a_b + S_a / C not above 2 max(a_b, 0) or not positive, or a
-    d_r that is not finite."""
+    ``SATURATED_AREA_FRACTION`` of the disc's area or is NaN (a crowded blob: no sums).
+    (rho, 0) where the model does not apply: radius_px not below ``median_radius_px``,
+    no sums, C at most a quarter of the disc's area, A_r = a_b + S_a / C not above
+    2 max(a_b, 0) or not positive, or a d_r that is not finite."""
     disc_area = np.pi * radius_px**2 * max(cos_incidence, 0.1)
-    if np.isfinite(mix[6]) and mix[4] > SATURATED_AREA_FRACTION * disc_area:
-        # saturation took most of the disc's range: the bounded-coverage range, any size
+    if np.isfinite(mix[6]) and not mix[4] <= SATURATED_AREA_FRACTION * disc_area:
+        # saturation took most of the disc's range, or a crowded blob has no sums (NaN
+        # C_unranged): the bounded-coverage range, any size
         return float(mix[6]), float(mix[7])
     a_b, d_b, s_a, s_ad, c_unranged = (float(v) for v in mix[:5])
     c = disc_area - c_unranged

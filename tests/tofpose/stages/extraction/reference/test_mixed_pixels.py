@@ -358,12 +358,13 @@ def test_a_saturated_reflector_reads_its_own_range_within_its_sigma(ratio):
 @pytest.mark.parametrize(("ratio", "measured"), [(3.6, True), (0.5, False)])
 def test_a_crowded_saturated_reflector_still_reads_its_own_range(ratio, measured):
     """Two raised reflectors side by side (the paper target's 7 and 8) put each other's
-    pixels in their surround rings: crowded. Unsaturated, the mixing model is left out
-    for such a blob (its centre and median range serve); saturated, the median of its
-    rims reads towards the plate (the other foreign renderer's saturating frames: +10 to
-    +24 mm), so its bounded-coverage range is still taken, from the surround's median
-    (the neighbour's own pixels are out of the ring): within 2 of its sigmas here, and
-    the same in the compiled kernel and its reference."""
+    pixels in their surround rings: crowded. The mixing sums are left out for such a
+    blob (a neighbour's light would bias them); unsaturated, its centre and median range
+    serve. Saturated, the median of its rims reads towards the plate (the other
+    renderer's saturating frames: +10 to +24 mm), so its bounded-coverage range is
+    taken, from the surround's median (the neighbour's own pixels are out of the ring),
+    whatever part of the disc is clipped: within 2 of its sigmas here, and the same in
+    the compiled kernel and its reference."""
     flat, starts, bbox, gray, distance, surround, owner, d_r, dark = _saturated_disc(
         ratio * (FULL_SCALE - 90.0)
     )
@@ -371,8 +372,15 @@ def test_a_crowded_saturated_reflector_still_reads_its_own_range(ratio, measured
         gray=surround.gray, distance_mm=surround.distance_mm, crowded=np.array([True])
     )
     row = _mixing_row(flat, starts, bbox, gray, distance, crowded, owner, dark)
+    # the sums stay out either way: the neighbour's light would bias them
+    assert np.isnan(row[:6]).all()
     if not measured:
         assert np.isnan(row).all()
         return
     got, sigma = row[6], row[7]
     assert sigma > 0 and abs(got - d_r) < 2.0 * sigma
+    # and the pose stage takes that bounded range at any apparent size (not the linear
+    # model, not the rims' median), in the kernel and its reference alike
+    for radius in (1.0, np.sqrt(SATURATED_DISC_AREA / np.pi), 6.0):
+        for m in (compiled, reference):
+            assert m.unmixed_range(6010.0, row, radius, 1.0, 4.0) == (got, sigma)
