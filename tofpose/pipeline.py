@@ -416,15 +416,15 @@ class PosePipeline:
             return replace(result, pixel_fit=fit.reason or "no covariance", timings_ms=timings)
         shift2 = pose_shift_chi2(result, fit.R, fit.t_mm)
         if not shift2 <= cfg.max_shift_chi2:
-            return replace(
-                result,
-                pixel_fit=(
-                    f"the fitted pose lies {np.sqrt(shift2):.1f} sigma from the centroid pose "
-                    f"(at most {np.sqrt(cfg.max_shift_chi2):.1f}): another answer, not a "
-                    "refinement"
-                ),
-                timings_ms=timings,
+            why = (
+                f"the fitted pose lies {np.sqrt(shift2):.1f} sigma from the centroid pose "
+                f"(at most {np.sqrt(cfg.max_shift_chi2):.1f}): another answer, not a "
+                "refinement"
+                if np.isfinite(shift2)
+                else "the centroid pose's covariance is singular: the fit cannot be checked "
+                "against it"
             )
+            return replace(result, pixel_fit=why, timings_ms=timings)
         return replace(
             result,
             R=fit.R,

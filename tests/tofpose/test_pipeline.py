@@ -729,3 +729,22 @@ def test_pixel_fit_config_refuses_a_shift_limit_that_is_not_positive():
 
     with pytest.raises(ValueError, match="max_shift_chi2"):
         PixelFitConfig(max_shift_chi2=0.0)
+
+
+def test_a_pixel_fit_is_not_taken_when_the_centroid_covariance_is_singular(monkeypatch):
+    """A centroid pose whose covariance cannot be inverted gives the fit nothing to be
+    checked against: the centroid pose stays, and the reason says why (not "inf
+    sigma")."""
+    from tofpose.config import PixelFitConfig
+
+    monkeypatch.setattr(
+        PosePipeline, "_reported_covariance", lambda self, ml, n, t: np.zeros((6, 6))
+    )
+    f = render(facing_pose(3000.0, 2, -3, 10), seed=4)
+    on = PipelineConfig(pixel_fit=PixelFitConfig(enabled=True))
+    fitted = PosePipeline(CameraModel(), paper_target(), on).process(f.gray, f.distance_mm)
+    assert fitted.ok
+    assert fitted.pixel_fit.startswith("the centroid pose's covariance is singular"), (
+        fitted.pixel_fit
+    )
+    assert np.all(fitted.covariance == 0.0)  # the centroid pose's own, kept
