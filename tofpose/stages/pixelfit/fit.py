@@ -293,17 +293,18 @@ class _Problem:
     def n_params(self) -> int:
         return self.layout.n_params
 
+    @property
+    def _model_options(self) -> dict:
+        """The keyword arguments both image calls of the model take from the problem."""
+        return {
+            "mm_per_radian": self.noise.mm_per_radian,
+            "reference_mm": self.reference_mm,
+            "compiled": self.compiled,
+            "near_flat": self.near_flat,
+        }
+
     def images(self, R: np.ndarray, t_mm: np.ndarray) -> DiscImages:
-        return disc_images(
-            R,
-            t_mm,
-            self.discs,
-            self.win,
-            mm_per_radian=self.noise.mm_per_radian,
-            reference_mm=self.reference_mm,
-            compiled=self.compiled,
-            near_flat=self.near_flat,
-        )
+        return disc_images(R, t_mm, self.discs, self.win, **self._model_options)
 
     @cached_property
     def gray_pixels(self) -> np.ndarray:
@@ -319,16 +320,7 @@ class _Problem:
     def images_with_derivatives(
         self, R: np.ndarray, t_mm: np.ndarray
     ) -> tuple[DiscImages, DiscImageDerivatives]:
-        return disc_images_with_derivatives(
-            R,
-            t_mm,
-            self.discs,
-            self.win,
-            mm_per_radian=self.noise.mm_per_radian,
-            reference_mm=self.reference_mm,
-            compiled=self.compiled,
-            near_flat=self.near_flat,
-        )
+        return disc_images_with_derivatives(R, t_mm, self.discs, self.win, **self._model_options)
 
     def predict(self, images: DiscImages, s: _State) -> Prediction:
         return predict(

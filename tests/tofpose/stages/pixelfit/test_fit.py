@@ -351,6 +351,16 @@ def _pipeline_frame(range_mm, seed):
     return sensor, f, r
 
 
+def _fit_pipeline_frame(sensor, f, r, **options):
+    """``fit_pose_to_pixels`` on a ``_pipeline_frame`` from the pipeline's pose and matches,
+    with the sensor's noise and ``options`` (jacobian, implementation)."""
+    ids = [m.catalog_id for m in r.matched]
+    noise = PixelNoise.from_sensor(sensor)
+    return fit_pose_to_pixels(
+        f.gray, f.distance_mm, CAM, CAT, r.R, r.t_mm, ids, noise=noise, **options
+    )
+
+
 @pytest.mark.parametrize("range_mm", [1000.0, 3000.0, 8000.0])
 def test_analytic_and_numeric_jacobians_converge_to_the_same_pose(range_mm):
     """The analytic pose derivatives change the iterations' path a little (central
@@ -359,17 +369,7 @@ def test_analytic_and_numeric_jacobians_converge_to_the_same_pose(range_mm):
     for seed in range(2):
         sensor, f, r = _pipeline_frame(range_mm, seed)
         fits = [
-            fit_pose_to_pixels(
-                f.gray,
-                f.distance_mm,
-                CAM,
-                CAT,
-                r.R,
-                r.t_mm,
-                [m.catalog_id for m in r.matched],
-                noise=PixelNoise.from_sensor(sensor),
-                jacobian=jacobian,
-            )
+            _fit_pipeline_frame(sensor, f, r, jacobian=jacobian)
             for jacobian in ("analytic", "central-differences")
         ]
         assert all(x.ok for x in fits), [x.reason for x in fits]
@@ -441,17 +441,7 @@ def test_reference_implementation_fits_the_same_pose():
     kernels are one arithmetic: the same iterations and the same pose to rounding."""
     sensor, f, r = _pipeline_frame(3000.0, 0)
     fits = [
-        fit_pose_to_pixels(
-            f.gray,
-            f.distance_mm,
-            CAM,
-            CAT,
-            r.R,
-            r.t_mm,
-            [m.catalog_id for m in r.matched],
-            noise=PixelNoise.from_sensor(sensor),
-            implementation=implementation,
-        )
+        _fit_pipeline_frame(sensor, f, r, implementation=implementation)
         for implementation in ("compiled", "reference")
     ]
     assert all(x.ok for x in fits), [x.reason for x in fits]
