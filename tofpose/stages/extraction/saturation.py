@@ -47,6 +47,15 @@ def pixels_at_full_scale(
         raise ValueError("starts must be non-decreasing")
     if len(flat) and (flat.min() < 0 or flat.max() >= gray.size):
         raise ValueError(f"pixel indices must lie in the {gray.shape} image")
+    return pixel_lists_at_full_scale(gray, flat, starts, full_scale_counts)
+
+
+def pixel_lists_at_full_scale(
+    gray: np.ndarray, flat: np.ndarray, starts: np.ndarray, full_scale_counts: float
+) -> np.ndarray:
+    """``pixels_at_full_scale`` without its checks of the arguments: for the per-frame
+    path, whose pixel lists the stages themselves built (every frame, acquisition and
+    tracking). (B,) bool."""
     at_full_scale = gray.ravel()[flat] >= full_scale_counts  # (P,)
     # pixels at full scale before each start: blob j has those of [starts[j], starts[j+1])
     before = np.concatenate(([0], np.cumsum(at_full_scale, dtype=np.int64)))  # (P + 1,)
@@ -59,4 +68,4 @@ def blobs_at_full_scale(
     """(B,) bool: whether each blob has a pixel at or above ``full_scale_counts`` in
     ``gray`` (H, W) (``pixels_at_full_scale`` over the blobs' own pixel lists)."""
     flat, starts = pixel_lists(blobs)
-    return pixels_at_full_scale(gray, flat, starts, full_scale_counts=full_scale_counts)
+    return pixel_lists_at_full_scale(np.asarray(gray), flat, starts, full_scale_counts)

@@ -19,7 +19,7 @@ from tofpose.config import SolveConfig, TrackingConfig
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import Catalog
 from tofpose.core.records import FrameRecord, camera_record, catalog_record
-from tofpose.stages.extraction.saturation import pixels_at_full_scale
+from tofpose.stages.extraction.saturation import pixel_lists_at_full_scale
 from tofpose.stages.extraction.uncertainty import SigmaFloors, kernel_constants
 from tofpose.stages.persistence.persistence import Persistence, PersistenceInfo
 from tofpose.stages.pose.records import NO_OFFSET, RangeOffsetPrior
@@ -156,7 +156,7 @@ class CompiledTracker:
         meas = Measurements(
             (), area, c.uv_px, observed.rho, c.y_mm, c.weights, c.sigma_px, observed.sr
         )
-        saturated = pixels_at_full_scale(
-            g, out.flat, out.starts, full_scale_counts=self.camera.full_scale_counts
+        saturated = pixel_lists_at_full_scale(
+            g, out.flat, out.starts, self.camera.full_scale_counts
         )
         return Tracked(solved, meas, PersistenceInfo(1 + out.n_used, out.motion, 0), saturated)
