@@ -225,6 +225,7 @@ class FitSettingsFields:
     calibrated_range_bias_sigma_mm: float = 2.0
     focal_length_sigma_rel: float | None = None
     common_centroid_bias_px: float = 0.05
+    class_centroid_bias_px: float = 0.02
     outlier_sigma: float = 6.0
     outlier_chi2_per_dof: float = 4.0
     max_view_angle_deg: float = 80.0
@@ -311,16 +312,27 @@ class PipelineConfig(FitSettingsFields):
         2026-12 this was a fixed 0.2 % for every camera: on frames rendered with exact
         intrinsics (ours and another renderer's) it made the reported z sigma ~0.2 % of
         the range (2 mm at 1 m) where the errors were a tenth of that.
-    common_centroid_bias_px : sigma of a centroid error common to a frame's markers
-        (0.05 px: the largest common-mode error of the matched centroids measured over
-        the physics robustness study's families, 0.046 px rms beyond their random
-        noise at 8 m with every knob drawn; ``bench/physics.py``'s scale column); over
-        the pattern's rms radius in the
-        image it is a scale error, estimated with the range offset. Markers of one size
-        share it apart from the others (their blobs mix with the surround, the PSF and the
-        fall-off alike), so each size's own scale error also enters the reported
-        covariance (``kernels.pose.class_scale_covariance``): where the sizes sit on
-        different sides of the pattern, the fit reads it as a tilt.
+    common_centroid_bias_px : sigma of a centroid error common to a frame's markers, for
+        markers of at most ``stages.pose.solve.RIM_RADIUS_PX`` (2 px) image radius,
+        whose pixels are mostly rim pixels (0.05 px: the largest common-mode error of
+        the matched centroids measured over the physics robustness study's families,
+        ``bench/physics.py``'s scale column, 3-8 m). Over the pattern's rms radius in
+        the image it is a scale error, estimated with the range offset and reported in
+        the covariance (``kernels.pose.class_scale_covariance``'s common term). Larger
+        discs have a smaller share of rim pixels and a smaller common error: the sigma
+        falls as the rim's width over the matched markers' median image radius
+        (``solve.centroid_bias_factor``: the rim is ``RIM_RADIUS_PX`` widened by two of
+        the frame's PSF sigmas, ``FrameStats.psf_sigma_px``; at 0.7-2 m on the
+        simulator's families the measured common-mode error is 0.004-0.014 px with sharp
+        optics, up to 0.03 px with a 1-1.5 px PSF). Until 2026-12 this sigma applied
+        at every size and to each size class independently, which made the reported
+        attitude and lateral sigmas 2-4x the errors at 0.7-2 m and on a 640 x 480 sensor.
+    class_centroid_bias_px : sigma of the part of that error one size class of markers
+        shares apart from the others (their blobs mix with the surround, the PSF and the
+        fall-off alike, by their size), with the same size factor; where the sizes sit
+        on different sides of the pattern, the fit reads it as a tilt. 0.02 px: the
+        measured per-class common-mode error beyond the common scale stays below 0.018
+        px (random part included) in every family of the physics study at 0.7-8 m.
     max_systematic_centroid_sigma_px : cap of the frame's excess centroid sigma, estimated
         beside the range one from the lateral residuals alone (``pose.systematic_sigmas``:
         small or blurred markers against a plate that is not black have centroids off by
@@ -399,6 +411,7 @@ class PipelineConfig(FitSettingsFields):
             estimate_range_offset=False,
             focal_length_sigma_rel=0.0,
             common_centroid_bias_px=0.0,
+            class_centroid_bias_px=0.0,
         )
 
 

@@ -494,7 +494,8 @@ class PosePipeline:
             )
         found, blobs = self._candidates(g, d, stats, timer)
         stats = found.stats  # I_t as applied (after the N_max cap)
-        active = ThresholdedFrame(g, stats.raw_threshold)  # A, for the pose check
+        # A, for the pose check; the lens blur for the centroid errors' prior
+        active = ThresholdedFrame(g, stats.raw_threshold, stats.psf_sigma_px)
         # The motion gate compares the cheap moment centroids of find_candidate_blobs;
         # the precise centroids and ranges are measured once, on the combined frames.
         meas, unmatched, n_kept, pinfo = self._measure(
@@ -566,6 +567,7 @@ class PosePipeline:
             threshold_counts=stats.raw_threshold,
             background_counts=stats.background,
             dark_counts=stats.dark_level,
+            psf_sigma_px=stats.psf_sigma_px,
         )
         return result
 
@@ -729,6 +731,7 @@ class PosePipeline:
             threshold_counts=track.threshold_counts,
             background_counts=track.background_counts,
             dark_counts=track.dark_counts,
+            psf_sigma_px=track.psf_sigma_px,
             frames_since_acquisition=track.frames_since_acquisition + 1,
         )
         return result

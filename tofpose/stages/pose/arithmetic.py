@@ -25,6 +25,7 @@ class PoseArithmetic:
     concluding_covariances: Callable
     covariance_envelope: Callable
     point_residuals_mm: Callable
+    pattern_scale_sigma: Callable
 
 
 _FIELDS = (
@@ -33,6 +34,7 @@ _FIELDS = (
     "concluding_covariances",
     "covariance_envelope",
     "point_residuals_mm",
+    "pattern_scale_sigma",
 )
 
 COMPILED = PoseArithmetic(

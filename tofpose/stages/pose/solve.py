@@ -68,15 +68,49 @@ def focal_length_sigma_rel(config: SolveConfig, camera: CameraModel) -> float:
     return float(camera.focal_length_sigma_rel)
 
 
-def offset_prior(config: SolveConfig, sigma_mm: float, camera: CameraModel) -> RangeOffsetPrior:
+#: a sharp disc's image radius (px) below which its pixels are mostly rim pixels
+#: (covered in part, mixed with the surround, cut by the pixel grid): the centroid errors
+#: common to a frame's markers (``common_centroid_bias_px``, ``class_centroid_bias_px``)
+#: are their size there; a larger disc's rim is a fraction ~ RIM_RADIUS_PX / r of it,
+#: and its common-mode error falls alike (``centroid_bias_factor``)
+RIM_RADIUS_PX = 2.0
+#: the lens blur widens the rim by this many PSF sigmas (the blurred edge's span on
+#: either side): a blurred disc's brightness gradient (entrance-angle fall-off across a
+#: tilted face) then moves every marker's centroid alike (0.05-0.1 px at 1-3 m with a
+#: 1-1.5 px PSF on the simulator's families)
+RIM_BLUR_SIGMAS = 2.0
+
+
+def centroid_bias_factor(
+    diameter_mm: np.ndarray, range_mm: np.ndarray, fx: float, psf_sigma_px: float = 0.0
+) -> float:
+    """The factor on the common centroid-error priors for markers of ``diameter_mm``
+    (m,) at ``range_mm`` (m,) through a lens of PSF sigma ``psf_sigma_px``: min(1, rim /
+    r), rim = ``RIM_RADIUS_PX`` + ``RIM_BLUR_SIGMAS`` psf_sigma_px, r the median of their
+    image radii fx d / (2 range) px; 1 without markers or with a non-finite radius."""
+    d = np.asarray(diameter_mm, float)
+    rho = np.asarray(range_mm, float)
+    if d.size == 0:
+        return 1.0
+    radius_px = float(np.median(fx * d / (2.0 * rho)))
+    rim_px = RIM_RADIUS_PX + RIM_BLUR_SIGMAS * max(float(psf_sigma_px), 0.0)
+    if not math.isfinite(radius_px) or radius_px <= rim_px:
+        return 1.0
+    return rim_px / radius_px
+
+
+def offset_prior(
+    config: SolveConfig, sigma_mm: float, camera: CameraModel, bias_factor: float = 1.0
+) -> RangeOffsetPrior:
     """The common range offset's prior for ``kernels.pose.common_range_offset``: sigma
     ``sigma_mm`` (the uncalibrated or calibrated range-bias sigma), and the image scale's
     uncertainty from the focal length's (``focal_length_sigma_rel``) and
-    ``common_centroid_bias_px`` (over the camera's focal length)."""
+    ``common_centroid_bias_px`` times ``bias_factor`` (``centroid_bias_factor``; over
+    the camera's focal length)."""
     return RangeOffsetPrior(
         sigma_mm=float(sigma_mm),
         focal_length_sigma_rel=focal_length_sigma_rel(config, camera),
-        centroid_bias_rad=float(config.common_centroid_bias_px) / camera.fx,
+        centroid_bias_rad=float(config.common_centroid_bias_px) * bias_factor / camera.fx,
     )
 
 
@@ -182,6 +216,9 @@ class ThresholdedFrame:
 
     gray: np.ndarray
     threshold: float
+    #: the frame's lens blur (``FrameStats.psf_sigma_px``), px: it sets the centroid
+    #: errors' size prior (``centroid_bias_factor``)
+    psf_sigma_px: float = 0.0
 
 
 #: the frame ``verify`` passes when the dark check does not run (never read)
@@ -307,7 +344,8 @@ class PoseSolver:
         fit without completion is taken if it keeps more reflectors."""
         cfg = self.config
         complete_mm = alpha_mm * cfg.residual_factor
-        solved = self._fit_pairs(pairs, meas, complete_mm)
+        psf = 0.0 if active is None else active.psf_sigma_px
+        solved = self._fit_pairs(pairs, meas, complete_mm, psf)
         kept = solved.result.kept
         n = len(pairs)
         if len(kept) > n and kept[n:].any() and not kept[:n].all():
@@ -315,14 +353,16 @@ class PoseSolver:
             # added blob may be what bent the fit (two markers imaged as one blob sits
             # near a predicted reflector); the fit without completion is taken when it
             # keeps more reflectors
-            alone = self._fit_pairs(pairs, meas, 0.0)
+            alone = self._fit_pairs(pairs, meas, 0.0, psf)
             if alone.result.kept.sum() > kept.sum():
                 solved = alone
         return self.conclude(
             matched_observations(solved), solved.result, active, dark_check_all=dark_check_all
         )
 
-    def _fit_pairs(self, pairs: np.ndarray, meas: Measurements, complete_mm: float) -> SolvedPairs:
+    def _fit_pairs(
+        self, pairs: np.ndarray, meas: Measurements, complete_mm: float, psf_sigma_px: float = 0.0
+    ) -> SolvedPairs:
         """``kernels.solve.solve_pairs`` on matched pairs (m, 2) with completion within
         ``complete_mm`` (0: none)."""
         mixing = (
@@ -347,16 +387,37 @@ class PoseSolver:
             self._camera_record,
             self._fit_settings,
             float(complete_mm),
-            self.offset_prior(meas.range_mm[pairs[:, 0]]),
+            self.offset_prior(meas.range_mm[pairs[:, 0]], pairs[:, 1], psf_sigma_px),
         )
 
-    def offset_prior(self, range_mm: np.ndarray) -> RangeOffsetPrior:
+    def offset_prior(
+        self,
+        range_mm: np.ndarray,
+        catalog_index: np.ndarray | None = None,
+        psf_sigma_px: float = 0.0,
+    ) -> RangeOffsetPrior:
         """What the fit knows of the common range offset before the frame (the module's
         ``offset_prior``; ``NO_OFFSET`` unless ``estimate_range_offset``), for
-        reflectors at ``range_mm`` (m,)."""
+        reflectors at ``range_mm`` (m,): the catalog's reflectors ``catalog_index`` (m,)
+        when given (their image size and the lens blur ``psf_sigma_px`` set
+        ``centroid_bias_factor``), else the full centroid-error prior."""
         if not self.config.estimate_range_offset:
             return NO_OFFSET
-        return offset_prior(self.config, self.range_bias_sigma_mm(range_mm), self.camera)
+        factor = (
+            1.0
+            if catalog_index is None
+            else self.bias_factor(range_mm, catalog_index, psf_sigma_px)
+        )
+        return offset_prior(self.config, self.range_bias_sigma_mm(range_mm), self.camera, factor)
+
+    def bias_factor(
+        self, range_mm: np.ndarray, catalog_index: np.ndarray, psf_sigma_px: float = 0.0
+    ) -> float:
+        """``centroid_bias_factor`` of the catalog's reflectors ``catalog_index`` (m,) at
+        ``range_mm`` (m,) through a lens of PSF sigma ``psf_sigma_px``."""
+        return centroid_bias_factor(
+            self._d[np.asarray(catalog_index)], range_mm, self.camera.fx, psf_sigma_px
+        )
 
     def conclude(
         self,
@@ -403,17 +464,24 @@ class PoseSolver:
         )
         fitted = fitted_reflectors(obs, fit)
         cfg = self.config
-        # the image scale's errors (the focal length's, one per size class)
-        focal_sigma = focal_length_sigma_rel(cfg, self.camera)
-        by_size = cfg.common_centroid_bias_px > 0 or focal_sigma > 0
+        # the image scale's errors: one common scale (the focal length's and the centroid
+        # error common to every marker, over the pattern's rms radius, as in the range
+        # offset's prior) and one per size class, both for markers of this image size
+        psf = 0.0 if active is None else active.psf_sigma_px
+        factor = self.bias_factor(fitted.rho, obs.i_idx, psf)
+        common_scale, _ = ar.pattern_scale_sigma(
+            np.ascontiguousarray(fitted.e), offset_prior(cfg, 0.0, self.camera, factor)
+        )
+        class_bias_px = float(cfg.class_centroid_bias_px) * factor
+        by_size = common_scale > 0 or class_bias_px > 0
         leave_one_out = cfg.leave_one_out_covariance and len(obs.i_idx) >= MIN_LEAVE_ONE_OUT
         terms = CovarianceTerms(
             bias_sigma_mm=float(bias),
             by_size=by_size,
             group=np.ascontiguousarray(self._size_class[obs.i_idx], dtype=np.int64),
             n_groups=self._n_sizes,
-            bias_rad=float(cfg.common_centroid_bias_px) / self.camera.fx,
-            common_scale_sigma=focal_sigma,
+            bias_rad=class_bias_px / self.camera.fx,
+            common_scale_sigma=float(common_scale),
             leave_one_out=bool(leave_one_out),
         )
         # one compiled call for the three (they share the Jacobian at the pose)

@@ -40,6 +40,8 @@ class TrackState:
     background_counts: float
     frames_since_acquisition: int = 0
     dark_counts: float = float("nan")  # the no-return level (``FrameStats.dark_level``)
+    #: the lens blur the acquisition frame showed (``FrameStats.psf_sigma_px``), px
+    psf_sigma_px: float = 0.0
 
 
 @dataclass(frozen=True)

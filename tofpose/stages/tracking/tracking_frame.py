@@ -30,7 +30,6 @@ from tofpose.stages.pose.solve import (
     ThresholdedFrame,
     fit_settings,
     matched_observations,
-    offset_prior,
 )
 from tofpose.stages.tracking.arithmetic import COMPILED, TrackingArithmetic
 from tofpose.stages.tracking.constants import TRACKED
@@ -77,11 +76,6 @@ class CompiledTracker:
         self._xyz = np.ascontiguousarray(catalog.positions_mm, dtype=float)
         # the arguments of ``track_frame`` that do not change from frame to frame, as the
         # kernels' records (``core.records``), built where the acquisition path builds them
-        # without a range correction the prior's sigma is the uncalibrated one, whatever
-        # the ranges (``PoseSolver.range_bias_sigma_mm``)
-        self._uncalibrated_prior = (
-            offset_prior(config, config.range_bias_sigma_mm, camera) if correction is None else None
-        )
         self._camera_record = camera_record(camera)
         self._catalog_record = catalog_record(catalog)
         self._fit_args = (
@@ -96,15 +90,15 @@ class CompiledTracker:
         )
 
     def _offset_prior(self, track: TrackState, cat_idx: np.ndarray) -> RangeOffsetPrior:
-        """The common range offset's prior for this frame: the solver's, for the ranges of
-        the windowed reflectors at the predicted pose (the calibrated sigma only where the
-        range correction's span holds them all)."""
+        """The common range offset's prior for this frame: the solver's, for the windowed
+        reflectors at their ranges at the predicted pose (the calibrated sigma only where
+        the range correction's span holds them all; their image size and the acquisition
+        frame's lens blur set the image scale's part, ``solve.centroid_bias_factor``)."""
         if not self.config.estimate_range_offset:
             return NO_OFFSET
-        if self._uncalibrated_prior is not None:  # no calibrated span: no range to read
-            return self._uncalibrated_prior
         p = self._xyz[cat_idx] @ np.asarray(track.R).T + np.asarray(track.t_mm)
-        return self._solver.offset_prior(np.sqrt((p * p).sum(axis=1)))  # |p| (linalg.norm's)
+        range_mm = np.sqrt((p * p).sum(axis=1))  # |p| (linalg.norm's)
+        return self._solver.offset_prior(range_mm, cat_idx, track.psf_sigma_px)
 
     def track(self, g: np.ndarray, d: np.ndarray, track: TrackState) -> Tracked | None:
         """One frame; None means "fall back to the acquisition pass" (fewer reflectors to
@@ -143,7 +137,7 @@ class CompiledTracker:
         if out.code != TRACKED:
             return None
         n = len(cat_idx)
-        active = ThresholdedFrame(g, track.threshold_counts)
+        active = ThresholdedFrame(g, track.threshold_counts, track.psf_sigma_px)
         solved = self._solver.conclude(matched_observations(out.solved), out.solved.result, active)
         if not isinstance(solved, Solution):
             return None
