@@ -114,8 +114,11 @@ NO_DIAGNOSTICS = FrameDiagnostics()
 #: hypothesis so far: a count, not a clock, so the answer does not depend on the
 #: machine's load) ...
 FALLBACK_CONFIDENCE = 0.999
-#: ... or after this long (ms), whichever comes first (23 blobs: 1771 triplets, ~5 ms)
-FALLBACK_BUDGET_MS = 100.0
+#: ... or after this many observed triplets, whichever comes first (every triplet of 50
+#: blobs; 23 blobs: 1771 triplets, ~5 ms). Until 2026-12 the cap was 100 ms of the
+#: clock: a first call's warm-up on a loaded machine ran past it and the frame had no
+#: pose, where a quiet machine found one
+FALLBACK_MAX_TRIPLETS = 20_000
 #: and its answer is taken only when its reflectors span a plane: the second singular
 #: value of their catalog points at least this fraction of the first (a row of bright
 #: fittings in a room matched the paper target's nearly collinear lower four markers,
@@ -527,7 +530,7 @@ class PosePipeline:
             hypotheses = self._match_ransac(
                 meas.y_mm,
                 meas.weights,
-                budget_ms=FALLBACK_BUDGET_MS,
+                max_triplets=FALLBACK_MAX_TRIPLETS,
                 confidence=FALLBACK_CONFIDENCE,
             )
             # at least one reflector beyond the fewest: a hypothesis of 3 is checked by
@@ -855,15 +858,21 @@ class PosePipeline:
         w: np.ndarray,
         *,
         budget_ms: float | None = None,
+        max_triplets: int | None = None,
         confidence: float | None = None,
     ) -> MatchResult:
-        """Random triplet hypotheses over all blobs, best inlier count, until the time
-        budget is spent or the standard RANSAC count for ``confidence`` is reached
-        (defaults: ``ransac_time_budget_ms``, ``ransac_confidence``); ``iterations`` of
-        the result = observed triplets tried."""
+        """Random triplet hypotheses over all blobs, best inlier count, until the standard
+        RANSAC count for ``confidence`` is reached or the budget is spent: at most
+        ``max_triplets`` observed triplets when given (no clock: the same frames give the
+        same answer on any machine), else the time budget ``budget_ms`` (defaults:
+        ``ransac_time_budget_ms``, ``ransac_confidence``); ``iterations`` of the result =
+        observed triplets tried."""
         cfg = self.config
         stats: dict = {}
         budget = cfg.ransac_time_budget_ms if budget_ms is None else budget_ms
+        triplets = random_triplets(len(y), self._rng)
+        if max_triplets is not None:
+            triplets, budget = triplets[:max_triplets], None
         confidence = cfg.ransac_confidence if confidence is None else confidence
         alpha = cfg.matching.alpha_for(y)
         tol = cfg.matching.pair_tolerance_mm(alpha, w)
@@ -875,7 +884,7 @@ class PosePipeline:
             self._solver.facing,
             weights=w,
             min_matches=cfg.matching.min_matches,
-            observed_triplets=random_triplets(len(y), self._rng),
+            observed_triplets=triplets,
             deadline_s=None if budget is None else time.perf_counter() + budget / 1000.0,
             confidence=confidence,
             stats=stats,

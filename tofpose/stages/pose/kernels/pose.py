@@ -465,18 +465,36 @@ def worst_outlier(refl, norms, fit):
     # points' residuals are large (masking); a fit without it shows it
     predicted = np.empty(m)
     for j in range(m):
-        _, Rj, tj = fit_without(j, refl, fit)
-        one = Reflectors(
-            x=refl.x[j : j + 1],
-            e=refl.e[j : j + 1],
-            rho=refl.rho[j : j + 1],
-            sr=refl.sr[j : j + 1],
-            sb=refl.sb[j : j + 1],
-        )
-        r, _ = residuals_jacobian(one, Rj, tj, tangent_bases(one.e))
-        predicted[j] = np.sqrt((r**2).sum())
+        predicted[j] = deleted_residual_norm(j, refl, fit)
     worst = int(np.argmax(predicted))
     return worst if predicted[worst] > fit.outlier_sigma else -1
+
+
+@jit
+def deleted_residual_norm(j, refl, fit):
+    """How far the fit without reflector j (of ``refl``, a ``records.Reflectors``)
+    predicts it, in sigmas of that prediction (ours): sqrt(r^T S^-1 r), r (3,) its
+    whitened residuals at the pose fitted without it, S = I + J_j C J_j^T (3, 3) with
+    J_j (3, 6) their Jacobian there and C (6, 6) that fit's covariance (its J^T J
+    inverse): the externally studentised residual. The pose of the others is uncertain
+    most where j alone fixes it (the only marker on one side of the pattern), and a
+    good marker there is predicted badly by them; S counts that. 0 when the others
+    cannot fix the pose (C singular): nothing tells j is wrong."""
+    keep = np.arange(refl.x.shape[0]) != j
+    without = fit_pose(subset(refl, keep), fit)
+    C = without.covariance
+    if not np.isfinite(C).all():
+        return 0.0
+    one = Reflectors(
+        x=refl.x[j : j + 1],
+        e=refl.e[j : j + 1],
+        rho=refl.rho[j : j + 1],
+        sr=refl.sr[j : j + 1],
+        sb=refl.sb[j : j + 1],
+    )
+    r, Jj = residuals_jacobian(one, without.R, without.t, tangent_bases(one.e))
+    S = np.eye(3) + Jj @ C @ Jj.T
+    return np.sqrt(max(float(r @ np.linalg.solve(S, r)), 0.0))
 
 
 #: Gauss-Newton steps of the common range offset's estimate (from a converged 6-parameter fit)

@@ -310,8 +310,8 @@ def worst_outlier(refl, norms, fit) -> int:
     are ``norms`` (m,)) is consistent (ours). Below 5 reflectors: the largest norm when
     above ``fit.outlier_sigma``. From 5: nothing when the largest norm is at most
     ``fit.outlier_sigma`` and chi^2 = sum norms^2 is at most ``fit.outlier_chi2_per_dof``
-    (3m - 6); else the reflector that the fit without it (``fit_without``) predicts worst
-    (the norm of its whitened residuals there), when that norm is above
+    (3m - 6); else the reflector that the fit without it predicts worst in sigmas of
+    that prediction (``deleted_residual_norm``), when that norm is above
     ``fit.outlier_sigma``."""
     m = len(norms)
     if m < 5:
@@ -320,13 +320,27 @@ def worst_outlier(refl, norms, fit) -> int:
     consistent = (norms**2).sum() <= fit.outlier_chi2_per_dof * (3 * m - 6)
     if norms.max() <= fit.outlier_sigma and consistent:
         return -1
-    predicted = np.empty(m)
-    for j in range(m):
-        _, Rj, tj = fit_without(j, refl, fit)
-        r = whitened_residuals(rows_of(refl, slice(j, j + 1)), Rj, tj)
-        predicted[j] = np.linalg.norm(r)
+    predicted = np.array([deleted_residual_norm(j, refl, fit) for j in range(m)])
     worst = int(np.argmax(predicted))
     return worst if predicted[worst] > fit.outlier_sigma else -1
+
+
+def deleted_residual_norm(j, refl, fit) -> float:
+    """sqrt(r^T S^-1 r), ours: r (3,) reflector j's whitened residuals at the pose fitted
+    without it, S = I + J_j C J_j^T (3, 3), J_j (3, 6) their Jacobian there and C (6, 6)
+    that fit's covariance (the externally studentised residual: the others predict a
+    marker worst where it alone fixes the pose, and S counts that); 0 when C is
+    singular."""
+    keep = np.arange(len(refl.x)) != j
+    without = fit_pose(rows_of(refl, keep), fit)
+    C = without.covariance
+    if not np.isfinite(C).all():
+        return 0.0
+    one = rows_of(refl, slice(j, j + 1))
+    r = whitened_residuals(one, without.R, without.t)
+    Jj = jacobian(one, without.R, without.t)
+    S = np.eye(3) + Jj @ C @ Jj.T
+    return float(np.sqrt(max(float(r @ np.linalg.solve(S, r)), 0.0)))
 
 
 def mean_bearing(e) -> np.ndarray:

@@ -392,3 +392,50 @@ def test_a_range_bias_moves_the_pose_along_the_line_of_sight_by_itself():
     moved = np.concatenate((Rotation.from_matrix(shifted.R @ R.T).as_rotvec(), shifted.t - t))
     cov = reference.range_bias_covariance(_refl(x, e, rho, sr, sb), R, t, b)
     np.testing.assert_allclose(np.outer(moved, moved), cov, atol=1e-4 * np.abs(cov).max())
+
+
+def test_worst_outlier_keeps_the_lone_marker_that_alone_fixes_the_pose():
+    """Four markers in a cluster and one alone 250 mm away (at 8 m, as glints leave a
+    target): the fit without the lone one predicts it badly because it alone fixes the
+    pose's tilt, not because it is wrong. worst_outlier (both implementations) drops the
+    cluster's marker whose bearing is 12 sigma off, not the lone one: the residual is
+    counted in sigmas of the prediction (``deleted_residual_norm``), and the lone
+    marker's own residual in its measurement sigmas alone is the largest."""
+    x = np.array(
+        [
+            [0.0, 0.0, 0.0],
+            [40.0, 0.0, 0.0],
+            [0.0, 40.0, 0.0],
+            [40.0, 40.0, 5.0],
+            [250.0, 180.0, 0.0],
+        ]
+    )
+    R = Rotation.from_rotvec([0.2, -0.3, 0.1]).as_matrix()
+    t = np.array([100.0, -50.0, 8000.0])
+    p = x @ R.T + t
+    rho = np.linalg.norm(p, axis=1)
+    e = p / rho[:, None]
+    sr = np.full(5, 3.0)
+    sb = np.full(5, 1.5e-4)
+    rng = np.random.default_rng(2)
+    e = e + 0.5 * sb[:, None] * rng.normal(0, 1, e.shape)
+    bad = 1
+    side = np.cross(e[bad], [0.0, 0.0, 1.0])
+    e[bad] += 12.0 * sb[bad] * side / np.linalg.norm(side)
+    e /= np.linalg.norm(e, axis=1, keepdims=True)
+    refl = _refl(x, e, rho, sr, sb)
+    fit = _settings("ml", adapt=False)
+    norms = reference.fit_pose(refl, fit).norms
+    raw = []
+    for j in range(5):
+        _, Rj, tj = reference.fit_without(j, refl, fit)
+        raw.append(
+            np.linalg.norm(reference.whitened_residuals(reference.rows_of(refl, [j]), Rj, tj))
+        )
+    assert int(np.argmax(raw)) == 4  # the old rule's choice: the lone, correct marker
+    assert reference.worst_outlier(refl, norms, fit) == bad
+    assert kernel.worst_outlier(refl, norms, fit) == bad
+    for j in range(5):
+        assert reference.deleted_residual_norm(j, refl, fit) == pytest.approx(
+            kernel.deleted_residual_norm(j, refl, fit), rel=0.02
+        )  # numerical Jacobian; fits to the optimiser's tolerance
