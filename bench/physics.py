@@ -4,21 +4,28 @@ random per frame from what real targets, lenses and sensors do (domain randomisa
 renderer (``bench/_foreign_metrics.py``: success, wrong, confidently wrong, share beyond
 3 reported sigmas, NEES).
 
-Families: ``tofpose.sim.randomise.FAMILIES`` (each frame draws its own values).
+Families: ``tofpose.sim.randomise.ALL_FAMILIES`` (each frame draws its own values;
+``draw_frame``): the seven of ``FAMILIES`` on the EPC660, and ``saturating`` (a fixed
+exposure: the markers' cores clipped), ``glints`` (15 specular glints around the target)
+and ``other sensor`` (640 x 480, 20 MHz, count scale 4: its own camera, and the pipeline
+set for it by ``config_for_camera`` as the CLI does).
 
 Poses: ranges 3, 4.5, 6 and 8 m, attitude up to 20 deg per axis from facing, the target
 centre up to half the half field of view off the optical axis. Each frame is a fresh
 acquisition.
 
-Run: ``python bench/physics.py [--frames N] [--out DIR]`` (N frames per family and range);
-``python bench/physics.py --compare-pixel-fit [--frames N]``: the same frames with and
-without the pixel-level fit, per family.
+Run: ``python bench/physics.py [--frames N] [--out DIR] [--families NAME ...]`` (N frames
+per family and range; the named families only); ``python bench/physics.py
+--compare-pixel-fit [--frames N] [--families NAME ...]``: the same frames with and without
+the pixel-level fit, per family.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +33,7 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench._common import pyplot, save_figure, section_main, table  # noqa: E402
+from bench._common import pyplot, save_figure, table  # noqa: E402
 from bench._foreign_metrics import (  # noqa: E402
     common_scale_error_px,
     common_scale_excess_px,
@@ -36,28 +43,33 @@ from bench._foreign_metrics import (  # noqa: E402
 )
 from bench.foreign import frame_outcome  # noqa: E402
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
-from tofpose.config import PixelFitConfig  # noqa: E402
-from tofpose.sim.randomise import FAMILIES, draw_background, draw_physics, draw_pose  # noqa: E402
-from tofpose.sim.render import render_frame  # noqa: E402
+from tofpose.config import PixelFitConfig, config_for_camera  # noqa: E402
+from tofpose.core.catalog import Catalog  # noqa: E402
+from tofpose.sim.randomise import ALL_FAMILIES, DrawnFrame, draw_frame  # noqa: E402
 
 RANGES_M = (3.0, 4.5, 6.0, 8.0)
 MAX_ATTITUDE_DEG = 20.0
 OFFSET_FRACTION = 0.5  # of the half field of view
+#: the examples' crop: this half angle (tan) around the target, 40 px on the EPC660
+EXAMPLE_HALF_FOV = 40.0 / 325.0
 
 
-def run(n: int = 12, seed: int = 0):
+def run(n: int = 12, seed: int = 0, families: Sequence[str] = ALL_FAMILIES):
     """{(family, range_m): (summary dict, per-marker range errors by diameter)}; the
     summary also holds ``scale_excess_px`` (``common_scale_excess_px`` of the cell)."""
-    cam, cat = CameraModel(), paper_target()
-    pipe = PosePipeline(cam, cat)
+    cat = paper_target()
+    pipes = _Pipelines(cat, PipelineConfig())
     out = {}
-    jobs = [(f, r) for f in FAMILIES for r in RANGES_M]
+    jobs = [(f, r) for f in _checked(families) for r in RANGES_M]
     for family, range_m in tqdm(jobs, desc="physics", unit="cell", file=sys.stderr):
-        outcomes, ranges, scale = [], {}, []
-        for i, (f, T) in enumerate(_frames(family, range_m, n, seed, cam, cat)):
+        outcomes, scale = [], []
+        ranges: dict[int, list[float]] = {}
+        for i, (f, d) in enumerate(_frames(family, range_m, n, seed, cat)):
+            pipe = pipes.get(d.camera)
             pipe.reset()
             r = pipe.process(f.gray, f.distance_mm)
-            truth = true_images(cam, cat, T)
+            T = d.T_camera_target
+            truth = true_images(d.camera, cat, T)
             markers = marker_errors(r, truth, cat, 0)  # [] without a pose
             c = common_scale_error_px(r, truth, cat)
             if c is not None:
@@ -72,35 +84,80 @@ def run(n: int = 12, seed: int = 0):
     return out
 
 
-def _frames(family: str, range_m: float, n: int, seed: int, cam, cat):
-    """The study's frames of one cell, (frame, true pose) each, drawn as ``run`` draws
-    them (the same rng stream, so both modes of ``compare_pixel_fit`` see one set)."""
-    rng = np.random.default_rng([seed, FAMILIES.index(family), int(range_m * 10)])
+class _Pipelines:
+    """One pipeline per camera, its settings scaled to the camera as the CLI scales them
+    (``config_for_camera``)."""
+
+    def __init__(self, catalog: Catalog, config: PipelineConfig) -> None:
+        self.catalog, self.config = catalog, config
+        self._by_camera: dict[CameraModel, PosePipeline] = {}
+
+    def get(self, camera: CameraModel) -> PosePipeline:
+        if camera not in self._by_camera:
+            config = config_for_camera(
+                self.config,
+                width=camera.width,
+                height=camera.height,
+                count_scale=camera.count_scale,
+            )
+            self._by_camera[camera] = PosePipeline(camera, self.catalog, config)
+        return self._by_camera[camera]
+
+
+def _checked(families: Sequence[str]) -> list[str]:
+    """``families`` in the study's order; ``ValueError`` naming an unknown one."""
+    unknown = [f for f in families if f not in ALL_FAMILIES]
+    if unknown:
+        raise ValueError(f"unknown families {unknown} (one of {', '.join(ALL_FAMILIES)})")
+    return [f for f in ALL_FAMILIES if f in families]
+
+
+def _families_of(out) -> list[str]:
+    """The families of a ``run`` or ``compare_pixel_fit`` result, in the study's order."""
+    present = {k[0] if isinstance(k, tuple) else k for k in out}
+    return [f for f in ALL_FAMILIES if f in present]
+
+
+def _frames(family: str, range_m: float, n: int, seed: int, cat: Catalog):
+    """The study's frames of one cell, (frame, its ``DrawnFrame``) each, drawn as ``run``
+    draws them (the same rng stream, so both modes of ``compare_pixel_fit`` see one set;
+    seeded by the family's place in ``ALL_FAMILIES``, new families appended)."""
+    rng = np.random.default_rng([seed, ALL_FAMILIES.index(family), int(range_m * 10)])
     for _ in range(n):
-        scene, sensor = draw_physics(family, rng, cat)
-        T = draw_pose(range_m, rng, cam, MAX_ATTITUDE_DEG, OFFSET_FRACTION)
-        scene = draw_background(family, scene, rng, cam, T)
-        yield render_frame(cam, scene, T, sensor, rng), T
+        d = _draw(family, range_m, rng, cat)
+        yield d.render(rng), d
 
 
-def compare_pixel_fit(n: int = 12, seed: int = 0) -> dict:
+def _draw(family: str, range_m: float, rng: np.random.Generator, cat: Catalog) -> DrawnFrame:
+    return draw_frame(
+        family,
+        range_m,
+        rng,
+        cat,
+        max_attitude_deg=MAX_ATTITUDE_DEG,
+        offset_fraction=OFFSET_FRACTION,
+    )
+
+
+def compare_pixel_fit(n: int = 12, seed: int = 0, families: Sequence[str] = ALL_FAMILIES) -> dict:
     """The study's frames (all ranges) measured twice per family: by the default
     pipeline and with the pixel-level fit (``PipelineConfig.pixel_fit``). {family:
     (centroid outcomes, pixel-fit outcomes, ok poses where the fit held, ok poses)}."""
-    cam, cat = CameraModel(), paper_target()
-    plain = PosePipeline(cam, cat)
-    fitted = PosePipeline(cam, cat, PipelineConfig(pixel_fit=PixelFitConfig(enabled=True)))
+    cat = paper_target()
+    plain = _Pipelines(cat, PipelineConfig())
+    fitted = _Pipelines(cat, PipelineConfig(pixel_fit=PixelFitConfig(enabled=True)))
     out: dict = {}
-    jobs = [(f, r) for f in FAMILIES for r in RANGES_M]
+    jobs = [(f, r) for f in _checked(families) for r in RANGES_M]
     for family, range_m in tqdm(jobs, desc="physics, pixel fit", unit="cell", file=sys.stderr):
         base, pixel, held, ok = out.setdefault(family, ([], [], [0], [0]))
-        for i, (f, T) in enumerate(_frames(family, range_m, n, seed, cam, cat)):
-            plain.reset()
-            fitted.reset()
-            a = plain.process(f.gray, f.distance_mm)
-            b = fitted.process(f.gray, f.distance_mm)
-            base.append(frame_outcome(i, a, T, []))
-            pixel.append(frame_outcome(i, b, T, []))
+        for i, (f, d) in enumerate(_frames(family, range_m, n, seed, cat)):
+            a_pipe, b_pipe = plain.get(d.camera), fitted.get(d.camera)
+            a_pipe.reset()
+            b_pipe.reset()
+            a = a_pipe.process(f.gray, f.distance_mm)
+            b = b_pipe.process(f.gray, f.distance_mm)
+            base.append(frame_outcome(i, a, d.T_camera_target, []))
+            pixel.append(frame_outcome(i, b, d.T_camera_target, []))
             ok[0] += int(b.ok)
             held[0] += int(b.ok and b.pixel_fit == "ok")
     return {k: (v[0], v[1], v[2][0], v[3][0]) for k, v in out.items()}
@@ -109,7 +166,7 @@ def compare_pixel_fit(n: int = 12, seed: int = 0) -> dict:
 def pixel_fit_markdown(cmp: dict, n: int) -> str:
     """The comparison of ``compare_pixel_fit`` as a table, one row per family and mode."""
     rows = []
-    for family in FAMILIES:
+    for family in _families_of(cmp):
         base, pixel, held, ok = cmp[family]
         for mode, outcomes in (("centroid", base), ("pixel fit", pixel)):
             s = summarise(outcomes)
@@ -168,7 +225,8 @@ def _num(x: float, digits: int = 2) -> str:
 def plot(out, path: Path) -> None:
     plt = pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(14, 4))
-    for family in FAMILIES:
+    families = _families_of(out)
+    for family in families:
         s = [out[(family, r)][0] for r in RANGES_M]
         axes[0].plot(RANGES_M, [x["success_pct"] for x in s], "o-", label=family)
         axes[1].plot(RANGES_M, [x["beyond_3sigma_pct"] for x in s], "o-", label=family)
@@ -185,7 +243,7 @@ def plot(out, path: Path) -> None:
     axes[0].legend(fontsize=8)
     fig.suptitle("physics robustness study (domain randomisation per frame)")
     save_figure(fig, path)
-    plot_examples(examples_path(path))
+    plot_examples(examples_path(path), families=families)
 
 
 def examples_path(path) -> Path:
@@ -193,21 +251,28 @@ def examples_path(path) -> Path:
     return Path(path).with_name(Path(path).stem + "-examples.png")
 
 
-def plot_examples(path: Path, range_m: float = 6.0, seed: int = 0) -> None:
+def plot_examples(
+    path: Path, range_m: float = 6.0, seed: int = 0, families: Sequence[str] = ALL_FAMILIES
+) -> None:
     """One frame per family at ``range_m`` (the first draw of a stream seeded like the
     study's, so the picture shows what the table measures), the gray image around the
-    target, each panel scaled to its own 1st-99.9th percentile."""
+    target (the same field of view on every camera), each panel scaled to its own
+    1st-99.9th percentile, in two rows when there are more than five families."""
     plt = pyplot()
-    cam, cat = CameraModel(), paper_target()
-    fig, axes = plt.subplots(1, len(FAMILIES), figsize=(2.3 * len(FAMILIES), 2.8))
-    for ax, family in zip(axes, FAMILIES, strict=True):
-        rng = np.random.default_rng([seed, FAMILIES.index(family), int(range_m * 10)])
-        scene, sensor = draw_physics(family, rng, cat)
-        T = draw_pose(range_m, rng, cam, MAX_ATTITUDE_DEG, OFFSET_FRACTION)
-        scene = draw_background(family, scene, rng, cam, T)
-        f = render_frame(cam, scene, T, sensor, rng)
+    cat = paper_target()
+    families = _checked(families)
+    cols = len(families) if len(families) <= 5 else math.ceil(len(families) / 2)
+    rows = math.ceil(len(families) / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(2.6 * cols, 3.2 * rows), squeeze=False)
+    for ax in axes.ravel()[len(families) :]:
+        ax.set_visible(False)
+    for ax, family in zip(axes.ravel(), families, strict=False):
+        rng = np.random.default_rng([seed, ALL_FAMILIES.index(family), int(range_m * 10)])
+        d = _draw(family, range_m, rng, cat)
+        f = d.render(rng)
+        cam, T = d.camera, d.T_camera_target
         u, v = cam.project(T.apply(cat.positions_mm.mean(axis=0)[None]))[0]
-        half = 28
+        half = round(EXAMPLE_HALF_FOV * cam.fx)
         v0, u0 = max(int(v) - half, 0), max(int(u) - half, 0)
         crop = np.asarray(f.gray, float)[v0 : v0 + 2 * half, u0 : u0 + 2 * half]
         lo, hi = np.percentile(crop, [1, 99.9])
@@ -221,7 +286,7 @@ def plot_examples(path: Path, range_m: float = 6.0, seed: int = 0) -> None:
 
 def markdown(out, img: str, n: int) -> str:
     rows = []
-    for family in FAMILIES:
+    for family in _families_of(out):
         for r in RANGES_M:
             s, ranges = out[(family, r)]
             bias = {d: float(np.median(v)) if v else math.nan for d, v in ranges.items()}
@@ -267,7 +332,13 @@ def markdown(out, img: str, n: int) -> str:
         "per-pixel offsets, a zero offset of -15 to +15 mm, lens scatter); `background` a "
         "room around the target (furniture, a person, shiny fittings; an arm in front of "
         "the target in 30 % of frames); `all` every knob but the background at once with "
-        "1-10 klx ambient. Range bias: signed median of the matched "
+        "1-10 klx ambient; `saturating` a fixed exposure for the plate, reflectors facing "
+        "the camera at 2-5x full scale (cores clipped, no distance); `glints` 15 specular "
+        "glints (Gaussian spots of sigma 0.5-1.6 px, peaks of 400-2500 counts, within 250 mm "
+        "of the target's range, around its image); `other sensor` the defaults on a 640 x 480 "
+        "camera (same field of view, 20 MHz: 7.49 m unambiguous, so the 8 m frames wrap; "
+        "count scale 4), the pipeline set for it by `config_for_camera`. Range bias: signed "
+        "median of the matched "
         "reflectors' range error, by diameter. Scale error: the matched centroids' "
         "common-mode (image-scale) error in px of the pattern's rms radius, beyond what "
         "their own sigmas give (`common_scale_excess_px`; the prior "
@@ -305,10 +376,33 @@ def markdown(out, img: str, n: int) -> str:
     return "\n".join(lines)
 
 
+def main(argv: list[str] | None = None) -> None:
+    """The command line (module docstring): the study's table (and its plots in
+    ``--out``), or with ``--compare-pixel-fit`` the pixel-fit comparison's."""
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--frames", type=int, default=12, help="frames per family and range")
+    ap.add_argument("--out", default="docs/img/results", help="where the plots go")
+    ap.add_argument(
+        "--families",
+        nargs="+",
+        choices=ALL_FAMILIES,
+        default=list(ALL_FAMILIES),
+        metavar="NAME",
+        help=f"the families to run (default all: {', '.join(ALL_FAMILIES)})",
+    )
+    ap.add_argument("--compare-pixel-fit", action="store_true")
+    args = ap.parse_args(argv)
+    if args.compare_pixel_fit:
+        cmp = compare_pixel_fit(args.frames, families=args.families)
+        print(pixel_fit_markdown(cmp, args.frames))
+        return
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    data = run(args.frames, families=args.families)
+    img = out / "physics.png"
+    plot(data, img)
+    print(markdown(data, str(img), args.frames))
+
+
 if __name__ == "__main__":
-    if "--compare-pixel-fit" in sys.argv:
-        sys.argv.remove("--compare-pixel-fit")
-        frames = int(sys.argv[sys.argv.index("--frames") + 1]) if "--frames" in sys.argv else 12
-        print(pixel_fit_markdown(compare_pixel_fit(frames), frames))
-    else:
-        section_main(__doc__, 12, run, plot, markdown, "physics.png")
+    main()

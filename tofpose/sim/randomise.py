@@ -16,15 +16,33 @@ Physics families (each frame draws its own values):
   frames an arm in front of the target covering part of it), 1-10 klx ambient; drawn by
   ``draw_background`` once the pose is known;
 * ``all``: every knob above but the background drawn at once, ambient 1-10 klx, wall or
-  none.
+  none;
 
-Used by the physics robustness study (``bench/physics.py``) and by Monte-Carlo accuracy
-studies (``tofpose.study``).
+and three more (``EXTRA_FAMILIES``) that are drawn whole by ``draw_frame``, since they
+need the pose or a camera of their own:
+
+* ``saturating``: the defaults with a fixed exposure set for the plate, so that a
+  reflector facing the camera at the target's range reads 2-5x full scale
+  (``fixed_exposure``): the markers' cores are clipped with no distance, only their rims
+  are measured;
+* ``glints``: the defaults plus 15 specular glints (``tofpose.sim.glints``): Gaussian
+  spots of sigma 0.5-1.6 px and peaks of 400-2500 reference counts, each within 250 mm
+  of the target's range and in and around its image (up to 1.5x its half extent from
+  its centre), none hidden by the target;
+* ``other sensor``: the defaults on a second sensor profile (``other_sensor_camera``:
+  640 x 480 px, twice the focal length in px so the same field of view, 20 MHz
+  modulation, count scale 4); the pipeline is set for it by
+  ``tofpose.config.config_for_camera``.
+
+Used by the physics robustness study (``bench/physics.py``, all ten) and by Monte-Carlo
+accuracy studies (``tofpose.study``: ``FAMILIES``, drawn by ``draw_physics``,
+``draw_pose`` and ``draw_background``).
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -33,12 +51,130 @@ from tofpose.core.catalog import Catalog
 from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg
 from tofpose.sim.background import synthetic_room
 from tofpose.sim.bench import R_FACING
-from tofpose.sim.render import SensorModel
+from tofpose.sim.glints import Glints, draw_glints, render_glints
+from tofpose.sim.render import (
+    RenderedFrame,
+    SensorModel,
+    reference_full_scale,
+    render_frame,
+    sensor_for_camera,
+)
 from tofpose.sim.scene import TargetScene
 from tofpose.sim.systematic import SystematicErrors
 
+#: the families ``draw_physics`` draws (a study's and the API's)
 FAMILIES = ("ideal", "grey plate", "lens blur", "gains", "systematic", "background", "all")
+#: the families only ``draw_frame`` draws (they need the pose or their own camera)
+EXTRA_FAMILIES = ("saturating", "glints", "other sensor")
+ALL_FAMILIES = FAMILIES + EXTRA_FAMILIES
 ARM_PROBABILITY = 0.3  # share of background frames with an arm in front of the target
+#: ``saturating``: a face-on reflector at the target's range reads this many full scales
+OVEREXPOSURE = (2.0, 5.0)
+N_GLINTS = 15  # ``glints``: glints per frame
+
+
+def other_sensor_camera() -> CameraModel:
+    """The ``other sensor`` family's camera: 640 x 480 px with twice the EPC660's focal
+    length in px (fx = fy = 650: the same field of view), 20 MHz modulation (7.49 m
+    unambiguous range, no unwrapping), gray counts 4x the EPC660's (full scale
+    4 x 4095)."""
+    ref = CameraModel()
+    return CameraModel(
+        width=2 * ref.width,
+        height=2 * ref.height,
+        fx=2.0 * ref.fx,
+        fy=2.0 * ref.fy,
+        cx=319.5,
+        cy=239.5,
+        name="640x480 20 MHz (robustness study)",
+        full_scale_counts=4.0 * ref.full_scale_counts,
+        modulation_frequency_hz=20.0e6,
+        count_scale=4.0,
+    )
+
+
+def camera_for(family: str) -> CameraModel:
+    """The camera a family's frames are taken with: ``other_sensor_camera`` for ``other
+    sensor``, the EPC660 (``CameraModel()``) for the others. ``ValueError`` naming an
+    unknown family."""
+    if family not in ALL_FAMILIES:
+        raise ValueError(f"unknown physics family {family!r} (one of {', '.join(ALL_FAMILIES)})")
+    return other_sensor_camera() if family == "other sensor" else CameraModel()
+
+
+@dataclass(frozen=True)
+class DrawnFrame:
+    """Everything one frame of a family is rendered from (``draw_frame``).
+
+    camera : the family's camera (``camera_for``); scene, sensor : its physics (the
+    sensor at the camera's modulation frequency); T_camera_target : the true pose;
+    glints : the frame's glints (family ``glints``), else None.
+    """
+
+    family: str
+    camera: CameraModel
+    scene: TargetScene
+    sensor: SensorModel
+    T_camera_target: RigidTransform
+    glints: Glints | None = None
+
+    def render(self, rng: np.random.Generator) -> RenderedFrame:
+        """The frame (``render_frame``, then ``render_glints`` when it has glints)."""
+        f = render_frame(self.camera, self.scene, self.T_camera_target, self.sensor, rng)
+        if self.glints is None:
+            return f
+        return render_glints(f, self.glints, self.camera, self.sensor, rng)
+
+
+def draw_frame(
+    family: str,
+    range_m: float,
+    rng: np.random.Generator,
+    catalog: Catalog,
+    *,
+    max_attitude_deg: float = 20.0,
+    offset_fraction: float = 0.5,
+    ambient_lux: float | None = None,
+) -> DrawnFrame:
+    """One frame of any family of ``ALL_FAMILIES`` at ``range_m``: ``draw_physics`` (the
+    defaults for ``EXTRA_FAMILIES``), ``draw_pose``, ``draw_background``, then what the
+    extra families draw once the pose is known: ``saturating`` its overexposure
+    (``OVEREXPOSURE``, ``fixed_exposure``), ``glints`` its glints (``draw_glints``).
+    A family of ``FAMILIES`` draws from ``rng`` exactly what those three calls draw."""
+    camera = camera_for(family)
+    base = family if family in FAMILIES else "ideal"
+    scene, sensor = draw_physics(base, rng, catalog, ambient_lux)
+    sensor = sensor_for_camera(sensor, camera)
+    T = draw_pose(range_m, rng, camera, max_attitude_deg, offset_fraction)
+    scene = draw_background(family, scene, rng, camera, T)
+    glints = None
+    if family == "saturating":
+        overexposure = float(rng.uniform(*OVEREXPOSURE))
+        range_mm = float(np.linalg.norm(T.t_mm))
+        sensor = fixed_exposure(sensor, camera, range_mm, overexposure)
+    if family == "glints":
+        glints = draw_glints(rng, camera, scene, T, n=N_GLINTS)
+    return DrawnFrame(family, camera, scene, sensor, T, glints)
+
+
+def fixed_exposure(
+    sensor: SensorModel, camera: CameraModel, distance_mm: float, overexposure: float
+) -> SensorModel:
+    """``sensor`` with its exposure fixed (no auto exposure) so that a reflector facing
+    the camera at ``distance_mm`` reads ``overexposure`` times ``camera``'s full scale:
+    the auto exposure's rule (``SensorModel.exposure_for``) aimed at ``overexposure``
+    instead of ``auto_exposure_fill``. A manual setting, not held to the auto exposure's
+    ``integration_limits_us``: at 8 m on the EPC660 it is 26-66 ms for 2-5x."""
+    if not overexposure > 0:
+        raise ValueError(f"overexposure must be positive, got {overexposure}")
+    aimed = replace(
+        sensor,
+        auto_exposure=True,
+        auto_exposure_fill=overexposure,
+        integration_limits_us=(sensor.integration_limits_us[0], math.inf),
+    )
+    t_us = aimed.exposure_for(distance_mm, full_scale_counts=reference_full_scale(camera))
+    return replace(sensor, auto_exposure=False, integration_time_us=t_us)
 
 
 def draw_physics(
@@ -47,9 +183,12 @@ def draw_physics(
     """(TargetScene, SensorModel) of one frame of ``family`` (module docstring).
     ``ambient_lux``: the ambient light, when the caller sets it (a study's grid axis);
     None keeps the sensor's default, except for ``all``, which draws 1-10 klx.
-    ``ValueError`` naming the family when it is not one of ``FAMILIES``."""
+    ``ValueError`` naming the family when it is not one of ``FAMILIES`` (one of
+    ``EXTRA_FAMILIES``: ``draw_frame`` draws it)."""
+    if family in EXTRA_FAMILIES:
+        raise ValueError(f"physics family {family!r} needs its pose or camera: use draw_frame")
     if family not in FAMILIES:
-        raise ValueError(f"unknown physics family {family!r} (one of {', '.join(FAMILIES)})")
+        raise ValueError(f"unknown physics family {family!r} (one of {', '.join(ALL_FAMILIES)})")
     scene: dict = {"catalog": catalog}
     sensor: dict = {}
     if family in ("grey plate", "all"):

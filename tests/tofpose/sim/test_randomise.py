@@ -11,6 +11,7 @@ from tofpose import CameraModel, paper_target
 from tofpose.core.geometry import rotation_angle_deg
 from tofpose.sim.bench import R_FACING
 from tofpose.sim.randomise import draw_physics, draw_pose
+from tofpose.sim.render import SensorModel
 
 CAT = paper_target()
 
@@ -94,3 +95,144 @@ def test_the_background_family_puts_a_room_around_the_target_others_draw_nothing
     state = rng.bit_generator.state
     assert draw_background("ideal", scene, rng, cam, T) is scene
     assert rng.bit_generator.state == state  # other families' streams are unchanged
+
+
+def test_draw_frame_draws_the_seven_families_exactly_as_the_three_calls_do():
+    """The families of ``FAMILIES`` keep their frames: ``draw_frame`` then ``render``
+    from one stream gives the frame ``draw_physics``, ``draw_pose``,
+    ``draw_background`` and ``render_frame`` give from the same stream, bit for bit."""
+    from tofpose.sim.randomise import FAMILIES, draw_background, draw_frame
+    from tofpose.sim.render import render_frame
+
+    cam = CameraModel()
+    for k, family in enumerate(FAMILIES):
+        a, b = np.random.default_rng([7, k]), np.random.default_rng([7, k])
+        d = draw_frame(family, 4.5, a, CAT, max_attitude_deg=15.0, offset_fraction=0.4)
+        fa = d.render(a)
+        scene, sensor = draw_physics(family, b, CAT)
+        T = draw_pose(4.5, b, cam, 15.0, 0.4)
+        scene = draw_background(family, scene, b, cam, T)
+        fb = render_frame(cam, scene, T, sensor, b)
+        assert d.camera == cam and d.glints is None
+        assert np.array_equal(fa.gray, fb.gray), family
+        assert np.array_equal(fa.distance_mm, fb.distance_mm, equal_nan=True), family
+        assert a.bit_generator.state == b.bit_generator.state
+
+
+def test_the_extra_families_are_drawn_only_whole_and_unknown_ones_are_named():
+    from tofpose.sim.randomise import EXTRA_FAMILIES, camera_for
+
+    rng = np.random.default_rng(4)
+    for family in EXTRA_FAMILIES:
+        with pytest.raises(ValueError, match="draw_frame"):
+            draw_physics(family, rng, CAT)
+    with pytest.raises(ValueError, match="'fog'"):
+        camera_for("fog")
+
+
+def test_a_fixed_exposure_brings_a_facing_reflector_to_its_overexposure():
+    """``fixed_exposure(..., 3000 mm, 3.0)``: a reflector facing the camera at 3 m
+    returns 3x full scale (noiseless amplitude of the pixels inside a disc, scaled to
+    each pixel's distance and incidence), on the EPC660 and on a camera of count scale
+    4, whose auto exposure aims at the same reference level."""
+    from tests.conftest import facing_pose
+    from tofpose.sim.randomise import fixed_exposure, other_sensor_camera
+    from tofpose.sim.render import render_frame
+    from tofpose.sim.scene import FIRST_DISC, TargetScene
+
+    T = facing_pose(3000.0)
+    for cam in (CameraModel(), other_sensor_camera()):
+        base = SensorModel(noise=False, supersampling=1)
+        sensor = fixed_exposure(base, cam, 3000.0, 3.0)
+        assert not sensor.auto_exposure and sensor.integration_time_us > 4000.0
+        f = render_frame(cam, TargetScene(CAT), T, sensor)
+        disc = f.surface_id >= FIRST_DISC
+        e = cam.pixel_bearings()[disc]
+        cos_inc = -(e @ T.R[:, 2])
+        d = f.true_distance_mm[disc]
+        expected = 3.0 * 4095.0 * (3000.0 / d) ** 2 * cos_inc**4  # cos^3 fall-off x cos
+        np.testing.assert_allclose(f.amplitude[disc], expected, rtol=1e-9)
+
+
+def test_saturating_frames_have_clipped_cores_without_distance_and_measured_rims():
+    """Each frame of ``saturating``: an overexposure of 2-5x (read back from its
+    exposure); every marker in view has its pixels' centres clipped at full scale with
+    no distance (NaN), as a ToF camera reports a saturated pixel; every clipped pixel has
+    no distance; and each marker keeps measured rim pixels (a distance, below full
+    scale) around its core."""
+    import cv2
+
+    from tofpose.sim.randomise import draw_frame
+    from tofpose.sim.scene import FIRST_DISC
+
+    rng = np.random.default_rng(6)
+    for range_m in (3.0, 4.5, 6.0, 8.0):
+        d = draw_frame("saturating", range_m, rng, CAT)
+        f = d.render(rng)
+        s, r_mm = d.sensor, float(np.linalg.norm(d.T_camera_target.t_mm))
+        over = s.integration_time_us * s.illumination_gain * s.retro_gain / r_mm**2 / 4095.0
+        assert not s.auto_exposure and 2.0 <= over <= 5.0
+        clipped = f.gray == 4095
+        assert np.isnan(f.distance_mm[clipped]).all()
+        for k in range(len(CAT)):
+            core = f.surface_id == FIRST_DISC + k
+            if not core.any():
+                continue
+            assert clipped[core].all() and np.isnan(f.distance_mm[core]).all()
+            ring = cv2.dilate(core.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+            rim = ring & ~core & np.isfinite(f.distance_mm) & (f.gray < 4095)
+            assert rim.any(), (range_m, k)
+
+
+def test_glints_frames_carry_15_glints_at_the_targets_range_that_light_their_pixels():
+    from dataclasses import replace
+
+    from tofpose.sim.randomise import draw_frame
+    from tofpose.sim.render import render_frame
+
+    rng = np.random.default_rng(8)
+    for range_m in (3.0, 8.0):
+        d = draw_frame("glints", range_m, rng, CAT)
+        g = d.glints
+        assert g is not None and len(g) == 15
+        assert np.all(np.abs(g.range_mm - np.linalg.norm(d.T_camera_target.t_mm)) <= 250.0)
+        quiet = replace(d, sensor=replace(d.sensor, noise=False))
+        f = quiet.render(rng)
+        plain = render_frame(d.camera, d.scene, d.T_camera_target, quiet.sensor)
+        u, v = np.rint(d.camera.project(g.positions_mm)).astype(int).T
+        # at least the share of a sigma-0.5 spot half a pixel off each axis: 0.36 of its peak
+        lit = np.minimum(plain.gray[v, u] + 0.35 * g.peak_counts, 4095)
+        assert np.all(f.gray[v, u] >= lit)
+
+
+def test_the_other_sensor_is_640_by_480_at_20_mhz_with_4x_the_counts():
+    """``other sensor``: its frames are 640 x 480 through a camera with the EPC660's
+    field of view; the same return reads 4x the counts, and its distance noise follows
+    its 20 MHz modulation: the markers' pixels scatter 6/20 as much as on the EPC660."""
+    from tests.conftest import facing_pose
+    from tofpose.sim.randomise import draw_frame, other_sensor_camera
+    from tofpose.sim.render import render_frame, sensor_for_camera
+    from tofpose.sim.scene import FIRST_DISC, TargetScene
+
+    rng = np.random.default_rng(9)
+    d = draw_frame("other sensor", 6.0, rng, CAT)
+    assert d.camera.shape == (480, 640) and d.camera.fx == 650.0
+    assert d.sensor.modulation_frequency_hz == 20e6 == d.camera.modulation_frequency_hz
+    assert d.render(rng).gray.shape == (480, 640)
+    ref = CameraModel()  # the same field of view: the same half width over focal length
+    assert (d.camera.width / d.camera.fx, d.camera.height / d.camera.fy) == (
+        ref.width / ref.fx,
+        ref.height / ref.fy,
+    )
+    assert (d.camera.cx, d.camera.cy) == ((d.camera.width - 1) / 2, (d.camera.height - 1) / 2)
+
+    T = facing_pose(3000.0)
+    spread, peak = [], []
+    for cam in (CameraModel(), other_sensor_camera()):
+        sensor = sensor_for_camera(SensorModel(supersampling=1), cam)
+        f = render_frame(cam, TargetScene(CAT), T, sensor, np.random.default_rng(1))
+        core = f.surface_id == FIRST_DISC + 5  # an 80 mm marker
+        spread.append(np.std(f.distance_mm[core] - f.true_distance_mm[core]))
+        peak.append(np.median(f.gray[core]))
+    assert peak[1] / peak[0] == pytest.approx(4.0, rel=0.02)
+    assert spread[1] / spread[0] == pytest.approx(6.0 / 20.0, rel=0.25)
