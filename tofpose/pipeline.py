@@ -837,8 +837,32 @@ class PosePipeline:
             f"; {len(wrong_size)} bright blob(s) in view do not have a size the catalog "
             f"{self.catalog.name!r} predicts at their range (e.g. {w.diameter_px:.0f} px "
             f"across{where}, expected {w.expected_min_px:.1f}-{w.expected_max_px:.1f} px): "
-            "is the right catalog active?"
+            + (self._wrap_hint(wrong_size) or "is the right catalog active?")
         )
+
+    def _wrap_hint(self, wrong_size) -> str:
+        """What to say when most of the blobs ``wrong_size`` (``WrongSizeBlob``), too small
+        for the catalog at their measured range, have its size at that range plus one to
+        three unambiguous ranges: the target is beyond the range the camera's distances
+        wrap at, and reads near. '' otherwise."""
+        wrap_mm = self.camera.unambiguous_range_mm
+        for n in (1, 2, 3):
+            fits = [
+                b.expected_min_px <= b.diameter_px * (1.0 + n * wrap_mm / b.distance_mm)
+                and b.diameter_px * (1.0 + n * wrap_mm / b.distance_mm) <= b.expected_max_px
+                for b in wrong_size
+                if np.isfinite(b.distance_mm) and b.distance_mm > 0
+            ]
+            if fits and 2 * sum(fits) >= len(fits):
+                ahead = min(b.distance_mm for b in wrong_size if np.isfinite(b.distance_mm))
+                return (
+                    f"they have the catalog's sizes at {n} unambiguous range(s) further "
+                    f"({(ahead + n * wrap_mm) / 1000:.1f} m or more): the target is likely "
+                    f"beyond the camera's unambiguous range ({wrap_mm / 1000:.2f} m at "
+                    f"{self.camera.modulation_frequency_hz / 1e6:g} MHz), where distances "
+                    "wrap; bring it nearer or use a lower modulation frequency"
+                )
+        return ""
 
     def _saturation_hint(self, gray: np.ndarray, blobs: list[Blob]) -> str:
         """A clause counting the candidate ``blobs`` with a pixel at the camera's full

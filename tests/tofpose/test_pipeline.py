@@ -444,6 +444,7 @@ def test_a_catalog_the_camera_cannot_see_says_so(diameter_mm):
     r = PosePipeline(CameraModel(), tiny).process(frame.gray, frame.distance_mm, 0.0)
     assert not r.ok
     assert "do not have a size the catalog 'tiny' predicts" in r.reason, r.reason
+    assert "is the right catalog active?" in r.reason and "unambiguous" not in r.reason
     n = int(r.reason.split("; ")[1].split()[0])
     assert n >= 4  # the 80 mm markers at least; each one is refused for its size
 
@@ -782,3 +783,23 @@ def test_the_fallback_triplet_search_stops_by_count_not_by_the_clock(monkeypatch
     assert np.array_equal(quiet.pairs, loaded.pairs)
     truth = {(6 + k, k) for k in range(len(cat))}
     assert set(map(tuple, loaded.pairs.tolist())) == truth
+
+
+def test_a_target_beyond_the_unambiguous_range_is_refused_with_the_wrap_named():
+    """At 8 m a 20 MHz camera (7.49 m unambiguous range) reads the target ~0.5 m away,
+    where its blobs are far too small for the catalog: the refusal says the distances
+    wrap and what to do, instead of suspecting the catalog."""
+    from tofpose.config import config_for_camera
+    from tofpose.sim.randomise import draw_frame
+
+    cat = paper_target()
+    drawn = draw_frame("other sensor", 8.0, np.random.default_rng(0), cat)
+    f = drawn.render(np.random.default_rng(1))
+    cam = drawn.camera
+    config = config_for_camera(
+        PipelineConfig(), width=cam.width, height=cam.height, count_scale=4.0
+    )
+    r = PosePipeline(cam, cat, config).process(f.gray, f.distance_mm)
+    assert not r.ok
+    assert "beyond the camera's unambiguous range (7.49 m at 20 MHz)" in r.reason
+    assert "right catalog" not in r.reason
