@@ -107,7 +107,7 @@ def test_blob_sigmas_equal_the_numpy_model(pooled):
     cen = rng.uniform(5, 50, (len(sizes), 2))
     split = np.arange(len(sizes)) % 2 == 1
     constants = u.kernel_constants(u.SigmaFloors(0.03, 1.0))
-    got = blob_sigmas(flat, starts, cen, gray, dist, 50.0, split, constants)
+    got = blob_sigmas(flat, starts, cen, gray, dist, 50.0, split, np.inf, constants)
     blobs = [flat[starts[j] : starts[j + 1]] for j in range(len(sizes))]
     want_px = [
         reference.centroid_sigma_px(gray, b, c, 50.0, bool(sp), constants)
@@ -117,6 +117,26 @@ def test_blob_sigmas_equal_the_numpy_model(pooled):
     want_mm = reference.range_sigmas_mm(gray, dist, blobs, 50.0, constants)
     np.testing.assert_allclose(got[1], want_mm, rtol=1e-6)
     assert (got[1] == u.UNCALIBRATED_RANGE_SIGMA_MM).any() != pooled
+    # a full scale below some blobs' brightest pixel: those get the clipped contour's term
+    full_scale = 880.0
+    clipped = np.array([(gray.reshape(-1)[b] >= full_scale).any() for b in blobs])
+    assert clipped.any() and not clipped.all()
+    sat = blob_sigmas(flat, starts, cen, gray, dist, 50.0, split, full_scale, constants)
+    want_sat = [
+        reference.centroid_sigma_px(gray, b, c, 50.0, bool(sp), constants, full_scale)
+        for b, c, sp in zip(blobs, cen, split, strict=True)
+    ]
+    np.testing.assert_allclose(sat[0], want_sat, rtol=1e-12)
+    # a blob all clipped is a binary image (q = 1): 1 / (12 pi r) per axis
+    binary = blob_sigmas(flat, starts, cen, gray, dist, 50.0, split, 0.0, constants)
+    n = np.diff(starts)
+    term = np.sqrt(1.0 / (12.0 * np.pi * np.sqrt(n / np.pi)))
+    np.testing.assert_allclose(binary[0] ** 2 - got[0] ** 2, term**2, rtol=1e-9)
+    # a partly clipped blob gets at most that (nothing when its graded pixels outnumber
+    # a disc's rim: these blobs are scattered pixels), an unclipped one nothing
+    assert (sat[0][clipped] >= got[0][clipped]).all()
+    assert (sat[0][clipped] <= binary[0][clipped]).all()
+    np.testing.assert_array_equal(sat[0][~clipped], got[0][~clipped])
 
 
 def test_point_residuals_are_the_distances_from_the_fitted_points():
@@ -136,3 +156,25 @@ def test_point_residuals_are_the_distances_from_the_fitted_points():
     want, want_rms = reference_point_residuals_mm(x, y, R, t)
     np.testing.assert_allclose(res, want, rtol=1e-12)
     assert rms == pytest.approx(want_rms, rel=1e-12)
+
+
+def test_a_clipped_disc_gets_the_contour_term_of_its_clipped_share():
+    """A disc of radius 5 px, 3x over full scale at its core (coverage-weighted rim):
+    the rim pixels covered more than 1/3 are clipped. clipped_contour_sigma_px sees the
+    rim's clipped share q near 1 - 1/3 and gives v(q) / (pi r), between the unclipped
+    disc's 0 and a binary disc's 1 / (12 pi r)."""
+    from tofpose.stages.extraction.kernels.sigmas import clipped_contour_sigma_px
+
+    sub = 16
+    yy, xx = np.mgrid[0 : 20 * sub, 0 : 20 * sub]
+    inside = np.hypot((xx + 0.5) / sub - 10.2, (yy + 0.5) / sub - 9.7) <= 5.0
+    coverage = inside.reshape(20, sub, 20, sub).mean(axis=(1, 3))
+    gray = np.minimum(3.0 * coverage, 1.0)
+    blob = coverage > 0.05
+    n, n_clipped = int(blob.sum()), int((gray[blob] >= 1.0).sum())
+    r = np.sqrt(n / np.pi)
+    got = clipped_contour_sigma_px(n, n_clipped) ** 2 * np.pi * r
+    q = 1.0 - 1.0 / 3.0
+    assert got == pytest.approx(q**3 / 3 - q**4 / 4, rel=0.35)
+    assert 0.0 < got < 1.0 / 12.0
+    assert clipped_contour_sigma_px(n, 0) == 0.0

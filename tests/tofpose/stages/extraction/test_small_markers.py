@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from bench._foreign_metrics import marker_errors, true_images
-from bench.physics import draw_pose
 from tofpose import CameraModel, PosePipeline, paper_target
 from tofpose.config import ExtractionConfig
+from tofpose.sim.randomise import draw_pose
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import TargetScene
 from tofpose.stages.extraction.extraction import check_frame, find_candidate_blobs, frame_levels

@@ -33,16 +33,34 @@ def shot_noise_centroid_px(gray, pixels, centroid_uv, background) -> float:
     return float(np.sqrt((g * r2).sum()) / amp.sum())
 
 
-def centroid_sigma_px(gray, pixels, centroid_uv, background, split: bool, constants) -> float:
+def centroid_sigma_px(
+    gray, pixels, centroid_uv, background, split: bool, constants, full_scale=np.inf
+) -> float:
     """A blob's centroid sigma per image axis, px: shot noise, the floor, the pixel
-    grid's sampling error (single_pixel_sigma_px n^-1.5) and, for a half cut out of a
-    merged pair, the light misassigned at the cut (split_centroid_px), in quadrature."""
+    grid's sampling error (single_pixel_sigma_px n^-1.5), for a half cut out of a
+    merged pair the light misassigned at the cut (split_centroid_px) and, for a blob
+    with pixels at or above ``full_scale``, the clipped contour's error
+    (``clipped_contour_sigma_px``), in quadrature."""
     n = len(pixels)
     sampling = constants.single_pixel_sigma_px * max(float(n), 1.0) ** -1.5
     neighbour = constants.split_centroid_px if split else 0.0
     shot = shot_noise_centroid_px(gray, pixels, centroid_uv, background)
     floor = constants.centroid_sigma_floor_px
-    return float(np.sqrt(shot**2 + floor**2 + sampling**2 + neighbour**2))
+    g = np.asarray(gray).reshape(-1)[np.asarray(pixels)]
+    clipped = clipped_contour_sigma_px(n, int(np.count_nonzero(g >= full_scale)))
+    return float(np.sqrt(shot**2 + floor**2 + sampling**2 + neighbour**2 + clipped**2))
+
+
+def clipped_contour_sigma_px(n_pixels: int, n_clipped: int) -> float:
+    """Centroid sigma per axis, px, of a blob of ``n_pixels`` with ``n_clipped`` at full
+    scale: sqrt(v(q) / (pi r)), v(q) = q^3 / 3 - q^4 / 4, q the rim's clipped share,
+    r = sqrt(n / pi); 0 without a clipped pixel (``kernels.sigmas.clipped_contour_sigma_px``)."""
+    if n_clipped <= 0:
+        return 0.0
+    n = max(float(n_pixels), 1.0)
+    rim = 2.0 * np.sqrt(np.pi * n)
+    q = min(max((rim - (n - n_clipped)) / rim, 0.0), 1.0)
+    return float(np.sqrt((q**3 / 3.0 - q**4 / 4.0) / (np.pi * np.sqrt(n / np.pi))))
 
 
 def range_spread(gray, distance, pixels, background) -> tuple[float, float, int]:

@@ -195,7 +195,15 @@ def measure_and_back_project(frame, blobs, history, camera, correction, sigmas):
         for a in range(n_ranged):  # the same shift of every distance in the mixing sums
             shift_mixing(r_mix[a], r_rho[a] - raw[a])
     sp, sr = blob_sigmas(
-        r_flat, r_starts, r_uv, mean_gray, med_dist, frame.background, r_split, sigmas
+        r_flat,
+        r_starts,
+        r_uv,
+        mean_gray,
+        med_dist,
+        frame.background,
+        r_split,
+        camera.full_scale_counts,
+        sigmas,
     )
     e = bearings(r_uv, fx, camera.fy, camera.cx, camera.cy, camera.dist)
     y = np.empty((n_ranged, 3))

@@ -220,7 +220,15 @@ def measure_and_back_project(frame, blobs, history, camera, correction, sigmas):
             mixed_pixels.shift_mixing(r_mix[a], r_rho[a] - raw)
     sp = np.array(
         [
-            centroid_sigma_px(mean_gray, p, r_uv[a], background, bool(blobs.split[j]), sigmas)
+            centroid_sigma_px(
+                mean_gray,
+                p,
+                r_uv[a],
+                background,
+                bool(blobs.split[j]),
+                sigmas,
+                camera.full_scale_counts,
+            )
             for a, (j, p) in enumerate(zip(ranged, r_pixels, strict=True))
         ]
     )
