@@ -268,11 +268,16 @@ class PipelineConfig(FitSettingsFields):
     verify_pose : refuse a pose that makes the target face away from the camera (beyond
         ``max_view_angle_deg``) or that predicts a well-resolved reflector where the
         frame has no bright pixel (catches congruent-triangle mismatches with 3 markers).
-    reject_outliers, outlier_sigma : after the fit, drop the matched reflector whose
-        whitened residual (lateral and range, in predicted sigmas) is largest while it
-        exceeds ``outlier_sigma`` and more than ``matching.min_matches`` remain, refitting
-        each time (ours: a spurious blob or a merged pair next to a marker's position
-        passes the matching tolerance but bends the pose by degrees).
+    reject_outliers, outlier_sigma : after the fit, drop a matched reflector while one
+        is more than ``outlier_sigma`` off and more than ``matching.min_matches`` remain,
+        refitting each time (ours: a spurious blob or a merged pair next to a marker's
+        position passes the matching tolerance but bends the pose by degrees). Below 5
+        reflectors the largest whitened residual (lateral and range, in predicted
+        sigmas) is tested; from 5, the reflector the fit without it predicts worst, in
+        sigmas of that prediction (``kernels.pose.deleted_residual_norm``; never more
+        than its whitened residual there, 0.77-0.92 of it on the paper target's eight
+        markers, so a bent marker must be 10-30 % further off than before 2026-12 to go;
+        6 stays far beyond the chi(3) tail of a good one: 7e-8 of them exceed it).
     adapt_range_sigma : before the outlier test, estimate from the frame's own residuals
         the range and centroid errors its noise model lacks (``pose.systematic_sigmas``:
         the systematic errors of a real, uncalibrated ToF camera; the centroid errors of
@@ -314,9 +319,10 @@ class PipelineConfig(FitSettingsFields):
         the range (2 mm at 1 m) where the errors were a tenth of that.
     common_centroid_bias_px : sigma of a centroid error common to a frame's markers, for
         markers of at most ``stages.pose.solve.RIM_RADIUS_PX`` (2 px) image radius,
-        whose pixels are mostly rim pixels (0.05 px: the largest common-mode error of
-        the matched centroids measured over the physics robustness study's families,
-        ``bench/physics.py``'s scale column, 3-8 m). Over the pattern's rms radius in
+        whose pixels are mostly rim pixels (0.05 px: the common-mode error of the
+        matched centroids measured over the physics robustness study's families,
+        ``bench/physics.py``'s scale column, 3-8 m: 0.02-0.05 px in most cells; the
+        'all' family at 8 m reads up to 0.066 px in some runs). Over the pattern's rms radius in
         the image it is a scale error, estimated with the range offset and reported in
         the covariance (``kernels.pose.class_scale_covariance``'s common term). Larger
         discs have a smaller share of rim pixels and a smaller common error: the sigma

@@ -115,7 +115,8 @@ NO_DIAGNOSTICS = FrameDiagnostics()
 #: machine's load) ...
 FALLBACK_CONFIDENCE = 0.999
 #: ... or after this many observed triplets, whichever comes first (every triplet of 50
-#: blobs; 23 blobs: 1771 triplets, ~5 ms). Until 2026-12 the cap was 100 ms of the
+#: blobs; at the default ``max_candidates`` of 32 there are at most 4960, ~5 ms warm, so
+#: the cap binds only where more candidates are allowed). Until 2026-12 the cap was 100 ms of the
 #: clock: a first call's warm-up on a loaded machine ran past it and the frame had no
 #: pose, where a quiet machine found one
 FALLBACK_MAX_TRIPLETS = 20_000
@@ -354,6 +355,7 @@ class PosePipeline:
                         tr.background_counts,
                         tr.dark_counts,
                         tr.frames_since_acquisition,
+                        tr.psf_sigma_px,
                     ],
                     float,
                 ).tobytes()
@@ -891,6 +893,8 @@ class PosePipeline:
         same answer on any machine), else the time budget ``budget_ms`` (defaults:
         ``ransac_time_budget_ms``, ``ransac_confidence``); ``iterations`` of the result =
         observed triplets tried."""
+        if max_triplets is not None and budget_ms is not None:
+            raise ValueError("_match_ransac: give max_triplets or budget_ms, not both")
         cfg = self.config
         stats: dict = {}
         budget = cfg.ransac_time_budget_ms if budget_ms is None else budget_ms

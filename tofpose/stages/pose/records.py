@@ -78,7 +78,8 @@ class RangeOffsetPrior(NamedTuple):
     sigma_mm : prior sigma of the offset (0: not estimated); focal_length_sigma_rel :
     relative sigma of the focal length's calibration (the image scale;
     ``PipelineConfig.focal_length_sigma_rel``); centroid_bias_rad : a systematic centroid
-    error common to the frame's markers (rad: ``common_centroid_bias_px`` over fx), which
+    error common to the frame's markers (rad: ``common_centroid_bias_px`` times
+    ``solve.centroid_bias_factor`` over fx), which
     scales the pattern by ``centroid_bias_rad / r_rms`` (r_rms its rms angular radius)."""
 
     sigma_mm: float
@@ -95,7 +96,9 @@ class CovarianceTerms(NamedTuple):
     (``concluding_covariances``), with their sigmas: ``bias_sigma_mm`` of the range
     offset common to the reflectors (0: none); ``by_size`` whether the image scale's
     errors enter, one common of relative sigma ``common_scale_sigma`` (the focal
-    length's) and one per size class from ``bias_rad`` (``group`` (m,) int64 each
+    length's and the markers' common centroid error over the pattern's rms radius,
+    ``kernels.pose.pattern_scale_sigma``) and one per size class from ``bias_rad``
+    (the per-class centroid error, rad; ``group`` (m,) int64 each
     reflector's class in [0, ``n_groups``)); ``leave_one_out`` whether the jackknife
     spread is computed."""
 

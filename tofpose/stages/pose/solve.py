@@ -88,12 +88,15 @@ def centroid_bias_factor(
     (m,) at ``range_mm`` (m,) through a lens of PSF sigma ``psf_sigma_px``: min(1, rim /
     r), rim = ``RIM_RADIUS_PX`` + ``RIM_BLUR_SIGMAS`` psf_sigma_px, r the median of their
     image radii fx d / (2 range) px; 1 without markers or with a non-finite radius."""
-    d = np.asarray(diameter_mm, float)
-    rho = np.asarray(range_mm, float)
-    if d.size == 0:
+    radii = sorted(
+        (fx * np.asarray(diameter_mm, float) / (2.0 * np.asarray(range_mm, float))).tolist()
+    )
+    m = len(radii)
+    if m == 0:
         return 1.0
-    radius_px = float(np.median(fx * d / (2.0 * rho)))
-    rim_px = RIM_RADIUS_PX + RIM_BLUR_SIGMAS * max(float(psf_sigma_px), 0.0)
+    radius_px = radii[m // 2] if m % 2 else 0.5 * (radii[m // 2 - 1] + radii[m // 2])
+    psf = float(psf_sigma_px) if math.isfinite(psf_sigma_px) and psf_sigma_px > 0 else 0.0
+    rim_px = RIM_RADIUS_PX + RIM_BLUR_SIGMAS * psf
     if not math.isfinite(radius_px) or radius_px <= rim_px:
         return 1.0
     return rim_px / radius_px
@@ -430,8 +433,10 @@ class PoseSolver:
         """The fitted pose of ``obs`` (the reflectors kept, the common range offset taken
         out: ``matched_observations``) from ``result`` (the fit with its outlier step;
         its ``fit``'s sigmas are the ones the fit used, the frame's excess components
-        included): verified against the frame (``active`` : the frame and its I_t; it is
-        only read when few reflectors are matched, ``dark_check_max_matches``), refused
+        included): verified against the frame (``active`` : the frame, its I_t and its lens
+        blur; its pixels are read by the dark check when few reflectors are matched,
+        ``dark_check_max_matches``, and the photometric check; its blur sets the
+        centroid-error priors' size factor, ``centroid_bias_factor``), refused
         when its residuals stay inconsistent with those sigmas (chi^2 beyond
         ``consistency_p``), with the covariance of the fit (6, 6; the pipeline scales it
         by the a-posteriori variance factor) and of the common range bias the data cannot

@@ -171,6 +171,11 @@ def test_the_state_digest_says_when_two_pipelines_will_agree(camera, catalog):
     assert a.state_digest() == b.state_digest()
     ra, rb = (p.process(frames[4].gray, frames[4].distance_mm) for p in (a, b))
     np.testing.assert_array_equal(ra.t_mm, rb.t_mm)  # ... and the same next result
+    # the lens blur the tracker keeps (it sets the next frames' centroid-error priors)
+    # is part of the state
+    before = b.state_digest()
+    b._track = replace(b._track, psf_sigma_px=b._track.psf_sigma_px + 0.5)
+    assert b.state_digest() != before
 
 
 def test_history_kept_between_frames_is_the_history_built_afresh():

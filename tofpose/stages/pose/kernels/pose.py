@@ -476,7 +476,7 @@ def deleted_residual_norm(j, refl, fit):
     predicts it, in sigmas of that prediction (ours): sqrt(r^T S^-1 r), r (3,) its
     whitened residuals at the pose fitted without it, S = I + J_j C J_j^T (3, 3) with
     J_j (3, 6) their Jacobian there and C (6, 6) that fit's covariance (its J^T J
-    inverse): the externally studentised residual. The pose of the others is uncertain
+    inverse): the deleted residual in sigmas of its prediction. The pose of the others is uncertain
     most where j alone fixes it (the only marker on one side of the pattern), and a
     good marker there is predicted badly by them; S counts that. 0 when the others
     cannot fix the pose (C singular): nothing tells j is wrong."""
@@ -680,7 +680,8 @@ def class_scale_covariance(refl, R, t, group, n_groups, bias_rad, common_scale_s
     """(6, 6) pose covariance from image-scale errors of the reflectors ``refl`` (a
     ``records.Reflectors``; bearings scaled about the pattern's mean bearing by 1 + kappa,
     as in ``common_range_offset``): one common to every reflector, of relative sigma
-    ``common_scale_sigma`` (the focal length's calibration), and one per group of
+    ``common_scale_sigma`` (the focal length's calibration and the markers' common
+    centroid error, ``pattern_scale_sigma``), and one per group of
     reflectors (``group`` (m,) int in [0, n_groups): the markers of one diameter),
     independent between groups, from a centroid error ``bias_rad`` common to a group's
     markers: sigma ``bias_rad / r_g`` (r_g the group's rms angle from the mean bearing).

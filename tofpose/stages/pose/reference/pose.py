@@ -328,7 +328,7 @@ def worst_outlier(refl, norms, fit) -> int:
 def deleted_residual_norm(j, refl, fit) -> float:
     """sqrt(r^T S^-1 r), ours: r (3,) reflector j's whitened residuals at the pose fitted
     without it, S = I + J_j C J_j^T (3, 3), J_j (3, 6) their Jacobian there and C (6, 6)
-    that fit's covariance (the externally studentised residual: the others predict a
+    that fit's covariance (the deleted residual in sigmas of its prediction: the others predict a
     marker worst where it alone fixes the pose, and S counts that); 0 when C is
     singular."""
     keep = np.arange(len(refl.x)) != j
