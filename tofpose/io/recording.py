@@ -55,8 +55,9 @@ radial distances and ``Recording.camera`` says ``distance_kind = "radial"``
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import h5py
@@ -65,6 +66,7 @@ import numpy as np
 from tofpose.core.camera import SCALAR_FIELDS, CameraModel
 from tofpose.core.catalog import Catalog
 from tofpose.core.depth import radial_from_z
+from tofpose.io.read_ahead import ReadAhead, cores_available
 
 FORMAT = "tofpose-recording"
 VERSION = 1
@@ -78,6 +80,10 @@ STAMP_DATASETS = ("frames/capture_ns", "frames/arrival_ns", "frames/pose_ready_n
 """The per-frame host stamps (module docstring), in the order of ``RecordingStamps``."""
 STAMP_ANCHOR_ATTRS = ("monotonic_anchor_ns", "wall_anchor_ns")
 """``/frames``' attributes: one moment on the host's monotonic clock and in UTC ns."""
+IMAGE_DATASETS = ("frames/gray", "frames/distance_mm")
+"""The per-frame images, in the order ``Recording.block`` returns them."""
+BLOCK_MIN_FRAMES = 32
+"""``Recording.blocks`` reads at least this many frames at a time."""
 
 
 class RecordingError(ValueError):
@@ -89,6 +95,12 @@ class RecordingWriter:
 
     Frames are written in chunks of one frame (resizable datasets), so a recording
     interrupted part-way still holds every frame written before the interruption.
+    ``compression="gzip"`` (the default) deflates each chunk at level 1 after HDF5's
+    byte shuffle: both filters are built into every HDF5 library, so any HDF5 tool
+    reads the file. On the simulator's range sweep the shuffle made the images 16 %
+    smaller and reading them about a third faster than deflate alone (on one core,
+    2.6 -> 1.7 ms a frame). ``compression=None`` stores the images uncompressed (about
+    twice the size; reading them costs next to nothing).
     The distance images are stored as given, in ``camera.distance_kind`` (radial, or
     the z depth of a z-depth device: the reader converts those to radial).
     ``with_truth``: store ``/truth`` (the rendered pose); ``with_reference``: store
@@ -123,7 +135,9 @@ class RecordingWriter:
             f.create_group("catalog").attrs["json"] = catalog.to_json()
         h, w = camera.height, camera.width
         fr = f.create_group("frames")
-        opts = {"compression": compression, "compression_opts": 1} if compression == "gzip" else {}
+        opts: dict = {}
+        if compression == "gzip":
+            opts = {"compression": "gzip", "compression_opts": 1, "shuffle": True}
         self._gray = fr.create_dataset(
             "gray", (0, h, w), np.uint16, maxshape=(None, h, w), chunks=(1, h, w), **opts
         )
@@ -334,6 +348,7 @@ class Recording:
     _stored_camera: CameraModel | None = None
     wall_time_ns: np.ndarray | None = None
     stamps: RecordingStamps | None = None
+    _read_aheads: weakref.WeakSet = field(default_factory=weakref.WeakSet, repr=False)
 
     @property
     def lab_truth_R(self) -> np.ndarray | None:
@@ -375,30 +390,82 @@ class Recording:
 
     def block(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Frames [start, stop) in one read: gray (n, H, W) uint16, distance (n, H, W)
-        float32, time_s (n,)."""
+        float32, time_s (n,). ``RecordingError`` naming the first frame of them that
+        cannot be read."""
         if not 0 <= start <= stop <= self.n_frames:
             raise IndexError(f"frames {start}..{stop} out of range 0..{self.n_frames}")
         try:
             g = self._file["frames/gray"][start:stop]
             d = self._file["frames/distance_mm"][start:stop]
         except (OSError, KeyError) as exc:
-            raise RecordingError(
-                f"{self.path}: frames {start}..{stop - 1} cannot be read ({exc})"
-            ) from exc
+            i = self._first_unreadable(start, stop)
+            raise RecordingError(f"{self.path}: frame {i} cannot be read ({exc})") from exc
         return g, self._radial(d), np.asarray(self.time_s[start:stop], float)
 
-    def blocks(self, start: int = 0, stop: int | None = None) -> Iterator[tuple[int, tuple]]:
-        """(first frame, ``block``) over [start, stop) in reads aligned to the file's
-        chunks (``frames_per_chunk``, at least 32 frames a read)."""
+    def _first_unreadable(self, start: int, stop: int) -> int:
+        """The first of frames [start, stop) that cannot be read on its own (``start``
+        when each can): the frame a failed block read names."""
+        for i in range(start, stop):
+            try:
+                for name in IMAGE_DATASETS:
+                    self._file[name][i]
+            except (OSError, KeyError):
+                return i
+        return start
+
+    def block_spans(self, start: int = 0, stop: int | None = None) -> list[tuple[int, int]]:
+        """The [a, b) spans ``blocks`` reads over [start, stop): aligned to the file's
+        chunks (``frames_per_chunk``), at least ``BLOCK_MIN_FRAMES`` frames each."""
         stop = self.n_frames if stop is None else stop
-        step = self.frames_per_chunk * max(1, -(-32 // self.frames_per_chunk))
-        a = start
+        per_chunk = self.frames_per_chunk
+        step = per_chunk * max(1, -(-BLOCK_MIN_FRAMES // per_chunk))
+        spans, a = [], start
         while a < stop:
             b = min(stop, (a // step + 1) * step)
-            yield a, self.block(a, b)
+            spans.append((a, b))
             a = b
+        return spans
+
+    def blocks(
+        self, start: int = 0, stop: int | None = None, *, read_ahead: bool | None = None
+    ) -> Iterator[tuple[int, tuple[np.ndarray, np.ndarray, np.ndarray]]]:
+        """(first frame, ``block``) over [start, stop) in reads aligned to the file's
+        chunks (``block_spans``).
+
+        ``read_ahead``: read the next block in a reader thread while the caller works on
+        this one (``tofpose.io.read_ahead``: the caller should make no h5py call of its
+        own meanwhile, or it waits for the read); None (the default): when there is more
+        than one block and this process may use more than one core (on one core the
+        thread has nothing to overlap). Stopping early, or closing the recording, stops
+        the thread.
+        """
+        spans = self.block_spans(start, stop)
+        if read_ahead is None:
+            read_ahead = len(spans) > 1 and cores_available() > 1
+        if not read_ahead:
+            for a, b in spans:
+                yield a, self.block(a, b)
+            return
+        reader = ReadAhead(self.block, spans)
+        self._read_aheads.add(reader)
+        with reader:
+            done = 0
+            for block in reader:
+                yield spans[done][0], block
+                done += 1
+        if done < len(spans):  # the reader was stopped by ``close``
+            raise RecordingError(f"{self.path}: closed before frame {spans[done][0]} was read")
+
+    @property
+    def reading_ahead(self) -> bool:
+        """Whether a reader thread of ``blocks`` is there now."""
+        return any(reader.running for reader in list(self._read_aheads))
 
     def close(self) -> None:
+        """Stop any reader thread of ``blocks`` (after its read in flight), then close
+        the file."""
+        for reader in list(self._read_aheads):
+            reader.close()
         if self._file.id.valid:
             self._file.close()
 

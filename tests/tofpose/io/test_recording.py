@@ -1,3 +1,4 @@
+import threading
 from dataclasses import replace
 
 import h5py
@@ -6,6 +7,7 @@ import pytest
 
 from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import paper_target
+from tofpose.io.read_ahead import THREAD_NAME
 from tofpose.io.recording import RecordingError, RecordingWriter, open_recording
 
 
@@ -36,6 +38,33 @@ def test_round_trip(tmp_path):
             np.testing.assert_array_equal(d, frames[i][1])  # NaN preserved
             assert t == pytest.approx(0.1 * i)
         np.testing.assert_allclose(rec.truth_t_mm[:, 2], [1000, 1001, 1002])
+
+
+def _filters(dset: h5py.Dataset) -> list[int]:
+    """The HDF5 filter ids of ``dset``'s pipeline, in the order they run on writing."""
+    plist = dset.id.get_create_plist()
+    return [plist.get_filter(k)[0] for k in range(plist.get_nfilters())]
+
+
+def test_images_are_stored_shuffled_and_deflated_with_filters_every_hdf5_library_has(tmp_path):
+    """Byte shuffle then deflate level 1 (both built into HDF5: no plugin needed to read
+    the file), one frame a chunk; a plain h5py read gives the frames back bit for bit,
+    NaN included. ``compression=None`` stores them without filters."""
+    p = tmp_path / "r.h5"
+    frames = _write(p, n=3)
+    with h5py.File(p) as f:
+        for name in ("frames/gray", "frames/distance_mm"):
+            ds = f[name]
+            assert _filters(ds) == [h5py.h5z.FILTER_SHUFFLE, h5py.h5z.FILTER_DEFLATE]
+            assert ds.compression_opts == 1 and ds.chunks == (1, 240, 320)
+        for i, (g, d) in enumerate(frames):
+            np.testing.assert_array_equal(f["frames/gray"][i], g)
+            assert f["frames/distance_mm"][i].tobytes() == d.tobytes()
+    plain = tmp_path / "plain.h5"
+    with RecordingWriter(plain, CameraModel(), compression=None) as w:
+        w.append(*frames[0], 0.0)
+    with h5py.File(plain) as f:
+        assert _filters(f["frames/gray"]) == [] == _filters(f["frames/distance_mm"])
 
 
 def test_missing_dataset_is_named(tmp_path):
@@ -290,3 +319,143 @@ def test_a_recordings_wall_clock_is_read_when_every_frame_has_one(tmp_path):
     _write(tmp_path / "none.h5")
     with open_recording(tmp_path / "none.h5") as rec:
         assert rec.wall_time_ns is None
+
+
+def _write_many(path, n):
+    """A recording of ``n`` frames cheap to compress (a ramp plus the frame's index; in
+    frame i's distance image a NaN with payload i at row i % 240, column 3) with a time
+    of 0.1 s a frame: its (gray, distance)."""
+    ramp = np.arange(240 * 320).reshape(240, 320)
+    frames = []
+    with RecordingWriter(path, CameraModel()) as w:
+        for i in range(n):
+            g = ((ramp + i) % 4096).astype(np.uint16)
+            d = (300.0 + ramp / 7.0 + i).astype(np.float32)
+            d.view(np.uint32)[i % 240, 3] = 0x7FC0_0000 + i
+            frames.append((g, d))
+            w.append(g, d, 0.1 * i)
+    return frames
+
+
+LAYOUTS = {
+    "the writer's (shuffle, deflate)": {},
+    "deflate alone": {"compression": "gzip", "compression_opts": 4},
+    "contiguous": {"chunks": None},
+    "several frames a chunk, tiled": {"chunks": (6, 30, 40), "compression": "gzip"},
+    "lzf": {"compression": "lzf", "shuffle": True},
+}
+
+
+def _restore(path, frames, layout):
+    """Store ``frames``' images again in another HDF5 layout (``create_dataset``
+    options), as files written by other tools are."""
+    if not layout:
+        return
+    layout = {"chunks": (1, 240, 320), **layout}
+    with h5py.File(path, "a") as f:
+        for k, name in enumerate(("gray", "distance_mm")):
+            del f[f"frames/{name}"]
+            data = np.stack([fr[k] for fr in frames])
+            f["frames"].create_dataset(name, data=data, **layout)
+
+
+@pytest.mark.parametrize("layout", LAYOUTS.values(), ids=list(LAYOUTS))
+@pytest.mark.parametrize("read_ahead", [True, False])
+def test_blocks_are_bit_identical_to_a_plain_h5py_read_in_every_layout(
+    tmp_path, layout, read_ahead
+):
+    """Whatever the chunking and filters, ``blocks`` (read ahead in a thread or not)
+    gives what h5py reads, NaN payloads and all, in the spans ``block_spans`` says."""
+    p = tmp_path / "r.h5"
+    frames = _write_many(p, 45)
+    _restore(p, frames, layout)
+    with h5py.File(p) as f:
+        gray, dist = f["frames/gray"][...], f["frames/distance_mm"][...]
+    with open_recording(p) as rec:
+        got = list(rec.blocks(2, 45, read_ahead=read_ahead))
+        assert [(a, a + len(t)) for a, (_, _, t) in got] == rec.block_spans(2, 45)
+        assert not rec.reading_ahead
+    g = np.concatenate([b[0] for _, b in got])
+    d = np.concatenate([b[1] for _, b in got])
+    assert g.dtype == np.uint16 and d.dtype == np.float32
+    assert g.tobytes() == gray[2:].tobytes() and d.tobytes() == dist[2:].tobytes()
+    assert np.isnan(d[5, 7, 3]) and d[5].view(np.uint32)[7, 3] == 0x7FC0_0007  # frame 7's
+
+
+def test_block_spans_follow_the_files_chunks(tmp_path):
+    p = tmp_path / "r.h5"
+    frames = _write_many(p, 45)
+    with open_recording(p) as rec:
+        assert rec.block_spans(5, 45) == [(5, 32), (32, 45)]
+    _restore(p, frames, LAYOUTS["several frames a chunk, tiled"])
+    with open_recording(p) as rec:  # 6 frames a chunk: reads of 36 frames, on chunk edges
+        assert rec.frames_per_chunk == 6
+        assert rec.block_spans(5, 45) == [(5, 36), (36, 45)]
+
+
+def _reader_threads():
+    return [t for t in threading.enumerate() if t.name.startswith(THREAD_NAME)]
+
+
+def test_a_z_depth_recording_read_ahead_is_converted_to_radial_as_frame_converts_it(tmp_path):
+    from tofpose.core.camera_profiles import load_profile
+
+    cam = load_profile("azure-kinect-nfov")
+    path = tmp_path / "k.h5"
+    with RecordingWriter(path, cam) as w:
+        for i in range(40):
+            w.append(np.zeros(cam.shape, np.uint16), np.full(cam.shape, 1000.0 + i, np.float32), i)
+    with open_recording(path) as rec:
+        for first, (_, d, _) in rec.blocks(read_ahead=True):
+            for k in (0, len(d) - 1):
+                assert d[k].tobytes() == rec.frame(first + k)[1].tobytes()
+
+
+def test_a_caller_that_stops_early_leaves_no_reader_thread(tmp_path):
+    p = tmp_path / "r.h5"
+    _write_many(p, 100)
+    with open_recording(p) as rec:
+        for first, _ in rec.blocks(read_ahead=True):
+            assert rec.reading_ahead
+            if first >= 32:
+                break
+        assert not rec.reading_ahead and not _reader_threads()
+        assert rec.frame(99)[2] == pytest.approx(9.9)  # the file is still usable
+
+
+def test_closing_the_recording_stops_its_reader_thread(tmp_path):
+    p = tmp_path / "r.h5"
+    _write_many(p, 100)
+    rec = open_recording(p)
+    blocks = rec.blocks(read_ahead=True)
+    first, _ = next(blocks)  # the next block is being read meanwhile
+    assert first == 0 and rec.reading_ahead
+    rec.close()
+    assert not rec.reading_ahead and not _reader_threads()
+    with pytest.raises(RecordingError, match="closed before frame 32 was read"):
+        next(blocks)
+
+
+def _spoil_chunk(path, name, frame):
+    """Overwrite the start of frame ``frame``'s stored chunk of ``/frames/name``."""
+    with h5py.File(path) as f:
+        info = f[f"frames/{name}"].id.get_chunk_info_by_coord((frame, 0, 0))
+    with open(path, "r+b") as fh:
+        fh.seek(info.byte_offset)
+        fh.write(b"\xff" * 16)
+
+
+@pytest.mark.parametrize("read_ahead", [True, False])
+def test_an_unreadable_chunk_is_an_error_naming_its_frame(tmp_path, read_ahead):
+    p = tmp_path / "r.h5"
+    _write_many(p, 70)
+    _spoil_chunk(p, "distance_mm", 40)
+    with open_recording(p) as rec:
+        seen = []
+        with pytest.raises(RecordingError, match=rf"{p.name}: frame 40 cannot be read"):
+            for first, _ in rec.blocks(read_ahead=read_ahead):
+                seen.append(first)
+        assert seen == [0]  # the frames before the bad block came through
+        with pytest.raises(RecordingError, match="frame 40 cannot be read"):
+            rec.frame(40)
+        assert not _reader_threads()
