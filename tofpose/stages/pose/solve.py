@@ -408,7 +408,7 @@ class PoseSolver:
             return NO_OFFSET
         factor = (
             1.0
-            if catalog_index is None
+            if catalog_index is None or not self.config.size_scaled_centroid_bias
             else self.bias_factor(range_mm, catalog_index, psf_sigma_px)
         )
         return offset_prior(self.config, self.range_bias_sigma_mm(range_mm), self.camera, factor)
@@ -472,12 +472,16 @@ class PoseSolver:
         # the image scale's errors: one common scale (the focal length's and the centroid
         # error common to every marker, over the pattern's rms radius, as in the range
         # offset's prior) and one per size class, both for markers of this image size
-        psf = 0.0 if active is None else active.psf_sigma_px
-        factor = self.bias_factor(fitted.rho, obs.i_idx, psf)
-        common_scale, _ = ar.pattern_scale_sigma(
-            np.ascontiguousarray(fitted.e), offset_prior(cfg, 0.0, self.camera, factor)
-        )
-        class_bias_px = float(cfg.class_centroid_bias_px) * factor
+        if cfg.size_scaled_centroid_bias:
+            psf = 0.0 if active is None else active.psf_sigma_px
+            factor = self.bias_factor(fitted.rho, obs.i_idx, psf)
+            common_scale, _ = ar.pattern_scale_sigma(
+                np.ascontiguousarray(fitted.e), offset_prior(cfg, 0.0, self.camera, factor)
+            )
+            class_bias_px = float(cfg.class_centroid_bias_px) * factor
+        else:  # the priors as before 2026-12: the full common error per size class
+            common_scale = focal_length_sigma_rel(cfg, self.camera)
+            class_bias_px = float(cfg.common_centroid_bias_px)
         by_size = common_scale > 0 or class_bias_px > 0
         leave_one_out = cfg.leave_one_out_covariance and len(obs.i_idx) >= MIN_LEAVE_ONE_OUT
         terms = CovarianceTerms(
