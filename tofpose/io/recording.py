@@ -56,7 +56,7 @@ radial distances and ``Recording.camera`` says ``distance_kind = "radial"``
 from __future__ import annotations
 
 import weakref
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -428,9 +428,9 @@ class Recording:
 
     def blocks(
         self, start: int = 0, stop: int | None = None, *, read_ahead: bool | None = None
-    ) -> Iterator[tuple[int, tuple[np.ndarray, np.ndarray, np.ndarray]]]:
+    ) -> Generator[tuple[int, tuple[np.ndarray, np.ndarray, np.ndarray]], None, None]:
         """(first frame, ``block``) over [start, stop) in reads aligned to the file's
-        chunks (``block_spans``).
+        chunks (``block_spans``); ``close()`` it to stop early.
 
         ``read_ahead``: read the next block in a reader thread while the caller works on
         this one (``tofpose.io.read_ahead``: the caller should make no h5py call of its
