@@ -20,7 +20,11 @@ and speaks the protocol; this driver adds what a server needs around it:
   acquisition command went out (the exposure follows it by the command's way over the
   link and lasts the integration time); its ``sequence`` is the measurement id of the
   image's UDP packets (a 16-bit counter the camera advances per acquisition),
-  unwrapped, so an image the camera took and the network lost shows as a gap;
+  unwrapped, so an image the camera took and the network lost shows as a gap; its
+  ``time_s`` (the instant its pose is of) is that clock at the middle of the
+  acquisition's four exposures (``capture_ns`` + 2 integration times; the read-outs
+  between them are not in it), not the arrival, which is later by the camera's
+  processing and the transfer;
 - time-outs of its own (the vendor client retries for up to half a minute) and
   reconnection: a command-link error drops the link, ``read`` raises ``CameraError`` and
   the next ``read`` reconnects after a back-off, while the server shows the camera
@@ -330,7 +334,9 @@ class TofCam660Driver:
             return CameraFrame(
                 gray=gray,
                 distance_mm=dist,
-                time_s=time.monotonic(),
+                # the pose's instant: the middle of the four phase exposures after the
+                # command went out (their read-outs between them are not known here)
+                time_s=capture_ns * 1e-9 + 2.0 * used_us * 1e-6,
                 index=self._index,
                 meta={
                     "integration_time_us": used_us,

@@ -138,8 +138,10 @@ def test_rosbags_bag_round_trips_to_the_same_poses(recording, source, tmp_path, 
     assert sum(r.ok for r in results) >= 5
     for got, want in zip(results, truth_results, strict=True):
         if want.ok:
+            # the float32 round trip moves ranges by up to 2e-7 of themselves (0.4 um at
+            # 2 m): over the markers' ~100 mm baselines up to ~4e-6 rad of attitude
             assert_allclose(got.t_mm, want.t_mm, atol=0.01)
-            assert_allclose(got.R, want.R, atol=1e-6)
+            assert_allclose(got.R, want.R, atol=1e-5)
 
 
 def test_big_endian_16uc1_depth_in_mm(recording, source, tmp_path):

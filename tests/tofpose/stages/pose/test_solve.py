@@ -46,7 +46,7 @@ def test_a_blurred_lens_widens_the_rim_the_centroid_errors_come_from() -> None:
 
 
 def test_reported_sigmas_at_1_m_no_longer_carry_the_far_range_centroid_bias() -> None:
-    """With ``size_scaled_centroid_bias`` (opt-in: docs/algorithm.md), ideal frames at 1 m
+    """With ``size_scaled_centroid_bias`` (the default; docs/algorithm.md), ideal frames at 1 m
     (discs 6-13 px in radius), each its own random pose: the RMS of error over reported
     sigma, pooled over the six axes, is at least 0.40 (0.37 on
     these frames with the far-range centroid-error priors at every size; 0.44-0.50 over
