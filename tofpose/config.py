@@ -44,6 +44,9 @@ class ExtractionConfig:
     ellipse_min_points : PC, fewest edge points for an ellipse fit (§3.3).
     ellipse_max_residual_px : RMS distance of edge points from the fitted ellipse above
         which a blob is not confirmed as a projected disc.
+    surface_threshold : raise I_t and I_peak above a lit surface around the markers (a
+        bright plate, a wall) when one is lit (``stages.extraction.surface``); off, the
+        thresholds are the paper's relative ones over the frame's background alone.
     h_min_px, h_max_px, raw_threshold_abs, peak_abs, nlog_peak_abs, nlog_floor_abs,
     nlog_sigma_px : paper preset only (fixed numbers, no range adaptivity).
     """
@@ -63,6 +66,7 @@ class ExtractionConfig:
     max_candidates: int = 32
     ellipse_min_points: int = 6
     ellipse_max_residual_px: float = 0.8
+    surface_threshold: bool = True
     h_min_px: int | None = None
     h_max_px: int | None = None
     raw_threshold_abs: float | None = None

@@ -36,6 +36,7 @@ from tofpose.stages.extraction.extraction import (
     check_frame,
 )
 from tofpose.stages.extraction.saturation import blobs_at_full_scale
+from tofpose.stages.extraction.surface import above_surface, lit_surface_level
 from tofpose.stages.extraction.uncertainty import (
     UNCALIBRATED_RANGE_SIGMA_MM,
     SigmaFloors,
@@ -476,6 +477,12 @@ class PosePipeline:
         stats = self.arithmetic.extraction.frame_levels(
             g, cfg.extraction, saturated_counts=self.camera.full_scale_counts
         )
+        # thresholds above a lit plate or wall, not inside its noise
+        scale = self.camera.count_scale
+        surface = lit_surface_level(
+            g, d, stats, self.camera.fx, self._catalog_d, cfg.extraction, scale
+        )
+        stats = above_surface(stats, surface, cfg.extraction, scale)
         timer.lap("levels")
 
         def fail(reason: str, unmatched=(), diagnostics=NO_DIAGNOSTICS) -> PoseResult:

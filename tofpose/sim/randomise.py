@@ -32,9 +32,15 @@ need the pose or a camera of their own:
 * ``other sensor``: the defaults on a second sensor profile (``other_sensor_camera``:
   640 x 480 px, twice the focal length in px so the same field of view, 20 MHz
   modulation, count scale 4); the pipeline is set for it by
-  ``tofpose.config.config_for_camera``.
+  ``tofpose.config.config_for_camera``;
+* ``bright plate``: a light-painted plate (reflectance 0.6-0.95, no wall) with weaker
+  reflectors: each reflector's return 0.7-1.3 of the others' and the retro-reflector
+  gain log-uniform over ``BRIGHT_PLATE_RETRO_GAIN`` (4-40 times a white diffuser, where
+  the default is 40: lower grades of retro-reflective sheeting return a tenth of
+  prismatic sheeting's). The plate then reads within 2-20x of the markers, and the
+  exposure set by the markers lifts it well above the noise.
 
-Used by the physics robustness study (``bench/physics.py``, all ten) and by Monte-Carlo
+Used by the physics robustness study (``bench/physics.py``, all eleven) and by Monte-Carlo
 accuracy studies (``tofpose.study``: ``FAMILIES``, drawn by ``draw_physics``,
 ``draw_pose`` and ``draw_background``).
 """
@@ -65,12 +71,16 @@ from tofpose.sim.systematic import SystematicErrors
 #: the families ``draw_physics`` draws (a study's and the API's)
 FAMILIES = ("ideal", "grey plate", "lens blur", "gains", "systematic", "background", "all")
 #: the families only ``draw_frame`` draws (they need the pose or their own camera)
-EXTRA_FAMILIES = ("saturating", "glints", "other sensor")
+EXTRA_FAMILIES = ("saturating", "glints", "other sensor", "bright plate")
 ALL_FAMILIES = FAMILIES + EXTRA_FAMILIES
 ARM_PROBABILITY = 0.3  # share of background frames with an arm in front of the target
 #: ``saturating``: a face-on reflector at the target's range reads this many full scales
 OVEREXPOSURE = (2.0, 5.0)
 N_GLINTS = 15  # ``glints``: glints per frame
+#: ``bright plate``: the retro-reflector gain's range (log-uniform), and the plate's
+#: reflectance
+BRIGHT_PLATE_RETRO_GAIN = (4.0, 40.0)
+BRIGHT_PLATE_REFLECTANCE = (0.6, 0.95)
 
 
 def other_sensor_camera() -> CameraModel:
@@ -154,7 +164,26 @@ def draw_frame(
         sensor = fixed_exposure(sensor, camera, range_mm, overexposure)
     if family == "glints":
         glints = draw_glints(rng, camera, scene, T, n=N_GLINTS)
+    if family == "bright plate":
+        scene, sensor = bright_plate(scene, sensor, rng, len(catalog))
     return DrawnFrame(family, camera, scene, sensor, T, glints)
+
+
+def bright_plate(
+    scene: TargetScene, sensor: SensorModel, rng: np.random.Generator, n_reflectors: int
+) -> tuple[TargetScene, SensorModel]:
+    """``scene`` and ``sensor`` as the ``bright plate`` family draws them: the plate's
+    reflectance over ``BRIGHT_PLATE_REFLECTANCE``, no wall, each of the
+    ``n_reflectors`` reflectors' gain 0.7-1.3, the retro-reflector gain log-uniform
+    over ``BRIGHT_PLATE_RETRO_GAIN``."""
+    lo, hi = np.log(BRIGHT_PLATE_RETRO_GAIN)
+    scene = replace(
+        scene,
+        plate_reflectance=float(rng.uniform(*BRIGHT_PLATE_REFLECTANCE)),
+        wall_distance_mm=None,
+        reflector_gains=tuple(rng.uniform(0.7, 1.3, n_reflectors).tolist()),
+    )
+    return scene, replace(sensor, retro_gain=float(np.exp(rng.uniform(lo, hi))))
 
 
 def fixed_exposure(

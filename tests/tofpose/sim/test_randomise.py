@@ -236,3 +236,32 @@ def test_the_other_sensor_is_640_by_480_at_20_mhz_with_4x_the_counts():
         peak.append(np.median(f.gray[core]))
     assert peak[1] / peak[0] == pytest.approx(4.0, rel=0.02)
     assert spread[1] / spread[0] == pytest.approx(6.0 / 20.0, rel=0.25)
+
+
+def test_bright_plate_frames_have_a_light_plate_and_weaker_reflectors_in_their_ranges():
+    """``bright plate``: plate reflectance 0.6-0.95 and no wall, each reflector's gain
+    0.7-1.3, the retro-reflector gain within 4-40 (log-uniform: both ends drawn); the
+    plate then reads within 2-20x of a face-on marker, far above the noise."""
+    from tofpose.sim.randomise import draw_frame
+    from tofpose.sim.scene import FIRST_DISC, PLATE
+
+    rng = np.random.default_rng(12)
+    gains = []
+    for _ in range(40):
+        d = draw_frame("bright plate", 4.5, rng, CAT)
+        assert 0.6 <= d.scene.plate_reflectance <= 0.95
+        assert d.scene.wall_distance_mm is None
+        assert len(d.scene.reflector_gains) == len(CAT)
+        assert all(0.7 <= g <= 1.3 for g in d.scene.reflector_gains)
+        gains.append(d.sensor.retro_gain)
+    assert 4.0 <= min(gains) < 8.0 and 20.0 < max(gains) <= 40.0
+    from tests.conftest import facing_pose
+    from tofpose.sim.randomise import bright_plate
+    from tofpose.sim.render import render_frame
+    from tofpose.sim.scene import TargetScene
+
+    scene, sensor = bright_plate(TargetScene(CAT), SensorModel(noise=False), rng, len(CAT))
+    f = render_frame(CameraModel(), scene, facing_pose(3000.0), sensor)
+    plate = np.median(f.gray[f.surface_id == PLATE])
+    core = np.median(f.gray[f.surface_id == FIRST_DISC + 5])  # an 80 mm marker
+    assert 2.0 <= core / plate <= 20.0 * 1.3 / 0.6 and plate > 20.0

@@ -92,6 +92,7 @@ def _reference_find_candidate_blobs(
         saturated_fraction=v.saturated_fraction,
         dark_level=v.dark_level,
         psf_sigma_px=float(found.psf_sigma_px),
+        surface_level=stats.surface_level,
     )
     return CandidateBlobs(
         accepted,

@@ -120,6 +120,9 @@ class FrameStats:
     #: the lens blur the frame's candidates show, px (1-sigma of a Gaussian PSF per
     #: axis; ``kernels.gates.psf_variance_px2``); 0 until the gates have run
     psf_sigma_px: float = 0.0
+    #: the gray of a lit surface the thresholds sit above (``surface.above_surface``);
+    #: NaN where none is lit
+    surface_level: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -292,6 +295,7 @@ def _active_set(
         n_active=n,
         saturated_fraction=stats.saturated_fraction,
         dark_level=stats.dark_level,
+        surface_level=stats.surface_level,
     )
     return mask, applied, runs
 
@@ -418,6 +422,7 @@ def find_candidate_blobs(
         saturated_fraction=stats.saturated_fraction,
         dark_level=stats.dark_level,
         psf_sigma_px=float(np.sqrt(found.blur_var_px2)),
+        surface_level=stats.surface_level,
     )
     return CandidateBlobs(
         accepted[: config.max_candidates],

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
+from tofpose.config import ExtractionConfig
 from tofpose.lab.pose_judgement import pose_error
 from tofpose.sim.randomise import FAMILIES, draw_background, draw_physics, draw_pose
 from tofpose.sim.render import render_frame
@@ -59,8 +60,10 @@ def test_the_flipped_pose_of_faint_specks_at_8_m_is_not_reported():
     """The physics study's frame (family ``all``, 8 m, draw 20 of the study's seed):
     four of the candidates are noise specks and one true marker; they fit a rigid pose
     159 deg off with 0.2 deg sigmas, its 80 mm discs on specks 20x fainter per area
-    than the 35 mm disc on the marker. Without the check it is reported; with it the
-    frame is refused, naming the two reflectors (a correct pose would do too)."""
+    than the 35 mm disc on the marker. Without the check (and without the thresholds
+    above the lit surface, ``extraction.surface``, which leave no specks to match) it
+    is reported; with it the frame is refused, naming the two reflectors (a correct
+    pose would do too); with both, no wrong pose either."""
     cam, cat = CameraModel(), paper_target()
     rng = np.random.default_rng([0, FAMILIES.index("all"), 80])
     for _ in range(21):
@@ -69,14 +72,17 @@ def test_the_flipped_pose_of_faint_specks_at_8_m_is_not_reported():
         scene = draw_background("all", scene, rng, cam, T)
         f = render_frame(cam, scene, T, sensor, rng)
 
-    unchecked = PosePipeline(cam, cat, PipelineConfig(photometric_check=False))
+    specks = ExtractionConfig(surface_threshold=False)
+    unchecked = PosePipeline(cam, cat, PipelineConfig(photometric_check=False, extraction=specks))
     wrong = unchecked.process(f.gray, f.distance_mm)
     assert wrong.ok and _attitude_error_deg(wrong, T) > 90
-    res = PosePipeline(cam, cat).process(f.gray, f.distance_mm)
+    res = PosePipeline(cam, cat, PipelineConfig(extraction=specks)).process(f.gray, f.distance_mm)
     if res.ok:
         assert _attitude_error_deg(res, T) < 2.0
     else:
         assert "returns differ" in res.reason and "reflector 2 against 5" in res.reason
+    default = PosePipeline(cam, cat).process(f.gray, f.distance_mm)
+    assert not default.ok or _attitude_error_deg(default, T) < 2.0
 
 
 def _attitude_error_deg(res, T) -> float:
