@@ -24,8 +24,10 @@ and ``bench/physics.py`` measure both against truth by marker size (docs/results
 
 A saturated reflector (its core at the camera's full scale, no distance there) breaks
 the sums: A_r is unknown (only A_r >= full scale), and a saturated pixel's coverage is
-anything from FS / A_r to 1. Its range comes from the ranged pixels alone, each with its
-own bounds: pixel p (amplitude a_p, distance d_p) is ``c_p A_r + (1 - c_p) a_b``, so
+anything from FS / A_r to 1. Its range comes from the blob's own ranged pixels alone
+(not the support's ring beyond it: at a plate's edge that ring can be a wall metres
+behind, whose pixels would bound the reflector at the wall's distance with narrow
+intervals and win the median), each with its own bounds: pixel p (amplitude a_p, distance d_p) is ``c_p A_r + (1 - c_p) a_b``, so
 ``0 <= c_p <= c_max = (a_p - a_b) / (FS - a_b)``, and its reflector distance
 
     d_r(c) = (a_p d_p - (1 - c) a_b d_b) / (a_p - (1 - c) a_b)
@@ -295,7 +297,13 @@ def blob_mixing(
                     a = g - dark
                     s_a += a - a_b
                     s_ad += a * d - a_b * db
-                    if saturated and a > 0 and a >= SATURATED_MIN_CONTRAST * a_bp and fs_a > a_bp:
+                    if (
+                        saturated
+                        and member[r, c]
+                        and a > 0
+                        and a >= SATURATED_MIN_CONTRAST * a_bp
+                        and fs_a > a_bp
+                    ):
                         c_max = min(max((a - a_bp) / (fs_a - a_bp), 0.0), 1.0)
                         lo = (a * d - a_bp * db) / (a - a_bp) if a > a_bp else d
                         wb = (1.0 - c_max) * a_bp

@@ -206,8 +206,9 @@ def blob_mixing(
     blob has NaN sums (a neighbour's light would bias them), and only when saturated
     its d_sat, sigma_sat (its rims read towards the plate whatever its neighbours, so its
     bounded-coverage range is taken from the ring's median);
-    d_sat, sigma_sat as ``saturated_range``, NaN unless a member reaches ``full_scale``
-    (counts).
+    d_sat, sigma_sat as ``saturated_range`` of the blob's own ranged pixels (not the
+    support's ring: beside a plate's edge it can be a wall metres behind), NaN unless a
+    member reaches ``full_scale`` (counts).
 
     a_b = surrounds.gray - dark, d_b = surrounds.distance_mm; a support pixel with a range (from
     ``member_distance`` at the blob's pixels, ``distance`` elsewhere) adds
@@ -243,8 +244,9 @@ def blob_mixing(
             c_unranged = float(np.sum(np.clip((g[support & ~ok] - gb) / (g_max - gb), 0, 1)))
         if not surrounds.crowded[j]:  # a neighbour's light would bias the sums
             out[j, :6] = a_b, db, s_a, s_ad, c_unranged, support.sum()
-        if g_max >= full_scale:
-            out[j, 6:] = saturated_range(a, d[ok], a_b, db, full_scale - dark)
+        if g_max >= full_scale:  # from the blob's own ranged pixels (module docstring)
+            own = member[ok]
+            out[j, 6:] = saturated_range(a[own], d[ok][own], a_b, db, full_scale - dark)
     return out
 
 

@@ -143,3 +143,34 @@ def test_a_marker_with_an_arm_across_its_edge_is_occluded_and_noise_is_not():
     smeared = dist.copy()
     smeared[rim & ~member] = MARKER_MM - 900.0
     assert not _occluded(blob, smeared)
+
+
+def test_a_saturated_marker_at_the_plates_edge_reads_its_own_range_not_the_walls():
+    """The physics study's ``saturating`` family at 3 m (a fixed exposure, the
+    reflectors at 2-5x full scale), frame 3 of its draws with seed (5, 30): marker 8
+    sits at the plate's edge, so the ring around its blob is mostly the wall 3 m
+    behind, and the wall pixels beside the blob read the ring's own distance. Each such
+    pixel bounded the reflector at the wall's distance with a narrow interval, and
+    while every support pixel bounded it (before 2026-12-08) they won the weighted
+    median: the marker read 2.8 m long (sigma 0.7 m). Only the blob's own ranged pixels
+    bound a saturated reflector now: every saturated marker reads its range within
+    30 mm and within 3 of its sigmas."""
+    from tofpose.core.catalog import paper_target
+    from tofpose.pipeline import PosePipeline
+    from tofpose.sim.randomise import draw_frame
+
+    cat = paper_target()
+    rng = np.random.default_rng([5, 30])
+    for _ in range(3):
+        drawn = draw_frame("saturating", 3.0, rng, cat)
+        frame = drawn.render(rng)
+    r = PosePipeline(drawn.camera, cat).process(frame.gray, frame.distance_mm)
+    assert r.ok, r.reason
+    T = drawn.T_camera_target
+    centres = cat.positions_mm @ T.R.T + T.t_mm
+    saturated = [m for m in r.matched if m.saturated]
+    assert 8 in [m.catalog_id for m in saturated]
+    for m in saturated:
+        true_mm = float(np.linalg.norm(centres[list(cat.ids).index(m.catalog_id)]))
+        error = m.distance_mm - true_mm
+        assert abs(error) < 30.0 and abs(error) < 3.0 * m.range_sigma_mm, (m.catalog_id, error)
