@@ -27,7 +27,8 @@ the sums: A_r is unknown (only A_r >= full scale), and a saturated pixel's cover
 anything from FS / A_r to 1. Its range comes from the blob's own ranged pixels alone
 (not the support's ring beyond it: at a plate's edge that ring can be a wall metres
 behind, whose pixels would bound the reflector at the wall's distance with narrow
-intervals and win the median), each with its own bounds: pixel p (amplitude a_p, distance d_p) is ``c_p A_r + (1 - c_p) a_b``, so
+intervals and win the median), each with its own bounds: pixel p (amplitude a_p,
+distance d_p) is ``c_p A_r + (1 - c_p) a_b``, so
 ``0 <= c_p <= c_max = (a_p - a_b) / (FS - a_b)``, and its reflector distance
 
     d_r(c) = (a_p d_p - (1 - c) a_b d_b) / (a_p - (1 - c) a_b)
