@@ -23,8 +23,9 @@ themselves, after matching (§4) has said which catalog disc each blob is:
   scale agrees with them). The covariance is the inverse Fisher information at the
   solution, the pose block after the nuisance parameters are marginalised. It falls back
   (``PixelFitResult.ok`` False, with the reason) when the fit does not converge or a
-  disc's residuals are far beyond its noise (a glint, an occluded disc), so the caller
-  keeps the centroid pose.
+  disc's residuals are far beyond its noise (a glint, an occluded disc), or a disc's
+  core is clipped (saturated: its gain seen only on the rim's outer pixels, where the
+  model's rim error makes the fit overconfident), so the caller keeps the centroid pose.
 
 Public entry point: ``fit.fit_pose_to_pixels``.
 """

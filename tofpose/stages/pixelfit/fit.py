@@ -17,7 +17,10 @@ these sigmas, re-evaluated at each iteration from the current model.
 
 Saturated pixels (gray at full scale) are censored: the measurement says "at least full
 scale", so a model at or above it leaves no residual and a model below it is pulled up
-by ``(full scale - model) / sigma``; their distance (NaN) is not used.
+by ``(full scale - model) / sigma``; their distance (NaN) is not used. A disc whose
+core is clipped (``MAX_CLIPPED_CORE_SHARE``) makes the fit fall back: its gain is then
+seen only on the rim's outer pixels and the rim's model error moves the pose far beyond
+its covariance (``constants.MAX_CLIPPED_CORE_SHARE`` has the numbers).
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ from tofpose.stages.pixelfit.constants import (
     FULL_SCALE_COUNTS,
     INITIAL_DAMPING,
     MAD_TO_SIGMA,
+    MAX_CLIPPED_CORE_SHARE,
     MAX_ITERATIONS,
     MAX_MARKER_RMS_SIGMA,
     MIN_CONTRAST_SIGMA,
@@ -189,6 +193,10 @@ class PixelFitResult:
     iterations : int; converged : bool
     n_gray_pixels, n_distance_pixels, n_saturated : int
         Pixels in the gray residuals, in the distance residuals, and censored.
+    clipped_share : ndarray of shape (K,)
+        Each disc's share of its fully covered pixels (at the fitted pose) that are
+        saturated: 1 when its core is clipped (``_clipped_share``), NaN when it covers
+        no pixel wholly.
     range_k_mm, gray_extra_var, coverage_sigma, disc_range_sigma_mm : float
         The noise model used (given or measured; coverage_sigma: the discs' median).
     """
@@ -208,6 +216,7 @@ class PixelFitResult:
     n_gray_pixels: int = 0
     n_distance_pixels: int = 0
     n_saturated: int = 0
+    clipped_share: np.ndarray = field(default_factory=lambda: np.zeros(0))
     range_k_mm: float = float("nan")
     gray_extra_var: float = float("nan")
     coverage_sigma: float = 0.0
@@ -871,6 +880,7 @@ def fit_pose_to_pixels(
         n_gray_pixels=len(pb.gray_rows),
         n_distance_pixels=len(pb.dist_rows),
         n_saturated=len(pb.sat_rows),
+        clipped_share=_clipped_share(pb, images),
         range_k_mm=sig.range_k_mm,
         gray_extra_var=extra_var,
         coverage_sigma=float(np.median(coverage_sigma)),
@@ -947,6 +957,17 @@ def _levenberg_marquardt(
     return _Solved(state, images, info, iterations, converged)
 
 
+def _clipped_share(pb: _Problem, images: DiscImages) -> np.ndarray:
+    """(K,) each disc's share of the pixels it covers wholly (coverage at least ``1 -
+    RIM_COVERAGE_EPS``) whose gray is saturated; NaN for a disc that covers none."""
+    inside = images.coverage >= 1.0 - RIM_COVERAGE_EPS  # (K, P)
+    saturated = np.zeros(pb.win.n_pixels, bool)
+    saturated[pb.sat_rows] = True
+    n = inside.sum(axis=1)
+    clipped = (inside & saturated[None]).sum(axis=1)
+    return np.where(n > 0, clipped / np.maximum(n, 1), np.nan)
+
+
 def _crowded(discs: Discs) -> np.ndarray:
     """(K,) bool: discs whose rim comes within ``CROWDED_GAP_MM`` of another's on the
     target (across its plane): where discs raised to different heights may hide each
@@ -974,7 +995,12 @@ def _unexplained(res: PixelFitResult, max_rms: float) -> np.ndarray:
 
 def _verdict(res: PixelFitResult, extra_var: float, max_rms: float) -> dict:
     """ok and reason of a finished fit (``fit_pose_to_pixels``' fallback rules); the
-    reason names every rule that failed, the discs beyond their noise first."""
+    reason names every rule that failed, the discs beyond their noise first. The rules:
+    a disc's residual RMS beyond ``max_rms`` or unlike its siblings' (``_unexplained``);
+    a disc with a clipped core (``res.clipped_share`` over ``MAX_CLIPPED_CORE_SHARE``:
+    the fit is overconfident there, NEES/6 17.8 on the saturating family, even though
+    its residuals look clean, RMS 0.6-1.9); no convergence; a singular information
+    matrix; then a dark disc."""
     reasons = []
     rms = res.marker_rms_sigma
     bad = rms > max_rms
@@ -992,6 +1018,14 @@ def _verdict(res: PixelFitResult, extra_var: float, max_rms: float) -> dict:
         reasons.append(
             f"residual RMS over {RELATIVE_RMS_FACTOR:g}x the discs' median ({typical:.1f} "
             f"sigma) at markers {worst}"
+        )
+    clipped = np.nan_to_num(res.clipped_share) > MAX_CLIPPED_CORE_SHARE  # NaN: no core
+    if np.any(clipped):
+        reasons.append(
+            f"markers {res.catalog_ids[clipped].tolist()} have clipped cores (over "
+            f"{MAX_CLIPPED_CORE_SHARE:.0%} of their wholly covered pixels saturated): their "
+            "gains are seen only on their rims' outer pixels, where the rim's model error "
+            "moves the pose beyond its covariance"
         )
     if not res.converged:
         reasons.append(f"not converged in {res.iterations} iterations")
