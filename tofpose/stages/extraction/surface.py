@@ -12,17 +12,28 @@ of plate pixels, the blob criteria find dozens of noise blobs, the markers merge
 them, and the matcher can fit the pattern to the speckle. The thresholds there must
 be relative to the surface's own level.
 
-A surface is told from the markers by its extent and its evenness. The pixels lit
-above the background's noise floor (``noise_floor_sigma`` sigmas) are a surface when
+A surface is told from the markers by its extent, its level and its evenness. The
+pixels lit above the background's noise floor (``noise_floor_sigma`` sigmas), of median
+``L``, are a surface when
+
 (a) they outnumber what the catalog's discs can cover at the lit pixels' median range,
-``SURFACE_AREA_FACTOR`` times over (each disc counted with a pixel of blur and mixing
-around its rim), and (b) their spread (MAD as a sigma) is within
-``SURFACE_MAX_SPREAD`` shot-noise sigmas of their median, sqrt(count_scale * L). Their
-median ``L`` is then the surface's level: markers are a minority of the lit pixels,
-so they do not move it. (b) keeps markers from being taken for a surface where (a)
-alone would: a catalog smaller than the markers in view, or glints and a lit room
-around the target. Markers' pixels spread from their rims to their cores, 3.5-47
-noise sigmas on the simulator's families, where a plate's spread 1.2-2.3. The
+    ``SURFACE_AREA_FACTOR`` times over (each disc counted with a pixel of blur and
+    mixing around its rim);
+(b) ``L`` is at most ``SURFACE_MAX_LEVEL_SHARE`` of the brightest pixel: the markers
+    are what is brightest, and a lit set that is mostly markers has its median near
+    their cores (0.74-0.93 of I_max on the simulator's frames where markers alone
+    outnumbered the discs: a catalog smaller than the markers in view, or 8 m frames
+    whose markers fill their pixels), where a plate or wall under markers bright
+    enough to be found sits at 0.01-0.3;
+(c) their spread (MAD as a sigma) is within ``SURFACE_MAX_SPREAD`` shot-noise sigmas,
+    sqrt(count_scale * L), or ``SURFACE_MAX_RELATIVE_SPREAD`` of ``L``: an evenly lit
+    surface, not the rims-to-cores spread of markers, glints and a lit room (3.5-47
+    noise sigmas and 0.3-1.3 of their median on the simulator's families). The
+    relative term is for a plate near the camera, whose shading across it (incidence,
+    1 / d^2) outgrows its shot noise: 3.3-4.2 noise sigmas at 1.5-2 m, against 1.2-2.3
+    at 3-8 m.
+
+Markers are a minority of the lit pixels then, so they do not move ``L``. The
 thresholds become
 
     I_t    = max(I_t,    L + raw_threshold_rel * (I_max - L),
@@ -58,6 +69,10 @@ SURFACE_AREA_FACTOR = 4.0
 DISC_RIM_PX = 1.0
 #: a surface's lit pixels spread at most this many shot-noise sigmas (MAD as a sigma)
 SURFACE_MAX_SPREAD = 3.0
+#: ... or at most this share of their median (a plate's shading at near range)
+SURFACE_MAX_RELATIVE_SPREAD = 0.25
+#: a surface's level is at most this share of the frame's brightest pixel
+SURFACE_MAX_LEVEL_SHARE = 0.5
 
 
 def discs_area_px(fx_px: float, range_mm: float, diameters_mm: np.ndarray) -> float:
@@ -101,8 +116,11 @@ def lit_surface_level(
         return math.nan
     values = g[lit].astype(np.float64)
     level = float(np.median(values))
+    if level > SURFACE_MAX_LEVEL_SHARE * stats.i_max:
+        return math.nan
     spread = MAD_TO_SIGMA * float(np.median(np.abs(values - level)))
-    if spread > SURFACE_MAX_SPREAD * math.sqrt(count_scale * max(level, 1.0)):
+    shot = math.sqrt(count_scale * max(level, 1.0))
+    if spread > max(SURFACE_MAX_SPREAD * shot, SURFACE_MAX_RELATIVE_SPREAD * level):
         return math.nan
     return level
 

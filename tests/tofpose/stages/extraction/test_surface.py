@@ -16,7 +16,7 @@ from tests.conftest import facing_pose, render
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
 from tofpose.config import ExtractionConfig
 from tofpose.core.catalog import Catalog, Reflector
-from tofpose.lab.pose_judgement import pose_error
+from tofpose.lab.pose_judgement import CHI2_6_3SIGMA, mahalanobis2, pose_error
 from tofpose.sim.render import SensorModel
 from tofpose.sim.scene import FIRST_DISC, PLATE, TargetScene
 from tofpose.stages.extraction.extraction import frame_levels
@@ -27,10 +27,10 @@ CFG = ExtractionConfig()
 T_6M = facing_pose(6000.0, 8, -12, 15, (300.0, -200.0))
 
 
-def _bright_plate(seed: int = 0, retro_gain: float = 5.0):
+def _bright_plate(seed: int = 0, retro_gain: float = 5.0, T=T_6M):
     """A light plate (0.85) with reflectors returning 5x a white diffuser, at 6 m."""
     scene = replace(TargetScene(CAT), plate_reflectance=0.85, wall_distance_mm=None)
-    return render(T_6M, seed=seed, scene=scene, sensor=SensorModel(retro_gain=retro_gain))
+    return render(T, seed=seed, scene=scene, sensor=SensorModel(retro_gain=retro_gain))
 
 
 def _surface(f, catalog=CAT):
@@ -39,15 +39,18 @@ def _surface(f, catalog=CAT):
     return stats, lit_surface_level(f.gray, f.distance_mm, stats, cam.fx, catalog.diameters_mm, CFG)
 
 
-def test_a_bright_plates_level_is_found_and_i_t_sits_above_its_noise():
-    f = _bright_plate()
+@pytest.mark.parametrize("range_mm", [1500.0, 2000.0, 6000.0])
+def test_a_bright_plates_level_is_found_and_i_t_sits_above_its_noise(range_mm):
+    """At 1.5-2 m the plate's shading across it (incidence, 1 / d^2) spreads it by
+    3-4 shot-noise sigmas: still a surface (``SURFACE_MAX_RELATIVE_SPREAD``)."""
+    f = _bright_plate(T=facing_pose(range_mm, 8, -12, 15, (0.05 * range_mm, -0.03 * range_mm)))
     stats, level = _surface(f)
     # the plate's pixels clear of the markers' blur and mixed rims
     near_disc = binary_dilation(f.surface_id >= FIRST_DISC, iterations=3)
     plate = f.gray[(f.surface_id == PLATE) & ~near_disc].astype(float)
     assert level == pytest.approx(np.median(plate), rel=0.1)
     # the frame's background alone puts I_t inside the plate's noise
-    assert np.mean(plate >= stats.raw_threshold) > 0.05
+    assert np.mean(plate >= stats.raw_threshold) > 0.01
     raised = above_surface(stats, level, CFG)
     assert raised.surface_level == level
     assert np.mean(plate >= raised.raw_threshold) < 0.002
@@ -94,4 +97,4 @@ def test_on_a_bright_plate_the_eight_markers_are_found_and_the_pose_holds(seed):
     assert r.diagnostics.n_candidates == 8 and len(r.matched) == 8
     err = pose_error(r.R, r.t_mm, T_6M.R, T_6M.t_mm)
     assert np.degrees(np.linalg.norm(err[:3])) < 2.0
-    assert float(err @ np.linalg.solve(r.covariance, err)) < 20.06  # within 3 sigma (chi2_6)
+    assert mahalanobis2(err, r.covariance) < CHI2_6_3SIGMA
