@@ -14,8 +14,10 @@ range-bias prior for a sensor without systematic errors). Per seed and frame rat
 - latency: the poses stamped ``d`` late (a driver that stamps on arrival after a transfer
   and processing delay d), the reference the lab's (encoders and nominal geometry) at the
   stamps, as a dynamic campaign stores it; ``tofpose.lab.dynamics.fit_latency`` should find
-  ``d`` minus the exposure timing (the pose is the attitude at the middle of the four
-  phase sub-frames: 1.5 sub-frame periods and half an exposure after the frame's start);
+  ``d``: a frame's stamp is the middle of its four phase sub-frames (the simulator's
+  convention since 2026-12-08; before, it was the first sub-frame's start and the fit
+  read ``d`` less 1.5 sub-frame periods). What it finds beyond ``d`` on frames with
+  motion artefacts is their rate-proportional attitude bias read as a time offset;
 - cost: the filter's update, median and p95 over every frame, beside the pipeline's time
   on the same frames.
 

@@ -46,12 +46,13 @@ def main() -> None:
             m, p = med_p95(times)
             rows.append([label, f"{z / 1000:.1f} m", f"{m:.1f}", f"{p:.1f}", f"{1000 / m:.0f}"])
     # a slew: four phase sub-frames at their own poses (8 deg/s about the camera's y axis,
-    # 2 ms apart), each a full ray cast
+    # 2 ms apart, centred on the frame's stamp as ``SimulatedBench.subframe_poses`` takes
+    # them), each a full ray cast, and the pose at the stamp for the truth's surface map
     T = RigidTransform(rotation_from_euler_deg(2, -3, 10) @ R_FACING, np.array([0, -30, 3000.0]))
     subs = [
         RigidTransform(
-            rotation_from_euler_deg(0, 8.0 * 0.002 * k, 0) @ T.R,
-            rotation_from_euler_deg(0, 8.0 * 0.002 * k, 0) @ T.t_mm,
+            rotation_from_euler_deg(0, 8.0 * 0.002 * (k - 1.5), 0) @ T.R,
+            rotation_from_euler_deg(0, 8.0 * 0.002 * (k - 1.5), 0) @ T.t_mm,
         )
         for k in range(4)
     ]

@@ -64,7 +64,9 @@ class CameraFrame:
     """One frame pair.
 
     gray : (H, W) uint16 counts; distance_mm : (H, W) float32 radial distance, NaN invalid.
-    time_s : the device's capture time (monotonic within a stream).
+    time_s : the instant the frame's pose is of, the middle of its acquisition where the
+        driver knows it (the simulator: exactly; the TOFcam-660: from the acquisition
+        command and the integration time), in seconds (monotonic within a stream).
     index : running frame number of this driver.
     T_camera_target_exact : the pose that produced the frame (docs/architecture.md §3,
         "Truth"), known only to a simulator (what it rendered) or a recording's ``/truth``;

@@ -22,9 +22,11 @@ and speaks the protocol; this driver adds what a server needs around it:
   image's UDP packets (a 16-bit counter the camera advances per acquisition),
   unwrapped, so an image the camera took and the network lost shows as a gap; its
   ``time_s`` (the instant its pose is of) is that clock at the middle of the
-  acquisition's four exposures (``capture_ns`` + 2 integration times; the read-outs
-  between them are not in it), not the arrival, which is later by the camera's
-  processing and the transfer;
+  acquisition's four phase sub-frames (``capture_ns`` + 2 integration times + 1.5
+  ``SUBFRAME_READOUT_S``, the simulator's read-out, since the vendor documents none; the
+  command's way over the link is not in it), not the arrival, which is later by the
+  camera's processing and the transfer. The emulator renders at the command's
+  receipt, so on it the stamp is that much after the rendered pose;
 - time-outs of its own (the vendor client retries for up to half a minute) and
   reconnection: a command-link error drops the link, ``read`` raises ``CameraError`` and
   the next ``read`` reconnects after a back-off, while the server shows the camera
@@ -56,6 +58,9 @@ INTEGRATION_LIMITS_US = (1.0, 4000.0)
 INVALID_CODE_MIN = 64000
 SATURATION_CODES = (64002, 64003)  # ADC overflow, saturation
 SENSOR_SIZE = (320, 240)
+#: read-out after each of the four phase exposures, s: the simulator's model
+#: (``SensorModel.subframe_readout_us``); the vendor documents none
+SUBFRAME_READOUT_S = 1.5e-3
 COMMAND_PORT = 50660
 
 
@@ -334,9 +339,9 @@ class TofCam660Driver:
             return CameraFrame(
                 gray=gray,
                 distance_mm=dist,
-                # the pose's instant: the middle of the four phase exposures after the
-                # command went out (their read-outs between them are not known here)
-                time_s=capture_ns * 1e-9 + 2.0 * used_us * 1e-6,
+                # the pose's instant: the middle of the four phase sub-frames after the
+                # command went out (two exposures and one and a half read-outs)
+                time_s=capture_ns * 1e-9 + 2.0 * used_us * 1e-6 + 1.5 * SUBFRAME_READOUT_S,
                 index=self._index,
                 meta={
                     "integration_time_us": used_us,

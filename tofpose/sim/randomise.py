@@ -37,8 +37,9 @@ need the pose or a camera of their own:
   reflectors: each reflector's return 0.7-1.3 of the others' and the retro-reflector
   gain log-uniform over ``BRIGHT_PLATE_RETRO_GAIN`` (4-40 times a white diffuser, where
   the default is 40: lower grades of retro-reflective sheeting return a tenth of
-  prismatic sheeting's). The plate then reads within 2-20x of the markers, and the
-  exposure set by the markers lifts it well above the noise.
+  prismatic sheeting's). A face-on marker then reads retro gain x its gain /
+  reflectance times the plate, about 3-90x (where the defaults give ~400x), and the
+  exposure the markers set lifts the plate well above the noise.
 
 Used by the physics robustness study (``bench/physics.py``, all eleven) and by Monte-Carlo
 accuracy studies (``tofpose.study``: ``FAMILIES``, drawn by ``draw_physics``,
@@ -70,7 +71,8 @@ from tofpose.sim.systematic import SystematicErrors
 
 #: the families ``draw_physics`` draws (a study's and the API's)
 FAMILIES = ("ideal", "grey plate", "lens blur", "gains", "systematic", "background", "all")
-#: the families only ``draw_frame`` draws (they need the pose or their own camera)
+#: the families only ``draw_frame`` draws (they need the pose, their own camera, or a
+#: sensor knob a study's families keep: appended so that the study's draws stay)
 EXTRA_FAMILIES = ("saturating", "glints", "other sensor", "bright plate")
 ALL_FAMILIES = FAMILIES + EXTRA_FAMILIES
 ARM_PROBABILITY = 0.3  # share of background frames with an arm in front of the target

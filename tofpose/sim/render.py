@@ -447,7 +447,8 @@ def render_frame(
     moved = np.zeros_like(mixed)  # pixels whose surface changes between sub-frames
     if subframe_poses is not None:
         # the four phase samples see the scene at their own times (a slewing table); a
-        # sub-frame at the frame's own pose (the first, usually) is not rendered again
+        # sub-frame at the frame's own pose is not rendered again (with the stamp at the
+        # acquisition's middle none is: a slewing frame is five ray casts)
         subs = [
             static
             if _same_pose(T, T_camera_target)

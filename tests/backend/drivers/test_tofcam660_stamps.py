@@ -48,3 +48,24 @@ def test_capture_stamp_and_a_lost_image_as_a_counter_gap(emu):
     assert third.sequence == second.sequence + 2
     assert gaps.observe(third.sequence) == 1
     assert emu.camera.frames_sent == 4
+
+
+def test_time_s_is_the_middle_of_the_four_phase_sub_frames(emu):
+    """``time_s`` (the instant the pose is of) is the acquisition command's stamp plus
+    two integration times and one and a half sub-frame read-outs: the middle of the four
+    phase sub-frames, not the image's arrival; monotonic from frame to frame."""
+    from backend.drivers.tofcam660 import SUBFRAME_READOUT_S
+
+    drv = TofCam660Driver(ADDRESS, settings=FIXED, io_timeout_s=0.5)
+    try:
+        frames = [drv.read(2.0) for _ in range(3)]
+        arrived_s = time.monotonic()
+    finally:
+        drv.close()
+    for f in frames:
+        used_s = f.meta["integration_time_us"] * 1e-6
+        assert used_s == pytest.approx(300e-6)
+        assert f.capture_ns is not None
+        expected = f.capture_ns * 1e-9 + 2.0 * used_s + 1.5 * SUBFRAME_READOUT_S
+        assert f.time_s == pytest.approx(expected, abs=1e-9)
+    assert frames[0].time_s < frames[1].time_s < frames[2].time_s < arrived_s

@@ -240,10 +240,19 @@ def test_the_other_sensor_is_640_by_480_at_20_mhz_with_4x_the_counts():
 
 def test_bright_plate_frames_have_a_light_plate_and_weaker_reflectors_in_their_ranges():
     """``bright plate``: plate reflectance 0.6-0.95 and no wall, each reflector's gain
-    0.7-1.3, the retro-reflector gain within 4-40 (log-uniform: both ends drawn); the
-    plate then reads within 2-20x of a face-on marker, far above the noise."""
-    from tofpose.sim.randomise import draw_frame
-    from tofpose.sim.scene import FIRST_DISC, PLATE
+    0.7-1.3, the retro-reflector gain within 4-40 (log-uniform: both ends drawn). A
+    face-on marker's core then reads retro gain x its gain / reflectance times the
+    plate (to 20 %: the plate's pixels are not all face-on), which the family's ranges
+    put at 2.9-87x, and the plate sits far above the noise."""
+    from tests.conftest import facing_pose
+    from tofpose.sim.randomise import (
+        BRIGHT_PLATE_REFLECTANCE,
+        BRIGHT_PLATE_RETRO_GAIN,
+        bright_plate,
+        draw_frame,
+    )
+    from tofpose.sim.render import render_frame
+    from tofpose.sim.scene import FIRST_DISC, PLATE, TargetScene
 
     rng = np.random.default_rng(12)
     gains = []
@@ -255,13 +264,14 @@ def test_bright_plate_frames_have_a_light_plate_and_weaker_reflectors_in_their_r
         assert all(0.7 <= g <= 1.3 for g in d.scene.reflector_gains)
         gains.append(d.sensor.retro_gain)
     assert 4.0 <= min(gains) < 8.0 and 20.0 < max(gains) <= 40.0
-    from tests.conftest import facing_pose
-    from tofpose.sim.randomise import bright_plate
-    from tofpose.sim.render import render_frame
-    from tofpose.sim.scene import TargetScene
-
-    scene, sensor = bright_plate(TargetScene(CAT), SensorModel(noise=False), rng, len(CAT))
-    f = render_frame(CameraModel(), scene, facing_pose(3000.0), sensor)
-    plate = np.median(f.gray[f.surface_id == PLATE])
-    core = np.median(f.gray[f.surface_id == FIRST_DISC + 5])  # an 80 mm marker
-    assert 2.0 <= core / plate <= 20.0 * 1.3 / 0.6 and plate > 20.0
+    lo = BRIGHT_PLATE_RETRO_GAIN[0] * 0.7 / BRIGHT_PLATE_REFLECTANCE[1]
+    hi = BRIGHT_PLATE_RETRO_GAIN[1] * 1.3 / BRIGHT_PLATE_REFLECTANCE[0]
+    assert (round(lo, 1), round(hi)) == (2.9, 87)
+    for _ in range(4):
+        scene, sensor = bright_plate(TargetScene(CAT), SensorModel(noise=False), rng, len(CAT))
+        f = render_frame(CameraModel(), scene, facing_pose(3000.0), sensor)
+        plate = np.median(f.gray[f.surface_id == PLATE])
+        core = np.median(f.gray[f.surface_id == FIRST_DISC + 5])  # an 80 mm marker
+        model = sensor.retro_gain * scene.reflector_gains[5] / scene.plate_reflectance
+        assert core / plate == pytest.approx(model, rel=0.2)
+        assert plate > 20.0

@@ -61,9 +61,9 @@ def test_the_flipped_pose_of_faint_specks_at_8_m_is_not_reported():
     four of the candidates are noise specks and one true marker; they fit a rigid pose
     159 deg off with 0.2 deg sigmas, its 80 mm discs on specks 20x fainter per area
     than the 35 mm disc on the marker. Without the check (and without the thresholds
-    above the lit surface, ``extraction.surface``, which leave no specks to match) it
+    above the lit surface, ``extraction.surface``: the plate is lit on this frame) it
     is reported; with it the frame is refused, naming the two reflectors (a correct
-    pose would do too); with both, no wrong pose either."""
+    pose would do too); with both (the default), no wrong pose either."""
     cam, cat = CameraModel(), paper_target()
     rng = np.random.default_rng([0, FAMILIES.index("all"), 80])
     for _ in range(21):

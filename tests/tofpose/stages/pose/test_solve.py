@@ -53,7 +53,8 @@ def test_reported_sigmas_at_1_m_no_longer_carry_the_far_range_centroid_bias() ->
     seeds with them scaled by the discs' size) and at most 1.5. At 1 m the fit's own
     covariance is still ~2x the errors: what is left is the per-reflector floors'."""
     cam, cat = CameraModel(), paper_target()
-    pipe = PosePipeline(cam, cat, PipelineConfig(size_scaled_centroid_bias=True))
+    pipe = PosePipeline(cam, cat, PipelineConfig())
+    assert pipe.config.solve.size_scaled_centroid_bias
     rng = np.random.default_rng(5)
     z2 = []
     for _ in range(48):

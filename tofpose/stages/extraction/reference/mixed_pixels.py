@@ -205,7 +205,8 @@ def blob_mixing(
     C_unranged, n_support, d_sat, sigma_sat), NaN rows for an unknown surround; a crowded
     blob has NaN sums (a neighbour's light would bias them), and only when saturated
     its d_sat, sigma_sat (its rims read towards the plate whatever its neighbours, so its
-    bounded-coverage range is taken from the ring's median);
+    bounded-coverage range is taken, with the surround ring's median level and distance
+    as a_b and d_b);
     d_sat, sigma_sat as ``saturated_range`` of the blob's own ranged pixels (not the
     support's ring: beside a plate's edge it can be a wall metres behind), NaN unless a
     member reaches ``full_scale`` (counts).
@@ -251,16 +252,17 @@ def blob_mixing(
 
 
 def saturated_range(a, d, a_b, d_b, fs_a) -> tuple[float, float]:
-    """A saturated reflector's distance and its sigma (mm) from its ranged support
-    pixels, amplitudes ``a`` (k,) and distances ``d`` (k,) mm, the surround's amplitude
-    ``a_b`` and distance ``d_b`` and the full scale's amplitude ``fs_a`` (counts above
-    the no-return level). Each pixel with ``a >= SATURATED_MIN_CONTRAST max(a_b, 0)``
-    bounds it between d_r(0) and d_r(c_max), ``d_r(c) = (a d - (1 - c) a_b d_b) / (a -
-    (1 - c) a_b)``, ``c_max = clip((a - a_b) / (fs_a - a_b), 0, 1)`` (its coverage, A_r
-    >= full scale); the weighted median of the mid-points, weights 1 / half-width^2
-    (floor ``SATURATED_HALF_WIDTH_FLOOR_MM``; the first mid-point in ascending order
-    where the cumulative weight reaches half), and the sigma sqrt(hbar^2 / 3 + (1.4826
-    MAD)^2 / k), hbar the weighted mean half-width, MAD the mid-points' median absolute
+    """A saturated reflector's distance and its sigma (mm) from its own ranged pixels
+    (``blob_mixing`` passes the blob's members only), amplitudes ``a`` (k,) and
+    distances ``d`` (k,) mm, the surround's amplitude ``a_b`` and distance ``d_b``
+    and the full scale's amplitude ``fs_a`` (counts above the no-return level). Each
+    pixel with ``a >= SATURATED_MIN_CONTRAST max(a_b, 0)`` bounds it between d_r(0)
+    and d_r(c_max), ``d_r(c) = (a d - (1 - c) a_b d_b) / (a - (1 - c) a_b)``,
+    ``c_max = clip((a - a_b) / (fs_a - a_b), 0, 1)`` (its coverage, A_r >= full
+    scale); the weighted median of the mid-points, weights 1 / half-width^2 (floor
+    ``SATURATED_HALF_WIDTH_FLOOR_MM``; the first mid-point in ascending order where the
+    cumulative weight reaches half), and the sigma sqrt(hbar^2 / 3 + (1.4826 MAD)^2 /
+    k), hbar the weighted mean half-width, MAD the mid-points' median absolute
     deviation from that median. (NaN, NaN) when no pixel qualifies."""
     a_b = max(float(a_b), 0.0)
     use = (a > 0) & (a >= SATURATED_MIN_CONTRAST * a_b)

@@ -148,8 +148,8 @@ def test_a_marker_with_an_arm_across_its_edge_is_occluded_and_noise_is_not():
 def test_a_saturated_marker_at_the_plates_edge_reads_its_own_range_not_the_walls():
     """The physics study's ``saturating`` family at 3 m (a fixed exposure, the
     reflectors at 2-5x full scale), frame 3 of its draws with seed (5, 30): marker 8
-    sits at the plate's edge, so the ring around its blob is mostly the wall 3 m
-    behind, and the wall pixels beside the blob read the ring's own distance. Each such
+    sits at the plate's edge, so the ring around its blob is mostly the wall
+    behind the target, and the wall pixels beside the blob read the ring's own distance. Each such
     pixel bounded the reflector at the wall's distance with a narrow interval, and
     while every support pixel bounded it (before 2026-12-08) they won the weighted
     median: the marker read 2.8 m long (sigma 0.7 m). Only the blob's own ranged pixels
