@@ -90,6 +90,10 @@ class RecordingError(ValueError):
     """A recording that cannot be read: names the file and what is wrong."""
 
 
+#: what ``RecordingWriter(compression=...)`` accepts: HDF5's built-in deflate, or none
+COMPRESSIONS = ("gzip", None)
+
+
 class RecordingWriter:
     """Append frames to a new recording. Use as a context manager.
 
@@ -118,6 +122,12 @@ class RecordingWriter:
         with_lab_truth: bool = False,
         compression: str | None = "gzip",
     ) -> None:
+        if compression not in COMPRESSIONS:
+            # before the file is opened: a bad argument must not truncate a recording
+            raise ValueError(
+                f"compression must be one of {', '.join(map(repr, COMPRESSIONS))}, "
+                f"got {compression!r}"
+            )
         self.path = Path(path)
         self.camera = camera
         self._f = h5py.File(self.path, "w")

@@ -67,6 +67,22 @@ def test_images_are_stored_shuffled_and_deflated_with_filters_every_hdf5_library
         assert _filters(f["frames/gray"]) == [] == _filters(f["frames/distance_mm"])
 
 
+@pytest.mark.parametrize("compression", ["lzf", "GZIP", "zstd", ""])
+def test_an_unknown_compression_is_named_and_an_existing_recording_is_kept(tmp_path, compression):
+    """A compression the writer does not offer is refused by name before the file is
+    opened (it used to write the images uncompressed without a word), so a recording
+    already at that path keeps its frames."""
+    p = tmp_path / "r.h5"
+    frames = _write(p, n=2)
+    with pytest.raises(
+        ValueError, match=f"compression must be one of 'gzip', None, got '{compression}'"
+    ):
+        RecordingWriter(p, CameraModel(), compression=compression)
+    with open_recording(p) as rec:
+        assert rec.n_frames == 2
+        np.testing.assert_array_equal(rec.frame(1)[0], frames[1][0])
+
+
 def test_missing_dataset_is_named(tmp_path):
     p = tmp_path / "r.h5"
     _write(p)
