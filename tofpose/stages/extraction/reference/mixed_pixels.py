@@ -261,9 +261,10 @@ def saturated_range(a, d, a_b, d_b, fs_a) -> tuple[float, float]:
     ``c_max = clip((a - a_b) / (fs_a - a_b), 0, 1)`` (its coverage, A_r >= full
     scale); the weighted median of the mid-points, weights 1 / half-width^2 (floor
     ``SATURATED_HALF_WIDTH_FLOOR_MM``; the first mid-point in ascending order where the
-    cumulative weight reaches half), and the sigma sqrt(hbar^2 / 3 + (1.4826 MAD)^2 /
-    k), hbar the weighted mean half-width, MAD the mid-points' median absolute
-    deviation from that median. (NaN, NaN) when no pixel qualifies."""
+    cumulative weight reaches half), and the sigma sqrt(hbar^2 / 3 + (1.4826 MAD)^2)
+    (not over k: the pixels share one surround), hbar the weighted mean half-width,
+    MAD the mid-points' median absolute deviation from that median. (NaN, NaN) when
+    no pixel qualifies."""
     a_b = max(float(a_b), 0.0)
     use = (a > 0) & (a >= SATURATED_MIN_CONTRAST * a_b)
     if not (use.any() and fs_a > a_b):
@@ -281,7 +282,7 @@ def saturated_range(a, d, a_b, d_b, fs_a) -> tuple[float, float]:
     med = float(mid[order[min(at, len(mid) - 1)]])
     spread = 1.4826 * float(np.median(np.abs(mid - med)))
     hbar = float(np.sum(wt * half) / wt.sum())
-    return med, float(np.sqrt(hbar**2 / 3.0 + spread**2 / len(mid)))
+    return med, float(np.sqrt(hbar**2 / 3.0 + spread**2))
 
 
 def shift_mixing(row, shift_mm):
