@@ -5,7 +5,7 @@
 // where the server says a reflector's pixels reach full scale, with a warning under the
 // images), and rejected blobs with the gate that refused them. Each drawn frame is
 // acknowledged (flow control, see live.ts).
-import { useEffect, useRef, useState } from "preact/hooks";
+import { useEffect, useLayoutEffect, useRef, useState } from "preact/hooks";
 import type { Pose } from "../api/client";
 import type { Shown } from "../live";
 import { activePixels, distancePixels, grayPixels, grayTop, turboCss } from "../colormap";
@@ -51,7 +51,10 @@ function useImage(draw: (f: RawFrame, img: ImageData) => void, raw: RawFrame | u
 function Overlay({ shown, layers }: { shown: Shown | null; layers: Layers }) {
   const ref = useRef<HTMLCanvasElement>(null);
   const mask = useRef<HTMLCanvasElement | null>(null);
-  useEffect(() => {
+  // drawn in the same commit as the text beside it (the saturation warning): a deferred
+  // effect left a moment where the warning counted the new frame's saturated reflectors
+  // and the overlay still labelled the last frame's
+  useLayoutEffect(() => {
     const c = ref.current;
     if (!c || !shown) return;
     const { raw, pose } = shown;
