@@ -36,7 +36,7 @@ from tofpose.stages.extraction.extraction import (
     check_frame,
 )
 from tofpose.stages.extraction.saturation import blobs_at_full_scale
-from tofpose.stages.extraction.surface import above_surface, lit_surface_level
+from tofpose.stages.extraction.surface import thresholds_above_surface
 from tofpose.stages.extraction.uncertainty import (
     UNCALIBRATED_RANGE_SIGMA_MM,
     SigmaFloors,
@@ -97,7 +97,8 @@ class FrameDiagnostics:
     (``tofpose.stages.extraction.extraction.REJECT_REASONS``); active_threshold_counts : I_t as
     applied
     (after the N_max cap): the active pixel set A (§3.1.1) is exactly ``gray >=
-    active_threshold_counts``.
+    active_threshold_counts``; surface_level_counts : the lit surface's gray that I_t
+    was raised above (``stages.extraction.surface``), NaN where none was lit.
     """
 
     n_candidates: int = 0
@@ -105,6 +106,7 @@ class FrameDiagnostics:
     motion: bool = False
     rejected: tuple[RejectedBlob, ...] = ()
     active_threshold_counts: float = float("nan")
+    surface_level_counts: float = float("nan")
 
 
 #: the diagnostics of a frame refused before extraction
@@ -478,11 +480,9 @@ class PosePipeline:
             g, cfg.extraction, saturated_counts=self.camera.full_scale_counts
         )
         # thresholds above a lit plate or wall, not inside its noise
-        scale = self.camera.count_scale
-        surface = lit_surface_level(
-            g, d, stats, self.camera.fx, self._catalog_d, cfg.extraction, scale
+        stats = thresholds_above_surface(
+            stats, g, d, self.camera.fx, self._catalog_d, cfg.extraction, self.camera.count_scale
         )
-        stats = above_surface(stats, surface, cfg.extraction, scale)
         timer.lap("levels")
 
         def fail(reason: str, unmatched=(), diagnostics=NO_DIAGNOSTICS) -> PoseResult:
@@ -520,6 +520,7 @@ class PosePipeline:
             motion=pinfo.motion,
             rejected=tuple(found.rejected),
             active_threshold_counts=stats.raw_threshold,
+            surface_level_counts=stats.surface_level,
         )
         if len(meas.range_mm) < cfg.matching.min_matches:
             return fail(

@@ -125,17 +125,37 @@ def lit_surface_level(
     return level
 
 
+def applies(config: ExtractionConfig) -> bool:
+    """The rule is on: ``surface_threshold`` set and the thresholds relative (not the
+    paper preset's absolute ones)."""
+    return config.surface_threshold and config.raw_threshold_abs is None
+
+
+def thresholds_above_surface(
+    stats: FrameStats,
+    gray: np.ndarray,
+    distance_mm: np.ndarray,
+    fx_px: float,
+    diameters_mm: np.ndarray,
+    config: ExtractionConfig,
+    count_scale: float = 1.0,
+) -> FrameStats:
+    """The frame's levels ``stats`` with I_t and I_peak above its lit surface, if one is
+    lit (``lit_surface_level`` then ``above_surface``; arguments as theirs); the frame is
+    not read when the rule is off (``applies``)."""
+    if not applies(config):
+        return stats
+    level = lit_surface_level(gray, distance_mm, stats, fx_px, diameters_mm, config, count_scale)
+    return above_surface(stats, level, config, count_scale)
+
+
 def above_surface(
     stats: FrameStats, level: float, config: ExtractionConfig, count_scale: float = 1.0
 ) -> FrameStats:
     """``stats`` with I_t and I_peak raised above a lit surface of gray ``level``
     (module docstring); unchanged when ``level`` is NaN or the thresholds are the paper
     preset's absolute ones or ``config.surface_threshold`` is off."""
-    if (
-        not math.isfinite(level)
-        or not config.surface_threshold
-        or config.raw_threshold_abs is not None
-    ):
+    if not (math.isfinite(level) and applies(config)):
         return stats
     contrast = stats.i_max - level
     i_t = max(

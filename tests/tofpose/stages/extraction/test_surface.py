@@ -95,6 +95,10 @@ def test_on_a_bright_plate_the_eight_markers_are_found_and_the_pose_holds(seed):
     r = PosePipeline(cam, CAT).process(f.gray, f.distance_mm)
     assert r.ok, r.reason
     assert r.diagnostics.n_candidates == 8 and len(r.matched) == 8
+    # the diagnostics say the rule fired, and at what level; off, that it did not
+    assert np.isfinite(r.diagnostics.surface_level_counts)
+    assert r.diagnostics.active_threshold_counts > r.diagnostics.surface_level_counts
+    assert np.isnan(speckle.diagnostics.surface_level_counts)
     err = pose_error(r.R, r.t_mm, T_6M.R, T_6M.t_mm)
     assert np.degrees(np.linalg.norm(err[:3])) < 2.0
     assert mahalanobis2(err, r.covariance) < CHI2_6_3SIGMA
