@@ -149,6 +149,7 @@ def reprocess_run(rec: Path, workers: int, tracking: bool, chunk_frames: int) ->
         "first_progress_s": start_s + run["first_progress_s"],
         "twice": sum(n - 1 for n in ran.values()) + run["chunks_run_again"],
         "chunks": s["recordings"][0]["chunks"],
+        "read_ahead": run["read_ahead"],
     }
 
 

@@ -118,7 +118,11 @@ def _write_atomic(path: Path, data: bytes) -> None:
 
 
 def run_chunk(
-    chunk: Chunk, settings: Settings, out_dir: str, progress_topic: str | None = None
+    chunk: Chunk,
+    settings: Settings,
+    out_dir: str,
+    progress_topic: str | None = None,
+    read_ahead: bool | None = None,
 ) -> dict:
     """The task: run frames [origin, stop), write the rows of [start, stop) as
     ``chunks/<name>.csv`` (no header) and their raw poses as ``chunks/<name>.npz``
@@ -127,7 +131,10 @@ def run_chunk(
     first of them, "ok", "seconds", "cpu_s" (its thread's CPU time)} (digests as hex
     strings).
     ``progress_topic``: the run's event topic, on which the frames output so far are
-    reported while it runs (``tofpose.batch.worker.ProgressReporter``)."""
+    reported while it runs (``tofpose.batch.worker.ProgressReporter``).
+    ``read_ahead``: read the next block in a thread (``Recording.blocks``; None: when
+    this process may use more than one core); the client passes
+    ``ClusterSession.read_ahead``, false where workers share the cores."""
     from tofpose.core.threads import single_threaded_blas
     from tofpose.io.camera_file import pipeline_for
 
@@ -155,7 +162,9 @@ def run_chunk(
             settings.tracking,
             moving=settings.moving,
         )
-        for first, (grays, dists, ts) in rec.blocks(chunk.origin, chunk.stop):
+        for first, (grays, dists, ts) in rec.blocks(
+            chunk.origin, chunk.stop, read_ahead=read_ahead
+        ):
             for k, tk in enumerate(ts.tolist()):
                 i = first + k
                 r = pipe.process(grays[k], dists[k], tk)
@@ -288,6 +297,7 @@ def reprocess(
                     settings,
                     str(out),
                     live.topic,
+                    cluster.read_ahead,
                     key=f"tofpose-reprocess-{run_id}-{c.name}",
                 ): c
                 for cs in chunks.values()
@@ -334,6 +344,8 @@ def reprocess(
                     again,
                     settings,
                     str(out),
+                    None,
+                    cluster.read_ahead,
                     key=f"tofpose-reprocess-{run_id}-{cur.name}-again",
                 ).result()
                 cs[j] = again
@@ -373,6 +385,8 @@ def reprocess(
         "workers": n_workers,
         "cluster": scheduler or f"LocalCluster({n_workers})",
         "warnings": list(cluster.warnings),
+        # whether each chunk read its next block in a thread of its own
+        "read_ahead": cluster.read_ahead,
         "frames": total,
         "wall_s": wall_s,
         # 0 on a cluster the caller opened

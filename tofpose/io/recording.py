@@ -425,15 +425,25 @@ class Recording:
 
     def block_spans(self, start: int = 0, stop: int | None = None) -> list[tuple[int, int]]:
         """The [a, b) spans ``blocks`` reads over [start, stop): aligned to the file's
-        chunks (``frames_per_chunk``), at least ``BLOCK_MIN_FRAMES`` frames each."""
+        chunks (``frames_per_chunk``); the first one chunk, each next one twice as long
+        until the next multiple of ``BLOCK_MIN_FRAMES`` frames (rounded up to whole
+        chunks) is at most two of them away, then from multiple to multiple. The ramp
+        lets the caller start on the first frames while the reader thread reads the
+        next ones: a whole first block read before any work cost each re-processed
+        chunk ~6 % of its time."""
         stop = self.n_frames if stop is None else stop
         per_chunk = self.frames_per_chunk
         step = per_chunk * max(1, -(-BLOCK_MIN_FRAMES // per_chunk))
-        spans, a = [], start
+        spans, a, size, ramp = [], start, per_chunk, True
         while a < stop:
-            b = min(stop, (a // step + 1) * step)
-            spans.append((a, b))
-            a = b
+            edge = (a // step + 1) * step
+            if ramp and edge - a > 2 * size:  # the ramp: whole chunks, doubling
+                b = a // per_chunk * per_chunk + size
+                size *= 2
+            else:  # to the next edge (the ramp's last read too)
+                b, ramp = edge, False
+            spans.append((a, min(stop, b)))
+            a = min(stop, b)
         return spans
 
     def blocks(

@@ -93,6 +93,8 @@ def test_two_workers_reproduce_estimate_byte_for_byte(recordings, tmp_path, trac
     for r in recordings:
         assert (out / f"{r.stem}.csv").read_bytes() == serial[r.stem]
     assert s["run"]["workers"] == 2
+    # two workers read ahead only on a host with a core to spare for each reader
+    assert s["run"]["read_ahead"] == (len(os.sched_getaffinity(0)) >= 4)
     rec = {r["csv"]: r for r in s["recordings"]}
     assert rec["sweep.csv"]["chunks"] == 5 and len(rec["sweep.csv"]["boundaries"]) == 4
     assert json.loads((out / "reprocess.json").read_text())["filter"] is True

@@ -15,7 +15,12 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from tofpose.batch.cluster import ClusterWarning, open_cluster, oversubscription_warnings
+from tofpose.batch.cluster import (
+    ClusterWarning,
+    open_cluster,
+    oversubscription_warnings,
+    spare_core_per_thread,
+)
 from tofpose.batch.reprocess import Settings, plan, reprocess
 from tofpose.cli import main
 from tofpose.core.camera import CameraModel
@@ -181,6 +186,17 @@ def test_more_workers_than_cores_is_said_per_host():
     assert oversubscription_warnings(infos[:2]) == []
 
 
+def test_tasks_read_ahead_only_where_every_worker_thread_has_a_core_to_spare():
+    one_of_two = [{"host": "a", "cores": 2, "threads": 1}]
+    assert spare_core_per_thread(one_of_two)
+    assert not spare_core_per_thread(one_of_two * 2)  # two workers share two cores
+    assert not spare_core_per_thread([{"host": "a", "cores": 4, "threads": 3}])
+    mixed = [{"host": "a", "cores": 4, "threads": 2}, {"host": "b", "cores": 2, "threads": 2}]
+    assert not spare_core_per_thread(mixed)  # host b has none to spare
+    assert spare_core_per_thread(mixed[:1])
+    assert not spare_core_per_thread([])
+
+
 def test_a_local_cluster_of_more_workers_than_cores_warns_and_its_workers_are_set_up():
     import os
 
@@ -190,6 +206,7 @@ def test_a_local_cluster_of_more_workers_than_cores_warns_and_its_workers_are_se
     with said, open_cluster(workers=cores + 1) as session:
         env = session.client.run(lambda: {k: os.environ.get(k) for k in names})
         assert len(session.warnings) == 1 and session.workers == cores + 1
+        assert not session.read_ahead
         assert session.dashboard_url is not None
         assert session.dashboard_url.startswith("http://127.0.0.1:")
     expected = {"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}

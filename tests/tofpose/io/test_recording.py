@@ -234,7 +234,8 @@ def test_blocks_read_what_frames_read_in_aligned_reads(tmp_path):
                 np.testing.assert_array_equal(g[k], frames[first + k][0])
                 np.testing.assert_array_equal(d[k], frames[first + k][1])
                 assert t[k] == rec.time_s[first + k]
-        assert spans == [(5, 32), (32, 40)]  # reads end on multiples of 32 frames
+        # a ramp of reads (1, 2, 4, 8 frames), then reads end on multiples of 32 frames
+        assert spans == [(5, 6), (6, 8), (8, 12), (12, 20), (20, 32), (32, 40)]
         with pytest.raises(IndexError, match="frames 30..41"):
             rec.block(30, 41)
 
@@ -402,11 +403,13 @@ def test_block_spans_follow_the_files_chunks(tmp_path):
     p = tmp_path / "r.h5"
     frames = _write_many(p, 45)
     with open_recording(p) as rec:
-        assert rec.block_spans(5, 45) == [(5, 32), (32, 45)]
+        # one frame, then twice as many each read up to 32 frames, then on 32-frame edges
+        assert rec.block_spans(5, 45) == [(5, 6), (6, 8), (8, 12), (12, 20), (20, 32), (32, 45)]
+        assert rec.block_spans(0, 45) == [(0, 1), (1, 3), (3, 7), (7, 15), (15, 32), (32, 45)]
     _restore(p, frames, LAYOUTS["several frames a chunk, tiled"])
     with open_recording(p) as rec:  # 6 frames a chunk: reads of 36 frames, on chunk edges
         assert rec.frames_per_chunk == 6
-        assert rec.block_spans(5, 45) == [(5, 36), (36, 45)]
+        assert rec.block_spans(5, 45) == [(5, 6), (6, 18), (18, 36), (36, 45)]
 
 
 def _reader_threads():
@@ -448,7 +451,7 @@ def test_closing_the_recording_stops_its_reader_thread(tmp_path):
     assert first == 0 and rec.reading_ahead
     rec.close()
     assert not rec.reading_ahead and not _reader_threads()
-    with pytest.raises(RecordingError, match="closed before frame 32 was read"):
+    with pytest.raises(RecordingError, match="closed before frame 1 was read"):
         next(blocks)
 
 
@@ -471,7 +474,8 @@ def test_an_unreadable_chunk_is_an_error_naming_its_frame(tmp_path, read_ahead):
         with pytest.raises(RecordingError, match=rf"{p.name}: frame 40 cannot be read"):
             for first, _ in rec.blocks(read_ahead=read_ahead):
                 seen.append(first)
-        assert seen == [0]  # the frames before the bad block came through
+        # the frames before the bad block (frames 32-63) came through
+        assert seen == [0, 1, 3, 7, 15]
         with pytest.raises(RecordingError, match="frame 40 cannot be read"):
             rec.frame(40)
         assert not _reader_threads()

@@ -10,6 +10,7 @@ combined, and a moving scene degrades gracefully to single-frame measurement.
 
 from __future__ import annotations
 
+import hashlib
 from collections import deque
 from dataclasses import dataclass
 
@@ -30,6 +31,21 @@ class _Entry:
     mask: np.ndarray  # (H * W,) bool, candidate-blob pixels
     gray: np.ndarray  # (H, W) float32
     distance: np.ndarray  # (H, W) float32
+    digest: bytes | None = None  # of the four arrays, once asked for (``update_digest``)
+
+    def content_digest(self) -> bytes:
+        """SHA-256 of the entry's arrays (shapes and bytes), computed once: an entry is
+        never changed after it enters the history, and the digest of a pipeline's state
+        is asked for on every frame of a re-processed chunk's warm-up, where each entry
+        stays for K - 1 frames (SHA-256 runs at twice blake2b's speed on CPUs with SHA
+        instructions; ~0.3 ms for a 320 x 240 entry)."""
+        if self.digest is None:
+            h = hashlib.sha256()
+            for a in (self.centroids, self.mask, self.gray, self.distance):
+                h.update(str(a.shape).encode())
+                h.update(np.ascontiguousarray(a).tobytes())
+            self.digest = h.digest()
+        return self.digest
 
 
 @dataclass
@@ -80,13 +96,11 @@ class Persistence:
         self._newest_first = None
 
     def update_digest(self, h) -> None:
-        """Feed the history (every entry's arrays, oldest first) into the hashlib object
-        ``h`` (``PosePipeline.state_digest``)."""
+        """Feed the history (every entry's digest of its arrays, oldest first) into the
+        hashlib object ``h`` (``PosePipeline.state_digest``)."""
         h.update(len(self._history).to_bytes(2, "little"))
         for e in self._history:
-            for a in (e.centroids, e.mask, e.gray, e.distance):
-                h.update(str(a.shape).encode())
-                h.update(np.ascontiguousarray(a).tobytes())
+            h.update(e.content_digest())
 
     def snapshot(self) -> list:
         """The history as it is (for ``restore``: a pass that is abandoned after ``apply``
