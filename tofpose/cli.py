@@ -77,8 +77,15 @@ def _add_measurement_commands(sub) -> None:
         "--filter",
         action="store_true",
         help="add the relative-state filter's angular rate and velocity with "
-        "their 1-sigma (rate_*, vel_*, sigma_rate_*, sigma_vel_*); each pose is then "
+        "their 1-sigma (rate_*, vel_*, sigma_rate_*, sigma_vel_*), each frame's from all "
+        "the recording's poses (a smoother: no start-up, no lag); each pose is then "
         "measured on its own frame (frames combined over time lag a moving target)",
+    )
+    p.add_argument(
+        "--causal",
+        action="store_true",
+        help="with --filter: each frame's state from the poses up to it only, as the live "
+        "loop has it (it starts with the rate unknown and lags a changing rate)",
     )
     p.add_argument(
         "--pixel-fit",
@@ -269,6 +276,11 @@ def _add_batch_commands(sub) -> None:
         help="add the relative-state filter's columns (poses from single frames, as "
         "estimate --filter)",
     )
+    p.add_argument(
+        "--causal",
+        action="store_true",
+        help="with --filter: each frame's state from the poses up to it (estimate --causal)",
+    )
     p.add_argument("--chunk-frames", type=int, default=512, help="frames per task (default 512)")
     _cluster_arguments(p)
     p = sub.add_parser(
@@ -343,6 +355,7 @@ def _run_library(args: argparse.Namespace) -> int:
             tracking=args.tracking,
             filter_state=args.filter,
             pixel_fit=args.pixel_fit,
+            causal_filter=args.causal,
         )
         print(f"{s['ok']}/{s['frames']} frames with a pose -> {args.out}")
     elif args.cmd == "export":

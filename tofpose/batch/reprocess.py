@@ -44,8 +44,9 @@ from tqdm import tqdm
 from tofpose.batch.cluster import ClusterSession, session_or_open
 from tofpose.batch.progress import RunProgress
 from tofpose.batch.worker import ProgressReporter
-from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
+from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_rows, pose_row
 from tofpose.io.recording import open_recording
+from tofpose.lab.smoothing import PoseOrNone
 
 DEFAULT_CHUNK_FRAMES = 512
 POLL_S = 0.1
@@ -222,6 +223,7 @@ def reprocess(
     workers: int | None = None,
     scheduler: str | None = None,
     filter_state: bool = False,
+    causal_filter: bool = False,
     chunk_frames: int = DEFAULT_CHUNK_FRAMES,
     progress: bool = True,
     should_stop=None,
@@ -240,7 +242,9 @@ def reprocess(
     server runs two passes of a job on one); else one is opened from ``workers`` /
     ``scheduler`` (``tofpose.batch.cluster.open_cluster``) and closed at the end.
     ``on_progress(frames_done, frames)``: called as running chunks report their frames
-    (``tofpose.batch.progress``), not only at a chunk's end."""
+    (``tofpose.batch.progress``), not only at a chunk's end. ``filter_state``,
+    ``causal_filter``: as ``tofpose estimate``'s (the filter runs once over every
+    chunk's poses, on the client)."""
     from dask.distributed import TimeoutError as DaskTimeout
     from dask.distributed import wait
 
@@ -364,12 +368,14 @@ def reprocess(
         "finished": _now(),
         "settings": asdict(settings),
         "filter": filter_state,
+        # with the filter: its state from the poses up to each frame, not from all
+        "causal_filter": causal_filter,
         "chunk_frames": chunk_frames,
         "recordings": summary_recordings,
     }
     for path, cs in chunks.items():
         csv_path = out / f"{Path(path).stem}.csv"
-        n_ok = _concatenate(cs, out, csv_path, filter_state)
+        n_ok = _concatenate(cs, out, csv_path, filter_state, causal_filter)
         summary_recordings.append(
             {
                 "path": str(path),
@@ -407,25 +413,34 @@ def reprocess(
     return summary
 
 
-def _concatenate(cs: list[Chunk], out: Path, csv_path: Path, filter_state: bool) -> int:
-    """Write one recording's CSV from its chunks, in order; returns its poses."""
-    from tofpose.lab.motion_models import TwoModelRelativeState
-
-    rel = TwoModelRelativeState() if filter_state else None  # as estimate --filter
+def _concatenate(
+    cs: list[Chunk], out: Path, csv_path: Path, filter_state: bool, causal_filter: bool = False
+) -> int:
+    """Write one recording's CSV from its chunks, in order; returns its poses. With
+    ``filter_state`` the filter's columns over all of them (``pose_csv.filter_rows``, as
+    estimate --filter)."""
     n_ok = 0
     tmp = csv_path.with_name(f".{csv_path.name}.tmp")
+    rows: list[list] = []
+    times: list[float] = []
+    poses: list[PoseOrNone] = []
     with open(tmp, "w", newline="") as fh:
         wr = csv.writer(fh)
-        wr.writerow(CSV_COLUMNS + (FILTER_COLUMNS if rel else ()))
+        wr.writerow(CSV_COLUMNS + (FILTER_COLUMNS if filter_state else ()))
         for c in cs:
             text = (out / "chunks" / f"{c.name}.csv").read_bytes().decode()  # keeps \r\n
             raw = np.load(out / "chunks" / f"{c.name}.npz")
             n_ok += int(raw["ok"].sum())
-            if rel is None:
+            if not filter_state:
                 fh.write(text)
                 continue
             for k, row in enumerate(csv.reader(io.StringIO(text))):
-                pose = (raw["R"][k], raw["t_mm"][k], raw["covariance"][k]) if raw["ok"][k] else ()
-                wr.writerow(row + filter_row(rel, float(raw["time_s"][k]), *pose))
+                rows.append(row)
+                times.append(float(raw["time_s"][k]))
+                ok = raw["ok"][k]
+                poses.append((raw["R"][k], raw["t_mm"][k], raw["covariance"][k]) if ok else None)
+        if filter_state:
+            cells = filter_rows(times, poses, causal_filter)
+            wr.writerows(row + c for row, c in zip(rows, cells, strict=True))
     os.replace(tmp, csv_path)
     return n_ok

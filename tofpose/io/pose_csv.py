@@ -5,10 +5,12 @@ the serial command's byte for byte."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
-from tofpose.lab.motion_models import TwoModelRelativeState
-from tofpose.lab.relative_state import STATE_COLUMNS, RelativeStateFilter
+from tofpose.lab.relative_state import STATE_COLUMNS, RelativeState
+from tofpose.lab.smoothing import PoseOrNone, relative_states
 
 CSV_COLUMNS = (
     "frame",
@@ -57,17 +59,8 @@ def pose_row(frame: int, time_s: float, r) -> list:
     return row
 
 
-def filter_row(
-    rel: RelativeStateFilter | TwoModelRelativeState,
-    time_s: float,
-    R=None,
-    t_mm=None,
-    covariance=None,
-) -> list:
-    """``FILTER_COLUMNS`` of one frame: its pose (R (3, 3), t (3,) mm, covariance (6, 6))
-    fused (or rejected), or without one (None) the state predicted to the frame's time;
-    empty before the filter's first pose."""
-    s = rel.step(time_s, R, t_mm, covariance)
+def state_cells(s: RelativeState | None) -> list:
+    """``FILTER_COLUMNS`` of one frame's relative state (empty without one)."""
     if s is None:
         return [""] * len(FILTER_COLUMNS)
     return (
@@ -77,3 +70,13 @@ def filter_row(
         + [f"{v:.3f}" for v in s.velocity_sigma_mm_s]
         + [s.status]
     )
+
+
+def filter_rows(
+    time_s: Sequence[float], poses: Sequence[PoseOrNone], causal: bool = False
+) -> list[list]:
+    """``FILTER_COLUMNS`` of every frame of a recording (``tofpose.lab.smoothing
+    .relative_states``: smoothed over all the poses, or ``causal`` the filter's state
+    from the poses up to each frame); time_s (n,), poses n items of (R (3, 3), t_mm
+    (3,), covariance (6, 6)) or None."""
+    return [state_cells(s) for s in relative_states(time_s, poses, causal)]

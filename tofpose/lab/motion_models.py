@@ -61,6 +61,20 @@ class TwoModelRelativeState:
     def selected(self) -> int:
         return int(np.argmax(self.probabilities))
 
+    @property
+    def initialised(self) -> bool:
+        """Whether both models have a state (after the first pose)."""
+        return all(f.initialised for f in self._filters)
+
+    def state_at(self, time_s: float) -> RelativeState:
+        """The combined state predicted to ``time_s`` (>= the last step's time), the
+        filters left as they are: each model's prediction, with the probabilities one
+        switch ahead (``combined``)."""
+        p = self.stay_probability
+        mu = np.array([[p, 1.0 - p], [1.0 - p, p]]).T @ self.probabilities
+        states = [f.state_at(time_s) for f in self._filters]
+        return combined(states, mu, int(np.argmax(mu)))
+
     def reset(self) -> None:
         for f in self._filters:
             f.reset()

@@ -63,6 +63,7 @@ def reprocess(args) -> int:
             workers=args.workers,
             scheduler=args.scheduler,
             filter_state=args.filter,
+            causal_filter=args.causal,
             chunk_frames=args.chunk_frames,
         )
     except (RecordingError, ReprocessError, ClusterError) as exc:

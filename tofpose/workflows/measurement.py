@@ -18,9 +18,9 @@ from tofpose.config import config_for_camera
 from tofpose.core.geometry import RigidTransform
 from tofpose.core.tof import unambiguous_range_mm
 from tofpose.io.camera_file import load_camera, pipeline_for, read_camera_text
-from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_row, pose_row
+from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_rows, pose_row
 from tofpose.io.recording import Recording, open_recording
-from tofpose.lab.motion_models import TwoModelRelativeState
+from tofpose.lab.smoothing import PoseOrNone
 from tofpose.pipeline import PipelineConfig, PosePipeline
 from tofpose.sim.pixel_truth import true_pixel_distances
 
@@ -156,13 +156,17 @@ def estimate(
     tracking: bool = False,
     filter_state: bool = False,
     pixel_fit: bool = False,
+    causal_filter: bool = False,
 ) -> dict[str, float]:
     """Run the pipeline over a recording and write the CSV; returns summary numbers.
     ``tracking``: the pipeline's tracking mode (faster on a continuous recording);
     ``filter_state``: run the relative-state filter over the poses and add
-    ``FILTER_COLUMNS`` (empty until its first pose), each pose measured on its own frame
-    (``pipeline_for``'s ``moving``); ``pixel_fit``: refine each pose on
-    the markers' pixels (``PipelineConfig.pixel_fit``)."""
+    ``FILTER_COLUMNS``, each pose measured on its own frame (``pipeline_for``'s
+    ``moving``): the state at each frame from all the recording's poses
+    (``tofpose.lab.smoothing``; the rows are held until the last frame), or with
+    ``causal_filter`` from the poses up to it, as the live loop has it (empty until its
+    first pose); ``pixel_fit``: refine each pose on the markers' pixels
+    (``PipelineConfig.pixel_fit``)."""
     with open_recording(rec_path) as rec:
         pipe = pipeline_for(
             rec,
@@ -174,11 +178,12 @@ def estimate(
             moving=filter_state,  # a filter follows a motion: poses from single frames
         )
         n_ok = 0
-        # both motion models, the state from the one the poses favour (lab.motion_models)
-        rel = TwoModelRelativeState() if filter_state else None
+        rows: list[list] = []  # with the filter: held for its pass over every pose
+        times: list[float] = []
+        poses: list[PoseOrNone] = []
         with open(out_csv, "w", newline="") as fh:
             wr = csv.writer(fh)
-            wr.writerow(CSV_COLUMNS + (FILTER_COLUMNS if rel else ()))
+            wr.writerow(CSV_COLUMNS + (FILTER_COLUMNS if filter_state else ()))
             bar = tqdm(
                 total=rec.n_frames,
                 desc="estimate",
@@ -186,14 +191,24 @@ def estimate(
                 disable=not progress,
                 file=sys.stderr,
             )
-            for first, (grays, dists, times) in rec.blocks():  # reads aligned to the chunks
-                for k, t in enumerate(times.tolist()):
+            for first, (grays, dists, block_times) in rec.blocks():  # aligned to the chunks
+                for k, t in enumerate(block_times.tolist()):
                     r = pipe.process(grays[k], dists[k], t)
                     n_ok += int(r.ok)
                     row = pose_row(first + k, t, r)
-                    if rel is not None:
-                        row += filter_row(rel, t, *((r.R, r.t_mm, r.covariance) if r.ok else ()))
-                    wr.writerow(row)
-                bar.update(len(times))
+                    if not filter_state:
+                        wr.writerow(row)
+                        continue
+                    rows.append(row)
+                    times.append(t)
+                    R, t_mm, cov = r.R, r.t_mm, r.covariance
+                    if r.ok and R is not None and t_mm is not None and cov is not None:
+                        poses.append((R, t_mm, cov))
+                    else:
+                        poses.append(None)
+                bar.update(len(block_times))
             bar.close()
+            if filter_state:
+                cells = filter_rows(times, poses, causal_filter)
+                wr.writerows(row + c for row, c in zip(rows, cells, strict=True))
         return {"frames": rec.n_frames, "ok": n_ok}
