@@ -288,7 +288,11 @@ class CampaignService:
                     reason="STOP pressed before it started (resume it to release STOP and run it)",
                 )
                 return False
+            # the motion system first: once the campaign reads "running" (to a person, or
+            # to a client that polls it), no one else's command reaches the driver
+            self.motion.claim(campaign.id, campaign.name)
             if not self.repository.set_status(campaign.id, CampaignState.RUNNING):
+                self.motion.release(campaign.id)
                 log.info(
                     "campaign %d was not run: %s since the scheduler picked it",
                     campaign.id,
@@ -308,7 +312,6 @@ class CampaignService:
                 campaign.frames_per_point,
                 time.monotonic(),
             )
-            self.motion.claim(campaign.id, campaign.name)
         self._bump()
         return True
 

@@ -323,6 +323,30 @@ def test_a_running_campaign_owns_the_turntable_and_stop_pauses_it(fast_client):
     assert r.status_code == 409 and "cancelled" in r.json()["detail"]
 
 
+def test_a_campaign_holds_the_motion_system_before_it_reads_running(client):
+    """The runner claims the turntable before it stores ``running``: a person who sees
+    the campaign running (and the test above polls for just that) can never slip a move
+    in between. Checked at the moment the status is stored, not by timing."""
+    svc = client.app.state.tofpose.campaigns
+    seen = []
+    store = svc.repository.set_status
+
+    def set_status(campaign_id, state, *args, **kwargs):
+        if state == "running":
+            owner = svc.motion.owner
+            seen.append(None if owner is None else owner.campaign_id)
+        return store(campaign_id, state, *args, **kwargs)
+
+    svc.repository.set_status = set_status
+    far = "2099-01-01T00:00:00+00:00"  # queued, never due: the runner is called below
+    cid = client.post("/api/campaigns", json={**GRID, "name": "order"}, headers=AUTH).json()["id"]
+    client.post(f"/api/campaigns/{cid}/start", json={"at": far}, headers=AUTH)
+    svc._run(cid)
+    assert seen == [cid]
+    assert client.get(f"/api/campaigns/{cid}").json()["status"] == "done"
+    assert svc.motion.owner is None  # given back at the end
+
+
 def test_a_campaign_paused_or_cancelled_after_the_scheduler_picked_it_never_runs(client):
     """The runner claims a campaign only if it is still queued, under the lock the
     commands take: a pause or cancel that lands between the scheduler's pick and the
