@@ -54,12 +54,14 @@ class SimWorld:
         inverse): how a frame's render time becomes its capture stamp."""
         return int(round((self._t0 + lab_time_s / self.time_scale) * 1e9))
 
-    def capture(self):
-        """Render the scene as the turntable stands now; returns (time_s, frame, T_lab,
-        T_true, encoders): the lab's reference (encoders + nominal geometry) and the exact
-        pose rendered, both ``T_camera_target``."""
+    def capture(self, ahead_s: float = 0.0):
+        """Render the scene as the turntable stands ``ahead_s`` (real seconds) from now:
+        the middle of an acquisition that starts now (an emulated camera's command) is
+        that far ahead; returns (time_s, frame, T_lab, T_true, encoders): the lab time
+        rendered, the lab's reference (encoders + nominal geometry) and the exact pose
+        rendered, both ``T_camera_target``."""
         with self._lock:  # the turntable state; rendering happens outside the lock
-            t = self.now_s()
+            t = self.now_s() + ahead_s * self.time_scale
             T_true, T_lab, enc = self.bench.poses_at(t)
             subframes = self.bench.subframe_poses(t, T_true)
             sensor = self.bench.sensor

@@ -171,6 +171,8 @@ class TofCam660Camera:
         self.state = CameraState()
         self._lock = threading.Lock()
         self.frames_sent = 0
+        #: (lab time the last image command arrived, lab time its frame shows)
+        self.last_capture_lab_s: tuple[float, float] | None = None
         self._apply_sensor()
 
     def _apply_sensor(self) -> None:
@@ -269,12 +271,25 @@ class TofCam660Camera:
         return bytes([NAK]), None
 
     def _capture(self, data_type: int) -> bytes:
-        _, frame, *_ = self.world.capture()
+        # the camera's four phase sub-frames start now; the frame is the scene at their
+        # exposures' middle, two integration times and 1.5 read-outs on, the instant the
+        # driver stamps (``backend.drivers.tofcam660``): rendered at the command's
+        # receipt, the pose was that much older than its stamp (~3-10 ms)
+        ahead_s = self.acquisition_middle_s()
+        received = self.world.now_s()
+        rendered, frame, *_ = self.world.capture(ahead_s)
+        self.last_capture_lab_s = (received, rendered)
         left, top, right, bottom = self.state.roi
         crop = np.s_[top:bottom, left:right]
         self.state.measurement_id += 1
         self.frames_sent += 1
         return encode_frame(data_type, frame.distance_mm[crop], frame.gray[crop], self.state)
+
+    def acquisition_middle_s(self) -> float:
+        """Seconds from the acquisition command to the middle of its four sub-frames'
+        exposures: 2 integration times + 1.5 read-outs (the simulated sensor's)."""
+        int_s = max(self.state.int_times_us[0], 1) * 1e-6
+        return 2.0 * int_s + 1.5 * self.world.bench.sensor.subframe_readout_us * 1e-6
 
     @property
     def unambiguous_range_mm(self) -> float:

@@ -69,3 +69,31 @@ def test_time_s_is_the_middle_of_the_four_phase_sub_frames(emu):
         expected = f.capture_ns * 1e-9 + 2.0 * used_s + 1.5 * SUBFRAME_READOUT_S
         assert f.time_s == pytest.approx(expected, abs=1e-9)
     assert frames[0].time_s < frames[1].time_s < frames[2].time_s < arrived_s
+
+
+def test_the_emulator_renders_the_scene_at_the_instant_the_driver_stamps(emu):
+    """The emulated camera renders the scene at the middle of the acquisition its command
+    starts (two integration times and 1.5 read-outs after the command's arrival), the
+    instant the driver's ``time_s`` names; it used to render at the arrival, so a moving
+    scene was that much older than its stamp."""
+    from backend.drivers.tofcam660 import SUBFRAME_READOUT_S
+
+    long_exposure = CameraSettings(
+        integration_time_us=4000.0, auto_exposure=False, frame_rate_hz=20.0
+    )
+    drv = TofCam660Driver(ADDRESS, settings=long_exposure, io_timeout_s=0.5)
+    try:
+        frame = drv.read(2.0)
+    finally:
+        drv.close()
+    assert emu.camera.last_capture_lab_s is not None
+    received, rendered = emu.camera.last_capture_lab_s
+    used_s = frame.meta["integration_time_us"] * 1e-6
+    assert used_s == pytest.approx(4000e-6)
+    ahead_s = 2.0 * used_s + 1.5 * SUBFRAME_READOUT_S  # the driver's stamp convention
+    assert rendered - received == pytest.approx(ahead_s, abs=5e-4)  # two clock reads apart
+    # the same instant on the host's clock, up to the command's trip to the camera
+    shown_s = emu.camera.world.host_monotonic_ns(rendered) * 1e-9
+    assert frame.capture_ns is not None
+    assert frame.capture_ns * 1e-9 < shown_s
+    assert shown_s - frame.time_s == pytest.approx(0.0, abs=0.25)
