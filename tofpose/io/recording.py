@@ -66,6 +66,7 @@ import numpy as np
 from tofpose.core.camera import SCALAR_FIELDS, CameraModel
 from tofpose.core.catalog import Catalog
 from tofpose.core.depth import radial_from_z
+from tofpose.io.deflate_chunks import chunk_reader
 from tofpose.io.read_ahead import ReadAhead, cores_available
 
 FORMAT = "tofpose-recording"
@@ -359,6 +360,18 @@ class Recording:
     wall_time_ns: np.ndarray | None = None
     stamps: RecordingStamps | None = None
     _read_aheads: weakref.WeakSet = field(default_factory=weakref.WeakSet, repr=False)
+    _readers: dict = field(default_factory=dict, repr=False)
+
+    def _images(self, name: str, start: int, stop: int) -> np.ndarray:
+        """Frames [start, stop) of the image dataset ``name``: by its chunks, inflated
+        with ISA-L where that reads it exactly (``tofpose.io.deflate_chunks``), else by
+        h5py; the same bytes either way."""
+        if name not in self._readers:
+            self._readers[name] = chunk_reader(self._file[name])
+        reader = self._readers[name]
+        if reader is None:
+            return self._file[name][start:stop]
+        return reader.read(start, stop)
 
     @property
     def lab_truth_R(self) -> np.ndarray | None:
@@ -381,8 +394,8 @@ class Recording:
         if not 0 <= i < self.n_frames:
             raise IndexError(f"frame {i} out of range 0..{self.n_frames - 1}")
         try:
-            g = self._file["frames/gray"][i]
-            d = self._file["frames/distance_mm"][i]
+            g = self._images("frames/gray", i, i + 1)[0]
+            d = self._images("frames/distance_mm", i, i + 1)[0]
         except (OSError, KeyError) as exc:
             raise RecordingError(f"{self.path}: frame {i} cannot be read ({exc})") from exc
         return g, self._radial(d), float(self.time_s[i])
@@ -405,8 +418,8 @@ class Recording:
         if not 0 <= start <= stop <= self.n_frames:
             raise IndexError(f"frames {start}..{stop} out of range 0..{self.n_frames}")
         try:
-            g = self._file["frames/gray"][start:stop]
-            d = self._file["frames/distance_mm"][start:stop]
+            g = self._images("frames/gray", start, stop)
+            d = self._images("frames/distance_mm", start, stop)
         except (OSError, KeyError) as exc:
             i = self._first_unreadable(start, stop)
             raise RecordingError(f"{self.path}: frame {i} cannot be read ({exc})") from exc

@@ -1,0 +1,114 @@
+"""Chunks inflated with ISA-L (``tofpose.io.deflate_chunks``) against h5py's own read of
+the same file: bit for bit in every layout it takes, and h5py's read (and errors) in
+every one it does not."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import h5py
+import numpy as np
+import pytest
+
+from tofpose.io import deflate_chunks
+from tofpose.io.deflate_chunks import chunk_reader
+
+
+def _data(dtype, shape=(14, 37, 53), seed=0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    if np.dtype(dtype).kind == "f":
+        a = rng.normal(1000.0, 300.0, shape).astype(dtype)
+        a[3, 5, 7] = np.nan
+        a.reshape(-1)[::97] = np.inf
+        return a
+    return rng.integers(0, 4096, shape).astype(dtype)
+
+
+LAYOUTS = {
+    "one frame a chunk, shuffled": {"chunks": (1, 37, 53), "compression": "gzip", "shuffle": True},
+    "tiles of 4 frames, level 4": {
+        "chunks": (4, 10, 16),
+        "compression": "gzip",
+        "compression_opts": 4,
+    },
+    "tiles, shuffled, level 9": {
+        "chunks": (3, 20, 20),
+        "compression": "gzip",
+        "compression_opts": 9,
+        "shuffle": True,
+    },
+}
+
+
+@pytest.mark.parametrize("dtype", ["<u2", "<f4", ">f4", ">u2"])
+@pytest.mark.parametrize("layout", LAYOUTS.values(), ids=list(LAYOUTS))
+def test_blocks_are_h5pys_bit_for_bit(tmp_path, layout, dtype):
+    """Spans that start and end inside chunks, edge tiles that overhang the image, NaN
+    and inf, both byte orders."""
+    data = _data(dtype)
+    with h5py.File(tmp_path / "r.h5", "w") as f:
+        f.create_dataset("x", data=data, **layout)
+    with h5py.File(tmp_path / "r.h5", "r") as f:
+        reader = chunk_reader(f["x"])
+        assert reader is not None
+        for a, b in ((0, 14), (1, 2), (2, 9), (5, 14), (13, 14)):
+            got = reader.read(a, b)
+            assert got.dtype == f["x"].dtype and got.shape == (b - a, 37, 53)
+            assert got.tobytes() == f["x"][a:b].tobytes()
+
+
+def test_layouts_it_cannot_read_exactly_are_left_to_h5py(tmp_path):
+    data = _data("<u2")
+    with h5py.File(tmp_path / "r.h5", "w") as f:
+        f.create_dataset("contiguous", data=data)
+        f.create_dataset("lzf", data=data, chunks=(1, 37, 53), compression="lzf")
+        f.create_dataset(
+            "checksummed", data=data, chunks=(1, 37, 53), compression="gzip", fletcher32=True
+        )
+        f.create_dataset("scaled", data=data, chunks=(1, 37, 53), scaleoffset=0)
+        f.create_dataset("plain chunks", data=data, chunks=(1, 37, 53))
+        f.create_dataset("two d", data=data[0], chunks=(37, 53), compression="gzip")
+    with h5py.File(tmp_path / "r.h5", "r") as f:
+        for name in ("contiguous", "lzf", "checksummed", "scaled", "plain chunks", "two d"):
+            assert chunk_reader(f[name]) is None, name
+
+
+def test_a_chunk_never_written_reads_as_h5py_fills_it(tmp_path):
+    with h5py.File(tmp_path / "r.h5", "w") as f:
+        ds = f.create_dataset(
+            "x", (6, 37, 53), "<f4", chunks=(1, 37, 53), compression="gzip", fillvalue=np.nan
+        )
+        ds[0] = 1.0
+        ds[2] = 2.0  # frames 1 and 3-5: no chunk stored
+    with h5py.File(tmp_path / "r.h5", "r") as f:
+        got = chunk_reader(f["x"]).read(0, 6)  # type: ignore[union-attr]
+        assert got.tobytes() == f["x"][0:6].tobytes()
+        assert np.isnan(got[1]).all() and (got[2] == 2.0).all()
+
+
+def test_bytes_that_do_not_inflate_give_h5pys_error(tmp_path):
+    with h5py.File(tmp_path / "r.h5", "w") as f:
+        f.create_dataset("x", data=_data("<u2"), chunks=(1, 37, 53), compression="gzip")
+        info = f["x"].id.get_chunk_info_by_coord((4, 0, 0))
+    with open(tmp_path / "r.h5", "r+b") as fh:
+        fh.seek(info.byte_offset)
+        fh.write(b"\xff" * 16)
+    with h5py.File(tmp_path / "r.h5", "r") as f:
+        reader = chunk_reader(f["x"])
+        assert reader is not None
+        assert reader.read(0, 4).tobytes() == f["x"][0:4].tobytes()
+        with pytest.raises(OSError):
+            reader.read(3, 6)
+
+
+def test_without_isal_h5py_reads_everything(tmp_path, monkeypatch):
+    with h5py.File(tmp_path / "r.h5", "w") as f:
+        f.create_dataset("x", data=_data("<u2"), chunks=(1, 37, 53), compression="gzip")
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        deflate_chunks.importlib.util,
+        "find_spec",
+        lambda name, *a: None if name == "isal" else real(name, *a),
+    )
+    with h5py.File(tmp_path / "r.h5", "r") as f:
+        assert chunk_reader(f["x"]) is None

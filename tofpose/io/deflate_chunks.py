@@ -1,0 +1,97 @@
+"""Read a recording's image datasets by their stored chunks, inflated with ISA-L.
+
+A recording's images are deflate-compressed HDF5 chunks (ours: one frame a chunk,
+level 1 after the byte shuffle; other writers': tiles of several frames, any level).
+HDF5 inflates them with zlib, about 0.5-0.7 ms a 320 x 240 frame pair, half of what
+``tofpose estimate`` spends on a frame. Intel's ISA-L (``isal``, the library made for
+fast deflate) inflates the same bytes 2-3x faster. ``ChunkReader`` reads each chunk's
+stored bytes (``read_direct_chunk``: HDF5 does the file I/O, no filter runs), inflates
+them with ISA-L, undoes the shuffle and places them, so that a block of frames is
+bit-identical to h5py's ``ds[a:b]``.
+
+It reads only what it can read exactly: a chunked dataset whose filters are deflate,
+optionally after the shuffle, of a fixed-size numeric type. Anything else (contiguous,
+other filters, a chunk stored with a filter skipped, a chunk never written, bytes that
+do not inflate) is read by h5py, whose errors name the problem as before.
+``chunk_reader(ds)`` gives None for a dataset it cannot read, or when ``isal`` is not
+installed. Measured on the bench's 3000-frame recording and on the other renderer's
+tiled files: 0.82 -> 0.48 and 1.21 -> 0.60 ms a frame pair.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+
+import h5py
+import numpy as np
+
+#: HDF5 filter ids (``h5py.h5z``) the reader undoes itself
+_DEFLATE, _SHUFFLE = h5py.h5z.FILTER_DEFLATE, h5py.h5z.FILTER_SHUFFLE
+
+
+class ChunkReader:
+    """``read(start, stop)``: frames [start, stop) of a (n, H, W) chunked dataset,
+    inflated with ISA-L; bit-identical to ``ds[start:stop]`` (module docstring)."""
+
+    def __init__(self, ds: h5py.Dataset, shuffled: bool) -> None:
+        from isal import isal_zlib
+
+        self._ds = ds
+        self._inflate = isal_zlib.decompress
+        self._shuffled = shuffled
+        self._chunk = tuple(int(c) for c in ds.chunks)
+        self._dtype = ds.dtype
+        self._shape = tuple(int(s) for s in ds.shape)
+
+    def read(self, start: int, stop: int) -> np.ndarray:
+        """(stop - start, H, W) array of the dataset's dtype; h5py's read where a chunk
+        cannot be read here (its errors then name what is wrong)."""
+        try:
+            return self._read(start, stop)
+        except Exception:  # noqa: BLE001 - a chunk missing, or bytes that do not inflate
+            return self._ds[start:stop]
+
+    def _read(self, start: int, stop: int) -> np.ndarray:
+        ds, (cz, cy, cx) = self._ds, self._chunk
+        _, height, width = self._shape
+        out = np.empty((stop - start, height, width), self._dtype)
+        first = start // cz * cz
+        for z0 in range(first, stop, cz):
+            a, b = max(start, z0), min(stop, z0 + cz)
+            for y0 in range(0, height, cy):
+                for x0 in range(0, width, cx):
+                    mask, raw = ds.id.read_direct_chunk((z0, y0, x0))
+                    if mask:  # a filter was skipped for this chunk: h5py knows which
+                        return ds[start:stop]
+                    chunk = self._decoded(raw).reshape(cz, cy, cx)
+                    out[a - start : b - start, y0 : y0 + cy, x0 : x0 + cx] = chunk[
+                        a - z0 : b - z0, : height - y0, : width - x0
+                    ]
+        return out
+
+    def _decoded(self, raw: bytes) -> np.ndarray:
+        """A chunk's elements (flat) from its stored bytes: inflated, then unshuffled
+        (the shuffle stores byte k of every element together, k = 0..itemsize-1)."""
+        data = self._inflate(raw)
+        size = self._dtype.itemsize
+        if not self._shuffled or size == 1:
+            return np.frombuffer(data, self._dtype)
+        planes = np.frombuffer(data, np.uint8).reshape(size, -1)
+        elements = np.empty((planes.shape[1], size), np.uint8)
+        for k in range(size):
+            elements[:, k] = planes[k]
+        return elements.view(self._dtype).ravel()
+
+
+def chunk_reader(ds: h5py.Dataset) -> ChunkReader | None:
+    """A ``ChunkReader`` of the 3-D dataset ``ds`` when it can read it exactly (module
+    docstring), else None (h5py reads it)."""
+    if importlib.util.find_spec("isal") is None:
+        return None
+    if ds.chunks is None or ds.ndim != 3 or ds.dtype.kind not in "uif" or ds.size == 0:
+        return None
+    plist = ds.id.get_create_plist()
+    filters = [plist.get_filter(i)[0] for i in range(plist.get_nfilters())]
+    if filters not in ([_DEFLATE], [_SHUFFLE, _DEFLATE]):
+        return None
+    return ChunkReader(ds, shuffled=filters[0] == _SHUFFLE)
