@@ -511,14 +511,21 @@ def pipeline_rows(n_frames: int, repeats: int, progress: Callable[[str], None]) 
 def _serial_on_cores(rec: Path, tracking: bool, cores: int) -> float:
     """``tofpose estimate`` frames/s in this process pinned to ``cores`` of its cores (one
     core: no reader thread, as a worker that shares the cores)."""
+    import cv2
+
     from bench.scaleout import serial_estimate
 
     mine = sorted(os.sched_getaffinity(0))
+    cv_threads = cv2.getNumThreads()
+    # Linux pins the calling thread (threads it starts inherit it; OpenCV's pool, started
+    # before, does not: it is held to one thread instead)
     os.sched_setaffinity(0, mine[: max(1, cores)])
+    cv2.setNumThreads(max(1, cores))
     try:
         return serial_estimate(rec, tracking)[0]
     finally:
         os.sched_setaffinity(0, mine)
+        cv2.setNumThreads(cv_threads)
 
 
 def reprocess_rows(

@@ -20,8 +20,9 @@ multiple of the re-acquisition period N at least K - 1 + N frames back (the seri
 run re-acquires at multiples of N while it keeps its target).
 
 The relative-state filter (``--filter``) remembers every frame, so it is not chunked:
-the workers store each frame's raw pose (``chunks/*.npz``) and the filter runs once
-over them in order, on the client (about 1 ms a frame).
+the workers store each frame's raw pose (``chunks/*.npz``) and the filter (by default
+the smoother of ``tofpose.lab.smoothing``) runs once over them in order, on the client
+(about 1.6 ms a frame smoothed, 0.6 ms causal).
 """
 
 from __future__ import annotations
@@ -375,7 +376,9 @@ def reprocess(
     }
     for path, cs in chunks.items():
         csv_path = out / f"{Path(path).stem}.csv"
-        n_ok = _concatenate(cs, out, csv_path, filter_state, causal_filter)
+        n_ok = _concatenate(
+            cs, out, csv_path, filter_state=filter_state, causal_filter=causal_filter
+        )
         summary_recordings.append(
             {
                 "path": str(path),
@@ -414,7 +417,7 @@ def reprocess(
 
 
 def _concatenate(
-    cs: list[Chunk], out: Path, csv_path: Path, filter_state: bool, causal_filter: bool = False
+    cs: list[Chunk], out: Path, csv_path: Path, *, filter_state: bool, causal_filter: bool = False
 ) -> int:
     """Write one recording's CSV from its chunks, in order; returns its poses. With
     ``filter_state`` the filter's columns over all of them (``pose_csv.filter_rows``, as
@@ -440,7 +443,7 @@ def _concatenate(
                 ok = raw["ok"][k]
                 poses.append((raw["R"][k], raw["t_mm"][k], raw["covariance"][k]) if ok else None)
         if filter_state:
-            cells = filter_rows(times, poses, causal_filter)
+            cells = filter_rows(times, poses, causal=causal_filter)
             wr.writerows(row + c for row, c in zip(rows, cells, strict=True))
     os.replace(tmp, csv_path)
     return n_ok

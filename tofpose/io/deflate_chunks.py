@@ -14,13 +14,17 @@ optionally after the shuffle, of a fixed-size numeric type. Anything else (conti
 other filters, a chunk stored with a filter skipped, a chunk never written, bytes that
 do not inflate) is read by h5py, whose errors name the problem as before.
 ``chunk_reader(ds)`` gives None for a dataset it cannot read, or when ``isal`` is not
-installed. Measured on the bench's 3000-frame recording and on the other renderer's
-tiled files: 0.82 -> 0.48 and 1.21 -> 0.60 ms a frame pair.
+installed. Reading a recording's blocks (``Recording.blocks``, one core), h5py then
+this: 1.25 -> 0.77 ms a frame on the bench's 3000-frame recording (one frame a chunk,
+shuffled, level 1), 1.16 -> 0.60 ms on the other renderer's tiled files (12 frames of
+30 x 40 a chunk, level 4). A single frame of a chunk of several frames is left to h5py
+(``Recording.frame``), whose chunk cache keeps the chunk for the next frame.
 """
 
 from __future__ import annotations
 
 import importlib.util
+from typing import cast
 
 import h5py
 import numpy as np
@@ -38,17 +42,30 @@ class ChunkReader:
 
         self._ds = ds
         self._inflate = isal_zlib.decompress
+        # the inflater's error class (its type stub calls it an instance)
+        self._error = cast("type[Exception]", isal_zlib.error)
         self._shuffled = shuffled
         self._chunk = tuple(int(c) for c in ds.chunks)
         self._dtype = ds.dtype
         self._shape = tuple(int(s) for s in ds.shape)
+        #: reads h5py made instead (a chunk missing or not inflating): the tests' witness
+        #: that the fast path ran
+        self.fallbacks = 0
+
+    @property
+    def frames_per_chunk(self) -> int:
+        """Frames along the first axis of one chunk (a single frame's read inflates the
+        whole chunk: h5py's chunk cache serves frame after frame of one chunk better)."""
+        return self._chunk[0]
 
     def read(self, start: int, stop: int) -> np.ndarray:
         """(stop - start, H, W) array of the dataset's dtype; h5py's read where a chunk
         cannot be read here (its errors then name what is wrong)."""
         try:
             return self._read(start, stop)
-        except Exception:  # noqa: BLE001 - a chunk missing, or bytes that do not inflate
+        except (RuntimeError, OSError, ValueError, KeyError, self._error):
+            # a chunk never written (HDF5: RuntimeError), bytes that do not inflate
+            self.fallbacks += 1
             return self._ds[start:stop]
 
     def _read(self, start: int, stop: int) -> np.ndarray:

@@ -5,9 +5,11 @@ the serial command's byte for byte."""
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 
 import numpy as np
+from tqdm import tqdm
 
 from tofpose.lab.relative_state import STATE_COLUMNS, RelativeState
 from tofpose.lab.smoothing import PoseOrNone, relative_states
@@ -73,10 +75,18 @@ def state_cells(s: RelativeState | None) -> list:
 
 
 def filter_rows(
-    time_s: Sequence[float], poses: Sequence[PoseOrNone], causal: bool = False
+    time_s: Sequence[float],
+    poses: Sequence[PoseOrNone],
+    *,
+    causal: bool = False,
+    progress: bool = False,
 ) -> list[list]:
     """``FILTER_COLUMNS`` of every frame of a recording (``tofpose.lab.smoothing
     .relative_states``: smoothed over all the poses, or ``causal`` the filter's state
     from the poses up to each frame); time_s (n,), poses n items of (R (3, 3), t_mm
-    (3,), covariance (6, 6)) or None."""
-    return [state_cells(s) for s in relative_states(time_s, poses, causal)]
+    (3,), covariance (6, 6)) or None; ``progress``: a bar on stderr over the passes."""
+    with tqdm(
+        total=3 * len(time_s), desc="filter", unit="frame", disable=not progress, file=sys.stderr
+    ) as bar:
+        states = relative_states(time_s, poses, causal=causal, advance=bar.update)
+    return [state_cells(s) for s in states]

@@ -362,14 +362,15 @@ class Recording:
     _read_aheads: weakref.WeakSet = field(default_factory=weakref.WeakSet, repr=False)
     _readers: dict = field(default_factory=dict, repr=False)
 
-    def _images(self, name: str, start: int, stop: int) -> np.ndarray:
+    def _images(self, name: str, start: int, stop: int, single: bool = False) -> np.ndarray:
         """Frames [start, stop) of the image dataset ``name``: by its chunks, inflated
         with ISA-L where that reads it exactly (``tofpose.io.deflate_chunks``), else by
-        h5py; the same bytes either way."""
+        h5py; the same bytes either way. ``single``: one frame of a sequence read frame
+        by frame, left to h5py (and its chunk cache) where a chunk holds several."""
         if name not in self._readers:
             self._readers[name] = chunk_reader(self._file[name])
         reader = self._readers[name]
-        if reader is None:
+        if reader is None or (single and reader.frames_per_chunk > 1):
             return self._file[name][start:stop]
         return reader.read(start, stop)
 
@@ -394,8 +395,8 @@ class Recording:
         if not 0 <= i < self.n_frames:
             raise IndexError(f"frame {i} out of range 0..{self.n_frames - 1}")
         try:
-            g = self._images("frames/gray", i, i + 1)[0]
-            d = self._images("frames/distance_mm", i, i + 1)[0]
+            g = self._images("frames/gray", i, i + 1, single=True)[0]
+            d = self._images("frames/distance_mm", i, i + 1, single=True)[0]
         except (OSError, KeyError) as exc:
             raise RecordingError(f"{self.path}: frame {i} cannot be read ({exc})") from exc
         return g, self._radial(d), float(self.time_s[i])

@@ -209,6 +209,6 @@ def estimate(
                 bar.update(len(block_times))
             bar.close()
             if filter_state:
-                cells = filter_rows(times, poses, causal_filter)
+                cells = filter_rows(times, poses, causal=causal_filter, progress=progress)
                 wr.writerows(row + c for row, c in zip(rows, cells, strict=True))
         return {"frames": rec.n_frames, "ok": n_ok}

@@ -291,7 +291,12 @@ class CampaignService:
             # the motion system first: once the campaign reads "running" (to a person, or
             # to a client that polls it), no one else's command reaches the driver
             self.motion.claim(campaign.id, campaign.name)
-            if not self.repository.set_status(campaign.id, CampaignState.RUNNING):
+            try:
+                stored = self.repository.set_status(campaign.id, CampaignState.RUNNING)
+            except BaseException:  # the database failed: nothing may stay held
+                self.motion.release(campaign.id)
+                raise
+            if not stored:
                 self.motion.release(campaign.id)
                 log.info(
                     "campaign %d was not run: %s since the scheduler picked it",

@@ -347,6 +347,27 @@ def test_a_campaign_holds_the_motion_system_before_it_reads_running(client):
     assert svc.motion.owner is None  # given back at the end
 
 
+def test_a_database_failure_as_a_campaign_starts_leaves_the_motion_system_free(client):
+    """Storing ``running`` fails (a locked or lost database): the runner gives the
+    turntable back it had just claimed, and a person can move it."""
+    svc = client.app.state.tofpose.campaigns
+    store = svc.repository.set_status
+
+    def set_status(campaign_id, state, *args, **kwargs):
+        if state == "running":
+            raise RuntimeError("database is locked")
+        return store(campaign_id, state, *args, **kwargs)
+
+    svc.repository.set_status = set_status
+    far = "2099-01-01T00:00:00+00:00"
+    cid = client.post("/api/campaigns", json={**GRID, "name": "db"}, headers=AUTH).json()["id"]
+    client.post(f"/api/campaigns/{cid}/start", json={"at": far}, headers=AUTH)
+    with pytest.raises(RuntimeError, match="database is locked"):
+        svc._run(cid)
+    assert svc.motion.owner is None
+    assert client.post("/api/motion/move", json={"yaw_deg": 1}, headers=AUTH).status_code == 202
+
+
 def test_a_campaign_paused_or_cancelled_after_the_scheduler_picked_it_never_runs(client):
     """The runner claims a campaign only if it is still queued, under the lock the
     commands take: a pause or cancel that lands between the scheduler's pick and the

@@ -55,6 +55,7 @@ def test_blocks_are_h5pys_bit_for_bit(tmp_path, layout, dtype):
             got = reader.read(a, b)
             assert got.dtype == f["x"].dtype and got.shape == (b - a, 37, 53)
             assert got.tobytes() == f["x"][a:b].tobytes()
+        assert reader.fallbacks == 0  # every read was the fast path's
 
 
 def test_layouts_it_cannot_read_exactly_are_left_to_h5py(tmp_path):
@@ -81,8 +82,11 @@ def test_a_chunk_never_written_reads_as_h5py_fills_it(tmp_path):
         ds[0] = 1.0
         ds[2] = 2.0  # frames 1 and 3-5: no chunk stored
     with h5py.File(tmp_path / "r.h5", "r") as f:
-        got = chunk_reader(f["x"]).read(0, 6)  # type: ignore[union-attr]
+        reader = chunk_reader(f["x"])
+        assert reader is not None
+        got = reader.read(0, 6)
         assert got.tobytes() == f["x"][0:6].tobytes()
+        assert reader.fallbacks == 1  # h5py fills what was never written
         assert np.isnan(got[1]).all() and (got[2] == 2.0).all()
 
 
@@ -97,8 +101,10 @@ def test_bytes_that_do_not_inflate_give_h5pys_error(tmp_path):
         reader = chunk_reader(f["x"])
         assert reader is not None
         assert reader.read(0, 4).tobytes() == f["x"][0:4].tobytes()
-        with pytest.raises(OSError):
+        assert reader.fallbacks == 0
+        with pytest.raises(OSError, match="(?i)filter|inflate|read"):
             reader.read(3, 6)
+        assert reader.fallbacks == 1
 
 
 def test_without_isal_h5py_reads_everything(tmp_path, monkeypatch):
