@@ -98,15 +98,21 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
-def oversubscription_warnings(workers: list[dict]) -> list[str]:
-    """One sentence per host whose workers have more threads than the host has cores;
-    ``workers``: ``tofpose.batch.worker.worker_info`` of each worker (host, cores,
-    threads)."""
+def _threads_and_cores(workers: list[dict]) -> tuple[dict[str, int], dict[str, int]]:
+    """Per host: its workers' threads and its cores (``worker_info`` of each worker)."""
     threads: dict[str, int] = defaultdict(int)
     cores: dict[str, int] = {}
     for w in workers:
         threads[w["host"]] += w["threads"]
         cores[w["host"]] = w["cores"]
+    return threads, cores
+
+
+def oversubscription_warnings(workers: list[dict]) -> list[str]:
+    """One sentence per host whose workers have more threads than the host has cores;
+    ``workers``: ``tofpose.batch.worker.worker_info`` of each worker (host, cores,
+    threads)."""
+    threads, cores = _threads_and_cores(workers)
     return [
         f"{threads[h]} worker threads on {h}, which has {cores[h]} cores: they share the "
         f"cores, so each runs slower than a serial run (use at most {cores[h]} workers there)"
@@ -121,11 +127,7 @@ def spare_core_per_thread(workers: list[dict]) -> bool:
     another worker's task on the same core (on 2 cores, two workers each reading ahead
     ran at 0.47x a serial run's frames/s per worker, one worker at 0.84x);
     ``workers`` as in ``oversubscription_warnings``."""
-    threads: dict[str, int] = defaultdict(int)
-    cores: dict[str, int] = {}
-    for w in workers:
-        threads[w["host"]] += w["threads"]
-        cores[w["host"]] = w["cores"]
+    threads, cores = _threads_and_cores(workers)
     return bool(threads) and all(cores[h] >= 2 * threads[h] for h in threads)
 
 
