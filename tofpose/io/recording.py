@@ -66,7 +66,7 @@ import numpy as np
 from tofpose.core.camera import SCALAR_FIELDS, CameraModel
 from tofpose.core.catalog import Catalog
 from tofpose.core.depth import radial_from_z
-from tofpose.io.deflate_chunks import chunk_reader
+from tofpose.io.deflate_chunks import ChunkWriter, chunk_reader, chunk_writer
 from tofpose.io.read_ahead import ReadAhead, cores_available
 
 FORMAT = "tofpose-recording"
@@ -131,6 +131,7 @@ class RecordingWriter:
             )
         self.path = Path(path)
         self.camera = camera
+        self._writers: tuple[ChunkWriter | None, ChunkWriter | None] | None = None
         self._f = h5py.File(self.path, "w")
         f = self._f
         f.attrs["format"] = FORMAT
@@ -181,8 +182,16 @@ class RecordingWriter:
         n = self.n
         for ds in (self._gray, self._dist, self._time):
             ds.resize(n + 1, axis=0)
-        self._gray[n] = gray.astype(np.uint16)
-        self._dist[n] = distance_mm.astype(np.float32)
+        if self._writers is None:  # the images' chunks deflated by ISA-L where it can
+            self._writers = (chunk_writer(self._gray), chunk_writer(self._dist))
+        for ds, writer, image, dtype in (
+            (self._gray, self._writers[0], gray, np.uint16),
+            (self._dist, self._writers[1], distance_mm, np.float32),
+        ):
+            if writer is None:
+                ds[n] = image.astype(dtype)
+            else:
+                writer.write(n, image.astype(dtype))
         self._time[n] = time_s
         for name, datasets, R, t in (
             ("truth", self._truth, R_camera_target, t_camera_target_mm),
@@ -214,6 +223,7 @@ class RecordingWriter:
                     raise RecordingError(f"{path}: missing dataset /{ds}")
             self = cls.__new__(cls)
             self.path, self._f = path, f
+            self._writers = None
             self.camera = _camera_from_attrs(f["camera"].attrs, path)
             self._gray, self._dist = f["frames/gray"], f["frames/distance_mm"]
             self._time = f["frames/time_s"]

@@ -118,3 +118,56 @@ def test_without_isal_h5py_reads_everything(tmp_path, monkeypatch):
     )
     with h5py.File(tmp_path / "r.h5", "r") as f:
         assert chunk_reader(f["x"]) is None
+
+
+@pytest.mark.parametrize("dtype", ["<u2", "<f4", ">f4"])
+@pytest.mark.parametrize("shuffle", [True, False])
+def test_frames_written_by_chunk_are_read_back_by_hdf5_bit_for_bit(tmp_path, dtype, shuffle):
+    """Frames deflated by ISA-L and stored chunk by chunk read back through HDF5's own
+    filters (h5py, no ISA-L) as the same bytes, NaN and inf included."""
+    data = _data(dtype)
+    with h5py.File(tmp_path / "w.h5", "w") as f:
+        ds = f.create_dataset(
+            "x",
+            (0, 37, 53),
+            dtype,
+            maxshape=(None, 37, 53),
+            chunks=(1, 37, 53),
+            compression="gzip",
+            compression_opts=1,
+            shuffle=shuffle,
+        )
+        writer = chunk_writer_of(ds)
+        for k, frame in enumerate(data):
+            ds.resize(k + 1, axis=0)
+            writer.write(k, frame)
+    with h5py.File(tmp_path / "w.h5", "r") as f:
+        assert f["x"].compression == "gzip" and f["x"].shuffle == shuffle
+        assert f["x"][:].tobytes() == data.astype(dtype).tobytes()
+
+
+def chunk_writer_of(ds):
+    from tofpose.io.deflate_chunks import chunk_writer
+
+    writer = chunk_writer(ds)
+    assert writer is not None
+    return writer
+
+
+def test_datasets_it_cannot_write_exactly_are_left_to_h5py(tmp_path):
+    from tofpose.io.deflate_chunks import chunk_writer
+
+    with h5py.File(tmp_path / "w.h5", "w") as f:
+        tiled = f.create_dataset(
+            "tiled", (4, 37, 53), "<u2", chunks=(1, 10, 16), compression="gzip"
+        )
+        several = f.create_dataset(
+            "several", (4, 37, 53), "<u2", chunks=(2, 37, 53), compression="gzip"
+        )
+        lzf = f.create_dataset("lzf", (4, 37, 53), "<u2", chunks=(1, 37, 53), compression="lzf")
+        plain = f.create_dataset("plain", (4, 37, 53), "<u2", chunks=(1, 37, 53))
+        for ds in (tiled, several, lzf, plain):
+            assert chunk_writer(ds) is None, ds.name
+        good = f.create_dataset("good", (4, 37, 53), "<u2", chunks=(1, 37, 53), compression="gzip")
+        with pytest.raises(ValueError, match=r"frame \(37, 52\) != the dataset's \(37, 53\)"):
+            chunk_writer_of(good).write(0, np.zeros((37, 52), np.uint16))
