@@ -107,18 +107,27 @@ class ChunkReader:
         return elements.view(self._dtype).ravel()
 
 
-def chunk_reader(ds: h5py.Dataset) -> ChunkReader | None:
-    """A ``ChunkReader`` of the 3-D dataset ``ds`` when it can read it exactly (module
-    docstring), else None (h5py reads it)."""
+def _shuffled_deflate(ds: h5py.Dataset) -> bool | None:
+    """For a chunked 3-D numeric dataset whose filters are deflate, optionally after
+    the shuffle, and with ``isal`` installed: whether it is shuffled; else None."""
     if importlib.util.find_spec("isal") is None:
         return None
-    if ds.chunks is None or ds.ndim != 3 or ds.dtype.kind not in "uif" or ds.size == 0:
+    if ds.chunks is None or ds.ndim != 3 or ds.dtype.kind not in "uif":
         return None
     plist = ds.id.get_create_plist()
     filters = [plist.get_filter(i)[0] for i in range(plist.get_nfilters())]
     if filters not in ([_DEFLATE], [_SHUFFLE, _DEFLATE]):
         return None
-    return ChunkReader(ds, shuffled=filters[0] == _SHUFFLE)
+    return filters[0] == _SHUFFLE
+
+
+def chunk_reader(ds: h5py.Dataset) -> ChunkReader | None:
+    """A ``ChunkReader`` of the 3-D dataset ``ds`` when it can read it exactly (module
+    docstring), else None (h5py reads it)."""
+    shuffled = _shuffled_deflate(ds)
+    if shuffled is None or ds.size == 0:
+        return None
+    return ChunkReader(ds, shuffled=shuffled)
 
 
 class ChunkWriter:
@@ -150,14 +159,7 @@ def chunk_writer(ds: h5py.Dataset) -> ChunkWriter | None:
     """A ``ChunkWriter`` of the 3-D dataset ``ds`` when it is stored one frame a chunk
     with the deflate filter (optionally after the shuffle) and ``isal`` is installed,
     else None (h5py writes it)."""
-    if importlib.util.find_spec("isal") is None:
+    shuffled = _shuffled_deflate(ds)
+    if shuffled is None or ds.chunks[0] != 1 or ds.chunks[1:] != ds.shape[1:]:
         return None
-    if ds.chunks is None or ds.ndim != 3 or ds.chunks[1:] != ds.shape[1:] or ds.chunks[0] != 1:
-        return None
-    if ds.dtype.kind not in "uif":
-        return None
-    plist = ds.id.get_create_plist()
-    filters = [plist.get_filter(i)[0] for i in range(plist.get_nfilters())]
-    if filters not in ([_DEFLATE], [_SHUFFLE, _DEFLATE]):
-        return None
-    return ChunkWriter(ds, shuffled=filters[0] == _SHUFFLE)
+    return ChunkWriter(ds, shuffled=shuffled)
