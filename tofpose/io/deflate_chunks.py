@@ -86,6 +86,7 @@ class ChunkReader:
                 for x0 in range(0, width, cx):
                     mask, raw = ds.id.read_direct_chunk((z0, y0, x0))
                     if mask:  # a filter was skipped for this chunk: h5py knows which
+                        self.fallbacks += 1
                         return ds[start:stop]
                     chunk = self._decoded(raw).reshape(cz, cy, cx)
                     out[a - start : b - start, y0 : y0 + cy, x0 : x0 + cx] = chunk[
@@ -145,9 +146,14 @@ class ChunkWriter:
         self._frame_shape = tuple(int(s) for s in ds.shape[1:])
 
     def write(self, index: int, frame: np.ndarray) -> None:
+        """``frame`` of the dataset's type (either byte order); of another type HDF5
+        converts it (clipping where NumPy would wrap), via h5py."""
+        if frame.shape != self._frame_shape:
+            raise ValueError(f"frame {frame.shape} != the dataset's {self._frame_shape}")
+        if frame.dtype.newbyteorder("=") != self._dtype.newbyteorder("="):
+            self._ds[index] = frame
+            return
         data = np.ascontiguousarray(frame, dtype=self._dtype)
-        if data.shape != self._frame_shape:
-            raise ValueError(f"frame {data.shape} != the dataset's {self._frame_shape}")
         raw = data.view(np.uint8).reshape(-1, self._dtype.itemsize)
         if self._shuffled and self._dtype.itemsize > 1:
             raw = raw.T  # byte k of every element together, as HDF5's shuffle stores them

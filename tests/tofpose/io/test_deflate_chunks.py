@@ -171,3 +171,7 @@ def test_datasets_it_cannot_write_exactly_are_left_to_h5py(tmp_path):
         good = f.create_dataset("good", (4, 37, 53), "<u2", chunks=(1, 37, 53), compression="gzip")
         with pytest.raises(ValueError, match=r"frame \(37, 52\) != the dataset's \(37, 53\)"):
             chunk_writer_of(good).write(0, np.zeros((37, 52), np.uint16))
+        # another type: HDF5 converts it (clips), as h5py's own write would
+        chunk_writer_of(good).write(1, np.full((37, 53), 70000.0))
+        chunk_writer_of(good).write(2, np.full((37, 53), -5.0))
+        assert (good[1] == 65535).all() and (good[2] == 0).all()

@@ -147,21 +147,29 @@ def test_a_recording_that_starts_over_is_smoothed_in_two_segments():
     assert _rate_errors(states, rates).max() < 0.1 * math.radians(5.0)
 
 
-def test_a_jump_of_the_target_is_not_smoothed_across():
-    """The target jumps 30 mm sideways at frame 30 (static otherwise): the forward filter
-    takes the first new pose, overshoots and rejects the next two. The smoother does not
-    blend the two sides into a state neither had (before: frame 29 at 22 sigma, where
-    both filters are within 1 sigma): every frame is within 4 of its sigma of the truth,
-    or closer to it than the live (causal) filter's state."""
-    times, poses, _ = _poses(lambda _t: np.zeros(3))
+@pytest.mark.parametrize("seed", range(2))
+@pytest.mark.parametrize("jump_frame", range(27, 34))
+def test_a_jump_of_the_target_is_not_smoothed_across(seed, jump_frame):
+    """The target jumps 30 mm sideways (static otherwise): the forward filter takes the
+    first new pose with its motion model, runs away from the next ones and rejects them,
+    then follows again. The smoother does not blend the two sides: every frame before
+    the jump, and every one from the fourth after it, is within 4 of its sigma of the
+    truth (before the fix a frame beside the jump read 22 sigma off, where both filters
+    were within 1), and its worst frame is nearer the truth, in sigmas, than the live
+    (causal) filter's worst."""
+    times, poses, _ = _poses(lambda _t: np.zeros(3), seed=seed)
     jump = np.array([30.0, 0.0, 0.0])
-    truth_x = np.array([0.0 if k < 30 else 30.0 for k in range(len(times))]) + 100.0
-    poses = [(R, t + (jump if k >= 30 else 0.0), c) for k, (R, t, c) in enumerate(poses)]
-    smoothed, causal = smoothed_states(times, poses), causal_states(times, poses)
-    for k, (s, c) in enumerate(zip(smoothed, causal, strict=True)):
-        err, live = abs(s.t_mm[0] - truth_x[k]), abs(c.t_mm[0] - truth_x[k])
-        assert err < 4.0 * math.sqrt(s.covariance[3, 3]) or err < live, (k, s.t_mm, c.t_mm)
-    assert abs(smoothed[29].t_mm[0] - truth_x[29]) < 4.0 * math.sqrt(smoothed[29].covariance[3, 3])
+    truth_x = np.where(np.arange(len(times)) < jump_frame, 100.0, 130.0)
+    poses = [(R, t + (jump if k >= jump_frame else 0.0), c) for k, (R, t, c) in enumerate(poses)]
+
+    def z(states) -> np.ndarray:
+        pairs = zip(states, truth_x, strict=True)
+        return np.array([abs(s.t_mm[0] - x) / math.sqrt(s.covariance[3, 3]) for s, x in pairs])
+
+    smoothed, live = z(smoothed_states(times, poses)), z(causal_states(times, poses))
+    assert smoothed[:jump_frame].max() < 4.0
+    assert smoothed[jump_frame + 4 :].max() < 4.0
+    assert smoothed.max() < live.max()
 
 
 def test_progress_counts_three_passes():
