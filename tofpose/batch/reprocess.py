@@ -45,9 +45,8 @@ from tqdm import tqdm
 from tofpose.batch.cluster import ClusterSession, session_or_open
 from tofpose.batch.progress import RunProgress
 from tofpose.batch.worker import ProgressReporter
-from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_rows, pose_row
+from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, HeldRows, pose_row
 from tofpose.io.recording import open_recording
-from tofpose.lab.smoothing import PoseOrNone
 
 DEFAULT_CHUNK_FRAMES = 512
 POLL_S = 0.1
@@ -420,13 +419,11 @@ def _concatenate(
     cs: list[Chunk], out: Path, csv_path: Path, *, filter_state: bool, causal_filter: bool = False
 ) -> int:
     """Write one recording's CSV from its chunks, in order; returns its poses. With
-    ``filter_state`` the filter's columns over all of them (``pose_csv.filter_rows``, as
+    ``filter_state`` the filter's columns over all of them (``pose_csv.HeldRows``, as
     estimate --filter)."""
     n_ok = 0
     tmp = csv_path.with_name(f".{csv_path.name}.tmp")
-    rows: list[list] = []
-    times: list[float] = []
-    poses: list[PoseOrNone] = []
+    held = HeldRows()
     with open(tmp, "w", newline="") as fh:
         wr = csv.writer(fh)
         wr.writerow(CSV_COLUMNS + (FILTER_COLUMNS if filter_state else ()))
@@ -438,12 +435,9 @@ def _concatenate(
                 fh.write(text)
                 continue
             for k, row in enumerate(csv.reader(io.StringIO(text))):
-                rows.append(row)
-                times.append(float(raw["time_s"][k]))
-                ok = raw["ok"][k]
-                poses.append((raw["R"][k], raw["t_mm"][k], raw["covariance"][k]) if ok else None)
+                pose = (raw["R"][k], raw["t_mm"][k], raw["covariance"][k])
+                held.add(row, float(raw["time_s"][k]), pose if raw["ok"][k] else None)
         if filter_state:
-            cells = filter_rows(times, poses, causal=causal_filter)
-            wr.writerows(row + c for row, c in zip(rows, cells, strict=True))
+            held.write(wr, causal=causal_filter)
     os.replace(tmp, csv_path)
     return n_ok

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 from tqdm import tqdm
@@ -72,6 +73,35 @@ def state_cells(s: RelativeState | None) -> list:
         + [f"{v:.3f}" for v in s.velocity_sigma_mm_s]
         + [s.status]
     )
+
+
+@dataclass
+class HeldRows:
+    """A recording's CSV rows held for the filter's pass over all its poses (``--filter``:
+    the smoother needs the poses after each frame): ``add`` each frame's row, time and
+    pose (R (3, 3), t_mm (3,), covariance (6, 6)) or None; ``write`` them with
+    ``filter_rows``' columns appended."""
+
+    rows: list[list] = field(default_factory=list)
+    time_s: list[float] = field(default_factory=list)
+    poses: list[PoseOrNone] = field(default_factory=list)
+
+    def add(self, row: list, time_s: float, pose: PoseOrNone) -> None:
+        self.rows.append(row)
+        self.time_s.append(time_s)
+        self.poses.append(pose)
+
+    def write(self, writer, *, causal: bool = False, progress: bool = False) -> None:
+        """Every held row plus its ``FILTER_COLUMNS`` through ``writer`` (a csv.writer)."""
+        cells = filter_rows(self.time_s, self.poses, causal=causal, progress=progress)
+        writer.writerows(row + c for row, c in zip(self.rows, cells, strict=True))
+
+
+def result_pose(r) -> PoseOrNone:
+    """(R, t_mm, covariance) of a ``PoseResult`` with a pose, else None."""
+    if r.ok and r.R is not None and r.t_mm is not None and r.covariance is not None:
+        return (r.R, r.t_mm, r.covariance)
+    return None
 
 
 def filter_rows(

@@ -84,11 +84,14 @@ def _difference(forward: RelativeState, backward: RelativeState) -> np.ndarray:
     )
 
 
-def fused(forward: RelativeState, backward: RelativeState) -> RelativeState:
+def fused(
+    forward: RelativeState, backward: RelativeState, difference: np.ndarray | None = None
+) -> RelativeState:
     """The product of the forward state and a backward state of the same frame (both in
     the forward convention: ``reversed_state``), in the forward state's error
-    coordinates (module docstring); status and innovation the forward state's."""
-    d = _difference(forward, backward)
+    coordinates (module docstring); status and innovation the forward state's.
+    ``difference``: their (12,) ``_difference`` when already computed."""
+    d = _difference(forward, backward) if difference is None else difference
     P_f = forward.covariance
     K = np.linalg.solve(P_f + backward.covariance, P_f).T  # P_f (P_f + P_b)^-1, symmetric P
     dx = K @ d
@@ -193,8 +196,10 @@ def smoothed_states(
                 if b is None
                 else replace(b, status="predicted", innovation_d2=float("nan"), n_rejected=0)
             )
-        elif ok and f.status != "rejected" and agree(f, b):
-            out.append(fused(f, b))
+            continue
+        d = _difference(f, b)  # once, for the gate and the fusion
+        if ok and f.status != "rejected" and agree(f, b, d):
+            out.append(fused(f, b, d))
         else:
             out.append(supported(f, b, p))
     tick(n)
@@ -231,10 +236,12 @@ def supported(forward: RelativeState, backward: RelativeState, pose: PoseOrNone)
     return forward
 
 
-def agree(forward: RelativeState, backward: RelativeState) -> bool:
+def agree(
+    forward: RelativeState, backward: RelativeState, difference: np.ndarray | None = None
+) -> bool:
     """Whether a frame's two estimates of the pose are within ``FUSION_GATE_CHI2`` of
-    each other under the sum of their covariances."""
-    d = _difference(forward, backward)[:6]
+    each other under the sum of their covariances; ``difference`` as ``fused``'s."""
+    d = (_difference(forward, backward) if difference is None else difference)[:6]
     S = (forward.covariance + backward.covariance)[:6, :6]
     try:
         d2 = float(d @ np.linalg.solve(S, d))

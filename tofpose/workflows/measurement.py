@@ -18,9 +18,8 @@ from tofpose.config import config_for_camera
 from tofpose.core.geometry import RigidTransform
 from tofpose.core.tof import unambiguous_range_mm
 from tofpose.io.camera_file import load_camera, pipeline_for, read_camera_text
-from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, filter_rows, pose_row
+from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, HeldRows, pose_row, result_pose
 from tofpose.io.recording import Recording, open_recording
-from tofpose.lab.smoothing import PoseOrNone
 from tofpose.pipeline import PipelineConfig, PosePipeline
 from tofpose.sim.pixel_truth import true_pixel_distances
 
@@ -178,9 +177,7 @@ def estimate(
             moving=filter_state,  # a filter follows a motion: poses from single frames
         )
         n_ok = 0
-        rows: list[list] = []  # with the filter: held for its pass over every pose
-        times: list[float] = []
-        poses: list[PoseOrNone] = []
+        held = HeldRows()  # with the filter: held for its pass over every pose
         with open(out_csv, "w", newline="") as fh:
             wr = csv.writer(fh)
             wr.writerow(CSV_COLUMNS + (FILTER_COLUMNS if filter_state else ()))
@@ -199,16 +196,9 @@ def estimate(
                     if not filter_state:
                         wr.writerow(row)
                         continue
-                    rows.append(row)
-                    times.append(t)
-                    R, t_mm, cov = r.R, r.t_mm, r.covariance
-                    if r.ok and R is not None and t_mm is not None and cov is not None:
-                        poses.append((R, t_mm, cov))
-                    else:
-                        poses.append(None)
+                    held.add(row, t, result_pose(r))
                 bar.update(len(block_times))
             bar.close()
             if filter_state:
-                cells = filter_rows(times, poses, causal=causal_filter, progress=progress)
-                wr.writerows(row + c for row, c in zip(rows, cells, strict=True))
+                held.write(wr, causal=causal_filter, progress=progress)
         return {"frames": rec.n_frames, "ok": n_ok}
