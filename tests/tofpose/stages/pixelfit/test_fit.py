@@ -57,6 +57,30 @@ def test_noiseless_frame_converges_to_truth_from_several_bounds_away(range_mm):
     assert np.all(res.marker_rms_sigma < 1.0)
 
 
+def _rendered_fits(sensor, rng, range_mm, frames, variants, damage=None):
+    """For ``frames`` poses drawn at ``range_mm``: the frame rendered, the centroid
+    pipeline's pose and matches, then ``fit_pose_to_pixels`` from them once per entry of
+    ``variants`` (keyword arguments of the fit; the noise defaults to the sensor's).
+    ``damage(frame, distance, rng)`` alters the distance image in place before the fits.
+    Yields (truth, frame, [result per variant])."""
+    for _ in range(frames):
+        T = _pose(rng, range_mm)
+        f = render_frame(CAM, TargetScene(), T, sensor, rng)
+        r = PosePipeline(CAM, CAT).process(f.gray, f.distance_mm)
+        assert r.ok, r.reason
+        distance = f.distance_mm.copy()
+        if damage is not None:
+            damage(f, distance, rng)
+        ids = [m.catalog_id for m in r.matched]
+        fits = []
+        for kwargs in variants:
+            options = {"noise": PixelNoise.from_sensor(sensor), **kwargs}
+            res = fit_pose_to_pixels(f.gray, distance, CAM, CAT, r.R, r.t_mm, ids, **options)
+            assert res.ok, res.reason
+            fits.append(res)
+        yield T, f, fits
+
+
 @pytest.mark.parametrize(
     "range_mm",
     [
@@ -79,22 +103,7 @@ def test_noisy_frames_reach_the_bound_with_consistent_sigmas(range_mm):
     sensor = SensorModel(supersampling=32)
     rng = np.random.default_rng([49, int(range_mm)])
     errs, covs, bounds = [], [], []
-    for _ in range(16):
-        T = _pose(rng, range_mm)
-        f = render_frame(CAM, TargetScene(), T, sensor, rng)
-        r = PosePipeline(CAM, CAT).process(f.gray, f.distance_mm)
-        assert r.ok, r.reason
-        res = fit_pose_to_pixels(
-            f.gray,
-            f.distance_mm,
-            CAM,
-            CAT,
-            r.R,
-            r.t_mm,
-            [m.catalog_id for m in r.matched],
-            noise=PixelNoise.from_sensor(sensor),
-        )
-        assert res.ok, res.reason
+    for T, f, (res,) in _rendered_fits(sensor, rng, range_mm, 16, [{}]):
         errs.append(_error(res.R, res.t_mm, T))
         covs.append(res.covariance)
         bounds.append(pose_crlb(f, T, CAM, CAT, sensor))
@@ -141,33 +150,13 @@ def _measured_against_none(sensor, rng, range_mm, frames, measured, none, damage
     )
     out = {"measured": ([], []), "none": ([], [])}
     values = []
-    for _ in range(frames):
-        T = _pose(rng, range_mm)
-        f = render_frame(CAM, TargetScene(), T, sensor, rng)
-        r = PosePipeline(CAM, CAT).process(f.gray, f.distance_mm)
-        assert r.ok, r.reason
-        distance = f.distance_mm.copy()
-        if damage is not None:
-            damage(f, distance, rng)
-        ids = [m.catalog_id for m in r.matched]
-        for name, noise in (("measured", measured), ("none", none)):
-            res = fit_pose_to_pixels(
-                f.gray,
-                distance,
-                CAM,
-                CAT,
-                r.R,
-                r.t_mm,
-                ids,
-                noise=noise,
-                max_marker_rms_sigma=10,
-                disc_deletion_terms=False,
-            )
-            assert res.ok, res.reason
+    common = {"max_marker_rms_sigma": 10, "disc_deletion_terms": False}
+    variants = [{"noise": measured, **common}, {"noise": none, **common}]
+    for T, _, fits in _rendered_fits(sensor, rng, range_mm, frames, variants, damage):
+        for name, res in zip(("measured", "none"), fits, strict=True):
             out[name][0].append(_error(res.R, res.t_mm, T))
             out[name][1].append(res.covariance)
-            if name == "measured":
-                values.append(getattr(res, field))
+        values.append(getattr(fits[0], field))
     return out["measured"], out["none"], values
 
 
@@ -233,33 +222,18 @@ def test_a_disc_with_a_range_error_of_its_own_is_found_by_deleting_it():
     sensor = SensorModel(supersampling=32)
     noise = replace(PixelNoise.from_sensor(sensor), coverage_sigma=0.0, disc_range_sigma_mm=0.0)
     rng = np.random.default_rng([49, 25])
-    with_terms, without, flagged = ([], []), ([], []), []
-    for _ in range(8):
-        T = _pose(rng, 3000.0)
-        f = render_frame(CAM, TargetScene(), T, sensor, rng)
-        r = PosePipeline(CAM, CAT).process(f.gray, f.distance_mm)
-        assert r.ok, r.reason
-        distance = f.distance_mm.copy()
+
+    def offset(f, distance, rng):
         distance[_disc_pixels(f, 7)] += 8.0
-        ids = [m.catalog_id for m in r.matched]
-        for out, terms in ((with_terms, True), (without, False)):
-            res = fit_pose_to_pixels(
-                f.gray,
-                distance,
-                CAM,
-                CAT,
-                r.R,
-                r.t_mm,
-                ids,
-                noise=noise,
-                max_marker_rms_sigma=10,
-                disc_deletion_terms=terms,
-            )
-            assert res.ok, res.reason
+
+    common = {"noise": noise, "max_marker_rms_sigma": 10}
+    variants = [{**common}, {**common, "disc_deletion_terms": False}]
+    with_terms, without, flagged = ([], []), ([], []), []
+    for T, _, fits in _rendered_fits(sensor, rng, 3000.0, 8, variants, offset):
+        for out, res in zip((with_terms, without), fits, strict=True):
             out[0].append(_error(res.R, res.t_mm, T))
             out[1].append(res.covariance)
-            if terms:
-                flagged.append(res.catalog_ids[res.influential].tolist())
+        flagged.append(fits[0].catalog_ids[fits[0].influential].tolist())
     # the damaged disc in every frame, and no other as often
     counts = {i: sum(i in f for f in flagged) for i in CAT.ids.tolist()}
     assert counts[7] == len(flagged)
@@ -275,22 +249,7 @@ def test_deleting_discs_of_frames_the_model_fits_leaves_the_covariance_near_fish
     sensor = SensorModel(supersampling=32)
     rng = np.random.default_rng([49, 26])
     factors, flagged, discs = [], 0, 0
-    for _ in range(8):
-        T = _pose(rng, 4000.0)
-        f = render_frame(CAM, TargetScene(), T, sensor, rng)
-        r = PosePipeline(CAM, CAT).process(f.gray, f.distance_mm)
-        assert r.ok, r.reason
-        res = fit_pose_to_pixels(
-            f.gray,
-            f.distance_mm,
-            CAM,
-            CAT,
-            r.R,
-            r.t_mm,
-            [m.catalog_id for m in r.matched],
-            noise=PixelNoise.from_sensor(sensor),
-        )
-        assert res.ok, res.reason
+    for _, _, (res,) in _rendered_fits(sensor, rng, 4000.0, 8, [{}]):
         factors.append(res.deletion_variance_factor)
         flagged += int(res.influential.sum())
         discs += len(res.influential)
