@@ -58,6 +58,19 @@ def _cluster_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--scheduler", help="address of a running Dask scheduler, tcp://host:8786")
 
 
+def _range_bias_argument(p) -> None:
+    """``--no-learn-range-bias`` (estimate's and reprocess')."""
+    p.add_argument(
+        "--no-learn-range-bias",
+        dest="learn_range_bias",
+        action="store_false",
+        help="measure every frame with the configured range-offset prior (15 mm without a "
+        "range calibration) instead of the spread of the offsets learned first over up to "
+        "64 of the recording's frames (docs/algorithm.md, 'Range bias learned over a "
+        "recording')",
+    )
+
+
 def _add_measurement_commands(sub) -> None:
     """The subcommands estimate, calibrate-range and calibrate-covariance, on ``sub``."""
     p = sub.add_parser("estimate", help="estimate the pose of every frame of a recording")
@@ -93,6 +106,7 @@ def _add_measurement_commands(sub) -> None:
         help="refine each pose on the markers' raw pixels (slow: tens to hundreds of ms a "
         "frame; docs/algorithm.md, 'Pixel-level fit')",
     )
+    _range_bias_argument(p)
     p = sub.add_parser(
         "calibrate-range",
         help="fit the camera's range correction from a recording of the known target",
@@ -282,6 +296,7 @@ def _add_batch_commands(sub) -> None:
         help="with --filter: each frame's state from the poses up to it (estimate --causal)",
     )
     p.add_argument("--chunk-frames", type=int, default=512, help="frames per task (default 512)")
+    _range_bias_argument(p)
     _cluster_arguments(p)
     p = sub.add_parser(
         "compare", help="compare two runs of estimate/reprocess: per-frame pose differences"
@@ -356,7 +371,10 @@ def _run_library(args: argparse.Namespace) -> int:
             filter_state=args.filter,
             pixel_fit=args.pixel_fit,
             causal_filter=args.causal,
+            learn_range_bias=args.learn_range_bias,
         )
+        if s["range_bias"]:
+            print(s["range_bias"])
         print(f"{s['ok']}/{s['frames']} frames with a pose -> {args.out}")
     elif args.cmd == "export":
         print(interop.export_file(args))

@@ -55,6 +55,7 @@ from tofpose.stages.pose.constants import (
     NARROWING_CONFIDENCE,
     NARROWING_MIN_REFLECTORS,
 )
+from tofpose.stages.pose.records import NO_RANGE_OFFSET, RangeOffset
 from tofpose.stages.pose.solve import (
     Measurements,
     PoseSolver,
@@ -153,6 +154,10 @@ class PoseResult:
     pixel_fit : "" when the pixel-level fit did not run (``PipelineConfig.pixel_fit``),
         "ok" when ``R``, ``t_mm`` and ``covariance`` are its answer, otherwise why it fell
         back to the centroid pose (which the result then carries).
+    range_offset : the range offset common to the reflectors that the pose's fit took
+        out of their ranges, its posterior sigma and its prior's
+        (``stages.pose.records.RangeOffset``; the pixel fit's when it holds): what the
+        frame says of the camera's range offset (``tofpose.lab.range_bias``).
     """
 
     ok: bool
@@ -173,6 +178,7 @@ class PoseResult:
     R_svd: np.ndarray | None = None
     t_svd_mm: np.ndarray | None = None
     pixel_fit: str = ""
+    range_offset: RangeOffset = NO_RANGE_OFFSET
 
     @property
     def n_matched(self) -> int:
@@ -442,6 +448,11 @@ class PosePipeline:
             covariance=fit.covariance,
             pixel_fit="ok",
             timings_ms=timings,
+            range_offset=RangeOffset(
+                fit.range_offset_mm,
+                fit.range_offset_sigma_mm,
+                0.0 if cfg.fit_range_offset else offset_sigma_mm,
+            ),
         )
 
     def _range_corrected(self, gray: np.ndarray, distance_mm: np.ndarray) -> np.ndarray:
@@ -820,6 +831,7 @@ class PosePipeline:
             mode=mode,
             R_svd=None if solved.T_svd is None else solved.T_svd.R,
             t_svd_mm=None if solved.T_svd is None else solved.T_svd.t_mm,
+            range_offset=ml.range_offset,
         )
 
     def _reported_covariance(self, ml, n_matched: int, t_mm: np.ndarray) -> np.ndarray:

@@ -68,13 +68,17 @@ class Settings:
     catalog_path: str | None = None
     tracking: bool = False
     moving: bool = False  # each pose from its own frame (as ``estimate --filter``)
+    # each recording's range bias learned first, as ``estimate`` does
+    # (``io.camera_file.learned_range_bias``; its chunks carry it)
+    learn_range_bias: bool = True
 
 
 @dataclass(frozen=True)
 class Chunk:
     """Frames [start, stop) of recording ``path`` output, after a warm-up from ``origin``;
     digests are recorded for the warm-up and for the last ``tail`` frames (the next
-    chunk's warm-up)."""
+    chunk's warm-up); ``range_bias_sigma_mm``: the range offset's prior learned over the
+    recording (None: the configured one)."""
 
     path: str
     index: int
@@ -82,6 +86,7 @@ class Chunk:
     start: int
     stop: int
     tail: int
+    range_bias_sigma_mm: float | None = None
 
     @property
     def name(self) -> str:
@@ -162,6 +167,7 @@ def run_chunk(
             settings.camera_path,
             settings.tracking,
             moving=settings.moving,
+            range_bias_sigma_mm=chunk.range_bias_sigma_mm,
         )
         for first, (grays, dists, ts) in rec.blocks(
             chunk.origin, chunk.stop, read_ahead=read_ahead
@@ -248,7 +254,7 @@ def reprocess(
     from dask.distributed import TimeoutError as DaskTimeout
     from dask.distributed import wait
 
-    from tofpose.io.camera_file import pipeline_for
+    from tofpose.io.camera_file import learned_range_bias, pipeline_for
 
     settings = settings or Settings()
     if filter_state:  # poses the filter follows: from single frames, as estimate --filter
@@ -262,6 +268,7 @@ def reprocess(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     chunks: dict[str, list[Chunk]] = {}
+    range_bias: dict[str, str] = {}
     for path in recordings:
         with open_recording(path) as rec:  # RecordingError names what is wrong
             pipe = pipeline_for(
@@ -273,14 +280,25 @@ def reprocess(
                 moving=settings.moving,
             )
             cfg = pipe.config
-            chunks[path] = plan(
-                str(path),
-                rec.n_frames,
-                chunk_frames,
-                cfg.persistence.k_frames,
-                settings.tracking,
-                cfg.tracking.reacquire_every,
+            learned = (
+                learned_range_bias(
+                    rec, path, settings.catalog_path, settings.camera_path, progress=False
+                )
+                if settings.learn_range_bias
+                else None
             )
+            range_bias[path] = "" if learned is None else learned.summary()
+            chunks[path] = [
+                replace(c, range_bias_sigma_mm=None if learned is None else learned.sigma_mm)
+                for c in plan(
+                    str(path),
+                    rec.n_frames,
+                    chunk_frames,
+                    cfg.persistence.k_frames,
+                    settings.tracking,
+                    cfg.tracking.reacquire_every,
+                )
+            ]
     total = sum(c.stop - c.start for cs in chunks.values() for c in cs)
     t0 = time.perf_counter()
     first_progress_s: float | None = None
@@ -342,7 +360,7 @@ def reprocess(
                     boundaries[path].append({"chunk": j, "start": cur.start, "synced_at_frame": k})
                     continue
                 # run again from the previous chunk's origin: its verified run, carried on
-                again = Chunk(path, j, prev.origin, cur.start, cur.stop, cur.tail)
+                again = replace(cur, origin=prev.origin)
                 results[cur] = client.submit(
                     run_chunk,
                     again,
@@ -386,6 +404,7 @@ def reprocess(
                 "ok": n_ok,
                 "chunks": len(cs),
                 "boundaries": boundaries[path],
+                "range_bias": range_bias[path],
             }
         )
     n_workers = cluster.workers

@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from tofpose.calibration.covariance import CovarianceScale
 from tofpose.calibration.range import RangeCorrection
@@ -25,6 +27,7 @@ from tofpose.core.camera import CameraModel
 from tofpose.core.camera_profiles import camera_from_profile, profile_names, profile_text
 from tofpose.core.catalog import BUILTIN_CATALOGS, Catalog
 from tofpose.pipeline import PipelineConfig, PosePipeline
+from tofpose.stages.pose.range_bias import RECORDING_FRAMES, LearnedRangeBias, learn_range_bias
 
 
 def load_camera(text: str) -> tuple[CameraModel, RangeCorrection | None, CovarianceScale | None]:
@@ -113,6 +116,7 @@ def pipeline_for(
     *,
     pixel_fit: bool = False,
     moving: bool = False,
+    range_bias_sigma_mm: float | None = None,
 ) -> PosePipeline:
     """The pipeline ``estimate`` runs over an open recording: its camera and catalog, or
     the ones given (a camera JSON with its range correction and covariance scale), with
@@ -120,7 +124,9 @@ def pipeline_for(
     ``pixel_fit``: refine each pose on the markers' pixels (``PixelFitConfig``);
     ``moving``: a target whose motion a filter follows (``estimate --filter``): each pose
     from its own frame (``PersistenceConfig.single_frame``), since combining frames
-    makes a pose lag a motion too slow for persistence's gates to see."""
+    makes a pose lag a motion too slow for persistence's gates to see;
+    ``range_bias_sigma_mm``: the range offset's prior sigma, calibrated or not (one
+    learned over the recording, ``tofpose.lab.range_bias``; None: the configured ones)."""
     camera, correction, scale = rec.camera, None, None
     if camera_path:
         camera, correction, scale = load_camera(read_camera_text(camera_path))
@@ -157,6 +163,47 @@ def pipeline_for(
         height=camera.height,
         count_scale=camera.count_scale,
     )
+    if range_bias_sigma_mm is not None:
+        config = replace(
+            config,
+            range_bias_sigma_mm=range_bias_sigma_mm,
+            calibrated_range_bias_sigma_mm=range_bias_sigma_mm,
+        )
     return PosePipeline(
         camera, catalog, config, range_correction=correction, covariance_scale=scale
     )
+
+
+def learned_range_bias(
+    rec,
+    rec_path: str,
+    catalog_path: str | None,
+    camera_path: str | None,
+    *,
+    pixel_fit: bool = False,
+    max_frames: int = RECORDING_FRAMES,
+    progress: bool = True,
+) -> LearnedRangeBias | None:
+    """The spread of the camera's range offsets over the open recording ``rec``
+    (``stages.pose.range_bias``): up to ``max_frames`` frames spaced evenly over it, each
+    measured on its own (``pipeline_for``'s pipeline without tracking or persistence
+    across frames, reset before each) with the configured prior, their
+    ``PoseResult.range_offset`` pooled. None when the pipeline estimates no offset, or
+    too few frames tell it. ``estimate`` and ``reprocess`` measure every frame with its
+    ``sigma_mm`` (``pipeline_for``'s ``range_bias_sigma_mm``)."""
+    pipe = pipeline_for(
+        rec, rec_path, catalog_path, camera_path, False, pixel_fit=pixel_fit, moving=True
+    )
+    if not pipe.config.solve.estimate_range_offset or rec.n_frames == 0:
+        return None
+    picked = np.unique(np.linspace(0, rec.n_frames - 1, min(rec.n_frames, max_frames)).astype(int))
+    offsets = []
+    for i in tqdm(
+        picked.tolist(), desc="range bias", unit="frame", disable=not progress, file=sys.stderr
+    ):
+        gray, distance, t = rec.frame(i)
+        pipe.reset()
+        r = pipe.process(gray, distance, t)
+        if r.ok:
+            offsets.append(r.range_offset)
+    return learn_range_bias(offsets)

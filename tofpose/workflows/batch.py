@@ -54,7 +54,9 @@ def reprocess(args) -> int:
     from tofpose.batch.reprocess import ReprocessError, Settings
     from tofpose.batch.reprocess import reprocess as run
 
-    settings = Settings(args.camera, args.catalog, args.tracking)
+    settings = Settings(
+        args.camera, args.catalog, args.tracking, learn_range_bias=args.learn_range_bias
+    )
     try:
         s = run(
             args.recordings,

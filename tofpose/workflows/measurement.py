@@ -17,7 +17,12 @@ from tofpose.calibration.range import fit_range_correction
 from tofpose.config import config_for_camera
 from tofpose.core.geometry import RigidTransform
 from tofpose.core.tof import unambiguous_range_mm
-from tofpose.io.camera_file import load_camera, pipeline_for, read_camera_text
+from tofpose.io.camera_file import (
+    learned_range_bias,
+    load_camera,
+    pipeline_for,
+    read_camera_text,
+)
 from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, HeldRows, pose_row, result_pose
 from tofpose.io.recording import Recording, open_recording
 from tofpose.pipeline import PipelineConfig, PosePipeline
@@ -156,7 +161,8 @@ def estimate(
     filter_state: bool = False,
     pixel_fit: bool = False,
     causal_filter: bool = False,
-) -> dict[str, float]:
+    learn_range_bias: bool = True,
+) -> dict[str, float | str]:
     """Run the pipeline over a recording and write the CSV; returns summary numbers.
     ``tracking``: the pipeline's tracking mode (faster on a continuous recording);
     ``filter_state``: run the relative-state filter over the poses and add
@@ -165,8 +171,18 @@ def estimate(
     (``tofpose.lab.smoothing``; the rows are held until the last frame), or with
     ``causal_filter`` from the poses up to it, as the live loop has it (empty until its
     first pose); ``pixel_fit``: refine each pose on the markers' pixels
-    (``PipelineConfig.pixel_fit``)."""
+    (``PipelineConfig.pixel_fit``); ``learn_range_bias``: first learn the spread of the
+    camera's range offsets over the recording (``io.camera_file.learned_range_bias``)
+    and measure every frame with it as the offset's prior (the summary's "range_bias"
+    says what was learned)."""
     with open_recording(rec_path) as rec:
+        learned = (
+            learned_range_bias(
+                rec, rec_path, catalog_path, camera_path, pixel_fit=pixel_fit, progress=progress
+            )
+            if learn_range_bias
+            else None
+        )
         pipe = pipeline_for(
             rec,
             rec_path,
@@ -175,6 +191,7 @@ def estimate(
             tracking,
             pixel_fit=pixel_fit,
             moving=filter_state,  # a filter follows a motion: poses from single frames
+            range_bias_sigma_mm=None if learned is None else learned.sigma_mm,
         )
         n_ok = 0
         held = HeldRows()  # with the filter: held for its pass over every pose
@@ -201,4 +218,8 @@ def estimate(
             bar.close()
             if filter_state:
                 held.write(wr, causal=causal_filter, progress=progress)
-        return {"frames": rec.n_frames, "ok": n_ok}
+        return {
+            "frames": rec.n_frames,
+            "ok": n_ok,
+            "range_bias": "" if learned is None else learned.summary(),
+        }

@@ -200,8 +200,9 @@ class PixelFitResult:
         the terms of discs too small to measure them).
     levels : ndarray of shape (K,)
         Fitted surround level, counts.
-    range_offset_mm : float
-        Fitted common range offset (0 unless fitted).
+    range_offset_mm, range_offset_sigma_mm : float
+        Fitted common range offset and its posterior sigma (the other parameters
+        marginalised), mm (0 unless fitted).
     iterations : int; converged : bool
     n_gray_pixels, n_distance_pixels, n_saturated : int
         Pixels in the gray residuals, in the distance residuals, and censored.
@@ -227,6 +228,7 @@ class PixelFitResult:
     gains: np.ndarray = field(default_factory=lambda: np.zeros((0, G)))
     levels: np.ndarray = field(default_factory=lambda: np.zeros(0))
     range_offset_mm: float = 0.0
+    range_offset_sigma_mm: float = 0.0
     iterations: int = 0
     converged: bool = False
     n_gray_pixels: int = 0
@@ -997,12 +999,17 @@ def fit_pose_to_pixels(
         ]
     )
     covariance = None
+    offset_sigma = 0.0
     if solved.info is not None:
         try:
-            covariance = np.linalg.inv(solved.info)[:6, :6]
-            covariance = 0.5 * (covariance + covariance.T)
+            info_inv = np.linalg.inv(solved.info)
         except np.linalg.LinAlgError:
-            covariance = None
+            info_inv = None
+        if info_inv is not None:
+            covariance = 0.5 * (info_inv[:6, :6] + info_inv[:6, :6].T)
+            if pb.layout.offset_col >= 0:
+                col = int(np.count_nonzero(pb.free[: pb.layout.offset_col]))
+                offset_sigma = float(np.sqrt(max(info_inv[col, col], 0.0)))
     deletion = None
     if (
         disc_deletion_terms
@@ -1029,6 +1036,7 @@ def fit_pose_to_pixels(
         gains=state.gains,
         levels=state.levels,
         range_offset_mm=state.offset_mm,
+        range_offset_sigma_mm=offset_sigma,
         iterations=solved.iterations,
         converged=solved.converged,
         n_gray_pixels=len(pb.gray_rows),

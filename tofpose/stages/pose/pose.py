@@ -25,7 +25,7 @@ from tofpose.stages.pose.kernels.pose import (
     systematic_sigmas as kernel_systematic_sigmas,
 )
 from tofpose.stages.pose.kernels.pose import tangent_bases as bearing_tangent_bases
-from tofpose.stages.pose.records import Reflectors
+from tofpose.stages.pose.records import NO_RANGE_OFFSET, RangeOffset, Reflectors
 
 
 def weighted_absolute_orientation(
@@ -234,8 +234,10 @@ class MLResult:
     bias_covariance : (6, 6) added by errors the data cannot reveal: a common range
         offset (``common_range_bias_covariance``) and the image scale's errors
         (``kernels.pose.class_scale_covariance``), or None.
-    range_offset_mm : the range offset common to the reflectors that the fit estimated
-        and took out of their ranges (``kernels.pose.common_range_offset``; 0: none).
+    range_offset : the range offset common to the reflectors that the fit estimated and
+        took out of their ranges (``kernels.pose.common_range_offset``), its posterior
+        sigma and its prior's (a ``records.RangeOffset``; ``NO_RANGE_OFFSET``: none
+        modelled).
     leave_one_out_covariance : (6, 6) spread of the poses fitted without one reflector
         each about this pose (``leave_one_out_covariance``), or None; the reported
         covariance is never narrower (``covariance_envelope``).
@@ -248,8 +250,12 @@ class MLResult:
     iterations: int
     reflector_norms: np.ndarray
     bias_covariance: np.ndarray | None = None
-    range_offset_mm: float = 0.0
+    range_offset: RangeOffset = NO_RANGE_OFFSET
     leave_one_out_covariance: np.ndarray | None = None
+
+    @property
+    def range_offset_mm(self) -> float:
+        return self.range_offset.mm
 
 
 def refine_maximum_likelihood(

@@ -57,6 +57,34 @@ class OutlierFit(NamedTuple):
     offset_sigma_mm: float
 
 
+class RangeOffset(NamedTuple):
+    """A frame's range offset common to its reflectors, as the fit saw it: ``mm`` the
+    posterior mean taken out of the ranges (0: not estimated), ``sigma_mm`` its
+    posterior sigma (the prior's when not estimated), ``prior_sigma_mm`` the prior's
+    sigma, about 0 (0: no offset modelled)."""
+
+    mm: float
+    sigma_mm: float
+    prior_sigma_mm: float
+
+    def likelihood(self) -> tuple[float, float] | None:
+        """(mean, variance) mm, mm^2: what the frame alone says of the offset, the prior
+        divided out of the posterior (Gaussians: ``1 / v = 1 / sigma^2 - 1 / prior^2``,
+        ``mean = v mm / sigma^2``); None when the frame says nothing the prior did not
+        (its posterior is no narrower than the prior, or no offset was modelled)."""
+        if not (self.prior_sigma_mm > 0 and self.sigma_mm > 0):
+            return None
+        precision = 1.0 / self.sigma_mm**2 - 1.0 / self.prior_sigma_mm**2
+        if not precision > 1e-12 / self.prior_sigma_mm**2:
+            return None
+        v = 1.0 / precision
+        return v * self.mm / self.sigma_mm**2, v
+
+
+#: no offset modelled
+NO_RANGE_OFFSET = RangeOffset(0.0, 0.0, 0.0)
+
+
 class SolvedPairs(NamedTuple):
     """The pose of matched pairs (``solve_pairs``): ``k_idx``, ``i_idx`` (m,) int64 the
     (candidate, catalog) pairs after completion, ``uv`` (m, 2) px their centroids after

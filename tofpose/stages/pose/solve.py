@@ -43,6 +43,7 @@ from tofpose.stages.pose.records import (
     CovarianceTerms,
     OutlierFit,
     PoseFit,
+    RangeOffset,
     RangeOffsetPrior,
     Reflectors,
     SolvedPairs,
@@ -507,7 +508,11 @@ class PoseSolver:
             int(fit.iterations),
             fit.norms,
             bias_covariance=extra,
-            range_offset_mm=float(result.offset_mm),
+            range_offset=RangeOffset(
+                float(result.offset_mm),
+                float(bias),
+                self.range_bias_sigma_mm(obs.range_mm) if cfg.estimate_range_offset else 0.0,
+            ),
             leave_one_out_covariance=spread,
         )
         c = np.ascontiguousarray
