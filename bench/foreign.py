@@ -102,7 +102,7 @@ def run_estimate(
     camera_path: str | None = None,
     catalog_path: str | None = None,
     progress: bool = True,
-    pixel_fit: bool = False,
+    pixel_fit: bool = True,
 ) -> tuple[list[PoseResult], PosePipeline]:
     """``tofpose.workflows.measurement.estimate`` over a recording (its CSV to a temporary
     file), with the pipelines it builds made to keep each frame's ``PoseResult``:
@@ -143,6 +143,8 @@ def run_estimate(
             f"{len(measured)} of {summary['frames']} frames; bench/foreign.py expects one "
             "process() call per frame from the pipeline that writes the CSV"
         )
+    if summary["range_bias"]:
+        print(f"{Path(rec_path).name}: {summary['range_bias']}", file=sys.stderr)
     return measured, built[-1]
 
 
@@ -233,7 +235,7 @@ def evaluate(
     bin_width_m: float | None = None,
     oracle: bool = True,
     progress: bool = True,
-    pixel_fit: bool = False,
+    pixel_fit: bool = True,
 ) -> dict:
     """One recording: the pose, spread and per-marker numbers per range bin and run, and
     the per-frame outcomes (``FrameOutcome``), as a dict (``report`` prints it; JSON-ready
@@ -309,7 +311,7 @@ def _int(x: int) -> str:
 def report(ev: dict) -> str:
     """The tables of one evaluated recording (``evaluate``)."""
     mode = "tracking" if ev["tracking"] else "acquisition"
-    mode += " mode with the pixel fit (`--pixel-fit`)" if ev.get("pixel_fit") else " mode"
+    mode += " mode" if ev.get("pixel_fit") else " mode, centroid pose only (`--no-pixel-fit`)"
     name = Path(ev["path"]).name
     head = f"### {name}: {ev['frames']} frames, {mode}, catalog {ev['catalog']!r}"
     n_truth = ev["oracle_frames_matched"]
@@ -473,7 +475,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--no-oracle", action="store_true", help="skip the true-correspondence run")
     ap.add_argument(
-        "--pixel-fit", action="store_true", help="the estimate's --pixel-fit (the pipeline rows)"
+        "--pixel-fit",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="the estimate's --pixel-fit / --no-pixel-fit (default: on, as estimate's)",
     )
     ap.add_argument("--json", help="write every number and the per-frame outcomes here")
     ap.add_argument("--quiet", action="store_true", help="no progress bars")

@@ -11,12 +11,15 @@ Rows (reference in brackets):
 - ``import tofpose`` in a fresh process [``python -c pass``], and which of the web
   stack, Dask, numba and OpenCV it loaded; ``python -X importtime`` names its costliest
   packages;
-- ``tofpose estimate`` per frame of a range-sweep recording [OpenCV SimpleBlobDetector +
-  solvePnP given the true correspondences on the same frames];
+- ``tofpose estimate --no-pixel-fit`` per frame of a range-sweep recording, and the
+  default ``tofpose estimate`` (each pose refined on its pixels) on a tenth of it
+  [OpenCV SimpleBlobDetector + solvePnP given the true correspondences on the same
+  frames];
 - acquisition and tracking per frame (``bench/pipeline.py``) [OpenCV as above]; Python
   calls and calls into compiled code per frame (cProfile);
-- ``tofpose reprocess`` on a LocalCluster of 1 and 2 workers, both modes, frames/s per
-  worker [``tofpose estimate`` serially], and chunks run more than once;
+- ``tofpose reprocess --no-pixel-fit`` on a LocalCluster of 1 and 2 workers, both modes,
+  frames/s per worker [``tofpose estimate --no-pixel-fit`` serially], and chunks run
+  more than once;
 - a study on 1 worker, frames/s [the same frames serially in one process];
 - ``tofpose study --example`` on 2 workers: the cluster's start [a bare Dask
   LocalCluster of 2 workers started in a fresh process] and the first progress update
@@ -377,25 +380,32 @@ def reading_setup(rec_path: Path) -> str:
     return f"{filters}; {'a reader thread' if ahead else 'no reader thread'}"
 
 
-def estimate_row(n_frames: int, repeats: int, progress: Callable[[str], None]) -> Row:
+def estimate_row(
+    n_frames: int, repeats: int, progress: Callable[[str], None], pixel_fit: bool = False
+) -> Row:
     """``tofpose estimate`` (acquisition mode, in this process: the command's work without
-    its start) per frame against OpenCV on the same frames; one core."""
+    its start, the range bias's learning pass included) per frame against OpenCV on the
+    same frames; one core. ``pixel_fit``: as the command runs by default (each pose
+    refined on its pixels), else ``--no-pixel-fit``."""
     from tofpose.workflows.measurement import estimate
 
-    progress(f"estimate vs OpenCV, {n_frames}-frame recording")
+    flag = "" if pixel_fit else " --no-pixel-fit"
+    progress(f"estimate{flag} vs OpenCV, {n_frames}-frame recording")
     rec = _recording(n_frames)
     ours, theirs, reading = [], [], []
     with tempfile.TemporaryDirectory() as d:
-        estimate(str(rec), str(Path(d) / "warm.csv"), None, None, progress=False)
+        out = str(Path(d) / "e.csv")
+        estimate(str(rec), out, None, None, progress=False, pixel_fit=pixel_fit)  # warm
         for _ in range(repeats):
             t0 = time.perf_counter()
-            s = estimate(str(rec), str(Path(d) / "e.csv"), None, None, progress=False)
+            s = estimate(str(rec), out, None, None, progress=False, pixel_fit=pixel_fit)
             ours.append(1e3 * (time.perf_counter() - t0) / s["frames"])
             theirs.append(opencv_ms_per_frame(rec))
             reading.append(read_ms_per_frame(rec))
+    what = "the default: each pose refined on its pixels" if pixel_fit else "centroid pose only"
     return Row(
         "estimate",
-        "`tofpose estimate` per frame (read, measure, write the CSV; one core)",
+        f"`tofpose estimate{flag}` per frame ({what}; read, measure, write the CSV; one core)",
         "ms",
         ours,
         "SimpleBlobDetector + solvePnP, true correspondences, same frames",
@@ -564,12 +574,13 @@ def reprocess_rows(
             out.append(
                 Row(
                     f"reprocess_{'tracking' if tracking else 'acquisition'}_{w}",
-                    f"`tofpose reprocess` {mode}, {n_frames} frames, {w} worker"
+                    f"`tofpose reprocess --no-pixel-fit` {mode}, {n_frames} frames, {w} worker"
                     + ("s" if w > 1 else "")
                     + ", frames/s per worker",
                     "frames/s",
                     fps,
-                    f"`tofpose estimate` serially on {c} core" + ("s" if c > 1 else ""),
+                    f"`tofpose estimate --no-pixel-fit` serially on {c} core"
+                    + ("s" if c > 1 else ""),
                     serial[c],
                     ">= 0.9x; no chunk run twice",
                     "ratio >=",
@@ -741,6 +752,8 @@ def run(
             try:
                 if group == "estimate":
                     rows.append(estimate_row(200 if quick else 3000, reps, say))
+                    # the default's pixel fit on a tenth of the frames (tens of ms each)
+                    rows.append(estimate_row(20 if quick else 300, reps, say, pixel_fit=True))
                 else:
                     rows += pipeline_rows(4 if quick else 20, reps, say)
             finally:

@@ -653,15 +653,18 @@ def foreign_section(recordings: list[str]) -> str:
             "plate mixing into partly covered pixels, no wall; per file: far poses, "
             "uncalibrated systematic range errors, reflectors saturating a fixed exposure, "
             "marker-like specular glints). They are not shipped with the project; the oracle "
-            "rows give the pipeline the true correspondences.",
+            "rows give the pipeline the true correspondences. Each recording as `tofpose "
+            "estimate` measures it by default: the range bias learned over the recording "
+            "first, each pose refined on its markers' pixels (the pixel-level fit; the "
+            "centroid pose where the fit falls back).",
             "",
             _script("foreign.py", *recordings, "--quiet"),
             "",
-            "The same recordings with the pixel-level fit after the pipeline (`tofpose "
-            "estimate --pixel-fit`, docs/algorithm.md): its pose and covariance where it "
-            "holds, the centroid pipeline's where it falls back.",
+            "The same recordings with the centroid pose only (`tofpose estimate "
+            "--no-pixel-fit`: no pixel-level fit after the pipeline, docs/algorithm.md), "
+            "the range bias learned as above.",
             "",
-            _script("foreign.py", *recordings, "--quiet", "--no-oracle", "--pixel-fit"),
+            _script("foreign.py", *recordings, "--quiet", "--no-oracle", "--no-pixel-fit"),
             "",
         ]
     )

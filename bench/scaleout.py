@@ -109,13 +109,22 @@ def make_recording(path: Path, n: int) -> None:
 
 
 def serial_estimate(rec: Path, tracking: bool) -> tuple[float, float]:
-    """``tofpose estimate`` of ``rec``: (frames/s, CPU s per frame)."""
+    """``tofpose estimate --no-pixel-fit`` of ``rec``: (frames/s, CPU s per frame). The
+    scale-out's runs measure the centroid pose only (``reprocess_run`` too): their
+    subject is the chunking, and the pixel fit's tens of ms a frame would hide its
+    costs (a heavier frame makes every per-worker ratio look better)."""
     from tofpose.workflows.measurement import estimate
 
     with tempfile.TemporaryDirectory() as d:
         t0, c0 = time.perf_counter(), time.process_time()
         s = estimate(
-            str(rec), str(Path(d) / "e.csv"), None, None, progress=False, tracking=tracking
+            str(rec),
+            str(Path(d) / "e.csv"),
+            None,
+            None,
+            progress=False,
+            tracking=tracking,
+            pixel_fit=False,
         )
         n = s["frames"]
         return n / (time.perf_counter() - t0), (time.process_time() - c0) / n
@@ -135,7 +144,7 @@ def reprocess_run(rec: Path, workers: int, tracking: bool, chunk_frames: int) ->
             s = reprocess(
                 [str(rec)],
                 d,
-                settings=Settings(tracking=tracking),
+                settings=Settings(tracking=tracking, pixel_fit=False),  # as serial_estimate
                 chunk_frames=chunk_frames,
                 progress=False,
                 session=session,

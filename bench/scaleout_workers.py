@@ -63,7 +63,11 @@ def reprocess_chunk(rec: str, k: int) -> int:
 
     start = 600 + 100 * k  # inside the sweep's tracked stretch
     with tempfile.TemporaryDirectory() as d:
-        run_chunk(Chunk(rec, k, start - 30, start, start + 100, 0), Settings(tracking=True), d)
+        run_chunk(
+            Chunk(rec, k, start - 30, start, start + 100, 0),
+            Settings(tracking=True, pixel_fit=False),
+            d,
+        )
     return 100
 
 

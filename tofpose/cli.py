@@ -58,6 +58,19 @@ def _cluster_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--scheduler", help="address of a running Dask scheduler, tcp://host:8786")
 
 
+def _pixel_fit_argument(p) -> None:
+    """``--pixel-fit`` / ``--no-pixel-fit`` (estimate's and reprocess')."""
+    p.add_argument(
+        "--pixel-fit",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="refine each pose on the markers' raw pixels, the pose and covariance of the "
+        "sensor's model (default; docs/algorithm.md, 'Pixel-level fit'); --no-pixel-fit: "
+        "the centroid pose only, 10-50x faster a frame at a cost in accuracy "
+        "(docs/results.md)",
+    )
+
+
 def _range_bias_argument(p) -> None:
     """``--no-learn-range-bias`` (estimate's and reprocess')."""
     p.add_argument(
@@ -100,12 +113,7 @@ def _add_measurement_commands(sub) -> None:
         help="with --filter: each frame's state from the poses up to it only, as the live "
         "loop has it (it starts with the rate unknown and lags a changing rate)",
     )
-    p.add_argument(
-        "--pixel-fit",
-        action="store_true",
-        help="refine each pose on the markers' raw pixels (slow: tens to hundreds of ms a "
-        "frame; docs/algorithm.md, 'Pixel-level fit')",
-    )
+    _pixel_fit_argument(p)
     _range_bias_argument(p)
     p = sub.add_parser(
         "calibrate-range",
@@ -296,6 +304,7 @@ def _add_batch_commands(sub) -> None:
         help="with --filter: each frame's state from the poses up to it (estimate --causal)",
     )
     p.add_argument("--chunk-frames", type=int, default=512, help="frames per task (default 512)")
+    _pixel_fit_argument(p)
     _range_bias_argument(p)
     _cluster_arguments(p)
     p = sub.add_parser(

@@ -178,8 +178,9 @@ class PixelFitConfig:
     on the matched markers' raw gray and distance pixels, its covariance the model's
     inverse Fisher information; the centroid pose stays when the fit falls back.
 
-    enabled : run it on every ok pose (off by default: it costs tens to hundreds of ms a
-        frame, docs/results.md "Pixel-level fit against the bound").
+    enabled : run it on every ok pose (off by default, as the live loop runs: it costs
+        tens of ms a frame, docs/results.md "Pixel-level fit against the bound";
+        ``tofpose estimate`` and ``reprocess`` turn it on unless ``--no-pixel-fit``).
     fit_range_offset : also fit a range offset common to every marker (an uncalibrated
         camera).
     max_marker_rms_sigma : a marker whose pixels' residual RMS exceeds this many sigmas

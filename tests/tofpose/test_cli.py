@@ -177,8 +177,16 @@ def test_calibrate_covariance_writes_a_camera_whose_sigmas_the_estimate_reports(
     assert scale is not None and json.loads(cam.read_text())["covariance_scale"]
     # the simulator's errors are smaller than the model's floors claim: factors below 1
     assert all(0.01 < f < 1.0 for f in scale.factors), scale
-    assert main(["estimate", str(rec), "--out", str(raw_csv)]) == 0
-    assert main(["estimate", str(rec), "--camera", str(cam), "--out", str(cal_csv)]) == 0
+    # the centroid pose's covariance, with the configured priors (what the scale was
+    # fitted on: a camera with a scale keeps them, and the pixel fit's covariance is the
+    # sensor model's own, not scaled)
+    centroid = ["--no-pixel-fit", "--no-learn-range-bias"]
+    assert main(["estimate", str(rec), "--out", str(raw_csv), *centroid]) == 0
+    assert (
+        main(["estimate", str(rec), "--camera", str(cam), "--out", str(cal_csv), "--no-pixel-fit"])
+        == 0
+    )
+    assert "range bias learned" not in capsys.readouterr().out
     raw, cal = (list(csv.DictReader(p.open())) for p in (raw_csv, cal_csv))
     n_ok = 0
     for a, b in zip(raw, cal, strict=True):

@@ -71,6 +71,7 @@ class Settings:
     # each recording's range bias learned first, as ``estimate`` does
     # (``io.camera_file.learned_range_bias``; its chunks carry it)
     learn_range_bias: bool = True
+    pixel_fit: bool = True  # each pose refined on its pixels, as ``estimate``'s default
 
 
 @dataclass(frozen=True)
@@ -167,6 +168,7 @@ def run_chunk(
             settings.camera_path,
             settings.tracking,
             moving=settings.moving,
+            pixel_fit=settings.pixel_fit,
             range_bias_sigma_mm=chunk.range_bias_sigma_mm,
         )
         for first, (grays, dists, ts) in rec.blocks(
@@ -282,7 +284,12 @@ def reprocess(
             cfg = pipe.config
             learned = (
                 learned_range_bias(
-                    rec, path, settings.catalog_path, settings.camera_path, progress=False
+                    rec,
+                    path,
+                    settings.catalog_path,
+                    settings.camera_path,
+                    pixel_fit=settings.pixel_fit,
+                    progress=False,
                 )
                 if settings.learn_range_bias
                 else None

@@ -189,12 +189,18 @@ def learned_range_bias(
     measured on its own (``pipeline_for``'s pipeline without tracking or persistence
     across frames, reset before each) with the configured prior, their
     ``PoseResult.range_offset`` pooled. None when the pipeline estimates no offset, or
-    too few frames tell it. ``estimate`` and ``reprocess`` measure every frame with its
+    too few frames tell it, and when the camera carries a covariance scale
+    (``calibrate-covariance``): that was fitted on covariances with the configured
+    priors, and keeps them. ``estimate`` and ``reprocess`` measure every frame with its
     ``sigma_mm`` (``pipeline_for``'s ``range_bias_sigma_mm``)."""
     pipe = pipeline_for(
         rec, rec_path, catalog_path, camera_path, False, pixel_fit=pixel_fit, moving=True
     )
-    if not pipe.config.solve.estimate_range_offset or rec.n_frames == 0:
+    if (
+        not pipe.config.solve.estimate_range_offset
+        or pipe.covariance_scale is not None
+        or rec.n_frames == 0
+    ):
         return None
     picked = np.unique(np.linspace(0, rec.n_frames - 1, min(rec.n_frames, max_frames)).astype(int))
     offsets = []

@@ -55,7 +55,11 @@ def reprocess(args) -> int:
     from tofpose.batch.reprocess import reprocess as run
 
     settings = Settings(
-        args.camera, args.catalog, args.tracking, learn_range_bias=args.learn_range_bias
+        args.camera,
+        args.catalog,
+        args.tracking,
+        pixel_fit=args.pixel_fit,
+        learn_range_bias=args.learn_range_bias,
     )
     try:
         s = run(

@@ -159,7 +159,7 @@ def estimate(
     progress: bool = True,
     tracking: bool = False,
     filter_state: bool = False,
-    pixel_fit: bool = False,
+    pixel_fit: bool = True,
     causal_filter: bool = False,
     learn_range_bias: bool = True,
 ) -> dict[str, float | str]:
@@ -171,7 +171,8 @@ def estimate(
     (``tofpose.lab.smoothing``; the rows are held until the last frame), or with
     ``causal_filter`` from the poses up to it, as the live loop has it (empty until its
     first pose); ``pixel_fit``: refine each pose on the markers' pixels
-    (``PipelineConfig.pixel_fit``); ``learn_range_bias``: first learn the spread of the
+    (``PipelineConfig.pixel_fit``; the default here, off in the live loop, whose frame
+    budget it does not fit); ``learn_range_bias``: first learn the spread of the
     camera's range offsets over the recording (``io.camera_file.learned_range_bias``)
     and measure every frame with it as the offset's prior (the summary's "range_bias"
     says what was learned)."""
