@@ -228,6 +228,7 @@ class FitSettingsFields:
     estimate_range_offset: bool = True
     range_bias_sigma_mm: float = 15.0
     calibrated_range_bias_sigma_mm: float = 2.0
+    range_offset_mean_mm: float = 0.0
     focal_length_sigma_rel: float | None = None
     common_centroid_bias_px: float = 0.05
     class_centroid_bias_px: float = 0.02
@@ -302,6 +303,10 @@ class PipelineConfig(FitSettingsFields):
         study's ``systematic`` family draws. Added
         to the reported covariance (``pose.common_range_bias_covariance``), so that the
         1-sigma of an uncalibrated camera does not claim the shot-noise limit.
+    range_offset_mean_mm : the mean of that offset's prior, mm (0: none known; ``tofpose
+        estimate`` and ``reprocess`` learn it, with its sigma, over the recording,
+        ``stages.pose.range_bias``): estimated about it, or taken out of the ranges as it
+        is where the offset is not estimated.
     max_systematic_range_sigma_mm : cap of that estimate (published uncalibrated ToF
         range errors are 10-20 mm; a larger spread is not a systematic error but a bad
         match, and must stay visible to the outlier test).

@@ -406,6 +406,11 @@ class PosePipeline:
             if self.config.solve.estimate_range_offset
             else 0.0
         )
+        offset_mean_mm = (
+            float(self.config.range_offset_mean_mm)
+            if self.config.solve.estimate_range_offset
+            else 0.0
+        )
         fit = fit_pose_to_pixels(
             np.asarray(gray),
             self._range_corrected(np.asarray(gray), np.asarray(distance_mm)),
@@ -422,6 +427,7 @@ class PosePipeline:
             # camera states a range-bias sigma of 0)
             fit_range_offset=cfg.fit_range_offset or offset_sigma_mm > 0,
             range_offset_sigma_mm=float("inf") if cfg.fit_range_offset else offset_sigma_mm or 1.0,
+            range_offset_mean_mm=offset_mean_mm,
             max_marker_rms_sigma=cfg.max_marker_rms_sigma,
             implementation=self.implementation,
         )
@@ -452,6 +458,7 @@ class PosePipeline:
                 fit.range_offset_mm,
                 fit.range_offset_sigma_mm,
                 0.0 if cfg.fit_range_offset else offset_sigma_mm,
+                offset_mean_mm,
             ),
         )
 

@@ -78,8 +78,8 @@ class Settings:
 class Chunk:
     """Frames [start, stop) of recording ``path`` output, after a warm-up from ``origin``;
     digests are recorded for the warm-up and for the last ``tail`` frames (the next
-    chunk's warm-up); ``range_bias_sigma_mm``: the range offset's prior learned over the
-    recording (None: the configured one)."""
+    chunk's warm-up); ``range_bias_sigma_mm``, ``range_offset_mean_mm``: the range
+    offset's prior learned over the recording (None and 0: the configured one)."""
 
     path: str
     index: int
@@ -88,6 +88,7 @@ class Chunk:
     stop: int
     tail: int
     range_bias_sigma_mm: float | None = None
+    range_offset_mean_mm: float = 0.0
 
     @property
     def name(self) -> str:
@@ -170,6 +171,7 @@ def run_chunk(
             moving=settings.moving,
             pixel_fit=settings.pixel_fit,
             range_bias_sigma_mm=chunk.range_bias_sigma_mm,
+            range_offset_mean_mm=chunk.range_offset_mean_mm,
         )
         for first, (grays, dists, ts) in rec.blocks(
             chunk.origin, chunk.stop, read_ahead=read_ahead
@@ -296,7 +298,11 @@ def reprocess(
             )
             range_bias[path] = "" if learned is None else learned.summary()
             chunks[path] = [
-                replace(c, range_bias_sigma_mm=None if learned is None else learned.sigma_mm)
+                c
+                if learned is None
+                else replace(
+                    c, range_bias_sigma_mm=learned.sigma_mm, range_offset_mean_mm=learned.mean_mm
+                )
                 for c in plan(
                     str(path),
                     rec.n_frames,

@@ -117,6 +117,7 @@ def pipeline_for(
     pixel_fit: bool = False,
     moving: bool = False,
     range_bias_sigma_mm: float | None = None,
+    range_offset_mean_mm: float = 0.0,
 ) -> PosePipeline:
     """The pipeline ``estimate`` runs over an open recording: its camera and catalog, or
     the ones given (a camera JSON with its range correction and covariance scale), with
@@ -125,8 +126,9 @@ def pipeline_for(
     ``moving``: a target whose motion a filter follows (``estimate --filter``): each pose
     from its own frame (``PersistenceConfig.single_frame``), since combining frames
     makes a pose lag a motion too slow for persistence's gates to see;
-    ``range_bias_sigma_mm``: the range offset's prior sigma, calibrated or not (one
-    learned over the recording, ``tofpose.lab.range_bias``; None: the configured ones)."""
+    ``range_bias_sigma_mm``, ``range_offset_mean_mm``: the range offset's prior sigma,
+    calibrated or not, and mean (learned over the recording, ``learned_range_bias``;
+    None and 0: the configured ones)."""
     camera, correction, scale = rec.camera, None, None
     if camera_path:
         camera, correction, scale = load_camera(read_camera_text(camera_path))
@@ -168,6 +170,7 @@ def pipeline_for(
             config,
             range_bias_sigma_mm=range_bias_sigma_mm,
             calibrated_range_bias_sigma_mm=range_bias_sigma_mm,
+            range_offset_mean_mm=range_offset_mean_mm,
         )
     return PosePipeline(
         camera, catalog, config, range_correction=correction, covariance_scale=scale
@@ -192,7 +195,8 @@ def learned_range_bias(
     too few frames tell it, and when the camera carries a covariance scale
     (``calibrate-covariance``): that was fitted on covariances with the configured
     priors, and keeps them. ``estimate`` and ``reprocess`` measure every frame with its
-    ``sigma_mm`` (``pipeline_for``'s ``range_bias_sigma_mm``)."""
+    ``mean_mm`` and ``sigma_mm`` (``pipeline_for``'s ``range_offset_mean_mm``,
+    ``range_bias_sigma_mm``)."""
     pipe = pipeline_for(
         rec, rec_path, catalog_path, camera_path, False, pixel_fit=pixel_fit, moving=True
     )

@@ -193,6 +193,7 @@ def estimate(
             pixel_fit=pixel_fit,
             moving=filter_state,  # a filter follows a motion: poses from single frames
             range_bias_sigma_mm=None if learned is None else learned.sigma_mm,
+            range_offset_mean_mm=0.0 if learned is None else learned.mean_mm,
         )
         n_ok = 0
         held = HeldRows()  # with the filter: held for its pass over every pose

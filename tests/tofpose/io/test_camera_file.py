@@ -129,20 +129,31 @@ def test_a_calibrated_cameras_range_bias_is_learned_near_zero_and_its_poses_foll
     assert rms(z_learned / sigma_learned) < 1.5
 
 
-def test_an_offset_cameras_range_bias_is_learned_as_its_size():
-    """Ranges 12 mm long on every frame: the spread about 0 is about the offset (the
-    prior stays wide enough to cover it), not the calibrated camera's ~0."""
-    import tempfile
-    from pathlib import Path
+def test_an_offset_cameras_range_offset_is_learned_and_taken_out(tmp_path):
+    """Ranges 12 mm long on every frame: the learned mean reads the offset and the
+    spread about it stays small, so estimate takes it out of every frame: the position
+    along the line of sight is then as good as the calibrated camera's, where the
+    configured prior (N(0, 15^2)) leaves each frame to find it in its image scale."""
+    import csv
 
+    from tofpose.cli import main
     from tofpose.io.camera_file import learned_range_bias
     from tofpose.io.recording import open_recording
 
-    with tempfile.TemporaryDirectory() as tmp:
-        rec = str(Path(tmp) / "offset.h5")
-        _far_recording(rec, 16, offset_mm=12.0, seed=13)
-        with open_recording(rec) as r:
-            learned = learned_range_bias(r, rec, None, None, progress=False)
+    rec = tmp_path / "offset.h5"
+    truth = _far_recording(rec, 32, offset_mm=12.0, seed=13)
+    with open_recording(str(rec)) as r:
+        learned = learned_range_bias(r, str(rec), None, None, progress=False)
     assert learned is not None
-    assert 6.0 < learned.sigma_mm < 20.0
-    assert learned.mean_mm == pytest.approx(12.0, abs=5.0)
+    assert learned.mean_mm == pytest.approx(12.0, abs=3 * learned.mean_se_mm + 0.5)
+    assert learned.sigma_mm < 6.0
+
+    def z_errors(*flags):
+        out = tmp_path / f"o{len(flags)}.csv"
+        assert main(["estimate", str(rec), "--out", str(out), "--no-pixel-fit", *flags]) == 0
+        rows = list(csv.DictReader(out.open()))
+        assert all(row["ok"] == "1" for row in rows)
+        return np.array([float(row["z_mm"]) for row in rows]) - truth[:, 2]
+
+    rms = lambda e: float(np.sqrt(np.mean(e**2)))  # noqa: E731
+    assert rms(z_errors()) < 0.6 * rms(z_errors("--no-learn-range-bias"))

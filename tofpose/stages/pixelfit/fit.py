@@ -310,6 +310,7 @@ class _Problem:
     basis: np.ndarray  # (K, P, GAIN_TERMS) the discs' gain basis at the pixels
     free: np.ndarray  # (n_params,) bool: the parameters fitted (the rest stay at 0 step)
     disc_range_sigma_mm: float = 0.0  # each disc's own range error's prior (0: none)
+    offset_mean_mm: float = 0.0  # the offset's prior mean (where it starts)
     compiled: bool = True  # the model's compiled kernel, else its NumPy reference
     near_flat: tuple[np.ndarray, np.ndarray] | None = None  # win.near_flat, kept
     numeric_jacobian: bool = False  # the pose's columns by central differences
@@ -522,7 +523,7 @@ def _prior_residual(pb: _Problem, s: _State) -> np.ndarray:
     (0,))."""
     rows = []
     if pb.fit_offset and np.isfinite(pb.offset_sigma_mm):
-        rows.append(np.array([-s.offset_mm / pb.offset_sigma_mm]))
+        rows.append(np.array([-(s.offset_mm - pb.offset_mean_mm) / pb.offset_sigma_mm]))
     if pb.disc_range_sigma_mm > 0:
         rows.append(-s.disc_offsets_mm / pb.disc_range_sigma_mm)
     return np.concatenate(rows) if rows else np.zeros(0)
@@ -809,6 +810,7 @@ def fit_pose_to_pixels(
     noise: PixelNoise | None = None,
     fit_range_offset: bool = False,
     range_offset_sigma_mm: float = float("inf"),
+    range_offset_mean_mm: float = 0.0,
     exclude_unmatched: bool = True,
     subsamples: int = SUBSAMPLES,
     pad_px: int = WINDOW_PAD_PX,
@@ -840,6 +842,10 @@ def fit_pose_to_pixels(
     range_offset_sigma_mm : float
         That offset's prior sigma, mm (the camera's range-bias sigma: the pose
         pipeline's ``range_bias_sigma_mm``); inf: no prior, the offset is free.
+    range_offset_mean_mm : float
+        That prior's mean, mm (the pipeline's ``range_offset_mean_mm``): where the
+        offset starts, and the offset taken out of every distance pixel when it is not
+        fitted.
     exclude_unmatched : bool
         Leave out the pixels near the predicted image of catalog discs not in
         ``catalog_ids`` (the model does not carry them).
@@ -938,6 +944,7 @@ def fit_pose_to_pixels(
         reference_mm=reference_mm,
         fit_offset=fit_range_offset,
         offset_sigma_mm=float(range_offset_sigma_mm),
+        offset_mean_mm=float(range_offset_mean_mm),
         compiled=implementation == "compiled",
         near_flat=win.near_flat,
         numeric_jacobian=jacobian == "central-differences",
@@ -954,7 +961,12 @@ def fit_pose_to_pixels(
     pb = replace(pb0, dist_rows=np.flatnonzero(usable_distance))
     gains, levels = _initial_linear(pb, images)
     state = _State(
-        R=R, t_mm=t_mm, gains=gains, levels=levels, offset_mm=0.0, disc_offsets_mm=np.zeros(k_count)
+        R=R,
+        t_mm=t_mm,
+        gains=gains,
+        levels=levels,
+        offset_mm=float(range_offset_mean_mm),
+        disc_offsets_mm=np.zeros(k_count),
     )
     extra_var = (
         _surround_extra_var(pb, images, state)

@@ -6,14 +6,14 @@ calibration). One frame can tell that offset only through the image scale, which
 few metres is noisy: on a calibrated camera (no offset) the per-frame estimate is then
 what spreads the position along the line of sight. Many frames of one camera tell more:
 each frame's likelihood of the offset (its posterior with the prior divided out,
-``RangeOffset.likelihood``: mean ``m_k``, variance ``v_k``) is a draw ``m_k ~ N(0, tau^2
-+ v_k)`` when the offsets of the camera's frames spread by ``tau`` about 0. ``tau^2`` is
-estimated by maximum likelihood over the frames, and the upper one-sigma value of that
-estimate replaces ``sigma_b`` when the frames are measured again: near 0 on a calibrated
-camera (the ranges are then trusted and the position follows them), about the offsets'
-RMS on an uncalibrated one (a constant offset, or one that changes with range or
-amplitude, stays covered). The spread is about 0, not about the offsets' mean: a common
-mean would need the fit's prior to be re-centred (left for later).
+``RangeOffset.likelihood``: mean ``m_k``, variance ``v_k``) is a draw ``m_k ~ N(mu,
+tau^2 + v_k)`` when the offsets of the camera's frames spread by ``tau`` about a mean
+``mu``. Both are estimated by maximum likelihood over the frames; the frames are then
+measured again with the prior N(mu, tau^2 + se(tau^2) + var(mu)) (the spread's upper
+one-sigma value and the mean's own uncertainty): near N(0, ~0) on a calibrated camera
+(the ranges are then trusted and the position follows them); a constant offset is
+learned and taken out; one that changes with range or amplitude stays covered by the
+spread.
 """
 
 from __future__ import annotations
@@ -41,70 +41,82 @@ TOLERANCE_MM2 = 1e-9
 
 @dataclass(frozen=True)
 class LearnedRangeBias:
-    """The spread of a camera's range offsets over a recording (``learn_range_bias``).
+    """The offsets of a camera's frames over a recording (``learn_range_bias``).
 
-    sigma_mm : the prior sigma to measure the frames with: ``sqrt(tau2 + tau2_se)``.
-    tau_mm : the maximum-likelihood spread of the offsets about 0; tau2_se_mm2 : the
-        standard error of its square (inverse Fisher information).
+    mean_mm : their maximum-likelihood mean ``mu``, mm: the prior's mean to measure the
+        frames with (``PipelineConfig.range_offset_mean_mm``).
+    sigma_mm : the prior's sigma: ``sqrt(tau^2 + se(tau^2) + var(mu))``.
+    tau_mm : the maximum-likelihood spread of the offsets about ``mu``; tau2_se_mm2 : the
+        standard error of its square; mean_se_mm : the standard error of ``mu`` (inverse
+        Fisher information, both).
     n_frames : the frames it was learned from; n_outliers : those left out.
-    mean_mm : the offsets' weighted mean (1 / (v_k + tau^2)), to read, not applied.
     """
 
+    mean_mm: float
     sigma_mm: float
     tau_mm: float
     tau2_se_mm2: float
+    mean_se_mm: float
     n_frames: int
     n_outliers: int
-    mean_mm: float
 
     def summary(self) -> str:
         return (
-            f"range bias learned over {self.n_frames} frames: offsets spread "
-            f"{self.tau_mm:.1f} mm about 0 (mean {self.mean_mm:+.1f} mm), prior sigma "
-            f"{self.sigma_mm:.1f} mm"
+            f"range bias learned over {self.n_frames} frames: offset "
+            f"{self.mean_mm:+.1f} +- {self.mean_se_mm:.1f} mm, spread {self.tau_mm:.1f} mm; "
+            f"prior {self.mean_mm:+.1f} mm, sigma {self.sigma_mm:.1f} mm"
             + (f"; {self.n_outliers} frame(s) left out" if self.n_outliers else "")
         )
 
 
-def _spread(m: np.ndarray, v: np.ndarray) -> float:
-    """The maximum-likelihood tau^2 of ``m ~ N(0, tau^2 + v)`` (m, v: (n,)), by its
-    score equation's fixed point ``tau^2 = sum w^2 (m^2 - v) / sum w^2``, w = 1 / (v +
-    tau^2), clipped at 0."""
+def _mean_and_spread(m: np.ndarray, v: np.ndarray) -> tuple[float, float]:
+    """The maximum-likelihood (mu, tau^2) of ``m ~ N(mu, tau^2 + v)`` (m, v: (n,)), by
+    the score equations' fixed point: ``mu = sum w m / sum w``, ``tau^2 = sum w^2 ((m -
+    mu)^2 - v) / sum w^2`` clipped at 0, w = 1 / (v + tau^2)."""
     tau2 = 0.0
+    mu = 0.0
     for _ in range(ITERATIONS):
-        w2 = (1.0 / (v + tau2)) ** 2
-        new = max(0.0, float(np.sum(w2 * (m**2 - v)) / np.sum(w2)))
+        w = 1.0 / (v + tau2)
+        mu = float(np.sum(w * m) / np.sum(w))
+        new = max(0.0, float(np.sum(w**2 * ((m - mu) ** 2 - v)) / np.sum(w**2)))
         if abs(new - tau2) < TOLERANCE_MM2:
-            return new
+            tau2 = new
+            break
         tau2 = new
-    return tau2
+    w = 1.0 / (v + tau2)
+    return float(np.sum(w * m) / np.sum(w)), tau2
 
 
 def learn_range_bias(offsets: Iterable[RangeOffset]) -> LearnedRangeBias | None:
-    """The spread of the range offsets of frames of one camera (module docstring), from
-    each frame's ``RangeOffset`` (those without a likelihood, whose fit could not tell the
-    offset, are skipped); None with fewer than ``MIN_FRAMES`` that tell it."""
+    """The mean and spread of the range offsets of frames of one camera (module
+    docstring), from each frame's ``RangeOffset`` (those without a likelihood, whose fit
+    could not tell the offset, are skipped); None with fewer than ``MIN_FRAMES`` that
+    tell it."""
     pairs = [lk for lk in (o.likelihood() for o in offsets) if lk is not None]
     if len(pairs) < MIN_FRAMES:
         return None
     m = np.array([p[0] for p in pairs], float)
     v = np.array([p[1] for p in pairs], float)
     keep = np.isfinite(m) & np.isfinite(v) & (v > 0)
+    if keep.sum() < MIN_FRAMES:
+        return None
     limit = float(chi2.ppf(OUTLIER_P, 1))
-    tau2 = _spread(m[keep], v[keep])
+    mu, tau2 = _mean_and_spread(m[keep], v[keep])
     while True:  # leave out the frames beyond the spread so far, until none is
-        inside = keep & (m**2 <= limit * (v + tau2))
+        inside = keep & ((m - mu) ** 2 <= limit * (v + tau2))
         if inside.sum() == keep.sum() or inside.sum() < MIN_FRAMES:
             break
         keep = inside
-        tau2 = _spread(m[keep], v[keep])
+        mu, tau2 = _mean_and_spread(m[keep], v[keep])
     w = 1.0 / (v[keep] + tau2)
-    se = float(np.sqrt(2.0 / np.sum(w**2)))
+    tau2_se = float(np.sqrt(2.0 / np.sum(w**2)))
+    mean_var = float(1.0 / np.sum(w))
     return LearnedRangeBias(
-        sigma_mm=float(np.sqrt(tau2 + se)),
+        mean_mm=mu,
+        sigma_mm=float(np.sqrt(tau2 + tau2_se + mean_var)),
         tau_mm=float(np.sqrt(tau2)),
-        tau2_se_mm2=se,
+        tau2_se_mm2=tau2_se,
+        mean_se_mm=float(np.sqrt(mean_var)),
         n_frames=int(keep.sum()),
         n_outliers=int(len(m) - keep.sum()),
-        mean_mm=float(np.sum(w * m[keep]) / np.sum(w)),
     )

@@ -59,26 +59,29 @@ class OutlierFit(NamedTuple):
 
 class RangeOffset(NamedTuple):
     """A frame's range offset common to its reflectors, as the fit saw it: ``mm`` the
-    posterior mean taken out of the ranges (0: not estimated), ``sigma_mm`` its
-    posterior sigma (the prior's when not estimated), ``prior_sigma_mm`` the prior's
-    sigma, about 0 (0: no offset modelled)."""
+    posterior mean taken out of the ranges (the prior's mean when not estimated),
+    ``sigma_mm`` its posterior sigma (the prior's when not estimated),
+    ``prior_sigma_mm`` the prior's sigma (0: no offset modelled) and ``prior_mean_mm``
+    its mean."""
 
     mm: float
     sigma_mm: float
     prior_sigma_mm: float
+    prior_mean_mm: float = 0.0
 
     def likelihood(self) -> tuple[float, float] | None:
         """(mean, variance) mm, mm^2: what the frame alone says of the offset, the prior
         divided out of the posterior (Gaussians: ``1 / v = 1 / sigma^2 - 1 / prior^2``,
-        ``mean = v mm / sigma^2``); None when the frame says nothing the prior did not
-        (its posterior is no narrower than the prior, or no offset was modelled)."""
+        ``mean = v (mm / sigma^2 - prior_mean / prior^2)``); None when the frame says
+        nothing the prior did not (its posterior is no narrower than the prior, or no
+        offset was modelled)."""
         if not (self.prior_sigma_mm > 0 and self.sigma_mm > 0):
             return None
         precision = 1.0 / self.sigma_mm**2 - 1.0 / self.prior_sigma_mm**2
         if not precision > 1e-12 / self.prior_sigma_mm**2:
             return None
         v = 1.0 / precision
-        return v * self.mm / self.sigma_mm**2, v
+        return v * (self.mm / self.sigma_mm**2 - self.prior_mean_mm / self.prior_sigma_mm**2), v
 
 
 #: no offset modelled
@@ -108,11 +111,15 @@ class RangeOffsetPrior(NamedTuple):
     ``PipelineConfig.focal_length_sigma_rel``); centroid_bias_rad : a systematic centroid
     error common to the frame's markers (rad: ``common_centroid_bias_px`` times
     ``solve.centroid_bias_factor`` over fx), which
-    scales the pattern by ``centroid_bias_rad / r_rms`` (r_rms its rms angular radius)."""
+    scales the pattern by ``centroid_bias_rad / r_rms`` (r_rms its rms angular radius);
+    mean_mm : the prior's mean (0: none known; a mean learned over a recording,
+    ``stages.pose.range_bias``), taken out of the ranges when the offset is not
+    estimated."""
 
     sigma_mm: float
     focal_length_sigma_rel: float
     centroid_bias_rad: float
+    mean_mm: float = 0.0
 
 
 #: no offset estimated

@@ -115,6 +115,7 @@ def offset_prior(
         sigma_mm=float(sigma_mm),
         focal_length_sigma_rel=focal_length_sigma_rel(config, camera),
         centroid_bias_rad=float(config.common_centroid_bias_px) * bias_factor / camera.fx,
+        mean_mm=float(config.range_offset_mean_mm),
     )
 
 
@@ -512,6 +513,7 @@ class PoseSolver:
                 float(result.offset_mm),
                 float(bias),
                 self.range_bias_sigma_mm(obs.range_mm) if cfg.estimate_range_offset else 0.0,
+                float(cfg.range_offset_mean_mm) if cfg.estimate_range_offset else 0.0,
             ),
             leave_one_out_covariance=spread,
         )

@@ -1,6 +1,6 @@
 """The range bias learned over a recording's frames: each frame's offset likelihood (its
-posterior with the prior divided out) and the maximum-likelihood spread of the offsets,
-against offsets drawn with a known spread."""
+posterior with the prior divided out) and the maximum-likelihood mean and spread of the
+offsets, against offsets drawn with a known mean and spread."""
 
 import numpy as np
 import pytest
@@ -11,11 +11,14 @@ from tofpose.stages.pose.records import NO_RANGE_OFFSET, RangeOffset
 PRIOR_MM = 15.0
 
 
-def _posterior(m_mm: float, v_mm2: float, prior_mm: float = PRIOR_MM) -> RangeOffset:
+def _posterior(
+    m_mm: float, v_mm2: float, prior_mm: float = PRIOR_MM, prior_mean_mm: float = 0.0
+) -> RangeOffset:
     """The RangeOffset a fit reports whose frame alone says N(m, v) of the offset, under
-    the prior N(0, prior^2): the product of the two Gaussians."""
+    the prior N(prior_mean, prior^2): the product of the two Gaussians."""
     precision = 1.0 / v_mm2 + 1.0 / prior_mm**2
-    return RangeOffset(m_mm / v_mm2 / precision, float(np.sqrt(1.0 / precision)), prior_mm)
+    mean = (m_mm / v_mm2 + prior_mean_mm / prior_mm**2) / precision
+    return RangeOffset(mean, float(np.sqrt(1.0 / precision)), prior_mm, prior_mean_mm)
 
 
 def _frames(rng, n: int, tau_mm: float, mean_mm: float = 0.0) -> list[RangeOffset]:
@@ -26,8 +29,9 @@ def _frames(rng, n: int, tau_mm: float, mean_mm: float = 0.0) -> list[RangeOffse
     return [_posterior(t + rng.normal(0.0, s), s**2) for t, s in zip(true, sd, strict=True)]
 
 
-def test_a_frames_likelihood_is_its_posterior_with_the_prior_divided_out():
-    m, v = _posterior(7.0, 4.0).likelihood()
+@pytest.mark.parametrize("prior_mean_mm", [0.0, -6.0])
+def test_a_frames_likelihood_is_its_posterior_with_the_prior_divided_out(prior_mean_mm):
+    m, v = _posterior(7.0, 4.0, prior_mean_mm=prior_mean_mm).likelihood()
     assert m == pytest.approx(7.0)
     assert v == pytest.approx(4.0)
 
@@ -38,17 +42,20 @@ def test_a_frame_that_tells_nothing_has_no_likelihood():
     assert RangeOffset(0.0, 3.0, 0.0).likelihood() is None  # no prior to divide out
 
 
-@pytest.mark.parametrize("tau_mm", [0.0, 4.0, 10.0])
-def test_the_learned_spread_is_the_drawn_one(tau_mm):
-    rng = np.random.default_rng([7, int(tau_mm)])
-    learned = learn_range_bias(_frames(rng, 400, tau_mm))
+@pytest.mark.parametrize(("tau_mm", "mean_mm"), [(0.0, 0.0), (4.0, 0.0), (10.0, 0.0), (4.0, -8.0)])
+def test_the_learned_mean_and_spread_are_the_drawn_ones(tau_mm, mean_mm):
+    rng = np.random.default_rng([7, int(tau_mm), int(-mean_mm)])
+    learned = learn_range_bias(_frames(rng, 400, tau_mm, mean_mm))
     assert learned is not None
     assert learned.n_frames == 400
-    # the estimate's own standard error decides how close: 3 of them
+    # the estimates' own standard errors decide how close: 3 of them
     assert abs(learned.tau_mm**2 - tau_mm**2) < 3 * learned.tau2_se_mm2 + 0.5
-    # the prior it gives covers the spread: its upper one-sigma value
+    assert abs(learned.mean_mm - mean_mm) < 3 * learned.mean_se_mm
+    # the prior it gives covers the spread: its upper one-sigma value, and the mean's own
     assert learned.sigma_mm >= learned.tau_mm
-    assert learned.sigma_mm**2 == pytest.approx(learned.tau_mm**2 + learned.tau2_se_mm2)
+    assert learned.sigma_mm**2 == pytest.approx(
+        learned.tau_mm**2 + learned.tau2_se_mm2 + learned.mean_se_mm**2
+    )
 
 
 def test_a_calibrated_cameras_frames_shrink_the_prior_far_below_the_uncalibrated_one():
@@ -57,13 +64,27 @@ def test_a_calibrated_cameras_frames_shrink_the_prior_far_below_the_uncalibrated
     assert learned.sigma_mm < 0.25 * PRIOR_MM
 
 
-def test_a_constant_offset_is_covered_by_the_spread_about_zero():
-    """A camera whose offset is 9 mm on every frame: the spread about 0 is ~9 mm (the
-    prior is not re-centred), and the mean reads it."""
+def test_a_constant_offset_is_learned_and_the_prior_stays_narrow():
+    """A camera whose offset is 9 mm on every frame: the mean reads it, the spread about
+    it is ~0, so the prior is N(~9, a few mm): the offset is taken out, not covered."""
     learned = learn_range_bias(_frames(np.random.default_rng(9), 200, 0.0, mean_mm=9.0))
     assert learned is not None
-    assert 7.5 < learned.tau_mm < 10.5
-    assert learned.mean_mm == pytest.approx(9.0, abs=1.0)
+    assert learned.mean_mm == pytest.approx(9.0, abs=3 * learned.mean_se_mm)
+    assert learned.tau_mm < 1.5
+    assert learned.sigma_mm < 0.25 * PRIOR_MM
+
+
+def test_frames_measured_with_a_learned_prior_learn_the_same():
+    """The likelihoods divide out whatever prior the frames were measured with: frames
+    measured with N(9, 3^2) say what frames measured with N(0, 15^2) say."""
+    rng = np.random.default_rng(12)
+    sd = rng.uniform(1.0, 6.0, 100)
+    m = 9.0 + rng.normal(0.0, 2.0, 100) + rng.normal(0.0, sd)
+    a = learn_range_bias([_posterior(x, s**2) for x, s in zip(m, sd, strict=True)])
+    b = learn_range_bias([_posterior(x, s**2, 3.0, 9.0) for x, s in zip(m, sd, strict=True)])
+    assert a is not None and b is not None
+    assert b.mean_mm == pytest.approx(a.mean_mm)
+    assert b.tau_mm == pytest.approx(a.tau_mm)
 
 
 def test_a_wrong_frames_offset_is_left_out():

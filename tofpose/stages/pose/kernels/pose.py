@@ -553,7 +553,7 @@ def common_range_offset(refl, R0, t0, prior):
     true ones (a focal-length error, or a centroid error common to the frame's small
     markers); it is what lets the image scale fix the distance, so it is estimated with
     its prior (``pattern_scale_sigma``) rather than assumed exact: a scale error of 1 %
-    at 6 m is 60 mm of range. Priors b ~ N(0, prior.sigma_mm^2) and kappa ~ N(0,
+    at 6 m is 60 mm of range. Priors b ~ N(prior.mean_mm, prior.sigma_mm^2) and kappa ~ N(0,
     sigma_kappa^2) enter as two more residuals (prior: a ``records.RangeOffsetPrior``).
     The image scale determines b when the target is large enough in the image and the
     scale is known well enough; otherwise the priors keep it near 0. Returns b, its
@@ -561,10 +561,11 @@ def common_range_offset(refl, R0, t0, prior):
     x, e, rho, sr, sb = refl.x, refl.e, refl.rho, refl.sr, refl.sb
     m = x.shape[0]
     prior_sigma_mm = prior.sigma_mm
+    prior_mean_mm = prior.mean_mm
     if prior_sigma_mm <= 0:
-        return 0.0, 0.0
+        return prior_mean_mm, 0.0
     sigma_kappa, mean = pattern_scale_sigma(e, prior)
-    R, t, b = R0.copy(), t0.copy(), 0.0
+    R, t, b = R0.copy(), t0.copy(), prior_mean_mm
     B = tangent_bases(e)
     scale_column = scale_directions(e, B, mean)
     fit_scale = sigma_kappa > 0  # else the scale is taken as exact: kappa stays 0
@@ -591,13 +592,13 @@ def common_range_offset(refl, R0, t0, prior):
                 J8[3 * i + k, 6] = r[3 * i + k] / max(rho[i] - b, 1e-6)
                 r8[3 * i + k] += kappa * col
             J8[3 * i + 2, 6] = 1.0 / sr[i]
-        r8[3 * m] = b / prior_sigma_mm
+        r8[3 * m] = (b - prior_mean_mm) / prior_sigma_mm
         J8[3 * m, 6] = 1.0 / prior_sigma_mm
         r8[3 * m + 1] = kappa * inv_sigma_kappa
         J8[3 * m + 1, 7] = inv_sigma_kappa
         L, ok = cholesky(gram(J8))
         if not ok:
-            return 0.0, prior_sigma_mm
+            return prior_mean_mm, prior_sigma_mm
         delta = -cholesky_solve(L, transposed_times(J8, r8))
         R = matmul3(rotation_step(delta[:3]), R)
         t = t + delta[3:6]
@@ -641,7 +642,8 @@ def fit_with_outliers(refl, fit, max_bearing_rad, offset_prior):
         result = fit_adaptive(refl, fit, max_bearing_rad)
     # the common offset from the reflectors kept: a reflection left in would bend the
     # fit the offset is estimated from
-    offset, offset_sigma = 0.0, offset_prior.sigma_mm
+    # not estimated: the prior's mean (0 unless one was learned) and sigma
+    offset, offset_sigma = offset_prior.mean_mm, offset_prior.sigma_mm
     if offset_prior.sigma_mm > 0 and fit.refinement == REFINE_ML and rows.shape[0] >= 4:
         used = Reflectors(x=refl.x, e=refl.e, rho=refl.rho, sr=result.sr, sb=result.sb)
         offset, offset_sigma = common_range_offset(used, result.R, result.t, offset_prior)

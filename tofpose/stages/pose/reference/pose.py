@@ -383,17 +383,18 @@ def common_range_offset(refl, R0, t0, prior):
     b), ours: the maximum a-posteriori (R, t, b, kappa) from (R0, t0, 0, 0), by SciPy's
     least squares on the whitened residuals (Eq. 10) of the ranges rho - b and of the
     bearings with an image scale error kappa (their lateral residuals plus kappa (rho_i -
-    b) ``scale_directions`` / (rho_i - b) sb_i), and two prior residuals b / sigma_b and
+    b) ``scale_directions`` / (rho_i - b) sb_i), and two prior residuals (b - mean_b) /
+    sigma_b (``prior.mean_mm``, from which b starts) and
     kappa / sigma_kappa (``prior.sigma_mm``, ``pattern_scale_sigma``; kappa held at 0
     when sigma_kappa is 0). Returns b and its posterior sigma sqrt((J^T J)^-1_bb) (kappa
-    marginalised) at the optimum, J by central differences; (0, 0) when
-    ``prior.sigma_mm`` <= 0, (0, sigma_b) when J^T J is singular.
+    marginalised) at the optimum, J by central differences; (mean_b, 0) when
+    ``prior.sigma_mm`` <= 0, (mean_b, sigma_b) when J^T J is singular.
 
     The kernel takes 3 Gauss-Newton steps from the converged 6-parameter fit with a
     Jacobian that leaves out how the lateral sigmas (rho - b) sb move with b (a term of
     order |r_lateral|^2 / rho): the two agree to ~1e-2 of the posterior sigma."""
     if prior.sigma_mm <= 0:
-        return 0.0, 0.0
+        return float(prior.mean_mm), 0.0
     x, e, rho, sr, sb = refl
     sigma_kappa, mean = pattern_scale_sigma(e, prior)
     scale = scale_directions(e, tangent_basis(e), mean)
@@ -406,16 +407,20 @@ def common_range_offset(refl, R0, t0, prior):
         r = whitened_residuals(shifted, R, t).reshape(-1, 3)
         lat = np.maximum((rho - b) * sb, MIN_LATERAL_SIGMA_MM)
         r[:, :2] += kappa * ((rho - b) / lat)[:, None] * scale
-        priors = [b / prior.sigma_mm] + ([kappa / sigma_kappa] if fit_scale else [])
+        priors = [(b - prior.mean_mm) / prior.sigma_mm] + (
+            [kappa / sigma_kappa] if fit_scale else []
+        )
         return np.concatenate((r.ravel(), priors))
 
     n = 8 if fit_scale else 7
-    sol = least_squares(residuals, np.zeros(n), method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14)
+    start = np.zeros(n)
+    start[6] = prior.mean_mm
+    sol = least_squares(residuals, start, method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14)
     steps = np.array([1e-7, 1e-7, 1e-7, 1e-4, 1e-4, 1e-4, 1e-4, 1e-7])[:n]
     J = _central_jacobian(residuals, sol.x, steps)
     cov = _inverse_or_nan(J.T @ J)
     if not np.isfinite(cov).all():
-        return 0.0, float(prior.sigma_mm)
+        return float(prior.mean_mm), float(prior.sigma_mm)
     return float(sol.x[6]), float(np.sqrt(cov[6, 6]))
 
 
@@ -442,7 +447,8 @@ def fit_with_outliers(refl, fit, max_bearing_rad, offset_prior) -> OutlierFit:
             break
         rows = np.delete(rows, worst)
         result = fit_adaptive(rows_of(refl, rows), fit, max_bearing_rad)
-    offset, offset_sigma = 0.0, offset_prior.sigma_mm
+    # not estimated: the prior's mean (0 unless one was learned) and sigma
+    offset, offset_sigma = float(offset_prior.mean_mm), offset_prior.sigma_mm
     if offset_prior.sigma_mm > 0 and fit.refinement == REFINE_ML and len(rows) >= 4:
         used = with_sigmas(rows_of(refl, rows), result.sr, result.sb)
         offset, offset_sigma = common_range_offset(used, result.R, result.t, offset_prior)
