@@ -404,7 +404,7 @@ def estimate_row(
             reading.append(read_ms_per_frame(rec))
     what = "the default: each pose refined on its pixels" if pixel_fit else "centroid pose only"
     return Row(
-        "estimate",
+        "estimate" if not pixel_fit else "estimate_pixel_fit",
         f"`tofpose estimate{flag}` per frame ({what}; read, measure, write the CSV; one core)",
         "ms",
         ours,

@@ -661,8 +661,9 @@ def foreign_section(recordings: list[str]) -> str:
             _script("foreign.py", *recordings, "--quiet"),
             "",
             "The same recordings with the centroid pose only (`tofpose estimate "
-            "--no-pixel-fit`: no pixel-level fit after the pipeline, docs/algorithm.md), "
-            "the range bias learned as above.",
+            "--no-pixel-fit`: no pixel-level fit after the pipeline, and the configured "
+            "range-offset prior, which is learned only with the pixel fit; "
+            "docs/algorithm.md).",
             "",
             _script("foreign.py", *recordings, "--quiet", "--no-oracle", "--no-pixel-fit"),
             "",

@@ -63,24 +63,27 @@ def _pixel_fit_argument(p) -> None:
     p.add_argument(
         "--pixel-fit",
         action=argparse.BooleanOptionalAction,
-        default=True,
+        default=None,
         help="refine each pose on the markers' raw pixels, the pose and covariance of the "
-        "sensor's model (default; docs/algorithm.md, 'Pixel-level fit'); --no-pixel-fit: "
-        "the centroid pose only, 10-50x faster a frame at a cost in accuracy "
-        "(docs/results.md)",
+        "sensor's model (default: on, unless --camera's JSON carries a covariance scale "
+        "from calibrate-covariance, which calibrates the centroid pose's covariance; "
+        "docs/algorithm.md, 'Pixel-level fit'); --no-pixel-fit: the centroid pose only, "
+        "10-50x faster a frame at a cost in accuracy (docs/results.md)",
     )
 
 
 def _range_bias_argument(p) -> None:
-    """``--no-learn-range-bias`` (estimate's and reprocess')."""
+    """``--learn-range-bias`` / ``--no-learn-range-bias`` (estimate's and reprocess')."""
     p.add_argument(
-        "--no-learn-range-bias",
-        dest="learn_range_bias",
-        action="store_false",
-        help="measure every frame with the configured range-offset prior (15 mm without a "
-        "range calibration) instead of the spread of the offsets learned first over up to "
-        "64 of the recording's frames (docs/algorithm.md, 'Range bias learned over a "
-        "recording')",
+        "--learn-range-bias",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="learn the mean and spread of the camera's range offsets over up to 64 of the "
+        "recording's frames first, and measure every frame with them as the offset's "
+        "prior (default: with the pixel fit, whose offset likelihoods are the sensor "
+        "model's own; the centroid pose's are too wide to learn the spread from); "
+        "--no-learn-range-bias: the configured prior (15 mm without a range "
+        "calibration). docs/algorithm.md, 'Range bias learned over a recording'",
     )
 
 

@@ -157,7 +157,7 @@ class PoseResult:
     range_offset : the range offset common to the reflectors that the pose's fit took
         out of their ranges, its posterior sigma and its prior's
         (``stages.pose.records.RangeOffset``; the pixel fit's when it holds): what the
-        frame says of the camera's range offset (``tofpose.lab.range_bias``).
+        frame says of the camera's range offset (``stages.pose.range_bias``).
     """
 
     ok: bool
@@ -457,7 +457,9 @@ class PosePipeline:
             range_offset=RangeOffset(
                 fit.range_offset_mm,
                 fit.range_offset_sigma_mm,
-                0.0 if cfg.fit_range_offset else offset_sigma_mm,
+                # a free offset: a prior of infinite sigma (the frame's likelihood is then
+                # its posterior)
+                float("inf") if cfg.fit_range_offset else offset_sigma_mm,
                 offset_mean_mm,
             ),
         )

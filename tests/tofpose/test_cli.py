@@ -142,12 +142,18 @@ def test_calibrate_range_writes_a_camera_the_estimate_uses(tmp_path, capsys):
     assert corr is not None and camera.width == 320
     near, far = corr.calibrated_span_mm  # stored with the camera and printed
     assert f"calibrated span {near:.0f}-{far:.0f} mm" in printed and near < far
-    assert main(["estimate", str(rec), "--out", str(raw_csv)]) == 0
-    assert main(["estimate", str(rec), "--camera", str(cam), "--out", str(cal_csv)]) == 0
+    # the centroid pose with the configured priors: what the correction alone does
+    centroid = ["--no-pixel-fit", "--no-learn-range-bias"]
+    assert main(["estimate", str(rec), "--out", str(raw_csv), *centroid]) == 0
+    assert main(["estimate", str(rec), "--camera", str(cam), "--out", str(cal_csv), *centroid]) == 0
+    # estimate's default on the uncalibrated recording: the pixel fit, with the range
+    # offsets' mean and spread learned over the recording
+    default_csv = tmp_path / "d.csv"
+    assert main(["estimate", str(rec), "--out", str(default_csv)]) == 0
     with open_recording(rec) as r:
         true_z = r.truth_t_mm[:, 2]
     errs = {}
-    for name, path in (("raw", raw_csv), ("cal", cal_csv)):
+    for name, path in (("raw", raw_csv), ("cal", cal_csv), ("default", default_csv)):
         rows = list(csv.DictReader(path.open()))
         far = [
             abs(float(x["z_mm"]) - true_z[i])
@@ -156,6 +162,7 @@ def test_calibrate_range_writes_a_camera_the_estimate_uses(tmp_path, capsys):
         ]
         errs[name] = float(np.median(far))
     assert errs["cal"] < 0.5 * errs["raw"], errs
+    assert errs["default"] < 0.5 * errs["raw"], errs
 
 
 def test_calibrate_covariance_writes_a_camera_whose_sigmas_the_estimate_reports(tmp_path, capsys):

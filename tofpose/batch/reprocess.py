@@ -47,6 +47,7 @@ from tofpose.batch.progress import RunProgress
 from tofpose.batch.worker import ProgressReporter
 from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, HeldRows, pose_row
 from tofpose.io.recording import open_recording
+from tofpose.stages.pose.range_bias import LearnedRangeBias
 
 DEFAULT_CHUNK_FRAMES = 512
 POLL_S = 0.1
@@ -69,17 +70,21 @@ class Settings:
     tracking: bool = False
     moving: bool = False  # each pose from its own frame (as ``estimate --filter``)
     # each recording's range bias learned first, as ``estimate`` does
-    # (``io.camera_file.learned_range_bias``; its chunks carry it)
-    learn_range_bias: bool = True
-    pixel_fit: bool = True  # each pose refined on its pixels, as ``estimate``'s default
+    # (``io.camera_file.learned_range_bias``; its chunks carry it; None: with the pixel
+    # fit)
+    learn_range_bias: bool | None = None
+    # each pose refined on its pixels (None: as ``estimate``'s default, on unless the
+    # camera JSON carries a covariance scale: ``io.camera_file.resolve_pixel_fit``)
+    pixel_fit: bool | None = None
 
 
 @dataclass(frozen=True)
 class Chunk:
     """Frames [start, stop) of recording ``path`` output, after a warm-up from ``origin``;
     digests are recorded for the warm-up and for the last ``tail`` frames (the next
-    chunk's warm-up); ``range_bias_sigma_mm``, ``range_offset_mean_mm``: the range
-    offset's prior learned over the recording (None and 0: the configured one)."""
+    chunk's warm-up); ``range_bias``: the range offset's prior learned over the
+    recording (None: the configured one); ``pixel_fit``: each pose refined on its pixels
+    (``Settings.pixel_fit`` resolved for the recording's camera)."""
 
     path: str
     index: int
@@ -87,8 +92,8 @@ class Chunk:
     start: int
     stop: int
     tail: int
-    range_bias_sigma_mm: float | None = None
-    range_offset_mean_mm: float = 0.0
+    range_bias: LearnedRangeBias | None = None
+    pixel_fit: bool = True
 
     @property
     def name(self) -> str:
@@ -169,9 +174,8 @@ def run_chunk(
             settings.camera_path,
             settings.tracking,
             moving=settings.moving,
-            pixel_fit=settings.pixel_fit,
-            range_bias_sigma_mm=chunk.range_bias_sigma_mm,
-            range_offset_mean_mm=chunk.range_offset_mean_mm,
+            pixel_fit=chunk.pixel_fit,
+            range_bias=chunk.range_bias,
         )
         for first, (grays, dists, ts) in rec.blocks(
             chunk.origin, chunk.stop, read_ahead=read_ahead
@@ -258,7 +262,7 @@ def reprocess(
     from dask.distributed import TimeoutError as DaskTimeout
     from dask.distributed import wait
 
-    from tofpose.io.camera_file import learned_range_bias, pipeline_for
+    from tofpose.io.camera_file import learned_range_bias, pipeline_for, resolve_pixel_fit
 
     settings = settings or Settings()
     if filter_state:  # poses the filter follows: from single frames, as estimate --filter
@@ -272,7 +276,7 @@ def reprocess(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     chunks: dict[str, list[Chunk]] = {}
-    range_bias: dict[str, str] = {}
+    method: dict[str, dict[str, Any]] = {}
     for path in recordings:
         with open_recording(path) as rec:  # RecordingError names what is wrong
             pipe = pipeline_for(
@@ -284,25 +288,28 @@ def reprocess(
                 moving=settings.moving,
             )
             cfg = pipe.config
+            pixel_fit = resolve_pixel_fit(settings.pixel_fit, settings.camera_path)
             learned = (
                 learned_range_bias(
                     rec,
                     path,
                     settings.catalog_path,
                     settings.camera_path,
-                    pixel_fit=settings.pixel_fit,
+                    pixel_fit=pixel_fit,
                     progress=False,
                 )
-                if settings.learn_range_bias
+                if (pixel_fit if settings.learn_range_bias is None else settings.learn_range_bias)
                 else None
             )
-            range_bias[path] = "" if learned is None else learned.summary()
+            method[path] = {
+                "pixel_fit": pixel_fit,
+                "range_bias": None if learned is None else asdict(learned),
+                "range_bias_summary": "" if learned is None else learned.summary(),
+            }
+            if learned is not None and progress:
+                print(f"{Path(path).name}: {learned.summary()}", file=sys.stderr)
             chunks[path] = [
-                c
-                if learned is None
-                else replace(
-                    c, range_bias_sigma_mm=learned.sigma_mm, range_offset_mean_mm=learned.mean_mm
-                )
+                replace(c, range_bias=learned, pixel_fit=pixel_fit)
                 for c in plan(
                     str(path),
                     rec.n_frames,
@@ -417,7 +424,9 @@ def reprocess(
                 "ok": n_ok,
                 "chunks": len(cs),
                 "boundaries": boundaries[path],
-                "range_bias": range_bias[path],
+                # how its frames were measured (``Settings.pixel_fit`` resolved; the
+                # range bias learned over it, None: the configured prior)
+                **method[path],
             }
         )
     n_workers = cluster.workers

@@ -116,8 +116,7 @@ def pipeline_for(
     *,
     pixel_fit: bool = False,
     moving: bool = False,
-    range_bias_sigma_mm: float | None = None,
-    range_offset_mean_mm: float = 0.0,
+    range_bias: LearnedRangeBias | None = None,
 ) -> PosePipeline:
     """The pipeline ``estimate`` runs over an open recording: its camera and catalog, or
     the ones given (a camera JSON with its range correction and covariance scale), with
@@ -126,9 +125,11 @@ def pipeline_for(
     ``moving``: a target whose motion a filter follows (``estimate --filter``): each pose
     from its own frame (``PersistenceConfig.single_frame``), since combining frames
     makes a pose lag a motion too slow for persistence's gates to see;
-    ``range_bias_sigma_mm``, ``range_offset_mean_mm``: the range offset's prior sigma,
-    calibrated or not, and mean (learned over the recording, ``learned_range_bias``;
-    None and 0: the configured ones)."""
+    ``range_bias``: the range offset's prior learned over the recording
+    (``learned_range_bias``): its mean, and its sigma in place of the configured
+    calibrated and uncalibrated ones (each capped at the configured one unless the
+    frames show a wider spread, ``LearnedRangeBias.prior_sigma_mm``); None: the
+    configured prior."""
     camera, correction, scale = rec.camera, None, None
     if camera_path:
         camera, correction, scale = load_camera(read_camera_text(camera_path))
@@ -165,12 +166,14 @@ def pipeline_for(
         height=camera.height,
         count_scale=camera.count_scale,
     )
-    if range_bias_sigma_mm is not None:
+    if range_bias is not None:
         config = replace(
             config,
-            range_bias_sigma_mm=range_bias_sigma_mm,
-            calibrated_range_bias_sigma_mm=range_bias_sigma_mm,
-            range_offset_mean_mm=range_offset_mean_mm,
+            range_bias_sigma_mm=range_bias.prior_sigma_mm(config.range_bias_sigma_mm),
+            calibrated_range_bias_sigma_mm=range_bias.prior_sigma_mm(
+                config.calibrated_range_bias_sigma_mm
+            ),
+            range_offset_mean_mm=range_bias.mean_mm,
         )
     return PosePipeline(
         camera, catalog, config, range_correction=correction, covariance_scale=scale
@@ -190,13 +193,13 @@ def learned_range_bias(
     """The spread of the camera's range offsets over the open recording ``rec``
     (``stages.pose.range_bias``): up to ``max_frames`` frames spaced evenly over it, each
     measured on its own (``pipeline_for``'s pipeline without tracking or persistence
-    across frames, reset before each) with the configured prior, their
+    across frames) with the configured prior, their
     ``PoseResult.range_offset`` pooled. None when the pipeline estimates no offset, or
     too few frames tell it, and when the camera carries a covariance scale
     (``calibrate-covariance``): that was fitted on covariances with the configured
-    priors, and keeps them. ``estimate`` and ``reprocess`` measure every frame with its
-    ``mean_mm`` and ``sigma_mm`` (``pipeline_for``'s ``range_offset_mean_mm``,
-    ``range_bias_sigma_mm``)."""
+    priors, and keeps them. ``estimate`` and ``reprocess`` measure every frame with it
+    (``pipeline_for``'s ``range_bias``). The frames are reset before each (persistence
+    and the track; the RANSAC fallback's generator runs on, deterministically)."""
     pipe = pipeline_for(
         rec, rec_path, catalog_path, camera_path, False, pixel_fit=pixel_fit, moving=True
     )
@@ -217,3 +220,15 @@ def learned_range_bias(
         if r.ok:
             offsets.append(r.range_offset)
     return learn_range_bias(offsets)
+
+
+def resolve_pixel_fit(pixel_fit: bool | None, camera_path: str | None) -> bool:
+    """Whether ``estimate`` / ``reprocess`` refine each pose on its pixels: ``pixel_fit``
+    when given; by default (None) yes, unless the camera JSON ``camera_path`` carries a
+    covariance scale (``calibrate-covariance``), which calibrates the centroid pose's
+    covariance: its sigmas are then what the camera's user asked for."""
+    if pixel_fit is not None:
+        return pixel_fit
+    if not camera_path:
+        return True  # a recording's own camera carries no covariance scale
+    return load_camera(read_camera_text(camera_path))[2] is None

@@ -22,6 +22,7 @@ from tofpose.io.camera_file import (
     load_camera,
     pipeline_for,
     read_camera_text,
+    resolve_pixel_fit,
 )
 from tofpose.io.pose_csv import CSV_COLUMNS, FILTER_COLUMNS, HeldRows, pose_row, result_pose
 from tofpose.io.recording import Recording, open_recording
@@ -159,10 +160,10 @@ def estimate(
     progress: bool = True,
     tracking: bool = False,
     filter_state: bool = False,
-    pixel_fit: bool = True,
+    pixel_fit: bool | None = None,
     causal_filter: bool = False,
-    learn_range_bias: bool = True,
-) -> dict[str, float | str]:
+    learn_range_bias: bool | None = None,
+) -> dict[str, float | str | bool]:
     """Run the pipeline over a recording and write the CSV; returns summary numbers.
     ``tracking``: the pipeline's tracking mode (faster on a continuous recording);
     ``filter_state``: run the relative-state filter over the poses and add
@@ -171,17 +172,20 @@ def estimate(
     (``tofpose.lab.smoothing``; the rows are held until the last frame), or with
     ``causal_filter`` from the poses up to it, as the live loop has it (empty until its
     first pose); ``pixel_fit``: refine each pose on the markers' pixels
-    (``PipelineConfig.pixel_fit``; the default here, off in the live loop, whose frame
-    budget it does not fit); ``learn_range_bias``: first learn the spread of the
-    camera's range offsets over the recording (``io.camera_file.learned_range_bias``)
-    and measure every frame with it as the offset's prior (the summary's "range_bias"
-    says what was learned)."""
+    (``PipelineConfig.pixel_fit``; None: on unless the camera JSON carries a covariance
+    scale, ``resolve_pixel_fit``; off in the live loop, whose frame budget it does not
+    fit); ``learn_range_bias``: first learn the mean and spread of the camera's range
+    offsets over the recording (``io.camera_file.learned_range_bias``) and measure every
+    frame with them as the offset's prior (None: with the pixel fit; the summary's
+    "range_bias" says what was learned)."""
+    pixel_fit = resolve_pixel_fit(pixel_fit, camera_path)
+    learn = pixel_fit if learn_range_bias is None else learn_range_bias
     with open_recording(rec_path) as rec:
         learned = (
             learned_range_bias(
                 rec, rec_path, catalog_path, camera_path, pixel_fit=pixel_fit, progress=progress
             )
-            if learn_range_bias
+            if learn
             else None
         )
         pipe = pipeline_for(
@@ -192,8 +196,7 @@ def estimate(
             tracking,
             pixel_fit=pixel_fit,
             moving=filter_state,  # a filter follows a motion: poses from single frames
-            range_bias_sigma_mm=None if learned is None else learned.sigma_mm,
-            range_offset_mean_mm=0.0 if learned is None else learned.mean_mm,
+            range_bias=learned,
         )
         n_ok = 0
         held = HeldRows()  # with the filter: held for its pass over every pose
@@ -223,5 +226,6 @@ def estimate(
         return {
             "frames": rec.n_frames,
             "ok": n_ok,
+            "pixel_fit": pixel_fit,
             "range_bias": "" if learned is None else learned.summary(),
         }

@@ -238,11 +238,19 @@ class ReprocessService(BatchJobService):
                     settings=Settings(camera_path=camera_path, tracking=job["tracking"]),
                     on_progress=partial(self._on_progress, jid, 0),
                 )
+                # the baseline measured as the run was (the camera JSON may have turned the
+                # pixel fit and the range bias's learning off), so that the two differ
+                # by the camera only
+                measured = run["recordings"][0]
                 reprocess(
                     [job["recording"]],
                     d / "baseline",
                     **common,
-                    settings=Settings(tracking=job["tracking"]),
+                    settings=Settings(
+                        tracking=job["tracking"],
+                        pixel_fit=measured["pixel_fit"],
+                        learn_range_bias=measured["range_bias"] is not None,
+                    ),
                     on_progress=partial(self._on_progress, jid, 1),
                 )
             # matplotlib with it: imported by the first comparison, not with the server

@@ -98,6 +98,41 @@ def test_two_workers_reproduce_estimate_byte_for_byte(recordings, tmp_path, trac
     rec = {r["csv"]: r for r in s["recordings"]}
     assert rec["sweep.csv"]["chunks"] == 5 and len(rec["sweep.csv"]["boundaries"]) == 4
     assert json.loads((out / "reprocess.json").read_text())["filter"] is True
+    # how each recording was measured: estimate's defaults, the learned prior's numbers
+    for r in s["recordings"]:
+        assert r["pixel_fit"] is True
+        assert r["range_bias"] is not None and r["range_bias"]["n_frames"] >= 8
+        assert r["range_bias_summary"].startswith("range bias learned over")
+
+
+def test_a_camera_with_a_covariance_scale_is_measured_with_the_centroid_pose_and_its_priors(
+    recordings, tmp_path
+):
+    """A covariance scale calibrates the centroid pose's covariance under the configured
+    priors: reprocess and estimate then measure without the pixel fit and without a
+    learned range bias, both alike, and say so."""
+    from tofpose.calibration.covariance import CovarianceScale
+    from tofpose.core.camera import CameraModel
+
+    sweep, _ = recordings
+    cam = tmp_path / "scaled.json"
+    scale = CovarianceScale((1000.0, 4000.0), (0.5, 0.8))
+    cam.write_text(json.dumps({**CameraModel().to_dict(), "covariance_scale": scale.to_dict()}))
+    serial = _estimate(sweep, tmp_path / "serial.csv", "--camera", str(cam))
+    s = reprocess(
+        [str(sweep)],
+        tmp_path / "out",
+        settings=Settings(camera_path=str(cam)),
+        workers=1,
+        chunk_frames=40,
+        progress=False,
+    )
+    assert (tmp_path / "out" / "sweep.csv").read_bytes() == serial
+    (r,) = s["recordings"]
+    assert r["pixel_fit"] is False and r["range_bias"] is None
+    # asked for, the pixel fit runs with that camera too
+    asked = _estimate(sweep, tmp_path / "asked.csv", "--camera", str(cam), "--pixel-fit")
+    assert asked != serial
 
 
 def test_a_chunk_that_never_catches_up_runs_on_from_the_previous_origin(

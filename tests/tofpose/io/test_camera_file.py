@@ -108,7 +108,7 @@ def test_a_calibrated_cameras_range_bias_is_learned_near_zero_and_its_poses_foll
     rec = tmp_path / "far.h5"
     truth = _far_recording(rec, 32)
     with open_recording(str(rec)) as r:
-        learned = learned_range_bias(r, str(rec), None, None, progress=False)
+        learned = learned_range_bias(r, str(rec), None, None, pixel_fit=True, progress=False)
     assert learned is not None and learned.n_frames >= 28
     assert learned.sigma_mm < 5.0
 
@@ -143,17 +143,32 @@ def test_an_offset_cameras_range_offset_is_learned_and_taken_out(tmp_path):
     rec = tmp_path / "offset.h5"
     truth = _far_recording(rec, 32, offset_mm=12.0, seed=13)
     with open_recording(str(rec)) as r:
-        learned = learned_range_bias(r, str(rec), None, None, progress=False)
+        learned = learned_range_bias(r, str(rec), None, None, pixel_fit=True, progress=False)
     assert learned is not None
     assert learned.mean_mm == pytest.approx(12.0, abs=3 * learned.mean_se_mm + 0.5)
     assert learned.sigma_mm < 6.0
 
     def z_errors(*flags):
         out = tmp_path / f"o{len(flags)}.csv"
-        assert main(["estimate", str(rec), "--out", str(out), "--no-pixel-fit", *flags]) == 0
+        assert main(["estimate", str(rec), "--out", str(out), *flags]) == 0
         rows = list(csv.DictReader(out.open()))
         assert all(row["ok"] == "1" for row in rows)
         return np.array([float(row["z_mm"]) for row in rows]) - truth[:, 2]
 
     rms = lambda e: float(np.sqrt(np.mean(e**2)))  # noqa: E731
     assert rms(z_errors()) < 0.6 * rms(z_errors("--no-learn-range-bias"))
+
+
+def test_the_pixel_fit_is_on_unless_the_camera_carries_a_covariance_scale(tmp_path):
+    from tofpose.calibration.covariance import CovarianceScale
+    from tofpose.io.camera_file import resolve_pixel_fit
+
+    plain, scaled = tmp_path / "plain.json", tmp_path / "scaled.json"
+    plain.write_text(CameraModel().to_json())
+    scale = CovarianceScale((1000.0,), (0.5,)).to_dict()
+    scaled.write_text(json.dumps({**CameraModel().to_dict(), "covariance_scale": scale}))
+    assert resolve_pixel_fit(None, None) is True
+    assert resolve_pixel_fit(None, str(plain)) is True
+    assert resolve_pixel_fit(None, str(scaled)) is False
+    assert resolve_pixel_fit(True, str(scaled)) is True
+    assert resolve_pixel_fit(False, None) is False

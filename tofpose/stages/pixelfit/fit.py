@@ -630,6 +630,10 @@ def disc_deletion(
         return None
     full = -info_inv @ grad
     C = info_inv[:6, :6]
+    try:
+        L = np.linalg.cholesky(0.5 * (C + C.T))
+    except np.linalg.LinAlgError:
+        return None
     k_count = len(disc_columns)
     influence = np.zeros((6, 6))
     influential = np.zeros(k_count, bool)
@@ -645,13 +649,15 @@ def disc_deletion(
             continue  # without disc k the pose is not determined: nothing to compare
         # the pose's columns are the first six of the free ones, and never a disc's own
         d = (-inv_k @ (grad - Jk.T @ rk)[keep])[:6] - full[:6]
-        V = inv_k[:6, :6] - C
-        w, U = np.linalg.eigh(0.5 * (V + V.T))
+        # in the pose's own sigmas (C = L L^T), so that the rank test does not mix rad^2
+        # and mm^2: V_w = L^-1 (C_-k - C) L^-T, d_w = L^-1 d
+        Vw = np.linalg.solve(L, np.linalg.solve(L, inv_k[:6, :6] - C).T)
+        w, U = np.linalg.eigh(0.5 * (Vw + Vw.T))
         big = w > DISC_DELETION_RANK_TOL * max(float(w.max()), 0.0)
         if not np.any(big):
             continue
         deleted += 1
-        z = U[:, big].T @ d
+        z = U[:, big].T @ np.linalg.solve(L, d)
         stat = float(np.sum(z**2 / w[big]))
         rank = int(big.sum())
         if stat > chi2_limit(rank, DISC_INFLUENCE_P):

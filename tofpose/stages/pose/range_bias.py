@@ -45,7 +45,8 @@ class LearnedRangeBias:
 
     mean_mm : their maximum-likelihood mean ``mu``, mm: the prior's mean to measure the
         frames with (``PipelineConfig.range_offset_mean_mm``).
-    sigma_mm : the prior's sigma: ``sqrt(tau^2 + se(tau^2) + var(mu))``.
+    sigma_mm : the prior's sigma: ``sqrt(tau^2 + se(tau^2) + var(mu))``, capped at the
+        configured one unless the frames show more (``prior_sigma_mm``).
     tau_mm : the maximum-likelihood spread of the offsets about ``mu``; tau2_se_mm2 : the
         standard error of its square; mean_se_mm : the standard error of ``mu`` (inverse
         Fisher information, both).
@@ -59,6 +60,21 @@ class LearnedRangeBias:
     mean_se_mm: float
     n_frames: int
     n_outliers: int
+
+    def wider_than(self, configured_sigma_mm: float) -> bool:
+        """Whether the frames show offsets spread wider than ``configured_sigma_mm`` beyond
+        doubt: ``tau^2`` more than two of its standard errors above its square."""
+        return self.tau_mm**2 - 2.0 * self.tau2_se_mm2 > configured_sigma_mm**2
+
+    def prior_sigma_mm(self, configured_sigma_mm: float) -> float:
+        """The prior sigma to measure the frames with in place of ``configured_sigma_mm``:
+        the learned one, but never wider than the configured one unless the frames show a
+        wider spread beyond doubt (``wider_than``): frames that tell the offset poorly
+        (small or far targets) leave a large ``se(tau^2)``, which must not widen a prior
+        a range calibration made narrow."""
+        if self.wider_than(configured_sigma_mm):
+            return self.sigma_mm
+        return min(self.sigma_mm, configured_sigma_mm)
 
     def summary(self) -> str:
         return (
@@ -93,11 +109,9 @@ def learn_range_bias(offsets: Iterable[RangeOffset]) -> LearnedRangeBias | None:
     could not tell the offset, are skipped); None with fewer than ``MIN_FRAMES`` that
     tell it."""
     pairs = [lk for lk in (o.likelihood() for o in offsets) if lk is not None]
-    if len(pairs) < MIN_FRAMES:
-        return None
     m = np.array([p[0] for p in pairs], float)
     v = np.array([p[1] for p in pairs], float)
-    keep = np.isfinite(m) & np.isfinite(v) & (v > 0)
+    keep = np.isfinite(m) & np.isfinite(v) & (v > 0)  # a NaN offset tells nothing
     if keep.sum() < MIN_FRAMES:
         return None
     limit = float(chi2.ppf(OUTLIER_P, 1))
@@ -111,6 +125,8 @@ def learn_range_bias(offsets: Iterable[RangeOffset]) -> LearnedRangeBias | None:
     w = 1.0 / (v[keep] + tau2)
     tau2_se = float(np.sqrt(2.0 / np.sum(w**2)))
     mean_var = float(1.0 / np.sum(w))
+    if not (np.isfinite(mu) and np.isfinite(tau2) and np.isfinite(tau2_se + mean_var)):
+        return None
     return LearnedRangeBias(
         mean_mm=mu,
         sigma_mm=float(np.sqrt(tau2 + tau2_se + mean_var)),

@@ -409,11 +409,14 @@ def _fit_pipeline_frame(sensor, f, r, **options):
 def test_analytic_and_numeric_jacobians_converge_to_the_same_pose(range_mm):
     """The analytic pose derivatives change the iterations' path a little (central
     differences err by up to 1e-2 of a derivative on a few rim pixels: see
-    test_derivatives.py); the converged poses agree to well under their sigma."""
+    test_derivatives.py); the converged poses agree to well under their sigma, and so do
+    their Fisher covariances (without the discs' deletion terms, whose variance factor
+    is a statistic of the residuals: a Jacobian 1e-2 off on rim pixels moves it by a
+    few per cent)."""
     for seed in range(2):
         sensor, f, r = _pipeline_frame(range_mm, seed)
         fits = [
-            _fit_pipeline_frame(sensor, f, r, jacobian=jacobian)
+            _fit_pipeline_frame(sensor, f, r, jacobian=jacobian, disc_deletion_terms=False)
             for jacobian in ("analytic", "central-differences")
         ]
         assert all(x.ok for x in fits), [x.reason for x in fits]
