@@ -64,7 +64,8 @@ def reprocess_chunk(rec: str, k: int) -> int:
     start = 600 + 100 * k  # inside the sweep's tracked stretch
     with tempfile.TemporaryDirectory() as d:
         run_chunk(
-            Chunk(rec, k, start - 30, start, start + 100, 0),
+            # the chunk carries its measurement (reprocess resolves the settings into it)
+            Chunk(rec, k, start - 30, start, start + 100, 0, pixel_fit=False),
             Settings(tracking=True, pixel_fit=False),
             d,
         )

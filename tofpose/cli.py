@@ -83,7 +83,9 @@ def _range_bias_argument(p) -> None:
         "prior (default: with the pixel fit, whose offset likelihoods are the sensor "
         "model's own; the centroid pose's are too wide to learn the spread from); "
         "--no-learn-range-bias: the configured prior (15 mm without a range "
-        "calibration). docs/algorithm.md, 'Range bias learned over a recording'",
+        "calibration). A camera JSON with a covariance scale keeps the configured prior "
+        "either way (the scale was fitted with it). docs/algorithm.md, 'Range bias "
+        "learned over a recording'",
     )
 
 

@@ -301,18 +301,34 @@ def reprocess(
                     settings.camera_path,
                     pixel_fit=pixel_fit,
                     progress=False,
+                    should_stop=should_stop,
                 )
                 if (pixel_fit if settings.learn_range_bias is None else settings.learn_range_bias)
                 else None
             )
+            if should_stop is not None and should_stop():  # during the learning
+                raise ReprocessCancelledError("re-processing cancelled")
             learn_s += time.perf_counter() - learn_t0
+            summary_line = (
+                ""
+                if learned is None
+                else learned.summary(cfg.range_bias_sigma_mm, cfg.calibrated_range_bias_sigma_mm)
+            )
             method[path] = {
                 "pixel_fit": pixel_fit,
                 "range_bias": None if learned is None else asdict(learned),
-                "range_bias_summary": "" if learned is None else learned.summary(),
+                # the prior each frame was measured with (the learned sigma capped at the
+                # configured ones: ``LearnedRangeBias.prior_sigma_mm``)
+                "range_bias_sigma_mm": None
+                if learned is None
+                else learned.prior_sigma_mm(cfg.range_bias_sigma_mm),
+                "calibrated_range_bias_sigma_mm": None
+                if learned is None
+                else learned.prior_sigma_mm(cfg.calibrated_range_bias_sigma_mm),
+                "range_bias_summary": summary_line,
             }
             if learned is not None and progress:
-                print(f"{Path(path).name}: {learned.summary()}", file=sys.stderr)
+                print(f"{Path(path).name}: {summary_line}", file=sys.stderr)
             chunks[path] = [
                 replace(c, range_bias=learned, pixel_fit=pixel_fit)
                 for c in plan(

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import sys
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -189,6 +190,7 @@ def learned_range_bias(
     pixel_fit: bool = False,
     max_frames: int = RECORDING_FRAMES,
     progress: bool = True,
+    should_stop: Callable[[], bool] | None = None,
 ) -> LearnedRangeBias | None:
     """The spread of the camera's range offsets over the open recording ``rec``
     (``stages.pose.range_bias``): up to ``max_frames`` frames spaced evenly over it, each
@@ -199,7 +201,9 @@ def learned_range_bias(
     (``calibrate-covariance``): that was fitted on covariances with the configured
     priors, and keeps them. ``estimate`` and ``reprocess`` measure every frame with it
     (``pipeline_for``'s ``range_bias``). The frames are reset before each (persistence
-    and the track; the RANSAC fallback's generator runs on, deterministically)."""
+    and the track; the RANSAC fallback's generator runs on, deterministically). With
+    ``pixel_fit`` only the frames it refined count. ``should_stop() -> bool``, polled
+    before each frame: True stops it (None returned; the caller says why)."""
     pipe = pipeline_for(
         rec, rec_path, catalog_path, camera_path, False, pixel_fit=pixel_fit, moving=True
     )
@@ -214,10 +218,14 @@ def learned_range_bias(
     for i in tqdm(
         picked.tolist(), desc="range bias", unit="frame", disable=not progress, file=sys.stderr
     ):
+        if should_stop is not None and should_stop():
+            return None
         gray, distance, t = rec.frame(i)
         pipe.reset()
         r = pipe.process(gray, distance, t)
-        if r.ok:
+        # with the pixel fit, only its frames: where it falls back, the centroid pose's
+        # likelihood is too wide and would read the spread too small
+        if r.ok and (not pixel_fit or r.pixel_fit == "ok"):
             offsets.append(r.range_offset)
     return learn_range_bias(offsets)
 

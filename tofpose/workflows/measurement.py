@@ -227,5 +227,10 @@ def estimate(
             "frames": rec.n_frames,
             "ok": n_ok,
             "pixel_fit": pixel_fit,
-            "range_bias": "" if learned is None else learned.summary(),
+            "range_bias": ""
+            if learned is None
+            # the sigmas the frames were measured with (pipeline_for capped them)
+            else learned.summary(
+                pipe.config.range_bias_sigma_mm, pipe.config.calibrated_range_bias_sigma_mm
+            ),
         }

@@ -103,6 +103,34 @@ def test_two_workers_reproduce_estimate_byte_for_byte(recordings, tmp_path, trac
         assert r["pixel_fit"] is True
         assert r["range_bias"] is not None and r["range_bias"]["n_frames"] >= 8
         assert r["range_bias_summary"].startswith("range bias learned over")
+        # the prior the frames were measured with: never wider than the configured one
+        # unless the recording showed more
+        assert 0 < r["range_bias_sigma_mm"] <= max(15.0, r["range_bias"]["sigma_mm"])
+        assert (
+            r["range_bias_sigma_mm"] == pytest.approx(min(r["range_bias"]["sigma_mm"], 15.0))
+            or r["range_bias"]["tau_mm"] ** 2 - 2 * r["range_bias"]["tau2_se_mm2"] > 15.0**2
+        )
+
+
+def test_a_cancel_during_the_range_bias_learning_stops_before_any_chunk_runs(recordings, tmp_path):
+    from tofpose.batch.reprocess import ReprocessCancelledError
+
+    sweep, _ = recordings
+    polls = []
+
+    def stop_at_the_third_poll():
+        polls.append(1)
+        return len(polls) >= 3  # once before the learning, then inside it
+
+    with pytest.raises(ReprocessCancelledError):
+        reprocess(
+            [str(sweep)],
+            tmp_path / "out",
+            workers=1,
+            progress=False,
+            should_stop=stop_at_the_third_poll,
+        )
+    assert not (tmp_path / "out" / "chunks").exists()
 
 
 def test_a_camera_with_a_covariance_scale_is_measured_with_the_centroid_pose_and_its_priors(

@@ -50,7 +50,8 @@ class LearnedRangeBias:
     tau_mm : the maximum-likelihood spread of the offsets about ``mu``; tau2_se_mm2 : the
         standard error of its square; mean_se_mm : the standard error of ``mu`` (inverse
         Fisher information, both).
-    n_frames : the frames it was learned from; n_outliers : those left out.
+    n_frames : the frames it was learned from; n_outliers : those left out as beyond the
+        spread (frames whose offset is not finite are not counted: they tell nothing).
     """
 
     mean_mm: float
@@ -76,11 +77,19 @@ class LearnedRangeBias:
             return self.sigma_mm
         return min(self.sigma_mm, configured_sigma_mm)
 
-    def summary(self) -> str:
+    def summary(self, configured_sigma_mm: float, calibrated_sigma_mm: float) -> str:
+        """One line: what was learned, and the prior the frames are measured with in
+        place of the configured sigmas (uncalibrated, and inside a range correction's
+        span: ``prior_sigma_mm`` of each)."""
+        used = self.prior_sigma_mm(configured_sigma_mm)
+        used_cal = self.prior_sigma_mm(calibrated_sigma_mm)
+        sigma = f"sigma {used:.1f} mm" + (
+            f" ({used_cal:.1f} mm inside a range correction's span)" if used_cal != used else ""
+        )
         return (
             f"range bias learned over {self.n_frames} frames: offset "
             f"{self.mean_mm:+.1f} +- {self.mean_se_mm:.1f} mm, spread {self.tau_mm:.1f} mm; "
-            f"prior {self.mean_mm:+.1f} mm, sigma {self.sigma_mm:.1f} mm"
+            f"prior {self.mean_mm:+.1f} mm, {sigma}"
             + (f"; {self.n_outliers} frame(s) left out" if self.n_outliers else "")
         )
 
@@ -111,7 +120,8 @@ def learn_range_bias(offsets: Iterable[RangeOffset]) -> LearnedRangeBias | None:
     pairs = [lk for lk in (o.likelihood() for o in offsets) if lk is not None]
     m = np.array([p[0] for p in pairs], float)
     v = np.array([p[1] for p in pairs], float)
-    keep = np.isfinite(m) & np.isfinite(v) & (v > 0)  # a NaN offset tells nothing
+    valid = np.isfinite(m) & np.isfinite(v) & (v > 0)  # a NaN offset tells nothing
+    keep = valid.copy()
     if keep.sum() < MIN_FRAMES:
         return None
     limit = float(chi2.ppf(OUTLIER_P, 1))
@@ -134,5 +144,5 @@ def learn_range_bias(offsets: Iterable[RangeOffset]) -> LearnedRangeBias | None:
         tau2_se_mm2=tau2_se,
         mean_se_mm=float(np.sqrt(mean_var)),
         n_frames=int(keep.sum()),
-        n_outliers=int(len(m) - keep.sum()),
+        n_outliers=int(valid.sum() - keep.sum()),
     )

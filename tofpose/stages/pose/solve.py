@@ -509,10 +509,14 @@ class PoseSolver:
             int(fit.iterations),
             fit.norms,
             bias_covariance=extra,
+            # the prior as the fit chose it: from the ranges as measured (``obs`` holds
+            # them with the offset taken out)
             range_offset=RangeOffset(
                 float(result.offset_mm),
                 float(bias),
-                self.range_bias_sigma_mm(obs.range_mm) if cfg.estimate_range_offset else 0.0,
+                self.range_bias_sigma_mm(obs.range_mm + result.offset_mm)
+                if cfg.estimate_range_offset
+                else 0.0,
                 float(cfg.range_offset_mean_mm) if cfg.estimate_range_offset else 0.0,
             ),
             leave_one_out_covariance=spread,

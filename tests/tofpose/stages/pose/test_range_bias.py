@@ -87,7 +87,18 @@ def test_nan_offsets_tell_nothing():
     assert learn_range_bias(nan + _frames(rng, MIN_FRAMES - 1, 0.0)) is None
     learned = learn_range_bias(nan + _frames(rng, MIN_FRAMES, 0.0))
     assert learned is not None and learned.n_frames == MIN_FRAMES
+    assert learned.n_outliers == 0  # they are not counted as left out
     assert np.isfinite(learned.sigma_mm) and np.isfinite(learned.mean_mm)
+
+
+def test_the_summary_gives_the_sigmas_the_frames_are_measured_with():
+    poor = learn_range_bias(
+        [_posterior(m, 40.0**2) for m in np.random.default_rng(18).normal(0.0, 40.0, 64)]
+    )
+    assert poor is not None
+    line = poor.summary(15.0, 2.0)
+    used = poor.prior_sigma_mm(15.0)
+    assert f"sigma {used:.1f} mm (2.0 mm inside a range correction's span)" in line
 
 
 def test_a_calibrated_cameras_frames_shrink_the_prior_far_below_the_uncalibrated_one():
