@@ -83,8 +83,9 @@ class LearnedRangeBias:
         span: ``prior_sigma_mm`` of each)."""
         used = self.prior_sigma_mm(configured_sigma_mm)
         used_cal = self.prior_sigma_mm(calibrated_sigma_mm)
-        sigma = f"sigma {used:.1f} mm" + (
-            f" ({used_cal:.1f} mm inside a range correction's span)" if used_cal != used else ""
+        sigma, sigma_cal = f"{used:.1f}", f"{used_cal:.1f}"
+        sigma = f"sigma {sigma} mm" + (
+            f" ({sigma_cal} mm inside a range correction's span)" if sigma_cal != sigma else ""
         )
         return (
             f"range bias learned over {self.n_frames} frames: offset "
