@@ -10,6 +10,8 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
+
 from backend.main import report as report_cli
 from tests.backend.api.test_campaigns import _run
 from tests.backend.conftest import AUTH, make_settings, running_app
@@ -48,11 +50,21 @@ def test_the_readme_quick_start_ends_in_the_right_verdict(tmp_path, capsys):
             {a: (over_cal[a]["max_abs"], over_exact[a]["max_abs"]) for a in AXES},
             verdicts,
         )
+    own = calibrated["calibration"]
+    # the calibrated reference errs by the calibration's own stated 1-sigma (mount and
+    # placement, in the axis's unit): the two references' largest errors differ by at
+    # most that error, so they must agree to 3 of its sigmas (a fixed 15 % of the
+    # requirement, 0.0225 deg in pitch, was ~2 of them: 1 run in 4 failed alone)
+    unit_sigma = {
+        "deg": np.hypot(own["mount_sigma_deg"], own["placement_sigma_deg"]),
+        "mm": np.hypot(own["mount_sigma_mm"], own["placement_sigma_mm"]),
+    }
     for a, (cal_v, exact_v) in verdicts.items():
-        # where the rendered pose's own error lies within 15 % of the requirement, the
-        # reference's 1-sigma can tip the verdict either way: there the errors must agree
-        # to that margin; everywhere else the verdict must be the same
-        req, margin = calibrated["requirements"][a], 0.15 * calibrated["requirements"][a]
+        # where the rendered pose's own error lies within the margin of the requirement,
+        # the reference's error can tip the verdict either way: there the errors must
+        # agree to that margin; everywhere else the verdict must be the same
+        req = calibrated["requirements"][a]
+        margin = max(0.15 * req, 3.0 * unit_sigma[a.rsplit("_", 1)[1]])
         assert abs(over_cal[a]["max_abs"] - over_exact[a]["max_abs"]) < margin, a
         if abs(over_exact[a]["max_abs"] - req) > margin:
             assert cal_v == exact_v, (a, verdicts)
@@ -60,7 +72,6 @@ def test_the_readme_quick_start_ends_in_the_right_verdict(tmp_path, capsys):
     assert max(nominal["overall"]["axes"][a]["rms"] for a in ("x_mm", "y_mm")) > 3.0 * max(
         over_cal[a]["rms"] for a in ("x_mm", "y_mm")
     )
-    own = calibrated["calibration"]
     assert own["id"] == 1 and own["name"] == "bench-1"
     assert 0 < own["mount_sigma_mm"] < 1.0 and 0 < own["placement_sigma_deg"] < 0.05
     # the CLI takes the same option and writes the same verdict
