@@ -91,6 +91,34 @@ def _far_recording(path, n_frames: int, offset_mm: float = 0.0, seed: int = 12):
     return np.array(truth)
 
 
+def _learned(rec):
+    """``learned_range_bias`` over the recording ``rec``, with the pixel fit (estimate's
+    default)."""
+    from tofpose.io.camera_file import learned_range_bias
+    from tofpose.io.recording import open_recording
+
+    with open_recording(str(rec)) as r:
+        return learned_range_bias(r, str(rec), None, None, pixel_fit=True, progress=False)
+
+
+def _z_errors(rec, truth, out, *flags):
+    """``tofpose estimate`` of ``rec`` with ``flags`` into ``out``: every frame ok, its z
+    errors against ``truth`` (n, 3) and its z sigmas, mm."""
+    import csv
+
+    from tofpose.cli import main
+
+    assert main(["estimate", str(rec), "--out", str(out), *flags]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert all(row["ok"] == "1" for row in rows)
+    z = np.array([float(row["z_mm"]) for row in rows]) - truth[:, 2]
+    return z, np.array([float(row["sigma_z_mm"]) for row in rows])
+
+
+def _rms(e):
+    return float(np.sqrt(np.mean(e**2)))
+
+
 def test_a_calibrated_cameras_range_bias_is_learned_near_zero_and_its_poses_follow_the_ranges(
     tmp_path, capsys
 ):
@@ -99,34 +127,17 @@ def test_a_calibrated_cameras_range_bias_is_learned_near_zero_and_its_poses_foll
     position along the line of sight follows the ranges instead of each frame's image
     scale: its RMS error well below the run that does not learn, its sigma still
     covering it."""
-    import csv
-
-    from tofpose.cli import main
-    from tofpose.io.camera_file import learned_range_bias
-    from tofpose.io.recording import open_recording
-
     rec = tmp_path / "far.h5"
     truth = _far_recording(rec, 32)
-    with open_recording(str(rec)) as r:
-        learned = learned_range_bias(r, str(rec), None, None, pixel_fit=True, progress=False)
+    learned = _learned(rec)
     assert learned is not None and learned.n_frames >= 28
     assert learned.sigma_mm < 5.0
-
-    def z_errors(*flags):
-        out = tmp_path / f"p{len(flags)}.csv"
-        assert main(["estimate", str(rec), "--out", str(out), *flags]) == 0
-        rows = list(csv.DictReader(out.open()))
-        assert all(row["ok"] == "1" for row in rows)
-        z = np.array([float(row["z_mm"]) for row in rows]) - truth[:, 2]
-        return z, np.array([float(row["sigma_z_mm"]) for row in rows])
-
-    z_learned, sigma_learned = z_errors()
+    z_learned, sigma_learned = _z_errors(rec, truth, tmp_path / "learned.csv")
     assert "range bias learned over" in capsys.readouterr().out
-    z_fixed, _ = z_errors("--no-learn-range-bias")
+    z_fixed, _ = _z_errors(rec, truth, tmp_path / "fixed.csv", "--no-learn-range-bias")
     assert "range bias learned" not in capsys.readouterr().out
-    rms = lambda e: float(np.sqrt(np.mean(e**2)))  # noqa: E731
-    assert rms(z_learned) < 0.8 * rms(z_fixed)
-    assert rms(z_learned / sigma_learned) < 1.5
+    assert _rms(z_learned) < 0.8 * _rms(z_fixed)
+    assert _rms(z_learned / sigma_learned) < 1.5
 
 
 def test_an_offset_cameras_range_offset_is_learned_and_taken_out(tmp_path):
@@ -134,29 +145,15 @@ def test_an_offset_cameras_range_offset_is_learned_and_taken_out(tmp_path):
     spread about it stays small, so estimate takes it out of every frame: the position
     along the line of sight is then as good as the calibrated camera's, where the
     configured prior (N(0, 15^2)) leaves each frame to find it in its image scale."""
-    import csv
-
-    from tofpose.cli import main
-    from tofpose.io.camera_file import learned_range_bias
-    from tofpose.io.recording import open_recording
-
     rec = tmp_path / "offset.h5"
     truth = _far_recording(rec, 32, offset_mm=12.0, seed=13)
-    with open_recording(str(rec)) as r:
-        learned = learned_range_bias(r, str(rec), None, None, pixel_fit=True, progress=False)
+    learned = _learned(rec)
     assert learned is not None
     assert learned.mean_mm == pytest.approx(12.0, abs=3 * learned.mean_se_mm + 0.5)
     assert learned.sigma_mm < 6.0
-
-    def z_errors(*flags):
-        out = tmp_path / f"o{len(flags)}.csv"
-        assert main(["estimate", str(rec), "--out", str(out), *flags]) == 0
-        rows = list(csv.DictReader(out.open()))
-        assert all(row["ok"] == "1" for row in rows)
-        return np.array([float(row["z_mm"]) for row in rows]) - truth[:, 2]
-
-    rms = lambda e: float(np.sqrt(np.mean(e**2)))  # noqa: E731
-    assert rms(z_errors()) < 0.6 * rms(z_errors("--no-learn-range-bias"))
+    z_learned, _ = _z_errors(rec, truth, tmp_path / "learned.csv")
+    z_fixed, _ = _z_errors(rec, truth, tmp_path / "fixed.csv", "--no-learn-range-bias")
+    assert _rms(z_learned) < 0.6 * _rms(z_fixed)
 
 
 def test_the_pixel_fit_is_on_unless_the_camera_carries_a_covariance_scale(tmp_path):
