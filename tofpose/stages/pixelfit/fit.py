@@ -61,6 +61,7 @@ from tofpose.stages.pixelfit.constants import (
     TRANSLATION_STEP_MM,
     WINDOW_PAD_PX,
 )
+from tofpose.stages.pixelfit.kernels import normal as normal_kernel
 from tofpose.stages.pixelfit.model import (
     GAIN_TERMS,
     DiscImageDerivatives,
@@ -76,6 +77,7 @@ from tofpose.stages.pixelfit.model import (
     predict,
     predicted_rims,
 )
+from tofpose.stages.pixelfit.records import FitConstants, FitRecord
 from tofpose.stages.pose.solve import chi2_limit
 
 #: the simulator's and the paper's camera default, Hz (c / (2 f) = 24.98 m)
@@ -562,6 +564,21 @@ def _disc_columns(pb: _Problem, k: int) -> np.ndarray:
     return own[pb.free]
 
 
+def disc_blocks(
+    J: np.ndarray, r: np.ndarray, owners: np.ndarray, k_count: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each disc's rows' share of ``J'J`` (K, F, F) and of ``J'r`` (K, F): J (rows, F)
+    and r (rows,) whitened, owners (rows,) each row's disc (-1: a prior's row, in no
+    disc's share)."""
+    blocks = np.zeros((k_count, J.shape[1], J.shape[1]))
+    grads = np.zeros((k_count, J.shape[1]))
+    for k in range(k_count):
+        mine = owners == k
+        blocks[k] = J[mine].T @ J[mine]
+        grads[k] = J[mine].T @ r[mine]
+    return blocks, grads
+
+
 @dataclass(frozen=True)
 class DiscDeletion:
     """What deleting each disc from the fit says of the pose covariance
@@ -589,7 +606,11 @@ class DiscDeletion:
 
 
 def disc_deletion(
-    J: np.ndarray, r: np.ndarray, owners: np.ndarray, disc_columns: Sequence[np.ndarray]
+    info: np.ndarray,
+    grad: np.ndarray,
+    disc_info: np.ndarray,
+    disc_grad: np.ndarray,
+    disc_columns: Sequence[np.ndarray],
 ) -> DiscDeletion | None:
     """How far the pose moves when each disc is deleted from the fit, against how far the
     model expects it to move: the part of the pose covariance that the Fisher
@@ -604,10 +625,11 @@ def disc_deletion(
     beyond ``DISC_INFLUENCE_P`` of that is influential: its move is added to the
     covariance. The others' ``sum D_k / sum rank_k`` is the variance factor.
 
-    J : (rows, n_free) whitened Jacobian; r : (rows,) whitened residuals at the same
-    state; owners : (rows,) each row's disc (-1: a prior's row, always kept). None when
-    the information is singular or fewer than ``MIN_DELETION_DISCS`` discs can be
-    deleted.
+    info : (n_free, n_free) ``J'J`` and grad : (n_free,) ``J'r`` of the whitened
+    Jacobian and residuals at one state; disc_info : (K, n_free, n_free) and disc_grad :
+    (K, n_free) the shares of each disc's rows (``disc_blocks``; a prior's rows are
+    always kept). None when the information is singular or fewer than
+    ``MIN_DELETION_DISCS`` discs can be deleted.
 
     Why: the Fisher information trusts the model at every pixel. A disc whose pixels
     are biased beyond their sigmas in a way the model can absorb (a range error of its
@@ -622,8 +644,6 @@ def disc_deletion(
     (errors/sigmas 0.65 on finely rendered ones at 3 m), where ``D_k`` weighs each
     deletion by its own expected move.
     """
-    info = J.T @ J
-    grad = J.T @ r
     try:
         info_inv = np.linalg.inv(info)
     except np.linalg.LinAlgError:
@@ -640,15 +660,13 @@ def disc_deletion(
     statistic = dof = 0.0
     deleted = 0
     for k in range(k_count):
-        mine = owners == k
-        Jk, rk = J[mine], r[mine]
         keep = ~disc_columns[k]
         try:
-            inv_k = np.linalg.inv((info - Jk.T @ Jk)[np.ix_(keep, keep)])
+            inv_k = np.linalg.inv((info - disc_info[k])[np.ix_(keep, keep)])
         except np.linalg.LinAlgError:
             continue  # without disc k the pose is not determined: nothing to compare
         # the pose's columns are the first six of the free ones, and never a disc's own
-        d = (-inv_k @ (grad - Jk.T @ rk)[keep])[:6] - full[:6]
+        d = (-inv_k @ (grad - disc_grad[k])[keep])[:6] - full[:6]
         # in the pose's own sigmas (C = L L^T), so that the rank test does not mix rad^2
         # and mm^2: V_w = L^-1 (C_-k - C) L^-T, d_w = L^-1 d
         Vw = np.linalg.solve(L, np.linalg.solve(L, inv_k[:6, :6] - C).T)
@@ -1032,13 +1050,12 @@ def fit_pose_to_pixels(
     if (
         disc_deletion_terms
         and covariance is not None
-        and solved.jacobian is not None
-        and solved.residuals is not None
+        and solved.info is not None
+        and solved.deletion_terms is not None
     ):
         deletion = disc_deletion(
-            solved.jacobian,
-            solved.residuals,
-            owners,
+            solved.info,
+            *solved.deletion_terms,
             [_disc_columns(pb, k) for k in range(k_count)],
         )
         if deletion is not None:
@@ -1079,8 +1096,9 @@ class _Solved:
     info: np.ndarray | None  # Fisher information at the last iteration's Jacobian
     iterations: int
     converged: bool
-    jacobian: np.ndarray | None = None  # (rows, free params) the last iteration's
-    residuals: np.ndarray | None = None  # (rows,) whitened, at the same state
+    # J'r at the last iteration's state, and each disc's shares of J'J and J'r there
+    # (``disc_blocks``: what ``disc_deletion`` takes)
+    deletion_terms: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
 def _levenberg_marquardt(
@@ -1098,22 +1116,23 @@ def _levenberg_marquardt(
     rim = None
     if np.any(coverage_sigma > 0):
         rim = _rim_sensitivity(pb, images, pb.predict(images, state), state)
+    compiled = pb.compiled and not pb.numeric_jacobian
+    record = _fit_record(pb, rim, coverage_sigma) if compiled else None
+    constants = _fit_constants(pb, extra_var) if compiled else None
     damping = INITIAL_DAMPING
     converged = False
     iterations = 0
-    info = J = r = None
+    info = None
+    linearised: tuple[_State, DiscImages, DiscImageDerivatives | None] | None = None
     for iteration in range(1, max_iterations + 1):
         iterations = iteration
         d_images = None
         if not pb.numeric_jacobian:
             images, d_images = pb.images_with_derivatives(state.R, state.t_mm)
-        pred = pb.predict(images, state)
-        sig = _sigmas(pb, pred, extra_var, rim, coverage_sigma)
-        r = _residuals(pb, pred, sig, state)
-        J = _jacobian(pb, state, images, pred, sig, d_images)
-        info = J.T @ J
-        grad = J.T @ r
-        cost = float(r @ r)
+        linearised = (state, images, d_images)
+        info, grad, cost, sig, _ = _linearised(
+            pb, state, images, d_images, extra_var, rim, coverage_sigma, record, per_disc=False
+        )
         diag = np.maximum(np.diag(info), 1e-12)
         accepted = False
         for _ in range(MAX_DAMPING_TRIES):
@@ -1126,8 +1145,20 @@ def _levenberg_marquardt(
             delta[pb.free] = step
             trial = state.stepped(delta, pb.layout)
             trial_images = pb.images(trial.R, trial.t_mm)
-            trial_pred = pb.predict(trial_images, trial)
-            trial_cost = float(np.sum(_residuals(pb, trial_pred, sig, trial) ** 2))
+            if record is not None:
+                trial_cost = normal_kernel.trial_cost(
+                    trial_images.coverage,
+                    trial_images.phasor,
+                    trial_images.plate_phasor,
+                    *_state_arrays(trial),
+                    sig.gray,
+                    sig.distance_mm,
+                    record,
+                    constants,
+                )
+            else:
+                trial_pred = pb.predict(trial_images, trial)
+                trial_cost = float(np.sum(_residuals(pb, trial_pred, sig, trial) ** 2))
             if trial_cost <= cost:
                 state, images, accepted = trial, trial_images, True
                 damping = max(damping * DAMPING_DOWN, 1e-9)
@@ -1138,7 +1169,120 @@ def _levenberg_marquardt(
             # no step lowers the cost any more, or the last one was negligible
             converged = True
             break
-    return _Solved(state, images, info, iterations, converged, J, r)
+    terms = None
+    if linearised is not None:
+        # at the last linearisation: each disc's share of it (``disc_deletion``)
+        lin_state, lin_images, lin_d_images = linearised
+        _, grad, _, _, blocks = _linearised(
+            pb, lin_state, lin_images, lin_d_images, extra_var, rim, coverage_sigma, record
+        )
+        assert blocks is not None
+        terms = (grad, *blocks)
+    return _Solved(state, images, info, iterations, converged, terms)
+
+
+def _image_arrays(
+    images: DiscImages, d_images: DiscImageDerivatives
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The discs' images and their pose derivatives as ``kernels.normal`` takes them."""
+    return (
+        images.coverage,
+        images.phasor,
+        images.plate_phasor,
+        d_images.coverage,
+        d_images.phasor,
+        d_images.plate_phasor,
+    )
+
+
+def _linearised(
+    pb: _Problem,
+    state: _State,
+    images: DiscImages,
+    d_images: DiscImageDerivatives | None,
+    extra_var: float,
+    rim: _RimSensitivity | None,
+    coverage_sigma: np.ndarray,
+    record: FitRecord | None,
+    per_disc: bool = True,
+) -> tuple[np.ndarray, np.ndarray, float, _Sigmas, tuple[np.ndarray, np.ndarray] | None]:
+    """The normal equations at ``state`` (``images`` and ``d_images`` its discs' images
+    and their pose derivatives, None: by central differences): ``J'J``, ``J'r``,
+    ``r'r``, the sigmas, and with ``per_disc`` each disc's shares of ``J'J`` and ``J'r``
+    (``disc_blocks``). By ``kernels.normal`` when ``record`` (``_fit_record``) is given
+    and the derivatives are analytic, else from J in NumPy."""
+    if record is not None and d_images is not None:
+        info, grad, cost, sigma_gray, sigma_distance, k, blocks, block_grads = (
+            normal_kernel.normal_equations(
+                *_image_arrays(images, d_images),
+                *_state_arrays(state),
+                record,
+                _fit_constants(pb, extra_var),
+                per_disc,
+            )
+        )
+        sig = _Sigmas(sigma_gray, sigma_distance, float(k))
+        return info, grad, float(cost), sig, (blocks, block_grads) if per_disc else None
+    pred = pb.predict(images, state)
+    sig = _sigmas(pb, pred, extra_var, rim, coverage_sigma)
+    r = _residuals(pb, pred, sig, state)
+    J = _jacobian(pb, state, images, pred, sig, d_images)
+    shares = disc_blocks(J, r, _row_owners(pb), len(pb.discs.ids)) if per_disc else None
+    return J.T @ J, J.T @ r, float(r @ r), sig, shares
+
+
+def _fit_record(pb: _Problem, rim: _RimSensitivity | None, coverage_sigma: np.ndarray) -> FitRecord:
+    """The problem as ``kernels.normal`` takes it, with the rim's model error of
+    ``_sigmas`` (the rim's sensitivity held over the iterations)."""
+    p_count = pb.win.n_pixels
+    edge_gray = edge_distance = np.zeros(p_count)
+    if rim is not None and np.any(coverage_sigma > 0):
+        edge_gray = np.einsum("k,kp->p", coverage_sigma**2, rim.gray2_k)
+        edge_distance = np.einsum("k,kp->p", coverage_sigma**2, rim.distance2_k)
+    free_index = np.full(pb.n_params, -1, np.int64)
+    free_index[pb.free] = np.arange(int(pb.free.sum()))
+    return FitRecord(
+        gray=np.ascontiguousarray(pb.win.gray, float),
+        distance_mm=np.ascontiguousarray(pb.win.distance_mm, float),
+        owner=pb.win.owner.astype(np.int64),
+        basis=np.ascontiguousarray(pb.basis, float),
+        gray_rows=pb.gray_rows.astype(np.int64),
+        sat_rows=pb.sat_rows.astype(np.int64),
+        dist_rows=pb.dist_rows.astype(np.int64),
+        free_index=free_index,
+        edge_var_gray=np.ascontiguousarray(edge_gray, float),
+        edge_var_distance=np.ascontiguousarray(edge_distance, float),
+    )
+
+
+def _fit_constants(pb: _Problem, extra_var: float) -> FitConstants:
+    """The problem's scalars as ``kernels.normal`` takes them."""
+    layout = pb.layout
+    k = pb.noise.range_k_mm
+    return FitConstants(
+        mm_per_radian=float(pb.noise.mm_per_radian),
+        reference_mm=float(pb.reference_mm),
+        unambiguous_range_mm=float(pb.noise.unambiguous_range_mm),
+        full_scale_counts=float(pb.noise.full_scale_counts),
+        extra_var=float(extra_var),
+        range_k_mm=float("nan") if k is None else float(k),
+        offset_col=int(layout.offset_col),
+        offset_sigma_mm=float(pb.offset_sigma_mm),
+        offset_mean_mm=float(pb.offset_mean_mm),
+        disc_col=int(layout.disc_cols[0]) if layout.disc_cols.size else -1,
+        disc_range_sigma_mm=float(pb.disc_range_sigma_mm),
+    )
+
+
+def _state_arrays(s: _State) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+    """The state's nuisance parameters as ``kernels.normal`` takes them: gains (K,
+    GAIN_TERMS), levels (K,), the common offset mm, the discs' own offsets (K,) mm."""
+    return (
+        np.ascontiguousarray(s.gains, float),
+        np.ascontiguousarray(s.levels, float),
+        float(s.offset_mm),
+        np.ascontiguousarray(s.disc_offsets_mm, float),
+    )
 
 
 def _clipped_share(pb: _Problem, images: DiscImages) -> np.ndarray:

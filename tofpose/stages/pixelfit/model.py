@@ -210,7 +210,13 @@ def build_windows(
     ox, oy = np.meshgrid(offs, offs)
     grid = np.column_stack([ox.ravel(), oy.ravel()])
     suv = (uv[:, None, :] + grid[None]).reshape(-1, 2)
-    sb, sbu, sbv = (x.reshape(len(uv), s * s, 3) for x in _bearings_with_derivatives(camera, suv))
+    sb = camera.bearings(suv).reshape(len(uv), s * s, 3)
+    # a sub-cell's bearing derivatives are its pixel's: they scale the rim's signed
+    # distance to px, and change across a pixel by ~1/f of themselves (first order in
+    # the sub-cell's offset, so their mean over the pixel's sub-cells is the pixel's);
+    # the bearings then cost (S^2 + 5) P evaluations instead of 5 (S^2 + 1) P
+    sbu = np.repeat(bu[:, None, :], s * s, axis=1)
+    sbv = np.repeat(bv[:, None, :], s * s, axis=1)
     return Windows(
         rows=rows,
         cols=cols,

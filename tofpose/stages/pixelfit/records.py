@@ -33,3 +33,47 @@ class WindowRays(NamedTuple):
     sample_dbdv: np.ndarray
     near_index: np.ndarray
     near_start: np.ndarray
+
+
+class FitRecord(NamedTuple):
+    """What stays fixed over the fit, as the normal equations' kernel takes it
+    (``kernels.normal``): the window pixels' ``gray`` (P,) counts and ``distance_mm``
+    (P,) (NaN invalid), ``owner`` (P,) the disc whose surround level each sees, the gain
+    ``basis`` (K, P, GAIN_TERMS); the residuals' pixels: ``gray_rows`` unsaturated,
+    ``sat_rows`` censored, ``dist_rows`` distance (int arrays); ``free_index``
+    (n_params,) each parameter's column among the fitted ones, -1 when it is held; the
+    pixels' rim variances ``edge_var_gray`` counts^2 and ``edge_var_distance`` mm^2
+    (P,) (0 without a rim model error)."""
+
+    gray: np.ndarray
+    distance_mm: np.ndarray
+    owner: np.ndarray
+    basis: np.ndarray
+    gray_rows: np.ndarray
+    sat_rows: np.ndarray
+    dist_rows: np.ndarray
+    free_index: np.ndarray
+    edge_var_gray: np.ndarray
+    edge_var_distance: np.ndarray
+
+
+class FitConstants(NamedTuple):
+    """The fit's scalars for ``kernels.normal``: ``mm_per_radian``, ``reference_mm``,
+    ``unambiguous_range_mm``, ``full_scale_counts``, ``extra_var`` (counts^2, the gray's
+    variance beyond its level), ``range_k_mm`` (NaN: measured on the distance
+    residuals), the range offset's column ``offset_col`` (-1: not fitted), its prior's
+    ``offset_sigma_mm`` (inf: none) and ``offset_mean_mm``, the first of the discs' own
+    range errors' columns ``disc_col`` (-1: not fitted) and their prior's
+    ``disc_range_sigma_mm``."""
+
+    mm_per_radian: float
+    reference_mm: float
+    unambiguous_range_mm: float
+    full_scale_counts: float
+    extra_var: float
+    range_k_mm: float
+    offset_col: int
+    offset_sigma_mm: float
+    offset_mean_mm: float
+    disc_col: int
+    disc_range_sigma_mm: float

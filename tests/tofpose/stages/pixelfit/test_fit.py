@@ -426,13 +426,38 @@ def test_analytic_and_numeric_jacobians_converge_to_the_same_pose(range_mm):
         np.testing.assert_allclose(np.sqrt(np.diag(fits[0].covariance)), sigma, rtol=0.02)
 
 
+def fit_with_every_parameter(noise_options, *, clip=True, **options):
+    """``fit_pose_to_pixels`` on a 3 m pipeline frame with a common range offset (a 5 mm
+    prior), the sensor's noise changed by ``noise_options`` and, with ``clip``, disc 6's
+    brightest pixels clipped (censored rows); ``options`` to the fit."""
+    sensor, f, r = _pipeline_frame(3000.0, 0)
+    gray = f.gray.copy()
+    if clip:
+        bright = gray > np.percentile(gray[_disc_pixels(f, 6)], 70)
+        gray[bright & _disc_pixels(f, 6)] = 4095
+    return fit_pose_to_pixels(
+        gray,
+        f.distance_mm,
+        CAM,
+        CAT,
+        r.R,
+        r.t_mm,
+        [m.catalog_id for m in r.matched],
+        noise=replace(PixelNoise.from_sensor(sensor), **noise_options),
+        fit_range_offset=True,
+        range_offset_sigma_mm=5.0,
+        **options,
+    )
+
+
 def test_jacobian_is_the_residuals_derivative_in_every_parameter(monkeypatch):
     """``fit._jacobian`` at an iteration of a fit with every kind of parameter (pose,
     gain terms, levels, a common range offset with its prior, each disc's own range
     error) and censored pixels, against central differences of the whitened residuals
     (``fit._residuals`` at the same sigmas): pose steps 1e-8 rad and 1e-5 mm (the
     images' derivatives are exact: test_derivatives.py), 1e-3 counts or mm for the rest
-    (the gray is linear in them, the distance smooth)."""
+    (the gray is linear in them, the distance smooth). The reference implementation
+    forms J (the compiled one its normal equations: kernels/test_normal.py)."""
     from tofpose.stages.pixelfit import fit
 
     seen = []
@@ -445,22 +470,8 @@ def test_jacobian_is_the_residuals_derivative_in_every_parameter(monkeypatch):
         return J
 
     monkeypatch.setattr(fit, "_jacobian", spy)
-    sensor, f, r = _pipeline_frame(3000.0, 0)
-    gray = f.gray.copy()
-    bright = gray > np.percentile(gray[_disc_pixels(f, 6)], 70)
-    gray[bright & _disc_pixels(f, 6)] = 4095  # the disc's brightest pixels clipped
-    noise = replace(PixelNoise.from_sensor(sensor), disc_range_sigma_mm=3.0, coverage_sigma=0.02)
-    fit_pose_to_pixels(
-        gray,
-        f.distance_mm,
-        CAM,
-        CAT,
-        r.R,
-        r.t_mm,
-        [m.catalog_id for m in r.matched],
-        noise=noise,
-        fit_range_offset=True,
-        range_offset_sigma_mm=5.0,
+    fit_with_every_parameter(
+        {"disc_range_sigma_mm": 3.0, "coverage_sigma": 0.02}, implementation="reference"
     )
     pb, s, sig, J = seen[0]
     assert len(pb.sat_rows) > 0 and pb.fit_offset
