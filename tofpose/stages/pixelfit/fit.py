@@ -1051,12 +1051,13 @@ def fit_pose_to_pixels(
         disc_deletion_terms
         and covariance is not None
         and solved.info is not None
-        and solved.deletion_terms is not None
+        and solved.last is not None
     ):
+        # each disc's share of the last linearisation (the one ``info`` is of)
+        _, grad, _, _, shares = _linearised(pb, solved.last, per_disc=True)
+        assert shares is not None
         deletion = disc_deletion(
-            solved.info,
-            *solved.deletion_terms,
-            [_disc_columns(pb, k) for k in range(k_count)],
+            solved.info, grad, *shares, [_disc_columns(pb, k) for k in range(k_count)]
         )
         if deletion is not None:
             covariance = deletion.covariance(covariance)
@@ -1096,9 +1097,31 @@ class _Solved:
     info: np.ndarray | None  # Fisher information at the last iteration's Jacobian
     iterations: int
     converged: bool
-    # J'r at the last iteration's state, and each disc's shares of J'J and J'r there
-    # (``disc_blocks``: what ``disc_deletion`` takes)
-    deletion_terms: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    # where the last iteration linearised the model (before its step): ``info``'s state
+    last: _Linearisation | None = None
+
+
+@dataclass(frozen=True)
+class _SolveNoise:
+    """The noise model's parts one solve holds fixed: the gray's extra variance, the rim's
+    model error per disc (K,) with the rim's sensitivity at the solve's start (None
+    without it), and the same as ``kernels.normal`` takes them (None: the NumPy path)."""
+
+    extra_var: float
+    coverage_sigma: np.ndarray
+    rim: _RimSensitivity | None
+    kernel: tuple[FitRecord, FitConstants] | None
+
+
+@dataclass(frozen=True)
+class _Linearisation:
+    """A state, its discs' images and their pose derivatives (None: by central
+    differences), and the solve's noise model: where an iteration linearises."""
+
+    state: _State
+    images: DiscImages
+    d_images: DiscImageDerivatives | None
+    noise: _SolveNoise
 
 
 def _levenberg_marquardt(
@@ -1116,23 +1139,22 @@ def _levenberg_marquardt(
     rim = None
     if np.any(coverage_sigma > 0):
         rim = _rim_sensitivity(pb, images, pb.predict(images, state), state)
-    compiled = pb.compiled and not pb.numeric_jacobian
-    record = _fit_record(pb, rim, coverage_sigma) if compiled else None
-    constants = _fit_constants(pb, extra_var) if compiled else None
+    kernel = None
+    if pb.compiled and not pb.numeric_jacobian:
+        kernel = (_fit_record(pb, rim, coverage_sigma), _fit_constants(pb, extra_var))
+    noise = _SolveNoise(extra_var, coverage_sigma, rim, kernel)
     damping = INITIAL_DAMPING
     converged = False
     iterations = 0
     info = None
-    linearised: tuple[_State, DiscImages, DiscImageDerivatives | None] | None = None
+    last = None
     for iteration in range(1, max_iterations + 1):
         iterations = iteration
         d_images = None
         if not pb.numeric_jacobian:
             images, d_images = pb.images_with_derivatives(state.R, state.t_mm)
-        linearised = (state, images, d_images)
-        info, grad, cost, sig, _ = _linearised(
-            pb, state, images, d_images, extra_var, rim, coverage_sigma, record, per_disc=False
-        )
+        last = _Linearisation(state, images, d_images, noise)
+        info, grad, cost, sig, _ = _linearised(pb, last, per_disc=False)
         diag = np.maximum(np.diag(info), 1e-12)
         accepted = False
         for _ in range(MAX_DAMPING_TRIES):
@@ -1145,7 +1167,7 @@ def _levenberg_marquardt(
             delta[pb.free] = step
             trial = state.stepped(delta, pb.layout)
             trial_images = pb.images(trial.R, trial.t_mm)
-            if record is not None:
+            if kernel is not None:
                 trial_cost = normal_kernel.trial_cost(
                     trial_images.coverage,
                     trial_images.phasor,
@@ -1153,8 +1175,7 @@ def _levenberg_marquardt(
                     *_state_arrays(trial),
                     sig.gray,
                     sig.distance_mm,
-                    record,
-                    constants,
+                    *kernel,
                 )
             else:
                 trial_pred = pb.predict(trial_images, trial)
@@ -1169,16 +1190,7 @@ def _levenberg_marquardt(
             # no step lowers the cost any more, or the last one was negligible
             converged = True
             break
-    terms = None
-    if linearised is not None:
-        # at the last linearisation: each disc's share of it (``disc_deletion``)
-        lin_state, lin_images, lin_d_images = linearised
-        _, grad, _, _, blocks = _linearised(
-            pb, lin_state, lin_images, lin_d_images, extra_var, rim, coverage_sigma, record
-        )
-        assert blocks is not None
-        terms = (grad, *blocks)
-    return _Solved(state, images, info, iterations, converged, terms)
+    return _Solved(state, images, info, iterations, converged, last)
 
 
 def _image_arrays(
@@ -1196,37 +1208,28 @@ def _image_arrays(
 
 
 def _linearised(
-    pb: _Problem,
-    state: _State,
-    images: DiscImages,
-    d_images: DiscImageDerivatives | None,
-    extra_var: float,
-    rim: _RimSensitivity | None,
-    coverage_sigma: np.ndarray,
-    record: FitRecord | None,
-    per_disc: bool = True,
+    pb: _Problem, lin: _Linearisation, per_disc: bool = True
 ) -> tuple[np.ndarray, np.ndarray, float, _Sigmas, tuple[np.ndarray, np.ndarray] | None]:
-    """The normal equations at ``state`` (``images`` and ``d_images`` its discs' images
-    and their pose derivatives, None: by central differences): ``J'J``, ``J'r``,
-    ``r'r``, the sigmas, and with ``per_disc`` each disc's shares of ``J'J`` and ``J'r``
-    (``disc_blocks``). By ``kernels.normal`` when ``record`` (``_fit_record``) is given
-    and the derivatives are analytic, else from J in NumPy."""
-    if record is not None and d_images is not None:
+    """The normal equations at ``lin``: ``J'J``, ``J'r``, ``r'r``, the sigmas, and with
+    ``per_disc`` each disc's shares of ``J'J`` and ``J'r`` (``disc_blocks``). By
+    ``kernels.normal`` when the solve has its inputs and the derivatives are analytic,
+    else from J in NumPy."""
+    noise = lin.noise
+    if noise.kernel is not None and lin.d_images is not None:
         info, grad, cost, sigma_gray, sigma_distance, k, blocks, block_grads = (
             normal_kernel.normal_equations(
-                *_image_arrays(images, d_images),
-                *_state_arrays(state),
-                record,
-                _fit_constants(pb, extra_var),
+                *_image_arrays(lin.images, lin.d_images),
+                *_state_arrays(lin.state),
+                *noise.kernel,
                 per_disc,
             )
         )
         sig = _Sigmas(sigma_gray, sigma_distance, float(k))
         return info, grad, float(cost), sig, (blocks, block_grads) if per_disc else None
-    pred = pb.predict(images, state)
-    sig = _sigmas(pb, pred, extra_var, rim, coverage_sigma)
-    r = _residuals(pb, pred, sig, state)
-    J = _jacobian(pb, state, images, pred, sig, d_images)
+    pred = pb.predict(lin.images, lin.state)
+    sig = _sigmas(pb, pred, noise.extra_var, noise.rim, noise.coverage_sigma)
+    r = _residuals(pb, pred, sig, lin.state)
+    J = _jacobian(pb, lin.state, lin.images, pred, sig, lin.d_images)
     shares = disc_blocks(J, r, _row_owners(pb), len(pb.discs.ids)) if per_disc else None
     return J.T @ J, J.T @ r, float(r @ r), sig, shares
 

@@ -212,9 +212,12 @@ def build_windows(
     suv = (uv[:, None, :] + grid[None]).reshape(-1, 2)
     sb = camera.bearings(suv).reshape(len(uv), s * s, 3)
     # a sub-cell's bearing derivatives are its pixel's: they scale the rim's signed
-    # distance to px, and change across a pixel by ~1/f of themselves (first order in
-    # the sub-cell's offset, so their mean over the pixel's sub-cells is the pixel's);
-    # the bearings then cost (S^2 + 5) P evaluations instead of 5 (S^2 + 1) P
+    # distance to px and set the sub-cell's box half-widths (``_rim_point``), and change
+    # across a pixel by ~offset/f of themselves, to first order in the sub-cell's
+    # offset: their mean over the sub-cells is the pixel's, and the coverage moves by
+    # the second order, up to 8e-5 of a pixel at 1 m (test_model.py bounds it at 1e-4;
+    # a rim pixel's shot noise there is ~2e-2 of its coverage); the bearings then cost
+    # (S^2 + 5) P evaluations instead of 5 (S^2 + 1) P
     sbu = np.repeat(bu[:, None, :], s * s, axis=1)
     sbv = np.repeat(bv[:, None, :], s * s, axis=1)
     return Windows(
