@@ -40,6 +40,12 @@ MAX_MARKER_RMS_SIGMA = 3.0
 #: a disc whose fitted gain is not this many surround sigmas above its surround is dark
 #: (occluded, or not there): fall back
 MIN_CONTRAST_SIGMA = 10.0
+#: the surround beyond the target's plate (``fit._plate_surround``): its level is measured
+#: on a window's pixels wholly beyond the plate and clear of the discs when it has at
+#: least this many (else on all windows' together); a window with less than
+#: ``MIN_PLATE_PIXELS`` of plate beside its disc fits no plate level
+MIN_BEYOND_PIXELS = 8
+MIN_PLATE_PIXELS = 1.0
 #: fewest discs the fit needs (three points fix a pose)
 MIN_MARKERS = 3
 #: robust scale of normal samples: sigma = MAD_TO_SIGMA * median absolute deviation

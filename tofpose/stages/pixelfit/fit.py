@@ -46,10 +46,12 @@ from tofpose.stages.pixelfit.constants import (
     MAX_CLIPPED_CORE_SHARE,
     MAX_ITERATIONS,
     MAX_MARKER_RMS_SIGMA,
+    MIN_BEYOND_PIXELS,
     MIN_CONTRAST_SIGMA,
     MIN_DISC_DISTANCE_PIXELS,
     MIN_DISC_RIM_PIXELS,
     MIN_MARKERS,
+    MIN_PLATE_PIXELS,
     MIN_RIM_PIXELS,
     QUANTISATION_VAR,
     RELATIVE_RMS_FACTOR,
@@ -311,6 +313,10 @@ class _Problem:
     offset_sigma_mm: float  # the offset's prior sigma (inf: free)
     basis: np.ndarray  # (K, P, GAIN_TERMS) the discs' gain basis at the pixels
     free: np.ndarray  # (n_params,) bool: the parameters fitted (the rest stay at 0 step)
+    # (P,) the part of each pixel the plate fills, and the surround's level beyond the
+    # plate times the rest (counts): ``pixel_levels``
+    plate_fraction: np.ndarray
+    beyond_counts: np.ndarray
     disc_range_sigma_mm: float = 0.0  # each disc's own range error's prior (0: none)
     offset_mean_mm: float = 0.0  # the offset's prior mean (where it starts)
     compiled: bool = True  # the model's compiled kernel, else its NumPy reference
@@ -338,6 +344,12 @@ class _Problem:
     def images(self, R: np.ndarray, t_mm: np.ndarray) -> DiscImages:
         return disc_images(R, t_mm, self.discs, self.win, **self._model_options)
 
+    def pixel_levels(self, levels: np.ndarray) -> np.ndarray:
+        """The surround's level at each pixel (P,), counts: its disc's plate level
+        ``levels`` (K,) where the plate fills it, the beyond's (held, measured on the
+        frame: ``_beyond_counts``) where it does not."""
+        return levels[self.win.owner] * self.plate_fraction + self.beyond_counts
+
     @cached_property
     def gray_pixels(self) -> np.ndarray:
         """The gray residuals' pixels: the unsaturated ones, then the censored ones."""
@@ -357,9 +369,8 @@ class _Problem:
     def predict(self, images: DiscImages, s: _State) -> Prediction:
         return predict(
             images,
-            self.win.owner,
+            self.pixel_levels(s.levels),
             s.gains,
-            s.levels,
             mm_per_radian=self.noise.mm_per_radian,
             basis=self.basis,
             reference_mm=self.reference_mm,
@@ -410,7 +421,7 @@ def _rim_sensitivity(
     cov = images.coverage  # (K, P)
     partial = (cov > RIM_COVERAGE_EPS) & (cov < 1.0 - RIM_COVERAGE_EPS)
     g = pixel_gains(s.gains, pb.basis)  # (K, P)
-    level = s.levels[pb.win.owner]  # (P,)
+    level = pb.pixel_levels(s.levels)  # (P,)
     d_gray = np.where(partial, g - level, 0.0)
     unit = images.phasor / np.where(cov > 0, cov, 1.0)
     mixed = np.where(np.abs(pred.phasor) > 0, pred.phasor, 1.0)
@@ -698,7 +709,7 @@ def _pose_columns_analytic(
     ``sum_k g_k c_k + level (1 - sum_k c_k)``, distance ``mm_per_radian arg(mixed)`` with
     ``d arg(mixed) = Im(d mixed / mixed)``; the surround's clip at 0 holds it still."""
     g = pixel_gains(s.gains, pb.basis)  # (K, P)
-    level = s.levels[pb.win.owner][:, None]  # (P, 1)
+    level = pb.pixel_levels(s.levels)[:, None]  # (P, 1)
     covered = images.coverage.sum(axis=0)
     d_surround = np.where((covered < 1.0)[:, None], -d_images.coverage.sum(axis=0), 0.0)
     d_gray = np.einsum("kp,kpj->pj", g, d_images.coverage) + level * d_surround
@@ -754,7 +765,9 @@ def _jacobian(
     inv_w = 1.0 / np.where(np.abs(pred.phasor) > 0, pred.phasor, 1.0)
     # d distance / d gain term = mm_per_radian Im(phasor_k basis / mixed): the basis is real
     dist_per_gain = mpr * np.imag(images.phasor * inv_w)  # (K, P)
-    dist_per_level = mpr * np.imag(pred.surround * images.plate_phasor * inv_w)  # (P,)
+    # the plate's level reaches a pixel through the part the plate fills
+    per_level = pred.surround * pb.plate_fraction  # (P,)
+    dist_per_level = mpr * np.imag(per_level * images.plate_phasor * inv_w)  # (P,)
     # rows: unsaturated gray, censored gray (a residual only below full scale), distance
     gray_px = pb.gray_pixels
     below = pred.gray[pb.sat_rows] < pb.noise.full_scale_counts
@@ -774,7 +787,7 @@ def _jacobian(
         block[:, gain_cols] = gain.transpose(1, 0, 2).reshape(len(px), G * k_count)
     rows_g, rows_d = np.arange(n_gray), np.arange(n_dist)
     # each pixel's surround level: its owner's column
-    gray_block[rows_g, 6 + G * k_count + owner[gray_px]] = pred.surround[gray_px] * gray_w
+    gray_block[rows_g, 6 + G * k_count + owner[gray_px]] = per_level[gray_px] * gray_w
     dist_block[rows_d, 6 + G * k_count + owner[dist_px]] = dist_per_level[dist_px] * dist_w
     if pb.fit_offset:
         dist_block[:, layout.offset_col] = dist_w
@@ -797,10 +810,32 @@ def _surround_extra_var(pb: _Problem, images: DiscImages, s: _State) -> float:
     free = (images.coverage.sum(axis=0) == 0) & (w.gray < pb.noise.full_scale_counts)
     if free.sum() < 8:
         return 0.0
-    level = s.levels[w.owner[free]]
+    level = pb.pixel_levels(s.levels)[free]
     z = w.gray[free] - level
     var = (MAD_TO_SIGMA * np.median(np.abs(z - np.median(z)))) ** 2
     return float(max(var - np.median(np.maximum(level, 0.0)), 0.0))
+
+
+def _plate_surround(
+    win: Windows, images: DiscImages, saturated: np.ndarray, k_count: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The surround's two parts at each window pixel (P,): the part the plate fills
+    (``win.plate_fraction``) and the beyond's level times the rest, counts
+    (``_Problem.pixel_levels``). The beyond's level is held, not fitted: the median gray
+    of the window's pixels wholly beyond the plate and clear of the discs (at least
+    ``MIN_BEYOND_PIXELS``; else those of all windows together). When no window has that
+    many, the surround is the plate's alone (fraction 1), as on a target whose plate
+    fills every window."""
+    p_count = win.n_pixels
+    clear = (images.coverage.sum(axis=0) == 0) & ~saturated & (win.plate_fraction == 0)
+    if clear.sum() < MIN_BEYOND_PIXELS:
+        return np.ones(p_count), np.zeros(p_count)
+    level = np.full(k_count, float(np.median(win.gray[clear])))
+    for k in range(k_count):
+        mine = clear & (win.owner == k)
+        if mine.sum() >= MIN_BEYOND_PIXELS:
+            level[k] = float(np.median(win.gray[mine]))
+    return win.plate_fraction, level[win.owner] * (1.0 - win.plate_fraction)
 
 
 def _initial_linear(pb: _Problem, images: DiscImages) -> tuple[np.ndarray, np.ndarray]:
@@ -811,8 +846,9 @@ def _initial_linear(pb: _Problem, images: DiscImages) -> tuple[np.ndarray, np.nd
     surround = np.clip(1.0 - images.coverage.sum(axis=0), 0.0, 1.0)
     A = np.zeros((len(rows), 2 * k_count))
     A[:, :k_count] = images.coverage[:, rows].T
-    A[np.arange(len(rows)), k_count + pb.win.owner[rows]] = surround[rows]
-    x, *_ = np.linalg.lstsq(A, pb.win.gray[rows], rcond=None)
+    A[np.arange(len(rows)), k_count + pb.win.owner[rows]] = (surround * pb.plate_fraction)[rows]
+    beyond = surround[rows] * pb.beyond_counts[rows]
+    x, *_ = np.linalg.lstsq(A, pb.win.gray[rows] - beyond, rcond=None)
     g0, levels = x[:k_count], x[k_count:]
     # a disc all of whose pixels are saturated has no unsaturated gain: start at full scale
     sat_only = A[:, :k_count].sum(axis=0) < MIN_DISC_AREA_PX
@@ -945,6 +981,7 @@ def fit_pose_to_pixels(
         others=others,
         pad_px=pad_px,
         subsamples=subsamples,
+        plate_size_mm=catalog.plate_size_mm,
     )
     saturated = win.gray >= noise.full_scale_counts
     reference_mm = float(np.linalg.norm(t_mm))
@@ -974,6 +1011,8 @@ def fit_pose_to_pixels(
         numeric_jacobian=jacobian == "central-differences",
         basis=gain_basis(uv[None] - centre_px[:, None], radius_px),
         free=free,
+        plate_fraction=np.ones(win.n_pixels),
+        beyond_counts=np.zeros(win.n_pixels),
     )
     images = pb0.images(R, t_mm)
     area = images.coverage.sum(axis=1)
@@ -982,7 +1021,17 @@ def fit_pose_to_pixels(
         return replace(start, reason=f"markers {lost} are not in the image at the start pose")
     covered = images.coverage.sum(axis=0)
     usable_distance = np.isfinite(win.distance_mm) & ~saturated & (covered >= DISTANCE_MIN_COVERAGE)
-    pb = replace(pb0, dist_rows=np.flatnonzero(usable_distance))
+    plate, beyond = _plate_surround(win, images, saturated, k_count)
+    # a window the plate does not reach has no plate level to fit
+    on_plate = np.bincount(win.owner, weights=plate * (covered < 1), minlength=k_count)
+    free[6 + G * k_count : 6 + (G + 1) * k_count] &= on_plate >= MIN_PLATE_PIXELS
+    pb = replace(
+        pb0,
+        dist_rows=np.flatnonzero(usable_distance),
+        plate_fraction=plate,
+        beyond_counts=beyond,
+        free=free,
+    )
     gains, levels = _initial_linear(pb, images)
     state = _State(
         R=R,
@@ -1255,6 +1304,8 @@ def _fit_record(pb: _Problem, rim: _RimSensitivity | None, coverage_sigma: np.nd
         free_index=free_index,
         edge_var_gray=np.ascontiguousarray(edge_gray, float),
         edge_var_distance=np.ascontiguousarray(edge_distance, float),
+        plate_fraction=np.ascontiguousarray(pb.plate_fraction, float),
+        beyond_counts=np.ascontiguousarray(pb.beyond_counts, float),
     )
 
 

@@ -91,7 +91,9 @@ class Windows:
     sees (the nearest predicted centre); bearings, dbdu, dbdv : (P, 3), the centre ray and
     its derivatives over u and v (per px); sample_bearings, sample_dbdu, sample_dbdv :
     (P, S * S, 3), the same for the sub-cell centres; near : K index arrays into the
-    pixels, where each disc's coverage is evaluated; subsamples : S.
+    pixels, where each disc's coverage is evaluated; subsamples : S; plate_fraction :
+    (P,) the part of each pixel the target's plate fills at the windows' pose
+    (``plate_fraction``; all 1 when the plate's size is not given).
     """
 
     rows: np.ndarray
@@ -107,6 +109,7 @@ class Windows:
     sample_dbdv: np.ndarray
     near: tuple[np.ndarray, ...]
     subsamples: int
+    plate_fraction: np.ndarray
 
     @property
     def near_flat(self) -> tuple[np.ndarray, np.ndarray]:
@@ -171,10 +174,13 @@ def build_windows(
     others: Discs | None = None,
     pad_px: int = WINDOW_PAD_PX,
     subsamples: int = SUBSAMPLES,
+    plate_size_mm: tuple[float, float] | None = None,
 ) -> Windows:
     """The windows around each disc's ellipse predicted at the pose ``(R, t_mm)``: its
     bounding box plus ``pad_px``, clipped to the image; pixels near the predicted image of
-    a disc in ``others`` (catalog discs not fitted) are left out."""
+    a disc in ``others`` (catalog discs not fitted) are left out; ``plate_size_mm``
+    (width, height) of the target's plate, centred on its origin in its z = 0 plane: the
+    part of each pixel it fills (``plate_fraction``)."""
     h, w = camera.height, camera.width
     rims = predicted_rims(camera, R, t_mm, discs)
     centres = rims.mean(axis=1)  # (K, 2)
@@ -234,7 +240,33 @@ def build_windows(
         sample_dbdv=sbv,
         near=tuple(near),
         subsamples=s,
+        plate_fraction=np.ones(len(uv))
+        if plate_size_mm is None
+        else plate_fraction(sb, R, t_mm, plate_size_mm),
     )
+
+
+def plate_fraction(
+    sample_bearings: np.ndarray,
+    R: np.ndarray,
+    t_mm: np.ndarray,
+    plate_size_mm: tuple[float, float],
+) -> np.ndarray:
+    """The part of each pixel (P,) that the target's plate fills at the pose ``(R,
+    t_mm)``: the share of its sub-cells' rays (``sample_bearings`` (P, S * S, 3)) that meet
+    the plate's plane (target z = 0) inside its ``plate_size_mm`` rectangle, centred on
+    the target's origin. Where the plate's edge crosses a disc's window, the surround
+    beyond it (a wall, the room, nothing) is not the plate's level. Point samples: the
+    edge's contrast is the plate's level less the beyond's, tens to hundreds of counts,
+    so the 1 / (S * S) steps are a few counts at S = 4, under the surround's noise."""
+    n = R[:, 2]
+    nb = sample_bearings @ n
+    lam = np.where(np.abs(nb) > 1e-12, (n @ t_mm) / np.where(nb == 0, 1.0, nb), -1.0)
+    points = lam[..., None] * sample_bearings - t_mm  # (P, S * S, 3) from the origin
+    x, y = points @ R[:, 0], points @ R[:, 1]
+    half_w, half_h = plate_size_mm[0] / 2, plate_size_mm[1] / 2
+    inside = (lam > 0) & (np.abs(x) <= half_w) & (np.abs(y) <= half_h)
+    return inside.mean(axis=1)
 
 
 def disc_images(
@@ -370,22 +402,22 @@ def pixel_gains(gains: np.ndarray, basis: np.ndarray) -> np.ndarray:
 
 def predict(
     images: DiscImages,
-    owner: np.ndarray,
+    level: np.ndarray,
     gains: np.ndarray,
-    levels: np.ndarray,
     *,
     basis: np.ndarray,
     mm_per_radian: float,
     reference_mm: float,
     range_offset_mm: float = 0.0,
 ) -> Prediction:
-    """Gray ``sum_k gain_k c_k + level_owner (1 - sum_k c_k)`` and the mixed phasor's
-    distance (plus ``range_offset_mm``) of every window pixel; ``gain_k`` varies linearly
+    """Gray ``sum_k gain_k c_k + level (1 - sum_k c_k)`` and the mixed phasor's distance
+    (plus ``range_offset_mm``) of every window pixel, ``level`` (P,) the surround's at
+    each (the plate's level of the disc that owns it where the plate fills it, the
+    beyond's where it does not: ``fit._Problem.pixel_levels``); ``gain_k`` varies linearly
     over the image (``pixel_gains``: the retro-reflector's return changes with the
     incidence angle and the range across a large disc by a few per cent, curved: a
     quadratic over the disc, ``gain_basis``)."""
     surround = np.clip(1.0 - images.coverage.sum(axis=0), 0.0, 1.0)
-    level = levels[owner]
     g = pixel_gains(gains, basis)
     gray = np.sum(g * images.coverage, axis=0) + level * surround
     mixed = np.sum(g * images.phasor, axis=0) + level * surround * images.plate_phasor

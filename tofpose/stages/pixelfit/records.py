@@ -43,7 +43,9 @@ class FitRecord(NamedTuple):
     ``sat_rows`` censored, ``dist_rows`` distance (int arrays); ``free_index``
     (n_params,) each parameter's column among the fitted ones, -1 when it is held; the
     pixels' rim variances ``edge_var_gray`` counts^2 and ``edge_var_distance`` mm^2
-    (P,) (0 without a rim model error)."""
+    (P,) (0 without a rim model error); the surround's parts ``plate_fraction`` (P,) the
+    part of each pixel the plate fills and ``beyond_counts`` (P,) the level beyond the
+    plate times the rest (``fit._Problem.pixel_levels``)."""
 
     gray: np.ndarray
     distance_mm: np.ndarray
@@ -55,6 +57,8 @@ class FitRecord(NamedTuple):
     free_index: np.ndarray
     edge_var_gray: np.ndarray
     edge_var_distance: np.ndarray
+    plate_fraction: np.ndarray
+    beyond_counts: np.ndarray
 
 
 class FitConstants(NamedTuple):

@@ -506,3 +506,42 @@ def test_reference_implementation_fits_the_same_pose():
     assert fits[0].iterations == fits[1].iterations
     diff = _error(fits[0].R, fits[0].t_mm, RigidTransform(fits[1].R, fits[1].t_mm))
     assert np.all(np.abs(diff) < 1e-6 * np.sqrt(np.diag(fits[1].covariance))), diff
+
+
+def test_the_plates_edge_in_a_window_is_modelled_not_mixed_into_the_plates_level(monkeypatch):
+    """At 6 m the plate's right edge crosses disc 8's window (35 mm beyond its rim, the
+    window's 3 px margin is 55 mm), and beyond it is nothing. On a light plate (0.9, its
+    level ~55 counts) the surround's two parts (``_plate_surround``) fit disc 8's plate
+    level as its siblings' (within 15 % of their median) and the fit lands within its
+    sigmas on every seed; with one level per window (the plate's fraction held at 1)
+    disc 8's is pulled halfway to the dark beyond (the other renderer's frames: its
+    residuals beyond its siblings', and the fit fell back on 46 of 96 frames)."""
+    from tofpose.stages.pixelfit import fit
+
+    sensor = SensorModel(supersampling=16)
+    scene = TargetScene(wall_distance_mm=None, plate_reflectance=0.9)
+    T = RigidTransform(rotation_from_euler_deg(3, -4, 8) @ R_FACING, np.array([-300, 200, 6000.0]))
+    frames = [render_frame(CAM, scene, T, sensor, np.random.default_rng(s)) for s in range(3)]
+
+    def disc_8_level_over_median(f):
+        r = PosePipeline(CAM, CAT).process(f.gray, f.distance_mm)
+        assert r.ok and [m.catalog_id for m in r.matched][-1] == 8, r.reason
+        res = _fit_pipeline_frame(sensor, f, r)
+        assert res.ok, res.reason
+        return res, res.levels[-1] / np.median(res.levels)
+
+    for f in frames:
+        res, ratio = disc_8_level_over_median(f)
+        assert abs(ratio - 1) < 0.15, res.levels
+        e = _error(res.R, res.t_mm, T)
+        assert e @ np.linalg.solve(res.covariance, e) < 20.06  # chi2_6 at 0.9973
+    original = fit._plate_surround
+
+    def one_level(win, images, saturated, k_count):
+        plate, _ = original(win, images, saturated, k_count)
+        assert np.any(plate == 0)  # the edge is in a window, and pixels beyond it
+        return np.ones(win.n_pixels), np.zeros(win.n_pixels)
+
+    monkeypatch.setattr(fit, "_plate_surround", one_level)
+    for f in frames:
+        assert disc_8_level_over_median(f)[1] < 0.6

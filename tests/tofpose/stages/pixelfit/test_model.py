@@ -72,3 +72,26 @@ def _sub_cell_offsets(s):
     offs = (np.arange(s) + 0.5) / s - 0.5
     ox, oy = np.meshgrid(offs, offs)
     return np.column_stack([ox.ravel(), oy.ravel()])
+
+
+def test_plate_fraction_is_the_plates_projected_area_and_edge():
+    """A facing plate off axis at 4 m: pixels wholly inside are 1, those beyond 0, the
+    fractions sum to the plate's projected area within its part of the image, and a
+    pixel its edge halves is near 1/2."""
+    from tofpose.stages.pixelfit.model import plate_fraction
+
+    cam, cat = CameraModel(), paper_target()
+    T = RigidTransform(R_FACING, np.array([600.0, 0.0, 4000.0]))
+    v, u = np.mgrid[0 : cam.height, 0 : cam.width]
+    uv = np.column_stack([u.ravel(), v.ravel()]).astype(float)
+    s = 4
+    offs = (np.arange(s) + 0.5) / s - 0.5
+    grid = np.stack(np.meshgrid(offs, offs), axis=-1).reshape(-1, 2)
+    rays = cam.bearings((uv[:, None] + grid[None]).reshape(-1, 2)).reshape(len(uv), s * s, 3)
+    f = plate_fraction(rays, T.R, T.t_mm, cat.plate_size_mm).reshape(cam.shape)
+    w, h = cat.plate_size_mm
+    assert f.sum() == pytest.approx(w * h * (cam.fx / 4000.0) ** 2, rel=0.01)
+    centre = cam.project(np.array([[600.0, 0.0, 4000.0]]))[0]
+    assert f[int(round(centre[1])), int(round(centre[0]))] == 1.0
+    assert f[0, 0] == 0.0 and f[-1, -1] == 0.0
+    assert set(np.unique(f)) > {0.0, 1.0}  # the edge's pixels in between

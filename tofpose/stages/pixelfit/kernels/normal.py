@@ -49,7 +49,7 @@ def predict(coverage, phasor, plate, gains, levels, offset_mm, disc_offsets_mm, 
         for k in range(k_count):
             covered += coverage[k, p]
         sur = min(max(1.0 - covered, 0.0), 1.0)
-        level = levels[owner[p]]
+        level = levels[owner[p]] * fit.plate_fraction[p] + fit.beyond_counts[p]
         gray_p = 0.0
         mixed_p = 0.0j
         for k in range(k_count):
@@ -222,7 +222,7 @@ def normal_equations(
         p = fit.sat_rows[i - n_gray] if censored else fit.gray_rows[i]
         r, w = _gray_residual(p, censored, gray, sigma_gray, fit, const)
         _surround_derivative(d_coverage, coverage, p, d_surround)
-        level = levels[fit.owner[p]]
+        level = levels[fit.owner[p]] * fit.plate_fraction[p] + fit.beyond_counts[p]
         n = 0
         for e in range(N_POSE):
             d = level * d_surround[e]
@@ -239,7 +239,7 @@ def normal_equations(
                     vals[n] = c * fit.basis[kk, p, j] * w
                     n += 1
         cols[n] = level_col + fit.owner[p]
-        vals[n] = surround[p] * w
+        vals[n] = surround[p] * fit.plate_fraction[p] * w
         n += 1
         _accumulate(cols, vals, n, r, info, grad, fit.free_index, idx, val)
         if per_disc:
@@ -252,7 +252,7 @@ def normal_equations(
         w = -1.0 / s
         inv = 1.0 / mixed[p] if abs(mixed[p]) > 0 else 1.0 + 0.0j
         _surround_derivative(d_coverage, coverage, p, d_surround)
-        level = levels[fit.owner[p]]
+        level = levels[fit.owner[p]] * fit.plate_fraction[p] + fit.beyond_counts[p]
         n = 0
         for e in range(N_POSE):
             dm = level * (d_surround[e] * plate[p] + surround[p] * d_plate[p, e])
@@ -270,7 +270,7 @@ def normal_equations(
                     vals[n] = per_gain * fit.basis[kk, p, j]
                     n += 1
         cols[n] = level_col + fit.owner[p]
-        vals[n] = mpr * (surround[p] * plate[p] * inv).imag * w
+        vals[n] = mpr * (surround[p] * fit.plate_fraction[p] * plate[p] * inv).imag * w
         n += 1
         if const.offset_col >= 0:
             cols[n] = const.offset_col

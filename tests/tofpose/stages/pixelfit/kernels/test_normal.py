@@ -38,7 +38,8 @@ def _solver_calls(monkeypatch, noise_options, clip):
 )
 def test_normal_equations_equal_the_numpy_jacobians(monkeypatch, noise_options, clip):
     """Information, gradient and cost, the sigmas, and each disc's share of the
-    information and gradient, at the start state of every solve, after a step of every
+    information and gradient, at the start state of every solve (and of the same solve
+    with the plate's edge across the windows), after a step of every
     parameter (the range offsets 1 mm: their priors' rows then count), and with the
     gains tripled (censored pixels whose model is above full scale, weight 0). The
     information and gradients are compared in the parameters' own scale (``D J'J D``,
@@ -56,7 +57,17 @@ def test_normal_equations_equal_the_numpy_jacobians(monkeypatch, noise_options, 
         ],
         False,
     )
+    rng = np.random.default_rng(0)
+    edged = []
     for pb, state, images, extra_var, coverage_sigma in calls:
+        # the same problem with the plate's edge across every window: a part of each
+        # pixel beyond the plate, at a level of its own
+        p_count = pb.win.n_pixels
+        plate = np.where(rng.random(p_count) < 0.3, rng.uniform(0.0, 1.0, p_count), 1.0)
+        beyond = rng.uniform(0.0, 300.0, p_count) * (1.0 - plate)
+        edge = replace(pb, plate_fraction=plate, beyond_counts=beyond)
+        edged.append((edge, state, images, extra_var, coverage_sigma))
+    for pb, state, images, extra_var, coverage_sigma in calls + edged:
         rim = None
         if np.any(coverage_sigma > 0):
             rim = fit._rim_sensitivity(pb, images, pb.predict(images, state), state)
@@ -66,7 +77,6 @@ def test_normal_equations_equal_the_numpy_jacobians(monkeypatch, noise_options, 
         scale = np.r_[[1e-4] * 3, [0.05] * 3, np.ones(pb.n_params - 6)]  # rad, mm, counts
         if layout.offset_col >= 0:
             scale[layout.offset_col] = 1.0  # mm
-        rng = np.random.default_rng(0)
         delta = rng.normal(0.0, 1.0, pb.n_params) * scale * pb.free
         bright = replace(state, gains=3.0 * state.gains)
         for s in (state, state.stepped(delta, pb.layout), bright):
