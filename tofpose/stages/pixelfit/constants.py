@@ -46,6 +46,12 @@ MIN_CONTRAST_SIGMA = 10.0
 #: ``MIN_PLATE_PIXELS`` of plate beside its disc fits no plate level
 MIN_BEYOND_PIXELS = 8
 MIN_PLATE_PIXELS = 1.0
+#: a bright spot in the surround (``fit._glint_pixels``): its peak's gray this many
+#: sigmas above the model (no pixel the model explains is: a 10 sigma residual has odds
+#: of 1e-23; the glints of the robustness study and of the other renderer are 25-800),
+#: its pixels those connected to the peak more than ``GLINT_TAIL_SIGMA`` above it
+GLINT_PEAK_SIGMA = 10.0
+GLINT_TAIL_SIGMA = 3.0
 #: fewest discs the fit needs (three points fix a pose)
 MIN_MARKERS = 3
 #: robust scale of normal samples: sigma = MAD_TO_SIGMA * median absolute deviation

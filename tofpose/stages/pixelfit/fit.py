@@ -30,6 +30,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
+from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
 from tofpose.core.camera import CameraModel
@@ -41,6 +42,8 @@ from tofpose.stages.pixelfit.constants import (
     DAMPING_UP,
     DISTANCE_MIN_COVERAGE,
     FULL_SCALE_COUNTS,
+    GLINT_PEAK_SIGMA,
+    GLINT_TAIL_SIGMA,
     INITIAL_DAMPING,
     MAD_TO_SIGMA,
     MAX_CLIPPED_CORE_SHARE,
@@ -210,6 +213,8 @@ class PixelFitResult:
     iterations : int; converged : bool
     n_gray_pixels, n_distance_pixels, n_saturated : int
         Pixels in the gray residuals, in the distance residuals, and censored.
+    n_glint_pixels : int
+        Window pixels left out as bright spots in the surround (``_glint_pixels``).
     clipped_share : ndarray of shape (K,)
         Each disc's share of its fully covered pixels (at the fitted pose) that are
         saturated: 1 when its core is clipped (``_clipped_share``), NaN when it covers
@@ -238,6 +243,7 @@ class PixelFitResult:
     n_gray_pixels: int = 0
     n_distance_pixels: int = 0
     n_saturated: int = 0
+    n_glint_pixels: int = 0
     clipped_share: np.ndarray = field(default_factory=lambda: np.zeros(0))
     range_k_mm: float = float("nan")
     gray_extra_var: float = float("nan")
@@ -816,6 +822,50 @@ def _surround_extra_var(pb: _Problem, images: DiscImages, s: _State) -> float:
     return float(max(var - np.median(np.maximum(level, 0.0)), 0.0))
 
 
+def _glint_pixels(pb: _Problem, solved: _Solved, extra_var: float) -> np.ndarray:
+    """(P,) bool: the window pixels of bright spots in the surround that the model does
+    not carry (a specular glint, a light, a marker-like reflection off the structure), at
+    the ``solved`` pose. A spot is a pixel whose gray is more than ``GLINT_PEAK_SIGMA``
+    sigmas above the model, the largest in its 3 x 3 neighbourhood, with no disc reaching
+    it or its eight neighbours (a disc's rim the model draws wrong, or blurs, is a model
+    error to be seen, not left out); its pixels are those connected to it, clear of the
+    discs, more than ``GLINT_TAIL_SIGMA`` above the model. Left in, such a spot pulls the
+    window's surround level up by tens of sigmas' worth and the disc's residuals beyond
+    the fallback's limit (the other renderer's glints recording: the fit held on 15 of
+    its 48 frames)."""
+    w = pb.win
+    pred = pb.predict(solved.images, solved.state)
+    z = (w.gray - pred.gray) / np.sqrt(_gray_variance(pred, extra_var))
+    covered = solved.images.coverage.sum(axis=0) > 0
+    r0, c0 = int(w.rows.min()), int(w.cols.min())
+    shape = (int(w.rows.max()) - r0 + 1, int(w.cols.max()) - c0 + 1)
+    at = (w.rows - r0, w.cols - c0)
+    z_img = np.full(shape, -np.inf)
+    z_img[at] = z
+    near_disc = np.zeros(shape, bool)
+    near_disc[at] = covered
+    near_disc = ndimage.binary_dilation(near_disc, structure=np.ones((3, 3), bool))
+    peak = (z_img > GLINT_PEAK_SIGMA) & ~near_disc
+    peak &= z_img >= ndimage.maximum_filter(z_img, size=3)
+    if not peak.any():
+        return np.zeros(w.n_pixels, bool)
+    tail = np.zeros(shape, bool)
+    tail[at] = (z > GLINT_TAIL_SIGMA) & ~covered
+    labels, _ = ndimage.label(tail, structure=np.ones((3, 3), bool))
+    spots = np.isin(labels, np.unique(labels[peak & tail]))
+    return spots[at]
+
+
+def _without_pixels(pb: _Problem, left_out: np.ndarray) -> _Problem:
+    """``pb`` with the pixels ``left_out`` (P,) bool in none of its residuals."""
+    return replace(
+        pb,
+        gray_rows=pb.gray_rows[~left_out[pb.gray_rows]],
+        sat_rows=pb.sat_rows[~left_out[pb.sat_rows]],
+        dist_rows=pb.dist_rows[~left_out[pb.dist_rows]],
+    )
+
+
 def _plate_surround(
     win: Windows, images: DiscImages, saturated: np.ndarray, k_count: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -1048,6 +1098,14 @@ def fit_pose_to_pixels(
     )
 
     solved = _levenberg_marquardt(pb, state, images, extra_var, np.zeros(k_count), max_iterations)
+    # bright spots in the surround the model does not carry (glints): left out, fitted again
+    glints = _glint_pixels(pb, solved, extra_var)
+    if np.any(glints):
+        pb = _without_pixels(pb, glints)
+        again = _levenberg_marquardt(
+            pb, solved.state, solved.images, extra_var, np.zeros(k_count), max_iterations
+        )
+        solved = replace(again, iterations=solved.iterations + again.iterations)
     # the model errors the frame shows at the first solution; then fitted again with them
     st, im = solved.state, solved.images
     pred = pb.predict(im, st)
@@ -1127,6 +1185,7 @@ def fit_pose_to_pixels(
         n_gray_pixels=len(pb.gray_rows),
         n_distance_pixels=len(pb.dist_rows),
         n_saturated=len(pb.sat_rows),
+        n_glint_pixels=int(glints.sum()),
         clipped_share=_clipped_share(pb, images),
         range_k_mm=sig.range_k_mm,
         gray_extra_var=extra_var,

@@ -545,3 +545,32 @@ def test_the_plates_edge_in_a_window_is_modelled_not_mixed_into_the_plates_level
     monkeypatch.setattr(fit, "_plate_surround", one_level)
     for f in frames:
         assert disc_8_level_over_median(f)[1] < 0.6
+
+
+def test_a_glint_in_a_discs_window_is_left_out_and_the_fit_holds():
+    """A marker-like glint (a Gaussian spot of 1 px sigma, 1500 counts) 2.5 px beyond
+    disc 6's rim, in its window: its pixels are left out (``n_glint_pixels``) and the
+    fit lands within its sigmas, as on the clean frame; the same spot on the disc's rim
+    is not left out (the model's own error there is to be seen) and the fit falls back,
+    naming the disc."""
+    sensor, T, f = _frame_and_start()
+    disc = _disc_pixels(f, 6)
+    rows, cols = np.nonzero(disc)
+    centre = np.array([rows.mean(), cols.mean()])
+    radius = (cols.max() - cols.min() + 1) / 2
+    vv, uu = np.mgrid[0 : CAM.height, 0 : CAM.width]
+    noise = PixelNoise.from_sensor(sensor)
+    for offset, holds in ((radius + 2.5, True), (radius - 0.5, False)):
+        spot = 1500.0 * np.exp(
+            -((vv - centre[0]) ** 2 + (uu - centre[1] - offset) ** 2) / (2 * 1.0**2)
+        )
+        gray = np.minimum(f.gray + spot, 4095)
+        res = fit_pose_to_pixels(gray, f.distance_mm, CAM, CAT, T.R, T.t_mm, CAT.ids, noise=noise)
+        if holds:
+            assert res.ok, res.reason
+            assert res.n_glint_pixels >= 5
+            e = _error(res.R, res.t_mm, T)
+            assert e @ np.linalg.solve(res.covariance, e) < 20.06
+        else:
+            assert not res.ok and "6 (" in res.reason, res.reason
+            assert res.n_glint_pixels == 0
