@@ -826,10 +826,11 @@ def _glint_pixels(pb: _Problem, solved: _Solved, extra_var: float) -> np.ndarray
     """(P,) bool: the window pixels of bright spots in the surround that the model does
     not carry (a specular glint, a light, a marker-like reflection off the structure), at
     the ``solved`` pose. A spot is a pixel whose gray is more than ``GLINT_PEAK_SIGMA``
-    sigmas above the model, the largest in its 3 x 3 neighbourhood, with no disc reaching
-    it or its eight neighbours (a disc's rim the model draws wrong, or blurs, is a model
-    error to be seen, not left out); its pixels are those connected to it, clear of the
-    discs, more than ``GLINT_TAIL_SIGMA`` above the model. Left in, such a spot pulls the
+    sigmas above the model, the largest in its 3 x 3 neighbourhood; its pixels are those
+    connected to it, clear of the discs, more than ``GLINT_TAIL_SIGMA`` above the model;
+    and none of them is a disc's pixel or next to one (a disc's rim the model draws
+    wrong, or blurs, is a model error to be seen, not left out, and a spot whose light
+    reaches a rim biases the rim where it cannot be left out). Left in, such a spot pulls the
     window's surround level up by tens of sigmas' worth and the disc's residuals beyond
     the fallback's limit (the other renderer's glints recording: the fit held on 15 of
     its 48 frames)."""
@@ -852,8 +853,10 @@ def _glint_pixels(pb: _Problem, solved: _Solved, extra_var: float) -> np.ndarray
     tail = np.zeros(shape, bool)
     tail[at] = (z > GLINT_TAIL_SIGMA) & ~covered
     labels, _ = ndimage.label(tail, structure=np.ones((3, 3), bool))
-    spots = np.isin(labels, np.unique(labels[peak & tail]))
-    return spots[at]
+    # a spot whose pixels reach a disc's neighbours lights its rim too: not left out
+    touching = np.unique(labels[tail & near_disc])
+    chosen = np.setdiff1d(np.unique(labels[peak & tail]), touching)
+    return np.isin(labels, chosen)[at]
 
 
 def _without_pixels(pb: _Problem, left_out: np.ndarray) -> _Problem:
