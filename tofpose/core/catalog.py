@@ -38,7 +38,9 @@ class Catalog:
     ----------
     name : str
     reflectors : tuple of Reflector
-    plate_size_mm : (width, height) of the backing plate, used by the simulator only.
+    plate_size_mm : (width, height) of the backing plate, centred on the target's origin in
+        its z = 0 plane: the simulator draws it and the pixel fit models its edge
+        (``stages.pixelfit``); a catalog JSON without it reads the paper target's.
     """
 
     name: str

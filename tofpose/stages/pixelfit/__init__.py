@@ -22,8 +22,8 @@ themselves, after matching (§4) has said which catalog disc each blob is:
   optional common range offset). The surround is the plate's level where the plate fills
   a pixel and a level measured beyond it elsewhere (the plate's edge crosses the windows
   of discs near it from a few metres on). Bright spots in the surround that touch no
-  disc (glints) are left out. Saturated pixels are censored (a model at or above full
-  scale agrees with them). The covariance is the inverse Fisher information at the
+  disc nor its neighbours (glints) are left out. Saturated pixels are censored (a model
+  at or above full scale agrees with them). The covariance is the inverse Fisher information at the
   solution, the pose block after the nuisance parameters are marginalised. It falls back
   (``PixelFitResult.ok`` False, with the reason) when the fit does not converge or a
   disc's residuals are far beyond its noise (a glint, an occluded disc), or a disc's

@@ -52,6 +52,10 @@ MIN_PLATE_PIXELS = 1.0
 #: its pixels those connected to the peak more than ``GLINT_TAIL_SIGMA`` above it
 GLINT_PEAK_SIGMA = 10.0
 GLINT_TAIL_SIGMA = 3.0
+#: nor is a spot larger than this share of the windows' surround pixels left out (a
+#: glint of 1.6 px sigma and 2500 counts is ~100 px over a surround of 3 counts' noise,
+#: against ~2000 surround pixels at 3 m; a larger one is more likely the model's error)
+GLINT_MAX_SHARE = 0.1
 #: fewest discs the fit needs (three points fix a pose)
 MIN_MARKERS = 3
 #: robust scale of normal samples: sigma = MAD_TO_SIGMA * median absolute deviation

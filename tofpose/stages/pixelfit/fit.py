@@ -42,6 +42,7 @@ from tofpose.stages.pixelfit.constants import (
     DAMPING_UP,
     DISTANCE_MIN_COVERAGE,
     FULL_SCALE_COUNTS,
+    GLINT_MAX_SHARE,
     GLINT_PEAK_SIGMA,
     GLINT_TAIL_SIGMA,
     INITIAL_DAMPING,
@@ -353,7 +354,7 @@ class _Problem:
     def pixel_levels(self, levels: np.ndarray) -> np.ndarray:
         """The surround's level at each pixel (P,), counts: its disc's plate level
         ``levels`` (K,) where the plate fills it, the beyond's (held, measured on the
-        frame: ``_beyond_counts``) where it does not."""
+        frame: ``_plate_surround``) where it does not."""
         return levels[self.win.owner] * self.plate_fraction + self.beyond_counts
 
     @cached_property
@@ -855,7 +856,12 @@ def _glint_pixels(pb: _Problem, solved: _Solved, extra_var: float) -> np.ndarray
     labels, _ = ndimage.label(tail, structure=np.ones((3, 3), bool))
     # a spot whose pixels reach a disc's neighbours lights its rim too: not left out
     touching = np.unique(labels[tail & near_disc])
-    chosen = np.setdiff1d(np.unique(labels[peak & tail]), touching)
+    # nor one larger than GLINT_MAX_SHARE of the surround (the model's own error: a
+    # plate drawn too small, a bright structure beyond it)
+    surround_px = int(np.sum(~covered))
+    sizes = np.bincount(labels.ravel())
+    large = np.flatnonzero(sizes > GLINT_MAX_SHARE * surround_px)
+    chosen = np.setdiff1d(np.unique(labels[peak & tail]), np.union1d(touching, large))
     return np.isin(labels, chosen)[at]
 
 
@@ -869,26 +875,40 @@ def _without_pixels(pb: _Problem, left_out: np.ndarray) -> _Problem:
     )
 
 
+def _plate_behind(discs: Discs, plate_size_mm: tuple[float, float]) -> tuple[float, float] | None:
+    """The plate's size when every fitted disc's centre lies on it (a catalog whose plate
+    is its target's), else None: no plate edge is modelled (one surround level per
+    window). A catalog that leaves the size out reads the paper target's 990 x 550 mm
+    (``Catalog``); where the real plate is larger, the pixels taken as beyond it read the
+    plate's level and the two parts are one level, as without the edge."""
+    half = np.asarray(plate_size_mm, float) / 2
+    inside = np.all(np.abs(discs.centres_mm[:, :2]) <= half, axis=1)
+    return plate_size_mm if bool(np.all(inside)) else None
+
+
 def _plate_surround(
     win: Windows, images: DiscImages, saturated: np.ndarray, k_count: int
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The surround's two parts at each window pixel (P,): the part the plate fills
     (``win.plate_fraction``) and the beyond's level times the rest, counts
-    (``_Problem.pixel_levels``). The beyond's level is held, not fitted: the median gray
-    of the window's pixels wholly beyond the plate and clear of the discs (at least
-    ``MIN_BEYOND_PIXELS``; else those of all windows together). When no window has that
-    many, the surround is the plate's alone (fraction 1), as on a target whose plate
-    fills every window."""
+    (``_Problem.pixel_levels``), and the beyond's level per window (K,) counts. The
+    beyond's level is held, not fitted: the median gray of the window's pixels wholly
+    beyond the plate and clear of the discs (at least ``MIN_BEYOND_PIXELS``; else those
+    of all windows together, a level that one window's surround may not share). When all
+    windows together have fewer, the surround is the plate's alone (fraction 1), as on a
+    target whose plate fills every window. The beyond's light takes the plate's phase in
+    the mixed phasor: it differs only in a distance row whose pixel holds both a disc's
+    rim and the beyond, a pixel or two at the longest ranges."""
     p_count = win.n_pixels
     clear = (images.coverage.sum(axis=0) == 0) & ~saturated & (win.plate_fraction == 0)
     if clear.sum() < MIN_BEYOND_PIXELS:
-        return np.ones(p_count), np.zeros(p_count)
+        return np.ones(p_count), np.zeros(p_count), np.zeros(k_count)
     level = np.full(k_count, float(np.median(win.gray[clear])))
     for k in range(k_count):
         mine = clear & (win.owner == k)
         if mine.sum() >= MIN_BEYOND_PIXELS:
             level[k] = float(np.median(win.gray[mine]))
-    return win.plate_fraction, level[win.owner] * (1.0 - win.plate_fraction)
+    return win.plate_fraction, level[win.owner] * (1.0 - win.plate_fraction), level
 
 
 def _initial_linear(pb: _Problem, images: DiscImages) -> tuple[np.ndarray, np.ndarray]:
@@ -1034,7 +1054,7 @@ def fit_pose_to_pixels(
         others=others,
         pad_px=pad_px,
         subsamples=subsamples,
-        plate_size_mm=catalog.plate_size_mm,
+        plate_size_mm=_plate_behind(discs, catalog.plate_size_mm),
     )
     saturated = win.gray >= noise.full_scale_counts
     reference_mm = float(np.linalg.norm(t_mm))
@@ -1074,10 +1094,12 @@ def fit_pose_to_pixels(
         return replace(start, reason=f"markers {lost} are not in the image at the start pose")
     covered = images.coverage.sum(axis=0)
     usable_distance = np.isfinite(win.distance_mm) & ~saturated & (covered >= DISTANCE_MIN_COVERAGE)
-    plate, beyond = _plate_surround(win, images, saturated, k_count)
+    plate, beyond, beyond_level = _plate_surround(win, images, saturated, k_count)
     # a window the plate does not reach has no plate level to fit
-    on_plate = np.bincount(win.owner, weights=plate * (covered < 1), minlength=k_count)
-    free[6 + G * k_count : 6 + (G + 1) * k_count] &= on_plate >= MIN_PLATE_PIXELS
+    seen_plate = plate * np.clip(1.0 - covered, 0.0, 1.0)
+    on_plate = np.bincount(win.owner, weights=seen_plate, minlength=k_count) >= MIN_PLATE_PIXELS
+    free = free.copy()
+    free[6 + G * k_count : 6 + (G + 1) * k_count] &= on_plate
     pb = replace(
         pb0,
         dist_rows=np.flatnonzero(usable_distance),
@@ -1086,6 +1108,8 @@ def fit_pose_to_pixels(
         free=free,
     )
     gains, levels = _initial_linear(pb, images)
+    # a held level is its window's surround: the beyond's (the dark test reads it)
+    levels = np.where(on_plate, levels, beyond_level)
     state = _State(
         R=R,
         t_mm=t_mm,

@@ -538,9 +538,9 @@ def test_the_plates_edge_in_a_window_is_modelled_not_mixed_into_the_plates_level
     original = fit._plate_surround
 
     def one_level(win, images, saturated, k_count):
-        plate, _ = original(win, images, saturated, k_count)
+        plate, _, _ = original(win, images, saturated, k_count)
         assert np.any(plate == 0)  # the edge is in a window, and pixels beyond it
-        return np.ones(win.n_pixels), np.zeros(win.n_pixels)
+        return np.ones(win.n_pixels), np.zeros(win.n_pixels), np.zeros(k_count)
 
     monkeypatch.setattr(fit, "_plate_surround", one_level)
     for f in frames:

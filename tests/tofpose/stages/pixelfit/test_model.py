@@ -75,23 +75,54 @@ def _sub_cell_offsets(s):
 
 
 def test_plate_fraction_is_the_plates_projected_area_and_edge():
-    """A facing plate off axis at 4 m: pixels wholly inside are 1, those beyond 0, the
-    fractions sum to the plate's projected area within its part of the image, and a
-    pixel its edge halves is near 1/2."""
+    """A plate turned 90 deg about its normal, off axis at 4 m: its 990 mm width spans
+    the image's rows, its 550 mm height the columns; each row through it sums to the
+    height in px (its two edge pixels' fractions included, to 0.3 px), each column to
+    the width; pixels wholly inside are 1 and those beyond 0."""
+    from tofpose.core.geometry import rotation_from_euler_deg
     from tofpose.stages.pixelfit.model import plate_fraction
 
     cam, cat = CameraModel(), paper_target()
-    T = RigidTransform(R_FACING, np.array([600.0, 0.0, 4000.0]))
+    R = R_FACING @ rotation_from_euler_deg(0.0, 0.0, 90.0)
+    T = RigidTransform(R, np.array([80.0, -40.0, 4000.0]))
     v, u = np.mgrid[0 : cam.height, 0 : cam.width]
     uv = np.column_stack([u.ravel(), v.ravel()]).astype(float)
-    s = 4
+    s = 8
     offs = (np.arange(s) + 0.5) / s - 0.5
     grid = np.stack(np.meshgrid(offs, offs), axis=-1).reshape(-1, 2)
     rays = cam.bearings((uv[:, None] + grid[None]).reshape(-1, 2)).reshape(len(uv), s * s, 3)
     f = plate_fraction(rays, T.R, T.t_mm, cat.plate_size_mm).reshape(cam.shape)
-    w, h = cat.plate_size_mm
-    assert f.sum() == pytest.approx(w * h * (cam.fx / 4000.0) ** 2, rel=0.01)
-    centre = cam.project(np.array([[600.0, 0.0, 4000.0]]))[0]
-    assert f[int(round(centre[1])), int(round(centre[0]))] == 1.0
+    width_mm, height_mm = cat.plate_size_mm
+    px_per_mm = cam.fx / 4000.0
+    centre = cam.project(np.array([[80.0, -40.0, 4000.0]]))[0]
+    row, col = int(round(centre[1])), int(round(centre[0]))
+    assert f[row].sum() == pytest.approx(height_mm * px_per_mm, abs=0.3)
+    assert f[:, col].sum() == pytest.approx(width_mm * px_per_mm, abs=0.3)
+    assert f[row, col] == 1.0
     assert f[0, 0] == 0.0 and f[-1, -1] == 0.0
-    assert set(np.unique(f)) > {0.0, 1.0}  # the edge's pixels in between
+    assert np.any((f[row] > 0.1) & (f[row] < 0.9))  # the edges' pixels in between
+
+
+def test_plate_fraction_follows_the_plates_projected_corners_at_any_pose():
+    """At a pose turned about every axis (``R`` not its transpose), the pixels whose
+    centres lie over 1 px inside the polygon of the plate's projected corners are 1,
+    those over 1 px outside it 0."""
+    import cv2
+
+    from tofpose.core.geometry import rotation_from_euler_deg
+    from tofpose.stages.pixelfit.model import plate_fraction
+
+    cam, cat = CameraModel(), paper_target()
+    R = R_FACING @ rotation_from_euler_deg(15.0, -25.0, 35.0)
+    assert not np.allclose(R, R.T)
+    t = np.array([150.0, 60.0, 3500.0])
+    w, h = np.asarray(cat.plate_size_mm) / 2
+    corners = np.array([[-w, -h, 0.0], [w, -h, 0.0], [w, h, 0.0], [-w, h, 0.0]])
+    polygon = cam.project(corners @ R.T + t).astype(np.float32)
+    v, u = np.mgrid[0 : cam.height, 0 : cam.width]
+    uv = np.column_stack([u.ravel(), v.ravel()]).astype(float)
+    rays = cam.bearings(uv)[:, None, :]  # one sub-cell: the pixel's centre
+    f = plate_fraction(rays, R, t, cat.plate_size_mm)
+    signed = np.array([cv2.pointPolygonTest(polygon, (float(a), float(b)), True) for a, b in uv])
+    assert np.sum(signed > 1) > 1000 and np.sum(signed < -1) > 1000
+    assert np.all(f[signed > 1] == 1.0) and np.all(f[signed < -1] == 0.0)
