@@ -83,7 +83,12 @@ from tofpose.stages.pixelfit.model import (
     predict,
     predicted_rims,
 )
-from tofpose.stages.pixelfit.records import FitConstants, FitRecord
+from tofpose.stages.pixelfit.records import (
+    FitConstants,
+    FitRecord,
+    ImageRecord,
+    NuisanceRecord,
+)
 from tofpose.stages.pose.solve import chi2_limit
 
 #: the simulator's and the paper's camera default, Hz (c / (2 f) = 24.98 m)
@@ -1307,7 +1312,7 @@ def _levenberg_marquardt(
                     trial_images.coverage,
                     trial_images.phasor,
                     trial_images.plate_phasor,
-                    *_state_arrays(trial),
+                    _nuisance_record(trial),
                     sig.gray,
                     sig.distance_mm,
                     *kernel,
@@ -1328,17 +1333,15 @@ def _levenberg_marquardt(
     return _Solved(state, images, info, iterations, converged, last)
 
 
-def _image_arrays(
-    images: DiscImages, d_images: DiscImageDerivatives
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _image_record(images: DiscImages, d_images: DiscImageDerivatives) -> ImageRecord:
     """The discs' images and their pose derivatives as ``kernels.normal`` takes them."""
-    return (
-        images.coverage,
-        images.phasor,
-        images.plate_phasor,
-        d_images.coverage,
-        d_images.phasor,
-        d_images.plate_phasor,
+    return ImageRecord(
+        coverage=images.coverage,
+        phasor=images.phasor,
+        plate=images.plate_phasor,
+        d_coverage=d_images.coverage,
+        d_phasor=d_images.phasor,
+        d_plate=d_images.plate_phasor,
     )
 
 
@@ -1351,16 +1354,15 @@ def _linearised(
     else from J in NumPy."""
     noise = lin.noise
     if noise.kernel is not None and lin.d_images is not None:
-        info, grad, cost, sigma_gray, sigma_distance, k, blocks, block_grads = (
-            normal_kernel.normal_equations(
-                *_image_arrays(lin.images, lin.d_images),
-                *_state_arrays(lin.state),
-                *noise.kernel,
-                per_disc,
-            )
+        out = normal_kernel.normal_equations(
+            _image_record(lin.images, lin.d_images),
+            _nuisance_record(lin.state),
+            *noise.kernel,
+            per_disc,
         )
-        sig = _Sigmas(sigma_gray, sigma_distance, float(k))
-        return info, grad, float(cost), sig, (blocks, block_grads) if per_disc else None
+        sig = _Sigmas(out.sigma_gray, out.sigma_distance, float(out.range_k_mm))
+        shares = (out.disc_info, out.disc_grad) if per_disc else None
+        return out.info, out.grad, float(out.cost), sig, shares
     pred = pb.predict(lin.images, lin.state)
     sig = _sigmas(pb, pred, noise.extra_var, noise.rim, noise.coverage_sigma)
     r = _residuals(pb, pred, sig, lin.state)
@@ -1414,14 +1416,13 @@ def _fit_constants(pb: _Problem, extra_var: float) -> FitConstants:
     )
 
 
-def _state_arrays(s: _State) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
-    """The state's nuisance parameters as ``kernels.normal`` takes them: gains (K,
-    GAIN_TERMS), levels (K,), the common offset mm, the discs' own offsets (K,) mm."""
-    return (
-        np.ascontiguousarray(s.gains, float),
-        np.ascontiguousarray(s.levels, float),
-        float(s.offset_mm),
-        np.ascontiguousarray(s.disc_offsets_mm, float),
+def _nuisance_record(s: _State) -> NuisanceRecord:
+    """The state's nuisance parameters as ``kernels.normal`` takes them."""
+    return NuisanceRecord(
+        gains=np.ascontiguousarray(s.gains, float),
+        levels=np.ascontiguousarray(s.levels, float),
+        offset_mm=float(s.offset_mm),
+        disc_offsets_mm=np.ascontiguousarray(s.disc_offsets_mm, float),
     )
 
 

@@ -81,3 +81,46 @@ class FitConstants(NamedTuple):
     offset_mean_mm: float
     disc_col: int
     disc_range_sigma_mm: float
+
+
+class ImageRecord(NamedTuple):
+    """The discs' images at one pose with their pose derivatives, as
+    ``kernels.derivatives.disc_images_with_derivatives`` returns them: ``coverage`` (K,
+    P), ``phasor`` (K, P) complex, ``plate`` (P,) complex, ``d_coverage`` (K, P, 6),
+    ``d_phasor`` (K, P, 6) complex, ``d_plate`` (P, 6) complex."""
+
+    coverage: np.ndarray
+    phasor: np.ndarray
+    plate: np.ndarray
+    d_coverage: np.ndarray
+    d_phasor: np.ndarray
+    d_plate: np.ndarray
+
+
+class NuisanceRecord(NamedTuple):
+    """The fit's nuisance parameters at a state: ``gains`` (K, GAIN_TERMS) counts,
+    ``levels`` (K,) counts, the common range offset ``offset_mm`` and each disc's own
+    ``disc_offsets_mm`` (K,)."""
+
+    gains: np.ndarray
+    levels: np.ndarray
+    offset_mm: float
+    disc_offsets_mm: np.ndarray
+
+
+class NormalEquations(NamedTuple):
+    """``kernels.normal.normal_equations``' result over the F fitted parameters: the
+    information ``info`` (F, F) = J'J, the gradient ``grad`` (F,) = J'r, the cost ``r'r``,
+    the sigmas the iteration used (``sigma_gray`` (P,) counts, ``sigma_distance`` (P,)
+    mm, the range constant ``range_k_mm``), and each disc's shares of the information
+    ``disc_info`` (K, F, F) and of the gradient ``disc_grad`` (K, F) (empty, K = 0,
+    when not asked for)."""
+
+    info: np.ndarray
+    grad: np.ndarray
+    cost: float
+    sigma_gray: np.ndarray
+    sigma_distance: np.ndarray
+    range_k_mm: float
+    disc_info: np.ndarray
+    disc_grad: np.ndarray

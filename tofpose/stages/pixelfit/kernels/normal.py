@@ -25,6 +25,7 @@ import numpy as np
 from tofpose.core.compiled import jit
 from tofpose.stages.pixelfit.constants import MAD_TO_SIGMA, QUANTISATION_VAR
 from tofpose.stages.pixelfit.kernels.derivatives import N_POSE
+from tofpose.stages.pixelfit.records import NormalEquations
 
 
 @jit
@@ -33,9 +34,11 @@ def _wrap(x, period):
 
 
 @jit
-def predict(coverage, phasor, plate, gains, levels, offset_mm, disc_offsets_mm, fit, const):
-    """``model.predict``: gray (P,) counts, distance (P,) mm, the mixed phasor (P,)
-    complex, the surround's share (P,) and each disc's gain at each pixel (K, P)."""
+def predict(coverage, phasor, plate, state, fit, const):
+    """``model.predict`` at the nuisance parameters ``state`` (a ``NuisanceRecord``):
+    gray (P,) counts, distance (P,) mm, the mixed phasor (P,) complex, the surround's
+    share (P,) and each disc's gain at each pixel (K, P)."""
+    gains, levels = state.gains, state.levels
     basis, owner = fit.basis, fit.owner
     k_count, p_count = coverage.shape
     n_terms = basis.shape[2]
@@ -65,8 +68,8 @@ def predict(coverage, phasor, plate, gains, levels, offset_mm, disc_offsets_mm, 
         distance[p] = (
             const.reference_mm
             + const.mm_per_radian * math.atan2(mixed[p].imag, mixed[p].real)
-            + offset_mm
-            + disc_offsets_mm[owner[p]]
+            + state.offset_mm
+            + state.disc_offsets_mm[owner[p]]
         )
     return gray, distance, mixed, surround, g
 
@@ -116,8 +119,9 @@ def _gray_residual(p, censored, gray, sigma_gray, fit, const):
 
 
 @jit
-def _cost(gray, distance, offset_mm, disc_offsets_mm, sigma_gray, sigma_distance, fit, const):
-    """``sum r^2`` of ``fit._residuals``."""
+def _cost(gray, distance, state, sigma_gray, sigma_distance, fit, const):
+    """``sum r^2`` of ``fit._residuals`` (``state``: a ``NuisanceRecord``)."""
+    offset_mm, disc_offsets_mm = state.offset_mm, state.disc_offsets_mm
     cost = 0.0
     for i in range(fit.gray_rows.shape[0]):
         r, _ = _gray_residual(fit.gray_rows[i], False, gray, sigma_gray, fit, const)
@@ -171,31 +175,20 @@ def _symmetric(info):
 
 
 @jit
-def normal_equations(
-    coverage,
-    phasor,
-    plate,
-    d_coverage,
-    d_phasor,
-    d_plate,
-    gains,
-    levels,
-    offset_mm,
-    disc_offsets_mm,
-    fit,
-    const,
-    per_disc,
-):
-    """The information ``J'J`` (F, F), gradient ``J'r`` (F,) and cost ``r'r`` over the F
-    fitted parameters at the state (``gains`` (K, GAIN_TERMS), ``levels`` (K,),
-    ``offset_mm``, ``disc_offsets_mm`` (K,)) whose discs' images and pose derivatives
-    these are (``derivatives.disc_images_with_derivatives``' six outputs), with the
+def normal_equations(images, state, fit, const, per_disc):
+    """The normal equations at a state (a ``NormalEquations``): the information ``J'J``
+    (F, F), gradient ``J'r`` (F,) and cost ``r'r`` over the F fitted parameters, with the
     sigmas (gray (P,), distance (P,), k) the iteration uses for its trials too; with
     ``per_disc`` also each disc's rows' share of the information (K, F, F) and of the
-    gradient (K, F) (``fit.disc_deletion``; else (0, F, F) and (0, F))."""
-    gray, distance, mixed, surround, g = predict(
-        coverage, phasor, plate, gains, levels, offset_mm, disc_offsets_mm, fit, const
-    )
+    gradient (K, F) (``fit.disc_deletion``; else (0, F, F) and (0, F)).
+
+    images : an ``ImageRecord``, the discs' images at the state's pose and their pose
+    derivatives; state : a ``NuisanceRecord``; fit : a ``FitRecord``; const : a
+    ``FitConstants``."""
+    coverage, phasor, plate = images.coverage, images.phasor, images.plate
+    d_coverage, d_phasor, d_plate = images.d_coverage, images.d_phasor, images.d_plate
+    levels, offset_mm, disc_offsets_mm = state.levels, state.offset_mm, state.disc_offsets_mm
+    gray, distance, mixed, surround, g = predict(coverage, phasor, plate, state, fit, const)
     sigma_gray, sigma_distance, k = sigmas(gray, distance, mixed, fit, const)
     k_count, p_count = coverage.shape
     n_terms = fit.basis.shape[2]
@@ -298,8 +291,17 @@ def normal_equations(
     _symmetric(info)
     for kk in range(n_blocks):
         _symmetric(disc_info[kk])
-    cost = _cost(gray, distance, offset_mm, disc_offsets_mm, sigma_gray, sigma_distance, fit, const)
-    return info, grad, cost, sigma_gray, sigma_distance, k, disc_info, disc_grad
+    cost = _cost(gray, distance, state, sigma_gray, sigma_distance, fit, const)
+    return NormalEquations(
+        info=info,
+        grad=grad,
+        cost=cost,
+        sigma_gray=sigma_gray,
+        sigma_distance=sigma_distance,
+        range_k_mm=k,
+        disc_info=disc_info,
+        disc_grad=disc_grad,
+    )
 
 
 @jit
@@ -318,22 +320,9 @@ def _surround_derivative(d_coverage, coverage, p, out):
 
 
 @jit
-def trial_cost(
-    coverage,
-    phasor,
-    plate,
-    gains,
-    levels,
-    offset_mm,
-    disc_offsets_mm,
-    sigma_gray,
-    sigma_distance,
-    fit,
-    const,
-):
-    """The cost ``r'r`` at a trial state (its discs' images; arguments as
-    ``normal_equations``) with the iteration's sigmas."""
-    gray, distance, _, _, _ = predict(
-        coverage, phasor, plate, gains, levels, offset_mm, disc_offsets_mm, fit, const
-    )
-    return _cost(gray, distance, offset_mm, disc_offsets_mm, sigma_gray, sigma_distance, fit, const)
+def trial_cost(coverage, phasor, plate, state, sigma_gray, sigma_distance, fit, const):
+    """The cost ``r'r`` at a trial state (its discs' images ``coverage``, ``phasor``,
+    ``plate``; ``state`` a ``NuisanceRecord``; the rest as ``normal_equations``) with the
+    iteration's sigmas."""
+    gray, distance, _, _, _ = predict(coverage, phasor, plate, state, fit, const)
+    return _cost(gray, distance, state, sigma_gray, sigma_distance, fit, const)

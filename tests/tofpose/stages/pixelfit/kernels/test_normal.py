@@ -83,7 +83,7 @@ def test_normal_equations_equal_the_numpy_jacobians(monkeypatch, noise_options, 
             im, d_im = pb.images_with_derivatives(s.R, s.t_mm)
             info, grad, cost, sigma_gray, sigma_distance, k, blocks, block_grads = (
                 normal.normal_equations(
-                    *fit._image_arrays(im, d_im), *fit._state_arrays(s), record, constants, True
+                    fit._image_record(im, d_im), fit._nuisance_record(s), record, constants, True
                 )
             )
             pred = pb.predict(im, s)
@@ -109,7 +109,7 @@ def test_normal_equations_equal_the_numpy_jacobians(monkeypatch, noise_options, 
                 im.coverage,
                 im.phasor,
                 im.plate_phasor,
-                *fit._state_arrays(s),
+                fit._nuisance_record(s),
                 sig.gray,
                 sig.distance_mm,
                 record,
