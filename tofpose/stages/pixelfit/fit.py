@@ -828,22 +828,25 @@ def _surround_extra_var(pb: _Problem, images: DiscImages, s: _State) -> float:
     return float(max(var - np.median(np.maximum(level, 0.0)), 0.0))
 
 
-def _glint_pixels(pb: _Problem, solved: _Solved, extra_var: float) -> np.ndarray:
+def _glint_pixels(
+    pb: _Problem, images: DiscImages, pred: Prediction, extra_var: float
+) -> np.ndarray:
     """(P,) bool: the window pixels of bright spots in the surround that the model does
     not carry (a specular glint, a light, a marker-like reflection off the structure), at
-    the ``solved`` pose. A spot is a pixel whose gray is more than ``GLINT_PEAK_SIGMA``
-    sigmas above the model, the largest in its 3 x 3 neighbourhood; its pixels are those
-    connected to it, clear of the discs, more than ``GLINT_TAIL_SIGMA`` above the model;
-    and none of them is a disc's pixel or next to one (a disc's rim the model draws
-    wrong, or blurs, is a model error to be seen, not left out, and a spot whose light
-    reaches a rim biases the rim where it cannot be left out). Left in, such a spot pulls the
-    window's surround level up by tens of sigmas' worth and the disc's residuals beyond
-    the fallback's limit (the other renderer's glints recording: the fit held on 15 of
-    its 48 frames)."""
+    a solution (``images`` its discs' images, ``pred`` the model there).
+
+    A spot is a pixel whose gray is more than ``GLINT_PEAK_SIGMA`` sigmas above the
+    model, the largest in its 3 x 3 neighbourhood; its pixels are those connected to it,
+    clear of the discs, more than ``GLINT_TAIL_SIGMA`` above the model. It is left out
+    only when none of its pixels is a disc's or next to one (a disc's rim the model
+    draws wrong, or blurs, is a model error to be seen, and a spot whose light reaches a
+    rim biases the rim where it cannot be left out) and it covers at most
+    ``GLINT_MAX_SHARE`` of the surround. Left in, such a spot pulls the window's
+    surround level up and the disc's residuals beyond the fallback's limit (the other
+    renderer's glints recording: the fit held on 15 of its 48 frames)."""
     w = pb.win
-    pred = pb.predict(solved.images, solved.state)
     z = (w.gray - pred.gray) / np.sqrt(_gray_variance(pred, extra_var))
-    covered = solved.images.coverage.sum(axis=0) > 0
+    covered = images.coverage.sum(axis=0) > 0
     r0, c0 = int(w.rows.min()), int(w.cols.min())
     shape = (int(w.rows.max()) - r0 + 1, int(w.cols.max()) - c0 + 1)
     at = (w.rows - r0, w.cols - c0)
@@ -1131,16 +1134,17 @@ def fit_pose_to_pixels(
 
     solved = _levenberg_marquardt(pb, state, images, extra_var, np.zeros(k_count), max_iterations)
     # bright spots in the surround the model does not carry (glints): left out, fitted again
-    glints = _glint_pixels(pb, solved, extra_var)
+    pred = pb.predict(solved.images, solved.state)
+    glints = _glint_pixels(pb, solved.images, pred, extra_var)
     if np.any(glints):
         pb = _without_pixels(pb, glints)
         again = _levenberg_marquardt(
             pb, solved.state, solved.images, extra_var, np.zeros(k_count), max_iterations
         )
         solved = replace(again, iterations=solved.iterations + again.iterations)
+        pred = pb.predict(solved.images, solved.state)
     # the model errors the frame shows at the first solution; then fitted again with them
     st, im = solved.state, solved.images
-    pred = pb.predict(im, st)
     rim = _rim_sensitivity(pb, im, pred, st)
     crowded = _crowded(discs)
     if noise.coverage_sigma is None:
