@@ -220,7 +220,7 @@ class SetPointCollector:
             except Exception as exc:
                 raise _paused(f"motion status failed at set-point {index}: {exc}") from exc
             if st.stopped:
-                raise _paused(f"the turntable was stopped at set-point {index}")
+                raise self._stopped(index)
             if st.settled and not st.busy:
                 return
             if time.monotonic() > deadline:
@@ -347,7 +347,7 @@ class SetPointCollector:
             )
         st = trace.latest
         if st.stopped:
-            raise _paused(f"the turntable was stopped at set-point {index}")
+            raise self._stopped(index)
         if t < t_done:
             return False
         if st.profile is None and st.settled and not st.busy:
@@ -393,6 +393,14 @@ class SetPointCollector:
         elapsed = st.profile.elapsed_s if st.profile is not None else 0.0
         t0 = float(st.time_s) - elapsed
         return t0, t0 + profile.duration_s
+
+    def _stopped(self, index: int) -> SetPointHalt:
+        """The pause for a table found stopped at set-point ``index``: a person's STOP
+        (latched in the motion service) reads "STOP pressed", as the campaign service's
+        own request does, whichever of the two the runner sees first."""
+        if self.motion.stop_latched:
+            return _paused(f"STOP pressed at set-point {index}")
+        return _paused(f"the turntable was stopped at set-point {index}")
 
     def _stop_table(self, index: int) -> None:
         """Stop the table after a move or a profile was interrupted; a stop that fails is

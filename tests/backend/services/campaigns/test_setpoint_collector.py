@@ -181,6 +181,26 @@ def test_a_stop_pressed_while_settling_pauses(lab):
     assert halt.reason == "the turntable was stopped at set-point 5"
 
 
+def test_a_persons_stop_found_by_the_runner_first_reads_stop_pressed(lab):
+    """The motion service latches a person's STOP and stops the table before it tells
+    the campaign service; a runner that sees the stopped table first names the same
+    cause as the campaign service's own request would."""
+    world, _, _ = lab
+    collector = _collector(lab)
+
+    checks = []
+
+    def person_presses_stop(index: int) -> None:
+        checks.append(index)
+        if len(checks) == 2:  # the move is sent: STOP while the table settles
+            collector.motion.latch_stop()
+            world.stop()
+
+    collector.check = person_presses_stop
+    halt = _halt(lambda: collector.collect(7, {"yaw": 30.0}, POLICY))
+    assert (halt.status, halt.reason) == (CampaignState.PAUSED, "STOP pressed at set-point 7")
+
+
 def test_a_lost_pose_lock_pauses_after_the_lock_timeout(lab):
     _, camera, _ = lab
     inner_read = camera.read
