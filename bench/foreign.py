@@ -67,6 +67,7 @@ from bench._foreign_metrics import (  # noqa: E402
     true_correspondences,
     true_images,
 )
+from bench.rim_sampling import rim_sampling  # noqa: E402
 from tofpose.core.geometry import RigidTransform  # noqa: E402
 from tofpose.core.threads import single_threaded_blas  # noqa: E402
 from tofpose.io import camera_file  # noqa: E402
@@ -258,6 +259,10 @@ def evaluate(
         matched_by_truth = None
         if oracle:
             runs["oracle"], matched_by_truth = run_oracle(rec, pipe, truth, progress)
+        try:
+            rims = rim_sampling(rec).describe()
+        except RecordingError as exc:  # no /catalog in the file: not read
+            rims = f"not read ({exc})"
     bins, labels = range_bins(np.linalg.norm(rec.truth_t_mm, axis=1), bin_width_m)
     out = {
         "path": str(rec_path),
@@ -267,6 +272,7 @@ def evaluate(
         "catalog": pipe.catalog.name,
         "bins": labels,
         "oracle_frames_matched": matched_by_truth,
+        "rim_sampling": rims,
         "pose": [],
         "markers": [],
         "outcomes": {},
@@ -321,6 +327,8 @@ def report(ev: dict) -> str:
             head += " (the others had too few candidate blobs)"
     lines = [
         head,
+        "",
+        f"Rendering, read at the true poses (`bench/rim_sampling.py`): {ev['rim_sampling']}.",
         "",
         "Poses (success: <= 1 deg and <= max(20 mm, 0.5 % range); wrong: ok and "
         "> 2 deg or > 2.5x that; conf. wrong: wrong and d2 > "

@@ -49,7 +49,7 @@ from tofpose.stages.matching.matching import (
     random_triplets,
 )
 from tofpose.stages.persistence.persistence import Persistence, PersistenceInfo, blob_lists
-from tofpose.stages.pixelfit.fit import PixelNoise, fit_pose_to_pixels
+from tofpose.stages.pixelfit.fit import PixelFitResult, PixelNoise, fit_pose_to_pixels
 from tofpose.stages.pose.constants import (
     MIN_VARIANCE_FACTOR,
     NARROWING_CONFIDENCE,
@@ -152,8 +152,10 @@ class PoseResult:
         reflectors with the fit's weights, before refinement (``solve.Solution.T_svd``):
         the paper's §5.1 answer on the same measurements, to see what refinement did.
     pixel_fit : "" when the pixel-level fit did not run (``PipelineConfig.pixel_fit``),
-        "ok" when ``R``, ``t_mm`` and ``covariance`` are its answer, otherwise why it fell
-        back to the centroid pose (which the result then carries).
+        "ok" when ``R``, ``t_mm`` and ``covariance`` are its answer (with three matched
+        markers the covariance also holds the centroid pose's: the fit cannot check its
+        own then, ``PixelFitResult.deletion_checked``), otherwise why it fell back to the
+        centroid pose (which the result then carries).
     range_offset : the range offset common to the reflectors that the pose's fit took
         out of their ranges, its posterior sigma and its prior's
         (``stages.pose.records.RangeOffset``; the pixel fit's when it holds): what the
@@ -451,7 +453,7 @@ class PosePipeline:
             t_mm=fit.t_mm,
             euler_deg=facing_euler_deg(fit.R),
             quaternion_wxyz=quaternion_wxyz_from_rotation(fit.R),
-            covariance=fit.covariance,
+            covariance=self._pixel_fit_covariance(fit, result),
             pixel_fit="ok",
             timings_ms=timings,
             range_offset=RangeOffset(
@@ -463,6 +465,16 @@ class PosePipeline:
                 offset_mean_mm,
             ),
         )
+
+    def _pixel_fit_covariance(self, fit: PixelFitResult, result: PoseResult) -> np.ndarray:
+        """(6, 6) the covariance reported with the pixel fit's pose: the fit's, and where
+        the fit could not check it by deleting each disc (``fit.deletion_checked``: three
+        matched markers) the envelope of the fit's and the centroid pose's ``result``
+        (``pose.covariance_envelope``): a claim no narrower than one that was checked."""
+        assert fit.covariance is not None and result.covariance is not None
+        if fit.deletion_checked:
+            return fit.covariance
+        return self.arithmetic.pose.covariance_envelope(fit.covariance, result.covariance)
 
     def _range_corrected(self, gray: np.ndarray, distance_mm: np.ndarray) -> np.ndarray:
         """``distance_mm`` (H, W) less the calibrated range error of each pixel

@@ -11,6 +11,7 @@ from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg
 from tofpose.sim.bench import R_FACING
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import TargetScene
+from tofpose.stages.pixelfit.fit import fit_pose_to_pixels
 
 CAM = CameraModel()
 CAT = paper_target()
@@ -54,3 +55,50 @@ def test_a_half_shadowed_disc_keeps_the_centroid_pose_and_says_why():
     assert "markers 6" in fitted.pixel_fit, fitted.pixel_fit
     assert np.array_equal(fitted.R, plain.R) and np.array_equal(fitted.t_mm, plain.t_mm)
     assert np.array_equal(fitted.covariance, plain.covariance)
+
+
+def _half_out_of_view(offset_mm: float):
+    """A frame of the target ``offset_mm`` across the view at 3 m (its right side out of
+    the image), the centroid pose, the pipeline's with the fit, and the fit run alone
+    with the pipeline's options."""
+    T = RigidTransform(
+        rotation_from_euler_deg(3, -4, 5) @ R_FACING, np.array([offset_mm, 0, 3000.0])
+    )
+    f = render_frame(CAM, TargetScene(), T, SensorModel(supersampling=32), np.random.default_rng(5))
+    plain = PosePipeline(CAM, CAT).process(f.gray, f.distance_mm)
+    fitted = PosePipeline(CAM, CAT, ON).process(f.gray, f.distance_mm)
+    assert plain.ok and fitted.ok and fitted.pixel_fit == "ok", (plain.reason, fitted.pixel_fit)
+    own = fit_pose_to_pixels(
+        f.gray,
+        f.distance_mm,
+        CAM,
+        CAT,
+        plain.R,
+        plain.t_mm,
+        [m.catalog_id for m in plain.matched],
+        fit_range_offset=True,
+        range_offset_sigma_mm=plain.range_offset.prior_sigma_mm,
+    )
+    assert own.ok and own.covariance is not None
+    return plain, fitted, own
+
+
+def test_three_markers_report_a_covariance_that_holds_the_centroid_poses():
+    """With three markers in view (the target half out of the field of view) the fit
+    cannot delete a disc and still fit the pose, so it cannot check its own covariance:
+    the pipeline reports the envelope of the fit's and the centroid pose's (both
+    ellipsoids inside it), the fit's pose kept."""
+    plain, fitted, own = _half_out_of_view(1600.0)
+    assert fitted.n_matched == 3 and not own.deletion_checked
+    assert not np.allclose(fitted.t_mm, plain.t_mm)  # the fit's pose
+    C = fitted.covariance
+    for inner in (plain.covariance, own.covariance):  # C - inner is positive semi-definite
+        assert np.linalg.eigvalsh(C - inner).min() > -1e-9 * np.abs(C).max()
+    assert np.trace(C[:3, :3]) > 1.5 * np.trace(own.covariance[:3, :3])
+
+
+def test_four_markers_keep_the_fits_checked_covariance():
+    """With a fourth marker each disc can be deleted: the fit's own covariance stands."""
+    _, fitted, own = _half_out_of_view(1500.0)
+    assert fitted.n_matched == 4 and own.deletion_checked
+    np.testing.assert_allclose(fitted.covariance, own.covariance, rtol=1e-6)
