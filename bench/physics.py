@@ -6,13 +6,14 @@ renderer (``bench/_foreign_metrics.py``: success, wrong, confidently wrong, shar
 
 Families: ``tofpose.sim.randomise.ALL_FAMILIES`` (each frame draws its own values;
 ``draw_frame``): the seven of ``FAMILIES`` on the EPC660, and ``saturating`` (a fixed
-exposure: the markers' cores clipped), ``glints`` (15 specular glints around the target)
-and ``other sensor`` (640 x 480, 20 MHz, count scale 4: its own camera, and the pipeline
-set for it by ``config_for_camera`` as the CLI does).
+exposure: the markers' cores clipped), ``glints`` (15 specular glints around the target),
+``other sensor`` (640 x 480, 20 MHz, count scale 4: its own camera, and the pipeline
+set for it by ``config_for_camera`` as the CLI does), ``bright plate`` and ``out of
+view`` (the target partly out of the frame).
 
 Poses: ranges 3, 4.5, 6 and 8 m, attitude up to 20 deg per axis from facing, the target
-centre up to half the half field of view off the optical axis. Each frame is a fresh
-acquisition.
+centre up to half the half field of view off the optical axis (``out of view``: near an
+edge, ``draw_edge_pose``). Each frame is a fresh acquisition.
 
 Run: ``python bench/physics.py [--frames N] [--out DIR] [--families NAME ...]`` (N frames
 per family and range; the named families only); ``python bench/physics.py
@@ -339,7 +340,10 @@ def markdown(out, img: str, n: int) -> str:
         "camera (same field of view, 20 MHz: 7.49 m unambiguous, so the 8 m frames wrap; "
         "count scale 4), the pipeline set for it by `config_for_camera`; `bright plate` a "
         "light-painted plate (reflectance 0.6-0.95, no wall) with weaker reflectors (gains "
-        "0.7-1.3 each, the retro-reflector gain 4-40 times a white diffuser, default 40). "
+        "0.7-1.3 each, the retro-reflector gain 4-40 times a white diffuser, default 40); "
+        "`out of view` the defaults with the target's centre 0.85-1.2 half fields of view "
+        "off the axis towards an edge (part of the target, often all but three markers, "
+        "out of the frame). "
         "Range bias: signed median of the matched "
         "reflectors' range error, by diameter. Scale error: the matched centroids' "
         "common-mode (image-scale) error in px of the pattern's rms radius, beyond what "

@@ -18,7 +18,7 @@ Physics families (each frame draws its own values):
 * ``all``: every knob above but the background drawn at once, ambient 1-10 klx, wall or
   none;
 
-and three more (``EXTRA_FAMILIES``) that are drawn whole by ``draw_frame``, since they
+and five more (``EXTRA_FAMILIES``) that are drawn whole by ``draw_frame``, since they
 need the pose or a camera of their own:
 
 * ``saturating``: the defaults with a fixed exposure set for the plate, so that a
@@ -40,8 +40,12 @@ need the pose or a camera of their own:
   prismatic sheeting's). A face-on marker then reads retro gain x its gain /
   reflectance times the plate, about 3-90x (where the defaults give ~400x), and the
   exposure the markers set lifts the plate well above the noise.
+* ``out of view``: the defaults with the target's centre near an edge of the image
+  (``draw_edge_pose``: 0.85-1.2 of the half field of view off the axis towards one
+  side, so that part of the target, often all but three of its markers, is out of the
+  frame).
 
-Used by the physics robustness study (``bench/physics.py``, all eleven) and by Monte-Carlo
+Used by the physics robustness study (``bench/physics.py``, all twelve) and by Monte-Carlo
 accuracy studies (``tofpose.study``: ``FAMILIES``, drawn by ``draw_physics``,
 ``draw_pose`` and ``draw_background``).
 """
@@ -73,7 +77,7 @@ from tofpose.sim.systematic import SystematicErrors
 FAMILIES = ("ideal", "grey plate", "lens blur", "gains", "systematic", "background", "all")
 #: the families only ``draw_frame`` draws (they need the pose, their own camera, or a
 #: sensor knob a study's families keep: appended so that the study's draws stay)
-EXTRA_FAMILIES = ("saturating", "glints", "other sensor", "bright plate")
+EXTRA_FAMILIES = ("saturating", "glints", "other sensor", "bright plate", "out of view")
 ALL_FAMILIES = FAMILIES + EXTRA_FAMILIES
 ARM_PROBABILITY = 0.3  # share of background frames with an arm in front of the target
 #: ``saturating``: a face-on reflector at the target's range reads this many full scales
@@ -83,6 +87,9 @@ N_GLINTS = 15  # ``glints``: glints per frame
 #: reflectance
 BRIGHT_PLATE_RETRO_GAIN = (4.0, 40.0)
 BRIGHT_PLATE_REFLECTANCE = (0.6, 0.95)
+#: ``out of view``: the target centre's distance off the axis towards one edge, in half
+#: fields of view (beyond 1 it lies outside the image)
+EDGE_OFFSET = (0.85, 1.2)
 
 
 def other_sensor_camera() -> CameraModel:
@@ -157,7 +164,10 @@ def draw_frame(
     base = family if family in FAMILIES else "ideal"
     scene, sensor = draw_physics(base, rng, catalog, ambient_lux)
     sensor = sensor_for_camera(sensor, camera)
-    T = draw_pose(range_m, rng, camera, max_attitude_deg, offset_fraction)
+    if family == "out of view":
+        T = draw_edge_pose(range_m, rng, camera, max_attitude_deg)
+    else:
+        T = draw_pose(range_m, rng, camera, max_attitude_deg, offset_fraction)
     scene = draw_background(family, scene, rng, camera, T)
     glints = None
     if family == "saturating":
@@ -284,6 +294,27 @@ def draw_systematic_errors(rng: np.random.Generator) -> SystematicErrors:
         scatter_fraction=float(rng.uniform(0.0, 0.008)),
         offset_mm=float(rng.uniform(-15.0, 15.0)),
     )
+
+
+def draw_edge_pose(
+    range_m: float,
+    rng: np.random.Generator,
+    camera: CameraModel,
+    max_attitude_deg: float = 20.0,
+) -> RigidTransform:
+    """T_camera_target of an ``out of view`` frame: the target centre at ``range_m``,
+    ``EDGE_OFFSET`` half fields of view off the axis towards one of the four edges (drawn
+    at random) and up to half of it along that edge, attitude as ``draw_pose``'s."""
+    p, y, r = rng.uniform(-max_attitude_deg, max_attitude_deg, 3)
+    R = rotation_from_euler_deg(p, y, r) @ R_FACING
+    half = np.array([(camera.width / 2) / camera.fx, (camera.height / 2) / camera.fy])
+    side = int(rng.integers(4))
+    across = rng.uniform(*EDGE_OFFSET) * (1.0 if side % 2 == 0 else -1.0)
+    along = rng.uniform(-0.5, 0.5)
+    uv = np.array([across, along]) if side < 2 else np.array([along, across])
+    direction = np.array([*(uv * half), 1.0])
+    t = range_m * 1000.0 * direction / np.linalg.norm(direction)
+    return RigidTransform(R, t)
 
 
 def draw_pose(

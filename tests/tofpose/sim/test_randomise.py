@@ -275,3 +275,33 @@ def test_bright_plate_frames_have_a_light_plate_and_weaker_reflectors_in_their_r
         model = sensor.retro_gain * scene.reflector_gains[5] / scene.plate_reflectance
         assert core / plate == pytest.approx(model, rel=0.2)
         assert plate > 20.0
+
+
+def test_out_of_view_frames_put_part_of_the_target_outside_the_image():
+    """``out of view``: the target's centre lies 0.85-1.2 half fields of view towards
+    an edge, every edge drawn, so some of its markers project outside the image and
+    some inside (in most frames)."""
+    from tofpose.sim.randomise import EDGE_OFFSET, draw_frame
+
+    rng = np.random.default_rng(9)
+    sides, split = set(), 0
+    for _ in range(40):
+        d = draw_frame("out of view", 4.5, rng, CAT)
+        cam, T = d.camera, d.T_camera_target
+        u, v = cam.project((T.t_mm)[None])[0]
+        off = max(abs(u - cam.cx) / (cam.width / 2), abs(v - cam.cy) / (cam.height / 2))
+        assert EDGE_OFFSET[0] - 0.02 <= off <= EDGE_OFFSET[1] + 0.02
+        sides.add(
+            (
+                np.sign(round(u - cam.cx)),
+                np.sign(round(v - cam.cy)),
+                off == abs(u - cam.cx) / (cam.width / 2),
+            )
+        )
+        uv = cam.project(CAT.positions_mm @ T.R.T + T.t_mm)
+        inside = (
+            (uv[:, 0] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
+        )
+        split += int(0 < inside.sum() < len(CAT))
+    assert split >= 24  # most of the 40
+    assert len({(s[2], s[0] if s[2] else s[1]) for s in sides}) == 4  # all four edges
