@@ -129,6 +129,30 @@ FALLBACK_MAX_TRIPLETS = 20_000
 #: fittings in a room matched the paper target's nearly collinear lower four markers,
 #: ratio 0.11; a row's pose turns freely about it)
 FALLBACK_MIN_SPREAD = 0.25
+#: a pose whose attitude's largest sigma (the reported covariance's rotation block) is
+#: beyond this is refused: that covariance is the fit's linearised at the pose, and at 3
+#: sigma of 20 deg a rotation's second-order terms are half its first-order ones
+#: (theta / 2 at theta = 60 deg); beyond, the ellipsoid no longer says where the pose
+#: may lie. Seen with three markers nearly on one line, the rest of the target out of
+#: view: 32 deg, the pose 25 deg off and 48 of its sigmas away through the position its
+#: rotation drags along (the physics study's ``out of view`` family). Far targets reach it
+#: too: at 15 m in 10 klx, 2 of 25 poses (their median 8 deg; none at 10-12 m)
+MAX_ATTITUDE_SIGMA_DEG = 20.0
+
+
+def undetermined_attitude(result: PoseResult) -> str:
+    """Why the ok ``result``'s attitude is not determined by its matched reflectors (its
+    largest attitude sigma beyond ``MAX_ATTITUDE_SIGMA_DEG``), or ''."""
+    assert result.covariance is not None
+    sigma_deg = math.degrees(math.sqrt(max(np.linalg.eigvalsh(result.covariance[:3, :3])[-1], 0)))
+    if sigma_deg <= MAX_ATTITUDE_SIGMA_DEG:
+        return ""
+    ids = [m.catalog_id for m in result.matched]
+    return (
+        f"attitude not determined by the matched reflectors {ids}: {sigma_deg:.0f} deg "
+        f"(1 sigma) about one axis, beyond the {MAX_ATTITUDE_SIGMA_DEG:g} deg a linearised "
+        "covariance describes (too few markers in view, or nearly on one line)"
+    )
 
 
 @dataclass
@@ -606,6 +630,8 @@ class PosePipeline:
             g, meas.blobs, full_scale_counts=self.camera.full_scale_counts
         )
         result = self._pose_result(solved, meas, saturated, unmatched, time_s, timer, diag)
+        if why := undetermined_attitude(result):
+            return fail(why, unmatched=unmatched + meas.as_unmatched(), diagnostics=diag)
         self._track = TrackState(
             R=solved.T_camera_target.R,
             t_mm=solved.T_camera_target.t_mm,
@@ -758,8 +784,12 @@ class PosePipeline:
             return None
         return self._tracked_result(tracked, time_s, timer, track)
 
-    def _tracked_result(self, tracked: Tracked, time_s, timer, track: TrackState) -> PoseResult:
-        """The ok result of a tracked frame; the track moves on to its pose."""
+    def _tracked_result(
+        self, tracked: Tracked, time_s, timer, track: TrackState
+    ) -> PoseResult | None:
+        """The ok result of a tracked frame; the track moves on to its pose. None (the
+        acquisition pass then runs) when its attitude is not determined
+        (``undetermined_attitude``)."""
         solved, meas, info = tracked.solution, tracked.measurements, tracked.persistence
         diag = FrameDiagnostics(
             n_candidates=len(meas.range_mm),
@@ -770,6 +800,8 @@ class PosePipeline:
         result = self._pose_result(
             solved, meas, tracked.saturated, [], time_s, timer, diag, mode="tracking"
         )
+        if undetermined_attitude(result):
+            return None  # the acquisition pass says why
         self._track = TrackState(
             R=solved.T_camera_target.R,
             t_mm=solved.T_camera_target.t_mm,
