@@ -630,7 +630,8 @@ class PosePipeline:
             g, meas.blobs, full_scale_counts=self.camera.full_scale_counts
         )
         result = self._pose_result(solved, meas, saturated, unmatched, time_s, timer, diag)
-        if why := undetermined_attitude(result):
+        why = undetermined_attitude(result) or self._merged_in_minimal_pose(solved, meas)
+        if why:
             return fail(why, unmatched=unmatched + meas.as_unmatched(), diagnostics=diag)
         self._track = TrackState(
             R=solved.T_camera_target.R,
@@ -885,6 +886,39 @@ class PosePipeline:
             R_svd=None if solved.T_svd is None else solved.T_svd.R,
             t_svd_mm=None if solved.T_svd is None else solved.T_svd.t_mm,
             range_offset=ml.range_offset,
+        )
+
+    def _merged_in_minimal_pose(self, solved: Solution, meas: Measurements) -> str:
+        """Why a pose on the fewest reflectors (``matching.min_matches``: no redundancy
+        to show a biased one) cannot stand, or '': a catalog reflector it did not match,
+        in front of the camera, projects inside a matched blob (within the blob's
+        equivalent radius plus the reflector's own image radius). That blob then holds
+        two reflectors imaged as one (7 and 8 of the paper target merge at long range),
+        and its centroid lies between them: at 8 m with the rest of the target out of
+        view such a pose was 7 deg off at 10 of its sigmas."""
+        obs = solved.observations
+        if len(obs.i_idx) > self.config.matching.min_matches:
+            return ""
+        T = solved.T_camera_target
+        others = np.setdiff1d(np.arange(len(self._catalog_ids)), obs.i_idx)
+        points = self._catalog_xyz[others] @ T.R.T + T.t_mm
+        front = points[:, 2] > 0
+        others, points = others[front], points[front]
+        if not len(others):
+            return ""
+        uv = self.camera.project(points)
+        own_radius_px = 0.5 * self.camera.fx * self._catalog_d[others] / points[:, 2]
+        blob_radius_px = np.sqrt(meas.area_px[obs.k_idx] / np.pi)
+        gap = np.linalg.norm(uv[:, None, :] - obs.uv_px[None, :, :], axis=2)
+        inside = gap < blob_radius_px[None, :] + own_radius_px[:, None]
+        if not inside.any():
+            return ""
+        o, j = np.argwhere(inside)[0]
+        return (
+            f"reflector {int(self._catalog_ids[others[o]])} would lie inside the blob "
+            f"matched as {int(self._catalog_ids[obs.i_idx[j]])}: two reflectors imaged as "
+            f"one, whose centroid lies between them, and {len(obs.i_idx)} matched "
+            "reflectors leave nothing to tell the pose it biases"
         )
 
     def _reported_covariance(self, ml, n_matched: int, t_mm: np.ndarray) -> np.ndarray:

@@ -797,32 +797,42 @@ def test_a_target_beyond_the_unambiguous_range_is_refused_with_the_wrap_named():
     assert "right catalog" not in r.reason
 
 
-def test_an_attitude_the_markers_do_not_determine_is_refused_not_reported():
-    """The target mostly out of view at 4.5 m (the physics study's ``out of view`` cell):
-    in one frame the three markers left (1, 4, 7) lie nearly on one line and the pose
-    turns about it by 32 deg (1 sigma). Reported, it was 25 deg off, 48 of its sigmas
-    away; it is refused, naming why, and no ok pose of the cell is confidently wrong."""
+@pytest.mark.parametrize(
+    ("range_m", "refusal"),
+    [
+        # markers 1, 4 and 7 nearly on one line: the pose turned about it by 32 deg (1
+        # sigma); reported, it was 25 deg off, 48 of its sigmas away
+        (4.5, "attitude not determined by the matched reflectors [7, 1, 4]"),
+        # markers 7 and 8 merged into one blob, matched as 8, with 5 and 6: reported,
+        # the pose was 7 deg off, 10 of its sigmas away
+        (8.0, "reflector 7 would lie inside the blob matched as 8"),
+    ],
+)
+def test_a_pose_the_few_markers_in_view_cannot_support_is_refused(range_m, refusal):
+    """The target mostly out of view (the physics study's ``out of view`` cells at 4.5
+    and 8 m): the frame whose three markers cannot support a pose is refused, naming
+    why, and no ok pose of the cell is confidently wrong."""
     from scipy.spatial.transform import Rotation
 
     from tofpose.pipeline import MAX_ATTITUDE_SIGMA_DEG
     from tofpose.sim.randomise import ALL_FAMILIES, draw_frame
 
     cat = paper_target()
-    rng = np.random.default_rng([0, ALL_FAMILIES.index("out of view"), 45])
+    rng = np.random.default_rng([0, ALL_FAMILIES.index("out of view"), int(range_m * 10)])
     refused, worst_d2 = [], 0.0
     pipe = PosePipeline(CameraModel(), cat)
     for _ in range(24):
-        d = draw_frame("out of view", 4.5, rng, cat)
+        d = draw_frame("out of view", range_m, rng, cat)
         f = d.render(rng)
         pipe.reset()
         r = pipe.process(f.gray, f.distance_mm)
         if not r.ok:
-            refused += [r.reason] if r.reason.startswith("attitude not determined") else []
+            refused += [r.reason] if refusal in r.reason else []
             continue
         T = d.T_camera_target
         e = np.r_[Rotation.from_matrix(r.R @ T.R.T).as_rotvec(), r.t_mm - T.t_mm]
         worst_d2 = max(worst_d2, float(e @ np.linalg.solve(r.covariance, e)))
         sigma = np.degrees(np.sqrt(np.linalg.eigvalsh(r.covariance[:3, :3]).max()))
         assert sigma <= MAX_ATTITUDE_SIGMA_DEG
-    assert len(refused) == 1 and "reflectors [7, 1, 4]" in refused[0], refused
+    assert len(refused) == 1, refused
     assert worst_d2 < 20.06  # chi2_6 at 3 sigma
