@@ -790,7 +790,8 @@ class PosePipeline:
     ) -> PoseResult | None:
         """The ok result of a tracked frame; the track moves on to its pose. None (the
         acquisition pass then runs) when its attitude is not determined
-        (``undetermined_attitude``)."""
+        (``undetermined_attitude``) or its fewest markers hold a merged blob
+        (``_merged_in_minimal_pose``)."""
         solved, meas, info = tracked.solution, tracked.measurements, tracked.persistence
         diag = FrameDiagnostics(
             n_candidates=len(meas.range_mm),
@@ -801,7 +802,7 @@ class PosePipeline:
         result = self._pose_result(
             solved, meas, tracked.saturated, [], time_s, timer, diag, mode="tracking"
         )
-        if undetermined_attitude(result):
+        if undetermined_attitude(result) or self._merged_in_minimal_pose(solved, meas):
             return None  # the acquisition pass says why
         self._track = TrackState(
             R=solved.T_camera_target.R,
