@@ -61,7 +61,10 @@ class RimSampling:
 
     def describe(self) -> str:
         if self.n_pixels == 0:
-            return "no rim pixel could be read"
+            return (
+                "no rim pixel could be read (no disc in view with a core below full "
+                "scale and a clear surround)"
+            )
         how = (
             f"rims point-sampled on a {self.grid} x {self.grid} grid per pixel "
             f"(coverage in steps of 1/{self.grid**2})"
