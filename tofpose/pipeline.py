@@ -180,6 +180,8 @@ class PoseResult:
         markers the covariance also holds the centroid pose's: the fit cannot check its
         own then, ``PixelFitResult.deletion_checked``), otherwise why it fell back to the
         centroid pose (which the result then carries).
+    pixel_fit_left_out : with ``pixel_fit`` "ok", the markers the fit left out and why
+        ("markers [6] left out: residual RMS ..."; ``PixelFitResult.left_out``), else "".
     range_offset : the range offset common to the reflectors that the pose's fit took
         out of their ranges, its posterior sigma and its prior's
         (``stages.pose.records.RangeOffset``; the pixel fit's when it holds): what the
@@ -205,6 +207,7 @@ class PoseResult:
     t_svd_mm: np.ndarray | None = None
     pixel_fit: str = ""
     range_offset: RangeOffset = NO_RANGE_OFFSET
+    pixel_fit_left_out: str = ""
 
     @property
     def n_matched(self) -> int:
@@ -479,6 +482,11 @@ class PosePipeline:
             quaternion_wxyz=quaternion_wxyz_from_rotation(fit.R),
             covariance=self._pixel_fit_covariance(fit, result),
             pixel_fit="ok",
+            pixel_fit_left_out=(
+                f"markers {fit.left_out.tolist()} left out: {fit.left_out_reason}"
+                if len(fit.left_out)
+                else ""
+            ),
             timings_ms=timings,
             range_offset=RangeOffset(
                 fit.range_offset_mm,

@@ -231,6 +231,10 @@ class PixelFitResult:
         The discs whose deletion moves the pose beyond what the model expects of it
         (their moves are in ``covariance``), and the other discs' variance factor
         (``disc_deletion``; 1 when not computed).
+    left_out : ndarray of shape (L,) int; left_out_reason : str
+        Matched markers the fit left out (``fit_pose_to_pixels``: their pixels were
+        unexplained, dark or clipped on a first fit over all of them) and that fit's
+        reason; empty when none was.
     deletion_checked : bool
         Whether ``disc_deletion`` checked the covariance: False with fewer than
         ``MIN_DELETION_DISCS`` discs whose deletion leaves the pose determined (three
@@ -265,6 +269,8 @@ class PixelFitResult:
     influential: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     deletion_variance_factor: float = 1.0
     deletion_checked: bool = False
+    left_out: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    left_out_reason: str = ""
 
 
 @dataclass(frozen=True)
@@ -1023,7 +1029,83 @@ def fit_pose_to_pixels(
     PixelFitResult
         ``ok`` False (with ``reason``) when the fit could not start, did not converge or
         a disc disagrees with the model: keep the starting pose then.
+
+    A first fit over every matched disc that fails only on discs it names (pixels the
+    model does not explain: a glint on a rim, an arm over a disc; a dark disc; not a
+    clipped core, ``_blamed``) is fitted again from the starting pose without the worst
+    of them (the largest residual RMS: one disc's error drags its neighbours' residuals
+    up too), its pixels left out, and so on while at least ``MIN_DELETION_DISCS`` discs
+    remain (so that deleting each can still check the covariance; a fit that did not
+    converge counts, since a disc it cannot explain is what holds it back). ``left_out``
+    names the discs left out and ``left_out_reason`` the fits' reasons; when no fit
+    holds, the first's result comes back with every reason.
     """
+
+    def fit(ids: Sequence[int], exclude: bool) -> PixelFitResult:
+        return _fit_discs(
+            gray,
+            distance_mm,
+            camera,
+            catalog,
+            R,
+            t_mm,
+            ids,
+            noise=noise,
+            fit_range_offset=fit_range_offset,
+            range_offset_sigma_mm=range_offset_sigma_mm,
+            range_offset_mean_mm=range_offset_mean_mm,
+            exclude_unmatched=exclude,
+            subsamples=subsamples,
+            pad_px=pad_px,
+            max_iterations=max_iterations,
+            max_marker_rms_sigma=max_marker_rms_sigma,
+            implementation=implementation,
+            jacobian=jacobian,
+            disc_deletion_terms=disc_deletion_terms,
+        )
+
+    first = fit(catalog_ids, exclude_unmatched)
+    res, left, reasons = first, [], []
+    while not res.ok and len(res.marker_rms_sigma):  # a fit that started, and failed
+        blamed = _blamed(res, max_marker_rms_sigma)
+        if not np.any(blamed) or len(res.catalog_ids) - 1 < MIN_DELETION_DISCS:
+            break
+        # the worst first: one disc's error drags its neighbours' residuals up too
+        rms = np.where(blamed, np.nan_to_num(res.marker_rms_sigma, nan=np.inf), -np.inf)
+        worst = int(res.catalog_ids[int(np.argmax(rms))])
+        left.append(worst)
+        reasons.append(res.reason)
+        res = fit([int(i) for i in res.catalog_ids if int(i) != worst], True)
+    if res.ok and left:
+        return replace(res, left_out=np.array(left), left_out_reason="; then ".join(reasons))
+    if left:
+        return replace(first, reason=f"{first.reason}; without markers {left}: {res.reason}")
+    return first
+
+
+def _fit_discs(
+    gray: np.ndarray,
+    distance_mm: np.ndarray,
+    camera: CameraModel,
+    catalog: Catalog,
+    R: np.ndarray,
+    t_mm: np.ndarray,
+    catalog_ids: Sequence[int],
+    *,
+    noise: PixelNoise | None = None,
+    fit_range_offset: bool = False,
+    range_offset_sigma_mm: float = float("inf"),
+    range_offset_mean_mm: float = 0.0,
+    exclude_unmatched: bool = True,
+    subsamples: int = SUBSAMPLES,
+    pad_px: int = WINDOW_PAD_PX,
+    max_iterations: int = MAX_ITERATIONS,
+    max_marker_rms_sigma: float = MAX_MARKER_RMS_SIGMA,
+    implementation: str = "compiled",
+    jacobian: str = "analytic",
+    disc_deletion_terms: bool = True,
+) -> PixelFitResult:
+    """``fit_pose_to_pixels`` on the discs ``catalog_ids``, once (its parameters)."""
     noise = PixelNoise() if noise is None else noise
     gray = np.asarray(gray)
     distance_mm = np.asarray(distance_mm)
@@ -1475,6 +1557,29 @@ def _unexplained(res: PixelFitResult, max_rms: float) -> np.ndarray:
     return (rms > max_rms) | unlike
 
 
+def _dark(res: PixelFitResult, extra_var: float) -> np.ndarray:
+    """(K,) bool: discs whose fitted gain is within ``MIN_CONTRAST_SIGMA`` of their
+    surround's noise (covered, occluded)."""
+    surround_sigma = np.sqrt(np.maximum(res.levels, 0.0) + extra_var + QUANTISATION_VAR)
+    return (res.gains[:, 0] - res.levels) < MIN_CONTRAST_SIGMA * surround_sigma
+
+
+def _clipped(res: PixelFitResult) -> np.ndarray:
+    """(K,) bool: discs with a clipped core (``MAX_CLIPPED_CORE_SHARE``; NaN: no core)."""
+    return np.nan_to_num(res.clipped_share) > MAX_CLIPPED_CORE_SHARE
+
+
+def _blamed(res: PixelFitResult, max_rms: float) -> np.ndarray:
+    """(K,) bool: the discs a failed fit names that it may be fitted without
+    (``_verdict``'s rules: unexplained, dark); none when a core is clipped, since a
+    fixed exposure that clips one marker leaves the others' rims near full scale too
+    (leaving the clipped ones out and fitting the rest on the physics study's
+    saturating frames held on 15 % of them, with one pose confidently wrong)."""
+    if np.any(_clipped(res)):
+        return np.zeros(len(res.catalog_ids), bool)
+    return _unexplained(res, max_rms) | _dark(res, res.gray_extra_var)
+
+
 def _verdict(res: PixelFitResult, extra_var: float, max_rms: float) -> dict:
     """ok and reason of a finished fit (``fit_pose_to_pixels``' fallback rules); the
     reason names every rule that failed, the discs beyond their noise first. The rules:
@@ -1501,7 +1606,7 @@ def _verdict(res: PixelFitResult, extra_var: float, max_rms: float) -> dict:
             f"residual RMS over {RELATIVE_RMS_FACTOR:g}x the discs' median ({typical:.1f} "
             f"sigma) at markers {worst}"
         )
-    clipped = np.nan_to_num(res.clipped_share) > MAX_CLIPPED_CORE_SHARE  # NaN: no core
+    clipped = _clipped(res)
     if np.any(clipped):
         reasons.append(
             f"markers {res.catalog_ids[clipped].tolist()} have clipped cores (over "
@@ -1515,8 +1620,7 @@ def _verdict(res: PixelFitResult, extra_var: float, max_rms: float) -> dict:
         reasons.append("singular information matrix")
     if reasons:
         return {"ok": False, "reason": "; ".join(reasons)}
-    surround_sigma = np.sqrt(np.maximum(res.levels, 0.0) + extra_var + QUANTISATION_VAR)
-    dark = (res.gains[:, 0] - res.levels) < MIN_CONTRAST_SIGMA * surround_sigma
+    dark = _dark(res, extra_var)
     if np.any(dark):
         return {"ok": False, "reason": f"markers {res.catalog_ids[dark].tolist()} are dark"}
     return {"ok": True, "reason": ""}

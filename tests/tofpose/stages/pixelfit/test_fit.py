@@ -268,35 +268,54 @@ def _disc_pixels(f, catalog_id):
     return f.surface_id == 3 + int(np.flatnonzero(CAT.ids == catalog_id)[0])
 
 
-@pytest.mark.parametrize("damage", ["half occluded", "glint"])
-def test_a_disc_the_model_does_not_explain_falls_back_with_its_id(damage):
+def _damaged(damage: str):
+    """The clean frame with disc 6 (or, ``dark``, disc 2) damaged: half occluded by an
+    arm at the plate's level, a saturated glint on its rim, or wholly dark."""
     sensor, T, f = _frame_and_start()
     gray = f.gray.copy()
-    disc = _disc_pixels(f, 6)
+    disc = _disc_pixels(f, 2 if damage == "dark" else 6)
     rows, cols = np.nonzero(disc)
     if damage == "half occluded":  # an arm over the disc's left half: the plate's level
         gray[rows[cols < np.median(cols)], cols[cols < np.median(cols)]] = 6
-    else:  # a saturated glint on the disc's rim, 3 px wide, one side
+    elif damage == "glint":  # a saturated glint on the disc's rim, 3 px wide, one side
         r0, c0 = rows.min(), cols.max()
         gray[r0 : r0 + 3, c0 - 1 : c0 + 2] = 4095
         gray[r0 + 3 : r0 + 6, c0 + 1 : c0 + 4] = 3000
+    else:  # covered whole
+        gray[disc] = 6
+    return sensor, T, f, gray
+
+
+@pytest.mark.parametrize(("damage", "disc"), [("half occluded", 6), ("glint", 6), ("dark", 2)])
+def test_a_disc_the_model_does_not_explain_is_left_out_and_the_rest_hold(damage, disc):
+    """The first fit names the damaged disc; fitted again without it (seven discs left)
+    the pose holds, within its covariance of the truth, and says which disc it left out
+    and why."""
+    sensor, T, f, gray = _damaged(damage)
     res = fit_pose_to_pixels(
         gray, f.distance_mm, CAM, CAT, T.R, T.t_mm, CAT.ids, noise=PixelNoise.from_sensor(sensor)
     )
-    assert not res.ok
-    assert "6" in res.reason and "residual" in res.reason
+    assert res.ok, res.reason
+    assert res.left_out.tolist() == [disc] and disc not in res.catalog_ids
+    assert str(disc) in res.left_out_reason
+    # a dark disc: its gain under the surround's noise, or its rim's residuals
+    assert "dark" in res.left_out_reason or "residual" in res.left_out_reason
+    e = np.concatenate([Rotation.from_matrix(res.R @ T.R.T).as_rotvec(), res.t_mm - T.t_mm])
+    assert e @ np.linalg.solve(res.covariance, e) < 20.06  # chi2_6 at 3 sigma
 
 
-def test_an_occluded_disc_falls_back_as_dark():
-    sensor, T, f = _frame_and_start()
-    gray = f.gray.copy()
-    gray[_disc_pixels(f, 2)] = 6
+@pytest.mark.parametrize(("damage", "disc"), [("half occluded", 6), ("glint", 6), ("dark", 2)])
+def test_a_damaged_disc_among_four_falls_back_naming_it(damage, disc):
+    """Four discs fitted: without the damaged one three would be left, too few to check
+    the covariance by deleting each (``MIN_DELETION_DISCS``), so the fit falls back
+    and names it."""
+    sensor, T, f, gray = _damaged(damage)
+    ids = [1, 3, 5, disc] if disc == 6 else [1, 2, 5, 6]
     res = fit_pose_to_pixels(
-        gray, f.distance_mm, CAM, CAT, T.R, T.t_mm, CAT.ids, noise=PixelNoise.from_sensor(sensor)
+        gray, f.distance_mm, CAM, CAT, T.R, T.t_mm, ids, noise=PixelNoise.from_sensor(sensor)
     )
-    assert not res.ok
-    assert res.reason  # dark, or its rim's residuals: either names the disc
-    assert "2" in res.reason
+    assert not res.ok and len(res.left_out) == 0
+    assert str(disc) in res.reason
 
 
 def test_clean_frame_is_ok_and_reports_its_pixels():
@@ -551,8 +570,9 @@ def test_a_glint_in_a_discs_window_is_left_out_and_the_fit_holds():
     """A marker-like glint (a Gaussian spot of 0.7 px sigma, 600 counts) 4.5 px beyond
     disc 6's rim, diagonally, in its window: its pixels are left out
     (``n_glint_pixels``) and the fit lands within its sigmas; the same spot 1.5 px
-    beyond the rim lights the rim too, is not left out, and the fit falls back, naming
-    the disc (the model's own error next to a disc is to be seen, not left out)."""
+    beyond the rim lights the rim too, is not left out as a glint (the model's own error
+    next to a disc is to be seen, not left out), so the first fit names the disc, and the
+    fit holds without it (``left_out``)."""
     sensor, T, f = _frame_and_start()
     disc = _disc_pixels(f, 6)
     rows, cols = np.nonzero(disc)
@@ -565,11 +585,11 @@ def test_a_glint_in_a_discs_window_is_left_out_and_the_fit_holds():
         r2 = (vv - centre[0] - d) ** 2 + (uu - centre[1] - d) ** 2
         gray = np.minimum(f.gray + 600.0 * np.exp(-r2 / (2 * 0.7**2)), 4095)
         res = fit_pose_to_pixels(gray, f.distance_mm, CAM, CAT, T.R, T.t_mm, CAT.ids, noise=noise)
+        assert res.ok, res.reason
+        e = _error(res.R, res.t_mm, T)
+        assert e @ np.linalg.solve(res.covariance, e) < 20.06
         if holds:
-            assert res.ok, res.reason
-            assert res.n_glint_pixels >= 3
-            e = _error(res.R, res.t_mm, T)
-            assert e @ np.linalg.solve(res.covariance, e) < 20.06
+            assert res.n_glint_pixels >= 3 and len(res.left_out) == 0
         else:
-            assert not res.ok and "6 (" in res.reason, res.reason
-            assert res.n_glint_pixels == 0
+            assert res.n_glint_pixels == 0 and res.left_out.tolist() == [6]
+            assert "6 (" in res.left_out_reason, res.left_out_reason
