@@ -953,6 +953,23 @@ def _initial_linear(pb: _Problem, images: DiscImages) -> tuple[np.ndarray, np.nd
     return gains, levels
 
 
+@dataclass(frozen=True)
+class _FitOptions:
+    """``fit_pose_to_pixels``' options, checked, as each of its fits takes them."""
+
+    noise: PixelNoise
+    fit_range_offset: bool
+    range_offset_sigma_mm: float
+    range_offset_mean_mm: float
+    subsamples: int
+    pad_px: int
+    max_iterations: int
+    max_marker_rms_sigma: float
+    implementation: str
+    jacobian: str
+    disc_deletion_terms: bool
+
+
 def fit_pose_to_pixels(
     gray: np.ndarray,
     distance_mm: np.ndarray,
@@ -1041,28 +1058,44 @@ def fit_pose_to_pixels(
     holds, the first's result comes back with every reason.
     """
 
-    def fit(ids: Sequence[int], exclude: bool) -> PixelFitResult:
-        return _fit_discs(
-            gray,
-            distance_mm,
-            camera,
-            catalog,
-            R,
-            t_mm,
-            ids,
-            noise=noise,
-            fit_range_offset=fit_range_offset,
-            range_offset_sigma_mm=range_offset_sigma_mm,
-            range_offset_mean_mm=range_offset_mean_mm,
-            exclude_unmatched=exclude,
-            subsamples=subsamples,
-            pad_px=pad_px,
-            max_iterations=max_iterations,
-            max_marker_rms_sigma=max_marker_rms_sigma,
-            implementation=implementation,
-            jacobian=jacobian,
-            disc_deletion_terms=disc_deletion_terms,
+    noise = PixelNoise() if noise is None else noise
+    gray = np.asarray(gray)
+    distance_mm = np.asarray(distance_mm)
+    if gray.shape != camera.shape or distance_mm.shape != camera.shape:
+        raise ValueError(
+            f"gray {gray.shape} and distance_mm {distance_mm.shape} must have the camera's "
+            f"shape {camera.shape}"
         )
+    R = np.asarray(R, float)
+    t_mm = np.asarray(t_mm, float).reshape(-1)
+    if R.shape != (3, 3) or t_mm.shape != (3,):
+        raise ValueError(f"R must be (3, 3) and t_mm (3,), got {R.shape} and {t_mm.shape}")
+    if implementation not in ("compiled", "reference"):
+        raise ValueError(
+            f"implementation must be 'compiled' or 'reference', got {implementation!r}"
+        )
+    if jacobian not in ("analytic", "central-differences"):
+        raise ValueError(f"jacobian must be 'analytic' or 'central-differences', got {jacobian!r}")
+    if not range_offset_sigma_mm > 0:
+        raise ValueError(f"range_offset_sigma_mm must be positive, got {range_offset_sigma_mm}")
+    if subsamples < 1:
+        raise ValueError(f"subsamples must be >= 1, got {subsamples}")
+    opts = _FitOptions(
+        noise=noise,
+        fit_range_offset=fit_range_offset,
+        range_offset_sigma_mm=range_offset_sigma_mm,
+        range_offset_mean_mm=range_offset_mean_mm,
+        subsamples=subsamples,
+        pad_px=pad_px,
+        max_iterations=max_iterations,
+        max_marker_rms_sigma=max_marker_rms_sigma,
+        implementation=implementation,
+        jacobian=jacobian,
+        disc_deletion_terms=disc_deletion_terms,
+    )
+
+    def fit(ids: Sequence[int], exclude: bool) -> PixelFitResult:
+        return _fit_discs(gray, distance_mm, camera, catalog, R, t_mm, ids, exclude, opts)
 
     first = fit(catalog_ids, exclude_unmatched)
     res, left, reasons = first, [], []
@@ -1091,43 +1124,11 @@ def _fit_discs(
     R: np.ndarray,
     t_mm: np.ndarray,
     catalog_ids: Sequence[int],
-    *,
-    noise: PixelNoise | None = None,
-    fit_range_offset: bool = False,
-    range_offset_sigma_mm: float = float("inf"),
-    range_offset_mean_mm: float = 0.0,
-    exclude_unmatched: bool = True,
-    subsamples: int = SUBSAMPLES,
-    pad_px: int = WINDOW_PAD_PX,
-    max_iterations: int = MAX_ITERATIONS,
-    max_marker_rms_sigma: float = MAX_MARKER_RMS_SIGMA,
-    implementation: str = "compiled",
-    jacobian: str = "analytic",
-    disc_deletion_terms: bool = True,
+    exclude_unmatched: bool,
+    opts: _FitOptions,
 ) -> PixelFitResult:
-    """``fit_pose_to_pixels`` on the discs ``catalog_ids``, once (its parameters)."""
-    noise = PixelNoise() if noise is None else noise
-    gray = np.asarray(gray)
-    distance_mm = np.asarray(distance_mm)
-    if gray.shape != camera.shape or distance_mm.shape != camera.shape:
-        raise ValueError(
-            f"gray {gray.shape} and distance_mm {distance_mm.shape} must have the camera's "
-            f"shape {camera.shape}"
-        )
-    R = np.asarray(R, float)
-    t_mm = np.asarray(t_mm, float).reshape(-1)
-    if R.shape != (3, 3) or t_mm.shape != (3,):
-        raise ValueError(f"R must be (3, 3) and t_mm (3,), got {R.shape} and {t_mm.shape}")
-    if implementation not in ("compiled", "reference"):
-        raise ValueError(
-            f"implementation must be 'compiled' or 'reference', got {implementation!r}"
-        )
-    if jacobian not in ("analytic", "central-differences"):
-        raise ValueError(f"jacobian must be 'analytic' or 'central-differences', got {jacobian!r}")
-    if not range_offset_sigma_mm > 0:
-        raise ValueError(f"range_offset_sigma_mm must be positive, got {range_offset_sigma_mm}")
-    if subsamples < 1:
-        raise ValueError(f"subsamples must be >= 1, got {subsamples}")
+    """``fit_pose_to_pixels`` on the discs ``catalog_ids``, once (its inputs checked, its
+    options in ``opts``)."""
     discs = Discs.from_catalog(catalog, catalog_ids)
     start = PixelFitResult(ok=False, reason="", R=R, t_mm=t_mm, catalog_ids=discs.ids)
     if len(discs.ids) < MIN_MARKERS:
@@ -1150,18 +1151,18 @@ def _fit_discs(
         R,
         t_mm,
         others=others,
-        pad_px=pad_px,
-        subsamples=subsamples,
+        pad_px=opts.pad_px,
+        subsamples=opts.subsamples,
         plate_size_mm=_plate_behind(discs, catalog.plate_size_mm),
     )
-    saturated = win.gray >= noise.full_scale_counts
+    saturated = win.gray >= opts.noise.full_scale_counts
     reference_mm = float(np.linalg.norm(t_mm))
     rims = predicted_rims(camera, R, t_mm, discs)
     centre_px = rims.mean(axis=1)  # (K, 2)
     radius_px = np.max(np.linalg.norm(rims - centre_px[:, None], axis=2), axis=1)
     uv = np.column_stack([win.cols, win.rows]).astype(float)
     k_count = len(discs.ids)
-    free = np.ones(6 + (G + 1) * k_count + (1 if fit_range_offset else 0), bool)
+    free = np.ones(6 + (G + 1) * k_count + (1 if opts.fit_range_offset else 0), bool)
     for k in range(k_count):  # a small disc's gain shape is not measurable
         terms = 1 if radius_px[k] < GAIN_SLOPE_MIN_RADIUS_PX else 3
         terms = G if radius_px[k] >= GAIN_CURVE_MIN_RADIUS_PX else terms
@@ -1172,14 +1173,14 @@ def _fit_discs(
         gray_rows=np.flatnonzero(~saturated),
         sat_rows=np.flatnonzero(saturated),
         dist_rows=np.zeros(0, int),
-        noise=noise,
+        noise=opts.noise,
         reference_mm=reference_mm,
-        fit_offset=fit_range_offset,
-        offset_sigma_mm=float(range_offset_sigma_mm),
-        offset_mean_mm=float(range_offset_mean_mm),
-        compiled=implementation == "compiled",
+        fit_offset=opts.fit_range_offset,
+        offset_sigma_mm=float(opts.range_offset_sigma_mm),
+        offset_mean_mm=float(opts.range_offset_mean_mm),
+        compiled=opts.implementation == "compiled",
         near_flat=win.near_flat,
-        numeric_jacobian=jacobian == "central-differences",
+        numeric_jacobian=opts.jacobian == "central-differences",
         basis=gain_basis(uv[None] - centre_px[:, None], radius_px),
         free=free,
         plate_fraction=np.ones(win.n_pixels),
@@ -1213,23 +1214,25 @@ def _fit_discs(
         t_mm=t_mm,
         gains=gains,
         levels=levels,
-        offset_mm=float(range_offset_mean_mm),
+        offset_mm=float(opts.range_offset_mean_mm),
         disc_offsets_mm=np.zeros(k_count),
     )
     extra_var = (
         _surround_extra_var(pb, images, state)
-        if noise.gray_extra_var is None
-        else float(noise.gray_extra_var)
+        if opts.noise.gray_extra_var is None
+        else float(opts.noise.gray_extra_var)
     )
 
-    solved = _levenberg_marquardt(pb, state, images, extra_var, np.zeros(k_count), max_iterations)
+    solved = _levenberg_marquardt(
+        pb, state, images, extra_var, np.zeros(k_count), opts.max_iterations
+    )
     # bright spots in the surround the model does not carry (glints): left out, fitted again
     pred = pb.predict(solved.images, solved.state)
     glints = _glint_pixels(pb, solved.images, pred, extra_var)
     if np.any(glints):
         pb = _without_pixels(pb, glints)
         again = _levenberg_marquardt(
-            pb, solved.state, solved.images, extra_var, np.zeros(k_count), max_iterations
+            pb, solved.state, solved.images, extra_var, np.zeros(k_count), opts.max_iterations
         )
         solved = replace(again, iterations=solved.iterations + again.iterations)
         pred = pb.predict(solved.images, solved.state)
@@ -1237,13 +1240,13 @@ def _fit_discs(
     st, im = solved.state, solved.images
     rim = _rim_sensitivity(pb, im, pred, st)
     crowded = _crowded(discs)
-    if noise.coverage_sigma is None:
+    if opts.noise.coverage_sigma is None:
         coverage_sigma = _measured_coverage_sigma(
             pb, pred, _sigmas(pb, pred, extra_var), rim, crowded
         )
     else:
-        coverage_sigma = np.full(k_count, float(noise.coverage_sigma))
-    disc_range_sigma = noise.disc_range_sigma_mm
+        coverage_sigma = np.full(k_count, float(opts.noise.coverage_sigma))
+    disc_range_sigma = opts.noise.disc_range_sigma_mm
     if disc_range_sigma is None:
         sig = _sigmas(pb, pred, extra_var, rim, coverage_sigma)
         disc_range_sigma = _measured_disc_range_sigma(pb, pred, sig)
@@ -1254,7 +1257,7 @@ def _fit_discs(
                 disc_range_sigma_mm=disc_range_sigma,
                 free=np.concatenate([pb.free, np.ones(k_count, bool)]),
             )
-        again = _levenberg_marquardt(pb, st, im, extra_var, coverage_sigma, max_iterations)
+        again = _levenberg_marquardt(pb, st, im, extra_var, coverage_sigma, opts.max_iterations)
         solved = replace(again, iterations=solved.iterations + again.iterations)
     state, images = solved.state, solved.images
     pred = pb.predict(images, state)
@@ -1281,7 +1284,7 @@ def _fit_discs(
                 offset_sigma = float(np.sqrt(max(info_inv[col, col], 0.0)))
     deletion = None
     if (
-        disc_deletion_terms
+        opts.disc_deletion_terms
         and covariance is not None
         and solved.info is not None
         and solved.last is not None
@@ -1321,7 +1324,7 @@ def _fit_discs(
         deletion_variance_factor=1.0 if deletion is None else deletion.variance_factor,
         deletion_checked=deletion is not None,
     )
-    result = replace(result, **_verdict(result, extra_var, max_marker_rms_sigma))
+    result = replace(result, **_verdict(result, extra_var, opts.max_marker_rms_sigma))
     return result
 
 
