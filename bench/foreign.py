@@ -260,8 +260,8 @@ def evaluate(
         if oracle:
             runs["oracle"], matched_by_truth = run_oracle(rec, pipe, truth, progress)
         try:
-            rims = rim_sampling(rec).describe()
-        except RecordingError as exc:  # no /catalog in the file: not read
+            rims = rim_sampling(rec, catalog=pipe.catalog).describe()
+        except RecordingError as exc:  # not read: say why
             rims = f"not read ({exc})"
     bins, labels = range_bins(np.linalg.norm(rec.truth_t_mm, axis=1), bin_width_m)
     out = {

@@ -10,7 +10,7 @@ pixel fit's exact-area model (``stages.pixelfit.model``, 8 x 8 sub-cells); its g
 its surround's level are the medians of the window's wholly covered and wholly clear
 pixels. A rim pixel (exact coverage in 0.02-0.98, no other disc) reads the coverage
 ``(gray - level) / (gain - level)``. Reported: the RMS of read less exact coverage, and
-for S = 2..6 the mean distance of ``S^2 * read`` from the nearest integer (0.25 for a
+for S = 1..6 the mean distance of ``S^2 * read`` from the nearest integer (0.25 for a
 read that is not quantised; near 0 on an S x S grid, raised by the noise left).
 
     python bench/rim_sampling.py recording.h5 [...]
@@ -27,12 +27,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from tofpose.core.catalog import Catalog  # noqa: E402
 from tofpose.core.tof import SPEED_OF_LIGHT_MM_S  # noqa: E402
 from tofpose.io.recording import Recording, RecordingError, open_recording  # noqa: E402
 from tofpose.stages.pixelfit.model import Discs, build_windows, disc_images  # noqa: E402
 
-#: grids tested: S x S point samples per pixel
-GRIDS = (2, 3, 4, 5, 6)
+#: grids tested: S x S point samples per pixel (1: one sample, a coverage of 0 or 1;
+#: the coarsest that fits is named, since a read on 1/S^2 steps is on 1/(kS)^2 too)
+GRIDS = (1, 2, 3, 4, 5, 6)
 #: a grid is named when its mean distance to the nearest level is below this (0.25 when
 #: the reads are not quantised on it)
 QUANTISED_BELOW = 0.15
@@ -65,12 +67,15 @@ class RimSampling:
                 "no rim pixel could be read (no disc in view with a core below full "
                 "scale and a clear surround)"
             )
-        how = (
-            f"rims point-sampled on a {self.grid} x {self.grid} grid per pixel "
-            f"(coverage in steps of 1/{self.grid**2})"
-            if self.grid is not None
-            else f"no point-sampling grid of {GRIDS[0]}-{GRIDS[-1]} per side"
-        )
+        if self.grid is None:
+            how = f"no point-sampling grid of {GRIDS[0]}-{GRIDS[-1]} per side"
+        elif self.grid == 1:
+            how = "rims sampled at one point per pixel (coverage 0 or 1)"
+        else:
+            how = (
+                f"rims point-sampled on a {self.grid} x {self.grid} grid per pixel "
+                f"(coverage in steps of 1/{self.grid**2})"
+            )
         levels = ", ".join(f"{s}: {d:.3f}" for s, d in self.distance_to_level.items())
         return (
             f"{how}; rim coverage read less the exact area's: {self.coverage_error_rms:.3f} "
@@ -99,14 +104,18 @@ def _poses(rec: Recording, max_poses: int) -> list[list[int]]:
 
 
 def read_rims(
-    gray: np.ndarray, distance_mm: np.ndarray, rec: Recording, R: np.ndarray, t_mm: np.ndarray
+    gray: np.ndarray,
+    distance_mm: np.ndarray,
+    rec: Recording,
+    catalog: Catalog,
+    R: np.ndarray,
+    t_mm: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(read, exact) coverages (n,) of the rim pixels of every disc in view, ``gray``
-    (H, W) averaged over a pose's frames, at the true pose ``(R, t_mm)``."""
-    assert rec.catalog is not None
+    """(read, exact) coverages (n,) of the rim pixels of every disc of ``catalog`` in
+    view, ``gray`` (H, W) averaged over a pose's frames, at the true pose ``(R, t_mm)``."""
     cam = rec.camera
-    front = (rec.catalog.positions_mm @ R.T + t_mm)[:, 2] > 0
-    discs = Discs.from_catalog(rec.catalog, [int(i) for i in rec.catalog.ids[front]])
+    front = (catalog.positions_mm @ R.T + t_mm)[:, 2] > 0
+    discs = Discs.from_catalog(catalog, [int(i) for i in catalog.ids[front]])
     win = build_windows(gray, distance_mm, cam, discs, R, t_mm, subsamples=MODEL_SUBSAMPLES)
     mm_per_radian = SPEED_OF_LIGHT_MM_S / (4 * np.pi * cam.modulation_frequency_hz)
     images = disc_images(
@@ -133,17 +142,20 @@ def read_rims(
     return np.concatenate(read), np.concatenate(exact)
 
 
-def rim_sampling(rec: Recording, max_poses: int = 16) -> RimSampling:
-    """``RimSampling`` of the first ``max_poses`` poses of ``rec`` (which needs /truth
-    and a catalog: ``RecordingError`` otherwise)."""
-    if rec.truth_R is None or rec.truth_t_mm is None or rec.catalog is None:
-        raise RecordingError(f"{rec.path}: rim sampling needs /truth and /catalog")
-    read, exact = [], []
+def rim_sampling(
+    rec: Recording, max_poses: int = 16, catalog: Catalog | None = None
+) -> RimSampling:
+    """``RimSampling`` of the first ``max_poses`` poses of ``rec`` (which needs /truth,
+    and /catalog unless ``catalog`` is given: ``RecordingError`` otherwise)."""
+    catalog = rec.catalog if catalog is None else catalog
+    if rec.truth_R is None or rec.truth_t_mm is None or catalog is None:
+        raise RecordingError(f"{rec.path}: rim sampling needs /truth and a catalog")
+    read, exact = [np.zeros(0)], [np.zeros(0)]
     runs = _poses(rec, max_poses)
     for run in runs:
         gray = np.mean([rec.frame(i)[0].astype(float) for i in run], axis=0)
         distance = rec.frame(run[0])[1]
-        r, e = read_rims(gray, distance, rec, rec.truth_R[run[0]], rec.truth_t_mm[run[0]])
+        r, e = read_rims(gray, distance, rec, catalog, rec.truth_R[run[0]], rec.truth_t_mm[run[0]])
         read.append(r)
         exact.append(e)
     r, e = np.concatenate(read), np.concatenate(exact)
@@ -167,7 +179,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     for path in args.recordings:
         try:
-            print(f"{Path(path).name}: {rim_sampling(open_recording(path), args.poses).describe()}")
+            with open_recording(path) as rec:
+                found = rim_sampling(rec, args.poses)
+            print(f"{Path(path).name}: {found.describe()}")
         except RecordingError as exc:
             print(f"bench/rim_sampling.py: {exc}", file=sys.stderr)
             return 2

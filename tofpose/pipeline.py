@@ -142,12 +142,15 @@ MAX_ATTITUDE_SIGMA_DEG = 20.0
 
 def undetermined_attitude(result: PoseResult) -> str:
     """Why the ok ``result``'s attitude is not determined by its matched reflectors (its
-    largest attitude sigma beyond ``MAX_ATTITUDE_SIGMA_DEG``), or ''."""
-    assert result.covariance is not None
-    sigma_deg = math.degrees(math.sqrt(max(np.linalg.eigvalsh(result.covariance[:3, :3])[-1], 0)))
+    largest attitude sigma beyond ``MAX_ATTITUDE_SIGMA_DEG``, or a covariance that is
+    missing or not finite), or ''."""
+    ids = [m.catalog_id for m in result.matched]
+    cov = result.covariance
+    if cov is None or not np.all(np.isfinite(cov)):
+        return f"the pose on the matched reflectors {ids} has no finite covariance"
+    sigma_deg = math.degrees(math.sqrt(max(np.linalg.eigvalsh(cov[:3, :3])[-1], 0)))
     if sigma_deg <= MAX_ATTITUDE_SIGMA_DEG:
         return ""
-    ids = [m.catalog_id for m in result.matched]
     return (
         f"attitude not determined by the matched reflectors {ids}: {sigma_deg:.0f} deg "
         f"(1 sigma) about one axis, beyond the {MAX_ATTITUDE_SIGMA_DEG:g} deg a linearised "
@@ -176,10 +179,11 @@ class PoseResult:
         reflectors with the fit's weights, before refinement (``solve.Solution.T_svd``):
         the paper's §5.1 answer on the same measurements, to see what refinement did.
     pixel_fit : "" when the pixel-level fit did not run (``PipelineConfig.pixel_fit``),
-        "ok" when ``R``, ``t_mm`` and ``covariance`` are its answer (with three matched
-        markers the covariance also holds the centroid pose's: the fit cannot check its
-        own then, ``PixelFitResult.deletion_checked``), otherwise why it fell back to the
-        centroid pose (which the result then carries).
+        "ok" when ``R``, ``t_mm`` and ``covariance`` are its answer (where the fit could
+        not check its own covariance by deleting each disc, as with three matched
+        markers, the covariance also holds the centroid pose's:
+        ``PixelFitResult.deletion_checked``), otherwise why it fell back to the centroid
+        pose (which the result then carries).
     pixel_fit_left_out : with ``pixel_fit`` "ok", the markers the fit left out and why
         ("markers [6] left out: residual RMS ..."; ``PixelFitResult.left_out``), else "".
     range_offset : the range offset common to the reflectors that the pose's fit took
@@ -501,8 +505,9 @@ class PosePipeline:
     def _pixel_fit_covariance(self, fit: PixelFitResult, result: PoseResult) -> np.ndarray:
         """(6, 6) the covariance reported with the pixel fit's pose: the fit's, and where
         the fit could not check it by deleting each disc (``fit.deletion_checked``: three
-        matched markers) the envelope of the fit's and the centroid pose's ``result``
-        (``pose.covariance_envelope``): a claim no narrower than one that was checked."""
+        matched markers, or a deletion that leaves the pose undetermined) the envelope of
+        the fit's and the centroid pose's ``result`` (``pose.covariance_envelope``): a
+        claim no narrower than one that was checked."""
         assert fit.covariance is not None and result.covariance is not None
         if fit.deletion_checked:
             return fit.covariance
@@ -787,11 +792,15 @@ class PosePipeline:
         searched only in windows around their predicted images, correspondences known,
         in one compiled call; None means "fall back to the full acquisition pass", and
         leaves no trace in the persistence history."""
+        before = self._persistence.snapshot()  # the tracker commits the frame it tracks
         tracked = self._compiled_tracker.track(g, d, track)
         timer.lap("tracking")
         if tracked is None:
             return None
-        return self._tracked_result(tracked, time_s, timer, track)
+        result = self._tracked_result(tracked, time_s, timer, track)
+        if result is None:  # refused: the acquisition pass commits the frame itself
+            self._persistence.restore(before)
+        return result
 
     def _tracked_result(
         self, tracked: Tracked, time_s, timer, track: TrackState
@@ -900,8 +909,9 @@ class PosePipeline:
     def _merged_in_minimal_pose(self, solved: Solution, meas: Measurements) -> str:
         """Why a pose on the fewest reflectors (``matching.min_matches``: no redundancy
         to show a biased one) cannot stand, or '': a catalog reflector it did not match,
-        in front of the camera, projects inside a matched blob (within the blob's
-        equivalent radius plus the reflector's own image radius). That blob then holds
+        in front of the camera and not seen as a candidate of its own, projects onto a
+        matched blob (nearer its centroid than the blob's equivalent radius plus the
+        reflector's own image radius). That blob then holds
         two reflectors imaged as one (7 and 8 of the paper target merge at long range),
         and its centroid lies between them: at 8 m with the rest of the target out of
         view such a pose was 7 deg off at 10 of its sigmas."""
@@ -917,14 +927,21 @@ class PosePipeline:
             return ""
         uv = self.camera.project(points)
         own_radius_px = 0.5 * self.camera.fx * self._catalog_d[others] / points[:, 2]
+        # a reflector seen as a blob of its own (an unmatched candidate on its image) is
+        # not inside another's
+        unmatched = np.setdiff1d(np.arange(len(meas.range_mm)), obs.k_idx)
+        if len(unmatched):
+            near = np.linalg.norm(uv[:, None, :] - meas.uv_px[None, unmatched], axis=2)
+            seen = np.any(near < own_radius_px[:, None], axis=1)
+            uv, own_radius_px, others = uv[~seen], own_radius_px[~seen], others[~seen]
         blob_radius_px = np.sqrt(meas.area_px[obs.k_idx] / np.pi)
         gap = np.linalg.norm(uv[:, None, :] - obs.uv_px[None, :, :], axis=2)
-        inside = gap < blob_radius_px[None, :] + own_radius_px[:, None]
-        if not inside.any():
+        overlap = gap < blob_radius_px[None, :] + own_radius_px[:, None]
+        if not overlap.any():
             return ""
-        o, j = np.argwhere(inside)[0]
+        o, j = np.argwhere(overlap)[0]
         return (
-            f"reflector {int(self._catalog_ids[others[o]])} would lie inside the blob "
+            f"reflector {int(self._catalog_ids[others[o]])} would overlap the blob "
             f"matched as {int(self._catalog_ids[obs.i_idx[j]])}: two reflectors imaged as "
             f"one, whose centroid lies between them, and {len(obs.i_idx)} matched "
             "reflectors leave nothing to tell the pose it biases"

@@ -31,7 +31,7 @@ def _recording(path, supersampling: int, *, truth: bool = True):
     return open_recording(path)
 
 
-@pytest.mark.parametrize("grid", [2, 3, 4])
+@pytest.mark.parametrize("grid", [1, 2, 3, 4])
 def test_a_coarse_point_sampling_grid_is_named(tmp_path, grid):
     found = rim_sampling(_recording(tmp_path / f"s{grid}.h5", grid))
     assert found.n_poses == 2 and found.n_pixels > 50
@@ -48,5 +48,5 @@ def test_finely_sampled_rims_have_no_grid_and_a_small_coverage_error(tmp_path):
 
 
 def test_a_recording_without_truth_is_refused(tmp_path):
-    with pytest.raises(RecordingError, match="needs /truth"):
+    with pytest.raises(RecordingError, match="needs /truth and a catalog"):
         rim_sampling(_recording(tmp_path / "no-truth.h5", 3, truth=False))

@@ -232,13 +232,15 @@ class PixelFitResult:
         (their moves are in ``covariance``), and the other discs' variance factor
         (``disc_deletion``; 1 when not computed).
     left_out : ndarray of shape (L,) int; left_out_reason : str
-        Matched markers the fit left out (``fit_pose_to_pixels``: their pixels were
-        unexplained, dark or clipped on a first fit over all of them) and that fit's
-        reason; empty when none was.
+        Matched markers the fit left out, in the order it left them out
+        (``fit_pose_to_pixels``: their pixels unexplained or the disc dark, ``_blamed``)
+        and, per disc, the rule that named it with the failed fit's reason; empty when
+        none was.
     deletion_checked : bool
         Whether ``disc_deletion`` checked the covariance: False with fewer than
         ``MIN_DELETION_DISCS`` discs whose deletion leaves the pose determined (three
-        matched markers), where ``covariance`` is the Fisher one alone and errs narrow
+        matched markers), a singular information or ``disc_deletion_terms`` off, where
+        ``covariance`` is the Fisher one alone and errs narrow
         (on the other renderer's far frames fitted on three of their markers: NEES/6
         2.2, 20 % beyond 3 sigma, against 1.3 and 1-4 % with four or more; the
         pipeline then widens it to the centroid pose's, ``PosePipeline``).
@@ -1054,8 +1056,10 @@ def fit_pose_to_pixels(
     up too), its pixels left out, and so on while at least ``MIN_DELETION_DISCS`` discs
     remain (so that deleting each can still check the covariance; a fit that did not
     converge counts, since a disc it cannot explain is what holds it back). ``left_out``
-    names the discs left out and ``left_out_reason`` the fits' reasons; when no fit
-    holds, the first's result comes back with every reason.
+    names the discs left out and ``left_out_reason`` why, disc by disc; when no fit
+    holds, the first's result comes back with every reason. The fits without a disc
+    leave out the pixels of every catalog disc they do not fit (as
+    ``exclude_unmatched`` does), whatever ``exclude_unmatched`` says.
     """
 
     noise = PixelNoise() if noise is None else noise
@@ -1105,9 +1109,12 @@ def fit_pose_to_pixels(
             break
         # the worst first: one disc's error drags its neighbours' residuals up too
         rms = np.where(blamed, np.nan_to_num(res.marker_rms_sigma, nan=np.inf), -np.inf)
-        worst = int(res.catalog_ids[int(np.argmax(rms))])
+        k = int(np.argmax(rms))
+        worst = int(res.catalog_ids[k])
         left.append(worst)
-        reasons.append(res.reason)
+        why = "dark" if _dark(res, res.gray_extra_var)[k] else "unexplained"
+        rms_k = res.marker_rms_sigma[k]
+        reasons.append(f"{worst} ({why}, residual RMS {rms_k:.1f} sigma; {res.reason})")
         res = fit([int(i) for i in res.catalog_ids if int(i) != worst], True)
     if res.ok and left:
         return replace(res, left_out=np.array(left), left_out_reason="; then ".join(reasons))
