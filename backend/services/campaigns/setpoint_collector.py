@@ -39,6 +39,11 @@ STALE_TRACE_S = 1.0
 # Frames in a row that may report another integration time than the one set before the
 # set-point pauses (the settings are applied before the move, so none should).
 MAX_OTHER_EXPOSURE_FRAMES = 20
+# Frames whose encoders are still off the set-point that may arrive after the settle
+# before the first one at it: a frame captured while the table moved can reach the runner
+# after the motion service reports settled (its render or measurement ran late on a
+# loaded machine); beyond these the table did not reach the set-point, and it pauses.
+MAX_UNSETTLED_FRAMES = 10
 # A frame's reported integration time matches the one set within this (the TOFcam-660
 # reports whole microseconds).
 EXPOSURE_MATCH_US = 0.5
@@ -170,7 +175,7 @@ class SetPointCollector:
     def collect(self, index: int, axes: dict[str, float], policy: CollectPolicy) -> SetPointRecord:
         """Move to ``axes`` and collect ``policy.frames`` frames taken at rest."""
         self.move_and_settle(index, axes)
-        at_rest = self._at_rest(index, policy.settle_s, policy.integration_time_us)
+        at_rest = self._at_rest(index, policy.settle_s, policy.integration_time_us, axes)
         last_ok_s = None
         out: list[CollectedFrame] = []
         while len(out) < policy.frames:
@@ -230,20 +235,30 @@ class SetPointCollector:
             time.sleep(self.timing.poll_s)
 
     def _at_rest(
-        self, index: int, settle_s: float, integration_time_us: float | None = None
+        self,
+        index: int,
+        settle_s: float,
+        integration_time_us: float | None = None,
+        axes: dict[str, float] | None = None,
     ) -> Iterator[tuple[LiveSample, float, float]]:
         """(sample, its device time, the device time from which frames count) of every
         frame captured after now (the motion system has settled) that the pipeline
-        measured, from ``settle_s`` after the first of them; with ``integration_time_us``
-        only frames that report it (or none)."""
+        measured, from ``settle_s`` after the first of them at the set-point ``axes``
+        (up to ``MAX_UNSETTLED_FRAMES`` frames off it are still in flight from the move);
+        with ``integration_time_us`` only frames that report it (or none)."""
         settled_unix_s = time.time()
         self.frames.drain()  # frames queued before the settle do not count
         t_ready = None
-        other_exposure = 0
+        other_exposure = unsettled = 0
         while True:
             sample = self._next_sample(index)
             if sample.captured_unix_s < settled_unix_s or not sample.measured:
                 continue  # before the settle, or while the pipeline's kernels compile
+            if t_ready is None and axes is not None and _off_setpoint(axes, sample):
+                unsettled += 1
+                if unsettled > MAX_UNSETTLED_FRAMES:
+                    _check_at_setpoint(index, axes, sample)
+                continue  # captured while the table still moved, arrived late
             if not _exposed_as_set(sample, integration_time_us):
                 other_exposure += 1
                 if other_exposure > MAX_OTHER_EXPOSURE_FRAMES:
@@ -296,7 +311,7 @@ class SetPointCollector:
         try:
             out: list[CollectedFrame] = []
             ran: tuple[float, float, float] | None = None  # (t0, t_end, deadline) once started
-            for sample, t, t_ready in self._at_rest(index, settle_s, integration_time_us):
+            for sample, t, t_ready in self._at_rest(index, settle_s, integration_time_us, axes):
                 if ran is None and t >= t_ready + rest_s:
                     running = True  # from here on, any way out stops the table first
                     t0, t_end = self._start_profile(index, axis, spec)
@@ -434,13 +449,18 @@ def _exposed_as_set(sample: LiveSample, integration_time_us: float | None) -> bo
     return abs(float(reported) - integration_time_us) <= EXPOSURE_MATCH_US
 
 
-def _check_at_setpoint(index: int, axes: dict[str, float], sample: LiveSample) -> None:
-    """Pauses when the frame's encoder read-back (if any) is off the set-point."""
+def _off_setpoint(axes: dict[str, float], sample: LiveSample) -> list[str]:
+    """The axes whose encoder read-back in the frame (if any) is off the set-point
+    ``axes`` by more than ``AT_SETPOINT_TOLERANCE``."""
     enc = sample.frame.meta.get("encoders") or {}
-    off = [
+    return [
         a
         for a, v in axes.items()
         if a in enc and abs(enc[a] - v) > AT_SETPOINT_TOLERANCE.get(a, 0.05)
     ]
-    if off:
+
+
+def _check_at_setpoint(index: int, axes: dict[str, float], sample: LiveSample) -> None:
+    """Pauses when the frame's encoder read-back (if any) is off the set-point."""
+    if off := _off_setpoint(axes, sample):
         raise _paused(f"the turntable left set-point {index} (axes {off})")

@@ -16,6 +16,7 @@ from backend.drivers.sim import SimCamera, SimMotion, make_sim_world
 from backend.services.campaigns.campaign_states import CampaignState
 from backend.services.campaigns.setpoint_collector import (
     AT_SETPOINT_TOLERANCE,
+    MAX_UNSETTLED_FRAMES,
     CollectPolicy,
     CollectTiming,
     SetPointCollector,
@@ -161,6 +162,45 @@ def test_a_setpoint_outside_the_soft_limits_pauses_before_the_driver_moves(lab):
         "move to set-point 0 failed: yaw set-point 1000 deg is outside the soft limits"
     )
     assert driver.calls == []
+
+
+class LateFrames(PipelineFrames):
+    """The first ``n_late`` frames after a settle carry the encoders of the move (the
+    rail 50 mm short), as frames captured while the table moved and measured late on a
+    loaded machine arrive after the motion service reports settled."""
+
+    def __init__(self, camera, n_late: int) -> None:
+        super().__init__(camera)
+        self.n_late = n_late
+
+    def get(self, timeout_s: float) -> LiveSample | None:
+        sample = super().get(timeout_s)
+        if sample is None or self.n_late <= 0:
+            return sample
+        self.n_late -= 1
+        enc = {**sample.frame.meta["encoders"], "rail": SETPOINT["rail"] - 50.0}
+        frame = replace(sample.frame, meta={**sample.frame.meta, "encoders": enc})
+        return replace(sample, frame=frame)
+
+
+@pytest.mark.parametrize("n_late", [6, MAX_UNSETTLED_FRAMES + 1])
+def test_frames_of_the_move_arriving_after_the_settle_are_not_counted(lab, n_late):
+    """Late frames still off the set-point, over more than the settle time (six frames
+    at 0.25 s of lab time each against a 1 s settle), are passed over, and the settle
+    time counts from the first frame at it (counted from the first frame after the
+    settle, the fifth and sixth paused the set-point); more than
+    ``MAX_UNSETTLED_FRAMES`` of them say the table is not at its set-point."""
+    _, camera, driver = lab
+    timing = CollectTiming(poll_s=0.02, move_timeout_s=30.0, frame_timeout_s=2.0)
+    collector = SetPointCollector(MotionService(driver), LateFrames(camera, n_late), timing=timing)
+    if n_late > MAX_UNSETTLED_FRAMES:
+        halt = _halt(lambda: collector.collect(2, SETPOINT, POLICY))
+        assert halt.reason == "the turntable left set-point 2 (axes ['rail'])"
+        return
+    record = collector.collect(2, SETPOINT, POLICY)
+    assert len(record.frames) == POLICY.frames
+    for f in record.frames:
+        assert abs(f.sample.frame.meta["encoders"]["rail"] - SETPOINT["rail"]) <= 1.0
 
 
 def test_the_table_leaving_the_setpoint_pauses(lab):

@@ -56,14 +56,18 @@ def test_a_faint_speck_on_a_big_disc_is_eight_fold_darker_and_a_clipped_disc_is_
     assert np.isnan(radiance_ratio(one)[0])
 
 
-def test_the_flipped_pose_of_faint_specks_at_8_m_is_not_reported():
+def test_the_flipped_pose_of_faint_specks_at_8_m_is_not_reported(monkeypatch):
     """The physics study's frame (family ``all``, 8 m, draw 20 of the study's seed):
     four of the candidates are noise specks and one true marker; they fit a rigid pose
-    159 deg off with 0.2 deg sigmas, its 80 mm discs on specks 20x fainter per area
-    than the 35 mm disc on the marker. Without the check (and without the thresholds
-    above the lit surface, ``extraction.surface``: the plate is lit on this frame) it
-    is reported; with it the frame is refused, naming the two reflectors (a correct
-    pose would do too); with both (the default), no wrong pose either."""
+    159 deg off, its 80 mm discs on specks 20x fainter per area than the 35 mm disc on
+    the marker. Without the check (and without the thresholds above the lit surface,
+    ``extraction.surface``: the plate is lit on this frame) it is reported when the
+    attitude rule is off too (its attitude sigma, 96 deg, refuses it otherwise:
+    ``MAX_ATTITUDE_SIGMA_DEG``); with the check the frame is refused, naming the two
+    reflectors (a correct pose would do too); with both (the default), no wrong pose
+    either."""
+    import tofpose.pipeline as pipeline_module
+
     cam, cat = CameraModel(), paper_target()
     rng = np.random.default_rng([0, FAMILIES.index("all"), 80])
     for _ in range(21):
@@ -73,8 +77,12 @@ def test_the_flipped_pose_of_faint_specks_at_8_m_is_not_reported():
         f = render_frame(cam, scene, T, sensor, rng)
 
     specks = ExtractionConfig(surface_threshold=False)
-    unchecked = PosePipeline(cam, cat, PipelineConfig(photometric_check=False, extraction=specks))
-    wrong = unchecked.process(f.gray, f.distance_mm)
+    unchecked = PipelineConfig(photometric_check=False, extraction=specks)
+    refused = PosePipeline(cam, cat, unchecked).process(f.gray, f.distance_mm)
+    assert not refused.ok and refused.reason.startswith("attitude not determined")
+    with monkeypatch.context() as m:
+        m.setattr(pipeline_module, "MAX_ATTITUDE_SIGMA_DEG", float("inf"))
+        wrong = PosePipeline(cam, cat, unchecked).process(f.gray, f.distance_mm)
     assert wrong.ok and _attitude_error_deg(wrong, T) > 90
     res = PosePipeline(cam, cat, PipelineConfig(extraction=specks)).process(f.gray, f.distance_mm)
     if res.ok:
