@@ -956,6 +956,19 @@ def _initial_linear(pb: _Problem, images: DiscImages) -> tuple[np.ndarray, np.nd
 
 
 @dataclass(frozen=True)
+class _FitFrame:
+    """``fit_pose_to_pixels``' frame and starting pose, checked: gray and distance_mm
+    (H, W), the camera and catalog, R (3, 3) and t_mm (3,)."""
+
+    gray: np.ndarray
+    distance_mm: np.ndarray
+    camera: CameraModel
+    catalog: Catalog
+    R: np.ndarray
+    t_mm: np.ndarray
+
+
+@dataclass(frozen=True)
 class _FitOptions:
     """``fit_pose_to_pixels``' options, checked, as each of its fits takes them."""
 
@@ -1098,8 +1111,10 @@ def fit_pose_to_pixels(
         disc_deletion_terms=disc_deletion_terms,
     )
 
+    frame = _FitFrame(gray, distance_mm, camera, catalog, R, t_mm)
+
     def fit(ids: Sequence[int], exclude: bool) -> PixelFitResult:
-        return _fit_discs(gray, distance_mm, camera, catalog, R, t_mm, ids, exclude, opts)
+        return _fit_discs(frame, ids, exclude, opts)
 
     first = fit(catalog_ids, exclude_unmatched)
     res, left, reasons = first, [], []
@@ -1124,18 +1139,12 @@ def fit_pose_to_pixels(
 
 
 def _fit_discs(
-    gray: np.ndarray,
-    distance_mm: np.ndarray,
-    camera: CameraModel,
-    catalog: Catalog,
-    R: np.ndarray,
-    t_mm: np.ndarray,
-    catalog_ids: Sequence[int],
-    exclude_unmatched: bool,
-    opts: _FitOptions,
+    frame: _FitFrame, catalog_ids: Sequence[int], exclude_unmatched: bool, opts: _FitOptions
 ) -> PixelFitResult:
-    """``fit_pose_to_pixels`` on the discs ``catalog_ids``, once (its inputs checked, its
-    options in ``opts``)."""
+    """``fit_pose_to_pixels`` on the discs ``catalog_ids``, once (its inputs checked, in
+    ``frame``; its options in ``opts``)."""
+    gray, distance_mm, camera, catalog = frame.gray, frame.distance_mm, frame.camera, frame.catalog
+    R, t_mm = frame.R, frame.t_mm
     discs = Discs.from_catalog(catalog, catalog_ids)
     start = PixelFitResult(ok=False, reason="", R=R, t_mm=t_mm, catalog_ids=discs.ids)
     if len(discs.ids) < MIN_MARKERS:
