@@ -15,6 +15,11 @@ instead of the kernels; compared against a saved compiled run it needs stated
 tolerances, ``--tolerance-mm``, ``--tolerance-deg`` and ``--tolerance-cov`` (the
 reference's ML fit is SciPy's ``least_squares``, equal to the kernels' only to its
 tolerance).
+
+``--pixel-fit`` runs both pipelines with the pixel-level fit on
+(``PipelineConfig.pixel_fit``): each ok pose refined on its pixels, and the fit's outcome
+(``PoseResult.pixel_fit``) compared as the modes are. Its saved runs compare only with
+runs of the same flag.
 """
 
 from __future__ import annotations
@@ -31,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.accuracy import random_pose  # noqa: E402
 from bench.pipeline import CASES  # noqa: E402
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target  # noqa: E402
-from tofpose.config import TrackingConfig  # noqa: E402
+from tofpose.config import PixelFitConfig, TrackingConfig  # noqa: E402
 from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg  # noqa: E402
 from tofpose.sim.bench import R_FACING  # noqa: E402
 from tofpose.sim.render import SensorModel, render_frame  # noqa: E402
@@ -73,7 +78,7 @@ def run(
 ) -> dict[str, np.ndarray]:
     cam, cat = CameraModel(), paper_target()
     pipes: dict[str, PosePipeline] = {}
-    ok, ids, Rs, ts, covs, modes = [], [], [], [], [], []
+    ok, ids, Rs, ts, covs, modes, fits = [], [], [], [], [], [], []
     for stream, gray, dist in tqdm(list(frames()), desc="A/B frames", file=sys.stderr):
         key = stream if stream.startswith("stream") else "single"
         if key not in pipes:
@@ -88,6 +93,7 @@ def run(
         ts.append(r.t_mm if r.ok else np.full(3, np.nan))
         covs.append(r.covariance if r.ok and r.covariance is not None else np.full((6, 6), np.nan))
         modes.append(r.mode)
+        fits.append(r.pixel_fit)
     return {
         "ok": np.array(ok),
         "ids": np.array(ids),
@@ -95,14 +101,18 @@ def run(
         "t": np.array(ts),
         "cov": np.array(covs),
         "mode": np.array(modes),
+        "pixel_fit": np.array(fits),
     }
 
 
-def run_both(implementation: str = "compiled") -> dict[str, np.ndarray]:
+def run_both(implementation: str = "compiled", pixel_fit: bool = False) -> dict[str, np.ndarray]:
     """The frames through the default pipeline and through one with tracking on (its
-    keys prefixed ``tracking_``)."""
-    out = run(implementation=implementation)
-    tracked = run(PipelineConfig(tracking=TrackingConfig(enabled=True)), implementation)
+    keys prefixed ``tracking_``); ``pixel_fit``: both with the pixel-level fit on."""
+    fit = PixelFitConfig(enabled=pixel_fit)
+    out = run(PipelineConfig(pixel_fit=fit), implementation=implementation)
+    tracked = run(
+        PipelineConfig(tracking=TrackingConfig(enabled=True), pixel_fit=fit), implementation
+    )
     out.update({f"tracking_{k}": v for k, v in tracked.items()})
     return out
 
@@ -119,9 +129,10 @@ def compare(
     """Print and return (1: beyond the tolerances) the differences of run ``b`` from
     ``a``; ``ids_as_sets``: matched ids compared regardless of order (the reference's
     split of a merged pair may list its halves the other way round)."""
-    if "mode" in a and np.any(a["mode"] != b["mode"]):
-        print(f"{label}: modes differ on {int(np.sum(a['mode'] != b['mode']))} frames")
-        return 1
+    for key in ("mode", "pixel_fit"):
+        if key in a and key in b and np.any(a[key] != b[key]):
+            print(f"{label}: {key} differs on {int(np.sum(a[key] != b[key]))} frames")
+            return 1
     flags = np.flatnonzero(a["ok"] != b["ok"])
     if ids_as_sets:
         idd = np.flatnonzero(
@@ -189,6 +200,12 @@ def main() -> None:
         help="largest accepted covariance difference in --compare, relative to the "
         f"covariance's largest entry (default {TOL:g})",
     )
+    ap.add_argument(
+        "--pixel-fit",
+        action="store_true",
+        help="with the pixel-level fit on (PipelineConfig.pixel_fit); compare with a run "
+        "saved with it",
+    )
     args = ap.parse_args()
     tols = (
         args.tolerance_mm,
@@ -196,13 +213,19 @@ def main() -> None:
         args.implementation == "reference",
         args.tolerance_cov,
     )
-    result = run_both(args.implementation)
+    result = run_both(args.implementation, args.pixel_fit)
+    result["pixel_fit_on"] = np.array(args.pixel_fit)
     if args.save:
         np.savez(args.save, **result)
         print(f"saved {len(result['ok'])} frames x 2 modes -> {args.save}")
         return
     with np.load(args.compare) as saved:
         before = dict(saved)
+    if bool(before.get("pixel_fit_on", False)) != args.pixel_fit:
+        sys.exit(
+            f"{args.compare} was saved {'with' if before.get('pixel_fit_on') else 'without'} "
+            "--pixel-fit: compare it with a run of the same flag"
+        )
     status = compare(before, result, "acquisition", *tols)
     if "tracking_ok" in before:
         tracked = {

@@ -194,13 +194,14 @@ def build_windows(
         boxes.append((u0, u1, v0, v1))
         if u0 < u1 and v0 < v1:
             taken[v0:v1, u0:u1] = True
+    rows, cols = np.nonzero(taken)
     if others is not None and len(others.ids):
-        vv, uu = np.mgrid[0:h, 0:w]
+        keep = np.ones(len(rows), bool)
         for rim in predicted_rims(camera, R, t_mm, others):
             c = rim.mean(axis=0)
             reach = np.max(np.hypot(*(rim - c).T)) + UNMATCHED_MARGIN_PX
-            taken &= np.hypot(uu - c[0], vv - c[1]) > reach
-    rows, cols = np.nonzero(taken)
+            keep &= np.hypot(cols - c[0], rows - c[1]) > reach
+        rows, cols = rows[keep], cols[keep]
     uv = np.column_stack([cols, rows]).astype(float)
     # owner: the nearest predicted centre among the windows holding the pixel
     d2 = np.full((len(rows), len(boxes)), np.inf)

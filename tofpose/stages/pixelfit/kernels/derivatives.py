@@ -253,8 +253,26 @@ def disc_images_with_derivatives(R, t_mm, discs, rays, band_px, mm_per_radian, r
                     ss, au, av, lam_s = _rim_point(sb, sbu, sbv, c, n, r)
                     a_half = au * half
                     b_half = av * half
-                    if ss <= -(max(a_half, floor) + max(b_half, floor)):
+                    reach = max(a_half, floor) + max(b_half, floor)
+                    if ss <= -reach:
                         continue  # wholly outside: coverage and derivatives 0
+                    if ss >= reach:
+                        # wholly inside: coverage 1, its derivatives 0; only the phase
+                        # moves, with the range to the plane (the rim's chain rule is
+                        # not needed: ``_box_coverage_derivatives`` is 1, 0, 0, 0 here)
+                        phase = (lam_s - reference_mm) / mm_per_radian
+                        cos_p = math.cos(phase)
+                        sin_p = math.sin(phase)
+                        cov_sum += 1.0
+                        re_sum += cos_p
+                        im_sum += sin_p
+                        nb_s = sb[0] * n[0] + sb[1] * n[1] + sb[2] * n[2]
+                        for e in range(N_POSE):
+                            d_phase = _range_derivative(sb, c, n, nb_s, lam_s, dc[e], dn[e])
+                            d_phase /= mm_per_radian
+                            d_re_sum[e] -= d_phase * sin_p
+                            d_im_sum[e] += d_phase * cos_p
+                        continue
                     _rim_point_derivatives(sb, sbu, sbv, c, n, r, dc, dn, out)
                     cov_s, c_s, c_a, c_b = _box_coverage_derivatives(
                         ss, max(a_half, floor), max(b_half, floor)

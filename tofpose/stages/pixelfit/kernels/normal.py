@@ -37,7 +37,13 @@ def _wrap(x, period):
 def predict(coverage, phasor, plate, state, fit, const):
     """``model.predict`` at the nuisance parameters ``state`` (a ``NuisanceRecord``):
     gray (P,) counts, distance (P,) mm, the mixed phasor (P,) complex, the surround's
-    share (P,) and each disc's gain at each pixel (K, P)."""
+    share (P,) and each disc's gain at each pixel (K, P), where the disc reaches it (0
+    elsewhere).
+
+    A disc with no coverage of a pixel has there no phasor and no pose derivatives
+    either (``kernels.derivatives``: a pixel is covered 0 only when every sub-cell is
+    wholly outside), so the loops over the discs skip it: a pixel is reached by one or
+    two of the K discs, and the (K, P, 6) derivative arrays are read only there."""
     gains, levels = state.gains, state.levels
     basis, owner = fit.basis, fit.owner
     k_count, p_count = coverage.shape
@@ -56,6 +62,8 @@ def predict(coverage, phasor, plate, state, fit, const):
         gray_p = 0.0
         mixed_p = 0.0j
         for k in range(k_count):
+            if coverage[k, p] == 0.0:
+                continue  # the disc does not reach the pixel: its phasor is 0 too
             gk = 0.0
             for j in range(n_terms):
                 gk += basis[k, p, j] * gains[k, j]
@@ -147,8 +155,10 @@ def _cost(gray, distance, state, sigma_gray, sigma_distance, fit, const):
 @jit
 def _accumulate(cols, vals, n, r, info, grad, free_index, idx, val):
     """Add one row's ``J_i' J_i`` (upper triangle; ``_symmetric`` mirrors it) and ``J_i'
-    r_i`` (its ``n`` nonzero entries ``vals`` at ``cols``; ``idx`` and ``val`` are
-    scratch of the same length)."""
+    r_i`` (its ``n`` nonzero entries ``vals`` at ``cols``, in ascending column order, as
+    ``normal_equations`` lists them in ``fit._Layout``'s order; ``idx`` and ``val`` are
+    scratch of the same length). The fitted columns ``free_index`` keeps ascend with
+    them, so the upper triangle is the pairs ``b >= a``."""
     m = 0
     for a in range(n):
         ia = free_index[cols[a]]
@@ -160,10 +170,8 @@ def _accumulate(cols, vals, n, r, info, grad, free_index, idx, val):
         ia = idx[a]
         va = val[a]
         grad[ia] += va * r
-        for b in range(m):
-            ib = idx[b]
-            if ib >= ia:
-                info[ia, ib] += va * val[b]
+        for b in range(a, m):
+            info[ia, idx[b]] += va * val[b]
 
 
 @jit
@@ -209,6 +217,8 @@ def normal_equations(images, state, fit, const, per_disc):
     idx = np.empty(width, np.int64)
     val = np.empty(width)
     d_surround = np.empty(N_POSE)
+    d_pose = np.empty(N_POSE)
+    dm_pose = np.empty(N_POSE, np.complex128)
     n_gray = fit.gray_rows.shape[0]
     for i in range(n_gray + fit.sat_rows.shape[0]):
         censored = i >= n_gray
@@ -216,13 +226,16 @@ def normal_equations(images, state, fit, const, per_disc):
         r, w = _gray_residual(p, censored, gray, sigma_gray, fit, const)
         _surround_derivative(d_coverage, coverage, p, d_surround)
         level = levels[fit.owner[p]] * fit.plate_fraction[p] + fit.beyond_counts[p]
+        for e in range(N_POSE):
+            d_pose[e] = level * d_surround[e]
+        for kk in range(k_count):
+            if coverage[kk, p] != 0.0:
+                for e in range(N_POSE):
+                    d_pose[e] += g[kk, p] * d_coverage[kk, p, e]
         n = 0
         for e in range(N_POSE):
-            d = level * d_surround[e]
-            for kk in range(k_count):
-                d += g[kk, p] * d_coverage[kk, p, e]
             cols[n] = e
-            vals[n] = d * w
+            vals[n] = d_pose[e] * w
             n += 1
         for kk in range(k_count):
             c = coverage[kk, p]
@@ -246,13 +259,16 @@ def normal_equations(images, state, fit, const, per_disc):
         inv = 1.0 / mixed[p] if abs(mixed[p]) > 0 else 1.0 + 0.0j
         _surround_derivative(d_coverage, coverage, p, d_surround)
         level = levels[fit.owner[p]] * fit.plate_fraction[p] + fit.beyond_counts[p]
+        for e in range(N_POSE):
+            dm_pose[e] = level * (d_surround[e] * plate[p] + surround[p] * d_plate[p, e])
+        for kk in range(k_count):
+            if coverage[kk, p] != 0.0:
+                for e in range(N_POSE):
+                    dm_pose[e] += g[kk, p] * d_phasor[kk, p, e]
         n = 0
         for e in range(N_POSE):
-            dm = level * (d_surround[e] * plate[p] + surround[p] * d_plate[p, e])
-            for kk in range(k_count):
-                dm += g[kk, p] * d_phasor[kk, p, e]
             cols[n] = e
-            vals[n] = mpr * (dm * inv).imag * w
+            vals[n] = mpr * (dm_pose[e] * inv).imag * w
             n += 1
         for kk in range(k_count):
             ph = phasor[kk, p]
@@ -312,11 +328,12 @@ def _surround_derivative(d_coverage, coverage, p, out):
     for k in range(coverage.shape[0]):
         covered += coverage[k, p]
     for e in range(N_POSE):
-        d = 0.0
-        if covered < 1.0:
-            for k in range(coverage.shape[0]):
-                d -= d_coverage[k, p, e]
-        out[e] = d
+        out[e] = 0.0
+    if covered < 1.0:
+        for k in range(coverage.shape[0]):
+            if coverage[k, p] != 0.0:
+                for e in range(N_POSE):
+                    out[e] -= d_coverage[k, p, e]
 
 
 @jit
