@@ -31,6 +31,23 @@ DAMPING_DOWN, DAMPING_UP = 0.3, 10.0
 #: 2026-12-07: the same RMS errors over the bound to three decimals at 1, 3 and 6 m,
 #: 10-20 % more time a frame, one iteration more per solve)
 STEP_TOLERANCE_SIGMA2 = 1e-2
+#: the same for the solve that only finds where the frame's model errors are measured
+#: (before the rim's model error and the discs' range errors are known, and the solve
+#: with them follows from its state): a step under one sigma. Near the solution the
+#: Gauss-Newton steps shrink quadratically, so the state is then a small part of a sigma
+#: from that solve's optimum, and the residuals the model errors are measured on move by
+#: less; the solve that follows converges to ``STEP_TOLERANCE_SIGMA2`` as before (when
+#: none follows, the starting solve is finished to it). One iteration less per frame.
+START_STEP_TOLERANCE_SIGMA2 = 1.0
+#: iterations over which the distance's noise constant, when the noise model leaves it
+#: open (``PixelNoise.range_k_mm`` None), is measured again at each iteration on the
+#: distance residuals (their median absolute deviation); then it is held at the last
+#: value, so the solve minimises one fixed cost and ends. Measured again at every step,
+#: the weights and the state can cycle: on a 300-frame range sweep, 14 of 576 solves
+#: alternated between two states (their cost at each linearisation e.g. 347.7, 329.4,
+#: 347.7, ...) until ``MAX_ITERATIONS`` and fell back; held after 6, every solve ended
+#: (in at most 18 iterations), and a solve of up to 6 iterations is unchanged.
+NOISE_FREEZE_ITERATIONS = 6
 #: central-difference steps of the pose derivative: rotation, rad; translation, mm
 ROTATION_STEP_RAD = 1e-5
 TRANSLATION_STEP_MM = 1e-2

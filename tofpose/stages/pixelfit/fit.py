@@ -57,11 +57,13 @@ from tofpose.stages.pixelfit.constants import (
     MIN_MARKERS,
     MIN_PLATE_PIXELS,
     MIN_RIM_PIXELS,
+    NOISE_FREEZE_ITERATIONS,
     QUANTISATION_VAR,
     RELATIVE_RMS_FACTOR,
     RELATIVE_RMS_MIN_SIGMA,
     RIM_COVERAGE_EPS,
     ROTATION_STEP_RAD,
+    START_STEP_TOLERANCE_SIGMA2,
     STEP_TOLERANCE_SIGMA2,
     SUBSAMPLES,
     TRANSLATION_STEP_MM,
@@ -1240,7 +1242,13 @@ def _fit_discs(
     )
 
     solved = _levenberg_marquardt(
-        pb, state, images, extra_var, np.zeros(k_count), opts.max_iterations
+        pb,
+        state,
+        images,
+        extra_var,
+        np.zeros(k_count),
+        opts.max_iterations,
+        START_STEP_TOLERANCE_SIGMA2,
     )
     # bright spots in the surround the model does not carry (glints): left out, fitted again
     pred = pb.predict(solved.images, solved.state)
@@ -1248,7 +1256,13 @@ def _fit_discs(
     if np.any(glints):
         pb = _without_pixels(pb, glints)
         again = _levenberg_marquardt(
-            pb, solved.state, solved.images, extra_var, np.zeros(k_count), opts.max_iterations
+            pb,
+            solved.state,
+            solved.images,
+            extra_var,
+            np.zeros(k_count),
+            opts.max_iterations,
+            START_STEP_TOLERANCE_SIGMA2,
         )
         solved = replace(again, iterations=solved.iterations + again.iterations)
         pred = pb.predict(solved.images, solved.state)
@@ -1266,15 +1280,15 @@ def _fit_discs(
     if disc_range_sigma is None:
         sig = _sigmas(pb, pred, extra_var, rim, coverage_sigma)
         disc_range_sigma = _measured_disc_range_sigma(pb, pred, sig)
-    if np.any(coverage_sigma > 0) or disc_range_sigma > 0:
-        if disc_range_sigma > 0:
-            pb = replace(
-                pb,
-                disc_range_sigma_mm=disc_range_sigma,
-                free=np.concatenate([pb.free, np.ones(k_count, bool)]),
-            )
-        again = _levenberg_marquardt(pb, st, im, extra_var, coverage_sigma, opts.max_iterations)
-        solved = replace(again, iterations=solved.iterations + again.iterations)
+    if disc_range_sigma > 0:
+        pb = replace(
+            pb,
+            disc_range_sigma_mm=disc_range_sigma,
+            free=np.concatenate([pb.free, np.ones(k_count, bool)]),
+        )
+    # with them (without any, the starting solve's own cost), to the full tolerance
+    again = _levenberg_marquardt(pb, st, im, extra_var, coverage_sigma, opts.max_iterations)
+    solved = replace(again, iterations=solved.iterations + again.iterations)
     state, images = solved.state, solved.images
     pred = pb.predict(images, state)
     sig = _sigmas(pb, pred, extra_var, _rim_sensitivity(pb, images, pred, state), coverage_sigma)
@@ -1385,11 +1399,14 @@ def _levenberg_marquardt(
     extra_var: float,
     coverage_sigma: np.ndarray,
     max_iterations: int,
+    step_tolerance_sigma2: float = STEP_TOLERANCE_SIGMA2,
 ) -> _Solved:
     """Levenberg-Marquardt from ``state`` (``images`` its discs' images) with the noise
-    model's sigmas re-evaluated at each iteration; the rim's model error, when
+    model's sigmas re-evaluated at each iteration (the distance's noise constant, when
+    measured, for the first ``NOISE_FREEZE_ITERATIONS``); the rim's model error, when
     ``coverage_sigma`` > 0, with the rim's sensitivity of the starting state (so that the
-    weights of the rim pixels do not follow the fit from one iteration to the next)."""
+    weights of the rim pixels do not follow the fit from one iteration to the next).
+    Converged at a step shorter than ``step_tolerance_sigma2`` in its own sigmas."""
     rim = None
     if np.any(coverage_sigma > 0):
         rim = _rim_sensitivity(pb, images, pb.predict(images, state), state)
@@ -1409,6 +1426,12 @@ def _levenberg_marquardt(
             images, d_images = pb.images_with_derivatives(state.R, state.t_mm)
         last = _Linearisation(state, images, d_images, noise)
         info, grad, cost, sig, _ = _linearised(pb, last, per_disc=False)
+        if iteration == NOISE_FREEZE_ITERATIONS and pb.noise.range_k_mm is None:
+            # held from here on (``NOISE_FREEZE_ITERATIONS``): one fixed cost to the end
+            pb = replace(pb, noise=replace(pb.noise, range_k_mm=sig.range_k_mm))
+            if kernel is not None:
+                kernel = (kernel[0], kernel[1]._replace(range_k_mm=sig.range_k_mm))
+            noise = _SolveNoise(extra_var, coverage_sigma, rim, kernel)
         diag = np.maximum(np.diag(info), 1e-12)
         accepted = False
         for _ in range(MAX_DAMPING_TRIES):
@@ -1440,7 +1463,7 @@ def _levenberg_marquardt(
                 break
             damping *= DAMPING_UP
         step2 = float(step @ info @ step) if accepted else 0.0
-        if not accepted or step2 < STEP_TOLERANCE_SIGMA2:
+        if not accepted or step2 < step_tolerance_sigma2:
             # no step lowers the cost any more, or the last one was negligible
             converged = True
             break

@@ -14,6 +14,7 @@ from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg
 from tofpose.sim.bench import R_FACING
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import TargetScene
+from tofpose.stages.pixelfit.constants import MAX_ITERATIONS
 from tofpose.stages.pixelfit.fit import PixelNoise, fit_pose_to_pixels
 
 CAM = CameraModel()
@@ -594,3 +595,22 @@ def test_a_glint_in_a_discs_window_is_left_out_and_the_fit_holds():
         else:
             assert res.n_glint_pixels == 0 and res.left_out.tolist() == [6]
             assert res.left_out_reason.startswith("6 (unexplained"), res.left_out_reason
+
+
+def test_a_solve_whose_measured_range_noise_cycles_ends_at_the_truth():
+    # at 13 m (seed 2) the distance noise constant, measured again at each iteration on
+    # the residuals' median, and the state alternated between two values until the
+    # iteration limit ("not converged in 34 iterations"); held after
+    # NOISE_FREEZE_ITERATIONS, the solve ends where the frame puts the pose
+    rng = np.random.default_rng(2)
+    T = RigidTransform(rotation_from_euler_deg(2, -3, 10) @ R_FACING, np.array([0, -30, 13000.0]))
+    f = render_frame(CAM, TargetScene(), T, SensorModel(), rng)
+    res = PosePipeline(CAM, CAT).process(f.gray, f.distance_mm)
+    assert res.ok
+    fit = fit_pose_to_pixels(
+        f.gray, f.distance_mm, CAM, CAT, res.R, res.t_mm, [m.catalog_id for m in res.matched]
+    )
+    assert fit.converged and fit.ok, fit.reason
+    assert fit.iterations < 2 * MAX_ITERATIONS
+    err = _error(fit.R, fit.t_mm, T)
+    assert err @ np.linalg.solve(fit.covariance, err) < 22.5  # chi-square(6), 0.999

@@ -18,9 +18,9 @@ def _solver_calls(monkeypatch, noise_options, clip):
     calls = []
     original = fit._levenberg_marquardt
 
-    def spy(pb, state, images, extra_var, coverage_sigma, max_iterations):
+    def spy(pb, state, images, extra_var, coverage_sigma, max_iterations, *tolerance):
         calls.append((pb, state, images, extra_var, coverage_sigma))
-        return original(pb, state, images, extra_var, coverage_sigma, max_iterations)
+        return original(pb, state, images, extra_var, coverage_sigma, max_iterations, *tolerance)
 
     monkeypatch.setattr(fit, "_levenberg_marquardt", spy)
     fit_with_every_parameter(noise_options, clip=clip)
