@@ -37,7 +37,8 @@ STEP_TOLERANCE_SIGMA2 = 1e-2
 #: Gauss-Newton steps shrink quadratically, so the state is then a small part of a sigma
 #: from that solve's optimum, and the residuals the model errors are measured on move by
 #: less; the solve that follows converges to ``STEP_TOLERANCE_SIGMA2`` as before (when
-#: none follows, the starting solve is finished to it). One iteration less per frame.
+#: none follows, the starting solve is finished to it). With the hold below, the
+#: 300-frame range sweep's fits took 5.4 Jacobians each instead of 7.4.
 START_STEP_TOLERANCE_SIGMA2 = 1.0
 #: iterations over which the distance's noise constant, when the noise model leaves it
 #: open (``PixelNoise.range_k_mm`` None), is measured again at each iteration on the
