@@ -158,11 +158,14 @@ def _accumulate(cols, vals, n, r, info, grad, free_index, idx, val):
     r_i`` (its ``n`` nonzero entries ``vals`` at ``cols``, in ascending column order, as
     ``normal_equations`` lists them in ``fit._Layout``'s order; ``idx`` and ``val`` are
     scratch of the same length). The fitted columns ``free_index`` keeps ascend with
-    them, so the upper triangle is the pairs ``b >= a``."""
+    them, so the upper triangle is the pairs ``b >= a``. Entries that are exactly 0 are
+    skipped: a pixel of the surround beyond every disc's rim has only its level's entry,
+    and a gray pixel wholly inside a disc only that disc's gain terms (its pose and level
+    entries are 0), so most gray rows are far shorter than their column list."""
     m = 0
     for a in range(n):
         ia = free_index[cols[a]]
-        if ia >= 0:
+        if ia >= 0 and vals[a] != 0.0:  # an exact zero adds nothing to J'J or J'r
             idx[m] = ia
             val[m] = vals[a]
             m += 1
