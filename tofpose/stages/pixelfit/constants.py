@@ -43,7 +43,10 @@ START_STEP_TOLERANCE_SIGMA2 = 1.0
 #: iterations over which the distance's noise constant, when the noise model leaves it
 #: open (``PixelNoise.range_k_mm`` None), is measured again at each iteration on the
 #: distance residuals (their median absolute deviation); then it is held at the last
-#: value, so the solve minimises one fixed cost and ends. Measured again at every step,
+#: value for the rest of the solve (and the fit's covariance, residuals and verdict are
+#: with it), so the distance weights no longer jump with the median from step to step
+#: (the gray's and the distance's shot-noise shapes still follow the model). Measured
+#: again at every step,
 #: the weights and the state can cycle: on a 300-frame range sweep, 14 of 576 solves
 #: alternated between two states (their cost at each linearisation e.g. 347.7, 329.4,
 #: 347.7, ...) until ``MAX_ITERATIONS`` and fell back; held after 6, every solve ended

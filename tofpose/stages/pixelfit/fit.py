@@ -13,7 +13,8 @@ model's gray plus the ambient's share the gray does not show (``gray_extra_var``
 default measured on the surround: its variance minus its level) plus quantisation; a
 distance pixel's sigma is ``range_k_mm * sqrt(A + B) / A`` (CW-ToF, Lange 2000) with A the
 model's mixed amplitude and ``A + B`` the gray's variance. Residuals are whitened by
-these sigmas, re-evaluated at each iteration from the current model.
+these sigmas, re-evaluated at each iteration from the current model (a measured
+``range_k_mm`` only over a solve's first ``NOISE_FREEZE_ITERATIONS``: ``constants``).
 
 Saturated pixels (gray at full scale) are censored: the measurement says "at least full
 scale", so a model at or above it leaves no residual and a model below it is pulled up
@@ -125,7 +126,8 @@ class PixelNoise:
     range_k_mm : float or None
         ``sigma_d = range_k_mm * sqrt(A + B) / A`` per pixel (the simulator's
         ``mm_per_radian / demod_gain``; the pipeline pools it per frame). None: measured
-        on the frame's distance residuals at each iteration.
+        on the frame's distance residuals at each of a solve's first
+        ``NOISE_FREEZE_ITERATIONS`` iterations, then held for the rest of it.
     gray_extra_var : float or None
         Gray variance beyond the model's level, counts^2 (the ambient B that background
         suppression removes from the gray but not from its noise). None: measured on the
@@ -1289,6 +1291,8 @@ def _fit_discs(
     # with them (without any, the starting solve's own cost), to the full tolerance
     again = _levenberg_marquardt(pb, st, im, extra_var, coverage_sigma, opts.max_iterations)
     solved = replace(again, iterations=solved.iterations + again.iterations)
+    if solved.held_range_k_mm is not None:  # the noise constant the covariance is with
+        pb = replace(pb, noise=replace(pb.noise, range_k_mm=solved.held_range_k_mm))
     state, images = solved.state, solved.images
     pred = pb.predict(images, state)
     sig = _sigmas(pb, pred, extra_var, _rim_sensitivity(pb, images, pred, state), coverage_sigma)
@@ -1367,6 +1371,9 @@ class _Solved:
     converged: bool
     # where the last iteration linearised the model (before its step): ``info``'s state
     last: _Linearisation | None = None
+    # the distance's noise constant the solve held (``NOISE_FREEZE_ITERATIONS``), None
+    # when it measured it at every iteration; ``info`` and ``last`` are with it
+    held_range_k_mm: float | None = None
 
 
 @dataclass(frozen=True)
@@ -1419,6 +1426,7 @@ def _levenberg_marquardt(
     iterations = 0
     info = None
     last = None
+    held = None
     for iteration in range(1, max_iterations + 1):
         iterations = iteration
         d_images = None
@@ -1427,8 +1435,10 @@ def _levenberg_marquardt(
         last = _Linearisation(state, images, d_images, noise)
         info, grad, cost, sig, _ = _linearised(pb, last, per_disc=False)
         if iteration == NOISE_FREEZE_ITERATIONS and pb.noise.range_k_mm is None:
-            # held from here on (``NOISE_FREEZE_ITERATIONS``): one fixed cost to the end
-            pb = replace(pb, noise=replace(pb.noise, range_k_mm=sig.range_k_mm))
+            # held from here on (``NOISE_FREEZE_ITERATIONS``): the distance weights no
+            # longer follow the residuals' median from step to step
+            held = sig.range_k_mm
+            pb = replace(pb, noise=replace(pb.noise, range_k_mm=held))
             if kernel is not None:
                 kernel = (kernel[0], kernel[1]._replace(range_k_mm=sig.range_k_mm))
             noise = _SolveNoise(extra_var, coverage_sigma, rim, kernel)
@@ -1467,7 +1477,7 @@ def _levenberg_marquardt(
             # no step lowers the cost any more, or the last one was negligible
             converged = True
             break
-    return _Solved(state, images, info, iterations, converged, last)
+    return _Solved(state, images, info, iterations, converged, last, held)
 
 
 def _image_record(images: DiscImages, d_images: DiscImageDerivatives) -> ImageRecord:

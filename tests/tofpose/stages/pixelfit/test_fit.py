@@ -14,6 +14,7 @@ from tofpose.core.geometry import RigidTransform, rotation_from_euler_deg
 from tofpose.sim.bench import R_FACING
 from tofpose.sim.render import SensorModel, render_frame
 from tofpose.sim.scene import TargetScene
+from tofpose.stages.pixelfit import fit as fit_module
 from tofpose.stages.pixelfit.constants import MAX_ITERATIONS
 from tofpose.stages.pixelfit.fit import PixelNoise, fit_pose_to_pixels
 
@@ -614,3 +615,42 @@ def test_a_solve_whose_measured_range_noise_cycles_ends_at_the_truth():
     assert fit.iterations < 2 * MAX_ITERATIONS
     err = _error(fit.R, fit.t_mm, T)
     assert err @ np.linalg.solve(fit.covariance, err) < 22.5  # chi-square(6), 0.999
+
+
+def test_a_held_noise_constant_is_the_one_the_fit_reports_in_both_arithmetics(monkeypatch):
+    # at 11 m (seed 5) the last solve runs past NOISE_FREEZE_ITERATIONS and holds the
+    # distance's noise constant; the information is with it, so the disc-deletion
+    # check's shares, the residuals, the verdict and the reported constant must be too
+    # (they had measured it again at the last state), in the NumPy arithmetic as in the
+    # kernels
+    held = []
+    solve = fit_module._levenberg_marquardt
+
+    def spy(*args):
+        solved = solve(*args)
+        held.append(solved.held_range_k_mm)
+        return solved
+
+    monkeypatch.setattr(fit_module, "_levenberg_marquardt", spy)
+    rng = np.random.default_rng(5)
+    T = RigidTransform(rotation_from_euler_deg(2, -3, 10) @ R_FACING, np.array([0, -30, 11000.0]))
+    f = render_frame(CAM, TargetScene(), T, SensorModel(), rng)
+    res = PosePipeline(CAM, CAT).process(f.gray, f.distance_mm)
+    ids = [m.catalog_id for m in res.matched]
+    fits = [
+        fit_pose_to_pixels(
+            f.gray, f.distance_mm, CAM, CAT, res.R, res.t_mm, ids, implementation=implementation
+        )
+        for implementation in ("compiled", "reference")
+    ]
+    assert all(x.ok for x in fits), [x.reason for x in fits]
+    assert fits[0].iterations == fits[1].iterations
+    last_solves = held[len(held) // 2 - 1], held[-1]  # each fit's last solve
+    for fit, k in zip(fits, last_solves, strict=True):
+        assert k is not None and fit.range_k_mm == k
+    assert fits[1].range_k_mm == pytest.approx(fits[0].range_k_mm, rel=1e-9)
+    np.testing.assert_array_equal(fits[1].influential, fits[0].influential)
+    assert fits[1].deletion_variance_factor == pytest.approx(
+        fits[0].deletion_variance_factor, rel=1e-6
+    )
+    np.testing.assert_allclose(fits[1].covariance, fits[0].covariance, rtol=1e-6, atol=1e-12)
