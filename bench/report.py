@@ -599,10 +599,12 @@ def physics_section(quick: bool) -> str:
     IMG.mkdir(parents=True, exist_ok=True)
     physics.plot(phys, IMG / "physics.png")
     compared = physics.compare_pixel_fit(n_phys // 2 if not quick else n_phys)
+    wrapped = physics.beyond_unambiguous(n_phys)
     return "\n".join(
         [
             physics.markdown(phys, _rel(IMG / "physics.png"), n_phys),
             physics.pixel_fit_markdown(compared, n_phys // 2 if not quick else n_phys),
+            physics.beyond_unambiguous_markdown(wrapped, n_phys),
         ]
     )
 

@@ -42,6 +42,14 @@ from tofpose.stages.extraction.uncertainty import (
     SigmaFloors,
     kernel_constants,
 )
+from tofpose.stages.extraction.wrap import (
+    MAX_READINGS,
+    WrapSuggestion,
+    max_reading_mm,
+    readings_beyond,
+    suggested_ranges_mm,
+    unwrap_about,
+)
 from tofpose.stages.matching.matching import (
     MatchResult,
     match_by_triplets,
@@ -354,6 +362,11 @@ class PosePipeline:
             camera, catalog, self.config.solve, range_correction, arithmetic=arithmetic.pose
         )
         self._track: TrackState | None = None
+        # the range the distances are read about when the target is beyond the camera's
+        # unambiguous range (``stages.extraction.wrap``), None: as measured; and what the
+        # last frame's refused components suggest it is
+        self._unwrap_about_mm: float | None = None
+        self._wrap_suggestions: list[WrapSuggestion] = []
         # frames this pipeline was given: in tracking mode every ``reacquire_every``-th
         # frame of the stream is a full acquisition, whatever happened before, so the
         # schedule depends on the frame's index alone (``tofpose.batch.reprocess`` starts
@@ -374,6 +387,7 @@ class PosePipeline:
         """Forget multi-frame history (call when the stream is discontinuous)."""
         self._persistence.reset()
         self._track = None
+        self._unwrap_about_mm = None
 
     def state_digest(self) -> bytes:
         """A digest (16 bytes) of everything a frame leaves for the next ones: the
@@ -403,6 +417,8 @@ class PosePipeline:
                 ).tobytes()
             )
         h.update(repr(self._rng.bit_generator.state).encode())
+        if self._unwrap_about_mm is not None:
+            h.update(np.float64(self._unwrap_about_mm).tobytes())
         if self.config.tracking.enabled:  # where the stream is in the re-acquisition period
             h.update(
                 (self._frames_seen % self.config.tracking.reacquire_every).to_bytes(4, "little")
@@ -418,12 +434,49 @@ class PosePipeline:
         Raises ``FrameError`` (a ValueError) for arrays of the wrong shape or dtype;
         every other failure is an ``ok = False`` result with a reason. With
         ``config.pixel_fit.enabled`` an ok pose is refined on the matched markers' pixels
-        (``PoseResult.pixel_fit`` says how that went).
+        (``PoseResult.pixel_fit`` says how that went). A frame refused because its
+        components have the catalog's sizes only at their distances plus whole unambiguous
+        ranges (the target beyond the range the camera's distances wrap at) is measured
+        again with its distances read so (``_measure_unwrapped``).
         """
         result = self._process(gray, distance_mm, time_s)
+        if not result.ok and self._wrap_suggestions:
+            result = self._measure_unwrapped(gray, distance_mm, time_s, result)
+        if result.ok and result.t_mm is not None and self._unwrap_about_mm is not None:
+            # the reading follows the target
+            self._unwrap_about_mm = float(np.linalg.norm(result.t_mm))
         if not (self.config.pixel_fit.enabled and result.ok):
             return result
         return self._refine_on_pixels(result, gray, distance_mm)
+
+    def _measure_unwrapped(
+        self, gray: np.ndarray, distance_mm: np.ndarray, time_s: float | None, refused: PoseResult
+    ) -> PoseResult:
+        """The frame measured again, from a fresh start, with its distances read about
+        each range ``_wrap_suggestions`` found in turn (``stages.extraction.wrap``, at most
+        ``MAX_READINGS``); the first ok result. When none is, the pipeline's state and
+        ``refused`` as they were (the first reading stands; nothing of the others is
+        kept)."""
+        suggestions = self._wrap_suggestions[:MAX_READINGS]
+        before = (
+            self._persistence.snapshot(),
+            self._track,
+            self._rng.bit_generator.state,
+            self._frames_seen,
+            self._unwrap_about_mm,
+        )
+        for suggestion in suggestions:
+            self.reset()
+            self._frames_seen = before[3] - 1  # the same frame of the stream
+            self._unwrap_about_mm = suggestion.about_mm
+            again = self._process(gray, distance_mm, time_s)
+            if again.ok:
+                return again
+        history, self._track, rng_state, self._frames_seen, self._unwrap_about_mm = before
+        self._persistence.restore(history)
+        self._rng.bit_generator.state = rng_state
+        self._wrap_suggestions = suggestions
+        return refused
 
     def _refine_on_pixels(
         self, result: PoseResult, gray: np.ndarray, distance_mm: np.ndarray
@@ -532,6 +585,10 @@ class PosePipeline:
         cfg = self.config
         timer = _Timer()
         g, d = check_frame(self.camera, gray, distance_mm)
+        self._wrap_suggestions = []
+        wrap_mm = self.camera.unambiguous_range_mm
+        if self._unwrap_about_mm is not None and self._unwrap_about_mm > 0.5 * wrap_mm:
+            d = unwrap_about(d, self._unwrap_about_mm, wrap_mm)
         frame_number = self._frames_seen
         self._frames_seen += 1
         track = self._track
@@ -592,6 +649,7 @@ class PosePipeline:
             surface_level_counts=stats.surface_level,
         )
         if len(meas.range_mm) < cfg.matching.min_matches:
+            self._wrap_suggestions = self._suggest_wraps(found.wrong_size)
             return fail(
                 f"found {len(meas.range_mm)} candidate reflector(s) with a valid range "
                 f"(of {n_kept} blobs), need {cfg.matching.min_matches}"
@@ -623,6 +681,7 @@ class PosePipeline:
                 m, from_hypotheses = hypotheses, True
         timer.lap("matching")
         if not m.ok:
+            self._wrap_suggestions = self._wrap_readings(found, meas)
             return fail(
                 f"matching failed: {m.reason}" + self._saturation_hint(g, blobs),
                 unmatched=unmatched + meas.as_unmatched(),
@@ -634,6 +693,7 @@ class PosePipeline:
         solved = self._solve_with_fallback(meas, m, active, dark_check_all=from_hypotheses)
         timer.lap("refine")
         if isinstance(solved, Rejected):
+            self._wrap_suggestions = self._wrap_readings(found, meas)
             return fail(
                 solved.reason + self._saturation_hint(g, blobs),
                 unmatched=unmatched + meas.as_unmatched(),
@@ -975,29 +1035,51 @@ class PosePipeline:
             + (self._wrap_hint(wrong_size) or "is the right catalog active?")
         )
 
+    def _suggest_wraps(self, wrong_size) -> list[WrapSuggestion]:
+        """``stages.extraction.wrap.suggested_ranges_mm`` of the components the size window
+        refused (``WrongSizeBlob``), at least as many as a match needs."""
+        if not wrong_size:
+            return []
+        return suggested_ranges_mm(
+            wrong_size,
+            self.camera.fx,
+            self._catalog_d,
+            self.config.extraction,
+            self.camera.unambiguous_range_mm,
+            self.config.matching.min_matches,
+        )
+
+    def _wrap_readings(self, found: CandidateBlobs, meas: Measurements) -> list[WrapSuggestion]:
+        """For a frame whose candidates give no pose where they read: the readings the
+        refused components' sizes suggest (``_suggest_wraps``), else, unless the frame is
+        already read about a range, ``stages.extraction.wrap.readings_beyond`` of the
+        candidates' ranges, up to ``max_reading_mm``."""
+        by_size = self._suggest_wraps(found.wrong_size)
+        if by_size or self._unwrap_about_mm is not None:
+            return by_size
+        return readings_beyond(
+            np.asarray(meas.range_mm, float),
+            self.camera.unambiguous_range_mm,
+            max_reading_mm(self.camera.fx, self._catalog_d),
+        )
+
     def _wrap_hint(self, wrong_size) -> str:
-        """What to say when most of the blobs ``wrong_size`` (``WrongSizeBlob``), too small
-        for the catalog at their measured range, have its size at that range plus one to
-        three unambiguous ranges: the target is beyond the range the camera's distances
-        wrap at, and reads near. '' otherwise."""
+        """What to say when most of the blobs ``wrong_size`` have the catalog's size only
+        at their range plus (or less) whole unambiguous ranges (``_wrap_suggestions``, found
+        on this frame): the target is beyond the range the camera's distances wrap at (or
+        was, and came nearer). '' otherwise."""
+        if not self._wrap_suggestions:
+            return ""
+        s = self._wrap_suggestions[0]
         wrap_mm = self.camera.unambiguous_range_mm
-        for n in (1, 2, 3):
-            fits = [
-                b.expected_min_px <= b.diameter_px * (1.0 + n * wrap_mm / b.distance_mm)
-                and b.diameter_px * (1.0 + n * wrap_mm / b.distance_mm) <= b.expected_max_px
-                for b in wrong_size
-                if np.isfinite(b.distance_mm) and b.distance_mm > 0
-            ]
-            if fits and 2 * sum(fits) >= len(fits):
-                ahead = min(b.distance_mm for b in wrong_size if np.isfinite(b.distance_mm))
-                return (
-                    f"they have the catalog's sizes at {n} unambiguous range(s) further "
-                    f"({(ahead + n * wrap_mm) / 1000:.1f} m or more): the target is likely "
-                    f"beyond the camera's unambiguous range ({wrap_mm / 1000:.2f} m at "
-                    f"{self.camera.modulation_frequency_hz / 1e6:g} MHz), where distances "
-                    "wrap; bring it nearer or use a lower modulation frequency"
-                )
-        return ""
+        way = "further" if s.wraps > 0 else "nearer"
+        return (
+            f"they have the catalog's sizes at {abs(s.wraps)} unambiguous range(s) {way} "
+            f"(about {s.about_mm / 1000:.1f} m), where the camera's distances wrap "
+            f"({wrap_mm / 1000:.2f} m at {self.camera.modulation_frequency_hz / 1e6:g} MHz), "
+            "but no pose held with the distances read so; bring the target within "
+            f"{wrap_mm / 1000:.2f} m or use a lower modulation frequency"
+        )
 
     def _saturation_hint(self, gray: np.ndarray, blobs: list[Blob]) -> str:
         """A clause counting the candidate ``blobs`` with a pixel at the camera's full

@@ -3,6 +3,7 @@ import pytest
 
 from tests.conftest import facing_pose, render
 from tofpose import CameraModel, PipelineConfig, PosePipeline, paper_target
+from tofpose.calibration.covariance import pose_nees
 from tofpose.core.geometry import RigidTransform, rotation_angle_deg
 from tofpose.sim.scene import Clutter, TargetScene
 from tofpose.stages.extraction.extraction import FrameError
@@ -777,24 +778,99 @@ def test_the_fallback_triplet_search_stops_by_count_not_by_the_clock(monkeypatch
     assert sorted(int(m.catalog_id) for m in r.matched) == sorted(int(i) for i in cat.ids)
 
 
-def test_a_target_beyond_the_unambiguous_range_is_refused_with_the_wrap_named():
-    """At 8 m a 20 MHz camera (7.49 m unambiguous range) reads the target ~0.5 m away,
-    where its blobs are far too small for the catalog: the refusal says the distances
-    wrap and what to do, instead of suspecting the catalog."""
+def _other_sensor_at(range_m: float, seed: int = 0):
+    """A frame of the physics study's ``other sensor`` (640 x 480, 20 MHz: 7.49 m
+    unambiguous range), its drawn scene, and the pipeline set for that camera."""
     from tofpose.config import config_for_camera
     from tofpose.sim.randomise import draw_frame
 
     cat = paper_target()
-    drawn = draw_frame("other sensor", 8.0, np.random.default_rng(0), cat)
-    f = drawn.render(np.random.default_rng(1))
+    drawn = draw_frame("other sensor", range_m, np.random.default_rng(seed), cat)
     cam = drawn.camera
     config = config_for_camera(
-        PipelineConfig(), width=cam.width, height=cam.height, count_scale=4.0
+        PipelineConfig(), width=cam.width, height=cam.height, count_scale=cam.count_scale
     )
-    r = PosePipeline(cam, cat, config).process(f.gray, f.distance_mm)
-    assert not r.ok
-    assert "beyond the camera's unambiguous range (7.49 m at 20 MHz)" in r.reason
-    assert "right catalog" not in r.reason
+    return drawn, PosePipeline(cam, cat, config)
+
+
+@pytest.mark.parametrize(("range_m", "seed"), [(8.0, 0), (8.0, 1), (12.0, 2), (16.0, 3)])
+def test_a_target_beyond_the_unambiguous_range_is_measured_with_its_distances_unwrapped(
+    range_m, seed
+):
+    """A 20 MHz camera reads a target at 8 m ~0.5 m away, where its blobs are far too
+    small for the catalog (at 8 m they are its size); at 12 m it reads 4.5 m, where the
+    sizes pass but no catalog geometry matches; at 16 m two ranges have wrapped. The frame
+    is measured again with its distances read whole unambiguous ranges further, and the
+    pose is right and consistent with its covariance. The stream's next frames are read
+    so from the start, the reading following the target."""
+    drawn, pipe = _other_sensor_at(range_m, seed)
+    assert drawn.camera.unambiguous_range_mm == pytest.approx(7494.8, abs=0.1)
+    T = drawn.T_camera_target
+    for k in range(3):
+        f = drawn.render(np.random.default_rng(100 + k))
+        assert np.nanmax(f.distance_mm) < drawn.camera.unambiguous_range_mm  # it wraps
+        r = pipe.process(f.gray, f.distance_mm, 0.1 * k)
+        assert r.ok, r.reason
+        assert rotation_angle_deg(r.R, T.R) < 1.0 and np.linalg.norm(r.t_mm - T.t_mm) < 40.0
+        assert pose_nees(r.R, r.t_mm, r.covariance, T.R, T.t_mm) < 20.06
+        assert np.min([m.distance_mm for m in r.matched]) > drawn.camera.unambiguous_range_mm
+
+
+def test_an_unwrapped_reading_that_does_not_hold_leaves_the_refusal_and_the_state():
+    """The same far frame with a catalog of the same discs in another layout: the sizes
+    say the distances wrap, but no reading matches the catalog's geometry. The refusal
+    names the wrap and what to do (not the catalog's sizes), and the pipeline's state is
+    what it is without the readings tried (equal digests)."""
+    from tofpose.core.catalog import Catalog, Reflector
+
+    drawn, pipe = _other_sensor_at(8.0)
+    scrambled = Catalog(
+        "scrambled",
+        tuple(
+            Reflector(
+                r.id, (r.position_mm[1], -2.0 * r.position_mm[0], r.position_mm[2]), r.diameter_mm
+            )
+            for r in paper_target().reflectors
+        ),
+    )
+    f = drawn.render(np.random.default_rng(1))
+    tried = PosePipeline(drawn.camera, scrambled, pipe.config)
+    untried = PosePipeline(drawn.camera, scrambled, pipe.config)
+    untried._suggest_wraps = lambda wrong_size: []  # type: ignore[method-assign]
+    for k in range(2):
+        r = tried.process(f.gray, f.distance_mm, 0.1 * k)
+        u = untried.process(f.gray, f.distance_mm, 0.1 * k)
+        assert not r.ok and not u.ok
+        assert "where the camera's distances wrap (7.49 m at 20 MHz)" in r.reason, r.reason
+        assert "lower modulation frequency" in r.reason and "right catalog" not in r.reason
+        assert tried.state_digest() == untried.state_digest()
+
+
+def test_a_stream_that_comes_back_within_the_unambiguous_range_is_read_as_measured_again():
+    """Read one range further at 8 m, then the target at 3 m in the same stream: read
+    about 8 m its discs come out far too large, the reading is taken back, and the pose
+    is right."""
+    far, pipe = _other_sensor_at(8.0)
+    near, _ = _other_sensor_at(3.0, seed=4)
+    f = far.render(np.random.default_rng(1))
+    assert pipe.process(f.gray, f.distance_mm, 0.0).ok
+    g = near.render(np.random.default_rng(2))
+    r = pipe.process(g.gray, g.distance_mm, 0.1)
+    assert r.ok, r.reason
+    T = near.T_camera_target
+    assert rotation_angle_deg(r.R, T.R) < 1.0 and np.linalg.norm(r.t_mm - T.t_mm) < 20.0
+    assert max(m.distance_mm for m in r.matched) < 4000.0
+
+
+def test_a_target_within_the_unambiguous_range_is_read_as_measured():
+    """The same camera at 4.5 m: no reading is tried, the pose is the measured one."""
+    drawn, pipe = _other_sensor_at(4.5)
+    f = drawn.render(np.random.default_rng(1))
+    r = pipe.process(f.gray, f.distance_mm)
+    assert r.ok, r.reason
+    assert pipe._unwrap_about_mm is None
+    T = drawn.T_camera_target
+    assert rotation_angle_deg(r.R, T.R) < 1.0 and np.linalg.norm(r.t_mm - T.t_mm) < 30.0
 
 
 @pytest.mark.parametrize(
