@@ -122,6 +122,20 @@ class FrameOutcome:
         }
 
 
+#: the columns of a table of ``summarise`` results (success, wrong, confidently wrong, no
+#: pose, beyond 3 sigma, NEES/6, medians), in this order
+OUTCOME_HEADERS = (
+    "success %",
+    "wrong ok",
+    "conf. wrong",
+    "no pose",
+    "ok > 3 sigma %",
+    "NEES/6",
+    "med att deg",
+    "med pos mm",
+)
+
+
 def summarise(outcomes: list[FrameOutcome]) -> dict:
     """The table's numbers over some frames: frames, success_pct, wrong, confident_wrong,
     no_pose, beyond_3sigma_pct (share of ok poses), nees_over_6 (mean d2 / 6 over ok

@@ -36,6 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench._common import pyplot, save_figure, table  # noqa: E402
 from bench._foreign_metrics import (  # noqa: E402
+    OUTCOME_HEADERS,
     common_scale_error_px,
     common_scale_excess_px,
     marker_errors,
@@ -196,14 +197,7 @@ def beyond_unambiguous_markdown(out: dict, n: int) -> str:
             f"{r:g} m",
             str(s["frames"]),
             str(unwrapped),
-            _num(s["success_pct"], 0),
-            str(s["wrong"]),
-            str(s["confident_wrong"]),
-            str(s["no_pose"]),
-            _num(s["beyond_3sigma_pct"], 0),
-            _num(s["nees_over_6"]),
-            _num(s["median_attitude_deg"], 3),
-            _num(s["median_position_mm"], 1),
+            *_outcome_cells(s),
         ]
         for r, (s, unwrapped) in out.items()
     ]
@@ -218,19 +212,7 @@ def beyond_unambiguous_markdown(out: dict, n: int) -> str:
             "unambiguous range).",
             "",
             table(
-                [
-                    "range",
-                    "frames",
-                    "read further",
-                    "success %",
-                    "wrong ok",
-                    "conf. wrong",
-                    "no pose",
-                    "ok > 3 sigma %",
-                    "NEES/6",
-                    "med att deg",
-                    "med pos mm",
-                ],
+                ["range", "frames", "read further", *OUTCOME_HEADERS],
                 rows,
             ),
             "",
@@ -291,6 +273,20 @@ def pixel_fit_markdown(cmp: dict, n: int) -> str:
             "",
         ]
     )
+
+
+def _outcome_cells(s: dict) -> list[str]:
+    """A ``summarise`` result's cells under ``OUTCOME_HEADERS``."""
+    return [
+        _num(s["success_pct"], 0),
+        str(s["wrong"]),
+        str(s["confident_wrong"]),
+        str(s["no_pose"]),
+        _num(s["beyond_3sigma_pct"], 0),
+        _num(s["nees_over_6"]),
+        _num(s["median_attitude_deg"], 3),
+        _num(s["median_position_mm"], 1),
+    ]
 
 
 def _num(x: float, digits: int = 2) -> str:
@@ -370,14 +366,7 @@ def markdown(out, img: str, n: int) -> str:
                     family,
                     f"{r:g} m",
                     str(s["frames"]),
-                    _num(s["success_pct"], 0),
-                    str(s["wrong"]),
-                    str(s["confident_wrong"]),
-                    str(s["no_pose"]),
-                    _num(s["beyond_3sigma_pct"], 0),
-                    _num(s["nees_over_6"]),
-                    _num(s["median_attitude_deg"], 3),
-                    _num(s["median_position_mm"], 1),
+                    *_outcome_cells(s),
                     _num(bias.get(35, math.nan), 1),
                     _num(bias.get(80, math.nan), 1),
                     _num(s["scale_excess_px"], 3),
@@ -430,14 +419,7 @@ def markdown(out, img: str, n: int) -> str:
                 "family",
                 "range",
                 "frames",
-                "success %",
-                "wrong ok",
-                "conf. wrong",
-                "no pose",
-                "ok > 3 sigma %",
-                "NEES/6",
-                "med att deg",
-                "med pos mm",
+                *OUTCOME_HEADERS,
                 "35 mm range bias",
                 "80 mm range bias",
                 "scale error px",
