@@ -198,6 +198,10 @@ class PoseResult:
         out of their ranges, its posterior sigma and its prior's
         (``stages.pose.records.RangeOffset``; the pixel fit's when it holds): what the
         frame says of the camera's range offset (``stages.pose.range_bias``).
+    distances_read_about_mm : None when the frame's distances were taken as measured;
+        else the range they were read about, each moved by whole unambiguous ranges
+        (the target beyond the range the camera's distances wrap at,
+        ``stages.extraction.wrap``).
     """
 
     ok: bool
@@ -220,6 +224,7 @@ class PoseResult:
     pixel_fit: str = ""
     range_offset: RangeOffset = NO_RANGE_OFFSET
     pixel_fit_left_out: str = ""
+    distances_read_about_mm: float | None = None
 
     @property
     def n_matched(self) -> int:
@@ -385,8 +390,7 @@ class PosePipeline:
 
     def reset(self) -> None:
         """Forget multi-frame history (call when the stream is discontinuous)."""
-        self._persistence.reset()
-        self._track = None
+        self._forget_history()
         self._unwrap_about_mm = None
 
     def state_digest(self) -> bytes:
@@ -437,16 +441,27 @@ class PosePipeline:
         (``PoseResult.pixel_fit`` says how that went). A frame refused because its
         components have the catalog's sizes only at their distances plus whole unambiguous
         ranges (the target beyond the range the camera's distances wrap at) is measured
-        again with its distances read so (``_measure_unwrapped``).
+        again with its distances read so (``_measure_unwrapped``; not on a camera that
+        states ``unwrapped_range_mm``, which unwraps its own or reports nothing beyond).
         """
         result = self._process(gray, distance_mm, time_s)
         if not result.ok and self._wrap_suggestions:
             result = self._measure_unwrapped(gray, distance_mm, time_s, result)
-        if result.ok and result.t_mm is not None and self._unwrap_about_mm is not None:
-            # the reading follows the target
-            self._unwrap_about_mm = float(np.linalg.norm(result.t_mm))
+        about = self._unwrap_about_mm
+        if result.ok and result.t_mm is not None and about is not None:
+            # the reading follows the target, and ends where the distances no longer wrap
+            range_mm = float(np.linalg.norm(result.t_mm))
+            result = replace(result, distances_read_about_mm=about)
+            near = range_mm <= 0.5 * self.camera.unambiguous_range_mm
+            self._unwrap_about_mm = None if near else range_mm
         if not (self.config.pixel_fit.enabled and result.ok):
             return result
+        if result.distances_read_about_mm is not None:
+            distance_mm = unwrap_about(
+                np.asarray(distance_mm, float),
+                result.distances_read_about_mm,
+                self.camera.unambiguous_range_mm,
+            )
         return self._refine_on_pixels(result, gray, distance_mm)
 
     def _measure_unwrapped(
@@ -454,9 +469,12 @@ class PosePipeline:
     ) -> PoseResult:
         """The frame measured again, from a fresh start, with its distances read about
         each range ``_wrap_suggestions`` found in turn (``stages.extraction.wrap``, at most
-        ``MAX_READINGS``); the first ok result. When none is, the pipeline's state and
-        ``refused`` as they were (the first reading stands; nothing of the others is
-        kept)."""
+        ``MAX_READINGS``); the first ok result with more reflectors than a match needs
+        (a reading is a guess: a minimal match, checked by its own few distances, is not
+        taken on it). When none is (or a reading raises), the pipeline's state and
+        ``refused`` as they were: the first reading stands, nothing of the others is kept.
+        The result's ``timings_ms`` hold the refused readings' time as ``"refused
+        reading"``, and its ``"total"`` every reading's."""
         suggestions = self._wrap_suggestions[:MAX_READINGS]
         before = (
             self._persistence.snapshot(),
@@ -465,18 +483,33 @@ class PosePipeline:
             self._frames_seen,
             self._unwrap_about_mm,
         )
-        for suggestion in suggestions:
-            self.reset()
-            self._frames_seen = before[3] - 1  # the same frame of the stream
-            self._unwrap_about_mm = suggestion.about_mm
-            again = self._process(gray, distance_mm, time_s)
-            if again.ok:
-                return again
-        history, self._track, rng_state, self._frames_seen, self._unwrap_about_mm = before
-        self._persistence.restore(history)
-        self._rng.bit_generator.state = rng_state
-        self._wrap_suggestions = suggestions
+        spent_ms = refused.timings_ms.get("total", 0.0)
+        kept = False
+        try:
+            for suggestion in suggestions:
+                self._forget_history()
+                self._frames_seen = before[3] - 1  # the same frame of the stream
+                self._unwrap_about_mm = suggestion.about_mm
+                again = self._process(gray, distance_mm, time_s)
+                if again.ok and again.n_matched > self.config.matching.min_matches:
+                    kept = True
+                    total = again.timings_ms.get("total", 0.0) + spent_ms
+                    timings = {**again.timings_ms, "refused reading": spent_ms, "total": total}
+                    return replace(again, timings_ms=timings)
+                spent_ms += again.timings_ms.get("total", 0.0)
+        finally:
+            if not kept:
+                history, self._track, rng_state, self._frames_seen, self._unwrap_about_mm = before
+                self._persistence.restore(history)
+                self._rng.bit_generator.state = rng_state
+                self._wrap_suggestions = suggestions
         return refused
+
+    def _forget_history(self) -> None:
+        """What a frame leaves for the next ones, forgotten (``reset`` but the reading of
+        the distances, which a saturated or dark frame says nothing of)."""
+        self._persistence.reset()
+        self._track = None
 
     def _refine_on_pixels(
         self, result: PoseResult, gray: np.ndarray, distance_mm: np.ndarray
@@ -622,10 +655,10 @@ class PosePipeline:
             )
 
         if stats.saturated_fraction > 0.5:
-            self.reset()
+            self._forget_history()
             return fail(f"frame saturated: {stats.saturated_fraction:.0%} of pixels at full scale")
         if stats.i_max - stats.background < cfg.extraction.min_contrast_counts:
-            self.reset()
+            self._forget_history()
             return fail(
                 f"no reflector contrast: brightest pixel {stats.i_max:.0f} counts over a "
                 f"background of {stats.background:.0f} (all-dark frame?)"
@@ -683,7 +716,9 @@ class PosePipeline:
         if not m.ok:
             self._wrap_suggestions = self._wrap_readings(found, meas)
             return fail(
-                f"matching failed: {m.reason}" + self._saturation_hint(g, blobs),
+                f"matching failed: {m.reason}"
+                + self._wrap_clause()
+                + self._saturation_hint(g, blobs),
                 unmatched=unmatched + meas.as_unmatched(),
                 diagnostics=diag,
             )
@@ -695,7 +730,7 @@ class PosePipeline:
         if isinstance(solved, Rejected):
             self._wrap_suggestions = self._wrap_readings(found, meas)
             return fail(
-                solved.reason + self._saturation_hint(g, blobs),
+                solved.reason + self._wrap_clause() + self._saturation_hint(g, blobs),
                 unmatched=unmatched + meas.as_unmatched(),
                 diagnostics=diag,
             )
@@ -1037,8 +1072,9 @@ class PosePipeline:
 
     def _suggest_wraps(self, wrong_size) -> list[WrapSuggestion]:
         """``stages.extraction.wrap.suggested_ranges_mm`` of the components the size window
-        refused (``WrongSizeBlob``), at least as many as a match needs."""
-        if not wrong_size:
+        refused (``WrongSizeBlob``), at least as many as a match needs, up to
+        ``max_reading_mm``; none on a camera that states ``unwrapped_range_mm``."""
+        if not wrong_size or self.camera.unwrapped_range_mm is not None:
             return []
         return suggested_ranges_mm(
             wrong_size,
@@ -1047,20 +1083,36 @@ class PosePipeline:
             self.config.extraction,
             self.camera.unambiguous_range_mm,
             self.config.matching.min_matches,
+            max_reading_mm(self.camera.fx, self._catalog_d),
         )
 
     def _wrap_readings(self, found: CandidateBlobs, meas: Measurements) -> list[WrapSuggestion]:
         """For a frame whose candidates give no pose where they read: the readings the
-        refused components' sizes suggest (``_suggest_wraps``), else, unless the frame is
-        already read about a range, ``stages.extraction.wrap.readings_beyond`` of the
-        candidates' ranges, up to ``max_reading_mm``."""
+        refused components' sizes suggest (``_suggest_wraps``), else
+        ``stages.extraction.wrap.readings_beyond`` of the candidates' ranges (either way
+        from a frame already read about a range), up to ``max_reading_mm``; none on a
+        camera that states ``unwrapped_range_mm``."""
         by_size = self._suggest_wraps(found.wrong_size)
-        if by_size or self._unwrap_about_mm is not None:
+        if by_size or self.camera.unwrapped_range_mm is not None:
             return by_size
         return readings_beyond(
             np.asarray(meas.range_mm, float),
             self.camera.unambiguous_range_mm,
             max_reading_mm(self.camera.fx, self._catalog_d),
+        )
+
+    def _wrap_clause(self) -> str:
+        """A clause naming the readings of the distances tried (``_wrap_suggestions``) for a
+        frame refused by matching or the pose's checks, or ''."""
+        if not self._wrap_suggestions:
+            return ""
+        wrap_mm = self.camera.unambiguous_range_mm
+        tried = ", ".join(f"{s.about_mm / 1000:.1f}" for s in self._wrap_suggestions[:MAX_READINGS])
+        return (
+            f"; the camera's distances wrap at {wrap_mm / 1000:.2f} m "
+            f"({self.camera.modulation_frequency_hz / 1e6:g} MHz), and no pose held with "
+            f"them read about {tried} m either: if the target is beyond that range, bring "
+            "it nearer or use a lower modulation frequency"
         )
 
     def _wrap_hint(self, wrong_size) -> str:

@@ -814,13 +814,33 @@ def test_a_target_beyond_the_unambiguous_range_is_measured_with_its_distances_un
         assert rotation_angle_deg(r.R, T.R) < 1.0 and np.linalg.norm(r.t_mm - T.t_mm) < 40.0
         assert pose_nees(r.R, r.t_mm, r.covariance, T.R, T.t_mm) < 20.06
         assert np.min([m.distance_mm for m in r.matched]) > drawn.camera.unambiguous_range_mm
+        assert r.distances_read_about_mm > drawn.camera.unambiguous_range_mm
+        # the first frame paid for the reading it refused, the next ones did not
+        assert ("refused reading" in r.timings_ms) == (k == 0)
 
 
-def test_an_unwrapped_reading_that_does_not_hold_leaves_the_refusal_and_the_state():
+def _counting_process(pipe: PosePipeline) -> list[int]:
+    """Counts ``pipe``'s passes over a frame (``_process`` calls)."""
+    calls = [0]
+    inner = pipe._process
+
+    def counted(*args, **kwargs):
+        calls[0] += 1
+        return inner(*args, **kwargs)
+
+    pipe._process = counted  # type: ignore[method-assign]
+    return calls
+
+
+@pytest.mark.parametrize("tracking", [False, True])
+def test_an_unwrapped_reading_that_does_not_hold_leaves_the_refusal_and_the_state(tracking):
     """The same far frame with a catalog of the same discs in another layout: the sizes
-    say the distances wrap, but no reading matches the catalog's geometry. The refusal
-    names the wrap and what to do (not the catalog's sizes), and the pipeline's state is
-    what it is without the readings tried (equal digests)."""
+    say the distances wrap, the frame is read again (more than one pass), but no reading
+    matches the catalog's geometry. The refusal names the wrap and what to do (not the
+    catalog's sizes), and the pipeline's state is what it is without the readings tried
+    (equal digests, with tracking on the frame counter too, over a following frame)."""
+    from dataclasses import replace
+
     from tofpose.core.catalog import Catalog, Reflector
 
     drawn, pipe = _other_sensor_at(8.0)
@@ -833,33 +853,72 @@ def test_an_unwrapped_reading_that_does_not_hold_leaves_the_refusal_and_the_stat
             for r in paper_target().reflectors
         ),
     )
-    f = drawn.render(np.random.default_rng(1))
-    tried = PosePipeline(drawn.camera, scrambled, pipe.config)
-    untried = PosePipeline(drawn.camera, scrambled, pipe.config)
+    config = replace(pipe.config, tracking=replace(pipe.config.tracking, enabled=tracking))
+    tried = PosePipeline(drawn.camera, scrambled, config)
+    untried = PosePipeline(drawn.camera, scrambled, config)
+    untried._wrap_readings = lambda found, meas: []  # type: ignore[method-assign]
     untried._suggest_wraps = lambda wrong_size: []  # type: ignore[method-assign]
-    for k in range(2):
+    passes = _counting_process(tried)
+    for k in range(3):
+        f = drawn.render(np.random.default_rng(k))
+        before = passes[0]
         r = tried.process(f.gray, f.distance_mm, 0.1 * k)
         u = untried.process(f.gray, f.distance_mm, 0.1 * k)
+        assert passes[0] - before > 1
         assert not r.ok and not u.ok
-        assert "where the camera's distances wrap (7.49 m at 20 MHz)" in r.reason, r.reason
+        assert "wrap at 7.49 m (20 MHz)" in r.reason or "wrap (7.49 m at 20 MHz)" in r.reason
         assert "lower modulation frequency" in r.reason and "right catalog" not in r.reason
         assert tried.state_digest() == untried.state_digest()
+
+
+def test_a_camera_that_unwraps_its_own_distances_is_read_as_measured():
+    """A camera that states where its distances wrap (``unwrapped_range_mm``: it unwraps
+    several frequencies, or reports nothing beyond) is not read again: one pass."""
+    from dataclasses import replace
+
+    drawn, pipe = _other_sensor_at(8.0)
+    cam = replace(drawn.camera, unwrapped_range_mm=drawn.camera.unambiguous_range_mm)
+    pipe = PosePipeline(cam, pipe.catalog, pipe.config)
+    passes = _counting_process(pipe)
+    f = drawn.render(np.random.default_rng(1))
+    r = pipe.process(f.gray, f.distance_mm)
+    assert not r.ok and passes[0] == 1
+
+
+def _after_a_frame_at_8_m(range_m: float, seed: int, tolerance_mm: float):
+    """A stream of the 20 MHz camera: a frame at 8 m (read one range further), then one
+    of another scene at ``range_m``, whose pose must be within 1 deg and
+    ``tolerance_mm``; (pipeline, that scene, its result)."""
+    far, pipe = _other_sensor_at(8.0)
+    then, _ = _other_sensor_at(range_m, seed=seed)
+    f = far.render(np.random.default_rng(1))
+    assert pipe.process(f.gray, f.distance_mm, 0.0).ok
+    g = then.render(np.random.default_rng(2))
+    r = pipe.process(g.gray, g.distance_mm, 5.0)
+    assert r.ok, r.reason
+    T = then.T_camera_target
+    assert rotation_angle_deg(r.R, T.R) < 1.0 and np.linalg.norm(r.t_mm - T.t_mm) < tolerance_mm
+    return pipe, then, r
+
+
+def test_a_far_target_found_again_after_a_gap_is_read_further_again():
+    """Read about 8 m, then (after a gap, no reset) the target at 13 m: it reads 5.5 m,
+    where its sizes pass and the reading about 8 m leaves it; the candidates' range
+    plus one unambiguous range is tried, and the pose is right."""
+    _, _, r = _after_a_frame_at_8_m(13.0, seed=5, tolerance_mm=65.0)
+    assert r.distances_read_about_mm > 12_000.0
 
 
 def test_a_stream_that_comes_back_within_the_unambiguous_range_is_read_as_measured_again():
     """Read one range further at 8 m, then the target at 3 m in the same stream: read
     about 8 m its discs come out far too large, the reading is taken back, and the pose
     is right."""
-    far, pipe = _other_sensor_at(8.0)
-    near, _ = _other_sensor_at(3.0, seed=4)
-    f = far.render(np.random.default_rng(1))
-    assert pipe.process(f.gray, f.distance_mm, 0.0).ok
-    g = near.render(np.random.default_rng(2))
-    r = pipe.process(g.gray, g.distance_mm, 0.1)
-    assert r.ok, r.reason
-    T = near.T_camera_target
-    assert rotation_angle_deg(r.R, T.R) < 1.0 and np.linalg.norm(r.t_mm - T.t_mm) < 20.0
+    pipe, near, r = _after_a_frame_at_8_m(3.0, seed=4, tolerance_mm=20.0)
     assert max(m.distance_mm for m in r.matched) < 4000.0
+    # near again, the reading ends: the next frame is taken as measured
+    h = near.render(np.random.default_rng(3))
+    r = pipe.process(h.gray, h.distance_mm, 0.2)
+    assert r.ok and r.distances_read_about_mm is None
 
 
 def test_a_target_within_the_unambiguous_range_is_read_as_measured():

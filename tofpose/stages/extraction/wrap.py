@@ -60,11 +60,14 @@ def suggested_ranges_mm(
     config: ExtractionConfig,
     unambiguous_range_mm: float,
     min_fitting: int,
+    max_range_mm: float,
 ) -> list[WrapSuggestion]:
     """The readings of ``wrong_size`` (their distances plus a whole number of unambiguous
-    ranges, ``MAX_WRAPS`` either way, not 0) at which most of them have a size the
-    catalog's ``diameters_mm`` (M,) predict (``predicted_diameter_window_px``): at least
-    ``min_fitting`` of them and at least half of those with a distance. Best first: the
+    ranges, ``MAX_WRAPS`` either way, not 0, at most ``max_range_mm`` away: the window's
+    floor of a pixel lets any small component pass far out, ``max_reading_mm``) at which
+    most of them have a size the catalog's ``diameters_mm`` (M,) predict
+    (``predicted_diameter_window_px``): at least ``min_fitting`` of them and at least
+    half of those with a distance. Best first: the
     most fitting, then the fewest wraps, then adding before taking off. The size window
     is wide (a tilted disc, blur), so more than one reading may pass (at 20 MHz, a target
     at 16 m has sizes inside the window at 8.5 m too): the catalog's geometry tells them
@@ -77,7 +80,7 @@ def suggested_ranges_mm(
         ranges = []
         for b in measured:
             r = b.distance_mm + wraps * unambiguous_range_mm
-            if r <= 0:
+            if r <= 0 or r > max_range_mm:
                 continue
             low, high = predicted_diameter_window_px(fx_px, r, diameters_mm, config)
             if low <= b.diameter_px <= high:
@@ -94,16 +97,20 @@ def readings_beyond(
     """Readings of candidates whose sizes do not tell (all inside the size window at the
     range they read: at 20 MHz a target at 10 m reads 2.5 m, where its discs' sizes are
     allowed too) but that match no catalog geometry there: their median distance
-    (``distances_mm`` (N,), finite) plus 1 to ``MAX_WRAPS`` unambiguous ranges, those up to
-    ``max_range_mm`` (``max_reading_mm``), nearest first. Empty when U is not finite."""
+    (``distances_mm`` (N,), finite) plus 1 to ``MAX_WRAPS`` unambiguous ranges, then less
+    (a frame read about a range may have read too far: the target came nearer), those
+    above 0 and up to ``max_range_mm`` (``max_reading_mm``), fewest wraps first. Empty
+    when U is not finite."""
     if not np.isfinite(unambiguous_range_mm) or unambiguous_range_mm <= 0 or len(distances_mm) == 0:
         return []
     median = float(np.median(distances_mm))
-    return [
-        WrapSuggestion(n, median + n * unambiguous_range_mm, len(distances_mm))
-        for n in range(1, MAX_WRAPS + 1)
-        if median + n * unambiguous_range_mm <= max_range_mm
-    ]
+    out = []
+    for n in range(1, MAX_WRAPS + 1):
+        for wraps in (n, -n):
+            r = median + wraps * unambiguous_range_mm
+            if 0 < r <= max_range_mm:
+                out.append(WrapSuggestion(wraps, r, len(distances_mm)))
+    return out
 
 
 def max_reading_mm(fx_px: float, diameters_mm: np.ndarray) -> float:
