@@ -226,6 +226,9 @@ def pose_from_sample(s: LiveSample) -> PosePublic:
         n_candidates=r.n_candidates,
         n_matched=r.n_matched,
         saturated_reflectors=sum(m.saturated for m in r.matched),
+        distances_read_about_mm=None
+        if r.distances_read_about_mm is None
+        else float(r.distances_read_about_mm),
         matched=[
             MatchedPublic(
                 catalog_id=m.catalog_id,

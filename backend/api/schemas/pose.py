@@ -123,6 +123,12 @@ class PosePublic(BaseModel):
     saturated_reflectors: int = Field(
         default=0, description="how many of the matched reflectors are saturated"
     )
+    distances_read_about_mm: float | None = Field(
+        default=None,
+        description="null when the frame's distances were taken as measured; else the "
+        "range (mm) they were read about, each moved by whole unambiguous ranges: the "
+        "target is beyond the range the camera's distances wrap at",
+    )
     matched: list[MatchedPublic]
     unmatched: list[BlobPublic]
     rejected: list[RejectedBlobPublic] = Field(

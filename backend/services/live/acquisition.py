@@ -261,6 +261,15 @@ class AcquisitionService:
                 self.camera.model, self._pipeline.catalog, self._config, implementation=wanted
             )
             log.info("live poses now from the %s pipeline", wanted)
+        elif self.camera.model is not self._pipeline.camera:
+            # the camera's settings changed its model (a modulation frequency: where the
+            # distances wrap, their noise): measure with the model the frames come from
+            self._pipeline = PosePipeline(
+                self.camera.model,
+                self._pipeline.catalog,
+                self._config,
+                implementation=self._pipeline.implementation,
+            )
         return None if wanted is None else self._pipeline
 
     def history(self, n: int) -> list[LiveSample]:

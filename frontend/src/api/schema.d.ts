@@ -2280,6 +2280,11 @@ export interface components {
             /** Catalog */
             catalog: string;
             /**
+             * Distances Read About Mm
+             * @description null when the frame's distances were taken as measured; else the range (mm) they were read about, each moved by whole unambiguous ranges: the target is beyond the range the camera's distances wrap at
+             */
+            distances_read_about_mm?: number | null;
+            /**
              * Filter Status
              * @description what the relative-state filter did with this frame: started from its pose (initialised), fused it (updated), refused it as inconsistent with the motion so far (rejected), restarted after rejections that agree (reset), or predicted without a pose (predicted); null before its first pose
              */

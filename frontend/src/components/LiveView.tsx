@@ -11,6 +11,7 @@ import type { Shown } from "../live";
 import { activePixels, distancePixels, grayPixels, grayTop, turboCss } from "../colormap";
 import type { RawFrame } from "../rawframe";
 import { reflectorLabel, saturationWarning } from "../saturation";
+import { wrapNotice } from "../wrap";
 
 // Overlay canvas pixels per image pixel: about 640 canvas pixels across whatever the
 // camera's width (2 for the TOFcam-660's 320, 1 for an Azure Kinect's 640), so that marks
@@ -145,6 +146,7 @@ export function LiveView({ shown, onDrawn }: { shown: Shown | null; onDrawn: (fr
   const [range, setRange] = useState<[number, number] | null>(null);
   const raw = shown?.raw;
   const warning = saturationWarning(shown?.pose);
+  const wrapped = wrapNotice(shown?.pose);
   const grayRef = useImage(grayPixels, raw);
   const distRef = useImage((f, img) => setRange(distancePixels(f, img)), raw);
   // the camera's own shape (640 x 576 for an Azure Kinect), not the TOFcam-660's 4:3
@@ -166,6 +168,7 @@ export function LiveView({ shown, onDrawn }: { shown: Shown | null; onDrawn: (fr
         ))}
       </div>
       {warning && <p class="warn" role="status" data-testid="saturation-warning">{warning}</p>}
+      {wrapped && <p class="small" role="status" data-testid="wrap-notice">{wrapped}</p>}
       <div class="images">
         {(["gray", "distance"] as const).map((k) => (
           <figure key={k}>
