@@ -72,3 +72,16 @@ def page_for(browser) -> Iterator:
     for ctx in pages:
         ctx.close()
     assert not foreign, f"the dashboard requested other hosts: {foreign[:5]}"
+
+
+def live_page_with_matches(page_for, base_url: str, token: str):
+    """The dashboard at ``base_url``, opened with ``token``, once its live view has drawn
+    a frame with matched reflectors labelled on the overlay (60 s at most each)."""
+    page = page_for(base_url, token)
+    page.goto(base_url + "/")
+    page.get_by_test_id("frame-index").wait_for(timeout=60_000)
+    page.wait_for_function(
+        "(document.querySelector('[data-testid=overlay]').dataset.labels || '').length > 0",
+        timeout=60_000,
+    )
+    return page

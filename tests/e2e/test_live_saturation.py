@@ -13,7 +13,7 @@ import time
 import pytest
 
 from tests.backend.conftest import TOKEN, LiveServer, make_settings
-from tests.e2e.conftest import SHOTS
+from tests.e2e.conftest import SHOTS, live_page_with_matches
 
 WARNING = re.compile(
     r"^(\d+) reflectors? saturates?: lower the integration time or turn auto exposure on$"
@@ -55,14 +55,8 @@ def _agree(state: dict) -> bool:
 
 
 def test_saturating_reflectors_are_marked_and_the_page_says_what_to_do(server, page_for):
-    page = page_for(server.base_url, TOKEN)
-    page.goto(server.base_url + "/")
-    page.get_by_test_id("frame-index").wait_for(timeout=60_000)
     # auto exposure (the simulator's default): reflectors matched, none saturated
-    page.wait_for_function(
-        "(document.querySelector('[data-testid=overlay]').dataset.labels || '').length > 0",
-        timeout=60_000,
-    )
+    page = live_page_with_matches(page_for, server.base_url, TOKEN)
     before = _overlay_state(page)
     assert before["warning"] is None and before["orange"] == 0, before
     assert not any("saturated" in label for label in before["labels"]), before

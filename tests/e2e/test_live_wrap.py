@@ -11,7 +11,7 @@ import re
 import pytest
 
 from tests.backend.conftest import TOKEN, LiveServer, make_settings
-from tests.e2e.conftest import SHOTS
+from tests.e2e.conftest import SHOTS, live_page_with_matches
 
 NOTICE = re.compile(r"^distances read about (\d+\.\d) m: the target is beyond the range")
 
@@ -25,13 +25,7 @@ def server(tmp_path):
 def test_a_target_beyond_the_unambiguous_range_is_read_further_and_the_page_says_so(
     server, page_for
 ):
-    page = page_for(server.base_url, TOKEN)
-    page.goto(server.base_url + "/")
-    page.get_by_test_id("frame-index").wait_for(timeout=60_000)
-    page.wait_for_function(
-        "(document.querySelector('[data-testid=overlay]').dataset.labels || '').length > 0",
-        timeout=60_000,
-    )
+    page = live_page_with_matches(page_for, server.base_url, TOKEN)
     assert page.get_by_test_id("wrap-notice").count() == 0
 
     page.get_by_test_id("cam-modulation_frequency_mhz").fill("24")
