@@ -295,13 +295,20 @@ def _num(x: float, digits: int = 2) -> str:
 
 def plot(out, path: Path) -> None:
     plt = pyplot()
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4))
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.2))
     families = _families_of(out)
-    for family in families:
+    for k, family in enumerate(families):
         s = [out[(family, r)][0] for r in RANGES_M]
-        axes[0].plot(RANGES_M, [x["success_pct"] for x in s], "o-", label=family)
-        axes[1].plot(RANGES_M, [x["beyond_3sigma_pct"] for x in s], "o-", label=family)
-        axes[2].plot(RANGES_M, [x["median_attitude_deg"] for x in s], "o-", label=family)
+        # ten colours, then dashed lines and squares: no two families look alike
+        style = {
+            "color": f"C{k % 10}",
+            "ls": "-" if k < 10 else "--",
+            "marker": "o" if k < 10 else "s",
+            "label": family,
+        }
+        axes[0].plot(RANGES_M, [x["success_pct"] for x in s], **style)
+        axes[1].plot(RANGES_M, [x["beyond_3sigma_pct"] for x in s], **style)
+        axes[2].plot(RANGES_M, [x["median_attitude_deg"] for x in s], **style)
     for ax, yl in zip(
         axes,
         ("success %", "ok poses beyond 3 sigma %", "median attitude error of successes (deg)"),
@@ -311,7 +318,7 @@ def plot(out, path: Path) -> None:
         ax.set_ylabel(yl)
         ax.grid(alpha=0.3)
     axes[1].axhline(5.0, color="k", lw=0.8, ls="--")
-    axes[0].legend(fontsize=8)
+    axes[2].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     fig.suptitle("physics robustness study (domain randomisation per frame)")
     save_figure(fig, path)
     plot_examples(examples_path(path), families=families)
