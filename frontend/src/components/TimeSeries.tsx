@@ -47,7 +47,9 @@ function Chart({ def, shown, range, height, onZoom, onWheel, onReset, onToggle }
           { size: 28, font: "10px system-ui, sans-serif", incrs: TIME_STEPS_S,
             space: (_u, _i, min, max, dim) => ((max - min) * 52 / dim < 1 ? 64 : 52),
             values: (_u, ticks, _i, _space, incr) => ticks.map((t) => fmtClock(t, incr < 1 ? 1 : 0)) },
-          { label: def.unit, size: 52, labelSize: 14 },
+          // as wide as its longest tick label (a range near 7 m reads "6,999.6" mm, wider
+          // than a fixed width leaves beside the unit's label)
+          { label: def.unit, size: valueAxisSize, labelSize: 14 },
         ],
         legend: { live: true },
         cursor: {
@@ -113,6 +115,19 @@ function Chart({ def, shown, range, height, onZoom, onWheel, onReset, onToggle }
 
 /** The chart height that puts two rows of charts on the first screen, from 768 px up. */
 const chartHeight = () => Math.max(100, Math.min(220, Math.round((window.innerHeight - 768) / 2 + 114)));
+
+/** The value axis' width (px): its ticks, its gap and its longest tick label as drawn in
+ * the axis' font, at least 40 px so that narrow labels keep the plots aligned (uPlot's
+ * recipe for a dynamic axis size; 52 px was fixed before). */
+export function valueAxisSize(u: uPlot, values: string[] | null, axisIdx: number, cycleNum: number): number {
+  const axis = u.axes[axisIdx];
+  if (cycleNum > 1) return (axis as { _size?: number })._size ?? 52;
+  const longest = (values ?? []).reduce((a, v) => (v.length > a.length ? v : a), "");
+  const tick = (axis.ticks?.size ?? 10) + (axis.gap ?? 5);
+  if (!longest) return Math.max(40, tick);
+  u.ctx.font = (axis.font as unknown as [string])?.[0] ?? "12px system-ui, sans-serif";
+  return Math.max(40, Math.ceil(tick + u.ctx.measureText(longest).width / devicePixelRatio + 4));
+}
 
 export function TimeSeries({ samples }: { samples: SampleBuffer }) {
   const [windowS, setWindowS] = useState(30);
