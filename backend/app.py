@@ -289,7 +289,7 @@ def _lifespan(settings: Settings, devices: Devices | None):
         recordings = RecordingService(
             settings.data_dir / "recordings",
             hub,
-            devs.camera.model,
+            lambda: devs.camera.model,  # it follows the camera's settings
             lambda: acq.catalog,
             motion_service,
             min_free_mb=settings.recording_min_free_mb,

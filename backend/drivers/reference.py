@@ -9,6 +9,7 @@ from dataclasses import replace
 from typing import Any
 
 from backend.drivers.base import CameraDriver, CameraFrame, MotionDriver
+from tofpose.core.camera import CameraModel
 from tofpose.sim.bench import LabGeometry
 
 log = logging.getLogger(__name__)
@@ -27,7 +28,15 @@ class EncoderReferencedCamera:
         self.motion = motion
         self.geometry = geometry
         self.name = camera.name
-        self.model = camera.model
+
+    @property
+    def model(self) -> CameraModel:
+        """The wrapped camera's model, as it is now (it follows the camera's settings)."""
+        return self.camera.model
+
+    @model.setter
+    def model(self, value: CameraModel) -> None:
+        self.camera.model = value
 
     def read(self, timeout_s: float) -> CameraFrame:
         frame = self.camera.read(timeout_s)

@@ -203,9 +203,10 @@ class SimCamera:
         self._pacer.set_rate(applied.frame_rate_hz)
         self._settings = applied
         # the model the live pipeline measures with: its distances now wrap at c / (2 f)
-        self.model = replace(
-            self.model, modulation_frequency_hz=applied.modulation_frequency_mhz * 1e6
-        )
+        # (a new model only for a new frequency: the live loop rebuilds its pipeline then)
+        hz = applied.modulation_frequency_mhz * 1e6
+        if hz != self.model.modulation_frequency_hz:
+            self.model = replace(self.model, modulation_frequency_hz=hz)
         return applied
 
     def close(self) -> None:

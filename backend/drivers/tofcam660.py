@@ -295,7 +295,9 @@ class TofCam660Driver:
         with self._lock:
             self._settings = applied
             # the model the live pipeline measures with: its distances wrap at c / (2 f)
-            self.model = replace(self.model, modulation_frequency_hz=mhz * 1e6)
+            # (a new model only for a new frequency: the live loop rebuilds its pipeline)
+            if mhz * 1e6 != self.model.modulation_frequency_hz:
+                self.model = replace(self.model, modulation_frequency_hz=mhz * 1e6)
             if not applied.auto_exposure or self._integration_us <= 0:
                 self._integration_us = applied.integration_time_us
             if self._cam is not None:

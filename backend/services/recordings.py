@@ -509,7 +509,7 @@ class RecordingService:
         self,
         directory: Path,
         hub: LiveHub,
-        camera: CameraModel,
+        camera: CameraModel | Callable[[], CameraModel],
         catalog: Callable[[], Catalog],
         motion: MotionService | None = None,
         *,
@@ -518,7 +518,9 @@ class RecordingService:
     ) -> None:
         self.directory = Path(directory)
         self.hub = hub
-        self.camera = camera
+        # the camera's model when a recording starts (a callable: the live camera's,
+        # which follows its settings, e.g. a new modulation frequency)
+        self._camera = camera if callable(camera) else (lambda: camera)
         self.catalog = catalog
         self.motion = motion
         self.min_free_mb = float(min_free_mb)
@@ -532,6 +534,12 @@ class RecordingService:
         self._load()
 
     # -- the index ----------------------------------------------------------------------
+
+    @property
+    def camera(self) -> CameraModel:
+        """The camera's model now (what a recording started now writes as ``/camera``)."""
+        return self._camera()
+
     def _load(self) -> None:
         """Read the index; entries left ``recording`` (the server died) become stopped,
         ``interrupted``, with the frames their file holds."""
@@ -754,7 +762,7 @@ class RecordingService:
         }
         return LiveRecordingWriter(
             path,
-            self.camera,
+            self.camera,  # the model as the recording starts
             self.catalog(),
             with_truth=frame is not None and frame.T_camera_target_exact is not None,
             with_reference=frame is not None and frame.T_camera_target_lab is not None,

@@ -42,7 +42,6 @@ class FlakyCamera:
     def __init__(self, inner) -> None:
         self.inner = inner
         self.name = inner.name
-        self.model = inner.model
         self.failing = threading.Event()
         self.reads = 0
 
@@ -52,6 +51,10 @@ class FlakyCamera:
             time.sleep(0.01)
             raise ConnectionError("camera unplugged (test)")
         return self.inner.read(timeout_s)
+
+    @property
+    def model(self):
+        return self.inner.model
 
     def get_settings(self):
         return self.inner.get_settings()

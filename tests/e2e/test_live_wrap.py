@@ -10,7 +10,7 @@ import re
 
 import pytest
 
-from tests.backend.conftest import TOKEN, LiveServer, make_settings
+from tests.backend.conftest import TOKEN, LiveServer, make_settings, wait_for
 from tests.e2e.conftest import SHOTS, live_page_with_matches
 
 NOTICE = re.compile(r"^distances read about (\d+\.\d) m: the target is beyond the range")
@@ -36,7 +36,11 @@ def test_a_target_beyond_the_unambiguous_range_is_read_further_and_the_page_says
     assert match, notice.inner_text()
     assert float(match.group(1)) == pytest.approx(7.0, abs=0.3)
     # the server's pose agrees: the lab's 7 m, not the wrapped 0.75 m
-    pose = page.request.get(server.base_url + "/api/pose/latest").json()
-    assert pose["ok"] and pose["z_mm"] == pytest.approx(7000.0, abs=300.0), pose
+    pose = wait_for(
+        lambda: (p := page.request.get(server.base_url + "/api/pose/latest").json())["ok"] and p,
+        30.0,
+        "an ok pose",
+    )
+    assert pose["z_mm"] == pytest.approx(7000.0, abs=300.0), pose
     notice.scroll_into_view_if_needed()
     page.screenshot(path=str(SHOTS / "live-wrap.png"), full_page=False)

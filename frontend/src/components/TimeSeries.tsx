@@ -117,8 +117,9 @@ function Chart({ def, shown, range, height, onZoom, onWheel, onReset, onToggle }
 const chartHeight = () => Math.max(100, Math.min(220, Math.round((window.innerHeight - 768) / 2 + 114)));
 
 /** The value axis' width (px): its ticks, its gap and its longest tick label as drawn in
- * the axis' font, at least 40 px so that narrow labels keep the plots aligned (uPlot's
- * recipe for a dynamic axis size; 52 px was fixed before). */
+ * the axis' font, rounded up to 8 px (a plot does not twitch as its labels change by a
+ * digit) and at least 40 px (uPlot's recipe for a dynamic axis size; 52 px was fixed
+ * before, and a label of seven digits ran under the unit's). */
 export function valueAxisSize(u: uPlot, values: string[] | null, axisIdx: number, cycleNum: number): number {
   const axis = u.axes[axisIdx];
   if (cycleNum > 1) return (axis as { _size?: number })._size ?? 52;
@@ -126,7 +127,8 @@ export function valueAxisSize(u: uPlot, values: string[] | null, axisIdx: number
   const tick = (axis.ticks?.size ?? 10) + (axis.gap ?? 5);
   if (!longest) return Math.max(40, tick);
   u.ctx.font = (axis.font as unknown as [string])?.[0] ?? "12px system-ui, sans-serif";
-  return Math.max(40, Math.ceil(tick + u.ctx.measureText(longest).width / devicePixelRatio + 4));
+  const px = tick + u.ctx.measureText(longest).width / uPlot.pxRatio + 4;
+  return Math.max(40, 8 * Math.ceil(px / 8));
 }
 
 export function TimeSeries({ samples }: { samples: SampleBuffer }) {

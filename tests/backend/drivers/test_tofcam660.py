@@ -4,6 +4,7 @@ codes, the same pose as the simulator directly, auto exposure, link loss."""
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -192,3 +193,27 @@ def test_absent_camera_is_an_error_naming_it_or_a_degraded_start():
 def test_a_refused_setting_is_reported_naming_the_command(emu):
     with pytest.raises(CameraError, match=r"setup failed: .*refused command: SetRoi.*Error"):
         TofCam660Driver(ADDRESS, settings=FIXED, roi=(0, 10, 320, 200))  # rows not symmetric
+
+
+def test_a_new_modulation_frequency_is_the_model_the_lab_camera_reports(world, emu):
+    """The driver's model (what the live pipeline measures with) takes the frequency the
+    camera applied: its distances now wrap at c / (2 f). Also through the lab's encoder
+    wrapper (``EncoderReferencedCamera``, how ``build_devices`` hands the camera to the
+    server beside a motion system), and only a new frequency makes a new model (the live
+    loop rebuilds its pipeline on one)."""
+    from backend.drivers.reference import EncoderReferencedCamera
+    from backend.drivers.sim import SimMotion
+    from tofpose.sim.bench import LabGeometry
+
+    drv = TofCam660Driver(ADDRESS, settings=FIXED)
+    lab = EncoderReferencedCamera(drv, SimMotion(world), LabGeometry())
+    try:
+        assert lab.model is drv.model and lab.model.modulation_frequency_hz == 6e6
+        before = lab.model
+        lab.apply_settings(replace(FIXED, frame_rate_hz=30.0))
+        assert lab.model is before  # no new frequency, the same model
+        lab.apply_settings(replace(FIXED, modulation_frequency_mhz=24.0))
+        assert lab.model is drv.model and lab.model.modulation_frequency_hz == 24e6
+        assert lab.model.unambiguous_range_mm == pytest.approx(6245.7, abs=0.1)
+    finally:
+        drv.close()

@@ -359,3 +359,29 @@ def test_delete_removes_the_files_and_the_entry_but_not_while_recording(service,
     assert service.list() == []
     # a new recording never reuses a deleted one's id
     assert service.start("new").id == info.id + 1
+
+
+def test_a_recording_writes_the_camera_model_as_it_is_when_it_starts(tmp_path, hub, motion):
+    """The live camera's model follows its settings (a new modulation frequency: where
+    its distances wrap); a recording started after a change writes the new one as
+    ``/camera``, so that a replay measures with it."""
+    from dataclasses import replace as replaced
+
+    now = {"model": CAMERA}
+    svc = RecordingService(
+        tmp_path / "recordings", hub, lambda: now["model"], paper_target, motion, min_free_mb=0
+    )
+    try:
+        rng = np.random.default_rng(3)
+        paths = []
+        for mhz in (6.0, 24.0):
+            now["model"] = replaced(CAMERA, modulation_frequency_hz=mhz * 1e6)
+            info = svc.start(f"at {mhz:g} MHz")
+            for i in range(3):
+                hub.publish(make_sample(i, rng))
+            paths.append(svc.directory / svc.stop(info.id).file)
+        for path, mhz in zip(paths, (6.0, 24.0), strict=True):
+            with open_recording(path) as rec:
+                assert rec.camera.modulation_frequency_hz == mhz * 1e6
+    finally:
+        svc.stop_all()
