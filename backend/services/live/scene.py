@@ -76,6 +76,7 @@ import contextlib
 import inspect
 import logging
 import re
+import socket
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -309,6 +310,23 @@ def _guarded_serve(access: SceneAccess) -> Iterator[list[Hook]]:
             ws_server.serve = original  # type: ignore[misc]
 
 
+def free_port_other_than(host: str, avoid: int, attempts: int = 20) -> int:
+    """A TCP port free on ``host`` now (the system's pick for port 0) that is not
+    ``avoid``; 0 (let the server pick) when ``host`` cannot be bound here or every pick
+    was ``avoid``."""
+    for _ in range(attempts):
+        try:
+            family = socket.AF_INET6 if ":" in host else socket.AF_INET
+            with socket.socket(family, socket.SOCK_STREAM) as sock:
+                sock.bind((host, 0))
+                port = int(sock.getsockname()[1])
+        except OSError:
+            return 0
+        if port != avoid:
+            return port
+    return 0
+
+
 class LiveScene:
     """Owns a ``viser.ViserServer`` and keeps its scene in step with the live results.
 
@@ -341,6 +359,10 @@ class LiveScene:
             allowed_origins=tuple(o.lower().rstrip("/") for o in allowed_origins),
             dashboard_port=dashboard_port or None,
         )
+        if port == 0 and dashboard_port:
+            # the main server binds its port only once the app has started: "any free
+            # port" could be that one (seen once: the dashboard then failed to bind)
+            port = free_port_other_than(host, dashboard_port)
         with _guarded_serve(self.access) as guarded:
             self.server = viser.ViserServer(host=host, port=port, label="tofpose", verbose=False)
         if not guarded:

@@ -148,3 +148,22 @@ def test_the_reference_node_shows_the_labs_reference_and_the_truth_node_the_rend
     # a real camera's frame: the lab's reference only
     scene.update(replace(sample, frame=replace(f, T_camera_target_exact=None), cache={}))
     assert scene.reference.visible and not scene.truth.visible
+
+
+def test_the_scene_never_takes_the_dashboard_s_port_when_any_free_port_is_asked():
+    """The main server binds its port only once the app has started, after the scene: a
+    scene asked for any free port must not be handed that one (once it was, and the
+    server could not bind). The port the system just gave out is the likeliest to come
+    back: it is the one avoided here."""
+    import socket
+
+    from backend.services.live.scene import free_port_other_than
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        taken = s.getsockname()[1]
+    picks = {free_port_other_than("127.0.0.1", taken) for _ in range(50)}
+    assert taken not in picks and 0 not in picks
+    for port in picks:  # each was free when given
+        assert 1024 <= port <= 65535
+    assert free_port_other_than("203.0.113.1", taken) == 0  # not an address of this host
