@@ -619,9 +619,10 @@ class PosePipeline:
         timer = _Timer()
         g, d = check_frame(self.camera, gray, distance_mm)
         self._wrap_suggestions = []
-        wrap_mm = self.camera.unambiguous_range_mm
-        if self._unwrap_about_mm is not None and self._unwrap_about_mm > 0.5 * wrap_mm:
-            d = unwrap_about(d, self._unwrap_about_mm, wrap_mm)
+        if self._unwrap_about_mm is not None:  # a frame read about a range (a far target)
+            wrap_mm = self.camera.unambiguous_range_mm
+            if self._unwrap_about_mm > 0.5 * wrap_mm:
+                d = unwrap_about(d, self._unwrap_about_mm, wrap_mm)
         frame_number = self._frames_seen
         self._frames_seen += 1
         track = self._track
