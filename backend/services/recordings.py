@@ -120,6 +120,7 @@ class StopReason(StrEnum):
     DISK_FULL = "disk_full"  # free space fell below the floor (or the disk was full)
     ERROR = "error"  # a write failed for another reason
     SHUTDOWN = "shutdown"  # the server stopped
+    CAMERA_CHANGED = "camera_changed"  # the camera's modulation frequency changed
     INTERRUPTED = "interrupted"  # the server died while it recorded (found at start)
 
 
@@ -429,6 +430,8 @@ class _Recorder:
                 f"stopped: {free:.0f} MB free on the data directory's disk, below the floor "
                 f"of {floor:g} MB (TOFPOSE_RECORDING_MIN_FREE_MB)"
             )
+        if self._writer is not None and (why := self._camera_change(sample)) is not None:
+            return StopReason.CAMERA_CHANGED, why
         try:
             if self._writer is None:
                 self._writer = self.service._open_writer(self.info, self.path, sample)
@@ -444,6 +447,23 @@ class _Recorder:
             self._flushed_at = now
             self.size_bytes = _size(self.path)
         return None
+
+    def _camera_change(self, sample: LiveSample) -> str | None:
+        """Why ``sample`` cannot go into this file: it was taken at another modulation
+        frequency than the file's ``/camera`` says (every frame of a recording is read
+        with its one camera model: where the distances wrap, their noise); else None."""
+        assert self._writer is not None
+        now = sample.camera_model
+        was_hz = self._writer.camera.modulation_frequency_hz
+        if now is None or now.modulation_frequency_hz == was_hz:
+            return None
+        return (
+            f"stopped after frame {self.frames}: the camera's modulation frequency changed "
+            f"from {was_hz / 1e6:g} to {now.modulation_frequency_hz / 1e6:g} MHz, and a "
+            "recording holds one camera model (/camera), with which every frame is read "
+            "(where its distances wrap, their noise): record the new frequency in a new "
+            "recording"
+        )
 
     def _motion_now(self) -> MotionReading | None:
         """The last motion status, read again when it is older than ``MOTION_POLL_S``
@@ -713,6 +733,11 @@ class RecordingService:
             )
         return info
 
+    def running(self) -> list[RecordingInfo]:
+        """The recordings that record now, oldest first."""
+        with self._lock:
+            return [self._info(i) for i in sorted(self._active)]
+
     def get(self, recording_id: int) -> RecordingInfo:
         with self._lock:
             return self._info(recording_id)
@@ -762,7 +787,8 @@ class RecordingService:
         }
         return LiveRecordingWriter(
             path,
-            self.camera,  # the model as the recording starts
+            # the model the first frame was taken with (else the camera's now)
+            first.camera_model if first is not None and first.camera_model else self.camera,
             self.catalog(),
             with_truth=frame is not None and frame.T_camera_target_exact is not None,
             with_reference=frame is not None and frame.T_camera_target_lab is not None,

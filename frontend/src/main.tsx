@@ -56,6 +56,9 @@ function App() {
   return (
     <ErrorContext.Provider value={setError}>
       <div class="page">
+        {/* the header and the last error stay on screen wherever the page is scrolled: a
+            panel far down (camera, campaigns) reports its refusals here */}
+        <div class="top">
         <header>
           <h1>tofpose</h1>
           <span class={`badge ${live.connected ? "ok" : "warn"}`} data-testid="link">
@@ -64,7 +67,14 @@ function App() {
           <button class="token" onClick={askToken}>{hasToken ? "change token" : "enter API token"}</button>
           <button class="stop" data-testid="stop" onClick={stop} title="stop every axis (key: Esc)">STOP <span class="key">Esc</span></button>
         </header>
-        {error && <p class="error banner" role="alert" data-testid="error">{error}</p>}
+        {error && (
+          <p class="error banner" role="alert">
+            <span data-testid="error">{error}</span>
+            <button class="dismiss" data-testid="error-dismiss" title="hide this message"
+              onClick={() => setError(null)}>×</button>
+          </p>
+        )}
+        </div>
         <main>
           {/* the images and the plots in one column, beside the pose: all on the first screen */}
           <div class="primary">

@@ -22,6 +22,15 @@ def server(tmp_path):
         yield srv
 
 
+def _record_from_the_page(page, name: str) -> int:
+    """Start a recording named ``name`` in the Record panel; its id once it runs."""
+    page.get_by_test_id("rec-name").fill(name)
+    page.get_by_test_id("rec-start").click()
+    live = page.locator("[data-testid^=rec-live-]")
+    live.wait_for(timeout=15_000)
+    return int(live.get_attribute("data-testid").rsplit("-", 1)[1])
+
+
 def test_record_from_the_page_stop_download_and_read_it(server, page_for, tmp_path):
     page = page_for(server.base_url, TOKEN)
     page.goto(server.base_url + "/")
@@ -32,11 +41,7 @@ def test_record_from_the_page_stop_download_and_read_it(server, page_for, tmp_pa
     assert "name" in page.get_by_test_id("rec-field-error").inner_text()
     assert httpx.get(server.base_url + "/api/recordings").json()["recordings"] == []
 
-    page.get_by_test_id("rec-name").fill("from the page")
-    page.get_by_test_id("rec-start").click()
-    live = page.locator("[data-testid^=rec-live-]")
-    live.wait_for(timeout=15_000)
-    rid = int(live.get_attribute("data-testid").rsplit("-", 1)[1])
+    rid = _record_from_the_page(page, "from the page")
     page.wait_for_timeout(2000)  # ~2 s of the live stream
     wait_for(
         lambda: float(page.get_by_test_id(f"rec-size-{rid}").inner_text()) > 0,
@@ -72,3 +77,40 @@ def test_record_from_the_page_stop_download_and_read_it(server, page_for, tmp_pa
         wall_s = f["frames/wall_time_ns"][...] / 1e9
         assert (np.abs(wall_s - time.time()) < 60).all()
         assert f["pose/ok"][...].any()
+
+
+def test_the_camera_panel_says_why_the_frequency_holds_while_recording(server, page_for):
+    """A new modulation frequency typed in the camera panel while a recording records is
+    refused, and the page says which recording holds it; the camera stays at 6 MHz. After
+    the stop the same change is applied."""
+    page = page_for(server.base_url, TOKEN)
+    page.goto(server.base_url + "/")
+    page.get_by_test_id("rec-name").wait_for(timeout=20_000)
+    rid = _record_from_the_page(page, "held frequency")
+
+    page.get_by_test_id("cam-modulation_frequency_mhz").fill("12")
+    page.get_by_test_id("cam-apply").click()
+    error = page.get_by_test_id("error")
+    error.wait_for(timeout=10_000)
+    text = error.inner_text()
+    assert f"recording {rid} ('held frequency')" in text and "stop it" in text, text
+    # the banner stays in view beside the panel the user is at (the page is scrolled to
+    # the camera panel), until dismissed
+    assert error.is_visible() and error.bounding_box()["y"] < 120
+    page.screenshot(path=SHOTS / "camera-frequency-held-while-recording.png")
+    page.get_by_test_id("error-dismiss").click()
+    assert page.get_by_test_id("error").count() == 0
+    settings = httpx.get(server.base_url + "/api/camera/settings").json()
+    assert settings["modulation_frequency_mhz"] == 6
+
+    page.get_by_test_id(f"rec-stop-{rid}").click()
+    page.get_by_test_id(f"rec-h5-{rid}").wait_for(timeout=15_000)
+    page.get_by_test_id("cam-apply").click()  # the field still says 12
+    wait_for(
+        lambda: (
+            httpx.get(server.base_url + "/api/camera/settings").json()["modulation_frequency_mhz"]
+            == 12
+        ),
+        10.0,
+        "12 MHz applied",
+    )

@@ -23,13 +23,37 @@ def get_camera_settings(state: StateDep) -> CameraSettingsPublic:
     return camera_settings_public(state.devices.camera.get_settings())
 
 
-@router.put("/settings", dependencies=[WriteAuth], responses=errors(503, 504))
+@router.put("/settings", dependencies=[WriteAuth], responses=errors(409, 503, 504))
 async def update_camera_settings(
     body: CameraSettingsUpdate, state: StateDep
 ) -> CameraSettingsPublic:
-    """Change some or all settings; returns what the camera actually uses (it may clamp)."""
+    """Change some or all settings; returns what the camera actually uses (it may clamp).
+
+    409 while a campaign runs (it sets the camera per set-point, and restores the
+    camera's own settings at its end), and for a new modulation frequency while a
+    recording records (a recording holds one camera model, with which every frame of it
+    is read: stop it first). Nothing is changed on a 409."""
     cam = state.devices.camera
-    wanted = replace(cam.get_settings(), **body.model_dump(exclude_none=True))
+    current = cam.get_settings()
+    wanted = replace(current, **body.model_dump(exclude_none=True))
+    if wanted != current and (owner := state.campaigns.running) is not None:
+        raise HTTPException(
+            409,
+            f"campaign {owner[0]} ({owner[1]!r}) sets the camera per set-point while it "
+            "runs: pause or cancel it to change the camera's settings by hand",
+        )
+    recording = state.recordings.running() if state.recordings is not None else []
+    if wanted.modulation_frequency_mhz != current.modulation_frequency_mhz and recording:
+        names = ", ".join(f"{r.id} ({r.name!r})" for r in recording)
+        which = (
+            f"recording {names} records" if len(recording) == 1 else f"recordings {names} record"
+        )
+        raise HTTPException(
+            409,
+            f"{which} now, and a recording holds one camera model "
+            "(/camera) with which all its frames are read (where their distances wrap, "
+            "their noise): stop it before changing the modulation frequency",
+        )
     fut = state.acquisition.submit(lambda: cam.apply_settings(wanted))
     try:
         applied = await asyncio.wait_for(asyncio.wrap_future(fut), APPLY_TIMEOUT_S)

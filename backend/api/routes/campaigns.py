@@ -34,7 +34,12 @@ from backend.api.schemas.campaigns import (
     MeasurementPage,
 )
 from backend.services.calibrations import get_calibration
-from backend.services.campaigns.camera_plan import camera_identity, camera_limits, plan_cameras
+from backend.services.campaigns.camera_plan import (
+    camera_identity,
+    camera_limits,
+    plan_cameras,
+    raw_recording_problems,
+)
 from backend.services.campaigns.campaign_repository import CampaignView
 from backend.services.campaigns.campaign_requests import (
     Planning,
@@ -101,7 +106,8 @@ def create_campaign(body: CampaignCreate, state: StateDep, session: SessionDep) 
     422 names every problem: no set-points, both or neither of ``setpoints`` and
     ``generator``, set-points outside the soft limits, too many set-points or frames, an
     unknown catalog, camera settings outside the camera's limits (the field and the allowed
-    range named), a camera serial or firmware the connected camera contradicts. 409 if
+    range named), a raw recording over more than one modulation frequency (one camera model
+    per recording), a camera serial or firmware the connected camera contradicts. 409 if
     the name is taken. Nothing is stored on an error.
     """
     if body.setpoints is not None and body.generator is not None:
@@ -134,6 +140,12 @@ def create_campaign(body: CampaignCreate, state: StateDep, session: SessionDep) 
     spec = dynamic_spec(generator, motion)
     located = profile_plan_problems(setpoints, spec, motion) if spec is not None else []
     located += camera_problems + identity_problems
+    if not camera_problems:
+        located += raw_recording_problems(
+            cameras,
+            body.camera.model_dump(exclude_none=True) if body.camera else None,
+            body.record_raw,
+        )
     at_body: list[tuple[Location, str]] = [(["body"], p) for p in problems]
     if at_body or located:
         raise unprocessable_at([*at_body, *located])

@@ -106,6 +106,33 @@ def with_sweep(
     return points, cameras
 
 
+def raw_recording_problems(
+    cameras: list[dict[str, float]], base: dict[str, Any] | None, record_raw: bool
+) -> list[Located]:
+    """With ``record_raw``: a problem when the set-points (``cameras``: each one's
+    settings, over the campaign-wide ``base``) are measured at more than one modulation
+    frequency, counting the camera's own wherever neither gives one. The raw recording is
+    one file with one camera model (``/camera``), with which every frame of it is read
+    (where its distances wrap, their noise): one frequency per recorded campaign."""
+    if not record_raw:
+        return []
+    fallback = (base or {}).get("modulation_frequency_mhz")
+    used = {c.get("modulation_frequency_mhz", fallback) for c in cameras}
+    if len(used) <= 1:
+        return []
+    named = sorted(_g(float(f)) + " MHz" for f in used if f is not None)
+    own = " and the camera's own where none is given" if None in used else ""
+    return [
+        (
+            ["body", "record_raw"],
+            f"record_raw keeps one recording, and a recording holds one camera model "
+            f"(/camera) with which all its frames are read; these set-points are measured "
+            f"at {', '.join(named)}{own}: give every set-point one "
+            "modulation_frequency_mhz, or record each frequency in its own campaign",
+        )
+    ]
+
+
 def camera_identity(
     described: dict[str, str], given: dict[str, str | None]
 ) -> tuple[dict[str, str], list[Located]]:

@@ -424,6 +424,11 @@ def _finite(v) -> float | None:
     return v if np.isfinite(v) else None
 
 
+class RawRecordingError(RuntimeError):
+    """A frame that cannot go into a campaign's raw recording (the runner pauses the
+    campaign with this reason)."""
+
+
 class RawRecorder:
     """A campaign's raw frames in an HDF5 recording (docs/architecture.md §7), kept equal
     to what the database holds: frames are appended as they are measured, the file is
@@ -432,6 +437,8 @@ class RawRecorder:
     off again, so ``/frames`` holds exactly the committed measurements, in order."""
 
     def __init__(self, path: Path, camera, catalog, committed_frames: int) -> None:
+        """``camera``: the model for a frame that does not carry its own
+        (``LiveSample.camera_model``)."""
         self.path = path
         self._camera, self._catalog = camera, catalog
         self._writer: CampaignRecordingWriter | None = None
@@ -451,14 +458,28 @@ class RawRecorder:
     def append(self, sample: LiveSample) -> int:
         """Write the sample's frame (``/truth`` from its exact pose, ``/reference`` from
         its lab reference, each when the first frame has it) with its wall clock,
-        encoders and set-point (``campaign_recording``); returns its index."""
+        encoders and set-point (``campaign_recording``); returns its index. The file's
+        ``/camera`` is the model its first frame was taken with (the set-point's settings
+        applied); ``RawRecordingError`` for a frame taken at another modulation frequency
+        (a campaign resumed after the camera's own frequency changed)."""
         f = sample.frame
         exact, lab = f.T_camera_target_exact, f.T_camera_target_lab
+        model = sample.camera_model or self._camera
+        if self._writer is not None:
+            held_hz = self._writer.camera.modulation_frequency_hz
+            if model.modulation_frequency_hz != held_hz:
+                raise RawRecordingError(
+                    f"the camera's modulation frequency is "
+                    f"{model.modulation_frequency_hz / 1e6:g} MHz, but this campaign's raw "
+                    f"recording holds frames taken at {held_hz / 1e6:g} MHz (one camera "
+                    f"model per recording): set the camera to {held_hz / 1e6:g} MHz and "
+                    "resume"
+                )
         if self._writer is None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._writer = CampaignRecordingWriter(
                 self.path,
-                self._camera,
+                model,
                 self._catalog,
                 axes={a: c.rsplit("_", 1)[1] for a, c in AXIS_COLUMNS.items()},
                 with_truth=exact is not None,

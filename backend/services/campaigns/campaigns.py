@@ -34,6 +34,7 @@ from backend.services.campaigns.campaign_repository import (
     CampaignRepository,
     CampaignView,
     RawRecorder,
+    RawRecordingError,
     create_campaign,
 )
 from backend.services.campaigns.campaign_states import (
@@ -156,6 +157,15 @@ class CampaignService:
     def owner(self) -> tuple[int, str] | None:
         """(id, name) of the campaign that owns the motion system now, or None."""
         return self.motion.owner
+
+    @property
+    def running(self) -> tuple[int, str] | None:
+        """(id, name) of the campaign being run now (it sets the camera's settings per
+        set-point), or None. Reads without the lock, as ``progress`` does."""
+        rid, p = self._running_id, self._progress
+        if rid is None:
+            return None
+        return rid, p.name if p is not None and p.campaign_id == rid else ""
 
     def progress(self, campaign_id: int | None = None) -> dict | None:
         """The running (or last) campaign's progress. Takes no lock: the live WebSocket
@@ -387,7 +397,10 @@ class CampaignService:
 
         def on_frame(sample: LiveSample, n: int) -> None:
             if recorder is not None:
-                recorder.append(sample)
+                try:
+                    recorder.append(sample)
+                except RawRecordingError as exc:  # the set-point's frames are rolled back
+                    raise SetPointHalt(CampaignState.PAUSED, str(exc)) from exc
             self._bump(frames_collected=n)
 
         collector = SetPointCollector(

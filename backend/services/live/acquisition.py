@@ -50,6 +50,7 @@ from backend.services.live.kernel_warmup import COMPILING_REASON, KernelWarmup
 from backend.services.live.latency import FrameStamps, LiveStatistics
 from backend.services.live.live_reference import LiveReference
 from tofpose.config import config_for_camera
+from tofpose.core.camera import CameraModel
 from tofpose.core.catalog import Catalog
 from tofpose.lab.relative_state import RelativeState, RelativeStateConfig, RelativeStateFilter
 from tofpose.pipeline import PipelineConfig, PosePipeline, PoseResult
@@ -89,6 +90,9 @@ class LiveSample:
     state : the relative-state filter's state at the frame's time (pose, rates,
         velocity and their covariance; ``tofpose.lab.relative_state``), None before its
         first pose.
+    camera_model : the camera model the frame was taken and measured with (its
+        modulation frequency: where its distances wrap, their noise); None for a sample
+        not made by the loop (a recording then takes the camera's model now).
     cache : serialised forms (JSON, PNG) computed once and shared by all consumers.
     """
 
@@ -101,6 +105,7 @@ class LiveSample:
     implementation: Implementation | None = "compiled"
     reference: LiveReference = field(default_factory=LiveReference)
     state: RelativeState | None = None
+    camera_model: CameraModel | None = None
     cache: dict[str, Any] = field(default_factory=dict)
     stamps: FrameStamps | None = None
     camera_gap: int = 0
@@ -378,6 +383,7 @@ class AcquisitionService:
                 implementation=_implementation(pipeline),
                 reference=self.reference,
                 state=state,
+                camera_model=pipeline.camera if pipeline is not None else self.camera.model,
                 stamps=stamps,
                 camera_gap=gap,
                 pipeline_skipped=skipped,

@@ -64,6 +64,11 @@ export interface paths {
         /**
          * Update Camera Settings
          * @description Change some or all settings; returns what the camera actually uses (it may clamp).
+         *
+         *     409 while a campaign runs (it sets the camera per set-point, and restores the
+         *     camera's own settings at its end), and for a new modulation frequency while a
+         *     recording records (a recording holds one camera model, with which every frame of it
+         *     is read: stop it first). Nothing is changed on a 409.
          */
         put: operations["updateCameraSettings"];
         post?: never;
@@ -93,7 +98,8 @@ export interface paths {
          *     422 names every problem: no set-points, both or neither of ``setpoints`` and
          *     ``generator``, set-points outside the soft limits, too many set-points or frames, an
          *     unknown catalog, camera settings outside the camera's limits (the field and the allowed
-         *     range named), a camera serial or firmware the connected camera contradicts. 409 if
+         *     range named), a raw recording over more than one modulation frequency (one camera model
+         *     per recording), a camera serial or firmware the connected camera contradicts. 409 if
          *     the name is taken. Nothing is stored on an error.
          */
         post: operations["createCampaign"];
@@ -2997,7 +3003,7 @@ export interface components {
          * @description Why a recording stopped.
          * @enum {string}
          */
-        StopReason: "requested" | "duration" | "disk_full" | "error" | "shutdown" | "interrupted";
+        StopReason: "requested" | "duration" | "disk_full" | "error" | "shutdown" | "camera_changed" | "interrupted";
         /**
          * StudyCreate
          * @description A study spec (``tofpose study --example`` prints one).
@@ -3502,6 +3508,15 @@ export interface operations {
             };
             /** @description The API key's scope is below what the operation needs (operate: state changes; admin: keys, the audit trail) */
             403: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["ErrorPublic"];
+                };
+            };
+            /** @description Conflicts with stored state (a name already taken, or the resource is busy) */
+            409: {
                 headers: {
                     [name: string]: unknown;
                 };

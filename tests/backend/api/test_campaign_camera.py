@@ -109,6 +109,42 @@ def test_a_sweep_repeats_every_set_point_at_each_setting(client):
     }
 
 
+@pytest.mark.parametrize(
+    ("extra", "named"),
+    [
+        ({"camera_sweep": {"modulation_frequency_mhz": [6, 12]}}, "at 12 MHz, 6 MHz:"),
+        (
+            {"setpoints": [AT_2M, {**AT_2M, "camera": {"modulation_frequency_mhz": 12}}]},
+            "at 12 MHz and the camera's own where none is given:",
+        ),
+        (
+            {
+                "camera": {"modulation_frequency_mhz": 6},
+                "setpoints": [AT_2M, {**AT_2M, "camera": {"modulation_frequency_mhz": 12}}],
+            },
+            "at 12 MHz, 6 MHz:",
+        ),
+    ],
+)
+def test_a_raw_recording_over_two_modulation_frequencies_is_refused(client, extra, named):
+    """One recording holds one camera model: a recorded campaign measures at one
+    frequency (422 naming ``record_raw`` and the frequencies; nothing stored). The same
+    set-points without the recording are accepted."""
+    body = {**BASE, "setpoints": [AT_2M], **extra}
+    r = client.post("/api/campaigns", json={**body, "record_raw": True}, headers=AUTH)
+    assert r.status_code == 422, r.text
+    [problem] = r.json()["detail"]
+    assert problem["loc"] == ["body", "record_raw"]
+    assert named in problem["msg"] and "one camera model" in problem["msg"], problem["msg"]
+    assert not any(x["name"] == "cam" for x in client.get("/api/campaigns").json())
+    _create(client, {**body, "name": "cam unrecorded"})
+    one = {"modulation_frequency_mhz": 12}
+    _create(
+        client,
+        {**body, "name": "cam at 12", "record_raw": True, "camera_sweep": None, "camera": one},
+    )
+
+
 def test_metadata_round_trip_device_values_first(client):
     body = {
         **BASE,
@@ -163,6 +199,25 @@ def test_the_runner_applies_each_setting_and_restores_the_camera(fast_client):
     assert c.get("/api/camera/settings").json() == before
 
 
+def test_a_recorded_campaign_writes_the_frequency_its_set_points_are_measured_at(
+    fast_client,
+):
+    """Every set-point at 12 MHz with the camera at 6 MHz before: the raw recording's
+    ``/camera`` says 12 MHz (the model its frames were taken with, so that a replay
+    reads them with it), and the camera is back at 6 MHz after."""
+    c = fast_client
+    before = c.get("/api/camera/settings").json()
+    assert before["modulation_frequency_mhz"] == 6
+    at_12 = {**AT_2M, "camera": {"modulation_frequency_mhz": 12}}
+    done = _run(c, {**BASE, "record_raw": True, "setpoints": [at_12, at_12]})
+    assert done["status"] == "done", done["status_reason"]
+    path = c.app.state.tofpose.campaigns.recording_path(done["id"])
+    with open_recording(path) as rec:
+        assert rec.n_frames == 8
+        assert rec.camera.modulation_frequency_hz == 12e6
+    assert c.get("/api/camera/settings").json() == before
+
+
 def test_stop_restores_the_cameras_settings(fast_client):
     c = fast_client
     before = c.get("/api/camera/settings").json()
@@ -185,6 +240,10 @@ def test_stop_restores_the_cameras_settings(fast_client):
     }
     during = c.get("/api/camera/settings").json()
     assert (during["integration_time_us"], during["auto_exposure"]) == (300.0, False)
+    # a person's change would land between the campaign's frames: refused, nothing changed
+    r = c.put("/api/camera/settings", json={"integration_time_us": 500}, headers=AUTH)
+    assert r.status_code == 409 and f"campaign {cid} ('cam')" in r.json()["detail"], r.text
+    assert c.get("/api/camera/settings").json() == during
     assert c.post("/api/motion/stop", headers=AUTH).status_code == 200
     paused = wait_for(
         lambda: (x := c.get(f"/api/campaigns/{cid}").json())["status"] == "paused" and x

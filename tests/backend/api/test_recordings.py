@@ -250,6 +250,31 @@ def test_a_duration_stops_it_and_the_list_shows_the_disk(app_client):
     assert listing["max_active"] == 2 and listing["used_mb"] > 0 and listing["free_mb"] > 100
 
 
+def test_a_new_modulation_frequency_is_refused_while_a_recording_records(app_client):
+    """A recording holds one camera model: the frequency stays until it is stopped (409
+    naming it, the camera unchanged); other settings change as before; after the stop
+    the frequency changes too."""
+    c = app_client
+    before = c.get("/api/camera/settings").json()
+    rid = _start(c, name="held")["id"]
+    try:
+        r = c.put("/api/camera/settings", json={"modulation_frequency_mhz": 12}, headers=AUTH)
+        assert r.status_code == 409, r.text
+        detail = r.json()["detail"]
+        assert f"recording {rid} ('held')" in detail and "stop it" in detail
+        assert c.get("/api/camera/settings").json() == before
+        r = c.put("/api/camera/settings", json={"integration_time_us": 300}, headers=AUTH)
+        assert r.status_code == 200, r.text
+    finally:
+        _stop(c, rid)
+    r = c.put("/api/camera/settings", json={"modulation_frequency_mhz": 12}, headers=AUTH)
+    assert r.status_code == 200 and r.json()["modulation_frequency_mhz"] == 12
+    restore = {
+        k: before[k] for k in ("integration_time_us", "modulation_frequency_mhz", "auto_exposure")
+    }
+    assert c.put("/api/camera/settings", json=restore, headers=AUTH).status_code == 200
+
+
 def test_a_server_that_stops_closes_its_recordings(tmp_path):
     data = tmp_path / "data"
     with running_app(make_settings(data, recording_min_free_mb=100)) as c:

@@ -385,3 +385,39 @@ def test_a_recording_writes_the_camera_model_as_it_is_when_it_starts(tmp_path, h
                 assert rec.camera.modulation_frequency_hz == mhz * 1e6
     finally:
         svc.stop_all()
+
+
+def test_a_frame_at_another_modulation_frequency_stops_the_recording_and_says_why(
+    tmp_path, hub, motion
+):
+    """A recording holds one camera model: its ``/camera`` is the model its first frame
+    was taken with (the sample's, not the camera's now, which may have moved on), and a
+    frame taken at another modulation frequency (a campaign's set-point, say) stops it
+    with ``camera_changed``, every earlier frame kept and readable."""
+    from dataclasses import replace as replaced
+
+    at_6 = replaced(CAMERA, modulation_frequency_hz=6e6)
+    at_24 = replaced(CAMERA, modulation_frequency_hz=24e6)
+    # the camera says 24 MHz already; the frames delivered so far were taken at 6
+    svc = RecordingService(
+        tmp_path / "recordings", hub, lambda: at_24, paper_target, motion, min_free_mb=0
+    )
+    try:
+        rng = np.random.default_rng(5)
+        info = svc.start("over a change")
+        for i in range(3):
+            hub.publish(replaced(make_sample(i, rng), camera_model=at_6))
+        hub.publish(replaced(make_sample(3, rng), camera_model=at_24))
+        stopped = wait_for(
+            lambda: (x := svc.get(info.id)).state is RecordingState.STOPPED and x,
+            10.0,
+            "the recording to stop",
+        )
+        assert stopped.stop_reason is StopReason.CAMERA_CHANGED
+        assert "from 6 to 24 MHz" in stopped.stop_detail
+        assert "after frame 3" in stopped.stop_detail and stopped.frames == 3
+        with open_recording(svc.directory / stopped.file) as rec:
+            assert rec.n_frames == 3
+            assert rec.camera.modulation_frequency_hz == 6e6
+    finally:
+        svc.stop_all()

@@ -12,6 +12,7 @@ from backend.services.campaigns.camera_plan import (
     camera_identity,
     camera_limits,
     plan_cameras,
+    raw_recording_problems,
     setting_problems,
     with_sweep,
 )
@@ -76,3 +77,21 @@ def test_the_drivers_report_their_limits_and_the_tofcam660_its_chip(tmp_path):
             f"{info['serial']!r}: leave it out to take the device's",
         )
     ]
+
+
+def test_a_raw_recording_takes_one_modulation_frequency():
+    """``raw_recording_problems``: one frequency (given everywhere, by the base, or the
+    camera's own everywhere) is fine; two, or one given beside the camera's own, is one
+    problem at ``record_raw``; nothing without ``record_raw``."""
+    f12, f6 = {"modulation_frequency_mhz": 12.0}, {"modulation_frequency_mhz": 6.0}
+    assert raw_recording_problems([f12, f12], None, True) == []
+    assert raw_recording_problems([{}, {}], None, True) == []
+    assert raw_recording_problems([{}, f12], f12, True) == []  # the base fills the gap
+    assert raw_recording_problems([{"integration_time_us": 100.0}, {}], None, True) == []
+    assert raw_recording_problems([f6, f12], None, False) == []
+    [(loc, msg)] = raw_recording_problems([f6, f12], None, True)
+    assert loc == ["body", "record_raw"] and "12 MHz, 6 MHz" in msg
+    [(_, msg)] = raw_recording_problems([{}, f12], None, True)
+    assert "12 MHz and the camera's own" in msg
+    [(_, msg)] = raw_recording_problems([{}, f12], f6, True)
+    assert "12 MHz, 6 MHz" in msg and "camera's own" not in msg
