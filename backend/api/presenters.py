@@ -155,9 +155,14 @@ def motion_public(state: AppState) -> MotionPublic:
     )
 
 
-def camera_settings_public(s: CameraSettings) -> CameraSettingsPublic:
+def camera_settings_public(
+    s: CameraSettings, *, locked: str | None = None, frequency_held: str | None = None
+) -> CameraSettingsPublic:
     return CameraSettingsPublic(
-        **asdict(s), unambiguous_range_mm=unambiguous_range_mm(s.modulation_frequency_mhz)
+        **asdict(s),
+        unambiguous_range_mm=unambiguous_range_mm(s.modulation_frequency_mhz),
+        locked=locked,
+        frequency_held=frequency_held,
     )
 
 

@@ -1,8 +1,8 @@
 """No control of the dashboard sends a move the user did not type: an empty, partial or
 out-of-limit go-to field sends nothing and says why; Enter and double clicks send one
 move; a jog is a relative step the server applies; while the turntable's status is stale
-or a campaign owns it, the controls are locked. Every request the page makes is recorded
-and compared with what the user did."""
+or a campaign owns it, the controls are locked (and the camera panel's, while a campaign
+runs). Every request the page makes is recorded and compared with what the user did."""
 
 from __future__ import annotations
 
@@ -179,6 +179,12 @@ def test_controls_lock_while_a_campaign_owns_the_turntable(server, page_for):
     locked = page.get_by_test_id("motion-locked")
     locked.wait_for(timeout=10_000)
     assert f"campaign {cid}" in locked.inner_text() and "owns the turntable" in locked.inner_text()
+    # the camera too: the campaign sets it per set-point, so its panel is locked and says so
+    cam_locked = page.get_by_test_id("cam-locked")
+    cam_locked.wait_for(timeout=10_000)
+    assert f"campaign {cid} ('owner')" in cam_locked.inner_text()
+    assert page.get_by_test_id("cam-apply").is_disabled()
+    assert page.get_by_test_id("cam-integration_time_us").is_disabled()
     page.get_by_test_id("target-rail").fill("12000")
     assert page.get_by_test_id("go-rail").is_disabled()
     assert page.get_by_test_id("jog-rail-minus").is_disabled()
@@ -189,6 +195,8 @@ def test_controls_lock_while_a_campaign_owns_the_turntable(server, page_for):
     assert sent == []
     httpx.post(f"{server.base_url}/api/campaigns/{cid}/cancel", headers=AUTH)
     wait_for(lambda: locked.count() == 0, 6.0, "the lock to lift after the cancel")
+    wait_for(lambda: cam_locked.count() == 0, 6.0, "the camera's lock to lift")
+    assert page.get_by_test_id("cam-apply").is_enabled()
 
 
 def test_stop_latches_in_the_page_until_a_person_releases_it(server, page_for):

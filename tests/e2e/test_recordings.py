@@ -80,15 +80,22 @@ def test_record_from_the_page_stop_download_and_read_it(server, page_for, tmp_pa
 
 
 def test_the_camera_panel_says_why_the_frequency_holds_while_recording(server, page_for):
-    """A new modulation frequency typed in the camera panel while a recording records is
-    refused, and the page says which recording holds it; the camera stays at 6 MHz. After
-    the stop the same change is applied."""
+    """While a recording records, the camera panel says which recording holds the
+    modulation frequency and its field is disabled (the other settings stay open); a
+    frequency typed before the start and applied anyway is refused, and the error banner
+    says why in view of the panel (under the sticky header) until dismissed; the camera
+    stays at 6 MHz. After the stop the field opens and the same change is applied."""
     page = page_for(server.base_url, TOKEN)
     page.goto(server.base_url + "/")
     page.get_by_test_id("rec-name").wait_for(timeout=20_000)
+    page.get_by_test_id("cam-modulation_frequency_mhz").fill("12")  # typed, not applied yet
     rid = _record_from_the_page(page, "held frequency")
 
-    page.get_by_test_id("cam-modulation_frequency_mhz").fill("12")
+    notice = page.get_by_test_id("cam-frequency-held")
+    notice.wait_for(timeout=10_000)  # the panel polls every 2 s
+    assert f"recording {rid} ('held frequency')" in notice.inner_text()
+    assert page.get_by_test_id("cam-modulation_frequency_mhz").is_disabled()
+    assert page.get_by_test_id("cam-integration_time_us").is_enabled()
     page.get_by_test_id("cam-apply").click()
     error = page.get_by_test_id("error")
     error.wait_for(timeout=10_000)
@@ -105,6 +112,8 @@ def test_the_camera_panel_says_why_the_frequency_holds_while_recording(server, p
 
     page.get_by_test_id(f"rec-stop-{rid}").click()
     page.get_by_test_id(f"rec-h5-{rid}").wait_for(timeout=15_000)
+    wait_for(lambda: notice.count() == 0, 10.0, "the notice to go")
+    assert page.get_by_test_id("cam-modulation_frequency_mhz").is_enabled()
     page.get_by_test_id("cam-apply").click()  # the field still says 12
     wait_for(
         lambda: (

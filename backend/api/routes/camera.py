@@ -12,15 +12,50 @@ from backend.api.contract import errors
 from backend.api.deps import ReadAuth, StateDep, WriteAuth
 from backend.api.presenters import camera_settings_public
 from backend.api.schemas.camera import CameraSettingsPublic, CameraSettingsUpdate
+from backend.drivers.base import CameraSettings
 from backend.services.store import save_device_settings
+from backend.state import AppState
 
 router = APIRouter(prefix="/api/camera", tags=["camera"])
 APPLY_TIMEOUT_S = 5.0
 
 
+def _locked(state: AppState) -> str | None:
+    """Why no setting can be changed by hand now (a campaign runs), or None."""
+    owner = state.campaigns.running
+    if owner is None:
+        return None
+    return (
+        f"campaign {owner[0]} ({owner[1]!r}) sets the camera per set-point while it runs: "
+        "pause or cancel it to change the camera's settings by hand"
+    )
+
+
+def _frequency_held(state: AppState) -> str | None:
+    """Why the modulation frequency cannot change now (recordings record), or None."""
+    recording = state.recordings.running() if state.recordings is not None else []
+    if not recording:
+        return None
+    names = ", ".join(f"{r.id} ({r.name!r})" for r in recording)
+    which = f"recording {names} records" if len(recording) == 1 else f"recordings {names} record"
+    return (
+        f"{which} now, and a recording holds one camera model (/camera) with which all "
+        "its frames are read (where their distances wrap, their noise): stop it before "
+        "changing the modulation frequency"
+    )
+
+
+def _public(state: AppState, settings: CameraSettings) -> CameraSettingsPublic:
+    return camera_settings_public(
+        settings, locked=_locked(state), frequency_held=_frequency_held(state)
+    )
+
+
 @router.get("/settings", dependencies=[ReadAuth])
 def get_camera_settings(state: StateDep) -> CameraSettingsPublic:
-    return camera_settings_public(state.devices.camera.get_settings())
+    """What the camera uses, and what holds its settings now (``locked``,
+    ``frequency_held``: the reasons a change would be refused, or null)."""
+    return _public(state, state.devices.camera.get_settings())
 
 
 @router.put("/settings", dependencies=[WriteAuth], responses=errors(409, 503, 504))
@@ -36,24 +71,12 @@ async def update_camera_settings(
     cam = state.devices.camera
     current = cam.get_settings()
     wanted = replace(current, **body.model_dump(exclude_none=True))
-    if wanted != current and (owner := state.campaigns.running) is not None:
-        raise HTTPException(
-            409,
-            f"campaign {owner[0]} ({owner[1]!r}) sets the camera per set-point while it "
-            "runs: pause or cancel it to change the camera's settings by hand",
-        )
-    recording = state.recordings.running() if state.recordings is not None else []
-    if wanted.modulation_frequency_mhz != current.modulation_frequency_mhz and recording:
-        names = ", ".join(f"{r.id} ({r.name!r})" for r in recording)
-        which = (
-            f"recording {names} records" if len(recording) == 1 else f"recordings {names} record"
-        )
-        raise HTTPException(
-            409,
-            f"{which} now, and a recording holds one camera model "
-            "(/camera) with which all its frames are read (where their distances wrap, "
-            "their noise): stop it before changing the modulation frequency",
-        )
+    if wanted != current and (locked := _locked(state)) is not None:
+        raise HTTPException(409, locked)
+    if wanted.modulation_frequency_mhz != current.modulation_frequency_mhz and (
+        held := _frequency_held(state)
+    ):
+        raise HTTPException(409, held)
     fut = state.acquisition.submit(lambda: cam.apply_settings(wanted))
     try:
         applied = await asyncio.wait_for(asyncio.wrap_future(fut), APPLY_TIMEOUT_S)
@@ -67,4 +90,4 @@ async def update_camera_settings(
             save_device_settings(session, "camera", asdict(applied))
 
     await asyncio.to_thread(persist)
-    return camera_settings_public(applied)
+    return _public(state, applied)

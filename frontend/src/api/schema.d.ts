@@ -59,7 +59,11 @@ export interface paths {
             path?: never;
             cookie?: never;
         };
-        /** Get Camera Settings */
+        /**
+         * Get Camera Settings
+         * @description What the camera uses, and what holds its settings now (``locked``,
+         *     ``frequency_held``: the reasons a change would be refused, or null).
+         */
         get: operations["getCameraSettings"];
         /**
          * Update Camera Settings
@@ -1384,14 +1388,24 @@ export interface components {
             /** Width Px */
             width_px: number;
         };
-        /** CameraSettingsPublic */
+        /**
+         * CameraSettingsPublic
+         * @description What the camera uses, and what holds its settings now: ``locked`` says why none
+         *     can be changed by hand (a campaign sets them per set-point), ``frequency_held`` why
+         *     the modulation frequency cannot (a recording records); null when nothing holds them.
+         *     A change they hold answers 409 with the same sentence.
+         */
         CameraSettingsPublic: {
             /** Auto Exposure */
             auto_exposure: boolean;
             /** Frame Rate Hz */
             frame_rate_hz: number;
+            /** Frequency Held */
+            frequency_held?: string | null;
             /** Integration Time Us */
             integration_time_us: number;
+            /** Locked */
+            locked?: string | null;
             /** Modulation Frequency Mhz */
             modulation_frequency_mhz: number;
             /** Unambiguous Range Mm */

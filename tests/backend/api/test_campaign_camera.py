@@ -241,8 +241,9 @@ def test_stop_restores_the_cameras_settings(fast_client):
     during = c.get("/api/camera/settings").json()
     assert (during["integration_time_us"], during["auto_exposure"]) == (300.0, False)
     # a person's change would land between the campaign's frames: refused, nothing changed
+    assert f"campaign {cid} ('cam')" in during["locked"]
     r = c.put("/api/camera/settings", json={"integration_time_us": 500}, headers=AUTH)
-    assert r.status_code == 409 and f"campaign {cid} ('cam')" in r.json()["detail"], r.text
+    assert r.status_code == 409 and r.json()["detail"] == during["locked"], r.text
     assert c.get("/api/camera/settings").json() == during
     assert c.post("/api/motion/stop", headers=AUTH).status_code == 200
     paused = wait_for(
@@ -250,6 +251,7 @@ def test_stop_restores_the_cameras_settings(fast_client):
     )
     assert "STOP pressed" in paused["status_reason"]
     assert wait_for(lambda: c.get("/api/camera/settings").json() == before, 5.0, "the restore")
+    assert before["locked"] is None  # nothing holds the settings once the campaign left
 
 
 def test_the_report_groups_by_integration_time_and_prints_the_metadata(fast_client, tmp_path):

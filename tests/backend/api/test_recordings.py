@@ -262,11 +262,15 @@ def test_a_new_modulation_frequency_is_refused_while_a_recording_records(app_cli
         assert r.status_code == 409, r.text
         detail = r.json()["detail"]
         assert f"recording {rid} ('held')" in detail and "stop it" in detail
-        assert c.get("/api/camera/settings").json() == before
+        # the settings say so before anyone tries: the same sentence, nothing else held
+        held = c.get("/api/camera/settings").json()
+        assert held == {**before, "frequency_held": detail}
+        assert before["frequency_held"] is None and before["locked"] is None
         r = c.put("/api/camera/settings", json={"integration_time_us": 300}, headers=AUTH)
         assert r.status_code == 200, r.text
     finally:
         _stop(c, rid)
+    assert c.get("/api/camera/settings").json()["frequency_held"] is None
     r = c.put("/api/camera/settings", json={"modulation_frequency_mhz": 12}, headers=AUTH)
     assert r.status_code == 200 and r.json()["modulation_frequency_mhz"] == 12
     restore = {
