@@ -25,7 +25,7 @@ the ideal sensor with the camera declared bias-free, the ideal sensor with the d
 (``bench/realistic.py``'s calibration run) and the calibrated prior; the bound is the
 offset-known one throughout, so a fitted offset shows as position over the bound.
 
-Judge the pixel fit on frames rendered with ``--supersampling 32`` or more: the
+Judge the pixel fit on frames rendered with ``--supersampling 64`` (32 at 3 m and beyond): the
 renderer's 16 x 16 point sampling of an edge pixel leaves +-10-40 counts on each rim
 pixel (one sample is 1/256 of a ~2500-count disc), which for a fit on the rim pixels is a
 model error of 0.5-2 bounds (at 3 m: 1.36 / 1.41 bounds and errors/sigmas 1.35 at 16,
@@ -154,8 +154,7 @@ def summarise(outcomes: list[FrameOutcome]) -> dict[str, float]:
     }
 
 
-#: the sensors of the product table (``product_table``): name -> (systematic errors,
-#: the camera's declared range calibration)
+#: the product table's sensors and camera configurations (``_product_pipelines``)
 PRODUCT_SENSORS = (
     "ideal, declared bias-free",
     "ideal, defaults (uncalibrated prior)",
@@ -166,50 +165,54 @@ WARM_S = 3600.0
 
 
 def _product_pipelines(
-    cam: CameraModel, supersampling: int = 32
-) -> dict[str, tuple[SensorModel, PosePipeline, float]]:
-    """Per ``PRODUCT_SENSORS`` entry: the renderer's sensor (``supersampling`` squared
-    points per rim pixel), the pipeline as
-    a user configures it for that camera (pixel fit on) and the range-offset prior sigma it
-    fits with (mm; 0: none)."""
-    from bench.realistic import calibration_samples
+    cam: CameraModel, supersampling: int = 32, names: tuple[str, ...] = PRODUCT_SENSORS
+) -> dict[str, tuple[SensorModel, PosePipeline]]:
+    """Per entry of ``names`` (of ``PRODUCT_SENSORS``): the renderer's sensor
+    (``supersampling`` squared points per rim pixel) and the pipeline as a user
+    configures it for that camera (pixel fit on): the ideal sensor declared bias-free
+    (``range_bias_sigma_mm=0``), the ideal sensor with the defaults, the realistic one
+    with the range correction of ``bench/realistic.py``'s calibration run."""
     from tofpose import PipelineConfig
-    from tofpose.calibration.range import fit_range_correction
     from tofpose.config import PixelFitConfig
-    from tofpose.sim.systematic import SystematicErrors
 
     cat = paper_target()
     fit_on = PixelFitConfig(enabled=True)
-    errors = SystematicErrors()
-    correction = fit_range_correction(
-        calibration_samples(cam, errors), SensorModel().unambiguous_range_mm
-    ).correction
     defaults = PipelineConfig(pixel_fit=fit_on)
-    return {
-        PRODUCT_SENSORS[0]: (
+    out: dict[str, tuple[SensorModel, PosePipeline]] = {}
+    if PRODUCT_SENSORS[0] in names:
+        bias_free = PipelineConfig(range_bias_sigma_mm=0.0, pixel_fit=fit_on)
+        out[PRODUCT_SENSORS[0]] = (
             SensorModel(supersampling=supersampling),
-            PosePipeline(cam, cat, PipelineConfig(range_bias_sigma_mm=0.0, pixel_fit=fit_on)),
-            0.0,
-        ),
-        PRODUCT_SENSORS[1]: (
+            PosePipeline(cam, cat, bias_free),
+        )
+    if PRODUCT_SENSORS[1] in names:
+        out[PRODUCT_SENSORS[1]] = (
             SensorModel(supersampling=supersampling),
             PosePipeline(cam, cat, defaults),
-            defaults.solve.range_bias_sigma_mm,
-        ),
-        PRODUCT_SENSORS[2]: (
+        )
+    if PRODUCT_SENSORS[2] in names:
+        from bench.realistic import calibration_samples
+        from tofpose.calibration.range import fit_range_correction
+        from tofpose.sim.systematic import SystematicErrors
+
+        errors = SystematicErrors()
+        correction = fit_range_correction(
+            calibration_samples(cam, errors), SensorModel().unambiguous_range_mm
+        ).correction
+        out[PRODUCT_SENSORS[2]] = (
             SensorModel(supersampling=supersampling, systematic=errors),
             PosePipeline(cam, cat, defaults, range_correction=correction),
-            defaults.solve.calibrated_range_bias_sigma_mm,
-        ),
-    }
+        )
+    return out
 
 
 def product_frame(
     rng: np.random.Generator, range_mm: float, sensor: SensorModel, pipe: PosePipeline
-) -> FrameOutcome:
+) -> tuple[FrameOutcome, float]:
     """One frame through the product's pipeline (pixel fit on, as ``tofpose estimate``
     runs it): its pose when the fit held (else a fallback), against the offset-known
-    bound."""
+    bound; and the range-offset prior sigma the pose was fitted with (mm; 0: none, NaN:
+    no pose)."""
     cam, cat = pipe.camera, pipe.catalog
     T = draw_pose(rng, range_mm)
     time_s = WARM_S if sensor.systematic is not None else 0.0
@@ -217,10 +220,12 @@ def product_frame(
     bound = pose_crlb(f, T, cam, cat, sensor)
     pipe.reset()
     r = pipe.process(f.gray, f.distance_mm)
+    prior_mm = r.range_offset.prior_sigma_mm if r.ok else np.nan
     if not r.ok or r.pixel_fit != "ok" or r.R is None or r.t_mm is None:
-        return FrameOutcome(None, None, None, bound, 0.0, r.reason or str(r.pixel_fit))
+        return FrameOutcome(None, None, None, bound, 0.0, r.reason or str(r.pixel_fit)), prior_mm
     err = pose_error(r.R, r.t_mm, T)
-    return FrameOutcome(err, err, r.covariance, bound, 1e-3 * r.timings_ms["pixel fit"], "")
+    fit_s = 1e-3 * r.timings_ms["pixel fit"]
+    return FrameOutcome(err, err, r.covariance, bound, fit_s, ""), prior_mm
 
 
 def product_table(
@@ -229,24 +234,27 @@ def product_table(
     """The pixel fit as the product runs it (``PosePipeline`` with ``pixel_fit`` on, the
     camera configured as a user would: ``PRODUCT_SENSORS``), RMS errors over the bound with
     the range offset known (the sensor's physics alone), errors over the reported sigmas,
-    and the frames where the fit fell back (the centroid pose reported instead)."""
+    the frames where the fit fell back (the centroid pose reported instead), and the
+    range-offset prior the poses were fitted with (a calibrated camera's holds only where
+    every reflector lies in the calibration's span: beyond, the uncalibrated one)."""
     pipes = _product_pipelines(CameraModel(), supersampling)
     lines = [
-        "| range m | sensor, camera configured as | offset prior mm | att / bound "
-        "| pos / bound | err/sigma att | err/sigma pos | fallbacks |",
+        "| range m | sensor, camera configured as | offset prior mm (median used) "
+        "| att / bound | pos / bound | err/sigma att | err/sigma pos | fallbacks |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for z in ranges:
-        for name, (sensor, pipe, prior_mm) in pipes.items():
-            rows = []
+        for name, (sensor, pipe) in pipes.items():
+            rows, priors = [], []
             for rep in range(repeats):
                 rng = np.random.default_rng([seed, int(z * 1000), rep])
-                rows.append(
-                    summarise([product_frame(rng, z * 1000.0, sensor, pipe) for _ in range(frames)])
-                )
+                done = [product_frame(rng, z * 1000.0, sensor, pipe) for _ in range(frames)]
+                rows.append(summarise([o for o, _ in done]))
+                priors += [p for _, p in done]
             m = {k: float(np.nanmedian([r[k] for r in rows])) for k in rows[0]}
             lines.append(
-                f"| {z:g} | {name} | {prior_mm:g} | {m['pix_att_deg'] / m['bound_att_deg']:.2f} "
+                f"| {z:g} | {name} | {np.nanmedian(priors):g} "
+                f"| {m['pix_att_deg'] / m['bound_att_deg']:.2f} "
                 f"| {m['pix_pos_mm'] / m['bound_pos_mm']:.2f} | {m['z_att']:.2f} "
                 f"| {m['z_pos']:.2f} | {m['fallbacks']:.0f} |"
             )

@@ -13,6 +13,7 @@ from backend.api.deps import ReadAuth, StateDep, WriteAuth
 from backend.api.presenters import camera_settings_public
 from backend.api.schemas.camera import CameraSettingsPublic, CameraSettingsUpdate
 from backend.drivers.base import CameraSettings
+from backend.services.campaigns.camera_plan import camera_limits
 from backend.services.store import save_device_settings
 from backend.state import AppState
 
@@ -58,6 +59,36 @@ def get_camera_settings(state: StateDep) -> CameraSettingsPublic:
     return _public(state, state.devices.camera.get_settings())
 
 
+class _HeldError(Exception):
+    """A change that something holds (``_locked``, ``_frequency_held``): a 409."""
+
+
+def _nearest_frequency_mhz(camera, mhz: float) -> float:
+    """The frequency ``camera`` would take for ``mhz``: the nearest one its driver
+    supports (``CameraLimits.modulation_frequencies_mhz``; the TOFcam-660 rounds), else
+    ``mhz``."""
+    choices = camera_limits(camera).modulation_frequencies_mhz
+    return min(choices, key=lambda c: abs(c - mhz)) if choices else mhz
+
+
+def _checked_apply(state: AppState, fields: dict) -> CameraSettings | None:
+    """On the acquisition thread, so that nothing changes the camera between the checks
+    and the change (a campaign's start reads and applies its settings there too): the
+    settings applied, or None when ``fields`` change nothing (nothing applied, nothing
+    to persist); ``_HeldError`` when a campaign runs or a recording holds the frequency."""
+    cam = state.devices.camera
+    current = cam.get_settings()
+    wanted = replace(current, **fields)
+    if wanted == current:
+        return None
+    if (locked := _locked(state)) is not None:
+        raise _HeldError(locked)
+    new_mhz = _nearest_frequency_mhz(cam, wanted.modulation_frequency_mhz)
+    if new_mhz != current.modulation_frequency_mhz and (held := _frequency_held(state)):
+        raise _HeldError(held)
+    return cam.apply_settings(wanted)
+
+
 @router.put("/settings", dependencies=[WriteAuth], responses=errors(409, 503, 504))
 async def update_camera_settings(
     body: CameraSettingsUpdate, state: StateDep
@@ -67,23 +98,20 @@ async def update_camera_settings(
     409 while a campaign runs (it sets the camera per set-point, and restores the
     camera's own settings at its end), and for a new modulation frequency while a
     recording records (a recording holds one camera model, with which every frame of it
-    is read: stop it first). Nothing is changed on a 409."""
-    cam = state.devices.camera
-    current = cam.get_settings()
-    wanted = replace(current, **body.model_dump(exclude_none=True))
-    if wanted != current and (locked := _locked(state)) is not None:
-        raise HTTPException(409, locked)
-    if wanted.modulation_frequency_mhz != current.modulation_frequency_mhz and (
-        held := _frequency_held(state)
-    ):
-        raise HTTPException(409, held)
-    fut = state.acquisition.submit(lambda: cam.apply_settings(wanted))
+    is read: stop it first). Nothing is changed on a 409; a body that changes nothing
+    is answered with the settings as they are (neither applied nor stored again)."""
+    fields = body.model_dump(exclude_none=True)
+    fut = state.acquisition.submit(lambda: _checked_apply(state, fields))
     try:
         applied = await asyncio.wait_for(asyncio.wrap_future(fut), APPLY_TIMEOUT_S)
+    except _HeldError as exc:
+        raise HTTPException(409, str(exc)) from exc
     except TimeoutError as exc:
         raise HTTPException(504, "the camera did not apply the settings in time") from exc
     except Exception as exc:
         raise HTTPException(503, f"the camera refused the settings: {exc}") from exc
+    if applied is None:
+        return _public(state, state.devices.camera.get_settings())
 
     def persist() -> None:
         with state.sessions() as session:

@@ -120,7 +120,7 @@ def raw_recording_problems(
     used = {c.get("modulation_frequency_mhz", fallback) for c in cameras}
     if len(used) <= 1:
         return []
-    named = sorted(_g(float(f)) + " MHz" for f in used if f is not None)
+    named = [_g(f) + " MHz" for f in sorted(float(f) for f in used if f is not None)]
     own = " and the camera's own where none is given" if None in used else ""
     return [
         (

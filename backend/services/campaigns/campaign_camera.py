@@ -49,8 +49,12 @@ class CampaignCamera:
         return applied
 
     def begin(self, base: dict[str, Any] | None) -> None:
-        """Remember the camera's settings and apply ``base`` over them (if any)."""
-        current = self.acquisition.camera.get_settings()
+        """Remember the camera's settings and apply ``base`` over them (if any). Read on
+        the acquisition thread, after any change a person's request queued there before
+        (``PUT /api/camera/settings`` checks and applies there in one step), so that the
+        restore puts back what that request set."""
+        cam = self.acquisition.camera
+        current = self.acquisition.submit(cam.get_settings).result(self.timeout_s)
         self.previous = current
         self.applied = current
         self.base = self._apply(replace(current, **base)) if base else current

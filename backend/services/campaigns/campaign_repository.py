@@ -455,26 +455,49 @@ class RawRecorder:
         """The set-point the frames appended from now on are measured at."""
         self._setpoint = setpoint
 
+    def check_camera(self, model, set_by_campaign: bool = False) -> None:
+        """``RawRecordingError`` when frames taken with ``model`` (the camera's, the
+        set-point's settings applied, before it moves) cannot go into the file: it holds
+        frames taken at another modulation frequency. ``set_by_campaign``: the campaign's
+        own settings chose that frequency (the advice then cannot be to change it back)."""
+        held = self._held_hz()
+        now = model.modulation_frequency_hz
+        if held is None or now == held:
+            return
+        advice = (
+            f"measure at {now / 1e6:g} MHz in a new campaign (this one's file was written "
+            f"at {held / 1e6:g} MHz)"
+            if set_by_campaign
+            else f"set the camera to {held / 1e6:g} MHz and resume"
+        )
+        raise RawRecordingError(
+            f"the camera's modulation frequency is {now / 1e6:g} MHz, but this campaign's "
+            f"raw recording holds frames taken at {held / 1e6:g} MHz (one camera model per "
+            f"recording): {advice}"
+        )
+
+    def _held_hz(self) -> float | None:
+        """The modulation frequency of the frames the file holds; None when it holds
+        none (a file rolled back to its start is written again with the next frame's
+        model)."""
+        if self._writer is None or self._writer.n == 0:
+            return None
+        return self._writer.camera.modulation_frequency_hz
+
     def append(self, sample: LiveSample) -> int:
         """Write the sample's frame (``/truth`` from its exact pose, ``/reference`` from
         its lab reference, each when the first frame has it) with its wall clock,
         encoders and set-point (``campaign_recording``); returns its index. The file's
         ``/camera`` is the model its first frame was taken with (the set-point's settings
         applied); ``RawRecordingError`` for a frame taken at another modulation frequency
-        (a campaign resumed after the camera's own frequency changed)."""
+        (``check_camera``)."""
         f = sample.frame
         exact, lab = f.T_camera_target_exact, f.T_camera_target_lab
         model = sample.camera_model or self._camera
-        if self._writer is not None:
-            held_hz = self._writer.camera.modulation_frequency_hz
-            if model.modulation_frequency_hz != held_hz:
-                raise RawRecordingError(
-                    f"the camera's modulation frequency is "
-                    f"{model.modulation_frequency_hz / 1e6:g} MHz, but this campaign's raw "
-                    f"recording holds frames taken at {held_hz / 1e6:g} MHz (one camera "
-                    f"model per recording): set the camera to {held_hz / 1e6:g} MHz and "
-                    "resume"
-                )
+        self.check_camera(model)
+        if self._writer is not None and self._writer.n == 0:
+            self._writer.close()  # nothing in it yet: made again with this frame's model
+            self._writer = None
         if self._writer is None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._writer = CampaignRecordingWriter(

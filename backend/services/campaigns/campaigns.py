@@ -99,6 +99,12 @@ class Progress:
         }
 
 
+def _sets_frequency(*settings: dict | None) -> bool:
+    """Whether any of a campaign's camera settings (its own, a set-point's) sets the
+    modulation frequency."""
+    return any(s and s.get("modulation_frequency_mhz") is not None for s in settings)
+
+
 class CampaignService:
     """Owns the campaign queue and at most one runner thread. Thread-safe."""
 
@@ -418,6 +424,14 @@ class CampaignService:
             if recorder is not None:
                 recorder.begin_setpoint(sp)
             self._setpoint_camera(camera, sp.index, sp.camera)
+            if recorder is not None:  # before the move: a frequency its file cannot take
+                try:
+                    recorder.check_camera(
+                        self.acquisition.camera.model,
+                        set_by_campaign=_sets_frequency(campaign.camera, sp.camera),
+                    )
+                except RawRecordingError as exc:
+                    raise SetPointHalt(CampaignState.PAUSED, str(exc)) from exc
             expected_us = camera.expected_integration_us
             try:
                 if sp.profile:

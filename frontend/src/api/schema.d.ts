@@ -72,7 +72,8 @@ export interface paths {
          *     409 while a campaign runs (it sets the camera per set-point, and restores the
          *     camera's own settings at its end), and for a new modulation frequency while a
          *     recording records (a recording holds one camera model, with which every frame of it
-         *     is read: stop it first). Nothing is changed on a 409.
+         *     is read: stop it first). Nothing is changed on a 409; a body that changes nothing
+         *     is answered with the settings as they are (neither applied nor stored again).
          */
         put: operations["updateCameraSettings"];
         post?: never;

@@ -112,7 +112,7 @@ def test_a_sweep_repeats_every_set_point_at_each_setting(client):
 @pytest.mark.parametrize(
     ("extra", "named"),
     [
-        ({"camera_sweep": {"modulation_frequency_mhz": [6, 12]}}, "at 12 MHz, 6 MHz:"),
+        ({"camera_sweep": {"modulation_frequency_mhz": [6, 12]}}, "at 6 MHz, 12 MHz:"),
         (
             {"setpoints": [AT_2M, {**AT_2M, "camera": {"modulation_frequency_mhz": 12}}]},
             "at 12 MHz and the camera's own where none is given:",
@@ -122,7 +122,7 @@ def test_a_sweep_repeats_every_set_point_at_each_setting(client):
                 "camera": {"modulation_frequency_mhz": 6},
                 "setpoints": [AT_2M, {**AT_2M, "camera": {"modulation_frequency_mhz": 12}}],
             },
-            "at 12 MHz, 6 MHz:",
+            "at 6 MHz, 12 MHz:",
         ),
     ],
 )
@@ -216,6 +216,33 @@ def test_a_recorded_campaign_writes_the_frequency_its_set_points_are_measured_at
         assert rec.n_frames == 8
         assert rec.camera.modulation_frequency_hz == 12e6
     assert c.get("/api/camera/settings").json() == before
+
+
+def test_a_campaign_at_another_frequency_stops_a_live_recording_before_its_frames(
+    fast_client,
+):
+    """A recording on demand runs at 6 MHz; a campaign's set-point sets 12 MHz: the
+    recording stops at the first frame taken at 12 MHz (``camera_changed``, both
+    frequencies named), its file holds only 6 MHz frames and says 6 MHz."""
+    c = fast_client
+    r = c.post("/api/recordings", json={"name": "beside a campaign"}, headers=AUTH)
+    assert r.status_code == 201, r.text
+    rid = r.json()["id"]
+    wait_for(lambda: c.get(f"/api/recordings/{rid}").json()["frames"] > 2, 30, "frames")
+    at_12 = {**AT_2M, "camera": {"modulation_frequency_mhz": 12}}
+    done = _run(c, {**BASE, "name": "at 12 MHz", "setpoints": [at_12]})
+    assert done["status"] == "done", done["status_reason"]
+    rec = wait_for(
+        lambda: (x := c.get(f"/api/recordings/{rid}").json())["state"] == "stopped" and x,
+        30,
+        "the recording to stop",
+    )
+    assert rec["stop_reason"] == "camera_changed", rec
+    assert "from 6 to 12 MHz" in rec["stop_detail"]
+    path = c.app.state.tofpose.recordings.file(rid)
+    with open_recording(path) as f:
+        assert f.n_frames == rec["frames"] > 2
+        assert f.camera.modulation_frequency_hz == 6e6
 
 
 def test_stop_restores_the_cameras_settings(fast_client):

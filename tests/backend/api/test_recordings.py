@@ -268,6 +268,9 @@ def test_a_new_modulation_frequency_is_refused_while_a_recording_records(app_cli
         assert before["frequency_held"] is None and before["locked"] is None
         r = c.put("/api/camera/settings", json={"integration_time_us": 300}, headers=AUTH)
         assert r.status_code == 200, r.text
+        same = {"modulation_frequency_mhz": before["modulation_frequency_mhz"]}
+        r = c.put("/api/camera/settings", json=same, headers=AUTH)  # no change: no refusal
+        assert r.status_code == 200, r.text
     finally:
         _stop(c, rid)
     assert c.get("/api/camera/settings").json()["frequency_held"] is None

@@ -90,8 +90,8 @@ def test_a_raw_recording_takes_one_modulation_frequency():
     assert raw_recording_problems([{"integration_time_us": 100.0}, {}], None, True) == []
     assert raw_recording_problems([f6, f12], None, False) == []
     [(loc, msg)] = raw_recording_problems([f6, f12], None, True)
-    assert loc == ["body", "record_raw"] and "12 MHz, 6 MHz" in msg
+    assert loc == ["body", "record_raw"] and "6 MHz, 12 MHz" in msg
     [(_, msg)] = raw_recording_problems([{}, f12], None, True)
     assert "12 MHz and the camera's own" in msg
     [(_, msg)] = raw_recording_problems([{}, f12], f6, True)
-    assert "12 MHz, 6 MHz" in msg and "camera's own" not in msg
+    assert "6 MHz, 12 MHz" in msg and "camera's own" not in msg
