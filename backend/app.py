@@ -84,7 +84,7 @@ from backend.services.recordings import (
 from backend.services.store import NameTakenError, find_catalog, load_device_settings
 from backend.settings import Settings
 from backend.state import AppState
-from tofpose.config import TrackingConfig
+from tofpose.config import PixelFitConfig, TrackingConfig
 from tofpose.core.catalog import Catalog
 from tofpose.lab.relative_state import RelativeStateConfig
 from tofpose.pipeline import PipelineConfig
@@ -123,8 +123,12 @@ def _restore_camera_settings(sessions, devices: Devices) -> None:
 def _pipeline_config(devices: Devices, settings: Settings) -> PipelineConfig:
     """The pipeline's defaults, but for a camera that states its common range bias (the
     ideal simulated sensor has none), whose 1-sigma need not carry the default prior, and
-    with tracking mode as the settings say (a live stream: on by default)."""
-    cfg = PipelineConfig(tracking=TrackingConfig(enabled=settings.tracking))
+    with tracking mode (a live stream: on by default) and the pixel-level fit (off by
+    default) as the settings say."""
+    cfg = PipelineConfig(
+        tracking=TrackingConfig(enabled=settings.tracking),
+        pixel_fit=PixelFitConfig(enabled=settings.pixel_fit),
+    )
     bias = getattr(devices.camera, "range_bias_sigma_mm", None)
     return cfg if bias is None else replace(cfg, range_bias_sigma_mm=bias)
 

@@ -58,6 +58,11 @@ class Settings(BaseSettings):
         127.0.0.1 and [::1]. A wildcard bind (0.0.0.0, ::) with none given accepts any.
     tracking : the live pipeline's tracking mode (windows around the predicted reflectors
         after a confident pose, full acquisition as fallback; docs/algorithm.md).
+    pixel_fit : the live pipeline refines each ok pose on its markers' pixels
+        (docs/algorithm.md, "Pixel-level fit"), as ``tofpose estimate`` does: the
+        accuracy and covariance of the sensor's model, at tens of ms a frame (a loop
+        slower than the camera measures the newest frame each time: fewer poses a
+        second; docs/server.md). Campaigns measure with it too.
     filter_model : the relative-state filter's motion model, ``acceleration`` (constant
         angular acceleration) or ``twist`` (constant twist); filter_jerk_deg : the
         acceleration model's white angular jerk, its density's square root in deg
@@ -121,6 +126,7 @@ class Settings(BaseSettings):
     shutdown_timeout_s: float = Field(default=3.0, gt=0, le=60)
     frontend_dir: Path | None = None
     tracking: bool = True
+    pixel_fit: bool = False
     filter_model: Literal["acceleration", "twist"] = "acceleration"
     filter_jerk_deg: float = Field(default=30.0, gt=0, le=10_000)
     dask_scheduler: str = ""

@@ -81,6 +81,20 @@ class Server:
         self.tmp.cleanup()
 
 
+async def pose_messages(ws, t_end: float):
+    """(receipt wall-clock time, the message's data) of each pose message ``ws`` (a live
+    WebSocket) receives until the monotonic clock reaches ``t_end``."""
+    while (left := t_end - time.monotonic()) > 0:
+        try:
+            raw = await asyncio.wait_for(ws.recv(), left)
+        except TimeoutError:
+            return
+        now = time.time()
+        m = json.loads(raw)
+        if m["type"] == "pose":
+            yield now, m["data"]
+
+
 async def _client(url: str, seconds: float, start: asyncio.Event):
     lat_ms, n, first, last = [], 0, None, None
     async with websockets.connect(url, max_queue=64, close_timeout=1) as ws:
@@ -88,17 +102,8 @@ async def _client(url: str, seconds: float, start: asyncio.Event):
         while not start.is_set():  # keep reading during warm-up so nothing queues up
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(ws.recv(), 0.05)
-        t_end = time.monotonic() + seconds
-        while (left := t_end - time.monotonic()) > 0:
-            try:
-                raw = await asyncio.wait_for(ws.recv(), left)
-            except TimeoutError:
-                break
-            now = time.time()
-            m = json.loads(raw)
-            if m["type"] != "pose":
-                continue
-            lat_ms.append(1e3 * (now - m["data"]["captured_unix_s"]))
+        async for now, data in pose_messages(ws, time.monotonic() + seconds):
+            lat_ms.append(1e3 * (now - data["captured_unix_s"]))
             n += 1
             first = first or time.monotonic()
             last = time.monotonic()

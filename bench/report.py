@@ -526,6 +526,39 @@ def pixelfit_section(quick: bool) -> str:
     )
 
 
+LIVEFIT_BEGIN, LIVEFIT_END = "<!-- livefit:begin -->", "<!-- livefit:end -->"
+
+
+def livefit_section(quick: bool) -> str:
+    """ "The pixel fit in the live loop" from ``bench/live_pixel_fit.py``, between its
+    markers (``--only livefit`` regenerates just this block)."""
+    out = _script(
+        "live_pixel_fit.py",
+        "--seconds",
+        "4" if quick else "8",
+        "--repeats",
+        "1" if quick else "2",
+    )
+    return "\n".join(
+        [
+            LIVEFIT_BEGIN,
+            "### The pixel fit in the live loop",
+            "",
+            "`bench/live_pixel_fit.py`: the server (`tofpose serve`, simulated lab) with "
+            "`TOFPOSE_PIXEL_FIT` off and on, the target at each range: ok poses a second "
+            "on the live WebSocket, the latency from the frame reaching the server to a "
+            "client, the share of ok poses the fit refined, its time, and the sigmas the "
+            "poses were reported with. The fit runs on the acquisition thread; a loop "
+            "slower than the camera measures the newest frame each time. This section was "
+            f"regenerated on {datetime.date.today().isoformat()}.",
+            "",
+            out,
+            "",
+            LIVEFIT_END,
+        ]
+    )
+
+
 def safety_section(quick: bool) -> str:
     """The "STOP under load" section from ``bench/stop_latency.py``, between its markers
     (``--only safety`` regenerates just this block)."""
@@ -690,6 +723,7 @@ def main() -> None:
         choices=[
             "accuracy",
             "pixelfit",
+            "livefit",
             "dynamics",
             "scaleout",
             "safety",
@@ -727,6 +761,10 @@ def main() -> None:
     if args.only == "pixelfit":
         replace_section(PIXEL_BEGIN, PIXEL_END, pixelfit_section(q))
         print(f"rewrote the pixel fit section of {DOC}", file=sys.stderr)
+        return
+    if args.only == "livefit":
+        replace_section(LIVEFIT_BEGIN, LIVEFIT_END, livefit_section(q))
+        print(f"rewrote the live pixel fit section of {DOC}", file=sys.stderr)
         return
     if args.only == "dynamics":
         replace_dynamics(dynamics_section(q))
@@ -898,6 +936,7 @@ def main() -> None:
     sec_scale = scaleout_section(q)
     sec_safety = safety_section(q)
     sec_pixel = pixelfit_section(q)
+    sec_livefit = livefit_section(q)
     goals_md = goals_table(q)
     sec_goals = goals_section(goals_md)
     text = "\n".join(
@@ -906,6 +945,7 @@ def main() -> None:
             sec_paper,
             sec_acc,
             sec_pixel,
+            sec_livefit,
             sec_real,
             sec_phys,
             sec_foreign,

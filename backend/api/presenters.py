@@ -234,6 +234,7 @@ def pose_from_sample(s: LiveSample) -> PosePublic:
         distances_read_about_mm=None
         if r.distances_read_about_mm is None
         else float(r.distances_read_about_mm),
+        pixel_fit=r.pixel_fit or None,
         matched=[
             MatchedPublic(
                 catalog_id=m.catalog_id,

@@ -129,6 +129,12 @@ class PosePublic(BaseModel):
         "range (mm) they were read about, each moved by whole unambiguous ranges: the "
         "target is beyond the range the camera's distances wrap at",
     )
+    pixel_fit: str | None = Field(
+        default=None,
+        description="null when the pose was not refined on its pixels (the server's "
+        "pixel_fit setting off, or no pose); 'ok' when the pose and covariance are the "
+        "pixel-level fit's; else why it fell back to the centroid pose",
+    )
     matched: list[MatchedPublic]
     unmatched: list[BlobPublic]
     rejected: list[RejectedBlobPublic] = Field(

@@ -2338,6 +2338,11 @@ export interface components {
             /** Pitch Deg */
             pitch_deg?: number | null;
             /**
+             * Pixel Fit
+             * @description null when the pose was not refined on its pixels (the server's pixel_fit setting off, or no pose); 'ok' when the pose and covariance are the pixel-level fit's; else why it fell back to the centroid pose
+             */
+            pixel_fit?: string | null;
+            /**
              * Position Sigma Mm
              * @description 1-sigma, x y z
              */

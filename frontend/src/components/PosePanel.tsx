@@ -1,6 +1,7 @@
 import type { ComponentChildren } from "preact";
 import type { Pose } from "../api/client";
 import type { LiveLatency } from "../latency";
+import { pixelFitText } from "../pixelFit";
 import { LatencyReadout } from "./LatencyReadout";
 
 const fmt = (v: number | null | undefined, d = 2) => (v === null || v === undefined ? "-" : v.toFixed(d));
@@ -31,6 +32,7 @@ export function PosePanel({ pose, stale, latency, children }: { pose: Pose | nul
         residual {fmt(pose.residual_mm, 3)} mm, {fmt(pose.timings_ms["total"], 1)} ms
         (<span data-testid="pose-mode">{pose.mode}</span>);
         attitude relative to the facing reference (face-on reads 0, 0, 0)</p>
+      {pose.ok && pixelFitText(pose) && <p class="small" data-testid="pose-pixel-fit">{pixelFitText(pose)}</p>}
       <LatencyReadout latency={latency ?? null} />
       {pose.angular_rate_deg_s && (
         <table class="pose" data-testid="rates">
