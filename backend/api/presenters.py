@@ -404,6 +404,7 @@ def measurement_public(m: MeasurementRow, setpoint_index: int) -> MeasurementPub
         lab_truth=_pose_dict(m, "lab_truth_"),
         encoders=m.encoders,
         integration_time_us=m.integration_time_us,
+        pixel_fit=m.pixel_fit,
         in_motion=m.in_motion,
     )
 

@@ -157,7 +157,9 @@ class MeasurementRow(Base):
     profile ran (null at a set-point without one; ``encoders`` and ``lab_truth_*`` of a
     profile set-point are interpolated to the frame's capture time).
     ``integration_time_us``: the exposure the frame was taken with, as the camera reports
-    it per frame (null when it does not).
+    it per frame (null when it does not). ``pixel_fit``: "ok" when the pose and sigmas are
+    the pixel-level fit's (the server's ``pixel_fit`` setting), else why the centroid pose
+    stands; null when the fit did not run.
     """
 
     __tablename__ = "measurements"
@@ -220,6 +222,7 @@ class MeasurementRow(Base):
     filter_status: Mapped[str | None] = mapped_column(String(16), nullable=True)
     in_motion: Mapped[bool | None] = mapped_column(Boolean, nullable=True)
     integration_time_us: Mapped[float | None] = mapped_column(Float, nullable=True)
+    pixel_fit: Mapped[str | None] = mapped_column(Text, nullable=True)
 
     setpoint: Mapped[SetPointRow] = relationship(back_populates="measurements")
 

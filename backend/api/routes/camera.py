@@ -79,12 +79,18 @@ def _checked_apply(state: AppState, fields: dict) -> CameraSettings | None:
     cam = state.devices.camera
     current = cam.get_settings()
     wanted = replace(current, **fields)
+    # the frequency the camera would take (the TOFcam-660 rounds to its nearest)
+    wanted = replace(
+        wanted,
+        modulation_frequency_mhz=_nearest_frequency_mhz(cam, wanted.modulation_frequency_mhz),
+    )
     if wanted == current:
         return None
     if (locked := _locked(state)) is not None:
         raise _HeldError(locked)
-    new_mhz = _nearest_frequency_mhz(cam, wanted.modulation_frequency_mhz)
-    if new_mhz != current.modulation_frequency_mhz and (held := _frequency_held(state)):
+    changes_frequency = wanted.modulation_frequency_mhz != current.modulation_frequency_mhz
+    # a source whose settings cannot change refuses any change itself (a replay: 503)
+    if changes_frequency and camera_limits(cam).settable and (held := _frequency_held(state)):
         raise _HeldError(held)
     return cam.apply_settings(wanted)
 

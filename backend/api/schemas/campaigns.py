@@ -351,6 +351,11 @@ class MeasurementPublic(BaseModel):
     integration_time_us: float | None = Field(
         default=None, description="the exposure the camera reports for the frame"
     )
+    pixel_fit: str | None = Field(
+        default=None,
+        description="'ok' when the pose and sigmas are the pixel-level fit's (the server's "
+        "TOFPOSE_PIXEL_FIT), else why the centroid pose stands; null when it did not run",
+    )
     in_motion: bool | None = Field(
         default=None,
         description="taken while the set-point's motion profile ran (null at a static set-point)",

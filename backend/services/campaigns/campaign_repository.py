@@ -359,8 +359,8 @@ class CampaignRepository:
 def measurement_row(setpoint_id: int, sample: LiveSample) -> MeasurementRow:
     """One stored frame: pose (facing Euler), sigmas, exact truth (``truth_*``, from the
     frame's ``T_camera_target_exact``) and the lab's reference (``lab_truth_*``, from
-    ``T_camera_target_lab``), encoders, and the relative-state filter's rates and
-    velocity with their sigmas."""
+    ``T_camera_target_lab``), encoders, the relative-state filter's rates and velocity
+    with their sigmas, and whether the pose is the pixel-level fit's (``pixel_fit``)."""
     r, f = sample.result, sample.frame
     row = MeasurementRow(
         setpoint_id=setpoint_id,
@@ -372,6 +372,7 @@ def measurement_row(setpoint_id: int, sample: LiveSample) -> MeasurementRow:
         residual_mm=_finite(r.residual_mm),
         encoders={k: float(v) for k, v in f.meta.get("encoders", {}).items()} or None,
         integration_time_us=_reported_us(f.meta.get("integration_time_us")),
+        pixel_fit=r.pixel_fit or None,
     )
     if r.ok and r.R is not None and r.t_mm is not None and r.quaternion_wxyz is not None:
         row.x_mm, row.y_mm, row.z_mm = (float(v) for v in r.t_mm)

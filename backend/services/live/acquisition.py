@@ -194,7 +194,7 @@ class AcquisitionService:
         self.reference = LiveReference()  # nominal until a calibration is selected
         self._catalog_name = catalog_name
         first = self._live_implementation() or "reference"  # (None: reference soon)
-        self._pipeline = PosePipeline(camera.model, catalog, self._config, implementation=first)
+        self._pipeline = self._new_pipeline(catalog, first)
         #: the relative state (rates, velocity) from the poses, on the loop's thread
         state_config = state_config or RelativeStateConfig.constant_acceleration()
         self._filter = RelativeStateFilter(state_config)
@@ -262,20 +262,24 @@ class AcquisitionService:
         implementation when the kernels have become ready; None: no pipeline yet."""
         wanted = self._live_implementation()
         if wanted is not None and wanted != self._pipeline.implementation:
-            self._pipeline = PosePipeline(
-                self.camera.model, self._pipeline.catalog, self._config, implementation=wanted
-            )
+            self._pipeline = self._new_pipeline(self._pipeline.catalog, wanted)
             log.info("live poses now from the %s pipeline", wanted)
         elif self.camera.model is not self._pipeline.camera:
             # the camera's settings changed its model (a modulation frequency: where the
             # distances wrap, their noise): measure with the model the frames come from
-            self._pipeline = PosePipeline(
-                self.camera.model,
-                self._pipeline.catalog,
-                self._config,
-                implementation=self._pipeline.implementation,
+            self._pipeline = self._new_pipeline(
+                self._pipeline.catalog, self._pipeline.implementation
             )
         return None if wanted is None else self._pipeline
+
+    def _new_pipeline(self, catalog: Catalog, implementation: str) -> PosePipeline:
+        """A pipeline of the camera's model now, with the loop's settings; the reference
+        implementation (while the kernels compile) without the pixel-level fit, whose
+        NumPy form takes seconds a frame: its poses say so (``pixel_fit`` empty)."""
+        config = self._config
+        if implementation == "reference" and config.pixel_fit.enabled:
+            config = replace(config, pixel_fit=replace(config.pixel_fit, enabled=False))
+        return PosePipeline(self.camera.model, catalog, config, implementation=implementation)
 
     def history(self, n: int) -> list[LiveSample]:
         """The last ``n`` results, oldest first, without their images."""
@@ -302,12 +306,7 @@ class AcquisitionService:
 
     def set_catalog(self, name: str, catalog: Catalog) -> Future:
         def swap() -> None:
-            self._pipeline = PosePipeline(
-                self.camera.model,
-                catalog,
-                self._config,
-                implementation=self._pipeline.implementation,
-            )
+            self._pipeline = self._new_pipeline(catalog, self._pipeline.implementation)
             self._filter.reset()  # another target: its motion starts again
             self._catalog_name = name
 

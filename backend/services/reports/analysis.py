@@ -187,6 +187,9 @@ def analyse(
         d["passed"] = all(passes) if passes else None
         overall_axes[a] = d
     n_ok = sum(1 for r in rows if _truthy(r["ok"]))
+    # which pose an ok row holds: the pixel-level fit's, or the centroid pose where the
+    # fit ran and fell back (an older CSV has no column: the fit did not run)
+    fitted = [r.get("pixel_fit") for r in rows if _truthy(r["ok"]) and r.get("pixel_fit")]
     return {
         "reference": reference,
         "rule": RULE,
@@ -194,6 +197,8 @@ def analyse(
         "n_frames": len(rows),
         "n_ok": n_ok,
         "success_rate": n_ok / len(rows) if rows else float("nan"),
+        "n_pixel_fit_tried": len(fitted),
+        "n_pixel_fit": sum(1 for f in fitted if f == "ok"),
         "setpoints": per_sp,
         "overall": {"axes": overall_axes, "passed": _all_passed(overall_axes)},
     }
@@ -252,6 +257,23 @@ def findings(result: dict) -> list[str]:
         out.append(
             f"{result['n_frames'] - result['n_ok']} of {result['n_frames']} frames gave no "
             f"pose (success rate {result['success_rate']:.1%})."
+        )
+    tried, held = result.get("n_pixel_fit_tried", 0), result.get("n_pixel_fit", 0)
+    if tried:
+        out.append(
+            f"{held} of the {result['n_ok']} poses are the pixel-level fit's"
+            + (
+                f"; on {tried - held} it fell back to the centroid pose, and the "
+                "statistics pool both"
+                if held < tried
+                else ""
+            )
+            + (
+                f"; {result['n_ok'] - tried} were measured without it"
+                if tried < result["n_ok"]
+                else ""
+            )
+            + "."
         )
     removed = sum(d["n_removed"] for d in over.values())
     if removed:

@@ -83,11 +83,14 @@ CSV_COLUMNS = (
     "integration_time_us",
     "setpoint_integration_time_us",
     "setpoint_modulation_frequency_mhz",
+    "pixel_fit",
 )
 """The report CSV's columns. ``truth_*``: the pose the simulator rendered (empty on real
 hardware); ``reference_*``: the lab's reference (encoders + nominal geometry);
 ``calibrated_reference_*``: encoders + a calibration (docs/interop.md, "Names: truth and
-reference"). ``report_csv.read_csv`` also reads the older names."""
+reference"); ``pixel_fit``: "ok" when the pose is the pixel-level fit's, else why the
+centroid pose stands, empty when the fit did not run. ``report_csv.read_csv`` also reads
+the older names."""
 MEASUREMENT_COLUMN = {f"reference_{a}": f"lab_truth_{a}" for a in POSE}
 """The stored measurement's attribute behind a CSV column where the two names differ
 (the database keeps the older name: renaming it would need a migration)."""

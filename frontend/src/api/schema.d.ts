@@ -2082,6 +2082,11 @@ export interface components {
             ok: boolean;
             /** Pitch Deg */
             pitch_deg: number | null;
+            /**
+             * Pixel Fit
+             * @description 'ok' when the pose and sigmas are the pixel-level fit's (the server's TOFPOSE_PIXEL_FIT), else why the centroid pose stands; null when it did not run
+             */
+            pixel_fit?: string | null;
             /** Reason */
             reason: string;
             /**

@@ -10,6 +10,7 @@ import subprocess
 import numpy as np
 import pytest
 
+from backend.services.store import load_device_settings
 from tests.backend.conftest import AUTH, make_settings, running_app, wait_for
 from tofpose import __version__
 from tofpose.io.recording import open_recording
@@ -272,6 +273,13 @@ def test_stop_restores_the_cameras_settings(fast_client):
     r = c.put("/api/camera/settings", json={"integration_time_us": 500}, headers=AUTH)
     assert r.status_code == 409 and r.json()["detail"] == during["locked"], r.text
     assert c.get("/api/camera/settings").json() == during
+    # a body that changes nothing is answered, and the campaign's setting is not stored as
+    # the camera's own (the server would start with it)
+    r = c.put("/api/camera/settings", json={"integration_time_us": 300}, headers=AUTH)
+    assert r.status_code == 200 and r.json() == during
+    with c.app.state.tofpose.sessions() as session:
+        stored = load_device_settings(session, "camera")
+    assert not stored or stored.get("integration_time_us") != 300.0, stored
     assert c.post("/api/motion/stop", headers=AUTH).status_code == 200
     paused = wait_for(
         lambda: (x := c.get(f"/api/campaigns/{cid}").json())["status"] == "paused" and x

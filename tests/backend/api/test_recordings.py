@@ -292,3 +292,22 @@ def test_a_server_that_stops_closes_its_recordings(tmp_path):
     assert (entry["state"], entry["stop_reason"]) == ("stopped", "shutdown")
     with open_recording(data / "recordings" / entry["file"]) as rec:
         assert rec.n_frames == entry["frames"] >= 3
+
+
+def test_the_frequency_is_compared_as_the_camera_would_take_it():
+    """A camera with a fixed list of frequencies (the TOFcam-660) takes the nearest:
+    11.9 MHz at 12 is no change (not refused while recording, not applied); a camera
+    without a list takes the value asked."""
+    from backend.api.routes.camera import _nearest_frequency_mhz
+    from backend.drivers.base import CameraLimits
+    from backend.drivers.tofcam660 import MODULATION_MHZ
+
+    class Listed:
+        def limits(self) -> CameraLimits:
+            return CameraLimits(
+                integration_time_us=(1.0, 4000.0), modulation_frequencies_mhz=MODULATION_MHZ
+            )
+
+    assert _nearest_frequency_mhz(Listed(), 11.9) == 12.0
+    assert _nearest_frequency_mhz(Listed(), 7.0) == 6.0
+    assert _nearest_frequency_mhz(object(), 11.9) == 11.9  # no limits(): the API's defaults

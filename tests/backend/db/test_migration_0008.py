@@ -35,13 +35,14 @@ def test_upgrade_from_0007_keeps_a_stored_campaign(tmp_path):
                 "n_matched, x_mm, lab_truth_x_mm) VALUES (70, 11, 1.25, 1, '', 7, 3.5, 3.0)"
             )
         )
-    upgrade_database(engine)
+    upgrade_database(engine, "0008")
     with engine.connect() as conn:
         assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0008"
         m = conn.execute(
             text("SELECT frame_index, x_mm, lab_truth_x_mm, integration_time_us FROM measurements")
         ).one()
     assert tuple(m) == (11, 3.5, 3.0, None)
+    upgrade_database(engine)  # the repository reads the head's columns
     c = CampaignRepository(sessionmaker(engine)).get(7)
     assert (c.name, c.status.value, c.notes, c.camera) == (
         "old grid",

@@ -366,3 +366,21 @@ def test_a_failed_warm_up_keeps_the_reference_pipeline(monkeypatch, compiled_cal
     assert svc.implementation == "reference"
     assert_pose_near_truth(svc.latest, cam.T)
     assert sum(compiled_calls.values()) == 0
+
+
+def test_the_reference_pipeline_runs_without_the_pixel_fit_and_the_compiled_one_with_it():
+    """With the pixel fit asked for (``TOFPOSE_PIXEL_FIT``), the pipelines the loop makes
+    (first, on a switch of implementation, a new camera model or catalog) keep it, but the
+    reference implementation (while the kernels compile) measures without it: its NumPy
+    form takes seconds a frame."""
+    cfg = PipelineConfig(pixel_fit=dataclasses.replace(PipelineConfig().pixel_fit, enabled=True))
+    svc = AcquisitionService(
+        ScriptedCamera(), paper_target(), "paper-target", LiveHub(), pipeline_config=cfg
+    )
+    compiled = svc._new_pipeline(paper_target(), "compiled")
+    reference = svc._new_pipeline(paper_target(), "reference")
+    assert compiled.config.pixel_fit.enabled and compiled.implementation == "compiled"
+    assert not reference.config.pixel_fit.enabled and reference.implementation == "reference"
+    assert svc._pipeline.config.pixel_fit.enabled  # kernels ready: the compiled one, with it
+    # everything else is the loop's configuration
+    assert dataclasses.replace(reference.config, pixel_fit=cfg.pixel_fit) == compiled.config

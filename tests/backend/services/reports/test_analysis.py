@@ -64,3 +64,31 @@ def test_findings_are_written_only_when_their_condition_holds():
     assert any("systematic offset" in s for s in f)
     assert any("12 of 60 frames gave no pose" in s for s in f)
     assert not any(s.startswith("All ") for s in f)
+
+
+def test_a_campaign_measured_with_the_pixel_fit_says_which_poses_are_its():
+    """Rows say which pose they hold (``pixel_fit``): none says nothing (the fit did not
+    run, or an older CSV without the column); all fitted says so; a mix says how many
+    fell back and that the statistics pool both."""
+    assert not any("pixel-level fit" in s for s in findings(analyse(_rows(), REQ)))
+    all_fit = _rows()
+    for r in all_fit:
+        r["pixel_fit"] = "ok"
+    res = analyse(all_fit, REQ)
+    assert (res["n_pixel_fit_tried"], res["n_pixel_fit"]) == (60, 60)
+    assert "60 of the 60 poses are the pixel-level fit's." in findings(res)
+    mixed = _rows(fail_every=6)
+    for k, r in enumerate(mixed):
+        if k % 6 == 1:  # an ok frame on which the fit fell back
+            r["pixel_fit"] = "markers [7] have clipped cores"
+        elif k % 6 in (2, 3, 4):
+            r["pixel_fit"] = "ok"
+        elif k % 6 == 0:
+            r["pixel_fit"] = "ok"  # a frame without a pose does not count
+    res = analyse(mixed, REQ)
+    assert (res["n_ok"], res["n_pixel_fit_tried"], res["n_pixel_fit"]) == (50, 40, 30)
+    [line] = [s for s in findings(res) if "pixel-level fit" in s]
+    assert line == (
+        "30 of the 50 poses are the pixel-level fit's; on 10 it fell back to the centroid "
+        "pose, and the statistics pool both; 10 were measured without it."
+    )
