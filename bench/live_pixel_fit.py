@@ -130,7 +130,7 @@ def main(argv: list[str] | None = None) -> str:
     )
     text = (
         title
-        + "\n"
+        + "\n\n"
         + table(
             [
                 "range",
