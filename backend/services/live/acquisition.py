@@ -340,6 +340,9 @@ class AcquisitionService:
                 self._stop.wait(backoff)
                 backoff = min(2.0 * backoff, self.backoff_s[1])
                 continue
+            # the model the frame was taken with (settings change only between reads, on
+            # this thread; the pipeline below is rebuilt to it)
+            model = self.camera.model
             arrival_ns = time.monotonic_ns()
             captured = time.time()
             self._arrivals.append(arrival_ns / 1e9)
@@ -382,7 +385,7 @@ class AcquisitionService:
                 implementation=_implementation(pipeline),
                 reference=self.reference,
                 state=state,
-                camera_model=pipeline.camera if pipeline is not None else self.camera.model,
+                camera_model=model,
                 stamps=stamps,
                 camera_gap=gap,
                 pipeline_skipped=skipped,
