@@ -12,7 +12,7 @@ from backend.api.contract import errors
 from backend.api.deps import ReadAuth, StateDep, WriteAuth
 from backend.api.presenters import camera_settings_public
 from backend.api.schemas.camera import CameraSettingsPublic, CameraSettingsUpdate
-from backend.drivers.base import CameraSettings
+from backend.drivers.base import CameraLimits, CameraSettings
 from backend.services.campaigns.camera_plan import camera_limits
 from backend.services.store import save_device_settings
 from backend.state import AppState
@@ -63,11 +63,10 @@ class _HeldError(Exception):
     """A change that something holds (``_locked``, ``_frequency_held``): a 409."""
 
 
-def _nearest_frequency_mhz(camera, mhz: float) -> float:
-    """The frequency ``camera`` would take for ``mhz``: the nearest one its driver
-    supports (``CameraLimits.modulation_frequencies_mhz``; the TOFcam-660 rounds), else
-    ``mhz``."""
-    choices = camera_limits(camera).modulation_frequencies_mhz
+def _nearest_frequency_mhz(limits: CameraLimits, mhz: float) -> float:
+    """The frequency a camera of ``limits`` would take for ``mhz``: the nearest one it
+    supports (``modulation_frequencies_mhz``; the TOFcam-660 rounds), else ``mhz``."""
+    choices = limits.modulation_frequencies_mhz
     return min(choices, key=lambda c: abs(c - mhz)) if choices else mhz
 
 
@@ -77,12 +76,13 @@ def _checked_apply(state: AppState, fields: dict) -> CameraSettings | None:
     settings applied, or None when ``fields`` change nothing (nothing applied, nothing
     to persist); ``_HeldError`` when a campaign runs or a recording holds the frequency."""
     cam = state.devices.camera
+    limits = camera_limits(cam)
     current = cam.get_settings()
     wanted = replace(current, **fields)
     # the frequency the camera would take (the TOFcam-660 rounds to its nearest)
     wanted = replace(
         wanted,
-        modulation_frequency_mhz=_nearest_frequency_mhz(cam, wanted.modulation_frequency_mhz),
+        modulation_frequency_mhz=_nearest_frequency_mhz(limits, wanted.modulation_frequency_mhz),
     )
     if wanted == current:
         return None
@@ -90,7 +90,7 @@ def _checked_apply(state: AppState, fields: dict) -> CameraSettings | None:
         raise _HeldError(locked)
     changes_frequency = wanted.modulation_frequency_mhz != current.modulation_frequency_mhz
     # a source whose settings cannot change refuses any change itself (a replay: 503)
-    if changes_frequency and camera_limits(cam).settable and (held := _frequency_held(state)):
+    if changes_frequency and limits.settable and (held := _frequency_held(state)):
         raise _HeldError(held)
     return cam.apply_settings(wanted)
 

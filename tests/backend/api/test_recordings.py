@@ -301,13 +301,11 @@ def test_the_frequency_is_compared_as_the_camera_would_take_it():
     from backend.api.routes.camera import _nearest_frequency_mhz
     from backend.drivers.base import CameraLimits
     from backend.drivers.tofcam660 import MODULATION_MHZ
+    from backend.services.campaigns.camera_plan import DEFAULT_LIMITS
 
-    class Listed:
-        def limits(self) -> CameraLimits:
-            return CameraLimits(
-                integration_time_us=(1.0, 4000.0), modulation_frequencies_mhz=MODULATION_MHZ
-            )
-
-    assert _nearest_frequency_mhz(Listed(), 11.9) == 12.0
-    assert _nearest_frequency_mhz(Listed(), 7.0) == 6.0
-    assert _nearest_frequency_mhz(object(), 11.9) == 11.9  # no limits(): the API's defaults
+    listed = CameraLimits(
+        integration_time_us=(1.0, 4000.0), modulation_frequencies_mhz=MODULATION_MHZ
+    )
+    assert _nearest_frequency_mhz(listed, 11.9) == 12.0
+    assert _nearest_frequency_mhz(listed, 7.0) == 6.0
+    assert _nearest_frequency_mhz(DEFAULT_LIMITS, 11.9) == 11.9  # no list: the API's defaults
